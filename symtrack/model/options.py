@@ -1,0 +1,53 @@
+"""Structural and numerical options of the symbolic model (not physical parameters)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..errors import ParameterError
+
+TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """How the equations are written.
+
+    traction_sign: how sign(j) of seed eq. (1) is evaluated.
+        "smooth" (default): j/sqrt(j^2 + d^2) with d = shear_smoothing_m, the product with the
+        bracket is then smooth and odd, and differs from the exact law only for |j| ~ d.
+        "tanh": tanh(k j) with k = tanh_steepness_per_m, the seed's approximation.
+        "sign": the discontinuous sign(), kept to reproduce the seed's numerical oscillations.
+    lateral_segments, gauss_points: the lateral resistance is integrated along each track with
+        composite Gauss-Legendre quadrature (segments x points per segment).
+    accel_fixed_point_iterations: the body accelerations a_x, a_y enter the pressure
+        distribution (load transfer), which sets the forces, which set the accelerations. For the
+        ODE form this algebraic loop is solved by this many fixed-point iterations from a = 0;
+        the DAE form (IDAS) solves it exactly. tests/test_vehicle.py measures the residual.
+    """
+
+    traction_sign: str = "smooth"
+    tanh_steepness_per_m: float = 1000.0
+    shear_smoothing_m: float = 1e-6
+    omega_smoothing_rad_s: float = 0.01
+    motion_smoothing_m_s: float = 0.01
+    bekker_regularisation_m: float = 1e-6
+    lateral_segments: int = 4
+    gauss_points: int = 3
+    accel_fixed_point_iterations: int = 4
+
+    def __post_init__(self):
+        if self.traction_sign not in TRACTION_SIGN_MODES:
+            raise ParameterError(
+                f"model.traction_sign = {self.traction_sign!r} is not one of {', '.join(TRACTION_SIGN_MODES)}"
+            )
+        for name in ("tanh_steepness_per_m", "shear_smoothing_m", "omega_smoothing_rad_s",
+                     "motion_smoothing_m_s", "bekker_regularisation_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and v > 0):
+                raise ParameterError(f"model.{name} = {v!r} must be a number > 0")
+        for name, lo, hi in (("lateral_segments", 1, 64), ("gauss_points", 1, 16),
+                             ("accel_fixed_point_iterations", 1, 50)):
+            v = getattr(self, name)
+            if not (isinstance(v, int) and lo <= v <= hi):
+                raise ParameterError(f"model.{name} = {v!r} must be an integer in [{lo}, {hi}]")

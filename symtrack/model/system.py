@@ -1,0 +1,99 @@
+"""The coupled system (vehicle + terrain) frozen into named CasADi Functions.
+
+Like do-mpc's ``setup()``: once built, a :class:`SystemModel` exposes Functions with one
+signature, which the integrators, the linearisation and the MPC all reuse:
+
+- ``dae(x, z, u, p) -> (ode, alg)``: the semi-explicit DAE; z are the body accelerations, alg
+  closes the load-transfer loop exactly (for IDAS);
+- ``ode(x, u, p) -> ode``: the ODE form, the loop solved by fixed-point iterations (for CVODES
+  and for control);
+- ``outputs(x, u, p) -> y``: the named outputs of :attr:`output_names`;
+- ``jac_ode(x, u, p) -> (A, B)``: the exact Jacobians of ``ode``;
+- ``accel(x, u, p) -> z``: the fixed-point accelerations (consistent z for IDAS).
+
+States, inputs, parameters and outputs are named symbols whose names carry units; the model
+holds no numbers except true constants and the numerical options of :class:`ModelOptions`.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ..parameters import SOIL_PARAM_NAMES, VEHICLE_PARAM_NAMES
+from .homogeneous import HomogeneousTerrain
+from .options import ModelOptions
+from .vehicle import ALGEBRAIC, INPUTS, TRACKS, VEHICLE_STATES, vehicle_equations
+
+PARAM_NAMES = VEHICLE_PARAM_NAMES + SOIL_PARAM_NAMES
+
+
+def _syms(names):
+    return [ca.SX.sym(n) for n in names]
+
+
+class SystemModel:
+    def __init__(self, opts: ModelOptions | None = None, terrain=None):
+        self.opts = opts or ModelOptions()
+        self.terrain = terrain or HomogeneousTerrain(self.opts)
+        self.state_names = VEHICLE_STATES + self.terrain.state_names
+        self.input_names = INPUTS
+        self.alg_names = ALGEBRAIC
+        self.param_names = PARAM_NAMES
+        nv = len(VEHICLE_STATES)
+
+        xs, us, zs, ps = (_syms(n) for n in (self.state_names, INPUTS, ALGEBRAIC, PARAM_NAMES))
+        x, u, z, p = (ca.vertcat(*s) for s in (xs, us, zs, ps))
+        P = dict(zip(PARAM_NAMES, ps))
+        xv, xc = x[:nv], x[nv:]
+        compaction = self.terrain.compaction(xc, P)
+
+        def evaluate(acc):
+            veh = vehicle_equations(xv, u, acc, P, compaction, self.opts)
+            cdot, csig = self.terrain.equations(xc, veh["dist"], P)
+            return veh, ca.vertcat(veh["xdot"], cdot), csig
+
+        # DAE form: the accelerations are algebraic variables.
+        veh_z, ode_z, _ = evaluate(z)
+        alg = z - veh_z["acc_implied"]
+        # ODE form: fixed-point iterations of the load-transfer loop from a = 0.
+        acc = ca.DM.zeros(2)
+        for _ in range(self.opts.accel_fixed_point_iterations):
+            acc = vehicle_equations(xv, u, acc, P, compaction, self.opts)["acc_implied"]
+        veh, ode, csig = evaluate(acc)
+
+        signals = dict(veh["signals"])
+        signals.update(csig)
+        signals["accel_x_m_s2"] = acc[0]
+        signals["accel_y_m_s2"] = acc[1]
+        signals["yaw_moment_N_m"] = veh["yaw_moment_N_m"]
+        pitch = 0
+        for k in TRACKS:
+            pitch += (signals[f"sinkage_sprocket_{k}_m"] - signals[f"sinkage_idler_{k}_m"]) / len(TRACKS)
+        signals["pitch_rad"] = pitch / P["contact_length_m"]
+        self.output_names = tuple(signals)
+        y = ca.vertcat(*signals.values())
+
+        self.x, self.z, self.u, self.p = x, z, u, p
+        self.ode_expr, self.alg_expr, self.ode_dae_expr = ode, alg, ode_z
+        fo = {"cse": True}
+        self.dae = ca.Function("dae", [x, z, u, p], [ode_z, alg], ["x", "z", "u", "p"], ["ode", "alg"], fo)
+        self.ode = ca.Function("ode", [x, u, p], [ode], ["x", "u", "p"], ["ode"], fo)
+        self.outputs = ca.Function("outputs", [x, u, p], [y], ["x", "u", "p"], ["y"], fo)
+        self.accel = ca.Function("accel", [x, u, p], [acc], ["x", "u", "p"], ["z"], fo)
+        self.jac_ode = ca.Function("jac_ode", [x, u, p], [ca.jacobian(ode, x), ca.jacobian(ode, u)],
+                                   ["x", "u", "p"], ["A", "B"], fo)
+        self.jac_outputs = ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x), ca.jacobian(y, u)],
+                                       ["x", "u", "p"], ["C", "D"], fo)
+
+    @property
+    def nx(self):
+        return len(self.state_names)
+
+    def state_index(self, name: str) -> int:
+        return self.state_names.index(name)
+
+    def output_index(self, name: str) -> int:
+        return self.output_names.index(name)
+
+    def param_vector(self, values: dict) -> list[float]:
+        return [float(values[n]) for n in self.param_names]

@@ -1,0 +1,198 @@
+"""The planar tracked vehicle of MODEL.md section 1, written once as CasADi SX expressions.
+
+Body frame at the CG: x forward, y left, yaw counter-clockwise. Left track at y = +B/2, right
+track at y = -B/2; each has its driven sprocket at the rear and its idler at the front.
+
+The equations here need from the terrain only the compaction resistance of each track
+(the terrain gets from here the pressure under each track), so the same vehicle serves the
+homogeneous terrain and the channel-pool grid terrain. Reconstructions (not in the seed) are
+marked as such; see MODEL.md for their sources.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .options import ModelOptions
+
+# Standard gravity (a true constant: CGPM 1901).
+GRAVITY_M_S2 = 9.80665
+
+TRACKS = ("left", "right")
+ENDS = ("sprocket", "idler")
+
+VEHICLE_STATES = (
+    "x_m", "y_m", "yaw_rad", "u_m_s", "v_m_s", "yaw_rate_rad_s",
+    "omega_left_rad_s", "omega_right_rad_s", "shear_left_m", "shear_right_m",
+    "torque_left_N_m", "torque_right_N_m",
+)
+INPUTS = ("torque_cmd_left_N_m", "torque_cmd_right_N_m")
+ALGEBRAIC = ("accel_x_m_s2", "accel_y_m_s2")
+
+# Vehicle-side parameters the equations use from the soil set.
+SOIL_PARAMS_USED = ("cohesion_Pa", "friction_angle_rad", "shear_modulus_K_m")
+
+
+def gauss_nodes(length, n_segments: int, n_points: int):
+    """Composite Gauss-Legendre nodes s in [0, length] and weights (they sum to length)."""
+    xg, wg = np.polynomial.legendre.leggauss(n_points)
+    s, w = [], []
+    for k in range(n_segments):
+        for xi, wi in zip(xg, wg):
+            s.append((k + 0.5 * (xi + 1.0)) / n_segments)
+            w.append(0.5 * wi / n_segments)
+    return [length * si for si in s], [length * wi for wi in w]
+
+
+class PressureDistribution:
+    """Normal pressure along one track, from its normal load N and pitching moment M about the
+    contact centre (reconstruction: rigid track, quasi-static, linear distribution; triangular
+    over a shorter length when the resultant leaves the middle third).
+
+    s is measured from the front (idler end, s = 0) to the rear (sprocket end, s = l).
+    """
+
+    def __init__(self, N, M, b, l):
+        self.N, self.b, self.l = N, b, l
+        e_r = M / N
+        e_c = ca.fmin(ca.fmax(e_r, -0.45 * l), 0.45 * l)
+        self.e_r = e_r
+        self.p_mean = N / (b * l)
+        self.slope = 12.0 * M / (b * l**3)  # linear case: p(s) = p_mean + slope (l/2 - s)
+        self.Lc_front = 3.0 * (l / 2 - e_c)
+        self.Lc_rear = 3.0 * (l / 2 + e_c)
+
+    def at(self, s):
+        b, l, N = self.b, self.l, self.N
+        linear = self.p_mean + self.slope * (l / 2 - s)
+        tri_front = 2 * N / (b * self.Lc_front) * ca.fmax(0, 1 - s / self.Lc_front)
+        tri_rear = 2 * N / (b * self.Lc_rear) * ca.fmax(0, 1 - (l - s) / self.Lc_rear)
+        return ca.if_else(self.e_r > l / 6, tri_front, ca.if_else(self.e_r < -l / 6, tri_rear, linear))
+
+    @property
+    def idler(self):
+        return self.at(0.0)
+
+    @property
+    def sprocket(self):
+        return self.at(self.l)
+
+
+def traction_shape(j, K, opts: ModelOptions):
+    """sign(j) [1 + K/(2|j|) (exp(-2|j|/K) - 1)] of seed eq. (1), in the chosen form."""
+    a = ca.sqrt(j**2 + opts.shear_smoothing_m**2)
+    bracket = 1 + K / (2 * a) * (ca.exp(-2 * a / K) - 1)
+    if opts.traction_sign == "smooth":
+        sgn = j / a
+    elif opts.traction_sign == "tanh":
+        sgn = ca.tanh(opts.tanh_steepness_per_m * j)
+    else:
+        sgn = ca.sign(j)
+    return sgn * bracket
+
+
+def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> dict:
+    """All vehicle expressions.
+
+    xv: the 12 states of VEHICLE_STATES; u: commanded torques; acc: the body accelerations
+    (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
+    compaction resistance (magnitude) of the left and right track from the terrain.
+
+    Returns a dict with 'xdot', 'acc_implied' (the accelerations the forces imply: equal to
+    acc on the solution of the algebraic loop), the pressure distributions and named signals.
+    """
+    X, Y, psi, vx, vy, rz, omL, omR, jL, jR, TL, TR = (xv[i] for i in range(12))
+    m = P["mass_kg"]
+    Iz = P["yaw_inertia_kg_m2"]
+    B = P["track_gauge_m"]
+    b = P["track_width_m"]
+    l = P["contact_length_m"]
+    r = P["sprocket_radius_m"]
+    h = P["cg_height_m"]
+    e = P["cg_ahead_of_contact_centre_m"]
+    J = P["sprocket_inertia_kg_m2"]
+    tauT = P["torque_time_constant_s"]
+    mu = P["lateral_friction_coeff"]
+    eps_v = P["lateral_creep_speed_m_s"]
+    drawbar = P["drawbar_pull_N"]
+    hd = P["hitch_height_m"]
+    c = P["cohesion_Pa"]
+    phi = P["friction_angle_rad"]
+    K = P["shear_modulus_K_m"]
+    ax, ay = acc[0], acc[1]
+    W = m * GRAVITY_M_S2
+
+    # Normal loads with lateral load transfer (a left turn, a_y > 0, loads the right track).
+    dN = m * ay * h / B
+    N = {"left": ca.fmax(W / 2 - dN, 1e-6 * W), "right": ca.fmax(W / 2 + dN, 1e-6 * W)}
+    # Pitching moment about the contact centre: traction at ground level moves load rearwards.
+    M_N = W * e - m * ax * h - drawbar * hd
+    dist = {k: PressureDistribution(N[k], M_N * N[k] / W, b, l) for k in TRACKS}
+
+    omega = {"left": omL, "right": omR}
+    shear = {"left": jL, "right": jR}
+    torque = {"left": TL, "right": TR}
+    # Track centre-line speeds (not the CG speed).
+    v_track = {"left": vx - rz * B / 2, "right": vx + rz * B / 2}
+    abs_om = {k: ca.sqrt(omega[k] ** 2 + opts.omega_smoothing_rad_s**2) for k in TRACKS}
+
+    F, R_in, Rc, Fy, Mz, jdot, omdot = {}, {}, {}, {}, {}, {}, {}
+    s_nodes, w_nodes = gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points)
+    for idx, k in enumerate(TRACKS):
+        # Seed eq. (1): b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
+        # integral of the shear strength over the contact, b l c + N tan phi, used here so that
+        # the triangular case is right too.
+        F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
+        # Internal running-gear resistance (reconstruction; Wong): W_k (0.0222 + 0.0003 V[km/h]).
+        V_kmh = 3.6 * r * abs_om[k]
+        R_in[k] = N[k] * (P["internal_resistance_const"] + P["internal_resistance_per_km_h"] * V_kmh) \
+            * ca.tanh(omega[k] / opts.omega_smoothing_rad_s)
+        # Compaction resistance from the terrain, opposing the track's motion.
+        Rc[k] = compaction_N[idx] * ca.tanh(v_track[k] / opts.motion_smoothing_m_s)
+        # Lateral resistance along the track (reconstruction), composite Gauss-Legendre.
+        fy_sum, mz_sum = 0, 0
+        for sn, wn in zip(s_nodes, w_nodes):
+            s = sn * l
+            x_body = l / 2 - e - s
+            q = b * dist[k].at(s)
+            fy = -mu * q * ca.tanh((vy + rz * x_body) / eps_v)
+            fy_sum += wn * l * fy
+            mz_sum += wn * l * x_body * fy
+        Fy[k], Mz[k] = fy_sum, mz_sum
+        # Seed eq. (2): mean shear displacement.
+        jdot[k] = -(2 * r / l) * abs_om[k] * shear[k] + r * omega[k] - v_track[k]
+        omdot[k] = (torque[k] - r * (F[k] + R_in[k])) / J
+
+    Fx_net = (F["left"] - Rc["left"]) + (F["right"] - Rc["right"]) - drawbar
+    acc_implied = ca.vertcat(Fx_net / m, (Fy["left"] + Fy["right"]) / m)
+    yaw_moment = (B / 2) * ((F["right"] - Rc["right"]) - (F["left"] - Rc["left"])) + Mz["left"] + Mz["right"]
+
+    xdot = ca.vertcat(
+        vx * ca.cos(psi) - vy * ca.sin(psi),
+        vx * ca.sin(psi) + vy * ca.cos(psi),
+        rz,
+        ax + vy * rz,
+        ay - vx * rz,
+        yaw_moment / Iz,
+        omdot["left"], omdot["right"],
+        jdot["left"], jdot["right"],
+        (u[0] - TL) / tauT,
+        (u[1] - TR) / tauT,
+    )
+    slip = {k: 1 - v_track[k] * omega[k] / (r * omega[k] ** 2 + opts.omega_smoothing_rad_s * r) for k in TRACKS}
+    signals = {}
+    for k in TRACKS:
+        signals[f"tractive_{k}_N"] = F[k]
+        signals[f"internal_resistance_{k}_N"] = R_in[k]
+        signals[f"compaction_resistance_{k}_N"] = Rc[k]
+        signals[f"lateral_force_{k}_N"] = Fy[k]
+        signals[f"normal_load_{k}_N"] = N[k]
+        signals[f"slip_{k}"] = slip[k]
+    return {
+        "xdot": xdot,
+        "acc_implied": acc_implied,
+        "dist": dist,
+        "signals": signals,
+        "yaw_moment_N_m": yaw_moment,
+    }

@@ -1,0 +1,96 @@
+"""Soil parameter sets (SI units; converted once, here, never in the equations).
+
+Sources:
+- Wong, J.Y., *Theory of Ground Vehicles*, Table 2.3 (Bekker n, k_c, k_phi, c, phi), quoted in
+  ``shared/MODEL.md`` section 5. The table gives k_c in kN/m^(n+1), k_phi in kN/m^(n+2) and c in
+  kPa; the ``* 1e3`` below is that conversion.
+- Janosi-Hanamoto K is not in that table: LETE sand 1.2 cm (Wong); "typical" clay 0.6 cm and
+  loose sand 2.5 cm (Wong's guidance). Where a soil has no measured K, the guidance value is
+  used and marked so.
+- Project Chrono SCM terrain presets ("soft", "hard") for comparison: k_phi, n, phi, K, the
+  elastic (unloading) stiffness K_e and the damping 3e4 Pa s/m.
+
+Terrain-cell dynamics (seed eq. 4) need an areal mass tau_z and an areal damping c'' that no
+table gives; see the two module constants below.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..errors import ParameterError
+from ..parameters import SOIL_PARAMS, check_set
+
+# Areal damping c'' of a cell: Project Chrono SCM's default damping (3e4 Pa s/m).
+CELL_DAMPING_PA_S_PER_M = 3.0e4
+# Areal mass tau_z of a cell: calibrated against MODEL.md section 2 (natural frequency of a cell
+# 200-1500 rad/s): at the validation load (about 28 kPa, 1.5 mm on clayey soil, dp/dz ~ 9e6 Pa/m)
+# 50 kg/m^2 gives about 430 rad/s and, with c'' above, a damping ratio of about 0.7.
+CELL_AREAL_MASS_KG_PER_M2 = 50.0
+# Unloading/reloading stiffness for the Wong soils, which have no measured K_e: Chrono SCM's
+# "soft" elastic stiffness (4e7 Pa/m), the lower end of the range MODEL.md section 2 allows.
+WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M = 4.0e7
+# Floor of the unloading slope, k_u >= kappa * p_max / z_max (MODEL.md section 2 allows 2-5):
+# keeps millimetre-sinkage unloading lines from rebounding above the original surface.
+UNLOADING_STIFFNESS_FLOOR = 3.0
+
+
+def _wong(n, k_c_kN, k_phi_kN, c_kPa, phi_deg, K_m):
+    return {
+        "bekker_n": n,
+        "k_c_N_per_m_n1": k_c_kN * 1e3,
+        "k_phi_N_per_m_n2": k_phi_kN * 1e3,
+        "cohesion_Pa": c_kPa * 1e3,
+        "friction_angle_rad": math.radians(phi_deg),
+        "shear_modulus_K_m": K_m,
+        "elastic_stiffness_Pa_per_m": WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M,
+        "unloading_stiffness_floor": UNLOADING_STIFFNESS_FLOOR,
+        "cell_areal_mass_kg_per_m2": CELL_AREAL_MASS_KG_PER_M2,
+        "cell_damping_Pa_s_per_m": CELL_DAMPING_PA_S_PER_M,
+    }
+
+
+def _chrono(k_phi, n, phi_deg, K_m, K_e):
+    return {
+        "bekker_n": n,
+        "k_c_N_per_m_n1": 0.0,
+        "k_phi_N_per_m_n2": k_phi,
+        "cohesion_Pa": 0.0,
+        "friction_angle_rad": math.radians(phi_deg),
+        "shear_modulus_K_m": K_m,
+        "elastic_stiffness_Pa_per_m": K_e,
+        "unloading_stiffness_floor": UNLOADING_STIFFNESS_FLOOR,
+        "cell_areal_mass_kg_per_m2": CELL_AREAL_MASS_KG_PER_M2,
+        "cell_damping_Pa_s_per_m": CELL_DAMPING_PA_S_PER_M,
+    }
+
+
+# name -> (values, source note)
+SOILS: dict[str, dict[str, float]] = {
+    # Wong Table 2.3; K: Wong's guidance for sand (2.5 cm)
+    "dry_sand": _wong(1.10, 0.99, 1528.43, 1.04, 28.0, 0.025),
+    # Wong Table 2.3; K: guidance value between clay and sand (1.2 cm, as LETE sand)
+    "sandy_loam_15": _wong(0.70, 5.27, 1515.04, 1.72, 29.0, 0.012),
+    # Wong Table 2.3; K = 1.5 cm calibrated against the seed's validation table (MODEL.md s. 4
+    # allows 0.6-2.5 cm): gives a driven-track shear of order 1 cm at 2000 N m.
+    "clayey_soil_thailand_38": _wong(0.50, 13.19, 692.15, 4.14, 13.0, 0.015),
+    # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
+    "clayey_soil_thailand_55": _wong(0.70, 16.03, 1262.53, 2.07, 10.0, 0.006),
+    # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
+    "heavy_clay_wes_40": _wong(0.11, 1.84, 103.27, 20.69, 6.0, 0.006),
+    # Wong Table 2.3; K = 1.2 cm measured for LETE sand (Wong)
+    "lete_sand": _wong(0.79, 102.0, 5301.0, 1.3, 31.1, 0.012),
+    # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
+    "north_gower_clayey_loam_46": _wong(0.73, 41.6, 2471.0, 6.1, 26.6, 0.006),
+    # Wong Table 2.3; K: guidance value between clay and sand (1.2 cm)
+    "upland_sandy_loam_51": _wong(1.10, 74.6, 2080.0, 3.3, 33.7, 0.012),
+    # Project Chrono SCM demo presets
+    "chrono_soft": _chrono(2e6, 1.1, 30.0, 0.01, 4e7),
+    "chrono_hard": _chrono(2e7, 1.1, 20.0, 0.01, 2e8),
+}
+
+
+def soil_preset(name: str) -> dict[str, float]:
+    if name not in SOILS:
+        raise ParameterError(f"soil.preset = {name!r} is not a known soil; known: {', '.join(SOILS)}")
+    return check_set(dict(SOILS[name]), SOIL_PARAMS, f"soil preset {name!r}")
