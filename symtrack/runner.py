@@ -53,7 +53,7 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
     params = scenario.params
     p = model.param_vector(params)
     settings = IntegratorSettings(scenario.run.integrator, scenario.run.reltol, scenario.run.abstol)
-    stepper = Stepper(model, params, settings)
+    stepper = Stepper(model, settings)
     st = scenario.start
     x = static_state(model, params, st.x_m, st.y_m, np.radians(st.yaw_deg))
 
@@ -77,7 +77,7 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
             if t + 1e-12 < tc < t_next - 1e-12:
                 t_next = tc
         u = np.array(scenario.torque_at(t))
-        x_new = stepper.step(x, u, t_next - t)
+        x_new = stepper.step(x, u, p, t_next - t)
         done = False
         if dist_from is not None and t_next > dist_from + 1e-12:
             d_step = float(np.hypot(x_new[0] - x[0], x_new[1] - x[1]))
@@ -88,7 +88,7 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
                     if d_step <= 0:
                         break
                     h *= (run_cfg.stop_after_distance_m - dist) / d_step
-                    x_new = stepper.step(x, u, h)
+                    x_new = stepper.step(x, u, p, h)
                     d_step = float(np.hypot(x_new[0] - x[0], x_new[1] - x[1]))
                 t_next = t + h
                 done = True

@@ -34,11 +34,10 @@ class IntegratorSettings:
 class Stepper:
     """Advances the state of a model over one step of given length with fixed inputs."""
 
-    def __init__(self, model: SystemModel, params: dict, settings: IntegratorSettings):
+    def __init__(self, model: SystemModel, settings: IntegratorSettings):
         if settings.method not in INTEGRATORS:
             raise SimulationError(f"run.integrator = {settings.method!r} is not one of {', '.join(INTEGRATORS)}")
         self.model, self.settings = model, settings
-        self.p = model.param_vector(params)
         h = ca.SX.sym("step_s")
         opts = {"abstol": settings.abstol, "reltol": settings.reltol, "max_num_steps": settings.max_num_steps}
         if settings.method == "cvodes":
@@ -50,10 +49,15 @@ class Stepper:
         self.F = ca.integrator("step_" + settings.method, settings.method, dae, 0.0, 1.0, opts)
         self.z = None
 
-    def step(self, x, u, dt: float):
-        args = {"x0": x, "u": u, "p": self.p + [dt]}
+    def reset(self):
+        """Forget the algebraic guess (IDAS) after a jump of the state."""
+        self.z = None
+
+    def step(self, x, u, p, dt: float):
+        """Integrate from state x over dt [s] with inputs u and parameter vector p held fixed."""
+        args = {"x0": x, "u": u, "p": ca.vertcat(p, dt)}
         if self.settings.method == "idas":
-            args["z0"] = self.model.accel(x, u, self.p) if self.z is None else self.z
+            args["z0"] = self.model.accel(x, u, p) if self.z is None else self.z
         try:
             r = self.F(**args)
         except RuntimeError as err:

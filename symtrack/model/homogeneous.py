@@ -31,6 +31,7 @@ def cell_state_names(track: str, end: str) -> tuple[str, str]:
 
 class HomogeneousTerrain:
     name = "homogeneous"
+    param_names = ()
 
     def __init__(self, opts: ModelOptions):
         self.opts = opts
@@ -43,7 +44,7 @@ class HomogeneousTerrain:
     def _keq(self, P):
         return cell.k_eq(P["k_c_N_per_m_n1"], P["k_phi_N_per_m_n2"], P["track_width_m"])
 
-    def compaction(self, xc, P):
+    def compaction(self, xv, xc, P, Q):
         keq, n = self._keq(P), P["bekker_n"]
         out = []
         for k in TRACKS:
@@ -53,7 +54,7 @@ class HomogeneousTerrain:
             out.append(P["track_width_m"] * keq * z ** (n + 1) / (n + 1))
         return ca.vertcat(*out)
 
-    def equations(self, xc, dist: dict, P):
+    def equations(self, xv, xc, dist: dict, P, Q):
         """Cell state derivatives and named signals, given the vehicle's pressure distributions."""
         keq, n = self._keq(P), P["bekker_n"]
         reg = self.opts.bekker_regularisation_m

@@ -11,6 +11,13 @@ signature, which the integrators, the linearisation and the MPC all reuse:
 - ``jac_ode(x, u, p) -> (A, B)``: the exact Jacobians of ``ode``;
 - ``accel(x, u, p) -> z``: the fixed-point accelerations (consistent z for IDAS).
 
+A terrain plugs in through a narrow interface (like Chrono's terrain query):
+``state_names``, optional ``param_names`` (its own entries of p, after the vehicle and soil
+parameters), ``compaction(xv, xc, P, Q) -> (2,)`` compaction resistance per track, and
+``equations(xv, xc, dist, P, Q) -> (xc_dot, signals)`` where ``dist`` are the tracks'
+:class:`~symtrack.model.vehicle.PressureDistribution` and ``signals`` must contain
+``sinkage_{sprocket,idler}_{left,right}_m`` and ``p_{sprocket,idler}_{left,right}_Pa``.
+
 States, inputs, parameters and outputs are named symbols whose names carry units; the model
 holds no numbers except true constants and the numerical options of :class:`ModelOptions`.
 """
@@ -38,18 +45,20 @@ class SystemModel:
         self.state_names = VEHICLE_STATES + self.terrain.state_names
         self.input_names = INPUTS
         self.alg_names = ALGEBRAIC
-        self.param_names = PARAM_NAMES
         nv = len(VEHICLE_STATES)
 
-        xs, us, zs, ps = (_syms(n) for n in (self.state_names, INPUTS, ALGEBRAIC, PARAM_NAMES))
+        self.terrain_param_names = tuple(getattr(self.terrain, "param_names", ()))
+        self.param_names = PARAM_NAMES + self.terrain_param_names
+        xs, us, zs, ps = (_syms(n) for n in (self.state_names, INPUTS, ALGEBRAIC, self.param_names))
         x, u, z, p = (ca.vertcat(*s) for s in (xs, us, zs, ps))
         P = dict(zip(PARAM_NAMES, ps))
+        Q = ca.vertcat(*ps[len(PARAM_NAMES):])
         xv, xc = x[:nv], x[nv:]
-        compaction = self.terrain.compaction(xc, P)
+        compaction = self.terrain.compaction(xv, xc, P, Q)
 
         def evaluate(acc):
             veh = vehicle_equations(xv, u, acc, P, compaction, self.opts)
-            cdot, csig = self.terrain.equations(xc, veh["dist"], P)
+            cdot, csig = self.terrain.equations(xv, xc, veh["dist"], P, Q)
             return veh, ca.vertcat(veh["xdot"], cdot), csig
 
         # DAE form: the accelerations are algebraic variables.
@@ -95,5 +104,12 @@ class SystemModel:
     def output_index(self, name: str) -> int:
         return self.output_names.index(name)
 
-    def param_vector(self, values: dict) -> list[float]:
-        return [float(values[n]) for n in self.param_names]
+    def param_vector(self, values: dict, terrain_values=None) -> list[float]:
+        """The parameter vector p: vehicle and soil values by name, then the terrain's own
+        parameters (empty for the homogeneous terrain) as a flat sequence."""
+        out = [float(values[n]) for n in PARAM_NAMES]
+        if self.terrain_param_names:
+            if terrain_values is None or len(terrain_values) != len(self.terrain_param_names):
+                raise ValueError(f"the {self.terrain.name} terrain needs {len(self.terrain_param_names)} values")
+            out += [float(v) for v in terrain_values]
+        return out
