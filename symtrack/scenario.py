@@ -238,8 +238,10 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     torque = _parse_torque(d.get("torque"))
     extra = {k: EXTRA_SECTIONS[k](d[k]) for k in EXTRA_SECTIONS if k in d}
     sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, extra)
-    if run.stop_distance_event is not None:
-        sc.event_time(run.stop_distance_event)  # raises if the event does not exist
+    events = [e.event for e in torque if e.event]
+    if run.stop_distance_event is not None and run.stop_distance_event not in events:
+        raise ScenarioError(f"run.stop_distance_event = {run.stop_distance_event!r} names no [[torque]] event; "
+                            f"events: {', '.join(events) or 'none'}")
     return sc
 
 
@@ -270,8 +272,8 @@ def load_scenario(name_or_path: str, overrides: list[str] | tuple[str, ...] = ()
         text = resources.files("symtrack.scenarios").joinpath(name_or_path + ".toml").read_text()
         default_name = name_or_path
     else:
-        raise ScenarioError(
-            f"scenario {name_or_path!r} is neither a file nor a built-in scenario; built-in: {', '.join(builtin_names())}")
+        known = ", ".join(builtin_names())
+        raise ScenarioError(f"scenario {name_or_path!r} is neither a file nor a built-in scenario; built-in: {known}")
     try:
         d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:

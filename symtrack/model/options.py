@@ -13,17 +13,23 @@ TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
 class ModelOptions:
     """How the equations are written.
 
-    traction_sign: how sign(j) of seed eq. (1) is evaluated.
-        "smooth" (default): j/sqrt(j^2 + d^2) with d = shear_smoothing_m, the product with the
-        bracket is then smooth and odd, and differs from the exact law only for |j| ~ d.
-        "tanh": tanh(k j) with k = tanh_steepness_per_m, the seed's approximation.
-        "sign": the discontinuous sign(), kept to reproduce the seed's numerical oscillations.
+    traction_sign: how the sign functions of the model are evaluated: sign(j) of seed eq. (1),
+        and the direction sign(omega) of the internal resistance and sign(v_k) of the compaction
+        resistance.
+        "smooth" (default): sign(j) = j/sqrt(j^2 + d^2) with d = shear_smoothing_m (the product
+        with the bracket of eq. (1) is then smooth and odd and differs from the exact law only
+        for |j| ~ d); the directions are tanh(omega/omega_smoothing), tanh(v/motion_smoothing).
+        "tanh": the seed's approximation, sign(j) = tanh(k j) with k = tanh_steepness_per_m;
+        directions as in "smooth".
+        "sign": the discontinuous sign() everywhere, kept to reproduce the seed's numerical
+        oscillations (Coulomb-like chattering of the internal resistance at omega = 0).
     lateral_segments, gauss_points: the lateral resistance is integrated along each track with
         composite Gauss-Legendre quadrature (segments x points per segment).
-    accel_fixed_point_iterations: the body accelerations a_x, a_y enter the pressure
-        distribution (load transfer), which sets the forces, which set the accelerations. For the
-        ODE form this algebraic loop is solved by this many fixed-point iterations from a = 0;
-        the DAE form (IDAS) solves it exactly. tests/test_vehicle.py measures the residual.
+    accel_newton_iterations: the body accelerations a_x, a_y enter the pressure distribution
+        (load transfer), which sets the forces, which set the accelerations. For the ODE form this
+        algebraic loop is solved inside the expression: one fixed-point step from a = 0, then this
+        many Newton steps on the 2x2 system; the DAE form (IDAS) solves it with algebraic
+        variables. tests/test_vehicle.py measures the residual.
     """
 
     traction_sign: str = "smooth"
@@ -34,7 +40,7 @@ class ModelOptions:
     bekker_regularisation_m: float = 1e-6
     lateral_segments: int = 4
     gauss_points: int = 3
-    accel_fixed_point_iterations: int = 4
+    accel_newton_iterations: int = 1
 
     def __post_init__(self):
         if self.traction_sign not in TRACTION_SIGN_MODES:
@@ -47,7 +53,7 @@ class ModelOptions:
             if not (isinstance(v, (int, float)) and v > 0):
                 raise ParameterError(f"model.{name} = {v!r} must be a number > 0")
         for name, lo, hi in (("lateral_segments", 1, 64), ("gauss_points", 1, 16),
-                             ("accel_fixed_point_iterations", 1, 50)):
+                             ("accel_newton_iterations", 0, 20)):
             v = getattr(self, name)
             if not (isinstance(v, int) and lo <= v <= hi):
                 raise ParameterError(f"model.{name} = {v!r} must be an integer in [{lo}, {hi}]")

@@ -5,11 +5,11 @@ signature, which the integrators, the linearisation and the MPC all reuse:
 
 - ``dae(x, z, u, p) -> (ode, alg)``: the semi-explicit DAE; z are the body accelerations, alg
   closes the load-transfer loop exactly (for IDAS);
-- ``ode(x, u, p) -> ode``: the ODE form, the loop solved by fixed-point iterations (for CVODES
-  and for control);
+- ``ode(x, u, p) -> ode``: the ODE form, the loop solved inside the expression by Newton steps
+  (for CVODES and for control);
 - ``outputs(x, u, p) -> y``: the named outputs of :attr:`output_names`;
 - ``jac_ode(x, u, p) -> (A, B)``: the exact Jacobians of ``ode``;
-- ``accel(x, u, p) -> z``: the fixed-point accelerations (consistent z for IDAS).
+- ``accel(x, u, p) -> z``: the ODE form's accelerations (a consistent z for IDAS).
 
 A terrain plugs in through a narrow interface (like Chrono's terrain query):
 ``state_names``, optional ``param_names`` (its own entries of p, after the vehicle and soil
@@ -51,7 +51,7 @@ class SystemModel:
         self.param_names = PARAM_NAMES + self.terrain_param_names
         xs, us, zs, ps = (_syms(n) for n in (self.state_names, INPUTS, ALGEBRAIC, self.param_names))
         x, u, z, p = (ca.vertcat(*s) for s in (xs, us, zs, ps))
-        P = dict(zip(PARAM_NAMES, ps))
+        P = dict(zip(PARAM_NAMES, ps[:len(PARAM_NAMES)], strict=True))
         Q = ca.vertcat(*ps[len(PARAM_NAMES):])
         xv, xc = x[:nv], x[nv:]
         compaction = self.terrain.compaction(xv, xc, P, Q)
@@ -64,10 +64,14 @@ class SystemModel:
         # DAE form: the accelerations are algebraic variables.
         veh_z, ode_z, _ = evaluate(z)
         alg = z - veh_z["acc_implied"]
-        # ODE form: fixed-point iterations of the load-transfer loop from a = 0.
-        acc = ca.DM.zeros(2)
-        for _ in range(self.opts.accel_fixed_point_iterations):
-            acc = vehicle_equations(xv, u, acc, P, compaction, self.opts)["acc_implied"]
+        # ODE form: the load-transfer loop a = g(x, a) solved inside the expression by one
+        # fixed-point step from a = 0 and then Newton steps on a - g(x, a) (a 2x2 system).
+        gz = veh_z["acc_implied"]
+        G = ca.Function("G", [z, x, u, p], [gz, ca.jacobian(gz, z)])
+        acc = G(ca.DM.zeros(2), x, u, p)[0]
+        for _ in range(self.opts.accel_newton_iterations):
+            g, dg = G(acc, x, u, p)
+            acc = acc - ca.solve(ca.DM.eye(2) - dg, acc - g)
         veh, ode, csig = evaluate(acc)
 
         signals = dict(veh["signals"])

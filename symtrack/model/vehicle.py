@@ -39,7 +39,7 @@ def gauss_nodes(length, n_segments: int, n_points: int):
     xg, wg = np.polynomial.legendre.leggauss(n_points)
     s, w = [], []
     for k in range(n_segments):
-        for xi, wi in zip(xg, wg):
+        for xi, wi in zip(xg, wg, strict=True):
             s.append((k + 0.5 * (xi + 1.0)) / n_segments)
             w.append(0.5 * wi / n_segments)
     return [length * si for si in s], [length * wi for wi in w]
@@ -92,6 +92,11 @@ def traction_shape(j, K, opts: ModelOptions):
     return sgn * bracket
 
 
+def direction(x, eps, opts: ModelOptions):
+    """sign(x) of a resistance's direction: tanh(x/eps), or the exact sign() in "sign" mode."""
+    return ca.sign(x) if opts.traction_sign == "sign" else ca.tanh(x / eps)
+
+
 def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> dict:
     """All vehicle expressions.
 
@@ -135,7 +140,10 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> 
     torque = {"left": TL, "right": TR}
     # Track centre-line speeds (not the CG speed).
     v_track = {"left": vx - rz * B / 2, "right": vx + rz * B / 2}
-    abs_om = {k: ca.sqrt(omega[k] ** 2 + opts.omega_smoothing_rad_s**2) for k in TRACKS}
+    if opts.traction_sign == "sign":
+        abs_om = {k: ca.fabs(omega[k]) for k in TRACKS}
+    else:
+        abs_om = {k: ca.sqrt(omega[k] ** 2 + opts.omega_smoothing_rad_s**2) for k in TRACKS}
 
     F, R_in, Rc, Fy, Mz, jdot, omdot = {}, {}, {}, {}, {}, {}, {}
     s_nodes, w_nodes = gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points)
@@ -147,12 +155,12 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> 
         # Internal running-gear resistance (reconstruction; Wong): W_k (0.0222 + 0.0003 V[km/h]).
         V_kmh = 3.6 * r * abs_om[k]
         R_in[k] = N[k] * (P["internal_resistance_const"] + P["internal_resistance_per_km_h"] * V_kmh) \
-            * ca.tanh(omega[k] / opts.omega_smoothing_rad_s)
+            * direction(omega[k], opts.omega_smoothing_rad_s, opts)
         # Compaction resistance from the terrain, opposing the track's motion.
-        Rc[k] = compaction_N[idx] * ca.tanh(v_track[k] / opts.motion_smoothing_m_s)
+        Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
         # Lateral resistance along the track (reconstruction), composite Gauss-Legendre.
         fy_sum, mz_sum = 0, 0
-        for sn, wn in zip(s_nodes, w_nodes):
+        for sn, wn in zip(s_nodes, w_nodes, strict=True):
             s = sn * l
             x_body = l / 2 - e - s
             q = b * dist[k].at(s)

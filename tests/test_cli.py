@@ -1,0 +1,51 @@
+"""The command line: the files it writes, and that a failed run writes nothing."""
+
+import csv
+import json
+
+from symtrack.cli import main
+
+REQUIRED_COLUMNS = (
+    "t_s x_m y_m yaw_rad u_m_s v_m_s yaw_rate_rad_s omega_left_rad_s omega_right_rad_s shear_left_m "
+    "shear_right_m torque_left_N_m torque_right_N_m tractive_left_N tractive_right_N p_sprocket_left_Pa "
+    "p_idler_left_Pa p_sprocket_right_Pa p_idler_right_Pa sinkage_sprocket_left_m sinkage_idler_left_m "
+    "sinkage_sprocket_right_m sinkage_idler_right_m pitch_rad"
+).split()
+
+
+def test_simulate_writes_summary_trajectory_scenario_and_plots(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", "validation", "--out", str(out), "--set", "run.output_dt_s=0.02", "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["schema_version"] == 1
+    for key in ("distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm",
+                "sinkage_idler_mm", "shear_driven_max_m", "shear_idle_min_m", "nose_up", "sim_time_s",
+                "wall_time_s", "real_time_factor"):
+        assert key in summary
+    with open(out / "trajectory.csv") as f:
+        rows = list(csv.reader(f))
+    header = rows[0]
+    for col in REQUIRED_COLUMNS:
+        assert col in header, col
+    assert len(rows) > 100 and len(rows[1]) == len(header)
+    assert float(rows[-1][0]) == summary["sim_time_s"] or abs(float(rows[-1][0]) - summary["sim_time_s"]) < 1e-6
+    assert "output_dt_s = 0.02" in (out / "scenario.resolved.toml").read_text()
+    for png in ("path.png", "yaw.png", "sinkage.png", "shear.png", "speeds.png", "torques.png"):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| lateral_deviation_m |" in capsys.readouterr().out
+
+
+def test_bad_input_fails_clearly_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "bad"
+    assert main(["simulate", "validation", "--out", str(out), "--set", "vehicle.mass_kg=-1"]) == 2
+    err = capsys.readouterr().err
+    assert "vehicle.mass_kg" in err and "-1" in err and "allowed range" in err
+    assert not out.exists()
+
+
+def test_run_that_cannot_finish_writes_no_summary(tmp_path, capsys):
+    out = tmp_path / "short"
+    # 0.5 s is not enough to cover 20 m after the idle event at 4 s
+    assert main(["simulate", "validation", "--out", str(out), "--set", "run.duration_s=0.5"]) == 2
+    assert "raise duration_s" in capsys.readouterr().err
+    assert not (out / "summary.json").exists()
