@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test lint clean
+.PHONY: demo test lint clean codegen standalone bench
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,21 @@ lint: $(VENV)/.installed-dev
 
 test: lint
 	$(PY) -m pytest
+
+# generated C (docs/codegen.md): regenerate generated/, build and run the standalone program, benchmark
+CC ?= cc
+codegen: $(VENV)/.installed
+	$(PY) -m codegen
+
+build/symtrack_standalone: codegen/standalone_main.c generated/homogeneous_rosenbrock.c generated/homogeneous_rosenbrock.h generated/homogeneous_validation.h
+	mkdir -p build
+	$(CC) -O2 -std=c99 -Wall -Igenerated codegen/standalone_main.c generated/homogeneous_rosenbrock.c -o $@ -lm
+
+standalone: build/symtrack_standalone
+	./build/symtrack_standalone
+
+bench: $(VENV)/.installed build/symtrack_standalone
+	$(VENV)/bin/symtrack bench --out out/bench.json
 
 clean:
 	rm -rf out build *.egg-info

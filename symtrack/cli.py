@@ -44,14 +44,35 @@ def main(argv=None) -> int:
     s.add_argument("scenario")
     s.add_argument("--out", required=True, help="output folder")
     s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="override a scenario value")
-    s.add_argument("--integrator", choices=("cvodes", "idas"), help="shorthand for --set run.integrator=...")
+    s.add_argument("--integrator", choices=("cvodes", "idas", "rosenbrock"),
+                   help="shorthand for --set run.integrator=... (rosenbrock: compiled fixed-step, docs/codegen.md)")
+    s.add_argument("--compiled", action="store_true",
+                   help="cvodes/idas on the compiled model (--set run.compiled=true)")
+    s.add_argument("--require-compiled", action="store_true",
+                   help="fail instead of falling back to the interpreter when no C compiler is found")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_simulate)
     ls = sub.add_parser("scenarios", help="list the built-in scenarios")
     ls.set_defaults(func=_scenarios)
+    from codegen import cli as codegen_cli
+
+    cg = sub.add_parser("codegen", help="write the generated C sources (as python -m codegen)")
+    codegen_cli.add_arguments(cg)
+    cg.set_defaults(func=codegen_cli.run)
+    from . import bench
+
+    bn = sub.add_parser("bench", help="real-time factors of every integrator, in one process (docs/codegen.md)")
+    bench.add_arguments(bn)
+    bn.set_defaults(func=bench.run_cli)
     args = ap.parse_args(argv)
     if getattr(args, "integrator", None):
         args.set = (args.set or []) + [f"run.integrator={args.integrator}"]
+    if getattr(args, "compiled", False):
+        args.set = (args.set or []) + ["run.compiled=true"]
+    if getattr(args, "require_compiled", False):
+        from .compiled import set_require_compiled
+
+        set_require_compiled(True)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
         return args.func(args)

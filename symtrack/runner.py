@@ -11,7 +11,7 @@ from .errors import SimulationError
 from .model import SystemModel
 from .progress import Progress
 from .scenario import Scenario
-from .simulate import IntegratorSettings, Stepper, static_state
+from .simulate import FIXED_STEP_INTEGRATORS, IntegratorSettings, Stepper, static_state
 
 SUMMARY_SCHEMA_VERSION = 1
 INPUT_COLUMNS = ("torque_cmd_left_N_m", "torque_cmd_right_N_m")
@@ -52,7 +52,13 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
     model = model or build_model(scenario)
     params = scenario.params
     p = model.param_vector(params)
-    settings = IntegratorSettings(scenario.run.integrator, scenario.run.reltol, scenario.run.abstol)
+    settings = IntegratorSettings(scenario.run.integrator, scenario.run.reltol, scenario.run.abstol,
+                                  compiled=scenario.run.compiled, fixed_step_s=scenario.run.fixed_step_s)
+    if settings.method in FIXED_STEP_INTEGRATORS:
+        # the same time loop, with the inner loop (many steps per call) in generated C
+        from .compiled import run_fixed_step
+
+        return run_fixed_step(scenario, model, settings, progress)
     stepper = Stepper(model, settings)
     st = scenario.start
     x = static_state(model, params, st.x_m, st.y_m, np.radians(st.yaw_deg))

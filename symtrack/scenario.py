@@ -7,7 +7,9 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     [run]
     duration_s = 30.0              # (0, 1e6]      simulated time limit
     output_dt_s = 0.01             # (0, duration] output (and macro) step
-    integrator = "cvodes"          # cvodes | idas
+    integrator = "cvodes"          # cvodes | idas | rosenbrock (compiled fixed-step, docs/codegen.md)
+    fixed_step_s = 0.01            # [1e-5, 0.1] rosenbrock: each output step is split into equal steps <= this
+    compiled = false               # cvodes/idas on the compiled dynamics and Jacobian (docs/codegen.md)
     reltol = 1e-7                  # (0, 1e-2]
     abstol = 1e-9                  # (0, 1e-2]
     stop_after_distance_m = 20.0   # (0, 1e6]  stop once the CG has covered this path length ...
@@ -65,6 +67,8 @@ class RunSettings:
     abstol: float = 1e-9
     stop_after_distance_m: float | None = None
     stop_distance_event: str | None = None
+    fixed_step_s: float = 0.01
+    compiled: bool = False
 
 
 @dataclass(frozen=True)
@@ -156,7 +160,11 @@ def _parse_run(t: dict) -> RunSettings:
         raise ScenarioError(f"run.stop_distance_event = {ev!r} must be the name of a [[torque]] event")
     if ev is not None and stop is None:
         raise ScenarioError("run.stop_distance_event is set but run.stop_after_distance_m is not")
-    return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev)
+    fixed = _num("run", "fixed_step_s", t.get("fixed_step_s", d.fixed_step_s), 1e-5, 0.1)
+    compiled = t.get("compiled", d.compiled)
+    if not isinstance(compiled, bool):
+        raise ScenarioError(f"run.compiled = {compiled!r} must be true or false")
+    return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev, fixed, compiled)
 
 
 def _parse_model(t: dict) -> ModelOptions:

@@ -1,0 +1,88 @@
+"""``python -m codegen`` / ``symtrack codegen``: write the generated C sources.
+
+Writes, for the homogeneous-terrain system of the default model options, the files listed in
+:mod:`codegen.generate` plus ``homogeneous_validation.h`` (the numbers of the built-in validation
+scenario for the standalone C program) into ``generated/`` (or ``--out``). Files are written
+atomically and only when their content changed; ``--check`` writes nothing and exits with 1 when
+the folder is out of date.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import tempfile
+from pathlib import Path
+
+log = logging.getLogger("symtrack.codegen")
+
+REPO_GENERATED = Path(__file__).resolve().parent.parent / "generated"
+
+
+def render_all(scratch: Path) -> dict[str, bytes]:
+    """Every file of generated/ as name -> bytes."""
+    from symtrack.model import SystemModel
+
+    from . import standalone
+    from .generate import build, render
+
+    model = SystemModel()
+    gen = build(model, model.terrain.name)
+    files = render(gen, scratch)
+    files[f"{gen.prefix}_validation.h"] = standalone.validation_header(model, gen)
+    return files
+
+
+def write(out_dir: Path) -> list[str]:
+    """Generate into out_dir; returns the names of the files that changed."""
+    from symtrack.output import atomic_write_bytes
+
+    with tempfile.TemporaryDirectory(prefix="symtrack-codegen-") as scratch:
+        files = render_all(Path(scratch))
+    changed = []
+    for name, data in sorted(files.items()):
+        path = out_dir / name
+        if not path.exists() or path.read_bytes() != data:
+            atomic_write_bytes(path, data)
+            path.chmod(0o644)
+            changed.append(name)
+    return changed
+
+
+def check(out_dir: Path) -> list[str]:
+    """Names of the files in out_dir that differ from a fresh generation (or are missing)."""
+    with tempfile.TemporaryDirectory(prefix="symtrack-codegen-") as scratch:
+        files = render_all(Path(scratch))
+    return [n for n, d in sorted(files.items()) if not (out_dir / n).exists() or (out_dir / n).read_bytes() != d]
+
+
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--out", default=str(REPO_GENERATED), help="output folder (default: the repository's generated/)")
+    ap.add_argument("--check", action="store_true", help="write nothing; exit 1 if the folder is out of date")
+
+
+def run(args) -> int:
+    out = Path(args.out)
+    if args.check:
+        stale = check(out)
+        if stale:
+            log.error("out of date in %s: %s (run python -m codegen)", out, ", ".join(stale))
+            return 1
+        log.info("%s is up to date", out)
+        return 0
+    changed = write(out)
+    log.info("wrote %d changed file(s) into %s%s", len(changed), out, (": " + ", ".join(changed)) if changed else "")
+    return 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m codegen", description="Generate symtrack's C sources.")
+    add_arguments(ap)
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    return run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

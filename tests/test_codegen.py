@@ -1,0 +1,69 @@
+"""generated/ is in sync with the model, deterministic, exportable and documented by its manifest."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from codegen import cli as codegen_cli
+from codegen.generate import build, unit_of
+from symtrack.model import SystemModel
+
+GEN = codegen_cli.REPO_GENERATED
+
+
+def test_generated_folder_is_in_sync_with_the_model(tmp_path):
+    # regenerate into a temporary folder and compare byte by byte with generated/
+    changed = codegen_cli.write(tmp_path)
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert changed == names
+    committed = sorted(p.name for p in GEN.iterdir() if not p.name.startswith("."))
+    assert names == committed
+    stale = [n for n in names if (tmp_path / n).read_bytes() != (GEN / n).read_bytes()]
+    assert not stale, f"generated/ is out of date ({stale}): run python -m codegen"
+    # regenerating over an up-to-date folder changes nothing
+    assert codegen_cli.write(tmp_path) == []
+
+
+def test_generated_files_are_exportable_and_small():
+    for path in GEN.iterdir():
+        data = path.read_bytes()
+        assert len(data) < 1_500_000, f"{path.name} is {len(data)} bytes"
+        if path.suffix == ".c":
+            assert b"#error" not in data, path.name
+
+
+def test_manifest_names_hash_and_units():
+    man = json.loads((GEN / "manifest.json").read_text())
+    model = SystemModel()
+    gen = build(model, "homogeneous")
+    assert man["model_hash"] == gen.model_hash
+    assert man["casadi_version"] == gen.casadi_version
+    funcs = man["functions"]
+    for name in ("homogeneous_ode", "jac_homogeneous_ode", "homogeneous_dae", "jac_homogeneous_dae",
+                 "homogeneous_outputs", "homogeneous_linearise", "homogeneous_linearise_outputs",
+                 "homogeneous_accel", "homogeneous_rosenbrock_step", "homogeneous_rosenbrock_chunk256",
+                 "homogeneous_rosenbrock_chunk16"):
+        assert name in funcs, name
+    x_in = funcs["homogeneous_ode"]["inputs"][0]
+    assert [e["name"] for e in x_in["elements"]] == list(model.state_names)
+    units = {e["name"]: e["unit"] for e in x_in["elements"]}
+    assert units["u_m_s"] == "m/s" and units["yaw_rad"] == "rad" and units["torque_left_N_m"] == "N m"
+    ode_out = {e["name"]: e["unit"] for e in funcs["homogeneous_ode"]["outputs"][0]["elements"]}
+    assert ode_out["d_u_m_s_dt"] == "m/s^2" and ode_out["d_x_m_dt"] == "m/s"
+    y = funcs["homogeneous_outputs"]["outputs"][0]["elements"]
+    assert [e["name"] for e in y] == list(model.output_names)
+    # every file listed with its hash exists
+    import hashlib
+
+    for fname, digest in man["files"].items():
+        assert hashlib.sha256((GEN / fname).read_bytes()).hexdigest() == digest
+
+
+@pytest.mark.parametrize("name, unit", [("k_c_N_per_m_n1", "N/m^(n+1)"), ("cell_damping_Pa_s_per_m", "Pa s/m"),
+                                        ("accel_x_m_s2", "m/s^2"), ("omega_left_rad_s", "rad/s"),
+                                        ("slip_left", "1"), ("bekker_n", "1"), ("mass_kg", "kg"),
+                                        ("internal_resistance_per_km_h", "h/km"), ("step_s", "s")])
+def test_unit_of(name, unit):
+    assert unit_of(name) == unit
