@@ -11,8 +11,9 @@ Files written for a model with prefix ``<m>`` (fixed, predictable names, like ac
 - ``<m>_outputs.c/.h``: ``<m>_outputs(x,u,p)->y`` and ``<m>_linearise_outputs(x,u,p)->(C,D)``
   (the exact Jacobians with respect to x and u);
 - ``<m>_dae.c/.h``: ``<m>_dae(x,z,u,p)->(ode,alg)``, ``jac_<m>_dae``, ``<m>_accel(x,u,p)->z``;
-- ``<m>_rosenbrock.c/.h``: the fixed-step integrator (CasADi's 8-stage, L-stable, order-5
-  ``rosenbrock`` on the index-1 DAE form): ``<m>_rosenbrock_step(x0,z0,u,p,h)->(xf,zf)``
+- ``<m>_rosenbrock.c/.h``: the fixed-step integrator (the 8-stage, L-stable, order-5 Rosenbrock
+  method of CasADi's ``rosenbrock`` plugin, unrolled with a sparse LU in :mod:`codegen.rosenbrock`,
+  on the index-1 DAE form): ``<m>_rosenbrock_step(x0,z0,u,p,h)->(xf,zf)``
   advances one step of length h, and ``<m>_rosenbrock_chunk<N>(x0,z0,U,H,p)->(X,Z,Y)``
   advances N steps in one call (column k of U and H are the input and the length of step k;
   a step of length 0 leaves the state unchanged; column k of X, Z, Y is the state,
@@ -29,6 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
+
+from . import rosenbrock
 
 MANIFEST_SCHEMA_VERSION = 1
 # Steps per call of the chunk functions: a long chunk for the bulk of a run and a short one
@@ -90,21 +93,18 @@ def _rename(f: ca.Function, name: str) -> ca.Function:
 
 
 def fixed_step_functions(model, prefix: str):
-    """One fixed step of the ``rosenbrock`` integrator on the DAE form and its chunked versions."""
-    h = ca.SX.sym("step_s")
-    dae = {"x": model.x, "z": model.z, "u": model.u, "p": ca.vertcat(model.p, h),
-           "ode": h * model.ode_dae_expr, "alg": model.alg_expr}
-    # time-scaled on [0, 1]: one integrator object serves every step length h
-    integ = ca.integrator(f"{prefix}_{FIXED_STEP_METHOD}_integrator", FIXED_STEP_METHOD, dae, 0.0, 1.0,
-                          {"step_size": 1.0})
+    """One step of the unrolled Rosenbrock method (:mod:`codegen.rosenbrock`) on the DAE form,
+    and chunks of many steps per call."""
+    x0, z0 = ca.SX.sym("x0", model.x.sparsity()), ca.SX.sym("z0", model.z.sparsity())
+    u, p, h = ca.SX.sym("u", model.u.sparsity()), ca.SX.sym("p", model.p.sparsity()), ca.SX.sym("h")
+    x1, z1 = rosenbrock.step_expressions(model.dae, x0, z0, u, p, h)
+    step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [x0, z0, u, p, h], [x1, z1],
+                       ["x0", "z0", "u", "p", "h"], ["xf", "zf"], {"cse": True})
+    # one column of a chunk: a step, then the outputs at its end (an MX Function calling the two)
     X0, Z0 = ca.MX.sym("x0", model.x.sparsity()), ca.MX.sym("z0", model.z.sparsity())
     U, P, H = ca.MX.sym("u", model.u.sparsity()), ca.MX.sym("p", model.p.sparsity()), ca.MX.sym("h")
-    r = integ(x0=X0, z0=Z0, u=U, p=ca.vertcat(P, H))
-    step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [X0, Z0, U, P, H], [r["xf"], r["zf"]],
-                       ["x0", "z0", "u", "p", "h"], ["xf", "zf"])
-    # one column of a chunk: a step, then the outputs at its end
-    y = model.outputs(r["xf"], U, P)
-    col = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_column", [X0, Z0, U, P, H], [r["xf"], r["zf"], y],
+    xf, zf = step(X0, Z0, U, P, H)
+    col = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_column", [X0, Z0, U, P, H], [xf, zf, model.outputs(xf, U, P)],
                       ["x0", "z0", "u", "p", "h"], ["xf", "zf", "y"])
     chunks = []
     for n in CHUNK_SIZES:

@@ -31,10 +31,10 @@ const casadi_int* homogeneous_rosenbrock_step_sparsity_in(casadi_int i);
 const casadi_int* homogeneous_rosenbrock_step_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_step_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_step_SZ_ARG 17
-#define homogeneous_rosenbrock_step_SZ_RES 18
+#define homogeneous_rosenbrock_step_SZ_ARG 5
+#define homogeneous_rosenbrock_step_SZ_RES 2
 #define homogeneous_rosenbrock_step_SZ_IW 0
-#define homogeneous_rosenbrock_step_SZ_W 1531
+#define homogeneous_rosenbrock_step_SZ_W 0
 int homogeneous_rosenbrock_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_chunk256_checkout(void);
 void homogeneous_rosenbrock_chunk256_release(int mem);
@@ -49,10 +49,10 @@ const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_in(casadi_int i);
 const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_chunk256_SZ_ARG 37
-#define homogeneous_rosenbrock_chunk256_SZ_RES 31
+#define homogeneous_rosenbrock_chunk256_SZ_ARG 30
+#define homogeneous_rosenbrock_chunk256_SZ_RES 17
 #define homogeneous_rosenbrock_chunk256_SZ_IW 0
-#define homogeneous_rosenbrock_chunk256_SZ_W 35372
+#define homogeneous_rosenbrock_chunk256_SZ_W 34397
 int homogeneous_rosenbrock_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_chunk16_checkout(void);
 void homogeneous_rosenbrock_chunk16_release(int mem);
@@ -67,10 +67,10 @@ const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_in(casadi_int i);
 const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_chunk16_SZ_ARG 32
-#define homogeneous_rosenbrock_chunk16_SZ_RES 28
+#define homogeneous_rosenbrock_chunk16_SZ_ARG 25
+#define homogeneous_rosenbrock_chunk16_SZ_RES 14
 #define homogeneous_rosenbrock_chunk16_SZ_IW 0
-#define homogeneous_rosenbrock_chunk16_SZ_W 4040
+#define homogeneous_rosenbrock_chunk16_SZ_W 3065
 void homogeneous_rosenbrock_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_rosenbrock_casadi_int_size(void);
 int homogeneous_rosenbrock_casadi_real_size(void);

@@ -40,7 +40,7 @@ log = logging.getLogger("symtrack.compiled")
 # bump when the compile flags or the library layout change (part of the cache key)
 BUILD_VERSION = 2
 # the large straight-line Jacobian files take 2x longer to compile at -O2 for little gain
-BIG_FILE_BYTES = 400_000
+BIG_FILE_BYTES = 600_000
 CFLAGS_SMALL = ("-O2",)
 CFLAGS_BIG = ("-O1",)
 # Only the CASADI_SYMBOL_EXPORT functions are exported: the generated helpers then are not
@@ -200,17 +200,41 @@ def substeps(length_s: float, fixed_step_s: float) -> int:
     return max(1, math.ceil(length_s / fixed_step_s - 1e-9))
 
 
+class _Chunk:
+    """A chunk Function (x0, z0, U, H, p) -> (X, Z, Y) called through CasADi's zero-copy buffer
+    interface on numpy arrays that are allocated once (the columns of a CasADi matrix are the
+    rows of these C-ordered arrays): no conversion of the 256 x (nx + nz + ny) results per call."""
+
+    def __init__(self, f: ca.Function, n: int, model):
+        nx, nz, nu, ny = model.nx, model.z.numel(), model.u.numel(), len(model.output_names)
+        self.n = n
+        self.x0, self.z0, self.p = np.zeros(nx), np.zeros(nz), np.zeros(model.p.numel())
+        self.U, self.H = np.zeros((n, nu)), np.zeros(n)
+        self.X, self.Z, self.Y = np.zeros((n, nx)), np.zeros((n, nz)), np.zeros((n, ny))
+        self.f = f
+        self.buf, self._eval = f.buffer()
+        for i, a in enumerate((self.x0, self.z0, self.U, self.H, self.p)):
+            self.buf.set_arg(i, memoryview(a))
+        for i, a in enumerate((self.X, self.Z, self.Y)):
+            self.buf.set_res(i, memoryview(a))
+
+    def __call__(self):
+        self._eval()
+        if self.buf.ret() != 0:
+            raise SimulationError(f"{self.f.name()} failed (status {self.buf.ret()})")
+
+
 class FixedStepper:
-    """simulate.Stepper's interface for the fixed-step integrator (one Python call per 16 steps)."""
+    """simulate.Stepper's interface for the fixed-step integrator (one call per 16 steps)."""
 
     def __init__(self, model, settings):
-        self.model, self.settings = model, settings
-        self.lib = library(model)
         from codegen.generate import CHUNK_SIZES, FIXED_STEP_METHOD
 
+        self.model, self.settings = model, settings
+        self.lib = library(model)
         self.method = FIXED_STEP_METHOD
         self.sizes = CHUNK_SIZES
-        self.chunk = {n: self.lib.f(f"{FIXED_STEP_METHOD}_chunk{n}") for n in CHUNK_SIZES}
+        self.chunk = {n: _Chunk(self.lib.f(f"{FIXED_STEP_METHOD}_chunk{n}"), n, model) for n in CHUNK_SIZES}
         self.z = None
         self.nsteps = 0
         self.ncalls = 0
@@ -218,53 +242,93 @@ class FixedStepper:
     def reset(self):
         self.z = None
 
+    def run_chunk(self, n_cols, x, z, U, H, p):
+        """Advance len(H) <= n_cols steps (column k: input U[k], length H[k]) from (x, z); returns
+        the chunk's arrays X, Z, Y (row k: after step k; rows beyond len(H) are left unchanged)."""
+        c = self.chunk[n_cols]
+        k = len(H)
+        c.x0[:], c.z0[:], c.p[:] = x, z, p
+        c.U[:k], c.U[k:] = U, 0.0
+        c.H[:k], c.H[k:] = H, 0.0
+        c()
+        self.nsteps += k
+        self.ncalls += 1
+        if not np.all(np.isfinite(c.X[k - 1])):
+            raise SimulationError(f"{self.method} returned a non-finite state")
+        return c.X, c.Z, c.Y
+
     def advance(self, x, z, u, p, length_s):
         """State and algebraic state after length_s [s] with input u (equal steps)."""
         n = substeps(length_s, self.settings.fixed_step_s)
         h = length_s / n
         short = min(self.sizes)
-        x, z = ca.DM(x), ca.DM(z)
+        x, z = np.asarray(x, dtype=float), np.asarray(z, dtype=float)
         while n > 0:
             k = min(n, short)
-            H = np.zeros((1, short))
-            H[0, :k] = h
-            X, Z, _ = self.chunk[short](x, z, np.tile(np.reshape(u, (-1, 1)), (1, short)), H, p)
-            x, z = X[:, k - 1], Z[:, k - 1]
+            X, Z, _ = self.run_chunk(short, x, z, np.tile(u, (k, 1)), np.full(k, h), p)
+            x, z = X[k - 1].copy(), Z[k - 1].copy()
             n -= k
-            self.nsteps += k
-            self.ncalls += 1
         return x, z
 
     def step(self, x, u, p, dt: float):
-        z0 = self.lib.f("accel")(x, u, p) if self.z is None else self.z
-        xf, self.z = self.advance(x, z0, u, p, dt)
-        xf = np.array(xf).ravel()
-        if not np.all(np.isfinite(xf)):
-            raise SimulationError(f"{self.method} returned a non-finite state")
+        z0 = np.array(self.lib.f("accel")(x, u, p)).ravel() if self.z is None else self.z
+        xf, self.z = self.advance(x, z0, np.asarray(u, dtype=float), np.asarray(p, dtype=float), dt)
         return xf
 
     def stats(self) -> dict:
         return {"nsteps": self.nsteps, "n_calls": self.ncalls, "compiled": self.lib.compiled}
 
 
-def _intervals(scenario):
-    """The output intervals of runner.run, in order: (t, t_next, u)."""
-    run_cfg = scenario.run
-    change_times = [e.t_s for e in scenario.torque[1:]]
-    t = 0.0
-    while t < run_cfg.duration_s - 1e-12:
-        t_next = min(t + run_cfg.output_dt_s, run_cfg.duration_s)
-        for tc in change_times:
-            if t + 1e-12 < tc < t_next - 1e-12:
-                t_next = tc
-        yield t, t_next, np.array(scenario.torque_at(t), dtype=float)
-        t = t_next
+class _Grid:
+    """The output intervals of runner.run (output_dt_s steps, split at the torque changes, up to
+    duration_s), cut into equal steps of at most fixed_step_s and handed out as chunk columns.
+    Written as a lean loop: it runs in the timed loop, once per step."""
+
+    def __init__(self, scenario, fixed_step_s: float):
+        run = scenario.run
+        self.dt, self.duration, self.fs = run.output_dt_s, run.duration_s, fixed_step_s
+        self.t_s = [e.t_s for e in scenario.torque]
+        self.torque = np.array([[e.left_N_m, e.right_N_m] for e in scenario.torque], dtype=float)
+        self.t = 0.0
+        self.cur = 0  # torque entry in force
+        self.nxt = 1  # first change time not yet passed
+        self.left = 0  # steps of the current interval still to hand out
+        self.h = self.t0 = self.t1 = 0.0
+
+    def fill(self, n_cols: int):
+        """Up to n_cols columns: (step lengths, torque entry per column, [(column, t0, t1) of the
+        columns that end an output interval]). Empty when the grid is exhausted."""
+        hs, ui, ends = [], [], []
+        t_s, dt, duration, fs = self.t_s, self.dt, self.duration, self.fs
+        while len(hs) < n_cols:
+            if self.left == 0:
+                t = self.t
+                if not t < duration - 1e-12:
+                    break
+                t_next = min(t + dt, duration)
+                while self.nxt < len(t_s) and not t + 1e-12 < t_s[self.nxt]:
+                    self.nxt += 1
+                if self.nxt < len(t_s) and t_s[self.nxt] < t_next - 1e-12:
+                    t_next = t_s[self.nxt]
+                while self.cur + 1 < len(t_s) and t_s[self.cur + 1] <= t + 1e-12:
+                    self.cur += 1
+                n = substeps(t_next - t, fs)
+                self.left, self.h, self.t0, self.t1 = n, (t_next - t) / n, t, t_next
+                self.t = t_next
+            take = min(self.left, n_cols - len(hs))
+            hs += [self.h] * take
+            ui += [self.cur] * take
+            self.left -= take
+            if self.left == 0:
+                ends.append((len(hs) - 1, self.t0, self.t1))
+        return hs, ui, ends
 
 
 def run_fixed_step(scenario, model, settings, progress: bool = True):
     """runner.run for the fixed-step integrator: the same output grid, torque schedule and
-    stop-at-distance rule (two secant refinements of the last step), with the steps advanced in
-    chunks of up to 256 per call of the generated C."""
+    stop-at-distance rule (three secant refinements of the last output step), with the steps
+    advanced in chunks of up to 256 per call of the generated C (a short chunk of 16 near the
+    stopping distance, so that little is computed past it)."""
     from .progress import Progress
     from .runner import Result
     from .simulate import static_state
@@ -273,7 +337,7 @@ def run_fixed_step(scenario, model, settings, progress: bool = True):
     lib, fs = stepper.lib, settings.fixed_step_s
     big, short = max(stepper.sizes), min(stepper.sizes)
     params = scenario.params
-    p = ca.DM(model.param_vector(params))
+    p = np.array(model.param_vector(params), dtype=float)
     st = scenario.start
     x = static_state(model, params, st.x_m, st.y_m, np.radians(st.yaw_deg))
     run_cfg = scenario.run
@@ -283,94 +347,82 @@ def run_fixed_step(scenario, model, settings, progress: bool = True):
     target = run_cfg.stop_after_distance_m
     outputs = lib.f("outputs")
     u0 = np.array(scenario.torque_at(0.0), dtype=float)
-    ts, xs, us, ys = [0.0], [x], [u0], [np.array(outputs(x, u0, p)).ravel()]
     z = np.array(lib.f("accel")(x, u0, p)).ravel()
+    # the trajectory as blocks of rows (one block per chunk)
+    tb, xb, ub, yb = [np.zeros(1)], [x[None, :]], [u0[None, :]], [np.array(outputs(x, u0, p)).T]
+    t_last = 0.0
     xk, zk = x, z  # state at the last output point
-    xc, zc = xk, zk  # state at the end of the last chunk (an output interval may span two chunks)
+    xc, zc = x, z  # state at the end of the last chunk (an output interval may span two chunks)
     dist, stopped_by, done = 0.0, "duration", False
-    ivals = _intervals(scenario)
-    pending = []  # (t, t_next, u, n) intervals not yet advanced
+    grid = _Grid(scenario, fs)
     bar = Progress(1.0, scenario.name, enabled=progress)
     wall0 = time.perf_counter()
-    exhausted = False
     while not done:
-        # choose the chunk: a short one near the stopping distance
         n_cols = big
-        if dist_from is not None and ts[-1] >= dist_from:
-            speed = float(np.hypot(xs[-1][3], xs[-1][4]))
-            est = (target - dist) / max(speed, 1e-3) / fs
+        if dist_from is not None and t_last >= dist_from:
+            speed = float(np.hypot(xk[3], xk[4]))
+            est = (target - dist) / max(speed, 1e-3) / fs  # steps left, roughly
             n_cols = big if est > 1.2 * big else short
-        cols_u, cols_h, ends = [], [], []
-        while len(cols_h) < n_cols:
-            if not pending:
-                nxt = next(ivals, None)
-                if nxt is None:
-                    exhausted = True
-                    break
-                t0_, t1_, u_ = nxt
-                pending.append([t0_, t1_, u_, substeps(t1_ - t0_, fs), 0])
-            iv = pending[0]
-            t0_, t1_, u_, n, used = iv
-            take = min(n - used, n_cols - len(cols_h))
-            cols_u += [u_] * take
-            cols_h += [(t1_ - t0_) / n] * take
-            iv[4] += take
-            if iv[4] == n:
-                ends.append((len(cols_h) - 1, t0_, t1_, u_))
-                pending.pop(0)
+        cols_h, cols_u, ends = grid.fill(n_cols)
         if not cols_h:
             break
         k = len(cols_h)
-        U = np.zeros((model.u.numel(), n_cols))
-        U[:, :k] = np.array(cols_u).T
-        H = np.zeros((1, n_cols))
-        H[0, :k] = cols_h
-        X, Z, Y = (np.array(a) for a in stepper.chunk[n_cols](xc, zc, U, H, p))
-        xc, zc = X[:, k - 1], Z[:, k - 1]
-        stepper.nsteps += k
-        stepper.ncalls += 1
-        for j, t0_, t1_, u_ in ends:
-            x_new = X[:, j]
-            if dist_from is not None and t1_ > dist_from + 1e-12:
-                d_step = float(np.hypot(x_new[0] - xs[-1][0], x_new[1] - xs[-1][1]))
-                if dist + d_step >= target:
-                    # shorten the last step so the run ends at the distance (secant refinements)
-                    h = t1_ - t0_
-                    for _ in range(3):
-                        if d_step <= 0:
-                            break
-                        h *= (target - dist) / d_step
-                        xn, _z = stepper.advance(xk, zk, u_, p, h)
-                        x_new = np.array(xn).ravel()
-                        d_step = float(np.hypot(x_new[0] - xs[-1][0], x_new[1] - xs[-1][1]))
-                    t1_ = t0_ + h
-                    done = True
-                    y_new = np.array(outputs(x_new, u_, p)).ravel()
-                dist += d_step
-            if not done:
-                y_new = Y[:, j]
-            ts.append(t1_)
-            xs.append(x_new)
-            us.append(u_)
-            ys.append(y_new)
-            xk, zk = x_new, Z[:, j]
-            if done:
-                stopped_by = "distance"
-                break
-        frac = ts[-1] / run_cfg.duration_s
+        U = grid.torque[cols_u]
+        X, Z, Y = stepper.run_chunk(n_cols, xc, zc, U, np.array(cols_h), p)
+        xc, zc = X[k - 1].copy(), Z[k - 1].copy()
+        if not ends:
+            continue
+        jj = np.array([e[0] for e in ends])
+        t1s = np.array([e[2] for e in ends])
+        Xe = X[jj]
+        m = len(jj)  # output points of this chunk that are kept
+        if dist_from is not None:
+            prev = np.vstack([xk[None, :2], Xe[:-1, :2]])
+            d = np.hypot(Xe[:, 0] - prev[:, 0], Xe[:, 1] - prev[:, 1])
+            active = t1s > dist_from + 1e-12
+            # the same sequential sums as runner.run: dist_i = dist_(i-1) + d_i
+            cum = np.cumsum(np.concatenate(([dist], np.where(active, d, 0.0))))[1:]
+            hit = np.flatnonzero(active & (cum >= target))
+            if hit.size:
+                m = int(hit[0])
+                dist = float(cum[m - 1]) if m > 0 else dist
+            else:
+                dist = float(cum[-1])
+        tb.append(t1s[:m])
+        xb.append(Xe[:m])
+        ub.append(U[jj[:m]])
+        yb.append(Y[jj[:m]].copy())
+        if m > 0:
+            t_last, xk, zk = float(t1s[m - 1]), Xe[m - 1], Z[jj[m - 1]].copy()
+        if m < len(jj):
+            # shorten the last step so the run ends at the distance (as runner.run)
+            t0_, u_ = ends[m][1], U[jj[m]]
+            x_new = Xe[m]
+            d_step = float(np.hypot(x_new[0] - xk[0], x_new[1] - xk[1]))
+            h = t1s[m] - t0_
+            for _ in range(3):
+                if d_step <= 0:
+                    break
+                h *= (target - dist) / d_step
+                x_new, _z = stepper.advance(xk, zk, u_, p, h)
+                d_step = float(np.hypot(x_new[0] - xk[0], x_new[1] - xk[1]))
+            dist += d_step
+            t_last = t0_ + h
+            tb.append(np.array([t_last]))
+            xb.append(x_new[None, :])
+            ub.append(u_[None, :])
+            yb.append(np.array(outputs(x_new, u_, p)).T)
+            done = True
+            stopped_by = "distance"
+        frac = t_last / run_cfg.duration_s
         if dist_from is not None:
             frac = max(frac, dist / target)
-        bar.update(frac, f"t={ts[-1]:.2f} s" + (f" d={dist:.2f} m" if dist_from is not None else ""))
-        if exhausted and not pending:
-            break
+        bar.update(frac, f"t={t_last:.2f} s" + (f" d={dist:.2f} m" if dist_from is not None else ""))
     bar.close()
     wall = time.perf_counter() - wall0
     if dist_from is not None and stopped_by != "distance":
         raise SimulationError(
             f"the run reached run.duration_s = {run_cfg.duration_s} s before covering "
             f"run.stop_after_distance_m = {target} m (covered {dist:.2f} m); raise duration_s")
-    X = np.array(xs)
-    if not np.all(np.isfinite(X)):
-        raise SimulationError(f"{stepper.method} returned a non-finite state")
-    return Result(scenario, np.array(ts), X, np.array(us), np.array(ys), model.state_names,
+    return Result(scenario, np.concatenate(tb), np.vstack(xb), np.vstack(ub), np.vstack(yb), model.state_names,
                   model.output_names, wall, stopped_by, stepper.stats())
