@@ -65,14 +65,8 @@ def homogeneous_rows(quick: bool = False, repeats: int = 3) -> list[dict]:
     ]
     if not quick:
         # the same integrator on CasADi's interpreter, for scale
-        lib_saved = compiled.find_compiler
-        compiled.find_compiler = lambda: None
-        compiled._cache.clear()
-        try:
+        with compiled.interpreter_only():
             rows.append(_validation_row("interpreted (same Functions)", "rosenbrock", [], 1, "fixed step 10 ms"))
-        finally:
-            compiled.find_compiler = lib_saved
-            compiled._cache.clear()
     rows.append(standalone_row())
     return rows
 

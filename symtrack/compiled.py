@@ -19,6 +19,7 @@ the fixed-step integrator (:func:`run_fixed_step`), which advances up to 256 ste
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -51,13 +52,26 @@ REPO_GENERATED = Path(__file__).resolve().parent.parent / "generated"
 
 _require = os.environ.get("SYMTRACK_REQUIRE_COMPILED", "") not in ("", "0")
 _warned_no_compiler = False
-_cache: dict[int, tuple[object, Library]] = {}
+_force_interpreter = False
+_cache: dict[tuple[int, bool], tuple[object, Library]] = {}
 
 
 def set_require_compiled(flag: bool = True) -> None:
     """Make a missing C compiler an error instead of a fallback to the interpreter."""
     global _require
     _require = bool(flag)
+
+
+@contextlib.contextmanager
+def interpreter_only():
+    """Within this block :func:`library` gives the interpreted Functions (for comparisons and the
+    benchmark), without the no-compiler warning."""
+    global _force_interpreter
+    saved, _force_interpreter = _force_interpreter, True
+    try:
+        yield
+    finally:
+        _force_interpreter = saved
 
 
 def cache_root() -> Path:
@@ -138,8 +152,9 @@ def _sources(gen) -> dict[str, bytes]:
             files = {n: (REPO_GENERATED / n).read_bytes() for n in m["files"] if (REPO_GENERATED / n).exists()}
             if len(files) == len(m["files"]):
                 return files
-        log.info("generated/ does not match the %s model (run python -m codegen); generating its sources afresh",
-                 gen.prefix)
+        if m.get("model") == gen.prefix:
+            log.info("generated/ does not match this %s model (other options, or stale: python -m codegen); "
+                     "generating its sources afresh", gen.prefix)
     with tempfile.TemporaryDirectory(prefix="symtrack-codegen-") as scratch:
         files = render(gen, Path(scratch))
     files.pop("manifest.json")
@@ -149,9 +164,10 @@ def _sources(gen) -> dict[str, bytes]:
 def library(model, compiled: bool = True) -> Library:
     """The generated Functions of ``model``: compiled and loaded from the cache when possible."""
     global _warned_no_compiler
-    key = id(model)
+    compiled = compiled and not _force_interpreter
+    key = (id(model), compiled)
     hit = _cache.get(key)
-    if hit is not None and hit[0] is model and (hit[1].compiled or not compiled):
+    if hit is not None and hit[0] is model:
         return hit[1]
     from codegen.generate import build
 
