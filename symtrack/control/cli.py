@@ -1,0 +1,94 @@
+"""The ``symtrack linearize`` and ``symtrack mpc`` commands (registered by symtrack.cli)."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+log = logging.getLogger("symtrack.control")
+
+DEFAULT_SOIL = "sandy_loam_15"
+DEFAULT_VEHICLE = "reference_crawler"
+
+
+def _params(vehicle: str, soil: str) -> dict:
+    from ..presets import soil_preset, vehicle_preset
+
+    return {**vehicle_preset(vehicle), **soil_preset(soil)}
+
+
+def linearize_command(args) -> int:
+    from ..model import SystemModel
+    from ..output import atomic_write_bytes, atomic_write_text
+    from . import linearize as L
+    from .trim import trim
+
+    params = _params(args.vehicle, args.soil)
+    model = SystemModel()
+    tp = trim(model, params, args.speed, args.radius)
+    lin = L.linearize(model, tp, path_frame=args.path_frame)
+    mode_list = L.modes(lin)
+    ctrb = L.controllability(lin)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    d = L.to_dict(lin)
+    d["vehicle_preset"], d["soil_preset"] = args.vehicle, args.soil
+    d["modes"] = mode_list
+    d["controllability"] = ctrb
+    atomic_write_bytes(out / "linearization.npz", L.npz_bytes(lin))
+    atomic_write_bytes(out / "bode.png", L.bode_png(lin))
+    report = L.report_markdown(lin, mode_list, ctrb)
+    atomic_write_text(out / "modes.md", report)
+    atomic_write_text(out / "linearization.json", json.dumps(d, indent=1) + "\n")
+    print(report)
+    print(f"linearisation written to {out} (linearization.json, linearization.npz, modes.md, bode.png)")
+    return 0
+
+
+def mpc_command(args) -> int:
+    from . import closedloop, scenario
+
+    overrides = list(args.set or [])
+    if args.solver:
+        overrides.append(f"mpc.solver={args.solver}")
+    if args.jit:
+        overrides.append("mpc.jit=true")
+    sc = scenario.load(args.scenario, overrides)
+    res = closedloop.run(sc, progress=not args.quiet)
+    closedloop.write(args.out, res)
+    s = res.summary
+    rms = s["rms_lateral_error_m"]
+    print(f"{sc.name}: rms lateral error on straights "
+          f"{'n/a' if rms is None else f'{100 * rms:.2f} cm'}, max {100 * s['max_lateral_error_m']:.1f} cm; "
+          f"solve time median {s['solve_time_median_ms']:.1f} ms, p95 {s['solve_time_p95_ms']:.1f} ms, "
+          f"max {s['solve_time_max_ms']:.1f} ms; failed solves {s['failed_solves']}; results in {args.out}")
+    return 0
+
+
+def mpc_scenarios_list() -> list[str]:
+    from .scenario import builtin_names
+
+    return builtin_names()
+
+
+def add_parsers(sub) -> None:
+    """Register the control subcommands on the argparse subparsers of symtrack.cli."""
+    lz = sub.add_parser("linearize", help="trim point + exact linearisation (A, B, C, D, modes, Bode plots)")
+    lz.add_argument("--speed", type=float, required=True, help="speed V [m/s]")
+    lz.add_argument("--radius", type=float, default=None, help="turn radius R [m], positive = left (default: straight)")
+    lz.add_argument("--soil", default=DEFAULT_SOIL, help=f"soil preset (default {DEFAULT_SOIL})")
+    lz.add_argument("--vehicle", default=DEFAULT_VEHICLE, help=f"vehicle preset (default {DEFAULT_VEHICLE})")
+    lz.add_argument("--path-frame", action="store_true",
+                    help="straight running only: keep y_m and yaw_rad (lateral offset, heading error)")
+    lz.add_argument("--out", required=True, help="output folder")
+    lz.set_defaults(func=linearize_command)
+    mp = sub.add_parser("mpc", help="closed-loop MPC path tracking (built-in name or TOML file); "
+                        f"built-in: {', '.join(mpc_scenarios_list())}")
+    mp.add_argument("scenario")
+    mp.add_argument("--out", required=True, help="output folder")
+    mp.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="override a scenario value")
+    mp.add_argument("--solver", choices=("ipopt", "fatrop"), help="shorthand for --set mpc.solver=...")
+    mp.add_argument("--jit", action="store_true", help="compile the solver's functions (gcc; cached build dir)")
+    mp.add_argument("--quiet", action="store_true", help="no progress bar")
+    mp.set_defaults(func=mpc_command)

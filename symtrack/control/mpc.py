@@ -1,0 +1,489 @@
+"""Nonlinear MPC of the commanded sprocket torques for path tracking.
+
+Prediction model
+    The model's own ``ode`` Function (no equation is written here). Two variants:
+
+    - ``prediction = "vehicle"`` (default): the 12 vehicle states are predicted; the 8 terrain-cell
+      states are frozen over the horizon at their measured values and enter ``ode`` as
+      parameters. The cells feed back on the vehicle only through the compaction resistance
+      (a function of the sinkage), and their 350-1500 rad/s modes are far faster than anything
+      a 0.1 s controller can act on. ``symtrack.control.bench.prediction_effect`` measures the
+      difference in the predicted trajectories against ``"full"``.
+    - ``prediction = "full"``: all 20 states, cells included.
+
+Discretisation
+    The model is stiff even without the cells (lateral creep mode about -600 1/s, yaw -225 1/s,
+    shear/sprocket oscillation about 80 rad/s), so explicit Runge-Kutta would need millisecond
+    sub-steps. Each sample interval is one Radau IIA collocation element (degree 1-3; default 2,
+    order 3, L-stable) written into the NLP: the collocation state values are extra variables of
+    the stage and the collocation equations are stage equality constraints. Because the Radau
+    end point is the last collocation value, the gap constraint is x_{k+1} - F(x_k, w_k) with F
+    linear, as fatrop's structure detection requires.
+
+NLP layout (stage ordered, as CASADI_NOTES section 6 prescribes)
+    w = [x_0, u_0, K_0, x_1, u_1, K_1, ..., x_N]; x_k = [vehicle states, previous command] (the
+    previous command makes the torque-rate bound and its penalty stage-local); u_k the two torque
+    commands in kN m; K_k the collocation values. All variables are scaled to O(1). The stage
+    function is built once and applied with one ``map(N)``. x_0 is fixed through its bounds.
+
+Cost (least squares, per stage, reference point k of the path sampled at the reference speed)
+    lateral error, heading error, along-track error, speed error, yaw-rate error against the path
+    curvature times speed, torque-rate and torque magnitude penalties; the terminal state is
+    weighted ``terminal_factor`` times more.
+
+Solvers
+    ``ipopt`` (default) or ``fatrop`` (structure detection ``auto``), both with the exact Hessian.
+    A Gauss-Newton Hessian (IPOPT with ``hess_lag``, or ``sqpmethod`` + ``qrqp``) was tried and
+    dropped: on this NLP it hit 30 iterations on every solve (the collocation constraints are
+    strongly curved, and GN ignores that curvature). ``jit = True`` compiles the NLP
+    functions with gcc (``expand`` off, as the notes require); the compiler writes temporary
+    files in the current directory, so the build runs inside ``jit_dir`` (default: a cache
+    folder under the user's cache directory).
+
+A failed solve (solver error, non-success status or non-finite result) never raises: the
+controller applies the next command of its previous plan (shifted), counts the failure and
+warm-starts the next solve from the shifted plan.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ..errors import ParameterError
+from ..model import SystemModel
+from ..model.vehicle import VEHICLE_STATES
+
+log = logging.getLogger("symtrack.control.mpc")
+
+SOLVERS = ("ipopt", "fatrop")
+_FATROP_EXTRA = {"mu_init": 1e-2}
+PREDICTIONS = ("vehicle", "full")
+
+# Typical magnitudes (scaling of the NLP variables), by state name prefix.
+_SCALES = (
+    ("x_m", 1.0), ("y_m", 1.0), ("yaw_rad", 0.1), ("u_m_s", 1.0), ("v_m_s", 0.05), ("yaw_rate_rad_s", 0.1),
+    ("omega_", 5.0), ("shear_", 0.02), ("torque_", 1000.0), ("sinkage_rate_", 0.01), ("sinkage_", 0.002),
+)
+TORQUE_SCALE_N_M = 1000.0
+
+
+def _scale(name: str) -> float:
+    for key, val in _SCALES:
+        if name == key or (key.endswith("_") and name.startswith(key)):
+            return val
+    return 1.0
+
+
+@dataclass(frozen=True)
+class MPCSettings:
+    """Settings of the MPC (validated; errors name the field, the value and the range).
+
+    Weights are per unit of the error named in SI (m, rad, m/s, rad/s) and kN m for torques.
+    """
+
+    horizon_steps: int = 20
+    sample_time_s: float = 0.1
+    solver: str = "ipopt"
+    jit: bool = False
+    jit_dir: str | None = None
+    prediction: str = "vehicle"
+    collocation_degree: int = 2
+    torque_max_N_m: float = 8000.0
+    torque_rate_max_N_m_s: float = 40000.0
+    weight_lateral: float = 30.0
+    weight_heading: float = 30.0
+    weight_along: float = 1.0
+    weight_speed: float = 3.0
+    weight_yaw_rate: float = 3.0
+    weight_torque: float = 0.001
+    weight_torque_rate: float = 0.3
+    terminal_factor: float = 5.0
+    max_iter: int = 60
+    prediction_lateral_creep_speed_m_s: float | None = None
+    tol: float = 1e-5
+
+    def __post_init__(self):
+        def rng(name, lo, hi, integer=False, lo_open=False):
+            v = getattr(self, name)
+            ok_type = isinstance(v, int) if integer else isinstance(v, (int, float))
+            if isinstance(v, bool) or not ok_type or not math.isfinite(v) or v > hi or (v <= lo if lo_open else v < lo):
+                kind = "an integer" if integer else "a number"
+                lb = "(" if lo_open else "["
+                raise ParameterError(f"mpc.{name} = {v!r} must be {kind} in {lb}{lo:g}, {hi:g}]")
+
+        rng("horizon_steps", 2, 500, integer=True)
+        rng("sample_time_s", 0.001, 5.0)
+        rng("collocation_degree", 1, 3, integer=True)
+        rng("torque_max_N_m", 0.0, 1e6, lo_open=True)
+        rng("torque_rate_max_N_m_s", 0.0, 1e8, lo_open=True)
+        for w in ("weight_lateral", "weight_heading", "weight_along", "weight_speed", "weight_yaw_rate",
+                  "weight_torque", "weight_torque_rate"):
+            rng(w, 0.0, 1e8)
+        rng("terminal_factor", 0.0, 1e6)
+        rng("max_iter", 1, 10000, integer=True)
+        rng("tol", 0.0, 1.0, lo_open=True)
+        if self.prediction_lateral_creep_speed_m_s is not None:
+            rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
+        if self.solver not in SOLVERS:
+            raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVERS)}")
+        if self.prediction not in PREDICTIONS:
+            raise ParameterError(f"mpc.prediction = {self.prediction!r} is not one of {', '.join(PREDICTIONS)}")
+        if not isinstance(self.jit, bool):
+            raise ParameterError(f"mpc.jit = {self.jit!r} must be true or false")
+        if self.jit_dir is not None and not isinstance(self.jit_dir, str):
+            raise ParameterError(f"mpc.jit_dir = {self.jit_dir!r} must be a folder path or None")
+
+    @property
+    def horizon_s(self) -> float:
+        return self.horizon_steps * self.sample_time_s
+
+
+def default_jit_dir() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "symtrack" / "jit"
+
+
+@contextlib.contextmanager
+def _in_dir(path: Path):
+    path.mkdir(parents=True, exist_ok=True)
+    old = os.getcwd()
+    os.chdir(path)
+    try:
+        yield
+    finally:
+        os.chdir(old)
+
+
+@dataclass
+class SolveInfo:
+    success: bool
+    solve_time_s: float
+    iterations: int
+    status: str
+    cost: float = float("nan")
+
+
+@dataclass
+class MPCStats:
+    solves: list = field(default_factory=list)
+    failed: int = 0
+
+    def solve_times_ms(self) -> np.ndarray:
+        return np.array([1e3 * s.solve_time_s for s in self.solves])
+
+
+class PathTrackingMPC:
+    """Nonlinear MPC of the two commanded torques on the model's dynamics.
+
+    ``step(x_plant_by_name, reference)`` returns the command to apply now; ``reference`` is a
+    (N+1) x 5 array of [x_m, y_m, yaw_rad, speed_m_s, curvature_1_per_m] for the stages.
+    """
+
+    REF_COLUMNS = ("x_m", "y_m", "yaw_rad", "speed_m_s", "curvature_1_per_m")
+
+    def __init__(self, model: SystemModel, params: dict, settings: MPCSettings | None = None):
+        self.model, self.settings = model, settings or MPCSettings()
+        s = self.settings
+        self.params = dict(params)
+        if s.prediction_lateral_creep_speed_m_s is not None:
+            self.params["lateral_creep_speed_m_s"] = s.prediction_lateral_creep_speed_m_s
+        self.p_model = np.asarray(model.param_vector(self.params), dtype=float)
+        names = model.state_names
+        nv = len(VEHICLE_STATES)
+        self.pred_names = tuple(names[:nv]) if s.prediction == "vehicle" else tuple(names)
+        self.cell_names = tuple(names[nv:]) if s.prediction == "vehicle" else ()
+        self.nxp = len(self.pred_names)
+        self.nu = 2
+        self.nxa = self.nxp + self.nu  # + previous command
+        self.N = s.horizon_steps
+        self.d = s.collocation_degree
+        self.nz = len(model.alg_names)  # body accelerations of the DAE form
+        self.nc = self.nxp + self.nz  # one collocation point: states and accelerations
+        self.nk = self.d * self.nc
+        self.sx = np.array([_scale(n) for n in self.pred_names] + [TORQUE_SCALE_N_M] * 2)
+        self._build()
+        self.stats = MPCStats()
+        self._w = None
+        self._plan_u = None  # (N, 2) commands in N m of the last accepted plan
+        self._plan_age = 0
+
+    # ------------------------------------------------------------------ construction
+    def _stage_function(self):
+        s, model = self.settings, self.model
+        nxp, nu, d, h = self.nxp, self.nu, self.d, s.sample_time_s
+        Xs = ca.SX.sym("xs", self.nxa)
+        Us = ca.SX.sym("us", nu)
+        Ks = ca.SX.sym("ks", self.nk)
+        ref = ca.SX.sym("ref", 5)
+        P = ca.SX.sym("p", len(self.p_model))
+        XC = ca.SX.sym("xc", len(self.cell_names))
+        Sx = ca.DM(self.sx[:nxp])
+        x = Xs[:nxp] * Sx
+        u = Us * TORQUE_SCALE_N_M
+
+        def f(xp, zp):
+            # the DAE form: the load-transfer loop closed by algebraic accelerations (one
+            # evaluation of the vehicle equations instead of the ODE form's fixed-point
+            # iterations: its Hessian has 9x fewer instructions)
+            if self.cell_names:
+                ode, alg = model.dae(ca.vertcat(xp, XC), zp, u, P)
+                return ode[:nxp], alg
+            return model.dae(xp, zp, u, P)
+
+        # Radau IIA collocation (Lagrange basis on [0, tau_1..tau_d]).
+        tau = [0.0] + list(ca.collocation_points(d, "radau"))
+        C = np.zeros((d + 1, d + 1))
+        for j in range(d + 1):
+            coeff = np.poly1d([1.0])
+            for r in range(d + 1):
+                if r != j:
+                    coeff *= np.poly1d([1.0, -tau[r]]) / (tau[j] - tau[r])
+            dp = np.polyder(coeff)
+            for r in range(d + 1):
+                C[j, r] = dp(tau[r])
+        nc = self.nc
+        xs_col = [x] + [Ks[j * nc:j * nc + nxp] * Sx for j in range(d)]
+        zs_col = [None] + [Ks[j * nc + nxp:(j + 1) * nc] for j in range(d)]
+        gcoll = []
+        for j in range(1, d + 1):
+            xp_deriv = sum(C[r, j] * xs_col[r] for r in range(d + 1))
+            fj, aj = f(xs_col[j], zs_col[j])
+            gcoll.append((h * fj - xp_deriv) / (h * Sx * 10.0))
+            gcoll.append(aj)
+        x_next = ca.vertcat(Ks[(d - 1) * nc:(d - 1) * nc + nxp], Us)  # scaled; the previous command becomes u
+        g_rate = Us - Xs[nxp:]  # kN m per step
+        res = self._residuals(x, ref)
+        r_u = ca.vertcat(math.sqrt(s.weight_torque) * Us, math.sqrt(s.weight_torque_rate) * g_rate)
+        r_all = ca.vertcat(res, r_u)
+        stage = ca.Function("mpc_stage", [Xs, Us, Ks, ref, P, XC],
+                            [x_next, ca.vertcat(*gcoll), g_rate, ca.sumsqr(r_all), r_all],
+                            ["x", "u", "k", "ref", "p", "xc"], ["x_next", "g_coll", "g_rate", "cost", "res"],
+                            {"cse": True})
+        XN = ca.SX.sym("xN", self.nxa)
+        resN = math.sqrt(s.terminal_factor) * self._residuals(XN[:nxp] * Sx, ref)
+        term = ca.Function("mpc_terminal", [XN, ref], [ca.sumsqr(resN), resN], ["x", "ref"], ["cost", "res"])
+        return stage, term
+
+    def _residuals(self, x, ref):
+        s = self.settings
+        i = {n: k for k, n in enumerate(self.pred_names)}
+        X, Y, psi = x[i["x_m"]], x[i["y_m"]], x[i["yaw_rad"]]
+        dx, dy = X - ref[0], Y - ref[1]
+        c, sn = ca.cos(ref[2]), ca.sin(ref[2])
+        e_lat = -dx * sn + dy * c
+        e_lon = dx * c + dy * sn
+        e_psi = psi - ref[2]
+        e_v = x[i["u_m_s"]] - ref[3]
+        e_r = x[i["yaw_rate_rad_s"]] - ref[3] * ref[4]
+        return ca.vertcat(math.sqrt(s.weight_lateral) * e_lat, math.sqrt(s.weight_heading) * e_psi,
+                          math.sqrt(s.weight_along) * e_lon, math.sqrt(s.weight_speed) * e_v,
+                          math.sqrt(s.weight_yaw_rate) * e_r)
+
+    def _build(self):
+        s = self.settings
+        N, nxa, nu, nk = self.N, self.nxa, self.nu, self.nk
+        stage, term = self._stage_function()
+        self.stage_fn = stage
+        blk = nxa + nu + nk
+        self.block = blk
+        nw = N * blk + nxa
+        w = ca.MX.sym("w", nw)
+        npar = len(self.p_model)
+        ncell = len(self.cell_names)
+        par = ca.MX.sym("par", 5 * (N + 1) + npar + ncell)
+        refs = ca.reshape(par[:5 * (N + 1)], 5, N + 1)
+        P = par[5 * (N + 1):5 * (N + 1) + npar]
+        XC = par[5 * (N + 1) + npar:]
+        W = ca.reshape(w[:N * blk], blk, N)
+        Xk, Uk, Kk = W[:nxa, :], W[nxa:nxa + nu, :], W[nxa + nu:, :]
+        Xnext = ca.horzcat(W[:nxa, 1:], w[N * blk:])
+        F = stage.map(N)
+        xn, gcoll, grate, cost, _ = F(Xk, Uk, Kk, refs[:, :N], ca.repmat(P, 1, N), ca.repmat(XC, 1, N))
+        costN, _ = term(w[N * blk:], refs[:, N])
+        gap = Xnext - xn
+        # constraints ordered stage by stage: [gap_k; collocation_k; rate_k] (fatrop's structure
+        # detection needs the gap first in each stage)
+        g = ca.vertcat(*[ca.vertcat(gap[:, k], gcoll[:, k], grate[:, k]) for k in range(N)])
+        f = ca.sum2(cost) + costN
+        ng_stage = nxa + nk + nu
+        eq = ([True] * nxa + [True] * nk + [False] * nu) * N
+        self.ng_stage = ng_stage
+        nlp = {"x": w, "p": par, "f": f, "g": g}
+        self.nlp = nlp
+        self.solver = self._nlpsol(nlp, eq, f, w, par, g)
+        # bounds
+        rate = s.torque_rate_max_N_m_s * s.sample_time_s / TORQUE_SCALE_N_M
+        lbg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), -rate * np.ones(nu)]), N)
+        ubg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), rate * np.ones(nu)]), N)
+        self.lbg, self.ubg = lbg, ubg
+        tmax = s.torque_max_N_m / TORQUE_SCALE_N_M
+        lbx = -np.inf * np.ones(nw)
+        ubx = np.inf * np.ones(nw)
+        for k in range(N):
+            o = k * blk
+            lbx[o + nxa:o + nxa + nu] = -tmax
+            ubx[o + nxa:o + nxa + nu] = tmax
+        self.lbx0, self.ubx0 = lbx, ubx
+
+    def _nlpsol(self, nlp, eq, f, w, par, g):
+        s = self.settings
+        common = {"print_time": False, "error_on_fail": False}
+        if s.jit:
+            common.update({"expand": False, "jit": True, "compiler": "shell",
+                           "jit_options": {"flags": ["-O1"], "verbose": False}, "jit_temp_suffix": True})
+        else:
+            common["expand"] = True
+        if s.solver == "ipopt":
+            opts = dict(common)
+            # Primal warm start only: with warm_start_init_point = yes (and the shifted multipliers)
+            # the warm solves of this NLP hit max_iter (measured); from the default barrier start
+            # they converge in 4-6 iterations.
+            opts["ipopt"] = {"print_level": 0, "sb": "yes", "max_iter": s.max_iter, "tol": s.tol,
+                             "acceptable_tol": 10 * s.tol, "acceptable_iter": 3, "linear_solver": "mumps"}
+            name = "ipopt"
+        elif s.solver == "fatrop":
+            opts = dict(common)
+            opts.update({"structure_detection": "auto", "equality": eq, "debug": False})
+            opts["fatrop"] = {"print_level": 0, "max_iter": s.max_iter, "tol": s.tol, **_FATROP_EXTRA}
+            name = "fatrop"
+        if s.jit:
+            jd = self._jit_dir()
+            t0 = time.perf_counter()
+            with _in_dir(jd):
+                S = ca.nlpsol("mpc", name, nlp, opts)
+            log.info("MPC %s jit build: %.1f s in %s", name, time.perf_counter() - t0, jd)
+            return S
+        return ca.nlpsol("mpc", name, nlp, opts)
+
+    def _jit_dir(self) -> Path:
+        return Path(self.settings.jit_dir) if self.settings.jit_dir else default_jit_dir()
+
+    # ------------------------------------------------------------------ run time
+    def _initial_guess(self, x0s, ref):
+        """A cold start: the stage states at the current state, moved along the reference."""
+        N, blk, nxa, nu, nxp = self.N, self.block, self.nxa, self.nu, self.nxp
+        w = np.zeros(N * blk + nxa)
+        i = {n: k for k, n in enumerate(self.pred_names)}
+        for k in range(N + 1):
+            xs = x0s.copy()
+            xs[i["x_m"]] = ref[k, 0] / self.sx[i["x_m"]]
+            xs[i["y_m"]] = ref[k, 1] / self.sx[i["y_m"]]
+            xs[i["yaw_rad"]] = ref[k, 2] / self.sx[i["yaw_rad"]]
+            o = k * blk
+            w[o:o + nxa] = xs
+            if k < N:
+                w[o + nxa:o + nxa + nu] = x0s[nxp:]
+                for j in range(self.d):
+                    w[o + nxa + nu + j * self.nc:o + nxa + nu + j * self.nc + nxp] = xs[:nxp]
+        return w
+
+    def _shift(self, v, block, tail):
+        """Shift a stage-ordered vector by one stage (the last stage is repeated)."""
+        N = self.N
+        out = v.copy()
+        out[:(N - 1) * block] = v[block:N * block]
+        out[(N - 1) * block:N * block] = v[(N - 1) * block:N * block]
+        if tail:
+            out[N * block:] = v[N * block:]
+        return out
+
+    def reset(self):
+        self._w = self._plan_u = None
+        self._plan_age = 0
+
+    def prepare(self, x_pred, x_cells, u_prev, ref, attempts: int = 10) -> SolveInfo:
+        """Cold start before the loop engages (not counted in the step statistics): solve the
+        first problem, restarting from the last iterate up to ``attempts`` times, so that the
+        first closed-loop step is already warm. Returns the info of the last attempt."""
+        self.reset()
+        total = 0.0
+        info = None
+        w = None
+        for _ in range(attempts):
+            info, w = self._solve(x_pred, x_cells, u_prev, ref, w)
+            total += info.solve_time_s
+            if info.success:
+                break
+        info.solve_time_s = total
+        if info.success:
+            self._accept(w)
+        return info
+
+    def step(self, x_pred: np.ndarray, x_cells: np.ndarray | None, u_prev: np.ndarray, ref: np.ndarray):
+        """One MPC step. x_pred: the prediction states (names ``pred_names``) now; x_cells: the
+        frozen cell states (prediction "vehicle") or None; u_prev: the command applied during the
+        last interval [N m]; ref: (N+1) x 5 reference. Returns (command [N m], SolveInfo)."""
+        N, blk = self.N, self.block
+        info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
+        self.stats.solves.append(info)
+        if info.success:
+            self._accept(wopt)
+            return self._plan_u[0].copy(), info
+        self.stats.failed += 1
+        log.warning("MPC solve failed (%s); applying the shifted previous plan", info.status)
+        if self._plan_u is None:
+            u = np.asarray(u_prev, float).copy()
+        else:
+            self._plan_age += 1
+            u = self._plan_u[min(self._plan_age, N - 1)].copy()
+            if self._w is not None:
+                self._w = self._shift(self._w, blk, True)
+        return u, info
+
+    def _accept(self, wopt):
+        N, blk, nxa, nu = self.N, self.block, self.nxa, self.nu
+        self._w = wopt
+        self._plan_u = wopt[:N * blk].reshape(N, blk)[:, nxa:nxa + nu] * TORQUE_SCALE_N_M
+        self._plan_age = 0
+
+    def _solve(self, x_pred, x_cells, u_prev, ref, w_start):
+        """One call of the NLP solver; never raises. Returns (SolveInfo, solution or None)."""
+        blk, nxa = self.block, self.nxa
+        x0s = np.concatenate([np.asarray(x_pred, float), np.asarray(u_prev, float)]) / self.sx
+        # ref is (N+1) x 5 row-major: its ravel is the 5 x (N+1) column-major matrix the NLP reads
+        par = np.concatenate([np.asarray(ref, float).ravel(), self.p_model,
+                              np.asarray(x_cells if x_cells is not None else [], float)])
+        if w_start is not None:
+            w0 = w_start.copy()
+        elif self._w is None:
+            w0 = self._initial_guess(x0s, ref)
+        else:
+            w0 = self._shift(self._w, blk, True)
+        w0[:nxa] = x0s
+        lbx, ubx = self.lbx0.copy(), self.ubx0.copy()
+        lbx[:nxa] = x0s
+        ubx[:nxa] = x0s
+        args = {"x0": w0, "p": par, "lbx": lbx, "ubx": ubx, "lbg": self.lbg, "ubg": self.ubg}
+        self.last_args = args  # for diagnosis (re-run the same NLP with another solver setting)
+        t0 = time.perf_counter()
+        ok, status, iters, cost, wopt = False, "exception", 0, float("nan"), None
+        try:
+            sol = self.solver(**args)
+            dt = time.perf_counter() - t0
+            st = self.solver.stats()
+            status = str(st.get("return_status", st.get("success")))
+            iters = int(st.get("iter_count", 0) or 0)
+            wopt = np.array(sol["x"]).ravel()
+            cost = float(sol["f"])
+            ok = bool(st.get("success", False)) and bool(np.all(np.isfinite(wopt)))
+        except RuntimeError as err:  # never crash on a failed solve
+            dt = time.perf_counter() - t0
+            status = f"exception: {err}"
+        return SolveInfo(bool(ok), dt, iters, status, cost), wopt
+
+    def predicted(self):
+        """The last accepted plan: (N+1) x nxp states [SI] and N x 2 commands [N m]."""
+        if self._w is None:
+            return None, None
+        N, blk, nxa, nxp = self.N, self.block, self.nxa, self.nxp
+        X = np.vstack([self._w[k * blk:k * blk + nxa] for k in range(N)] + [self._w[N * blk:]]) * self.sx
+        return X[:, :nxp], self._plan_u

@@ -1,0 +1,273 @@
+"""MPC path-tracking scenarios: TOML files validated on load (built-in ones in
+``symtrack/control/scenarios/``).
+
+Schema (unknown keys are errors; ranges in brackets)::
+
+    name = "straight_offset"          # defaults to the file name
+    description = "..."
+    [vehicle]
+    preset = "reference_crawler"      # any vehicle parameter may follow as an override
+    [soil]
+    preset = "sandy_loam_15"          # any soil parameter may follow as an override
+    [start]                           # the vehicle starts in steady straight running (trim)
+    x_m = 0.0                         # [-1e6, 1e6]
+    y_m = 1.0                         # [-1e6, 1e6]
+    yaw_deg = 0.0                     # [-360, 360]
+    speed_m_s = 2.0                   # [0.1, 10]
+    [path]
+    x_m = 0.0                         # start pose of the path
+    y_m = 0.0
+    heading_deg = 0.0
+    speed_m_s = 2.0                   # [0.1, 10] reference speed on straights
+    turn_speed_m_s = 1.5              # [0.1, 10] reference speed on arcs (default: speed_m_s)
+    kind = "segments"                 # segments | field
+    # kind = "segments": a list of segments
+    segments = [{straight_m = 40.0}, {arc_radius_m = 5.0, angle_deg = 180.0}]
+    # kind = "field": parallel passes joined by headland U-turns of radius spacing_m / 2
+    passes = 4                        # [1, 100]
+    pass_length_m = 40.0              # [1, 1e4]
+    spacing_m = 8.0                   # [1, 100]
+    first_turn = "left"               # left | right
+    [run]
+    integrator = "cvodes"             # plant integrator: cvodes | idas
+    duration_s = 120.0                # (0, 1e5] time limit; the run ends at the path's end
+    rms_exclude_first_m = 0.0         # [0, 1e6] path length at the start left out of the RMS
+                                      # (the approach from an initial offset)
+    [mpc]                             # any field of symtrack.control.mpc.MPCSettings
+    horizon_steps = 20
+    sample_time_s = 0.1
+    solver = "ipopt"
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from ..errors import ParameterError, ScenarioError
+from ..parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..presets import soil_preset, vehicle_preset
+from ..simulate import INTEGRATORS
+from .mpc import MPCSettings
+from .path import Path as RefPath
+from .path import Segment, field_segments
+
+TOP_KEYS = ("name", "description", "vehicle", "soil", "start", "path", "run", "mpc")
+SCENARIO_PACKAGE = "symtrack.control.scenarios"
+
+
+@dataclass(frozen=True)
+class StartSettings:
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_deg: float = 0.0
+    speed_m_s: float = 2.0
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    integrator: str = "cvodes"
+    duration_s: float = 120.0
+    rms_exclude_first_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class MPCScenario:
+    name: str
+    description: str
+    vehicle_preset: str
+    soil_preset: str
+    params: dict
+    start: StartSettings
+    path_spec: dict
+    run: RunSettings
+    mpc: MPCSettings
+
+    def build_path(self) -> RefPath:
+        d = self.path_spec
+        if d["kind"] == "field":
+            segs = field_segments(d["passes"], d["pass_length_m"], d["spacing_m"], d["first_turn"])
+        else:
+            segs = d["segments"]
+        return RefPath(d["x_m"], d["y_m"], math.radians(d["heading_deg"]), segs, d["speed_m_s"],
+                       d.get("turn_speed_m_s"))
+
+    def to_dict(self) -> dict:
+        path = dict(self.path_spec)
+        if "segments" in path:
+            path["segments"] = [
+                {"straight_m": s.length_m} if s.kind == "straight" else
+                {"arc_radius_m": s.radius_m, "angle_deg": s.angle_deg} for s in path["segments"]]
+        return {"name": self.name, "description": self.description,
+                "vehicle": {"preset": self.vehicle_preset}, "soil": {"preset": self.soil_preset},
+                "parameters": dict(self.params),
+                "start": dataclasses.asdict(self.start), "path": path, "run": dataclasses.asdict(self.run),
+                "mpc": {k: v for k, v in dataclasses.asdict(self.mpc).items() if v is not None}}
+
+
+def _num(where, value, low, high, low_open=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ScenarioError(f"{where} = {value!r} must be a number")
+    v = float(value)
+    if (v <= low if low_open else v < low) or v > high:
+        lb = "(" if low_open else "["
+        raise ScenarioError(f"{where} = {value!r} is outside the allowed range {lb}{low:g}, {high:g}]")
+    return v
+
+
+def _int(where, value, low, high):
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ScenarioError(f"{where} = {value!r} must be an integer in [{low}, {high}]")
+    return value
+
+
+def _keys(section, table, allowed):
+    if not isinstance(table, dict):
+        raise ScenarioError(f"[{section}] must be a table, got {table!r}")
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise ScenarioError(f"unknown key(s) in [{section}]: {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+
+
+def _params(section, t, preset_fn, specs, default):
+    _keys(section, t, ["preset"] + [s.name for s in specs])
+    preset = t.get("preset", default)
+    if not isinstance(preset, str):
+        raise ScenarioError(f"{section}.preset = {preset!r} must be a preset name")
+    try:
+        values = preset_fn(preset)
+        values.update({k: v for k, v in t.items() if k != "preset"})
+        return preset, check_set(values, specs, section)
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
+
+
+def _segments(items) -> list[Segment]:
+    if not isinstance(items, list) or not items:
+        raise ScenarioError("path.segments must be a non-empty list of {straight_m = ...} or "
+                            "{arc_radius_m = ..., angle_deg = ...} tables")
+    out = []
+    for i, it in enumerate(items):
+        where = f"path.segments[{i}]"
+        if not isinstance(it, dict):
+            raise ScenarioError(f"{where} = {it!r} must be a table")
+        if "straight_m" in it:
+            _keys(where, it, ["straight_m"])
+            out.append(Segment("straight", _num(f"{where}.straight_m", it["straight_m"], 0, 1e5, True)))
+        elif "arc_radius_m" in it:
+            _keys(where, it, ["arc_radius_m", "angle_deg"])
+            r = _num(f"{where}.arc_radius_m", it["arc_radius_m"], -1e4, 1e4)
+            if abs(r) < 1.0:
+                raise ScenarioError(f"{where}.arc_radius_m = {r!r}: |radius| must be at least 1 m")
+            if "angle_deg" not in it:
+                raise ScenarioError(f"{where}.angle_deg is required for an arc")
+            out.append(Segment("arc", radius_m=r, angle_deg=_num(f"{where}.angle_deg", it["angle_deg"], 0, 720, True)))
+        else:
+            raise ScenarioError(f"{where} = {it!r} must have straight_m or arc_radius_m")
+    return out
+
+
+def _path(t: dict) -> dict:
+    allowed = ["x_m", "y_m", "heading_deg", "speed_m_s", "turn_speed_m_s", "kind", "segments", "passes",
+               "pass_length_m", "spacing_m", "first_turn"]
+    _keys("path", t, allowed)
+    kind = t.get("kind", "segments")
+    if kind not in ("segments", "field"):
+        raise ScenarioError(f"path.kind = {kind!r} is not one of segments, field")
+    d = {"kind": kind,
+         "x_m": _num("path.x_m", t.get("x_m", 0.0), -1e6, 1e6),
+         "y_m": _num("path.y_m", t.get("y_m", 0.0), -1e6, 1e6),
+         "heading_deg": _num("path.heading_deg", t.get("heading_deg", 0.0), -360, 360),
+         "speed_m_s": _num("path.speed_m_s", t.get("speed_m_s", 2.0), 0.1, 10)}
+    if "turn_speed_m_s" in t:
+        d["turn_speed_m_s"] = _num("path.turn_speed_m_s", t["turn_speed_m_s"], 0.1, 10)
+    if kind == "segments":
+        for k in ("passes", "pass_length_m", "spacing_m", "first_turn"):
+            if k in t:
+                raise ScenarioError(f"path.{k} only applies to path.kind = \"field\"")
+        d["segments"] = _segments(t.get("segments"))
+    else:
+        if "segments" in t:
+            raise ScenarioError("path.segments only applies to path.kind = \"segments\"")
+        d["passes"] = _int("path.passes", t.get("passes", 4), 1, 100)
+        d["pass_length_m"] = _num("path.pass_length_m", t.get("pass_length_m", 40.0), 1, 1e4)
+        d["spacing_m"] = _num("path.spacing_m", t.get("spacing_m", 8.0), 2, 100)
+        ft = t.get("first_turn", "left")
+        if ft not in ("left", "right"):
+            raise ScenarioError(f"path.first_turn = {ft!r} is not one of left, right")
+        d["first_turn"] = ft
+    return d
+
+
+def _mpc(t: dict) -> MPCSettings:
+    names = [f.name for f in dataclasses.fields(MPCSettings)]
+    _keys("mpc", t, names)
+    try:
+        return MPCSettings(**t)
+    except (ParameterError, TypeError) as err:
+        raise ScenarioError(str(err)) from err
+
+
+def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
+    _keys("scenario", d, TOP_KEYS)
+    name, desc = d.get("name", default_name), d.get("description", "")
+    if not isinstance(name, str) or not isinstance(desc, str):
+        raise ScenarioError("name and description must be strings")
+    vp, veh = _params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS, "reference_crawler")
+    sp, soil = _params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS, "sandy_loam_15")
+    st = d.get("start", {})
+    _keys("start", st, [f.name for f in dataclasses.fields(StartSettings)])
+    start = StartSettings(_num("start.x_m", st.get("x_m", 0.0), -1e6, 1e6),
+                          _num("start.y_m", st.get("y_m", 0.0), -1e6, 1e6),
+                          _num("start.yaw_deg", st.get("yaw_deg", 0.0), -360, 360),
+                          _num("start.speed_m_s", st.get("speed_m_s", 2.0), 0.1, 10))
+    rn = d.get("run", {})
+    _keys("run", rn, [f.name for f in dataclasses.fields(RunSettings)])
+    integ = rn.get("integrator", "cvodes")
+    if integ not in INTEGRATORS:
+        raise ScenarioError(f"run.integrator = {integ!r} is not one of {', '.join(INTEGRATORS)}")
+    run = RunSettings(integ, _num("run.duration_s", rn.get("duration_s", 120.0), 0, 1e5, True),
+                      _num("run.rms_exclude_first_m", rn.get("rms_exclude_first_m", 0.0), 0, 1e6))
+    return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
+                       _mpc(d.get("mpc", {})))
+
+
+def builtin_names() -> list[str]:
+    return sorted(p.name[:-5] for p in resources.files(SCENARIO_PACKAGE).iterdir() if p.name.endswith(".toml"))
+
+
+def load(name_or_path: str, overrides=()) -> MPCScenario:
+    """A built-in scenario by name or a TOML file; overrides are 'section.key=value' strings."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ScenarioError(f"MPC scenario file {str(path)!r} does not exist")
+        text, default = path.read_text(), path.stem
+    elif name_or_path in builtin_names():
+        text = resources.files(SCENARIO_PACKAGE).joinpath(name_or_path + ".toml").read_text()
+        default = name_or_path
+    else:
+        raise ScenarioError(f"MPC scenario {name_or_path!r} is neither a file nor built-in; "
+                            f"built-in: {', '.join(builtin_names())}")
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"{name_or_path}: not valid TOML: {err}") from err
+    for item in overrides:
+        if "=" not in item or "." not in item.split("=", 1)[0]:
+            raise ScenarioError(f"--set {item!r}: expected section.key=value, e.g. mpc.solver=fatrop")
+        key, raw = item.split("=", 1)
+        section, k = key.strip().split(".", 1)
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw.strip()
+        d.setdefault(section, {})
+        if not isinstance(d[section], dict):
+            raise ScenarioError(f"--set {item!r}: [{section}] is not a table")
+        d[section][k.strip()] = value
+    return scenario_from_dict(d, default)

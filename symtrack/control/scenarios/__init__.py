@@ -1,0 +1,1 @@
+"""Built-in MPC path-tracking scenarios (TOML, schema in symtrack.control.scenario)."""

@@ -1,0 +1,279 @@
+"""Trim points (steady motions) of the model, solved on the model's own ``ode`` Function.
+
+A trim point is a state x and a constant command u at which every state derivative except
+those of the position states is zero:
+
+- straight running at speed V: u_m_s = V, yaw_rate_rad_s = 0;
+- a steady turn of radius R (positive: left, counter-clockwise) at speed V:
+  u_m_s = V, yaw_rate_rad_s = V / R.
+
+X, Y and yaw are not equilibrium coordinates (on a turn they keep changing; on a straight the
+dynamics do not depend on them): they are set to 0 and their derivatives are not equations.
+Unknowns: every other state except u_m_s and yaw_rate_rad_s (fixed by the specification) plus the
+two commanded torques; equations: the derivatives of every state except X, Y, yaw (the torque-lag
+rows give command = actual torque). Same count, so a Newton root-finder (CasADi ``rootfinder``)
+solves it.
+
+A steady turn is found by continuation in curvature from the straight trim at the same speed;
+when Newton stops converging before the requested curvature, the last converged point tells which
+physical limit was reached (:func:`trim`): the lateral resistance (the tracks cannot carry the
+centripetal force m V^2 / R) or the traction (the yaw moment the tracks' tractive forces can make,
+(B/2) (F_outer - F_inner), cannot overcome the turning resistance of the soil).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ..errors import ParameterError, SymtrackError
+from ..model import SystemModel
+from ..model.vehicle import GRAVITY_M_S2, traction_shape
+from ..simulate import static_state
+
+POSITION_STATES = ("x_m", "y_m", "yaw_rad")
+SPECIFIED_STATES = ("u_m_s", "yaw_rate_rad_s")
+
+
+class TrimError(SymtrackError, RuntimeError):
+    """No steady motion exists (or none was found) for the requested speed, radius and soil."""
+
+
+@dataclass(frozen=True)
+class TrimSettings:
+    """Numerical settings of the trim solver.
+
+    abstol: Newton tolerance on the residual (state derivatives, SI units).
+    max_iter: Newton iterations per solve.
+    continuation_steps: initial number of curvature steps from straight running to 1/R.
+    min_step_fraction: the continuation gives up (and reports a limit) when the step it needs is
+        smaller than this fraction of the full curvature.
+    """
+
+    abstol: float = 1e-9
+    max_iter: int = 60
+    continuation_steps: int = 8
+    min_step_fraction: float = 1e-3
+
+    def __post_init__(self):
+        if not (isinstance(self.abstol, (int, float)) and 0 < self.abstol <= 1e-2):
+            raise ParameterError(f"trim.abstol = {self.abstol!r} is outside the allowed range (0, 1e-2]")
+        if not (isinstance(self.max_iter, int) and 1 <= self.max_iter <= 1000):
+            raise ParameterError(f"trim.max_iter = {self.max_iter!r} must be an integer in [1, 1000]")
+        if not (isinstance(self.continuation_steps, int) and 1 <= self.continuation_steps <= 1000):
+            raise ParameterError(
+                f"trim.continuation_steps = {self.continuation_steps!r} must be an integer in [1, 1000]")
+        if not (isinstance(self.min_step_fraction, (int, float)) and 0 < self.min_step_fraction < 1):
+            raise ParameterError(
+                f"trim.min_step_fraction = {self.min_step_fraction!r} is outside the allowed range (0, 1)")
+
+
+@dataclass(frozen=True)
+class TrimPoint:
+    """A steady motion: full state x (positions 0), command u, parameter vector p, and the model
+    outputs there (named). ``radius_m`` is None for straight running."""
+
+    speed_m_s: float
+    radius_m: float | None
+    x: np.ndarray
+    u: np.ndarray
+    p: np.ndarray
+    state_names: tuple
+    input_names: tuple
+    outputs: dict = field(default_factory=dict)
+    residual_norm: float = 0.0
+    limits: dict = field(default_factory=dict)
+
+    @property
+    def yaw_rate_rad_s(self) -> float:
+        return 0.0 if self.radius_m is None else self.speed_m_s / self.radius_m
+
+    def state(self, name: str) -> float:
+        return float(self.x[self.state_names.index(name)])
+
+    def to_dict(self) -> dict:
+        return {
+            "speed_m_s": self.speed_m_s,
+            "radius_m": self.radius_m,
+            "yaw_rate_rad_s": self.yaw_rate_rad_s,
+            "state": {n: float(v) for n, v in zip(self.state_names, self.x, strict=True)},
+            "input": {n: float(v) for n, v in zip(self.input_names, self.u, strict=True)},
+            "outputs": {k: float(v) for k, v in self.outputs.items()},
+            "limits": dict(self.limits),
+            "residual_norm": self.residual_norm,
+        }
+
+
+class _TrimProblem:
+    """The root-finding problem on model.ode, parametrised by (speed, yaw rate)."""
+
+    def __init__(self, model: SystemModel, p, settings: TrimSettings):
+        self.model, self.p, self.settings = model, ca.DM(p), settings
+        names = model.state_names
+        self.fixed = [names.index(n) for n in POSITION_STATES + SPECIFIED_STATES]
+        self.free = [i for i in range(model.nx) if i not in self.fixed]
+        self.eq_rows = [i for i in range(model.nx) if names[i] not in POSITION_STATES]
+        nf = len(self.free)
+        w = ca.SX.sym("w", nf + model.u.numel())
+        spec = ca.SX.sym("spec", 2)  # speed, yaw rate
+        x = [ca.SX(0)] * model.nx
+        for k, i in enumerate(self.free):
+            x[i] = w[k]
+        x[names.index("u_m_s")] = spec[0]
+        x[names.index("yaw_rate_rad_s")] = spec[1]
+        x = ca.vertcat(*x)
+        u = w[nf:]
+        res = model.ode(x, u, self.p)[self.eq_rows]
+        g = ca.Function("trim_residual", [w, spec], [res])
+        self.residual = g
+        self.assemble = ca.Function("trim_assemble", [w, spec], [x, u])
+        self.rf = ca.rootfinder("trim", "newton", g, {"abstol": settings.abstol, "max_iter": settings.max_iter,
+                                                      "error_on_fail": True})
+
+    def solve(self, w0, speed, yaw_rate):
+        spec = ca.DM([speed, yaw_rate])
+        try:
+            w = self.rf(w0, spec)
+        except RuntimeError:
+            return None
+        w = np.array(w).ravel()
+        if not np.all(np.isfinite(w)):
+            return None
+        res = float(np.linalg.norm(np.array(self.residual(w, spec)).ravel(), np.inf))
+        if res > 1e3 * self.settings.abstol:
+            return None
+        return w, res
+
+    def point(self, w, speed, yaw_rate):
+        x, u = self.assemble(w, ca.DM([speed, yaw_rate]))
+        return np.array(x).ravel(), np.array(u).ravel()
+
+
+def _outputs(model, x, u, p) -> dict:
+    y = np.array(model.outputs(x, u, p)).ravel()
+    return dict(zip(model.output_names, y, strict=True))
+
+
+def limit_usage(model: SystemModel, params: dict, x, u, p) -> dict:
+    """How much of the soil's traction and lateral resistance a state uses (1 = all of it).
+
+    traction_usage_{left,right}: |F_k| / F_max,k, with F_max,k = b l c + N_k tan(phi) the
+    fully-developed shear strength of the contact patch, read from the model output F_k and the
+    model's own traction shape (F_k = shape(j_k) F_max,k).
+    lateral_usage: |sum F_y| / (mu_t W), the lateral force used over the largest lateral
+    resistance the tracks can give.
+    """
+    y = _outputs(model, x, u, p)
+    out = {}
+    for k in ("left", "right"):
+        j = float(x[model.state_index(f"shear_{k}_m")])
+        shape = float(traction_shape(j, params["shear_modulus_K_m"], model.opts))
+        fmax = abs(y[f"tractive_{k}_N"] / shape) if abs(shape) > 1e-12 else float("nan")
+        out[f"tractive_{k}_N"] = y[f"tractive_{k}_N"]
+        out[f"traction_max_{k}_N"] = fmax
+        out[f"traction_usage_{k}"] = abs(shape)
+    W = params["mass_kg"] * GRAVITY_M_S2
+    out["lateral_force_N"] = y["lateral_force_left_N"] + y["lateral_force_right_N"]
+    out["lateral_resistance_max_N"] = params["lateral_friction_coeff"] * W
+    out["lateral_usage"] = abs(out["lateral_force_N"]) / out["lateral_resistance_max_N"]
+    return out
+
+
+def _straight_guess(model: SystemModel, params: dict, problem: _TrimProblem, speed: float) -> np.ndarray:
+    x0 = static_state(model, params)
+    names = model.state_names
+    r = params["sprocket_radius_m"]
+    W = params["mass_kg"] * GRAVITY_M_S2
+    # running-gear resistance at this speed (Wong), carried by the torques; a small slip
+    res_per_track = 0.5 * W * (params["internal_resistance_const"]
+                               + params["internal_resistance_per_km_h"] * 3.6 * abs(speed))
+    torque = math.copysign(r * res_per_track, speed) if speed != 0 else 0.0
+    x0[names.index("omega_left_rad_s")] = x0[names.index("omega_right_rad_s")] = speed / r * 1.01
+    x0[names.index("shear_left_m")] = x0[names.index("shear_right_m")] = 0.005 * params["contact_length_m"] * (
+        1 if speed >= 0 else -1)
+    x0[names.index("torque_left_N_m")] = x0[names.index("torque_right_N_m")] = torque
+    return np.concatenate([x0[problem.free], [torque, torque]])
+
+
+def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | None = None,
+         settings: TrimSettings | None = None) -> TrimPoint:
+    """Steady straight running (radius_m None or infinite) or a steady turn at radius_m
+    (positive: left turn) at speed_m_s, on the soil in params. Raises :class:`TrimError` when no
+    steady motion exists, naming the limit."""
+    settings = settings or TrimSettings()
+    if isinstance(speed_m_s, bool) or not isinstance(speed_m_s, (int, float)) or not math.isfinite(speed_m_s):
+        raise ParameterError(f"trim speed_m_s = {speed_m_s!r} must be a finite number")
+    if abs(speed_m_s) < 0.05 or abs(speed_m_s) > 20.0:
+        raise ParameterError(f"trim speed_m_s = {speed_m_s!r} is outside the allowed range 0.05 <= |V| <= 20 m/s")
+    if radius_m is not None:
+        if isinstance(radius_m, bool) or not isinstance(radius_m, (int, float)) or math.isnan(radius_m):
+            raise ParameterError(f"trim radius_m = {radius_m!r} must be a number (or None for straight running)")
+        if math.isinf(radius_m):
+            radius_m = None
+        elif abs(radius_m) <= 0.5 * params["track_gauge_m"]:
+            raise ParameterError(
+                f"trim radius_m = {radius_m!r}: |R| must exceed half the track gauge "
+                f"({0.5 * params['track_gauge_m']:g} m); turning on the spot has no steady forward speed")
+    p = np.asarray(model.param_vector(params), dtype=float)
+    problem = _TrimProblem(model, p, settings)
+    w0 = _straight_guess(model, params, problem, speed_m_s)
+    sol = problem.solve(w0, speed_m_s, 0.0)
+    if sol is None:
+        raise TrimError(f"no steady straight running found at speed_m_s = {speed_m_s:g} on this soil "
+                        "(Newton did not converge from the rolling-resistance guess)")
+    w, res = sol
+    W = params["mass_kg"] * GRAVITY_M_S2
+    if radius_m is not None:
+        # the centripetal force cannot exceed the lateral resistance (a necessary condition)
+        need = params["mass_kg"] * speed_m_s**2 / abs(radius_m)
+        have = params["lateral_friction_coeff"] * W
+        if need >= have:
+            raise TrimError(
+                f"no steady turn at radius_m = {radius_m:g}, speed_m_s = {speed_m_s:g}: lateral resistance limit, "
+                f"the centripetal force m V^2/R = {need:.0f} N exceeds the largest lateral resistance "
+                f"mu_t m g = {have:.0f} N (the vehicle slides out); use a larger radius or a lower speed")
+        target = speed_m_s / radius_m
+        frac, step = 0.0, 1.0 / settings.continuation_steps
+        last_x, last_u = problem.point(w, speed_m_s, 0.0)
+        while frac < 1.0 - 1e-12:
+            nxt = min(1.0, frac + step)
+            sol = problem.solve(w, speed_m_s, nxt * target)
+            if sol is None:
+                step *= 0.5
+                if step < settings.min_step_fraction:
+                    usage = limit_usage(model, params, last_x, last_u, p)
+                    raise TrimError(_limit_message(radius_m, speed_m_s, frac, usage))
+                continue
+            w, res = sol
+            frac = nxt
+            last_x, last_u = problem.point(w, speed_m_s, frac * target)
+            step = min(2 * step, 1.0 / settings.continuation_steps * 4)
+    x, u = problem.point(w, speed_m_s, 0.0 if radius_m is None else speed_m_s / radius_m)
+    usage = limit_usage(model, params, x, u, p)
+    for k in ("left", "right"):
+        om = x[model.state_index(f"omega_{k}_rad_s")]
+        if om * speed_m_s <= 0:
+            raise TrimError(
+                f"no steady turn at radius_m = {radius_m:g}, speed_m_s = {speed_m_s:g}: traction limit, the {k} "
+                "sprocket would have to stop or reverse (the soil's shear strength cannot hold the turn)")
+    return TrimPoint(float(speed_m_s), None if radius_m is None else float(radius_m), x, u, p,
+                     tuple(model.state_names), tuple(model.input_names), _outputs(model, x, u, p), res, usage)
+
+
+def _limit_message(radius_m, speed_m_s, frac, usage) -> str:
+    reached = f"{abs(radius_m) / frac:.3g} m" if frac > 0 else "none (not even a slight curve)"
+    trac = max(usage["traction_usage_left"], usage["traction_usage_right"])
+    lat = usage["lateral_usage"]
+    if trac >= lat:
+        why = (f"traction limit: the tracks use {100 * trac:.0f} % of the soil's shear strength "
+               f"(left {usage['tractive_left_N']:.0f} of {usage['traction_max_left_N']:.0f} N, right "
+               f"{usage['tractive_right_N']:.0f} of {usage['traction_max_right_N']:.0f} N), so the yaw moment "
+               "(B/2)(F_outer - F_inner) cannot grow to overcome the soil's turning resistance")
+    else:
+        why = (f"lateral resistance limit: the tracks carry {100 * lat:.0f} % of the largest lateral "
+               f"resistance mu_t m g = {usage['lateral_resistance_max_N']:.0f} N")
+    return (f"no steady turn at radius_m = {radius_m:g}, speed_m_s = {speed_m_s:g} on this soil: {why}; "
+            f"the tightest steady radius reached by continuation was {reached}")

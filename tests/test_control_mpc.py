@@ -1,0 +1,173 @@
+"""MPC path tracking: settings and scenario validation, paths, a short closed loop, failures."""
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from symtrack.control import closedloop as CL
+from symtrack.control import scenario as S
+from symtrack.control.mpc import MPCSettings, PathTrackingMPC
+from symtrack.control.path import Path, Segment, field_segments
+from symtrack.errors import ParameterError, ScenarioError
+from symtrack.model import SystemModel
+
+
+@pytest.fixture(scope="module")
+def model():
+    return SystemModel()
+
+
+FAST = {"horizon_steps": 20, "sample_time_s": 0.1}
+
+
+def fast_scenario(name="straight_offset", **mpc):
+    sc = S.load(name)
+    return dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, **{**FAST, **mpc}))
+
+
+@pytest.mark.parametrize("kw, field", [
+    ({"horizon_steps": 1}, "horizon_steps"), ({"sample_time_s": 0.0}, "sample_time_s"),
+    ({"solver": "snopt"}, "solver"), ({"torque_max_N_m": -1.0}, "torque_max_N_m"),
+    ({"collocation_degree": 4}, "collocation_degree"), ({"weight_lateral": -1.0}, "weight_lateral"),
+    ({"prediction": "cells"}, "prediction"), ({"jit": "yes"}, "jit"),
+])
+def test_settings_validation(kw, field):
+    with pytest.raises(ParameterError, match=f"mpc.{field}"):
+        MPCSettings(**kw)
+
+
+@pytest.mark.parametrize("override, match", [
+    ("mpc.horizon_step=5", "unknown key"),
+    ("path.speed_m_s=50", r"path.speed_m_s = 50 is outside the allowed range \[0.1, 10\]"),
+    ("run.integrator='rk4'", "run.integrator"),
+    ("soil.preset='moon_dust'", "moon_dust"),
+    ("start.speed_m_s=-1", "start.speed_m_s"),
+])
+def test_scenario_validation(override, match):
+    with pytest.raises(ScenarioError, match=match):
+        S.load("straight_offset", [override])
+
+
+def test_scenario_segment_validation(tmp_path):
+    f = tmp_path / "bad.toml"
+    f.write_text('[path]\nsegments = [{arc_radius_m = 0.5, angle_deg = 90.0}]\n')
+    with pytest.raises(ScenarioError, match=r"segments\[0\].arc_radius_m"):
+        S.load(str(f))
+    f.write_text('[path]\nkind = "field"\npasses = 0\n')
+    with pytest.raises(ScenarioError, match="path.passes"):
+        S.load(str(f))
+
+
+def test_builtin_scenarios_load():
+    names = S.builtin_names()
+    assert {"straight_offset", "headland_uturn", "field_pattern"} <= set(names)
+    for n in names:
+        sc = S.load(n)
+        assert sc.mpc.horizon_s >= 2.0
+        sc.build_path()
+
+
+def test_field_path_geometry():
+    p = Path(0, 0, 0, field_segments(3, 20.0, 6.0), 2.0, 1.0)
+    assert p.length_m == pytest.approx(3 * 20 + 2 * math.pi * 3, rel=1e-6)
+    end = p.at(p.length_m)
+    # after two U-turns (left then right) the heading is back to 0, and 12 m to the left
+    assert end["yaw_rad"] == pytest.approx(0.0, abs=1e-9)
+    assert end["y_m"] == pytest.approx(12.0, abs=1e-6)
+    assert end["x_m"] == pytest.approx(20.0, abs=1e-6)
+    # the turn speed applies on arcs
+    assert p.at(21.0)["speed_m_s"] == 1.0 and not p.at(21.0)["straight"]
+    # projection with a hint never jumps to the parallel pass
+    s = p.project(10.0, 6.5, s_hint=10.0)
+    assert s == pytest.approx(10.0, abs=0.05)
+    e_lat, _ = p.errors(10.0, 0.5, 0.0, 10.0)
+    assert e_lat == pytest.approx(0.5)
+
+
+def test_reference_yaw_continuity():
+    p = Path(0, 0, 0, [Segment("straight", 5.0), Segment("arc", radius_m=2.0, angle_deg=180)], 1.0)
+    ref = p.reference(4.0, 40, 0.1, 2 * math.pi)
+    assert ref[0, 2] == pytest.approx(2 * math.pi)
+    assert np.all(np.diff(ref[:, 2]) >= -1e-12)
+
+
+def test_closed_loop_straight_offset(model, tmp_path):
+    sc = fast_scenario()
+    res = CL.run(sc, model=model, max_steps=30)
+    s = res.summary
+    for key in ("rms_lateral_error_m", "max_lateral_error_m", "solve_time_median_ms", "solve_time_p95_ms",
+                "solve_time_max_ms", "failed_solves", "horizon_s", "sample_time_s"):
+        assert key in s
+    assert s["failed_solves"] == int(np.sum(~res.solve_ok)) <= 3
+    assert s["horizon_s"] == pytest.approx(2.0)
+    # the 1 m offset is being removed: after 3 s the vehicle is within 20 cm
+    assert abs(res.e_lat[0]) == pytest.approx(1.0, abs=1e-6)
+    assert abs(res.e_lat[-1]) < 0.2
+    # torque and torque-rate bounds hold
+    st = sc.mpc
+    assert np.max(np.abs(res.U)) <= st.torque_max_N_m * (1 + 1e-6)
+    rate = np.max(np.abs(np.diff(res.U[:-1], axis=0))) / st.sample_time_s
+    assert rate <= st.torque_rate_max_N_m_s * (1 + 1e-4)
+    CL.write(tmp_path, res)
+    d = json.loads((tmp_path / "summary.json").read_text())
+    assert d["schema_version"] == CL.SUMMARY_SCHEMA_VERSION
+    header = (tmp_path / "trajectory.csv").read_text().splitlines()[0].split(",")
+    assert {"t_s", "x_m", "lateral_error_m", "torque_cmd_left_N_m", "solve_time_ms"} <= set(header)
+    for png in ("path.png", "errors.png", "torques.png", "solve_times.png"):
+        assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_failed_solve_reuses_shifted_plan(model):
+    sc = fast_scenario()
+    mpc = PathTrackingMPC(model, sc.params, sc.mpc)
+    x, u = CL.initial_state(model, sc)
+    path = sc.build_path()
+    ref = path.reference(0.0, mpc.N, sc.mpc.sample_time_s, 0.0)
+    info = mpc.prepare(x[:12], x[12:], u, ref)
+    assert info.success
+    _, plan = mpc.predicted()
+    # a reference with NaN makes the solver fail: no exception, the shifted plan is applied
+    bad = ref.copy()
+    bad[:, 0] = np.nan
+    u1, info1 = mpc.step(x[:12], x[12:], u, bad)
+    assert not info1.success and mpc.stats.failed == 1
+    np.testing.assert_allclose(u1, plan[1])
+    u2, _ = mpc.step(x[:12], x[12:], u, bad)
+    np.testing.assert_allclose(u2, plan[2])
+    assert mpc.stats.failed == 2
+
+
+class _RecordingPlant:
+    """A plant without terrain-cell states (like a grid-terrain plant): the MPC must still run."""
+
+    def __init__(self, model, params):
+        self.inner = CL.HomogeneousPlant(model, params)
+        self.state_names = self.inner.state_names
+        self.calls = 0
+
+    def step(self, x, u, dt):
+        self.calls += 1
+        return self.inner.step(x, u, dt)
+
+
+def test_any_plant_with_a_step_method(model):
+    sc = fast_scenario()
+    plant = _RecordingPlant(model, sc.params)
+    res = CL.run(sc, model=model, plant=plant, max_steps=5)
+    assert plant.calls == 5
+    assert len(res.t) == 6
+
+
+def test_mpc_cli(tmp_path):
+    from symtrack.cli import main
+
+    out = tmp_path / "o"
+    rc = main(["mpc", "straight_offset", "--out", str(out), "--quiet", "--set", "mpc.horizon_steps=6",
+               "--set", "run.duration_s=1.0"])
+    assert rc == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["horizon_steps"] == 6 and s["sim_time_s"] == pytest.approx(1.0)
+    assert main(["mpc", "no_such_scenario", "--out", str(out)]) == 2
