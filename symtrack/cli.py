@@ -64,6 +64,9 @@ def main(argv=None) -> int:
     bn = sub.add_parser("bench", help="real-time factors of every integrator, in one process (docs/codegen.md)")
     bench.add_arguments(bn)
     bn.set_defaults(func=bench.run_cli)
+    from .control import cli as control_cli
+
+    control_cli.add_parsers(sub)  # symtrack linearize, symtrack mpc (docs/control.md)
     args = ap.parse_args(argv)
     if getattr(args, "integrator", None):
         args.set = (args.set or []) + [f"run.integrator={args.integrator}"]
