@@ -234,3 +234,18 @@ def test_fresh_model_without_generated_sources(tmp_path, monkeypatch):
     srcs = compiled._sources(compiled.library(m, compiled=False).gen)
     assert "homogeneous_rosenbrock.c" in srcs and "manifest.json" not in srcs
     assert gen_hash != compiled.library(SystemModel(), compiled=False).gen.model_hash
+
+
+def test_bench_calls_the_providers_that_exist(monkeypatch):
+    import sys
+    import types
+
+    from symtrack import bench
+
+    fake = types.ModuleType("fake_bench_provider")
+    fake.bench_rows = lambda quick: [{"group": "grid", "case": f"quick={quick}"}]
+    monkeypatch.setitem(sys.modules, "fake_bench_provider", fake)
+    monkeypatch.setattr(bench, "PROVIDERS", ("fake_bench_provider", "symtrack.no_such_bench_module"))
+    monkeypatch.setattr(bench, "homogeneous_rows", lambda quick, repeats: [{"group": "h", "case": "x"}])
+    rows = bench.collect(quick=True)
+    assert rows == [{"group": "h", "case": "x"}, {"group": "grid", "case": "quick=True"}]
