@@ -17,7 +17,8 @@ Files written for a model with prefix ``<m>`` (fixed, predictable names, like ac
   advances one step of length h, and ``<m>_rosenbrock_chunk<N>(x0,z0,U,H,p)->(X,Z,Y)``
   advances N steps in one call (column k of U and H are the input and the length of step k;
   a step of length 0 leaves the state unchanged; column k of X, Z, Y is the state,
-  algebraic state and outputs after step k);
+  algebraic state and outputs after step k); ``<m>_consistent_z(x,z0,u,p)->z`` solves the
+  algebraic equations for z by Newton steps from z0 (the steps start from the z they are given);
 - ``manifest.json``: model hash (SHA-256 of the serialised Functions), CasADi version, and
   the names and units of every input and output of every function.
 """
@@ -100,6 +101,9 @@ def fixed_step_functions(model, prefix: str):
     x1, z1 = rosenbrock.step_expressions(model.dae, x0, z0, u, p, h)
     step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [x0, z0, u, p, h], [x1, z1],
                        ["x0", "z0", "u", "p", "h"], ["xf", "zf"], {"cse": True})
+    zc = rosenbrock.consistent_z_expressions(model.dae, x0, z0, u, p)
+    consistent = ca.Function(f"{prefix}_consistent_z", [x0, z0, u, p], [zc], ["x", "z0", "u", "p"], ["z"],
+                             {"cse": True})
     # one column of a chunk: a step, then the outputs at its end (an MX Function calling the two)
     X0, Z0 = ca.MX.sym("x0", model.x.sparsity()), ca.MX.sym("z0", model.z.sparsity())
     U, P, H = ca.MX.sym("u", model.u.sparsity()), ca.MX.sym("p", model.p.sparsity()), ca.MX.sym("h")
@@ -114,7 +118,7 @@ def fixed_step_functions(model, prefix: str):
         Xs, Zs, Ys = acc(X0, Z0, Us, ca.repmat(P, 1, n), Hs)
         chunks.append(ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_chunk{n}", [X0, Z0, Us, Hs, P], [Xs, Zs, Ys],
                                   ["x0", "z0", "U", "H", "p"], ["X", "Z", "Y"]))
-    return step, chunks
+    return step, consistent, chunks
 
 
 def build(model, prefix: str = "homogeneous") -> Generated:
@@ -130,7 +134,7 @@ def build(model, prefix: str = "homogeneous") -> Generated:
     dae = _rename(model.dae, f"{prefix}_dae")
     jac_dae = dae.jacobian()
     accel = _rename(model.accel, f"{prefix}_accel")
-    step, chunks = fixed_step_functions(model, prefix)
+    step, consistent, chunks = fixed_step_functions(model, prefix)
 
     sx, su, sz, sp, sy = (tuple(model.state_names), tuple(model.input_names), tuple(model.alg_names),
                           tuple(model.param_names), tuple(model.output_names))
@@ -141,7 +145,7 @@ def build(model, prefix: str = "homogeneous") -> Generated:
         f"{prefix}_ode": (ode, jac_ode, lin),
         f"{prefix}_outputs": (outputs, lin_out),
         f"{prefix}_dae": (dae, jac_dae, accel),
-        f"{prefix}_{FIXED_STEP_METHOD}": (step, *chunks),
+        f"{prefix}_{FIXED_STEP_METHOD}": (step, consistent, *chunks),
     }
     return Generated(prefix, files, signals, ca.__version__)
 

@@ -159,6 +159,20 @@ def step_expressions(dae: ca.Function, x0, z0, u, p, h):
     return y1[:nx], y1[nx:]
 
 
+def consistent_z_expressions(dae: ca.Function, x, z0, u, p, iterations: int = 2):
+    """z with g(x, z) = 0 by Newton steps from z0 (the step itself starts from the z it is given:
+    call this after anything that moved x, u or p away from the previous step's end)."""
+    nz = z0.numel()
+    xs, zs, us, ps = (ca.SX.sym(n, v.numel()) for n, v in (("x", x), ("z", z0), ("u", u), ("p", p)))
+    g = dae(xs, zs, us, ps)[1]
+    G = ca.Function("g_and_dg_dz", [xs, zs, us, ps], [g, ca.jacobian(g, zs)])
+    z = z0
+    for _ in range(iterations):
+        gz, dg = G(x, z, u, p)
+        z = z - SparseLU(dg).solve(gz) if nz else z
+    return z
+
+
 def plugin_step(model) -> ca.Function:
     """The same step through CasADi's own ``rosenbrock`` plugin (fixed step, time-scaled): the
     reference the unrolled step is tested against (it re-solves g(x0, z0) = 0 first)."""

@@ -35,6 +35,24 @@ int homogeneous_rosenbrock_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_re
 #define homogeneous_rosenbrock_step_SZ_RES 2
 #define homogeneous_rosenbrock_step_SZ_IW 0
 #define homogeneous_rosenbrock_step_SZ_W 0
+int homogeneous_consistent_z(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int homogeneous_consistent_z_checkout(void);
+void homogeneous_consistent_z_release(int mem);
+void homogeneous_consistent_z_incref(void);
+void homogeneous_consistent_z_decref(void);
+casadi_int homogeneous_consistent_z_n_in(void);
+casadi_int homogeneous_consistent_z_n_out(void);
+casadi_real homogeneous_consistent_z_default_in(casadi_int i);
+const char* homogeneous_consistent_z_name_in(casadi_int i);
+const char* homogeneous_consistent_z_name_out(casadi_int i);
+const casadi_int* homogeneous_consistent_z_sparsity_in(casadi_int i);
+const casadi_int* homogeneous_consistent_z_sparsity_out(casadi_int i);
+int homogeneous_consistent_z_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int homogeneous_consistent_z_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define homogeneous_consistent_z_SZ_ARG 4
+#define homogeneous_consistent_z_SZ_RES 1
+#define homogeneous_consistent_z_SZ_IW 0
+#define homogeneous_consistent_z_SZ_W 0
 int homogeneous_rosenbrock_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_chunk256_checkout(void);
 void homogeneous_rosenbrock_chunk256_release(int mem);

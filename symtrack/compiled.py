@@ -252,11 +252,18 @@ class FixedStepper:
         self.sizes = CHUNK_SIZES
         self.chunk = {n: _Chunk(self.lib.f(f"{FIXED_STEP_METHOD}_chunk{n}"), n, model) for n in CHUNK_SIZES}
         self.z = None
+        self._end = None  # (x, u, p) at the end of the last step: z is consistent there
         self.nsteps = 0
         self.ncalls = 0
 
     def reset(self):
         self.z = None
+
+    def consistent_z(self, x, u, p, z_guess=None):
+        """The algebraic state consistent with (x, u, p) (Newton steps from z_guess or accel)."""
+        if z_guess is None:
+            z_guess = self.lib.f("accel")(x, u, p)
+        return np.array(self.lib.f("consistent_z")(x, z_guess, u, p)).ravel()
 
     def run_chunk(self, n_cols, x, z, U, H, p):
         """Advance len(H) <= n_cols steps (column k: input U[k], length H[k]) from (x, z); returns
@@ -287,8 +294,15 @@ class FixedStepper:
         return x, z
 
     def step(self, x, u, p, dt: float):
-        z0 = np.array(self.lib.f("accel")(x, u, p)).ravel() if self.z is None else self.z
-        xf, self.z = self.advance(x, z0, np.asarray(u, dtype=float), np.asarray(p, dtype=float), dt)
+        x, u, p = (np.asarray(a, dtype=float) for a in (x, u, p))
+        z0 = self.z
+        if z0 is None or self._end is None or not all(np.array_equal(a, b) for a, b in zip((x, u, p), self._end,
+                                                                                          strict=True)):
+            # a new start, a shortened step repeated from an earlier state, new inputs or new
+            # parameters (the grid world's channels): re-solve z for this (x, u, p)
+            z0 = self.consistent_z(x, u, p, z0)
+        xf, self.z = self.advance(x, z0, u, p, dt)
+        self._end = (xf.copy(), u.copy(), p.copy())
         return xf
 
     def stats(self) -> dict:
@@ -363,7 +377,7 @@ def run_fixed_step(scenario, model, settings, progress: bool = True):
     target = run_cfg.stop_after_distance_m
     outputs = lib.f("outputs")
     u0 = np.array(scenario.torque_at(0.0), dtype=float)
-    z = np.array(lib.f("accel")(x, u0, p)).ravel()
+    z = stepper.consistent_z(x, u0, p)
     # the trajectory as blocks of rows (one block per chunk)
     tb, xb, ub, yb = [np.zeros(1)], [x[None, :]], [u0[None, :]], [np.array(outputs(x, u0, p)).T]
     t_last = 0.0

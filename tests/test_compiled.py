@@ -249,3 +249,14 @@ def test_bench_calls_the_providers_that_exist(monkeypatch):
     monkeypatch.setattr(bench, "homogeneous_rows", lambda quick, repeats: [{"group": "h", "case": "x"}])
     rows = bench.collect(quick=True)
     assert rows == [{"group": "h", "case": "x"}, {"group": "grid", "case": "quick=True"}]
+
+
+def test_chunked_run_matches_the_step_by_step_loop_with_substeps(model, monkeypatch):
+    """run_fixed_step (256 steps per call, output intervals cut into 3 steps that straddle the
+    chunk boundaries) against runner.run's own loop driving simulate.Stepper step by step."""
+    sc = load_scenario("validation", ["run.integrator=rosenbrock", "run.fixed_step_s=0.004"])
+    chunked = runner.summarise(runner.run(sc, progress=False, model=model))
+    monkeypatch.setattr(runner, "FIXED_STEP_INTEGRATORS", ())
+    looped = runner.summarise(runner.run(sc, progress=False, model=model))
+    for k in FIGURES + ("distance_m",):
+        assert chunked[k] == pytest.approx(looped[k], rel=1e-7, abs=1e-12), k
