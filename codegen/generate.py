@@ -8,8 +8,8 @@ Files written for a model with prefix ``<m>`` (fixed, predictable names, like ac
 
 - ``<m>_ode.c/.h``: ``<m>_ode(x,u,p)->ode``, its exact sparse Jacobian ``jac_<m>_ode`` (the
   symbol ``casadi.external`` looks for) and the linearisation ``<m>_linearise(x,u,p)->(A,B)``;
-- ``<m>_outputs.c/.h``: ``<m>_outputs(x,u,p)->y`` and ``<m>_linearise_outputs(x,u,p)->(C,D)``
-  (the exact Jacobians with respect to x and u);
+- ``<m>_outputs.c/.h``: ``<m>_outputs(x,u,p)->y``; ``<m>_linearise_outputs.c/.h``:
+  ``<m>_linearise_outputs(x,u,p)->(C,D)`` (the exact Jacobians with respect to x and u);
 - ``<m>_dae.c/.h``: ``<m>_dae(x,z,u,p)->(ode,alg)``, ``jac_<m>_dae``, ``<m>_accel(x,u,p)->z``;
 - ``<m>_rosenbrock.c/.h``: the fixed-step integrator (the 8-stage, L-stable, order-5 Rosenbrock
   method of CasADi's ``rosenbrock`` plugin, unrolled with a sparse LU in :mod:`codegen.rosenbrock`,
@@ -19,15 +19,16 @@ Files written for a model with prefix ``<m>`` (fixed, predictable names, like ac
   a step of length 0 leaves the state unchanged; column k of X, Z, Y is the state,
   algebraic state and outputs after step k); ``<m>_consistent_z(x,z0,u,p)->z`` solves the
   algebraic equations for z by Newton steps from z0 (the steps start from the z they are given);
-- ``manifest.json``: model hash (SHA-256 of the serialised Functions), CasADi version, and
-  the names and units of every input and output of every function.
+- ``manifest.json``: model hash (SHA-256 over the files' hashes of their serialised Functions;
+  each file's own hash is its key in the compiled-library cache), CasADi version, and the names
+  and units of every input and output of every function.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import casadi as ca
@@ -65,6 +66,7 @@ class Generated:
     files: dict  # file stem -> tuple of Functions (in generation order)
     signals: dict  # function input/output label -> tuple of element names
     casadi_version: str
+    _hashes: dict = field(default_factory=dict, compare=False, repr=False)
 
     def functions(self):
         for fs in self.files.values():
@@ -76,13 +78,24 @@ class Generated:
                 return f
         raise KeyError(name)
 
-    @property
-    def model_hash(self) -> str:
+    def file_hash(self, stem: str) -> str:
+        """SHA-256 of the serialised Functions of one file (its cache key)."""
+        if stem in self._hashes:
+            return self._hashes[stem]
         h = hashlib.sha256()
         h.update(f"casadi {self.casadi_version}\n".encode())
-        for f in self.functions():
+        for f in self.files[stem]:
             h.update(f.name().encode() + b"\n")
             h.update(f.serialize().encode())
+        self._hashes[stem] = h.hexdigest()
+        return self._hashes[stem]
+
+    @property
+    def model_hash(self) -> str:
+        """SHA-256 over the files' hashes (the whole generated model)."""
+        h = hashlib.sha256()
+        for stem in self.files:
+            h.update(f"{stem} {self.file_hash(stem)}\n".encode())
         return h.hexdigest()
 
 
@@ -121,32 +134,47 @@ def fixed_step_functions(model, prefix: str):
     return step, consistent, chunks
 
 
-def build(model, prefix: str = "homogeneous") -> Generated:
-    """All generated Functions of ``model`` (a SystemModel), with their element names."""
-    ode = _rename(model.ode, f"{prefix}_ode")
-    jac_ode = ode.jacobian()  # named jac_<prefix>_ode: casadi.external finds it
-    x, u, p = (ca.MX.sym(n, s) for n, s in (("x", model.x.sparsity()), ("u", model.u.sparsity()),
-                                              ("p", model.p.sparsity())))
-    J = jac_ode(x, u, p, ca.MX(ode.sparsity_out(0).size1(), 1))
-    lin = ca.Function(f"{prefix}_linearise", [x, u, p], [J[0], J[1]], ["x", "u", "p"], ["A", "B"])
-    outputs = _rename(model.outputs, f"{prefix}_outputs")
-    lin_out = _rename(model.jac_outputs, f"{prefix}_linearise_outputs")
-    dae = _rename(model.dae, f"{prefix}_dae")
-    jac_dae = dae.jacobian()
-    accel = _rename(model.accel, f"{prefix}_accel")
-    step, consistent, chunks = fixed_step_functions(model, prefix)
+# The files, each a group of Functions that is compiled and loaded on its own: a simulation
+# builds and compiles only what it uses (the ODE form's Jacobian of the grid terrain is dense).
+GROUPS = ("ode", "dae", "outputs", "linearise_outputs", FIXED_STEP_METHOD)
+# short function name (after "<prefix>_") -> group
+GROUP_OF = {"ode": "ode", "linearise": "ode", "dae": "dae", "accel": "dae", "outputs": "outputs",
+            "linearise_outputs": "linearise_outputs", f"{FIXED_STEP_METHOD}_step": FIXED_STEP_METHOD,
+            "consistent_z": FIXED_STEP_METHOD,
+            **{f"{FIXED_STEP_METHOD}_chunk{n}": FIXED_STEP_METHOD for n in CHUNK_SIZES}}
 
+
+def _group(model, prefix: str, group: str) -> tuple:
+    if group == "ode":
+        ode = _rename(model.ode, f"{prefix}_ode")
+        jac_ode = ode.jacobian()  # named jac_<prefix>_ode: casadi.external finds it
+        x, u, p = (ca.MX.sym(n, s) for n, s in (("x", model.x.sparsity()), ("u", model.u.sparsity()),
+                                                  ("p", model.p.sparsity())))
+        J = jac_ode(x, u, p, ca.MX(ode.sparsity_out(0).size1(), 1))
+        lin = ca.Function(f"{prefix}_linearise", [x, u, p], [J[0], J[1]], ["x", "u", "p"], ["A", "B"])
+        return ode, jac_ode, lin
+    if group == "dae":
+        dae = _rename(model.dae, f"{prefix}_dae")
+        return dae, dae.jacobian(), _rename(model.accel, f"{prefix}_accel")
+    if group == "outputs":
+        return (_rename(model.outputs, f"{prefix}_outputs"),)
+    if group == "linearise_outputs":
+        return (_rename(model.jac_outputs, f"{prefix}_linearise_outputs"),)
+    if group == FIXED_STEP_METHOD:
+        step, consistent, chunks = fixed_step_functions(model, prefix)
+        return step, consistent, *chunks
+    raise ValueError(f"unknown group {group!r}; groups: {', '.join(GROUPS)}")
+
+
+def build(model, prefix: str = "homogeneous", groups=GROUPS) -> Generated:
+    """The generated Functions of ``model`` (a SystemModel) in the given groups, with their
+    element names."""
     sx, su, sz, sp, sy = (tuple(model.state_names), tuple(model.input_names), tuple(model.alg_names),
                           tuple(model.param_names), tuple(model.output_names))
     signals = {"x": sx, "x0": sx, "xf": sx, "ode": tuple(f"d_{n}_dt" for n in sx), "X": sx,
                "u": su, "U": su, "z": sz, "z0": sz, "zf": sz, "Z": sz, "alg": tuple(f"res_{n}" for n in sz),
                "p": sp, "y": sy, "Y": sy, "h": ("step_s",), "H": ("step_s",)}
-    files = {
-        f"{prefix}_ode": (ode, jac_ode, lin),
-        f"{prefix}_outputs": (outputs, lin_out),
-        f"{prefix}_dae": (dae, jac_dae, accel),
-        f"{prefix}_{FIXED_STEP_METHOD}": (step, consistent, *chunks),
-    }
+    files = {f"{prefix}_{g}": _group(model, prefix, g) for g in groups}
     return Generated(prefix, files, signals, ca.__version__)
 
 
@@ -195,6 +223,7 @@ def manifest(gen: Generated, file_hashes: dict) -> dict:
         "model_hash": gen.model_hash,
         "fixed_step_method": FIXED_STEP_METHOD,
         "chunk_sizes": list(CHUNK_SIZES),
+        "model_hash_by_file": {stem + ".c": gen.file_hash(stem) for stem in gen.files},
         "functions": funcs,
         "files": file_hashes,
     }

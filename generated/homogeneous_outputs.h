@@ -35,24 +35,6 @@ int homogeneous_outputs_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casad
 #define homogeneous_outputs_SZ_RES 1
 #define homogeneous_outputs_SZ_IW 0
 #define homogeneous_outputs_SZ_W 0
-int homogeneous_linearise_outputs(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int homogeneous_linearise_outputs_checkout(void);
-void homogeneous_linearise_outputs_release(int mem);
-void homogeneous_linearise_outputs_incref(void);
-void homogeneous_linearise_outputs_decref(void);
-casadi_int homogeneous_linearise_outputs_n_in(void);
-casadi_int homogeneous_linearise_outputs_n_out(void);
-casadi_real homogeneous_linearise_outputs_default_in(casadi_int i);
-const char* homogeneous_linearise_outputs_name_in(casadi_int i);
-const char* homogeneous_linearise_outputs_name_out(casadi_int i);
-const casadi_int* homogeneous_linearise_outputs_sparsity_in(casadi_int i);
-const casadi_int* homogeneous_linearise_outputs_sparsity_out(casadi_int i);
-int homogeneous_linearise_outputs_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int homogeneous_linearise_outputs_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_linearise_outputs_SZ_ARG 3
-#define homogeneous_linearise_outputs_SZ_RES 2
-#define homogeneous_linearise_outputs_SZ_IW 0
-#define homogeneous_linearise_outputs_SZ_W 0
 void homogeneous_outputs_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_outputs_casadi_int_size(void);
 int homogeneous_outputs_casadi_real_size(void);

@@ -28,7 +28,6 @@ import shutil
 import subprocess
 import tempfile
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import casadi as ca
@@ -86,22 +85,73 @@ def find_compiler() -> str | None:
     return None
 
 
-@dataclass
-class Library:
-    """The generated Functions of one model, compiled (``compiled`` True) or interpreted."""
+def _compiler() -> str | None:
+    """The C compiler, or None after saying once that there is none (an error when required)."""
+    global _warned_no_compiler
+    cc = find_compiler()
+    if cc is None:
+        if _require:
+            raise SimulationError("no C compiler found (looked for $CC, cc, gcc) and compiled code is required "
+                                  "(--require-compiled); install gcc or drop --require-compiled")
+        if not _warned_no_compiler:
+            log.warning("no C compiler found (looked for $CC, cc, gcc): running the generated functions "
+                        "on CasADi's interpreter instead (slower)")
+            _warned_no_compiler = True
+    return cc
 
-    prefix: str
-    gen: object  # codegen.generate.Generated
-    path: Path | None
-    functions: dict
+
+class Library:
+    """The generated Functions of one model (prefix = its terrain's name), built, compiled and
+    loaded file by file (codegen.generate.GROUPS) on first use, so that a simulation pays only
+    for what it calls; interpreted when compiled code is not wanted or there is no compiler."""
+
+    def __init__(self, model, compiled: bool = True):
+        self.model, self.prefix, self.want_compiled = model, model.terrain.name, compiled
+        self.functions: dict[str, ca.Function] = {}  # what f() returns: external or interpreted
+        self.interpreted: dict[str, ca.Function] = {}
+        self.paths: dict[str, Path | None] = {}  # group -> shared library (None: interpreted)
+        self.gens: dict = {}  # group -> codegen.generate.Generated
 
     @property
     def compiled(self) -> bool:
-        return self.path is not None
+        return bool(self.paths) and all(p is not None for p in self.paths.values())
+
+    def load(self, group: str) -> None:
+        if group in self.paths:
+            return
+        from codegen.generate import build
+
+        gen = build(self.model, self.prefix, (group,))
+        stem = f"{self.prefix}_{group}"
+        interp = {f.name(): f for f in gen.functions()}
+        path = None
+        cc = _compiler() if self.want_compiled else None
+        if cc is not None:
+            path = cache_root() / f"{stem}-{gen.file_hash(stem)[:16]}-b{BUILD_VERSION}" / f"lib{stem}.so"
+            if not path.exists():
+                t0 = time.perf_counter()
+                log.info("compiling %s into %s (once; cached)", stem, path.parent)
+                _compile(_sources(gen, stem), path, cc)
+                log.info("compiled %s in %.1f s", stem, time.perf_counter() - t0)
+        self.interpreted.update(interp)
+        self.functions.update(interp if path is None else {n: ca.external(n, str(path)) for n in interp})
+        self.paths[group], self.gens[group] = path, gen
+
+    def _name(self, short: str) -> str:
+        from codegen.generate import GROUP_OF
+
+        if short not in GROUP_OF:
+            raise KeyError(f"no generated function {short!r}; known: {', '.join(GROUP_OF)}")
+        self.load(GROUP_OF[short])
+        return f"{self.prefix}_{short}"
 
     def f(self, short: str) -> ca.Function:
-        """A Function by its short name: ode, dae, outputs, accel, linearise, ..."""
-        return self.functions[f"{self.prefix}_{short}"]
+        """A Function by its short name: ode, dae, outputs, accel, linearise, rosenbrock_step, ..."""
+        return self.functions[self._name(short)]
+
+    def interpreted_f(self, short: str) -> ca.Function:
+        """The same Function on CasADi's interpreter."""
+        return self.interpreted[self._name(short)]
 
 
 def _compile(sources: dict[str, bytes], out_so: Path, cc: str) -> None:
@@ -141,20 +191,21 @@ def _compile(sources: dict[str, bytes], out_so: Path, cc: str) -> None:
         shutil.rmtree(build, ignore_errors=True)
 
 
-def _sources(gen) -> dict[str, bytes]:
-    """The C sources of gen: from the repository's generated/ when it matches, else fresh."""
+def _sources(gen, stem: str) -> dict[str, bytes]:
+    """The C sources of one file of gen: from the repository's generated/ when it matches, else
+    generated afresh (an installed package, other model options, or a stale generated/)."""
     from codegen.generate import render
 
     manifest = REPO_GENERATED / "manifest.json"
     if manifest.exists():
         m = json.loads(manifest.read_text())
-        if m.get("model_hash") == gen.model_hash:
-            files = {n: (REPO_GENERATED / n).read_bytes() for n in m["files"] if (REPO_GENERATED / n).exists()}
-            if len(files) == len(m["files"]):
-                return files
-        if m.get("model") == gen.prefix:
-            log.info("generated/ does not match this %s model (other options, or stale: python -m codegen); "
-                     "generating its sources afresh", gen.prefix)
+        if m.get("model_hash_by_file", {}).get(stem + ".c") == gen.file_hash(stem):
+            names = (stem + ".c", stem + ".h")
+            if all((REPO_GENERATED / n).exists() for n in names):
+                return {n: (REPO_GENERATED / n).read_bytes() for n in names}
+        elif m.get("model") == gen.prefix:
+            log.info("generated/%s.c does not match this %s model (other options, or stale: python -m codegen); "
+                     "generating it afresh", stem, gen.prefix)
     with tempfile.TemporaryDirectory(prefix="symtrack-codegen-") as scratch:
         files = render(gen, Path(scratch))
     files.pop("manifest.json")
@@ -162,38 +213,13 @@ def _sources(gen) -> dict[str, bytes]:
 
 
 def library(model, compiled: bool = True) -> Library:
-    """The generated Functions of ``model``: compiled and loaded from the cache when possible."""
-    global _warned_no_compiler
+    """The generated Functions of ``model`` (one Library per model object and mode)."""
     compiled = compiled and not _force_interpreter
     key = (id(model), compiled)
     hit = _cache.get(key)
     if hit is not None and hit[0] is model:
         return hit[1]
-    from codegen.generate import build
-
-    prefix = model.terrain.name
-    gen = build(model, prefix)
-    interpreted = {f.name(): f for f in gen.functions()}
-    lib = Library(prefix, gen, None, interpreted)
-    if compiled:
-        cc = find_compiler()
-        if cc is None:
-            if _require:
-                raise SimulationError("no C compiler found (looked for $CC, cc, gcc) and compiled code is required "
-                                      "(--require-compiled); install gcc or drop --require-compiled")
-            if not _warned_no_compiler:
-                log.warning("no C compiler found (looked for $CC, cc, gcc): running the generated functions "
-                            "on CasADi's interpreter instead (slower)")
-                _warned_no_compiler = True
-        else:
-            so = cache_root() / f"{prefix}-{gen.model_hash[:16]}-b{BUILD_VERSION}" / f"lib{prefix}.so"
-            if not so.exists():
-                t0 = time.perf_counter()
-                log.info("compiling the %s model into %s (once; cached)", prefix, so.parent)
-                _compile(_sources(gen), so, cc)
-                log.info("compiled in %.1f s", time.perf_counter() - t0)
-            funcs = {name: ca.external(name, str(so)) for name in interpreted}
-            lib = Library(prefix, gen, so, funcs)
+    lib = Library(model, compiled)
     _cache[key] = (model, lib)
     return lib
 

@@ -14,6 +14,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from codegen.generate import GROUPS
 from symtrack import compiled, runner
 from symtrack.errors import ScenarioError, SimulationError
 from symtrack.model import SystemModel
@@ -39,7 +40,9 @@ def model(scenario):
 @pytest.fixture(scope="module")
 def lib(model):
     lib = compiled.library(model)
-    assert lib.compiled and lib.path.exists()
+    for group in GROUPS:
+        lib.load(group)
+    assert lib.compiled and all(p.exists() for p in lib.paths.values())
     return lib
 
 
@@ -78,7 +81,7 @@ def _close(a, b, rtol=1e-12):
 
 
 def test_compiled_functions_agree_with_interpreted(lib, model, scenario):
-    interp = {f.name(): f for f in lib.gen.functions()}
+    interp = lib.interpreted
     checked = 0
     for x, z, u, p in _points(model, scenario):
         for name, args in (("ode", (x, u, p)), ("dae", (x, z, u, p)), ("outputs", (x, u, p)), ("accel", (x, u, p)),
@@ -108,8 +111,11 @@ def test_library_is_cached_and_reused(lib, model, monkeypatch):
     monkeypatch.setattr(compiled, "_compile", no_compile)
     compiled._cache.clear()
     again = compiled.library(model)
-    assert again.path == lib.path
-    assert again.path.parent.name.startswith("homogeneous-" + lib.gen.model_hash[:16])
+    again.f("rosenbrock_step")
+    again.f("ode")
+    assert again.paths == {"rosenbrock": lib.paths["rosenbrock"], "ode": lib.paths["ode"]}
+    stem = "homogeneous_rosenbrock"
+    assert again.paths["rosenbrock"].parent.name.startswith(stem + "-" + lib.gens["rosenbrock"].file_hash(stem)[:16])
 
 
 def test_no_compiler_falls_back_once_or_fails_when_required(model, monkeypatch, caplog):
@@ -119,14 +125,15 @@ def test_no_compiler_falls_back_once_or_fails_when_required(model, monkeypatch, 
     try:
         with caplog.at_level(logging.WARNING, logger="symtrack.compiled"):
             lib = compiled.library(model)
+            y = lib.f("outputs")
             compiled._cache.clear()
-            compiled.library(model)
-        assert not lib.compiled
+            compiled.library(model).f("accel")
+        assert not lib.compiled and y.class_name() != "External"
         assert sum("no C compiler" in r.message for r in caplog.records) == 1
         monkeypatch.setattr(compiled, "_require", True)
         compiled._cache.clear()
         with pytest.raises(SimulationError, match="no C compiler"):
-            compiled.library(model)
+            compiled.library(model).f("outputs")
     finally:
         compiled._cache.clear()
 
@@ -230,10 +237,13 @@ def test_fresh_model_without_generated_sources(tmp_path, monkeypatch):
 
     monkeypatch.setenv("SYMTRACK_CACHE", str(tmp_path))
     m = SystemModel(ModelOptions(lateral_segments=1, gauss_points=1, accel_newton_iterations=1))
-    gen_hash = compiled.library(m, compiled=False).gen.model_hash
-    srcs = compiled._sources(compiled.library(m, compiled=False).gen)
-    assert "homogeneous_rosenbrock.c" in srcs and "manifest.json" not in srcs
-    assert gen_hash != compiled.library(SystemModel(), compiled=False).gen.model_hash
+    lib = compiled.library(m, compiled=False)
+    lib.load("rosenbrock")
+    gen = lib.gens["rosenbrock"]
+    srcs = compiled._sources(gen, "homogeneous_rosenbrock")
+    assert sorted(srcs) == ["homogeneous_rosenbrock.c", "homogeneous_rosenbrock.h"]
+    assert srcs["homogeneous_rosenbrock.c"] != (compiled.REPO_GENERATED / "homogeneous_rosenbrock.c").read_bytes()
+    assert not lib.compiled and lib.f("rosenbrock_step").class_name() != "External"
 
 
 def test_bench_calls_the_providers_that_exist(monkeypatch):
