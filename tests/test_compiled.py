@@ -209,14 +209,15 @@ def test_run_settings_for_compiled_integrators():
         load_scenario("validation", ["run.compiled=1"])
 
 
-def test_cli_simulate_rosenbrock_and_codegen_check(tmp_path, capsys):
+def test_cli_simulate_rosenbrock_and_codegen_check(tmp_path, capsys, monkeypatch):
     from symtrack.cli import main
+
+    monkeypatch.setattr(compiled, "_require", False)  # restored after the test (--require-compiled sets it)
 
     assert main(["simulate", "validation", "--integrator", "rosenbrock", "--require-compiled", "--quiet",
                  "--out", str(tmp_path / "run")]) == 0
     assert (tmp_path / "run" / "summary.json").exists()
     assert main(["codegen", "--check"]) == 0
-    compiled.set_require_compiled(False)
 
 
 def test_bench_table_and_report():
