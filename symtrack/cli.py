@@ -17,6 +17,10 @@ def _simulate(args) -> int:
     from .scenario import load_scenario
 
     sc = load_scenario(args.scenario, args.set or [])
+    if "terrain" in sc.extra or getattr(args, "terrain_in", None) or getattr(args, "terrain_out", None):
+        from .terrain.study import simulate_cli  # the grid terrain (docs/terrain.md)
+
+        return simulate_cli(args, sc)
     res = runner.run(sc, progress=not args.quiet)
     summary = runner.summarise(res)
     figs = plots.all_plots(res)
@@ -51,6 +55,8 @@ def main(argv=None) -> int:
     s.add_argument("--require-compiled", action="store_true",
                    help="fail instead of falling back to the interpreter when no C compiler is found")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--terrain-in", metavar="FILE", help="continue from a saved grid terrain (docs/terrain.md)")
+    s.add_argument("--terrain-out", metavar="FILE", help="save the grid terrain at the end (docs/terrain.md)")
     s.set_defaults(func=_simulate)
     ls = sub.add_parser("scenarios", help="list the built-in scenarios")
     ls.set_defaults(func=_scenarios)

@@ -29,6 +29,7 @@ class Result:
     wall_time_s: float
     stopped_by: str
     stats: dict = field(default_factory=dict)
+    terrain: dict | None = None  # grid terrain figures of the run (symtrack.terrain.world)
 
     def state(self, name):
         return self.X[:, self.state_names.index(name)]
@@ -48,20 +49,31 @@ def build_model(scenario: Scenario) -> SystemModel:
     return SystemModel(scenario.model)
 
 
-def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = None) -> Result:
-    model = model or build_model(scenario)
+def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = None, world=None) -> Result:
+    """One run (one pass). With a ``[terrain]`` section, or a ``world`` (a
+    :class:`symtrack.terrain.world.World`, shared by several passes), the grid terrain's world
+    manager assigns channels before and writes the cells back after every macro step."""
+    if world is None and "terrain" in scenario.extra:
+        from .terrain.study import make_world
+
+        world = make_world(scenario)
+    model = world.model if world is not None else (model or build_model(scenario))
     params = scenario.params
-    p = model.param_vector(params)
+    p = model.param_vector(params) if world is None else world.param_vector()
     settings = IntegratorSettings(scenario.run.integrator, scenario.run.reltol, scenario.run.abstol,
                                   compiled=scenario.run.compiled, fixed_step_s=scenario.run.fixed_step_s)
-    if settings.method in FIXED_STEP_INTEGRATORS:
-        # the same time loop, with the inner loop (many steps per call) in generated C
+    if settings.method in FIXED_STEP_INTEGRATORS and world is None:
+        # the same time loop, with the inner loop (many steps per call) in generated C; with a
+        # grid world the loop below runs it step by step (simulate.Stepper -> FixedStepper)
         from .compiled import run_fixed_step
 
         return run_fixed_step(scenario, model, settings, progress)
-    stepper = Stepper(model, settings)
+    stepper = Stepper(model, settings) if world is None else world.stepper(settings)
     st = scenario.start
-    x = static_state(model, params, st.x_m, st.y_m, np.radians(st.yaw_deg))
+    if world is None:
+        x = static_state(model, params, st.x_m, st.y_m, np.radians(st.yaw_deg))
+    else:
+        x = world.begin_pass(stepper, st.x_m, st.y_m, np.radians(st.yaw_deg))
 
     run_cfg = scenario.run
     dt = run_cfg.output_dt_s
@@ -83,12 +95,14 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
             if t + 1e-12 < tc < t_next - 1e-12:
                 t_next = tc
         u = np.array(scenario.torque_at(t))
+        if world is not None:
+            x, p = world.before_step(x, t_next - t, stepper)
         x_new = stepper.step(x, u, p, t_next - t)
         done = False
         if dist_from is not None and t_next > dist_from + 1e-12:
             d_step = float(np.hypot(x_new[0] - x[0], x_new[1] - x[1]))
             if dist + d_step >= run_cfg.stop_after_distance_m:
-                # shorten the last step so the run ends at the distance (two secant refinements)
+                # shorten the last step so the run ends at the distance (three secant refinements)
                 h = t_next - t
                 for _ in range(3):
                     if d_step <= 0:
@@ -100,6 +114,9 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
                 done = True
             dist += d_step
         t, x = t_next, x_new
+        if world is not None:
+            world.after_step(x)
+            world.check_covered(x)
         ts.append(t)
         xs.append(x)
         us.append(u)
@@ -113,13 +130,16 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
             break
     bar.close()
     wall = time.perf_counter() - wall0
+    if world is not None:
+        world.end_pass(x)  # lift the vehicle off: the loaded cells unload and go back to storage
     if dist_from is not None and stopped_by != "distance":
         raise SimulationError(
             f"the run reached run.duration_s = {run_cfg.duration_s} s before covering "
             f"run.stop_after_distance_m = {run_cfg.stop_after_distance_m} m (covered {dist:.2f} m); "
             "raise duration_s")
     return Result(scenario, np.array(ts), np.array(xs), np.array(us), np.array(ys),
-                  model.state_names, model.output_names, wall, stopped_by)
+                  model.state_names, model.output_names, wall, stopped_by,
+                  terrain=None if world is None else world.figures())
 
 
 def summarise(res: Result) -> dict:
@@ -162,4 +182,6 @@ def summarise(res: Result) -> dict:
     out["sim_time_s"] = float(res.t[-1])
     out["wall_time_s"] = float(res.wall_time_s)
     out["real_time_factor"] = float(res.t[-1] / res.wall_time_s) if res.wall_time_s > 0 else None
+    if res.terrain:
+        out.update(res.terrain)
     return out

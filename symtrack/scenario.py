@@ -232,6 +232,15 @@ def _parse_start(t) -> Start:
 EXTRA_SECTIONS: dict = {}  # section name -> validator(dict) -> dict, registered by extensions
 
 
+def _register_builtin_sections():
+    from .terrain.config import validate_section
+
+    EXTRA_SECTIONS.setdefault("terrain", validate_section)  # [terrain]: symtrack/terrain/config.py
+
+
+_register_builtin_sections()
+
+
 def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     _check_keys("scenario", d, TOP_KEYS + tuple(EXTRA_SECTIONS))
     name = d.get("name", default_name)

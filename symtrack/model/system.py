@@ -24,6 +24,8 @@ holds no numbers except true constants and the numerical options of :class:`Mode
 
 from __future__ import annotations
 
+import functools
+
 import casadi as ca
 
 from ..parameters import SOIL_PARAM_NAMES, VEHICLE_PARAM_NAMES
@@ -93,10 +95,22 @@ class SystemModel:
         self.ode = ca.Function("ode", [x, u, p], [ode], ["x", "u", "p"], ["ode"], fo)
         self.outputs = ca.Function("outputs", [x, u, p], [y], ["x", "u", "p"], ["y"], fo)
         self.accel = ca.Function("accel", [x, u, p], [acc], ["x", "u", "p"], ["z"], fo)
-        self.jac_ode = ca.Function("jac_ode", [x, u, p], [ca.jacobian(ode, x), ca.jacobian(ode, u)],
-                                   ["x", "u", "p"], ["A", "B"], fo)
-        self.jac_outputs = ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x), ca.jacobian(y, u)],
-                                       ["x", "u", "p"], ["C", "D"], fo)
+        self._y_expr = y
+
+    # The Jacobian Functions are built on first use: for the grid terrain the ODE form's
+    # Jacobian is dense (see symtrack/terrain/channels.py) and costly to build, and the
+    # simulation does not need it.
+    @functools.cached_property
+    def jac_ode(self) -> ca.Function:
+        x, u, p, ode = self.x, self.u, self.p, self.ode_expr
+        return ca.Function("jac_ode", [x, u, p], [ca.jacobian(ode, x), ca.jacobian(ode, u)],
+                           ["x", "u", "p"], ["A", "B"], {"cse": True})
+
+    @functools.cached_property
+    def jac_outputs(self) -> ca.Function:
+        x, u, p, y = self.x, self.u, self.p, self._y_expr
+        return ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x), ca.jacobian(y, u)],
+                           ["x", "u", "p"], ["C", "D"], {"cse": True})
 
     @property
     def nx(self):

@@ -1,0 +1,153 @@
+"""The brute-force reference and the terrain benchmark.
+
+- :func:`brute_force_run`: every cell of a (small) field integrated as its own state, the same
+  cell equations as the channels, each channel permanently bound to one cell. The same time
+  loop, settling and history update as the channel pool; the test of the world manager
+  compares the two (tests/test_terrain_world.py).
+- :func:`benchmark`: the figures of the issue, measured in one run (see ``examples/bench_terrain.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import casadi as ca
+import numpy as np
+
+from ..simulate import IntegratorSettings
+from .channels import NF, NG, ChannelTerrain, soil_law_values
+from .config import TerrainSettings, settings_from_dict
+from .world import END_STRIP_CELLS, NV, CellStorage, Grid
+
+
+@dataclasses.dataclass
+class BruteResult:
+    t: np.ndarray
+    X: np.ndarray  # vehicle states per output time
+    z: np.ndarray  # final sinkage of every cell (nx, ny)
+    wall_time_s: float
+    n_states: int
+
+
+def brute_force_run(scenario, duration_s: float) -> BruteResult:
+    """Integrate the scenario for duration_s on its [terrain] field with one channel per cell."""
+    from ..model import SystemModel
+    from .stepper import ChannelStepper
+
+    s = settings_from_dict(scenario.extra["terrain"])
+    params = scenario.params
+    nx, ny = s.shape
+    origin = s.origin_m or (scenario.start.x_m - 0.5 * nx * s.cell_m, scenario.start.y_m - 0.5 * ny * s.cell_m)
+    grid = Grid(tuple(float(v) for v in origin), float(s.cell_m), (nx, ny))
+    n = grid.n_cells
+    terrain = ChannelTerrain(scenario.model, n)
+    model = SystemModel(scenario.model, terrain)
+    st = CellStorage(grid)
+    Q = np.zeros(NG + NF * n)
+    Q[0], Q[1] = grid.cell_m, END_STRIP_CELLS * grid.cell_m
+    qc = Q[NG:].reshape(n, NF)
+    ii, jj = np.divmod(np.arange(n), ny)
+    qc[:, 0], qc[:, 1] = grid.centres(ii, jj)
+    qc[:, 4] = 1.0
+    pbase = np.array(model.param_vector(params, Q))[:-len(Q)]
+    law = ca.DM(soil_law_values(params))
+    history = terrain.fn["history"].map("history_all", "serial", n, [3], [])
+    stepper = ChannelStepper(model, IntegratorSettings("idas", scenario.run.reltol, scenario.run.abstol))
+
+    def update(x):
+        zc = x[NV::2]
+        zmax, pmax, _, _ = (np.array(a).ravel() for a in history(zc, qc[:, 2], qc[:, 3], law))
+        qc[:, 2], qc[:, 3] = zmax, pmax
+
+    x = np.zeros(model.nx)
+    x[0], x[1], x[2] = scenario.start.x_m, scenario.start.y_m, np.radians(scenario.start.yaw_deg)
+    dt = scenario.run.output_dt_s
+    for _ in range(int(round(s.settle_s / 0.01))):
+        x = stepper.step(x, np.zeros(2), np.concatenate([pbase, Q]), 0.01)
+        update(x)
+    stepper.reset()
+    t = 0.0
+    change_times = [e.t_s for e in scenario.torque[1:]]
+    ts, xs = [t], [x[:NV].copy()]
+    wall0 = time.perf_counter()
+    while t < duration_s - 1e-12:
+        t_next = min(t + dt, duration_s)
+        for tc in change_times:
+            if t + 1e-12 < tc < t_next - 1e-12:
+                t_next = tc
+        u = np.array(scenario.torque_at(t))
+        x = stepper.step(x, u, np.concatenate([pbase, Q]), t_next - t)
+        update(x)
+        t = t_next
+        ts.append(t)
+        xs.append(x[:NV].copy())
+    wall = time.perf_counter() - wall0
+    st.z[:] = x[NV::2]
+    return BruteResult(np.array(ts), np.array(xs), st.z.reshape(grid.shape).copy(), wall, model.nx)
+
+
+def pool_run(scenario, duration_s: float):
+    """The same run through the channel pool (the runner with the world manager)."""
+    from .. import runner
+    from .study import make_world
+
+    sc = dataclasses.replace(scenario, run=dataclasses.replace(
+        scenario.run, duration_s=duration_s, stop_after_distance_m=None, stop_distance_event=None))
+    world = make_world(sc)
+    res = runner.run(sc, progress=False, world=world)
+    return world, res
+
+
+def _field_scenario(base, size_m, cell_m, extra=()):
+    from ..scenario import load_scenario
+
+    return load_scenario(base, ["run.integrator=idas", f"terrain.size_m={list(size_m)}",
+                                f"terrain.cell_m={cell_m}", *extra])
+
+
+def benchmark(big_size_m=(100.0, 100.0), big_cell_m=0.1, small_size_m=(12.0, 4.0), small_cell_m=0.25,
+              small_duration_s=1.0, big_duration_s=None) -> dict:
+    """All figures of the issue's benchmark, measured in one process.
+
+    1. The validation run (validation_grid) on the big field: wall time per simulated second,
+       peak active cells, channels, storage memory.
+    2. On the small field, ``small_duration_s`` of the validation's torque programme through the
+       channel pool and with every cell integrated as its own state: the speed ratio.
+    """
+    from .. import runner, validation
+    from .study import make_world
+
+    out = {}
+    sc = _field_scenario("validation_grid", big_size_m, big_cell_m)
+    if big_duration_s is not None:  # a shortened run (the example's test), not the validation
+        sc = dataclasses.replace(sc, run=dataclasses.replace(
+            sc.run, duration_s=big_duration_s, stop_after_distance_m=None, stop_distance_event=None))
+    t0 = time.perf_counter()
+    world = make_world(sc)
+    stepper_settings = IntegratorSettings("idas", sc.run.reltol, sc.run.abstol)
+    world.stepper(stepper_settings)
+    out["big_build_s"] = time.perf_counter() - t0
+    res = runner.run(sc, progress=False, world=world)
+    out["big_field_cells"] = world.grid.n_cells
+    out["big_cell_m"] = big_cell_m
+    out["big_sim_time_s"] = float(res.t[-1])
+    out["big_wall_time_s"] = float(res.wall_time_s)
+    out["big_wall_s_per_sim_s"] = float(res.wall_time_s / res.t[-1])
+    out["big_peak_active_cells"] = res.terrain["terrain_peak_active_cells"]
+    out["big_channels"] = world.n_channels
+    out["big_storage_MB"] = world.storage.nbytes / 1e6
+    if big_duration_s is None:
+        summ = runner.summarise(res)
+        out["big_validation_all_within"] = all(ok for *_, ok in validation.check(summ))
+        out["big_validation"] = {k: v for k, _, v, _ in validation.check(summ)}
+
+    sc2 = _field_scenario("validation_grid", small_size_m, small_cell_m)
+    _, pres = pool_run(sc2, small_duration_s)
+    b = brute_force_run(sc2, small_duration_s)
+    out["small_field_cells"] = int(np.prod(TerrainSettings(size_m=tuple(small_size_m), cell_m=small_cell_m).shape))
+    out["small_pool_wall_s"] = float(pres.wall_time_s)
+    out["small_brute_wall_s"] = float(b.wall_time_s)
+    out["small_speed_ratio_brute_over_pool"] = float(b.wall_time_s / pres.wall_time_s)
+    out["small_pose_difference_m"] = float(np.max(np.abs(pres.X[:, :2] - b.X[:, :2])))
+    return out

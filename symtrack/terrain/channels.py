@@ -1,0 +1,234 @@
+"""The channel pool: a fixed number of copies of the cell equations (MODEL.md section 3).
+
+A channel is one copy of the cell law of :mod:`symtrack.model.cell` (seed eq. 4, Bekker
+loading, Wong unloading/reloading line). It does not know which cell it simulates: the world
+manager (:mod:`symtrack.terrain.world`) writes the cell's identity and history into the
+channel's entries of the terrain parameter vector Q before every macro step and reads the
+channel's states back after it (the seed's INFO_IN / INFO_OUT).
+
+Layout
+------
+States, per channel c: ``ch{c}_sinkage_m``, ``ch{c}_sinkage_rate_m_s`` (the seed's int_1_state
+and int_2_state).
+
+Q (the terrain's own parameters, appended to the vehicle and soil parameters):
+``cell_size_m``, ``end_strip_m``, then per channel c the :data:`CHANNEL_FIELDS`: the cell
+centre (world x, y), the history z_max, p_max of the cell and the active flag (1 active,
+0 idle). An idle channel is inert: zero derivatives, no load, no weight, no work.
+
+Coupling with the vehicle
+-------------------------
+- **Load.** In track k's frame (s from the front/idler end backwards, t across the track) the
+  cell is taken as the axis-aligned square of side dx around its centre (exact when the
+  heading is a multiple of 90 deg, an approximation of the rotated square otherwise). The
+  fraction of its area under the track's l x b rectangle is the product of two clamped 1-D
+  overlaps, a continuous (piecewise linear) function of the pose, so the integrator meets no
+  discontinuity when a cell enters or leaves the footprint. The load is
+  p_load = sum_k frac_k * p_k(s_mid,k), with p_k the track's linear (or triangular) pressure
+  distribution of :class:`~symtrack.model.vehicle.PressureDistribution` evaluated at the
+  middle of the overlapped interval of s.
+- **Sinkage under the track ends.** The sprocket (idler) sinkage of track k is the mean of the
+  channels' sinkages weighted by the area each cell shares with a strip of length
+  ``end_strip_m`` (two cells) at the rear (front) end of the contact, the contact being shrunk
+  by half a cell on every side first. The shrinking keeps out the cells the track's edges only
+  partly cover: they carry only part of the pressure and sink much less (z ~ p^(1/n)), and
+  would otherwise bias a rigid track's sinkage low (at dx = 0.1 m and b = 0.45 m, by about
+  15 %). The weights are continuous in the pose; with no cell under a strip its sinkage is 0.
+  Needs dx < b (checked by the world manager).
+- **Compaction resistance** (MODEL.md section 1, reconstruction): the power the track spends
+  pressing the soil, divided by the track speed,
+  R_c,k = sum_c A_cell frac_k,c p_c max(dz_c/dt, 0) / sqrt(v_k^2 + eps_v^2),
+  with p_c the soil's reaction pressure and eps_v the model's ``motion_smoothing_m_s``. It
+  depends on the cells' states, not on the pressure distribution, so it does not enter the
+  load-transfer loop.
+
+Why IDAS
+--------
+The compaction resistance sums over all cells and enters the body's longitudinal
+acceleration, which sets the pressure distribution, which loads every cell. In the ODE form
+(CVODES) the accelerations are fixed-point iterations of that loop, so every cell's
+derivative depends on every other cell's rate and the Jacobian is dense (N x N). In the DAE
+form (IDAS) the accelerations are algebraic variables: a cell depends only on its own states,
+the pose and the accelerations, and the Jacobian is an arrowhead (see
+tests/test_terrain_channels.py). The grid terrain therefore runs with IDAS.
+
+The channel equations are CasADi Functions of one cell, applied to all channels with
+``Function.map`` (shared inputs reduced). The model is SX, so the mapped calls are expanded
+into the SX graph when the system is assembled; the Jacobian's sparsity is what keeps the
+integrator cheap.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ..model import cell
+from ..model.options import ModelOptions
+from ..model.vehicle import ENDS, TRACKS
+
+CHANNEL_FIELDS = ("centre_x_m", "centre_y_m", "z_max_m", "p_max_Pa", "active")
+GLOBAL_FIELDS = ("cell_size_m", "end_strip_m")
+NF = len(CHANNEL_FIELDS)
+NG = len(GLOBAL_FIELDS)
+
+# Phase flag of a cell (the seed's ``state``): untouched, loading on the Bekker curve,
+# unloading/reloading on the line through (z_max, p_max).
+PHASE_VIRGIN, PHASE_LOADING, PHASE_UNLOADING = 0, 1, 2
+
+# Track index -> lateral sign (left track at y = +B/2).
+_SIDE = {"left": 1.0, "right": -1.0}
+
+
+def channel_state_names(c: int) -> tuple[str, str]:
+    return f"ch{c}_sinkage_m", f"ch{c}_sinkage_rate_m_s"
+
+
+def channel_param_names(c: int) -> tuple[str, ...]:
+    return tuple(f"ch{c}_{f}" for f in CHANNEL_FIELDS)
+
+
+def _overlap(c, h, lo, hi):
+    """Fraction of the interval [c - h, c + h] inside [lo, hi]: continuous, piecewise linear."""
+    return ca.fmin(ca.fmax(ca.fmin(hi, c + h) - ca.fmax(lo, c - h), 0), 2 * h) / (2 * h)
+
+
+def _law_symbols():
+    return ca.SX.sym("law", 4)  # k_eq, n, elastic stiffness, kappa
+
+
+def _law_dict(law, reg_m):
+    return dict(keq=law[0], n=law[1], elastic_stiffness=law[2], kappa=law[3], reg_m=reg_m)
+
+
+def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
+    """The one-cell Functions a channel is made of.
+
+    - ``geometry(q[5], pose[3], geo[6]) -> g[8]``: frac_left, frac_right, s_mid_left, s_mid_right,
+      and the end-strip weights (sprocket_left, idler_left, sprocket_right, idler_right);
+      geo = (l, b, B, e, cell size, end strip).
+    - ``soil(z, z_max, p_max, law[4]) -> p``: the reaction pressure (cell.reaction_pressure).
+    - ``dynamics(z_dot, p_load, p, active, cellpar[2]) -> xc_dot[2]`` (cell.cell_acceleration),
+      cellpar = (areal mass, areal damping).
+    - ``history(z, z_max, p_max, law[4]) -> (z_max', p_max', p, phase)``: INFO_OUT, the history
+      update applied by the world manager after each macro step.
+    """
+    reg = opts.bekker_regularisation_m
+    q = ca.SX.sym("q", NF)
+    pose = ca.SX.sym("pose", 3)
+    geo = ca.SX.sym("geo", 6)
+    l, b, B, e, dx, strip = (geo[i] for i in range(6))
+    X, Y, psi = pose[0], pose[1], pose[2]
+    ddx, ddy = q[0] - X, q[1] - Y
+    xb = ca.cos(psi) * ddx + ca.sin(psi) * ddy
+    yb = -ca.sin(psi) * ddx + ca.cos(psi) * ddy
+    s = (l / 2 - e) - xb  # distance of the cell centre behind the track's front end
+    h = dx / 2
+    active = q[4]
+    fr, sm, w = [], [], {}
+    for k in TRACKS:
+        t = yb - _SIDE[k] * B / 2
+        fr.append(active * _overlap(s, h, 0, l) * _overlap(t, h, -b / 2, b / 2))
+        sm.append(0.5 * (ca.fmax(s - h, 0) + ca.fmin(s + h, l)))
+        # end-strip weights on the contact shrunk by half a cell on every side (module doc)
+        inner = _overlap(t, h, -(b / 2 - h), b / 2 - h)
+        w[("sprocket", k)] = active * _overlap(s, h, l - h - strip, l - h) * inner
+        w[("idler", k)] = active * _overlap(s, h, h, h + strip) * inner
+    g = ca.vertcat(*fr, *sm, *(w[(end, k)] for k in TRACKS for end in ENDS))
+    geometry = ca.Function("channel_geometry", [q, pose, geo], [g], ["q", "pose", "geo"], ["g"])
+
+    z, zmax, pmax = ca.SX.sym("z"), ca.SX.sym("z_max"), ca.SX.sym("p_max")
+    law = _law_symbols()
+    p = cell.reaction_pressure(z, zmax, pmax, **_law_dict(law, reg))
+    soil = ca.Function("channel_soil", [z, zmax, pmax, law], [p], ["z", "z_max", "p_max", "law"], ["p"])
+
+    zdot, pload, ps, act = ca.SX.sym("z_dot"), ca.SX.sym("p_load"), ca.SX.sym("p"), ca.SX.sym("active")
+    cellpar = ca.SX.sym("cellpar", 2)
+    acc = cell.cell_acceleration(zdot, pload, ps, cellpar[0], cellpar[1])
+    dynamics = ca.Function("channel_dynamics", [zdot, pload, ps, act, cellpar],
+                           [ca.vertcat(act * zdot, act * acc)],
+                           ["z_dot", "p_load", "p", "active", "cellpar"], ["xc_dot"])
+
+    loading = z >= zmax
+    zmax_new = ca.fmax(zmax, z)
+    pmax_new = ca.if_else(loading, ca.fmax(pmax, p), pmax)
+    phase = ca.if_else(loading, PHASE_LOADING, PHASE_UNLOADING)
+    history = ca.Function("channel_history", [z, zmax, pmax, law], [zmax_new, pmax_new, p, phase],
+                          ["z", "z_max", "p_max", "law"], ["z_max_new", "p_max_new", "p", "phase"])
+    return {"geometry": geometry, "soil": soil, "dynamics": dynamics, "history": history}
+
+
+def soil_law_values(params: dict) -> list[float]:
+    """Numeric law vector (k_eq, n, K_e, kappa) from a parameter dict."""
+    keq = cell.k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])
+    return [float(keq), float(params["bekker_n"]), float(params["elastic_stiffness_Pa_per_m"]),
+            float(params["unloading_stiffness_floor"])]
+
+
+class ChannelTerrain:
+    """A terrain of ``n_channels`` channels for :class:`~symtrack.model.SystemModel`."""
+
+    name = "channels"
+
+    def __init__(self, opts: ModelOptions, n_channels: int):
+        if not (isinstance(n_channels, int) and n_channels >= 1):
+            raise ValueError(f"n_channels = {n_channels!r} must be an integer >= 1")
+        self.opts = opts
+        self.n = n_channels
+        self.state_names = tuple(s for c in range(n_channels) for s in channel_state_names(c))
+        self.param_names = GLOBAL_FIELDS + tuple(s for c in range(n_channels) for s in channel_param_names(c))
+        self.fn = build_cell_functions(opts)
+        n = n_channels
+        self._geometry = self.fn["geometry"].map("channels_geometry", "serial", n, [1, 2], [])
+        self._soil = self.fn["soil"].map("channels_soil", "serial", n, [3], [])
+        self._dynamics = self.fn["dynamics"].map("channels_dynamics", "serial", n, [4], [])
+        self._cache = None
+
+    # -- pieces shared by compaction() and equations() (same xv, xc, Q objects from SystemModel)
+    def _parts(self, xv, xc, P, Q):
+        if self._cache is not None and self._cache[0] is xv and self._cache[1] is xc and self._cache[2] is Q:
+            return self._cache[3]
+        n = self.n
+        qc = ca.reshape(Q[NG:], NF, n)
+        pose = ca.vertcat(xv[0], xv[1], xv[2])
+        geo = ca.vertcat(P["contact_length_m"], P["track_width_m"], P["track_gauge_m"],
+                         P["cg_ahead_of_contact_centre_m"], Q[0], Q[1])
+        g = self._geometry(qc, pose, geo)  # 8 x n
+        xcm = ca.reshape(xc, 2, n)
+        keq = cell.k_eq(P["k_c_N_per_m_n1"], P["k_phi_N_per_m_n2"], P["track_width_m"])
+        law = ca.vertcat(keq, P["bekker_n"], P["elastic_stiffness_Pa_per_m"], P["unloading_stiffness_floor"])
+        p_soil = self._soil(xcm[0, :], qc[2, :], qc[3, :], law)  # 1 x n
+        parts = {"qc": qc, "g": g, "xcm": xcm, "p_soil": p_soil, "cell_area": Q[0] ** 2}
+        self._cache = (xv, xc, Q, parts)
+        return parts
+
+    def compaction(self, xv, xc, P, Q):
+        d = self._parts(xv, xc, P, Q)
+        B = P["track_gauge_m"]
+        u, r = xv[3], xv[5]
+        v_track = {"left": u - r * B / 2, "right": u + r * B / 2}
+        power_density = d["p_soil"] * ca.fmax(d["xcm"][1, :], 0)  # W/m^2 per cell
+        out = []
+        for i, k in enumerate(TRACKS):
+            power = d["cell_area"] * ca.sum2(d["g"][i, :] * power_density)
+            out.append(power / ca.sqrt(v_track[k] ** 2 + self.opts.motion_smoothing_m_s**2))
+        return ca.vertcat(*out)
+
+    def equations(self, xv, xc, dist: dict, P, Q):
+        d = self._parts(xv, xc, P, Q)
+        g, xcm = d["g"], d["xcm"]
+        p_load = 0
+        for i, k in enumerate(TRACKS):
+            p_load = p_load + g[i, :] * dist[k].at(g[2 + i, :])
+        cellpar = ca.vertcat(P["cell_areal_mass_kg_per_m2"], P["cell_damping_Pa_s_per_m"])
+        xdot = self._dynamics(xcm[1, :], p_load, d["p_soil"], d["qc"][4, :], cellpar)  # 2 x n
+        signals = {}
+        row = 4
+        for k in TRACKS:
+            for end in ENDS:
+                w = g[row, :]
+                row += 1
+                signals[f"sinkage_{end}_{k}_m"] = ca.sum2(w * xcm[0, :]) / (ca.sum2(w) + 1e-9)
+                signals[f"p_{end}_{k}_Pa"] = getattr(dist[k], end)
+        signals["compaction_power_W"] = d["cell_area"] * ca.sum2(
+            (g[0, :] + g[1, :]) * d["p_soil"] * ca.fmax(xcm[1, :], 0))
+        return ca.reshape(xdot, 2 * self.n, 1), signals

@@ -1,0 +1,400 @@
+"""The world manager: the cell storage Cell[N, N] and the channel assignment (MODEL.md s. 3).
+
+Storage
+-------
+Five values per cell, as the seed's INFO_IN / INFO_OUT: sinkage z [m], sinkage rate dz/dt [m/s],
+history z_max [m] and p_max [Pa] (float64: the integrator's values are stored to the last
+bit, which the bit-exact continuation needs) and the phase flag (int8, see
+:data:`~symtrack.terrain.channels.PHASE_VIRGIN`). 33 bytes per cell: 33 MB for the default
+million-cell field. Cell (i, j) has its centre at world (x0 + (i + 1/2) dx, y0 + (j + 1/2) dx).
+
+Per macro step (:meth:`World.before_step`, :meth:`World.after_step`)
+-------------------------------------------------------------------
+1. The footprint: the cells whose centres lie in either track's contact rectangle, padded by
+   ``pad = (sqrt(2)/2 + 1/4) dx``, at the pose at the start of the step and at the pose
+   predicted for its end (body velocities held over the step). The padding covers every cell
+   the channel law can load (its overlap is non-zero when the centre is within dx/2 of the
+   rectangle in the track frame) and the prediction error.
+2. Release: an active cell is released (its channel freed) only when it is outside the
+   footprint, its reaction pressure is exactly 0 (clipped line: the soil has let go of the
+   track) and |dz/dt| <= ``release_rate_m_s``. Its state was already written back. All
+   other active cells stay active (still unloading).
+3. Assignment by the seed's sector rule, Cell[i, j] -> CHANNEL[i mod M, j mod M], with no search.
+   A newly active cell whose channel is held by another active cell stops the run
+   (:class:`~symtrack.errors.SimulationError` naming both cells and the M that the active set
+   needs); so does a footprint that leaves the field.
+4. INFO_IN: the channel's integrator states are reset to the cell's stored (z, dz/dt), its Q
+   entries to the cell's centre and history; IDAS's algebraic guess is reset too.
+5. After the step, INFO_OUT for every active channel: z, dz/dt, z_max <- max(z_max, z),
+   p_max <- max(p_max, p) on the loading branch, phase; written to storage and to Q. The
+   run also checks that every cell the tracks loaded at the end of the step held a channel.
+
+M ("auto")
+----------
+All cells active together lie in a rectangle of the body frame W x H with
+W = l + 2 pad + v_max (dt + t_release) (the contact length, the padding, the travel over one
+step and the unloading tail) and H = B + b + 2 pad (both tracks). In any orientation two
+cell centres in it differ by at most D = sqrt(W^2 + H^2) along x and along y, so their indices
+differ by at most floor(D / dx) and M = floor(D / dx) + 2 channels per axis keep them apart.
+The bound assumes the speed stays below ``max_speed_m_s`` and a cell unloads within
+``release_time_s``; if either fails the run stops with the collision error, never silently.
+
+Shear memory: a cell that comes under a track starts with zero shear (Janosi & Hanamoto
+measure shear from the front of the contact); cells store no shear, and the vehicle's mean
+shear displacement is the vehicle's state.
+
+A pass (:meth:`begin_pass`, :meth:`end_pass`): the vehicle is set down at rest at its start
+pose on the current terrain, the cells under it settle for ``settle_s`` with zero torque (the
+initial static state), the run follows its torque programme to its stop rule, then the vehicle
+is lifted off: the active cells unload with zero load until they are released. Between passes
+the storage is the only state, which is why a saved and reloaded terrain continues bit-exactly.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..errors import ScenarioError, SimulationError
+from ..model import SystemModel
+from ..model.options import ModelOptions
+from ..model.vehicle import VEHICLE_STATES
+from .channels import NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
+from .config import TerrainSettings
+
+log = logging.getLogger("symtrack.terrain")
+
+NV = len(VEHICLE_STATES)
+STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase")
+END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
+
+
+@dataclass(frozen=True)
+class Grid:
+    origin_m: tuple[float, float]
+    cell_m: float
+    shape: tuple[int, int]
+
+    @property
+    def n_cells(self) -> int:
+        return self.shape[0] * self.shape[1]
+
+    def centres(self, i, j):
+        return (self.origin_m[0] + (np.asarray(i) + 0.5) * self.cell_m,
+                self.origin_m[1] + (np.asarray(j) + 0.5) * self.cell_m)
+
+    def bounds(self):
+        x0, y0 = self.origin_m
+        return x0, x0 + self.shape[0] * self.cell_m, y0, y0 + self.shape[1] * self.cell_m
+
+
+class CellStorage:
+    """Cell[N, N]: five values per cell, flat arrays indexed by i * ny + j."""
+
+    def __init__(self, grid: Grid):
+        n = grid.n_cells
+        self.grid = grid
+        self.z = np.zeros(n)
+        self.zdot = np.zeros(n)
+        self.zmax = np.zeros(n)
+        self.pmax = np.zeros(n)
+        self.phase = np.zeros(n, dtype=np.int8)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.z, self.zdot, self.zmax, self.pmax, self.phase))
+
+    def arrays(self) -> dict:
+        return dict(zip(STORAGE_FIELDS, (self.z, self.zdot, self.zmax, self.pmax, self.phase), strict=True))
+
+    def copy_z(self):
+        return self.z.reshape(self.grid.shape).copy()
+
+
+def padding_m(cell_m: float) -> float:
+    return (math.sqrt(2) / 2 + 0.25) * cell_m
+
+
+def derive_modulus(params: dict, settings: TerrainSettings, dt_s: float) -> int:
+    """M of the sector rule (module doc): two cells active together never share a channel."""
+    dx = settings.cell_m
+    pad = padding_m(dx)
+    W = params["contact_length_m"] + 2 * pad + settings.max_speed_m_s * (dt_s + settings.release_time_s)
+    H = params["track_gauge_m"] + params["track_width_m"] + 2 * pad
+    return int(math.floor(math.hypot(W, H) / dx)) + 2
+
+
+class World:
+    """The world manager for one field and one vehicle (see the module doc)."""
+
+    def __init__(self, settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s: float,
+                 start_xy=(0.0, 0.0), modulus: int | None = None, storage: CellStorage | None = None):
+        self.settings, self.params, self.opts = settings, dict(params), opts
+        if not settings.cell_m < params["track_width_m"]:
+            raise ScenarioError(f"terrain.cell_m = {settings.cell_m!r} must be smaller than the track width "
+                                f"{params['track_width_m']!r} m (cells resolve the contact patch)")
+        if storage is not None:
+            self.grid = storage.grid
+        else:
+            nx, ny = settings.shape
+            origin = settings.origin_m
+            if origin is None:
+                origin = (start_xy[0] - 0.5 * nx * settings.cell_m, start_xy[1] - 0.5 * ny * settings.cell_m)
+            self.grid = Grid((float(origin[0]), float(origin[1])), float(settings.cell_m), (nx, ny))
+        self.storage = storage if storage is not None else CellStorage(self.grid)
+        if modulus is None:
+            modulus = settings.channels if settings.channels != "auto" else derive_modulus(params, settings, dt_s)
+        self.M = int(modulus)
+        self.n_channels = self.M * self.M
+        self.terrain = ChannelTerrain(opts, self.n_channels)
+        self.model = SystemModel(opts, self.terrain)
+        n = self.n_channels
+        self.channel_cell = np.full(n, -1, dtype=np.int64)
+        self.Q = np.zeros(NG + NF * n)
+        self.Q[0] = self.grid.cell_m
+        self.Q[1] = END_STRIP_CELLS * self.grid.cell_m
+        self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
+        self.p_soil = np.zeros(n)
+        self._pbase = np.array(self.model.param_vector(params, self.Q), dtype=float)[:-len(self.Q)]
+        self._history = self.terrain.fn["history"].map("history_all", "serial", n, [3], [])
+        self._law = ca.DM(soil_law_values(params))
+        self._pad = padding_m(self.grid.cell_m)
+        self.peak_active = 0
+        self.touched = np.zeros(self.grid.n_cells, dtype=bool)
+        self._unload = None
+        self._stepper = None
+        self.z_at_pass_end = None
+
+    # ---- geometry -----------------------------------------------------------------------------
+    def _rectangles(self, X, Y, psi, pad):
+        P = self.params
+        e, B = P["cg_ahead_of_contact_centre_m"], P["track_gauge_m"]
+        c, s = math.cos(psi), math.sin(psi)
+        out = []
+        for side in (1.0, -1.0):
+            bx, by = -e, side * B / 2
+            out.append((X + c * bx - s * by, Y + s * bx + c * by, c, s,
+                        P["contact_length_m"] / 2 + pad, P["track_width_m"] / 2 + pad))
+        return out
+
+    def cells_under(self, X, Y, psi, pad, check_field=True) -> np.ndarray:
+        """Flat indices of the cells whose centres lie in the tracks' rectangles padded by pad."""
+        g = self.grid
+        dx = g.cell_m
+        x0, x1, y0, y1 = g.bounds()
+        found = []
+        for cx, cy, c, s, hl, hw in self._rectangles(X, Y, psi, pad):
+            ex = abs(c) * hl + abs(s) * hw
+            ey = abs(s) * hl + abs(c) * hw
+            if check_field:
+                exu, eyu = ex - pad * (abs(c) + abs(s)), ey - pad * (abs(c) + abs(s))
+                if cx - exu < x0 or cx + exu > x1 or cy - eyu < y0 or cy + eyu > y1:
+                    raise SimulationError(
+                        f"the vehicle left the terrain field: a track's contact around ({cx:.2f}, {cy:.2f}) m "
+                        f"is outside x in [{x0:g}, {x1:g}] m, y in [{y0:g}, {y1:g}] m; enlarge terrain.size_m "
+                        "or move terrain.origin_m")
+            i0 = max(int(math.floor((cx - ex - x0) / dx)), 0)
+            i1 = min(int(math.ceil((cx + ex - x0) / dx)), g.shape[0] - 1)
+            j0 = max(int(math.floor((cy - ey - y0) / dx)), 0)
+            j1 = min(int(math.ceil((cy + ey - y0) / dx)), g.shape[1] - 1)
+            if i1 < i0 or j1 < j0:
+                continue
+            ii, jj = np.meshgrid(np.arange(i0, i1 + 1), np.arange(j0, j1 + 1), indexing="ij")
+            px, py = g.centres(ii, jj)
+            along = (px - cx) * c + (py - cy) * s
+            across = -(px - cx) * s + (py - cy) * c
+            inside = (np.abs(along) <= hl) & (np.abs(across) <= hw)
+            found.append(ii[inside] * g.shape[1] + jj[inside])
+        if not found:
+            return np.zeros(0, dtype=np.int64)
+        return np.unique(np.concatenate(found))
+
+    def channel_of(self, cells: np.ndarray) -> np.ndarray:
+        i, j = np.divmod(cells, self.grid.shape[1])
+        return (i % self.M) * self.M + (j % self.M)
+
+    def ij(self, cell: int) -> tuple[int, int]:
+        return tuple(int(v) for v in divmod(int(cell), self.grid.shape[1]))
+
+    def stepper(self, settings):
+        """The integrator for this world's model (IDAS, channel states ordered first)."""
+        from .stepper import ChannelStepper
+
+        if self._stepper is None or self._stepper.settings != settings:
+            self._stepper = ChannelStepper(self.model, settings)
+        return self._stepper
+
+    # ---- the parameter vector --------------------------------------------------------------------
+    def param_vector(self) -> np.ndarray:
+        return np.concatenate([self._pbase, self.Q])
+
+    # ---- per macro step ----------------------------------------------------------------------
+    def before_step(self, x: np.ndarray, dt: float, stepper=None):
+        """Assign channels for the step from x over dt; returns (x with INFO_IN loaded, p)."""
+        x = np.array(x, dtype=float)
+        X, Y, psi, u, v, r = x[:6]
+        c, s = math.cos(psi), math.sin(psi)
+        X1, Y1, psi1 = X + dt * (u * c - v * s), Y + dt * (u * s + v * c), psi + dt * r
+        foot = np.union1d(self.cells_under(X, Y, psi, self._pad), self.cells_under(X1, Y1, psi1, self._pad))
+        act = np.nonzero(self.channel_cell >= 0)[0]
+        cells = self.channel_cell[act]
+        in_foot = np.isin(cells, foot)
+        zdot = x[NV + 2 * act + 1]
+        release = (~in_foot) & (self.p_soil[act] <= 0.0) & (np.abs(zdot) <= self.settings.release_rate_m_s)
+        rel = act[release]
+        if rel.size:
+            self.channel_cell[rel] = -1
+            self.qc[rel] = 0.0
+            self.p_soil[rel] = 0.0
+            x[NV + 2 * rel] = 0.0
+            x[NV + 2 * rel + 1] = 0.0
+        new = np.setdiff1d(foot, cells, assume_unique=True)
+        if new.size:
+            ch = self.channel_of(new)
+            self._check_collisions(new, ch)
+            self.channel_cell[ch] = new
+            st = self.storage
+            cx, cy = self.grid.centres(*np.divmod(new, self.grid.shape[1]))
+            self.qc[ch, 0], self.qc[ch, 1] = cx, cy
+            self.qc[ch, 2], self.qc[ch, 3], self.qc[ch, 4] = st.zmax[new], st.pmax[new], 1.0
+            x[NV + 2 * ch] = st.z[new]
+            x[NV + 2 * ch + 1] = st.zdot[new]
+            self.p_soil[ch] = 0.0
+            self.touched[new] = True
+            if stepper is not None:
+                stepper.reset()
+        n_act = int(np.count_nonzero(self.channel_cell >= 0))
+        self.peak_active = max(self.peak_active, n_act)
+        return x, self.param_vector()
+
+    def _check_collisions(self, new, ch):
+        held = self.channel_cell[ch] >= 0
+        order = np.argsort(ch, kind="stable")
+        dup = np.nonzero(np.diff(ch[order]) == 0)[0]
+        if not held.any() and dup.size == 0:
+            return
+        if held.any():
+            k = int(np.nonzero(held)[0][0])
+            a, b = int(new[k]), int(self.channel_cell[ch[k]])
+        else:
+            a, b = int(new[order[dup[0]]]), int(new[order[dup[0] + 1]])
+        act = np.concatenate([self.channel_cell[self.channel_cell >= 0], new])
+        i, j = np.divmod(act, self.grid.shape[1])
+        need = int(max(np.ptp(i), np.ptp(j))) + 1
+        raise SimulationError(
+            f"channel collision: cells {self.ij(a)} and {self.ij(b)} (i, j) are both active and both map to "
+            f"channel {int(self.channel_of(np.array([a]))[0])} with M = {self.M} (Cell[i, j] -> CHANNEL[i mod M, "
+            f"j mod M]); the active set spans {np.ptp(i) + 1} x {np.ptp(j) + 1} cells and needs M >= {need}. "
+            "Raise terrain.channels, terrain.max_speed_m_s or terrain.release_time_s")
+
+    def after_step(self, x: np.ndarray) -> None:
+        """INFO_OUT: write every active channel's state and history back to its cell."""
+        x = np.asarray(x, dtype=float)
+        zc = x[NV::2]
+        zmax, pmax, p, phase = (np.array(a).ravel() for a in
+                                self._history(zc, self.qc[:, 2], self.qc[:, 3], self._law))
+        act = np.nonzero(self.channel_cell >= 0)[0]
+        cells = self.channel_cell[act]
+        st = self.storage
+        st.z[cells] = zc[act]
+        st.zdot[cells] = x[NV + 2 * act + 1]
+        st.zmax[cells] = zmax[act]
+        st.pmax[cells] = pmax[act]
+        st.phase[cells] = np.where(zmax[act] > 0, phase[act], PHASE_VIRGIN).astype(np.int8)
+        self.qc[act, 2] = zmax[act]
+        self.qc[act, 3] = pmax[act]
+        self.p_soil[act] = p[act]
+
+    def check_covered(self, x: np.ndarray) -> None:
+        """Every cell that the tracks load at state x holds a channel (else the prediction missed)."""
+        X, Y, psi = x[:3]
+        under = self.cells_under(X, Y, psi, 0.5 * self.grid.cell_m, check_field=False)
+        missing = np.setdiff1d(under, self.channel_cell[self.channel_cell >= 0])
+        if missing.size:
+            raise SimulationError(
+                f"cell {self.ij(int(missing[0]))} came under a track without a channel ({missing.size} cells): "
+                "the footprint prediction missed it; reduce run.output_dt_s")
+
+    def active_cells(self) -> np.ndarray:
+        return self.channel_cell[self.channel_cell >= 0]
+
+    # ---- passes ------------------------------------------------------------------------------
+    def begin_pass(self, stepper, x_m: float, y_m: float, yaw_rad: float, dt_s: float = 0.01) -> np.ndarray:
+        """The vehicle at rest at the pose with the cells under it settled: the initial state."""
+        self.release_all()
+        self.peak_active = 0
+        self.touched[:] = False
+        stepper.reset()
+        x = np.zeros(self.model.nx)
+        x[0], x[1], x[2] = x_m, y_m, yaw_rad
+        u = np.zeros(2)
+        n = int(round(self.settings.settle_s / dt_s))
+        for _ in range(n):
+            x, p = self.before_step(x, dt_s, stepper)
+            x = stepper.step(x, u, p, dt_s)
+            self.after_step(x)
+        x[NV:] = np.where(np.repeat(self.channel_cell >= 0, 2), x[NV:], 0.0)
+        x, _ = self.before_step(x, 0.0, stepper)
+        stepper.reset()
+        return x
+
+    def end_pass(self, x: np.ndarray, dt_s: float = 0.01, max_steps: int = 200) -> None:
+        """Lift the vehicle: the active cells unload with zero load until released, then free all."""
+        self.after_step(x)
+        self.z_at_pass_end = self.storage.z.copy()  # the terrain with the vehicle still on it
+        act = np.nonzero(self.channel_cell >= 0)[0]
+        if act.size:
+            F = self._unloader()
+            xc = np.array(x[NV:], dtype=float)
+            for _ in range(max_steps):
+                rates = xc[1::2][act]
+                if np.all((self.p_soil[act] <= 0.0) & (np.abs(rates) <= self.settings.release_rate_m_s)):
+                    break
+                xc = np.array(F(x0=xc, p=np.concatenate([self.Q, [dt_s]]))["xf"]).ravel()
+                xfull = np.concatenate([x[:NV], xc])
+                self.after_step(xfull)
+            else:
+                log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
+                            act.size, max_steps * dt_s)
+        self.release_all()
+
+    def release_all(self) -> None:
+        self.channel_cell[:] = -1
+        self.qc[:] = 0.0
+        self.p_soil[:] = 0.0
+
+    def _unloader(self):
+        """A cells-only integrator of all channels with zero load (the vehicle lifted off)."""
+        if self._unload is None:
+            n = self.n_channels
+            fn = self.terrain.fn
+            xc = ca.SX.sym("xc", 2 * n)
+            Q = ca.SX.sym("Q", NG + NF * n)
+            h = ca.SX.sym("h")
+            qc = ca.reshape(Q[NG:], NF, n)
+            xm = ca.reshape(xc, 2, n)
+            law = ca.DM(soil_law_values(self.params))
+            p = fn["soil"].map(n, [False, False, False, True], [False])(xm[0, :], qc[2, :], qc[3, :], law)
+            cellpar = ca.DM([self.params["cell_areal_mass_kg_per_m2"], self.params["cell_damping_Pa_s_per_m"]])
+            d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], 0, p, qc[4, :], cellpar)
+            dae = {"x": xc, "p": ca.vertcat(Q, h), "ode": h * ca.reshape(d, 2 * n, 1)}
+            self._unload = ca.integrator("unload", "cvodes", dae, 0.0, 1.0,
+                                         {"abstol": 1e-12, "reltol": 1e-9})
+        return self._unload
+
+    # ---- figures -----------------------------------------------------------------------------
+    def figures(self) -> dict:
+        return {
+            "terrain_cells": self.grid.n_cells,
+            "terrain_cell_m": self.grid.cell_m,
+            "terrain_channel_modulus_M": self.M,
+            "terrain_channels": self.n_channels,
+            "terrain_peak_active_cells": int(self.peak_active),
+            "terrain_storage_MB": self.storage.nbytes / 1e6,
+            "terrain_cells_touched": int(np.count_nonzero(self.storage.zmax > 0)),
+            "terrain_max_sinkage_mm": 1e3 * float(self.storage.z.max()),
+        }

@@ -1,0 +1,93 @@
+"""One channel (symtrack.terrain.channels) through load, unload and reload against the analytic law,
+with its history kept by the channel's INFO_OUT function, as the world manager keeps it; and the
+channel geometry (load fraction, end-strip weights) against hand computations."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from symtrack.model import cell
+from symtrack.model.options import ModelOptions
+from symtrack.presets import soil_preset, vehicle_preset
+from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions, soil_law_values
+
+PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
+FN = build_cell_functions(ModelOptions())
+LAW = soil_law_values(PARAMS)
+KEQ, N, KE, KAPPA = LAW
+
+
+def _channel_step(dt):
+    z, zd, pl, zmax, pmax = (ca.SX.sym(n) for n in ("z", "zd", "p_load", "z_max", "p_max"))
+    p = FN["soil"](z, zmax, pmax, LAW)
+    xdot = FN["dynamics"](zd, pl, p, 1.0, [PARAMS["cell_areal_mass_kg_per_m2"], PARAMS["cell_damping_Pa_s_per_m"]])
+    dae = {"x": ca.vertcat(z, zd), "p": ca.vertcat(pl, zmax, pmax), "ode": xdot}
+    return ca.integrator("ch", "cvodes", dae, 0, dt, {"abstol": 1e-12, "reltol": 1e-10})
+
+
+def test_one_channel_load_unload_reload_matches_the_analytic_curves():
+    F = _channel_step(2e-3)
+    x, zmax, pmax = np.zeros(2), 0.0, 0.0
+    ends, phases = [], []
+    for a, b in [(0.0, 30e3), (30e3, 10e3), (10e3, 30e3), (30e3, 40e3)]:
+        for k, s in enumerate(np.linspace(0, 1, 501)[1:]):
+            x = np.array(F(x0=x, p=[a + (b - a) * s, zmax, pmax])["xf"]).ravel()
+            zmax, pmax, _, phase = (float(v) for v in FN["history"](x[0], zmax, pmax, LAW))
+            if k == 300:
+                phases.append(phase)  # the phase flag on the ramp
+        for _ in range(200):  # hold: settle to the static state
+            x = np.array(F(x0=x, p=[b, zmax, pmax])["xf"]).ravel()
+            zmax, pmax, _, phase = (float(v) for v in FN["history"](x[0], zmax, pmax, LAW))
+        ends.append((x[0], zmax, pmax))
+    bekker = lambda p: (p / KEQ) ** (1 / N)  # noqa: E731
+    z1 = bekker(30e3)
+    assert ends[0][0] == pytest.approx(z1, rel=2e-3)  # virgin loading on Bekker's curve
+    assert ends[0][2] == pytest.approx(30e3, rel=2e-3)  # p_max recorded
+    k_u = max(KE, KAPPA * ends[0][2] / ends[0][1])
+    assert ends[1][0] == pytest.approx(ends[0][1] - 20e3 / k_u, rel=2e-3)  # unloading line
+    assert ends[2][0] == pytest.approx(ends[0][1], rel=2e-3)  # reloading line back to z_max
+    assert ends[3][0] == pytest.approx(bekker(40e3), rel=2e-3)  # rejoins Bekker beyond p_max
+    assert (phases[0], phases[1], phases[3]) == (PHASE_LOADING, PHASE_UNLOADING, PHASE_LOADING)
+
+
+def _geometry(cx, cy, X=0.0, Y=0.0, psi=0.0, active=1.0, dx=0.1):
+    P = PARAMS
+    geo = [P["contact_length_m"], P["track_width_m"], P["track_gauge_m"], P["cg_ahead_of_contact_centre_m"],
+           dx, 2 * dx]
+    return np.array(FN["geometry"]([cx, cy, 0, 0, active], [X, Y, psi], geo)).ravel()
+
+
+def test_load_fraction_is_the_overlap_of_the_cell_with_the_track():
+    l, b, B = PARAMS["contact_length_m"], PARAMS["track_width_m"], PARAMS["track_gauge_m"]
+    # a cell fully under the left track
+    g = _geometry(0.0, B / 2)
+    assert g[0] == pytest.approx(1.0) and g[1] == 0.0
+    # a cell straddling the left track's outer edge by a quarter of its width
+    g = _geometry(0.0, B / 2 + b / 2 + 0.025)
+    assert g[0] == pytest.approx(0.25)
+    # a cell straddling the front end by 30 %
+    g = _geometry(l / 2 + 0.02, -B / 2)
+    assert g[1] == pytest.approx(0.3) and g[0] == 0.0
+    # rotated by 90 deg: the left track now lies along -x
+    g = _geometry(-B / 2, 0.0, psi=np.pi / 2)
+    assert g[0] == pytest.approx(1.0)
+    # an inactive channel carries no load and no weight
+    assert np.all(_geometry(0.0, B / 2, active=0.0)[[0, 1, 4, 5, 6, 7]] == 0)
+
+
+def test_load_fraction_is_continuous_in_the_pose():
+    xs = np.linspace(-0.1, 0.2, 301)  # the front end (X + l/2) passes over the cell at x = 1.25
+    fr = np.array([_geometry(1.25, PARAMS["track_gauge_m"] / 2, X=x)[0] for x in xs])
+    assert np.max(np.abs(np.diff(fr))) < 0.02
+    assert fr[0] == 0.0 and fr[-1] == pytest.approx(1.0)
+
+
+def test_end_strip_weights_select_the_ends_and_skip_partly_covered_cells():
+    l, b, B = PARAMS["contact_length_m"], PARAMS["track_width_m"], PARAMS["track_gauge_m"]
+    front = _geometry(l / 2 - 0.1, B / 2)  # one cell behind the front end, inside
+    assert front[5] == pytest.approx(1.0) and front[4] == 0.0  # idler weight, no sprocket weight
+    rear = _geometry(-l / 2 + 0.1, B / 2)
+    assert rear[4] == pytest.approx(1.0) and rear[5] == 0.0
+    edge = _geometry(l / 2 - 0.1, B / 2 + b / 2 - 0.025)  # 3/4 under the track, at its edge
+    assert edge[0] == pytest.approx(0.75) and edge[5] < 0.3
+    assert cell.k_eq(1.0, 2.0, 0.5) == 4.0

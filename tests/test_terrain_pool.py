@@ -1,0 +1,77 @@
+"""The channel pool against brute force (every cell of a small field integrated as its own state),
+and the bit-exact continuation of a terrain through a file."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from symtrack import runner
+from symtrack.scenario import scenario_from_dict
+from symtrack.terrain import persist
+from symtrack.terrain.bench import brute_force_run, pool_run
+from symtrack.terrain.study import make_world, run_passes
+
+# A 12 m x 4 m field at 0.25 m (768 cells); both sprockets at 2000 N m for 0.5 s, then the left
+# one idle: the vehicle starts from rest, accelerates and begins to turn.
+SMALL = {
+    "name": "pool_vs_brute",
+    "run": {"duration_s": 1.0, "output_dt_s": 0.01, "integrator": "idas"},
+    "vehicle": {"preset": "reference_crawler"},
+    "soil": {"preset": "clayey_soil_thailand_38"},
+    "start": {"x_m": -3.0},
+    "terrain": {"size_m": [12.0, 4.0], "cell_m": 0.25, "origin_m": [-6.0, -2.0], "settle_s": 0.1},
+    "torque": [{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0},
+               {"t_s": 0.5, "left_N_m": 0.0, "right_N_m": 2000.0}],
+}
+
+# Tolerances (stated): the two systems differ only in the cells the pool has released (at rest
+# to |dz/dt| <= 1e-5 m/s, p = 0) and in the integrator's step choices (reltol 1e-7).
+POSE_TOL_M = 1e-6
+SINKAGE_TOL_M = 1e-7  # 0.1 um, against sinkages of about 1 mm
+RATE_TOL = 1e-4  # velocities, speeds, shears, torques: relative to 1 + abs(value)
+
+
+@pytest.fixture(scope="module")
+def both():
+    sc = scenario_from_dict(SMALL)
+    world, pool = pool_run(sc, 1.0)
+    brute = brute_force_run(sc, 1.0)
+    return world, pool, brute
+
+
+def test_pool_and_brute_force_give_the_same_vehicle_motion(both):
+    world, pool, brute = both
+    assert pool.t.shape == brute.t.shape and np.allclose(pool.t, brute.t)
+    assert pool.X[-1, 0] - pool.X[0, 0] > 0.5  # it did drive
+    assert np.max(np.abs(pool.X[:, :3] - brute.X[:, :3])) < POSE_TOL_M
+    assert np.max(np.abs(pool.X[:, 3:12] - brute.X[:, 3:12]) / (1 + np.abs(brute.X[:, 3:12]))) < RATE_TOL
+
+
+def test_pool_and_brute_force_give_the_same_terrain(both):
+    world, pool, brute = both
+    z_pool = world.z_at_pass_end.reshape(world.grid.shape)  # before the vehicle is lifted off
+    assert z_pool.max() > 5e-4  # a rut of about a millimetre
+    assert np.max(np.abs(z_pool - brute.z)) < SINKAGE_TOL_M
+    # the pool simulated far fewer cells at a time than the field has
+    assert pool.terrain["terrain_peak_active_cells"] < world.grid.n_cells / 4
+
+
+def test_two_passes_equal_one_pass_save_load_and_a_second_pass(tmp_path):
+    d = dict(SMALL, run={"duration_s": 5.0, "output_dt_s": 0.01, "integrator": "idas",
+                         "stop_after_distance_m": 0.3},
+             terrain=dict(SMALL["terrain"], passes=2))
+    sc2 = scenario_from_dict(d)
+    w2, res2, figs2, _ = run_passes(sc2)
+    sc1 = dataclasses.replace(sc2, extra={"terrain": dict(d["terrain"], passes=1)})
+    w1, _, _, _ = run_passes(sc1)
+    f = tmp_path / "after_pass_1.npz"
+    persist.save(f, w1.storage, sc1.soil)
+    w1b = make_world(sc1, terrain_in=str(f))
+    res1b = runner.run(sc1, progress=False, world=w1b)
+    for a, b in zip(w2.storage.arrays().values(), w1b.storage.arrays().values(), strict=True):
+        assert np.array_equal(a, b)  # to the last bit
+    assert np.array_equal(res2[-1].X, res1b.X) and np.array_equal(res2[-1].Y, res1b.Y)
+    # the second pass over the compacted soil adds less sinkage and meets less resistance
+    assert figs2[1]["new_sinkage_mean_mm"] < figs2[0]["new_sinkage_mean_mm"]
+    assert figs2[1]["compaction_resistance_mean_N"] < figs2[0]["compaction_resistance_mean_N"]
