@@ -179,6 +179,7 @@ def summarise(res: ClosedLoopResult, wall_s: float, mpc: PathTrackingMPC) -> dic
         "solve_iterations_median": float(np.median(res.solve_iter)) if res.solve_iter.size else None,
         "solves": int(res.solve_ms.size),
         "failed_solves": int(mpc.stats.failed),
+        "fallback_solves": int(getattr(mpc.stats, "fallbacks", 0)),
         "path_length_m": float(res.path.length_m),
         "path_completed": bool(res.s[-1] >= res.path.length_m),
         "sim_time_s": float(res.t[-1]),

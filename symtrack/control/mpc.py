@@ -65,7 +65,6 @@ from ..model.vehicle import VEHICLE_STATES
 log = logging.getLogger("symtrack.control.mpc")
 
 SOLVERS = ("ipopt", "fatrop")
-_FATROP_EXTRA = {"mu_init": 1e-2}
 PREDICTIONS = ("vehicle", "full")
 
 # Typical magnitudes (scaling of the NLP variables), by state name prefix.
@@ -99,7 +98,7 @@ class MPCSettings:
     collocation_degree: int = 2
     torque_max_N_m: float = 8000.0
     torque_rate_max_N_m_s: float = 40000.0
-    weight_lateral: float = 30.0
+    weight_lateral: float = 10.0
     weight_heading: float = 30.0
     weight_along: float = 1.0
     weight_speed: float = 3.0
@@ -109,6 +108,7 @@ class MPCSettings:
     terminal_factor: float = 5.0
     max_iter: int = 60
     prediction_lateral_creep_speed_m_s: float | None = None
+    fallback_solver: str | None = "ipopt"
     tol: float = 1e-5
 
     def __post_init__(self):
@@ -135,6 +135,9 @@ class MPCSettings:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
         if self.solver not in SOLVERS:
             raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVERS)}")
+        if self.fallback_solver is not None and self.fallback_solver not in SOLVERS:
+            raise ParameterError(f"mpc.fallback_solver = {self.fallback_solver!r} is not one of "
+                                 f"{', '.join(SOLVERS)} (or absent)")
         if self.prediction not in PREDICTIONS:
             raise ParameterError(f"mpc.prediction = {self.prediction!r} is not one of {', '.join(PREDICTIONS)}")
         if not isinstance(self.jit, bool):
@@ -176,6 +179,7 @@ class SolveInfo:
 class MPCStats:
     solves: list = field(default_factory=list)
     failed: int = 0
+    fallbacks: int = 0  # primary solver failed, the fallback solver succeeded (not a failure)
 
     def solve_times_ms(self) -> np.ndarray:
         return np.array([1e3 * s.solve_time_s for s in self.solves])
@@ -319,7 +323,11 @@ class PathTrackingMPC:
         self.ng_stage = ng_stage
         nlp = {"x": w, "p": par, "f": f, "g": g}
         self.nlp = nlp
-        self.solver = self._nlpsol(nlp, eq, f, w, par, g)
+        self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
+        # the fallback: interpreted (no compilation), tried when the primary solver fails
+        self.fallback = None
+        if s.fallback_solver is not None and (s.fallback_solver, False) != (s.solver, s.jit):
+            self.fallback = self._nlpsol(nlp, eq, s.fallback_solver, False)
         # bounds
         rate = s.torque_rate_max_N_m_s * s.sample_time_s / TORQUE_SCALE_N_M
         lbg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), -rate * np.ones(nu)]), N)
@@ -334,15 +342,15 @@ class PathTrackingMPC:
             ubx[o + nxa:o + nxa + nu] = tmax
         self.lbx0, self.ubx0 = lbx, ubx
 
-    def _nlpsol(self, nlp, eq, f, w, par, g):
+    def _nlpsol(self, nlp, eq, solver: str, jit: bool):
         s = self.settings
         common = {"print_time": False, "error_on_fail": False}
-        if s.jit:
+        if jit:
             common.update({"expand": False, "jit": True, "compiler": "shell",
                            "jit_options": {"flags": ["-O1"], "verbose": False}, "jit_temp_suffix": True})
         else:
             common["expand"] = True
-        if s.solver == "ipopt":
+        if solver == "ipopt":
             opts = dict(common)
             # Primal warm start only: with warm_start_init_point = yes (and the shifted multipliers)
             # the warm solves of this NLP hit max_iter (measured); from the default barrier start
@@ -350,12 +358,12 @@ class PathTrackingMPC:
             opts["ipopt"] = {"print_level": 0, "sb": "yes", "max_iter": s.max_iter, "tol": s.tol,
                              "acceptable_tol": 10 * s.tol, "acceptable_iter": 3, "linear_solver": "mumps"}
             name = "ipopt"
-        elif s.solver == "fatrop":
+        else:
             opts = dict(common)
             opts.update({"structure_detection": "auto", "equality": eq, "debug": False})
-            opts["fatrop"] = {"print_level": 0, "max_iter": s.max_iter, "tol": s.tol, **_FATROP_EXTRA}
+            opts["fatrop"] = {"print_level": 0, "max_iter": s.max_iter, "tol": s.tol, "mu_init": 1e-2}
             name = "fatrop"
-        if s.jit:
+        if jit:
             jd = self._jit_dir()
             t0 = time.perf_counter()
             with _in_dir(jd):
@@ -424,6 +432,14 @@ class PathTrackingMPC:
         last interval [N m]; ref: (N+1) x 5 reference. Returns (command [N m], SolveInfo)."""
         N, blk = self.N, self.block
         info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
+        if not info.success and self.fallback is not None:
+            info2, wopt2 = self._solve(x_pred, x_cells, u_prev, ref, None, self.fallback)
+            info2.solve_time_s += info.solve_time_s
+            info2.iterations += info.iterations
+            info2.status = f"{info.status} -> fallback {self.settings.fallback_solver}: {info2.status}"
+            if info2.success:
+                self.stats.fallbacks += 1
+            info, wopt = info2, wopt2
         self.stats.solves.append(info)
         if info.success:
             self._accept(wopt)
@@ -445,8 +461,9 @@ class PathTrackingMPC:
         self._plan_u = wopt[:N * blk].reshape(N, blk)[:, nxa:nxa + nu] * TORQUE_SCALE_N_M
         self._plan_age = 0
 
-    def _solve(self, x_pred, x_cells, u_prev, ref, w_start):
+    def _solve(self, x_pred, x_cells, u_prev, ref, w_start, solver=None):
         """One call of the NLP solver; never raises. Returns (SolveInfo, solution or None)."""
+        solver = solver or self.solver
         blk, nxa = self.block, self.nxa
         x0s = np.concatenate([np.asarray(x_pred, float), np.asarray(u_prev, float)]) / self.sx
         # ref is (N+1) x 5 row-major: its ravel is the 5 x (N+1) column-major matrix the NLP reads
@@ -467,9 +484,9 @@ class PathTrackingMPC:
         t0 = time.perf_counter()
         ok, status, iters, cost, wopt = False, "exception", 0, float("nan"), None
         try:
-            sol = self.solver(**args)
+            sol = solver(**args)
             dt = time.perf_counter() - t0
-            st = self.solver.stats()
+            st = solver.stats()
             status = str(st.get("return_status", st.get("success")))
             iters = int(st.get("iter_count", 0) or 0)
             wopt = np.array(sol["x"]).ravel()
