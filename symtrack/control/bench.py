@@ -170,12 +170,13 @@ def _row(name, description, build_s, res) -> dict:
 
 def timing_comparison(scenario: str = "straight_offset", max_steps: int | None = None, fast_config: dict | None = None,
                       jit_dir: str | None = None, include=("nmpc_ipopt_plain", "nmpc_fast", "linear_mpc"),
-                      model: SystemModel | None = None) -> list[dict]:
-    """Run the scenario with each controller in ``include``; returns one dict per row."""
+                      model: SystemModel | None = None, overrides=()) -> list[dict]:
+    """Run the scenario (with ``overrides``, 'section.key=value' strings as for ``symtrack mpc
+    --set``) with each controller in ``include``; returns one dict per row."""
     from .mpc import PathTrackingMPC
 
     model = model or SystemModel()
-    base = scenario_mod.load(scenario)
+    base = scenario_mod.load(scenario, overrides)
     rows = []
     fast = dict(FAST_CONFIG if fast_config is None else fast_config)
     if jit_dir is not None:
