@@ -106,9 +106,11 @@ class MPCSettings:
     weight_torque: float = 0.001
     weight_torque_rate: float = 0.3
     terminal_factor: float = 5.0
+    terminal_lateral_factor: float | None = 50.0
+    lateral_huber_m: float = 0.0
     max_iter: int = 60
     prediction_lateral_creep_speed_m_s: float | None = None
-    fallback_solver: str | None = "ipopt"
+    fallback_solver: str | None = "auto"
     tol: float = 1e-5
 
     def __post_init__(self):
@@ -129,15 +131,18 @@ class MPCSettings:
                   "weight_torque", "weight_torque_rate"):
             rng(w, 0.0, 1e8)
         rng("terminal_factor", 0.0, 1e6)
+        rng("lateral_huber_m", 0.0, 100.0)
+        if self.terminal_lateral_factor is not None:
+            rng("terminal_lateral_factor", 0.0, 1e6)
         rng("max_iter", 1, 10000, integer=True)
         rng("tol", 0.0, 1.0, lo_open=True)
         if self.prediction_lateral_creep_speed_m_s is not None:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
         if self.solver not in SOLVERS:
             raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVERS)}")
-        if self.fallback_solver is not None and self.fallback_solver not in SOLVERS:
+        if self.fallback_solver is not None and self.fallback_solver not in SOLVERS + ("auto", "none"):
             raise ParameterError(f"mpc.fallback_solver = {self.fallback_solver!r} is not one of "
-                                 f"{', '.join(SOLVERS)} (or absent)")
+                                 f"{', '.join(SOLVERS)}, auto (the other solver), none")
         if self.prediction not in PREDICTIONS:
             raise ParameterError(f"mpc.prediction = {self.prediction!r} is not one of {', '.join(PREDICTIONS)}")
         if not isinstance(self.jit, bool):
@@ -267,15 +272,27 @@ class PathTrackingMPC:
         g_rate = Us - Xs[nxp:]  # kN m per step
         res = self._residuals(x, ref)
         r_u = ca.vertcat(math.sqrt(s.weight_torque) * Us, math.sqrt(s.weight_torque_rate) * g_rate)
-        r_all = ca.vertcat(res, r_u)
+        r_all = ca.vertcat(res[1:], r_u)
+        cost = s.weight_lateral * self._lateral_penalty(res[0]) + ca.sumsqr(r_all)
         stage = ca.Function("mpc_stage", [Xs, Us, Ks, ref, P, XC],
-                            [x_next, ca.vertcat(*gcoll), g_rate, ca.sumsqr(r_all), r_all],
-                            ["x", "u", "k", "ref", "p", "xc"], ["x_next", "g_coll", "g_rate", "cost", "res"],
+                            [x_next, ca.vertcat(*gcoll), g_rate, cost],
+                            ["x", "u", "k", "ref", "p", "xc"], ["x_next", "g_coll", "g_rate", "cost"],
                             {"cse": True})
         XN = ca.SX.sym("xN", self.nxa)
-        resN = math.sqrt(s.terminal_factor) * self._residuals(XN[:nxp] * Sx, ref)
-        term = ca.Function("mpc_terminal", [XN, ref], [ca.sumsqr(resN), resN], ["x", "ref"], ["cost", "res"])
+        resN = self._residuals(XN[:nxp] * Sx, ref)
+        tf_lat = s.terminal_factor if s.terminal_lateral_factor is None else s.terminal_lateral_factor
+        costN = tf_lat * s.weight_lateral * self._lateral_penalty(resN[0]) + s.terminal_factor * ca.sumsqr(resN[1:])
+        term = ca.Function("mpc_terminal", [XN, ref], [costN], ["x", "ref"], ["cost"])
         return stage, term
+
+    def _lateral_penalty(self, e):
+        """e^2 near the path; with lateral_huber_m = delta > 0 the pseudo-Huber
+        2 delta^2 (sqrt(1 + (e/delta)^2) - 1), which grows only linearly far from the path, so
+        a large offset does not ask for a violent manoeuvre."""
+        dl = self.settings.lateral_huber_m
+        if dl <= 0:
+            return e**2
+        return 2 * dl**2 * (ca.sqrt(1 + (e / dl) ** 2) - 1)
 
     def _residuals(self, x, ref):
         s = self.settings
@@ -288,7 +305,7 @@ class PathTrackingMPC:
         e_psi = psi - ref[2]
         e_v = x[i["u_m_s"]] - ref[3]
         e_r = x[i["yaw_rate_rad_s"]] - ref[3] * ref[4]
-        return ca.vertcat(math.sqrt(s.weight_lateral) * e_lat, math.sqrt(s.weight_heading) * e_psi,
+        return ca.vertcat(e_lat, math.sqrt(s.weight_heading) * e_psi,
                           math.sqrt(s.weight_along) * e_lon, math.sqrt(s.weight_speed) * e_v,
                           math.sqrt(s.weight_yaw_rate) * e_r)
 
@@ -311,8 +328,8 @@ class PathTrackingMPC:
         Xk, Uk, Kk = W[:nxa, :], W[nxa:nxa + nu, :], W[nxa + nu:, :]
         Xnext = ca.horzcat(W[:nxa, 1:], w[N * blk:])
         F = stage.map(N)
-        xn, gcoll, grate, cost, _ = F(Xk, Uk, Kk, refs[:, :N], ca.repmat(P, 1, N), ca.repmat(XC, 1, N))
-        costN, _ = term(w[N * blk:], refs[:, N])
+        xn, gcoll, grate, cost = F(Xk, Uk, Kk, refs[:, :N], ca.repmat(P, 1, N), ca.repmat(XC, 1, N))
+        costN = term(w[N * blk:], refs[:, N])
         gap = Xnext - xn
         # constraints ordered stage by stage: [gap_k; collocation_k; rate_k] (fatrop's structure
         # detection needs the gap first in each stage)
@@ -326,8 +343,12 @@ class PathTrackingMPC:
         self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
         # the fallback: interpreted (no compilation), tried when the primary solver fails
         self.fallback = None
-        if s.fallback_solver is not None and (s.fallback_solver, False) != (s.solver, s.jit):
-            self.fallback = self._nlpsol(nlp, eq, s.fallback_solver, False)
+        fb = s.fallback_solver
+        if fb == "auto":
+            fb = next(x for x in SOLVERS if x != s.solver)
+        if fb not in (None, "none") and (fb, False) != (s.solver, s.jit):
+            self.fallback = self._nlpsol(nlp, eq, fb, False)
+        self.fallback_name = fb
         # bounds
         rate = s.torque_rate_max_N_m_s * s.sample_time_s / TORQUE_SCALE_N_M
         lbg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), -rate * np.ones(nu)]), N)
@@ -433,10 +454,11 @@ class PathTrackingMPC:
         N, blk = self.N, self.block
         info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
         if not info.success and self.fallback is not None:
+            # from the same warm start (starting from where the primary stopped was measured worse)
             info2, wopt2 = self._solve(x_pred, x_cells, u_prev, ref, None, self.fallback)
             info2.solve_time_s += info.solve_time_s
             info2.iterations += info.iterations
-            info2.status = f"{info.status} -> fallback {self.settings.fallback_solver}: {info2.status}"
+            info2.status = f"{info.status} -> fallback {self.fallback_name}: {info2.status}"
             if info2.success:
                 self.stats.fallbacks += 1
             info, wopt = info2, wopt2
