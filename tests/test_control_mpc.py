@@ -171,3 +171,28 @@ def test_mpc_cli(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["horizon_steps"] == 6 and s["sim_time_s"] == pytest.approx(1.0)
     assert main(["mpc", "no_such_scenario", "--out", str(out)]) == 2
+
+
+class _ExtendedPlant:
+    """A plant whose state has more entries than the model's (as a grid-terrain plant would)."""
+
+    def __init__(self, model, params):
+        self.inner = CL.HomogeneousPlant(model, params)
+        self.state_names = self.inner.state_names + ("channel_0_sinkage_m",)
+
+    def step(self, x, u, dt):
+        return np.concatenate([self.inner.step(x[:-1], u, dt), [x[-1]]])
+
+
+def test_plant_with_another_state_layout_needs_x0(model):
+    from symtrack.errors import SimulationError
+
+    sc = fast_scenario()
+    plant = _ExtendedPlant(model, sc.params)
+    with pytest.raises(SimulationError, match="give x0"):
+        CL.run(sc, model=model, plant=plant, max_steps=2)
+    x, _ = CL.initial_state(model, sc)
+    res = CL.run(sc, model=model, plant=plant, x0=np.concatenate([x, [0.0]]), max_steps=3)
+    assert res.X.shape == (4, model.nx + 1)
+    # the first command continues the trim torques (read from the plant state)
+    assert res.summary["failed_solves"] == 0

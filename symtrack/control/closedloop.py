@@ -89,10 +89,16 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     path = sc.build_path()
     dt, N = sc.mpc.sample_time_s, sc.mpc.horizon_steps
     if x0 is None:
+        if tuple(plant.state_names) != tuple(model.state_names):
+            from ..errors import SimulationError
+
+            raise SimulationError("the plant's state differs from the model's: give x0 (the plant's initial "
+                                  "state, e.g. the vehicle states of initial_state() placed into it)")
         x, u_prev = initial_state(model, sc)
     else:
         x = np.asarray(x0, float)
-        u_prev = np.zeros(2)
+        # the command that holds the actual torques where they are
+        u_prev = np.array([x[plant.state_names.index(f"torque_{k}_N_m")] for k in ("left", "right")])
     pidx = [plant.state_names.index(n) for n in mpc.pred_names if n in plant.state_names]
     if len(pidx) != len(mpc.pred_names):
         missing = [n for n in mpc.pred_names if n not in plant.state_names]
