@@ -1,10 +1,13 @@
 """Nonlinear MPC of the commanded sprocket torques for path tracking.
 
 Prediction model
-    The model's own ``ode`` Function (no equation is written here). Two variants:
+    The model's own ``dae`` Function (no equation is written here): the DAE form, whose two
+    algebraic accelerations close the load-transfer loop exactly, costs one evaluation of the
+    vehicle equations where the ODE form iterates them; the Hessian of one collocation point has
+    5.5 k instead of 49 k instructions. Two variants:
 
     - ``prediction = "vehicle"`` (default): the 12 vehicle states are predicted; the 8 terrain-cell
-      states are frozen over the horizon at their measured values and enter ``ode`` as
+      states are frozen over the horizon at their measured values and enter ``dae`` as
       parameters. The cells feed back on the vehicle only through the compaction resistance
       (a function of the sinkage), and their 350-1500 rad/s modes are far faster than anything
       a 0.1 s controller can act on. ``symtrack.control.bench.prediction_effect`` measures the
@@ -23,13 +26,14 @@ Discretisation
 NLP layout (stage ordered, as CASADI_NOTES section 6 prescribes)
     w = [x_0, u_0, K_0, x_1, u_1, K_1, ..., x_N]; x_k = [vehicle states, previous command] (the
     previous command makes the torque-rate bound and its penalty stage-local); u_k the two torque
-    commands in kN m; K_k the collocation values. All variables are scaled to O(1). The stage
+    commands in kN m; K_k the collocation states and accelerations. All variables are scaled to O(1). The stage
     function is built once and applied with one ``map(N)``. x_0 is fixed through its bounds.
 
-Cost (least squares, per stage, reference point k of the path sampled at the reference speed)
-    lateral error, heading error, along-track error, speed error, yaw-rate error against the path
-    curvature times speed, torque-rate and torque magnitude penalties; the terminal state is
-    weighted ``terminal_factor`` times more.
+Cost (per stage, reference point k of the path sampled at the reference speed)
+    lateral error (quadratic, or pseudo-Huber with ``lateral_huber_m``), heading error,
+    along-track error, speed error, yaw-rate error against the path curvature times speed,
+    torque-rate and torque magnitude penalties; the terminal state is weighted
+    ``terminal_factor`` times more, its lateral error ``terminal_lateral_factor`` times.
 
 Solvers
     ``ipopt`` (default) or ``fatrop`` (structure detection ``auto``), both with the exact Hessian.
@@ -41,8 +45,9 @@ Solvers
     folder under the user's cache directory).
 
 A failed solve (solver error, non-success status or non-finite result) never raises: the
-controller applies the next command of its previous plan (shifted), counts the failure and
-warm-starts the next solve from the shifted plan.
+fallback solver (by default the other of ipopt / fatrop, interpreted) is tried from the same warm
+start; if it fails too, the controller applies the next command of its previous plan (shifted),
+counts the failure and warm-starts the next solve from the shifted plan.
 """
 
 from __future__ import annotations
