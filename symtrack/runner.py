@@ -74,6 +74,7 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
         x = static_state(model, params, st.x_m, st.y_m, np.radians(st.yaw_deg))
     else:
         x = world.begin_pass(stepper, st.x_m, st.y_m, np.radians(st.yaw_deg))
+        p = world.param_vector()  # the channels the settled start holds
 
     run_cfg = scenario.run
     dt = run_cfg.output_dt_s

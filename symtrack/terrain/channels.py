@@ -37,8 +37,8 @@ Coupling with the vehicle
   Needs dx < b (checked by the world manager).
 - **Compaction resistance** (MODEL.md section 1, reconstruction): the power the track spends
   pressing the soil, divided by the track speed,
-  R_c,k = sum_c A_cell frac_k,c p_c max(dz_c/dt, 0) / sqrt(v_k^2 + eps_v^2),
-  with p_c the soil's reaction pressure and eps_v the model's ``motion_smoothing_m_s``. It
+  R_c,k = sum_c A_cell frac_k,c p_c max(dz_c/dt, 0) / sqrt(v_k^2 + v0^2),
+  with p_c the soil's reaction pressure and v0 = :data:`COMPACTION_SPEED_FLOOR_M_S`. It
   depends on the cells' states, not on the pressure distribution, so it does not enter the
   load-transfer loop.
 
@@ -70,6 +70,15 @@ CHANNEL_FIELDS = ("centre_x_m", "centre_y_m", "z_max_m", "p_max_Pa", "active")
 GLOBAL_FIELDS = ("cell_size_m", "end_strip_m")
 NF = len(CHANNEL_FIELDS)
 NG = len(GLOBAL_FIELDS)
+
+# Regularisation speed of the compaction resistance R_c = P / sqrt(v^2 + v0^2) (numerical, not
+# physical): at walking pace and above it is P / |v|, the work per metre. Measured: with
+# v0 = 0.01 m/s (the model's motion_smoothing_m_s) a second pass starting from rest on the
+# compacted soil locked up in a stiff loop (resistance from cells settling under the
+# decelerating vehicle -> more pitch load -> more settling), IDAS taking 1500 steps per 10 ms;
+# with 0.1 m/s it runs through. Below v0 the settling of the cells under a vehicle at rest is
+# not a travel resistance anyway.
+COMPACTION_SPEED_FLOOR_M_S = 0.1
 
 # Phase flag of a cell (the seed's ``state``): untouched, loading on the Bekker curve,
 # unloading/reloading on the line through (z_max, p_max).
@@ -210,7 +219,7 @@ class ChannelTerrain:
         out = []
         for i, k in enumerate(TRACKS):
             power = d["cell_area"] * ca.sum2(d["g"][i, :] * power_density)
-            out.append(power / ca.sqrt(v_track[k] ** 2 + self.opts.motion_smoothing_m_s**2))
+            out.append(power / ca.sqrt(v_track[k] ** 2 + COMPACTION_SPEED_FLOOR_M_S**2))
         return ca.vertcat(*out)
 
     def equations(self, xv, xc, dist: dict, P, Q):

@@ -14,7 +14,8 @@ pass, the terrain figures (``terrain_*``), and ``passes``: a list with, per pass
 ``rut_max_depth_mm``, ``rut_mean_depth_mm`` (mean sinkage over the rut: the cells loaded in
 the pass, z_max > 1 um), ``new_sinkage_mean_mm`` (mean sinkage added by the pass over the rut),
 ``new_sinkage_volume_m3``, ``compaction_resistance_mean_N`` (time mean of the sum of both
-tracks' compaction resistance), ``distance_m``, ``sim_time_s``, ``wall_time_s``.
+tracks' compaction resistance), ``distance_m``, ``sim_time_s``, ``wall_time_s``; with several
+passes also ``later_passes_add_less_sinkage`` and ``later_passes_meet_less_resistance``.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ def make_world(scenario, terrain_in: str | None = None) -> World:
                 f"{path}: the terrain file has {g.shape[0]} x {g.shape[1]} cells of {g.cell_m} m, the scenario's "
                 f"[terrain] asks for {s.shape[0]} x {s.shape[1]} cells of {s.cell_m} m (size_m = {list(s.size_m)}); "
                 "make them agree")
+        s = dataclasses.replace(s, cell_m=g.cell_m, size_m=(g.shape[0] * g.cell_m, g.shape[1] * g.cell_m))
     return World(s, scenario.params, scenario.model, scenario.run.output_dt_s,
                  start_xy=(scenario.start.x_m, scenario.start.y_m), storage=storage)
 
@@ -132,6 +134,12 @@ def simulate_cli(args, sc) -> int:
             output.write_run(folder, trimmed, summary, plots.all_plots(trimmed))
     top = dict(summaries[-1])
     top["passes"] = figures
+    if multi:
+        pairs = list(zip(figures[:-1], figures[1:], strict=True))
+        top["later_passes_add_less_sinkage"] = all(
+            b["new_sinkage_mean_mm"] < a["new_sinkage_mean_mm"] for a, b in pairs)
+        top["later_passes_meet_less_resistance"] = all(
+            b["compaction_resistance_mean_N"] < a["compaction_resistance_mean_N"] for a, b in pairs)
     top["terrain_storage_memory_MB"] = world.storage.nbytes / 1e6
     if terrain_in:
         top["terrain_in"] = str(terrain_in)

@@ -71,6 +71,7 @@ log = logging.getLogger("symtrack.terrain")
 NV = len(VEHICLE_STATES)
 STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase")
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
+LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
 
 
 @dataclass(frozen=True)
@@ -342,21 +343,28 @@ class World:
         stepper.reset()
         return x
 
-    def end_pass(self, x: np.ndarray, dt_s: float = 0.01, max_steps: int = 200) -> None:
-        """Lift the vehicle: the active cells unload with zero load until released, then free all."""
+    def end_pass(self, x: np.ndarray, dt_s: float = 0.01, max_steps: int = 300) -> None:
+        """Lift the vehicle off: each active cell's load falls linearly from its reaction pressure at
+        the end of the pass to zero over LIFT_TIME_S (quasi-statically: a sudden removal would fling
+        the underdamped cells above their unloaded rest, as no tension holds them back), then the
+        cells settle until released; all channels are freed. Cells that have not come to rest
+        within max_steps keep their (stored) state and a warning says so."""
         self.after_step(x)
         self.z_at_pass_end = self.storage.z.copy()  # the terrain with the vehicle still on it
         act = np.nonzero(self.channel_cell >= 0)[0]
         if act.size:
             F = self._unloader()
             xc = np.array(x[NV:], dtype=float)
-            for _ in range(max_steps):
+            p_end = self.p_soil.copy()
+            for k in range(max_steps):
+                t0 = k * dt_s
                 rates = xc[1::2][act]
-                if np.all((self.p_soil[act] <= 0.0) & (np.abs(rates) <= self.settings.release_rate_m_s)):
+                if t0 >= LIFT_TIME_S and np.all((self.p_soil[act] <= 0.0)
+                                                & (np.abs(rates) <= self.settings.release_rate_m_s)):
                     break
-                xc = np.array(F(x0=xc, p=np.concatenate([self.Q, [dt_s]]))["xf"]).ravel()
-                xfull = np.concatenate([x[:NV], xc])
-                self.after_step(xfull)
+                par = np.concatenate([self.Q, p_end, [t0, dt_s, LIFT_TIME_S]])
+                xc = np.array(F(x0=xc, p=par)["xf"]).ravel()
+                self.after_step(np.concatenate([x[:NV], xc]))
             else:
                 log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
                             act.size, max_steps * dt_s)
@@ -368,20 +376,23 @@ class World:
         self.p_soil[:] = 0.0
 
     def _unloader(self):
-        """A cells-only integrator of all channels with zero load (the vehicle lifted off)."""
+        """A cells-only integrator of all channels, the load falling linearly to zero (the lift)."""
         if self._unload is None:
             n = self.n_channels
             fn = self.terrain.fn
             xc = ca.SX.sym("xc", 2 * n)
             Q = ca.SX.sym("Q", NG + NF * n)
-            h = ca.SX.sym("h")
+            p_end = ca.SX.sym("p_end", n)
+            t0, h, T, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("tau")
             qc = ca.reshape(Q[NG:], NF, n)
             xm = ca.reshape(xc, 2, n)
             law = ca.DM(soil_law_values(self.params))
             p = fn["soil"].map(n, [False, False, False, True], [False])(xm[0, :], qc[2, :], qc[3, :], law)
+            load = p_end.T * ca.fmax(0, 1 - (t0 + h * tau) / T)
             cellpar = ca.DM([self.params["cell_areal_mass_kg_per_m2"], self.params["cell_damping_Pa_s_per_m"]])
-            d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], 0, p, qc[4, :], cellpar)
-            dae = {"x": xc, "p": ca.vertcat(Q, h), "ode": h * ca.reshape(d, 2 * n, 1)}
+            d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], load, p, qc[4, :],
+                                                                                  cellpar)
+            dae = {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T), "ode": h * ca.reshape(d, 2 * n, 1)}
             self._unload = ca.integrator("unload", "cvodes", dae, 0.0, 1.0,
                                          {"abstol": 1e-12, "reltol": 1e-9})
         return self._unload
