@@ -91,3 +91,55 @@ def test_end_strip_weights_select_the_ends_and_skip_partly_covered_cells():
     edge = _geometry(l / 2 - 0.1, B / 2 + b / 2 - 0.025)  # 3/4 under the track, at its edge
     assert edge[0] == pytest.approx(0.75) and edge[5] < 0.3
     assert cell.k_eq(1.0, 2.0, 0.5) == 4.0
+
+
+def _small_system(n=30):
+    from symtrack.model import SystemModel
+    from symtrack.terrain.channels import ChannelTerrain
+
+    return SystemModel(ModelOptions(), ChannelTerrain(ModelOptions(), n))
+
+
+def test_the_dae_jacobian_is_an_arrowhead():
+    n, nv = 30, 12
+    m = _small_system(n)
+    J = ca.jacobian(ca.vertcat(m.ode_dae_expr, m.alg_expr), ca.vertcat(m.x, m.z)).sparsity()
+    rows, cols = J.get_triplet()
+    for r, c in zip(rows, cols, strict=True):
+        if nv <= r < m.nx and nv <= c < m.nx:
+            assert (r - nv) // 2 == (c - nv) // 2  # a channel couples only to itself among the channels
+    assert J.nnz() < 20 * m.nx  # linear in the channel count, not quadratic
+
+
+def test_the_block_built_jacobian_equals_casadi_automatic_jacobian():
+    from symtrack.terrain.channels import NF, NG
+    from symtrack.terrain.stepper import NV, channel_dae
+
+    n = 30
+    m = _small_system(n)
+    F = channel_dae(m)
+    rng = np.random.default_rng(3)
+    Q = np.zeros(NG + NF * n)
+    Q[0], Q[1] = 0.25, 0.5
+    qc = Q[NG:].reshape(n, NF)
+    qc[:, 0] = rng.uniform(-1.5, 1.5, n)
+    qc[:, 1] = rng.uniform(-1.0, 1.0, n)
+    qc[:, 2] = rng.uniform(0, 1e-3, n)
+    qc[:, 3] = rng.uniform(0, 3e4, n)
+    qc[:, 4] = rng.integers(0, 2, n)
+    p = np.r_[m.param_vector(PARAMS, Q), 0.01]
+    x = np.r_[rng.uniform(0, 2e-3, 2 * n), [0.1, 0.05, 0.02, 2.0, 0.01, 0.03, 5.0, 5.5, 0.01, 0.012, 1900, 2000]]
+    z = np.array([0.5, 0.01])
+    u = np.array([2000.0, 1800.0])
+    xs, zs = ca.MX.sym("x", x.size), ca.MX.sym("z", 2)
+    out = F(t=0, x=xs, z=zs, p=p, u=u)
+    J_custom = ca.Function("jc", [xs, zs], [ca.jacobian(ca.vertcat(out["ode"], out["alg"]), ca.vertcat(xs, zs))])
+    # the reference: CasADi's own AD on the permuted expressions
+    h = ca.SX.sym("h")
+    xp = ca.vertcat(m.x[NV:], m.x[:NV])
+    ode = h * m.ode_dae_expr
+    expr = ca.vertcat(ode[NV:], ode[:NV], m.alg_expr)
+    J_ref = ca.Function("jr", [xp, m.z, m.p, h, m.u], [ca.jacobian(expr, ca.vertcat(xp, m.z))])
+    A = np.array(J_custom(x, z))
+    B = np.array(J_ref(x, z, p[:-1], 0.01, u))
+    assert np.max(np.abs(A - B)) <= 1e-9 * max(1.0, np.max(np.abs(B)))
