@@ -140,7 +140,6 @@ def simulate_cli(args, sc) -> int:
             b["new_sinkage_mean_mm"] < a["new_sinkage_mean_mm"] for a, b in pairs)
         top["later_passes_meet_less_resistance"] = all(
             b["compaction_resistance_mean_N"] < a["compaction_resistance_mean_N"] for a, b in pairs)
-    top["terrain_storage_memory_MB"] = world.storage.nbytes / 1e6
     if terrain_in:
         top["terrain_in"] = str(terrain_in)
     if terrain_out:
