@@ -91,7 +91,8 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
     bar = Progress(1.0, scenario.name, enabled=progress)
     wall0 = time.perf_counter()
     while t < run_cfg.duration_s - 1e-12:
-        t_next = min(t + dt, run_cfg.duration_s)
+        # next point of the output grid k dt (no accumulated round-off), or a torque change
+        t_next = min(float(np.floor(t / dt + 1e-9) + 1) * dt, run_cfg.duration_s)
         for tc in change_times:
             if t + 1e-12 < tc < t_next - 1e-12:
                 t_next = tc
@@ -170,7 +171,7 @@ def summarise(res: Result) -> dict:
         out[f"sinkage_{end}_mm"] = 1e3 * ends[end]
     last = sc.torque[-1]
     jl, jr = res.state("shear_left_m"), res.state("shear_right_m")
-    if abs(last.left_N_m) != abs(last.right_N_m):
+    if abs(last.left_N_m) != abs(last.right_N_m) and res.t[-1] >= last.t_s:
         driven, idle = (jr, jl) if abs(last.right_N_m) > abs(last.left_N_m) else (jl, jr)
         since = res.t >= last.t_s
         out["shear_driven_max_m"] = float(driven[since].max())

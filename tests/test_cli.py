@@ -49,3 +49,30 @@ def test_run_that_cannot_finish_writes_no_summary(tmp_path, capsys):
     assert main(["simulate", "validation", "--out", str(out), "--set", "run.duration_s=0.5"]) == 2
     assert "raise duration_s" in capsys.readouterr().err
     assert not (out / "summary.json").exists()
+
+
+
+def test_summary_of_a_run_that_ends_before_the_last_torque_change(tmp_path):
+    scenario = tmp_path / "early.toml"
+    scenario.write_text("""
+[run]
+duration_s = 0.5
+output_dt_s = 0.05
+[vehicle]
+preset = "reference_crawler"
+[soil]
+preset = "clayey_soil_thailand_38"
+[[torque]]
+t_s = 0.0
+left_N_m = 1000.0
+right_N_m = 1000.0
+[[torque]]
+t_s = 4.0
+left_N_m = 0.0
+right_N_m = 1000.0
+""")
+    out = tmp_path / "early"
+    assert main(["simulate", str(scenario), "--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stopped_by"] == "duration" and summary["sim_time_s"] == 0.5
+    assert summary["shear_idle_min_m"] is None and summary["shear_driven_max_m"] > 0
