@@ -151,3 +151,27 @@ def test_nose_up_under_traction(model, params):
     ps, pi = _out(model, x, p, "p_sprocket_left_Pa"), _out(model, x, p, "p_idler_left_Pa")
     assert _out(model, x, p, "accel_x_m_s2") > 0.5
     assert ps > pi * 1.1
+
+
+def test_lateral_shear_cap_limits_the_turning_resistance_to_the_soil_strength(params):
+    """With the cap, pure yaw on uniform pressure meets M = (c + p tan phi) b l^2 / 4 per track
+    where the soil is weaker than mu_t p (clayey soil: c + p tan phi < 0.55 p at 25 kPa)."""
+    model = SystemModel(ModelOptions(lateral_shear_cap=True))
+    pr = dict(params, cg_ahead_of_contact_centre_m=0.0, lateral_creep_speed_m_s=1e-6)
+    p = model.param_vector(pr)
+    x = _state(model, yaw_rate_rad_s=0.5)
+    b, l = pr["track_width_m"], pr["contact_length_m"]
+    p_mean = pr["mass_kg"] * GRAVITY_M_S2 / (2 * b * l)
+    strength = pr["cohesion_Pa"] + p_mean * math.tan(pr["friction_angle_rad"])
+    assert strength < pr["lateral_friction_coeff"] * p_mean  # the cap binds on this soil
+    M = 2 * strength * b * l**2 / 4
+    assert _out(model, x, p, "yaw_moment_N_m") == pytest.approx(-M, rel=1e-4)
+
+
+def test_with_the_cap_the_reference_crawler_turns_on_clay(params):
+    from symtrack.control.trim import TrimError, trim
+
+    with pytest.raises(TrimError, match="traction limit"):
+        trim(SystemModel(), params, 2.0, 20.0)
+    tp = trim(SystemModel(ModelOptions(lateral_shear_cap=True)), params, 2.0, 20.0)
+    assert tp.u[0] < 0 < tp.u[1]  # a left turn: the inner (left) sprocket brakes

@@ -164,7 +164,11 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> 
             s = sn * l
             x_body = l / 2 - e - s
             q = b * dist[k].at(s)
-            fy = -mu * q * ca.tanh((vy + rz * x_body) / eps_v)
+            if opts.lateral_shear_cap:
+                # the lateral shear stress cannot exceed the soil's shear strength c + p tan(phi)
+                fy = -ca.fmin(mu * q, b * c + q * ca.tan(phi)) * ca.tanh((vy + rz * x_body) / eps_v)
+            else:
+                fy = -mu * q * ca.tanh((vy + rz * x_body) / eps_v)
             fy_sum += wn * l * fy
             mz_sum += wn * l * x_body * fy
         Fy[k], Mz[k] = fy_sum, mz_sum
