@@ -31,6 +31,7 @@ from .config import settings_from_dict, validate_section
 from .world import NV, World
 
 RUT_THRESHOLD_M = 1e-6
+GRID_INTEGRATORS = ("idas", "rosenbrock")  # rosenbrock: symtrack/terrain/compiled_grid.py
 
 
 def make_world(scenario, terrain_in: str | None = None) -> World:
@@ -40,10 +41,10 @@ def make_world(scenario, terrain_in: str | None = None) -> World:
     if t is None:
         raise ScenarioError("the scenario has no [terrain] section")
     s = settings_from_dict(t)
-    if scenario.run.integrator != "idas":
+    if scenario.run.integrator not in GRID_INTEGRATORS:
         raise ScenarioError(
             f"run.integrator = {scenario.run.integrator!r}: the grid terrain runs with run.integrator = \"idas\" "
-            "(its DAE form keeps the Jacobian sparse; see symtrack/terrain/channels.py)")
+            "or \"rosenbrock\" (the DAE form keeps the Jacobian an arrowhead; see symtrack/terrain/channels.py)")
     if scenario.run.compiled:
         raise ScenarioError("run.compiled = true is not available with the grid terrain")
     path = terrain_in or s.initial_state

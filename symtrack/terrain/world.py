@@ -222,11 +222,17 @@ class World:
         return tuple(int(v) for v in divmod(int(cell), self.grid.shape[1]))
 
     def stepper(self, settings):
-        """The integrator for this world's model (IDAS, channel states ordered first)."""
+        """The integrator for this world's model: IDAS (channel states ordered first) or the compiled
+        fixed-step Rosenbrock (symtrack.terrain.compiled_grid)."""
         from .stepper import ChannelStepper
 
         if self._stepper is None or self._stepper.settings != settings:
-            self._stepper = ChannelStepper(self.model, settings)
+            if settings.method == "rosenbrock":
+                from .compiled_grid import GridRosenbrockStepper
+
+                self._stepper = GridRosenbrockStepper(self.model, settings, self.n_channels)
+            else:
+                self._stepper = ChannelStepper(self.model, settings)
         return self._stepper
 
     # ---- the parameter vector --------------------------------------------------------------------
