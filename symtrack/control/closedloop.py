@@ -6,12 +6,18 @@ The plant is any object with
   :data:`symtrack.model.vehicle.VEHICLE_STATES`);
 - ``step(x, u, dt) -> x``: advance the state over dt [s] with the commanded torques u held.
 
-The default plant, :class:`HomogeneousPlant`, is the full simulator (CVODES/IDAS on the
-SystemModel with its terrain cells), not the MPC's prediction model: the mismatch (cells frozen
-in the prediction, collocation error, the plant's tight tolerances) is real. A plant whose
-state carries the homogeneous terrain's cell states by name gives them to the prediction;
-another plant (e.g. the grid terrain) leaves the prediction's cells at the static equilibrium
-on the scenario's soil.
+The default plant, :class:`~symtrack.control.plants.HomogeneousPlant`, is the full simulator
+(CVODES/IDAS on the SystemModel with its terrain cells), not the MPC's prediction model: the
+mismatch (cells frozen in the prediction, collocation error, the plant's tight tolerances) is
+real. With a ``[terrain]`` section the plant is :class:`~symtrack.control.plants.GridPlant`, the
+vehicle on the persistent grid terrain. A plant whose state carries the homogeneous terrain's
+cell states by name gives them to the prediction; another plant (the grid terrain) leaves the
+prediction's cells at the static equilibrium on the scenario's soil.
+
+Optional plant hooks: ``start(x_vehicle) -> x`` (the loop's initial plant state from the
+vehicle's trim state), ``finish(x)`` (after the loop, e.g. lift the vehicle off the grid),
+``figures() -> dict`` (merged into the summary) and ``wall_time_s`` (the plant's share of the
+loop's wall time, reported as ``plant_wall_time_s``).
 """
 
 from __future__ import annotations
@@ -29,27 +35,15 @@ from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from ..output import atomic_write_bytes, atomic_write_text
 from ..progress import Progress
-from ..simulate import IntegratorSettings, Stepper, static_state
 from .mpc import PathTrackingMPC
+from .plants import HomogeneousPlant, make_grid_plant
 from .scenario import MPCScenario
 from .trim import trim
 
 log = logging.getLogger("symtrack.control.closedloop")
 
 SUMMARY_SCHEMA_VERSION = 1
-
-
-class HomogeneousPlant:
-    """The full simulator on homogeneous soil: Stepper (CVODES or IDAS) on a SystemModel."""
-
-    def __init__(self, model: SystemModel, params: dict, integrator: str = "cvodes"):
-        self.model = model
-        self.p = model.param_vector(params)
-        self.stepper = Stepper(model, IntegratorSettings(integrator))
-        self.state_names = tuple(model.state_names)
-
-    def step(self, x, u, dt):
-        return self.stepper.step(x, u, self.p, dt)
+__all__ = ["HomogeneousPlant", "ClosedLoopResult", "initial_state", "make_plant", "run", "summarise", "write"]
 
 
 @dataclass
@@ -69,6 +63,7 @@ class ClosedLoopResult:
     state_names: tuple
     summary: dict
     path: object
+    plant: object = None
 
 
 def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
@@ -81,13 +76,35 @@ def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
     return x, tp.u.copy()
 
 
+def make_plant(sc: MPCScenario, model: SystemModel, terrain_in: str | None = None):
+    """The scenario's plant: the grid terrain with a [terrain] section, else the homogeneous one."""
+    if sc.terrain is not None or terrain_in:
+        if sc.terrain is None:
+            import dataclasses
+
+            sc = dataclasses.replace(sc, terrain={})
+        return make_grid_plant(sc, terrain_in)
+    return HomogeneousPlant(model, sc.params, sc.run.integrator)
+
+
+def cidx_missing(plant, mpc) -> bool:
+    """True when the prediction has cells the plant's state does not carry (e.g. the grid plant)."""
+    return bool(mpc.cell_names) and not all(n in plant.state_names for n in mpc.cell_names)
+
+
 def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: PathTrackingMPC | None = None,
-        x0=None, progress: bool = False, max_steps: int | None = None) -> ClosedLoopResult:
+        x0=None, progress: bool = False, max_steps: int | None = None, finish: bool = True) -> ClosedLoopResult:
+    """The closed loop until the path's end, ``run.duration_s`` or ``max_steps``. A plant with
+    ``start`` gets the vehicle's trim state there (unless x0 is given); with ``finish`` (default)
+    the plant's ``finish`` hook runs after the loop."""
     model = model or SystemModel()
     mpc = mpc or PathTrackingMPC(model, sc.params, sc.mpc)
-    plant = plant or HomogeneousPlant(model, sc.params, sc.run.integrator)
+    plant = plant or make_plant(sc, model)
     path = sc.build_path()
     dt, N = sc.mpc.sample_time_s, sc.mpc.horizon_steps
+    if x0 is None and hasattr(plant, "start"):
+        xt, _ = initial_state(model, sc)
+        x0 = plant.start(xt[:len(VEHICLE_STATES)])
     if x0 is None:
         if tuple(plant.state_names) != tuple(model.state_names):
             from ..errors import SimulationError
@@ -106,7 +123,9 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
             from ..errors import SimulationError
 
             raise SimulationError(f"the plant's state has no {', '.join(missing)}: the MPC cannot read it")
-    cell_default = static_state(model, sc.params)[len(VEHICLE_STATES):]
+    # a plant without the homogeneous cells (the grid): the prediction freezes its cells at those
+    # of steady straight running at the start speed (trim), as the homogeneous plant starts
+    cell_default = initial_state(model, sc)[0][len(VEHICLE_STATES):] if cidx_missing(plant, mpc) else None
     cidx = [plant.state_names.index(n) for n in mpc.cell_names] if all(
         n in plant.state_names for n in mpc.cell_names) else None
     ts, xs, us, refs, ss, elat, epsi, strt, sms, sok, sit = ([] for _ in range(11))
@@ -149,12 +168,24 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
         bar.update(s_hint, f"t={t:.1f} s e_lat={100 * e_l:+.1f} cm")
     bar.close()
     wall = time.perf_counter() - wall0
+    plant_wall = float(getattr(plant, "wall_time_s", float("nan")))
+    if finish and hasattr(plant, "finish"):
+        plant.finish(x)
     res = ClosedLoopResult(sc, np.array(ts), np.array(xs), np.array(us), np.array(refs), np.array(ss),
                            np.array(elat), np.array(epsi), np.array(strt, bool), np.array(sms),
-                           np.array(sok, bool), np.array(sit), tuple(plant.state_names), {}, path)
+                           np.array(sok, bool), np.array(sit), tuple(plant.state_names), {}, path, plant)
     res.summary = summarise(res, wall, mpc)
     res.summary["initial_solve_ms"] = 1e3 * cold.solve_time_s
     res.summary["initial_solve_success"] = cold.success
+    res.summary["plant"] = getattr(plant, "kind", type(plant).__name__)
+    res.summary["plant_wall_time_s"] = plant_wall
+    res.summary["solver_wall_time_s"] = float(np.sum(res.solve_ms) / 1e3)
+    res.summary["plant_wall_time_per_sim_s"] = plant_wall / res.summary["sim_time_s"] if res.summary[
+        "sim_time_s"] > 0 else None
+    if hasattr(plant, "figures"):
+        res.summary.update(plant.figures())
+    if getattr(plant, "kind", None) == "grid":
+        res.summary.update(rut_figures(plant))
     return res
 
 
@@ -277,6 +308,30 @@ def plots(res: ClosedLoopResult) -> dict[str, bytes]:
     return out
 
 
+def rut_figures(plant) -> dict:
+    """Figures of the final terrain of a grid plant: the rut (cells loaded in the run, z_max > 1 um)."""
+    world = plant.world
+    st = world.storage
+    rut = world.touched & (st.zmax > 1e-6)
+    return {
+        "rut_cells": int(rut.sum()),
+        "rut_area_m2": float(rut.sum() * world.grid.cell_m ** 2),
+        "rut_max_depth_mm": 1e3 * float(st.z[rut].max()) if rut.any() else 0.0,
+        "rut_mean_depth_mm": 1e3 * float(st.z[rut].mean()) if rut.any() else 0.0,
+        "rut_volume_m3": float(st.z[rut].sum() * world.grid.cell_m ** 2),
+    }
+
+
+def terrain_plots(res: ClosedLoopResult) -> dict[str, bytes]:
+    """The final terrain of a grid plant: ``sinkage_map.png`` (top view, symtrack/terrain/plots.py)."""
+    plant = res.plant
+    if getattr(plant, "kind", None) != "grid":
+        return {}
+    from ..terrain.plots import sinkage_map_png
+
+    return {"sinkage_map.png": sinkage_map_png(plant.world, plant.world.storage.copy_z(), 1)}
+
+
 def write(out_dir, res: ClosedLoopResult) -> None:
     """trajectory.csv, path.csv, scenario.resolved.json, the plots, then summary.json (last)."""
     from pathlib import Path
@@ -288,5 +343,7 @@ def write(out_dir, res: ClosedLoopResult) -> None:
     atomic_write_text(out_dir / "scenario.resolved.json",
                       json.dumps({"schema_version": SUMMARY_SCHEMA_VERSION, **res.scenario.to_dict()}, indent=2) + "\n")
     for name, data in plots(res).items():
+        atomic_write_bytes(out_dir / name, data)
+    for name, data in terrain_plots(res).items():
         atomic_write_bytes(out_dir / name, data)
     atomic_write_text(out_dir / "summary.json", json.dumps(res.summary, indent=2) + "\n")

@@ -37,6 +37,13 @@ Schema (unknown keys are errors; ranges in brackets)::
     horizon_steps = 20
     sample_time_s = 0.1
     solver = "ipopt"
+    [terrain]                         # optional: the plant is then the vehicle on the persistent
+    cell_m = 0.25                     # grid terrain (symtrack.control.plants.GridPlant); keys and
+                                      # ranges of symtrack/terrain/config.py (docs/terrain.md).
+                                      # Without size_m and origin_m the field covers the path
+                                      # plus 4 m; passes must be 1; the plant runs IDAS
+                                      # whatever run.integrator says (that one is the
+                                      # homogeneous plant's).
 """
 
 from __future__ import annotations
@@ -56,8 +63,12 @@ from .mpc import MPCSettings
 from .path import Path as RefPath
 from .path import Segment, field_segments
 
-TOP_KEYS = ("name", "description", "vehicle", "soil", "start", "path", "run", "mpc")
+TOP_KEYS = ("name", "description", "vehicle", "soil", "start", "path", "run", "mpc", "terrain")
 SCENARIO_PACKAGE = "symtrack.control.scenarios"
+# the [terrain] section that plant="grid" (symtrack mpc --plant grid) adds to a scenario without one:
+# 0.25 m cells (the track is 0.45 m wide) and a speed bound of 4 m/s for the channel modulus M
+# keep a closed loop of a minute or two affordable (docs/control.md); the field covers the path
+GRID_DEFAULT_TERRAIN = {"cell_m": 0.25, "max_speed_m_s": 4.0}
 
 
 @dataclass(frozen=True)
@@ -86,6 +97,11 @@ class MPCScenario:
     path_spec: dict
     run: RunSettings
     mpc: MPCSettings
+    terrain: dict | None = None  # the validated [terrain] section (None: homogeneous plant)
+
+    @property
+    def plant(self) -> str:
+        return "homogeneous" if self.terrain is None else "grid"
 
     def build_path(self) -> RefPath:
         d = self.path_spec
@@ -106,7 +122,8 @@ class MPCScenario:
                 "vehicle": {"preset": self.vehicle_preset}, "soil": {"preset": self.soil_preset},
                 "parameters": dict(self.params),
                 "start": dataclasses.asdict(self.start), "path": path, "run": dataclasses.asdict(self.run),
-                "mpc": {k: v for k, v in dataclasses.asdict(self.mpc).items() if v is not None}}
+                "mpc": {k: v for k, v in dataclasses.asdict(self.mpc).items() if v is not None},
+                **({} if self.terrain is None else {"terrain": dict(self.terrain)})}
 
 
 def _num(where, value, low, high, low_open=False):
@@ -232,16 +249,26 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
         raise ScenarioError(f"run.integrator = {integ!r} is not one of {', '.join(INTEGRATORS)}")
     run = RunSettings(integ, _num("run.duration_s", rn.get("duration_s", 120.0), 0, 1e5, True),
                       _num("run.rms_exclude_first_m", rn.get("rms_exclude_first_m", 0.0), 0, 1e6))
+    terrain = None
+    if d.get("terrain") is not None:
+        from ..terrain.config import validate_section
+
+        terrain = validate_section(d["terrain"])
     return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
-                       _mpc(d.get("mpc", {})))
+                       _mpc(d.get("mpc", {})), terrain)
 
 
 def builtin_names() -> list[str]:
     return sorted(p.name[:-5] for p in resources.files(SCENARIO_PACKAGE).iterdir() if p.name.endswith(".toml"))
 
 
-def load(name_or_path: str, overrides=()) -> MPCScenario:
-    """A built-in scenario by name or a TOML file; overrides are 'section.key=value' strings."""
+def load(name_or_path: str, overrides=(), plant: str | None = None) -> MPCScenario:
+    """A built-in scenario by name or a TOML file; overrides are 'section.key=value' strings
+    (``--set terrain.cell_m=0.25`` adds a [terrain] section, so the plant becomes the grid).
+    ``plant``: None keeps the scenario's choice; "homogeneous" drops its [terrain] section;
+    "grid" adds :data:`GRID_DEFAULT_TERRAIN` as [terrain] if it has none."""
+    if plant not in (None, "homogeneous", "grid"):
+        raise ScenarioError(f"plant = {plant!r} is not one of homogeneous, grid")
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
@@ -270,4 +297,8 @@ def load(name_or_path: str, overrides=()) -> MPCScenario:
         if not isinstance(d[section], dict):
             raise ScenarioError(f"--set {item!r}: [{section}] is not a table")
         d[section][k.strip()] = value
+    if plant == "homogeneous":
+        d.pop("terrain", None)
+    elif plant == "grid":
+        d.setdefault("terrain", dict(GRID_DEFAULT_TERRAIN))
     return scenario_from_dict(d, default)
