@@ -151,3 +151,112 @@ def benchmark(big_size_m=(100.0, 100.0), big_cell_m=0.1, small_size_m=(12.0, 4.0
     out["small_speed_ratio_brute_over_pool"] = float(b.wall_time_s / pres.wall_time_s)
     out["small_pose_difference_m"] = float(np.max(np.abs(pres.X[:, :2] - b.X[:, :2])))
     return out
+
+
+# ---- rows of `symtrack bench` (symtrack/bench.py) ---------------------------------------------------------
+GRID_FIXED_STEP_S = 0.000625  # the grid rosenbrock's step (docs/terrain.md, "Speed": accuracy against IDAS)
+
+
+class _Timed:
+    """Wall time spent in named methods of an object (wrapped on the instance)."""
+
+    def __init__(self, obj, names):
+        self.total = dict.fromkeys(names, 0.0)
+        for n in names:
+            fn = getattr(obj, n)
+
+            def wrapped(*a, _fn=fn, _n=n, **k):
+                t0 = time.perf_counter()
+                try:
+                    return _fn(*a, **k)
+                finally:
+                    self.total[_n] += time.perf_counter() - t0
+            setattr(obj, n, wrapped)
+
+
+def _grid_row(integrator, duration_s=None, channels=None, note=""):
+    """One validation run on the million-cell field; the world manager's and the integrator's
+    shares of the wall time of the time loop (model construction and compilation excluded: a
+    warm-up macro step compiles what the run needs first)."""
+    from .. import runner, validation
+    from .study import make_world
+
+    extra = [f"run.integrator={integrator}", f"run.fixed_step_s={GRID_FIXED_STEP_S}"]
+    if channels is not None:
+        extra.append(f"terrain.channels={channels}")
+    sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, extra)
+    if duration_s is not None:
+        sc = dataclasses.replace(sc, run=dataclasses.replace(
+            sc.run, duration_s=duration_s, stop_after_distance_m=None, stop_distance_event=None))
+    t0 = time.perf_counter()
+    world = make_world(sc)
+    settings = IntegratorSettings(integrator, sc.run.reltol, sc.run.abstol, fixed_step_s=sc.run.fixed_step_s)
+    stepper = world.stepper(settings)
+    if integrator == "rosenbrock":  # compile the packed sizes the validation meets (up to 448 slots)
+        from .compiled_grid import PACK_SLOTS
+
+        n_sub = int(round(sc.run.output_dt_s / sc.run.fixed_step_s))
+        for slots in range(PACK_SLOTS, 512, PACK_SLOTS):
+            stepper.function(min(slots, world.n_channels), n_sub)
+    build_s = time.perf_counter() - t0
+    st = _Timed(stepper, ("step",))
+    begin = world.begin_pass
+    in_begin = {}
+
+    def timed_begin(*a, **k):  # the settling before the time loop is not in the run's wall time
+        s0 = st.total["step"]
+        try:
+            return begin(*a, **k)
+        finally:
+            in_begin["step"] = st.total["step"] - s0
+    world.begin_pass = timed_begin
+    wt = _Timed(world, ("before_step", "after_step", "check_covered"))
+    res = runner.run(sc, progress=False, world=world)
+    integration = st.total["step"] - in_begin.get("step", 0.0)
+    if world.stepper(settings) is not stepper:
+        raise RuntimeError("the runner built another integrator than the benchmark timed")
+    wall = float(res.wall_time_s)
+    manager = sum(wt.total[k] for k in ("before_step", "after_step", "check_covered"))
+    other = wall - manager - integration
+    row = {"group": "grid validation (1e6 cells)", "case": f"M = {world.M}", "integrator": integrator,
+           "sim_time_s": float(res.t[-1]), "wall_time_s": wall, "real_time_factor": float(res.t[-1]) / wall,
+           "build_s": build_s, "channels": world.n_channels, "peak_active_cells": world.peak_active,
+           "world_manager_s": manager, "integration_s": integration, "other_s": other,
+           "world_manager_share": manager / wall, "integration_share": integration / wall}
+    if duration_s is None:
+        summ = runner.summarise(res)
+        row["validation"] = {k: v for k, _, v, _ in validation.check(summ)}
+        row["validation_all_within"] = all(ok for *_, ok in validation.check(summ))
+    row["note"] = (note + f"; wall: integration {100 * integration / wall:.0f} %, world manager "
+                   f"{100 * manager / wall:.0f} %, outputs and loop {100 * other / wall:.0f} %").lstrip("; ")
+    return row
+
+
+def bench_rows(quick: bool = False) -> list[dict]:
+    """Rows of ``symtrack bench``: the validation on the million-cell field (IDAS interpreted, the
+    compiled grid rosenbrock), the channel-pool size M against cost, the pool against brute force
+    on the small field. ``quick``: the IDAS row and the M sweep over 0.5 s of the run only."""
+    rows = []
+    short = 0.5 if quick else None
+    rows.append(_grid_row("idas", duration_s=0.5 if quick else None,
+                          note="first 0.5 s only" if quick else "the whole validation"))
+    rows.append(_grid_row("rosenbrock", note=f"compiled, step {GRID_FIXED_STEP_S * 1e3:g} ms"))
+    for M in (48, 64):
+        r = _grid_row("rosenbrock", duration_s=short, channels=M,
+                      note="M sweep" + ("; first 0.5 s only" if quick else ""))
+        r["group"] = "grid: pool size M vs cost"
+        rows.append(r)
+    sc2 = _field_scenario("validation_grid", (12.0, 4.0), 0.25, [f"run.fixed_step_s={GRID_FIXED_STEP_S}"])
+    _, pres = pool_run(sc2, 1.0)
+    b = brute_force_run(sc2, 1.0)
+    sc3 = dataclasses.replace(sc2, run=dataclasses.replace(sc2.run, integrator="rosenbrock"))
+    pool_run(sc3, 0.05)  # compile
+    _, rres = pool_run(sc3, 1.0)
+    for case, integ, wall in (("brute force (768 cells as states)", "idas", b.wall_time_s),
+                              ("channel pool", "idas", pres.wall_time_s),
+                              ("channel pool", "rosenbrock", rres.wall_time_s)):
+        rows.append({"group": "small field 12 m x 4 m at 0.25 m", "case": case, "integrator": integ,
+                     "sim_time_s": 1.0, "wall_time_s": float(wall), "real_time_factor": 1.0 / float(wall),
+                     "note": f"brute / pool (idas) = {b.wall_time_s / pres.wall_time_s:.1f}"
+                     if case == "channel pool" and integ == "idas" else ""})
+    return rows

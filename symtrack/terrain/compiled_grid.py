@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from ..compiled import _compile, _compiler, cache_root, substeps
-from ..errors import SimulationError
+from ..errors import ScenarioError, SimulationError
 from ..model.vehicle import VEHICLE_STATES
 from .channels import NF, NG
 
@@ -32,7 +32,14 @@ log = logging.getLogger("symtrack.terrain")
 
 NV = len(VEHICLE_STATES)
 BUILD_VERSION = 1
-PACK_MIN = 64  # smallest packed call (slots)
+# the active channels are packed into calls of a multiple of PACK_SLOTS slots (one compiled library
+# per size met: at most 64 - 1 idle slots evaluated)
+PACK_SLOTS = 64
+# The largest step measured to work on the grid (docs/terrain.md, "Speed"): at 1.25 ms the
+# validation on the million-cell field diverged (a linearly-implicit step freezes the Jacobian,
+# and the regularised Bekker slope of a cell that starts loading from z = 0 is very steep and
+# falls fast); at 0.625 ms every figure agrees with IDAS.
+MAX_STEP_S = 0.000625
 
 
 def grid_library(opts, n_channels: int, n_steps: int, compiled: bool = True):
@@ -65,6 +72,10 @@ class GridRosenbrockStepper:
     """simulate.Stepper's interface (step, reset) for the world of the grid terrain."""
 
     def __init__(self, model, settings, n_channels: int, compiled: bool = True):
+        if settings.fixed_step_s > MAX_STEP_S * (1 + 1e-9):
+            raise ScenarioError(f"run.fixed_step_s = {settings.fixed_step_s!r} s is above {MAX_STEP_S} s, the largest "
+                                "step of the grid rosenbrock integrator that was measured stable and accurate "
+                                "(docs/terrain.md, \"Speed\"); set run.fixed_step_s <= " + f"{MAX_STEP_S}")
         self.model, self.settings, self.n = model, settings, n_channels
         self.want_compiled = compiled
         self._f: dict[tuple[int, int], ca.Function] = {}
@@ -85,17 +96,14 @@ class GridRosenbrockStepper:
 
     def step(self, x, u, p, dt: float):
         """One macro step. Only the active channels are integrated (an idle channel is inert: its
-        derivatives are zero), packed in channel order into a call for the next bucket size
-        (PACK_MIN * 2^k slots, the spare slots idle); the channel identity is kept."""
+        derivatives are zero), packed in channel order into a call with the next multiple
+        of PACK_SLOTS slots (the spare slots idle); the channel identity is kept."""
         x, p = np.asarray(x, dtype=float), np.asarray(p, dtype=float)
         n = substeps(dt, self.settings.fixed_step_s)
         npv = p.size - NG - NF * self.n
         qc = p[npv + NG:].reshape(self.n, NF)
         act = np.nonzero(qc[:, 4] != 0.0)[0]
-        cap = PACK_MIN
-        while cap < act.size:
-            cap *= 2
-        cap = min(cap, self.n)
+        cap = min(PACK_SLOTS * max(1, -(-act.size // PACK_SLOTS)), self.n)
         f = self.function(cap, n)
         xc = x[NV:].reshape(self.n, 2)
         xc_p = np.zeros((cap, 2))
