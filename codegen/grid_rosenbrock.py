@@ -13,10 +13,10 @@ and the 2 algebraic accelerations. The model is split so that no expression is e
 channel:
 
 - one channel (an SX Function, mapped over the pool): F_c(x_c, q_c, a) with
-  a = (X, Y, psi, N_left, M_left, N_right, M_right) -- the pose and each track's normal load and
-  pitching moment, which set its pressure distribution -- and the channel's contributions s_c to
-  the 10 sums the vehicle sees (compaction power per track; weighted sinkage and weight per
-  track end);
+  a = (X, Y, cos psi, sin psi, alpha_k, beta_k) -- the pose and each track's pressure line
+  p(s) = max(0, alpha + beta s) (the linear and both triangular distributions are of this
+  form) -- and the channel's contributions s_c to the 10 sums the vehicle sees (compaction
+  power per track; weighted sinkage and weight per track end);
 - the vehicle (an SX Function of 14 + 10 inputs): F_w(w, u, p, S) with S = sum_c s_c, and a(w).
 
 The Jacobian is then the arrowhead J_cc (2x2 blocks), J_cw = dF_c/da da/dw, and the vehicle rows
@@ -44,7 +44,7 @@ from codegen.rosenbrock import A as RB_A
 from codegen.rosenbrock import C as RB_C
 from codegen.rosenbrock import M as RB_M
 
-NA = 7  # a = (X, Y, psi, N_left, M_left, N_right, M_right)
+NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_right)
 NS = 10  # S: compaction power (left, right), then per track and end: sum w z, then sum w
 NW = 14  # w = 12 vehicle states + 2 algebraic
 
@@ -103,6 +103,22 @@ class AggregateTerrain:
         return ca.SX(0, 1), signals
 
 
+def _pressure_line(dist):
+    """(alpha, beta) with the track's pressure p(s) = max(0, alpha + beta s) on the contact: the
+    linear distribution (non-negative there: |e| <= l/6) and both triangular ones of
+    :class:`~symtrack.model.vehicle.PressureDistribution` are of this form, so a channel needs two
+    numbers per track instead of three branches."""
+    b, l, N = dist.b, dist.l, dist.N
+    a_lin, b_lin = dist.p_mean + dist.slope * l / 2, -dist.slope
+    Af = 2 * N / (b * dist.Lc_front)
+    Ar = 2 * N / (b * dist.Lc_rear)
+    a_f, b_f = Af, -Af / dist.Lc_front
+    a_r, b_r = Ar * (1 - l / dist.Lc_rear), Ar / dist.Lc_rear
+    alpha = ca.if_else(dist.e_r > l / 6, a_f, ca.if_else(dist.e_r < -l / 6, a_r, a_lin))
+    beta = ca.if_else(dist.e_r > l / 6, b_f, ca.if_else(dist.e_r < -l / 6, b_r, b_lin))
+    return alpha, beta
+
+
 def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") -> dict[str, ca.Function]:
     """The Functions of the grid Rosenbrock integrator for a pool of n_channels channels.
 
@@ -111,7 +127,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     """
     from symtrack.model import SystemModel
     from symtrack.model.system import PARAM_NAMES
-    from symtrack.model.vehicle import ENDS, TRACKS, PressureDistribution
+    from symtrack.model.vehicle import ENDS, TRACKS
     from symtrack.terrain.channels import NF, NG, build_cell_functions
 
     agg = AggregateTerrain()
@@ -123,9 +139,8 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     Sv = pv[npv + NG:]
     D = []
     for k in TRACKS:
-        d = agg.dist[k]
-        D += [d.N, d.e_r * d.N]
-    a = ca.vertcat(xv[0], xv[1], xv[2], *D)
+        D += list(_pressure_line(agg.dist[k]))
+    a = ca.vertcat(xv[0], xv[1], ca.cos(xv[2]), ca.sin(xv[2]), *D)
     if ca.depends_on(a, Sv):
         raise RuntimeError("the pressure distributions depend on the channel sums: the Schur form does not hold")
     Fw = ca.vertcat(h * veh.ode_dae_expr, veh.alg_expr)
@@ -148,14 +163,16 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     q = ca.SX.sym("q", NF)
     av = ca.SX.sym("a", NA)
     cst = ca.SX.sym("c", 15)  # l, b, B, e, dx, strip, law[4], cellpar[2], h, unused x2
-    l, b = cst[0], cst[1]
     geo, law, cellpar, hh = cst[0:6], cst[6:10], cst[10:12], cst[12]
-    gvec = fn["geometry"](q, av[0:3], geo)
+    # the cell centre in the body frame here (cos, sin of the yaw computed once per stage, not per
+    # channel), then the channel's own geometry at the zero pose (cos 0 = 1 folds away)
+    ddx, ddy = q[0] - av[0], q[1] - av[1]
+    qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, q[2], q[3], q[4])
+    gvec = fn["geometry"](qb, ca.DM.zeros(3), geo)
     p_soil = fn["soil"](xc[0], q[2], q[3], law)
     p_load = 0
     for i in range(2):
-        dist = PressureDistribution(av[3 + 2 * i], av[4 + 2 * i], b, l)
-        p_load = p_load + gvec[i] * dist.at(gvec[2 + i])
+        p_load = p_load + gvec[i] * ca.fmax(0, av[4 + 2 * i] + av[5 + 2 * i] * gvec[2 + i])
     Fc = hh * fn["dynamics"](xc[1], p_load, p_soil, q[4], cellpar)
     power = p_soil * ca.fmax(xc[1], 0)
     rows = [gvec[4 + r] for r in range(len(TRACKS) * len(ENDS))]
