@@ -117,3 +117,24 @@ def test_plant_choice_and_terrain_validation():
     # the field covers the path plus the margin
     origin, size = field_from_path(S.load("field_pattern").build_path())
     assert origin[0] < -4 and origin[1] <= -4 and size[0] > 48 and size[1] >= 31.9
+
+
+def test_grid_plant_with_the_compiled_rosenbrock_matches_idas(grid_run, tmp_path):
+    """run.integrator = "rosenbrock": the compiled grid integrator as the plant's; the closed loop
+    and the ruts agree with the IDAS plant's."""
+    from symtrack.compiled import _compiler
+
+    if _compiler() is None:
+        pytest.skip("no C compiler: the grid rosenbrock would run interpreted (slow)")
+    d, out = grid_run
+    sc = S.load(str(d / "grid_short.toml"), ['run.integrator="rosenbrock"'])
+    plant = CL.make_plant(sc, None)
+    assert plant.integrator == "rosenbrock"
+    res = CL.run(sc, plant=plant)
+    assert res.summary["failed_solves"] == 0 and res.summary["path_completed"]
+    ref = np.genfromtxt(out / "trajectory.csv", delimiter=",", names=True)
+    n = min(len(ref), len(res.t))
+    for k, name in enumerate(("x_m", "y_m")):
+        assert np.max(np.abs(res.X[:n, k] - ref[name][:n])) < 1e-3, name
+    idas = persist.load(d / "terrain.npz")
+    assert np.max(np.abs(plant.world.storage.z - idas.z)) < 2e-5  # m, of ruts about 2-6 mm deep

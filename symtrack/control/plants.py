@@ -39,6 +39,7 @@ GRID_ABSTOL = 1e-8
 # plant sub-step: the world manager's macro step (footprint prediction, release); the MPC's sample
 # is split into sub-steps no longer than this
 GRID_SUBSTEP_S = 0.02
+GRID_INTEGRATORS = ("idas", "rosenbrock")
 # margin around the reference path when the field is sized from it
 FIELD_MARGIN_M = 4.0
 
@@ -77,18 +78,29 @@ class GridPlant(_Timed):
     """The vehicle on the persistent grid terrain (see the module doc).
 
     ``world``: a :class:`symtrack.terrain.world.World`; its M must have been derived for a macro
-    step of at most ``substep_s``. ``reltol``/``abstol``: IDAS tolerances.
+    step of at most ``substep_s``. ``integrator``: "idas" (default; tolerances ``reltol``,
+    ``abstol``) or "rosenbrock" (the compiled fixed-step integrator of
+    symtrack/terrain/compiled_grid.py at its largest measured step).
     """
 
     kind = "grid"
 
     def __init__(self, world, substep_s: float = GRID_SUBSTEP_S, reltol: float = GRID_RELTOL,
-                 abstol: float = GRID_ABSTOL):
+                 abstol: float = GRID_ABSTOL, integrator: str = "idas"):
         if not 0.0 < substep_s <= 1.0:
             raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
+        if integrator not in GRID_INTEGRATORS:
+            raise ScenarioError(f"grid plant integrator = {integrator!r} is not one of {', '.join(GRID_INTEGRATORS)}")
         self.world = world
         self.substep_s = float(substep_s)
-        self.stepper = world.stepper(IntegratorSettings("idas", reltol, abstol))
+        self.integrator = integrator
+        if integrator == "rosenbrock":
+            from ..terrain.compiled_grid import MAX_STEP_S
+
+            settings = IntegratorSettings("rosenbrock", fixed_step_s=MAX_STEP_S)
+        else:
+            settings = IntegratorSettings("idas", reltol, abstol)
+        self.stepper = world.stepper(settings)
         self.state_names = tuple(VEHICLE_STATES)
         self._x = None  # the full state (vehicle + channel slots) after the last step
         self.finished = False
@@ -157,7 +169,9 @@ def field_from_path(path, margin_m: float = FIELD_MARGIN_M) -> tuple[tuple[float
 def make_grid_plant(sc, terrain_in: str | None = None, substep_s: float = GRID_SUBSTEP_S) -> GridPlant:
     """The grid plant of an MPC scenario with a ``[terrain]`` section. Without ``size_m`` and
     ``origin_m`` (and no terrain file) the field covers the reference path plus
-    :data:`FIELD_MARGIN_M` on every side."""
+    :data:`FIELD_MARGIN_M` on every side. The plant integrates with IDAS, or with the compiled
+    Rosenbrock integrator when ``run.integrator = "rosenbrock"`` (``cvodes``, the homogeneous
+    plant's default, means IDAS here: the grid needs the DAE form)."""
     import dataclasses
 
     from ..model.options import ModelOptions
@@ -182,4 +196,4 @@ def make_grid_plant(sc, terrain_in: str | None = None, substep_s: float = GRID_S
     world = World(s, sc.params, ModelOptions(), substep_s, start_xy=(sc.start.x_m, sc.start.y_m), storage=storage)
     log.info("grid plant: %d x %d cells of %g m, M = %d (%d channels)", *world.grid.shape, world.grid.cell_m,
              world.M, world.n_channels)
-    return GridPlant(world, substep_s)
+    return GridPlant(world, substep_s, integrator="rosenbrock" if sc.run.integrator == "rosenbrock" else "idas")
