@@ -138,3 +138,18 @@ def test_grid_plant_with_the_compiled_rosenbrock_matches_idas(grid_run, tmp_path
         assert np.max(np.abs(res.X[:n, k] - ref[name][:n])) < 1e-3, name
     idas = persist.load(d / "terrain.npz")
     assert np.max(np.abs(plant.world.storage.z - idas.z)) < 2e-5  # m, of ruts about 2-6 mm deep
+
+
+def test_terrain_in_takes_the_file_geometry(grid_run):
+    d, _ = grid_run
+    sc = S.load("straight_offset", plant="homogeneous")
+    plant = CL.make_plant(sc, None, str(d / "terrain.npz"))  # no [terrain]: all from the file
+    g = persist.load(d / "terrain.npz").grid
+    assert plant.world.grid == g and plant.world.grid.cell_m == 0.25
+    from symtrack.terrain.config import TerrainSettings
+    from symtrack.terrain.world import derive_modulus
+
+    # derived for the file's 0.25 m cells (and the default 10 m/s bound), not the 0.1 m default cells
+    assert plant.world.M == derive_modulus(sc.params, TerrainSettings(cell_m=0.25), plant.substep_s) < 25
+    with pytest.raises(ScenarioError, match="cell_m"):
+        CL.make_plant(S.load("straight_offset", ["terrain.cell_m=0.2"]), None, str(d / "terrain.npz"))

@@ -190,6 +190,12 @@ def make_grid_plant(sc, terrain_in: str | None = None, substep_s: float = GRID_S
     storage = None
     if path_in:
         storage = persist.load(path_in, sc.params)
+        g = storage.grid
+        if "cell_m" in t and abs(g.cell_m - s.cell_m) > 1e-12:
+            raise ScenarioError(f"{path_in}: the terrain file has cells of {g.cell_m} m, the scenario's [terrain] "
+                                f"asks for terrain.cell_m = {s.cell_m}; make them agree")
+        # the file's geometry (M is derived from the cell size)
+        s = dataclasses.replace(s, cell_m=g.cell_m, size_m=(g.shape[0] * g.cell_m, g.shape[1] * g.cell_m))
     elif "size_m" not in t and "origin_m" not in t:
         origin, size = field_from_path(sc.build_path())
         s = dataclasses.replace(s, origin_m=origin, size_m=size)
