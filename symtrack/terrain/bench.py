@@ -227,8 +227,9 @@ def _grid_row(integrator, duration_s=None, channels=None, note=""):
         summ = runner.summarise(res)
         row["validation"] = {k: v for k, _, v, _ in validation.check(summ)}
         row["validation_all_within"] = all(ok for *_, ok in validation.check(summ))
-    row["note"] = (note + f"; wall: integration {100 * integration / wall:.0f} %, world manager "
-                   f"{100 * manager / wall:.0f} %, outputs and loop {100 * other / wall:.0f} %").lstrip("; ")
+    row["note"] = (note + f"; {float(res.t[-1]) / wall:.3g} x real time; wall: integration "
+                   f"{100 * integration / wall:.0f} %, world manager {100 * manager / wall:.0f} %, outputs and loop "
+                   f"{100 * other / wall:.0f} %").lstrip("; ")
     return row
 
 
@@ -257,6 +258,37 @@ def bench_rows(quick: bool = False) -> list[dict]:
                               ("channel pool", "rosenbrock", rres.wall_time_s)):
         rows.append({"group": "small field 12 m x 4 m at 0.25 m", "case": case, "integrator": integ,
                      "sim_time_s": 1.0, "wall_time_s": float(wall), "real_time_factor": 1.0 / float(wall),
-                     "note": f"brute / pool (idas) = {b.wall_time_s / pres.wall_time_s:.1f}"
-                     if case == "channel pool" and integ == "idas" else ""})
+                     "note": f"{1.0 / float(wall):.3g} x real time"
+                     + (f"; brute / pool (idas) = {b.wall_time_s / pres.wall_time_s:.1f}"
+                        if case == "channel pool" and integ == "idas" else "")})
     return rows
+
+
+def main(argv=None) -> int:
+    """``python -m symtrack.terrain.bench [--quick] [--out FILE]``: the grid rows of ``symtrack bench``
+    alone, printed as its table and written as its JSON."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    from ..bench import report, table
+    from ..output import atomic_write_text
+
+    ap = argparse.ArgumentParser(prog="python -m symtrack.terrain.bench")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default="out/bench_terrain.json")
+    args = ap.parse_args(argv)
+    rows = bench_rows(args.quick)
+    rep = report(rows)
+    atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
+    print(table(rows))
+    print(f"load average {rep['load_average'][0]:.2f} on {rep['cpus']} CPUs; JSON in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    import logging
+    import sys
+
+    logging.basicConfig(level=logging.WARNING)
+    sys.exit(main())
