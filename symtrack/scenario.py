@@ -121,18 +121,24 @@ class Scenario:
         return d
 
 
-def _num(section, key, value, low, high, low_open=False):
+def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
+    """A finite number in [low, high] (or (low, high]); the error names where, the value and the range."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScenarioError(f"{section}.{key} = {value!r} must be a number")
+        raise ScenarioError(f"{where} = {value!r} must be a number")
     v = float(value)
     ok = (v > low if low_open else v >= low) and v <= high and math.isfinite(v)
     if not ok:
         lb = "(" if low_open else "["
-        raise ScenarioError(f"{section}.{key} = {value!r} is outside the allowed range {lb}{low:g}, {high:g}]")
+        raise ScenarioError(f"{where} = {value!r} is outside the allowed range {lb}{low:g}, {high:g}]")
     return v
 
 
-def _check_keys(section, table, allowed):
+def _num(section, key, value, low, high, low_open=False):
+    return number(f"{section}.{key}", value, low, high, low_open)
+
+
+def check_keys(section, table, allowed):
+    """Unknown keys of a table are errors that list the allowed ones."""
     if not isinstance(table, dict):
         raise ScenarioError(f"[{section}] must be a table, got {table!r}")
     unknown = sorted(set(table) - set(allowed))
@@ -143,7 +149,7 @@ def _check_keys(section, table, allowed):
 
 def _parse_run(t: dict) -> RunSettings:
     fields = [f.name for f in dataclasses.fields(RunSettings)]
-    _check_keys("run", t, fields)
+    check_keys("run", t, fields)
     d = RunSettings()
     duration = _num("run", "duration_s", t.get("duration_s", d.duration_s), 0, 1e6, True)
     out_dt = _num("run", "output_dt_s", t.get("output_dt_s", d.output_dt_s), 0, duration, True)
@@ -169,16 +175,17 @@ def _parse_run(t: dict) -> RunSettings:
 
 def _parse_model(t: dict) -> ModelOptions:
     fields = [f.name for f in dataclasses.fields(ModelOptions)]
-    _check_keys("model", t, fields)
+    check_keys("model", t, fields)
     try:
         return ModelOptions(**t)
     except ParameterError as err:
         raise ScenarioError(str(err)) from err
 
 
-def _parse_params(section, t, preset_fn, specs, default_preset=None):
+def parse_params(section, t, preset_fn, specs, default_preset=None):
+    """A [vehicle] or [soil] table: preset plus overrides, validated as a complete set."""
     names = [s.name for s in specs]
-    _check_keys(section, t, ["preset"] + names)
+    check_keys(section, t, ["preset"] + names)
     preset = t.get("preset", default_preset)
     if not isinstance(preset, str):
         raise ScenarioError(f"{section}.preset is required (a preset name), got {preset!r}")
@@ -198,7 +205,7 @@ def _parse_torque(entries) -> tuple[TorqueEntry, ...]:
     out, events = [], set()
     for i, e in enumerate(entries):
         sec = f"torque[{i}]"
-        _check_keys(sec, e, ["t_s", "left_N_m", "right_N_m", "event"])
+        check_keys(sec, e, ["t_s", "left_N_m", "right_N_m", "event"])
         for k in ("t_s", "left_N_m", "right_N_m"):
             if k not in e:
                 raise ScenarioError(f"{sec}.{k} is required")
@@ -223,7 +230,7 @@ def _parse_torque(entries) -> tuple[TorqueEntry, ...]:
 
 
 def _parse_start(t) -> Start:
-    _check_keys("start", t, ["x_m", "y_m", "yaw_deg"])
+    check_keys("start", t, ["x_m", "y_m", "yaw_deg"])
     return Start(_num("start", "x_m", t.get("x_m", 0.0), -1e7, 1e7),
                  _num("start", "y_m", t.get("y_m", 0.0), -1e7, 1e7),
                  _num("start", "yaw_deg", t.get("yaw_deg", 0.0), -360, 360))
@@ -242,15 +249,15 @@ _register_builtin_sections()
 
 
 def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
-    _check_keys("scenario", d, TOP_KEYS + tuple(EXTRA_SECTIONS))
+    check_keys("scenario", d, TOP_KEYS + tuple(EXTRA_SECTIONS))
     name = d.get("name", default_name)
     desc = d.get("description", "")
     if not isinstance(name, str) or not isinstance(desc, str):
         raise ScenarioError("name and description must be strings")
     run = _parse_run(d.get("run", {}))
     model = _parse_model(d.get("model", {}))
-    vp, vehicle = _parse_params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS)
-    sp, soil = _parse_params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS)
+    vp, vehicle = parse_params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS)
+    sp, soil = parse_params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS)
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
     extra = {k: EXTRA_SECTIONS[k](d[k]) for k in EXTRA_SECTIONS if k in d}

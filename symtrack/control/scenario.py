@@ -56,8 +56,9 @@ from importlib import resources
 from pathlib import Path
 
 from ..errors import ParameterError, ScenarioError
-from ..parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets import soil_preset, vehicle_preset
+from ..scenario import check_keys, number, parse_params
 from ..simulate import INTEGRATORS
 from .mpc import MPCSettings
 from .path import Path as RefPath
@@ -126,41 +127,17 @@ class MPCScenario:
                 **({} if self.terrain is None else {"terrain": dict(self.terrain)})}
 
 
-def _num(where, value, low, high, low_open=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScenarioError(f"{where} = {value!r} must be a number")
-    v = float(value)
-    if (v <= low if low_open else v < low) or v > high:
-        lb = "(" if low_open else "["
-        raise ScenarioError(f"{where} = {value!r} is outside the allowed range {lb}{low:g}, {high:g}]")
-    return v
-
-
 def _int(where, value, low, high):
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
         raise ScenarioError(f"{where} = {value!r} must be an integer in [{low}, {high}]")
     return value
 
 
-def _keys(section, table, allowed):
-    if not isinstance(table, dict):
-        raise ScenarioError(f"[{section}] must be a table, got {table!r}")
-    unknown = sorted(set(table) - set(allowed))
-    if unknown:
-        raise ScenarioError(f"unknown key(s) in [{section}]: {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+_num = number
+_keys = check_keys
 
 
-def _params(section, t, preset_fn, specs, default):
-    _keys(section, t, ["preset"] + [s.name for s in specs])
-    preset = t.get("preset", default)
-    if not isinstance(preset, str):
-        raise ScenarioError(f"{section}.preset = {preset!r} must be a preset name")
-    try:
-        values = preset_fn(preset)
-        values.update({k: v for k, v in t.items() if k != "preset"})
-        return preset, check_set(values, specs, section)
-    except ParameterError as err:
-        raise ScenarioError(str(err)) from err
+_params = parse_params
 
 
 def _segments(items) -> list[Segment]:

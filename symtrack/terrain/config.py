@@ -20,7 +20,6 @@ Schema (every key optional; unknown keys are errors)::
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 from ..errors import ScenarioError
@@ -72,13 +71,9 @@ class TerrainSettings:
 
 
 def _num(key, value, low, high, low_open=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ScenarioError(f"terrain.{key} = {value!r} must be a finite number")
-    ok = (value > low if low_open else value >= low) and value <= high
-    if not ok:
-        lb = "(" if low_open else "["
-        raise ScenarioError(f"terrain.{key} = {value!r} is outside the allowed range {lb}{low:g}, {high:g}]")
-    return float(value)
+    from ..scenario import number  # late: symtrack.scenario imports this module when it loads
+
+    return number(f"terrain.{key}", value, low, high, low_open)
 
 
 def _pair(key, value):
