@@ -268,3 +268,22 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
         out[f"max_abs_diff_full_vs_plant_{key}"] = float(np.max(np.abs(traj["full"][:, i] - traj["plant"][:, i])))
     out["horizon_s"] = N * sample_time_s
     return out
+
+
+def _cm(v) -> str:
+    return "n/a" if v is None else f"{100 * v:.2f} cm"
+
+
+def bench_rows(quick: bool) -> list[dict]:
+    """Rows for ``symtrack bench``: the MPC timing comparison on ``straight_offset`` (plain IPOPT
+    without compilation, the fast configuration, the linear MPC), measured in the bench's process.
+    ``quick`` stops each closed loop after 60 samples."""
+    rows = []
+    for r in timing_comparison("straight_offset", max_steps=60 if quick else None):
+        note = (f"solve median {r['solve_time_median_ms']:.1f} / p95 {r['solve_time_p95_ms']:.1f} / "
+                f"max {r['solve_time_max_ms']:.1f} ms; failed {r['failed_solves']}/{r['solves']}; "
+                f"rms lateral {_cm(r['rms_lateral_error_m'])}; horizon {r['horizon_s']:g} s; "
+                f"build {r['build_s']:.1f} s; path completed: {r['path_completed']}")
+        rows.append({"group": "MPC straight_offset (homogeneous plant)", "case": r["controller"],
+                     "integrator": "cvodes plant", "note": note, **r})
+    return rows
