@@ -43,6 +43,9 @@ class Stepper:
             raise SimulationError(f"run.integrator = {settings.method!r} is not one of {', '.join(INTEGRATORS)}")
         self.model, self.settings = model, settings
         self.z, self._fixed = None, None
+        # optional state permutation of the integrator (x_integrator = x[perm]); see
+        # symtrack/terrain/stepper.py, which orders the channel states first
+        self.perm = self.inv = None
         if settings.method in FIXED_STEP_INTEGRATORS:
             from .compiled import FixedStepper
 
@@ -61,7 +64,6 @@ class Stepper:
 
             dae = compiled_dae(model, settings.method)
         self.F = ca.integrator("step_" + settings.method, settings.method, dae, 0.0, 1.0, opts)
-        self.z = None
 
     def reset(self):
         """Forget the algebraic guess (IDAS) after a jump of the state."""
@@ -73,7 +75,8 @@ class Stepper:
         """Integrate from state x over dt [s] with inputs u and parameter vector p held fixed."""
         if self._fixed is not None:
             return self._fixed.step(x, u, p, dt)
-        args = {"x0": x, "u": u, "p": ca.vertcat(p, dt)}
+        x = np.asarray(x, dtype=float)
+        args = {"x0": x if self.perm is None else x[self.perm], "u": u, "p": ca.vertcat(p, dt)}
         if self.settings.method == "idas":
             args["z0"] = self.model.accel(x, u, p) if self.z is None else self.z
         try:
@@ -85,7 +88,7 @@ class Stepper:
             raise SimulationError(f"{self.settings.method} returned a non-finite state")
         if self.settings.method == "idas":
             self.z = r["zf"]
-        return xf
+        return xf if self.inv is None else xf[self.inv]
 
     def stats(self) -> dict:
         if self._fixed is not None:

@@ -145,11 +145,17 @@ TYPICAL_SCALE = (
 INPUT_SCALE_N_M = 1000.0
 
 
-def _typical(name: str) -> float:
-    for key, val in TYPICAL_SCALE:
+def scale_by_name(name: str, table) -> float:
+    """The typical magnitude of a named signal: the entry of ``table`` ((name or prefix ending in
+    '_', value) pairs) that matches it first, else 1."""
+    for key, val in table:
         if name == key or (key.endswith("_") and name.startswith(key)):
             return val
     return 1.0
+
+
+def _typical(name: str) -> float:
+    return scale_by_name(name, TYPICAL_SCALE)
 
 
 def controllability(lin: Linearisation, rtol: float = 1e-9) -> dict:

@@ -66,6 +66,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
+from .linearize import scale_by_name
 
 log = logging.getLogger("symtrack.control.mpc")
 
@@ -81,10 +82,7 @@ TORQUE_SCALE_N_M = 1000.0
 
 
 def _scale(name: str) -> float:
-    for key, val in _SCALES:
-        if name == key or (key.endswith("_") and name.startswith(key)):
-            return val
-    return 1.0
+    return scale_by_name(name, _SCALES)
 
 
 @dataclass(frozen=True)

@@ -90,17 +90,3 @@ class ChannelStepper(Stepper):
                 # 1e-4 of it took about 10 % fewer internal steps than IDAS's own guess
                 "step0": 1e-4}
         self.F = ca.integrator("step_channels_idas", "idas", channel_dae(model), 0.0, 1.0, opts)
-
-    def step(self, x, u, p, dt: float):
-        x = np.asarray(x, dtype=float)
-        args = {"x0": x[self.perm], "u": u, "p": ca.vertcat(p, dt)}
-        args["z0"] = self.model.accel(x, u, p) if self.z is None else self.z
-        try:
-            r = self.F(**args)
-        except RuntimeError as err:
-            raise SimulationError(f"idas failed: {err}") from err
-        xf = np.array(r["xf"]).ravel()
-        if not np.all(np.isfinite(xf)):
-            raise SimulationError("idas returned a non-finite state")
-        self.z = r["zf"]
-        return xf[self.inv]
