@@ -1,7 +1,7 @@
 """Numbers for the standalone C program (codegen/standalone_main.c): ``<prefix>_validation.h``.
 
 The header carries the built-in validation scenario as C constants: the parameter vector, the
-static initial state (solved in Python by :func:`symtrack.simulate.static_state`), the
+static initial state (solved in Python by :func:`symtrack.model.static.static_state`), the
 consistent algebraic state, the torque schedule, the run settings and the indices of the states
 that the summary reads. The C program then needs only the generated sources and libc/libm.
 """
@@ -16,8 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from symtrack.scenario import load_scenario
-from symtrack.simulate import static_state
+from symtrack.build.cache import REPO_GENERATED, cache_root, find_compiler
+from symtrack.foundations.errors import SimulationError
+from symtrack.model.static import static_state
+from symtrack.simulation.scenario import load_scenario
 
 FIXED_STEP = "rosenbrock"
 # the flags of `make standalone` (Makefile)
@@ -88,9 +90,6 @@ MAIN_C = Path(__file__).resolve().parent / "standalone_main.c"
 def build_standalone(src_dir: Path | None = None, prefix: str = "homogeneous") -> Path:
     """Compile the standalone program from the generated sources in src_dir (default: the
     repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
-    from codegen.cli import REPO_GENERATED
-    from symtrack.compiled import cache_root, find_compiler
-    from symtrack.errors import SimulationError
 
     src = Path(src_dir) if src_dir else REPO_GENERATED
     names = [f"{prefix}_{FIXED_STEP}.c", f"{prefix}_{FIXED_STEP}.h", f"{prefix}_validation.h"]
@@ -118,7 +117,6 @@ def build_standalone(src_dir: Path | None = None, prefix: str = "homogeneous") -
 
 def run_standalone(binary: Path, repeats: int = 1) -> dict:
     """Run the standalone program; returns its JSON summary."""
-    from symtrack.errors import SimulationError
 
     res = subprocess.run([str(binary), str(repeats)], capture_output=True, text=True)
     if res.returncode != 0:

@@ -11,7 +11,7 @@ channel pool against brute force on a 12 m x 4 m field at 0.25 m (speed ratio, p
 import argparse
 import json
 
-from symtrack.terrain.bench import benchmark
+from symtrack.bench.terrain import benchmark
 
 
 def main():

@@ -1,9 +1,9 @@
-"""LQR with integral action for speed and yaw rate, designed on the exact linearisation at a
+"""LQR with integral action for speed and yaw rate, designed on the exact linearization at a
 steady turn and run on the nonlinear model (the full simulator, CVODES).
 
     PYTHONPATH=. .venv/bin/python examples/lqr_speed_yaw.py --out out/lqr
 
-Design: trim at V = 2 m/s on a 20 m left turn (sandy loam); linearise (17 states, positions
+Design: trim at V = 2 m/s on a 20 m left turn (sandy loam); linearize (17 states, positions
 dropped); add two integrators of the speed and yaw-rate errors; continuous LQR from
 python-control. On the nonlinear model the controller is u = u_trim - K [x - x_trim; integrals],
 applied with a zero-order hold every ``--dt`` seconds; the references step in speed and then in
@@ -19,12 +19,13 @@ from pathlib import Path
 import control
 import numpy as np
 
-from symtrack.control.linearize import linearize
+from symtrack.control.linearization import linearize
 from symtrack.control.trim import trim
+from symtrack.foundations.files import atomic_write_bytes, atomic_write_text
+from symtrack.integrators.settings import IntegratorSettings
+from symtrack.integrators.sundials import SundialsStepper as Stepper
 from symtrack.model import SystemModel
-from symtrack.output import atomic_write_bytes, atomic_write_text
 from symtrack.presets import soil_preset, vehicle_preset
-from symtrack.simulate import IntegratorSettings, Stepper
 
 
 def design(lin, q_speed=30.0, q_yaw=300.0, q_int_speed=30.0, q_int_yaw=300.0, r_torque_per_kNm=1.0):
@@ -82,7 +83,7 @@ def run(duration_s=8.0, dt=0.01, out=None, speed_step_m_s=0.3, yaw_rate_step_rad
         "control_period_s": dt,
     }
     if out is not None:
-        from symtrack.plots import _png, plt
+        from symtrack.reports.plots import plt, png_bytes
 
         out = Path(out)
         fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
@@ -96,8 +97,8 @@ def run(duration_s=8.0, dt=0.01, out=None, speed_step_m_s=0.3, yaw_rate_step_rad
         for a in ax:
             a.grid(True)
             a.legend()
-        ax[0].set_title("LQR (linearised at R = 20 m, 2 m/s) on the nonlinear model")
-        atomic_write_bytes(out / "lqr_response.png", _png(fig))
+        ax[0].set_title("LQR (linearized at R = 20 m, 2 m/s) on the nonlinear model")
+        atomic_write_bytes(out / "lqr_response.png", png_bytes(fig))
         atomic_write_text(out / "lqr_summary.json", json.dumps(summary, indent=2) + "\n")
     return summary
 

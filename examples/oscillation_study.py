@@ -30,10 +30,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from symtrack.foundations.files import atomic_write_bytes, atomic_write_text
 from symtrack.model import SystemModel
-from symtrack.output import atomic_write_bytes, atomic_write_text
-from symtrack.scenario import load_scenario
-from symtrack.simulate import static_state
+from symtrack.model.static import static_state
+from symtrack.simulation.scenario import load_scenario
 
 # A torque "step": an actuator time constant 100 x shorter than the reference crawler's.
 STEP_TIME_CONSTANT_S = 0.001
@@ -89,13 +89,13 @@ def chatter_rad_s(t, omega, until_s=0.012):
 
 def cvodes_status(scenario, duration_s=0.05):
     """Does the error-controlled CVODES get through the start of the manoeuvre?"""
-    from symtrack.errors import SimulationError
-    from symtrack.runner import run
+    from symtrack import simulate
+    from symtrack.foundations.errors import SimulationError
 
     sc = dataclasses.replace(scenario, run=dataclasses.replace(
         scenario.run, duration_s=duration_s, stop_after_distance_m=None, stop_distance_event=None))
     try:
-        run(sc, progress=False)
+        simulate(sc)
     except SimulationError as err:
         return "fails: " + ("CV_TOO_MUCH_WORK" if "TOO_MUCH_WORK" in str(err) else str(err).splitlines()[0])
     return "ok"

@@ -51747,7 +51747,7 @@ CASADI_SYMBOL_EXPORT int jac_homogeneous_ode_work_bytes(casadi_int *sz_arg, casa
   return 0;
 }
 
-/* homogeneous_linearise:(x[20],u[2],p[26])->(A[20x20,110nz],B[20x2,2nz]) */
+/* homogeneous_linearize:(x[20],u[2],p[26])->(A[20x20,110nz],B[20x2,2nz]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+2, *w1=w+5190, *w4=w+5192, *w5=w+5302;
   const casadi_real **arg1=arg+3, *wr0, *wr2;
@@ -51774,34 +51774,34 @@ static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_linearise(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+CASADI_SYMBOL_EXPORT int homogeneous_linearize(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
   return casadi_f2(arg, res, iw, w, mem);
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_linearise_checkout(void) {
+CASADI_SYMBOL_EXPORT int homogeneous_linearize_checkout(void) {
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_linearise_release(int mem) {
+CASADI_SYMBOL_EXPORT void homogeneous_linearize_release(int mem) {
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_linearise_incref(void) {
+CASADI_SYMBOL_EXPORT void homogeneous_linearize_incref(void) {
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_linearise_decref(void) {
+CASADI_SYMBOL_EXPORT void homogeneous_linearize_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_linearise_n_in(void) { return 3;}
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_linearize_n_in(void) { return 3;}
 
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_linearise_n_out(void) { return 2;}
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_linearize_n_out(void) { return 2;}
 
-CASADI_SYMBOL_EXPORT casadi_real homogeneous_linearise_default_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT casadi_real homogeneous_linearize_default_in(casadi_int i) {
   switch (i) {
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* homogeneous_linearise_name_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* homogeneous_linearize_name_in(casadi_int i) {
   switch (i) {
     case 0: return "x";
     case 1: return "u";
@@ -51810,7 +51810,7 @@ CASADI_SYMBOL_EXPORT const char* homogeneous_linearise_name_in(casadi_int i) {
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* homogeneous_linearise_name_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* homogeneous_linearize_name_out(casadi_int i) {
   switch (i) {
     case 0: return "A";
     case 1: return "B";
@@ -51818,7 +51818,7 @@ CASADI_SYMBOL_EXPORT const char* homogeneous_linearise_name_out(casadi_int i) {
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_linearise_sparsity_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_linearize_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s1;
@@ -51827,7 +51827,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_linearise_sparsity_in(casadi_
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_linearise_sparsity_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_linearize_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s4;
     case 1: return casadi_s5;
@@ -51835,7 +51835,7 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_linearise_sparsity_out(casadi
   }
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_linearise_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+CASADI_SYMBOL_EXPORT int homogeneous_linearize_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 7;
   if (sz_res) *sz_res = 5;
   if (sz_iw) *sz_iw = 0;
@@ -51843,7 +51843,7 @@ CASADI_SYMBOL_EXPORT int homogeneous_linearise_work(casadi_int *sz_arg, casadi_i
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_linearise_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+CASADI_SYMBOL_EXPORT int homogeneous_linearize_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 7*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 5*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);

@@ -53,24 +53,24 @@ int jac_homogeneous_ode_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casad
 #define jac_homogeneous_ode_SZ_RES 3
 #define jac_homogeneous_ode_SZ_IW 0
 #define jac_homogeneous_ode_SZ_W 0
-int homogeneous_linearise(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int homogeneous_linearise_checkout(void);
-void homogeneous_linearise_release(int mem);
-void homogeneous_linearise_incref(void);
-void homogeneous_linearise_decref(void);
-casadi_int homogeneous_linearise_n_in(void);
-casadi_int homogeneous_linearise_n_out(void);
-casadi_real homogeneous_linearise_default_in(casadi_int i);
-const char* homogeneous_linearise_name_in(casadi_int i);
-const char* homogeneous_linearise_name_out(casadi_int i);
-const casadi_int* homogeneous_linearise_sparsity_in(casadi_int i);
-const casadi_int* homogeneous_linearise_sparsity_out(casadi_int i);
-int homogeneous_linearise_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int homogeneous_linearise_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_linearise_SZ_ARG 7
-#define homogeneous_linearise_SZ_RES 5
-#define homogeneous_linearise_SZ_IW 0
-#define homogeneous_linearise_SZ_W 5304
+int homogeneous_linearize(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int homogeneous_linearize_checkout(void);
+void homogeneous_linearize_release(int mem);
+void homogeneous_linearize_incref(void);
+void homogeneous_linearize_decref(void);
+casadi_int homogeneous_linearize_n_in(void);
+casadi_int homogeneous_linearize_n_out(void);
+casadi_real homogeneous_linearize_default_in(casadi_int i);
+const char* homogeneous_linearize_name_in(casadi_int i);
+const char* homogeneous_linearize_name_out(casadi_int i);
+const casadi_int* homogeneous_linearize_sparsity_in(casadi_int i);
+const casadi_int* homogeneous_linearize_sparsity_out(casadi_int i);
+int homogeneous_linearize_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int homogeneous_linearize_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define homogeneous_linearize_SZ_ARG 7
+#define homogeneous_linearize_SZ_RES 5
+#define homogeneous_linearize_SZ_IW 0
+#define homogeneous_linearize_SZ_W 5304
 void homogeneous_ode_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_ode_casadi_int_size(void);
 int homogeneous_ode_casadi_real_size(void);

@@ -1,3 +1,50 @@
-"""symtrack: an agricultural tracked vehicle on soft soil that remembers every pass."""
+"""symtrack: an agricultural tracked vehicle on soft soil that remembers every pass.
+
+The public API (one import is enough in a notebook)::
+
+    import symtrack
+    sc = symtrack.load_scenario("validation", {"run.duration_s": 5.0})
+    res = symtrack.simulate(sc)
+    res.summary, res.column("x_m"), res.write("out/v")
+
+- :func:`load_scenario`, :class:`Scenario`: built-in scenarios by name or TOML files, with
+  overrides in the grammar of ``--set``;
+- :func:`simulate` -> :class:`Result` (``summary``, ``column``, ``write``, ``terrain``);
+- :class:`Terrain`: the grid terrain's cell storage (``load``, ``save``, the arrays);
+- :class:`SystemModel`: the symbolic model (named CasADi Functions);
+- :mod:`symtrack.control`: trim, linearize, the MPC and the closed loop.
+
+The names are imported on first use, so that ``symtrack --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
+
+__all__ = ["Result", "Scenario", "SystemModel", "Terrain", "__version__", "control", "load_scenario", "simulate"]
+
+_LAZY = {
+    "Result": ("symtrack.api", "Result"),
+    "simulate": ("symtrack.api", "simulate"),
+    "load_scenario": ("symtrack.simulation.scenario", "load_scenario"),
+    "Scenario": ("symtrack.simulation.scenario", "Scenario"),
+    "Terrain": ("symtrack.terrain.storage", "Terrain"),
+    "SystemModel": ("symtrack.model.system", "SystemModel"),
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        module, attr = _LAZY[name]
+        value = getattr(importlib.import_module(module), attr)
+        globals()[name] = value
+        return value
+    if name == "control":
+        return importlib.import_module("symtrack.control")
+    raise AttributeError(f"module 'symtrack' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

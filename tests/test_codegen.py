@@ -7,7 +7,7 @@ import json
 import pytest
 
 from codegen import cli as codegen_cli
-from codegen.generate import build, unit_of
+from symtrack.build.generate import build, unit_of
 from symtrack.model import SystemModel
 
 GEN = codegen_cli.REPO_GENERATED
@@ -42,7 +42,7 @@ def test_manifest_names_hash_and_units():
     assert man["casadi_version"] == gen.casadi_version
     funcs = man["functions"]
     for name in ("homogeneous_ode", "jac_homogeneous_ode", "homogeneous_dae", "jac_homogeneous_dae",
-                 "homogeneous_outputs", "homogeneous_linearise", "homogeneous_linearise_outputs",
+                 "homogeneous_outputs", "homogeneous_linearize", "homogeneous_linearize_outputs",
                  "homogeneous_accel", "homogeneous_rosenbrock_step", "homogeneous_rosenbrock_chunk256",
                  "homogeneous_rosenbrock_chunk16"):
         assert name in funcs, name
@@ -75,9 +75,9 @@ def test_unrolled_rosenbrock_step_is_the_casadi_plugin_method():
     import casadi as ca
     import numpy as np
 
-    from codegen.rosenbrock import SparseLU, plugin_step
-    from symtrack.scenario import load_scenario
-    from symtrack.simulate import static_state
+    from symtrack.build.rosenbrock import SparseLU, plugin_step
+    from symtrack.model.static import static_state
+    from symtrack.simulation.scenario import load_scenario
 
     sc = load_scenario("validation")
     model = SystemModel(sc.model)

@@ -13,13 +13,17 @@ import logging
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import run_once
 
-from codegen.generate import GROUPS
-from symtrack import compiled, runner
-from symtrack.errors import ScenarioError, SimulationError
+from symtrack.build import cache as compiled
+from symtrack.build.generate import GROUPS
+from symtrack.foundations.errors import ScenarioError, SimulationError
+from symtrack.integrators.fixed_step import FixedStepper
+from symtrack.integrators.settings import IntegratorSettings
 from symtrack.model import SystemModel
-from symtrack.scenario import load_scenario
-from symtrack.simulate import IntegratorSettings, static_state
+from symtrack.model.static import static_state
+from symtrack.simulation.result import summarise
+from symtrack.simulation.scenario import load_scenario
 
 pytestmark = pytest.mark.skipif(compiled.find_compiler() is None, reason="no C compiler")
 
@@ -34,7 +38,7 @@ def scenario():
 
 @pytest.fixture(scope="module")
 def model(scenario):
-    return runner.build_model(scenario)
+    return SystemModel(scenario.model)
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +53,7 @@ def lib(model):
 @pytest.fixture(scope="module")
 def rosenbrock_run(model):
     sc = load_scenario("validation", ["run.integrator=rosenbrock"])
-    return runner.run(sc, progress=False, model=model)
+    return run_once(sc, model)
 
 
 def _points(model, scenario, n=8, seed=1):
@@ -85,7 +89,7 @@ def test_compiled_functions_agree_with_interpreted(lib, model, scenario):
     checked = 0
     for x, z, u, p in _points(model, scenario):
         for name, args in (("ode", (x, u, p)), ("dae", (x, z, u, p)), ("outputs", (x, u, p)), ("accel", (x, u, p)),
-                           ("linearise", (x, u, p)), ("linearise_outputs", (x, u, p))):
+                           ("linearize", (x, u, p)), ("linearize_outputs", (x, u, p))):
             full = f"homogeneous_{name}"
             for a, b in zip(_call(lib.functions[full], *args), _call(interp[full], *args), strict=True):
                 assert _close(a, b), (name, np.max(np.abs(np.array(a) - np.array(b))))
@@ -108,7 +112,7 @@ def test_library_is_cached_and_reused(lib, model, monkeypatch):
     def no_compile(*a, **k):
         raise AssertionError("compiled again although the cache holds the library")
 
-    monkeypatch.setattr(compiled, "_compile", no_compile)
+    monkeypatch.setattr(compiled, "compile_sources", no_compile)
     compiled._cache.clear()
     again = compiled.library(model)
     again.f("rosenbrock_step")
@@ -123,7 +127,7 @@ def test_no_compiler_falls_back_once_or_fails_when_required(model, monkeypatch, 
     monkeypatch.setattr(compiled, "_warned_no_compiler", False)
     compiled._cache.clear()
     try:
-        with caplog.at_level(logging.WARNING, logger="symtrack.compiled"):
+        with caplog.at_level(logging.WARNING, logger="symtrack.build"):
             lib = compiled.library(model)
             y = lib.f("outputs")
             compiled._cache.clear()
@@ -143,15 +147,15 @@ def test_cvodes_and_idas_on_compiled_model_match_interpreted(model):
         res = {}
         for comp in (False, True):
             sc = load_scenario("validation", [f"run.integrator={method}", f"run.compiled={str(comp).lower()}"])
-            res[comp] = runner.summarise(runner.run(sc, progress=False, model=model))
+            res[comp] = summarise(run_once(sc, model))
         for k in FIGURES:
             assert res[True][k] == pytest.approx(res[False][k], rel=1e-7, abs=1e-12), (method, k)
 
 
 def test_rosenbrock_agrees_with_tight_cvodes_within_one_percent(model, rosenbrock_run):
     sc = load_scenario("validation", ["run.reltol=1e-10", "run.abstol=1e-12"])
-    ref = runner.summarise(runner.run(sc, progress=False, model=model))
-    got = runner.summarise(rosenbrock_run)
+    ref = summarise(run_once(sc, model))
+    got = summarise(rosenbrock_run)
     assert got["stopped_by"] == "distance" and got["nose_up"] == ref["nose_up"]
     for k in FIGURES:
         assert got[k] == pytest.approx(ref[k], rel=0.01), k
@@ -168,7 +172,7 @@ def test_rosenbrock_converges_at_fifth_order(model, scenario, rosenbrock_run):
     scale = np.maximum(np.abs(rosenbrock_run.X).max(axis=0), 1e-12)
 
     def solve(n):
-        st = compiled.FixedStepper(model, IntegratorSettings("rosenbrock", fixed_step_s=span / n))
+        st = FixedStepper(model, IntegratorSettings("rosenbrock", fixed_step_s=span / n))
         z0 = np.array(st.lib.f("accel")(x0, u, p)).ravel()
         return np.array(st.advance(x0, z0, u, p, span)[0]).ravel()
 
@@ -179,9 +183,9 @@ def test_rosenbrock_converges_at_fifth_order(model, scenario, rosenbrock_run):
 
 
 def test_stepper_interface_for_rosenbrock(model, scenario):
-    from symtrack.simulate import Stepper
+    from symtrack.integrators.sundials import SundialsStepper as Stepper
 
-    st = Stepper(model, IntegratorSettings("rosenbrock", fixed_step_s=0.005))
+    st = FixedStepper(model, IntegratorSettings("rosenbrock", fixed_step_s=0.005))
     x0 = static_state(model, scenario.params)
     p = model.param_vector(scenario.params)
     x1 = st.step(x0, [2000.0, 2000.0], p, 0.1)
@@ -194,7 +198,7 @@ def test_standalone_program_reproduces_python(rosenbrock_run):
     from codegen.standalone import build_standalone, run_standalone
 
     got = run_standalone(build_standalone(), 1)
-    ref = runner.summarise(rosenbrock_run)
+    ref = summarise(rosenbrock_run)
     for k in FIGURES + ("distance_m", "lateral_deviation_signed_m"):
         assert got[k] == pytest.approx(ref[k], rel=1e-9, abs=1e-12), k
     assert got["stopped_by"] == ref["stopped_by"] and got["nose_up"] == ref["nose_up"]
@@ -221,7 +225,7 @@ def test_cli_simulate_rosenbrock_and_codegen_check(tmp_path, capsys, monkeypatch
 
 
 def test_bench_table_and_report():
-    from symtrack import bench
+    from symtrack.bench import homogeneous as bench
 
     rows = [{"group": "g", "case": "c", "integrator": "rosenbrock", "sim_time_s": 6.87, "wall_time_s": 0.0061,
              "real_time_factor": 1126.2, "note": "n"}, {"group": "g", "case": "other"}]
@@ -241,7 +245,7 @@ def test_fresh_model_without_generated_sources(tmp_path, monkeypatch):
     lib = compiled.library(m, compiled=False)
     lib.load("rosenbrock")
     gen = lib.gens["rosenbrock"]
-    srcs = compiled._sources(gen, "homogeneous_rosenbrock")
+    srcs = compiled.generated_sources(gen, "homogeneous_rosenbrock")
     assert sorted(srcs) == ["homogeneous_rosenbrock.c", "homogeneous_rosenbrock.h"]
     assert srcs["homogeneous_rosenbrock.c"] != (compiled.REPO_GENERATED / "homogeneous_rosenbrock.c").read_bytes()
     assert not lib.compiled and lib.f("rosenbrock_step").class_name() != "External"
@@ -251,7 +255,7 @@ def test_bench_calls_the_providers_that_exist(monkeypatch):
     import sys
     import types
 
-    from symtrack import bench
+    from symtrack.bench import homogeneous as bench
 
     fake = types.ModuleType("fake_bench_provider")
     fake.bench_rows = lambda quick: [{"group": "grid", "case": f"quick={quick}"}]
@@ -263,11 +267,16 @@ def test_bench_calls_the_providers_that_exist(monkeypatch):
 
 
 def test_chunked_run_matches_the_step_by_step_loop_with_substeps(model, monkeypatch):
-    """run_fixed_step (256 steps per call, output intervals cut into 3 steps that straddle the
-    chunk boundaries) against runner.run's own loop driving simulate.Stepper step by step."""
+    """The batch plant (256 steps per call, output intervals cut into 3 steps that straddle the
+    chunk boundaries) against the step plant driving the same FixedStepper one output step per call."""
+    from symtrack.simulation import loop
+    from symtrack.simulation.plants import BatchPlant, StepPlant
+
     sc = load_scenario("validation", ["run.integrator=rosenbrock", "run.fixed_step_s=0.004"])
-    chunked = runner.summarise(runner.run(sc, progress=False, model=model))
-    monkeypatch.setattr(runner, "FIXED_STEP_INTEGRATORS", ())
-    looped = runner.summarise(runner.run(sc, progress=False, model=model))
+    settings = sc.run.integrator_settings()
+    plant = BatchPlant(model, sc.params, FixedStepper(model, settings), sc.run.output_dt_s)
+    assert plant.max_intervals == 85  # 256 steps per call, 3 steps per output interval
+    chunked = summarise(loop.run(sc, plant))
+    looped = summarise(loop.run(sc, StepPlant(model, sc.params, FixedStepper(model, settings))))
     for k in FIGURES + ("distance_m",):
         assert chunked[k] == pytest.approx(looped[k], rel=1e-7, abs=1e-12), k

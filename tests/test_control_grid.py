@@ -7,13 +7,14 @@ import json
 import numpy as np
 import pytest
 
+from symtrack.cli.control import mpc_command
 from symtrack.control import closedloop as CL
 from symtrack.control import scenario as S
-from symtrack.control.cli import mpc_command
-from symtrack.control.plants import GridPlant, field_from_path
-from symtrack.errors import ScenarioError
+from symtrack.control.closedloop import field_from_path
+from symtrack.foundations.errors import ScenarioError
 from symtrack.model.vehicle import VEHICLE_STATES
-from symtrack.terrain import persist
+from symtrack.simulation.plants import GridPlant
+from symtrack.terrain import storage as persist
 
 # a short straight run on a small field: 6 m of path at 2 m/s, 3 s simulated
 SHORT = """
@@ -104,8 +105,8 @@ def test_plant_choice_and_terrain_validation():
     assert S.load("field_pattern").plant == "grid"
     assert S.load("field_pattern", plant="homogeneous").plant == "homogeneous"
     sc = S.load("straight_offset", plant="grid")
-    assert sc.plant == "grid" and sc.terrain == S.GRID_DEFAULT_TERRAIN
-    assert S.load("straight_offset", ["terrain.cell_m=0.2"]).terrain == {"cell_m": 0.2}
+    assert sc.plant == "grid" and sc.terrain.to_dict() == S.GRID_DEFAULT_TERRAIN
+    assert S.load("straight_offset", ["terrain.cell_m=0.2"]).terrain.to_dict() == {"cell_m": 0.2}
     with pytest.raises(ScenarioError, match="terrain.cell_m"):
         S.load("straight_offset", ["terrain.cell_m=9.0"])
     with pytest.raises(ScenarioError, match="unknown key"):
@@ -122,14 +123,14 @@ def test_plant_choice_and_terrain_validation():
 def test_grid_plant_with_the_compiled_rosenbrock_matches_idas(grid_run, tmp_path):
     """run.integrator = "rosenbrock": the compiled grid integrator as the plant's; the closed loop
     and the ruts agree with the IDAS plant's."""
-    from symtrack.compiled import _compiler
+    from symtrack.build.cache import compiler as _compiler
 
     if _compiler() is None:
         pytest.skip("no C compiler: the grid rosenbrock would run interpreted (slow)")
     d, out = grid_run
     sc = S.load(str(d / "grid_short.toml"), ['run.integrator="rosenbrock"'])
     plant = CL.make_plant(sc, None)
-    assert plant.integrator == "rosenbrock"
+    assert plant.stepper.settings.method == "rosenbrock"
     res = CL.run(sc, plant=plant)
     assert res.summary["failed_solves"] == 0 and res.summary["path_completed"]
     ref = np.genfromtxt(out / "trajectory.csv", delimiter=",", names=True)
@@ -146,10 +147,10 @@ def test_terrain_in_takes_the_file_geometry(grid_run):
     plant = CL.make_plant(sc, None, str(d / "terrain.npz"))  # no [terrain]: all from the file
     g = persist.load(d / "terrain.npz").grid
     assert plant.world.grid == g and plant.world.grid.cell_m == 0.25
-    from symtrack.terrain.config import TerrainSettings
+    from symtrack.terrain.settings import TerrainSettings
     from symtrack.terrain.world import derive_modulus
 
     # derived for the file's 0.25 m cells (and the default 10 m/s bound), not the 0.1 m default cells
-    assert plant.world.M == derive_modulus(sc.params, TerrainSettings(cell_m=0.25), plant.substep_s) < 25
+    assert plant.world.M == derive_modulus(sc.params, TerrainSettings(cell_m=0.25), plant.macro_step_s) < 25
     with pytest.raises(ScenarioError, match="cell_m"):
         CL.make_plant(S.load("straight_offset", ["terrain.cell_m=0.2"]), None, str(d / "terrain.npz"))

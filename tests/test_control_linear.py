@@ -1,4 +1,4 @@
-"""Trim points and the exact linearisation (symtrack.control.trim, symtrack.control.linearize)."""
+"""Trim points and the exact linearization (symtrack.control.trim, symtrack.control.linearization)."""
 
 import json
 
@@ -7,12 +7,13 @@ import control
 import numpy as np
 import pytest
 
-from symtrack.control import linearize as L
+from symtrack.control import linearization as L
 from symtrack.control.trim import TrimError, trim
-from symtrack.errors import ParameterError
+from symtrack.foundations.errors import ParameterError
+from symtrack.integrators.settings import IntegratorSettings
+from symtrack.integrators.sundials import SundialsStepper as Stepper
 from symtrack.model import SystemModel
 from symtrack.presets import soil_preset, vehicle_preset
-from symtrack.simulate import IntegratorSettings, Stepper
 
 
 @pytest.fixture(scope="module")
@@ -205,7 +206,7 @@ def test_linearize_cli(tmp_path):
 
 
 def test_casadi_functions_only(model):
-    # the linearisation consumes the model's Functions: jac_ode is the Jacobian of ode
+    # the linearization consumes the model's Functions: jac_ode is the Jacobian of ode
     x = ca.SX.sym("x", model.nx)
     u = ca.SX.sym("u", 2)
     p = ca.SX.sym("p", len(model.param_names))

@@ -11,7 +11,7 @@ from symtrack.control import closedloop as CL
 from symtrack.control import scenario as S
 from symtrack.control.mpc import MPCSettings, PathTrackingMPC
 from symtrack.control.path import Path, Segment, field_segments
-from symtrack.errors import ParameterError, ScenarioError
+from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model import SystemModel
 
 
@@ -141,19 +141,21 @@ def test_failed_solve_reuses_shifted_plan(model):
 
 
 class _RecordingPlant:
-    """A plant without terrain-cell states (like a grid-terrain plant): the MPC must still run."""
+    """Any object with the Plant protocol (here one that delegates and counts its steps)."""
 
     def __init__(self, model, params):
-        self.inner = CL.HomogeneousPlant(model, params)
-        self.state_names = self.inner.state_names
+        self.inner = CL.homogeneous_plant(model, params)
         self.calls = 0
 
-    def step(self, x, u, dt):
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def advance(self):
         self.calls += 1
-        return self.inner.step(x, u, dt)
+        return self.inner.advance()
 
 
-def test_any_plant_with_a_step_method(model):
+def test_any_plant_with_the_plant_protocol(model):
     sc = fast_scenario()
     plant = _RecordingPlant(model, sc.params)
     res = CL.run(sc, model=model, plant=plant, max_steps=5)
@@ -177,15 +179,25 @@ class _ExtendedPlant:
     """A plant whose state has more entries than the model's (as a grid-terrain plant would)."""
 
     def __init__(self, model, params):
-        self.inner = CL.HomogeneousPlant(model, params)
+        self.inner = CL.homogeneous_plant(model, params)
         self.state_names = self.inner.state_names + ("channel_0_sinkage_m",)
+        self.extra = 0.0
 
-    def step(self, x, u, dt):
-        return np.concatenate([self.inner.step(x[:-1], u, dt), [x[-1]]])
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def start(self, x_m, y_m, yaw_rad, u0, state=None):
+        self.extra = state[-1]
+        x, y = self.inner.start(x_m, y_m, yaw_rad, u0, state[:-1])
+        return np.append(x, self.extra), y
+
+    def advance(self):
+        X = self.inner.advance()
+        return np.hstack([X, np.full((len(X), 1), self.extra)])
 
 
 def test_plant_with_another_state_layout_needs_x0(model):
-    from symtrack.errors import SimulationError
+    from symtrack.foundations.errors import SimulationError
 
     sc = fast_scenario()
     plant = _ExtendedPlant(model, sc.params)

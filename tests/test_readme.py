@@ -3,14 +3,43 @@
 import re
 from pathlib import Path
 
-from symtrack import validation
-from symtrack.runner import run, summarise
-from symtrack.scenario import load_scenario
+from conftest import run_once as run
+
+from symtrack.reports import validation
+from symtrack.simulation.result import summarise
+from symtrack.simulation.scenario import load_scenario
 
 
 def test_readme_validation_table_matches_the_code():
     text = Path("README.md").read_text()
     m = re.search(r"<!-- validation-table:start -->\n(.*?)<!-- validation-table:end -->", text, re.S)
     assert m, "README has no validation table markers"
-    summary = summarise(run(load_scenario("validation"), progress=False))
+    summary = summarise(run(load_scenario("validation")))
     assert m.group(1) == validation.table_markdown(summary)
+
+
+def test_readme_api_example_runs_and_agrees_with_the_cli(tmp_path, monkeypatch):
+    import json
+
+    from symtrack.cli import main
+
+    text = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    m = re.search(r"<!-- api-example:start -->\n```python\n(.*?)```\n<!-- api-example:end -->", text, re.S)
+    assert m, "README has no API example markers"
+    monkeypatch.chdir(tmp_path)
+    ns = {}
+    exec(compile(m.group(1), "README.md (API example)", "exec"), ns)
+    res, files = ns["res"], ns["files"]
+    assert Path("out/api_validation/summary.json") in files
+    assert main(["simulate", "validation", "--integrator", "rosenbrock", "--quiet", "--out", "cli"]) == 0
+    cli = json.loads((tmp_path / "cli" / "summary.json").read_text())
+    api = json.loads((tmp_path / "out" / "api_validation" / "summary.json").read_text())
+    assert sorted(p.name for p in (tmp_path / "cli").iterdir()) == sorted(
+        p.name for p in (tmp_path / "out" / "api_validation").iterdir())
+    for k, v in cli.items():
+        if k not in ("wall_time_s", "real_time_factor"):
+            assert api[k] == v, k
+    assert res.column("yaw_rad")[-1] == ns["yaw"][-1] and len(ns["yaw"]) == len(res.t)
+    # the second pass continued the saved terrain: it added less than the first
+    assert ns["second"].summary["passes"][0]["new_sinkage_mean_mm"] < ns["first"].summary["passes"][0][
+        "new_sinkage_mean_mm"]

@@ -2,8 +2,9 @@
 
 import pytest
 
-from symtrack.errors import ScenarioError
-from symtrack.scenario import builtin_names, load_scenario, scenario_from_dict, to_toml
+from symtrack.foundations.config import to_toml
+from symtrack.foundations.errors import ScenarioError
+from symtrack.simulation.scenario import builtin_names, load_scenario, scenario_from_dict
 
 GOOD = """
 [run]

@@ -3,18 +3,21 @@
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import run_once as run
 
-from symtrack import validation
-from symtrack.runner import run, summarise
-from symtrack.scenario import load_scenario
-from symtrack.simulate import IntegratorSettings, Stepper, static_state
+from symtrack.integrators.settings import IntegratorSettings
+from symtrack.integrators.sundials import SundialsStepper as Stepper
+from symtrack.model.static import static_state
+from symtrack.reports import validation
+from symtrack.simulation.result import summarise
+from symtrack.simulation.scenario import load_scenario
 
 
 @pytest.fixture(scope="module")
 def summaries():
     out = {}
     for integ in ("cvodes", "idas"):
-        res = run(load_scenario("validation", [f"run.integrator={integ}"]), progress=False)
+        res = run(load_scenario("validation", [f"run.integrator={integ}"]))
         out[integ] = summarise(res)
     return out
 

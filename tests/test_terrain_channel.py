@@ -112,8 +112,8 @@ def test_the_dae_jacobian_is_an_arrowhead():
 
 
 def test_the_block_built_jacobian_equals_casadi_automatic_jacobian():
+    from symtrack.integrators.grid_idas import NV, channel_dae
     from symtrack.terrain.channels import NF, NG
-    from symtrack.terrain.stepper import NV, channel_dae
 
     n = 30
     m = _small_system(n)

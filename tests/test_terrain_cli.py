@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from symtrack.cli import main
-from symtrack.terrain import persist
+from symtrack.terrain import storage as persist
 
 SCENARIO = """
 name = "tiny_terrain"
@@ -64,8 +64,8 @@ def test_a_terrain_file_of_another_soil_is_refused(tmp_path, capsys):
     f.write_text(SCENARIO)
     t1 = tmp_path / "t1.npz"
     from symtrack.presets import soil_preset
-    from symtrack.terrain.world import CellStorage, Grid
-    persist.save(t1, CellStorage(Grid((-4.0, -2.0), 0.25, (32, 16))), soil_preset("dry_sand"))
+    from symtrack.terrain.storage import Grid, Terrain
+    persist.save(t1, Terrain(Grid((-4.0, -2.0), 0.25, (32, 16))), soil_preset("dry_sand"))
     assert main(["simulate", str(f), "--out", str(tmp_path / "a"), "--quiet", "--terrain-in", str(t1)]) == 2
     assert "soil" in capsys.readouterr().err
 

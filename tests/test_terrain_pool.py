@@ -6,11 +6,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from symtrack import runner
-from symtrack.scenario import scenario_from_dict
-from symtrack.terrain import persist
-from symtrack.terrain.bench import brute_force_run, pool_run
-from symtrack.terrain.study import make_world, run_passes
+import symtrack
+from symtrack.bench.terrain import brute_force_run, pool_run
+from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.terrain.settings import settings_from_dict
+from symtrack.terrain.storage import Terrain
 
 # A 12 m x 4 m field at 0.25 m (768 cells); both sprockets at 2000 N m for 0.5 s, then the left
 # one idle: the vehicle starts from rest, accelerates and begins to turn.
@@ -62,16 +62,16 @@ def test_two_passes_equal_one_pass_save_load_and_a_second_pass(tmp_path):
                          "stop_after_distance_m": 0.3},
              terrain=dict(SMALL["terrain"], passes=2))
     sc2 = scenario_from_dict(d)
-    w2, res2, figs2, _ = run_passes(sc2)
-    sc1 = dataclasses.replace(sc2, extra={"terrain": dict(d["terrain"], passes=1)})
-    w1, _, _, _ = run_passes(sc1)
+    two = symtrack.simulate(sc2)
+    res2, figs2 = two.runs, two.summary["passes"]
+    sc1 = dataclasses.replace(sc2, terrain=settings_from_dict(dict(d["terrain"], passes=1)))
+    one = symtrack.simulate(sc1)
     f = tmp_path / "after_pass_1.npz"
-    persist.save(f, w1.storage, sc1.soil)
-    w1b = make_world(sc1, terrain_in=str(f))
-    res1b = runner.run(sc1, progress=False, world=w1b)
-    for a, b in zip(w2.storage.arrays().values(), w1b.storage.arrays().values(), strict=True):
+    one.terrain.save(f)
+    again = symtrack.simulate(sc1, terrain=Terrain.load(f))
+    for a, b in zip(two.terrain.arrays().values(), again.terrain.arrays().values(), strict=True):
         assert np.array_equal(a, b)  # to the last bit
-    assert np.array_equal(res2[-1].X, res1b.X) and np.array_equal(res2[-1].Y, res1b.Y)
+    assert np.array_equal(res2[-1].X, again.runs[0].X) and np.array_equal(res2[-1].Y, again.runs[0].Y)
     # the second pass over the compacted soil adds less sinkage and meets less resistance
     assert figs2[1]["new_sinkage_mean_mm"] < figs2[0]["new_sinkage_mean_mm"]
     assert figs2[1]["compaction_resistance_mean_N"] < figs2[0]["compaction_resistance_mean_N"]

@@ -6,12 +6,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from symtrack.errors import ScenarioError, SimulationError
+from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.model.options import ModelOptions
 from symtrack.presets import soil_preset, vehicle_preset
-from symtrack.terrain import persist
-from symtrack.terrain.config import TerrainSettings, settings_from_dict, validate_section
-from symtrack.terrain.world import NV, CellStorage, Grid, World, derive_modulus
+from symtrack.terrain import storage as persist
+from symtrack.terrain.settings import TerrainSettings, settings_from_dict
+from symtrack.terrain.storage import Grid, Terrain
+from symtrack.terrain.world import NV, World, derive_modulus
 
 PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
 FIELD = TerrainSettings(size_m=(6.0, 4.0), cell_m=0.25, release_rate_m_s=1e-5)
@@ -123,7 +124,7 @@ def test_leaving_the_field_is_an_error(world):
 
 def test_terrain_settings_validation():
     assert settings_from_dict({}).shape == (1000, 1000)
-    assert validate_section({"cell_m": 0.2}) == {"cell_m": 0.2}
+    assert settings_from_dict({"cell_m": 0.2}).to_dict() == {"cell_m": 0.2}
     for bad, msg in [({"cell_m": 0.0}, "cell_m"), ({"channels": 1}, "channels"), ({"size_m": [1.0]}, "size_m"),
                      ({"passes": 0}, "passes"), ({"cells": 3}, "unknown key"),
                      ({"size_m": [1e4, 1e4], "cell_m": 0.01}, "at most")]:
@@ -133,7 +134,7 @@ def test_terrain_settings_validation():
 
 def _random_storage(seed=1):
     g = Grid((-3.0, -2.0), 0.25, (24, 16))
-    s = CellStorage(g)
+    s = Terrain(g)
     rng = np.random.default_rng(seed)
     s.z[:] = rng.standard_normal(g.n_cells) * 1e-3
     s.zdot[:] = rng.standard_normal(g.n_cells) * 1e-6

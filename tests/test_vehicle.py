@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from symtrack.model import ModelOptions, SystemModel
+from symtrack.model.static import static_state
 from symtrack.model.vehicle import GRAVITY_M_S2
-from symtrack.simulate import static_state
 
 
 def _state(model, **values):

@@ -5,7 +5,7 @@
 - ``nmpc_ipopt_plain``: the nonlinear MPC with IPOPT, interpreted (CasADi VM, ``expand``), no
   compilation: the reference point;
 - ``nmpc_fast``: the fast configuration (:data:`FAST_CONFIG`);
-- ``linear_mpc``: a linear MPC on the exact linearisation at straight running (path frame:
+- ``linear_mpc``: a linear MPC on the exact linearization at straight running (path frame:
   lateral offset and heading error kept), discretised with zero-order hold, solved as a sparse
   QP with OSQP through ``casadi.conic``;
 
@@ -31,7 +31,7 @@ from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from . import closedloop
 from . import scenario as scenario_mod
-from .linearize import linearize
+from .linearization import linearize
 from .mpc import TORQUE_SCALE_N_M, MPCStats, SolveInfo
 from .trim import trim
 
@@ -43,7 +43,7 @@ FAST_CONFIG = {"solver": "fatrop", "jit": True, "lateral_huber_m": 0.2}
 
 
 class LinearMPC:
-    """Linear MPC on the linearisation at straight running at the path's speed (path frame).
+    """Linear MPC on the linearization at straight running at the path's speed (path frame).
 
     Same interface as PathTrackingMPC for :func:`closedloop.run`: deviation states are the kept
     states of :func:`linearize` with ``path_frame=True``, except that y_m and yaw_rad are replaced
@@ -188,7 +188,7 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
             sc = base
             t0 = time.perf_counter()
             ctrl = LinearMPC(model, sc.params, sc.mpc, sc.build_path().at(0.0)["speed_m_s"])
-            desc = f"linear MPC (OSQP) on the linearisation at straight running, N = {sc.mpc.horizon_steps}"
+            desc = f"linear MPC (OSQP) on the linearization at straight running, N = {sc.mpc.horizon_steps}"
         else:
             cfg = {} if name == "nmpc_ipopt_plain" else fast
             sc = dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, **cfg))
@@ -223,8 +223,9 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
     ("vehicle") and with the cells integrated ("full"): from straight running at speed, the
     torque plan that ramps to the steady turn of radius_m is integrated by both variants (same
     Radau collocation, solved as a root-finding problem) and by the plant (CVODES)."""
+    from ..integrators.settings import IntegratorSettings
+    from ..integrators.sundials import SundialsStepper
     from ..presets import soil_preset, vehicle_preset
-    from ..simulate import IntegratorSettings, Stepper
     from .mpc import MPCSettings, PathTrackingMPC
 
     params = {**vehicle_preset("reference_crawler"), **soil_preset(soil)}
@@ -254,7 +255,7 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
             xs = xn
             X.append(xs[:nxp] * mpc.sx[:nxp])
         traj[pred] = np.array(X)[:, :len(VEHICLE_STATES)]
-    stepper = Stepper(model, IntegratorSettings("cvodes"))
+    stepper = SundialsStepper(model, IntegratorSettings("cvodes"))
     x = st.x.copy()
     P = [x[:len(VEHICLE_STATES)]]
     for k in range(N):

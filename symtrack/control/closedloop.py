@@ -1,27 +1,31 @@
 """Closed-loop path tracking: the MPC against a plant.
 
-The plant is any object with
+The plant is any plant of :mod:`symtrack.simulation.plants` (the protocol
+:class:`~symtrack.simulation.plants.Plant`), the same ones the simulation's time loop drives:
+its ``state_names`` must contain the 12 vehicle states of
+:data:`symtrack.model.vehicle.VEHICLE_STATES`. Each sample the loop advances it by the sample
+time with the commands held (:func:`~symtrack.simulation.plants.advance_plant`, in sub-steps of
+the plant's ``macro_step_s`` when it has one: the grid's world-manager step).
 
-- ``state_names``: names of its state vector (it must contain the 12 vehicle states of
-  :data:`symtrack.model.vehicle.VEHICLE_STATES`);
-- ``step(x, u, dt) -> x``: advance the state over dt [s] with the commanded torques u held.
-
-The default plant, :class:`~symtrack.control.plants.HomogeneousPlant`, is the full simulator
+The default plant, :class:`~symtrack.simulation.plants.StepPlant`, is the full simulator
 (CVODES/IDAS on the SystemModel with its terrain cells), not the MPC's prediction model: the
 mismatch (cells frozen in the prediction, collocation error, the plant's tight tolerances) is
-real. With a ``[terrain]`` section the plant is :class:`~symtrack.control.plants.GridPlant`, the
-vehicle on the persistent grid terrain. A plant whose state carries the homogeneous terrain's
-cell states by name gives them to the prediction; another plant (the grid terrain) leaves the
-prediction's cells at the static equilibrium on the scenario's soil.
+real. With a ``[terrain]`` section the plant is a
+:class:`~symtrack.simulation.plants.GridPlant`, the vehicle on the persistent grid terrain
+(:func:`make_grid_plant`). A plant whose state carries the homogeneous terrain's cell states by
+name gives them to the prediction; another plant (the grid terrain) leaves the prediction's
+cells at those of steady straight running.
 
-Optional plant hooks: ``start(x_vehicle) -> x`` (the loop's initial plant state from the
-vehicle's trim state), ``finish(x)`` (after the loop, e.g. lift the vehicle off the grid),
-``figures() -> dict`` (merged into the summary) and ``wall_time_s`` (the plant's share of the
-loop's wall time, reported as ``plant_wall_time_s``).
+The loop starts the plant at the trim state of steady straight running at the start speed
+(``plant.start(pose, u, state)``; the grid first sets the vehicle down on its cells) and
+finishes it after the loop (the grid lifts the vehicle off); the plant's ``figures()`` are
+merged into the summary, and the plant's share of the loop's wall time is reported as
+``plant_wall_time_s``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import logging
@@ -31,19 +35,39 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..foundations.errors import ScenarioError, SimulationError
+from ..foundations.files import atomic_write_bytes, atomic_write_text
+from ..foundations.progress import Progress
+from ..integrators import registry
+from ..integrators.grid_rosenbrock import MAX_STEP_S
+from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
+from ..model.options import ModelOptions
 from ..model.vehicle import VEHICLE_STATES
-from ..output import atomic_write_bytes, atomic_write_text
-from ..progress import Progress
+from ..reports.plots import plt, png_bytes
+from ..reports.terrain_plots import sinkage_map_png
+from ..simulation.plants import GridPlant, StepPlant, advance_plant
+from ..terrain.settings import TerrainSettings
+from ..terrain.world import open_world
 from .mpc import PathTrackingMPC
-from .plants import HomogeneousPlant, make_grid_plant
 from .scenario import MPCScenario
 from .trim import trim
 
 log = logging.getLogger("symtrack.control.closedloop")
 
 SUMMARY_SCHEMA_VERSION = 1
-__all__ = ["HomogeneousPlant", "ClosedLoopResult", "initial_state", "make_plant", "run", "summarise", "write"]
+__all__ = ["ClosedLoopResult", "field_from_path", "homogeneous_plant", "initial_state", "make_grid_plant",
+           "make_plant", "run", "summarise", "write"]
+
+# IDAS tolerances of the grid plant: those of `symtrack simulate validation_grid` (docs/terrain.md:
+# every validation figure equal to 3 digits against 1e-7 / 1e-9, in half the time)
+GRID_RELTOL = 1e-5
+GRID_ABSTOL = 1e-8
+# plant sub-step: the world manager's macro step (footprint prediction, release); the MPC's sample
+# is split into sub-steps no longer than this
+GRID_SUBSTEP_S = 0.02
+# margin around the reference path when the field is sized from it
+FIELD_MARGIN_M = 4.0
 
 
 @dataclass
@@ -76,15 +100,57 @@ def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
     return x, tp.u.copy()
 
 
-def make_plant(sc: MPCScenario, model: SystemModel, terrain_in: str | None = None):
-    """The scenario's plant: the grid terrain with a [terrain] section, else the homogeneous one."""
-    if sc.terrain is not None or terrain_in:
-        if sc.terrain is None:
-            import dataclasses
+def homogeneous_plant(model: SystemModel, params: dict, integrator: str = "cvodes") -> StepPlant:
+    """The full simulator on homogeneous soil (CVODES or IDAS at their default tolerances)."""
+    settings = IntegratorSettings(integrator)
+    return StepPlant(model, params, registry.get(integrator).stepper("homogeneous", model, settings))
 
-            sc = dataclasses.replace(sc, terrain={})
-        return make_grid_plant(sc, terrain_in)
-    return HomogeneousPlant(model, sc.params, sc.run.integrator)
+
+def field_from_path(path, margin_m: float = FIELD_MARGIN_M) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(origin_m, size_m) of a field covering the reference path (without its straight extension
+    past the end) with a margin on every side."""
+    on = path.segment >= 0
+    x, y = path.x[on], path.y[on]
+    x0, x1 = float(x.min()) - margin_m, float(x.max()) + margin_m
+    y0, y1 = float(y.min()) - margin_m, float(y.max()) + margin_m
+    return (x0, y0), (x1 - x0, y1 - y0)
+
+
+def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float = GRID_SUBSTEP_S) -> GridPlant:
+    """The grid plant of an MPC scenario: the world of its [terrain] section (without size_m and
+    origin_m the field covers the path plus FIELD_MARGIN_M; ``terrain``: a Terrain or terrain
+    file to continue from, whose geometry it takes) with IDAS, or with the compiled Rosenbrock
+    integrator when ``run.integrator = "rosenbrock"`` (``cvodes``, the homogeneous plant's
+    default, means IDAS here: the grid needs the DAE form). The MPC's sample is split into
+    macro steps of at most ``substep_s``."""
+    if not 0.0 < substep_s <= 1.0:
+        raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
+    s = sc.terrain if sc.terrain is not None else TerrainSettings()
+    if s.passes != 1:
+        raise ScenarioError(f"terrain.passes = {s.passes}: an MPC run drives its path once (use --terrain-in "
+                            "to continue from a saved terrain)")
+    if terrain is None and not s.initial_state and "size_m" not in s.given and "origin_m" not in s.given:
+        origin, size = field_from_path(sc.build_path())
+        s = dataclasses.replace(s, origin_m=origin, size_m=size)
+    world = open_world(s, sc.params, ModelOptions(), substep_s, start_xy=(sc.start.x_m, sc.start.y_m),
+                       terrain=terrain, where="[terrain]")
+    log.info("grid plant: %d x %d cells of %g m, M = %d (%d channels)", *world.grid.shape, world.grid.cell_m,
+             world.M, world.n_channels)
+    if sc.run.integrator == "rosenbrock":
+        settings = IntegratorSettings("rosenbrock", fixed_step_s=MAX_STEP_S)
+    else:
+        settings = IntegratorSettings("idas", GRID_RELTOL, GRID_ABSTOL)
+    plant = GridPlant(world, registry.get(settings.method).stepper("grid", world.model, settings, world.n_channels))
+    plant.macro_step_s = substep_s
+    return plant
+
+
+def make_plant(sc: MPCScenario, model: SystemModel, terrain=None):
+    """The scenario's plant: the grid terrain with a [terrain] section (or a ``terrain`` to
+    continue from), else the homogeneous one."""
+    if sc.terrain is not None or terrain is not None:
+        return make_grid_plant(sc, terrain)
+    return homogeneous_plant(model, sc.params, sc.run.integrator)
 
 
 def cidx_missing(plant, mpc) -> bool:
@@ -94,38 +160,42 @@ def cidx_missing(plant, mpc) -> bool:
 
 def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: PathTrackingMPC | None = None,
         x0=None, progress: bool = False, max_steps: int | None = None, finish: bool = True) -> ClosedLoopResult:
-    """The closed loop until the path's end, ``run.duration_s`` or ``max_steps``. A plant with
-    ``start`` gets the vehicle's trim state there (unless x0 is given); with ``finish`` (default)
-    the plant's ``finish`` hook runs after the loop."""
+    """The closed loop until the path's end, ``run.duration_s`` or ``max_steps``. The plant is
+    started at the vehicle's trim state of straight running (or at ``x0``, values of the plant's
+    ``state_names``); with ``finish`` (default) the plant is finished after the loop (the grid
+    lifts the vehicle off)."""
     model = model or SystemModel()
     mpc = mpc or PathTrackingMPC(model, sc.params, sc.mpc)
     plant = plant or make_plant(sc, model)
     path = sc.build_path()
     dt, N = sc.mpc.sample_time_s, sc.mpc.horizon_steps
-    if x0 is None and hasattr(plant, "start"):
-        xt, _ = initial_state(model, sc)
-        x0 = plant.start(xt[:len(VEHICLE_STATES)])
+    xt, ut = initial_state(model, sc)
     if x0 is None:
-        if tuple(plant.state_names) != tuple(model.state_names):
-            from ..errors import SimulationError
-
+        if tuple(plant.state_names) == tuple(model.state_names):
+            x0 = xt
+        elif tuple(plant.state_names) == tuple(VEHICLE_STATES):
+            x0 = xt[:len(VEHICLE_STATES)]
+        else:
             raise SimulationError("the plant's state differs from the model's: give x0 (the plant's initial "
                                   "state, e.g. the vehicle states of initial_state() placed into it)")
-        x, u_prev = initial_state(model, sc)
+    x0 = np.asarray(x0, float)
+    names0 = plant.state_names
+    if x0 is xt:
+        u_prev = ut.copy()
     else:
-        x = np.asarray(x0, float)
         # the command that holds the actual torques where they are
-        u_prev = np.array([x[plant.state_names.index(f"torque_{k}_N_m")] for k in ("left", "right")])
+        u_prev = np.array([x0[names0.index(f"torque_{k}_N_m")] for k in ("left", "right")])
+    ix0, iy0, ipsi0 = (names0.index(n) for n in ("x_m", "y_m", "yaw_rad"))
+    x, _ = plant.start(x0[ix0], x0[iy0], x0[ipsi0], u_prev, state=x0)
+    plant_wall = 0.0
     pidx = [plant.state_names.index(n) for n in mpc.pred_names if n in plant.state_names]
     if len(pidx) != len(mpc.pred_names):
         missing = [n for n in mpc.pred_names if n not in plant.state_names]
         if mpc.cell_names or any(n in VEHICLE_STATES for n in missing):
-            from ..errors import SimulationError
-
             raise SimulationError(f"the plant's state has no {', '.join(missing)}: the MPC cannot read it")
     # a plant without the homogeneous cells (the grid): the prediction freezes its cells at those
     # of steady straight running at the start speed (trim), as the homogeneous plant starts
-    cell_default = initial_state(model, sc)[0][len(VEHICLE_STATES):] if cidx_missing(plant, mpc) else None
+    cell_default = xt[len(VEHICLE_STATES):] if cidx_missing(plant, mpc) else None
     cidx = [plant.state_names.index(n) for n in mpc.cell_names] if all(
         n in plant.state_names for n in mpc.cell_names) else None
     ts, xs, us, refs, ss, elat, epsi, strt, sms, sok, sit = ([] for _ in range(11))
@@ -161,16 +231,17 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
         sok.append(info.success)
         sit.append(info.iterations)
         us.append(u.copy())
-        x = plant.step(x, u, dt)
+        tp0 = time.perf_counter()
+        x, _ = advance_plant(plant, u, dt, getattr(plant, "macro_step_s", None))
+        plant_wall += time.perf_counter() - tp0
         u_prev = u
         t += dt
         k += 1
         bar.update(s_hint, f"t={t:.1f} s e_lat={100 * e_l:+.1f} cm")
     bar.close()
     wall = time.perf_counter() - wall0
-    plant_wall = float(getattr(plant, "wall_time_s", float("nan")))
-    if finish and hasattr(plant, "finish"):
-        plant.finish(x)
+    if finish:
+        plant.finish()
     res = ClosedLoopResult(sc, np.array(ts), np.array(xs), np.array(us), np.array(refs), np.array(ss),
                            np.array(elat), np.array(epsi), np.array(strt, bool), np.array(sms),
                            np.array(sok, bool), np.array(sit), tuple(plant.state_names), {}, path, plant)
@@ -182,8 +253,7 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     res.summary["solver_wall_time_s"] = float(np.sum(res.solve_ms) / 1e3)
     res.summary["plant_wall_time_per_sim_s"] = plant_wall / res.summary["sim_time_s"] if res.summary[
         "sim_time_s"] > 0 else None
-    if hasattr(plant, "figures"):
-        res.summary.update(plant.figures())
+    res.summary.update(plant.figures())
     if getattr(plant, "kind", None) == "grid":
         res.summary.update(rut_figures(plant))
     return res
@@ -255,8 +325,6 @@ def path_csv(res: ClosedLoopResult) -> str:
 
 
 def plots(res: ClosedLoopResult) -> dict[str, bytes]:
-    from ..plots import _png, plt
-
     out = {}
     p = res.path
     ix, iy = res.state_names.index("x_m"), res.state_names.index("y_m")
@@ -269,7 +337,7 @@ def plots(res: ClosedLoopResult) -> dict[str, bytes]:
     ax.set_ylabel("y [m]")
     ax.legend()
     ax.set_title(f"{res.scenario.name}: path")
-    out["path.png"] = _png(fig)
+    out["path.png"] = png_bytes(fig)
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     a1.plot(res.s, 100 * res.e_lat)
@@ -284,7 +352,7 @@ def plots(res: ClosedLoopResult) -> dict[str, bytes]:
         a.fill_between(res.s, lo, hi, where=~res.straight, color="0.9", step="mid", label="turn")
         a.set_ylim(lo, hi)
     a1.set_title("tracking errors (grey: turns)")
-    out["errors.png"] = _png(fig)
+    out["errors.png"] = png_bytes(fig)
 
     fig, ax = plt.subplots(figsize=(9, 4))
     for k, name in enumerate(("left", "right")):
@@ -294,7 +362,7 @@ def plots(res: ClosedLoopResult) -> dict[str, bytes]:
     ax.set_ylabel("torque [N m]")
     ax.grid(True)
     ax.legend()
-    out["torques.png"] = _png(fig)
+    out["torques.png"] = png_bytes(fig)
 
     fig, ax = plt.subplots(figsize=(9, 4))
     ax.plot(res.t[:len(res.solve_ms)], res.solve_ms, ".", ms=3)
@@ -304,7 +372,7 @@ def plots(res: ClosedLoopResult) -> dict[str, bytes]:
     ax.set_ylabel("solve time [ms]")
     ax.set_title(f"solver {res.scenario.mpc.solver}{' (jit)' if res.scenario.mpc.jit else ''}")
     ax.grid(True)
-    out["solve_times.png"] = _png(fig)
+    out["solve_times.png"] = png_bytes(fig)
     return out
 
 
@@ -327,8 +395,6 @@ def terrain_plots(res: ClosedLoopResult) -> dict[str, bytes]:
     plant = res.plant
     if getattr(plant, "kind", None) != "grid":
         return {}
-    from ..terrain.plots import sinkage_map_png
-
     return {"sinkage_map.png": sinkage_map_png(plant.world, plant.world.storage.copy_z(), 1)}
 
 

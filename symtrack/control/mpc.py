@@ -63,10 +63,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..errors import ParameterError
+from ..foundations.errors import ParameterError
 from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
-from .linearize import scale_by_name
+from .linearization import scale_by_name
 
 log = logging.getLogger("symtrack.control.mpc")
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ScenarioError
+from ..foundations.errors import ScenarioError
 
 
 @dataclass(frozen=True)

@@ -50,16 +50,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass
-from importlib import resources
-from pathlib import Path
 
-from ..errors import ParameterError, ScenarioError
-from ..parameters import SOIL_PARAMS, VEHICLE_PARAMS
+from ..foundations.config import builtin_names as _package_names
+from ..foundations.config import check_keys, integer, number, read_document
+from ..foundations.errors import ParameterError, ScenarioError
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets import soil_preset, vehicle_preset
-from ..scenario import check_keys, number, parse_params
-from ..simulate import INTEGRATORS
+from ..simulation.scenario import RunSettings, parse_params, parse_run, parse_terrain
+from ..terrain.settings import TerrainSettings
 from .mpc import MPCSettings
 from .path import Path as RefPath
 from .path import Segment, field_segments
@@ -80,11 +79,9 @@ class StartSettings:
     speed_m_s: float = 2.0
 
 
-@dataclass(frozen=True)
-class RunSettings:
-    integrator: str = "cvodes"
-    duration_s: float = 120.0
-    rms_exclude_first_m: float = 0.0
+# the [run] keys of an MPC scenario (symtrack.simulation.scenario.RunSettings) and their defaults
+MPC_RUN_KEYS = ("integrator", "duration_s", "rms_exclude_first_m")
+MPC_RUN_DEFAULTS = RunSettings(duration_s=120.0)
 
 
 @dataclass(frozen=True)
@@ -98,7 +95,7 @@ class MPCScenario:
     path_spec: dict
     run: RunSettings
     mpc: MPCSettings
-    terrain: dict | None = None  # the validated [terrain] section (None: homogeneous plant)
+    terrain: TerrainSettings | None = None  # the [terrain] section (None: homogeneous plant)
 
     @property
     def plant(self) -> str:
@@ -122,21 +119,15 @@ class MPCScenario:
         return {"name": self.name, "description": self.description,
                 "vehicle": {"preset": self.vehicle_preset}, "soil": {"preset": self.soil_preset},
                 "parameters": dict(self.params),
-                "start": dataclasses.asdict(self.start), "path": path, "run": dataclasses.asdict(self.run),
+                "start": dataclasses.asdict(self.start), "path": path,
+                "run": {k: getattr(self.run, k) for k in MPC_RUN_KEYS},
                 "mpc": {k: v for k, v in dataclasses.asdict(self.mpc).items() if v is not None},
-                **({} if self.terrain is None else {"terrain": dict(self.terrain)})}
+                **({} if self.terrain is None else {"terrain": self.terrain.to_dict()})}
 
 
-def _int(where, value, low, high):
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise ScenarioError(f"{where} = {value!r} must be an integer in [{low}, {high}]")
-    return value
-
-
+_int = integer
 _num = number
 _keys = check_keys
-
-
 _params = parse_params
 
 
@@ -219,61 +210,26 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
                           _num("start.y_m", st.get("y_m", 0.0), -1e6, 1e6),
                           _num("start.yaw_deg", st.get("yaw_deg", 0.0), -360, 360),
                           _num("start.speed_m_s", st.get("speed_m_s", 2.0), 0.1, 10))
-    rn = d.get("run", {})
-    _keys("run", rn, [f.name for f in dataclasses.fields(RunSettings)])
-    integ = rn.get("integrator", "cvodes")
-    if integ not in INTEGRATORS:
-        raise ScenarioError(f"run.integrator = {integ!r} is not one of {', '.join(INTEGRATORS)}")
-    run = RunSettings(integ, _num("run.duration_s", rn.get("duration_s", 120.0), 0, 1e5, True),
-                      _num("run.rms_exclude_first_m", rn.get("rms_exclude_first_m", 0.0), 0, 1e6))
-    terrain = None
-    if d.get("terrain") is not None:
-        from ..terrain.config import validate_section
-
-        terrain = validate_section(d["terrain"])
+    run = parse_run(d.get("run", {}), MPC_RUN_KEYS, MPC_RUN_DEFAULTS)
+    terrain = parse_terrain(d.get("terrain"))
     return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
                        _mpc(d.get("mpc", {})), terrain)
 
 
 def builtin_names() -> list[str]:
-    return sorted(p.name[:-5] for p in resources.files(SCENARIO_PACKAGE).iterdir() if p.name.endswith(".toml"))
+    """The names of the built-in MPC scenarios."""
+    return _package_names(SCENARIO_PACKAGE)
 
 
-def load(name_or_path: str, overrides=(), plant: str | None = None) -> MPCScenario:
-    """A built-in scenario by name or a TOML file; overrides are 'section.key=value' strings
-    (``--set terrain.cell_m=0.25`` adds a [terrain] section, so the plant becomes the grid).
+def load(name_or_path: str, overrides=None, plant: str | None = None) -> MPCScenario:
+    """A built-in scenario by name or a TOML file; overrides as for
+    :func:`symtrack.simulation.scenario.load_scenario` (``--set terrain.cell_m=0.25`` adds a
+    [terrain] section, so the plant becomes the grid).
     ``plant``: None keeps the scenario's choice; "homogeneous" drops its [terrain] section;
     "grid" adds :data:`GRID_DEFAULT_TERRAIN` as [terrain] if it has none."""
     if plant not in (None, "homogeneous", "grid"):
         raise ScenarioError(f"plant = {plant!r} is not one of homogeneous, grid")
-    path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
-        if not path.is_file():
-            raise ScenarioError(f"MPC scenario file {str(path)!r} does not exist")
-        text, default = path.read_text(), path.stem
-    elif name_or_path in builtin_names():
-        text = resources.files(SCENARIO_PACKAGE).joinpath(name_or_path + ".toml").read_text()
-        default = name_or_path
-    else:
-        raise ScenarioError(f"MPC scenario {name_or_path!r} is neither a file nor built-in; "
-                            f"built-in: {', '.join(builtin_names())}")
-    try:
-        d = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise ScenarioError(f"{name_or_path}: not valid TOML: {err}") from err
-    for item in overrides:
-        if "=" not in item or "." not in item.split("=", 1)[0]:
-            raise ScenarioError(f"--set {item!r}: expected section.key=value, e.g. mpc.solver=fatrop")
-        key, raw = item.split("=", 1)
-        section, k = key.strip().split(".", 1)
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw.strip()
-        d.setdefault(section, {})
-        if not isinstance(d[section], dict):
-            raise ScenarioError(f"--set {item!r}: [{section}] is not a table")
-        d[section][k.strip()] = value
+    d, default = read_document(name_or_path, SCENARIO_PACKAGE, "MPC scenario", overrides)
     if plant == "homogeneous":
         d.pop("terrain", None)
     elif plant == "grid":

@@ -29,10 +29,10 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from ..errors import ParameterError, SymtrackError
+from ..foundations.errors import ParameterError, SymtrackError
 from ..model import SystemModel
+from ..model.static import static_state
 from ..model.vehicle import GRAVITY_M_S2, traction_shape
-from ..simulate import static_state
 
 POSITION_STATES = ("x_m", "y_m", "yaw_rad")
 SPECIFIED_STATES = ("u_m_s", "yaw_rate_rad_s")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..errors import ParameterError
+from ..foundations.errors import ParameterError
 
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
 

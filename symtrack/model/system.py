@@ -1,7 +1,7 @@
 """The coupled system (vehicle + terrain) frozen into named CasADi Functions.
 
 Like do-mpc's ``setup()``: once built, a :class:`SystemModel` exposes Functions with one
-signature, which the integrators, the linearisation and the MPC all reuse:
+signature, which the integrators, the linearization and the MPC all reuse:
 
 - ``dae(x, z, u, p) -> (ode, alg)``: the semi-explicit DAE; z are the body accelerations, alg
   closes the load-transfer loop exactly (for IDAS);
@@ -28,9 +28,9 @@ import functools
 
 import casadi as ca
 
-from ..parameters import SOIL_PARAM_NAMES, VEHICLE_PARAM_NAMES
 from .homogeneous import HomogeneousTerrain
 from .options import ModelOptions
+from .parameters import SOIL_PARAM_NAMES, VEHICLE_PARAM_NAMES
 from .vehicle import ALGEBRAIC, INPUTS, TRACKS, VEHICLE_STATES, vehicle_equations
 
 PARAM_NAMES = VEHICLE_PARAM_NAMES + SOIL_PARAM_NAMES

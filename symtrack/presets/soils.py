@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import math
 
-from ..errors import ParameterError
-from ..parameters import SOIL_PARAMS, check_set
+from ..foundations.errors import ParameterError
+from ..model.parameters import SOIL_PARAMS, check_set
 
 # Areal damping c'' of a cell: Project Chrono SCM's default damping (3e4 Pa s/m).
 CELL_DAMPING_PA_S_PER_M = 3.0e4

@@ -9,8 +9,8 @@ Vehicles* (tracked vehicles: R_in = W (0.0222 + 0.0003 V[km/h])).
 
 from __future__ import annotations
 
-from ..errors import ParameterError
-from ..parameters import VEHICLE_PARAMS, check_set
+from ..foundations.errors import ParameterError
+from ..model.parameters import VEHICLE_PARAMS, check_set
 
 VEHICLES: dict[str, dict[str, float]] = {
     "reference_crawler": {

@@ -1,15 +1,16 @@
 """The persistent grid terrain: Bekker cells simulated through a fixed pool of channels.
 
-MODEL.md sections 2 and 3; user documentation in docs/terrain.md.
+MODEL.md sections 2 and 3; user documentation in docs/terrain.md. This layer knows no
+integrator: the world manager is driven by a plant of :mod:`symtrack.simulation.plants`.
 
+- :mod:`.settings`: the ``[terrain]`` scenario section (:class:`TerrainSettings`);
+- :mod:`.storage`: :class:`Grid`, :class:`Terrain` (the cell storage Cell[N, N]) and terrain files;
 - :mod:`.channels`: :class:`ChannelTerrain`, the symbolic part (a fixed number of channels,
   each one copy of the cell equations of :mod:`symtrack.model.cell`);
-- :mod:`.world`: :class:`World`, the numpy cell storage Cell[N, N] and the world manager;
-- :mod:`.config`: the ``[terrain]`` scenario section;
-- :mod:`.persist`: terrain files (save / load);
-- :mod:`.study`: running scenarios on the grid terrain (passes, summaries, plots);
-- :mod:`.bench`: the benchmark.
-
-This package is kept light on import: :mod:`symtrack.scenario` imports :mod:`.config` to
-register the ``[terrain]`` section.
+- :mod:`.world`: :class:`World`, the world manager (footprint, sector rule, INFO_IN / INFO_OUT).
 """
+
+from .settings import TerrainSettings
+from .storage import Grid, Terrain
+
+__all__ = ["Grid", "Terrain", "TerrainSettings"]

@@ -52,68 +52,29 @@ the storage is the only state, which is why a saved and reloaded terrain continu
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
-from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from ..errors import ScenarioError, SimulationError
+from ..foundations.errors import ScenarioError, SimulationError
 from ..model import SystemModel
 from ..model.options import ModelOptions
+from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.vehicle import VEHICLE_STATES
 from .channels import NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
-from .config import TerrainSettings
+from .settings import TerrainSettings
+from .storage import Grid, Terrain
+
+__all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "NV", "World", "derive_modulus", "open_world", "padding_m"]
 
 log = logging.getLogger("symtrack.terrain")
 
 NV = len(VEHICLE_STATES)
-STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase")
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
 LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
-
-
-@dataclass(frozen=True)
-class Grid:
-    origin_m: tuple[float, float]
-    cell_m: float
-    shape: tuple[int, int]
-
-    @property
-    def n_cells(self) -> int:
-        return self.shape[0] * self.shape[1]
-
-    def centres(self, i, j):
-        return (self.origin_m[0] + (np.asarray(i) + 0.5) * self.cell_m,
-                self.origin_m[1] + (np.asarray(j) + 0.5) * self.cell_m)
-
-    def bounds(self):
-        x0, y0 = self.origin_m
-        return x0, x0 + self.shape[0] * self.cell_m, y0, y0 + self.shape[1] * self.cell_m
-
-
-class CellStorage:
-    """Cell[N, N]: five values per cell, flat arrays indexed by i * ny + j."""
-
-    def __init__(self, grid: Grid):
-        n = grid.n_cells
-        self.grid = grid
-        self.z = np.zeros(n)
-        self.zdot = np.zeros(n)
-        self.zmax = np.zeros(n)
-        self.pmax = np.zeros(n)
-        self.phase = np.zeros(n, dtype=np.int8)
-
-    @property
-    def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.z, self.zdot, self.zmax, self.pmax, self.phase))
-
-    def arrays(self) -> dict:
-        return dict(zip(STORAGE_FIELDS, (self.z, self.zdot, self.zmax, self.pmax, self.phase), strict=True))
-
-    def copy_z(self):
-        return self.z.reshape(self.grid.shape).copy()
 
 
 def padding_m(cell_m: float) -> float:
@@ -133,7 +94,7 @@ class World:
     """The world manager for one field and one vehicle (see the module doc)."""
 
     def __init__(self, settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s: float,
-                 start_xy=(0.0, 0.0), modulus: int | None = None, storage: CellStorage | None = None):
+                 start_xy=(0.0, 0.0), modulus: int | None = None, storage: Terrain | None = None):
         self.settings, self.params, self.opts = settings, dict(params), opts
         if not settings.cell_m < params["track_width_m"]:
             raise ScenarioError(f"terrain.cell_m = {settings.cell_m!r} must be smaller than the track width "
@@ -146,7 +107,9 @@ class World:
             if origin is None:
                 origin = (start_xy[0] - 0.5 * nx * settings.cell_m, start_xy[1] - 0.5 * ny * settings.cell_m)
             self.grid = Grid((float(origin[0]), float(origin[1])), float(settings.cell_m), (nx, ny))
-        self.storage = storage if storage is not None else CellStorage(self.grid)
+        self.storage = storage if storage is not None else Terrain(self.grid)
+        if self.storage.soil is None:
+            self.storage.soil = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
         if modulus is None:
             modulus = settings.channels if settings.channels != "auto" else derive_modulus(params, settings, dt_s)
         self.M = int(modulus)
@@ -166,8 +129,6 @@ class World:
         self._pad = padding_m(self.grid.cell_m)
         self.peak_active = 0
         self.touched = np.zeros(self.grid.n_cells, dtype=bool)
-        self._unload = None
-        self._stepper = None
         self.z_at_pass_end = None
 
     # ---- geometry -----------------------------------------------------------------------------
@@ -220,20 +181,6 @@ class World:
 
     def ij(self, cell: int) -> tuple[int, int]:
         return tuple(int(v) for v in divmod(int(cell), self.grid.shape[1]))
-
-    def stepper(self, settings):
-        """The integrator for this world's model: IDAS (channel states ordered first) or the compiled
-        fixed-step Rosenbrock (symtrack.terrain.compiled_grid)."""
-        from .stepper import ChannelStepper
-
-        if self._stepper is None or self._stepper.settings != settings:
-            if settings.method == "rosenbrock":
-                from .compiled_grid import GridRosenbrockStepper
-
-                self._stepper = GridRosenbrockStepper(self.model, settings, self.n_channels)
-            else:
-                self._stepper = ChannelStepper(self.model, settings)
-        return self._stepper
 
     # ---- the parameter vector --------------------------------------------------------------------
     def param_vector(self) -> np.ndarray:
@@ -331,7 +278,8 @@ class World:
 
     # ---- passes ------------------------------------------------------------------------------
     def begin_pass(self, stepper, x_m: float, y_m: float, yaw_rad: float, dt_s: float = 0.01) -> np.ndarray:
-        """The vehicle at rest at the pose with the cells under it settled: the initial state."""
+        """The vehicle at rest at the pose with the cells under it settled: the initial state.
+        ``stepper``: any integrator of this world's model (``step(x, u, p, dt)``, ``reset()``)."""
         self.release_all()
         self.peak_active = 0
         self.touched[:] = False
@@ -349,17 +297,20 @@ class World:
         stepper.reset()
         return x
 
-    def end_pass(self, x: np.ndarray, dt_s: float = 0.01, max_steps: int = 300) -> None:
+    def end_pass(self, x: np.ndarray, unloader, dt_s: float = 0.01, max_steps: int = 300) -> None:
         """Lift the vehicle off: each active cell's load falls linearly from its reaction pressure at
         the end of the pass to zero over LIFT_TIME_S (quasi-statically: a sudden removal would fling
         the underdamped cells above their unloaded rest, as no tension holds them back), then the
         cells settle until released; all channels are freed. Cells that have not come to rest
-        within max_steps keep their (stored) state and a warning says so."""
+        within max_steps keep their (stored) state and a warning says so.
+
+        ``unloader(xc, par) -> xc``: the cells-only integrator of :meth:`unload_dae` over one
+        step of dt_s (built by :func:`symtrack.integrators.unload.unloader`)."""
         self.after_step(x)
         self.z_at_pass_end = self.storage.z.copy()  # the terrain with the vehicle still on it
         act = np.nonzero(self.channel_cell >= 0)[0]
         if act.size:
-            F = self._unloader()
+            F = unloader
             xc = np.array(x[NV:], dtype=float)
             p_end = self.p_soil.copy()
             for k in range(max_steps):
@@ -369,7 +320,7 @@ class World:
                                                 & (np.abs(rates) <= self.settings.release_rate_m_s)):
                     break
                 par = np.concatenate([self.Q, p_end, [t0, dt_s, LIFT_TIME_S]])
-                xc = np.array(F(x0=xc, p=par)["xf"]).ravel()
+                xc = np.asarray(F(xc, par), dtype=float).ravel()
                 self.after_step(np.concatenate([x[:NV], xc]))
             else:
                 log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
@@ -381,27 +332,25 @@ class World:
         self.qc[:] = 0.0
         self.p_soil[:] = 0.0
 
-    def _unloader(self):
-        """A cells-only integrator of all channels, the load falling linearly to zero (the lift)."""
-        if self._unload is None:
-            n = self.n_channels
-            fn = self.terrain.fn
-            xc = ca.SX.sym("xc", 2 * n)
-            Q = ca.SX.sym("Q", NG + NF * n)
-            p_end = ca.SX.sym("p_end", n)
-            t0, h, T, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("tau")
-            qc = ca.reshape(Q[NG:], NF, n)
-            xm = ca.reshape(xc, 2, n)
-            law = ca.DM(soil_law_values(self.params))
-            p = fn["soil"].map(n, [False, False, False, True], [False])(xm[0, :], qc[2, :], qc[3, :], law)
-            load = p_end.T * ca.fmax(0, 1 - (t0 + h * tau) / T)
-            cellpar = ca.DM([self.params["cell_areal_mass_kg_per_m2"], self.params["cell_damping_Pa_s_per_m"]])
-            d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], load, p, qc[4, :],
-                                                                                  cellpar)
-            dae = {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T), "ode": h * ca.reshape(d, 2 * n, 1)}
-            self._unload = ca.integrator("unload", "cvodes", dae, 0.0, 1.0,
-                                         {"abstol": 1e-12, "reltol": 1e-9})
-        return self._unload
+    def unload_dae(self) -> dict:
+        """The cells-only DAE of the lift (all channels, the load falling linearly to zero over
+        T from the pass end's pressures p_end), time-scaled to [0, 1] over a step of length h:
+        parameters (Q, p_end, t0, h, T). An integrator of it is :meth:`end_pass`'s unloader."""
+        n = self.n_channels
+        fn = self.terrain.fn
+        xc = ca.SX.sym("xc", 2 * n)
+        Q = ca.SX.sym("Q", NG + NF * n)
+        p_end = ca.SX.sym("p_end", n)
+        t0, h, T, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("tau")
+        qc = ca.reshape(Q[NG:], NF, n)
+        xm = ca.reshape(xc, 2, n)
+        law = ca.DM(soil_law_values(self.params))
+        p = fn["soil"].map(n, [False, False, False, True], [False])(xm[0, :], qc[2, :], qc[3, :], law)
+        load = p_end.T * ca.fmax(0, 1 - (t0 + h * tau) / T)
+        cellpar = ca.DM([self.params["cell_areal_mass_kg_per_m2"], self.params["cell_damping_Pa_s_per_m"]])
+        d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], load, p, qc[4, :],
+                                                                              cellpar)
+        return {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T), "ode": h * ca.reshape(d, 2 * n, 1)}
 
     # ---- figures -----------------------------------------------------------------------------
     def figures(self) -> dict:
@@ -415,3 +364,40 @@ class World:
             "terrain_cells_touched": int(np.count_nonzero(self.storage.zmax > 0)),
             "terrain_max_sinkage_mm": 1e3 * float(self.storage.z.max()),
         }
+
+
+def open_world(settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s: float, start_xy=(0.0, 0.0),
+               terrain: Terrain | str | None = None, where: str = "[terrain]") -> World:
+    """The world of a scenario's ``[terrain]`` section, on a new field or on ``terrain`` (a
+    :class:`Terrain` or a terrain file path; default: ``settings.initial_state``). A terrain
+    brings its geometry: it replaces the section's size_m and cell_m unless the section gave them,
+    in which case they must agree. The terrain's soil must be the scenario's."""
+    if terrain is None and settings.initial_state:
+        terrain = settings.initial_state
+    storage = None
+    if terrain is not None:
+        label = str(terrain) if not isinstance(terrain, Terrain) else "the terrain"
+        if isinstance(terrain, Terrain):
+            storage = terrain
+            if storage.soil is not None:
+                for n, v in storage.soil.items():
+                    if n in params and float(params[n]) != v:
+                        raise ScenarioError(f"{label} was made with soil {n} = {v!r}, the scenario has "
+                                            f"{float(params[n])!r}; use the same [soil] to continue a terrain")
+        else:
+            storage = Terrain.load(terrain, params)
+        g = storage.grid
+        cell_differs = "cell_m" in settings.given and abs(g.cell_m - settings.cell_m) > 1e-12
+        shape_differs = "size_m" in settings.given and tuple(g.shape) != tuple(settings.shape)
+        if cell_differs:
+            raise ScenarioError(f"{label}: the terrain file has cells of {g.cell_m} m, the scenario's {where} asks "
+                                f"for terrain.cell_m = {settings.cell_m}; make them agree (or leave cell_m out to "
+                                "take the file's)")
+        if shape_differs:
+            raise ScenarioError(
+                f"{label}: the terrain file has {g.shape[0]} x {g.shape[1]} cells of {g.cell_m} m, the scenario's "
+                f"{where} asks for terrain.size_m = {list(settings.size_m)} ({settings.shape[0]} x "
+                f"{settings.shape[1]} cells); make them agree (or leave size_m out to take the file's)")
+        settings = dataclasses.replace(settings, cell_m=g.cell_m, size_m=(g.shape[0] * g.cell_m,
+                                                                          g.shape[1] * g.cell_m))
+    return World(settings, params, opts, dt_s, start_xy=start_xy, storage=storage)

@@ -1,0 +1,285 @@
+"""The brute-force reference and the terrain benchmark.
+
+- :func:`brute_force_run`: every cell of a (small) field integrated as its own state, the same
+  cell equations as the channels, each channel permanently bound to one cell. The same time
+  loop, settling and history update as the channel pool; the test of the world manager
+  compares the two (tests/test_terrain_world.py).
+- :func:`benchmark`: the figures of the issue, measured in one run (see ``examples/bench_terrain.py``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import casadi as ca
+import numpy as np
+
+from ..integrators.grid_idas import ChannelStepper
+from ..integrators.settings import IntegratorSettings
+from ..model import SystemModel
+from ..reports import validation
+from ..simulation import loop
+from ..simulation.plants import make_plant
+from ..simulation.result import summarise
+from ..simulation.scenario import load_scenario
+from ..terrain.channels import NF, NG, ChannelTerrain, soil_law_values
+from ..terrain.settings import TerrainSettings
+from ..terrain.storage import Grid, Terrain
+from ..terrain.world import END_STRIP_CELLS, NV
+
+
+@dataclasses.dataclass
+class BruteResult:
+    t: np.ndarray
+    X: np.ndarray  # vehicle states per output time
+    z: np.ndarray  # final sinkage of every cell (nx, ny)
+    wall_time_s: float
+    n_states: int
+
+
+def brute_force_run(scenario, duration_s: float) -> BruteResult:
+    """Integrate the scenario for duration_s on its [terrain] field with one channel per cell."""
+    s = scenario.terrain
+    params = scenario.params
+    nx, ny = s.shape
+    origin = s.origin_m or (scenario.start.x_m - 0.5 * nx * s.cell_m, scenario.start.y_m - 0.5 * ny * s.cell_m)
+    grid = Grid(tuple(float(v) for v in origin), float(s.cell_m), (nx, ny))
+    n = grid.n_cells
+    terrain = ChannelTerrain(scenario.model, n)
+    model = SystemModel(scenario.model, terrain)
+    st = Terrain(grid)
+    Q = np.zeros(NG + NF * n)
+    Q[0], Q[1] = grid.cell_m, END_STRIP_CELLS * grid.cell_m
+    qc = Q[NG:].reshape(n, NF)
+    ii, jj = np.divmod(np.arange(n), ny)
+    qc[:, 0], qc[:, 1] = grid.centres(ii, jj)
+    qc[:, 4] = 1.0
+    pbase = np.array(model.param_vector(params, Q))[:-len(Q)]
+    law = ca.DM(soil_law_values(params))
+    history = terrain.fn["history"].map("history_all", "serial", n, [3], [])
+    stepper = ChannelStepper(model, IntegratorSettings("idas", scenario.run.reltol, scenario.run.abstol))
+
+    def update(x):
+        zc = x[NV::2]
+        zmax, pmax, _, _ = (np.array(a).ravel() for a in history(zc, qc[:, 2], qc[:, 3], law))
+        qc[:, 2], qc[:, 3] = zmax, pmax
+
+    x = np.zeros(model.nx)
+    x[0], x[1], x[2] = scenario.start.x_m, scenario.start.y_m, np.radians(scenario.start.yaw_deg)
+    dt = scenario.run.output_dt_s
+    for _ in range(int(round(s.settle_s / 0.01))):
+        x = stepper.step(x, np.zeros(2), np.concatenate([pbase, Q]), 0.01)
+        update(x)
+    stepper.reset()
+    t = 0.0
+    change_times = [e.t_s for e in scenario.torque[1:]]
+    ts, xs = [t], [x[:NV].copy()]
+    wall0 = time.perf_counter()
+    while t < duration_s - 1e-12:
+        t_next = min(t + dt, duration_s)
+        for tc in change_times:
+            if t + 1e-12 < tc < t_next - 1e-12:
+                t_next = tc
+        u = np.array(scenario.torque_at(t))
+        x = stepper.step(x, u, np.concatenate([pbase, Q]), t_next - t)
+        update(x)
+        t = t_next
+        ts.append(t)
+        xs.append(x[:NV].copy())
+    wall = time.perf_counter() - wall0
+    st.z[:] = x[NV::2]
+    return BruteResult(np.array(ts), np.array(xs), st.z.reshape(grid.shape).copy(), wall, model.nx)
+
+
+def pool_run(scenario, duration_s: float):
+    """The same run through the channel pool (the time loop with the grid plant)."""
+    sc = dataclasses.replace(scenario, run=dataclasses.replace(
+        scenario.run, duration_s=duration_s, stop_after_distance_m=None, stop_distance_event=None))
+    plant = make_plant(sc)
+    res = loop.run(sc, plant)
+    return plant.world, res
+
+
+def _field_scenario(base, size_m, cell_m, extra=()):
+    return load_scenario(base, ["run.integrator=idas", f"terrain.size_m={list(size_m)}",
+                                f"terrain.cell_m={cell_m}", *extra])
+
+
+def benchmark(big_size_m=(100.0, 100.0), big_cell_m=0.1, small_size_m=(12.0, 4.0), small_cell_m=0.25,
+              small_duration_s=1.0, big_duration_s=None) -> dict:
+    """All figures of the issue's benchmark, measured in one process.
+
+    1. The validation run (validation_grid) on the big field: wall time per simulated second,
+       peak active cells, channels, storage memory.
+    2. On the small field, ``small_duration_s`` of the validation's torque programme through the
+       channel pool and with every cell integrated as its own state: the speed ratio.
+    """
+    out = {}
+    sc = _field_scenario("validation_grid", big_size_m, big_cell_m)
+    if big_duration_s is not None:  # a shortened run (the example's test), not the validation
+        sc = dataclasses.replace(sc, run=dataclasses.replace(
+            sc.run, duration_s=big_duration_s, stop_after_distance_m=None, stop_distance_event=None))
+    t0 = time.perf_counter()
+    plant = make_plant(sc)
+    world = plant.world
+    out["big_build_s"] = time.perf_counter() - t0
+    res = loop.run(sc, plant)
+    out["big_field_cells"] = world.grid.n_cells
+    out["big_cell_m"] = big_cell_m
+    out["big_sim_time_s"] = float(res.t[-1])
+    out["big_wall_time_s"] = float(res.wall_time_s)
+    out["big_wall_s_per_sim_s"] = float(res.wall_time_s / res.t[-1])
+    out["big_peak_active_cells"] = res.terrain["terrain_peak_active_cells"]
+    out["big_channels"] = world.n_channels
+    out["big_storage_MB"] = world.storage.nbytes / 1e6
+    if big_duration_s is None:
+        summ = summarise(res)
+        out["big_validation_all_within"] = all(ok for *_, ok in validation.check(summ))
+        out["big_validation"] = {k: v for k, _, v, _ in validation.check(summ)}
+
+    sc2 = _field_scenario("validation_grid", small_size_m, small_cell_m)
+    _, pres = pool_run(sc2, small_duration_s)
+    b = brute_force_run(sc2, small_duration_s)
+    out["small_field_cells"] = int(np.prod(TerrainSettings(size_m=tuple(small_size_m), cell_m=small_cell_m).shape))
+    out["small_pool_wall_s"] = float(pres.wall_time_s)
+    out["small_brute_wall_s"] = float(b.wall_time_s)
+    out["small_speed_ratio_brute_over_pool"] = float(b.wall_time_s / pres.wall_time_s)
+    out["small_pose_difference_m"] = float(np.max(np.abs(pres.X[:, :2] - b.X[:, :2])))
+    return out
+
+
+# ---- rows of `symtrack bench` (symtrack/bench/homogeneous.py) ----------------------------------------
+GRID_FIXED_STEP_S = 0.000625  # the grid rosenbrock's step (docs/terrain.md, "Speed": accuracy against IDAS)
+
+
+class _Timed:
+    """Wall time spent in named methods of an object (wrapped on the instance)."""
+
+    def __init__(self, obj, names):
+        self.total = dict.fromkeys(names, 0.0)
+        for n in names:
+            fn = getattr(obj, n)
+
+            def wrapped(*a, _fn=fn, _n=n, **k):
+                t0 = time.perf_counter()
+                try:
+                    return _fn(*a, **k)
+                finally:
+                    self.total[_n] += time.perf_counter() - t0
+            setattr(obj, n, wrapped)
+
+
+def _grid_row(integrator, duration_s=None, channels=None, note=""):
+    """One validation run on the million-cell field; the world manager's and the integrator's
+    shares of the wall time of the time loop (model construction and compilation excluded: a
+    warm-up macro step compiles what the run needs first)."""
+    extra = [f"run.integrator={integrator}", f"run.fixed_step_s={GRID_FIXED_STEP_S}"]
+    if channels is not None:
+        extra.append(f"terrain.channels={channels}")
+    sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, extra)
+    if duration_s is not None:
+        sc = dataclasses.replace(sc, run=dataclasses.replace(
+            sc.run, duration_s=duration_s, stop_after_distance_m=None, stop_distance_event=None))
+    t0 = time.perf_counter()
+    plant = make_plant(sc)
+    world, stepper = plant.world, plant.stepper
+    if integrator == "rosenbrock":  # compile the packed sizes the validation meets (up to 448 slots)
+        from ..integrators.grid_rosenbrock import PACK_SLOTS
+
+        n_sub = int(round(sc.run.output_dt_s / sc.run.fixed_step_s))
+        for slots in range(PACK_SLOTS, 512, PACK_SLOTS):
+            stepper.function(min(slots, world.n_channels), n_sub)
+    build_s = time.perf_counter() - t0
+    st = _Timed(stepper, ("step",))
+    wt = _Timed(world, ("before_step", "after_step", "check_covered"))
+    begin = world.begin_pass
+    in_begin = {}
+
+    def timed_begin(*a, **k):  # the settling before the time loop is not in the run's wall time
+        s0, w0 = dict(st.total), dict(wt.total)
+        try:
+            return begin(*a, **k)
+        finally:
+            in_begin.update({k: st.total[k] - s0[k] for k in s0})
+            in_begin.update({k: wt.total[k] - w0[k] for k in w0})
+    world.begin_pass = timed_begin
+    res = loop.run(sc, plant)
+    integration = st.total["step"] - in_begin.get("step", 0.0)
+    wall = float(res.wall_time_s)
+    manager = sum(wt.total[k] - in_begin.get(k, 0.0) for k in ("before_step", "after_step", "check_covered"))
+    other = wall - manager - integration
+    row = {"group": "grid validation (1e6 cells)", "case": f"M = {world.M}", "integrator": integrator,
+           "sim_time_s": float(res.t[-1]), "wall_time_s": wall, "real_time_factor": float(res.t[-1]) / wall,
+           "build_s": build_s, "channels": world.n_channels, "peak_active_cells": world.peak_active,
+           "world_manager_s": manager, "integration_s": integration, "other_s": other,
+           "world_manager_share": manager / wall, "integration_share": integration / wall}
+    if duration_s is None:
+        summ = summarise(res)
+        row["validation"] = {k: v for k, _, v, _ in validation.check(summ)}
+        row["validation_all_within"] = all(ok for *_, ok in validation.check(summ))
+    row["note"] = (note + f"; {float(res.t[-1]) / wall:.3g} x real time; wall: integration "
+                   f"{100 * integration / wall:.0f} %, world manager {100 * manager / wall:.0f} %, outputs and loop "
+                   f"{100 * other / wall:.0f} %").lstrip("; ")
+    return row
+
+
+def bench_rows(quick: bool = False) -> list[dict]:
+    """Rows of ``symtrack bench``: the validation on the million-cell field (IDAS interpreted, the
+    compiled grid rosenbrock), the channel-pool size M against cost, the pool against brute force
+    on the small field. ``quick``: the IDAS row and the M sweep over 0.5 s of the run only."""
+    rows = []
+    short = 0.5 if quick else None
+    rows.append(_grid_row("idas", duration_s=0.5 if quick else None,
+                          note="first 0.5 s only" if quick else "the whole validation"))
+    rows.append(_grid_row("rosenbrock", note=f"compiled, step {GRID_FIXED_STEP_S * 1e3:g} ms"))
+    for M in (48, 64):
+        r = _grid_row("rosenbrock", duration_s=short, channels=M,
+                      note="M sweep" + ("; first 0.5 s only" if quick else ""))
+        r["group"] = "grid: pool size M vs cost"
+        rows.append(r)
+    sc2 = _field_scenario("validation_grid", (12.0, 4.0), 0.25, [f"run.fixed_step_s={GRID_FIXED_STEP_S}"])
+    _, pres = pool_run(sc2, 1.0)
+    b = brute_force_run(sc2, 1.0)
+    sc3 = dataclasses.replace(sc2, run=dataclasses.replace(sc2.run, integrator="rosenbrock"))
+    pool_run(sc3, 0.05)  # compile
+    _, rres = pool_run(sc3, 1.0)
+    for case, integ, wall in (("brute force (768 cells as states)", "idas", b.wall_time_s),
+                              ("channel pool", "idas", pres.wall_time_s),
+                              ("channel pool", "rosenbrock", rres.wall_time_s)):
+        rows.append({"group": "small field 12 m x 4 m at 0.25 m", "case": case, "integrator": integ,
+                     "sim_time_s": 1.0, "wall_time_s": float(wall), "real_time_factor": 1.0 / float(wall),
+                     "note": f"{1.0 / float(wall):.3g} x real time"
+                     + (f"; brute / pool (idas) = {b.wall_time_s / pres.wall_time_s:.1f}"
+                        if case == "channel pool" and integ == "idas" else "")})
+    return rows
+
+
+def main(argv=None) -> int:
+    """``python -m symtrack.bench.terrain [--quick] [--out FILE]``: the grid rows of ``symtrack bench``
+    alone, printed as its table and written as its JSON."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    from ..foundations.files import atomic_write_text
+    from .homogeneous import report, table
+
+    ap = argparse.ArgumentParser(prog="python -m symtrack.bench.terrain")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default="out/bench_terrain.json")
+    args = ap.parse_args(argv)
+    rows = bench_rows(args.quick)
+    rep = report(rows)
+    atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
+    print(table(rows))
+    print(f"load average {rep['load_average'][0]:.2f} on {rep['cpus']} CPUs; JSON in {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    import logging
+    import sys
+
+    logging.basicConfig(level=logging.WARNING)
+    sys.exit(main())

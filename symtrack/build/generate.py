@@ -1,0 +1,257 @@
+"""Generate the C sources of a :class:`~symtrack.model.SystemModel` into a folder.
+
+Everything here works on a generic ``SystemModel`` (its Functions ``ode``, ``dae``,
+``outputs``, ``accel`` and its symbols), so the grid terrain's coupled system goes through the
+same path as the homogeneous one; only the prefix of the names differs.
+
+Files written for a model with prefix ``<m>`` (fixed, predictable names, like acados):
+
+- ``<m>_ode.c/.h``: ``<m>_ode(x,u,p)->ode``, its exact sparse Jacobian ``jac_<m>_ode`` (the
+  symbol ``casadi.external`` looks for) and the linearization ``<m>_linearize(x,u,p)->(A,B)``;
+- ``<m>_outputs.c/.h``: ``<m>_outputs(x,u,p)->y``; ``<m>_linearize_outputs.c/.h``:
+  ``<m>_linearize_outputs(x,u,p)->(C,D)`` (the exact Jacobians with respect to x and u);
+- ``<m>_dae.c/.h``: ``<m>_dae(x,z,u,p)->(ode,alg)``, ``jac_<m>_dae``, ``<m>_accel(x,u,p)->z``;
+- ``<m>_rosenbrock.c/.h``: the fixed-step integrator (the 8-stage, L-stable, order-5 Rosenbrock
+  method of CasADi's ``rosenbrock`` plugin, unrolled with a sparse LU in :mod:`symtrack.build.rosenbrock`,
+  on the index-1 DAE form): ``<m>_rosenbrock_step(x0,z0,u,p,h)->(xf,zf)``
+  advances one step of length h, and ``<m>_rosenbrock_chunk<N>(x0,z0,U,H,p)->(X,Z,Y)``
+  advances N steps in one call (column k of U and H are the input and the length of step k;
+  a step of length 0 leaves the state unchanged; column k of X, Z, Y is the state,
+  algebraic state and outputs after step k); ``<m>_consistent_z(x,z0,u,p)->z`` solves the
+  algebraic equations for z by Newton steps from z0 (the steps start from the z they are given);
+- ``manifest.json``: model hash (SHA-256 over the files' hashes of their serialised Functions;
+  each file's own hash is its key in the compiled-library cache), CasADi version, and the names
+  and units of every input and output of every function.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import casadi as ca
+
+from . import rosenbrock
+
+MANIFEST_SCHEMA_VERSION = 1
+# Steps per call of the chunk functions: a long chunk for the bulk of a run and a short one
+# for its end (a run that stops at a distance wastes at most a short chunk).
+CHUNK_SIZES = (256, 16)
+FIXED_STEP_METHOD = "rosenbrock"
+
+# Unit of a name from its suffix (longest match first); names without one are dimensionless.
+_UNIT_SUFFIXES = (
+    ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
+    ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_per_km_h", "h/km"),
+    ("_rad_s", "rad/s"), ("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_N_m", "N m"), ("_rad", "rad"),
+    ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_m", "m"), ("_s", "s"),
+)
+
+
+def unit_of(name: str) -> str:
+    """The unit a symtrack name carries in its suffix ("1" when it has none)."""
+    for suffix, unit in _UNIT_SUFFIXES:
+        if name.endswith(suffix):
+            return unit
+    return "1"
+
+
+@dataclass(frozen=True)
+class Generated:
+    """The Functions of one model, grouped by the C file they go into."""
+
+    prefix: str
+    files: dict  # file stem -> tuple of Functions (in generation order)
+    signals: dict  # function input/output label -> tuple of element names
+    casadi_version: str
+    _hashes: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def functions(self):
+        for fs in self.files.values():
+            yield from fs
+
+    def function(self, name: str) -> ca.Function:
+        for f in self.functions():
+            if f.name() == name:
+                return f
+        raise KeyError(name)
+
+    def file_hash(self, stem: str) -> str:
+        """SHA-256 of the serialised Functions of one file (its cache key)."""
+        if stem in self._hashes:
+            return self._hashes[stem]
+        h = hashlib.sha256()
+        h.update(f"casadi {self.casadi_version}\n".encode())
+        for f in self.files[stem]:
+            h.update(f.name().encode() + b"\n")
+            h.update(f.serialize().encode())
+        self._hashes[stem] = h.hexdigest()
+        return self._hashes[stem]
+
+    @property
+    def model_hash(self) -> str:
+        """SHA-256 over the files' hashes (the whole generated model)."""
+        h = hashlib.sha256()
+        for stem in self.files:
+            h.update(f"{stem} {self.file_hash(stem)}\n".encode())
+        return h.hexdigest()
+
+
+def _rename(f: ca.Function, name: str) -> ca.Function:
+    """A copy of the SX Function f under another name (same expressions, common subexpressions
+    eliminated)."""
+    args = f.sx_in()
+    return ca.Function(name, args, f.call(args), f.name_in(), f.name_out(), {"cse": True})
+
+
+def fixed_step_functions(model, prefix: str):
+    """One step of the unrolled Rosenbrock method (:mod:`symtrack.build.rosenbrock`) on the DAE form,
+    and chunks of many steps per call."""
+    x0, z0 = ca.SX.sym("x0", model.x.sparsity()), ca.SX.sym("z0", model.z.sparsity())
+    u, p, h = ca.SX.sym("u", model.u.sparsity()), ca.SX.sym("p", model.p.sparsity()), ca.SX.sym("h")
+    x1, z1 = rosenbrock.step_expressions(model.dae, x0, z0, u, p, h)
+    step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [x0, z0, u, p, h], [x1, z1],
+                       ["x0", "z0", "u", "p", "h"], ["xf", "zf"], {"cse": True})
+    zc = rosenbrock.consistent_z_expressions(model.dae, x0, z0, u, p)
+    consistent = ca.Function(f"{prefix}_consistent_z", [x0, z0, u, p], [zc], ["x", "z0", "u", "p"], ["z"],
+                             {"cse": True})
+    # one column of a chunk: a step, then the outputs at its end (an MX Function calling the two)
+    X0, Z0 = ca.MX.sym("x0", model.x.sparsity()), ca.MX.sym("z0", model.z.sparsity())
+    U, P, H = ca.MX.sym("u", model.u.sparsity()), ca.MX.sym("p", model.p.sparsity()), ca.MX.sym("h")
+    xf, zf = step(X0, Z0, U, P, H)
+    col = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_column", [X0, Z0, U, P, H], [xf, zf, model.outputs(xf, U, P)],
+                      ["x0", "z0", "u", "p", "h"], ["xf", "zf", "y"])
+    chunks = []
+    for n in CHUNK_SIZES:
+        acc = col.mapaccum(f"{prefix}_{FIXED_STEP_METHOD}_acc{n}", n, 2)
+        Us = ca.MX.sym("U", model.u.numel(), n)
+        Hs = ca.MX.sym("H", 1, n)
+        Xs, Zs, Ys = acc(X0, Z0, Us, ca.repmat(P, 1, n), Hs)
+        chunks.append(ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_chunk{n}", [X0, Z0, Us, Hs, P], [Xs, Zs, Ys],
+                                  ["x0", "z0", "U", "H", "p"], ["X", "Z", "Y"]))
+    return step, consistent, chunks
+
+
+# The files, each a group of Functions that is compiled and loaded on its own: a simulation
+# builds and compiles only what it uses (the ODE form's Jacobian of the grid terrain is dense).
+GROUPS = ("ode", "dae", "outputs", "linearize_outputs", FIXED_STEP_METHOD)
+# short function name (after "<prefix>_") -> group
+GROUP_OF = {"ode": "ode", "linearize": "ode", "dae": "dae", "accel": "dae", "outputs": "outputs",
+            "linearize_outputs": "linearize_outputs", f"{FIXED_STEP_METHOD}_step": FIXED_STEP_METHOD,
+            "consistent_z": FIXED_STEP_METHOD,
+            **{f"{FIXED_STEP_METHOD}_chunk{n}": FIXED_STEP_METHOD for n in CHUNK_SIZES}}
+
+
+def _group(model, prefix: str, group: str) -> tuple:
+    if group == "ode":
+        ode = _rename(model.ode, f"{prefix}_ode")
+        jac_ode = ode.jacobian()  # named jac_<prefix>_ode: casadi.external finds it
+        x, u, p = (ca.MX.sym(n, s) for n, s in (("x", model.x.sparsity()), ("u", model.u.sparsity()),
+                                                  ("p", model.p.sparsity())))
+        J = jac_ode(x, u, p, ca.MX(ode.sparsity_out(0).size1(), 1))
+        lin = ca.Function(f"{prefix}_linearize", [x, u, p], [J[0], J[1]], ["x", "u", "p"], ["A", "B"])
+        return ode, jac_ode, lin
+    if group == "dae":
+        dae = _rename(model.dae, f"{prefix}_dae")
+        return dae, dae.jacobian(), _rename(model.accel, f"{prefix}_accel")
+    if group == "outputs":
+        return (_rename(model.outputs, f"{prefix}_outputs"),)
+    if group == "linearize_outputs":
+        return (_rename(model.jac_outputs, f"{prefix}_linearize_outputs"),)
+    if group == FIXED_STEP_METHOD:
+        step, consistent, chunks = fixed_step_functions(model, prefix)
+        return step, consistent, *chunks
+    raise ValueError(f"unknown group {group!r}; groups: {', '.join(GROUPS)}")
+
+
+def build(model, prefix: str = "homogeneous", groups=GROUPS) -> Generated:
+    """The generated Functions of ``model`` (a SystemModel) in the given groups, with their
+    element names."""
+    sx, su, sz, sp, sy = (tuple(model.state_names), tuple(model.input_names), tuple(model.alg_names),
+                          tuple(model.param_names), tuple(model.output_names))
+    signals = {"x": sx, "x0": sx, "xf": sx, "ode": tuple(f"d_{n}_dt" for n in sx), "X": sx,
+               "u": su, "U": su, "z": sz, "z0": sz, "zf": sz, "Z": sz, "alg": tuple(f"res_{n}" for n in sz),
+               "p": sp, "y": sy, "Y": sy, "h": ("step_s",), "H": ("step_s",)}
+    files = {f"{prefix}_{g}": _group(model, prefix, g) for g in groups}
+    return Generated(prefix, files, signals, ca.__version__)
+
+
+def _unit_of_signal(label: str, name: str) -> str:
+    if label == "ode":
+        base = unit_of(name[2:-3])
+        if base == "1":
+            return "1/s"
+        return base + "^2" if base.endswith("/s") else base + "/s"
+    return unit_of(name)
+
+
+def _describe(gen: Generated, f: ca.Function) -> dict:
+    def io(label, sp, names):
+        d = {"name": label, "shape": [sp.size1(), sp.size2()], "nnz": sp.nnz()}
+        if names is not None:
+            d["elements"] = [{"name": n, "unit": _unit_of_signal(label, n)} for n in names]
+        return d
+
+    def names_for(label):
+        return gen.signals.get(label)
+
+    ins = [io(f.name_in(i), f.sparsity_in(i), names_for(f.name_in(i))) for i in range(f.n_in())]
+    outs = []
+    for i in range(f.n_out()):
+        label = f.name_out(i)
+        names = names_for(label)
+        if names is None:  # Jacobian blocks: rows x columns named by their signals
+            outs.append({"name": label, "shape": [f.size1_out(i), f.size2_out(i)], "nnz": f.nnz_out(i),
+                         "description": "sparse Jacobian block, column-major (CCS) as in CasADi"})
+        else:
+            outs.append(io(label, f.sparsity_out(i), names))
+    return {"inputs": ins, "outputs": outs}
+
+
+def manifest(gen: Generated, file_hashes: dict) -> dict:
+    funcs = {}
+    for stem, fs in gen.files.items():
+        for f in fs:
+            funcs[f.name()] = {"file": stem + ".c", **_describe(gen, f)}
+    return {
+        "schema_version": MANIFEST_SCHEMA_VERSION,
+        "generator": "python -m codegen (symtrack)",
+        "casadi_version": gen.casadi_version,
+        "model": gen.prefix,
+        "model_hash": gen.model_hash,
+        "fixed_step_method": FIXED_STEP_METHOD,
+        "chunk_sizes": list(CHUNK_SIZES),
+        "model_hash_by_file": {stem + ".c": gen.file_hash(stem) for stem in gen.files},
+        "functions": funcs,
+        "files": file_hashes,
+    }
+
+
+def write_sources(gen: Generated, out_dir: Path, scratch: Path) -> dict[str, bytes]:
+    """Generate every C file of ``gen``; returns file name -> content (not yet in out_dir).
+
+    CasADi's code generator writes into the current folder; it is pointed at ``scratch``.
+    """
+    out = {}
+    for stem, fs in gen.files.items():
+        cg = ca.CodeGenerator(stem + ".c", {"with_header": True})
+        for f in fs:
+            cg.add(f)
+        cg.generate(str(scratch) + "/")
+        for ext in (".c", ".h"):
+            data = (scratch / (stem + ext)).read_bytes()
+            if ext == ".c" and b"#error" in data:
+                # CasADi writes '#error' for plugins it cannot export; never ship that
+                raise RuntimeError(f"{stem}.c contains #error: a component cannot be code-generated")
+            out[stem + ext] = data
+    return out
+
+
+def render(gen: Generated, scratch: Path) -> dict[str, bytes]:
+    """All files (sources and manifest.json) as name -> bytes."""
+    files = write_sources(gen, Path("."), scratch)
+    hashes = {n: hashlib.sha256(d).hexdigest() for n, d in sorted(files.items())}
+    files["manifest.json"] = (json.dumps(manifest(gen, hashes), indent=1) + "\n").encode()
+    return files

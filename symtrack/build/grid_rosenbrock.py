@@ -1,0 +1,281 @@
+"""A Rosenbrock step for the vehicle + channel pool (the grid terrain), built with ``map`` over
+the channels and solved through the arrowhead's Schur complement: O(channels) per step.
+
+The method is the one of :mod:`symtrack.build.rosenbrock` (CasADi 3.8's ``rosenbrock`` plugin tableau:
+8 stages, order 5, L-stable, stiffly accurate) on the time-scaled DAE F = (h f, g), unit step:
+
+    W U_i = F(y0 + sum_j a_ij U_j) + M sum_j c_ij U_j,   W = M / gamma - J(y0),   y1 = y0 + sum m_i U_i
+
+Structure
+---------
+The unknowns are the channel states x_c (2 per channel) and w = (x_v, z): the 12 vehicle states
+and the 2 algebraic accelerations. The model is split so that no expression is expanded per
+channel:
+
+- one channel (an SX Function, mapped over the pool): F_c(x_c, q_c, a) with
+  a = (X, Y, cos psi, sin psi, alpha_k, beta_k) -- the pose and each track's pressure line
+  p(s) = max(0, alpha + beta s) (the linear and both triangular distributions are of this
+  form) -- and the channel's contributions s_c to the 10 sums the vehicle sees (compaction
+  power per track; weighted sinkage and weight per track end);
+- the vehicle (an SX Function of 14 + 10 inputs): F_w(w, u, p, S) with S = sum_c s_c, and a(w).
+
+The Jacobian is then the arrowhead J_cc (2x2 blocks), J_cw = dF_c/da da/dw, and the vehicle rows
+J_ww + dF_w/dS (dS/dx_c, dS/dw). With W_c = I / gamma - dF_c/dx_c (2x2, inverted in closed
+form), eliminating the channels gives the 14 x 14 Schur system
+
+    (M_w / gamma - J_ww - dF_w/dS T da/dw) k_w = r_w + dF_w/dS sum_c G_c W_c^-1 r_c,
+    T = sum_c (G_c W_c^-1 dF_c/da + ds_c/da),  G_c = ds_c/dx_c,
+    k_c = W_c^-1 r_c + W_c^-1 dF_c/da (da/dw k_w)
+
+The per-channel factors (W_c^-1, W_c^-1 dF_c/da, G_c W_c^-1, T_c) are formed once per step;
+each stage costs one evaluation of F_c and s_c per channel and a few small products. The 14 x 14
+system is solved per stage (its cost does not depend on the pool size).
+
+The algebraic state is first made consistent (two Newton steps on g(w) = 0 at the step start,
+the sums S held), so the step accepts the channel resets of the world manager between macro steps.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from .rosenbrock import GAMMA, N_STAGES
+from .rosenbrock import A as RB_A
+from .rosenbrock import C as RB_C
+from .rosenbrock import M as RB_M
+
+NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_right)
+NS = 10  # S: compaction power (left, right), then per track and end: sum w z, then sum w
+NW = 14  # w = 12 vehicle states + 2 algebraic
+
+
+def _sum_names():
+    from symtrack.model.vehicle import ENDS, TRACKS
+
+    names = [f"sum_power_{k}" for k in TRACKS]
+    names += [f"sum_wz_{end}_{k}" for k in TRACKS for end in ENDS]
+    names += [f"sum_w_{end}_{k}" for k in TRACKS for end in ENDS]
+    return tuple(names)
+
+
+class AggregateTerrain:
+    """The grid terrain seen from the vehicle: the channel sums S as parameters (no states)."""
+
+    name = "channel_sums"
+
+    def __init__(self):
+        from symtrack.terrain.channels import GLOBAL_FIELDS
+
+        self.state_names = ()
+        self.sum_names = _sum_names()
+        self.param_names = GLOBAL_FIELDS + self.sum_names
+        self.dist = None  # the pressure distributions of the DAE form (first evaluation)
+
+    def _S(self, Q):
+        from symtrack.terrain.channels import NG
+
+        return {n: Q[NG + i] for i, n in enumerate(self.sum_names)}
+
+    def compaction(self, xv, xc, P, Q):
+        from symtrack.model.vehicle import TRACKS
+        from symtrack.terrain.channels import COMPACTION_SPEED_FLOOR_M_S
+
+        S = self._S(Q)
+        B = P["track_gauge_m"]
+        u, r = xv[3], xv[5]
+        v_track = {"left": u - r * B / 2, "right": u + r * B / 2}
+        area = Q[0] ** 2
+        return ca.vertcat(*(area * S[f"sum_power_{k}"] / ca.sqrt(v_track[k] ** 2 + COMPACTION_SPEED_FLOOR_M_S**2)
+                            for k in TRACKS))
+
+    def equations(self, xv, xc, dist, P, Q):
+        from symtrack.model.vehicle import ENDS, TRACKS
+
+        if self.dist is None:
+            self.dist = dist
+        S = self._S(Q)
+        signals = {}
+        for k in TRACKS:
+            for end in ENDS:
+                signals[f"sinkage_{end}_{k}_m"] = S[f"sum_wz_{end}_{k}"] / (S[f"sum_w_{end}_{k}"] + 1e-9)
+                signals[f"p_{end}_{k}_Pa"] = getattr(dist[k], end)
+        signals["compaction_power_W"] = Q[0] ** 2 * (S["sum_power_left"] + S["sum_power_right"])
+        return ca.SX(0, 1), signals
+
+
+def _pressure_line(dist):
+    """(alpha, beta) with the track's pressure p(s) = max(0, alpha + beta s) on the contact: the
+    linear distribution (non-negative there: |e| <= l/6) and both triangular ones of
+    :class:`~symtrack.model.vehicle.PressureDistribution` are of this form, so a channel needs two
+    numbers per track instead of three branches."""
+    b, l, N = dist.b, dist.l, dist.N
+    a_lin, b_lin = dist.p_mean + dist.slope * l / 2, -dist.slope
+    Af = 2 * N / (b * dist.Lc_front)
+    Ar = 2 * N / (b * dist.Lc_rear)
+    a_f, b_f = Af, -Af / dist.Lc_front
+    a_r, b_r = Ar * (1 - l / dist.Lc_rear), Ar / dist.Lc_rear
+    alpha = ca.if_else(dist.e_r > l / 6, a_f, ca.if_else(dist.e_r < -l / 6, a_r, a_lin))
+    beta = ca.if_else(dist.e_r > l / 6, b_f, ca.if_else(dist.e_r < -l / 6, b_r, b_lin))
+    return alpha, beta
+
+
+def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") -> dict[str, ca.Function]:
+    """The Functions of the grid Rosenbrock integrator for a pool of n_channels channels.
+
+    ``<name>``: (xc[2n], w[14], u[2], p[np], h) -> (xc, w) after n_steps steps of length h (s),
+    p being the grid model's parameter vector (vehicle and soil parameters, then the terrain's Q).
+    """
+    from symtrack.model import SystemModel
+    from symtrack.model.system import PARAM_NAMES
+    from symtrack.model.vehicle import ENDS, TRACKS
+    from symtrack.terrain.channels import NF, NG, build_cell_functions
+
+    agg = AggregateTerrain()
+    veh = SystemModel(opts, agg)
+    npv = len(PARAM_NAMES)
+    xv, z, u, pv = veh.x, veh.z, veh.u, veh.p  # pv = (P, Q globals, S)
+    h = ca.SX.sym("h")
+    w = ca.vertcat(xv, z)
+    Sv = pv[npv + NG:]
+    D = []
+    for k in TRACKS:
+        D += list(_pressure_line(agg.dist[k]))
+    a = ca.vertcat(xv[0], xv[1], ca.cos(xv[2]), ca.sin(xv[2]), *D)
+    if ca.depends_on(a, Sv):
+        raise RuntimeError("the pressure distributions depend on the channel sums: the Schur form does not hold")
+    Fw = ca.vertcat(h * veh.ode_dae_expr, veh.alg_expr)
+    fo = {"cse": True}
+    vehicle_F = ca.Function("grid_vehicle_F", [w, u, pv, h], [Fw, a], ["w", "u", "pv", "h"], ["Fw", "a"], fo)
+    vehicle_J = ca.Function("grid_vehicle_J", [w, u, pv, h],
+                            [Fw, a, ca.jacobian(Fw, w), ca.jacobian(Fw, Sv), ca.jacobian(a, w)],
+                            ["w", "u", "pv", "h"], ["Fw", "a", "Jww", "JwS", "Aw"], fo)
+    g = veh.alg_expr
+    zn = z
+    for _ in range(2):
+        gz = ca.substitute(g, z, zn)
+        zn = zn - ca.solve(ca.substitute(ca.jacobian(g, z), z, zn), gz)
+    consistent = ca.Function("grid_consistent_z", [w, u, pv], [ca.vertcat(xv, zn)], ["w", "u", "pv"],
+                             ["w_consistent"], fo)
+
+    # ---- one channel -------------------------------------------------------------------------------
+    fn = build_cell_functions(opts)
+    xc = ca.SX.sym("xc", 2)
+    q = ca.SX.sym("q", NF)
+    av = ca.SX.sym("a", NA)
+    cst = ca.SX.sym("c", 15)  # l, b, B, e, dx, strip, law[4], cellpar[2], h, unused x2
+    geo, law, cellpar, hh = cst[0:6], cst[6:10], cst[10:12], cst[12]
+    # the cell centre in the body frame here (cos, sin of the yaw computed once per stage, not per
+    # channel), then the channel's own geometry at the zero pose (cos 0 = 1 folds away)
+    ddx, ddy = q[0] - av[0], q[1] - av[1]
+    qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, q[2], q[3], q[4])
+    gvec = fn["geometry"](qb, ca.DM.zeros(3), geo)
+    p_soil = fn["soil"](xc[0], q[2], q[3], law)
+    p_load = 0
+    for i in range(2):
+        p_load = p_load + gvec[i] * ca.fmax(0, av[4 + 2 * i] + av[5 + 2 * i] * gvec[2 + i])
+    Fc = hh * fn["dynamics"](xc[1], p_load, p_soil, q[4], cellpar)
+    power = p_soil * ca.fmax(xc[1], 0)
+    rows = [gvec[4 + r] for r in range(len(TRACKS) * len(ENDS))]
+    s = ca.vertcat(gvec[0] * power, gvec[1] * power, *(r * xc[0] for r in rows), *rows)
+    chan_F = ca.Function("grid_channel_F", [xc, q, av, cst], [Fc, s], ["xc", "q", "a", "c"], ["Fc", "s"], fo)
+    Wc = ca.DM.eye(2) / GAMMA - ca.jacobian(Fc, xc)
+    det = Wc[0, 0] * Wc[1, 1] - Wc[0, 1] * Wc[1, 0]
+    Winv = ca.vertcat(ca.horzcat(Wc[1, 1], -Wc[0, 1]), ca.horzcat(-Wc[1, 0], Wc[0, 0])) / det
+    G = ca.jacobian(s, xc)
+    Pm = Winv @ ca.jacobian(Fc, av)  # 2 x 7
+    GW = G @ Winv  # 10 x 2
+    T = G @ Pm + ca.jacobian(s, av)  # 10 x 7
+    chan_J = ca.Function("grid_channel_J", [xc, q, av, cst],
+                         [Fc, s, ca.vec(Winv), ca.vec(Pm), ca.vec(GW), ca.vec(T)],
+                         ["xc", "q", "a", "c"], ["Fc", "s", "Winv", "Pm", "GW", "T"], fo)
+    r_c, Wv, GWv = ca.SX.sym("r", 2), ca.SX.sym("Winv", 4), ca.SX.sym("GW", 20)
+    chan_solve = ca.Function("grid_channel_solve", [r_c, Wv, GWv],
+                             [ca.reshape(Wv, 2, 2) @ r_c, ca.reshape(GWv, NS, 2) @ r_c],
+                             ["r", "Winv", "GW"], ["v", "Gv"], fo)
+    v_c, Pmv, da = ca.SX.sym("v", 2), ca.SX.sym("Pm", 2 * NA), ca.SX.sym("da", NA)
+    chan_back = ca.Function("grid_channel_back", [v_c, Pmv, da], [v_c + ca.reshape(Pmv, 2, NA) @ da],
+                            ["v", "Pm", "da"], ["k"], fo)
+    Ks, rs = ca.SX.sym("K", NW, NW), ca.SX.sym("rhs", NW)
+    small_solve = ca.Function("grid_schur_solve", [Ks, rs], [ca.solve(Ks, rs)], ["K", "rhs"], ["k"], fo)
+
+    n = n_channels
+    mF = chan_F.map("grid_channels_F", "serial", n, [3], [])
+    mJ = chan_J.map("grid_channels_J", "serial", n, [3], [])
+    mS = chan_solve.map("grid_channels_solve", "serial", n, [], [])
+    mB = chan_back.map("grid_channels_back", "serial", n, [2], [])
+
+    # ---- one step (MX: the mapped calls stay loops) --------------------------------------------------
+    XC, Wm, U, PV, Qg, QC, H = (ca.MX.sym("xc", 2, n), ca.MX.sym("w", NW), ca.MX.sym("u", 2),
+                                ca.MX.sym("pv", npv), ca.MX.sym("qg", NG), ca.MX.sym("qc", NF, n), ca.MX.sym("h"))
+    Pm_ = [PV[i] for i in range(npv)]
+    Pd = dict(zip(PARAM_NAMES, Pm_, strict=True))
+    from symtrack.model.cell import k_eq
+
+    keq = k_eq(Pd["k_c_N_per_m_n1"], Pd["k_phi_N_per_m_n2"], Pd["track_width_m"])
+    C_MX = ca.vertcat(Pd["contact_length_m"], Pd["track_width_m"], Pd["track_gauge_m"],
+                      Pd["cg_ahead_of_contact_centre_m"], Qg[0], Qg[1], keq, Pd["bekker_n"],
+                      Pd["elastic_stiffness_Pa_per_m"], Pd["unloading_stiffness_floor"],
+                      Pd["cell_areal_mass_kg_per_m2"], Pd["cell_damping_Pa_s_per_m"], H, 0, 0)
+    mass_w = ca.DM.zeros(NW)
+    mass_w[:12] = 1.0
+
+    def pvec(S):
+        return ca.vertcat(PV, Qg, S)
+
+    zeroS = ca.MX.zeros(NS)
+
+    def stage_F(XCi, Wi):
+        a_i = vehicle_F(Wi, U, pvec(zeroS), H)[1]
+        Fci, si = mF(XCi, QC, a_i, C_MX)
+        S = ca.sum2(si)
+        Fwi = vehicle_F(Wi, U, pvec(S), H)[0]
+        return Fci, Fwi
+
+    a0 = vehicle_F(Wm, U, pvec(zeroS), H)[1]
+    Fc0, s0, Winv_m, Pm_m, GW_m, T_m = mJ(XC, QC, a0, C_MX)
+    S0 = ca.sum2(s0)
+    Fw0, _, Jww, JwS, Aw = vehicle_J(Wm, U, pvec(S0), H)
+    Tsum = ca.reshape(ca.sum2(T_m), NS, NA)
+    K = ca.diag(mass_w / GAMMA) - Jww - JwS @ (Tsum @ Aw)
+    Uc, Uw = [], []
+    for i in range(N_STAGES):
+        if i == 0:
+            Fci, Fwi = Fc0, Fw0
+        else:
+            XCi, Wi = XC, Wm
+            for j, aij in enumerate(RB_A[i]):
+                if aij != 0.0:
+                    XCi = XCi + aij * Uc[j]
+                    Wi = Wi + aij * Uw[j]
+            Fci, Fwi = stage_F(XCi, Wi)
+        rc, rw = Fci, Fwi
+        for j, cij in enumerate(RB_C[i]):
+            if cij != 0.0:
+                rc = rc + cij * Uc[j]
+                rw = rw + cij * (mass_w * Uw[j])
+        v, Gv = mS(rc, Winv_m, GW_m)
+        kw = small_solve(K, rw + JwS @ ca.sum2(Gv))
+        kc = mB(v, Pm_m, Aw @ kw)
+        Uc.append(kc)
+        Uw.append(kw)
+    XC1, W1 = XC, Wm
+    for mi, ci, wi in zip(RB_M, Uc, Uw, strict=True):
+        XC1 = XC1 + mi * ci
+        W1 = W1 + mi * wi
+    step = ca.Function(name + "_step", [XC, Wm, U, PV, Qg, QC, H], [XC1, W1],
+                       ["xc", "w", "u", "pv", "qg", "qc", "h"], ["xc1", "w1"])
+
+    # ---- n_steps steps per call, on the model's vectors ----------------------------------------------
+    xcv, w0 = ca.MX.sym("xc", 2 * n), ca.MX.sym("w", NW)
+    u0, p0, h0 = ca.MX.sym("u", 2), ca.MX.sym("p", npv + NG + NF * n), ca.MX.sym("h")
+    PV0, Qg0 = p0[:npv], p0[npv:npv + NG]
+    QC0 = ca.reshape(p0[npv + NG:], NF, n)
+    Xc = ca.reshape(xcv, 2, n)
+    a_s = vehicle_F(w0, u0, ca.vertcat(PV0, Qg0, zeroS), h0)[1]
+    S_start = ca.sum2(mF(Xc, QC0, a_s, ca.substitute(C_MX, ca.vertcat(PV, Qg, H), ca.vertcat(PV0, Qg0, h0)))[1])
+    Wc = consistent(w0, u0, ca.vertcat(PV0, Qg0, S_start))
+    for _ in range(n_steps):
+        Xc, Wc = step(Xc, Wc, u0, PV0, Qg0, QC0, h0)
+    multi = ca.Function(name, [xcv, w0, u0, p0, h0], [ca.reshape(Xc, 2 * n, 1), Wc],
+                        ["xc", "w", "u", "p", "h"], ["xc1", "w1"])
+    return {"step": step, "multi": multi, "vehicle_F": vehicle_F, "channel_F": chan_F, "channel_J": chan_J}

@@ -1,0 +1,125 @@
+"""The ``symtrack linearize`` and ``symtrack mpc`` commands (registered by :mod:`symtrack.cli.main`)."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+log = logging.getLogger("symtrack.control")
+
+DEFAULT_SOIL = "sandy_loam_15"
+DEFAULT_VEHICLE = "reference_crawler"
+
+
+def _params(vehicle: str, soil: str) -> dict:
+    from ..presets import soil_preset, vehicle_preset
+
+    return {**vehicle_preset(vehicle), **soil_preset(soil)}
+
+
+def linearize_command(args) -> int:
+    from ..control import linearization as L
+    from ..control.trim import trim
+    from ..foundations.files import atomic_write_bytes, atomic_write_text
+    from ..model import SystemModel
+
+    params = _params(args.vehicle, args.soil)
+    model = SystemModel()
+    tp = trim(model, params, args.speed, args.radius)
+    lin = L.linearize(model, tp, path_frame=args.path_frame)
+    mode_list = L.modes(lin)
+    ctrb = L.controllability(lin)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    d = L.to_dict(lin)
+    d["vehicle_preset"], d["soil_preset"] = args.vehicle, args.soil
+    d["modes"] = mode_list
+    d["controllability"] = ctrb
+    atomic_write_bytes(out / "linearization.npz", L.npz_bytes(lin))
+    atomic_write_bytes(out / "bode.png", L.bode_png(lin))
+    report = L.report_markdown(lin, mode_list, ctrb)
+    atomic_write_text(out / "modes.md", report)
+    atomic_write_text(out / "linearization.json", json.dumps(d, indent=1) + "\n")
+    print(report)
+    print(f"linearization written to {out} (linearization.json, linearization.npz, modes.md, bode.png)")
+    return 0
+
+
+def mpc_command(args) -> int:
+    from ..control import closedloop, scenario
+    from ..foundations.errors import ScenarioError
+    from .simulate import check_output_file, check_output_folder
+
+    overrides = list(args.set or [])
+    if args.solver:
+        overrides.append(f"mpc.solver={args.solver}")
+    if args.jit:
+        overrides.append("mpc.jit=true")
+    terrain_in = getattr(args, "terrain_in", None)
+    terrain_out = getattr(args, "terrain_out", None)
+    plant_kind = getattr(args, "plant", None)
+    if plant_kind is None and terrain_in:
+        plant_kind = "grid"
+    if plant_kind == "homogeneous" and (terrain_in or terrain_out):
+        raise ScenarioError("--terrain-in / --terrain-out need the grid plant; drop --plant homogeneous")
+    sc = scenario.load(args.scenario, overrides, plant_kind)
+    out = check_output_folder(args.out)
+    if terrain_out:
+        check_output_file(terrain_out, "--terrain-out")
+    if terrain_out and sc.terrain is None:
+        raise ScenarioError(f"--terrain-out: scenario {sc.name!r} runs on the homogeneous plant (no [terrain] "
+                            "section); add --plant grid")
+    from ..model import SystemModel
+
+    model = SystemModel()
+    plant = closedloop.make_plant(sc, model, terrain_in)
+    res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
+    if terrain_out:
+        plant.world.storage.save(terrain_out, sc.params)
+        res.summary["terrain_out"] = str(terrain_out)
+    if terrain_in:
+        res.summary["terrain_in"] = str(terrain_in)
+    closedloop.write(out, res)
+    s = res.summary
+    rms = s["rms_lateral_error_m"]
+    print(f"{sc.name}: rms lateral error on straights "
+          f"{'n/a' if rms is None else f'{100 * rms:.2f} cm'}, max {100 * s['max_lateral_error_m']:.1f} cm; "
+          f"solve time median {s['solve_time_median_ms']:.1f} ms, p95 {s['solve_time_p95_ms']:.1f} ms, "
+          f"max {s['solve_time_max_ms']:.1f} ms; failed solves {s['failed_solves']}; plant {s['plant']} "
+          f"{s['plant_wall_time_s']:.1f} s, solver {s['solver_wall_time_s']:.1f} s of wall time; results in {args.out}")
+    return 0
+
+
+def mpc_scenarios_list() -> list[str]:
+    """The built-in MPC scenarios, read from the folder (importing symtrack.control would load
+    CasADi and python-control just to print --help)."""
+    folder = Path(__file__).resolve().parents[1] / "control" / "scenarios"
+    return sorted(p.stem for p in folder.glob("*.toml"))
+
+
+def add_parsers(sub) -> None:
+    """Register the control subcommands on the argparse subparsers of symtrack.cli."""
+    lz = sub.add_parser("linearize", help="trim point + exact linearization (A, B, C, D, modes, Bode plots)")
+    lz.add_argument("--speed", type=float, required=True, help="speed V [m/s]")
+    lz.add_argument("--radius", type=float, default=None, help="turn radius R [m], positive = left (default: straight)")
+    lz.add_argument("--soil", default=DEFAULT_SOIL, help=f"soil preset (default {DEFAULT_SOIL})")
+    lz.add_argument("--vehicle", default=DEFAULT_VEHICLE, help=f"vehicle preset (default {DEFAULT_VEHICLE})")
+    lz.add_argument("--path-frame", action="store_true",
+                    help="straight running only: keep y_m and yaw_rad (lateral offset, heading error)")
+    lz.add_argument("--out", required=True, help="output folder")
+    lz.set_defaults(func=linearize_command)
+    mp = sub.add_parser("mpc", help="closed-loop MPC path tracking (built-in name or TOML file); "
+                        f"built-in: {', '.join(mpc_scenarios_list())}")
+    mp.add_argument("scenario")
+    mp.add_argument("--out", required=True, help="output folder")
+    mp.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="override a scenario value")
+    mp.add_argument("--solver", choices=("ipopt", "fatrop"), help="shorthand for --set mpc.solver=...")
+    mp.add_argument("--jit", action="store_true", help="compile the solver's functions (gcc; cached build dir)")
+    mp.add_argument("--plant", choices=("homogeneous", "grid"),
+                    help="the plant: homogeneous terrain, or the persistent grid terrain (default: grid when the "
+                    "scenario has a [terrain] section; --plant grid adds cell_m = 0.25 m, the field covering the path)")
+    mp.add_argument("--terrain-in", metavar="FILE", help="grid plant: start from a saved terrain (docs/terrain.md)")
+    mp.add_argument("--terrain-out", metavar="FILE", help="grid plant: save the final terrain (docs/terrain.md)")
+    mp.add_argument("--quiet", action="store_true", help="no progress bar")
+    mp.set_defaults(func=mpc_command)

@@ -1,0 +1,105 @@
+"""The ``symtrack`` command line: argument parsing only; every command is a thin call into the
+layers below (:mod:`symtrack.api`, :mod:`symtrack.control`, :mod:`symtrack.bench`, ``codegen``).
+
+Heavy packages (CasADi, matplotlib, python-control) are imported by the commands, not here, so
+that ``symtrack --help`` answers at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from .. import __version__
+from ..foundations.errors import SymtrackError
+
+__all__ = ["main"]
+
+log = logging.getLogger("symtrack")
+
+def simulate_command(args) -> int:
+    from .simulate import simulate_command as run
+
+    return run(args)
+
+
+def scenarios_command(args) -> int:
+    from ..simulation.scenario import builtin_names
+
+    print("\n".join(builtin_names()))
+    return 0
+
+
+def codegen_command(args) -> int:
+    from codegen import cli as codegen_cli
+
+    return codegen_cli.run(args)
+
+
+def bench_command(args) -> int:
+    from ..bench.homogeneous import run_cli
+
+    return run_cli(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="symtrack", description="Tracked vehicle on soil that remembers.")
+    ap.add_argument("--version", action="version", version=f"symtrack {__version__}")
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("simulate", help="run a scenario (built-in name or TOML file)")
+    s.add_argument("scenario")
+    s.add_argument("--out", required=True, help="output folder")
+    s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="override a scenario value")
+    s.add_argument("--integrator", metavar="NAME",
+                   help="shorthand for --set run.integrator=NAME, a name of the integrator registry: cvodes, idas, "
+                   "rosenbrock (compiled fixed-step, docs/codegen.md)")
+    s.add_argument("--compiled", action="store_true",
+                   help="cvodes/idas on the compiled model (--set run.compiled=true)")
+    s.add_argument("--require-compiled", action="store_true",
+                   help="fail instead of falling back to the interpreter when no C compiler is found")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--terrain-in", metavar="FILE", help="continue from a saved grid terrain (docs/terrain.md)")
+    s.add_argument("--terrain-out", metavar="FILE", help="save the grid terrain at the end (docs/terrain.md)")
+    s.set_defaults(func=simulate_command)
+    ls = sub.add_parser("scenarios", help="list the built-in scenarios")
+    ls.set_defaults(func=scenarios_command)
+    cg = sub.add_parser("codegen", help="write the generated C sources (as python -m codegen)")
+    from codegen.cli import add_arguments as codegen_arguments
+
+    codegen_arguments(cg)
+    cg.set_defaults(func=codegen_command)
+    bn = sub.add_parser("bench", help="real-time factors of every integrator, in one process (docs/codegen.md)")
+    from ..bench.homogeneous import add_arguments as bench_arguments
+
+    bench_arguments(bn)
+    bn.set_defaults(func=bench_command)
+    from .control import add_parsers
+
+    add_parsers(sub)  # symtrack linearize, symtrack mpc (docs/control.md)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    if getattr(args, "integrator", None):
+        args.set = (args.set or []) + [f"run.integrator={args.integrator}"]
+    if getattr(args, "compiled", False):
+        args.set = (args.set or []) + ["run.compiled=true"]
+    if getattr(args, "require_compiled", False):
+        from ..build.cache import set_require_compiled
+
+        set_require_compiled(True)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    try:
+        return args.func(args)
+    except SymtrackError as err:
+        print(f"symtrack: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("symtrack: interrupted (Ctrl-C); the results of this run were not written", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,69 @@
+"""``symtrack simulate``: load, check the outputs can be written, simulate, write, report."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..foundations.errors import ScenarioError
+
+__all__ = ["check_output_file", "check_output_folder", "simulate_command"]
+
+
+def check_output_folder(path: str, option: str = "--out") -> Path:
+    """Refuse, before any computation, an output folder that cannot be written."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ScenarioError(f"{option} {path!r} is an existing file, not a folder: give a folder name")
+    probe = p
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ScenarioError(f"{option} {path!r}: {str(probe)!r} is a file, so the folder cannot be created")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise ScenarioError(f"{option} {path!r}: the folder {str(probe)!r} is not writable")
+    return p
+
+
+def check_output_file(path: str, option: str) -> Path:
+    """Refuse, before any computation, an output file that cannot be written."""
+    p = Path(path)
+    if p.is_dir():
+        raise ScenarioError(f"{option} {path!r} is a folder: give a file name (e.g. out/terrain.npz)")
+    check_output_folder(str(p.parent) if str(p.parent) else ".", option)
+    return p
+
+
+def simulate_command(args) -> int:
+    from ..api import simulate
+    from ..simulation.scenario import load_scenario
+
+    sc = load_scenario(args.scenario, args.set or [])
+    out = check_output_folder(args.out)
+    terrain_out = check_output_file(args.terrain_out, "--terrain-out") if args.terrain_out else None
+    if terrain_out is not None and sc.terrain is None:
+        raise ScenarioError(f"--terrain-out: scenario {sc.name!r} has no [terrain] section (it runs on the "
+                            "homogeneous terrain, which has no field to save)")
+    res = simulate(sc, terrain=args.terrain_in, progress=not args.quiet)
+    if terrain_out is not None:
+        res.terrain.save(terrain_out, sc.soil)
+        res.summary["terrain_out"] = str(terrain_out)
+    res.write(out)
+    table = res.validation_table
+    if table is not None:
+        print(table)
+    summ = res.summary
+    if res.terrain is not None:
+        for k, f in enumerate(summ["passes"]):
+            print(f"pass {k + 1}: rut max {f['rut_max_depth_mm']:.3f} mm, mean {f['rut_mean_depth_mm']:.3f} mm, "
+                  f"new sinkage {f['new_sinkage_mean_mm']:.4f} mm, compaction resistance "
+                  f"{f['compaction_resistance_mean_N']:.1f} N")
+        runs = res.runs
+        g = res.terrain.grid
+        print(f"{sc.name}: {sum(r.t[-1] for r in runs):.2f} s simulated in {sum(r.wall_time_s for r in runs):.2f} s "
+              f"on {g.n_cells} cells through {summ['terrain_channels']} channels (peak "
+              f"{max(r.terrain['terrain_peak_active_cells'] for r in runs)} active); results in {out}")
+    else:
+        print(f"{sc.name}: {summ['sim_time_s']:.2f} s simulated in {summ['wall_time_s']:.2f} s "
+              f"({summ['real_time_factor']:.1f} x real time); results in {out}")
+    return 0

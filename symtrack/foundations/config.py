@@ -1,0 +1,152 @@
+"""The configuration grammar shared by every scenario kind: TOML documents, ``--set`` overrides,
+number and key checks, and writing a document back as TOML.
+
+A scenario document is read once, by :func:`read_document` (a built-in name of a scenario
+package or a file path, then the overrides), and its sections are checked by the schema of
+its kind (:mod:`symtrack.simulation.scenario`, :mod:`symtrack.control.scenario`) with the
+helpers here, so that every error names the key, the value and the allowed range.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from importlib import resources
+from pathlib import Path
+
+from .errors import ScenarioError
+
+__all__ = ["number", "integer", "check_keys", "parse_override", "apply_overrides", "builtin_names",
+           "read_document", "to_toml"]
+
+
+def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
+    """A finite number in [low, high] (or (low, high]); the error names where, the value and the range."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(f"{where} = {value!r} must be a number")
+    v = float(value)
+    ok = (v > low if low_open else v >= low) and v <= high and math.isfinite(v)
+    if not ok:
+        lb = "(" if low_open else "["
+        raise ScenarioError(f"{where} = {value!r} is outside the allowed range {lb}{low:g}, {high:g}]")
+    return v
+
+
+def integer(where: str, value, low: int, high: int) -> int:
+    """An integer in [low, high] (a float with an integer value is accepted, as TOML writes 3.0)."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ScenarioError(f"{where} = {value!r} must be an integer in [{low}, {high}]")
+    return value
+
+
+def check_keys(section: str, table, allowed: Iterable[str]) -> None:
+    """Unknown keys of a table are errors that list the allowed ones."""
+    allowed = list(allowed)
+    if not isinstance(table, dict):
+        raise ScenarioError(f"[{section}] must be a table, got {table!r}")
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise ScenarioError(
+            f"unknown key(s) in [{section}]: {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+
+
+def parse_override(item: str) -> tuple[str, str, object]:
+    """``section.key=value`` -> (section, key, value); the value is read as TOML, else as a string."""
+    if not isinstance(item, str) or "=" not in item or "." not in item.split("=", 1)[0]:
+        raise ScenarioError(f"--set {item!r}: expected section.key=value, e.g. run.integrator=idas")
+    key, raw = item.split("=", 1)
+    section, name = key.strip().split(".", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return section, name.strip(), value
+
+
+def apply_overrides(doc: dict, overrides) -> dict:
+    """Apply ``--set`` overrides (strings ``section.key=value``, or a mapping ``{"section.key":
+    value}`` whose values are Python values) to a document, in place; returns it."""
+    if overrides is None:
+        return doc
+    if isinstance(overrides, Mapping):
+        items = []
+        for key, value in overrides.items():
+            if not isinstance(key, str) or "." not in key:
+                raise ScenarioError(f"override {key!r}: expected a 'section.key' name, e.g. 'run.integrator'")
+            section, name = key.split(".", 1)
+            items.append((f"{key}={value!r}", section.strip(), name.strip(), value))
+    else:
+        if isinstance(overrides, str):
+            raise ScenarioError(f"overrides = {overrides!r}: give a list of 'section.key=value' strings or a dict")
+        items = [(item, *parse_override(item)) for item in overrides]
+    for item, section, key, value in items:
+        if section == "torque":
+            raise ScenarioError("--set cannot change [[torque]] entries; write a scenario file instead")
+        doc.setdefault(section, {})
+        if not isinstance(doc[section], dict):
+            raise ScenarioError(f"--set {item!r}: [{section}] is not a table")
+        doc[section][key] = value
+    return doc
+
+
+def builtin_names(package: str) -> list[str]:
+    """The scenario names (TOML files) of a scenario package."""
+    return sorted(p.name[:-5] for p in resources.files(package).iterdir() if p.name.endswith(".toml"))
+
+
+def read_document(name_or_path: str, package: str, kind: str = "scenario", overrides=None) -> tuple[dict, str]:
+    """A scenario document by built-in name (of ``package``) or by TOML file path, with the
+    overrides applied. Returns (document, default name). ``kind`` names the scenario kind in
+    messages."""
+    if not isinstance(name_or_path, (str, Path)):
+        raise ScenarioError(f"{kind} {name_or_path!r}: give a built-in name or a TOML file path")
+    name_or_path = str(name_or_path)
+    path = Path(name_or_path)
+    names = builtin_names(package)
+    if path.suffix == ".toml" or (name_or_path not in names and path.exists()):
+        if not path.is_file():
+            raise ScenarioError(f"{kind} file {str(path)!r} does not exist")
+        text, default_name = path.read_text(), path.stem
+    elif name_or_path in names:
+        text = resources.files(package).joinpath(name_or_path + ".toml").read_text()
+        default_name = name_or_path
+    else:
+        raise ScenarioError(f"{kind} {name_or_path!r} is neither a file nor a built-in {kind}; "
+                            f"built-in: {', '.join(names)}")
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"{name_or_path}: not valid TOML: {err}") from err
+    return apply_overrides(doc, overrides), default_name
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def to_toml(d: dict) -> str:
+    """Write a document (tables, arrays of tables, scalars) as TOML."""
+    lines = []
+    for k, v in d.items():
+        if not isinstance(v, (dict, list)) or (isinstance(v, list) and v and not isinstance(v[0], dict)):
+            lines.append(f"{k} = {_toml_value(v)}")
+    for k, v in d.items():
+        if isinstance(v, dict):
+            lines.append(f"\n[{k}]")
+            lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items() if vv is not None]
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                lines.append(f"\n[[{k}]]")
+                lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in item.items() if vv is not None]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,128 @@
+"""The compiled fixed-step Rosenbrock integrator for the grid terrain (``run.integrator =
+"rosenbrock"`` with a ``[terrain]`` section).
+
+The step is :mod:`symtrack.build.grid_rosenbrock` (8-stage L-stable Rosenbrock on the DAE form, the
+channels eliminated through the arrowhead's Schur complement, ``map`` over the channels). Its C
+source is generated on first use for the pool size and the number of steps per call, compiled
+into ``<cache>/grid-<hash>/`` (the cache of :mod:`symtrack.build.cache`; the key hashes the
+serialised Function) and loaded with ``casadi.external``. The sources are not committed: they
+depend on the pool size M^2. Without a C compiler the same Function runs on CasADi's
+interpreter (slow; an error with ``--require-compiled``).
+
+Every macro step of the world manager (one output step) is one call: n equal steps of at most
+``run.fixed_step_s``, the algebraic state first made consistent for the (possibly reset) channels.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import tempfile
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ..build.cache import cache_root, compile_sources, compiler
+from ..build.grid_rosenbrock import build
+from ..foundations.errors import SimulationError
+from ..model.vehicle import VEHICLE_STATES
+from ..terrain.channels import NF, NG
+from .settings import substeps
+
+__all__ = ["MAX_STEP_S", "PACK_SLOTS", "GridRosenbrockStepper", "grid_library"]
+
+log = logging.getLogger("symtrack.terrain")
+
+NV = len(VEHICLE_STATES)
+BUILD_VERSION = 1
+# the active channels are packed into calls of a multiple of PACK_SLOTS slots (one compiled library
+# per size met: at most 64 - 1 idle slots evaluated)
+PACK_SLOTS = 64
+# The largest step measured to work on the grid (docs/terrain.md, "Speed"): at 1.25 ms the
+# validation on the million-cell field diverged (a linearly-implicit step freezes the Jacobian,
+# and the regularised Bekker slope of a cell that starts loading from z = 0 is very steep and
+# falls fast); at 0.625 ms every figure agrees with IDAS.
+MAX_STEP_S = 0.000625
+
+
+def grid_library(opts, n_channels: int, n_steps: int, compiled: bool = True):
+    """(Function, compiled?) of ``grid_rosenbrock`` for n_channels channels and n_steps steps per call."""
+    f = build(opts, n_channels, n_steps)["multi"]
+    if not compiled:
+        return f, False
+    cc = compiler()
+    if cc is None:
+        return f, False
+    key = hashlib.sha256(f.serialize().encode() + f"{ca.__version__}/{BUILD_VERSION}".encode()).hexdigest()[:16]
+    folder = cache_root() / f"grid-{key}"
+    so = folder / "libgrid_rosenbrock.so"
+    if not so.exists():
+        with tempfile.TemporaryDirectory(prefix="symtrack-gridgen-") as scratch:
+            cg = ca.CodeGenerator("grid_rosenbrock.c", {"with_header": True})
+            cg.add(f)
+            cg.generate(str(Path(scratch)) + "/")
+            sources = {n: (Path(scratch) / n).read_bytes() for n in ("grid_rosenbrock.c", "grid_rosenbrock.h")}
+        if b"#error" in sources["grid_rosenbrock.c"]:
+            raise SimulationError("the generated grid integrator is not exportable (#error in grid_rosenbrock.c)")
+        log.info("compiling the grid integrator (%d channels, %d steps per call) into %s", n_channels, n_steps, so)
+        compile_sources(sources, so, cc)
+    return ca.external(f.name(), str(so)), True
+
+
+class GridRosenbrockStepper:
+    """The :class:`~symtrack.integrators.settings.Stepper` interface for the world of the grid
+    terrain (one macro step per call)."""
+
+    def __init__(self, model, settings, n_channels: int, compiled: bool = True):
+        self.model, self.settings, self.n = model, settings, n_channels
+        self.want_compiled = compiled
+        self._f: dict[tuple[int, int], ca.Function] = {}
+        self.compiled = None
+        self.z = None
+        self.nsteps = 0
+        self.ncalls = 0
+
+    def function(self, slots: int, n_steps: int) -> ca.Function:
+        f = self._f.get((slots, n_steps))
+        if f is None:
+            f, self.compiled = grid_library(self.model.opts, slots, n_steps, self.want_compiled)
+            self._f[(slots, n_steps)] = f
+        return f
+
+    def reset(self):
+        """Nothing to forget: each call makes the algebraic state consistent first."""
+
+    def stats(self) -> dict:
+        return {"nsteps": self.nsteps, "n_calls": self.ncalls, "compiled": bool(self.compiled)}
+
+    def step(self, x, u, p, dt: float):
+        """One macro step. Only the active channels are integrated (an idle channel is inert: its
+        derivatives are zero), packed in channel order into a call with the next multiple
+        of PACK_SLOTS slots (the spare slots idle); the channel identity is kept."""
+        x, p = np.asarray(x, dtype=float), np.asarray(p, dtype=float)
+        n = substeps(dt, self.settings.fixed_step_s)
+        npv = p.size - NG - NF * self.n
+        qc = p[npv + NG:].reshape(self.n, NF)
+        act = np.nonzero(qc[:, 4] != 0.0)[0]
+        cap = min(PACK_SLOTS * max(1, -(-act.size // PACK_SLOTS)), self.n)
+        f = self.function(cap, n)
+        xc = x[NV:].reshape(self.n, 2)
+        xc_p = np.zeros((cap, 2))
+        xc_p[:act.size] = xc[act]
+        q_p = np.zeros((cap, NF))
+        q_p[:act.size] = qc[act]
+        z0 = self.z if self.z is not None else np.array(self.model.accel(x, u, p)).ravel()
+        xc1, w1 = f(xc_p.ravel(), np.concatenate([x[:NV], z0]), u, np.concatenate([p[:npv + NG], q_p.ravel()]),
+                    dt / n)
+        w1 = np.array(w1).ravel()
+        xc_new = xc.copy()
+        xc_new[act] = np.array(xc1).reshape(cap, 2)[:act.size]
+        out = np.concatenate([w1[:NV], xc_new.ravel()])
+        if not np.all(np.isfinite(out)):
+            raise SimulationError("the grid rosenbrock integrator returned a non-finite state "
+                                  f"(step {dt / n:g} s: lower run.fixed_step_s)")
+        self.z = w1[NV:]
+        self.nsteps += n
+        self.ncalls += 1
+        return out

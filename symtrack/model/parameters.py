@@ -1,0 +1,101 @@
+"""The registry of model parameters: names (with units), meaning and allowed range.
+
+Values do NOT live here: they live in the parameter sets of :mod:`symtrack.presets`, each
+with its source. This module only says which parameters exist and which values are legal,
+so that a misspelt key or a negative mass fails with a message that names the key, the value
+and the allowed range.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..foundations.errors import ParameterError
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    name: str
+    description: str
+    low: float
+    high: float
+    low_inclusive: bool = True
+
+    def check(self, value: object, where: str = "") -> float:
+        label = f"{where}.{self.name}" if where else self.name
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParameterError(f"{label} = {value!r} is not a number ({self.description})")
+        v = float(value)
+        ok_low = v >= self.low if self.low_inclusive else v > self.low
+        if not math.isfinite(v) or not ok_low or v > self.high:
+            lb = "[" if self.low_inclusive else "("
+            raise ParameterError(
+                f"{label} = {value!r} is outside the allowed range {lb}{self.low:g}, {self.high:g}] "
+                f"({self.description})"
+            )
+        return v
+
+
+def _spec(name, description, low, high, low_inclusive=True):
+    return ParamSpec(name, description, low, high, low_inclusive)
+
+
+VEHICLE_PARAMS: tuple[ParamSpec, ...] = (
+    _spec("mass_kg", "vehicle mass", 0.0, 1e6, False),
+    _spec("yaw_inertia_kg_m2", "yaw moment of inertia about the CG", 0.0, 1e8, False),
+    _spec("track_gauge_m", "distance B between the track centre-lines", 0.0, 20.0, False),
+    _spec("track_width_m", "track width b", 0.0, 5.0, False),
+    _spec("contact_length_m", "track contact length l", 0.0, 20.0, False),
+    _spec("sprocket_radius_m", "sprocket pitch radius r", 0.0, 5.0, False),
+    _spec("cg_height_m", "CG height h above the ground", 0.0, 10.0),
+    _spec("cg_ahead_of_contact_centre_m", "CG offset e ahead of the contact centre", -5.0, 5.0),
+    _spec("sprocket_inertia_kg_m2", "equivalent inertia J_eq per side (sprocket, idler, rollers, track)",
+          0.0, 1e5, False),
+    _spec("torque_time_constant_s", "time constant tau_T of the first-order torque actuator", 0.0, 100.0, False),
+    _spec("internal_resistance_const", "Wong's internal resistance R_in/W_k, speed-independent part", 0.0, 1.0),
+    _spec("internal_resistance_per_km_h", "Wong's internal resistance R_in/W_k per km/h of track speed",
+          0.0, 0.1),
+    _spec("lateral_friction_coeff", "lateral friction coefficient mu_t between track and soil", 0.0, 5.0),
+    _spec("lateral_creep_speed_m_s", "lateral slip speed eps_v at which friction reaches tanh(1) of mu_t",
+          0.0, 10.0, False),
+    _spec("drawbar_pull_N", "drawbar pull P (external resistance at the hitch)", 0.0, 1e7),
+    _spec("hitch_height_m", "height h_d of the drawbar hitch", 0.0, 10.0),
+)
+
+SOIL_PARAMS: tuple[ParamSpec, ...] = (
+    _spec("bekker_n", "Bekker sinkage exponent n", 0.0, 3.0, False),
+    _spec("k_c_N_per_m_n1", "Bekker cohesive modulus k_c [N/m^(n+1)]", 0.0, 1e9),
+    _spec("k_phi_N_per_m_n2", "Bekker frictional modulus k_phi [N/m^(n+2)]", 0.0, 1e12),
+    _spec("cohesion_Pa", "Mohr-Coulomb cohesion c", 0.0, 1e7),
+    _spec("friction_angle_rad", "Mohr-Coulomb internal friction angle phi", 0.0, 1.5),
+    _spec("shear_modulus_K_m", "Janosi-Hanamoto shear deformation modulus K", 0.0, 1.0, False),
+    _spec("elastic_stiffness_Pa_per_m", "unloading/reloading stiffness K_e (Chrono SCM's elastic stiffness)",
+          0.0, 1e12, False),
+    _spec("unloading_stiffness_floor", "kappa: the unloading slope is at least kappa * p_max / z_max",
+          1.0, 100.0),
+    _spec("cell_areal_mass_kg_per_m2", "tau_z of seed eq. (4): areal mass of a terrain cell", 0.0, 1e5, False),
+    _spec("cell_damping_Pa_s_per_m", "c'' of seed eq. (4): areal damping of a terrain cell", 0.0, 1e9),
+)
+
+VEHICLE_PARAM_NAMES = tuple(s.name for s in VEHICLE_PARAMS)
+SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS)
+_ALL = {s.name: s for s in VEHICLE_PARAMS + SOIL_PARAMS}
+
+
+def spec(name: str) -> ParamSpec:
+    return _ALL[name]
+
+
+def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str) -> dict[str, float]:
+    """Validate a complete parameter set: no unknown key, no missing key, every value in range."""
+    names = [s.name for s in specs]
+    unknown = sorted(set(values) - set(names))
+    if unknown:
+        raise ParameterError(
+            f"unknown parameter(s) in {where}: {', '.join(unknown)}; allowed: {', '.join(names)}"
+        )
+    missing = [n for n in names if n not in values]
+    if missing:
+        raise ParameterError(f"missing parameter(s) in {where}: {', '.join(missing)}")
+    return {s.name: s.check(values[s.name], where) for s in specs}

@@ -1,0 +1,41 @@
+"""The vehicle at rest: the static equilibrium of a model's terrain cells at a given pose."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..foundations.errors import SimulationError
+from .cell import k_eq
+from .system import SystemModel
+from .vehicle import GRAVITY_M_S2, VEHICLE_STATES
+
+__all__ = ["static_state"]
+
+
+def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0) -> np.ndarray:
+    """The vehicle at rest at the given pose with its terrain cells in static equilibrium.
+
+    Solved with a CasADi Newton root-finder on the model's own cell equations (rates zero).
+    """
+    nv = len(VEHICLE_STATES)
+    x = np.zeros(model.nx)
+    x[0], x[1], x[2] = x_m, y_m, yaw_rad
+    cell_idx = list(range(nv, model.nx, 2))
+    rate_idx = [i + 1 for i in cell_idx]
+    zc = ca.SX.sym("zc", len(cell_idx))
+    xs = ca.SX(ca.DM(x))
+    for k, i in enumerate(cell_idx):
+        xs[i] = zc[k]
+    p = model.param_vector(params)
+    resid = model.ode(xs, ca.DM.zeros(2), p)[rate_idx]
+    rf = ca.rootfinder("static", "newton", ca.Function("g", [zc], [resid]), {"abstol": 1e-12, "max_iter": 200})
+    keq = k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])
+    p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
+    z_guess = (p_mean / keq) ** (1 / params["bekker_n"])
+    try:
+        sol = np.array(rf(np.full(len(cell_idx), z_guess))).ravel()
+    except RuntimeError as err:
+        raise SimulationError(f"no static equilibrium of the terrain cells: {err}") from err
+    x[cell_idx] = sol
+    return x

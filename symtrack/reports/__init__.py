@@ -1,0 +1,1 @@
+"""Reports: plots, the validation table, the files of a run."""

@@ -1,0 +1,157 @@
+"""The one time loop: any plant, the output grid, the torque programme, the stop rules,
+progress, Ctrl-C and the errors, written once.
+
+The output grid is k * output_dt_s (no accumulated round-off), split at the torque changes, up
+to ``run.duration_s``. The stop-at-distance rule (``run.stop_after_distance_m``, counted from
+the ``run.stop_distance_event``) shortens the last interval so that the run ends at the
+distance (three secant refinements, :meth:`Plant.retry`). A plant that advances many intervals
+per call (:class:`~symtrack.simulation.plants.BatchPlant`) gets short batches near the stopping
+distance, so that little is computed past it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..foundations.errors import SimulationError
+from ..foundations.interrupt import raise_if_interrupted, watch_interrupts
+from ..foundations.progress import Progress
+from .result import RunResult
+
+__all__ = ["OutputGrid", "run"]
+
+
+class OutputGrid:
+    """The output intervals of a scenario: (t0, t1, u) with u the torque commands in force."""
+
+    def __init__(self, scenario):
+        run = scenario.run
+        self.dt, self.duration = run.output_dt_s, run.duration_s
+        self.changes = [e.t_s for e in scenario.torque[1:]]
+        self.scenario = scenario
+        self.t = 0.0
+
+    def take(self, n: int) -> list[tuple[float, float, np.ndarray]]:
+        """The next n intervals (fewer at the end; none when the grid is exhausted)."""
+        out = []
+        t, dt = self.t, self.dt
+        while len(out) < n and t < self.duration - 1e-12:
+            t_next = min(float(np.floor(t / dt + 1e-9) + 1) * dt, self.duration)
+            for tc in self.changes:
+                if t + 1e-12 < tc < t_next - 1e-12:
+                    t_next = tc
+            out.append((t, t_next, np.array(self.scenario.torque_at(t))))
+            t = t_next
+        self.t = t
+        return out
+
+
+def _xy_dist(a, b) -> float:
+    return float(np.hypot(a[0] - b[0], a[1] - b[1]))
+
+
+def run(scenario, plant, progress: bool = False, label: str | None = None) -> RunResult:
+    """Drive ``plant`` through ``scenario``'s torque programme until its stop rule.
+
+    Parameters
+    ----------
+    scenario : symtrack.simulation.scenario.Scenario
+    plant : symtrack.simulation.plants.Plant
+        A plant not yet started; the loop starts it at the scenario's start pose and finishes
+        it at the end (the grid lifts the vehicle off), also when the run fails.
+    progress : bool
+        Show a progress bar (or log lines when stderr is no terminal).
+
+    Returns
+    -------
+    RunResult
+    """
+    run_cfg = scenario.run
+    dt = run_cfg.output_dt_s
+    dist_from = target = None
+    if run_cfg.stop_after_distance_m is not None:
+        target = run_cfg.stop_after_distance_m
+        dist_from = scenario.event_time(run_cfg.stop_distance_event) if run_cfg.stop_distance_event else 0.0
+    names = plant.state_names
+    iu, iv = names.index("u_m_s"), names.index("v_m_s")
+    st = scenario.start
+    u0 = np.array(scenario.torque_at(0.0))
+    grid = OutputGrid(scenario)
+    bar = Progress(1.0, label or scenario.name, enabled=progress)
+    with watch_interrupts():
+        x, y = plant.start(st.x_m, st.y_m, math.radians(st.yaw_deg), u0)
+        ts, xs, us, ys = [np.zeros(1)], [x[None, :]], [u0[None, :]], [y[None, :]]
+        t, dist, stopped_by = 0.0, 0.0, "duration"
+        wall0 = time.perf_counter()
+        try:
+            while True:
+                n = plant.max_intervals
+                if dist_from is not None and t >= dist_from and plant.short_intervals < n:
+                    speed = float(np.hypot(x[iu], x[iv]))
+                    if (target - dist) / max(speed, 1e-3) / dt <= 1.2 * n:
+                        n = plant.short_intervals
+                ivs = grid.take(n)
+                if not ivs:
+                    break
+                try:
+                    plant.synchronize([(t1 - t0, u) for t0, t1, u in ivs])
+                    X = plant.advance()
+                    hit = None
+                    if dist_from is not None:
+                        for k, (_, t1, _) in enumerate(ivs):
+                            if t1 > dist_from + 1e-12:
+                                d = _xy_dist(X[k], x if k == 0 else X[k - 1])
+                                if dist + d >= target:
+                                    hit = k
+                                    break
+                                dist += d
+                    if hit is None:
+                        Y = plant.commit(len(ivs))
+                        times = np.array([t1 for _, t1, _ in ivs])
+                    else:
+                        # shorten the last interval so the run ends at the distance (three secant refinements)
+                        t0, t1, _ = ivs[hit]
+                        prev = x if hit == 0 else X[hit - 1]
+                        d_step = _xy_dist(X[hit], prev)
+                        h = t1 - t0
+                        for _ in range(3):
+                            if d_step <= 0:
+                                break
+                            h *= (target - dist) / d_step
+                            X[hit] = plant.retry(hit, h)
+                            d_step = _xy_dist(X[hit], prev)
+                        dist += d_step
+                        Y = plant.commit(hit + 1)
+                        X = X[:hit + 1]
+                        times = np.array([t1 for _, t1, _ in ivs[:hit]] + [t0 + h])
+                        stopped_by = "distance"
+                except SimulationError:
+                    raise_if_interrupted()
+                    raise
+                k = len(times)
+                ts.append(times)
+                xs.append(np.array(X[:k]))
+                us.append(np.array([u for _, _, u in ivs[:k]]))
+                ys.append(np.array(Y[:k]))
+                t, x = float(times[-1]), xs[-1][-1]
+                frac = t / run_cfg.duration_s
+                if dist_from is not None:
+                    frac = max(frac, dist / target)
+                bar.update(frac, f"t={t:.2f} s" + (f" d={dist:.2f} m" if dist_from is not None else ""))
+                if stopped_by == "distance":
+                    break
+        finally:
+            bar.close()
+            wall = time.perf_counter() - wall0
+            plant.finish()
+    if dist_from is not None and stopped_by != "distance":
+        raise SimulationError(
+            f"the run reached run.duration_s = {run_cfg.duration_s} s before covering "
+            f"run.stop_after_distance_m = {target} m (covered {dist:.2f} m); raise duration_s")
+    figures = plant.figures()
+    return RunResult(scenario, np.concatenate(ts), np.vstack(xs), np.vstack(us), np.vstack(ys),
+                     tuple(plant.state_names), tuple(plant.output_names), wall, stopped_by, plant.stats(),
+                     figures or None)

@@ -1,0 +1,94 @@
+"""Passes over the grid terrain: one world, several runs, the figures of each pass.
+
+summary.json of a terrain study (``schema_version`` 1): the run's summary keys of the last
+pass, the terrain figures (``terrain_*``), and ``passes``: a list with, per pass,
+``rut_max_depth_mm``, ``rut_mean_depth_mm`` (mean sinkage over the rut: the cells loaded in
+the pass, z_max > 1 um), ``new_sinkage_mean_mm`` (mean sinkage added by the pass over the rut),
+``new_sinkage_volume_m3``, ``compaction_resistance_mean_N`` (time mean of the sum of both
+tracks' compaction resistance), ``rut_cells``, ``distance_m``, ``sim_time_s``,
+``wall_time_s``; with several passes also ``later_passes_add_less_sinkage`` and
+``later_passes_meet_less_resistance``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..terrain.world import World
+from . import loop
+from .plants import GridPlant
+from .result import RunResult, summarise
+
+__all__ = ["RUT_THRESHOLD_M", "PassStudy", "pass_figures", "run_passes", "study_summary"]
+
+RUT_THRESHOLD_M = 1e-6
+
+
+@dataclass
+class PassStudy:
+    """The passes of a terrain study: one :class:`RunResult` per pass, its figures, the
+    sinkage map after it ((nx, ny) arrays), and the world they ran on."""
+
+    world: World
+    runs: list
+    figures: list
+    maps: list
+
+
+def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np.ndarray) -> dict:
+    """The figures of one pass (module doc) from the storage before and after it."""
+    st = world.storage
+    z = st.z
+    rut = touched & (st.zmax > RUT_THRESHOLD_M)
+    dz = z - z_before
+    area = world.grid.cell_m ** 2
+    rc = res.output("compaction_resistance_left_N") + res.output("compaction_resistance_right_N")
+    tt = res.t
+    rc_mean = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * np.diff(tt)) / (tt[-1] - tt[0])) if tt[-1] > tt[0] else 0.0
+    seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))
+    return {
+        "rut_max_depth_mm": 1e3 * float(z[rut].max()) if rut.any() else 0.0,
+        "rut_mean_depth_mm": 1e3 * float(z[rut].mean()) if rut.any() else 0.0,
+        "new_sinkage_mean_mm": 1e3 * float(dz[rut].mean()) if rut.any() else 0.0,
+        "new_sinkage_volume_m3": float(dz.sum() * area),
+        "compaction_resistance_mean_N": rc_mean,
+        "rut_cells": int(rut.sum()),
+        "distance_m": float(seg.sum()),
+        "sim_time_s": float(res.t[-1]),
+        "wall_time_s": float(res.wall_time_s),
+    }
+
+
+def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: bool = False) -> PassStudy:
+    """All passes of the scenario (``terrain.passes`` unless given) with one grid plant."""
+    world = plant.world
+    n = passes if passes is not None else (scenario.terrain.passes if scenario.terrain is not None else 1)
+    study = PassStudy(world, [], [], [])
+    for k in range(n):
+        z0 = world.storage.z.copy()
+        label = scenario.name if n == 1 else f"{scenario.name} pass {k + 1}/{n}"
+        res = loop.run(scenario, plant, progress=progress, label=label)
+        study.figures.append(pass_figures(world, z0, res, world.touched.copy()))
+        study.maps.append(world.storage.copy_z())
+        study.runs.append(res)
+    return study
+
+
+def study_summary(study: PassStudy) -> tuple[dict, list[dict]]:
+    """(the study's summary.json, the summary of each pass)."""
+    summaries = []
+    for res, fig in zip(study.runs, study.figures, strict=True):
+        s = summarise(res)
+        s.update(fig)
+        summaries.append(s)
+    top = dict(summaries[-1])
+    top["passes"] = list(study.figures)
+    if len(study.runs) > 1:
+        pairs = list(zip(study.figures[:-1], study.figures[1:], strict=False))
+        top["later_passes_add_less_sinkage"] = all(
+            b["new_sinkage_mean_mm"] < a["new_sinkage_mean_mm"] for a, b in pairs)
+        top["later_passes_meet_less_resistance"] = all(
+            b["compaction_resistance_mean_N"] < a["compaction_resistance_mean_N"] for a, b in pairs)
+    return top, summaries

@@ -1,0 +1,343 @@
+"""Plants: what the time loop (and the closed loop of :mod:`symtrack.control`) drives.
+
+A plant is the vehicle on a terrain with an integrator. Every plant has the same protocol
+(:class:`Plant`), with two phases per step as Chrono::Vehicle's subsystems have
+(Synchronize, then Advance):
+
+1. :meth:`Plant.synchronize` hands the plant the coming output intervals (length and sprocket
+   torque commands of each). The grid terrain's world manager does its per-step work here:
+   footprint, release, channel assignment, INFO_IN.
+2. :meth:`Plant.advance` integrates over them tentatively and returns the states at their
+   ends; :meth:`Plant.retry` integrates one of them again with another length (the stop rule's
+   secant refinement); :meth:`Plant.commit` accepts the first k intervals and returns their
+   outputs (the grid: INFO_OUT, the coverage check).
+
+A plant reports ``state_names`` (the states it exposes: the homogeneous model's full state, or
+the 12 vehicle states of the grid, whose channel slots stay inside) and ``output_names``.
+``max_intervals`` is how many output intervals one :meth:`advance` may cover: 1 for the
+adaptive integrators and the grid, many for the compiled fixed-step batch (256 steps per call
+of the generated C).
+
+- :class:`StepPlant`: the homogeneous terrain with a per-step integrator (CVODES, IDAS);
+- :class:`BatchPlant`: the homogeneous terrain with a batch stepper (compiled Rosenbrock);
+- :class:`GridPlant`: the persistent grid terrain (a :class:`~symtrack.terrain.world.World`)
+  with its integrator (IDAS, compiled Rosenbrock);
+- :func:`make_plant`: the plant a scenario asks for (the integrator from the registry).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+import numpy as np
+
+from ..foundations.errors import SimulationError
+from ..integrators import registry
+from ..integrators.settings import IntegratorSettings, substeps
+from ..integrators.unload import unloader
+from ..model import SystemModel
+from ..model.static import static_state
+from ..model.vehicle import VEHICLE_STATES
+from ..terrain.settings import TerrainSettings
+from ..terrain.world import World, open_world
+
+__all__ = ["BatchPlant", "GridPlant", "Plant", "StepPlant", "advance_plant", "make_plant", "make_grid_plant"]
+
+NV = len(VEHICLE_STATES)
+
+
+class Plant(Protocol):
+    """The protocol of every plant (module doc). ``intervals`` are (length_s, u) pairs."""
+
+    kind: str
+    model: SystemModel
+    state_names: tuple
+    output_names: tuple
+    max_intervals: int
+    short_intervals: int
+
+    def start(self, x_m: float, y_m: float, yaw_rad: float, u0, state=None) -> tuple[np.ndarray, np.ndarray]:
+        """Set the vehicle down at rest at the pose (cells settled); with ``state`` (values of
+        ``state_names``), continue from that state instead. Returns (state, outputs at u0)."""
+
+    def synchronize(self, intervals) -> None:
+        """Phase 1: the coming intervals, consecutive from the committed state."""
+
+    def advance(self) -> np.ndarray:
+        """Phase 2: the states at the ends of the synchronized intervals (tentative), (n, nx)."""
+
+    def retry(self, k: int, length_s: float) -> np.ndarray:
+        """Interval k again, from the end of interval k - 1, with another length; returns its end state."""
+
+    def commit(self, k: int) -> np.ndarray:
+        """Accept the first k intervals (the last as advanced or retried); their outputs, (k, ny)."""
+
+    def finish(self) -> None:
+        """The end of a run (the grid lifts the vehicle off)."""
+
+    def figures(self) -> dict:
+        """Figures of the terrain for the summary ({} for the homogeneous terrain)."""
+
+    def stats(self) -> dict:
+        """Integrator counters."""
+
+
+class StepPlant:
+    """The homogeneous terrain with a per-step integrator (one interval per advance)."""
+
+    kind = "homogeneous"
+    max_intervals = short_intervals = 1
+
+    def __init__(self, model: SystemModel, params: dict, stepper):
+        self.model, self.params, self.stepper = model, dict(params), stepper
+        self.p = model.param_vector(params)
+        self.state_names = tuple(model.state_names)
+        self.output_names = tuple(model.output_names)
+        self.x = None
+
+    def _outputs(self, x, u):
+        return np.array(self.model.outputs(x, u, self.p)).ravel()
+
+    def start(self, x_m, y_m, yaw_rad, u0, state=None):
+        if state is None:
+            x = static_state(self.model, self.params, x_m, y_m, yaw_rad)
+        else:
+            x = np.array(state, dtype=float)
+            if x.shape != (self.model.nx,):
+                raise SimulationError(f"{type(self).__name__}.start: expected {self.model.nx} states, got {x.shape}")
+        self.stepper.reset()
+        self.x = x
+        return x, self._outputs(x, np.asarray(u0, dtype=float))
+
+    def synchronize(self, intervals):
+        if len(intervals) != 1:
+            raise SimulationError(f"{type(self).__name__} advances one interval at a time, got {len(intervals)}")
+        if self.x is None:
+            raise SimulationError(f"{type(self).__name__}: start the plant before stepping it")
+        (self.h, u), = intervals
+        self.u = np.asarray(u, dtype=float)
+
+    def advance(self):
+        self.x_new = self.stepper.step(self.x, self.u, self.p, self.h)
+        return self.x_new[None, :]
+
+    def retry(self, k, length_s):
+        self.x_new = self.stepper.step(self.x, self.u, self.p, length_s)
+        return self.x_new
+
+    def commit(self, k):
+        self.x = self.x_new
+        return self._outputs(self.x, self.u)[None, :]
+
+    def finish(self):
+        pass
+
+    def figures(self):
+        return {}
+
+    def stats(self):
+        return self.stepper.stats()
+
+
+class BatchPlant:
+    """The homogeneous terrain with a batch stepper (:class:`~symtrack.integrators.fixed_step.FixedStepper`):
+    many output intervals per advance, their equal steps of at most ``fixed_step_s`` packed into
+    calls of the generated C (256 steps per call, 16 for a short batch)."""
+
+    kind = "homogeneous"
+
+    def __init__(self, model: SystemModel, params: dict, stepper, output_dt_s: float):
+        self.model, self.params, self.stepper = model, dict(params), stepper
+        self.p = np.array(model.param_vector(params), dtype=float)
+        self.state_names = tuple(model.state_names)
+        self.output_names = tuple(model.output_names)
+        self.big, self.short = max(stepper.sizes), min(stepper.sizes)
+        per = substeps(output_dt_s, stepper.settings.fixed_step_s)
+        self.max_intervals = max(1, self.big // per)
+        self.short_intervals = max(1, self.short // per)
+        self.outputs_f = stepper.lib.f("outputs")
+        self.x = self.z = None
+
+    def _outputs(self, x, u):
+        return np.array(self.outputs_f(x, u, self.p)).ravel()
+
+    def start(self, x_m, y_m, yaw_rad, u0, state=None):
+        u0 = np.asarray(u0, dtype=float)
+        x = static_state(self.model, self.params, x_m, y_m, yaw_rad) if state is None else np.array(state, float)
+        self.x, self.z = x, self.stepper.consistent_z(x, u0, self.p)
+        return x, self._outputs(x, u0)
+
+    def synchronize(self, intervals):
+        if self.x is None:
+            raise SimulationError("BatchPlant: start the plant before stepping it")
+        self.intervals = [(float(h), np.asarray(u, dtype=float)) for h, u in intervals]
+
+    def advance(self):
+        fs = self.stepper.settings.fixed_step_s
+        hs, ui, ends = [], [], []
+        for i, (h, _) in enumerate(self.intervals):
+            n = substeps(h, fs)
+            hs += [h / n] * n
+            ui += [i] * n
+            ends.append(len(hs) - 1)
+        n_cols = self.short if len(hs) <= self.short else self.big
+        U_all = np.array([self.intervals[i][1] for i in ui])
+        H_all = np.array(hs)
+        x, z = self.x, self.z
+        Xe, Ze, Ye = [], [], []
+        ends_set = {e: k for k, e in enumerate(ends)}
+        for c0 in range(0, len(hs), n_cols):
+            c1 = min(c0 + n_cols, len(hs))
+            X, Z, Y = self.stepper.run_chunk(n_cols, x, z, U_all[c0:c1], H_all[c0:c1], self.p)
+            k = c1 - c0
+            x, z = X[k - 1].copy(), Z[k - 1].copy()
+            for col in range(c0, c1):
+                if col in ends_set:
+                    Xe.append(X[col - c0].copy())
+                    Ze.append(Z[col - c0].copy())
+                    Ye.append(Y[col - c0].copy())
+        self.Xe, self.Ze, self.Ye = np.array(Xe), np.array(Ze), np.array(Ye)
+        return self.Xe
+
+    def retry(self, k, length_s):
+        x0, z0 = (self.x, self.z) if k == 0 else (self.Xe[k - 1], self.Ze[k - 1])
+        u = self.intervals[k][1]
+        x_new, z_new = self.stepper.advance(x0, z0, u, self.p, length_s)
+        self.Xe[k], self.Ze[k] = x_new, z_new
+        self.Ye[k] = self._outputs(x_new, u)
+        return x_new
+
+    def commit(self, k):
+        self.x, self.z = self.Xe[k - 1].copy(), self.Ze[k - 1].copy()
+        return self.Ye[:k]
+
+    def finish(self):
+        pass
+
+    def figures(self):
+        return {}
+
+    def stats(self):
+        return self.stepper.stats()
+
+
+class GridPlant:
+    """The vehicle on the persistent grid terrain: a :class:`~symtrack.terrain.world.World` and
+    its integrator, one macro step per interval (``world.before_step`` in :meth:`synchronize`,
+    ``world.after_step`` and ``world.check_covered`` in :meth:`commit`). ``state_names`` are the
+    12 vehicle states: the channel slots stay inside (the cells live in the world's storage).
+    :meth:`start` sets the vehicle down (the cells under it settle, :meth:`World.begin_pass`);
+    :meth:`finish` lifts it off (:meth:`World.end_pass`), so the terrain holds the rebound."""
+
+    kind = "grid"
+    max_intervals = short_intervals = 1
+
+    def __init__(self, world: World, stepper):
+        self.world, self.stepper = world, stepper
+        self.model = world.model
+        self.state_names = tuple(VEHICLE_STATES)
+        self.output_names = tuple(world.model.output_names)
+        self._x = None  # the full state (vehicle + channel slots)
+        self._unloader = None
+        self.finished = True
+
+    @property
+    def full_state(self) -> np.ndarray:
+        return self._x
+
+    def _outputs(self, x, u, p):
+        return np.array(self.model.outputs(x, u, p)).ravel()
+
+    def start(self, x_m, y_m, yaw_rad, u0, state=None):
+        x = self.world.begin_pass(self.stepper, float(x_m), float(y_m), float(yaw_rad))
+        if state is not None:
+            xv = np.asarray(state, dtype=float)
+            if xv.shape != (NV,):
+                raise SimulationError(f"GridPlant.start: expected the {NV} vehicle states, got shape {xv.shape}")
+            x[:NV] = xv
+            self.stepper.reset()
+        self._x = x
+        self.finished = False
+        return x[:NV].copy(), self._outputs(x, np.asarray(u0, dtype=float), self.world.param_vector())
+
+    def synchronize(self, intervals):
+        if self._x is None or self.finished:
+            raise SimulationError("GridPlant: start the plant (set the vehicle down) before stepping it")
+        if len(intervals) != 1:
+            raise SimulationError(f"GridPlant advances one interval at a time, got {len(intervals)}")
+        (self.h, u), = intervals
+        self.u = np.asarray(u, dtype=float)
+        self.x_pre, self.p = self.world.before_step(self._x, self.h, self.stepper)
+
+    def advance(self):
+        self.x_new = self.stepper.step(self.x_pre, self.u, self.p, self.h)
+        return self.x_new[None, :NV]
+
+    def retry(self, k, length_s):
+        self.x_new = self.stepper.step(self.x_pre, self.u, self.p, length_s)
+        return self.x_new[:NV]
+
+    def commit(self, k):
+        x = self._x = self.x_new
+        self.world.after_step(x)
+        self.world.check_covered(x)
+        return self._outputs(x, self.u, self.p)[None, :]
+
+    def finish(self):
+        if self._x is None or self.finished:
+            return
+        if self._unloader is None:
+            self._unloader = unloader(self.world)
+        self.world.end_pass(self._x, self._unloader)
+        self.finished = True
+
+    def figures(self):
+        return self.world.figures()
+
+    def stats(self):
+        return self.stepper.stats()
+
+
+def advance_plant(plant, u, length_s: float, substep_s: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Advance a started plant by ``length_s`` with input ``u`` (in equal sub-steps of at most
+    ``substep_s``, the grid's macro step); returns its state and outputs at the end."""
+    n = 1 if substep_s is None else max(1, int(math.ceil(length_s / substep_s - 1e-9)))
+    h = length_s / n
+    u = np.asarray(u, dtype=float)
+    done = 0
+    x = y = None
+    while done < n:
+        k = min(plant.max_intervals, n - done)
+        plant.synchronize([(h, u)] * k)
+        X = plant.advance()
+        Y = plant.commit(k)
+        x, y = X[k - 1], Y[k - 1]
+        done += k
+    return x, y
+
+
+def make_grid_plant(world: World, settings: IntegratorSettings) -> GridPlant:
+    """The grid plant of a world with the integrator of ``settings`` (from the registry)."""
+    spec = registry.get(settings.method)
+    return GridPlant(world, spec.stepper("grid", world.model, settings, world.n_channels))
+
+
+def make_plant(scenario, *, terrain=None, world: World | None = None, model: SystemModel | None = None):
+    """The plant a simulation scenario asks for: the grid terrain when it has a ``[terrain]``
+    section (or a ``world`` / ``terrain`` is given: a :class:`~symtrack.terrain.storage.Terrain`
+    or a terrain file), else the homogeneous terrain; the integrator of ``run.integrator``."""
+    settings = scenario.run.integrator_settings()
+    spec = registry.get(settings.method)
+    if world is not None or scenario.terrain is not None or terrain is not None:
+        if world is None:
+            spec.check("grid", settings)
+            st = scenario.start
+            world = open_world(scenario.terrain or TerrainSettings(), scenario.params, scenario.model,
+                               scenario.run.output_dt_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
+        return make_grid_plant(world, settings)
+    model = model or SystemModel(scenario.model)
+    stepper = spec.stepper("homogeneous", model, settings)
+    if "homogeneous" in spec.batch:
+        return BatchPlant(model, scenario.params, stepper, scenario.run.output_dt_s)
+    return StepPlant(model, scenario.params, stepper)

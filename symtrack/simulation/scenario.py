@@ -1,0 +1,298 @@
+"""Scenarios: TOML files validated on load.
+
+Schema (every key optional unless marked required; unknown keys are errors)::
+
+    name = "validation"            # defaults to the file name
+    description = "..."
+    [run]
+    duration_s = 30.0              # (0, 1e6]      simulated time limit
+    output_dt_s = 0.01             # (0, duration] output (and macro) step
+    integrator = "cvodes"          # a name of symtrack.integrators.registry: cvodes | idas | rosenbrock
+    fixed_step_s = 0.01            # [1e-5, 0.1] rosenbrock: each output step is split into equal steps <= this
+    compiled = false               # cvodes/idas on the compiled dynamics and Jacobian (docs/codegen.md)
+    reltol = 1e-7                  # (0, 1e-2]
+    abstol = 1e-9                  # (0, 1e-2]
+    stop_after_distance_m = 20.0   # (0, 1e6] or "none": stop once the CG has covered this path length ...
+    stop_distance_event = "idle"   # ... counted from this [[torque]] event (default: from t = 0)
+    [model]                        # numerical/structural options, see symtrack.model.ModelOptions
+    traction_sign = "smooth"       # smooth | tanh | sign
+    tanh_steepness_per_m = 1000.0
+    [vehicle]
+    preset = "reference_crawler"   # required; any vehicle parameter may follow as an override
+    [soil]
+    preset = "clayey_soil_thailand_38"   # required; any soil parameter may follow
+    [start]
+    x_m = 0.0
+    y_m = 0.0
+    yaw_deg = 0.0                  # [-360, 360]
+    [[torque]]                     # required, at least one; held piecewise constant
+    t_s = 0.0                      # the first entry at 0, then strictly increasing
+    left_N_m = 2000.0              # [-1e6, 1e6]
+    right_N_m = 2000.0
+    event = "idle"                 # optional name, unique
+    [terrain]                      # optional: the persistent grid terrain (symtrack.terrain.settings)
+
+Loading (:func:`load_scenario`) reads the document once (:func:`symtrack.foundations.config.read_document`:
+a built-in name of ``symtrack/simulation/scenarios/`` or a TOML path, then the overrides) and
+checks every section here; the MPC scenarios of :mod:`symtrack.control.scenario` share the
+loader, the ``[run]``, ``[vehicle]``, ``[soil]`` and ``[terrain]`` parsers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from ..foundations.config import builtin_names as _package_names
+from ..foundations.config import check_keys, number, read_document
+from ..foundations.errors import ParameterError, ScenarioError
+from ..integrators import registry
+from ..integrators.settings import IntegratorSettings
+from ..model.options import ModelOptions
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..presets import soil_preset, vehicle_preset
+from ..terrain.settings import TerrainSettings, settings_from_dict
+
+__all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
+           "parse_run", "parse_terrain", "scenario_from_dict"]
+
+SCENARIO_PACKAGE = "symtrack.simulation.scenarios"
+TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "start", "torque", "terrain")
+
+
+@dataclass(frozen=True)
+class TorqueEntry:
+    """One entry of the torque programme: from ``t_s`` on, these sprocket torque commands."""
+
+    t_s: float
+    left_N_m: float
+    right_N_m: float
+    event: str | None = None
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """The ``[run]`` section of every scenario kind (each kind accepts the fields it uses:
+    :data:`SIMULATION_RUN_KEYS`, :data:`symtrack.control.scenario.MPC_RUN_KEYS`)."""
+
+    duration_s: float = 30.0
+    output_dt_s: float = 0.01
+    integrator: str = "cvodes"
+    reltol: float = 1e-7
+    abstol: float = 1e-9
+    stop_after_distance_m: float | None = None
+    stop_distance_event: str | None = None
+    fixed_step_s: float = 0.01
+    compiled: bool = False
+    rms_exclude_first_m: float = 0.0
+
+    def integrator_settings(self) -> IntegratorSettings:
+        return IntegratorSettings(self.integrator, self.reltol, self.abstol, compiled=self.compiled,
+                                  fixed_step_s=self.fixed_step_s)
+
+
+SIMULATION_RUN_KEYS = ("duration_s", "output_dt_s", "integrator", "reltol", "abstol", "stop_after_distance_m",
+                       "stop_distance_event", "fixed_step_s", "compiled")
+
+
+@dataclass(frozen=True)
+class Start:
+    """The start pose."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    yaw_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A simulation scenario, validated: run settings, model options, vehicle and soil parameters
+    (preset plus overrides), start pose, torque programme and the optional grid terrain."""
+
+    name: str
+    description: str
+    run: RunSettings
+    model: ModelOptions
+    vehicle_preset: str
+    vehicle: dict
+    soil_preset: str
+    soil: dict
+    start: Start
+    torque: tuple[TorqueEntry, ...]
+    terrain: TerrainSettings | None = None
+
+    @property
+    def params(self) -> dict:
+        return {**self.vehicle, **self.soil}
+
+    def event_time(self, name: str) -> float:
+        for e in self.torque:
+            if e.event == name:
+                return e.t_s
+        raise ScenarioError(f"no [[torque]] entry has event = {name!r}")
+
+    def torque_at(self, t: float) -> tuple[float, float]:
+        cur = self.torque[0]
+        for e in self.torque:
+            if e.t_s <= t + 1e-12:
+                cur = e
+        return cur.left_N_m, cur.right_N_m
+
+    def to_dict(self) -> dict:
+        run = {k: v for k, v in dataclasses.asdict(self.run).items() if v is not None and k in SIMULATION_RUN_KEYS}
+        d = {"name": self.name, "description": self.description, "run": run,
+             "model": dataclasses.asdict(self.model),
+             "vehicle": {"preset": self.vehicle_preset, **self.vehicle},
+             "soil": {"preset": self.soil_preset, **self.soil},
+             "start": dataclasses.asdict(self.start),
+             "torque": [{k: v for k, v in dataclasses.asdict(e).items() if v is not None} for e in self.torque]}
+        if self.terrain is not None:
+            d["terrain"] = self.terrain.to_dict()
+        return d
+
+
+def _num(section, key, value, low, high, low_open=False):
+    return number(f"{section}.{key}", value, low, high, low_open)
+
+
+def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSettings()) -> RunSettings:
+    """A ``[run]`` table with the given keys allowed, on the given defaults."""
+    check_keys("run", t, keys)
+    d = defaults
+    duration = _num("run", "duration_s", t.get("duration_s", d.duration_s), 0, 1e6, True)
+    out_dt = _num("run", "output_dt_s", t.get("output_dt_s", d.output_dt_s), 0, duration, True)
+    integ = t.get("integrator", d.integrator)
+    if not isinstance(integ, str):
+        raise ScenarioError(f"run.integrator = {integ!r} is not one of {', '.join(registry.names())}")
+    registry.get(integ)
+    reltol = _num("run", "reltol", t.get("reltol", d.reltol), 0, 1e-2, True)
+    abstol = _num("run", "abstol", t.get("abstol", d.abstol), 0, 1e-2, True)
+    stop = t.get("stop_after_distance_m", d.stop_after_distance_m)
+    ev = t.get("stop_distance_event", d.stop_distance_event)
+    if isinstance(stop, str) and stop.lower() == "none":
+        stop = ev = None  # the distance stop switched off (--set run.stop_after_distance_m=none)
+    if stop is not None:
+        stop = _num("run", "stop_after_distance_m", stop, 0, 1e6, True)
+    if ev is not None and not isinstance(ev, str):
+        raise ScenarioError(f"run.stop_distance_event = {ev!r} must be the name of a [[torque]] event")
+    if ev is not None and stop is None:
+        raise ScenarioError("run.stop_distance_event is set but run.stop_after_distance_m is not")
+    fixed = _num("run", "fixed_step_s", t.get("fixed_step_s", d.fixed_step_s), 1e-5, 0.1)
+    compiled = t.get("compiled", d.compiled)
+    if not isinstance(compiled, bool):
+        raise ScenarioError(f"run.compiled = {compiled!r} must be true or false")
+    rms = _num("run", "rms_exclude_first_m", t.get("rms_exclude_first_m", d.rms_exclude_first_m), 0, 1e6)
+    return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev, fixed, compiled, rms)
+
+
+def _parse_model(t: dict) -> ModelOptions:
+    fields = [f.name for f in dataclasses.fields(ModelOptions)]
+    check_keys("model", t, fields)
+    try:
+        return ModelOptions(**t)
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
+
+
+def parse_params(section, t, preset_fn, specs, default_preset=None):
+    """A [vehicle] or [soil] table: preset plus overrides, validated as a complete set."""
+    names = [s.name for s in specs]
+    check_keys(section, t, ["preset"] + names)
+    preset = t.get("preset", default_preset)
+    if not isinstance(preset, str):
+        raise ScenarioError(f"{section}.preset is required (a preset name), got {preset!r}")
+    try:
+        values = preset_fn(preset)
+        overrides = {k: v for k, v in t.items() if k != "preset"}
+        values.update(overrides)
+        values = check_set(values, specs, section)
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
+    return preset, values
+
+
+def parse_terrain(t) -> TerrainSettings | None:
+    """The optional ``[terrain]`` table."""
+    return None if t is None else settings_from_dict(t)
+
+
+def _parse_torque(entries) -> tuple[TorqueEntry, ...]:
+    if not isinstance(entries, list) or not entries:
+        raise ScenarioError("[[torque]] is required: at least one entry with t_s, left_N_m, right_N_m")
+    out, events = [], set()
+    for i, e in enumerate(entries):
+        sec = f"torque[{i}]"
+        check_keys(sec, e, ["t_s", "left_N_m", "right_N_m", "event"])
+        for k in ("t_s", "left_N_m", "right_N_m"):
+            if k not in e:
+                raise ScenarioError(f"{sec}.{k} is required")
+        t = _num(sec, "t_s", e["t_s"], 0, 1e6)
+        left = _num(sec, "left_N_m", e["left_N_m"], -1e6, 1e6)
+        right = _num(sec, "right_N_m", e["right_N_m"], -1e6, 1e6)
+        if i == 0 and t != 0.0:
+            raise ScenarioError(f"{sec}.t_s = {e['t_s']!r}: the first torque entry must be at t_s = 0")
+        if out and t <= out[-1].t_s:
+            raise ScenarioError(
+                f"{sec}.t_s = {e['t_s']!r} is not after the previous entry's t_s = {out[-1].t_s!r}: "
+                "torque entries must be in strictly increasing time order")
+        ev = e.get("event")
+        if ev is not None:
+            if not isinstance(ev, str) or not ev:
+                raise ScenarioError(f"{sec}.event = {ev!r} must be a non-empty string")
+            if ev in events:
+                raise ScenarioError(f"{sec}.event = {ev!r} is used twice")
+            events.add(ev)
+        out.append(TorqueEntry(t, left, right, ev))
+    return tuple(out)
+
+
+def _parse_start(t) -> Start:
+    check_keys("start", t, ["x_m", "y_m", "yaw_deg"])
+    return Start(_num("start", "x_m", t.get("x_m", 0.0), -1e7, 1e7),
+                 _num("start", "y_m", t.get("y_m", 0.0), -1e7, 1e7),
+                 _num("start", "yaw_deg", t.get("yaw_deg", 0.0), -360, 360))
+
+
+def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
+    """A scenario document (already read) -> :class:`Scenario`, every section checked."""
+    check_keys("scenario", d, TOP_KEYS)
+    name = d.get("name", default_name)
+    desc = d.get("description", "")
+    if not isinstance(name, str) or not isinstance(desc, str):
+        raise ScenarioError("name and description must be strings")
+    run = parse_run(d.get("run", {}))
+    model = _parse_model(d.get("model", {}))
+    vp, vehicle = parse_params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS)
+    sp, soil = parse_params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS)
+    start = _parse_start(d.get("start", {}))
+    torque = _parse_torque(d.get("torque"))
+    terrain = parse_terrain(d.get("terrain"))
+    sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain)
+    events = [e.event for e in torque if e.event]
+    if run.stop_distance_event is not None and run.stop_distance_event not in events:
+        raise ScenarioError(f"run.stop_distance_event = {run.stop_distance_event!r} names no [[torque]] event; "
+                            f"events: {', '.join(events) or 'none'}")
+    return sc
+
+
+def builtin_names() -> list[str]:
+    """The names of the built-in simulation scenarios."""
+    return _package_names(SCENARIO_PACKAGE)
+
+
+def load_scenario(name_or_path, overrides=None) -> Scenario:
+    """Load a built-in scenario by name or a TOML file by path, apply the overrides, validate.
+
+    Parameters
+    ----------
+    name_or_path : str or path
+        A built-in name (``symtrack scenarios``) or a TOML file.
+    overrides : list of str or dict, optional
+        ``["run.duration_s=2", ...]`` as ``--set`` takes them, or ``{"run.duration_s": 2.0}``.
+
+    Returns
+    -------
+    Scenario
+    """
+    doc, default_name = read_document(name_or_path, SCENARIO_PACKAGE, "scenario", overrides)
+    return scenario_from_dict(doc, default_name)

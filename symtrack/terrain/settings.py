@@ -1,0 +1,111 @@
+"""The ``[terrain]`` scenario section, parsed once into a frozen :class:`TerrainSettings`.
+
+Schema (every key optional; unknown keys are errors)::
+
+    [terrain]
+    size_m = [100.0, 100.0]     # field size along world x and y, each in [0.5, 10000] m
+    cell_m = 0.1                # cell side, [0.01, 5] m (at most 1e8 cells)
+    origin_m = [-50.0, -50.0]   # world (x, y) of the field's lower-left corner
+                                # (default: the field centred on the start position)
+    channels = "auto"           # "auto" or M: the pool is M x M channels, M in [2, 400]
+    initial_state = "t.npz"     # a terrain file to continue from (symtrack simulate --terrain-in)
+    passes = 1                  # [1, 100] passes over the same terrain in one run
+    max_speed_m_s = 10.0        # (0, 100] speed bound used to derive M ("auto")
+    release_time_s = 0.05       # (0, 10] bound on the time a cell takes to unload, for M
+    release_rate_m_s = 1e-5     # (0, 1] |dz/dt| below which an unloaded cell is released
+    settle_s = 0.2              # [0, 10] settling of the cells under the vehicle at rest
+                                # before each pass (the pass's initial static state)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from ..foundations.config import check_keys, integer, number
+from ..foundations.errors import ScenarioError
+
+__all__ = ["MAX_CELLS", "TerrainSettings", "settings_from_dict"]
+
+MAX_CELLS = 100_000_000
+
+
+@dataclass(frozen=True)
+class TerrainSettings:
+    """The ``[terrain]`` section, validated on construction (module doc for keys and ranges).
+    ``given`` holds the keys the scenario set (the others are defaults): a terrain file's
+    geometry replaces size_m and cell_m unless the scenario gave them, and
+    :meth:`to_dict` writes back only those keys."""
+
+    size_m: tuple[float, float] = (100.0, 100.0)
+    cell_m: float = 0.1
+    origin_m: tuple[float, float] | None = None
+    channels: str | int = "auto"
+    initial_state: str | None = None
+    passes: int = 1
+    max_speed_m_s: float = 10.0
+    release_time_s: float = 0.05
+    release_rate_m_s: float = 1e-5
+    settle_s: float = 0.2
+    given: frozenset = field(default=frozenset(), compare=False, repr=False)
+
+    def __post_init__(self):
+        for i, v in enumerate(self.size_m):
+            _num(f"size_m[{i}]", v, 0.5, 1e4)
+        _num("cell_m", self.cell_m, 0.01, 5.0)
+        n = self.shape[0] * self.shape[1]
+        if n > MAX_CELLS:
+            raise ScenarioError(f"terrain: size_m = {list(self.size_m)} at cell_m = {self.cell_m} gives {n} cells; "
+                                f"at most {MAX_CELLS} are allowed (raise cell_m or shrink the field)")
+        if self.origin_m is not None:
+            for i, v in enumerate(self.origin_m):
+                _num(f"origin_m[{i}]", v, -1e7, 1e7)
+        if self.channels != "auto":
+            if isinstance(self.channels, bool) or not isinstance(self.channels, int) or not 2 <= self.channels <= 400:
+                raise ScenarioError(f"terrain.channels = {self.channels!r} must be \"auto\" or an integer M "
+                                    "in [2, 400] (the pool has M x M channels)")
+        if self.initial_state is not None and (not isinstance(self.initial_state, str) or not self.initial_state):
+            raise ScenarioError(f"terrain.initial_state = {self.initial_state!r} must be a terrain file path")
+        integer("terrain.passes", self.passes, 1, 100)
+        _num("max_speed_m_s", self.max_speed_m_s, 0, 100, low_open=True)
+        _num("release_time_s", self.release_time_s, 0, 10, low_open=True)
+        _num("release_rate_m_s", self.release_rate_m_s, 0, 1, low_open=True)
+        _num("settle_s", self.settle_s, 0, 10)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Number of cells along x and y (the field is rounded to whole cells)."""
+        return tuple(max(1, int(round(s / self.cell_m))) for s in self.size_m)
+
+
+    def to_dict(self) -> dict:
+        """The keys the scenario gave, as a TOML-writable dict (pairs as lists)."""
+        out = {k: getattr(self, k) for k in sorted(self.given)}
+        for k in ("size_m", "origin_m"):
+            if out.get(k) is not None:
+                out[k] = list(out[k])
+        return out
+
+
+def _num(key, value, low, high, low_open=False):
+    return number(f"terrain.{key}", value, low, high, low_open)
+
+
+def _pair(key, value):
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise ScenarioError(f"terrain.{key} = {value!r} must be a pair [x, y]")
+    return tuple(_num(f"{key}[{i}]", v, -1e7, 1e7) for i, v in enumerate(value))
+
+
+def settings_from_dict(t: dict) -> TerrainSettings:
+    """The ``[terrain]`` table -> :class:`TerrainSettings` (unknown keys and bad values raise)."""
+    names = [f.name for f in dataclasses.fields(TerrainSettings) if f.name != "given"]
+    check_keys("terrain", t, names)
+    d = dict(t)
+    if "size_m" in d:
+        d["size_m"] = _pair("size_m", d["size_m"])
+    if "origin_m" in d:
+        d["origin_m"] = _pair("origin_m", d["origin_m"])
+    if isinstance(d.get("passes"), float) and d["passes"].is_integer():
+        d["passes"] = int(d["passes"])
+    return TerrainSettings(**d, given=frozenset(t))

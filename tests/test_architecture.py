@@ -1,0 +1,196 @@
+"""The package's structure, read from the source (nothing imported): the layers of DESIGN.md,
+no import circle (imports inside functions count), no private name imported across modules,
+and nothing below the CLI and the bench imports the top-level codegen/ package. Also: adding
+an integrator is one class and one registry entry."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symtrack.foundations.errors import ScenarioError
+
+ROOT = Path(__file__).resolve().parent.parent
+
+# layer of each top-level part of symtrack, bottom first; a module may import its own layer or below
+LAYERS = {
+    "foundations": 1, "model": 2, "presets": 2, "terrain": 3, "build": 4, "integrators": 5, "simulation": 6,
+    "control": 7, "reports": 7, "api": 7, "bench": 8, "cli": 9, "__main__": 9, "": 9,
+}
+CODEGEN_ALLOWED = ("cli", "bench")
+
+
+def _modules():
+    mods = {}
+    for pkg in ("symtrack", "codegen"):
+        for f in (ROOT / pkg).rglob("*.py"):
+            parts = list(f.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            mods[".".join(parts)] = f
+    return mods
+
+
+def _resolve(mod, is_pkg, level, name):
+    if level == 0:
+        return name
+    base = mod.split(".")
+    if not is_pkg:
+        base = base[:-1]
+    if level > 1:
+        base = base[: len(base) - (level - 1)]
+    return ".".join(base + ([name] if name else []))
+
+
+def _edges(mods):
+    """module -> {(imported module, imported name or None)} for imports among mods."""
+    out = {m: set() for m in mods}
+    for m, f in mods.items():
+        is_pkg = f.name == "__init__.py"
+        for node in ast.walk(ast.parse(f.read_text(), str(f))):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [(a.name, None) for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = _resolve(m, is_pkg, node.level, node.module or "")
+                for a in node.names:
+                    full = f"{base}.{a.name}"
+                    targets.append((full, None) if full in mods else (base, a.name))
+            for t, name in targets:
+                while t and t not in mods:
+                    t = t.rpartition(".")[0]
+                if t and t != m:
+                    out[m].add((t, name))
+    return out
+
+
+def _layer(mod: str) -> int:
+    parts = mod.split(".")
+    return LAYERS[parts[1] if len(parts) > 1 else ""]
+
+
+@pytest.fixture(scope="module")
+def graph():
+    mods = _modules()
+    return mods, _edges(mods)
+
+
+def test_no_import_cycles(graph):
+    mods, edges = graph
+    adj = {m: {t for t, _ in e} for m, e in edges.items()}
+    index, low, stack, on, sccs = {}, {}, [], set(), []
+
+    def visit(v):  # Tarjan
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in adj[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                sccs.append(sorted(comp))
+
+    for m in mods:
+        if m not in index:
+            visit(m)
+    assert sccs == []
+    assert len(mods) > 50  # the reader found the package
+
+
+def test_no_private_names_imported_from_another_module(graph):
+    _, edges = graph
+    private = [(m, t, n) for m, e in edges.items() for t, n in e if n and n.startswith("_") and not n.startswith("__")]
+    assert private == []
+
+
+def test_layers_import_only_downwards(graph):
+    _, edges = graph
+    upward = []
+    for m, e in edges.items():
+        if not m.startswith("symtrack"):
+            continue
+        for t, _ in e:
+            if t.startswith("symtrack") and _layer(t) > _layer(m):
+                upward.append((m, t))
+    assert upward == []
+
+
+def test_only_cli_and_bench_import_codegen(graph):
+    _, edges = graph
+    bad = [(m, t) for m, e in edges.items() for t, _ in e
+           if m.startswith("symtrack") and t.startswith("codegen") and m.split(".")[1] not in CODEGEN_ALLOWED]
+    assert bad == []
+
+
+def test_the_reader_sees_a_circle_and_a_private_import(tmp_path, monkeypatch):
+    """The checks above can fail: a two-module circle through a function-level import and a
+    private import, in a throwaway package."""
+    pkg = tmp_path / "symtrack"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from .b import _hidden\n")
+    (pkg / "b.py").write_text("def f():\n    from . import a\n\n_hidden = 1\n")
+    mods = {"symtrack": pkg / "__init__.py", "symtrack.a": pkg / "a.py", "symtrack.b": pkg / "b.py"}
+    e = _edges(mods)
+    assert ("symtrack.b", "_hidden") in e["symtrack.a"] and ("symtrack.a", None) in e["symtrack.b"]
+
+
+class EulerStepper:
+    """A toy integrator (explicit Euler on the ODE form, in equal sub-steps of fixed_step_s): the
+    one class an integrator needs."""
+
+    def __init__(self, model, settings):
+        self.model, self.settings, self.n = model, settings, 0
+
+    def step(self, x, u, p, dt):
+        from symtrack.integrators.settings import substeps
+
+        n = substeps(dt, self.settings.fixed_step_s)
+        x = np.asarray(x, dtype=float)
+        for _ in range(n):
+            x = x + dt / n * np.array(self.model.ode(x, u, p)).ravel()
+        self.n += n
+        return x
+
+    def reset(self):
+        pass
+
+    def stats(self):
+        return {"nsteps": self.n}
+
+
+def test_adding_an_integrator_is_one_class_and_one_registry_entry():
+    import symtrack
+    from symtrack.integrators import registry
+
+    spec = registry.register(registry.IntegratorSpec(  # the one registry entry
+        "euler_toy", "explicit Euler (a test's toy)", terrains=frozenset({"homogeneous"}), fixed_step=True,
+        homogeneous=EulerStepper))
+    try:
+        sc = symtrack.load_scenario("validation", {"run.integrator": "euler_toy", "run.duration_s": 0.5,
+                                                   "run.fixed_step_s": 0.0005, "run.stop_after_distance_m": "none"})
+        res = symtrack.simulate(sc)
+        ref = symtrack.simulate(sc, integrator="cvodes")
+        assert res.runs[0].stats["nsteps"] == 1000
+        assert res.column("u_m_s")[-1] > 0.1
+        assert res.column("u_m_s")[-1] == pytest.approx(ref.column("u_m_s")[-1], rel=2e-2)
+        with pytest.raises(ScenarioError, match="does not integrate the grid"):
+            symtrack.simulate("validation_grid", integrator="euler_toy")
+    finally:
+        registry.unregister(spec.name)
+    with pytest.raises(ScenarioError, match="euler_toy"):
+        symtrack.load_scenario("validation", ["run.integrator=euler_toy"])
