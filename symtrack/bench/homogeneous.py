@@ -24,6 +24,9 @@ import platform
 import time
 from pathlib import Path
 
+__all__ = ["BENCH_SCHEMA_VERSION", "COLUMNS", "PROVIDERS", "add_arguments", "collect", "homogeneous_rows", "report",
+           "run_cli", "standalone_row", "table"]
+
 log = logging.getLogger("symtrack.bench")
 
 BENCH_SCHEMA_VERSION = 1

@@ -28,6 +28,8 @@ from ..terrain.settings import TerrainSettings
 from ..terrain.storage import Grid, Terrain
 from ..terrain.world import END_STRIP_CELLS, NV
 
+__all__ = ["BruteResult", "GRID_FIXED_STEP_S", "bench_rows", "benchmark", "brute_force_run", "main", "pool_run"]
+
 
 @dataclasses.dataclass
 class BruteResult:

@@ -35,6 +35,9 @@ import casadi as ca
 
 from . import rosenbrock
 
+__all__ = ["CHUNK_SIZES", "FIXED_STEP_METHOD", "GROUPS", "GROUP_OF", "Generated", "MANIFEST_SCHEMA_VERSION", "build",
+           "fixed_step_functions", "manifest", "render", "unit_of", "write_sources"]
+
 MANIFEST_SCHEMA_VERSION = 1
 # Steps per call of the chunk functions: a long chunk for the bulk of a run and a short one
 # for its end (a run that stops at a distance wastes at most a short chunk).

@@ -44,6 +44,8 @@ from .rosenbrock import A as RB_A
 from .rosenbrock import C as RB_C
 from .rosenbrock import M as RB_M
 
+__all__ = ["AggregateTerrain", "NA", "NS", "NW", "build"]
+
 NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_right)
 NS = 10  # S: compaction power (left, right), then per track and end: sum w z, then sum w
 NW = 14  # w = 12 vehicle states + 2 algebraic

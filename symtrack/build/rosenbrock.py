@@ -25,6 +25,9 @@ from __future__ import annotations
 
 import casadi as ca
 
+__all__ = ["A", "C", "GAMMA", "M", "N_STAGES", "SparseLU", "consistent_z_expressions", "plugin_step",
+           "step_expressions"]
+
 N_STAGES = 8
 GAMMA = 3.3233404432797148e-01
 # a[i][j], c[i][j] (j < i) and m[i] of CasADi 3.8.2's rosenbrock plugin (generated C: p.a, pe.c, p.m)

@@ -6,6 +6,8 @@ import json
 import logging
 from pathlib import Path
 
+__all__ = ["DEFAULT_SOIL", "DEFAULT_VEHICLE", "add_parsers", "linearize_command", "mpc_command", "mpc_scenarios_list"]
+
 log = logging.getLogger("symtrack.control")
 
 DEFAULT_SOIL = "sandy_loam_15"

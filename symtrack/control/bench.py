@@ -35,6 +35,8 @@ from .linearization import linearize
 from .mpc import TORQUE_SCALE_N_M, MPCStats, SolveInfo
 from .trim import trim
 
+__all__ = ["FAST_CONFIG", "LinearMPC", "bench_rows", "prediction_effect", "table_markdown", "timing_comparison"]
+
 # The fast configuration: fatrop (Riccati-structured interior point) with its functions
 # jit-compiled (gcc -O1), and the pseudo-Huber lateral penalty (delta 0.2 m), with which fatrop
 # converged on every solve of the built-in scenarios (with the plain quadratic penalty it failed

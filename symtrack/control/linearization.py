@@ -26,6 +26,10 @@ from ..model import SystemModel
 from ..reports.plots import plt, png_bytes
 from .trim import POSITION_STATES, TrimPoint
 
+__all__ = ["INPUT_SCALE_N_M", "Linearization", "MODE_GROUPS", "SCHEMA_VERSION", "TYPICAL_SCALE", "bode_png",
+           "controllability", "linearize", "load_npz", "modes", "npz_bytes", "report_markdown", "scale_by_name",
+           "statespace_from_dict", "to_dict"]
+
 SCHEMA_VERSION = 1
 
 # Physical groups used to read the modes (a mode is named by the group that participates most).

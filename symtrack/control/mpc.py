@@ -68,6 +68,9 @@ from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from .linearization import scale_by_name
 
+__all__ = ["MPCSettings", "MPCStats", "PREDICTIONS", "PathTrackingMPC", "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M",
+           "default_jit_dir"]
+
 log = logging.getLogger("symtrack.control.mpc")
 
 SOLVERS = ("ipopt", "fatrop")

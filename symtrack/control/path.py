@@ -16,6 +16,8 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 
+__all__ = ["Path", "Segment", "field_segments"]
+
 
 @dataclass(frozen=True)
 class Segment:

@@ -63,6 +63,9 @@ from .mpc import MPCSettings
 from .path import Path as RefPath
 from .path import Segment, field_segments
 
+__all__ = ["GRID_DEFAULT_TERRAIN", "MPCScenario", "MPC_RUN_DEFAULTS", "MPC_RUN_KEYS", "SCENARIO_PACKAGE",
+           "StartSettings", "TOP_KEYS", "builtin_names", "load", "scenario_from_dict"]
+
 TOP_KEYS = ("name", "description", "vehicle", "soil", "start", "path", "run", "mpc", "terrain")
 SCENARIO_PACKAGE = "symtrack.control.scenarios"
 # the [terrain] section that plant="grid" (symtrack mpc --plant grid) adds to a scenario without one:

@@ -34,6 +34,8 @@ from ..model import SystemModel
 from ..model.static import static_state
 from ..model.vehicle import GRAVITY_M_S2, traction_shape
 
+__all__ = ["POSITION_STATES", "SPECIFIED_STATES", "TrimError", "TrimPoint", "TrimSettings", "limit_usage", "trim"]
+
 POSITION_STATES = ("x_m", "y_m", "yaw_rad")
 SPECIFIED_STATES = ("u_m_s", "yaw_rate_rad_s")
 

@@ -1,3 +1,5 @@
+
+__all__ = ["ParameterError", "ScenarioError", "SimulationError", "SymtrackError"]
 """Exception types of symtrack. Every message names what was wrong and what is allowed."""
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import sys
 import time
 
+__all__ = ["Progress"]
+
 
 class Progress:
     def __init__(self, total: float, label: str = "", enabled: bool = True, stream=None):

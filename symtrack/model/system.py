@@ -33,6 +33,8 @@ from .options import ModelOptions
 from .parameters import SOIL_PARAM_NAMES, VEHICLE_PARAM_NAMES
 from .vehicle import ALGEBRAIC, INPUTS, TRACKS, VEHICLE_STATES, vehicle_equations
 
+__all__ = ["PARAM_NAMES", "SystemModel"]
+
 PARAM_NAMES = VEHICLE_PARAM_NAMES + SOIL_PARAM_NAMES
 
 
@@ -41,6 +43,11 @@ def _syms(names):
 
 
 class SystemModel:
+    """The vehicle and a terrain (default: the homogeneous terrain's four travelling cells) frozen
+    into named CasADi expressions and Functions (module doc): states ``x`` (``state_names``),
+    inputs ``u``, parameters ``p`` (``param_vector`` builds it from a parameter dict), algebraic
+    accelerations ``z``, outputs (``output_names``)."""
+
     def __init__(self, opts: ModelOptions | None = None, terrain=None):
         self.opts = opts or ModelOptions()
         self.terrain = terrain or HomogeneousTerrain(self.opts)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+__all__ = ["REPORTED", "check", "table_markdown"]
+
 # key in summary.json -> (reported, accepted range (low, high) or None, unit/scale label)
 REPORTED = (
     ("distance_after_idle_m", "about 20 m", (19.5, 20.5)),

@@ -66,6 +66,9 @@ from ..model import cell
 from ..model.options import ModelOptions
 from ..model.vehicle import ENDS, TRACKS
 
+__all__ = ["CHANNEL_FIELDS", "COMPACTION_SPEED_FLOOR_M_S", "ChannelTerrain", "GLOBAL_FIELDS", "NF", "NG",
+           "build_cell_functions", "channel_param_names", "channel_state_names", "soil_law_values"]
+
 CHANNEL_FIELDS = ("centre_x_m", "centre_y_m", "z_max_m", "p_max_Pa", "active")
 GLOBAL_FIELDS = ("cell_size_m", "end_strip_m")
 NF = len(CHANNEL_FIELDS)
