@@ -93,7 +93,8 @@ def cvodes_status(scenario, duration_s=0.05):
     from symtrack.foundations.errors import SimulationError
 
     sc = dataclasses.replace(scenario, run=dataclasses.replace(
-        scenario.run, duration_s=duration_s, stop_after_distance_m=None, stop_distance_event=None))
+        scenario.run, integrator="cvodes", duration_s=duration_s, stop_after_distance_m=None,
+        stop_distance_event=None))
     try:
         simulate(sc)
     except SimulationError as err:

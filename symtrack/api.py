@@ -19,11 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .foundations.errors import ScenarioError
+from .foundations.config import to_toml
+from .foundations.errors import ScenarioError, SimulationError
 from .foundations.files import atomic_write_bytes, atomic_write_text
 from .integrators import registry
 from .reports import plots, terrain_plots, validation
-from .reports.run_files import write_run
+from .reports.html import report_html
+from .reports.run_files import clear_previous_run, write_run
 from .simulation import loop
 from .simulation.passes import run_passes, study_summary
 from .simulation.plants import make_plant
@@ -31,7 +33,19 @@ from .simulation.result import RunResult, summarise
 from .simulation.scenario import Scenario, builtin_names, load_scenario
 from .terrain.storage import Terrain
 
-__all__ = ["Result", "simulate"]
+__all__ = ["ANIMATION_EVERY_S", "IncompleteSimulation", "Result", "simulate"]
+
+# a grid run keeps a snapshot of its loaded cells this often, for the pass animations
+ANIMATION_EVERY_S = 0.1
+
+
+class IncompleteSimulation(SimulationError):
+    """A simulation that failed part of the way; ``result`` holds what was computed up to there
+    (its summary has ``complete = false`` and ``error``), and can be written as any result."""
+
+    def __init__(self, message: str, result: Result):
+        super().__init__(message)
+        self.result = result
 
 
 class Result:
@@ -83,43 +97,59 @@ class Result:
 
     def write(self, out_dir) -> list[Path]:
         """Write the files of the run into ``out_dir`` (as ``symtrack simulate --out``);
-        summary.json last. Returns the paths written."""
+        summary.json last. The files of a previous run in the folder are removed first
+        (:func:`~symtrack.reports.run_files.clear_previous_run`). Returns the paths written."""
         out = Path(out_dir)
-        written = []
+        clear_previous_run(out)
+        sc = self.scenario
+        table = self.validation_table
+        top: dict[str, bytes] = {}  # the files of the folder's top, besides the run files
+        shown: dict[str, bytes] = {}  # the images of report.html
+        passes = []  # (folder, run, summary, plots) of each pass of a multi-pass study
         if self._study is None:
-            res = self.runs[0]
-            figs = plots.all_plots(res)
-            write_run(out, res, self.summary, figs)
-            written += [out / n for n in ("trajectory.csv", "scenario.resolved.toml", *figs)]
+            run = self.runs[0]
+            top.update(plots.all_plots(run))
+            shown.update(top)
         else:
             st = self._study
             multi = len(st.runs) > 1
-            if multi:
-                for k, (res, summ) in enumerate(zip(st.runs, self.pass_summaries, strict=True)):
-                    figs = plots.all_plots(res)
-                    write_run(out / f"pass_{k + 1}", res, summ, figs)
-                    written += [out / f"pass_{k + 1}" / n for n in ("trajectory.csv", "scenario.resolved.toml",
-                                                                     *figs, "summary.json")]
-            pngs = {}
             for k, z in enumerate(st.maps):
                 name = f"sinkage_map_pass_{k + 1}.png" if multi else "sinkage_map.png"
-                pngs[name] = terrain_plots.sinkage_map_png(st.world, z, k + 1)
-            sc = self.scenario
+                top[name] = terrain_plots.sinkage_map_png(st.world, z, k + 1)
             line = (sc.start.x_m, sc.start.y_m, np.radians(sc.start.yaw_deg))
-            pngs["rut_section.png"] = terrain_plots.rut_section_png(st.world, st.maps, st.runs, line)
+            top["rut_section.png"] = terrain_plots.rut_section_png(st.world, st.maps, st.runs, line)
+            for k, snaps in enumerate(st.snapshots):
+                if snaps:
+                    name = f"animation_pass_{k + 1}.gif" if multi else "animation.gif"
+                    top[name] = terrain_plots.pass_animation_gif(st.world, st.before[k], snaps, st.maps[k])
             if multi:
-                for name, data in pngs.items():
-                    atomic_write_bytes(out / name, data)
-                    written.append(out / name)
-                atomic_write_text(out / "summary.json", json.dumps(self.summary, indent=2) + "\n")
+                top["passes.png"] = terrain_plots.passes_png(st.figures)
+                for k, (res, summ) in enumerate(zip(st.runs, self.pass_summaries, strict=True)):
+                    passes.append((out / f"pass_{k + 1}", res, summ, plots.all_plots(res)))
+                shown.update(top)
+                shown.update({f"pass_{len(passes)}/{n}": d for n, d in passes[-1][3].items()})
             else:
-                pngs.update(plots.all_plots(st.runs[0]))
-                write_run(out, st.runs[0], self.summary, pngs)
-                written += [out / n for n in ("trajectory.csv", "scenario.resolved.toml", *pngs)]
-        table = self.validation_table
+                top.update(plots.all_plots(st.runs[0]))
+                shown.update(top)
+            run = None if multi else st.runs[0]
         if table is not None:
-            atomic_write_text(out / "validation_table.md", table)
-            written.append(out / "validation_table.md")
+            top["validation_table.md"] = table.encode()
+        top["report.html"] = report_html(
+            f"symtrack: {sc.name}", self.summary, shown, to_toml(sc.to_dict()),
+            validation.check(self.summary) if table is not None else None, self.summary.get("passes"),
+            sc.description).encode()
+        written = []
+        for folder, res, summ, figs in passes:
+            write_run(folder, res, summ, figs)
+            written += [folder / n for n in ("trajectory.csv", "scenario.resolved.toml", *figs, "summary.json")]
+        if run is not None:
+            write_run(out, run, self.summary, top)  # summary.json last
+            written += [out / n for n in ("trajectory.csv", "scenario.resolved.toml", *top)]
+        else:
+            for name, data in top.items():
+                atomic_write_bytes(out / name, data)
+                written.append(out / name)
+            atomic_write_text(out / "summary.json", json.dumps(self.summary, indent=2) + "\n")
         written.append(out / "summary.json")
         return sorted(set(written))
 
@@ -159,12 +189,26 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
                             f"terrain and cannot start from a terrain file; the grid scenarios are "
                             f"{', '.join(_grid_names())} (or add a [terrain] section)")
     plant = make_plant(scenario, terrain=terrain)
+    failure = None
     if plant.kind == "grid":
-        study = run_passes(scenario, plant, progress=progress)
+        plant.record_every_s = ANIMATION_EVERY_S
+        try:
+            study = run_passes(scenario, plant, progress=progress)
+        except loop.IncompleteRun as err:
+            study, failure = err.study, err
         summary, per_pass = study_summary(study)
         if terrain is not None and not isinstance(terrain, Terrain):
             summary["terrain_in"] = str(terrain)
-        return Result(scenario, study.runs, summary, per_pass, study)
-    res = loop.run(scenario, plant, progress=progress)
-    summary = summarise(res)
-    return Result(scenario, [res], summary, [summary])
+        result = Result(scenario, study.runs, summary, per_pass, study)
+    else:
+        try:
+            res = loop.run(scenario, plant, progress=progress)
+        except loop.IncompleteRun as err:
+            res, failure = err.partial, err
+        summary = summarise(res)
+        result = Result(scenario, [res], summary, [summary])
+    if failure is not None:
+        result.summary["complete"] = False
+        result.summary["error"] = str(failure)
+        raise IncompleteSimulation(str(failure), result) from failure
+    return result

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import tomllib
+from pathlib import Path
 
 from .. import __version__
 from ..foundations.errors import SymtrackError
@@ -24,10 +26,27 @@ def simulate_command(args) -> int:
     return run(args)
 
 
-def scenarios_command(args) -> int:
-    from ..simulation.scenario import builtin_names
+def _described(folder: Path) -> list[tuple[str, str]]:
+    out = []
+    for f in sorted(folder.glob("*.toml")):
+        try:
+            desc = tomllib.loads(f.read_text()).get("description", "")
+        except tomllib.TOMLDecodeError:
+            desc = "(not valid TOML)"
+        out.append((f.stem, desc))
+    return out
 
-    print("\n".join(builtin_names()))
+
+def scenarios_command(args) -> int:
+    """The built-in scenarios with their descriptions (read from the package's TOML files)."""
+    here = Path(__file__).resolve().parents[1]
+    for title, command, folder in (("simulation scenarios", "symtrack simulate NAME", "simulation/scenarios"),
+                                   ("MPC scenarios", "symtrack mpc NAME", "control/scenarios")):
+        print(f"{title} ({command}):")
+        rows = _described(here / folder)
+        width = max(len(n) for n, _ in rows)
+        for name, desc in rows:
+            print(f"  {name:<{width}}  {desc}")
     return 0
 
 
@@ -62,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--terrain-in", metavar="FILE", help="continue from a saved grid terrain (docs/terrain.md)")
     s.add_argument("--terrain-out", metavar="FILE", help="save the grid terrain at the end (docs/terrain.md)")
     s.set_defaults(func=simulate_command)
-    ls = sub.add_parser("scenarios", help="list the built-in scenarios")
+    ls = sub.add_parser("scenarios", help="list the built-in simulation and MPC scenarios with their descriptions")
     ls.set_defaults(func=scenarios_command)
     cg = sub.add_parser("codegen", help="write the generated C sources (as python -m codegen)")
     from codegen.cli import add_arguments as codegen_arguments

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from ..foundations.errors import ScenarioError
+from ..foundations.errors import ScenarioError, SimulationError
 
 __all__ = ["check_output_file", "check_output_folder", "simulate_command"]
 
@@ -35,16 +35,23 @@ def check_output_file(path: str, option: str) -> Path:
 
 
 def simulate_command(args) -> int:
-    from ..api import simulate
+    # the outputs first: a bad --out fails at once, before CasADi is even imported
+    out = check_output_folder(args.out)
+    terrain_out = check_output_file(args.terrain_out, "--terrain-out") if args.terrain_out else None
+    from ..api import IncompleteSimulation, simulate
     from ..simulation.scenario import load_scenario
 
     sc = load_scenario(args.scenario, args.set or [])
-    out = check_output_folder(args.out)
-    terrain_out = check_output_file(args.terrain_out, "--terrain-out") if args.terrain_out else None
     if terrain_out is not None and sc.terrain is None:
         raise ScenarioError(f"--terrain-out: scenario {sc.name!r} has no [terrain] section (it runs on the "
                             "homogeneous terrain, which has no field to save)")
-    res = simulate(sc, terrain=args.terrain_in, progress=not args.quiet)
+    try:
+        res = simulate(sc, terrain=args.terrain_in, progress=not args.quiet)
+    except IncompleteSimulation as err:
+        # keep what was computed: the files of the run up to the failure, marked incomplete
+        err.result.write(out)
+        raise SimulationError(f"{err}; what was computed up to there is in {out} (summary.json: "
+                              "complete = false); no terrain file was written") from err
     if terrain_out is not None:
         res.terrain.save(terrain_out, sc.soil)
         res.summary["terrain_out"] = str(terrain_out)

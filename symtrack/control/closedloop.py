@@ -45,6 +45,7 @@ from ..model import SystemModel
 from ..model.options import ModelOptions
 from ..model.vehicle import VEHICLE_STATES
 from ..reports.plots import plt, png_bytes
+from ..reports.run_files import clear_previous_run
 from ..reports.terrain_plots import sinkage_map_png
 from ..simulation.plants import GridPlant, StepPlant, advance_plant
 from ..terrain.settings import TerrainSettings
@@ -403,6 +404,7 @@ def write(out_dir, res: ClosedLoopResult) -> None:
     from pathlib import Path
 
     out_dir = Path(out_dir)
+    clear_previous_run(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out_dir / "trajectory.csv", trajectory_csv(res))
     atomic_write_text(out_dir / "path.csv", path_csv(res))

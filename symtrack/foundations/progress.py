@@ -1,36 +1,75 @@
-"""A dependency-free progress bar on stderr for long runs (updates at most ~10 times a second)."""
+"""Progress of long runs on stderr: a bar on a terminal (at most ~10 updates a second), log
+lines otherwise (every ``LOG_EVERY_S`` seconds and at the end), so that logs and CI output show
+progress too. :func:`timed_step` logs every step longer than a few seconds with its time."""
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import sys
 import time
 
-__all__ = ["Progress"]
+__all__ = ["LOG_EVERY_S", "SLOW_STEP_S", "Progress", "timed_step"]
+
+log = logging.getLogger("symtrack.progress")
+
+LOG_EVERY_S = 10.0  # a progress line in logs (stderr not a terminal) at most this often
+SLOW_STEP_S = 3.0  # timed_step reports steps that took longer than this
 
 
 class Progress:
+    """Progress of one task as a fraction of ``total``. ``enabled=False`` shows nothing."""
+
     def __init__(self, total: float, label: str = "", enabled: bool = True, stream=None):
         self.total = max(float(total), 1e-12)
         self.label = label
         self.stream = stream or sys.stderr
-        # only on a terminal: logs and CI output stay clean
-        self.enabled = enabled and hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.enabled = enabled
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self._last = 0.0
         self._t0 = time.perf_counter()
+        self._done = 0.0
+        self._note = ""
 
     def update(self, done: float, note: str = ""):
+        self._done, self._note = done, note
         if not self.enabled:
             return
         now = time.perf_counter()
-        if now - self._last < 0.1 and done < self.total:
+        if now - self._last < (0.1 if self.tty else LOG_EVERY_S) and done < self.total:
             return
         self._last = now
-        frac = min(max(done / self.total, 0.0), 1.0)
-        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
-        self.stream.write(f"\r{self.label} [{bar}] {100 * frac:5.1f}% {now - self._t0:6.1f} s {note}   ")
+        self._write(now)
+
+    def _write(self, now, end=False):
+        frac = min(max(self._done / self.total, 0.0), 1.0)
+        if self.tty:
+            bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
+            self.stream.write(f"\r{self.label} [{bar}] {100 * frac:5.1f}% {now - self._t0:6.1f} s {self._note}   ")
+            if end:
+                self.stream.write("\n")
+        else:
+            self.stream.write(f"{self.label}: {100 * frac:5.1f}% after {now - self._t0:.1f} s {self._note}\n")
         self.stream.flush()
 
-    def close(self):
-        if self.enabled:
-            self.stream.write("\n")
-            self.stream.flush()
+    def close(self, complete: bool = True):
+        """End the bar; ``complete`` shows 100 % (the task ended by its own rule, which may be
+        before the nominal total, e.g. a distance reached before the time limit)."""
+        if not self.enabled:
+            return
+        if complete:
+            self._done = self.total
+        self._write(time.perf_counter(), end=True)
+
+
+@contextlib.contextmanager
+def timed_step(what: str, logger: logging.Logger | None = None, slow_s: float = SLOW_STEP_S):
+    """Log ``what`` with its wall time when it took longer than ``slow_s`` (a compilation, a
+    jit build, an integrator construction), so that no long silence goes unexplained."""
+    t0 = time.perf_counter()
+    try:
+        yield
+    finally:
+        dt = time.perf_counter() - t0
+        if dt > slow_s:
+            (logger or log).info("%s took %.1f s", what, dt)

@@ -10,7 +10,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["all_plots", "path_plot", "plt", "png_bytes"]
+__all__ = ["LATERAL_SCALE_FLOOR_M", "all_plots", "path_plot", "plt", "png_bytes"]
+
+# smallest half-range of the magnified lateral-deviation axis (1 mm)
+LATERAL_SCALE_FLOOR_M = 1e-3
 
 
 def png_bytes(fig) -> bytes:
@@ -38,8 +41,11 @@ def path_plot(res) -> bytes:
     a1.set_ylabel("y [m]")
     a1.set_title("path (true scale)")
     a2.plot(along, 100 * lateral)
+    # a floor of scale: a straight run's round-off (1e-15 m) is not drawn as a deviation
+    lim = max(float(np.abs(100 * lateral).max()), 100 * LATERAL_SCALE_FLOOR_M)
+    a2.set_ylim(-1.1 * lim, 1.1 * lim)
     a2.set_xlabel("distance along the initial heading [m]")
-    a2.set_ylabel("lateral deviation [cm]")
+    a2.set_ylabel("lateral deviation [cm] (left +)")
     a2.set_title("lateral deviation from the initial straight line (magnified)")
     a2.grid(True)
     return png_bytes(fig)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import io
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,12 @@ import numpy as np
 from ..foundations.config import to_toml
 from ..foundations.files import atomic_write_bytes, atomic_write_text
 
-__all__ = ["trajectory_columns", "trajectory_csv", "write_run"]
+__all__ = ["RUN_MARKERS", "clear_previous_run", "trajectory_columns", "trajectory_csv", "write_run"]
+
+# files whose presence marks a folder as a previous run's (symtrack simulate / mpc)
+RUN_MARKERS = ("summary.json", "scenario.resolved.toml", "scenario.resolved.json")
+# what a run writes into its folder (and what clear_previous_run removes)
+RUN_SUFFIXES = (".csv", ".png", ".json", ".toml", ".md", ".html", ".gif", ".mp4")
 
 
 def trajectory_columns(res) -> tuple[list[str], np.ndarray]:
@@ -48,3 +54,22 @@ def write_run(out_dir: Path, res, summary: dict, plots: dict[str, bytes]) -> Non
     for name, data in plots.items():
         atomic_write_bytes(out_dir / name, data)
     atomic_write_text(out_dir / "summary.json", json.dumps(summary, indent=2) + "\n")
+
+
+def clear_previous_run(out_dir: Path) -> list[Path]:
+    """Remove the files of a previous run from ``out_dir`` (a folder holding one of
+    :data:`RUN_MARKERS`): its result files (:data:`RUN_SUFFIXES`) and its ``pass_<k>/`` folders,
+    so that a reused ``--out`` never mixes two runs' files. Anything else is left alone; a
+    folder that is no run's is not touched. Returns what was removed."""
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir() or not any((out_dir / m).exists() for m in RUN_MARKERS):
+        return []
+    removed = []
+    for p in sorted(out_dir.iterdir()):
+        if p.is_dir() and p.name.startswith("pass_") and p.name[5:].isdigit():
+            shutil.rmtree(p)
+            removed.append(p)
+        elif p.is_file() and p.suffix in RUN_SUFFIXES:
+            p.unlink()
+            removed.append(p)
+    return removed

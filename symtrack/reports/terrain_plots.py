@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import tempfile
+from pathlib import Path
+
 import numpy as np
 
 from .plots import plt, png_bytes
 
-__all__ = ["rut_section_png", "sinkage_map_png"]
+__all__ = ["ANIMATION_MAX_FRAMES", "pass_animation_gif", "passes_png", "rut_section_png", "sinkage_map_png"]
+
+ANIMATION_MAX_FRAMES = 60  # frames of a pass animation (snapshots are thinned to at most this)
 
 
 def _window(world, maps, margin_cells=10):
@@ -16,8 +21,9 @@ def _window(world, maps, margin_cells=10):
     if not touched.any():
         return slice(0, world.grid.shape[0]), slice(0, world.grid.shape[1])
     ii, jj = np.nonzero(touched)
-    return (slice(max(ii.min() - margin_cells, 0), ii.max() + margin_cells + 1),
-            slice(max(jj.min() - margin_cells, 0), jj.max() + margin_cells + 1))
+    nx, ny = world.grid.shape
+    return (slice(max(ii.min() - margin_cells, 0), min(ii.max() + margin_cells + 1, nx)),
+            slice(max(jj.min() - margin_cells, 0), min(jj.max() + margin_cells + 1, ny)))
 
 
 def sinkage_map_png(world, z, pass_no: int, maps=None) -> bytes:
@@ -54,3 +60,71 @@ def rut_section_png(world, maps, results, line) -> bytes:
     ax.grid(True)
     ax.legend()
     return png_bytes(fig)
+
+
+def passes_png(figures: list[dict]) -> bytes:
+    """Rut depth (max and mean), the sinkage each pass added and the mean compaction resistance
+    against the pass number (the per-pass figures of a terrain study)."""
+    k = np.arange(1, len(figures) + 1)
+    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    a1.plot(k, [f["rut_max_depth_mm"] for f in figures], "o-", label="max")
+    a1.plot(k, [f["rut_mean_depth_mm"] for f in figures], "s-", label="mean over the rut")
+    a1.set_ylabel("rut depth after the pass [mm]")
+    a1.legend()
+    a2.bar(k, [f["new_sinkage_mean_mm"] for f in figures])
+    a2.set_ylabel("sinkage added by the pass [mm]")
+    a3.plot(k, [f["compaction_resistance_mean_N"] for f in figures], "o-")
+    a3.set_ylabel("mean compaction resistance [N]")
+    a3.set_xlabel("pass number")
+    a3.set_xticks(k)
+    for a in (a1, a2, a3):
+        a.grid(True)
+    a1.set_title("the rut pass by pass")
+    return png_bytes(fig)
+
+
+def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 8) -> bytes:
+    """A GIF of one pass: the tracks' footprints over the growing sinkage map, from the
+    plant's snapshots (t_s, pose, loaded cells, their sinkage)."""
+    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.patches import Polygon
+
+    g = world.grid
+    si, sj = _window(world, [z_after])
+    x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
+    ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
+    step = max(1, -(-len(snapshots) // ANIMATION_MAX_FRAMES))
+    frames = list(range(0, len(snapshots), step))
+    if frames and frames[-1] != len(snapshots) - 1:
+        frames.append(len(snapshots) - 1)
+    z = np.array(z_before, dtype=float).ravel().copy()
+    applied = [0]
+    vmax = max(1e3 * float(np.max(z_after[si, sj])), 1e-3)
+    fig, ax = plt.subplots(figsize=(9, 3.5))
+    im = ax.imshow(1e3 * z.reshape(g.shape)[si, sj].T, origin="lower", extent=ext, aspect="equal", cmap="viridis",
+                   vmin=0.0, vmax=vmax)
+    fig.colorbar(im, ax=ax, label="sinkage [mm]")
+    tracks = [ax.add_patch(Polygon(np.zeros((4, 2)), closed=True, fill=False, ec="w", lw=1.5)) for _ in range(2)]
+    title = ax.set_title("")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+
+    def draw(k):
+        while applied[0] <= k:  # the snapshots up to frame k, in order
+            _, _, cells, zc = snapshots[applied[0]]
+            z[cells] = zc
+            applied[0] += 1
+        t, pose, _, _ = snapshots[k]
+        im.set_data(1e3 * z.reshape(g.shape)[si, sj].T)
+        for patch, corners in zip(tracks, world.track_corners(*pose), strict=True):
+            patch.set_xy(corners)
+        title.set_text(f"t = {t:.2f} s")
+        return [im, *tracks, title]
+
+    anim = FuncAnimation(fig, draw, frames=frames, blit=False)
+    with tempfile.TemporaryDirectory(prefix="symtrack-gif-") as tmp:
+        path = Path(tmp) / "pass.gif"
+        anim.save(str(path), writer=PillowWriter(fps=fps), dpi=80)
+        data = path.read_bytes()
+    plt.close(fig)
+    return data

@@ -11,6 +11,7 @@ distance, so that little is computed past it.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 
@@ -21,7 +22,19 @@ from ..foundations.interrupt import raise_if_interrupted, watch_interrupts
 from ..foundations.progress import Progress
 from .result import RunResult
 
-__all__ = ["OutputGrid", "run"]
+__all__ = ["IncompleteRun", "OutputGrid", "run"]
+
+log = logging.getLogger("symtrack.simulation")
+
+
+class IncompleteRun(SimulationError):
+    """A run that failed part of the way (the vehicle left the field, the integrator failed):
+    ``partial`` is the :class:`RunResult` up to the last completed output step
+    (``stopped_by = "error"``), so that what was computed can still be written."""
+
+    def __init__(self, message: str, partial: RunResult):
+        super().__init__(message)
+        self.partial = partial
 
 
 class OutputGrid:
@@ -31,8 +44,11 @@ class OutputGrid:
         run = scenario.run
         self.dt, self.duration = run.output_dt_s, run.duration_s
         self.changes = [e.t_s for e in scenario.torque[1:]]
+        self.torque = [np.array([e.left_N_m, e.right_N_m], dtype=float) for e in scenario.torque]
+        self.starts = [e.t_s for e in scenario.torque]
         self.scenario = scenario
         self.t = 0.0
+        self.cur = 0  # the torque entry in force at self.t (Scenario.torque_at)
 
     def take(self, n: int) -> list[tuple[float, float, np.ndarray]]:
         """The next n intervals (fewer at the end; none when the grid is exhausted)."""
@@ -43,7 +59,9 @@ class OutputGrid:
             for tc in self.changes:
                 if t + 1e-12 < tc < t_next - 1e-12:
                     t_next = tc
-            out.append((t, t_next, np.array(self.scenario.torque_at(t))))
+            while self.cur + 1 < len(self.starts) and self.starts[self.cur + 1] <= t + 1e-12:
+                self.cur += 1
+            out.append((t, t_next, self.torque[self.cur]))
             t = t_next
         self.t = t
         return out
@@ -51,6 +69,7 @@ class OutputGrid:
 
 def _xy_dist(a, b) -> float:
     return float(np.hypot(a[0] - b[0], a[1] - b[1]))
+
 
 
 def run(scenario, plant, progress: bool = False, label: str | None = None) -> RunResult:
@@ -68,6 +87,13 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
     Returns
     -------
     RunResult
+        ``stopped_by`` is "distance", or "duration" (when a distance stop was set but not
+        reached in ``run.duration_s``, a warning says so).
+
+    Raises
+    ------
+    IncompleteRun
+        When the plant fails part of the way; it carries the partial result.
     """
     run_cfg = scenario.run
     dt = run_cfg.output_dt_s
@@ -86,6 +112,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
         ts, xs, us, ys = [np.zeros(1)], [x[None, :]], [u0[None, :]], [y[None, :]]
         t, dist, stopped_by = 0.0, 0.0, "duration"
         wall0 = time.perf_counter()
+        failure = None
         try:
             while True:
                 n = plant.max_intervals
@@ -101,13 +128,18 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                     X = plant.advance()
                     hit = None
                     if dist_from is not None:
-                        for k, (_, t1, _) in enumerate(ivs):
-                            if t1 > dist_from + 1e-12:
-                                d = _xy_dist(X[k], x if k == 0 else X[k - 1])
-                                if dist + d >= target:
-                                    hit = k
-                                    break
-                                dist += d
+                        t1s = np.array([t1 for _, t1, _ in ivs])
+                        prev = np.vstack([x[None, :2], X[:-1, :2]])
+                        d = np.hypot(X[:, 0] - prev[:, 0], X[:, 1] - prev[:, 1])
+                        active = t1s > dist_from + 1e-12
+                        # the sequential sums dist_k = dist_(k-1) + d_k (np.cumsum adds in order)
+                        cum = np.cumsum(np.concatenate(([dist], np.where(active, d, 0.0))))[1:]
+                        reached = np.flatnonzero(active & (cum >= target))
+                        if reached.size:
+                            hit = int(reached[0])
+                            dist = float(cum[hit - 1]) if hit > 0 else dist
+                        else:
+                            dist = float(cum[-1])
                     if hit is None:
                         Y = plant.commit(len(ivs))
                         times = np.array([t1 for _, t1, _ in ivs])
@@ -128,9 +160,10 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                         X = X[:hit + 1]
                         times = np.array([t1 for _, t1, _ in ivs[:hit]] + [t0 + h])
                         stopped_by = "distance"
-                except SimulationError:
+                except SimulationError as err:
                     raise_if_interrupted()
-                    raise
+                    failure = err
+                    break
                 k = len(times)
                 ts.append(times)
                 xs.append(np.array(X[:k]))
@@ -144,14 +177,15 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                 if stopped_by == "distance":
                     break
         finally:
-            bar.close()
+            bar.close(complete=failure is None)
             wall = time.perf_counter() - wall0
             plant.finish()
+    res = RunResult(scenario, np.concatenate(ts), np.vstack(xs), np.vstack(us), np.vstack(ys),
+                    tuple(plant.state_names), tuple(plant.output_names), wall,
+                    "error" if failure is not None else stopped_by, plant.stats(), plant.figures() or None)
+    if failure is not None:
+        raise IncompleteRun(f"{failure} (at t = {t:.3f} s; the run up to there is kept)", res) from failure
     if dist_from is not None and stopped_by != "distance":
-        raise SimulationError(
-            f"the run reached run.duration_s = {run_cfg.duration_s} s before covering "
-            f"run.stop_after_distance_m = {target} m (covered {dist:.2f} m); raise duration_s")
-    figures = plant.figures()
-    return RunResult(scenario, np.concatenate(ts), np.vstack(xs), np.vstack(us), np.vstack(ys),
-                     tuple(plant.state_names), tuple(plant.output_names), wall, stopped_by, plant.stats(),
-                     figures or None)
+        log.warning("%s: the run reached run.duration_s = %g s before covering run.stop_after_distance_m = %g m "
+                    "(covered %.2f m); it ended by duration", scenario.name, run_cfg.duration_s, target, dist)
+    return res

@@ -12,7 +12,7 @@ tracks' compaction resistance), ``rut_cells``, ``distance_m``, ``sim_time_s``,
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -29,12 +29,15 @@ RUT_THRESHOLD_M = 1e-6
 @dataclass
 class PassStudy:
     """The passes of a terrain study: one :class:`RunResult` per pass, its figures, the
-    sinkage map after it ((nx, ny) arrays), and the world they ran on."""
+    sinkage map after it ((nx, ny) arrays), the world they ran on, and per pass the sinkage
+    before it and the plant's snapshots (for the animation; empty when none were recorded)."""
 
     world: World
     runs: list
     figures: list
     maps: list
+    before: list = field(default_factory=list)
+    snapshots: list = field(default_factory=list)
 
 
 def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np.ndarray) -> dict:
@@ -62,17 +65,28 @@ def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np
 
 
 def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: bool = False) -> PassStudy:
-    """All passes of the scenario (``terrain.passes`` unless given) with one grid plant."""
+    """All passes of the scenario (``terrain.passes`` unless given) with one grid plant. A pass
+    that fails raises :class:`~symtrack.simulation.loop.IncompleteRun` with ``study``: the passes
+    so far, the failed one up to where it failed."""
     world = plant.world
     n = passes if passes is not None else (scenario.terrain.passes if scenario.terrain is not None else 1)
     study = PassStudy(world, [], [], [])
     for k in range(n):
         z0 = world.storage.z.copy()
         label = scenario.name if n == 1 else f"{scenario.name} pass {k + 1}/{n}"
-        res = loop.run(scenario, plant, progress=progress, label=label)
+        failure = None
+        try:
+            res = loop.run(scenario, plant, progress=progress, label=label)
+        except loop.IncompleteRun as err:
+            res, failure = err.partial, err  # the failed pass up to where it failed: kept, with its figures
         study.figures.append(pass_figures(world, z0, res, world.touched.copy()))
         study.maps.append(world.storage.copy_z())
         study.runs.append(res)
+        study.before.append(z0.reshape(world.grid.shape))
+        study.snapshots.append(list(plant.snapshots))
+        if failure is not None:
+            failure.study = study
+            raise failure
     return study
 
 

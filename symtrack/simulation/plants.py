@@ -171,38 +171,35 @@ class BatchPlant:
     def synchronize(self, intervals):
         if self.x is None:
             raise SimulationError("BatchPlant: start the plant before stepping it")
-        self.intervals = [(float(h), np.asarray(u, dtype=float)) for h, u in intervals]
+        self.lengths = np.array([h for h, _ in intervals], dtype=float)
+        self.inputs = np.array([u for _, u in intervals], dtype=float)
 
     def advance(self):
         fs = self.stepper.settings.fixed_step_s
-        hs, ui, ends = [], [], []
-        for i, (h, _) in enumerate(self.intervals):
-            n = substeps(h, fs)
-            hs += [h / n] * n
-            ui += [i] * n
-            ends.append(len(hs) - 1)
-        n_cols = self.short if len(hs) <= self.short else self.big
-        U_all = np.array([self.intervals[i][1] for i in ui])
-        H_all = np.array(hs)
+        n = np.maximum(1, np.ceil(self.lengths / fs - 1e-9)).astype(int)  # substeps() of each interval
+        H_all = np.repeat(self.lengths / n, n)
+        U_all = np.repeat(self.inputs, n, axis=0)
+        ends = np.cumsum(n) - 1  # the column that ends each interval
+        total = int(ends[-1]) + 1
+        n_cols = self.short if total <= self.short else self.big
+        m = len(ends)
+        self.Xe = np.empty((m, self.model.nx))
+        self.Ze = np.empty((m, self.model.z.numel()))
+        self.Ye = np.empty((m, len(self.output_names)))
         x, z = self.x, self.z
-        Xe, Ze, Ye = [], [], []
-        ends_set = {e: k for k, e in enumerate(ends)}
-        for c0 in range(0, len(hs), n_cols):
-            c1 = min(c0 + n_cols, len(hs))
+        for c0 in range(0, total, n_cols):
+            c1 = min(c0 + n_cols, total)
             X, Z, Y = self.stepper.run_chunk(n_cols, x, z, U_all[c0:c1], H_all[c0:c1], self.p)
             k = c1 - c0
             x, z = X[k - 1].copy(), Z[k - 1].copy()
-            for col in range(c0, c1):
-                if col in ends_set:
-                    Xe.append(X[col - c0].copy())
-                    Ze.append(Z[col - c0].copy())
-                    Ye.append(Y[col - c0].copy())
-        self.Xe, self.Ze, self.Ye = np.array(Xe), np.array(Ze), np.array(Ye)
+            i0, i1 = np.searchsorted(ends, c0), np.searchsorted(ends, c1)
+            rows = ends[i0:i1] - c0
+            self.Xe[i0:i1], self.Ze[i0:i1], self.Ye[i0:i1] = X[rows], Z[rows], Y[rows]
         return self.Xe
 
     def retry(self, k, length_s):
         x0, z0 = (self.x, self.z) if k == 0 else (self.Xe[k - 1], self.Ze[k - 1])
-        u = self.intervals[k][1]
+        u = self.inputs[k]
         x_new, z_new = self.stepper.advance(x0, z0, u, self.p, length_s)
         self.Xe[k], self.Ze[k] = x_new, z_new
         self.Ye[k] = self._outputs(x_new, u)
@@ -233,8 +230,14 @@ class GridPlant:
     kind = "grid"
     max_intervals = short_intervals = 1
 
-    def __init__(self, world: World, stepper):
+    def __init__(self, world: World, stepper, record_every_s: float | None = None):
+        """``record_every_s``: keep a snapshot of the loaded cells' sinkage and the pose this
+        often (``snapshots``: (t_s, pose, cells, z_m) per snapshot, reset at every start), for an
+        animation of the pass; None records nothing."""
         self.world, self.stepper = world, stepper
+        self.record_every_s = record_every_s
+        self.snapshots: list = []
+        self._t = self._t_snap = 0.0
         self.model = world.model
         self.state_names = tuple(VEHICLE_STATES)
         self.output_names = tuple(world.model.output_names)
@@ -259,7 +262,18 @@ class GridPlant:
             self.stepper.reset()
         self._x = x
         self.finished = False
+        self._t = 0.0
+        self.snapshots = []
+        self._t_snap = -np.inf
+        self._record(x)
         return x[:NV].copy(), self._outputs(x, np.asarray(u0, dtype=float), self.world.param_vector())
+
+    def _record(self, x):
+        if self.record_every_s is None or self._t < self._t_snap + self.record_every_s - 1e-9:
+            return
+        self._t_snap = self._t
+        cells = self.world.active_cells()
+        self.snapshots.append((self._t, x[:3].copy(), cells.copy(), self.world.storage.z[cells].copy()))
 
     def synchronize(self, intervals):
         if self._x is None or self.finished:
@@ -272,16 +286,20 @@ class GridPlant:
 
     def advance(self):
         self.x_new = self.stepper.step(self.x_pre, self.u, self.p, self.h)
+        self.h_done = self.h
         return self.x_new[None, :NV]
 
     def retry(self, k, length_s):
         self.x_new = self.stepper.step(self.x_pre, self.u, self.p, length_s)
+        self.h_done = length_s
         return self.x_new[:NV]
 
     def commit(self, k):
         x = self._x = self.x_new
         self.world.after_step(x)
         self.world.check_covered(x)
+        self._t += self.h_done
+        self._record(x)
         return self._outputs(x, self.u, self.p)[None, :]
 
     def finish(self):

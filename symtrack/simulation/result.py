@@ -62,7 +62,10 @@ def summarise(res: RunResult) -> dict:
         "integrator": sc.run.integrator,
         "stopped_by": res.stopped_by,
         "distance_m": float(seg.sum()),
+        "complete": res.stopped_by != "error",
     }
+    if sc.run.stop_after_distance_m is not None:
+        out["distance_stop_reached"] = res.stopped_by == "distance"
     if sc.run.stop_distance_event:
         te = sc.event_time(sc.run.stop_distance_event)
         after = res.t[1:] > te + 1e-12

@@ -121,8 +121,10 @@ def load(path, soil: dict | None = None) -> Terrain:
         with np.load(path, allow_pickle=False) as f:
             d = {k: f[k] for k in f.files}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
-        raise ScenarioError(f"{path}: not a symtrack terrain file (a .npz written by --terrain-out or "
-                            f"Terrain.save): {type(err).__name__}: {err}") from err
+        what = "truncated or damaged zip archive" if isinstance(err, (zipfile.BadZipFile, EOFError)) else \
+            "not a .npz archive"
+        raise ScenarioError(f"{path}: not a symtrack terrain file ({what}; a terrain file is the .npz that "
+                            "--terrain-out or Terrain.save writes)") from err
     if str(d.get("kind", "")) != KIND:
         raise ScenarioError(f"{path}: not a symtrack terrain file (kind = {d.get('kind')!r})")
     missing = [k for k in ("schema_version", "shape", "origin_m", "cell_m", "soil_names", "soil_values",

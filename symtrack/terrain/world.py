@@ -143,6 +143,14 @@ class World:
                         P["contact_length_m"] / 2 + pad, P["track_width_m"] / 2 + pad))
         return out
 
+    def track_corners(self, X: float, Y: float, psi: float) -> list[np.ndarray]:
+        """The corners (4, 2) of each track's contact rectangle in world coordinates."""
+        out = []
+        for cx, cy, c, s, hl, hw in self._rectangles(X, Y, psi, 0.0):
+            loc = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+            out.append(np.column_stack([cx + c * loc[:, 0] - s * loc[:, 1], cy + s * loc[:, 0] + c * loc[:, 1]]))
+        return out
+
     def cells_under(self, X, Y, psi, pad, check_field=True) -> np.ndarray:
         """Flat indices of the cells whose centres lie in the tracks' rectangles padded by pad."""
         g = self.grid

@@ -1,0 +1,97 @@
+"""``report.html``: one self-contained page per run (no external file, no network): the summary
+table, the validation table when the scenario is a validation, the per-pass table of a terrain
+study, every plot embedded as a PNG data URI, and the resolved scenario.
+
+A small inline script checks on load that every image decoded and writes the result into the
+page (``<body data-images-ok="N/M">``), which a headless browser's DOM dump can read
+(tests/test_report.py).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+
+__all__ = ["REPORT_SCHEMA_VERSION", "report_html"]
+
+REPORT_SCHEMA_VERSION = 1
+
+_STYLE = """
+body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
+table { border-collapse: collapse; margin: 1em 0; }
+td, th { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: left; }
+th { background: #eee; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+img { max-width: 100%; border: 1px solid #ddd; margin: 0.5em 0; }
+pre { background: #f6f6f6; padding: 1em; overflow-x: auto; }
+.bad { color: #b00; font-weight: bold; }
+"""
+
+_CHECK = """
+window.addEventListener("load", function () {
+  var imgs = document.images, ok = 0;
+  for (var i = 0; i < imgs.length; i++) { if (imgs[i].complete && imgs[i].naturalWidth > 0) { ok++; } }
+  document.body.setAttribute("data-images-ok", ok + "/" + imgs.length);
+});
+"""
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if v is None:
+        return "n/a"
+    return str(v)
+
+
+def _table(rows, header) -> str:
+    out = ["<table>", "<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>"]
+    for row in rows:
+        cells = []
+        for v in row:
+            cls = ' class="num"' if isinstance(v, (int, float)) and not isinstance(v, bool) else ""
+            cells.append(f"<td{cls}>{html.escape(_fmt(v))}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_text: str,
+                validation_rows=None, passes: list[dict] | None = None, note: str = "") -> str:
+    """The page (see the module doc). ``images``: file name -> PNG (or GIF) bytes, shown in
+    order; ``validation_rows``: (key, reported, value, ok) rows; ``passes``: per-pass figures."""
+    parts = [f"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+             f"<meta name=\"symtrack-report-schema\" content=\"{REPORT_SCHEMA_VERSION}\">\n"
+             f"<title>{html.escape(title)}</title>\n<style>{_STYLE}</style>\n<script>{_CHECK}</script>\n"
+             f"</head>\n<body>\n<h1>{html.escape(title)}</h1>"]
+    if summary.get("complete") is False:
+        parts.append(f"<p class=\"bad\">Incomplete run: {html.escape(str(summary.get('error', '')))}</p>")
+    if note:
+        parts.append(f"<p>{html.escape(note)}</p>")
+    if validation_rows:
+        parts.append("<h2>Validation (seed / Ferretti &amp; Girelli)</h2>")
+        parts.append(_table([(k, rep, v, "yes" if ok else "NO") for k, rep, v, ok in validation_rows],
+                            ["quantity", "reported", "simulated", "within"]))
+    scalars = [(k, v) for k, v in summary.items() if not isinstance(v, (list, dict))]
+    parts.append("<h2>Summary</h2>")
+    parts.append(_table(scalars, ["key", "value"]))
+    if passes:
+        keys = list(passes[0])
+        parts.append("<h2>Passes</h2>")
+        parts.append(_table([[k + 1] + [p.get(c) for c in keys] for k, p in enumerate(passes)], ["pass", *keys]))
+    if images:
+        parts.append("<h2>Plots</h2>")
+        for name, data in images.items():
+            mime = "image/gif" if name.endswith(".gif") else "image/png"
+            uri = f"data:{mime};base64,{base64.b64encode(data).decode()}"
+            parts.append(f"<figure><img src=\"{uri}\" alt=\"{html.escape(name)}\">"
+                         f"<figcaption>{html.escape(name)}</figcaption></figure>")
+    parts.append("<h2>Scenario (resolved)</h2>")
+    parts.append(f"<pre>{html.escape(scenario_text)}</pre>")
+    parts.append("<h2>summary.json</h2>")
+    parts.append(f"<pre>{html.escape(json.dumps(summary, indent=2, default=str))}</pre>")
+    parts.append("</body>\n</html>\n")
+    return "\n".join(parts)
