@@ -93,6 +93,9 @@ def run(duration_s=8.0, dt=0.01, out=None, speed_step_m_s=0.3, yaw_rate_step_rad
         ax[1].plot(ts, refs[:, 1], "k--", label="reference")
         ax[2].plot(ts, us[:, 0], label="torque_cmd_left_N_m")
         ax[2].plot(ts, us[:, 1], label="torque_cmd_right_N_m")
+        ax[0].set_ylabel("speed u [m/s]")
+        ax[1].set_ylabel("yaw rate [rad/s]")
+        ax[2].set_ylabel("torque command [N m]")
         ax[2].set_xlabel("t [s]")
         for a in ax:
             a.grid(True)

@@ -186,3 +186,32 @@ def test_ctrl_c_stops_simulate_with_exit_130_and_writes_nothing(tmp_path):
     assert p.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err and "failed" not in err
     assert not (out / "summary.json").exists()
+
+
+def test_presets_list_and_show_units_and_sources(capsys):
+    assert main(["presets"]) == 0
+    out = capsys.readouterr().out
+    assert "reference_crawler" in out and "heavy_clay_wes_40" in out
+    assert main(["presets", "reference_crawler"]) == 0
+    out = capsys.readouterr().out
+    row = next(line for line in out.splitlines() if line.startswith("| mass_kg |"))
+    assert "| kg |" in row and "calibrated against the validation table" in row
+    assert main(["presets", "clayey_soil_thailand_38"]) == 0
+    out = capsys.readouterr().out
+    assert "Wong Table 2.3" in next(line for line in out.splitlines() if line.startswith("| bekker_n |"))
+    assert "Chrono SCM's default damping" in next(line for line in out.splitlines()
+                                                  if line.startswith("| cell_damping_Pa_s_per_m |"))
+
+
+def test_a_user_preset_file(tmp_path, capsys):
+    f = tmp_path / "my_crawler.toml"
+    f.write_text('description = "heavier"\nbase = "reference_crawler"\nmass_kg = 7000.0\n'
+                 '[sources]\nmass_kg = "weighed on the farm scale"\n')
+    assert main(["presets", str(f), "--kind", "vehicle"]) == 0
+    assert "weighed on the farm scale" in capsys.readouterr().out
+    out = tmp_path / "o"
+    assert main(["simulate", "validation", "--out", str(out), *FAST, "--set", f'vehicle.preset="{f}"']) == 0
+    assert "mass_kg = 7000.0" in (out / "scenario.resolved.toml").read_text()
+    f.write_text("mass_kgg = 1.0\n")
+    assert main(["simulate", "validation", "--out", str(out), *FAST, "--set", f'vehicle.preset="{f}"']) == 2
+    assert "mass_kgg" in capsys.readouterr().err

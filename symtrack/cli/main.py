@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import tomllib
 from pathlib import Path
@@ -50,6 +51,26 @@ def scenarios_command(args) -> int:
     return 0
 
 
+def presets_command(args) -> int:
+    """The built-in presets, or one preset's parameters with units, meaning and source."""
+    from ..presets.catalog import describe, preset_names
+
+    if args.name is None:
+        for kind in ("vehicle", "soil"):
+            print(f"{kind} presets ([{kind}] preset = NAME): {', '.join(preset_names(kind))}")
+        print("symtrack presets NAME shows one; a preset file (*.toml) is shown the same way")
+        return 0
+    kind = args.kind
+    if kind is None:
+        kind = "vehicle" if args.name in preset_names("vehicle") else "soil"
+    rows = describe(kind, args.name)
+    print(f"{kind} preset {args.name}:")
+    print("| parameter | value | unit | meaning | source |\n|---|---|---|---|---|")
+    for name, value, unit, meaning, source in rows:
+        print(f"| {name} | {value:.6g} | {unit} | {meaning} | {source or 'n/a'} |")
+    return 0
+
+
 def codegen_command(args) -> int:
     from codegen import cli as codegen_cli
 
@@ -83,6 +104,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=simulate_command)
     ls = sub.add_parser("scenarios", help="list the built-in simulation and MPC scenarios with their descriptions")
     ls.set_defaults(func=scenarios_command)
+    pr = sub.add_parser("presets", help="list the vehicle and soil presets, or one preset's parameters with sources")
+    pr.add_argument("name", nargs="?", help="a preset name or a preset file (*.toml)")
+    pr.add_argument("--kind", choices=("vehicle", "soil"), help="for a preset file: which kind it is")
+    pr.set_defaults(func=presets_command)
     cg = sub.add_parser("codegen", help="write the generated C sources (as python -m codegen)")
     from codegen.cli import add_arguments as codegen_arguments
 
@@ -118,6 +143,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("symtrack: interrupted (Ctrl-C); the results of this run were not written", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the output was piped into a reader that stopped (| head)
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (closed at exit)
+        return 0
 
 
 if __name__ == "__main__":

@@ -329,7 +329,7 @@ def plots(res: ClosedLoopResult) -> dict[str, bytes]:
     out = {}
     p = res.path
     ix, iy = res.state_names.index("x_m"), res.state_names.index("y_m")
-    fig, ax = plt.subplots(figsize=(8, 6))
+    fig, (ax, ae) = plt.subplots(2, 1, figsize=(8, 9), gridspec_kw={"height_ratios": [3, 1]})
     on = p.segment >= 0
     ax.plot(p.x[on], p.y[on], "k--", lw=1, label="reference path")
     ax.plot(res.X[:, ix], res.X[:, iy], "C0", lw=1.5, label="vehicle (CG)")
@@ -337,7 +337,17 @@ def plots(res: ClosedLoopResult) -> dict[str, bytes]:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.legend()
-    ax.set_title(f"{res.scenario.name}: path")
+    ax.set_title(f"{res.scenario.name}: path (true scale; the error below, magnified)")
+    # the centimetre errors the true-scale path hides: lateral error along the path, with the band
+    # of the largest error on the straights
+    ae.plot(res.s, 100 * res.e_lat, "C0")
+    band = 100 * float(np.max(np.abs(res.e_lat[res.straight]))) if res.straight.any() else 0.0
+    ae.axhspan(-band, band, color="C0", alpha=0.12, label=f"max on straights: {band:.1f} cm")
+    ae.axhline(0.0, color="k", lw=0.8)
+    ae.set_xlabel("path length s [m]")
+    ae.set_ylabel("lateral error [cm]")
+    ae.grid(True)
+    ae.legend(fontsize=8)
     out["path.png"] = png_bytes(fig)
 
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)

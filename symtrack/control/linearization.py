@@ -277,6 +277,10 @@ def bode_png(lin: Linearization, omega_rad_s=None) -> bytes:
         for a in axes[:, j]:
             a.grid(True, which="both", alpha=0.4)
             a.legend(fontsize=8)
+    tp = lin.trim
+    where = "straight running" if tp.radius_m is None else f"a steady turn of radius {tp.radius_m:g} m"
+    fig.suptitle(f"linearized at {where}, {tp.speed_m_s:g} m/s; torque commands "
+                 f"{tp.u[0]:.0f} / {tp.u[1]:.0f} N m (left / right)")
     return png_bytes(fig)
 
 

@@ -27,12 +27,14 @@ of the generated C).
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Protocol
 
 import numpy as np
 
 from ..foundations.errors import SimulationError
+from ..foundations.progress import timed_step
 from ..integrators import registry
 from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
@@ -45,6 +47,8 @@ from ..terrain.world import World, open_world
 __all__ = ["BatchPlant", "GridPlant", "Plant", "StepPlant", "advance_plant", "make_plant", "make_grid_plant"]
 
 NV = len(VEHICLE_STATES)
+
+log = logging.getLogger("symtrack.simulation")
 
 
 class Plant(Protocol):
@@ -348,14 +352,16 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
     settings = scenario.run.integrator_settings()
     spec = registry.get(settings.method)
     if world is not None or scenario.terrain is not None or terrain is not None:
-        if world is None:
-            spec.check("grid", settings)
-            st = scenario.start
-            world = open_world(scenario.terrain or TerrainSettings(), scenario.params, scenario.model,
-                               scenario.run.output_dt_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
-        return make_grid_plant(world, settings)
-    model = model or SystemModel(scenario.model)
-    stepper = spec.stepper("homogeneous", model, settings)
+        with timed_step("building the grid terrain's model and its integrator", log):
+            if world is None:
+                spec.check("grid", settings)
+                st = scenario.start
+                world = open_world(scenario.terrain or TerrainSettings(), scenario.params, scenario.model,
+                                   scenario.run.output_dt_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
+            return make_grid_plant(world, settings)
+    with timed_step("building the model and its integrator", log):
+        model = model or SystemModel(scenario.model)
+        stepper = spec.stepper("homogeneous", model, settings)
     if "homogeneous" in spec.batch:
         return BatchPlant(model, scenario.params, stepper, scenario.run.output_dt_s)
     return StepPlant(model, scenario.params, stepper)

@@ -18,7 +18,9 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     traction_sign = "smooth"       # smooth | tanh | sign
     tanh_steepness_per_m = 1000.0
     [vehicle]
-    preset = "reference_crawler"   # required; any vehicle parameter may follow as an override
+    preset = "reference_crawler"   # required: a built-in preset (symtrack presets) or a preset file
+                                   # "my_crawler.toml" (symtrack/presets/catalog.py); any vehicle
+                                   # parameter may follow as an override
     [soil]
     preset = "clayey_soil_thailand_38"   # required; any soil parameter may follow
     [start]
@@ -51,6 +53,7 @@ from ..integrators.settings import IntegratorSettings
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..presets import soil_preset, vehicle_preset
+from ..presets.catalog import read_preset_file
 from ..terrain.settings import TerrainSettings, settings_from_dict
 
 __all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
@@ -195,14 +198,18 @@ def _parse_model(t: dict) -> ModelOptions:
 
 
 def parse_params(section, t, preset_fn, specs, default_preset=None):
-    """A [vehicle] or [soil] table: preset plus overrides, validated as a complete set."""
+    """A [vehicle] or [soil] table: preset (a built-in name or a user preset file ``*.toml``)
+    plus overrides, validated as a complete set."""
     names = [s.name for s in specs]
     check_keys(section, t, ["preset"] + names)
     preset = t.get("preset", default_preset)
     if not isinstance(preset, str):
         raise ScenarioError(f"{section}.preset is required (a preset name), got {preset!r}")
     try:
-        values = preset_fn(preset)
+        if preset.endswith(".toml"):  # a user preset file (symtrack.presets.catalog)
+            values, _, _ = read_preset_file(preset, section)
+        else:
+            values = preset_fn(preset)
         overrides = {k: v for k, v in t.items() if k != "preset"}
         values.update(overrides)
         values = check_set(values, specs, section)
