@@ -184,8 +184,10 @@ def test_ctrl_c_stops_simulate_with_exit_130_and_writes_nothing(tmp_path):
     _, err = p.communicate(timeout=60)
     print(f"stopped {time.perf_counter() - t0:.2f} s after SIGINT")
     assert p.returncode == 130, err
-    assert "interrupted" in err and "Traceback" not in err and "failed" not in err
-    assert not (out / "summary.json").exists()
+    # (CasADi itself prints that IDAS's residual was interrupted; symtrack reports no failure)
+    assert "symtrack: interrupted" in err and "Traceback" not in err and "symtrack: error" not in err
+    assert "100.0%" not in err  # the progress shown stops where the run stopped
+    assert not (out / "summary.json").exists() and not out.exists()
 
 
 def test_presets_list_and_show_units_and_sources(capsys):

@@ -233,7 +233,7 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
         sit.append(info.iterations)
         us.append(u.copy())
         tp0 = time.perf_counter()
-        x, _ = advance_plant(plant, u, dt, getattr(plant, "macro_step_s", None))
+        x, _ = advance_plant(plant, u, dt, getattr(plant, "macro_step_s", None), t)
         plant_wall += time.perf_counter() - tp0
         u_prev = u
         t += dt

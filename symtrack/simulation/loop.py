@@ -112,7 +112,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
         ts, xs, us, ys = [np.zeros(1)], [x[None, :]], [u0[None, :]], [y[None, :]]
         t, dist, stopped_by = 0.0, 0.0, "duration"
         wall0 = time.perf_counter()
-        failure = None
+        failure, finished = None, False
         try:
             while True:
                 n = plant.max_intervals
@@ -124,7 +124,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                 if not ivs:
                     break
                 try:
-                    plant.synchronize([(t1 - t0, u) for t0, t1, u in ivs])
+                    plant.synchronize([(t0, t1 - t0, u) for t0, t1, u in ivs])
                     X = plant.advance()
                     hit = None
                     if dist_from is not None:
@@ -176,8 +176,9 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                 bar.update(frac, f"t={t:.2f} s" + (f" d={dist:.2f} m" if dist_from is not None else ""))
                 if stopped_by == "distance":
                     break
+            finished = failure is None
         finally:
-            bar.close(complete=failure is None)
+            bar.close(complete=finished)
             wall = time.perf_counter() - wall0
             plant.finish()
     res = RunResult(scenario, np.concatenate(ts), np.vstack(xs), np.vstack(us), np.vstack(ys),

@@ -4,8 +4,8 @@ A plant is the vehicle on a terrain with an integrator. Every plant has the same
 (:class:`Plant`), with two phases per step as Chrono::Vehicle's subsystems have
 (Synchronize, then Advance):
 
-1. :meth:`Plant.synchronize` hands the plant the coming output intervals (length and sprocket
-   torque commands of each). The grid terrain's world manager does its per-step work here:
+1. :meth:`Plant.synchronize` hands the plant the coming output intervals (start time, length
+   and the sprocket torque commands of each). The grid terrain's world manager does its per-step work here:
    footprint, release, channel assignment, INFO_IN.
 2. :meth:`Plant.advance` integrates over them tentatively and returns the states at their
    ends; :meth:`Plant.retry` integrates one of them again with another length (the stop rule's
@@ -52,7 +52,8 @@ log = logging.getLogger("symtrack.simulation")
 
 
 class Plant(Protocol):
-    """The protocol of every plant (module doc). ``intervals`` are (length_s, u) pairs."""
+    """The protocol of every plant (module doc). ``intervals`` are (t0_s, length_s, u) triples,
+    consecutive from the committed state."""
 
     kind: str
     model: SystemModel
@@ -119,7 +120,7 @@ class StepPlant:
             raise SimulationError(f"{type(self).__name__} advances one interval at a time, got {len(intervals)}")
         if self.x is None:
             raise SimulationError(f"{type(self).__name__}: start the plant before stepping it")
-        (self.h, u), = intervals
+        (_, self.h, u), = intervals
         self.u = np.asarray(u, dtype=float)
 
     def advance(self):
@@ -175,8 +176,8 @@ class BatchPlant:
     def synchronize(self, intervals):
         if self.x is None:
             raise SimulationError("BatchPlant: start the plant before stepping it")
-        self.lengths = np.array([h for h, _ in intervals], dtype=float)
-        self.inputs = np.array([u for _, u in intervals], dtype=float)
+        self.lengths = np.array([h for _, h, _ in intervals], dtype=float)
+        self.inputs = np.array([u for _, _, u in intervals], dtype=float)
 
     def advance(self):
         fs = self.stepper.settings.fixed_step_s
@@ -284,7 +285,7 @@ class GridPlant:
             raise SimulationError("GridPlant: start the plant (set the vehicle down) before stepping it")
         if len(intervals) != 1:
             raise SimulationError(f"GridPlant advances one interval at a time, got {len(intervals)}")
-        (self.h, u), = intervals
+        (_, self.h, u), = intervals
         self.u = np.asarray(u, dtype=float)
         self.x_pre, self.p = self.world.before_step(self._x, self.h, self.stepper)
 
@@ -321,9 +322,11 @@ class GridPlant:
         return self.stepper.stats()
 
 
-def advance_plant(plant, u, length_s: float, substep_s: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Advance a started plant by ``length_s`` with input ``u`` (in equal sub-steps of at most
-    ``substep_s``, the grid's macro step); returns its state and outputs at the end."""
+def advance_plant(plant, u, length_s: float, substep_s: float | None = None,
+                  t0_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Advance a started plant from time ``t0_s`` by ``length_s`` with input ``u`` (in equal
+    sub-steps of at most ``substep_s``, the grid's macro step); returns its state and outputs at
+    the end."""
     n = 1 if substep_s is None else max(1, int(math.ceil(length_s / substep_s - 1e-9)))
     h = length_s / n
     u = np.asarray(u, dtype=float)
@@ -331,7 +334,7 @@ def advance_plant(plant, u, length_s: float, substep_s: float | None = None) -> 
     x = y = None
     while done < n:
         k = min(plant.max_intervals, n - done)
-        plant.synchronize([(h, u)] * k)
+        plant.synchronize([(t0_s + (done + i) * h, h, u) for i in range(k)])
         X = plant.advance()
         Y = plant.commit(k)
         x, y = X[k - 1], Y[k - 1]
