@@ -1,7 +1,7 @@
 """``python -m codegen`` / ``symtrack codegen``: write the generated C sources.
 
 Writes, for the homogeneous-terrain system of the default model options, the files listed in
-:mod:`symtrack.build.generate` plus ``homogeneous_validation.h`` (the numbers of the built-in validation
+:mod:`symtrack.native.generate` plus ``homogeneous_validation.h`` (the numbers of the built-in validation
 scenario for the standalone C program) into ``generated/`` (or ``--out``). Files are written
 atomically and only when their content changed; ``--check`` writes nothing and exits with 1 when
 the folder is out of date.
@@ -17,15 +17,15 @@ from pathlib import Path
 
 log = logging.getLogger("symtrack.codegen")
 
-# the repository's generated/ (symtrack.build.cache.REPO_GENERATED; spelled here so that the
+# the repository's generated/ (symtrack.native.cache.REPO_GENERATED; spelled here so that the
 # argument parser needs no CasADi import)
 REPO_GENERATED = Path(__file__).resolve().parent.parent / "generated"
 
 
 def render_all(scratch: Path) -> dict[str, bytes]:
     """Every file of generated/ as name -> bytes."""
-    from symtrack.build.generate import build, render
     from symtrack.model import SystemModel
+    from symtrack.native.generate import build, render
 
     from . import standalone
 

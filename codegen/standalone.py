@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from symtrack.build.cache import REPO_GENERATED, cache_root, find_compiler
 from symtrack.foundations.errors import SimulationError
 from symtrack.model.static import static_state
+from symtrack.native.cache import REPO_GENERATED, cache_root, find_compiler
 from symtrack.simulation.scenario import load_scenario
 
 FIXED_STEP = "rosenbrock"

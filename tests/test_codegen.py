@@ -7,8 +7,8 @@ import json
 import pytest
 
 from codegen import cli as codegen_cli
-from symtrack.build.generate import build, unit_of
 from symtrack.model import SystemModel
+from symtrack.native.generate import build, unit_of
 
 GEN = codegen_cli.REPO_GENERATED
 
@@ -75,8 +75,8 @@ def test_unrolled_rosenbrock_step_is_the_casadi_plugin_method():
     import casadi as ca
     import numpy as np
 
-    from symtrack.build.rosenbrock import SparseLU, plugin_step
     from symtrack.model.static import static_state
+    from symtrack.native.rosenbrock import SparseLU, plugin_step
     from symtrack.simulation.scenario import load_scenario
 
     sc = load_scenario("validation")

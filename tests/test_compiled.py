@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 from conftest import run_once
 
-from symtrack.build import cache as compiled
-from symtrack.build.generate import GROUPS
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators.fixed_step import FixedStepper
 from symtrack.integrators.settings import IntegratorSettings
 from symtrack.model import SystemModel
 from symtrack.model.static import static_state
+from symtrack.native import cache as compiled
+from symtrack.native.generate import GROUPS
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
 
@@ -127,7 +127,7 @@ def test_no_compiler_falls_back_once_or_fails_when_required(model, monkeypatch, 
     monkeypatch.setattr(compiled, "_warned_no_compiler", False)
     compiled._cache.clear()
     try:
-        with caplog.at_level(logging.WARNING, logger="symtrack.build"):
+        with caplog.at_level(logging.WARNING, logger="symtrack.native"):
             lib = compiled.library(model)
             y = lib.f("outputs")
             compiled._cache.clear()

@@ -123,7 +123,7 @@ def test_plant_choice_and_terrain_validation():
 def test_grid_plant_with_the_compiled_rosenbrock_matches_idas(grid_run, tmp_path):
     """run.integrator = "rosenbrock": the compiled grid integrator as the plant's; the closed loop
     and the ruts agree with the IDAS plant's."""
-    from symtrack.build.cache import compiler as _compiler
+    from symtrack.native.cache import compiler as _compiler
 
     if _compiler() is None:
         pytest.skip("no C compiler: the grid rosenbrock would run interpreted (slow)")

@@ -58,7 +58,7 @@ def _validation_row(case, integrator, overrides, repeats, note=""):
 
 
 def homogeneous_rows(quick: bool = False, repeats: int = 3) -> list[dict]:
-    from ..build import cache
+    from ..native import cache
 
     rows = [
         _validation_row("interpreted", "cvodes", [], repeats),

@@ -1,10 +1,10 @@
 """The compiled fixed-step Rosenbrock integrator for the grid terrain (``run.integrator =
 "rosenbrock"`` with a ``[terrain]`` section).
 
-The step is :mod:`symtrack.build.grid_rosenbrock` (8-stage L-stable Rosenbrock on the DAE form, the
+The step is :mod:`symtrack.native.grid_rosenbrock` (8-stage L-stable Rosenbrock on the DAE form, the
 channels eliminated through the arrowhead's Schur complement, ``map`` over the channels). Its C
 source is generated on first use for the pool size and the number of steps per call, compiled
-into ``<cache>/grid-<hash>/`` (the cache of :mod:`symtrack.build.cache`; the key hashes the
+into ``<cache>/grid-<hash>/`` (the cache of :mod:`symtrack.native.cache`; the key hashes the
 serialised Function) and loaded with ``casadi.external``. The sources are not committed: they
 depend on the pool size M^2. Without a C compiler the same Function runs on CasADi's
 interpreter (slow; an error with ``--require-compiled``).
@@ -23,10 +23,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..build.cache import cache_root, compile_sources, compiler
-from ..build.grid_rosenbrock import build
 from ..foundations.errors import SimulationError
 from ..model.vehicle import VEHICLE_STATES
+from ..native.cache import cache_root, compile_sources, compiler
+from ..native.grid_rosenbrock import build
 from ..terrain.channels import NF, NG
 from .settings import substeps
 

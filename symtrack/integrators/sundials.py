@@ -13,9 +13,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..build.cache import library
 from ..foundations.errors import SimulationError
 from ..model import SystemModel
+from ..native.cache import library
 from .settings import IntegratorSettings
 
 __all__ = ["SundialsStepper", "compiled_dae"]

@@ -1,7 +1,7 @@
 """A Rosenbrock step for the vehicle + channel pool (the grid terrain), built with ``map`` over
 the channels and solved through the arrowhead's Schur complement: O(channels) per step.
 
-The method is the one of :mod:`symtrack.build.rosenbrock` (CasADi 3.8's ``rosenbrock`` plugin tableau:
+The method is the one of :mod:`symtrack.native.rosenbrock` (CasADi 3.8's ``rosenbrock`` plugin tableau:
 8 stages, order 5, L-stable, stiffly accurate) on the time-scaled DAE F = (h f, g), unit step:
 
     W U_i = F(y0 + sum_j a_ij U_j) + M sum_j c_ij U_j,   W = M / gamma - J(y0),   y1 = y0 + sum m_i U_i

@@ -1,7 +1,7 @@
 """Compiled model functions: generated C -> shared library in a cache -> ``casadi.external``.
 
 For a :class:`~symtrack.model.SystemModel` (any terrain), :func:`library` builds the Functions
-of :mod:`symtrack.build.generate`, hashes them (SHA-256 of the serialised Functions, the manifest's
+of :mod:`symtrack.native.generate`, hashes them (SHA-256 of the serialised Functions, the manifest's
 ``model_hash``), and looks for ``<cache>/<prefix>-<hash>/lib<prefix>.so``, where ``<cache>`` is
 ``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``. When it is missing, the sources are taken from the
 repository's ``generated/`` if its manifest has the same hash, or generated afresh (an installed
@@ -30,12 +30,11 @@ import time
 from pathlib import Path
 
 import casadi as ca
-import numpy as np
 
 from ..foundations.errors import SimulationError
 from .generate import GROUP_OF, build, render
 
-log = logging.getLogger("symtrack.build")
+log = logging.getLogger("symtrack.native")
 
 __all__ = ["BUILD_VERSION", "Library", "cache_root", "compile_sources", "compiler", "find_compiler",
            "generated_sources", "interpreter_only", "library", "set_require_compiled"]
@@ -105,7 +104,7 @@ def compiler() -> str | None:
 
 class Library:
     """The generated Functions of one model (prefix = its terrain's name), built, compiled and
-    loaded file by file (symtrack.build.generate.GROUPS) on first use, so that a simulation pays only
+    loaded file by file (symtrack.native.generate.GROUPS) on first use, so that a simulation pays only
     for what it calls; interpreted when compiled code is not wanted or there is no compiler."""
 
     def __init__(self, model, compiled: bool = True):
@@ -113,7 +112,7 @@ class Library:
         self.functions: dict[str, ca.Function] = {}  # what f() returns: external or interpreted
         self.interpreted: dict[str, ca.Function] = {}
         self.paths: dict[str, Path | None] = {}  # group -> shared library (None: interpreted)
-        self.gens: dict = {}  # group -> symtrack.build.generate.Generated
+        self.gens: dict = {}  # group -> symtrack.native.generate.Generated
 
     @property
     def compiled(self) -> bool:

@@ -12,7 +12,7 @@ Files written for a model with prefix ``<m>`` (fixed, predictable names, like ac
   ``<m>_linearize_outputs(x,u,p)->(C,D)`` (the exact Jacobians with respect to x and u);
 - ``<m>_dae.c/.h``: ``<m>_dae(x,z,u,p)->(ode,alg)``, ``jac_<m>_dae``, ``<m>_accel(x,u,p)->z``;
 - ``<m>_rosenbrock.c/.h``: the fixed-step integrator (the 8-stage, L-stable, order-5 Rosenbrock
-  method of CasADi's ``rosenbrock`` plugin, unrolled with a sparse LU in :mod:`symtrack.build.rosenbrock`,
+  method of CasADi's ``rosenbrock`` plugin, unrolled with a sparse LU in :mod:`symtrack.native.rosenbrock`,
   on the index-1 DAE form): ``<m>_rosenbrock_step(x0,z0,u,p,h)->(xf,zf)``
   advances one step of length h, and ``<m>_rosenbrock_chunk<N>(x0,z0,U,H,p)->(X,Z,Y)``
   advances N steps in one call (column k of U and H are the input and the length of step k;
@@ -110,7 +110,7 @@ def _rename(f: ca.Function, name: str) -> ca.Function:
 
 
 def fixed_step_functions(model, prefix: str):
-    """One step of the unrolled Rosenbrock method (:mod:`symtrack.build.rosenbrock`) on the DAE form,
+    """One step of the unrolled Rosenbrock method (:mod:`symtrack.native.rosenbrock`) on the DAE form,
     and chunks of many steps per call."""
     x0, z0 = ca.SX.sym("x0", model.x.sparsity()), ca.SX.sym("z0", model.z.sparsity())
     u, p, h = ca.SX.sym("u", model.u.sparsity()), ca.SX.sym("p", model.p.sparsity()), ca.SX.sym("h")
