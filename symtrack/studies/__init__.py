@@ -8,8 +8,8 @@ on Dask distributed, a local cluster or an existing scheduler (docs/studies.md).
 """
 
 from .design import Axis, latin_hypercube, parse_vary
+from .engine import SCHEMA_VERSION, SweepResult, plan, results_csv, sweep
 from .runs import run_one
-from .sweep import SCHEMA_VERSION, SweepResult, plan, results_csv, sweep
 
 __all__ = ["SCHEMA_VERSION", "Axis", "SweepResult", "latin_hypercube", "parse_vary", "plan", "results_csv",
            "run_one", "sweep"]
