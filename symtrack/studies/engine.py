@@ -200,7 +200,8 @@ def _store(out: Path, run: dict, result: dict, kind: str) -> dict:
         atomic_write_bytes(folder / name, data)
     record = {"schema_version": SCHEMA_VERSION, "id": run["id"], "kind": kind, "values": run["values"],
               "overrides": run["overrides"], "status": result["status"], "error": result["error"],
-              "wall_time_s": result.get("wall_time_s"), "host": result.get("host"), "pid": result.get("pid")}
+              "wall_time_s": result.get("wall_time_s"), "cpu_time_s": result.get("cpu_time_s"),
+              "host": result.get("host"), "pid": result.get("pid")}
     atomic_write_text(folder / "run.json", json.dumps(record, indent=2, default=repr) + "\n")
     if summary is not None and result["status"] == "ok":
         atomic_write_bytes(folder / "summary.json", summary)
@@ -277,8 +278,9 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     atomic_write_text(out / "sweep.json", json.dumps(p.describe(), indent=2, default=repr) + "\n")
     todo = [r for r in p.runs if not (out / "runs" / r["id"] / "summary.json").is_file()]
     skipped = len(p.runs) - len(todo)
-    log.info("sweep of %d runs of %s (%s): %d to run, %d finished before; %s", len(p.runs), p.source.label,
-             p.source.kind, len(todo), skipped, f"scheduler {scheduler}" if scheduler else f"{workers} local workers")
+    say = log.info if progress else log.debug
+    say("sweep of %d runs of %s (%s): %d to run, %d finished before; %s", len(p.runs), p.source.label,
+        p.source.kind, len(todo), skipped, f"scheduler {scheduler}" if scheduler else f"{workers} local workers")
     rows = {r["id"]: _row_on_disk(out, r) for r in p.runs}
     for r in todo:
         rows[r["id"]] = _row(r, None, {})  # to be (re)done: not_run until this sweep has run it
@@ -319,7 +321,7 @@ def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, workers: int, sch
             if result["status"] != "ok":
                 failed.append({"id": run["id"], "values": run["values"], "error": result["error"]})
                 log.warning("run %s (%s) failed: %s", run["id"], values, result["error"])
-            elif not bar.enabled:
+            elif progress and not bar.enabled:
                 log.info("[%d/%d] run %s (%s) ok in %.1f s", done, len(todo), run["id"], values,
                          result.get("wall_time_s") or 0.0)
             bar.update(done, f"{done}/{len(todo)} runs, {len(failed)} failed")

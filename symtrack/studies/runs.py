@@ -104,9 +104,9 @@ def _files(folder: Path) -> dict[str, bytes]:
 def run_one(task: dict) -> dict:
     """Run one task of a sweep (on a worker): ``task`` has ``id``, ``kind``, ``text``, ``name``
     and ``overrides``. Returns ``{"id", "status": "ok" | "failed", "error", "files": {relative
-    path: bytes}, "wall_time_s", "host", "pid"}``; any exception of the run is a failed run with
+    path: bytes}, "wall_time_s", "cpu_time_s", "host", "pid"}``; any exception of the run is a failed run with
     its message (the sweep goes on), an interrupt is not caught."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     out = {"id": task["id"], "status": "ok", "error": "", "files": {}, "host": socket.gethostname(),
            "pid": os.getpid()}
     try:
@@ -125,4 +125,5 @@ def run_one(task: dict) -> dict:
     except Exception as err:  # noqa: BLE001 - a failed run is recorded with its message; the others go on
         out.update(status="failed", error=f"{type(err).__name__}: {err}".strip(), files={})
     out["wall_time_s"] = time.perf_counter() - t0
+    out["cpu_time_s"] = time.process_time() - c0
     return out
