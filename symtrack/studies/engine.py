@@ -9,6 +9,7 @@ sweep folder (docs/studies.md).
 The folder (schema version :data:`SCHEMA_VERSION`)::
 
     DIR/sweep.json            the design: scenario, kind, fixed overrides, axes, every run's id and values
+    DIR/comparison.png        each figure against each varied key (symtrack.studies.plots)
     DIR/results.csv           one row per run: the varied keys, run_id, status, error, run_wall_time_s,
                               every scalar figure of the run's summary.json
     DIR/runs/<id>/            the files of a single run (summary.json last: it means the run finished)
@@ -32,6 +33,7 @@ from ..foundations.errors import ScenarioError, SymtrackError
 from ..foundations.files import atomic_write_bytes, atomic_write_text, check_output_folder
 from ..foundations.progress import Progress
 from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
+from .plots import comparison_png
 from .runs import Source, load, resolve_source, run_one
 
 __all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "plan", "results_csv", "scalar_figures", "sweep"]
@@ -288,6 +290,9 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     if todo:
         failed = _run_all(out, p, todo, rows, workers, scheduler, progress)
     table = _write_table(out, p, rows)
+    png = comparison_png(table, [a.key for a in p.axes])
+    if png is not None:
+        atomic_write_bytes(out / "comparison.png", png)
     return SweepResult(out, table, len(todo), skipped, time.perf_counter() - t0, failed)
 
 
