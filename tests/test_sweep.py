@@ -7,6 +7,12 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
 import tomllib
 
 import numpy as np
@@ -49,6 +55,7 @@ def test_grid_sweep_writes_a_row_and_a_run_folder_per_combination(grid_sweep):
     assert [(float(r["vehicle.mass_kg"]), float(r["soil.k_phi_N_per_m_n2"])) for r in rows] == [
         (5000, 6e5), (5000, 1.2e6), (6500, 6e5), (6500, 1.2e6)]
     assert {r["status"] for r in rows} == {"ok"} and {r["error"] for r in rows} == {""}
+    assert (out / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     design_doc = json.loads((out / "sweep.json").read_text())
     assert design_doc["schema_version"] == 1 and design_doc["kind"] == "simulate"
     assert [r["id"] for r in design_doc["runs"]] == [r["run_id"] for r in rows]
@@ -219,3 +226,57 @@ def test_mpc_sweep_on_a_scheduler_started_here(tmp_path):
         assert {"summary.json", "trajectory.csv", "path.csv", "scenario.resolved.json"} <= {
             p.name for p in folder.iterdir()}
         assert int(r["solves"]) == 4
+
+
+def test_ctrl_c_cancels_the_runs_in_flight_and_keeps_the_finished_ones(tmp_path):
+    out = tmp_path / "interrupted"
+    masses = ",".join(str(5000 + 100 * k) for k in range(8))
+    cmd = [sys.executable, "-m", "symtrack", "sweep", "validation", "--vary", f"vehicle.mass_kg={masses}",
+           "--out", str(out), "--workers", "1", "--quiet", *_sets(FAST)]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 180
+        while not list((out / "runs").glob("*/summary.json")) and time.monotonic() < deadline:
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C on a terminal signals the whole process group
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "finished ones are kept" in err
+    rows = _table(out / "results.csv")
+    statuses = [r["status"] for r in rows]
+    assert len(rows) == 8 and "ok" in statuses and "not_run" in statuses and "failed" not in statuses
+    for r in rows:
+        assert (out / "runs" / r["run_id"] / "summary.json").is_file() == (r["status"] == "ok")
+    assert not list(out.rglob("*.tmp"))  # nothing half-written
+
+
+def test_a_killed_worker_has_its_run_redone_on_another(tmp_path):
+    from distributed import Client, LocalCluster
+
+    out, box = tmp_path / "killed", []
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        pids = client.run(os.getpid)
+        th = threading.Thread(target=lambda: box.append(studies.sweep(
+            "validation", {"vehicle.mass_kg": [5000, 5500, 6000]}, out=out, overrides=FAST,
+            scheduler=cluster.scheduler_address, progress=False)))
+        th.start()
+        deadline = time.monotonic() + 120
+        busy = []
+        while not busy and time.monotonic() < deadline:
+            busy = [ws.address for ws in list(cluster.scheduler.workers.values()) if ws.processing]
+            time.sleep(0.05)
+        assert busy, "no run started"
+        victim = pids[busy[0]]
+        os.kill(victim, signal.SIGKILL)
+        th.join(240)
+        assert not th.is_alive()
+    res = box[0]
+    assert res.ok and [r["status"] for r in res.rows] == ["ok"] * 3
+    ran_on = {json.loads((out / "runs" / r["run_id"] / "run.json").read_text())["pid"] for r in res.rows}
+    assert victim not in ran_on
