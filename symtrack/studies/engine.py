@@ -225,7 +225,7 @@ def _client(workers: int, scheduler: str | None):
             raise SymtrackError(f"--scheduler {scheduler!r}: cannot connect ({err}); start one with "
                                 "`dask scheduler` and workers with `dask worker ADDRESS`") from err
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.CRITICAL)
     return Client(cluster), cluster
 
 
