@@ -220,7 +220,7 @@ def _client(workers: int, scheduler: str | None):
     logging.getLogger("distributed").setLevel(logging.WARNING)
     if scheduler:
         try:
-            return Client(scheduler, timeout="30s"), None
+            return Client(scheduler, timeout="15s"), None
         except (OSError, TimeoutError) as err:
             raise SymtrackError(f"--scheduler {scheduler!r}: cannot connect ({err}); start one with "
                                 "`dask scheduler` and workers with `dask worker ADDRESS`") from err
@@ -276,8 +276,6 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     p = plan(scenario, vary, ranges=ranges, samples=samples, seed=seed, overrides=overrides, kind=kind)
     out = check_output_folder(str(out))
     t0 = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "sweep.json", json.dumps(p.describe(), indent=2, default=repr) + "\n")
     todo = [r for r in p.runs if not (out / "runs" / r["id"] / "summary.json").is_file()]
     skipped = len(p.runs) - len(todo)
     say = log.info if progress else log.debug
@@ -287,8 +285,12 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     for r in todo:
         rows[r["id"]] = _row(r, None, {})  # to be (re)done: not_run until this sweep has run it
     failed = []
+    # the cluster first: a scheduler that cannot be reached leaves nothing written
+    client, cluster = _client(workers, scheduler) if todo else (None, None)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "sweep.json", json.dumps(p.describe(), indent=2, default=repr) + "\n")
     if todo:
-        failed = _run_all(out, p, todo, rows, workers, scheduler, progress)
+        failed = _run_all(out, p, todo, rows, client, cluster, progress)
     table = _write_table(out, p, rows)
     png = comparison_png(table, [a.key for a in p.axes])
     if png is not None:
@@ -296,13 +298,12 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     return SweepResult(out, table, len(todo), skipped, time.perf_counter() - t0, failed)
 
 
-def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, workers: int, scheduler: str | None,
-             progress: bool) -> list:
-    """The runs of ``todo`` on the cluster; each finished run is stored at once and results.csv
-    rewritten (at most once a second, and at the end). Returns the failed runs."""
+def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, progress: bool) -> list:
+    """The runs of ``todo`` on the client's cluster; each finished run is stored at once and
+    results.csv rewritten (at most once a second, and at the end); the client (and a local
+    cluster) are closed at the end. Returns the failed runs."""
     from distributed import as_completed
 
-    client, cluster = _client(workers, scheduler)
     futures = {}
     failed = []
     bar = Progress(len(todo), f"sweep {p.source.name}", enabled=progress)
