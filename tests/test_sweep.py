@@ -207,25 +207,61 @@ def test_plan_of_a_sampled_sweep_is_the_same_on_a_rerun():
     assert [r["id"] for r in a.runs] == [r["id"] for r in b.runs] and len(a.runs) == 5
 
 
-def test_mpc_sweep_on_a_scheduler_started_here(tmp_path):
-    from distributed import LocalCluster
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """A scheduler and two workers as a user starts them (`dask scheduler`, `dask worker`), on
+    127.0.0.1, stopped at the end. Yields the scheduler's address."""
+    from distributed import Client
+
+    info = tmp_path / "scheduler.json"
+    common = ["--no-dashboard"]
+    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--scheduler-file", str(info), *common], start_new_session=True,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60
+        while not info.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(info.read_text())["address"]
+        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", "2",
+                                       "--nthreads", "1", "--host", "127.0.0.1", *common], start_new_session=True,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        with Client(address, timeout="30s") as client:
+            client.wait_for_workers(2, timeout=90)
+        yield address
+    finally:
+        for p in reversed(procs):
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+
+
+def test_mpc_sweep_on_a_scheduler_and_workers_started_here(tmp_path, dask_cluster):
+    from distributed import Client
 
     out = tmp_path / "mpc"
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-        res = studies.sweep("straight_offset", {"mpc.horizon_steps": [4, 6]}, out=out,
-                                     overrides={"run.duration_s": 0.4}, scheduler=cluster.scheduler_address,
-                                     progress=False)
-        assert len(cluster.scheduler.workers) == 2  # the sweep left the user's cluster running
-    assert res.ok and res.ran == 2
+    code = main(["sweep", "straight_offset", "--vary", "mpc.horizon_steps=4,6", "--set", "run.duration_s=0.4",
+                 "--scheduler", dask_cluster, "--out", str(out), "--quiet"])
+    assert code == 0
+    with Client(dask_cluster, timeout="30s") as client:  # the sweep left the user's cluster running
+        assert len(client.scheduler_info()["workers"]) == 2
     rows = _table(out / "results.csv")
     assert [int(r["mpc.horizon_steps"]) for r in rows] == [4, 6]
     assert [int(r["horizon_steps"]) for r in rows] == [4, 6]  # the MPC's own summary field
     assert json.loads((out / "sweep.json").read_text())["kind"] == "mpc"
+    pids = set()
     for r in rows:
         folder = out / "runs" / r["run_id"]
         assert {"summary.json", "trajectory.csv", "path.csv", "scenario.resolved.json"} <= {
             p.name for p in folder.iterdir()}
         assert int(r["solves"]) == 4
+        pids.add(json.loads((folder / "run.json").read_text())["pid"])
+    assert os.getpid() not in pids  # run by the workers, not here
 
 
 def test_ctrl_c_cancels_the_runs_in_flight_and_keeps_the_finished_ones(tmp_path):
