@@ -314,6 +314,7 @@ def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, 
                     "overrides": r["overrides"]}
             futures[client.submit(run_one, task, key=f"symtrack-run-{r['id']}-{time.time_ns()}", pure=False)] = r
         done, last_table = 0, time.perf_counter()
+        bar.update(0, f"0/{len(todo)} runs")
         for fut in as_completed(list(futures)):
             run = futures[fut]
             try:
