@@ -34,12 +34,15 @@ def serial_wall_time(scenario: str, key: str, values, overrides: list[str], out:
     return time.perf_counter() - t0, sim
 
 
-def sweep_wall_time(scenario: str, key: str, values, overrides: list[str], out: Path, workers: int) -> float:
-    """Wall time of the same runs as one sweep on a new local cluster of ``workers`` processes."""
+def sweep_wall_time(scenario: str, key: str, values, overrides: list[str], out: Path, workers: int,
+                    scheduler: str | None = None) -> float:
+    """Wall time of the same runs as one sweep on a new local cluster of ``workers`` processes
+    (or on the running cluster of ``scheduler``)."""
     from ..studies import sweep
 
     t0 = time.perf_counter()
-    res = sweep(scenario, {key: list(values)}, out=out, overrides=overrides, workers=workers, progress=False)
+    res = sweep(scenario, {key: list(values)}, out=out, overrides=overrides, workers=workers, scheduler=scheduler,
+                progress=False)
     wall = time.perf_counter() - t0
     if not res.ok:
         raise RuntimeError(f"the benchmark sweep had failed runs: {res.failed}")
@@ -65,4 +68,23 @@ def bench_rows(quick: bool = False, workers=(1, 2)) -> list[dict]:
                          "integrator": "cvodes", "sim_time_s": sim, "wall_time_s": wall,
                          "real_time_factor": sim / wall, "ratio_to_serial": wall / serial,
                          "note": f"{wall / serial:.2f} x the serial time (cluster start and stop counted)"})
+        rows.append(_running_cluster_row(scenario, key, values, overrides, tmp, serial, sim, max(workers)))
     return rows
+
+
+def _running_cluster_row(scenario, key, values, overrides, tmp: Path, serial: float, sim: float, workers: int):
+    """The same sweep on a cluster that is already running and has run once (imports done): what
+    Dask itself costs per sweep, without the cluster's start and stop."""
+    import logging
+
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.CRITICAL) as cluster:
+        address = cluster.scheduler_address
+        sweep_wall_time(scenario, key, [values[0] * 1.01], overrides, tmp / "cluster_warm", workers, address)
+        wall = sweep_wall_time(scenario, key, values, overrides, tmp / "cluster", workers, address)
+    return {"group": "sweep overhead", "case": f"symtrack sweep of the {len(values)} runs, --scheduler of a running "
+            f"{workers}-worker cluster", "integrator": "cvodes", "sim_time_s": sim, "wall_time_s": wall,
+            "real_time_factor": sim / wall, "ratio_to_serial": wall / serial,
+            "note": f"{wall / serial:.2f} x the serial time (cluster started before, workers warm)"}
