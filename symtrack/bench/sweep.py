@@ -4,8 +4,10 @@ serial time, the model build counted).
 
 Both sides do the same work per run: load the scenario, build the model (compiled libraries from
 the warm cache), simulate, write the files of a single run (plots included). The sweep's wall
-time counts the local cluster's start and stop. Measured in one process, one after another, so
-the ratios compare like with like on a shared machine.
+time counts the local cluster's start and stop; a last row runs the same sweep on a cluster
+started before and warmed by one run (``--scheduler``), which leaves out the cluster's start,
+stop and imports. Measured in one process, one after another, so the ratios compare like with
+like on a shared machine.
 """
 
 from __future__ import annotations
