@@ -18,9 +18,10 @@ ROOT = Path(__file__).resolve().parent.parent
 # layer of each top-level part of symtrack, bottom first; a module may import its own layer or below
 LAYERS = {
     "foundations": 1, "model": 2, "presets": 2, "terrain": 3, "native": 4, "integrators": 5, "simulation": 6,
-    "control": 7, "reports": 7, "api": 7, "bench": 8, "cli": 9, "__main__": 9, "": 9,
+    "control": 7, "reports": 7, "api": 7, "studies": 7, "bench": 8, "cli": 9, "__main__": 9, "": 9,
 }
 CODEGEN_ALLOWED = ("cli", "bench")
+STUDIES_ALLOWED = ("cli", "bench", "studies")  # the studies are an application: only the CLI and the bench use them
 
 
 def _modules():
@@ -134,6 +135,14 @@ def test_only_cli_and_bench_import_codegen(graph):
     bad = [(m, t) for m, e in edges.items() for t, _ in e
            if m.startswith("symtrack") and t.startswith("codegen") and m.split(".")[1] not in CODEGEN_ALLOWED]
     assert bad == []
+
+
+def test_only_cli_and_bench_import_studies(graph):
+    _, edges = graph
+    users = {m.split(".")[1] for m, e in edges.items() for t, _ in e
+             if m.startswith("symtrack.") and t.startswith("symtrack.studies")}
+    assert "cli" in users  # the reader found the sweep command
+    assert users <= set(STUDIES_ALLOWED)
 
 
 def test_the_reader_sees_a_circle_and_a_private_import(tmp_path, monkeypatch):

@@ -132,6 +132,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--out", default="out/bench.json", help="JSON file to write (default out/bench.json)")
     ap.add_argument("--quick", action="store_true", help="fewer rows and sizes (providers decide what to skip)")
     ap.add_argument("--repeats", type=int, default=3, help="timed runs per row after a warm-up (best is kept)")
+    ap.add_argument("--sweep", action="store_true",
+                    help="only the sweep overhead: 8 validation runs one after another vs symtrack sweep on 1 and 2 "
+                    "workers (docs/studies.md; --quick: 4 runs)")
 
 
 def run_cli(args) -> int:
@@ -140,7 +143,12 @@ def run_cli(args) -> int:
 
     if args.repeats < 1:
         raise ScenarioError(f"--repeats = {args.repeats} must be >= 1")
-    rows = collect(args.quick, args.repeats)
+    if getattr(args, "sweep", False):
+        from .sweep import bench_rows as sweep_rows
+
+        rows = sweep_rows(args.quick)
+    else:
+        rows = collect(args.quick, args.repeats)
     rep = report(rows)
     atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
     print(table(rows))

@@ -1,5 +1,6 @@
 """The ``symtrack`` command line: argument parsing only; every command is a thin call into the
-layers below (:mod:`symtrack.api`, :mod:`symtrack.control`, :mod:`symtrack.bench`, ``codegen``).
+layers below (:mod:`symtrack.api`, :mod:`symtrack.control`, :mod:`symtrack.studies`,
+:mod:`symtrack.bench`, ``codegen``).
 
 Heavy packages (CasADi, matplotlib, python-control) are imported by the commands, not here, so
 that ``symtrack --help`` answers at once.
@@ -121,6 +122,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .control import add_parsers
 
     add_parsers(sub)  # symtrack linearize, symtrack mpc (docs/control.md)
+    from .sweep import add_parser as add_sweep_parser
+
+    add_sweep_parser(sub)  # symtrack sweep (docs/studies.md)
     return ap
 
 

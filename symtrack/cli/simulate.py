@@ -2,36 +2,10 @@
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 from ..foundations.errors import ScenarioError, SimulationError
+from ..foundations.files import check_output_file, check_output_folder
 
 __all__ = ["check_output_file", "check_output_folder", "simulate_command"]
-
-
-def check_output_folder(path: str, option: str = "--out") -> Path:
-    """Refuse, before any computation, an output folder that cannot be written."""
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise ScenarioError(f"{option} {path!r} is an existing file, not a folder: give a folder name")
-    probe = p
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ScenarioError(f"{option} {path!r}: {str(probe)!r} is a file, so the folder cannot be created")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise ScenarioError(f"{option} {path!r}: the folder {str(probe)!r} is not writable")
-    return p
-
-
-def check_output_file(path: str, option: str) -> Path:
-    """Refuse, before any computation, an output file that cannot be written."""
-    p = Path(path)
-    if p.is_dir():
-        raise ScenarioError(f"{option} {path!r} is a folder: give a file name (e.g. out/terrain.npz)")
-    check_output_folder(str(p.parent) if str(p.parent) else ".", option)
-    return p
 
 
 def simulate_command(args) -> int:

@@ -1,7 +1,8 @@
 """Atomic file writing: a temporary file in the same folder, fsync, then rename.
 
 A reader never sees a half-written file: either the old content or the new. Every result file
-of symtrack is written through these functions.
+of symtrack is written through these functions. :func:`check_output_folder` and
+:func:`check_output_file` refuse, before any computation, an output that cannot be written.
 """
 
 from __future__ import annotations
@@ -10,7 +11,9 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_write_bytes", "atomic_write_text"]
+from .errors import ScenarioError
+
+__all__ = ["atomic_write_bytes", "atomic_write_text", "check_output_file", "check_output_folder"]
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -37,3 +40,27 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 def atomic_write_text(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     atomic_write_bytes(path, text.encode())
+
+
+def check_output_folder(path: str, option: str = "--out") -> Path:
+    """Refuse, before any computation, an output folder that cannot be written."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise ScenarioError(f"{option} {path!r} is an existing file, not a folder: give a folder name")
+    probe = p
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ScenarioError(f"{option} {path!r}: {str(probe)!r} is a file, so the folder cannot be created")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise ScenarioError(f"{option} {path!r}: the folder {str(probe)!r} is not writable")
+    return p
+
+
+def check_output_file(path: str, option: str) -> Path:
+    """Refuse, before any computation, an output file that cannot be written."""
+    p = Path(path)
+    if p.is_dir():
+        raise ScenarioError(f"{option} {path!r} is a folder: give a file name (e.g. out/terrain.npz)")
+    check_output_folder(str(p.parent) if str(p.parent) else ".", option)
+    return p

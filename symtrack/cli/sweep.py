@@ -1,0 +1,56 @@
+"""``symtrack sweep``: a parameter sweep on Dask distributed (docs/studies.md); argument parsing
+only, the engine is :mod:`symtrack.studies`. Dask and CasADi are imported by the command, not
+here, so that ``symtrack --help`` answers at once."""
+
+from __future__ import annotations
+
+import sys
+
+__all__ = ["add_parser", "sweep_command"]
+
+
+def sweep_command(args) -> int:
+    from ..studies import sweep
+
+    try:
+        res = sweep(args.scenario, args.vary, out=args.out, samples=args.sample, seed=args.seed,
+                    overrides=args.set or [], kind=args.kind, workers=args.workers, scheduler=args.scheduler,
+                    progress=not args.quiet)
+    except KeyboardInterrupt:
+        print(f"symtrack: interrupted (Ctrl-C); the runs in flight were cancelled, the finished ones are kept "
+              f"in {args.out} (results.csv); run the same command again to do the rest", file=sys.stderr)
+        return 130
+    for f in res.failed:
+        values = ", ".join(f"{k}={v!r}" for k, v in f["values"].items())
+        print(f"failed: run {f['id']} ({values}): {f['error']}", file=sys.stderr)
+    print(f"sweep: {len(res.rows)} runs, {res.count('ok')} ok, {res.count('failed')} failed "
+          f"({res.ran} run now, {res.skipped} finished before) in {res.wall_time_s:.1f} s; "
+          f"table in {res.out / 'results.csv'}")
+    return 0 if res.ok else 1
+
+
+def add_parser(sub) -> None:
+    """Register ``symtrack sweep`` on the argparse subparsers of symtrack.cli."""
+    sw = sub.add_parser(
+        "sweep", help="a parameter sweep (full grid or Latin hypercube) on Dask distributed (docs/studies.md)",
+        description="Run a scenario (of `symtrack simulate` or `symtrack mpc`) for every combination of the "
+        "varied values, on a local Dask cluster or an existing scheduler. Writes DIR/results.csv (one row per "
+        "run), DIR/sweep.json and DIR/runs/<id>/. Exit code 0 when every run succeeded, 1 when some failed, "
+        "2 for an invalid sweep (nothing run), 130 on Ctrl-C (finished runs kept). A rerun into the same DIR "
+        "redoes only what failed or is missing.")
+    sw.add_argument("scenario", help="built-in scenario name (symtrack scenarios, symtrack mpc --help) or TOML file")
+    sw.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2,...",
+                    help="a varied key (any --set key) and its values; or KEY=LO:HI, a range sampled by --sample")
+    sw.add_argument("--sample", type=int, metavar="N",
+                    help="N points of a Latin hypercube over the KEY=LO:HI ranges (crossed with the listed values)")
+    sw.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube (default 0)")
+    sw.add_argument("--out", required=True, help="the sweep folder")
+    sw.add_argument("--workers", type=int, default=2,
+                    help="worker processes of the local Dask cluster (default 2; ignored with --scheduler)")
+    sw.add_argument("--scheduler", metavar="ADDRESS",
+                    help="a running Dask scheduler, e.g. tcp://127.0.0.1:8786 (instead of a local cluster)")
+    sw.add_argument("--kind", choices=("auto", "simulate", "mpc"), default="auto",
+                    help="the scenario kind (default: the kind whose loader accepts the scenario)")
+    sw.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a fixed override of every run")
+    sw.add_argument("--quiet", action="store_true", help="no progress bar or log lines")
+    sw.set_defaults(func=sweep_command)

@@ -1,0 +1,347 @@
+"""Parameter sweeps on Dask distributed: the design, its validation, the runs on a cluster, the
+sweep folder (docs/studies.md).
+
+    from symtrack import studies
+    res = studies.sweep("validation", {"vehicle.mass_kg": [5000, 6000], "soil.n": [0.6, 0.8]},
+                        out="out/sweep", overrides={"run.integrator": "rosenbrock"}, workers=2)
+    res.rows          # the rows of results.csv (dicts); res.ok: every run succeeded
+
+The folder (schema version :data:`SCHEMA_VERSION`)::
+
+    DIR/sweep.json            the design: scenario, kind, fixed overrides, axes, every run's id and values
+    DIR/comparison.png        each figure against each varied key (symtrack.studies.plots)
+    DIR/results.csv           one row per run: the varied keys, run_id, status, error, run_wall_time_s,
+                              every scalar figure of the run's summary.json
+    DIR/runs/<id>/            the files of a single run (summary.json last: it means the run finished)
+    DIR/runs/<id>/run.json    the run's record: status, error, overrides, worker host, wall time
+
+A rerun into the same folder skips the runs whose ``summary.json`` is there and redoes the rest.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..foundations.errors import ScenarioError, SymtrackError
+from ..foundations.files import atomic_write_bytes, atomic_write_text, check_output_folder
+from ..foundations.progress import Progress
+from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
+from .plots import comparison_png
+from .runs import Source, load, resolve_source, run_one
+
+__all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "plan", "results_csv", "scalar_figures", "sweep"]
+
+log = logging.getLogger("symtrack.studies")
+
+SCHEMA_VERSION = 1
+# ok: summary.json written; failed: the run raised (its message in error); not_run: not reached
+# (the sweep was interrupted)
+STATUSES = ("ok", "failed", "not_run")
+# run_wall_time_s: the run on its worker, model build and file rendering included (the summary's
+# wall_time_s is the time loop's alone)
+FIXED_COLUMNS = ("run_id", "status", "error", "run_wall_time_s")
+
+
+@dataclass
+class Plan:
+    """A validated sweep: its scenario, axes and runs (id -> overrides), nothing run yet."""
+
+    source: Source
+    fixed: dict
+    axes: list[Axis]
+    samples: int | None
+    seed: int
+    runs: list[dict]  # {"id", "values", "overrides"}
+
+    def describe(self) -> dict:
+        return {"schema_version": SCHEMA_VERSION, "kind": self.source.kind, "scenario": self.source.label,
+                "scenario_name": self.source.name, "overrides": self.fixed,
+                "axes": [a.describe() for a in self.axes], "samples": self.samples, "seed": self.seed,
+                "runs": [{"id": r["id"], "values": r["values"]} for r in self.runs]}
+
+
+@dataclass
+class SweepResult:
+    """What :func:`sweep` returns: the rows of results.csv and the counts."""
+
+    out: Path
+    rows: list[dict]
+    ran: int = 0
+    skipped: int = 0
+    wall_time_s: float = 0.0
+    failed: list[dict] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when every run of the sweep succeeded."""
+        return all(r["status"] == "ok" for r in self.rows)
+
+    def count(self, status: str) -> int:
+        return sum(r["status"] == status for r in self.rows)
+
+
+def plan(scenario, vary=None, *, ranges=None, samples: int | None = None, seed: int = 0, overrides=None,
+         kind: str = "auto") -> Plan:
+    """Build and validate a sweep without running it: every value of every axis, then every
+    run's scenario, is checked by the scenario's loader; the first error is raised as a
+    :class:`ScenarioError` naming the key and the value."""
+    source = resolve_source(scenario, kind)
+    fixed = normalise_overrides(overrides)
+    axes = axes_from(vary, ranges)
+    for a in axes:
+        if a.key in fixed:
+            raise ScenarioError(f"{a.key} is both varied and set (--set {a.key}={fixed[a.key]!r}); drop one")
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise ScenarioError(f"--seed {seed!r} must be an integer")
+    if not source.text.strip():
+        raise ScenarioError(f"scenario {source.label!r} is empty")
+    # each value alone first: the message names the key and the value
+    for a in axes:
+        for v in (a.values if not a.sampled else (a.low, a.high)):
+            try:
+                load(source.kind, source.text, source.name, {**fixed, a.key: v})
+            except ScenarioError as err:
+                raise ScenarioError(f"--vary {a.key}={v!r}: {err}") from err
+    runs = []
+    seen = set()
+    for values in design_runs(axes, samples, seed):
+        ov = {**fixed, **values}
+        try:
+            load(source.kind, source.text, source.name, ov)
+        except ScenarioError as err:
+            which = ", ".join(f"{k}={v!r}" for k, v in values.items())
+            raise ScenarioError(f"the run with {which}: {err}") from err
+        rid = run_id(source.kind, source.text, ov)
+        if rid in seen:
+            continue  # integer sampling can give the same point twice
+        seen.add(rid)
+        runs.append({"id": rid, "values": values, "overrides": ov})
+    return Plan(source, fixed, axes, samples, seed, runs)
+
+
+def scalar_figures(summary: dict) -> dict:
+    """The scalar figures of a summary.json (numbers, booleans, strings, nulls; notes and nested
+    tables left out), for a row of results.csv."""
+    return {k: v for k, v in summary.items()
+            if k != "schema_version" and not k.endswith("_note")
+            and (v is None or isinstance(v, (bool, int, float, str)))}
+
+
+def _cell(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else str(v)
+    return str(v)
+
+
+def results_csv(rows: list[dict], keys: list[str]) -> str:
+    """results.csv from rows: the varied keys, the fixed columns, then every figure in order of
+    first appearance."""
+    figures: list[str] = []
+    for r in rows:
+        figures += [k for k in r if k not in figures and k not in keys and k not in FIXED_COLUMNS]
+    cols = [*keys, *FIXED_COLUMNS, *figures]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in rows:
+        w.writerow([_cell(r.get(c)) for c in cols])
+    return buf.getvalue()
+
+
+def _read_json(path: Path) -> dict | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _row(run: dict, summary: dict | None, record: dict) -> dict:
+    """The row of a run: ok when its summary is there, else failed or not_run from its record."""
+    row = dict(run["values"])
+    row["run_id"] = run["id"]
+    if summary is not None:
+        row.update(status="ok", error="", run_wall_time_s=record.get("wall_time_s"))
+        row.update(scalar_figures(summary))
+    elif record.get("status") == "failed":
+        row.update(status="failed", error=record.get("error", ""), run_wall_time_s=record.get("wall_time_s"))
+    else:
+        row.update(status="not_run", error="", run_wall_time_s=None)
+    return row
+
+
+def _row_on_disk(out: Path, run: dict) -> dict:
+    folder = out / "runs" / run["id"]
+    return _row(run, _read_json(folder / "summary.json"), _read_json(folder / "run.json") or {})
+
+
+def _write_table(out: Path, p: Plan, rows: dict) -> list[dict]:
+    """results.csv (atomically) from the rows by run id, in the order of the design."""
+    table = [rows[r["id"]] for r in p.runs]
+    atomic_write_text(out / "results.csv", results_csv(table, [a.key for a in p.axes]))
+    return table
+
+
+def _store(out: Path, run: dict, result: dict, kind: str) -> dict:
+    """The files of a finished run into DIR/runs/<id>/ (summary.json last) and its record;
+    returns its row of results.csv."""
+    folder = out / "runs" / run["id"]
+    files = dict(result.get("files") or {})
+    summary = files.pop("summary.json", None)
+    for name, data in files.items():
+        atomic_write_bytes(folder / name, data)
+    record = {"schema_version": SCHEMA_VERSION, "id": run["id"], "kind": kind, "values": run["values"],
+              "overrides": run["overrides"], "status": result["status"], "error": result["error"],
+              "wall_time_s": result.get("wall_time_s"), "cpu_time_s": result.get("cpu_time_s"),
+              "host": result.get("host"), "pid": result.get("pid")}
+    atomic_write_text(folder / "run.json", json.dumps(record, indent=2, default=repr) + "\n")
+    if summary is not None and result["status"] == "ok":
+        atomic_write_bytes(folder / "summary.json", summary)
+        return _row(run, json.loads(summary), record)
+    return _row(run, None, record)
+
+
+def _client(workers: int, scheduler: str | None):
+    """A Dask client: on the scheduler at ``scheduler`` or on a new local cluster of ``workers``
+    processes (one thread each: CasADi's integrators hold the GIL). Returns (client, cluster)."""
+    from distributed import Client, LocalCluster
+
+    # the scheduler of a local cluster runs in this process: its INFO lines are not ours to show
+    logging.getLogger("distributed").setLevel(logging.WARNING)
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="15s"), None
+        except (OSError, TimeoutError) as err:
+            raise SymtrackError(f"--scheduler {scheduler!r}: cannot connect ({err}); start one with "
+                                "`dask scheduler` and workers with `dask worker ADDRESS`") from err
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.CRITICAL)
+    return Client(cluster), cluster
+
+
+def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, seed: int = 0, overrides=None,
+          kind: str = "auto", workers: int = 2, scheduler: str | None = None, progress: bool = True) -> SweepResult:
+    """Run a sweep on Dask distributed and write its folder.
+
+    Parameters
+    ----------
+    scenario : str or path
+        A built-in scenario (of ``symtrack simulate`` or ``symtrack mpc``) or a TOML file.
+    vary : list of str or dict
+        ``["vehicle.mass_kg=5000,6000", "soil.n=0.6:1.1"]`` as ``--vary`` takes them, or
+        ``{"vehicle.mass_kg": [5000, 6000]}``; the full grid of the listed values.
+    out : path
+        The sweep folder (``results.csv``, ``sweep.json``, ``runs/<id>/``).
+    ranges : dict, optional
+        ``{"soil.n": (0.6, 1.1)}``: ranges sampled by a Latin hypercube of ``samples`` points.
+    samples : int, optional
+        The number of Latin hypercube points (crossed with the grid).
+    seed : int
+        The seed of the Latin hypercube (the same seed gives the same runs, so a rerun skips them).
+    overrides : list of str or dict, optional
+        Fixed overrides of every run, as ``--set``.
+    kind : "auto", "simulate" or "mpc"
+        The scenario kind; "auto" takes the loader that accepts the scenario.
+    workers : int
+        Processes of the local cluster (ignored with ``scheduler``).
+    scheduler : str, optional
+        The address of a running Dask scheduler (``tcp://HOST:PORT``).
+    progress : bool
+        A progress bar on a terminal, log lines otherwise.
+
+    Returns
+    -------
+    SweepResult
+        ``rows`` (those of results.csv), ``ok``, ``ran``, ``skipped``.
+
+    Raises
+    ------
+    ScenarioError
+        An invalid sweep, before anything runs.
+    KeyboardInterrupt
+        On Ctrl-C, after cancelling the runs in flight and writing results.csv with the finished ones.
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 1024:
+        raise ScenarioError(f"--workers {workers!r} must be an integer in [1, 1024]")
+    p = plan(scenario, vary, ranges=ranges, samples=samples, seed=seed, overrides=overrides, kind=kind)
+    out = check_output_folder(str(out))
+    t0 = time.perf_counter()
+    todo = [r for r in p.runs if not (out / "runs" / r["id"] / "summary.json").is_file()]
+    skipped = len(p.runs) - len(todo)
+    say = log.info if progress else log.debug
+    say("sweep of %d runs of %s (%s): %d to run, %d finished before; %s", len(p.runs), p.source.label,
+        p.source.kind, len(todo), skipped, f"scheduler {scheduler}" if scheduler else f"{workers} local workers")
+    rows = {r["id"]: _row_on_disk(out, r) for r in p.runs}
+    for r in todo:
+        rows[r["id"]] = _row(r, None, {})  # to be (re)done: not_run until this sweep has run it
+    failed = []
+    # the cluster first: a scheduler that cannot be reached leaves nothing written
+    client, cluster = _client(workers, scheduler) if todo else (None, None)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "sweep.json", json.dumps(p.describe(), indent=2, default=repr) + "\n")
+    if todo:
+        failed = _run_all(out, p, todo, rows, client, cluster, progress)
+    table = _write_table(out, p, rows)
+    png = comparison_png(table, [a.key for a in p.axes])
+    if png is not None:
+        atomic_write_bytes(out / "comparison.png", png)
+    return SweepResult(out, table, len(todo), skipped, time.perf_counter() - t0, failed)
+
+
+def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, progress: bool) -> list:
+    """The runs of ``todo`` on the client's cluster; each finished run is stored at once and
+    results.csv rewritten (at most once a second, and at the end); the client (and a local
+    cluster) are closed at the end. Returns the failed runs."""
+    from distributed import as_completed
+
+    futures = {}
+    failed = []
+    bar = Progress(len(todo), f"sweep {p.source.name}", enabled=progress)
+    try:
+        by_id = {r["id"]: r for r in todo}
+        for r in todo:
+            task = {"id": r["id"], "kind": p.source.kind, "text": p.source.text, "name": p.source.name,
+                    "overrides": r["overrides"]}
+            futures[client.submit(run_one, task, key=f"symtrack-run-{r['id']}-{time.time_ns()}", pure=False)] = r
+        done, last_table = 0, time.perf_counter()
+        bar.update(0, f"0/{len(todo)} runs")
+        for fut in as_completed(list(futures)):
+            run = futures[fut]
+            try:
+                result = fut.result()
+            except Exception as err:  # noqa: BLE001 - a worker that died, a lost connection: the run failed
+                result = {"id": run["id"], "status": "failed", "error": f"{type(err).__name__}: {err}",
+                          "files": {}}
+            rows[run["id"]] = _store(out, by_id[result["id"]], result, p.source.kind)
+            done += 1
+            values = ", ".join(f"{k}={v!r}" for k, v in run["values"].items())
+            if result["status"] != "ok":
+                failed.append({"id": run["id"], "values": run["values"], "error": result["error"]})
+                log.warning("run %s (%s) failed: %s", run["id"], values, result["error"])
+            elif progress and not bar.enabled:
+                log.info("[%d/%d] run %s (%s) ok in %.1f s", done, len(todo), run["id"], values,
+                         result.get("wall_time_s") or 0.0)
+            bar.update(done, f"{done}/{len(todo)} runs, {len(failed)} failed")
+            if time.perf_counter() - last_table > 1.0:
+                _write_table(out, p, rows)
+                last_table = time.perf_counter()
+    except KeyboardInterrupt:
+        client.cancel(list(futures), force=True)
+        _write_table(out, p, rows)
+        raise
+    finally:
+        bar.close()
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return failed
