@@ -57,6 +57,12 @@ def run(scenario: Scenario, progress: bool = True, model: SystemModel | None = N
         from .terrain.study import make_world
 
         world = make_world(scenario)
+    if scenario.run.integrator == "grid_fast":  # issue 9: the terrain engine (symtrack/terrain/engine.py)
+        if world is None:
+            raise SimulationError('run.integrator = "grid_fast" needs a [terrain] section (the grid terrain engine)')
+        from .terrain import engine
+
+        return engine.run(scenario, world, progress)
     model = world.model if world is not None else (model or build_model(scenario))
     params = scenario.params
     p = model.param_vector(params) if world is None else world.param_vector()

@@ -31,7 +31,7 @@ from .config import settings_from_dict, validate_section
 from .world import NV, World
 
 RUT_THRESHOLD_M = 1e-6
-GRID_INTEGRATORS = ("idas", "rosenbrock")  # rosenbrock: symtrack/terrain/compiled_grid.py
+GRID_INTEGRATORS = ("idas", "rosenbrock", "grid_fast")  # rosenbrock: compiled_grid.py; grid_fast: engine.py
 
 
 def make_world(scenario, terrain_in: str | None = None) -> World:

@@ -1,0 +1,399 @@
+/* The terrain engine's hot path (symtrack/terrain/engine.py, docs/terrain.md "The terrain engine").
+ *
+ * Per macro step: the footprint, release and sector assignment of the world manager
+ * (symtrack/terrain/world.py, same rules and the same floating-point expressions), the vehicle's
+ * step (generated from CasADi: eng_vehicle_step), each active cell's step (two-stage SDIRK with a
+ * safeguarded scalar Newton per stage on the generated law eng_cell_law), INFO_OUT (history of
+ * the active channels only), the channel sums, the outputs (eng_outputs) and the coverage check.
+ * engine.py mirrors every line of it in Python (the interpreted path, tested against this file).
+ *
+ * Compiled together with the CasADi-generated engine_gen.c (which defines the eng_* Functions).
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "engine_gen.h"
+
+#define EXPORT __attribute__((visibility("default")))
+#define NV 12
+#define NW 14
+#define NA 8
+#define NS 10
+#define NGEO 7
+
+/* error codes (engine.py turns them into SimulationError messages) */
+#define ERR_FIELD 1       /* the footprint leaves the field: err_x = (cx, cy) */
+#define ERR_COLLISION 2   /* err_a, err_b: the two cells; err_ch: the channel */
+#define ERR_UNCOVERED 3   /* err_a: a loaded cell without a channel; err_b: how many */
+#define ERR_NONFINITE 4   /* the vehicle step returned a non-finite state */
+#define ERR_NEWTON 5      /* a cell's stage equation did not converge; err_a: the cell */
+
+typedef struct {
+  /* grid */
+  long long nx, ny, M, n_ch;
+  double x0, y0, dx;
+  /* storage, flat i * ny + j */
+  double *z, *zdot, *zmax, *pmax;
+  signed char *phase;
+  unsigned char *touched;
+  /* channels */
+  long long *ch_cell, *ch_foot, *ch_new_stamp, *ch_new_cell;
+  double *ch_z, *ch_v, *ch_zmax, *ch_pmax, *ch_p, *ch_cx, *ch_cy, *ch_g; /* ch_g: NGEO per channel */
+  unsigned char *ch_new; /* 1: assigned at this step's start (its first geometry is evaluated here) */
+  long long *act, *new_list;
+  long long n_act, n_new, peak_active, stamp;
+  /* constants */
+  double *pv;     /* parameters of the vehicle Functions; the last NS entries are the channel sums */
+  double *geo;    /* 6: l, b, B, e, dx, end strip */
+  double *wv;     /* NW: the vehicle's states and accelerations */
+  double *a;      /* NA: pose and pressure lines at wv */
+  double *work;   /* the generated Functions' work vector (the largest sz_w) */
+  long long n_pv, ny_out, cell_substeps, entry_substeps;
+  double pad, release_rate, areal_mass, damping, gamma, entry_fraction;
+  /* error and statistics */
+  long long err_code, err_a, err_b, err_ch;
+  double err_x[2];
+  long long n_newton, n_cell_stages, n_vehicle_steps;
+} eng_t;
+
+/* ---- calls of the generated Functions (no integer work, no extra arguments: checked in engine.py) */
+static double *WORK;
+
+static void law(double z, double zmax, double pmax, double *p, double *dp) {
+  const double *arg[3] = {&z, &zmax, &pmax};
+  double *res[2] = {p, dp};
+  eng_cell_law(arg, res, 0, WORK, 0);
+}
+
+static void cell_geo(const double *c, const double *a, const double *geo, double *g) {
+  const double *arg[3] = {c, a, geo};
+  double *res[1] = {g};
+  eng_cell_geo(arg, res, 0, WORK, 0);
+}
+
+/* ---- geometry: the tracks' rectangles (world.World._rectangles / cells_under) ------------------- */
+typedef void (*cell_fn)(eng_t *E, long long cell, void *ctx);
+
+static int scan(eng_t *E, double X, double Y, double psi, double pad, int check_field, cell_fn fn, void *ctx) {
+  const double *geo = E->geo;
+  double l = geo[0], b = geo[1], B = geo[2], e = geo[3];
+  double c = cos(psi), s = sin(psi);
+  double dx = E->dx, x0 = E->x0, y0 = E->y0;
+  double x1 = x0 + E->nx * dx, y1 = y0 + E->ny * dx;
+  for (int side = 0; side < 2; ++side) {
+    double sg = side == 0 ? 1.0 : -1.0;
+    double bx = -e, by = sg * B / 2;
+    double cx = X + c * bx - s * by, cy = Y + s * bx + c * by;
+    double hl = l / 2 + pad, hw = b / 2 + pad;
+    double ex = fabs(c) * hl + fabs(s) * hw;
+    double ey = fabs(s) * hl + fabs(c) * hw;
+    if (check_field) {
+      double exu = ex - pad * (fabs(c) + fabs(s)), eyu = ey - pad * (fabs(c) + fabs(s));
+      if (cx - exu < x0 || cx + exu > x1 || cy - eyu < y0 || cy + eyu > y1) {
+        E->err_code = ERR_FIELD;
+        E->err_x[0] = cx;
+        E->err_x[1] = cy;
+        return 1;
+      }
+    }
+    long long i0 = (long long)floor((cx - ex - x0) / dx), i1 = (long long)ceil((cx + ex - x0) / dx);
+    long long j0 = (long long)floor((cy - ey - y0) / dx), j1 = (long long)ceil((cy + ey - y0) / dx);
+    if (i0 < 0) i0 = 0;
+    if (j0 < 0) j0 = 0;
+    if (i1 > E->nx - 1) i1 = E->nx - 1;
+    if (j1 > E->ny - 1) j1 = E->ny - 1;
+    for (long long i = i0; i <= i1; ++i) {
+      double px = x0 + ((double)i + 0.5) * dx;
+      for (long long j = j0; j <= j1; ++j) {
+        double py = y0 + ((double)j + 0.5) * dx;
+        double along = (px - cx) * c + (py - cy) * s;
+        double across = -(px - cx) * s + (py - cy) * c;
+        if (fabs(along) <= hl && fabs(across) <= hw) fn(E, i * E->ny + j, ctx);
+      }
+    }
+  }
+  return 0;
+}
+
+static long long channel_of(const eng_t *E, long long cell) {
+  long long i = cell / E->ny, j = cell % E->ny;
+  return (i % E->M) * E->M + (j % E->M);
+}
+
+static void mark_footprint(eng_t *E, long long cell, void *ctx) {
+  (void)ctx;
+  if (E->err_code) return;
+  long long ch = channel_of(E, cell);
+  if (E->ch_cell[ch] == cell) {
+    E->ch_foot[ch] = E->stamp;
+  } else if (E->ch_new_stamp[ch] == E->stamp) {
+    if (E->ch_new_cell[ch] != cell) {
+      E->err_code = ERR_COLLISION;
+      E->err_a = E->ch_new_cell[ch];
+      E->err_b = cell;
+      E->err_ch = ch;
+    }
+  } else {
+    E->ch_new_stamp[ch] = E->stamp;
+    E->ch_new_cell[ch] = cell;
+    E->new_list[E->n_new++] = cell;
+  }
+}
+
+/* Release and assignment for a step of length h from the current state (world.World.before_step). */
+EXPORT int eng_assign(eng_t *E, double h) {
+  WORK = E->work;
+  const double *w = E->wv;
+  double X = w[0], Y = w[1], psi = w[2], u = w[3], v = w[4], r = w[5];
+  double c = cos(psi), s = sin(psi);
+  double X1 = X + h * (u * c - v * s), Y1 = Y + h * (u * s + v * c), psi1 = psi + h * r;
+  E->stamp += 1;
+  E->n_new = 0;
+  if (scan(E, X, Y, psi, E->pad, 1, mark_footprint, 0)) return E->err_code;
+  if (scan(E, X1, Y1, psi1, E->pad, 1, mark_footprint, 0)) return E->err_code;
+  if (E->err_code) return E->err_code;
+  /* release (the order of the active list is kept) */
+  long long k = 0;
+  for (long long q = 0; q < E->n_act; ++q) {
+    long long ch = E->act[q];
+    if (E->ch_foot[ch] != E->stamp && E->ch_p[ch] <= 0.0 && fabs(E->ch_v[ch]) <= E->release_rate) {
+      E->ch_cell[ch] = -1;
+      E->ch_z[ch] = 0.0;
+      E->ch_v[ch] = 0.0;
+      E->ch_p[ch] = 0.0;
+    } else {
+      E->act[k++] = ch;
+    }
+  }
+  E->n_act = k;
+  /* assignment, INFO_IN */
+  for (long long q = 0; q < E->n_new; ++q) {
+    long long cell = E->new_list[q], ch = channel_of(E, cell);
+    if (E->ch_cell[ch] >= 0) {
+      E->err_code = ERR_COLLISION;
+      E->err_a = cell;
+      E->err_b = E->ch_cell[ch];
+      E->err_ch = ch;
+      return E->err_code;
+    }
+  }
+  for (long long q = 0; q < E->n_new; ++q) {
+    long long cell = E->new_list[q], ch = channel_of(E, cell);
+    long long i = cell / E->ny, j = cell % E->ny;
+    E->ch_cell[ch] = cell;
+    E->ch_cx[ch] = E->x0 + ((double)i + 0.5) * E->dx;
+    E->ch_cy[ch] = E->y0 + ((double)j + 0.5) * E->dx;
+    E->ch_z[ch] = E->z[cell];
+    E->ch_v[ch] = E->zdot[cell];
+    E->ch_zmax[ch] = E->zmax[cell];
+    E->ch_pmax[ch] = E->pmax[cell];
+    E->ch_p[ch] = 0.0;
+    E->touched[cell] = 1;
+    double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+    cell_geo(cc, E->a, E->geo, E->ch_g + NGEO * ch);
+    E->act[E->n_act++] = ch;
+  }
+  if (E->n_act > E->peak_active) E->peak_active = E->n_act;
+  return 0;
+}
+
+/* ---- one cell ---------------------------------------------------------------------------------- */
+/* The implicit stage Z = zeta + gh V, V = omega + gh (pl - p(Z) - c V) / m as one monotone scalar
+ * equation F(Z) = a (Z - zeta) + g p(Z) - omega - g pl = 0 (a = (1 + gh c / m) / gh, g = gh / m),
+ * bracketed by [hi - g p(hi) / a, hi] with hi = zeta + (omega + g pl) / a (p >= 0, nondecreasing),
+ * solved by Newton from hi, bisection when a step leaves the bracket. */
+static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double *Z) {
+  double m = E->areal_mass, cd = E->damping;
+  double a = (1.0 + gh * cd / m) / gh, g = gh / m;
+  double hi = zeta + (omega + g * pl) / a;
+  double p, dp;
+  law(hi, zmax, pmax, &p, &dp);
+  if (p <= 0.0) {
+    *Z = hi;
+    return 0;
+  }
+  double lo = hi - g * p / a;
+  double x = hi, F = g * p;
+  for (int it = 0; it < 100; ++it) {
+    E->n_newton += 1;
+    double xn = x - F / (a + g * dp);
+    if (!(xn > lo && xn < hi)) xn = 0.5 * (lo + hi);
+    if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) {
+      *Z = xn;
+      return 0;
+    }
+    x = xn;
+    law(x, zmax, pmax, &p, &dp);
+    F = a * (x - zeta) + g * p - omega - g * pl;
+    if (F > 0.0) hi = x;
+    else if (F < 0.0) lo = x;
+    else {
+      *Z = x;
+      return 0;
+    }
+  }
+  return 1;
+}
+
+/* (z, v) over one macro step of length h, the load linear in time from plA to plB (Alexander's
+ * two-stage SDIRK, L-stable, order 2, stiffly accurate; n equal substeps). */
+static int cell_step(eng_t *E, double *z, double *v, double plA, double plB, double zmax, double pmax, double h,
+                     long long n) {
+  double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
+  double z0 = *z, v0 = *v;
+  for (long long k = 0; k < n; ++k) {
+    double th1 = ((double)k + gam) / (double)n, th2 = ((double)k + 1.0) / (double)n;
+    double Z1, Z2;
+    if (stage(E, z0, v0, plA + (plB - plA) * th1, gh, zmax, pmax, &Z1)) return 1;
+    double V1 = (Z1 - z0) / gh;
+    double A1 = (V1 - v0) / gh;
+    double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
+    if (stage(E, zeta, omega, plA + (plB - plA) * th2, gh, zmax, pmax, &Z2)) return 1;
+    v0 = (Z2 - zeta) / gh;
+    z0 = Z2;
+    E->n_cell_stages += 2;
+  }
+  *z = z0;
+  *v = v0;
+  return 0;
+}
+
+static void check_cover(eng_t *E, long long cell, void *ctx) {
+  long long *missing = (long long *)ctx;
+  long long ch = channel_of(E, cell);
+  if (E->ch_cell[ch] != cell) {
+    if (missing[0] == 0) missing[1] = cell;
+    missing[0] += 1;
+  }
+}
+
+/* The channel sums at the current state (the vehicle's view of the terrain) into pv's last NS. */
+static void sums(eng_t *E) {
+  double S[NS];
+  for (int i = 0; i < NS; ++i) S[i] = 0.0;
+  for (long long q = 0; q < E->n_act; ++q) {
+    long long ch = E->act[q];
+    const double *g = E->ch_g + NGEO * ch;
+    double zc = E->ch_z[ch], pw = E->ch_p[ch] * fmax(E->ch_v[ch], 0.0);
+    S[0] += g[1] * pw;
+    S[1] += g[2] * pw;
+    for (int r = 0; r < 4; ++r) {
+      S[2 + r] += g[3 + r] * zc;
+      S[6 + r] += g[3 + r];
+    }
+  }
+  memcpy(E->pv + E->n_pv - NS, S, sizeof S);
+}
+
+EXPORT void eng_sums(eng_t *E) {
+  WORK = E->work;
+  sums(E);
+}
+
+static void vehicle_step(eng_t *E, const double *u, double h, double *w1, double *a1) {
+  double hh = h;
+  const double *arg[4] = {E->wv, u, E->pv, &hh};
+  double *res[2] = {w1, a1};
+  eng_vehicle_step(arg, res, 0, WORK, 0);
+  E->n_vehicle_steps += 1;
+}
+
+/* n macro steps: step k ends at T[k] (the step starts at t0, then at T[k-1]) with the inputs
+ * U[2k..2k+1]. dist[0]: distance covered so far, dist[1]: the stop distance (< 0: none), dist[2]:
+ * the time from which distance counts. Writes T_out (the step's end time, shortened on the
+ * distance stop), X (NV per step), Y (ny_out per step). Returns 0, or 1 when the distance stop
+ * ended the run (at step *n_done - 1), or -err_code. */
+EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const double *U, double *dist,
+                   int check_covered, double *T_out, double *X, double *Y, long long *n_done) {
+  double w1[NW], a1[NA];
+  double t = t0;
+  WORK = E->work;
+  *n_done = 0;
+  for (long long k = 0; k < n; ++k) {
+    double t_next = T[k], h = t_next - t;
+    const double *u = U + 2 * k;
+    int done = 0;
+    if (eng_assign(E, h)) return -(int)E->err_code;
+    WORK = E->work;
+    vehicle_step(E, u, h, w1, a1);
+    if (dist[1] >= 0.0 && t_next > dist[2] + 1e-12) {
+      double d_step = hypot(w1[0] - E->wv[0], w1[1] - E->wv[1]);
+      if (dist[0] + d_step >= dist[1]) {
+        for (int it = 0; it < 3; ++it) { /* three secant refinements (runner.run) */
+          if (d_step <= 0) break;
+          h *= (dist[1] - dist[0]) / d_step;
+          vehicle_step(E, u, h, w1, a1);
+          d_step = hypot(w1[0] - E->wv[0], w1[1] - E->wv[1]);
+        }
+        t_next = t + h;
+        done = 1;
+      }
+      dist[0] += d_step;
+    }
+    for (int i = 0; i < NW; ++i) {
+      if (!isfinite(w1[i])) {
+        E->err_code = ERR_NONFINITE;
+        return -ERR_NONFINITE;
+      }
+    }
+    /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end */
+    for (long long q = 0; q < E->n_act; ++q) {
+      long long ch = E->act[q];
+      double *g = E->ch_g + NGEO * ch;
+      double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+      cell_geo(cc, a1, E->geo, gB);
+      double plA = g[0], plB = gB[0];
+      long long ns = E->cell_substeps;
+      if (E->entry_substeps > ns) {
+        double p0, dp0;
+        law(E->ch_z[ch], E->ch_zmax[ch], E->ch_pmax[ch], &p0, &dp0);
+        if (p0 < E->entry_fraction * fmax(plA, plB)) ns = E->entry_substeps;
+      }
+      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, plA, plB, E->ch_zmax[ch], E->ch_pmax[ch], h, ns)) {
+        E->err_code = ERR_NEWTON;
+        E->err_a = E->ch_cell[ch];
+        return -ERR_NEWTON;
+      }
+      memcpy(g, gB, sizeof gB);
+      /* INFO_OUT: the history (channels.build_cell_functions' "history") and the storage */
+      double zc = E->ch_z[ch], zm = E->ch_zmax[ch], pm = E->ch_pmax[ch], p, dp;
+      law(zc, zm, pm, &p, &dp);
+      int loading = zc >= zm;
+      double zm1 = fmax(zm, zc), pm1 = loading ? fmax(pm, p) : pm;
+      long long cell = E->ch_cell[ch];
+      E->z[cell] = zc;
+      E->zdot[cell] = E->ch_v[ch];
+      E->zmax[cell] = zm1;
+      E->pmax[cell] = pm1;
+      E->phase[cell] = zm1 > 0 ? (loading ? 1 : 2) : 0;
+      E->ch_zmax[ch] = zm1;
+      E->ch_pmax[ch] = pm1;
+      E->ch_p[ch] = p;
+    }
+    memcpy(E->wv, w1, sizeof w1);
+    memcpy(E->a, a1, sizeof a1);
+    sums(E);
+    t = t_next;
+    T_out[k] = t;
+    memcpy(X + NV * k, w1, NV * sizeof(double));
+    {
+      const double *arg[3] = {w1, u, E->pv};
+      double *res[1] = {Y + E->ny_out * k};
+      eng_outputs(arg, res, 0, WORK, 0);
+    }
+    *n_done = k + 1;
+    if (check_covered) {
+      long long missing[2] = {0, -1};
+      scan(E, w1[0], w1[1], w1[2], 0.5 * E->dx, 0, check_cover, missing);
+      if (missing[0]) {
+        E->err_code = ERR_UNCOVERED;
+        E->err_a = missing[1];
+        E->err_b = missing[0];
+        return -ERR_UNCOVERED;
+      }
+    }
+    if (done) return 1;
+  }
+  return 0;
+}
