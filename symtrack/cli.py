@@ -48,8 +48,9 @@ def main(argv=None) -> int:
     s.add_argument("scenario")
     s.add_argument("--out", required=True, help="output folder")
     s.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="override a scenario value")
-    s.add_argument("--integrator", choices=("cvodes", "idas", "rosenbrock"),
-                   help="shorthand for --set run.integrator=... (rosenbrock: compiled fixed-step, docs/codegen.md)")
+    s.add_argument("--integrator", choices=("cvodes", "idas", "rosenbrock", "grid_fast"),
+                   help="shorthand for --set run.integrator=... (rosenbrock: compiled fixed-step, docs/codegen.md; "
+                   "grid_fast: the grid terrain engine, docs/terrain.md)")
     s.add_argument("--compiled", action="store_true",
                    help="cvodes/idas on the compiled model (--set run.compiled=true)")
     s.add_argument("--require-compiled", action="store_true",

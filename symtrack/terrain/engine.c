@@ -200,40 +200,51 @@ EXPORT int eng_assign(eng_t *E, double h) {
 
 /* ---- one cell ---------------------------------------------------------------------------------- */
 /* The implicit stage Z = zeta + gh V, V = omega + gh (pl - p(Z) - c V) / m as one monotone scalar
- * equation F(Z) = a (Z - zeta) + g p(Z) - omega - g pl = 0 (a = (1 + gh c / m) / gh, g = gh / m),
- * bracketed by [hi - g p(hi) / a, hi] with hi = zeta + (omega + g pl) / a (p >= 0, nondecreasing),
- * solved by Newton from hi, bisection when a step leaves the bracket. */
-static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double *Z) {
+ * equation F(Z) = a (Z - zeta) + g p(Z) - omega - g pl = 0 (a = (1 + gh c / m) / gh, g = gh / m;
+ * F' >= a > 0 as p is nondecreasing). The root lies in [hi - g p(hi) / a, hi] with
+ * hi = zeta + (omega + g pl) / a (p >= 0). Newton from the root of F linearised at zs (the last
+ * solution of this cell: its slope there is known), each iterate kept in the bracket (bisection
+ * otherwise; the lower end is evaluated only when a step needs it); converged when the Newton
+ * step is below 1e-13 |Z| + 1e-18 m. */
+static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double zs,
+                 double ps, double dps, double *Z, double *pz, double *dpz) {
   double m = E->areal_mass, cd = E->damping;
   double a = (1.0 + gh * cd / m) / gh, g = gh / m;
-  double hi = zeta + (omega + g * pl) / a;
+  double hi = zeta + (omega + g * pl) / a, lo = -INFINITY;
+  double x = (a * zeta + omega + g * (pl - ps + dps * zs)) / (a + g * dps);
+  if (!(x < hi)) x = hi;
   double p, dp;
-  law(hi, zmax, pmax, &p, &dp);
-  if (p <= 0.0) {
-    *Z = hi;
-    return 0;
-  }
-  double lo = hi - g * p / a;
-  double x = hi, F = g * p;
   for (int it = 0; it < 100; ++it) {
     E->n_newton += 1;
-    double xn = x - F / (a + g * dp);
-    if (!(xn > lo && xn < hi)) xn = 0.5 * (lo + hi);
-    if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) {
-      *Z = xn;
-      return 0;
-    }
-    x = xn;
     law(x, zmax, pmax, &p, &dp);
-    F = a * (x - zeta) + g * p - omega - g * pl;
+    double F = a * (x - zeta) + g * p - omega - g * pl;
     if (F > 0.0) hi = x;
     else if (F < 0.0) lo = x;
-    else {
+    else break;
+    double xn = x - F / (a + g * dp);
+    if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) {
+      x = xn;
+      law(x, zmax, pmax, &p, &dp);
       *Z = x;
+      *pz = p;
+      *dpz = dp;
       return 0;
     }
+    if (!(xn < hi && xn > lo)) {
+      if (lo == -INFINITY) {
+        double ph, dph;
+        law(hi, zmax, pmax, &ph, &dph);
+        lo = hi - g * ph / a;
+      }
+      if (!(xn < hi && xn > lo)) xn = 0.5 * (lo + hi);
+    }
+    x = xn;
   }
-  return 1;
+  if (!(fabs(a * (x - zeta) + g * p - omega - g * pl) <= 0.0)) return 1;
+  *Z = x;
+  *pz = p;
+  *dpz = dp;
+  return 0;
 }
 
 /* (z, v) over one macro step of length h, the load linear in time from plA to plB (Alexander's
@@ -241,15 +252,16 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
 static int cell_step(eng_t *E, double *z, double *v, double plA, double plB, double zmax, double pmax, double h,
                      long long n) {
   double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
-  double z0 = *z, v0 = *v;
+  double z0 = *z, v0 = *v, p, dp;
+  law(z0, zmax, pmax, &p, &dp);
   for (long long k = 0; k < n; ++k) {
     double th1 = ((double)k + gam) / (double)n, th2 = ((double)k + 1.0) / (double)n;
     double Z1, Z2;
-    if (stage(E, z0, v0, plA + (plB - plA) * th1, gh, zmax, pmax, &Z1)) return 1;
+    if (stage(E, z0, v0, plA + (plB - plA) * th1, gh, zmax, pmax, z0, p, dp, &Z1, &p, &dp)) return 1;
     double V1 = (Z1 - z0) / gh;
     double A1 = (V1 - v0) / gh;
     double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
-    if (stage(E, zeta, omega, plA + (plB - plA) * th2, gh, zmax, pmax, &Z2)) return 1;
+    if (stage(E, zeta, omega, plA + (plB - plA) * th2, gh, zmax, pmax, Z1, p, dp, &Z2, &p, &dp)) return 1;
     v0 = (Z2 - zeta) / gh;
     z0 = Z2;
     E->n_cell_stages += 2;

@@ -378,25 +378,18 @@ class PyKernel:
         s.peak_active = max(s.peak_active, s.n_act)
         return 0, e
 
-    def _stage(self, zeta, omega, pl, gh, zmax, pmax):
+    def _stage(self, zeta, omega, pl, gh, zmax, pmax, zs, ps, dps):
         s = self.s
         m, cd = s.areal_mass, s.damping
         a = (1.0 + gh * cd / m) / gh
         g = gh / m
         hi = zeta + (omega + g * pl) / a
-        p, dp = self._law(hi, zmax, pmax)
-        if p <= 0.0:
-            return hi
-        lo = hi - g * p / a
-        x, F = hi, g * p
+        lo = -math.inf
+        x = (a * zeta + omega + g * (pl - ps + dps * zs)) / (a + g * dps)
+        if not x < hi:
+            x = hi
         for _ in range(NEWTON_MAX_ITER):
             s.stats["n_newton"] += 1
-            xn = x - F / (a + g * dp)
-            if not (lo < xn < hi):
-                xn = 0.5 * (lo + hi)
-            if abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
-                return xn
-            x = xn
             p, dp = self._law(x, zmax, pmax)
             F = a * (x - zeta) + g * p - omega - g * pl
             if F > 0.0:
@@ -404,24 +397,41 @@ class PyKernel:
             elif F < 0.0:
                 lo = x
             else:
-                return x
-        return None
+                break
+            xn = x - F / (a + g * dp)
+            if abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
+                x = xn
+                p, dp = self._law(x, zmax, pmax)
+                return x, p, dp
+            if not (lo < xn < hi):
+                if lo == -math.inf:
+                    ph, _ = self._law(hi, zmax, pmax)
+                    lo = hi - g * ph / a
+                if not (lo < xn < hi):
+                    xn = 0.5 * (lo + hi)
+            x = xn
+        if not abs(a * (x - zeta) + g * p - omega - g * pl) <= 0.0:
+            return None
+        return x, p, dp
 
     def _cell_step(self, z0, v0, plA, plB, zmax, pmax, h, n):
         gam = SDIRK_GAMMA
         hs = h / n
         gh = gam * hs
+        p, dp = self._law(z0, zmax, pmax)
         for k in range(n):
             th1, th2 = (k + gam) / n, (k + 1.0) / n
-            Z1 = self._stage(z0, v0, plA + (plB - plA) * th1, gh, zmax, pmax)
-            if Z1 is None:
+            r1 = self._stage(z0, v0, plA + (plB - plA) * th1, gh, zmax, pmax, z0, p, dp)
+            if r1 is None:
                 return None
+            Z1, p, dp = r1
             V1 = (Z1 - z0) / gh
             A1 = (V1 - v0) / gh
             zeta, omega = z0 + hs * (1.0 - gam) * V1, v0 + hs * (1.0 - gam) * A1
-            Z2 = self._stage(zeta, omega, plA + (plB - plA) * th2, gh, zmax, pmax)
-            if Z2 is None:
+            r2 = self._stage(zeta, omega, plA + (plB - plA) * th2, gh, zmax, pmax, Z1, p, dp)
+            if r2 is None:
                 return None
+            Z2, p, dp = r2
             v0 = (Z2 - zeta) / gh
             z0 = Z2
             self.s.stats["n_cell_stages"] += 2
