@@ -40,6 +40,7 @@ typedef struct {
   /* channels */
   long long *ch_cell, *ch_foot, *ch_new_stamp, *ch_new_cell;
   double *ch_z, *ch_v, *ch_zmax, *ch_pmax, *ch_p, *ch_cx, *ch_cy, *ch_g; /* ch_g: NGEO per channel */
+  double *ch_dp, *ch_pw; /* dp/dz at the channel's state; its compaction power over the last step (2) */
   unsigned char *ch_new; /* 1: assigned at this step's start (its first geometry is evaluated here) */
   long long *act, *new_list;
   long long n_act, n_new, peak_active, stamp;
@@ -49,7 +50,8 @@ typedef struct {
   double *wv;     /* NW: the vehicle's states and accelerations */
   double *a;      /* NA: pose and pressure lines at wv */
   double *work;   /* the generated Functions' work vector (the largest sz_w) */
-  long long n_pv, ny_out, cell_substeps, entry_substeps;
+  double *agrid, *plbuf, *frbuf; /* scratch: NA (n + 1), n + 1, 2 (n + 1) for n = the largest substep count */
+  long long n_pv, ny_out, cell_substeps, entry_substeps, power_mode; /* 0: step mean, 1: instantaneous */
   double pad, release_rate, areal_mass, damping, gamma, entry_fraction;
   /* error and statistics */
   long long err_code, err_a, err_b, err_ch;
@@ -189,6 +191,9 @@ EXPORT int eng_assign(eng_t *E, double h) {
     E->ch_zmax[ch] = E->zmax[cell];
     E->ch_pmax[ch] = E->pmax[cell];
     E->ch_p[ch] = 0.0;
+    E->ch_pw[2 * ch] = 0.0;
+    E->ch_pw[2 * ch + 1] = 0.0;
+    law(E->ch_z[ch], E->ch_zmax[ch], E->ch_pmax[ch], &E->ch_p[ch], &E->ch_dp[ch]);
     E->touched[cell] = 1;
     double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
     cell_geo(cc, E->a, E->geo, E->ch_g + NGEO * ch);
@@ -205,7 +210,8 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * hi = zeta + (omega + g pl) / a (p >= 0). Newton from the root of F linearised at zs (the last
  * solution of this cell: its slope there is known), each iterate kept in the bracket (bisection
  * otherwise; the lower end is evaluated only when a step needs it); converged when the Newton
- * step is below 1e-13 |Z| + 1e-18 m. */
+ * step from Z is below 1e-13 |Z| + 1e-18 m (Z, p(Z), p'(Z) are returned: the history and the
+ * release rule see the law at exactly the stored sinkage). */
 static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double zs,
                  double ps, double dps, double *Z, double *pz, double *dpz) {
   double m = E->areal_mass, cd = E->damping;
@@ -222,14 +228,7 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
     else if (F < 0.0) lo = x;
     else break;
     double xn = x - F / (a + g * dp);
-    if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) {
-      x = xn;
-      law(x, zmax, pmax, &p, &dp);
-      *Z = x;
-      *pz = p;
-      *dpz = dp;
-      return 0;
-    }
+    if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) break; /* x solves the stage to that tolerance */
     if (!(xn < hi && xn > lo)) {
       if (lo == -INFINITY) {
         double ph, dph;
@@ -240,34 +239,49 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
     }
     x = xn;
   }
-  if (!(fabs(a * (x - zeta) + g * p - omega - g * pl) <= 0.0)) return 1;
+  if (!(fabs(a * (x - zeta) + g * p - omega - g * pl) <= 1e-9 * (a * fabs(x) + 1e-18))) {
+    double xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp);
+    if (!(fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18)) return 1;
+  }
   *Z = x;
   *pz = p;
   *dpz = dp;
   return 0;
 }
 
-/* (z, v) over one macro step of length h, the load linear in time from plA to plB (Alexander's
- * two-stage SDIRK, L-stable, order 2, stiffly accurate; n equal substeps). */
-static int cell_step(eng_t *E, double *z, double *v, double plA, double plB, double zmax, double pmax, double h,
-                     long long n) {
+/* (z, v) over one macro step of length h in n equal substeps (Alexander's two-stage SDIRK,
+ * L-stable, order 2, stiffly accurate), the load linear in time within each substep between its
+ * values pl[k], pl[k + 1] at the substep ends. p, dp: the law at z on entry and on exit.
+ * work[t] += the compaction work per unit area under track t over the step: the sum over the
+ * stage segments of frac_t(mid) (p_a + p_b) / 2 max(z_b - z_a, 0), frac_t linear within each
+ * substep between f[2k + t] and f[2k + 2 + t] (the energy-consistent compaction power is work / h). */
+static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, const double *pl, const double *f,
+                     double zmax, double pmax, double h, long long n, double *work) {
   double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
-  double z0 = *z, v0 = *v, p, dp;
-  law(z0, zmax, pmax, &p, &dp);
+  double z0 = *z, v0 = *v, pz = *p, dpz = *dp;
   for (long long k = 0; k < n; ++k) {
-    double th1 = ((double)k + gam) / (double)n, th2 = ((double)k + 1.0) / (double)n;
-    double Z1, Z2;
-    if (stage(E, z0, v0, plA + (plB - plA) * th1, gh, zmax, pmax, z0, p, dp, &Z1, &p, &dp)) return 1;
+    double Z1, Z2, p0 = pz, p1;
+    double plA = pl[k], plB = pl[k + 1];
+    if (stage(E, z0, v0, plA + (plB - plA) * gam, gh, zmax, pmax, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
+    p1 = pz;
     double V1 = (Z1 - z0) / gh;
     double A1 = (V1 - v0) / gh;
     double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
-    if (stage(E, zeta, omega, plA + (plB - plA) * th2, gh, zmax, pmax, Z1, p, dp, &Z2, &p, &dp)) return 1;
+    if (stage(E, zeta, omega, plB, gh, zmax, pmax, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
+    double m1 = 0.5 * gam, m2 = 0.5 * (gam + 1.0);
+    double w1 = 0.5 * (p0 + p1) * fmax(Z1 - z0, 0.0), w2 = 0.5 * (p1 + pz) * fmax(Z2 - Z1, 0.0);
+    for (int t = 0; t < 2; ++t) {
+      double fa = f[2 * k + t], fb = f[2 * k + 2 + t];
+      work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2;
+    }
     v0 = (Z2 - zeta) / gh;
     z0 = Z2;
     E->n_cell_stages += 2;
   }
   *z = z0;
   *v = v0;
+  *p = pz;
+  *dp = dpz;
   return 0;
 }
 
@@ -280,16 +294,23 @@ static void check_cover(eng_t *E, long long cell, void *ctx) {
   }
 }
 
-/* The channel sums at the current state (the vehicle's view of the terrain) into pv's last NS. */
+/* The channel sums (the vehicle's view of the terrain) into pv's last NS: the compaction power of
+ * each track over the last step (energy-consistent), the end-strip sinkages at the current state. */
 static void sums(eng_t *E) {
   double S[NS];
   for (int i = 0; i < NS; ++i) S[i] = 0.0;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     const double *g = E->ch_g + NGEO * ch;
-    double zc = E->ch_z[ch], pw = E->ch_p[ch] * fmax(E->ch_v[ch], 0.0);
-    S[0] += g[1] * pw;
-    S[1] += g[2] * pw;
+    double zc = E->ch_z[ch];
+    if (E->power_mode == 0) {
+      S[0] += E->ch_pw[2 * ch];
+      S[1] += E->ch_pw[2 * ch + 1];
+    } else {
+      double pw = E->ch_p[ch] * fmax(E->ch_v[ch], 0.0);
+      S[0] += g[1] * pw;
+      S[1] += g[2] * pw;
+    }
     for (int r = 0; r < 4; ++r) {
       S[2 + r] += g[3 + r] * zc;
       S[6 + r] += g[3 + r];
@@ -349,6 +370,20 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         return -ERR_NONFINITE;
       }
     }
+    /* the pose and pressure lines at the ends of the transient windows' substeps (shared by all cells) */
+    long long nw = E->entry_substeps > E->cell_substeps ? E->entry_substeps : E->cell_substeps;
+    double *agrid = E->agrid;
+    memcpy(agrid, E->a, NA * sizeof(double));
+    for (long long j = 1; j < nw; ++j) {
+      double th = (double)j / (double)nw, psi = E->wv[2] + (w1[2] - E->wv[2]) * th;
+      double *aj = agrid + NA * j;
+      aj[0] = E->a[0] + (a1[0] - E->a[0]) * th;
+      aj[1] = E->a[1] + (a1[1] - E->a[1]) * th;
+      aj[2] = cos(psi);
+      aj[3] = sin(psi);
+      for (int i = 4; i < NA; ++i) aj[i] = E->a[i] + (a1[i] - E->a[i]) * th;
+    }
+    memcpy(agrid + NA * nw, a1, NA * sizeof(double));
     /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end */
     for (long long q = 0; q < E->n_act; ++q) {
       long long ch = E->act[q];
@@ -356,21 +391,61 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
       cell_geo(cc, a1, E->geo, gB);
       double plA = g[0], plB = gB[0];
-      long long ns = E->cell_substeps;
-      if (E->entry_substeps > ns) {
-        double p0, dp0;
-        law(E->ch_z[ch], E->ch_zmax[ch], E->ch_pmax[ch], &p0, &dp0);
-        if (p0 < E->entry_fraction * fmax(plA, plB)) ns = E->entry_substeps;
+      double *pw = E->ch_pw + 2 * ch;
+      pw[0] = pw[1] = 0.0;
+      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && plA == 0.0 && plB == 0.0) {
+        /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
+        memcpy(g, gB, sizeof gB);
+        E->ch_p[ch] = 0.0;
+        continue;
       }
-      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, plA, plB, E->ch_zmax[ch], E->ch_pmax[ch], h, ns)) {
+      long long ns = E->cell_substeps;
+      double *pl = E->plbuf, *fr = E->frbuf;
+      int window = 0;
+      if (E->entry_substeps > ns) {
+        /* the transient windows: entry (soil reaction below entry_fraction of the load) and exit
+           (the load falling while the cell is on its unloading line): substeps, the geometry
+           evaluated at each substep end (the overlap's kinks resolved to a substep) */
+        double plm = fmax(plA, plB);
+        if (E->ch_p[ch] < E->entry_fraction * plm || (plB < plA && E->ch_z[ch] < E->ch_zmax[ch])) {
+          ns = nw;
+          window = 1;
+        }
+      }
+      pl[0] = plA;
+      fr[0] = g[1];
+      fr[1] = g[2];
+      for (long long j = 1; j < ns; ++j) {
+        if (window) {
+          double gj[NGEO];
+          cell_geo(cc, agrid + NA * j, E->geo, gj);
+          pl[j] = gj[0];
+          fr[2 * j] = gj[1];
+          fr[2 * j + 1] = gj[2];
+        } else {
+          double th = (double)j / (double)ns;
+          pl[j] = plA + (plB - plA) * th;
+          fr[2 * j] = g[1] + (gB[1] - g[1]) * th;
+          fr[2 * j + 1] = g[2] + (gB[2] - g[2]) * th;
+        }
+      }
+      pl[ns] = plB;
+      fr[2 * ns] = gB[1];
+      fr[2 * ns + 1] = gB[2];
+      double work[2] = {0.0, 0.0};
+      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, E->ch_zmax[ch],
+                    E->ch_pmax[ch], h, ns, work)) {
         E->err_code = ERR_NEWTON;
         E->err_a = E->ch_cell[ch];
         return -ERR_NEWTON;
       }
+      if (h > 0.0) {
+        pw[0] = work[0] / h;
+        pw[1] = work[1] / h;
+      }
       memcpy(g, gB, sizeof gB);
       /* INFO_OUT: the history (channels.build_cell_functions' "history") and the storage */
-      double zc = E->ch_z[ch], zm = E->ch_zmax[ch], pm = E->ch_pmax[ch], p, dp;
-      law(zc, zm, pm, &p, &dp);
+      double zc = E->ch_z[ch], zm = E->ch_zmax[ch], pm = E->ch_pmax[ch], p = E->ch_p[ch];
       int loading = zc >= zm;
       double zm1 = fmax(zm, zc), pm1 = loading ? fmax(pm, p) : pm;
       long long cell = E->ch_cell[ch];
@@ -379,9 +454,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       E->zmax[cell] = zm1;
       E->pmax[cell] = pm1;
       E->phase[cell] = zm1 > 0 ? (loading ? 1 : 2) : 0;
-      E->ch_zmax[ch] = zm1;
+      E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as World.after_step's p_soil */
       E->ch_pmax[ch] = pm1;
-      E->ch_p[ch] = p;
     }
     memcpy(E->wv, w1, sizeof w1);
     memcpy(E->a, a1, sizeof a1);

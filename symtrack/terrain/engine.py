@@ -59,6 +59,7 @@ SETTLE_STEP_S = 0.01  # the settling steps of World.begin_pass
 ERR_FIELD, ERR_COLLISION, ERR_UNCOVERED, ERR_NONFINITE, ERR_NEWTON = 1, 2, 3, 4, 5
 SDIRK_GAMMA = 1.0 - 1.0 / math.sqrt(2.0)  # Alexander (1977): L-stable two-stage SDIRK
 NEWTON_MAX_ITER = 100
+POWER_MODES = ("step_mean", "instantaneous")
 CHUNK_STEPS = 100  # macro steps per call from Python (the progress bar moves between calls)
 
 
@@ -71,6 +72,9 @@ class EngineSettings:
     entry_substeps: substeps of a cell in its entry window (soil reaction below entry_fraction
         of its load at the step start), [1, 256]; not below cell_substeps.
     entry_fraction: [0, 1].
+    power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
+        absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
+        max(dz/dt, 0) at the step end, the channel model's expression).
     compiled: the C hot path (False: the interpreted PyKernel).
     """
 
@@ -78,6 +82,7 @@ class EngineSettings:
     cell_substeps: int = 1
     entry_substeps: int = 4
     entry_fraction: float = 0.5
+    power: str = "step_mean"
     compiled: bool = True
 
     def __post_init__(self):
@@ -87,6 +92,8 @@ class EngineSettings:
                 raise ScenarioError(f"engine.{name} = {v!r} must be an integer in [1, {hi}]")
         if not (isinstance(self.entry_fraction, (int, float)) and 0.0 <= self.entry_fraction <= 1.0):
             raise ScenarioError(f"engine.entry_fraction = {self.entry_fraction!r} must be a number in [0, 1]")
+        if self.power not in POWER_MODES:
+            raise ScenarioError(f"engine.power = {self.power!r} is not one of {', '.join(POWER_MODES)}")
 
 
 # ---- the compiled library ---------------------------------------------------------------------------------
@@ -96,10 +103,10 @@ class _Eng(ctypes.Structure):
                 + [(n, ctypes.c_void_p) for n in ("z", "zdot", "zmax", "pmax", "phase", "touched",
                                                   "ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell",
                                                   "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx", "ch_cy",
-                                                  "ch_g", "ch_new", "act", "new_list")]
+                                                  "ch_g", "ch_dp", "ch_pw", "ch_new", "act", "new_list")]
                 + [(n, ctypes.c_longlong) for n in ("n_act", "n_new", "peak_active", "stamp")]
-                + [(n, ctypes.c_void_p) for n in ("pv", "geo", "wv", "a", "work")]
-                + [(n, ctypes.c_longlong) for n in ("n_pv", "ny_out", "cell_substeps", "entry_substeps")]
+                + [(n, ctypes.c_void_p) for n in ("pv", "geo", "wv", "a", "work", "agrid", "plbuf", "frbuf")]
+                + [(n, ctypes.c_longlong) for n in ("n_pv", "ny_out", "cell_substeps", "entry_substeps", "power_mode")]
                 + [(n, ctypes.c_double) for n in ("pad", "release_rate", "areal_mass", "damping", "gamma",
                                                   "entry_fraction")]
                 + [(n, ctypes.c_longlong) for n in ("err_code", "err_a", "err_b", "err_ch")]
@@ -177,6 +184,8 @@ class EngineState:
         for name in ("ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx", "ch_cy"):
             setattr(self, name, np.zeros(n))
         self.ch_g = np.zeros((n, NGEO))
+        self.ch_dp = np.zeros(n)
+        self.ch_pw = np.zeros((n, 2))
         self.ch_new = np.zeros(n, dtype=np.uint8)
         self.act = np.zeros(n, dtype=np.int64)
         self.new_list = np.zeros(4 * n + 16, dtype=np.int64)
@@ -191,6 +200,8 @@ class EngineState:
         self.wv = np.zeros(NW)
         self.a = np.zeros(NA)
         self.work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
+        nmax = max(settings.cell_substeps, settings.entry_substeps)
+        self.agrid, self.plbuf, self.frbuf = np.zeros(NA * (nmax + 1)), np.zeros(nmax + 1), np.zeros(2 * (nmax + 1))
         self.pad = padding_m(g.cell_m)
         self.release_rate = float(world.settings.release_rate_m_s)
         self.areal_mass, self.damping = cell_constants(world.params)
@@ -207,11 +218,13 @@ class EngineState:
                           ("touched", self.touched)):
             setattr(e, name, _ptr(arr))
         for name in ("ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax",
-                     "ch_p", "ch_cx", "ch_cy", "ch_g", "ch_new", "act", "new_list", "pv", "geo", "wv", "a", "work"):
+                     "ch_p", "ch_cx", "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_new", "act", "new_list", "pv", "geo", "wv",
+                     "a", "work", "agrid", "plbuf", "frbuf"):
             setattr(e, name, _ptr(getattr(self, name)))
         e.n_act, e.n_new, e.peak_active, e.stamp = self.n_act, 0, self.peak_active, self.stamp
         e.n_pv, e.ny_out = self.pv.size, self.ny_out
         e.cell_substeps, e.entry_substeps = s.cell_substeps, max(s.entry_substeps, s.cell_substeps)
+        e.power_mode = POWER_MODES.index(s.power)
         e.pad, e.release_rate, e.areal_mass, e.damping = self.pad, self.release_rate, self.areal_mass, self.damping
         e.gamma, e.entry_fraction = SDIRK_GAMMA, float(s.entry_fraction)
         e.n_newton, e.n_cell_stages, e.n_vehicle_steps = (self.stats[k] for k in
@@ -371,6 +384,8 @@ class PyKernel:
             s.ch_z[ch], s.ch_v[ch] = st.z[cell], st.zdot[cell]
             s.ch_zmax[ch], s.ch_pmax[ch] = st.zmax[cell], st.pmax[cell]
             s.ch_p[ch] = 0.0
+            s.ch_pw[ch] = 0.0
+            s.ch_p[ch], s.ch_dp[ch] = self._law(s.ch_z[ch], s.ch_zmax[ch], s.ch_pmax[ch])
             s.touched[cell] = True
             s.ch_g[ch] = self._geo(s.ch_cx[ch], s.ch_cy[ch], s.a)
             s.act[s.n_act] = ch
@@ -400,9 +415,7 @@ class PyKernel:
                 break
             xn = x - F / (a + g * dp)
             if abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
-                x = xn
-                p, dp = self._law(x, zmax, pmax)
-                return x, p, dp
+                break
             if not (lo < xn < hi):
                 if lo == -math.inf:
                     ph, _ = self._law(hi, zmax, pmax)
@@ -410,41 +423,54 @@ class PyKernel:
                 if not (lo < xn < hi):
                     xn = 0.5 * (lo + hi)
             x = xn
-        if not abs(a * (x - zeta) + g * p - omega - g * pl) <= 0.0:
-            return None
+        if not abs(a * (x - zeta) + g * p - omega - g * pl) <= 1e-9 * (a * abs(x) + 1e-18):
+            xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp)
+            if not abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
+                return None
         return x, p, dp
 
-    def _cell_step(self, z0, v0, plA, plB, zmax, pmax, h, n):
+    def _cell_step(self, z0, v0, pz, dpz, pl, f, zmax, pmax, h, n, work):
         gam = SDIRK_GAMMA
         hs = h / n
         gh = gam * hs
-        p, dp = self._law(z0, zmax, pmax)
         for k in range(n):
-            th1, th2 = (k + gam) / n, (k + 1.0) / n
-            r1 = self._stage(z0, v0, plA + (plB - plA) * th1, gh, zmax, pmax, z0, p, dp)
+            p0 = pz
+            plA, plB = pl[k], pl[k + 1]
+            r1 = self._stage(z0, v0, plA + (plB - plA) * gam, gh, zmax, pmax, z0, pz, dpz)
             if r1 is None:
                 return None
-            Z1, p, dp = r1
+            Z1, pz, dpz = r1
+            p1 = pz
             V1 = (Z1 - z0) / gh
             A1 = (V1 - v0) / gh
             zeta, omega = z0 + hs * (1.0 - gam) * V1, v0 + hs * (1.0 - gam) * A1
-            r2 = self._stage(zeta, omega, plA + (plB - plA) * th2, gh, zmax, pmax, Z1, p, dp)
+            r2 = self._stage(zeta, omega, plB, gh, zmax, pmax, Z1, pz, dpz)
             if r2 is None:
                 return None
-            Z2, p, dp = r2
+            Z2, pz, dpz = r2
+            m1, m2 = 0.5 * gam, 0.5 * (gam + 1.0)
+            w1, w2 = 0.5 * (p0 + p1) * max(Z1 - z0, 0.0), 0.5 * (p1 + pz) * max(Z2 - Z1, 0.0)
+            for t in range(2):
+                fa, fb = f[2 * k + t], f[2 * k + 2 + t]
+                work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2
             v0 = (Z2 - zeta) / gh
             z0 = Z2
             self.s.stats["n_cell_stages"] += 2
-        return z0, v0
+        return z0, v0, pz, dpz
 
     def sums(self):
         s = self.s
         S = [0.0] * NS
         for ch in s.act[:s.n_act]:
             g = s.ch_g[ch]
-            zc, pw = float(s.ch_z[ch]), float(s.ch_p[ch]) * max(float(s.ch_v[ch]), 0.0)
-            S[0] += g[1] * pw
-            S[1] += g[2] * pw
+            zc = float(s.ch_z[ch])
+            if s.settings.power == "step_mean":
+                S[0] += s.ch_pw[ch, 0]
+                S[1] += s.ch_pw[ch, 1]
+            else:
+                pw = float(s.ch_p[ch]) * max(float(s.ch_v[ch]), 0.0)
+                S[0] += g[1] * pw
+                S[1] += g[2] * pw
             for r in range(4):
                 S[2 + r] += g[3 + r] * zc
                 S[6 + r] += g[3 + r]
@@ -495,29 +521,59 @@ class PyKernel:
             if not np.all(np.isfinite(w1)):
                 e.err_code = ERR_NONFINITE
                 return -ERR_NONFINITE, n_done, e
+            nw = max(nentry, nsub)
+            agrid = [s.a.copy()]
+            for j in range(1, nw):
+                th = j / nw
+                psi = s.wv[2] + (w1[2] - s.wv[2]) * th
+                aj = s.a + (a1 - s.a) * th
+                aj[2], aj[3] = math.cos(psi), math.sin(psi)
+                agrid.append(aj)
+            agrid.append(a1.copy())
             for ch in s.act[:s.n_act]:
                 gB = self._geo(s.ch_cx[ch], s.ch_cy[ch], a1)
-                plA, plB = float(s.ch_g[ch][0]), float(gB[0])
+                gA = s.ch_g[ch]
+                plA, plB = float(gA[0]), float(gB[0])
+                s.ch_pw[ch] = 0.0
+                if s.ch_z[ch] == 0.0 and s.ch_v[ch] == 0.0 and plA == 0.0 and plB == 0.0:
+                    s.ch_g[ch] = gB
+                    s.ch_p[ch] = 0.0
+                    continue
                 ns = nsub
+                window = False
                 if nentry > ns:
-                    p0, _ = self._law(s.ch_z[ch], s.ch_zmax[ch], s.ch_pmax[ch])
-                    if p0 < sset.entry_fraction * max(plA, plB):
-                        ns = nentry
-                out = self._cell_step(float(s.ch_z[ch]), float(s.ch_v[ch]), plA, plB, float(s.ch_zmax[ch]),
-                                      float(s.ch_pmax[ch]), h, ns)
+                    plm = max(plA, plB)
+                    if s.ch_p[ch] < sset.entry_fraction * plm or (plB < plA and s.ch_z[ch] < s.ch_zmax[ch]):
+                        ns, window = nw, True
+                pl, fr = [plA], [float(gA[1]), float(gA[2])]
+                for j in range(1, ns):
+                    if window:
+                        gj = self._geo(s.ch_cx[ch], s.ch_cy[ch], agrid[j])
+                        pl.append(float(gj[0]))
+                        fr += [float(gj[1]), float(gj[2])]
+                    else:
+                        th = j / ns
+                        pl.append(plA + (plB - plA) * th)
+                        fr += [float(gA[1] + (gB[1] - gA[1]) * th), float(gA[2] + (gB[2] - gA[2]) * th)]
+                pl.append(plB)
+                fr += [float(gB[1]), float(gB[2])]
+                work = [0.0, 0.0]
+                out = self._cell_step(float(s.ch_z[ch]), float(s.ch_v[ch]), float(s.ch_p[ch]), float(s.ch_dp[ch]),
+                                      pl, fr, float(s.ch_zmax[ch]), float(s.ch_pmax[ch]), h, ns, work)
                 if out is None:
                     e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
                     return -ERR_NEWTON, n_done, e
-                s.ch_z[ch], s.ch_v[ch] = out
+                s.ch_z[ch], s.ch_v[ch], s.ch_p[ch], s.ch_dp[ch] = out
+                if h > 0.0:
+                    s.ch_pw[ch] = (work[0] / h, work[1] / h)
                 s.ch_g[ch] = gB
-                zc, zm, pm = float(s.ch_z[ch]), float(s.ch_zmax[ch]), float(s.ch_pmax[ch])
-                p, _ = self._law(zc, zm, pm)
+                zc, zm, pm, p = float(s.ch_z[ch]), float(s.ch_zmax[ch]), float(s.ch_pmax[ch]), float(s.ch_p[ch])
                 loading = zc >= zm
                 zm1, pm1 = max(zm, zc), (max(pm, p) if loading else pm)
                 cell = int(s.ch_cell[ch])
                 st.z[cell], st.zdot[cell], st.zmax[cell], st.pmax[cell] = zc, s.ch_v[ch], zm1, pm1
                 st.phase[cell] = (1 if loading else 2) if zm1 > 0 else 0
-                s.ch_zmax[ch], s.ch_pmax[ch], s.ch_p[ch] = zm1, pm1, p
+                s.ch_zmax[ch], s.ch_pmax[ch] = zm1, pm1
             s.wv[:] = w1
             s.a[:] = a1
             self.sums()
