@@ -7,13 +7,15 @@
  * the active channels only), the channel sums, the outputs (eng_outputs) and the coverage check.
  * engine.py mirrors every line of it in Python (the interpreted path, tested against this file).
  *
- * Compiled together with the CasADi-generated engine_gen.c (which defines the eng_* Functions).
+ * Compiled with the CasADi-generated C of the eng_* Functions included (engine_gen.inc).
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "engine_gen.h"
+/* the generated Functions in this translation unit, internal: the compiler inlines the small ones */
+#define CASADI_SYMBOL_EXPORT static
+#include "engine_gen.inc"
 
 #define EXPORT __attribute__((visibility("default")))
 #define NV 12
@@ -41,6 +43,7 @@ typedef struct {
   long long *ch_cell, *ch_foot, *ch_new_stamp, *ch_new_cell;
   double *ch_z, *ch_v, *ch_zmax, *ch_pmax, *ch_p, *ch_cx, *ch_cy, *ch_g; /* ch_g: NGEO per channel */
   double *ch_dp, *ch_pw; /* dp/dz at the channel's state; its compaction power over the last step (2) */
+  double *ch_vr;         /* dz/dt at the step end from the quadratic through the last substep's stages */
   unsigned char *ch_new; /* 1: assigned at this step's start (its first geometry is evaluated here) */
   long long *act, *new_list;
   long long n_act, n_new, peak_active, stamp;
@@ -193,6 +196,7 @@ EXPORT int eng_assign(eng_t *E, double h) {
     E->ch_p[ch] = 0.0;
     E->ch_pw[2 * ch] = 0.0;
     E->ch_pw[2 * ch + 1] = 0.0;
+    E->ch_vr[ch] = E->ch_v[ch];
     law(E->ch_z[ch], E->ch_zmax[ch], E->ch_pmax[ch], &E->ch_p[ch], &E->ch_dp[ch]);
     E->touched[cell] = 1;
     double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
@@ -210,8 +214,10 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * hi = zeta + (omega + g pl) / a (p >= 0). Newton from the root of F linearised at zs (the last
  * solution of this cell: its slope there is known), each iterate kept in the bracket (bisection
  * otherwise; the lower end is evaluated only when a step needs it); converged when the Newton
- * step from Z is below 1e-13 |Z| + 1e-18 m (Z, p(Z), p'(Z) are returned: the history and the
- * release rule see the law at exactly the stored sinkage). */
+ * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
+ * inside the bracket is below 1e-6 |Z| (its result is then within about 1e-12 |Z| of the root).
+ * Z, p(Z), p'(Z) are returned: the history and the release rule see the law at exactly the
+ * stored sinkage. */
 static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double zs,
                  double ps, double dps, double *Z, double *pz, double *dpz) {
   double m = E->areal_mass, cd = E->damping;
@@ -229,6 +235,13 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
     else break;
     double xn = x - F / (a + g * dp);
     if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) break; /* x solves the stage to that tolerance */
+    if (fabs(xn - x) <= 1e-6 * fabs(xn) && xn < hi && xn > lo) {
+      /* quadratic convergence: xn is within about (1e-6)^2 |Z| of the root; take it */
+      x = xn;
+      E->n_newton += 1;
+      law(x, zmax, pmax, &p, &dp);
+      break;
+    }
     if (!(xn < hi && xn > lo)) {
       if (lo == -INFINITY) {
         double ph, dph;
@@ -239,9 +252,9 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
     }
     x = xn;
   }
-  if (!(fabs(a * (x - zeta) + g * p - omega - g * pl) <= 1e-9 * (a * fabs(x) + 1e-18))) {
+  {
     double xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp);
-    if (!(fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18)) return 1;
+    if (!(fabs(xn - x) <= 1e-6 * fabs(xn) + 1e-18)) return 1;
   }
   *Z = x;
   *pz = p;
@@ -256,7 +269,7 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
  * stage segments of frac_t(mid) (p_a + p_b) / 2 max(z_b - z_a, 0), frac_t linear within each
  * substep between f[2k + t] and f[2k + 2 + t] (the energy-consistent compaction power is work / h). */
 static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, const double *pl, const double *f,
-                     double zmax, double pmax, double h, long long n, double *work) {
+                     double zmax, double pmax, double h, long long n, double *work, double *vr) {
   double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
   double z0 = *z, v0 = *v, pz = *p, dpz = *dp;
   for (long long k = 0; k < n; ++k) {
@@ -275,6 +288,8 @@ static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, cons
       work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2;
     }
     v0 = (Z2 - zeta) / gh;
+    /* the rate at the substep end from the quadratic through (0, z0), (gamma, Z1), (1, Z2) */
+    *vr = (z0 * (1.0 - gam) / gam + Z1 / (gam * (gam - 1.0)) + Z2 * (2.0 - gam) / (1.0 - gam)) / hs;
     z0 = Z2;
     E->n_cell_stages += 2;
   }
@@ -307,7 +322,7 @@ static void sums(eng_t *E) {
       S[0] += E->ch_pw[2 * ch];
       S[1] += E->ch_pw[2 * ch + 1];
     } else {
-      double pw = E->ch_p[ch] * fmax(E->ch_v[ch], 0.0);
+      double pw = E->ch_p[ch] * fmax(E->ch_vr[ch], 0.0);
       S[0] += g[1] * pw;
       S[1] += g[2] * pw;
     }
@@ -397,6 +412,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
         memcpy(g, gB, sizeof gB);
         E->ch_p[ch] = 0.0;
+        E->ch_vr[ch] = 0.0;
         continue;
       }
       long long ns = E->cell_substeps;
@@ -434,7 +450,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       fr[2 * ns + 1] = gB[2];
       double work[2] = {0.0, 0.0};
       if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, E->ch_zmax[ch],
-                    E->ch_pmax[ch], h, ns, work)) {
+                    E->ch_pmax[ch], h, ns, work, E->ch_vr + ch)) {
         E->err_code = ERR_NEWTON;
         E->err_a = E->ch_cell[ch];
         return -ERR_NEWTON;

@@ -80,7 +80,7 @@ class EngineSettings:
 
     vehicle_substeps: int = 1
     cell_substeps: int = 1
-    entry_substeps: int = 4
+    entry_substeps: int = 8
     entry_fraction: float = 0.5
     power: str = "step_mean"
     compiled: bool = True
@@ -103,7 +103,7 @@ class _Eng(ctypes.Structure):
                 + [(n, ctypes.c_void_p) for n in ("z", "zdot", "zmax", "pmax", "phase", "touched",
                                                   "ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell",
                                                   "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx", "ch_cy",
-                                                  "ch_g", "ch_dp", "ch_pw", "ch_new", "act", "new_list")]
+                                                  "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list")]
                 + [(n, ctypes.c_longlong) for n in ("n_act", "n_new", "peak_active", "stamp")]
                 + [(n, ctypes.c_void_p) for n in ("pv", "geo", "wv", "a", "work", "agrid", "plbuf", "frbuf")]
                 + [(n, ctypes.c_longlong) for n in ("n_pv", "ny_out", "cell_substeps", "entry_substeps", "power_mode")]
@@ -136,14 +136,14 @@ def library(fns, compiled: bool = True):
     so = cache_root() / f"engine-{key}" / "libsymtrack_engine.so"
     if not so.exists():
         with tempfile.TemporaryDirectory(prefix="symtrack-enginegen-") as scratch:
-            cg = ca.CodeGenerator("engine_gen.c", {"with_header": True})
+            cg = ca.CodeGenerator("engine_gen.c", {"with_header": False})
             for f in fns.all():
                 cg.add(f)
             cg.generate(str(Path(scratch)) + "/")
-            sources = {n: (Path(scratch) / n).read_bytes() for n in ("engine_gen.c", "engine_gen.h")}
-        if b"#error" in sources["engine_gen.c"]:
+            gen = (Path(scratch) / "engine_gen.c").read_bytes()
+        if b"#error" in gen:
             raise SimulationError("the generated engine functions are not exportable (#error in engine_gen.c)")
-        sources["engine.c"] = csrc
+        sources = {"engine.c": csrc, "engine_gen.inc": gen}  # engine.c includes the generated C
         log.info("compiling the terrain engine into %s", so)
         _compile(sources, so, cc)
     lib = ctypes.CDLL(str(so))
@@ -186,6 +186,7 @@ class EngineState:
         self.ch_g = np.zeros((n, NGEO))
         self.ch_dp = np.zeros(n)
         self.ch_pw = np.zeros((n, 2))
+        self.ch_vr = np.zeros(n)
         self.ch_new = np.zeros(n, dtype=np.uint8)
         self.act = np.zeros(n, dtype=np.int64)
         self.new_list = np.zeros(4 * n + 16, dtype=np.int64)
@@ -218,8 +219,8 @@ class EngineState:
                           ("touched", self.touched)):
             setattr(e, name, _ptr(arr))
         for name in ("ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax",
-                     "ch_p", "ch_cx", "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_new", "act", "new_list", "pv", "geo", "wv",
-                     "a", "work", "agrid", "plbuf", "frbuf"):
+                     "ch_p", "ch_cx", "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv",
+                     "geo", "wv", "a", "work", "agrid", "plbuf", "frbuf"):
             setattr(e, name, _ptr(getattr(self, name)))
         e.n_act, e.n_new, e.peak_active, e.stamp = self.n_act, 0, self.peak_active, self.stamp
         e.n_pv, e.ny_out = self.pv.size, self.ny_out
@@ -385,6 +386,7 @@ class PyKernel:
             s.ch_zmax[ch], s.ch_pmax[ch] = st.zmax[cell], st.pmax[cell]
             s.ch_p[ch] = 0.0
             s.ch_pw[ch] = 0.0
+            s.ch_vr[ch] = s.ch_v[ch]
             s.ch_p[ch], s.ch_dp[ch] = self._law(s.ch_z[ch], s.ch_zmax[ch], s.ch_pmax[ch])
             s.touched[cell] = True
             s.ch_g[ch] = self._geo(s.ch_cx[ch], s.ch_cy[ch], s.a)
@@ -416,6 +418,11 @@ class PyKernel:
             xn = x - F / (a + g * dp)
             if abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
                 break
+            if abs(xn - x) <= 1e-6 * abs(xn) and lo < xn < hi:
+                x = xn
+                s.stats["n_newton"] += 1
+                p, dp = self._law(x, zmax, pmax)
+                break
             if not (lo < xn < hi):
                 if lo == -math.inf:
                     ph, _ = self._law(hi, zmax, pmax)
@@ -423,10 +430,9 @@ class PyKernel:
                 if not (lo < xn < hi):
                     xn = 0.5 * (lo + hi)
             x = xn
-        if not abs(a * (x - zeta) + g * p - omega - g * pl) <= 1e-9 * (a * abs(x) + 1e-18):
-            xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp)
-            if not abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
-                return None
+        xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp)
+        if not abs(xn - x) <= 1e-6 * abs(xn) + 1e-18:
+            return None
         return x, p, dp
 
     def _cell_step(self, z0, v0, pz, dpz, pl, f, zmax, pmax, h, n, work):
@@ -454,9 +460,10 @@ class PyKernel:
                 fa, fb = f[2 * k + t], f[2 * k + 2 + t]
                 work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2
             v0 = (Z2 - zeta) / gh
+            vr = (z0 * (1.0 - gam) / gam + Z1 / (gam * (gam - 1.0)) + Z2 * (2.0 - gam) / (1.0 - gam)) / hs
             z0 = Z2
             self.s.stats["n_cell_stages"] += 2
-        return z0, v0, pz, dpz
+        return z0, v0, pz, dpz, vr
 
     def sums(self):
         s = self.s
@@ -468,7 +475,7 @@ class PyKernel:
                 S[0] += s.ch_pw[ch, 0]
                 S[1] += s.ch_pw[ch, 1]
             else:
-                pw = float(s.ch_p[ch]) * max(float(s.ch_v[ch]), 0.0)
+                pw = float(s.ch_p[ch]) * max(float(s.ch_vr[ch]), 0.0)
                 S[0] += g[1] * pw
                 S[1] += g[2] * pw
             for r in range(4):
@@ -538,6 +545,7 @@ class PyKernel:
                 if s.ch_z[ch] == 0.0 and s.ch_v[ch] == 0.0 and plA == 0.0 and plB == 0.0:
                     s.ch_g[ch] = gB
                     s.ch_p[ch] = 0.0
+                    s.ch_vr[ch] = 0.0
                     continue
                 ns = nsub
                 window = False
@@ -563,7 +571,7 @@ class PyKernel:
                 if out is None:
                     e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
                     return -ERR_NEWTON, n_done, e
-                s.ch_z[ch], s.ch_v[ch], s.ch_p[ch], s.ch_dp[ch] = out
+                s.ch_z[ch], s.ch_v[ch], s.ch_p[ch], s.ch_dp[ch], s.ch_vr[ch] = out
                 if h > 0.0:
                     s.ch_pw[ch] = (work[0] / h, work[1] / h)
                 s.ch_g[ch] = gB
@@ -622,7 +630,7 @@ class TerrainEngine:
         lib = library(self.fns, self.settings.compiled)
         self.kernel = CKernel(lib, self.state) if lib is not None else PyKernel(self.fns, self.state)
         self.compiled = self.kernel.compiled
-        self.timing = {"kernel_s": 0.0, "calls": 0}
+        self.timing = {"kernel_s": 0.0, "kernel_cpu_s": 0.0, "calls": 0}
 
     # -- errors ---------------------------------------------------------------------------------------------
     def _raise(self, code: int, e) -> None:
@@ -694,9 +702,10 @@ class TerrainEngine:
         n = T.size
         T_out, X, Y = np.zeros(n), np.zeros((n, NV)), np.zeros((n, self.state.ny_out))
         T, U = np.ascontiguousarray(T, dtype=float), np.ascontiguousarray(U, dtype=float)
-        w0 = time.perf_counter()
+        w0, c0 = time.perf_counter(), time.process_time()
         rc, n_done, e = self.kernel.run(t0, T, U, dist, check_covered, T_out, X, Y)
         self.timing["kernel_s"] += time.perf_counter() - w0
+        self.timing["kernel_cpu_s"] += time.process_time() - c0
         self.timing["calls"] += 1
         if rc < 0:
             self._raise(-rc, e)
@@ -777,7 +786,7 @@ def run(scenario, world, progress: bool = True, settings: EngineSettings | None 
     bar = Progress(1.0, scenario.name, enabled=progress)
     stopped_by = "duration"
     t = 0.0
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     k = 0
     while k < T.size:
         m = min(CHUNK_STEPS, T.size - k)
@@ -797,7 +806,7 @@ def run(scenario, world, progress: bool = True, settings: EngineSettings | None 
             stopped_by = "distance"
             break
     bar.close()
-    wall = time.perf_counter() - wall0
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     x_end = eng.sync_world()
     world.end_pass(x_end)
     if dist[1] >= 0 and stopped_by != "distance":
@@ -809,5 +818,5 @@ def run(scenario, world, progress: bool = True, settings: EngineSettings | None 
 
     res = Result(scenario, np.concatenate(ts), np.concatenate(xs), np.concatenate(us), np.concatenate(ys),
                  VEHICLE_STATES, eng.output_names, wall, stopped_by, terrain=world.figures())
-    res.stats.update({"engine_compiled": eng.compiled, **eng.state.stats})
+    res.stats.update({"engine_compiled": eng.compiled, "cpu_s": cpu, **eng.state.stats})
     return res
