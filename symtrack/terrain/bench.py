@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import casadi as ca
@@ -234,6 +235,130 @@ def _grid_row(integrator, duration_s=None, channels=None, note=""):
     return row
 
 
+# ---- the terrain engine (run.integrator = "grid_fast", symtrack/terrain/engine.py; issue 9) ------------------
+ENGINE_FIGURES = ("lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm", "sinkage_idler_mm",
+                  "shear_driven_max_m", "shear_idle_min_m", "rut_max_depth_mm", "rut_mean_depth_mm",
+                  "compaction_resistance_mean_N")
+
+
+def _clear(world):
+    for a in world.storage.arrays().values():
+        a[:] = 0
+
+
+def _engine_validation(world, sc, settings=None, repeats=2):
+    """The validation through the engine on world (cleared before each run); the best of repeats."""
+    from .. import runner
+    from . import engine
+    from .study import pass_figures
+
+    best = None
+    for _ in range(repeats):
+        _clear(world)
+        z0 = world.storage.z.copy()
+        res = engine.run(sc, world, progress=False, settings=settings or engine.engine_settings_of(sc))
+        if best is None or res.wall_time_s < best[0].wall_time_s:
+            summ = runner.summarise(res)
+            summ.update(pass_figures(world, z0, res, world.touched.copy()))
+            best = (res, summ)
+    return best
+
+
+def _engine_row(group, case, res, note=""):
+    st = res.stats
+    wall, sim = float(res.wall_time_s), float(res.t[-1])
+    parts = {k: st[k] * 1e-9 for k in ("ns_manager", "ns_vehicle", "ns_cells", "ns_outputs")}
+    loop = max(0.0, wall - sum(parts.values()))
+    row = {"group": group, "case": case, "integrator": "grid_fast", "sim_time_s": sim, "wall_time_s": wall,
+           "real_time_factor": sim / wall, "cpu_time_s": st["cpu_s"], "real_time_factor_cpu": sim / st["cpu_s"],
+           "world_manager_s": parts["ns_manager"], "vehicle_s": parts["ns_vehicle"], "cells_s": parts["ns_cells"],
+           "outputs_s": parts["ns_outputs"], "python_loop_s": loop, "peak_active_cells": res.terrain[
+               "terrain_peak_active_cells"], "cell_stages": st["n_cell_stages"], "newton_iterations": st["n_newton"]}
+    shares = ", ".join(f"{n} {100 * v / wall:.0f} %" for n, v in (
+        ("world manager", parts["ns_manager"]), ("vehicle", parts["ns_vehicle"]), ("cells", parts["ns_cells"]),
+        ("outputs", parts["ns_outputs"]), ("python", loop)))
+    row["note"] = (note + f"; {sim / wall:.3g} x real time (CPU time: {sim / st['cpu_s']:.3g} x); "
+                   f"{shares}").lstrip("; ")
+    return row
+
+
+def engine_field_rows(sizes_cells=(1e4, 1e6, 1.6e7), duration_s=2.0) -> list[dict]:
+    """Cost against field size: duration_s of the validation's torque programme on square fields of
+    about sizes_cells cells at 0.1 m, the vehicle starting at the centre (the same run on each)."""
+    from . import engine
+    from .study import make_world
+
+    rows = []
+    base = None
+    for n in sizes_cells:
+        side = round(math.sqrt(n) * 0.1, 1)
+        sc = _field_scenario("validation_grid", (side, side), 0.1, ["run.integrator=grid_fast"])
+        sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=duration_s, stop_after_distance_m=None,
+                                                             stop_distance_event=None))
+        world = make_world(sc)
+        res, _ = _engine_validation(world, sc, engine.engine_settings_of(sc), repeats=2)
+        per = res.stats["cpu_s"] / float(res.t[-1])
+        base = base if base is not None else per
+        r = _engine_row("grid_fast: cost vs field size", f"{world.grid.n_cells:.3g} cells", res,
+                        note=f"{world.storage.nbytes / world.grid.n_cells:.0f} B per cell in storage; CPU s per "
+                             f"simulated s {per:.4f} ({per / base:.2f} x the smallest field)")
+        r["cells"] = world.grid.n_cells
+        r["storage_MB"] = world.storage.nbytes / 1e6
+        r["cpu_s_per_sim_s"] = per
+        rows.append(r)
+        del world
+    return rows
+
+
+def engine_rows(quick: bool = False, rosenbrock_row: dict | None = None, reference_summary: dict | None = None):
+    """Rows of the terrain engine: the validation on the million-cell field (real-time factor, the
+    shares of its parts, the gain over the compiled grid rosenbrock of the same run, the figures
+    against a reference summary if given), the cost against field size, the pool against one
+    channel per cell on the small field."""
+    from . import engine
+    from .study import make_world
+
+    rows = []
+    sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, ["run.integrator=grid_fast"])
+    world = make_world(sc)
+    t0 = time.perf_counter()
+    eng = engine.TerrainEngine(world, engine.engine_settings_of(sc))  # builds and compiles (cached)
+    world._engine = eng
+    build_s = time.perf_counter() - t0
+    res, summ = _engine_validation(world, sc)
+    row = _engine_row("grid validation (1e6 cells)", f"M = {world.M}", res, note="the whole validation")
+    row["build_s"] = build_s
+    row["validation"] = {k: summ[k] for k in ENGINE_FIGURES}
+    if rosenbrock_row is not None:
+        gain = row["real_time_factor"] / rosenbrock_row["real_time_factor"]
+        row["gain_over_rosenbrock"] = gain
+        row["note"] += f"; {gain:.0f} x the compiled grid rosenbrock of this run"
+    if reference_summary is not None:
+        ref = {**reference_summary, **reference_summary.get("passes", [{}])[0]}
+        row["relative_difference_to_reference"] = {k: summ[k] / ref[k] - 1 for k in ENGINE_FIGURES if ref.get(k)}
+    rows.append(row)
+    del world
+    rows += engine_field_rows((1e4, 1e6) if quick else (1e4, 1e6, 1.6e7))
+    # the small field: the pool (sector rule) against one channel per cell (bit for bit)
+    sc2 = _field_scenario("validation_grid", (12.0, 4.0), 0.25, ["run.integrator=grid_fast"])
+    sc2 = dataclasses.replace(sc2, run=dataclasses.replace(sc2.run, duration_s=1.0, stop_after_distance_m=None,
+                                                           stop_distance_event=None))
+    w_pool = make_world(sc2)
+    r_pool, _ = _engine_validation(w_pool, sc2)
+    nx, ny = w_pool.grid.shape
+    sc3 = dataclasses.replace(sc2, extra={"terrain": dict(sc2.extra["terrain"], channels=max(nx, ny))})
+    w_all = make_world(sc3)
+    r_all, _ = _engine_validation(w_all, sc3)
+    same = bool((r_pool.X == r_all.X).all() and (w_pool.z_at_pass_end == w_all.z_at_pass_end).all())
+    for case, r, w in (("channel pool", r_pool, w_pool), ("one channel per cell", r_all, w_all)):
+        rr = _engine_row("small field 12 m x 4 m at 0.25 m", case, r,
+                         note=f"M = {w.M}, {w.n_channels} channels" + ("; identical to the pool to the last bit"
+                                                                        if case != "channel pool" and same else ""))
+        rr["identical_to_pool"] = same
+        rows.append(rr)
+    return rows
+
+
 def bench_rows(quick: bool = False) -> list[dict]:
     """Rows of ``symtrack bench``: the validation on the million-cell field (IDAS interpreted, the
     compiled grid rosenbrock), the channel-pool size M against cost, the pool against brute force
@@ -243,6 +368,7 @@ def bench_rows(quick: bool = False) -> list[dict]:
     rows.append(_grid_row("idas", duration_s=0.5 if quick else None,
                           note="first 0.5 s only" if quick else "the whole validation"))
     rows.append(_grid_row("rosenbrock", note=f"compiled, step {GRID_FIXED_STEP_S * 1e3:g} ms"))
+    rows += engine_rows(quick, rosenbrock_row=rows[-1])
     for M in (48, 64):
         r = _grid_row("rosenbrock", duration_s=short, channels=M,
                       note="M sweep" + ("; first 0.5 s only" if quick else ""))
@@ -278,8 +404,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m symtrack.terrain.bench")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default="out/bench_terrain.json")
+    ap.add_argument("--engine", action="store_true",
+                    help="only the terrain engine's rows, with the compiled grid rosenbrock for the gain")
+    ap.add_argument("--reference", help="summary.json of `symtrack simulate validation_grid --integrator idas`: "
+                                        "the engine's figures relative to it")
     args = ap.parse_args(argv)
-    rows = bench_rows(args.quick)
+    if args.engine:
+        ref = json.loads(Path(args.reference).read_text()) if args.reference else None
+        rb = _grid_row("rosenbrock", note=f"compiled, step {GRID_FIXED_STEP_S * 1e3:g} ms")
+        rows = [rb, *engine_rows(args.quick, rosenbrock_row=rb, reference_summary=ref)]
+    else:
+        rows = bench_rows(args.quick)
     rep = report(rows)
     atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
     print(table(rows))

@@ -12,6 +12,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 /* the generated Functions in this translation unit, internal: the compiler inlines the small ones */
 #define CASADI_SYMBOL_EXPORT static
@@ -60,7 +61,16 @@ typedef struct {
   long long err_code, err_a, err_b, err_ch;
   double err_x[2];
   long long n_newton, n_cell_stages, n_vehicle_steps;
+  /* wall time (ns) of the parts: world manager (footprint, release, assignment, INFO_IN; coverage
+     check), vehicle step, cells (geometry, integration, INFO_OUT), sums and outputs */
+  long long ns_manager, ns_vehicle, ns_cells, ns_outputs;
 } eng_t;
+
+static long long now_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
 
 /* ---- calls of the generated Functions (no integer work, no extra arguments: checked in engine.py) */
 static double *WORK;
@@ -215,9 +225,8 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * solution of this cell: its slope there is known), each iterate kept in the bracket (bisection
  * otherwise; the lower end is evaluated only when a step needs it); converged when the Newton
  * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
- * inside the bracket is below 1e-6 |Z| (its result is then within about 1e-12 |Z| of the root).
- * Z, p(Z), p'(Z) are returned: the history and the release rule see the law at exactly the
- * stored sinkage. */
+ * inside the bracket is below 1e-6 |Z| (its result is then within about 1e-12 |Z| of the root, and
+ * p is extended linearly to it). Z, p(Z), p'(Z) are returned. */
 static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double zs,
                  double ps, double dps, double *Z, double *pz, double *dpz) {
   double m = E->areal_mass, cd = E->damping;
@@ -236,10 +245,11 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
     double xn = x - F / (a + g * dp);
     if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) break; /* x solves the stage to that tolerance */
     if (fabs(xn - x) <= 1e-6 * fabs(xn) && xn < hi && xn > lo) {
-      /* quadratic convergence: xn is within about (1e-6)^2 |Z| of the root; take it */
+      /* quadratic convergence: xn is within about (1e-6)^2 |Z| of the root; take it, with the law
+         extended linearly from x (an error of the same order; p = 0 stays exactly 0 on the clipped
+         branch, where dp = 0) */
+      p = fmax(0.0, p + dp * (xn - x));
       x = xn;
-      E->n_newton += 1;
-      law(x, zmax, pmax, &p, &dp);
       break;
     }
     if (!(xn < hi && xn > lo)) {
@@ -362,8 +372,11 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     double t_next = T[k], h = t_next - t;
     const double *u = U + 2 * k;
     int done = 0;
+    long long c0 = now_ns();
     if (eng_assign(E, h)) return -(int)E->err_code;
     WORK = E->work;
+    long long c1 = now_ns();
+    E->ns_manager += c1 - c0;
     vehicle_step(E, u, h, w1, a1);
     if (dist[1] >= 0.0 && t_next > dist[2] + 1e-12) {
       double d_step = hypot(w1[0] - E->wv[0], w1[1] - E->wv[1]);
@@ -385,6 +398,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         return -ERR_NONFINITE;
       }
     }
+    long long c2 = now_ns();
+    E->ns_vehicle += c2 - c1;
     /* the pose and pressure lines at the ends of the transient windows' substeps (shared by all cells) */
     long long nw = E->entry_substeps > E->cell_substeps ? E->entry_substeps : E->cell_substeps;
     double *agrid = E->agrid;
@@ -473,6 +488,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as World.after_step's p_soil */
       E->ch_pmax[ch] = pm1;
     }
+    long long c3 = now_ns();
+    E->ns_cells += c3 - c2;
     memcpy(E->wv, w1, sizeof w1);
     memcpy(E->a, a1, sizeof a1);
     sums(E);
@@ -485,6 +502,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       eng_outputs(arg, res, 0, WORK, 0);
     }
     *n_done = k + 1;
+    long long c4 = now_ns();
+    E->ns_outputs += c4 - c3;
     if (check_covered) {
       long long missing[2] = {0, -1};
       scan(E, w1[0], w1[1], w1[2], 0.5 * E->dx, 0, check_cover, missing);
@@ -495,6 +514,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         return -ERR_UNCOVERED;
       }
     }
+    E->ns_manager += now_ns() - c4;
     if (done) return 1;
   }
   return 0;

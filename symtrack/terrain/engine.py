@@ -111,7 +111,8 @@ class _Eng(ctypes.Structure):
                                                   "entry_fraction")]
                 + [(n, ctypes.c_longlong) for n in ("err_code", "err_a", "err_b", "err_ch")]
                 + [("err_x", ctypes.c_double * 2)]
-                + [(n, ctypes.c_longlong) for n in ("n_newton", "n_cell_stages", "n_vehicle_steps")])
+                + [(n, ctypes.c_longlong) for n in ("n_newton", "n_cell_stages", "n_vehicle_steps", "ns_manager",
+                                                    "ns_vehicle", "ns_cells", "ns_outputs")])
 
 
 def _check_no_work(fns):
@@ -208,7 +209,8 @@ class EngineState:
         self.areal_mass, self.damping = cell_constants(world.params)
         self.settings = settings
         self.ny_out = len(fns.output_names)
-        self.stats = {"n_newton": 0, "n_cell_stages": 0, "n_vehicle_steps": 0}
+        self.stats = {"n_newton": 0, "n_cell_stages": 0, "n_vehicle_steps": 0, "ns_manager": 0, "ns_vehicle": 0,
+                      "ns_cells": 0, "ns_outputs": 0}  # ns_*: the C kernel's parts (0 when interpreted)
 
     def struct(self) -> _Eng:
         g, st, s = self.grid, self.storage, self.settings
@@ -228,8 +230,8 @@ class EngineState:
         e.power_mode = POWER_MODES.index(s.power)
         e.pad, e.release_rate, e.areal_mass, e.damping = self.pad, self.release_rate, self.areal_mass, self.damping
         e.gamma, e.entry_fraction = SDIRK_GAMMA, float(s.entry_fraction)
-        e.n_newton, e.n_cell_stages, e.n_vehicle_steps = (self.stats[k] for k in
-                                                          ("n_newton", "n_cell_stages", "n_vehicle_steps"))
+        for k, v in self.stats.items():
+            setattr(e, k, v)
         return e
 
     def absorb(self, e: _Eng) -> None:
@@ -419,9 +421,8 @@ class PyKernel:
             if abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
                 break
             if abs(xn - x) <= 1e-6 * abs(xn) and lo < xn < hi:
+                p = max(0.0, p + dp * (xn - x))
                 x = xn
-                s.stats["n_newton"] += 1
-                p, dp = self._law(x, zmax, pmax)
                 break
             if not (lo < xn < hi):
                 if lo == -math.inf:
@@ -775,6 +776,8 @@ def run(scenario, world, progress: bool = True, settings: EngineSettings | None 
         world._engine = eng
     st = scenario.start
     x0 = eng.begin_pass(st.x_m, st.y_m, math.radians(st.yaw_deg))
+    for key in eng.state.stats:  # the statistics of the time loop (the settling excluded)
+        eng.state.stats[key] = 0
     T, U = schedule(scenario)
     run_cfg = scenario.run
     dist = np.array([0.0, -1.0, 0.0])
