@@ -41,6 +41,9 @@ class Stepper:
     def __init__(self, model: SystemModel, settings: IntegratorSettings):
         if settings.method not in INTEGRATORS:
             raise SimulationError(f"run.integrator = {settings.method!r} is not one of {', '.join(INTEGRATORS)}")
+        if settings.method == "grid_fast":  # issue 9: not a stepper (symtrack/terrain/engine.py runs the pass)
+            raise SimulationError('run.integrator = "grid_fast" is the grid terrain engine: it needs a [terrain] '
+                                  "section and runs through runner.run")
         self.model, self.settings = model, settings
         self.z, self._fixed = None, None
         # optional state permutation of the integrator (x_integrator = x[perm]); see

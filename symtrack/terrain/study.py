@@ -43,8 +43,9 @@ def make_world(scenario, terrain_in: str | None = None) -> World:
     s = settings_from_dict(t)
     if scenario.run.integrator not in GRID_INTEGRATORS:
         raise ScenarioError(
-            f"run.integrator = {scenario.run.integrator!r}: the grid terrain runs with run.integrator = \"idas\" "
-            "or \"rosenbrock\" (the DAE form keeps the Jacobian an arrowhead; see symtrack/terrain/channels.py)")
+            f"run.integrator = {scenario.run.integrator!r}: the grid terrain runs with run.integrator = \"idas\", "
+            "\"rosenbrock\" (the DAE form keeps the Jacobian an arrowhead; see symtrack/terrain/channels.py) or "
+            "\"grid_fast\" (the terrain engine, symtrack/terrain/engine.py)")
     if scenario.run.compiled:
         raise ScenarioError("run.compiled = true is not available with the grid terrain")
     path = terrain_in or s.initial_state
