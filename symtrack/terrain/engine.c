@@ -435,10 +435,11 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       int window = 0;
       if (E->entry_substeps > ns) {
         /* the transient windows: entry (soil reaction below entry_fraction of the load) and exit
-           (the load falling while the cell is on its unloading line): substeps, the geometry
+           (the cell leaving a track's contact, its load falling, on its unloading line): substeps, the geometry
            evaluated at each substep end (the overlap's kinks resolved to a substep) */
         double plm = fmax(plA, plB);
-        if (E->ch_p[ch] < E->entry_fraction * plm || (plB < plA && E->ch_z[ch] < E->ch_zmax[ch])) {
+        if (E->ch_p[ch] < E->entry_fraction * plm
+            || (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch])) {
           ns = nw;
           window = 1;
         }

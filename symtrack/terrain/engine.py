@@ -552,7 +552,8 @@ class PyKernel:
                 window = False
                 if nentry > ns:
                     plm = max(plA, plB)
-                    if s.ch_p[ch] < sset.entry_fraction * plm or (plB < plA and s.ch_z[ch] < s.ch_zmax[ch]):
+                    if s.ch_p[ch] < sset.entry_fraction * plm or (
+                            plB < plA and gB[1] + gB[2] < gA[1] + gA[2] and s.ch_z[ch] < s.ch_zmax[ch]):
                         ns, window = nw, True
                 pl, fr = [plA], [float(gA[1]), float(gA[2])]
                 for j in range(1, ns):
