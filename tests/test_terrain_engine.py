@@ -231,3 +231,12 @@ def test_grid_fast_needs_a_terrain_and_settings_are_validated():
     with pytest.raises(ScenarioError, match="power"):
         engine.EngineSettings(power="bogus")
     assert math.isclose(engine.SDIRK_GAMMA, 1 - 1 / math.sqrt(2))
+
+
+def test_a_loaded_cell_without_a_channel_is_an_error():
+    sc = _scenario(duration_s=0.2)
+    world = make_world(sc)
+    eng = engine.TerrainEngine(world)
+    eng.state.pad = -0.2  # a footprint shrunk by 0.2 m misses cells the tracks load
+    with pytest.raises(SimulationError, match=r"cell \(\d+, \d+\) came under a track without a channel"):
+        engine.run(sc, world, progress=False, engine=eng)
