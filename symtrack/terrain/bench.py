@@ -19,6 +19,7 @@ import numpy as np
 from ..simulate import IntegratorSettings
 from .channels import NF, NG, ChannelTerrain, soil_law_values
 from .config import TerrainSettings, settings_from_dict
+from .study import RUT_THRESHOLD_M
 from .world import END_STRIP_CELLS, NV, CellStorage, Grid
 
 
@@ -359,6 +360,41 @@ def engine_rows(quick: bool = False, rosenbrock_row: dict | None = None, referen
     return rows
 
 
+def engine_field_pattern(passes: int = 20, length_m: float = 85.0, spacing_m: float = 4.0) -> dict:
+    """A whole-field study: ``passes`` straight passes of length_m (2000 N m on both sprockets) on
+    parallel lines spacing_m apart, alternating direction, over one 100 m x 100 m field at 0.1 m
+    (1e6 cells) through the engine; the wall time of everything (the World's construction, the
+    compilation if not cached, every pass with its settling and lift-off)."""
+    from . import engine
+    from .study import make_world, pass_figures
+
+    t0 = time.perf_counter()
+    sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1,
+                         ["run.integrator=grid_fast", "terrain.origin_m=[-50.0, -50.0]"])
+    torque = (dataclasses.replace(sc.torque[0], left_N_m=2000.0, right_N_m=2000.0, event="go"),)
+    run = dataclasses.replace(sc.run, duration_s=200.0, stop_after_distance_m=length_m, stop_distance_event="go")
+    world = make_world(sc)
+    loop_s, sim_s, figs = 0.0, 0.0, []
+    for k in range(passes):
+        y = -0.5 * (passes - 1) * spacing_m + k * spacing_m
+        x, yaw = (-0.5 * length_m - 2.0, 0.0) if k % 2 == 0 else (0.5 * length_m + 2.0, 180.0)
+        sck = dataclasses.replace(sc, run=run, torque=torque, start=dataclasses.replace(sc.start, x_m=x, y_m=y,
+                                                                                         yaw_deg=yaw))
+        z0 = world.storage.z.copy()
+        res = engine.run(sck, world, progress=False)
+        figs.append(pass_figures(world, z0, res, world.touched.copy()))
+        loop_s += res.wall_time_s
+        sim_s += float(res.t[-1])
+    total = time.perf_counter() - t0
+    cells = int((world.storage.zmax > RUT_THRESHOLD_M).sum())
+    return {"group": "grid_fast: field pattern", "case": f"{passes} passes x {length_m:g} m, 1e6 cells",
+            "integrator": "grid_fast", "sim_time_s": sim_s, "wall_time_s": total, "real_time_factor": sim_s / total,
+            "time_loop_s": loop_s, "cells_rutted": cells,
+            "note": f"{sim_s:.0f} s simulated; wall {total:.1f} s in all (time loops {loop_s:.2f} s: "
+                    f"{sim_s / loop_s:.0f} x real time); {cells} cells rutted; mean compaction resistance "
+                    f"{np.mean([f['compaction_resistance_mean_N'] for f in figs]):.1f} N"}
+
+
 def bench_rows(quick: bool = False) -> list[dict]:
     """Rows of ``symtrack bench``: the validation on the million-cell field (IDAS interpreted, the
     compiled grid rosenbrock), the channel-pool size M against cost, the pool against brute force
@@ -406,10 +442,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out/bench_terrain.json")
     ap.add_argument("--engine", action="store_true",
                     help="only the terrain engine's rows, with the compiled grid rosenbrock for the gain")
+    ap.add_argument("--pattern", action="store_true", help="only the 20-pass field pattern through the engine")
     ap.add_argument("--reference", help="summary.json of `symtrack simulate validation_grid --integrator idas`: "
                                         "the engine's figures relative to it")
     args = ap.parse_args(argv)
-    if args.engine:
+    if args.pattern:
+        rows = [engine_field_pattern()]
+    elif args.engine:
         ref = json.loads(Path(args.reference).read_text()) if args.reference else None
         rb = _grid_row("rosenbrock", note=f"compiled, step {GRID_FIXED_STEP_S * 1e3:g} ms")
         rows = [rb, *engine_rows(args.quick, rosenbrock_row=rb, reference_summary=ref)]
