@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 import casadi as ca
@@ -20,6 +21,7 @@ from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..reports import validation
 from ..simulation import loop
+from ..simulation.passes import RUT_THRESHOLD_M, pass_figures
 from ..simulation.plants import make_plant
 from ..simulation.result import summarise
 from ..simulation.scenario import load_scenario
@@ -226,6 +228,158 @@ def _grid_row(integrator, duration_s=None, channels=None, note=""):
     return row
 
 
+# ---- the terrain engine (run.integrator = "grid_fast", symtrack/integrators/grid_engine.py) -------------
+ENGINE_FIGURES = ("lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm", "sinkage_idler_mm",
+                  "shear_driven_max_m", "shear_idle_min_m", "rut_max_depth_mm", "rut_mean_depth_mm",
+                  "compaction_resistance_mean_N")
+
+
+def _clear(world):
+    for a in world.storage.arrays().values():
+        a[:] = 0
+
+
+def _engine_validation(plant, sc, repeats=2):
+    """The scenario through the engine plant on its world (cleared before each run); the best of repeats."""
+    world = plant.world
+    best = None
+    for _ in range(repeats):
+        _clear(world)
+        z0 = world.storage.z.copy()
+        res = loop.run(sc, plant)
+        if best is None or res.wall_time_s < best[0].wall_time_s:
+            summ = summarise(res)
+            summ.update(pass_figures(world, z0, res, world.touched.copy()))
+            best = (res, summ)
+    return best
+
+
+def _engine_row(group, case, res, note=""):
+    st = res.stats
+    wall, sim = float(res.wall_time_s), float(res.t[-1])
+    parts = {k: st[k] * 1e-9 for k in ("ns_manager", "ns_vehicle", "ns_cells", "ns_outputs")}
+    loop = max(0.0, wall - sum(parts.values()))
+    row = {"group": group, "case": case, "integrator": "grid_fast", "sim_time_s": sim, "wall_time_s": wall,
+           "real_time_factor": sim / wall, "cpu_time_s": res.cpu_time_s, "real_time_factor_cpu": sim / res.cpu_time_s,
+           "world_manager_s": parts["ns_manager"], "vehicle_s": parts["ns_vehicle"], "cells_s": parts["ns_cells"],
+           "outputs_s": parts["ns_outputs"], "python_loop_s": loop, "peak_active_cells": res.terrain[
+               "terrain_peak_active_cells"], "cell_stages": st["n_cell_stages"], "newton_iterations": st["n_newton"]}
+    shares = ", ".join(f"{n} {100 * v / wall:.0f} %" for n, v in (
+        ("world manager", parts["ns_manager"]), ("vehicle", parts["ns_vehicle"]), ("cells", parts["ns_cells"]),
+        ("outputs", parts["ns_outputs"]), ("python", loop)))
+    row["note"] = (note + f"; {sim / wall:.3g} x real time (CPU time: {sim / res.cpu_time_s:.3g} x); "
+                   f"{shares}").lstrip("; ")
+    return row
+
+
+def engine_field_rows(sizes_cells=(1e4, 1e6, 1.6e7), duration_s=2.0) -> list[dict]:
+    """Cost against field size: duration_s of the validation's torque programme on square fields of
+    about sizes_cells cells at 0.1 m, the vehicle starting at the centre (the same run on each)."""
+    rows = []
+    base = None
+    for n in sizes_cells:
+        side = round(math.sqrt(n) * 0.1, 1)
+        sc = _field_scenario("validation_grid", (side, side), 0.1, ["run.integrator=grid_fast"])
+        sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=duration_s, stop_after_distance_m=None,
+                                                             stop_distance_event=None))
+        plant = make_plant(sc)
+        world = plant.world
+        res, _ = _engine_validation(plant, sc, repeats=2)
+        per = res.cpu_time_s / float(res.t[-1])
+        base = base if base is not None else per
+        r = _engine_row("grid_fast: cost vs field size", f"{world.grid.n_cells:.3g} cells", res,
+                        note=f"{world.storage.nbytes / world.grid.n_cells:.0f} B per cell in storage; CPU s per "
+                             f"simulated s {per:.4f} ({per / base:.2f} x the smallest field)")
+        r["cells"] = world.grid.n_cells
+        r["storage_MB"] = world.storage.nbytes / 1e6
+        r["cpu_s_per_sim_s"] = per
+        rows.append(r)
+        del world, plant
+    return rows
+
+
+def engine_rows(quick: bool = False, rosenbrock_row: dict | None = None, reference_summary: dict | None = None):
+    """Rows of the terrain engine: the validation on the million-cell field (real-time factor, the
+    shares of its parts, the gain over the compiled grid rosenbrock of the same run, the figures
+    against a reference summary if given), the cost against field size, the pool against one
+    channel per cell on the small field."""
+    rows = []
+    sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, ["run.integrator=grid_fast"])
+    t0 = time.perf_counter()
+    plant = make_plant(sc)  # builds and compiles the engine (cached)
+    world = plant.world
+    build_s = time.perf_counter() - t0
+    res, summ = _engine_validation(plant, sc)
+    row = _engine_row("grid validation (1e6 cells)", f"M = {world.M}", res, note="the whole validation")
+    row["build_s"] = build_s
+    row["validation"] = {k: summ[k] for k in ENGINE_FIGURES}
+    if rosenbrock_row is not None:
+        gain = row["real_time_factor"] / rosenbrock_row["real_time_factor"]
+        row["gain_over_rosenbrock"] = gain
+        row["note"] += f"; {gain:.0f} x the compiled grid rosenbrock of this run"
+    if reference_summary is not None:
+        ref = {**reference_summary, **reference_summary.get("passes", [{}])[0]}
+        row["relative_difference_to_reference"] = {k: summ[k] / ref[k] - 1 for k in ENGINE_FIGURES if ref.get(k)}
+    rows.append(row)
+    del world, plant
+    rows += engine_field_rows((1e4, 1e6) if quick else (1e4, 1e6, 1.6e7))
+    # the small field: the pool (sector rule) against one channel per cell (bit for bit)
+    sc2 = _field_scenario("validation_grid", (12.0, 4.0), 0.25, ["run.integrator=grid_fast"])
+    sc2 = dataclasses.replace(sc2, run=dataclasses.replace(sc2.run, duration_s=1.0, stop_after_distance_m=None,
+                                                           stop_distance_event=None))
+    p_pool = make_plant(sc2)
+    w_pool = p_pool.world
+    r_pool, _ = _engine_validation(p_pool, sc2)
+    nx, ny = w_pool.grid.shape
+    sc3 = dataclasses.replace(sc2, terrain=dataclasses.replace(sc2.terrain, channels=max(nx, ny)))
+    p_all = make_plant(sc3)
+    w_all = p_all.world
+    r_all, _ = _engine_validation(p_all, sc3)
+    same = bool((r_pool.X == r_all.X).all() and (w_pool.z_at_pass_end == w_all.z_at_pass_end).all())
+    for case, r, w in (("channel pool", r_pool, w_pool), ("one channel per cell", r_all, w_all)):
+        rr = _engine_row("small field 12 m x 4 m at 0.25 m", case, r,
+                         note=f"M = {w.M}, {w.n_channels} channels" + ("; identical to the pool to the last bit"
+                                                                        if case != "channel pool" and same else ""))
+        rr["identical_to_pool"] = same
+        rows.append(rr)
+    return rows
+
+
+def engine_field_pattern(passes: int = 20, length_m: float = 85.0, spacing_m: float = 4.0) -> dict:
+    """A whole-field study: ``passes`` straight passes of length_m (2000 N m on both sprockets) on
+    parallel lines spacing_m apart, alternating direction, over one 100 m x 100 m field at 0.1 m
+    (1e6 cells) through the engine; the wall time of everything (the World's construction, the
+    compilation if not cached, every pass with its settling and lift-off)."""
+    t0 = time.perf_counter()
+    sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1,
+                         ["run.integrator=grid_fast", "terrain.origin_m=[-50.0, -50.0]"])
+    torque = (dataclasses.replace(sc.torque[0], left_N_m=2000.0, right_N_m=2000.0, event="go"),)
+    run = dataclasses.replace(sc.run, duration_s=200.0, stop_after_distance_m=length_m, stop_distance_event="go")
+    plant = make_plant(sc)
+    world = plant.world
+    loop_s, sim_s, figs = 0.0, 0.0, []
+    for k in range(passes):
+        y = -0.5 * (passes - 1) * spacing_m + k * spacing_m
+        x, yaw = (-0.5 * length_m - 2.0, 0.0) if k % 2 == 0 else (0.5 * length_m + 2.0, 180.0)
+        sck = dataclasses.replace(sc, run=run, torque=torque, start=dataclasses.replace(sc.start, x_m=x, y_m=y,
+                                                                                         yaw_deg=yaw))
+        z0 = world.storage.z.copy()
+        res = loop.run(sck, plant)
+        figs.append(pass_figures(world, z0, res, world.touched.copy()))
+        loop_s += res.wall_time_s
+        sim_s += float(res.t[-1])
+    total = time.perf_counter() - t0
+    cells = int((world.storage.zmax > RUT_THRESHOLD_M).sum())
+    return {"group": "grid_fast: field pattern", "case": f"{passes} passes x {length_m:g} m, 1e6 cells",
+            "integrator": "grid_fast", "sim_time_s": sim_s, "wall_time_s": total, "real_time_factor": sim_s / total,
+            "time_loop_s": loop_s, "cells_rutted": cells,
+            "note": f"{sim_s:.0f} s simulated; wall {total:.1f} s in all (time loops {loop_s:.2f} s: "
+                    f"{sim_s / loop_s:.0f} x real time); {cells} cells rutted; mean compaction resistance "
+                    f"{np.mean([f['compaction_resistance_mean_N'] for f in figs]):.1f} N"}
+
+
+
+
 def bench_rows(quick: bool = False) -> list[dict]:
     """Rows of ``symtrack bench``: the validation on the million-cell field (IDAS interpreted, the
     compiled grid rosenbrock), the channel-pool size M against cost, the pool against brute force
@@ -235,6 +389,7 @@ def bench_rows(quick: bool = False) -> list[dict]:
     rows.append(_grid_row("idas", duration_s=0.5 if quick else None,
                           note="first 0.5 s only" if quick else "the whole validation"))
     rows.append(_grid_row("rosenbrock", note=f"compiled, step {GRID_FIXED_STEP_S * 1e3:g} ms"))
+    rows += engine_rows(quick, rosenbrock_row=rows[-1])
     for M in (48, 64):
         r = _grid_row("rosenbrock", duration_s=short, channels=M,
                       note="M sweep" + ("; first 0.5 s only" if quick else ""))
@@ -270,8 +425,20 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m symtrack.bench.terrain")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default="out/bench_terrain.json")
+    ap.add_argument("--engine", action="store_true",
+                    help="only the terrain engine's rows, with the compiled grid rosenbrock for the gain")
+    ap.add_argument("--pattern", action="store_true", help="only the 20-pass field pattern through the engine")
+    ap.add_argument("--reference", help="summary.json of `symtrack simulate validation_grid --integrator idas`: "
+                                        "the engine's figures relative to it")
     args = ap.parse_args(argv)
-    rows = bench_rows(args.quick)
+    if args.pattern:
+        rows = [engine_field_pattern()]
+    elif args.engine:
+        ref = json.loads(Path(args.reference).read_text()) if args.reference else None
+        rb = _grid_row("rosenbrock", note=f"compiled, step {GRID_FIXED_STEP_S * 1e3:g} ms")
+        rows = [rb, *engine_rows(args.quick, rosenbrock_row=rb, reference_summary=ref)]
+    else:
+        rows = bench_rows(args.quick)
     rep = report(rows)
     atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
     print(table(rows))

@@ -107,11 +107,14 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
     u0 = np.array(scenario.torque_at(0.0))
     grid = OutputGrid(scenario)
     bar = Progress(1.0, label or scenario.name, enabled=progress)
+    own_stop = getattr(plant, "applies_stop_rule", False)  # the plant applies the distance rule in its calls
+    if own_stop:
+        plant.set_stop_rule(target, dist_from or 0.0)
     with watch_interrupts():
         x, y = plant.start(st.x_m, st.y_m, math.radians(st.yaw_deg), u0)
         ts, xs, us, ys = [np.zeros(1)], [x[None, :]], [u0[None, :]], [y[None, :]]
         t, dist, stopped_by = 0.0, 0.0, "duration"
-        wall0 = time.perf_counter()
+        wall0, cpu0 = time.perf_counter(), time.process_time()
         failure, finished = None, False
         try:
             while True:
@@ -127,7 +130,14 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                     plant.synchronize([(t0, t1 - t0, u) for t0, t1, u in ivs])
                     X = plant.advance()
                     hit = None
-                    if dist_from is not None:
+                    if own_stop:
+                        k = len(X)
+                        Y = plant.commit(k)
+                        times = np.asarray(plant.end_times, dtype=float)
+                        dist = plant.distance_m
+                        if plant.stopped:
+                            stopped_by = "distance"
+                    elif dist_from is not None:
                         t1s = np.array([t1 for _, t1, _ in ivs])
                         prev = np.vstack([x[None, :2], X[:-1, :2]])
                         d = np.hypot(X[:, 0] - prev[:, 0], X[:, 1] - prev[:, 1])
@@ -140,7 +150,9 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                             dist = float(cum[hit - 1]) if hit > 0 else dist
                         else:
                             dist = float(cum[-1])
-                    if hit is None:
+                    if own_stop:
+                        pass
+                    elif hit is None:
                         Y = plant.commit(len(ivs))
                         times = np.array([t1 for _, t1, _ in ivs])
                     else:
@@ -179,11 +191,11 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
             finished = failure is None
         finally:
             bar.close(complete=finished)
-            wall = time.perf_counter() - wall0
+            wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
             plant.finish()
     res = RunResult(scenario, np.concatenate(ts), np.vstack(xs), np.vstack(us), np.vstack(ys),
                     tuple(plant.state_names), tuple(plant.output_names), wall,
-                    "error" if failure is not None else stopped_by, plant.stats(), plant.figures() or None)
+                    "error" if failure is not None else stopped_by, plant.stats(), plant.figures() or None, cpu)
     if failure is not None:
         raise IncompleteRun(f"{failure} (at t = {t:.3f} s; the run up to there is kept)", res) from failure
     if dist_from is not None and stopped_by != "distance":

@@ -44,7 +44,8 @@ from ..model.vehicle import VEHICLE_STATES
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import World, open_world
 
-__all__ = ["BatchPlant", "GridPlant", "Plant", "StepPlant", "advance_plant", "make_plant", "make_grid_plant"]
+__all__ = ["BatchPlant", "EnginePlant", "GridPlant", "Plant", "StepPlant", "advance_plant", "make_grid_plant",
+           "make_plant"]
 
 NV = len(VEHICLE_STATES)
 
@@ -322,6 +323,96 @@ class GridPlant:
         return self.stepper.stats()
 
 
+class EnginePlant:
+    """The vehicle on the grid terrain through the compiled terrain engine
+    (:class:`~symtrack.integrators.grid_engine.TerrainEngine`, ``run.integrator = "grid_fast"``):
+    the world manager's per-step work, the vehicle and the cells in C, up to ``max_intervals``
+    macro steps per call. It applies the stop-at-distance rule inside its calls
+    (``applies_stop_rule``: :meth:`set_stop_rule`; after :meth:`advance`, ``end_times`` holds the
+    steps' end times, the last one shortened when ``stopped``); :meth:`retry` is not needed.
+    ``record_every_s``: snapshots for the animation, one per call (calls of 25 macro steps then)."""
+
+    kind = "grid"
+    applies_stop_rule = True
+    CALL_STEPS = 100  # macro steps per call
+    RECORD_CALL_STEPS = 25  # ... when recording snapshots
+
+    def __init__(self, world: World, engine, record_every_s: float | None = None):
+        self.world, self.engine = world, engine
+        self.model = world.model
+        self.state_names = tuple(VEHICLE_STATES)
+        self.output_names = tuple(engine.output_names)
+        self.record_every_s = record_every_s
+        self.snapshots: list = []
+        self.dist = np.array([0.0, -1.0, 0.0])  # distance so far, stop distance (< 0: none), counted from
+        self._unloader = None
+        self.finished = True
+
+    @property
+    def max_intervals(self) -> int:
+        return self.CALL_STEPS if self.record_every_s is None else self.RECORD_CALL_STEPS
+
+    short_intervals = max_intervals
+
+    @property
+    def distance_m(self) -> float:
+        return float(self.dist[0])
+
+    def set_stop_rule(self, target_m: float | None, from_s: float = 0.0) -> None:
+        self.dist[:] = [0.0, -1.0 if target_m is None else target_m, from_s]
+
+    def _record(self, t):
+        if self.record_every_s is not None:
+            cells = self.world.storage  # the engine writes the active cells' state into the storage
+            ch = self.engine.state.ch_cell
+            act = ch[ch >= 0]
+            self.snapshots.append((t, self.engine.state.wv[:3].copy(), act.copy(), cells.z[act].copy()))
+
+    def start(self, x_m, y_m, yaw_rad, u0, state=None):
+        x = self.engine.begin_pass(float(x_m), float(y_m), float(yaw_rad))
+        for key in self.engine.state.stats:  # the statistics of the time loop (the settling excluded)
+            self.engine.state.stats[key] = 0
+        if state is not None:
+            raise SimulationError("EnginePlant.start: the terrain engine starts from rest only (no state=)")
+        self.dist[0] = 0.0
+        self.finished = False
+        self.snapshots = []
+        self._record(0.0)
+        return x, self.engine.outputs_now(np.asarray(u0, dtype=float))
+
+    def synchronize(self, intervals):
+        if self.finished:
+            raise SimulationError("EnginePlant: start the plant (set the vehicle down) before stepping it")
+        self.t0 = intervals[0][0]
+        self.T = np.array([t0 + h for t0, h, _ in intervals], dtype=float)
+        self.U = np.array([u for _, _, u in intervals], dtype=float)
+
+    def advance(self):
+        self.stopped, self.end_times, X, self.Y = self.engine.advance(self.t0, self.T, self.U, self.dist)
+        self._record(float(self.end_times[-1]) if len(self.end_times) else self.t0)
+        return X
+
+    def retry(self, k, length_s):
+        raise SimulationError("EnginePlant applies the stop rule itself; retry is not used")
+
+    def commit(self, k):
+        return self.Y[:k]
+
+    def finish(self):
+        if self.finished:
+            return
+        if self._unloader is None:
+            self._unloader = unloader(self.world)
+        self.world.end_pass(self.engine.sync_world(), self._unloader)
+        self.finished = True
+
+    def figures(self):
+        return self.world.figures()
+
+    def stats(self):
+        return {"engine_compiled": self.engine.compiled, **self.engine.state.stats}
+
+
 def advance_plant(plant, u, length_s: float, substep_s: float | None = None,
                   t0_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Advance a started plant from time ``t0_s`` by ``length_s`` with input ``u`` (in equal
@@ -342,9 +433,13 @@ def advance_plant(plant, u, length_s: float, substep_s: float | None = None,
     return x, y
 
 
-def make_grid_plant(world: World, settings: IntegratorSettings) -> GridPlant:
-    """The grid plant of a world with the integrator of ``settings`` (from the registry)."""
+def make_grid_plant(world: World, settings: IntegratorSettings):
+    """The grid plant of a world with the integrator of ``settings`` (from the registry): an
+    :class:`EnginePlant` for an engine, else a :class:`GridPlant` with its stepper."""
     spec = registry.get(settings.method)
+    if spec.grid_engine is not None:
+        spec.check("grid", settings)
+        return EnginePlant(world, spec.grid_engine(world, settings))
     return GridPlant(world, spec.stepper("grid", world.model, settings, world.n_channels))
 
 

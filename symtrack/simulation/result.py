@@ -30,6 +30,7 @@ class RunResult:
     stopped_by: str
     stats: dict = field(default_factory=dict)
     terrain: dict | None = None  # grid terrain figures of the run (World.figures)
+    cpu_time_s: float = float("nan")  # CPU time of the time loop (process time: less sensitive to load)
 
     def state(self, name):
         return self.X[:, self.state_names.index(name)]

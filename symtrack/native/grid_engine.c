@@ -1,0 +1,529 @@
+/* The terrain engine's hot path (symtrack/terrain/engine.py, docs/terrain.md "The terrain engine").
+ *
+ * Per macro step: the footprint, release and sector assignment of the world manager
+ * (symtrack/terrain/world.py, same rules and the same floating-point expressions), the vehicle's
+ * step (generated from CasADi: eng_vehicle_step), each active cell's step (two-stage SDIRK with a
+ * safeguarded scalar Newton per stage on the generated law eng_cell_law), INFO_OUT (history of
+ * the active channels only), the channel sums, the outputs (eng_outputs) and the coverage check.
+ * engine.py mirrors every line of it in Python (the interpreted path, tested against this file).
+ *
+ * Compiled with the CasADi-generated C of the eng_* Functions included (engine_gen.inc).
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+/* fmax / fmin as inline comparisons with C99's NaN rule (a non-NaN argument wins): without
+   -ffinite-math-only gcc calls libm's through the PLT, 3 to 5 times per law evaluation */
+static inline double eng_fmax_(double x, double y) { return x > y ? x : (y == y ? y : x); }
+static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y ? y : x); }
+#define fmax(x, y) eng_fmax_(x, y)
+#define fmin(x, y) eng_fmin_(x, y)
+
+/* the generated Functions in this translation unit, internal: the compiler inlines the small ones */
+#define CASADI_SYMBOL_EXPORT static
+#include "engine_gen.inc"
+
+#define EXPORT __attribute__((visibility("default")))
+#define NV 12
+#define NW 14
+#define NA 8
+#define NS 10
+#define NGEO 7
+
+/* error codes (engine.py turns them into SimulationError messages) */
+#define ERR_FIELD 1       /* the footprint leaves the field: err_x = (cx, cy) */
+#define ERR_COLLISION 2   /* err_a, err_b: the two cells; err_ch: the channel */
+#define ERR_UNCOVERED 3   /* err_a: a loaded cell without a channel; err_b: how many */
+#define ERR_NONFINITE 4   /* the vehicle step returned a non-finite state */
+#define ERR_NEWTON 5      /* a cell's stage equation did not converge; err_a: the cell */
+
+typedef struct {
+  /* grid */
+  long long nx, ny, M, n_ch;
+  double x0, y0, dx;
+  /* storage, flat i * ny + j */
+  double *z, *zdot, *zmax, *pmax;
+  signed char *phase;
+  unsigned char *touched;
+  /* channels */
+  long long *ch_cell, *ch_foot, *ch_new_stamp, *ch_new_cell;
+  double *ch_z, *ch_v, *ch_zmax, *ch_pmax, *ch_p, *ch_cx, *ch_cy, *ch_g; /* ch_g: NGEO per channel */
+  double *ch_dp, *ch_pw; /* dp/dz at the channel's state; its compaction power over the last step (2) */
+  double *ch_vr;         /* dz/dt at the step end from the quadratic through the last substep's stages */
+  unsigned char *ch_new; /* 1: assigned at this step's start (its first geometry is evaluated here) */
+  long long *act, *new_list;
+  long long n_act, n_new, peak_active, stamp;
+  /* constants */
+  double *pv;     /* parameters of the vehicle Functions; the last NS entries are the channel sums */
+  double *geo;    /* 6: l, b, B, e, dx, end strip */
+  double *wv;     /* NW: the vehicle's states and accelerations */
+  double *a;      /* NA: pose and pressure lines at wv */
+  double *work;   /* the generated Functions' work vector (the largest sz_w) */
+  double *agrid, *plbuf, *frbuf; /* scratch: NA (n + 1), n + 1, 2 (n + 1) for n = the largest substep count */
+  long long n_pv, ny_out, cell_substeps, entry_substeps, power_mode; /* 0: step mean, 1: instantaneous */
+  double pad, release_rate, areal_mass, damping, gamma, entry_fraction;
+  /* error and statistics */
+  long long err_code, err_a, err_b, err_ch;
+  double err_x[2];
+  long long n_newton, n_cell_stages, n_vehicle_steps;
+  /* wall time (ns) of the parts: world manager (footprint, release, assignment, INFO_IN; coverage
+     check), vehicle step, cells (geometry, integration, INFO_OUT), sums and outputs */
+  long long ns_manager, ns_vehicle, ns_cells, ns_outputs;
+} eng_t;
+
+static long long now_ns(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+/* ---- calls of the generated Functions (no integer work, no extra arguments: checked in engine.py) */
+static double *WORK;
+
+static void law(double z, double zmax, double pmax, double *p, double *dp) {
+  const double *arg[3] = {&z, &zmax, &pmax};
+  double *res[2] = {p, dp};
+  eng_cell_law(arg, res, 0, WORK, 0);
+}
+
+static void cell_geo(const double *c, const double *a, const double *geo, double *g) {
+  const double *arg[3] = {c, a, geo};
+  double *res[1] = {g};
+  eng_cell_geo(arg, res, 0, WORK, 0);
+}
+
+/* ---- geometry: the tracks' rectangles (world.World._rectangles / cells_under) ------------------- */
+typedef void (*cell_fn)(eng_t *E, long long cell, void *ctx);
+
+static int scan(eng_t *E, double X, double Y, double psi, double pad, int check_field, cell_fn fn, void *ctx) {
+  const double *geo = E->geo;
+  double l = geo[0], b = geo[1], B = geo[2], e = geo[3];
+  double c = cos(psi), s = sin(psi);
+  double dx = E->dx, x0 = E->x0, y0 = E->y0;
+  double x1 = x0 + E->nx * dx, y1 = y0 + E->ny * dx;
+  for (int side = 0; side < 2; ++side) {
+    double sg = side == 0 ? 1.0 : -1.0;
+    double bx = -e, by = sg * B / 2;
+    double cx = X + c * bx - s * by, cy = Y + s * bx + c * by;
+    double hl = l / 2 + pad, hw = b / 2 + pad;
+    double ex = fabs(c) * hl + fabs(s) * hw;
+    double ey = fabs(s) * hl + fabs(c) * hw;
+    if (check_field) {
+      double exu = ex - pad * (fabs(c) + fabs(s)), eyu = ey - pad * (fabs(c) + fabs(s));
+      if (cx - exu < x0 || cx + exu > x1 || cy - eyu < y0 || cy + eyu > y1) {
+        E->err_code = ERR_FIELD;
+        E->err_x[0] = cx;
+        E->err_x[1] = cy;
+        return 1;
+      }
+    }
+    long long i0 = (long long)floor((cx - ex - x0) / dx), i1 = (long long)ceil((cx + ex - x0) / dx);
+    long long j0 = (long long)floor((cy - ey - y0) / dx), j1 = (long long)ceil((cy + ey - y0) / dx);
+    if (i0 < 0) i0 = 0;
+    if (j0 < 0) j0 = 0;
+    if (i1 > E->nx - 1) i1 = E->nx - 1;
+    if (j1 > E->ny - 1) j1 = E->ny - 1;
+    for (long long i = i0; i <= i1; ++i) {
+      double px = x0 + ((double)i + 0.5) * dx;
+      for (long long j = j0; j <= j1; ++j) {
+        double py = y0 + ((double)j + 0.5) * dx;
+        double along = (px - cx) * c + (py - cy) * s;
+        double across = -(px - cx) * s + (py - cy) * c;
+        if (fabs(along) <= hl && fabs(across) <= hw) fn(E, i * E->ny + j, ctx);
+      }
+    }
+  }
+  return 0;
+}
+
+static long long channel_of(const eng_t *E, long long cell) {
+  long long i = cell / E->ny, j = cell % E->ny;
+  return (i % E->M) * E->M + (j % E->M);
+}
+
+static void mark_footprint(eng_t *E, long long cell, void *ctx) {
+  (void)ctx;
+  if (E->err_code) return;
+  long long ch = channel_of(E, cell);
+  if (E->ch_cell[ch] == cell) {
+    E->ch_foot[ch] = E->stamp;
+  } else if (E->ch_new_stamp[ch] == E->stamp) {
+    if (E->ch_new_cell[ch] != cell) {
+      E->err_code = ERR_COLLISION;
+      E->err_a = E->ch_new_cell[ch];
+      E->err_b = cell;
+      E->err_ch = ch;
+    }
+  } else {
+    E->ch_new_stamp[ch] = E->stamp;
+    E->ch_new_cell[ch] = cell;
+    E->new_list[E->n_new++] = cell;
+  }
+}
+
+/* Release and assignment for a step of length h from the current state (world.World.before_step). */
+EXPORT int eng_assign(eng_t *E, double h) {
+  WORK = E->work;
+  const double *w = E->wv;
+  double X = w[0], Y = w[1], psi = w[2], u = w[3], v = w[4], r = w[5];
+  double c = cos(psi), s = sin(psi);
+  double X1 = X + h * (u * c - v * s), Y1 = Y + h * (u * s + v * c), psi1 = psi + h * r;
+  E->stamp += 1;
+  E->n_new = 0;
+  if (scan(E, X, Y, psi, E->pad, 1, mark_footprint, 0)) return E->err_code;
+  if (scan(E, X1, Y1, psi1, E->pad, 1, mark_footprint, 0)) return E->err_code;
+  if (E->err_code) return E->err_code;
+  /* release (the order of the active list is kept) */
+  long long k = 0;
+  for (long long q = 0; q < E->n_act; ++q) {
+    long long ch = E->act[q];
+    if (E->ch_foot[ch] != E->stamp && E->ch_p[ch] <= 0.0 && fabs(E->ch_v[ch]) <= E->release_rate) {
+      E->ch_cell[ch] = -1;
+      E->ch_z[ch] = 0.0;
+      E->ch_v[ch] = 0.0;
+      E->ch_p[ch] = 0.0;
+    } else {
+      E->act[k++] = ch;
+    }
+  }
+  E->n_act = k;
+  /* assignment, INFO_IN */
+  for (long long q = 0; q < E->n_new; ++q) {
+    long long cell = E->new_list[q], ch = channel_of(E, cell);
+    if (E->ch_cell[ch] >= 0) {
+      E->err_code = ERR_COLLISION;
+      E->err_a = cell;
+      E->err_b = E->ch_cell[ch];
+      E->err_ch = ch;
+      return E->err_code;
+    }
+  }
+  for (long long q = 0; q < E->n_new; ++q) {
+    long long cell = E->new_list[q], ch = channel_of(E, cell);
+    long long i = cell / E->ny, j = cell % E->ny;
+    E->ch_cell[ch] = cell;
+    E->ch_cx[ch] = E->x0 + ((double)i + 0.5) * E->dx;
+    E->ch_cy[ch] = E->y0 + ((double)j + 0.5) * E->dx;
+    E->ch_z[ch] = E->z[cell];
+    E->ch_v[ch] = E->zdot[cell];
+    E->ch_zmax[ch] = E->zmax[cell];
+    E->ch_pmax[ch] = E->pmax[cell];
+    E->ch_p[ch] = 0.0;
+    E->ch_pw[2 * ch] = 0.0;
+    E->ch_pw[2 * ch + 1] = 0.0;
+    E->ch_vr[ch] = E->ch_v[ch];
+    law(E->ch_z[ch], E->ch_zmax[ch], E->ch_pmax[ch], &E->ch_p[ch], &E->ch_dp[ch]);
+    E->touched[cell] = 1;
+    double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+    cell_geo(cc, E->a, E->geo, E->ch_g + NGEO * ch);
+    E->act[E->n_act++] = ch;
+  }
+  if (E->n_act > E->peak_active) E->peak_active = E->n_act;
+  return 0;
+}
+
+/* ---- one cell ---------------------------------------------------------------------------------- */
+/* The implicit stage Z = zeta + gh V, V = omega + gh (pl - p(Z) - c V) / m as one monotone scalar
+ * equation F(Z) = a (Z - zeta) + g p(Z) - omega - g pl = 0 (a = (1 + gh c / m) / gh, g = gh / m;
+ * F' >= a > 0 as p is nondecreasing). The root lies in [hi - g p(hi) / a, hi] with
+ * hi = zeta + (omega + g pl) / a (p >= 0). Newton from the root of F linearised at zs (the last
+ * solution of this cell: its slope there is known), each iterate kept in the bracket (bisection
+ * otherwise; the lower end is evaluated only when a step needs it); converged when the Newton
+ * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
+ * inside the bracket is below 1e-6 |Z| (its result is then within about 1e-12 |Z| of the root, and
+ * p is extended linearly to it). Z, p(Z), p'(Z) are returned. */
+static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double zs,
+                 double ps, double dps, double *Z, double *pz, double *dpz) {
+  double m = E->areal_mass, cd = E->damping;
+  double a = (1.0 + gh * cd / m) / gh, g = gh / m;
+  double hi = zeta + (omega + g * pl) / a, lo = -INFINITY;
+  double x = (a * zeta + omega + g * (pl - ps + dps * zs)) / (a + g * dps);
+  if (!(x < hi)) x = hi;
+  double p, dp;
+  for (int it = 0; it < 100; ++it) {
+    E->n_newton += 1;
+    law(x, zmax, pmax, &p, &dp);
+    double F = a * (x - zeta) + g * p - omega - g * pl;
+    if (F > 0.0) hi = x;
+    else if (F < 0.0) lo = x;
+    else break;
+    double xn = x - F / (a + g * dp);
+    if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) break; /* x solves the stage to that tolerance */
+    if (fabs(xn - x) <= 1e-6 * fabs(xn) && xn < hi && xn > lo) {
+      /* quadratic convergence: xn is within about (1e-6)^2 |Z| of the root; take it, with the law
+         extended linearly from x (an error of the same order; p = 0 stays exactly 0 on the clipped
+         branch, where dp = 0) */
+      p = fmax(0.0, p + dp * (xn - x));
+      x = xn;
+      break;
+    }
+    if (!(xn < hi && xn > lo)) {
+      if (lo == -INFINITY) {
+        double ph, dph;
+        law(hi, zmax, pmax, &ph, &dph);
+        lo = hi - g * ph / a;
+      }
+      if (!(xn < hi && xn > lo)) xn = 0.5 * (lo + hi);
+    }
+    x = xn;
+  }
+  {
+    double xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp);
+    if (!(fabs(xn - x) <= 1e-6 * fabs(xn) + 1e-18)) return 1;
+  }
+  *Z = x;
+  *pz = p;
+  *dpz = dp;
+  return 0;
+}
+
+/* (z, v) over one macro step of length h in n equal substeps (Alexander's two-stage SDIRK,
+ * L-stable, order 2, stiffly accurate), the load linear in time within each substep between its
+ * values pl[k], pl[k + 1] at the substep ends. p, dp: the law at z on entry and on exit.
+ * work[t] += the compaction work per unit area under track t over the step: the sum over the
+ * stage segments of frac_t(mid) (p_a + p_b) / 2 max(z_b - z_a, 0), frac_t linear within each
+ * substep between f[2k + t] and f[2k + 2 + t] (the energy-consistent compaction power is work / h). */
+static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, const double *pl, const double *f,
+                     double zmax, double pmax, double h, long long n, double *work, double *vr) {
+  double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
+  double z0 = *z, v0 = *v, pz = *p, dpz = *dp;
+  for (long long k = 0; k < n; ++k) {
+    double Z1, Z2, p0 = pz, p1;
+    double plA = pl[k], plB = pl[k + 1];
+    if (stage(E, z0, v0, plA + (plB - plA) * gam, gh, zmax, pmax, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
+    p1 = pz;
+    double V1 = (Z1 - z0) / gh;
+    double A1 = (V1 - v0) / gh;
+    double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
+    if (stage(E, zeta, omega, plB, gh, zmax, pmax, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
+    double m1 = 0.5 * gam, m2 = 0.5 * (gam + 1.0);
+    double w1 = 0.5 * (p0 + p1) * fmax(Z1 - z0, 0.0), w2 = 0.5 * (p1 + pz) * fmax(Z2 - Z1, 0.0);
+    for (int t = 0; t < 2; ++t) {
+      double fa = f[2 * k + t], fb = f[2 * k + 2 + t];
+      work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2;
+    }
+    v0 = (Z2 - zeta) / gh;
+    /* the rate at the substep end from the quadratic through (0, z0), (gamma, Z1), (1, Z2) */
+    *vr = (z0 * (1.0 - gam) / gam + Z1 / (gam * (gam - 1.0)) + Z2 * (2.0 - gam) / (1.0 - gam)) / hs;
+    z0 = Z2;
+    E->n_cell_stages += 2;
+  }
+  *z = z0;
+  *v = v0;
+  *p = pz;
+  *dp = dpz;
+  return 0;
+}
+
+static void check_cover(eng_t *E, long long cell, void *ctx) {
+  long long *missing = (long long *)ctx;
+  long long ch = channel_of(E, cell);
+  if (E->ch_cell[ch] != cell) {
+    if (missing[0] == 0) missing[1] = cell;
+    missing[0] += 1;
+  }
+}
+
+/* The channel sums (the vehicle's view of the terrain) into pv's last NS: the compaction power of
+ * each track over the last step (energy-consistent), the end-strip sinkages at the current state. */
+static void sums(eng_t *E) {
+  double S[NS];
+  for (int i = 0; i < NS; ++i) S[i] = 0.0;
+  for (long long q = 0; q < E->n_act; ++q) {
+    long long ch = E->act[q];
+    const double *g = E->ch_g + NGEO * ch;
+    double zc = E->ch_z[ch];
+    if (E->power_mode == 0) {
+      S[0] += E->ch_pw[2 * ch];
+      S[1] += E->ch_pw[2 * ch + 1];
+    } else {
+      double pw = E->ch_p[ch] * fmax(E->ch_vr[ch], 0.0);
+      S[0] += g[1] * pw;
+      S[1] += g[2] * pw;
+    }
+    for (int r = 0; r < 4; ++r) {
+      S[2 + r] += g[3 + r] * zc;
+      S[6 + r] += g[3 + r];
+    }
+  }
+  memcpy(E->pv + E->n_pv - NS, S, sizeof S);
+}
+
+EXPORT void eng_sums(eng_t *E) {
+  WORK = E->work;
+  sums(E);
+}
+
+static void vehicle_step(eng_t *E, const double *u, double h, double *w1, double *a1) {
+  double hh = h;
+  const double *arg[4] = {E->wv, u, E->pv, &hh};
+  double *res[2] = {w1, a1};
+  eng_vehicle_step(arg, res, 0, WORK, 0);
+  E->n_vehicle_steps += 1;
+}
+
+/* n macro steps: step k ends at T[k] (the step starts at t0, then at T[k-1]) with the inputs
+ * U[2k..2k+1]. dist[0]: distance covered so far, dist[1]: the stop distance (< 0: none), dist[2]:
+ * the time from which distance counts. Writes T_out (the step's end time, shortened on the
+ * distance stop), X (NV per step), Y (ny_out per step). Returns 0, or 1 when the distance stop
+ * ended the run (at step *n_done - 1), or -err_code. */
+EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const double *U, double *dist,
+                   int check_covered, double *T_out, double *X, double *Y, long long *n_done) {
+  double w1[NW], a1[NA];
+  double t = t0;
+  WORK = E->work;
+  *n_done = 0;
+  for (long long k = 0; k < n; ++k) {
+    double t_next = T[k], h = t_next - t;
+    const double *u = U + 2 * k;
+    int done = 0;
+    long long c0 = now_ns();
+    if (eng_assign(E, h)) return -(int)E->err_code;
+    WORK = E->work;
+    long long c1 = now_ns();
+    E->ns_manager += c1 - c0;
+    vehicle_step(E, u, h, w1, a1);
+    if (dist[1] >= 0.0 && t_next > dist[2] + 1e-12) {
+      double d_step = hypot(w1[0] - E->wv[0], w1[1] - E->wv[1]);
+      if (dist[0] + d_step >= dist[1]) {
+        for (int it = 0; it < 3; ++it) { /* three secant refinements (runner.run) */
+          if (d_step <= 0) break;
+          h *= (dist[1] - dist[0]) / d_step;
+          vehicle_step(E, u, h, w1, a1);
+          d_step = hypot(w1[0] - E->wv[0], w1[1] - E->wv[1]);
+        }
+        t_next = t + h;
+        done = 1;
+      }
+      dist[0] += d_step;
+    }
+    for (int i = 0; i < NW; ++i) {
+      if (!isfinite(w1[i])) {
+        E->err_code = ERR_NONFINITE;
+        return -ERR_NONFINITE;
+      }
+    }
+    long long c2 = now_ns();
+    E->ns_vehicle += c2 - c1;
+    /* the pose and pressure lines at the ends of the transient windows' substeps (shared by all cells) */
+    long long nw = E->entry_substeps > E->cell_substeps ? E->entry_substeps : E->cell_substeps;
+    double *agrid = E->agrid;
+    memcpy(agrid, E->a, NA * sizeof(double));
+    for (long long j = 1; j < nw; ++j) {
+      double th = (double)j / (double)nw, psi = E->wv[2] + (w1[2] - E->wv[2]) * th;
+      double *aj = agrid + NA * j;
+      aj[0] = E->a[0] + (a1[0] - E->a[0]) * th;
+      aj[1] = E->a[1] + (a1[1] - E->a[1]) * th;
+      aj[2] = cos(psi);
+      aj[3] = sin(psi);
+      for (int i = 4; i < NA; ++i) aj[i] = E->a[i] + (a1[i] - E->a[i]) * th;
+    }
+    memcpy(agrid + NA * nw, a1, NA * sizeof(double));
+    /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end */
+    for (long long q = 0; q < E->n_act; ++q) {
+      long long ch = E->act[q];
+      double *g = E->ch_g + NGEO * ch;
+      double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+      cell_geo(cc, a1, E->geo, gB);
+      double plA = g[0], plB = gB[0];
+      double *pw = E->ch_pw + 2 * ch;
+      pw[0] = pw[1] = 0.0;
+      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && plA == 0.0 && plB == 0.0) {
+        /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
+        memcpy(g, gB, sizeof gB);
+        E->ch_p[ch] = 0.0;
+        E->ch_vr[ch] = 0.0;
+        continue;
+      }
+      long long ns = E->cell_substeps;
+      double *pl = E->plbuf, *fr = E->frbuf;
+      int window = 0;
+      if (E->entry_substeps > ns) {
+        /* the transient windows: entry (soil reaction below entry_fraction of the load) and exit
+           (the cell leaving a track's contact, its load falling, on its unloading line): substeps, the geometry
+           evaluated at each substep end (the overlap's kinks resolved to a substep) */
+        double plm = fmax(plA, plB);
+        if (E->ch_p[ch] < E->entry_fraction * plm
+            || (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch])) {
+          ns = nw;
+          window = 1;
+        }
+      }
+      pl[0] = plA;
+      fr[0] = g[1];
+      fr[1] = g[2];
+      for (long long j = 1; j < ns; ++j) {
+        if (window) {
+          double gj[NGEO];
+          cell_geo(cc, agrid + NA * j, E->geo, gj);
+          pl[j] = gj[0];
+          fr[2 * j] = gj[1];
+          fr[2 * j + 1] = gj[2];
+        } else {
+          double th = (double)j / (double)ns;
+          pl[j] = plA + (plB - plA) * th;
+          fr[2 * j] = g[1] + (gB[1] - g[1]) * th;
+          fr[2 * j + 1] = g[2] + (gB[2] - g[2]) * th;
+        }
+      }
+      pl[ns] = plB;
+      fr[2 * ns] = gB[1];
+      fr[2 * ns + 1] = gB[2];
+      double work[2] = {0.0, 0.0};
+      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, E->ch_zmax[ch],
+                    E->ch_pmax[ch], h, ns, work, E->ch_vr + ch)) {
+        E->err_code = ERR_NEWTON;
+        E->err_a = E->ch_cell[ch];
+        return -ERR_NEWTON;
+      }
+      if (h > 0.0) {
+        pw[0] = work[0] / h;
+        pw[1] = work[1] / h;
+      }
+      memcpy(g, gB, sizeof gB);
+      /* INFO_OUT: the history (channels.build_cell_functions' "history") and the storage */
+      double zc = E->ch_z[ch], zm = E->ch_zmax[ch], pm = E->ch_pmax[ch], p = E->ch_p[ch];
+      int loading = zc >= zm;
+      double zm1 = fmax(zm, zc), pm1 = loading ? fmax(pm, p) : pm;
+      long long cell = E->ch_cell[ch];
+      E->z[cell] = zc;
+      E->zdot[cell] = E->ch_v[ch];
+      E->zmax[cell] = zm1;
+      E->pmax[cell] = pm1;
+      E->phase[cell] = zm1 > 0 ? (loading ? 1 : 2) : 0;
+      E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as World.after_step's p_soil */
+      E->ch_pmax[ch] = pm1;
+    }
+    long long c3 = now_ns();
+    E->ns_cells += c3 - c2;
+    memcpy(E->wv, w1, sizeof w1);
+    memcpy(E->a, a1, sizeof a1);
+    sums(E);
+    t = t_next;
+    T_out[k] = t;
+    memcpy(X + NV * k, w1, NV * sizeof(double));
+    {
+      const double *arg[3] = {w1, u, E->pv};
+      double *res[1] = {Y + E->ny_out * k};
+      eng_outputs(arg, res, 0, WORK, 0);
+    }
+    *n_done = k + 1;
+    long long c4 = now_ns();
+    E->ns_outputs += c4 - c3;
+    if (check_covered) {
+      long long missing[2] = {0, -1};
+      scan(E, w1[0], w1[1], w1[2], 0.5 * E->dx, 0, check_cover, missing);
+      if (missing[0]) {
+        E->err_code = ERR_UNCOVERED;
+        E->err_a = missing[1];
+        E->err_b = missing[0];
+        return -ERR_UNCOVERED;
+      }
+    }
+    E->ns_manager += now_ns() - c4;
+    if (done) return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,260 @@
+"""The CasADi side of the terrain engine (:mod:`symtrack.terrain.engine`): the equations the
+engine's hot path evaluates, as small SX Functions built from the project's symbolic model.
+
+The engine integrates the vehicle and the active cells *staggered* over each macro step
+(docs/terrain.md, "The terrain engine"): the vehicle first, with the terrain's channel sums
+held at their values at the step start, then every active cell on its own, with its load
+interpolated between the step's two poses. So the Functions are:
+
+- ``eng_vehicle_step(w[14], u[2], pv, h) -> (w1[14], a1[8])``: w = the 12 vehicle states and the
+  two body accelerations of the DAE form (the load-transfer loop as algebraic equations, as IDAS
+  sees it); the accelerations made consistent with the channel sums (two Newton steps), then
+  ``vehicle_substeps`` steps of the 8-stage, order-5, L-stable Rosenbrock method of CasADi's
+  ``rosenbrock`` plugin (the tableau of :mod:`symtrack.native.rosenbrock`) with the exact Jacobian, and
+  the pressure line ``a`` of both tracks at the end state. ``pv`` = vehicle and soil parameters,
+  the terrain's two globals (cell size, end strip) and the 10 channel sums S (:data:`SUM_NAMES`).
+- ``eng_vehicle_a(w[14], pv) -> a[8]``: a = (X, Y, cos psi, sin psi, alpha_L, beta_L, alpha_R,
+  beta_R) with each track's pressure p(s) = max(0, alpha + beta s) (the linear and both
+  triangular distributions of :class:`~symtrack.model.vehicle.PressureDistribution` are of
+  this form).
+- ``eng_outputs(x[12], u[2], pv) -> y``: the model's outputs (same names and order as the
+  channel model's) from the vehicle state and the channel sums.
+- ``eng_cell_geo(c[2], a[8], geo[6]) -> g[7]``: one cell's load p_load = sum_k frac_k
+  p_k(s_mid,k), its overlap fractions (left, right) and its four end-strip weights, from
+  :func:`symtrack.terrain.channels.build_cell_functions`'s geometry.
+- ``eng_cell_law(z, z_max, p_max) -> (p, dp/dz)``: the reaction pressure of
+  :func:`symtrack.model.cell.reaction_pressure` with the soil's law constants baked in, and its
+  exact derivative (the Newton iteration of each implicit stage). For n = 0.5 the regularised
+  Bekker term k z+ (z+ + d)^(n-1) is written k z+ / sqrt(z+ + d) (the same number; libm's pow is
+  about 20 x slower than sqrt).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+
+from ..model import SystemModel, cell
+from ..model.system import PARAM_NAMES
+from ..model.vehicle import ENDS, TRACKS, VEHICLE_STATES
+from ..terrain.channels import COMPACTION_SPEED_FLOOR_M_S, GLOBAL_FIELDS, NF, NG, build_cell_functions, soil_law_values
+from .rosenbrock import GAMMA as RB_GAMMA
+from .rosenbrock import N_STAGES as RB_STAGES
+from .rosenbrock import A as RB_A
+from .rosenbrock import C as RB_C
+from .rosenbrock import M as RB_M
+
+NV = len(VEHICLE_STATES)
+NA = 8
+NS = 10
+NGEO = 7
+NW = NV + 2  # the vehicle's states and its two algebraic accelerations
+
+
+def _sum_names():
+    names = [f"sum_power_{k}" for k in TRACKS]
+    names += [f"sum_wz_{end}_{k}" for k in TRACKS for end in ENDS]
+    names += [f"sum_w_{end}_{k}" for k in TRACKS for end in ENDS]
+    return tuple(names)
+
+
+SUM_NAMES = _sum_names()
+
+
+class SumsTerrain:
+    """The grid terrain seen from the vehicle: the channel sums S as parameters, no states."""
+
+    name = "channel_sums"
+
+    def __init__(self):
+        self.state_names = ()
+        self.param_names = GLOBAL_FIELDS + SUM_NAMES
+        self.dist_dae = None  # the pressure distributions of the DAE form (the first evaluation)
+
+    def _S(self, Q):
+        return {n: Q[NG + i] for i, n in enumerate(SUM_NAMES)}
+
+    def compaction(self, xv, xc, P, Q):
+        S = self._S(Q)
+        B = P["track_gauge_m"]
+        u, r = xv[3], xv[5]
+        v_track = {"left": u - r * B / 2, "right": u + r * B / 2}
+        area = Q[0] ** 2
+        return ca.vertcat(*(area * S[f"sum_power_{k}"] / ca.sqrt(v_track[k] ** 2 + COMPACTION_SPEED_FLOOR_M_S**2)
+                            for k in TRACKS))
+
+    def equations(self, xv, xc, dist, P, Q):
+        if self.dist_dae is None:
+            self.dist_dae = dist
+        S = self._S(Q)
+        signals = {}
+        for k in TRACKS:
+            for end in ENDS:
+                signals[f"sinkage_{end}_{k}_m"] = S[f"sum_wz_{end}_{k}"] / (S[f"sum_w_{end}_{k}"] + 1e-9)
+                signals[f"p_{end}_{k}_Pa"] = getattr(dist[k], end)
+        signals["compaction_power_W"] = Q[0] ** 2 * (S["sum_power_left"] + S["sum_power_right"])
+        return ca.SX(0, 1), signals
+
+
+def pressure_line(dist):
+    """(alpha, beta) with the track's pressure p(s) = max(0, alpha + beta s) on the contact."""
+    b, l, N = dist.b, dist.l, dist.N
+    a_lin, b_lin = dist.p_mean + dist.slope * l / 2, -dist.slope
+    Af = 2 * N / (b * dist.Lc_front)
+    Ar = 2 * N / (b * dist.Lc_rear)
+    a_f, b_f = Af, -Af / dist.Lc_front
+    a_r, b_r = Ar * (1 - l / dist.Lc_rear), Ar / dist.Lc_rear
+    alpha = ca.if_else(dist.e_r > l / 6, a_f, ca.if_else(dist.e_r < -l / 6, a_r, a_lin))
+    beta = ca.if_else(dist.e_r > l / 6, b_f, ca.if_else(dist.e_r < -l / 6, b_r, b_lin))
+    return alpha, beta
+
+
+def _lu_solve_factory(A):
+    """Doolittle LU of a small dense SX matrix without pivoting (I - gamma h J is close to the
+    identity at the vehicle's steps) and a solve that reuses it."""
+    n = A.shape[0]
+    L = [[None] * n for _ in range(n)]
+    U = [[A[i, j] for j in range(n)] for i in range(n)]
+    for k in range(n):
+        for i in range(k + 1, n):
+            f = U[i][k] / U[k][k]
+            L[i][k] = f
+            for j in range(k + 1, n):
+                U[i][j] = U[i][j] - f * U[k][j]
+
+    def solve(b):
+        y = [b[i] for i in range(n)]
+        for i in range(n):
+            for k in range(i):
+                y[i] = y[i] - L[i][k] * y[k]
+        x = [None] * n
+        for i in reversed(range(n)):
+            s = y[i]
+            for j in range(i + 1, n):
+                s = s - U[i][j] * x[j]
+            x[i] = s / U[i][i]
+        return ca.vertcat(*x)
+
+    return solve
+
+
+def reaction_pressure_fast(z, z_max, p_max, keq, n, elastic_stiffness, kappa, reg_m):
+    """:func:`symtrack.model.cell.reaction_pressure` with numeric law constants; for n = 0.5 the
+    Bekker term through sqrt (the same number)."""
+    if n == 0.5:
+        zp = ca.fmax(z, 0)
+        pb = keq * zp / ca.sqrt(zp + reg_m)
+    else:
+        pb = cell.bekker_pressure(z, keq, n, reg_m)
+    k_u = cell.unloading_slope(z_max, p_max, elastic_stiffness, kappa, reg_m)
+    line = p_max - k_u * (z_max - z)
+    return ca.if_else(z >= z_max, pb, ca.fmax(0, ca.fmin(pb, line)))
+
+
+@dataclasses.dataclass(frozen=True)
+class EngineFunctions:
+    vehicle_step: ca.Function
+    vehicle_a: ca.Function
+    outputs: ca.Function
+    cell_geo: ca.Function
+    cell_law: ca.Function
+    output_names: tuple
+    n_pv: int
+
+    def all(self):
+        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, self.cell_law)
+
+
+def build_engine_functions(opts, params: dict, vehicle_substeps: int) -> EngineFunctions:
+    """The Functions of the module doc for model options ``opts`` and the soil in ``params``."""
+    terr = SumsTerrain()
+    veh = SystemModel(opts, terr)
+    x, zacc, u, pv = veh.x, veh.z, veh.u, veh.p
+    dist = terr.dist_dae
+    D = []
+    for k in TRACKS:
+        D += list(pressure_line(dist[k]))
+    w = ca.vertcat(x, zacc)
+    a = ca.vertcat(x[0], x[1], ca.cos(x[2]), ca.sin(x[2]), *D)
+    fo = {"cse": True}
+    vehicle_a = ca.Function("eng_vehicle_a", [w, pv], [a], ["w", "pv"], ["a"], fo)
+    outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo)
+
+    # The 8-stage, order-5, L-stable, stiffly accurate Rosenbrock method of CasADi 3.8's plugin
+    # (codegen/rosenbrock.py's tableau) on the time-scaled DAE F = (h f, alg), unit step,
+    # mass M = diag(1 (12), 0 (2)): W U_i = F(w0 + sum a_ij U_j) + M sum c_ij U_j, W = M / gamma - dF/dw,
+    # w1 = w0 + sum m_i U_i. (ROS2, order 2, was measured first: docs/terrain.md.)
+    h = ca.SX.sym("h")
+    hs = h / vehicle_substeps
+    hsym = ca.SX.sym("hs")
+    Fh = ca.vertcat(hsym * veh.ode_dae_expr, veh.alg_expr)
+    fF = ca.Function("F", [w, u, pv, hsym], [Fh])
+    fJ = ca.Function("J", [w, u, pv, hsym], [ca.jacobian(Fh, w)])
+    mass = ca.DM.zeros(NW)
+    mass[:NV] = 1.0
+    g = veh.alg_expr
+    Jg = ca.jacobian(g, zacc)
+    # the accelerations first made consistent with the (new) channel sums: two Newton steps
+    ws = w
+    for _ in range(2):
+        gz = ca.substitute(g, w, ws)
+        ws = ca.vertcat(ws[:NV], ws[NV:] - ca.solve(ca.substitute(Jg, w, ws), gz))
+    for _ in range(vehicle_substeps):
+        Wm = ca.diag(mass) / RB_GAMMA - fJ(ws, u, pv, hs)
+        solve = _lu_solve_factory(Wm)
+        Us = []
+        for i in range(RB_STAGES):
+            wi = ws
+            for j, aij in enumerate(RB_A[i]):
+                if aij != 0.0:
+                    wi = wi + aij * Us[j]
+            r = fF(wi, u, pv, hs)
+            for j, cij in enumerate(RB_C[i]):
+                if cij != 0.0:
+                    r = r + cij * (mass * Us[j])
+            Us.append(solve(r))
+        for mi, Ui in zip(RB_M, Us, strict=True):
+            ws = ws + mi * Ui
+    vehicle_step = ca.Function("eng_vehicle_step", [w, u, pv, h], [ws, vehicle_a(ws, pv)],
+                               ["w", "u", "pv", "h"], ["w1", "a1"], fo)
+
+    # one cell: load and weights
+    fn = build_cell_functions(opts)
+    c = ca.SX.sym("c", 2)
+    av = ca.SX.sym("a", NA)
+    geo = ca.SX.sym("geo", 6)
+    ddx, ddy = c[0] - av[0], c[1] - av[1]
+    qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, 0, 0, 1)
+    g = fn["geometry"](qb, ca.DM.zeros(3), geo)
+    p_load = 0
+    for i in range(2):
+        p_load = p_load + g[i] * ca.fmax(0, av[4 + 2 * i] + av[5 + 2 * i] * g[2 + i])
+    cell_geo = ca.Function("eng_cell_geo", [c, av, geo], [ca.vertcat(p_load, g[0], g[1], g[4], g[5], g[6], g[7])],
+                           ["c", "a", "geo"], ["g"], fo)
+
+    keq, n, ke, kappa = soil_law_values(params)
+    z, zmax, pmax = ca.SX.sym("z"), ca.SX.sym("z_max"), ca.SX.sym("p_max")
+    p = reaction_pressure_fast(z, zmax, pmax, keq, n, ke, kappa, opts.bekker_regularisation_m)
+    cell_law = ca.Function("eng_cell_law", [z, zmax, pmax], [p, ca.jacobian(p, z)], ["z", "z_max", "p_max"],
+                           ["p", "dp_dz"], fo)
+    return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, cell_law, veh.output_names,
+                           len(PARAM_NAMES) + NG + NS)
+
+
+def pv_base(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
+    """The first entries of pv (vehicle and soil parameters, the terrain's globals); the 10 sums follow."""
+    return [float(params[k]) for k in PARAM_NAMES] + [float(cell_m), float(end_strip_m)]
+
+
+def geo_vector(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
+    return [float(params["contact_length_m"]), float(params["track_width_m"]), float(params["track_gauge_m"]),
+            float(params["cg_ahead_of_contact_centre_m"]), float(cell_m), float(end_strip_m)]
+
+
+def cell_constants(params: dict) -> tuple[float, float]:
+    """(areal mass, areal damping) of the cells."""
+    return float(params["cell_areal_mass_kg_per_m2"]), float(params["cell_damping_Pa_s_per_m"])
+
+
+__all__ = ["EngineFunctions", "build_engine_functions", "SUM_NAMES", "NA", "NS", "NGEO", "NF"]
