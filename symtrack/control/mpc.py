@@ -67,10 +67,12 @@ from ..errors import ParameterError
 from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from .linearize import scale_by_name
+from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 
 log = logging.getLogger("symtrack.control.mpc")
 
-SOLVERS = ("ipopt", "fatrop")
+SOLVERS = ("ipopt", "fatrop")  # the NLP solvers (also the fallbacks)
+SOLVER_CHOICES = SOLVERS + ("rti",)  # rti: real-time iteration (symtrack.control.rti)
 PREDICTIONS = ("vehicle", "full")
 
 # Typical magnitudes (scaling of the NLP variables), by state name prefix.
@@ -115,6 +117,8 @@ class MPCSettings:
     prediction_lateral_creep_speed_m_s: float | None = None
     fallback_solver: str | None = "auto"
     tol: float = 1e-5
+    rti_qp_solver: str = "qrqp"
+    rti_max_defect: float = 0.03
 
     def __post_init__(self):
         def rng(name, lo, hi, integer=False, lo_open=False):
@@ -139,10 +143,13 @@ class MPCSettings:
             rng("terminal_lateral_factor", 0.0, 1e6)
         rng("max_iter", 1, 10000, integer=True)
         rng("tol", 0.0, 1.0, lo_open=True)
+        rng("rti_max_defect", 0.0, 1e6, lo_open=True)
         if self.prediction_lateral_creep_speed_m_s is not None:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
-        if self.solver not in SOLVERS:
-            raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVERS)}")
+        if self.solver not in SOLVER_CHOICES:
+            raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVER_CHOICES)}")
+        if self.rti_qp_solver not in QP_SOLVERS:
+            raise ParameterError(f"mpc.rti_qp_solver = {self.rti_qp_solver!r} is not one of {', '.join(QP_SOLVERS)}")
         if self.fallback_solver is not None and self.fallback_solver not in SOLVERS + ("auto", "none"):
             raise ParameterError(f"mpc.fallback_solver = {self.fallback_solver!r} is not one of "
                                  f"{', '.join(SOLVERS)}, auto (the other solver), none")
@@ -177,10 +184,11 @@ def _in_dir(path: Path):
 @dataclass
 class SolveInfo:
     success: bool
-    solve_time_s: float
+    solve_time_s: float  # RTI: the feedback phase (measurement -> command)
     iterations: int
     status: str
     cost: float = float("nan")
+    preparation_time_s: float = 0.0  # RTI: the preparation phase after the command (else 0)
 
 
 @dataclass
@@ -286,7 +294,31 @@ class PathTrackingMPC:
         tf_lat = s.terminal_factor if s.terminal_lateral_factor is None else s.terminal_lateral_factor
         costN = tf_lat * s.weight_lateral * self._lateral_penalty(resN[0]) + s.terminal_factor * ca.sumsqr(resN[1:])
         term = ca.Function("mpc_terminal", [XN, ref], [costN], ["x", "ref"], ["cost"])
+        # The same cost as least squares (cost = |r|^2, to round-off), for the Gauss-Newton
+        # Hessian of the real-time iteration (symtrack.control.rti): the residuals are affine in
+        # the states for a given reference, so GN is exact for the cost and drops only the
+        # curvature of the collocation equations.
+        r_stage = ca.vertcat(math.sqrt(s.weight_lateral) * self._lateral_residual(res[0]), r_all)
+        r_term = ca.vertcat(math.sqrt(tf_lat * s.weight_lateral) * self._lateral_residual(resN[0]),
+                            math.sqrt(s.terminal_factor) * resN[1:])
+        self.res_fn = ca.Function("mpc_res", [Xs, Us, ref], [r_stage, ca.jacobian(r_stage, Xs),
+                                                             ca.jacobian(r_stage, Us)],
+                                  ["x", "u", "ref"], ["r", "r_x", "r_u"], {"cse": True})
+        self.res_term_fn = ca.Function("mpc_res_term", [XN, ref], [r_term, ca.jacobian(r_term, XN)],
+                                       ["x", "ref"], ["r", "r_x"], {"cse": True})
+        g_c = ca.vertcat(*gcoll)
+        self.coll_fn = ca.Function("mpc_coll", [Xs, Us, Ks, P, XC],
+                                   [g_c, ca.jacobian(g_c, Ks), ca.jacobian(g_c, Xs), ca.jacobian(g_c, Us)],
+                                   ["x", "u", "k", "p", "xc"], ["g", "g_k", "g_x", "g_u"], {"cse": True})
         return stage, term
+
+    def _lateral_residual(self, e):
+        """r with r^2 = the lateral penalty: e, or for the pseudo-Huber penalty
+        e sqrt(2 / (sqrt(1 + (e/delta)^2) + 1)) (smooth through e = 0)."""
+        dl = self.settings.lateral_huber_m
+        if dl <= 0:
+            return e
+        return e * ca.sqrt(2 / (ca.sqrt(1 + (e / dl) ** 2) + 1))
 
     def _lateral_penalty(self, e):
         """e^2 near the path; with lateral_huber_m = delta > 0 the pseudo-Huber
@@ -343,7 +375,12 @@ class PathTrackingMPC:
         self.ng_stage = ng_stage
         nlp = {"x": w, "p": par, "f": f, "g": g}
         self.nlp = nlp
-        self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
+        self.rti = None
+        if s.solver == "rti":
+            self.solver = None
+            self.rti = RTI(self, s.rti_qp_solver, compiled=s.jit)
+        else:
+            self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
         # the fallback: interpreted (no compilation), tried when the primary solver fails
         self.fallback = None
         fb = s.fallback_solver
@@ -354,6 +391,8 @@ class PathTrackingMPC:
         self.fallback_name = fb
         # bounds
         rate = s.torque_rate_max_N_m_s * s.sample_time_s / TORQUE_SCALE_N_M
+        self.rate_scaled = rate
+        self.tmax_scaled = s.torque_max_N_m / TORQUE_SCALE_N_M
         lbg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), -rate * np.ones(nu)]), N)
         ubg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), rate * np.ones(nu)]), N)
         self.lbg, self.ubg = lbg, ubg
@@ -431,12 +470,16 @@ class PathTrackingMPC:
     def reset(self):
         self._w = self._plan_u = None
         self._plan_age = 0
+        if self.rti is not None:
+            self.rti.lin = None
 
     def prepare(self, x_pred, x_cells, u_prev, ref, attempts: int = 10) -> SolveInfo:
         """Cold start before the loop engages (not counted in the step statistics): solve the
         first problem, restarting from the last iterate up to ``attempts`` times, so that the
         first closed-loop step is already warm. Returns the info of the last attempt."""
         self.reset()
+        if self.rti is not None:
+            return self._prepare_rti(x_pred, x_cells, u_prev, ref, attempts)
         total = 0.0
         info = None
         w = None
@@ -455,10 +498,14 @@ class PathTrackingMPC:
         frozen cell states (prediction "vehicle") or None; u_prev: the command applied during the
         last interval [N m]; ref: (N+1) x 5 reference. Returns (command [N m], SolveInfo)."""
         N, blk = self.N, self.block
-        info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
+        if self.rti is not None:
+            info, wopt = self._feedback_rti(x_pred, x_cells, u_prev, ref)
+        else:
+            info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
         if not info.success and self.fallback is not None:
             # from the same warm start (starting from where the primary stopped was measured worse)
-            info2, wopt2 = self._solve(x_pred, x_cells, u_prev, ref, None, self.fallback)
+            w_start = self.rti.lin["w"] if self.rti is not None and self.rti.lin is not None else None
+            info2, wopt2 = self._solve(x_pred, x_cells, u_prev, ref, w_start, self.fallback)
             info2.solve_time_s += info.solve_time_s
             info2.iterations += info.iterations
             info2.status = f"{info.status} -> fallback {self.fallback_name}: {info2.status}"
@@ -468,17 +515,89 @@ class PathTrackingMPC:
         self.stats.solves.append(info)
         if info.success:
             self._accept(wopt)
-            return self._plan_u[0].copy(), info
-        self.stats.failed += 1
-        log.warning("MPC solve failed (%s); applying the shifted previous plan", info.status)
-        if self._plan_u is None:
-            u = np.asarray(u_prev, float).copy()
+            u = self._plan_u[0].copy()
         else:
-            self._plan_age += 1
-            u = self._plan_u[min(self._plan_age, N - 1)].copy()
-            if self._w is not None:
-                self._w = self._shift(self._w, blk, True)
+            self.stats.failed += 1
+            log.warning("MPC solve failed (%s); applying the shifted previous plan", info.status)
+            if self._plan_u is None:
+                u = np.asarray(u_prev, float).copy()
+            else:
+                self._plan_age += 1
+                u = self._plan_u[min(self._plan_age, N - 1)].copy()
+                if self._w is not None:
+                    self._w = self._shift(self._w, blk, True)
+        if self.rti is not None:
+            # the preparation phase of the next sample: shift, linearise, condense (no measurement)
+            t0 = time.perf_counter()
+            self._prepare_next_rti(x_cells)
+            info.preparation_time_s = time.perf_counter() - t0
         return u, info
+
+    # ------------------------------------------------------------------ real-time iteration
+    def _x0s(self, x_pred, u_prev):
+        return np.concatenate([np.asarray(x_pred, float), np.asarray(u_prev, float)]) / self.sx
+
+    def _cells(self, x_cells):
+        return np.asarray(x_cells if x_cells is not None else [], float)
+
+    def _prepare_next_rti(self, x_cells):
+        """Linearise at the shifted plan (the guess of the next sample). After a failure with no
+        plan the next feedback prepares from a cold guess itself."""
+        self.rti.lin = None
+        if self._w is None:
+            return
+        w = shift_guess(self, self._w) if self._plan_age == 0 else self._w
+        try:
+            self.rti.prepare_at(w, self.p_model, self._cells(x_cells))
+        except (RuntimeError, np.linalg.LinAlgError) as err:
+            log.warning("RTI preparation failed (%s); the next sample prepares again", err)
+            self.rti.lin = None
+
+    def _feedback_rti(self, x_pred, x_cells, u_prev, ref):
+        """The feedback phase: one QP from the prepared linearisation; never raises."""
+        x0s = self._x0s(x_pred, u_prev)
+        t0 = time.perf_counter()
+        try:
+            if self.rti.lin is None:  # nothing prepared (first sample, or after a failure)
+                w0 = self._initial_guess(x0s, ref) if self._w is None else self._w.copy()
+                w0[:self.nxa] = x0s
+                self.rti.prepare_at(w0, self.p_model, self._cells(x_cells))
+            defect = self.rti.lin["defect"]
+            if defect > self.settings.rti_max_defect:
+                # the previous step left the dynamics far from satisfied: the linearisation is
+                # not trusted (the Gauss-Newton iteration is diverging: docs/control.md)
+                wopt, ok, status = None, False, f"defect {defect:.2g} > rti_max_defect"
+            else:
+                wopt, ok, status = self.rti.feedback(x0s, np.asarray(ref, float))
+        except (RuntimeError, np.linalg.LinAlgError) as err:
+            wopt, ok, status = None, False, f"exception: {err}"
+        dt = time.perf_counter() - t0
+        self.last_args = {"x0s": x0s, "ref": ref}
+        return SolveInfo(ok, dt, 1, f"rti {self.rti.qp_name}: {status}"), wopt
+
+    def _prepare_rti(self, x_pred, x_cells, u_prev, ref, attempts):
+        """Cold start for RTI: the fallback NLP solver to convergence (up to ``attempts``
+        restarts), then the first linearisation. Without a fallback solver, the Gauss-Newton SQP
+        with full steps from the cold guess (which diverges from a cold guess on the built-in
+        scenarios: docs/control.md)."""
+        t0 = time.perf_counter()
+        x0s = self._x0s(x_pred, u_prev)
+        if self.fallback is not None:
+            w, ok, iters, status = None, False, 0, "no attempt"
+            for _ in range(attempts):
+                info2, w = self._solve(x_pred, x_cells, u_prev, ref, w, self.fallback)
+                iters += info2.iterations
+                ok, status = info2.success, f"cold start by {self.fallback_name}: {info2.status}"
+                if ok:
+                    break
+        else:
+            w, ok, iters, status = gn_solve(self, x0s, self._cells(x_cells), np.asarray(ref, float),
+                                            self._initial_guess(x0s, ref), self.settings.max_iter)
+        info = SolveInfo(ok, time.perf_counter() - t0, iters, status)
+        if ok:
+            self._accept(w)
+            self._prepare_next_rti(x_cells)
+        return info
 
     def _accept(self, wopt):
         N, blk, nxa, nu = self.N, self.block, self.nxa, self.nu
