@@ -36,7 +36,6 @@ zero-Hessian block of the collocation variables that the QP solver then regulari
 from __future__ import annotations
 
 import logging
-import time
 
 import casadi as ca
 import numpy as np
@@ -64,21 +63,27 @@ class RTI:
     Functions and bounds. ``compiled`` compiles the mapped linearisation and residual Functions
     (cached across processes by :mod:`symtrack.control.solver_cache`)."""
 
-    def __init__(self, mpc, qp_solver: str = "qrqp", compiled: bool = False, regularisation: float = 1e-8):
+    def __init__(self, mpc, qp_solver: str = "qrqp", compiled: bool = False, regularisation: float = 1e-8,
+                 max_defect: float = 0.1, halvings: int = 3):
         self.m = mpc
+        self.max_defect, self.halvings = max_defect, halvings
+        self.last_alpha, self.last_defect = 1.0, 0.0
+        self._xc = np.zeros(0)
         N = mpc.N
         self.N, self.nxa, self.nu, self.nk, self.nxp = N, mpc.nxa, mpc.nu, mpc.nk, mpc.nxp
         self.reg = regularisation
         coll = mpc.coll_fn.map(N)
         res = mpc.res_fn.map(N)
         resN = mpc.res_term_fn
+        collg = mpc.coll_res_fn.map(N)
         if compiled:
             from .solver_cache import compiled_function
 
             coll = compiled_function(ca.Function("mpc_rti_coll", coll.mx_in(), coll.call(coll.mx_in())))
             res = compiled_function(ca.Function("mpc_rti_res", res.mx_in(), res.call(res.mx_in())))
             resN = compiled_function(ca.Function("mpc_rti_res_term", resN.sx_in(), resN.call(resN.sx_in())))
-        self.coll, self.res, self.resN = coll, res, resN
+            collg = compiled_function(ca.Function("mpc_rti_coll_res", collg.mx_in(), collg.call(collg.mx_in())))
+        self.coll, self.res, self.resN, self.collg = coll, res, resN, collg
         self.nr = mpc.res_fn.size1_out(0)
         self.nrN = mpc.res_term_fn.size1_out(0)
         nz = self.nu * N
@@ -97,6 +102,7 @@ class RTI:
         W = w[:N * blk].reshape(N, blk)
         Xk, Uk, Kk = W[:, :nxa], W[:, nxa:nxa + nu], W[:, nxa + nu:]
         xc = np.asarray(x_cells, float)
+        self._xc = xc
         g, gk, gx, gu = self.coll(Xk.T, Uk.T, Kk.T, p_model, xc)
         g = np.asarray(g).T  # N x nk
         # the mapped Jacobians are horizontally stacked blocks: nk x (N * n)
@@ -128,11 +134,7 @@ class RTI:
             Gam[k + 1][:, k * nu:(k + 1) * nu] += B[k]
             xi[k + 1] = A[k] @ xi[k] + c[k]
         self.lin = {"w": w.copy(), "M": Msol, "Phi": Phi, "Gam": Gam, "xi": xi, "X": np.vstack([Xk, w[N * blk:]]),
-                    "U": Uk.copy(),
-                    # how far the guess is from satisfying the dynamics: the gaps and the Newton
-                    # correction of the collocation variables, except the last stage (the shifted tail)
-                    "defect": float(max(np.max(np.abs(c[:-1])) if N > 1 else 0.0,
-                                        np.max(np.abs(Msol[:-1, :, 0])) if N > 1 else 0.0))}
+                    "U": Uk.copy()}
 
     # ------------------------------------------------------------------ feedback
     def feedback(self, x0s: np.ndarray, ref: np.ndarray):
@@ -184,17 +186,38 @@ class RTI:
         Msol = L["M"]
         dK = -(Msol[:, :, 0] + np.einsum("kij,kj->ki", Msol[:, :, 1:1 + nxa], dX[:N])
                + np.einsum("kij,kj->ki", Msol[:, :, 1 + nxa:], dUk))
-        w = L["w"].copy()
         blk = nxa + nu + nk
-        Wv = w[:N * blk].reshape(N, blk)
-        Wv[:, :nxa] += dX[:N]
-        Wv[:, nxa:nxa + nu] += dUk
-        Wv[:, nxa + nu:] += dK
-        w[N * blk:] += dX[N]
-        w[:nxa] = x0s  # dX[0] = dx0 exactly; no round-off in the fixed initial state
-        if not np.all(np.isfinite(w)):
+        step = np.zeros_like(L["w"])
+        Sv = step[:N * blk].reshape(N, blk)
+        Sv[:, :nxa] = dX[:N]
+        Sv[:, nxa:nxa + nu] = dUk
+        Sv[:, nxa + nu:] = dK
+        step[N * blk:] = dX[N]
+        if not np.all(np.isfinite(step)):
             return None, False, "non-finite step"
-        return w, True, status
+        # Safeguard: the collocation residual at the new point (the linearisation's error). A full
+        # step whose residual exceeds max_defect is halved (at most ``halvings`` times): the
+        # Gauss-Newton step overshoots where the lateral resistance changes regime (docs/control.md).
+        alpha = 1.0
+        for _ in range(self.halvings + 1):
+            w = L["w"] + alpha * step
+            w[:nxa] = x0s  # the initial state is the measurement, whatever the step length
+            defect = self.defect(w)
+            if defect <= self.max_defect:
+                break
+            alpha *= 0.5
+        else:
+            return None, False, f"{status}; defect {defect:.2g} > {self.max_defect:g} after {self.halvings} halvings"
+        self.last_alpha, self.last_defect = alpha, defect
+        return w, True, status if alpha == 1.0 else f"{status}; step {alpha:g}"
+
+    def defect(self, w: np.ndarray) -> float:
+        """Largest collocation residual (scaled rows) of w: how far it is from the dynamics."""
+        N, nxa, nu = self.N, self.nxa, self.nu
+        blk = nxa + nu + self.nk
+        W = w[:N * blk].reshape(N, blk)
+        g = self.collg(W[:, :nxa].T, W[:, nxa:nxa + nu].T, W[:, nxa + nu:].T, self.m.p_model, self._xc)
+        return float(np.max(np.abs(np.asarray(g))))
 
 
 def shift_guess(mpc, w: np.ndarray) -> np.ndarray:
