@@ -35,7 +35,7 @@ from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from ..output import atomic_write_bytes, atomic_write_text
 from ..progress import Progress
-from .mpc import PathTrackingMPC
+from .mpc import PathTrackingMPC, realtime_figures
 from .plants import HomogeneousPlant, make_grid_plant
 from .scenario import MPCScenario
 from .trim import trim
@@ -226,6 +226,8 @@ def summarise(res: ClosedLoopResult, wall_s: float, mpc: PathTrackingMPC) -> dic
         if len(res.U) > 1 else 0.0,
         "machine_note": "solve times measured on this machine in this run (wall clock of the solver call)",
     }
+    # issue 13 (real-time honesty): overruns of the sample time, RTI preparation times
+    out.update(realtime_figures(mpc.stats, sc.mpc.sample_time_s))
     return out
 
 

@@ -56,6 +56,8 @@ import contextlib
 import logging
 import math
 import os
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -181,6 +183,60 @@ def _in_dir(path: Path):
         yield
     finally:
         os.chdir(old)
+
+
+class InterruptWatch:
+    """Ctrl-C during a solver call stops the run: CasADi catches the KeyboardInterrupt raised
+    inside its solvers' callbacks (IPOPT reports a failed or stopped solve, and the loop would
+    count it as a failed solve and go on). Within this block a SIGINT handler records the signal
+    (and still calls the previous handler); on leaving the block a recorded SIGINT raises
+    KeyboardInterrupt whatever the solver made of it. Outside the main thread it does nothing."""
+
+    def __enter__(self):
+        self.hit = False
+        self._prev = None
+        if threading.current_thread() is threading.main_thread():
+            self._prev = signal.getsignal(signal.SIGINT)
+
+            def handler(signum, frame):
+                self.hit = True
+                if callable(self._prev):
+                    self._prev(signum, frame)
+
+            signal.signal(signal.SIGINT, handler)
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if self._prev is not None:
+            signal.signal(signal.SIGINT, self._prev)
+        if self.hit and not (exc_type is not None and issubclass(exc_type, KeyboardInterrupt)):
+            raise KeyboardInterrupt("interrupted during an MPC solve")
+        return False
+
+
+def realtime_figures(stats, sample_time_s: float) -> dict:
+    """Real-time honesty: the samples whose computation (solve, plus the RTI preparation) took
+    longer than the sample time, the worst of them, and the preparation times. Logs a warning
+    when the median computation exceeds the sample time (the controller is not real-time here)."""
+    solve = np.array([s.solve_time_s for s in stats.solves]) * 1e3
+    prep = np.array([getattr(s, "preparation_time_s", 0.0) for s in stats.solves]) * 1e3
+    total = solve + prep
+    limit = 1e3 * sample_time_s
+    over = total > limit
+    out = {
+        "overrun_samples": int(over.sum()),
+        "overrun_worst_ms": float(total.max()) if over.any() else None,
+        "computation_per_sample_median_ms": float(np.median(total)) if total.size else None,
+        "computation_per_sample_max_ms": float(total.max()) if total.size else None,
+        "preparation_time_median_ms": float(np.median(prep)) if prep.size else None,
+        "preparation_time_p95_ms": float(np.percentile(prep, 95)) if prep.size else None,
+        "preparation_time_max_ms": float(prep.max()) if prep.size else None,
+        "overrun_note": f"samples whose solve (+ RTI preparation) took longer than the sample time {limit:g} ms",
+    }
+    if total.size and np.median(total) > limit:
+        log.warning("MPC not real-time on this machine: the median computation per sample %.1f ms exceeds the "
+                    "sample time %.0f ms (%d of %d samples over)", np.median(total), limit, int(over.sum()), total.size)
+    return out
 
 
 @dataclass
@@ -353,6 +409,7 @@ class PathTrackingMPC:
         N, nxa, nu, nk = self.N, self.nxa, self.nu, self.nk
         stage, term = self._stage_function()
         self.stage_fn = stage
+        self._term_fn = term
         blk = nxa + nu + nk
         self.block = blk
         nw = N * blk + nxa
@@ -479,6 +536,18 @@ class PathTrackingMPC:
             self.rti.lin = None
 
     def prepare(self, x_pred, x_cells, u_prev, ref, attempts: int = 10) -> SolveInfo:
+        with InterruptWatch():
+            return self._prepare(x_pred, x_cells, u_prev, ref, attempts)
+
+    def step(self, x_pred: np.ndarray, x_cells: np.ndarray | None, u_prev: np.ndarray, ref: np.ndarray):
+        """One MPC step. x_pred: the prediction states (names ``pred_names``) now; x_cells: the
+        frozen cell states (prediction "vehicle") or None; u_prev: the command applied during the
+        last interval [N m]; ref: (N+1) x 5 reference. Returns (command [N m], SolveInfo).
+        Ctrl-C raises KeyboardInterrupt (:class:`InterruptWatch`)."""
+        with InterruptWatch():
+            return self._step(x_pred, x_cells, u_prev, ref)
+
+    def _prepare(self, x_pred, x_cells, u_prev, ref, attempts: int = 10) -> SolveInfo:
         """Cold start before the loop engages (not counted in the step statistics): solve the
         first problem, restarting from the last iterate up to ``attempts`` times, so that the
         first closed-loop step is already warm. Returns the info of the last attempt."""
@@ -498,10 +567,7 @@ class PathTrackingMPC:
             self._accept(w)
         return info
 
-    def step(self, x_pred: np.ndarray, x_cells: np.ndarray | None, u_prev: np.ndarray, ref: np.ndarray):
-        """One MPC step. x_pred: the prediction states (names ``pred_names``) now; x_cells: the
-        frozen cell states (prediction "vehicle") or None; u_prev: the command applied during the
-        last interval [N m]; ref: (N+1) x 5 reference. Returns (command [N m], SolveInfo)."""
+    def _step(self, x_pred, x_cells, u_prev, ref):
         N, blk = self.N, self.block
         if self.rti is not None:
             info, wopt = self._feedback_rti(x_pred, x_cells, u_prev, ref)

@@ -79,10 +79,14 @@ class RTI:
         if compiled:
             from .solver_cache import compiled_function
 
-            coll = compiled_function(ca.Function("mpc_rti_coll", coll.mx_in(), coll.call(coll.mx_in())))
-            res = compiled_function(ca.Function("mpc_rti_res", res.mx_in(), res.call(res.mx_in())))
-            resN = compiled_function(ca.Function("mpc_rti_res_term", resN.sx_in(), resN.call(resN.sx_in())))
-            collg = compiled_function(ca.Function("mpc_rti_coll_res", collg.mx_in(), collg.call(collg.mx_in())))
+            def renamed(name, f):
+                ins = f.mx_in()
+                return ca.Function(name, ins, f.call(ins), f.name_in(), f.name_out())
+
+            coll = compiled_function(renamed("mpc_rti_coll", coll))
+            res = compiled_function(renamed("mpc_rti_res", res))
+            resN = compiled_function(renamed("mpc_rti_res_term", resN))
+            collg = compiled_function(renamed("mpc_rti_coll_res", collg))
         self.coll, self.res, self.resN, self.collg = coll, res, resN, collg
         self.nr = mpc.res_fn.size1_out(0)
         self.nrN = mpc.res_term_fn.size1_out(0)
