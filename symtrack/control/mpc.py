@@ -36,13 +36,14 @@ Cost (per stage, reference point k of the path sampled at the reference speed)
     ``terminal_factor`` times more, its lateral error ``terminal_lateral_factor`` times.
 
 Solvers
-    ``ipopt`` (default) or ``fatrop`` (structure detection ``auto``), both with the exact Hessian.
-    A Gauss-Newton Hessian (IPOPT with ``hess_lag``, or ``sqpmethod`` + ``qrqp``) was tried and
-    dropped: on this NLP it hit 30 iterations on every solve (the collocation constraints are
-    strongly curved, and GN ignores that curvature). ``jit = True`` compiles the NLP
-    functions with gcc (``expand`` off, as the notes require); the compiler writes temporary
-    files in the current directory, so the build runs inside ``jit_dir`` (default: a cache
-    folder under the user's cache directory).
+    ``ipopt`` (default) or ``fatrop`` (structure detection ``auto``), both with the exact Hessian,
+    or ``rti``: the real-time iteration of :mod:`symtrack.control.rti` (one Gauss-Newton SQP step
+    per sample on this same NLP, preparation/feedback split; why the earlier Gauss-Newton attempts
+    failed is in that module and docs/control.md). ``jit = True`` compiles the NLP functions
+    (``expand`` off, as the notes require), or the RTI's mapped Functions, once into the solver
+    cache of :mod:`symtrack.control.solver_cache` (``jit_dir``, default
+    ``~/.cache/symtrack/mpc``), keyed by the problem, the CasADi version and the flags; later
+    processes load the library without calling a compiler.
 
 A failed solve (solver error, non-success status or non-finite result) never raises: the
 fallback solver (by default the other of ipopt / fatrop, interpreted) is tried from the same warm
@@ -52,10 +53,8 @@ counts the failure and warm-starts the next solve from the shifted plan.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import os
 import signal
 import threading
 import time
@@ -167,22 +166,6 @@ class MPCSettings:
     @property
     def horizon_s(self) -> float:
         return self.horizon_steps * self.sample_time_s
-
-
-def default_jit_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "symtrack" / "jit"
-
-
-@contextlib.contextmanager
-def _in_dir(path: Path):
-    path.mkdir(parents=True, exist_ok=True)
-    old = os.getcwd()
-    os.chdir(path)
-    try:
-        yield
-    finally:
-        os.chdir(old)
 
 
 class InterruptWatch:
@@ -440,7 +423,7 @@ class PathTrackingMPC:
         if s.solver == "rti":
             self.solver = None
             self.rti = RTI(self, s.rti_qp_solver, compiled=s.jit, max_defect=s.rti_max_defect,
-                           halvings=s.rti_step_halvings)
+                           halvings=s.rti_step_halvings, cache=Path(s.jit_dir) if s.jit_dir else None)
         else:
             self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
         # the fallback: interpreted (no compilation), tried when the primary solver fails
@@ -470,11 +453,10 @@ class PathTrackingMPC:
     def _nlpsol(self, nlp, eq, solver: str, jit: bool):
         s = self.settings
         common = {"print_time": False, "error_on_fail": False}
-        if jit:
-            common.update({"expand": False, "jit": True, "compiler": "shell",
-                           "jit_options": {"flags": ["-O1"], "verbose": False}, "jit_temp_suffix": True})
-        else:
-            common["expand"] = True
+        # jit: the NLP's functions compiled once into the solver cache (symtrack.control.solver_cache,
+        # keyed by the problem, the CasADi version and the flags) and loaded by the next process
+        # without a compiler; expand off (the expanded SX graph takes minutes of gcc, notes section 6)
+        common["expand"] = not jit
         if solver == "ipopt":
             opts = dict(common)
             # Primal warm start only: with warm_start_init_point = yes (and the shifted multipliers)
@@ -489,16 +471,14 @@ class PathTrackingMPC:
             opts["fatrop"] = {"print_level": 0, "max_iter": s.max_iter, "tol": s.tol, "mu_init": 1e-2}
             name = "fatrop"
         if jit:
-            jd = self._jit_dir()
-            t0 = time.perf_counter()
-            with _in_dir(jd):
-                S = ca.nlpsol("mpc", name, nlp, opts)
-            log.info("MPC %s jit build: %.1f s in %s", name, time.perf_counter() - t0, jd)
-            return S
-        return ca.nlpsol("mpc", name, nlp, opts)
+            from .solver_cache import compiled_nlp_library
 
-    def _jit_dir(self) -> Path:
-        return Path(self.settings.jit_dir) if self.settings.jit_dir else default_jit_dir()
+            symbolic = ca.nlpsol("mpc", name, nlp, opts)
+            problem = ca.Function("mpc_nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]).serialize()
+            payload = f"{name}|{sorted(opts.items())!r}|".encode() + problem.encode()
+            so = compiled_nlp_library(symbolic, payload, root=Path(s.jit_dir) if s.jit_dir else None)
+            return ca.nlpsol("mpc", name, str(so), opts)
+        return ca.nlpsol("mpc", name, nlp, opts)
 
     # ------------------------------------------------------------------ run time
     def _initial_guess(self, x0s, ref):

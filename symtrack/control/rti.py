@@ -64,7 +64,7 @@ class RTI:
     (cached across processes by :mod:`symtrack.control.solver_cache`)."""
 
     def __init__(self, mpc, qp_solver: str = "qrqp", compiled: bool = False, regularisation: float = 1e-8,
-                 max_defect: float = 0.1, halvings: int = 3):
+                 max_defect: float = 0.1, halvings: int = 3, cache=None):
         self.m = mpc
         self.max_defect, self.halvings = max_defect, halvings
         self.last_alpha, self.last_defect = 1.0, 0.0
@@ -83,10 +83,10 @@ class RTI:
                 ins = f.mx_in()
                 return ca.Function(name, ins, f.call(ins), f.name_in(), f.name_out())
 
-            coll = compiled_function(renamed("mpc_rti_coll", coll))
-            res = compiled_function(renamed("mpc_rti_res", res))
-            resN = compiled_function(renamed("mpc_rti_res_term", resN))
-            collg = compiled_function(renamed("mpc_rti_coll_res", collg))
+            coll = compiled_function(renamed("mpc_rti_coll", coll), root=cache)
+            res = compiled_function(renamed("mpc_rti_res", res), root=cache)
+            resN = compiled_function(renamed("mpc_rti_res_term", resN), root=cache)
+            collg = compiled_function(renamed("mpc_rti_coll_res", collg), root=cache)
         self.coll, self.res, self.resN, self.collg = coll, res, resN, collg
         self.nr = mpc.res_fn.size1_out(0)
         self.nrN = mpc.res_term_fn.size1_out(0)

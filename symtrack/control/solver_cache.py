@@ -82,12 +82,12 @@ def _build(so: Path, write_sources, flags, what: str) -> None:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
-def compiled_function(fn: ca.Function, flags=DEFAULT_FLAGS) -> ca.Function:
+def compiled_function(fn: ca.Function, flags=DEFAULT_FLAGS, root: Path | None = None) -> ca.Function:
     """``fn`` as a cached compiled library (``casadi.external``); same inputs and outputs."""
     flags = tuple(flags)
     name = fn.name()
-    key = problem_key(fn.serialize().encode() if isinstance(fn.serialize(), str) else fn.serialize(), flags)
-    so = cache_dir() / f"{name}-{key[:20]}" / f"lib{name}.so"
+    key = problem_key(fn.serialize().encode(), flags)
+    so = (root or cache_dir()) / f"{name}-{key[:20]}" / f"lib{name}.so"
     if not so.exists():
         def write(folder: Path):
             cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
@@ -99,13 +99,13 @@ def compiled_function(fn: ca.Function, flags=DEFAULT_FLAGS) -> ca.Function:
     return ca.external(name, str(so))
 
 
-def compiled_nlp_library(solver: ca.Function, payload: bytes, flags=DEFAULT_FLAGS) -> Path:
+def compiled_nlp_library(solver: ca.Function, payload: bytes, flags=DEFAULT_FLAGS, root: Path | None = None) -> Path:
     """The functions an NLP solver calls (``generate_dependencies``: nlp_f, nlp_g, nlp_grad_f,
     nlp_jac_g, nlp_hess_l, ...) as a cached shared library; ``nlpsol(name, plugin, path, opts)``
     loads it. ``payload`` identifies the problem (the serialised NLP functions and options)."""
     flags = tuple(flags)
     key = problem_key(payload, flags)
-    so = cache_dir() / f"nlp-{key[:20]}" / "libmpc_nlp.so"
+    so = (root or cache_dir()) / f"nlp-{key[:20]}" / "libmpc_nlp.so"
     if not so.exists():
         def write(folder: Path):
             solver.generate_dependencies("mpc_nlp.c", {"with_header": False})
