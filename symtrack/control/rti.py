@@ -25,12 +25,19 @@ new reference, forms the dense QP, solves it and expands the step. ``solve_time_
 returned :class:`~symtrack.control.mpc.SolveInfo` is the feedback time (the latency from the
 measurement to the command); ``preparation_time_s`` is the rest of the sample's computation.
 
-Why Gauss-Newton "hit the iteration limit" before (docs/control.md): see :func:`gn_contraction`
-and the note in docs/control.md. In short, the GN iteration itself converges (linearly, with a
-contraction factor measured at about 0.1 on the built-in scenarios); what failed was the
-stopping test of a full SQP solver run on the GN Hessian, whose dual infeasibility is computed
-with the GN Hessian and the QP's multipliers of the 1e4-scaled collocation rows, and the
-zero-Hessian block of the collocation variables that the QP solver then regularises.
+Why Gauss-Newton "hit the iteration limit" before (measured with :func:`gn_solve`; details in
+docs/control.md): not the scaling, the algebraic variables or a missing regularisation. The
+linearisation is right (A, B against finite differences of the converged collocation step: 8e-8),
+Newton on the collocation equations alone converges quadratically, and a Levenberg-Marquardt term
+(1e-3 ... 1 on the torque steps) does not stop the divergence. The cause is the curvature that GN
+drops: the lateral resistance is a sum over 12 Gauss points of tanh((v_y + r x_i) / eps_v) with
+eps_v = 9 mm/s, a staircase in (v_y, r) as soon as the vehicle yaws, so after a step the
+first-order model of the dynamics is far off and the steps grow (GN from the IPOPT optimum of the
+1 m offset: step norms x4-20 per iteration; with eps_v = 0.3 m/s in the prediction it contracts
+by 0.2 from a cold guess). How hard the plan yaws decides it: with the pseudo-Huber lateral penalty
+(0.2 m) and a x5 terminal lateral weight the same GN contracts by about 2e-3 per iteration there.
+Hence: the step halving on the collocation residual (``max_defect``), the NLP fallback beyond it,
+and :data:`symtrack.control.bench.RTI_CONFIG`.
 """
 
 from __future__ import annotations
