@@ -69,6 +69,7 @@ from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from .linearize import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
+from .solver_cache import compiled_nlp_library
 
 log = logging.getLogger("symtrack.control.mpc")
 
@@ -471,8 +472,6 @@ class PathTrackingMPC:
             opts["fatrop"] = {"print_level": 0, "max_iter": s.max_iter, "tol": s.tol, "mu_init": 1e-2}
             name = "fatrop"
         if jit:
-            from .solver_cache import compiled_nlp_library
-
             symbolic = ca.nlpsol("mpc", name, nlp, opts)
             problem = ca.Function("mpc_nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]).serialize()
             payload = f"{name}|{sorted(opts.items())!r}|".encode() + problem.encode()

@@ -47,6 +47,8 @@ import logging
 import casadi as ca
 import numpy as np
 
+from .solver_cache import compiled_function
+
 log = logging.getLogger("symtrack.control.rti")
 
 # CasADi conic solvers measured on the condensed (dense) QP. hpipm is not among them: it needs
@@ -85,8 +87,6 @@ class RTI:
         resN = mpc.res_term_fn
         collg = mpc.coll_res_fn.map(N)
         if compiled:
-            from .solver_cache import compiled_function
-
             def renamed(name, f):
                 ins = f.mx_in()
                 return ca.Function(name, ins, f.call(ins), f.name_in(), f.name_out())
@@ -103,7 +103,6 @@ class RTI:
         self.qp_name = qp_solver
         self.qp = ca.conic("mpc_rti_qp", qp_solver, {"h": ca.Sparsity.dense(nz, nz), "a": ca.Sparsity.dense(nz, nz)},
                            _qp_options(qp_solver))
-        # torque selection: E[k] picks du_k out of dU
         self.lin = None  # the prepared linearisation (dict), or None
 
     # ------------------------------------------------------------------ preparation
