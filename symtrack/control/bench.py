@@ -179,7 +179,8 @@ def _row(name, description, build_s, res) -> dict:
 
 
 def timing_comparison(scenario: str = "straight_offset", max_steps: int | None = None, fast_config: dict | None = None,
-                      jit_dir: str | None = None, include=("nmpc_ipopt_plain", "nmpc_fast", "linear_mpc", "nmpc_rti"),
+                      jit_dir: str | None = None, include=("nmpc_ipopt_plain", "nmpc_fast", "linear_mpc", "nmpc_rti",
+                                                         "nmpc_rti_daqp"),
                       model: SystemModel | None = None, overrides=()) -> list[dict]:
     """Run the scenario (with ``overrides``, 'section.key=value' strings as for ``symtrack mpc
     --set``) with each controller in ``include``; returns one dict per row."""
@@ -198,15 +199,18 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
             ctrl = LinearMPC(model, sc.params, sc.mpc, sc.build_path().at(0.0)["speed_m_s"])
             desc = f"linear MPC (OSQP) on the linearisation at straight running, N = {sc.mpc.horizon_steps}"
         else:
-            cfg = {} if name == "nmpc_ipopt_plain" else (dict(RTI_CONFIG) if name == "nmpc_rti" else fast)
-            if name == "nmpc_rti" and jit_dir is not None:
+            rti = name.startswith("nmpc_rti")
+            cfg = {} if name == "nmpc_ipopt_plain" else (dict(RTI_CONFIG) if rti else fast)
+            if name == "nmpc_rti_daqp":  # the same RTI with DAQP (dual active set) on the dense QP
+                cfg["rti_qp_solver"] = "daqp"
+            if rti and jit_dir is not None:
                 cfg["jit_dir"] = jit_dir
             sc = dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, **cfg))
             t0 = time.perf_counter()
             ctrl = PathTrackingMPC(model, sc.params, sc.mpc)
             desc = (f"NMPC {sc.mpc.solver}{' + jit' if sc.mpc.jit else ''}, Radau-{sc.mpc.collocation_degree} "
                     f"collocation, N = {sc.mpc.horizon_steps}")
-            if name == "nmpc_rti":
+            if rti:
                 desc = (f"RTI: 1 Gauss-Newton SQP step/sample, {sc.mpc.rti_qp_solver} on the condensed QP, "
                         f"compiled, Huber {sc.mpc.lateral_huber_m:g} m, "
                         f"terminal lateral x{sc.mpc.terminal_lateral_factor:g}, "

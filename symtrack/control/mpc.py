@@ -554,7 +554,14 @@ class PathTrackingMPC:
             info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
         if not info.success and self.fallback is not None:
             # from the same warm start (starting from where the primary stopped was measured worse)
-            w_start = self.rti.lin["w"] if self.rti is not None and self.rti.lin is not None else None
+            w_start = None
+            if self.rti is not None:
+                # from the prepared guess, unless it is far off the dynamics: then from a cold guess
+                lin = self.rti.lin
+                if lin is not None and self.rti.defect(lin["w"]) <= 10.0 * self.settings.rti_max_defect:
+                    w_start = lin["w"]
+                else:
+                    w_start = self._initial_guess(self._x0s(x_pred, u_prev), ref)
             info2, wopt2 = self._solve(x_pred, x_cells, u_prev, ref, w_start, self.fallback)
             info2.solve_time_s += info.solve_time_s
             info2.iterations += info.iterations

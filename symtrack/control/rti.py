@@ -217,7 +217,9 @@ class RTI:
             # mismatch at a turn entry), else the QP step is not trusted (fallback)
             base = self._point(L, x0s, dxa, 0.0 * GdU, 0.0 * dU, Msol)
             defect0 = self.defect(base)
-            if defect > 2.0 * defect0 + self.max_defect:
+            # ... but never a large residual: accepted steps with large residuals let the
+            # iteration drift off the dynamics (measured on field_pattern before this bound)
+            if defect > 2.0 * defect0 + self.max_defect or defect0 > 10.0 * self.max_defect:
                 return None, False, (f"{status}; defect {defect:.2g} > {self.max_defect:g} after "
                                      f"{self.halvings} halvings (measurement alone: {defect0:.2g})")
         self.last_alpha, self.last_defect = alpha, defect
