@@ -42,6 +42,14 @@ def _scenarios(args) -> int:
 
 
 def main(argv=None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # issue 13: Ctrl-C in any phase of any command: exit 130
+        print("\nsymtrack: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="symtrack", description="Tracked vehicle on soil that remembers.")
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("simulate", help="run a scenario (built-in name or TOML file)")
