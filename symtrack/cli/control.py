@@ -76,7 +76,16 @@ def mpc_command(args) -> int:
 
     model = SystemModel()
     plant = closedloop.make_plant(sc, model, terrain_in)
-    res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
+    from ..control.mpc import InterruptWatch
+
+    try:
+        with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error
+            res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
+    except KeyboardInterrupt:  # issue 13: Ctrl-C stops at once, nothing written
+        import sys
+
+        print("\nsymtrack mpc: interrupted; nothing written", file=sys.stderr)
+        return 130
     if terrain_out:
         plant.world.storage.save(terrain_out, sc.params)
         res.summary["terrain_out"] = str(terrain_out)
@@ -88,7 +97,8 @@ def mpc_command(args) -> int:
     print(f"{sc.name}: rms lateral error on straights "
           f"{'n/a' if rms is None else f'{100 * rms:.2f} cm'}, max {100 * s['max_lateral_error_m']:.1f} cm; "
           f"solve time median {s['solve_time_median_ms']:.1f} ms, p95 {s['solve_time_p95_ms']:.1f} ms, "
-          f"max {s['solve_time_max_ms']:.1f} ms; failed solves {s['failed_solves']}; plant {s['plant']} "
+          f"max {s['solve_time_max_ms']:.1f} ms; failed solves {s['failed_solves']}; "
+          f"over the sample time {s['overrun_samples']}; plant {s['plant']} "
           f"{s['plant_wall_time_s']:.1f} s, solver {s['solver_wall_time_s']:.1f} s of wall time; results in {args.out}")
     return 0
 
@@ -116,8 +126,10 @@ def add_parsers(sub) -> None:
     mp.add_argument("scenario")
     mp.add_argument("--out", required=True, help="output folder")
     mp.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="override a scenario value")
-    mp.add_argument("--solver", choices=("ipopt", "fatrop"), help="shorthand for --set mpc.solver=...")
-    mp.add_argument("--jit", action="store_true", help="compile the solver's functions (gcc; cached build dir)")
+    mp.add_argument("--solver", choices=("ipopt", "fatrop", "rti"),
+                    help="shorthand for --set mpc.solver=... (rti: real-time iteration, docs/control.md)")
+    mp.add_argument("--jit", action="store_true",
+                    help="compile the solver's functions (gcc; cached across runs under ~/.cache/symtrack)")
     mp.add_argument("--plant", choices=("homogeneous", "grid"),
                     help="the plant: homogeneous terrain, or the persistent grid terrain (default: grid when the "
                     "scenario has a [terrain] section; --plant grid adds cell_m = 0.25 m, the field covering the path)")

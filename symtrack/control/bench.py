@@ -42,6 +42,10 @@ __all__ = ["FAST_CONFIG", "LinearMPC", "bench_rows", "prediction_effect", "table
 # converged on every solve of the built-in scenarios (with the plain quadratic penalty it failed
 # in the 1 m approach of straight_offset, where IPOPT does not). Measured in docs/control.md.
 FAST_CONFIG = {"solver": "fatrop", "jit": True, "lateral_huber_m": 0.2}
+# issue 13: the real-time iteration (symtrack.control.rti) with its functions compiled (cached);
+# the pseudo-Huber lateral penalty and a x5 terminal lateral weight keep its Gauss-Newton steps
+# contracting in the 1 m approach (with x50 they diverge there: docs/control.md)
+RTI_CONFIG = {"solver": "rti", "jit": True, "lateral_huber_m": 0.2, "terminal_lateral_factor": 5.0}
 
 
 class LinearMPC:
@@ -169,11 +173,16 @@ def _row(name, description, build_s, res) -> dict:
         "horizon_s": s["horizon_s"],
         "sample_time_s": s["sample_time_s"],
         "path_completed": s["path_completed"],
+        "scenario": s["scenario"],
+        "fallback_solves": s.get("fallback_solves", 0),
+        "preparation_time_median_ms": s.get("preparation_time_median_ms"),
+        "overrun_samples": s.get("overrun_samples"),
     }
 
 
 def timing_comparison(scenario: str = "straight_offset", max_steps: int | None = None, fast_config: dict | None = None,
-                      jit_dir: str | None = None, include=("nmpc_ipopt_plain", "nmpc_fast", "linear_mpc"),
+                      jit_dir: str | None = None, include=("nmpc_ipopt_plain", "nmpc_fast", "linear_mpc", "nmpc_rti",
+                                                         "nmpc_rti_daqp"),
                       model: SystemModel | None = None, overrides=()) -> list[dict]:
     """Run the scenario (with ``overrides``, 'section.key=value' strings as for ``symtrack mpc
     --set``) with each controller in ``include``; returns one dict per row."""
@@ -192,12 +201,22 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
             ctrl = LinearMPC(model, sc.params, sc.mpc, sc.build_path().at(0.0)["speed_m_s"])
             desc = f"linear MPC (OSQP) on the linearization at straight running, N = {sc.mpc.horizon_steps}"
         else:
-            cfg = {} if name == "nmpc_ipopt_plain" else fast
+            rti = name.startswith("nmpc_rti")
+            cfg = {} if name == "nmpc_ipopt_plain" else (dict(RTI_CONFIG) if rti else fast)
+            if name == "nmpc_rti_daqp":  # the same RTI with DAQP (dual active set) on the dense QP
+                cfg["rti_qp_solver"] = "daqp"
+            if rti and jit_dir is not None:
+                cfg["jit_dir"] = jit_dir
             sc = dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, **cfg))
             t0 = time.perf_counter()
             ctrl = PathTrackingMPC(model, sc.params, sc.mpc)
             desc = (f"NMPC {sc.mpc.solver}{' + jit' if sc.mpc.jit else ''}, Radau-{sc.mpc.collocation_degree} "
                     f"collocation, N = {sc.mpc.horizon_steps}")
+            if rti:
+                desc = (f"RTI: 1 Gauss-Newton SQP step/sample, {sc.mpc.rti_qp_solver} on the condensed QP, "
+                        f"compiled, Huber {sc.mpc.lateral_huber_m:g} m, "
+                        f"terminal lateral x{sc.mpc.terminal_lateral_factor:g}, "
+                        f"N = {sc.mpc.horizon_steps}")
         build = time.perf_counter() - t0
         res = closedloop.run(sc, model=model, mpc=ctrl, max_steps=max_steps)
         rows.append(_row(name, desc, build, res))
@@ -208,12 +227,15 @@ def table_markdown(rows: list[dict]) -> str:
     def f(v, scale=1.0, fmt="{:.1f}"):
         return "-" if v is None else fmt.format(scale * v)
 
-    lines = ["| controller | build [s] | median [ms] | p95 [ms] | max [ms] | failed | RMS lat. straights [cm] "
-             "| max lat. (all) [cm] | path completed |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| scenario | controller | build [s] | median [ms] | p95 [ms] | max [ms] | RTI preparation median [ms] "
+             "| over 0.1 s | failed (fallbacks) | RMS lat. straights [cm] "
+             "| max lat. (all) [cm] | path completed |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['controller']} ({r['description']}) | {f(r['build_s'])} "
+        lines.append(f"| {r.get('scenario', '-')} | {r['controller']} ({r['description']}) | {f(r['build_s'])} "
                      f"| {f(r['solve_time_median_ms'])} | {f(r['solve_time_p95_ms'])} | {f(r['solve_time_max_ms'])} "
-                     f"| {r['failed_solves']}/{r['solves']} "
+                     f"| {f(r.get('preparation_time_median_ms') or None, 1, '{:.2f}')} "
+                     f"| {r.get('overrun_samples', '-')} "
+                     f"| {r['failed_solves']}/{r['solves']} ({r.get('fallback_solves', 0)}) "
                      f"| {f(r['rms_lateral_error_m'], 100, '{:.2f}')} | {f(r['max_lateral_error_m'], 100)} "
                      f"| {'yes' if r['path_completed'] else 'no'} |")
     return "\n".join(lines) + "\n"
@@ -278,15 +300,17 @@ def _cm(v) -> str:
 
 
 def bench_rows(quick: bool) -> list[dict]:
-    """Rows for ``symtrack bench``: the MPC timing comparison on ``straight_offset`` (plain IPOPT
-    without compilation, the fast configuration, the linear MPC), measured in the bench's process.
-    ``quick`` stops each closed loop after 60 samples."""
+    """Rows for ``symtrack bench``: the MPC timing comparison on ``straight_offset`` and
+    ``headland_uturn`` (plain IPOPT without compilation, the fast configuration, the linear MPC,
+    the RTI), measured in the bench's process. ``quick`` stops each closed loop after 60 samples."""
     rows = []
-    for r in timing_comparison("straight_offset", max_steps=60 if quick else None):
-        note = (f"solve median {r['solve_time_median_ms']:.1f} / p95 {r['solve_time_p95_ms']:.1f} / "
-                f"max {r['solve_time_max_ms']:.1f} ms; failed {r['failed_solves']}/{r['solves']}; "
-                f"rms lateral {_cm(r['rms_lateral_error_m'])}; horizon {r['horizon_s']:g} s; "
-                f"build {r['build_s']:.1f} s; path completed: {r['path_completed']}")
-        rows.append({"group": "MPC straight_offset (homogeneous plant)", "case": r["controller"],
-                     "integrator": "cvodes plant", "note": note, **r})
+    for scen in ("straight_offset", "headland_uturn"):  # issue 13: both scenarios of the RTI targets
+        for r in timing_comparison(scen, max_steps=60 if quick else None):
+            note = (f"solve median {r['solve_time_median_ms']:.1f} / p95 {r['solve_time_p95_ms']:.1f} / "
+                    f"max {r['solve_time_max_ms']:.1f} ms; failed {r['failed_solves']}/{r['solves']} "
+                    f"(fallbacks {r['fallback_solves']}); over the sample time {r['overrun_samples']}; "
+                    f"rms lateral {_cm(r['rms_lateral_error_m'])}; horizon {r['horizon_s']:g} s; "
+                    f"build {r['build_s']:.1f} s; path completed: {r['path_completed']}")
+            rows.append({"group": f"MPC {scen} (homogeneous plant)", "case": r["controller"],
+                         "integrator": "cvodes plant", "note": note, **r})
     return rows

@@ -50,7 +50,7 @@ from ..reports.terrain_plots import sinkage_map_png
 from ..simulation.plants import GridPlant, StepPlant, advance_plant
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import open_world
-from .mpc import PathTrackingMPC
+from .mpc import PathTrackingMPC, realtime_figures
 from .scenario import MPCScenario
 from .trim import trim
 
@@ -297,6 +297,8 @@ def summarise(res: ClosedLoopResult, wall_s: float, mpc: PathTrackingMPC) -> dic
         if len(res.U) > 1 else 0.0,
         "machine_note": "solve times measured on this machine in this run (wall clock of the solver call)",
     }
+    # issue 13 (real-time honesty): overruns of the sample time, RTI preparation times
+    out.update(realtime_figures(mpc.stats, sc.mpc.sample_time_s))
     return out
 
 

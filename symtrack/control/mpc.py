@@ -36,13 +36,14 @@ Cost (per stage, reference point k of the path sampled at the reference speed)
     ``terminal_factor`` times more, its lateral error ``terminal_lateral_factor`` times.
 
 Solvers
-    ``ipopt`` (default) or ``fatrop`` (structure detection ``auto``), both with the exact Hessian.
-    A Gauss-Newton Hessian (IPOPT with ``hess_lag``, or ``sqpmethod`` + ``qrqp``) was tried and
-    dropped: on this NLP it hit 30 iterations on every solve (the collocation constraints are
-    strongly curved, and GN ignores that curvature). ``jit = True`` compiles the NLP
-    functions with gcc (``expand`` off, as the notes require); the compiler writes temporary
-    files in the current directory, so the build runs inside ``jit_dir`` (default: a cache
-    folder under the user's cache directory).
+    ``ipopt`` (default) or ``fatrop`` (structure detection ``auto``), both with the exact Hessian,
+    or ``rti``: the real-time iteration of :mod:`symtrack.control.rti` (one Gauss-Newton SQP step
+    per sample on this same NLP, preparation/feedback split; why the earlier Gauss-Newton attempts
+    failed is in that module and docs/control.md). ``jit = True`` compiles the NLP functions
+    (``expand`` off, as the notes require), or the RTI's mapped Functions, once into the solver
+    cache of :mod:`symtrack.control.solver_cache` (``jit_dir``, default
+    ``~/.cache/symtrack/mpc``), keyed by the problem, the CasADi version and the flags; later
+    processes load the library without calling a compiler.
 
 A failed solve (solver error, non-success status or non-finite result) never raises: the
 fallback solver (by default the other of ipopt / fatrop, interpreted) is tried from the same warm
@@ -52,10 +53,10 @@ counts the failure and warm-starts the next solve from the shifted plan.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
-import os
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,13 +68,16 @@ from ..foundations.errors import ParameterError
 from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from .linearization import scale_by_name
+from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
+from .solver_cache import compiled_nlp_library
 
 __all__ = ["MPCSettings", "MPCStats", "PREDICTIONS", "PathTrackingMPC", "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M",
-           "default_jit_dir"]
+           "InterruptWatch", "realtime_figures"]
 
 log = logging.getLogger("symtrack.control.mpc")
 
-SOLVERS = ("ipopt", "fatrop")
+SOLVERS = ("ipopt", "fatrop")  # the NLP solvers (also the fallbacks)
+SOLVER_CHOICES = SOLVERS + ("rti",)  # rti: real-time iteration (symtrack.control.rti)
 PREDICTIONS = ("vehicle", "full")
 
 # Typical magnitudes (scaling of the NLP variables), by state name prefix.
@@ -118,6 +122,9 @@ class MPCSettings:
     prediction_lateral_creep_speed_m_s: float | None = None
     fallback_solver: str | None = "auto"
     tol: float = 1e-5
+    rti_qp_solver: str = "qrqp"
+    rti_max_defect: float = 0.1
+    rti_step_halvings: int = 3
 
     def __post_init__(self):
         def rng(name, lo, hi, integer=False, lo_open=False):
@@ -142,10 +149,14 @@ class MPCSettings:
             rng("terminal_lateral_factor", 0.0, 1e6)
         rng("max_iter", 1, 10000, integer=True)
         rng("tol", 0.0, 1.0, lo_open=True)
+        rng("rti_max_defect", 0.0, 1e6, lo_open=True)
+        rng("rti_step_halvings", 0, 20, integer=True)
         if self.prediction_lateral_creep_speed_m_s is not None:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
-        if self.solver not in SOLVERS:
-            raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVERS)}")
+        if self.solver not in SOLVER_CHOICES:
+            raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVER_CHOICES)}")
+        if self.rti_qp_solver not in QP_SOLVERS:
+            raise ParameterError(f"mpc.rti_qp_solver = {self.rti_qp_solver!r} is not one of {', '.join(QP_SOLVERS)}")
         if self.fallback_solver is not None and self.fallback_solver not in SOLVERS + ("auto", "none"):
             raise ParameterError(f"mpc.fallback_solver = {self.fallback_solver!r} is not one of "
                                  f"{', '.join(SOLVERS)}, auto (the other solver), none")
@@ -161,29 +172,68 @@ class MPCSettings:
         return self.horizon_steps * self.sample_time_s
 
 
-def default_jit_dir() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "symtrack" / "jit"
+class InterruptWatch:
+    """Ctrl-C during a solver call stops the run: CasADi catches the KeyboardInterrupt raised
+    inside its solvers' callbacks (IPOPT reports a failed or stopped solve, and the loop would
+    count it as a failed solve and go on). Within this block a SIGINT handler records the signal
+    (and still calls the previous handler); on leaving the block a recorded SIGINT raises
+    KeyboardInterrupt whatever the solver made of it. Outside the main thread it does nothing."""
+
+    def __enter__(self):
+        self.hit = False
+        self._prev = None
+        if threading.current_thread() is threading.main_thread():
+            self._prev = signal.getsignal(signal.SIGINT)
+
+            def handler(signum, frame):
+                self.hit = True
+                if callable(self._prev):
+                    self._prev(signum, frame)
+
+            signal.signal(signal.SIGINT, handler)
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if self._prev is not None:
+            signal.signal(signal.SIGINT, self._prev)
+        if self.hit and not (exc_type is not None and issubclass(exc_type, KeyboardInterrupt)):
+            raise KeyboardInterrupt("interrupted during an MPC solve")
+        return False
 
 
-@contextlib.contextmanager
-def _in_dir(path: Path):
-    path.mkdir(parents=True, exist_ok=True)
-    old = os.getcwd()
-    os.chdir(path)
-    try:
-        yield
-    finally:
-        os.chdir(old)
+def realtime_figures(stats, sample_time_s: float) -> dict:
+    """Real-time honesty: the samples whose computation (solve, plus the RTI preparation) took
+    longer than the sample time, the worst of them, and the preparation times. Logs a warning
+    when the median computation exceeds the sample time (the controller is not real-time here)."""
+    solve = np.array([s.solve_time_s for s in stats.solves]) * 1e3
+    prep = np.array([getattr(s, "preparation_time_s", 0.0) for s in stats.solves]) * 1e3
+    total = solve + prep
+    limit = 1e3 * sample_time_s
+    over = total > limit
+    out = {
+        "overrun_samples": int(over.sum()),
+        "overrun_worst_ms": float(total.max()) if over.any() else None,
+        "computation_per_sample_median_ms": float(np.median(total)) if total.size else None,
+        "computation_per_sample_max_ms": float(total.max()) if total.size else None,
+        "preparation_time_median_ms": float(np.median(prep)) if prep.size else None,
+        "preparation_time_p95_ms": float(np.percentile(prep, 95)) if prep.size else None,
+        "preparation_time_max_ms": float(prep.max()) if prep.size else None,
+        "overrun_note": f"samples whose solve (+ RTI preparation) took longer than the sample time {limit:g} ms",
+    }
+    if total.size and np.median(total) > limit:
+        log.warning("MPC not real-time on this machine: the median computation per sample %.1f ms exceeds the "
+                    "sample time %.0f ms (%d of %d samples over)", np.median(total), limit, int(over.sum()), total.size)
+    return out
 
 
 @dataclass
 class SolveInfo:
     success: bool
-    solve_time_s: float
+    solve_time_s: float  # RTI: the feedback phase (measurement -> command)
     iterations: int
     status: str
     cost: float = float("nan")
+    preparation_time_s: float = 0.0  # RTI: the preparation phase after the command (else 0)
 
 
 @dataclass
@@ -289,7 +339,33 @@ class PathTrackingMPC:
         tf_lat = s.terminal_factor if s.terminal_lateral_factor is None else s.terminal_lateral_factor
         costN = tf_lat * s.weight_lateral * self._lateral_penalty(resN[0]) + s.terminal_factor * ca.sumsqr(resN[1:])
         term = ca.Function("mpc_terminal", [XN, ref], [costN], ["x", "ref"], ["cost"])
+        # The same cost as least squares (cost = |r|^2, to round-off), for the Gauss-Newton
+        # Hessian of the real-time iteration (symtrack.control.rti): the residuals are affine in
+        # the states for a given reference, so GN is exact for the cost and drops only the
+        # curvature of the collocation equations.
+        r_stage = ca.vertcat(math.sqrt(s.weight_lateral) * self._lateral_residual(res[0]), r_all)
+        r_term = ca.vertcat(math.sqrt(tf_lat * s.weight_lateral) * self._lateral_residual(resN[0]),
+                            math.sqrt(s.terminal_factor) * resN[1:])
+        self.res_fn = ca.Function("mpc_res", [Xs, Us, ref], [r_stage, ca.jacobian(r_stage, Xs),
+                                                             ca.jacobian(r_stage, Us)],
+                                  ["x", "u", "ref"], ["r", "r_x", "r_u"], {"cse": True})
+        self.res_term_fn = ca.Function("mpc_res_term", [XN, ref], [r_term, ca.jacobian(r_term, XN)],
+                                       ["x", "ref"], ["r", "r_x"], {"cse": True})
+        g_c = ca.vertcat(*gcoll)
+        self.coll_fn = ca.Function("mpc_coll", [Xs, Us, Ks, P, XC],
+                                   [g_c, ca.jacobian(g_c, Ks), ca.jacobian(g_c, Xs), ca.jacobian(g_c, Us)],
+                                   ["x", "u", "k", "p", "xc"], ["g", "g_k", "g_x", "g_u"], {"cse": True})
+        self.coll_res_fn = ca.Function("mpc_coll_res", [Xs, Us, Ks, P, XC], [g_c], ["x", "u", "k", "p", "xc"], ["g"],
+                                       {"cse": True})
         return stage, term
+
+    def _lateral_residual(self, e):
+        """r with r^2 = the lateral penalty: e, or for the pseudo-Huber penalty
+        e sqrt(2 / (sqrt(1 + (e/delta)^2) + 1)) (smooth through e = 0)."""
+        dl = self.settings.lateral_huber_m
+        if dl <= 0:
+            return e
+        return e * ca.sqrt(2 / (ca.sqrt(1 + (e / dl) ** 2) + 1))
 
     def _lateral_penalty(self, e):
         """e^2 near the path; with lateral_huber_m = delta > 0 the pseudo-Huber
@@ -320,6 +396,7 @@ class PathTrackingMPC:
         N, nxa, nu, nk = self.N, self.nxa, self.nu, self.nk
         stage, term = self._stage_function()
         self.stage_fn = stage
+        self._term_fn = term
         blk = nxa + nu + nk
         self.block = blk
         nw = N * blk + nxa
@@ -346,7 +423,13 @@ class PathTrackingMPC:
         self.ng_stage = ng_stage
         nlp = {"x": w, "p": par, "f": f, "g": g}
         self.nlp = nlp
-        self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
+        self.rti = None
+        if s.solver == "rti":
+            self.solver = None
+            self.rti = RTI(self, s.rti_qp_solver, compiled=s.jit, max_defect=s.rti_max_defect,
+                           halvings=s.rti_step_halvings, cache=Path(s.jit_dir) if s.jit_dir else None)
+        else:
+            self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
         # the fallback: interpreted (no compilation), tried when the primary solver fails
         self.fallback = None
         fb = s.fallback_solver
@@ -357,6 +440,8 @@ class PathTrackingMPC:
         self.fallback_name = fb
         # bounds
         rate = s.torque_rate_max_N_m_s * s.sample_time_s / TORQUE_SCALE_N_M
+        self.rate_scaled = rate
+        self.tmax_scaled = s.torque_max_N_m / TORQUE_SCALE_N_M
         lbg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), -rate * np.ones(nu)]), N)
         ubg = np.tile(np.concatenate([np.zeros(nxa), np.zeros(nk), rate * np.ones(nu)]), N)
         self.lbg, self.ubg = lbg, ubg
@@ -372,11 +457,10 @@ class PathTrackingMPC:
     def _nlpsol(self, nlp, eq, solver: str, jit: bool):
         s = self.settings
         common = {"print_time": False, "error_on_fail": False}
-        if jit:
-            common.update({"expand": False, "jit": True, "compiler": "shell",
-                           "jit_options": {"flags": ["-O1"], "verbose": False}, "jit_temp_suffix": True})
-        else:
-            common["expand"] = True
+        # jit: the NLP's functions compiled once into the solver cache (symtrack.control.solver_cache,
+        # keyed by the problem, the CasADi version and the flags) and loaded by the next process
+        # without a compiler; expand off (the expanded SX graph takes minutes of gcc, notes section 6)
+        common["expand"] = not jit
         if solver == "ipopt":
             opts = dict(common)
             # Primal warm start only: with warm_start_init_point = yes (and the shifted multipliers)
@@ -391,16 +475,12 @@ class PathTrackingMPC:
             opts["fatrop"] = {"print_level": 0, "max_iter": s.max_iter, "tol": s.tol, "mu_init": 1e-2}
             name = "fatrop"
         if jit:
-            jd = self._jit_dir()
-            t0 = time.perf_counter()
-            with _in_dir(jd):
-                S = ca.nlpsol("mpc", name, nlp, opts)
-            log.info("MPC %s jit build: %.1f s in %s", name, time.perf_counter() - t0, jd)
-            return S
+            symbolic = ca.nlpsol("mpc", name, nlp, opts)
+            problem = ca.Function("mpc_nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]).serialize()
+            payload = f"{name}|{sorted(opts.items())!r}|".encode() + problem.encode()
+            so = compiled_nlp_library(symbolic, payload, root=Path(s.jit_dir) if s.jit_dir else None)
+            return ca.nlpsol("mpc", name, str(so), opts)
         return ca.nlpsol("mpc", name, nlp, opts)
-
-    def _jit_dir(self) -> Path:
-        return Path(self.settings.jit_dir) if self.settings.jit_dir else default_jit_dir()
 
     # ------------------------------------------------------------------ run time
     def _initial_guess(self, x0s, ref):
@@ -434,12 +514,28 @@ class PathTrackingMPC:
     def reset(self):
         self._w = self._plan_u = None
         self._plan_age = 0
+        if self.rti is not None:
+            self.rti.lin = None
 
     def prepare(self, x_pred, x_cells, u_prev, ref, attempts: int = 10) -> SolveInfo:
+        with InterruptWatch():
+            return self._prepare(x_pred, x_cells, u_prev, ref, attempts)
+
+    def step(self, x_pred: np.ndarray, x_cells: np.ndarray | None, u_prev: np.ndarray, ref: np.ndarray):
+        """One MPC step. x_pred: the prediction states (names ``pred_names``) now; x_cells: the
+        frozen cell states (prediction "vehicle") or None; u_prev: the command applied during the
+        last interval [N m]; ref: (N+1) x 5 reference. Returns (command [N m], SolveInfo).
+        Ctrl-C raises KeyboardInterrupt (:class:`InterruptWatch`)."""
+        with InterruptWatch():
+            return self._step(x_pred, x_cells, u_prev, ref)
+
+    def _prepare(self, x_pred, x_cells, u_prev, ref, attempts: int = 10) -> SolveInfo:
         """Cold start before the loop engages (not counted in the step statistics): solve the
         first problem, restarting from the last iterate up to ``attempts`` times, so that the
         first closed-loop step is already warm. Returns the info of the last attempt."""
         self.reset()
+        if self.rti is not None:
+            return self._prepare_rti(x_pred, x_cells, u_prev, ref, attempts)
         total = 0.0
         info = None
         w = None
@@ -453,15 +549,23 @@ class PathTrackingMPC:
             self._accept(w)
         return info
 
-    def step(self, x_pred: np.ndarray, x_cells: np.ndarray | None, u_prev: np.ndarray, ref: np.ndarray):
-        """One MPC step. x_pred: the prediction states (names ``pred_names``) now; x_cells: the
-        frozen cell states (prediction "vehicle") or None; u_prev: the command applied during the
-        last interval [N m]; ref: (N+1) x 5 reference. Returns (command [N m], SolveInfo)."""
+    def _step(self, x_pred, x_cells, u_prev, ref):
         N, blk = self.N, self.block
-        info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
+        if self.rti is not None:
+            info, wopt = self._feedback_rti(x_pred, x_cells, u_prev, ref)
+        else:
+            info, wopt = self._solve(x_pred, x_cells, u_prev, ref, None)
         if not info.success and self.fallback is not None:
             # from the same warm start (starting from where the primary stopped was measured worse)
-            info2, wopt2 = self._solve(x_pred, x_cells, u_prev, ref, None, self.fallback)
+            w_start = None
+            if self.rti is not None:
+                # from the prepared guess, unless it is far off the dynamics: then from a cold guess
+                lin = self.rti.lin
+                if lin is not None and self.rti.defect(lin["w"]) <= 10.0 * self.settings.rti_max_defect:
+                    w_start = lin["w"]
+                else:
+                    w_start = self._initial_guess(self._x0s(x_pred, u_prev), ref)
+            info2, wopt2 = self._solve(x_pred, x_cells, u_prev, ref, w_start, self.fallback)
             info2.solve_time_s += info.solve_time_s
             info2.iterations += info.iterations
             info2.status = f"{info.status} -> fallback {self.fallback_name}: {info2.status}"
@@ -471,17 +575,83 @@ class PathTrackingMPC:
         self.stats.solves.append(info)
         if info.success:
             self._accept(wopt)
-            return self._plan_u[0].copy(), info
-        self.stats.failed += 1
-        log.warning("MPC solve failed (%s); applying the shifted previous plan", info.status)
-        if self._plan_u is None:
-            u = np.asarray(u_prev, float).copy()
+            u = self._plan_u[0].copy()
         else:
-            self._plan_age += 1
-            u = self._plan_u[min(self._plan_age, N - 1)].copy()
-            if self._w is not None:
-                self._w = self._shift(self._w, blk, True)
+            self.stats.failed += 1
+            log.warning("MPC solve failed (%s); applying the shifted previous plan", info.status)
+            if self._plan_u is None:
+                u = np.asarray(u_prev, float).copy()
+            else:
+                self._plan_age += 1
+                u = self._plan_u[min(self._plan_age, N - 1)].copy()
+                if self._w is not None:
+                    self._w = self._shift(self._w, blk, True)
+        if self.rti is not None:
+            # the preparation phase of the next sample: shift, linearise, condense (no measurement)
+            t0 = time.perf_counter()
+            self._prepare_next_rti(x_cells)
+            info.preparation_time_s = time.perf_counter() - t0
         return u, info
+
+    # ------------------------------------------------------------------ real-time iteration
+    def _x0s(self, x_pred, u_prev):
+        return np.concatenate([np.asarray(x_pred, float), np.asarray(u_prev, float)]) / self.sx
+
+    def _cells(self, x_cells):
+        return np.asarray(x_cells if x_cells is not None else [], float)
+
+    def _prepare_next_rti(self, x_cells):
+        """Linearise at the shifted plan (the guess of the next sample). After a failure with no
+        plan the next feedback prepares from a cold guess itself."""
+        self.rti.lin = None
+        if self._w is None:
+            return
+        w = shift_guess(self, self._w) if self._plan_age == 0 else self._w
+        try:
+            self.rti.prepare_at(w, self.p_model, self._cells(x_cells))
+        except (RuntimeError, np.linalg.LinAlgError) as err:
+            log.warning("RTI preparation failed (%s); the next sample prepares again", err)
+            self.rti.lin = None
+
+    def _feedback_rti(self, x_pred, x_cells, u_prev, ref):
+        """The feedback phase: one QP from the prepared linearisation; never raises."""
+        x0s = self._x0s(x_pred, u_prev)
+        t0 = time.perf_counter()
+        try:
+            if self.rti.lin is None:  # nothing prepared (first sample, or after a failure)
+                w0 = self._initial_guess(x0s, ref) if self._w is None else self._w.copy()
+                w0[:self.nxa] = x0s
+                self.rti.prepare_at(w0, self.p_model, self._cells(x_cells))
+            wopt, ok, status = self.rti.feedback(x0s, np.asarray(ref, float))
+        except (RuntimeError, np.linalg.LinAlgError) as err:
+            wopt, ok, status = None, False, f"exception: {err}"
+        dt = time.perf_counter() - t0
+        self.last_args = {"x0s": x0s, "ref": ref}
+        return SolveInfo(ok, dt, 1, f"rti {self.rti.qp_name}: {status}"), wopt
+
+    def _prepare_rti(self, x_pred, x_cells, u_prev, ref, attempts):
+        """Cold start for RTI: the fallback NLP solver to convergence (up to ``attempts``
+        restarts), then the first linearisation. Without a fallback solver, the Gauss-Newton SQP
+        with full steps from the cold guess (which diverges from a cold guess on the built-in
+        scenarios: docs/control.md)."""
+        t0 = time.perf_counter()
+        x0s = self._x0s(x_pred, u_prev)
+        if self.fallback is not None:
+            w, ok, iters, status = None, False, 0, "no attempt"
+            for _ in range(attempts):
+                info2, w = self._solve(x_pred, x_cells, u_prev, ref, w, self.fallback)
+                iters += info2.iterations
+                ok, status = info2.success, f"cold start by {self.fallback_name}: {info2.status}"
+                if ok:
+                    break
+        else:
+            w, ok, iters, status = gn_solve(self, x0s, self._cells(x_cells), np.asarray(ref, float),
+                                            self._initial_guess(x0s, ref), self.settings.max_iter)
+        info = SolveInfo(ok, time.perf_counter() - t0, iters, status)
+        if ok:
+            self._accept(w)
+            self._prepare_next_rti(x_cells)
+        return info
 
     def _accept(self, wopt):
         N, blk, nxa, nu = self.N, self.block, self.nxa, self.nu

@@ -38,7 +38,7 @@ Schema (unknown keys are errors; ranges in brackets)::
     sample_time_s = 0.1
     solver = "ipopt"
     [terrain]                         # optional: the plant is then the vehicle on the persistent
-    cell_m = 0.25                     # grid terrain (symtrack.control.plants.GridPlant); keys and
+    cell_m = 0.25                     # grid terrain (symtrack.simulation.plants.GridPlant); keys and
                                       # ranges of symtrack/terrain/config.py (docs/terrain.md).
                                       # Without size_m and origin_m the field covers the path
                                       # plus 4 m; passes must be 1; the plant runs IDAS

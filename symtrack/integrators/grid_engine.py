@@ -623,7 +623,8 @@ class TerrainEngine:
         self.world = world
         self.settings = settings or EngineSettings()
         self.fns = engine_functions(world.opts, world.params, self.settings.vehicle_substeps)
-        names = getattr(getattr(world, "model", None), "output_names", None)
+        # the channel model's outputs, when it was built (World.model is built on first use)
+        names = getattr(vars(world).get("model"), "output_names", None)
         if names is not None and tuple(names) != tuple(self.fns.output_names):
             raise SimulationError("the engine's outputs differ from the channel model's")
         self.output_names = self.fns.output_names
@@ -734,7 +735,7 @@ class TerrainEngine:
         w.qc[act, 2], w.qc[act, 3], w.qc[act, 4] = s.ch_zmax[act], s.ch_pmax[act], 1.0
         w.p_soil[act] = s.ch_p[act]
         w.peak_active = s.peak_active
-        x = np.zeros(w.model.nx)
+        x = np.zeros(NV + 2 * w.n_channels)
         x[:NV] = s.wv[:NV]
         x[NV::2][act] = s.ch_z[act]
         x[NV + 1::2][act] = s.ch_v[act]

@@ -11,7 +11,7 @@ from .plots import plt, png_bytes
 
 __all__ = ["ANIMATION_MAX_FRAMES", "pass_animation_gif", "passes_png", "rut_section_png", "sinkage_map_png"]
 
-ANIMATION_MAX_FRAMES = 60  # frames of a pass animation (snapshots are thinned to at most this)
+ANIMATION_MAX_FRAMES = 30  # frames of a pass animation (snapshots are thinned to at most this)
 
 
 def _window(world, maps, margin_cells=10):
@@ -83,7 +83,7 @@ def passes_png(figures: list[dict]) -> bytes:
     return png_bytes(fig)
 
 
-def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 8) -> bytes:
+def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 6) -> bytes:
     """A GIF of one pass: the tracks' footprints over the growing sinkage map, from the
     plant's snapshots (t_s, pose, loaded cells, their sinkage)."""
     from matplotlib.animation import FuncAnimation, PillowWriter
@@ -124,7 +124,7 @@ def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 8) -> byt
     anim = FuncAnimation(fig, draw, frames=frames, blit=False)
     with tempfile.TemporaryDirectory(prefix="symtrack-gif-") as tmp:
         path = Path(tmp) / "pass.gif"
-        anim.save(str(path), writer=PillowWriter(fps=fps), dpi=80)
+        anim.save(str(path), writer=PillowWriter(fps=fps), dpi=70)
         data = path.read_bytes()
     plt.close(fig)
     return data

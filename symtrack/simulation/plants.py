@@ -339,7 +339,6 @@ class EnginePlant:
 
     def __init__(self, world: World, engine, record_every_s: float | None = None):
         self.world, self.engine = world, engine
-        self.model = world.model
         self.state_names = tuple(VEHICLE_STATES)
         self.output_names = tuple(engine.output_names)
         self.record_every_s = record_every_s

@@ -21,7 +21,7 @@ Per macro step (:meth:`World.before_step`, :meth:`World.after_step`)
    other active cells stay active (still unloading).
 3. Assignment by the seed's sector rule, Cell[i, j] -> CHANNEL[i mod M, j mod M], with no search.
    A newly active cell whose channel is held by another active cell stops the run
-   (:class:`~symtrack.errors.SimulationError` naming both cells and the M that the active set
+   (:class:`~symtrack.foundations.errors.SimulationError` naming both cells and the M that the active set
    needs); so does a footprint that leaves the field.
 4. INFO_IN: the channel's integrator states are reset to the cell's stored (z, dz/dt), its Q
    entries to the cell's centre and history; IDAS's algebraic guess is reset too.
@@ -53,6 +53,7 @@ the storage is the only state, which is why a saved and reloaded terrain continu
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 
@@ -61,6 +62,7 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError, SimulationError
 from ..model import SystemModel
+from ..model.system import PARAM_NAMES
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.vehicle import VEHICLE_STATES
@@ -115,7 +117,6 @@ class World:
         self.M = int(modulus)
         self.n_channels = self.M * self.M
         self.terrain = ChannelTerrain(opts, self.n_channels)
-        self.model = SystemModel(opts, self.terrain)
         n = self.n_channels
         self.channel_cell = np.full(n, -1, dtype=np.int64)
         self.Q = np.zeros(NG + NF * n)
@@ -123,13 +124,19 @@ class World:
         self.Q[1] = END_STRIP_CELLS * self.grid.cell_m
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
-        self._pbase = np.array(self.model.param_vector(params, self.Q), dtype=float)[:-len(self.Q)]
+        self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
         self._history = self.terrain.fn["history"].map("history_all", "serial", n, [3], [])
         self._law = ca.DM(soil_law_values(params))
         self._pad = padding_m(self.grid.cell_m)
         self.peak_active = 0
         self.touched = np.zeros(self.grid.n_cells, dtype=bool)
         self.z_at_pass_end = None
+
+    @functools.cached_property
+    def model(self) -> SystemModel:
+        """The vehicle with this world's channel pool as one symbolic system (built on first use:
+        for 1600 channels it takes seconds, and the compiled terrain engine does not need it)."""
+        return SystemModel(self.opts, self.terrain)
 
     # ---- geometry -----------------------------------------------------------------------------
     def _rectangles(self, X, Y, psi, pad):

@@ -1,0 +1,299 @@
+"""Real-time iteration (RTI) of the path-tracking MPC: one Gauss-Newton SQP iteration per sample.
+
+The problem is the NLP of :class:`symtrack.control.mpc.PathTrackingMPC`, unchanged: the same
+stage-ordered variables w = [x_k, u_k, K_k] (K_k the Radau collocation states and algebraic
+accelerations of stage k), the same collocation equations, bounds and cost. Each sample takes one
+SQP step on it from the shifted previous solution, with
+
+- the **Gauss-Newton Hessian** of the cost written as least squares (``PathTrackingMPC.res_fn``:
+  the residuals are affine in the states for a given reference, so GN is the exact Hessian of the
+  cost; only the curvature of the collocation equations is dropped);
+- the collocation variables **eliminated stage by stage** from the linearised collocation
+  equations (dK = -G_K^-1 (G + G_x dx + G_u du); G_K is the Newton matrix of one implicit Radau
+  step, invertible for any step small against the model's time constants). Because the cost does
+  not depend on K, this gives exactly the step of the full QP in (x, u, K). What remains is a
+  multiple-shooting QP in (dx_k, du_k) with dx_{k+1} = A_k dx_k + B_k du_k + c_k, which is then
+  condensed (dx_0 is the measured state minus the guess: the initial-value embedding) to a dense
+  QP in the 2 N torque steps with the torque bounds and the torque-rate constraints, solved with
+  one of CasADi's conic solvers (``rti_qp_solver``, default ``qrqp``; measured in docs/control.md).
+
+Preparation / feedback split. After the command of a sample has been returned, the guess is
+shifted by one stage and the dynamics are linearised and condensed there (:meth:`RTI.prepare_next`,
+the "preparation" phase, which needs no measurement). When the next measurement and reference
+arrive, the feedback phase (:meth:`RTI.feedback`) only evaluates the cost residuals against the
+new reference, forms the dense QP, solves it and expands the step. ``solve_time_s`` of the
+returned :class:`~symtrack.control.mpc.SolveInfo` is the feedback time (the latency from the
+measurement to the command); ``preparation_time_s`` is the rest of the sample's computation.
+
+Why Gauss-Newton "hit the iteration limit" before (measured with :func:`gn_solve`; details in
+docs/control.md): not the scaling, the algebraic variables or a missing regularisation. The
+linearisation is right (A, B against finite differences of the converged collocation step: 8e-8),
+Newton on the collocation equations alone converges quadratically, and a Levenberg-Marquardt term
+(1e-3 ... 1 on the torque steps) does not stop the divergence. The cause is the curvature that GN
+drops: the lateral resistance is a sum over 12 Gauss points of tanh((v_y + r x_i) / eps_v) with
+eps_v = 9 mm/s, a staircase in (v_y, r) as soon as the vehicle yaws, so after a step the
+first-order model of the dynamics is far off and the steps grow (GN from the IPOPT optimum of the
+1 m offset: step norms x4-20 per iteration; with eps_v = 0.3 m/s in the prediction it contracts
+by 0.2 from a cold guess). How hard the plan yaws decides it: with the pseudo-Huber lateral penalty
+(0.2 m) and a x5 terminal lateral weight the same GN contracts by about 2e-3 per iteration there.
+Hence: the step halving on the collocation residual (``max_defect``), the NLP fallback beyond it,
+and :data:`symtrack.control.bench.RTI_CONFIG`.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import casadi as ca
+import numpy as np
+
+from .solver_cache import compiled_function
+
+log = logging.getLogger("symtrack.control.rti")
+
+# CasADi conic solvers measured on the condensed (dense) QP. hpipm is not among them: it needs
+# the stage structure (N, nx, nu, ng) of an uncondensed QP and rejects the dense one ("HPIPM:
+# specified structure of A does not correspond to what the interface can handle").
+QP_SOLVERS = ("qrqp", "osqp", "daqp", "piqp")
+
+
+def _qp_options(name: str) -> dict:
+    base = {"error_on_fail": False, "print_time": False}
+    if name == "qrqp":
+        base.update({"print_iter": False, "print_header": False, "print_info": False, "max_iter": 200})
+    elif name == "osqp":
+        base["osqp"] = {"verbose": False, "eps_abs": 1e-8, "eps_rel": 1e-8, "max_iter": 20000, "polish": False}
+    elif name == "piqp":
+        base["piqp"] = {"verbose": False}
+    return base
+
+
+class RTI:
+    """The real-time iteration of one :class:`PathTrackingMPC` (``mpc``): its dimensions,
+    Functions and bounds. ``compiled`` compiles the mapped linearisation and residual Functions
+    (cached across processes by :mod:`symtrack.control.solver_cache`)."""
+
+    def __init__(self, mpc, qp_solver: str = "qrqp", compiled: bool = False, regularisation: float = 1e-8,
+                 max_defect: float = 0.1, halvings: int = 3, cache=None):
+        self.m = mpc
+        self.max_defect, self.halvings = max_defect, halvings
+        self.last_alpha, self.last_defect = 1.0, 0.0
+        self._xc = np.zeros(0)
+        N = mpc.N
+        self.N, self.nxa, self.nu, self.nk, self.nxp = N, mpc.nxa, mpc.nu, mpc.nk, mpc.nxp
+        self.reg = regularisation
+        coll = mpc.coll_fn.map(N)
+        res = mpc.res_fn.map(N)
+        resN = mpc.res_term_fn
+        collg = mpc.coll_res_fn.map(N)
+        if compiled:
+            def renamed(name, f):
+                ins = f.mx_in()
+                return ca.Function(name, ins, f.call(ins), f.name_in(), f.name_out())
+
+            coll = compiled_function(renamed("mpc_rti_coll", coll), root=cache)
+            res = compiled_function(renamed("mpc_rti_res", res), root=cache)
+            resN = compiled_function(renamed("mpc_rti_res_term", resN), root=cache)
+            collg = compiled_function(renamed("mpc_rti_coll_res", collg), root=cache)
+        self.coll, self.res, self.resN, self.collg = coll, res, resN, collg
+        self.nr = mpc.res_fn.size1_out(0)
+        self.nrN = mpc.res_term_fn.size1_out(0)
+        nz = self.nu * N
+        # the dense QP: H (2N x 2N) and the rate rows A (2N x 2N, dense after condensing)
+        self.qp_name = qp_solver
+        self.qp = ca.conic("mpc_rti_qp", qp_solver, {"h": ca.Sparsity.dense(nz, nz), "a": ca.Sparsity.dense(nz, nz)},
+                           _qp_options(qp_solver))
+        self.lin = None  # the prepared linearisation (dict), or None
+
+    # ------------------------------------------------------------------ preparation
+    def prepare_at(self, w: np.ndarray, p_model: np.ndarray, x_cells: np.ndarray) -> None:
+        """Linearise the collocation at the guess w and condense the dynamics (no measurement)."""
+        N, nxa, nu, nk, nxp = self.N, self.nxa, self.nu, self.nk, self.nxp
+        blk = nxa + nu + nk
+        W = w[:N * blk].reshape(N, blk)
+        Xk, Uk, Kk = W[:, :nxa], W[:, nxa:nxa + nu], W[:, nxa + nu:]
+        xc = np.asarray(x_cells, float)
+        self._xc = xc
+        g, gk, gx, gu = self.coll(Xk.T, Uk.T, Kk.T, p_model, xc)
+        g = np.asarray(g).T  # N x nk
+        # the mapped Jacobians are horizontally stacked blocks: nk x (N * n)
+        gk = np.asarray(gk).reshape(nk, N, nk).transpose(1, 0, 2)
+        gx = np.asarray(gx).reshape(nk, N, nxa).transpose(1, 0, 2)
+        gu = np.asarray(gu).reshape(nk, N, nu).transpose(1, 0, 2)
+        rhs = np.concatenate([g[:, :, None], gx, gu], axis=2)  # N x nk x (1 + nxa + nu)
+        Msol = np.linalg.solve(gk, rhs)  # dK = -(M0 + Mx dx + Mu du)
+        # x_{k+1} = [states of the last collocation point; u_k]
+        last = slice(nk - self.m.nc, nk - self.m.nc + nxp)
+        A = np.zeros((N, nxa, nxa))
+        B = np.zeros((N, nxa, nu))
+        c = np.zeros((N, nxa))
+        A[:, :nxp, :] = -Msol[:, last, 1:1 + nxa]
+        B[:, :nxp, :] = -Msol[:, last, 1 + nxa:]
+        B[:, nxp:, :] = np.eye(nu)
+        xnext_guess = np.vstack([W[1:, :nxa], w[N * blk:][None, :]])
+        c[:, :nxp] = Kk[:, last] - Msol[:, last, 0] - xnext_guess[:, :nxp]
+        c[:, nxp:] = Uk - xnext_guess[:, nxp:]
+        # condensing: dx_k = Phi_k dx0 + Gam_k dU + xi_k
+        nzu = nu * N
+        Phi = np.zeros((N + 1, nxa, nxa))
+        Gam = np.zeros((N + 1, nxa, nzu))
+        xi = np.zeros((N + 1, nxa))
+        Phi[0] = np.eye(nxa)
+        for k in range(N):
+            Phi[k + 1] = A[k] @ Phi[k]
+            Gam[k + 1] = A[k] @ Gam[k]
+            Gam[k + 1][:, k * nu:(k + 1) * nu] += B[k]
+            xi[k + 1] = A[k] @ xi[k] + c[k]
+        self.lin = {"w": w.copy(), "M": Msol, "Phi": Phi, "Gam": Gam, "xi": xi, "X": np.vstack([Xk, w[N * blk:]]),
+                    "U": Uk.copy()}
+
+    # ------------------------------------------------------------------ feedback
+    def feedback(self, x0s: np.ndarray, ref: np.ndarray):
+        """The QP step from the prepared linearisation for the measured (scaled) x0 and the
+        reference: returns (new w, ok, status)."""
+        L = self.lin
+        N, nxa, nu, nxp = self.N, self.nxa, self.nu, self.nxp
+        nzu = nu * N
+        X, U, Phi, Gam, xi = L["X"], L["U"], L["Phi"], L["Gam"], L["xi"]
+        dx0 = x0s - X[0]
+        refT = np.asarray(ref, float).T  # 5 x (N+1)
+        r, rx, ru = self.res(X[:N].T, U.T, refT[:, :N])
+        r = np.asarray(r).T  # N x nr
+        rx = np.asarray(rx).reshape(self.nr, N, nxa).transpose(1, 0, 2)
+        ru = np.asarray(ru).reshape(self.nr, N, nu).transpose(1, 0, 2)
+        rN, rxN = self.resN(X[N], refT[:, N])
+        rN = np.asarray(rN).ravel()
+        rxN = np.asarray(rxN)
+        dxa = np.einsum("kij,j->ki", Phi, dx0) + xi  # (N+1) x nxa: the state steps without dU
+        # residual rows: r_k + rx_k dx_k + ru_k du_k, dx_k = dxa_k + Gam_k dU
+        Mk = np.einsum("kij,kjl->kil", rx, Gam[:N])
+        for k in range(N):
+            Mk[k][:, k * nu:(k + 1) * nu] += ru[k]
+        vk = r + np.einsum("kij,kj->ki", rx, dxa[:N])
+        MN = rxN @ Gam[N]
+        vN = rN + rxN @ dxa[N]
+        Mall = np.vstack([Mk.reshape(N * self.nr, nzu), MN])
+        vall = np.concatenate([vk.ravel(), vN])
+        H = 2.0 * (Mall.T @ Mall) + 2.0 * self.reg * np.eye(nzu)
+        gvec = 2.0 * (Mall.T @ vall)
+        # rate rows: u_k - prev_k in [-rate, rate], prev_k = state entries nxp: of x_k
+        s = self.m
+        Arate = -Gam[:N, nxp:, :].reshape(N * nu, nzu) + np.eye(nzu)
+        rate_now = (U - X[:N, nxp:]).ravel() - dxa[:N, nxp:].ravel()
+        rate = s.rate_scaled
+        lba = -rate - rate_now
+        uba = rate - rate_now
+        tmax = s.tmax_scaled
+        ug = U.ravel()
+        sol = self.qp(h=H, g=gvec, a=Arate, lba=lba, uba=uba, lbx=-tmax - ug, ubx=tmax - ug)
+        st = self.qp.stats()
+        dU = np.asarray(sol["x"]).ravel()
+        ok = bool(st.get("success", False)) and bool(np.all(np.isfinite(dU)))
+        status = str(st.get("return_status", st.get("success")))
+        if not ok:
+            return None, False, status
+        # Safeguard: the collocation residual at the new point (the linearisation's error). A
+        # step whose residual exceeds max_defect is halved (at most ``halvings`` times): the
+        # Gauss-Newton step overshoots where the lateral resistance changes regime
+        # (docs/control.md). Only the QP's torque step is scaled; the response to the measured
+        # state (dx0) and the closing of the guess's gaps are always applied in full, so that a
+        # short step stays consistent with the measurement.
+        GdU = np.einsum("kij,j->ki", Gam, dU)
+        Msol = L["M"]
+        alpha = 1.0
+        for _ in range(self.halvings + 1):
+            w = self._point(L, x0s, dxa, alpha * GdU, alpha * dU, Msol)
+            if not np.all(np.isfinite(w)):
+                return None, False, "non-finite step"
+            defect = self.defect(w)
+            if defect <= self.max_defect:
+                break
+            if alpha <= 0.5 ** self.halvings:
+                break
+            alpha *= 0.5
+        if defect > self.max_defect:
+            # the shortest step still leaves a large residual: accept it when that residual is
+            # the measurement's (the response to dx0 alone, alpha = 0, is as far off: model
+            # mismatch at a turn entry), else the QP step is not trusted (fallback)
+            base = self._point(L, x0s, dxa, 0.0 * GdU, 0.0 * dU, Msol)
+            defect0 = self.defect(base)
+            # ... but never a large residual: accepted steps with large residuals let the
+            # iteration drift off the dynamics (measured on field_pattern before this bound)
+            if defect > 2.0 * defect0 + self.max_defect or defect0 > 10.0 * self.max_defect:
+                return None, False, (f"{status}; defect {defect:.2g} > {self.max_defect:g} after "
+                                     f"{self.halvings} halvings (measurement alone: {defect0:.2g})")
+        self.last_alpha, self.last_defect = alpha, defect
+        return w, True, status if alpha == 1.0 else f"{status}; step {alpha:g}"
+
+    def _point(self, L, x0s, dxa, GdU, dU, Msol):
+        """The guess plus a step: state steps dxa + GdU, torque steps dU, collocation steps from
+        the eliminated linearised collocation equations."""
+        N, nxa, nu, nk = self.N, self.nxa, self.nu, self.nk
+        blk = nxa + nu + nk
+        dX = dxa + GdU
+        dUk = dU.reshape(N, nu)
+        dK = -(Msol[:, :, 0] + np.einsum("kij,kj->ki", Msol[:, :, 1:1 + nxa], dX[:N])
+               + np.einsum("kij,kj->ki", Msol[:, :, 1 + nxa:], dUk))
+        w = L["w"].copy()
+        Wv = w[:N * blk].reshape(N, blk)
+        Wv[:, :nxa] += dX[:N]
+        Wv[:, nxa:nxa + nu] += dUk
+        Wv[:, nxa + nu:] += dK
+        w[N * blk:] += dX[N]
+        w[:nxa] = x0s  # dX[0] = dx0: no round-off in the fixed initial state
+        return w
+
+    def defect(self, w: np.ndarray) -> float:
+        """Largest collocation residual (scaled rows) of w: how far it is from the dynamics."""
+        N, nxa, nu = self.N, self.nxa, self.nu
+        blk = nxa + nu + self.nk
+        W = w[:N * blk].reshape(N, blk)
+        g = self.collg(W[:, :nxa].T, W[:, nxa:nxa + nu].T, W[:, nxa + nu:].T, self.m.p_model, self._xc)
+        return float(np.max(np.abs(np.asarray(g))))
+
+
+def shift_guess(mpc, w: np.ndarray) -> np.ndarray:
+    """The guess of the next sample: every stage moved one ahead; the new last stage starts at
+    the old end state and is the old last stage translated by its own state change (so that the
+    tail is nearly consistent with the dynamics in steady motion, instead of a repeated stage
+    whose gap is a whole sample's travel)."""
+    N, blk, nxa, nu, nxp, nc, d = mpc.N, mpc.block, mpc.nxa, mpc.nu, mpc.nxp, mpc.nc, mpc.d
+    out = w.copy()
+    out[:(N - 1) * blk] = w[blk:N * blk]
+    last = w[(N - 1) * blk:N * blk]
+    xN = w[N * blk:]
+    delta = xN - last[:nxa]
+    o = (N - 1) * blk
+    out[o:o + nxa] = xN
+    out[o + nxa:o + nxa + nu] = last[nxa:nxa + nu]
+    for j in range(d):
+        a = o + nxa + nu + j * nc
+        out[a:a + nxp] = last[nxa + nu + j * nc:nxa + nu + j * nc + nxp] + delta[:nxp]
+    out[N * blk:N * blk + nxp] = xN[:nxp] + delta[:nxp]
+    out[N * blk + nxp:] = last[nxa:nxa + nu]
+    return out
+
+
+def gn_solve(mpc, x0s, x_cells, ref, w0, max_iter: int = 60, tol: float = 1e-8, steps: list | None = None):
+    """The Gauss-Newton SQP with full steps on one fixed problem (repeated RTI steps without a
+    shift: a stationary reference). Stops when the step norm (scaled variables) is below tol.
+    Returns (w, converged, iterations, status); ``steps`` (a list) receives the step norms, whose
+    ratios are the measured linear contraction factor of GN on this NLP."""
+    rti = mpc.rti
+    w = np.asarray(w0, float).copy()
+    w[:mpc.nxa] = x0s
+    for it in range(1, max_iter + 1):
+        try:
+            rti.prepare_at(w, mpc.p_model, x_cells)
+            wn, ok, status = rti.feedback(x0s, ref)
+        except (RuntimeError, np.linalg.LinAlgError) as err:
+            return w, False, it, f"gauss-newton: exception {err}"
+        if not ok:
+            return w, False, it, f"gauss-newton: QP failed at iteration {it}: {status}"
+        step = float(np.linalg.norm(wn - w))
+        if steps is not None:
+            steps.append(step)
+        w = wn
+        if step < tol:
+            return w, True, it, f"gauss-newton converged in {it} iterations"
+    return w, False, max_iter, f"gauss-newton: step {step:.2e} after {max_iter} iterations"
