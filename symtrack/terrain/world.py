@@ -62,9 +62,9 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError, SimulationError
 from ..model import SystemModel
-from ..model.system import PARAM_NAMES
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
+from ..model.system import PARAM_NAMES
 from ..model.vehicle import VEHICLE_STATES
 from .channels import NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
 from .settings import TerrainSettings
