@@ -76,7 +76,7 @@ def mpc_command(args) -> int:
 
     model = SystemModel()
     plant = closedloop.make_plant(sc, model, terrain_in)
-    from ..control.mpc import InterruptWatch
+    from ..foundations.interrupt import InterruptWatch
 
     try:
         with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error

@@ -55,8 +55,6 @@ from __future__ import annotations
 
 import logging
 import math
-import signal
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,6 +63,7 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import ParameterError
+from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
 from .linearization import scale_by_name
@@ -72,7 +71,7 @@ from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
 
 __all__ = ["MPCSettings", "MPCStats", "PREDICTIONS", "PathTrackingMPC", "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M",
-           "InterruptWatch", "realtime_figures"]
+           "realtime_figures"]
 
 log = logging.getLogger("symtrack.control.mpc")
 
@@ -170,35 +169,6 @@ class MPCSettings:
     @property
     def horizon_s(self) -> float:
         return self.horizon_steps * self.sample_time_s
-
-
-class InterruptWatch:
-    """Ctrl-C during a solver call stops the run: CasADi catches the KeyboardInterrupt raised
-    inside its solvers' callbacks (IPOPT reports a failed or stopped solve, and the loop would
-    count it as a failed solve and go on). Within this block a SIGINT handler records the signal
-    (and still calls the previous handler); on leaving the block a recorded SIGINT raises
-    KeyboardInterrupt whatever the solver made of it. Outside the main thread it does nothing."""
-
-    def __enter__(self):
-        self.hit = False
-        self._prev = None
-        if threading.current_thread() is threading.main_thread():
-            self._prev = signal.getsignal(signal.SIGINT)
-
-            def handler(signum, frame):
-                self.hit = True
-                if callable(self._prev):
-                    self._prev(signum, frame)
-
-            signal.signal(signal.SIGINT, handler)
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if self._prev is not None:
-            signal.signal(signal.SIGINT, self._prev)
-        if self.hit and not (exc_type is not None and issubclass(exc_type, KeyboardInterrupt)):
-            raise KeyboardInterrupt("interrupted during an MPC solve")
-        return False
 
 
 def realtime_figures(stats, sample_time_s: float) -> dict:
