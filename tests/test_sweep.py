@@ -56,6 +56,8 @@ def test_grid_sweep_writes_a_row_and_a_run_folder_per_combination(grid_sweep):
         (5000, 6e5), (5000, 1.2e6), (6500, 6e5), (6500, 1.2e6)]
     assert {r["status"] for r in rows} == {"ok"} and {r["error"] for r in rows} == {""}
     assert (out / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    page = (out / "report.html").read_text()  # one report: the table and the comparison plot
+    assert page.count("data:image/png;base64,") == 1 and all(r["run_id"] in page for r in rows)
     design_doc = json.loads((out / "sweep.json").read_text())
     assert design_doc["schema_version"] == 1 and design_doc["kind"] == "simulate"
     assert [r["id"] for r in design_doc["runs"]] == [r["run_id"] for r in rows]

@@ -13,7 +13,7 @@ import base64
 import html
 import json
 
-__all__ = ["REPORT_SCHEMA_VERSION", "report_html"]
+__all__ = ["REPORT_SCHEMA_VERSION", "report_html", "table_html"]
 
 REPORT_SCHEMA_VERSION = 1
 
@@ -47,7 +47,8 @@ def _fmt(v) -> str:
     return str(v)
 
 
-def _table(rows, header) -> str:
+def table_html(rows, header) -> str:
+    """An HTML table (cells escaped, numbers right-aligned)."""
     out = ["<table>", "<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header) + "</tr>"]
     for row in rows:
         cells = []
@@ -60,7 +61,8 @@ def _table(rows, header) -> str:
 
 
 def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_text: str,
-                validation_rows=None, passes: list[dict] | None = None, note: str = "") -> str:
+                validation_rows=None, passes: list[dict] | None = None, note: str = "",
+                tables: dict[str, tuple[list, list]] | None = None) -> str:
     """The page (see the module doc). ``images``: file name -> PNG (or GIF) bytes, shown in
     order; ``validation_rows``: (key, reported, value, ok) rows; ``passes``: per-pass figures."""
     parts = [f"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
@@ -73,15 +75,18 @@ def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_te
         parts.append(f"<p>{html.escape(note)}</p>")
     if validation_rows:
         parts.append("<h2>Validation (seed / Ferretti &amp; Girelli)</h2>")
-        parts.append(_table([(k, rep, v, "yes" if ok else "NO") for k, rep, v, ok in validation_rows],
+        parts.append(table_html([(k, rep, v, "yes" if ok else "NO") for k, rep, v, ok in validation_rows],
                             ["quantity", "reported", "simulated", "within"]))
     scalars = [(k, v) for k, v in summary.items() if not isinstance(v, (list, dict))]
     parts.append("<h2>Summary</h2>")
-    parts.append(_table(scalars, ["key", "value"]))
+    parts.append(table_html(scalars, ["key", "value"]))
+    for heading, (header, rows) in (tables or {}).items():
+        parts.append(f"<h2>{html.escape(heading)}</h2>")
+        parts.append(table_html(rows, header))
     if passes:
         keys = list(passes[0])
         parts.append("<h2>Passes</h2>")
-        parts.append(_table([[k + 1] + [p.get(c) for c in keys] for k, p in enumerate(passes)], ["pass", *keys]))
+        parts.append(table_html([[k + 1] + [p.get(c) for c in keys] for k, p in enumerate(passes)], ["pass", *keys]))
     if images:
         parts.append("<h2>Plots</h2>")
         for name, data in images.items():

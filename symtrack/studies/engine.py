@@ -32,6 +32,7 @@ from pathlib import Path
 from ..foundations.errors import ScenarioError, SymtrackError
 from ..foundations.files import atomic_write_bytes, atomic_write_text, check_output_folder
 from ..foundations.progress import Progress
+from ..reports.html import report_html
 from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
 from .plots import comparison_png
 from .runs import Source, load, resolve_source, run_one
@@ -295,7 +296,19 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     png = comparison_png(table, [a.key for a in p.axes])
     if png is not None:
         atomic_write_bytes(out / "comparison.png", png)
+    atomic_write_text(out / "report.html", _report(p, table, png))
     return SweepResult(out, table, len(todo), skipped, time.perf_counter() - t0, failed)
+
+
+def _report(p: Plan, table: list[dict], png: bytes | None) -> str:
+    """DIR/report.html: the sweep's table and its comparison plot, one self-contained page."""
+    header = list(table[0]) if table else []
+    rows = [[r.get(k) for k in header] for r in table]
+    counts = {s: sum(r.get("status") == s for r in table) for s in STATUSES}
+    summary = {"runs": len(table), **counts, "varied": ", ".join(a.key for a in p.axes)}
+    return report_html(f"symtrack sweep: {p.source.name}", summary, {"comparison.png": png} if png else {},
+                       p.source.text, tables={"results.csv": (header, rows)},
+                       note=f"{p.source.kind} scenario {p.source.label}; fixed overrides {p.fixed or 'none'}")
 
 
 def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, progress: bool) -> list:
