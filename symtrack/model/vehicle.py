@@ -123,7 +123,8 @@ def shear_forces(j, omega, abs_om, vy, rz, x_front, dist, N, b, l, r, c, phi, K,
     longitudinally resists less laterally, and the other way round).
 
     With no lateral sliding the longitudinal force is seed eq. (1) exactly (mean-pressure strength,
-    the default) or the exact Janosi integral over p(s) (``shear_strength_pressure = "local"``).
+    the default: eq. (1) in closed form plus the integral of the change that lateral sliding makes)
+    or the exact Janosi integral over p(s) (``shear_strength_pressure = "local"``).
 
     The integral is split where the integrand has its features (the pivot, where i_y changes sign;
     the point where j_y returns to zero; the ends, where the shear builds up from zero), each piece
@@ -138,22 +139,30 @@ def shear_forces(j, omega, abs_om, vy, rz, x_front, dist, N, b, l, r, c, phi, K,
     a1 = rz / tread
     JF_l = a0 * l - a1 * l**2 / 2
 
+    d2 = opts.shear_smoothing_m**2
+
     def field(s):
         i_y = a0 - a1 * s
         JF = a0 * s - a1 * s**2 / 2
-        jy = fwd * JF + (1 - fwd) * (JF_l - JF)
-        jx = i_x * (fwd * s + (1 - fwd) * (l - s))
-        jmag = ca.sqrt(jx**2 + jy**2 + opts.shear_smoothing_m**2)
+        # displacement of an element that entered at the front (moving forward) or at the rear
+        # (moving backward); the two stress magnitudes are blended by the direction of motion,
+        # so that at standstill (the tread still) both ends' elements are saturated alike
+        g_front = 1 - ca.exp(-ca.sqrt((i_x * s) ** 2 + JF**2 + d2) / K)
+        g_rear = 1 - ca.exp(-ca.sqrt((i_x * (l - s)) ** 2 + (JF_l - JF) ** 2 + d2) / K)
         if opts.shear_strength_pressure == "mean":
             tau_max = c + N / (b * l) * ca.tan(phi)
         else:
             tau_max = c + dist.at(s) * ca.tan(phi)
-        tau = tau_max * (1 - ca.exp(-jmag / K))
+        tau = tau_max * (fwd * g_front + (1 - fwd) * g_rear)
         ax = ca.sqrt(i_x**2 + opts.sliding_smoothing**2)  # regularised |i_x|
         norm = ca.sqrt(ax**2 + i_y**2)
-        fx = tau * traction_sign(j, opts) * ax / norm
+        sgn = traction_sign(j, opts)
+        fx = tau * sgn * ax / norm
         fy = -tau * i_y / norm
-        return b * fx, b * fy
+        # the same track without lateral sliding (the integrand of seed eq. (1))
+        g0 = fwd * (1 - ca.exp(-ca.sqrt((i_x * s) ** 2 + d2) / K)) \
+            + (1 - fwd) * (1 - ca.exp(-ca.sqrt((i_x * (l - s)) ** 2 + d2) / K))
+        return b * fx, b * fy, b * tau_max * g0 * sgn
 
     if not opts.lateral_split:
         nodes = [(sn * l, wn * l) for sn, wn in zip(*gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points),
@@ -174,11 +183,30 @@ def shear_forces(j, omega, abs_om, vy, rz, x_front, dist, N, b, l, r, c, phi, K,
                 nodes.append((hi - half * t, half * w))  # graded towards hi
     Fx, Fy, Mz = 0, 0, 0
     for s, w in nodes:
-        fx, fy = field(s)
-        Fx += w * fx
+        fx, fy, fx0 = field(s)
+        # with the mean pressure, the longitudinal force is eq. (1) in closed form plus the
+        # integral of what lateral sliding changes (zero in straight running: eq. (1) exactly,
+        # whatever the quadrature)
+        Fx += w * (fx - fx0 if opts.shear_strength_pressure == "mean" else fx)
         Fy += w * fy
         Mz += w * (x_front - s) * fy
+    if opts.shear_strength_pressure == "mean":
+        Fx += traction_shape(j, K, opts) * (b * l * c + N * ca.tan(phi))
     return Fx, Fy, Mz
+
+
+def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
+    """The largest lateral force the two tracks can carry on level ground (for trim's limit
+    checks): the soil's shear strength over both contacts, 2 b l c + W tan(phi), for the "shear"
+    law (mean pressure or not, the integral of c + p tan(phi) is the same); mu_t W for the "creep"
+    law (with lateral_shear_cap, the smaller of the two)."""
+    W = params["mass_kg"] * GRAVITY_M_S2
+    strength = 2 * params["track_width_m"] * params["contact_length_m"] * params["cohesion_Pa"] \
+        + W * np.tan(params["friction_angle_rad"])
+    if opts.lateral_law == "shear":
+        return float(strength)
+    friction = params["lateral_friction_coeff"] * W
+    return float(min(friction, strength)) if opts.lateral_shear_cap else float(friction)
 
 
 def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> dict:
