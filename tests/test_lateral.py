@@ -128,7 +128,9 @@ def test_pivot_split_matches_a_brute_force_1000_point_integral(pivot_m, state):
     strength = b * l * P["cohesion_Pa"] + N * math.tan(P["friction_angle_rad"])
     assert abs(ref[1]) > 1e-3 * strength  # the case does have lateral resistance
     err = np.abs(got - ref) / np.array([strength, strength, strength * l / 4])
-    assert err.max() < 2e-3, (err, got, ref)
+    # 4 graded points per half-piece (the default): over 300 random states the worst error was
+    # 0.2 % of the strength (forces) and 0.8 % of strength l / 4 (moment); 6 points: 0.1 / 0.2 %
+    assert err.max() < 1e-2, (err, got, ref)
     # the plain composite rule of the old creep law's size (4 x 3) is not that good where the
     # pivot is inside the contact: the split is what makes it independent of the quadrature
     if state == "near_free_rolling" and 0.3 <= pivot_m <= 2.2:
@@ -156,9 +158,10 @@ def test_local_pressure_option_is_the_exact_janosi_integral_over_the_linear_dist
     exact = b * ((c + A * tphi) * i0 + B * tphi * i1)
     local = _track_function(P, ModelOptions(shear_strength_pressure="local"))(slip * l / 2, 8.0, 0.0, 0.0, M, N)
     mean = _track_function(P, ModelOptions())(slip * l / 2, 8.0, 0.0, 0.0, M, N)
+    # tolerance: the quadrature along the track (7e-5 at 30 % slip, tests/test_vehicle.py)
     assert local[0] == pytest.approx(exact, rel=1e-4)
     eq1 = (b * l * c + N * tphi) * (1 - K / (slip * l) * (1 - math.exp(-slip * l / K)))
-    assert mean[0] == pytest.approx(eq1, rel=1e-9)
+    assert mean[0] == pytest.approx(eq1, rel=1e-4)
     assert mean[0] < local[0]
 
 

@@ -81,7 +81,7 @@ class ModelOptions:
     lateral_shear_cap: bool = False
     lateral_law: str = "shear"
     shear_strength_pressure: str = "mean"
-    shear_points: int = 6
+    shear_points: int = 4
     shear_grading: int = 2
     lateral_split: bool = True
     sliding_smoothing: float = 1e-5
