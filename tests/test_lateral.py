@@ -30,7 +30,8 @@ def _track_function(P, opts):
     x_front = l / 2 - P["cg_ahead_of_contact_centre_m"]
     dist = PressureDistribution(N, M, b, l)
     abs_om = ca.sqrt(om**2 + opts.omega_smoothing_rad_s**2)
-    out = shear_forces(j, om, abs_om, vy, rz, x_front, dist, N, b, l, r, P["cohesion_Pa"],
+    v_k = r * om * (1 - 2 * j / l)  # the track speed whose steady shear is j (seed eq. 2)
+    out = shear_forces(j, om, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, P["cohesion_Pa"],
                        P["friction_angle_rad"], P["shear_modulus_K_m"], opts)
     return lambda *a: np.array(ca.Function("f", [q], [ca.vertcat(*out)])(a)).ravel()
 
@@ -57,13 +58,18 @@ def _brute_force(P, j, om, vy, rz, M, N, n=1000, local=False):
 
 
 def test_pure_yaw_on_uniform_pressure_gives_wongs_moment_with_the_equivalent_mu():
-    """Wong: M_r = mu_t W l / 4 for pure yaw with the friction fully developed. The shear law's
-    fully developed stress is c + p tan(phi), so its equivalent mu_t = (2 b l c + W tan phi) / W."""
-    P = _params(cg_ahead_of_contact_centre_m=0.0)
+    """Wong: M_r = mu_t W l / 4 for pure yaw with the lateral friction fully developed and no
+    longitudinal sliding (the tracks counter-rotate with the hull: r omega = -/+ r_z B / 2). The
+    shear law's fully developed stress is c + p tan(phi), so its equivalent mu_t is
+    (2 b l c + W tan phi) / W; "fully developed" is the limit K -> 0 (here K = 0.1 mm)."""
+    P = _params(cg_ahead_of_contact_centre_m=0.0, shear_modulus_K_m=1e-4)
     model = SystemModel()
     p = model.param_vector(P)
     x = np.zeros(model.nx)
-    x[model.state_index("yaw_rate_rad_s")] = 0.5  # at rest otherwise: no compaction, uniform pressure
+    rz = 0.5
+    x[model.state_index("yaw_rate_rad_s")] = rz  # no sinkage: no compaction, uniform pressure
+    x[model.state_index("omega_left_rad_s")] = -rz * P["track_gauge_m"] / 2 / P["sprocket_radius_m"]
+    x[model.state_index("omega_right_rad_s")] = rz * P["track_gauge_m"] / 2 / P["sprocket_radius_m"]
     y = dict(zip(model.output_names, np.array(model.outputs(x, [0, 0], p)).ravel(), strict=True))
     W = P["mass_kg"] * GRAVITY_M_S2
     b, l = P["track_width_m"], P["contact_length_m"]

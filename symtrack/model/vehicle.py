@@ -109,18 +109,19 @@ def graded_nodes(n_points: int, grading: int):
     return [float(ti**grading) for ti in t], weights
 
 
-def shear_forces(j, omega, abs_om, vy, rz, x_front, dist, N, b, l, r, c, phi, K, opts: ModelOptions):
+def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, phi, K, opts: ModelOptions):
     """Tractive force, lateral force and yaw moment (about the CG) of one track from the soil's
     shear law (reconstruction after Wong & Chiang 2001; docs/turning.md).
 
     At a point s of the contact (s from the front, body x = x_front - s) the track slides over the
-    soil with, per unit of tread speed r|omega|, the longitudinal slip i_x = 2 j / l of seed eq. (2)
-    (its steady state is Wong's slip i) and the lateral slip i_y(s) = (v + r_z x(s)) / (r|omega|).
-    The shear displacement is accumulated from the end where the track element entered the contact
-    (the front when omega > 0): j_x(s) = i_x s, j_y(s) = integral of i_y from 0 to s. The shear
-    stress has the Mohr-Coulomb / Janosi magnitude (c + p tan phi)(1 - exp(-|j|/K)) and acts
-    against the local sliding velocity (i_x, i_y(s)) (combined slip: a track that slips
-    longitudinally resists less laterally, and the other way round).
+    soil with, per unit of tread speed r|omega|, the longitudinal slip (r omega - v_k)/(r|omega|)
+    and the lateral slip i_y(s) = (v + r_z x(s)) / (r|omega|). The shear displacement is accumulated
+    from the end where the track element entered the contact (the front when omega > 0):
+    longitudinally j_x(s) = i_x s with i_x = 2 j / l from the state of seed eq. (2) (its steady
+    state is Wong's j = i s), laterally j_y(s) = integral of i_y from 0 to s (quasi-static). The
+    shear stress has the Mohr-Coulomb / Janosi magnitude (c + p tan phi)(1 - exp(-|j|/K)) and acts
+    against the local sliding velocity (combined slip: a track that slips longitudinally resists
+    less laterally, and the other way round), with the longitudinal sign of eq. (1), sign(j).
 
     With no lateral sliding the longitudinal force is seed eq. (1) (mean-pressure strength, the
     default; to the quadrature's accuracy, 1e-5 at 30 % slip) or the exact Janosi integral over p(s)
@@ -140,7 +141,10 @@ def shear_forces(j, omega, abs_om, vy, rz, x_front, dist, N, b, l, r, c, phi, K,
     JF_l = a0 * l - a1 * l**2 / 2
 
     d2 = opts.shear_smoothing_m**2
-    ax = ca.sqrt(i_x**2 + opts.sliding_smoothing**2)  # regularised |i_x|
+    # the sliding direction from the track's sliding velocity now: longitudinal r omega - v_k,
+    # lateral v + r_z x (per unit tread speed), with the longitudinal sign of seed eq. (1), sign(j)
+    i_x_now = (r * omega - v_k) / tread
+    ax = ca.sqrt(i_x_now**2 + opts.sliding_smoothing**2)  # regularised |i_x|
     sgn_ax = traction_sign(j, opts) * ax
 
     def field(s):
@@ -258,7 +262,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> 
         Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
         if opts.lateral_law == "shear":
             F[k], Fy[k], Mz[k] = shear_forces(
-                shear[k], omega[k], abs_om[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts)
+                shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts)
         else:
             # Seed eq. (1): b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
             # integral of the shear strength over the contact, b l c + N tan phi, used here so that
