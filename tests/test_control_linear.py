@@ -147,10 +147,12 @@ def _nonlinear_response(model, tp, du, t_end, dt):
     return np.array(out)
 
 
+# the shear law (combined slip) is more nonlinear in a turn than the creep law was: perturbations
+# of 10 N m stay linear to 5 % over 3 s where 40 N m no longer does
 @pytest.mark.parametrize("du, names", [
-    ([40.0, 40.0], ("u_m_s", "omega_left_rad_s", "omega_right_rad_s", "shear_right_m", "yaw_rate_rad_s")),
+    ([10.0, 10.0], ("u_m_s", "omega_left_rad_s", "omega_right_rad_s", "shear_right_m", "yaw_rate_rad_s")),
     # a differential torque changes the speed only at second order: not compared
-    ([30.0, -30.0], ("yaw_rate_rad_s", "omega_left_rad_s", "omega_right_rad_s", "shear_right_m", "v_m_s")),
+    ([8.0, -8.0], ("yaw_rate_rad_s", "omega_left_rad_s", "omega_right_rad_s", "shear_right_m", "v_m_s")),
 ])
 def test_linear_matches_nonlinear_for_small_perturbations(model, turn, du, names):
     lin = L.linearize(model, turn)
@@ -201,7 +203,7 @@ def test_linearize_cli(tmp_path):
     assert "modes" in d and "controllability" in d
     s = L.load_npz(out / "linearization.npz")
     assert list(s.state_labels) == d["state_names"]
-    assert main(["linearize", "--speed", "2", "--radius", "20", "--soil", "clayey_soil_thailand_38",
+    assert main(["linearize", "--speed", "2", "--radius", "1", "--soil", "clayey_soil_thailand_38",
                  "--out", str(tmp_path / "x")]) == 2
 
 
