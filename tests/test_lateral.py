@@ -10,6 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from symtrack import validation
 from symtrack.control.trim import trim
 from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.vehicle import GRAVITY_M_S2, PressureDistribution, shear_forces
@@ -244,3 +245,20 @@ def test_the_reference_crawler_holds_a_10_m_turn(soil, speed):
     # centripetal balance: the tracks' lateral force carries m V^2 / R
     assert y["lateral_force_left_N"] + y["lateral_force_right_N"] == pytest.approx(
         P["mass_kg"] * tp.state("u_m_s") * tp.yaw_rate_rad_s, rel=1e-6)
+
+
+def test_examples_steady_turns_and_sensitivity_run(capsys):
+    """examples/steady_turns.py and examples/validation_sensitivity.py (short settings)."""
+    import runpy
+
+    ns = runpy.run_path("examples/steady_turns.py")
+    ns["main"](["--radii", "10", "--speeds", "2"])
+    out = capsys.readouterr().out
+    assert out.count("\n| clayey_soil_thailand_38 | 10 | 2 |") == 1 and "no steady turn" not in out
+    ns = runpy.run_path("examples/validation_sensitivity.py")
+    ns["main"](["--rows", 'model.lateral_law="creep"'])
+    out = capsys.readouterr().out.splitlines()
+    cells = [c.strip() for c in out[2].strip("|").split("|")]
+    assert cells[0] == 'model.lateral_law="creep"'
+    band = dict((k, rng) for k, _, rng in validation.REPORTED)["lateral_deviation_m"]
+    assert band[0] <= float(cells[1]) <= band[1]  # the creep law gives the seed's lateral deviation
