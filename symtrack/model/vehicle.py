@@ -124,7 +124,7 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     less laterally, and the other way round), with the longitudinal sign of eq. (1), sign(j).
 
     With no lateral sliding the longitudinal force is seed eq. (1) (mean-pressure strength, the
-    default; to the quadrature's accuracy, 1e-5 at 30 % slip) or the exact Janosi integral over p(s)
+    default; to the quadrature's accuracy, 7e-5 at 30 % slip) or the exact Janosi integral over p(s)
     (``shear_strength_pressure = "local"``).
 
     The integral is split where the integrand has its features (the pivot, where i_y changes sign;
