@@ -132,7 +132,8 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     halved and integrated by Gauss-Legendre graded towards its ends, so that its accuracy does not
     depend on where the pivot falls.
     """
-    tread = r * abs_om  # regularised |r omega| > 0
+    # regularised |r omega| > 0 (also in traction_sign = "sign" mode, where abs_om is exact)
+    tread = r * ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
     i_x = 2 * j / l
     fwd = 0.5 * (1 + ca.tanh(omega / opts.omega_smoothing_rad_s))  # 1: the contact is entered at the front
     # lateral slip i_y(s) = a0 - a1 s
