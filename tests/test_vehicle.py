@@ -64,8 +64,9 @@ def test_tanh_option_matches_smooth_away_from_zero(params):
 
 
 def test_turning_resistance_moment_pure_yaw_uniform_pressure(params):
-    """Wong: M_r = mu_t W l / 4 for pure yaw on a uniform pressure (saturated friction)."""
-    model = SystemModel()
+    """Wong: M_r = mu_t W l / 4 for pure yaw on a uniform pressure (saturated friction), for the
+    creep law (the shear law's own test is in tests/test_lateral.py)."""
+    model = SystemModel(ModelOptions(lateral_law="creep"))
     pr = dict(params, cg_ahead_of_contact_centre_m=0.0, lateral_creep_speed_m_s=1e-6)
     p = model.param_vector(pr)
     x = _state(model, yaw_rate_rad_s=0.5)  # at rest otherwise, no sinkage -> no compaction
@@ -156,7 +157,7 @@ def test_nose_up_under_traction(model, params):
 def test_lateral_shear_cap_limits_the_turning_resistance_to_the_soil_strength(params):
     """With the cap, pure yaw on uniform pressure meets M = (c + p tan phi) b l^2 / 4 per track
     where the soil is weaker than mu_t p (clayey soil: c + p tan phi < 0.55 p at 25 kPa)."""
-    model = SystemModel(ModelOptions(lateral_shear_cap=True))
+    model = SystemModel(ModelOptions(lateral_law="creep", lateral_shear_cap=True))
     pr = dict(params, cg_ahead_of_contact_centre_m=0.0, lateral_creep_speed_m_s=1e-6)
     p = model.param_vector(pr)
     x = _state(model, yaw_rate_rad_s=0.5)
@@ -168,10 +169,10 @@ def test_lateral_shear_cap_limits_the_turning_resistance_to_the_soil_strength(pa
     assert _out(model, x, p, "yaw_moment_N_m") == pytest.approx(-M, rel=1e-4)
 
 
-def test_with_the_cap_the_reference_crawler_turns_on_clay(params):
+def test_with_the_cap_the_creep_law_turns_on_clay(params):
     from symtrack.control.trim import TrimError, trim
 
     with pytest.raises(TrimError, match="traction limit"):
-        trim(SystemModel(), params, 2.0, 20.0)
-    tp = trim(SystemModel(ModelOptions(lateral_shear_cap=True)), params, 2.0, 20.0)
+        trim(SystemModel(ModelOptions(lateral_law="creep")), params, 2.0, 20.0)
+    tp = trim(SystemModel(ModelOptions(lateral_law="creep", lateral_shear_cap=True)), params, 2.0, 20.0)
     assert tp.u[0] < 0 < tp.u[1]  # a left turn: the inner (left) sprocket brakes

@@ -32,7 +32,7 @@ import numpy as np
 from ..foundations.errors import ParameterError, SymtrackError
 from ..model import SystemModel
 from ..model.static import static_state
-from ..model.vehicle import GRAVITY_M_S2, traction_shape
+from ..model.vehicle import GRAVITY_M_S2, lateral_resistance_max_N
 
 __all__ = ["POSITION_STATES", "SPECIFIED_STATES", "TrimError", "TrimPoint", "TrimSettings", "limit_usage", "trim"]
 
@@ -134,13 +134,21 @@ class _TrimProblem:
         self.assemble = ca.Function("trim_assemble", [w, spec], [x, u])
         self.rf = ca.rootfinder("trim", "newton", g, {"abstol": settings.abstol, "max_iter": settings.max_iter,
                                                       "error_on_fail": True})
+        # fallback: KINSOL's Newton with a line search, for the first curvature steps from straight
+        # running, where the combined-slip lateral law is strongly nonlinear at near-zero track slip
+        self.rf_safe = ca.rootfinder("trim_ls", "kinsol", g, {
+            "abstol": settings.abstol, "max_iter": settings.max_iter, "error_on_fail": True,
+            "strategy": "linesearch", "disable_internal_warnings": True})
 
     def solve(self, w0, speed, yaw_rate):
         spec = ca.DM([speed, yaw_rate])
         try:
             w = self.rf(w0, spec)
         except RuntimeError:
-            return None
+            try:
+                w = self.rf_safe(w0, spec)
+            except RuntimeError:
+                return None
         w = np.array(w).ravel()
         if not np.all(np.isfinite(w)):
             return None
@@ -163,23 +171,21 @@ def limit_usage(model: SystemModel, params: dict, x, u, p) -> dict:
     """How much of the soil's traction and lateral resistance a state uses (1 = all of it).
 
     traction_usage_{left,right}: |F_k| / F_max,k, with F_max,k = b l c + N_k tan(phi) the
-    fully-developed shear strength of the contact patch, read from the model output F_k and the
-    model's own traction shape (F_k = shape(j_k) F_max,k).
-    lateral_usage: |sum F_y| / (mu_t W), the lateral force used over the largest lateral
-    resistance the tracks can give.
+    fully-developed shear strength of the contact patch (N_k from the model's output).
+    lateral_usage: |sum F_y| over the largest lateral resistance the tracks can give
+    (:func:`symtrack.model.vehicle.lateral_resistance_max_N`: the soil's shear strength for the
+    "shear" law, mu_t W for the "creep" law).
     """
     y = _outputs(model, x, u, p)
     out = {}
     for k in ("left", "right"):
-        j = float(x[model.state_index(f"shear_{k}_m")])
-        shape = float(traction_shape(j, params["shear_modulus_K_m"], model.opts))
-        fmax = abs(y[f"tractive_{k}_N"] / shape) if abs(shape) > 1e-12 else float("nan")
+        fmax = params["track_width_m"] * params["contact_length_m"] * params["cohesion_Pa"] \
+            + y[f"normal_load_{k}_N"] * math.tan(params["friction_angle_rad"])
         out[f"tractive_{k}_N"] = y[f"tractive_{k}_N"]
         out[f"traction_max_{k}_N"] = fmax
-        out[f"traction_usage_{k}"] = abs(shape)
-    W = params["mass_kg"] * GRAVITY_M_S2
+        out[f"traction_usage_{k}"] = abs(y[f"tractive_{k}_N"]) / fmax
     out["lateral_force_N"] = y["lateral_force_left_N"] + y["lateral_force_right_N"]
-    out["lateral_resistance_max_N"] = params["lateral_friction_coeff"] * W
+    out["lateral_resistance_max_N"] = lateral_resistance_max_N(params, model.opts)
     out["lateral_usage"] = abs(out["lateral_force_N"]) / out["lateral_resistance_max_N"]
     return out
 
@@ -227,16 +233,15 @@ def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | N
         raise TrimError(f"no steady straight running found at speed_m_s = {speed_m_s:g} on this soil "
                         "(Newton did not converge from the rolling-resistance guess)")
     w, res = sol
-    W = params["mass_kg"] * GRAVITY_M_S2
     if radius_m is not None:
         # the centripetal force cannot exceed the lateral resistance (a necessary condition)
         need = params["mass_kg"] * speed_m_s**2 / abs(radius_m)
-        have = params["lateral_friction_coeff"] * W
+        have = lateral_resistance_max_N(params, model.opts)
         if need >= have:
             raise TrimError(
                 f"no steady turn at radius_m = {radius_m:g}, speed_m_s = {speed_m_s:g}: lateral resistance limit, "
                 f"the centripetal force m V^2/R = {need:.0f} N exceeds the largest lateral resistance "
-                f"mu_t m g = {have:.0f} N (the vehicle slides out); use a larger radius or a lower speed")
+                f"{have:.0f} N (the vehicle slides out); use a larger radius or a lower speed")
         target = speed_m_s / radius_m
         frac, step = 0.0, 1.0 / settings.continuation_steps
         last_x, last_u = problem.point(w, speed_m_s, 0.0)
@@ -276,6 +281,6 @@ def _limit_message(radius_m, speed_m_s, frac, usage) -> str:
                "(B/2)(F_outer - F_inner) cannot grow to overcome the soil's turning resistance")
     else:
         why = (f"lateral resistance limit: the tracks carry {100 * lat:.0f} % of the largest lateral "
-               f"resistance mu_t m g = {usage['lateral_resistance_max_N']:.0f} N")
+               f"resistance {usage['lateral_resistance_max_N']:.0f} N")
     return (f"no steady turn at radius_m = {radius_m:g}, speed_m_s = {speed_m_s:g} on this soil: {why}; "
             f"the tightest steady radius reached by continuation was {reached}")

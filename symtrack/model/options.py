@@ -7,6 +7,8 @@ from dataclasses import dataclass
 from ..foundations.errors import ParameterError
 
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
+LATERAL_LAWS = ("shear", "creep")
+SHEAR_STRENGTH_PRESSURES = ("mean", "local")
 
 
 @dataclass(frozen=True)
@@ -23,9 +25,40 @@ class ModelOptions:
         directions as in "smooth".
         "sign": the discontinuous sign() everywhere, kept to reproduce the seed's numerical
         oscillations (Coulomb-like chattering of the internal resistance at omega = 0).
-    lateral_segments, gauss_points: the lateral resistance is integrated along each track with
-        composite Gauss-Legendre quadrature (segments x points per segment).
-    lateral_shear_cap: when true, the lateral resistance per unit area, mu_t p, is capped at
+    lateral_law: how the tracks meet the soil (docs/turning.md).
+        "shear": the shear stress at each point of the contact from the soil's shear law,
+        Mohr-Coulomb strength c + p tan(phi) with Janosi-Hanamoto shear (modulus K), against the
+        local sliding velocity, longitudinal and lateral together (combined slip; after Wong &
+        Chiang 2001). The tractive force of each track is the longitudinal part of the same
+        integral (seed eq. (1) exactly when the track does not slide sideways).
+        "creep" (default): the reconstruction the validation is calibrated on: seed eq. (1) for the tractive
+        force and a lateral resistance -mu_t q tanh((v + r_z x)/eps_v) with the vehicle's
+        lateral_friction_coeff and lateral_creep_speed_m_s (a velocity creep, not a soil property).
+        The shear law is not the default: with it the validation's yaw and lateral deviation
+        leave their bands (14.6 deg, 2.25 m; docs/turning.md) and the NLP MPC stalls.
+    shear_strength_pressure: the pressure in the shear strength c + p tan(phi) of the "shear" law.
+        "mean" (default): the track's mean pressure N/(b l), as seed eq. (1) does; the tractive force
+        in straight running is then eq. (1) exactly. "local": the linear (or triangular) pressure
+        p(s): the exact Janosi integral over the pressure distribution (3-5 % more thrust than eq. (1)
+        on the validation clay when traction loads the rear; REVIEW.md defect 7).
+    shear_points, shear_grading: the "shear" law's integral along each track is split at the pivot
+        (where the lateral sliding velocity changes sign) and at the zero of the lateral shear
+        displacement, each of the three pieces halved, and each half integrated by shear_points
+        Gauss-Legendre points graded as t**shear_grading towards the half's outer end (where the
+        shear builds up from zero or the sliding direction turns).
+    lateral_split: false integrates the "shear" law with the plain composite rule
+        lateral_segments x gauss_points instead (the reference of the convergence tests).
+    sliding_smoothing: the sliding direction is (i_x, i_y)/sqrt(i_x^2 + i_y^2) with |i_x|
+        regularised as sqrt(i_x^2 + d^2), d this value (a slip ratio, dimensionless). It matters
+        only where both slips are below d: at 1e-5 and 2.6 m/s, within 0.1 mm of a turning track's
+        pivot; in straight running the tractive force is eq. (1) for every slip (sign form as
+        traction_sign says).
+    pivot_smoothing_rad_s: the pivot s = x_front + v/r_z is computed as x_front + v r_z/(r_z^2 + e^2),
+        e this yaw rate; it only places a split point (the integral does not depend on it).
+    lateral_segments, gauss_points: the "creep" law is integrated along each track with composite
+        Gauss-Legendre quadrature (segments x points per segment); the "shear" law too when
+        lateral_split is false.
+    lateral_shear_cap: ("creep" law only) when true, the lateral resistance per unit area, mu_t p, is capped at
         the soil's shear strength c + p tan(phi) (reconstruction, not in MODEL.md). Without the cap
         the reference crawler on clayey soil (Thailand, 38 %) meets a turning resistance larger
         than the soil lets its tracks push (mu_t W = 29.7 kN > b l c + W tan(phi) = 21.4 kN) and
@@ -48,20 +81,34 @@ class ModelOptions:
     gauss_points: int = 3
     accel_newton_iterations: int = 1
     lateral_shear_cap: bool = False
+    lateral_law: str = "creep"
+    shear_strength_pressure: str = "mean"
+    shear_points: int = 4
+    shear_grading: int = 2
+    lateral_split: bool = True
+    sliding_smoothing: float = 1e-5
+    pivot_smoothing_rad_s: float = 1e-5
 
     def __post_init__(self):
         if self.traction_sign not in TRACTION_SIGN_MODES:
             raise ParameterError(
                 f"model.traction_sign = {self.traction_sign!r} is not one of {', '.join(TRACTION_SIGN_MODES)}"
             )
+        for name, allowed in (("lateral_law", LATERAL_LAWS), ("shear_strength_pressure", SHEAR_STRENGTH_PRESSURES)):
+            v = getattr(self, name)
+            if v not in allowed:
+                raise ParameterError(f"model.{name} = {v!r} is not one of {', '.join(allowed)}")
         for name in ("tanh_steepness_per_m", "shear_smoothing_m", "omega_smoothing_rad_s",
-                     "motion_smoothing_m_s", "bekker_regularisation_m"):
+                     "motion_smoothing_m_s", "bekker_regularisation_m", "sliding_smoothing",
+                     "pivot_smoothing_rad_s"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and v > 0):
                 raise ParameterError(f"model.{name} = {v!r} must be a number > 0")
-        if not isinstance(self.lateral_shear_cap, bool):
-            raise ParameterError(f"model.lateral_shear_cap = {self.lateral_shear_cap!r} must be true or false")
-        for name, lo, hi in (("lateral_segments", 1, 64), ("gauss_points", 1, 16),
+        for name in ("lateral_shear_cap", "lateral_split"):
+            if not isinstance(getattr(self, name), bool):
+                raise ParameterError(f"model.{name} = {getattr(self, name)!r} must be true or false")
+        for name, lo, hi in (("lateral_segments", 1, 64), ("gauss_points", 1, 16), ("shear_points", 1, 16),
+                             ("shear_grading", 1, 4),
                              ("accel_newton_iterations", 0, 20)):
             v = getattr(self, name)
             if not (isinstance(v, int) and lo <= v <= hi):

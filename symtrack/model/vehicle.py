@@ -79,22 +79,128 @@ class PressureDistribution:
         return self.at(self.l)
 
 
+def traction_sign(j, opts: ModelOptions):
+    """sign(j) of seed eq. (1) in the chosen form (ModelOptions.traction_sign)."""
+    if opts.traction_sign == "smooth":
+        return j / ca.sqrt(j**2 + opts.shear_smoothing_m**2)
+    if opts.traction_sign == "tanh":
+        return ca.tanh(opts.tanh_steepness_per_m * j)
+    return ca.sign(j)
+
+
 def traction_shape(j, K, opts: ModelOptions):
     """sign(j) [1 + K/(2|j|) (exp(-2|j|/K) - 1)] of seed eq. (1), in the chosen form."""
     a = ca.sqrt(j**2 + opts.shear_smoothing_m**2)
     bracket = 1 + K / (2 * a) * (ca.exp(-2 * a / K) - 1)
-    if opts.traction_sign == "smooth":
-        sgn = j / a
-    elif opts.traction_sign == "tanh":
-        sgn = ca.tanh(opts.tanh_steepness_per_m * j)
-    else:
-        sgn = ca.sign(j)
-    return sgn * bracket
+    return traction_sign(j, opts) * bracket
 
 
 def direction(x, eps, opts: ModelOptions):
     """sign(x) of a resistance's direction: tanh(x/eps), or the exact sign() in "sign" mode."""
     return ca.sign(x) if opts.traction_sign == "sign" else ca.tanh(x / eps)
+
+
+def graded_nodes(n_points: int, grading: int):
+    """Gauss-Legendre nodes t in [0, 1] mapped by t -> t**grading, with the mapped weights: a rule
+    on [0, 1] whose nodes crowd towards 0, for integrands with a boundary layer there."""
+    xg, wg = np.polynomial.legendre.leggauss(n_points)
+    t = 0.5 * (xg + 1.0)
+    weights = [float(0.5 * wi * grading * ti ** (grading - 1)) for ti, wi in zip(t, wg, strict=True)]
+    return [float(ti**grading) for ti in t], weights
+
+
+def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, phi, K, opts: ModelOptions):
+    """Tractive force, lateral force and yaw moment (about the CG) of one track from the soil's
+    shear law (reconstruction after Wong & Chiang 2001; docs/turning.md).
+
+    At a point s of the contact (s from the front, body x = x_front - s) the track slides over the
+    soil with, per unit of tread speed r|omega|, the longitudinal slip (r omega - v_k)/(r|omega|)
+    and the lateral slip i_y(s) = (v + r_z x(s)) / (r|omega|). The shear displacement is accumulated
+    from the end where the track element entered the contact (the front when omega > 0):
+    longitudinally j_x(s) = i_x s with i_x = 2 j / l from the state of seed eq. (2) (its steady
+    state is Wong's j = i s), laterally j_y(s) = integral of i_y from 0 to s (quasi-static). The
+    shear stress has the Mohr-Coulomb / Janosi magnitude (c + p tan phi)(1 - exp(-|j|/K)) and acts
+    against the local sliding velocity (combined slip: a track that slips longitudinally resists
+    less laterally, and the other way round), with the longitudinal sign of eq. (1), sign(j).
+
+    With no lateral sliding the longitudinal force is seed eq. (1) (mean-pressure strength, the
+    default; to the quadrature's accuracy, 7e-5 at 30 % slip) or the exact Janosi integral over p(s)
+    (``shear_strength_pressure = "local"``).
+
+    The integral is split where the integrand has its features (the pivot, where i_y changes sign;
+    the point where j_y returns to zero; the ends, where the shear builds up from zero), each piece
+    halved and integrated by Gauss-Legendre graded towards its ends, so that its accuracy does not
+    depend on where the pivot falls.
+    """
+    # regularised |r omega| > 0 (also in traction_sign = "sign" mode, where abs_om is exact)
+    tread = r * ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
+    i_x = 2 * j / l
+    fwd = 0.5 * (1 + ca.tanh(omega / opts.omega_smoothing_rad_s))  # 1: the contact is entered at the front
+    # lateral slip i_y(s) = a0 - a1 s
+    a0 = (vy + rz * x_front) / tread
+    a1 = rz / tread
+    JF_l = a0 * l - a1 * l**2 / 2
+
+    d2 = opts.shear_smoothing_m**2
+    # the sliding direction from the track's sliding velocity now: longitudinal r omega - v_k,
+    # lateral v + r_z x (per unit tread speed), with the longitudinal sign of seed eq. (1), sign(j)
+    i_x_now = (r * omega - v_k) / tread
+    ax = ca.sqrt(i_x_now**2 + opts.sliding_smoothing**2)  # regularised |i_x|
+    sgn_ax = traction_sign(j, opts) * ax
+
+    def field(s):
+        i_y = a0 - a1 * s
+        JF = a0 * s - a1 * s**2 / 2
+        # |j| of an element that entered at the front (moving forward) or at the rear (moving
+        # backward), blended by the direction of motion (at standstill both are large: saturated)
+        j_front = ca.sqrt((i_x * s) ** 2 + JF**2 + d2)
+        j_rear = ca.sqrt((i_x * (l - s)) ** 2 + (JF_l - JF) ** 2 + d2)
+        if opts.shear_strength_pressure == "mean":
+            tau_max = c + N / (b * l) * ca.tan(phi)
+        else:
+            tau_max = c + dist.at(s) * ca.tan(phi)
+        tau = tau_max * (1 - ca.exp(-(fwd * j_front + (1 - fwd) * j_rear) / K))
+        norm = ca.sqrt(ax**2 + i_y**2)
+        return b * tau * sgn_ax / norm, -b * tau * i_y / norm
+
+    if not opts.lateral_split:
+        nodes = [(sn * l, wn * l) for sn, wn in zip(*gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points),
+                                                     strict=True)]
+    else:
+        # features inside the contact: the pivot (i_y = 0) and the zero of j_y
+        s_pivot = x_front + vy * rz / (rz**2 + opts.pivot_smoothing_rad_s**2)
+        s_zero = 2 * s_pivot - (1 - fwd) * l
+        clip = lambda z: ca.fmin(ca.fmax(z, 0), l)  # noqa: E731
+        s1 = clip(ca.fmin(s_pivot, s_zero))
+        s2 = clip(ca.fmax(s_pivot, s_zero))
+        tg, wg = graded_nodes(opts.shear_points, opts.shear_grading)
+        nodes = []
+        for lo, hi in ((0, s1), (s1, s2), (s2, l)):
+            half = 0.5 * (hi - lo)
+            for t, w in zip(tg, wg, strict=True):
+                nodes.append((lo + half * t, half * w))  # graded towards lo
+                nodes.append((hi - half * t, half * w))  # graded towards hi
+    Fx, Fy, Mz = 0, 0, 0
+    for s, w in nodes:
+        fx, fy = field(s)
+        Fx += w * fx
+        Fy += w * fy
+        Mz += w * (x_front - s) * fy
+    return Fx, Fy, Mz
+
+
+def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
+    """The largest lateral force the two tracks can carry on level ground (for trim's limit
+    checks): the soil's shear strength over both contacts, 2 b l c + W tan(phi), for the "shear"
+    law (mean pressure or not, the integral of c + p tan(phi) is the same); mu_t W for the "creep"
+    law (with lateral_shear_cap, the smaller of the two)."""
+    W = params["mass_kg"] * GRAVITY_M_S2
+    strength = 2 * params["track_width_m"] * params["contact_length_m"] * params["cohesion_Pa"] \
+        + W * np.tan(params["friction_angle_rad"])
+    if opts.lateral_law == "shear":
+        return float(strength)
+    friction = params["lateral_friction_coeff"] * W
+    return float(min(friction, strength)) if opts.lateral_shear_cap else float(friction)
 
 
 def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> dict:
@@ -147,31 +253,37 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> 
 
     F, R_in, Rc, Fy, Mz, jdot, omdot = {}, {}, {}, {}, {}, {}, {}
     s_nodes, w_nodes = gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points)
+    x_front = l / 2 - e  # body x of the front end of the contact (s = 0)
     for idx, k in enumerate(TRACKS):
-        # Seed eq. (1): b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
-        # integral of the shear strength over the contact, b l c + N tan phi, used here so that
-        # the triangular case is right too.
-        F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
         # Internal running-gear resistance (reconstruction; Wong): W_k (0.0222 + 0.0003 V[km/h]).
         V_kmh = 3.6 * r * abs_om[k]
         R_in[k] = N[k] * (P["internal_resistance_const"] + P["internal_resistance_per_km_h"] * V_kmh) \
             * direction(omega[k], opts.omega_smoothing_rad_s, opts)
         # Compaction resistance from the terrain, opposing the track's motion.
         Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
-        # Lateral resistance along the track (reconstruction), composite Gauss-Legendre.
-        fy_sum, mz_sum = 0, 0
-        for sn, wn in zip(s_nodes, w_nodes, strict=True):
-            s = sn * l
-            x_body = l / 2 - e - s
-            q = b * dist[k].at(s)
-            if opts.lateral_shear_cap:
-                # the lateral shear stress cannot exceed the soil's shear strength c + p tan(phi)
-                fy = -ca.fmin(mu * q, b * c + q * ca.tan(phi)) * ca.tanh((vy + rz * x_body) / eps_v)
-            else:
-                fy = -mu * q * ca.tanh((vy + rz * x_body) / eps_v)
-            fy_sum += wn * l * fy
-            mz_sum += wn * l * x_body * fy
-        Fy[k], Mz[k] = fy_sum, mz_sum
+        if opts.lateral_law == "shear":
+            F[k], Fy[k], Mz[k] = shear_forces(
+                shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts)
+        else:
+            # Seed eq. (1): b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
+            # integral of the shear strength over the contact, b l c + N tan phi, used here so that
+            # the triangular case is right too.
+            F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
+            # Lateral resistance along the track (reconstruction: the velocity-creep law),
+            # composite Gauss-Legendre.
+            fy_sum, mz_sum = 0, 0
+            for sn, wn in zip(s_nodes, w_nodes, strict=True):
+                s = sn * l
+                x_body = x_front - s
+                q = b * dist[k].at(s)
+                if opts.lateral_shear_cap:
+                    # the lateral shear stress cannot exceed the soil's shear strength c + p tan(phi)
+                    fy = -ca.fmin(mu * q, b * c + q * ca.tan(phi)) * ca.tanh((vy + rz * x_body) / eps_v)
+                else:
+                    fy = -mu * q * ca.tanh((vy + rz * x_body) / eps_v)
+                fy_sum += wn * l * fy
+                mz_sum += wn * l * x_body * fy
+            Fy[k], Mz[k] = fy_sum, mz_sum
         # Seed eq. (2): mean shear displacement.
         jdot[k] = -(2 * r / l) * abs_om[k] * shear[k] + r * omega[k] - v_track[k]
         omdot[k] = (torque[k] - r * (F[k] + R_in[k])) / J

@@ -1,0 +1,60 @@
+"""Steady turns of the reference crawler (docs/turning.md): trim points (symtrack.control.trim) at
+several radii and speeds on the validation clay and on sandy loam, printed as a markdown table.
+
+    python examples/steady_turns.py                     # the shear law (this example's default)
+    python examples/steady_turns.py --law creep         # the earlier velocity-creep law
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from symtrack.control.trim import TrimError, trim
+from symtrack.model import ModelOptions, SystemModel
+from symtrack.presets import soil_preset, vehicle_preset
+
+SOILS = ("clayey_soil_thailand_38", "sandy_loam_15")
+
+
+def rows(law: str, radii, speeds, soils=SOILS):
+    model = SystemModel(ModelOptions(lateral_law=law))
+    for soil in soils:
+        params = {**vehicle_preset("reference_crawler"), **soil_preset(soil)}
+        for radius in radii:
+            for speed in speeds:
+                try:
+                    tp = trim(model, params, speed, radius)
+                except TrimError as e:
+                    yield {"soil": soil, "radius_m": radius, "speed_m_s": speed, "error": str(e)}
+                    continue
+                y = tp.outputs
+                yield {"soil": soil, "radius_m": radius, "speed_m_s": speed,
+                       "torque_left_N_m": float(tp.u[0]), "torque_right_N_m": float(tp.u[1]),
+                       "slip_left": float(y["slip_left"]), "slip_right": float(y["slip_right"]),
+                       "v_m_s": tp.state("v_m_s"), "lateral_usage": tp.limits["lateral_usage"]}
+
+
+def table(law: str, radii, speeds) -> str:
+    lines = ["| soil | R [m] | V [m/s] | T_left (inner) [N m] | T_right (outer) [N m] | slip_left | slip_right "
+             "| v [m/s] | lateral usage |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows(law, radii, speeds):
+        head = f"| {r['soil']} | {r['radius_m']:g} | {r['speed_m_s']:g} |"
+        if "error" in r:
+            lines.append(head + " no steady turn | | | | | |")
+        else:
+            lines.append(head + f" {r['torque_left_N_m']:.0f} | {r['torque_right_N_m']:.0f} | {r['slip_left']:.4f} "
+                         f"| {r['slip_right']:.4f} | {r['v_m_s']:.4f} | {r['lateral_usage']:.3f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--law", choices=("shear", "creep"), default="shear")
+    ap.add_argument("--radii", type=float, nargs="+", default=[10.0, 15.0, 20.0, 50.0, 100.0])
+    ap.add_argument("--speeds", type=float, nargs="+", default=[1.0, 2.0, 3.0])
+    a = ap.parse_args(argv)
+    print(table(a.law, a.radii, a.speeds), end="")
+
+
+if __name__ == "__main__":
+    main()
