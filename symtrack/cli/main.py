@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import signal
 import sys
 import tomllib
 from pathlib import Path
@@ -147,9 +146,6 @@ def main(argv=None) -> int:
         return 2
     except KeyboardInterrupt:
         print("symtrack: interrupted (Ctrl-C); the results of this run were not written", file=sys.stderr)
-        # a second interrupt while exiting (or one re-raised by a library's own handler) must not
-        # turn the exit status 130 into death by signal
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
         return 130
     except BrokenPipeError:  # the output was piped into a reader that stopped (| head)
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (closed at exit)

@@ -129,6 +129,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                 try:
                     plant.synchronize([(t0, t1 - t0, u) for t0, t1, u in ivs])
                     X = plant.advance()
+                    raise_if_interrupted()  # a solver may have swallowed the interrupt and returned
                     hit = None
                     if own_stop:
                         k = len(X)
