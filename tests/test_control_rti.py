@@ -204,7 +204,8 @@ def test_ctrl_c_stops_symtrack_mpc(tmp_path):
     out = tmp_path / "o"
     env = dict(os.environ, PYTHONPATH=str(REPO))
     p = subprocess.Popen([sys.executable, "-m", "symtrack", "mpc", "straight_offset", "--out", str(out), "--quiet"],
-                         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # a terminal's default
     try:
         time.sleep(8.0)  # model, trim, NLP built; in the closed loop (the whole run takes far longer)
         assert p.poll() is None, p.communicate()[1][-2000:]

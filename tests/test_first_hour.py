@@ -177,7 +177,8 @@ def test_ctrl_c_stops_simulate_with_exit_130_and_writes_nothing(tmp_path):
     p = subprocess.Popen([sys.executable, "-m", "symtrack", "simulate", "validation", "--out", str(out),
                           "--set", "run.integrator=idas", "--set", "run.duration_s=600",
                           "--set", "run.stop_after_distance_m=none"],
-                         stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+                         stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # a terminal's default
     time.sleep(6.0)  # model built, the time loop running
     p.send_signal(signal.SIGINT)
     t0 = time.perf_counter()

@@ -299,7 +299,10 @@ def test_ctrl_c_cancels_the_runs_in_flight_and_keeps_the_finished_ones(tmp_path)
     masses = ",".join(str(5000 + 10 * k) for k in range(60))  # far more than finish before the interrupt
     cmd = [sys.executable, "-m", "symtrack", "sweep", "validation", "--vary", f"vehicle.mass_kg={masses}",
            "--out", str(out), "--workers", "1", "--quiet", *_sets(FAST)]
-    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # a terminal's default SIGINT disposition, whatever this test process has (an ignored SIGINT is
+    # inherited across exec, and in-process clusters of earlier tests may have changed ours)
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 180
         while not list((out / "runs").glob("*/summary.json")) and time.monotonic() < deadline:
