@@ -39,86 +39,16 @@ from __future__ import annotations
 
 import casadi as ca
 
+# NS: the channel sums S; NW: the 12 vehicle states + 2 algebraic (shared with the terrain engine)
+from .grid_engine_model import NS, NW, SumsTerrain, pressure_line
 from .rosenbrock import GAMMA, N_STAGES
 from .rosenbrock import A as RB_A
 from .rosenbrock import C as RB_C
 from .rosenbrock import M as RB_M
 
-__all__ = ["AggregateTerrain", "NA", "NS", "NW", "build"]
+__all__ = ["NA", "NS", "NW", "build"]
 
 NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_right)
-NS = 10  # S: compaction power (left, right), then per track and end: sum w z, then sum w
-NW = 14  # w = 12 vehicle states + 2 algebraic
-
-
-def _sum_names():
-    from symtrack.model.vehicle import ENDS, TRACKS
-
-    names = [f"sum_power_{k}" for k in TRACKS]
-    names += [f"sum_wz_{end}_{k}" for k in TRACKS for end in ENDS]
-    names += [f"sum_w_{end}_{k}" for k in TRACKS for end in ENDS]
-    return tuple(names)
-
-
-class AggregateTerrain:
-    """The grid terrain seen from the vehicle: the channel sums S as parameters (no states)."""
-
-    name = "channel_sums"
-
-    def __init__(self):
-        from symtrack.terrain.channels import GLOBAL_FIELDS
-
-        self.state_names = ()
-        self.sum_names = _sum_names()
-        self.param_names = GLOBAL_FIELDS + self.sum_names
-        self.dist = None  # the pressure distributions of the DAE form (first evaluation)
-
-    def _S(self, Q):
-        from symtrack.terrain.channels import NG
-
-        return {n: Q[NG + i] for i, n in enumerate(self.sum_names)}
-
-    def compaction(self, xv, xc, P, Q):
-        from symtrack.model.vehicle import TRACKS
-        from symtrack.terrain.channels import COMPACTION_SPEED_FLOOR_M_S
-
-        S = self._S(Q)
-        B = P["track_gauge_m"]
-        u, r = xv[3], xv[5]
-        v_track = {"left": u - r * B / 2, "right": u + r * B / 2}
-        area = Q[0] ** 2
-        return ca.vertcat(*(area * S[f"sum_power_{k}"] / ca.sqrt(v_track[k] ** 2 + COMPACTION_SPEED_FLOOR_M_S**2)
-                            for k in TRACKS))
-
-    def equations(self, xv, xc, dist, P, Q):
-        from symtrack.model.vehicle import ENDS, TRACKS
-
-        if self.dist is None:
-            self.dist = dist
-        S = self._S(Q)
-        signals = {}
-        for k in TRACKS:
-            for end in ENDS:
-                signals[f"sinkage_{end}_{k}_m"] = S[f"sum_wz_{end}_{k}"] / (S[f"sum_w_{end}_{k}"] + 1e-9)
-                signals[f"p_{end}_{k}_Pa"] = getattr(dist[k], end)
-        signals["compaction_power_W"] = Q[0] ** 2 * (S["sum_power_left"] + S["sum_power_right"])
-        return ca.SX(0, 1), signals
-
-
-def _pressure_line(dist):
-    """(alpha, beta) with the track's pressure p(s) = max(0, alpha + beta s) on the contact: the
-    linear distribution (non-negative there: |e| <= l/6) and both triangular ones of
-    :class:`~symtrack.model.vehicle.PressureDistribution` are of this form, so a channel needs two
-    numbers per track instead of three branches."""
-    b, l, N = dist.b, dist.l, dist.N
-    a_lin, b_lin = dist.p_mean + dist.slope * l / 2, -dist.slope
-    Af = 2 * N / (b * dist.Lc_front)
-    Ar = 2 * N / (b * dist.Lc_rear)
-    a_f, b_f = Af, -Af / dist.Lc_front
-    a_r, b_r = Ar * (1 - l / dist.Lc_rear), Ar / dist.Lc_rear
-    alpha = ca.if_else(dist.e_r > l / 6, a_f, ca.if_else(dist.e_r < -l / 6, a_r, a_lin))
-    beta = ca.if_else(dist.e_r > l / 6, b_f, ca.if_else(dist.e_r < -l / 6, b_r, b_lin))
-    return alpha, beta
 
 
 def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") -> dict[str, ca.Function]:
@@ -132,7 +62,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     from symtrack.model.vehicle import ENDS, TRACKS
     from symtrack.terrain.channels import NF, NG, build_cell_functions
 
-    agg = AggregateTerrain()
+    agg = SumsTerrain()
     veh = SystemModel(opts, agg)
     npv = len(PARAM_NAMES)
     xv, z, u, pv = veh.x, veh.z, veh.u, veh.p  # pv = (P, Q globals, S)
@@ -141,7 +71,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     Sv = pv[npv + NG:]
     D = []
     for k in TRACKS:
-        D += list(_pressure_line(agg.dist[k]))
+        D += list(pressure_line(agg.dist_dae[k]))
     a = ca.vertcat(xv[0], xv[1], ca.cos(xv[2]), ca.sin(xv[2]), *D)
     if ca.depends_on(a, Sv):
         raise RuntimeError("the pressure distributions depend on the channel sums: the Schur form does not hold")
