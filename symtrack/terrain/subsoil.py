@@ -144,6 +144,8 @@ class SubsoilTables:
     n_x: np.ndarray  # int32 (n_depths,)
     n_t: np.ndarray  # int32 (n_depths,)
     offset: np.ndarray  # int64 (n_depths,): start of each depth's table in data (in doubles)
+    inv_x_step: np.ndarray  # float64 (n_depths,): 1 / x_step_m (what C and _lookup multiply by)
+    inv_t_step: np.ndarray  # float64 (n_depths,)
     data: np.ndarray  # float64
     xi: float
     contact_length_m: float
@@ -158,7 +160,7 @@ class SubsoilTables:
     @property
     def nbytes(self) -> int:
         return int(sum(a.nbytes for a in (self.depth_m, self.x_step_m, self.t_step_m, self.n_x, self.n_t,
-                                          self.offset, self.data)))
+                                          self.offset, self.inv_x_step, self.inv_t_step, self.data)))
 
     def table(self, k: int) -> np.ndarray:
         """Depth k's table as an (n_x, n_t, 2) view."""
@@ -169,7 +171,8 @@ class SubsoilTables:
     def to_bytes(self) -> bytes:
         """Everything that defines the tables, as bytes (for a cache key or a file)."""
         head = np.array([self.xi, self.contact_length_m, self.track_width_m, self.track_gauge_m, self.reach_m])
-        parts = (head, self.depth_m, self.x_step_m, self.t_step_m, self.n_x, self.n_t, self.offset, self.data)
+        parts = (head, self.depth_m, self.x_step_m, self.t_step_m, self.n_x, self.n_t, self.offset, self.inv_x_step,
+                 self.inv_t_step, self.data)
         return b"".join(np.ascontiguousarray(p).tobytes() for p in parts)
 
     def key(self) -> str:
@@ -182,15 +185,15 @@ class SubsoilTables:
         import ctypes
 
         class _T(ctypes.Structure):
-            _fields_ = [("n_depths", ctypes.c_int), ("x_step_m", ctypes.POINTER(ctypes.c_double)),
-                        ("t_step_m", ctypes.POINTER(ctypes.c_double)), ("n_x", ctypes.POINTER(ctypes.c_int)),
+            _fields_ = [("n_depths", ctypes.c_int), ("inv_x_step", ctypes.POINTER(ctypes.c_double)),
+                        ("inv_t_step", ctypes.POINTER(ctypes.c_double)), ("n_x", ctypes.POINTER(ctypes.c_int)),
                         ("n_t", ctypes.POINTER(ctypes.c_int)), ("offset", ctypes.POINTER(ctypes.c_longlong)),
                         ("data", ctypes.POINTER(ctypes.c_double))]
 
         def ptr(a, ct):
             return a.ctypes.data_as(ctypes.POINTER(ct))
 
-        return _T(self.n_depths, ptr(self.x_step_m, ctypes.c_double), ptr(self.t_step_m, ctypes.c_double),
+        return _T(self.n_depths, ptr(self.inv_x_step, ctypes.c_double), ptr(self.inv_t_step, ctypes.c_double),
                   ptr(self.n_x, ctypes.c_int), ptr(self.n_t, ctypes.c_int), ptr(self.offset, ctypes.c_longlong),
                   ptr(self.data, ctypes.c_double))
 
@@ -260,7 +263,9 @@ def build_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_
         offs.append(off)
         blocks.append(H.ravel())
         off += H.size
-    return SubsoilTables(depth_m=d_all.copy(), x_step_m=np.array(steps_x), t_step_m=np.array(steps_t),
+    steps_x, steps_t = np.array(steps_x), np.array(steps_t)
+    return SubsoilTables(depth_m=d_all.copy(), x_step_m=steps_x, t_step_m=steps_t, inv_x_step=1.0 / steps_x,
+                         inv_t_step=1.0 / steps_t,
                          n_x=np.array(nxs, dtype=np.int32), n_t=np.array(nts, dtype=np.int32),
                          offset=np.array(offs, dtype=np.int64), data=np.concatenate(blocks), xi=xi,
                          contact_length_m=l_m, track_width_m=b_m, track_gauge_m=B_m, reach_m=reach)
@@ -271,8 +276,8 @@ def _lookup(T: SubsoilTables, k: int, x, t):
     the grid saturates, |t| past it gives 0. The same operations, in the same order, as subsoil.h."""
     n_x, n_t = int(T.n_x[k]), int(T.n_t[k])
     tab = T.table(k)
-    ux = np.minimum(np.abs(x) * (1.0 / T.x_step_m[k]), float(n_x - 1))
-    ut = np.abs(t) * (1.0 / T.t_step_m[k])
+    ux = np.minimum(np.abs(x) * T.inv_x_step[k], float(n_x - 1))
+    ut = np.abs(t) * T.inv_t_step[k]
     inside = ut < n_t - 1
     ut = np.where(inside, ut, 0.0)
     i = np.minimum(ux.astype(np.int64), n_x - 2)

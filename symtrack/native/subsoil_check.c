@@ -1,0 +1,23 @@
+/* Test and benchmark wrapper of subsoil.h (tests/test_subsoil.py): subsoil_stress over many points. */
+#include <math.h>
+#include <time.h>
+
+#include "subsoil.h"
+
+#define EXPORT __attribute__((visibility("default")))
+
+/* sigma[n * n_depths + k] for the points (px[n], py[n]), n < n_points */
+EXPORT void subsoil_stress_many(const subsoil_tables_t *T, const double *a, const double *geo, const double *px,
+                                const double *py, long long n_points, double *sigma) {
+  for (long long n = 0; n < n_points; ++n) subsoil_stress(T, a, geo, px[n], py[n], sigma + n * T->n_depths);
+}
+
+/* repeats x subsoil_stress_many; returns the wall time in ns (the benchmark) */
+EXPORT long long subsoil_stress_bench(const subsoil_tables_t *T, const double *a, const double *geo, const double *px,
+                                      const double *py, long long n_points, double *sigma, long long repeats) {
+  struct timespec t0, t1;
+  clock_gettime(CLOCK_MONOTONIC, &t0);
+  for (long long r = 0; r < repeats; ++r) subsoil_stress_many(T, a, geo, px, py, n_points, sigma);
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  return (long long)(t1.tv_sec - t0.tv_sec) * 1000000000LL + (t1.tv_nsec - t0.tv_nsec);
+}
