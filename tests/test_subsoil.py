@@ -1,0 +1,215 @@
+"""Subsoil stress and compaction risk (symtrack/terrain/subsoil.py, symtrack/native/subsoil.h),
+each against an independent truth: closed forms (uniform circle, Boussinesq/Newmark rectangle),
+a brute-force integration of the point-load formula, a refined table, and numpy for the C."""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symtrack.foundations.errors import ParameterError
+from symtrack.native import cache
+from symtrack.terrain import subsoil as S
+
+GEO = (2.4, 0.45, 1.5, 0.1, 0.1, 0.2)  # l, b, B, e (CG 0.1 m ahead of the contact centre), cell, end strip
+DEPTHS = S.DEFAULT_DEPTHS_M
+# pressure lines (alpha, beta) of the left and right tracks [Pa, Pa/m]
+LINEAR = (30e3, -5e3, 22e3, 4e3)
+TRIANGULAR = (2 * 50e3 / 1.8, -2 * 50e3 / 1.8**2, 0.0, 2 * 40e3 / 2.4**2)  # front: zero from s = 1.8; rear: from 0
+NATIVE = Path(S.__file__).resolve().parents[1] / "native"
+
+
+def _a(X, Y, psi, line):
+    return np.array([X, Y, math.cos(psi), math.sin(psi), *line])
+
+
+def _world(a, bx, by):
+    """World points of body coordinates (bx, by) at the pose of a."""
+    c, s = a[2], a[3]
+    return a[0] + c * np.asarray(bx) - s * np.asarray(by), a[1] + s * np.asarray(bx) + c * np.asarray(by)
+
+
+@pytest.fixture(scope="module")
+def tables5():
+    return S.build_tables(DEPTHS, 5.0, GEO[0], GEO[1], GEO[2])
+
+
+# (a) ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("xi", [3.0, 4.0, 5.0, 6.0])
+def test_uniform_circle_centre_closed_form(xi):
+    """Point loads over a uniform disc (radius a, pressure p) integrated numerically give, at the
+    centre, p (1 - cos^xi(alpha)), tan(alpha) = a / z: integral of xi p z^xi r / (r^2 + z^2)^((xi+2)/2)."""
+    p, a_m = 100e3, 0.3
+    nodes, weights = np.polynomial.legendre.leggauss(8)
+    for z in (0.05, 0.3, 1.0):
+        n = 200
+        h = a_m / n
+        r = (h * np.arange(n)[:, None] + 0.5 * h * (1 + nodes)).ravel()
+        w = np.tile(0.5 * h * weights, n)
+        sigma = float(np.sum(S.frohlich_point(p * 2 * np.pi * r * w, r, z, xi)))
+        exact = p * (1 - (z / math.hypot(a_m, z)) ** xi)
+        assert sigma == pytest.approx(exact, rel=1e-9)
+
+
+# (b) ---------------------------------------------------------------------------------------------
+def _newmark_corner(q, m, n):
+    """Boussinesq vertical stress below the corner of a uniform m z x n z rectangle (Newmark)."""
+    s2 = m * m + n * n + 1
+    root = math.sqrt(s2)
+    return q / (4 * math.pi) * (2 * m * n * root / (s2 + m * m * n * n) * (s2 + 1) / s2
+                                + math.atan2(2 * m * n * root, s2 - m * m * n * n))
+
+
+def test_rectangle_centre_boussinesq():
+    """xi = 3, the left track loaded uniformly: the stress below its centre is 4 Newmark corners."""
+    l_m, b_m = GEO[0], GEO[1]
+    q = 40e3
+    T = S.build_tables(DEPTHS, 3.0, l_m, b_m, GEO[2])
+    a = _a(3.0, -1.0, 0.7, (q, 0.0, 0.0, 0.0))
+    px, py = _world(a, -GEO[3], GEO[2] / 2)  # the track centre: body (-e, +B/2)
+    table = S.stress_at(T, px, py, a, GEO)[0]
+    for k, z in enumerate(DEPTHS):
+        exact = 4 * _newmark_corner(q, b_m / 2 / z, l_m / 2 / z)
+        assert S.stress_bruteforce(px, py, a, GEO, z, 3.0)[0] == pytest.approx(exact, rel=1e-6)
+        assert table[k] == pytest.approx(exact, rel=5e-3)
+
+
+# (c) ---------------------------------------------------------------------------------------------
+# body coordinates: under the left track (centre, near the front end, near the rear end), under the
+# right track, between the tracks, beyond the front and the rear end, outside the right track
+POINTS_BODY = np.array([(-0.1, 0.75), (1.05, 0.70), (-1.25, 0.80), (0.2, -0.75), (0.0, 0.0),
+                        (1.35, 0.75), (-1.5, -0.75), (0.4, -1.15), (-0.6, 0.55)])
+
+
+@pytest.mark.parametrize("line", [LINEAR, TRIANGULAR], ids=["linear", "triangular"])
+def test_tables_against_bruteforce(tables5, line):
+    a = _a(-2.0, 5.0, -0.4, line)
+    px, py = _world(a, *POINTS_BODY.T)
+    sigma = S.stress_at(tables5, px, py, a, GEO)
+    for k, z in enumerate(DEPTHS):
+        ref = S.stress_bruteforce(px, py, a, GEO, z, 5.0)
+        assert np.max(np.abs(sigma[:, k] - ref)) < 0.01 * ref.max(), (z, sigma[:, k], ref)
+        # the other track and the ends are covered: under the right track, the stress is mostly its own
+        assert ref[3] > 0
+
+
+# (d) ---------------------------------------------------------------------------------------------
+def test_halving_the_table_step_changes_little(tables5):
+    fine = S.build_tables(DEPTHS, 5.0, GEO[0], GEO[1], GEO[2], x_step_per_depth=S.DEFAULT_X_STEP_PER_DEPTH / 2,
+                          t_step_per_depth=S.DEFAULT_T_STEP_PER_DEPTH / 2)
+    rng = np.random.default_rng(7)
+    bx, by = rng.uniform(-1.7, 1.7, 3000), rng.uniform(-1.45, 1.45, 3000)
+    for line in (LINEAR, TRIANGULAR):
+        a = _a(0.5, 0.5, 1.1, line)
+        px, py = _world(a, bx, by)
+        coarse, ref = S.stress_at(tables5, px, py, a, GEO), S.stress_at(fine, px, py, a, GEO)
+        change = np.max(np.abs(coarse - ref), axis=0) / np.max(ref, axis=0)
+        assert np.all(change < 0.005), change
+
+
+# (f) ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def clib():
+    cc = cache.find_compiler()
+    if cc is None:
+        pytest.skip("no C compiler")
+    sources = {n: (NATIVE / n).read_bytes() for n in ("subsoil.h", "subsoil_check.c")}
+    h = hashlib.sha256(b"".join(sources[n] for n in sorted(sources))).hexdigest()[:16]
+    so = cache.cache_root() / f"subsoil_check-{h}-b{cache.BUILD_VERSION}" / "libsubsoil_check.so"
+    if not so.exists():
+        cache.compile_sources(sources, so, cc)
+    lib = ctypes.CDLL(str(so))
+    lib.subsoil_stress_bench.restype = ctypes.c_longlong
+    return lib
+
+
+def _dp(x):
+    return np.ascontiguousarray(x, dtype=float).ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+def test_c_equals_numpy(clib, tables5):
+    rng = np.random.default_rng(3)
+    st = tables5.c_struct()
+    geo = np.array(GEO)
+    for line in (LINEAR, TRIANGULAR, (25e3, 0.0, -1.0, 0.0)):
+        a = _a(10.0, -3.0, 2.5, line)
+        bx, by = rng.uniform(-4.5, 4.5, 4000), rng.uniform(-3.0, 3.0, 4000)  # also past the tables' ends
+        px, py = _world(a, bx, by)
+        out = np.zeros((px.size, tables5.n_depths))
+        clib.subsoil_stress_many(ctypes.byref(st), _dp(a), _dp(geo), _dp(px), _dp(py), ctypes.c_longlong(px.size),
+                                 out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        ref = S.stress_at(tables5, px, py, a, GEO)
+        np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
+def test_c_cost(clib, tables5):
+    """Measures (prints) the C cost per point and depth on the engine's ~250 loaded cells."""
+    st = tables5.c_struct()
+    geo = np.array(GEO)
+    a = _a(1.0, 2.0, 0.3, LINEAR)
+    rng = np.random.default_rng(0)
+    px, py = _world(a, rng.uniform(-1.3, 1.3, 250), rng.uniform(-1.0, 1.0, 250))
+    out = np.zeros((250, tables5.n_depths))
+    reps = 4000
+    ns = clib.subsoil_stress_bench(ctypes.byref(st), _dp(a), _dp(geo), _dp(px), _dp(py), ctypes.c_longlong(250),
+                                   out.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), ctypes.c_longlong(reps))
+    per = ns / reps / 250 / tables5.n_depths
+    print(f"\nsubsoil_stress: {per:.1f} ns per point and depth ({ns / reps / 1e3:.1f} us per 250 points x "
+          f"{tables5.n_depths} depths); tables {tables5.nbytes / 1024:.0f} KiB")
+    assert per > 0
+
+
+# (g) ---------------------------------------------------------------------------------------------
+def test_risk_classes_at_the_thresholds():
+    pc = 100.0
+    sigma = np.array([0.0, 49.999, 50.0, 80.0, 110.0, 110.001, 500.0])
+    assert S.risk_class(sigma, pc).tolist() == [0, 0, 1, 1, 1, 2, 2]
+    assert S.risk_class(sigma, pc).dtype == np.int8
+
+
+def test_risk_area_fractions():
+    # 5 cells, 2 depths; cell 4 untouched; strength 100 at depth 0, 50 at depth 1
+    sm = np.array([[10.0, 10.0], [60.0, 30.0], [120.0, 60.0], [200.0, 100.0], [900.0, 900.0]])
+    touched = np.array([True, True, True, True, False])
+    out = S.risk_area_fractions(sm, np.array([100.0, 50.0]), touched, 0.01)
+    assert out["touched_area_m2"] == pytest.approx(0.04)
+    # depth 0: ratios 0.1, 0.6, 1.2, 2.0 -> 1 low, 1 medium, 2 high; depth 1: 0.2, 0.6, 1.2, 2.0 -> same
+    np.testing.assert_allclose(out["fraction_low"], [0.25, 0.25])
+    np.testing.assert_allclose(out["fraction_medium"], [0.25, 0.25])
+    np.testing.assert_allclose(out["fraction_high"], [0.5, 0.5])
+    np.testing.assert_allclose(out["area_high_m2"], [0.02, 0.02])
+
+
+def test_precompression_ptf():
+    """Schjønning & Lamandé (2018) as cited in docs/subsoil.md (no value printed in a source we
+    could read to test against): the formula's own structure, the floor at 0 and the range checks."""
+    c = S.PTF_SL2018
+    rho, h, clay = 1.46, 100.0, 0.3
+    root = c["c0"] + c["c_rho"] * rho + c["c_clay"] * clay + c["c_clay_pF"] * clay * 2.0
+    assert float(S.precompression_stress_kPa(rho, h, clay)) == pytest.approx(root**2, rel=1e-12)
+    # stronger when denser, and when drier for a clay soil (pF > 2 here: 10.26 pF > 20.40)
+    assert S.precompression_stress_kPa(1.6, h, clay) > S.precompression_stress_kPa(1.4, h, clay)
+    assert S.precompression_stress_kPa(rho, 300.0, clay) > S.precompression_stress_kPa(rho, 100.0, clay)
+    assert float(S.precompression_stress_kPa(0.9, 10.0, 0.5)) == 0.0  # the bracket is negative: floored
+    with pytest.raises(ParameterError, match="clay_kg_kg"):
+        S.precompression_stress_kPa(1.4, 100.0, 30.0)  # 30 %, not a fraction
+    with pytest.raises(ParameterError, match="matric_suction_hPa"):
+        S.precompression_stress_kPa(1.4, 0.0, 0.2)
+
+
+def test_update_max_and_errors(tables5):
+    sm = np.zeros((4, 2))
+    S.update_max(sm, [1, 1, 3], np.array([[1.0, 5.0], [3.0, 2.0], [7.0, 0.5]]))
+    assert sm.tolist() == [[0, 0], [3.0, 5.0], [0, 0], [7.0, 0.5]]
+    with pytest.raises(ParameterError, match="depth_m"):
+        S.build_tables([0.3, 0.0])
+    with pytest.raises(ParameterError, match=r"xi .*\[1.0, 10.0\]"):
+        S.build_tables(xi=12.0)
+    with pytest.raises(ParameterError, match="geo l"):
+        S.stress_at(tables5, [0.0], [0.0], _a(0, 0, 0, LINEAR), (2.0, 0.45, 1.5, 0.0, 0.1, 0.2))
+    assert len(tables5.key()) == 64 and tables5.key() == S.build_tables(DEPTHS, 5.0, *GEO[:3]).key()
