@@ -213,3 +213,20 @@ def test_update_max_and_errors(tables5):
     with pytest.raises(ParameterError, match="geo l"):
         S.stress_at(tables5, [0.0], [0.0], _a(0, 0, 0, LINEAR), (2.0, 0.45, 1.5, 0.0, 0.1, 0.2))
     assert len(tables5.key()) == 64 and tables5.key() == S.build_tables(DEPTHS, 5.0, *GEO[:3]).key()
+
+
+def test_plots_are_pngs_of_the_arrays(tables5):
+    from symtrack.reports import subsoil_plots as P
+
+    a = _a(2.0, 0.0, 0.0, LINEAR)
+    xs, ys = np.arange(0.05, 4.0, 0.1), np.arange(-1.45, 1.5, 0.1)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    sm = S.stress_at(tables5, gx.ravel(), gy.ravel(), a, GEO)
+    touched = (sm[:, 0] > 1e3).reshape(gx.shape)
+    risk = S.risk_class(sm, 25e3).reshape(*gx.shape, len(DEPTHS))
+    pngs = [P.risk_map_png(risk, touched, DEPTHS, (0.0, 4.0, -1.5, 1.5)),
+            P.stress_profile_png(DEPTHS, sm.max(axis=0) / 1e3, [25.0, 30.0, 30.0, 35.0]),
+            P.passes_subsoil_png([1.0, 1.4], np.vstack([sm.max(axis=0), sm.max(axis=0)]) / 1e3, DEPTHS)]
+    assert all(p.startswith(b"\x89PNG") for p in pngs)
+    with pytest.raises(ValueError, match="risk has shape"):
+        P.risk_map_png(risk[:, :, :2], touched, DEPTHS, (0.0, 4.0, -1.5, 1.5))
