@@ -26,8 +26,8 @@ The tables: strips summed at build time
 ---------------------------------------
 Cut the track into strips of length ds' along s: the stress at a point is
 sum_i p_k(s_i) T(s_k - s_i, t_k) with T the stress below a unit-pressure strip (ds' x b). With
-2 n_s bilinear lookups per point and depth that costs about 40 n_s ns; at the engine's cell size
-(n_s = 24 on the reference crawler) ~10 times the budget. Because p_k is linear on the loaded
+2 n_s bilinear lookups per point and depth (~8 ns each, measured) that costs ~16 n_s ns; at the
+engine's cell size (n_s = 24 on the reference crawler) ~10 times the 40 ns budget. Because p_k is linear on the loaded
 part [s_a, s_b] of the track, the sum over strips can be done once, at build time, in the limit
 ds' -> 0 (the prefix sums of the strip table): with K(u, t) the stress below a strip of unit
 pressure, infinitesimal length du and width b (the Fröhlich kernel integrated across the width),
