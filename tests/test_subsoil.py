@@ -230,3 +230,32 @@ def test_plots_are_pngs_of_the_arrays(tables5):
     assert all(p.startswith(b"\x89PNG") for p in pngs)
     with pytest.raises(ValueError, match="risk has shape"):
         P.risk_map_png(risk[:, :, :2], touched, DEPTHS, (0.0, 4.0, -1.5, 1.5))
+
+
+def test_track_frame_is_the_channels_frame():
+    """The cells' load geometry of symtrack.terrain.channels (an independent implementation of the
+    same frame): its overlap fractions follow from track_frame's (s, t) with the same clamped overlaps."""
+    import casadi as ca
+
+    from symtrack.model.options import ModelOptions
+    from symtrack.terrain.channels import build_cell_functions
+
+    geometry = build_cell_functions(ModelOptions())["geometry"]
+
+    def overlap(c, h, lo, hi):
+        return np.clip(np.minimum(hi, c + h) - np.maximum(lo, c - h), 0, 2 * h) / (2 * h)
+
+    rng = np.random.default_rng(5)
+    l_m, b_m, _, _, dx, _ = GEO
+    loaded = 0
+    for _ in range(40):
+        X, Y, psi = rng.uniform(-3, 3), rng.uniform(-3, 3), rng.uniform(-np.pi, np.pi)
+        a = _a(X, Y, psi, LINEAR)
+        px, py = _world(a, rng.uniform(-1.6, 1.6, 1), rng.uniform(-1.2, 1.2, 1))
+        g = np.array(geometry(ca.DM([px[0], py[0], 0.0, 0.0, 1.0]), ca.DM([X, Y, psi]), ca.DM(GEO))).ravel()
+        s, tl, tr = S.track_frame(px, py, a, GEO)
+        for frac, t in ((g[0], tl[0]), (g[1], tr[0])):
+            mine = overlap(s[0], dx / 2, 0, l_m) * overlap(t, dx / 2, -b_m / 2, b_m / 2)
+            assert mine == pytest.approx(frac, abs=1e-12)
+            loaded += frac > 0
+    assert loaded >= 5  # the check saw cells under the tracks, not only empty ground

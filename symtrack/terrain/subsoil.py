@@ -73,7 +73,7 @@ from ..foundations.errors import ParameterError
 
 __all__ = ["DEFAULT_DEPTHS_M", "DEFAULT_REACH_M", "RISK_HIGH_ABOVE", "RISK_LOW_BELOW", "RISK_NAMES",
            "SubsoilTables", "XI_RANGE", "build_tables", "frohlich_point", "precompression_stress_kPa",
-           "risk_area_fractions", "risk_class", "stress_at", "stress_bruteforce", "update_max"]
+           "risk_area_fractions", "risk_class", "stress_at", "stress_bruteforce", "track_frame", "update_max"]
 
 DEFAULT_DEPTHS_M = (0.1, 0.3, 0.5, 0.8)
 DEFAULT_REACH_M = 0.5
@@ -312,10 +312,9 @@ def _active(alpha, beta, l_m):
     return (sa, sb) if sb > sa else None
 
 
-def stress_at(T: SubsoilTables, px, py, a, geo) -> np.ndarray:
-    """Vertical stress [Pa], shape (n_points, n_depths), at the world points (px, py) at the
-    tables' depths, from both tracks with the engine's a[8] and geo[6] (module doc)."""
-    _check_geo(T, geo)
+def track_frame(px, py, a, geo):
+    """(s, t_left, t_right) of world points: s behind the tracks' front end, t across each track
+    from its centre line (module doc; the frame of channels.build_cell_functions)."""
     px = np.atleast_1d(np.asarray(px, dtype=float))
     py = np.atleast_1d(np.asarray(py, dtype=float))
     X, Y, c, s = (float(v) for v in a[:4])
@@ -323,13 +322,21 @@ def stress_at(T: SubsoilTables, px, py, a, geo) -> np.ndarray:
     ddx, ddy = px - X, py - Y
     xb = c * ddx + s * ddy
     yb = -s * ddx + c * ddy
-    s_pt = (l_m / 2 - e_m) - xb
-    out = np.zeros((px.size, T.n_depths))
-    for side, (alpha, beta) in zip(_SIDE, ((float(a[4]), float(a[5])), (float(a[6]), float(a[7]))), strict=True):
+    return (l_m / 2 - e_m) - xb, yb - _SIDE[0] * B_m / 2, yb - _SIDE[1] * B_m / 2
+
+
+def stress_at(T: SubsoilTables, px, py, a, geo) -> np.ndarray:
+    """Vertical stress [Pa], shape (n_points, n_depths), at the world points (px, py) at the
+    tables' depths, from both tracks with the engine's a[8] and geo[6] (module doc)."""
+    _check_geo(T, geo)
+    l_m = float(geo[0])
+    s_pt, t_left, t_right = track_frame(px, py, a, geo)
+    out = np.zeros((s_pt.size, T.n_depths))
+    for t, (alpha, beta) in zip((t_left, t_right), ((float(a[4]), float(a[5])), (float(a[6]), float(a[7]))),
+                                strict=True):
         act = _active(alpha, beta, l_m)
         if act is None:
             continue
-        t = yb - side * B_m / 2
         p_lin = alpha + beta * s_pt
         xa, xe = s_pt - act[0], s_pt - act[1]
         for k in range(T.n_depths):
