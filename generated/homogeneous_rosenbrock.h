@@ -70,7 +70,7 @@ int homogeneous_rosenbrock_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* s
 #define homogeneous_rosenbrock_chunk256_SZ_ARG 30
 #define homogeneous_rosenbrock_chunk256_SZ_RES 17
 #define homogeneous_rosenbrock_chunk256_SZ_IW 0
-#define homogeneous_rosenbrock_chunk256_SZ_W 34397
+#define homogeneous_rosenbrock_chunk256_SZ_W 34400
 int homogeneous_rosenbrock_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_chunk16_checkout(void);
 void homogeneous_rosenbrock_chunk16_release(int mem);
@@ -88,7 +88,7 @@ int homogeneous_rosenbrock_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz
 #define homogeneous_rosenbrock_chunk16_SZ_ARG 25
 #define homogeneous_rosenbrock_chunk16_SZ_RES 14
 #define homogeneous_rosenbrock_chunk16_SZ_IW 0
-#define homogeneous_rosenbrock_chunk16_SZ_W 3065
+#define homogeneous_rosenbrock_chunk16_SZ_W 3068
 void homogeneous_rosenbrock_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_rosenbrock_casadi_int_size(void);
 int homogeneous_rosenbrock_casadi_real_size(void);

@@ -122,6 +122,7 @@ class Result:
                 if snaps:
                     name = f"animation_pass_{k + 1}.gif" if multi else "animation.gif"
                     top[name] = terrain_plots.pass_animation_gif(st.world, st.before[k], snaps, st.maps[k])
+            top.update(terrain_plots.subsoil_pngs(st.world, st.figures))
             if multi:
                 top["passes.png"] = terrain_plots.passes_png(st.figures)
                 for k, (res, summ) in enumerate(zip(st.runs, self.pass_summaries, strict=True)):

@@ -252,7 +252,8 @@ def test_track_frame_is_the_channels_frame():
         X, Y, psi = rng.uniform(-3, 3), rng.uniform(-3, 3), rng.uniform(-np.pi, np.pi)
         a = _a(X, Y, psi, LINEAR)
         px, py = _world(a, rng.uniform(-1.6, 1.6, 1), rng.uniform(-1.2, 1.2, 1))
-        g = np.array(geometry(ca.DM([px[0], py[0], 0.0, 0.0, 1.0]), ca.DM([X, Y, psi]), ca.DM(GEO))).ravel()
+        g = np.array(geometry(ca.DM([px[0], py[0], 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]), ca.DM([X, Y, psi]),
+                              ca.DM(GEO))).ravel()
         s, tl, tr = S.track_frame(px, py, a, GEO)
         for frac, t in ((g[0], tl[0]), (g[1], tr[0])):
             mine = overlap(s[0], dx / 2, 0, l_m) * overlap(t, dx / 2, -b_m / 2, b_m / 2)

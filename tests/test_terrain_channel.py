@@ -14,12 +14,12 @@ from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell
 PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
 FN = build_cell_functions(ModelOptions())
 LAW = soil_law_values(PARAMS)
-KEQ, N, KE, KAPPA = LAW
+KEQ, N, KE, KAPPA, REG = LAW
 
 
 def _channel_step(dt):
     z, zd, pl, zmax, pmax = (ca.SX.sym(n) for n in ("z", "zd", "p_load", "z_max", "p_max"))
-    p = FN["soil"](z, zmax, pmax, LAW)
+    p = FN["soil"](z, ca.vertcat(zmax, pmax, 0, 0, 0), LAW)
     xdot = FN["dynamics"](zd, pl, p, 1.0, [PARAMS["cell_areal_mass_kg_per_m2"], PARAMS["cell_damping_Pa_s_per_m"]])
     dae = {"x": ca.vertcat(z, zd), "p": ca.vertcat(pl, zmax, pmax), "ode": xdot}
     return ca.integrator("ch", "cvodes", dae, 0, dt, {"abstol": 1e-12, "reltol": 1e-10})
@@ -32,12 +32,12 @@ def test_one_channel_load_unload_reload_matches_the_analytic_curves():
     for a, b in [(0.0, 30e3), (30e3, 10e3), (10e3, 30e3), (30e3, 40e3)]:
         for k, s in enumerate(np.linspace(0, 1, 501)[1:]):
             x = np.array(F(x0=x, p=[a + (b - a) * s, zmax, pmax])["xf"]).ravel()
-            zmax, pmax, _, phase = (float(v) for v in FN["history"](x[0], zmax, pmax, LAW))
+            zmax, pmax, _, _, phase, _ = (float(v) for v in FN["history"](x[0], [zmax, pmax, 0, 0, 0], LAW))
             if k == 300:
                 phases.append(phase)  # the phase flag on the ramp
         for _ in range(200):  # hold: settle to the static state
             x = np.array(F(x0=x, p=[b, zmax, pmax])["xf"]).ravel()
-            zmax, pmax, _, phase = (float(v) for v in FN["history"](x[0], zmax, pmax, LAW))
+            zmax, pmax, _, _, phase, _ = (float(v) for v in FN["history"](x[0], [zmax, pmax, 0, 0, 0], LAW))
         ends.append((x[0], zmax, pmax))
     bekker = lambda p: (p / KEQ) ** (1 / N)  # noqa: E731
     z1 = bekker(30e3)
@@ -54,7 +54,7 @@ def _geometry(cx, cy, X=0.0, Y=0.0, psi=0.0, active=1.0, dx=0.1):
     P = PARAMS
     geo = [P["contact_length_m"], P["track_width_m"], P["track_gauge_m"], P["cg_ahead_of_contact_centre_m"],
            dx, 2 * dx]
-    return np.array(FN["geometry"]([cx, cy, 0, 0, active], [X, Y, psi], geo)).ravel()
+    return np.array(FN["geometry"]([cx, cy, 0, 0, active, 0, 0, 0], [X, Y, psi], geo)).ravel()
 
 
 def test_load_fraction_is_the_overlap_of_the_cell_with_the_track():

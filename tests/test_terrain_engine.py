@@ -100,7 +100,7 @@ def _one_cell_reference_and_engine(substeps, h=0.01, t_end=0.9):
         return frac * (20000.0 + 10000.0 * min(t, t_c) / t_c)
 
     def law(z, zm, pm):
-        return tuple(float(v) for v in f.cell_law(z, zm, pm))
+        return tuple(float(v) for v in f.cell_law(z, [zm, pm, 0, 0, 0]))
     n = int(round(t_end / h))
     st = types.SimpleNamespace(areal_mass=m, damping=c, stats={"n_newton": 0, "n_cell_stages": 0})
     kern = engine.PyKernel(f, st)
@@ -112,7 +112,8 @@ def _one_cell_reference_and_engine(substeps, h=0.01, t_end=0.9):
         t0 = k * h
         pl = [load(t0 + j * h / substeps) for j in range(substeps + 1)]
         work = [0.0, 0.0]
-        z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0] * (substeps + 1), zm, pm, h, substeps, work)
+        z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0] * (substeps + 1), [zm, pm, 0, 0, 0], h,
+                                         substeps, work)
         pm = max(pm, p) if z >= zm else pm
         zm = max(zm, z)
         mine.append(z)
@@ -144,17 +145,18 @@ def test_fast_law_equals_the_model_law():
     from symtrack.terrain.channels import soil_law_values
 
     sc = load_scenario("validation_grid")
-    keq, n, ke, kappa = soil_law_values(sc.params)
+    keq, n, ke, kappa, reg = soil_law_values(sc.params, sc.model.bekker_regularisation_m)
     import casadi as ca
 
-    z, zm, pm = ca.SX.sym("z"), ca.SX.sym("zm"), ca.SX.sym("pm")
-    reg = sc.model.bekker_regularisation_m
-    a = ca.Function("a", [z, zm, pm], [reaction_pressure_fast(z, zm, pm, keq, n, ke, kappa, reg)])
-    b = ca.Function("b", [z, zm, pm], [cell.reaction_pressure(z, zm, pm, keq, n, ke, kappa, reg)])
-    for args in ((-1e-4, 0, 0), (0, 0, 0), (1e-6, 0, 0), (1.2e-3, 0, 0), (1.0e-3, 1.5e-3, 3e4), (1.4e-3, 1.5e-3, 3e4),
-                 (2e-3, 1.5e-3, 3e4), (1e-5, 1.5e-3, 3e4)):
-        pa, pb = float(a(*args)), float(b(*args))
-        assert pa == pytest.approx(pb, rel=1e-14, abs=1e-9)
+    z, h = ca.SX.sym("z"), ca.SX.sym("h", 5)
+    a = ca.Function("a", [z, h], [reaction_pressure_fast(z, h, keq, n, ke, kappa, reg)])
+    b = ca.Function("b", [z, h], [cell.reaction_pressure(z, h[0], h[1], keq, n, ke, kappa, reg, z_off=h[2],
+                                                         delta=h[3], d_c=h[4])])
+    hist = ((0, 0, 0, 0, 0), (1.5e-3, 3e4, 0, 0, 0), (1.5e-3, 3e4, 2e-4, 1e-4, 3e-5))
+    for zz in (-1e-4, 0, 1e-6, 1e-5, 1.0e-3, 1.2e-3, 1.4e-3, 1.65e-3, 1.75e-3, 2e-3):
+        for hh in hist:
+            pa, pb = float(a(zz, hh)), float(b(zz, hh))
+            assert pa == pytest.approx(pb, rel=1e-14, abs=1e-9)
 
 
 def test_compiled_equals_interpreted():

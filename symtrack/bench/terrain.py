@@ -25,10 +25,10 @@ from ..simulation.passes import RUT_THRESHOLD_M, pass_figures
 from ..simulation.plants import make_plant
 from ..simulation.result import summarise
 from ..simulation.scenario import load_scenario
-from ..terrain.channels import NF, NG, ChannelTerrain, soil_law_values
+from ..terrain.channels import HIST_ROWS, NF, NG, ChannelTerrain, soil_law_values
 from ..terrain.settings import TerrainSettings
 from ..terrain.storage import Grid, Terrain
-from ..terrain.world import END_STRIP_CELLS, NV
+from ..terrain.world import END_STRIP_CELLS, NV, static_sinkage
 
 __all__ = ["BruteResult", "GRID_FIXED_STEP_S", "bench_rows", "benchmark", "brute_force_run", "main", "pool_run"]
 
@@ -60,18 +60,25 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
     qc[:, 0], qc[:, 1] = grid.centres(ii, jj)
     qc[:, 4] = 1.0
     pbase = np.array(model.param_vector(params, Q))[:-len(Q)]
-    law = ca.DM(soil_law_values(params))
-    history = terrain.fn["history"].map("history_all", "serial", n, [3], [])
+    law = ca.DM(soil_law_values(params, scenario.model.bekker_regularisation_m))
+    history = terrain.fn["history"].map("history_all", "serial", n, [2], [])
     stepper = ChannelStepper(model, IntegratorSettings("idas", scenario.run.reltol, scenario.run.abstol))
 
     def update(x):
         zc = x[NV::2]
-        zmax, pmax, _, _ = (np.array(a).ravel() for a in history(zc, qc[:, 2], qc[:, 3], law))
+        zmax, pmax, _, _, _, _ = (np.array(a).ravel() for a in history(zc, qc[:, HIST_ROWS].T, law))
         qc[:, 2], qc[:, 3] = zmax, pmax
 
     x = np.zeros(model.nx)
     x[0], x[1], x[2] = scenario.start.x_m, scenario.start.y_m, np.radians(scenario.start.yaw_deg)
     dt = scenario.run.output_dt_s
+    # the cells at their static sinkage first (World.begin_pass)
+    P0 = np.concatenate([pbase, Q])
+    acc = np.array(model.ode(x, np.zeros(2), P0)).ravel()[NV + 1::2]
+    p_load = params["cell_areal_mass_kg_per_m2"] * acc
+    loaded = np.nonzero(p_load > 0)[0]
+    x[NV + 2 * loaded] = static_sinkage(terrain.fn["soil"], law, np.zeros(loaded.size),
+                                        qc[loaded][:, HIST_ROWS].T, p_load[loaded])
     for _ in range(int(round(s.settle_s / 0.01))):
         x = stepper.step(x, np.zeros(2), np.concatenate([pbase, Q]), 0.01)
         update(x)

@@ -53,8 +53,9 @@ import numpy as np
 from ..foundations.errors import ScenarioError, SimulationError
 from ..native.cache import cache_root, compile_sources, compiler
 from ..native.grid_engine_model import NA, NGEO, NS, NW, build_engine_functions, cell_constants, geo_vector, pv_base
+from ..terrain import subsoil
 from ..terrain.channels import soil_law_values
-from ..terrain.world import END_STRIP_CELLS, padding_m
+from ..terrain.world import END_STRIP_CELLS, padding_m, static_sinkage
 
 log = logging.getLogger("symtrack.terrain")
 
@@ -117,7 +118,10 @@ class _Eng(ctypes.Structure):
                 + [(n, ctypes.c_longlong) for n in ("err_code", "err_a", "err_b", "err_ch")]
                 + [("err_x", ctypes.c_double * 2)]
                 + [(n, ctypes.c_longlong) for n in ("n_newton", "n_cell_stages", "n_vehicle_steps", "ns_manager",
-                                                    "ns_vehicle", "ns_cells", "ns_outputs")])
+                                                    "ns_vehicle", "ns_cells", "ns_outputs")]
+                + [(n, ctypes.c_void_p) for n in ("zoff", "cycles", "ch_zoff", "ch_delta", "ch_dc", "ch_counted",
+                                                  "subsoil", "sig_pass")]
+                + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")])
 
 
 def _check_no_work(fns):
@@ -135,7 +139,8 @@ def library(fns, compiled: bool = True):
         return None
     _check_no_work(fns.all())
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
-    key = hashlib.sha256(b"".join(f.serialize().encode() for f in fns.all()) + csrc
+    hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
+    key = hashlib.sha256(b"".join(f.serialize().encode() for f in fns.all()) + csrc + hsrc
                          + f"{ca.__version__}/{BUILD_VERSION}".encode()).hexdigest()[:16]
     so = cache_root() / f"engine-{key}" / "libsymtrack_engine.so"
     if not so.exists():
@@ -147,7 +152,7 @@ def library(fns, compiled: bool = True):
             gen = (Path(scratch) / "engine_gen.c").read_bytes()
         if b"#error" in gen:
             raise SimulationError("the generated engine functions are not exportable (#error in engine_gen.c)")
-        sources = {"engine.c": csrc, "engine_gen.inc": gen}  # engine.c includes the generated C
+        sources = {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc}  # engine.c includes both
         log.info("compiling the terrain engine into %s", so)
         compile_sources(sources, so, cc)
     lib = ctypes.CDLL(str(so))
@@ -185,8 +190,9 @@ class EngineState:
         self.ch_foot = np.zeros(n, dtype=np.int64)
         self.ch_new_stamp = np.zeros(n, dtype=np.int64)
         self.ch_new_cell = np.full(n, -1, dtype=np.int64)
-        for name in ("ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx", "ch_cy"):
+        for name in ("ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx", "ch_cy", "ch_zoff", "ch_delta", "ch_dc"):
             setattr(self, name, np.zeros(n))
+        self.ch_counted = np.zeros(n, dtype=np.uint8)
         self.ch_g = np.zeros((n, NGEO))
         self.ch_dp = np.zeros(n)
         self.ch_pw = np.zeros((n, 2))
@@ -211,7 +217,11 @@ class EngineState:
         self.settings = settings
         self.ny_out = len(fns.output_names)
         self.stats = {"n_newton": 0, "n_cell_stages": 0, "n_vehicle_steps": 0, "ns_manager": 0, "ns_vehicle": 0,
-                      "ns_cells": 0, "ns_outputs": 0}  # ns_*: the C kernel's parts (0 when interpreted)
+                      "ns_cells": 0, "ns_outputs": 0, "ns_subsoil": 0}  # ns_*: the C kernel's parts (0: interpreted)
+        # the subsoil stress (docs/subsoil.md): tables for the vehicle and soil, this pass's maxima
+        self.sig_pass = world.pass_sigma
+        self.subsoil = subsoil_tables(world.params, world.storage.subsoil_depths_m)
+        self._subsoil_c = self.subsoil.c_struct() if self.subsoil is not None else None
 
     def struct(self) -> _Eng:
         g, st, s = self.grid, self.storage, self.settings
@@ -219,11 +229,12 @@ class EngineState:
         e.nx, e.ny, e.M, e.n_ch = g.shape[0], g.shape[1], self.M, self.n_ch
         e.x0, e.y0, e.dx = g.origin_m[0], g.origin_m[1], g.cell_m
         for name, arr in (("z", st.z), ("zdot", st.zdot), ("zmax", st.zmax), ("pmax", st.pmax), ("phase", st.phase),
-                          ("touched", self.touched)):
+                          ("touched", self.touched), ("zoff", st.zoff), ("cycles", st.cycles)):
             setattr(e, name, _ptr(arr))
         for name in ("ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax",
                      "ch_p", "ch_cx", "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv",
-                     "geo", "wv", "a", "work", "agrid", "plbuf", "frbuf"):
+                     "geo", "wv", "a", "work", "agrid", "plbuf", "frbuf", "ch_zoff", "ch_delta", "ch_dc",
+                     "ch_counted"):
             setattr(e, name, _ptr(getattr(self, name)))
         e.n_act, e.n_new, e.peak_active, e.stamp = self.n_act, 0, self.peak_active, self.stamp
         e.n_pv, e.ny_out = self.pv.size, self.ny_out
@@ -233,6 +244,9 @@ class EngineState:
         e.gamma, e.entry_fraction = SDIRK_GAMMA, float(s.entry_fraction)
         for k, v in self.stats.items():
             setattr(e, k, v)
+        e.sig_pass = _ptr(self.sig_pass)
+        e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
+        e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
         return e
 
     def absorb(self, e: _Eng) -> None:
@@ -291,9 +305,14 @@ class PyKernel:
         self.e = _PyErr()
 
     # the generated Functions
-    def _law(self, z, zmax, pmax):
-        p, dp = self.f.cell_law(z, zmax, pmax)
+    def _law(self, z, hist):
+        p, dp = self.f.cell_law(z, hist)
         return float(p), float(dp)
+
+    def _hist(self, ch):
+        s = self.s
+        return [float(s.ch_zmax[ch]), float(s.ch_pmax[ch]), float(s.ch_zoff[ch]), float(s.ch_delta[ch]),
+                float(s.ch_dc[ch])]
 
     def _geo(self, cx, cy, a):
         return np.array(self.f.cell_geo(ca.DM([cx, cy]), ca.DM(a), ca.DM(self.s.geo))).ravel()
@@ -387,10 +406,12 @@ class PyKernel:
             s.ch_cy[ch] = g.origin_m[1] + (j + 0.5) * g.cell_m
             s.ch_z[ch], s.ch_v[ch] = st.z[cell], st.zdot[cell]
             s.ch_zmax[ch], s.ch_pmax[ch] = st.zmax[cell], st.pmax[cell]
+            s.ch_zoff[ch], s.ch_delta[ch], s.ch_dc[ch], s.ch_counted[ch] = st.zoff[cell], 0.0, 0.0, 0
+            s.ch_delta[ch] = float(self.f.cell_entry(float(s.ch_z[ch]), self._hist(ch), float(st.cycles[cell])))
             s.ch_p[ch] = 0.0
             s.ch_pw[ch] = 0.0
             s.ch_vr[ch] = s.ch_v[ch]
-            s.ch_p[ch], s.ch_dp[ch] = self._law(s.ch_z[ch], s.ch_zmax[ch], s.ch_pmax[ch])
+            s.ch_p[ch], s.ch_dp[ch] = self._law(s.ch_z[ch], self._hist(ch))
             s.touched[cell] = True
             s.ch_g[ch] = self._geo(s.ch_cx[ch], s.ch_cy[ch], s.a)
             s.act[s.n_act] = ch
@@ -398,7 +419,7 @@ class PyKernel:
         s.peak_active = max(s.peak_active, s.n_act)
         return 0, e
 
-    def _stage(self, zeta, omega, pl, gh, zmax, pmax, zs, ps, dps):
+    def _stage(self, zeta, omega, pl, gh, hist, zs, ps, dps):
         s = self.s
         m, cd = s.areal_mass, s.damping
         a = (1.0 + gh * cd / m) / gh
@@ -410,7 +431,7 @@ class PyKernel:
             x = hi
         for _ in range(NEWTON_MAX_ITER):
             s.stats["n_newton"] += 1
-            p, dp = self._law(x, zmax, pmax)
+            p, dp = self._law(x, hist)
             F = a * (x - zeta) + g * p - omega - g * pl
             if F > 0.0:
                 hi = x
@@ -427,7 +448,7 @@ class PyKernel:
                 break
             if not (lo < xn < hi):
                 if lo == -math.inf:
-                    ph, _ = self._law(hi, zmax, pmax)
+                    ph, _ = self._law(hi, hist)
                     lo = hi - g * ph / a
                 if not (lo < xn < hi):
                     xn = 0.5 * (lo + hi)
@@ -437,14 +458,14 @@ class PyKernel:
             return None
         return x, p, dp
 
-    def _cell_step(self, z0, v0, pz, dpz, pl, f, zmax, pmax, h, n, work):
+    def _cell_step(self, z0, v0, pz, dpz, pl, f, hist, h, n, work):
         gam = SDIRK_GAMMA
         hs = h / n
         gh = gam * hs
         for k in range(n):
             p0 = pz
             plA, plB = pl[k], pl[k + 1]
-            r1 = self._stage(z0, v0, plA + (plB - plA) * gam, gh, zmax, pmax, z0, pz, dpz)
+            r1 = self._stage(z0, v0, plA + (plB - plA) * gam, gh, hist, z0, pz, dpz)
             if r1 is None:
                 return None
             Z1, pz, dpz = r1
@@ -452,7 +473,7 @@ class PyKernel:
             V1 = (Z1 - z0) / gh
             A1 = (V1 - v0) / gh
             zeta, omega = z0 + hs * (1.0 - gam) * V1, v0 + hs * (1.0 - gam) * A1
-            r2 = self._stage(zeta, omega, plB, gh, zmax, pmax, Z1, pz, dpz)
+            r2 = self._stage(zeta, omega, plB, gh, hist, Z1, pz, dpz)
             if r2 is None:
                 return None
             Z2, pz, dpz = r2
@@ -554,7 +575,8 @@ class PyKernel:
                 if nentry > ns:
                     plm = max(plA, plB)
                     if s.ch_p[ch] < sset.entry_fraction * plm or (
-                            plB < plA and gB[1] + gB[2] < gA[1] + gA[2] and s.ch_z[ch] < s.ch_zmax[ch]):
+                            plB < plA and gB[1] + gB[2] < gA[1] + gA[2]
+                            and s.ch_z[ch] < s.ch_zmax[ch] + s.ch_zoff[ch] + s.ch_dc[ch]):
                         ns, window = nw, True
                 pl, fr = [plA], [float(gA[1]), float(gA[2])]
                 for j in range(1, ns):
@@ -569,8 +591,9 @@ class PyKernel:
                 pl.append(plB)
                 fr += [float(gB[1]), float(gB[2])]
                 work = [0.0, 0.0]
+                hist = self._hist(ch)
                 out = self._cell_step(float(s.ch_z[ch]), float(s.ch_v[ch]), float(s.ch_p[ch]), float(s.ch_dp[ch]),
-                                      pl, fr, float(s.ch_zmax[ch]), float(s.ch_pmax[ch]), h, ns, work)
+                                      pl, fr, hist, h, ns, work)
                 if out is None:
                     e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
                     return -ERR_NEWTON, n_done, e
@@ -578,13 +601,23 @@ class PyKernel:
                 if h > 0.0:
                     s.ch_pw[ch] = (work[0] / h, work[1] / h)
                 s.ch_g[ch] = gB
-                zc, zm, pm, p = float(s.ch_z[ch]), float(s.ch_zmax[ch]), float(s.ch_pmax[ch]), float(s.ch_p[ch])
-                loading = zc >= zm
-                zm1, pm1 = max(zm, zc), (max(pm, p) if loading else pm)
+                zc, p = float(s.ch_z[ch]), float(s.ch_p[ch])
+                zm1, pm1, dc1, plastic, phase = np.array(self.f.cell_history(zc, p, hist)).ravel()
                 cell = int(s.ch_cell[ch])
                 st.z[cell], st.zdot[cell], st.zmax[cell], st.pmax[cell] = zc, s.ch_v[ch], zm1, pm1
-                st.phase[cell] = (1 if loading else 2) if zm1 > 0 else 0
-                s.ch_zmax[ch], s.ch_pmax[ch] = zm1, pm1
+                st.phase[cell] = int(phase) if zm1 > 0 else 0
+                st.zoff[cell] = s.ch_zoff[ch] + dc1
+                if plastic > 0 and not s.ch_counted[ch]:
+                    s.ch_counted[ch] = 1
+                    st.cycles[cell] = min(int(st.cycles[cell]) + 1, 65535)
+                s.ch_zmax[ch], s.ch_pmax[ch], s.ch_dc[ch] = zm1, pm1, dc1
+            if s.subsoil is not None:
+                act = s.act[:s.n_act]
+                act = act[s.ch_g[act, 0] > 0.0]
+                if act.size:
+                    sig = subsoil.stress_at(s.subsoil, s.ch_cx[act], s.ch_cy[act], a1, s.geo).astype(np.float32)
+                    cells = s.ch_cell[act]
+                    s.sig_pass[cells] = np.maximum(s.sig_pass[cells], sig)
             s.wv[:] = w1
             s.a[:] = a1
             self.sums()
@@ -605,11 +638,25 @@ class PyKernel:
 
 # ---- the engine -------------------------------------------------------------------------------------------
 _FUNCTIONS: dict = {}
+_TABLES: dict = {}
+
+
+def subsoil_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
+    """The subsoil stress tables of the vehicle's tracks and the soil's concentration factor at the
+    depths (None for no depths), cached per (geometry, xi, depths) in this process."""
+    if not depths_m:
+        return None
+    key = (tuple(depths_m), float(params["stress_concentration_factor"]), float(params["contact_length_m"]),
+           float(params["track_width_m"]), float(params["track_gauge_m"]))
+    if key not in _TABLES:
+        _TABLES[key] = subsoil.build_tables(key[0], key[1], key[2], key[3], key[4])
+    return _TABLES[key]
 
 
 def engine_functions(opts, params: dict, vehicle_substeps: int):
     """build_engine_functions, cached per (options, soil law, substeps) in this process."""
-    key = (opts, tuple(soil_law_values(params)), vehicle_substeps)
+    key = (opts, tuple(soil_law_values(params, opts.bekker_regularisation_m)),
+           float(params["repeated_loading_exponent"]), vehicle_substeps)
     if key not in _FUNCTIONS:
         _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps)
     return _FUNCTIONS[key]
@@ -675,8 +722,9 @@ class TerrainEngine:
     def release_all(self) -> None:
         s = self.state
         s.ch_cell[:] = -1
-        for name in ("ch_z", "ch_v", "ch_p", "ch_zmax", "ch_pmax", "ch_cx", "ch_cy"):
+        for name in ("ch_z", "ch_v", "ch_p", "ch_zmax", "ch_pmax", "ch_cx", "ch_cy", "ch_zoff", "ch_delta", "ch_dc"):
             getattr(s, name)[:] = 0.0
+        s.ch_counted[:] = 0
         s.ch_g[:] = 0.0
         s.n_act = 0
         s.pv[-NS:] = 0.0
@@ -688,16 +736,30 @@ class TerrainEngine:
         self.release_all()
         s.peak_active = 0
         s.touched[:] = False
+        s.sig_pass[:] = 0.0
         s.wv[:] = 0.0
         s.wv[0], s.wv[1], s.wv[2] = x_m, y_m, yaw_rad
         s.a[:] = np.array(self.fns.vehicle_a(s.wv, s.pv)).ravel()
+        # the cells under the vehicle at their static sinkage first (World.begin_pass)
+        rc, e = self.kernel.assign(0.0)
+        if rc:
+            self._raise(abs(rc), e)
+        act = s.active_channels().copy()
+        if act.size:
+            hist = np.vstack([s.ch_zmax[act], s.ch_pmax[act], s.ch_zoff[act], s.ch_delta[act], s.ch_dc[act]])
+            w = self.world
+            z = static_sinkage(w.terrain.fn["soil"], w._law, s.ch_z[act], hist, s.ch_g[act, 0])
+            s.ch_z[act], s.ch_v[act] = z, 0.0
+            for q, ch in enumerate(act):
+                p, dp = self.fns.cell_law(z[q], hist[:, q])
+                s.ch_p[ch], s.ch_dp[ch], s.ch_vr[ch] = float(p), float(dp), 0.0
         n = int(round(self.world.settings.settle_s / SETTLE_STEP_S))
         if n:
             T = SETTLE_STEP_S * np.arange(1, n + 1)
             self._call(0.0, T, np.zeros((n, 2)), np.array([0.0, -1.0, 0.0]), False)
         rc, e = self.kernel.assign(0.0)
         if rc:
-            self._raise(rc, e)
+            self._raise(abs(rc), e)
         return s.wv[:NV].copy()
 
     def _call(self, t0, T, U, dist, check_covered):
@@ -733,6 +795,8 @@ class TerrainEngine:
         w.channel_cell[act] = s.ch_cell[act]
         w.qc[act, 0], w.qc[act, 1] = s.ch_cx[act], s.ch_cy[act]
         w.qc[act, 2], w.qc[act, 3], w.qc[act, 4] = s.ch_zmax[act], s.ch_pmax[act], 1.0
+        w.qc[act, 5], w.qc[act, 6], w.qc[act, 7] = s.ch_zoff[act], s.ch_delta[act], s.ch_dc[act]
+        w.counted[act] = s.ch_counted[act] > 0
         w.p_soil[act] = s.ch_p[act]
         w.peak_active = s.peak_active
         x = np.zeros(NV + 2 * w.n_channels)

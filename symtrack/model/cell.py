@@ -1,31 +1,78 @@
-"""One terrain cell: MODEL.md section 2 and seed eq. (4), written once in CasADi.
+"""One terrain cell: MODEL.md sections 2 and 6 and seed eq. (4), written once in CasADi.
 
 Pressure-sinkage law (z positive down):
 
 - virgin loading (Bekker): p = k_eq z^n with k_eq = k_c / b + k_phi, b the track width.
   Regularised as p = k_eq z+ (z+ + d)^(n-1), z+ = max(z, 0), so that dp/dz stays finite at
-  z = 0 (for n < 1 it is infinite in the exact law); the relative error is |1 - n| d / z,
-  3e-4 at 1.5 mm with d = 1 um.
-- unloading and reloading (Wong; reconstruction): below the largest sinkage so far z_max the
-  soil follows the straight line through (z_max, p_max) with slope
-  k_u = max(K_e, kappa p_max / z_max), clipped at p >= 0 (no tension). Reloading climbs the same
-  line back to (z_max, p_max) and then rejoins the Bekker curve. The floor kappa p_max / z_max
-  (kappa >= max(1, n)) keeps the line below the Bekker curve, so
-  p = bekker(z) if z >= z_max else max(0, min(bekker(z), line(z))).
+  z = 0 (for n < 1 it is infinite in the exact law). The relative error is about (1 - n) d / z,
+  so d is set per soil (:func:`bekker_regularisation_length`): at most the model option
+  ``bekker_regularisation_m`` (1 um) and at most what keeps the error below
+  ``BEKKER_REG_RELATIVE_ERROR`` at ``BEKKER_REG_REFERENCE_PRESSURE_PA``. A fixed 1 um gave 3.5 x
+  Bekker's static sinkage on heavy clay (n = 0.11, sinkage of micrometres: shared/REVIEW.md,
+  defect 3).
+- unloading and reloading (Wong; reconstruction): below the top of the history the soil follows
+  the straight line of slope k_u = max(K_e, kappa p_max / z_max) through it, clipped at p >= 0.
+- repeated loading (MODEL.md section 6; the cycle law of this module): a cell counts its plastic
+  load cycles N. The first cycle is the virgin Bekker loading. Each later cycle, one stay of
+  the cell under a track, may add a plastic increment delta_{N+1} = z_p1 ((N+1)^beta - N^beta)
+  (Monismith et al. 1975, Li & Selig 1996: plastic strain ~ N^beta), z_p1 = z_max - p_max / k_u
+  the plastic (rut) depth the first cycle left, so that N full cycles at the same peak pressure
+  leave a rut z_p1 N^beta (:func:`rut_after_cycles`, the closed form the tests check). The
+  increment is taken along the reloading path: the reload line is the elastic line up to
+  ``CYCLE_THRESHOLD_FRACTION`` r0 of p_max (no plastic increment for lighter cycles), then a
+  softer line to (Z + delta, p_max), then Bekker's curve shifted by the cycles' plastic sinkage.
+  A cycle that peaks at p_pk between r0 p_max and p_max adds delta (p_pk / p_max - r0) / (1 - r0).
+  Unloading from any point of it follows the elastic line (slope k_u) through that point.
+
+The history of a cell, as the law sees it: z_max, p_max (the top of the Bekker loading it met,
+on the unshifted curve), z_off (the plastic sinkage of its earlier cycles), delta (the increment
+this stay may add, 0 on a virgin cell) and d_c (what this stay has added so far, 0 <= d_c <= delta
+below p_max). Z = z_max + z_off is the top of the elastic line at the start of the stay.
+
+    L(z) = p_max + k_u (z - Z - d_c)                    elastic line through the current top
+    R(z) = p_max + k_r (z - Z - delta),                 the cycle's reload line, through
+           k_r = (1 - r0) p_max k_u / ((1 - r0) p_max + delta k_u)   (Z - (1-r0) p_max/k_u, r0 p_max)
+    C(z) = bekker(z - z_off - delta)                    virgin compression beyond the cycle
+    p(z) = C(z) if z >= Z + delta else max(0, min(L, R, C))
+
+With delta = z_off = d_c = 0 this is the law of the first wave exactly: R = L.
+:func:`history_update` moves the history after each step (INFO_OUT) so that p stays continuous.
+
 - dynamics (seed eq. 4): tau_z d2z/dt2 = p_load - p - c'' dz/dt.
 
-The history (z_max, p_max) enters as an input: inside one integration step it is constant and
-the law above switches branch by itself; the world manager updates it between steps.
+The history enters as inputs: inside one integration step it is constant and the law above
+switches branch by itself; the world manager updates it between steps.
 """
 
 from __future__ import annotations
 
 import casadi as ca
 
+# The relative bias of the regularised Bekker term that the regularisation length allows at the
+# reference pressure (lower pressures are not track loads): 0.2 % at 10 kPa, less above it
+# (agricultural tracks load the soil with 20-100 kPa). Calibrated against the 1 % target of
+# Bekker's inverse on every preset (tests/test_soil_memory.py).
+BEKKER_REG_RELATIVE_ERROR = 2e-3
+BEKKER_REG_REFERENCE_PRESSURE_PA = 1e4
+
+# Fraction r0 of p_max below which a reload adds no plastic sinkage, and the peak a stay must
+# pass to count as a load cycle. 0.5: Terranimo's boundary between "low" and "medium" risk,
+# stress below half the precompression stress (Stettler et al. 2014, Soil Use Manage. 30) --
+# loads of less than half the largest one the soil has carried are taken as elastic.
+CYCLE_THRESHOLD_FRACTION = 0.5
+
 
 def k_eq(k_c, k_phi, track_width):
     """Bekker's combined modulus k_eq = k_c / b + k_phi [N/m^(n+2)]."""
     return k_c / track_width + k_phi
+
+
+def bekker_regularisation_length(keq, n, cap_m):
+    """The regularisation length d [m] of :func:`bekker_pressure` for a soil (module doc):
+    min(cap_m, eps z_ref / |1 - n|), z_ref = (p_ref / k_eq)^(1/n) Bekker's sinkage at the reference
+    pressure (the bias is (n - 1) d / z; none for n = 1). Symbolic or numeric (a DM for numbers)."""
+    z_ref = (BEKKER_REG_REFERENCE_PRESSURE_PA / keq) ** (1 / n)
+    return ca.fmin(cap_m, BEKKER_REG_RELATIVE_ERROR * z_ref / ca.fmax(ca.fabs(1 - n), 1e-3))
 
 
 def bekker_pressure(z, keq, n, reg_m):
@@ -35,15 +82,72 @@ def bekker_pressure(z, keq, n, reg_m):
 
 
 def unloading_slope(z_max, p_max, elastic_stiffness, kappa, reg_m):
-    return ca.fmax(elastic_stiffness, kappa * p_max / ca.fmax(z_max, reg_m))
+    return ca.fmax(elastic_stiffness, kappa * p_max / ca.fmax(z_max, ca.fmax(reg_m, 1e-12)))
 
 
-def reaction_pressure(z, z_max, p_max, keq, n, elastic_stiffness, kappa, reg_m):
-    """Soil reaction pressure p(z; z_max, p_max) [Pa] of the loading/unloading/reloading law."""
-    pb = bekker_pressure(z, keq, n, reg_m)
+def _reload_slope(p_max, k_u, delta, r0):
+    num = (1 - r0) * p_max
+    return num * k_u / ca.fmax(num + delta * k_u, 1e-9)
+
+
+def reaction_pressure(z, z_max, p_max, keq, n, elastic_stiffness, kappa, reg_m, z_off=0, delta=0, d_c=0,
+                      r0=CYCLE_THRESHOLD_FRACTION, bekker=None):
+    """Soil reaction pressure p(z; history) [Pa] of the loading/unloading/reloading law with load
+    cycles (module doc). ``bekker``: the Bekker term as a function of the shifted sinkage (default
+    :func:`bekker_pressure`; the engine passes an equal, faster form)."""
+    bk = bekker or (lambda zz: bekker_pressure(zz, keq, n, reg_m))
     k_u = unloading_slope(z_max, p_max, elastic_stiffness, kappa, reg_m)
-    line = p_max - k_u * (z_max - z)
-    return ca.if_else(z >= z_max, pb, ca.fmax(0, ca.fmin(pb, line)))
+    Z = z_max + z_off
+    line = p_max + k_u * (z - Z - d_c)
+    reload = p_max + _reload_slope(p_max, k_u, delta, r0) * (z - Z - delta)
+    virgin = bk(z - z_off - delta)
+    return ca.if_else(z >= Z + delta, virgin, ca.fmax(0, ca.fmin(virgin, ca.fmin(line, reload))))
+
+
+def history_update(z, p, z_max, p_max, z_off, delta, d_c, elastic_stiffness, kappa, reg_m):
+    """INFO_OUT: the history after a step that ended at sinkage z with reaction pressure p.
+
+    Returns (z_max', p_max', d_c', plastic, phase): on the virgin branch (z >= Z + delta) the top
+    moves to the current point on the unshifted curve (z_max' = z - z_off - delta, p_max' = p) and
+    the stay has taken its whole increment (d_c' = delta); below it d_c grows to the current
+    point's horizontal distance from the stay's first elastic line (the plastic sinkage taken on
+    the reload line), kept in [d_c, delta]. ``plastic`` is 1 when the stay has deformed the soil
+    plastically (it then counts as a load cycle), ``phase`` 1 on the virgin branch, else 2."""
+    Z = z_max + z_off
+    loading = z >= Z + delta
+    k_u = unloading_slope(z_max, p_max, elastic_stiffness, kappa, reg_m)
+    # the point's distance from the stay's first elastic line; rounding noise (a point on an
+    # elastic line is that line's to about 1e-16 m) is not plastic sinkage
+    tiny = 1e-12 * (Z + delta) + 1e-15
+    raw = z - Z - (p - p_max) / k_u
+    progress = ca.fmin(ca.if_else(raw > d_c + tiny, raw, d_c), delta)
+    z_max1 = ca.if_else(loading, z - z_off - delta, z_max)
+    p_max1 = ca.if_else(loading, ca.fmax(p, p_max), p_max)
+    d_c1 = ca.if_else(loading, delta, progress)
+    plastic = ca.if_else(ca.logic_or(ca.logic_and(loading, z > 0), d_c1 > tiny), 1, 0)
+    phase = ca.if_else(loading, 1, 2)
+    return z_max1, p_max1, d_c1, plastic, phase
+
+
+def cycle_increment(z, z_max, p_max, z_off, cycles, elastic_stiffness, kappa, reg_m, beta,
+                    r0=CYCLE_THRESHOLD_FRACTION):
+    """delta_{N+1} [m], the plastic increment the cell's next stay may add (module doc), for a cell
+    at sinkage z with history (z_max, p_max, z_off) and N = ``cycles`` load cycles. 0 for a virgin
+    cell (N = 0: its first cycle is the Bekker loading) and for a cell already loaded above
+    r0 p_max on its elastic line (it is under a track now: a new cycle starts only from below r0,
+    where the reload line and the elastic line coincide, so the law stays continuous)."""
+    k_u = unloading_slope(z_max, p_max, elastic_stiffness, kappa, reg_m)
+    z_p1 = ca.fmax(z_max - p_max / k_u, 0)
+    N = ca.fmax(cycles, 1)
+    inc = z_p1 * ((N + 1) ** beta - N ** beta)
+    loaded = p_max + k_u * (z - z_max - z_off) > r0 * p_max
+    return ca.if_else(ca.logic_or(cycles < 1, loaded), 0, inc)
+
+
+def rut_after_cycles(rut_first_m, cycles, beta):
+    """The closed form of the cycle law: the rut depth after N full cycles at the same peak
+    pressure, z_p1 N^beta."""
+    return rut_first_m * cycles ** beta
 
 
 def cell_acceleration(zdot, p_load, p, areal_mass, damping):

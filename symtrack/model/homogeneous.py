@@ -57,7 +57,7 @@ class HomogeneousTerrain:
     def equations(self, xv, xc, dist: dict, P, Q):
         """Cell state derivatives and named signals, given the vehicle's pressure distributions."""
         keq, n = self._keq(P), P["bekker_n"]
-        reg = self.opts.bekker_regularisation_m
+        reg = cell.bekker_regularisation_length(keq, n, self.opts.bekker_regularisation_m)
         law = dict(keq=keq, n=n, elastic_stiffness=P["elastic_stiffness_Pa_per_m"],
                    kappa=P["unloading_stiffness_floor"], reg_m=reg)
         xdot = [None] * len(self.state_names)

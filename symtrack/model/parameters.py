@@ -21,6 +21,7 @@ class ParamSpec:
     low: float
     high: float
     low_inclusive: bool = True
+    default: float | None = None  # used when a parameter set leaves it out (terrain-only soil parameters)
 
     def check(self, value: object, where: str = "") -> float:
         label = f"{where}.{self.name}" if where else self.name
@@ -37,8 +38,8 @@ class ParamSpec:
         return v
 
 
-def _spec(name, description, low, high, low_inclusive=True):
-    return ParamSpec(name, description, low, high, low_inclusive)
+def _spec(name, description, low, high, low_inclusive=True, default=None):
+    return ParamSpec(name, description, low, high, low_inclusive, default)
 
 
 VEHICLE_PARAMS: tuple[ParamSpec, ...] = (
@@ -64,7 +65,7 @@ VEHICLE_PARAMS: tuple[ParamSpec, ...] = (
     _spec("hitch_height_m", "height h_d of the drawbar hitch", 0.0, 10.0),
 )
 
-SOIL_PARAMS: tuple[ParamSpec, ...] = (
+SOIL_MODEL_PARAMS: tuple[ParamSpec, ...] = (
     _spec("bekker_n", "Bekker sinkage exponent n", 0.0, 3.0, False),
     _spec("k_c_N_per_m_n1", "Bekker cohesive modulus k_c [N/m^(n+1)]", 0.0, 1e9),
     _spec("k_phi_N_per_m_n2", "Bekker frictional modulus k_phi [N/m^(n+2)]", 0.0, 1e12),
@@ -79,8 +80,28 @@ SOIL_PARAMS: tuple[ParamSpec, ...] = (
     _spec("cell_damping_Pa_s_per_m", "c'' of seed eq. (4): areal damping of a terrain cell", 0.0, 1e9),
 )
 
+# Soil parameters only the grid terrain's cells use (its world manager and engine): not in the
+# vehicle model's parameter vector. A parameter set may leave them out; the default is then used
+# (its source is in symtrack/presets/soils.py, where the presets' values are).
+REPEATED_LOADING_EXPONENT_DEFAULT = 0.16  # Li & Selig 1996, lean clay (CL): see presets/soils.py
+STRESS_CONCENTRATION_FACTOR_DEFAULT = 5.0  # Soehne's "medium" soil: see presets/soils.py
+# The pedotransfer function of Schjoenning & Lamande (2018) (symtrack.terrain.subsoil) at a bulk
+# density of 1.5 Mg/m^3, 20 % clay and field capacity (pF 2): 139 kPa. Not soil-specific: give the
+# soil's own value (or the PTF's at its inputs) where known.
+PRECOMPRESSION_STRESS_DEFAULT_PA = 139.0e3
+SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
+    _spec("repeated_loading_exponent", "beta of the cycle law: the rut after N passes is the first pass's N^beta",
+          0.0, 1.0, default=REPEATED_LOADING_EXPONENT_DEFAULT),
+    _spec("stress_concentration_factor", "Froehlich's concentration factor xi of the subsoil stress (3: Boussinesq)",
+          1.0, 10.0, default=STRESS_CONCENTRATION_FACTOR_DEFAULT),
+    _spec("precompression_stress_Pa", "the soil's strength against compaction sigma_pc (the subsoil risk classes)",
+          0.0, 1e7, False, default=PRECOMPRESSION_STRESS_DEFAULT_PA),
+)
+SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
+
 VEHICLE_PARAM_NAMES = tuple(s.name for s in VEHICLE_PARAMS)
 SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS)
+SOIL_MODEL_PARAM_NAMES = tuple(s.name for s in SOIL_MODEL_PARAMS)
 _ALL = {s.name: s for s in VEHICLE_PARAMS + SOIL_PARAMS}
 
 
@@ -96,6 +117,10 @@ def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str) -> dict[st
         raise ParameterError(
             f"unknown parameter(s) in {where}: {', '.join(unknown)}; allowed: {', '.join(names)}"
         )
+    values = dict(values)
+    for s in specs:
+        if s.name not in values and s.default is not None:
+            values[s.name] = s.default
     missing = [n for n in names if n not in values]
     if missing:
         raise ParameterError(f"missing parameter(s) in {where}: {', '.join(missing)}")

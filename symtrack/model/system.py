@@ -30,12 +30,12 @@ import casadi as ca
 
 from .homogeneous import HomogeneousTerrain
 from .options import ModelOptions
-from .parameters import SOIL_PARAM_NAMES, VEHICLE_PARAM_NAMES
+from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
 from .vehicle import ALGEBRAIC, INPUTS, TRACKS, VEHICLE_STATES, vehicle_equations
 
 __all__ = ["PARAM_NAMES", "SystemModel"]
 
-PARAM_NAMES = VEHICLE_PARAM_NAMES + SOIL_PARAM_NAMES
+PARAM_NAMES = VEHICLE_PARAM_NAMES + SOIL_MODEL_PARAM_NAMES
 
 
 def _syms(names):

@@ -24,6 +24,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 /* the generated Functions in this translation unit, internal: the compiler inlines the small ones */
 #define CASADI_SYMBOL_EXPORT static
 #include "engine_gen.inc"
+#include "subsoil.h" /* the subsoil stress below the tracks (symtrack/terrain/subsoil.py) */
 
 #define EXPORT __attribute__((visibility("default")))
 #define NV 12
@@ -71,6 +72,17 @@ typedef struct {
   /* wall time (ns) of the parts: world manager (footprint, release, assignment, INFO_IN; coverage
      check), vehicle step, cells (geometry, integration, INFO_OUT), sums and outputs */
   long long ns_manager, ns_vehicle, ns_cells, ns_outputs;
+  /* the cycle law (symtrack/model/cell.py): storage z_off and cycle count per cell; per channel the
+     stay's z_off at its start, its increment delta, its progress d_c, and whether it has counted */
+  double *zoff;
+  unsigned short *cycles;
+  double *ch_zoff, *ch_delta, *ch_dc;
+  unsigned char *ch_counted;
+  /* the subsoil stress: tables (NULL: off), this pass's largest stress per cell and depth
+     (n_depths per cell), and the time spent on it */
+  const subsoil_tables_t *subsoil;
+  float *sig_pass;
+  long long n_depths, ns_subsoil;
 } eng_t;
 
 static long long now_ns(void) {
@@ -82,10 +94,19 @@ static long long now_ns(void) {
 /* ---- calls of the generated Functions (no integer work, no extra arguments: checked in engine.py) */
 static double *WORK;
 
-static void law(double z, double zmax, double pmax, double *p, double *dp) {
-  const double *arg[3] = {&z, &zmax, &pmax};
+/* hist: (z_max, p_max, z_off, delta, d_c) */
+static void law(double z, const double *hist, double *p, double *dp) {
+  const double *arg[2] = {&z, hist};
   double *res[2] = {p, dp};
   eng_cell_law(arg, res, 0, WORK, 0);
+}
+
+static void channel_hist(const eng_t *E, long long ch, double *hist) {
+  hist[0] = E->ch_zmax[ch];
+  hist[1] = E->ch_pmax[ch];
+  hist[2] = E->ch_zoff[ch];
+  hist[3] = E->ch_delta[ch];
+  hist[4] = E->ch_dc[ch];
 }
 
 static void cell_geo(const double *c, const double *a, const double *geo, double *g) {
@@ -210,11 +231,26 @@ EXPORT int eng_assign(eng_t *E, double h) {
     E->ch_v[ch] = E->zdot[cell];
     E->ch_zmax[ch] = E->zmax[cell];
     E->ch_pmax[ch] = E->pmax[cell];
+    E->ch_zoff[ch] = E->zoff[cell];
+    E->ch_delta[ch] = 0.0;
+    E->ch_dc[ch] = 0.0;
+    E->ch_counted[ch] = 0;
+    {
+      double hist[5], ncyc = (double)E->cycles[cell], zc = E->ch_z[ch];
+      channel_hist(E, ch, hist);
+      const double *arg[3] = {&zc, hist, &ncyc};
+      double *res[1] = {E->ch_delta + ch};
+      eng_cell_entry(arg, res, 0, WORK, 0);
+    }
     E->ch_p[ch] = 0.0;
     E->ch_pw[2 * ch] = 0.0;
     E->ch_pw[2 * ch + 1] = 0.0;
     E->ch_vr[ch] = E->ch_v[ch];
-    law(E->ch_z[ch], E->ch_zmax[ch], E->ch_pmax[ch], &E->ch_p[ch], &E->ch_dp[ch]);
+    {
+      double hist[5];
+      channel_hist(E, ch, hist);
+      law(E->ch_z[ch], hist, &E->ch_p[ch], &E->ch_dp[ch]);
+    }
     E->touched[cell] = 1;
     double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
     cell_geo(cc, E->a, E->geo, E->ch_g + NGEO * ch);
@@ -234,7 +270,7 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
  * inside the bracket is below 1e-6 |Z| (its result is then within about 1e-12 |Z| of the root, and
  * p is extended linearly to it). Z, p(Z), p'(Z) are returned. */
-static int stage(eng_t *E, double zeta, double omega, double pl, double gh, double zmax, double pmax, double zs,
+static int stage(eng_t *E, double zeta, double omega, double pl, double gh, const double *hist, double zs,
                  double ps, double dps, double *Z, double *pz, double *dpz) {
   double m = E->areal_mass, cd = E->damping;
   double a = (1.0 + gh * cd / m) / gh, g = gh / m;
@@ -244,7 +280,7 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
   double p, dp;
   for (int it = 0; it < 100; ++it) {
     E->n_newton += 1;
-    law(x, zmax, pmax, &p, &dp);
+    law(x, hist, &p, &dp);
     double F = a * (x - zeta) + g * p - omega - g * pl;
     if (F > 0.0) hi = x;
     else if (F < 0.0) lo = x;
@@ -262,7 +298,7 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
     if (!(xn < hi && xn > lo)) {
       if (lo == -INFINITY) {
         double ph, dph;
-        law(hi, zmax, pmax, &ph, &dph);
+        law(hi, hist, &ph, &dph);
         lo = hi - g * ph / a;
       }
       if (!(xn < hi && xn > lo)) xn = 0.5 * (lo + hi);
@@ -286,18 +322,18 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, doub
  * stage segments of frac_t(mid) (p_a + p_b) / 2 max(z_b - z_a, 0), frac_t linear within each
  * substep between f[2k + t] and f[2k + 2 + t] (the energy-consistent compaction power is work / h). */
 static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, const double *pl, const double *f,
-                     double zmax, double pmax, double h, long long n, double *work, double *vr) {
+                     const double *hist, double h, long long n, double *work, double *vr) {
   double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
   double z0 = *z, v0 = *v, pz = *p, dpz = *dp;
   for (long long k = 0; k < n; ++k) {
     double Z1, Z2, p0 = pz, p1;
     double plA = pl[k], plB = pl[k + 1];
-    if (stage(E, z0, v0, plA + (plB - plA) * gam, gh, zmax, pmax, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
+    if (stage(E, z0, v0, plA + (plB - plA) * gam, gh, hist, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
     p1 = pz;
     double V1 = (Z1 - z0) / gh;
     double A1 = (V1 - v0) / gh;
     double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
-    if (stage(E, zeta, omega, plB, gh, zmax, pmax, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
+    if (stage(E, zeta, omega, plB, gh, hist, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
     double m1 = 0.5 * gam, m2 = 0.5 * (gam + 1.0);
     double w1 = 0.5 * (p0 + p1) * fmax(Z1 - z0, 0.0), w2 = 0.5 * (p1 + pz) * fmax(Z2 - Z1, 0.0);
     for (int t = 0; t < 2; ++t) {
@@ -446,7 +482,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
            evaluated at each substep end (the overlap's kinks resolved to a substep) */
         double plm = fmax(plA, plB);
         if (E->ch_p[ch] < E->entry_fraction * plm
-            || (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch])) {
+            || (plB < plA && gB[1] + gB[2] < g[1] + g[2]
+                && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch])) {
           ns = nw;
           window = 1;
         }
@@ -471,9 +508,10 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       pl[ns] = plB;
       fr[2 * ns] = gB[1];
       fr[2 * ns + 1] = gB[2];
-      double work[2] = {0.0, 0.0};
-      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, E->ch_zmax[ch],
-                    E->ch_pmax[ch], h, ns, work, E->ch_vr + ch)) {
+      double work[2] = {0.0, 0.0}, hist[5];
+      channel_hist(E, ch, hist);
+      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, h, ns, work,
+                    E->ch_vr + ch)) {
         E->err_code = ERR_NEWTON;
         E->err_a = E->ch_cell[ch];
         return -ERR_NEWTON;
@@ -483,21 +521,49 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         pw[1] = work[1] / h;
       }
       memcpy(g, gB, sizeof gB);
-      /* INFO_OUT: the history (channels.build_cell_functions' "history") and the storage */
-      double zc = E->ch_z[ch], zm = E->ch_zmax[ch], pm = E->ch_pmax[ch], p = E->ch_p[ch];
-      int loading = zc >= zm;
-      double zm1 = fmax(zm, zc), pm1 = loading ? fmax(pm, p) : pm;
+      /* INFO_OUT: the history (cell.history_update, generated: eng_cell_history) and the storage */
+      double zc = E->ch_z[ch], p = E->ch_p[ch], hn[5];
+      {
+        const double *arg[3] = {&zc, &p, hist};
+        double *res[1] = {hn};
+        eng_cell_history(arg, res, 0, WORK, 0);
+      }
+      double zm1 = hn[0], pm1 = hn[1], dc1 = hn[2];
       long long cell = E->ch_cell[ch];
       E->z[cell] = zc;
       E->zdot[cell] = E->ch_v[ch];
       E->zmax[cell] = zm1;
       E->pmax[cell] = pm1;
-      E->phase[cell] = zm1 > 0 ? (loading ? 1 : 2) : 0;
+      E->phase[cell] = zm1 > 0 ? (signed char)hn[4] : 0;
+      E->zoff[cell] = E->ch_zoff[ch] + dc1;
+      if (hn[3] > 0.0 && !E->ch_counted[ch]) {
+        E->ch_counted[ch] = 1;
+        if (E->cycles[cell] < 65535) E->cycles[cell] += 1;
+      }
       E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as World.after_step's p_soil */
       E->ch_pmax[ch] = pm1;
+      E->ch_dc[ch] = dc1;
     }
     long long c3 = now_ns();
     E->ns_cells += c3 - c2;
+    if (E->subsoil && E->n_depths > 0) {
+      /* the vertical stress at the subsoil depths below every loaded cell at the step end; each
+         cell keeps this pass's largest (float: the stored precision) */
+      double sig[16];
+      for (long long q = 0; q < E->n_act; ++q) {
+        long long ch = E->act[q];
+        if (!(E->ch_g[NGEO * ch] > 0.0)) continue;
+        subsoil_stress(E->subsoil, a1, E->geo, E->ch_cx[ch], E->ch_cy[ch], sig);
+        float *o = E->sig_pass + E->n_depths * E->ch_cell[ch];
+        for (long long k = 0; k < E->n_depths; ++k) {
+          float v = (float)sig[k];
+          if (v > o[k]) o[k] = v;
+        }
+      }
+      long long c3b = now_ns();
+      E->ns_subsoil += c3b - c3;
+      c3 = c3b;
+    }
     memcpy(E->wv, w1, sizeof w1);
     memcpy(E->a, a1, sizeof a1);
     sums(E);

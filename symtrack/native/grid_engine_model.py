@@ -22,11 +22,16 @@ interpolated between the step's two poses. So the Functions are:
 - ``eng_cell_geo(c[2], a[8], geo[6]) -> g[7]``: one cell's load p_load = sum_k frac_k
   p_k(s_mid,k), its overlap fractions (left, right) and its four end-strip weights, from
   :func:`symtrack.terrain.channels.build_cell_functions`'s geometry.
-- ``eng_cell_law(z, z_max, p_max) -> (p, dp/dz)``: the reaction pressure of
+- ``eng_cell_law(z, hist[5]) -> (p, dp/dz)``: the reaction pressure of
   :func:`symtrack.model.cell.reaction_pressure` with the soil's law constants baked in, and its
-  exact derivative (the Newton iteration of each implicit stage). For n = 0.5 the regularised
-  Bekker term k z+ (z+ + d)^(n-1) is written k z+ / sqrt(z+ + d) (the same number; libm's pow is
-  about 20 x slower than sqrt).
+  exact derivative (the Newton iteration of each implicit stage); hist = (z_max, p_max, z_off,
+  delta, d_c), the cycle law's history. For n = 0.5 the regularised Bekker term
+  k z+ (z+ + d)^(n-1) is written k z+ / sqrt(z+ + d) (the same number; libm's pow is about 20 x
+  slower than sqrt).
+- ``eng_cell_history(z, p, hist[5]) -> (z_max', p_max', d_c', plastic, phase)``:
+  :func:`symtrack.model.cell.history_update` (INFO_OUT).
+- ``eng_cell_entry(z, hist[5], cycles) -> delta``: :func:`symtrack.model.cell.cycle_increment`
+  with the soil's exponent (INFO_IN).
 """
 
 from __future__ import annotations
@@ -38,7 +43,15 @@ import casadi as ca
 from ..model import SystemModel, cell
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import ENDS, TRACKS, VEHICLE_STATES
-from ..terrain.channels import COMPACTION_SPEED_FLOOR_M_S, GLOBAL_FIELDS, NF, NG, build_cell_functions, soil_law_values
+from ..terrain.channels import (
+    COMPACTION_SPEED_FLOOR_M_S,
+    GLOBAL_FIELDS,
+    NF,
+    NG,
+    NH,
+    build_cell_functions,
+    soil_law_values,
+)
 from .rosenbrock import GAMMA as RB_GAMMA
 from .rosenbrock import N_STAGES as RB_STAGES
 from .rosenbrock import A as RB_A
@@ -139,17 +152,17 @@ def _lu_solve_factory(A):
     return solve
 
 
-def reaction_pressure_fast(z, z_max, p_max, keq, n, elastic_stiffness, kappa, reg_m):
-    """:func:`symtrack.model.cell.reaction_pressure` with numeric law constants; for n = 0.5 the
-    Bekker term through sqrt (the same number)."""
+def reaction_pressure_fast(z, hist, keq, n, elastic_stiffness, kappa, reg_m):
+    """:func:`symtrack.model.cell.reaction_pressure` with numeric law constants, hist = (z_max,
+    p_max, z_off, delta, d_c); for n = 0.5 the Bekker term through sqrt (the same number)."""
     if n == 0.5:
-        zp = ca.fmax(z, 0)
-        pb = keq * zp / ca.sqrt(zp + reg_m)
+        def bekker(zz):
+            zp = ca.fmax(zz, 0)
+            return keq * zp / ca.sqrt(zp + reg_m)
     else:
-        pb = cell.bekker_pressure(z, keq, n, reg_m)
-    k_u = cell.unloading_slope(z_max, p_max, elastic_stiffness, kappa, reg_m)
-    line = p_max - k_u * (z_max - z)
-    return ca.if_else(z >= z_max, pb, ca.fmax(0, ca.fmin(pb, line)))
+        bekker = None
+    return cell.reaction_pressure(z, hist[0], hist[1], keq, n, elastic_stiffness, kappa, reg_m, z_off=hist[2],
+                                  delta=hist[3], d_c=hist[4], bekker=bekker)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -159,11 +172,14 @@ class EngineFunctions:
     outputs: ca.Function
     cell_geo: ca.Function
     cell_law: ca.Function
+    cell_history: ca.Function
+    cell_entry: ca.Function
     output_names: tuple
     n_pv: int
 
     def all(self):
-        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, self.cell_law)
+        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, self.cell_law, self.cell_history,
+                self.cell_entry)
 
 
 def build_engine_functions(opts, params: dict, vehicle_substeps: int) -> EngineFunctions:
@@ -225,7 +241,7 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int) -> EngineF
     av = ca.SX.sym("a", NA)
     geo = ca.SX.sym("geo", 6)
     ddx, ddy = c[0] - av[0], c[1] - av[1]
-    qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, 0, 0, 1)
+    qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, 0, 0, 1, ca.DM.zeros(NF - 5))
     g = fn["geometry"](qb, ca.DM.zeros(3), geo)
     p_load = 0
     for i in range(2):
@@ -233,13 +249,20 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int) -> EngineF
     cell_geo = ca.Function("eng_cell_geo", [c, av, geo], [ca.vertcat(p_load, g[0], g[1], g[4], g[5], g[6], g[7])],
                            ["c", "a", "geo"], ["g"], fo)
 
-    keq, n, ke, kappa = soil_law_values(params)
-    z, zmax, pmax = ca.SX.sym("z"), ca.SX.sym("z_max"), ca.SX.sym("p_max")
-    p = reaction_pressure_fast(z, zmax, pmax, keq, n, ke, kappa, opts.bekker_regularisation_m)
-    cell_law = ca.Function("eng_cell_law", [z, zmax, pmax], [p, ca.jacobian(p, z)], ["z", "z_max", "p_max"],
-                           ["p", "dp_dz"], fo)
-    return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, cell_law, veh.output_names,
-                           len(PARAM_NAMES) + NG + NS)
+    keq, n, ke, kappa, reg = soil_law_values(params, opts.bekker_regularisation_m)
+    z, hist, ps = ca.SX.sym("z"), ca.SX.sym("hist", NH), ca.SX.sym("p")
+    p = reaction_pressure_fast(z, hist, keq, n, ke, kappa, reg)
+    cell_law = ca.Function("eng_cell_law", [z, hist], [p, ca.jacobian(p, z)], ["z", "hist"], ["p", "dp_dz"], fo)
+    zm1, pm1, dc1, plastic, phase = cell.history_update(z, ps, hist[0], hist[1], hist[2], hist[3], hist[4], ke,
+                                                        kappa, reg)
+    cell_history = ca.Function("eng_cell_history", [z, ps, hist], [ca.vertcat(zm1, pm1, dc1, plastic, phase)],
+                               ["z", "p", "hist"], ["h"], fo)
+    cycles = ca.SX.sym("cycles")
+    delta = cell.cycle_increment(z, hist[0], hist[1], hist[2], cycles, ke, kappa, reg,
+                                 float(params["repeated_loading_exponent"]))
+    cell_entry = ca.Function("eng_cell_entry", [z, hist, cycles], [delta], ["z", "hist", "cycles"], ["delta"], fo)
+    return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, cell_law, cell_history, cell_entry,
+                           veh.output_names, len(PARAM_NAMES) + NG + NS)
 
 
 def pv_base(params: dict, cell_m: float, end_strip_m: float) -> list[float]:

@@ -60,7 +60,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     from symtrack.model import SystemModel
     from symtrack.model.system import PARAM_NAMES
     from symtrack.model.vehicle import ENDS, TRACKS
-    from symtrack.terrain.channels import NF, NG, build_cell_functions
+    from symtrack.terrain.channels import HIST_ROWS, NF, NG, build_cell_functions, law_vector
 
     agg = SumsTerrain()
     veh = SystemModel(opts, agg)
@@ -94,14 +94,14 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     xc = ca.SX.sym("xc", 2)
     q = ca.SX.sym("q", NF)
     av = ca.SX.sym("a", NA)
-    cst = ca.SX.sym("c", 15)  # l, b, B, e, dx, strip, law[4], cellpar[2], h, unused x2
-    geo, law, cellpar, hh = cst[0:6], cst[6:10], cst[10:12], cst[12]
+    cst = ca.SX.sym("c", 15)  # l, b, B, e, dx, strip, law[5], cellpar[2], h, unused
+    geo, law, cellpar, hh = cst[0:6], cst[6:11], cst[11:13], cst[13]
     # the cell centre in the body frame here (cos, sin of the yaw computed once per stage, not per
     # channel), then the channel's own geometry at the zero pose (cos 0 = 1 folds away)
     ddx, ddy = q[0] - av[0], q[1] - av[1]
-    qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, q[2], q[3], q[4])
+    qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, q[2:])
     gvec = fn["geometry"](qb, ca.DM.zeros(3), geo)
-    p_soil = fn["soil"](xc[0], q[2], q[3], law)
+    p_soil = fn["soil"](xc[0], ca.vertcat(*(q[r] for r in HIST_ROWS)), law)
     p_load = 0
     for i in range(2):
         p_load = p_load + gvec[i] * ca.fmax(0, av[4 + 2 * i] + av[5 + 2 * i] * gvec[2 + i])
@@ -144,10 +144,11 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     from symtrack.model.cell import k_eq
 
     keq = k_eq(Pd["k_c_N_per_m_n1"], Pd["k_phi_N_per_m_n2"], Pd["track_width_m"])
+    law_mx = law_vector(keq, Pd["bekker_n"], Pd["elastic_stiffness_Pa_per_m"], Pd["unloading_stiffness_floor"],
+                        opts.bekker_regularisation_m)
     C_MX = ca.vertcat(Pd["contact_length_m"], Pd["track_width_m"], Pd["track_gauge_m"],
-                      Pd["cg_ahead_of_contact_centre_m"], Qg[0], Qg[1], keq, Pd["bekker_n"],
-                      Pd["elastic_stiffness_Pa_per_m"], Pd["unloading_stiffness_floor"],
-                      Pd["cell_areal_mass_kg_per_m2"], Pd["cell_damping_Pa_s_per_m"], H, 0, 0)
+                      Pd["cg_ahead_of_contact_centre_m"], Qg[0], Qg[1], law_mx,
+                      Pd["cell_areal_mass_kg_per_m2"], Pd["cell_damping_Pa_s_per_m"], H, 0)
     mass_w = ca.DM.zeros(NW)
     mass_w[:12] = 1.0
 

@@ -10,6 +10,25 @@ Sources:
 - Project Chrono SCM terrain presets ("soft", "hard") for comparison: k_phi, n, phi, K, the
   elastic (unloading) stiffness K_e and the damping 3e4 Pa s/m.
 
+- The cycle law's exponent ``repeated_loading_exponent`` beta (rut after N passes = first rut
+  N^beta, symtrack/model/cell.py): Li, D. & Selig, E.T. (1996), "Cumulative plastic deformation
+  for fine-grained subgrade soils", J. Geotech. Eng. 122(12), 1006-1013, who fitted
+  eps_p = a (sigma_d / sigma_s)^m N^b to repeated-load triaxial tests and give b by soil group:
+  0.10 (ML, silt), 0.13 (MH), 0.16 (CL, lean clay), 0.18 (CH, fat clay). The power law in N is
+  Monismith, Ogawa & Freeme (1975), Transp. Res. Rec. 537. Each soil below takes the group it
+  is closest to; for sands (not fine-grained, outside Li & Selig's data) the lowest, ML's 0.10,
+  is used and marked so.
+
+- The subsoil stress's concentration factor ``stress_concentration_factor`` xi (Froehlich): Soehne
+  (1953, Grundlagen der Landtechnik 5), as quoted by Keller et al. (2007), Soil Till. Res. 93,
+  391-411: 4 for hard (dry) soil, 5 for firm (medium), 6 for soft (wet). No preset has a
+  measured xi: each takes Soehne's class from its description (dry sand hard, wet soils soft),
+  a judgement, marked so. (A second-hand source, the soilphysics R package's documentation,
+  states the opposite order; docs/subsoil.md.)
+- The precompression stress ``precompression_stress_Pa``: no preset has a measured value; all
+  take the registry's default (symtrack/model/parameters.py: the Schjoenning & Lamande 2018
+  pedotransfer function at typical inputs), which is not soil-specific.
+
 Terrain-cell dynamics (seed eq. 4) need an areal mass tau_z and an areal damping c'' that no
 table gives; see the two module constants below.
 """
@@ -35,7 +54,13 @@ WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M = 4.0e7
 UNLOADING_STIFFNESS_FLOOR = 3.0
 
 
-def _wong(n, k_c_kN, k_phi_kN, c_kPa, phi_deg, K_m):
+# beta of the cycle law by Li & Selig's (1996) soil groups (module doc)
+BETA_ML, BETA_MH, BETA_CL, BETA_CH = 0.10, 0.13, 0.16, 0.18
+# xi of the subsoil stress by Soehne's classes (module doc)
+XI_HARD, XI_FIRM, XI_SOFT = 4.0, 5.0, 6.0
+
+
+def _wong(n, k_c_kN, k_phi_kN, c_kPa, phi_deg, K_m, beta, xi):
     return {
         "bekker_n": n,
         "k_c_N_per_m_n1": k_c_kN * 1e3,
@@ -47,10 +72,12 @@ def _wong(n, k_c_kN, k_phi_kN, c_kPa, phi_deg, K_m):
         "unloading_stiffness_floor": UNLOADING_STIFFNESS_FLOOR,
         "cell_areal_mass_kg_per_m2": CELL_AREAL_MASS_KG_PER_M2,
         "cell_damping_Pa_s_per_m": CELL_DAMPING_PA_S_PER_M,
+        "repeated_loading_exponent": beta,
+        "stress_concentration_factor": xi,
     }
 
 
-def _chrono(k_phi, n, phi_deg, K_m, K_e):
+def _chrono(k_phi, n, phi_deg, K_m, K_e, beta, xi):
     return {
         "bekker_n": n,
         "k_c_N_per_m_n1": 0.0,
@@ -62,31 +89,41 @@ def _chrono(k_phi, n, phi_deg, K_m, K_e):
         "unloading_stiffness_floor": UNLOADING_STIFFNESS_FLOOR,
         "cell_areal_mass_kg_per_m2": CELL_AREAL_MASS_KG_PER_M2,
         "cell_damping_Pa_s_per_m": CELL_DAMPING_PA_S_PER_M,
+        "repeated_loading_exponent": beta,
+        "stress_concentration_factor": xi,
     }
 
 
 # name -> (values, source note)
 SOILS: dict[str, dict[str, float]] = {
-    # Wong Table 2.3; K: Wong's guidance for sand (2.5 cm)
-    "dry_sand": _wong(1.10, 0.99, 1528.43, 1.04, 28.0, 0.025),
+    # Wong Table 2.3; K: Wong's guidance for sand (2.5 cm); beta: ML's, extrapolated to sand
+    "dry_sand": _wong(1.10, 0.99, 1528.43, 1.04, 28.0, 0.025, BETA_ML, XI_HARD),
     # Wong Table 2.3; K: guidance value between clay and sand (1.2 cm, as LETE sand)
-    "sandy_loam_15": _wong(0.70, 5.27, 1515.04, 1.72, 29.0, 0.012),
+    # beta: Li & Selig's silt (ML)
+    "sandy_loam_15": _wong(0.70, 5.27, 1515.04, 1.72, 29.0, 0.012, BETA_ML, XI_FIRM),
     # Wong Table 2.3; K = 1.5 cm calibrated against the seed's validation table (MODEL.md s. 4
     # allows 0.6-2.5 cm): gives a driven-track shear of order 1 cm at 2000 N m.
-    "clayey_soil_thailand_38": _wong(0.50, 13.19, 692.15, 4.14, 13.0, 0.015),
+    # beta: Li & Selig's lean clay (CL); xi: firm (its sinkage under the crawler is millimetres)
+    "clayey_soil_thailand_38": _wong(0.50, 13.19, 692.15, 4.14, 13.0, 0.015, BETA_CL, XI_FIRM),
     # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
-    "clayey_soil_thailand_55": _wong(0.70, 16.03, 1262.53, 2.07, 10.0, 0.006),
+    # beta: Li & Selig's lean clay (CL)
+    "clayey_soil_thailand_55": _wong(0.70, 16.03, 1262.53, 2.07, 10.0, 0.006, BETA_CL, XI_SOFT),
     # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
-    "heavy_clay_wes_40": _wong(0.11, 1.84, 103.27, 20.69, 6.0, 0.006),
+    # beta: Li & Selig's fat clay (CH)
+    "heavy_clay_wes_40": _wong(0.11, 1.84, 103.27, 20.69, 6.0, 0.006, BETA_CH, XI_SOFT),
     # Wong Table 2.3; K = 1.2 cm measured for LETE sand (Wong)
-    "lete_sand": _wong(0.79, 102.0, 5301.0, 1.3, 31.1, 0.012),
+    # beta: ML's, extrapolated to sand
+    "lete_sand": _wong(0.79, 102.0, 5301.0, 1.3, 31.1, 0.012, BETA_ML, XI_HARD),
     # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
-    "north_gower_clayey_loam_46": _wong(0.73, 41.6, 2471.0, 6.1, 26.6, 0.006),
+    # beta: Li & Selig's lean clay (CL)
+    "north_gower_clayey_loam_46": _wong(0.73, 41.6, 2471.0, 6.1, 26.6, 0.006, BETA_CL, XI_SOFT),
     # Wong Table 2.3; K: guidance value between clay and sand (1.2 cm)
-    "upland_sandy_loam_51": _wong(1.10, 74.6, 2080.0, 3.3, 33.7, 0.012),
-    # Project Chrono SCM demo presets
-    "chrono_soft": _chrono(2e6, 1.1, 30.0, 0.01, 4e7),
-    "chrono_hard": _chrono(2e7, 1.1, 20.0, 0.01, 2e8),
+    # beta: Li & Selig's silt (ML)
+    "upland_sandy_loam_51": _wong(1.10, 74.6, 2080.0, 3.3, 33.7, 0.012, BETA_ML, XI_SOFT),
+    # Project Chrono SCM demo presets; beta: no source for these generic soils, Li & Selig's lean
+    # clay (CL) as the registry's default
+    "chrono_soft": _chrono(2e6, 1.1, 30.0, 0.01, 4e7, BETA_CL, XI_SOFT),
+    "chrono_hard": _chrono(2e7, 1.1, 20.0, 0.01, 2e8, BETA_CL, XI_HARD),
 }
 
 

@@ -128,3 +128,33 @@ def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 6) -> byt
         data = path.read_bytes()
     plt.close(fig)
     return data
+
+
+def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
+    """The subsoil plots of a terrain study (docs/subsoil.md), when it computed the stress:
+    ``risk_map.png`` (the risk class by depth over the field's record of all passes),
+    ``stress_profile.png`` (the field's largest stress against depth with the soil's strength) and,
+    for several passes, ``subsoil_passes.png`` (rut depth and largest stress against the pass)."""
+    from ..terrain.subsoil import risk_class
+    from .subsoil_plots import passes_subsoil_png, risk_map_png, stress_profile_png
+
+    st = world.storage
+    depths = st.subsoil_depths_m
+    if not depths or not any("subsoil_sigma_z_max_kPa" in f for f in figures):
+        return {}
+    g = world.grid
+    pc = float(world.params["precompression_stress_Pa"])
+    sig = st.sigma_max.reshape(*g.shape, len(depths))
+    loaded = sig[:, :, 0] > 0
+    si, sj = _window(world, [loaded.astype(float)])
+    x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
+    ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
+    out = {"risk_map.png": risk_map_png(risk_class(sig[si, sj], pc), loaded[si, sj], depths, ext,
+                                        title=f"compaction risk after all passes (strength {1e-3 * pc:g} kPa)"),
+           "stress_profile.png": stress_profile_png(depths, 1e-3 * sig[loaded].max(axis=0), 1e-3 * pc,
+                                                    label="largest over the field")}
+    subs = [f for f in figures if "subsoil_sigma_z_max_kPa" in f]
+    if len(figures) > 1 and len(subs) == len(figures):
+        out["subsoil_passes.png"] = passes_subsoil_png([f["rut_mean_depth_mm"] for f in figures],
+                                                       [f["subsoil_sigma_z_max_kPa"] for f in figures], depths)
+    return out

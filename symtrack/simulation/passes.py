@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..terrain import subsoil
 from ..terrain.world import World
 from . import loop
 from .plants import GridPlant
@@ -51,7 +52,7 @@ def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np
     tt = res.t
     rc_mean = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * np.diff(tt)) / (tt[-1] - tt[0])) if tt[-1] > tt[0] else 0.0
     seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))
-    return {
+    return {**_subsoil_figures(world), **{
         "rut_max_depth_mm": 1e3 * float(z[rut].max()) if rut.any() else 0.0,
         "rut_mean_depth_mm": 1e3 * float(z[rut].mean()) if rut.any() else 0.0,
         "new_sinkage_mean_mm": 1e3 * float(dz[rut].mean()) if rut.any() else 0.0,
@@ -61,7 +62,28 @@ def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np
         "distance_m": float(seg.sum()),
         "sim_time_s": float(res.t[-1]),
         "wall_time_s": float(res.wall_time_s),
-    }
+    }}
+
+
+def _subsoil_figures(world: World) -> dict:
+    """The subsoil figures of a pass (docs/subsoil.md): the depths, the largest vertical stress
+    over the field at each, and the area fraction of each risk class at each over the cells the
+    pass loaded (Terranimo's classes of stress / precompression stress). Empty when the stress
+    is off or was not computed (only the terrain engine computes it)."""
+    depths = world.storage.subsoil_depths_m
+    sig = world.pass_sigma
+    loaded = sig[:, 0] > 0 if sig.size else np.zeros(0, dtype=bool)
+    if not depths or not loaded.any():
+        return {}
+    pc = float(world.params["precompression_stress_Pa"])
+    fr = subsoil.risk_area_fractions(sig.astype(np.float64), pc, loaded, world.grid.cell_m ** 2)
+    out = {"subsoil_depths_m": list(depths),
+           "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig[loaded].max(axis=0)],
+           "subsoil_precompression_stress_kPa": 1e-3 * pc,
+           "subsoil_loaded_area_m2": float(fr["touched_area_m2"])}
+    for name in subsoil.RISK_NAMES:
+        out[f"subsoil_risk_fraction_{name}"] = [float(v) for v in fr[f"fraction_{name}"]]
+    return out
 
 
 def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: bool = False) -> PassStudy:

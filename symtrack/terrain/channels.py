@@ -13,8 +13,10 @@ and int_2_state).
 
 Q (the terrain's own parameters, appended to the vehicle and soil parameters):
 ``cell_size_m``, ``end_strip_m``, then per channel c the :data:`CHANNEL_FIELDS`: the cell
-centre (world x, y), the history z_max, p_max of the cell and the active flag (1 active,
-0 idle). An idle channel is inert: zero derivatives, no load, no weight, no work.
+centre (world x, y), the history z_max, p_max of the cell, the active flag (1 active,
+0 idle), and the cycle law's z_off (plastic sinkage of the cell's earlier load cycles), delta (the
+increment this stay may add) and d_c (what it has added so far): symtrack/model/cell.py. An idle
+channel is inert: zero derivatives, no load, no weight, no work.
 
 Coupling with the vehicle
 -------------------------
@@ -66,10 +68,15 @@ from ..model import cell
 from ..model.options import ModelOptions
 from ..model.vehicle import ENDS, TRACKS
 
-__all__ = ["CHANNEL_FIELDS", "COMPACTION_SPEED_FLOOR_M_S", "ChannelTerrain", "GLOBAL_FIELDS", "NF", "NG",
-           "build_cell_functions", "channel_param_names", "channel_state_names", "soil_law_values"]
+__all__ = ["CHANNEL_FIELDS", "COMPACTION_SPEED_FLOOR_M_S", "ChannelTerrain", "GLOBAL_FIELDS", "HIST_ROWS", "NF",
+           "NG", "NH", "NLAW", "build_cell_functions", "channel_param_names", "channel_state_names", "law_vector",
+           "soil_law_values"]
 
-CHANNEL_FIELDS = ("centre_x_m", "centre_y_m", "z_max_m", "p_max_Pa", "active")
+CHANNEL_FIELDS = ("centre_x_m", "centre_y_m", "z_max_m", "p_max_Pa", "active", "z_off_m", "cycle_increment_m",
+                  "cycle_progress_m")
+# the history the cell law reads, as rows of the channel fields: z_max, p_max, z_off, delta, d_c
+HIST_ROWS = (2, 3, 5, 6, 7)
+NH = len(HIST_ROWS)
 GLOBAL_FIELDS = ("cell_size_m", "end_strip_m")
 NF = len(CHANNEL_FIELDS)
 NG = len(GLOBAL_FIELDS)
@@ -105,11 +112,24 @@ def _overlap(c, h, lo, hi):
 
 
 def _law_symbols():
-    return ca.SX.sym("law", 4)  # k_eq, n, elastic stiffness, kappa
+    return ca.SX.sym("law", NLAW)  # k_eq, n, elastic stiffness, kappa, regularisation length
 
 
-def _law_dict(law, reg_m):
-    return dict(keq=law[0], n=law[1], elastic_stiffness=law[2], kappa=law[3], reg_m=reg_m)
+NLAW = 5
+
+
+def _law_dict(law):
+    return dict(keq=law[0], n=law[1], elastic_stiffness=law[2], kappa=law[3], reg_m=law[4])
+
+
+def _hist(h):
+    """(z_max, p_max, z_off, delta, d_c) from a history vector."""
+    return h[0], h[1], h[2], h[3], h[4]
+
+
+def law_vector(keq, n, elastic_stiffness, kappa, reg_cap_m):
+    """The law vector (symbolic or numeric) with the soil's regularisation length."""
+    return ca.vertcat(keq, n, elastic_stiffness, kappa, cell.bekker_regularisation_length(keq, n, reg_cap_m))
 
 
 def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
@@ -118,13 +138,16 @@ def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
     - ``geometry(q[5], pose[3], geo[6]) -> g[8]``: frac_left, frac_right, s_mid_left, s_mid_right,
       and the end-strip weights (sprocket_left, idler_left, sprocket_right, idler_right);
       geo = (l, b, B, e, cell size, end strip).
-    - ``soil(z, z_max, p_max, law[4]) -> p``: the reaction pressure (cell.reaction_pressure).
+    - ``soil(z, hist[5], law[5]) -> p``: the reaction pressure (cell.reaction_pressure);
+      hist = (z_max, p_max, z_off, delta, d_c) (:data:`HIST_ROWS` of the channel fields), law =
+      (k_eq, n, K_e, kappa, regularisation length) (:func:`soil_law_values`).
     - ``dynamics(z_dot, p_load, p, active, cellpar[2]) -> xc_dot[2]`` (cell.cell_acceleration),
       cellpar = (areal mass, areal damping).
-    - ``history(z, z_max, p_max, law[4]) -> (z_max', p_max', p, phase)``: INFO_OUT, the history
-      update applied by the world manager after each macro step.
+    - ``history(z, hist[5], law[5]) -> (z_max', p_max', d_c', p, phase, plastic)``: INFO_OUT, the
+      history update (cell.history_update) applied by the world manager after each macro step.
+    - ``entry(z, hist[5], cycles, law[5], beta) -> delta``: INFO_IN, the plastic increment the
+      cell's new stay may add (cell.cycle_increment).
     """
-    reg = opts.bekker_regularisation_m
     q = ca.SX.sym("q", NF)
     pose = ca.SX.sym("pose", 3)
     geo = ca.SX.sym("geo", 6)
@@ -148,10 +171,10 @@ def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
     g = ca.vertcat(*fr, *sm, *(w[(end, k)] for k in TRACKS for end in ENDS))
     geometry = ca.Function("channel_geometry", [q, pose, geo], [g], ["q", "pose", "geo"], ["g"])
 
-    z, zmax, pmax = ca.SX.sym("z"), ca.SX.sym("z_max"), ca.SX.sym("p_max")
-    law = _law_symbols()
-    p = cell.reaction_pressure(z, zmax, pmax, **_law_dict(law, reg))
-    soil = ca.Function("channel_soil", [z, zmax, pmax, law], [p], ["z", "z_max", "p_max", "law"], ["p"])
+    z, hist, law = ca.SX.sym("z"), ca.SX.sym("hist", NH), _law_symbols()
+    zm, pm, zo, dl, dc = _hist(hist)
+    p = cell.reaction_pressure(z, zm, pm, **_law_dict(law), z_off=zo, delta=dl, d_c=dc)
+    soil = ca.Function("channel_soil", [z, hist, law], [p], ["z", "hist", "law"], ["p"])
 
     zdot, pload, ps, act = ca.SX.sym("z_dot"), ca.SX.sym("p_load"), ca.SX.sym("p"), ca.SX.sym("active")
     cellpar = ca.SX.sym("cellpar", 2)
@@ -160,20 +183,25 @@ def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
                            [ca.vertcat(act * zdot, act * acc)],
                            ["z_dot", "p_load", "p", "active", "cellpar"], ["xc_dot"])
 
-    loading = z >= zmax
-    zmax_new = ca.fmax(zmax, z)
-    pmax_new = ca.if_else(loading, ca.fmax(pmax, p), pmax)
-    phase = ca.if_else(loading, PHASE_LOADING, PHASE_UNLOADING)
-    history = ca.Function("channel_history", [z, zmax, pmax, law], [zmax_new, pmax_new, p, phase],
-                          ["z", "z_max", "p_max", "law"], ["z_max_new", "p_max_new", "p", "phase"])
-    return {"geometry": geometry, "soil": soil, "dynamics": dynamics, "history": history}
+    lw = _law_dict(law)
+    zmax1, pmax1, dc1, plastic, phase = cell.history_update(z, p, *_hist(hist), lw["elastic_stiffness"], lw["kappa"],
+                                                            lw["reg_m"])
+    history = ca.Function("channel_history", [z, hist, law], [zmax1, pmax1, dc1, p, phase, plastic],
+                          ["z", "hist", "law"], ["z_max_new", "p_max_new", "d_c_new", "p", "phase", "plastic"])
+    cycles, beta = ca.SX.sym("cycles"), ca.SX.sym("beta")
+    delta = cell.cycle_increment(z, zm, pm, zo, cycles, lw["elastic_stiffness"], lw["kappa"], lw["reg_m"], beta)
+    entry = ca.Function("channel_entry", [z, hist, cycles, law, beta], [delta],
+                        ["z", "hist", "cycles", "law", "beta"], ["delta"])
+    return {"geometry": geometry, "soil": soil, "dynamics": dynamics, "history": history, "entry": entry}
 
 
-def soil_law_values(params: dict) -> list[float]:
-    """Numeric law vector (k_eq, n, K_e, kappa) from a parameter dict."""
+def soil_law_values(params: dict, reg_cap_m: float = ModelOptions.bekker_regularisation_m) -> list[float]:
+    """Numeric law vector (k_eq, n, K_e, kappa, regularisation length) from a parameter dict;
+    ``reg_cap_m``: the model option bekker_regularisation_m."""
     keq = cell.k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])
-    return [float(keq), float(params["bekker_n"]), float(params["elastic_stiffness_Pa_per_m"]),
-            float(params["unloading_stiffness_floor"])]
+    v = law_vector(float(keq), float(params["bekker_n"]), float(params["elastic_stiffness_Pa_per_m"]),
+                   float(params["unloading_stiffness_floor"]), float(reg_cap_m))
+    return [float(x) for x in ca.DM(ca.evalf(v)).full().ravel()]
 
 
 class ChannelTerrain:
@@ -191,7 +219,7 @@ class ChannelTerrain:
         self.fn = build_cell_functions(opts)
         n = n_channels
         self._geometry = self.fn["geometry"].map("channels_geometry", "serial", n, [1, 2], [])
-        self._soil = self.fn["soil"].map("channels_soil", "serial", n, [3], [])
+        self._soil = self.fn["soil"].map("channels_soil", "serial", n, [2], [])
         self._dynamics = self.fn["dynamics"].map("channels_dynamics", "serial", n, [4], [])
         self._cache = None
 
@@ -207,8 +235,10 @@ class ChannelTerrain:
         g = self._geometry(qc, pose, geo)  # 8 x n
         xcm = ca.reshape(xc, 2, n)
         keq = cell.k_eq(P["k_c_N_per_m_n1"], P["k_phi_N_per_m_n2"], P["track_width_m"])
-        law = ca.vertcat(keq, P["bekker_n"], P["elastic_stiffness_Pa_per_m"], P["unloading_stiffness_floor"])
-        p_soil = self._soil(xcm[0, :], qc[2, :], qc[3, :], law)  # 1 x n
+        law = law_vector(keq, P["bekker_n"], P["elastic_stiffness_Pa_per_m"], P["unloading_stiffness_floor"],
+                         self.opts.bekker_regularisation_m)
+        hist = ca.vertcat(*(qc[r, :] for r in HIST_ROWS))
+        p_soil = self._soil(xcm[0, :], hist, law)  # 1 x n
         parts = {"qc": qc, "g": g, "xcm": xcm, "p_soil": p_soil, "cell_area": Q[0] ** 2}
         self._cache = (xv, xc, Q, parts)
         return parts

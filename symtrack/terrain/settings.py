@@ -15,6 +15,8 @@ Schema (every key optional; unknown keys are errors)::
     release_rate_m_s = 1e-5     # (0, 1] |dz/dt| below which an unloaded cell is released
     settle_s = 0.2              # [0, 10] settling of the cells under the vehicle at rest
                                 # before each pass (the pass's initial static state)
+    subsoil_depths_m = [0.1, 0.3, 0.5, 0.8]  # depths of the subsoil stress (docs/subsoil.md),
+                                # increasing, each in (0, 5] m, at most 8; [] switches it off
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from ..foundations.errors import ScenarioError
 __all__ = ["MAX_CELLS", "TerrainSettings", "settings_from_dict"]
 
 MAX_CELLS = 100_000_000
+MAX_SUBSOIL_DEPTHS = 8
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,7 @@ class TerrainSettings:
     release_time_s: float = 0.05
     release_rate_m_s: float = 1e-5
     settle_s: float = 0.2
+    subsoil_depths_m: tuple = (0.1, 0.3, 0.5, 0.8)
     given: frozenset = field(default=frozenset(), compare=False, repr=False)
 
     def __post_init__(self):
@@ -71,6 +75,14 @@ class TerrainSettings:
         _num("release_time_s", self.release_time_s, 0, 10, low_open=True)
         _num("release_rate_m_s", self.release_rate_m_s, 0, 1, low_open=True)
         _num("settle_s", self.settle_s, 0, 10)
+        d = self.subsoil_depths_m
+        if not isinstance(d, (list, tuple)) or len(d) > MAX_SUBSOIL_DEPTHS:
+            raise ScenarioError(f"terrain.subsoil_depths_m = {d!r} must be a list of at most {MAX_SUBSOIL_DEPTHS} "
+                                "depths in m (an empty list switches the subsoil stress off)")
+        for i, v in enumerate(d):
+            _num(f"subsoil_depths_m[{i}]", v, 0, 5, low_open=True)
+            if i and not v > d[i - 1]:
+                raise ScenarioError(f"terrain.subsoil_depths_m = {list(d)!r} must increase (entry {i} is {v!r})")
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -81,7 +93,7 @@ class TerrainSettings:
     def to_dict(self) -> dict:
         """The keys the scenario gave, as a TOML-writable dict (pairs as lists)."""
         out = {k: getattr(self, k) for k in sorted(self.given)}
-        for k in ("size_m", "origin_m"):
+        for k in ("size_m", "origin_m", "subsoil_depths_m"):
             if out.get(k) is not None:
                 out[k] = list(out[k])
         return out
@@ -106,6 +118,8 @@ def settings_from_dict(t: dict) -> TerrainSettings:
         d["size_m"] = _pair("size_m", d["size_m"])
     if "origin_m" in d:
         d["origin_m"] = _pair("origin_m", d["origin_m"])
+    if "subsoil_depths_m" in d and isinstance(d["subsoil_depths_m"], list):
+        d["subsoil_depths_m"] = tuple(d["subsoil_depths_m"])
     if isinstance(d.get("passes"), float) and d["passes"].is_integer():
         d["passes"] = int(d["passes"])
     return TerrainSettings(**d, given=frozenset(t))

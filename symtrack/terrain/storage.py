@@ -1,7 +1,7 @@
 """The field's cell storage (:class:`Grid`, :class:`Terrain`) and terrain files: the whole cell
 storage in one ``.npz`` file, written atomically.
 
-Schema (``TERRAIN_SCHEMA_VERSION`` = 1), one NumPy array per key:
+Schema (``TERRAIN_SCHEMA_VERSION`` = 2), one NumPy array per key:
 
 - ``kind``: the string "symtrack-terrain"; ``schema_version``: int;
 - ``origin_m`` (2,) float64: world (x, y) of the field's lower-left corner; ``cell_m`` float64;
@@ -9,11 +9,19 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 1), one NumPy array per key:
   origin + ((i + 1/2) cell_m, (j + 1/2) cell_m);
 - ``z_m``, ``z_rate_m_s``, ``z_max_m``, ``p_max_Pa`` float64 (nx, ny) and ``phase`` int8 (nx, ny):
   every cell's five stored values (phase 0 untouched, 1 loading, 2 unloading/reloading);
+- ``z_off_m`` float64 (nx, ny) and ``load_cycles`` uint16 (nx, ny) (schema 2): the cycle law's
+  plastic sinkage of the cell's later load cycles and the number of load cycles it has seen
+  (symtrack/model/cell.py). A schema-1 file loads with z_off = 0 and the count inferred from its
+  phase: 1 for a loaded cell (phase 1 or 2), 0 for an untouched one;
+- ``subsoil_depths_m`` float64 (n_depths,) and ``sigma_max_Pa`` float32 (nx, ny, n_depths)
+  (schema 2, optional): the largest vertical stress each cell's soil has carried at each depth
+  over all passes (symtrack/terrain/subsoil.py; float32: a stress to 7 digits);
 - ``soil_names`` (str array) and ``soil_values`` float64: the soil parameters the history
   was made with. Loading a file into a scenario with a different soil is an error.
 
-Values are stored bit for bit (float64), compressed (zip deflate): the default field of a
-million cells, mostly untouched, takes well under its 33 MB in memory.
+Values are stored bit for bit, compressed (zip deflate): the default field of a million cells,
+mostly untouched, takes well under its 43 MB in memory (43 bytes per cell: 5 float64, the int8
+phase and the uint16 cycle count).
 """
 
 from __future__ import annotations
@@ -31,9 +39,11 @@ from ..model.parameters import SOIL_PARAM_NAMES
 
 __all__ = ["KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "load", "save"]
 
-STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase")
+STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase", "z_off_m", "load_cycles")
+SCHEMA1_FIELDS = STORAGE_FIELDS[:5]
 
-TERRAIN_SCHEMA_VERSION = 1
+TERRAIN_SCHEMA_VERSION = 2
+READABLE_SCHEMAS = (1, 2)
 KIND = "symtrack-terrain"
 
 
@@ -57,14 +67,14 @@ class Grid:
 
 
 class Terrain:
-    """The field's state, Cell[N, N]: five values per cell (module doc), flat arrays indexed by
+    """The field's state, Cell[N, N]: seven values per cell (module doc), flat arrays indexed by
     i * ny + j, and the soil parameters the history was made with (None for a new field until a
     world with a soil writes into it).
 
     ``Terrain.load(path)`` reads a terrain file, :meth:`save` writes one; :meth:`arrays` gives
     the storage arrays by their file names (views: writing into them changes the terrain)."""
 
-    def __init__(self, grid: Grid, soil: dict | None = None):
+    def __init__(self, grid: Grid, soil: dict | None = None, subsoil_depths_m=()):
         n = grid.n_cells
         self.grid = grid
         self.soil = None if soil is None else {str(k): float(v) for k, v in soil.items()}
@@ -73,13 +83,35 @@ class Terrain:
         self.zmax = np.zeros(n)
         self.pmax = np.zeros(n)
         self.phase = np.zeros(n, dtype=np.int8)
+        self.zoff = np.zeros(n)
+        self.cycles = np.zeros(n, dtype=np.uint16)
+        self.subsoil_depths_m = tuple(float(d) for d in subsoil_depths_m)
+        self.sigma_max = np.zeros((n, len(self.subsoil_depths_m)), dtype=np.float32)
+
+    def _all(self):
+        return (self.z, self.zdot, self.zmax, self.pmax, self.phase, self.zoff, self.cycles)
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.z, self.zdot, self.zmax, self.pmax, self.phase))
+        return sum(a.nbytes for a in self._all()) + self.sigma_max.nbytes
 
     def arrays(self) -> dict:
-        return dict(zip(STORAGE_FIELDS, (self.z, self.zdot, self.zmax, self.pmax, self.phase), strict=True))
+        out = dict(zip(STORAGE_FIELDS, self._all(), strict=True))
+        out["sigma_max_Pa"] = self.sigma_max
+        return out
+
+    def set_subsoil_depths(self, depths_m) -> None:
+        """Use these depths for the stress field: a terrain without stress takes them; one that has
+        recorded stress at other depths is an error (its record would not mean the same)."""
+        depths = tuple(float(d) for d in depths_m)
+        if depths == self.subsoil_depths_m:
+            return
+        if self.sigma_max.size and np.any(self.sigma_max > 0):
+            raise ScenarioError(f"the terrain recorded subsoil stress at depths {list(self.subsoil_depths_m)} m, the "
+                                f"scenario asks for terrain.subsoil_depths_m = {list(depths)}; use the same depths "
+                                "to continue a terrain")
+        self.subsoil_depths_m = depths
+        self.sigma_max = np.zeros((self.grid.n_cells, len(depths)), dtype=np.float32)
 
     def copy_z(self):
         """The sinkage as an (nx, ny) array (a copy)."""
@@ -101,7 +133,9 @@ class Terrain:
 def save(path, storage: Terrain, soil: dict) -> None:
     """Write ``storage`` with the soil parameters ``soil`` as a terrain file, atomically."""
     g = storage.grid
-    arrays = {k: v.reshape(g.shape) for k, v in storage.arrays().items()}
+    arrays = {k: v.reshape(g.shape) for k, v in storage.arrays().items() if k != "sigma_max_Pa"}
+    arrays["sigma_max_Pa"] = storage.sigma_max.reshape(*g.shape, len(storage.subsoil_depths_m))
+    arrays["subsoil_depths_m"] = np.array(storage.subsoil_depths_m, dtype=np.float64)
     buf = io.BytesIO()
     np.savez_compressed(
         buf, kind=np.array(KIND), schema_version=np.array(TERRAIN_SCHEMA_VERSION),
@@ -127,14 +161,17 @@ def load(path, soil: dict | None = None) -> Terrain:
                             "--terrain-out or Terrain.save writes)") from err
     if str(d.get("kind", "")) != KIND:
         raise ScenarioError(f"{path}: not a symtrack terrain file (kind = {d.get('kind')!r})")
-    missing = [k for k in ("schema_version", "shape", "origin_m", "cell_m", "soil_names", "soil_values",
-                           *STORAGE_FIELDS) if k not in d]
+    if "schema_version" not in d:
+        raise ScenarioError(f"{path}: the terrain file lacks schema_version (truncated, or not written by symtrack)")
+    version = int(d["schema_version"])
+    if version not in READABLE_SCHEMAS:
+        raise ScenarioError(f"{path}: terrain schema_version = {version}, this symtrack reads "
+                            f"{', '.join(str(v) for v in READABLE_SCHEMAS)}")
+    fields = STORAGE_FIELDS if version >= 2 else SCHEMA1_FIELDS
+    missing = [k for k in ("shape", "origin_m", "cell_m", "soil_names", "soil_values", *fields) if k not in d]
     if missing:
         raise ScenarioError(f"{path}: the terrain file lacks {', '.join(missing)} "
                             "(truncated, or not written by symtrack)")
-    version = int(d["schema_version"])
-    if version != TERRAIN_SCHEMA_VERSION:
-        raise ScenarioError(f"{path}: terrain schema_version = {version}, this symtrack reads {TERRAIN_SCHEMA_VERSION}")
     try:
         shape = tuple(int(v) for v in d["shape"])
         grid = Grid(tuple(float(v) for v in d["origin_m"]), float(d["cell_m"]), shape)
@@ -145,7 +182,9 @@ def load(path, soil: dict | None = None) -> Terrain:
         raise ScenarioError(f"{path}: malformed terrain geometry: shape {shape}, cell_m {grid.cell_m}, "
                             f"origin_m {grid.origin_m}")
     st = Terrain(grid, file_soil)
-    for name, arr in zip(STORAGE_FIELDS, (st.z, st.zdot, st.zmax, st.pmax, st.phase), strict=True):
+    for name, arr in zip(STORAGE_FIELDS, st._all(), strict=True):
+        if name not in fields:
+            continue
         a = d[name]
         if a.shape != shape or a.dtype != arr.dtype:
             raise ScenarioError(f"{path}: {name} has shape {a.shape} and type {a.dtype}, "
@@ -156,9 +195,25 @@ def load(path, soil: dict | None = None) -> Terrain:
         arr[:] = a.ravel()
     if not np.all((st.phase >= 0) & (st.phase <= 2)):
         raise ScenarioError(f"{path}: phase holds values outside 0, 1, 2: the file is damaged")
+    if version >= 2 and "subsoil_depths_m" in d:
+        depths = d["subsoil_depths_m"]
+        sig = d.get("sigma_max_Pa")
+        if depths.ndim != 1 or sig is None or sig.dtype != np.float32 or sig.shape != (*shape, depths.size):
+            raise ScenarioError(f"{path}: sigma_max_Pa must be float32 of shape {(*shape, depths.size)} for "
+                                f"{depths.size} subsoil depths; the file is damaged")
+        if not (np.all(np.isfinite(sig)) and np.all(sig >= 0)):
+            raise ScenarioError(f"{path}: sigma_max_Pa holds negative or non-finite values: the file is damaged")
+        st.subsoil_depths_m = tuple(float(v) for v in depths)
+        st.sigma_max = sig.reshape(grid.n_cells, depths.size).copy()
+    if version < 2:
+        st.cycles[:] = (st.phase > 0).astype(np.uint16)
+    elif not np.all(st.zoff >= 0):
+        raise ScenarioError(f"{path}: z_off_m holds negative values: the file is damaged")
     if soil is not None:
         for n, v in file_soil.items():
             if n in soil and float(soil[n]) != float(v):
                 raise ScenarioError(f"{path}: the terrain was made with soil {n} = {float(v)!r}, the scenario has "
                                     f"{float(soil[n])!r}; use the same [soil] to continue a terrain")
+        # an older file lacks the soil parameters added since: the scenario's complete the set
+        st.soil.update({n: float(soil[n]) for n in SOIL_PARAM_NAMES if n not in st.soil and n in soil})
     return st

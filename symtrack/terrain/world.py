@@ -2,10 +2,11 @@
 
 Storage
 -------
-Five values per cell, as the seed's INFO_IN / INFO_OUT: sinkage z [m], sinkage rate dz/dt [m/s],
+Seven values per cell, as the seed's INFO_IN / INFO_OUT: sinkage z [m], sinkage rate dz/dt [m/s],
 history z_max [m] and p_max [Pa] (float64: the integrator's values are stored to the last
-bit, which the bit-exact continuation needs) and the phase flag (int8, see
-:data:`~symtrack.terrain.channels.PHASE_VIRGIN`). 33 bytes per cell: 33 MB for the default
+bit, which the bit-exact continuation needs), the phase flag (int8, see
+:data:`~symtrack.terrain.channels.PHASE_VIRGIN`), and the cycle law's z_off [m] (float64) and
+load-cycle count (uint16) (symtrack/model/cell.py). 43 bytes per cell: 43 MB for the default
 million-cell field. Cell (i, j) has its centre at world (x0 + (i + 1/2) dx, y0 + (j + 1/2) dx).
 
 Per macro step (:meth:`World.before_step`, :meth:`World.after_step`)
@@ -24,9 +25,12 @@ Per macro step (:meth:`World.before_step`, :meth:`World.after_step`)
    (:class:`~symtrack.foundations.errors.SimulationError` naming both cells and the M that the active set
    needs); so does a footprint that leaves the field.
 4. INFO_IN: the channel's integrator states are reset to the cell's stored (z, dz/dt), its Q
-   entries to the cell's centre and history; IDAS's algebraic guess is reset too.
-5. After the step, INFO_OUT for every active channel: z, dz/dt, z_max <- max(z_max, z),
-   p_max <- max(p_max, p) on the loading branch, phase; written to storage and to Q. The
+   entries to the cell's centre and history, with the plastic increment delta its stay may add
+   (cell.cycle_increment, from its cycle count); IDAS's algebraic guess is reset too.
+5. After the step, INFO_OUT for every active channel: z, dz/dt and the history
+   (cell.history_update: z_max, p_max on the loading branch, the stay's plastic progress d_c,
+   stored as z_off + d_c; the cycle count + 1 at the stay's first plastic step), phase; written
+   to storage and to Q. The
    run also checks that every cell the tracks loaded at the end of the step held a channel.
 
 M ("auto")
@@ -44,9 +48,11 @@ measure shear from the front of the contact); cells store no shear, and the vehi
 shear displacement is the vehicle's state.
 
 A pass (:meth:`begin_pass`, :meth:`end_pass`): the vehicle is set down at rest at its start
-pose on the current terrain, the cells under it settle for ``settle_s`` with zero torque (the
-initial static state), the run follows its torque programme to its stop rule, then the vehicle
-is lifted off: the active cells unload with zero load until they are released. Between passes
+pose on the current terrain, the cells under it placed at their static sinkage
+(:func:`static_sinkage`: a sudden load would overshoot it and write the overshoot into the
+history), then they settle for ``settle_s`` with zero torque (the initial static state), the
+run follows its torque programme to its stop rule, then the vehicle is lifted off: the active
+cells unload with zero load until they are released. Between passes
 the storage is the only state, which is why a saved and reloaded terrain continues bit-exactly.
 """
 
@@ -66,17 +72,55 @@ from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import VEHICLE_STATES
-from .channels import NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
+from .channels import HIST_ROWS, NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
 from .settings import TerrainSettings
 from .storage import Grid, Terrain
 
-__all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "NV", "World", "derive_modulus", "open_world", "padding_m"]
+__all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "NV", "World", "derive_modulus", "open_world", "padding_m",
+           "static_sinkage"]
 
 log = logging.getLogger("symtrack.terrain")
 
 NV = len(VEHICLE_STATES)
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
 LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
+
+
+def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarray) -> np.ndarray:
+    """The sinkage at which each cell's reaction equals its load, p(z; hist) = p_load (the cells
+    at rest under a vehicle set down quasi-statically): bisection on the monotone law, to 1e-15 m.
+    ``soil``: the channel soil Function (z, hist[5], law) -> p; z0 (k,), hist (5, k), p_load (k,).
+    A cell whose reaction at z0 already equals its load keeps z0."""
+    z0 = np.asarray(z0, dtype=float)
+    k = z0.size
+    if k == 0:
+        return z0.copy()
+    f = soil.map(k, [False, False, True], [False])
+
+    def p_of(z):
+        return np.array(f(z[None, :], hist, law)).ravel()
+
+    p0 = p_of(z0)
+    lo, hi = z0.copy(), z0.copy()
+    up = p_load > p0
+    down = p_load < p0
+    step = np.full(k, 1e-4)
+    for _ in range(60):  # bracket the root
+        hi = np.where(up, lo + step, hi)
+        lo = np.where(down, hi - step, lo)
+        ph, pl = p_of(hi), p_of(lo)
+        open_ = (up & (ph < p_load)) | (down & (pl > p_load))
+        if not open_.any():
+            break
+        step = np.where(open_, 2 * step, step)
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        below = p_of(mid) <= p_load  # (<=: for p_load = 0 the top of the unloaded set, the rest position)
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+        if np.all(hi - lo <= 1e-15):
+            break
+    return np.where(up | down, 0.5 * (lo + hi), z0)
 
 
 def padding_m(cell_m: float) -> float:
@@ -112,6 +156,10 @@ class World:
         self.storage = storage if storage is not None else Terrain(self.grid)
         if self.storage.soil is None:
             self.storage.soil = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
+        self.storage.set_subsoil_depths(settings.subsoil_depths_m)
+        # the largest vertical stress of this pass at each subsoil depth, per cell (the terrain
+        # engine writes it; end_pass folds it into the storage's record over all passes)
+        self.pass_sigma = np.zeros_like(self.storage.sigma_max)
         if modulus is None:
             modulus = settings.channels if settings.channels != "auto" else derive_modulus(params, settings, dt_s)
         self.M = int(modulus)
@@ -125,8 +173,11 @@ class World:
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
-        self._history = self.terrain.fn["history"].map("history_all", "serial", n, [3], [])
-        self._law = ca.DM(soil_law_values(params))
+        self._history = self.terrain.fn["history"].map("history_all", "serial", n, [2], [])
+        self._entry = self.terrain.fn["entry"]
+        self._law = ca.DM(soil_law_values(params, opts.bekker_regularisation_m))
+        self._beta = float(params["repeated_loading_exponent"])
+        self.counted = np.zeros(n, dtype=bool)  # the channel's stay has counted as a load cycle
         self._pad = padding_m(self.grid.cell_m)
         self.peak_active = 0
         self.touched = np.zeros(self.grid.n_cells, dtype=bool)
@@ -230,6 +281,12 @@ class World:
             cx, cy = self.grid.centres(*np.divmod(new, self.grid.shape[1]))
             self.qc[ch, 0], self.qc[ch, 1] = cx, cy
             self.qc[ch, 2], self.qc[ch, 3], self.qc[ch, 4] = st.zmax[new], st.pmax[new], 1.0
+            self.qc[ch, 5], self.qc[ch, 7] = st.zoff[new], 0.0
+            self.qc[ch, 6] = 0.0
+            hist = self.qc[ch][:, HIST_ROWS].T
+            self.qc[ch, 6] = np.array(self._entry.map(ch.size)(st.z[new][None, :], hist, st.cycles[new][None, :]
+                                                              .astype(float), self._law, self._beta)).ravel()
+            self.counted[ch] = False
             x[NV + 2 * ch] = st.z[new]
             x[NV + 2 * ch + 1] = st.zdot[new]
             self.p_soil[ch] = 0.0
@@ -264,8 +321,8 @@ class World:
         """INFO_OUT: write every active channel's state and history back to its cell."""
         x = np.asarray(x, dtype=float)
         zc = x[NV::2]
-        zmax, pmax, p, phase = (np.array(a).ravel() for a in
-                                self._history(zc, self.qc[:, 2], self.qc[:, 3], self._law))
+        zmax, pmax, dc, p, phase, plastic = (np.array(a).ravel() for a in
+                                             self._history(zc, self.qc[:, HIST_ROWS].T, self._law))
         act = np.nonzero(self.channel_cell >= 0)[0]
         cells = self.channel_cell[act]
         st = self.storage
@@ -274,8 +331,13 @@ class World:
         st.zmax[cells] = zmax[act]
         st.pmax[cells] = pmax[act]
         st.phase[cells] = np.where(zmax[act] > 0, phase[act], PHASE_VIRGIN).astype(np.int8)
+        st.zoff[cells] = self.qc[act, 5] + dc[act]
+        first = (plastic[act] > 0) & ~self.counted[act]
+        st.cycles[cells[first]] += 1
+        self.counted[act[first]] = True
         self.qc[act, 2] = zmax[act]
         self.qc[act, 3] = pmax[act]
+        self.qc[act, 7] = dc[act]
         self.p_soil[act] = p[act]
 
     def check_covered(self, x: np.ndarray) -> None:
@@ -298,10 +360,26 @@ class World:
         self.release_all()
         self.peak_active = 0
         self.touched[:] = False
+        self.pass_sigma[:] = 0.0
         stepper.reset()
         x = np.zeros(self.model.nx)
         x[0], x[1], x[2] = x_m, y_m, yaw_rad
         u = np.zeros(2)
+        # the cells under the vehicle at their static sinkage first (set down quasi-statically: a
+        # sudden load would overshoot it by some 10 % and write the overshoot into the history)
+        x, p = self.before_step(x, 0.0, stepper)
+        act = np.nonzero(self.channel_cell >= 0)[0]
+        if act.size:
+            acc = np.array(self.model.ode(x, u, p)).ravel()[NV + 1::2][act]
+            zc, vc = x[NV::2][act], x[NV + 1::2][act]
+            hist = self.qc[act][:, HIST_ROWS].T
+            p_soil = np.array(self.terrain.fn["soil"].map(act.size, [False, False, True], [False])(
+                zc[None, :], hist, self._law)).ravel()
+            p_load = self.params["cell_areal_mass_kg_per_m2"] * acc + p_soil + self.params[
+                "cell_damping_Pa_s_per_m"] * vc
+            x[NV + 2 * act] = static_sinkage(self.terrain.fn["soil"], self._law, zc, hist, p_load)
+            x[NV + 2 * act + 1] = 0.0
+            stepper.reset()
         n = int(round(self.settings.settle_s / dt_s))
         for _ in range(n):
             x, p = self.before_step(x, dt_s, stepper)
@@ -341,11 +419,13 @@ class World:
                 log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
                             act.size, max_steps * dt_s)
         self.release_all()
+        np.maximum(self.storage.sigma_max, self.pass_sigma, out=self.storage.sigma_max)
 
     def release_all(self) -> None:
         self.channel_cell[:] = -1
         self.qc[:] = 0.0
         self.p_soil[:] = 0.0
+        self.counted[:] = False
 
     def unload_dae(self) -> dict:
         """The cells-only DAE of the lift (all channels, the load falling linearly to zero over
@@ -359,8 +439,9 @@ class World:
         t0, h, T, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("tau")
         qc = ca.reshape(Q[NG:], NF, n)
         xm = ca.reshape(xc, 2, n)
-        law = ca.DM(soil_law_values(self.params))
-        p = fn["soil"].map(n, [False, False, False, True], [False])(xm[0, :], qc[2, :], qc[3, :], law)
+        law = ca.DM(soil_law_values(self.params, self.opts.bekker_regularisation_m))
+        hist = ca.vertcat(*(qc[r, :] for r in HIST_ROWS))
+        p = fn["soil"].map(n, [False, False, True], [False])(xm[0, :], hist, law)
         load = p_end.T * ca.fmax(0, 1 - (t0 + h * tau) / T)
         cellpar = ca.DM([self.params["cell_areal_mass_kg_per_m2"], self.params["cell_damping_Pa_s_per_m"]])
         d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], load, p, qc[4, :],
