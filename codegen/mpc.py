@@ -477,6 +477,11 @@ def command(args) -> int:
           f"{ms['p95']:.3f} / max {ms['max']:.3f} ms; failed {summary['failed_solves']}; final position "
           f"({summary['final_x_m']:.4f}, {summary['final_y_m']:.4f}) m; build {t_build:.1f} s; "
           f"{out / 'closed_loop.csv'}")
+    if summary["failed_solves"]:
+        log.warning("%d of %d samples of the C loop failed (QP failure or rejected step) and applied the previous "
+                    "plan: the C loop has no NLP fallback (docs/codegen.md); the cost of symtrack.control.bench."
+                    "RTI_CONFIG (--set mpc.lateral_huber_m=0.2 --set mpc.terminal_lateral_factor=5) needs none on "
+                    "the built-in U-turn", summary["failed_solves"], summary["samples"])
     if args.compare:
         res = python_closed_loop(sc, pb.model)
         s = res.summary
