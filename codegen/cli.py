@@ -60,12 +60,30 @@ def check(out_dir: Path) -> list[str]:
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
-    ap.add_argument("--out", default=str(REPO_GENERATED), help="output folder (default: the repository's generated/)")
+    ap.add_argument("target", nargs="?", metavar="mpc",
+                    help="mpc NAME: the MPC scenario NAME's real-time iteration and closed loop as C (docs/codegen.md)")
+    ap.add_argument("name", nargs="?", help="with mpc: a built-in MPC scenario or a TOML file")
+    ap.add_argument("--out", default=None, help="output folder (default: the repository's generated/; "
+                    "required with mpc)")
     ap.add_argument("--check", action="store_true", help="write nothing; exit 1 if the folder is out of date")
+    ap.add_argument("--solver", choices=("rti",), help="mpc: the controller (only rti: the real-time iteration)")
+    ap.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="mpc: override a scenario value")
+    ap.add_argument("--no-run", action="store_true", help="mpc: generate and build, do not run the program")
+    ap.add_argument("--compare", action="store_true",
+                    help="mpc: also run the Python closed loop of the same configuration and print the agreement")
 
 
 def run(args) -> int:
-    out = Path(args.out)
+    target = getattr(args, "target", None)
+    if target is not None:
+        if target != "mpc":
+            from symtrack.foundations.errors import ScenarioError
+
+            raise ScenarioError(f"symtrack codegen {target!r}: unknown target (known: mpc)")
+        from . import mpc
+
+        return mpc.command(args)
+    out = Path(args.out) if args.out else REPO_GENERATED
     if args.check:
         stale = check(out)
         if stale:
@@ -83,7 +101,13 @@ def main(argv=None) -> int:
     add_arguments(ap)
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
-    return run(args)
+    from symtrack.foundations.errors import SymtrackError
+
+    try:
+        return run(args)
+    except SymtrackError as err:
+        print(f"python -m codegen: {err}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
