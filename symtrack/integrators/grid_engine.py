@@ -52,7 +52,18 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError, SimulationError
 from ..native.cache import cache_root, compile_sources, compiler
-from ..native.grid_engine_model import NA, NGEO, NS, NW, build_engine_functions, cell_constants, geo_vector, pv_base
+from ..native.grid_engine_model import (
+    NA,
+    NGEO,
+    NS,
+    NW,
+    TRACK_SOIL_PARAMS,
+    build_engine_functions,
+    cell_constants,
+    geo_vector,
+    pv_base,
+    soil_dispatch_c,
+)
 from ..terrain import subsoil
 from ..terrain.channels import soil_law_values
 from ..terrain.world import END_STRIP_CELLS, padding_m, static_sinkage
@@ -121,7 +132,9 @@ class _Eng(ctypes.Structure):
                                                     "ns_vehicle", "ns_cells", "ns_outputs")]
                 + [(n, ctypes.c_void_p) for n in ("zoff", "cycles", "ch_zoff", "ch_delta", "ch_dc", "ch_counted",
                                                   "subsoil", "sig_pass")]
-                + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")])
+                + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")]
+                + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
+                + [("n_sums", ctypes.c_longlong)])
 
 
 def _check_no_work(fns):
@@ -140,7 +153,8 @@ def library(fns, compiled: bool = True):
     _check_no_work(fns.all())
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
-    key = hashlib.sha256(b"".join(f.serialize().encode() for f in fns.all()) + csrc + hsrc
+    dsrc = soil_dispatch_c(fns.n_soils).encode()
+    key = hashlib.sha256(b"".join(f.serialize().encode() for f in fns.all()) + csrc + hsrc + dsrc
                          + f"{ca.__version__}/{BUILD_VERSION}".encode()).hexdigest()[:16]
     so = cache_root() / f"engine-{key}" / "libsymtrack_engine.so"
     if not so.exists():
@@ -152,7 +166,7 @@ def library(fns, compiled: bool = True):
             gen = (Path(scratch) / "engine_gen.c").read_bytes()
         if b"#error" in gen:
             raise SimulationError("the generated engine functions are not exportable (#error in engine_gen.c)")
-        sources = {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc}  # engine.c includes both
+        sources = {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc, "engine_soils.inc": dsrc}
         log.info("compiling the terrain engine into %s", so)
         compile_sources(sources, so, cc)
     lib = ctypes.CDLL(str(so))
@@ -204,7 +218,12 @@ class EngineState:
         self.peak_active = 0
         self.stamp = 0
         strip = END_STRIP_CELLS * g.cell_m
-        self.pv = np.array(pv_base(world.params, g.cell_m, strip) + [0.0] * NS)
+        self.n_sums = fns.n_sums
+        self.pv = np.array(pv_base(world.params, g.cell_m, strip) + [0.0] * self.n_sums)
+        # the soil map: each channel's soil, per soil what the traction uses
+        self.soil_index = world.storage.soil_index
+        self.ch_soil = np.zeros(n, dtype=np.uint8)
+        self.soil_veh = np.array([[float(sp[k]) for k in TRACK_SOIL_PARAMS] for sp in world.soils]).ravel()
         self.geo = np.array(geo_vector(world.params, g.cell_m, strip))
         self.wv = np.zeros(NW)
         self.a = np.zeros(NA)
@@ -247,6 +266,8 @@ class EngineState:
         e.sig_pass = _ptr(self.sig_pass)
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
+        e.soil_index, e.ch_soil, e.soil_veh = _ptr(self.soil_index), _ptr(self.ch_soil), _ptr(self.soil_veh)
+        e.n_sums = self.n_sums
         return e
 
     def absorb(self, e: _Eng) -> None:
@@ -305,8 +326,8 @@ class PyKernel:
         self.e = _PyErr()
 
     # the generated Functions
-    def _law(self, z, hist):
-        p, dp = self.f.cell_law(z, hist)
+    def _law(self, z, hist, soil):
+        p, dp = self.f.cell_law[soil](z, hist)
         return float(p), float(dp)
 
     def _hist(self, ch):
@@ -407,11 +428,13 @@ class PyKernel:
             s.ch_z[ch], s.ch_v[ch] = st.z[cell], st.zdot[cell]
             s.ch_zmax[ch], s.ch_pmax[ch] = st.zmax[cell], st.pmax[cell]
             s.ch_zoff[ch], s.ch_delta[ch], s.ch_dc[ch], s.ch_counted[ch] = st.zoff[cell], 0.0, 0.0, 0
-            s.ch_delta[ch] = float(self.f.cell_entry(float(s.ch_z[ch]), self._hist(ch), float(st.cycles[cell])))
+            s.ch_soil[ch] = st.soil_index[cell]
+            soil = int(s.ch_soil[ch])
+            s.ch_delta[ch] = float(self.f.cell_entry[soil](float(s.ch_z[ch]), self._hist(ch), float(st.cycles[cell])))
             s.ch_p[ch] = 0.0
             s.ch_pw[ch] = 0.0
             s.ch_vr[ch] = s.ch_v[ch]
-            s.ch_p[ch], s.ch_dp[ch] = self._law(s.ch_z[ch], self._hist(ch))
+            s.ch_p[ch], s.ch_dp[ch] = self._law(s.ch_z[ch], self._hist(ch), soil)
             s.touched[cell] = True
             s.ch_g[ch] = self._geo(s.ch_cx[ch], s.ch_cy[ch], s.a)
             s.act[s.n_act] = ch
@@ -419,7 +442,7 @@ class PyKernel:
         s.peak_active = max(s.peak_active, s.n_act)
         return 0, e
 
-    def _stage(self, zeta, omega, pl, gh, hist, zs, ps, dps):
+    def _stage(self, zeta, omega, pl, gh, hist, soil, zs, ps, dps):
         s = self.s
         m, cd = s.areal_mass, s.damping
         a = (1.0 + gh * cd / m) / gh
@@ -431,7 +454,7 @@ class PyKernel:
             x = hi
         for _ in range(NEWTON_MAX_ITER):
             s.stats["n_newton"] += 1
-            p, dp = self._law(x, hist)
+            p, dp = self._law(x, hist, soil)
             F = a * (x - zeta) + g * p - omega - g * pl
             if F > 0.0:
                 hi = x
@@ -448,7 +471,7 @@ class PyKernel:
                 break
             if not (lo < xn < hi):
                 if lo == -math.inf:
-                    ph, _ = self._law(hi, hist)
+                    ph, _ = self._law(hi, hist, soil)
                     lo = hi - g * ph / a
                 if not (lo < xn < hi):
                     xn = 0.5 * (lo + hi)
@@ -458,14 +481,14 @@ class PyKernel:
             return None
         return x, p, dp
 
-    def _cell_step(self, z0, v0, pz, dpz, pl, f, hist, h, n, work):
+    def _cell_step(self, z0, v0, pz, dpz, pl, f, hist, soil, h, n, work):
         gam = SDIRK_GAMMA
         hs = h / n
         gh = gam * hs
         for k in range(n):
             p0 = pz
             plA, plB = pl[k], pl[k + 1]
-            r1 = self._stage(z0, v0, plA + (plB - plA) * gam, gh, hist, z0, pz, dpz)
+            r1 = self._stage(z0, v0, plA + (plB - plA) * gam, gh, hist, soil, z0, pz, dpz)
             if r1 is None:
                 return None
             Z1, pz, dpz = r1
@@ -473,7 +496,7 @@ class PyKernel:
             V1 = (Z1 - z0) / gh
             A1 = (V1 - v0) / gh
             zeta, omega = z0 + hs * (1.0 - gam) * V1, v0 + hs * (1.0 - gam) * A1
-            r2 = self._stage(zeta, omega, plB, gh, hist, Z1, pz, dpz)
+            r2 = self._stage(zeta, omega, plB, gh, hist, soil, Z1, pz, dpz)
             if r2 is None:
                 return None
             Z2, pz, dpz = r2
@@ -490,7 +513,7 @@ class PyKernel:
 
     def sums(self):
         s = self.s
-        S = [0.0] * NS
+        S = [0.0] * s.n_sums
         for ch in s.act[:s.n_act]:
             g = s.ch_g[ch]
             zc = float(s.ch_z[ch])
@@ -504,7 +527,13 @@ class PyKernel:
             for r in range(4):
                 S[2 + r] += g[3 + r] * zc
                 S[6 + r] += g[3 + r]
-        s.pv[-NS:] = S
+            if s.n_sums > NS:
+                sv = s.soil_veh[3 * int(s.ch_soil[ch]):3 * int(s.ch_soil[ch]) + 3]
+                for t in range(2):
+                    S[NS + t] += g[1 + t]
+                    for i in range(3):
+                        S[NS + 2 + 3 * t + i] += g[1 + t] * sv[i]
+        s.pv[-s.n_sums:] = S
 
     def _uncovered(self, w1):
         s = self.s
@@ -592,8 +621,9 @@ class PyKernel:
                 fr += [float(gB[1]), float(gB[2])]
                 work = [0.0, 0.0]
                 hist = self._hist(ch)
+                soil = int(s.ch_soil[ch])
                 out = self._cell_step(float(s.ch_z[ch]), float(s.ch_v[ch]), float(s.ch_p[ch]), float(s.ch_dp[ch]),
-                                      pl, fr, hist, h, ns, work)
+                                      pl, fr, hist, soil, h, ns, work)
                 if out is None:
                     e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
                     return -ERR_NEWTON, n_done, e
@@ -602,7 +632,7 @@ class PyKernel:
                     s.ch_pw[ch] = (work[0] / h, work[1] / h)
                 s.ch_g[ch] = gB
                 zc, p = float(s.ch_z[ch]), float(s.ch_p[ch])
-                zm1, pm1, dc1, plastic, phase = np.array(self.f.cell_history(zc, p, hist)).ravel()
+                zm1, pm1, dc1, plastic, phase = np.array(self.f.cell_history[soil](zc, p, hist)).ravel()
                 cell = int(s.ch_cell[ch])
                 st.z[cell], st.zdot[cell], st.zmax[cell], st.pmax[cell] = zc, s.ch_v[ch], zm1, pm1
                 st.phase[cell] = int(phase) if zm1 > 0 else 0
@@ -653,12 +683,15 @@ def subsoil_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
     return _TABLES[key]
 
 
-def engine_functions(opts, params: dict, vehicle_substeps: int):
-    """build_engine_functions, cached per (options, soil law, substeps) in this process."""
-    key = (opts, tuple(soil_law_values(params, opts.bekker_regularisation_m)),
-           float(params["repeated_loading_exponent"]), vehicle_substeps)
+def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = ()):
+    """build_engine_functions, cached per (options, soil laws, substeps) in this process;
+    ``soils``: the parameter dicts of a soil map's soils (index 0 the scenario's)."""
+    soils = tuple(soils) or (params,)
+    key = (opts, vehicle_substeps, tuple(
+        (tuple(soil_law_values(sp, opts.bekker_regularisation_m)), float(sp["repeated_loading_exponent"]),
+         tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils))
     if key not in _FUNCTIONS:
-        _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps)
+        _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps, soils if len(soils) > 1 else ())
     return _FUNCTIONS[key]
 
 
@@ -669,7 +702,7 @@ class TerrainEngine:
     def __init__(self, world, settings: EngineSettings | None = None):
         self.world = world
         self.settings = settings or EngineSettings()
-        self.fns = engine_functions(world.opts, world.params, self.settings.vehicle_substeps)
+        self.fns = engine_functions(world.opts, world.params, self.settings.vehicle_substeps, world.soils)
         # the channel model's outputs, when it was built (World.model is built on first use)
         names = getattr(vars(world).get("model"), "output_names", None)
         if names is not None and tuple(names) != tuple(self.fns.output_names):
@@ -727,7 +760,7 @@ class TerrainEngine:
         s.ch_counted[:] = 0
         s.ch_g[:] = 0.0
         s.n_act = 0
-        s.pv[-NS:] = 0.0
+        s.pv[-s.n_sums:] = 0.0
 
     def begin_pass(self, x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
         """World.begin_pass: the vehicle at rest at the pose, the cells under it settled for
@@ -748,10 +781,10 @@ class TerrainEngine:
         if act.size:
             hist = np.vstack([s.ch_zmax[act], s.ch_pmax[act], s.ch_zoff[act], s.ch_delta[act], s.ch_dc[act]])
             w = self.world
-            z = static_sinkage(w.terrain.fn["soil"], w._law, s.ch_z[act], hist, s.ch_g[act, 0])
+            z = static_sinkage(w.terrain.fn["soil"], w.laws[:, s.ch_soil[act]], s.ch_z[act], hist, s.ch_g[act, 0])
             s.ch_z[act], s.ch_v[act] = z, 0.0
             for q, ch in enumerate(act):
-                p, dp = self.fns.cell_law(z[q], hist[:, q])
+                p, dp = self.fns.cell_law[int(s.ch_soil[ch])](z[q], hist[:, q])
                 s.ch_p[ch], s.ch_dp[ch], s.ch_vr[ch] = float(p), float(dp), 0.0
         n = int(round(self.world.settings.settle_s / SETTLE_STEP_S))
         if n:
@@ -797,6 +830,7 @@ class TerrainEngine:
         w.qc[act, 2], w.qc[act, 3], w.qc[act, 4] = s.ch_zmax[act], s.ch_pmax[act], 1.0
         w.qc[act, 5], w.qc[act, 6], w.qc[act, 7] = s.ch_zoff[act], s.ch_delta[act], s.ch_dc[act]
         w.counted[act] = s.ch_counted[act] > 0
+        w.ch_soil[act] = s.ch_soil[act]
         w.p_soil[act] = s.ch_p[act]
         w.peak_active = s.peak_active
         x = np.zeros(NV + 2 * w.n_channels)

@@ -64,9 +64,10 @@ class SystemModel:
         Q = ca.vertcat(*ps[len(PARAM_NAMES):])
         xv, xc = x[:nv], x[nv:]
         compaction = self.terrain.compaction(xv, xc, P, Q)
+        track_soil = self.terrain.track_soil(xv, xc, P, Q) if hasattr(self.terrain, "track_soil") else None
 
         def evaluate(acc):
-            veh = vehicle_equations(xv, u, acc, P, compaction, self.opts)
+            veh = vehicle_equations(xv, u, acc, P, compaction, self.opts, track_soil)
             cdot, csig = self.terrain.equations(xv, xc, veh["dist"], P, Q)
             return veh, ca.vertcat(veh["xdot"], cdot), csig
 

@@ -203,12 +203,14 @@ def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
     return float(min(friction, strength)) if opts.lateral_shear_cap else float(friction)
 
 
-def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> dict:
+def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
     """All vehicle expressions.
 
     xv: the 12 states of VEHICLE_STATES; u: commanded torques; acc: the body accelerations
     (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
-    compaction resistance (magnitude) of the left and right track from the terrain.
+    compaction resistance (magnitude) of the left and right track from the terrain; track_soil:
+    optional track -> (cohesion, friction angle, shear modulus K) of the soil under that track (a
+    terrain whose soil varies over the field: symtrack/terrain, soil maps); default P's soil.
 
     Returns a dict with 'xdot', 'acc_implied' (the accelerations the forces imply: equal to
     acc on the solution of the algebraic loop), the pressure distributions and named signals.
@@ -261,6 +263,8 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions) -> 
             * direction(omega[k], opts.omega_smoothing_rad_s, opts)
         # Compaction resistance from the terrain, opposing the track's motion.
         Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
+        if track_soil is not None:
+            c, phi, K = track_soil[k]
         if opts.lateral_law == "shear":
             F[k], Fy[k], Mz[k] = shear_forces(
                 shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts)

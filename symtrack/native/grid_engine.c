@@ -24,13 +24,15 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 /* the generated Functions in this translation unit, internal: the compiler inlines the small ones */
 #define CASADI_SYMBOL_EXPORT static
 #include "engine_gen.inc"
+#include "engine_soils.inc" /* ENG_SOIL_CALL: the Function of a cell's soil (generated: a soil map's soils) */
 #include "subsoil.h" /* the subsoil stress below the tracks (symtrack/terrain/subsoil.py) */
 
 #define EXPORT __attribute__((visibility("default")))
 #define NV 12
 #define NW 14
 #define NA 8
-#define NS 10
+#define NS 10     /* the cell sums */
+#define NS_MAX 18 /* with a soil map: + the soil under each track (grid_engine_model.SOIL_SUM_NAMES) */
 #define NGEO 7
 
 /* error codes (engine.py turns them into SimulationError messages) */
@@ -83,6 +85,11 @@ typedef struct {
   const subsoil_tables_t *subsoil;
   float *sig_pass;
   long long n_depths, ns_subsoil;
+  /* the soil map: each cell's soil (storage), each channel's, and per soil the cohesion, friction
+     angle and shear modulus the traction uses; n_sums = NS, or NS_MAX with a soil map */
+  unsigned char *soil_index, *ch_soil;
+  const double *soil_veh;
+  long long n_sums;
 } eng_t;
 
 static long long now_ns(void) {
@@ -95,10 +102,10 @@ static long long now_ns(void) {
 static double *WORK;
 
 /* hist: (z_max, p_max, z_off, delta, d_c) */
-static void law(double z, const double *hist, double *p, double *dp) {
+static void law(double z, const double *hist, int soil, double *p, double *dp) {
   const double *arg[2] = {&z, hist};
   double *res[2] = {p, dp};
-  eng_cell_law(arg, res, 0, WORK, 0);
+  ENG_SOIL_CALL(eng_cell_law, soil, arg, res);
 }
 
 static void channel_hist(const eng_t *E, long long ch, double *hist) {
@@ -235,12 +242,13 @@ EXPORT int eng_assign(eng_t *E, double h) {
     E->ch_delta[ch] = 0.0;
     E->ch_dc[ch] = 0.0;
     E->ch_counted[ch] = 0;
+    E->ch_soil[ch] = E->soil_index[cell];
     {
       double hist[5], ncyc = (double)E->cycles[cell], zc = E->ch_z[ch];
       channel_hist(E, ch, hist);
       const double *arg[3] = {&zc, hist, &ncyc};
       double *res[1] = {E->ch_delta + ch};
-      eng_cell_entry(arg, res, 0, WORK, 0);
+      ENG_SOIL_CALL(eng_cell_entry, E->ch_soil[ch], arg, res);
     }
     E->ch_p[ch] = 0.0;
     E->ch_pw[2 * ch] = 0.0;
@@ -249,7 +257,7 @@ EXPORT int eng_assign(eng_t *E, double h) {
     {
       double hist[5];
       channel_hist(E, ch, hist);
-      law(E->ch_z[ch], hist, &E->ch_p[ch], &E->ch_dp[ch]);
+      law(E->ch_z[ch], hist, E->ch_soil[ch], &E->ch_p[ch], &E->ch_dp[ch]);
     }
     E->touched[cell] = 1;
     double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
@@ -270,8 +278,8 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
  * inside the bracket is below 1e-6 |Z| (its result is then within about 1e-12 |Z| of the root, and
  * p is extended linearly to it). Z, p(Z), p'(Z) are returned. */
-static int stage(eng_t *E, double zeta, double omega, double pl, double gh, const double *hist, double zs,
-                 double ps, double dps, double *Z, double *pz, double *dpz) {
+static int stage(eng_t *E, double zeta, double omega, double pl, double gh, const double *hist, int soil,
+                 double zs, double ps, double dps, double *Z, double *pz, double *dpz) {
   double m = E->areal_mass, cd = E->damping;
   double a = (1.0 + gh * cd / m) / gh, g = gh / m;
   double hi = zeta + (omega + g * pl) / a, lo = -INFINITY;
@@ -280,7 +288,7 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, cons
   double p, dp;
   for (int it = 0; it < 100; ++it) {
     E->n_newton += 1;
-    law(x, hist, &p, &dp);
+    law(x, hist, soil, &p, &dp);
     double F = a * (x - zeta) + g * p - omega - g * pl;
     if (F > 0.0) hi = x;
     else if (F < 0.0) lo = x;
@@ -298,7 +306,7 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, cons
     if (!(xn < hi && xn > lo)) {
       if (lo == -INFINITY) {
         double ph, dph;
-        law(hi, hist, &ph, &dph);
+        law(hi, hist, soil, &ph, &dph);
         lo = hi - g * ph / a;
       }
       if (!(xn < hi && xn > lo)) xn = 0.5 * (lo + hi);
@@ -322,18 +330,18 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, cons
  * stage segments of frac_t(mid) (p_a + p_b) / 2 max(z_b - z_a, 0), frac_t linear within each
  * substep between f[2k + t] and f[2k + 2 + t] (the energy-consistent compaction power is work / h). */
 static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, const double *pl, const double *f,
-                     const double *hist, double h, long long n, double *work, double *vr) {
+                     const double *hist, int soil, double h, long long n, double *work, double *vr) {
   double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
   double z0 = *z, v0 = *v, pz = *p, dpz = *dp;
   for (long long k = 0; k < n; ++k) {
     double Z1, Z2, p0 = pz, p1;
     double plA = pl[k], plB = pl[k + 1];
-    if (stage(E, z0, v0, plA + (plB - plA) * gam, gh, hist, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
+    if (stage(E, z0, v0, plA + (plB - plA) * gam, gh, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
     p1 = pz;
     double V1 = (Z1 - z0) / gh;
     double A1 = (V1 - v0) / gh;
     double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
-    if (stage(E, zeta, omega, plB, gh, hist, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
+    if (stage(E, zeta, omega, plB, gh, hist, soil, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
     double m1 = 0.5 * gam, m2 = 0.5 * (gam + 1.0);
     double w1 = 0.5 * (p0 + p1) * fmax(Z1 - z0, 0.0), w2 = 0.5 * (p1 + pz) * fmax(Z2 - Z1, 0.0);
     for (int t = 0; t < 2; ++t) {
@@ -365,8 +373,8 @@ static void check_cover(eng_t *E, long long cell, void *ctx) {
 /* The channel sums (the vehicle's view of the terrain) into pv's last NS: the compaction power of
  * each track over the last step (energy-consistent), the end-strip sinkages at the current state. */
 static void sums(eng_t *E) {
-  double S[NS];
-  for (int i = 0; i < NS; ++i) S[i] = 0.0;
+  double S[NS_MAX];
+  for (int i = 0; i < NS_MAX; ++i) S[i] = 0.0;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     const double *g = E->ch_g + NGEO * ch;
@@ -383,8 +391,15 @@ static void sums(eng_t *E) {
       S[2 + r] += g[3 + r] * zc;
       S[6 + r] += g[3 + r];
     }
+    if (E->n_sums > NS) { /* the soil under each track, weighted by the load fraction */
+      const double *sv = E->soil_veh + 3 * E->ch_soil[ch];
+      for (int t = 0; t < 2; ++t) {
+        S[NS + t] += g[1 + t];
+        for (int i = 0; i < 3; ++i) S[NS + 2 + 3 * t + i] += g[1 + t] * sv[i];
+      }
+    }
   }
-  memcpy(E->pv + E->n_pv - NS, S, sizeof S);
+  memcpy(E->pv + E->n_pv - E->n_sums, S, (size_t)E->n_sums * sizeof(double));
 }
 
 EXPORT void eng_sums(eng_t *E) {
@@ -510,8 +525,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       fr[2 * ns + 1] = gB[2];
       double work[2] = {0.0, 0.0}, hist[5];
       channel_hist(E, ch, hist);
-      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, h, ns, work,
-                    E->ch_vr + ch)) {
+      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, E->ch_soil[ch], h, ns,
+                    work, E->ch_vr + ch)) {
         E->err_code = ERR_NEWTON;
         E->err_a = E->ch_cell[ch];
         return -ERR_NEWTON;
@@ -526,7 +541,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       {
         const double *arg[3] = {&zc, &p, hist};
         double *res[1] = {hn};
-        eng_cell_history(arg, res, 0, WORK, 0);
+        ENG_SOIL_CALL(eng_cell_history, E->ch_soil[ch], arg, res);
       }
       double zm1 = hn[0], pm1 = hn[1], dc1 = hn[2];
       long long cell = E->ch_cell[ch];

@@ -73,20 +73,43 @@ def _sum_names():
 
 
 SUM_NAMES = _sum_names()
+# with a soil map: per track the load fraction and the load-fraction-weighted cohesion, friction
+# angle and shear modulus of the cells under it (the vehicle's traction uses their means)
+TRACK_SOIL_PARAMS = ("cohesion_Pa", "friction_angle_rad", "shear_modulus_K_m")
+SOIL_SUM_NAMES = tuple(f"sum_f_{k}" for k in TRACKS) + tuple(
+    f"sum_f_{name}_{k}" for k in TRACKS for name in TRACK_SOIL_PARAMS)
+NS_SOIL = len(SOIL_SUM_NAMES)
 
 
 class SumsTerrain:
-    """The grid terrain seen from the vehicle: the channel sums S as parameters, no states."""
+    """The grid terrain seen from the vehicle: the channel sums S as parameters, no states.
+    ``soil_sums``: the field's soil varies (a soil map): the sums also carry the soil under each
+    track (:data:`SOIL_SUM_NAMES`) and the traction uses it (:meth:`track_soil`)."""
 
     name = "channel_sums"
 
-    def __init__(self):
+    def __init__(self, soil_sums: bool = False):
         self.state_names = ()
-        self.param_names = GLOBAL_FIELDS + SUM_NAMES
+        self.names = SUM_NAMES + (SOIL_SUM_NAMES if soil_sums else ())
+        self.param_names = GLOBAL_FIELDS + self.names
+        self.soil_sums = soil_sums
         self.dist_dae = None  # the pressure distributions of the DAE form (the first evaluation)
+        if soil_sums:
+            self.track_soil = self._track_soil
 
     def _S(self, Q):
-        return {n: Q[NG + i] for i, n in enumerate(SUM_NAMES)}
+        return {n: Q[NG + i] for i, n in enumerate(self.names)}
+
+    def _track_soil(self, xv, xc, P, Q):
+        """track -> (c, phi, K): the load-fraction-weighted means over the cells under the track
+        (the scenario's soil where no cell is under it)."""
+        S = self._S(Q)
+        out = {}
+        for k in TRACKS:
+            f = S[f"sum_f_{k}"]
+            out[k] = tuple(ca.if_else(f > 1e-12, S[f"sum_f_{n}_{k}"] / ca.fmax(f, 1e-12), P[n])
+                           for n in TRACK_SOIL_PARAMS)
+        return out
 
     def compaction(self, xv, xc, P, Q):
         S = self._S(Q)
@@ -171,20 +194,28 @@ class EngineFunctions:
     vehicle_a: ca.Function
     outputs: ca.Function
     cell_geo: ca.Function
-    cell_law: ca.Function
-    cell_history: ca.Function
-    cell_entry: ca.Function
+    cell_law: tuple  # one Function per soil of the field (soil index order)
+    cell_history: tuple
+    cell_entry: tuple
     output_names: tuple
     n_pv: int
+    n_sums: int  # NS, or NS + NS_SOIL with a soil map
+
+    @property
+    def n_soils(self) -> int:
+        return len(self.cell_law)
 
     def all(self):
-        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, self.cell_law, self.cell_history,
-                self.cell_entry)
+        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, *self.cell_law, *self.cell_history,
+                *self.cell_entry)
 
 
-def build_engine_functions(opts, params: dict, vehicle_substeps: int) -> EngineFunctions:
-    """The Functions of the module doc for model options ``opts`` and the soil in ``params``."""
-    terr = SumsTerrain()
+def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = ()) -> EngineFunctions:
+    """The Functions of the module doc for model options ``opts`` and the soil in ``params``;
+    ``soils``: with a soil map, the parameter dicts (vehicle and soil) of every soil of the field,
+    index 0 the scenario's: a cell law per soil, and the sums carry the soil under each track."""
+    soils = tuple(soils) or (params,)
+    terr = SumsTerrain(soil_sums=len(soils) > 1)
     veh = SystemModel(opts, terr)
     x, zacc, u, pv = veh.x, veh.z, veh.u, veh.p
     dist = terr.dist_dae
@@ -249,24 +280,51 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int) -> EngineF
     cell_geo = ca.Function("eng_cell_geo", [c, av, geo], [ca.vertcat(p_load, g[0], g[1], g[4], g[5], g[6], g[7])],
                            ["c", "a", "geo"], ["g"], fo)
 
+    laws, histories, entries = [], [], []
+    for k, sp in enumerate(soils):
+        law_k, hist_k, entry_k = _cell_functions(opts, sp, k, fo)
+        laws.append(law_k)
+        histories.append(hist_k)
+        entries.append(entry_k)
+    n_sums = NS + (NS_SOIL if len(soils) > 1 else 0)
+    return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, tuple(laws), tuple(histories), tuple(entries),
+                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums)
+
+
+def _cell_functions(opts, params: dict, k: int, fo: dict):
+    """eng_cell_law_<k>, eng_cell_history_<k>, eng_cell_entry_<k> of soil k (the module doc)."""
     keq, n, ke, kappa, reg = soil_law_values(params, opts.bekker_regularisation_m)
     z, hist, ps = ca.SX.sym("z"), ca.SX.sym("hist", NH), ca.SX.sym("p")
     p = reaction_pressure_fast(z, hist, keq, n, ke, kappa, reg)
-    cell_law = ca.Function("eng_cell_law", [z, hist], [p, ca.jacobian(p, z)], ["z", "hist"], ["p", "dp_dz"], fo)
+    cell_law = ca.Function(f"eng_cell_law_{k}", [z, hist], [p, ca.jacobian(p, z)], ["z", "hist"], ["p", "dp_dz"], fo)
     zm1, pm1, dc1, plastic, phase = cell.history_update(z, ps, hist[0], hist[1], hist[2], hist[3], hist[4], ke,
                                                         kappa, reg)
-    cell_history = ca.Function("eng_cell_history", [z, ps, hist], [ca.vertcat(zm1, pm1, dc1, plastic, phase)],
+    cell_history = ca.Function(f"eng_cell_history_{k}", [z, ps, hist], [ca.vertcat(zm1, pm1, dc1, plastic, phase)],
                                ["z", "p", "hist"], ["h"], fo)
     cycles = ca.SX.sym("cycles")
     delta = cell.cycle_increment(z, hist[0], hist[1], hist[2], cycles, ke, kappa, reg,
                                  float(params["repeated_loading_exponent"]))
-    cell_entry = ca.Function("eng_cell_entry", [z, hist, cycles], [delta], ["z", "hist", "cycles"], ["delta"], fo)
-    return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, cell_law, cell_history, cell_entry,
-                           veh.output_names, len(PARAM_NAMES) + NG + NS)
+    cell_entry = ca.Function(f"eng_cell_entry_{k}", [z, hist, cycles], [delta], ["z", "hist", "cycles"], ["delta"],
+                             fo)
+    return cell_law, cell_history, cell_entry
+
+
+def soil_dispatch_c(n_soils: int) -> str:
+    """The C of engine_soils.inc: ENG_SOIL_CALL(fn, soil, arg, res) calls fn_<soil> (a switch the
+    compiler can inline; one soil: a plain call)."""
+    lines = [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
+    if n_soils == 1:
+        lines.append("  fn##_0(arg, res, 0, WORK, 0)")
+    else:
+        lines.append("  do { switch (soil) { \\")
+        for k in range(1, n_soils):
+            lines.append(f"    case {k}: fn##_{k}(arg, res, 0, WORK, 0); break; \\")
+        lines.append("    default: fn##_0(arg, res, 0, WORK, 0); } } while (0)")
+    return "\n".join(lines) + "\n"
 
 
 def pv_base(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
-    """The first entries of pv (vehicle and soil parameters, the terrain's globals); the 10 sums follow."""
+    """The first entries of pv (vehicle and soil parameters, the terrain's globals); the sums follow."""
     return [float(params[k]) for k in PARAM_NAMES] + [float(cell_m), float(end_strip_m)]
 
 
@@ -280,4 +338,5 @@ def cell_constants(params: dict) -> tuple[float, float]:
     return float(params["cell_areal_mass_kg_per_m2"]), float(params["cell_damping_Pa_s_per_m"])
 
 
-__all__ = ["EngineFunctions", "build_engine_functions", "SUM_NAMES", "NA", "NS", "NGEO", "NF"]
+__all__ = ["EngineFunctions", "build_engine_functions", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
+           "NF", "TRACK_SOIL_PARAMS", "soil_dispatch_c"]

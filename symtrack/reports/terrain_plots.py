@@ -143,16 +143,21 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     if not depths or not any("subsoil_sigma_z_max_kPa" in f for f in figures):
         return {}
     g = world.grid
-    pc = float(world.params["precompression_stress_Pa"])
+    pc = world.precompression_stress_Pa().reshape(g.shape)
     sig = st.sigma_max.reshape(*g.shape, len(depths))
     loaded = sig[:, :, 0] > 0
     si, sj = _window(world, [loaded.astype(float)])
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
-    out = {"risk_map.png": risk_map_png(risk_class(sig[si, sj], pc), loaded[si, sj], depths, ext,
-                                        title=f"compaction risk after all passes (strength {1e-3 * pc:g} kPa)"),
-           "stress_profile.png": stress_profile_png(depths, 1e-3 * sig[loaded].max(axis=0), 1e-3 * pc,
-                                                    label="largest over the field")}
+    strengths = sorted({float(v) for v in pc[loaded]})
+    label = ", ".join(f"{1e-3 * v:.3g}" for v in strengths)
+    # the profile where the stress is largest against its strength
+    ratio = (sig / pc[:, :, None]).max(axis=2)
+    worst = np.unravel_index(np.argmax(np.where(loaded, ratio, -1.0)), g.shape)
+    out = {"risk_map.png": risk_map_png(risk_class(sig[si, sj], pc[si, sj, None]), loaded[si, sj], depths, ext,
+                                        title=f"compaction risk after all passes (strength {label} kPa)"),
+           "stress_profile.png": stress_profile_png(depths, 1e-3 * sig[worst], 1e-3 * pc[worst],
+                                                    label="the cell nearest its strength")}
     subs = [f for f in figures if "subsoil_sigma_z_max_kPa" in f]
     if len(figures) > 1 and len(subs) == len(figures):
         out["subsoil_passes.png"] = passes_subsoil_png([f["rut_mean_depth_mm"] for f in figures],

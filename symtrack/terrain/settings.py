@@ -17,6 +17,7 @@ Schema (every key optional; unknown keys are errors)::
                                 # before each pass (the pass's initial static state)
     subsoil_depths_m = [0.1, 0.3, 0.5, 0.8]  # depths of the subsoil stress (docs/subsoil.md),
                                 # increasing, each in (0, 5] m, at most 8; [] switches it off
+    [terrain.soil_map]          # a field of several soils (symtrack.terrain.soil_map)
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 
 from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ScenarioError
+from .soil_map import SoilMap, parse_soil_map
 
 __all__ = ["MAX_CELLS", "TerrainSettings", "settings_from_dict"]
 
@@ -51,6 +53,7 @@ class TerrainSettings:
     release_rate_m_s: float = 1e-5
     settle_s: float = 0.2
     subsoil_depths_m: tuple = (0.1, 0.3, 0.5, 0.8)
+    soil_map: SoilMap | None = None
     given: frozenset = field(default=frozenset(), compare=False, repr=False)
 
     def __post_init__(self):
@@ -96,6 +99,8 @@ class TerrainSettings:
         for k in ("size_m", "origin_m", "subsoil_depths_m"):
             if out.get(k) is not None:
                 out[k] = list(out[k])
+        if out.get("soil_map") is not None:
+            out["soil_map"] = dict(self.soil_map.raw)
         return out
 
 
@@ -120,6 +125,8 @@ def settings_from_dict(t: dict) -> TerrainSettings:
         d["origin_m"] = _pair("origin_m", d["origin_m"])
     if "subsoil_depths_m" in d and isinstance(d["subsoil_depths_m"], list):
         d["subsoil_depths_m"] = tuple(d["subsoil_depths_m"])
+    if "soil_map" in d:
+        d["soil_map"] = parse_soil_map(d["soil_map"])
     if isinstance(d.get("passes"), float) and d["passes"].is_integer():
         d["passes"] = int(d["passes"])
     return TerrainSettings(**d, given=frozenset(t))

@@ -16,6 +16,9 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 2), one NumPy array per key:
 - ``subsoil_depths_m`` float64 (n_depths,) and ``sigma_max_Pa`` float32 (nx, ny, n_depths)
   (schema 2, optional): the largest vertical stress each cell's soil has carried at each depth
   over all passes (symtrack/terrain/subsoil.py; float32: a stress to 7 digits);
+- ``soil_index`` uint8 (nx, ny) (schema 2): each cell's soil, 0 the soil of ``soil_values``,
+  k >= 1 row k - 1 of ``soil_map_values`` (float64 (n, len(soil_map_names))) with its label in
+  ``soil_map_labels`` (a soil map: symtrack/terrain/soil_map.py; absent when the field has one soil);
 - ``soil_names`` (str array) and ``soil_values`` float64: the soil parameters the history
   was made with. Loading a file into a scenario with a different soil is an error.
 
@@ -87,6 +90,8 @@ class Terrain:
         self.cycles = np.zeros(n, dtype=np.uint16)
         self.subsoil_depths_m = tuple(float(d) for d in subsoil_depths_m)
         self.sigma_max = np.zeros((n, len(self.subsoil_depths_m)), dtype=np.float32)
+        self.soil_index = np.zeros(n, dtype=np.uint8)
+        self.soil_table: list[tuple[str, dict]] = []  # soils 1, 2, ... of a soil map: (label, parameters)
 
     def _all(self):
         return (self.z, self.zdot, self.zmax, self.pmax, self.phase, self.zoff, self.cycles)
@@ -98,6 +103,7 @@ class Terrain:
     def arrays(self) -> dict:
         out = dict(zip(STORAGE_FIELDS, self._all(), strict=True))
         out["sigma_max_Pa"] = self.sigma_max
+        out["soil_index"] = self.soil_index
         return out
 
     def set_subsoil_depths(self, depths_m) -> None:
@@ -134,6 +140,10 @@ def save(path, storage: Terrain, soil: dict) -> None:
     """Write ``storage`` with the soil parameters ``soil`` as a terrain file, atomically."""
     g = storage.grid
     arrays = {k: v.reshape(g.shape) for k, v in storage.arrays().items() if k != "sigma_max_Pa"}
+    if storage.soil_table:
+        arrays["soil_map_labels"] = np.array([lab for lab, _ in storage.soil_table])
+        arrays["soil_map_names"] = np.array(SOIL_PARAM_NAMES)
+        arrays["soil_map_values"] = np.array([[float(v[n]) for n in SOIL_PARAM_NAMES] for _, v in storage.soil_table])
     arrays["sigma_max_Pa"] = storage.sigma_max.reshape(*g.shape, len(storage.subsoil_depths_m))
     arrays["subsoil_depths_m"] = np.array(storage.subsoil_depths_m, dtype=np.float64)
     buf = io.BytesIO()
@@ -205,6 +215,23 @@ def load(path, soil: dict | None = None) -> Terrain:
             raise ScenarioError(f"{path}: sigma_max_Pa holds negative or non-finite values: the file is damaged")
         st.subsoil_depths_m = tuple(float(v) for v in depths)
         st.sigma_max = sig.reshape(grid.n_cells, depths.size).copy()
+    if version >= 2 and "soil_index" in d:
+        si = d["soil_index"]
+        if si.shape != shape or si.dtype != np.uint8:
+            raise ScenarioError(f"{path}: soil_index has shape {si.shape} and type {si.dtype}, expected {shape} uint8")
+        st.soil_index[:] = si.ravel()
+        if "soil_map_values" in d:
+            names = [str(n) for n in d["soil_map_names"]]
+            vals = d["soil_map_values"]
+            labels = [str(v) for v in d["soil_map_labels"]]
+            if vals.ndim != 2 or vals.shape != (len(labels), len(names)):
+                raise ScenarioError(f"{path}: soil_map_values has shape {vals.shape}, expected "
+                                    f"({len(labels)}, {len(names)}): the file is damaged")
+            st.soil_table = [(lab, dict(zip(names, (float(x) for x in row), strict=True)))
+                             for lab, row in zip(labels, vals, strict=True)]
+        if int(st.soil_index.max(initial=0)) > len(st.soil_table):
+            raise ScenarioError(f"{path}: soil_index refers to soil {int(st.soil_index.max())}, the file's soil map "
+                                f"has {len(st.soil_table)}: the file is damaged")
     if version < 2:
         st.cycles[:] = (st.phase > 0).astype(np.uint16)
     elif not np.all(st.zoff >= 0):

@@ -74,6 +74,7 @@ from ..model.system import PARAM_NAMES
 from ..model.vehicle import VEHICLE_STATES
 from .channels import HIST_ROWS, NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
 from .settings import TerrainSettings
+from .soil_map import soil_index
 from .storage import Grid, Terrain
 
 __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "NV", "World", "derive_modulus", "open_world", "padding_m",
@@ -89,13 +90,17 @@ LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pa
 def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarray) -> np.ndarray:
     """The sinkage at which each cell's reaction equals its load, p(z; hist) = p_load (the cells
     at rest under a vehicle set down quasi-statically): bisection on the monotone law, to 1e-15 m.
-    ``soil``: the channel soil Function (z, hist[5], law) -> p; z0 (k,), hist (5, k), p_load (k,).
+    ``soil``: the channel soil Function (z, hist[5], law) -> p; law (5,) or (5, k) (per cell); z0 (k,),
+    hist (5, k), p_load (k,).
     A cell whose reaction at z0 already equals its load keeps z0."""
     z0 = np.asarray(z0, dtype=float)
     k = z0.size
     if k == 0:
         return z0.copy()
-    f = soil.map(k, [False, False, True], [False])
+    law = np.asarray(law, dtype=float)
+    if law.ndim == 1 or law.shape[1] == 1:  # one law for all cells
+        law = np.repeat(law.reshape(-1, 1), k, axis=1)
+    f = soil.map(k)
 
     def p_of(z):
         return np.array(f(z[None, :], hist, law)).ravel()
@@ -173,10 +178,14 @@ class World:
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
-        self._history = self.terrain.fn["history"].map("history_all", "serial", n, [2], [])
+        self._history = self.terrain.fn["history"].map("history_all", "serial", n, [], [])
         self._entry = self.terrain.fn["entry"]
-        self._law = ca.DM(soil_law_values(params, opts.bekker_regularisation_m))
-        self._beta = float(params["repeated_loading_exponent"])
+        # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
+        # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
+        self.soils = self._apply_soil_map(settings, params)
+        self.laws = np.column_stack([soil_law_values(sp, opts.bekker_regularisation_m) for sp in self.soils])
+        self.betas = np.array([float(sp["repeated_loading_exponent"]) for sp in self.soils])
+        self.ch_soil = np.zeros(n, dtype=np.uint8)
         self.counted = np.zeros(n, dtype=bool)  # the channel's stay has counted as a load cycle
         self._pad = padding_m(self.grid.cell_m)
         self.peak_active = 0
@@ -187,7 +196,47 @@ class World:
     def model(self) -> SystemModel:
         """The vehicle with this world's channel pool as one symbolic system (built on first use:
         for 1600 channels it takes seconds, and the compiled terrain engine does not need it)."""
+        if len(self.soils) > 1:
+            raise ScenarioError("this field has a soil map (several soils): it runs on the terrain engine only "
+                                "(run.integrator = \"grid_fast\"); IDAS and the grid Rosenbrock take one soil")
         return SystemModel(self.opts, self.terrain)
+
+    def _apply_soil_map(self, settings, params) -> list[dict]:
+        """The field's soils: a new field takes the scenario's soil map; a terrain that has one keeps
+        it (the scenario's must then be the same). Soils equal to the scenario's [soil] and soils no
+        cell has are folded into soil 0, so that a uniform map is the single soil, bit for bit."""
+        st = self.storage
+        sm = settings.soil_map
+        if sm is not None:
+            table = [(lab, {k: float(v) for k, v in sp.items()}) for lab, sp in zip(sm.labels, sm.soils, strict=True)]
+            idx = soil_index(self.grid, sm)
+            if st.soil_table or st.soil_index.any():
+                if not (np.array_equal(idx, st.soil_index)
+                        and [v for _, v in table] == [v for _, v in st.soil_table][:len(table)]):
+                    raise ScenarioError("the terrain has a soil map of its own that differs from the scenario's "
+                                        "[terrain.soil_map]; leave the soil map out to continue the terrain's")
+            else:
+                st.soil_index[:] = idx
+                st.soil_table = table
+        base = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
+        soils, table = [dict(params)], []
+        remap = np.zeros(len(st.soil_table) + 1, dtype=np.uint8)
+        used = np.bincount(st.soil_index, minlength=len(st.soil_table) + 1) > 0
+        for k, (label, sp) in enumerate(st.soil_table, start=1):
+            if not used[k] or {n: sp[n] for n in SOIL_PARAM_NAMES} == base:
+                continue
+            full = {**params, **{n: sp[n] for n in SOIL_PARAM_NAMES}}
+            for n in ("cell_areal_mass_kg_per_m2", "cell_damping_Pa_s_per_m"):
+                if full[n] != float(params[n]):
+                    raise ScenarioError(f"terrain.soil_map: soil {k} has {n} = {full[n]!r}, the scenario's soil "
+                                        f"{float(params[n])!r}: the cells of one field share their dynamics")
+            remap[k] = len(soils)
+            soils.append(full)
+            table.append((label, sp))
+        if st.soil_table:
+            st.soil_index[:] = remap[st.soil_index]
+            st.soil_table = table
+        return soils
 
     # ---- geometry -----------------------------------------------------------------------------
     def _rectangles(self, X, Y, psi, pad):
@@ -284,8 +333,11 @@ class World:
             self.qc[ch, 5], self.qc[ch, 7] = st.zoff[new], 0.0
             self.qc[ch, 6] = 0.0
             hist = self.qc[ch][:, HIST_ROWS].T
-            self.qc[ch, 6] = np.array(self._entry.map(ch.size)(st.z[new][None, :], hist, st.cycles[new][None, :]
-                                                              .astype(float), self._law, self._beta)).ravel()
+            self.ch_soil[ch] = st.soil_index[new]
+            soil = self.ch_soil[ch]
+            self.qc[ch, 6] = np.array(self._entry.map(ch.size)(
+                st.z[new][None, :], hist, st.cycles[new][None, :].astype(float), self.laws[:, soil],
+                self.betas[soil][None, :])).ravel()
             self.counted[ch] = False
             x[NV + 2 * ch] = st.z[new]
             x[NV + 2 * ch + 1] = st.zdot[new]
@@ -322,7 +374,7 @@ class World:
         x = np.asarray(x, dtype=float)
         zc = x[NV::2]
         zmax, pmax, dc, p, phase, plastic = (np.array(a).ravel() for a in
-                                             self._history(zc, self.qc[:, HIST_ROWS].T, self._law))
+                                             self._history(zc, self.qc[:, HIST_ROWS].T, self.laws[:, self.ch_soil]))
         act = np.nonzero(self.channel_cell >= 0)[0]
         cells = self.channel_cell[act]
         st = self.storage
@@ -373,11 +425,11 @@ class World:
             acc = np.array(self.model.ode(x, u, p)).ravel()[NV + 1::2][act]
             zc, vc = x[NV::2][act], x[NV + 1::2][act]
             hist = self.qc[act][:, HIST_ROWS].T
-            p_soil = np.array(self.terrain.fn["soil"].map(act.size, [False, False, True], [False])(
-                zc[None, :], hist, self._law)).ravel()
+            p_soil = np.array(self.terrain.fn["soil"].map(act.size)(
+                zc[None, :], hist, self.laws[:, self.ch_soil[act]])).ravel()
             p_load = self.params["cell_areal_mass_kg_per_m2"] * acc + p_soil + self.params[
                 "cell_damping_Pa_s_per_m"] * vc
-            x[NV + 2 * act] = static_sinkage(self.terrain.fn["soil"], self._law, zc, hist, p_load)
+            x[NV + 2 * act] = static_sinkage(self.terrain.fn["soil"], self.laws[:, self.ch_soil[act]], zc, hist, p_load)
             x[NV + 2 * act + 1] = 0.0
             stepper.reset()
         n = int(round(self.settings.settle_s / dt_s))
@@ -412,7 +464,8 @@ class World:
                 if t0 >= LIFT_TIME_S and np.all((self.p_soil[act] <= 0.0)
                                                 & (np.abs(rates) <= self.settings.release_rate_m_s)):
                     break
-                par = np.concatenate([self.Q, p_end, [t0, dt_s, LIFT_TIME_S]])
+                par = np.concatenate([self.Q, p_end, [t0, dt_s, LIFT_TIME_S],
+                                      self.laws[:, self.ch_soil].ravel(order="F")])
                 xc = np.asarray(F(xc, par), dtype=float).ravel()
                 self.after_step(np.concatenate([x[:NV], xc]))
             else:
@@ -430,7 +483,8 @@ class World:
     def unload_dae(self) -> dict:
         """The cells-only DAE of the lift (all channels, the load falling linearly to zero over
         T from the pass end's pressures p_end), time-scaled to [0, 1] over a step of length h:
-        parameters (Q, p_end, t0, h, T). An integrator of it is :meth:`end_pass`'s unloader."""
+        parameters (Q, p_end, t0, h, T, each channel's soil law (5 x n, column-major)). An
+        integrator of it is :meth:`end_pass`'s unloader."""
         n = self.n_channels
         fn = self.terrain.fn
         xc = ca.SX.sym("xc", 2 * n)
@@ -439,14 +493,20 @@ class World:
         t0, h, T, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("tau")
         qc = ca.reshape(Q[NG:], NF, n)
         xm = ca.reshape(xc, 2, n)
-        law = ca.DM(soil_law_values(self.params, self.opts.bekker_regularisation_m))
+        law = ca.SX.sym("law", self.laws.shape[0], n)  # each channel's soil law (a soil map)
         hist = ca.vertcat(*(qc[r, :] for r in HIST_ROWS))
-        p = fn["soil"].map(n, [False, False, True], [False])(xm[0, :], hist, law)
+        p = fn["soil"].map(n)(xm[0, :], hist, law)
         load = p_end.T * ca.fmax(0, 1 - (t0 + h * tau) / T)
         cellpar = ca.DM([self.params["cell_areal_mass_kg_per_m2"], self.params["cell_damping_Pa_s_per_m"]])
         d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], load, p, qc[4, :],
                                                                               cellpar)
-        return {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T), "ode": h * ca.reshape(d, 2 * n, 1)}
+        return {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T, ca.vec(law)),
+                "ode": h * ca.reshape(d, 2 * n, 1)}
+
+    def precompression_stress_Pa(self) -> np.ndarray:
+        """Each cell's precompression stress [Pa] (its soil's: a soil map gives cells different ones)."""
+        table = np.array([float(sp["precompression_stress_Pa"]) for sp in self.soils])
+        return table[self.storage.soil_index]
 
     # ---- figures -----------------------------------------------------------------------------
     def figures(self) -> dict:

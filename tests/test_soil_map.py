@@ -1,0 +1,158 @@
+"""A field of several soils (issue 10 part 4, MODEL.md section 8): the soil map's parsing, a
+uniform map equal to the single soil bit for bit, each cell's law its own soil's, the traction
+from the soil under each track, persistence, and the integrators that take one soil only."""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+import symtrack
+from symtrack.foundations.errors import ScenarioError
+from symtrack.integrators.grid_engine import TerrainEngine
+from symtrack.model.options import ModelOptions
+from symtrack.model.vehicle import traction_shape
+from symtrack.presets import soil_preset
+from symtrack.simulation.scenario import load_scenario, scenario_from_dict
+from symtrack.terrain.channels import soil_law_values
+from symtrack.terrain.storage import Terrain
+from symtrack.terrain.world import open_world
+
+WET = "clayey_soil_thailand_55"
+BASE = {
+    "name": "soil_map_test", "run": {"duration_s": 3.0, "output_dt_s": 0.01, "integrator": "grid_fast",
+                                     "stop_after_distance_m": 0.6},
+    "vehicle": {"preset": "reference_crawler"}, "soil": {"preset": "clayey_soil_thailand_38"},
+    "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0},
+    "terrain": {"size_m": [8.0, 5.0], "origin_m": [-3.0, -2.5], "cell_m": 0.1},
+    "torque": [{"t_s": 0.0, "left_N_m": 1500.0, "right_N_m": 1500.0}],
+}
+
+
+def _scenario(soil_map=None, **run):
+    d = copy.deepcopy(BASE)
+    d["run"].update(run)
+    if soil_map is not None:
+        d["terrain"]["soil_map"] = soil_map
+    return scenario_from_dict(d)
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"soils": [WET], "zones": [{"soil": 2, "x_m": [0, 1], "y_m": [0, 1]}]}, r"zones\[0\]\.soil = 2"),
+    ({"soils": ["no_such_soil"], "zones": [{"soil": 1, "x_m": [0, 1], "y_m": [0, 1]}]}, "no_such_soil"),
+    ({"soils": [WET]}, "needs zones or a raster"),
+    ({"soils": [WET], "zones": [{"soil": 1, "x_m": [1, 0], "y_m": [0, 1]}]}, r"x_m = \[1, 0\] must have low < high"),
+    ({"soils": [WET], "colour": "red", "zones": []}, "colour"),
+    ({"soils": [{"preset": WET, "bekker_n": -1.0}], "zones": [{"soil": 1, "x_m": [0, 1], "y_m": [0, 1]}]},
+     "bekker_n"),
+])
+def test_a_bad_soil_map_is_refused_naming_the_key(bad, match):
+    with pytest.raises(ScenarioError, match=match):
+        _scenario(bad)
+
+
+def test_a_uniform_soil_map_is_the_single_soil_bit_for_bit():
+    plain = symtrack.simulate(_scenario())
+    # the whole field given the scenario's own soil, as a map: the same soil, the same run
+    same = {"soils": ["clayey_soil_thailand_38"], "zones": [{"soil": 1, "x_m": [-10, 10], "y_m": [-10, 10]}]}
+    mapped = symtrack.simulate(_scenario(same))
+    assert np.array_equal(plain.runs[0].X, mapped.runs[0].X) and np.array_equal(plain.runs[0].Y, mapped.runs[0].Y)
+    for name, a in plain.terrain.arrays().items():
+        assert np.array_equal(a, mapped.terrain.arrays()[name]), name
+
+
+def _split_world():
+    """The left track (y > 0) on the wet soil, the right on the scenario's."""
+    sm = {"soils": [WET], "zones": [{"soil": 1, "x_m": [-10, 10], "y_m": [0.0, 10]}]}
+    sc = _scenario(sm)
+    world = open_world(sc.terrain, sc.params, sc.model, sc.run.output_dt_s)
+    return sc, world
+
+
+def test_each_cell_sinks_by_its_own_soil_and_the_traction_uses_the_soil_under_each_track():
+    sc, world = _split_world()
+    assert len(world.soils) == 2
+    eng = TerrainEngine(world)
+    eng.begin_pass(0.0, 0.0, 0.0)
+    s = eng.state
+    act = s.active_channels()
+    for soil, frac_col in ((1, 1), (0, 2)):  # soil 1 under the left track (frac_left), soil 0 under the right
+        full = act[(s.ch_g[act, frac_col] > 0.999) & (s.ch_soil[act] == soil)]
+        assert full.size > 20
+        keq, n = soil_law_values(world.soils[soil])[:2]
+        z_static = (s.ch_g[full, 0] / keq) ** (1 / n)
+        assert np.max(np.abs(s.ch_z[full] / z_static - 1)) < 1e-2
+    # the traction of each track with the soil under it: the engine's outputs at a state with shear
+    eng.kernel.sums()
+    x = s.wv[:12].copy()
+    x[8], x[9] = 0.01, 0.012  # shear displacements (left, right)
+    y = dict(zip(eng.output_names, np.array(eng.fns.outputs(x, [0, 0], s.pv)).ravel(), strict=True))
+    opts = ModelOptions()
+    P = sc.params
+    for track, j, soil in (("left", x[8], world.soils[1]), ("right", x[9], world.soils[0])):
+        N = y[f"normal_load_{track}_N"]
+        F = float(traction_shape(j, soil["shear_modulus_K_m"], opts)) * (
+            P["track_width_m"] * P["contact_length_m"] * soil["cohesion_Pa"] + N * math.tan(soil["friction_angle_rad"]))
+        assert y[f"tractive_{track}_N"] == pytest.approx(F, rel=1e-9), track
+    assert soil_preset(WET)["cohesion_Pa"] != P["cohesion_Pa"]  # the two soils do differ
+
+
+def test_the_soil_map_persists_and_a_terrain_keeps_its_own(tmp_path):
+    sm = {"soils": [WET], "zones": [{"soil": 1, "x_m": [1.0, 10], "y_m": [-10, 10]}]}
+    res = symtrack.simulate(_scenario(sm))
+    idx = res.terrain.soil_index.copy()
+    assert idx.any() and not idx.all()
+    res.terrain.save(tmp_path / "t.npz")
+    t = Terrain.load(tmp_path / "t.npz", res.scenario.params)
+    assert np.array_equal(t.soil_index, idx) and t.soil_table == res.terrain.soil_table
+    # a second pass on the saved terrain, the scenario without a soil map: the file's is kept
+    again = symtrack.simulate(_scenario(), terrain=tmp_path / "t.npz")
+    assert np.array_equal(again.terrain.soil_index, idx)
+    # a scenario with another map cannot continue it
+    other = {"soils": [WET], "zones": [{"soil": 1, "x_m": [2.0, 10], "y_m": [-10, 10]}]}
+    with pytest.raises(ScenarioError, match="soil map of its own"):
+        symtrack.simulate(_scenario(other), terrain=tmp_path / "t.npz")
+
+
+def test_idas_refuses_a_field_of_several_soils():
+    sm = {"soils": [WET], "zones": [{"soil": 1, "x_m": [-10, 10], "y_m": [0.0, 10]}]}
+    with pytest.raises(ScenarioError, match="terrain engine only"):
+        symtrack.simulate(_scenario(sm, integrator="idas", duration_s=0.05))
+
+
+def test_a_raster_gives_each_cell_its_soil(tmp_path):
+    sc = load_scenario("multipass")
+    nx, ny = sc.terrain.shape
+    r = np.zeros((nx, ny), dtype=np.int16)
+    r[:, ny // 2:] = 1
+    np.save(tmp_path / "soils.npy", r)
+    sm = {"soils": [WET], "raster": str(tmp_path / "soils.npy")}
+    d = copy.deepcopy(BASE)
+    d["terrain"] = dict(sc.terrain.to_dict(), soil_map=sm)
+    s2 = scenario_from_dict(d)
+    world = open_world(s2.terrain, s2.params, s2.model, s2.run.output_dt_s)
+    assert np.array_equal(world.storage.soil_index.reshape(nx, ny), r.astype(np.uint8))
+    np.save(tmp_path / "bad.npy", np.zeros((3, 3), dtype=np.int16))
+    d["terrain"]["soil_map"] = {"soils": [WET], "raster": str(tmp_path / "bad.npy")}
+    s3 = scenario_from_dict(d)
+    with pytest.raises(ScenarioError, match=r"shape \(200, 80\)"):
+        open_world(s3.terrain, s3.params, s3.model, s3.run.output_dt_s)
+
+
+def test_the_wet_headland_example_puts_the_risk_where_the_soil_is_weak(tmp_path):
+    import runpy
+
+    ex = runpy.run_path("examples/wet_headland.py")
+    res = symtrack.simulate(ex["scenario"](2, 10.0))
+    res.write(tmp_path)
+    assert (tmp_path / "risk_map.png").stat().st_size > 10000 and (tmp_path / "stress_profile.png").exists()
+    st = res.terrain
+    world_pc = np.array([sp["precompression_stress_Pa"] for sp in res._study.world.soils])[st.soil_index]
+    ratio = st.sigma_max[:, 0] / world_pc
+    gx, _ = st.grid.centres(*np.divmod(np.arange(st.grid.n_cells), st.grid.shape[1]))
+    risky = ratio >= 0.5
+    assert risky.any() and np.all(gx[risky] >= 10.0 - 8.0 - 0.05)  # medium risk only in the wet headland
+    assert np.all(ratio[(st.sigma_max[:, 0] > 0) & (gx < 1.9)] < 0.5)  # the dry field stays low
+    fr = res.summary["passes"][0]["subsoil_risk_fraction_medium"]
+    assert fr[0] > 0.2 and fr[-1] <= fr[0]  # less risk deeper down
