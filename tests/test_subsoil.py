@@ -260,3 +260,30 @@ def test_track_frame_is_the_channels_frame():
             assert mine == pytest.approx(frac, abs=1e-12)
             loaded += frac > 0
     assert loaded >= 5  # the check saw cells under the tracks, not only empty ground
+
+
+def test_lamande_2007_load_sets_the_subsoil_stress_and_area_the_topsoil_stress():
+    """Lamandé, Schjønning & Tøgersen (2007), Soil Till. Res. 97, 91-106 (abstract; their stress
+    table could not be read): stiff plates of A = 0.45 m^2 and 2A = 0.90 m^2 loaded with F = 43 kN
+    and 2F = 85 kN; stresses at 30-90 cm below the centre. Their finding: "doubling the contact
+    area reduced stresses ... in the topsoil, but load determined stresses ... in the subsoil,
+    which supports the elasticity theory". The model (square plates, the stiff plate's pressure
+    taken uniform, xi = 5) reproduces the trend: the small plate's stress is 1.9 x the large one's
+    at 0.3 m and 1.3 x at 0.9 m, and twice the load gives twice the stress at every depth. (Their
+    measured values, to test the magnitudes, are not in the abstract.)"""
+    depths = (0.3, 0.5, 0.7, 0.9)
+
+    def centre_stress(F_N, area_m2):
+        side = math.sqrt(area_m2)
+        T = S.build_tables(depths, 5.0, contact_length_m=side, track_width_m=side, track_gauge_m=10.0)
+        geo = (side, side, 10.0, 0.0, 0.1, 0.2)
+        a = _a(0.0, 0.0, 0.0, (F_N / area_m2, 0.0, 0.0, 0.0))  # the left "track" is the plate
+        return S.stress_at(T, np.array([0.0]), np.array([5.0]), a, geo)[0]  # the left track's centre
+
+    small, large, heavy = centre_stress(43e3, 0.45), centre_stress(43e3, 0.90), centre_stress(85e3, 0.45)
+    area_effect = small / large  # measured: 1.86, 1.59, 1.38, 1.27 at 0.3 ... 0.9 m
+    assert area_effect[0] > 1.5  # topsoil: halving the area nearly doubles the stress
+    assert np.all(np.diff(area_effect) < 0) and area_effect[-1] < 1.3  # the area matters less with depth
+    assert area_effect[0] - 1 > 2.5 * (area_effect[-1] - 1)
+    assert np.allclose(heavy / small, 85 / 43, rtol=1e-9)  # the load sets the stress at every depth
+    assert np.all(np.diff(small) < 0)  # the stress falls with depth
