@@ -76,3 +76,20 @@ def test_unknown_section_and_override_errors():
         load_scenario("no_such_scenario")
     with pytest.raises(ScenarioError, match="stop_distance_event"):
         load_scenario("validation", ["run.stop_distance_event=start"])
+
+
+def test_the_engine_section_reaches_the_terrain_engine_and_bad_values_are_refused():
+    import pytest as _pytest
+
+    from symtrack.foundations.errors import ScenarioError as _SE
+    from symtrack.simulation.plants import make_plant
+    from symtrack.simulation.scenario import load_scenario as _load
+
+    sc = _load("multipass", ["engine.cell_substeps=3", "engine.power=instantaneous"])
+    plant = make_plant(sc)
+    assert plant.engine.settings.cell_substeps == 3 and plant.engine.settings.power == "instantaneous"
+    assert "engine" in sc.to_dict() and sc.to_dict()["engine"]["cell_substeps"] == 3
+    with _pytest.raises(_SE, match=r"engine.entry_fraction = 2"):
+        _load("multipass", ["engine.entry_fraction=2"])
+    with _pytest.raises(_SE, match="unknown key"):
+        _load("multipass", ["engine.substeps=2"])

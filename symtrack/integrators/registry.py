@@ -131,4 +131,4 @@ register(IntegratorSpec(
     "grid_fast", "the compiled terrain engine: vehicle Rosenbrock with frozen channel sums, each cell by SDIRK, "
     "the world manager in C, 100 macro steps per call (docs/terrain.md)",
     terrains=frozenset({"grid"}), fixed_step=True, needs_compiler=True,
-    grid_engine=lambda world, settings: TerrainEngine(world, EngineSettings())))
+    grid_engine=lambda world, settings: TerrainEngine(world, settings.engine or EngineSettings())))

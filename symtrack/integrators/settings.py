@@ -24,6 +24,7 @@ class IntegratorSettings:
     max_num_steps: int = 200000
     compiled: bool = False
     fixed_step_s: float = 0.01
+    engine: object = None  # the terrain engine's settings (grid_engine.EngineSettings; None: its defaults)
 
 
 class Stepper(Protocol):

@@ -27,6 +27,7 @@ of the generated C).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from typing import Protocol
@@ -446,7 +447,7 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
     """The plant a simulation scenario asks for: the grid terrain when it has a ``[terrain]``
     section (or a ``world`` / ``terrain`` is given: a :class:`~symtrack.terrain.storage.Terrain`
     or a terrain file), else the homogeneous terrain; the integrator of ``run.integrator``."""
-    settings = scenario.run.integrator_settings()
+    settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = registry.get(settings.method)
     if world is not None or scenario.terrain is not None or terrain is not None:
         with timed_step("building the grid terrain's model and its integrator", log):

@@ -33,6 +33,13 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     right_N_m = 2000.0
     event = "idle"                 # optional name, unique
     [terrain]                      # optional: the persistent grid terrain (symtrack.terrain.settings)
+    [engine]                       # optional: the terrain engine's scheme (run.integrator = "grid_fast"):
+    vehicle_substeps = 1           # [1, 64]   (symtrack.integrators.grid_engine.EngineSettings)
+    cell_substeps = 1              # [1, 64]
+    entry_substeps = 8             # [1, 256]
+    entry_fraction = 0.5           # [0, 1]
+    power = "step_mean"            # or "instantaneous"
+    compiled = true                # false: the interpreted kernel
 
 Loading (:func:`load_scenario`) reads the document once (:func:`symtrack.foundations.config.read_document`:
 a built-in name of ``symtrack/simulation/scenarios/`` or a TOML path, then the overrides) and
@@ -49,6 +56,7 @@ from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_keys, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
+from ..integrators.grid_engine import EngineSettings
 from ..integrators.settings import IntegratorSettings
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
@@ -60,7 +68,7 @@ __all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "
            "parse_run", "parse_terrain", "scenario_from_dict"]
 
 SCENARIO_PACKAGE = "symtrack.simulation.scenarios"
-TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "start", "torque", "terrain")
+TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "start", "torque", "terrain", "engine")
 
 
 @dataclass(frozen=True)
@@ -123,6 +131,7 @@ class Scenario:
     start: Start
     torque: tuple[TorqueEntry, ...]
     terrain: TerrainSettings | None = None
+    engine: EngineSettings | None = None  # the [engine] section (the terrain engine's scheme), if given
 
     @property
     def params(self) -> dict:
@@ -151,6 +160,8 @@ class Scenario:
              "torque": [{k: v for k, v in dataclasses.asdict(e).items() if v is not None} for e in self.torque]}
         if self.terrain is not None:
             d["terrain"] = self.terrain.to_dict()
+        if self.engine is not None:
+            d["engine"] = dataclasses.asdict(self.engine)
         return d
 
 
@@ -218,6 +229,17 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
     return preset, values
 
 
+def parse_engine(t) -> EngineSettings | None:
+    """The optional ``[engine]`` table: the terrain engine's scheme (docs/terrain.md, "The terrain
+    engine"; keys and ranges: :class:`~symtrack.integrators.grid_engine.EngineSettings`)."""
+    if t is None:
+        return None
+    if not isinstance(t, dict):
+        raise ScenarioError(f"[engine] = {t!r} must be a table")
+    check_keys("engine", t, [f.name for f in dataclasses.fields(EngineSettings)])
+    return EngineSettings(**t)
+
+
 def parse_terrain(t) -> TerrainSettings | None:
     """The optional ``[terrain]`` table."""
     return None if t is None else settings_from_dict(t)
@@ -274,7 +296,8 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
     terrain = parse_terrain(d.get("terrain"))
-    sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain)
+    engine = parse_engine(d.get("engine"))
+    sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain, engine)
     events = [e.event for e in torque if e.event]
     if run.stop_distance_event is not None and run.stop_distance_event not in events:
         raise ScenarioError(f"run.stop_distance_event = {run.stop_distance_event!r} names no [[torque]] event; "
