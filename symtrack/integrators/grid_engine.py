@@ -66,7 +66,7 @@ from ..native.grid_engine_model import (
 )
 from ..terrain import subsoil
 from ..terrain.channels import soil_law_values
-from ..terrain.world import END_STRIP_CELLS, padding_m, static_sinkage
+from ..terrain.world import END_STRIP_CELLS, LIFT_TIME_S, padding_m, static_sinkage
 
 log = logging.getLogger("symtrack.terrain")
 
@@ -178,6 +178,9 @@ def library(fns, compiled: bool = True):
     lib.eng_sums.restype = None
     lib.eng_run.argtypes = [P, ctypes.c_longlong, ctypes.c_double, dp, dp, dp, ctypes.c_int, dp, dp, dp, ll]
     lib.eng_run.restype = ctypes.c_int
+    lib.eng_lift.argtypes = [P, dp, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, ctypes.c_longlong,
+                             ctypes.POINTER(ctypes.c_int)]
+    lib.eng_lift.restype = ctypes.c_longlong
     return lib
 
 
@@ -305,6 +308,14 @@ class CKernel:
                               int(bool(check_covered)), _dptr(T_out), _dptr(X), _dptr(Y), ctypes.byref(n_done))
         self.s.absorb(e)
         return rc, int(n_done.value), e
+
+    def lift(self, p_end, h, T, n, max_steps):
+        e = self.s.struct()
+        settled = ctypes.c_int(0)
+        rc = self.lib.eng_lift(ctypes.byref(e), _dptr(p_end), float(h), float(T), int(n), int(max_steps),
+                               ctypes.byref(settled))
+        self.s.absorb(e)
+        return int(rc), bool(settled.value), e
 
 
 class _PyErr:
@@ -511,6 +522,43 @@ class PyKernel:
             self.s.stats["n_cell_stages"] += 2
         return z0, v0, pz, dpz, vr
 
+    def _info_out(self, ch, hist, soil):
+        s, st = self.s, self.s.storage
+        zc, p = float(s.ch_z[ch]), float(s.ch_p[ch])
+        zm1, pm1, dc1, plastic, phase = np.array(self.f.cell_history[soil](zc, p, hist)).ravel()
+        cell = int(s.ch_cell[ch])
+        st.z[cell], st.zdot[cell], st.zmax[cell], st.pmax[cell] = zc, s.ch_v[ch], zm1, pm1
+        st.phase[cell] = int(phase) if zm1 > 0 else 0
+        st.zoff[cell] = s.ch_zoff[ch] + dc1
+        if plastic > 0 and not s.ch_counted[ch]:
+            s.ch_counted[ch] = 1
+            st.cycles[cell] = min(int(st.cycles[cell]) + 1, 65535)
+        s.ch_zmax[ch], s.ch_pmax[ch], s.ch_dc[ch] = zm1, pm1, dc1
+
+    def lift(self, p_end, h, T, n, max_steps):
+        s, e = self.s, self.e
+        fr = [0.0] * (2 * (n + 1))
+        for k in range(max_steps):
+            t0 = k * h
+            act = s.act[:s.n_act]
+            if t0 >= T and all(s.ch_p[ch] <= 0.0 and abs(s.ch_v[ch]) <= s.release_rate for ch in act):
+                return k, True, e
+            for ch in act:
+                pe = float(p_end[ch])
+                if s.ch_z[ch] == 0.0 and s.ch_v[ch] == 0.0 and pe == 0.0:
+                    continue
+                pl = [pe * max(0.0, 1.0 - (t0 + h * j / n) / T) for j in range(n + 1)]
+                hist = self._hist(ch)
+                soil = int(s.ch_soil[ch])
+                out = self._cell_step(float(s.ch_z[ch]), float(s.ch_v[ch]), float(s.ch_p[ch]), float(s.ch_dp[ch]),
+                                      pl, fr, hist, soil, h, n, [0.0, 0.0])
+                if out is None:
+                    e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
+                    return -ERR_NEWTON, False, e
+                s.ch_z[ch], s.ch_v[ch], s.ch_p[ch], s.ch_dp[ch], _ = out
+                self._info_out(ch, hist, soil)
+        return max_steps, False, e
+
     def sums(self):
         s = self.s
         S = [0.0] * s.n_sums
@@ -551,7 +599,7 @@ class PyKernel:
         return np.array(w1).ravel(), np.array(a1).ravel()
 
     def run(self, t0, T, U, dist, check_covered, T_out, X, Y):
-        s, e, st = self.s, self.e, self.s.storage
+        s, e = self.s, self.e
         t = t0
         n_done = 0
         sset = s.settings
@@ -631,16 +679,7 @@ class PyKernel:
                 if h > 0.0:
                     s.ch_pw[ch] = (work[0] / h, work[1] / h)
                 s.ch_g[ch] = gB
-                zc, p = float(s.ch_z[ch]), float(s.ch_p[ch])
-                zm1, pm1, dc1, plastic, phase = np.array(self.f.cell_history[soil](zc, p, hist)).ravel()
-                cell = int(s.ch_cell[ch])
-                st.z[cell], st.zdot[cell], st.zmax[cell], st.pmax[cell] = zc, s.ch_v[ch], zm1, pm1
-                st.phase[cell] = int(phase) if zm1 > 0 else 0
-                st.zoff[cell] = s.ch_zoff[ch] + dc1
-                if plastic > 0 and not s.ch_counted[ch]:
-                    s.ch_counted[ch] = 1
-                    st.cycles[cell] = min(int(st.cycles[cell]) + 1, 65535)
-                s.ch_zmax[ch], s.ch_pmax[ch], s.ch_dc[ch] = zm1, pm1, dc1
+                self._info_out(ch, hist, soil)
             if s.subsoil is not None:
                 act = s.act[:s.n_act]
                 act = act[s.ch_g[act, 0] > 0.0]
@@ -794,6 +833,26 @@ class TerrainEngine:
         if rc:
             self._raise(abs(rc), e)
         return s.wv[:NV].copy()
+
+    def end_pass(self, dt_s: float = SETTLE_STEP_S, max_steps: int = 300) -> None:
+        """World.end_pass in the engine: the vehicle lifted off (each active cell's load falls from its
+        reaction at the pass end to zero over LIFT_TIME_S), the cells settle until released (or
+        max_steps, with a warning), every channel freed; the pass's subsoil maxima folded into the
+        terrain's record. The cells are integrated by the engine's own cell step (SDIRK, its entry
+        substep count per step): the same as CVODES over the pool to the tolerance tested."""
+        w, s = self.world, self.state
+        w.z_at_pass_end = w.storage.z.copy()
+        if s.n_act:
+            n = max(self.settings.entry_substeps, self.settings.cell_substeps)
+            rc, settled, e = self.kernel.lift(s.ch_p.copy(), dt_s, LIFT_TIME_S, n, max_steps)
+            if rc < 0:
+                self._raise(-rc, e)
+            if not settled:
+                log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
+                            s.n_act, max_steps * dt_s)
+        self.release_all()
+        w.release_all()
+        np.maximum(w.storage.sigma_max, w.pass_sigma, out=w.storage.sigma_max)
 
     def _call(self, t0, T, U, dist, check_covered):
         n = T.size

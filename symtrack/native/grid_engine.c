@@ -361,6 +361,32 @@ static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, cons
   return 0;
 }
 
+/* INFO_OUT of one channel after its step: the history (cell.history_update, generated:
+ * eng_cell_history) and the storage; hist: the history the step was integrated with */
+static void info_out(eng_t *E, long long ch, const double *hist) {
+  double zc = E->ch_z[ch], p = E->ch_p[ch], hn[5];
+  {
+    const double *arg[3] = {&zc, &p, hist};
+    double *res[1] = {hn};
+    ENG_SOIL_CALL(eng_cell_history, E->ch_soil[ch], arg, res);
+  }
+  double zm1 = hn[0], pm1 = hn[1], dc1 = hn[2];
+  long long cell = E->ch_cell[ch];
+  E->z[cell] = zc;
+  E->zdot[cell] = E->ch_v[ch];
+  E->zmax[cell] = zm1;
+  E->pmax[cell] = pm1;
+  E->phase[cell] = zm1 > 0 ? (signed char)hn[4] : 0;
+  E->zoff[cell] = E->ch_zoff[ch] + dc1;
+  if (hn[3] > 0.0 && !E->ch_counted[ch]) {
+    E->ch_counted[ch] = 1;
+    if (E->cycles[cell] < 65535) E->cycles[cell] += 1;
+  }
+  E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as World.after_step's p_soil */
+  E->ch_pmax[ch] = pm1;
+  E->ch_dc[ch] = dc1;
+}
+
 static void check_cover(eng_t *E, long long cell, void *ctx) {
   long long *missing = (long long *)ctx;
   long long ch = channel_of(E, cell);
@@ -536,28 +562,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         pw[1] = work[1] / h;
       }
       memcpy(g, gB, sizeof gB);
-      /* INFO_OUT: the history (cell.history_update, generated: eng_cell_history) and the storage */
-      double zc = E->ch_z[ch], p = E->ch_p[ch], hn[5];
-      {
-        const double *arg[3] = {&zc, &p, hist};
-        double *res[1] = {hn};
-        ENG_SOIL_CALL(eng_cell_history, E->ch_soil[ch], arg, res);
-      }
-      double zm1 = hn[0], pm1 = hn[1], dc1 = hn[2];
-      long long cell = E->ch_cell[ch];
-      E->z[cell] = zc;
-      E->zdot[cell] = E->ch_v[ch];
-      E->zmax[cell] = zm1;
-      E->pmax[cell] = pm1;
-      E->phase[cell] = zm1 > 0 ? (signed char)hn[4] : 0;
-      E->zoff[cell] = E->ch_zoff[ch] + dc1;
-      if (hn[3] > 0.0 && !E->ch_counted[ch]) {
-        E->ch_counted[ch] = 1;
-        if (E->cycles[cell] < 65535) E->cycles[cell] += 1;
-      }
-      E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as World.after_step's p_soil */
-      E->ch_pmax[ch] = pm1;
-      E->ch_dc[ch] = dc1;
+      info_out(E, ch, hist);
     }
     long long c3 = now_ns();
     E->ns_cells += c3 - c2;
@@ -607,4 +612,47 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     if (done) return 1;
   }
   return 0;
+}
+
+/* The lift at a pass end (World.end_pass, here in C): each active cell's load falls linearly from
+ * p_end (its reaction at the pass end, given per channel) to zero over T, the cells alone, steps
+ * of h in n substeps each, INFO_OUT after every step; it stops at the first step start t >= T at
+ * which every active cell has p <= 0 and |dz/dt| <= release_rate. Returns the steps done, or
+ * -err_code; *settled = 1 when the stop rule was met within max_steps. */
+EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, long long n, long long max_steps,
+                          int *settled) {
+  WORK = E->work;
+  *settled = 0;
+  double *pl = E->plbuf, *fr = E->frbuf;
+  for (long long j = 0; j <= n; ++j) fr[2 * j] = fr[2 * j + 1] = 0.0;
+  for (long long k = 0; k < max_steps; ++k) {
+    double t0 = (double)k * h;
+    if (t0 >= T) {
+      int all = 1;
+      for (long long q = 0; q < E->n_act && all; ++q) {
+        long long ch = E->act[q];
+        if (!(E->ch_p[ch] <= 0.0 && fabs(E->ch_v[ch]) <= E->release_rate)) all = 0;
+      }
+      if (all) {
+        *settled = 1;
+        return k;
+      }
+    }
+    for (long long q = 0; q < E->n_act; ++q) {
+      long long ch = E->act[q];
+      double pe = p_end[ch];
+      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && pe == 0.0) continue;
+      for (long long j = 0; j <= n; ++j) pl[j] = pe * fmax(0.0, 1.0 - (t0 + h * (double)j / (double)n) / T);
+      double work[2] = {0.0, 0.0}, hist[5], vr;
+      channel_hist(E, ch, hist);
+      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, E->ch_soil[ch], h, n,
+                    work, &vr)) {
+        E->err_code = ERR_NEWTON;
+        E->err_a = E->ch_cell[ch];
+        return -ERR_NEWTON;
+      }
+      info_out(E, ch, hist);
+    }
+  }
+  return max_steps;
 }

@@ -345,7 +345,6 @@ class EnginePlant:
         self.record_every_s = record_every_s
         self.snapshots: list = []
         self.dist = np.array([0.0, -1.0, 0.0])  # distance so far, stop distance (< 0: none), counted from
-        self._unloader = None
         self.finished = True
 
     @property
@@ -401,9 +400,7 @@ class EnginePlant:
     def finish(self):
         if self.finished:
             return
-        if self._unloader is None:
-            self._unloader = unloader(self.world)
-        self.world.end_pass(self.engine.sync_world(), self._unloader)
+        self.engine.end_pass()  # the lift-off in the engine (World.end_pass's rules)
         self.finished = True
 
     def figures(self):
