@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test lint clean codegen standalone bench
+.PHONY: demo test lint clean codegen standalone grid-standalone bench
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +36,14 @@ build/symtrack_standalone: codegen/standalone_main.c generated/homogeneous_rosen
 
 standalone: build/symtrack_standalone
 	./build/symtrack_standalone
+
+# the grid validation (validation_grid, the million-cell field) on the terrain engine, libc and libm only
+build/symtrack_grid_standalone: codegen/grid_standalone_main.c symtrack/native/grid_engine.c symtrack/native/subsoil.h generated/engine_gen.inc generated/engine_soils.inc generated/grid_validation.h
+	mkdir -p build
+	$(CC) -O2 -Wall -Wno-unused-function -Wno-unused-variable -Wno-unused-but-set-variable -Igenerated -Isymtrack/native codegen/grid_standalone_main.c -o $@ -lm
+
+grid-standalone: build/symtrack_grid_standalone
+	./build/symtrack_grid_standalone build/grid_validation.csv
 
 bench: $(VENV)/.installed build/symtrack_standalone
 	$(VENV)/bin/symtrack bench --out out/bench.json

@@ -2,7 +2,9 @@
 
 Writes, for the homogeneous-terrain system of the default model options, the files listed in
 :mod:`symtrack.native.generate` plus ``homogeneous_validation.h`` (the numbers of the built-in validation
-scenario for the standalone C program) into ``generated/`` (or ``--out``). Files are written
+scenario for the standalone C program), and the grid validation's standalone program's
+``engine_gen.inc``, ``engine_soils.inc`` and ``grid_validation.h`` (:mod:`codegen.grid_standalone`)
+into ``generated/`` (or ``--out``). Files are written
 atomically and only when their content changed; ``--check`` writes nothing and exits with 1 when
 the folder is out of date.
 """
@@ -27,12 +29,13 @@ def render_all(scratch: Path) -> dict[str, bytes]:
     from symtrack.model import SystemModel
     from symtrack.native.generate import build, render
 
-    from . import standalone
+    from . import grid_standalone, standalone
 
     model = SystemModel()
     gen = build(model, model.terrain.name)
     files = render(gen, scratch)
     files[f"{gen.prefix}_validation.h"] = standalone.validation_header(model, gen)
+    files.update(grid_standalone.render(scratch))  # the grid validation's standalone program
     return files
 
 

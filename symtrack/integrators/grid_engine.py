@@ -66,7 +66,7 @@ from ..native.grid_engine_model import (
 )
 from ..terrain import subsoil
 from ..terrain.channels import soil_law_values
-from ..terrain.world import END_STRIP_CELLS, LIFT_TIME_S, padding_m, static_sinkage
+from ..terrain.world import END_STRIP_CELLS, LIFT_TIME_S, padding_m
 
 log = logging.getLogger("symtrack.terrain")
 
@@ -181,6 +181,8 @@ def library(fns, compiled: bool = True):
     lib.eng_lift.argtypes = [P, dp, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, ctypes.c_longlong,
                              ctypes.POINTER(ctypes.c_int)]
     lib.eng_lift.restype = ctypes.c_longlong
+    lib.eng_static.argtypes = [P]
+    lib.eng_static.restype = None
     return lib
 
 
@@ -308,6 +310,10 @@ class CKernel:
                               int(bool(check_covered)), _dptr(T_out), _dptr(X), _dptr(Y), ctypes.byref(n_done))
         self.s.absorb(e)
         return rc, int(n_done.value), e
+
+    def static(self) -> None:
+        e = self.s.struct()
+        self.lib.eng_static(ctypes.byref(e))
 
     def lift(self, p_end, h, T, n, max_steps):
         e = self.s.struct()
@@ -534,6 +540,38 @@ class PyKernel:
             s.ch_counted[ch] = 1
             st.cycles[cell] = min(int(st.cycles[cell]) + 1, 65535)
         s.ch_zmax[ch], s.ch_pmax[ch], s.ch_dc[ch] = zm1, pm1, dc1
+
+    def static(self) -> None:
+        s = self.s
+        for ch in s.act[:s.n_act]:
+            soil, hist = int(s.ch_soil[ch]), self._hist(ch)
+            z0, pl = float(s.ch_z[ch]), float(s.ch_g[ch, 0])
+            p, _ = self._law(z0, hist, soil)
+            if pl != p:
+                up = pl > p
+                lo = hi = z0
+                step = 1e-4
+                for _ in range(60):
+                    if up:
+                        hi = lo + step
+                    else:
+                        lo = hi - step
+                    p, _ = self._law(hi if up else lo, hist, soil)
+                    if (not p < pl) if up else (not p > pl):
+                        break
+                    step *= 2.0
+                for _ in range(200):
+                    if not hi - lo > 1e-15:
+                        break
+                    mid = 0.5 * (lo + hi)
+                    p, _ = self._law(mid, hist, soil)
+                    if p <= pl:
+                        lo = mid
+                    else:
+                        hi = mid
+                s.ch_z[ch] = 0.5 * (lo + hi)
+            s.ch_v[ch] = s.ch_vr[ch] = 0.0
+            s.ch_p[ch], s.ch_dp[ch] = self._law(float(s.ch_z[ch]), hist, soil)
 
     def lift(self, p_end, h, T, n, max_steps):
         s, e = self.s, self.e
@@ -816,15 +854,7 @@ class TerrainEngine:
         rc, e = self.kernel.assign(0.0)
         if rc:
             self._raise(abs(rc), e)
-        act = s.active_channels().copy()
-        if act.size:
-            hist = np.vstack([s.ch_zmax[act], s.ch_pmax[act], s.ch_zoff[act], s.ch_delta[act], s.ch_dc[act]])
-            w = self.world
-            z = static_sinkage(w.terrain.fn["soil"], w.laws[:, s.ch_soil[act]], s.ch_z[act], hist, s.ch_g[act, 0])
-            s.ch_z[act], s.ch_v[act] = z, 0.0
-            for q, ch in enumerate(act):
-                p, dp = self.fns.cell_law[int(s.ch_soil[ch])](z[q], hist[:, q])
-                s.ch_p[ch], s.ch_dp[ch], s.ch_vr[ch] = float(p), float(dp), 0.0
+        self.kernel.static()
         n = int(round(self.world.settings.settle_s / SETTLE_STEP_S))
         if n:
             T = SETTLE_STEP_S * np.arange(1, n + 1)

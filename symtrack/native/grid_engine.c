@@ -656,3 +656,39 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
   }
   return max_steps;
 }
+
+/* The set-down (TerrainEngine.begin_pass): every active cell at the sinkage where its reaction equals
+ * the load it carries at rest (ch_g[0], evaluated at assignment), p(z; history) = p_load, by
+ * bracketing from its stored z and bisection on the monotone law to 1e-15 m (world.static_sinkage's
+ * rule; the top of the unloaded set for p_load = 0); rate 0. */
+EXPORT void eng_static(eng_t *E) {
+  WORK = E->work;
+  for (long long q = 0; q < E->n_act; ++q) {
+    long long ch = E->act[q];
+    int soil = E->ch_soil[ch];
+    double hist[5], p, dp, z0 = E->ch_z[ch], pl = E->ch_g[NGEO * ch];
+    channel_hist(E, ch, hist);
+    law(z0, hist, soil, &p, &dp);
+    if (pl != p) {
+      int up = pl > p;
+      double lo = z0, hi = z0, step = 1e-4;
+      for (int it = 0; it < 60; ++it) {
+        if (up) hi = lo + step;
+        else lo = hi - step;
+        law(up ? hi : lo, hist, soil, &p, &dp);
+        if (up ? !(p < pl) : !(p > pl)) break;
+        step *= 2.0;
+      }
+      for (int it = 0; it < 200 && hi - lo > 1e-15; ++it) {
+        double mid = 0.5 * (lo + hi);
+        law(mid, hist, soil, &p, &dp);
+        if (p <= pl) lo = mid;
+        else hi = mid;
+      }
+      E->ch_z[ch] = 0.5 * (lo + hi);
+    }
+    E->ch_v[ch] = 0.0;
+    E->ch_vr[ch] = 0.0;
+    law(E->ch_z[ch], hist, soil, E->ch_p + ch, E->ch_dp + ch);
+  }
+}
