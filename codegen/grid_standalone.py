@@ -51,8 +51,14 @@ def _time_grid(sc) -> tuple[np.ndarray, np.ndarray]:
 
 def render(scratch: Path) -> dict[str, bytes]:
     """The generated/ files of the grid standalone program, name -> bytes."""
-    from symtrack.integrators.grid_engine import (POWER_MODES, SDIRK_GAMMA, SETTLE_STEP_S, EngineSettings,
-                                                  EngineState, engine_functions)
+    from symtrack.integrators.grid_engine import (
+        POWER_MODES,
+        SDIRK_GAMMA,
+        SETTLE_STEP_S,
+        EngineSettings,
+        EngineState,
+        engine_functions,
+    )
     from symtrack.native.grid_engine_model import NA, NGEO, NW, soil_dispatch_c
     from symtrack.simulation.scenario import load_scenario
     from symtrack.terrain.world import open_world
