@@ -100,7 +100,7 @@ def _one_cell_reference_and_engine(substeps, h=0.01, t_end=0.9):
         return frac * (20000.0 + 10000.0 * min(t, t_c) / t_c)
 
     def law(z, zm, pm):
-        return tuple(float(v) for v in f.cell_law(z, [zm, pm, 0, 0, 0]))
+        return tuple(float(v) for v in f.cell_law[0](z, [zm, pm, 0, 0, 0]))
     n = int(round(t_end / h))
     st = types.SimpleNamespace(areal_mass=m, damping=c, stats={"n_newton": 0, "n_cell_stages": 0})
     kern = engine.PyKernel(f, st)
@@ -112,7 +112,7 @@ def _one_cell_reference_and_engine(substeps, h=0.01, t_end=0.9):
         t0 = k * h
         pl = [load(t0 + j * h / substeps) for j in range(substeps + 1)]
         work = [0.0, 0.0]
-        z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0] * (substeps + 1), [zm, pm, 0, 0, 0], h,
+        z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0] * (substeps + 1), [zm, pm, 0, 0, 0], 0, h,
                                          substeps, work)
         pm = max(pm, p) if z >= zm else pm
         zm = max(zm, z)
