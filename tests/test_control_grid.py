@@ -47,7 +47,7 @@ def grid_run(tmp_path_factory):
 def test_grid_closed_loop_runs_without_failed_solves(grid_run):
     _, out = grid_run
     s = json.loads((out / "summary.json").read_text())
-    assert s["plant"] == "grid"
+    assert s["plant"] == "grid" and s["plant_integrator"] == "grid_fast"  # the engine: the default (issue 9)
     assert s["path_completed"]
     assert s["failed_solves"] == 0
     assert s["max_lateral_error_m"] < 0.05
@@ -127,7 +127,9 @@ def idas_run(grid_run):
     sc = S.load(str(d / "grid_short.toml"), ['run.integrator="idas"'])
     plant = CL.make_plant(sc, None)
     assert isinstance(plant, GridPlant) and plant.stepper.settings.method == "idas"
-    return CL.run(sc, plant=plant), plant
+    res = CL.run(sc, plant=plant)
+    assert res.summary["plant_integrator"] == "idas"
+    return res, plant
 
 
 def test_engine_plant_is_the_default_and_matches_idas(grid_run, idas_run):

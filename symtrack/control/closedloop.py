@@ -10,11 +10,13 @@ the plant's ``macro_step_s`` when it has one: the grid's world-manager step).
 The default plant, :class:`~symtrack.simulation.plants.StepPlant`, is the full simulator
 (CVODES/IDAS on the SystemModel with its terrain cells), not the MPC's prediction model: the
 mismatch (cells frozen in the prediction, collocation error, the plant's tight tolerances) is
-real. With a ``[terrain]`` section the plant is a
-:class:`~symtrack.simulation.plants.GridPlant`, the vehicle on the persistent grid terrain
-(:func:`make_grid_plant`). A plant whose state carries the homogeneous terrain's cell states by
-name gives them to the prediction; another plant (the grid terrain) leaves the prediction's
-cells at those of steady straight running.
+real. With a ``[terrain]`` section the plant is the vehicle on the persistent grid terrain
+(:func:`make_grid_plant`): by default the terrain engine
+(:class:`~symtrack.simulation.plants.EnginePlant`, ``grid_fast``, 10 ms macro steps), with
+``run.integrator = "idas"`` (the reference) or ``"rosenbrock"`` a
+:class:`~symtrack.simulation.plants.GridPlant` (:func:`grid_integrator`). A plant whose state
+carries the homogeneous terrain's cell states by name gives them to the prediction; another plant
+(the grid terrain) leaves the prediction's cells at those of steady straight running.
 
 The loop starts the plant at the trim state of steady straight running at the start speed
 (``plant.start(pose, u, state)``; the grid first sets the vehicle down on its cells) and
@@ -175,6 +177,14 @@ def make_plant(sc: MPCScenario, model: SystemModel, terrain=None):
     return homogeneous_plant(model, sc.params, sc.run.integrator)
 
 
+def plant_integrator(plant) -> str | None:
+    """The integrator a plant runs: "grid_fast" for the terrain engine, else its stepper's method."""
+    if getattr(plant, "engine", None) is not None:
+        return "grid_fast"
+    settings = getattr(getattr(plant, "stepper", None), "settings", None)
+    return getattr(settings, "method", None)
+
+
 def cidx_missing(plant, mpc) -> bool:
     """True when the prediction has cells the plant's state does not carry (e.g. the grid plant)."""
     return bool(mpc.cell_names) and not all(n in plant.state_names for n in mpc.cell_names)
@@ -271,6 +281,7 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     res.summary["initial_solve_ms"] = 1e3 * cold.solve_time_s
     res.summary["initial_solve_success"] = cold.success
     res.summary["plant"] = getattr(plant, "kind", type(plant).__name__)
+    res.summary["plant_integrator"] = plant_integrator(plant)
     res.summary["plant_wall_time_s"] = plant_wall
     res.summary["solver_wall_time_s"] = float(np.sum(res.solve_ms) / 1e3)
     res.summary["plant_wall_time_per_sim_s"] = plant_wall / res.summary["sim_time_s"] if res.summary[
