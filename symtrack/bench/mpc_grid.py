@@ -62,6 +62,7 @@ def comparison(scenario: str = "field_pattern", integrators=("grid_fast", "idas"
         kept.append((integ, res, plant.world.storage.z.copy()))
         if out is not None:
             closedloop.write(Path(out) / integ, res)
+            plant.world.storage.save(Path(out) / integ / "terrain.npz", sc.params)
     agreement = []
     if kept:
         ref_name, ref, z_ref = kept[0]
@@ -104,7 +105,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scenario", default="field_pattern")
     ap.add_argument("--integrators", nargs="+", default=["grid_fast", "idas", "rosenbrock"])
     ap.add_argument("--quick", action="store_true", help="two passes of 20 m (a field scenario)")
-    ap.add_argument("--out", default=None, help="write each closed loop's files and bench.json here")
+    ap.add_argument("--out", default=None, help="write each loop's files, its final terrain.npz and bench.json here")
     ap.add_argument("--set", action="append", default=[], help="scenario override KEY=VALUE (repeatable)")
     args = ap.parse_args(argv)
     res = comparison(args.scenario, args.integrators, args.quick, args.out, args.set)
