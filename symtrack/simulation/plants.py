@@ -22,6 +22,9 @@ of the generated C).
 - :class:`BatchPlant`: the homogeneous terrain with a batch stepper (compiled Rosenbrock);
 - :class:`GridPlant`: the persistent grid terrain (a :class:`~symtrack.terrain.world.World`)
   with its integrator (IDAS, compiled Rosenbrock);
+- :class:`EnginePlant`: the persistent grid terrain through the compiled terrain engine
+  (``grid_fast``; many macro steps per call, the stop rule inside, start from a state, retry
+  from checkpoints);
 - :func:`make_plant`: the plant a scenario asks for (the integrator from the registry).
 """
 
