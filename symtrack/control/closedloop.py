@@ -10,11 +10,13 @@ the plant's ``macro_step_s`` when it has one: the grid's world-manager step).
 The default plant, :class:`~symtrack.simulation.plants.StepPlant`, is the full simulator
 (CVODES/IDAS on the SystemModel with its terrain cells), not the MPC's prediction model: the
 mismatch (cells frozen in the prediction, collocation error, the plant's tight tolerances) is
-real. With a ``[terrain]`` section the plant is a
-:class:`~symtrack.simulation.plants.GridPlant`, the vehicle on the persistent grid terrain
-(:func:`make_grid_plant`). A plant whose state carries the homogeneous terrain's cell states by
-name gives them to the prediction; another plant (the grid terrain) leaves the prediction's
-cells at those of steady straight running.
+real. With a ``[terrain]`` section the plant is the vehicle on the persistent grid terrain
+(:func:`make_grid_plant`): by default the terrain engine
+(:class:`~symtrack.simulation.plants.EnginePlant`, ``grid_fast``, 10 ms macro steps), with
+``run.integrator = "idas"`` (the reference) or ``"rosenbrock"`` a
+:class:`~symtrack.simulation.plants.GridPlant` (:func:`grid_integrator`). A plant whose state
+carries the homogeneous terrain's cell states by name gives them to the prediction; another plant
+(the grid terrain) leaves the prediction's cells at those of steady straight running.
 
 The loop starts the plant at the trim state of steady straight running at the start speed
 (``plant.start(pose, u, state)``; the grid first sets the vehicle down on its cells) and
@@ -47,7 +49,8 @@ from ..model.vehicle import VEHICLE_STATES
 from ..reports.plots import plt, png_bytes
 from ..reports.run_files import clear_previous_run
 from ..reports.terrain_plots import sinkage_map_png
-from ..simulation.plants import GridPlant, StepPlant, advance_plant
+from ..simulation.plants import StepPlant, advance_plant
+from ..simulation.plants import make_grid_plant as plant_for_world
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import open_world
 from .mpc import PathTrackingMPC, realtime_figures
@@ -57,8 +60,8 @@ from .trim import trim
 log = logging.getLogger("symtrack.control.closedloop")
 
 SUMMARY_SCHEMA_VERSION = 1
-__all__ = ["ClosedLoopResult", "field_from_path", "homogeneous_plant", "initial_state", "make_grid_plant",
-           "make_plant", "run", "summarise", "write"]
+__all__ = ["ClosedLoopResult", "field_from_path", "grid_integrator", "homogeneous_plant", "initial_state",
+           "make_grid_plant", "make_plant", "run", "summarise", "write"]
 
 # IDAS tolerances of the grid plant: those of `symtrack simulate validation_grid` (docs/terrain.md:
 # every validation figure equal to 3 digits against 1e-7 / 1e-9, in half the time)
@@ -67,6 +70,9 @@ GRID_ABSTOL = 1e-8
 # plant sub-step: the world manager's macro step (footprint prediction, release); the MPC's sample
 # is split into sub-steps no longer than this
 GRID_SUBSTEP_S = 0.02
+# the terrain engine's macro step (its integration step: vehicle Rosenbrock, each cell SDIRK), the
+# step its accuracy was measured at (docs/terrain.md, "The terrain engine")
+ENGINE_SUBSTEP_S = 0.01
 # margin around the reference path when the field is sized from it
 FIELD_MARGIN_M = 4.0
 
@@ -117,13 +123,34 @@ def field_from_path(path, margin_m: float = FIELD_MARGIN_M) -> tuple[tuple[float
     return (x0, y0), (x1 - x0, y1 - y0)
 
 
-def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float = GRID_SUBSTEP_S) -> GridPlant:
+def grid_integrator(sc: MPCScenario) -> IntegratorSettings:
+    """The grid plant's integrator from ``run.integrator``: the terrain engine (``grid_fast``) by
+    default (``cvodes``, the homogeneous plant's default, means the engine here: the grid needs
+    the DAE form), IDAS at the tolerances of ``validation_grid`` (``idas``, the reference), or the
+    compiled fixed-step grid Rosenbrock (``rosenbrock``)."""
+    name = sc.run.integrator
+    if name in ("cvodes", "grid_fast"):
+        return IntegratorSettings("grid_fast")
+    if name == "idas":
+        return IntegratorSettings("idas", GRID_RELTOL, GRID_ABSTOL)
+    if name == "rosenbrock":
+        return IntegratorSettings("rosenbrock", fixed_step_s=MAX_STEP_S)
+    raise ScenarioError(f"run.integrator = {name!r}: the grid plant runs grid_fast (the default), idas or rosenbrock")
+
+
+def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float | None = None):
     """The grid plant of an MPC scenario: the world of its [terrain] section (without size_m and
     origin_m the field covers the path plus FIELD_MARGIN_M; ``terrain``: a Terrain or terrain
-    file to continue from, whose geometry it takes) with IDAS, or with the compiled Rosenbrock
-    integrator when ``run.integrator = "rosenbrock"`` (``cvodes``, the homogeneous plant's
-    default, means IDAS here: the grid needs the DAE form). The MPC's sample is split into
-    macro steps of at most ``substep_s``."""
+    file to continue from, whose geometry it takes) with the integrator of :func:`grid_integrator`:
+    an :class:`~symtrack.simulation.plants.EnginePlant` (the terrain engine, the default) or a
+    :class:`~symtrack.simulation.plants.GridPlant` (IDAS, the compiled Rosenbrock). The MPC's
+    sample is split into macro steps of at most ``substep_s`` (default: ENGINE_SUBSTEP_S for the
+    engine, whose macro step is its integration step; GRID_SUBSTEP_S, the world manager's
+    step, for the others)."""
+    settings = grid_integrator(sc)
+    engine = settings.method == "grid_fast"
+    if substep_s is None:
+        substep_s = ENGINE_SUBSTEP_S if engine else GRID_SUBSTEP_S
     if not 0.0 < substep_s <= 1.0:
         raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
     s = sc.terrain if sc.terrain is not None else TerrainSettings()
@@ -135,13 +162,9 @@ def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float = GRID_SUBST
         s = dataclasses.replace(s, origin_m=origin, size_m=size)
     world = open_world(s, sc.params, ModelOptions(), substep_s, start_xy=(sc.start.x_m, sc.start.y_m),
                        terrain=terrain, where="[terrain]")
-    log.info("grid plant: %d x %d cells of %g m, M = %d (%d channels)", *world.grid.shape, world.grid.cell_m,
-             world.M, world.n_channels)
-    if sc.run.integrator == "rosenbrock":
-        settings = IntegratorSettings("rosenbrock", fixed_step_s=MAX_STEP_S)
-    else:
-        settings = IntegratorSettings("idas", GRID_RELTOL, GRID_ABSTOL)
-    plant = GridPlant(world, registry.get(settings.method).stepper("grid", world.model, settings, world.n_channels))
+    log.info("grid plant (%s): %d x %d cells of %g m, M = %d (%d channels)", settings.method, *world.grid.shape,
+             world.grid.cell_m, world.M, world.n_channels)
+    plant = plant_for_world(world, settings)
     plant.macro_step_s = substep_s
     return plant
 
@@ -152,6 +175,14 @@ def make_plant(sc: MPCScenario, model: SystemModel, terrain=None):
     if sc.terrain is not None or terrain is not None:
         return make_grid_plant(sc, terrain)
     return homogeneous_plant(model, sc.params, sc.run.integrator)
+
+
+def plant_integrator(plant) -> str | None:
+    """The integrator a plant runs: "grid_fast" for the terrain engine, else its stepper's method."""
+    if getattr(plant, "engine", None) is not None:
+        return "grid_fast"
+    settings = getattr(getattr(plant, "stepper", None), "settings", None)
+    return getattr(settings, "method", None)
 
 
 def cidx_missing(plant, mpc) -> bool:
@@ -250,6 +281,7 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     res.summary["initial_solve_ms"] = 1e3 * cold.solve_time_s
     res.summary["initial_solve_success"] = cold.success
     res.summary["plant"] = getattr(plant, "kind", type(plant).__name__)
+    res.summary["plant_integrator"] = plant_integrator(plant)
     res.summary["plant_wall_time_s"] = plant_wall
     res.summary["solver_wall_time_s"] = float(np.sum(res.solve_ms) / 1e3)
     res.summary["plant_wall_time_per_sim_s"] = plant_wall / res.summary["sim_time_s"] if res.summary[

@@ -29,7 +29,9 @@ Schema (unknown keys are errors; ranges in brackets)::
     spacing_m = 8.0                   # [1, 100]
     first_turn = "left"               # left | right
     [run]
-    integrator = "cvodes"             # plant integrator: cvodes | idas
+    integrator = "cvodes"             # plant integrator: homogeneous plant cvodes | idas; grid plant
+                                      # grid_fast (the terrain engine; also what cvodes means there)
+                                      # | idas (the reference) | rosenbrock
     duration_s = 120.0                # (0, 1e5] time limit; the run ends at the path's end
     rms_exclude_first_m = 0.0         # [0, 1e6] path length at the start left out of the RMS
                                       # (the approach from an initial offset)
@@ -38,12 +40,11 @@ Schema (unknown keys are errors; ranges in brackets)::
     sample_time_s = 0.1
     solver = "ipopt"
     [terrain]                         # optional: the plant is then the vehicle on the persistent
-    cell_m = 0.25                     # grid terrain (symtrack.simulation.plants.GridPlant); keys and
-                                      # ranges of symtrack/terrain/config.py (docs/terrain.md).
+    cell_m = 0.25                     # grid terrain (symtrack.control.closedloop.make_grid_plant); keys
+                                      # and ranges of symtrack/terrain/config.py (docs/terrain.md).
                                       # Without size_m and origin_m the field covers the path
-                                      # plus 4 m; passes must be 1; the plant runs IDAS
-                                      # whatever run.integrator says (that one is the
-                                      # homogeneous plant's).
+                                      # plus 4 m; passes must be 1; the plant runs the terrain
+                                      # engine unless run.integrator is idas or rosenbrock.
 """
 
 from __future__ import annotations

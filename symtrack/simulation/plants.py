@@ -22,6 +22,9 @@ of the generated C).
 - :class:`BatchPlant`: the homogeneous terrain with a batch stepper (compiled Rosenbrock);
 - :class:`GridPlant`: the persistent grid terrain (a :class:`~symtrack.terrain.world.World`)
   with its integrator (IDAS, compiled Rosenbrock);
+- :class:`EnginePlant`: the persistent grid terrain through the compiled terrain engine
+  (``grid_fast``; many macro steps per call, the stop rule inside, start from a state, retry
+  from checkpoints);
 - :func:`make_plant`: the plant a scenario asks for (the integrator from the registry).
 """
 
@@ -330,21 +333,42 @@ class EnginePlant:
     the world manager's per-step work, the vehicle and the cells in C, up to ``max_intervals``
     macro steps per call. It applies the stop-at-distance rule inside its calls
     (``applies_stop_rule``: :meth:`set_stop_rule`; after :meth:`advance`, ``end_times`` holds the
-    steps' end times, the last one shortened when ``stopped``); :meth:`retry` is not needed.
-    ``record_every_s``: snapshots for the animation, one per call (calls of 25 macro steps then)."""
+    steps' end times, the last one shortened when ``stopped``), so the time loop needs no
+    :meth:`retry`.
+    ``record_every_s``: snapshots for the animation, one per call (calls of 25 macro steps then).
+
+    :meth:`start` with ``state`` (the 12 vehicle states, e.g. the trim of the closed loop) sets
+    the vehicle down at rest first (:meth:`TerrainEngine.begin_pass`: the cells under it at their
+    static sinkage, then settled), then gives it that state: the accelerations of the DAE form
+    and the tracks' pressure lines made consistent with it (a vehicle step of length 0), the
+    active cells' geometry re-evaluated for those pressure lines, the channel sums recomputed.
+
+    Retry: the engine advances its state in place (the World's storage arrays and its channel
+    tables). With ``checkpoints = True`` :meth:`synchronize` saves that state (the storage arrays
+    of the whole field, the channel tables, the vehicle; :meth:`checkpoint`), so :meth:`retry` and
+    a :meth:`commit` of fewer intervals than were advanced restore it and re-run the intervals
+    (bit for bit the same, the engine being deterministic). Off by default: the saved field costs
+    about 40 bytes per cell per synchronize, and neither the time loop nor the closed loop needs
+    it (they commit every interval they advance)."""
 
     kind = "grid"
     applies_stop_rule = True
     CALL_STEPS = 100  # macro steps per call
     RECORD_CALL_STEPS = 25  # ... when recording snapshots
+    # the engine state's scalars besides its arrays (symtrack.integrators.grid_engine.EngineState)
+    _STATE_SCALARS = ("n_act", "peak_active", "stamp")
+    _STATE_SCRATCH = ("work", "agrid", "plbuf", "frbuf", "new_list", "geo")
+    _STORAGE_ARRAYS = ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles", "sigma_max")
 
-    def __init__(self, world: World, engine, record_every_s: float | None = None):
+    def __init__(self, world: World, engine, record_every_s: float | None = None, checkpoints: bool = False):
         self.world, self.engine = world, engine
         self.state_names = tuple(VEHICLE_STATES)
         self.output_names = tuple(engine.output_names)
         self.record_every_s = record_every_s
+        self.checkpoints = checkpoints
         self.snapshots: list = []
         self.dist = np.array([0.0, -1.0, 0.0])  # distance so far, stop distance (< 0: none), counted from
+        self._saved = None
         self.finished = True
 
     @property
@@ -368,16 +392,75 @@ class EnginePlant:
             self.snapshots.append((t, self.engine.state.wv[:3].copy(), act.copy(), cells.z[act].copy()))
 
     def start(self, x_m, y_m, yaw_rad, u0, state=None):
+        u0 = np.asarray(u0, dtype=float)
         x = self.engine.begin_pass(float(x_m), float(y_m), float(yaw_rad))
         for key in self.engine.state.stats:  # the statistics of the time loop (the settling excluded)
             self.engine.state.stats[key] = 0
         if state is not None:
-            raise SimulationError("EnginePlant.start: the terrain engine starts from rest only (no state=)")
+            x = self._give_state(state, u0)
         self.dist[0] = 0.0
         self.finished = False
         self.snapshots = []
+        self._saved = None
         self._record(0.0)
-        return x, self.engine.outputs_now(np.asarray(u0, dtype=float))
+        return x, self.engine.outputs_now(u0)
+
+    def _give_state(self, state, u0) -> np.ndarray:
+        """The vehicle, set down and settled at rest, given ``state`` (class doc)."""
+        xv = np.array(state, dtype=float)
+        s, fns = self.engine.state, self.engine.fns
+        if xv.shape != (NV,):
+            raise SimulationError(f"EnginePlant.start: expected the {NV} vehicle states, got shape {xv.shape}")
+        if not np.all(np.isfinite(xv)):
+            raise SimulationError("EnginePlant.start: the state has non-finite values")
+        if np.max(np.abs(xv[:3] - s.wv[:3])) > 1e-9:
+            raise SimulationError(f"EnginePlant.start: the state's pose {tuple(xv[:3])} differs from the pose the "
+                                  f"vehicle was set down at {tuple(s.wv[:3])}")
+        s.wv[:NV] = xv
+        act = s.active_channels()
+        for _ in range(2):  # accelerations <-> pressure lines <-> channel sums: a fixed point, 2 passes
+            w1, a1 = fns.vehicle_step(s.wv, u0, s.pv, 0.0)  # h = 0: the states stay, the algebraic ones settle
+            s.wv[NV:] = np.array(w1).ravel()[NV:]
+            s.a[:] = np.array(a1).ravel()
+            if act.size:
+                G = fns.cell_geo.map(act.size)(np.vstack([s.ch_cx[act], s.ch_cy[act]]), s.a, s.geo)
+                s.ch_g[act] = np.array(G).T
+            self.engine.kernel.sums()
+        return s.wv[:NV].copy()
+
+    # -- checkpoints (retry) ----------------------------------------------------------------------------------
+    def checkpoint(self) -> dict:
+        """The engine's whole state: its arrays and scalars, the World's storage arrays, the stop rule's distance."""
+        s, st = self.engine.state, self.world.storage
+        arrays = {k: v.copy() for k, v in vars(s).items() if isinstance(v, np.ndarray) and k not in self._STATE_SCRATCH}
+        return {"state": arrays, "scalars": {k: getattr(s, k) for k in self._STATE_SCALARS},
+                "storage": {k: getattr(st, k).copy() for k in self._STORAGE_ARRAYS}, "dist": self.dist.copy()}
+
+    def restore(self, saved: dict) -> None:
+        """Back to a :meth:`checkpoint` (in place: the C kernel and the World share these arrays)."""
+        s, st = self.engine.state, self.world.storage
+        for k, v in saved["state"].items():
+            getattr(s, k)[...] = v
+        for k, v in saved["scalars"].items():
+            setattr(s, k, v)
+        for k, v in saved["storage"].items():
+            getattr(st, k)[...] = v
+        self.dist[:] = saved["dist"]
+
+    def _rerun(self, k: int, last_length_s: float | None = None) -> None:
+        """From the checkpoint, intervals 0 .. k-1 as synchronized (the last one with ``last_length_s``)."""
+        if self._saved is None:
+            raise SimulationError("EnginePlant: retry / a partial commit needs checkpoints (EnginePlant(..., "
+                                  "checkpoints=True)): the engine advances the terrain in place")
+        self.restore(self._saved)
+        T = self.T[:k].copy()
+        if last_length_s is not None:
+            T[k - 1] = (self.T[k - 2] if k >= 2 else self.t0) + float(last_length_s)
+        self.stopped, self.end_times, X, Y = self.engine.advance(self.t0, T, self.U[:k], self.dist)
+        if len(self.end_times) != k:
+            raise SimulationError("EnginePlant: the stop rule ended the re-run early; retry is for runs without it")
+        self.X, self.Y = X, Y
+        self._done = k
 
     def synchronize(self, intervals):
         if self.finished:
@@ -385,16 +468,23 @@ class EnginePlant:
         self.t0 = intervals[0][0]
         self.T = np.array([t0 + h for t0, h, _ in intervals], dtype=float)
         self.U = np.array([u for _, _, u in intervals], dtype=float)
+        self._saved = self.checkpoint() if self.checkpoints else None
 
     def advance(self):
         self.stopped, self.end_times, X, self.Y = self.engine.advance(self.t0, self.T, self.U, self.dist)
+        self.X = X
+        self._done = len(self.end_times)
         self._record(float(self.end_times[-1]) if len(self.end_times) else self.t0)
         return X
 
     def retry(self, k, length_s):
-        raise SimulationError("EnginePlant applies the stop rule itself; retry is not used")
+        """Interval k again with another length, from the end of interval k - 1 (needs ``checkpoints``)."""
+        self._rerun(k + 1, length_s)
+        return self.X[k].copy()
 
     def commit(self, k):
+        if k != self._done:
+            self._rerun(k)
         return self.Y[:k]
 
     def finish(self):
