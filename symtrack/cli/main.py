@@ -125,6 +125,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .sweep import add_parser as add_sweep_parser
 
     add_sweep_parser(sub)  # symtrack sweep (docs/studies.md)
+    from .field import add_parser as add_field_parser
+
+    add_field_parser(sub)  # symtrack field (docs/studies.md, "Whole-field traffic study")
     return ap
 
 

@@ -8,11 +8,12 @@ A field of the persistent grid terrain worked in parallel straight passes, in tw
   lanes ``field.lane_spacing_m`` apart, centred on the field; pass k on lane k mod n_lanes.
 
 The path is prescribed, the simplest honest one: each pass is a straight run along x from one
-headland to the other (the CG covers ``field.pass_length_m``), both sprockets at ``torque_N_m``
-for ``drive_time_s`` and then at ``coast_torque_N_m``; the passes alternate direction. The
-headland turn is **not driven**: at the end of a pass the vehicle is lifted off (the terrain's
-``end_pass``) and set down at rest at the next pass's start (``begin_pass``), so the headlands
-carry no traffic in this study.
+headland to the other (the CG covers ``field.pass_length_m``), the same torque on both sprockets:
+held at ``field.speed_m_s`` by a speed governor (:class:`SpeedGovernor`, a PI law sampled per plant
+call, the torque limited to ``field.torque_N_m``), or ``field.torque_N_m`` throughout with
+``speed_m_s = "none"``; the passes alternate direction. The headland turn is **not driven**: at
+the end of a pass the vehicle is lifted off (the terrain's ``end_pass``) and set down at rest at
+the next pass's start (``begin_pass``), so the headlands carry no traffic in this study.
 
 A spec is a scenario-like TOML document: ``[run]``, ``[model]``, ``[vehicle]``, ``[soil]`` as a
 simulation scenario (``[run]`` without the stop rule, which the field sets), an optional
@@ -60,7 +61,7 @@ from ..terrain.world import padding_m
 from . import field_plots
 
 __all__ = ["FIELD_KEYS", "FIELD_PACKAGE", "PATTERNS", "SCHEMA_VERSION", "FieldSettings", "FieldSpec",
-           "FieldStudyResult", "IncompleteFieldStudy", "PassLine", "PatternResult", "field_figures",
+           "FieldStudyResult", "IncompleteFieldStudy", "PassLine", "PatternResult", "SpeedGovernor", "field_figures",
            "field_spec_from_dict", "flat_figures", "lane_positions", "load_field_spec", "plan_passes",
            "run_field_study", "usable_band_m"]
 
@@ -72,7 +73,7 @@ PATTERNS = ("random", "controlled")
 PATTERN_CHOICES = (*PATTERNS, "both")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "field")
 FIELD_KEYS = ("size_m", "cell_m", "pattern", "passes", "seed", "lane_spacing_m", "lanes", "headland_m",
-              "pass_length_m", "torque_N_m", "drive_time_s", "coast_torque_N_m")
+              "pass_length_m", "speed_m_s", "torque_N_m")
 # [run] keys of a field spec: a simulation's, without the stop rule (the field sets it)
 FIELD_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
 # [terrain] keys the [field] section sets
@@ -100,9 +101,8 @@ class FieldSettings:
     lanes: int | str = "auto"
     headland_m: float = 7.5
     pass_length_m: float | None = None  # None: size_m[0] - 2 headland_m
+    speed_m_s: float | None = 2.5  # None: torque_N_m on both sprockets for the whole pass
     torque_N_m: float = 2000.0
-    drive_time_s: float | None = 2.0  # None: torque_N_m for the whole pass
-    coast_torque_N_m: float = 0.0
 
     @property
     def patterns(self) -> tuple[str, ...]:
@@ -146,6 +146,29 @@ class PassLine:
         return 1 if self.yaw_deg == 0.0 else -1
 
 
+class SpeedGovernor:
+    """The torque law of a pass at ``field.speed_m_s``: the same torque on both sprockets,
+    u = clip(I + Kp e, -T, T) with the speed error e = v_ref - u_m_s, sampled and held over each
+    plant call of ``hold_s`` (:func:`symtrack.simulation.loop.run`'s ``torque_law``). Kp halves the
+    speed error per hold (Kp = r m / (4 hold): both tracks' force 2 u / r on the mass m, the
+    sprocket radius r); the integral I (I += Kp e / 4 per hold, frozen while the torque is at its
+    limit T = ``field.torque_N_m``) finds the torque that balances the soil's resistance."""
+
+    def __init__(self, speed_m_s: float, torque_limit_N_m: float, mass_kg: float, sprocket_radius_m: float,
+                 hold_s: float, speed_index: int):
+        self.v_ref, self.limit, self.iu = speed_m_s, torque_limit_N_m, speed_index
+        self.kp = sprocket_radius_m * mass_kg / (4.0 * hold_s)
+        self.integral = 0.0
+
+    def __call__(self, t_s: float, x) -> tuple[float, float]:
+        e = self.v_ref - float(x[self.iu])
+        u = self.integral + self.kp * e
+        if abs(u) < self.limit:
+            self.integral += 0.25 * self.kp * e
+        u = min(max(u, -self.limit), self.limit)
+        return u, u
+
+
 # ---- the spec -------------------------------------------------------------------------------------
 def _num(key, value, low, high, low_open=False):
     return number(f"field.{key}", value, low, high, low_open)
@@ -178,11 +201,10 @@ def _parse_field(t: dict) -> FieldSettings:
     headland = _num("headland_m", t.get("headland_m", d.headland_m), 0.0, 5e3, low_open=True)
     length = t.get("pass_length_m", d.pass_length_m)
     length = None if _none(length) else _num("pass_length_m", length, 0.0, 1e4, low_open=True)
-    torque = _num("torque_N_m", t.get("torque_N_m", d.torque_N_m), -1e6, 1e6)
-    drive = t.get("drive_time_s", d.drive_time_s)
-    drive = None if _none(drive) else _num("drive_time_s", drive, 0.0, 1e6, low_open=True)
-    coast = _num("coast_torque_N_m", t.get("coast_torque_N_m", d.coast_torque_N_m), -1e6, 1e6)
-    return FieldSettings(size, cell, pattern, passes, seed, spacing, lanes, headland, length, torque, drive, coast)
+    speed = t.get("speed_m_s", d.speed_m_s)
+    speed = None if _none(speed) else _num("speed_m_s", speed, 0.0, 10.0, low_open=True)
+    torque = _num("torque_N_m", t.get("torque_N_m", d.torque_N_m), 0.0, 1e6, low_open=True)
+    return FieldSettings(size, cell, pattern, passes, seed, spacing, lanes, headland, length, speed, torque)
 
 
 def usable_band_m(fs: FieldSettings, params: dict) -> tuple[float, float]:
@@ -255,9 +277,8 @@ def _pass_scenario_doc(doc: dict, fs: FieldSettings) -> dict:
     run.setdefault("integrator", "grid_fast")
     run["stop_after_distance_m"] = fs.length_m
     run["stop_distance_event"] = "go"
+    # the programme of a constant-torque pass (with field.speed_m_s the governor replaces it)
     torque = [{"t_s": 0.0, "left_N_m": fs.torque_N_m, "right_N_m": fs.torque_N_m, "event": "go"}]
-    if fs.drive_time_s is not None:
-        torque.append({"t_s": fs.drive_time_s, "left_N_m": fs.coast_torque_N_m, "right_N_m": fs.coast_torque_N_m})
     terrain.update(size_m=list(fs.size_m), cell_m=fs.cell_m, origin_m=[0.0, 0.0])
     out = {k: doc[k] for k in ("model", "vehicle", "soil") if k in doc}
     return {"name": doc.get("name", "field"), "description": doc.get("description", ""), "run": run, **out,
@@ -280,8 +301,10 @@ def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
     sc = scenario_from_dict(sdoc, name)
     registry.get(sc.run.integrator).check("grid", sc.run.integrator_settings())
     _check_geometry(fs, sc.params)
-    if fs.drive_time_s is None and fs.torque_N_m == 0.0:
-        raise ScenarioError("field.torque_N_m = 0.0 with field.drive_time_s = \"none\": the vehicle would never move")
+    if fs.speed_m_s is not None and fs.speed_m_s > sc.terrain.max_speed_m_s:
+        raise ScenarioError(f"field.speed_m_s = {fs.speed_m_s!r} is outside the allowed range (0, "
+                            f"{sc.terrain.max_speed_m_s:g}] m/s (terrain.max_speed_m_s, the speed the channel pool "
+                            "is sized for)")
     resolved = {"name": name, "description": desc, **{k: doc[k] for k in ("run", "model", "vehicle", "soil", "terrain")
                                                        if k in doc}}
     resolved["field"] = {k: (list(v) if isinstance(v, tuple) else ("none" if v is None else v))
@@ -442,8 +465,8 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
     counts = np.zeros(world.grid.n_cells, dtype=np.uint16)
     pr.counts = counts
     engine_stress = bool(world.storage.subsoil_depths_m) and hasattr(plant, "engine")
-    pr.count_source = ("cells a track's contact overlapped at a macro step's end (World.pass_sigma > 0)" if engine_stress
-                       else "cells whose sinkage changed during the pass")
+    pr.count_source = ("cells a track's contact overlapped at a macro step's end (World.pass_sigma > 0)"
+                       if engine_stress else "cells whose sinkage changed during the pass")
     iu = plant.state_names.index("u_m_s")
     t_pat = time.perf_counter()
     try:
@@ -453,7 +476,11 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
             t0 = time.perf_counter()
             failure = None
             try:
-                res = loop.run(sck, plant)
+                law = None
+                if spec.field.speed_m_s is not None:
+                    law = SpeedGovernor(spec.field.speed_m_s, spec.field.torque_N_m, sc.params["mass_kg"],
+                                        sc.params["sprocket_radius_m"], plant.max_intervals * sc.run.output_dt_s, iu)
+                res = loop.run(sck, plant, torque_law=law)
             except loop.IncompleteRun as err:
                 res, failure = err.partial, err
             wall = time.perf_counter() - t0
