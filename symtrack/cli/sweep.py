@@ -36,8 +36,8 @@ def add_parser(sub) -> None:
         description="Run a scenario (of `symtrack simulate`, `symtrack mpc` or `symtrack field`) for every "
         "combination of the varied values, on a local Dask cluster or an existing scheduler. Writes "
         "DIR/results.csv (one row per run), DIR/sweep.json and DIR/runs/<id>/. Exit code 0 when every run "
-        "succeeded, 1 when some failed, 2 for an invalid sweep (nothing run), 130 on Ctrl-C (finished runs kept). A rerun into the same DIR "
-        "redoes only what failed or is missing.")
+        "succeeded, 1 when some failed, 2 for an invalid sweep (nothing run), 130 on Ctrl-C (finished runs "
+        "kept). A rerun into the same DIR redoes only what failed or is missing.")
     sw.add_argument("scenario", help="built-in scenario name (symtrack scenarios, symtrack mpc --help, "
                     "symtrack field --help) or TOML file")
     sw.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2,...",
