@@ -148,24 +148,31 @@ class PassLine:
 
 class SpeedGovernor:
     """The torque law of a pass at ``field.speed_m_s``: the same torque on both sprockets,
-    u = clip(I + Kp e, -T, T) with the speed error e = v_ref - u_m_s, sampled and held over each
-    plant call of ``hold_s`` (:func:`symtrack.simulation.loop.run`'s ``torque_law``). Kp halves the
-    speed error per hold (Kp = r m / (4 hold): both tracks' force 2 u / r on the mass m, the
-    sprocket radius r); the integral I (I += Kp e / 4 per hold, frozen while the torque is at its
-    limit T = ``field.torque_N_m``) finds the torque that balances the soil's resistance."""
+    u = clip(u_r + Kp e, -T, T) with the speed error e = v_ref - u_m_s, sampled and held over each
+    plant call (:func:`symtrack.simulation.loop.run`'s ``torque_law``; a call of the terrain engine
+    is ``hold_s`` = 1 s). Kp = r m / (4 hold) halves the speed error per hold (both tracks' force
+    2 u / r on the mass m, the sprocket radius r). u_r, the torque that balances the soil's
+    resistance, is estimated from the last hold: u_r = u_prev - (r m / 2) (v - v_prev) / h (the
+    mean of the new and the previous estimate; 0 before the first hold), so the speed settles
+    without the overshoot of an integral's wind-up. T = ``field.torque_N_m``."""
 
     def __init__(self, speed_m_s: float, torque_limit_N_m: float, mass_kg: float, sprocket_radius_m: float,
                  hold_s: float, speed_index: int):
         self.v_ref, self.limit, self.iu = speed_m_s, torque_limit_N_m, speed_index
         self.kp = sprocket_radius_m * mass_kg / (4.0 * hold_s)
-        self.integral = 0.0
+        self.half_rm = 0.5 * sprocket_radius_m * mass_kg
+        self.resistance = None
+        self.prev = None
 
     def __call__(self, t_s: float, x) -> tuple[float, float]:
-        e = self.v_ref - float(x[self.iu])
-        u = self.integral + self.kp * e
-        if abs(u) < self.limit:
-            self.integral += 0.25 * self.kp * e
+        v = float(x[self.iu])
+        if self.prev is not None and t_s > self.prev[2]:
+            u_prev, v_prev, t_prev = self.prev
+            est = u_prev - self.half_rm * (v - v_prev) / (t_s - t_prev)
+            self.resistance = est if self.resistance is None else 0.5 * (self.resistance + est)
+        u = (self.resistance or 0.0) + self.kp * (self.v_ref - v)
         u = min(max(u, -self.limit), self.limit)
+        self.prev = (u, v, t_s)
         return u, u
 
 
@@ -573,7 +580,7 @@ def _summary(spec: FieldSpec, results: dict, build_s: float, t_start: float, err
     return s
 
 
-def run_field_study(spec, out=None, *, overrides=None, progress: bool = False) -> FieldStudyResult:
+def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, plant=None) -> FieldStudyResult:
     """Run a field study: every pattern of ``field.pattern`` on a field of its own (one plant,
     the field cleared between the patterns), and write its folder.
 
@@ -589,6 +596,9 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False) -
         With a name or path: ``--set`` overrides.
     progress : bool
         A progress bar over the passes on stderr.
+    plant : optional
+        The grid plant to run on (``make_plant(spec.scenario)``, e.g. instrumented by a benchmark);
+        built here by default. Its field is cleared first.
 
     Returns
     -------
@@ -608,7 +618,10 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False) -
     folder = check_output_folder(str(out)) if out is not None else None
     t_start = time.perf_counter()
     fs = spec.field
-    plant = make_plant(spec.scenario)
+    if plant is None:
+        plant = make_plant(spec.scenario)
+    else:
+        _clear(plant.world)
     build_s = time.perf_counter() - t_start
     results: dict[str, PatternResult] = {}
     bar = Progress(fs.passes * len(fs.patterns), f"field {spec.name}", enabled=progress)
