@@ -69,6 +69,8 @@ def comparison_png(figures: dict) -> bytes:
         area = h * 100.0 / max(figures[n]["field_cells"], 1)
         ax.bar(np.arange(1, h.size + 1) + (k - 0.5 * (len(names) - 1)) * width, area, width,
                label=n, color=PATTERN_COLOURS.get(n, "C2"))
+    top = max(len(figures[n]["passes_per_cell_histogram"]) - 1 for n in names)
+    ax.set_xticks(range(1, top + 1))
     ax.set_xlabel("passes per cell")
     ax.set_ylabel("area [% of the field]")
     ax.set_title("passes per cell (trafficked cells)")
@@ -94,6 +96,8 @@ def comparison_png(figures: dict) -> bytes:
             ax.plot([100 * v for v in f[f"risk_fraction_of_field_{name}"]], d, style, marker="o",
                     color=PATTERN_COLOURS.get(n, "C2"), label=f"{n}: {name} risk")
     if shown:
+        if not any(v for n in names for r in RISK_NAMES[1:] for v in figures[n].get(f"risk_fraction_of_field_{r}", [])):
+            ax.text(0.5, 0.5, "no cell above low risk at any depth", transform=ax.transAxes, ha="center")
         ax.invert_yaxis()
         ax.set_xlabel("area [% of the field]")
         ax.set_ylabel("depth [m]")
