@@ -555,7 +555,7 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult) -> dict[str, bytes]:
 
 
 def _summary(spec: FieldSpec, results: dict, build_s: float, t_start: float, error: str | None,
-             interrupted: bool) -> dict:
+             interrupted: bool, world) -> dict:
     fs = spec.field
     g = next(iter(results.values())).terrain.grid if results else None
     complete = (not interrupted and error is None and set(results) == set(fs.patterns)
@@ -565,7 +565,8 @@ def _summary(spec: FieldSpec, results: dict, build_s: float, t_start: float, err
          "interrupted": interrupted, "patterns_run": list(results), "passes_per_pattern": fs.passes,
          "field_size_m": list(fs.size_m), "field_cell_m": fs.cell_m,
          "field_cells": g.n_cells if g is not None else None, "field_area_m2": fs.size_m[0] * fs.size_m[1],
-         "pass_length_m": fs.length_m, "build_s": build_s,
+         "pass_length_m": fs.length_m, "terrain_channel_modulus_M": world.M, "terrain_channels": world.n_channels,
+         "build_s": build_s,
          "passes_wall_time_s": sum(r.wall_time_s for r in results.values()),
          "sim_time_s": sum(r.sim_time_s for r in results.values()),
          "wall_time_s": time.perf_counter() - t_start,
@@ -645,7 +646,7 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
         bar.close(complete=error is None and not interrupted)
         if folder is not None and pending is not None and pending.terrain is not None:
             _write_pattern(folder, spec, pending)  # the pattern Ctrl-C stopped: its passes done
-        summary = _summary(spec, results, build_s, t_start, error, interrupted)
+        summary = _summary(spec, results, build_s, t_start, error, interrupted, plant.world)
         written = _write_top(folder, spec, results, summary) if folder is not None else []
         result = FieldStudyResult(spec, results, summary, written)
     if error is not None:
