@@ -14,9 +14,11 @@ import pytest
 
 from symtrack.cli.main import main as cli_main
 from symtrack.foundations.errors import ScenarioError
+from symtrack.simulation.plants import make_plant
 from symtrack.studies import plan
 from symtrack.studies.field import (
     PATTERNS,
+    clear_previous_study,
     field_figures,
     lane_positions,
     load_field_spec,
@@ -206,3 +208,53 @@ def test_the_field_study_is_a_sweep_kind():
     s = json.loads(done["files"]["summary.json"])
     assert s["patterns_run"] == ["controlled"] and s["complete"]
     assert "controlled/field.npz" in done["files"] and s["controlled_rut_max_depth_mm"] > 0
+
+
+def test_ctrl_c_keeps_the_passes_done(tmp_path):
+    """Ctrl-C during the third pass (raised from the plant's set-down, as the loop's interrupt
+    watch raises it): the two passes done are written, marked incomplete, and the interrupt goes on."""
+    spec = load_field_spec("field_traffic", [*SMALL, "field.pattern=random", "field.passes=3"])
+    plant = make_plant(spec.scenario)
+    start, calls = plant.start, []
+
+    def start_then_interrupt(*a, **k):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return start(*a, **k)
+
+    plant.start = start_then_interrupt
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        run_field_study(spec, out=out, plant=plant)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is False and s["interrupted"] is True
+    f = s["patterns"]["random"]
+    assert f["passes_done"] == 2 and len(f["passes"]) == 2 and f["complete"] is False
+    assert len(list(csv.DictReader((out / "random" / "passes.csv").open()))) == 2
+    t = Terrain.load(out / "random" / "field.npz")
+    # the field holds the two passes: the cells they loaded moved (an edge cell's rebound may end
+    # above its rest: z < 0), no other cell did; the plastic cycles are among the loaded cells
+    trafficked = sum(f["passes_per_cell_histogram"][1:])
+    assert trafficked > 500 and int((t.z != 0).sum()) == trafficked
+    assert 0 < int((t.cycles > 0).sum()) <= trafficked
+
+
+def test_an_unwritable_out_is_refused_before_any_work(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert cli_main(["field", "field_traffic", "--out", str(blocker / "sub"), "--quiet"]) == 2
+
+
+def test_a_reused_out_loses_only_the_previous_studys_files(tmp_path):
+    (tmp_path / "random").mkdir()
+    for p in ("summary.json", "comparison.png", "random/field.npz", "random/passes_map.png", "mine.txt",
+              "random/notes.txt"):
+        (tmp_path / p).write_text(json.dumps({"kind": "symtrack-field-study"}) if p == "summary.json" else "x")
+    removed = clear_previous_study(tmp_path)
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in removed) == [
+        "comparison.png", "random/field.npz", "random/passes_map.png", "summary.json"]
+    assert (tmp_path / "mine.txt").exists() and (tmp_path / "random" / "notes.txt").exists()
+    (tmp_path / "summary.json").write_text(json.dumps({"schema_version": 1}))  # a simulation's folder
+    (tmp_path / "comparison.png").write_text("x")
+    assert clear_previous_study(tmp_path) == [] and (tmp_path / "comparison.png").exists()

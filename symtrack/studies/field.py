@@ -61,9 +61,9 @@ from ..terrain.world import padding_m
 from . import field_plots
 
 __all__ = ["FIELD_KEYS", "FIELD_PACKAGE", "PATTERNS", "SCHEMA_VERSION", "FieldSettings", "FieldSpec",
-           "FieldStudyResult", "IncompleteFieldStudy", "PassLine", "PatternResult", "SpeedGovernor", "field_figures",
-           "field_spec_from_dict", "flat_figures", "lane_positions", "load_field_spec", "plan_passes",
-           "run_field_study", "usable_band_m"]
+           "FieldStudyResult", "IncompleteFieldStudy", "PassLine", "PatternResult", "SpeedGovernor",
+           "clear_previous_study", "field_figures", "field_spec_from_dict", "flat_figures", "lane_positions",
+           "load_field_spec", "plan_passes", "run_field_study", "usable_band_m"]
 
 log = logging.getLogger("symtrack.studies")
 
@@ -619,6 +619,8 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     folder = check_output_folder(str(out)) if out is not None else None
     t_start = time.perf_counter()
     fs = spec.field
+    if folder is not None:
+        clear_previous_study(folder)
     if plant is None:
         plant = make_plant(spec.scenario)
     else:
@@ -654,6 +656,35 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     return result
 
 
+PATTERN_FILES = ("field.npz", "passes.csv", "sinkage_map.png", "passes_map.png", "risk_map.png")
+TOP_FILES = ("summary.json", "field.resolved.toml", "comparison.png")
+
+
+def clear_previous_study(folder) -> list:
+    """Remove the files of a previous field study from ``folder`` (one whose summary.json is a
+    field study's): :data:`TOP_FILES` and each pattern folder's :data:`PATTERN_FILES`, so that a
+    reused ``--out`` never mixes two studies' files. Anything else is left alone."""
+    try:
+        old = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return []
+    if not isinstance(old, dict) or old.get("kind") != "symtrack-field-study":
+        return []
+    removed = []
+    for sub in (folder / p for p in PATTERNS):
+        for name in PATTERN_FILES:
+            if (sub / name).is_file():
+                (sub / name).unlink()
+                removed.append(sub / name)
+        if sub.is_dir() and not any(sub.iterdir()):
+            sub.rmdir()
+    for name in TOP_FILES[::-1]:  # summary.json last: an interrupted clean-up is still recognised
+        if (folder / name).is_file():
+            (folder / name).unlink()
+            removed.append(folder / name)
+    return removed
+
+
 def _write_pattern(folder, spec: FieldSpec, pr: PatternResult) -> list:
     sub = folder / pr.pattern
     pr.terrain.save(sub / "field.npz", spec.scenario.soil)
@@ -668,9 +699,7 @@ def _write_top(folder, spec: FieldSpec, results: dict, summary: dict) -> list:
     atomic_write_text(folder / "field.resolved.toml", to_toml(spec.document))
     written.append(folder / "field.resolved.toml")
     for pr in results.values():
-        written += [folder / pr.pattern / n for n in ("field.npz", "passes.csv", "sinkage_map.png", "passes_map.png")]
-        if pr.terrain.subsoil_depths_m:
-            written.append(folder / pr.pattern / "risk_map.png")
+        written += [folder / pr.pattern / n for n in PATTERN_FILES if (folder / pr.pattern / n).is_file()]
     if len(results) == 2:
         atomic_write_bytes(folder / "comparison.png", field_plots.comparison_png(
             {k: r.figures for k, r in results.items()}))
