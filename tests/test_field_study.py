@@ -258,3 +258,17 @@ def test_a_reused_out_loses_only_the_previous_studys_files(tmp_path):
     (tmp_path / "summary.json").write_text(json.dumps({"schema_version": 1}))  # a simulation's folder
     (tmp_path / "comparison.png").write_text("x")
     assert clear_previous_study(tmp_path) == [] and (tmp_path / "comparison.png").exists()
+
+
+def test_a_pass_that_fails_is_reported_and_what_was_done_is_written(tmp_path, capsys):
+    out = tmp_path / "out"
+    args = ["field", "field_traffic", "--out", str(out), "--quiet", "--pattern", "random"]
+    for o in (*SMALL, "field.passes=2", "run.duration_s=1.0"):
+        args += ["--set", o]
+    assert cli_main(args) == 1
+    assert "run.duration_s = 1 s ended the pass" in capsys.readouterr().err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is False and "random pass 1: run.duration_s" in s["error"]
+    f = s["patterns"]["random"]
+    assert f["passes_done"] == 1 and f["passes"][0]["stopped_by"] == "duration" and f["trafficked_cells"] > 0
+    assert (out / "random" / "field.npz").is_file() and not (out / "controlled").exists()

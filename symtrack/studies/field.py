@@ -502,9 +502,9 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
             pr.sim_time_s += float(res.t[-1])
             bar.update(done_before + line.index + 1, f"{pattern} pass {line.index + 1}/{len(lines)}")
             if failure is None and res.stopped_by != "distance":
-                failure = SimulationError(f"{pattern} pass {line.index + 1}: run.duration_s = {sc.run.duration_s:g} s "
-                                          f"ended the pass before it covered field.pass_length_m = "
-                                          f"{spec.field.length_m:g} m; raise run.duration_s")
+                failure = SimulationError(f"run.duration_s = {sc.run.duration_s:g} s ended the pass before it "
+                                          f"covered field.pass_length_m = {spec.field.length_m:g} m (it covered "
+                                          f"{pr.records[-1]['distance_m']:.2f} m); raise run.duration_s")
             if failure is not None:
                 pr.error = f"{pattern} pass {line.index + 1}: {failure}"
                 break
