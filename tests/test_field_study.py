@@ -26,6 +26,7 @@ from symtrack.studies.field import (
     run_field_study,
     usable_band_m,
 )
+from symtrack.studies.field_plots import block_max
 from symtrack.studies.runs import run_one
 from symtrack.terrain import subsoil
 from symtrack.terrain.storage import Terrain
@@ -163,6 +164,10 @@ def test_output_files_and_their_schema(study):
         # the terrain file is the field after the passes: its record gives the summary's figures again
         t = Terrain.load(out / name / "field.npz")
         pr = res.patterns[name]
+        with np.load(out / name / "passes_per_cell.npz") as z:
+            assert str(z["kind"]) == "symtrack-field-passes" and int(z["schema_version"]) == 1
+            assert tuple(z["shape"]) == t.grid.shape and float(z["cell_m"]) == CELL
+            assert np.array_equal(z["passes"].ravel(), pr.counts)
         assert np.array_equal(t.z, pr.terrain.z) and np.array_equal(t.cycles, pr.terrain.cycles)
         again = field_figures(t, pr.counts, spec.params["precompression_stress_Pa"])
         for k, v in again.items():
@@ -272,3 +277,16 @@ def test_a_pass_that_fails_is_reported_and_what_was_done_is_written(tmp_path, ca
     f = s["patterns"]["random"]
     assert f["passes_done"] == 1 and f["passes"][0]["stopped_by"] == "duration" and f["trafficked_cells"] > 0
     assert (out / "random" / "field.npz").is_file() and not (out / "controlled").exists()
+
+
+def test_the_maps_of_a_large_field_keep_a_narrow_rut():
+    """A rut two cells wide on a field of 1000 x 1000 cells, drawn in blocks: every block it
+    touches shows it (each block its largest value), nothing else does."""
+    risk = np.zeros((1000, 1000, 2), dtype=np.int8)
+    risk[:, 501:503, 0] = 2
+    out, f = block_max(risk, 200)
+    assert f == 5 and out.shape == (200, 200, 2)
+    assert (out[:, 100, 0] == 2).all() and out[:, :100, 0].max() == 0 and out[:, 101:, 0].max() == 0
+    assert out[..., 1].max() == 0
+    odd, f = block_max(np.ones((7, 3), dtype=np.uint16), 2)
+    assert f == 4 and odd.shape == (2, 1) and (odd == 1).all()

@@ -542,15 +542,20 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult) -> dict[str, bytes]:
     ext = (x0, x1, y0, y1)
     shape = g.shape
     label = f"{pr.pattern} traffic, {len(pr.records)} passes"
-    files = {"passes.csv": _passes_csv(pr.records).encode(),
+    files = {"passes_per_cell.npz": passes_per_cell_npz(pr), "passes.csv": _passes_csv(pr.records).encode(),
              "sinkage_map.png": field_plots.sinkage_map_png(pr.terrain.z.reshape(shape), ext, label),
              "passes_map.png": field_plots.passes_map_png(pr.counts.reshape(shape), ext, label)}
     depths = pr.terrain.subsoil_depths_m
     if depths:
         pc = float(spec.params["precompression_stress_Pa"])
+        # a field of many cells in blocks, each its highest class (a rut of a few cells stays visible)
         risk = subsoil.risk_class(pr.terrain.sigma_max, pc).reshape(*shape, len(depths))
-        files["risk_map.png"] = risk_map_png(risk, (pr.counts > 0).reshape(shape), depths, ext,
-                                             title=f"compaction risk: {label}")
+        risk, f = field_plots.block_max(risk, field_plots.RISK_MAP_BLOCKS)
+        touched, _ = field_plots.block_max((pr.counts > 0).reshape(shape), field_plots.RISK_MAP_BLOCKS)
+        blocks = f", blocks of {f} x {f} cells: the highest class" if f > 1 else ""
+        files["risk_map.png"] = risk_map_png(risk, touched, depths, (x0, x0 + risk.shape[0] * f * g.cell_m, y0,
+                                                                     y0 + risk.shape[1] * f * g.cell_m),
+                                             title=f"compaction risk: {label}{blocks}")
     return files
 
 
@@ -656,7 +661,20 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     return result
 
 
-PATTERN_FILES = ("field.npz", "passes.csv", "sinkage_map.png", "passes_map.png", "risk_map.png")
+PATTERN_FILES = ("field.npz", "passes_per_cell.npz", "passes.csv", "sinkage_map.png", "passes_map.png",
+                 "risk_map.png")
+
+
+def passes_per_cell_npz(pr: PatternResult) -> bytes:
+    """``passes_per_cell.npz``: ``kind`` "symtrack-field-passes", ``schema_version``, ``origin_m``,
+    ``cell_m``, ``shape`` (as the terrain file) and ``passes`` uint16 (nx, ny): the passes that
+    loaded each cell (the counts of docs/studies.md)."""
+    g = pr.terrain.grid
+    buf = io.BytesIO()
+    np.savez_compressed(buf, kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
+                        origin_m=np.array(g.origin_m, dtype=float), cell_m=np.array(g.cell_m), shape=np.array(g.shape),
+                        passes=pr.counts.reshape(g.shape))
+    return buf.getvalue()
 TOP_FILES = ("summary.json", "field.resolved.toml", "comparison.png")
 
 

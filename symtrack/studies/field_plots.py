@@ -12,9 +12,31 @@ from ..reports.plots import plt, png_bytes
 from ..reports.subsoil_plots import RISK_COLOURS
 from ..terrain.subsoil import RISK_NAMES
 
-__all__ = ["comparison_png", "passes_map_png", "sinkage_map_png"]
+__all__ = ["RISK_MAP_BLOCKS", "PASSES_MAP_BLOCKS", "block_max", "comparison_png", "passes_map_png", "sinkage_map_png"]
 
 PATTERN_COLOURS = {"random": "C1", "controlled": "C0"}
+# a field of many cells is drawn in at most this many blocks along each axis, each block showing
+# its largest value (block_max): a rut a few cells wide would otherwise drop out of the picture
+# when the image is scaled down to the panel
+PASSES_MAP_BLOCKS = 400
+RISK_MAP_BLOCKS = 200
+
+
+def block_max(a, max_blocks: int):
+    """``a`` (nx, ny, ...) reduced to at most max_blocks blocks along each of its first two axes,
+    each block of f x f cells (f = ceil(max(nx, ny) / max_blocks)) its largest value; returns
+    (the reduced array, f). f = 1 returns ``a`` itself."""
+    a = np.asarray(a)
+    nx, ny = a.shape[:2]
+    f = max(1, int(np.ceil(max(nx, ny) / max_blocks)))
+    if f == 1:
+        return a, 1
+    px, py = (-nx) % f, (-ny) % f
+    low = np.zeros((), dtype=a.dtype) if a.dtype == bool else np.array(np.iinfo(a.dtype).min if a.dtype.kind in "iu"
+                                                                       else -np.inf, dtype=a.dtype)
+    padded = np.pad(a, [(0, px), (0, py)] + [(0, 0)] * (a.ndim - 2), constant_values=low)
+    shape = (padded.shape[0] // f, f, padded.shape[1] // f, f, *a.shape[2:])
+    return padded.reshape(shape).max(axis=(1, 3)), f
 
 
 def sinkage_map_png(z_m, extent_m, title: str) -> bytes:
@@ -31,8 +53,9 @@ def sinkage_map_png(z_m, extent_m, title: str) -> bytes:
 
 
 def passes_map_png(counts, extent_m, title: str) -> bytes:
-    """The number of passes that loaded each cell (nx, ny), untrafficked cells white."""
-    c = np.asarray(counts)
+    """The number of passes that loaded each cell (nx, ny), untrafficked cells white (a large field
+    in blocks of cells, each its largest count: :func:`block_max`)."""
+    c, f = block_max(np.asarray(counts), PASSES_MAP_BLOCKS)
     top = max(int(c.max()), 1)
     colours = ["#ffffff", *plt.get_cmap("magma_r")(np.linspace(0.15, 0.95, top))]
     cmap = ListedColormap(colours)
@@ -44,8 +67,9 @@ def passes_map_png(counts, extent_m, title: str) -> bytes:
     cb.set_ticks(range(0, top + 1, max(1, (top + 1) // 10)))
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    frac = float((c > 0).mean())
-    ax.set_title(f"passes per cell: {title} ({100 * frac:.1f} % of the field trafficked)")
+    frac = float((np.asarray(counts) > 0).mean())
+    ax.set_title(f"passes per cell: {title} ({100 * frac:.1f} % of the field trafficked)"
+                 + (f"\nblocks of {f} x {f} cells, each its largest count" if f > 1 else ""), fontsize=10)
     return png_bytes(fig)
 
 
