@@ -552,7 +552,7 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult) -> dict[str, bytes]:
         risk = subsoil.risk_class(pr.terrain.sigma_max, pc).reshape(*shape, len(depths))
         risk, f = field_plots.block_max(risk, field_plots.RISK_MAP_BLOCKS)
         touched, _ = field_plots.block_max((pr.counts > 0).reshape(shape), field_plots.RISK_MAP_BLOCKS)
-        blocks = f", blocks of {f} x {f} cells: the highest class" if f > 1 else ""
+        blocks = f"\n(blocks of {f * g.cell_m:g} m: the highest class)" if f > 1 else ""
         files["risk_map.png"] = risk_map_png(risk, touched, depths, (x0, x0 + risk.shape[0] * f * g.cell_m, y0,
                                                                      y0 + risk.shape[1] * f * g.cell_m),
                                              title=f"compaction risk: {label}{blocks}")

@@ -19,7 +19,7 @@ PATTERN_COLOURS = {"random": "C1", "controlled": "C0"}
 # its largest value (block_max): a rut a few cells wide would otherwise drop out of the picture
 # when the image is scaled down to the panel
 PASSES_MAP_BLOCKS = 400
-RISK_MAP_BLOCKS = 200
+RISK_MAP_BLOCKS = 100  # risk_map_png's panels are about 190 pixels high
 
 
 def block_max(a, max_blocks: int):
