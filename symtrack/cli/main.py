@@ -43,7 +43,8 @@ def scenarios_command(args) -> int:
     """The built-in scenarios with their descriptions (read from the package's TOML files)."""
     here = Path(__file__).resolve().parents[1]
     for title, command, folder in (("simulation scenarios", "symtrack simulate NAME", "simulation/scenarios"),
-                                   ("MPC scenarios", "symtrack mpc NAME", "control/scenarios")):
+                                   ("MPC scenarios", "symtrack mpc NAME", "control/scenarios"),
+                                   ("field studies", "symtrack field NAME", "studies/fields")):
         print(f"{title} ({command}):")
         rows = _described(here / folder)
         width = max(len(n) for n, _ in rows)
@@ -103,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--terrain-in", metavar="FILE", help="continue from a saved grid terrain (docs/terrain.md)")
     s.add_argument("--terrain-out", metavar="FILE", help="save the grid terrain at the end (docs/terrain.md)")
     s.set_defaults(func=simulate_command)
-    ls = sub.add_parser("scenarios", help="list the built-in simulation and MPC scenarios with their descriptions")
+    ls = sub.add_parser("scenarios", help="list the built-in simulation and MPC scenarios and field studies with their "
+                        "descriptions")
     ls.set_defaults(func=scenarios_command)
     pr = sub.add_parser("presets", help="list the vehicle and soil presets, or one preset's parameters with sources")
     pr.add_argument("name", nargs="?", help="a preset name or a preset file (*.toml)")
@@ -125,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .sweep import add_parser as add_sweep_parser
 
     add_sweep_parser(sub)  # symtrack sweep (docs/studies.md)
+    from .field import add_parser as add_field_parser
+
+    add_field_parser(sub)  # symtrack field (docs/studies.md, "Whole-field traffic study")
     return ap
 
 

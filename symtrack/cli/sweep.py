@@ -33,12 +33,13 @@ def add_parser(sub) -> None:
     """Register ``symtrack sweep`` on the argparse subparsers of symtrack.cli."""
     sw = sub.add_parser(
         "sweep", help="a parameter sweep (full grid or Latin hypercube) on Dask distributed (docs/studies.md)",
-        description="Run a scenario (of `symtrack simulate` or `symtrack mpc`) for every combination of the "
-        "varied values, on a local Dask cluster or an existing scheduler. Writes DIR/results.csv (one row per "
-        "run), DIR/sweep.json and DIR/runs/<id>/. Exit code 0 when every run succeeded, 1 when some failed, "
-        "2 for an invalid sweep (nothing run), 130 on Ctrl-C (finished runs kept). A rerun into the same DIR "
-        "redoes only what failed or is missing.")
-    sw.add_argument("scenario", help="built-in scenario name (symtrack scenarios, symtrack mpc --help) or TOML file")
+        description="Run a scenario (of `symtrack simulate`, `symtrack mpc` or `symtrack field`) for every "
+        "combination of the varied values, on a local Dask cluster or an existing scheduler. Writes "
+        "DIR/results.csv (one row per run), DIR/sweep.json and DIR/runs/<id>/. Exit code 0 when every run "
+        "succeeded, 1 when some failed, 2 for an invalid sweep (nothing run), 130 on Ctrl-C (finished runs "
+        "kept). A rerun into the same DIR redoes only what failed or is missing.")
+    sw.add_argument("scenario", help="built-in scenario name (symtrack scenarios, symtrack mpc --help, "
+                    "symtrack field --help) or TOML file")
     sw.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2,...",
                     help="a varied key (any --set key) and its values; or KEY=LO:HI, a range sampled by --sample")
     sw.add_argument("--sample", type=int, metavar="N",
@@ -49,7 +50,7 @@ def add_parser(sub) -> None:
                     help="worker processes of the local Dask cluster (default 2; ignored with --scheduler)")
     sw.add_argument("--scheduler", metavar="ADDRESS",
                     help="a running Dask scheduler, e.g. tcp://127.0.0.1:8786 (instead of a local cluster)")
-    sw.add_argument("--kind", choices=("auto", "simulate", "mpc"), default="auto",
+    sw.add_argument("--kind", choices=("auto", "simulate", "mpc", "field"), default="auto",
                     help="the scenario kind (default: the kind whose loader accepts the scenario)")
     sw.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a fixed override of every run")
     sw.add_argument("--quiet", action="store_true", help="no progress bar or log lines")

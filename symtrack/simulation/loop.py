@@ -7,6 +7,12 @@ the ``run.stop_distance_event``) shortens the last interval so that the run ends
 distance (three secant refinements, :meth:`Plant.retry`). A plant that advances many intervals
 per call (:class:`~symtrack.simulation.plants.BatchPlant`) gets short batches near the stopping
 distance, so that little is computed past it.
+
+A ``torque_law`` (``law(t_s, x) -> (left_N_m, right_N_m)``, x the plant's states) replaces the
+torque programme by state feedback: it is sampled at the committed state before each plant call
+and held over the call's intervals (a digital controller whose sample time is the plant's call:
+one output step for the adaptive integrators, ``max_intervals`` steps for the terrain engine);
+the run's ``U`` holds the torques applied.
 """
 
 from __future__ import annotations
@@ -72,7 +78,7 @@ def _xy_dist(a, b) -> float:
 
 
 
-def run(scenario, plant, progress: bool = False, label: str | None = None) -> RunResult:
+def run(scenario, plant, progress: bool = False, label: str | None = None, torque_law=None) -> RunResult:
     """Drive ``plant`` through ``scenario``'s torque programme until its stop rule.
 
     Parameters
@@ -83,6 +89,8 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
         it at the end (the grid lifts the vehicle off), also when the run fails.
     progress : bool
         Show a progress bar (or log lines when stderr is no terminal).
+    torque_law : callable, optional
+        ``law(t_s, x) -> (left_N_m, right_N_m)`` in place of the torque programme (module doc).
 
     Returns
     -------
@@ -126,6 +134,9 @@ def run(scenario, plant, progress: bool = False, label: str | None = None) -> Ru
                 ivs = grid.take(n)
                 if not ivs:
                     break
+                if torque_law is not None:
+                    u_law = np.asarray(torque_law(t, x), dtype=float).reshape(2)
+                    ivs = [(t0, t1, u_law) for t0, t1, _ in ivs]
                 try:
                     plant.synchronize([(t0, t1 - t0, u) for t0, t1, u in ivs])
                     X = plant.advance()

@@ -251,7 +251,7 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
         The seed of the Latin hypercube (the same seed gives the same runs, so a rerun skips them).
     overrides : list of str or dict, optional
         Fixed overrides of every run, as ``--set``.
-    kind : "auto", "simulate" or "mpc"
+    kind : "auto", "simulate", "mpc" or "field"
         The scenario kind; "auto" takes the loader that accepts the scenario.
     workers : int
         Processes of the local cluster (ignored with ``scheduler``).

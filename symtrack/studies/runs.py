@@ -23,9 +23,10 @@ from ..foundations.errors import ScenarioError
 
 __all__ = ["KINDS", "Source", "load", "resolve_source", "run_one", "scenario_text"]
 
-# the scenario kinds a sweep runs: those of `symtrack simulate` and of `symtrack mpc`
-KINDS = ("simulate", "mpc")
-PACKAGES = {"simulate": "symtrack.simulation.scenarios", "mpc": "symtrack.control.scenarios"}
+# the scenario kinds a sweep runs: those of `symtrack simulate`, `symtrack mpc` and `symtrack field`
+KINDS = ("simulate", "mpc", "field")
+PACKAGES = {"simulate": "symtrack.simulation.scenarios", "mpc": "symtrack.control.scenarios",
+            "field": "symtrack.studies.fields"}
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,8 @@ def scenario_text(name_or_path, package: str) -> tuple[str, str] | None:
 
 def load(kind: str, text: str, name: str, overrides: dict | None = None):
     """The validated scenario of ``kind`` from its text and overrides (``{"section.key": value}``):
-    a :class:`symtrack.Scenario` or a :class:`symtrack.control.MPCScenario`."""
+    a :class:`symtrack.Scenario`, a :class:`symtrack.control.MPCScenario` or a
+    :class:`symtrack.studies.field.FieldSpec`."""
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -70,6 +72,10 @@ def load(kind: str, text: str, name: str, overrides: dict | None = None):
         from ..control.scenario import scenario_from_dict as mpc_from_dict
 
         return mpc_from_dict(doc, name)
+    if kind == "field":
+        from .field import field_spec_from_dict
+
+        return field_spec_from_dict(doc, name)
     raise ScenarioError(f"kind = {kind!r} is not one of {', '.join(KINDS)}")
 
 
@@ -117,6 +123,10 @@ def run_one(task: dict) -> dict:
                 from ..api import simulate
 
                 simulate(sc).write(folder)
+            elif task["kind"] == "field":
+                from .field import run_field_study
+
+                run_field_study(sc, out=folder)
             else:
                 from ..control.closedloop import run, write
 

@@ -1,0 +1,68 @@
+"""``symtrack field``: the whole-field traffic study (docs/studies.md, "Whole-field traffic study");
+argument parsing only, the study is :mod:`symtrack.studies.field`. CasADi is imported by the
+command, not here, so that ``symtrack --help`` answers at once."""
+
+from __future__ import annotations
+
+import sys
+
+from ..foundations.files import check_output_folder
+
+__all__ = ["add_parser", "field_command"]
+
+
+def field_command(args) -> int:
+    out = check_output_folder(args.out)  # before anything is loaded or built
+    from ..studies.field import IncompleteFieldStudy, load_field_spec, run_field_study
+
+    overrides = list(args.set or [])
+    if args.pattern:
+        overrides.append(f"field.pattern={args.pattern}")
+    spec = load_field_spec(args.scenario, overrides)
+    try:
+        res = run_field_study(spec, out=out, progress=not args.quiet)
+    except KeyboardInterrupt:
+        print(f"symtrack: interrupted (Ctrl-C); the passes done are kept in {out} (summary.json: complete = "
+              "false)", file=sys.stderr)
+        return 130
+    except IncompleteFieldStudy as err:
+        print(f"symtrack: error: {err}; what was computed up to there is in {out} (summary.json: complete = "
+              "false)", file=sys.stderr)
+        return 1
+    s = res.summary
+    for name, f in s["patterns"].items():
+        hist = f["passes_per_cell_histogram"]
+        print(f"{name}: {100 * f['trafficked_area_fraction']:.2f} % of the field trafficked; cells per pass count "
+              f"{dict(enumerate(hist))}; rut mean {f['rut_mean_depth_mm']:.3f} mm, max {f['rut_max_depth_mm']:.3f} "
+              f"mm; {f['passes_done']} passes in {f['wall_time_s']:.1f} s")
+        for risk in ("medium", "high"):
+            if f"risk_fraction_of_field_{risk}" in f:
+                by = ", ".join(f"{d:g} m {100 * v:.2f} %" for d, v in zip(
+                    f["subsoil_depths_m"], f[f"risk_fraction_of_field_{risk}"], strict=True))
+                print(f"  {risk} risk (% of the field): {by}")
+    print(f"{spec.name}: {s['sim_time_s']:.0f} s simulated in {s['wall_time_s']:.1f} s of wall time (the passes "
+          f"{s['passes_wall_time_s']:.1f} s, building {s['build_s']:.1f} s); results in {out}")
+    return 0
+
+
+def add_parser(sub) -> None:
+    """Register ``symtrack field`` on the argparse subparsers of symtrack.cli."""
+    from importlib import resources
+
+    names = sorted(p.name[:-5] for p in resources.files("symtrack.studies.fields").iterdir()
+                   if p.name.endswith(".toml"))
+    fp = sub.add_parser(
+        "field", help="a whole-field traffic study: random against controlled traffic (docs/studies.md)",
+        description="Work a field of the grid terrain in parallel straight passes (the vehicle lifted off at a "
+        "pass's end and set down at the next pass's start), with random and/or controlled traffic, and write "
+        "DIR/summary.json, DIR/<pattern>/field.npz, passes.csv and the maps, DIR/comparison.png. Exit code 0 "
+        "when every pass ran, 1 when one failed (what was computed is written), 2 for an invalid spec (nothing "
+        f"run), 130 on Ctrl-C (the passes done are written). Built-in: {', '.join(names)}.")
+    fp.add_argument("scenario", help="a built-in field study or a TOML file with a [field] section")
+    fp.add_argument("--out", required=True, help="output folder")
+    fp.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                    help="override a value, e.g. field.passes=4, vehicle.mass_kg=8000")
+    fp.add_argument("--pattern", choices=("random", "controlled", "both"),
+                    help="shorthand for --set field.pattern=...")
+    fp.add_argument("--quiet", action="store_true", help="no progress bar")
+    fp.set_defaults(func=field_command)

@@ -1,0 +1,727 @@
+"""The whole-field traffic study (issue 12 point 5; docs/studies.md, "Whole-field traffic study").
+
+A field of the persistent grid terrain worked in parallel straight passes, in two patterns:
+
+- ``random``: the passes' lateral positions drawn uniformly over the usable width of the field by
+  numpy's default generator seeded with ``field.seed`` (uncoordinated traffic);
+- ``controlled``: controlled traffic farming (CTF): every pass on one of a fixed set of permanent
+  lanes ``field.lane_spacing_m`` apart, centred on the field; pass k on lane k mod n_lanes.
+
+The path is prescribed, the simplest honest one: each pass is a straight run along x from one
+headland to the other (the CG covers ``field.pass_length_m``), the same torque on both sprockets:
+held at ``field.speed_m_s`` by a speed governor (:class:`SpeedGovernor`, a PI law sampled per plant
+call, the torque limited to ``field.torque_N_m``), or ``field.torque_N_m`` throughout with
+``speed_m_s = "none"``; the passes alternate direction. The headland turn is **not driven**: at
+the end of a pass the vehicle is lifted off (the terrain's ``end_pass``) and set down at rest at
+the next pass's start (``begin_pass``), so the headlands carry no traffic in this study.
+
+A spec is a scenario-like TOML document: ``[run]``, ``[model]``, ``[vehicle]``, ``[soil]`` as a
+simulation scenario (``[run]`` without the stop rule, which the field sets), an optional
+``[terrain]`` with the pool's keys (not size_m, cell_m, origin_m, passes, initial_state: the field
+sets those) and the ``[field]`` section (:data:`FIELD_KEYS`; the built-in
+``symtrack/studies/fields/field_traffic.toml`` documents every key). The field spans
+[0, size_x] x [0, size_y] in world coordinates.
+
+Passes per cell are counted from per-pass masks of the cells the pass loaded: a cell counts once
+per pass when a track's contact overlapped it at the end of some macro step (the terrain
+engine's per-pass subsoil stress is non-zero exactly there, ``World.pass_sigma``). Without the
+subsoil stress (``terrain.subsoil_depths_m = []`` or an integrator other than the engine) the
+mask is the cells whose sinkage changed during the pass. ``Terrain.cycles`` (the soil's count of
+plastic load cycles) is reported beside it, but is not the pass count: a reload that peaks below
+half the cell's previous largest pressure does not count as a cycle (docs/terrain.md, "Soil
+memory"), so cells under a track's edge of a later pass are missing from it.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import logging
+import math
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..foundations.config import check_keys, integer, number, read_document, to_toml
+from ..foundations.errors import ScenarioError, SimulationError
+from ..foundations.files import atomic_write_bytes, atomic_write_text, check_output_folder
+from ..foundations.progress import Progress
+from ..integrators import registry
+from ..reports.subsoil_plots import risk_map_png
+from ..simulation import loop
+from ..simulation.plants import make_plant
+from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario_from_dict
+from ..terrain import subsoil
+from ..terrain.storage import Terrain
+from ..terrain.world import padding_m
+from . import field_plots
+
+__all__ = ["FIELD_KEYS", "FIELD_PACKAGE", "PATTERNS", "SCHEMA_VERSION", "FieldSettings", "FieldSpec",
+           "FieldStudyResult", "IncompleteFieldStudy", "PassLine", "PatternResult", "SpeedGovernor",
+           "clear_previous_study", "field_figures", "field_spec_from_dict", "flat_figures", "lane_positions",
+           "load_field_spec", "plan_passes", "run_field_study", "usable_band_m"]
+
+log = logging.getLogger("symtrack.studies")
+
+SCHEMA_VERSION = 1
+FIELD_PACKAGE = "symtrack.studies.fields"
+PATTERNS = ("random", "controlled")
+PATTERN_CHOICES = (*PATTERNS, "both")
+TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "field")
+FIELD_KEYS = ("size_m", "cell_m", "pattern", "passes", "seed", "lane_spacing_m", "lanes", "headland_m",
+              "pass_length_m", "speed_m_s", "torque_N_m")
+# [run] keys of a field spec: a simulation's, without the stop rule (the field sets it)
+FIELD_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
+# [terrain] keys the [field] section sets
+TERRAIN_KEYS_OF_FIELD = ("size_m", "cell_m", "origin_m", "passes", "initial_state")
+DEFAULT_PASS_LIMIT_S = 300.0
+# the lateral room kept beyond the vehicle's half width and the footprint's padding (a pass that
+# drifts sideways stays in the field)
+LATERAL_ALLOWANCE_M = 0.25
+# the longitudinal room kept at each end beyond half the contact length and the padding (the
+# footprint predicted one macro step ahead)
+END_ALLOWANCE_M = 0.5
+MAX_PASSES = 1000
+
+
+@dataclass(frozen=True)
+class FieldSettings:
+    """The ``[field]`` section, validated by :func:`field_spec_from_dict` (module doc)."""
+
+    size_m: tuple[float, float] = (100.0, 100.0)
+    cell_m: float = 0.1
+    pattern: str = "both"
+    passes: int = 20
+    seed: int = 1
+    lane_spacing_m: float = 10.0
+    lanes: int | str = "auto"
+    headland_m: float = 7.5
+    pass_length_m: float | None = None  # None: size_m[0] - 2 headland_m
+    speed_m_s: float | None = 2.5  # None: torque_N_m on both sprockets for the whole pass
+    torque_N_m: float = 2000.0
+
+    @property
+    def patterns(self) -> tuple[str, ...]:
+        return PATTERNS if self.pattern == "both" else (self.pattern,)
+
+    @property
+    def length_m(self) -> float:
+        return self.pass_length_m if self.pass_length_m is not None else self.size_m[0] - 2 * self.headland_m
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """A validated field study: the ``[field]`` settings and the scenario of one pass (its
+    ``[terrain]`` is the field, its torque programme and stop rule the pass's; ``start`` is
+    replaced per pass); ``document`` is the resolved spec (written as ``field.resolved.toml``)."""
+
+    name: str
+    description: str
+    field: FieldSettings
+    scenario: Scenario
+    document: dict
+
+    @property
+    def params(self) -> dict:
+        return self.scenario.params
+
+
+@dataclass(frozen=True)
+class PassLine:
+    """One planned pass: its number (0-based), lane (controlled traffic; None for random), the
+    lateral position of the CG y_m, the start of the CG x_start_m and the heading (0 or 180 deg)."""
+
+    index: int
+    lane: int | None
+    y_m: float
+    x_start_m: float
+    yaw_deg: float
+
+    @property
+    def direction(self) -> int:
+        return 1 if self.yaw_deg == 0.0 else -1
+
+
+class SpeedGovernor:
+    """The torque law of a pass at ``field.speed_m_s``: the same torque on both sprockets,
+    u = clip(u_r + Kp e, -T, T) with the speed error e = v_ref - u_m_s, sampled and held over each
+    plant call (:func:`symtrack.simulation.loop.run`'s ``torque_law``; a call of the terrain engine
+    is ``hold_s`` = 1 s). Kp = r m / (4 hold) halves the speed error per hold (both tracks' force
+    2 u / r on the mass m, the sprocket radius r). u_r, the torque that balances the soil's
+    resistance, is estimated from the last hold: u_r = u_prev - (r m / 2) (v - v_prev) / h (the
+    mean of the new and the previous estimate; 0 before the first hold), so the speed settles
+    without the overshoot of an integral's wind-up. T = ``field.torque_N_m``."""
+
+    def __init__(self, speed_m_s: float, torque_limit_N_m: float, mass_kg: float, sprocket_radius_m: float,
+                 hold_s: float, speed_index: int):
+        self.v_ref, self.limit, self.iu = speed_m_s, torque_limit_N_m, speed_index
+        self.kp = sprocket_radius_m * mass_kg / (4.0 * hold_s)
+        self.half_rm = 0.5 * sprocket_radius_m * mass_kg
+        self.resistance = None
+        self.prev = None
+
+    def __call__(self, t_s: float, x) -> tuple[float, float]:
+        v = float(x[self.iu])
+        if self.prev is not None and t_s > self.prev[2]:
+            u_prev, v_prev, t_prev = self.prev
+            est = u_prev - self.half_rm * (v - v_prev) / (t_s - t_prev)
+            self.resistance = est if self.resistance is None else 0.5 * (self.resistance + est)
+        u = (self.resistance or 0.0) + self.kp * (self.v_ref - v)
+        u = min(max(u, -self.limit), self.limit)
+        self.prev = (u, v, t_s)
+        return u, u
+
+
+# ---- the spec -------------------------------------------------------------------------------------
+def _num(key, value, low, high, low_open=False):
+    return number(f"field.{key}", value, low, high, low_open)
+
+
+def _none(value) -> bool:
+    return value is None or (isinstance(value, str) and value.lower() == "none")
+
+
+def _parse_field(t: dict) -> FieldSettings:
+    """The [field] values on their own (the checks against the vehicle follow in :func:`_check_geometry`)."""
+    check_keys("field", t, FIELD_KEYS)
+    d = FieldSettings()
+    size = t.get("size_m", list(d.size_m))
+    if not isinstance(size, (list, tuple)) or len(size) != 2:
+        raise ScenarioError(f"field.size_m = {size!r} must be a pair [x, y] of lengths in m")
+    size = tuple(_num(f"size_m[{i}]", v, 1.0, 1e4) for i, v in enumerate(size))
+    cell = _num("cell_m", t.get("cell_m", d.cell_m), 0.01, 5.0)
+    pattern = t.get("pattern", d.pattern)
+    if pattern not in PATTERN_CHOICES:
+        raise ScenarioError(f"field.pattern = {pattern!r} is not one of {', '.join(PATTERN_CHOICES)}")
+    passes = integer("field.passes", t.get("passes", d.passes), 1, MAX_PASSES)
+    seed = t.get("seed", d.seed)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
+        raise ScenarioError(f"field.seed = {seed!r} must be an integer in [0, 2^63)")
+    spacing = _num("lane_spacing_m", t.get("lane_spacing_m", d.lane_spacing_m), 0.0, 1e4, low_open=True)
+    lanes = t.get("lanes", d.lanes)
+    if lanes != "auto":
+        lanes = integer("field.lanes", lanes, 1, 10_000)
+    headland = _num("headland_m", t.get("headland_m", d.headland_m), 0.0, 5e3, low_open=True)
+    length = t.get("pass_length_m", d.pass_length_m)
+    length = None if _none(length) else _num("pass_length_m", length, 0.0, 1e4, low_open=True)
+    speed = t.get("speed_m_s", d.speed_m_s)
+    speed = None if _none(speed) else _num("speed_m_s", speed, 0.0, 10.0, low_open=True)
+    torque = _num("torque_N_m", t.get("torque_N_m", d.torque_N_m), 0.0, 1e6, low_open=True)
+    return FieldSettings(size, cell, pattern, passes, seed, spacing, lanes, headland, length, speed, torque)
+
+
+def usable_band_m(fs: FieldSettings, params: dict) -> tuple[float, float]:
+    """The lateral positions (world y of the CG) a pass may take: the vehicle, the footprint's
+    padding, one cell and :data:`LATERAL_ALLOWANCE_M` inside the field on both sides."""
+    margin = (0.5 * (params["track_gauge_m"] + params["track_width_m"]) + padding_m(fs.cell_m) + fs.cell_m
+              + LATERAL_ALLOWANCE_M)
+    return margin, fs.size_m[1] - margin
+
+
+def _min_headland_m(fs: FieldSettings, params: dict) -> float:
+    return (0.5 * params["contact_length_m"] + abs(params["cg_ahead_of_contact_centre_m"]) + padding_m(fs.cell_m)
+            + fs.cell_m + END_ALLOWANCE_M)
+
+
+def lane_positions(fs: FieldSettings, params: dict) -> np.ndarray:
+    """The controlled-traffic lanes (world y of the CG), centred across the field, lane_spacing_m
+    apart; "auto": as many as fit in :func:`usable_band_m`."""
+    lo, hi = usable_band_m(fs, params)
+    n = int(math.floor((hi - lo) / fs.lane_spacing_m + 1e-9)) + 1 if fs.lanes == "auto" else fs.lanes
+    centre = 0.5 * fs.size_m[1]
+    return centre + (np.arange(n) - 0.5 * (n - 1)) * fs.lane_spacing_m
+
+
+def _check_geometry(fs: FieldSettings, params: dict) -> None:
+    """The field against the vehicle: room for the passes, headlands, lanes (errors name the key)."""
+    width = params["track_gauge_m"] + params["track_width_m"]
+    lo, hi = usable_band_m(fs, params)
+    if not hi > lo:
+        raise ScenarioError(f"field.size_m = {list(fs.size_m)}: the field is too narrow for the vehicle "
+                            f"({width:g} m wide; size_m[1] must exceed {2 * lo:g} m)")
+    if not fs.cell_m < params["track_width_m"]:
+        raise ScenarioError(f"field.cell_m = {fs.cell_m!r} must be smaller than the track width "
+                            f"{params['track_width_m']!r} m (cells resolve the contact patch)")
+    hmin = _min_headland_m(fs, params)
+    if fs.headland_m < hmin:
+        raise ScenarioError(f"field.headland_m = {fs.headland_m!r} is outside the allowed range [{hmin:.3g}, "
+                            f"{0.5 * fs.size_m[0]:g}] m (half the contact length, the footprint's padding and "
+                            f"{END_ALLOWANCE_M} m for the set-down and the stop)")
+    room = fs.size_m[0] - 2 * fs.headland_m
+    if not room > 0:
+        raise ScenarioError(f"field.headland_m = {fs.headland_m!r}: two headlands leave no room for a pass on a "
+                            f"field {fs.size_m[0]:g} m long")
+    if fs.pass_length_m is not None and fs.pass_length_m > room + 1e-9:
+        raise ScenarioError(f"field.pass_length_m = {fs.pass_length_m!r} is outside the allowed range (0, {room:g}] "
+                            f"m (size_m[0] - 2 headland_m)")
+    if "controlled" in fs.patterns:
+        if fs.lane_spacing_m < width:
+            raise ScenarioError(f"field.lane_spacing_m = {fs.lane_spacing_m!r} is outside the allowed range "
+                                f"[{width:g}, 1e4] m: lanes closer than the vehicle's width ({width:g} m) overlap")
+        y = lane_positions(fs, params)
+        if y[0] < lo - 1e-9 or y[-1] > hi + 1e-9:
+            most = int(math.floor((hi - lo) / fs.lane_spacing_m + 1e-9)) + 1
+            raise ScenarioError(f"field.lanes = {fs.lanes!r}: {y.size} lanes {fs.lane_spacing_m:g} m apart do not fit "
+                                f"across the field; at most {most} fit (lateral positions {lo:g} to {hi:g} m)")
+
+
+def _pass_scenario_doc(doc: dict, fs: FieldSettings) -> dict:
+    """The simulation scenario of one pass from the field spec's document."""
+    run = dict(doc.get("run", {}))
+    check_keys("run", run, FIELD_RUN_KEYS)
+    terrain = dict(doc.get("terrain", {}))
+    if not isinstance(terrain, dict):
+        raise ScenarioError(f"[terrain] must be a table, got {terrain!r}")
+    for k in TERRAIN_KEYS_OF_FIELD:
+        if k in terrain:
+            raise ScenarioError(f"terrain.{k} = {terrain[k]!r}: the [field] section sets the field "
+                                "(field.size_m, field.cell_m, field.passes); leave it out of [terrain]")
+    run.setdefault("duration_s", DEFAULT_PASS_LIMIT_S)
+    run.setdefault("integrator", "grid_fast")
+    run["stop_after_distance_m"] = fs.length_m
+    run["stop_distance_event"] = "go"
+    # the programme of a constant-torque pass (with field.speed_m_s the governor replaces it)
+    torque = [{"t_s": 0.0, "left_N_m": fs.torque_N_m, "right_N_m": fs.torque_N_m, "event": "go"}]
+    terrain.update(size_m=list(fs.size_m), cell_m=fs.cell_m, origin_m=[0.0, 0.0])
+    out = {k: doc[k] for k in ("model", "vehicle", "soil") if k in doc}
+    return {"name": doc.get("name", "field"), "description": doc.get("description", ""), "run": run, **out,
+            "terrain": terrain, "torque": torque}
+
+
+def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
+    """A field spec document (already read) -> :class:`FieldSpec`, every section checked before
+    any work: errors name the key, the value and the allowed range."""
+    check_keys("field spec", doc, TOP_KEYS)
+    if "field" not in doc:
+        raise ScenarioError("a field study needs a [field] section (docs/studies.md, \"Whole-field traffic study\")")
+    name = doc.get("name", default_name)
+    desc = doc.get("description", "")
+    if not isinstance(name, str) or not isinstance(desc, str):
+        raise ScenarioError("name and description must be strings")
+    fs = _parse_field(doc["field"])
+    sdoc = _pass_scenario_doc(doc, fs)
+    sdoc["name"] = name
+    sc = scenario_from_dict(sdoc, name)
+    registry.get(sc.run.integrator).check("grid", sc.run.integrator_settings())
+    _check_geometry(fs, sc.params)
+    if fs.speed_m_s is not None and fs.speed_m_s > sc.terrain.max_speed_m_s:
+        raise ScenarioError(f"field.speed_m_s = {fs.speed_m_s!r} is outside the allowed range (0, "
+                            f"{sc.terrain.max_speed_m_s:g}] m/s (terrain.max_speed_m_s, the speed the channel pool "
+                            "is sized for)")
+    resolved = {"name": name, "description": desc, **{k: doc[k] for k in ("run", "model", "vehicle", "soil", "terrain")
+                                                       if k in doc}}
+    resolved["field"] = {k: (list(v) if isinstance(v, tuple) else ("none" if v is None else v))
+                         for k, v in dataclasses.asdict(fs).items()}
+    return FieldSpec(name, desc, fs, sc, resolved)
+
+
+def load_field_spec(name_or_path, overrides=None) -> FieldSpec:
+    """Load a built-in field study (``symtrack/studies/fields/``) or a TOML file, apply the
+    overrides (``["field.passes=4", ...]`` as ``--set`` takes them, or a dict), validate."""
+    doc, default_name = read_document(name_or_path, FIELD_PACKAGE, "field study", overrides)
+    return field_spec_from_dict(doc, default_name)
+
+
+def plan_passes(spec: FieldSpec, pattern: str) -> list[PassLine]:
+    """The passes of a pattern, in order (module doc)."""
+    fs = spec.field
+    if pattern not in PATTERNS:
+        raise ScenarioError(f"pattern = {pattern!r} is not one of {', '.join(PATTERNS)}")
+    if pattern == "random":
+        lo, hi = usable_band_m(fs, spec.params)
+        ys = np.random.default_rng(fs.seed).uniform(lo, hi, fs.passes)
+        lanes = [None] * fs.passes
+    else:
+        lane_y = lane_positions(fs, spec.params)
+        lanes = [k % lane_y.size for k in range(fs.passes)]
+        ys = lane_y[lanes]
+    out = []
+    for k in range(fs.passes):
+        forward = k % 2 == 0
+        x0 = fs.headland_m if forward else fs.size_m[0] - fs.headland_m
+        out.append(PassLine(k, lanes[k], float(ys[k]), float(x0), 0.0 if forward else 180.0))
+    return out
+
+
+# ---- the figures -----------------------------------------------------------------------------------
+def _copy_terrain(st: Terrain) -> Terrain:
+    t = Terrain(st.grid, st.soil, st.subsoil_depths_m)
+    for name, a in st.arrays().items():
+        t.arrays()[name][...] = a
+    return t
+
+
+def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa: float) -> dict:
+    """The figures of one pattern's field (docs/studies.md): from the terrain after the passes and
+    the passes-per-cell counts (n_cells,)."""
+    g = terrain.grid
+    area = g.cell_m ** 2
+    counts = np.asarray(counts).ravel()
+    traff = counts > 0
+    n_t = int(traff.sum())
+    z = terrain.z
+    out = {
+        "field_cells": g.n_cells,
+        "trafficked_cells": n_t,
+        "trafficked_area_m2": n_t * area,
+        "trafficked_area_fraction": n_t / g.n_cells,
+        "passes_per_cell_max": int(counts.max()) if counts.size else 0,
+        "passes_per_cell_mean_trafficked": float(counts[traff].mean()) if n_t else 0.0,
+        "passes_per_cell_histogram": [int(v) for v in np.bincount(counts.astype(np.int64), minlength=1)],
+        "load_cycles_histogram": [int(v) for v in np.bincount(terrain.cycles.astype(np.int64), minlength=1)],
+        "rut_mean_depth_mm": 1e3 * float(z[traff].mean()) if n_t else 0.0,
+        "rut_max_depth_mm": 1e3 * float(z.max()) if z.size else 0.0,
+        "sinkage_volume_m3": float(z.sum() * area),
+    }
+    depths = list(terrain.subsoil_depths_m)
+    if depths:
+        sm = terrain.sigma_max
+        fr = subsoil.risk_area_fractions(sm, precompression_stress_Pa, traff, area)
+        out["subsoil_depths_m"] = depths
+        out["subsoil_precompression_stress_kPa"] = 1e-3 * float(precompression_stress_Pa)
+        out["subsoil_sigma_z_max_kPa"] = [1e-3 * float(v) for v in (sm[traff].max(axis=0) if n_t
+                                                                     else np.zeros(len(depths)))]
+        field_area = g.n_cells * area
+        for name in subsoil.RISK_NAMES:
+            out[f"risk_fraction_of_trafficked_{name}"] = [float(v) for v in fr[f"fraction_{name}"]]
+            out[f"risk_area_m2_{name}"] = [float(v) for v in fr[f"area_{name}_m2"]]
+            out[f"risk_fraction_of_field_{name}"] = [float(v) / field_area for v in fr[f"area_{name}_m2"]]
+    return out
+
+
+def flat_figures(pattern: str, figures: dict) -> dict:
+    """The scalar figures of a pattern under ``<pattern>_<name>`` (the per-depth risk fractions of
+    the field as ``<pattern>_risk_fraction_of_field_<class>_at_<depth>m``): the top-level keys of
+    summary.json that a sweep's results.csv takes."""
+    out = {}
+    for k, v in figures.items():
+        if isinstance(v, (bool, int, float, str)) or v is None:
+            out[f"{pattern}_{k}"] = v
+    for name in subsoil.RISK_NAMES:
+        for d, v in zip(figures.get("subsoil_depths_m", []), figures.get(f"risk_fraction_of_field_{name}", []),
+                        strict=True):
+            out[f"{pattern}_risk_fraction_of_field_{name}_at_{d:g}m"] = v
+    return out
+
+
+# ---- running it --------------------------------------------------------------------------------------
+@dataclass
+class PatternResult:
+    """One pattern's study: the planned passes, a record per pass run, the passes-per-cell counts
+    (n_cells,) uint16, the terrain after it (a copy), its figures, and whether all passes ran."""
+
+    pattern: str
+    lines: list
+    records: list = field(default_factory=list)
+    counts: np.ndarray | None = None
+    terrain: Terrain | None = None
+    figures: dict = field(default_factory=dict)
+    complete: bool = False
+    error: str | None = None
+    wall_time_s: float = 0.0
+    sim_time_s: float = 0.0
+    count_source: str = ""
+
+
+@dataclass
+class FieldStudyResult:
+    """What :func:`run_field_study` returns: per pattern a :class:`PatternResult`, the summary
+    (summary.json) and the files written (when ``out`` was given)."""
+
+    spec: FieldSpec
+    patterns: dict
+    summary: dict
+    written: list = field(default_factory=list)
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.summary.get("complete"))
+
+
+class IncompleteFieldStudy(SimulationError):
+    """A field study in which a pass failed; ``result`` holds (and ``out`` has) what was computed."""
+
+    def __init__(self, message: str, result: FieldStudyResult):
+        super().__init__(message)
+        self.result = result
+
+
+def _clear(world) -> None:
+    for a in world.storage.arrays().values():
+        a[...] = 0
+    world.pass_sigma[...] = 0
+    world.touched[:] = False
+
+
+def _pass_mask(world, engine_stress: bool, z_before: np.ndarray | None) -> np.ndarray:
+    if engine_stress:
+        return world.pass_sigma[:, 0] > 0
+    return world.touched & (world.storage.z != z_before)
+
+
+def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_before: int) -> None:
+    """Run the passes of ``pr.lines`` on the plant's world, filling ``pr`` (also when a pass fails
+    or Ctrl-C stops it: its figures are those of the passes done)."""
+    world = plant.world
+    sc = spec.scenario
+    pattern, lines = pr.pattern, pr.lines
+    counts = np.zeros(world.grid.n_cells, dtype=np.uint16)
+    pr.counts = counts
+    engine_stress = bool(world.storage.subsoil_depths_m) and hasattr(plant, "engine")
+    pr.count_source = ("cells a track's contact overlapped at a macro step's end (World.pass_sigma > 0)"
+                       if engine_stress else "cells whose sinkage changed during the pass")
+    iu = plant.state_names.index("u_m_s")
+    t_pat = time.perf_counter()
+    try:
+        for line in lines:
+            sck = dataclasses.replace(sc, start=Start(line.x_start_m, line.y_m, line.yaw_deg))
+            z0 = None if engine_stress else world.storage.z.copy()
+            t0 = time.perf_counter()
+            failure = None
+            try:
+                law = None
+                if spec.field.speed_m_s is not None:
+                    law = SpeedGovernor(spec.field.speed_m_s, spec.field.torque_N_m, sc.params["mass_kg"],
+                                        sc.params["sprocket_radius_m"], plant.max_intervals * sc.run.output_dt_s, iu)
+                res = loop.run(sck, plant, torque_law=law)
+            except loop.IncompleteRun as err:
+                res, failure = err.partial, err
+            wall = time.perf_counter() - t0
+            mask = _pass_mask(world, engine_stress, z0)
+            counts += mask
+            pr.records.append({"pass": line.index + 1, "lane": line.lane, "y_m": line.y_m, "x_start_m": line.x_start_m,
+                               "direction": line.direction, "distance_m": float(np.sum(np.hypot(
+                                   np.diff(res.X[:, 0]), np.diff(res.X[:, 1])))),
+                               "sim_time_s": float(res.t[-1]), "wall_time_s": wall,
+                               "speed_end_m_s": float(res.X[-1, iu]), "cells_loaded": int(mask.sum()),
+                               "stopped_by": res.stopped_by})
+            pr.sim_time_s += float(res.t[-1])
+            bar.update(done_before + line.index + 1, f"{pattern} pass {line.index + 1}/{len(lines)}")
+            if failure is None and res.stopped_by != "distance":
+                failure = SimulationError(f"run.duration_s = {sc.run.duration_s:g} s ended the pass before it "
+                                          f"covered field.pass_length_m = {spec.field.length_m:g} m (it covered "
+                                          f"{pr.records[-1]['distance_m']:.2f} m); raise run.duration_s")
+            if failure is not None:
+                pr.error = f"{pattern} pass {line.index + 1}: {failure}"
+                break
+        else:
+            pr.complete = True
+    finally:  # also on Ctrl-C: the passes done are kept
+        pr.wall_time_s = time.perf_counter() - t_pat
+        pr.terrain = _copy_terrain(world.storage)
+        pr.figures = field_figures(pr.terrain, counts, float(world.params["precompression_stress_Pa"]))
+        pr.figures.update(passes_done=len(pr.records), wall_time_s=pr.wall_time_s, sim_time_s=pr.sim_time_s,
+                          lateral_positions_m=[ln.y_m for ln in lines[:len(pr.records)]])
+        if pattern == "controlled":
+            pr.figures["lanes"] = int(lane_positions(spec.field, spec.params).size)
+        else:
+            pr.figures["seed"] = spec.field.seed
+
+
+PASS_COLUMNS = ("pass", "lane", "y_m", "x_start_m", "direction", "distance_m", "sim_time_s", "wall_time_s",
+                "speed_end_m_s", "cells_loaded", "stopped_by")
+
+
+def _passes_csv(records) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(PASS_COLUMNS)
+    for r in records:
+        w.writerow(["" if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else r[c]) for c in PASS_COLUMNS])
+    return buf.getvalue()
+
+
+def _pattern_files(spec: FieldSpec, pr: PatternResult) -> dict[str, bytes]:
+    """The files of one pattern's folder (besides field.npz)."""
+    g = pr.terrain.grid
+    x0, x1, y0, y1 = g.bounds()
+    ext = (x0, x1, y0, y1)
+    shape = g.shape
+    label = f"{pr.pattern} traffic, {len(pr.records)} passes"
+    files = {"passes_per_cell.npz": passes_per_cell_npz(pr), "passes.csv": _passes_csv(pr.records).encode(),
+             "sinkage_map.png": field_plots.sinkage_map_png(pr.terrain.z.reshape(shape), ext, label),
+             "passes_map.png": field_plots.passes_map_png(pr.counts.reshape(shape), ext, label)}
+    depths = pr.terrain.subsoil_depths_m
+    if depths:
+        pc = float(spec.params["precompression_stress_Pa"])
+        # a field of many cells in blocks, each its highest class (a rut of a few cells stays visible)
+        risk = subsoil.risk_class(pr.terrain.sigma_max, pc).reshape(*shape, len(depths))
+        risk, f = field_plots.block_max(risk, field_plots.RISK_MAP_BLOCKS)
+        touched, _ = field_plots.block_max((pr.counts > 0).reshape(shape), field_plots.RISK_MAP_BLOCKS)
+        blocks = f"\n(blocks of {f * g.cell_m:g} m: the highest class)" if f > 1 else ""
+        files["risk_map.png"] = risk_map_png(risk, touched, depths, (x0, x0 + risk.shape[0] * f * g.cell_m, y0,
+                                                                     y0 + risk.shape[1] * f * g.cell_m),
+                                             title=f"compaction risk: {label}{blocks}")
+    return files
+
+
+def _summary(spec: FieldSpec, results: dict, build_s: float, t_start: float, error: str | None,
+             interrupted: bool, world) -> dict:
+    fs = spec.field
+    g = next(iter(results.values())).terrain.grid if results else None
+    complete = (not interrupted and error is None and set(results) == set(fs.patterns)
+                and all(r.complete for r in results.values()))
+    s = {"schema_version": SCHEMA_VERSION, "kind": "symtrack-field-study", "name": spec.name,
+         "description": spec.description, "complete": complete, "error": error,
+         "interrupted": interrupted, "patterns_run": list(results), "passes_per_pattern": fs.passes,
+         "field_size_m": list(fs.size_m), "field_cell_m": fs.cell_m,
+         "field_cells": g.n_cells if g is not None else None, "field_area_m2": fs.size_m[0] * fs.size_m[1],
+         "pass_length_m": fs.length_m, "terrain_channel_modulus_M": world.M, "terrain_channels": world.n_channels,
+         "build_s": build_s,
+         "passes_wall_time_s": sum(r.wall_time_s for r in results.values()),
+         "sim_time_s": sum(r.sim_time_s for r in results.values()),
+         "wall_time_s": time.perf_counter() - t_start,
+         "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+         "path_note": "prescribed straight passes along x between the headlands; the headland turn is not "
+                      "driven: the vehicle is lifted off at a pass's end and set down at rest at the next start",
+         "passes_count_source": next(iter(results.values())).count_source if results else ""}
+    for name, r in results.items():
+        s.update(flat_figures(name, r.figures))
+    s["patterns"] = {name: {**r.figures, "complete": r.complete, "error": r.error, "passes": r.records}
+                     for name, r in results.items()}
+    return s
+
+
+def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, plant=None) -> FieldStudyResult:
+    """Run a field study: every pattern of ``field.pattern`` on a field of its own (one plant,
+    the field cleared between the patterns), and write its folder.
+
+    Parameters
+    ----------
+    spec : FieldSpec or str
+        A loaded spec, or a built-in name / TOML path (loaded with ``overrides``).
+    out : path, optional
+        The output folder (docs/studies.md): ``summary.json`` (last), ``field.resolved.toml``,
+        ``<pattern>/field.npz``, ``<pattern>/passes.csv``, ``<pattern>/*.png``, ``comparison.png``
+        with both patterns. Checked before any work.
+    overrides : list of str or dict, optional
+        With a name or path: ``--set`` overrides.
+    progress : bool
+        A progress bar over the passes on stderr.
+    plant : optional
+        The grid plant to run on (``make_plant(spec.scenario)``, e.g. instrumented by a benchmark);
+        built here by default. Its field is cleared first.
+
+    Returns
+    -------
+    FieldStudyResult
+
+    Raises
+    ------
+    IncompleteFieldStudy
+        A pass failed; what was computed is in ``result`` (and written to ``out``).
+    KeyboardInterrupt
+        On Ctrl-C, after writing the passes done (``summary.json``: ``complete = false``).
+    """
+    if not isinstance(spec, FieldSpec):
+        spec = load_field_spec(spec, overrides)
+    elif overrides:
+        raise ScenarioError("overrides apply to a spec given by name or path; this spec is loaded already")
+    folder = check_output_folder(str(out)) if out is not None else None
+    t_start = time.perf_counter()
+    fs = spec.field
+    if folder is not None:
+        clear_previous_study(folder)
+    if plant is None:
+        plant = make_plant(spec.scenario)
+    else:
+        _clear(plant.world)
+    build_s = time.perf_counter() - t_start
+    results: dict[str, PatternResult] = {}
+    bar = Progress(fs.passes * len(fs.patterns), f"field {spec.name}", enabled=progress)
+    error, interrupted, pending = None, False, None
+    try:
+        for k, pattern in enumerate(fs.patterns):
+            if k:
+                _clear(plant.world)
+            pr = pending = results[pattern] = PatternResult(pattern, plan_passes(spec, pattern))
+            _run_pattern(spec, plant, pr, bar, k * fs.passes)
+            if folder is not None:
+                _write_pattern(folder, spec, pr)
+            pending = None
+            if not pr.complete:
+                error = pr.error
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
+    finally:
+        bar.close(complete=error is None and not interrupted)
+        if folder is not None and pending is not None and pending.terrain is not None:
+            _write_pattern(folder, spec, pending)  # the pattern Ctrl-C stopped: its passes done
+        summary = _summary(spec, results, build_s, t_start, error, interrupted, plant.world)
+        written = _write_top(folder, spec, results, summary) if folder is not None else []
+        result = FieldStudyResult(spec, results, summary, written)
+    if error is not None:
+        raise IncompleteFieldStudy(error, result)
+    return result
+
+
+PATTERN_FILES = ("field.npz", "passes_per_cell.npz", "passes.csv", "sinkage_map.png", "passes_map.png",
+                 "risk_map.png")
+
+
+def passes_per_cell_npz(pr: PatternResult) -> bytes:
+    """``passes_per_cell.npz``: ``kind`` "symtrack-field-passes", ``schema_version``, ``origin_m``,
+    ``cell_m``, ``shape`` (as the terrain file) and ``passes`` uint16 (nx, ny): the passes that
+    loaded each cell (the counts of docs/studies.md)."""
+    g = pr.terrain.grid
+    buf = io.BytesIO()
+    np.savez_compressed(buf, kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
+                        origin_m=np.array(g.origin_m, dtype=float), cell_m=np.array(g.cell_m), shape=np.array(g.shape),
+                        passes=pr.counts.reshape(g.shape))
+    return buf.getvalue()
+TOP_FILES = ("summary.json", "field.resolved.toml", "comparison.png")
+
+
+def clear_previous_study(folder) -> list:
+    """Remove the files of a previous field study from ``folder`` (one whose summary.json is a
+    field study's): :data:`TOP_FILES` and each pattern folder's :data:`PATTERN_FILES`, so that a
+    reused ``--out`` never mixes two studies' files. Anything else is left alone."""
+    try:
+        old = json.loads((folder / "summary.json").read_text())
+    except (OSError, ValueError):
+        return []
+    if not isinstance(old, dict) or old.get("kind") != "symtrack-field-study":
+        return []
+    removed = []
+    for sub in (folder / p for p in PATTERNS):
+        for name in PATTERN_FILES:
+            if (sub / name).is_file():
+                (sub / name).unlink()
+                removed.append(sub / name)
+        if sub.is_dir() and not any(sub.iterdir()):
+            sub.rmdir()
+    for name in TOP_FILES[::-1]:  # summary.json last: an interrupted clean-up is still recognised
+        if (folder / name).is_file():
+            (folder / name).unlink()
+            removed.append(folder / name)
+    return removed
+
+
+def _write_pattern(folder, spec: FieldSpec, pr: PatternResult) -> list:
+    sub = folder / pr.pattern
+    pr.terrain.save(sub / "field.npz", spec.scenario.soil)
+    files = _pattern_files(spec, pr)
+    for name, data in files.items():
+        atomic_write_bytes(sub / name, data)
+    return [sub / "field.npz", *(sub / n for n in files)]
+
+
+def _write_top(folder, spec: FieldSpec, results: dict, summary: dict) -> list:
+    written = []
+    atomic_write_text(folder / "field.resolved.toml", to_toml(spec.document))
+    written.append(folder / "field.resolved.toml")
+    for pr in results.values():
+        written += [folder / pr.pattern / n for n in PATTERN_FILES if (folder / pr.pattern / n).is_file()]
+    if len(results) == 2:
+        atomic_write_bytes(folder / "comparison.png", field_plots.comparison_png(
+            {k: r.figures for k, r in results.items()}))
+        written.append(folder / "comparison.png")
+    atomic_write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
+    written.append(folder / "summary.json")
+    return written

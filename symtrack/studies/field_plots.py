@@ -1,0 +1,132 @@
+"""The plots of a whole-field traffic study (docs/studies.md): the final sinkage map of the whole
+field, the passes-per-cell map and the comparison of the two traffic patterns. Pure functions of
+arrays and figures; each returns PNG bytes. (The risk map by depth is
+:func:`symtrack.reports.subsoil_plots.risk_map_png`.)"""
+
+from __future__ import annotations
+
+import numpy as np
+from matplotlib.colors import BoundaryNorm, ListedColormap
+
+from ..reports.plots import plt, png_bytes
+from ..reports.subsoil_plots import RISK_COLOURS
+from ..terrain.subsoil import RISK_NAMES
+
+__all__ = ["RISK_MAP_BLOCKS", "PASSES_MAP_BLOCKS", "block_max", "comparison_png", "passes_map_png", "sinkage_map_png"]
+
+PATTERN_COLOURS = {"random": "C1", "controlled": "C0"}
+# a field of many cells is drawn in at most this many blocks along each axis, each block showing
+# its largest value (block_max): a rut a few cells wide would otherwise drop out of the picture
+# when the image is scaled down to the panel
+PASSES_MAP_BLOCKS = 400
+RISK_MAP_BLOCKS = 100  # risk_map_png's panels are about 190 pixels high
+
+
+def block_max(a, max_blocks: int):
+    """``a`` (nx, ny, ...) reduced to at most max_blocks blocks along each of its first two axes,
+    each block of f x f cells (f = ceil(max(nx, ny) / max_blocks)) its largest value; returns
+    (the reduced array, f). f = 1 returns ``a`` itself."""
+    a = np.asarray(a)
+    nx, ny = a.shape[:2]
+    f = max(1, int(np.ceil(max(nx, ny) / max_blocks)))
+    if f == 1:
+        return a, 1
+    px, py = (-nx) % f, (-ny) % f
+    low = np.zeros((), dtype=a.dtype) if a.dtype == bool else np.array(np.iinfo(a.dtype).min if a.dtype.kind in "iu"
+                                                                       else -np.inf, dtype=a.dtype)
+    padded = np.pad(a, [(0, px), (0, py)] + [(0, 0)] * (a.ndim - 2), constant_values=low)
+    shape = (padded.shape[0] // f, f, padded.shape[1] // f, f, *a.shape[2:])
+    return padded.reshape(shape).max(axis=(1, 3)), f
+
+
+def sinkage_map_png(z_m, extent_m, title: str) -> bytes:
+    """The sinkage z (nx, ny) [m] of the whole field, top view, x along the first axis."""
+    z = np.asarray(z_m, dtype=float)
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    im = ax.imshow(1e3 * z.T, origin="lower", extent=extent_m, aspect="equal", cmap="viridis",
+                   interpolation="antialiased")
+    fig.colorbar(im, ax=ax, label="sinkage [mm]", shrink=0.85)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"final sinkage: {title}")
+    return png_bytes(fig)
+
+
+def passes_map_png(counts, extent_m, title: str) -> bytes:
+    """The number of passes that loaded each cell (nx, ny), untrafficked cells white (a large field
+    in blocks of cells, each its largest count: :func:`block_max`)."""
+    c, f = block_max(np.asarray(counts), PASSES_MAP_BLOCKS)
+    top = max(int(c.max()), 1)
+    colours = ["#ffffff", *plt.get_cmap("magma_r")(np.linspace(0.15, 0.95, top))]
+    cmap = ListedColormap(colours)
+    norm = BoundaryNorm(np.arange(-0.5, top + 1.5), cmap.N)
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    im = ax.imshow(c.T, origin="lower", extent=extent_m, aspect="equal", cmap=cmap, norm=norm,
+                   interpolation="nearest")
+    cb = fig.colorbar(im, ax=ax, label="passes per cell", shrink=0.85)
+    cb.set_ticks(range(0, top + 1, max(1, (top + 1) // 10)))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    frac = float((np.asarray(counts) > 0).mean())
+    ax.set_title(f"passes per cell: {title} ({100 * frac:.1f} % of the field trafficked)"
+                 + (f"\nblocks of {f} x {f} cells, each its largest count" if f > 1 else ""), fontsize=10)
+    return png_bytes(fig)
+
+
+def comparison_png(figures: dict) -> bytes:
+    """The patterns side by side: figures {pattern: field figures (studies.field.field_figures)}.
+    Panels: trafficked area fraction; passes-per-cell histogram of the trafficked cells; mean and
+    largest rut depth; the field's area fraction at medium and high risk against depth."""
+    names = list(figures)
+    fig, axes = plt.subplots(2, 2, figsize=(11, 8))
+    ax = axes[0, 0]
+    fr = [100 * figures[n]["trafficked_area_fraction"] for n in names]
+    ax.bar(names, fr, color=[PATTERN_COLOURS.get(n, "C2") for n in names])
+    for i, v in enumerate(fr):
+        ax.text(i, v, f"{v:.1f} %", ha="center", va="bottom")
+    ax.set_ylabel("trafficked area [% of the field]")
+    ax.set_title("area trafficked at least once")
+    ax = axes[0, 1]
+    width = 0.8 / max(len(names), 1)
+    for k, n in enumerate(names):
+        h = np.asarray(figures[n]["passes_per_cell_histogram"], dtype=float)[1:]
+        area = h * 100.0 / max(figures[n]["field_cells"], 1)
+        ax.bar(np.arange(1, h.size + 1) + (k - 0.5 * (len(names) - 1)) * width, area, width,
+               label=n, color=PATTERN_COLOURS.get(n, "C2"))
+    top = max(len(figures[n]["passes_per_cell_histogram"]) - 1 for n in names)
+    ax.set_xticks(range(1, top + 1))
+    ax.set_xlabel("passes per cell")
+    ax.set_ylabel("area [% of the field]")
+    ax.set_title("passes per cell (trafficked cells)")
+    ax.legend()
+    ax = axes[1, 0]
+    x = np.arange(2)
+    for k, n in enumerate(names):
+        v = [figures[n]["rut_mean_depth_mm"], figures[n]["rut_max_depth_mm"]]
+        ax.bar(x + (k - 0.5 * (len(names) - 1)) * width, v, width, label=n, color=PATTERN_COLOURS.get(n, "C2"))
+    ax.set_xticks(x, ["mean over the trafficked cells", "largest"])
+    ax.set_ylabel("rut depth [mm]")
+    ax.set_title("rut depth after all passes")
+    ax.legend()
+    ax = axes[1, 1]
+    shown = False
+    for n in names:
+        f = figures[n]
+        d = f.get("subsoil_depths_m")
+        if not d:
+            continue
+        shown = True
+        for name, style in zip(RISK_NAMES[1:], ("--", "-"), strict=True):
+            ax.plot([100 * v for v in f[f"risk_fraction_of_field_{name}"]], d, style, marker="o",
+                    color=PATTERN_COLOURS.get(n, "C2"), label=f"{n}: {name} risk")
+    if shown:
+        if not any(v for n in names for r in RISK_NAMES[1:] for v in figures[n].get(f"risk_fraction_of_field_{r}", [])):
+            ax.text(0.5, 0.5, "no cell above low risk at any depth", transform=ax.transAxes, ha="center")
+        ax.invert_yaxis()
+        ax.set_xlabel("area [% of the field]")
+        ax.set_ylabel("depth [m]")
+        ax.legend(fontsize=8)
+        ax.axvline(0, color=RISK_COLOURS[0], lw=0.8)
+    ax.set_title("subsoil compaction risk by depth (Terranimo classes)")
+    fig.suptitle("traffic patterns compared")
+    return png_bytes(fig)
