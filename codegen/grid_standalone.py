@@ -31,7 +31,7 @@ import numpy as np
 from symtrack.foundations.errors import SimulationError
 from symtrack.native.cache import REPO_GENERATED, cache_root, find_compiler
 
-from .standalone import _arr, _c
+from .standalone import c_array, c_literal
 
 SCENARIO = "validation_grid"
 MAIN_C = Path(__file__).resolve().parent / "grid_standalone_main.c"
@@ -85,27 +85,28 @@ def render(scratch: Path) -> dict[str, bytes]:
         "#define GRID_VALIDATION_H",
         f'#define GV_SCENARIO "{sc.name}"',
         f"#define GV_NX {g.shape[0]}LL", f"#define GV_NY {g.shape[1]}LL", f"#define GV_M {world.M}LL",
-        f"#define GV_X0 {_c(g.origin_m[0])}", f"#define GV_Y0 {_c(g.origin_m[1])}", f"#define GV_DX {_c(g.cell_m)}",
+        f"#define GV_X0 {c_literal(g.origin_m[0])}", f"#define GV_Y0 {c_literal(g.origin_m[1])}",
+        f"#define GV_DX {c_literal(g.cell_m)}",
         f"#define GV_NA {NA}", f"#define GV_NW {NW}", f"#define GV_NGEO {NGEO}",
         f"#define GV_N_PV {state.pv.size}LL", f"#define GV_N_SUMS {state.n_sums}LL",
         f"#define GV_NY_OUT {state.ny_out}LL", f"#define GV_WORK {state.work.size}LL",
         f"#define GV_CELL_SUBSTEPS {settings.cell_substeps}LL",
         f"#define GV_ENTRY_SUBSTEPS {max(settings.entry_substeps, settings.cell_substeps)}LL",
         f"#define GV_POWER_MODE {POWER_MODES.index(settings.power)}LL",
-        f"#define GV_PAD {_c(state.pad)}", f"#define GV_RELEASE_RATE {_c(state.release_rate)}",
-        f"#define GV_AREAL_MASS {_c(state.areal_mass)}", f"#define GV_DAMPING {_c(state.damping)}",
-        f"#define GV_GAMMA {_c(SDIRK_GAMMA)}", f"#define GV_ENTRY_FRACTION {_c(settings.entry_fraction)}",
-        f"#define GV_START_X {_c(st.x_m)}", f"#define GV_START_Y {_c(st.y_m)}",
-        f"#define GV_START_YAW {_c(np.radians(st.yaw_deg))}",
+        f"#define GV_PAD {c_literal(state.pad)}", f"#define GV_RELEASE_RATE {c_literal(state.release_rate)}",
+        f"#define GV_AREAL_MASS {c_literal(state.areal_mass)}", f"#define GV_DAMPING {c_literal(state.damping)}",
+        f"#define GV_GAMMA {c_literal(SDIRK_GAMMA)}", f"#define GV_ENTRY_FRACTION {c_literal(settings.entry_fraction)}",
+        f"#define GV_START_X {c_literal(st.x_m)}", f"#define GV_START_Y {c_literal(st.y_m)}",
+        f"#define GV_START_YAW {c_literal(np.radians(st.yaw_deg))}",
         f"#define GV_SETTLE_STEPS {int(round(world.settings.settle_s / SETTLE_STEP_S))}LL",
-        f"#define GV_SETTLE_STEP_S {_c(SETTLE_STEP_S)}",
+        f"#define GV_SETTLE_STEP_S {c_literal(SETTLE_STEP_S)}",
         f"#define GV_N_STEPS {T.size}LL",
-        f"#define GV_STOP_DISTANCE_M {_c(run.stop_after_distance_m if run.stop_after_distance_m else -1.0)}",
-        f"#define GV_STOP_FROM_T_S {_c(te)}",
+        f"#define GV_STOP_DISTANCE_M {c_literal(run.stop_after_distance_m if run.stop_after_distance_m else -1.0)}",
+        f"#define GV_STOP_FROM_T_S {c_literal(te)}",
     ]
     text = "\n".join(lines) + "\n"
-    text += _arr("gv_pv", state.pv) + _arr("gv_geo", state.geo) + _arr("gv_soil_veh", state.soil_veh)
-    text += _arr("gv_T", T) + _arr("gv_U", U.ravel())
+    text += c_array("gv_pv", state.pv) + c_array("gv_geo", state.geo) + c_array("gv_soil_veh", state.soil_veh)
+    text += c_array("gv_T", T) + c_array("gv_U", U.ravel())
     names = ", ".join(f'"{n}"' for n in fns.output_names)
     text += f"static const char *gv_output_names[{len(fns.output_names)}] = {{{names}}};\n"
     text += "#endif\n"

@@ -30,14 +30,14 @@ SUMMARY_STATES = ("x_m", "y_m", "yaw_rad", "u_m_s", "v_m_s", "shear_left_m", "sh
                   "sinkage_idler_right_m")
 
 
-def _c(v) -> str:
+def c_literal(v) -> str:
     """A double literal that round-trips (always with a '.' or an exponent)."""
     s = f"{float(v):.17g}"
     return s if any(c in s for c in ".enN") else s + ".0"
 
 
-def _arr(name: str, values) -> str:
-    body = ",\n  ".join(", ".join(_c(v) for v in values[i:i + 4]) for i in range(0, len(values), 4))
+def c_array(name: str, values) -> str:
+    body = ",\n  ".join(", ".join(c_literal(v) for v in values[i:i + 4]) for i in range(0, len(values), 4))
     return f"static const double {name}[{len(values)}] = {{\n  {body}\n}};\n"
 
 
@@ -64,22 +64,22 @@ def validation_header(model, gen, scenario_name: str = "validation") -> bytes:
         f"#define SYM_NZ {model.z.numel()}",
         f"#define SYM_NU {model.u.numel()}",
         f"#define SYM_NP {len(p)}",
-        f"#define SYM_DURATION_S {_c(run.duration_s)}",
-        f"#define SYM_OUTPUT_DT_S {_c(run.output_dt_s)}",
-        f"#define SYM_FIXED_STEP_S {_c(run.fixed_step_s)}",
+        f"#define SYM_DURATION_S {c_literal(run.duration_s)}",
+        f"#define SYM_OUTPUT_DT_S {c_literal(run.output_dt_s)}",
+        f"#define SYM_FIXED_STEP_S {c_literal(run.fixed_step_s)}",
         f"#define SYM_HAS_STOP_DISTANCE {int(run.stop_after_distance_m is not None)}",
-        f"#define SYM_STOP_DISTANCE_M {_c(run.stop_after_distance_m or 0.0)}",
-        f"#define SYM_STOP_FROM_T_S {_c(te)}",
+        f"#define SYM_STOP_DISTANCE_M {c_literal(run.stop_after_distance_m or 0.0)}",
+        f"#define SYM_STOP_FROM_T_S {c_literal(te)}",
         f'#define SYM_STOP_EVENT "{run.stop_distance_event or ""}"',
         f"#define SYM_N_TORQUE {len(sc.torque)}",
     ]
     for n in SUMMARY_STATES:
         lines.append(f"#define SYM_I_{n.upper()} {model.state_index(n)}")
     text = "\n".join(lines) + "\n"
-    text += _arr("sym_p", p) + _arr("sym_x0", x0) + _arr("sym_z0", z0)
-    text += _arr("sym_torque_t_s", [e.t_s for e in sc.torque])
-    text += _arr("sym_torque_left_N_m", [e.left_N_m for e in sc.torque])
-    text += _arr("sym_torque_right_N_m", [e.right_N_m for e in sc.torque])
+    text += c_array("sym_p", p) + c_array("sym_x0", x0) + c_array("sym_z0", z0)
+    text += c_array("sym_torque_t_s", [e.t_s for e in sc.torque])
+    text += c_array("sym_torque_left_N_m", [e.left_N_m for e in sc.torque])
+    text += c_array("sym_torque_right_N_m", [e.right_N_m for e in sc.torque])
     text += "#endif\n"
     return text.encode()
 

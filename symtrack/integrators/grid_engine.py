@@ -872,6 +872,7 @@ class TerrainEngine:
         substep count per step): the same as CVODES over the pool to the tolerance tested."""
         w, s = self.world, self.state
         w.z_at_pass_end = w.storage.z.copy()
+        w.peak_active = s.peak_active  # the World's figures report it
         if s.n_act:
             n = max(self.settings.entry_substeps, self.settings.cell_substeps)
             rc, settled, e = self.kernel.lift(s.ch_p.copy(), dt_s, LIFT_TIME_S, n, max_steps)
