@@ -7,8 +7,8 @@ writes the JSON (the load average before and after included). The parts of a pat
 
 - ``set_down_s``: ``plant.start`` of every pass (the set-down at the static sinkage and the
   settling of ``terrain.settle_s``, in the engine);
-- ``lift_off_s``: ``plant.finish`` of every pass (``World.end_pass``: the cells-only CVODES over all
-  M x M channels, in Python);
+- ``lift_off_s``: ``plant.finish`` of every pass (``TerrainEngine.end_pass``: the active cells
+  unloaded in the engine's C);
 - ``time_loop_s``: the rest of each pass's ``loop.run`` (the engine's macro steps and the loop);
 - ``other_s``: between the passes (the per-pass masks and records, the figures at the end);
 - outside the passes: ``build_s`` (the World and the engine: construction, the compiled library
