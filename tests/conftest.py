@@ -21,3 +21,58 @@ def run_once(scenario, model=None, **plant_kw):
     from symtrack.simulation.plants import make_plant
 
     return loop.run(scenario, make_plant(scenario, model=model, **plant_kw))
+
+
+# ---- the parallel run (pytest-xdist, `-n 2 --dist loadfile` in pyproject.toml) --------------------------
+# Each test file runs whole on one worker, in file order, as in a serial run (its module-scoped
+# fixtures, the expensive worlds, runs and sweeps, are built once). The files start slowest first
+# (longest processing time first: no long file is left to start last on one worker while the other
+# is idle). SLOW_S are seconds measured in a serial run on 2 cores (setup + call, --durations): an
+# ordering hint only; a test not listed counts as 1 s.
+SLOW_S = {
+    "tests/test_terrain_examples.py::test_bench_terrain_quick": 63,
+    "tests/test_terrain_pool.py::test_pool_and_brute_force_give_the_same_vehicle_motion": 58,
+    "tests/test_terrain_pool_passes.py::test_two_passes_equal_one_pass_save_load_and_a_second_pass": 53,
+    "tests/test_compiled.py::test_compiled_functions_agree_with_interpreted": 29,
+    "tests/test_control_rti.py::test_compiled_mpc_cached_across_processes[ipopt-1]": 28,
+    "tests/test_sweep.py::test_a_failing_run_is_recorded_and_a_rerun_redoes_only_it": 26,
+    "tests/test_terrain_engine.py::test_pool_equals_one_channel_per_cell_and_brute_force": 23,
+    "tests/test_terrain_cli.py::test_simulate_with_terrain_out_and_in": 23,
+    "tests/test_control_examples.py::test_jit_build_runs": 22,
+    "tests/test_terrain_compiled.py::test_grid_rosenbrock_matches_idas": 19,
+    "tests/test_terrain_engine.py::test_engine_matches_idas_on_a_small_field": 18,
+    "tests/test_control_grid.py::test_grid_plant_with_the_compiled_rosenbrock_matches_idas": 18,
+    "tests/test_cli.py::test_simulate_writes_summary_trajectory_scenario_and_plots": 16,
+    "tests/test_readme.py::test_readme_api_example_runs_and_agrees_with_the_cli": 15,
+    "tests/test_first_hour.py::test_a_run_that_leaves_the_field_keeps_what_it_computed": 15,
+    "tests/test_terrain_engine.py::test_one_cell_converges_under_step_refinement": 13,
+    "tests/test_terrain_compiled.py::test_grid_code_is_compiled": 13,
+    "tests/test_control_grid.py::test_grid_closed_loop_runs_without_failed_solves": 13,
+    "tests/test_compiled.py::test_standalone_program_reproduces_python": 11,
+    "tests/test_sweep.py::test_grid_sweep_writes_a_row_and_a_run_folder_per_combination": 10,
+    "tests/test_control_rti.py::test_ctrl_c_stops_symtrack_mpc": 9,
+    "tests/test_control_rti.py::test_compiled_mpc_cached_across_processes[rti-4]": 9,
+    "tests/test_simulate.py::test_cvodes_and_idas_match_a_fine_fixed_step_reference": 8,
+    "tests/test_control_grid.py::test_grid_plant_continues_a_saved_terrain": 8,
+    "tests/test_sweep.py::test_ctrl_c_cancels_the_runs_in_flight_and_keeps_the_finished_ones": 7,
+    "tests/test_lateral.py::test_sharp_turn_trajectory_agrees_with_a_64_by_5_quadrature_within_one_percent": 7,
+    "tests/test_control_mpc.py::test_closed_loop_straight_offset": 7,
+    "tests/test_control_grid.py::test_terrain_in_takes_the_file_geometry": 7,
+    "tests/test_sweep.py::test_mpc_sweep_on_a_scheduler_and_workers_started_here": 6,
+    "tests/test_first_hour.py::test_ctrl_c_stops_simulate_with_exit_130_and_writes_nothing": 6,
+    "tests/test_control_mpc.py::test_plant_with_another_state_layout_needs_x0": 6,
+    "tests/test_sweep.py::test_a_killed_worker_has_its_run_redone_on_another": 5,
+}
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    if not hasattr(config, "workerinput"):
+        return  # a serial run (or xdist's controller): the collection order stays
+    cost, first = {}, {}
+    for k, item in enumerate(items):
+        f = item.nodeid.split("::")[0]
+        cost[f] = cost.get(f, 0.0) + SLOW_S.get(item.nodeid, 1.0)
+        first.setdefault(f, k)
+    # the slowest file first; within a file (and among equals) the collection order
+    items.sort(key=lambda it: (-cost[it.nodeid.split("::")[0]], first[it.nodeid.split("::")[0]]))

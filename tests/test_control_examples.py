@@ -37,7 +37,7 @@ def test_mpc_example(tmp_path):
     assert (tmp_path / "summary.json").exists()
 
 
-def test_jit_build_runs(tmp_path):
+def test_jit_build_runs(tmp_path, monkeypatch):
     import dataclasses
 
     from symtrack.control import closedloop, scenario
@@ -46,6 +46,10 @@ def test_jit_build_runs(tmp_path):
     sc = scenario.load("headland_uturn")
     sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, solver="fatrop", jit=True, horizon_steps=20,
                                                          jit_dir=str(tmp_path / "jit")))
+    # a working directory of this test's own: the repository's is shared with the tests that run
+    # at the same time on the other worker (a first Hypothesis run creates .hypothesis/ there)
+    (tmp_path / "cwd").mkdir()
+    monkeypatch.chdir(tmp_path / "cwd")
     before = set(Path.cwd().iterdir())
     res = closedloop.run(sc, model=SystemModel(), max_steps=3)
     assert res.summary["jit"] and res.summary["failed_solves"] == 0

@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -179,11 +180,33 @@ def test_ctrl_c_stops_simulate_with_exit_130_and_writes_nothing(tmp_path):
                           "--set", "run.stop_after_distance_m=none"],
                          stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # a terminal's default
-    time.sleep(6.0)  # model built, the time loop running
-    p.send_signal(signal.SIGINT)
-    t0 = time.perf_counter()
-    _, err = p.communicate(timeout=60)
-    print(f"stopped {time.perf_counter() - t0:.2f} s after SIGINT")
+    # wait for the first progress line ("validation:   0.0% after ..."): the model is built and the
+    # time loop running (a fixed sleep was too short on a loaded machine, e.g. the parallel suite)
+    lines = []
+
+    def read():
+        for line in p.stderr:
+            lines.append(line)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        deadline = time.monotonic() + 120
+        while not any(line.startswith("validation:") for line in list(lines)) and time.monotonic() < deadline:
+            assert p.poll() is None, "".join(lines)
+            time.sleep(0.05)
+        time.sleep(1.0)  # well inside the loop
+        p.send_signal(signal.SIGINT)
+        t0 = time.perf_counter()
+        p.wait(timeout=60)
+        print(f"stopped {time.perf_counter() - t0:.2f} s after SIGINT")
+        reader.join(10)
+        p.stdout.read()
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    err = "".join(lines)
     assert p.returncode == 130, err
     # (CasADi itself prints that IDAS's residual was interrupted; symtrack reports no failure)
     assert "symtrack: interrupted" in err and "Traceback" not in err and "symtrack: error" not in err

@@ -1,16 +1,12 @@
-"""The channel pool against brute force (every cell of a small field integrated as its own state),
-and the bit-exact continuation of a terrain through a file."""
-
-import dataclasses
+"""The channel pool against brute force (every cell of a small field integrated as its own state);
+the bit-exact continuation of a terrain through a file is in test_terrain_pool_passes.py (a file
+of its own, so that a parallel run can give it to the other worker)."""
 
 import numpy as np
 import pytest
 
-import symtrack
 from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.simulation.scenario import scenario_from_dict
-from symtrack.terrain.settings import settings_from_dict
-from symtrack.terrain.storage import Terrain
 
 # A 12 m x 4 m field at 0.25 m (768 cells); both sprockets at 2000 N m for 0.5 s, then the left
 # one idle: the vehicle starts from rest, accelerates and begins to turn.
@@ -55,23 +51,3 @@ def test_pool_and_brute_force_give_the_same_terrain(both):
     assert np.max(np.abs(z_pool - brute.z)) < SINKAGE_TOL_M
     # the pool simulated far fewer cells at a time than the field has
     assert pool.terrain["terrain_peak_active_cells"] < world.grid.n_cells / 4
-
-
-def test_two_passes_equal_one_pass_save_load_and_a_second_pass(tmp_path):
-    d = dict(SMALL, run={"duration_s": 5.0, "output_dt_s": 0.01, "integrator": "idas",
-                         "stop_after_distance_m": 0.3},
-             terrain=dict(SMALL["terrain"], passes=2))
-    sc2 = scenario_from_dict(d)
-    two = symtrack.simulate(sc2)
-    res2, figs2 = two.runs, two.summary["passes"]
-    sc1 = dataclasses.replace(sc2, terrain=settings_from_dict(dict(d["terrain"], passes=1)))
-    one = symtrack.simulate(sc1)
-    f = tmp_path / "after_pass_1.npz"
-    one.terrain.save(f)
-    again = symtrack.simulate(sc1, terrain=Terrain.load(f))
-    for a, b in zip(two.terrain.arrays().values(), again.terrain.arrays().values(), strict=True):
-        assert np.array_equal(a, b)  # to the last bit
-    assert np.array_equal(res2[-1].X, again.runs[0].X) and np.array_equal(res2[-1].Y, again.runs[0].Y)
-    # the second pass over the compacted soil adds less sinkage and meets less resistance
-    assert figs2[1]["new_sinkage_mean_mm"] < figs2[0]["new_sinkage_mean_mm"]
-    assert figs2[1]["compaction_resistance_mean_N"] < figs2[0]["compaction_resistance_mean_N"]

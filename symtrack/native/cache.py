@@ -7,6 +7,8 @@ of :mod:`symtrack.native.generate`, hashes them (SHA-256 of the serialised Funct
 repository's ``generated/`` if its manifest has the same hash, or generated afresh (an installed
 package, or a model that differs from the committed sources), compiled with the C compiler
 (``$CC``, default ``cc``/``gcc``) and linked into the cache atomically (temporary name, rename).
+Processes that build the same entry at once (parallel test workers, sweep workers) take turns on
+a lock file beside it: the first compiles, the others find its library and compile nothing.
 
 Without a C compiler the module says so once (logging) and everything runs on CasADi's
 interpreter with the same Functions; with :func:`set_require_compiled` (``--require-compiled``)
@@ -152,9 +154,35 @@ class Library:
         return self.interpreted[self._name(short)]
 
 
+@contextlib.contextmanager
+def _build_lock(folder: Path):
+    """An exclusive lock on ``folder/.lock`` (flock; released when the holder exits or dies), so
+    that concurrent builds of one cache entry run one at a time; no lock where flock is missing
+    (the rename alone keeps the library whole)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        yield
+        return
+    with open(folder / ".lock", "a+b") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
 def compile_sources(sources: dict[str, bytes], out_so: Path, cc: str) -> None:
-    """Compile the .c files of sources into out_so, atomically."""
+    """Compile the .c files of sources into out_so, atomically (a temporary folder beside it, then
+    a rename); a process that finds out_so built by another while it waited compiles nothing."""
     out_so.parent.mkdir(parents=True, exist_ok=True)
+    with _build_lock(out_so.parent):
+        if out_so.exists():  # built by another process while this one waited for the lock
+            return
+        _compile(sources, out_so, cc)
+
+
+def _compile(sources: dict[str, bytes], out_so: Path, cc: str) -> None:
     build = Path(tempfile.mkdtemp(prefix=".build-", dir=out_so.parent))
     try:
         for name, data in sources.items():
