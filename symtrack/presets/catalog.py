@@ -124,7 +124,30 @@ def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
               "cell_damping_Pa_s_per_m": "#CELL_DAMPING_PA_S_PER_M",
               "elastic_stiffness_Pa_per_m": "#WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M",
               "unloading_stiffness_floor": "#UNLOADING_STIFFNESS_FLOOR"}
+    raw = {} if name.endswith(".toml") or kind == "vehicle" else soils.SOILS.get(name, {})
     for s in specs:
         src = sources.get(s.name) or base.get(s.name) or base.get(consts.get(s.name, ""), "") or base.get("*", "")
+        if s.default is not None and kind == "soil" and s.name not in raw and not sources.get(s.name):
+            src = f"the registry's default (symtrack/model/parameters.py): {_default_source(s.name)}"
         rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
     return rows
+
+
+def _default_source(name: str) -> str:
+    """The comment above the registry's default constant of a parameter (parameters.py)."""
+    from ..model import parameters
+
+    const = {"repeated_loading_exponent": "REPEATED_LOADING_EXPONENT_DEFAULT",
+             "stress_concentration_factor": "STRESS_CONCENTRATION_FACTOR_DEFAULT",
+             "precompression_stress_Pa": "PRECOMPRESSION_STRESS_DEFAULT_PA"}.get(name)
+    lines = inspect.getsource(parameters).splitlines()
+    for k, line in enumerate(lines):
+        if const and line.startswith(const):
+            notes = []
+            j = k - 1
+            while j >= 0 and lines[j].lstrip().startswith("#"):
+                notes.insert(0, lines[j].lstrip("# ").strip())
+                j -= 1
+            tail = line.split("#", 1)[1].strip() if "#" in line else ""
+            return " ".join(notes + ([tail] if tail else []))
+    return ""
