@@ -211,8 +211,16 @@ class World:
             table = [(lab, {k: float(v) for k, v in sp.items()}) for lab, sp in zip(sm.labels, sm.soils, strict=True)]
             idx = soil_index(self.grid, sm)
             if st.soil_table or st.soil_index.any():
-                if not (np.array_equal(idx, st.soil_index)
-                        and [v for _, v in table] == [v for _, v in st.soil_table][:len(table)]):
+                # the same soil in every cell (compared by the soils' parameters, not their numbering:
+                # the terrain's table was folded when it was made)
+                ids: dict = {}
+
+                def cell_soils(index, tab):
+                    keys = [tuple(float(params[n]) for n in SOIL_PARAM_NAMES)]
+                    keys += [tuple(float(v[n]) for n in SOIL_PARAM_NAMES) for _, v in tab]
+                    return np.array([ids.setdefault(k, len(ids)) for k in keys])[index]
+
+                if not np.array_equal(cell_soils(idx, table), cell_soils(st.soil_index, st.soil_table)):
                     raise ScenarioError("the terrain has a soil map of its own that differs from the scenario's "
                                         "[terrain.soil_map]; leave the soil map out to continue the terrain's")
             else:
