@@ -47,10 +47,12 @@ def field_command(args) -> int:
 
 def add_parser(sub) -> None:
     """Register ``symtrack field`` on the argparse subparsers of symtrack.cli."""
-    from importlib import resources
+    from pathlib import Path
 
-    names = sorted(p.name[:-5] for p in resources.files("symtrack.studies.fields").iterdir()
-                   if p.name.endswith(".toml"))
+    # the built-in studies' files, listed without importing symtrack.studies (it imports the plots,
+    # and `symtrack --help` stays free of heavy packages: tests/test_first_hour.py)
+    fields = Path(__file__).resolve().parent.parent / "studies" / "fields"
+    names = sorted(p.name[:-5] for p in fields.iterdir() if p.name.endswith(".toml"))
     fp = sub.add_parser(
         "field", help="a whole-field traffic study: random against controlled traffic (docs/studies.md)",
         description="Work a field of the grid terrain in parallel straight passes (the vehicle lifted off at a "
