@@ -23,8 +23,9 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 2), one NumPy array per key:
   was made with. Loading a file into a scenario with a different soil is an error.
 
 Values are stored bit for bit, compressed (zip deflate): the default field of a million cells,
-mostly untouched, takes well under its 43 MB in memory (43 bytes per cell: 5 float64, the int8
-phase and the uint16 cycle count).
+mostly untouched, takes well under its 60 MB in memory (60 bytes per cell: 5 float64, the int8
+phase, the uint16 cycle count, the uint8 soil index and 4 float32 subsoil stresses at the
+default depths).
 """
 
 from __future__ import annotations
@@ -98,7 +99,7 @@ class Terrain:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in self._all()) + self.sigma_max.nbytes
+        return sum(a.nbytes for a in self._all()) + self.sigma_max.nbytes + self.soil_index.nbytes
 
     def arrays(self) -> dict:
         out = dict(zip(STORAGE_FIELDS, self._all(), strict=True))

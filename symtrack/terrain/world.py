@@ -6,8 +6,9 @@ Seven values per cell, as the seed's INFO_IN / INFO_OUT: sinkage z [m], sinkage 
 history z_max [m] and p_max [Pa] (float64: the integrator's values are stored to the last
 bit, which the bit-exact continuation needs), the phase flag (int8, see
 :data:`~symtrack.terrain.channels.PHASE_VIRGIN`), and the cycle law's z_off [m] (float64) and
-load-cycle count (uint16) (symtrack/model/cell.py). 43 bytes per cell: 43 MB for the default
-million-cell field. Cell (i, j) has its centre at world (x0 + (i + 1/2) dx, y0 + (j + 1/2) dx).
+load-cycle count (uint16) (symtrack/model/cell.py), the soil index (uint8, a soil map) and the
+subsoil stress record (float32 per depth): 60 bytes per cell with the four default depths, 60 MB
+for the default million-cell field. Cell (i, j) has its centre at world (x0 + (i + 1/2) dx, y0 + (j + 1/2) dx).
 
 Per macro step (:meth:`World.before_step`, :meth:`World.after_step`)
 -------------------------------------------------------------------
