@@ -19,8 +19,6 @@ distance stop, and writes every step's vehicle state and outputs as CSV.
 
 from __future__ import annotations
 
-import hashlib
-import os
 import subprocess
 import tempfile
 from pathlib import Path
@@ -29,9 +27,9 @@ import casadi as ca
 import numpy as np
 
 from symtrack.foundations.errors import SimulationError
-from symtrack.native.cache import REPO_GENERATED, cache_root, find_compiler
+from symtrack.native.cache import REPO_GENERATED
 
-from .standalone import c_array, c_literal
+from .standalone import build_program, c_array, c_literal
 
 SCENARIO = "validation_grid"
 MAIN_C = Path(__file__).resolve().parent / "grid_standalone_main.c"
@@ -118,26 +116,8 @@ def build(src_dir: Path | None = None) -> Path:
     """Compile the grid standalone program from the generated sources in src_dir (default: the
     repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
     src = Path(src_dir) if src_dir else REPO_GENERATED
-    missing = [n for n in FILES if not (src / n).exists()]
-    if missing:
-        raise SimulationError(f"{src} lacks {', '.join(missing)}: run python -m codegen --out {src}")
-    h = hashlib.sha256(MAIN_C.read_bytes())
-    for p in [*(src / n for n in FILES), NATIVE / "grid_engine.c", NATIVE / "subsoil.h"]:
-        h.update(p.read_bytes())
-    binary = cache_root() / f"grid-standalone-{h.hexdigest()[:16]}" / "symtrack_grid_standalone"
-    if binary.exists():
-        return binary
-    cc = find_compiler()
-    if cc is None:
-        raise SimulationError("no C compiler found (looked for $CC, cc, gcc): cannot build the grid standalone program")
-    binary.parent.mkdir(parents=True, exist_ok=True)
-    tmp = binary.parent / f".symtrack_grid_standalone.{os.getpid()}.tmp"
-    cmd = [cc, *CFLAGS, f"-I{src}", f"-I{NATIVE}", str(MAIN_C), "-o", str(tmp), "-lm"]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode != 0:
-        raise SimulationError(f"building the grid standalone program failed:\n{' '.join(cmd)}\n{res.stderr[-2000:]}")
-    os.replace(tmp, binary)
-    return binary
+    hashed = [*(src / n for n in FILES), NATIVE / "grid_engine.c", NATIVE / "subsoil.h"]
+    return build_program("grid_standalone", MAIN_C, src, list(FILES), hashed, CFLAGS, [src, NATIVE])
 
 
 def run(binary: Path, out_csv: Path | None = None) -> np.ndarray:

@@ -46,6 +46,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .standalone import c_array, c_literal
+
 log = logging.getLogger("symtrack.codegen.mpc")
 
 MAIN_C = Path(__file__).resolve().parent / "mpc_main.c"
@@ -175,20 +177,6 @@ def rti_functions(mpc) -> list[ca.Function]:
 
 
 # ---------------------------------------------------------------------------------------- numbers
-def _c(v) -> str:
-    s = f"{float(v):.17g}"
-    return s if any(ch in s for ch in ".enN") else s + ".0"
-
-
-def _arr(name: str, values, ctype: str = "double") -> str:
-    values = list(values)
-    fmt = _c if ctype == "double" else (lambda v: str(int(v)))
-    if not values:  # C has no empty arrays
-        return f"static const {ctype} {name}[1] = {{0}};\n"
-    body = ",\n  ".join(", ".join(fmt(v) for v in values[i:i + 6]) for i in range(0, len(values), 6))
-    return f"static const {ctype} {name}[{len(values)}] = {{\n  {body}\n}};\n"
-
-
 @dataclasses.dataclass
 class Problem:
     """An MPC scenario set up for the C closed loop: the scenario, the model, the RTI controller
@@ -258,35 +246,35 @@ def scenario_header(pb: Problem) -> str:
         f"#define MPC_NCOL {1 + mpc.nxa + mpc.nu}",
         f"#define MPC_NP {len(mpc.p_model)}",
         f"#define MPC_NCELL {len(mpc.cell_names)}",
-        f"#define MPC_DT_S {_c(s.sample_time_s)}",
-        f"#define MPC_DURATION_S {_c(sc.run.duration_s)}",
+        f"#define MPC_DT_S {c_literal(s.sample_time_s)}",
+        f"#define MPC_DURATION_S {c_literal(sc.run.duration_s)}",
         f"#define MPC_MAX_SAMPLES {max_samples}",
-        f"#define MPC_MAX_DEFECT {_c(s.rti_max_defect)}",
+        f"#define MPC_MAX_DEFECT {c_literal(s.rti_max_defect)}",
         f"#define MPC_HALVINGS {s.rti_step_halvings}",
-        f"#define MPC_TORQUE_SCALE_N_M {_c(1000.0)}",
-        f"#define MPC_TWO_PI {_c(2 * math.pi)}",
+        f"#define MPC_TORQUE_SCALE_N_M {c_literal(1000.0)}",
+        f"#define MPC_TWO_PI {c_literal(2 * math.pi)}",
         f"#define PLANT_NX {model.nx}",
         f"#define PLANT_NZ {model.z.numel()}",
         f"#define PLANT_NU {model.u.numel()}",
-        f"#define PLANT_FIXED_STEP_S {_c(fixed_step)}",
+        f"#define PLANT_FIXED_STEP_S {c_literal(fixed_step)}",
         f"#define PLANT_CHUNK {min(CHUNK_SIZES)}",
         f"#define PLANT_I_X_M {names.index('x_m')}",
         f"#define PLANT_I_Y_M {names.index('y_m')}",
         f"#define PLANT_I_YAW_RAD {names.index('yaw_rad')}",
         f"#define PATH_N {len(path.s)}",
-        f"#define PATH_LENGTH_M {_c(path.length_m)}",
-        f"#define PATH_WINDOW_LO_M {_c(-3.0)}",
-        f"#define PATH_WINDOW_HI_M {_c(12.0)}",
+        f"#define PATH_LENGTH_M {c_literal(path.length_m)}",
+        f"#define PATH_WINDOW_LO_M {c_literal(-3.0)}",
+        f"#define PATH_WINDOW_HI_M {c_literal(12.0)}",
     ]
     text = "\n".join(lines) + "\n"
-    text += _arr("mpc_sx", mpc.sx) + _arr("mpc_p", mpc.p_model)
-    text += _arr("mpc_pred_index", [names.index(n) for n in mpc.pred_names], "int")
-    text += _arr("mpc_cell_index", [names.index(n) for n in mpc.cell_names], "int")
-    text += _arr("plant_p", model.param_vector(sc.params)) + _arr("plant_x0", pb.x0) + _arr("plant_u0", pb.u0)
-    text += _arr("mpc_w_cold", pb.w_cold)
+    text += c_array("mpc_sx", mpc.sx) + c_array("mpc_p", mpc.p_model)
+    text += c_array("mpc_pred_index", [names.index(n) for n in mpc.pred_names], "int")
+    text += c_array("mpc_cell_index", [names.index(n) for n in mpc.cell_names], "int")
+    text += c_array("plant_p", model.param_vector(sc.params)) + c_array("plant_x0", pb.x0) + c_array("plant_u0", pb.u0)
+    text += c_array("mpc_w_cold", pb.w_cold)
     for nm, arr in (("path_s", path.s), ("path_x", path.x), ("path_y", path.y), ("path_psi", path.psi),
                     ("path_kappa", path.kappa), ("path_speed", path.speed)):
-        text += _arr(nm, arr)
+        text += c_array(nm, arr)
     return text + "#endif\n"
 
 

@@ -36,9 +36,14 @@ def c_literal(v) -> str:
     return s if any(c in s for c in ".enN") else s + ".0"
 
 
-def c_array(name: str, values) -> str:
-    body = ",\n  ".join(", ".join(c_literal(v) for v in values[i:i + 4]) for i in range(0, len(values), 4))
-    return f"static const double {name}[{len(values)}] = {{\n  {body}\n}};\n"
+def c_array(name: str, values, ctype: str = "double") -> str:
+    """A static const C array of doubles (round-trip literals) or of an integer type."""
+    values = list(values)
+    fmt = c_literal if ctype == "double" else (lambda v: str(int(v)))
+    if not values:  # C has no empty arrays
+        return f"static const {ctype} {name}[1] = {{0}};\n"
+    body = ",\n  ".join(", ".join(fmt(v) for v in values[i:i + 4]) for i in range(0, len(values), 4))
+    return f"static const {ctype} {name}[{len(values)}] = {{\n  {body}\n}};\n"
 
 
 def validation_header(model, gen, scenario_name: str = "validation") -> bytes:
@@ -87,32 +92,41 @@ def validation_header(model, gen, scenario_name: str = "validation") -> bytes:
 MAIN_C = Path(__file__).resolve().parent / "standalone_main.c"
 
 
-def build_standalone(src_dir: Path | None = None, prefix: str = "homogeneous") -> Path:
-    """Compile the standalone program from the generated sources in src_dir (default: the
-    repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
-
-    src = Path(src_dir) if src_dir else REPO_GENERATED
-    names = [f"{prefix}_{FIXED_STEP}.c", f"{prefix}_{FIXED_STEP}.h", f"{prefix}_validation.h"]
-    missing = [n for n in names if not (src / n).exists()]
+def build_program(stem: str, main_c: Path, src: Path, required: list[str], hashed: list[Path], cflags,
+                  include_dirs: list[Path], extra_c: list[Path] = ()) -> Path:
+    """Compile a standalone C program (``main_c`` plus ``extra_c``, with ``include_dirs``) into the
+    cache, keyed by the hash of every input in ``hashed``; ``required``: the generated files of
+    ``src`` it needs (named in the error when missing). Returns the binary's path."""
+    missing = [n for n in required if not (src / n).exists()]
     if missing:
         raise SimulationError(f"{src} lacks {', '.join(missing)}: run python -m codegen --out {src}")
-    h = hashlib.sha256(MAIN_C.read_bytes())
-    for n in names:
-        h.update((src / n).read_bytes())
-    binary = cache_root() / f"standalone-{h.hexdigest()[:16]}" / "symtrack_standalone"
+    h = hashlib.sha256(main_c.read_bytes())
+    for p in hashed:
+        h.update(p.read_bytes())
+    binary = cache_root() / f"{stem.replace('_', '-')}-{h.hexdigest()[:16]}" / f"symtrack_{stem}"
     if binary.exists():
         return binary
     cc = find_compiler()
     if cc is None:
-        raise SimulationError("no C compiler found (looked for $CC, cc, gcc): cannot build the standalone program")
+        raise SimulationError(f"no C compiler found (looked for $CC, cc, gcc): cannot build the {stem} program")
     binary.parent.mkdir(parents=True, exist_ok=True)
-    tmp = binary.parent / f".symtrack_standalone.{os.getpid()}.tmp"
-    cmd = [cc, *STANDALONE_CFLAGS, f"-I{src}", str(MAIN_C), str(src / names[0]), "-o", str(tmp), "-lm"]
+    tmp = binary.parent / f".symtrack_{stem}.{os.getpid()}.tmp"
+    cmd = [cc, *cflags, *(f"-I{d}" for d in include_dirs), str(main_c), *(str(c) for c in extra_c), "-o", str(tmp),
+           "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode != 0:
-        raise SimulationError(f"building the standalone program failed:\n{' '.join(cmd)}\n{res.stderr[-2000:]}")
+        raise SimulationError(f"building the {stem} program failed:\n{' '.join(cmd)}\n{res.stderr[-2000:]}")
     os.replace(tmp, binary)
     return binary
+
+
+def build_standalone(src_dir: Path | None = None, prefix: str = "homogeneous") -> Path:
+    """Compile the standalone program from the generated sources in src_dir (default: the
+    repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
+    src = Path(src_dir) if src_dir else REPO_GENERATED
+    names = [f"{prefix}_{FIXED_STEP}.c", f"{prefix}_{FIXED_STEP}.h", f"{prefix}_validation.h"]
+    return build_program("standalone", MAIN_C, src, names, [src / n for n in names], STANDALONE_CFLAGS, [src],
+                         [src / names[0]])
 
 
 def run_standalone(binary: Path, repeats: int = 1) -> dict:

@@ -86,3 +86,30 @@ def pytest_collection_modifyitems(config, items):
         first.setdefault(f, k)
     # the slowest file first; within a file (and among equals) the collection order
     items.sort(key=lambda it: (-cost[it.nodeid.split("::")[0]], first[it.nodeid.split("::")[0]]))
+
+
+def two_passes_against_a_continued_pass(d: dict, tmp_path):
+    """The scenario document ``d`` (with a [terrain] section) run as two passes in one run, and as
+    one pass saved to a terrain file, loaded and driven again: asserts the second equals the
+    first run's second pass to the last bit (every storage array, the trajectory and outputs);
+    returns (two-pass result, continued result)."""
+    import dataclasses
+
+    import numpy as np
+
+    import symtrack
+    from symtrack.simulation.scenario import scenario_from_dict
+    from symtrack.terrain.settings import settings_from_dict
+    from symtrack.terrain.storage import Terrain
+
+    d = dict(d, terrain=dict(d["terrain"], passes=2))
+    sc2 = scenario_from_dict(d)
+    two = symtrack.simulate(sc2)
+    sc1 = dataclasses.replace(sc2, terrain=settings_from_dict(dict(d["terrain"], passes=1)))
+    f = tmp_path / "after_pass_1.npz"
+    symtrack.simulate(sc1).terrain.save(f)
+    again = symtrack.simulate(sc1, terrain=Terrain.load(f))
+    for a, b in zip(two.terrain.arrays().values(), again.terrain.arrays().values(), strict=True):
+        assert np.array_equal(a, b)  # to the last bit
+    assert np.array_equal(two.runs[-1].X, again.runs[0].X) and np.array_equal(two.runs[-1].Y, again.runs[0].Y)
+    return two, again

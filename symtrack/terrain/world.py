@@ -181,6 +181,7 @@ class World:
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
         self._history = self.terrain.fn["history"].map("history_all", "serial", n, [], [])
         self._entry = self.terrain.fn["entry"]
+        self._entry_maps: dict = {}
         # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
         # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
         self.soils = self._apply_soil_map(settings, params)
@@ -201,6 +202,12 @@ class World:
             raise ScenarioError("this field has a soil map (several soils): it runs on the terrain engine only "
                                 "(run.integrator = \"grid_fast\"); IDAS and the grid Rosenbrock take one soil")
         return SystemModel(self.opts, self.terrain)
+
+    def _entry_map(self, k: int) -> ca.Function:
+        """The entry Function mapped over k cells (built once per count: a step's new cells)."""
+        if k not in self._entry_maps:
+            self._entry_maps[k] = self._entry.map(k)
+        return self._entry_maps[k]
 
     def _apply_soil_map(self, settings, params) -> list[dict]:
         """The field's soils: a new field takes the scenario's soil map; a terrain that has one keeps
@@ -344,7 +351,7 @@ class World:
             hist = self.qc[ch][:, HIST_ROWS].T
             self.ch_soil[ch] = st.soil_index[new]
             soil = self.ch_soil[ch]
-            self.qc[ch, 6] = np.array(self._entry.map(ch.size)(
+            self.qc[ch, 6] = np.array(self._entry_map(ch.size)(
                 st.z[new][None, :], hist, st.cycles[new][None, :].astype(float), self.laws[:, soil],
                 self.betas[soil][None, :])).ravel()
             self.counted[ch] = False
