@@ -56,6 +56,7 @@ def render(scratch: Path) -> dict[str, bytes]:
         EngineSettings,
         EngineState,
         engine_functions,
+        window_substeps,
     )
     from symtrack.native.grid_engine_model import NA, NGEO, NW, soil_dispatch_c
     from symtrack.simulation.scenario import load_scenario
@@ -89,7 +90,8 @@ def render(scratch: Path) -> dict[str, bytes]:
         f"#define GV_N_PV {state.pv.size}LL", f"#define GV_N_SUMS {state.n_sums}LL",
         f"#define GV_NY_OUT {state.ny_out}LL", f"#define GV_WORK {state.work.size}LL",
         f"#define GV_CELL_SUBSTEPS {settings.cell_substeps}LL",
-        f"#define GV_ENTRY_SUBSTEPS {max(settings.entry_substeps, settings.cell_substeps)}LL",
+        f"#define GV_ENTRY_SUBSTEPS {window_substeps(settings)[0]}LL",
+        f"#define GV_EXIT_SUBSTEPS {window_substeps(settings)[1]}LL",
         f"#define GV_POWER_MODE {POWER_MODES.index(settings.power)}LL",
         f"#define GV_PAD {c_literal(state.pad)}", f"#define GV_RELEASE_RATE {c_literal(state.release_rate)}",
         f"#define GV_AREAL_MASS {c_literal(state.areal_mass)}", f"#define GV_DAMPING {c_literal(state.damping)}",

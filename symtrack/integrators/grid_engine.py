@@ -76,6 +76,11 @@ SETTLE_STEP_S = 0.01  # the settling steps of World.begin_pass
 ERR_FIELD, ERR_COLLISION, ERR_UNCOVERED, ERR_NONFINITE, ERR_NEWTON = 1, 2, 3, 4, 5
 SDIRK_GAMMA = 1.0 - 1.0 / math.sqrt(2.0)  # Alexander (1977): L-stable two-stage SDIRK
 NEWTON_MAX_ITER = 100
+# a Newton step inside the bracket below this fraction of |Z| is the stage's last (grid_engine.c
+# NEWTON_ACCEPT): the result is then within about its square (1e-8) of the root, as the law is
+# smooth there; at a kink of the law between the iterate and the root, within this fraction
+# (docs/terrain.md, "The terrain engine")
+NEWTON_ACCEPT_STEP = 1e-4
 POWER_MODES = ("step_mean", "instantaneous")
 CHUNK_STEPS = 100  # macro steps per call from Python (the progress bar moves between calls)
 
@@ -88,6 +93,8 @@ class EngineSettings:
     cell_substeps: SDIRK substeps of every active cell per macro step, [1, 64].
     entry_substeps: substeps of a cell in its entry window (soil reaction below entry_fraction
         of its load at the step start), [1, 256]; not below cell_substeps.
+    exit_substeps: substeps of a cell in its exit window (leaving a track's contact, its load
+        falling, on its unloading line), [1, 256]; not below cell_substeps.
     entry_fraction: [0, 1].
     power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
         absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
@@ -97,13 +104,15 @@ class EngineSettings:
 
     vehicle_substeps: int = 1
     cell_substeps: int = 1
-    entry_substeps: int = 8
+    entry_substeps: int = 4
+    exit_substeps: int = 8
     entry_fraction: float = 0.5
     power: str = "step_mean"
     compiled: bool = True
 
     def __post_init__(self):
-        for name, hi in (("vehicle_substeps", 64), ("cell_substeps", 64), ("entry_substeps", 256)):
+        for name, hi in (("vehicle_substeps", 64), ("cell_substeps", 64), ("entry_substeps", 256),
+                         ("exit_substeps", 256)):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= hi:
                 raise ScenarioError(f"engine.{name} = {v!r} must be an integer in [1, {hi}]")
@@ -111,6 +120,11 @@ class EngineSettings:
             raise ScenarioError(f"engine.entry_fraction = {self.entry_fraction!r} must be a number in [0, 1]")
         if self.power not in POWER_MODES:
             raise ScenarioError(f"engine.power = {self.power!r} is not one of {', '.join(POWER_MODES)}")
+
+
+def window_substeps(settings: EngineSettings) -> tuple[int, int]:
+    """The substeps of the entry and of the exit windows (neither below cell_substeps)."""
+    return (max(settings.entry_substeps, settings.cell_substeps), max(settings.exit_substeps, settings.cell_substeps))
 
 
 # ---- the compiled library ---------------------------------------------------------------------------------
@@ -134,7 +148,8 @@ class _Eng(ctypes.Structure):
                                                   "subsoil", "sig_pass")]
                 + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")]
                 + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
-                + [("n_sums", ctypes.c_longlong)])
+                + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
+                   ("agrid_entry", ctypes.c_void_p)])
 
 
 def _check_no_work(fns):
@@ -233,8 +248,10 @@ class EngineState:
         self.wv = np.zeros(NW)
         self.a = np.zeros(NA)
         self.work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
-        nmax = max(settings.cell_substeps, settings.entry_substeps)
-        self.agrid, self.plbuf, self.frbuf = np.zeros(NA * (nmax + 1)), np.zeros(nmax + 1), np.zeros(2 * (nmax + 1))
+        n_entry, n_exit = window_substeps(settings)
+        nmax = max(n_entry, n_exit)
+        self.agrid, self.agrid_entry = np.zeros(NA * (n_exit + 1)), np.zeros(NA * (n_entry + 1))
+        self.plbuf, self.frbuf = np.zeros(nmax + 1), np.zeros(2 * (nmax + 1))
         self.pad = padding_m(g.cell_m)
         self.release_rate = float(world.settings.release_rate_m_s)
         self.areal_mass, self.damping = cell_constants(world.params)
@@ -257,12 +274,13 @@ class EngineState:
             setattr(e, name, _ptr(arr))
         for name in ("ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax",
                      "ch_p", "ch_cx", "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv",
-                     "geo", "wv", "a", "work", "agrid", "plbuf", "frbuf", "ch_zoff", "ch_delta", "ch_dc",
-                     "ch_counted"):
+                     "geo", "wv", "a", "work", "agrid", "agrid_entry", "plbuf", "frbuf", "ch_zoff", "ch_delta",
+                     "ch_dc", "ch_counted"):
             setattr(e, name, _ptr(getattr(self, name)))
         e.n_act, e.n_new, e.peak_active, e.stamp = self.n_act, 0, self.peak_active, self.stamp
         e.n_pv, e.ny_out = self.pv.size, self.ny_out
-        e.cell_substeps, e.entry_substeps = s.cell_substeps, max(s.entry_substeps, s.cell_substeps)
+        e.cell_substeps = s.cell_substeps
+        e.entry_substeps, e.exit_substeps = window_substeps(s)
         e.power_mode = POWER_MODES.index(s.power)
         e.pad, e.release_rate, e.areal_mass, e.damping = self.pad, self.release_rate, self.areal_mass, self.damping
         e.gamma, e.entry_fraction = SDIRK_GAMMA, float(s.entry_fraction)
@@ -482,7 +500,7 @@ class PyKernel:
             xn = x - F / (a + g * dp)
             if abs(xn - x) <= 1e-13 * abs(xn) + 1e-18:
                 break
-            if abs(xn - x) <= 1e-6 * abs(xn) and lo < xn < hi:
+            if abs(xn - x) <= NEWTON_ACCEPT_STEP * abs(xn) and lo < xn < hi:
                 p = max(0.0, p + dp * (xn - x))
                 x = xn
                 break
@@ -636,12 +654,26 @@ class PyKernel:
         self.s.stats["n_vehicle_steps"] += 1
         return np.array(w1).ravel(), np.array(a1).ravel()
 
+    def _pose_grid(self, a1, psi1, n):
+        """engine.c pose_grid: the pose and pressure lines at the ends of n equal substeps."""
+        s = self.s
+        grid = [s.a.copy()]
+        for j in range(1, n):
+            th = j / n
+            psi = s.wv[2] + (psi1 - s.wv[2]) * th
+            aj = s.a + (a1 - s.a) * th
+            aj[2], aj[3] = math.cos(psi), math.sin(psi)
+            grid.append(aj)
+        grid.append(a1.copy())
+        return grid
+
     def run(self, t0, T, U, dist, check_covered, T_out, X, Y):
         s, e = self.s, self.e
         t = t0
         n_done = 0
         sset = s.settings
-        nsub, nentry = sset.cell_substeps, max(sset.entry_substeps, sset.cell_substeps)
+        nsub = sset.cell_substeps
+        nentry, nexit = window_substeps(sset)
         for k in range(T.size):
             t_next = float(T[k])
             h = t_next - t
@@ -666,15 +698,8 @@ class PyKernel:
             if not np.all(np.isfinite(w1)):
                 e.err_code = ERR_NONFINITE
                 return -ERR_NONFINITE, n_done, e
-            nw = max(nentry, nsub)
-            agrid = [s.a.copy()]
-            for j in range(1, nw):
-                th = j / nw
-                psi = s.wv[2] + (w1[2] - s.wv[2]) * th
-                aj = s.a + (a1 - s.a) * th
-                aj[2], aj[3] = math.cos(psi), math.sin(psi)
-                agrid.append(aj)
-            agrid.append(a1.copy())
+            grid_exit = self._pose_grid(a1, w1[2], nexit)
+            grid_entry = self._pose_grid(a1, w1[2], nentry)
             for ch in s.act[:s.n_act]:
                 gB = self._geo(s.ch_cx[ch], s.ch_cy[ch], a1)
                 gA = s.ch_g[ch]
@@ -686,17 +711,18 @@ class PyKernel:
                     s.ch_vr[ch] = 0.0
                     continue
                 ns = nsub
-                window = False
-                if nentry > ns:
-                    plm = max(plA, plB)
-                    if s.ch_p[ch] < sset.entry_fraction * plm or (
-                            plB < plA and gB[1] + gB[2] < gA[1] + gA[2]
-                            and s.ch_z[ch] < s.ch_zmax[ch] + s.ch_zoff[ch] + s.ch_dc[ch]):
-                        ns, window = nw, True
+                wgrid = None
+                if (plB < plA and gB[1] + gB[2] < gA[1] + gA[2]
+                        and s.ch_z[ch] < s.ch_zmax[ch] + s.ch_zoff[ch] + s.ch_dc[ch]):
+                    if nexit > ns:
+                        ns, wgrid = nexit, grid_exit
+                elif s.ch_p[ch] < sset.entry_fraction * max(plA, plB):
+                    if nentry > ns:
+                        ns, wgrid = nentry, grid_entry
                 pl, fr = [plA], [float(gA[1]), float(gA[2])]
                 for j in range(1, ns):
-                    if window:
-                        gj = self._geo(s.ch_cx[ch], s.ch_cy[ch], agrid[j])
+                    if wgrid is not None:
+                        gj = self._geo(s.ch_cx[ch], s.ch_cy[ch], wgrid[j])
                         pl.append(float(gj[0]))
                         fr += [float(gj[1]), float(gj[2])]
                     else:
@@ -869,12 +895,12 @@ class TerrainEngine:
         reaction at the pass end to zero over LIFT_TIME_S), the cells settle until released (or
         max_steps, with a warning), every channel freed; the pass's subsoil maxima folded into the
         terrain's record. The cells are integrated by the engine's own cell step (SDIRK, its entry
-        substep count per step): the same as CVODES over the pool to the tolerance tested."""
+        substep count per step, the exit windows'): the same as CVODES over the pool to the tolerance tested."""
         w, s = self.world, self.state
         w.z_at_pass_end = w.storage.z.copy()
         w.peak_active = s.peak_active  # the World's figures report it
         if s.n_act:
-            n = max(self.settings.entry_substeps, self.settings.cell_substeps)
+            n = window_substeps(self.settings)[1]
             rc, settled, e = self.kernel.lift(s.ch_p.copy(), dt_s, LIFT_TIME_S, n, max_steps)
             if rc < 0:
                 self._raise(-rc, e)

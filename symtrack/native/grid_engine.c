@@ -34,6 +34,8 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #define NS 10     /* the cell sums */
 #define NS_MAX 18 /* with a soil map: + the soil under each track (grid_engine_model.SOIL_SUM_NAMES) */
 #define NGEO 7
+/* a Newton step inside the bracket below this fraction of |Z| is the last one (engine.py NEWTON_ACCEPT_STEP) */
+#define NEWTON_ACCEPT 1e-4
 
 /* error codes (engine.py turns them into SimulationError messages) */
 #define ERR_FIELD 1       /* the footprint leaves the field: err_x = (cx, cy) */
@@ -64,7 +66,9 @@ typedef struct {
   double *wv;     /* NW: the vehicle's states and accelerations */
   double *a;      /* NA: pose and pressure lines at wv */
   double *work;   /* the generated Functions' work vector (the largest sz_w) */
-  double *agrid, *plbuf, *frbuf; /* scratch: NA (n + 1), n + 1, 2 (n + 1) for n = the largest substep count */
+  double *agrid, *plbuf, *frbuf; /* scratch: NA (n + 1) for n = exit_substeps; n + 1, 2 (n + 1) for n = the largest
+                                    substep count */
+  /* substeps: every cell's, the entry windows' (both not below cell_substeps; engine.py) */
   long long n_pv, ny_out, cell_substeps, entry_substeps, power_mode; /* 0: step mean, 1: instantaneous */
   double pad, release_rate, areal_mass, damping, gamma, entry_fraction;
   /* error and statistics */
@@ -90,6 +94,10 @@ typedef struct {
   unsigned char *soil_index, *ch_soil;
   const double *soil_veh;
   long long n_sums;
+  /* the exit windows' substeps (not below cell_substeps; their poses: agrid), the entry windows' poses:
+     NA (entry_substeps + 1) */
+  long long exit_substeps;
+  double *agrid_entry;
 } eng_t;
 
 static long long now_ns(void) {
@@ -123,7 +131,9 @@ static void cell_geo(const double *c, const double *a, const double *geo, double
 }
 
 /* ---- geometry: the tracks' rectangles (world.World._rectangles / cells_under) ------------------- */
-typedef void (*cell_fn)(eng_t *E, long long cell, void *ctx);
+/* fn(E, cell, its channel, ctx): the channel from the sector rule, computed here by rows (no integer
+   division per cell) */
+typedef void (*cell_fn)(eng_t *E, long long cell, long long ch, void *ctx);
 
 static int scan(eng_t *E, double X, double Y, double psi, double pad, int check_field, cell_fn fn, void *ctx) {
   const double *geo = E->geo;
@@ -153,13 +163,17 @@ static int scan(eng_t *E, double X, double Y, double psi, double pad, int check_
     if (j0 < 0) j0 = 0;
     if (i1 > E->nx - 1) i1 = E->nx - 1;
     if (j1 > E->ny - 1) j1 = E->ny - 1;
+    const long long M = E->M, jm0 = j0 % M;
     for (long long i = i0; i <= i1; ++i) {
       double px = x0 + ((double)i + 0.5) * dx;
+      const long long row = (i % M) * M;
+      long long jm = jm0;
       for (long long j = j0; j <= j1; ++j) {
         double py = y0 + ((double)j + 0.5) * dx;
         double along = (px - cx) * c + (py - cy) * s;
         double across = -(px - cx) * s + (py - cy) * c;
-        if (fabs(along) <= hl && fabs(across) <= hw) fn(E, i * E->ny + j, ctx);
+        if (fabs(along) <= hl && fabs(across) <= hw) fn(E, i * E->ny + j, row + jm, ctx);
+        if (++jm == M) jm = 0;
       }
     }
   }
@@ -171,10 +185,9 @@ static long long channel_of(const eng_t *E, long long cell) {
   return (i % E->M) * E->M + (j % E->M);
 }
 
-static void mark_footprint(eng_t *E, long long cell, void *ctx) {
+static void mark_footprint(eng_t *E, long long cell, long long ch, void *ctx) {
   (void)ctx;
   if (E->err_code) return;
-  long long ch = channel_of(E, cell);
   if (E->ch_cell[ch] == cell) {
     E->ch_foot[ch] = E->stamp;
   } else if (E->ch_new_stamp[ch] == E->stamp) {
@@ -276,8 +289,8 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * solution of this cell: its slope there is known), each iterate kept in the bracket (bisection
  * otherwise; the lower end is evaluated only when a step needs it); converged when the Newton
  * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
- * inside the bracket is below 1e-6 |Z| (its result is then within about 1e-12 |Z| of the root, and
- * p is extended linearly to it). Z, p(Z), p'(Z) are returned. */
+ * inside the bracket is below NEWTON_ACCEPT |Z| (its result is then within about NEWTON_ACCEPT^2 |Z| of the
+ * root, and p is extended linearly to it; engine.py's NEWTON_ACCEPT_STEP). Z, p(Z), p'(Z) are returned. */
 static int stage(eng_t *E, double zeta, double omega, double pl, double gh, const double *hist, int soil,
                  double zs, double ps, double dps, double *Z, double *pz, double *dpz) {
   double m = E->areal_mass, cd = E->damping;
@@ -295,8 +308,8 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, cons
     else break;
     double xn = x - F / (a + g * dp);
     if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) break; /* x solves the stage to that tolerance */
-    if (fabs(xn - x) <= 1e-6 * fabs(xn) && xn < hi && xn > lo) {
-      /* quadratic convergence: xn is within about (1e-6)^2 |Z| of the root; take it, with the law
+    if (fabs(xn - x) <= NEWTON_ACCEPT * fabs(xn) && xn < hi && xn > lo) {
+      /* quadratic convergence: xn is within about NEWTON_ACCEPT^2 |Z| of the root; take it, with the law
          extended linearly from x (an error of the same order; p = 0 stays exactly 0 on the clipped
          branch, where dp = 0) */
       p = fmax(0.0, p + dp * (xn - x));
@@ -387,9 +400,8 @@ static void info_out(eng_t *E, long long ch, const double *hist) {
   E->ch_dc[ch] = dc1;
 }
 
-static void check_cover(eng_t *E, long long cell, void *ctx) {
+static void check_cover(eng_t *E, long long cell, long long ch, void *ctx) {
   long long *missing = (long long *)ctx;
-  long long ch = channel_of(E, cell);
   if (E->ch_cell[ch] != cell) {
     if (missing[0] == 0) missing[1] = cell;
     missing[0] += 1;
@@ -441,6 +453,22 @@ static void vehicle_step(eng_t *E, const double *u, double h, double *w1, double
   E->n_vehicle_steps += 1;
 }
 
+/* ag[NA j], j = 0..n: the pose and pressure lines at the ends of n equal substeps from a0 (yaw psi0)
+ * to a1 (yaw psi1), linear in time (the yaw too: its cosine and sine from it) */
+static void pose_grid(double *ag, const double *a0, const double *a1, double psi0, double psi1, long long n) {
+  memcpy(ag, a0, NA * sizeof(double));
+  for (long long j = 1; j < n; ++j) {
+    double th = (double)j / (double)n, psi = psi0 + (psi1 - psi0) * th;
+    double *aj = ag + NA * j;
+    aj[0] = a0[0] + (a1[0] - a0[0]) * th;
+    aj[1] = a0[1] + (a1[1] - a0[1]) * th;
+    aj[2] = cos(psi);
+    aj[3] = sin(psi);
+    for (int i = 4; i < NA; ++i) aj[i] = a0[i] + (a1[i] - a0[i]) * th;
+  }
+  memcpy(ag + NA * n, a1, NA * sizeof(double));
+}
+
 /* n macro steps: step k ends at T[k] (the step starts at t0, then at T[k-1]) with the inputs
  * U[2k..2k+1]. dist[0]: distance covered so far, dist[1]: the stop distance (< 0: none), dist[2]:
  * the time from which distance counts. Writes T_out (the step's end time, shortened on the
@@ -484,20 +512,10 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     }
     long long c2 = now_ns();
     E->ns_vehicle += c2 - c1;
-    /* the pose and pressure lines at the ends of the transient windows' substeps (shared by all cells) */
-    long long nw = E->entry_substeps > E->cell_substeps ? E->entry_substeps : E->cell_substeps;
-    double *agrid = E->agrid;
-    memcpy(agrid, E->a, NA * sizeof(double));
-    for (long long j = 1; j < nw; ++j) {
-      double th = (double)j / (double)nw, psi = E->wv[2] + (w1[2] - E->wv[2]) * th;
-      double *aj = agrid + NA * j;
-      aj[0] = E->a[0] + (a1[0] - E->a[0]) * th;
-      aj[1] = E->a[1] + (a1[1] - E->a[1]) * th;
-      aj[2] = cos(psi);
-      aj[3] = sin(psi);
-      for (int i = 4; i < NA; ++i) aj[i] = E->a[i] + (a1[i] - E->a[i]) * th;
-    }
-    memcpy(agrid + NA * nw, a1, NA * sizeof(double));
+    /* the pose and pressure lines at the ends of the transient windows' substeps (shared by all cells):
+       the exit windows' (agrid) and the entry windows' (agrid_entry) */
+    pose_grid(E->agrid, E->a, a1, E->wv[2], w1[2], E->exit_substeps);
+    pose_grid(E->agrid_entry, E->a, a1, E->wv[2], w1[2], E->entry_substeps);
     /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end */
     for (long long q = 0; q < E->n_act; ++q) {
       long long ch = E->act[q];
@@ -516,26 +534,28 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       }
       long long ns = E->cell_substeps;
       double *pl = E->plbuf, *fr = E->frbuf;
-      int window = 0;
-      if (E->entry_substeps > ns) {
-        /* the transient windows: entry (soil reaction below entry_fraction of the load) and exit
-           (the cell leaving a track's contact, its load falling, on its unloading line): substeps, the geometry
-           evaluated at each substep end (the overlap's kinks resolved to a substep) */
-        double plm = fmax(plA, plB);
-        if (E->ch_p[ch] < E->entry_fraction * plm
-            || (plB < plA && gB[1] + gB[2] < g[1] + g[2]
-                && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch])) {
-          ns = nw;
-          window = 1;
+      const double *wgrid = 0;
+      /* the transient windows, substeps with the geometry evaluated at each substep end (the overlap's
+         kinks resolved to a substep): exit (the cell leaving a track's contact, its load falling, on
+         its unloading line), else entry (soil reaction below entry_fraction of the load) */
+      if (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch]) {
+        if (E->exit_substeps > ns) {
+          ns = E->exit_substeps;
+          wgrid = E->agrid;
+        }
+      } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB)) {
+        if (E->entry_substeps > ns) {
+          ns = E->entry_substeps;
+          wgrid = E->agrid_entry;
         }
       }
       pl[0] = plA;
       fr[0] = g[1];
       fr[1] = g[2];
       for (long long j = 1; j < ns; ++j) {
-        if (window) {
+        if (wgrid) {
           double gj[NGEO];
-          cell_geo(cc, agrid + NA * j, E->geo, gj);
+          cell_geo(cc, wgrid + NA * j, E->geo, gj);
           pl[j] = gj[0];
           fr[2 * j] = gj[1];
           fr[2 * j + 1] = gj[2];

@@ -36,7 +36,8 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     [engine]                       # optional: the terrain engine's scheme (run.integrator = "grid_fast"):
     vehicle_substeps = 1           # [1, 64]   (symtrack.integrators.grid_engine.EngineSettings)
     cell_substeps = 1              # [1, 64]
-    entry_substeps = 8             # [1, 256]
+    entry_substeps = 4             # [1, 256]
+    exit_substeps = 8              # [1, 256]
     entry_fraction = 0.5           # [0, 1]
     power = "step_mean"            # or "instantaneous"
     compiled = true                # false: the interpreted kernel
