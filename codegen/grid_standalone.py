@@ -92,6 +92,7 @@ def render(scratch: Path) -> dict[str, bytes]:
         f"#define GV_CELL_SUBSTEPS {settings.cell_substeps}LL",
         f"#define GV_ENTRY_SUBSTEPS {window_substeps(settings)[0]}LL",
         f"#define GV_EXIT_SUBSTEPS {window_substeps(settings)[1]}LL",
+        f"#define GV_STEADY_EULER {int(settings.steady_method == 'euler')}LL",
         f"#define GV_POWER_MODE {POWER_MODES.index(settings.power)}LL",
         f"#define GV_PAD {c_literal(state.pad)}", f"#define GV_RELEASE_RATE {c_literal(state.release_rate)}",
         f"#define GV_AREAL_MASS {c_literal(state.areal_mass)}", f"#define GV_DAMPING {c_literal(state.damping)}",

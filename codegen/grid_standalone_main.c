@@ -70,6 +70,7 @@ int main(int argc, char **argv) {
   E.frbuf = zalloc(2 * (nmax + 1), sizeof(double));
   E.n_pv = GV_N_PV; E.ny_out = GV_NY_OUT; E.cell_substeps = GV_CELL_SUBSTEPS; E.entry_substeps = GV_ENTRY_SUBSTEPS;
   E.exit_substeps = GV_EXIT_SUBSTEPS;
+  E.steady_euler = GV_STEADY_EULER;
   E.power_mode = GV_POWER_MODE; E.pad = GV_PAD; E.release_rate = GV_RELEASE_RATE; E.areal_mass = GV_AREAL_MASS;
   E.damping = GV_DAMPING; E.gamma = GV_GAMMA; E.entry_fraction = GV_ENTRY_FRACTION;
   E.soil_veh = gv_soil_veh; E.n_sums = GV_N_SUMS;

@@ -157,12 +157,13 @@ def test_fast_law_equals_the_model_law():
             assert pa == pytest.approx(pb, rel=1e-14, abs=1e-9)
 
 
-def test_compiled_equals_interpreted():
+@pytest.mark.parametrize("method", engine.STEADY_METHODS)
+def test_compiled_equals_interpreted(method):
     if compiled.find_compiler() is None:
         pytest.skip("no C compiler")
     sc = _scenario(duration_s=0.3)
-    wc, rc = _engine_run(sc)
-    wi, ri = _engine_run(sc, engine.EngineSettings(compiled=False))
+    wc, rc = _engine_run(sc, engine.EngineSettings(steady_method=method))
+    wi, ri = _engine_run(sc, engine.EngineSettings(compiled=False, steady_method=method))
     assert rc.stats["engine_compiled"] and not ri.stats["engine_compiled"]
     assert rc.stats["n_cell_stages"] == ri.stats["n_cell_stages"]  # the same algorithm, step by step
     scale = np.maximum(1.0, np.abs(ri.X))

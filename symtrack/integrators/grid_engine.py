@@ -82,6 +82,7 @@ NEWTON_MAX_ITER = 100
 # (docs/terrain.md, "The terrain engine")
 NEWTON_ACCEPT_STEP = 1e-4
 POWER_MODES = ("step_mean", "instantaneous")
+STEADY_METHODS = ("sdirk2", "euler")
 CHUNK_STEPS = 100  # macro steps per call from Python (the progress bar moves between calls)
 
 
@@ -95,6 +96,8 @@ class EngineSettings:
         of its load at the step start), [1, 256]; not below cell_substeps.
     exit_substeps: substeps of a cell in its exit window (leaving a track's contact, its load
         falling, on its unloading line), [1, 256]; not below cell_substeps.
+    steady_method: the method of the cells outside the windows: "sdirk2" (Alexander's two-stage
+        SDIRK, the windows' method) or "euler" (implicit Euler: one stage a substep).
     entry_fraction: [0, 1].
     power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
         absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
@@ -106,6 +109,7 @@ class EngineSettings:
     cell_substeps: int = 1
     entry_substeps: int = 4
     exit_substeps: int = 8
+    steady_method: str = "sdirk2"
     entry_fraction: float = 0.5
     power: str = "step_mean"
     compiled: bool = True
@@ -118,6 +122,9 @@ class EngineSettings:
                 raise ScenarioError(f"engine.{name} = {v!r} must be an integer in [1, {hi}]")
         if not (isinstance(self.entry_fraction, (int, float)) and 0.0 <= self.entry_fraction <= 1.0):
             raise ScenarioError(f"engine.entry_fraction = {self.entry_fraction!r} must be a number in [0, 1]")
+        if self.steady_method not in STEADY_METHODS:
+            raise ScenarioError(f"engine.steady_method = {self.steady_method!r} is not one of "
+                                f"{', '.join(STEADY_METHODS)}")
         if self.power not in POWER_MODES:
             raise ScenarioError(f"engine.power = {self.power!r} is not one of {', '.join(POWER_MODES)}")
 
@@ -149,7 +156,7 @@ class _Eng(ctypes.Structure):
                 + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")]
                 + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
                 + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
-                   ("agrid_entry", ctypes.c_void_p)])
+                   ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong)])
 
 
 def _check_no_work(fns):
@@ -201,8 +208,11 @@ def library(fns, compiled: bool = True):
     return lib
 
 
-def _ptr(a: np.ndarray):
-    return a.ctypes.data_as(ctypes.c_void_p)
+def _address(a: np.ndarray) -> int:
+    """The address of a C-contiguous array's data (without building a ctypes object)."""
+    if not a.flags.c_contiguous:
+        raise SimulationError("the engine's arrays must be C-contiguous")
+    return a.__array_interface__["data"][0]
 
 
 def _dptr(a: np.ndarray):
@@ -261,6 +271,7 @@ class EngineState:
                       "ns_cells": 0, "ns_outputs": 0, "ns_subsoil": 0}  # ns_*: the C kernel's parts (0: interpreted)
         # the subsoil stress (docs/subsoil.md): tables for the vehicle and soil, this pass's maxima
         self.sig_pass = world.pass_sigma
+        self._addresses = None  # struct(): the arrays and their addresses
         self.subsoil = subsoil_tables(world.params, world.storage.subsoil_depths_m)
         self._subsoil_c = self.subsoil.c_struct() if self.subsoil is not None else None
 
@@ -269,27 +280,34 @@ class EngineState:
         e = _Eng()
         e.nx, e.ny, e.M, e.n_ch = g.shape[0], g.shape[1], self.M, self.n_ch
         e.x0, e.y0, e.dx = g.origin_m[0], g.origin_m[1], g.cell_m
-        for name, arr in (("z", st.z), ("zdot", st.zdot), ("zmax", st.zmax), ("pmax", st.pmax), ("phase", st.phase),
-                          ("touched", self.touched), ("zoff", st.zoff), ("cycles", st.cycles)):
-            setattr(e, name, _ptr(arr))
-        for name in ("ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax",
-                     "ch_p", "ch_cx", "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv",
-                     "geo", "wv", "a", "work", "agrid", "agrid_entry", "plbuf", "frbuf", "ch_zoff", "ch_delta",
-                     "ch_dc", "ch_counted"):
-            setattr(e, name, _ptr(getattr(self, name)))
+        arrays = [("z", st.z), ("zdot", st.zdot), ("zmax", st.zmax), ("pmax", st.pmax), ("phase", st.phase),
+                  ("touched", self.touched), ("zoff", st.zoff), ("cycles", st.cycles), ("sig_pass", self.sig_pass),
+                  ("soil_index", self.soil_index)]
+        arrays += [(name, getattr(self, name)) for name in (
+            "ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx",
+            "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv", "geo", "wv", "a", "work",
+            "agrid", "agrid_entry", "plbuf", "frbuf", "ch_zoff", "ch_delta", "ch_dc", "ch_counted", "ch_soil",
+            "soil_veh")]
+        # the addresses, taken again only when an array was replaced (a call runs 100 macro steps:
+        # ctypes' data_as for the 43 arrays was a few percent of a call)
+        cached = self._addresses
+        if cached is None or len(cached[0]) != len(arrays) or any(
+                a is not b for (_, a), b in zip(arrays, cached[0], strict=True)):
+            cached = self._addresses = ([a for _, a in arrays], [_address(a) for _, a in arrays])
+        for (name, _), addr in zip(arrays, cached[1], strict=True):
+            setattr(e, name, addr)
         e.n_act, e.n_new, e.peak_active, e.stamp = self.n_act, 0, self.peak_active, self.stamp
         e.n_pv, e.ny_out = self.pv.size, self.ny_out
         e.cell_substeps = s.cell_substeps
         e.entry_substeps, e.exit_substeps = window_substeps(s)
+        e.steady_euler = int(s.steady_method == "euler")
         e.power_mode = POWER_MODES.index(s.power)
         e.pad, e.release_rate, e.areal_mass, e.damping = self.pad, self.release_rate, self.areal_mass, self.damping
         e.gamma, e.entry_fraction = SDIRK_GAMMA, float(s.entry_fraction)
         for k, v in self.stats.items():
             setattr(e, k, v)
-        e.sig_pass = _ptr(self.sig_pass)
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
-        e.soil_index, e.ch_soil, e.soil_veh = _ptr(self.soil_index), _ptr(self.ch_soil), _ptr(self.soil_veh)
         e.n_sums = self.n_sums
         return e
 
@@ -516,10 +534,26 @@ class PyKernel:
             return None
         return x, p, dp
 
-    def _cell_step(self, z0, v0, pz, dpz, pl, f, hist, soil, h, n, work):
+    def _cell_step(self, z0, v0, pz, dpz, pl, f, hist, soil, h, n, work, euler=False):
         gam = SDIRK_GAMMA
         hs = h / n
         gh = gam * hs
+        if euler:
+            vr = v0
+            for k in range(n):
+                p0 = pz
+                r1 = self._stage(z0, v0, pl[k + 1], hs, hist, soil, z0, pz, dpz)
+                if r1 is None:
+                    return None
+                Z1, pz, dpz = r1
+                w1 = 0.5 * (p0 + pz) * max(Z1 - z0, 0.0)
+                for t in range(2):
+                    work[t] += 0.5 * (f[2 * k + t] + f[2 * k + 2 + t]) * w1
+                v0 = (Z1 - z0) / hs
+                vr = v0
+                z0 = Z1
+                self.s.stats["n_cell_stages"] += 1
+            return z0, v0, pz, dpz, vr
         for k in range(n):
             p0 = pz
             plA, plB = pl[k], pl[k + 1]
@@ -735,7 +769,8 @@ class PyKernel:
                 hist = self._hist(ch)
                 soil = int(s.ch_soil[ch])
                 out = self._cell_step(float(s.ch_z[ch]), float(s.ch_v[ch]), float(s.ch_p[ch]), float(s.ch_dp[ch]),
-                                      pl, fr, hist, soil, h, ns, work)
+                                      pl, fr, hist, soil, h, ns, work,
+                                      wgrid is None and sset.steady_method == "euler")
                 if out is None:
                     e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
                     return -ERR_NEWTON, n_done, e

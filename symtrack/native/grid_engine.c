@@ -98,6 +98,8 @@ typedef struct {
      NA (entry_substeps + 1) */
   long long exit_substeps;
   double *agrid_entry;
+  /* 1: the cells outside the windows by implicit Euler (engine.py EngineSettings.steady_method) */
+  long long steady_euler;
 } eng_t;
 
 static long long now_ns(void) {
@@ -343,9 +345,28 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, cons
  * stage segments of frac_t(mid) (p_a + p_b) / 2 max(z_b - z_a, 0), frac_t linear within each
  * substep between f[2k + t] and f[2k + 2 + t] (the energy-consistent compaction power is work / h). */
 static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, const double *pl, const double *f,
-                     const double *hist, int soil, double h, long long n, double *work, double *vr) {
+                     const double *hist, int soil, double h, long long n, double *work, double *vr, int euler) {
   double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
   double z0 = *z, v0 = *v, pz = *p, dpz = *dp;
+  if (euler) {
+    /* implicit Euler (L-stable, order 1, one stage a substep): V = (Z - z0) / hs, the load at the
+       substep end, the work by one trapezoid per substep, the fractions at its middle */
+    for (long long k = 0; k < n; ++k) {
+      double Z1, p0 = pz;
+      if (stage(E, z0, v0, pl[k + 1], hs, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
+      double w1 = 0.5 * (p0 + pz) * fmax(Z1 - z0, 0.0);
+      for (int t = 0; t < 2; ++t) work[t] += 0.5 * (f[2 * k + t] + f[2 * k + 2 + t]) * w1;
+      v0 = (Z1 - z0) / hs;
+      *vr = v0;
+      z0 = Z1;
+      E->n_cell_stages += 1;
+    }
+    *z = z0;
+    *v = v0;
+    *p = pz;
+    *dp = dpz;
+    return 0;
+  }
   for (long long k = 0; k < n; ++k) {
     double Z1, Z2, p0 = pz, p1;
     double plA = pl[k], plB = pl[k + 1];
@@ -572,7 +593,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       double work[2] = {0.0, 0.0}, hist[5];
       channel_hist(E, ch, hist);
       if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, E->ch_soil[ch], h, ns,
-                    work, E->ch_vr + ch)) {
+                    work, E->ch_vr + ch, !wgrid && E->steady_euler)) {
         E->err_code = ERR_NEWTON;
         E->err_a = E->ch_cell[ch];
         return -ERR_NEWTON;
@@ -666,7 +687,7 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
       double work[2] = {0.0, 0.0}, hist[5], vr;
       channel_hist(E, ch, hist);
       if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, E->ch_soil[ch], h, n,
-                    work, &vr)) {
+                    work, &vr, 0)) {
         E->err_code = ERR_NEWTON;
         E->err_a = E->ch_cell[ch];
         return -ERR_NEWTON;

@@ -38,6 +38,7 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     cell_substeps = 1              # [1, 64]
     entry_substeps = 4             # [1, 256]
     exit_substeps = 8              # [1, 256]
+    steady_method = "sdirk2"       # or "euler": the cells outside the windows
     entry_fraction = 0.5           # [0, 1]
     power = "step_mean"            # or "instantaneous"
     compiled = true                # false: the interpreted kernel
