@@ -4,8 +4,11 @@ summary.json of a terrain study (``schema_version`` 1): the run's summary keys o
 pass, the terrain figures (``terrain_*``), and ``passes``: a list with, per pass,
 ``rut_max_depth_mm``, ``rut_mean_depth_mm`` (mean sinkage over the rut: the cells loaded in
 the pass, z_max > 1 um), ``new_sinkage_mean_mm`` (mean sinkage added by the pass over the rut),
-``new_sinkage_volume_m3``, ``compaction_resistance_mean_N`` (time mean of the sum of both
-tracks' compaction resistance), ``rut_cells``, ``distance_m``, ``sim_time_s``,
+``new_sinkage_volume_m3``, ``compaction_resistance_mean_N`` (the sum of both tracks'
+compaction resistance, mean over the distance the CG travelled: the compaction work per metre
+of travel), ``compaction_resistance_time_mean_N`` (the same, mean over time: dominated by the
+start from rest, where R_c = P / max(v, v0) divides the cells' settling power by the speed floor
+v0; docs/terrain.md "The compaction resistance figure"), ``rut_cells``, ``distance_m``, ``sim_time_s``,
 ``wall_time_s``; with several passes also ``later_passes_add_less_sinkage`` and
 ``later_passes_meet_less_resistance``.
 """
@@ -50,14 +53,16 @@ def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np
     area = world.grid.cell_m ** 2
     rc = res.output("compaction_resistance_left_N") + res.output("compaction_resistance_right_N")
     tt = res.t
-    rc_mean = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * np.diff(tt)) / (tt[-1] - tt[0])) if tt[-1] > tt[0] else 0.0
+    rc_time = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * np.diff(tt)) / (tt[-1] - tt[0])) if tt[-1] > tt[0] else 0.0
     seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))
+    rc_dist = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * seg) / seg.sum()) if seg.sum() > 0 else 0.0
     return {**_subsoil_figures(world), **{
         "rut_max_depth_mm": 1e3 * float(z[rut].max()) if rut.any() else 0.0,
         "rut_mean_depth_mm": 1e3 * float(z[rut].mean()) if rut.any() else 0.0,
         "new_sinkage_mean_mm": 1e3 * float(dz[rut].mean()) if rut.any() else 0.0,
         "new_sinkage_volume_m3": float(dz.sum() * area),
-        "compaction_resistance_mean_N": rc_mean,
+        "compaction_resistance_mean_N": rc_dist,
+        "compaction_resistance_time_mean_N": rc_time,
         "rut_cells": int(rut.sum()),
         "distance_m": float(seg.sum()),
         "sim_time_s": float(res.t[-1]),
