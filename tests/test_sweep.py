@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -345,6 +346,47 @@ def test_a_killed_worker_has_its_run_redone_on_another(tmp_path):
         os.kill(victim, signal.SIGKILL)
         th.join(240)
         assert not th.is_alive()
+    res = box[0]
+    assert res.ok and [r["status"] for r in res.rows] == ["ok"] * 3
+    ran_on = {json.loads((out / "runs" / r["run_id"] / "run.json").read_text())["pid"] for r in res.rows}
+    assert victim not in ran_on
+
+
+@pytest.mark.skipif("forkserver" not in multiprocessing.get_all_start_methods(), reason="no forkserver here")
+def test_a_killed_worker_of_the_local_cluster_is_forked_anew_and_its_run_redone(tmp_path, monkeypatch):
+    # the local cluster's workers are forks of the fork server (which imported symtrack once); a nanny
+    # whose worker dies forks a new one the same way, and the run is redone there
+    import psutil
+
+    out, box, seen = tmp_path / "local_killed", [], {}
+    real_client = sweep_module._client
+
+    def capturing_client(*a, **k):
+        client, cluster = real_client(*a, **k)
+        seen["cluster"] = cluster
+        return client, cluster
+
+    monkeypatch.setattr(sweep_module, "_client", capturing_client)
+    th = threading.Thread(target=lambda: box.append(studies.sweep(
+        "validation", {"vehicle.mass_kg": [5000, 5500, 6000]}, out=out, overrides=FAST, workers=2, progress=False)))
+    th.start()
+    try:
+        deadline = time.monotonic() + 120
+        busy = []
+        while not busy and time.monotonic() < deadline:
+            cluster = seen.get("cluster")
+            if cluster is not None:
+                busy = [ws.address for ws in list(cluster.scheduler.workers.values()) if ws.processing]
+            time.sleep(0.05)
+        assert busy, "no run started"
+        nannies = {n.worker_address: n for n in cluster.workers.values()}
+        victim = nannies[busy[0]].process.pid
+        parent = psutil.Process(victim).parent()  # the fork server, not this process
+        assert parent.pid != os.getpid() and "multiprocessing.forkserver" in " ".join(parent.cmdline())
+        os.kill(victim, signal.SIGKILL)
+    finally:
+        th.join(240)
+    assert not th.is_alive()
     res = box[0]
     assert res.ok and [r["status"] for r in res.rows] == ["ok"] * 3
     ran_on = {json.loads((out / "runs" / r["run_id"] / "run.json").read_text())["pid"] for r in res.rows}
