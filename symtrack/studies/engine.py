@@ -2,7 +2,7 @@
 sweep folder (docs/studies.md).
 
     from symtrack import studies
-    res = studies.sweep("validation", {"vehicle.mass_kg": [5000, 6000], "soil.n": [0.6, 0.8]},
+    res = studies.sweep("validation", {"vehicle.mass_kg": [5000, 6000], "soil.bekker_n": [0.6, 0.8]},
                         out="out/sweep", overrides={"run.integrator": "rosenbrock"}, workers=2)
     res.rows          # the rows of results.csv (dicts); res.ok: every run succeeded
 
@@ -292,12 +292,12 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     scenario : str or path
         A built-in scenario (of ``symtrack simulate`` or ``symtrack mpc``) or a TOML file.
     vary : list of str or dict
-        ``["vehicle.mass_kg=5000,6000", "soil.n=0.6:1.1"]`` as ``--vary`` takes them, or
+        ``["vehicle.mass_kg=5000,6000", "soil.bekker_n=0.6:1.1"]`` as ``--vary`` takes them, or
         ``{"vehicle.mass_kg": [5000, 6000]}``; the full grid of the listed values.
     out : path
         The sweep folder (``results.csv``, ``sweep.json``, ``runs/<id>/``).
     ranges : dict, optional
-        ``{"soil.n": (0.6, 1.1)}``: ranges sampled by a Latin hypercube of ``samples`` points.
+        ``{"soil.bekker_n": (0.6, 1.1)}``: ranges sampled by a Latin hypercube of ``samples`` points.
     samples : int, optional
         The number of Latin hypercube points (crossed with the grid).
     seed : int
