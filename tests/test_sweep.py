@@ -383,6 +383,8 @@ def test_a_killed_worker_of_the_local_cluster_is_forked_anew_and_its_run_redone(
         victim = nannies[busy[0]].process.pid
         parent = psutil.Process(victim).parent()  # the fork server, not this process
         assert parent.pid != os.getpid() and "multiprocessing.forkserver" in " ".join(parent.cmdline())
+        # one thread for numpy's BLAS, as Dask's nanny sets it for the workers it spawns
+        assert parent.environ().get("OPENBLAS_NUM_THREADS") == "1"
         os.kill(victim, signal.SIGKILL)
     finally:
         th.join(240)

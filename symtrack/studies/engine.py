@@ -219,6 +219,9 @@ def _store(out: Path, run: dict, result: dict, kind: str) -> dict:
 WORKER_MODULES = {"simulate": ("symtrack.api",), "mpc": ("symtrack.control.closedloop",),
                   "field": ("symtrack.studies.field",)}
 MP_METHOD_KEY = "distributed.worker.multiprocessing-method"
+# Dask's defaults of distributed.nanny.pre-spawn-environ: what a nanny sets before it spawns a worker
+WORKER_ENVIRON = {"MALLOC_TRIM_THRESHOLD_": 65536, "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
+                  "OPENBLAS_NUM_THREADS": 1}
 
 
 def _start_fork_server(kind: str) -> bool:
@@ -240,8 +243,9 @@ def _start_fork_server(kind: str) -> bool:
         ["distributed", "numpy", "symtrack.studies.runs", *WORKER_MODULES.get(kind, ())])
     # the variables a nanny sets before it spawns a worker (one thread for OpenMP, OpenBLAS, MKL) must
     # be there before the server imports numpy; the nanny writes them into this process's environment
-    # the same way (Dask's distributed.nanny.pre-spawn-environ)
-    env = dask.config.get("distributed.nanny.pre-spawn-environ", default={}) or {}
+    # the same way. Dask's config has them once distributed is imported (not yet, on a first sweep)
+    env = dask.config.get("distributed.nanny.pre-spawn-environ", default=None)
+    env = WORKER_ENVIRON if env is None else env
     os.environ.update({k: str(v) for k, v in env.items() if v is not None})
     forkserver.ensure_running()
     return True
