@@ -380,6 +380,8 @@ def test_a_killed_worker_of_the_local_cluster_is_forked_anew_and_its_run_redone(
             time.sleep(0.05)
         assert busy, "no run started"
         nannies = {n.worker_address: n for n in cluster.workers.values()}
+        # no statistical profiler in the workers (no dashboard to show it)
+        assert all(n.config["distributed"]["worker"]["profile"]["enabled"] is False for n in nannies.values())
         victim = nannies[busy[0]].process.pid
         parent = psutil.Process(victim).parent()  # the fork server, not this process
         assert parent.pid != os.getpid() and "multiprocessing.forkserver" in " ".join(parent.cmdline())
