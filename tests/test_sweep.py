@@ -80,15 +80,26 @@ def test_grid_sweep_writes_a_row_and_a_run_folder_per_combination(grid_sweep):
     assert sink[(6500, 6e5)] > sink[(5000, 6e5)] > sink[(5000, 1.2e6)]
 
 
-def test_grid_sweep_rows_agree_with_single_runs(grid_sweep):
+def test_grid_sweep_rows_agree_with_single_runs(grid_sweep, tmp_path):
     out, _ = grid_sweep
     for row in _table(out / "results.csv"):
         sc = symtrack.load_scenario("validation", FAST + [f"vehicle.mass_kg={row['vehicle.mass_kg']}",
                                                           f"soil.k_phi_N_per_m_n2={row['soil.k_phi_N_per_m_n2']}"])
-        single = symtrack.simulate(sc).summary
+        res = symtrack.simulate(sc)
+        single = res.summary
         for key in ("distance_m", "sinkage_sprocket_mm", "sinkage_idler_mm", "shear_driven_max_m",
                     "speed_final_m_s"):
             assert float(row[key]) == pytest.approx(single[key], rel=1e-9, abs=1e-12), (row["run_id"], key)
+        # the run's folder: the files of the single run (and run.json), the same trajectory, the same
+        # summary but for the machine's timings
+        res.write(tmp_path / row["run_id"])
+        folder, alone = out / "runs" / row["run_id"], tmp_path / row["run_id"]
+        assert {p.name for p in folder.iterdir()} == {p.name for p in alone.iterdir()} | {"run.json"}
+        assert (folder / "trajectory.csv").read_bytes() == (alone / "trajectory.csv").read_bytes()
+        timings = ("wall_time_s", "real_time_factor")
+        swept, written = (json.loads((f / "summary.json").read_text()) for f in (folder, alone))
+        assert {k: v for k, v in swept.items() if k not in timings} == {
+            k: v for k, v in written.items() if k not in timings}
 
 
 def test_rerun_of_a_finished_sweep_redoes_nothing(grid_sweep, monkeypatch, capsys):
