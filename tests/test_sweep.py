@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -79,15 +80,26 @@ def test_grid_sweep_writes_a_row_and_a_run_folder_per_combination(grid_sweep):
     assert sink[(6500, 6e5)] > sink[(5000, 6e5)] > sink[(5000, 1.2e6)]
 
 
-def test_grid_sweep_rows_agree_with_single_runs(grid_sweep):
+def test_grid_sweep_rows_agree_with_single_runs(grid_sweep, tmp_path):
     out, _ = grid_sweep
     for row in _table(out / "results.csv"):
         sc = symtrack.load_scenario("validation", FAST + [f"vehicle.mass_kg={row['vehicle.mass_kg']}",
                                                           f"soil.k_phi_N_per_m_n2={row['soil.k_phi_N_per_m_n2']}"])
-        single = symtrack.simulate(sc).summary
+        res = symtrack.simulate(sc)
+        single = res.summary
         for key in ("distance_m", "sinkage_sprocket_mm", "sinkage_idler_mm", "shear_driven_max_m",
                     "speed_final_m_s"):
             assert float(row[key]) == pytest.approx(single[key], rel=1e-9, abs=1e-12), (row["run_id"], key)
+        # the run's folder: the files of the single run (and run.json), the same trajectory, the same
+        # summary but for the machine's timings
+        res.write(tmp_path / row["run_id"])
+        folder, alone = out / "runs" / row["run_id"], tmp_path / row["run_id"]
+        assert {p.name for p in folder.iterdir()} == {p.name for p in alone.iterdir()} | {"run.json"}
+        assert (folder / "trajectory.csv").read_bytes() == (alone / "trajectory.csv").read_bytes()
+        timings = ("wall_time_s", "real_time_factor")
+        swept, written = (json.loads((f / "summary.json").read_text()) for f in (folder, alone))
+        assert {k: v for k, v in swept.items() if k not in timings} == {
+            k: v for k, v in written.items() if k not in timings}
 
 
 def test_rerun_of_a_finished_sweep_redoes_nothing(grid_sweep, monkeypatch, capsys):
@@ -345,6 +357,51 @@ def test_a_killed_worker_has_its_run_redone_on_another(tmp_path):
         os.kill(victim, signal.SIGKILL)
         th.join(240)
         assert not th.is_alive()
+    res = box[0]
+    assert res.ok and [r["status"] for r in res.rows] == ["ok"] * 3
+    ran_on = {json.loads((out / "runs" / r["run_id"] / "run.json").read_text())["pid"] for r in res.rows}
+    assert victim not in ran_on
+
+
+@pytest.mark.skipif("forkserver" not in multiprocessing.get_all_start_methods(), reason="no forkserver here")
+def test_a_killed_worker_of_the_local_cluster_is_forked_anew_and_its_run_redone(tmp_path, monkeypatch):
+    # the local cluster's workers are forks of the fork server (which imported symtrack once); a nanny
+    # whose worker dies forks a new one the same way, and the run is redone there
+    import psutil
+
+    out, box, seen = tmp_path / "local_killed", [], {}
+    real_client = sweep_module._client
+
+    def capturing_client(*a, **k):
+        client, cluster = real_client(*a, **k)
+        seen["cluster"] = cluster
+        return client, cluster
+
+    monkeypatch.setattr(sweep_module, "_client", capturing_client)
+    th = threading.Thread(target=lambda: box.append(studies.sweep(
+        "validation", {"vehicle.mass_kg": [5000, 5500, 6000]}, out=out, overrides=FAST, workers=2, progress=False)))
+    th.start()
+    try:
+        deadline = time.monotonic() + 120
+        busy = []
+        while not busy and time.monotonic() < deadline:
+            cluster = seen.get("cluster")
+            if cluster is not None:
+                busy = [ws.address for ws in list(cluster.scheduler.workers.values()) if ws.processing]
+            time.sleep(0.05)
+        assert busy, "no run started"
+        nannies = {n.worker_address: n for n in cluster.workers.values()}
+        # no statistical profiler in the workers (no dashboard to show it)
+        assert all(n.config["distributed"]["worker"]["profile"]["enabled"] is False for n in nannies.values())
+        victim = nannies[busy[0]].process.pid
+        parent = psutil.Process(victim).parent()  # the fork server, not this process
+        assert parent.pid != os.getpid() and "multiprocessing.forkserver" in " ".join(parent.cmdline())
+        # one thread for numpy's BLAS, as Dask's nanny sets it for the workers it spawns
+        assert parent.environ().get("OPENBLAS_NUM_THREADS") == "1"
+        os.kill(victim, signal.SIGKILL)
+    finally:
+        th.join(240)
+    assert not th.is_alive()
     res = box[0]
     assert res.ok and [r["status"] for r in res.rows] == ["ok"] * 3
     ran_on = {json.loads((out / "runs" / r["run_id"] / "run.json").read_text())["pid"] for r in res.rows}

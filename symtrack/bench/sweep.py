@@ -4,19 +4,26 @@ serial time, the model build counted).
 
 Both sides do the same work per run: load the scenario, build the model (compiled libraries from
 the warm cache), simulate, write the files of a single run (plots included). The sweep's wall
-time counts the local cluster's start and stop; a last row runs the same sweep on a cluster
-started before and warmed by one run (``--scheduler``), which leaves out the cluster's start,
-stop and imports. Measured in one process, one after another, so the ratios compare like with
-like on a shared machine.
+time counts the local cluster's start and stop; the 2-worker sweep runs first, so it also pays
+what a process pays once (importing distributed, starting the fork server that imports symtrack
+for the workers: symtrack.studies.engine); the 1-worker sweep after it finds both done. A last
+row runs the same sweep on a cluster started before and warmed by one run (``--scheduler``),
+which leaves out the cluster's start, stop and imports. Measured in one process, one after
+another, so the ratios compare like with like on a shared machine. A row after the serial one
+splits the same runs over plain processes (no Dask, imports done before the clock starts): the
+machine's own bound for any process-parallel sweep at that moment (on a machine whose cores other
+jobs keep busy, it is near 1 x: Linux shares the CPU between sessions, not processes).
 """
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["SWEEP_MASSES_KG", "bench_rows", "serial_wall_time", "sweep_wall_time"]
+__all__ = ["SWEEP_MASSES_KG", "bench_rows", "plain_processes_wall_time", "serial_wall_time", "sweep_wall_time"]
 
 # 8 vehicle masses around the reference crawler's 5500 kg: 8 validation runs that all finish
 SWEEP_MASSES_KG = (5000.0, 5150.0, 5300.0, 5450.0, 5600.0, 5750.0, 5900.0, 6050.0)
@@ -36,6 +43,50 @@ def serial_wall_time(scenario: str, key: str, values, overrides: list[str], out:
     return time.perf_counter() - t0, sim
 
 
+# one plain process of plain_processes_wall_time: warms up as the serial loop does (imports, one run),
+# says ready, waits for a line, runs its share
+_PLAIN_PROCESS = """
+import sys
+from pathlib import Path
+from symtrack.bench.sweep import serial_wall_time
+out, key, values = Path(sys.argv[1]), sys.argv[2], [float(v) for v in sys.argv[3].split(",")]
+serial_wall_time(sys.argv[4], key, values[:1], sys.argv[5:], out / "warm")
+print("ready", flush=True)
+sys.stdin.readline()
+serial_wall_time(sys.argv[4], key, values, sys.argv[5:], out)
+print("done", flush=True)
+"""
+
+
+def plain_processes_wall_time(scenario: str, key: str, values, overrides: list[str], out: Path,
+                              processes: int) -> float:
+    """Wall time of the same runs split over ``processes`` plain Python processes (no Dask), timed
+    from when all of them are warm (imports and one run done, as the serial loop's warm-up) to
+    when the last one is done: what the machine gives a process-parallel sweep at best, with no
+    start, stop or imports counted."""
+    shares = [list(values)[k::processes] for k in range(processes)]
+    procs = [subprocess.Popen([sys.executable, "-c", _PLAIN_PROCESS, str(out / f"process_{k}"), key,
+                               ",".join(repr(float(v)) for v in share), scenario, *overrides],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+             for k, share in enumerate(shares) if share]
+    try:
+        for p in procs:
+            if p.stdout.readline().strip() != "ready":
+                raise RuntimeError("a plain process of the sweep bench did not start")
+        t0 = time.perf_counter()
+        for p in procs:
+            p.stdin.write("go\n")
+            p.stdin.flush()
+        for p in procs:
+            if p.stdout.readline().strip() != "done":
+                raise RuntimeError("a plain process of the sweep bench failed")
+        return time.perf_counter() - t0
+    finally:
+        for p in procs:
+            p.stdin.close()
+            p.wait()
+
+
 def sweep_wall_time(scenario: str, key: str, values, overrides: list[str], out: Path, workers: int,
                     scheduler: str | None = None) -> float:
     """Wall time of the same runs as one sweep on a new local cluster of ``workers`` processes
@@ -51,8 +102,9 @@ def sweep_wall_time(scenario: str, key: str, values, overrides: list[str], out: 
     return wall
 
 
-def bench_rows(quick: bool = False, workers=(1, 2)) -> list[dict]:
-    """Rows of the sweep overhead: serial, then a sweep on each number of workers."""
+def bench_rows(quick: bool = False, workers=(2, 1)) -> list[dict]:
+    """Rows of the sweep overhead: serial, then a sweep on each number of workers (in that order:
+    the first pays the process's one-off costs)."""
     values = SWEEP_MASSES_KG[:4] if quick else SWEEP_MASSES_KG
     key, scenario, overrides = "vehicle.mass_kg", "validation", []
     n = len(values)
@@ -64,6 +116,13 @@ def bench_rows(quick: bool = False, workers=(1, 2)) -> list[dict]:
         rows = [{"group": "sweep overhead", "case": f"{n} validation runs one after another, one process",
                  "integrator": "cvodes", "sim_time_s": sim, "wall_time_s": serial, "real_time_factor": sim / serial,
                  "note": "load, model build, simulate, write (plots) per run"}]
+        plain = plain_processes_wall_time(scenario, key, values, overrides, tmp / "plain", max(workers))
+        rows.append({"group": "sweep overhead",
+                     "case": f"the {n} runs split over {max(workers)} plain processes (no Dask)",
+                     "integrator": "cvodes", "sim_time_s": sim, "wall_time_s": plain,
+                     "real_time_factor": sim / plain, "ratio_to_serial": plain / serial,
+                     "note": f"{plain / serial:.2f} x the serial time: the machine's bound for a sweep "
+                     "(imports before the clock, no start or stop)"})
         for w in workers:
             wall = sweep_wall_time(scenario, key, values, overrides, tmp / f"sweep_{w}", w)
             rows.append({"group": "sweep overhead", "case": f"symtrack sweep of the {n} runs, {w} local worker(s)",

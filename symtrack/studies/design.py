@@ -4,7 +4,7 @@ A sweep varies any key of ``--set`` (``section.key``). Each axis is either
 
 - a list of values (``--vary vehicle.mass_kg=5000,6000,7000``): the sweep takes the full grid
   (every combination of the listed values), or
-- a range (``--vary soil.n=0.6:1.1`` with ``--sample N``): the sweep takes N points of a Latin
+- a range (``--vary soil.bekker_n=0.6:1.1`` with ``--sample N``): the sweep takes N points of a Latin
   hypercube over all the ranges (each range cut into N equal strata, each stratum hit by exactly
   one point, the strata of different keys paired at random with a fixed seed).
 

@@ -4,9 +4,10 @@ one value of a key shows what the other keys do)."""
 
 from __future__ import annotations
 
+import io
 import math
 
-from ..reports.plots import plt, png_bytes
+from ..reports.plots import plt
 
 __all__ = ["EXCLUDED_FIGURES", "MAX_FIGURES", "comparison_figures", "comparison_png"]
 
@@ -14,6 +15,12 @@ __all__ = ["EXCLUDED_FIGURES", "MAX_FIGURES", "comparison_figures", "comparison_
 EXCLUDED_FIGURES = ("run_wall_time_s", "wall_time_s", "real_time_factor", "plant_wall_time_s",
                     "solver_wall_time_s", "plant_wall_time_per_sim_s")
 MAX_FIGURES = 16
+# the layout, fixed in inches (no tight layout: it measured every tick label again and took about
+# half of the plot's time): a panel, the margins around the grid, the gaps between panels
+PANEL_IN = (3.2, 1.5)
+MARGINS_IN = {"left": 1.0, "right": 0.4, "top": 0.35, "bottom": 0.7}
+GAPS_IN = (0.8, 0.5)  # between columns (the next column's tick labels and name), between rows
+DPI = 110
 
 
 def _number(v):
@@ -48,9 +55,13 @@ def comparison_png(rows: list[dict], keys: list[str]) -> bytes | None:
     figures = comparison_figures(rows, keys)
     if len(ok) < 2 or not figures:
         return None
-    ncol = len(keys)
-    fig, axes = plt.subplots(len(figures), ncol, figsize=(3.2 * ncol + 0.5, 2.1 * len(figures) + 0.5),
-                             squeeze=False)
+    ncol, nrow = len(keys), len(figures)
+    width_in = ncol * PANEL_IN[0] + MARGINS_IN["left"] + MARGINS_IN["right"] + (ncol - 1) * GAPS_IN[0]
+    height_in = nrow * PANEL_IN[1] + MARGINS_IN["top"] + MARGINS_IN["bottom"] + (nrow - 1) * GAPS_IN[1]
+    fig, axes = plt.subplots(nrow, ncol, figsize=(width_in, height_in), squeeze=False)
+    fig.subplots_adjust(left=MARGINS_IN["left"] / width_in, right=1 - MARGINS_IN["right"] / width_in,
+                        bottom=MARGINS_IN["bottom"] / height_in, top=1 - MARGINS_IN["top"] / height_in,
+                        wspace=GAPS_IN[0] / PANEL_IN[0], hspace=GAPS_IN[1] / PANEL_IN[1])
     for j, key in enumerate(keys):
         xs = [r[key] for r in ok]
         numeric = all(_number(x) is not None for x in xs)
@@ -70,4 +81,7 @@ def comparison_png(rows: list[dict], keys: list[str]) -> bytes | None:
     failed = len(rows) - len(ok)
     axes[0][0].set_title(f"sweep: {len(ok)} runs" + (f" ({failed} failed or not run, not shown)" if failed else ""),
                          fontsize=8, loc="left")
-    return png_bytes(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    plt.close(fig)
+    return buf.getvalue()
