@@ -44,7 +44,6 @@ from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
-from ..model.options import ModelOptions
 from ..model.vehicle import VEHICLE_STATES
 from ..reports.plots import plt, png_bytes
 from ..reports.run_files import clear_previous_run
@@ -160,7 +159,7 @@ def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float | None = Non
     if terrain is None and not s.initial_state and "size_m" not in s.given and "origin_m" not in s.given:
         origin, size = field_from_path(sc.build_path())
         s = dataclasses.replace(s, origin_m=origin, size_m=size)
-    world = open_world(s, sc.params, ModelOptions(), substep_s, start_xy=(sc.start.x_m, sc.start.y_m),
+    world = open_world(s, sc.params, sc.model, substep_s, start_xy=(sc.start.x_m, sc.start.y_m),
                        terrain=terrain, where="[terrain]")
     log.info("grid plant (%s): %d x %d cells of %g m, M = %d (%d channels)", settings.method, *world.grid.shape,
              world.grid.cell_m, world.M, world.n_channels)
@@ -196,7 +195,10 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     started at the vehicle's trim state of straight running (or at ``x0``, values of the plant's
     ``state_names``); with ``finish`` (default) the plant is finished after the loop (the grid
     lifts the vehicle off)."""
-    model = model or SystemModel()
+    model = model or SystemModel(sc.model)
+    if model.opts != sc.model:
+        raise ScenarioError(f"the model's options ({model.opts}) differ from the scenario's [model] section "
+                            f"({sc.model}): build the model as SystemModel(scenario.model)")
     mpc = mpc or PathTrackingMPC(model, sc.params, sc.mpc)
     plant = plant or make_plant(sc, model)
     path = sc.build_path()
