@@ -129,7 +129,7 @@ def grid_integrator(sc: MPCScenario) -> IntegratorSettings:
     compiled fixed-step grid Rosenbrock (``rosenbrock``)."""
     name = sc.run.integrator
     if name in ("cvodes", "grid_fast"):
-        return IntegratorSettings("grid_fast")
+        return IntegratorSettings("grid_fast", engine=sc.engine)
     if name == "idas":
         return IntegratorSettings("idas", GRID_RELTOL, GRID_ABSTOL)
     if name == "rosenbrock":
@@ -149,7 +149,9 @@ def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float | None = Non
     settings = grid_integrator(sc)
     engine = settings.method == "grid_fast"
     if substep_s is None:
-        substep_s = ENGINE_SUBSTEP_S if engine else GRID_SUBSTEP_S
+        # the engine: run.output_dt_s (default ENGINE_SUBSTEP_S; the shear law needs 2 ms with 4
+        # vehicle substeps: docs/turning.md)
+        substep_s = sc.run.output_dt_s if engine else GRID_SUBSTEP_S
     if not 0.0 < substep_s <= 1.0:
         raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
     s = sc.terrain if sc.terrain is not None else TerrainSettings()
