@@ -33,6 +33,7 @@ import json
 import logging
 import math
 import time
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -318,12 +319,14 @@ def summarise(res: ClosedLoopResult, wall_s: float, mpc: PathTrackingMPC) -> dic
         "rms_lateral_error_all_m": float(np.sqrt(np.mean(e ** 2))),
         "max_heading_error_deg": float(np.degrees(np.max(np.abs(res.e_psi)))),
         "solve_time_median_ms": float(np.median(ms)),
+        "solve_time_mean_ms": float(np.mean(ms)),
         "solve_time_p95_ms": float(np.percentile(ms, 95)),
         "solve_time_max_ms": float(np.max(ms)),
         "solve_iterations_median": float(np.median(res.solve_iter)) if res.solve_iter.size else None,
         "solves": int(res.solve_ms.size),
         "failed_solves": int(mpc.stats.failed),
         "fallback_solves": int(getattr(mpc.stats, "fallbacks", 0)),
+        "solve_status_counts": dict(Counter(str(i.status) for i in mpc.stats.solves)),
         "path_length_m": float(res.path.length_m),
         "path_completed": bool(res.s[-1] >= res.path.length_m),
         "sim_time_s": float(res.t[-1]),

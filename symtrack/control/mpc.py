@@ -14,6 +14,9 @@ Prediction model
       difference in the predicted trajectories against ``"full"``.
     - ``prediction = "full"``: all 20 states, cells included.
 
+    On the shear law (``ModelOptions.lateral_law = "shear"``) the prediction is the model with a
+    regularised sliding direction (:func:`prediction_model`; docs/turning.md section 6).
+
 Discretisation
     The model is stiff even without the cells (lateral creep mode about -600 1/s, yaw -225 1/s,
     shear/sprocket oscillation about 80 rad/s), so explicit Runge-Kutta would need millisecond

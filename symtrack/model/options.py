@@ -36,7 +36,8 @@ class ModelOptions:
         force and a lateral resistance -mu_t q tanh((v + r_z x)/eps_v) with the vehicle's
         lateral_friction_coeff and lateral_creep_speed_m_s (a velocity creep, not a soil property).
         The shear law is not the default: with it the validation's yaw and lateral deviation
-        leave their bands (14.6 deg, 2.25 m; docs/turning.md) and the NLP MPC stalls.
+        leave their bands (14.6 deg, 2.25 m; docs/turning.md); the NLP MPC predicts it with a
+        regularised sliding direction (MPCSettings.prediction_sliding_*, docs/turning.md section 6).
     shear_strength_pressure: the pressure in the shear strength c + p tan(phi) of the "shear" law.
         "mean" (default): the track's mean pressure N/(b l), as seed eq. (1) does; the tractive force
         in straight running is then eq. (1) exactly. "local": the linear (or triangular) pressure
