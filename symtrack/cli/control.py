@@ -74,7 +74,7 @@ def mpc_command(args) -> int:
                             "section); add --plant grid")
     from ..model import SystemModel
 
-    model = SystemModel()
+    model = SystemModel(sc.model)
     plant = closedloop.make_plant(sc, model, terrain_in)
     from ..foundations.interrupt import InterruptWatch
 

@@ -33,6 +33,7 @@ import json
 import logging
 import math
 import time
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,7 +45,6 @@ from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
-from ..model.options import ModelOptions
 from ..model.vehicle import VEHICLE_STATES
 from ..reports.plots import plt, png_bytes
 from ..reports.run_files import clear_previous_run
@@ -130,7 +130,7 @@ def grid_integrator(sc: MPCScenario) -> IntegratorSettings:
     compiled fixed-step grid Rosenbrock (``rosenbrock``)."""
     name = sc.run.integrator
     if name in ("cvodes", "grid_fast"):
-        return IntegratorSettings("grid_fast")
+        return IntegratorSettings("grid_fast", engine=sc.engine)
     if name == "idas":
         return IntegratorSettings("idas", GRID_RELTOL, GRID_ABSTOL)
     if name == "rosenbrock":
@@ -150,7 +150,9 @@ def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float | None = Non
     settings = grid_integrator(sc)
     engine = settings.method == "grid_fast"
     if substep_s is None:
-        substep_s = ENGINE_SUBSTEP_S if engine else GRID_SUBSTEP_S
+        # the engine: run.output_dt_s (default ENGINE_SUBSTEP_S; the shear law needs 2 ms with 4
+        # vehicle substeps: docs/turning.md)
+        substep_s = sc.run.output_dt_s if engine else GRID_SUBSTEP_S
     if not 0.0 < substep_s <= 1.0:
         raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
     s = sc.terrain if sc.terrain is not None else TerrainSettings()
@@ -160,7 +162,7 @@ def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float | None = Non
     if terrain is None and not s.initial_state and "size_m" not in s.given and "origin_m" not in s.given:
         origin, size = field_from_path(sc.build_path())
         s = dataclasses.replace(s, origin_m=origin, size_m=size)
-    world = open_world(s, sc.params, ModelOptions(), substep_s, start_xy=(sc.start.x_m, sc.start.y_m),
+    world = open_world(s, sc.params, sc.model, substep_s, start_xy=(sc.start.x_m, sc.start.y_m),
                        terrain=terrain, where="[terrain]")
     log.info("grid plant (%s): %d x %d cells of %g m, M = %d (%d channels)", settings.method, *world.grid.shape,
              world.grid.cell_m, world.M, world.n_channels)
@@ -196,7 +198,10 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     started at the vehicle's trim state of straight running (or at ``x0``, values of the plant's
     ``state_names``); with ``finish`` (default) the plant is finished after the loop (the grid
     lifts the vehicle off)."""
-    model = model or SystemModel()
+    model = model or SystemModel(sc.model)
+    if model.opts != sc.model:
+        raise ScenarioError(f"the model's options ({model.opts}) differ from the scenario's [model] section "
+                            f"({sc.model}): build the model as SystemModel(scenario.model)")
     mpc = mpc or PathTrackingMPC(model, sc.params, sc.mpc)
     plant = plant or make_plant(sc, model)
     path = sc.build_path()
@@ -314,12 +319,14 @@ def summarise(res: ClosedLoopResult, wall_s: float, mpc: PathTrackingMPC) -> dic
         "rms_lateral_error_all_m": float(np.sqrt(np.mean(e ** 2))),
         "max_heading_error_deg": float(np.degrees(np.max(np.abs(res.e_psi)))),
         "solve_time_median_ms": float(np.median(ms)),
+        "solve_time_mean_ms": float(np.mean(ms)),
         "solve_time_p95_ms": float(np.percentile(ms, 95)),
         "solve_time_max_ms": float(np.max(ms)),
         "solve_iterations_median": float(np.median(res.solve_iter)) if res.solve_iter.size else None,
         "solves": int(res.solve_ms.size),
         "failed_solves": int(mpc.stats.failed),
         "fallback_solves": int(getattr(mpc.stats, "fallbacks", 0)),
+        "solve_status_counts": dict(Counter(str(i.status) for i in mpc.stats.solves)),
         "path_length_m": float(res.path.length_m),
         "path_completed": bool(res.s[-1] >= res.path.length_m),
         "sim_time_s": float(res.t[-1]),

@@ -14,6 +14,9 @@ Prediction model
       difference in the predicted trajectories against ``"full"``.
     - ``prediction = "full"``: all 20 states, cells included.
 
+    On the shear law (``ModelOptions.lateral_law = "shear"``) the prediction is the model with a
+    regularised sliding direction (:func:`prediction_model`; docs/turning.md section 6).
+
 Discretisation
     The model is stiff even without the cells (lateral creep mode about -600 1/s, yaw -225 1/s,
     shear/sprocket oscillation about 80 rad/s), so explicit Runge-Kutta would need millisecond
@@ -53,6 +56,7 @@ counts the failure and warm-starts the next solve from the shifted plan.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -65,6 +69,8 @@ import numpy as np
 from ..foundations.errors import ParameterError
 from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
+from ..model.homogeneous import HomogeneousTerrain
+from ..model.options import SLIDING_SIGNS
 from ..model.vehicle import VEHICLE_STATES
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
@@ -119,6 +125,12 @@ class MPCSettings:
     lateral_huber_m: float = 0.0
     max_iter: int = 60
     prediction_lateral_creep_speed_m_s: float | None = None
+    # the shear law's prediction regularisation (used only when the model's lateral_law is "shear";
+    # docs/turning.md, "Nonlinear MPC on the shear law"): the sliding direction's slip floor d and
+    # the sign of the longitudinal stress from the sliding velocity (ModelOptions.sliding_sign).
+    # None / "model": the model's own (then IPOPT stalls on the clay: measured)
+    prediction_sliding_smoothing: float | None = 0.01
+    prediction_sliding_sign: str = "velocity"
     fallback_solver: str | None = "auto"
     tol: float = 1e-5
     rti_qp_solver: str = "qrqp"
@@ -152,6 +164,11 @@ class MPCSettings:
         rng("rti_step_halvings", 0, 20, integer=True)
         if self.prediction_lateral_creep_speed_m_s is not None:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
+        if self.prediction_sliding_smoothing is not None:
+            rng("prediction_sliding_smoothing", 0.0, 1.0, lo_open=True)
+        if self.prediction_sliding_sign not in ("model",) + SLIDING_SIGNS:
+            raise ParameterError(f"mpc.prediction_sliding_sign = {self.prediction_sliding_sign!r} is not one of "
+                                 f"model, {', '.join(SLIDING_SIGNS)}")
         if self.solver not in SOLVER_CHOICES:
             raise ParameterError(f"mpc.solver = {self.solver!r} is not one of {', '.join(SOLVER_CHOICES)}")
         if self.rti_qp_solver not in QP_SOLVERS:
@@ -196,6 +213,31 @@ def realtime_figures(stats, sample_time_s: float) -> dict:
     return out
 
 
+def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
+    """The model the MPC predicts with: ``model`` itself, except on the shear law, where the
+    sliding direction is regularised for the NLP (``prediction_sliding_smoothing``,
+    ``prediction_sliding_sign``). Why: the shear law's tractive force and yaw moment depend on the
+    ratio of the longitudinal to the lateral sliding velocity, and in the MPC's working range
+    (straight running and path corrections, slips 1e-5 ... 1e-2) that ratio turns over changes of
+    the sprocket speed of 1e-3 rad/s; the exact law's curvature then stalls IPOPT
+    (docs/turning.md, "Nonlinear MPC on the shear law")."""
+    o = model.opts
+    if o.lateral_law != "shear":
+        return model
+    changes = {}
+    if settings.prediction_sliding_smoothing is not None:
+        changes["sliding_smoothing"] = settings.prediction_sliding_smoothing
+    if settings.prediction_sliding_sign != "model":
+        changes["sliding_sign"] = settings.prediction_sliding_sign
+    if all(getattr(o, k) == v for k, v in changes.items()):
+        return model
+    if not isinstance(model.terrain, HomogeneousTerrain):
+        raise ParameterError("mpc.prediction_sliding_*: the prediction's regularisation needs the homogeneous "
+                             "terrain's model (set prediction_sliding_smoothing = None and "
+                             "prediction_sliding_sign = \"model\" for another terrain)")
+    return SystemModel(dataclasses.replace(o, **changes))
+
+
 @dataclass
 class SolveInfo:
     success: bool
@@ -226,8 +268,10 @@ class PathTrackingMPC:
     REF_COLUMNS = ("x_m", "y_m", "yaw_rad", "speed_m_s", "curvature_1_per_m")
 
     def __init__(self, model: SystemModel, params: dict, settings: MPCSettings | None = None):
-        self.model, self.settings = model, settings or MPCSettings()
+        self.settings = settings or MPCSettings()
         s = self.settings
+        self.plant_model = model
+        self.model = model = prediction_model(model, s)
         self.params = dict(params)
         if s.prediction_lateral_creep_speed_m_s is not None:
             self.params["lateral_creep_speed_m_s"] = s.prediction_lateral_creep_speed_m_s

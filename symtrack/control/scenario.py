@@ -35,16 +35,25 @@ Schema (unknown keys are errors; ranges in brackets)::
     duration_s = 120.0                # (0, 1e5] time limit; the run ends at the path's end
     rms_exclude_first_m = 0.0         # [0, 1e6] path length at the start left out of the RMS
                                       # (the approach from an initial offset)
+    output_dt_s = 0.01                # the terrain engine's macro step (grid plant, grid_fast);
+                                      # the MPC sample is split into steps no longer than this
     [mpc]                             # any field of symtrack.control.mpc.MPCSettings
     horizon_steps = 20
     sample_time_s = 0.1
     solver = "ipopt"
+    [model]                           # optional: any field of symtrack.model.options.ModelOptions,
+    lateral_law = "shear"             # for the plant and the prediction (e.g. the soil's shear law,
+                                      # docs/turning.md; default: the creep law)
     [terrain]                         # optional: the plant is then the vehicle on the persistent
     cell_m = 0.25                     # grid terrain (symtrack.control.closedloop.make_grid_plant); keys
                                       # and ranges of symtrack/terrain/config.py (docs/terrain.md).
                                       # Without size_m and origin_m the field covers the path
                                       # plus 4 m; passes must be 1; the plant runs the terrain
                                       # engine unless run.integrator is idas or rosenbrock.
+    [engine]                          # optional: the terrain engine's scheme (grid plant, grid_fast;
+    vehicle_substeps = 4              # symtrack.integrators.grid_engine.EngineSettings; the shear
+                                      # law needs 0.5 ms vehicle steps: with output_dt_s = 0.002,
+                                      # vehicle_substeps = 4; docs/turning.md)
 """
 
 from __future__ import annotations
@@ -56,9 +65,11 @@ from dataclasses import dataclass
 from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_keys, integer, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
+from ..integrators.grid_engine import EngineSettings
+from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets import soil_preset, vehicle_preset
-from ..simulation.scenario import RunSettings, parse_params, parse_run, parse_terrain
+from ..simulation.scenario import RunSettings, parse_engine, parse_params, parse_run, parse_terrain
 from ..terrain.settings import TerrainSettings
 from .mpc import MPCSettings
 from .path import Path as RefPath
@@ -67,7 +78,7 @@ from .path import Segment, field_segments
 __all__ = ["GRID_DEFAULT_TERRAIN", "MPCScenario", "MPC_RUN_DEFAULTS", "MPC_RUN_KEYS", "SCENARIO_PACKAGE",
            "StartSettings", "TOP_KEYS", "builtin_names", "load", "scenario_from_dict"]
 
-TOP_KEYS = ("name", "description", "vehicle", "soil", "start", "path", "run", "mpc", "terrain")
+TOP_KEYS = ("name", "description", "vehicle", "soil", "start", "path", "run", "mpc", "model", "terrain", "engine")
 SCENARIO_PACKAGE = "symtrack.control.scenarios"
 # the [terrain] section that plant="grid" (symtrack mpc --plant grid) adds to a scenario without one:
 # 0.25 m cells (the track is 0.45 m wide) and a speed bound of 4 m/s for the channel modulus M
@@ -84,7 +95,7 @@ class StartSettings:
 
 
 # the [run] keys of an MPC scenario (symtrack.simulation.scenario.RunSettings) and their defaults
-MPC_RUN_KEYS = ("integrator", "duration_s", "rms_exclude_first_m")
+MPC_RUN_KEYS = ("integrator", "duration_s", "rms_exclude_first_m", "output_dt_s")
 MPC_RUN_DEFAULTS = RunSettings(duration_s=120.0)
 
 
@@ -100,6 +111,8 @@ class MPCScenario:
     run: RunSettings
     mpc: MPCSettings
     terrain: TerrainSettings | None = None  # the [terrain] section (None: homogeneous plant)
+    model: ModelOptions = ModelOptions()  # the [model] section (plant and prediction)
+    engine: EngineSettings | None = None  # the [engine] section (the grid plant's terrain engine)
 
     @property
     def plant(self) -> str:
@@ -126,7 +139,11 @@ class MPCScenario:
                 "start": dataclasses.asdict(self.start), "path": path,
                 "run": {k: getattr(self.run, k) for k in MPC_RUN_KEYS},
                 "mpc": {k: v for k, v in dataclasses.asdict(self.mpc).items() if v is not None},
-                **({} if self.terrain is None else {"terrain": self.terrain.to_dict()})}
+                **({} if self.terrain is None else {"terrain": self.terrain.to_dict()}),
+                **({} if self.engine is None else {"engine": dataclasses.asdict(self.engine)}),
+                **({} if self.model == ModelOptions() else {"model": {
+                    k: v for k, v in dataclasses.asdict(self.model).items()
+                    if v != getattr(ModelOptions(), k)}})}
 
 
 _int = integer
@@ -201,6 +218,14 @@ def _mpc(t: dict) -> MPCSettings:
         raise ScenarioError(str(err)) from err
 
 
+def _model(t: dict) -> ModelOptions:
+    _keys("model", t, [f.name for f in dataclasses.fields(ModelOptions)])
+    try:
+        return ModelOptions(**t)
+    except (ParameterError, TypeError) as err:
+        raise ScenarioError(str(err)) from err
+
+
 def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
     _keys("scenario", d, TOP_KEYS)
     name, desc = d.get("name", default_name), d.get("description", "")
@@ -217,7 +242,7 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
     run = parse_run(d.get("run", {}), MPC_RUN_KEYS, MPC_RUN_DEFAULTS)
     terrain = parse_terrain(d.get("terrain"))
     return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
-                       _mpc(d.get("mpc", {})), terrain)
+                       _mpc(d.get("mpc", {})), terrain, _model(d.get("model", {})), parse_engine(d.get("engine")))
 
 
 def builtin_names() -> list[str]:

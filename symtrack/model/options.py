@@ -9,6 +9,7 @@ from ..foundations.errors import ParameterError
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
 LATERAL_LAWS = ("shear", "creep")
 SHEAR_STRENGTH_PRESSURES = ("mean", "local")
+SLIDING_SIGNS = ("displacement", "velocity")
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,8 @@ class ModelOptions:
         force and a lateral resistance -mu_t q tanh((v + r_z x)/eps_v) with the vehicle's
         lateral_friction_coeff and lateral_creep_speed_m_s (a velocity creep, not a soil property).
         The shear law is not the default: with it the validation's yaw and lateral deviation
-        leave their bands (14.6 deg, 2.25 m; docs/turning.md) and the NLP MPC stalls.
+        leave their bands (14.6 deg, 2.25 m; docs/turning.md); the NLP MPC predicts it with a
+        regularised sliding direction (MPCSettings.prediction_sliding_*, docs/turning.md section 6).
     shear_strength_pressure: the pressure in the shear strength c + p tan(phi) of the "shear" law.
         "mean" (default): the track's mean pressure N/(b l), as seed eq. (1) does; the tractive force
         in straight running is then eq. (1) exactly. "local": the linear (or triangular) pressure
@@ -53,6 +55,15 @@ class ModelOptions:
         only where both slips are below d: at 1e-5 and 2.6 m/s, within 0.1 mm of a turning track's
         pivot; in straight running the tractive force is eq. (1) for every slip (sign form as
         traction_sign says).
+    sliding_sign: ("shear" law only) where the sign of the longitudinal stress comes from.
+        "displacement" (default): sign(j) of seed eq. (1) times the regularised |i_x| of the sliding
+        velocity (eq. (1) exactly in straight running for every slip). "velocity": the sliding
+        velocity's own i_x, so that the stress is -b tau (i_x, i_y)/sqrt(i_x^2 + i_y^2 + d^2): smooth
+        where the track's longitudinal sliding changes sign while it slides sideways (sign(j) there
+        flips the longitudinal stress over 2 shear_smoothing_m of j). Used with a large
+        sliding_smoothing by the nonlinear MPC's prediction (MPCSettings.prediction_sliding_*;
+        docs/turning.md, "Nonlinear MPC on the shear law"); not for simulation: with it a track needs
+        a slip of order d to develop its tractive force.
     pivot_smoothing_rad_s: the pivot s = x_front + v/r_z is computed as x_front + v r_z/(r_z^2 + e^2),
         e this yaw rate; it only places a split point (the integral does not depend on it).
     lateral_segments, gauss_points: the "creep" law is integrated along each track with composite
@@ -87,6 +98,7 @@ class ModelOptions:
     shear_grading: int = 2
     lateral_split: bool = True
     sliding_smoothing: float = 1e-5
+    sliding_sign: str = "displacement"
     pivot_smoothing_rad_s: float = 1e-5
 
     def __post_init__(self):
@@ -94,7 +106,8 @@ class ModelOptions:
             raise ParameterError(
                 f"model.traction_sign = {self.traction_sign!r} is not one of {', '.join(TRACTION_SIGN_MODES)}"
             )
-        for name, allowed in (("lateral_law", LATERAL_LAWS), ("shear_strength_pressure", SHEAR_STRENGTH_PRESSURES)):
+        for name, allowed in (("lateral_law", LATERAL_LAWS), ("shear_strength_pressure", SHEAR_STRENGTH_PRESSURES),
+                              ("sliding_sign", SLIDING_SIGNS)):
             v = getattr(self, name)
             if v not in allowed:
                 raise ParameterError(f"model.{name} = {v!r} is not one of {', '.join(allowed)}")

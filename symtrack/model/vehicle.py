@@ -146,7 +146,12 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     # lateral v + r_z x (per unit tread speed), with the longitudinal sign of seed eq. (1), sign(j)
     i_x_now = (r * omega - v_k) / tread
     ax = ca.sqrt(i_x_now**2 + opts.sliding_smoothing**2)  # regularised |i_x|
-    sgn_ax = traction_sign(j, opts) * ax
+    if opts.sliding_sign == "velocity":
+        # the longitudinal sign from the sliding velocity too (ModelOptions.sliding_sign): smooth
+        # through i_x = 0 while the track slides sideways (the MPC's prediction, docs/turning.md)
+        sgn_ax = i_x_now
+    else:
+        sgn_ax = traction_sign(j, opts) * ax
 
     def field(s):
         i_y = a0 - a1 * s
