@@ -264,16 +264,17 @@ def _engine_validation(plant, sc, repeats=2):
 def _engine_row(group, case, res, note=""):
     st = res.stats
     wall, sim = float(res.wall_time_s), float(res.t[-1])
-    parts = {k: st[k] * 1e-9 for k in ("ns_manager", "ns_vehicle", "ns_cells", "ns_outputs")}
+    parts = {k: st.get(k, 0) * 1e-9 for k in ("ns_manager", "ns_vehicle", "ns_cells", "ns_subsoil", "ns_outputs")}
     loop = max(0.0, wall - sum(parts.values()))
     row = {"group": group, "case": case, "integrator": "grid_fast", "sim_time_s": sim, "wall_time_s": wall,
            "real_time_factor": sim / wall, "cpu_time_s": res.cpu_time_s, "real_time_factor_cpu": sim / res.cpu_time_s,
            "world_manager_s": parts["ns_manager"], "vehicle_s": parts["ns_vehicle"], "cells_s": parts["ns_cells"],
-           "outputs_s": parts["ns_outputs"], "python_loop_s": loop, "peak_active_cells": res.terrain[
-               "terrain_peak_active_cells"], "cell_stages": st["n_cell_stages"], "newton_iterations": st["n_newton"]}
+           "subsoil_s": parts["ns_subsoil"], "outputs_s": parts["ns_outputs"], "python_loop_s": loop,
+           "peak_active_cells": res.terrain["terrain_peak_active_cells"], "cell_stages": st["n_cell_stages"],
+           "newton_iterations": st["n_newton"]}
     shares = ", ".join(f"{n} {100 * v / wall:.0f} %" for n, v in (
         ("world manager", parts["ns_manager"]), ("vehicle", parts["ns_vehicle"]), ("cells", parts["ns_cells"]),
-        ("outputs", parts["ns_outputs"]), ("python", loop)))
+        ("subsoil stress", parts["ns_subsoil"]), ("outputs", parts["ns_outputs"]), ("python", loop)))
     row["note"] = (note + f"; {sim / wall:.3g} x real time (CPU time: {sim / res.cpu_time_s:.3g} x); "
                    f"{shares}").lstrip("; ")
     return row
