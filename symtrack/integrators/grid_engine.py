@@ -129,6 +129,18 @@ class EngineSettings:
             raise ScenarioError(f"engine.power = {self.power!r} is not one of {', '.join(POWER_MODES)}")
 
 
+def outside_tracks(geo, cx: float, cy: float, a) -> bool:
+    """engine.c outside_tracks: the cell centred at (cx, cy) lies wholly outside both contact
+    rectangles at the pose and pressure lines a (grown by 0.7072 cell, more than the half cell by
+    which the cell geometry's overlap reaches out), so its geometry is exactly zero."""
+    length, b, B, e, r = geo[0], geo[1], geo[2], geo[3], 0.7072 * geo[4]
+    dx, dy = cx - a[0], cy - a[1]
+    xb, yb = a[2] * dx + a[3] * dy, -a[3] * dx + a[2] * dy
+    if abs(xb + e) > length / 2 + r:
+        return True
+    return abs(yb - B / 2) > b / 2 + r and abs(yb + B / 2) > b / 2 + r
+
+
 def window_substeps(settings: EngineSettings) -> tuple[int, int]:
     """The substeps of the entry and of the exit windows (neither below cell_substeps)."""
     return (max(settings.entry_substeps, settings.cell_substeps), max(settings.exit_substeps, settings.cell_substeps))
@@ -735,6 +747,13 @@ class PyKernel:
             grid_exit = self._pose_grid(a1, w1[2], nexit)
             grid_entry = self._pose_grid(a1, w1[2], nentry)
             for ch in s.act[:s.n_act]:
+                if (s.ch_z[ch] == 0.0 and s.ch_v[ch] == 0.0 and s.ch_g[ch][0] == 0.0
+                        and outside_tracks(s.geo, s.ch_cx[ch], s.ch_cy[ch], a1)):
+                    s.ch_g[ch] = 0.0
+                    s.ch_pw[ch] = 0.0
+                    s.ch_p[ch] = 0.0
+                    s.ch_vr[ch] = 0.0
+                    continue
                 gB = self._geo(s.ch_cx[ch], s.ch_cy[ch], a1)
                 gA = s.ch_g[ch]
                 plA, plB = float(gA[0]), float(gB[0])

@@ -132,6 +132,18 @@ static void cell_geo(const double *c, const double *a, const double *geo, double
   eng_cell_geo(arg, res, 0, WORK, 0);
 }
 
+/* 1 when a cell centred at c lies wholly outside both tracks' contact rectangles at the pose a (the
+ * rectangles grown by 0.7072 cell, more than the half cell by which eng_cell_geo's overlap reaches
+ * out): its geometry (load, fractions, end-strip weights) is then exactly zero (engine.py
+ * outside_tracks) */
+static int outside_tracks(const double *geo, const double *c, const double *a) {
+  const double l = geo[0], b = geo[1], B = geo[2], e = geo[3], r = 0.7072 * geo[4];
+  const double dx = c[0] - a[0], dy = c[1] - a[1];
+  const double xb = a[2] * dx + a[3] * dy, yb = -a[3] * dx + a[2] * dy;
+  if (fabs(xb + e) > l / 2 + r) return 1;
+  return fabs(yb - B / 2) > b / 2 + r && fabs(yb + B / 2) > b / 2 + r;
+}
+
 /* ---- geometry: the tracks' rectangles (world.World._rectangles / cells_under) ------------------- */
 /* fn(E, cell, its channel, ctx): the channel from the sector rule, computed here by rows (no integer
    division per cell) */
@@ -542,9 +554,18 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       long long ch = E->act[q];
       double *g = E->ch_g + NGEO * ch;
       double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+      double *pw = E->ch_pw + 2 * ch;
+      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && g[0] == 0.0 && outside_tracks(E->geo, cc, a1)) {
+        /* an unloaded cell at rest, outside both tracks at the step end: it stays so and its
+           geometry is zero (the case below, without evaluating eng_cell_geo) */
+        memset(g, 0, NGEO * sizeof(double));
+        pw[0] = pw[1] = 0.0;
+        E->ch_p[ch] = 0.0;
+        E->ch_vr[ch] = 0.0;
+        continue;
+      }
       cell_geo(cc, a1, E->geo, gB);
       double plA = g[0], plB = gB[0];
-      double *pw = E->ch_pw + 2 * ch;
       pw[0] = pw[1] = 0.0;
       if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && plA == 0.0 && plB == 0.0) {
         /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
