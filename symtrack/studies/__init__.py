@@ -2,7 +2,7 @@
 on Dask distributed, a local cluster or an existing scheduler (docs/studies.md).
 
     from symtrack import studies
-    res = studies.sweep("validation", ["vehicle.mass_kg=5000,6000", "soil.n=0.6,0.8"], out="out/sweep",
+    res = studies.sweep("validation", ["vehicle.mass_kg=5000,6000", "soil.bekker_n=0.6,0.8"], out="out/sweep",
                         overrides={"run.integrator": "rosenbrock"}, workers=2)
     res.ok, res.rows          # every run succeeded; the rows of out/sweep/results.csv
 """
