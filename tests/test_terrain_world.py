@@ -33,7 +33,8 @@ moves = st.lists(st.tuples(st.floats(-0.08, 0.08), st.floats(-0.08, 0.08), st.fl
                            st.floats(0, 2e-3), st.sampled_from([0.0, 1e-7, 1e-3])), min_size=1, max_size=25)
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+# derandomize: the same examples on every run (CI must not depend on a random draw)
+@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(start=st.tuples(st.floats(-0.8, 0.8), st.floats(-0.2, 0.2), st.floats(-np.pi, np.pi)), steps=moves)
 @example(start=(0.0, 0.0, 1.0), steps=[(0.0, 0.0625, 0.0, 0.0, 0.0)] * 25)  # a walk off the field (a CI run)
 def test_assignment_invariants(world, start, steps):
