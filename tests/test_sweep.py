@@ -347,17 +347,29 @@ def test_a_killed_worker_has_its_run_redone_on_another(tmp_path):
             "validation", {"vehicle.mass_kg": [5000, 5500, 6000]}, out=out, overrides=FAST,
             scheduler=cluster.scheduler_address, progress=False)))
         th.start()
-        deadline = time.monotonic() + 120
-        busy = []
-        while not busy and time.monotonic() < deadline:
-            busy = [ws.address for ws in list(cluster.scheduler.workers.values()) if ws.processing]
-            time.sleep(0.05)
-        assert busy, "no run started"
-        victim = pids[busy[0]]
+        victim = pids[_busy_worker(lambda: cluster)]
         os.kill(victim, signal.SIGKILL)
         th.join(240)
         assert not th.is_alive()
-    res = box[0]
+    _assert_redone_elsewhere(box[0], out, victim)
+
+
+def _busy_worker(get_cluster, timeout_s=120):
+    """The address of a worker that is running a task of the cluster get_cluster() gives (None
+    until it exists), waited for up to timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        cluster = get_cluster()
+        if cluster is not None:
+            busy = [ws.address for ws in list(cluster.scheduler.workers.values()) if ws.processing]
+            if busy:
+                return busy[0]
+        time.sleep(0.05)
+    raise AssertionError("no run started")
+
+
+def _assert_redone_elsewhere(res, out, victim):
+    """Every run of the sweep ok, none of them in the killed process."""
     assert res.ok and [r["status"] for r in res.rows] == ["ok"] * 3
     ran_on = {json.loads((out / "runs" / r["run_id"] / "run.json").read_text())["pid"] for r in res.rows}
     assert victim not in ran_on
@@ -382,18 +394,12 @@ def test_a_killed_worker_of_the_local_cluster_is_forked_anew_and_its_run_redone(
         "validation", {"vehicle.mass_kg": [5000, 5500, 6000]}, out=out, overrides=FAST, workers=2, progress=False)))
     th.start()
     try:
-        deadline = time.monotonic() + 120
-        busy = []
-        while not busy and time.monotonic() < deadline:
-            cluster = seen.get("cluster")
-            if cluster is not None:
-                busy = [ws.address for ws in list(cluster.scheduler.workers.values()) if ws.processing]
-            time.sleep(0.05)
-        assert busy, "no run started"
+        busy = _busy_worker(lambda: seen.get("cluster"))
+        cluster = seen["cluster"]
         nannies = {n.worker_address: n for n in cluster.workers.values()}
         # no statistical profiler in the workers (no dashboard to show it)
         assert all(n.config["distributed"]["worker"]["profile"]["enabled"] is False for n in nannies.values())
-        victim = nannies[busy[0]].process.pid
+        victim = nannies[busy].process.pid
         parent = psutil.Process(victim).parent()  # the fork server, not this process
         assert parent.pid != os.getpid() and "multiprocessing.forkserver" in " ".join(parent.cmdline())
         # one thread for numpy's BLAS, as Dask's nanny sets it for the workers it spawns
@@ -402,7 +408,4 @@ def test_a_killed_worker_of_the_local_cluster_is_forked_anew_and_its_run_redone(
     finally:
         th.join(240)
     assert not th.is_alive()
-    res = box[0]
-    assert res.ok and [r["status"] for r in res.rows] == ["ok"] * 3
-    ran_on = {json.loads((out / "runs" / r["run_id"] / "run.json").read_text())["pid"] for r in res.rows}
-    assert victim not in ran_on
+    _assert_redone_elsewhere(box[0], out, victim)

@@ -311,38 +311,31 @@ def engine_rows(quick: bool = False, rosenbrock_row: dict | None = None, referen
     shares of its parts, the gain over the compiled grid rosenbrock of the same run, the figures
     against a reference summary if given), the cost against field size, the pool against one
     channel per cell on the small field."""
-    rows = []
-    sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, ["run.integrator=grid_fast"])
-    t0 = time.perf_counter()
-    plant = make_plant(sc)  # builds and compiles the engine (cached)
-    world = plant.world
-    build_s = time.perf_counter() - t0
-    res, summ = _engine_validation(plant, sc)
-    row = _engine_row("grid validation (1e6 cells)", f"M = {world.M}", res, note="the whole validation")
-    row["build_s"] = build_s
-    row["validation"] = {k: summ[k] for k in ENGINE_FIGURES}
+    ref = None if reference_summary is None else {**reference_summary, **reference_summary.get("passes", [{}])[0]}
+
+    def validation_row(extra, case):
+        sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, ["run.integrator=grid_fast", *extra])
+        t0 = time.perf_counter()
+        plant = make_plant(sc)  # builds and compiles the engine (cached)
+        build_s = time.perf_counter() - t0
+        res, summ = _engine_validation(plant, sc)
+        row = _engine_row("grid validation (1e6 cells)", f"M = {plant.world.M}{case}", res,
+                          note="the whole validation")
+        row["build_s"] = build_s
+        row["validation"] = {k: summ[k] for k in ENGINE_FIGURES}
+        if ref is not None:
+            row["relative_difference_to_reference"] = {k: summ[k] / ref[k] - 1 for k in ENGINE_FIGURES if ref.get(k)}
+        return row
+
+    row = validation_row([], "")
     if rosenbrock_row is not None:
         gain = row["real_time_factor"] / rosenbrock_row["real_time_factor"]
         row["gain_over_rosenbrock"] = gain
         row["note"] += f"; {gain:.0f} x the compiled grid rosenbrock of this run"
-    if reference_summary is not None:
-        ref = {**reference_summary, **reference_summary.get("passes", [{}])[0]}
-        row["relative_difference_to_reference"] = {k: summ[k] / ref[k] - 1 for k in ENGINE_FIGURES if ref.get(k)}
-    rows.append(row)
-    del world, plant
     # the cells outside the windows by implicit Euler (EngineSettings.steady_method): the same run
-    sce = _field_scenario("validation_grid", (100.0, 100.0), 0.1,
-                          ["run.integrator=grid_fast", "engine.steady_method='euler'"])
-    plant = make_plant(sce)
-    res_e, summ_e = _engine_validation(plant, sce)
-    row_e = _engine_row("grid validation (1e6 cells)", f"M = {plant.world.M}, steady_method euler", res_e,
-                        note="the whole validation")
-    row_e["validation"] = {k: summ_e[k] for k in ENGINE_FIGURES}
+    row_e = validation_row(["engine.steady_method='euler'"], ", steady_method euler")
     row_e["note"] += f"; {row_e['real_time_factor'] / row['real_time_factor']:.2f} x the default's speed"
-    if reference_summary is not None:
-        row_e["relative_difference_to_reference"] = {k: summ_e[k] / ref[k] - 1 for k in ENGINE_FIGURES if ref.get(k)}
-    rows.append(row_e)
-    del plant
+    rows = [row, row_e]
     rows += engine_field_rows((1e4, 1e6) if quick else (1e4, 1e6, 1.6e7))
     # the small field: the pool (sector rule) against one channel per cell (bit for bit)
     sc2 = _field_scenario("validation_grid", (12.0, 4.0), 0.25, ["run.integrator=grid_fast"])

@@ -27,9 +27,11 @@ DYN_IN = ("t", "x", "z", "p", "u")
 DYN_OUT = ("ode", "alg", "quad", "zero")
 
 
-def channel_dae(model):
+def channel_dae(model, quad=None):
     """The time-scaled DAE (channel states first) as a Function with its exact Jacobian built by
-    blocks.
+    blocks; ``quad``: optional SX expressions in the model's x, z, u, p to integrate alongside (IDAS's
+    quadratures, not in its error control; their Jacobian blocks are declared zero: IDAS does not
+    use them).
 
     CasADi's automatic Jacobian of the whole system colours columns (or rows) in one
     direction; the arrowhead has dense rows (yaw rate and longitudinal acceleration: the
@@ -55,7 +57,7 @@ def channel_dae(model):
     J_cz = ca.jacobian(fc, z)
     J_vz = ca.jacobian(rows_v, z)
     ins = [t, xp, z, ca.vertcat(model.p, h), model.u]
-    outs = [ca.vertcat(fc, fv), alg, ca.SX(0, 1), ca.SX(0, 1)]
+    outs = [ca.vertcat(fc, fv), alg, ca.SX(0, 1) if quad is None else h * ca.vec(quad), ca.SX(0, 1)]
     blocks = {("ode", "x"): ca.vertcat(J_cx, J_vx[:NV, :]), ("alg", "x"): J_vx[NV:, :],
               ("ode", "z"): ca.vertcat(J_cz, J_vz[:NV, :]), ("alg", "z"): J_vz[NV:, :]}
     jac, jac_names = [], []
@@ -81,7 +83,9 @@ def channel_dae(model):
 class ChannelStepper(SundialsStepper):
     """IDAS on the vehicle + channel pool with the channel states ordered first (module doc)."""
 
-    def __init__(self, model, settings: IntegratorSettings):
+    def __init__(self, model, settings: IntegratorSettings, quad=None):
+        """quad: optional expressions to integrate over each step (:func:`channel_dae`); their
+        integral over the last step is then ``last_quad``."""
         if settings.method != "idas":
             raise SimulationError(f"run.integrator = {settings.method!r}: the grid terrain runs with \"idas\"")
         self.model, self.settings = model, settings
@@ -94,4 +98,5 @@ class ChannelStepper(SundialsStepper):
                 # IDAS restarts at every macro step (time scaled to [0, 1]): a first step of
                 # 1e-4 of it took about 10 % fewer internal steps than IDAS's own guess
                 "step0": 1e-4}
-        self.F = ca.integrator("step_channels_idas", "idas", channel_dae(model), 0.0, 1.0, opts)
+        self.F = ca.integrator("step_channels_idas", "idas", channel_dae(model, quad), 0.0, 1.0, opts)
+        self.last_quad = None

@@ -46,6 +46,7 @@ class SundialsStepper:
         if settings.compiled:
             dae = compiled_dae(model, settings.method)
         self.F = ca.integrator("step_" + settings.method, settings.method, dae, 0.0, 1.0, opts)
+        self.last_quad = None
 
     def reset(self):
         """Forget the algebraic guess (IDAS) after a jump of the state."""
@@ -66,6 +67,7 @@ class SundialsStepper:
             raise SimulationError(f"{self.settings.method} returned a non-finite state")
         if self.settings.method == "idas":
             self.z = r["zf"]
+        self.last_quad = np.array(r["qf"]).ravel()  # the quadratures over this step (empty: none)
         return xf if self.inv is None else xf[self.inv]
 
     def stats(self) -> dict:
