@@ -97,6 +97,7 @@ def render(scratch: Path) -> dict[str, bytes]:
         f"#define GV_PAD {c_literal(state.pad)}", f"#define GV_RELEASE_RATE {c_literal(state.release_rate)}",
         f"#define GV_AREAL_MASS {c_literal(state.areal_mass)}", f"#define GV_DAMPING {c_literal(state.damping)}",
         f"#define GV_GAMMA {c_literal(SDIRK_GAMMA)}", f"#define GV_ENTRY_FRACTION {c_literal(settings.entry_fraction)}",
+        f"#define GV_RING_TOL {c_literal(settings.ring_tolerance)}",
         f"#define GV_START_X {c_literal(st.x_m)}", f"#define GV_START_Y {c_literal(st.y_m)}",
         f"#define GV_START_YAW {c_literal(np.radians(st.yaw_deg))}",
         f"#define GV_SETTLE_STEPS {int(round(world.settings.settle_s / SETTLE_STEP_S))}LL",

@@ -7,15 +7,19 @@ Scheme (staggered, per macro step of length h, the output step)
    pose predicted for the end, release, sector assignment Cell[i, j] -> CHANNEL[i mod M, j mod M],
    INFO_IN): the rules and expressions of :class:`symtrack.terrain.world.World.before_step`.
 2. The vehicle (12 states, 2 algebraic accelerations) over h with the channel sums (compaction
-   power per track, the end-strip sinkages) held at their values at the step start: a two-stage
-   L-stable Rosenbrock method (ROS2) with the exact Jacobian, ``vehicle_substeps`` steps.
+   power per track, the end-strip sinkages) held at their values at the step start: the 8-stage,
+   order-5, L-stable Rosenbrock method of CasADi's plugin with the exact Jacobian,
+   ``vehicle_substeps`` steps.
 3. Every active cell on its own over h, its load p_load linear in time between the geometry at
    the step's start pose and at its end pose: Alexander's two-stage SDIRK (L-stable, order 2,
-   stiffly accurate), each implicit stage one monotone scalar equation in z solved by Newton in a
-   bracket (exact derivative of the cell's unchanged law, bisection when a step leaves the
-   bracket). ``cell_substeps`` equal substeps, ``entry_substeps`` for a cell whose soil reaction
-   at the step start is below ``entry_fraction`` of its load (the entry from z = 0, where the
-   stiffness is discontinuous and falls 40 x within a step).
+   stiffly accurate; or implicit Euler, ``steady_method``), each implicit stage one monotone
+   scalar equation in z solved by Newton in a bracket (exact derivative of the cell's unchanged
+   law, bisection when a step leaves the bracket). ``cell_substeps`` equal substeps; transient
+   windows with the geometry at every substep end: ``exit_substeps`` for a cell leaving a track on
+   its unloading line, ``entry_substeps`` for a cell whose soil reaction at the step start is
+   below ``entry_fraction`` of its load (the entry from z = 0, where the stiffness is
+   discontinuous and falls 40 x within a step) or that rings (:func:`ringing`: the lightly damped
+   oscillation on the elastic line that the end of the entry ramp excites).
 4. INFO_OUT for the active channels only (z, dz/dt, z_max, p_max, phase into storage), the
    channel sums at the end state, the outputs, the coverage check (every cell the tracks load
    holds a channel).
@@ -93,12 +97,15 @@ class EngineSettings:
     vehicle_substeps: ROS2 steps of the vehicle per macro step, [1, 64].
     cell_substeps: SDIRK substeps of every active cell per macro step, [1, 64].
     entry_substeps: substeps of a cell in its entry window (soil reaction below entry_fraction
-        of its load at the step start), [1, 256]; not below cell_substeps.
+        of its load at the step start, or ringing: :func:`ringing`), [1, 256]; not below
+        cell_substeps.
     exit_substeps: substeps of a cell in its exit window (leaving a track's contact, its load
         falling, on its unloading line), [1, 256]; not below cell_substeps.
     steady_method: the method of the cells outside the windows: "sdirk2" (Alexander's two-stage
         SDIRK, the windows' method) or "euler" (implicit Euler: one stage a substep).
     entry_fraction: [0, 1].
+    ring_tolerance: a cell whose transient about its quasi-static path exceeds this fraction of
+        its sinkage at the step start takes an entry window (:func:`ringing`), [0, 1]; 0: never.
     power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
         absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
         max(dz/dt, 0) at the step end, the channel model's expression).
@@ -107,10 +114,11 @@ class EngineSettings:
 
     vehicle_substeps: int = 1
     cell_substeps: int = 1
-    entry_substeps: int = 4
+    entry_substeps: int = 8
     exit_substeps: int = 8
-    steady_method: str = "sdirk2"
+    steady_method: str = "euler"
     entry_fraction: float = 0.5
+    ring_tolerance: float = 5e-3
     power: str = "step_mean"
     compiled: bool = True
 
@@ -122,6 +130,9 @@ class EngineSettings:
                 raise ScenarioError(f"engine.{name} = {v!r} must be an integer in [1, {hi}]")
         if not (isinstance(self.entry_fraction, (int, float)) and 0.0 <= self.entry_fraction <= 1.0):
             raise ScenarioError(f"engine.entry_fraction = {self.entry_fraction!r} must be a number in [0, 1]")
+        if not (isinstance(self.ring_tolerance, (int, float)) and not isinstance(self.ring_tolerance, bool)
+                and 0.0 <= self.ring_tolerance <= 1.0):
+            raise ScenarioError(f"engine.ring_tolerance = {self.ring_tolerance!r} must be a number in [0, 1]")
         if self.steady_method not in STEADY_METHODS:
             raise ScenarioError(f"engine.steady_method = {self.steady_method!r} is not one of "
                                 f"{', '.join(STEADY_METHODS)}")
@@ -139,6 +150,21 @@ def outside_tracks(geo, cx: float, cy: float, a) -> bool:
     if abs(xb + e) > length / 2 + r:
         return True
     return abs(yb - B / 2) > b / 2 + r and abs(yb + B / 2) > b / 2 + r
+
+
+def ringing(tol: float, z: float, v: float, p: float, dp: float, plA: float, plB: float, h: float,
+            areal_mass: float, damping: float) -> bool:
+    """engine.c ringing: the cell (sinkage z, rate v, reaction p, dp/dz = dp at its state) rings at
+    the step start, its load going from plA to plB over h: its motion about the quasi-static path
+    (p following the load, at the rate (plB - plA) / (h dp)) has an amplitude sqrt(d^2 + e^2 m / dp)
+    above tol |z|, d = (plA - p - c v) / dp its displacement from that path and e its excess rate
+    (docs/terrain.md, "The cells' ringing")."""
+    if not (tol > 0.0 and dp > 0.0 and h > 0.0):
+        return False
+    d = (plA - p - damping * v) / dp
+    ev = v - (plB - plA) / (h * dp)
+    tz = tol * z
+    return d * d + areal_mass * ev * ev / dp > tz * tz
 
 
 def window_substeps(settings: EngineSettings) -> tuple[int, int]:
@@ -168,7 +194,7 @@ class _Eng(ctypes.Structure):
                 + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")]
                 + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
                 + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
-                   ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong)])
+                   ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong), ("ring_tol", ctypes.c_double)])
 
 
 def _check_no_work(fns):
@@ -316,6 +342,7 @@ class EngineState:
         e.power_mode = POWER_MODES.index(s.power)
         e.pad, e.release_rate, e.areal_mass, e.damping = self.pad, self.release_rate, self.areal_mass, self.damping
         e.gamma, e.entry_fraction = SDIRK_GAMMA, float(s.entry_fraction)
+        e.ring_tol = float(s.ring_tolerance)
         for k, v in self.stats.items():
             setattr(e, k, v)
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
@@ -769,7 +796,9 @@ class PyKernel:
                         and s.ch_z[ch] < s.ch_zmax[ch] + s.ch_zoff[ch] + s.ch_dc[ch]):
                     if nexit > ns:
                         ns, wgrid = nexit, grid_exit
-                elif s.ch_p[ch] < sset.entry_fraction * max(plA, plB):
+                elif (s.ch_p[ch] < sset.entry_fraction * max(plA, plB)
+                      or ringing(sset.ring_tolerance, float(s.ch_z[ch]), float(s.ch_v[ch]), float(s.ch_p[ch]),
+                                 float(s.ch_dp[ch]), plA, plB, h, s.areal_mass, s.damping)):
                     if nentry > ns:
                         ns, wgrid = nentry, grid_entry
                 pl, fr = [plA], [float(gA[1]), float(gA[2])]

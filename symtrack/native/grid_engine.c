@@ -100,6 +100,9 @@ typedef struct {
   double *agrid_entry;
   /* 1: the cells outside the windows by implicit Euler (engine.py EngineSettings.steady_method) */
   long long steady_euler;
+  /* a cell whose transient about its quasi-static path exceeds ring_tol |z| takes an entry window
+     (ringing below; 0: off) */
+  double ring_tol;
 } eng_t;
 
 static long long now_ns(void) {
@@ -142,6 +145,20 @@ static int outside_tracks(const double *geo, const double *c, const double *a) {
   const double xb = a[2] * dx + a[3] * dy, yb = -a[3] * dx + a[2] * dy;
   if (fabs(xb + e) > l / 2 + r) return 1;
   return fabs(yb - B / 2) > b / 2 + r && fabs(yb + B / 2) > b / 2 + r;
+}
+
+/* 1 when the cell on channel ch rings at the step start (engine.py ringing): its motion about the
+ * quasi-static path (p following the load, at the rate (plB - plA) / (h k)) has an amplitude
+ * sqrt(d^2 + e^2 m / k) above ring_tol |z|, with k = dp/dz at its state, d = (plA - p - c v) / k its
+ * displacement from that path (m a / k) and e = v - (plB - plA) / (h k) its excess rate: the ringing
+ * that a load kink (the end of the entry ramp) excites on the lightly damped elastic line
+ * (docs/terrain.md, "The cells' ringing") */
+static int ringing(const eng_t *E, long long ch, double plA, double plB, double h) {
+  const double k = E->ch_dp[ch];
+  if (!(E->ring_tol > 0.0) || !(k > 0.0) || !(h > 0.0)) return 0;
+  const double v = E->ch_v[ch], d = (plA - E->ch_p[ch] - E->damping * v) / k, ev = v - (plB - plA) / (h * k);
+  const double tz = E->ring_tol * E->ch_z[ch];
+  return d * d + E->areal_mass * ev * ev / k > tz * tz;
 }
 
 /* ---- geometry: the tracks' rectangles (world.World._rectangles / cells_under) ------------------- */
@@ -579,13 +596,13 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       const double *wgrid = 0;
       /* the transient windows, substeps with the geometry evaluated at each substep end (the overlap's
          kinks resolved to a substep): exit (the cell leaving a track's contact, its load falling, on
-         its unloading line), else entry (soil reaction below entry_fraction of the load) */
+         its unloading line), else entry (soil reaction below entry_fraction of the load, or ringing) */
       if (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch]) {
         if (E->exit_substeps > ns) {
           ns = E->exit_substeps;
           wgrid = E->agrid;
         }
-      } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB)) {
+      } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, h)) {
         if (E->entry_substeps > ns) {
           ns = E->entry_substeps;
           wgrid = E->agrid_entry;

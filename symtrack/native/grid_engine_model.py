@@ -24,7 +24,8 @@ interpolated between the step's two poses. So the Functions are:
   :func:`symtrack.terrain.channels.build_cell_functions`'s geometry.
 - ``eng_cell_law(z, hist[5]) -> (p, dp/dz)``: the reaction pressure of
   :func:`symtrack.model.cell.reaction_pressure` with the soil's law constants baked in, and its
-  exact derivative (the Newton iteration of each implicit stage); hist = (z_max, p_max, z_off,
+  exact derivative (the Newton iteration of each implicit stage), written by branch
+  (:func:`symtrack.model.cell.reaction_pressure_and_slope`); hist = (z_max, p_max, z_off,
   delta, d_c), the cycle law's history. For n = 0.5 the regularised Bekker term
   k z+ (z+ + d)^(n-1) is written k z+ / sqrt(z+ + d) (the same number; libm's pow is about 20 x
   slower than sqrt).
@@ -176,16 +177,19 @@ def _lu_solve_factory(A):
 
 
 def reaction_pressure_fast(z, hist, keq, n, elastic_stiffness, kappa, reg_m):
-    """:func:`symtrack.model.cell.reaction_pressure` with numeric law constants, hist = (z_max,
-    p_max, z_off, delta, d_c); for n = 0.5 the Bekker term through sqrt (the same number)."""
+    """(p, dp/dz) of :func:`symtrack.model.cell.reaction_pressure_and_slope` with numeric law
+    constants, hist = (z_max, p_max, z_off, delta, d_c); for n = 0.5 the Bekker term through sqrt
+    (the same number; libm's pow is about 20 x slower)."""
     if n == 0.5:
         def bekker(zz):
             zp = ca.fmax(zz, 0)
-            return keq * zp / ca.sqrt(zp + reg_m)
+            sq = ca.sqrt(zp + reg_m)
+            # k (z+ / 2 + d) / (z+ + d)^(3/2): the general slope k (n z+ + d) (z+ + d)^(n-2) at n = 1/2
+            return keq * zp / sq, ca.if_else(zz > 0, keq * (0.5 * zp + reg_m) / ((zp + reg_m) * sq), 0)
     else:
         bekker = None
-    return cell.reaction_pressure(z, hist[0], hist[1], keq, n, elastic_stiffness, kappa, reg_m, z_off=hist[2],
-                                  delta=hist[3], d_c=hist[4], bekker=bekker)
+    return cell.reaction_pressure_and_slope(z, hist[0], hist[1], keq, n, elastic_stiffness, kappa, reg_m,
+                                            z_off=hist[2], delta=hist[3], d_c=hist[4], bekker=bekker)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -295,8 +299,8 @@ def _cell_functions(opts, params: dict, k: int, fo: dict):
     """eng_cell_law_<k>, eng_cell_history_<k>, eng_cell_entry_<k> of soil k (the module doc)."""
     keq, n, ke, kappa, reg = soil_law_values(params, opts.bekker_regularisation_m)
     z, hist, ps = ca.SX.sym("z"), ca.SX.sym("hist", NH), ca.SX.sym("p")
-    p = reaction_pressure_fast(z, hist, keq, n, ke, kappa, reg)
-    cell_law = ca.Function(f"eng_cell_law_{k}", [z, hist], [p, ca.jacobian(p, z)], ["z", "hist"], ["p", "dp_dz"], fo)
+    p, dp = reaction_pressure_fast(z, hist, keq, n, ke, kappa, reg)
+    cell_law = ca.Function(f"eng_cell_law_{k}", [z, hist], [p, dp], ["z", "hist"], ["p", "dp_dz"], fo)
     zm1, pm1, dc1, plastic, phase = cell.history_update(z, ps, hist[0], hist[1], hist[2], hist[3], hist[4], ke,
                                                         kappa, reg)
     cell_history = ca.Function(f"eng_cell_history_{k}", [z, ps, hist], [ca.vertcat(zm1, pm1, dc1, plastic, phase)],
