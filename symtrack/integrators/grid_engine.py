@@ -194,7 +194,8 @@ class _Eng(ctypes.Structure):
                 + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")]
                 + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
                 + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
-                   ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong), ("ring_tol", ctypes.c_double)])
+                   ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong),
+                   ("ring_tol", ctypes.c_double)])
 
 
 def _check_no_work(fns):
