@@ -535,12 +535,15 @@ class PyKernel:
         s.peak_active = max(s.peak_active, s.n_act)
         return 0, e
 
-    def _stage(self, zeta, omega, pl, gh, hist, soil, zs, ps, dps):
-        s = self.s
-        m, cd = s.areal_mass, s.damping
+    def _coefficients(self, gh):
+        """engine.c stage_coefficients: (a, 1 / a, g) of a stage of length gh."""
+        m, cd = self.s.areal_mass, self.s.damping
         a = (1.0 + gh * cd / m) / gh
-        g = gh / m
-        hi = zeta + (omega + g * pl) / a
+        return a, 1.0 / a, gh / m
+
+    def _stage(self, zeta, omega, pl, a, ia, g, hist, soil, zs, ps, dps):
+        s = self.s
+        hi = zeta + (omega + g * pl) * ia
         lo = -math.inf
         x = (a * zeta + omega + g * (pl - ps + dps * zs)) / (a + g * dps)
         if not x < hi:
@@ -565,13 +568,12 @@ class PyKernel:
             if not (lo < xn < hi):
                 if lo == -math.inf:
                     ph, _ = self._law(hi, hist, soil)
-                    lo = hi - g * ph / a
+                    lo = hi - g * ph * ia
                 if not (lo < xn < hi):
                     xn = 0.5 * (lo + hi)
             x = xn
-        xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp)
-        if not abs(xn - x) <= 1e-6 * abs(xn) + 1e-18:
-            return None
+        if not abs(a * (x - zeta) + g * p - omega - g * pl) <= (1e-6 * abs(x) + 1e-18) * (a + g * dp):
+            return None  # the Newton step from x, F / F', not below 1e-6 |x| + 1e-18 m
         return x, p, dp
 
     def _cell_step(self, z0, v0, pz, dpz, pl, f, hist, soil, h, n, work, euler=False):
@@ -580,32 +582,37 @@ class PyKernel:
         gh = gam * hs
         if euler:
             vr = v0
+            ae, iae, ge = self._coefficients(hs)
+            ihs = 1.0 / hs
             for k in range(n):
                 p0 = pz
-                r1 = self._stage(z0, v0, pl[k + 1], hs, hist, soil, z0, pz, dpz)
+                r1 = self._stage(z0, v0, pl[k + 1], ae, iae, ge, hist, soil, z0, pz, dpz)
                 if r1 is None:
                     return None
                 Z1, pz, dpz = r1
                 w1 = 0.5 * (p0 + pz) * max(Z1 - z0, 0.0)
                 for t in range(2):
                     work[t] += 0.5 * (f[2 * k + t] + f[2 * k + 2 + t]) * w1
-                v0 = (Z1 - z0) / hs
+                v0 = (Z1 - z0) * ihs
                 vr = v0
                 z0 = Z1
                 self.s.stats["n_cell_stages"] += 1
             return z0, v0, pz, dpz, vr
+        a, ia, g = self._coefficients(gh)
+        igh, ihs = 1.0 / gh, 1.0 / hs
+        q0, q1, q2 = (1.0 - gam) / gam * ihs, ihs / (gam * (gam - 1.0)), (2.0 - gam) / (1.0 - gam) * ihs
         for k in range(n):
             p0 = pz
             plA, plB = pl[k], pl[k + 1]
-            r1 = self._stage(z0, v0, plA + (plB - plA) * gam, gh, hist, soil, z0, pz, dpz)
+            r1 = self._stage(z0, v0, plA + (plB - plA) * gam, a, ia, g, hist, soil, z0, pz, dpz)
             if r1 is None:
                 return None
             Z1, pz, dpz = r1
             p1 = pz
-            V1 = (Z1 - z0) / gh
-            A1 = (V1 - v0) / gh
+            V1 = (Z1 - z0) * igh
+            A1 = (V1 - v0) * igh
             zeta, omega = z0 + hs * (1.0 - gam) * V1, v0 + hs * (1.0 - gam) * A1
-            r2 = self._stage(zeta, omega, plB, gh, hist, soil, Z1, pz, dpz)
+            r2 = self._stage(zeta, omega, plB, a, ia, g, hist, soil, Z1, pz, dpz)
             if r2 is None:
                 return None
             Z2, pz, dpz = r2
@@ -614,8 +621,8 @@ class PyKernel:
             for t in range(2):
                 fa, fb = f[2 * k + t], f[2 * k + 2 + t]
                 work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2
-            v0 = (Z2 - zeta) / gh
-            vr = (z0 * (1.0 - gam) / gam + Z1 / (gam * (gam - 1.0)) + Z2 * (2.0 - gam) / (1.0 - gam)) / hs
+            v0 = (Z2 - zeta) * igh
+            vr = z0 * q0 + Z1 * q1 + Z2 * q2  # the quadratic through (0, z0), (gamma, Z1), (1, Z2)
             z0 = Z2
             self.s.stats["n_cell_stages"] += 2
         return z0, v0, pz, dpz, vr

@@ -322,11 +322,18 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
  * inside the bracket is below NEWTON_ACCEPT |Z| (its result is then within about NEWTON_ACCEPT^2 |Z| of the
  * root, and p is extended linearly to it; engine.py's NEWTON_ACCEPT_STEP). Z, p(Z), p'(Z) are returned. */
-static int stage(eng_t *E, double zeta, double omega, double pl, double gh, const double *hist, int soil,
+/* (a, 1 / a, g) of a stage of length gh (the same for every stage of a cell step: computed once
+   there; the divisions were a fifth of the cells' time) */
+static inline void stage_coefficients(const eng_t *E, double gh, double *a, double *ia, double *g) {
+  const double m = E->areal_mass, cd = E->damping;
+  *a = (1.0 + gh * cd / m) / gh;
+  *ia = 1.0 / *a;
+  *g = gh / m;
+}
+
+static int stage(eng_t *E, double zeta, double omega, double pl, double a, double ia, double g, const double *hist, int soil,
                  double zs, double ps, double dps, double *Z, double *pz, double *dpz) {
-  double m = E->areal_mass, cd = E->damping;
-  double a = (1.0 + gh * cd / m) / gh, g = gh / m;
-  double hi = zeta + (omega + g * pl) / a, lo = -INFINITY;
+  double hi = zeta + (omega + g * pl) * ia, lo = -INFINITY;
   double x = (a * zeta + omega + g * (pl - ps + dps * zs)) / (a + g * dps);
   if (!(x < hi)) x = hi;
   double p, dp;
@@ -351,15 +358,15 @@ static int stage(eng_t *E, double zeta, double omega, double pl, double gh, cons
       if (lo == -INFINITY) {
         double ph, dph;
         law(hi, hist, soil, &ph, &dph);
-        lo = hi - g * ph / a;
+        lo = hi - g * ph * ia;
       }
       if (!(xn < hi && xn > lo)) xn = 0.5 * (lo + hi);
     }
     x = xn;
   }
   {
-    double xn = x - (a * (x - zeta) + g * p - omega - g * pl) / (a + g * dp);
-    if (!(fabs(xn - x) <= 1e-6 * fabs(xn) + 1e-18)) return 1;
+    /* the Newton step from x, F / F', below 1e-6 |x| + 1e-18 m */
+    if (!(fabs(a * (x - zeta) + g * p - omega - g * pl) <= (1e-6 * fabs(x) + 1e-18) * (a + g * dp))) return 1;
   }
   *Z = x;
   *pz = p;
@@ -380,12 +387,14 @@ static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, cons
   if (euler) {
     /* implicit Euler (L-stable, order 1, one stage a substep): V = (Z - z0) / hs, the load at the
        substep end, the work by one trapezoid per substep, the fractions at its middle */
+    double ae, iae, ge, ihs = 1.0 / hs;
+    stage_coefficients(E, hs, &ae, &iae, &ge);
     for (long long k = 0; k < n; ++k) {
       double Z1, p0 = pz;
-      if (stage(E, z0, v0, pl[k + 1], hs, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
+      if (stage(E, z0, v0, pl[k + 1], ae, iae, ge, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
       double w1 = 0.5 * (p0 + pz) * fmax(Z1 - z0, 0.0);
       for (int t = 0; t < 2; ++t) work[t] += 0.5 * (f[2 * k + t] + f[2 * k + 2 + t]) * w1;
-      v0 = (Z1 - z0) / hs;
+      v0 = (Z1 - z0) * ihs;
       *vr = v0;
       z0 = Z1;
       E->n_cell_stages += 1;
@@ -396,24 +405,27 @@ static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, cons
     *dp = dpz;
     return 0;
   }
+  double a, ia, g, igh = 1.0 / gh, ihs = 1.0 / hs;
+  stage_coefficients(E, gh, &a, &ia, &g);
+  /* the rate at a substep end from the quadratic through (0, z0), (gamma, Z1), (1, Z2) */
+  const double q0 = (1.0 - gam) / gam * ihs, q1 = ihs / (gam * (gam - 1.0)), q2 = (2.0 - gam) / (1.0 - gam) * ihs;
   for (long long k = 0; k < n; ++k) {
     double Z1, Z2, p0 = pz, p1;
     double plA = pl[k], plB = pl[k + 1];
-    if (stage(E, z0, v0, plA + (plB - plA) * gam, gh, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
+    if (stage(E, z0, v0, plA + (plB - plA) * gam, a, ia, g, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
     p1 = pz;
-    double V1 = (Z1 - z0) / gh;
-    double A1 = (V1 - v0) / gh;
+    double V1 = (Z1 - z0) * igh;
+    double A1 = (V1 - v0) * igh;
     double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
-    if (stage(E, zeta, omega, plB, gh, hist, soil, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
+    if (stage(E, zeta, omega, plB, a, ia, g, hist, soil, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
     double m1 = 0.5 * gam, m2 = 0.5 * (gam + 1.0);
     double w1 = 0.5 * (p0 + p1) * fmax(Z1 - z0, 0.0), w2 = 0.5 * (p1 + pz) * fmax(Z2 - Z1, 0.0);
     for (int t = 0; t < 2; ++t) {
       double fa = f[2 * k + t], fb = f[2 * k + 2 + t];
       work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2;
     }
-    v0 = (Z2 - zeta) / gh;
-    /* the rate at the substep end from the quadratic through (0, z0), (gamma, Z1), (1, Z2) */
-    *vr = (z0 * (1.0 - gam) / gam + Z1 / (gam * (gam - 1.0)) + Z2 * (2.0 - gam) / (1.0 - gam)) / hs;
+    v0 = (Z2 - zeta) * igh;
+    *vr = z0 * q0 + Z1 * q1 + Z2 * q2;
     z0 = Z2;
     E->n_cell_stages += 2;
   }
