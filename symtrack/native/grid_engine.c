@@ -62,7 +62,7 @@ typedef struct {
   long long n_act, n_new, peak_active, stamp;
   /* constants */
   double *pv;     /* parameters of the vehicle Functions; the last NS entries are the channel sums */
-  double *geo;    /* 6: l, b, B, e, dx, end strip */
+  double *geo;    /* 7: l, b, B, e, dx, end strip, 1 / dx */
   double *wv;     /* NW: the vehicle's states and accelerations */
   double *a;      /* NA: pose and pressure lines at wv */
   double *work;   /* the generated Functions' work vector (the largest sz_w) */

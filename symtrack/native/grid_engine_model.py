@@ -19,7 +19,7 @@ interpolated between the step's two poses. So the Functions are:
   this form).
 - ``eng_outputs(x[12], u[2], pv) -> y``: the model's outputs (same names and order as the
   channel model's) from the vehicle state and the channel sums.
-- ``eng_cell_geo(c[2], a[8], geo[6]) -> g[7]``: one cell's load p_load = sum_k frac_k
+- ``eng_cell_geo(c[2], a[8], geo[7]) -> g[7]``: one cell's load p_load = sum_k frac_k
   p_k(s_mid,k), its overlap fractions (left, right) and its four end-strip weights, from
   :func:`symtrack.terrain.channels.build_cell_functions`'s geometry.
 - ``eng_cell_law(z, hist[5]) -> (p, dp/dz)``: the reaction pressure of
@@ -271,10 +271,10 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
                                ["w", "u", "pv", "h"], ["w1", "a1"], fo)
 
     # one cell: load and weights
-    fn = build_cell_functions(opts)
+    fn = build_cell_functions(opts, cell_reciprocal=True)
     c = ca.SX.sym("c", 2)
     av = ca.SX.sym("a", NA)
-    geo = ca.SX.sym("geo", 6)
+    geo = ca.SX.sym("geo", 7)
     ddx, ddy = c[0] - av[0], c[1] - av[1]
     qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, 0, 0, 1, ca.DM.zeros(NF - 5))
     g = fn["geometry"](qb, ca.DM.zeros(3), geo)
@@ -333,8 +333,9 @@ def pv_base(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
 
 
 def geo_vector(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
+    """(l, b, B, e, cell size, end strip, 1 / cell size): eng_cell_geo's geo."""
     return [float(params["contact_length_m"]), float(params["track_width_m"]), float(params["track_gauge_m"]),
-            float(params["cg_ahead_of_contact_centre_m"]), float(cell_m), float(end_strip_m)]
+            float(params["cg_ahead_of_contact_centre_m"]), float(cell_m), float(end_strip_m), 1.0 / float(cell_m)]
 
 
 def cell_constants(params: dict) -> tuple[float, float]:

@@ -106,9 +106,12 @@ def channel_param_names(c: int) -> tuple[str, ...]:
     return tuple(f"ch{c}_{f}" for f in CHANNEL_FIELDS)
 
 
-def _overlap(c, h, lo, hi):
-    """Fraction of the interval [c - h, c + h] inside [lo, hi]: continuous, piecewise linear."""
-    return ca.fmin(ca.fmax(ca.fmin(hi, c + h) - ca.fmax(lo, c - h), 0), 2 * h) / (2 * h)
+def _overlap(c, h, lo, hi, inv_2h=None):
+    """Fraction of the interval [c - h, c + h] inside [lo, hi]: continuous, piecewise linear.
+    inv_2h: 1 / (2 h) as a symbol of its own (then a product: CasADi would fold a product with
+    1 / (2 h) back into the quotient), or None (the quotient)."""
+    overlap = ca.fmin(ca.fmax(ca.fmin(hi, c + h) - ca.fmax(lo, c - h), 0), 2 * h)
+    return overlap / (2 * h) if inv_2h is None else overlap * inv_2h
 
 
 def _law_symbols():
@@ -132,12 +135,14 @@ def law_vector(keq, n, elastic_stiffness, kappa, reg_cap_m):
     return ca.vertcat(keq, n, elastic_stiffness, kappa, cell.bekker_regularisation_length(keq, n, reg_cap_m))
 
 
-def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
+def build_cell_functions(opts: ModelOptions, cell_reciprocal: bool = False) -> dict[str, ca.Function]:
     """The one-cell Functions a channel is made of.
 
     - ``geometry(q[5], pose[3], geo[6]) -> g[8]``: frac_left, frac_right, s_mid_left, s_mid_right,
       and the end-strip weights (sprocket_left, idler_left, sprocket_right, idler_right);
-      geo = (l, b, B, e, cell size, end strip).
+      geo = (l, b, B, e, cell size, end strip). With ``cell_reciprocal`` geo[7] ends with
+      1 / cell size, and the overlaps are products with it (one division instead of seven; the
+      terrain engine's geometry, within an ulp of the quotients).
     - ``soil(z, hist[5], law[5]) -> p``: the reaction pressure (cell.reaction_pressure);
       hist = (z_max, p_max, z_off, delta, d_c) (:data:`HIST_ROWS` of the channel fields), law =
       (k_eq, n, K_e, kappa, regularisation length) (:func:`soil_law_values`).
@@ -150,8 +155,9 @@ def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
     """
     q = ca.SX.sym("q", NF)
     pose = ca.SX.sym("pose", 3)
-    geo = ca.SX.sym("geo", 6)
+    geo = ca.SX.sym("geo", 7 if cell_reciprocal else 6)
     l, b, B, e, dx, strip = (geo[i] for i in range(6))
+    inv = geo[6] if cell_reciprocal else None  # 1 / dx = 1 / (2 h)
     X, Y, psi = pose[0], pose[1], pose[2]
     ddx, ddy = q[0] - X, q[1] - Y
     xb = ca.cos(psi) * ddx + ca.sin(psi) * ddy
@@ -162,12 +168,12 @@ def build_cell_functions(opts: ModelOptions) -> dict[str, ca.Function]:
     fr, sm, w = [], [], {}
     for k in TRACKS:
         t = yb - _SIDE[k] * B / 2
-        fr.append(active * _overlap(s, h, 0, l) * _overlap(t, h, -b / 2, b / 2))
+        fr.append(active * _overlap(s, h, 0, l, inv) * _overlap(t, h, -b / 2, b / 2, inv))
         sm.append(0.5 * (ca.fmax(s - h, 0) + ca.fmin(s + h, l)))
         # end-strip weights on the contact shrunk by half a cell on every side (module doc)
-        inner = _overlap(t, h, -(b / 2 - h), b / 2 - h)
-        w[("sprocket", k)] = active * _overlap(s, h, l - h - strip, l - h) * inner
-        w[("idler", k)] = active * _overlap(s, h, h, h + strip) * inner
+        inner = _overlap(t, h, -(b / 2 - h), b / 2 - h, inv)
+        w[("sprocket", k)] = active * _overlap(s, h, l - h - strip, l - h, inv) * inner
+        w[("idler", k)] = active * _overlap(s, h, h, h + strip, inv) * inner
     g = ca.vertcat(*fr, *sm, *(w[(end, k)] for k in TRACKS for end in ENDS))
     geometry = ca.Function("channel_geometry", [q, pose, geo], [g], ["q", "pose", "geo"], ["g"])
 
