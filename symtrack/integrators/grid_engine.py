@@ -161,10 +161,11 @@ def ringing(tol: float, z: float, v: float, p: float, dp: float, plA: float, plB
     (docs/terrain.md, "The cells' ringing")."""
     if not (tol > 0.0 and dp > 0.0 and h > 0.0):
         return False
-    d = (plA - p - damping * v) / dp
-    ev = v - (plB - plA) / (h * dp)
+    ik, ih = 1.0 / dp, 1.0 / h  # as engine.c: the reciprocals, then products
+    d = (plA - p - damping * v) * ik
+    ev = v - (plB - plA) * ih * ik
     tz = tol * z
-    return d * d + areal_mass * ev * ev / dp > tz * tz
+    return d * d + areal_mass * ev * ev * ik > tz * tz
 
 
 def window_substeps(settings: EngineSettings) -> tuple[int, int]:
@@ -831,8 +832,8 @@ class PyKernel:
                     e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
                     return -ERR_NEWTON, n_done, e
                 s.ch_z[ch], s.ch_v[ch], s.ch_p[ch], s.ch_dp[ch], s.ch_vr[ch] = out
-                if h > 0.0:
-                    s.ch_pw[ch] = (work[0] / h, work[1] / h)
+                ih = 1.0 / h if h > 0.0 else 0.0  # engine.c: the step's reciprocal
+                s.ch_pw[ch] = (work[0] * ih, work[1] * ih)
                 s.ch_g[ch] = gB
                 self._info_out(ch, hist, soil)
             if s.subsoil is not None:

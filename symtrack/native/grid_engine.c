@@ -153,12 +153,13 @@ static int outside_tracks(const double *geo, const double *c, const double *a) {
  * displacement from that path (m a / k) and e = v - (plB - plA) / (h k) its excess rate: the ringing
  * that a load kink (the end of the entry ramp) excites on the lightly damped elastic line
  * (docs/terrain.md, "The cells' ringing") */
-static int ringing(const eng_t *E, long long ch, double plA, double plB, double h) {
+static int ringing(const eng_t *E, long long ch, double plA, double plB, double ih) {
   const double k = E->ch_dp[ch];
-  if (!(E->ring_tol > 0.0) || !(k > 0.0) || !(h > 0.0)) return 0;
-  const double v = E->ch_v[ch], d = (plA - E->ch_p[ch] - E->damping * v) / k, ev = v - (plB - plA) / (h * k);
+  if (!(E->ring_tol > 0.0) || !(k > 0.0) || !(ih > 0.0)) return 0;
+  const double ik = 1.0 / k, v = E->ch_v[ch];
+  const double d = (plA - E->ch_p[ch] - E->damping * v) * ik, ev = v - (plB - plA) * ih * ik;
   const double tz = E->ring_tol * E->ch_z[ch];
-  return d * d + E->areal_mass * ev * ev / k > tz * tz;
+  return d * d + E->areal_mass * ev * ev * ik > tz * tz;
 }
 
 /* ---- geometry: the tracks' rectangles (world.World._rectangles / cells_under) ------------------- */
@@ -576,6 +577,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     E->ns_vehicle += c2 - c1;
     /* the pose and pressure lines at the ends of the transient windows' substeps (shared by all cells):
        the exit windows' (agrid) and the entry windows' (agrid_entry) */
+    const double ih = h > 0.0 ? 1.0 / h : 0.0; /* the step's reciprocal (0: a zero step) */
     pose_grid(E->agrid, E->a, a1, E->wv[2], w1[2], E->exit_substeps);
     pose_grid(E->agrid_entry, E->a, a1, E->wv[2], w1[2], E->entry_substeps);
     /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end */
@@ -614,7 +616,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
           ns = E->exit_substeps;
           wgrid = E->agrid;
         }
-      } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, h)) {
+      } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, ih)) {
         if (E->entry_substeps > ns) {
           ns = E->entry_substeps;
           wgrid = E->agrid_entry;
@@ -648,10 +650,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         E->err_a = E->ch_cell[ch];
         return -ERR_NEWTON;
       }
-      if (h > 0.0) {
-        pw[0] = work[0] / h;
-        pw[1] = work[1] / h;
-      }
+      pw[0] = work[0] * ih;
+      pw[1] = work[1] * ih;
       memcpy(g, gB, sizeof gB);
       info_out(E, ch, hist);
     }
