@@ -306,6 +306,11 @@ def test_grid_fast_needs_a_terrain_and_settings_are_validated():
         engine.EngineSettings(entry_substeps=0)
     with pytest.raises(ScenarioError, match="power"):
         engine.EngineSettings(power="bogus")
+    for bad in (-1e-3, 1.5, True, "0.01"):
+        with pytest.raises(ScenarioError, match=r"engine.ring_tolerance = .* must be a number in \[0, 1\]"):
+            engine.EngineSettings(ring_tolerance=bad)
+    with pytest.raises(ScenarioError, match="ring_tolerance"):  # from a scenario override, before any work
+        load_scenario("validation_grid", ["engine.ring_tolerance=2"])
     assert math.isclose(engine.SDIRK_GAMMA, 1 - 1 / math.sqrt(2))
 
 
