@@ -124,7 +124,7 @@ def reaction_pressure_and_slope(z, z_max, p_max, keq, n, elastic_stiffness, kapp
                                                           delta, d_c, r0)
     if bekker is None:
         zp = ca.fmax(zs, 0)
-        virgin = keq * zp * (zp + reg_m) ** (n - 1)
+        virgin = bekker_pressure(zs, keq, n, reg_m)
         # d/dz of k z+ (z+ + d)^(n-1) = k (n z+ + d) (z+ + d)^(n-2) where z > 0, 0 below
         slope_v = ca.if_else(zs > 0, keq * (n * zp + reg_m) * (zp + reg_m) ** (n - 2), 0)
     else:

@@ -314,6 +314,15 @@ EXPORT int eng_assign(eng_t *E, double h) {
 }
 
 /* ---- one cell ---------------------------------------------------------------------------------- */
+/* (a, 1 / a, g) of a stage of length gh (the same for every stage of a cell step: computed once
+   there rather than divided out in every stage) */
+static inline void stage_coefficients(const eng_t *E, double gh, double *a, double *ia, double *g) {
+  const double m = E->areal_mass, cd = E->damping;
+  *a = (1.0 + gh * cd / m) / gh;
+  *ia = 1.0 / *a;
+  *g = gh / m;
+}
+
 /* The implicit stage Z = zeta + gh V, V = omega + gh (pl - p(Z) - c V) / m as one monotone scalar
  * equation F(Z) = a (Z - zeta) + g p(Z) - omega - g pl = 0 (a = (1 + gh c / m) / gh, g = gh / m;
  * F' >= a > 0 as p is nondecreasing). The root lies in [hi - g p(hi) / a, hi] with
@@ -323,15 +332,6 @@ EXPORT int eng_assign(eng_t *E, double h) {
  * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
  * inside the bracket is below NEWTON_ACCEPT |Z| (its result is then within about NEWTON_ACCEPT^2 |Z| of the
  * root, and p is extended linearly to it; engine.py's NEWTON_ACCEPT_STEP). Z, p(Z), p'(Z) are returned. */
-/* (a, 1 / a, g) of a stage of length gh (the same for every stage of a cell step: computed once
-   there; the divisions were a fifth of the cells' time) */
-static inline void stage_coefficients(const eng_t *E, double gh, double *a, double *ia, double *g) {
-  const double m = E->areal_mass, cd = E->damping;
-  *a = (1.0 + gh * cd / m) / gh;
-  *ia = 1.0 / *a;
-  *g = gh / m;
-}
-
 static int stage(eng_t *E, double zeta, double omega, double pl, double a, double ia, double g, const double *hist, int soil,
                  double zs, double ps, double dps, double *Z, double *pz, double *dpz) {
   double hi = zeta + (omega + g * pl) * ia, lo = -INFINITY;
