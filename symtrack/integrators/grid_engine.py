@@ -94,7 +94,7 @@ CHUNK_STEPS = 100  # macro steps per call from Python (the progress bar moves be
 class EngineSettings:
     """How the engine integrates (docs/terrain.md, "The terrain engine": the measured choices).
 
-    vehicle_substeps: ROS2 steps of the vehicle per macro step, [1, 64].
+    vehicle_substeps: steps of the vehicle's 8-stage Rosenbrock method per macro step, [1, 64].
     cell_substeps: SDIRK substeps of every active cell per macro step, [1, 64].
     entry_substeps: substeps of a cell in its entry window (soil reaction below entry_fraction
         of its load at the step start, or ringing: :func:`ringing`), [1, 256]; not below
@@ -106,6 +106,10 @@ class EngineSettings:
     entry_fraction: [0, 1].
     ring_tolerance: a cell whose transient about its quasi-static path exceeds this fraction of
         its sinkage at the step start takes an entry window (:func:`ringing`), [0, 1]; 0: never.
+
+    The defaults of the windows (entry 8, exit 8, ring_tolerance 5e-3, steady_method "euler") were
+    calibrated against IDAS on validation_grid: every figure of its summary within 0.5 % at the
+    fewest cell stages measured (docs/terrain.md, "The cells' ringing", the variants' table).
     power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
         absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
         max(dz/dt, 0) at the step end, the channel model's expression).
@@ -781,7 +785,8 @@ class PyKernel:
                 e.err_code = ERR_NONFINITE
                 return -ERR_NONFINITE, n_done, e
             grid_exit = self._pose_grid(a1, w1[2], nexit)
-            grid_entry = self._pose_grid(a1, w1[2], nentry)
+            grid_entry = grid_exit if nentry == nexit else self._pose_grid(a1, w1[2], nentry)
+            ih = 1.0 / h if h > 0.0 else 0.0  # engine.c: the step's reciprocal
             for ch in s.act[:s.n_act]:
                 if (s.ch_z[ch] == 0.0 and s.ch_v[ch] == 0.0 and s.ch_g[ch][0] == 0.0
                         and outside_tracks(s.geo, s.ch_cx[ch], s.ch_cy[ch], a1)):
@@ -832,7 +837,6 @@ class PyKernel:
                     e.err_code, e.err_a = ERR_NEWTON, int(s.ch_cell[ch])
                     return -ERR_NEWTON, n_done, e
                 s.ch_z[ch], s.ch_v[ch], s.ch_p[ch], s.ch_dp[ch], s.ch_vr[ch] = out
-                ih = 1.0 / h if h > 0.0 else 0.0  # engine.c: the step's reciprocal
                 s.ch_pw[ch] = (work[0] * ih, work[1] * ih)
                 s.ch_g[ch] = gB
                 self._info_out(ch, hist, soil)
@@ -986,8 +990,8 @@ class TerrainEngine:
         """World.end_pass in the engine: the vehicle lifted off (each active cell's load falls from its
         reaction at the pass end to zero over LIFT_TIME_S), the cells settle until released (or
         max_steps, with a warning), every channel freed; the pass's subsoil maxima folded into the
-        terrain's record. The cells are integrated by the engine's own cell step (SDIRK, its entry
-        substep count per step, the exit windows'): the same as CVODES over the pool to the tolerance tested."""
+        terrain's record. The cells are integrated by the engine's own cell step (SDIRK, the exit
+        windows' substep count per step): the same as CVODES over the pool to the tolerance tested."""
         w, s = self.world, self.state
         w.z_at_pass_end = w.storage.z.copy()
         w.peak_active = s.peak_active  # the World's figures report it

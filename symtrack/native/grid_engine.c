@@ -576,10 +576,15 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     long long c2 = now_ns();
     E->ns_vehicle += c2 - c1;
     /* the pose and pressure lines at the ends of the transient windows' substeps (shared by all cells):
-       the exit windows' (agrid) and the entry windows' (agrid_entry) */
+       the exit windows' (agrid) and the entry windows' (agrid_entry; the same grid when the counts
+       are equal, as by default) */
     const double ih = h > 0.0 ? 1.0 / h : 0.0; /* the step's reciprocal (0: a zero step) */
     pose_grid(E->agrid, E->a, a1, E->wv[2], w1[2], E->exit_substeps);
-    pose_grid(E->agrid_entry, E->a, a1, E->wv[2], w1[2], E->entry_substeps);
+    const double *grid_entry = E->agrid;
+    if (E->entry_substeps != E->exit_substeps) {
+      pose_grid(E->agrid_entry, E->a, a1, E->wv[2], w1[2], E->entry_substeps);
+      grid_entry = E->agrid_entry;
+    }
     /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end */
     for (long long q = 0; q < E->n_act; ++q) {
       long long ch = E->act[q];
@@ -619,7 +624,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, ih)) {
         if (E->entry_substeps > ns) {
           ns = E->entry_substeps;
-          wgrid = E->agrid_entry;
+          wgrid = grid_entry;
         }
       }
       pl[0] = plA;

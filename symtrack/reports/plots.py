@@ -16,10 +16,12 @@ __all__ = ["LATERAL_SCALE_FLOOR_M", "all_plots", "path_plot", "plt", "png_bytes"
 LATERAL_SCALE_FLOOR_M = 1e-3
 
 
-def png_bytes(fig) -> bytes:
-    """The figure as PNG bytes (the figure is closed)."""
+def png_bytes(fig, tight: bool = True) -> bytes:
+    """The figure as PNG bytes (the figure is closed). ``tight``: lay it out with tight_layout
+    first (False for a figure laid out in fixed inches: tight_layout measures every label again)."""
     buf = io.BytesIO()
-    fig.tight_layout()
+    if tight:
+        fig.tight_layout()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
     return buf.getvalue()

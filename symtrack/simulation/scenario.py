@@ -36,10 +36,11 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     [engine]                       # optional: the terrain engine's scheme (run.integrator = "grid_fast"):
     vehicle_substeps = 1           # [1, 64]   (symtrack.integrators.grid_engine.EngineSettings)
     cell_substeps = 1              # [1, 64]
-    entry_substeps = 4             # [1, 256]
+    entry_substeps = 8             # [1, 256]
     exit_substeps = 8              # [1, 256]
-    steady_method = "sdirk2"       # or "euler": the cells outside the windows
+    steady_method = "euler"        # or "sdirk2": the cells outside the windows
     entry_fraction = 0.5           # [0, 1]
+    ring_tolerance = 5e-3          # [0, 1]: a ringing cell takes an entry window (0: never)
     power = "step_mean"            # or "instantaneous"
     compiled = true                # false: the interpreted kernel
 

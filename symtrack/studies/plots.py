@@ -4,10 +4,9 @@ one value of a key shows what the other keys do)."""
 
 from __future__ import annotations
 
-import io
 import math
 
-from ..reports.plots import plt
+from ..reports.plots import plt, png_bytes
 
 __all__ = ["EXCLUDED_FIGURES", "MAX_FIGURES", "comparison_figures", "comparison_png"]
 
@@ -20,7 +19,6 @@ MAX_FIGURES = 16
 PANEL_IN = (3.2, 1.5)
 MARGINS_IN = {"left": 1.0, "right": 0.4, "top": 0.35, "bottom": 0.7}
 GAPS_IN = (0.8, 0.5)  # between columns (the next column's tick labels and name), between rows
-DPI = 110
 
 
 def _number(v):
@@ -81,7 +79,4 @@ def comparison_png(rows: list[dict], keys: list[str]) -> bytes | None:
     failed = len(rows) - len(ok)
     axes[0][0].set_title(f"sweep: {len(ok)} runs" + (f" ({failed} failed or not run, not shown)" if failed else ""),
                          fontsize=8, loc="left")
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI)
-    plt.close(fig)
-    return buf.getvalue()
+    return png_bytes(fig, tight=False)
