@@ -173,3 +173,38 @@ def test_a_toy_law_in_one_channel_load_unload_reload(toy):
         pa, da, pb, db = (float(v) for v in f(zz, [30e3 / k, 30e3, 0, 0, 0]))
         assert pa == pb and da == pytest.approx(db, rel=1e-12)
     assert float(toy.cycle_increment(ca.DM(1e-3), [1e-3, 1e4, 0, 0, 0], 3, law, 0.16)) == 0.0
+
+
+def test_a_toy_law_in_the_terrain_engines_cell_functions(toy):
+    """The terrain engine's cell Functions (those its generated C is made of) on the toy law: the
+    pressure and slope, INFO_OUT and INFO_IN, and one cell stepped by the engine's kernel (SDIRK
+    with the law's slope in its Newton iterations) under a constant load to the toy's p / k."""
+    import types
+
+    from symtrack.integrators import grid_engine as engine
+    from symtrack.native.grid_engine_model import build_engine_functions
+
+    f = build_engine_functions(toy.opts, PARAMS, 1)
+    k, k_u = _stiffness()
+    top = (30e3 / k, 30e3)
+    for z, hist, p, dp in ((1e-3, (0, 0), k * 1e-3, k), (2.1e-3, top, 30e3 + k_u * (2.1e-3 - top[0]), k_u),
+                           (1e-3, top, 0.0, 0.0), (3e-3, top, k * 3e-3, k)):
+        got = [float(v) for v in f.cell_law[0](z, [*hist, 0, 0, 0])]
+        assert got == pytest.approx([p, dp], rel=1e-12, abs=1e-9)
+    zm1, pm1, _, plastic, phase = np.array(f.cell_history[0](3e-3, k * 3e-3, [*top, 0, 0, 0])).ravel()
+    assert (zm1, pm1, plastic, phase) == pytest.approx((3e-3, k * 3e-3, 1, 1), rel=1e-15)
+    assert float(f.cell_entry[0](1e-3, [*top, 0, 0, 0], 2)) == 0.0
+    st = types.SimpleNamespace(areal_mass=PARAMS["cell_areal_mass_kg_per_m2"],
+                               damping=PARAMS["cell_damping_Pa_s_per_m"], stats={"n_newton": 0, "n_cell_stages": 0})
+    kern = engine.PyKernel(f, st)
+    z = v = zm = pm = 0.0
+    p, dp = (float(x) for x in f.cell_law[0](0.0, [0, 0, 0, 0, 0]))
+    for i in range(150):  # the load ramped to 20 kPa over 0.5 s, then held: 10 ms macro steps, the history after each
+        pl = [20e3 * min(1.0, j * 0.02) for j in (i, i + 1)]
+        z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0, 1.0, 0.0], [zm, pm, 0, 0, 0], 0, 0.01, 1,
+                                         [0.0, 0.0])
+        zm, pm = np.array(f.cell_history[0](z, p, [zm, pm, 0, 0, 0])).ravel()[:2]
+    # at rest on the elastic line through the top the history recorded, the top on p = k z near
+    # the load's own static sinkage (the engine's step lags a little and moves the top)
+    assert z == pytest.approx(zm + (20e3 - pm) / k_u, rel=1e-9)
+    assert pm == pytest.approx(k * zm, rel=1e-12) and zm == pytest.approx(20e3 / k, rel=2e-2)
