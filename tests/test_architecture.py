@@ -1,7 +1,8 @@
 """The package's structure, read from the source (nothing imported): the layers of DESIGN.md,
 no import circle (imports inside functions count), no private name imported across modules,
-and nothing below the CLI and the bench imports the top-level codegen/ package. Also: adding
-an integrator is one class and one registry entry."""
+nothing below the CLI and the bench imports the top-level codegen/ package, and the soil law is
+reached only through its object (symtrack.model.soil_law). Also: adding an integrator is one
+class and one registry entry (adding a soil law: tests/test_soil_law.py)."""
 
 from __future__ import annotations
 
@@ -156,6 +157,71 @@ def test_the_reader_sees_a_circle_and_a_private_import(tmp_path, monkeypatch):
     mods = {"symtrack": pkg / "__init__.py", "symtrack.a": pkg / "a.py", "symtrack.b": pkg / "b.py"}
     e = _edges(mods)
     assert ("symtrack.b", "_hidden") in e["symtrack.a"] and ("symtrack.a", None) in e["symtrack.b"]
+
+
+# The soil law's mathematics (symtrack.model.cell) and its parameter vector belong to the law
+# object: no other module calls the law's functions of cell.py, makes a law vector symbol of a
+# fixed length, or brings back the positional vector's old helpers.
+LAW_MODULES = ("symtrack.model.cell", "symtrack.model.soil_law")
+LAW_FUNCTIONS = frozenset({"k_eq", "bekker_regularisation_length", "bekker_pressure", "unloading_slope",
+                           "reaction_pressure", "reaction_pressure_and_slope", "history_update", "cycle_increment"})
+OLD_LAW_NAMES = frozenset({"NLAW", "law_vector", "soil_law_values", "_law_dict", "_law_symbols",
+                           "reaction_pressure_fast"})
+
+
+def _soil_law_misuses(mods, check_cell=True):
+    """(module, what) for every use of the soil law around its object (the comment above)."""
+    bad = []
+    for m, f in mods.items():
+        if m in LAW_MODULES:
+            continue
+        is_pkg = f.name == "__init__.py"
+        for node in ast.walk(ast.parse(f.read_text(), str(f))):
+            names = []
+            if isinstance(node, ast.ImportFrom):
+                base = _resolve(m, is_pkg, node.level, node.module or "")
+                names = [a.name for a in node.names]
+                if check_cell and base == "symtrack.model.cell":
+                    bad += [(m, f"from cell import {n}") for n in names if n in LAW_FUNCTIONS]
+                names += [a.asname for a in node.names if a.asname]
+            elif isinstance(node, ast.Attribute):
+                names = [node.attr]
+                if check_cell and node.attr in LAW_FUNCTIONS and isinstance(node.value, ast.Name) \
+                        and node.value.id == "cell":
+                    bad.append((m, f"cell.{node.attr}"))
+            elif isinstance(node, ast.Name):
+                names = [node.id]
+            elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                names = [node.name]
+            elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "sym" \
+                    and node.args and isinstance(node.args[0], ast.Constant) and node.args[0].value == "law" \
+                    and any(isinstance(a, ast.Constant) for a in node.args[1:2]):
+                bad.append((m, "a law vector symbol of a fixed length"))  # (one sized by the law's values is fine)
+            bad += [(m, n) for n in names if n in OLD_LAW_NAMES]
+    return bad
+
+
+def test_the_soil_law_is_used_only_through_its_object(graph):
+    mods, _ = graph
+    assert _soil_law_misuses(mods) == []
+    tests = {f"tests.{f.stem}": f for f in (ROOT / "tests").glob("*.py")}  # the tests may test cell.py itself
+    assert _soil_law_misuses(tests, check_cell=False) == []
+
+
+def test_the_soil_law_check_can_fail(tmp_path):
+    """The check above sees the old positional vector, a law function of cell.py called from a
+    consumer and a law symbol of a fixed length, in a throwaway package."""
+    pkg = tmp_path / "symtrack"
+    (pkg / "model").mkdir(parents=True)
+    (pkg / "terrain").mkdir()
+    (pkg / "terrain" / "a.py").write_text("from ..model import cell\nimport casadi as ca\n"
+                                          "law = ca.SX.sym('law', 5)\np = cell.reaction_pressure(0, 0, 0, *law)\n")
+    (pkg / "terrain" / "b.py").write_text("from ..model.cell import k_eq\nNLAW = 5\n")
+    mods = {"symtrack.terrain.a": pkg / "terrain" / "a.py", "symtrack.terrain.b": pkg / "terrain" / "b.py"}
+    assert sorted(_soil_law_misuses(mods)) == [
+        ("symtrack.terrain.a", "a law vector symbol of a fixed length"),
+        ("symtrack.terrain.a", "cell.reaction_pressure"),
+        ("symtrack.terrain.b", "NLAW"), ("symtrack.terrain.b", "from cell import k_eq")]
 
 
 class EulerStepper:

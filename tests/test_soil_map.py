@@ -15,7 +15,6 @@ from symtrack.model.options import ModelOptions
 from symtrack.model.vehicle import traction_shape
 from symtrack.presets import soil_preset
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
-from symtrack.terrain.channels import soil_law_values
 from symtrack.terrain.storage import Terrain
 from symtrack.terrain.world import open_world
 
@@ -80,8 +79,7 @@ def test_each_cell_sinks_by_its_own_soil_and_the_traction_uses_the_soil_under_ea
     for soil, frac_col in ((1, 1), (0, 2)):  # soil 1 under the left track (frac_left), soil 0 under the right
         full = act[(s.ch_g[act, frac_col] > 0.999) & (s.ch_soil[act] == soil)]
         assert full.size > 20
-        keq, n = soil_law_values(world.soils[soil])[:2]
-        z_static = (s.ch_g[full, 0] / keq) ** (1 / n)
+        z_static = world.terrain.law.static_sinkage(s.ch_g[full, 0], world.terrain.law.values(world.soils[soil]))
         assert np.max(np.abs(s.ch_z[full] / z_static - 1)) < 1e-2
     # the traction of each track with the soil under it: the engine's outputs at a state with shear
     eng.kernel.sums()

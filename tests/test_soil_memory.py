@@ -9,16 +9,18 @@ import pytest
 from symtrack import api
 from symtrack.model import SystemModel, cell
 from symtrack.model.options import ModelOptions
+from symtrack.model.soil_law import BekkerWong
 from symtrack.model.static import static_state
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.presets.soils import SOILS
 from symtrack.simulation.scenario import load_scenario
-from symtrack.terrain.channels import build_cell_functions, soil_law_values
+from symtrack.terrain.channels import build_cell_functions
 from symtrack.terrain.storage import Grid, Terrain
 from symtrack.terrain.world import static_sinkage
 
 VEHICLE = vehicle_preset("reference_crawler")
 FN = build_cell_functions(ModelOptions())
+LAW = BekkerWong(ModelOptions())
 G = 9.81
 
 
@@ -35,11 +37,11 @@ def test_static_sinkage_is_bekkers_inverse_on_every_preset(soil):
     """The regularised law's static sinkage under the vehicle's mean pressure, and the four
     cells of the homogeneous model at rest, within 1 % of Bekker's z = (p / k_eq)^(1/n)."""
     p = _params(soil)
-    law = ca.DM(soil_law_values(p))
-    keq, n = float(law[0]), float(law[1])
+    values = LAW.values(p)
+    law = ca.DM(values)
     for pressure in (0.5 * _mean_pressure(p), _mean_pressure(p), 2 * _mean_pressure(p)):
         z = static_sinkage(FN["soil"], law, np.zeros(1), np.zeros((5, 1)), np.array([pressure]))[0]
-        assert z == pytest.approx((pressure / keq) ** (1 / n), rel=1e-2)
+        assert z == pytest.approx(LAW.static_sinkage(pressure, values), rel=1e-2)
     model = SystemModel()
     x = static_state(model, p)
     y = np.array(model.outputs(x, [0, 0], model.param_vector(p))).ravel()
@@ -50,7 +52,7 @@ def test_static_sinkage_is_bekkers_inverse_on_every_preset(soil):
             # the idler cell is on Bekker's curve; the sprocket cell reloads the idler's history and
             # is on Bekker's curve too when its pressure is the larger
             if end == "idler" or pe >= y[model.output_index(f"p_idler_{track}_Pa")]:
-                assert z == pytest.approx((pe / keq) ** (1 / n), rel=1e-2), (end, track)
+                assert z == pytest.approx(LAW.static_sinkage(pe, values), rel=1e-2), (end, track)
 
 
 def _cycle(hist, z, cycles, peak, law, beta):
@@ -76,7 +78,7 @@ def _cycle(hist, z, cycles, peak, law, beta):
 def test_cycle_law_closed_form_rut_after_n_cycles():
     """A cell loaded N times to the same peak: rut_N = rut_1 N^beta (cell.rut_after_cycles)."""
     p = _params("clayey_soil_thailand_38")
-    law = ca.DM(soil_law_values(p))
+    law = ca.DM(LAW.values(p))
     beta = p["repeated_loading_exponent"]
     hist, z, cycles = (0.0, 0.0, 0.0), 0.0, 0
     ruts = []
@@ -91,7 +93,7 @@ def test_cycle_law_closed_form_rut_after_n_cycles():
 
 def test_light_cycles_add_nothing_and_partial_cycles_add_their_share():
     p = _params("clayey_soil_thailand_38")
-    law = ca.DM(soil_law_values(p))
+    law = ca.DM(LAW.values(p))
     beta = p["repeated_loading_exponent"]
     hist, z, cycles = _cycle((0.0, 0.0, 0.0), 0.0, 0, 40e3, law, beta)  # the first (virgin) pass
     rut1, n1 = z, cycles
@@ -123,9 +125,8 @@ def test_set_down_writes_no_overshoot_into_the_history():
     act = s.active_channels()
     full = act[(s.ch_g[act, 1] > 0.999) | (s.ch_g[act, 2] > 0.999)]  # cells wholly under a track
     assert full.size > 50
-    keq, n = soil_law_values(sc.params)[:2]
     p_load = s.ch_g[full, 0]
-    z_static = (p_load / keq) ** (1 / n)
+    z_static = LAW.static_sinkage(p_load, LAW.values(sc.params))
     zmax = world.storage.zmax[s.ch_cell[full]]
     assert np.max(np.abs(zmax / z_static - 1)) < 1e-2
 

@@ -8,13 +8,15 @@ import pytest
 
 from symtrack.model import cell
 from symtrack.model.options import ModelOptions
+from symtrack.model.soil_law import BekkerWong
 from symtrack.presets import soil_preset, vehicle_preset
-from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions, soil_law_values
+from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions
 
 PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
 FN = build_cell_functions(ModelOptions())
-LAW = soil_law_values(PARAMS)
-KEQ, N, KE, KAPPA, REG = LAW
+SOIL = BekkerWong(ModelOptions())
+LAW = SOIL.values(PARAMS)
+KE, KAPPA = SOIL.named(LAW)["elastic_stiffness_Pa_per_m"], SOIL.named(LAW)["kappa"]
 
 
 def _channel_step(dt):
@@ -39,7 +41,7 @@ def test_one_channel_load_unload_reload_matches_the_analytic_curves():
             x = np.array(F(x0=x, p=[b, zmax, pmax])["xf"]).ravel()
             zmax, pmax, _, _, phase, _ = (float(v) for v in FN["history"](x[0], [zmax, pmax, 0, 0, 0], LAW))
         ends.append((x[0], zmax, pmax))
-    bekker = lambda p: (p / KEQ) ** (1 / N)  # noqa: E731
+    bekker = lambda p: SOIL.static_sinkage(p, LAW)  # noqa: E731  Bekker's z = (p / k_eq)^(1/n)
     z1 = bekker(30e3)
     assert ends[0][0] == pytest.approx(z1, rel=2e-3)  # virgin loading on Bekker's curve
     assert ends[0][2] == pytest.approx(30e3, rel=2e-3)  # p_max recorded

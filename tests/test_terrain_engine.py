@@ -16,8 +16,9 @@ from scipy.integrate import solve_ivp
 from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators import grid_engine as engine
+from symtrack.model.soil_law import BekkerWong
 from symtrack.native import cache as compiled
-from symtrack.native.grid_engine_model import build_engine_functions, reaction_pressure_fast
+from symtrack.native.grid_engine_model import build_engine_functions
 from symtrack.simulation import loop
 from symtrack.simulation.plants import EnginePlant, make_plant
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
@@ -213,14 +214,16 @@ def test_fast_law_equals_the_model_law(n_exp):
     """The engine's law (p and its slope by branch) against the model's law and its Jacobian, on
     every piece: below the surface, virgin, elastic line, reload line of a cycle, clipped at 0."""
     from symtrack.model import cell
-    from symtrack.terrain.channels import soil_law_values
 
     sc = load_scenario("validation_grid")
-    keq, n, ke, kappa, reg = soil_law_values({**sc.params, "bekker_n": n_exp}, sc.model.bekker_regularisation_m)
+    soil = BekkerWong(sc.model)
+    law = soil.values({**sc.params, "bekker_n": n_exp})  # floats: the engine's form (sqrt at n = 0.5)
+    lw = soil.named(law)
+    keq, n, ke, kappa, reg = (lw[k] for k in ("k_eq", "n", "elastic_stiffness_Pa_per_m", "kappa", "regularisation_m"))
     import casadi as ca
 
     z, h = ca.SX.sym("z"), ca.SX.sym("h", 5)
-    pf, dpf = reaction_pressure_fast(z, h, keq, n, ke, kappa, reg)
+    pf, dpf = soil.pressure_and_slope(z, h, law)
     a = ca.Function("a", [z, h], [pf, dpf])
     pm = cell.reaction_pressure(z, h[0], h[1], keq, n, ke, kappa, reg, z_off=h[2], delta=h[3], d_c=h[4])
     b = ca.Function("b", [z, h], [pm, ca.jacobian(pm, z)])

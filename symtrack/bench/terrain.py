@@ -25,7 +25,7 @@ from ..simulation.passes import RUT_THRESHOLD_M, pass_figures
 from ..simulation.plants import make_plant
 from ..simulation.result import summarise
 from ..simulation.scenario import load_scenario
-from ..terrain.channels import HIST_ROWS, NF, NG, ChannelTerrain, soil_law_values
+from ..terrain.channels import HIST_ROWS, NF, NG, ChannelTerrain
 from ..terrain.settings import TerrainSettings
 from ..terrain.storage import Grid, Terrain
 from ..terrain.world import END_STRIP_CELLS, NV, static_sinkage
@@ -60,7 +60,7 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
     qc[:, 0], qc[:, 1] = grid.centres(ii, jj)
     qc[:, 4] = 1.0
     pbase = np.array(model.param_vector(params, Q))[:-len(Q)]
-    law = ca.DM(soil_law_values(params, scenario.model.bekker_regularisation_m))
+    law = ca.DM(terrain.law.values(params))
     history = terrain.fn["history"].map("history_all", "serial", n, [2], [])
     stepper = ChannelStepper(model, IntegratorSettings("idas", scenario.run.reltol, scenario.run.abstol))
 

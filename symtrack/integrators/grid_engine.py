@@ -55,6 +55,7 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import ScenarioError, SimulationError
+from ..model import soil_law
 from ..native.cache import cache_root, compile_sources, compiler
 from ..native.grid_engine_model import (
     NA,
@@ -69,7 +70,6 @@ from ..native.grid_engine_model import (
     soil_dispatch_c,
 )
 from ..terrain import subsoil
-from ..terrain.channels import soil_law_values
 from ..terrain.world import END_STRIP_CELLS, LIFT_TIME_S, padding_m
 
 log = logging.getLogger("symtrack.terrain")
@@ -887,7 +887,7 @@ def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (
     ``soils``: the parameter dicts of a soil map's soils (index 0 the scenario's)."""
     soils = tuple(soils) or (params,)
     key = (opts, vehicle_substeps, tuple(
-        (tuple(soil_law_values(sp, opts.bekker_regularisation_m)), float(sp["repeated_loading_exponent"]),
+        (tuple(soil_law.make(opts).values(sp)), float(sp["repeated_loading_exponent"]),
          tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils))
     if key not in _FUNCTIONS:
         _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps, soils if len(soils) > 1 else ())

@@ -10,8 +10,11 @@ loading/unloading law of MODEL.md section 2 (:mod:`symtrack.model.cell`):
   pressure exceeds the front pressure (nose up) it continues on the Bekker branch; when it is
   lower it sits on the unloading line through the front's (z, p).
 
-Compaction resistance (reconstruction; Bekker): the work per metre to press a rut of depth z,
-R_c = b k_eq z^(n+1) / (n+1), with z the deepest sinkage under the track.
+The soil law is the model's (:mod:`symtrack.model.soil_law`, ``opts.soil_law``); above, the
+default Bekker/Wong law.
+
+Compaction resistance: the soil law's work per metre to press a rut of depth z (Bekker/Wong:
+R_c = b k_eq z^(n+1) / (n+1), reconstruction), with z the deepest sinkage under the track.
 
 This terrain stays as the light terrain for control design once the grid terrain exists.
 """
@@ -20,9 +23,11 @@ from __future__ import annotations
 
 import casadi as ca
 
-from . import cell
+from . import cell, soil_law
 from .options import ModelOptions
 from .vehicle import ENDS, TRACKS
+
+__all__ = ["HomogeneousTerrain", "cell_state_names"]
 
 
 def cell_state_names(track: str, end: str) -> tuple[str, str]:
@@ -35,40 +40,35 @@ class HomogeneousTerrain:
 
     def __init__(self, opts: ModelOptions):
         self.opts = opts
+        self.law = soil_law.make(opts)
         self.state_names = tuple(n for k in TRACKS for e in ENDS for n in cell_state_names(k, e))
 
     def _index(self, track, end):
         i = 2 * (2 * TRACKS.index(track) + ENDS.index(end))
         return i, i + 1
 
-    def _keq(self, P):
-        return cell.k_eq(P["k_c_N_per_m_n1"], P["k_phi_N_per_m_n2"], P["track_width_m"])
-
     def compaction(self, xv, xc, P, Q):
-        keq, n = self._keq(P), P["bekker_n"]
+        law = self.law.vector(P)
         out = []
         for k in TRACKS:
             zs = xc[self._index(k, "sprocket")[0]]
             zi = xc[self._index(k, "idler")[0]]
             z = ca.fmax(ca.fmax(zs, zi), 0)
-            out.append(P["track_width_m"] * keq * z ** (n + 1) / (n + 1))
+            out.append(self.law.compaction_work(z, law, P["track_width_m"]))
         return ca.vertcat(*out)
 
     def equations(self, xv, xc, dist: dict, P, Q):
         """Cell state derivatives and named signals, given the vehicle's pressure distributions."""
-        keq, n = self._keq(P), P["bekker_n"]
-        reg = cell.bekker_regularisation_length(keq, n, self.opts.bekker_regularisation_m)
-        law = dict(keq=keq, n=n, elastic_stiffness=P["elastic_stiffness_Pa_per_m"],
-                   kappa=P["unloading_stiffness_floor"], reg_m=reg)
+        law = self.law.vector(P)
         xdot = [None] * len(self.state_names)
         signals = {}
         for k in TRACKS:
             iz_i, iv_i = self._index(k, "idler")
             iz_s, iv_s = self._index(k, "sprocket")
             z_i, z_s = xc[iz_i], xc[iz_s]
-            p_idler_soil = cell.reaction_pressure(z_i, 0, 0, **law)
-            p_hist = cell.bekker_pressure(z_i, keq, n, reg)
-            p_sprocket_soil = cell.reaction_pressure(z_s, z_i, p_hist, **law)
+            p_idler_soil = self.law.pressure(z_i, (0, 0, 0, 0, 0), law)
+            p_hist = self.law.virgin_pressure(z_i, law)
+            p_sprocket_soil = self.law.pressure(z_s, (z_i, p_hist, 0, 0, 0), law)
             p_load = {"idler": dist[k].idler, "sprocket": dist[k].sprocket}
             p_soil = {"idler": p_idler_soil, "sprocket": p_sprocket_soil}
             for end, (iz, iv) in (("idler", (iz_i, iv_i)), ("sprocket", (iz_s, iv_s))):

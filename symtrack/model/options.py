@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..foundations.errors import ParameterError
+from .soil_law import DEFAULT as DEFAULT_SOIL_LAW
+from .soil_law import REGISTRY as SOIL_LAWS
 
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
 LATERAL_LAWS = ("shear", "creep")
@@ -75,6 +77,9 @@ class ModelOptions:
         than the soil lets its tracks push (mu_t W = 29.7 kN > b l c + W tan(phi) = 21.4 kN) and
         holds no steady turn tighter than about 100 m. Off by default: the validation was
         calibrated without it (its lateral creep is far from either limit).
+    soil_law: the terrain cells' soil law, a name of the soil-law registry
+        (:mod:`symtrack.model.soil_law`); "bekker_wong" (default): Bekker loading, Wong
+        unloading/reloading line and the cycle law of MODEL.md sections 2 and 6.
     accel_newton_iterations: the body accelerations a_x, a_y enter the pressure distribution
         (load transfer), which sets the forces, which set the accelerations. For the ODE form this
         algebraic loop is solved inside the expression: one fixed-point step from a = 0, then this
@@ -100,6 +105,7 @@ class ModelOptions:
     sliding_smoothing: float = 1e-5
     sliding_sign: str = "displacement"
     pivot_smoothing_rad_s: float = 1e-5
+    soil_law: str = DEFAULT_SOIL_LAW
 
     def __post_init__(self):
         if self.traction_sign not in TRACTION_SIGN_MODES:
@@ -111,6 +117,8 @@ class ModelOptions:
             v = getattr(self, name)
             if v not in allowed:
                 raise ParameterError(f"model.{name} = {v!r} is not one of {', '.join(allowed)}")
+        if self.soil_law not in SOIL_LAWS:
+            raise ParameterError(f"model.soil_law = {self.soil_law!r} is not one of {', '.join(SOIL_LAWS)}")
         for name in ("tanh_steepness_per_m", "shear_smoothing_m", "omega_smoothing_rad_s",
                      "motion_smoothing_m_s", "bekker_regularisation_m", "sliding_smoothing",
                      "pivot_smoothing_rad_s"):

@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import SimulationError
-from .cell import k_eq
+from .soil_law import make as make_soil_law
 from .system import SystemModel
 from .vehicle import GRAVITY_M_S2, VEHICLE_STATES
 
@@ -16,7 +16,8 @@ __all__ = ["static_state"]
 def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0) -> np.ndarray:
     """The vehicle at rest at the given pose with its terrain cells in static equilibrium.
 
-    Solved with a CasADi Newton root-finder on the model's own cell equations (rates zero).
+    Solved with a CasADi Newton root-finder on the model's own cell equations (rates zero), from
+    the sinkage at which the model's soil law carries the vehicle's mean pressure (its static inverse).
     """
     nv = len(VEHICLE_STATES)
     x = np.zeros(model.nx)
@@ -30,9 +31,9 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     p = model.param_vector(params)
     resid = model.ode(xs, ca.DM.zeros(2), p)[rate_idx]
     rf = ca.rootfinder("static", "newton", ca.Function("g", [zc], [resid]), {"abstol": 1e-12, "max_iter": 200})
-    keq = k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])
+    law = make_soil_law(model.opts)
     p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
-    z_guess = (p_mean / keq) ** (1 / params["bekker_n"])
+    z_guess = float(law.static_sinkage(p_mean, law.values(params)))
     try:
         sol = np.array(rf(np.full(len(cell_idx), z_guess))).ravel()
     except RuntimeError as err:

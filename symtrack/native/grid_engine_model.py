@@ -22,17 +22,17 @@ interpolated between the step's two poses. So the Functions are:
 - ``eng_cell_geo(c[2], a[8], geo[7]) -> g[7]``: one cell's load p_load = sum_k frac_k
   p_k(s_mid,k), its overlap fractions (left, right) and its four end-strip weights, from
   :func:`symtrack.terrain.channels.build_cell_functions`'s geometry.
-- ``eng_cell_law(z, hist[5]) -> (p, dp/dz)``: the reaction pressure of
-  :func:`symtrack.model.cell.reaction_pressure` with the soil's law constants baked in, and its
-  exact derivative (the Newton iteration of each implicit stage), written by branch
-  (:func:`symtrack.model.cell.reaction_pressure_and_slope`); hist = (z_max, p_max, z_off,
-  delta, d_c), the cycle law's history. For n = 0.5 the regularised Bekker term
-  k z+ (z+ + d)^(n-1) is written k z+ / sqrt(z+ + d) (the same number; libm's pow is about 20 x
-  slower than sqrt).
-- ``eng_cell_history(z, p, hist[5]) -> (z_max', p_max', d_c', plastic, phase)``:
-  :func:`symtrack.model.cell.history_update` (INFO_OUT).
-- ``eng_cell_entry(z, hist[5], cycles) -> delta``: :func:`symtrack.model.cell.cycle_increment`
-  with the soil's exponent (INFO_IN).
+- ``eng_cell_law(z, hist[5]) -> (p, dp/dz)``: the reaction pressure of the model's soil law
+  (:mod:`symtrack.model.soil_law`) with the soil's law constants baked in, and its exact
+  derivative (the Newton iteration of each implicit stage), written by branch (the law's
+  ``pressure_and_slope``); hist = (z_max, p_max, z_off, delta, d_c), the cycle law's history.
+  With numeric constants the Bekker/Wong law writes the regularised Bekker term
+  k z+ (z+ + d)^(n-1) for n = 0.5 as k z+ / sqrt(z+ + d) (the same number; libm's pow is about
+  20 x slower than sqrt).
+- ``eng_cell_history(z, p, hist[5]) -> (z_max', p_max', d_c', plastic, phase)``: the law's
+  ``history_update`` (INFO_OUT).
+- ``eng_cell_entry(z, hist[5], cycles) -> delta``: the law's ``cycle_increment`` with the soil's
+  exponent (INFO_IN).
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ import dataclasses
 
 import casadi as ca
 
-from ..model import SystemModel, cell
+from ..model import SystemModel, soil_law
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import ENDS, TRACKS, VEHICLE_STATES
 from ..terrain.channels import (
@@ -51,7 +51,6 @@ from ..terrain.channels import (
     NG,
     NH,
     build_cell_functions,
-    soil_law_values,
 )
 from .rosenbrock import GAMMA as RB_GAMMA
 from .rosenbrock import N_STAGES as RB_STAGES
@@ -176,22 +175,6 @@ def _lu_solve_factory(A):
     return solve
 
 
-def reaction_pressure_fast(z, hist, keq, n, elastic_stiffness, kappa, reg_m):
-    """(p, dp/dz) of :func:`symtrack.model.cell.reaction_pressure_and_slope` with numeric law
-    constants, hist = (z_max, p_max, z_off, delta, d_c); for n = 0.5 the Bekker term through sqrt
-    (the same number; libm's pow is about 20 x slower)."""
-    if n == 0.5:
-        def bekker(zz):
-            zp = ca.fmax(zz, 0)
-            sq = ca.sqrt(zp + reg_m)
-            # k (z+ / 2 + d) / (z+ + d)^(3/2): the general slope k (n z+ + d) (z+ + d)^(n-2) at n = 1/2
-            return keq * zp / sq, ca.if_else(zz > 0, keq * (0.5 * zp + reg_m) / ((zp + reg_m) * sq), 0)
-    else:
-        bekker = None
-    return cell.reaction_pressure_and_slope(z, hist[0], hist[1], keq, n, elastic_stiffness, kappa, reg_m,
-                                            z_off=hist[2], delta=hist[3], d_c=hist[4], bekker=bekker)
-
-
 @dataclasses.dataclass(frozen=True)
 class EngineFunctions:
     vehicle_step: ca.Function
@@ -297,17 +280,16 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
 
 def _cell_functions(opts, params: dict, k: int, fo: dict):
     """eng_cell_law_<k>, eng_cell_history_<k>, eng_cell_entry_<k> of soil k (the module doc)."""
-    keq, n, ke, kappa, reg = soil_law_values(params, opts.bekker_regularisation_m)
+    sl = soil_law.make(opts)
+    law = sl.values(params)  # floats: the constants baked in (and the law's numeric specialisations)
     z, hist, ps = ca.SX.sym("z"), ca.SX.sym("hist", NH), ca.SX.sym("p")
-    p, dp = reaction_pressure_fast(z, hist, keq, n, ke, kappa, reg)
+    p, dp = sl.pressure_and_slope(z, hist, law)
     cell_law = ca.Function(f"eng_cell_law_{k}", [z, hist], [p, dp], ["z", "hist"], ["p", "dp_dz"], fo)
-    zm1, pm1, dc1, plastic, phase = cell.history_update(z, ps, hist[0], hist[1], hist[2], hist[3], hist[4], ke,
-                                                        kappa, reg)
+    zm1, pm1, dc1, plastic, phase = sl.history_update(z, ps, hist, law)
     cell_history = ca.Function(f"eng_cell_history_{k}", [z, ps, hist], [ca.vertcat(zm1, pm1, dc1, plastic, phase)],
                                ["z", "p", "hist"], ["h"], fo)
     cycles = ca.SX.sym("cycles")
-    delta = cell.cycle_increment(z, hist[0], hist[1], hist[2], cycles, ke, kappa, reg,
-                                 float(params["repeated_loading_exponent"]))
+    delta = sl.cycle_increment(z, hist, cycles, law, float(params["repeated_loading_exponent"]))
     cell_entry = ca.Function(f"eng_cell_entry_{k}", [z, hist, cycles], [delta], ["z", "hist", "cycles"], ["delta"],
                              fo)
     return cell_law, cell_history, cell_entry

@@ -58,9 +58,10 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     p being the grid model's parameter vector (vehicle and soil parameters, then the terrain's Q).
     """
     from symtrack.model import SystemModel
+    from symtrack.model.soil_law import make as make_soil_law
     from symtrack.model.system import PARAM_NAMES
     from symtrack.model.vehicle import ENDS, TRACKS
-    from symtrack.terrain.channels import HIST_ROWS, NF, NG, build_cell_functions, law_vector
+    from symtrack.terrain.channels import HIST_ROWS, NF, NG, build_cell_functions
 
     agg = SumsTerrain()
     veh = SystemModel(opts, agg)
@@ -94,8 +95,10 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     xc = ca.SX.sym("xc", 2)
     q = ca.SX.sym("q", NF)
     av = ca.SX.sym("a", NA)
-    cst = ca.SX.sym("c", 15)  # l, b, B, e, dx, strip, law[5], cellpar[2], h, unused
-    geo, law, cellpar, hh = cst[0:6], cst[6:11], cst[11:13], cst[13]
+    sl = make_soil_law(opts)
+    nl = sl.size
+    cst = ca.SX.sym("c", 10 + nl)  # l, b, B, e, dx, strip, the soil law's vector, cellpar[2], h, unused
+    geo, law, cellpar, hh = cst[0:6], cst[6:6 + nl], cst[6 + nl:8 + nl], cst[8 + nl]
     # the cell centre in the body frame here (cos, sin of the yaw computed once per stage, not per
     # channel), then the channel's own geometry at the zero pose (cos 0 = 1 folds away)
     ddx, ddy = q[0] - av[0], q[1] - av[1]
@@ -141,11 +144,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
                                 ca.MX.sym("pv", npv), ca.MX.sym("qg", NG), ca.MX.sym("qc", NF, n), ca.MX.sym("h"))
     Pm_ = [PV[i] for i in range(npv)]
     Pd = dict(zip(PARAM_NAMES, Pm_, strict=True))
-    from symtrack.model.cell import k_eq
-
-    keq = k_eq(Pd["k_c_N_per_m_n1"], Pd["k_phi_N_per_m_n2"], Pd["track_width_m"])
-    law_mx = law_vector(keq, Pd["bekker_n"], Pd["elastic_stiffness_Pa_per_m"], Pd["unloading_stiffness_floor"],
-                        opts.bekker_regularisation_m)
+    law_mx = sl.vector(Pd)
     C_MX = ca.vertcat(Pd["contact_length_m"], Pd["track_width_m"], Pd["track_gauge_m"],
                       Pd["cg_ahead_of_contact_centre_m"], Qg[0], Qg[1], law_mx,
                       Pd["cell_areal_mass_kg_per_m2"], Pd["cell_damping_Pa_s_per_m"], H, 0)

@@ -64,13 +64,12 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..model import cell
+from ..model import cell, soil_law
 from ..model.options import ModelOptions
 from ..model.vehicle import ENDS, TRACKS
 
 __all__ = ["CHANNEL_FIELDS", "COMPACTION_SPEED_FLOOR_M_S", "ChannelTerrain", "GLOBAL_FIELDS", "HIST_ROWS", "NF",
-           "NG", "NH", "NLAW", "build_cell_functions", "channel_param_names", "channel_state_names", "law_vector",
-           "soil_law_values"]
+           "NG", "NH", "build_cell_functions", "channel_param_names", "channel_state_names"]
 
 CHANNEL_FIELDS = ("centre_x_m", "centre_y_m", "z_max_m", "p_max_Pa", "active", "z_off_m", "cycle_increment_m",
                   "cycle_progress_m")
@@ -114,25 +113,9 @@ def _overlap(c, h, lo, hi, inv_2h=None):
     return overlap / (2 * h) if inv_2h is None else overlap * inv_2h
 
 
-def _law_symbols():
-    return ca.SX.sym("law", NLAW)  # k_eq, n, elastic stiffness, kappa, regularisation length
-
-
-NLAW = 5
-
-
-def _law_dict(law):
-    return dict(keq=law[0], n=law[1], elastic_stiffness=law[2], kappa=law[3], reg_m=law[4])
-
-
 def _hist(h):
     """(z_max, p_max, z_off, delta, d_c) from a history vector."""
     return h[0], h[1], h[2], h[3], h[4]
-
-
-def law_vector(keq, n, elastic_stiffness, kappa, reg_cap_m):
-    """The law vector (symbolic or numeric) with the soil's regularisation length."""
-    return ca.vertcat(keq, n, elastic_stiffness, kappa, cell.bekker_regularisation_length(keq, n, reg_cap_m))
 
 
 def build_cell_functions(opts: ModelOptions, cell_reciprocal: bool = False) -> dict[str, ca.Function]:
@@ -143,15 +126,16 @@ def build_cell_functions(opts: ModelOptions, cell_reciprocal: bool = False) -> d
       geo = (l, b, B, e, cell size, end strip). With ``cell_reciprocal`` geo[7] ends with
       1 / cell size, and the overlaps are products with it (one division instead of seven; the
       terrain engine's geometry, within an ulp of the quotients).
-    - ``soil(z, hist[5], law[5]) -> p``: the reaction pressure (cell.reaction_pressure);
-      hist = (z_max, p_max, z_off, delta, d_c) (:data:`HIST_ROWS` of the channel fields), law =
-      (k_eq, n, K_e, kappa, regularisation length) (:func:`soil_law_values`).
+    - ``soil(z, hist[5], law) -> p``: the reaction pressure of the model's soil law
+      (:mod:`symtrack.model.soil_law`, ``opts.soil_law``); hist = (z_max, p_max, z_off, delta, d_c)
+      (:data:`HIST_ROWS` of the channel fields), law = the law's vector (its ``values`` of a
+      parameter dict).
     - ``dynamics(z_dot, p_load, p, active, cellpar[2]) -> xc_dot[2]`` (cell.cell_acceleration),
       cellpar = (areal mass, areal damping).
-    - ``history(z, hist[5], law[5]) -> (z_max', p_max', d_c', p, phase, plastic)``: INFO_OUT, the
-      history update (cell.history_update) applied by the world manager after each macro step.
-    - ``entry(z, hist[5], cycles, law[5], beta) -> delta``: INFO_IN, the plastic increment the
-      cell's new stay may add (cell.cycle_increment).
+    - ``history(z, hist[5], law) -> (z_max', p_max', d_c', p, phase, plastic)``: INFO_OUT, the
+      history update (the law's history_update) applied by the world manager after each macro step.
+    - ``entry(z, hist[5], cycles, law, beta) -> delta``: INFO_IN, the plastic increment the
+      cell's new stay may add (the law's cycle_increment).
     """
     q = ca.SX.sym("q", NF)
     pose = ca.SX.sym("pose", 3)
@@ -177,9 +161,9 @@ def build_cell_functions(opts: ModelOptions, cell_reciprocal: bool = False) -> d
     g = ca.vertcat(*fr, *sm, *(w[(end, k)] for k in TRACKS for end in ENDS))
     geometry = ca.Function("channel_geometry", [q, pose, geo], [g], ["q", "pose", "geo"], ["g"])
 
-    z, hist, law = ca.SX.sym("z"), ca.SX.sym("hist", NH), _law_symbols()
-    zm, pm, zo, dl, dc = _hist(hist)
-    p = cell.reaction_pressure(z, zm, pm, **_law_dict(law), z_off=zo, delta=dl, d_c=dc)
+    sl = soil_law.make(opts)
+    z, hist, law = ca.SX.sym("z"), ca.SX.sym("hist", NH), sl.symbols()
+    p = sl.pressure(z, _hist(hist), law)
     soil = ca.Function("channel_soil", [z, hist, law], [p], ["z", "hist", "law"], ["p"])
 
     zdot, pload, ps, act = ca.SX.sym("z_dot"), ca.SX.sym("p_load"), ca.SX.sym("p"), ca.SX.sym("active")
@@ -189,25 +173,14 @@ def build_cell_functions(opts: ModelOptions, cell_reciprocal: bool = False) -> d
                            [ca.vertcat(act * zdot, act * acc)],
                            ["z_dot", "p_load", "p", "active", "cellpar"], ["xc_dot"])
 
-    lw = _law_dict(law)
-    zmax1, pmax1, dc1, plastic, phase = cell.history_update(z, p, *_hist(hist), lw["elastic_stiffness"], lw["kappa"],
-                                                            lw["reg_m"])
+    zmax1, pmax1, dc1, plastic, phase = sl.history_update(z, p, _hist(hist), law)
     history = ca.Function("channel_history", [z, hist, law], [zmax1, pmax1, dc1, p, phase, plastic],
                           ["z", "hist", "law"], ["z_max_new", "p_max_new", "d_c_new", "p", "phase", "plastic"])
     cycles, beta = ca.SX.sym("cycles"), ca.SX.sym("beta")
-    delta = cell.cycle_increment(z, zm, pm, zo, cycles, lw["elastic_stiffness"], lw["kappa"], lw["reg_m"], beta)
+    delta = sl.cycle_increment(z, _hist(hist), cycles, law, beta)
     entry = ca.Function("channel_entry", [z, hist, cycles, law, beta], [delta],
                         ["z", "hist", "cycles", "law", "beta"], ["delta"])
     return {"geometry": geometry, "soil": soil, "dynamics": dynamics, "history": history, "entry": entry}
-
-
-def soil_law_values(params: dict, reg_cap_m: float = ModelOptions.bekker_regularisation_m) -> list[float]:
-    """Numeric law vector (k_eq, n, K_e, kappa, regularisation length) from a parameter dict;
-    ``reg_cap_m``: the model option bekker_regularisation_m."""
-    keq = cell.k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])
-    v = law_vector(float(keq), float(params["bekker_n"]), float(params["elastic_stiffness_Pa_per_m"]),
-                   float(params["unloading_stiffness_floor"]), float(reg_cap_m))
-    return [float(x) for x in ca.DM(ca.evalf(v)).full().ravel()]
 
 
 class ChannelTerrain:
@@ -222,6 +195,7 @@ class ChannelTerrain:
         self.n = n_channels
         self.state_names = tuple(s for c in range(n_channels) for s in channel_state_names(c))
         self.param_names = GLOBAL_FIELDS + tuple(s for c in range(n_channels) for s in channel_param_names(c))
+        self.law = soil_law.make(opts)  # the soil law of the channels (its vector: self.law.values(params))
         self.fn = build_cell_functions(opts)
         n = n_channels
         self._geometry = self.fn["geometry"].map("channels_geometry", "serial", n, [1, 2], [])
@@ -240,9 +214,7 @@ class ChannelTerrain:
                          P["cg_ahead_of_contact_centre_m"], Q[0], Q[1])
         g = self._geometry(qc, pose, geo)  # 8 x n
         xcm = ca.reshape(xc, 2, n)
-        keq = cell.k_eq(P["k_c_N_per_m_n1"], P["k_phi_N_per_m_n2"], P["track_width_m"])
-        law = law_vector(keq, P["bekker_n"], P["elastic_stiffness_Pa_per_m"], P["unloading_stiffness_floor"],
-                         self.opts.bekker_regularisation_m)
+        law = self.law.vector(P)
         hist = ca.vertcat(*(qc[r, :] for r in HIST_ROWS))
         p_soil = self._soil(xcm[0, :], hist, law)  # 1 x n
         parts = {"qc": qc, "g": g, "xcm": xcm, "p_soil": p_soil, "cell_area": Q[0] ** 2}

@@ -73,7 +73,7 @@ from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import VEHICLE_STATES
-from .channels import HIST_ROWS, NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
+from .channels import HIST_ROWS, NF, NG, PHASE_VIRGIN, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import soil_index
 from .storage import Grid, Terrain
@@ -185,7 +185,7 @@ class World:
         # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
         # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
         self.soils = self._apply_soil_map(settings, params)
-        self.laws = np.column_stack([soil_law_values(sp, opts.bekker_regularisation_m) for sp in self.soils])
+        self.laws = np.column_stack([self.terrain.law.values(sp) for sp in self.soils])
         self.betas = np.array([float(sp["repeated_loading_exponent"]) for sp in self.soils])
         self.ch_soil = np.zeros(n, dtype=np.uint8)
         self.counted = np.zeros(n, dtype=bool)  # the channel's stay has counted as a load cycle

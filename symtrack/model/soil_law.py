@@ -1,0 +1,224 @@
+"""The soil law as an object, and the menu of laws (a registry, as the integrators' one).
+
+A soil law is what a terrain cell's soil does under load: the reaction pressure p(z; history)
+and its slope dp/dz, the history update after a step (the world manager's INFO_OUT), the
+increment a new stay of a cell may add (INFO_IN), the work per metre to press a rut (the
+homogeneous terrain's compaction resistance) and the sinkage at which the virgin law carries a
+pressure (the static start guess). Everything is written in CasADi, so the same expressions reach
+the symbolic models, the channel pool and the terrain engine's generated C.
+
+The law owns its parameter vector: :meth:`SoilLaw.vector` builds it from a mapping of the
+model's parameter names (numbers, or the model's parameter symbols), :meth:`SoilLaw.values`
+as numbers, :meth:`SoilLaw.symbols` as a symbol of its own (the channel Functions' ``law``
+input). Nothing outside this module knows its length or the meaning of its entries.
+
+The history a law reads is the cell's stored history (the world manager keeps it, the channel
+fields of :mod:`symtrack.terrain.channels` carry it), :data:`HISTORY_NAMES`: z_max, p_max (the
+top of the virgin loading met), z_off (the plastic sinkage of earlier load cycles), delta (the
+increment this stay may add) and d_c (what it has added so far). A law that has no cycles
+leaves the last three alone.
+
+The law of a model is its option ``model.soil_law`` (:class:`~symtrack.model.options.ModelOptions`);
+the default, ``"bekker_wong"``, is :class:`BekkerWong`. Adding a law is one class and one
+:func:`register` call::
+
+    class LinearPlastic(SoilLaw):
+        name = "linear_plastic"
+        ...
+    register(LinearPlastic)
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Mapping
+
+import casadi as ca
+
+from ..foundations.errors import ParameterError
+from . import cell
+
+__all__ = ["BekkerWong", "DEFAULT", "HISTORY_NAMES", "REGISTRY", "SoilLaw", "get", "make", "names", "register",
+           "unregister"]
+
+# the cell history every law reads, in the order of its ``hist`` argument (module doc)
+HISTORY_NAMES = ("z_max_m", "p_max_Pa", "z_off_m", "cycle_increment_m", "cycle_progress_m")
+
+
+class SoilLaw(abc.ABC):
+    """A soil law (module doc). Subclasses set :attr:`name`, :attr:`param_names` (the model
+    parameters :meth:`vector` reads) and :attr:`vector_names` (the entries of the law vector) and
+    write the abstract methods; ``hist`` is a sequence of the :data:`HISTORY_NAMES` (a CasADi
+    vector or a tuple), ``law`` the law vector (symbolic, or a sequence of floats: then a law may
+    specialise its expressions to the numbers, as the terrain engine wants).
+
+    Parameters
+    ----------
+    opts : ModelOptions
+        The model's options (a law may read its numerical options, e.g. the Bekker
+        regularisation cap).
+    """
+
+    name: str = ""
+    description: str = ""
+    param_names: tuple[str, ...] = ()
+    vector_names: tuple[str, ...] = ()
+
+    def __init__(self, opts):
+        self.opts = opts
+
+    @property
+    def size(self) -> int:
+        """The length of the law vector."""
+        return len(self.vector_names)
+
+    def symbols(self, name: str = "law") -> ca.SX:
+        """The law vector as a symbol of its own (an input of the channel Functions)."""
+        return ca.SX.sym(name, self.size)
+
+    @abc.abstractmethod
+    def vector(self, params: Mapping):
+        """The law vector from ``params`` (parameter name -> number or CasADi expression)."""
+
+    def values(self, params: Mapping) -> list[float]:
+        """The law vector as floats, from a numeric parameter dict."""
+        v = self.vector({k: float(params[k]) for k in self.param_names})
+        return [float(x) for x in ca.DM(ca.evalf(v)).full().ravel()]
+
+    def named(self, law) -> dict:
+        """The entries of a law vector by name (:attr:`vector_names`)."""
+        return {k: law[i] for i, k in enumerate(self.vector_names)}
+
+    @abc.abstractmethod
+    def virgin_pressure(self, z, law):
+        """The pressure [Pa] of the virgin (never loaded) soil at sinkage z [m]."""
+
+    @abc.abstractmethod
+    def pressure(self, z, hist, law):
+        """The reaction pressure p(z; history) [Pa]."""
+
+    @abc.abstractmethod
+    def pressure_and_slope(self, z, hist, law):
+        """(p [Pa], dp/dz [Pa/m]): the pressure and its slope written piece by piece (the terrain
+        engine's Newton iterations)."""
+
+    @abc.abstractmethod
+    def history_update(self, z, p, hist, law):
+        """INFO_OUT: (z_max', p_max', d_c', plastic, phase) after a step that ended at sinkage z
+        with reaction pressure p; ``plastic`` 1 when the stay deformed the soil plastically (it
+        then counts as a load cycle), ``phase`` 1 on the virgin branch, else 2."""
+
+    @abc.abstractmethod
+    def cycle_increment(self, z, hist, cycles, law, beta):
+        """INFO_IN: the plastic increment delta [m] a cell's new stay may add, for a cell at
+        sinkage z with ``cycles`` load cycles; ``beta`` the soil's repeated-loading exponent."""
+
+    @abc.abstractmethod
+    def compaction_work(self, z, law, width):
+        """The work per metre [N] a track of width ``width`` [m] spends pressing virgin soil to a
+        rut of depth z [m] (the homogeneous terrain's compaction resistance)."""
+
+    @abc.abstractmethod
+    def static_sinkage(self, p, law):
+        """The sinkage [m] at which the virgin law carries the pressure p [Pa] (its inverse; the
+        static start guess)."""
+
+
+class BekkerWong(SoilLaw):
+    """Bekker's virgin loading, Wong's unloading/reloading line and the cycle law of
+    :mod:`symtrack.model.cell` (MODEL.md sections 2 and 6); the mathematics lives there.
+
+    Law vector: k_eq = k_c / b + k_phi [N/m^(n+2)], n, the elastic stiffness K_e [Pa/m], kappa
+    (the unloading-stiffness floor) and the regularisation length d [m] of the Bekker term
+    (:func:`~symtrack.model.cell.bekker_regularisation_length`, capped at the model option
+    ``bekker_regularisation_m``).
+    """
+
+    name = "bekker_wong"
+    description = "Bekker loading, Wong unloading/reloading line, plastic load cycles (MODEL.md 2, 6)"
+    param_names = ("k_c_N_per_m_n1", "k_phi_N_per_m_n2", "track_width_m", "bekker_n", "elastic_stiffness_Pa_per_m",
+                   "unloading_stiffness_floor")
+    vector_names = ("k_eq", "n", "elastic_stiffness_Pa_per_m", "kappa", "regularisation_m")
+
+    def vector(self, params):
+        keq = cell.k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])
+        n = params["bekker_n"]
+        return ca.vertcat(keq, n, params["elastic_stiffness_Pa_per_m"], params["unloading_stiffness_floor"],
+                          cell.bekker_regularisation_length(keq, n, self.opts.bekker_regularisation_m))
+
+    def virgin_pressure(self, z, law):
+        return cell.bekker_pressure(z, law[0], law[1], law[4])
+
+    def pressure(self, z, hist, law):
+        return cell.reaction_pressure(z, hist[0], hist[1], law[0], law[1], law[2], law[3], law[4], z_off=hist[2],
+                                      delta=hist[3], d_c=hist[4])
+
+    def pressure_and_slope(self, z, hist, law):
+        """With a numeric n = 0.5 the Bekker term k z+ (z+ + d)^(n-1) is written k z+ / sqrt(z+ + d)
+        (the same number; libm's pow is about 20 x slower than sqrt)."""
+        keq, n, reg_m = law[0], law[1], law[4]
+        if isinstance(n, float) and n == 0.5:
+            def bekker(zz):
+                zp = ca.fmax(zz, 0)
+                sq = ca.sqrt(zp + reg_m)
+                # k (z+ / 2 + d) / (z+ + d)^(3/2): the general slope k (n z+ + d) (z+ + d)^(n-2) at n = 1/2
+                return keq * zp / sq, ca.if_else(zz > 0, keq * (0.5 * zp + reg_m) / ((zp + reg_m) * sq), 0)
+        else:
+            bekker = None
+        return cell.reaction_pressure_and_slope(z, hist[0], hist[1], keq, n, law[2], law[3], reg_m, z_off=hist[2],
+                                                delta=hist[3], d_c=hist[4], bekker=bekker)
+
+    def history_update(self, z, p, hist, law):
+        return cell.history_update(z, p, hist[0], hist[1], hist[2], hist[3], hist[4], law[2], law[3], law[4])
+
+    def cycle_increment(self, z, hist, cycles, law, beta):
+        return cell.cycle_increment(z, hist[0], hist[1], hist[2], cycles, law[2], law[3], law[4], beta)
+
+    def compaction_work(self, z, law, width):
+        """Bekker's b k_eq z^(n+1) / (n+1) (reconstruction)."""
+        n = law[1]
+        return width * law[0] * z ** (n + 1) / (n + 1)
+
+    def static_sinkage(self, p, law):
+        """Bekker's z = (p / k_eq)^(1/n) (the unregularised law)."""
+        return (p / law[0]) ** (1 / law[1])
+
+
+REGISTRY: dict[str, type[SoilLaw]] = {}
+DEFAULT = BekkerWong.name
+
+
+def register(law: type[SoilLaw], replace: bool = False) -> type[SoilLaw]:
+    """Add a law to the menu (``model.soil_law`` accepts its name from then on)."""
+    if not (isinstance(law, type) and issubclass(law, SoilLaw) and law.name):
+        raise ValueError(f"{law!r} is not a named SoilLaw subclass")
+    if law.name in REGISTRY and not replace:
+        raise ValueError(f"a soil law named {law.name!r} is registered already")
+    REGISTRY[law.name] = law
+    return law
+
+
+def unregister(name: str) -> None:
+    """Remove a law from the menu."""
+    REGISTRY.pop(name, None)
+
+
+def names() -> tuple[str, ...]:
+    """The registered names."""
+    return tuple(REGISTRY)
+
+
+def get(name: str, where: str = "model.soil_law") -> type[SoilLaw]:
+    """The class of ``name``; an unknown name is a :class:`ParameterError` listing the menu."""
+    law = REGISTRY.get(name)
+    if law is None:
+        raise ParameterError(f"{where} = {name!r} is not one of {', '.join(REGISTRY)}")
+    return law
+
+
+def make(opts) -> SoilLaw:
+    """The law of the model options ``opts`` (their ``soil_law``), set up with them."""
+    return get(opts.soil_law)(opts)
+
+
+register(BekkerWong)
