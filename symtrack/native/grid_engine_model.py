@@ -44,7 +44,7 @@ import casadi as ca
 from ..model import SystemModel, cell
 from ..model.layout import StateLayout
 from ..model.system import PARAM_NAMES
-from ..model.vehicle import ENDS, PLANAR_LAYOUT, TRACKS
+from ..model.vehicle import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
 from ..terrain.channels import (
     COMPACTION_SPEED_FLOOR_M_S,
     GLOBAL_FIELDS,
@@ -60,11 +60,12 @@ from .rosenbrock import A as RB_A
 from .rosenbrock import C as RB_C
 from .rosenbrock import M as RB_M
 
-NV = PLANAR_LAYOUT.nv  # the engine's vehicle: the planar one (its C reads ENG_NV, engine_layout_c)
 NA = 8
 NS = 10
 NGEO = 7
-NW = NV + 2  # the vehicle's states and its two algebraic accelerations
+# the engine's vehicle is the planar one: w = its states and its algebraic accelerations (the C reads
+# ENG_NV and ENG_NW: engine_layout_c)
+NW = PLANAR_LAYOUT.nv + len(ALGEBRAIC)
 
 
 def _sum_names():
@@ -320,7 +321,7 @@ def _cell_functions(opts, params: dict, k: int, fo: dict):
 def engine_layout_c() -> list[str]:
     """The engine's state sizes as C defines, from the vehicle's layout (grid_engine.c reads them):
     ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations."""
-    return [f"#define ENG_NV {NV} /* the vehicle's states (symtrack.model.layout) */",
+    return [f"#define ENG_NV {PLANAR_LAYOUT.nv} /* the vehicle's states (symtrack.model.layout) */",
             f"#define ENG_NW {NW} /* and its algebraic accelerations */"]
 
 
