@@ -7,6 +7,8 @@ class and one registry entry (adding a soil law: tests/test_soil_law.py)."""
 from __future__ import annotations
 
 import ast
+import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -283,3 +285,56 @@ def test_every_package_folder_is_a_package_and_tracked():
     folders = {str(Path(f).parent) for f in tracked if f.endswith(".py")}
     missing = sorted(d for d in folders if f"{d}/__init__.py" not in tracked)
     assert missing == []
+
+
+# Positional reads of the state vector: where each state sits is symtrack/model/layout.py's business
+# (StateLayout); a vehicle model with more states would silently shift every one of these.
+_STATE_NAMES = r"(?:x|xv|x0|xs|xt|xc|w|w1|ws|wv|s\.wv|state|self\._x|self\.x_new)"
+POSITIONAL_STATE = {
+    "an NV constant": re.compile(r"^\s*NV\s*=|#define\s+NV\s+\d"),
+    "a slice at the vehicle's size": re.compile(r"(?<!\))\[\s*:\s*(?:NV|nv|12)\s*\]|,\s*:\s*(?:NV|nv|12)\s*\]"
+                                                r"|\[\s*(?:NV|nv)\s*(?::|\+)"),
+    "len(VEHICLE_STATES) as an index": re.compile(r"len\(VEHICLE_STATES\)"),
+    "the pose by position (x[0], x[1], x[2])": re.compile(_STATE_NAMES + r"\[0\],\s*" + _STATE_NAMES + r"\[1\],\s*"
+                                                         + _STATE_NAMES + r"\[2\]"),
+    "a state's head sliced by position": re.compile(r"\b" + _STATE_NAMES + r"\[:[36]\]"),
+}
+# the C engine's vehicle is the planar one: it reads the pose as w[0], w[1], w[2] by contract (its sizes
+# come from the generated ENG_NV / ENG_NW); the Python reads every state through a layout
+C_CHECKS = ("an NV constant", "a slice at the vehicle's size")
+LAYOUT_MODULE = "symtrack/model/layout.py"
+
+
+def _positional_state_reads(root: Path):
+    found = []
+    for f in sorted([*root.rglob("*.py"), *root.rglob("*.c"), *root.rglob("*.h")]):
+        rel = f.relative_to(ROOT).as_posix()
+        if rel == LAYOUT_MODULE:
+            continue
+        checks = {w: rx for w, rx in POSITIONAL_STATE.items() if f.suffix == ".py" or w in C_CHECKS}
+        for n, line in enumerate(f.read_text().splitlines(), 1):
+            for what, rx in checks.items():
+                if rx.search(line):
+                    found.append(f"{rel}:{n}: {what}: {line.strip()}")
+    return found
+
+
+def test_no_positional_slicing_of_the_state_outside_the_layout():
+    """Every index into the state vector comes from a StateLayout (issue 20)."""
+    assert _positional_state_reads(ROOT / "symtrack") == []
+
+
+def test_the_positional_scan_catches_todays_forms(tmp_path, monkeypatch):
+    """The scan above is not vacuous: each form the package held before the layout is caught."""
+    pkg = tmp_path / "symtrack"
+    pkg.mkdir()
+    before = ["NV = len(VEHICLE_STATES)", "xc, xv = x[NV:], x[:NV]", "x[0], x[1], x[2] = x_m, y_m, yaw_rad",
+              "mass_w[:12] = 1.0", "zc = x[NV::2]", "x[NV + 2 * act + 1]", "X, Y, psi = x[:3]",
+              "nv = len(VEHICLE_STATES)", "#define NV 12", "self.x_new[None, :NV]", "xs.append(x[:nv].copy())"]
+    (pkg / "old.py").write_text("\n".join(before) + "\n")
+    (pkg / "old.c").write_text("#define NV 12\nscan(E, w1[0], w1[1], w1[2]);\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    found = _positional_state_reads(pkg)
+    assert {int(f.split(":")[1]) for f in found if "old.py" in f} == set(range(1, len(before) + 1)), "\n".join(found)
+    assert [f.split(":")[1] for f in found if "old.c" in f] == ["1"]
+    assert "hexdigest()[:12]" not in "".join(found)

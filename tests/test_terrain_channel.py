@@ -114,7 +114,7 @@ def test_the_dae_jacobian_is_an_arrowhead():
 
 
 def test_the_block_built_jacobian_equals_casadi_automatic_jacobian():
-    from symtrack.integrators.grid_idas import NV, channel_dae
+    from symtrack.integrators.grid_idas import channel_dae
     from symtrack.terrain.channels import NF, NG
 
     n = 30
@@ -138,9 +138,10 @@ def test_the_block_built_jacobian_equals_casadi_automatic_jacobian():
     J_custom = ca.Function("jc", [xs, zs], [ca.jacobian(ca.vertcat(out["ode"], out["alg"]), ca.vertcat(xs, zs))])
     # the reference: CasADi's own AD on the permuted expressions
     h = ca.SX.sym("h")
-    xp = ca.vertcat(m.x[NV:], m.x[:NV])
+    vs, cs = m.layout.block("vehicle"), m.layout.block("cells")
+    xp = ca.vertcat(m.x[cs], m.x[vs])
     ode = h * m.ode_dae_expr
-    expr = ca.vertcat(ode[NV:], ode[:NV], m.alg_expr)
+    expr = ca.vertcat(ode[cs], ode[vs], m.alg_expr)
     J_ref = ca.Function("jr", [xp, m.z, m.p, h, m.u], [ca.jacobian(expr, ca.vertcat(xp, m.z))])
     A = np.array(J_custom(x, z))
     B = np.array(J_ref(x, z, p[:-1], 0.01, u))

@@ -12,7 +12,7 @@ from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.terrain import storage as persist
 from symtrack.terrain.settings import TerrainSettings, settings_from_dict
 from symtrack.terrain.storage import Grid, Terrain
-from symtrack.terrain.world import NV, World, derive_modulus
+from symtrack.terrain.world import World, derive_modulus
 
 PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
 FIELD = TerrainSettings(size_m=(6.0, 4.0), cell_m=0.25, release_rate_m_s=1e-5)
@@ -25,7 +25,7 @@ def world():
 
 def _state(world, X, Y, psi):
     x = np.zeros(world.model.nx)
-    x[:3] = X, Y, psi
+    x[world.layout.pose_index] = X, Y, psi
     return x
 
 
@@ -46,8 +46,9 @@ def test_assignment_invariants(world, start, steps):
     for dX, dY, dpsi, zlevel, rate in steps:
         before = set(world.active_cells().tolist())
         p_prev = {int(c): world.p_soil[ch] for ch, c in enumerate(world.channel_cell) if c >= 0}
-        rate_prev = {int(c): x[NV + 2 * ch + 1] for ch, c in enumerate(world.channel_cell) if c >= 0}
-        x[:3] = X, Y, psi
+        rate_prev = {int(c): x[world.layout.cell_index(ch, "rate")]
+                     for ch, c in enumerate(world.channel_cell) if c >= 0}
+        x[world.layout.pose_index] = X, Y, psi
         try:
             world.cells_under(X, Y, psi, world._pad)  # before_step's field check, on its own
         except SimulationError:
@@ -67,12 +68,12 @@ def test_assignment_invariants(world, start, steps):
             assert p_prev[c] <= 0.0 and abs(rate_prev[c]) <= FIELD.release_rate_m_s and c not in foot
         # the step: synthetic channel states, then INFO_OUT
         zc = zlevel * rng.random(ch.size)
-        x[NV + 2 * ch] = zc
-        x[NV + 2 * ch + 1] = rate * rng.choice([-1.0, 1.0], ch.size)
+        x[world.layout.cell_index(ch, "sinkage")] = zc
+        x[world.layout.cell_index(ch, "rate")] = rate * rng.choice([-1.0, 1.0], ch.size)
         world.after_step(x)
         cells = world.channel_cell[ch]
         assert np.array_equal(world.storage.z[cells], zc)  # INFO_OUT reaches the storage
-        assert np.array_equal(world.storage.zdot[cells], x[NV + 2 * ch + 1])
+        assert np.array_equal(world.storage.zdot[cells], x[world.layout.cell_index(ch, "rate")])
         # the top of the elastic line (cycle law: z_max on Bekker's curve + the plastic z_off) is never below z
         # (to rounding: z_max' = z - z_off - delta)
         assert np.all(world.storage.zmax[cells] + world.storage.zoff[cells] >= zc * (1 - 1e-14))
@@ -85,7 +86,7 @@ def test_a_loaded_cell_is_not_released_until_it_has_unloaded(world):
     x = _state(world, 0.0, 0.0, 0.0)
     x, _ = world.before_step(x, 0.0)
     ch = np.nonzero(world.channel_cell >= 0)[0]
-    x[NV + 2 * ch] = 1e-3  # loaded: on the Bekker curve, p > 0
+    x[world.layout.cell_index(ch, "sinkage")] = 1e-3  # loaded: on the Bekker curve, p > 0
     world.after_step(x)
     cells = world.channel_cell[ch].copy()
     x[0] = 1.7  # the vehicle moves on, far enough to leave the cells behind
@@ -93,13 +94,13 @@ def test_a_loaded_cell_is_not_released_until_it_has_unloaded(world):
     assert set(cells.tolist()) <= set(world.active_cells().tolist())  # still loaded: kept
     z_max = world.storage.zmax[cells].copy()
     # unloaded along the line to p = 0 but still moving: kept
-    x[NV + 2 * ch] = z_max - 1e-3
-    x[NV + 2 * ch + 1] = 1e-3
+    x[world.layout.cell_index(ch, "sinkage")] = z_max - 1e-3
+    x[world.layout.cell_index(ch, "rate")] = 1e-3
     world.after_step(x)
     x, _ = world.before_step(x, 0.0)
     assert set(cells.tolist()) <= set(world.active_cells().tolist())
     # at rest: released (those not under the tracks at x = 1.7) and the stored state is the last INFO_OUT
-    x[NV + 2 * ch + 1] = 0.0
+    x[world.layout.cell_index(ch, "rate")] = 0.0
     world.after_step(x)
     x, _ = world.before_step(x, 0.0)
     foot = set(world.cells_under(1.7, 0.0, 0.0, world._pad).tolist())

@@ -28,7 +28,7 @@ from ..simulation.scenario import load_scenario
 from ..terrain.channels import HIST_ROWS, NF, NG, ChannelTerrain
 from ..terrain.settings import TerrainSettings
 from ..terrain.storage import Grid, Terrain
-from ..terrain.world import END_STRIP_CELLS, NV, static_sinkage
+from ..terrain.world import END_STRIP_CELLS, static_sinkage
 
 __all__ = ["BruteResult", "GRID_FIXED_STEP_S", "bench_rows", "benchmark", "brute_force_run", "main", "pool_run"]
 
@@ -64,28 +64,31 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
     history = terrain.fn["history"].map("history_all", "serial", n, [2], [])
     stepper = ChannelStepper(model, IntegratorSettings("idas", scenario.run.reltol, scenario.run.abstol))
 
+    L = model.layout
+
     def update(x):
-        zc = x[NV::2]
+        zc = x[L.cell_field("sinkage")]
         zmax, pmax, _, _, _, _ = (np.array(a).ravel() for a in history(zc, qc[:, HIST_ROWS].T, law))
         qc[:, 2], qc[:, 3] = zmax, pmax
 
     x = np.zeros(model.nx)
-    x[0], x[1], x[2] = scenario.start.x_m, scenario.start.y_m, np.radians(scenario.start.yaw_deg)
+    x[L.pose_index] = scenario.start.x_m, scenario.start.y_m, np.radians(scenario.start.yaw_deg)
     dt = scenario.run.output_dt_s
     # the cells at their static sinkage first (World.begin_pass)
     P0 = np.concatenate([pbase, Q])
-    acc = np.array(model.ode(x, np.zeros(2), P0)).ravel()[NV + 1::2]
+    acc = np.array(model.ode(x, np.zeros(2), P0)).ravel()[L.cell_field("rate")]
     p_load = params["cell_areal_mass_kg_per_m2"] * acc
     loaded = np.nonzero(p_load > 0)[0]
-    x[NV + 2 * loaded] = static_sinkage(terrain.fn["soil"], law, np.zeros(loaded.size),
-                                        qc[loaded][:, HIST_ROWS].T, p_load[loaded])
+    x[L.cell_index(loaded, "sinkage")] = static_sinkage(terrain.fn["soil"], law, np.zeros(loaded.size),
+                                                        qc[loaded][:, HIST_ROWS].T, p_load[loaded])
     for _ in range(int(round(s.settle_s / 0.01))):
         x = stepper.step(x, np.zeros(2), np.concatenate([pbase, Q]), 0.01)
         update(x)
     stepper.reset()
     t = 0.0
     change_times = [e.t_s for e in scenario.torque[1:]]
-    ts, xs = [t], [x[:NV].copy()]
+    vs = L.block("vehicle")
+    ts, xs = [t], [x[vs].copy()]
     wall0 = time.perf_counter()
     while t < duration_s - 1e-12:
         t_next = min(t + dt, duration_s)
@@ -97,9 +100,9 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
         update(x)
         t = t_next
         ts.append(t)
-        xs.append(x[:NV].copy())
+        xs.append(x[vs].copy())
     wall = time.perf_counter() - wall0
-    st.z[:] = x[NV::2]
+    st.z[:] = x[L.cell_field("sinkage")]
     return BruteResult(np.array(ts), np.array(xs), st.z.reshape(grid.shape).copy(), wall, model.nx)
 
 

@@ -28,7 +28,6 @@ import control
 import numpy as np
 
 from ..model import SystemModel
-from ..model.vehicle import VEHICLE_STATES
 from . import closedloop
 from . import scenario as scenario_mod
 from .linearization import linearize
@@ -63,8 +62,8 @@ class LinearMPC:
         tp = trim(model, params, speed_m_s)
         self.lin = linearize(model, tp, path_frame=True)
         self.tp = tp
-        self.pred_names = tuple(VEHICLE_STATES)
-        self.cell_names = tuple(model.state_names[len(VEHICLE_STATES):])
+        self.pred_names = model.layout.vehicle_names
+        self.cell_names = model.layout.cell_names
         self.N = s.horizon_steps
         self.stats = MPCStats()
         sysd = control.c2d(self.lin.sys, s.sample_time_s, "zoh")
@@ -117,11 +116,12 @@ class LinearMPC:
         x = np.concatenate([np.asarray(x_pred, float), np.asarray(x_cells, float)])
         dx = x[self.keep] - self.lin.x0
         xr, yr, psir = ref[0, 0], ref[0, 1], ref[0, 2]
-        X, Y, psi = x[0], x[1], x[2]
+        lay = self.model.layout
+        X, Y, psi = x[lay.pose_index]
         names = self.lin.state_names
         dx[names.index("y_m")] = -(X - xr) * np.sin(psir) + (Y - yr) * np.cos(psir)
         dx[names.index("yaw_rad")] = psi - psir
-        dx[names.index("u_m_s")] = x[3] - ref[0, 3]
+        dx[names.index("u_m_s")] = x[lay.index("u_m_s")] - ref[0, 3]
         return dx
 
     def step(self, x_pred, x_cells, u_prev, ref):
@@ -266,7 +266,7 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
         fn = mpc.stage_fn
         nxp = mpc.nxp
         xs = np.concatenate([st.x[:nxp], st.u]) / mpc.sx
-        xc = st.x[len(VEHICLE_STATES):] if pred == "vehicle" else np.zeros(0)
+        xc = st.x[model.layout.block("cells")] if pred == "vehicle" else np.zeros(0)
         X = [xs[:nxp] * mpc.sx[:nxp]]
         Kv = ca.SX.sym("k", mpc.nk)
         for k in range(N):
@@ -278,15 +278,16 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
             xn = np.array(fn(xs, us, Ksol, np.zeros(5), mpc.p_model, xc)[0]).ravel()
             xs = xn
             X.append(xs[:nxp] * mpc.sx[:nxp])
-        traj[pred] = np.array(X)[:, :len(VEHICLE_STATES)]
+        traj[pred] = np.array(X)[:, model.layout.block("vehicle")]
     stepper = SundialsStepper(model, IntegratorSettings("cvodes"))
     x = st.x.copy()
-    P = [x[:len(VEHICLE_STATES)]]
+    vs = model.layout.block("vehicle")
+    P = [x[vs]]
     for k in range(N):
         x = stepper.step(x, U[k], st.p, sample_time_s)
-        P.append(x[:len(VEHICLE_STATES)])
+        P.append(x[vs])
     traj["plant"] = np.array(P)
-    names = VEHICLE_STATES
+    names = model.layout.vehicle_names
     for key in ("x_m", "y_m", "yaw_rad", "u_m_s", "yaw_rate_rad_s"):
         i = names.index(key)
         out[f"max_abs_diff_vehicle_vs_full_{key}"] = float(np.max(np.abs(traj["vehicle"][:, i] - traj["full"][:, i])))

@@ -2,10 +2,11 @@
 
 The plant is any plant of :mod:`symtrack.simulation.plants` (the protocol
 :class:`~symtrack.simulation.plants.Plant`), the same ones the simulation's time loop drives:
-its ``state_names`` must contain the 12 vehicle states of
-:data:`symtrack.model.vehicle.VEHICLE_STATES`. Each sample the loop advances it by the sample
-time with the commands held (:func:`~symtrack.simulation.plants.advance_plant`, in sub-steps of
-the plant's ``macro_step_s`` when it has one: the grid's world-manager step).
+its ``state_names`` must contain the vehicle states of the model's layout
+(``model.layout.vehicle_names``: the 12 of :data:`symtrack.model.vehicle.VEHICLE_STATES`). Each
+sample the loop advances it by the sample time with the commands held
+(:func:`~symtrack.simulation.plants.advance_plant`, in sub-steps of the plant's ``macro_step_s``
+when it has one: the grid's world-manager step).
 
 The default plant, :class:`~symtrack.simulation.plants.StepPlant`, is the full simulator
 (CVODES/IDAS on the SystemModel with its terrain cells), not the MPC's prediction model: the
@@ -45,7 +46,6 @@ from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
-from ..model.vehicle import VEHICLE_STATES
 from ..reports.plots import plt, png_bytes
 from ..reports.run_files import clear_previous_run
 from ..reports.terrain_plots import sinkage_map_png
@@ -210,8 +210,8 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     if x0 is None:
         if tuple(plant.state_names) == tuple(model.state_names):
             x0 = xt
-        elif tuple(plant.state_names) == tuple(VEHICLE_STATES):
-            x0 = xt[:len(VEHICLE_STATES)]
+        elif tuple(plant.state_names) == model.layout.vehicle_names:
+            x0 = xt[model.layout.block("vehicle")]
         else:
             raise SimulationError("the plant's state differs from the model's: give x0 (the plant's initial "
                                   "state, e.g. the vehicle states of initial_state() placed into it)")
@@ -228,11 +228,11 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     pidx = [plant.state_names.index(n) for n in mpc.pred_names if n in plant.state_names]
     if len(pidx) != len(mpc.pred_names):
         missing = [n for n in mpc.pred_names if n not in plant.state_names]
-        if mpc.cell_names or any(n in VEHICLE_STATES for n in missing):
+        if mpc.cell_names or any(n in model.layout.vehicle_names for n in missing):
             raise SimulationError(f"the plant's state has no {', '.join(missing)}: the MPC cannot read it")
     # a plant without the homogeneous cells (the grid): the prediction freezes its cells at those
     # of steady straight running at the start speed (trim), as the homogeneous plant starts
-    cell_default = xt[len(VEHICLE_STATES):] if cidx_missing(plant, mpc) else None
+    cell_default = xt[model.layout.block("cells")] if cidx_missing(plant, mpc) else None
     cidx = [plant.state_names.index(n) for n in mpc.cell_names] if all(
         n in plant.state_names for n in mpc.cell_names) else None
     ts, xs, us, refs, ss, elat, epsi, strt, sms, sok, sit = ([] for _ in range(11))

@@ -71,7 +71,6 @@ from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
 from ..model.homogeneous import HomogeneousTerrain
 from ..model.options import SLIDING_SIGNS
-from ..model.vehicle import VEHICLE_STATES
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
@@ -276,10 +275,9 @@ class PathTrackingMPC:
         if s.prediction_lateral_creep_speed_m_s is not None:
             self.params["lateral_creep_speed_m_s"] = s.prediction_lateral_creep_speed_m_s
         self.p_model = np.asarray(model.param_vector(self.params), dtype=float)
-        names = model.state_names
-        nv = len(VEHICLE_STATES)
-        self.pred_names = tuple(names[:nv]) if s.prediction == "vehicle" else tuple(names)
-        self.cell_names = tuple(names[nv:]) if s.prediction == "vehicle" else ()
+        names, lay = model.state_names, model.layout
+        self.pred_names = lay.vehicle_names if s.prediction == "vehicle" else tuple(names)
+        self.cell_names = lay.cell_names if s.prediction == "vehicle" else ()
         self.nxp = len(self.pred_names)
         self.nu = 2
         self.nxa = self.nxp + self.nu  # + previous command

@@ -74,7 +74,6 @@ from ..terrain.world import END_STRIP_CELLS, LIFT_TIME_S, padding_m
 
 log = logging.getLogger("symtrack.terrain")
 
-NV = 12
 BUILD_VERSION = 1
 SETTLE_STEP_S = 0.01  # the settling steps of World.begin_pass
 ERR_FIELD, ERR_COLLISION, ERR_UNCOVERED, ERR_NONFINITE, ERR_NEWTON = 1, 2, 3, 4, 5
@@ -732,7 +731,7 @@ class PyKernel:
         def check(cell):
             if s.ch_cell[self._channel_of(cell)] != cell:
                 missing.append(cell)
-        self._scan(w1[0], w1[1], w1[2], 0.5 * s.grid.cell_m, False, check)
+        self._scan(*w1[self.f.layout.pose_index], 0.5 * s.grid.cell_m, False, check)
         return missing
 
     def _vehicle_step(self, u, h):
@@ -852,8 +851,9 @@ class PyKernel:
             self.sums()
             t = t_next
             T_out[k] = t
-            X[k] = w1[:NV]
-            Y[k] = np.array(self.f.outputs(w1[:NV], u, s.pv)).ravel()
+            vs = self.f.layout.block("vehicle")
+            X[k] = w1[vs]
+            Y[k] = np.array(self.f.outputs(w1[vs], u, s.pv)).ravel()
             n_done = k + 1
             if check_covered:
                 missing = self._uncovered(w1)
@@ -970,7 +970,7 @@ class TerrainEngine:
         s.touched[:] = False
         s.sig_pass[:] = 0.0
         s.wv[:] = 0.0
-        s.wv[0], s.wv[1], s.wv[2] = x_m, y_m, yaw_rad
+        s.wv[self.fns.layout.pose_index] = x_m, y_m, yaw_rad
         s.a[:] = np.array(self.fns.vehicle_a(s.wv, s.pv)).ravel()
         # the cells under the vehicle at their static sinkage first (World.begin_pass)
         rc, e = self.kernel.assign(0.0)
@@ -984,7 +984,7 @@ class TerrainEngine:
         rc, e = self.kernel.assign(0.0)
         if rc:
             self._raise(abs(rc), e)
-        return s.wv[:NV].copy()
+        return s.wv[self.fns.layout.block("vehicle")].copy()
 
     def end_pass(self, dt_s: float = SETTLE_STEP_S, max_steps: int = 300) -> None:
         """World.end_pass in the engine: the vehicle lifted off (each active cell's load falls from its
@@ -1009,7 +1009,7 @@ class TerrainEngine:
 
     def _call(self, t0, T, U, dist, check_covered):
         n = T.size
-        T_out, X, Y = np.zeros(n), np.zeros((n, NV)), np.zeros((n, self.state.ny_out))
+        T_out, X, Y = np.zeros(n), np.zeros((n, self.fns.layout.nv)), np.zeros((n, self.state.ny_out))
         T, U = np.ascontiguousarray(T, dtype=float), np.ascontiguousarray(U, dtype=float)
         w0, c0 = time.perf_counter(), time.process_time()
         rc, n_done, e = self.kernel.run(t0, T, U, dist, check_covered, T_out, X, Y)
@@ -1029,7 +1029,7 @@ class TerrainEngine:
     def outputs_now(self, u) -> np.ndarray:
         s = self.state
         self.kernel.sums()
-        return np.array(self.fns.outputs(s.wv[:NV], u, s.pv)).ravel()
+        return np.array(self.fns.outputs(s.wv[self.fns.layout.block("vehicle")], u, s.pv)).ravel()
 
     def sync_world(self) -> np.ndarray:
         """Hand the active channels to the World (channel_cell, Q, p_soil) for World.end_pass; returns
@@ -1045,8 +1045,9 @@ class TerrainEngine:
         w.ch_soil[act] = s.ch_soil[act]
         w.p_soil[act] = s.ch_p[act]
         w.peak_active = s.peak_active
-        x = np.zeros(NV + 2 * w.n_channels)
-        x[:NV] = s.wv[:NV]
-        x[NV::2][act] = s.ch_z[act]
-        x[NV + 1::2][act] = s.ch_v[act]
+        L = w.layout
+        x = np.zeros(L.size)
+        x[L.block("vehicle")] = s.wv[L.block("vehicle")]
+        x[L.cell_index(act, "sinkage")] = s.ch_z[act]
+        x[L.cell_index(act, "rate")] = s.ch_v[act]
         return x

@@ -16,13 +16,11 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import SimulationError
-from ..model.vehicle import VEHICLE_STATES
 from .settings import IntegratorSettings
 from .sundials import SundialsStepper
 
 __all__ = ["ChannelStepper", "channel_dae"]
 
-NV = len(VEHICLE_STATES)
 DYN_IN = ("t", "x", "z", "p", "u")
 DYN_OUT = ("ode", "alg", "quad", "zero")
 
@@ -47,9 +45,11 @@ def channel_dae(model, quad=None):
     """
     h = ca.SX.sym("step_s")
     t = ca.SX.sym("t")
-    xc, xv, z = model.x[NV:], model.x[:NV], model.z
+    vs, cs = model.layout.block("vehicle"), model.layout.block("cells")
+    alg_rows = slice(vs.stop, None)  # the rows of rows_v after the vehicle's: the algebraic equations
+    xc, xv, z = model.x[cs], model.x[vs], model.z
     ode = h * model.ode_dae_expr
-    fc, fv, alg = ode[NV:], ode[:NV], model.alg_expr
+    fc, fv, alg = ode[cs], ode[vs], model.alg_expr
     rows_v = ca.vertcat(fv, alg)
     xp = ca.vertcat(xc, xv)
     J_cx = ca.horzcat(ca.jacobian(fc, xc), ca.jacobian(fc, xv))
@@ -58,8 +58,8 @@ def channel_dae(model, quad=None):
     J_vz = ca.jacobian(rows_v, z)
     ins = [t, xp, z, ca.vertcat(model.p, h), model.u]
     outs = [ca.vertcat(fc, fv), alg, ca.SX(0, 1) if quad is None else h * ca.vec(quad), ca.SX(0, 1)]
-    blocks = {("ode", "x"): ca.vertcat(J_cx, J_vx[:NV, :]), ("alg", "x"): J_vx[NV:, :],
-              ("ode", "z"): ca.vertcat(J_cz, J_vz[:NV, :]), ("alg", "z"): J_vz[NV:, :]}
+    blocks = {("ode", "x"): ca.vertcat(J_cx, J_vx[vs, :]), ("alg", "x"): J_vx[alg_rows, :],
+              ("ode", "z"): ca.vertcat(J_cz, J_vz[vs, :]), ("alg", "z"): J_vz[alg_rows, :]}
     jac, jac_names = [], []
     for o, oe in zip(DYN_OUT, outs, strict=True):
         for i, ie in zip(DYN_IN, ins, strict=True):
@@ -91,7 +91,8 @@ class ChannelStepper(SundialsStepper):
         self.model, self.settings = model, settings
         self.z = None
         nx = model.nx
-        self.perm = np.r_[np.arange(NV, nx), np.arange(NV)]
+        nv = model.layout.nv
+        self.perm = np.r_[np.arange(nv, nx), np.arange(nv)]
         self.inv = np.argsort(self.perm)
         opts = {"abstol": settings.abstol, "reltol": settings.reltol, "max_num_steps": settings.max_num_steps,
                 "calc_ic": True, "linear_solver": "csparse",

@@ -24,7 +24,6 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import SimulationError
-from ..model.vehicle import VEHICLE_STATES
 from ..native.cache import cache_root, compile_sources, compiler
 from ..native.grid_rosenbrock import build
 from ..terrain.channels import NF, NG
@@ -34,7 +33,6 @@ __all__ = ["MAX_STEP_S", "PACK_SLOTS", "GridRosenbrockStepper", "grid_library"]
 
 log = logging.getLogger("symtrack.terrain")
 
-NV = len(VEHICLE_STATES)
 BUILD_VERSION = 1
 # the active channels are packed into calls of a multiple of PACK_SLOTS slots (one compiled library
 # per size met: at most 64 - 1 idle slots evaluated)
@@ -107,22 +105,24 @@ class GridRosenbrockStepper:
         act = np.nonzero(qc[:, 4] != 0.0)[0]
         cap = min(PACK_SLOTS * max(1, -(-act.size // PACK_SLOTS)), self.n)
         f = self.function(cap, n)
-        xc = x[NV:].reshape(self.n, 2)
+        lay = self.model.layout
+        vs = lay.block("vehicle")
+        xc = x[lay.block("cells")].reshape(self.n, lay.cell_width)
         xc_p = np.zeros((cap, 2))
         xc_p[:act.size] = xc[act]
         q_p = np.zeros((cap, NF))
         q_p[:act.size] = qc[act]
         z0 = self.z if self.z is not None else np.array(self.model.accel(x, u, p)).ravel()
-        xc1, w1 = f(xc_p.ravel(), np.concatenate([x[:NV], z0]), u, np.concatenate([p[:npv + NG], q_p.ravel()]),
+        xc1, w1 = f(xc_p.ravel(), np.concatenate([x[vs], z0]), u, np.concatenate([p[:npv + NG], q_p.ravel()]),
                     dt / n)
         w1 = np.array(w1).ravel()
         xc_new = xc.copy()
         xc_new[act] = np.array(xc1).reshape(cap, 2)[:act.size]
-        out = np.concatenate([w1[:NV], xc_new.ravel()])
+        out = np.concatenate([w1[vs], xc_new.ravel()])
         if not np.all(np.isfinite(out)):
             raise SimulationError("the grid rosenbrock integrator returned a non-finite state "
                                   f"(step {dt / n:g} s: lower run.fixed_step_s)")
-        self.z = w1[NV:]
+        self.z = w1[vs.stop:]  # w1 = (vehicle states, accelerations)
         self.nsteps += n
         self.ncalls += 1
         return out

@@ -8,7 +8,7 @@ import numpy as np
 from ..foundations.errors import SimulationError
 from .soil_law import make as make_soil_law
 from .system import SystemModel
-from .vehicle import GRAVITY_M_S2, VEHICLE_STATES
+from .vehicle import GRAVITY_M_S2
 
 __all__ = ["static_state"]
 
@@ -19,11 +19,11 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     Solved with a CasADi Newton root-finder on the model's own cell equations (rates zero), from
     the sinkage at which the model's soil law carries the vehicle's mean pressure (its static inverse).
     """
-    nv = len(VEHICLE_STATES)
+    lay = model.layout
     x = np.zeros(model.nx)
-    x[0], x[1], x[2] = x_m, y_m, yaw_rad
-    cell_idx = list(range(nv, model.nx, 2))
-    rate_idx = [i + 1 for i in cell_idx]
+    x[lay.indices(("x_m", "y_m", "yaw_rad"))] = x_m, y_m, yaw_rad
+    cell_idx = lay.cell_indices("sinkage")
+    rate_idx = lay.cell_indices("rate")
     zc = ca.SX.sym("zc", len(cell_idx))
     xs = ca.SX(ca.DM(x))
     for k, i in enumerate(cell_idx):

@@ -11,9 +11,15 @@ signature, which the integrators, the linearization and the MPC all reuse:
 - ``jac_ode(x, u, p) -> (A, B)``: the exact Jacobians of ``ode``;
 - ``accel(x, u, p) -> z``: the ODE form's accelerations (a consistent z for IDAS).
 
+The vehicle is a vehicle model of :mod:`symtrack.model.vehicle_registry` (``vehicle=``, default
+the planar vehicle); the state vector's layout is :attr:`SystemModel.layout` (the vehicle's
+blocks, then the terrain's ``cells``: :mod:`symtrack.model.layout`).
+
 A terrain plugs in through a narrow interface (like Chrono's terrain query):
 ``state_names``, optional ``param_names`` (its own entries of p, after the vehicle and soil
-parameters), ``compaction(xv, xc, P, Q) -> (2,)`` compaction resistance per track, and
+parameters), ``compaction(xv, xc, P, Q) -> (2,)`` compaction resistance per track (``xv``: the
+vehicle's :class:`~symtrack.model.layout.VehicleState`, its states by name and its contact pose
+``xv.pose``), and
 ``equations(xv, xc, dist, P, Q) -> (xc_dot, signals)`` where ``dist`` are the tracks'
 :class:`~symtrack.model.vehicle.PressureDistribution` and ``signals`` must contain
 ``sinkage_{sprocket,idler}_{left,right}_m`` and ``p_{sprocket,idler}_{left,right}_Pa``.
@@ -28,10 +34,11 @@ import functools
 
 import casadi as ca
 
+from . import vehicle_registry
 from .homogeneous import HomogeneousTerrain
+from .layout import VehicleState
 from .options import ModelOptions
 from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
-from .vehicle import ALGEBRAIC, INPUTS, TRACKS, VEHICLE_STATES, vehicle_equations
 
 __all__ = ["PARAM_NAMES", "SystemModel"]
 
@@ -48,27 +55,32 @@ class SystemModel:
     inputs ``u``, parameters ``p`` (``param_vector`` builds it from a parameter dict), algebraic
     accelerations ``z``, outputs (``output_names``)."""
 
-    def __init__(self, opts: ModelOptions | None = None, terrain=None):
+    def __init__(self, opts: ModelOptions | None = None, terrain=None, vehicle=None):
         self.opts = opts or ModelOptions()
         self.terrain = terrain or HomogeneousTerrain(self.opts)
-        self.state_names = VEHICLE_STATES + self.terrain.state_names
-        self.input_names = INPUTS
-        self.alg_names = ALGEBRAIC
-        nv = len(VEHICLE_STATES)
+        self.vehicle = vehicle_registry.get(vehicle)
+        vm = self.vehicle
+        self.layout = vm.layout.with_cells(self.terrain.state_names)
+        self.state_names = self.layout.names
+        self.input_names = tuple(vm.input_names)
+        self.alg_names = tuple(vm.alg_names)
+        n_alg = len(self.alg_names)
 
         self.terrain_param_names = tuple(getattr(self.terrain, "param_names", ()))
         self.param_names = PARAM_NAMES + self.terrain_param_names
-        xs, us, zs, ps = (_syms(n) for n in (self.state_names, INPUTS, ALGEBRAIC, self.param_names))
+        xs, us, zs, ps = (_syms(n) for n in (self.state_names, self.input_names, self.alg_names, self.param_names))
         x, u, z, p = (ca.vertcat(*s) for s in (xs, us, zs, ps))
         P = dict(zip(PARAM_NAMES, ps[:len(PARAM_NAMES)], strict=True))
         Q = ca.vertcat(*ps[len(PARAM_NAMES):])
-        xv, xc = x[:nv], x[nv:]
-        compaction = self.terrain.compaction(xv, xc, P, Q)
-        track_soil = self.terrain.track_soil(xv, xc, P, Q) if hasattr(self.terrain, "track_soil") else None
+        xv, xc = x[self.layout.block("vehicle")], x[self.layout.block("cells")]
+        # what the terrain sees of the vehicle: its states by name and its contact pose
+        xs_v = VehicleState(xv, vm.layout, vm.contact_pose(xv))
+        compaction = self.terrain.compaction(xs_v, xc, P, Q)
+        track_soil = self.terrain.track_soil(xs_v, xc, P, Q) if hasattr(self.terrain, "track_soil") else None
 
         def evaluate(acc):
-            veh = vehicle_equations(xv, u, acc, P, compaction, self.opts, track_soil)
-            cdot, csig = self.terrain.equations(xv, xc, veh["dist"], P, Q)
+            veh = vm.equations(xv, u, acc, P, compaction, self.opts, track_soil)
+            cdot, csig = self.terrain.equations(xs_v, xc, veh["dist"], P, Q)
             return veh, ca.vertcat(veh["xdot"], cdot), csig
 
         # DAE form: the accelerations are algebraic variables.
@@ -78,20 +90,21 @@ class SystemModel:
         # fixed-point step from a = 0 and then Newton steps on a - g(x, a) (a 2x2 system).
         gz = veh_z["acc_implied"]
         G = ca.Function("G", [z, x, u, p], [gz, ca.jacobian(gz, z)])
-        acc = G(ca.DM.zeros(2), x, u, p)[0]
+        acc = G(ca.DM.zeros(n_alg), x, u, p)[0]
         for _ in range(self.opts.accel_newton_iterations):
             g, dg = G(acc, x, u, p)
-            acc = acc - ca.solve(ca.DM.eye(2) - dg, acc - g)
+            acc = acc - ca.solve(ca.DM.eye(n_alg) - dg, acc - g)
         veh, ode, csig = evaluate(acc)
 
         signals = dict(veh["signals"])
         signals.update(csig)
-        signals["accel_x_m_s2"] = acc[0]
-        signals["accel_y_m_s2"] = acc[1]
+        for i, name in enumerate(self.alg_names):
+            signals[name] = acc[i]
         signals["yaw_moment_N_m"] = veh["yaw_moment_N_m"]
         pitch = 0
-        for k in TRACKS:
-            pitch += (signals[f"sinkage_sprocket_{k}_m"] - signals[f"sinkage_idler_{k}_m"]) / len(TRACKS)
+        tracks = vm.tracks
+        for k in tracks:
+            pitch += (signals[f"sinkage_sprocket_{k}_m"] - signals[f"sinkage_idler_{k}_m"]) / len(tracks)
         signals["pitch_rad"] = pitch / P["contact_length_m"]
         self.output_names = tuple(signals)
         y = ca.vertcat(*signals.values())
@@ -125,7 +138,7 @@ class SystemModel:
         return len(self.state_names)
 
     def state_index(self, name: str) -> int:
-        return self.state_names.index(name)
+        return self.layout.index(name)
 
     def output_index(self, name: str) -> int:
         return self.output_names.index(name)

@@ -14,7 +14,12 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .layout import ContactPose, StateLayout, VehicleState
 from .options import ModelOptions
+
+__all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "PLANAR_LAYOUT", "PlanarVehicle", "PressureDistribution",
+           "SOIL_PARAMS_USED", "TRACKS", "VEHICLE_STATES", "direction", "gauss_nodes", "graded_nodes",
+           "lateral_resistance_max_N", "shear_forces", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # Standard gravity (a true constant: CGPM 1901).
 GRAVITY_M_S2 = 9.80665
@@ -27,6 +32,10 @@ VEHICLE_STATES = (
     "omega_left_rad_s", "omega_right_rad_s", "shear_left_m", "shear_right_m",
     "torque_left_N_m", "torque_right_N_m",
 )
+# the planar vehicle's states in blocks (symtrack.model.layout)
+PLANAR_LAYOUT = StateLayout((
+    ("pose", VEHICLE_STATES[0:3]), ("velocity", VEHICLE_STATES[3:6]), ("sprockets", VEHICLE_STATES[6:8]),
+    ("shear", VEHICLE_STATES[8:10]), ("torque", VEHICLE_STATES[10:12])))
 INPUTS = ("torque_cmd_left_N_m", "torque_cmd_right_N_m")
 ALGEBRAIC = ("accel_x_m_s2", "accel_y_m_s2")
 
@@ -220,7 +229,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     Returns a dict with 'xdot', 'acc_implied' (the accelerations the forces imply: equal to
     acc on the solution of the algebraic loop), the pressure distributions and named signals.
     """
-    X, Y, psi, vx, vy, rz, omL, omR, jL, jR, TL, TR = (xv[i] for i in range(12))
+    X, Y, psi, vx, vy, rz, omL, omR, jL, jR, TL, TR = (xv[i] for i in PLANAR_LAYOUT.indices(VEHICLE_STATES))
     m = P["mass_kg"]
     Iz = P["yaw_inertia_kg_m2"]
     B = P["track_gauge_m"]
@@ -329,3 +338,24 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
         "signals": signals,
         "yaw_moment_N_m": yaw_moment,
     }
+
+
+class PlanarVehicle:
+    """The planar tracked vehicle of this module as a vehicle model (the registry's ``"planar"``,
+    :mod:`symtrack.model.vehicle_registry`, which says what a vehicle model provides)."""
+
+    name = "planar"
+    layout = PLANAR_LAYOUT
+    state_names = VEHICLE_STATES
+    input_names = INPUTS
+    alg_names = ALGEBRAIC
+    tracks = TRACKS
+
+    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
+        """:func:`vehicle_equations`."""
+        return vehicle_equations(xv, u, acc, P, compaction_N, opts, track_soil)
+
+    def contact_pose(self, xv) -> ContactPose:
+        """x, y and yaw from the state ``xv`` (the vehicle's states, a vector); no heave, pitch or roll."""
+        s = VehicleState(xv, self.layout)
+        return ContactPose(s["x_m"], s["y_m"], s["yaw_rad"])

@@ -28,8 +28,8 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #include "subsoil.h" /* the subsoil stress below the tracks (symtrack/terrain/subsoil.py) */
 
 #define EXPORT __attribute__((visibility("default")))
-#define NV 12
-#define NW 14
+#define NV ENG_NV /* generated: engine_soils.inc (grid_engine_model.engine_layout_c) */
+#define NW ENG_NW
 #define NA 8
 #define NS 10     /* the cell sums */
 #define NS_MAX 18 /* with a soil map: + the soil under each track (grid_engine_model.SOIL_SUM_NAMES) */

@@ -42,8 +42,9 @@ import dataclasses
 import casadi as ca
 
 from ..model import SystemModel, soil_law
+from ..model.layout import StateLayout
 from ..model.system import PARAM_NAMES
-from ..model.vehicle import ENDS, TRACKS, VEHICLE_STATES
+from ..model.vehicle import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
 from ..terrain.channels import (
     COMPACTION_SPEED_FLOOR_M_S,
     GLOBAL_FIELDS,
@@ -58,11 +59,12 @@ from .rosenbrock import A as RB_A
 from .rosenbrock import C as RB_C
 from .rosenbrock import M as RB_M
 
-NV = len(VEHICLE_STATES)
 NA = 8
 NS = 10
 NGEO = 7
-NW = NV + 2  # the vehicle's states and its two algebraic accelerations
+# the engine's vehicle is the planar one: w = its states and its algebraic accelerations (the C reads
+# ENG_NV and ENG_NW: engine_layout_c)
+NW = PLANAR_LAYOUT.nv + len(ALGEBRAIC)
 
 
 def _sum_names():
@@ -114,7 +116,7 @@ class SumsTerrain:
     def compaction(self, xv, xc, P, Q):
         S = self._S(Q)
         B = P["track_gauge_m"]
-        u, r = xv[3], xv[5]
+        u, r = xv["u_m_s"], xv["yaw_rate_rad_s"]
         v_track = {"left": u - r * B / 2, "right": u + r * B / 2}
         area = Q[0] ** 2
         return ca.vertcat(*(area * S[f"sum_power_{k}"] / ca.sqrt(v_track[k] ** 2 + COMPACTION_SPEED_FLOOR_M_S**2)
@@ -187,6 +189,7 @@ class EngineFunctions:
     output_names: tuple
     n_pv: int
     n_sums: int  # NS, or NS + NS_SOIL with a soil map
+    layout: StateLayout = PLANAR_LAYOUT  # the vehicle's states (w = these, then its accelerations)
 
     @property
     def n_soils(self) -> int:
@@ -210,7 +213,8 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     for k in TRACKS:
         D += list(pressure_line(dist[k]))
     w = ca.vertcat(x, zacc)
-    a = ca.vertcat(x[0], x[1], ca.cos(x[2]), ca.sin(x[2]), *D)
+    pose = veh.vehicle.contact_pose(x[veh.layout.block("vehicle")])
+    a = ca.vertcat(pose.x_m, pose.y_m, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D)
     fo = {"cse": True}
     vehicle_a = ca.Function("eng_vehicle_a", [w, pv], [a], ["w", "pv"], ["a"], fo)
     outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo)
@@ -226,14 +230,15 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     fF = ca.Function("F", [w, u, pv, hsym], [Fh])
     fJ = ca.Function("J", [w, u, pv, hsym], [ca.jacobian(Fh, w)])
     mass = ca.DM.zeros(NW)
-    mass[:NV] = 1.0
+    vs = veh.layout.block("vehicle")
+    mass[vs] = 1.0
     g = veh.alg_expr
     Jg = ca.jacobian(g, zacc)
     # the accelerations first made consistent with the (new) channel sums: two Newton steps
     ws = w
     for _ in range(2):
         gz = ca.substitute(g, w, ws)
-        ws = ca.vertcat(ws[:NV], ws[NV:] - ca.solve(ca.substitute(Jg, w, ws), gz))
+        ws = ca.vertcat(ws[vs], ws[vs.stop:] - ca.solve(ca.substitute(Jg, w, ws), gz))
     for _ in range(vehicle_substeps):
         Wm = ca.diag(mass) / RB_GAMMA - fJ(ws, u, pv, hs)
         solve = _lu_solve_factory(Wm)
@@ -275,7 +280,7 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
         entries.append(entry_k)
     n_sums = NS + (NS_SOIL if len(soils) > 1 else 0)
     return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, tuple(laws), tuple(histories), tuple(entries),
-                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums)
+                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums, veh.layout)
 
 
 def _cell_functions(opts, params: dict, k: int, fo: dict):
@@ -295,10 +300,19 @@ def _cell_functions(opts, params: dict, k: int, fo: dict):
     return cell_law, cell_history, cell_entry
 
 
+def engine_layout_c() -> list[str]:
+    """The engine's state sizes as C defines, from the vehicle's layout (grid_engine.c reads them):
+    ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations."""
+    return [f"#define ENG_NV {PLANAR_LAYOUT.nv} /* the vehicle's states (symtrack.model.layout) */",
+            f"#define ENG_NW {NW} /* and its algebraic accelerations */"]
+
+
 def soil_dispatch_c(n_soils: int) -> str:
-    """The C of engine_soils.inc: ENG_SOIL_CALL(fn, soil, arg, res) calls fn_<soil> (a switch the
-    compiler can inline; one soil: a plain call)."""
-    lines = [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
+    """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c`, and
+    ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch the compiler can inline; one
+    soil: a plain call)."""
+    lines = engine_layout_c()
+    lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
     if n_soils == 1:
         lines.append("  fn##_0(arg, res, 0, WORK, 0)")
     else:

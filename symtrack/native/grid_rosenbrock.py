@@ -73,7 +73,8 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     D = []
     for k in TRACKS:
         D += list(pressure_line(agg.dist_dae[k]))
-    a = ca.vertcat(xv[0], xv[1], ca.cos(xv[2]), ca.sin(xv[2]), *D)
+    pose = veh.vehicle.contact_pose(xv[veh.layout.block("vehicle")])
+    a = ca.vertcat(pose.x_m, pose.y_m, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D)
     if ca.depends_on(a, Sv):
         raise RuntimeError("the pressure distributions depend on the channel sums: the Schur form does not hold")
     Fw = ca.vertcat(h * veh.ode_dae_expr, veh.alg_expr)
@@ -149,7 +150,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
                       Pd["cg_ahead_of_contact_centre_m"], Qg[0], Qg[1], law_mx,
                       Pd["cell_areal_mass_kg_per_m2"], Pd["cell_damping_Pa_s_per_m"], H, 0)
     mass_w = ca.DM.zeros(NW)
-    mass_w[:12] = 1.0
+    mass_w[veh.layout.block("vehicle")] = 1.0
 
     def pvec(S):
         return ca.vertcat(PV, Qg, S)

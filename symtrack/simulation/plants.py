@@ -44,14 +44,11 @@ from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
 from ..model import SystemModel
 from ..model.static import static_state
-from ..model.vehicle import VEHICLE_STATES
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import World, open_world
 
 __all__ = ["BatchPlant", "EnginePlant", "GridPlant", "Plant", "StepPlant", "advance_plant", "make_grid_plant",
            "make_plant"]
-
-NV = len(VEHICLE_STATES)
 
 log = logging.getLogger("symtrack.simulation")
 
@@ -249,7 +246,8 @@ class GridPlant:
         self.snapshots: list = []
         self._t = self._t_snap = 0.0
         self.model = world.model
-        self.state_names = tuple(VEHICLE_STATES)
+        self._vs = world.layout.block("vehicle")
+        self.state_names = world.layout.vehicle_names
         self.output_names = tuple(world.model.output_names)
         self._x = None  # the full state (vehicle + channel slots)
         self._unloader = None
@@ -266,9 +264,10 @@ class GridPlant:
         x = self.world.begin_pass(self.stepper, float(x_m), float(y_m), float(yaw_rad))
         if state is not None:
             xv = np.asarray(state, dtype=float)
-            if xv.shape != (NV,):
-                raise SimulationError(f"GridPlant.start: expected the {NV} vehicle states, got shape {xv.shape}")
-            x[:NV] = xv
+            if xv.shape != (len(self.state_names),):
+                raise SimulationError(f"GridPlant.start: expected the {len(self.state_names)} vehicle states, got "
+                                      f"shape {xv.shape}")
+            x[self._vs] = xv
             self.stepper.reset()
         self._x = x
         self.finished = False
@@ -276,14 +275,15 @@ class GridPlant:
         self.snapshots = []
         self._t_snap = -np.inf
         self._record(x)
-        return x[:NV].copy(), self._outputs(x, np.asarray(u0, dtype=float), self.world.param_vector())
+        return x[self._vs].copy(), self._outputs(x, np.asarray(u0, dtype=float), self.world.param_vector())
 
     def _record(self, x):
         if self.record_every_s is None or self._t < self._t_snap + self.record_every_s - 1e-9:
             return
         self._t_snap = self._t
         cells = self.world.active_cells()
-        self.snapshots.append((self._t, x[:3].copy(), cells.copy(), self.world.storage.z[cells].copy()))
+        self.snapshots.append((self._t, x[self.model.layout.pose_index], cells.copy(),
+                               self.world.storage.z[cells].copy()))
 
     def synchronize(self, intervals):
         if self._x is None or self.finished:
@@ -297,12 +297,12 @@ class GridPlant:
     def advance(self):
         self.x_new = self.stepper.step(self.x_pre, self.u, self.p, self.h)
         self.h_done = self.h
-        return self.x_new[None, :NV]
+        return self.x_new[None, self._vs]
 
     def retry(self, k, length_s):
         self.x_new = self.stepper.step(self.x_pre, self.u, self.p, length_s)
         self.h_done = length_s
-        return self.x_new[:NV]
+        return self.x_new[self._vs]
 
     def commit(self, k):
         x = self._x = self.x_new
@@ -362,7 +362,8 @@ class EnginePlant:
 
     def __init__(self, world: World, engine, record_every_s: float | None = None, checkpoints: bool = False):
         self.world, self.engine = world, engine
-        self.state_names = tuple(VEHICLE_STATES)
+        self._layout = world.layout  # the engine's wv: the vehicle's states, then its accelerations
+        self.state_names = self._layout.vehicle_names
         self.output_names = tuple(engine.output_names)
         self.record_every_s = record_every_s
         self.checkpoints = checkpoints
@@ -389,7 +390,7 @@ class EnginePlant:
             cells = self.world.storage  # the engine writes the active cells' state into the storage
             ch = self.engine.state.ch_cell
             act = ch[ch >= 0]
-            self.snapshots.append((t, self.engine.state.wv[:3].copy(), act.copy(), cells.z[act].copy()))
+            self.snapshots.append((t, self.engine.state.wv[self._layout.pose_index], act.copy(), cells.z[act].copy()))
 
     def start(self, x_m, y_m, yaw_rad, u0, state=None):
         u0 = np.asarray(u0, dtype=float)
@@ -409,24 +410,26 @@ class EnginePlant:
         """The vehicle, set down and settled at rest, given ``state`` (class doc)."""
         xv = np.array(state, dtype=float)
         s, fns = self.engine.state, self.engine.fns
-        if xv.shape != (NV,):
-            raise SimulationError(f"EnginePlant.start: expected the {NV} vehicle states, got shape {xv.shape}")
+        vs, pose = self._layout.block("vehicle"), self._layout.pose_index
+        if xv.shape != (len(self.state_names),):
+            raise SimulationError(f"EnginePlant.start: expected the {len(self.state_names)} vehicle states, got shape "
+                                  f"{xv.shape}")
         if not np.all(np.isfinite(xv)):
             raise SimulationError("EnginePlant.start: the state has non-finite values")
-        if np.max(np.abs(xv[:3] - s.wv[:3])) > 1e-9:
-            raise SimulationError(f"EnginePlant.start: the state's pose {tuple(xv[:3])} differs from the pose the "
-                                  f"vehicle was set down at {tuple(s.wv[:3])}")
-        s.wv[:NV] = xv
+        if np.max(np.abs(xv[pose] - s.wv[pose])) > 1e-9:
+            raise SimulationError(f"EnginePlant.start: the state's pose {tuple(xv[pose])} differs from the pose the "
+                                  f"vehicle was set down at {tuple(s.wv[pose])}")
+        s.wv[vs] = xv
         act = s.active_channels()
         for _ in range(2):  # accelerations <-> pressure lines <-> channel sums: a fixed point, 2 passes
             w1, a1 = fns.vehicle_step(s.wv, u0, s.pv, 0.0)  # h = 0: the states stay, the algebraic ones settle
-            s.wv[NV:] = np.array(w1).ravel()[NV:]
+            s.wv[vs.stop:] = np.array(w1).ravel()[vs.stop:]  # the accelerations
             s.a[:] = np.array(a1).ravel()
             if act.size:
                 G = fns.cell_geo.map(act.size)(np.vstack([s.ch_cx[act], s.ch_cy[act]]), s.a, s.geo)
                 s.ch_g[act] = np.array(G).T
             self.engine.kernel.sums()
-        return s.wv[:NV].copy()
+        return s.wv[vs].copy()
 
     # -- checkpoints (retry) ----------------------------------------------------------------------------------
     def checkpoint(self) -> dict:

@@ -209,7 +209,7 @@ class ChannelTerrain:
             return self._cache[3]
         n = self.n
         qc = ca.reshape(Q[NG:], NF, n)
-        pose = ca.vertcat(xv[0], xv[1], xv[2])
+        pose = ca.vertcat(*xv.pose.planar)  # the flat field's geometry: x, y, yaw
         geo = ca.vertcat(P["contact_length_m"], P["track_width_m"], P["track_gauge_m"],
                          P["cg_ahead_of_contact_centre_m"], Q[0], Q[1])
         g = self._geometry(qc, pose, geo)  # 8 x n
@@ -224,7 +224,7 @@ class ChannelTerrain:
     def compaction(self, xv, xc, P, Q):
         d = self._parts(xv, xc, P, Q)
         B = P["track_gauge_m"]
-        u, r = xv[3], xv[5]
+        u, r = xv["u_m_s"], xv["yaw_rate_rad_s"]
         v_track = {"left": u - r * B / 2, "right": u + r * B / 2}
         power_density = d["p_soil"] * ca.fmax(d["xcm"][1, :], 0)  # W/m^2 per cell
         out = []

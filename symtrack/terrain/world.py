@@ -68,22 +68,21 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import ScenarioError, SimulationError
-from ..model import SystemModel
+from ..model import SystemModel, vehicle_registry
+from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
-from ..model.vehicle import VEHICLE_STATES
 from .channels import HIST_ROWS, NF, NG, PHASE_VIRGIN, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import soil_index
 from .storage import Grid, Terrain
 
-__all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "NV", "World", "derive_modulus", "open_world", "padding_m",
+__all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "World", "derive_modulus", "open_world", "padding_m",
            "static_sinkage"]
 
 log = logging.getLogger("symtrack.terrain")
 
-NV = len(VEHICLE_STATES)
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
 LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
 
@@ -193,6 +192,12 @@ class World:
         self.peak_active = 0
         self.touched = np.zeros(self.grid.n_cells, dtype=bool)
         self.z_at_pass_end = None
+
+    @functools.cached_property
+    def layout(self) -> StateLayout:
+        """The state layout of :attr:`model` (the default vehicle's, then this pool's channels),
+        without building the model."""
+        return vehicle_registry.get().layout.with_cells(self.terrain.state_names)
 
     @functools.cached_property
     def model(self) -> SystemModel:
@@ -321,22 +326,23 @@ class World:
     def before_step(self, x: np.ndarray, dt: float, stepper=None):
         """Assign channels for the step from x over dt; returns (x with INFO_IN loaded, p)."""
         x = np.array(x, dtype=float)
-        X, Y, psi, u, v, r = x[:6]
+        L = self.layout
+        X, Y, psi, u, v, r = x[L.indices(("x_m", "y_m", "yaw_rad", "u_m_s", "v_m_s", "yaw_rate_rad_s"))]
         c, s = math.cos(psi), math.sin(psi)
         X1, Y1, psi1 = X + dt * (u * c - v * s), Y + dt * (u * s + v * c), psi + dt * r
         foot = np.union1d(self.cells_under(X, Y, psi, self._pad), self.cells_under(X1, Y1, psi1, self._pad))
         act = np.nonzero(self.channel_cell >= 0)[0]
         cells = self.channel_cell[act]
         in_foot = np.isin(cells, foot)
-        zdot = x[NV + 2 * act + 1]
+        zdot = x[L.cell_index(act, "rate")]
         release = (~in_foot) & (self.p_soil[act] <= 0.0) & (np.abs(zdot) <= self.settings.release_rate_m_s)
         rel = act[release]
         if rel.size:
             self.channel_cell[rel] = -1
             self.qc[rel] = 0.0
             self.p_soil[rel] = 0.0
-            x[NV + 2 * rel] = 0.0
-            x[NV + 2 * rel + 1] = 0.0
+            x[L.cell_index(rel, "sinkage")] = 0.0
+            x[L.cell_index(rel, "rate")] = 0.0
         new = np.setdiff1d(foot, cells, assume_unique=True)
         if new.size:
             ch = self.channel_of(new)
@@ -355,8 +361,8 @@ class World:
                 st.z[new][None, :], hist, st.cycles[new][None, :].astype(float), self.laws[:, soil],
                 self.betas[soil][None, :])).ravel()
             self.counted[ch] = False
-            x[NV + 2 * ch] = st.z[new]
-            x[NV + 2 * ch + 1] = st.zdot[new]
+            x[L.cell_index(ch, "sinkage")] = st.z[new]
+            x[L.cell_index(ch, "rate")] = st.zdot[new]
             self.p_soil[ch] = 0.0
             self.touched[new] = True
             if stepper is not None:
@@ -388,14 +394,15 @@ class World:
     def after_step(self, x: np.ndarray) -> None:
         """INFO_OUT: write every active channel's state and history back to its cell."""
         x = np.asarray(x, dtype=float)
-        zc = x[NV::2]
+        L = self.layout
+        zc = x[L.cell_field("sinkage")]
         zmax, pmax, dc, p, phase, plastic = (np.array(a).ravel() for a in
                                              self._history(zc, self.qc[:, HIST_ROWS].T, self.laws[:, self.ch_soil]))
         act = np.nonzero(self.channel_cell >= 0)[0]
         cells = self.channel_cell[act]
         st = self.storage
         st.z[cells] = zc[act]
-        st.zdot[cells] = x[NV + 2 * act + 1]
+        st.zdot[cells] = x[L.cell_index(act, "rate")]
         st.zmax[cells] = zmax[act]
         st.pmax[cells] = pmax[act]
         st.phase[cells] = np.where(zmax[act] > 0, phase[act], PHASE_VIRGIN).astype(np.int8)
@@ -410,7 +417,7 @@ class World:
 
     def check_covered(self, x: np.ndarray) -> None:
         """Every cell that the tracks load at state x holds a channel (else the prediction missed)."""
-        X, Y, psi = x[:3]
+        X, Y, psi = x[self.layout.pose_index]
         under = self.cells_under(X, Y, psi, 0.5 * self.grid.cell_m, check_field=False)
         missing = np.setdiff1d(under, self.channel_cell[self.channel_cell >= 0])
         if missing.size:
@@ -430,30 +437,33 @@ class World:
         self.touched[:] = False
         self.pass_sigma[:] = 0.0
         stepper.reset()
+        L = self.layout
         x = np.zeros(self.model.nx)
-        x[0], x[1], x[2] = x_m, y_m, yaw_rad
+        x[L.indices(("x_m", "y_m", "yaw_rad"))] = x_m, y_m, yaw_rad
         u = np.zeros(2)
         # the cells under the vehicle at their static sinkage first (set down quasi-statically: a
         # sudden load would overshoot it by some 10 % and write the overshoot into the history)
         x, p = self.before_step(x, 0.0, stepper)
         act = np.nonzero(self.channel_cell >= 0)[0]
         if act.size:
-            acc = np.array(self.model.ode(x, u, p)).ravel()[NV + 1::2][act]
-            zc, vc = x[NV::2][act], x[NV + 1::2][act]
+            acc = np.array(self.model.ode(x, u, p)).ravel()[L.cell_field("rate")][act]
+            zc, vc = x[L.cell_field("sinkage")][act], x[L.cell_field("rate")][act]
             hist = self.qc[act][:, HIST_ROWS].T
             p_soil = np.array(self.terrain.fn["soil"].map(act.size)(
                 zc[None, :], hist, self.laws[:, self.ch_soil[act]])).ravel()
             p_load = self.params["cell_areal_mass_kg_per_m2"] * acc + p_soil + self.params[
                 "cell_damping_Pa_s_per_m"] * vc
-            x[NV + 2 * act] = static_sinkage(self.terrain.fn["soil"], self.laws[:, self.ch_soil[act]], zc, hist, p_load)
-            x[NV + 2 * act + 1] = 0.0
+            x[L.cell_index(act, "sinkage")] = static_sinkage(self.terrain.fn["soil"], self.laws[:, self.ch_soil[act]],
+                                                             zc, hist, p_load)
+            x[L.cell_index(act, "rate")] = 0.0
             stepper.reset()
         n = int(round(self.settings.settle_s / dt_s))
         for _ in range(n):
             x, p = self.before_step(x, dt_s, stepper)
             x = stepper.step(x, u, p, dt_s)
             self.after_step(x)
-        x[NV:] = np.where(np.repeat(self.channel_cell >= 0, 2), x[NV:], 0.0)
+        cs = L.block("cells")
+        x[cs] = np.where(np.repeat(self.channel_cell >= 0, L.cell_width), x[cs], 0.0)
         x, _ = self.before_step(x, 0.0, stepper)
         stepper.reset()
         return x
@@ -472,7 +482,8 @@ class World:
         act = np.nonzero(self.channel_cell >= 0)[0]
         if act.size:
             F = unloader
-            xc = np.array(x[NV:], dtype=float)
+            L = self.layout
+            xc = np.array(x[L.block("cells")], dtype=float)
             p_end = self.p_soil.copy()
             for k in range(max_steps):
                 t0 = k * dt_s
@@ -483,7 +494,7 @@ class World:
                 par = np.concatenate([self.Q, p_end, [t0, dt_s, LIFT_TIME_S],
                                       self.laws[:, self.ch_soil].ravel(order="F")])
                 xc = np.asarray(F(xc, par), dtype=float).ravel()
-                self.after_step(np.concatenate([x[:NV], xc]))
+                self.after_step(np.concatenate([x[L.block("vehicle")], xc]))
             else:
                 log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
                             act.size, max_steps * dt_s)

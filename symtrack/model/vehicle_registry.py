@@ -1,0 +1,73 @@
+"""The vehicle-model menu: one registry of vehicle models (as the integrators have theirs).
+
+A vehicle model is an object with
+
+- ``name``: its registry name (``ModelOptions.vehicle`` takes it);
+- ``layout``: its :class:`~symtrack.model.layout.StateLayout` (its own states only, in blocks;
+  ``state_names`` the same names in order); ``input_names``, ``alg_names``: its inputs and the
+  algebraic variables of the DAE form (the accelerations of the load-transfer loop, closed by
+  ``acc_implied``); ``tracks``: the names of its tracks (the terrain's signals are per track);
+- ``equations(xv, u, acc, P, compaction_N, opts, track_soil=None) -> dict`` with ``xdot`` (as
+  many rows as its states), ``acc_implied`` (as many as ``alg_names``), ``dist`` (track ->
+  :class:`~symtrack.model.vehicle.PressureDistribution`: what the terrain's cells carry),
+  ``signals`` (named outputs) and ``yaw_moment_N_m`` (:func:`symtrack.model.vehicle.vehicle_equations`
+  documents the arguments);
+- ``contact_pose(xv) -> ContactPose``: the pose handed to the terrain's geometry.
+
+The vehicle and soil parameters are the project's (:data:`symtrack.model.PARAM_NAMES`).
+
+Adding a vehicle model is one module and one :func:`register` call::
+
+    register(MyVehicle())           # then SystemModel(opts, terrain, vehicle="my_vehicle")
+"""
+
+from __future__ import annotations
+
+from .vehicle import PlanarVehicle
+
+__all__ = ["DEFAULT_VEHICLE", "REGISTRY", "get", "names", "register", "unregister"]
+
+DEFAULT_VEHICLE = "planar"
+_REQUIRED = ("name", "layout", "state_names", "input_names", "alg_names", "tracks", "equations", "contact_pose")
+
+REGISTRY: dict = {}
+
+
+def register(vehicle, replace: bool = False):
+    """Add a vehicle model to the menu; returns it."""
+    missing = [a for a in _REQUIRED if not hasattr(vehicle, a)]
+    if missing:
+        raise ValueError(f"vehicle model {getattr(vehicle, 'name', vehicle)!r} lacks {', '.join(missing)}")
+    if tuple(vehicle.layout.names) != tuple(vehicle.state_names) or vehicle.layout.n_cells:
+        raise ValueError(f"vehicle model {vehicle.name!r}: its layout must hold its state_names, in order, "
+                         "and no terrain cells")
+    if vehicle.name in REGISTRY and not replace:
+        raise ValueError(f"a vehicle model named {vehicle.name!r} is registered already")
+    REGISTRY[vehicle.name] = vehicle
+    return vehicle
+
+
+def unregister(name: str) -> None:
+    """Remove a vehicle model from the menu."""
+    REGISTRY.pop(name, None)
+
+
+def names() -> tuple[str, ...]:
+    """The registered names."""
+    return tuple(REGISTRY)
+
+
+def get(vehicle=None):
+    """The vehicle model ``vehicle`` names (or ``vehicle`` itself when it is a model; None: the
+    default, planar); an unknown name is a ValueError listing the menu."""
+    if vehicle is None:
+        vehicle = DEFAULT_VEHICLE
+    if not isinstance(vehicle, str):
+        return vehicle
+    try:
+        return REGISTRY[vehicle]
+    except KeyError:
+        raise ValueError(f"vehicle = {vehicle!r} is not one of {', '.join(REGISTRY)}") from None
+
+
+register(PlanarVehicle())

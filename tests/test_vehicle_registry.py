@@ -1,0 +1,95 @@
+"""The vehicle seam: the named state layout, the vehicle-model registry, and a toy vehicle registered
+here that runs through the same path (SystemModel, make_plant, CVODES, the time loop) as the planar one."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+import symtrack
+from symtrack.model import SystemModel, vehicle_registry
+from symtrack.model.layout import ContactPose, StateLayout
+from symtrack.model.static import static_state
+from symtrack.model.vehicle import PLANAR_LAYOUT, VEHICLE_STATES, PlanarVehicle, vehicle_equations
+from symtrack.simulation import loop
+from symtrack.simulation.plants import make_plant
+
+
+class OdometerVehicle(PlanarVehicle):
+    """The planar vehicle with one more state, right after the pose: the distance travelled along
+    the field's x axis, d(odometer)/dt = dX/dt. Every planar state after the pose moves up by one."""
+
+    name = "odometer_toy"
+    state_names = VEHICLE_STATES[:3] + ("odometer_m",) + VEHICLE_STATES[3:]
+    layout = StateLayout((("pose", VEHICLE_STATES[:3]), ("odometer", ("odometer_m",)),
+                          *((b, PLANAR_LAYOUT.block_names_of(b))
+                            for b in ("velocity", "sprockets", "shear", "torque"))))
+
+    def equations(self, xv, u, acc, P, compaction_N, opts, track_soil=None):
+        planar = ca.vertcat(*(xv[self.layout.index(n)] for n in VEHICLE_STATES))  # by name, not by position
+        out = vehicle_equations(planar, u, acc, P, compaction_N, opts, track_soil)
+        rates = dict(zip(VEHICLE_STATES, ca.vertsplit(out["xdot"]), strict=True))
+        rates["odometer_m"] = rates["x_m"]
+        return {**out, "xdot": ca.vertcat(*(rates[n] for n in self.state_names))}
+
+
+@pytest.fixture
+def toy():
+    vehicle = vehicle_registry.register(OdometerVehicle())  # the one registry entry
+    yield vehicle
+    vehicle_registry.unregister(vehicle.name)
+
+
+def test_layout_names_blocks_and_cells():
+    lay = PLANAR_LAYOUT.with_cells(("a_m", "a_rate", "b_m", "b_rate"))
+    assert lay.size == 16 and lay.nv == 12 and lay.n_cells == 2
+    assert lay.index("yaw_rad") == 2 and lay.pose_index == [0, 1, 2]
+    assert lay.block("vehicle") == slice(0, 12) and lay.block("cells") == slice(12, 16)
+    assert lay.block_names_of("velocity") == ("u_m_s", "v_m_s", "yaw_rate_rad_s")
+    x = np.arange(16.0)
+    assert list(x[lay.cell_field("sinkage")]) == [12.0, 14.0] and list(x[lay.cell_field("rate")]) == [13.0, 15.0]
+    assert list(lay.cell_index(np.array([1, 0]), "rate")) == [15, 13]
+    assert lay.view(x)["u_m_s"] == 3.0
+    with pytest.raises(KeyError, match="no state named 'z_m'"):
+        lay.index("z_m")
+    with pytest.raises(ValueError, match="appear more than once"):
+        StateLayout((("pose", ("x_m",)), ("other", ("x_m",))))
+    with pytest.raises(ValueError, match="not a multiple of 2"):
+        PLANAR_LAYOUT.with_cells(("a_m",))
+
+
+def test_the_default_model_is_the_planar_vehicle():
+    model = SystemModel()
+    assert model.vehicle is vehicle_registry.get("planar")
+    assert model.layout.vehicle_names == VEHICLE_STATES and model.state_names == model.layout.names
+    pose = model.vehicle.contact_pose(ca.DM(np.arange(12.0)))
+    assert isinstance(pose, ContactPose) and pose.is_planar and [float(v) for v in pose.planar] == [0.0, 1.0, 2.0]
+    with pytest.raises(ValueError, match="is not one of planar"):
+        SystemModel(vehicle="no_such_vehicle")
+
+
+def test_a_vehicle_without_the_interface_is_refused():
+    class Half:
+        name = "half"
+    with pytest.raises(ValueError, match="lacks layout"):
+        vehicle_registry.register(Half())
+
+
+def test_toy_vehicle_runs_through_cvodes_and_keeps_its_own_equations(toy):
+    sc = symtrack.load_scenario("validation", {"run.integrator": "cvodes", "run.duration_s": 3.0,
+                                               "run.stop_after_distance_m": "none"})
+    model = SystemModel(sc.model, vehicle="odometer_toy")
+    assert model.layout.index("u_m_s") == 4 and model.layout.nv == 13 and model.nx == 13 + 8
+    x0 = static_state(model, sc.params, 1.0, 0.0, 0.0)
+    assert x0[model.layout.index("x_m")] == 1.0 and np.all(x0[model.layout.cell_field("sinkage")] > 0)
+    run = loop.run(sc, make_plant(sc, model=model))
+    ref = loop.run(sc, make_plant(sc))  # the planar vehicle, same scenario, same path
+    assert run.state_names == model.state_names and run.X.shape[1] == 21
+    assert ref.state("u_m_s")[-1] > 0.5  # it drove
+    # what the toy must satisfy: its odometer is the distance travelled along x
+    np.testing.assert_allclose(run.state("odometer_m") - run.state("odometer_m")[0],
+                               run.state("x_m") - run.state("x_m")[0], rtol=1e-6, atol=1e-7)
+    # and the extra state does not feed back: the planar states and the outputs are the planar vehicle's
+    for name in VEHICLE_STATES + tuple(n for n in ref.state_names if n.startswith("sinkage_")):
+        np.testing.assert_allclose(run.state(name), ref.state(name), rtol=1e-5, atol=1e-7, err_msg=name)
+    np.testing.assert_allclose(run.output("compaction_resistance_left_N"), ref.output("compaction_resistance_left_N"),
+                               rtol=1e-5)
