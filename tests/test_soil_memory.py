@@ -112,7 +112,7 @@ def test_light_cycles_add_nothing_and_partial_cycles_add_their_share():
 def test_set_down_writes_no_overshoot_into_the_history():
     """After the settle of a pass on a virgin field, the interior cells' z_max is their static
     sinkage (within 1 %) -- a sudden load overshot it by about 10 %."""
-    from symtrack.integrators.grid_engine import TerrainEngine
+    from symtrack.integrators.engine import TerrainEngine
     from symtrack.terrain.world import open_world
 
     sc = load_scenario("multipass")
@@ -200,7 +200,7 @@ def test_the_engines_lift_off_equals_cvodes_over_the_pool():
     """TerrainEngine.end_pass (the cells' SDIRK step in C) against World.end_pass (CVODES over the
     whole pool at tight tolerances) from the same pass end: the same rut, to 0.1 % of its depth
     (measured 0.02 %)."""
-    from symtrack.integrators.grid_engine import TerrainEngine
+    from symtrack.integrators.engine import TerrainEngine
     from symtrack.integrators.unload import unloader
     from symtrack.simulation import loop
     from symtrack.simulation.plants import EnginePlant

@@ -235,7 +235,7 @@ def _grid_row(integrator, duration_s=None, channels=None, note=""):
     return row
 
 
-# ---- the terrain engine (run.integrator = "grid_fast", symtrack/integrators/grid_engine.py) -------------
+# ---- the terrain engine (run.integrator = "grid_fast", symtrack/integrators/engine/) -------------
 ENGINE_FIGURES = ("lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm", "sinkage_idler_mm",
                   "shear_driven_max_m", "shear_idle_min_m", "rut_max_depth_mm", "rut_mean_depth_mm",
                   "compaction_resistance_mean_N", "compaction_resistance_time_mean_N")
