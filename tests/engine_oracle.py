@@ -1,8 +1,10 @@
-"""The test oracle of the terrain engine: symtrack/native/grid_engine.c in Python on CasADi's
+"""The test oracle of the terrain engine and of the world manager: symtrack/native/grid_engine.c in Python on CasADi's
 interpreter, the same algorithm expression by expression (:class:`PyKernel`; slow). It is a second
 copy of the world manager's rules (footprint, release, sector assignment, INFO_IN / INFO_OUT, the
 collision error) and of the cells' step, kept here, with the tests, to check the C against:
-``TerrainEngine(world, settings, kernel=PyKernel)`` runs the engine on it."""
+``TerrainEngine(world, settings, kernel=PyKernel)`` runs the engine on it. :func:`cells_under` and
+:func:`channel_of` are the footprint and the sector rule in numpy on a World (the World's own copy
+before the rules moved to grid_engine.c), for the invariant tests of tests/test_terrain_world.py."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import math
 import casadi as ca
 import numpy as np
 
+from symtrack.foundations.errors import SimulationError
 from symtrack.integrators.engine.state import (
     ERR_COLLISION,
     ERR_FIELD,
@@ -27,7 +30,45 @@ from symtrack.integrators.settings import window_substeps
 from symtrack.native.grid_engine_model import NS
 from symtrack.terrain import subsoil
 
-__all__ = ["PyErr", "PyKernel", "outside_tracks", "ringing"]
+__all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "outside_tracks", "ringing"]
+
+
+def cells_under(world, X, Y, psi, pad, check_field=True) -> np.ndarray:
+    """Flat indices of the cells whose centres lie in the tracks' rectangles padded by pad (grid_engine.c
+    scan), sorted; the field error when a track's contact leaves the field and ``check_field``."""
+    g = world.grid
+    dx = g.cell_m
+    x0, x1, y0, y1 = g.bounds()
+    found = []
+    for cx, cy, c, s, hl, hw in world._rectangles(X, Y, psi, pad):
+        ex = abs(c) * hl + abs(s) * hw
+        ey = abs(s) * hl + abs(c) * hw
+        if check_field:
+            exu, eyu = ex - pad * (abs(c) + abs(s)), ey - pad * (abs(c) + abs(s))
+            if cx - exu < x0 or cx + exu > x1 or cy - eyu < y0 or cy + eyu > y1:
+                raise SimulationError(f"the vehicle left the terrain field: a track's contact around ({cx:.2f}, "
+                                      f"{cy:.2f}) m")
+        i0 = max(int(math.floor((cx - ex - x0) / dx)), 0)
+        i1 = min(int(math.ceil((cx + ex - x0) / dx)), g.shape[0] - 1)
+        j0 = max(int(math.floor((cy - ey - y0) / dx)), 0)
+        j1 = min(int(math.ceil((cy + ey - y0) / dx)), g.shape[1] - 1)
+        if i1 < i0 or j1 < j0:
+            continue
+        ii, jj = np.meshgrid(np.arange(i0, i1 + 1), np.arange(j0, j1 + 1), indexing="ij")
+        px, py = g.centres(ii, jj)
+        along = (px - cx) * c + (py - cy) * s
+        across = -(px - cx) * s + (py - cy) * c
+        inside = (np.abs(along) <= hl) & (np.abs(across) <= hw)
+        found.append(ii[inside] * g.shape[1] + jj[inside])
+    if not found:
+        return np.zeros(0, dtype=np.int64)
+    return np.unique(np.concatenate(found))
+
+
+def channel_of(world, cells: np.ndarray) -> np.ndarray:
+    """The sector rule Cell[i, j] -> CHANNEL[i mod M, j mod M] (grid_engine.c channel_of)."""
+    i, j = np.divmod(cells, world.grid.shape[1])
+    return (i % world.M) * world.M + (j % world.M)
 
 
 def outside_tracks(geo, cx: float, cy: float, a) -> bool:

@@ -197,10 +197,10 @@ def test_a_schema_1_file_loads_with_cycles_from_its_phase(tmp_path):
 
 
 def test_the_engines_lift_off_equals_cvodes_over_the_pool():
-    """TerrainEngine.end_pass (the cells' SDIRK step in C) against World.end_pass (CVODES over the
+    """TerrainEngine.end_pass (the cells' SDIRK step in C) against ChannelManager.end_pass (CVODES over the
     whole pool at tight tolerances) from the same pass end: the same rut, to 0.1 % of its depth
     (measured 0.02 %)."""
-    from symtrack.integrators.engine import TerrainEngine
+    from symtrack.integrators.engine import ChannelManager, TerrainEngine
     from symtrack.integrators.unload import unloader
     from symtrack.simulation import loop
     from symtrack.simulation.plants import EnginePlant
@@ -216,7 +216,7 @@ def test_the_engines_lift_off_equals_cvodes_over_the_pool():
         if how == "engine":
             plant.engine.end_pass()
         else:
-            world.end_pass(plant.engine.sync_world(), unloader(world))
+            ChannelManager(world).end_pass(plant.engine.sync_world(), unloader(world))
         assert not (world.channel_cell >= 0).any()
         ruts.append(world.storage.z.copy())
         zmax = world.storage.zmax.copy()

@@ -40,6 +40,7 @@ import numpy as np
 from ..foundations.errors import SimulationError
 from ..foundations.progress import timed_step
 from ..integrators import registry
+from ..integrators.engine import ChannelManager
 from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
 from ..model import SystemModel
@@ -231,11 +232,13 @@ class BatchPlant:
 
 class GridPlant:
     """The vehicle on the persistent grid terrain: a :class:`~symtrack.terrain.world.World` and
-    its integrator, one macro step per interval (``world.before_step`` in :meth:`synchronize`,
-    ``world.after_step`` and ``world.check_covered`` in :meth:`commit`). ``state_names`` are the
-    12 vehicle states: the channel slots stay inside (the cells live in the world's storage).
-    :meth:`start` sets the vehicle down (the cells under it settle, :meth:`World.begin_pass`);
-    :meth:`finish` lifts it off (:meth:`World.end_pass`), so the terrain holds the rebound."""
+    its integrator, one macro step per interval; the world manager's rules are grid_engine.c's, run on
+    the World's channel tables by a :class:`~symtrack.integrators.engine.ChannelManager`
+    (``before_step`` in :meth:`synchronize`, ``after_step`` and ``check_covered`` in :meth:`commit`).
+    ``state_names`` are the 12 vehicle states: the channel slots stay inside (the cells live in the
+    world's storage). :meth:`start` sets the vehicle down (the cells under it settle,
+    ``ChannelManager.begin_pass``); :meth:`finish` lifts it off (``ChannelManager.end_pass``), so the
+    terrain holds the rebound."""
 
     kind = "grid"
     max_intervals = short_intervals = 1
@@ -245,6 +248,7 @@ class GridPlant:
         often (``snapshots``: (t_s, pose, cells, z_m) per snapshot, reset at every start), for an
         animation of the pass; None records nothing."""
         self.world, self.stepper = world, stepper
+        self.manager = ChannelManager(world)
         self.record_every_s = record_every_s
         self.snapshots: list = []
         self._t = self._t_snap = 0.0
@@ -263,7 +267,7 @@ class GridPlant:
         return np.array(self.model.outputs(x, u, p)).ravel()
 
     def start(self, x_m, y_m, yaw_rad, u0, state=None):
-        x = self.world.begin_pass(self.stepper, float(x_m), float(y_m), float(yaw_rad))
+        x = self.manager.begin_pass(self.stepper, float(x_m), float(y_m), float(yaw_rad))
         if state is not None:
             xv = np.asarray(state, dtype=float)
             if xv.shape != (NV,):
@@ -292,7 +296,7 @@ class GridPlant:
             raise SimulationError(f"GridPlant advances one interval at a time, got {len(intervals)}")
         (_, self.h, u), = intervals
         self.u = np.asarray(u, dtype=float)
-        self.x_pre, self.p = self.world.before_step(self._x, self.h, self.stepper)
+        self.x_pre, self.p = self.manager.before_step(self._x, self.h, self.stepper)
 
     def advance(self):
         self.x_new = self.stepper.step(self.x_pre, self.u, self.p, self.h)
@@ -306,8 +310,8 @@ class GridPlant:
 
     def commit(self, k):
         x = self._x = self.x_new
-        self.world.after_step(x)
-        self.world.check_covered(x)
+        self.manager.after_step(x)
+        self.manager.check_covered(x)
         self._t += self.h_done
         self._record(x)
         return self._outputs(x, self.u, self.p)[None, :]
@@ -317,7 +321,7 @@ class GridPlant:
             return
         if self._unloader is None:
             self._unloader = unloader(self.world)
-        self.world.end_pass(self._x, self._unloader)
+        self.manager.end_pass(self._x, self._unloader)
         self.finished = True
 
     def figures(self):

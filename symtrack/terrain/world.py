@@ -10,8 +10,13 @@ load-cycle count (uint16) (symtrack/model/cell.py), the soil index (uint8, a soi
 subsoil stress record (float32 per depth): 60 bytes per cell with the four default depths, 60 MB
 for the default million-cell field. Cell (i, j) has its centre at world (x0 + (i + 1/2) dx, y0 + (j + 1/2) dx).
 
-Per macro step (:meth:`World.before_step`, :meth:`World.after_step`)
--------------------------------------------------------------------
+Per macro step (the rules; their one home is symtrack/native/grid_engine.c)
+--------------------------------------------------------------------------
+The terrain engine runs them inside its steps; the IDAS reference path runs the same C on this
+World's channel tables through :class:`symtrack.integrators.engine.ChannelManager` (``before_step``,
+``after_step``, ``check_covered``). This module holds the storage, the channel tables and the
+constants of the rules (:func:`padding_m`, :func:`derive_modulus`), not a second copy of them.
+
 1. The footprint: the cells whose centres lie in either track's contact rectangle, padded by
    ``pad = (sqrt(2)/2 + 1/4) dx``, at the pose at the start of the step and at the pose
    predicted for its end (body velocities held over the step). The padding covers every cell
@@ -48,10 +53,10 @@ Shear memory: a cell that comes under a track starts with zero shear (Janosi & H
 measure shear from the front of the contact); cells store no shear, and the vehicle's mean
 shear displacement is the vehicle's state.
 
-A pass (:meth:`begin_pass`, :meth:`end_pass`): the vehicle is set down at rest at its start
-pose on the current terrain, the cells under it placed at their static sinkage
-(:func:`static_sinkage`: a sudden load would overshoot it and write the overshoot into the
-history), then they settle for ``settle_s`` with zero torque (the initial static state), the
+A pass (``ChannelManager.begin_pass`` / ``end_pass``; the engine's ``begin_pass`` / ``end_pass``):
+the vehicle is set down at rest at its start pose on the current terrain, the cells under it
+placed at their static sinkage (:func:`static_sinkage`: a sudden load would overshoot it and write the
+overshoot into the history), then they settle for ``settle_s`` with zero torque (the initial static state), the
 run follows its torque programme to its stop rule, then the vehicle is lifted off: the active
 cells unload with zero load until they are released. Between passes
 the storage is the only state, which is why a saved and reloaded terrain continues bit-exactly.
@@ -61,27 +66,24 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import logging
 import math
 
 import casadi as ca
 import numpy as np
 
-from ..foundations.errors import ScenarioError, SimulationError
+from ..foundations.errors import ScenarioError
 from ..model import SystemModel
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import VEHICLE_STATES
-from .channels import HIST_ROWS, NF, NG, PHASE_VIRGIN, ChannelTerrain, soil_law_values
+from .channels import HIST_ROWS, NF, NG, ChannelTerrain, soil_law_values
 from .settings import TerrainSettings
 from .soil_map import soil_index
 from .storage import Grid, Terrain
 
 __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "NV", "World", "derive_modulus", "open_world", "padding_m",
            "static_sinkage"]
-
-log = logging.getLogger("symtrack.terrain")
 
 NV = len(VEHICLE_STATES)
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
@@ -179,9 +181,6 @@ class World:
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
-        self._history = self.terrain.fn["history"].map("history_all", "serial", n, [], [])
-        self._entry = self.terrain.fn["entry"]
-        self._entry_maps: dict = {}
         # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
         # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
         self.soils = self._apply_soil_map(settings, params)
@@ -189,7 +188,6 @@ class World:
         self.betas = np.array([float(sp["repeated_loading_exponent"]) for sp in self.soils])
         self.ch_soil = np.zeros(n, dtype=np.uint8)
         self.counted = np.zeros(n, dtype=bool)  # the channel's stay has counted as a load cycle
-        self._pad = padding_m(self.grid.cell_m)
         self.peak_active = 0
         self.touched = np.zeros(self.grid.n_cells, dtype=bool)
         self.z_at_pass_end = None
@@ -202,12 +200,6 @@ class World:
             raise ScenarioError("this field has a soil map (several soils): it runs on the terrain engine only "
                                 "(run.integrator = \"grid_fast\"); IDAS and the grid Rosenbrock take one soil")
         return SystemModel(self.opts, self.terrain)
-
-    def _entry_map(self, k: int) -> ca.Function:
-        """The entry Function mapped over k cells (built once per count: a step's new cells)."""
-        if k not in self._entry_maps:
-            self._entry_maps[k] = self._entry.map(k)
-        return self._entry_maps[k]
 
     def _apply_soil_map(self, settings, params) -> list[dict]:
         """The field's soils: a new field takes the scenario's soil map; a terrain that has one keeps
@@ -274,42 +266,6 @@ class World:
             out.append(np.column_stack([cx + c * loc[:, 0] - s * loc[:, 1], cy + s * loc[:, 0] + c * loc[:, 1]]))
         return out
 
-    def cells_under(self, X, Y, psi, pad, check_field=True) -> np.ndarray:
-        """Flat indices of the cells whose centres lie in the tracks' rectangles padded by pad."""
-        g = self.grid
-        dx = g.cell_m
-        x0, x1, y0, y1 = g.bounds()
-        found = []
-        for cx, cy, c, s, hl, hw in self._rectangles(X, Y, psi, pad):
-            ex = abs(c) * hl + abs(s) * hw
-            ey = abs(s) * hl + abs(c) * hw
-            if check_field:
-                exu, eyu = ex - pad * (abs(c) + abs(s)), ey - pad * (abs(c) + abs(s))
-                if cx - exu < x0 or cx + exu > x1 or cy - eyu < y0 or cy + eyu > y1:
-                    raise SimulationError(
-                        f"the vehicle left the terrain field: a track's contact around ({cx:.2f}, {cy:.2f}) m "
-                        f"is outside x in [{x0:g}, {x1:g}] m, y in [{y0:g}, {y1:g}] m; enlarge terrain.size_m "
-                        "or move terrain.origin_m")
-            i0 = max(int(math.floor((cx - ex - x0) / dx)), 0)
-            i1 = min(int(math.ceil((cx + ex - x0) / dx)), g.shape[0] - 1)
-            j0 = max(int(math.floor((cy - ey - y0) / dx)), 0)
-            j1 = min(int(math.ceil((cy + ey - y0) / dx)), g.shape[1] - 1)
-            if i1 < i0 or j1 < j0:
-                continue
-            ii, jj = np.meshgrid(np.arange(i0, i1 + 1), np.arange(j0, j1 + 1), indexing="ij")
-            px, py = g.centres(ii, jj)
-            along = (px - cx) * c + (py - cy) * s
-            across = -(px - cx) * s + (py - cy) * c
-            inside = (np.abs(along) <= hl) & (np.abs(across) <= hw)
-            found.append(ii[inside] * g.shape[1] + jj[inside])
-        if not found:
-            return np.zeros(0, dtype=np.int64)
-        return np.unique(np.concatenate(found))
-
-    def channel_of(self, cells: np.ndarray) -> np.ndarray:
-        i, j = np.divmod(cells, self.grid.shape[1])
-        return (i % self.M) * self.M + (j % self.M)
-
     def ij(self, cell: int) -> tuple[int, int]:
         return tuple(int(v) for v in divmod(int(cell), self.grid.shape[1]))
 
@@ -317,179 +273,10 @@ class World:
     def param_vector(self) -> np.ndarray:
         return np.concatenate([self._pbase, self.Q])
 
-    # ---- per macro step ----------------------------------------------------------------------
-    def before_step(self, x: np.ndarray, dt: float, stepper=None):
-        """Assign channels for the step from x over dt; returns (x with INFO_IN loaded, p)."""
-        x = np.array(x, dtype=float)
-        X, Y, psi, u, v, r = x[:6]
-        c, s = math.cos(psi), math.sin(psi)
-        X1, Y1, psi1 = X + dt * (u * c - v * s), Y + dt * (u * s + v * c), psi + dt * r
-        foot = np.union1d(self.cells_under(X, Y, psi, self._pad), self.cells_under(X1, Y1, psi1, self._pad))
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        cells = self.channel_cell[act]
-        in_foot = np.isin(cells, foot)
-        zdot = x[NV + 2 * act + 1]
-        release = (~in_foot) & (self.p_soil[act] <= 0.0) & (np.abs(zdot) <= self.settings.release_rate_m_s)
-        rel = act[release]
-        if rel.size:
-            self.channel_cell[rel] = -1
-            self.qc[rel] = 0.0
-            self.p_soil[rel] = 0.0
-            x[NV + 2 * rel] = 0.0
-            x[NV + 2 * rel + 1] = 0.0
-        new = np.setdiff1d(foot, cells, assume_unique=True)
-        if new.size:
-            ch = self.channel_of(new)
-            self._check_collisions(new, ch)
-            self.channel_cell[ch] = new
-            st = self.storage
-            cx, cy = self.grid.centres(*np.divmod(new, self.grid.shape[1]))
-            self.qc[ch, 0], self.qc[ch, 1] = cx, cy
-            self.qc[ch, 2], self.qc[ch, 3], self.qc[ch, 4] = st.zmax[new], st.pmax[new], 1.0
-            self.qc[ch, 5], self.qc[ch, 7] = st.zoff[new], 0.0
-            self.qc[ch, 6] = 0.0
-            hist = self.qc[ch][:, HIST_ROWS].T
-            self.ch_soil[ch] = st.soil_index[new]
-            soil = self.ch_soil[ch]
-            self.qc[ch, 6] = np.array(self._entry_map(ch.size)(
-                st.z[new][None, :], hist, st.cycles[new][None, :].astype(float), self.laws[:, soil],
-                self.betas[soil][None, :])).ravel()
-            self.counted[ch] = False
-            x[NV + 2 * ch] = st.z[new]
-            x[NV + 2 * ch + 1] = st.zdot[new]
-            self.p_soil[ch] = 0.0
-            self.touched[new] = True
-            if stepper is not None:
-                stepper.reset()
-        n_act = int(np.count_nonzero(self.channel_cell >= 0))
-        self.peak_active = max(self.peak_active, n_act)
-        return x, self.param_vector()
-
-    def _check_collisions(self, new, ch):
-        held = self.channel_cell[ch] >= 0
-        order = np.argsort(ch, kind="stable")
-        dup = np.nonzero(np.diff(ch[order]) == 0)[0]
-        if not held.any() and dup.size == 0:
-            return
-        if held.any():
-            k = int(np.nonzero(held)[0][0])
-            a, b = int(new[k]), int(self.channel_cell[ch[k]])
-        else:
-            a, b = int(new[order[dup[0]]]), int(new[order[dup[0] + 1]])
-        act = np.concatenate([self.channel_cell[self.channel_cell >= 0], new])
-        i, j = np.divmod(act, self.grid.shape[1])
-        need = int(max(np.ptp(i), np.ptp(j))) + 1
-        raise SimulationError(
-            f"channel collision: cells {self.ij(a)} and {self.ij(b)} (i, j) are both active and both map to "
-            f"channel {int(self.channel_of(np.array([a]))[0])} with M = {self.M} (Cell[i, j] -> CHANNEL[i mod M, "
-            f"j mod M]); the active set spans {np.ptp(i) + 1} x {np.ptp(j) + 1} cells and needs M >= {need}. "
-            "Raise terrain.channels, terrain.max_speed_m_s or terrain.release_time_s")
-
-    def after_step(self, x: np.ndarray) -> None:
-        """INFO_OUT: write every active channel's state and history back to its cell."""
-        x = np.asarray(x, dtype=float)
-        zc = x[NV::2]
-        zmax, pmax, dc, p, phase, plastic = (np.array(a).ravel() for a in
-                                             self._history(zc, self.qc[:, HIST_ROWS].T, self.laws[:, self.ch_soil]))
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        cells = self.channel_cell[act]
-        st = self.storage
-        st.z[cells] = zc[act]
-        st.zdot[cells] = x[NV + 2 * act + 1]
-        st.zmax[cells] = zmax[act]
-        st.pmax[cells] = pmax[act]
-        st.phase[cells] = np.where(zmax[act] > 0, phase[act], PHASE_VIRGIN).astype(np.int8)
-        st.zoff[cells] = self.qc[act, 5] + dc[act]
-        first = (plastic[act] > 0) & ~self.counted[act]
-        st.cycles[cells[first]] += 1
-        self.counted[act[first]] = True
-        self.qc[act, 2] = zmax[act]
-        self.qc[act, 3] = pmax[act]
-        self.qc[act, 7] = dc[act]
-        self.p_soil[act] = p[act]
-
-    def check_covered(self, x: np.ndarray) -> None:
-        """Every cell that the tracks load at state x holds a channel (else the prediction missed)."""
-        X, Y, psi = x[:3]
-        under = self.cells_under(X, Y, psi, 0.5 * self.grid.cell_m, check_field=False)
-        missing = np.setdiff1d(under, self.channel_cell[self.channel_cell >= 0])
-        if missing.size:
-            raise SimulationError(
-                f"cell {self.ij(int(missing[0]))} came under a track without a channel ({missing.size} cells): "
-                "the footprint prediction missed it; reduce run.output_dt_s")
-
     def active_cells(self) -> np.ndarray:
         return self.channel_cell[self.channel_cell >= 0]
 
     # ---- passes ------------------------------------------------------------------------------
-    def begin_pass(self, stepper, x_m: float, y_m: float, yaw_rad: float, dt_s: float = 0.01) -> np.ndarray:
-        """The vehicle at rest at the pose with the cells under it settled: the initial state.
-        ``stepper``: any integrator of this world's model (``step(x, u, p, dt)``, ``reset()``)."""
-        self.release_all()
-        self.peak_active = 0
-        self.touched[:] = False
-        self.pass_sigma[:] = 0.0
-        stepper.reset()
-        x = np.zeros(self.model.nx)
-        x[0], x[1], x[2] = x_m, y_m, yaw_rad
-        u = np.zeros(2)
-        # the cells under the vehicle at their static sinkage first (set down quasi-statically: a
-        # sudden load would overshoot it by some 10 % and write the overshoot into the history)
-        x, p = self.before_step(x, 0.0, stepper)
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        if act.size:
-            acc = np.array(self.model.ode(x, u, p)).ravel()[NV + 1::2][act]
-            zc, vc = x[NV::2][act], x[NV + 1::2][act]
-            hist = self.qc[act][:, HIST_ROWS].T
-            p_soil = np.array(self.terrain.fn["soil"].map(act.size)(
-                zc[None, :], hist, self.laws[:, self.ch_soil[act]])).ravel()
-            p_load = self.params["cell_areal_mass_kg_per_m2"] * acc + p_soil + self.params[
-                "cell_damping_Pa_s_per_m"] * vc
-            x[NV + 2 * act] = static_sinkage(self.terrain.fn["soil"], self.laws[:, self.ch_soil[act]], zc, hist, p_load)
-            x[NV + 2 * act + 1] = 0.0
-            stepper.reset()
-        n = int(round(self.settings.settle_s / dt_s))
-        for _ in range(n):
-            x, p = self.before_step(x, dt_s, stepper)
-            x = stepper.step(x, u, p, dt_s)
-            self.after_step(x)
-        x[NV:] = np.where(np.repeat(self.channel_cell >= 0, 2), x[NV:], 0.0)
-        x, _ = self.before_step(x, 0.0, stepper)
-        stepper.reset()
-        return x
-
-    def end_pass(self, x: np.ndarray, unloader, dt_s: float = 0.01, max_steps: int = 300) -> None:
-        """Lift the vehicle off: each active cell's load falls linearly from its reaction pressure at
-        the end of the pass to zero over LIFT_TIME_S (quasi-statically: a sudden removal would fling
-        the underdamped cells above their unloaded rest, as no tension holds them back), then the
-        cells settle until released; all channels are freed. Cells that have not come to rest
-        within max_steps keep their (stored) state and a warning says so.
-
-        ``unloader(xc, par) -> xc``: the cells-only integrator of :meth:`unload_dae` over one
-        step of dt_s (built by :func:`symtrack.integrators.unload.unloader`)."""
-        self.after_step(x)
-        self.z_at_pass_end = self.storage.z.copy()  # the terrain with the vehicle still on it
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        if act.size:
-            F = unloader
-            xc = np.array(x[NV:], dtype=float)
-            p_end = self.p_soil.copy()
-            for k in range(max_steps):
-                t0 = k * dt_s
-                rates = xc[1::2][act]
-                if t0 >= LIFT_TIME_S and np.all((self.p_soil[act] <= 0.0)
-                                                & (np.abs(rates) <= self.settings.release_rate_m_s)):
-                    break
-                par = np.concatenate([self.Q, p_end, [t0, dt_s, LIFT_TIME_S],
-                                      self.laws[:, self.ch_soil].ravel(order="F")])
-                xc = np.asarray(F(xc, par), dtype=float).ravel()
-                self.after_step(np.concatenate([x[:NV], xc]))
-            else:
-                log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
-                            act.size, max_steps * dt_s)
-        self.release_all()
-        np.maximum(self.storage.sigma_max, self.pass_sigma, out=self.storage.sigma_max)
-
     def release_all(self) -> None:
         self.channel_cell[:] = -1
         self.qc[:] = 0.0

@@ -5,7 +5,7 @@ Scheme (staggered, per macro step of length h, the output step)
 ---------------------------------------------------------------
 1. The world manager's bookkeeping at the step start (footprint at the start pose and at the
    pose predicted for the end, release, sector assignment Cell[i, j] -> CHANNEL[i mod M, j mod M],
-   INFO_IN): the rules and expressions of :class:`symtrack.terrain.world.World.before_step`.
+   INFO_IN; grid_engine.c, the rules' one home, also run for the IDAS path by :class:`ChannelManager`).
 2. The vehicle (12 states, 2 algebraic accelerations) over h with the channel sums (compaction
    power per track, the end-strip sinkages) held at their values at the step start: the 8-stage,
    order-5, L-stable Rosenbrock method of CasADi's plugin with the exact Jacobian,
@@ -32,8 +32,9 @@ line by line, on CasADi's interpreter is the tests' oracle (tests/engine_oracle.
 tests/test_terrain_engine.py checks that both agree).
 
 Modules: :mod:`.state` (the channel tables and the C struct), :mod:`.kernel` (the library and its
-ctypes calls), :mod:`.engine` (:class:`TerrainEngine`); the settings are
-:class:`symtrack.integrators.settings.EngineSettings`.
+ctypes calls), :mod:`.engine` (:class:`TerrainEngine`), :mod:`.manager` (:class:`ChannelManager`:
+the same world-manager rules, grid_engine.c's, on a World's channel tables for the IDAS reference
+path); the settings are :class:`symtrack.integrators.settings.EngineSettings`.
 
 Interface: :class:`TerrainEngine` is built from a World-like object (``storage``, ``grid``,
 ``M``, ``params``, ``opts``, ``settings``, ``touched``) and :class:`EngineSettings`;
@@ -49,7 +50,8 @@ from __future__ import annotations
 from ..settings import POWER_MODES, EngineSettings, window_substeps
 from .engine import SETTLE_STEP_S, TerrainEngine, engine_functions
 from .kernel import CKernel, library
+from .manager import ChannelManager
 from .state import NV, SDIRK_GAMMA, EngineState, subsoil_tables
 
-__all__ = ["CKernel", "EngineSettings", "EngineState", "NV", "POWER_MODES", "SDIRK_GAMMA", "SETTLE_STEP_S",
-           "TerrainEngine", "engine_functions", "library", "subsoil_tables", "window_substeps"]
+__all__ = ["CKernel", "ChannelManager", "EngineSettings", "EngineState", "NV", "POWER_MODES", "SDIRK_GAMMA",
+           "SETTLE_STEP_S", "TerrainEngine", "engine_functions", "library", "subsoil_tables", "window_substeps"]

@@ -16,16 +16,7 @@ from ...terrain.channels import soil_law_values
 from ...terrain.world import LIFT_TIME_S
 from ..settings import EngineSettings, window_substeps
 from .kernel import CKernel, library
-from .state import (
-    ERR_COLLISION,
-    ERR_FIELD,
-    ERR_NEWTON,
-    ERR_NONFINITE,
-    ERR_UNCOVERED,
-    NEWTON_MAX_ITER,
-    NV,
-    EngineState,
-)
+from .state import NV, EngineState, engine_error
 
 __all__ = ["SETTLE_STEP_S", "TerrainEngine", "engine_functions"]
 
@@ -72,43 +63,6 @@ class TerrainEngine:
         self.compiled = self.kernel.compiled
         self.timing = {"kernel_s": 0.0, "kernel_cpu_s": 0.0, "calls": 0}
 
-    # -- errors ---------------------------------------------------------------------------------------------
-    def _raise(self, code: int, e) -> None:
-        s = self.state
-        g = s.grid
-
-        def ij(cell):
-            return tuple(int(v) for v in divmod(int(cell), g.shape[1]))
-        if code == ERR_FIELD:
-            x0, x1 = g.origin_m[0], g.origin_m[0] + g.shape[0] * g.cell_m
-            y0, y1 = g.origin_m[1], g.origin_m[1] + g.shape[1] * g.cell_m
-            raise SimulationError(
-                f"the vehicle left the terrain field: a track's contact around ({e.err_x[0]:.2f}, {e.err_x[1]:.2f}) m "
-                f"is outside x in [{x0:g}, {x1:g}] m, y in [{y0:g}, {y1:g}] m; enlarge terrain.size_m "
-                "or move terrain.origin_m")
-        if code == ERR_COLLISION:
-            held = s.ch_cell[s.ch_cell >= 0]
-            new = s.new_list[:int(e.n_new)]
-            cells = np.unique(np.concatenate([held, new, [e.err_a, e.err_b]]).astype(np.int64))
-            i, j = np.divmod(cells, g.shape[1])
-            need = int(max(np.ptp(i), np.ptp(j))) + 1
-            raise SimulationError(
-                f"channel collision: cells {ij(e.err_a)} and {ij(e.err_b)} (i, j) are both active and both map to "
-                f"channel {int(e.err_ch)} with M = {s.M} (Cell[i, j] -> CHANNEL[i mod M, j mod M]); the active set "
-                f"spans {np.ptp(i) + 1} x {np.ptp(j) + 1} cells and needs M >= {need}. "
-                "Raise terrain.channels, terrain.max_speed_m_s or terrain.release_time_s")
-        if code == ERR_UNCOVERED:
-            raise SimulationError(
-                f"cell {ij(e.err_a)} came under a track without a channel ({int(e.err_b)} cells): "
-                "the footprint prediction missed it; reduce run.output_dt_s")
-        if code == ERR_NONFINITE:
-            raise SimulationError("the terrain engine's vehicle step returned a non-finite state "
-                                  "(raise engine vehicle_substeps)")
-        if code == ERR_NEWTON:
-            raise SimulationError(f"the implicit stage of cell {ij(e.err_a)} did not converge in "
-                                  f"{NEWTON_MAX_ITER} iterations")
-        raise SimulationError(f"terrain engine error {code}")
-
     # -- passes ---------------------------------------------------------------------------------------------
     def release_all(self) -> None:
         s = self.state
@@ -134,7 +88,7 @@ class TerrainEngine:
         # the cells under the vehicle at their static sinkage first (World.begin_pass)
         rc, e = self.kernel.assign(0.0)
         if rc:
-            self._raise(abs(rc), e)
+            raise engine_error(abs(rc), e, s)
         self.kernel.static()
         n = int(round(self.world.settings.settle_s / SETTLE_STEP_S))
         if n:
@@ -142,7 +96,7 @@ class TerrainEngine:
             self._call(0.0, T, np.zeros((n, 2)), np.array([0.0, -1.0, 0.0]), False)
         rc, e = self.kernel.assign(0.0)
         if rc:
-            self._raise(abs(rc), e)
+            raise engine_error(abs(rc), e, s)
         return s.wv[:NV].copy()
 
     def end_pass(self, dt_s: float = SETTLE_STEP_S, max_steps: int = 300) -> None:
@@ -158,7 +112,7 @@ class TerrainEngine:
             n = window_substeps(self.settings)[1]
             rc, settled, e = self.kernel.lift(s.ch_p.copy(), dt_s, LIFT_TIME_S, n, max_steps)
             if rc < 0:
-                self._raise(-rc, e)
+                raise engine_error(-rc, e, s)
             if not settled:
                 log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
                             s.n_act, max_steps * dt_s)
@@ -176,7 +130,7 @@ class TerrainEngine:
         self.timing["kernel_cpu_s"] += time.process_time() - c0
         self.timing["calls"] += 1
         if rc < 0:
-            self._raise(-rc, e)
+            raise engine_error(-rc, e, self.state)
         return rc == 1, T_out[:n_done], X[:n_done], Y[:n_done]
 
     def advance(self, t0: float, T: np.ndarray, U: np.ndarray, dist: np.ndarray, check_covered: bool = True):

@@ -79,6 +79,10 @@ def library(fns):
     lib.eng_lift.restype = ctypes.c_longlong
     lib.eng_static.argtypes = [P]
     lib.eng_static.restype = None
+    lib.eng_info_out.argtypes = [P]
+    lib.eng_info_out.restype = None
+    lib.eng_uncovered.argtypes = [P, ctypes.c_double, ctypes.c_double, ctypes.c_double]
+    lib.eng_uncovered.restype = ctypes.c_longlong
     return lib
 
 
@@ -116,6 +120,19 @@ class CKernel:
     def static(self) -> None:
         e = self.s.struct()
         self.lib.eng_static(ctypes.byref(e))
+
+    def info_out_all(self) -> None:
+        """INFO_OUT of every active channel at its state (the IDAS reference path's after_step)."""
+        e = self.s.struct()
+        self.lib.eng_info_out(ctypes.byref(e))
+        self.s.absorb(e)
+
+    def uncovered(self, X: float, Y: float, psi: float) -> tuple[int, EngineStruct]:
+        """The number of cells the tracks load at the pose that hold no channel (and the struct: err_a
+        the first)."""
+        e = self.s.struct()
+        n = self.lib.eng_uncovered(ctypes.byref(e), float(X), float(Y), float(psi))
+        return int(n), e
 
     def lift(self, p_end, h, T, n, max_steps):
         e = self.s.struct()

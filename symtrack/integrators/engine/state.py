@@ -15,7 +15,8 @@ from ...terrain.world import END_STRIP_CELLS, padding_m
 from ..settings import POWER_MODES, EngineSettings, window_substeps
 
 __all__ = ["ERR_COLLISION", "ERR_FIELD", "ERR_NEWTON", "ERR_NONFINITE", "ERR_UNCOVERED", "EngineState", "EngineStruct",
-           "NEWTON_ACCEPT_STEP", "NEWTON_MAX_ITER", "NV", "SDIRK_GAMMA", "array_address", "subsoil_tables"]
+           "NEWTON_ACCEPT_STEP", "NEWTON_MAX_ITER", "NV", "SDIRK_GAMMA", "array_address", "engine_error",
+           "subsoil_tables"]
 
 NV = 12
 ERR_FIELD, ERR_COLLISION, ERR_UNCOVERED, ERR_NONFINITE, ERR_NEWTON = 1, 2, 3, 4, 5
@@ -62,6 +63,47 @@ def array_address(a: np.ndarray) -> int:
         raise SimulationError("the engine's arrays must be C-contiguous")
     return a.__array_interface__["data"][0]
 
+
+
+def engine_error(code: int, e, state) -> SimulationError:
+    """The :class:`SimulationError` of grid_engine.c's error ``code`` (its struct ``e``: err_a, err_b,
+    err_ch, err_x, n_new) on ``state`` (an :class:`EngineState`): the field, the channel collision
+    (the two cells, the channel and the M the active set needs), a loaded cell without a channel, a
+    non-finite vehicle step, a cell stage that did not converge."""
+    s = state
+    g = s.grid
+
+    def ij(cell):
+        return tuple(int(v) for v in divmod(int(cell), g.shape[1]))
+    if code == ERR_FIELD:
+        x0, x1 = g.origin_m[0], g.origin_m[0] + g.shape[0] * g.cell_m
+        y0, y1 = g.origin_m[1], g.origin_m[1] + g.shape[1] * g.cell_m
+        return SimulationError(
+            f"the vehicle left the terrain field: a track's contact around ({e.err_x[0]:.2f}, {e.err_x[1]:.2f}) m "
+            f"is outside x in [{x0:g}, {x1:g}] m, y in [{y0:g}, {y1:g}] m; enlarge terrain.size_m "
+            "or move terrain.origin_m")
+    if code == ERR_COLLISION:
+        held = s.ch_cell[s.ch_cell >= 0]
+        new = s.new_list[:int(e.n_new)]
+        cells = np.unique(np.concatenate([held, new, [e.err_a, e.err_b]]).astype(np.int64))
+        i, j = np.divmod(cells, g.shape[1])
+        need = int(max(np.ptp(i), np.ptp(j))) + 1
+        return SimulationError(
+            f"channel collision: cells {ij(e.err_a)} and {ij(e.err_b)} (i, j) are both active and both map to "
+            f"channel {int(e.err_ch)} with M = {s.M} (Cell[i, j] -> CHANNEL[i mod M, j mod M]); the active set "
+            f"spans {np.ptp(i) + 1} x {np.ptp(j) + 1} cells and needs M >= {need}. "
+            "Raise terrain.channels, terrain.max_speed_m_s or terrain.release_time_s")
+    if code == ERR_UNCOVERED:
+        return SimulationError(
+            f"cell {ij(e.err_a)} came under a track without a channel ({int(e.err_b)} cells): "
+            "the footprint prediction missed it; reduce run.output_dt_s")
+    if code == ERR_NONFINITE:
+        return SimulationError("the terrain engine's vehicle step returned a non-finite state "
+                               "(raise engine vehicle_substeps)")
+    if code == ERR_NEWTON:
+        return SimulationError(f"the implicit stage of cell {ij(e.err_a)} did not converge in "
+                               f"{NEWTON_MAX_ITER} iterations")
+    return SimulationError(f"terrain engine error {code}")
 
 
 def subsoil_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
