@@ -80,7 +80,7 @@ class ChannelManager:
         s.wv[:6] = x[:6]  # the pose and the body velocities: the footprint at the start and the predicted end
         rc, e = self.kernel.assign(dt)
         if rc:
-            raise engine_error(rc, e, s)
+            raise engine_error(abs(rc), e, s)
         changed = s.ch_cell != w.channel_cell
         rel = np.nonzero(changed & (w.channel_cell >= 0))[0]  # released (and maybe taken by a new cell)
         if rel.size:
