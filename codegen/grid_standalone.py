@@ -49,7 +49,7 @@ def _time_grid(sc) -> tuple[np.ndarray, np.ndarray]:
 
 def render(scratch: Path) -> dict[str, bytes]:
     """The generated/ files of the grid standalone program, name -> bytes."""
-    from symtrack.integrators.grid_engine import (
+    from symtrack.integrators.engine import (
         POWER_MODES,
         SDIRK_GAMMA,
         SETTLE_STEP_S,

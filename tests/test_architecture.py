@@ -338,3 +338,61 @@ def test_the_positional_scan_catches_todays_forms(tmp_path, monkeypatch):
     assert {int(f.split(":")[1]) for f in found if "old.py" in f} == set(range(1, len(before) + 1)), "\n".join(found)
     assert [f.split(":")[1] for f in found if "old.c" in f] == ["1"]
     assert "hexdigest()[:12]" not in "".join(found)
+# The world manager's rules (footprint, release, sector assignment Cell[i, j] -> CHANNEL[i mod M, j mod M],
+# INFO_IN / INFO_OUT, the collision and coverage errors) have one home: symtrack/native/grid_engine.c
+# (the engine runs them in its steps, the IDAS reference path through ChannelManager). The Python copy
+# is the tests' oracle (tests/engine_oracle.py).
+WORLD_MANAGER_HOME = "symtrack/native/grid_engine.c"
+SECTOR_RULE = re.compile(r"%\s*\(?\s*(?:[A-Za-z_]\w*(?:\.|->))*M\b")  # i % M, i % self.M, j % E->M
+STORAGE_WRITE = re.compile(r"\.(?:z|zdot|zmax|pmax|phase|zoff|cycles)\[[^\]\n]*\]\s*[+\-]?=(?!=)")  # INFO_OUT
+RULE_FUNCTIONS = {"cells_under", "channel_of", "scan", "_scan", "mark_footprint", "check_cover", "info_out",
+                  "_info_out", "_check_collisions", "_uncovered"}
+STORAGE_OWNER = "symtrack/terrain/storage.py"  # the storage's own files and upgrades
+
+
+def _world_manager_copies(root: Path) -> list[str]:
+    found = []
+    for f in sorted((root / "symtrack").rglob("*")):
+        rel = f.relative_to(root).as_posix()
+        if f.suffix not in (".py", ".c", ".h") or rel == WORLD_MANAGER_HOME:
+            continue
+        text = f.read_text()
+        for n, line in enumerate(text.splitlines(), 1):
+            code = line.split("#")[0] if f.suffix == ".py" else line.split("//")[0]
+            if SECTOR_RULE.search(code):
+                found.append(f"{rel}:{n}: the sector rule ({line.strip()})")
+            if f.suffix == ".py" and rel != STORAGE_OWNER and STORAGE_WRITE.search(code):
+                found.append(f"{rel}:{n}: a write into the cell storage (INFO_OUT) ({line.strip()})")
+        if f.suffix == ".py":
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name in RULE_FUNCTIONS:
+                    found.append(f"{rel}:{node.lineno}: a world-manager rule function {node.name}()")
+        elif re.search(r"\b(?:scan|channel_of|mark_footprint|info_out)\s*\([^;]*\)\s*\{", text):
+            found.append(f"{rel}: a world-manager rule function in C")
+    return found
+
+
+def test_one_home_for_the_world_manager_rules():
+    assert (ROOT / WORLD_MANAGER_HOME).exists()
+    assert not _world_manager_copies(ROOT), _world_manager_copies(ROOT)
+
+
+def test_the_one_home_check_sees_a_second_copy(tmp_path):
+    """The check above finds the World's old copy (its sector rule, footprint scan and INFO_OUT)."""
+    pkg = tmp_path / "symtrack" / "terrain"
+    pkg.mkdir(parents=True)
+    (tmp_path / "symtrack" / "native").mkdir()
+    (tmp_path / WORLD_MANAGER_HOME).write_text("static long long channel_of(eng_t *E, long long c) { return 0; }\n")
+    (pkg / "ok.py").write_text("def figures(world):\n    return world.M % 2 == 0  # modulus parity, not the rule\n")
+    assert _world_manager_copies(tmp_path) == []
+    (pkg / "world.py").write_text(
+        "def channel_of(self, cells):\n    i, j = divmod(cells, self.ny)\n"
+        "    return (i % self.M) * self.M + (j % self.M)\n"
+        "def after_step(self, st, cells, zc):\n    st.z[cells] = zc\n")
+    found = _world_manager_copies(tmp_path)
+    assert any("sector rule" in f for f in found) and any("channel_of()" in f for f in found)
+    assert any("cell storage" in f for f in found)
+    (pkg / "world.py").unlink()
+    other = tmp_path / "symtrack" / "native" / "other.c"
+    other.write_text("static long long scan(eng_t *E) { return E->n % E->M; }\n")
+    assert len(_world_manager_copies(tmp_path)) == 2

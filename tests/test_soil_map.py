@@ -7,10 +7,11 @@ import math
 
 import numpy as np
 import pytest
+from engine_oracle import PyKernel
 
 import symtrack
 from symtrack.foundations.errors import ScenarioError
-from symtrack.integrators.grid_engine import TerrainEngine
+from symtrack.integrators.engine import TerrainEngine
 from symtrack.model.options import ModelOptions
 from symtrack.model.vehicle import traction_shape
 from symtrack.presets import soil_preset
@@ -157,9 +158,8 @@ def test_the_wet_headland_example_puts_the_risk_where_the_soil_is_weak(tmp_path)
 
 
 def test_compiled_equals_interpreted_on_a_field_of_two_soils():
-    """The interpreted kernel (PyKernel) against the C one on the split field: the same algorithm,
-    soil by soil (measured: identical to the last bit)."""
-    from symtrack.integrators.grid_engine import EngineSettings
+    """The interpreted kernel (tests/engine_oracle.py's PyKernel) against the C one on the split field:
+    the same algorithm, soil by soil (measured: identical to the last bit)."""
     from symtrack.native.cache import find_compiler
     from symtrack.simulation import loop
     from symtrack.simulation.plants import EnginePlant
@@ -171,7 +171,7 @@ def test_compiled_equals_interpreted_on_a_field_of_two_soils():
     out = []
     for compiled in (True, False):
         world = open_world(sc.terrain, sc.params, sc.model, sc.run.output_dt_s)
-        res = loop.run(sc, EnginePlant(world, TerrainEngine(world, EngineSettings(compiled=compiled))))
+        res = loop.run(sc, EnginePlant(world, TerrainEngine(world, kernel=None if compiled else PyKernel)))
         out.append((res.X, res.Y, world.storage.z.copy()))
     assert np.max(np.abs(out[0][0] - out[1][0]) / np.maximum(1.0, np.abs(out[1][0]))) < 1e-12
     assert np.max(np.abs(out[0][1] - out[1][1]) / np.maximum(1.0, np.abs(out[1][1]))) < 1e-9

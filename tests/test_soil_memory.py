@@ -114,7 +114,7 @@ def test_light_cycles_add_nothing_and_partial_cycles_add_their_share():
 def test_set_down_writes_no_overshoot_into_the_history():
     """After the settle of a pass on a virgin field, the interior cells' z_max is their static
     sinkage (within 1 %) -- a sudden load overshot it by about 10 %."""
-    from symtrack.integrators.grid_engine import TerrainEngine
+    from symtrack.integrators.engine import TerrainEngine
     from symtrack.terrain.world import open_world
 
     sc = load_scenario("multipass")
@@ -198,10 +198,10 @@ def test_a_schema_1_file_loads_with_cycles_from_its_phase(tmp_path):
 
 
 def test_the_engines_lift_off_equals_cvodes_over_the_pool():
-    """TerrainEngine.end_pass (the cells' SDIRK step in C) against World.end_pass (CVODES over the
+    """TerrainEngine.end_pass (the cells' SDIRK step in C) against ChannelManager.end_pass (CVODES over the
     whole pool at tight tolerances) from the same pass end: the same rut, to 0.1 % of its depth
     (measured 0.02 %)."""
-    from symtrack.integrators.grid_engine import TerrainEngine
+    from symtrack.integrators.engine import ChannelManager, TerrainEngine
     from symtrack.integrators.unload import unloader
     from symtrack.simulation import loop
     from symtrack.simulation.plants import EnginePlant
@@ -217,7 +217,7 @@ def test_the_engines_lift_off_equals_cvodes_over_the_pool():
         if how == "engine":
             plant.engine.end_pass()
         else:
-            world.end_pass(plant.engine.sync_world(), unloader(world))
+            ChannelManager(world).end_pass(plant.engine.sync_world(), unloader(world))
         assert not (world.channel_cell >= 0).any()
         ruts.append(world.storage.z.copy())
         zmax = world.storage.zmax.copy()

@@ -1,5 +1,6 @@
-"""The terrain engine (run.integrator = "grid_fast", symtrack/integrators/grid_engine.py): against IDAS on a
-small field, one cell against a tight reference under step refinement, compiled == interpreted,
+"""The terrain engine (run.integrator = "grid_fast", symtrack/integrators/engine/): against IDAS on a
+small field, one cell against a tight reference under step refinement, compiled == interpreted
+(the oracle of tests/engine_oracle.py),
 the pool against every cell holding its own channel and against brute force, bit-exact
 persistence, and the collision error."""
 
@@ -11,11 +12,13 @@ import types
 import numpy as np
 import pytest
 from conftest import two_passes_against_a_continued_pass
+from engine_oracle import PyKernel, ringing
 from scipy.integrate import solve_ivp
 
 from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.foundations.errors import ScenarioError, SimulationError
-from symtrack.integrators import grid_engine as engine
+from symtrack.integrators import engine
+from symtrack.integrators.settings import STEADY_METHODS
 from symtrack.model.soil_law import BekkerWong
 from symtrack.native import cache as compiled
 from symtrack.native.grid_engine_model import build_engine_functions
@@ -51,10 +54,10 @@ def _scenario(integrator="grid_fast", **run):
     return scenario_from_dict(d)
 
 
-def _engine_run(sc, settings=None, world=None):
+def _engine_run(sc, settings=None, world=None, kernel=None):
     plant = make_plant(sc)
-    if settings is not None:
-        plant = EnginePlant(plant.world, engine.TerrainEngine(plant.world, settings))
+    if settings is not None or kernel is not None:
+        plant = EnginePlant(plant.world, engine.TerrainEngine(plant.world, settings, kernel=kernel))
     res = loop.run(sc, plant)
     return plant.world, res
 
@@ -95,7 +98,7 @@ def _one_cell():
     def law(z, zm, pm):
         return tuple(float(v) for v in f.cell_law[0](z, [zm, pm, 0, 0, 0]))
     st = types.SimpleNamespace(areal_mass=m, damping=c, stats={"n_newton": 0, "n_cell_stages": 0})
-    return engine.PyKernel(f, st), law, m, c
+    return PyKernel(f, st), law, m, c
 
 
 def _radau_step(law, load, m, c, t0, h, y, zm, pm):
@@ -174,7 +177,7 @@ def _one_cell_work(ring_tolerance, speed_m_s=6.0, h=0.01, t_end=0.3):
     for k in range(int(round(t_end / h))):
         t0 = k * h
         plA, plB = load(t0), load(t0 + h)
-        transient = p < es.entry_fraction * max(plA, plB) or engine.ringing(
+        transient = p < es.entry_fraction * max(plA, plB) or ringing(
             es.ring_tolerance, z, v, p, dp, plA, plB, h, m, c)
         n = es.entry_substeps if transient else 1
         windows += transient
@@ -249,13 +252,13 @@ def test_fast_law_equals_the_model_law(n_exp):
     assert not missing, missing
 
 
-@pytest.mark.parametrize("method", engine.STEADY_METHODS)
+@pytest.mark.parametrize("method", STEADY_METHODS)
 def test_compiled_equals_interpreted(method):
     if compiled.find_compiler() is None:
         pytest.skip("no C compiler")
     sc = _scenario(duration_s=0.3)
     wc, rc = _engine_run(sc, engine.EngineSettings(steady_method=method))
-    wi, ri = _engine_run(sc, engine.EngineSettings(compiled=False, steady_method=method))
+    wi, ri = _engine_run(sc, engine.EngineSettings(steady_method=method), kernel=PyKernel)
     assert rc.stats["engine_compiled"] and not ri.stats["engine_compiled"]
     assert rc.stats["n_cell_stages"] == ri.stats["n_cell_stages"]  # the same algorithm, step by step
     scale = np.maximum(1.0, np.abs(ri.X))

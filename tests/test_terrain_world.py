@@ -1,18 +1,22 @@
 """The world manager's invariants (property-based), the collision error, INFO_OUT, release, and
-terrain files (lossless save/load)."""
+terrain files (lossless save/load). The rules run in C (grid_engine.c through ChannelManager, on a
+World's channel tables); the footprint and the sector rule they are checked against are the oracle's
+(tests/engine_oracle.py: numpy)."""
 
 import numpy as np
 import pytest
+from engine_oracle import cells_under, channel_of
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from symtrack.foundations.errors import ScenarioError, SimulationError
+from symtrack.integrators.engine import ChannelManager
 from symtrack.model.options import ModelOptions
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.terrain import storage as persist
 from symtrack.terrain.settings import TerrainSettings, settings_from_dict
 from symtrack.terrain.storage import Grid, Terrain
-from symtrack.terrain.world import World, derive_modulus
+from symtrack.terrain.world import World, derive_modulus, padding_m
 
 PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
 FIELD = TerrainSettings(size_m=(6.0, 4.0), cell_m=0.25, release_rate_m_s=1e-5)
@@ -21,6 +25,11 @@ FIELD = TerrainSettings(size_m=(6.0, 4.0), cell_m=0.25, release_rate_m_s=1e-5)
 @pytest.fixture(scope="module")
 def world():
     return World(FIELD, PARAMS, ModelOptions(), 0.01)
+
+
+@pytest.fixture(scope="module")
+def manager(world):
+    return ChannelManager(world)
 
 
 def _state(world, X, Y, psi):
@@ -37,12 +46,13 @@ moves = st.lists(st.tuples(st.floats(-0.08, 0.08), st.floats(-0.08, 0.08), st.fl
 @settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(start=st.tuples(st.floats(-0.8, 0.8), st.floats(-0.2, 0.2), st.floats(-np.pi, np.pi)), steps=moves)
 @example(start=(0.0, 0.0, 1.0), steps=[(0.0, 0.0625, 0.0, 0.0, 0.0)] * 25)  # a walk off the field (a CI run)
-def test_assignment_invariants(world, start, steps):
+def test_assignment_invariants(world, manager, start, steps):
     world.release_all()
     world.storage.__init__(world.grid)
     X, Y, psi = start
     x = _state(world, X, Y, psi)
     rng = np.random.default_rng(0)
+    pad = padding_m(world.grid.cell_m)
     for dX, dY, dpsi, zlevel, rate in steps:
         before = set(world.active_cells().tolist())
         p_prev = {int(c): world.p_soil[ch] for ch, c in enumerate(world.channel_cell) if c >= 0}
@@ -50,27 +60,27 @@ def test_assignment_invariants(world, start, steps):
                      for ch, c in enumerate(world.channel_cell) if c >= 0}
         x[world.layout.pose_index] = X, Y, psi
         try:
-            world.cells_under(X, Y, psi, world._pad)  # before_step's field check, on its own
+            cells_under(world, X, Y, psi, pad)  # before_step's field check, on its own
         except SimulationError:
             break  # the random walk took a track off the 6 m x 4 m field: checked up to here
-        x, _ = world.before_step(x, 0.0)
+        x, _ = manager.before_step(x, 0.0)
         held = world.channel_cell[world.channel_cell >= 0]
         # every active cell has exactly one channel, no two share one, and it is the sector rule's
         assert len(set(held.tolist())) == held.size
         ch = np.nonzero(world.channel_cell >= 0)[0]
-        assert np.array_equal(world.channel_of(world.channel_cell[ch]), ch)
+        assert np.array_equal(channel_of(world, world.channel_cell[ch]), ch)
         # every cell under the tracks is active
-        under = world.cells_under(X, Y, psi, 0.5 * world.grid.cell_m, check_field=False)
+        under = cells_under(world, X, Y, psi, 0.5 * world.grid.cell_m, check_field=False)
         assert set(under.tolist()) <= set(held.tolist())
         # released cells had unloaded: zero reaction pressure, negligible rate, not under a track
-        foot = set(world.cells_under(X, Y, psi, world._pad).tolist())
+        foot = set(cells_under(world, X, Y, psi, pad).tolist())
         for c in before - set(held.tolist()):
             assert p_prev[c] <= 0.0 and abs(rate_prev[c]) <= FIELD.release_rate_m_s and c not in foot
         # the step: synthetic channel states, then INFO_OUT
         zc = zlevel * rng.random(ch.size)
         x[world.layout.cell_index(ch, "sinkage")] = zc
         x[world.layout.cell_index(ch, "rate")] = rate * rng.choice([-1.0, 1.0], ch.size)
-        world.after_step(x)
+        manager.after_step(x)
         cells = world.channel_cell[ch]
         assert np.array_equal(world.storage.z[cells], zc)  # INFO_OUT reaches the storage
         assert np.array_equal(world.storage.zdot[cells], x[world.layout.cell_index(ch, "rate")])
@@ -80,30 +90,30 @@ def test_assignment_invariants(world, start, steps):
         X, Y, psi = X + dX, Y + dY, psi + dpsi
 
 
-def test_a_loaded_cell_is_not_released_until_it_has_unloaded(world):
+def test_a_loaded_cell_is_not_released_until_it_has_unloaded(world, manager):
     world.release_all()
     world.storage.__init__(world.grid)
     x = _state(world, 0.0, 0.0, 0.0)
-    x, _ = world.before_step(x, 0.0)
+    x, _ = manager.before_step(x, 0.0)
     ch = np.nonzero(world.channel_cell >= 0)[0]
     x[world.layout.cell_index(ch, "sinkage")] = 1e-3  # loaded: on the Bekker curve, p > 0
-    world.after_step(x)
+    manager.after_step(x)
     cells = world.channel_cell[ch].copy()
     x[0] = 1.7  # the vehicle moves on, far enough to leave the cells behind
-    x, _ = world.before_step(x, 0.0)
+    x, _ = manager.before_step(x, 0.0)
     assert set(cells.tolist()) <= set(world.active_cells().tolist())  # still loaded: kept
     z_max = world.storage.zmax[cells].copy()
     # unloaded along the line to p = 0 but still moving: kept
     x[world.layout.cell_index(ch, "sinkage")] = z_max - 1e-3
     x[world.layout.cell_index(ch, "rate")] = 1e-3
-    world.after_step(x)
-    x, _ = world.before_step(x, 0.0)
+    manager.after_step(x)
+    x, _ = manager.before_step(x, 0.0)
     assert set(cells.tolist()) <= set(world.active_cells().tolist())
     # at rest: released (those not under the tracks at x = 1.7) and the stored state is the last INFO_OUT
     x[world.layout.cell_index(ch, "rate")] = 0.0
-    world.after_step(x)
-    x, _ = world.before_step(x, 0.0)
-    foot = set(world.cells_under(1.7, 0.0, 0.0, world._pad).tolist())
+    manager.after_step(x)
+    x, _ = manager.before_step(x, 0.0)
+    foot = set(cells_under(world, 1.7, 0.0, 0.0, padding_m(world.grid.cell_m)).tolist())
     gone = [c for c in cells.tolist() if c not in foot]
     assert gone and not set(gone) & set(world.active_cells().tolist())
     assert np.all(world.storage.z[gone] == (z_max - 1e-3)[[cells.tolist().index(c) for c in gone]])
@@ -113,22 +123,23 @@ def test_too_few_channels_stop_the_run_with_the_cells_and_the_m_needed():
     w = World(TerrainSettings(size_m=(6.0, 4.0), cell_m=0.25, channels=6), PARAMS, ModelOptions(), 0.01)
     pattern = r"channel collision: cells \(\d+, \d+\) and \(\d+, \d+\).*needs M >= \d+"
     with pytest.raises(SimulationError, match=pattern):
-        w.before_step(_state(w, 0.0, 0.0, 0.3), 0.0)
+        ChannelManager(w).before_step(_state(w, 0.0, 0.0, 0.3), 0.0)
 
 
 def test_auto_modulus_covers_the_footprint_in_any_heading():
     M = derive_modulus(PARAMS, FIELD, 0.01)
     w = World(FIELD, PARAMS, ModelOptions(), 0.01)
+    m = ChannelManager(w)
     assert w.M == M
     for psi in np.linspace(0, np.pi, 13):
         w.release_all()
-        w.before_step(_state(w, 0.0, 0.0, psi), 0.01)  # raises on a collision
+        m.before_step(_state(w, 0.0, 0.0, psi), 0.01)  # raises on a collision
 
 
-def test_leaving_the_field_is_an_error(world):
+def test_leaving_the_field_is_an_error(world, manager):
     world.release_all()
     with pytest.raises(SimulationError, match="left the terrain field"):
-        world.before_step(_state(world, 2.5, 0.0, 0.0), 0.0)
+        manager.before_step(_state(world, 2.5, 0.0, 0.0), 0.0)
 
 
 def test_terrain_settings_validation():

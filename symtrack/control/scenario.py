@@ -51,7 +51,7 @@ Schema (unknown keys are errors; ranges in brackets)::
                                       # plus 4 m; passes must be 1; the plant runs the terrain
                                       # engine unless run.integrator is idas or rosenbrock.
     [engine]                          # optional: the terrain engine's scheme (grid plant, grid_fast;
-    vehicle_substeps = 4              # symtrack.integrators.grid_engine.EngineSettings; the shear
+    vehicle_substeps = 4              # symtrack.integrators.settings.EngineSettings; the shear
                                       # law needs 0.5 ms vehicle steps: with output_dt_s = 0.002,
                                       # vehicle_substeps = 4; docs/turning.md)
 """
@@ -65,7 +65,7 @@ from dataclasses import dataclass
 from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_keys, integer, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
-from ..integrators.grid_engine import EngineSettings
+from ..integrators.settings import EngineSettings
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets import soil_preset, vehicle_preset

@@ -24,11 +24,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..foundations.errors import ScenarioError
+from .engine import TerrainEngine
 from .fixed_step import FixedStepper
-from .grid_engine import EngineSettings, TerrainEngine
 from .grid_idas import ChannelStepper
 from .grid_rosenbrock import MAX_STEP_S, GridRosenbrockStepper
-from .settings import IntegratorSettings
+from .settings import EngineSettings, IntegratorSettings
 from .sundials import SundialsStepper
 
 __all__ = ["IntegratorSpec", "get", "names", "register", "REGISTRY", "TERRAINS"]

@@ -1,4 +1,7 @@
-"""The settings every integrator takes, and the stepper interface they share."""
+"""The settings every integrator takes (and the terrain engine's scheme), and the stepper interface they share.
+
+Low in the package: the scenario reads :class:`EngineSettings` from here without importing the engine's
+kernel (:mod:`symtrack.integrators.engine`)."""
 
 from __future__ import annotations
 
@@ -8,7 +11,10 @@ from typing import Protocol
 
 import numpy as np
 
-__all__ = ["IntegratorSettings", "Stepper", "substeps"]
+from ..foundations.errors import ScenarioError
+
+__all__ = ["EngineSettings", "IntegratorSettings", "POWER_MODES", "STEADY_METHODS", "Stepper", "substeps",
+           "window_substeps"]
 
 
 @dataclass(frozen=True)
@@ -24,7 +30,7 @@ class IntegratorSettings:
     max_num_steps: int = 200000
     compiled: bool = False
     fixed_step_s: float = 0.01
-    engine: object = None  # the terrain engine's settings (grid_engine.EngineSettings; None: its defaults)
+    engine: object = None  # the terrain engine's settings (EngineSettings; None: its defaults)
 
 
 class Stepper(Protocol):
@@ -42,3 +48,64 @@ class Stepper(Protocol):
 def substeps(length_s: float, fixed_step_s: float) -> int:
     """Number of equal steps of at most fixed_step_s that cover length_s (the C driver mirrors it)."""
     return max(1, math.ceil(length_s / fixed_step_s - 1e-9))
+
+
+POWER_MODES = ("step_mean", "instantaneous")
+STEADY_METHODS = ("sdirk2", "euler")
+
+
+@dataclass(frozen=True)
+class EngineSettings:
+    """How the engine integrates (docs/terrain.md, "The terrain engine": the measured choices).
+
+    vehicle_substeps: steps of the vehicle's 8-stage Rosenbrock method per macro step, [1, 64].
+    cell_substeps: SDIRK substeps of every active cell per macro step, [1, 64].
+    entry_substeps: substeps of a cell in its entry window (soil reaction below entry_fraction
+        of its load at the step start, or ringing), [1, 256]; not below
+        cell_substeps.
+    exit_substeps: substeps of a cell in its exit window (leaving a track's contact, its load
+        falling, on its unloading line), [1, 256]; not below cell_substeps.
+    steady_method: the method of the cells outside the windows: "sdirk2" (Alexander's two-stage
+        SDIRK, the windows' method) or "euler" (implicit Euler: one stage a substep).
+    entry_fraction: [0, 1].
+    ring_tolerance: a cell whose transient about its quasi-static path exceeds this fraction of
+        its sinkage at the step start takes an entry window (grid_engine.c ``ringing``), [0, 1]; 0: never.
+
+    The defaults of the windows (entry 8, exit 8, ring_tolerance 5e-3, steady_method "euler") were
+    calibrated against IDAS on validation_grid: every figure of its summary within 0.5 % at the
+    fewest cell stages measured (docs/terrain.md, "The cells' ringing", the variants' table).
+    power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
+        absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
+        max(dz/dt, 0) at the step end, the channel model's expression).
+    """
+
+    vehicle_substeps: int = 1
+    cell_substeps: int = 1
+    entry_substeps: int = 8
+    exit_substeps: int = 8
+    steady_method: str = "euler"
+    entry_fraction: float = 0.5
+    ring_tolerance: float = 5e-3
+    power: str = "step_mean"
+
+    def __post_init__(self):
+        for name, hi in (("vehicle_substeps", 64), ("cell_substeps", 64), ("entry_substeps", 256),
+                         ("exit_substeps", 256)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= hi:
+                raise ScenarioError(f"engine.{name} = {v!r} must be an integer in [1, {hi}]")
+        if not (isinstance(self.entry_fraction, (int, float)) and 0.0 <= self.entry_fraction <= 1.0):
+            raise ScenarioError(f"engine.entry_fraction = {self.entry_fraction!r} must be a number in [0, 1]")
+        if not (isinstance(self.ring_tolerance, (int, float)) and not isinstance(self.ring_tolerance, bool)
+                and 0.0 <= self.ring_tolerance <= 1.0):
+            raise ScenarioError(f"engine.ring_tolerance = {self.ring_tolerance!r} must be a number in [0, 1]")
+        if self.steady_method not in STEADY_METHODS:
+            raise ScenarioError(f"engine.steady_method = {self.steady_method!r} is not one of "
+                                f"{', '.join(STEADY_METHODS)}")
+        if self.power not in POWER_MODES:
+            raise ScenarioError(f"engine.power = {self.power!r} is not one of {', '.join(POWER_MODES)}")
+
+
+def window_substeps(settings: EngineSettings) -> tuple[int, int]:
+    """The substeps of the entry and of the exit windows (neither below cell_substeps)."""
+    return (max(settings.entry_substeps, settings.cell_substeps), max(settings.exit_substeps, settings.cell_substeps))

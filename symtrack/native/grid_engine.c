@@ -1,11 +1,15 @@
-/* The terrain engine's hot path (symtrack/terrain/engine.py, docs/terrain.md "The terrain engine").
+/* The terrain engine's hot path (symtrack/integrators/engine/, docs/terrain.md "The terrain engine").
  *
  * Per macro step: the footprint, release and sector assignment of the world manager
  * (symtrack/terrain/world.py, same rules and the same floating-point expressions), the vehicle's
  * step (generated from CasADi: eng_vehicle_step), each active cell's step (two-stage SDIRK with a
  * safeguarded scalar Newton per stage on the generated law eng_cell_law), INFO_OUT (history of
  * the active channels only), the channel sums, the outputs (eng_outputs) and the coverage check.
- * engine.py mirrors every line of it in Python (the interpreted path, tested against this file).
+ * This file is the one home of the world manager's rules (footprint, release, sector assignment,
+ * INFO_IN, INFO_OUT, the collision and coverage errors): the engine runs them inside eng_run, the
+ * IDAS reference path (symtrack/integrators/engine/manager.py, ChannelManager) through eng_assign,
+ * eng_info_out and eng_uncovered on the World's channel tables. tests/engine_oracle.py mirrors every
+ * line of it in Python (the test oracle, checked against this file).
  *
  * Compiled with the CasADi-generated C of the eng_* Functions included (engine_gen.inc).
  */
@@ -471,6 +475,35 @@ static void check_cover(eng_t *E, long long cell, long long ch, void *ctx) {
   }
 }
 
+/* The coverage check at the pose (X, Y, psi): every cell whose centre lies in a track's contact
+ * rectangle padded by half a cell (every cell the tracks load) holds a channel. Returns the number
+ * that do not (0: covered); then ERR_UNCOVERED with err_a the first, err_b their number. Called by
+ * eng_run at each step end and by the IDAS reference path (ChannelManager.check_covered). */
+EXPORT long long eng_uncovered(eng_t *E, double X, double Y, double psi) {
+  long long missing[2] = {0, -1};
+  scan(E, X, Y, psi, 0.5 * E->dx, 0, check_cover, missing);
+  if (missing[0]) {
+    E->err_code = ERR_UNCOVERED;
+    E->err_a = missing[1];
+    E->err_b = missing[0];
+  }
+  return missing[0];
+}
+
+/* INFO_OUT of every active channel after a step of the IDAS reference path
+ * (ChannelManager.after_step): the channels' z and dz/dt as the DAE's integrator left them, ch_p
+ * the reaction of the integrated model's law at that state on the history the step was integrated
+ * with (given by the caller). The engine's own steps call info_out with their cell step's last stage. */
+EXPORT void eng_info_out(eng_t *E) {
+  WORK = E->work;
+  for (long long q = 0; q < E->n_act; ++q) {
+    long long ch = E->act[q];
+    double hist[5];
+    channel_hist(E, ch, hist);
+    info_out(E, ch, hist);
+  }
+}
+
 /* The channel sums (the vehicle's view of the terrain) into pv's last NS: the compaction power of
  * each track over the last step (energy-consistent), the end-strip sinkages at the current state. */
 static void sums(eng_t *E) {
@@ -694,16 +727,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     *n_done = k + 1;
     long long c4 = now_ns();
     E->ns_outputs += c4 - c3;
-    if (check_covered) {
-      long long missing[2] = {0, -1};
-      scan(E, w1[0], w1[1], w1[2], 0.5 * E->dx, 0, check_cover, missing);
-      if (missing[0]) {
-        E->err_code = ERR_UNCOVERED;
-        E->err_a = missing[1];
-        E->err_b = missing[0];
-        return -ERR_UNCOVERED;
-      }
-    }
+    if (check_covered && eng_uncovered(E, w1[0], w1[1], w1[2])) return -ERR_UNCOVERED;
     E->ns_manager += now_ns() - c4;
     if (done) return 1;
   }

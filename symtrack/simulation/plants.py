@@ -40,6 +40,7 @@ import numpy as np
 from ..foundations.errors import SimulationError
 from ..foundations.progress import timed_step
 from ..integrators import registry
+from ..integrators.engine import ChannelManager
 from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
 from ..model import SystemModel
@@ -228,11 +229,13 @@ class BatchPlant:
 
 class GridPlant:
     """The vehicle on the persistent grid terrain: a :class:`~symtrack.terrain.world.World` and
-    its integrator, one macro step per interval (``world.before_step`` in :meth:`synchronize`,
-    ``world.after_step`` and ``world.check_covered`` in :meth:`commit`). ``state_names`` are the
-    12 vehicle states: the channel slots stay inside (the cells live in the world's storage).
-    :meth:`start` sets the vehicle down (the cells under it settle, :meth:`World.begin_pass`);
-    :meth:`finish` lifts it off (:meth:`World.end_pass`), so the terrain holds the rebound."""
+    its integrator, one macro step per interval; the world manager's rules are grid_engine.c's, run on
+    the World's channel tables by a :class:`~symtrack.integrators.engine.ChannelManager`
+    (``before_step`` in :meth:`synchronize`, ``after_step`` and ``check_covered`` in :meth:`commit`).
+    ``state_names`` are the 12 vehicle states: the channel slots stay inside (the cells live in the
+    world's storage). :meth:`start` sets the vehicle down (the cells under it settle,
+    ``ChannelManager.begin_pass``); :meth:`finish` lifts it off (``ChannelManager.end_pass``), so the
+    terrain holds the rebound."""
 
     kind = "grid"
     max_intervals = short_intervals = 1
@@ -242,6 +245,7 @@ class GridPlant:
         often (``snapshots``: (t_s, pose, cells, z_m) per snapshot, reset at every start), for an
         animation of the pass; None records nothing."""
         self.world, self.stepper = world, stepper
+        self.manager = ChannelManager(world)
         self.record_every_s = record_every_s
         self.snapshots: list = []
         self._t = self._t_snap = 0.0
@@ -261,7 +265,7 @@ class GridPlant:
         return np.array(self.model.outputs(x, u, p)).ravel()
 
     def start(self, x_m, y_m, yaw_rad, u0, state=None):
-        x = self.world.begin_pass(self.stepper, float(x_m), float(y_m), float(yaw_rad))
+        x = self.manager.begin_pass(self.stepper, float(x_m), float(y_m), float(yaw_rad))
         if state is not None:
             xv = np.asarray(state, dtype=float)
             if xv.shape != (len(self.state_names),):
@@ -292,7 +296,7 @@ class GridPlant:
             raise SimulationError(f"GridPlant advances one interval at a time, got {len(intervals)}")
         (_, self.h, u), = intervals
         self.u = np.asarray(u, dtype=float)
-        self.x_pre, self.p = self.world.before_step(self._x, self.h, self.stepper)
+        self.x_pre, self.p = self.manager.before_step(self._x, self.h, self.stepper)
 
     def advance(self):
         self.x_new = self.stepper.step(self.x_pre, self.u, self.p, self.h)
@@ -306,8 +310,8 @@ class GridPlant:
 
     def commit(self, k):
         x = self._x = self.x_new
-        self.world.after_step(x)
-        self.world.check_covered(x)
+        self.manager.after_step(x)
+        self.manager.check_covered(x)
         self._t += self.h_done
         self._record(x)
         return self._outputs(x, self.u, self.p)[None, :]
@@ -317,7 +321,7 @@ class GridPlant:
             return
         if self._unloader is None:
             self._unloader = unloader(self.world)
-        self.world.end_pass(self._x, self._unloader)
+        self.manager.end_pass(self._x, self._unloader)
         self.finished = True
 
     def figures(self):
@@ -329,7 +333,7 @@ class GridPlant:
 
 class EnginePlant:
     """The vehicle on the grid terrain through the compiled terrain engine
-    (:class:`~symtrack.integrators.grid_engine.TerrainEngine`, ``run.integrator = "grid_fast"``):
+    (:class:`~symtrack.integrators.engine.TerrainEngine`, ``run.integrator = "grid_fast"``):
     the world manager's per-step work, the vehicle and the cells in C, up to ``max_intervals``
     macro steps per call. It applies the stop-at-distance rule inside its calls
     (``applies_stop_rule``: :meth:`set_stop_rule`; after :meth:`advance`, ``end_times`` holds the
@@ -355,10 +359,6 @@ class EnginePlant:
     applies_stop_rule = True
     CALL_STEPS = 100  # macro steps per call
     RECORD_CALL_STEPS = 25  # ... when recording snapshots
-    # the engine state's scalars besides its arrays (symtrack.integrators.grid_engine.EngineState)
-    _STATE_SCALARS = ("n_act", "peak_active", "stamp")
-    _STATE_SCRATCH = ("work", "agrid", "plbuf", "frbuf", "new_list", "geo")
-    _STORAGE_ARRAYS = ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles", "sigma_max")
 
     def __init__(self, world: World, engine, record_every_s: float | None = None, checkpoints: bool = False):
         self.world, self.engine = world, engine
@@ -388,17 +388,15 @@ class EnginePlant:
     def _record(self, t):
         if self.record_every_s is not None:
             cells = self.world.storage  # the engine writes the active cells' state into the storage
-            ch = self.engine.state.ch_cell
-            act = ch[ch >= 0]
-            self.snapshots.append((t, self.engine.state.wv[self._layout.pose_index], act.copy(), cells.z[act].copy()))
+            act = self.engine.active_cells()
+            self.snapshots.append((t, self.engine.vehicle_state()[self._layout.pose_index], act, cells.z[act].copy()))
 
     def start(self, x_m, y_m, yaw_rad, u0, state=None):
         u0 = np.asarray(u0, dtype=float)
         x = self.engine.begin_pass(float(x_m), float(y_m), float(yaw_rad))
-        for key in self.engine.state.stats:  # the statistics of the time loop (the settling excluded)
-            self.engine.state.stats[key] = 0
+        self.engine.reset_stats()  # the statistics of the time loop (the settling excluded)
         if state is not None:
-            x = self._give_state(state, u0)
+            x = self.engine.set_vehicle_state(state, u0)
         self.dist[0] = 0.0
         self.finished = False
         self.snapshots = []
@@ -406,48 +404,15 @@ class EnginePlant:
         self._record(0.0)
         return x, self.engine.outputs_now(u0)
 
-    def _give_state(self, state, u0) -> np.ndarray:
-        """The vehicle, set down and settled at rest, given ``state`` (class doc)."""
-        xv = np.array(state, dtype=float)
-        s, fns = self.engine.state, self.engine.fns
-        vs, pose = self._layout.block("vehicle"), self._layout.pose_index
-        if xv.shape != (len(self.state_names),):
-            raise SimulationError(f"EnginePlant.start: expected the {len(self.state_names)} vehicle states, got shape "
-                                  f"{xv.shape}")
-        if not np.all(np.isfinite(xv)):
-            raise SimulationError("EnginePlant.start: the state has non-finite values")
-        if np.max(np.abs(xv[pose] - s.wv[pose])) > 1e-9:
-            raise SimulationError(f"EnginePlant.start: the state's pose {tuple(xv[pose])} differs from the pose the "
-                                  f"vehicle was set down at {tuple(s.wv[pose])}")
-        s.wv[vs] = xv
-        act = s.active_channels()
-        for _ in range(2):  # accelerations <-> pressure lines <-> channel sums: a fixed point, 2 passes
-            w1, a1 = fns.vehicle_step(s.wv, u0, s.pv, 0.0)  # h = 0: the states stay, the algebraic ones settle
-            s.wv[vs.stop:] = np.array(w1).ravel()[vs.stop:]  # the accelerations
-            s.a[:] = np.array(a1).ravel()
-            if act.size:
-                G = fns.cell_geo.map(act.size)(np.vstack([s.ch_cx[act], s.ch_cy[act]]), s.a, s.geo)
-                s.ch_g[act] = np.array(G).T
-            self.engine.kernel.sums()
-        return s.wv[vs].copy()
-
     # -- checkpoints (retry) ----------------------------------------------------------------------------------
     def checkpoint(self) -> dict:
-        """The engine's whole state: its arrays and scalars, the World's storage arrays, the stop rule's distance."""
-        s, st = self.engine.state, self.world.storage
-        arrays = {k: v.copy() for k, v in vars(s).items() if isinstance(v, np.ndarray) and k not in self._STATE_SCRATCH}
-        return {"state": arrays, "scalars": {k: getattr(s, k) for k in self._STATE_SCALARS},
-                "storage": {k: getattr(st, k).copy() for k in self._STORAGE_ARRAYS}, "dist": self.dist.copy()}
+        """The engine's whole state (:meth:`TerrainEngine.checkpoint`: its arrays and scalars, the World's
+        storage arrays) and the stop rule's distance."""
+        return {"engine": self.engine.checkpoint(), "dist": self.dist.copy()}
 
     def restore(self, saved: dict) -> None:
         """Back to a :meth:`checkpoint` (in place: the C kernel and the World share these arrays)."""
-        s, st = self.engine.state, self.world.storage
-        for k, v in saved["state"].items():
-            getattr(s, k)[...] = v
-        for k, v in saved["scalars"].items():
-            setattr(s, k, v)
-        for k, v in saved["storage"].items():
-            getattr(st, k)[...] = v
+        self.engine.restore(saved["engine"])
         self.dist[:] = saved["dist"]
 
     def _rerun(self, k: int, last_length_s: float | None = None) -> None:
@@ -500,7 +465,7 @@ class EnginePlant:
         return self.world.figures()
 
     def stats(self):
-        return {"engine_compiled": self.engine.compiled, **self.engine.state.stats}
+        return {"engine_compiled": self.engine.compiled, **self.engine.stats}
 
 
 def advance_plant(plant, u, length_s: float, substep_s: float | None = None,

@@ -34,7 +34,7 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     event = "idle"                 # optional name, unique
     [terrain]                      # optional: the persistent grid terrain (symtrack.terrain.settings)
     [engine]                       # optional: the terrain engine's scheme (run.integrator = "grid_fast"):
-    vehicle_substeps = 1           # [1, 64]   (symtrack.integrators.grid_engine.EngineSettings)
+    vehicle_substeps = 1           # [1, 64]   (symtrack.integrators.settings.EngineSettings)
     cell_substeps = 1              # [1, 64]
     entry_substeps = 8             # [1, 256]
     exit_substeps = 8              # [1, 256]
@@ -42,7 +42,6 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     entry_fraction = 0.5           # [0, 1]
     ring_tolerance = 5e-3          # [0, 1]: a ringing cell takes an entry window (0: never)
     power = "step_mean"            # or "instantaneous"
-    compiled = true                # false: the interpreted kernel
 
 Loading (:func:`load_scenario`) reads the document once (:func:`symtrack.foundations.config.read_document`:
 a built-in name of ``symtrack/simulation/scenarios/`` or a TOML path, then the overrides) and
@@ -59,8 +58,7 @@ from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_keys, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
-from ..integrators.grid_engine import EngineSettings
-from ..integrators.settings import IntegratorSettings
+from ..integrators.settings import EngineSettings, IntegratorSettings
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..presets import soil_preset, vehicle_preset
@@ -234,7 +232,7 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
 
 def parse_engine(t) -> EngineSettings | None:
     """The optional ``[engine]`` table: the terrain engine's scheme (docs/terrain.md, "The terrain
-    engine"; keys and ranges: :class:`~symtrack.integrators.grid_engine.EngineSettings`)."""
+    engine"; keys and ranges: :class:`~symtrack.integrators.settings.EngineSettings`)."""
     if t is None:
         return None
     if not isinstance(t, dict):

@@ -10,8 +10,13 @@ load-cycle count (uint16) (symtrack/model/cell.py), the soil index (uint8, a soi
 subsoil stress record (float32 per depth): 60 bytes per cell with the four default depths, 60 MB
 for the default million-cell field. Cell (i, j) has its centre at world (x0 + (i + 1/2) dx, y0 + (j + 1/2) dx).
 
-Per macro step (:meth:`World.before_step`, :meth:`World.after_step`)
--------------------------------------------------------------------
+Per macro step (the rules; their one home is symtrack/native/grid_engine.c)
+--------------------------------------------------------------------------
+The terrain engine runs them inside its steps; the IDAS reference path runs the same C on this
+World's channel tables through :class:`symtrack.integrators.engine.ChannelManager` (``before_step``,
+``after_step``, ``check_covered``). This module holds the storage, the channel tables and the
+constants of the rules (:func:`padding_m`, :func:`derive_modulus`), not a second copy of them.
+
 1. The footprint: the cells whose centres lie in either track's contact rectangle, padded by
    ``pad = (sqrt(2)/2 + 1/4) dx``, at the pose at the start of the step and at the pose
    predicted for its end (body velocities held over the step). The padding covers every cell
@@ -48,10 +53,10 @@ Shear memory: a cell that comes under a track starts with zero shear (Janosi & H
 measure shear from the front of the contact); cells store no shear, and the vehicle's mean
 shear displacement is the vehicle's state.
 
-A pass (:meth:`begin_pass`, :meth:`end_pass`): the vehicle is set down at rest at its start
-pose on the current terrain, the cells under it placed at their static sinkage
-(:func:`static_sinkage`: a sudden load would overshoot it and write the overshoot into the
-history), then they settle for ``settle_s`` with zero torque (the initial static state), the
+A pass (``ChannelManager.begin_pass`` / ``end_pass``; the engine's ``begin_pass`` / ``end_pass``):
+the vehicle is set down at rest at its start pose on the current terrain, the cells under it
+placed at their static sinkage (:func:`static_sinkage`: a sudden load would overshoot it and write the
+overshoot into the history), then they settle for ``settle_s`` with zero torque (the initial static state), the
 run follows its torque programme to its stop rule, then the vehicle is lifted off: the active
 cells unload with zero load until they are released. Between passes
 the storage is the only state, which is why a saved and reloaded terrain continues bit-exactly.
@@ -61,7 +66,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import logging
 import math
 
 import casadi as ca
@@ -80,8 +84,6 @@ from .storage import Grid, Terrain
 
 __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "World", "derive_modulus", "open_world", "padding_m",
            "static_sinkage"]
-
-log = logging.getLogger("symtrack.terrain")
 
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
 LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
@@ -178,9 +180,6 @@ class World:
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
-        self._history = self.terrain.fn["history"].map("history_all", "serial", n, [], [])
-        self._entry = self.terrain.fn["entry"]
-        self._entry_maps: dict = {}
         # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
         # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
         self.soils = self._apply_soil_map(settings, params)
@@ -188,7 +187,6 @@ class World:
         self.betas = np.array([float(sp["repeated_loading_exponent"]) for sp in self.soils])
         self.ch_soil = np.zeros(n, dtype=np.uint8)
         self.counted = np.zeros(n, dtype=bool)  # the channel's stay has counted as a load cycle
-        self._pad = padding_m(self.grid.cell_m)
         self.peak_active = 0
         self.touched = np.zeros(self.grid.n_cells, dtype=bool)
         self.z_at_pass_end = None
@@ -207,12 +205,6 @@ class World:
             raise ScenarioError("this field has a soil map (several soils): it runs on the terrain engine only "
                                 "(run.integrator = \"grid_fast\"); IDAS and the grid Rosenbrock take one soil")
         return SystemModel(self.opts, self.terrain)
-
-    def _entry_map(self, k: int) -> ca.Function:
-        """The entry Function mapped over k cells (built once per count: a step's new cells)."""
-        if k not in self._entry_maps:
-            self._entry_maps[k] = self._entry.map(k)
-        return self._entry_maps[k]
 
     def _apply_soil_map(self, settings, params) -> list[dict]:
         """The field's soils: a new field takes the scenario's soil map; a terrain that has one keeps
@@ -278,42 +270,6 @@ class World:
             loc = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
             out.append(np.column_stack([cx + c * loc[:, 0] - s * loc[:, 1], cy + s * loc[:, 0] + c * loc[:, 1]]))
         return out
-
-    def cells_under(self, X, Y, psi, pad, check_field=True) -> np.ndarray:
-        """Flat indices of the cells whose centres lie in the tracks' rectangles padded by pad."""
-        g = self.grid
-        dx = g.cell_m
-        x0, x1, y0, y1 = g.bounds()
-        found = []
-        for cx, cy, c, s, hl, hw in self._rectangles(X, Y, psi, pad):
-            ex = abs(c) * hl + abs(s) * hw
-            ey = abs(s) * hl + abs(c) * hw
-            if check_field:
-                exu, eyu = ex - pad * (abs(c) + abs(s)), ey - pad * (abs(c) + abs(s))
-                if cx - exu < x0 or cx + exu > x1 or cy - eyu < y0 or cy + eyu > y1:
-                    raise SimulationError(
-                        f"the vehicle left the terrain field: a track's contact around ({cx:.2f}, {cy:.2f}) m "
-                        f"is outside x in [{x0:g}, {x1:g}] m, y in [{y0:g}, {y1:g}] m; enlarge terrain.size_m "
-                        "or move terrain.origin_m")
-            i0 = max(int(math.floor((cx - ex - x0) / dx)), 0)
-            i1 = min(int(math.ceil((cx + ex - x0) / dx)), g.shape[0] - 1)
-            j0 = max(int(math.floor((cy - ey - y0) / dx)), 0)
-            j1 = min(int(math.ceil((cy + ey - y0) / dx)), g.shape[1] - 1)
-            if i1 < i0 or j1 < j0:
-                continue
-            ii, jj = np.meshgrid(np.arange(i0, i1 + 1), np.arange(j0, j1 + 1), indexing="ij")
-            px, py = g.centres(ii, jj)
-            along = (px - cx) * c + (py - cy) * s
-            across = -(px - cx) * s + (py - cy) * c
-            inside = (np.abs(along) <= hl) & (np.abs(across) <= hw)
-            found.append(ii[inside] * g.shape[1] + jj[inside])
-        if not found:
-            return np.zeros(0, dtype=np.int64)
-        return np.unique(np.concatenate(found))
-
-    def channel_of(self, cells: np.ndarray) -> np.ndarray:
-        i, j = np.divmod(cells, self.grid.shape[1])
-        return (i % self.M) * self.M + (j % self.M)
 
     def ij(self, cell: int) -> tuple[int, int]:
         return tuple(int(v) for v in divmod(int(cell), self.grid.shape[1]))
@@ -429,78 +385,6 @@ class World:
         return self.channel_cell[self.channel_cell >= 0]
 
     # ---- passes ------------------------------------------------------------------------------
-    def begin_pass(self, stepper, x_m: float, y_m: float, yaw_rad: float, dt_s: float = 0.01) -> np.ndarray:
-        """The vehicle at rest at the pose with the cells under it settled: the initial state.
-        ``stepper``: any integrator of this world's model (``step(x, u, p, dt)``, ``reset()``)."""
-        self.release_all()
-        self.peak_active = 0
-        self.touched[:] = False
-        self.pass_sigma[:] = 0.0
-        stepper.reset()
-        L = self.layout
-        x = np.zeros(self.model.nx)
-        x[L.indices(("x_m", "y_m", "yaw_rad"))] = x_m, y_m, yaw_rad
-        u = np.zeros(2)
-        # the cells under the vehicle at their static sinkage first (set down quasi-statically: a
-        # sudden load would overshoot it by some 10 % and write the overshoot into the history)
-        x, p = self.before_step(x, 0.0, stepper)
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        if act.size:
-            acc = np.array(self.model.ode(x, u, p)).ravel()[L.cell_field("rate")][act]
-            zc, vc = x[L.cell_field("sinkage")][act], x[L.cell_field("rate")][act]
-            hist = self.qc[act][:, HIST_ROWS].T
-            p_soil = np.array(self.terrain.fn["soil"].map(act.size)(
-                zc[None, :], hist, self.laws[:, self.ch_soil[act]])).ravel()
-            p_load = self.params["cell_areal_mass_kg_per_m2"] * acc + p_soil + self.params[
-                "cell_damping_Pa_s_per_m"] * vc
-            x[L.cell_index(act, "sinkage")] = static_sinkage(self.terrain.fn["soil"], self.laws[:, self.ch_soil[act]],
-                                                             zc, hist, p_load)
-            x[L.cell_index(act, "rate")] = 0.0
-            stepper.reset()
-        n = int(round(self.settings.settle_s / dt_s))
-        for _ in range(n):
-            x, p = self.before_step(x, dt_s, stepper)
-            x = stepper.step(x, u, p, dt_s)
-            self.after_step(x)
-        cs = L.block("cells")
-        x[cs] = np.where(np.repeat(self.channel_cell >= 0, L.cell_width), x[cs], 0.0)
-        x, _ = self.before_step(x, 0.0, stepper)
-        stepper.reset()
-        return x
-
-    def end_pass(self, x: np.ndarray, unloader, dt_s: float = 0.01, max_steps: int = 300) -> None:
-        """Lift the vehicle off: each active cell's load falls linearly from its reaction pressure at
-        the end of the pass to zero over LIFT_TIME_S (quasi-statically: a sudden removal would fling
-        the underdamped cells above their unloaded rest, as no tension holds them back), then the
-        cells settle until released; all channels are freed. Cells that have not come to rest
-        within max_steps keep their (stored) state and a warning says so.
-
-        ``unloader(xc, par) -> xc``: the cells-only integrator of :meth:`unload_dae` over one
-        step of dt_s (built by :func:`symtrack.integrators.unload.unloader`)."""
-        self.after_step(x)
-        self.z_at_pass_end = self.storage.z.copy()  # the terrain with the vehicle still on it
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        if act.size:
-            F = unloader
-            L = self.layout
-            xc = np.array(x[L.block("cells")], dtype=float)
-            p_end = self.p_soil.copy()
-            for k in range(max_steps):
-                t0 = k * dt_s
-                rates = xc[1::2][act]
-                if t0 >= LIFT_TIME_S and np.all((self.p_soil[act] <= 0.0)
-                                                & (np.abs(rates) <= self.settings.release_rate_m_s)):
-                    break
-                par = np.concatenate([self.Q, p_end, [t0, dt_s, LIFT_TIME_S],
-                                      self.laws[:, self.ch_soil].ravel(order="F")])
-                xc = np.asarray(F(xc, par), dtype=float).ravel()
-                self.after_step(np.concatenate([x[L.block("vehicle")], xc]))
-            else:
-                log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
-                            act.size, max_steps * dt_s)
-        self.release_all()
-        np.maximum(self.storage.sigma_max, self.pass_sigma, out=self.storage.sigma_max)
-
     def release_all(self) -> None:
         self.channel_cell[:] = -1
         self.qc[:] = 0.0

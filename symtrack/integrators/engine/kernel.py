@@ -1,0 +1,143 @@
+"""The compiled kernel of the terrain engine: symtrack/native/grid_engine.c with the CasADi-generated
+C of :mod:`symtrack.native.grid_engine_model`, built through the package's compile-and-cache API
+(``<cache>/engine-<hash>/``) and called through ctypes on the :class:`~.state.EngineState` arrays.
+
+The engine needs a C compiler: without one :func:`library` raises a
+:class:`~symtrack.foundations.errors.SimulationError` that says what to install. (The same
+algorithm in Python, on CasADi's interpreter, is the tests' oracle: tests/engine_oracle.py.)"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import tempfile
+from importlib import resources
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ...foundations.errors import SimulationError
+from ...native.cache import cache_root, compile_sources, compiler
+from ...native.grid_engine_model import soil_dispatch_c
+from .state import EngineState, EngineStruct
+
+__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library"]
+
+log = logging.getLogger("symtrack.terrain")
+
+BUILD_VERSION = 1
+NO_COMPILER = ("the terrain engine (run.integrator = \"grid_fast\") is compiled C and no C compiler was found "
+               "(looked for $CC, cc, gcc): install one (e.g. apt-get install gcc, or set CC), or run the grid "
+               "terrain with run.integrator = \"idas\"")
+
+
+def check_no_work(fns):
+    """Raise when a Function needs integer work or extra arguments (engine.c passes neither)."""
+    for f in fns:
+        if f.sz_iw() or f.sz_arg() != f.n_in() or f.sz_res() != f.n_out():
+            raise SimulationError(f"{f.name()} needs integer work or extra arguments; engine.c passes neither")
+
+
+def library(fns):
+    """The loaded engine library (ctypes.CDLL) for these Functions (compiled into the cache on first
+    use); a :class:`SimulationError` naming what to install when there is no C compiler."""
+    cc = compiler()
+    if cc is None:
+        raise SimulationError(NO_COMPILER)
+    check_no_work(fns.all())
+    csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
+    hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
+    dsrc = soil_dispatch_c(fns.n_soils).encode()
+    key = hashlib.sha256(b"".join(f.serialize().encode() for f in fns.all()) + csrc + hsrc + dsrc
+                         + f"{ca.__version__}/{BUILD_VERSION}".encode()).hexdigest()[:16]
+    so = cache_root() / f"engine-{key}" / "libsymtrack_engine.so"
+    if not so.exists():
+        with tempfile.TemporaryDirectory(prefix="symtrack-enginegen-") as scratch:
+            cg = ca.CodeGenerator("engine_gen.c", {"with_header": False})
+            for f in fns.all():
+                cg.add(f)
+            cg.generate(str(Path(scratch)) + "/")
+            gen = (Path(scratch) / "engine_gen.c").read_bytes()
+        if b"#error" in gen:
+            raise SimulationError("the generated engine functions are not exportable (#error in engine_gen.c)")
+        sources = {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc, "engine_soils.inc": dsrc}
+        log.info("compiling the terrain engine into %s", so)
+        compile_sources(sources, so, cc)
+    lib = ctypes.CDLL(str(so))
+    P = ctypes.POINTER(EngineStruct)
+    dp, ll = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong)
+    lib.eng_assign.argtypes = [P, ctypes.c_double]
+    lib.eng_assign.restype = ctypes.c_int
+    lib.eng_sums.argtypes = [P]
+    lib.eng_sums.restype = None
+    lib.eng_run.argtypes = [P, ctypes.c_longlong, ctypes.c_double, dp, dp, dp, ctypes.c_int, dp, dp, dp, ll]
+    lib.eng_run.restype = ctypes.c_int
+    lib.eng_lift.argtypes = [P, dp, ctypes.c_double, ctypes.c_double, ctypes.c_longlong, ctypes.c_longlong,
+                             ctypes.POINTER(ctypes.c_int)]
+    lib.eng_lift.restype = ctypes.c_longlong
+    lib.eng_static.argtypes = [P]
+    lib.eng_static.restype = None
+    lib.eng_info_out.argtypes = [P]
+    lib.eng_info_out.restype = None
+    lib.eng_uncovered.argtypes = [P, ctypes.c_double, ctypes.c_double, ctypes.c_double]
+    lib.eng_uncovered.restype = ctypes.c_longlong
+    return lib
+
+
+def dptr(a: np.ndarray):
+    """A ctypes double pointer to a float64 array's data."""
+    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+class CKernel:
+    """engine.c through ctypes (the arrays are shared; the struct's scalars are copied in and out)."""
+
+    compiled = True
+
+    def __init__(self, lib, state: EngineState):
+        self.lib, self.s = lib, state
+
+    def assign(self, h: float) -> tuple[int, EngineStruct]:
+        e = self.s.struct()
+        rc = self.lib.eng_assign(ctypes.byref(e), float(h))
+        self.s.absorb(e)
+        return (-rc if rc > 0 else 0), e
+
+    def sums(self) -> None:
+        e = self.s.struct()
+        self.lib.eng_sums(ctypes.byref(e))
+
+    def run(self, t0, T, U, dist, check_covered, T_out, X, Y):
+        e = self.s.struct()
+        n_done = ctypes.c_longlong(0)
+        rc = self.lib.eng_run(ctypes.byref(e), T.size, float(t0), dptr(T), dptr(U), dptr(dist),
+                              int(bool(check_covered)), dptr(T_out), dptr(X), dptr(Y), ctypes.byref(n_done))
+        self.s.absorb(e)
+        return rc, int(n_done.value), e
+
+    def static(self) -> None:
+        e = self.s.struct()
+        self.lib.eng_static(ctypes.byref(e))
+
+    def info_out_all(self) -> None:
+        """INFO_OUT of every active channel at its state (the IDAS reference path's after_step)."""
+        e = self.s.struct()
+        self.lib.eng_info_out(ctypes.byref(e))
+        self.s.absorb(e)
+
+    def uncovered(self, X: float, Y: float, psi: float) -> tuple[int, EngineStruct]:
+        """The number of cells the tracks load at the pose that hold no channel (and the struct: err_a
+        the first)."""
+        e = self.s.struct()
+        n = self.lib.eng_uncovered(ctypes.byref(e), float(X), float(Y), float(psi))
+        return int(n), e
+
+    def lift(self, p_end, h, T, n, max_steps):
+        e = self.s.struct()
+        settled = ctypes.c_int(0)
+        rc = self.lib.eng_lift(ctypes.byref(e), dptr(p_end), float(h), float(T), int(n), int(max_steps),
+                               ctypes.byref(settled))
+        self.s.absorb(e)
+        return int(rc), bool(settled.value), e

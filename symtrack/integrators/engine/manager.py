@@ -1,0 +1,208 @@
+"""The world manager's per-step work for the IDAS reference path (IDAS, the compiled grid Rosenbrock,
+the brute-force runs): :class:`ChannelManager` runs the rules of symtrack/native/grid_engine.c, their
+one home, on a :class:`~symtrack.terrain.world.World`'s channel tables (MODEL.md s. 3; the rules:
+the module doc of :mod:`symtrack.terrain.world`).
+
+Per macro step, :meth:`ChannelManager.before_step` loads the World's channel tables (which cell each
+channel holds, its Q entries, its reaction p_soil, the channel states of the DAE's state vector x)
+into the engine's state, calls the engine's ``eng_assign`` (footprint at the step's start pose and
+at the pose predicted for its end, release, sector assignment with the collision error, INFO_IN)
+and writes back what it changed: released channels zeroed, new channels loaded from their cells.
+:meth:`ChannelManager.after_step` calls ``eng_info_out`` (INFO_OUT of every active channel: the
+storage, the history in Q, p_soil), :meth:`ChannelManager.check_covered` ``eng_uncovered``. The
+World owns the tables between calls (the engine's state is scratch here), so a World may pass
+between the engine and this path (:meth:`symtrack.integrators.engine.TerrainEngine.sync_world`).
+
+:meth:`ChannelManager.begin_pass` and :meth:`ChannelManager.end_pass` set the vehicle down and lift
+it off on the channel model with any integrator of it."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ...terrain.channels import HIST_ROWS
+from ...terrain.world import LIFT_TIME_S, World, static_sinkage
+from ..settings import EngineSettings
+from .engine import engine_functions
+from .kernel import CKernel, library
+from .state import EngineState, engine_error
+
+__all__ = ["ChannelManager"]
+
+log = logging.getLogger("symtrack.terrain")
+
+# the Q entries of a channel (symtrack.terrain.channels: NF per channel) and the engine's arrays
+QC_COLUMNS = ((0, "ch_cx"), (1, "ch_cy"), (2, "ch_zmax"), (3, "ch_pmax"), (5, "ch_zoff"), (6, "ch_delta"), (7, "ch_dc"))
+
+
+class ChannelManager:
+    """The world manager's rules (grid_engine.c) on ``world``'s channel tables (module doc)."""
+
+    def __init__(self, world: World):
+        self.world = world
+        self.fns = engine_functions(world.opts, world.params, 1, world.soils)
+        self.state = EngineState(world, EngineSettings(), self.fns)
+        self.kernel = CKernel(library(self.fns), self.state)
+        self._soil_maps: dict = {}
+
+    def _soil_map(self, k: int):
+        """The channel model's soil law mapped over k channels (built once per count)."""
+        if k not in self._soil_maps:
+            self._soil_maps[k] = self.world.terrain.fn["soil"].map(k)
+        return self._soil_maps[k]
+
+    def _load(self, x: np.ndarray) -> np.ndarray:
+        """The World's channel tables and the channel states of x into the engine's state; returns
+        the active channels."""
+        w, s = self.world, self.state
+        s.soil_index = w.storage.soil_index  # (a storage may have been replaced)
+        s.ch_cell[:] = w.channel_cell
+        L = w.layout
+        s.ch_z[:] = x[L.cell_field("sinkage")]
+        s.ch_v[:] = x[L.cell_field("rate")]
+        s.ch_p[:] = w.p_soil
+        for col, name in QC_COLUMNS:
+            getattr(s, name)[:] = w.qc[:, col]
+        s.ch_counted[:] = w.counted
+        s.ch_soil[:] = w.ch_soil
+        act = np.nonzero(w.channel_cell >= 0)[0]
+        s.act[:act.size] = act
+        s.n_act = act.size
+        return act
+
+    # ---- per macro step ----------------------------------------------------------------------
+    def before_step(self, x: np.ndarray, dt: float, stepper=None):
+        """Assign channels for the step from x over dt; returns (x with INFO_IN loaded, p)."""
+        w, s = self.world, self.state
+        x = np.array(x, dtype=float)
+        self._load(x)
+        L = w.layout
+        head = L.indices(("x_m", "y_m", "yaw_rad", "u_m_s", "v_m_s", "yaw_rate_rad_s"))
+        s.wv[head] = x[head]  # the pose and the body velocities: the footprint at the start and the predicted end
+        rc, e = self.kernel.assign(dt)
+        if rc:
+            raise engine_error(abs(rc), e, s)
+        changed = s.ch_cell != w.channel_cell
+        rel = np.nonzero(changed & (w.channel_cell >= 0))[0]  # released (and maybe taken by a new cell)
+        if rel.size:
+            w.channel_cell[rel] = -1
+            w.qc[rel] = 0.0
+            w.p_soil[rel] = 0.0
+            x[L.cell_index(rel, "sinkage")] = 0.0
+            x[L.cell_index(rel, "rate")] = 0.0
+        new = np.nonzero(changed & (s.ch_cell >= 0))[0]
+        if new.size:
+            w.channel_cell[new] = s.ch_cell[new]
+            for col, name in QC_COLUMNS:
+                w.qc[new, col] = getattr(s, name)[new]
+            w.qc[new, 4] = 1.0
+            w.ch_soil[new] = s.ch_soil[new]
+            w.counted[new] = False
+            w.p_soil[new] = s.ch_p[new]
+            x[L.cell_index(new, "sinkage")] = s.ch_z[new]
+            x[L.cell_index(new, "rate")] = s.ch_v[new]
+            if stepper is not None:
+                stepper.reset()
+        w.peak_active = max(w.peak_active, int(s.n_act))
+        return x, w.param_vector()
+
+    def after_step(self, x: np.ndarray) -> None:
+        """INFO_OUT: write every active channel's state and history back to its cell."""
+        w, s = self.world, self.state
+        x = np.asarray(x, dtype=float)
+        act = self._load(x)
+        if act.size:  # the reaction of the integrated model's law (the channel model's), on the step's history
+            z_act = x[w.layout.cell_index(act, "sinkage")]
+            s.ch_p[act] = np.array(self._soil_map(act.size)(
+                z_act[None, :], w.qc[act][:, HIST_ROWS].T, w.laws[:, w.ch_soil[act]])).ravel()
+        self.kernel.info_out_all()
+        w.qc[act, 2] = s.ch_zmax[act]
+        w.qc[act, 3] = s.ch_pmax[act]
+        w.qc[act, 7] = s.ch_dc[act]
+        w.p_soil[act] = s.ch_p[act]
+        w.counted[act] = s.ch_counted[act] > 0
+
+    def check_covered(self, x: np.ndarray) -> None:
+        """Every cell that the tracks load at state x holds a channel (else the prediction missed)."""
+        s = self.state
+        s.ch_cell[:] = self.world.channel_cell
+        n, e = self.kernel.uncovered(*x[self.world.layout.pose_index])
+        if n:
+            raise engine_error(e.err_code, e, s)
+
+    # ---- passes ------------------------------------------------------------------------------
+    def begin_pass(self, stepper, x_m: float, y_m: float, yaw_rad: float, dt_s: float = 0.01) -> np.ndarray:
+        """The vehicle at rest at the pose with the cells under it settled: the initial state.
+        ``stepper``: any integrator of the world's model (``step(x, u, p, dt)``, ``reset()``)."""
+        w = self.world
+        w.release_all()
+        w.peak_active = 0
+        w.touched[:] = False
+        w.pass_sigma[:] = 0.0
+        stepper.reset()
+        L = w.layout
+        x = np.zeros(L.size)
+        x[L.pose_index] = x_m, y_m, yaw_rad
+        u = np.zeros(2)
+        # the cells under the vehicle at their static sinkage first (set down quasi-statically: a
+        # sudden load would overshoot it by some 10 % and write the overshoot into the history)
+        x, p = self.before_step(x, 0.0, stepper)
+        act = np.nonzero(w.channel_cell >= 0)[0]
+        if act.size:
+            acc = np.array(w.model.ode(x, u, p)).ravel()[L.cell_field("rate")][act]
+            zc, vc = x[L.cell_field("sinkage")][act], x[L.cell_field("rate")][act]
+            hist = w.qc[act][:, HIST_ROWS].T
+            p_soil = np.array(w.terrain.fn["soil"].map(act.size)(
+                zc[None, :], hist, w.laws[:, w.ch_soil[act]])).ravel()
+            p_load = w.params["cell_areal_mass_kg_per_m2"] * acc + p_soil + w.params[
+                "cell_damping_Pa_s_per_m"] * vc
+            x[L.cell_index(act, "sinkage")] = static_sinkage(w.terrain.fn["soil"], w.laws[:, w.ch_soil[act]], zc, hist,
+                                                             p_load)
+            x[L.cell_index(act, "rate")] = 0.0
+            stepper.reset()
+        n = int(round(w.settings.settle_s / dt_s))
+        for _ in range(n):
+            x, p = self.before_step(x, dt_s, stepper)
+            x = stepper.step(x, u, p, dt_s)
+            self.after_step(x)
+        cs = L.block("cells")
+        x[cs] = np.where(np.repeat(w.channel_cell >= 0, L.cell_width), x[cs], 0.0)
+        x, _ = self.before_step(x, 0.0, stepper)
+        stepper.reset()
+        return x
+
+    def end_pass(self, x: np.ndarray, unloader, dt_s: float = 0.01, max_steps: int = 300) -> None:
+        """Lift the vehicle off: each active cell's load falls linearly from its reaction pressure at
+        the end of the pass to zero over LIFT_TIME_S (quasi-statically: a sudden removal would fling
+        the underdamped cells above their unloaded rest, as no tension holds them back), then the
+        cells settle until released; all channels are freed. Cells that have not come to rest
+        within max_steps keep their (stored) state and a warning says so.
+
+        ``unloader(xc, par) -> xc``: the cells-only integrator of :meth:`World.unload_dae` over one
+        step of dt_s (built by :func:`symtrack.integrators.unload.unloader`)."""
+        w = self.world
+        self.after_step(x)
+        w.z_at_pass_end = w.storage.z.copy()  # the terrain with the vehicle still on it
+        act = np.nonzero(w.channel_cell >= 0)[0]
+        if act.size:
+            L = w.layout
+            xc = np.array(x[L.block("cells")], dtype=float)
+            p_end = w.p_soil.copy()
+            for k in range(max_steps):
+                t0 = k * dt_s
+                rates = xc[1::2][act]
+                if t0 >= LIFT_TIME_S and np.all((w.p_soil[act] <= 0.0)
+                                                & (np.abs(rates) <= w.settings.release_rate_m_s)):
+                    break
+                par = np.concatenate([w.Q, p_end, [t0, dt_s, LIFT_TIME_S],
+                                      w.laws[:, w.ch_soil].ravel(order="F")])
+                xc = np.asarray(unloader(xc, par), dtype=float).ravel()
+                self.after_step(np.concatenate([x[L.block("vehicle")], xc]))
+            else:
+                log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
+                            act.size, max_steps * dt_s)
+        w.release_all()
+        np.maximum(w.storage.sigma_max, w.pass_sigma, out=w.storage.sigma_max)
+
