@@ -181,7 +181,8 @@ def test_a_toy_law_in_the_terrain_engines_cell_functions(toy):
     with the law's slope in its Newton iterations) under a constant load to the toy's p / k."""
     import types
 
-    from symtrack.integrators import grid_engine as engine
+    from engine_oracle import PyKernel
+
     from symtrack.native.grid_engine_model import build_engine_functions
 
     f = build_engine_functions(toy.opts, PARAMS, 1)
@@ -196,7 +197,7 @@ def test_a_toy_law_in_the_terrain_engines_cell_functions(toy):
     assert float(f.cell_entry[0](1e-3, [*top, 0, 0, 0], 2)) == 0.0
     st = types.SimpleNamespace(areal_mass=PARAMS["cell_areal_mass_kg_per_m2"],
                                damping=PARAMS["cell_damping_Pa_s_per_m"], stats={"n_newton": 0, "n_cell_stages": 0})
-    kern = engine.PyKernel(f, st)
+    kern = PyKernel(f, st)
     z = v = zm = pm = 0.0
     p, dp = (float(x) for x in f.cell_law[0](0.0, [0, 0, 0, 0, 0]))
     for i in range(150):  # the load ramped to 20 kPa over 0.5 s, then held: 10 ms macro steps, the history after each

@@ -11,8 +11,8 @@ from collections.abc import Callable
 import numpy as np
 
 from ...foundations.errors import SimulationError
+from ...model import soil_law
 from ...native.grid_engine_model import TRACK_SOIL_PARAMS, build_engine_functions
-from ...terrain.channels import soil_law_values
 from ...terrain.world import LIFT_TIME_S
 from ..settings import EngineSettings, window_substeps
 from .kernel import CKernel, library
@@ -36,7 +36,7 @@ def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (
     ``soils``: the parameter dicts of a soil map's soils (index 0 the scenario's)."""
     soils = tuple(soils) or (params,)
     key = (opts, vehicle_substeps, tuple(
-        (tuple(soil_law_values(sp, opts.bekker_regularisation_m)), float(sp["repeated_loading_exponent"]),
+        (tuple(soil_law.make(opts).values(sp)), float(sp["repeated_loading_exponent"]),
          tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils))
     if key not in _FUNCTIONS:
         _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps, soils if len(soils) > 1 else ())
