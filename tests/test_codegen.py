@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from codegen import cli as codegen_cli
+from symtrack.codegen import cli as codegen_cli
 from symtrack.model import SystemModel
 from symtrack.native.generate import build, unit_of
 

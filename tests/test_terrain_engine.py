@@ -13,10 +13,10 @@ import pytest
 from conftest import two_passes_against_a_continued_pass
 from scipy.integrate import solve_ivp
 
+from symtrack import build as compiled
 from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators import grid_engine as engine
-from symtrack.native import cache as compiled
 from symtrack.native.grid_engine_model import build_engine_functions, reaction_pressure_fast
 from symtrack.simulation import loop
 from symtrack.simulation.plants import EnginePlant, make_plant
