@@ -217,7 +217,7 @@ def test_run_settings_for_compiled_integrators():
 def test_cli_simulate_rosenbrock_and_codegen_check(tmp_path, capsys, monkeypatch):
     from symtrack.cli import main
 
-    monkeypatch.setattr(compiled, "_require", False)  # restored after the test (--require-compiled sets it)
+    monkeypatch.setattr(build_cache, "_require", False)  # restored after the test (--require-compiled sets it)
 
     assert main(["simulate", "validation", "--integrator", "rosenbrock", "--require-compiled", "--quiet",
                  "--out", str(tmp_path / "run")]) == 0
