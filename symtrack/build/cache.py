@@ -239,12 +239,13 @@ def build(spec: BuildSpec, cc: str | None = None) -> Path:
         return out
     cc = cc or require_compiler(spec.what)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with _entry_lock(out.parent):
+    with _entry_lock(out.parent) as locked:
         if out.exists():  # built by another process while this one waited for the lock
             log.info("%s: built by another process meanwhile (%s)", spec.what, out.parent)
             return out
-        for stale in out.parent.glob(".build-*"):  # left by a build that was killed
-            shutil.rmtree(stale, ignore_errors=True)
+        if locked:  # no other build of the entry runs: a temporary folder is a killed build's
+            for stale in out.parent.glob(".build-*"):
+                shutil.rmtree(stale, ignore_errors=True)
         t0 = time.perf_counter()
         log.info("compiling %s (first run; cached in %s) ...", spec.what, out.parent)
         _compile(spec, dict(spec.sources()), out, cc)
@@ -256,17 +257,17 @@ def build(spec: BuildSpec, cc: str | None = None) -> Path:
 
 @contextlib.contextmanager
 def _entry_lock(folder: Path):
-    """An exclusive lock on ``folder/.lock`` (flock; released when the holder exits or dies); no
-    lock where flock is missing (the rename alone keeps the artefact whole)."""
+    """An exclusive lock on ``folder/.lock`` (flock; released when the holder exits or dies); yields
+    whether it is held: no lock where flock is missing (the rename alone keeps the artefact whole)."""
     try:
         import fcntl
     except ImportError:  # not POSIX
-        yield
+        yield False
         return
     with open(folder / ".lock", "a+b") as fh:
         fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
         try:
-            yield
+            yield True
         finally:
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
