@@ -5,6 +5,7 @@ one key at once: tests/test_cache_concurrency.py.)"""
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import logging
 import os
@@ -105,18 +106,22 @@ def test_an_interrupted_build_leaves_no_half_written_library(tmp_path, sig):
     runs: no library appears, and the next build of the entry succeeds."""
     started = tmp_path / "started"
     cc = tmp_path / "cc"  # a compiler that hangs after writing half an object
-    cc.write_text(f"#!/bin/sh\ntouch {started}\nfor a; do case $a in *.o) echo half > $a;; esac; done\nsleep 60\n")
+    cc.write_text(f"#!/bin/sh\necho $$ > {started}\nfor a; do case $a in *.o) echo half > $a;; esac; done\n"
+                  "exec sleep 60\n")
     cc.chmod(0o755)
     root = tmp_path / "cache"
     p = subprocess.Popen([sys.executable, "-c", INTERRUPTED, str(root), str(cc)],
                          env=dict(os.environ, PYTHONPATH=str(REPO)), stderr=subprocess.PIPE)
     t0 = time.monotonic()
-    while not started.exists():
+    while not (started.exists() and started.read_text().strip()):
         assert p.poll() is None and time.monotonic() - t0 < 60, p.stderr.read().decode()
         time.sleep(0.05)
+    time.sleep(0.2)  # the half object written
     p.send_signal(sig)
     p.wait(timeout=60)
     p.stderr.close()
+    with contextlib.suppress(ProcessLookupError, ValueError):  # the killed build's compiler, orphaned
+        os.kill(int(started.read_text()), signal.SIGKILL)
     assert p.returncode != 0
     (entry,) = root.iterdir()
     assert not (entry / "libanswer.so").exists()
