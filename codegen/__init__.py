@@ -1,7 +1,8 @@
-"""Code generation for symtrack: ``python -m codegen`` writes the C sources into ``generated/``.
+"""``python -m codegen`` from a checkout: the entry point of the code generation (Makefile, docs/codegen.md).
 
-See docs/codegen.md. The generation itself lives in the package (:mod:`symtrack.native.generate`, the step builders
-:mod:`symtrack.native.rosenbrock` and :mod:`symtrack.native.grid_rosenbrock`), since the runtime
-compiles the same sources; the command line (and ``symtrack codegen``) is :mod:`codegen.cli`, the
-standalone program :mod:`codegen.standalone`.
+Not installed (pyproject.toml installs ``symtrack*`` only): the generators live in the package as
+:mod:`symtrack.codegen` (``symtrack codegen`` in an installed package runs the same command); this
+folder only keeps the checkout's short command.
 """
+
+__all__: list[str] = []

@@ -1,8 +1,10 @@
 """The package's structure, read from the source (nothing imported): the layers of DESIGN.md,
 no import circle (imports inside functions count), no private name imported across modules,
-nothing below the CLI and the bench imports the top-level codegen/ package, and the soil law is
-reached only through its object (symtrack.model.soil_law). Also: adding an integrator is one
-class and one registry entry (adding a soil law: tests/test_soil_law.py)."""
+nothing below the CLI and the bench imports symtrack.codegen (and nothing in the package the top-level
+codegen/ entry point), no module outside the compile-and-cache API (symtrack.build) composes a
+cache path or takes a lock, and the soil law is reached only through its object
+(symtrack.model.soil_law). Also: adding an integrator is one class and one registry entry (adding a
+soil law: tests/test_soil_law.py)."""
 
 from __future__ import annotations
 
@@ -20,8 +22,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # layer of each top-level part of symtrack, bottom first; a module may import its own layer or below
 LAYERS = {
-    "foundations": 1, "model": 2, "presets": 2, "terrain": 3, "native": 4, "integrators": 5, "simulation": 6,
-    "control": 7, "reports": 7, "api": 7, "studies": 7, "bench": 8, "cli": 9, "__main__": 9, "": 9,
+    "foundations": 1, "model": 2, "presets": 2, "terrain": 3, "build": 4, "native": 4, "integrators": 5,
+    "simulation": 6, "control": 7, "reports": 7, "api": 7, "studies": 7, "codegen": 7, "bench": 8, "cli": 9,
+    "__main__": 9, "": 9,
 }
 CODEGEN_ALLOWED = ("cli", "bench")
 STUDIES_ALLOWED = ("cli", "bench", "studies")  # the studies are an application: only the CLI and the bench use them
@@ -134,10 +137,60 @@ def test_layers_import_only_downwards(graph):
 
 
 def test_only_cli_and_bench_import_codegen(graph):
+    """symtrack.codegen is an application the CLI and the bench call; the top-level codegen/ is the
+    checkout's ``python -m codegen`` entry point only (not installed): nothing in the package imports it."""
     _, edges = graph
-    bad = [(m, t) for m, e in edges.items() for t, _ in e
-           if m.startswith("symtrack") and t.startswith("codegen") and m.split(".")[1] not in CODEGEN_ALLOWED]
+    users = {m.split(".")[1] for m, e in edges.items() for t, _ in e
+             if m.startswith("symtrack.") and t.startswith("symtrack.codegen") and not m.startswith("symtrack.codegen")}
+    assert "cli" in users  # the reader found symtrack codegen
+    assert users <= set(CODEGEN_ALLOWED)
+    top = [(m, t) for m, e in edges.items() for t, _ in e if m.startswith("symtrack") and t.split(".")[0] == "codegen"]
+    assert top == []
+    assert {m for m in edges if m.split(".")[0] == "codegen"} == {"codegen", "codegen.__main__"}
+
+
+def test_the_build_api_imports_only_foundations(graph):
+    """symtrack.build sits below everything that compiles: it imports nothing of symtrack but foundations."""
+    _, edges = graph
+    below = {t.split(".")[1] for m, e in edges.items() if m.startswith("symtrack.build") for t, _ in e
+             if t.startswith("symtrack.") and not t.startswith("symtrack.build")}
+    assert below <= {"foundations"}
+
+
+# what only the compile-and-cache API may do: compose a cache path, read the cache's variable, lock
+CACHE_CALLS = ("cache_root",)
+LOCK_NAMES = ("fcntl", "flock", "lockf")
+CACHE_STRINGS = ("SYMTRACK_CACHE", ".cache")
+
+
+def _cache_composers(path: Path) -> list[str]:
+    """The places in one source file that compose a cache path or take a lock."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        name = (node.func.id if isinstance(node.func, ast.Name) else node.func.attr
+                if isinstance(node.func, ast.Attribute) else "") if isinstance(node, ast.Call) else ""
+        if name in CACHE_CALLS or name in LOCK_NAMES:
+            found.append(f"{path.name}:{node.lineno} {name}()")
+        elif isinstance(node, ast.Import | ast.ImportFrom):
+            mods = [a.name for a in node.names] + [node.module or ""] if isinstance(node, ast.ImportFrom) else \
+                [a.name for a in node.names]
+            if any(m.split(".")[0] in LOCK_NAMES for m in mods):
+                found.append(f"{path.name}:{node.lineno} import {', '.join(mods)}")
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value in CACHE_STRINGS:
+            found.append(f"{path.name}:{node.lineno} {node.value!r}")
+    return found
+
+
+def test_no_cache_path_or_lock_outside_the_build_api(graph, tmp_path):
+    """Every compiled artefact goes through symtrack.build.build: no other module calls cache_root(),
+    reads $SYMTRACK_CACHE, spells ~/.cache or takes a file lock (the check finds each in a snippet)."""
+    mods, _ = graph
+    bad = [hit for m, f in sorted(mods.items()) if not m.startswith("symtrack.build") for hit in _cache_composers(f)]
     assert bad == []
+    assert _cache_composers(mods["symtrack.build.cache"])  # the reader sees the API's own
+    snippet = tmp_path / "snippet.py"
+    snippet.write_text("import fcntl\nfrom x import cache_root\np = cache_root() / 'grid'\nq = env['SYMTRACK_CACHE']\n")
+    assert len(_cache_composers(snippet)) == 3
 
 
 def test_only_cli_and_bench_import_studies(graph):

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from symtrack.native import cache as compiled
+from symtrack import build
 
-pytestmark = pytest.mark.skipif(compiled.find_compiler() is None, reason="no C compiler")
+pytestmark = pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler")
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -26,11 +26,13 @@ SOURCE = b'__attribute__((visibility("default"))) int symtrack_race_answer(void)
 BUILD = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from symtrack.native.cache import compile_sources
-    out_so, cc, go = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
+    from symtrack.build import BuildSpec, build
+    root, cc, go = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
+    src = sys.stdin.buffer.read()
     while not go.exists():  # both processes start compiling at the same moment
         time.sleep(0.01)
-    compile_sources({"race.c": sys.stdin.buffer.read()}, out_so, cc)
+    out_so = build(BuildSpec(kind="race", key="0123456789abcdef", output="librace.so", sources=lambda: {"race.c": src},
+                             what="the race library", root=root), cc)
     print("built", out_so.exists())
 """)
 
@@ -39,12 +41,12 @@ def test_two_concurrent_builds_of_one_key_both_succeed_and_compile_once(tmp_path
     calls = tmp_path / "cc_calls.txt"
     cc = tmp_path / "cc"
     # a slow compiler (1 s per call), so that the two builds overlap; it logs every call
-    cc.write_text(f"#!/bin/sh\necho \"$@\" >> {calls}\nsleep 1\nexec {compiled.find_compiler()} \"$@\"\n")
+    cc.write_text(f"#!/bin/sh\necho \"$@\" >> {calls}\nsleep 1\nexec {build.find_compiler()} \"$@\"\n")
     cc.chmod(0o755)
     out_so = tmp_path / "cache" / "race-0123456789abcdef" / "librace.so"
     go = tmp_path / "go"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    procs = [subprocess.Popen([sys.executable, "-c", BUILD, str(out_so), str(cc), str(go)], env=env,
+    procs = [subprocess.Popen([sys.executable, "-c", BUILD, str(out_so.parent.parent), str(cc), str(go)], env=env,
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
              for _ in range(2)]
     for p in procs:

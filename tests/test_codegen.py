@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from codegen import cli as codegen_cli
+from symtrack.codegen import cli as codegen_cli
 from symtrack.model import SystemModel
 from symtrack.native.generate import build, unit_of
 
@@ -105,3 +105,22 @@ def test_unrolled_rosenbrock_step_is_the_casadi_plugin_method():
     Wn = Wn + 10 * ca.DM.eye(5)
     bn = rng.normal(size=5)
     assert np.allclose(np.array(f(Wn, bn)).ravel(), np.linalg.solve(np.array(Wn), bn), rtol=1e-12, atol=1e-12)
+
+
+def test_python_m_codegen_is_the_checkouts_entry_point_and_not_installed():
+    """``python -m codegen`` runs symtrack.codegen's command from a checkout; the wheel installs
+    symtrack only (no generic top-level ``codegen`` package in site-packages)."""
+    import subprocess
+    import sys
+    import tomllib
+
+    root = GEN.parent
+    res = subprocess.run([sys.executable, "-m", "codegen", "--help"], cwd=root, capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert "usage: python -m codegen" in res.stdout and "--check" in res.stdout
+    tool = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert tool["packages"]["find"]["include"] == ["symtrack*"]
+    assert tool["package-data"]["symtrack.codegen"] == ["*.c"]
+    assert {p.name for p in (root / "symtrack" / "codegen").glob("*_main.c")} == {
+        "standalone_main.c", "grid_standalone_main.c", "mpc_main.c"}

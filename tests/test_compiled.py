@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from conftest import run_once
 
+from symtrack.build import cache as build_cache
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators.fixed_step import FixedStepper
 from symtrack.integrators.settings import IntegratorSettings
@@ -25,7 +26,7 @@ from symtrack.native.generate import GROUPS
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
 
-pytestmark = pytest.mark.skipif(compiled.find_compiler() is None, reason="no C compiler")
+pytestmark = pytest.mark.skipif(build_cache.find_compiler() is None, reason="no C compiler")
 
 FIGURES = ("distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm",
            "sinkage_idler_mm", "shear_driven_max_m", "shear_idle_min_m", "speed_final_m_s", "sim_time_s")
@@ -112,7 +113,7 @@ def test_library_is_cached_and_reused(lib, model, monkeypatch):
     def no_compile(*a, **k):
         raise AssertionError("compiled again although the cache holds the library")
 
-    monkeypatch.setattr(compiled, "compile_sources", no_compile)
+    monkeypatch.setattr(build_cache, "_compile", no_compile)
     compiled._cache.clear()
     again = compiled.library(model)
     again.f("rosenbrock_step")
@@ -123,18 +124,18 @@ def test_library_is_cached_and_reused(lib, model, monkeypatch):
 
 
 def test_no_compiler_falls_back_once_or_fails_when_required(model, monkeypatch, caplog):
-    monkeypatch.setattr(compiled, "find_compiler", lambda: None)
-    monkeypatch.setattr(compiled, "_warned_no_compiler", False)
+    monkeypatch.setattr(build_cache, "find_compiler", lambda: None)
+    monkeypatch.setattr(build_cache, "_warned_no_compiler", False)
     compiled._cache.clear()
     try:
-        with caplog.at_level(logging.WARNING, logger="symtrack.native"):
+        with caplog.at_level(logging.WARNING, logger="symtrack.build"):
             lib = compiled.library(model)
             y = lib.f("outputs")
             compiled._cache.clear()
             compiled.library(model).f("accel")
         assert not lib.compiled and y.class_name() != "External"
         assert sum("no C compiler" in r.message for r in caplog.records) == 1
-        monkeypatch.setattr(compiled, "_require", True)
+        monkeypatch.setattr(build_cache, "_require", True)
         compiled._cache.clear()
         with pytest.raises(SimulationError, match="no C compiler"):
             compiled.library(model).f("outputs")
@@ -195,7 +196,7 @@ def test_stepper_interface_for_rosenbrock(model, scenario):
 
 
 def test_standalone_program_reproduces_python(rosenbrock_run):
-    from codegen.standalone import build_standalone, run_standalone
+    from symtrack.codegen.standalone import build_standalone, run_standalone
 
     got = run_standalone(build_standalone(), 1)
     ref = summarise(rosenbrock_run)
@@ -216,7 +217,7 @@ def test_run_settings_for_compiled_integrators():
 def test_cli_simulate_rosenbrock_and_codegen_check(tmp_path, capsys, monkeypatch):
     from symtrack.cli import main
 
-    monkeypatch.setattr(compiled, "_require", False)  # restored after the test (--require-compiled sets it)
+    monkeypatch.setattr(build_cache, "_require", False)  # restored after the test (--require-compiled sets it)
 
     assert main(["simulate", "validation", "--integrator", "rosenbrock", "--require-compiled", "--quiet",
                  "--out", str(tmp_path / "run")]) == 0

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 
 import symtrack
-from symtrack.native.cache import find_compiler
+from symtrack.build import find_compiler
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 
 
 @pytest.fixture(scope="module")
 def both():
-    from codegen import grid_standalone
+    from symtrack.codegen import grid_standalone
 
     binary = grid_standalone.build()
     rows = grid_standalone.run(binary)

@@ -5,13 +5,13 @@ a brute-force integration of the point-load formula, a refined table, and numpy 
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from symtrack import build
 from symtrack.foundations.errors import ParameterError
 from symtrack.native import cache
 from symtrack.terrain import subsoil as S
@@ -115,14 +115,12 @@ def test_halving_the_table_step_changes_little(tables5):
 # (f) ---------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def clib():
-    cc = cache.find_compiler()
-    if cc is None:
+    if build.find_compiler() is None:
         pytest.skip("no C compiler")
     sources = {n: (NATIVE / n).read_bytes() for n in ("subsoil.h", "subsoil_check.c")}
-    h = hashlib.sha256(b"".join(sources[n] for n in sorted(sources))).hexdigest()[:16]
-    so = cache.cache_root() / f"subsoil_check-{h}-b{cache.BUILD_VERSION}" / "libsubsoil_check.so"
-    if not so.exists():
-        cache.compile_sources(sources, so, cc)
+    so = build.build(build.BuildSpec(kind="subsoil_check", key=build.digest(*(sources[n] for n in sorted(sources))),
+                                     output="libsubsoil_check.so", sources=lambda: sources,
+                                     what="the subsoil check library", suffix=f"-b{cache.BUILD_VERSION}"))
     lib = ctypes.CDLL(str(so))
     lib.subsoil_stress_bench.restype = ctypes.c_longlong
     return lib

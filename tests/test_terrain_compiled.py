@@ -8,10 +8,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from symtrack import build as compiled
 from symtrack.bench.terrain import pool_run
 from symtrack.foundations.errors import ScenarioError
 from symtrack.integrators.grid_rosenbrock import grid_library
-from symtrack.native import cache as compiled
 from symtrack.simulation.scenario import scenario_from_dict
 
 # A 12 m x 4 m field at 0.25 m (768 cells, M = 18): from rest, both sprockets at 2000 N m, then the

@@ -16,11 +16,11 @@ from engine_oracle import PyKernel, ringing
 from scipy.integrate import solve_ivp
 
 from symtrack.bench.terrain import brute_force_run, pool_run
+from symtrack.build import find_compiler
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators import engine
 from symtrack.integrators.settings import STEADY_METHODS
 from symtrack.model.soil_law import BekkerWong
-from symtrack.native import cache as compiled
 from symtrack.native.grid_engine_model import build_engine_functions
 from symtrack.simulation import loop
 from symtrack.simulation.plants import EnginePlant, make_plant
@@ -75,7 +75,7 @@ def fast():
 
 def test_engine_matches_idas_on_a_small_field(idas, fast):
     (wi, ri), (wf, rf) = idas, fast
-    assert rf.stats["engine_compiled"] == (compiled.find_compiler() is not None)
+    assert rf.stats["engine_compiled"] == (find_compiler() is not None)
     assert rf.t.shape == ri.t.shape and np.allclose(rf.t, ri.t)
     assert rf.X[-1, 0] - rf.X[0, 0] > 0.1  # it did drive
     assert np.max(np.abs(rf.X[:, :3] - ri.X[:, :3])) < POSE_TOL_M
@@ -254,7 +254,7 @@ def test_fast_law_equals_the_model_law(n_exp):
 
 @pytest.mark.parametrize("method", STEADY_METHODS)
 def test_compiled_equals_interpreted(method):
-    if compiled.find_compiler() is None:
+    if find_compiler() is None:
         pytest.skip("no C compiler")
     sc = _scenario(duration_s=0.3)
     wc, rc = _engine_run(sc, engine.EngineSettings(steady_method=method))

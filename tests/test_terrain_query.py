@@ -1,14 +1,13 @@
 """The terrain query (symtrack/terrain/query.py) and its C twin (symtrack/native/terrain_query.h)."""
 
 import ctypes
-import hashlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from symtrack.build import BuildSpec, build, digest, find_compiler
 from symtrack.foundations.errors import SimulationError
-from symtrack.native import cache
 from symtrack.terrain import query as Q
 from symtrack.terrain.storage import Grid, Terrain
 
@@ -67,14 +66,13 @@ class _Field(ctypes.Structure):
 
 @pytest.fixture(scope="module")
 def clib():
-    cc = cache.find_compiler()
+    cc = find_compiler()
     if cc is None:
         pytest.skip("no C compiler")
     sources = {n: (NATIVE / n).read_bytes() for n in ("terrain_query.h", "terrain_query_check.c")}
-    h = hashlib.sha256(b"".join(sources[n] for n in sorted(sources))).hexdigest()[:16]
-    so = cache.cache_root() / f"terrain_query_check-{h}-b{cache.BUILD_VERSION}" / "libterrain_query_check.so"
-    if not so.exists():
-        cache.compile_sources(sources, so, cc)
+    so = build(BuildSpec(kind="terrain_query_check", key=digest(*(sources[n] for n in sorted(sources))),
+                         output="libterrain_query_check.so", sources=lambda: sources,
+                         what="the terrain query's C check"), cc)
     lib = ctypes.CDLL(str(so))
     lib.terrain_query_many.restype = ctypes.c_longlong
     lib.terrain_query_many.argtypes = [ctypes.POINTER(_Field)] + [ctypes.c_void_p] * 2 + [ctypes.c_longlong] \

@@ -4,7 +4,7 @@ Rows of the homogeneous validation scenario (simulated seconds per wall second o
 loop, model construction and compilation excluded, best of ``--repeats`` runs after a warm-up):
 CVODES and IDAS on CasADi's interpreter and on the compiled model, the compiled fixed-step
 ``rosenbrock`` integrator (and the same on the interpreter, for scale), and the standalone C
-program (codegen/standalone_main.c; best of its own repeats).
+program (symtrack/codegen/standalone_main.c; best of its own repeats).
 
 Extensible: every module of :data:`PROVIDERS` that can be imported and has
 ``bench_rows(quick: bool) -> list[dict]`` adds its rows (the grid terrain and the MPC). A row is
@@ -76,7 +76,7 @@ def homogeneous_rows(quick: bool = False, repeats: int = 3) -> list[dict]:
 
 
 def standalone_row(repeats: int = 20) -> dict:
-    from codegen.standalone import build_standalone, run_standalone
+    from ..codegen.standalone import build_standalone, run_standalone
 
     binary = build_standalone()
     s = run_standalone(binary, repeats)

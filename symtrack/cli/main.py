@@ -74,7 +74,7 @@ def presets_command(args) -> int:
 
 
 def codegen_command(args) -> int:
-    from codegen import cli as codegen_cli
+    from ..codegen import cli as codegen_cli
 
     return codegen_cli.run(args)
 
@@ -112,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     pr.add_argument("--kind", choices=("vehicle", "soil"), help="for a preset file: which kind it is")
     pr.set_defaults(func=presets_command)
     cg = sub.add_parser("codegen", help="write the generated C sources (as python -m codegen)")
-    from codegen.cli import add_arguments as codegen_arguments
+    from ..codegen.cli import add_arguments as codegen_arguments
 
     codegen_arguments(cg)
     cg.set_defaults(func=codegen_command)
@@ -140,7 +140,7 @@ def main(argv=None) -> int:
     if getattr(args, "compiled", False):
         args.set = (args.set or []) + ["run.compiled=true"]
     if getattr(args, "require_compiled", False):
-        from ..native.cache import set_require_compiled
+        from ..build import set_require_compiled
 
         set_require_compiled(True)
     logging.basicConfig(level=logging.INFO, format="%(message)s")

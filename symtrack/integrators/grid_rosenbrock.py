@@ -4,7 +4,7 @@
 The step is :mod:`symtrack.native.grid_rosenbrock` (8-stage L-stable Rosenbrock on the DAE form, the
 channels eliminated through the arrowhead's Schur complement, ``map`` over the channels). Its C
 source is generated on first use for the pool size and the number of steps per call, compiled
-into ``<cache>/grid-<hash>/`` (the cache of :mod:`symtrack.native.cache`; the key hashes the
+into ``<cache>/grid-<hash>/`` through :func:`symtrack.build.build` (the key hashes the
 serialised Function) and loaded with ``casadi.external``. The sources are not committed: they
 depend on the pool size M^2. Without a C compiler the same Function runs on CasADi's
 interpreter (slow; an error with ``--require-compiled``).
@@ -15,7 +15,6 @@ Every macro step of the world manager (one output step) is one call: n equal ste
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import tempfile
 from pathlib import Path
@@ -23,9 +22,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..build import BuildSpec, build, casadi_tag, compiler, digest
 from ..foundations.errors import SimulationError
-from ..native.cache import cache_root, compile_sources, compiler
-from ..native.grid_rosenbrock import build
+from ..native.grid_rosenbrock import build as build_step
 from ..terrain.channels import NF, NG
 from .settings import substeps
 
@@ -46,25 +45,26 @@ MAX_STEP_S = 0.000625
 
 def grid_library(opts, n_channels: int, n_steps: int, compiled: bool = True):
     """(Function, compiled?) of ``grid_rosenbrock`` for n_channels channels and n_steps steps per call."""
-    f = build(opts, n_channels, n_steps)["multi"]
+    f = build_step(opts, n_channels, n_steps)["multi"]
     if not compiled:
         return f, False
     cc = compiler()
     if cc is None:
         return f, False
-    key = hashlib.sha256(f.serialize().encode() + f"{ca.__version__}/{BUILD_VERSION}".encode()).hexdigest()[:16]
-    folder = cache_root() / f"grid-{key}"
-    so = folder / "libgrid_rosenbrock.so"
-    if not so.exists():
+
+    def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-gridgen-") as scratch:
             cg = ca.CodeGenerator("grid_rosenbrock.c", {"with_header": True})
             cg.add(f)
             cg.generate(str(Path(scratch)) + "/")
-            sources = {n: (Path(scratch) / n).read_bytes() for n in ("grid_rosenbrock.c", "grid_rosenbrock.h")}
-        if b"#error" in sources["grid_rosenbrock.c"]:
+            files = {n: (Path(scratch) / n).read_bytes() for n in ("grid_rosenbrock.c", "grid_rosenbrock.h")}
+        if b"#error" in files["grid_rosenbrock.c"]:
             raise SimulationError("the generated grid integrator is not exportable (#error in grid_rosenbrock.c)")
-        log.info("compiling the grid integrator (%d channels, %d steps per call) into %s", n_channels, n_steps, so)
-        compile_sources(sources, so, cc)
+        return files
+
+    so = build(BuildSpec(kind="grid", key=digest(f.serialize(), casadi_tag(BUILD_VERSION)),
+                         output="libgrid_rosenbrock.so", sources=sources,
+                         what=f"the grid integrator ({n_channels} channels, {n_steps} steps per call)"), cc)
     return ca.external(f.name(), str(so)), True
 
 

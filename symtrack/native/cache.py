@@ -1,22 +1,15 @@
-"""Compiled model functions: generated C -> shared library in a cache -> ``casadi.external``.
+"""Compiled model functions: generated C -> shared library in the cache -> ``casadi.external``.
 
 For a :class:`~symtrack.model.SystemModel` (any terrain), :func:`library` builds the Functions
 of :mod:`symtrack.native.generate`, hashes them (SHA-256 of the serialised Functions, the manifest's
-``model_hash``), and looks for ``<cache>/<prefix>-<hash>/lib<prefix>.so``, where ``<cache>`` is
-``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``. When it is missing, the sources are taken from the
+``model_hash``), and has :func:`symtrack.build.build` compile each file into
+``<cache>/<prefix>_<file>-<hash>-b<BUILD_VERSION>/lib<prefix>_<file>.so`` once (the cache, its lock,
+its atomic writes and the compiler are :mod:`symtrack.build`'s). The sources are taken from the
 repository's ``generated/`` if its manifest has the same hash, or generated afresh (an installed
-package, or a model that differs from the committed sources), compiled with the C compiler
-(``$CC``, default ``cc``/``gcc``) and linked into the cache atomically (temporary name, rename).
-Processes that build the same entry at once (parallel test workers, sweep workers) take turns on
-a lock file beside it: the first compiles, the others find its library and compile nothing.
+package, or a model that differs from the committed sources).
 
-Without a C compiler the module says so once (logging) and everything runs on CasADi's
-interpreter with the same Functions; with :func:`set_require_compiled` (``--require-compiled``)
-or ``SYMTRACK_REQUIRE_COMPILED=1`` that is an error instead.
-
-This is the one compile-and-cache API of symtrack: the model libraries (:func:`library`), the
-grid integrator (:mod:`symtrack.integrators.grid_rosenbrock`) and the standalone program of
-``codegen/`` all compile through :func:`compiler` and :func:`compile_sources`.
+Without a C compiler everything runs on CasADi's interpreter with the same Functions (a warning
+once; an error with ``--require-compiled``: :func:`symtrack.build.set_require_compiled`).
 """
 
 from __future__ import annotations
@@ -24,45 +17,25 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import os
-import shutil
-import subprocess
 import tempfile
-import time
 from pathlib import Path
 
 import casadi as ca
 
-from ..foundations.errors import SimulationError
-from .generate import GROUP_OF, build, render
+from ..build import BuildSpec, build, compiler
+from .generate import GROUP_OF, render
+from .generate import build as build_functions
 
 log = logging.getLogger("symtrack.native")
 
-__all__ = ["BUILD_VERSION", "Library", "cache_root", "compile_sources", "compiler", "find_compiler",
-           "generated_sources", "interpreter_only", "library", "set_require_compiled"]
+__all__ = ["BUILD_VERSION", "REPO_GENERATED", "Library", "generated_sources", "interpreter_only", "library"]
 
-# bump when the compile flags or the library layout change (part of the cache key)
+# bump when the compile flags or the library layout change (part of the cache folder's name)
 BUILD_VERSION = 2
-# the large straight-line Jacobian files take 2x longer to compile at -O2 for little gain
-BIG_FILE_BYTES = 600_000
-CFLAGS_SMALL = ("-O2",)
-CFLAGS_BIG = ("-O1",)
-# Only the CASADI_SYMBOL_EXPORT functions are exported: the generated helpers then are not
-# interposable, which lets the compiler call them directly (-fPIC alone made the integrator
-# 20 % slower than in the standalone program).
-CFLAGS_SHARED = ("-fPIC", "-fvisibility=hidden", "-DGCC_HASCLASSVISIBILITY")
 REPO_GENERATED = Path(__file__).resolve().parents[2] / "generated"
 
-_require = os.environ.get("SYMTRACK_REQUIRE_COMPILED", "") not in ("", "0")
-_warned_no_compiler = False
 _force_interpreter = False
 _cache: dict[tuple[int, bool], tuple[object, Library]] = {}
-
-
-def set_require_compiled(flag: bool = True) -> None:
-    """Make a missing C compiler an error instead of a fallback to the interpreter."""
-    global _require
-    _require = bool(flag)
 
 
 @contextlib.contextmanager
@@ -75,33 +48,6 @@ def interpreter_only():
         yield
     finally:
         _force_interpreter = saved
-
-
-def cache_root() -> Path:
-    env = os.environ.get("SYMTRACK_CACHE")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "symtrack"
-
-
-def find_compiler() -> str | None:
-    for cc in (os.environ.get("CC"), "cc", "gcc"):
-        if cc and shutil.which(cc):
-            return shutil.which(cc)
-    return None
-
-
-def compiler() -> str | None:
-    """The C compiler, or None after saying once that there is none (an error when required)."""
-    global _warned_no_compiler
-    cc = find_compiler()
-    if cc is None:
-        if _require:
-            raise SimulationError("no C compiler found (looked for $CC, cc, gcc) and compiled code is required "
-                                  "(--require-compiled); install gcc or drop --require-compiled")
-        if not _warned_no_compiler:
-            log.warning("no C compiler found (looked for $CC, cc, gcc): running the generated functions "
-                        "on CasADi's interpreter instead (slower)")
-            _warned_no_compiler = True
-    return cc
 
 
 class Library:
@@ -123,18 +69,15 @@ class Library:
     def load(self, group: str) -> None:
         if group in self.paths:
             return
-        gen = build(self.model, self.prefix, (group,))
+        gen = build_functions(self.model, self.prefix, (group,))
         stem = f"{self.prefix}_{group}"
         interp = {f.name(): f for f in gen.functions()}
         path = None
         cc = compiler() if self.want_compiled else None
         if cc is not None:
-            path = cache_root() / f"{stem}-{gen.file_hash(stem)[:16]}-b{BUILD_VERSION}" / f"lib{stem}.so"
-            if not path.exists():
-                t0 = time.perf_counter()
-                log.info("compiling %s into %s (once; cached)", stem, path.parent)
-                compile_sources(generated_sources(gen, stem), path, cc)
-                log.info("compiled %s in %.1f s", stem, time.perf_counter() - t0)
+            path = build(BuildSpec(kind=stem, key=gen.file_hash(stem), output=f"lib{stem}.so",
+                                   sources=lambda: generated_sources(gen, stem), what=f"the model functions {stem}",
+                                   suffix=f"-b{BUILD_VERSION}"), cc)
         self.interpreted.update(interp)
         self.functions.update(interp if path is None else {n: ca.external(n, str(path)) for n in interp})
         self.paths[group], self.gens[group] = path, gen
@@ -152,69 +95,6 @@ class Library:
     def interpreted_f(self, short: str) -> ca.Function:
         """The same Function on CasADi's interpreter."""
         return self.interpreted[self._name(short)]
-
-
-@contextlib.contextmanager
-def _build_lock(folder: Path):
-    """An exclusive lock on ``folder/.lock`` (flock; released when the holder exits or dies), so
-    that concurrent builds of one cache entry run one at a time; no lock where flock is missing
-    (the rename alone keeps the library whole)."""
-    try:
-        import fcntl
-    except ImportError:  # not POSIX
-        yield
-        return
-    with open(folder / ".lock", "a+b") as fh:
-        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
-
-
-def compile_sources(sources: dict[str, bytes], out_so: Path, cc: str) -> None:
-    """Compile the .c files of sources into out_so, atomically (a temporary folder beside it, then
-    a rename); a process that finds out_so built by another while it waited compiles nothing."""
-    out_so.parent.mkdir(parents=True, exist_ok=True)
-    with _build_lock(out_so.parent):
-        if out_so.exists():  # built by another process while this one waited for the lock
-            return
-        _compile(sources, out_so, cc)
-
-
-def _compile(sources: dict[str, bytes], out_so: Path, cc: str) -> None:
-    build = Path(tempfile.mkdtemp(prefix=".build-", dir=out_so.parent))
-    try:
-        for name, data in sources.items():
-            (build / name).write_bytes(data)
-        cfiles = sorted(n for n in sources if n.endswith(".c"))
-        jobs, objs = [], []
-        # biggest first, at most two compilers at a time (2-core machines)
-        pending = sorted(cfiles, key=lambda n: -len(sources[n]))
-        while pending or jobs:
-            while pending and len(jobs) < 2:
-                name = pending.pop(0)
-                flags = CFLAGS_BIG if len(sources[name]) > BIG_FILE_BYTES else CFLAGS_SMALL
-                obj = name[:-2] + ".o"
-                cmd = [cc, *flags, *CFLAGS_SHARED, "-c", name, "-o", obj]
-                jobs.append((name, subprocess.Popen(cmd, cwd=build, stdout=subprocess.PIPE,
-                                                    stderr=subprocess.STDOUT)))
-                objs.append(obj)
-            name, proc = jobs.pop(0)
-            out, _ = proc.communicate()
-            if proc.returncode != 0:
-                for _, other in jobs:
-                    other.kill()
-                    other.wait()
-                raise SimulationError(f"compiling {name} failed ({cc}):\n{out.decode(errors='replace')[-2000:]}")
-        tmp_so = build / out_so.name
-        res = subprocess.run([cc, "-shared", "-o", tmp_so.name, *objs, "-lm"], cwd=build,
-                             capture_output=True, text=True)
-        if res.returncode != 0:
-            raise SimulationError(f"linking {out_so.name} failed: {res.stderr[-2000:]}")
-        os.replace(tmp_so, out_so)
-    finally:
-        shutil.rmtree(build, ignore_errors=True)
 
 
 def generated_sources(gen, stem: str) -> dict[str, bytes]:

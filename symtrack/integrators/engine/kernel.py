@@ -9,7 +9,6 @@ algorithm in Python, on CasADi's interpreter, is the tests' oracle: tests/engine
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import logging
 import tempfile
 from importlib import resources
@@ -18,8 +17,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ...build import BuildSpec, build, casadi_tag, compiler, digest
 from ...foundations.errors import SimulationError
-from ...native.cache import cache_root, compile_sources, compiler
 from ...native.grid_engine_model import soil_dispatch_c
 from .state import EngineState, EngineStruct
 
@@ -50,10 +49,9 @@ def library(fns):
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
     dsrc = soil_dispatch_c(fns.n_soils).encode()
-    key = hashlib.sha256(b"".join(f.serialize().encode() for f in fns.all()) + csrc + hsrc + dsrc
-                         + f"{ca.__version__}/{BUILD_VERSION}".encode()).hexdigest()[:16]
-    so = cache_root() / f"engine-{key}" / "libsymtrack_engine.so"
-    if not so.exists():
+    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, dsrc, casadi_tag(BUILD_VERSION))
+
+    def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-enginegen-") as scratch:
             cg = ca.CodeGenerator("engine_gen.c", {"with_header": False})
             for f in fns.all():
@@ -62,9 +60,10 @@ def library(fns):
             gen = (Path(scratch) / "engine_gen.c").read_bytes()
         if b"#error" in gen:
             raise SimulationError("the generated engine functions are not exportable (#error in engine_gen.c)")
-        sources = {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc, "engine_soils.inc": dsrc}
-        log.info("compiling the terrain engine into %s", so)
-        compile_sources(sources, so, cc)
+        return {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc, "engine_soils.inc": dsrc}
+
+    so = build(BuildSpec(kind="engine", key=key, output="libsymtrack_engine.so", sources=sources,
+                         what="the terrain engine"), cc)
     lib = ctypes.CDLL(str(so))
     P = ctypes.POINTER(EngineStruct)
     dp, ll = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong)

@@ -1,7 +1,7 @@
 /* symtrack standalone: the validation scenario on the homogeneous terrain in plain C.
  *
  * Links only the generated sources (generated/homogeneous_rosenbrock.c) and libc/libm:
- *   make standalone        (or: cc -O2 -Igenerated codegen/standalone_main.c
+ *   make standalone        (or: cc -O2 -Igenerated symtrack/codegen/standalone_main.c
  *                                 generated/homogeneous_rosenbrock.c -lm -o build/symtrack_standalone)
  *   build/symtrack_standalone [repeats]
  *

@@ -1,4 +1,4 @@
-"""Numbers for the standalone C program (codegen/standalone_main.c): ``<prefix>_validation.h``.
+"""Numbers for the standalone C program (symtrack/codegen/standalone_main.c): ``<prefix>_validation.h``.
 
 The header carries the built-in validation scenario as C constants: the parameter vector, the
 static initial state (solved in Python by :func:`symtrack.model.static.static_state`), the
@@ -8,18 +8,20 @@ that the summary reads. The C program then needs only the generated sources and 
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
 import subprocess
 from pathlib import Path
 
 import numpy as np
 
-from symtrack.foundations.errors import SimulationError
-from symtrack.model.static import static_state
-from symtrack.native.cache import REPO_GENERATED, cache_root, find_compiler
-from symtrack.simulation.scenario import load_scenario
+from ..build import BuildSpec, build, digest
+from ..foundations.errors import SimulationError
+from ..model.static import static_state
+from ..native.cache import REPO_GENERATED
+from ..simulation.scenario import load_scenario
+
+__all__ = ["FIXED_STEP", "MAIN_C", "STANDALONE_CFLAGS", "SUMMARY_STATES", "build_program", "build_standalone",
+           "c_array", "c_literal", "run_standalone", "validation_header"]
 
 FIXED_STEP = "rosenbrock"
 # the flags of `make standalone` (Makefile)
@@ -92,32 +94,24 @@ def validation_header(model, gen, scenario_name: str = "validation") -> bytes:
 MAIN_C = Path(__file__).resolve().parent / "standalone_main.c"
 
 
-def build_program(stem: str, main_c: Path, src: Path, required: list[str], hashed: list[Path], cflags,
-                  include_dirs: list[Path], extra_c: list[Path] = ()) -> Path:
-    """Compile a standalone C program (``main_c`` plus ``extra_c``, with ``include_dirs``) into the
-    cache, keyed by the hash of every input in ``hashed``; ``required``: the generated files of
-    ``src`` it needs (named in the error when missing). Returns the binary's path."""
-    missing = [n for n in required if not (src / n).exists()]
+def build_program(stem: str, main_c: Path, inputs: list[Path], cflags, extra_units: tuple[str, ...] = ()) -> Path:
+    """Compile a standalone C program into the cache (:func:`symtrack.build.build`) and return its path.
+
+    ``main_c`` and ``inputs`` (the generated sources of a ``python -m codegen`` folder and what
+    they include) are compiled in one flat folder: the units are ``main_c`` and the ``inputs``
+    named in ``extra_units``. The key hashes ``main_c``, every input in order and the flags; the entry is
+    ``<cache>/<stem with dashes>-<key>/symtrack_<stem>``."""
+    missing = [p for p in inputs if not p.exists()]
     if missing:
-        raise SimulationError(f"{src} lacks {', '.join(missing)}: run python -m codegen --out {src}")
-    h = hashlib.sha256(main_c.read_bytes())
-    for p in hashed:
-        h.update(p.read_bytes())
-    binary = cache_root() / f"{stem.replace('_', '-')}-{h.hexdigest()[:16]}" / f"symtrack_{stem}"
-    if binary.exists():
-        return binary
-    cc = find_compiler()
-    if cc is None:
-        raise SimulationError(f"no C compiler found (looked for $CC, cc, gcc): cannot build the {stem} program")
-    binary.parent.mkdir(parents=True, exist_ok=True)
-    tmp = binary.parent / f".symtrack_{stem}.{os.getpid()}.tmp"
-    cmd = [cc, *cflags, *(f"-I{d}" for d in include_dirs), str(main_c), *(str(c) for c in extra_c), "-o", str(tmp),
-           "-lm"]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode != 0:
-        raise SimulationError(f"building the {stem} program failed:\n{' '.join(cmd)}\n{res.stderr[-2000:]}")
-    os.replace(tmp, binary)
-    return binary
+        folder = missing[0].parent
+        raise SimulationError(f"{folder} lacks {', '.join(p.name for p in missing)}: run python -m codegen "
+                              f"--out {folder}")
+    data = {main_c.name: main_c.read_bytes(), **{p.name: p.read_bytes() for p in inputs}}
+    key = digest(data[main_c.name], *(data[p.name] for p in inputs), " ".join(cflags))
+    spec = BuildSpec(kind=stem.replace("_", "-"), key=key,
+                     output=f"symtrack_{stem}", sources=lambda: data, what=f"the {stem} program",
+                     units=(main_c.name, *extra_units), cflags=tuple(cflags), shared=False)
+    return build(spec)
 
 
 def build_standalone(src_dir: Path | None = None, prefix: str = "homogeneous") -> Path:
@@ -125,8 +119,7 @@ def build_standalone(src_dir: Path | None = None, prefix: str = "homogeneous") -
     repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
     src = Path(src_dir) if src_dir else REPO_GENERATED
     names = [f"{prefix}_{FIXED_STEP}.c", f"{prefix}_{FIXED_STEP}.h", f"{prefix}_validation.h"]
-    return build_program("standalone", MAIN_C, src, names, [src / n for n in names], STANDALONE_CFLAGS, [src],
-                         [src / names[0]])
+    return build_program("standalone", MAIN_C, [src / n for n in names], STANDALONE_CFLAGS, (names[0],))
 
 
 def run_standalone(binary: Path, repeats: int = 1) -> dict:

@@ -3,7 +3,7 @@
 Writes, for the homogeneous-terrain system of the default model options, the files listed in
 :mod:`symtrack.native.generate` plus ``homogeneous_validation.h`` (the numbers of the built-in validation
 scenario for the standalone C program), and the grid validation's standalone program's
-``engine_gen.inc``, ``engine_soils.inc`` and ``grid_validation.h`` (:mod:`codegen.grid_standalone`)
+``engine_gen.inc``, ``engine_soils.inc`` and ``grid_validation.h`` (:mod:`symtrack.codegen.grid_standalone`)
 into ``generated/`` (or ``--out``). Files are written
 atomically and only when their content changed; ``--check`` writes nothing and exits with 1 when
 the folder is out of date.
@@ -17,11 +17,13 @@ import sys
 import tempfile
 from pathlib import Path
 
+__all__ = ["REPO_GENERATED", "add_arguments", "check", "main", "render_all", "run", "write"]
+
 log = logging.getLogger("symtrack.codegen")
 
-# the repository's generated/ (symtrack.native.cache.REPO_GENERATED; spelled here so that the
+# the checkout's generated/ (symtrack.native.cache.REPO_GENERATED; spelled here so that the
 # argument parser needs no CasADi import)
-REPO_GENERATED = Path(__file__).resolve().parent.parent / "generated"
+REPO_GENERATED = Path(__file__).resolve().parents[2] / "generated"
 
 
 def render_all(scratch: Path) -> dict[str, bytes]:

@@ -26,7 +26,7 @@ z re-solved when the command changes, each sample cut into equal steps of at mos
 vectors, the densely sampled reference path (the arrays of :class:`symtrack.control.path.Path`),
 the initial state and command (trim), and the cold start: the solution of the first problem by
 the fallback NLP solver (IPOPT), computed here in Python as the Python closed loop computes it
-before its loop engages. ``mpc_closed_loop.c`` (copied from ``codegen/mpc_main.c``) is the loop
+before its loop engages. ``mpc_closed_loop.c`` (copied from ``symtrack/codegen/mpc_main.c``) is the loop
 of :func:`symtrack.control.closedloop.run` with the RTI of ``PathTrackingMPC`` (feedback, accept
 or the shifted plan, preparation of the next sample) and writes ``closed_loop.csv``.
 """
@@ -46,7 +46,12 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..build import require_compiler
 from .standalone import c_array, c_literal
+
+__all__ = ["CFLAGS", "CSV_COLUMNS", "MAIN_C", "MAKEFILE", "PLANT_STEM", "SOLVERS", "Problem", "build_program",
+           "command", "compare", "load_scenario", "python_closed_loop", "read_csv", "render", "rti_functions",
+           "run_program", "scenario_header", "setup", "write"]
 
 log = logging.getLogger("symtrack.codegen.mpc")
 
@@ -433,10 +438,8 @@ def compare(res, csv_path: Path) -> dict:
 
 def command(args) -> int:
     """``symtrack codegen mpc NAME [--solver rti] --out DIR [--set ...] [--no-run] [--compare]``."""
-    from symtrack.foundations.errors import ScenarioError, SimulationError
+    from symtrack.foundations.errors import ScenarioError
     from symtrack.foundations.files import check_output_folder
-    from symtrack.native.cache import find_compiler
-
     if not args.name:
         raise ScenarioError("symtrack codegen mpc NAME --out DIR: give an MPC scenario (built-in name or TOML file)")
     if args.out is None:
@@ -444,10 +447,7 @@ def command(args) -> int:
                             "the repository's generated/)")
     sc = load_scenario(args.name, args.set or [], args.solver or "rti")
     out = check_output_folder(args.out)
-    cc = find_compiler()
-    if cc is None:
-        raise SimulationError("no C compiler found (looked for $CC, cc, gcc): cannot build mpc_closed_loop; "
-                              "install gcc (or set $CC)")
+    cc = require_compiler("mpc_closed_loop")
     t0 = time.perf_counter()
     pb = setup(sc)
     files = render(pb)

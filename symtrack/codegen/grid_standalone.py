@@ -1,4 +1,4 @@
-"""The standalone C program of the grid validation (codegen/grid_standalone_main.c): the terrain
+"""The standalone C program of the grid validation (symtrack/codegen/grid_standalone_main.c): the terrain
 engine of ``validation_grid`` on its million-cell field, linking only libc and libm.
 
 ``python -m codegen`` writes, besides the homogeneous files, into ``generated/``:
@@ -26,14 +26,15 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from symtrack.foundations.errors import SimulationError
-from symtrack.native.cache import REPO_GENERATED
-
+from ..foundations.errors import SimulationError
+from ..native.cache import REPO_GENERATED
 from .standalone import build_program, c_array, c_literal
+
+__all__ = ["CFLAGS", "FILES", "MAIN_C", "NATIVE", "SCENARIO", "build", "render", "run"]
 
 SCENARIO = "validation_grid"
 MAIN_C = Path(__file__).resolve().parent / "grid_standalone_main.c"
-NATIVE = Path(__file__).resolve().parent.parent / "symtrack" / "native"
+NATIVE = Path(__file__).resolve().parent.parent / "native"
 FILES = ("engine_gen.inc", "engine_soils.inc", "grid_validation.h")
 CFLAGS = ("-O2", "-Wall", "-Wno-unused-function", "-Wno-unused-variable", "-Wno-unused-but-set-variable")
 
@@ -121,7 +122,7 @@ def build(src_dir: Path | None = None) -> Path:
     repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
     src = Path(src_dir) if src_dir else REPO_GENERATED
     hashed = [*(src / n for n in FILES), NATIVE / "grid_engine.c", NATIVE / "subsoil.h"]
-    return build_program("grid_standalone", MAIN_C, src, list(FILES), hashed, CFLAGS, [src, NATIVE])
+    return build_program("grid_standalone", MAIN_C, hashed, CFLAGS)
 
 
 def run(binary: Path, out_csv: Path | None = None) -> np.ndarray:

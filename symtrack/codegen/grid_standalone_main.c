@@ -1,7 +1,7 @@
 /* The grid validation as a standalone program: the terrain engine (symtrack/native/grid_engine.c)
  * on the million-cell field of the built-in validation_grid scenario, linking only libc and libm.
  * The numbers come from generated/grid_validation.h, the engine's equations from
- * generated/engine_gen.inc (python -m codegen; codegen/grid_standalone.py says what each is).
+ * generated/engine_gen.inc (python -m codegen; symtrack/codegen/grid_standalone.py says what each is).
  *
  * It does what TerrainEngine.begin_pass and the time loop do with the EnginePlant: the vehicle set
  * down at rest, the cells under it at their static sinkage (eng_assign, eng_static), the settling

@@ -1,0 +1,20 @@
+"""The compile-and-cache API (layer 4): every compiled library and program of symtrack is built
+through :func:`build` (:mod:`symtrack.build.cache`)."""
+
+from .cache import (
+    BuildSpec,
+    Built,
+    build,
+    builds,
+    cache_root,
+    casadi_tag,
+    compiled_required,
+    compiler,
+    digest,
+    find_compiler,
+    require_compiler,
+    set_require_compiled,
+)
+
+__all__ = ["BuildSpec", "Built", "build", "builds", "cache_root", "casadi_tag", "compiled_required", "compiler",
+           "digest", "find_compiler", "require_compiler", "set_require_compiled"]

@@ -1,0 +1,326 @@
+"""The one compile-and-cache API: C sources -> a shared library or a program in a hash-keyed cache.
+
+Every compiled artefact of symtrack goes through :func:`build`: the model libraries
+(:mod:`symtrack.native.cache`), the terrain engine (:mod:`symtrack.integrators.grid_engine`), the grid
+Rosenbrock integrator (:mod:`symtrack.integrators.grid_rosenbrock`), the MPC's functions
+(:mod:`symtrack.control.solver_cache`) and the standalone programs (:mod:`symtrack.codegen`). A caller
+describes one artefact with a :class:`BuildSpec` (what identifies it: its key, made with
+:func:`digest`; how to get its sources, called only when it is missing; how to compile them) and gets
+its path. This module alone owns:
+
+- the cache's location, :func:`cache_root`: ``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``;
+- the entry's folder, ``<root>[/<group>]/<kind>-<key[:digits]><suffix>/``, and the artefact in it;
+- the lock: processes that build one entry at once (parallel test workers, sweep workers) take
+  turns on ``<entry>/.lock`` (``flock``, released when its holder exits or dies): the first
+  compiles, the others find its artefact and compile nothing;
+- the atomic write: the sources are written and compiled in a temporary folder ``<entry>/.build-*``
+  and the artefact is renamed into place, so that an interrupted build (Ctrl-C, a killed worker)
+  leaves no half-written library; a temporary folder a killed build left behind is removed by the
+  next build of the entry;
+- the compiler lookup (``$CC``, ``cc``, ``gcc``) and its messages: :func:`compiler` for callers that
+  can fall back on CasADi's interpreter (a warning once; an error with :func:`set_require_compiled`,
+  ``--require-compiled`` or ``SYMTRACK_REQUIRE_COMPILED=1``), :func:`require_compiler` and
+  :func:`build` for those that cannot (an error that names what was being built);
+- the log: ``compiling <what> (first run; cached in <entry>) ...`` and ``compiled <what> in <s> s``
+  at INFO on the ``symtrack.build`` logger (a user who waits minutes for the compiler is told why),
+  and :data:`builds`, every compilation of this process.
+
+A cache hit costs one ``stat``: no lock, no source generation, no compiler lookup.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import logging
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import casadi as ca
+
+from ..foundations.errors import SimulationError
+
+__all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_COMPILER", "BuildSpec", "Built",
+           "build", "builds", "cache_root", "casadi_tag", "compiled_required", "compiler", "digest",
+           "find_compiler", "require_compiler", "set_require_compiled"]
+
+log = logging.getLogger("symtrack.build")
+
+# the large straight-line Jacobian files take 2x longer to compile at -O2 for little gain
+BIG_FILE_BYTES = 600_000
+CFLAGS_SMALL = ("-O2",)
+CFLAGS_BIG = ("-O1",)
+# Only the CASADI_SYMBOL_EXPORT functions are exported: the generated helpers then are not
+# interposable, which lets the compiler call them directly (-fPIC alone made the integrator
+# 20 % slower than in the standalone program).
+CFLAGS_SHARED = ("-fPIC", "-fvisibility=hidden", "-DGCC_HASCLASSVISIBILITY")
+MAX_JOBS = 2  # compilers at a time (2-core machines)
+NO_COMPILER = "no C compiler found (looked for $CC, cc, gcc)"
+
+_require = os.environ.get("SYMTRACK_REQUIRE_COMPILED", "") not in ("", "0")
+_warned_no_compiler = False
+
+
+@dataclasses.dataclass(frozen=True)
+class Built:
+    """One compilation of this process: its kind, its description, the artefact, the seconds."""
+
+    kind: str
+    what: str
+    path: Path
+    seconds: float
+
+
+# every compilation of this process, in order (the tests and the MPC's solver cache read it)
+builds: list[Built] = []
+
+
+@dataclasses.dataclass(frozen=True)
+class BuildSpec:
+    """One cached artefact and how to build it.
+
+    Parameters
+    ----------
+    kind : str
+        The entry's folder name before its key: ``engine``, ``grid``, ``homogeneous_ode``, ...
+    key : str
+        The hexadecimal :func:`digest` of everything the artefact depends on (the serialised
+        Functions or the sources, the flags where they vary, :func:`casadi_tag`). Cheap to compute:
+        the sources themselves are made only on a miss.
+    output : str
+        The artefact's file name in the entry: ``libX.so`` or a program's name.
+    sources : callable
+        ``sources() -> {file name: bytes}``: every file the compilation needs (the .c units and what
+        they include), written flat into the build folder; called only when the artefact is missing.
+    what : str
+        What is being built, for the log and the errors ("the terrain engine").
+    units : tuple of str, optional
+        The files compiled (default: every ``.c`` of the sources; a ``.c`` that another includes is
+        left out by naming the units).
+    cflags : tuple of str, optional
+        The compile flags of every unit (default: :data:`CFLAGS_SMALL`, :data:`CFLAGS_BIG` for a
+        unit above :data:`BIG_FILE_BYTES`).
+    shared : bool
+        A shared library (``shared_cflags`` added to every unit, linked with ``-shared``) or a program.
+    shared_cflags : tuple of str
+        The flags a shared library's units get besides ``cflags``.
+    one_command : bool
+        Compile and link in one compiler call (default: one call per unit, at most :data:`MAX_JOBS`
+        at a time, largest first, then one link call).
+    digits : int
+        The hexadecimal digits of the key in the folder name.
+    suffix : str
+        Appended to the folder name (a layout version, ``-b2``).
+    group : str
+        A sub-folder of the cache root (``mpc``).
+    root : Path, optional
+        A folder that replaces the cache root and the group (the MPC's ``jit_dir``).
+    """
+
+    kind: str
+    key: str
+    output: str
+    sources: Callable[[], Mapping[str, bytes]]
+    what: str
+    units: tuple[str, ...] | None = None
+    cflags: tuple[str, ...] | None = None
+    shared: bool = True
+    shared_cflags: tuple[str, ...] = CFLAGS_SHARED
+    one_command: bool = False
+    digits: int = 16
+    suffix: str = ""
+    group: str = ""
+    root: Path | None = None
+
+    @property
+    def folder(self) -> Path:
+        """The entry's folder."""
+        base = Path(self.root) if self.root is not None else (cache_root() / self.group if self.group
+                                                              else cache_root())
+        return base / f"{self.kind}-{self.key[:self.digits]}{self.suffix}"
+
+    @property
+    def path(self) -> Path:
+        """The artefact's path (it exists once built)."""
+        return self.folder / self.output
+
+
+def cache_root() -> Path:
+    """The cache's folder: ``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``."""
+    env = os.environ.get("SYMTRACK_CACHE")
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "symtrack"
+
+
+def digest(*parts: bytes | str) -> str:
+    """SHA-256 (hexadecimal) of the parts in order (a str as UTF-8): the key of a :class:`BuildSpec`."""
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(part.encode() if isinstance(part, str) else part)
+    return h.hexdigest()
+
+
+def casadi_tag(build_version: int) -> str:
+    """``<CasADi version>/<build_version>``: the key part that rebuilds an artefact when CasADi's
+    generated code or the caller's layout (its build version) changes."""
+    return f"{ca.__version__}/{build_version}"
+
+
+def set_require_compiled(flag: bool = True) -> None:
+    """Make a missing C compiler an error in :func:`compiler` instead of a fallback to the interpreter."""
+    global _require
+    _require = bool(flag)
+
+
+def compiled_required() -> bool:
+    """Whether compiled code is required (:func:`set_require_compiled`, ``SYMTRACK_REQUIRE_COMPILED``)."""
+    return _require
+
+
+def find_compiler() -> str | None:
+    """The C compiler's path: ``$CC``, else ``cc``, else ``gcc``; None when there is none."""
+    for cc in (os.environ.get("CC"), "cc", "gcc"):
+        if cc and shutil.which(cc):
+            return shutil.which(cc)
+    return None
+
+
+def compiler() -> str | None:
+    """The C compiler for a caller that can run on CasADi's interpreter instead: None after saying
+    once that there is none (a SimulationError when compiled code is required)."""
+    global _warned_no_compiler
+    cc = find_compiler()
+    if cc is None:
+        if _require:
+            raise SimulationError(f"{NO_COMPILER} and compiled code is required (--require-compiled); install "
+                                  "gcc (or set $CC) or drop --require-compiled")
+        if not _warned_no_compiler:
+            log.warning("%s: running the generated functions on CasADi's interpreter instead (slower)",
+                        NO_COMPILER)
+            _warned_no_compiler = True
+    return cc
+
+
+def require_compiler(what: str) -> str:
+    """The C compiler; a SimulationError naming ``what`` cannot be built when there is none."""
+    cc = find_compiler()
+    if cc is None:
+        raise SimulationError(f"{NO_COMPILER}: cannot build {what}; install gcc (or set $CC)")
+    return cc
+
+
+def build(spec: BuildSpec, cc: str | None = None) -> Path:
+    """The path of ``spec``'s artefact, compiled into the cache first when it is missing.
+
+    Parameters
+    ----------
+    spec : BuildSpec
+        The artefact.
+    cc : str, optional
+        The compiler (default: :func:`require_compiler`, looked up only on a miss).
+
+    Returns
+    -------
+    Path
+        The artefact (a shared library to load, or a program to run).
+
+    Raises
+    ------
+    SimulationError
+        No C compiler; the sources or the compiler failed (the compiler's output in the message).
+    """
+    out = spec.path
+    if out.exists():
+        return out
+    cc = cc or require_compiler(spec.what)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with _entry_lock(out.parent) as locked:
+        if out.exists():  # built by another process while this one waited for the lock
+            log.info("%s: built by another process meanwhile (%s)", spec.what, out.parent)
+            return out
+        if locked:  # no other build of the entry runs: a temporary folder is a killed build's
+            for stale in out.parent.glob(".build-*"):
+                shutil.rmtree(stale, ignore_errors=True)
+        t0 = time.perf_counter()
+        log.info("compiling %s (first run; cached in %s) ...", spec.what, out.parent)
+        _compile(spec, dict(spec.sources()), out, cc)
+        seconds = time.perf_counter() - t0
+        builds.append(Built(spec.kind, spec.what, out, seconds))
+        log.info("compiled %s in %.1f s", spec.what, seconds)
+    return out
+
+
+@contextlib.contextmanager
+def _entry_lock(folder: Path):
+    """An exclusive lock on ``folder/.lock`` (flock; released when the holder exits or dies); yields
+    whether it is held: no lock where flock is missing (the rename alone keeps the artefact whole)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        yield False
+        return
+    with open(folder / ".lock", "a+b") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield True
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
+def _unit_flags(spec: BuildSpec, size: int) -> tuple[str, ...]:
+    flags = spec.cflags if spec.cflags is not None else (CFLAGS_BIG if size > BIG_FILE_BYTES else CFLAGS_SMALL)
+    return (*flags, *spec.shared_cflags) if spec.shared else tuple(flags)
+
+
+def _run(cmd: list[str], cwd: Path, what: str, cc: str) -> None:
+    res = subprocess.run(cmd, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    if res.returncode != 0:
+        raise SimulationError(f"building {what} failed ({cc}):\n{' '.join(cmd)}\n"
+                              f"{res.stdout.decode(errors='replace')[-2000:]}")
+
+
+def _compile(spec: BuildSpec, sources: dict[str, bytes], out: Path, cc: str) -> None:
+    """Write the sources into a temporary folder beside ``out``, compile them, rename the result to ``out``."""
+    work = Path(tempfile.mkdtemp(prefix=".build-", dir=out.parent))
+    jobs: list[tuple[str, subprocess.Popen]] = []
+    try:
+        for name, data in sources.items():
+            (work / name).write_bytes(data)
+        units = list(spec.units) if spec.units is not None else sorted(n for n in sources if n.endswith(".c"))
+        missing = [u for u in units if u not in sources]
+        if missing or not units:
+            raise SimulationError(f"building {spec.what}: no source {', '.join(missing) or '(.c)'} among "
+                                  f"{', '.join(sorted(sources))}")
+        link = ["-shared"] if spec.shared else []
+        tmp_out = work / out.name
+        if spec.one_command:
+            size = max(len(sources[u]) for u in units)
+            _run([cc, *_unit_flags(spec, size), *link, *units, "-o", tmp_out.name, "-lm"], work, spec.what, cc)
+        else:
+            objs = []
+            pending = sorted(units, key=lambda n: -len(sources[n]))  # biggest first
+            while pending or jobs:
+                while pending and len(jobs) < MAX_JOBS:
+                    name = pending.pop(0)
+                    obj = name.rsplit(".", 1)[0] + ".o"
+                    cmd = [cc, *_unit_flags(spec, len(sources[name])), "-c", name, "-o", obj]
+                    jobs.append((name, subprocess.Popen(cmd, cwd=work, stdout=subprocess.PIPE,
+                                                        stderr=subprocess.STDOUT)))
+                    objs.append(obj)
+                name, proc = jobs.pop(0)
+                text, _ = proc.communicate()
+                if proc.returncode != 0:
+                    raise SimulationError(f"compiling {name} of {spec.what} failed ({cc}):\n"
+                                          f"{text.decode(errors='replace')[-2000:]}")
+            _run([cc, *link, "-o", tmp_out.name, *objs, "-lm"], work, spec.what, cc)
+        os.replace(tmp_out, out)
+    finally:
+        for _, proc in jobs:  # an error or an interrupt: no compiler outlives the build
+            proc.kill()
+            proc.wait()
+        shutil.rmtree(work, ignore_errors=True)

@@ -1,0 +1,169 @@
+"""The compile-and-cache API (symtrack.build): the key follows the sources and the flags, a second
+build is a cache hit, an interrupted build leaves no half-written artefact, a missing or failing
+compiler gives a clear error, the log tells the user what is compiling. (Two processes building
+one key at once: tests/test_cache_concurrency.py.)"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from symtrack import build
+from symtrack.build import cache as build_cache
+from symtrack.codegen.standalone import build_program
+from symtrack.control.solver_cache import problem_key
+from symtrack.foundations.errors import SimulationError
+
+pytestmark = pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler")
+
+REPO = Path(__file__).resolve().parent.parent
+ANSWER = b'__attribute__((visibility("default"))) int symtrack_answer(void) { return %d; }\n'
+
+
+def _spec(root: Path, value: int, calls: list | None = None, **kw) -> build.BuildSpec:
+    source = ANSWER % value
+
+    def sources():
+        if calls is not None:
+            calls.append(value)
+        return {"answer.c": source}
+
+    return build.BuildSpec(kind="answer", key=build.digest(source, " ".join(kw.get("cflags") or ())),
+                           output="libanswer.so", sources=sources, what=f"the answer {value}", root=root, **kw)
+
+
+def test_a_second_build_is_a_cache_hit_and_the_key_follows_the_sources(tmp_path, caplog):
+    calls: list[int] = []
+    n0 = len(build.builds)
+    with caplog.at_level(logging.INFO, logger="symtrack.build"):
+        so = build.build(_spec(tmp_path, 42, calls))
+    assert ctypes.CDLL(str(so)).symtrack_answer() == 42
+    assert so.parent.parent == tmp_path and so.parent.name == f"answer-{build.digest(ANSWER % 42, '')[:16]}"
+    assert sorted(p.name for p in so.parent.iterdir()) == [".lock", "libanswer.so"]  # no temporary folder left
+    assert any(f"compiling the answer 42 (first run; cached in {so.parent})" in r.getMessage()
+               for r in caplog.records)
+    assert len(build.builds) == n0 + 1 and build.builds[-1].path == so and build.builds[-1].kind == "answer"
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="symtrack.build"):
+        assert build.build(_spec(tmp_path, 42, calls)) == so  # the hit: no sources made, no compiler, no log
+    assert calls == [42] and len(build.builds) == n0 + 1 and not caplog.records
+    other = build.build(_spec(tmp_path, 7, calls))  # other sources: another entry
+    assert other.parent != so.parent and ctypes.CDLL(str(other)).symtrack_answer() == 7
+    assert calls == [42, 7]
+
+
+def test_the_key_follows_the_flags(tmp_path):
+    a = build.build(_spec(tmp_path, 1, cflags=("-O0",)))
+    b = build.build(_spec(tmp_path, 1, cflags=("-O2",)))
+    assert a.parent != b.parent and a.exists() and b.exists()
+    # the callers' keys: the MPC's (flags in its key) and the standalone programs'
+    assert problem_key(b"problem", ("-O1",)) != problem_key(b"problem", ("-O2",))
+    main = tmp_path / "src" / "main.c"
+    main.parent.mkdir()
+    main.write_text('#include <stdio.h>\n#include "value.h"\nint main(void) { printf("%d\\n", VALUE); return 0; }\n')
+    header = tmp_path / "src" / "value.h"
+    header.write_text("#define VALUE 5\n")
+    os.environ["SYMTRACK_CACHE"], saved = str(tmp_path / "cache"), os.environ.get("SYMTRACK_CACHE")
+    try:
+        p1 = build_program("toy", main, [header], ("-O0",))
+        assert build_program("toy", main, [header], ("-O0",)) == p1
+        p2 = build_program("toy", main, [header], ("-O1",))
+        header.write_text("#define VALUE 6\n")
+        p3 = build_program("toy", main, [header], ("-O1",))
+    finally:
+        if saved is None:
+            del os.environ["SYMTRACK_CACHE"]
+        else:
+            os.environ["SYMTRACK_CACHE"] = saved
+    assert len({p1, p2, p3}) == 3 and all(p.parent.parent == tmp_path / "cache" for p in (p1, p2, p3))
+    assert [subprocess.run([str(p)], capture_output=True, text=True).stdout for p in (p1, p3)] == ["5\n", "6\n"]
+
+
+INTERRUPTED = textwrap.dedent("""
+    import sys
+    from pathlib import Path
+    from symtrack import build
+    src = b'int symtrack_answer(void) { return 3; }\\n'
+    build.build(build.BuildSpec(kind="answer", key=build.digest(src), output="libanswer.so",
+                                sources=lambda: {"answer.c": src}, what="the answer", root=Path(sys.argv[1])),
+                cc=sys.argv[2])
+""")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+def test_an_interrupted_build_leaves_no_half_written_library(tmp_path, sig):
+    """Ctrl-C (the build cleans up) or a killed worker (the next build cleans up) while the compiler
+    runs: no library appears, and the next build of the entry succeeds."""
+    started = tmp_path / "started"
+    cc = tmp_path / "cc"  # a compiler that hangs after writing half an object
+    cc.write_text(f"#!/bin/sh\necho $$ > {started}\nfor a; do case $a in *.o) echo half > $a;; esac; done\n"
+                  "exec sleep 60\n")
+    cc.chmod(0o755)
+    root = tmp_path / "cache"
+    p = subprocess.Popen([sys.executable, "-c", INTERRUPTED, str(root), str(cc)],
+                         env=dict(os.environ, PYTHONPATH=str(REPO)), stderr=subprocess.PIPE)
+    t0 = time.monotonic()
+    while not (started.exists() and started.read_text().strip()):
+        assert p.poll() is None and time.monotonic() - t0 < 60, p.stderr.read().decode()
+        time.sleep(0.05)
+    time.sleep(0.2)  # the half object written
+    p.send_signal(sig)
+    p.wait(timeout=60)
+    p.stderr.close()
+    with contextlib.suppress(ProcessLookupError, ValueError):  # the killed build's compiler, orphaned
+        os.kill(int(started.read_text()), signal.SIGKILL)
+    assert p.returncode != 0
+    (entry,) = root.iterdir()
+    assert not (entry / "libanswer.so").exists()
+    leftovers = list(entry.glob(".build-*"))
+    assert (leftovers == []) == (sig == signal.SIGINT)  # Ctrl-C cleans up; a kill leaves the folder
+    so = build.build(build.BuildSpec(kind="answer", key=build.digest(b"int symtrack_answer(void) { return 3; }\n"),
+                                     output="libanswer.so", what="the answer", root=root,
+                                     sources=lambda: {"answer.c": b"int symtrack_answer(void) { return 3; }\n"},
+                                     shared_cflags=("-fPIC",)))
+    assert so.parent == entry and ctypes.CDLL(str(so)).symtrack_answer() == 3
+    assert sorted(q.name for q in entry.iterdir()) == [".lock", "libanswer.so"]  # the killed build's folder is gone
+
+
+def test_a_missing_compiler_is_a_clear_error(tmp_path, monkeypatch, caplog):
+    monkeypatch.setattr(build_cache, "find_compiler", lambda: None)
+    with pytest.raises(SimulationError, match=r"no C compiler found \(looked for \$CC, cc, gcc\): cannot build "
+                                              r"the answer 5; install gcc \(or set \$CC\)"):
+        build.build(_spec(tmp_path, 5))
+    assert list(tmp_path.iterdir()) == []
+    # callers with an interpreted fallback: a warning once, or an error when compiled code is required
+    monkeypatch.setattr(build_cache, "_warned_no_compiler", False)
+    with caplog.at_level(logging.WARNING, logger="symtrack.build"):
+        assert build.compiler() is None and build.compiler() is None
+    assert sum("no C compiler found" in r.getMessage() for r in caplog.records) == 1
+    monkeypatch.setattr(build_cache, "_require", True)
+    with pytest.raises(SimulationError, match="compiled code is required"):
+        build.compiler()
+
+
+def test_a_compiler_error_names_the_build_and_leaves_nothing(tmp_path):
+    spec = build.BuildSpec(kind="broken", key=build.digest(b"broken"), output="libbroken.so", what="the broken one",
+                           sources=lambda: {"broken.c": b"int f(void) { return }\n"}, root=tmp_path)
+    with pytest.raises(SimulationError, match=r"(?s)compiling broken.c of the broken one failed .*error: expected"):
+        build.build(spec)
+    assert sorted(q.name for q in spec.folder.iterdir()) == [".lock"]
+
+
+def test_the_cache_root_is_the_environment_variable_or_the_user_cache(monkeypatch, tmp_path):
+    monkeypatch.setenv("SYMTRACK_CACHE", str(tmp_path))
+    assert build.cache_root() == tmp_path
+    spec = build.BuildSpec(kind="k", key="0123456789abcdef0123", output="x", sources=dict, what="x", group="mpc",
+                           digits=20, suffix="-b2")
+    assert spec.path == tmp_path / "mpc" / "k-0123456789abcdef0123-b2" / "x"
+    monkeypatch.delenv("SYMTRACK_CACHE")
+    assert build.cache_root() == Path.home() / ".cache" / "symtrack"
