@@ -27,13 +27,14 @@ from .reports import plots, terrain_plots, validation
 from .reports.html import report_html
 from .reports.run_files import clear_previous_run, write_run
 from .simulation import loop
+from .simulation.build import Built
+from .simulation.build import build as build_plant
 from .simulation.passes import run_passes, study_summary
-from .simulation.plants import make_plant
 from .simulation.result import RunResult, summarise
 from .simulation.scenario import Scenario, builtin_names, load_scenario
 from .terrain.storage import Terrain
 
-__all__ = ["ANIMATION_EVERY_S", "IncompleteSimulation", "Result", "simulate"]
+__all__ = ["ANIMATION_EVERY_S", "Built", "IncompleteSimulation", "Result", "build", "simulate"]
 
 # a grid run keeps a snapshot of its loaded cells this often, for the pass animations
 ANIMATION_EVERY_S = 0.1
@@ -159,8 +160,9 @@ def _grid_names() -> list[str]:
     return [n for n in builtin_names() if load_scenario(n).terrain is not None]
 
 
-def simulate(scenario, *, integrator: str | None = None, terrain=None, progress: bool = False) -> Result:
-    """Run a scenario: its torque programme until its stop rule, every pass of a terrain study.
+def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
+    """Build a scenario's plant ingredients, explicitly (:mod:`symtrack.simulation.build`: the
+    model is built once per process for its options; :func:`simulate` builds through here).
 
     Parameters
     ----------
@@ -169,14 +171,12 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
     integrator : str, optional
         Instead of the scenario's ``run.integrator`` (a name of the integrator registry).
     terrain : Terrain or path, optional
-        A grid terrain to start from (instead of a new field); the scenario needs a
-        ``[terrain]`` section.
-    progress : bool
-        Show progress on stderr.
+        A grid terrain the run will start from; the scenario needs a ``[terrain]`` section.
 
     Returns
     -------
-    Result
+    Built
+        ``Built.scenario`` is the scenario as run; ``simulate(built)`` runs it.
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
@@ -189,7 +189,33 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
         raise ScenarioError(f"scenario {scenario.name!r} has no [terrain] section, so it runs on the homogeneous "
                             f"terrain and cannot start from a terrain file; the grid scenarios are "
                             f"{', '.join(_grid_names())} (or add a [terrain] section)")
-    plant = make_plant(scenario, terrain=terrain)
+    return build_plant(scenario, terrain)
+
+
+def simulate(scenario, *, integrator: str | None = None, terrain=None, progress: bool = False) -> Result:
+    """Run a scenario: its torque programme until its stop rule, every pass of a terrain study.
+
+    Parameters
+    ----------
+    scenario : Scenario, str or Built
+        A loaded scenario, a built-in name / TOML path (loaded with no overrides), or what
+        :func:`build` returned.
+    integrator : str, optional
+        Instead of the scenario's ``run.integrator`` (a name of the integrator registry).
+    terrain : Terrain or path, optional
+        A grid terrain to start from (instead of a new field); the scenario needs a
+        ``[terrain]`` section.
+    progress : bool
+        Show progress on stderr.
+
+    Returns
+    -------
+    Result
+    """
+    built = build(scenario.scenario if isinstance(scenario, Built) else scenario, integrator=integrator,
+                  terrain=terrain)
+    scenario = built.scenario
+    plant = built.plant(terrain)
     failure = None
     if plant.kind == "grid":
         plant.record_every_s = ANIMATION_EVERY_S
