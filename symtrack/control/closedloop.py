@@ -40,16 +40,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..foundations.errors import ScenarioError, SimulationError
-from ..foundations.files import atomic_write_bytes, atomic_write_text
 from ..foundations.progress import Progress
 from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..model.vehicle import VEHICLE_STATES
-from ..reports.plots import plt, png_bytes
-from ..reports.run_files import clear_previous_run
-from ..reports.terrain_plots import sinkage_map_png
+from ..reports.figures import figures
+from ..reports.run_files import write_folder
 from ..simulation import loop
 from ..simulation.build import system_model
 from ..simulation.plants import StepPlant
@@ -63,8 +61,8 @@ from .trim import trim
 log = logging.getLogger("symtrack.control.closedloop")
 
 SUMMARY_SCHEMA_VERSION = 1
-__all__ = ["ClosedLoopResult", "TrackingLaw", "field_from_path", "grid_integrator", "homogeneous_plant",
-           "initial_state", "make_grid_plant", "make_plant", "run", "summarise", "write"]
+__all__ = ["ClosedLoopResult", "TrackingLaw", "closed_loop_files", "field_from_path", "grid_integrator",
+           "homogeneous_plant", "initial_state", "make_grid_plant", "make_plant", "run", "summarise", "write"]
 
 # IDAS tolerances of the grid plant: those of `symtrack simulate validation_grid` (docs/terrain.md:
 # every validation figure equal to 3 digits against 1e-7 / 1e-9, in half the time)
@@ -409,68 +407,6 @@ def path_csv(res: ClosedLoopResult) -> str:
     return buf.getvalue()
 
 
-def plots(res: ClosedLoopResult) -> dict[str, bytes]:
-    out = {}
-    p = res.path
-    ix, iy = res.state_names.index("x_m"), res.state_names.index("y_m")
-    fig, (ax, ae) = plt.subplots(2, 1, figsize=(8, 9), gridspec_kw={"height_ratios": [3, 1]})
-    on = p.segment >= 0
-    ax.plot(p.x[on], p.y[on], "k--", lw=1, label="reference path")
-    ax.plot(res.X[:, ix], res.X[:, iy], "C0", lw=1.5, label="vehicle (CG)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.legend()
-    ax.set_title(f"{res.scenario.name}: path (true scale; the error below, magnified)")
-    # the centimetre errors the true-scale path hides: lateral error along the path, with the band
-    # of the largest error on the straights
-    ae.plot(res.s, 100 * res.e_lat, "C0")
-    band = 100 * float(np.max(np.abs(res.e_lat[res.straight]))) if res.straight.any() else 0.0
-    ae.axhspan(-band, band, color="C0", alpha=0.12, label=f"max on straights: {band:.1f} cm")
-    ae.axhline(0.0, color="k", lw=0.8)
-    ae.set_xlabel("path length s [m]")
-    ae.set_ylabel("lateral error [cm]")
-    ae.grid(True)
-    ae.legend(fontsize=8)
-    out["path.png"] = png_bytes(fig)
-
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    a1.plot(res.s, 100 * res.e_lat)
-    a1.set_ylabel("lateral error [cm]")
-    a1.grid(True)
-    a2.plot(res.s, np.degrees(res.e_psi))
-    a2.set_ylabel("heading error [deg]")
-    a2.set_xlabel("path length s [m]")
-    a2.grid(True)
-    for a in (a1, a2):
-        lo, hi = a.get_ylim()
-        a.fill_between(res.s, lo, hi, where=~res.straight, color="0.9", step="mid", label="turn")
-        a.set_ylim(lo, hi)
-    a1.set_title("tracking errors (grey: turns)")
-    out["errors.png"] = png_bytes(fig)
-
-    fig, ax = plt.subplots(figsize=(9, 4))
-    for k, name in enumerate(("left", "right")):
-        ax.step(res.t, res.U[:, k], where="post", label=f"{name} command")
-        ax.plot(res.t, res.X[:, res.state_names.index(f"torque_{name}_N_m")], "--", label=f"{name} actual")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("torque [N m]")
-    ax.grid(True)
-    ax.legend()
-    out["torques.png"] = png_bytes(fig)
-
-    fig, ax = plt.subplots(figsize=(9, 4))
-    ax.plot(res.t[:len(res.solve_ms)], res.solve_ms, ".", ms=3)
-    bad = ~res.solve_ok
-    ax.plot(res.t[:len(res.solve_ms)][bad], res.solve_ms[bad], "rx", label="failed")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("solve time [ms]")
-    ax.set_title(f"solver {res.scenario.mpc.solver}{' (jit)' if res.scenario.mpc.jit else ''}")
-    ax.grid(True)
-    out["solve_times.png"] = png_bytes(fig)
-    return out
-
-
 def rut_figures(plant) -> dict:
     """Figures of the final terrain of a grid plant: the rut (cells loaded in the run, z_max > 1 um)."""
     world = plant.world
@@ -485,27 +421,17 @@ def rut_figures(plant) -> dict:
     }
 
 
-def terrain_plots(res: ClosedLoopResult) -> dict[str, bytes]:
-    """The final terrain of a grid plant: ``sinkage_map.png`` (top view, symtrack/terrain/plots.py)."""
-    plant = res.plant
-    if getattr(plant, "kind", None) != "grid":
-        return {}
-    return {"sinkage_map.png": sinkage_map_png(plant.world, plant.world.storage.copy_z(), 1)}
+def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
+    """The folder of a closed loop: trajectory.csv, path.csv, scenario.resolved.json, the
+    ``control`` figures of :mod:`symtrack.reports.figures`, summary.json."""
+    return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res),
+            "scenario.resolved.json": json.dumps({"schema_version": SUMMARY_SCHEMA_VERSION, **res.scenario.to_dict()},
+                                                 indent=2) + "\n",
+            **figures("control", res), "summary.json": json.dumps(res.summary, indent=2) + "\n"}
 
 
-def write(out_dir, res: ClosedLoopResult) -> None:
-    """trajectory.csv, path.csv, scenario.resolved.json, the plots, then summary.json (last)."""
-    from pathlib import Path
-
-    out_dir = Path(out_dir)
-    clear_previous_run(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / "trajectory.csv", trajectory_csv(res))
-    atomic_write_text(out_dir / "path.csv", path_csv(res))
-    atomic_write_text(out_dir / "scenario.resolved.json",
-                      json.dumps({"schema_version": SUMMARY_SCHEMA_VERSION, **res.scenario.to_dict()}, indent=2) + "\n")
-    for name, data in plots(res).items():
-        atomic_write_bytes(out_dir / name, data)
-    for name, data in terrain_plots(res).items():
-        atomic_write_bytes(out_dir / name, data)
-    atomic_write_text(out_dir / "summary.json", json.dumps(res.summary, indent=2) + "\n")
+def write(out_dir, res: ClosedLoopResult) -> list:
+    """Write the closed loop's folder (:func:`closed_loop_files`) with the one writer
+    (:func:`~symtrack.reports.run_files.write_folder`: a previous run's files removed first,
+    summary.json last). Returns the paths written."""
+    return write_folder(out_dir, closed_loop_files(res))
