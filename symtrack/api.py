@@ -21,11 +21,9 @@ import numpy as np
 from .foundations.errors import ScenarioError, SimulationError
 from .integrators import registry
 from .reports.run_files import simulation_files, validation_table, write_folder
-from .simulation import loop
 from .simulation.build import Built
 from .simulation.build import build as build_plant
-from .simulation.passes import run_passes, study_summary
-from .simulation.result import RunResult, summarise
+from .simulation.result import RunResult
 from .simulation.scenario import Scenario, builtin_names, load_scenario
 from .terrain.storage import Terrain
 
@@ -156,25 +154,9 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
     built = build(scenario.scenario if isinstance(scenario, Built) else scenario, integrator=integrator,
                   terrain=terrain)
     scenario = built.scenario
-    plant = built.plant(terrain)
-    failure = None
-    if plant.kind == "grid":
-        plant.record_every_s = ANIMATION_EVERY_S
-        try:
-            study = run_passes(scenario, plant, progress=progress)
-        except loop.IncompleteRun as err:
-            study, failure = err.study, err
-        summary, per_pass = study_summary(study)
-        if terrain is not None and not isinstance(terrain, Terrain):
-            summary["terrain_in"] = str(terrain)
-        result = Result(scenario, study.runs, summary, per_pass, study)
-    else:
-        try:
-            res = loop.run(scenario, plant, progress=progress)
-        except loop.IncompleteRun as err:
-            res, failure = err.partial, err
-        summary = summarise(res)
-        result = Result(scenario, [res], summary, [summary])
+    out = built.run(terrain, progress=progress, record_every_s=ANIMATION_EVERY_S)
+    result = Result(scenario, out.runs, out.summary, out.pass_summaries, out.study)
+    failure = out.failure
     if failure is not None:
         result.summary["complete"] = False
         result.summary["error"] = str(failure)

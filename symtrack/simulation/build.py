@@ -15,7 +15,8 @@ algebraic guess), the plant, and the grid terrain's world (its cell storage is t
 result).
 
 - :func:`build` -> :class:`Built`: the ingredients of a scenario's plant; :meth:`Built.plant`
-  makes a fresh plant from them;
+  makes a fresh plant from them, :meth:`Built.run` runs the scenario on one (the one time loop,
+  every pass of a terrain study) -> :class:`Outcome`;
 - :func:`system_model`: the cached model of a set of model options;
 - :func:`clear_build_cache`, :func:`build_cache_info`: empty and inspect the cache.
 """
@@ -30,9 +31,13 @@ from ..integrators import registry
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..model.options import ModelOptions
+from ..terrain.storage import Terrain
+from . import loop
+from .passes import PassStudy, run_passes, study_summary
 from .plants import make_plant
+from .result import summarise
 
-__all__ = ["Built", "build", "build_cache_info", "clear_build_cache", "system_model"]
+__all__ = ["Built", "Outcome", "build", "build_cache_info", "clear_build_cache", "system_model"]
 
 _models: dict[ModelOptions, SystemModel] = {}
 _lock = threading.Lock()
@@ -68,6 +73,31 @@ def build_cache_info() -> dict:
         return {"models": len(_models), **_hits}
 
 
+@dataclass
+class Outcome:
+    """What :meth:`Built.run` computed.
+
+    Attributes
+    ----------
+    runs : list of RunResult
+        One per pass (one for the homogeneous terrain).
+    summary : dict
+        The run's summary.json (a terrain study's: the last pass's figures with ``passes``).
+    pass_summaries : list of dict
+        The summary of each pass.
+    study : PassStudy or None
+        The passes over the grid terrain (None on the homogeneous terrain).
+    failure : IncompleteRun or None
+        The error that ended the run part of the way (what was computed up to there is kept).
+    """
+
+    runs: list
+    summary: dict
+    pass_summaries: list
+    study: PassStudy | None = None
+    failure: loop.IncompleteRun | None = None
+
+
 @dataclass(frozen=True)
 class Built:
     """The built ingredients of a scenario's plant (:func:`build`).
@@ -95,6 +125,32 @@ class Built:
         built model): a new stepper, and for the grid a new world (on ``terrain``, a
         :class:`~symtrack.terrain.storage.Terrain` or terrain file, if given)."""
         return make_plant(self.scenario, terrain=terrain, model=self.model)
+
+    def run(self, terrain=None, progress: bool = False, record_every_s: float | None = None) -> Outcome:
+        """Run the scenario on a fresh plant (:meth:`plant`): the one time loop
+        (:func:`symtrack.simulation.loop.run`) until its stop rule, on the grid terrain every
+        pass (:func:`~symtrack.simulation.passes.run_passes`, the grid plant keeping a snapshot
+        every ``record_every_s``). A run that fails part of the way is returned with its
+        ``failure`` (not raised)."""
+        plant = self.plant(terrain)
+        if plant.kind == "grid":
+            plant.record_every_s = record_every_s
+            failure = None
+            try:
+                study = run_passes(self.scenario, plant, progress=progress)
+            except loop.IncompleteRun as err:
+                study, failure = err.study, err
+            summary, per_pass = study_summary(study)
+            if terrain is not None and not isinstance(terrain, Terrain):
+                summary["terrain_in"] = str(terrain)
+            return Outcome(study.runs, summary, per_pass, study, failure)
+        failure = None
+        try:
+            res = loop.run(self.scenario, plant, progress=progress)
+        except loop.IncompleteRun as err:
+            res, failure = err.partial, err
+        summary = summarise(res)
+        return Outcome([res], summary, [summary], None, failure)
 
 
 def build(scenario, terrain=None) -> Built:
