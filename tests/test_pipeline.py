@@ -44,3 +44,82 @@ def test_build_checks_the_integrator_and_the_terrain():
     with pytest.raises(ScenarioError):
         symtrack.build("validation", terrain="field.npz")
     assert symtrack.build("validation_grid").kind == "grid"
+
+
+def test_a_figure_registered_in_a_test_is_drawn_and_written(tmp_path):
+    """Adding a figure is one function and one registry entry: a toy figure of the trajectory
+    kind lands in the run's folder and in report.html, after the built-in ones."""
+    from symtrack.reports import figures
+    from symtrack.reports.plots import plt, png_bytes
+
+    def toy(res):
+        fig, ax = plt.subplots()
+        ax.plot(res.t, res.column("u_m_s"))
+        return {"toy_speed.png": png_bytes(fig)}
+
+    figures.register("toy_speed", "trajectory", toy)
+    try:
+        assert figures.names("trajectory")[-1] == "toy_speed"
+        res = symtrack.simulate(symtrack.load_scenario("validation", {"run.duration_s": 1.0}))
+        written = res.write(tmp_path)
+    finally:
+        figures.unregister("toy_speed")
+    assert tmp_path / "toy_speed.png" in written
+    assert (tmp_path / "toy_speed.png").read_bytes()[:4] == b"\x89PNG"
+    assert "toy_speed.png" in (tmp_path / "report.html").read_text()
+    assert "toy_speed" not in figures.names()
+    with pytest.raises(KeyError):
+        figures.register("path", "trajectory", toy)  # taken
+    with pytest.raises(KeyError):
+        figures.register("toy", "sound", toy)
+
+
+def test_the_one_writer_writes_summary_last_and_clears_a_previous_run(tmp_path, monkeypatch):
+    from symtrack.reports import run_files
+
+    (tmp_path / "summary.json").write_text("{}")
+    (tmp_path / "old.png").write_text("x")
+    (tmp_path / "pass_2").mkdir()
+    (tmp_path / "notes.txt").write_text("mine")
+    order = []
+    real = run_files.atomic_write_bytes
+    monkeypatch.setattr(run_files, "atomic_write_bytes", lambda p, d: (order.append(p.relative_to(tmp_path).as_posix()),
+                                                                     real(p, d)))
+    files = {"pass_1/summary.json": "{}", "summary.json": "{}\n", "pass_1/a.csv": "1", "b.png": b"png"}
+    written = run_files.write_folder(tmp_path, files)
+    assert order == ["pass_1/a.csv", "b.png", "pass_1/summary.json", "summary.json"]
+    assert written == sorted(tmp_path / n for n in files)
+    assert not (tmp_path / "old.png").exists() and not (tmp_path / "pass_2").exists()
+    assert (tmp_path / "notes.txt").read_text() == "mine"
+
+
+def test_a_sampled_law_runs_on_its_own_clock():
+    """The one loop with a sampled law (the MPC's form): sampled every sample_time_s at the summed
+    sample times, its torques held over sub-steps of at most substep_s, the run ended by the law."""
+    from symtrack.simulation import loop
+
+    calls = []
+
+    class Law:
+        sample_time_s, substep_s = 0.05, 0.02
+
+        def __call__(self, t_s, x, final=False):
+            calls.append((t_s, final))
+            return None if len(calls) == 5 else (200.0 * len(calls), 100.0)
+
+    sc = symtrack.load_scenario("validation", {"run.duration_s": 10.0})
+    res = loop.run(sc, symtrack.build(sc).plant(), torque_law=Law())
+    t_expected = [0.0]
+    for _ in range(4):
+        t_expected.append(t_expected[-1] + 0.05)
+    assert [t for t, _ in calls] == t_expected and not any(f for _, f in calls)
+    assert res.stopped_by == "controller"
+    assert len(res.t) == 1 + 4 * 3  # 3 sub-steps of 1/60 s per sample
+    np.testing.assert_allclose(np.diff(res.t), 0.05 / 3, rtol=1e-12)
+    np.testing.assert_array_equal(res.U[1:4, 0], 200.0)
+    np.testing.assert_array_equal(res.U[10:13, 0], 800.0)
+    # at the duration the law sees the last state once more (final)
+    calls.clear()
+    sc = symtrack.load_scenario("validation", {"run.duration_s": 0.1})
+    res = loop.run(sc, symtrack.build(sc).plant(), torque_law=Law())
+    assert calls[-1] == (0.1, True) and len(calls) == 3 and res.stopped_by == "duration"
