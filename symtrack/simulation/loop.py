@@ -53,8 +53,7 @@ class IncompleteRun(SimulationError):
 
 
 class OutputGrid:
-    """The output intervals of a scenario: (t0_s, t1_s, length_s, u) with u the torque commands in
-    force (length_s = t1_s - t0_s)."""
+    """The output intervals of a scenario: (t0, t1, u) with u the torque commands in force."""
 
     def __init__(self, scenario):
         run = scenario.run
@@ -77,7 +76,7 @@ class OutputGrid:
                     t_next = tc
             while self.cur + 1 < len(self.starts) and self.starts[self.cur + 1] <= t + 1e-12:
                 self.cur += 1
-            out.append((t, t_next, t_next - t, self.torque[self.cur]))
+            out.append((t, t_next, self.torque[self.cur]))
             t = t_next
         self.t = t
         return out
@@ -113,13 +112,14 @@ class SampleGrid:
         self.t0, self.t = self.t, self.t + self.dt
         self.u, self.done = np.asarray(u, dtype=float), 0
 
-    def take(self, n: int) -> list[tuple[float, float, float, np.ndarray]]:
-        """The next at most n sub-steps of the current sample, as (t0_s, t1_s, length_s, u)."""
+    def take(self, n: int) -> list[tuple[float, float, np.ndarray]]:
+        """The next at most n sub-steps of the current sample, as (t0_s, t1_s, u); their length is
+        ``h`` (exactly: not t1_s - t0_s)."""
         k = min(n, self.n - self.done)
         out = []
         for i in range(self.done, self.done + k):
             t0 = self.t0 + i * self.h
-            out.append((t0, t0 + self.h, self.h, self.u))
+            out.append((t0, t0 + self.h, self.u))
         self.done += k
         return out
 
@@ -231,7 +231,8 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                         stopped_by = "controller"
                         break
                     grid.hold(np.asarray(u_law, dtype=float).reshape(2))
-                ivs = grid.take(n)
+                # (t0_s, t1_s, length_s, u): a sampled law's sub-steps have the length h exactly
+                ivs = [(t0, t1, grid.h if sampled else t1 - t0, u) for t0, t1, u in grid.take(n)]
                 if not ivs:
                     break
                 if torque_law is not None and not sampled:
