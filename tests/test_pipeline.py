@@ -123,3 +123,27 @@ def test_a_sampled_law_runs_on_its_own_clock():
     sc = symtrack.load_scenario("validation", {"run.duration_s": 0.1})
     res = loop.run(sc, symtrack.build(sc).plant(), torque_law=Law())
     assert calls[-1] == (0.1, True) and len(calls) == 3 and res.stopped_by == "duration"
+
+
+def test_one_loop_and_one_writer_in_the_source():
+    """Read from the source: only the time loop (and the plants' own helper) drives a plant
+    (``synchronize``), and the run folders of simulate, mpc and the field study are written by
+    the one writer (no atomic write of their own in api, control, simulation, reports but
+    run_files, studies/field)."""
+    import ast
+    from pathlib import Path
+
+    root = Path(symtrack.__file__).parent
+    drivers, writers = set(), set()
+    for f in root.rglob("*.py"):
+        rel = f.relative_to(root).as_posix()
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Attribute) and node.attr == "synchronize" and isinstance(node.ctx, ast.Load):
+                drivers.add(rel)
+            if isinstance(node, ast.Name | ast.alias) and getattr(node, "id", getattr(node, "name", "")) in (
+                    "atomic_write_bytes", "atomic_write_text"):
+                writers.add(rel)
+    assert {d for d in drivers if not d.startswith("bench/")} == {"simulation/loop.py", "simulation/plants.py"}
+    run_folders = {w for w in writers if w == "api.py" or w.split("/")[0] in ("control", "simulation", "reports")
+                   or w == "studies/field.py"}
+    assert run_folders == {"reports/run_files.py"}
