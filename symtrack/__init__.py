@@ -10,6 +10,8 @@ The public API (one import is enough in a notebook)::
 - :func:`load_scenario`, :class:`Scenario`: built-in scenarios by name or TOML files, with
   overrides in the grammar of ``--set``;
 - :func:`simulate` -> :class:`Result` (``summary``, ``column``, ``write``, ``terrain``);
+- :func:`build` -> :class:`Built`: the explicit, cached build of a scenario's plant (``simulate``
+  builds through it: a second run of the same model costs its time loop);
 - :class:`Terrain`: the grid terrain's cell storage (``load``, ``save``, the arrays);
 - :class:`SystemModel`: the symbolic model (named CasADi Functions);
 - :mod:`symtrack.control`: trim, linearize, the MPC and the closed loop.
@@ -23,10 +25,13 @@ import importlib
 
 __version__ = "0.1.0"
 
-__all__ = ["Result", "Scenario", "SystemModel", "Terrain", "__version__", "control", "load_scenario", "simulate"]
+__all__ = ["Built", "Result", "Scenario", "SystemModel", "Terrain", "__version__", "build", "control",
+           "load_scenario", "simulate"]
 
 _LAZY = {
     "Result": ("symtrack.api", "Result"),
+    "build": ("symtrack.api", "build"),
+    "Built": ("symtrack.api", "Built"),
     "simulate": ("symtrack.api", "simulate"),
     "load_scenario": ("symtrack.simulation.scenario", "load_scenario"),
     "Scenario": ("symtrack.simulation.scenario", "Scenario"),

@@ -14,26 +14,20 @@ A scenario with a ``[terrain]`` section runs on the persistent grid terrain (all
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
 
-from .foundations.config import to_toml
 from .foundations.errors import ScenarioError, SimulationError
-from .foundations.files import atomic_write_bytes, atomic_write_text
 from .integrators import registry
-from .reports import plots, terrain_plots, validation
-from .reports.html import report_html
-from .reports.run_files import clear_previous_run, write_run
-from .simulation import loop
-from .simulation.passes import run_passes, study_summary
-from .simulation.plants import make_plant
-from .simulation.result import RunResult, summarise
+from .reports.run_files import simulation_files, validation_table, write_folder
+from .simulation.build import Built
+from .simulation.build import build as build_plant
+from .simulation.result import RunResult
 from .simulation.scenario import Scenario, builtin_names, load_scenario
 from .terrain.storage import Terrain
 
-__all__ = ["ANIMATION_EVERY_S", "IncompleteSimulation", "Result", "simulate"]
+__all__ = ["ANIMATION_EVERY_S", "Built", "IncompleteSimulation", "Result", "build", "simulate"]
 
 # a grid run keeps a snapshot of its loaded cells this often, for the pass animations
 ANIMATION_EVERY_S = 0.1
@@ -90,77 +84,24 @@ class Result:
     @property
     def validation_table(self) -> str | None:
         """The reported-vs-simulated table (Markdown) of a validation scenario, else None."""
-        sc = self.scenario
-        if sc.run.stop_distance_event == "idle" and "validation" in sc.name:
-            return validation.table_markdown(self.summary)
-        return None
+        return validation_table(self.scenario, self.summary)
 
     def write(self, out_dir) -> list[Path]:
-        """Write the files of the run into ``out_dir`` (as ``symtrack simulate --out``);
-        summary.json last. The files of a previous run in the folder are removed first
-        (:func:`~symtrack.reports.run_files.clear_previous_run`). Returns the paths written."""
-        out = Path(out_dir)
-        clear_previous_run(out)
-        sc = self.scenario
-        table = self.validation_table
-        top: dict[str, bytes] = {}  # the files of the folder's top, besides the run files
-        shown: dict[str, bytes] = {}  # the images of report.html
-        passes = []  # (folder, run, summary, plots) of each pass of a multi-pass study
-        if self._study is None:
-            run = self.runs[0]
-            top.update(plots.all_plots(run))
-            shown.update(top)
-        else:
-            st = self._study
-            multi = len(st.runs) > 1
-            for k, z in enumerate(st.maps):
-                name = f"sinkage_map_pass_{k + 1}.png" if multi else "sinkage_map.png"
-                top[name] = terrain_plots.sinkage_map_png(st.world, z, k + 1)
-            line = (sc.start.x_m, sc.start.y_m, np.radians(sc.start.yaw_deg))
-            top["rut_section.png"] = terrain_plots.rut_section_png(st.world, st.maps, st.runs, line)
-            for k, snaps in enumerate(st.snapshots):
-                if snaps:
-                    name = f"animation_pass_{k + 1}.gif" if multi else "animation.gif"
-                    top[name] = terrain_plots.pass_animation_gif(st.world, st.before[k], snaps, st.maps[k])
-            top.update(terrain_plots.subsoil_pngs(st.world, st.figures))
-            if multi:
-                top["passes.png"] = terrain_plots.passes_png(st.figures)
-                for k, (res, summ) in enumerate(zip(st.runs, self.pass_summaries, strict=True)):
-                    passes.append((out / f"pass_{k + 1}", res, summ, plots.all_plots(res)))
-                shown.update(top)
-                shown.update({f"pass_{len(passes)}/{n}": d for n, d in passes[-1][3].items()})
-            else:
-                top.update(plots.all_plots(st.runs[0]))
-                shown.update(top)
-            run = None if multi else st.runs[0]
-        if table is not None:
-            top["validation_table.md"] = table.encode()
-        top["report.html"] = report_html(
-            f"symtrack: {sc.name}", self.summary, shown, to_toml(sc.to_dict()),
-            validation.check(self.summary) if table is not None else None, self.summary.get("passes"),
-            sc.description).encode()
-        written = []
-        for folder, res, summ, figs in passes:
-            write_run(folder, res, summ, figs)
-            written += [folder / n for n in ("trajectory.csv", "scenario.resolved.toml", *figs, "summary.json")]
-        if run is not None:
-            write_run(out, run, self.summary, top)  # summary.json last
-            written += [out / n for n in ("trajectory.csv", "scenario.resolved.toml", *top)]
-        else:
-            for name, data in top.items():
-                atomic_write_bytes(out / name, data)
-                written.append(out / name)
-            atomic_write_text(out / "summary.json", json.dumps(self.summary, indent=2) + "\n")
-        written.append(out / "summary.json")
-        return sorted(set(written))
+        """Write the files of the run into ``out_dir`` (as ``symtrack simulate --out``;
+        :func:`~symtrack.reports.run_files.simulation_files` through the one writer,
+        :func:`~symtrack.reports.run_files.write_folder`: the files of a previous run in the folder
+        are removed first, summary.json last). Returns the paths written."""
+        files = simulation_files(self.scenario, self.runs, self.summary, self.pass_summaries, self._study)
+        return write_folder(out_dir, files)
 
 
 def _grid_names() -> list[str]:
     return [n for n in builtin_names() if load_scenario(n).terrain is not None]
 
 
-def simulate(scenario, *, integrator: str | None = None, terrain=None, progress: bool = False) -> Result:
-    """Run a scenario: its torque programme until its stop rule, every pass of a terrain study.
+def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
+    """Build a scenario's plant ingredients, explicitly (:mod:`symtrack.simulation.build`: the
+    model is built once per process for its options; :func:`simulate` builds through here).
 
     Parameters
     ----------
@@ -169,14 +110,12 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
     integrator : str, optional
         Instead of the scenario's ``run.integrator`` (a name of the integrator registry).
     terrain : Terrain or path, optional
-        A grid terrain to start from (instead of a new field); the scenario needs a
-        ``[terrain]`` section.
-    progress : bool
-        Show progress on stderr.
+        A grid terrain the run will start from; the scenario needs a ``[terrain]`` section.
 
     Returns
     -------
-    Result
+    Built
+        ``Built.scenario`` is the scenario as run; ``simulate(built)`` runs it.
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
@@ -189,25 +128,35 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
         raise ScenarioError(f"scenario {scenario.name!r} has no [terrain] section, so it runs on the homogeneous "
                             f"terrain and cannot start from a terrain file; the grid scenarios are "
                             f"{', '.join(_grid_names())} (or add a [terrain] section)")
-    plant = make_plant(scenario, terrain=terrain)
-    failure = None
-    if plant.kind == "grid":
-        plant.record_every_s = ANIMATION_EVERY_S
-        try:
-            study = run_passes(scenario, plant, progress=progress)
-        except loop.IncompleteRun as err:
-            study, failure = err.study, err
-        summary, per_pass = study_summary(study)
-        if terrain is not None and not isinstance(terrain, Terrain):
-            summary["terrain_in"] = str(terrain)
-        result = Result(scenario, study.runs, summary, per_pass, study)
-    else:
-        try:
-            res = loop.run(scenario, plant, progress=progress)
-        except loop.IncompleteRun as err:
-            res, failure = err.partial, err
-        summary = summarise(res)
-        result = Result(scenario, [res], summary, [summary])
+    return build_plant(scenario, terrain)
+
+
+def simulate(scenario, *, integrator: str | None = None, terrain=None, progress: bool = False) -> Result:
+    """Run a scenario: its torque programme until its stop rule, every pass of a terrain study.
+
+    Parameters
+    ----------
+    scenario : Scenario, str or Built
+        A loaded scenario, a built-in name / TOML path (loaded with no overrides), or what
+        :func:`build` returned.
+    integrator : str, optional
+        Instead of the scenario's ``run.integrator`` (a name of the integrator registry).
+    terrain : Terrain or path, optional
+        A grid terrain to start from (instead of a new field); the scenario needs a
+        ``[terrain]`` section.
+    progress : bool
+        Show progress on stderr.
+
+    Returns
+    -------
+    Result
+    """
+    built = build(scenario.scenario if isinstance(scenario, Built) else scenario, integrator=integrator,
+                  terrain=terrain)
+    scenario = built.scenario
+    out = built.run(terrain, progress=progress, record_every_s=ANIMATION_EVERY_S)
+    result = Result(scenario, out.runs, out.summary, out.pass_summaries, out.study)
+    failure = out.failure
     if failure is not None:
         result.summary["complete"] = False
         result.summary["error"] = str(failure)

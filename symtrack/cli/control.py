@@ -72,9 +72,9 @@ def mpc_command(args) -> int:
     if terrain_out and sc.terrain is None:
         raise ScenarioError(f"--terrain-out: scenario {sc.name!r} runs on the homogeneous plant (no [terrain] "
                             "section); add --plant grid")
-    from ..model import SystemModel
+    from ..simulation.build import system_model
 
-    model = SystemModel(sc.model)
+    model = system_model(sc.model)  # the cached build (symtrack.simulation.build)
     plant = closedloop.make_plant(sc, model, terrain_in)
     from ..foundations.interrupt import InterruptWatch
 

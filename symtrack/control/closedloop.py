@@ -1,12 +1,12 @@
 """Closed-loop path tracking: the MPC against a plant.
 
-The plant is any plant of :mod:`symtrack.simulation.plants` (the protocol
-:class:`~symtrack.simulation.plants.Plant`), the same ones the simulation's time loop drives:
-its ``state_names`` must contain the vehicle states of the model's layout
+The loop is the simulation's one time loop (:func:`symtrack.simulation.loop.run`) with the MPC
+as its sampled torque law (:class:`TrackingLaw`). The plant is any plant of
+:mod:`symtrack.simulation.plants` (the protocol :class:`~symtrack.simulation.plants.Plant`): its
+``state_names`` must contain the vehicle states of the model's layout
 (``model.layout.vehicle_names``: the 12 of :data:`symtrack.model.vehicle.VEHICLE_STATES`). Each
-sample the loop advances it by the sample time with the commands held
-(:func:`~symtrack.simulation.plants.advance_plant`, in sub-steps of the plant's ``macro_step_s``
-when it has one: the grid's world-manager step).
+sample the loop advances it by the sample time with the commands held (in sub-steps of the
+plant's ``macro_step_s`` when it has one: the grid's world-manager step).
 
 The default plant, :class:`~symtrack.simulation.plants.StepPlant`, is the full simulator
 (CVODES/IDAS on the SystemModel with its terrain cells), not the MPC's prediction model: the
@@ -40,16 +40,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..foundations.errors import ScenarioError, SimulationError
-from ..foundations.files import atomic_write_bytes, atomic_write_text
 from ..foundations.progress import Progress
 from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
-from ..reports.plots import plt, png_bytes
-from ..reports.run_files import clear_previous_run
-from ..reports.terrain_plots import sinkage_map_png
-from ..simulation.plants import StepPlant, advance_plant
+from ..reports.figures import figures
+from ..reports.run_files import write_folder
+from ..simulation import loop
+from ..simulation.build import system_model
+from ..simulation.plants import StepPlant
 from ..simulation.plants import make_grid_plant as plant_for_world
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import open_world
@@ -60,8 +60,8 @@ from .trim import trim
 log = logging.getLogger("symtrack.control.closedloop")
 
 SUMMARY_SCHEMA_VERSION = 1
-__all__ = ["ClosedLoopResult", "field_from_path", "grid_integrator", "homogeneous_plant", "initial_state",
-           "make_grid_plant", "make_plant", "run", "summarise", "write"]
+__all__ = ["ClosedLoopResult", "TrackingLaw", "closed_loop_files", "field_from_path", "grid_integrator",
+           "homogeneous_plant", "initial_state", "make_grid_plant", "make_plant", "run", "summarise", "write"]
 
 # IDAS tolerances of the grid plant: those of `symtrack simulate validation_grid` (docs/terrain.md:
 # every validation figure equal to 3 digits against 1e-7 / 1e-9, in half the time)
@@ -192,20 +192,106 @@ def cidx_missing(plant, mpc) -> bool:
     return bool(mpc.cell_names) and not all(n in plant.state_names for n in mpc.cell_names)
 
 
+class TrackingLaw:
+    """The MPC as a sampled torque law of the one time loop (:class:`~symtrack.simulation.loop.SampledLaw`):
+    every ``sample_time_s`` it projects the plant's state on the path, records the sample (time,
+    state, reference, errors) and returns the MPC's torques, or None at the path's end or after
+    ``max_steps`` samples. Its first call solves the cold start (:meth:`PathTrackingMPC.prepare`,
+    reported apart from the per-sample statistics). The records are the rows of the
+    :class:`ClosedLoopResult` (:meth:`result`)."""
+
+    def __init__(self, sc: MPCScenario, mpc, path, state_names, u_prev, cell_default, substep_s: float | None,
+                 max_steps: int | None = None):
+        self.sc, self.mpc, self.path, self.max_steps = sc, mpc, path, max_steps
+        self.sample_time_s, self.substep_s = sc.mpc.sample_time_s, substep_s
+        names = tuple(state_names)
+        self.pidx = [names.index(n) for n in mpc.pred_names if n in names]
+        if len(self.pidx) != len(mpc.pred_names):
+            missing = [n for n in mpc.pred_names if n not in names]
+            if mpc.cell_names or any(n in mpc.model.layout.vehicle_names for n in missing):
+                raise SimulationError(f"the plant's state has no {', '.join(missing)}: the MPC cannot read it")
+        self.cell_default = cell_default
+        self.cidx = [names.index(n) for n in mpc.cell_names] if all(n in names for n in mpc.cell_names) else None
+        self.ix, self.iy, self.ipsi = (names.index(n) for n in ("x_m", "y_m", "yaw_rad"))
+        self.u_prev = np.asarray(u_prev, dtype=float).copy()
+        self.s_hint = self.cold = None
+        self.k = 0
+        self.law_wall_s = 0.0  # wall time in the law (the solver, the path), for the plant's share
+        self.cold_wall_s = 0.0  # ... of it the cold start's (not in the loop's wall time, as before the loop)
+        self.rows = {n: [] for n in ("t", "x", "u", "ref", "s", "e_lat", "e_psi", "straight", "solve_ms",
+                                     "solve_ok", "solve_iter")}
+        self.bar = None
+
+    def _cells(self, x):
+        if not self.mpc.cell_names:
+            return None
+        return x[self.cidx] if self.cidx is not None else self.cell_default
+
+    def __call__(self, t_s: float, x: np.ndarray, final: bool = False):
+        w0 = time.perf_counter()
+        try:
+            return self._sample(t_s, x, final)
+        finally:
+            self.law_wall_s += time.perf_counter() - w0
+
+    def _sample(self, t_s, x, final):
+        path, mpc, r = self.path, self.mpc, self.rows
+        N, dt = self.sc.mpc.horizon_steps, self.sc.mpc.sample_time_s
+        if self.cold is None:  # the cold start before the loop engages
+            w0 = time.perf_counter()
+            self.s_hint = path.project(x[self.ix], x[self.iy])
+            ref0 = path.reference(self.s_hint, N, dt, x[self.ipsi])
+            self.cold = mpc.prepare(x[self.pidx], self._cells(x), self.u_prev, ref0)
+            self.cold_wall_s = time.perf_counter() - w0
+        self.s_hint = s_hint = path.project(x[self.ix], x[self.iy], self.s_hint)
+        e_l, e_p = path.errors(x[self.ix], x[self.iy], x[self.ipsi], s_hint)
+        here = path.at(s_hint)
+        r["t"].append(t_s)
+        r["x"].append(x.copy())
+        r["s"].append(s_hint)
+        r["e_lat"].append(e_l)
+        r["e_psi"].append(e_p)
+        r["straight"].append(here["straight"] and here["segment"] >= 0)
+        r["ref"].append([here["x_m"], here["y_m"], here["yaw_rad"], here["speed_m_s"], here["curvature_1_per_m"]])
+        if self.bar is not None:
+            self.bar.update(s_hint, f"t={t_s:.1f} s e_lat={100 * e_l:+.1f} cm")
+        if (final or s_hint >= path.length_m or t_s >= self.sc.run.duration_s - 1e-9
+                or (self.max_steps is not None and self.k >= self.max_steps)):
+            r["u"].append(self.u_prev.copy())
+            return None
+        ref = path.reference(s_hint, N, dt, x[self.ipsi])
+        u, info = mpc.step(x[self.pidx], self._cells(x), self.u_prev, ref)
+        r["solve_ms"].append(1e3 * info.solve_time_s)
+        r["solve_ok"].append(info.success)
+        r["solve_iter"].append(info.iterations)
+        r["u"].append(u.copy())
+        self.u_prev = u
+        self.k += 1
+        return u
+
+    def result(self, plant) -> ClosedLoopResult:
+        """The closed loop's rows (one per sample) as a :class:`ClosedLoopResult` (summary empty)."""
+        r = self.rows
+        return ClosedLoopResult(self.sc, np.array(r["t"]), np.array(r["x"]), np.array(r["u"]), np.array(r["ref"]),
+                                np.array(r["s"]), np.array(r["e_lat"]), np.array(r["e_psi"]),
+                                np.array(r["straight"], bool), np.array(r["solve_ms"]), np.array(r["solve_ok"], bool),
+                                np.array(r["solve_iter"]), tuple(plant.state_names), {}, self.path, plant)
+
+
 def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: PathTrackingMPC | None = None,
         x0=None, progress: bool = False, max_steps: int | None = None, finish: bool = True) -> ClosedLoopResult:
-    """The closed loop until the path's end, ``run.duration_s`` or ``max_steps``. The plant is
-    started at the vehicle's trim state of straight running (or at ``x0``, values of the plant's
-    ``state_names``); with ``finish`` (default) the plant is finished after the loop (the grid
-    lifts the vehicle off)."""
-    model = model or SystemModel(sc.model)
+    """The closed loop until the path's end, ``run.duration_s`` or ``max_steps``: the MPC
+    (:class:`TrackingLaw`) as the sampled torque law of the one time loop
+    (:func:`symtrack.simulation.loop.run`). The plant is started at the vehicle's trim state of
+    straight running (or at ``x0``, values of the plant's ``state_names``); with ``finish``
+    (default) the plant is finished after the loop (the grid lifts the vehicle off)."""
+    model = model or system_model(sc.model)
     if model.opts != sc.model:
         raise ScenarioError(f"the model's options ({model.opts}) differ from the scenario's [model] section "
                             f"({sc.model}): build the model as SystemModel(scenario.model)")
     mpc = mpc or PathTrackingMPC(model, sc.params, sc.mpc)
     plant = plant or make_plant(sc, model)
     path = sc.build_path()
-    dt, N = sc.mpc.sample_time_s, sc.mpc.horizon_steps
     xt, ut = initial_state(model, sc)
     if x0 is None:
         if tuple(plant.state_names) == tuple(model.state_names):
@@ -223,65 +309,22 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
         # the command that holds the actual torques where they are
         u_prev = np.array([x0[names0.index(f"torque_{k}_N_m")] for k in ("left", "right")])
     ix0, iy0, ipsi0 = (names0.index(n) for n in ("x_m", "y_m", "yaw_rad"))
-    x, _ = plant.start(x0[ix0], x0[iy0], x0[ipsi0], u_prev, state=x0)
-    plant_wall = 0.0
-    pidx = [plant.state_names.index(n) for n in mpc.pred_names if n in plant.state_names]
-    if len(pidx) != len(mpc.pred_names):
-        missing = [n for n in mpc.pred_names if n not in plant.state_names]
-        if mpc.cell_names or any(n in model.layout.vehicle_names for n in missing):
-            raise SimulationError(f"the plant's state has no {', '.join(missing)}: the MPC cannot read it")
     # a plant without the homogeneous cells (the grid): the prediction freezes its cells at those
     # of steady straight running at the start speed (trim), as the homogeneous plant starts
     cell_default = xt[model.layout.block("cells")] if cidx_missing(plant, mpc) else None
-    cidx = [plant.state_names.index(n) for n in mpc.cell_names] if all(
-        n in plant.state_names for n in mpc.cell_names) else None
-    ts, xs, us, refs, ss, elat, epsi, strt, sms, sok, sit = ([] for _ in range(11))
-    s_hint = path.project(x[plant.state_names.index("x_m")], x[plant.state_names.index("y_m")])
-    ix, iy, ipsi = (plant.state_names.index(n) for n in ("x_m", "y_m", "yaw_rad"))
-    # cold start before the loop engages (reported separately, not in the per-step statistics)
-    ref0 = path.reference(s_hint, N, dt, x[ipsi])
-    xc0 = (x[cidx] if cidx is not None else cell_default) if mpc.cell_names else None
-    cold = mpc.prepare(x[pidx], xc0, u_prev, ref0)
-    bar = Progress(path.length_m, sc.name, enabled=progress)
-    t = 0.0
-    k = 0
-    wall0 = time.perf_counter()
-    while True:
-        s_hint = path.project(x[ix], x[iy], s_hint)
-        e_l, e_p = path.errors(x[ix], x[iy], x[ipsi], s_hint)
-        here = path.at(s_hint)
-        ts.append(t)
-        xs.append(x.copy())
-        ss.append(s_hint)
-        elat.append(e_l)
-        epsi.append(e_p)
-        strt.append(here["straight"] and here["segment"] >= 0)
-        refs.append([here["x_m"], here["y_m"], here["yaw_rad"], here["speed_m_s"], here["curvature_1_per_m"]])
-        if s_hint >= path.length_m or t >= sc.run.duration_s - 1e-9 or (max_steps is not None and k >= max_steps):
-            us.append(u_prev.copy())
-            break
-        ref = path.reference(s_hint, N, dt, x[ipsi])
-        xp = x[pidx]
-        xc = (x[cidx] if cidx is not None else cell_default) if mpc.cell_names else None
-        u, info = mpc.step(xp, xc, u_prev, ref)
-        sms.append(1e3 * info.solve_time_s)
-        sok.append(info.success)
-        sit.append(info.iterations)
-        us.append(u.copy())
-        tp0 = time.perf_counter()
-        x, _ = advance_plant(plant, u, dt, getattr(plant, "macro_step_s", None), t)
-        plant_wall += time.perf_counter() - tp0
-        u_prev = u
-        t += dt
-        k += 1
-        bar.update(s_hint, f"t={t:.1f} s e_lat={100 * e_l:+.1f} cm")
-    bar.close()
-    wall = time.perf_counter() - wall0
-    if finish:
-        plant.finish()
-    res = ClosedLoopResult(sc, np.array(ts), np.array(xs), np.array(us), np.array(refs), np.array(ss),
-                           np.array(elat), np.array(epsi), np.array(strt, bool), np.array(sms),
-                           np.array(sok, bool), np.array(sit), tuple(plant.state_names), {}, path, plant)
+    law = TrackingLaw(sc, mpc, path, names0, u_prev, cell_default, getattr(plant, "macro_step_s", None), max_steps)
+    law.bar = Progress(path.length_m, sc.name, enabled=progress)
+    try:
+        run_res = loop.run(sc, plant, torque_law=law, finish=finish,
+                           start=loop.StartPoint(x0[ix0], x0[iy0], x0[ipsi0], u_prev, x0))
+    except loop.IncompleteRun as err:  # the plant failed: the closed loop reports the plant's error
+        raise err.__cause__ from None
+    finally:
+        law.bar.close()
+    res = law.result(plant)
+    wall = run_res.wall_time_s - law.cold_wall_s  # the loop's wall time after the cold start
+    plant_wall = max(0.0, wall - (law.law_wall_s - law.cold_wall_s))
+    cold = law.cold
     res.summary = summarise(res, wall, mpc)
     res.summary["initial_solve_ms"] = 1e3 * cold.solve_time_s
     res.summary["initial_solve_success"] = cold.success
@@ -366,68 +409,6 @@ def path_csv(res: ClosedLoopResult) -> str:
     return buf.getvalue()
 
 
-def plots(res: ClosedLoopResult) -> dict[str, bytes]:
-    out = {}
-    p = res.path
-    ix, iy = res.state_names.index("x_m"), res.state_names.index("y_m")
-    fig, (ax, ae) = plt.subplots(2, 1, figsize=(8, 9), gridspec_kw={"height_ratios": [3, 1]})
-    on = p.segment >= 0
-    ax.plot(p.x[on], p.y[on], "k--", lw=1, label="reference path")
-    ax.plot(res.X[:, ix], res.X[:, iy], "C0", lw=1.5, label="vehicle (CG)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.legend()
-    ax.set_title(f"{res.scenario.name}: path (true scale; the error below, magnified)")
-    # the centimetre errors the true-scale path hides: lateral error along the path, with the band
-    # of the largest error on the straights
-    ae.plot(res.s, 100 * res.e_lat, "C0")
-    band = 100 * float(np.max(np.abs(res.e_lat[res.straight]))) if res.straight.any() else 0.0
-    ae.axhspan(-band, band, color="C0", alpha=0.12, label=f"max on straights: {band:.1f} cm")
-    ae.axhline(0.0, color="k", lw=0.8)
-    ae.set_xlabel("path length s [m]")
-    ae.set_ylabel("lateral error [cm]")
-    ae.grid(True)
-    ae.legend(fontsize=8)
-    out["path.png"] = png_bytes(fig)
-
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    a1.plot(res.s, 100 * res.e_lat)
-    a1.set_ylabel("lateral error [cm]")
-    a1.grid(True)
-    a2.plot(res.s, np.degrees(res.e_psi))
-    a2.set_ylabel("heading error [deg]")
-    a2.set_xlabel("path length s [m]")
-    a2.grid(True)
-    for a in (a1, a2):
-        lo, hi = a.get_ylim()
-        a.fill_between(res.s, lo, hi, where=~res.straight, color="0.9", step="mid", label="turn")
-        a.set_ylim(lo, hi)
-    a1.set_title("tracking errors (grey: turns)")
-    out["errors.png"] = png_bytes(fig)
-
-    fig, ax = plt.subplots(figsize=(9, 4))
-    for k, name in enumerate(("left", "right")):
-        ax.step(res.t, res.U[:, k], where="post", label=f"{name} command")
-        ax.plot(res.t, res.X[:, res.state_names.index(f"torque_{name}_N_m")], "--", label=f"{name} actual")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("torque [N m]")
-    ax.grid(True)
-    ax.legend()
-    out["torques.png"] = png_bytes(fig)
-
-    fig, ax = plt.subplots(figsize=(9, 4))
-    ax.plot(res.t[:len(res.solve_ms)], res.solve_ms, ".", ms=3)
-    bad = ~res.solve_ok
-    ax.plot(res.t[:len(res.solve_ms)][bad], res.solve_ms[bad], "rx", label="failed")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("solve time [ms]")
-    ax.set_title(f"solver {res.scenario.mpc.solver}{' (jit)' if res.scenario.mpc.jit else ''}")
-    ax.grid(True)
-    out["solve_times.png"] = png_bytes(fig)
-    return out
-
-
 def rut_figures(plant) -> dict:
     """Figures of the final terrain of a grid plant: the rut (cells loaded in the run, z_max > 1 um)."""
     world = plant.world
@@ -442,27 +423,17 @@ def rut_figures(plant) -> dict:
     }
 
 
-def terrain_plots(res: ClosedLoopResult) -> dict[str, bytes]:
-    """The final terrain of a grid plant: ``sinkage_map.png`` (top view, symtrack/terrain/plots.py)."""
-    plant = res.plant
-    if getattr(plant, "kind", None) != "grid":
-        return {}
-    return {"sinkage_map.png": sinkage_map_png(plant.world, plant.world.storage.copy_z(), 1)}
+def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
+    """The folder of a closed loop: trajectory.csv, path.csv, scenario.resolved.json, the
+    ``control`` figures of :mod:`symtrack.reports.figures`, summary.json."""
+    return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res),
+            "scenario.resolved.json": json.dumps({"schema_version": SUMMARY_SCHEMA_VERSION, **res.scenario.to_dict()},
+                                                 indent=2) + "\n",
+            **figures("control", res), "summary.json": json.dumps(res.summary, indent=2) + "\n"}
 
 
-def write(out_dir, res: ClosedLoopResult) -> None:
-    """trajectory.csv, path.csv, scenario.resolved.json, the plots, then summary.json (last)."""
-    from pathlib import Path
-
-    out_dir = Path(out_dir)
-    clear_previous_run(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / "trajectory.csv", trajectory_csv(res))
-    atomic_write_text(out_dir / "path.csv", path_csv(res))
-    atomic_write_text(out_dir / "scenario.resolved.json",
-                      json.dumps({"schema_version": SUMMARY_SCHEMA_VERSION, **res.scenario.to_dict()}, indent=2) + "\n")
-    for name, data in plots(res).items():
-        atomic_write_bytes(out_dir / name, data)
-    for name, data in terrain_plots(res).items():
-        atomic_write_bytes(out_dir / name, data)
-    atomic_write_text(out_dir / "summary.json", json.dumps(res.summary, indent=2) + "\n")
+def write(out_dir, res: ClosedLoopResult) -> list:
+    """Write the closed loop's folder (:func:`closed_loop_files`) with the one writer
+    (:func:`~symtrack.reports.run_files.write_folder`: a previous run's files removed first,
+    summary.json last). Returns the paths written."""
+    return write_folder(out_dir, closed_loop_files(res))

@@ -1,4 +1,5 @@
-"""PNG plots of a run (matplotlib, Agg backend). Each function returns PNG bytes."""
+"""PNG plots of a run (matplotlib, Agg backend). Each function returns PNG bytes; the run folder's
+figures are registered in :mod:`symtrack.reports.figures`."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["LATERAL_SCALE_FLOOR_M", "all_plots", "path_plot", "plt", "png_bytes"]
+__all__ = ["LATERAL_SCALE_FLOOR_M", "path_plot", "plt", "png_bytes", "time_plot"]
 
 # smallest half-range of the magnified lateral-deviation axis (1 mm)
 LATERAL_SCALE_FLOOR_M = 1e-3
@@ -53,7 +54,9 @@ def path_plot(res) -> bytes:
     return png_bytes(fig)
 
 
-def _time_plot(res, series, ylabel, title, scale=1.0) -> bytes:
+def time_plot(res, series, ylabel, title, scale=1.0) -> bytes:
+    """Columns of a run against time (``series``: (column, label) pairs, times ``scale``), with
+    the torque programme's changes."""
     fig, ax = plt.subplots(figsize=(8, 4))
     for name, label in series:
         ax.plot(res.t, scale * res.column(name), label=label)
@@ -64,21 +67,3 @@ def _time_plot(res, series, ylabel, title, scale=1.0) -> bytes:
     ax.grid(True)
     ax.legend()
     return png_bytes(fig)
-
-
-def all_plots(res) -> dict[str, bytes]:
-    return {
-        "path.png": path_plot(res),
-        "yaw.png": _time_plot(res, [("yaw_rad", "yaw")], "yaw [deg]", "yaw angle", np.degrees(1.0)),
-        "sinkage.png": _time_plot(
-            res, [(f"sinkage_{e}_{k}_m", f"{e} {k}") for e in ("sprocket", "idler") for k in ("left", "right")],
-            "sinkage [mm]", "sinkage under sprocket (rear) and idler (front)", 1e3),
-        "shear.png": _time_plot(res, [("shear_left_m", "left"), ("shear_right_m", "right")],
-                                "shear displacement [mm]", "mean shear displacement j", 1e3),
-        "speeds.png": _time_plot(res, [("u_m_s", "u (forward)"), ("v_m_s", "v (lateral)")],
-                                 "speed [m/s]", "body velocities"),
-        "torques.png": _time_plot(
-            res, [("torque_left_N_m", "left (actual)"), ("torque_right_N_m", "right (actual)"),
-                  ("torque_cmd_left_N_m", "left (command)"), ("torque_cmd_right_N_m", "right (command)")],
-            "torque [N m]", "sprocket torques"),
-    }

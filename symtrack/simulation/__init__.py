@@ -1,9 +1,10 @@
 """Simulation: scenarios, the Plant protocol and its plants, the one time loop, results, passes."""
 
+from .build import Built, build
 from .loop import run
 from .plants import BatchPlant, GridPlant, Plant, StepPlant, make_plant
 from .result import RunResult, summarise
 from .scenario import RunSettings, Scenario, load_scenario
 
-__all__ = ["BatchPlant", "GridPlant", "Plant", "RunResult", "RunSettings", "Scenario", "StepPlant",
-           "load_scenario", "make_plant", "run", "summarise"]
+__all__ = ["BatchPlant", "Built", "GridPlant", "Plant", "RunResult", "RunSettings", "Scenario", "StepPlant",
+           "build", "load_scenario", "make_plant", "run", "summarise"]

@@ -13,6 +13,14 @@ torque programme by state feedback: it is sampled at the committed state before 
 and held over the call's intervals (a digital controller whose sample time is the plant's call:
 one output step for the adaptive integrators, ``max_intervals`` steps for the terrain engine);
 the run's ``U`` holds the torques applied.
+
+A *sampled* law (:class:`SampledLaw`: a ``sample_time_s`` attribute, e.g. the MPC of
+:mod:`symtrack.control.closedloop`) has its own clock instead: the loop samples it every
+``sample_time_s`` (the sample times summed, t_k+1 = t_k + sample_time_s), holds its torques over
+the sample, cut into equal sub-steps of at most ``substep_s`` (the grid's macro step; None: one
+step per sample) handed to the plant in calls of at most ``max_intervals`` sub-steps that never
+cross a sample; the run ends when the law returns None (``stopped_by = "controller"``) or at
+``run.duration_s`` (the law is then called once more with ``final=True``, to see the last state).
 """
 
 from __future__ import annotations
@@ -20,6 +28,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -28,7 +37,7 @@ from ..foundations.interrupt import raise_if_interrupted, watch_interrupts
 from ..foundations.progress import Progress
 from .result import RunResult
 
-__all__ = ["IncompleteRun", "OutputGrid", "run"]
+__all__ = ["IncompleteRun", "OutputGrid", "SampleGrid", "SampledLaw", "StartPoint", "run"]
 
 log = logging.getLogger("symtrack.simulation")
 
@@ -73,30 +82,103 @@ class OutputGrid:
         return out
 
 
+class SampleGrid:
+    """The intervals of a sampled law (module doc): samples of ``sample_time_s`` from 0 (the
+    sample times summed, ``t_s``) until ``duration_s``, each cut into ``n`` equal sub-steps of
+    length h = sample_time_s / n <= ``substep_s``, sub-step i from t_s + i h; the torques of each
+    sample are given by :meth:`hold` at its start."""
+
+    def __init__(self, sample_time_s: float, substep_s: float | None, duration_s: float):
+        self.dt, self.duration = float(sample_time_s), float(duration_s)
+        self.n = 1 if substep_s is None else max(1, int(math.ceil(self.dt / substep_s - 1e-9)))
+        self.h = self.dt / self.n
+        self.t = 0.0  # the time at the current sample boundary: the next sample's start
+        self.t0 = 0.0  # the current sample's start
+        self.done = self.n  # sub-steps of the current sample handed out (n: at a sample boundary)
+        self.u = None
+
+    @property
+    def at_sample(self) -> bool:
+        """True at a sample boundary (the law is due)."""
+        return self.done == self.n
+
+    @property
+    def exhausted(self) -> bool:
+        """True at a sample boundary at ``duration_s`` (1e-9 s tolerance)."""
+        return self.at_sample and self.t >= self.duration - 1e-9
+
+    def hold(self, u) -> None:
+        """Start the next sample (from ``t``) with the torques ``u``."""
+        self.t0, self.t = self.t, self.t + self.dt
+        self.u, self.done = np.asarray(u, dtype=float), 0
+
+    def take(self, n: int) -> list[tuple[float, float, np.ndarray]]:
+        """The next at most n sub-steps of the current sample, as (t0_s, t1_s, u); their length is
+        ``h`` (exactly: not t1_s - t0_s)."""
+        k = min(n, self.n - self.done)
+        out = []
+        for i in range(self.done, self.done + k):
+            t0 = self.t0 + i * self.h
+            out.append((t0, t0 + self.h, self.u))
+        self.done += k
+        return out
+
+
+class SampledLaw(Protocol):
+    """A torque law with its own sample time (module doc)."""
+
+    sample_time_s: float
+    substep_s: float | None
+
+    def __call__(self, t_s: float, x: np.ndarray, final: bool = False) -> np.ndarray | None:
+        """The torques (left_N_m, right_N_m) to hold over the sample from ``t_s`` at the plant's
+        state ``x``, or None to end the run; with ``final`` the run ends (the return is ignored)."""
+
+
+class StartPoint(NamedTuple):
+    """Where the loop starts the plant (``plant.start(x_m, y_m, yaw_rad, u0, state=state)``)
+    instead of the scenario's start pose at rest."""
+
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    u0: np.ndarray
+    state: np.ndarray | None = None
+
+
 def _xy_dist(a, b) -> float:
     return float(np.hypot(a[0] - b[0], a[1] - b[1]))
 
 
 
-def run(scenario, plant, progress: bool = False, label: str | None = None, torque_law=None) -> RunResult:
+def run(scenario, plant, progress: bool = False, label: str | None = None, torque_law=None,
+        start: StartPoint | None = None, finish: bool = True) -> RunResult:
     """Drive ``plant`` through ``scenario``'s torque programme until its stop rule.
 
     Parameters
     ----------
     scenario : symtrack.simulation.scenario.Scenario
+        (An MPC scenario with a sampled ``torque_law``: its ``run`` and ``name`` are read.)
     plant : symtrack.simulation.plants.Plant
         A plant not yet started; the loop starts it at the scenario's start pose and finishes
         it at the end (the grid lifts the vehicle off), also when the run fails.
     progress : bool
         Show a progress bar (or log lines when stderr is no terminal).
-    torque_law : callable, optional
-        ``law(t_s, x) -> (left_N_m, right_N_m)`` in place of the torque programme (module doc).
+    torque_law : callable or SampledLaw, optional
+        ``law(t_s, x) -> (left_N_m, right_N_m)`` in place of the torque programme, sampled at
+        each plant call, or a :class:`SampledLaw` on its own clock (module doc).
+    start : StartPoint, optional
+        The pose, first torques and state to start the plant at (default: the scenario's start
+        pose, at rest, with the programme's first torques).
+    finish : bool
+        Finish the plant at the end (default); False leaves it started (the grid's vehicle stays
+        down, e.g. to continue).
 
     Returns
     -------
     RunResult
-        ``stopped_by`` is "distance", or "duration" (when a distance stop was set but not
-        reached in ``run.duration_s``, a warning says so).
+        ``stopped_by`` is "distance", "controller" (a sampled law ended the run), or "duration"
+        (when a distance stop was set but not reached in ``run.duration_s``, a warning says so).
 
     Raises
     ------
@@ -111,15 +193,24 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
         dist_from = scenario.event_time(run_cfg.stop_distance_event) if run_cfg.stop_distance_event else 0.0
     names = plant.state_names
     iu, iv = names.index("u_m_s"), names.index("v_m_s")
-    st = scenario.start
-    u0 = np.array(scenario.torque_at(0.0))
-    grid = OutputGrid(scenario)
+    sampled = torque_law is not None and hasattr(torque_law, "sample_time_s")
+    if start is None:
+        st = scenario.start
+        start = StartPoint(st.x_m, st.y_m, math.radians(st.yaw_deg), np.array(scenario.torque_at(0.0)))
+    u0 = np.asarray(start.u0, dtype=float)
+    if sampled:
+        grid = SampleGrid(torque_law.sample_time_s, torque_law.substep_s, run_cfg.duration_s)
+    else:
+        grid = OutputGrid(scenario)
     bar = Progress(1.0, label or scenario.name, enabled=progress)
     own_stop = getattr(plant, "applies_stop_rule", False)  # the plant applies the distance rule in its calls
     if own_stop:
         plant.set_stop_rule(target, dist_from or 0.0)
     with watch_interrupts():
-        x, y = plant.start(st.x_m, st.y_m, math.radians(st.yaw_deg), u0)
+        if start.state is None:
+            x, y = plant.start(start.x_m, start.y_m, start.yaw_rad, u0)
+        else:
+            x, y = plant.start(start.x_m, start.y_m, start.yaw_rad, u0, state=start.state)
         ts, xs, us, ys = [np.zeros(1)], [x[None, :]], [u0[None, :]], [y[None, :]]
         t, dist, stopped_by = 0.0, 0.0, "duration"
         wall0, cpu0 = time.perf_counter(), time.process_time()
@@ -131,14 +222,24 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                     speed = float(np.hypot(x[iu], x[iv]))
                     if (target - dist) / max(speed, 1e-3) / dt <= 1.2 * n:
                         n = plant.short_intervals
-                ivs = grid.take(n)
+                if sampled and grid.at_sample:
+                    if grid.exhausted:
+                        torque_law(grid.t, x, final=True)
+                        break
+                    u_law = torque_law(grid.t, x)
+                    if u_law is None:
+                        stopped_by = "controller"
+                        break
+                    grid.hold(np.asarray(u_law, dtype=float).reshape(2))
+                # (t0_s, t1_s, length_s, u): a sampled law's sub-steps have the length h exactly
+                ivs = [(t0, t1, grid.h if sampled else t1 - t0, u) for t0, t1, u in grid.take(n)]
                 if not ivs:
                     break
-                if torque_law is not None:
+                if torque_law is not None and not sampled:
                     u_law = np.asarray(torque_law(t, x), dtype=float).reshape(2)
-                    ivs = [(t0, t1, u_law) for t0, t1, _ in ivs]
+                    ivs = [(t0, t1, h, u_law) for t0, t1, h, _ in ivs]
                 try:
-                    plant.synchronize([(t0, t1 - t0, u) for t0, t1, u in ivs])
+                    plant.synchronize([(t0, h, u) for t0, _, h, u in ivs])
                     X = plant.advance()
                     raise_if_interrupted()  # a solver may have swallowed the interrupt and returned
                     hit = None
@@ -150,7 +251,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                         if plant.stopped:
                             stopped_by = "distance"
                     elif dist_from is not None:
-                        t1s = np.array([t1 for _, t1, _ in ivs])
+                        t1s = np.array([t1 for _, t1, _, _ in ivs])
                         prev = np.vstack([x[None, :2], X[:-1, :2]])
                         d = np.hypot(X[:, 0] - prev[:, 0], X[:, 1] - prev[:, 1])
                         active = t1s > dist_from + 1e-12
@@ -166,10 +267,10 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                         pass
                     elif hit is None:
                         Y = plant.commit(len(ivs))
-                        times = np.array([t1 for _, t1, _ in ivs])
+                        times = np.array([t1 for _, t1, _, _ in ivs])
                     else:
                         # shorten the last interval so the run ends at the distance (three secant refinements)
-                        t0, t1, _ = ivs[hit]
+                        t0, t1, _, _ = ivs[hit]
                         prev = x if hit == 0 else X[hit - 1]
                         d_step = _xy_dist(X[hit], prev)
                         h = t1 - t0
@@ -182,7 +283,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                         dist += d_step
                         Y = plant.commit(hit + 1)
                         X = X[:hit + 1]
-                        times = np.array([t1 for _, t1, _ in ivs[:hit]] + [t0 + h])
+                        times = np.array([t1 for _, t1, _, _ in ivs[:hit]] + [t0 + h])
                         stopped_by = "distance"
                 except SimulationError as err:
                     raise_if_interrupted()
@@ -191,7 +292,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 k = len(times)
                 ts.append(times)
                 xs.append(np.array(X[:k]))
-                us.append(np.array([u for _, _, u in ivs[:k]]))
+                us.append(np.array([u for _, _, _, u in ivs[:k]]))
                 ys.append(np.array(Y[:k]))
                 t, x = float(times[-1]), xs[-1][-1]
                 frac = t / run_cfg.duration_s
@@ -204,7 +305,8 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
         finally:
             bar.close(complete=finished)
             wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
-            plant.finish()
+            if finish:
+                plant.finish()
     res = RunResult(scenario, np.concatenate(ts), np.vstack(xs), np.vstack(us), np.vstack(ys),
                     tuple(plant.state_names), tuple(plant.output_names), wall,
                     "error" if failure is not None else stopped_by, plant.stats(), plant.figures() or None, cpu)

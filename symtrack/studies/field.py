@@ -48,9 +48,10 @@ import numpy as np
 
 from ..foundations.config import check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError, SimulationError
-from ..foundations.files import atomic_write_bytes, atomic_write_text, check_output_folder
+from ..foundations.files import check_output_folder
 from ..foundations.progress import Progress
 from ..integrators import registry
+from ..reports.run_files import clear_previous_run, write_folder
 from ..reports.subsoil_plots import risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
@@ -681,47 +682,29 @@ TOP_FILES = ("summary.json", "field.resolved.toml", "comparison.png")
 def clear_previous_study(folder) -> list:
     """Remove the files of a previous field study from ``folder`` (one whose summary.json is a
     field study's): :data:`TOP_FILES` and each pattern folder's :data:`PATTERN_FILES`, so that a
-    reused ``--out`` never mixes two studies' files. Anything else is left alone."""
-    try:
-        old = json.loads((folder / "summary.json").read_text())
-    except (OSError, ValueError):
-        return []
-    if not isinstance(old, dict) or old.get("kind") != "symtrack-field-study":
-        return []
-    removed = []
-    for sub in (folder / p for p in PATTERNS):
-        for name in PATTERN_FILES:
-            if (sub / name).is_file():
-                (sub / name).unlink()
-                removed.append(sub / name)
-        if sub.is_dir() and not any(sub.iterdir()):
-            sub.rmdir()
-    for name in TOP_FILES[::-1]:  # summary.json last: an interrupted clean-up is still recognised
-        if (folder / name).is_file():
-            (folder / name).unlink()
-            removed.append(folder / name)
-    return removed
+    reused ``--out`` never mixes two studies' files (the one clean-up,
+    :func:`~symtrack.reports.run_files.clear_previous_run`). Anything else is left alone."""
+    names = [f"{p}/{n}" for p in PATTERNS for n in PATTERN_FILES] + list(TOP_FILES)
+    return clear_previous_run(folder, names, kind="symtrack-field-study")
 
 
 def _write_pattern(folder, spec: FieldSpec, pr: PatternResult) -> list:
     sub = folder / pr.pattern
     pr.terrain.save(sub / "field.npz", spec.scenario.soil)
     files = _pattern_files(spec, pr)
-    for name, data in files.items():
-        atomic_write_bytes(sub / name, data)
+    write_folder(sub, files, clear=False)
     return [sub / "field.npz", *(sub / n for n in files)]
 
 
 def _write_top(folder, spec: FieldSpec, results: dict, summary: dict) -> list:
-    written = []
-    atomic_write_text(folder / "field.resolved.toml", to_toml(spec.document))
-    written.append(folder / "field.resolved.toml")
+    written = [folder / "field.resolved.toml"]
+    files = {"field.resolved.toml": to_toml(spec.document)}
     for pr in results.values():
         written += [folder / pr.pattern / n for n in PATTERN_FILES if (folder / pr.pattern / n).is_file()]
     if len(results) == 2:
-        atomic_write_bytes(folder / "comparison.png", field_plots.comparison_png(
-            {k: r.figures for k, r in results.items()}))
+        files["comparison.png"] = field_plots.comparison_png({k: r.figures for k, r in results.items()})
         written.append(folder / "comparison.png")
-    atomic_write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
+    files["summary.json"] = json.dumps(summary, indent=2) + "\n"
+    write_folder(folder, files, clear=False)  # summary.json last
     written.append(folder / "summary.json")
     return written

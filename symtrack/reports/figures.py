@@ -1,0 +1,141 @@
+"""The registry of a run folder's figures, by what they plot.
+
+Every plot of a run folder (``symtrack simulate``, ``symtrack mpc``, a terrain study's passes)
+is one entry: a name, the kind of thing it plots and a function of the run that returns its
+files (name -> PNG or GIF bytes; several for a figure drawn once per pass, none when it does not
+apply). The kinds and what their functions take:
+
+- ``"trajectory"``: a :class:`~symtrack.simulation.result.RunResult` (the time series of one run);
+- ``"terrain"`` and ``"subsoil"``: a :class:`TerrainRun` (a terrain study's passes over the grid
+  terrain and its scenario);
+- ``"control"``: a closed loop (:class:`~symtrack.control.closedloop.ClosedLoopResult`).
+
+:func:`figures` draws the figures of some kinds, in the order of registration (the order of the
+files in report.html). Adding a figure is one function and one :func:`register` call.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from . import control_plots, plots, terrain_plots
+
+__all__ = ["KINDS", "Figure", "TerrainRun", "figures", "names", "register", "unregister"]
+
+KINDS = ("trajectory", "terrain", "subsoil", "control")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One registered figure: ``make(source) -> {file name: bytes}`` (module doc)."""
+
+    name: str
+    kind: str
+    make: Callable[[object], dict[str, bytes]]
+
+
+class TerrainRun(NamedTuple):
+    """The source of the terrain and subsoil figures: a terrain study's passes
+    (:class:`~symtrack.simulation.passes.PassStudy`) and its scenario (its start pose draws the
+    rut's cross-section)."""
+
+    scenario: object
+    study: object
+
+    @property
+    def multi(self) -> bool:
+        """True for several passes (their files are numbered)."""
+        return len(self.study.runs) > 1
+
+
+_REGISTRY: dict[str, Figure] = {}
+
+
+def register(name: str, kind: str, make: Callable[[object], dict[str, bytes]]) -> Figure:
+    """Register a figure (after the others: its files come after theirs)."""
+    if kind not in KINDS:
+        raise KeyError(f"figure kind {kind!r} is not one of {', '.join(KINDS)}")
+    if name in _REGISTRY:
+        raise KeyError(f"a figure named {name!r} is registered already")
+    fig = _REGISTRY[name] = Figure(name, kind, make)
+    return fig
+
+
+def unregister(name: str) -> None:
+    """Remove a registered figure (a figure registered by a test)."""
+    del _REGISTRY[name]
+
+
+def names(kind: str | None = None) -> list[str]:
+    """The registered figures' names (of one kind), in registration order."""
+    return [f.name for f in _REGISTRY.values() if kind is None or f.kind == kind]
+
+
+def figures(kinds, source) -> dict[str, bytes]:
+    """The files of the registered figures of ``kinds`` (a kind or a tuple of kinds) drawn from
+    ``source``, in registration order."""
+    kinds = (kinds,) if isinstance(kinds, str) else tuple(kinds)
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise KeyError(f"figure kind {unknown[0]!r} is not one of {', '.join(KINDS)}")
+    out: dict[str, bytes] = {}
+    for fig in _REGISTRY.values():
+        if fig.kind in kinds:
+            out.update(fig.make(source))
+    return out
+
+
+# -- the trajectory of a run ------------------------------------------------------------------------------------
+def _time_series(name, series, ylabel, title, scale=1.0):
+    return lambda res: {name: plots.time_plot(res, series, ylabel, title, scale)}
+
+
+register("path", "trajectory", lambda res: {"path.png": plots.path_plot(res)})
+register("yaw", "trajectory", _time_series("yaw.png", [("yaw_rad", "yaw")], "yaw [deg]", "yaw angle", np.degrees(1.0)))
+register("sinkage", "trajectory", _time_series(
+    "sinkage.png", [(f"sinkage_{e}_{k}_m", f"{e} {k}") for e in ("sprocket", "idler") for k in ("left", "right")],
+    "sinkage [mm]", "sinkage under sprocket (rear) and idler (front)", 1e3))
+register("shear", "trajectory", _time_series("shear.png", [("shear_left_m", "left"), ("shear_right_m", "right")],
+                                             "shear displacement [mm]", "mean shear displacement j", 1e3))
+register("speeds", "trajectory", _time_series("speeds.png", [("u_m_s", "u (forward)"), ("v_m_s", "v (lateral)")],
+                                              "speed [m/s]", "body velocities"))
+register("torques", "trajectory", _time_series(
+    "torques.png", [("torque_left_N_m", "left (actual)"), ("torque_right_N_m", "right (actual)"),
+                    ("torque_cmd_left_N_m", "left (command)"), ("torque_cmd_right_N_m", "right (command)")],
+    "torque [N m]", "sprocket torques"))
+
+
+# -- the terrain of a study's passes ----------------------------------------------------------------------------
+def _sinkage_maps(src: TerrainRun) -> dict[str, bytes]:
+    st = src.study
+    return {(f"sinkage_map_pass_{k + 1}.png" if src.multi else "sinkage_map.png"):
+            terrain_plots.sinkage_map_png(st.world, z, k + 1) for k, z in enumerate(st.maps)}
+
+
+def _rut_section(src: TerrainRun) -> dict[str, bytes]:
+    st, s = src.study, src.scenario.start
+    line = (s.x_m, s.y_m, np.radians(s.yaw_deg))
+    return {"rut_section.png": terrain_plots.rut_section_png(st.world, st.maps, st.runs, line)}
+
+
+def _animations(src: TerrainRun) -> dict[str, bytes]:
+    st = src.study
+    return {(f"animation_pass_{k + 1}.gif" if src.multi else "animation.gif"):
+            terrain_plots.pass_animation_gif(st.world, st.before[k], snaps, st.maps[k])
+            for k, snaps in enumerate(st.snapshots) if snaps}
+
+
+register("sinkage_map", "terrain", _sinkage_maps)
+register("rut_section", "terrain", _rut_section)
+register("animation", "terrain", _animations)
+register("subsoil", "subsoil", lambda src: terrain_plots.subsoil_pngs(src.study.world, src.study.figures))
+register("passes", "terrain",
+         lambda src: {"passes.png": terrain_plots.passes_png(src.study.figures)} if src.multi else {})
+
+# -- a closed loop ------------------------------------------------------------------------------------------------
+register("closed_loop", "control", control_plots.closed_loop_pngs)
+register("closed_loop_terrain", "control", control_plots.closed_loop_terrain_pngs)

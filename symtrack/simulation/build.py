@@ -1,0 +1,164 @@
+"""The explicit, cached build of a run (as PyBaMM's ``Simulation.build``): what a scenario's
+plant is made of, built once per process for what determines it and reused by every later run.
+
+Building the homogeneous terrain's :class:`~symtrack.model.system.SystemModel` (its CasADi
+expressions and Functions) and loading its generated library cost about 0.9 s, the time loop of
+the validation scenario 0.04 s. The symbolic model depends only on its
+:class:`~symtrack.model.options.ModelOptions` (the vehicle's and the soil's parameters are a
+numeric vector handed to every call), and the generated library is cached per model object
+(:func:`symtrack.native.cache.library`), so one model per set of options serves every run of a
+process: a second ``symtrack.simulate`` of the same model costs its time loop, the integrator's
+set-up and the start state.
+
+What is *not* cached is what a run changes: the integrator's stepper (its counters, its
+algebraic guess), the plant, and the grid terrain's world (its cell storage is the run's
+result).
+
+- :func:`build` -> :class:`Built`: the ingredients of a scenario's plant; :meth:`Built.plant`
+  makes a fresh plant from them, :meth:`Built.run` runs the scenario on one (the one time loop,
+  every pass of a terrain study) -> :class:`Outcome`;
+- :func:`system_model`: the cached model of a set of model options;
+- :func:`clear_build_cache`, :func:`build_cache_info`: empty and inspect the cache.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from dataclasses import dataclass
+
+from ..integrators import registry
+from ..integrators.settings import IntegratorSettings
+from ..model import SystemModel
+from ..model.options import ModelOptions
+from ..terrain.storage import Terrain
+from . import loop
+from .passes import PassStudy, run_passes, study_summary
+from .plants import make_plant
+from .result import summarise
+
+__all__ = ["Built", "Outcome", "build", "build_cache_info", "clear_build_cache", "system_model"]
+
+_models: dict[ModelOptions, SystemModel] = {}
+_lock = threading.Lock()
+_hits = {"hits": 0, "misses": 0}
+
+
+def system_model(opts: ModelOptions | None = None) -> SystemModel:
+    """The homogeneous terrain's model of ``opts`` (default options when None), built on the
+    first call for these options and then shared (a SystemModel is not changed after its
+    construction; its generated library is cached per model object)."""
+    opts = ModelOptions() if opts is None else opts
+    with _lock:
+        model = _models.get(opts)
+        if model is not None:
+            _hits["hits"] += 1
+            return model
+        _hits["misses"] += 1
+    model = SystemModel(opts)
+    with _lock:
+        return _models.setdefault(opts, model)
+
+
+def clear_build_cache() -> None:
+    """Forget every cached model (the next build builds them again)."""
+    with _lock:
+        _models.clear()
+        _hits.update(hits=0, misses=0)
+
+
+def build_cache_info() -> dict:
+    """``{"models": n, "hits": h, "misses": m}``: the cached models and the lookups so far."""
+    with _lock:
+        return {"models": len(_models), **_hits}
+
+
+@dataclass
+class Outcome:
+    """What :meth:`Built.run` computed.
+
+    Attributes
+    ----------
+    runs : list of RunResult
+        One per pass (one for the homogeneous terrain).
+    summary : dict
+        The run's summary.json (a terrain study's: the last pass's figures with ``passes``).
+    pass_summaries : list of dict
+        The summary of each pass.
+    study : PassStudy or None
+        The passes over the grid terrain (None on the homogeneous terrain).
+    failure : IncompleteRun or None
+        The error that ended the run part of the way (what was computed up to there is kept).
+    """
+
+    runs: list
+    summary: dict
+    pass_summaries: list
+    study: PassStudy | None = None
+    failure: loop.IncompleteRun | None = None
+
+
+@dataclass(frozen=True)
+class Built:
+    """The built ingredients of a scenario's plant (:func:`build`).
+
+    Attributes
+    ----------
+    scenario : Scenario
+        The scenario built for (a simulation scenario or an MPC scenario).
+    kind : str
+        "homogeneous" or "grid" (a ``[terrain]`` section, or a terrain to start from).
+    settings : IntegratorSettings
+        The integrator of ``run.integrator``, with the scenario's engine settings.
+    model : SystemModel or None
+        The homogeneous terrain's model (shared, :func:`system_model`); None for the grid,
+        whose world builds its model from its channels.
+    """
+
+    scenario: object
+    kind: str
+    settings: IntegratorSettings
+    model: SystemModel | None
+
+    def plant(self, terrain=None):
+        """A fresh plant of the scenario (:func:`symtrack.simulation.plants.make_plant` on the
+        built model): a new stepper, and for the grid a new world (on ``terrain``, a
+        :class:`~symtrack.terrain.storage.Terrain` or terrain file, if given)."""
+        return make_plant(self.scenario, terrain=terrain, model=self.model)
+
+    def run(self, terrain=None, progress: bool = False, record_every_s: float | None = None) -> Outcome:
+        """Run the scenario on a fresh plant (:meth:`plant`): the one time loop
+        (:func:`symtrack.simulation.loop.run`) until its stop rule, on the grid terrain every
+        pass (:func:`~symtrack.simulation.passes.run_passes`, the grid plant keeping a snapshot
+        every ``record_every_s``). A run that fails part of the way is returned with its
+        ``failure`` (not raised)."""
+        plant = self.plant(terrain)
+        if plant.kind == "grid":
+            plant.record_every_s = record_every_s
+            failure = None
+            try:
+                study = run_passes(self.scenario, plant, progress=progress)
+            except loop.IncompleteRun as err:
+                study, failure = err.study, err
+            summary, per_pass = study_summary(study)
+            if terrain is not None and not isinstance(terrain, Terrain):
+                summary["terrain_in"] = str(terrain)
+            return Outcome(study.runs, summary, per_pass, study, failure)
+        failure = None
+        try:
+            res = loop.run(self.scenario, plant, progress=progress)
+        except loop.IncompleteRun as err:
+            res, failure = err.partial, err
+        summary = summarise(res)
+        return Outcome([res], summary, [summary], None, failure)
+
+
+def build(scenario, terrain=None) -> Built:
+    """Build what ``scenario``'s plant is made of (cached: a second build of the same model
+    options costs nothing). ``terrain``: a grid terrain the run will start from (the plant is then
+    the grid's)."""
+    settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
+    registry.get(settings.method, "integrator")
+    if scenario.terrain is not None or terrain is not None:
+        return Built(scenario, "grid", settings, None)
+    return Built(scenario, "homogeneous", settings, system_model(scenario.model))
