@@ -1,7 +1,7 @@
 """The package's structure, read from the source (nothing imported): the layers of DESIGN.md,
 no import circle (imports inside functions count), no private name imported across modules,
 nothing below the CLI and the bench imports symtrack.codegen (and nothing in the package the top-level
-codegen/ entry point), no module outside the compile-and-cache API (symtrack.build) composes a
+codegen/ entry point), no module outside the compile-and-cache API (symtrack.toolchain) composes a
 cache path or takes a lock, and the soil law is reached only through its object
 (symtrack.model.soil_law). Also: adding an integrator is one class and one registry entry (adding a
 soil law: tests/test_soil_law.py)."""
@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # layer of each top-level part of symtrack, bottom first; a module may import its own layer or below
 LAYERS = {
-    "foundations": 1, "model": 2, "presets": 2, "terrain": 3, "build": 4, "native": 4, "integrators": 5,
+    "foundations": 1, "model": 2, "presets": 2, "terrain": 3, "toolchain": 4, "native": 4, "integrators": 5,
     "simulation": 6, "control": 7, "reports": 7, "api": 7, "studies": 7, "codegen": 7, "bench": 8, "cli": 9,
     "__main__": 9, "": 9,
 }
@@ -150,10 +150,10 @@ def test_only_cli_and_bench_import_codegen(graph):
 
 
 def test_the_build_api_imports_only_foundations(graph):
-    """symtrack.build sits below everything that compiles: it imports nothing of symtrack but foundations."""
+    """symtrack.toolchain sits below everything that compiles: it imports nothing of symtrack but foundations."""
     _, edges = graph
-    below = {t.split(".")[1] for m, e in edges.items() if m.startswith("symtrack.build") for t, _ in e
-             if t.startswith("symtrack.") and not t.startswith("symtrack.build")}
+    below = {t.split(".")[1] for m, e in edges.items() if m.startswith("symtrack.toolchain") for t, _ in e
+             if t.startswith("symtrack.") and not t.startswith("symtrack.toolchain")}
     assert below <= {"foundations"}
 
 
@@ -182,12 +182,13 @@ def _cache_composers(path: Path) -> list[str]:
 
 
 def test_no_cache_path_or_lock_outside_the_build_api(graph, tmp_path):
-    """Every compiled artefact goes through symtrack.build.build: no other module calls cache_root(),
+    """Every compiled artefact goes through symtrack.toolchain.build: no other module calls cache_root(),
     reads $SYMTRACK_CACHE, spells ~/.cache or takes a file lock (the check finds each in a snippet)."""
     mods, _ = graph
-    bad = [hit for m, f in sorted(mods.items()) if not m.startswith("symtrack.build") for hit in _cache_composers(f)]
+    bad = [hit for m, f in sorted(mods.items()) if not m.startswith("symtrack.toolchain")
+           for hit in _cache_composers(f)]
     assert bad == []
-    assert _cache_composers(mods["symtrack.build.cache"])  # the reader sees the API's own
+    assert _cache_composers(mods["symtrack.toolchain.cache"])  # the reader sees the API's own
     snippet = tmp_path / "snippet.py"
     snippet.write_text("import fcntl\nfrom x import cache_root\np = cache_root() / 'grid'\nq = env['SYMTRACK_CACHE']\n")
     assert len(_cache_composers(snippet)) == 3

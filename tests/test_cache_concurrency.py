@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from symtrack import build
+from symtrack import toolchain as build
 
 pytestmark = pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler")
 
@@ -26,7 +26,7 @@ SOURCE = b'__attribute__((visibility("default"))) int symtrack_race_answer(void)
 BUILD = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from symtrack.build import BuildSpec, build
+    from symtrack.toolchain import BuildSpec, build
     root, cc, go = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
     src = sys.stdin.buffer.read()
     while not go.exists():  # both processes start compiling at the same moment

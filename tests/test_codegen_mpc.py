@@ -10,10 +10,10 @@ import subprocess
 import numpy as np
 import pytest
 
-from symtrack.build import find_compiler
 from symtrack.cli.main import main as symtrack_main
 from symtrack.codegen import mpc as M
 from symtrack.control import closedloop as CL
+from symtrack.toolchain import find_compiler
 
 # The headland U-turn with the cost of the bench's RTI configuration (symtrack.control.bench.RTI_CONFIG
 # without jit: pseudo-Huber 0.2 m, terminal lateral x5) and its straights shortened from 25 + 25 m
@@ -106,7 +106,7 @@ def test_errors_before_any_work(tmp_path, capsys, monkeypatch):
         assert symtrack_main(argv) == 2, argv
         err = capsys.readouterr().err
         assert msg in err, (argv, err)
-    monkeypatch.setattr("symtrack.build.cache.find_compiler", lambda: None)
+    monkeypatch.setattr("symtrack.toolchain.cache.find_compiler", lambda: None)
     assert symtrack_main(["codegen", "mpc", "headland_uturn", "--out", str(tmp_path / "d")]) == 2
     assert "no C compiler" in capsys.readouterr().err
     assert not any((tmp_path / n).exists() for n in ("a", "b", "c", "d"))

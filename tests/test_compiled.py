@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from conftest import run_once
 
-from symtrack.build import cache as build_cache
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators.fixed_step import FixedStepper
 from symtrack.integrators.settings import IntegratorSettings
@@ -25,6 +24,7 @@ from symtrack.native import cache as compiled
 from symtrack.native.generate import GROUPS
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
+from symtrack.toolchain import cache as build_cache
 
 pytestmark = pytest.mark.skipif(build_cache.find_compiler() is None, reason="no C compiler")
 
@@ -128,7 +128,7 @@ def test_no_compiler_falls_back_once_or_fails_when_required(model, monkeypatch, 
     monkeypatch.setattr(build_cache, "_warned_no_compiler", False)
     compiled._cache.clear()
     try:
-        with caplog.at_level(logging.WARNING, logger="symtrack.build"):
+        with caplog.at_level(logging.WARNING, logger="symtrack.toolchain"):
             lib = compiled.library(model)
             y = lib.f("outputs")
             compiled._cache.clear()

@@ -156,7 +156,7 @@ def test_engine_plant_is_the_default_and_matches_idas(grid_run, idas_run):
 def test_grid_plant_with_the_compiled_rosenbrock_matches_idas(grid_run, idas_run):
     """run.integrator = "rosenbrock": the compiled grid integrator as the plant's; the closed loop
     and the ruts agree with the IDAS plant's."""
-    from symtrack.build import compiler as _compiler
+    from symtrack.toolchain import compiler as _compiler
 
     if _compiler() is None:
         pytest.skip("no C compiler: the grid rosenbrock would run interpreted (slow)")

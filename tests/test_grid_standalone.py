@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import symtrack
-from symtrack.build import find_compiler
+from symtrack.toolchain import find_compiler
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 

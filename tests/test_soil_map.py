@@ -160,9 +160,9 @@ def test_the_wet_headland_example_puts_the_risk_where_the_soil_is_weak(tmp_path)
 def test_compiled_equals_interpreted_on_a_field_of_two_soils():
     """The interpreted kernel (tests/engine_oracle.py's PyKernel) against the C one on the split field:
     the same algorithm, soil by soil (measured: identical to the last bit)."""
-    from symtrack.build import find_compiler
     from symtrack.simulation import loop
     from symtrack.simulation.plants import EnginePlant
+    from symtrack.toolchain import find_compiler
 
     if find_compiler() is None:
         pytest.skip("no C compiler")

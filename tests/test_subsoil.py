@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from symtrack import build
+from symtrack import toolchain as build
 from symtrack.foundations.errors import ParameterError
 from symtrack.native import cache
 from symtrack.terrain import subsoil as S

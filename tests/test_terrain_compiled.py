@@ -8,7 +8,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from symtrack import build as compiled
+from symtrack import toolchain as compiled
 from symtrack.bench.terrain import pool_run
 from symtrack.foundations.errors import ScenarioError
 from symtrack.integrators.grid_rosenbrock import grid_library

@@ -16,7 +16,6 @@ from engine_oracle import PyKernel, ringing
 from scipy.integrate import solve_ivp
 
 from symtrack.bench.terrain import brute_force_run, pool_run
-from symtrack.build import find_compiler
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators import engine
 from symtrack.integrators.settings import STEADY_METHODS
@@ -25,6 +24,7 @@ from symtrack.native.grid_engine_model import build_engine_functions
 from symtrack.simulation import loop
 from symtrack.simulation.plants import EnginePlant, make_plant
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
+from symtrack.toolchain import find_compiler
 
 # A 12 m x 4 m field at 0.25 m (768 cells, M = 18): from rest, both sprockets at 2000 N m, then the
 # left one idle at 0.3 s: the vehicle accelerates and begins to turn.

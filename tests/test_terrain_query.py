@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from symtrack.build import BuildSpec, build, digest, find_compiler
 from symtrack.foundations.errors import SimulationError
 from symtrack.terrain import query as Q
 from symtrack.terrain.storage import Grid, Terrain
+from symtrack.toolchain import BuildSpec, build, digest, find_compiler
 
 NATIVE = Path(__file__).resolve().parent.parent / "symtrack" / "native"
 GRID = Grid((-2.0, 1.0), 0.25, (12, 8))  # x in [-2, 1], y in [1, 3]

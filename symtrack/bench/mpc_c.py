@@ -30,8 +30,8 @@ def _toml(v) -> str:
 def comparison(scenario: str = "headland_uturn", quick: bool = False, out: Path | None = None) -> dict:
     """Python RTI and C RTI closed loops of one configuration: their summaries, the agreement and
     the C build time."""
-    from ..build import find_compiler
     from ..codegen import mpc as M
+    from ..toolchain import find_compiler
 
     overrides = [f"mpc.{k}={_toml(v)}" for k, v in RTI_CONFIG.items() if k != "solver"]
     if quick:

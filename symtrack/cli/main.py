@@ -140,7 +140,7 @@ def main(argv=None) -> int:
     if getattr(args, "compiled", False):
         args.set = (args.set or []) + ["run.compiled=true"]
     if getattr(args, "require_compiled", False):
-        from ..build import set_require_compiled
+        from ..toolchain import set_require_compiled
 
         set_require_compiled(True)
     logging.basicConfig(level=logging.INFO, format="%(message)s")

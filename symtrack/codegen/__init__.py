@@ -6,7 +6,7 @@ the runtime never does. The generation of the model's Functions lives lower in t
 (:mod:`symtrack.native.generate`, the step builders :mod:`symtrack.native.rosenbrock` and
 :mod:`symtrack.native.grid_rosenbrock`), since the runtime compiles the same sources; the command
 line is :mod:`symtrack.codegen.cli`, the standalone programs :mod:`symtrack.codegen.standalone` and
-:mod:`symtrack.codegen.grid_standalone` (compiled through :func:`symtrack.build.build`), the MPC's
+:mod:`symtrack.codegen.grid_standalone` (compiled through :func:`symtrack.toolchain.build`), the MPC's
 C closed loop :mod:`symtrack.codegen.mpc`. The top-level ``codegen/`` folder of a checkout is only
 the entry point of ``python -m codegen``; it is not installed.
 """

@@ -46,7 +46,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..build import require_compiler
+from ..toolchain import require_compiler
 from .standalone import c_array, c_literal
 
 __all__ = ["CFLAGS", "CSV_COLUMNS", "MAIN_C", "MAKEFILE", "PLANT_STEM", "SOLVERS", "Problem", "build_program",

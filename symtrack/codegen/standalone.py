@@ -14,11 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..build import BuildSpec, build, digest
 from ..foundations.errors import SimulationError
 from ..model.static import static_state
 from ..native.cache import REPO_GENERATED
 from ..simulation.scenario import load_scenario
+from ..toolchain import BuildSpec, build, digest
 
 __all__ = ["FIXED_STEP", "MAIN_C", "STANDALONE_CFLAGS", "SUMMARY_STATES", "build_program", "build_standalone",
            "c_array", "c_literal", "run_standalone", "validation_header"]
@@ -95,7 +95,7 @@ MAIN_C = Path(__file__).resolve().parent / "standalone_main.c"
 
 
 def build_program(stem: str, main_c: Path, inputs: list[Path], cflags, extra_units: tuple[str, ...] = ()) -> Path:
-    """Compile a standalone C program into the cache (:func:`symtrack.build.build`) and return its path.
+    """Compile a standalone C program into the cache (:func:`symtrack.toolchain.build`) and return its path.
 
     ``main_c`` and ``inputs`` (the generated sources of a ``python -m codegen`` folder and what
     they include) are compiled in one flat folder: the units are ``main_c`` and the ``inputs``

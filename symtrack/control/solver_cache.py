@@ -2,7 +2,7 @@
 
 A CasADi Function (the mapped collocation Jacobians and residuals of the real-time iteration, or
 the functions an NLP solver calls) is turned into C with CasADi's code generator, compiled into
-a shared library by :func:`symtrack.build.build` and loaded with ``casadi.external``. The library
+a shared library by :func:`symtrack.toolchain.build` and loaded with ``casadi.external``. The library
 lives in ``<cache>/mpc/<name>-<key>/lib<name>.so`` (``<cache>``: ``$SYMTRACK_CACHE`` or
 ``~/.cache/symtrack``, as the model libraries; a ``jit_dir`` replaces ``<cache>/mpc``), where
 ``key`` is the SHA-256 of the serialised Function, the CasADi version, the compile flags and
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import casadi as ca
 
-from .. import build as cache
-from ..build import BuildSpec, digest
+from .. import toolchain as cache
+from ..toolchain import BuildSpec, digest
 
 __all__ = ["BUILD_VERSION", "DEFAULT_FLAGS", "GROUP", "builds", "compiled_function", "compiled_nlp_library",
            "problem_key"]
@@ -37,7 +37,7 @@ BUILD_VERSION = 1
 DEFAULT_FLAGS = ("-O1",)
 GROUP = "mpc"  # the libraries' sub-folder of the cache
 
-# every compilation of this process for the MPC (symtrack.build.Built: kind, what, path, seconds); the tests read it
+# every compilation of this process for the MPC (symtrack.toolchain.Built: kind, what, path, seconds); the tests read it
 builds: list = []
 
 

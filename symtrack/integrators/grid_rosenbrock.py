@@ -4,7 +4,7 @@
 The step is :mod:`symtrack.native.grid_rosenbrock` (8-stage L-stable Rosenbrock on the DAE form, the
 channels eliminated through the arrowhead's Schur complement, ``map`` over the channels). Its C
 source is generated on first use for the pool size and the number of steps per call, compiled
-into ``<cache>/grid-<hash>/`` through :func:`symtrack.build.build` (the key hashes the
+into ``<cache>/grid-<hash>/`` through :func:`symtrack.toolchain.build` (the key hashes the
 serialised Function) and loaded with ``casadi.external``. The sources are not committed: they
 depend on the pool size M^2. Without a C compiler the same Function runs on CasADi's
 interpreter (slow; an error with ``--require-compiled``).
@@ -22,10 +22,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..build import BuildSpec, build, casadi_tag, compiler, digest
 from ..foundations.errors import SimulationError
 from ..native.grid_rosenbrock import build as build_step
 from ..terrain.channels import NF, NG
+from ..toolchain import BuildSpec, build, casadi_tag, compiler, digest
 from .settings import substeps
 
 __all__ = ["MAX_STEP_S", "PACK_SLOTS", "GridRosenbrockStepper", "grid_library"]

@@ -2,14 +2,14 @@
 
 For a :class:`~symtrack.model.SystemModel` (any terrain), :func:`library` builds the Functions
 of :mod:`symtrack.native.generate`, hashes them (SHA-256 of the serialised Functions, the manifest's
-``model_hash``), and has :func:`symtrack.build.build` compile each file into
+``model_hash``), and has :func:`symtrack.toolchain.build` compile each file into
 ``<cache>/<prefix>_<file>-<hash>-b<BUILD_VERSION>/lib<prefix>_<file>.so`` once (the cache, its lock,
-its atomic writes and the compiler are :mod:`symtrack.build`'s). The sources are taken from the
+its atomic writes and the compiler are :mod:`symtrack.toolchain`'s). The sources are taken from the
 repository's ``generated/`` if its manifest has the same hash, or generated afresh (an installed
 package, or a model that differs from the committed sources).
 
 Without a C compiler everything runs on CasADi's interpreter with the same Functions (a warning
-once; an error with ``--require-compiled``: :func:`symtrack.build.set_require_compiled`).
+once; an error with ``--require-compiled``: :func:`symtrack.toolchain.set_require_compiled`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import casadi as ca
 
-from ..build import BuildSpec, build, compiler
+from ..toolchain import BuildSpec, build, compiler
 from .generate import GROUP_OF, render
 from .generate import build as build_functions
 

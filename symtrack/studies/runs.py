@@ -2,7 +2,7 @@
 Dask worker receives, never CasADi objects) to the files a single run writes.
 
 A worker builds the model itself; the compiled libraries come from that machine's hash-keyed
-cache (``$SYMTRACK_CACHE``, :mod:`symtrack.build`), compiled there once when missing. The
+cache (``$SYMTRACK_CACHE``, :mod:`symtrack.toolchain`), compiled there once when missing. The
 files come back to the client as bytes, so the client alone writes the sweep folder (a cluster
 needs no shared file system).
 """

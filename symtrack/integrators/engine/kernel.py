@@ -17,9 +17,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ...build import BuildSpec, build, casadi_tag, compiler, digest
 from ...foundations.errors import SimulationError
 from ...native.grid_engine_model import soil_dispatch_c
+from ...toolchain import BuildSpec, build, casadi_tag, compiler, digest
 from .state import EngineState, EngineStruct
 
 __all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library"]

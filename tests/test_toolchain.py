@@ -1,4 +1,4 @@
-"""The compile-and-cache API (symtrack.build): the key follows the sources and the flags, a second
+"""The compile-and-cache API (symtrack.toolchain): the key follows the sources and the flags, a second
 build is a cache hit, an interrupted build leaves no half-written artefact, a missing or failing
 compiler gives a clear error, the log tells the user what is compiling. (Two processes building
 one key at once: tests/test_cache_concurrency.py.)"""
@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from symtrack import build
-from symtrack.build import cache as build_cache
+from symtrack import toolchain as build
 from symtrack.codegen.standalone import build_program
 from symtrack.control.solver_cache import problem_key
 from symtrack.foundations.errors import SimulationError
+from symtrack.toolchain import cache as build_cache
 
 pytestmark = pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler")
 
@@ -45,7 +45,7 @@ def _spec(root: Path, value: int, calls: list | None = None, **kw) -> build.Buil
 def test_a_second_build_is_a_cache_hit_and_the_key_follows_the_sources(tmp_path, caplog):
     calls: list[int] = []
     n0 = len(build.builds)
-    with caplog.at_level(logging.INFO, logger="symtrack.build"):
+    with caplog.at_level(logging.INFO, logger="symtrack.toolchain"):
         so = build.build(_spec(tmp_path, 42, calls))
     assert ctypes.CDLL(str(so)).symtrack_answer() == 42
     assert so.parent.parent == tmp_path and so.parent.name == f"answer-{build.digest(ANSWER % 42, '')[:16]}"
@@ -54,7 +54,7 @@ def test_a_second_build_is_a_cache_hit_and_the_key_follows_the_sources(tmp_path,
                for r in caplog.records)
     assert len(build.builds) == n0 + 1 and build.builds[-1].path == so and build.builds[-1].kind == "answer"
     caplog.clear()
-    with caplog.at_level(logging.INFO, logger="symtrack.build"):
+    with caplog.at_level(logging.INFO, logger="symtrack.toolchain"):
         assert build.build(_spec(tmp_path, 42, calls)) == so  # the hit: no sources made, no compiler, no log
     assert calls == [42] and len(build.builds) == n0 + 1 and not caplog.records
     other = build.build(_spec(tmp_path, 7, calls))  # other sources: another entry
@@ -92,7 +92,7 @@ def test_the_key_follows_the_flags(tmp_path):
 INTERRUPTED = textwrap.dedent("""
     import sys
     from pathlib import Path
-    from symtrack import build
+    from symtrack import toolchain as build
     src = b'int symtrack_answer(void) { return 3; }\\n'
     build.build(build.BuildSpec(kind="answer", key=build.digest(src), output="libanswer.so",
                                 sources=lambda: {"answer.c": src}, what="the answer", root=Path(sys.argv[1])),
@@ -143,7 +143,7 @@ def test_a_missing_compiler_is_a_clear_error(tmp_path, monkeypatch, caplog):
     assert list(tmp_path.iterdir()) == []
     # callers with an interpreted fallback: a warning once, or an error when compiled code is required
     monkeypatch.setattr(build_cache, "_warned_no_compiler", False)
-    with caplog.at_level(logging.WARNING, logger="symtrack.build"):
+    with caplog.at_level(logging.WARNING, logger="symtrack.toolchain"):
         assert build.compiler() is None and build.compiler() is None
     assert sum("no C compiler found" in r.getMessage() for r in caplog.records) == 1
     monkeypatch.setattr(build_cache, "_require", True)

@@ -22,7 +22,7 @@ its path. This module alone owns:
   ``--require-compiled`` or ``SYMTRACK_REQUIRE_COMPILED=1``), :func:`require_compiler` and
   :func:`build` for those that cannot (an error that names what was being built);
 - the log: ``compiling <what> (first run; cached in <entry>) ...`` and ``compiled <what> in <s> s``
-  at INFO on the ``symtrack.build`` logger (a user who waits minutes for the compiler is told why),
+  at INFO on the ``symtrack.toolchain`` logger (a user who waits minutes for the compiler is told why),
   and :data:`builds`, every compilation of this process.
 
 A cache hit costs one ``stat``: no lock, no source generation, no compiler lookup.
@@ -50,7 +50,7 @@ __all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_
            "build", "builds", "cache_root", "casadi_tag", "compiled_required", "compiler", "digest",
            "find_compiler", "require_compiler", "set_require_compiled"]
 
-log = logging.getLogger("symtrack.build")
+log = logging.getLogger("symtrack.toolchain")
 
 # the large straight-line Jacobian files take 2x longer to compile at -O2 for little gain
 BIG_FILE_BYTES = 600_000

@@ -1,5 +1,5 @@
 """The compile-and-cache API (layer 4): every compiled library and program of symtrack is built
-through :func:`build` (:mod:`symtrack.build.cache`)."""
+through :func:`build` (:mod:`symtrack.toolchain.cache`)."""
 
 from .cache import (
     BuildSpec,
