@@ -71,13 +71,13 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..foundations.errors import ScenarioError, SimulationError
+from ..foundations.errors import ScenarioError
 from ..model import SystemModel, vehicle_registry
 from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
-from .channels import HIST_ROWS, NF, NG, PHASE_VIRGIN, ChannelTerrain
+from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import soil_index
 from .storage import Grid, Terrain
@@ -277,109 +277,6 @@ class World:
     # ---- the parameter vector --------------------------------------------------------------------
     def param_vector(self) -> np.ndarray:
         return np.concatenate([self._pbase, self.Q])
-
-    # ---- per macro step ----------------------------------------------------------------------
-    def before_step(self, x: np.ndarray, dt: float, stepper=None):
-        """Assign channels for the step from x over dt; returns (x with INFO_IN loaded, p)."""
-        x = np.array(x, dtype=float)
-        L = self.layout
-        X, Y, psi, u, v, r = x[L.indices(("x_m", "y_m", "yaw_rad", "u_m_s", "v_m_s", "yaw_rate_rad_s"))]
-        c, s = math.cos(psi), math.sin(psi)
-        X1, Y1, psi1 = X + dt * (u * c - v * s), Y + dt * (u * s + v * c), psi + dt * r
-        foot = np.union1d(self.cells_under(X, Y, psi, self._pad), self.cells_under(X1, Y1, psi1, self._pad))
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        cells = self.channel_cell[act]
-        in_foot = np.isin(cells, foot)
-        zdot = x[L.cell_index(act, "rate")]
-        release = (~in_foot) & (self.p_soil[act] <= 0.0) & (np.abs(zdot) <= self.settings.release_rate_m_s)
-        rel = act[release]
-        if rel.size:
-            self.channel_cell[rel] = -1
-            self.qc[rel] = 0.0
-            self.p_soil[rel] = 0.0
-            x[L.cell_index(rel, "sinkage")] = 0.0
-            x[L.cell_index(rel, "rate")] = 0.0
-        new = np.setdiff1d(foot, cells, assume_unique=True)
-        if new.size:
-            ch = self.channel_of(new)
-            self._check_collisions(new, ch)
-            self.channel_cell[ch] = new
-            st = self.storage
-            cx, cy = self.grid.centres(*np.divmod(new, self.grid.shape[1]))
-            self.qc[ch, 0], self.qc[ch, 1] = cx, cy
-            self.qc[ch, 2], self.qc[ch, 3], self.qc[ch, 4] = st.zmax[new], st.pmax[new], 1.0
-            self.qc[ch, 5], self.qc[ch, 7] = st.zoff[new], 0.0
-            self.qc[ch, 6] = 0.0
-            hist = self.qc[ch][:, HIST_ROWS].T
-            self.ch_soil[ch] = st.soil_index[new]
-            soil = self.ch_soil[ch]
-            self.qc[ch, 6] = np.array(self._entry_map(ch.size)(
-                st.z[new][None, :], hist, st.cycles[new][None, :].astype(float), self.laws[:, soil],
-                self.betas[soil][None, :])).ravel()
-            self.counted[ch] = False
-            x[L.cell_index(ch, "sinkage")] = st.z[new]
-            x[L.cell_index(ch, "rate")] = st.zdot[new]
-            self.p_soil[ch] = 0.0
-            self.touched[new] = True
-            if stepper is not None:
-                stepper.reset()
-        n_act = int(np.count_nonzero(self.channel_cell >= 0))
-        self.peak_active = max(self.peak_active, n_act)
-        return x, self.param_vector()
-
-    def _check_collisions(self, new, ch):
-        held = self.channel_cell[ch] >= 0
-        order = np.argsort(ch, kind="stable")
-        dup = np.nonzero(np.diff(ch[order]) == 0)[0]
-        if not held.any() and dup.size == 0:
-            return
-        if held.any():
-            k = int(np.nonzero(held)[0][0])
-            a, b = int(new[k]), int(self.channel_cell[ch[k]])
-        else:
-            a, b = int(new[order[dup[0]]]), int(new[order[dup[0] + 1]])
-        act = np.concatenate([self.channel_cell[self.channel_cell >= 0], new])
-        i, j = np.divmod(act, self.grid.shape[1])
-        need = int(max(np.ptp(i), np.ptp(j))) + 1
-        raise SimulationError(
-            f"channel collision: cells {self.ij(a)} and {self.ij(b)} (i, j) are both active and both map to "
-            f"channel {int(self.channel_of(np.array([a]))[0])} with M = {self.M} (Cell[i, j] -> CHANNEL[i mod M, "
-            f"j mod M]); the active set spans {np.ptp(i) + 1} x {np.ptp(j) + 1} cells and needs M >= {need}. "
-            "Raise terrain.channels, terrain.max_speed_m_s or terrain.release_time_s")
-
-    def after_step(self, x: np.ndarray) -> None:
-        """INFO_OUT: write every active channel's state and history back to its cell."""
-        x = np.asarray(x, dtype=float)
-        L = self.layout
-        zc = x[L.cell_field("sinkage")]
-        zmax, pmax, dc, p, phase, plastic = (np.array(a).ravel() for a in
-                                             self._history(zc, self.qc[:, HIST_ROWS].T, self.laws[:, self.ch_soil]))
-        act = np.nonzero(self.channel_cell >= 0)[0]
-        cells = self.channel_cell[act]
-        st = self.storage
-        st.z[cells] = zc[act]
-        st.zdot[cells] = x[L.cell_index(act, "rate")]
-        st.zmax[cells] = zmax[act]
-        st.pmax[cells] = pmax[act]
-        st.phase[cells] = np.where(zmax[act] > 0, phase[act], PHASE_VIRGIN).astype(np.int8)
-        st.zoff[cells] = self.qc[act, 5] + dc[act]
-        first = (plastic[act] > 0) & ~self.counted[act]
-        st.cycles[cells[first]] += 1
-        self.counted[act[first]] = True
-        self.qc[act, 2] = zmax[act]
-        self.qc[act, 3] = pmax[act]
-        self.qc[act, 7] = dc[act]
-        self.p_soil[act] = p[act]
-
-    def check_covered(self, x: np.ndarray) -> None:
-        """Every cell that the tracks load at state x holds a channel (else the prediction missed)."""
-        X, Y, psi = x[self.layout.pose_index]
-        under = self.cells_under(X, Y, psi, 0.5 * self.grid.cell_m, check_field=False)
-        missing = np.setdiff1d(under, self.channel_cell[self.channel_cell >= 0])
-        if missing.size:
-            raise SimulationError(
-                f"cell {self.ij(int(missing[0]))} came under a track without a channel ({missing.size} cells): "
-                "the footprint prediction missed it; reduce run.output_dt_s")
 
     def active_cells(self) -> np.ndarray:
         return self.channel_cell[self.channel_cell >= 0]
