@@ -122,7 +122,6 @@ def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
     if integrator is not None:
         if not isinstance(integrator, str):
             raise ScenarioError(f"integrator = {integrator!r} must be a name: {', '.join(registry.names())}")
-        registry.get(integrator, "integrator")
         scenario = dataclasses.replace(scenario, run=dataclasses.replace(scenario.run, integrator=integrator))
     if terrain is not None and scenario.terrain is None:
         raise ScenarioError(f"scenario {scenario.name!r} has no [terrain] section, so it runs on the homogeneous "

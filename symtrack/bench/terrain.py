@@ -72,7 +72,7 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
 
     x = np.zeros(model.nx)
     x[L.pose_index] = scenario.start.x_m, scenario.start.y_m, np.radians(scenario.start.yaw_deg)
-    dt = scenario.run.output_dt_s
+    dt = scenario.run.macro_step_s
     # the cells at their static sinkage first (World.begin_pass)
     P0 = np.concatenate([pbase, Q])
     acc = np.array(model.ode(x, np.zeros(2), P0)).ravel()[L.cell_field("rate")]
@@ -200,7 +200,7 @@ def _grid_row(integrator, duration_s=None, channels=None, note=""):
     if integrator == "rosenbrock":  # compile the packed sizes the validation meets (up to 448 slots)
         from ..integrators.grid_rosenbrock import PACK_SLOTS
 
-        n_sub = int(round(sc.run.output_dt_s / sc.run.fixed_step_s))
+        n_sub = int(round(sc.run.macro_step_s / sc.run.fixed_step_s))
         for slots in range(PACK_SLOTS, 512, PACK_SLOTS):
             stepper.function(min(slots, world.n_channels), n_sub)
     build_s = time.perf_counter() - t0

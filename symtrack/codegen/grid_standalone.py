@@ -66,7 +66,7 @@ def render(scratch: Path) -> dict[str, bytes]:
     sc = load_scenario(SCENARIO)
     settings = EngineSettings()
     st = sc.start
-    world = open_world(sc.terrain, sc.params, sc.model, sc.run.output_dt_s, start_xy=(st.x_m, st.y_m))
+    world = open_world(sc.terrain, sc.params, sc.model, sc.run.macro_step_s, start_xy=(st.x_m, st.y_m))
     fns = engine_functions(sc.model, sc.params, settings.vehicle_substeps)
     state = EngineState(world, settings, fns)
     cg = ca.CodeGenerator("engine_gen.c", {"with_header": False})

@@ -150,9 +150,9 @@ def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float | None = Non
     settings = grid_integrator(sc)
     engine = settings.method == "grid_fast"
     if substep_s is None:
-        # the engine: run.output_dt_s (default ENGINE_SUBSTEP_S; the shear law needs 2 ms with 4
-        # vehicle substeps: docs/turning.md)
-        substep_s = sc.run.output_dt_s if engine else GRID_SUBSTEP_S
+        # the engine: its macro step, run.output_dt_s (default ENGINE_SUBSTEP_S; the shear law needs
+        # 2 ms with 4 vehicle substeps: docs/turning.md)
+        substep_s = sc.run.macro_step_s if engine else GRID_SUBSTEP_S
     if not 0.0 < substep_s <= 1.0:
         raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
     s = sc.terrain if sc.terrain is not None else TerrainSettings()

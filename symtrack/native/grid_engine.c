@@ -240,7 +240,7 @@ static void mark_footprint(eng_t *E, long long cell, long long ch, void *ctx) {
   }
 }
 
-/* Release and assignment for a step of length h from the current state (world.World.before_step). */
+/* Release and assignment for a step of length h from the current state (the ChannelManager of the IDAS path calls it too: integrators/engine/manager.py). */
 EXPORT int eng_assign(eng_t *E, double h) {
   WORK = E->work;
   const double *w = E->wv;
@@ -462,7 +462,7 @@ static void info_out(eng_t *E, long long ch, const double *hist) {
     E->ch_counted[ch] = 1;
     if (E->cycles[cell] < 65535) E->cycles[cell] += 1;
   }
-  E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as World.after_step's p_soil */
+  E->ch_zmax[ch] = zm1; /* ch_p stays p(z) on the old history, as the IDAS path's p_soil */
   E->ch_pmax[ch] = pm1;
   E->ch_dc[ch] = dc1;
 }

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 from ..integrators import registry
@@ -37,9 +38,11 @@ from .passes import PassStudy, run_passes, study_summary
 from .plants import make_plant
 from .result import summarise
 
-__all__ = ["Built", "Outcome", "build", "build_cache_info", "clear_build_cache", "system_model"]
+__all__ = ["MAX_MODELS", "Built", "Outcome", "build", "build_cache_info", "clear_build_cache", "system_model"]
 
-_models: dict[ModelOptions, SystemModel] = {}
+# the most recently used models, at most MAX_MODELS (a sweep over model options does not keep them all)
+MAX_MODELS = 8
+_models: OrderedDict[ModelOptions, SystemModel] = OrderedDict()
 _lock = threading.Lock()
 _hits = {"hits": 0, "misses": 0}
 
@@ -47,17 +50,23 @@ _hits = {"hits": 0, "misses": 0}
 def system_model(opts: ModelOptions | None = None) -> SystemModel:
     """The homogeneous terrain's model of ``opts`` (default options when None), built on the
     first call for these options and then shared (a SystemModel is not changed after its
-    construction; its generated library is cached per model object)."""
+    construction; its generated library is cached per model object). The :data:`MAX_MODELS` most
+    recently used are kept."""
     opts = ModelOptions() if opts is None else opts
     with _lock:
         model = _models.get(opts)
         if model is not None:
+            _models.move_to_end(opts)
             _hits["hits"] += 1
             return model
         _hits["misses"] += 1
     model = SystemModel(opts)
     with _lock:
-        return _models.setdefault(opts, model)
+        model = _models.setdefault(opts, model)
+        _models.move_to_end(opts)
+        while len(_models) > MAX_MODELS:
+            _models.popitem(last=False)
+        return model
 
 
 def clear_build_cache() -> None:
@@ -110,6 +119,8 @@ class Built:
         "homogeneous" or "grid" (a ``[terrain]`` section, or a terrain to start from).
     settings : IntegratorSettings
         The integrator of ``run.integrator``, with the scenario's engine settings.
+    spec : IntegratorSpec
+        Its registry entry (looked up once per build: every plant of the build takes it).
     model : SystemModel or None
         The homogeneous terrain's model (shared, :func:`system_model`); None for the grid,
         whose world builds its model from its channels.
@@ -118,13 +129,14 @@ class Built:
     scenario: object
     kind: str
     settings: IntegratorSettings
+    spec: registry.IntegratorSpec
     model: SystemModel | None
 
     def plant(self, terrain=None):
         """A fresh plant of the scenario (:func:`symtrack.simulation.plants.make_plant` on the
         built model): a new stepper, and for the grid a new world (on ``terrain``, a
         :class:`~symtrack.terrain.storage.Terrain` or terrain file, if given)."""
-        return make_plant(self.scenario, terrain=terrain, model=self.model)
+        return make_plant(self.scenario, terrain=terrain, model=self.model, spec=self.spec)
 
     def run(self, terrain=None, progress: bool = False, record_every_s: float | None = None) -> Outcome:
         """Run the scenario on a fresh plant (:meth:`plant`): the one time loop
@@ -158,7 +170,7 @@ def build(scenario, terrain=None) -> Built:
     options costs nothing). ``terrain``: a grid terrain the run will start from (the plant is then
     the grid's)."""
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
-    registry.get(settings.method, "integrator")
+    spec = registry.get(settings.method, "integrator")
     if scenario.terrain is not None or terrain is not None:
-        return Built(scenario, "grid", settings, None)
-    return Built(scenario, "homogeneous", settings, system_model(scenario.model))
+        return Built(scenario, "grid", settings, spec, None)
+    return Built(scenario, "homogeneous", settings, spec, system_model(scenario.model))

@@ -488,30 +488,33 @@ def advance_plant(plant, u, length_s: float, substep_s: float | None = None,
     return x, y
 
 
-def make_grid_plant(world: World, settings: IntegratorSettings):
-    """The grid plant of a world with the integrator of ``settings`` (from the registry): an
-    :class:`EnginePlant` for an engine, else a :class:`GridPlant` with its stepper."""
-    spec = registry.get(settings.method)
+def make_grid_plant(world: World, settings: IntegratorSettings, spec: registry.IntegratorSpec | None = None):
+    """The grid plant of a world with the integrator of ``settings`` (``spec``: its registry entry,
+    looked up when None): an :class:`EnginePlant` for an engine, else a :class:`GridPlant` with its
+    stepper."""
+    spec = spec or registry.get(settings.method)
     if spec.grid_engine is not None:
         spec.check("grid", settings)
         return EnginePlant(world, spec.grid_engine(world, settings))
     return GridPlant(world, spec.stepper("grid", world.model, settings, world.n_channels))
 
 
-def make_plant(scenario, *, terrain=None, world: World | None = None, model: SystemModel | None = None):
+def make_plant(scenario, *, terrain=None, world: World | None = None, model: SystemModel | None = None,
+               spec: registry.IntegratorSpec | None = None):
     """The plant a simulation scenario asks for: the grid terrain when it has a ``[terrain]``
     section (or a ``world`` / ``terrain`` is given: a :class:`~symtrack.terrain.storage.Terrain`
-    or a terrain file), else the homogeneous terrain; the integrator of ``run.integrator``."""
+    or a terrain file), else the homogeneous terrain; the integrator of ``run.integrator`` (``spec``:
+    its registry entry, as :class:`~symtrack.simulation.build.Built` holds it; looked up when None)."""
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
-    spec = registry.get(settings.method)
+    spec = spec or registry.get(settings.method)
     if world is not None or scenario.terrain is not None or terrain is not None:
         with timed_step("building the grid terrain's model and its integrator", log):
             if world is None:
                 spec.check("grid", settings)
                 st = scenario.start
                 world = open_world(scenario.terrain or TerrainSettings(), scenario.params, scenario.model,
-                                   scenario.run.output_dt_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
-            return make_grid_plant(world, settings)
+                                   scenario.run.macro_step_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
+            return make_grid_plant(world, settings, spec)
     with timed_step("building the model and its integrator", log):
         model = model or SystemModel(scenario.model)
         stepper = spec.stepper("homogeneous", model, settings)

@@ -98,6 +98,14 @@ class RunSettings:
     compiled: bool = False
     rms_exclude_first_m: float = 0.0
 
+    @property
+    def macro_step_s(self) -> float:
+        """The grid terrain's macro step [s]: the world manager's step (channels assigned, INFO_IN,
+        the vehicle and the cells advanced, INFO_OUT) and the step whose travel sizes the channel
+        pool (:func:`symtrack.terrain.world.derive_modulus`). It is the output step today (one
+        output per macro step); its one home, so that the two can part without touching readers."""
+        return self.output_dt_s
+
     def integrator_settings(self) -> IntegratorSettings:
         return IntegratorSettings(self.integrator, self.reltol, self.abstol, compiled=self.compiled,
                                   fixed_step_s=self.fixed_step_s)

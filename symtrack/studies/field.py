@@ -487,7 +487,7 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
                 law = None
                 if spec.field.speed_m_s is not None:
                     law = SpeedGovernor(spec.field.speed_m_s, spec.field.torque_N_m, sc.params["mass_kg"],
-                                        sc.params["sprocket_radius_m"], plant.max_intervals * sc.run.output_dt_s, iu)
+                                        sc.params["sprocket_radius_m"], plant.max_intervals * sc.run.macro_step_s, iu)
                 res = loop.run(sck, plant, torque_law=law)
             except loop.IncompleteRun as err:
                 res, failure = err.partial, err

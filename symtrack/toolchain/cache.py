@@ -1,7 +1,7 @@
 """The one compile-and-cache API: C sources -> a shared library or a program in a hash-keyed cache.
 
 Every compiled artefact of symtrack goes through :func:`build`: the model libraries
-(:mod:`symtrack.native.cache`), the terrain engine (:mod:`symtrack.integrators.grid_engine`), the grid
+(:mod:`symtrack.native.cache`), the terrain engine (:mod:`symtrack.integrators.engine.kernel`), the grid
 Rosenbrock integrator (:mod:`symtrack.integrators.grid_rosenbrock`), the MPC's functions
 (:mod:`symtrack.control.solver_cache`) and the standalone programs (:mod:`symtrack.codegen`). A caller
 describes one artefact with a :class:`BuildSpec` (what identifies it: its key, made with
