@@ -38,7 +38,7 @@ standalone: build/symtrack_standalone
 	./build/symtrack_standalone
 
 # the grid validation (validation_grid, the million-cell field) on the terrain engine, libc and libm only
-build/symtrack_grid_standalone: symtrack/codegen/grid_standalone_main.c symtrack/native/grid_engine.c symtrack/native/subsoil.h generated/engine_gen.inc generated/engine_soils.inc generated/grid_validation.h
+build/symtrack_grid_standalone: symtrack/codegen/grid_standalone_main.c symtrack/native/grid_engine.c symtrack/native/subsoil.h symtrack/native/terrain_query.h generated/engine_gen.inc generated/engine_soils.inc generated/grid_validation.h
 	mkdir -p build
 	$(CC) -O2 -Wall -Wno-unused-function -Wno-unused-variable -Wno-unused-but-set-variable -Igenerated -Isymtrack/native symtrack/codegen/grid_standalone_main.c -o $@ -lm
 

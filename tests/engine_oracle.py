@@ -27,7 +27,7 @@ from symtrack.integrators.engine.state import (
 )
 from symtrack.integrators.settings import window_substeps
 from symtrack.native.grid_engine_model import NS
-from symtrack.terrain import subsoil
+from symtrack.terrain import query, subsoil
 
 __all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "outside_tracks", "ringing"]
 
@@ -369,6 +369,12 @@ class PyKernel:
                 s.ch_z[ch] = 0.5 * (lo + hi)
             s.ch_v[ch] = s.ch_vr[ch] = 0.0
             s.ch_p[ch], s.ch_dp[ch] = self._law(float(s.ch_z[ch]), hist, soil)
+
+    def surface(self, x, y):
+        """eng_surface: the numpy terrain query on the storage (symtrack/terrain/query.py)."""
+        q = query.query(self.s.storage, x, y, outside="nan")
+        out = np.column_stack([q.elevation_m, q.sinkage_m, q.height_m, q.normal])
+        return int(np.count_nonzero(q.cell < 0)), q.cell, q.phase.astype(np.intc), out
 
     def lift(self, p_end, h, T, n, max_steps):
         s, e = self.s, self.e

@@ -24,6 +24,7 @@ from symtrack.native.grid_engine_model import build_engine_functions
 from symtrack.simulation import loop
 from symtrack.simulation.plants import EnginePlant, make_plant
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
+from symtrack.terrain import query
 from symtrack.toolchain import find_compiler
 
 # A 12 m x 4 m field at 0.25 m (768 cells, M = 18): from rest, both sprockets at 2000 N m, then the
@@ -337,3 +338,25 @@ def test_a_loaded_cell_without_a_channel_is_an_error():
     plant.engine.state.pad = -0.2  # a footprint shrunk by 0.2 m misses cells the tracks load
     with pytest.raises(SimulationError, match=r"cell \(\d+, \d+\) came under a track without a channel"):
         loop.run(sc, plant)
+
+
+def test_the_engines_terrain_query_is_the_numpy_query():
+    """The engine's C query on its own storage (terrain_query.h, eng_surface) against the numpy query
+    on the world's storage after a short pass (rutted cells and untouched ones), outside points
+    included; the interpreted oracle answers the same."""
+    sc = _scenario(duration_s=0.3)
+    plant = make_plant(sc)
+    loop.run(sc, plant)
+    w = plant.world
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(-6.5, 6.5, 3000), [-6.0, 6.0, 0.0]])
+    y = np.concatenate([rng.uniform(-2.5, 2.5, 3000), [-2.0, 2.0, 2.0]])
+    ref = query.query(w.storage, x, y, outside="nan")
+    assert np.nanmax(ref.sinkage_m) > 1e-4 and np.any(ref.cell < 0)  # the run left ruts; some points outside
+    for eng in (plant.engine, engine.TerrainEngine(w, kernel=PyKernel)):
+        got = eng.surface(x, y, outside="nan")
+        for name in ("cell", "elevation_m", "sinkage_m", "height_m", "normal", "phase"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+    with pytest.raises(SimulationError, match=r"terrain query at \(100, 0\) m: outside the field"):
+        plant.engine.surface(100.0, 0.0)
+

@@ -11,7 +11,7 @@ engine of ``validation_grid`` on its million-cell field, linking only libc and l
   damping, SDIRK gamma, substeps, power mode), the parameter vector, the geometry vector, the
   work size, the settling, the torque programme and the run settings.
 
-The program includes symtrack/native/grid_engine.c (and subsoil.h; the subsoil stress is off:
+The program includes symtrack/native/grid_engine.c (and subsoil.h and terrain_query.h; the subsoil stress is off:
 it feeds nothing back) and runs what TerrainEngine.begin_pass and the time loop do: the set-down
 (eng_assign, eng_static), the settling, then the scenario's output steps in one eng_run with the
 distance stop, and writes every step's vehicle state and outputs as CSV.
@@ -121,7 +121,7 @@ def build(src_dir: Path | None = None) -> Path:
     """Compile the grid standalone program from the generated sources in src_dir (default: the
     repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
     src = Path(src_dir) if src_dir else REPO_GENERATED
-    hashed = [*(src / n for n in FILES), NATIVE / "grid_engine.c", NATIVE / "subsoil.h"]
+    hashed = [*(src / n for n in FILES), NATIVE / "grid_engine.c", NATIVE / "subsoil.h", NATIVE / "terrain_query.h"]
     return build_program("grid_standalone", MAIN_C, hashed, CFLAGS)
 
 

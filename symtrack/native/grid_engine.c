@@ -30,6 +30,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #include "engine_gen.inc"
 #include "engine_soils.inc" /* ENG_SOIL_CALL: the Function of a cell's soil (generated: a soil map's soils) */
 #include "subsoil.h" /* the subsoil stress below the tracks (symtrack/terrain/subsoil.py) */
+#include "terrain_query.h" /* the ground's height, normal and cell under a point (symtrack/terrain/query.py) */
 
 #define EXPORT __attribute__((visibility("default")))
 #define NV ENG_NV /* generated: engine_soils.inc (grid_engine_model.engine_layout_c) */
@@ -811,4 +812,27 @@ EXPORT void eng_static(eng_t *E) {
     E->ch_vr[ch] = 0.0;
     law(E->ch_z[ch], hist, soil, E->ch_p + ch, E->ch_dp + ch);
   }
+}
+
+/* The terrain query on the engine's own storage (terrain_query.h; TerrainEngine.surface): per point n
+ * cell[n], phase[n] and out[6 n ..] = (elevation, sinkage, height, normal x, y, z); returns how many
+ * points lie outside the field (their cell -1, numbers NaN). */
+EXPORT long long eng_surface(const eng_t *E, const double *px, const double *py, long long n_points, long long *cell,
+                             int *phase, double *out) {
+  const tq_field_t F = {E->nx, E->ny, E->x0, E->y0, E->dx, E->z, E->phase};
+  long long outside = 0;
+  for (long long n = 0; n < n_points; ++n) {
+    tq_result_t r;
+    outside += terrain_query(&F, px[n], py[n], &r);
+    cell[n] = r.cell;
+    phase[n] = r.phase;
+    double *o = out + 6 * n;
+    o[0] = r.elevation_m;
+    o[1] = r.sinkage_m;
+    o[2] = r.height_m;
+    o[3] = r.normal[0];
+    o[4] = r.normal[1];
+    o[5] = r.normal[2];
+  }
+  return outside;
 }

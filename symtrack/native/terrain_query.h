@@ -9,8 +9,9 @@
  * height = elevation - sinkage (the undisturbed surface, flat today: elevation 0, minus the rut);
  * normal = the undisturbed surface's unit normal, (0, 0, 1) on a flat field.
  *
- * Not yet included by grid_engine.c (nothing in the engine asks for the height yet: the planar
- * vehicle rides the flat field); a 3D vehicle's engine includes it there. */
+ * grid_engine.c includes it and exports it on its own storage (eng_surface; TerrainEngine.surface);
+ * terrain_query_check.c wraps it alone for the tests. The planar vehicle does not ask for the height
+ * yet (it rides the flat field); a 3D vehicle's contact will. */
 #ifndef SYMTRACK_TERRAIN_QUERY_H
 #define SYMTRACK_TERRAIN_QUERY_H
 

@@ -18,7 +18,9 @@ A point outside the field is an error naming the point and the field's extent
 (``outside="nan"``: NaN heights and normals, cell -1, instead).
 
 The same query in C for the engine: symtrack/native/terrain_query.h (``terrain_query``, same
-rule for the cell and the same numbers; tests/test_terrain_query.py compares them).
+rule for the cell and the same numbers), compiled into the terrain engine and exported on its own
+storage (``eng_surface``: :meth:`symtrack.integrators.engine.TerrainEngine.surface`);
+tests/test_terrain_query.py compares them.
 """
 
 from __future__ import annotations

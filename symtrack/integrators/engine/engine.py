@@ -13,6 +13,7 @@ import numpy as np
 from ...foundations.errors import SimulationError
 from ...model import soil_law
 from ...native.grid_engine_model import TRACK_SOIL_PARAMS, build_engine_functions
+from ...terrain import query
 from ...terrain.world import LIFT_TIME_S
 from ..settings import EngineSettings, window_substeps
 from .kernel import CKernel, library
@@ -169,6 +170,21 @@ class TerrainEngine:
     def vehicle_state(self) -> np.ndarray:
         """The vehicle's 12 states now (a copy)."""
         return self.state.wv[self.fns.layout.block("vehicle")].copy()
+
+    def surface(self, x_m, y_m, outside: str = "raise") -> query.SurfaceQuery:
+        """The terrain under the points (x_m, y_m) from the engine's storage, by the engine's C
+        (symtrack/native/terrain_query.h): the same :class:`~symtrack.terrain.query.SurfaceQuery`,
+        rule and numbers as :func:`symtrack.terrain.query.query` on the world's storage."""
+        if outside not in query.OUTSIDE_MODES:
+            raise SimulationError(f"outside = {outside!r} must be one of {', '.join(query.OUTSIDE_MODES)}")
+        x, y = np.broadcast_arrays(np.asarray(x_m, dtype=float), np.asarray(y_m, dtype=float))
+        n_out, cell, phase, out = self.kernel.surface(x.ravel(), y.ravel())
+        if n_out and outside == "raise":
+            query.cell_of(self.world.grid, x, y)  # the query's error: the first point outside, the field's extent
+        shape = x.shape
+        return query.SurfaceQuery(cell.reshape(shape), out[:, 0].reshape(shape), out[:, 1].reshape(shape),
+                                  out[:, 2].reshape(shape), out[:, 3:].reshape(shape + (3,)),
+                                  phase.astype(np.int8).reshape(shape))
 
     def active_cells(self) -> np.ndarray:
         """The flat indices of the cells that hold a channel, in channel order (a copy)."""

@@ -48,8 +48,9 @@ def library(fns):
     check_no_work(fns.all())
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
+    qsrc = resources.files("symtrack.native").joinpath("terrain_query.h").read_bytes()
     dsrc = soil_dispatch_c(fns.n_soils).encode()
-    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, dsrc, casadi_tag(BUILD_VERSION))
+    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dsrc, casadi_tag(BUILD_VERSION))
 
     def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-enginegen-") as scratch:
@@ -60,7 +61,8 @@ def library(fns):
             gen = (Path(scratch) / "engine_gen.c").read_bytes()
         if b"#error" in gen:
             raise SimulationError("the generated engine functions are not exportable (#error in engine_gen.c)")
-        return {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc, "engine_soils.inc": dsrc}
+        return {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc, "terrain_query.h": qsrc,
+                "engine_soils.inc": dsrc}
 
     so = build(BuildSpec(kind="engine", key=key, output="libsymtrack_engine.so", sources=sources,
                          what="the terrain engine"), cc)
@@ -82,6 +84,9 @@ def library(fns):
     lib.eng_info_out.restype = None
     lib.eng_uncovered.argtypes = [P, ctypes.c_double, ctypes.c_double, ctypes.c_double]
     lib.eng_uncovered.restype = ctypes.c_longlong
+    vp = ctypes.c_void_p
+    lib.eng_surface.argtypes = [P, vp, vp, ctypes.c_longlong, vp, vp, vp]
+    lib.eng_surface.restype = ctypes.c_longlong
     return lib
 
 
@@ -132,6 +137,18 @@ class CKernel:
         e = self.s.struct()
         n = self.lib.eng_uncovered(ctypes.byref(e), float(X), float(Y), float(psi))
         return int(n), e
+
+    def surface(self, x: np.ndarray, y: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+        """The terrain query (terrain_query.h) at the points (x, y) on the engine's storage: (points
+        outside, cell, phase, the (n, 6) rows elevation, sinkage, height, normal x, y, z)."""
+        x = np.ascontiguousarray(x, dtype=float)
+        y = np.ascontiguousarray(y, dtype=float)
+        n = x.size
+        cell, phase, out = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.intc), np.zeros((n, 6))
+        e = self.s.struct()
+        outside = self.lib.eng_surface(ctypes.byref(e), x.ctypes.data, y.ctypes.data, n, cell.ctypes.data,
+                                       phase.ctypes.data, out.ctypes.data)
+        return int(outside), cell, phase, out
 
     def lift(self, p_end, h, T, n, max_steps):
         e = self.s.struct()
