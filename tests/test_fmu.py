@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import zipfile
+from pathlib import Path
 
 import fmpy  # the dev extra's independent FMI importer
 import fmpy.fmi2
@@ -148,7 +149,7 @@ def test_an_unwritable_output_is_refused_before_any_build(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")
     for out, message in ((blocker / "x.fmu", "is an existing file"), (tmp_path, "is a folder"),
-                         (tmp_path / "x.zip", "ends in .fmu")):
+                         (tmp_path / "x.zip", "ends in .fmu"), (Path("/proc/x.fmu"), "cannot write into")):
         with pytest.raises(ScenarioError) as info:
             fmu_export.export_fmu("validation", out)
         assert message in str(info.value)

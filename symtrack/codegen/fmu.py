@@ -35,6 +35,7 @@ import dataclasses
 import io
 import logging
 import math
+import os
 import tempfile
 import uuid
 import zipfile
@@ -176,8 +177,8 @@ def _xml_number(v: float) -> str:
     return repr(float(v))
 
 
-def model_description(sc: Scenario, variables, guid: str, model_hash: str) -> str:
-    """modelDescription.xml (FMI 2.0, co-simulation)."""
+def model_description(sc: Scenario, variables, guid: str, model_hash: str, prefix: str = "homogeneous") -> str:
+    """modelDescription.xml (FMI 2.0, co-simulation); ``prefix``: the generated files' prefix."""
     units = sorted({v.unit for v in variables if v.unit != "1"})
     desc = (f"symtrack {sc.name}: tracked vehicle on homogeneous deformable soil, compiled fixed-step Rosenbrock "
             f"(model hash {model_hash[:16]})")
@@ -197,8 +198,8 @@ def model_description(sc: Scenario, variables, guid: str, model_hash: str) -> st
         '    providesDirectionalDerivative="false">',
         "    <SourceFiles>",
     ]
-    lines += [f'      <File name="{n}"/>' for n in ("symtrack_fmu.c", f"{model_prefix(sc)}_{FIXED_STEP_METHOD}.c",
-                                                   f"{model_prefix(sc)}_outputs.c", f"{model_prefix(sc)}_fmu_init.c")]
+    lines += [f'      <File name="{n}"/>' for n in ("symtrack_fmu.c", f"{prefix}_{FIXED_STEP_METHOD}.c",
+                                                   f"{prefix}_outputs.c", f"{prefix}_fmu_init.c")]
     lines += ["    </SourceFiles>", "  </CoSimulation>", "  <UnitDefinitions>"]
     for u in units:
         base = BASE_UNITS.get(u)
@@ -233,11 +234,6 @@ def model_description(sc: Scenario, variables, guid: str, model_hash: str) -> st
     lines += [f'      <Unknown index="{v.value_reference + 1}"/>' for v in outs]
     lines += ["    </InitialUnknowns>", "  </ModelStructure>", "</fmiModelDescription>", ""]
     return "\n".join(lines)
-
-
-def model_prefix(sc: Scenario) -> str:
-    """The generated files' prefix (the terrain's name)."""
-    return "homogeneous"
 
 
 def init_functions(model, prefix: str) -> tuple[ca.Function, ...]:
@@ -344,6 +340,18 @@ def _documentation(sc: Scenario, variables) -> bytes:
             f"<th>unit</th><th>start</th><th>description</th></tr>\n{rows}\n</table></body></html>\n").encode()
 
 
+def _probe_writable(path: Path) -> None:
+    """Create and remove a file beside ``path`` (permission bits do not tell for root or special file systems)."""
+    folder = path.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
+    except OSError as err:
+        raise ScenarioError(f"--out {str(path)!r}: cannot write into {str(folder)!r} ({err.strerror})") from err
+    os.close(fd)
+    os.unlink(probe)
+
+
 def export_fmu(scenario, out, overrides=None) -> ExportedFmu:
     """Write the FMU of ``scenario`` (a name, a TOML path or a Scenario) to ``out`` (a .fmu file, written
     atomically). The scenario and the output path are checked before anything is built."""
@@ -352,8 +360,9 @@ def export_fmu(scenario, out, overrides=None) -> ExportedFmu:
         raise ScenarioError(f"--out {str(out)!r}: an FMU file name ends in .fmu")
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
     check_exportable(sc)
+    _probe_writable(out_path)  # the scenario first: a refused scenario creates no folder
     model = system_model(sc.model)
-    prefix = model_prefix(sc)
+    prefix = model.terrain.name  # the generated files' prefix
     variables = fmu_variables(model, sc)
     gen = generate_functions(model, prefix, groups=(FIXED_STEP_METHOD, "outputs"))
     sources: dict[str, bytes] = {}
@@ -363,12 +372,12 @@ def export_fmu(scenario, out, overrides=None) -> ExportedFmu:
     sources.update({h.name: h.read_bytes() for h in FMI2_HEADERS})
     sources["symtrack_fmu.c"] = FMU_TEMPLATE.read_bytes()
     # the GUID: the model's hash with everything else the binary and the description depend on
-    body = model_description(sc, variables, "{GUID}", gen.model_hash)
+    body = model_description(sc, variables, "{GUID}", gen.model_hash, prefix)
     key = digest(gen.model_hash, body, *(sources[n] for n in sorted(sources)), " ".join(FMU_CFLAGS),
                  casadi_tag(FMU_BUILD_VERSION))
     guid = "{" + str(uuid.UUID(key[:32])) + "}"
     sources["fmu_model.h"] = _model_header(model, sc, variables, guid, prefix)
-    xml = model_description(sc, variables, guid, gen.model_hash)
+    xml = model_description(sc, variables, guid, gen.model_hash, prefix)
     spec = BuildSpec(kind="fmu", key=key, output=f"{MODEL_IDENTIFIER}.so", sources=lambda: sources,
                      what=f"the FMU of scenario {sc.name!r}",
                      units=("symtrack_fmu.c", f"{prefix}_{FIXED_STEP_METHOD}.c", f"{prefix}_outputs.c",
