@@ -154,3 +154,40 @@ def test_an_unwritable_output_is_refused_before_any_build(tmp_path):
             fmu_export.export_fmu("validation", out)
         assert message in str(info.value)
     assert len(toolchain.builds) == n_builds
+
+
+def test_reset_reruns_the_same_steps_and_a_wrong_guid_is_refused(exported):
+    md = fmpy.read_model_description(str(exported.path))
+    unzipped = fmpy.extract(str(exported.path))
+    slave = fmpy.fmi2.FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName="a")
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    slave.instantiate()
+    try:
+        runs = []
+        for _ in range(2):
+            slave.setupExperiment(startTime=0.0)
+            slave.enterInitializationMode()
+            slave.setReal([vr["torque_cmd_left_N_m"]], [1500.0])
+            slave.exitInitializationMode()
+            for k in range(20):
+                slave.doStep(0.01 * k, 0.01)
+            runs.append(slave.getReal([vr["x_m"], vr["omega_left_rad_s"], vr["tractive_left_N"]]))
+            with pytest.raises(FMICallException):  # a parameter is fixed after initialization
+                slave.setReal([vr["mass_kg"]], [1.0])
+            slave.reset()
+        assert runs[0] == runs[1] and runs[0][0] > 0
+    finally:
+        slave.freeInstance()
+    wrong = fmpy.fmi2.FMU2Slave(guid="{00000000-0000-0000-0000-000000000000}", unzipDirectory=unzipped,
+                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName="b")
+    with pytest.raises(Exception, match="instantiate"):
+        wrong.instantiate()
+
+
+def test_the_cli_refuses_a_grid_scenario_with_exit_2(tmp_path, capsys):
+    from symtrack.cli import main
+
+    out = tmp_path / "g.fmu"
+    assert main(["export", "fmu", "validation_grid", "--out", str(out)]) == 2
+    assert "[terrain]" in capsys.readouterr().err and not out.exists()
