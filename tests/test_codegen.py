@@ -121,6 +121,6 @@ def test_python_m_codegen_is_the_checkouts_entry_point_and_not_installed():
     assert "usage: python -m codegen" in res.stdout and "--check" in res.stdout
     tool = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
     assert tool["packages"]["find"]["include"] == ["symtrack*"]
-    assert tool["package-data"]["symtrack.codegen"] == ["*.c"]
+    assert tool["package-data"]["symtrack.codegen"] == ["*.c", "fmi2/*.h"]  # the FMU: template, FMI 2.0 headers
     assert {p.name for p in (root / "symtrack" / "codegen").glob("*_main.c")} == {
         "standalone_main.c", "grid_standalone_main.c", "mpc_main.c"}
