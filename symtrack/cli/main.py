@@ -130,6 +130,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .field import add_parser as add_field_parser
 
     add_field_parser(sub)  # symtrack field (docs/studies.md, "Whole-field traffic study")
+    from .terrain import add_parser as add_terrain_parser
+
+    add_terrain_parser(sub)  # symtrack terrain export (docs/terrain.md, "GIS rasters")
     return ap
 
 

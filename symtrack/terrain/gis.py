@@ -34,7 +34,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from ..foundations.errors import MissingExtraError, ScenarioError
 from ..foundations.files import atomic_write_bytes
 from .storage import Grid, Terrain
@@ -277,7 +276,7 @@ def write_geotiffs(terrain: Terrain, folder, crs: str | None = None) -> list[Pat
                     ds.update_tags(b, units=layer.units, long_name=layer.long_name + at,
                                    **({"depth_m": f"{depths[b - 1]!r}"} if layer.per_depth else {}))
                 ds.update_tags(symtrack_kind="symtrack-terrain-layer", symtrack_schema_version=str(GIS_SCHEMA_VERSION),
-                               symtrack_version=__version__, layer=name, units=layer.units, long_name=layer.long_name)
+                               layer=name, units=layer.units, long_name=layer.long_name)
             data = mem.read()
         path = Path(folder) / f"{name}.tif"
         atomic_write_bytes(path, data)
@@ -313,7 +312,7 @@ def _dataset(terrain: Terrain, crs: str | None):
         # a coordinate, as rioxarray writes it (GDAL derives the transform from x, y)
         ds = ds.assign_coords(spatial_ref=((), np.int32(0), {"crs_wkt": wkt, "spatial_ref": wkt,
                                                              "long_name": "coordinate reference system"}))
-    ds.attrs = {"Conventions": "CF-1.8", "title": "symtrack field state", "source": f"symtrack {__version__}",
+    ds.attrs = {"Conventions": "CF-1.8", "title": "symtrack field state", "source": "symtrack (symtrack.terrain.gis)",
                 "symtrack_kind": "symtrack-terrain-dataset", "symtrack_schema_version": np.int32(GIS_SCHEMA_VERSION),
                 "cell_m": float(g.cell_m), "origin_m": np.asarray(g.origin_m, dtype=float),
                 "soil_labels": json.dumps(["the terrain's soil"] + [lab for lab, _ in terrain.soil_table])}
