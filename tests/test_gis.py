@@ -196,6 +196,20 @@ def test_a_raster_finer_or_coarser_than_the_cells_is_sampled_at_the_cell_centres
     assert np.array_equal(w.storage.soil_index.reshape(SHAPE) > 0, want)
 
 
+def test_a_raster_of_oblong_pixels_needs_the_cell_size(tmp_path):
+    nx, ny = 80, 25  # 0.1 m x 0.2 m pixels over the 8 m x 5 m field
+    path = tmp_path / "oblong.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=nx, height=ny, count=1, dtype="uint8", crs="EPSG:32633",
+                       transform=from_origin(ORIGIN[0], ORIGIN[1] + 5.0, 0.1, 0.2)) as ds:
+        ds.write(np.zeros((ny, nx), dtype=np.uint8), 1)
+    with pytest.raises(ScenarioError, match=r"pixels of 0.1 x 0.2 m: .* give terrain.cell_m"):
+        _raster_scenario(str(path))
+    d = copy.deepcopy(BASE)
+    d["terrain"] = {"cell_m": 0.25, "soil_map": {"soils": [WET_SOIL], "raster": str(path)}}
+    t = scenario_from_dict(d).terrain
+    assert (t.origin_m, t.shape) == (ORIGIN, (32, 20)) and {"origin_m", "size_m"} <= t.given
+
+
 @pytest.fixture
 def nothing_built(monkeypatch):
     """Fail the test if the world's channel pool (the first thing a world builds) is built."""
