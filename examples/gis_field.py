@@ -3,7 +3,7 @@ a soil map given as a GeoTIFF in a projected CRS, one pass of the reference craw
 terrain engine, the field's state exported as GeoTIFF layers and one NetCDF dataset, and the rut
 depth read back from its GeoTIFF with rasterio and drawn in the CRS's coordinates.
 
-    python examples/gis_field.py --out out/gis_field [--png docs/gis/rut_depth.png]
+    python examples/gis_field.py --out out/gis_field [--png docs/gis/rut_depth.png] [--distance 18]
 
 The soil map is made here: a 26 m x 8 m field at 0.5 m pixels in UTM zone 32N (EPSG:32632), its
 lower-left corner at an illustrative E 530 000 m, N 6 250 000 m (not a surveyed field), the
@@ -49,7 +49,7 @@ def write_soil_map(path: Path) -> None:
         ds.set_band_description(1, "soil: 0 clay 38 %, 1 clay 55 % (wet)")
 
 
-def write_scenario(path: Path) -> None:
+def write_scenario(path: Path, distance_m: float = 18.0) -> None:
     wet_pc_Pa = 1e3 * float(precompression_stress_kPa(**WET_PTF))
     path.write_text(f"""name = "gis_field"
 description = "one pass over a GeoTIFF soil map with a wet hollow (EPSG:32632)"
@@ -57,7 +57,7 @@ description = "one pass over a GeoTIFF soil map with a wet hollow (EPSG:32632)"
 duration_s = 30.0
 output_dt_s = 0.01
 integrator = "grid_fast"
-stop_after_distance_m = 18.0
+stop_after_distance_m = {distance_m!r}
 [vehicle]
 preset = "reference_crawler"
 [soil]
@@ -81,12 +81,13 @@ right_N_m = 1500.0
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/gis_field")
+    ap.add_argument("--distance", type=float, default=18.0, help="length of the pass [m]")
     ap.add_argument("--png", default=None, help="also write the figure here (e.g. docs/gis/rut_depth.png)")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     write_soil_map(out / "soils.tif")
-    write_scenario(out / "gis_field.toml")
+    write_scenario(out / "gis_field.toml", a.distance)
     sc = load_scenario(out / "gis_field.toml")
     print(f"field: origin {sc.terrain.origin_m} m, cell {sc.terrain.cell_m} m, {sc.terrain.shape} cells (from the "
           "GeoTIFF's transform)")

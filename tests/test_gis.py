@@ -5,6 +5,7 @@ QGIS's reader) with its variables, units and CRS; bad rasters are refused before
 built; without the extra, symtrack runs and a raster feature names the install."""
 
 import copy
+import runpy
 import subprocess
 import sys
 from pathlib import Path
@@ -271,3 +272,13 @@ def test_without_the_extra_symtrack_runs_and_a_raster_feature_names_the_install(
             "sc = load_scenario('multipass')\nprint(sc.terrain.shape)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr
+
+
+def test_the_gis_example_writes_the_layers_and_the_figure(tmp_path, capsys):
+    example = runpy.run_path(str(ROOT / "examples" / "gis_field.py"))
+    assert example["main"](["--out", str(tmp_path), "--distance", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "(530000.0, 6250000.0) m, cell 0.1 m, (260, 80) cells" in out
+    with rasterio.open(tmp_path / "geotiff" / "rut_depth.tif") as ds:
+        assert ds.crs.to_epsg() == 32632 and ds.read(1).max() > 0
+    assert (tmp_path / "rut_depth.png").stat().st_size > 10_000 and (tmp_path / "field.nc").is_file()
