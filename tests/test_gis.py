@@ -100,6 +100,10 @@ def test_the_crs_is_kept_in_the_terrain_file_and_the_geotiff_layers_read_back(ru
     run.terrain.save(tmp_path / "t.npz", sc.soil)
     t = Terrain.load(tmp_path / "t.npz")
     assert gis.same_crs(t.crs_wkt, "EPSG:32633")
+    # the terrain continues on its own soil map (the same CRS: no mismatch) and keeps its CRS
+    w = world_module.open_world(sc.terrain, sc.params, sc.model, sc.run.output_dt_s, terrain=Terrain.load(tmp_path /
+                                                                                                         "t.npz"))
+    assert gis.same_crs(w.storage.crs_wkt, t.crs_wkt) and np.array_equal(w.storage.soil_index, t.soil_index)
     files = gis.export_terrain(t, geotiff_dir=tmp_path / "tif")["geotiff"]
     layers = gis.layer_arrays(t)
     assert {f.stem for f in files} == set(layers) == {la.name for la in gis.LAYERS}
