@@ -263,7 +263,7 @@ def test_a_bad_raster_is_refused_naming_it(tmp_path, kwargs, match):
 
 
 def test_without_the_extra_symtrack_runs_and_a_raster_feature_names_the_install(tmp_path, monkeypatch):
-    for mod in ("rasterio", "rasterio.crs", "rasterio.io", "rasterio.transform", "xarray"):
+    for mod in ("rasterio", "rasterio.crs", "rasterio.errors", "rasterio.io", "rasterio.transform", "xarray"):
         monkeypatch.setitem(sys.modules, mod, None)  # import of these now raises ImportError
     with pytest.raises(MissingExtraError, match=r"pip install 'symtrack\[gis\]'"):
         _raster_scenario(str(tmp_path / "soils.tif"))

@@ -65,9 +65,10 @@ def is_geotiff(path) -> bool:
 
 def _crs(text: str, where: str):
     rio_crs = _extra("rasterio.crs", f"{where} (a CRS)")
+    rio_errors = _extra("rasterio.errors", f"{where} (a CRS)")
     try:
         crs = rio_crs.CRS.from_user_input(text)
-    except Exception as err:  # rasterio raises CRSError, a ValueError or a PROJ message, by input
+    except (rio_errors.CRSError, ValueError, TypeError) as err:
         raise ScenarioError(f"{where} = {text!r} is not a CRS rasterio knows (EPSG:32633, a WKT, a PROJ "
                             f"string): {err}") from err
     _check_metric(crs, where, text)
