@@ -13,6 +13,7 @@ The public API (one import is enough in a notebook)::
 - :func:`build` -> :class:`Built`: the explicit, cached build of a scenario's plant (``simulate``
   builds through it: a second run of the same model costs its time loop);
 - :class:`Terrain`: the grid terrain's cell storage (``load``, ``save``, the arrays);
+  :func:`export_terrain` its layers as GeoTIFF and NetCDF (the extra ``symtrack[gis]``);
 - :class:`SystemModel`: the symbolic model (named CasADi Functions);
 - :mod:`symtrack.control`: trim, linearize, the MPC and the closed loop.
 
@@ -26,7 +27,7 @@ import importlib
 __version__ = "0.1.0"
 
 __all__ = ["Built", "Result", "Scenario", "SystemModel", "Terrain", "__version__", "build", "control",
-           "load_scenario", "simulate"]
+           "export_terrain", "load_scenario", "simulate"]
 
 _LAZY = {
     "Result": ("symtrack.api", "Result"),
@@ -36,6 +37,7 @@ _LAZY = {
     "load_scenario": ("symtrack.simulation.scenario", "load_scenario"),
     "Scenario": ("symtrack.simulation.scenario", "Scenario"),
     "Terrain": ("symtrack.terrain.storage", "Terrain"),
+    "export_terrain": ("symtrack.terrain.gis", "export_terrain"),
     "SystemModel": ("symtrack.model.system", "SystemModel"),
 }
 

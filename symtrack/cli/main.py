@@ -133,6 +133,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .export import add_parser as add_export_parser
 
     add_export_parser(sub)  # symtrack export fmu (docs/codegen.md, "The FMU")
+
+    from .terrain import add_parser as add_terrain_parser
+
+    add_terrain_parser(sub)  # symtrack terrain export (docs/terrain.md, "GIS rasters")
     return ap
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from .errors import ScenarioError
 
 __all__ = ["number", "integer", "check_keys", "parse_override", "apply_overrides", "builtin_names",
-           "read_document", "to_toml"]
+           "read_document", "resolve_paths", "to_toml"]
 
 
 def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
@@ -97,10 +97,25 @@ def builtin_names(package: str) -> list[str]:
     return sorted(p.name[:-5] for p in resources.files(package).iterdir() if p.name.endswith(".toml"))
 
 
-def read_document(name_or_path: str, package: str, kind: str = "scenario", overrides=None) -> tuple[dict, str]:
+def resolve_paths(doc: dict, folder: Path, keys=()) -> dict:
+    """Resolve the relative file paths of ``doc`` at ``keys`` (tuples of table names ending with the
+    key, e.g. ("terrain", "soil_map", "raster")) against ``folder``, in place; returns ``doc``."""
+    for key in keys:
+        table = doc
+        for name in key[:-1]:
+            table = table.get(name) if isinstance(table, dict) else None
+        if isinstance(table, dict) and isinstance(table.get(key[-1]), str):
+            p = Path(table[key[-1]]).expanduser()
+            table[key[-1]] = str(p if p.is_absolute() else folder / p)
+    return doc
+
+
+def read_document(name_or_path: str, package: str, kind: str = "scenario", overrides=None,
+                  paths=()) -> tuple[dict, str]:
     """A scenario document by built-in name (of ``package``) or by TOML file path, with the
     overrides applied. Returns (document, default name). ``kind`` names the scenario kind in
-    messages."""
+    messages. ``paths``: the keys holding file paths (:func:`resolve_paths`): in a file, a
+    relative path is resolved against the file's folder (an override's stays as given)."""
     if not isinstance(name_or_path, (str, Path)):
         raise ScenarioError(f"{kind} {name_or_path!r}: give a built-in name or a TOML file path")
     name_or_path = str(name_or_path)
@@ -110,9 +125,11 @@ def read_document(name_or_path: str, package: str, kind: str = "scenario", overr
         if not path.is_file():
             raise ScenarioError(f"{kind} file {str(path)!r} does not exist")
         text, default_name = path.read_text(), path.stem
+        folder = path.resolve().parent
     elif name_or_path in names:
         text = resources.files(package).joinpath(name_or_path + ".toml").read_text()
         default_name = name_or_path
+        folder = None
     else:
         raise ScenarioError(f"{kind} {name_or_path!r} is neither a file nor a built-in {kind}; "
                             f"built-in: {', '.join(names)}")
@@ -120,6 +137,8 @@ def read_document(name_or_path: str, package: str, kind: str = "scenario", overr
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{name_or_path}: not valid TOML: {err}") from err
+    if folder is not None:
+        resolve_paths(doc, folder, paths)
     return apply_overrides(doc, overrides), default_name
 
 

@@ -1,5 +1,5 @@
 
-__all__ = ["ParameterError", "ScenarioError", "SimulationError", "SymtrackError"]
+__all__ = ["MissingExtraError", "ParameterError", "ScenarioError", "SimulationError", "SymtrackError"]
 """Exception types of symtrack. Every message names what was wrong and what is allowed."""
 
 
@@ -17,3 +17,8 @@ class ScenarioError(SymtrackError, ValueError):
 
 class SimulationError(SymtrackError, RuntimeError):
     """The integrator failed or the simulation left its domain of validity."""
+
+
+class MissingExtraError(SymtrackError, ImportError):
+    """A feature needs an optional extra of symtrack that is not installed (the message names the
+    ``pip install`` that brings it)."""

@@ -18,16 +18,23 @@ Schema (every key optional; unknown keys are errors)::
     subsoil_depths_m = [0.1, 0.3, 0.5, 0.8]  # depths of the subsoil stress (docs/subsoil.md),
                                 # increasing, each in (0, 5] m, at most 8; [] switches it off
     [terrain.soil_map]          # a field of several soils (symtrack.terrain.soil_map)
+
+With a GeoTIFF soil map (``soil_map.raster = "soils.tif"``), origin_m, cell_m and size_m not
+given are the raster's (its lower-left corner, pixel and extent), and the raster must cover the
+field (checked here, before anything is built); the keys it gives count as given (``given``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ScenarioError
+from . import gis
 from .soil_map import SoilMap, parse_soil_map
+from .storage import Grid
 
 __all__ = ["MAX_CELLS", "TerrainSettings", "settings_from_dict"]
 
@@ -125,8 +132,24 @@ def settings_from_dict(t: dict) -> TerrainSettings:
         d["origin_m"] = _pair("origin_m", d["origin_m"])
     if "subsoil_depths_m" in d and isinstance(d["subsoil_depths_m"], list):
         d["subsoil_depths_m"] = tuple(d["subsoil_depths_m"])
+    filled = frozenset()
     if "soil_map" in d:
         d["soil_map"] = parse_soil_map(d["soil_map"])
+        header = d["soil_map"].header
+        if header is not None:  # a GeoTIFF: the field's geometry where the scenario gives none
+            if "cell_m" in d:  # the whole cells of the given size the raster holds
+                cell = number("terrain.cell_m", d["cell_m"], 0.01, 5.0)
+                extent = (header.right_m - header.left_m, header.top_m - header.bottom_m)
+                geometry = {"origin_m": (header.left_m, header.bottom_m),
+                            "size_m": tuple(math.floor(e / cell + 1e-9) * cell for e in extent)}
+            else:
+                geometry = gis.field_geometry(header)
+            for k, v in geometry.items():
+                d.setdefault(k, v)
+            filled = frozenset(geometry)  # given by the raster: as if the scenario had
     if isinstance(d.get("passes"), float) and d["passes"].is_integer():
         d["passes"] = int(d["passes"])
-    return TerrainSettings(**d, given=frozenset(t))
+    out = TerrainSettings(**d, given=frozenset(t) | filled)
+    if out.soil_map is not None and out.soil_map.header is not None:
+        gis.check_covers(out.soil_map.header, Grid(out.origin_m, out.cell_m, out.shape))
+    return out

@@ -10,8 +10,13 @@ Schema (docs/terrain.md, "Soil maps")::
     # rectangles in world coordinates, later ones over earlier ones (a cell belongs to a zone
     # when its centre lies in it)
     zones = [{soil = 1, x_m = [-50.0, -40.0], y_m = [-50.0, 50.0]}]
-    # or/and a raster: a .npy file of integers (nx, ny), the soil of every cell (applied first)
+    # or/and a raster (applied first): a .npy file of integers (nx, ny), the soil of every cell,
+    # or a GeoTIFF (.tif, .tiff; the extra symtrack[gis]) of integers: each cell the soil of the
+    # pixel holding its centre; its transform gives the field's origin_m, cell_m and size_m
+    # unless [terrain] gives them, its CRS is kept in the terrain (symtrack/terrain/gis.py)
     raster = "soils.npy"
+
+A relative raster path in a scenario file is resolved against the file's folder.
 
 A soil map is applied to a new field; a terrain file keeps its own (``soil_index`` and the soil
 table in the file, schema 2). Only the terrain engine (``run.integrator = "grid_fast"``) runs a
@@ -30,23 +35,34 @@ from ..foundations.errors import ParameterError, ScenarioError
 from ..model.parameters import SOIL_PARAMS, check_set
 from ..presets.catalog import read_preset_file
 from ..presets.soils import soil_preset
+from . import gis
 
-__all__ = ["MAX_SOILS", "SoilMap", "parse_soil_map", "soil_index"]
+__all__ = ["MAX_SOILS", "PATH_KEYS", "SoilMap", "parse_soil_map", "soil_index"]
 
 MAX_SOILS = 16  # soils of one field (the engine dispatches the cell law by a switch over them)
 SOIL_NAMES = tuple(s.name for s in SOIL_PARAMS)
+# the keys of a scenario document that hold a soil map's file (resolved against a scenario file's folder)
+PATH_KEYS = (("terrain", "soil_map", "raster"),)
 
 
 @dataclasses.dataclass(frozen=True)
 class SoilMap:
     """The parsed ``[terrain.soil_map]``: ``labels`` and ``soils`` (parameter sets) of soils 1..n,
-    ``zones`` as (soil, x0, x1, y0, y1), ``raster`` a path or None; ``raw`` the table as given."""
+    ``zones`` as (soil, x0, x1, y0, y1), ``raster`` a path or None, ``header`` a GeoTIFF's
+    georeference (:class:`~symtrack.terrain.gis.RasterHeader`, read when the map is parsed) or
+    None; ``raw`` the table as given."""
 
     labels: tuple
     soils: tuple
     zones: tuple
     raster: str | None
     raw: dict = dataclasses.field(compare=False, repr=False, default_factory=dict)
+    header: gis.RasterHeader | None = dataclasses.field(compare=False, repr=False, default=None)
+
+    @property
+    def crs_wkt(self) -> str | None:
+        """The CRS of the map's GeoTIFF (WKT), None for a map without one."""
+        return None if self.header is None else self.header.crs_wkt
 
 
 def _soil(entry, i: int) -> tuple[str, dict]:
@@ -100,18 +116,26 @@ def parse_soil_map(t) -> SoilMap:
                                 "[soil], i: soils[i - 1])")
         zones.append((k, *_pair(f"{where}.x_m", z.get("x_m")), *_pair(f"{where}.y_m", z.get("y_m"))))
     raster = t.get("raster")
-    if raster is not None and (not isinstance(raster, str) or not raster.endswith(".npy")):
-        raise ScenarioError(f"terrain.soil_map.raster = {raster!r} must be the path of a .npy file of integers")
+    if raster is not None and (not isinstance(raster, str) or not (raster.endswith(".npy") or gis.is_geotiff(raster))):
+        raise ScenarioError(f"terrain.soil_map.raster = {raster!r} must be the path of a .npy file of integers or "
+                            f"of a GeoTIFF ({', '.join(gis.GEOTIFF_SUFFIXES)})")
     if not zones and raster is None:
         raise ScenarioError("terrain.soil_map needs zones or a raster (which cells have which soil)")
-    return SoilMap(tuple(p[0] for p in parsed), tuple(p[1] for p in parsed), tuple(zones), raster, dict(t))
+    header = gis.read_header(raster) if raster is not None and gis.is_geotiff(raster) else None
+    return SoilMap(tuple(p[0] for p in parsed), tuple(p[1] for p in parsed), tuple(zones), raster, dict(t), header)
 
 
 def soil_index(grid, sm: SoilMap) -> np.ndarray:
     """The soil of every cell (flat uint8, i * ny + j) on ``grid``: the raster, then the zones."""
     nx, ny = grid.shape
     idx = np.zeros((nx, ny), dtype=np.uint8)
-    if sm.raster is not None:
+    if sm.raster is not None and gis.is_geotiff(sm.raster):
+        r = gis.read_soil_raster(sm.raster, grid)
+        if r.min() < 0 or r.max() > len(sm.soils):
+            raise ScenarioError(f"terrain.soil_map.raster = {sm.raster!r}: soil indices must be in "
+                                f"[0, {len(sm.soils)}], the raster has {int(r.min())}..{int(r.max())} under the field")
+        idx[:] = r.astype(np.uint8)
+    elif sm.raster is not None:
         path = Path(sm.raster)
         if not path.is_file():
             raise ScenarioError(f"terrain.soil_map.raster = {sm.raster!r}: no such file")

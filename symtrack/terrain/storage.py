@@ -20,7 +20,9 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 2), one NumPy array per key:
   k >= 1 row k - 1 of ``soil_map_values`` (float64 (n, len(soil_map_names))) with its label in
   ``soil_map_labels`` (a soil map: symtrack/terrain/soil_map.py; absent when the field has one soil);
 - ``soil_names`` (str array) and ``soil_values`` float64: the soil parameters the history
-  was made with. Loading a file into a scenario with a different soil is an error.
+  was made with. Loading a file into a scenario with a different soil is an error;
+- ``crs_wkt`` (str, optional): the coordinate reference system of the field's x, y (WKT), when
+  it came from a georeferenced raster (symtrack/terrain/gis.py); absent for local coordinates.
 
 Values are stored bit for bit, compressed (zip deflate): the default field of a million cells,
 mostly untouched, takes well under its 60 MB in memory (60 bytes per cell: 5 float64, the int8
@@ -93,6 +95,7 @@ class Terrain:
         self.sigma_max = np.zeros((n, len(self.subsoil_depths_m)), dtype=np.float32)
         self.soil_index = np.zeros(n, dtype=np.uint8)
         self.soil_table: list[tuple[str, dict]] = []  # soils 1, 2, ... of a soil map: (label, parameters)
+        self.crs_wkt: str | None = None  # the CRS of x, y (WKT), from a georeferenced soil map
 
     def _all(self):
         return (self.z, self.zdot, self.zmax, self.pmax, self.phase, self.zoff, self.cycles)
@@ -147,6 +150,8 @@ def save(path, storage: Terrain, soil: dict) -> None:
         arrays["soil_map_values"] = np.array([[float(v[n]) for n in SOIL_PARAM_NAMES] for _, v in storage.soil_table])
     arrays["sigma_max_Pa"] = storage.sigma_max.reshape(*g.shape, len(storage.subsoil_depths_m))
     arrays["subsoil_depths_m"] = np.array(storage.subsoil_depths_m, dtype=np.float64)
+    if storage.crs_wkt is not None:
+        arrays["crs_wkt"] = np.array(storage.crs_wkt)
     buf = io.BytesIO()
     np.savez_compressed(
         buf, kind=np.array(KIND), schema_version=np.array(TERRAIN_SCHEMA_VERSION),
@@ -233,6 +238,10 @@ def load(path, soil: dict | None = None) -> Terrain:
         if int(st.soil_index.max(initial=0)) > len(st.soil_table):
             raise ScenarioError(f"{path}: soil_index refers to soil {int(st.soil_index.max())}, the file's soil map "
                                 f"has {len(st.soil_table)}: the file is damaged")
+    if "crs_wkt" in d:
+        if d["crs_wkt"].ndim != 0 or d["crs_wkt"].dtype.kind != "U":
+            raise ScenarioError(f"{path}: crs_wkt must be one string (a WKT); the file is damaged")
+        st.crs_wkt = str(d["crs_wkt"])
     if version < 2:
         st.cycles[:] = (st.phase > 0).astype(np.uint16)
     elif not np.all(st.zoff >= 0):

@@ -77,6 +77,7 @@ from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
+from . import gis
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import soil_index
@@ -160,6 +161,15 @@ class World:
             if origin is None:
                 origin = (start_xy[0] - 0.5 * nx * settings.cell_m, start_xy[1] - 0.5 * ny * settings.cell_m)
             self.grid = Grid((float(origin[0]), float(origin[1])), float(settings.cell_m), (nx, ny))
+        # the soil map's cells first: a raster that misses the field, or a CRS that is not the
+        # terrain's, stops here, before the channel pool is built
+        sm = settings.soil_map
+        self._map_index = None if sm is None else soil_index(self.grid, sm)
+        if sm is not None and sm.header is not None and storage is not None and \
+                not gis.same_crs(storage.crs_wkt, sm.crs_wkt) and (storage.crs_wkt or storage.soil_index.any()):
+            raise ScenarioError(f"terrain.soil_map.raster = {sm.raster!r} is in {gis.crs_label(sm.crs_wkt)}, the "
+                                f"terrain continued is in {gis.crs_label(storage.crs_wkt)}: two maps of one field must "
+                                "share their CRS (reproject the raster, gdalwarp -t_srs)")
         self.storage = storage if storage is not None else Terrain(self.grid)
         if self.storage.soil is None:
             self.storage.soil = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
@@ -214,7 +224,7 @@ class World:
         sm = settings.soil_map
         if sm is not None:
             table = [(lab, {k: float(v) for k, v in sp.items()}) for lab, sp in zip(sm.labels, sm.soils, strict=True)]
-            idx = soil_index(self.grid, sm)
+            idx = self._map_index
             if st.soil_table or st.soil_index.any():
                 # the same soil in every cell (compared by the soils' parameters, not their numbering:
                 # the terrain's table was folded when it was made)
@@ -231,6 +241,8 @@ class World:
             else:
                 st.soil_index[:] = idx
                 st.soil_table = table
+            if sm.crs_wkt is not None:
+                st.crs_wkt = sm.crs_wkt
         base = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
         soils, table = [dict(params)], []
         remap = np.zeros(len(st.soil_table) + 1, dtype=np.uint8)
