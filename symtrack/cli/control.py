@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 from pathlib import Path
@@ -75,23 +76,23 @@ def mpc_command(args) -> int:
     from ..simulation.build import system_model
 
     model = system_model(sc.model)  # the cached build (symtrack.simulation.build)
-    plant = closedloop.make_plant(sc, model, terrain_in)
     from ..foundations.interrupt import InterruptWatch
+    from ..reports.run_files import terrain_lock
 
-    try:
-        with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error
-            res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
-    except KeyboardInterrupt:  # issue 13: Ctrl-C stops at once, nothing written
-        import sys
+    # the terrain file is locked from before it is read until it is replaced (as symtrack simulate)
+    with terrain_lock(terrain_out) if terrain_out else contextlib.nullcontext():
+        plant = closedloop.make_plant(sc, model, terrain_in)
+        try:
+            with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error
+                res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
+        except KeyboardInterrupt:  # issue 13: Ctrl-C stops at once, nothing written
+            import sys
 
-        print("\nsymtrack mpc: interrupted; nothing written", file=sys.stderr)
-        return 130
-    if terrain_out:
-        plant.world.storage.save(terrain_out, sc.params)
-        res.summary["terrain_out"] = str(terrain_out)
-    if terrain_in:
-        res.summary["terrain_in"] = str(terrain_in)
-    closedloop.write(out, res)
+            print("\nsymtrack mpc: interrupted; nothing written", file=sys.stderr)
+            return 130
+        if terrain_in:
+            res.summary["terrain_in"] = str(terrain_in)
+        closedloop.write(out, res, terrain_out=terrain_out or None, plant=plant)
     s = res.summary
     rms = s["rms_lateral_error_m"]
     print(f"{sc.name}: rms lateral error on straights "

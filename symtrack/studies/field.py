@@ -51,7 +51,7 @@ from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_folder
 from ..foundations.progress import Progress
 from ..integrators import registry
-from ..reports.run_files import clear_previous_run, write_folder
+from ..reports.run_files import TerrainOut, clear_previous_run, terrain_run, write_folder
 from ..reports.subsoil_plots import risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
@@ -690,9 +690,10 @@ def clear_previous_study(folder) -> list:
 
 def _write_pattern(folder, spec: FieldSpec, pr: PatternResult) -> list:
     sub = folder / pr.pattern
-    pr.terrain.save(sub / "field.npz", spec.scenario.soil)
     files = _pattern_files(spec, pr)
-    write_folder(sub, files, clear=False)
+    # field.npz with the pattern's files, through the one writer (its history: this study's passes)
+    field = TerrainOut(sub / "field.npz", pr.terrain, spec.scenario.soil, terrain_run(spec.scenario, len(pr.records)))
+    write_folder(sub, files, clear=False, terrain=field)
     return [sub / "field.npz", *(sub / n for n in files)]
 
 
