@@ -96,7 +96,9 @@ def setup(tmp_path_factory):
         if t_summary is None and (out / "summary.json").exists():
             t_summary = now
         time.sleep(0.001)
-    assert p.returncode == 0, p.stderr.read().decode()
+    err = p.stderr.read().decode()
+    assert p.returncode == 0, err
+    assert "Animation.save" not in err  # --quiet: no matplotlib line (issue 26, the newcomer's list)
     total = time.monotonic() - t0
     write = (t_summary - t_stage) if t_stage is not None and t_summary is not None else 0.05
     return d, sc, f, first_id, total, max(write, 0.005)

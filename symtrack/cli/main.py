@@ -144,6 +144,8 @@ def main(argv=None) -> int:
 
         set_require_compiled(True)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    # matplotlib's own INFO lines ("Animation.save using ...") are no message of symtrack's (--quiet too)
+    logging.getLogger("matplotlib").setLevel(logging.WARNING)
     try:
         return args.func(args)
     except SymtrackError as err:

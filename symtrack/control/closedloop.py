@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..foundations.config import to_toml
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.progress import Progress
 from ..integrators import registry
@@ -425,11 +426,11 @@ def rut_figures(plant) -> dict:
 
 
 def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
-    """The folder of a closed loop: trajectory.csv, path.csv, scenario.resolved.json, the
+    """The folder of a closed loop: trajectory.csv, path.csv, scenario.resolved.toml (as
+    ``symtrack simulate``'s: a scenario file that loads back to the scenario as run), the
     ``control`` figures of :mod:`symtrack.reports.figures`, summary.json."""
     return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res),
-            "scenario.resolved.json": json.dumps({"schema_version": SUMMARY_SCHEMA_VERSION, **res.scenario.to_dict()},
-                                                 indent=2) + "\n",
+            "scenario.resolved.toml": to_toml(res.scenario.resolved_dict()),
             **figures("control", res), "summary.json": json.dumps(res.summary, indent=2) + "\n"}
 
 
