@@ -254,8 +254,10 @@ def _check_geometry(fs: FieldSettings, params: dict) -> None:
                             f"{END_ALLOWANCE_M} m for the set-down and the stop)")
     room = fs.size_m[0] - 2 * fs.headland_m
     if not room > 0:
-        raise ScenarioError(f"field.headland_m = {fs.headland_m!r}: two headlands leave no room for a pass on a "
-                            f"field {fs.size_m[0]:g} m long")
+        raise ScenarioError(f"field.size_m = {list(fs.size_m)}: a field {fs.size_m[0]:g} m long leaves no room for a "
+                            f"pass between its two headlands of field.headland_m = {fs.headland_m:g} m; the smallest "
+                            f"that fits has size_m[0] > {2 * fs.headland_m:g} m (2 headland_m; headland_m may go down "
+                            f"to {hmin:.3g} m: a field longer than {2 * hmin:.3g} m)")
     if fs.pass_length_m is not None and fs.pass_length_m > room + 1e-9:
         raise ScenarioError(f"field.pass_length_m = {fs.pass_length_m!r} is outside the allowed range (0, {room:g}] "
                             f"m (size_m[0] - 2 headland_m)")
@@ -306,6 +308,8 @@ def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
     fs = _parse_field(doc["field"])
     sdoc = _pass_scenario_doc(doc, fs)
     sdoc["name"] = name
+    if fs.length_m <= 0:  # no room for a pass: _check_geometry names the field's size, not the pass's stop rule
+        sdoc["run"]["stop_after_distance_m"] = fs.size_m[0]
     sc = scenario_from_dict(sdoc, name)
     registry.get(sc.run.integrator).check("grid", sc.run.integrator_settings())
     _check_geometry(fs, sc.params)
