@@ -198,6 +198,15 @@ def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
     presence means the folder is whole and the terrain file advanced. Interrupted or killed before
     that, the terrain file is untouched. Returns the paths written, sorted."""
     out = Path(out_dir)
+    try:
+        return _write_folder(out, files, clear, terrain)
+    except OSError as err:  # a folder made read-only, a full disk: an error naming the file, no traceback
+        what = err.filename if err.filename is not None else out
+        raise ScenarioError(f"cannot write the run's files into {str(out)!r}: {err.strerror or err} ({what}); "
+                            "nothing of this run was put in place") from err
+
+
+def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | None) -> list[Path]:
     out.parent.mkdir(parents=True, exist_ok=True)
     _remove_dead_staging(out)
     stage = Path(tempfile.mkdtemp(prefix=f"{_staging_prefix(out)}{os.getpid()}-", dir=out.parent))
