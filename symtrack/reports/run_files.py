@@ -221,9 +221,7 @@ def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | Non
             atomic_write_bytes(terrain_tmp, data)
         # commit: nothing above touched the output or the terrain file
         if clear:
-            if any((out / m).exists() for m in RUN_MARKERS) and (out / "summary.json").is_file():
-                (out / "summary.json").unlink()
-            clear_previous_run(out)
+            clear_previous_run(out)  # its summary.json first
         out.mkdir(parents=True, exist_ok=True)
         last = [n for n in files if Path(n).name == "summary.json"]
         last.sort(key=lambda n: n == "summary.json")
@@ -251,7 +249,7 @@ def clear_previous_run(out_dir, files=None, kind: str | None = None) -> list[Pat
 
     A run's folder holds one of :data:`RUN_MARKERS` (with ``kind``: a summary.json whose
     ``"kind"`` is ``kind``, e.g. a field study's). Without ``files`` its result files
-    (:data:`RUN_SUFFIXES`) and its ``pass_<k>/`` folders are removed; with ``files`` (names
+    (:data:`RUN_SUFFIXES`) and its ``pass_<k>/`` folders are removed, summary.json first; with ``files`` (names
     relative to the folder) exactly those, sub-folders' first, then the top's with summary.json
     last (an interrupted clean-up is still recognised), and sub-folders left empty."""
     out_dir = Path(out_dir)
@@ -267,6 +265,11 @@ def clear_previous_run(out_dir, files=None, kind: str | None = None) -> list[Pat
     elif not any((out_dir / m).exists() for m in RUN_MARKERS):
         return []
     removed = []
+    if files is None and (out_dir / "summary.json").is_file():
+        # the summary first: a clean-up stopped half-way leaves no summary.json claiming a whole run
+        # (the folder is still recognised by its scenario.resolved file)
+        (out_dir / "summary.json").unlink()
+        removed.append(out_dir / "summary.json")
     if files is not None:
         names = sorted(files, key=lambda n: (Path(n).parent == Path("."), Path(n).name == "summary.json"))
         subs = []
