@@ -129,12 +129,15 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
 @dataclass(frozen=True)
 class TerrainOut:
     """A terrain file a run writes (``--terrain-out``): ``path``, the terrain, its soil parameters,
-    and ``run``, the history entry of the run (:func:`terrain_run`)."""
+    and ``run``, the history entry of the run (:func:`terrain_run`); ``lock``: hold the file's
+    :func:`terrain_lock` while writing it (not for a file inside the run's own folder, as a field
+    study's field.npz, which no other run writes)."""
 
     path: Path
     terrain: Terrain
     soil: dict
     run: dict
+    lock: bool = True
 
 
 def scenario_sha256(scenario) -> str:
@@ -150,6 +153,9 @@ def terrain_run(scenario, passes: int) -> dict:
         "passes": int(passes)}
 
 
+_HELD: set[str] = set()  # the terrain files whose lock this process holds
+
+
 @contextlib.contextmanager
 def terrain_lock(path, option: str = "--terrain-out"):
     """Hold ``<terrain file>.lock`` (beside the file) while a run reads and writes the terrain
@@ -158,9 +164,17 @@ def terrain_lock(path, option: str = "--terrain-out"):
     killed or not; the empty ``.lock`` file may stay)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    key = str(path.resolve())
+    if key in _HELD:  # this process holds it already (the CLI around Result.write): re-entrant
+        yield path
+        return
     try:
         with file_lock(path.with_name(path.name + ".lock"), wait=False):
-            yield path
+            _HELD.add(key)
+            try:
+                yield path
+            finally:
+                _HELD.discard(key)
     except LockBusy as err:
         raise ScenarioError(f"{option} {str(path)!r}: another symtrack process (pid {err.holder or 'unknown'}) is "
                             "writing this terrain file; wait for it to finish, or give another file") from None
@@ -196,10 +210,12 @@ def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
     every ``summary.json`` after the other files; ``terrain`` (its file, with the run in its
     history) replaces its file next, and the folder's own ``summary.json`` comes last, so that its
     presence means the folder is whole and the terrain file advanced. Interrupted or killed before
-    that, the terrain file is untouched. Returns the paths written, sorted."""
+    that, the terrain file is untouched. The terrain file's lock (:func:`terrain_lock`) is held
+    while it is written (a caller that read it holds it from before). Returns the paths written, sorted."""
     out = Path(out_dir)
     try:
-        return _write_folder(out, files, clear, terrain)
+        with terrain_lock(terrain.path) if terrain is not None and terrain.lock else contextlib.nullcontext():
+            return _write_folder(out, files, clear, terrain)
     except OSError as err:  # a folder made read-only, a full disk: an error naming the file, no traceback
         what = err.filename if err.filename is not None else out
         raise ScenarioError(f"cannot write the run's files into {str(out)!r}: {err.strerror or err} ({what}); "

@@ -696,7 +696,8 @@ def _write_pattern(folder, spec: FieldSpec, pr: PatternResult) -> list:
     sub = folder / pr.pattern
     files = _pattern_files(spec, pr)
     # field.npz with the pattern's files, through the one writer (its history: this study's passes)
-    field = TerrainOut(sub / "field.npz", pr.terrain, spec.scenario.soil, terrain_run(spec.scenario, len(pr.records)))
+    field = TerrainOut(sub / "field.npz", pr.terrain, spec.scenario.soil, terrain_run(spec.scenario, len(pr.records)),
+                       lock=False)
     write_folder(sub, files, clear=False, terrain=field)
     return [sub / "field.npz", *(sub / n for n in files)]
 
