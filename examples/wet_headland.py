@@ -16,8 +16,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 import symtrack
+from symtrack.foundations.errors import SymtrackError
+from symtrack.foundations.files import check_output_folder
 from symtrack.simulation.scenario import scenario_from_dict
 from symtrack.terrain.subsoil import precompression_stress_kPa
 
@@ -49,8 +52,13 @@ def main(argv=None) -> int:
     ap.add_argument("--passes", type=int, default=2)
     ap.add_argument("--length", type=float, default=14.0, help="distance of each pass [m]")
     a = ap.parse_args(argv)
-    res = symtrack.simulate(scenario(a.passes, a.length), progress=True)
-    res.write(a.out)
+    try:
+        out = check_output_folder(a.out)  # before the work (DESIGN.md): a bad --out fails at once
+        res = symtrack.simulate(scenario(a.passes, a.length), progress=True)
+        res.write(out)
+    except SymtrackError as err:
+        print(f"wet_headland: error: {err}", file=sys.stderr)
+        return 2
     rows = []
     for k, p in enumerate(res.summary["passes"], start=1):
         rows.append({"pass": k, "new_sinkage_mean_mm": p["new_sinkage_mean_mm"],

@@ -20,7 +20,14 @@ import numpy as np
 
 from .foundations.errors import ScenarioError, SimulationError
 from .integrators import registry
-from .reports.run_files import simulation_files, validation_table, write_folder
+from .reports.run_files import (
+    TerrainOut,
+    simulation_files,
+    terrain_run,
+    trajectory_columns,
+    validation_table,
+    write_folder,
+)
 from .simulation.build import Built
 from .simulation.build import build as build_plant
 from .simulation.result import RunResult
@@ -86,13 +93,44 @@ class Result:
         """The reported-vs-simulated table (Markdown) of a validation scenario, else None."""
         return validation_table(self.scenario, self.summary)
 
-    def write(self, out_dir) -> list[Path]:
+    def write(self, out_dir, terrain_out=None) -> list[Path]:
         """Write the files of the run into ``out_dir`` (as ``symtrack simulate --out``;
         :func:`~symtrack.reports.run_files.simulation_files` through the one writer,
         :func:`~symtrack.reports.run_files.write_folder`: the files of a previous run in the folder
-        are removed first, summary.json last). Returns the paths written."""
+        are removed first, summary.json last, all or nothing). With ``terrain_out`` (a path; as
+        ``--terrain-out``) the terrain file is written with them, this run added to its history
+        (its id is ``summary["terrain_run_id"]``). Returns the paths written (the folder's)."""
+        terrain = None
+        if terrain_out is not None:
+            if self.terrain is None:
+                raise ScenarioError(f"terrain_out = {str(terrain_out)!r}: scenario {self.scenario.name!r} ran on the "
+                                    "homogeneous terrain, which has no field to save")
+            run = terrain_run(self.scenario, len(self.runs))
+            terrain = TerrainOut(Path(terrain_out), self.terrain, self.scenario.soil, run)
+            self.summary["terrain_out"] = str(terrain_out)
+            self.summary["terrain_run_id"] = run["run_id"]
         files = simulation_files(self.scenario, self.runs, self.summary, self.pass_summaries, self._study)
-        return write_folder(out_dir, files)
+        return write_folder(out_dir, files, terrain=terrain)
+
+    def __repr__(self) -> str:
+        s = self.summary
+        head = f"<Result {self.scenario.name!r}: {len(self.runs)} pass{'es' if len(self.runs) != 1 else ''}"
+        figs = [f"{k} {s[k]:.4g}" for k in ("sim_time_s", "distance_m", "lateral_deviation_m", "rut_max_depth_mm",
+                                             "wall_time_s") if isinstance(s.get(k), int | float)]
+        tail = "" if s.get("complete", True) else ", incomplete"
+        return f"{head}{', ' if figs else ''}{', '.join(figs)}{tail}>"
+
+    def to_pandas(self, pass_no: int | None = None):
+        """The trajectory (the columns of trajectory.csv) of the last pass, or of pass ``pass_no``,
+        as a pandas DataFrame; pandas is optional (not a dependency of symtrack)."""
+        try:
+            import pandas
+        except ImportError as err:
+            raise ScenarioError("Result.to_pandas needs pandas, which symtrack does not install: "
+                                "pip install pandas (or use Result.column)") from err
+        run = self.runs[-1 if pass_no is None else self._pass_index(pass_no)]
+        names, data = trajectory_columns(run)
+        return pandas.DataFrame(data, columns=names)
 
 
 def _grid_names() -> list[str]:

@@ -3,6 +3,7 @@ model and gives the same figures bit for bit)."""
 
 import dataclasses
 import importlib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -116,13 +117,15 @@ def test_the_one_writer_writes_summary_last_and_clears_a_previous_run(tmp_path, 
     (tmp_path / "old.png").write_text("x")
     (tmp_path / "pass_2").mkdir()
     (tmp_path / "notes.txt").write_text("mine")
-    order = []
-    real = run_files.atomic_write_bytes
-    monkeypatch.setattr(run_files, "atomic_write_bytes", lambda p, d: (order.append(p.relative_to(tmp_path).as_posix()),
-                                                                     real(p, d)))
+    order = []  # the files as they arrive in the folder (moved from the staging folder beside it)
+    real = run_files.os.replace
+    monkeypatch.setattr(run_files.os, "replace", lambda a, b: (
+        order.append(Path(b).relative_to(tmp_path).as_posix()) if Path(b).is_relative_to(tmp_path) else None,
+        real(a, b)))
     files = {"pass_1/summary.json": "{}", "summary.json": "{}\n", "pass_1/a.csv": "1", "b.png": b"png"}
     written = run_files.write_folder(tmp_path, files)
     assert order == ["pass_1/a.csv", "b.png", "pass_1/summary.json", "summary.json"]
+    assert not list(tmp_path.parent.glob(f".{tmp_path.name}.staging-*"))
     assert written == sorted(tmp_path / n for n in files)
     assert not (tmp_path / "old.png").exists() and not (tmp_path / "pass_2").exists()
     assert (tmp_path / "notes.txt").read_text() == "mine"

@@ -43,3 +43,12 @@ def test_readme_api_example_runs_and_agrees_with_the_cli(tmp_path, monkeypatch):
     # the second pass continued the saved terrain: it added less than the first
     assert ns["second"].summary["passes"][0]["new_sinkage_mean_mm"] < ns["first"].summary["passes"][0][
         "new_sinkage_mean_mm"]
+
+
+def test_readme_says_how_to_call_the_cli_after_make_demo():
+    """After `make demo` the CLI is in .venv, not on PATH (issue 26): the quick start says so, and the
+    Makefile's venv is the one it names."""
+    root = Path(__file__).resolve().parent.parent
+    quick = (root / "README.md").read_text().split("## The validation run")[0]
+    assert ".venv/bin/symtrack" in quick and "source .venv/bin/activate" in quick
+    assert "VENV ?= .venv" in (root / "Makefile").read_text()

@@ -299,7 +299,7 @@ def test_mpc_sweep_on_a_scheduler_and_workers_started_here(tmp_path, dask_cluste
     pids = set()
     for r in rows:
         folder = out / "runs" / r["run_id"]
-        assert {"summary.json", "trajectory.csv", "path.csv", "scenario.resolved.json"} <= {
+        assert {"summary.json", "trajectory.csv", "path.csv", "scenario.resolved.toml"} <= {
             p.name for p in folder.iterdir()}
         assert int(r["solves"]) == 4
         pids.add(json.loads((folder / "run.json").read_text())["pid"])

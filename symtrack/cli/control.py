@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 from pathlib import Path
@@ -23,26 +24,25 @@ def _params(vehicle: str, soil: str) -> dict:
 def linearize_command(args) -> int:
     from ..control import linearization as L
     from ..control.trim import trim
-    from ..foundations.files import atomic_write_bytes, atomic_write_text
+    from ..foundations.files import check_output_folder
     from ..model import SystemModel
+    from ..reports.run_files import write_folder
 
+    out = check_output_folder(args.out)  # before the work (DESIGN.md: outputs checked writable first)
     params = _params(args.vehicle, args.soil)
     model = SystemModel()
     tp = trim(model, params, args.speed, args.radius)
     lin = L.linearize(model, tp, path_frame=args.path_frame)
     mode_list = L.modes(lin)
     ctrb = L.controllability(lin)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     d = L.to_dict(lin)
     d["vehicle_preset"], d["soil_preset"] = args.vehicle, args.soil
     d["modes"] = mode_list
     d["controllability"] = ctrb
-    atomic_write_bytes(out / "linearization.npz", L.npz_bytes(lin))
-    atomic_write_bytes(out / "bode.png", L.bode_png(lin))
     report = L.report_markdown(lin, mode_list, ctrb)
-    atomic_write_text(out / "modes.md", report)
-    atomic_write_text(out / "linearization.json", json.dumps(d, indent=1) + "\n")
+    # the one writer (all or nothing; linearization.json last: its presence means the folder is whole)
+    write_folder(out, {"linearization.npz": L.npz_bytes(lin), "bode.png": L.bode_png(lin), "modes.md": report,
+                       "linearization.json": json.dumps(d, indent=1) + "\n"}, clear=False)
     print(report)
     print(f"linearization written to {out} (linearization.json, linearization.npz, modes.md, bode.png)")
     return 0
@@ -75,23 +75,23 @@ def mpc_command(args) -> int:
     from ..simulation.build import system_model
 
     model = system_model(sc.model)  # the cached build (symtrack.simulation.build)
-    plant = closedloop.make_plant(sc, model, terrain_in)
     from ..foundations.interrupt import InterruptWatch
+    from ..reports.run_files import terrain_lock
 
-    try:
-        with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error
-            res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
-    except KeyboardInterrupt:  # issue 13: Ctrl-C stops at once, nothing written
-        import sys
+    # the terrain file is locked from before it is read until it is replaced (as symtrack simulate)
+    with terrain_lock(terrain_out) if terrain_out else contextlib.nullcontext():
+        plant = closedloop.make_plant(sc, model, terrain_in)
+        try:
+            with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error
+                res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
+        except KeyboardInterrupt:  # issue 13: Ctrl-C stops at once, nothing written
+            import sys
 
-        print("\nsymtrack mpc: interrupted; nothing written", file=sys.stderr)
-        return 130
-    if terrain_out:
-        plant.world.storage.save(terrain_out, sc.params)
-        res.summary["terrain_out"] = str(terrain_out)
-    if terrain_in:
-        res.summary["terrain_in"] = str(terrain_in)
-    closedloop.write(out, res)
+            print("\nsymtrack mpc: interrupted; nothing written", file=sys.stderr)
+            return 130
+        if terrain_in:
+            res.summary["terrain_in"] = str(terrain_in)
+        closedloop.write(out, res, terrain_out=terrain_out or None, plant=plant)
     s = res.summary
     rms = s["rms_lateral_error_m"]
     print(f"{sc.name}: rms lateral error on straights "

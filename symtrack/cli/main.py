@@ -55,7 +55,7 @@ def scenarios_command(args) -> int:
 
 def presets_command(args) -> int:
     """The built-in presets, or one preset's parameters with units, meaning and source."""
-    from ..presets.catalog import describe, preset_names
+    from ..presets.catalog import describe, preset_file_kind, preset_names
 
     if args.name is None:
         for kind in ("vehicle", "soil"):
@@ -63,6 +63,8 @@ def presets_command(args) -> int:
         print("symtrack presets NAME shows one; a preset file (*.toml) is shown the same way")
         return 0
     kind = args.kind
+    if kind is None and args.name.endswith(".toml"):
+        kind = preset_file_kind(args.name)  # a preset file says by its keys which kind it is
     if kind is None:
         kind = "vehicle" if args.name in preset_names("vehicle") else "soil"
     rows = describe(kind, args.name)
@@ -151,6 +153,8 @@ def main(argv=None) -> int:
 
         set_require_compiled(True)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    # matplotlib's own INFO lines ("Animation.save using ...") are no message of symtrack's (--quiet too)
+    logging.getLogger("matplotlib").setLevel(logging.WARNING)
     try:
         return args.func(args)
     except SymtrackError as err:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_file, check_output_folder
 
@@ -13,23 +15,24 @@ def simulate_command(args) -> int:
     out = check_output_folder(args.out)
     terrain_out = check_output_file(args.terrain_out, "--terrain-out") if args.terrain_out else None
     from ..api import IncompleteSimulation, simulate
+    from ..reports.run_files import terrain_lock
     from ..simulation.scenario import load_scenario
 
     sc = load_scenario(args.scenario, args.set or [])
     if terrain_out is not None and sc.terrain is None:
         raise ScenarioError(f"--terrain-out: scenario {sc.name!r} has no [terrain] section (it runs on the "
                             "homogeneous terrain, which has no field to save)")
-    try:
-        res = simulate(sc, terrain=args.terrain_in, progress=not args.quiet)
-    except IncompleteSimulation as err:
-        # keep what was computed: the files of the run up to the failure, marked incomplete
-        err.result.write(out)
-        raise SimulationError(f"{err}; what was computed up to there is in {out} (summary.json: "
-                              "complete = false); no terrain file was written") from err
-    if terrain_out is not None:
-        res.terrain.save(terrain_out, sc.soil)
-        res.summary["terrain_out"] = str(terrain_out)
-    res.write(out)
+    # the terrain file is locked from before it is read (--terrain-in F --terrain-out F) until the
+    # run's files and it are in place: a second writer fails at once, the two never mix
+    with terrain_lock(terrain_out) if terrain_out is not None else contextlib.nullcontext():
+        try:
+            res = simulate(sc, terrain=args.terrain_in, progress=not args.quiet)
+        except IncompleteSimulation as err:
+            # keep what was computed: the files of the run up to the failure, marked incomplete
+            err.result.write(out)
+            raise SimulationError(f"{err}; what was computed up to there is in {out} (summary.json: "
+                                  "complete = false); no terrain file was written") from err
+        res.write(out, terrain_out=terrain_out)
     table = res.validation_table
     if table is not None:
         print(table)

@@ -36,9 +36,11 @@ import math
 import time
 from collections import Counter
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from ..foundations.config import to_toml
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.progress import Progress
 from ..integrators import registry
@@ -46,7 +48,7 @@ from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..reports.figures import figures
-from ..reports.run_files import write_folder
+from ..reports.run_files import TerrainOut, terrain_run, write_folder
 from ..simulation import loop
 from ..simulation.build import system_model
 from ..simulation.plants import StepPlant
@@ -424,16 +426,23 @@ def rut_figures(plant) -> dict:
 
 
 def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
-    """The folder of a closed loop: trajectory.csv, path.csv, scenario.resolved.json, the
+    """The folder of a closed loop: trajectory.csv, path.csv, scenario.resolved.toml (as
+    ``symtrack simulate``'s: a scenario file that loads back to the scenario as run), the
     ``control`` figures of :mod:`symtrack.reports.figures`, summary.json."""
     return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res),
-            "scenario.resolved.json": json.dumps({"schema_version": SUMMARY_SCHEMA_VERSION, **res.scenario.to_dict()},
-                                                 indent=2) + "\n",
+            "scenario.resolved.toml": to_toml(res.scenario.resolved_dict()),
             **figures("control", res), "summary.json": json.dumps(res.summary, indent=2) + "\n"}
 
 
-def write(out_dir, res: ClosedLoopResult) -> list:
+def write(out_dir, res: ClosedLoopResult, terrain_out=None, plant=None) -> list:
     """Write the closed loop's folder (:func:`closed_loop_files`) with the one writer
     (:func:`~symtrack.reports.run_files.write_folder`: a previous run's files removed first,
-    summary.json last). Returns the paths written."""
-    return write_folder(out_dir, closed_loop_files(res))
+    summary.json last, all or nothing); with ``terrain_out`` the grid ``plant``'s terrain file
+    with them, this run in its history (``summary["terrain_run_id"]``). Returns the paths written."""
+    terrain = None
+    if terrain_out is not None:
+        run = terrain_run(res.scenario, 1)
+        terrain = TerrainOut(Path(terrain_out), plant.world.storage, res.scenario.params, run)
+        res.summary["terrain_out"] = str(terrain_out)
+        res.summary["terrain_run_id"] = run["run_id"]
+    return write_folder(out_dir, closed_loop_files(res), terrain=terrain)

@@ -146,6 +146,15 @@ class MPCScenario:
                     k: v for k, v in dataclasses.asdict(self.model).items()
                     if v != getattr(ModelOptions(), k)}})}
 
+    def resolved_dict(self) -> dict:
+        """The scenario after presets and overrides, as a scenario document (``scenario.resolved.toml``:
+        :func:`load` reads it back to the same scenario): the parameters in [vehicle] and [soil]."""
+        d = self.to_dict()
+        params = d.pop("parameters")
+        d["vehicle"] = {"preset": self.vehicle_preset, **{s.name: params[s.name] for s in VEHICLE_PARAMS}}
+        d["soil"] = {"preset": self.soil_preset, **{s.name: params[s.name] for s in SOIL_PARAMS if s.name in params}}
+        return d
+
 
 _int = integer
 _num = number

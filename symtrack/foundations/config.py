@@ -18,7 +18,7 @@ from pathlib import Path
 from .errors import ScenarioError
 
 __all__ = ["number", "integer", "check_keys", "parse_override", "apply_overrides", "builtin_names",
-           "read_document", "resolve_paths", "to_toml"]
+           "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
 
 
 def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
@@ -139,7 +139,40 @@ def read_document(name_or_path: str, package: str, kind: str = "scenario", overr
         raise ScenarioError(f"{name_or_path}: not valid TOML: {err}") from err
     if folder is not None:
         resolve_paths(doc, folder, paths)
+        doc = resolve_file_paths(doc, folder)
     return apply_overrides(doc, overrides), default_name
+
+
+def _relative_to(value, folder: Path, suffixes: tuple[str, ...]):
+    if isinstance(value, str) and value and value.endswith(suffixes) and not Path(value).expanduser().is_absolute():
+        return str(folder / Path(value).expanduser())
+    return value
+
+
+def resolve_file_paths(doc: dict, folder: Path) -> dict:
+    """The file paths inside a scenario document (``vehicle.preset`` and ``soil.preset`` naming a
+    preset file, ``terrain.initial_state``, ``terrain.soil_map.raster`` and the preset files among
+    ``terrain.soil_map.soils``) taken relative to ``folder``, the scenario file's, not the current
+    folder (a copy; absolute paths and built-in names are left alone; ``--set`` values stay relative to
+    the current folder, as a shell's arguments are)."""
+    doc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in doc.items()}
+    for section in ("vehicle", "soil"):
+        if isinstance(doc.get(section), dict) and "preset" in doc[section]:
+            doc[section]["preset"] = _relative_to(doc[section]["preset"], folder, (".toml",))
+    terrain = doc.get("terrain")
+    if isinstance(terrain, dict):
+        if "initial_state" in terrain:
+            terrain["initial_state"] = _relative_to(terrain["initial_state"], folder, ("",))
+        sm = terrain.get("soil_map")
+        if isinstance(sm, dict):
+            sm = terrain["soil_map"] = dict(sm)
+            if "raster" in sm:
+                sm["raster"] = _relative_to(sm["raster"], folder, (".npy",))
+            if isinstance(sm.get("soils"), list):
+                sm["soils"] = [
+                    {**e, "preset": _relative_to(e["preset"], folder, (".toml",))} if isinstance(e, dict) and
+                    "preset" in e else _relative_to(e, folder, (".toml",)) for e in sm["soils"]]
+    return doc
 
 
 def _toml_value(v) -> str:

@@ -7,7 +7,8 @@ stiffness and the unloading floor) have theirs above their definitions.
 User preset files (``[vehicle] preset = "my_crawler.toml"``): a TOML file with an optional
 ``base`` (a built-in preset the file starts from), an optional ``description``, any parameters
 (SI values, names with units as in ``symtrack presets``) and an optional ``[sources]`` table
-(parameter -> where the value comes from).
+(parameter -> where the value comes from); the format is documented in the README ("Preset
+files"). :func:`preset_file_kind` tells a vehicle file from a soil file by its keys.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from ..foundations.errors import ParameterError
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from . import soils, vehicles
 
-__all__ = ["PRESET_FILE_KEYS", "describe", "preset_names", "preset_sources", "read_preset_file", "unit_of"]
+__all__ = ["PRESET_FILE_KEYS", "describe", "preset_file_kind", "preset_names", "preset_sources", "read_preset_file",
+           "unit_of"]
 
 PRESET_FILE_KEYS = ("base", "description", "sources")
 _UNITS = (("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
@@ -80,6 +82,26 @@ def preset_sources(kind: str, name: str) -> dict[str, str]:
 
 def preset_names(kind: str) -> list[str]:
     return sorted(vehicles.VEHICLES if kind == "vehicle" else soils.SOILS)
+
+
+def preset_file_kind(path) -> str:
+    """"vehicle" or "soil": the kind of a user preset file, read from its keys (the parameters it
+    sets, the built-in preset its ``base`` names); a ParameterError when they do not tell."""
+    path = Path(path)
+    if not path.is_file():
+        raise ParameterError(f"preset file {str(path)!r}: no such file")
+    try:
+        d = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise ParameterError(f"{path}: not valid TOML: {err}") from err
+    kinds = set()
+    for kind, specs, table in (("vehicle", VEHICLE_PARAMS, vehicles.VEHICLES), ("soil", SOIL_PARAMS, soils.SOILS)):
+        if d.get("base") in table or any(s.name in d for s in specs):
+            kinds.add(kind)
+    if len(kinds) != 1:
+        raise ParameterError(f"{path}: cannot tell whether this is a vehicle or a soil preset file (its base and "
+                             "parameters name " + (" and ".join(sorted(kinds)) or "neither") + "); give --kind")
+    return kinds.pop()
 
 
 def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str], str]:

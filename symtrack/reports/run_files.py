@@ -9,6 +9,13 @@ Files of a ``symtrack simulate`` run (schemas documented in the README):
 - ``*.png``: plots (the registry of :mod:`symtrack.reports.figures`), ``report.html``;
 - ``summary.json``: written last, so that its presence means the run finished.
 
+A run's files appear together or not at all: :func:`write_folder` writes them into a staging
+folder beside the output (``.<name>.staging-<pid>-*``), then moves them into place, replaces the
+run's terrain file (``--terrain-out``) after them and moves summary.json in last. Killed before the
+end, the output has no summary.json and the terrain file is the one it was; a later writer of the
+same output removes the staging folders of dead processes. :func:`terrain_lock` keeps two
+processes from writing one terrain file.
+
 :func:`simulation_files` composes the folder of a ``symtrack simulate`` run (one pass, or a
 terrain study's passes in ``pass_<k>/``), :func:`write_folder` writes any run's folder
 (``simulate``, ``mpc``, a field study's) and :func:`clear_previous_run` removes a previous
@@ -17,21 +24,32 @@ run's files first.
 
 from __future__ import annotations
 
+import contextlib
+import datetime
+import hashlib
 import io
 import json
+import os
 import shutil
+import tempfile
+import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..foundations.config import to_toml
+from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
+from ..terrain.storage import Terrain, file_bytes
+from ..toolchain import LockBusy, file_lock
 from . import validation
 from .figures import TerrainRun, figures
 from .html import report_html
 
-__all__ = ["RUN_MARKERS", "RUN_SUFFIXES", "clear_previous_run", "run_files", "simulation_files", "trajectory_columns",
-           "trajectory_csv", "validation_table", "write_folder"]
+__all__ = ["RUN_MARKERS", "RUN_SUFFIXES", "TerrainOut", "clear_previous_run", "run_files", "scenario_sha256",
+           "simulation_files", "terrain_lock", "terrain_run", "trajectory_columns", "trajectory_csv",
+           "validation_table", "write_folder"]
 
 # files whose presence marks a folder as a previous run's (symtrack simulate / mpc)
 RUN_MARKERS = ("summary.json", "scenario.resolved.toml", "scenario.resolved.json")
@@ -108,21 +126,135 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
     return {**passes, **top, "summary.json": json.dumps(summary, indent=2) + "\n"}
 
 
-def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True) -> list[Path]:
-    """The one writer of a run's folder: with ``clear``, the files of a previous run are removed
-    first (:func:`clear_previous_run`); then ``files`` (names relative to the folder, sub-folders
-    created; str written as UTF-8) in their order, every ``summary.json`` after the other files
-    and the folder's own ``summary.json`` last, so that its presence means the folder is whole.
-    Returns the paths written, sorted."""
+@dataclass(frozen=True)
+class TerrainOut:
+    """A terrain file a run writes (``--terrain-out``): ``path``, the terrain, its soil parameters,
+    and ``run``, the history entry of the run (:func:`terrain_run`); ``lock``: hold the file's
+    :func:`terrain_lock` while writing it (not for a file inside the run's own folder, as a field
+    study's field.npz, which no other run writes)."""
+
+    path: Path
+    terrain: Terrain
+    soil: dict
+    run: dict
+    lock: bool = True
+
+
+def scenario_sha256(scenario) -> str:
+    """SHA-256 (hexadecimal) of the scenario's resolved TOML (scenario.resolved.toml)."""
+    return hashlib.sha256(to_toml(scenario.to_dict()).encode()).hexdigest()
+
+
+def terrain_run(scenario, passes: int) -> dict:
+    """A new run's entry of a terrain file's history (:mod:`symtrack.terrain.storage`): a new run
+    id, the time now (UTC), the scenario's name and hash, its passes."""
+    return {"run_id": uuid.uuid4().hex, "time_utc": datetime.datetime.now(datetime.UTC).isoformat(
+        timespec="seconds"), "scenario": scenario.name, "scenario_sha256": scenario_sha256(scenario),
+        "passes": int(passes)}
+
+
+_HELD: set[str] = set()  # the terrain files whose lock this process holds
+
+
+@contextlib.contextmanager
+def terrain_lock(path, option: str = "--terrain-out"):
+    """Hold ``<terrain file>.lock`` (beside the file) while a run reads and writes the terrain
+    file ``path``: a second process that would write the same file fails at once with a message
+    naming the holder, instead of the two runs' results mixing (the lock goes with its holder,
+    killed or not; the empty ``.lock`` file may stay)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    key = str(path.resolve())
+    if key in _HELD:  # this process holds it already (the CLI around Result.write): re-entrant
+        yield path
+        return
+    try:
+        with file_lock(path.with_name(path.name + ".lock"), wait=False):
+            _HELD.add(key)
+            try:
+                yield path
+            finally:
+                _HELD.discard(key)
+    except LockBusy as err:
+        raise ScenarioError(f"{option} {str(path)!r}: another symtrack process (pid {err.holder or 'unknown'}) is "
+                            "writing this terrain file; wait for it to finish, or give another file") from None
+
+
+def _staging_prefix(out: Path) -> str:
+    return f".{out.name}.staging-"
+
+
+def _remove_dead_staging(out: Path) -> None:
+    """Remove the staging folders of ``out`` whose process is gone (a killed writer's)."""
+    if not out.parent.is_dir():
+        return
+    for p in out.parent.glob(_staging_prefix(out) + "*"):
+        pid = p.name[len(_staging_prefix(out)):].split("-")[0]
+        if pid.isdigit() and int(pid) != os.getpid():
+            try:
+                os.kill(int(pid), 0)
+                continue  # alive: another writer's
+            except ProcessLookupError:
+                pass
+            except PermissionError:
+                continue
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
+                 terrain: TerrainOut | None = None) -> list[Path]:
+    """The one writer of a run's folder, all or nothing: ``files`` (names relative to the folder,
+    sub-folders created; str written as UTF-8) are written into a staging folder beside
+    ``out_dir``; then, with ``clear``, the files of a previous run are removed
+    (:func:`clear_previous_run`, its summary.json first); the staged files are moved into place,
+    every ``summary.json`` after the other files; ``terrain`` (its file, with the run in its
+    history) replaces its file next, and the folder's own ``summary.json`` comes last, so that its
+    presence means the folder is whole and the terrain file advanced. Interrupted or killed before
+    that, the terrain file is untouched. The terrain file's lock (:func:`terrain_lock`) is held
+    while it is written (a caller that read it holds it from before). Returns the paths written, sorted."""
     out = Path(out_dir)
-    if clear:
-        clear_previous_run(out)
-    out.mkdir(parents=True, exist_ok=True)
-    last = [n for n in files if Path(n).name == "summary.json"]
-    last.sort(key=lambda n: n == "summary.json")
-    for name in [n for n in files if n not in last] + last:
-        data = files[name]
-        atomic_write_bytes(out / name, data.encode() if isinstance(data, str) else data)
+    try:
+        with terrain_lock(terrain.path) if terrain is not None and terrain.lock else contextlib.nullcontext():
+            return _write_folder(out, files, clear, terrain)
+    except OSError as err:  # a folder made read-only, a full disk: an error naming the file, no traceback
+        what = err.filename if err.filename is not None else out
+        raise ScenarioError(f"cannot write the run's files into {str(out)!r}: {err.strerror or err} ({what}); "
+                            "nothing of this run was put in place") from err
+
+
+def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | None) -> list[Path]:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    _remove_dead_staging(out)
+    stage = Path(tempfile.mkdtemp(prefix=f"{_staging_prefix(out)}{os.getpid()}-", dir=out.parent))
+    terrain_tmp = None
+    try:
+        for name, data in files.items():
+            atomic_write_bytes(stage / name, data.encode() if isinstance(data, str) else data)
+        if terrain is not None:
+            data, file_id, history = file_bytes(terrain.terrain, terrain.soil, terrain.run)
+            tpath = Path(terrain.path)
+            terrain_tmp = tpath.with_name(f".{tpath.name}.{os.getpid()}.tmp")
+            atomic_write_bytes(terrain_tmp, data)
+        # commit: nothing above touched the output or the terrain file
+        if clear:
+            clear_previous_run(out)  # its summary.json first
+        out.mkdir(parents=True, exist_ok=True)
+        last = [n for n in files if Path(n).name == "summary.json"]
+        last.sort(key=lambda n: n == "summary.json")
+        final = "summary.json" if "summary.json" in files else None
+        for name in [n for n in files if n not in last] + [n for n in last if n != final]:
+            (out / name).parent.mkdir(parents=True, exist_ok=True)
+            os.replace(stage / name, out / name)
+        if terrain_tmp is not None:
+            os.replace(terrain_tmp, terrain.path)
+            terrain_tmp = None
+            terrain.terrain.file_id, terrain.terrain.history = file_id, history
+        if final is not None:
+            os.replace(stage / final, out / final)
+    finally:
+        if terrain_tmp is not None and terrain_tmp.exists():
+            terrain_tmp.unlink()
+        shutil.rmtree(stage, ignore_errors=True)
     return sorted(out / n for n in files)
 
 
@@ -133,7 +265,7 @@ def clear_previous_run(out_dir, files=None, kind: str | None = None) -> list[Pat
 
     A run's folder holds one of :data:`RUN_MARKERS` (with ``kind``: a summary.json whose
     ``"kind"`` is ``kind``, e.g. a field study's). Without ``files`` its result files
-    (:data:`RUN_SUFFIXES`) and its ``pass_<k>/`` folders are removed; with ``files`` (names
+    (:data:`RUN_SUFFIXES`) and its ``pass_<k>/`` folders are removed, summary.json first; with ``files`` (names
     relative to the folder) exactly those, sub-folders' first, then the top's with summary.json
     last (an interrupted clean-up is still recognised), and sub-folders left empty."""
     out_dir = Path(out_dir)
@@ -149,6 +281,11 @@ def clear_previous_run(out_dir, files=None, kind: str | None = None) -> list[Pat
     elif not any((out_dir / m).exists() for m in RUN_MARKERS):
         return []
     removed = []
+    if files is None and (out_dir / "summary.json").is_file():
+        # the summary first: a clean-up stopped half-way leaves no summary.json claiming a whole run
+        # (the folder is still recognised by its scenario.resolved file)
+        (out_dir / "summary.json").unlink()
+        removed.append(out_dir / "summary.json")
     if files is not None:
         names = sorted(files, key=lambda n: (Path(n).parent == Path("."), Path(n).name == "summary.json"))
         subs = []

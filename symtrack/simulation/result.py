@@ -46,8 +46,9 @@ class RunResult:
             return self.state(name)
         if name in self.output_names:
             return self.output(name)
-        raise KeyError(f"no column {name!r}; columns: t_s, {', '.join(self.state_names + INPUT_COLUMNS)}, "
-                       f"{', '.join(self.output_names)}")
+        names = ["t_s", *self.state_names, *INPUT_COLUMNS]
+        names += [n for n in self.output_names if n not in names]  # trajectory.csv's columns, each once
+        raise KeyError(f"no column {name!r}; columns: {', '.join(names)}")
 
 
 def summarise(res: RunResult) -> dict:

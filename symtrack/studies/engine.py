@@ -271,6 +271,37 @@ def _worker_start(kind: str):
                             **({MP_METHOD_KEY: "forkserver"} if forked else {})})
 
 
+def _check_scheduler_address(address: str) -> None:
+    """A scheduler address is ``[protocol://]host:port`` (Dask's ``tcp://127.0.0.1:8786``): refused
+    before anything runs otherwise."""
+    rest = address.split("://", 1)[-1]
+    host, sep, port = rest.rpartition(":")
+    if not (sep and host and port.isdigit() and 1 <= int(port) <= 65535):
+        raise ScenarioError(f"--scheduler {address!r} must be an address with a port, [tcp://]HOST:PORT "
+                            "(e.g. tcp://127.0.0.1:8786, the address `dask scheduler` prints)")
+
+
+def _check_same_sweep(out: Path, p: Plan) -> None:
+    """A folder holding another sweep's sweep.json is refused (its results.csv would be replaced);
+    the same sweep (the same runs: scenario, fixed overrides and values) resumes."""
+    try:
+        old = json.loads((out / "sweep.json").read_text())
+    except FileNotFoundError:
+        return
+    except (OSError, ValueError) as err:
+        raise ScenarioError(f"--out {str(out)!r}: its sweep.json cannot be read ({err}); give another folder") from err
+    old_ids = [r.get("id") for r in old.get("runs", [])] if isinstance(old, dict) else None
+    if old_ids == [r["id"] for r in p.runs]:
+        return
+    what = (f"{old.get('scenario')!r}, {len(old_ids)} runs, varied "
+            f"{', '.join(a.get('key', '?') for a in old.get('axes', [])) or 'nothing'}") if isinstance(old, dict) \
+        and old_ids is not None else "an unreadable design"
+    raise ScenarioError(f"--out {str(out)!r} holds another sweep ({what}); this one ({p.source.label!r}, "
+                        f"{len(p.runs)} runs, varied {', '.join(a.key for a in p.axes) or 'nothing'}) would replace "
+                        "its results.csv. To resume that sweep, rerun its own command (sweep.json holds its design); "
+                        "for this one, give another --out")
+
+
 def _client(workers: int, scheduler: str | None):
     """A Dask client: on the scheduler at ``scheduler`` or on a new local cluster of ``workers``
     processes (one thread each: CasADi's integrators hold the GIL; started the way
@@ -334,8 +365,11 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= 1024:
         raise ScenarioError(f"--workers {workers!r} must be an integer in [1, 1024]")
+    if scheduler:
+        _check_scheduler_address(scheduler)
     p = plan(scenario, vary, ranges=ranges, samples=samples, seed=seed, overrides=overrides, kind=kind)
     out = check_output_folder(str(out))
+    _check_same_sweep(out, p)
     t0 = time.perf_counter()
     todo = [r for r in p.runs if not (out / "runs" / r["id"] / "summary.json").is_file()]
     skipped = len(p.runs) - len(todo)

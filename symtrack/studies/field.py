@@ -51,7 +51,7 @@ from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_folder
 from ..foundations.progress import Progress
 from ..integrators import registry
-from ..reports.run_files import clear_previous_run, write_folder
+from ..reports.run_files import TerrainOut, clear_previous_run, terrain_run, write_folder
 from ..reports.subsoil_plots import risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
@@ -255,8 +255,10 @@ def _check_geometry(fs: FieldSettings, params: dict) -> None:
                             f"{END_ALLOWANCE_M} m for the set-down and the stop)")
     room = fs.size_m[0] - 2 * fs.headland_m
     if not room > 0:
-        raise ScenarioError(f"field.headland_m = {fs.headland_m!r}: two headlands leave no room for a pass on a "
-                            f"field {fs.size_m[0]:g} m long")
+        raise ScenarioError(f"field.size_m = {list(fs.size_m)}: a field {fs.size_m[0]:g} m long leaves no room for a "
+                            f"pass between its two headlands of field.headland_m = {fs.headland_m:g} m; the smallest "
+                            f"that fits has size_m[0] > {2 * fs.headland_m:g} m (2 headland_m; headland_m may go down "
+                            f"to {hmin:.3g} m: a field longer than {2 * hmin:.3g} m)")
     if fs.pass_length_m is not None and fs.pass_length_m > room + 1e-9:
         raise ScenarioError(f"field.pass_length_m = {fs.pass_length_m!r} is outside the allowed range (0, {room:g}] "
                             f"m (size_m[0] - 2 headland_m)")
@@ -307,6 +309,8 @@ def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
     fs = _parse_field(doc["field"])
     sdoc = _pass_scenario_doc(doc, fs)
     sdoc["name"] = name
+    if fs.length_m <= 0:  # no room for a pass: _check_geometry names the field's size, not the pass's stop rule
+        sdoc["run"]["stop_after_distance_m"] = fs.size_m[0]
     sc = scenario_from_dict(sdoc, name)
     registry.get(sc.run.integrator).check("grid", sc.run.integrator_settings())
     _check_geometry(fs, sc.params)
@@ -691,9 +695,11 @@ def clear_previous_study(folder) -> list:
 
 def _write_pattern(folder, spec: FieldSpec, pr: PatternResult) -> list:
     sub = folder / pr.pattern
-    pr.terrain.save(sub / "field.npz", spec.scenario.soil)
     files = _pattern_files(spec, pr)
-    write_folder(sub, files, clear=False)
+    # field.npz with the pattern's files, through the one writer (its history: this study's passes)
+    field = TerrainOut(sub / "field.npz", pr.terrain, spec.scenario.soil, terrain_run(spec.scenario, len(pr.records)),
+                       lock=False)
+    write_folder(sub, files, clear=False, terrain=field)
     return [sub / "field.npz", *(sub / n for n in files)]
 
 

@@ -80,8 +80,9 @@ def _soil(entry, i: int) -> tuple[str, dict]:
             values.update({k: v for k, v in entry.items() if k != "preset"})
             extra = ", ".join(f"{k}={v}" for k, v in entry.items() if k != "preset")
             return (f"{preset} ({extra})" if extra else preset), check_set(values, SOIL_PARAMS, where)
-    except ParameterError as err:
-        raise ScenarioError(str(err)) from err
+    except ParameterError as err:  # the preset lookups name soil.preset: name the soil map's entry instead
+        key = where if isinstance(entry, str) else f"{where}.preset"
+        raise ScenarioError(str(err).replace("soil.preset", key, 1)) from err
     raise ScenarioError(f"{where} = {entry!r} must be a soil preset name, a preset file or a table with preset")
 
 

@@ -1,7 +1,7 @@
 """The field's cell storage (:class:`Grid`, :class:`Terrain`) and terrain files: the whole cell
 storage in one ``.npz`` file, written atomically.
 
-Schema (``TERRAIN_SCHEMA_VERSION`` = 2), one NumPy array per key:
+Schema (``TERRAIN_SCHEMA_VERSION`` = 3), one NumPy array per key:
 
 - ``kind``: the string "symtrack-terrain"; ``schema_version``: int;
 - ``origin_m`` (2,) float64: world (x, y) of the field's lower-left corner; ``cell_m`` float64;
@@ -23,6 +23,14 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 2), one NumPy array per key:
   was made with. Loading a file into a scenario with a different soil is an error;
 - ``crs_wkt`` (str, optional): the coordinate reference system of the field's x, y (WKT), when
   it came from a georeferenced raster (symtrack/terrain/gis.py); absent for local coordinates.
+- ``file_id`` str (schema 3): this file's own id (32 hexadecimal digits, new at every write);
+- ``history_json`` str (schema 3): the runs that produced the file, oldest first, a JSON list of
+  objects ``{"run_id", "time_utc", "scenario", "scenario_sha256", "passes", "input_file_id"}``:
+  the run's id (also in its summary.json as ``terrain_run_id``), when it wrote the file (ISO 8601,
+  UTC), the scenario's name and the SHA-256 of its resolved TOML, the passes it ran, and the
+  ``file_id`` of the terrain file it started from (null for a new field). A file written twice by
+  ``--terrain-in F --terrain-out F`` lists both runs, the second's ``input_file_id`` the first's
+  file. A schema-1 or -2 file loads with an empty history and no file id.
 
 Values are stored bit for bit, compressed (zip deflate): the default field of a million cells,
 mostly untouched, takes well under its 60 MB in memory (60 bytes per cell: 5 float64, the int8
@@ -33,6 +41,8 @@ default depths).
 from __future__ import annotations
 
 import io
+import json
+import uuid
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,13 +53,15 @@ from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
 from ..model.parameters import SOIL_PARAM_NAMES
 
-__all__ = ["KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "load", "save"]
+__all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes", "load",
+           "save"]
 
 STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase", "z_off_m", "load_cycles")
 SCHEMA1_FIELDS = STORAGE_FIELDS[:5]
 
-TERRAIN_SCHEMA_VERSION = 2
-READABLE_SCHEMAS = (1, 2)
+TERRAIN_SCHEMA_VERSION = 3
+READABLE_SCHEMAS = (1, 2, 3)
+HISTORY_KEYS = ("run_id", "time_utc", "scenario", "scenario_sha256", "passes", "input_file_id")
 KIND = "symtrack-terrain"
 
 
@@ -96,6 +108,14 @@ class Terrain:
         self.soil_index = np.zeros(n, dtype=np.uint8)
         self.soil_table: list[tuple[str, dict]] = []  # soils 1, 2, ... of a soil map: (label, parameters)
         self.crs_wkt: str | None = None  # the CRS of x, y (WKT), from a georeferenced soil map
+        self.file_id: str | None = None  # the id of the terrain file this terrain was last read from or written to
+        self.history: list[dict] = []  # the runs that produced it (module doc: history_json)
+
+    def __repr__(self) -> str:
+        g = self.grid
+        loaded = int(np.count_nonzero(self.phase))
+        return (f"<Terrain {g.shape[0]} x {g.shape[1]} cells of {g.cell_m} m from {g.origin_m}, {loaded} loaded, "
+                f"z max {1000 * float(self.z.max(initial=0.0)):.2f} mm, {len(self.history)} run(s) in its history>")
 
     def _all(self):
         return (self.z, self.zdot, self.zmax, self.pmax, self.phase, self.zoff, self.cycles)
@@ -127,12 +147,11 @@ class Terrain:
         """The sinkage as an (nx, ny) array (a copy)."""
         return self.z.reshape(self.grid.shape).copy()
 
-    def save(self, path, soil: dict | None = None) -> None:
-        """Write the terrain file (schema in the module doc), atomically."""
-        soil = soil if soil is not None else self.soil
-        if soil is None:
-            raise ScenarioError("Terrain.save: the terrain has no soil yet; give soil= (the soil parameters)")
-        save(path, self, soil)
+    def save(self, path, soil: dict | None = None, run: dict | None = None) -> None:
+        """Write the terrain file (schema in the module doc), atomically; ``run`` (the keys of
+        :data:`HISTORY_KEYS` but ``input_file_id``) is added to its history. A run's folder and
+        its terrain file are written together by :func:`symtrack.reports.run_files.write_folder`."""
+        save(path, self, soil, run)
 
     @classmethod
     def load(cls, path, soil: dict | None = None) -> Terrain:
@@ -140,8 +159,29 @@ class Terrain:
         return load(path, soil)
 
 
-def save(path, storage: Terrain, soil: dict) -> None:
-    """Write ``storage`` with the soil parameters ``soil`` as a terrain file, atomically."""
+def save(path, storage: Terrain, soil: dict | None = None, run: dict | None = None) -> None:
+    """Write ``storage`` with the soil parameters ``soil`` as a terrain file, atomically
+    (:func:`file_bytes`; ``storage`` takes the file's id and history once it is written)."""
+    data, file_id, history = file_bytes(storage, soil, run)
+    atomic_write_bytes(Path(path), data)
+    storage.file_id, storage.history = file_id, history
+
+
+def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = None) -> tuple[bytes, str, list[dict]]:
+    """The terrain file of ``storage`` (soil parameters ``soil``, default the terrain's own) with
+    ``run`` added to its history: ``(bytes, file id, history)``. ``storage`` is not changed (it
+    takes the id and history when the file is in place: :func:`save`)."""
+    soil = soil if soil is not None else storage.soil
+    if soil is None:
+        raise ScenarioError("Terrain.save: the terrain has no soil yet; give soil= (the soil parameters)")
+    history = [dict(h) for h in storage.history]
+    if run is not None:
+        missing = [k for k in HISTORY_KEYS if k != "input_file_id" and k not in run]
+        if missing:
+            raise ScenarioError(f"Terrain.save: run = {run!r} lacks {', '.join(missing)}")
+        history.append({**{k: run[k] for k in HISTORY_KEYS if k != "input_file_id"},
+                        "input_file_id": storage.file_id})
+    file_id = uuid.uuid4().hex
     g = storage.grid
     arrays = {k: v.reshape(g.shape) for k, v in storage.arrays().items() if k != "sigma_max_Pa"}
     if storage.soil_table:
@@ -158,8 +198,8 @@ def save(path, storage: Terrain, soil: dict) -> None:
         origin_m=np.array(g.origin_m, dtype=np.float64), cell_m=np.array(g.cell_m, dtype=np.float64),
         shape=np.array(g.shape, dtype=np.int64),
         soil_names=np.array(SOIL_PARAM_NAMES), soil_values=np.array([float(soil[n]) for n in SOIL_PARAM_NAMES]),
-        **arrays)
-    atomic_write_bytes(Path(path), buf.getvalue())
+        file_id=np.array(file_id), history_json=np.array(json.dumps(history)), **arrays)
+    return buf.getvalue(), file_id, history
 
 
 def load(path, soil: dict | None = None) -> Terrain:
@@ -242,6 +282,17 @@ def load(path, soil: dict | None = None) -> Terrain:
         if d["crs_wkt"].ndim != 0 or d["crs_wkt"].dtype.kind != "U":
             raise ScenarioError(f"{path}: crs_wkt must be one string (a WKT); the file is damaged")
         st.crs_wkt = str(d["crs_wkt"])
+    if version >= 3:
+        if "file_id" not in d or "history_json" not in d:
+            raise ScenarioError(f"{path}: the terrain file lacks file_id or history_json (schema 3): "
+                                "the file is damaged")
+        try:
+            history = json.loads(str(d["history_json"]))
+        except ValueError as err:
+            raise ScenarioError(f"{path}: history_json is not JSON ({err}): the file is damaged") from err
+        if not isinstance(history, list) or not all(isinstance(h, dict) for h in history):
+            raise ScenarioError(f"{path}: history_json must be a list of runs: the file is damaged")
+        st.file_id, st.history = str(d["file_id"]), history
     if version < 2:
         st.cycles[:] = (st.phase > 0).astype(np.uint16)
     elif not np.all(st.zoff >= 0):

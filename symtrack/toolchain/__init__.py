@@ -4,6 +4,7 @@ through :func:`build` (:mod:`symtrack.toolchain.cache`)."""
 from .cache import (
     BuildSpec,
     Built,
+    LockBusy,
     build,
     builds,
     cache_root,
@@ -11,10 +12,11 @@ from .cache import (
     compiled_required,
     compiler,
     digest,
+    file_lock,
     find_compiler,
     require_compiler,
     set_require_compiled,
 )
 
-__all__ = ["BuildSpec", "Built", "build", "builds", "cache_root", "casadi_tag", "compiled_required", "compiler",
-           "digest", "find_compiler", "require_compiler", "set_require_compiled"]
+__all__ = ["BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required",
+           "compiler", "digest", "file_lock", "find_compiler", "require_compiler", "set_require_compiled"]

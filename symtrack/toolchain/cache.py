@@ -47,8 +47,8 @@ import casadi as ca
 from ..foundations.errors import SimulationError
 
 __all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_COMPILER", "BuildSpec", "Built",
-           "build", "builds", "cache_root", "casadi_tag", "compiled_required", "compiler", "digest",
-           "find_compiler", "require_compiler", "set_require_compiled"]
+           "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required", "compiler", "digest",
+           "file_lock", "find_compiler", "require_compiler", "set_require_compiled"]
 
 log = logging.getLogger("symtrack.toolchain")
 
@@ -259,15 +259,44 @@ def build(spec: BuildSpec, cc: str | None = None) -> Path:
 def _entry_lock(folder: Path):
     """An exclusive lock on ``folder/.lock`` (flock; released when the holder exits or dies); yields
     whether it is held: no lock where flock is missing (the rename alone keeps the artefact whole)."""
+    with file_lock(folder / ".lock") as held:
+        yield held is not False
+
+
+class LockBusy(Exception):
+    """:func:`file_lock` with ``wait=False`` found the lock held; ``holder`` is what the holder wrote
+    into the lock file (its process id), or ""."""
+
+    def __init__(self, path: Path, holder: str):
+        super().__init__(f"{path} is held by process {holder or '(unknown)'}")
+        self.path, self.holder = path, holder
+
+
+@contextlib.contextmanager
+def file_lock(path, wait: bool = True):
+    """An exclusive lock on the file ``path`` (created if missing; ``flock``: released when the
+    holder exits or dies, so a killed holder never leaves it taken). The holder writes its process
+    id into the file. ``wait=False``: :class:`LockBusy` at once when another process holds it.
+    Yields the process id written, or False where flock is missing (not POSIX: no lock).
+    The one lock of symtrack (the cache's entries, terrain files)."""
     try:
         import fcntl
     except ImportError:  # not POSIX
         yield False
         return
-    with open(folder / ".lock", "a+b") as fh:
-        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+    path = Path(path)
+    with open(path, "a+b") as fh:
         try:
-            yield True
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            fh.seek(0)
+            raise LockBusy(path, fh.read(64).decode(errors="replace").strip()) from None
+        try:
+            fh.seek(0)
+            fh.truncate()
+            fh.write(str(os.getpid()).encode())
+            fh.flush()
+            yield os.getpid()
         finally:
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
