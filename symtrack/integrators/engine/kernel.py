@@ -48,7 +48,7 @@ def library(fns):
     check_no_work(fns.all())
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
-    dsrc = soil_dispatch_c(fns.n_soils).encode()
+    dsrc = soil_dispatch_c(fns.n_soils, fns.layout).encode()
     key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, dsrc, casadi_tag(BUILD_VERSION))
 
     def sources():
