@@ -34,7 +34,7 @@ def models():
 def _steady_shear_states(model, x, P):
     """Set the shear states of x (in place) to their steady values for x's velocities: seed eq. (2)'s
     j = (l/2)(r omega - v_k)/(r |omega|) and the lateral j_y = (l/2)(v + r_z x_c)/(r |omega|), with the
-    model's regularised |omega| (the same in both laws)."""
+    model's regularised |omega| (the same in both laws), and the twist theta = (l/2) r_z / (r |omega|)."""
     idx = model.state_index
     l, r, B = P["contact_length_m"], P["sprocket_radius_m"], P["track_gauge_m"]
     e = P["cg_ahead_of_contact_centre_m"]
@@ -45,6 +45,7 @@ def _steady_shear_states(model, x, P):
         x[idx(f"shear_{k}_m")] = (l / 2) * (r * om - (u + sgn * rz * B / 2)) / (r * abs_om)
         if f"lateral_shear_{k}_m" in model.state_names:
             x[idx(f"lateral_shear_{k}_m")] = (l / 2) * (v - rz * e) / (r * abs_om)
+            x[idx(f"shear_twist_{k}_rad")] = (l / 2) * rz / (r * abs_om)
 
 
 # (u, v, r_z, omega_left, omega_right): straight driving, a gentle and a tight left turn (inner track
@@ -79,13 +80,14 @@ def test_steady_state_is_the_quasi_static_shear_law(models, state):
     ft = np.array(trans.ode(xt, uu, trans.param_vector(P))).ravel()
     for i, name in enumerate(shear.state_names):
         assert ft[trans.state_index(name)] == pytest.approx(fs[i], rel=1e-9, abs=1e-9), name
-    # the lateral shear states are at rest (relative to their own scale, their decay rate times j_y)
+    # the lateral shear states are at rest (relative to their own scale, their decay rate times the state)
     l, r = P["contact_length_m"], P["sprocket_radius_m"]
-    for k, name in zip(("left", "right"), LATERAL_STATES, strict=True):
+    for name in LATERAL_STATES:
+        k = "left" if "left" in name else "right"
         decay = 2 * r / l * abs(xt[trans.state_index(f"omega_{k}_rad_s")]) * abs(xt[trans.state_index(name)])
         assert abs(ft[trans.state_index(name)]) <= 1e-12 + 1e-9 * decay
     # and a state away from the steady one gives other forces (the lag is in the law)
-    xt[trans.state_index(LATERAL_STATES[1])] *= 0.5
+    xt[trans.state_index("lateral_shear_right_m")] *= 0.5
     if state != "straight":
         ft2 = np.array(trans.ode(xt, uu, trans.param_vector(P))).ravel()
         assert abs(ft2[trans.state_index("yaw_rate_rad_s")] - ft[trans.state_index("yaw_rate_rad_s")]) > 1e-6
@@ -93,8 +95,9 @@ def test_steady_state_is_the_quasi_static_shear_law(models, state):
 
 def test_pure_yaw_on_uniform_pressure_gives_wongs_moment(models):
     """Wong: M_r = mu_t W l / 4 in pure yaw with the shear fully developed (K -> 0) and no
-    longitudinal sliding; the transient law's lateral states relaxed (zero: the contact centre is
-    the CG, it does not slide), its mu_t the soil's (2 b l c + W tan phi) / W."""
+    longitudinal sliding; the transient law's lateral states relaxed (j_y = 0: the contact centre is
+    the CG, it does not slide; the twist (l/2) r_z / (r |omega|)), its mu_t the soil's
+    (2 b l c + W tan phi) / W."""
     _, model = models
     P = _params(cg_ahead_of_contact_centre_m=0.0, shear_modulus_K_m=1e-4)
     p = model.param_vector(P)
@@ -103,14 +106,17 @@ def test_pure_yaw_on_uniform_pressure_gives_wongs_moment(models):
     x[model.state_index("yaw_rate_rad_s")] = rz
     x[model.state_index("omega_left_rad_s")] = -rz * P["track_gauge_m"] / 2 / P["sprocket_radius_m"]
     x[model.state_index("omega_right_rad_s")] = rz * P["track_gauge_m"] / 2 / P["sprocket_radius_m"]
+    b, l, r = P["track_width_m"], P["contact_length_m"], P["sprocket_radius_m"]
+    for k in ("left", "right"):
+        abs_om = math.hypot(x[model.state_index(f"omega_{k}_rad_s")], TRANSIENT.omega_smoothing_rad_s)
+        x[model.state_index(f"shear_twist_{k}_rad")] = (l / 2) * rz / (r * abs_om)
     y = dict(zip(model.output_names, np.array(model.outputs(x, [0, 0], p)).ravel(), strict=True))
     W = P["mass_kg"] * GRAVITY_M_S2
-    b, l = P["track_width_m"], P["contact_length_m"]
     mu_eq = (2 * b * l * P["cohesion_Pa"] + W * math.tan(P["friction_angle_rad"])) / W
     assert y["yaw_moment_N_m"] == pytest.approx(-mu_eq * W * l / 4, rel=1e-3)
     assert abs(y["lateral_force_left_N"] + y["lateral_force_right_N"]) < 1e-6 * W
     xdot = np.array(model.ode(x, [0, 0], p)).ravel()
-    assert np.abs(xdot[[model.state_index(n) for n in LATERAL_STATES]]).max() < 1e-12
+    assert np.abs(xdot[[model.state_index(n) for n in LATERAL_STATES]]).max() < 1e-9
 
 
 def test_the_layout_follows_the_law(models):
