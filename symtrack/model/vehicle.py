@@ -38,10 +38,10 @@ VEHICLE_STATES = (
 PLANAR_LAYOUT = StateLayout((
     ("pose", VEHICLE_STATES[0:3]), ("velocity", VEHICLE_STATES[3:6]), ("sprockets", VEHICLE_STATES[6:8]),
     ("shear", VEHICLE_STATES[8:10]), ("torque", VEHICLE_STATES[10:12])))
-# the "shear_transient" law's lateral shear states of each track (ModelOptions.lateral_law), after the
-# planar vehicle's 12: the vehicle model "planar_lateral"
-# per track the lateral shear displacement at the contact centre and the twist (the hull's rotation
-# while an element crosses half the contact: its lateral displacement's gradient along the track)
+# the "shear_transient" law's lateral shear states (ModelOptions.lateral_law), after the planar vehicle's
+# 12 (the vehicle model "planar_lateral"): per track the lateral shear displacement at the contact
+# centre and the twist (the hull's rotation while an element crosses half the contact: the gradient
+# of the lateral slip along the track)
 LATERAL_STATES = ("lateral_shear_left_m", "lateral_shear_right_m", "shear_twist_left_rad", "shear_twist_right_rad")
 PLANAR_LATERAL_LAYOUT = StateLayout(tuple((b, PLANAR_LAYOUT.block_names_of(b)) for b in
                                           ("pose", "velocity", "sprockets", "shear", "torque"))
@@ -258,8 +258,9 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
                       layout: StateLayout = PLANAR_LAYOUT) -> dict:
     """All vehicle expressions.
 
-    xv: the 12 states of VEHICLE_STATES (``layout``: PLANAR_LAYOUT), or with the two lateral shear
-    states of the "shear_transient" law (PLANAR_LATERAL_LAYOUT); u: commanded torques; acc: the body accelerations
+    xv: the 12 states of VEHICLE_STATES (``layout``: PLANAR_LAYOUT), or with the four lateral shear
+    states of the "shear_transient" law (PLANAR_LATERAL_LAYOUT); u: commanded torques; acc: the body
+    accelerations
     (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
     compaction resistance (magnitude) of the left and right track from the terrain; track_soil:
     optional track -> (cohesion, friction angle, shear modulus K) of the soil under that track (a
