@@ -260,8 +260,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
 
     xv: the 12 states of VEHICLE_STATES (``layout``: PLANAR_LAYOUT), or with the four lateral shear
     states of the "shear_transient" law (PLANAR_LATERAL_LAYOUT); u: commanded torques; acc: the body
-    accelerations
-    (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
+    accelerations (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
     compaction resistance (magnitude) of the left and right track from the terrain; track_soil:
     optional track -> (cohesion, friction angle, shear modulus K) of the soil under that track (a
     terrain whose soil varies over the field: symtrack/terrain, soil maps); default P's soil.
