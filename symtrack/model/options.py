@@ -9,7 +9,7 @@ from .soil_law import DEFAULT as DEFAULT_SOIL_LAW
 from .soil_law import REGISTRY as SOIL_LAWS
 
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
-LATERAL_LAWS = ("shear", "creep")
+LATERAL_LAWS = ("shear", "creep", "shear_transient")
 SHEAR_STRENGTH_PRESSURES = ("mean", "local")
 SLIDING_SIGNS = ("displacement", "velocity")
 
@@ -34,6 +34,14 @@ class ModelOptions:
         local sliding velocity, longitudinal and lateral together (combined slip; after Wong &
         Chiang 2001). The tractive force of each track is the longitudinal part of the same
         integral (seed eq. (1) exactly when the track does not slide sideways).
+        "shear_transient": the "shear" law with the sliding state lagged as seed eq. (2) lags the
+        longitudinal one: each track carries two lateral shear states (the vehicle model
+        "planar_lateral", four more states), j_y at the contact centre and the twist theta,
+        dj_y/dt = -(2 r |omega| / l) j_y + v + r_z x_c (x_c the contact centre's body x) and
+        dtheta/dt = -(2 r |omega| / l) theta + r_z, and the sliding direction and the displacement
+        field use the lagged slips: 2 j / l longitudinally, 2 j_y / l + (2 theta / l)(l/2 - s)
+        laterally. In steady running it is the "shear" law exactly; a 10 ms step carries it where
+        the "shear" law needs 0.5 ms (docs/turning.md section 8).
         "creep" (default): the reconstruction the validation is calibrated on: seed eq. (1) for the tractive
         force and a lateral resistance -mu_t q tanh((v + r_z x)/eps_v) with the vehicle's
         lateral_friction_coeff and lateral_creep_speed_m_s (a velocity creep, not a soil property).

@@ -12,8 +12,9 @@ signature, which the integrators, the linearization and the MPC all reuse:
 - ``accel(x, u, p) -> z``: the ODE form's accelerations (a consistent z for IDAS).
 
 The vehicle is a vehicle model of :mod:`symtrack.model.vehicle_registry` (``vehicle=``, default
-the planar vehicle); the state vector's layout is :attr:`SystemModel.layout` (the vehicle's
-blocks, then the terrain's ``cells``: :mod:`symtrack.model.layout`).
+the planar vehicle, or the one the options need: :func:`~symtrack.model.vehicle_registry.for_options`);
+the state vector's layout is :attr:`SystemModel.layout` (the vehicle's blocks, then the terrain's
+``cells``: :mod:`symtrack.model.layout`).
 
 A terrain plugs in through a narrow interface (like Chrono's terrain query):
 ``state_names``, optional ``param_names`` (its own entries of p, after the vehicle and soil
@@ -58,7 +59,7 @@ class SystemModel:
     def __init__(self, opts: ModelOptions | None = None, terrain=None, vehicle=None):
         self.opts = opts or ModelOptions()
         self.terrain = terrain or HomogeneousTerrain(self.opts)
-        self.vehicle = vehicle_registry.get(vehicle)
+        self.vehicle = vehicle_registry.for_options(self.opts, vehicle)
         vm = self.vehicle
         self.layout = vm.layout.with_cells(self.terrain.state_names)
         self.state_names = self.layout.names

@@ -14,12 +14,14 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from ..foundations.errors import ParameterError
 from .layout import ContactPose, StateLayout, VehicleState
 from .options import ModelOptions
 
-__all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "PLANAR_LAYOUT", "PlanarVehicle", "PressureDistribution",
-           "SOIL_PARAMS_USED", "TRACKS", "VEHICLE_STATES", "direction", "gauss_nodes", "graded_nodes",
-           "lateral_resistance_max_N", "shear_forces", "traction_shape", "traction_sign", "vehicle_equations"]
+__all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
+           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SOIL_PARAMS_USED", "TRACKS",
+           "VEHICLE_STATES", "direction", "gauss_nodes", "graded_nodes", "lateral_resistance_max_N",
+           "lateral_shear_rates", "shear_forces", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # Standard gravity (a true constant: CGPM 1901).
 GRAVITY_M_S2 = 9.80665
@@ -36,6 +38,14 @@ VEHICLE_STATES = (
 PLANAR_LAYOUT = StateLayout((
     ("pose", VEHICLE_STATES[0:3]), ("velocity", VEHICLE_STATES[3:6]), ("sprockets", VEHICLE_STATES[6:8]),
     ("shear", VEHICLE_STATES[8:10]), ("torque", VEHICLE_STATES[10:12])))
+# the "shear_transient" law's lateral shear states (ModelOptions.lateral_law), after the planar vehicle's
+# 12 (the vehicle model "planar_lateral"): per track the lateral shear displacement at the contact
+# centre and the twist (the hull's rotation while an element crosses half the contact: the gradient
+# of the lateral slip along the track)
+LATERAL_STATES = ("lateral_shear_left_m", "lateral_shear_right_m", "shear_twist_left_rad", "shear_twist_right_rad")
+PLANAR_LATERAL_LAYOUT = StateLayout(tuple((b, PLANAR_LAYOUT.block_names_of(b)) for b in
+                                          ("pose", "velocity", "sprockets", "shear", "torque"))
+                                    + (("lateral_shear", LATERAL_STATES),))
 INPUTS = ("torque_cmd_left_N_m", "torque_cmd_right_N_m")
 ALGEBRAIC = ("accel_x_m_s2", "accel_y_m_s2")
 
@@ -118,7 +128,8 @@ def graded_nodes(n_points: int, grading: int):
     return [float(ti**grading) for ti in t], weights
 
 
-def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, phi, K, opts: ModelOptions):
+def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, phi, K, opts: ModelOptions,
+                 lagged=None):
     """Tractive force, lateral force and yaw moment (about the CG) of one track from the soil's
     shear law (reconstruction after Wong & Chiang 2001; docs/turning.md).
 
@@ -140,20 +151,35 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     the point where j_y returns to zero; the ends, where the shear builds up from zero), each piece
     halved and integrated by Gauss-Legendre graded towards its ends, so that its accuracy does not
     depend on where the pivot falls.
+
+    ``lagged``: (j_y, theta), the track's lateral shear states of the "shear_transient" law (their
+    dynamics: :func:`lateral_shear_rates`): the sliding direction and the displacement field then
+    use the lagged slips, longitudinal 2 j / l, lateral 2 j_y / l at the contact centre and its
+    slope along the track 2 theta / l, instead of the sliding velocity now. In steady running the
+    lagged slips equal the instantaneous ones: the "shear" law.
     """
     # regularised |r omega| > 0 (also in traction_sign = "sign" mode, where abs_om is exact)
     tread = r * ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
     i_x = 2 * j / l
     fwd = 0.5 * (1 + ca.tanh(omega / opts.omega_smoothing_rad_s))  # 1: the contact is entered at the front
     # lateral slip i_y(s) = a0 - a1 s
-    a0 = (vy + rz * x_front) / tread
-    a1 = rz / tread
+    if lagged is None:
+        a1 = rz / tread
+        a0 = (vy + rz * x_front) / tread
+    else:
+        # the lagged lateral slip: 2 j_y / l at the contact centre (s = l/2), slope 2 theta / l; the
+        # yaw rate and lateral velocity that give it, for the pivot below (it only places a split)
+        a1 = 2 * lagged[1] / l
+        a0 = 2 * lagged[0] / l + a1 * l / 2
+        rz = a1 * tread
+        vy = a0 * tread - rz * x_front
     JF_l = a0 * l - a1 * l**2 / 2
 
     d2 = opts.shear_smoothing_m**2
     # the sliding direction from the track's sliding velocity now: longitudinal r omega - v_k,
     # lateral v + r_z x (per unit tread speed), with the longitudinal sign of seed eq. (1), sign(j)
-    i_x_now = (r * omega - v_k) / tread
+    # ("shear_transient": the lagged longitudinal slip 2 j / l, seed eq. (2)'s)
+    i_x_now = (r * omega - v_k) / tread if lagged is None else i_x
     ax = ca.sqrt(i_x_now**2 + opts.sliding_smoothing**2)  # regularised |i_x|
     if opts.sliding_sign == "velocity":
         # the longitudinal sign from the sliding velocity too (ModelOptions.sliding_sign): smooth
@@ -203,6 +229,17 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     return Fx, Fy, Mz
 
 
+def lateral_shear_rates(j_y, theta, abs_om, vy, rz, x_centre, l, r):
+    """(dj_y/dt, dtheta/dt) of a track's lateral shear states (the "shear_transient" law): seed
+    eq. (2) written for the lateral sliding velocity at the contact centre, v + r_z x_centre
+    (x_centre the centre's body x), and for the yaw rate (the lateral sliding velocity's gradient
+    along the track), with eq. (2)'s time constant l / (2 r |omega|). Steady states: j_y = (l/2)
+    i_y(l/2), half the contact times the lateral slip, as eq. (2)'s j = i l / 2; theta = r_z l /
+    (2 r |omega|), the hull's rotation while an element crosses half the contact."""
+    decay = (2 * r / l) * abs_om
+    return -decay * j_y + vy + rz * x_centre, -decay * theta + rz
+
+
 def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
     """The largest lateral force the two tracks can carry on level ground (for trim's limit
     checks): the soil's shear strength over both contacts, 2 b l c + W tan(phi), for the "shear"
@@ -211,17 +248,19 @@ def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
     W = params["mass_kg"] * GRAVITY_M_S2
     strength = 2 * params["track_width_m"] * params["contact_length_m"] * params["cohesion_Pa"] \
         + W * np.tan(params["friction_angle_rad"])
-    if opts.lateral_law == "shear":
+    if opts.lateral_law in ("shear", "shear_transient"):
         return float(strength)
     friction = params["lateral_friction_coeff"] * W
     return float(min(friction, strength)) if opts.lateral_shear_cap else float(friction)
 
 
-def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
+def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None,
+                      layout: StateLayout = PLANAR_LAYOUT) -> dict:
     """All vehicle expressions.
 
-    xv: the 12 states of VEHICLE_STATES; u: commanded torques; acc: the body accelerations
-    (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
+    xv: the 12 states of VEHICLE_STATES (``layout``: PLANAR_LAYOUT), or with the four lateral shear
+    states of the "shear_transient" law (PLANAR_LATERAL_LAYOUT); u: commanded torques; acc: the body
+    accelerations (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
     compaction resistance (magnitude) of the left and right track from the terrain; track_soil:
     optional track -> (cohesion, friction angle, shear modulus K) of the soil under that track (a
     terrain whose soil varies over the field: symtrack/terrain, soil maps); default P's soil.
@@ -229,7 +268,13 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     Returns a dict with 'xdot', 'acc_implied' (the accelerations the forces imply: equal to
     acc on the solution of the algebraic loop), the pressure distributions and named signals.
     """
-    X, Y, psi, vx, vy, rz, omL, omR, jL, jR, TL, TR = (xv[i] for i in PLANAR_LAYOUT.indices(VEHICLE_STATES))
+    X, Y, psi, vx, vy, rz, omL, omR, jL, jR, TL, TR = (xv[i] for i in layout.indices(VEHICLE_STATES))
+    transient = opts.lateral_law == "shear_transient"
+    if transient != (tuple(layout.names) == PLANAR_LATERAL_LAYOUT.names):
+        raise ParameterError(f"model.lateral_law = {opts.lateral_law!r} needs the vehicle model "
+                             f"{'planar_lateral' if transient else 'planar'} (states {', '.join(layout.names)})")
+    lagged = {k: (xv[layout.index(f"lateral_shear_{k}_m")], xv[layout.index(f"shear_twist_{k}_rad")])
+              for k in TRACKS} if transient else None
     m = P["mass_kg"]
     Iz = P["yaw_inertia_kg_m2"]
     B = P["track_gauge_m"]
@@ -279,9 +324,10 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
         Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
         if track_soil is not None:
             c, phi, K = track_soil[k]
-        if opts.lateral_law == "shear":
+        if opts.lateral_law in ("shear", "shear_transient"):
             F[k], Fy[k], Mz[k] = shear_forces(
-                shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts)
+                shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts,
+                lagged[k] if transient else None)
         else:
             # Seed eq. (1): b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
             # integral of the shear strength over the contact, b l c + N tan phi, used here so that
@@ -322,6 +368,9 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
         (u[0] - TL) / tauT,
         (u[1] - TR) / tauT,
     )
+    if transient:
+        rates = {k: lateral_shear_rates(*lagged[k], abs_om[k], vy, rz, -e, l, r) for k in TRACKS}
+        xdot = ca.vertcat(xdot, *(rates[k][0] for k in TRACKS), *(rates[k][1] for k in TRACKS))
     slip = {k: 1 - v_track[k] * omega[k] / (r * omega[k] ** 2 + opts.omega_smoothing_rad_s * r) for k in TRACKS}
     signals = {}
     for k in TRACKS:
@@ -359,3 +408,17 @@ class PlanarVehicle:
         """x, y and yaw from the state ``xv`` (the vehicle's states, a vector); no heave, pitch or roll."""
         s = VehicleState(xv, self.layout)
         return ContactPose(s["x_m"], s["y_m"], s["yaw_rad"])
+
+
+class PlanarLateralVehicle(PlanarVehicle):
+    """The planar vehicle with two lateral shear states per track (:data:`LATERAL_STATES`, after the
+    planar vehicle's 12): the vehicle model of the "shear_transient" lateral law (the registry's
+    ``"planar_lateral"``; :func:`symtrack.model.vehicle_registry.for_options` picks it)."""
+
+    name = "planar_lateral"
+    layout = PLANAR_LATERAL_LAYOUT
+    state_names = PLANAR_LATERAL_LAYOUT.names
+
+    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
+        """:func:`vehicle_equations` on :data:`PLANAR_LATERAL_LAYOUT`."""
+        return vehicle_equations(xv, u, acc, P, compaction_N, opts, track_soil, PLANAR_LATERAL_LAYOUT)

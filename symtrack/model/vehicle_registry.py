@@ -23,9 +23,9 @@ Adding a vehicle model is one module and one :func:`register` call::
 
 from __future__ import annotations
 
-from .vehicle import PlanarVehicle
+from .vehicle import PlanarLateralVehicle, PlanarVehicle
 
-__all__ = ["DEFAULT_VEHICLE", "REGISTRY", "get", "names", "register", "unregister"]
+__all__ = ["DEFAULT_VEHICLE", "REGISTRY", "for_options", "get", "names", "register", "unregister"]
 
 DEFAULT_VEHICLE = "planar"
 _REQUIRED = ("name", "layout", "state_names", "input_names", "alg_names", "tracks", "equations", "contact_pose")
@@ -70,4 +70,14 @@ def get(vehicle=None):
         raise ValueError(f"vehicle = {vehicle!r} is not one of {', '.join(REGISTRY)}") from None
 
 
+def for_options(opts, vehicle=None):
+    """The vehicle model for model options ``opts`` when ``vehicle`` is None: ``"planar_lateral"``
+    (the planar vehicle with a lateral shear state per track) for ``lateral_law = "shear_transient"``,
+    the default otherwise; else :func:`get` (``vehicle``)."""
+    if vehicle is None and opts is not None and opts.lateral_law == "shear_transient":
+        return REGISTRY["planar_lateral"]
+    return get(vehicle)
+
+
 register(PlanarVehicle())
+register(PlanarLateralVehicle())

@@ -63,7 +63,8 @@ NA = 8
 NS = 10
 NGEO = 7
 # the engine's vehicle is the planar one: w = its states and its algebraic accelerations (the C reads
-# ENG_NV and ENG_NW: engine_layout_c)
+# ENG_NV and ENG_NW: engine_layout_c); NW of the default vehicle (the "shear_transient" law's has two
+# more: EngineFunctions.nw)
 NW = PLANAR_LAYOUT.nv + len(ALGEBRAIC)
 
 
@@ -192,6 +193,11 @@ class EngineFunctions:
     layout: StateLayout = PLANAR_LAYOUT  # the vehicle's states (w = these, then its accelerations)
 
     @property
+    def nw(self) -> int:
+        """The length of w: the vehicle's states and its algebraic accelerations."""
+        return self.layout.nv + len(ALGEBRAIC)
+
+    @property
     def n_soils(self) -> int:
         return len(self.cell_law)
 
@@ -229,7 +235,7 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     Fh = ca.vertcat(hsym * veh.ode_dae_expr, veh.alg_expr)
     fF = ca.Function("F", [w, u, pv, hsym], [Fh])
     fJ = ca.Function("J", [w, u, pv, hsym], [ca.jacobian(Fh, w)])
-    mass = ca.DM.zeros(NW)
+    mass = ca.DM.zeros(veh.layout.nv + len(ALGEBRAIC))
     vs = veh.layout.block("vehicle")
     mass[vs] = 1.0
     g = veh.alg_expr
@@ -300,18 +306,18 @@ def _cell_functions(opts, params: dict, k: int, fo: dict):
     return cell_law, cell_history, cell_entry
 
 
-def engine_layout_c() -> list[str]:
+def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT) -> list[str]:
     """The engine's state sizes as C defines, from the vehicle's layout (grid_engine.c reads them):
     ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations."""
-    return [f"#define ENG_NV {PLANAR_LAYOUT.nv} /* the vehicle's states (symtrack.model.layout) */",
-            f"#define ENG_NW {NW} /* and its algebraic accelerations */"]
+    return [f"#define ENG_NV {layout.nv} /* the vehicle's states (symtrack.model.layout) */",
+            f"#define ENG_NW {layout.nv + len(ALGEBRAIC)} /* and its algebraic accelerations */"]
 
 
-def soil_dispatch_c(n_soils: int) -> str:
-    """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c`, and
-    ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch the compiler can inline; one
-    soil: a plain call)."""
-    lines = engine_layout_c()
+def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT) -> str:
+    """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c` (of the vehicle's
+    ``layout``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch the compiler can
+    inline; one soil: a plain call)."""
+    lines = engine_layout_c(layout)
     lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
     if n_soils == 1:
         lines.append("  fn##_0(arg, res, 0, WORK, 0)")

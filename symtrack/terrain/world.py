@@ -203,9 +203,9 @@ class World:
 
     @functools.cached_property
     def layout(self) -> StateLayout:
-        """The state layout of :attr:`model` (the default vehicle's, then this pool's channels),
+        """The state layout of :attr:`model` (the options' vehicle's, then this pool's channels),
         without building the model."""
-        return vehicle_registry.get().layout.with_cells(self.terrain.state_names)
+        return vehicle_registry.for_options(self.opts).layout.with_cells(self.terrain.state_names)
 
     @functools.cached_property
     def model(self) -> SystemModel:

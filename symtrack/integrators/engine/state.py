@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from ...foundations.errors import SimulationError
-from ...native.grid_engine_model import NA, NGEO, NW, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
+from ...native.grid_engine_model import NA, NGEO, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
 from ...terrain import subsoil
 from ...terrain.world import END_STRIP_CELLS, padding_m
 from ..settings import POWER_MODES, EngineSettings, window_substeps
@@ -152,7 +152,7 @@ class EngineState:
         self.ch_soil = np.zeros(n, dtype=np.uint8)
         self.soil_veh = np.array([[float(sp[k]) for k in TRACK_SOIL_PARAMS] for sp in world.soils]).ravel()
         self.geo = np.array(geo_vector(world.params, g.cell_m, strip))
-        self.wv = np.zeros(NW)
+        self.wv = np.zeros(fns.nw)
         self.a = np.zeros(NA)
         self.work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
         n_entry, n_exit = window_substeps(settings)
