@@ -28,8 +28,8 @@ from .reports.run_files import (
     validation_table,
     write_folder,
 )
-from .simulation.build import Built
-from .simulation.build import build as build_plant
+from .simulation.builder import Built
+from .simulation.builder import build as build_plant
 from .simulation.result import RunResult
 from .simulation.scenario import Scenario, builtin_names, load_scenario
 from .terrain.storage import Terrain
@@ -138,7 +138,7 @@ def _grid_names() -> list[str]:
 
 
 def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
-    """Build a scenario's plant ingredients, explicitly (:mod:`symtrack.simulation.build`: the
+    """Build a scenario's plant ingredients, explicitly (:mod:`symtrack.simulation.builder`: the
     model is built once per process for its options; :func:`simulate` builds through here).
 
     Parameters

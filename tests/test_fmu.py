@@ -23,7 +23,7 @@ from symtrack.api import simulate
 from symtrack.codegen import fmu as fmu_export
 from symtrack.foundations.errors import ScenarioError
 from symtrack.model.static import static_state
-from symtrack.simulation.build import system_model
+from symtrack.simulation.builder import system_model
 from symtrack.simulation.scenario import load_scenario
 
 REL_TOL = 1e-6

@@ -2,7 +2,6 @@
 model and gives the same figures bit for bit)."""
 
 import dataclasses
-import importlib
 from pathlib import Path
 
 import numpy as np
@@ -12,10 +11,8 @@ import symtrack
 from symtrack.foundations.errors import ScenarioError
 from symtrack.integrators import registry
 from symtrack.model.options import ModelOptions
-from symtrack.simulation.build import build_cache_info, clear_build_cache, system_model
-
-# the module (symtrack.simulation.build is also the name of its build function in the package)
-build_module = importlib.import_module("symtrack.simulation.build")
+from symtrack.simulation import builder as build_module
+from symtrack.simulation.builder import build_cache_info, clear_build_cache, system_model
 
 
 def test_a_second_build_reuses_the_model_and_runs_the_same():

@@ -72,9 +72,9 @@ def mpc_command(args) -> int:
     if terrain_out and sc.terrain is None:
         raise ScenarioError(f"--terrain-out: scenario {sc.name!r} runs on the homogeneous plant (no [terrain] "
                             "section); add --plant grid")
-    from ..simulation.build import system_model
+    from ..simulation.builder import system_model
 
-    model = system_model(sc.model)  # the cached build (symtrack.simulation.build)
+    model = system_model(sc.model)  # the cached build (symtrack.simulation.builder)
     from ..foundations.interrupt import InterruptWatch
     from ..reports.run_files import terrain_lock
 

@@ -52,7 +52,7 @@ from ..model.vehicle import GRAVITY_M_S2
 from ..native.cache import generated_sources
 from ..native.generate import FIXED_STEP_METHOD, unit_of
 from ..native.generate import build as generate_functions
-from ..simulation.build import system_model
+from ..simulation.builder import system_model
 from ..simulation.scenario import Scenario, load_scenario
 from ..toolchain import BuildSpec, build, casadi_tag, digest
 from .standalone import c_array, c_literal

@@ -50,7 +50,7 @@ from ..model import SystemModel
 from ..reports.figures import figures
 from ..reports.run_files import TerrainOut, terrain_run, write_folder
 from ..simulation import loop
-from ..simulation.build import system_model
+from ..simulation.builder import system_model
 from ..simulation.plants import StepPlant
 from ..simulation.plants import make_grid_plant as plant_for_world
 from ..terrain.settings import TerrainSettings

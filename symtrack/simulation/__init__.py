@@ -1,6 +1,6 @@
 """Simulation: scenarios, the Plant protocol and its plants, the one time loop, results, passes."""
 
-from .build import Built, build
+from .builder import Built, build
 from .loop import run
 from .plants import BatchPlant, GridPlant, Plant, StepPlant, make_plant
 from .result import RunResult, summarise

@@ -504,7 +504,7 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
     """The plant a simulation scenario asks for: the grid terrain when it has a ``[terrain]``
     section (or a ``world`` / ``terrain`` is given: a :class:`~symtrack.terrain.storage.Terrain`
     or a terrain file), else the homogeneous terrain; the integrator of ``run.integrator`` (``spec``:
-    its registry entry, as :class:`~symtrack.simulation.build.Built` holds it; looked up when None)."""
+    its registry entry, as :class:`~symtrack.simulation.builder.Built` holds it; looked up when None)."""
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = spec or registry.get(settings.method)
     if world is not None or scenario.terrain is not None or terrain is not None:
