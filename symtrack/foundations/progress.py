@@ -30,6 +30,7 @@ class Progress:
         self._t0 = time.perf_counter()
         self._done = 0.0
         self._note = ""
+        self._shown = None  # (fraction, note) of the last line written (a log, not a tty)
 
     def update(self, done: float, note: str = ""):
         self._done, self._note = done, note
@@ -49,7 +50,10 @@ class Progress:
             if end:
                 self.stream.write("\n")
         else:
+            if end and self._shown == (frac, self._note):
+                return  # the last line said it already (a log gets each state once)
             self.stream.write(f"{self.label}: {100 * frac:5.1f}% after {now - self._t0:.1f} s {self._note}\n")
+            self._shown = (frac, self._note)
         self.stream.flush()
 
     def close(self, complete: bool = True):

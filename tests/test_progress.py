@@ -1,0 +1,28 @@
+"""The progress shown on a log (not a terminal): each state once, the end at 100 % when the task
+ended by its own rule."""
+
+import io
+
+from symtrack.foundations.progress import Progress
+
+
+def test_a_log_gets_the_final_state_once():
+    s = io.StringIO()
+    p = Progress(10.0, "run", stream=s)
+    p.update(10.0, "t=3.0 s")  # the task's last update already shows the end
+    p.close()
+    assert s.getvalue().count("100.0%") == 1
+
+
+def test_close_completes_a_task_that_ended_early_and_disabled_shows_nothing():
+    s = io.StringIO()
+    p = Progress(10.0, "run", stream=s)
+    p.update(4.0, "t=1.0 s")
+    p.close()
+    lines = s.getvalue().splitlines()
+    assert lines[0].startswith("run:  40.0%") and lines[-1].startswith("run: 100.0%") and len(lines) == 2
+    q = io.StringIO()
+    off = Progress(10.0, "run", enabled=False, stream=q)
+    off.update(10.0)
+    off.close()
+    assert q.getvalue() == ""
