@@ -24,6 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..foundations.errors import ScenarioError
+from ..foundations.registry import Registry
 from .engine import TerrainEngine
 from .fixed_step import FixedStepper
 from .grid_idas import ChannelStepper
@@ -85,20 +86,18 @@ class IntegratorSpec:
         return self.homogeneous(model, settings)
 
 
-REGISTRY: dict[str, IntegratorSpec] = {}
+_MENU: Registry[IntegratorSpec] = Registry("an integrator", "run.integrator", ScenarioError)
+REGISTRY = _MENU.entries
 
 
 def register(spec: IntegratorSpec, replace: bool = False) -> IntegratorSpec:
     """Add an integrator to the menu (``run.integrator`` accepts its name from then on)."""
-    if spec.name in REGISTRY and not replace:
-        raise ValueError(f"an integrator named {spec.name!r} is registered already")
-    REGISTRY[spec.name] = spec
-    return spec
+    return _MENU.add(spec.name, spec, replace)
 
 
 def unregister(name: str) -> None:
     """Remove an integrator from the menu."""
-    REGISTRY.pop(name, None)
+    _MENU.remove(name)
 
 
 def names(terrain: str | None = None) -> tuple[str, ...]:
@@ -108,10 +107,7 @@ def names(terrain: str | None = None) -> tuple[str, ...]:
 
 def get(name: str, where: str = "run.integrator") -> IntegratorSpec:
     """The entry of ``name``; an unknown name is a :class:`ScenarioError` listing the menu."""
-    spec = REGISTRY.get(name)
-    if spec is None:
-        raise ScenarioError(f"{where} = {name!r} is not one of {', '.join(REGISTRY)}")
-    return spec
+    return _MENU.get(name, where)
 
 
 register(IntegratorSpec(

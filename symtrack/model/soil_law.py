@@ -36,6 +36,7 @@ from collections.abc import Mapping
 import casadi as ca
 
 from ..foundations.errors import ParameterError
+from ..foundations.registry import Registry
 from . import cell
 
 __all__ = ["BekkerWong", "DEFAULT", "HISTORY_NAMES", "REGISTRY", "SoilLaw", "get", "make", "names", "register",
@@ -184,7 +185,8 @@ class BekkerWong(SoilLaw):
         return (p / law[0]) ** (1 / law[1])
 
 
-REGISTRY: dict[str, type[SoilLaw]] = {}
+_MENU: Registry[type[SoilLaw]] = Registry("a soil law", "model.soil_law", ParameterError)
+REGISTRY = _MENU.entries
 DEFAULT = BekkerWong.name
 
 
@@ -192,28 +194,16 @@ def register(law: type[SoilLaw], replace: bool = False) -> type[SoilLaw]:
     """Add a law to the menu (``model.soil_law`` accepts its name from then on)."""
     if not (isinstance(law, type) and issubclass(law, SoilLaw) and law.name):
         raise ValueError(f"{law!r} is not a named SoilLaw subclass")
-    if law.name in REGISTRY and not replace:
-        raise ValueError(f"a soil law named {law.name!r} is registered already")
-    REGISTRY[law.name] = law
-    return law
+    return _MENU.add(law.name, law, replace)
 
 
-def unregister(name: str) -> None:
-    """Remove a law from the menu."""
-    REGISTRY.pop(name, None)
-
-
-def names() -> tuple[str, ...]:
-    """The registered names."""
-    return tuple(REGISTRY)
+unregister = _MENU.remove
+names = _MENU.names
 
 
 def get(name: str, where: str = "model.soil_law") -> type[SoilLaw]:
     """The class of ``name``; an unknown name is a :class:`ParameterError` listing the menu."""
-    law = REGISTRY.get(name)
-    if law is None:
-        raise ParameterError(f"{where} = {name!r} is not one of {', '.join(REGISTRY)}")
-    return law
+    return _MENU.get(name, where)
 
 
 def make(opts) -> SoilLaw:

@@ -416,6 +416,7 @@ class PlanarLateralVehicle(PlanarVehicle):
     ``"planar_lateral"``; :func:`symtrack.model.vehicle_registry.for_options` picks it)."""
 
     name = "planar_lateral"
+    lateral_laws = ("shear_transient",)  # the lateral laws whose states it carries (vehicle_registry.for_options)
     layout = PLANAR_LATERAL_LAYOUT
     state_names = PLANAR_LATERAL_LAYOUT.names
 

@@ -2,7 +2,8 @@
 
 A vehicle model is an object with
 
-- ``name``: its registry name (``ModelOptions.vehicle`` takes it);
+- ``name``: its registry name (``SystemModel(vehicle=...)`` takes it); optionally ``lateral_laws``:
+  the lateral laws whose states it carries (:func:`for_options` picks it for them);
 - ``layout``: its :class:`~symtrack.model.layout.StateLayout` (its own states only, in blocks;
   ``state_names`` the same names in order); ``input_names``, ``alg_names``: its inputs and the
   algebraic variables of the DAE form (the accelerations of the load-transfer loop, closed by
@@ -23,6 +24,8 @@ Adding a vehicle model is one module and one :func:`register` call::
 
 from __future__ import annotations
 
+from ..foundations.errors import ParameterError
+from ..foundations.registry import Registry
 from .vehicle import PlanarLateralVehicle, PlanarVehicle
 
 __all__ = ["DEFAULT_VEHICLE", "REGISTRY", "for_options", "get", "names", "register", "unregister"]
@@ -30,7 +33,8 @@ __all__ = ["DEFAULT_VEHICLE", "REGISTRY", "for_options", "get", "names", "regist
 DEFAULT_VEHICLE = "planar"
 _REQUIRED = ("name", "layout", "state_names", "input_names", "alg_names", "tracks", "equations", "contact_pose")
 
-REGISTRY: dict = {}
+_MENU: Registry = Registry("a vehicle model", "vehicle", ParameterError)
+REGISTRY = _MENU.entries
 
 
 def register(vehicle, replace: bool = False):
@@ -41,41 +45,30 @@ def register(vehicle, replace: bool = False):
     if tuple(vehicle.layout.names) != tuple(vehicle.state_names) or vehicle.layout.n_cells:
         raise ValueError(f"vehicle model {vehicle.name!r}: its layout must hold its state_names, in order, "
                          "and no terrain cells")
-    if vehicle.name in REGISTRY and not replace:
-        raise ValueError(f"a vehicle model named {vehicle.name!r} is registered already")
-    REGISTRY[vehicle.name] = vehicle
-    return vehicle
+    return _MENU.add(vehicle.name, vehicle, replace)
 
 
-def unregister(name: str) -> None:
-    """Remove a vehicle model from the menu."""
-    REGISTRY.pop(name, None)
-
-
-def names() -> tuple[str, ...]:
-    """The registered names."""
-    return tuple(REGISTRY)
+unregister = _MENU.remove
+names = _MENU.names
 
 
 def get(vehicle=None):
     """The vehicle model ``vehicle`` names (or ``vehicle`` itself when it is a model; None: the
-    default, planar); an unknown name is a ValueError listing the menu."""
+    default, planar); an unknown name is a :class:`ParameterError` listing the menu."""
     if vehicle is None:
         vehicle = DEFAULT_VEHICLE
-    if not isinstance(vehicle, str):
-        return vehicle
-    try:
-        return REGISTRY[vehicle]
-    except KeyError:
-        raise ValueError(f"vehicle = {vehicle!r} is not one of {', '.join(REGISTRY)}") from None
+    return _MENU.get(vehicle) if isinstance(vehicle, str) else vehicle
 
 
 def for_options(opts, vehicle=None):
-    """The vehicle model for model options ``opts`` when ``vehicle`` is None: ``"planar_lateral"``
-    (the planar vehicle with a lateral shear state per track) for ``lateral_law = "shear_transient"``,
-    the default otherwise; else :func:`get` (``vehicle``)."""
-    if vehicle is None and opts is not None and opts.lateral_law == "shear_transient":
-        return REGISTRY["planar_lateral"]
+    """The vehicle model for model options ``opts`` when ``vehicle`` is None: the first registered
+    model that declares ``opts.lateral_law`` among its ``lateral_laws`` (the laws whose states it
+    carries: ``"planar_lateral"`` for ``"shear_transient"``), else the default; else :func:`get`
+    (``vehicle``)."""
+    if vehicle is None and opts is not None:
+        for model in REGISTRY.values():
+            if opts.lateral_law in getattr(model, "lateral_laws", ()):
+                return model
     return get(vehicle)
 
 

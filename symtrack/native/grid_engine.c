@@ -820,19 +820,5 @@ EXPORT void eng_static(eng_t *E) {
 EXPORT long long eng_surface(const eng_t *E, const double *px, const double *py, long long n_points, long long *cell,
                              int *phase, double *out) {
   const tq_field_t F = {E->nx, E->ny, E->x0, E->y0, E->dx, E->z, E->phase};
-  long long outside = 0;
-  for (long long n = 0; n < n_points; ++n) {
-    tq_result_t r;
-    outside += terrain_query(&F, px[n], py[n], &r);
-    cell[n] = r.cell;
-    phase[n] = r.phase;
-    double *o = out + 6 * n;
-    o[0] = r.elevation_m;
-    o[1] = r.sinkage_m;
-    o[2] = r.height_m;
-    o[3] = r.normal[0];
-    o[4] = r.normal[1];
-    o[5] = r.normal[2];
-  }
-  return outside;
+  return terrain_query_points(&F, px, py, n_points, cell, phase, out);
 }

@@ -59,4 +59,25 @@ static inline int terrain_query(const tq_field_t *F, double x, double y, tq_resu
   return 0;
 }
 
+/* The query over many points: per point n cell[n], phase[n] and out[6 n ..] = (elevation, sinkage,
+ * height, normal x, y, z); returns how many points lie outside the field. */
+static inline long long terrain_query_points(const tq_field_t *F, const double *px, const double *py,
+                                             long long n_points, long long *cell, int *phase, double *out) {
+  long long outside = 0;
+  for (long long n = 0; n < n_points; ++n) {
+    tq_result_t r;
+    outside += terrain_query(F, px[n], py[n], &r);
+    cell[n] = r.cell;
+    phase[n] = r.phase;
+    double *o = out + 6 * n;
+    o[0] = r.elevation_m;
+    o[1] = r.sinkage_m;
+    o[2] = r.height_m;
+    o[3] = r.normal[0];
+    o[4] = r.normal[1];
+    o[5] = r.normal[2];
+  }
+  return outside;
+}
+
 #endif
