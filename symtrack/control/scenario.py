@@ -63,7 +63,7 @@ import math
 from dataclasses import dataclass
 
 from ..foundations.config import builtin_names as _package_names
-from ..foundations.config import check_keys, integer, number, read_document
+from ..foundations.config import check_document, check_keys, integer, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators.settings import EngineSettings
 from ..model.options import ModelOptions
@@ -237,7 +237,7 @@ def _model(t: dict) -> ModelOptions:
 
 
 def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
-    _keys("scenario", d, TOP_KEYS)
+    check_document("MPC scenario", d, TOP_KEYS)
     name, desc = d.get("name", default_name), d.get("description", "")
     if not isinstance(name, str) or not isinstance(desc, str):
         raise ScenarioError("name and description must be strings")

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from .errors import ScenarioError
 
-__all__ = ["number", "integer", "check_keys", "parse_override", "apply_overrides", "builtin_names",
+__all__ = ["number", "integer", "check_document", "check_keys", "parse_override", "apply_overrides", "builtin_names",
            "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
 
 
@@ -51,6 +51,22 @@ def check_keys(section: str, table, allowed: Iterable[str]) -> None:
     if unknown:
         raise ScenarioError(
             f"unknown key(s) in [{section}]: {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+
+
+def check_document(kind: str, doc, top_keys: Iterable[str], arrays: Iterable[str] = ()) -> None:
+    """A document's top level: a table with only ``top_keys``; ``name`` and ``description``
+    strings; every other key a table, those of ``arrays`` arrays of tables ([[key]])."""
+    check_keys(kind, doc, top_keys)
+    arrays = tuple(arrays)
+    for k, v in doc.items():
+        if k in ("name", "description"):
+            if not isinstance(v, str):
+                raise ScenarioError(f"{k} = {v!r} must be a string")
+        elif k in arrays:
+            if not isinstance(v, list) or not all(isinstance(x, dict) for x in v):
+                raise ScenarioError(f"{k} = {v!r} must be an array of tables ([[{k}]] entries)")
+        elif not isinstance(v, dict):
+            raise ScenarioError(f"[{k}] must be a table, got {k} = {v!r}")
 
 
 def parse_override(item: str) -> tuple[str, str, object]:
@@ -175,17 +191,31 @@ def resolve_file_paths(doc: dict, folder: Path) -> dict:
     return doc
 
 
+_TOML_ESCAPES = {"\\": "\\\\", '"': '\\"', "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def _is_table_array(v) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
+
+
+def _toml_key(k) -> str:
+    """A bare key when TOML allows one, else a quoted key."""
+    k = str(k)
+    return k if k and all(c.isascii() and (c.isalnum() or c in "_-") for c in k) else _toml_value(k)
+
+
 def _toml_value(v) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, (int, float)):
         return repr(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, str):  # a basic string: backslash, quote and every control character escaped (TOML 1.0)
+        return '"' + "".join(_TOML_ESCAPES.get(c) or (f"\\u{ord(c):04x}" if ord(c) < 32 or ord(c) == 127 else c)
+                             for c in v) + '"'
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     if isinstance(v, dict):  # an inline table
-        return "{" + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items() if x is not None) + "}"
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items() if x is not None) + "}"
     raise TypeError(f"cannot write {v!r} as TOML")
 
 
@@ -193,14 +223,14 @@ def to_toml(d: dict) -> str:
     """Write a document (tables, arrays of tables, scalars) as TOML."""
     lines = []
     for k, v in d.items():
-        if not isinstance(v, (dict, list)) or (isinstance(v, list) and v and not isinstance(v[0], dict)):
-            lines.append(f"{k} = {_toml_value(v)}")
+        if not isinstance(v, dict) and not _is_table_array(v):
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
     for k, v in d.items():
         if isinstance(v, dict):
-            lines.append(f"\n[{k}]")
-            lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items() if vv is not None]
-        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            lines.append(f"\n[{_toml_key(k)}]")
+            lines += [f"{_toml_key(kk)} = {_toml_value(vv)}" for kk, vv in v.items() if vv is not None]
+        elif _is_table_array(v):
             for item in v:
-                lines.append(f"\n[[{k}]]")
-                lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in item.items() if vv is not None]
+                lines.append(f"\n[[{_toml_key(k)}]]")
+                lines += [f"{_toml_key(kk)} = {_toml_value(vv)}" for kk, vv in item.items() if vv is not None]
     return "\n".join(lines) + "\n"

@@ -55,7 +55,7 @@ import dataclasses
 from dataclasses import dataclass
 
 from ..foundations.config import builtin_names as _package_names
-from ..foundations.config import check_keys, number, read_document
+from ..foundations.config import check_document, check_keys, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
@@ -294,7 +294,7 @@ def _parse_start(t) -> Start:
 
 def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     """A scenario document (already read) -> :class:`Scenario`, every section checked."""
-    check_keys("scenario", d, TOP_KEYS)
+    check_document("scenario", d, TOP_KEYS, arrays=("torque",))
     name = d.get("name", default_name)
     desc = d.get("description", "")
     if not isinstance(name, str) or not isinstance(desc, str):

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..foundations.config import check_keys, integer, number, read_document, to_toml
+from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_folder
 from ..foundations.progress import Progress
@@ -299,7 +299,7 @@ def _pass_scenario_doc(doc: dict, fs: FieldSettings) -> dict:
 def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
     """A field spec document (already read) -> :class:`FieldSpec`, every section checked before
     any work: errors name the key, the value and the allowed range."""
-    check_keys("field spec", doc, TOP_KEYS)
+    check_document("field spec", doc, TOP_KEYS)
     if "field" not in doc:
         raise ScenarioError("a field study needs a [field] section (docs/studies.md, \"Whole-field traffic study\")")
     name = doc.get("name", default_name)

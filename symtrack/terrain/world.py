@@ -72,6 +72,7 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import ScenarioError
+from ..foundations.memory import require_memory
 from ..model import SystemModel, vehicle_registry
 from ..model.layout import StateLayout
 from ..model.options import ModelOptions
@@ -84,7 +85,7 @@ from .soil_map import soil_index
 from .storage import Grid, Terrain
 
 __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "World", "derive_modulus", "open_world", "padding_m",
-           "static_sinkage"]
+           "static_sinkage", "world_bytes_per_cell"]
 
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
 LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
@@ -144,6 +145,14 @@ def derive_modulus(params: dict, settings: TerrainSettings, dt_s: float) -> int:
     return int(math.floor(math.hypot(W, H) / dx)) + 2
 
 
+def world_bytes_per_cell(n_depths: int) -> int:
+    """The memory a new field takes per cell: the storage's arrays (measured from a one-cell
+    :class:`Terrain`), the pass's stress record per depth (float32), the touched mask and the soil
+    map's index (a byte each)."""
+    one = Terrain(Grid((0.0, 0.0), 1.0, (1, 1)), None, [0.1 * (k + 1) for k in range(n_depths)])
+    return one.nbytes + 4 * n_depths + 2
+
+
 class World:
     """The world manager for one field and one vehicle (see the module doc)."""
 
@@ -161,6 +170,11 @@ class World:
             if origin is None:
                 origin = (start_xy[0] - 0.5 * nx * settings.cell_m, start_xy[1] - 0.5 * ny * settings.cell_m)
             self.grid = Grid((float(origin[0]), float(origin[1])), float(settings.cell_m), (nx, ny))
+            n, nd = self.grid.n_cells, len(settings.subsoil_depths_m)
+            require_memory(n * world_bytes_per_cell(nd), f"terrain.size_m = {list(settings.size_m)} at terrain.cell_m "
+                           f"= {settings.cell_m} ({nx} x {ny} = {n} cells, {len(settings.subsoil_depths_m)} subsoil "
+                           "depths)", "raise terrain.cell_m, shrink terrain.size_m or drop subsoil depths "
+                           "(terrain.subsoil_depths_m)")
         # the soil map's cells first: a raster that misses the field, or a CRS that is not the
         # terrain's, stops here, before the channel pool is built
         sm = settings.soil_map

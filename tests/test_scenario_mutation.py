@@ -1,0 +1,140 @@
+"""Property-based test of scenario input (issue 26, item 5): hypothesis mutates the built-in
+scenario files (every kind a user writes: simulate, MPC, field study) and every outcome must be a
+validated scenario or the package's own error with a message, never a traceback of another type.
+
+Mutations: a value replaced (wrong type, NaN, infinities, huge or negative numbers, unicode text,
+empty containers), a key deleted, an unknown key added, at any depth (arrays of tables too); and
+the whole text mangled (truncated, unicode inserted). A scenario that is accepted must also write
+itself back as TOML that reads back to the same document (scenario.resolved.toml)."""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from importlib import resources
+
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from symtrack.foundations.config import to_toml
+from symtrack.foundations.errors import SymtrackError
+from symtrack.studies.runs import KINDS, PACKAGES, load, package_names
+
+BUILTINS = [(kind, name) for kind in KINDS for name in package_names(PACKAGES[kind])]
+
+VALUES = st.one_of(
+    st.sampled_from([math.nan, math.inf, -math.inf, 1e308, -1e308, 0.0, -1.0, -0.0, 1e-320, 10**30, -(10**30), 0, -1,
+                     True, False, "", "nan", "ü∂ß🚜", "a\nb", "\x00", [], {}, [1.0, "x"], {"k": 1}]),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(min_value=-(2**63), max_value=2**63 - 1),
+    st.text(max_size=12),
+    st.lists(st.floats(allow_nan=False, allow_infinity=False, width=32), max_size=3),
+)
+
+
+def _doc(kind: str, name: str) -> tuple[str, dict]:
+    text = resources.files(PACKAGES[kind]).joinpath(name + ".toml").read_text()
+    return text, tomllib.loads(text)
+
+
+def _paths(doc, prefix=()):
+    """Every (path, value) of the document: a path is a tuple of keys and list indices."""
+    items = doc.items() if isinstance(doc, dict) else enumerate(doc)
+    for k, v in items:
+        yield (*prefix, k), v
+        if isinstance(v, dict) or (isinstance(v, list) and v and isinstance(v[0], dict)):
+            yield from _paths(v, (*prefix, k))
+
+
+def _parent(doc, path):
+    for k in path[:-1]:
+        doc = doc[k]
+    return doc
+
+
+@st.composite
+def mutated(draw):
+    kind, name = draw(st.sampled_from(BUILTINS))
+    _, doc = _doc(kind, name)
+    paths = list(_paths(doc))
+    path, _ = draw(st.sampled_from(paths))
+    op = draw(st.sampled_from(["replace", "replace", "replace", "delete", "unknown"]))
+    parent = _parent(doc, path)
+    if op == "replace":
+        parent[path[-1]] = draw(VALUES)
+    elif op == "delete":
+        if isinstance(parent, list):
+            parent.pop(path[-1])
+        else:
+            del parent[path[-1]]
+    else:
+        target = parent[path[-1]] if isinstance(parent[path[-1]], dict) else parent
+        if isinstance(target, list):
+            target = doc
+        target[draw(st.text(min_size=1, max_size=8))] = draw(VALUES)
+    return kind, name, op, path, doc
+
+
+def _outcome(kind: str, text: str, name: str):
+    """The loader's result, or the package's error; any other exception fails the test."""
+    try:
+        return load(kind, text, name)
+    except SymtrackError as err:
+        assert str(err).strip(), f"{kind} {name}: an error without a message ({type(err).__name__})"
+        return err
+
+
+# SYMTRACK_FUZZ_EXAMPLES=5000 for a longer search (5000 passed when the test was written)
+@settings(max_examples=int(os.environ.get("SYMTRACK_FUZZ_EXAMPLES", "300")), deadline=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(mutated())
+def test_mutated_document_is_a_scenario_or_a_clear_error(case):
+    kind, name, op, path, doc = case
+    try:
+        text = to_toml(doc)
+    except TypeError:
+        pytest.skip("a value TOML cannot hold (the writer refuses it)")
+    res = _outcome(kind, text, name)
+    event(f"{op}: {'error' if isinstance(res, SymtrackError) else 'accepted'}")
+    if isinstance(res, SymtrackError):
+        # the message says where: a key of the mutated path (a replaced value, an unknown key's table)
+        names = [p for p in path if isinstance(p, str)]
+        assert any(n in str(res) for n in names), f"{kind} {name}: {op} at {path}: {res}"
+        return
+    # accepted: what the run writes as scenario.resolved.toml must read back as the same document
+    resolved = res.resolved_dict() if callable(getattr(res, "resolved_dict", None)) else getattr(res, "resolved", None)
+    if isinstance(resolved, dict):
+        back = tomllib.loads(to_toml(resolved))
+        assert _same(back, {k: v for k, v in resolved.items() if v is not None}), f"{kind} {name} {op} {path}"
+
+
+def _same(a, b) -> bool:
+    if isinstance(b, tuple):
+        b = list(b)
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    if isinstance(a, dict) and isinstance(b, dict):
+        b = {k: v for k, v in b.items() if v is not None}
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return a == b
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.sampled_from(BUILTINS), st.data())
+def test_mangled_text_is_a_scenario_or_a_clear_error(builtin, data):
+    kind, name = builtin
+    text, _ = _doc(kind, name)
+    cut = data.draw(st.integers(0, len(text)))
+    insert = data.draw(st.sampled_from(["", "\x00", "🚜", "\ufeff", "=", "[", "]]", "\n[run]\n", '"', "\r"]))
+    _outcome(kind, text[:cut] + insert + text[cut + data.draw(st.integers(0, 20)):], name)
+
+
+def test_the_writer_round_trips_strings_a_user_may_write():
+    """Descriptions with newlines, quotes, tabs, backslashes and unicode survive
+    scenario.resolved.toml."""
+    doc = {"name": "n", "description": 'two\nlines, a "quote", a\ttab, a \\ and 🚜\x7f\x01', "run": {"x": 1.0}}
+    assert tomllib.loads(to_toml(doc)) == doc
