@@ -22,7 +22,7 @@ import pytest
 import symtrack
 from symtrack import studies
 from symtrack.cli import main
-from symtrack.foundations.errors import ScenarioError
+from symtrack.foundations.errors import ScenarioError, SymtrackError
 from symtrack.studies import design, latin_hypercube, plan
 from symtrack.studies import engine as sweep_module
 
@@ -409,3 +409,42 @@ def test_a_killed_worker_of_the_local_cluster_is_forked_anew_and_its_run_redone(
         th.join(240)
     assert not th.is_alive()
     _assert_redone_elsewhere(box[0], out, victim)
+
+
+def test_a_lost_scheduler_ends_the_sweep_with_a_message_and_a_rerun_resumes(tmp_path):
+    """The scheduler stops while runs are in flight: the sweep ends with SymtrackError (no run is
+    marked failed: the rest are not_run), the finished runs are kept, and the same sweep rerun on
+    another cluster does only the rest."""
+    from distributed import LocalCluster
+
+    out, box = tmp_path / "lost", []
+    vary = {"vehicle.mass_kg": [5000 + 100 * k for k in range(4)]}
+
+    def run():
+        try:
+            box.append(studies.sweep("validation", vary, out=out, overrides=FAST, scheduler=cluster.scheduler_address,
+                                     progress=False))
+        except Exception as err:  # noqa: BLE001 - the test inspects it
+            box.append(err)
+
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None)
+    th = threading.Thread(target=run)
+    th.start()
+    try:
+        deadline = time.monotonic() + 180
+        while not list((out / "runs").glob("*/summary.json")) and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        cluster.close()
+        th.join(240)
+    assert not th.is_alive()
+    err = box[0]
+    assert isinstance(err, SymtrackError) and "the Dask scheduler was lost" in str(err), err
+    assert "rerun the same command" in str(err)
+    rows = _table(out / "results.csv")
+    statuses = [r["status"] for r in rows]
+    assert len(rows) == 4 and "ok" in statuses and "not_run" in statuses and "failed" not in statuses
+    for r in rows:
+        assert (out / "runs" / r["run_id"] / "summary.json").is_file() == (r["status"] == "ok")
+    res = studies.sweep("validation", vary, out=out, overrides=FAST, workers=1, progress=False)
+    assert res.ok and res.skipped == statuses.count("ok") and res.ran == 4 - res.skipped

@@ -310,6 +310,9 @@ def _client(workers: int, scheduler: str | None):
 
     # the scheduler of a local cluster runs in this process: its INFO lines are not ours to show
     logging.getLogger("distributed").setLevel(logging.WARNING)
+    # the client's own errors (a lost scheduler: a traceback per reconnection attempt) are the sweep's
+    # to report, in one message (_run_all)
+    logging.getLogger("distributed.client").setLevel(logging.CRITICAL)
     if scheduler:
         try:
             return Client(scheduler, timeout="15s"), None
@@ -406,10 +409,31 @@ def _report(p: Plan, table: list[dict], png: bytes | None) -> str:
                        note=f"{p.source.kind} scenario {p.source.label}; fixed overrides {p.fixed or 'none'}")
 
 
+class SchedulerLost(Exception):
+    """The client lost its scheduler: no run of the sweep can finish (not a failure of a run)."""
+
+    def __init__(self, done: int, total: int):
+        super().__init__(f"after {done} of {total} runs")
+        self.done, self.total = done, total
+
+
+def _scheduler_lost(client, err: BaseException) -> bool:
+    """Whether a run's error is the loss of the scheduler (Dask cancels every future with the
+    reason "scheduler-connection-lost" and the client leaves its running state), not the run's."""
+    return "scheduler-connection-lost" in str(err) or \
+        getattr(client, "status", "running") not in ("running", "newly-created")
+
+
 def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, progress: bool) -> list:
     """The runs of ``todo`` on the client's cluster; each finished run is stored at once and
     results.csv rewritten (at most once a second, and at the end); the client (and a local
-    cluster) are closed at the end. Returns the failed runs."""
+    cluster) are closed at the end. Returns the failed runs.
+
+    A worker process that dies (killed, out of memory) loses its run: Dask's scheduler gives the
+    run to another worker (a local cluster's nanny restarts the dead one), up to Dask's
+    ``distributed.scheduler.allowed-failures`` deaths for one run (3 by default), after which the run
+    is failed with Dask's KilledWorker. A scheduler that disappears ends the sweep with
+    :class:`SymtrackError`: the finished runs are stored, the rest stay not_run for a rerun."""
     from distributed import as_completed
 
     futures = {}
@@ -427,7 +451,9 @@ def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, 
             run = futures[fut]
             try:
                 result = fut.result()
-            except Exception as err:  # noqa: BLE001 - a worker that died, a lost connection: the run failed
+            except Exception as err:  # noqa: BLE001 - the run raised, or its worker died SCHEDULER_RETRIES times
+                if _scheduler_lost(client, err):
+                    raise SchedulerLost(done, len(todo)) from err
                 result = {"id": run["id"], "status": "failed", "error": f"{type(err).__name__}: {err}",
                           "files": {}}
             rows[run["id"]] = _store(out, by_id[result["id"]], result, p.source.kind)
@@ -447,6 +473,11 @@ def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, 
         client.cancel(list(futures), force=True)
         _write_table(out, p, rows)
         raise
+    except SchedulerLost as lost:  # the runs not finished stay not_run: a rerun of the command does them
+        _write_table(out, p, rows)
+        raise SymtrackError(f"the Dask scheduler was lost (connection closed) after {lost.done} of {lost.total} runs; "
+                            f"the finished runs are kept in {out} (results.csv; the others are not_run): start the "
+                            "scheduler and its workers again and rerun the same command to do the rest") from None
     finally:
         bar.close()
         client.close()
