@@ -290,3 +290,87 @@ def test_the_maps_of_a_large_field_keep_a_narrow_rut():
     assert out[..., 1].max() == 0
     odd, f = block_max(np.ones((7, 3), dtype=np.uint16), 2)
     assert f == 4 and odd.shape == (2, 1) and (odd == 1).all()
+
+
+def _arrays(path):
+    return Terrain.load(path).arrays()
+
+
+def _killed_at_pass(spec, out, k, kill):
+    """Run the study with ``plant.start`` of pass ``k`` (counted over the study) interrupted by
+    ``kill()``; returns the number of passes started."""
+    plant = make_plant(spec.scenario)
+    start, calls = plant.start, []
+
+    def start_then(*a, **kw):
+        calls.append(1)
+        if len(calls) == k:
+            kill()
+        return start(*a, **kw)
+
+    plant.start = start_then
+    return plant, calls
+
+
+def test_a_rerun_resumes_an_interrupted_study_and_gives_the_uninterrupted_result(study, tmp_path):
+    """Ctrl-C at the random pattern's third pass, then the same study again into the same folder: it
+    runs passes 3 and 4 only (and the controlled pattern), and every file of the random pattern's
+    field equals the uninterrupted study's bit for bit."""
+    spec = load_field_spec("field_traffic", SMALL)
+    out = tmp_path / "out"
+
+    def interrupt():
+        raise KeyboardInterrupt
+
+    plant, calls = _killed_at_pass(spec, out, 3, interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        run_field_study(spec, out=out, plant=plant)
+    plant2, calls2 = _killed_at_pass(spec, out, 99, interrupt)
+    res = run_field_study(spec, out=out, plant=plant2)
+    assert res.complete and len(calls2) == 2 + 4  # random passes 3, 4; controlled 1-4
+    ref = study[2]
+    for pattern in PATTERNS:
+        a, b = _arrays(out / pattern / "field.npz"), _arrays(ref / pattern / "field.npz")
+        assert all(np.array_equal(a[k], b[k]) for k in b), pattern
+        with np.load(out / pattern / "passes_per_cell.npz") as x, np.load(ref / pattern / "passes_per_cell.npz") as y:
+            assert np.array_equal(x["passes"], y["passes"])
+        rows = list(csv.DictReader((out / pattern / "passes.csv").open()))
+        ref_rows = list(csv.DictReader((ref / pattern / "passes.csv").open()))
+        assert [(r["pass"], r["distance_m"], r["cells_loaded"]) for r in rows] == \
+            [(r["pass"], r["distance_m"], r["cells_loaded"]) for r in ref_rows]
+    s, s_ref = (json.loads((d / "summary.json").read_text()) for d in (out, ref))
+    for k in ("random_trafficked_area_fraction", "controlled_trafficked_area_fraction"):
+        assert s[k] == s_ref[k]
+
+
+def test_a_killed_study_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
+    """SIGKILL in the random pattern's third pass (checkpoints after every pass): the folder holds
+    the two passes' checkpoint and no summary; a rerun runs the last pass only, and the field equals
+    an uninterrupted study's."""
+    import multiprocessing
+    import os
+    import signal
+
+    from symtrack.studies import field as field_module
+
+    monkeypatch.setattr(field_module, "CHECKPOINT_EVERY_S", 0.0)
+    spec = load_field_spec("field_traffic", [*SMALL, "field.pattern=random", "field.passes=3"])
+    out = tmp_path / "out"
+
+    def child():
+        plant, _ = _killed_at_pass(spec, out, 3, lambda: os.kill(os.getpid(), signal.SIGKILL))
+        run_field_study(spec, out=out, plant=plant)
+
+    proc = multiprocessing.get_context("fork").Process(target=child)
+    proc.start()
+    proc.join(300)
+    assert proc.exitcode == -signal.SIGKILL
+    assert not (out / "summary.json").exists()
+    assert len(list(csv.DictReader((out / "random" / "passes.csv").open()))) == 2
+    plant, calls = _killed_at_pass(spec, out, 99, lambda: None)
+    res = run_field_study(spec, out=out, plant=plant)
+    assert res.complete and len(calls) == 1
+    ref = run_field_study(spec, out=tmp_path / "ref")
+    a, b = _arrays(out / "random" / "field.npz"), _arrays(tmp_path / "ref" / "random" / "field.npz")
+    assert all(np.array_equal(a[k], b[k]) for k in b)
+    assert res.summary["random_trafficked_area_fraction"] == ref.summary["random_trafficked_area_fraction"]

@@ -22,8 +22,8 @@ def field_command(args) -> int:
     try:
         res = run_field_study(spec, out=out, progress=not args.quiet)
     except KeyboardInterrupt:
-        print(f"symtrack: interrupted (Ctrl-C); the passes done are kept in {out} (summary.json: complete = "
-              "false)", file=sys.stderr)
+        print(f"symtrack: interrupted (Ctrl-C); the whole passes done are kept in {out} (summary.json: complete = "
+              "false); run the same command again to resume from them", file=sys.stderr)
         return 130
     except IncompleteFieldStudy as err:
         print(f"symtrack: error: {err}; what was computed up to there is in {out} (summary.json: complete = "
@@ -59,7 +59,9 @@ def add_parser(sub) -> None:
         "pass's end and set down at the next pass's start), with random and/or controlled traffic, and write "
         "DIR/summary.json, DIR/<pattern>/field.npz, passes.csv and the maps, DIR/comparison.png. Exit code 0 "
         "when every pass ran, 1 when one failed (what was computed is written), 2 for an invalid spec (nothing "
-        f"run), 130 on Ctrl-C (the passes done are written). Built-in: {', '.join(names)}.")
+        "run), 130 on Ctrl-C (the whole passes done are written). The same study run again into a folder it was "
+        "interrupted in (Ctrl-C, or killed: its folder is checkpointed every minute) resumes from the passes done. "
+        f"Built-in: {', '.join(names)}.")
     fp.add_argument("scenario", help="a built-in field study or a TOML file with a [field] section")
     fp.add_argument("--out", required=True, help="output folder")
     fp.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",

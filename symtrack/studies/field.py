@@ -72,6 +72,11 @@ log = logging.getLogger("symtrack.studies")
 SCHEMA_VERSION = 1
 FIELD_PACKAGE = "symtrack.studies.fields"
 PATTERNS = ("random", "controlled")
+# the longest stretch of a pattern's passes between two checkpoints of its folder (field.npz,
+# passes.csv, passes_per_cell.npz of the whole passes done): a study killed (SIGKILL, a lost machine)
+# redoes at most this much when it is run again into the same folder. A checkpoint of the
+# million-cell field writes about 1 MB compressed (~0.5 s), a pass takes seconds to a minute.
+CHECKPOINT_EVERY_S = 60.0
 PATTERN_CHOICES = (*PATTERNS, "both")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "field")
 FIELD_KEYS = ("size_m", "cell_m", "pattern", "passes", "seed", "lane_spacing_m", "lanes", "headland_m",
@@ -356,9 +361,14 @@ def plan_passes(spec: FieldSpec, pattern: str) -> list[PassLine]:
 # ---- the figures -----------------------------------------------------------------------------------
 def _copy_terrain(st: Terrain) -> Terrain:
     t = Terrain(st.grid, st.soil, st.subsoil_depths_m)
-    for name, a in st.arrays().items():
-        t.arrays()[name][...] = a
+    _copy_into(t, st)
     return t
+
+
+def _copy_into(dst: Terrain, src: Terrain) -> None:
+    """The cell state of ``src`` into ``dst`` (same grid and depths)."""
+    for name, a in src.arrays().items():
+        dst.arrays()[name][...] = a
 
 
 def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa: float) -> dict:
@@ -463,27 +473,46 @@ def _clear(world) -> None:
     world.touched[:] = False
 
 
+def _engine_stress(plant) -> bool:
+    """Whether the plant's engine records each pass's stress (then a pass's cells are those it stressed)."""
+    return bool(plant.world.storage.subsoil_depths_m) and hasattr(plant, "engine")
+
+
+def _count_source(plant) -> str:
+    return ("cells a track's contact overlapped at a macro step's end (World.pass_sigma > 0)"
+            if _engine_stress(plant) else "cells whose sinkage changed during the pass")
+
+
 def _pass_mask(world, engine_stress: bool, z_before: np.ndarray | None) -> np.ndarray:
     if engine_stress:
         return world.pass_sigma[:, 0] > 0
     return world.touched & (world.storage.z != z_before)
 
 
-def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_before: int) -> None:
-    """Run the passes of ``pr.lines`` on the plant's world, filling ``pr`` (also when a pass fails
-    or Ctrl-C stops it: its figures are those of the passes done)."""
+def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_before: int,
+                 checkpoint=None) -> None:
+    """Run the passes of ``pr.lines`` after those of ``pr.records`` (a resumed pattern: its
+    terrain is in the plant's world, its counts in ``pr.counts``) on the plant's world, filling
+    ``pr`` (also when a pass fails or Ctrl-C stops it: its figures are those of the passes done;
+    a pass that Ctrl-C stopped is not among them: the terrain is the one after the last whole
+    pass). ``checkpoint(pr)``, when given, is called after a pass at most every
+    :data:`CHECKPOINT_EVERY_S`, with ``pr.terrain`` the terrain after it."""
     world = plant.world
     sc = spec.scenario
     pattern, lines = pr.pattern, pr.lines
-    counts = np.zeros(world.grid.n_cells, dtype=np.uint16)
-    pr.counts = counts
-    engine_stress = bool(world.storage.subsoil_depths_m) and hasattr(plant, "engine")
-    pr.count_source = ("cells a track's contact overlapped at a macro step's end (World.pass_sigma > 0)"
-                       if engine_stress else "cells whose sinkage changed during the pass")
+    if pr.counts is None:
+        pr.counts = np.zeros(world.grid.n_cells, dtype=np.uint16)
+    counts = pr.counts
+    whole = _copy_terrain(world.storage)  # the terrain after the last whole pass
+    in_pass = False
+    last_checkpoint = time.perf_counter()
+    engine_stress = _engine_stress(plant)
+    pr.count_source = _count_source(plant)
     iu = plant.state_names.index("u_m_s")
     t_pat = time.perf_counter()
     try:
-        for line in lines:
+        for line in lines[len(pr.records):]:
+            in_pass = True
             sck = dataclasses.replace(sc, start=Start(line.x_start_m, line.y_m, line.yaw_deg))
             z0 = None if engine_stress else world.storage.z.copy()
             t0 = time.perf_counter()
@@ -506,7 +535,14 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
                                "speed_end_m_s": float(res.X[-1, iu]), "cells_loaded": int(mask.sum()),
                                "stopped_by": res.stopped_by})
             pr.sim_time_s += float(res.t[-1])
+            _copy_into(whole, world.storage)
+            in_pass = False
             bar.update(done_before + line.index + 1, f"{pattern} pass {line.index + 1}/{len(lines)}")
+            if checkpoint is not None and time.perf_counter() - last_checkpoint >= CHECKPOINT_EVERY_S \
+                    and len(pr.records) < len(lines):
+                pr.terrain = whole
+                checkpoint(pr)
+                last_checkpoint = time.perf_counter()
             if failure is None and res.stopped_by != "distance":
                 failure = SimulationError(f"run.duration_s = {sc.run.duration_s:g} s ended the pass before it "
                                           f"covered field.pass_length_m = {spec.field.length_m:g} m (it covered "
@@ -516,16 +552,22 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
                 break
         else:
             pr.complete = True
-    finally:  # also on Ctrl-C: the passes done are kept
-        pr.wall_time_s = time.perf_counter() - t_pat
-        pr.terrain = _copy_terrain(world.storage)
-        pr.figures = field_figures(pr.terrain, counts, float(world.params["precompression_stress_Pa"]))
-        pr.figures.update(passes_done=len(pr.records), wall_time_s=pr.wall_time_s, sim_time_s=pr.sim_time_s,
-                          lateral_positions_m=[ln.y_m for ln in lines[:len(pr.records)]])
-        if pattern == "controlled":
-            pr.figures["lanes"] = int(lane_positions(spec.field, spec.params).size)
-        else:
-            pr.figures["seed"] = spec.field.seed
+    finally:  # also on Ctrl-C: the whole passes done are kept
+        pr.wall_time_s += time.perf_counter() - t_pat
+        pr.terrain = whole if in_pass else _copy_terrain(world.storage)
+        pr.figures = _pattern_figures(spec, pr)
+
+
+def _pattern_figures(spec: FieldSpec, pr: PatternResult) -> dict:
+    """The figures of a pattern's passes done (its terrain, counts and records)."""
+    f = field_figures(pr.terrain, pr.counts, float(spec.params["precompression_stress_Pa"]))
+    f.update(passes_done=len(pr.records), wall_time_s=pr.wall_time_s, sim_time_s=pr.sim_time_s,
+             lateral_positions_m=[ln.y_m for ln in pr.lines[:len(pr.records)]])
+    if pr.pattern == "controlled":
+        f["lanes"] = int(lane_positions(spec.field, spec.params).size)
+    else:
+        f["seed"] = spec.field.seed
+    return f
 
 
 PASS_COLUMNS = ("pass", "lane", "y_m", "x_start_m", "direction", "distance_m", "sim_time_s", "wall_time_s",
@@ -630,8 +672,14 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     folder = check_output_folder(str(out)) if out is not None else None
     t_start = time.perf_counter()
     fs = spec.field
-    if folder is not None:
+    done = _resumable(folder, spec) if folder is not None else {}
+    if folder is not None and not done:
         clear_previous_study(folder)
+        # first: a folder interrupted later is known by it as this study's (a rerun resumes it)
+        write_folder(folder, {"field.resolved.toml": to_toml(spec.document)}, clear=False)
+    elif done:
+        log.info("field %s: resuming the study in %s (%s)", spec.name, folder, ", ".join(
+            f"{p}: {len(r.records)} of {fs.passes} passes done" for p, r in done.items()))
     if plant is None:
         plant = make_plant(spec.scenario)
     else:
@@ -640,12 +688,19 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     results: dict[str, PatternResult] = {}
     bar = Progress(fs.passes * len(fs.patterns), f"field {spec.name}", enabled=progress)
     error, interrupted, pending = None, False, None
+    checkpoint = None if folder is None else (lambda pr: _write_checkpoint(folder, spec, pr))
     try:
         for k, pattern in enumerate(fs.patterns):
-            if k:
-                _clear(plant.world)
-            pr = pending = results[pattern] = PatternResult(pattern, plan_passes(spec, pattern))
-            _run_pattern(spec, plant, pr, bar, k * fs.passes)
+            _clear(plant.world)
+            pr = done.get(pattern) or PatternResult(pattern, plan_passes(spec, pattern))
+            pending = results[pattern] = pr
+            if pr.complete:  # finished before: its folder is whole
+                pr.count_source = _count_source(plant)
+                pending = None
+                continue
+            if pr.records:  # resumed: the terrain after its last checkpointed pass
+                _copy_into(plant.world.storage, pr.terrain)
+            _run_pattern(spec, plant, pr, bar, k * fs.passes + len(pr.records), checkpoint)
             if folder is not None:
                 _write_pattern(folder, spec, pr)
             pending = None
@@ -691,6 +746,71 @@ def clear_previous_study(folder) -> list:
     :func:`~symtrack.reports.run_files.clear_previous_run`). Anything else is left alone."""
     names = [f"{p}/{n}" for p in PATTERNS for n in PATTERN_FILES] + list(TOP_FILES)
     return clear_previous_run(folder, names, kind="symtrack-field-study")
+
+
+def _write_checkpoint(folder, spec: FieldSpec, pr: PatternResult) -> None:
+    """The pattern's data files of the whole passes done (no figures): what a rerun resumes from."""
+    sub = folder / pr.pattern
+    files = {"passes_per_cell.npz": passes_per_cell_npz(pr), "passes.csv": _passes_csv(pr.records).encode()}
+    field = TerrainOut(sub / "field.npz", pr.terrain, spec.scenario.soil, terrain_run(spec.scenario, len(pr.records)),
+                       lock=False)
+    write_folder(sub, files, clear=False, terrain=field)
+
+
+def _read_records(text: str) -> list[dict]:
+    """passes.csv -> the records of :func:`_run_pattern` (the types of :data:`PASS_COLUMNS`)."""
+    out = []
+    for row in csv.DictReader(io.StringIO(text)):
+        r = {}
+        for k in PASS_COLUMNS:
+            v = row[k]
+            r[k] = (None if v == "" else int(v) if k in ("pass", "lane", "cells_loaded") and v not in ("", "None")
+                    else v if k in ("direction", "stopped_by") else float(v))
+        out.append(r)
+    return out
+
+
+def _resumable(folder, spec: FieldSpec) -> dict:
+    """The patterns of an interrupted run of this same study in ``folder`` (its field.resolved.toml
+    is this spec's, its summary.json absent (killed) or interrupted, not failed): per pattern whose
+    data files are there, a :class:`PatternResult` with its passes done, counts and terrain (complete
+    when every pass is done). Empty when there is nothing to resume."""
+    try:
+        if (folder / "field.resolved.toml").read_text() != to_toml(spec.document):
+            return {}
+    except OSError:
+        return {}
+    try:
+        summary = json.loads((folder / "summary.json").read_text())
+    except FileNotFoundError:
+        summary = None
+    except (OSError, ValueError):
+        return {}
+    if summary is not None and (summary.get("complete") or summary.get("error") is not None):
+        return {}
+    done = {}
+    for pattern in spec.field.patterns:
+        sub = folder / pattern
+        try:
+            records = _read_records((sub / "passes.csv").read_text())
+            with np.load(sub / "passes_per_cell.npz") as z:
+                counts = np.asarray(z["passes"], dtype=np.uint16).ravel()
+            terrain = Terrain.load(sub / "field.npz", spec.params)
+        except (OSError, KeyError, ValueError, ScenarioError) as err:
+            log.info("field %s: %s is not resumable (%s); it runs again", spec.name, sub, err)
+            continue
+        lines = plan_passes(spec, pattern)
+        ran = sum(h.get("passes", 0) for h in terrain.history[-1:])
+        if len(records) > len(lines) or ran != len(records) or counts.size != terrain.grid.n_cells:
+            continue
+        pr = PatternResult(pattern, lines, records=records, counts=counts, terrain=terrain,
+                           complete=len(records) == len(lines) and (sub / "sinkage_map.png").is_file(),
+                           sim_time_s=sum(r["sim_time_s"] for r in records),
+                           wall_time_s=sum(r["wall_time_s"] for r in records))
+        if pr.complete:
+            pr.figures = _pattern_figures(spec, pr)
+        done[pattern] = pr
+    return done
 
 
 def _write_pattern(folder, spec: FieldSpec, pr: PatternResult) -> list:
