@@ -26,3 +26,26 @@ def test_close_completes_a_task_that_ended_early_and_disabled_shows_nothing():
     off.update(10.0)
     off.close()
     assert q.getvalue() == ""
+
+
+def test_a_slow_step_says_what_it_does_while_it_runs_and_then_its_time(caplog):
+    """No silent wait (issue 26, item 3): past slow_s the step is announced from a timer while it
+    still runs, and its time follows; a quick step says nothing."""
+    import logging
+    import time as _time
+
+    from symtrack.foundations.progress import timed_step
+
+    lg = logging.getLogger("symtrack.test_timed_step")
+    with caplog.at_level(logging.INFO, logger=lg.name):
+        with timed_step("building a thing", lg, slow_s=0.05):
+            deadline = _time.monotonic() + 5.0
+            while "building a thing ..." not in caplog.text and _time.monotonic() < deadline:
+                _time.sleep(0.01)
+            seen_while_running = "building a thing ..." in caplog.text
+        assert seen_while_running
+        assert "building a thing took" in caplog.text
+        caplog.clear()
+        with timed_step("a quick thing", lg, slow_s=60.0):
+            pass
+        assert caplog.text == ""

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..foundations.config import to_toml
 from ..foundations.errors import ScenarioError, SimulationError
-from ..foundations.progress import Progress
+from ..foundations.progress import Progress, timed_step
 from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
@@ -287,12 +287,16 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     (:func:`symtrack.simulation.loop.run`). The plant is started at the vehicle's trim state of
     straight running (or at ``x0``, values of the plant's ``state_names``); with ``finish``
     (default) the plant is finished after the loop (the grid lifts the vehicle off)."""
-    model = model or system_model(sc.model)
+    with timed_step("building the vehicle model", log):
+        model = model or system_model(sc.model)
     if model.opts != sc.model:
         raise ScenarioError(f"the model's options ({model.opts}) differ from the scenario's [model] section "
                             f"({sc.model}): build the model as SystemModel(scenario.model)")
-    mpc = mpc or PathTrackingMPC(model, sc.params, sc.mpc)
-    plant = plant or make_plant(sc, model)
+    if mpc is None:
+        with timed_step(f"building the MPC's solver ({sc.mpc.solver}, {sc.mpc.horizon_steps} steps)", log):
+            mpc = PathTrackingMPC(model, sc.params, sc.mpc)
+    with timed_step("building the plant", log):
+        plant = plant or make_plant(sc, model)
     path = sc.build_path()
     xt, ut = initial_state(model, sc)
     if x0 is None:

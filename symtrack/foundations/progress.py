@@ -1,12 +1,13 @@
 """Progress of long runs on stderr: a bar on a terminal (at most ~10 updates a second), log
 lines otherwise (every ``LOG_EVERY_S`` seconds and at the end), so that logs and CI output show
-progress too. :func:`timed_step` logs every step longer than a few seconds with its time."""
+progress too. :func:`timed_step` says what a step does once it has taken 2 s, and then its time."""
 
 from __future__ import annotations
 
 import contextlib
 import logging
 import sys
+import threading
 import time
 
 __all__ = ["LOG_EVERY_S", "SLOW_STEP_S", "Progress", "timed_step"]
@@ -14,7 +15,7 @@ __all__ = ["LOG_EVERY_S", "SLOW_STEP_S", "Progress", "timed_step"]
 log = logging.getLogger("symtrack.progress")
 
 LOG_EVERY_S = 10.0  # a progress line in logs (stderr not a terminal) at most this often
-SLOW_STEP_S = 3.0  # timed_step reports steps that took longer than this
+SLOW_STEP_S = 2.0  # timed_step says what a step does once it has taken this long (issue 26: no silent wait over 2 s)
 
 
 class Progress:
@@ -68,12 +69,25 @@ class Progress:
 
 @contextlib.contextmanager
 def timed_step(what: str, logger: logging.Logger | None = None, slow_s: float = SLOW_STEP_S):
-    """Log ``what`` with its wall time when it took longer than ``slow_s`` (a compilation, a
-    jit build, an integrator construction), so that no long silence goes unexplained."""
+    """Say what a step does once it has taken ``slow_s`` ("what ..." from a timer thread, while the
+    step still runs) and, then, how long it took ("what took 12.3 s"), so that no wait longer than
+    ``slow_s`` is silent (a solver build, a model's code generation, an integrator construction;
+    the compilations say their own, symtrack.toolchain). A quick step logs nothing."""
+    lg = logger or log
     t0 = time.perf_counter()
+    announced = threading.Event()
+
+    def announce():
+        announced.set()
+        lg.info("%s ...", what)
+
+    timer = threading.Timer(slow_s, announce)
+    timer.daemon = True
+    timer.start()
     try:
         yield
     finally:
+        timer.cancel()
         dt = time.perf_counter() - t0
-        if dt > slow_s:
-            (logger or log).info("%s took %.1f s", what, dt)
+        if announced.is_set() or dt > slow_s:
+            lg.info("%s took %.1f s", what, dt)
