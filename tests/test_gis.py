@@ -23,6 +23,7 @@ from symtrack.terrain.storage import Grid, Terrain
 
 rasterio = pytest.importorskip("rasterio")  # the extra symtrack[gis], in the dev extra: CI has it
 xr = pytest.importorskip("xarray")
+pyproj = pytest.importorskip("pyproj")
 from rasterio.transform import from_origin  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -138,6 +139,10 @@ def test_the_netcdf_opens_in_xarray_and_gdal_with_its_variables_units_and_crs(ru
         assert np.array_equal(ds.rut_depth.values, run.terrain.z.reshape(SHAPE).T.astype(np.float32))
         assert np.array_equal(ds.passes.values, run.terrain.cycles.reshape(SHAPE).T)
         assert rasterio.crs.CRS.from_wkt(ds.spatial_ref.attrs["crs_wkt"]).to_epsg() == 32633
+        # the CF grid mapping (CF-1.8 appendix F), read back by pyproj from the CF attributes alone
+        cf = {k: v for k, v in ds.spatial_ref.attrs.items() if k not in ("crs_wkt", "spatial_ref", "long_name")}
+        assert cf["grid_mapping_name"] == "transverse_mercator" and cf["longitude_of_central_meridian"] == 15.0
+        assert pyproj.CRS.from_cf(cf).to_epsg() == 32633
     with rasterio.open(f"netcdf:{nc}:stress_max") as ds:  # GDAL's netCDF driver, as QGIS opens it
         assert ds.crs.to_epsg() == 32633 and ds.count == len(run.terrain.subsoil_depths_m)
         assert ds.transform == from_origin(ORIGIN[0], ORIGIN[1] + SHAPE[1] * CELL, CELL, CELL)

@@ -1,11 +1,11 @@
 """GIS rasters in and out: soil maps from GeoTIFF, the field's state as GeoTIFF layers and as one
 NetCDF dataset (user documentation: docs/terrain.md, "GIS rasters").
 
-The optional extra ``symtrack[gis]`` brings rasterio (GeoTIFF, the CRS) and xarray (NetCDF, written
-by SciPy's NetCDF-3 writer: SciPy is already installed with python-control, so the extra adds no
-HDF5 library). They are imported on first use: without them symtrack runs everything else, and a
-raster feature stops with :class:`~symtrack.foundations.errors.MissingExtraError` naming
-``pip install 'symtrack[gis]'``.
+The optional extra ``symtrack[gis]`` brings rasterio (GeoTIFF, the CRS), pyproj (the CF grid
+mapping of a CRS) and xarray (NetCDF, written by SciPy's NetCDF-3 writer: SciPy is already
+installed with python-control, so the extra adds no HDF5 library). They are imported on first use:
+without them symtrack runs everything else, and a raster feature stops with
+:class:`~symtrack.foundations.errors.MissingExtraError` naming ``pip install 'symtrack[gis]'``.
 
 Coordinates: world x, y of a field are the coordinates of its CRS, in metres (a projected CRS:
 UTM, a national grid). Cell (i, j) of a :class:`~symtrack.terrain.storage.Grid` is the square
@@ -22,7 +22,8 @@ Out (:func:`export_terrain`, schema version :data:`GIS_SCHEMA_VERSION`): the lay
 depth layers one band per depth) and/or one NetCDF-3 dataset (dims ``depth``, ``y``, ``x``;
 coordinates the cell centres in metres; each variable with ``units``, ``long_name`` and
 ``grid_mapping = "spatial_ref"``, the CRS as WKT in that variable's ``crs_wkt`` and
-``spatial_ref``, the attributes GDAL, QGIS and rioxarray read). Both are written atomically.
+``spatial_ref``, the attributes GDAL, QGIS and rioxarray read, and the CF grid mapping's
+``grid_mapping_name`` and parameters (CF-1.8 appendix F, from pyproj) for CF readers). Both are written atomically.
 """
 
 from __future__ import annotations
@@ -310,8 +311,12 @@ def _dataset(terrain: Terrain, crs: str | None):
             ds[name] = (("y", "x"), a.T.astype(layer.netcdf_dtype), attrs)
     if crs is not None:
         wkt = crs_wkt(crs, "the terrain's CRS")
-        # a coordinate, as rioxarray writes it (GDAL derives the transform from x, y)
-        ds = ds.assign_coords(spatial_ref=((), np.int32(0), {"crs_wkt": wkt, "spatial_ref": wkt,
+        # a coordinate, as rioxarray writes it (GDAL derives the transform from x, y), with the CF
+        # grid-mapping attributes (grid_mapping_name and its parameters, CF-1.8 appendix F) that pyproj
+        # derives from the CRS, so that CF readers without WKT support know the projection too
+        cf = _extra("pyproj", "NetCDF export with a CRS").CRS.from_wkt(wkt).to_cf()
+        attrs = {k: v for k, v in cf.items() if k != "crs_wkt" and v is not None}
+        ds = ds.assign_coords(spatial_ref=((), np.int32(0), {**attrs, "crs_wkt": wkt, "spatial_ref": wkt,
                                                              "long_name": "coordinate reference system"}))
     ds.attrs = {"Conventions": "CF-1.8", "title": "symtrack field state", "source": "symtrack (symtrack.terrain.gis)",
                 "symtrack_kind": "symtrack-terrain-dataset", "symtrack_schema_version": np.int32(GIS_SCHEMA_VERSION),
