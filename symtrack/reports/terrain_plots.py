@@ -9,7 +9,8 @@ import numpy as np
 
 from .plots import plt, png_bytes
 
-__all__ = ["ANIMATION_MAX_FRAMES", "pass_animation_gif", "passes_png", "rut_section_png", "sinkage_map_png"]
+__all__ = ["ANIMATION_MAX_FRAMES", "pass_animation_gif", "passes_png", "rut_section_png", "sinkage_map_png",
+           "surface_png"]
 
 ANIMATION_MAX_FRAMES = 30  # frames of a pass animation (snapshots are thinned to at most this)
 
@@ -37,6 +38,43 @@ def sinkage_map_png(world, z, pass_no: int, maps=None) -> bytes:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"terrain sinkage after pass {pass_no} (cell {dx:g} m)")
+    return png_bytes(fig)
+
+
+def surface_png(world, maps, results) -> bytes:
+    """The ground's shape (a field with an elevation): the initial elevation z0 over the field with
+    the driven paths, the surface z0 - z after the last pass around the ruts, and both along the
+    first pass's path (under the vehicle's centre)."""
+    g = world.grid
+    nx, ny = g.shape
+    z0 = world.storage.elevation.reshape(g.shape)
+    z = maps[-1]
+    x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
+    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(10, 11))
+    im = a1.imshow(z0.T, origin="lower", extent=(x0, x0 + nx * dx, y0, y0 + ny * dx), aspect="equal", cmap="terrain")
+    fig.colorbar(im, ax=a1, label="elevation z0 [m]")
+    for k, res in enumerate(results):
+        a1.plot(res.X[:, 0], res.X[:, 1], color="k" if k == 0 else "r", lw=1, label=f"pass {k + 1}")
+    a1.set_title(f"initial elevation (cell {dx:g} m) and the driven path")
+    a1.legend(loc="upper right")
+    si, sj = _window(world, maps)
+    ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
+    im = a2.imshow((z0 - z)[si, sj].T, origin="lower", extent=ext, aspect="equal", cmap="terrain")
+    fig.colorbar(im, ax=a2, label="surface z0 - z [m]")
+    a2.set_title(f"surface after pass {len(maps)} (elevation minus sinkage)")
+    for a in (a1, a2):
+        a.set_xlabel("x [m]")
+        a.set_ylabel("y [m]")
+    X = results[0].X
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(X[:, 0]), np.diff(X[:, 1])))])
+    i = np.clip(np.floor((X[:, 0] - x0) / dx).astype(int), 0, nx - 1)
+    j = np.clip(np.floor((X[:, 1] - y0) / dx).astype(int), 0, ny - 1)
+    a3.plot(s, 1e3 * z0[i, j], label="initial elevation z0")
+    a3.plot(s, 1e3 * (z0 - z)[i, j], label=f"surface after pass {len(maps)}")
+    a3.set_xlabel("distance along the first pass's path [m]")
+    a3.set_ylabel("height under the centre [mm]")
+    a3.grid(True)
+    a3.legend()
     return png_bytes(fig)
 
 
