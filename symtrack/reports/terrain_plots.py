@@ -43,8 +43,8 @@ def sinkage_map_png(world, z, pass_no: int, maps=None) -> bytes:
 
 def surface_png(world, maps, results) -> bytes:
     """The ground's shape (a field with an elevation): the initial elevation z0 over the field with
-    the driven paths, the surface z0 - z after the last pass around the ruts, and both along the
-    first pass's path (under the vehicle's centre)."""
+    the driven paths, the surface z0 - z after the last pass around the ruts, and under each track's
+    centre-line along the first pass's path the elevation and the rut after the last pass."""
     g = world.grid
     nx, ny = g.shape
     z0 = world.storage.elevation.reshape(g.shape)
@@ -67,14 +67,21 @@ def surface_png(world, maps, results) -> bytes:
         a.set_ylabel("y [m]")
     X = results[0].X
     s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(X[:, 0]), np.diff(X[:, 1])))])
-    i = np.clip(np.floor((X[:, 0] - x0) / dx).astype(int), 0, nx - 1)
-    j = np.clip(np.floor((X[:, 1] - y0) / dx).astype(int), 0, ny - 1)
-    a3.plot(s, 1e3 * z0[i, j], label="initial elevation z0")
-    a3.plot(s, 1e3 * (z0 - z)[i, j], label=f"surface after pass {len(maps)}")
+    half = 0.5 * float(world.params["track_gauge_m"])
+    a4 = a3.twinx()
+    for side, name, color in ((1.0, "left", "C0"), (-1.0, "right", "C1")):
+        px, py = X[:, 0] - side * half * np.sin(X[:, 2]), X[:, 1] + side * half * np.cos(X[:, 2])
+        i = np.clip(np.floor((px - x0) / dx).astype(int), 0, nx - 1)
+        j = np.clip(np.floor((py - y0) / dx).astype(int), 0, ny - 1)
+        a3.plot(s, z0[i, j], color=color, label=f"elevation z0 under the {name} track")
+        a4.plot(s, -1e3 * z[i, j], color=color, ls="--", label=f"rut -z under the {name} track")
     a3.set_xlabel("distance along the first pass's path [m]")
-    a3.set_ylabel("height under the centre [mm]")
+    a3.set_ylabel("elevation z0 [m] (solid)")
+    a4.set_ylabel(f"rut after pass {len(maps)} [mm] (dashed)")
+    a3.set_title("under the tracks' centre-lines: the ground is z0 minus the rut")
     a3.grid(True)
-    a3.legend()
+    a3.legend(loc="upper left", fontsize=8)
+    a4.legend(loc="lower right", fontsize=8)
     return png_bytes(fig)
 
 
