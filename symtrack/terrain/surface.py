@@ -36,17 +36,19 @@ GeoTIFF, a nodata pixel) there; at least 2 x 2 pixels.
 Limits (checked before anything is built, each naming the key, the value and the range):
 
 - the steepest slope of the whole surface, atan(|grad z0|), at most :data:`MAX_SLOPE_DEG` = 20
-  deg. Why: the terrain's cells are vertical columns (MODEL.md section 2: the Bekker sinkage is
-  measured vertically and the pressure taken as the vertical load over the horizontal cell area),
-  which on ground inclined by t mistakes the normal pressure by 1 - cos t: 6 % at 20 deg, 13 % at
-  30 deg. 20 deg is also beyond the slopes agricultural machines are operated on (ISO 16231-2 asks
-  for stability on 15 deg side slopes). For the analytic part the bound is
+  deg. Why: the terrain's cells are vertical columns (MODEL.md section 2: the sinkage measured
+  vertically, the pressure the vertical load over the horizontal cell area), while Bekker's law is
+  a plate's pressed normal to the ground; on ground inclined by t they differ by cos t (the
+  sinkage) and cos^2 t (the pressure: the load's normal component, cos t, over an area 1 / cos t
+  larger): 6 % and 12 % at 20 deg, 13 % and 25 % at 30 deg. (A side slope steep enough for the
+  reference crawler to slide on the 38 % Thailand clay, about 22 deg, is thus beyond the limit; on
+  the 55 % clay it slides from about 15 deg.) For the analytic part the bound is
   atan(hypot(tan slope_x, tan slope_y) + pi d / lambda); a raster adds its steepest pixel gradient.
 - the furrow depth at most :data:`GROUND_CLEARANCE_M`: the vehicle's hull rides above the ridges
   only while the furrows are shallower than its ground clearance. The vehicle parameters have no
-  clearance yet (symtrack/model/parameters.py); 0.40 m is assumed for the reference crawler, the
-  clearance of medium agricultural rubber-track crawlers (0.38 - 0.45 m in their makers' data
-  sheets). The 3D vehicle of issue 22 may make it a vehicle parameter: then this limit takes it.
+  clearance yet (symtrack/model/parameters.py); 0.40 m is ASSUMED for the reference crawler (an
+  order of magnitude for a medium agricultural crawler, not taken from a data sheet). The 3D
+  vehicle of issue 22 may make it a vehicle parameter: then this limit takes it.
 - a furrow spacing of at least 4 cells (``terrain.cell_m``): the cells sample a furrow period
   with four points at least (checked where the field's cell size is known: :meth:`Surface.check_field`).
 
@@ -71,8 +73,8 @@ from .storage import Grid
 __all__ = ["GROUND_CLEARANCE_M", "MAX_SLOPE_DEG", "MIN_FURROW_CELLS", "PATH_KEYS", "SURFACE_KEYS", "ElevationRaster",
            "Surface", "parse_surface"]
 
-MAX_SLOPE_DEG = 20.0  # module doc: the vertical-column cells' error 1 - cos t (6 % at 20 deg)
-GROUND_CLEARANCE_M = 0.40  # module doc: assumed for the reference crawler (no vehicle parameter yet)
+MAX_SLOPE_DEG = 20.0  # module doc: the vertical-column cells' errors cos t, cos^2 t (6 %, 12 % at 20 deg)
+GROUND_CLEARANCE_M = 0.40  # module doc: ASSUMED for the reference crawler (no vehicle parameter yet)
 MIN_FURROW_CELLS = 4  # cells per furrow period at least
 SURFACE_KEYS = ("slope_x_deg", "slope_y_deg", "furrow_spacing_m", "furrow_depth_m", "furrow_heading_deg",
                 "elevation_file", "elevation_cell_m", "elevation_origin_m")
@@ -361,6 +363,7 @@ def parse_surface(t) -> Surface:
                                                        "furrow_spacing_m", "elevation_file") if k in t)
         raise ScenarioError(
             f"{WHERE}: {parts} make a slope of up to {math.degrees(math.atan(steep)):.3g} deg; the allowed range is "
-            f"[0, {limit:g}] deg (the cells are vertical columns: their pressure error 1 - cos t is 6 % at 20 deg; "
+            f"[0, {limit:g}] deg (the cells are vertical columns: at t = 20 deg their sinkage errs by 1 - cos t = 6 %, "
+            "their pressure by 1 - cos^2 t = 12 %; "
             "steepest = atan(hypot(tan slope_x, tan slope_y) + pi furrow_depth / furrow_spacing + the raster's)")
     return s
