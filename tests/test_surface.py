@@ -113,9 +113,12 @@ def test_the_cells_and_the_query_height_and_gradient():
 
 
 @pytest.mark.parametrize("table, match", [
-    ({"slope_x_deg": 25.0}, r"terrain\.surface\.slope_x_deg = 25\.0 .*\[-20, 20\]"),
+    ({"slope_x_deg": 25.0}, r"terrain\.surface\.slope_x_deg = 25\.0 is outside the allowed range \[-20, 20\] deg: "
+                            r"the cells are vertical columns"),
+    ({"slope_y_deg": -95.0}, r"terrain\.surface\.slope_y_deg = -95\.0"),
     ({"slope_x_deg": 15.0, "slope_y_deg": 15.0}, r"make a slope of up to 20\.8 deg; the allowed range is \[0, 20\]"),
-    ({"furrow_spacing_m": 0.5, "furrow_depth_m": 0.5}, r"furrow_depth_m = 0\.5 .*\[0, 0\.4\]"),
+    ({"furrow_spacing_m": 0.5, "furrow_depth_m": 0.5}, r"furrow_depth_m = 0\.5 is outside the allowed range \[0, "
+                                                       r"0\.4\] m: furrows deeper than the vehicle's ground clearance"),
     ({"furrow_spacing_m": 0.2, "furrow_depth_m": 0.1}, r"furrow_depth_m = 0\.1, furrow_spacing_m = 0\.2 make a "
                                                        r"slope of up to 57\.5 deg"),
     ({"furrow_depth_m": 0.1}, r"furrow_depth_m = 0\.1 needs furrow_spacing_m"),
@@ -128,6 +131,11 @@ def test_the_cells_and_the_query_height_and_gradient():
 def test_bad_input_is_refused_naming_the_key(table, match):
     with pytest.raises(ScenarioError, match=match):
         parse_surface(table)
+
+
+def test_a_surface_of_zeros_is_flat():
+    assert parse_surface({"slope_x_deg": 0.0, "furrow_spacing_m": 1.0, "furrow_depth_m": 0.0}).is_flat
+    assert not parse_surface({"slope_y_deg": 0.5}).is_flat
 
 
 def test_bad_rasters_and_fields_are_refused(tmp_path):

@@ -309,9 +309,17 @@ def parse_surface(t) -> Surface:
         raise ScenarioError(f"{WHERE} = {t!r} must be a table ({', '.join(SURFACE_KEYS)})")
     check_keys(WHERE, t, list(SURFACE_KEYS))
     limit = MAX_SLOPE_DEG
-    sx = _num("slope_x_deg", t.get("slope_x_deg", 0.0), -limit, limit)
-    sy = _num("slope_y_deg", t.get("slope_y_deg", 0.0), -limit, limit)
-    depth = _num("furrow_depth_m", t.get("furrow_depth_m", 0.0), 0.0, GROUND_CLEARANCE_M)
+    sx, sy = (_num(k, t.get(k, 0.0), -90.0, 90.0, low_open=True) for k in ("slope_x_deg", "slope_y_deg"))
+    for k, v in (("slope_x_deg", sx), ("slope_y_deg", sy)):
+        if abs(v) > limit:
+            raise ScenarioError(f"{WHERE}.{k} = {t[k]!r} is outside the allowed range [{-limit:g}, {limit:g}] deg: the "
+                                "cells are vertical columns, valid on ground inclined by at most 20 deg (at 20 deg "
+                                "their sinkage errs by 1 - cos t = 6 %, their pressure by 1 - cos^2 t = 12 %)")
+    depth = _num("furrow_depth_m", t.get("furrow_depth_m", 0.0), 0.0, 1e3)
+    if depth > GROUND_CLEARANCE_M:
+        raise ScenarioError(f"{WHERE}.furrow_depth_m = {t['furrow_depth_m']!r} is outside the allowed range "
+                            f"[0, {GROUND_CLEARANCE_M:g}] m: furrows deeper than the vehicle's ground clearance "
+                            f"({GROUND_CLEARANCE_M:g} m, assumed for the reference crawler) would ground its hull")
     if depth > 0.0 and "furrow_spacing_m" not in t:
         raise ScenarioError(f"{WHERE}.furrow_depth_m = {t['furrow_depth_m']!r} needs furrow_spacing_m (the distance "
                             "between furrows, in (0, 20] m)")
