@@ -35,15 +35,20 @@ GeoTIFF, a nodata pixel) there; at least 2 x 2 pixels.
 
 Limits (checked before anything is built, each naming the key, the value and the range):
 
-- the steepest slope of the whole surface, atan(|grad z0|), at most :data:`MAX_SLOPE_DEG` = 20
-  deg. Why: the terrain's cells are vertical columns (MODEL.md section 2: the sinkage measured
-  vertically, the pressure the vertical load over the horizontal cell area), while Bekker's law is
-  a plate's pressed normal to the ground; on ground inclined by t they differ by cos t (the
-  sinkage) and cos^2 t (the pressure: the load's normal component, cos t, over an area 1 / cos t
-  larger): 6 % and 12 % at 20 deg, 13 % and 25 % at 30 deg. (A side slope steep enough for the
-  reference crawler to slide on the 38 % Thailand clay, about 22 deg, is thus beyond the limit; on
-  the 55 % clay it slides from about 15 deg.) For the analytic part the bound is
-  atan(hypot(tan slope_x, tan slope_y) + pi d / lambda); a raster adds its steepest pixel gradient.
+- the steepest slope of the ground's plane, atan(|grad z0|) of the slopes and the raster (not the
+  furrows': below), at most :data:`MAX_SLOPE_DEG` = 20 deg. Why: the terrain's cells are vertical
+  columns (MODEL.md section 2: the sinkage measured vertically, the pressure the vertical load over
+  the horizontal cell area), while Bekker's law is a plate's pressed normal to the ground; on ground
+  inclined by t they differ by cos t (the sinkage) and cos^2 t (the pressure: the load's normal
+  component, cos t, over an area 1 / cos t larger): 6 % and 12 % at 20 deg, 13 % and 25 % at 30 deg.
+  (A side slope steep enough for the reference crawler to slide on the 38 % Thailand clay, about
+  22 deg by Mohr-Coulomb, is thus beyond the limit; on the 55 % clay it slides from about 15 deg.)
+  The bound checked is atan(hypot(tan slope_x, tan slope_y) + the raster's steepest bilinear
+  gradient). The furrows' flanks (up to atan(pi d / lambda): 23 deg for ridges 0.1 m deep every
+  0.75 m) are not held to it, a modelling choice: a track bridges furrows that run across it and
+  rests on the ridges (or in a furrow) of furrows along it, so its load stays normal to the mean
+  plane and the flanks are pressed down vertically, as a rut's walls are; their limits are the
+  depth and the spacing below.
 - the furrow depth at most :data:`GROUND_CLEARANCE_M`: the vehicle's hull rides above the ridges
   only while the furrows are shallower than its ground clearance. The vehicle parameters have no
   clearance yet (symtrack/model/parameters.py); 0.40 m is ASSUMED for the reference crawler (an
@@ -184,10 +189,11 @@ class Surface:
             return gx, gy, 0.5 * self.furrow_depth_m, k, -math.sin(h), math.cos(h)
         return gx, gy, 0.0, 0.0, 0.0, 0.0
 
-    def analytic_steepest(self) -> float:
-        """An upper bound of |grad z0| of the planes and furrows: hypot(tan sx, tan sy) + pi d / lambda."""
-        gx, gy, a, k, _, _ = self._coefficients()
-        return math.hypot(gx, gy) + a * k
+    def plane_steepest(self) -> float:
+        """An upper bound of the ground plane's |grad z0| (the slopes and the raster; not the furrows,
+        module doc): hypot(tan sx, tan sy) + the raster's steepest gradient."""
+        gx, gy = math.tan(math.radians(self.slope_x_deg)), math.tan(math.radians(self.slope_y_deg))
+        return math.hypot(gx, gy) + (self.raster.steepest_gradient() if self.raster is not None else 0.0)
 
     # -- numerically (numpy) ---------------------------------------------------------------------------
     def elevation(self, x_m, y_m) -> np.ndarray:
@@ -365,13 +371,12 @@ def parse_surface(t) -> Surface:
             raise ScenarioError(f"{WHERE}.elevation_file = {path!r}: heights must be metres in [-1e5, 1e5], the "
                                 f"raster has {float(np.abs(raster.values).max()):g}")
     s = Surface(sx, sy, spacing, depth, heading, raster, dict(t))
-    steep = s.analytic_steepest() + (raster.steepest_gradient() if raster is not None else 0.0)
+    steep = s.plane_steepest()
     if math.degrees(math.atan(steep)) > limit + 1e-9:
-        parts = ", ".join(f"{k} = {t[k]!r}" for k in ("slope_x_deg", "slope_y_deg", "furrow_depth_m",
-                                                       "furrow_spacing_m", "elevation_file") if k in t)
+        parts = ", ".join(f"{k} = {t[k]!r}" for k in ("slope_x_deg", "slope_y_deg", "elevation_file") if k in t)
         raise ScenarioError(
             f"{WHERE}: {parts} make a slope of up to {math.degrees(math.atan(steep)):.3g} deg; the allowed range is "
             f"[0, {limit:g}] deg (the cells are vertical columns: at t = 20 deg their sinkage errs by 1 - cos t = 6 %, "
-            "their pressure by 1 - cos^2 t = 12 %; "
-            "steepest = atan(hypot(tan slope_x, tan slope_y) + pi furrow_depth / furrow_spacing + the raster's)")
+            "their pressure by 1 - cos^2 t = 12 %; the steepest = atan(hypot(tan slope_x, tan slope_y) + the "
+            "raster's steepest gradient))")
     return s
