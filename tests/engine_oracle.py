@@ -373,7 +373,7 @@ class PyKernel:
     def surface(self, x, y):
         """eng_surface: the numpy terrain query on the storage (symtrack/terrain/query.py)."""
         q = query.query(self.s.storage, x, y, outside="nan")
-        out = np.column_stack([q.elevation_m, q.sinkage_m, q.height_m, q.normal])
+        out = np.column_stack([q.elevation_m, q.sinkage_m, q.height_m, q.normal, q.gradient])
         return int(np.count_nonzero(q.cell < 0)), q.cell, q.phase.astype(np.intc), out
 
     def lift(self, p_end, h, T, n, max_steps):

@@ -355,7 +355,7 @@ def test_the_engines_terrain_query_is_the_numpy_query():
     assert np.nanmax(ref.sinkage_m) > 1e-4 and np.any(ref.cell < 0)  # the run left ruts; some points outside
     for eng in (plant.engine, engine.TerrainEngine(w, kernel=PyKernel)):
         got = eng.surface(x, y, outside="nan")
-        for name in ("cell", "elevation_m", "sinkage_m", "height_m", "normal", "phase"):
+        for name in ("cell", "elevation_m", "sinkage_m", "height_m", "normal", "phase", "gradient"):
             np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
     with pytest.raises(SimulationError, match=r"terrain query at \(100, 0\) m: outside the field"):
         plant.engine.surface(100.0, 0.0)

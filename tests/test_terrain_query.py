@@ -61,7 +61,8 @@ def test_outside_the_field(terrain):
 
 class _Field(ctypes.Structure):
     _fields_ = [("nx", ctypes.c_longlong), ("ny", ctypes.c_longlong), ("x0", ctypes.c_double),
-                ("y0", ctypes.c_double), ("dx", ctypes.c_double), ("z", ctypes.c_void_p), ("phase", ctypes.c_void_p)]
+                ("y0", ctypes.c_double), ("dx", ctypes.c_double), ("z", ctypes.c_void_p), ("phase", ctypes.c_void_p),
+                ("elev", ctypes.c_void_p)]
 
 
 @pytest.fixture(scope="module")
@@ -80,14 +81,20 @@ def clib():
     return lib
 
 
-def test_c_equals_numpy(clib, terrain):
+@pytest.mark.parametrize("shaped", [False, True], ids=["flat", "elevation"])
+def test_c_equals_numpy(clib, terrain, shaped):
+    """The C query (terrain_query.h) and numpy's, bit for bit, on a flat field (elevation NULL) and on
+    one with an elevation (random heights: the gradient's central and one-sided differences)."""
+    if shaped:
+        terrain.set_elevation(np.random.default_rng(3).uniform(-0.5, 0.5, terrain.z.size))
     rng = np.random.default_rng(11)
     x = np.concatenate([rng.uniform(-2.3, 1.3, 4000), [-2.0, 1.0, 1.0, -1.75, np.nan]])
     y = np.concatenate([rng.uniform(0.8, 3.2, 4000), [1.0, 3.0, 2.0, 1.25, 2.0]])
     F = _Field(GRID.shape[0], GRID.shape[1], GRID.origin_m[0], GRID.origin_m[1], GRID.cell_m,
-               terrain.z.ctypes.data, terrain.phase.ctypes.data)
+               terrain.z.ctypes.data, terrain.phase.ctypes.data,
+               None if terrain.elevation is None else terrain.elevation.ctypes.data)
     n = x.size
-    cell, phase, out = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.intc), np.zeros((n, 6))
+    cell, phase, out = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.intc), np.zeros((n, 8))
     n_out = clib.terrain_query_many(ctypes.byref(F), x.ctypes.data, y.ctypes.data, n, cell.ctypes.data,
                                     phase.ctypes.data, out.ctypes.data)
     q = Q.query(terrain, x, y, outside="nan")
@@ -97,4 +104,6 @@ def test_c_equals_numpy(clib, terrain):
     np.testing.assert_array_equal(out[:, 0], q.elevation_m)
     np.testing.assert_array_equal(out[:, 1], q.sinkage_m)
     np.testing.assert_array_equal(out[:, 2], q.height_m)
-    np.testing.assert_array_equal(out[:, 3:], q.normal)
+    np.testing.assert_array_equal(out[:, 3:6], q.normal)
+    np.testing.assert_array_equal(out[:, 6:8], q.gradient)
+    assert np.any(q.gradient[q.cell >= 0] != 0.0) == shaped

@@ -70,8 +70,8 @@ from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets import soil_preset, vehicle_preset
 from ..simulation.scenario import RunSettings, parse_engine, parse_params, parse_run, parse_terrain
+from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings
-from ..terrain.soil_map import PATH_KEYS as SOIL_MAP_PATH_KEYS
 from .mpc import MPCSettings
 from .path import Path as RefPath
 from .path import Segment, field_segments
@@ -268,7 +268,7 @@ def load(name_or_path: str, overrides=None, plant: str | None = None) -> MPCScen
     "grid" adds :data:`GRID_DEFAULT_TERRAIN` as [terrain] if it has none."""
     if plant not in (None, "homogeneous", "grid"):
         raise ScenarioError(f"plant = {plant!r} is not one of homogeneous, grid")
-    d, default = read_document(name_or_path, SCENARIO_PACKAGE, "MPC scenario", overrides, paths=SOIL_MAP_PATH_KEYS)
+    d, default = read_document(name_or_path, SCENARIO_PACKAGE, "MPC scenario", overrides, paths=TERRAIN_PATH_KEYS)
     if plant == "homogeneous":
         d.pop("terrain", None)
     elif plant == "grid":

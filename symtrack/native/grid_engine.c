@@ -108,6 +108,8 @@ typedef struct {
   /* a cell whose transient about its quasi-static path exceeds ring_tol |z| takes an entry window
      (ringing below; 0: off) */
   double ring_tol;
+  /* the field's initial elevation per cell (terrain_query.h; NULL: flat): read by eng_surface only */
+  const double *elev;
 } eng_t;
 
 static long long now_ns(void) {
@@ -815,10 +817,10 @@ EXPORT void eng_static(eng_t *E) {
 }
 
 /* The terrain query on the engine's own storage (terrain_query.h; TerrainEngine.surface): per point n
- * cell[n], phase[n] and out[6 n ..] = (elevation, sinkage, height, normal x, y, z); returns how many
- * points lie outside the field (their cell -1, numbers NaN). */
+ * cell[n], phase[n] and out[TQ_OUT n ..] = (elevation, sinkage, height, normal x, y, z, gradient x, y);
+ * returns how many points lie outside the field (their cell -1, numbers NaN). */
 EXPORT long long eng_surface(const eng_t *E, const double *px, const double *py, long long n_points, long long *cell,
                              int *phase, double *out) {
-  const tq_field_t F = {E->nx, E->ny, E->x0, E->y0, E->dx, E->z, E->phase};
+  const tq_field_t F = {E->nx, E->ny, E->x0, E->y0, E->dx, E->z, E->phase, E->elev};
   return terrain_query_points(&F, px, py, n_points, cell, phase, out);
 }

@@ -129,9 +129,18 @@ def _animations(src: TerrainRun) -> dict[str, bytes]:
             for k, snaps in enumerate(st.snapshots) if snaps}
 
 
+def _surface(src: TerrainRun) -> dict[str, bytes]:
+    """The ground's shape: only for a field with an elevation (a non-flat [terrain.surface])."""
+    st = src.study
+    if st.world.storage.elevation is None:
+        return {}
+    return {"surface.png": terrain_plots.surface_png(st.world, st.maps, st.runs)}
+
+
 register("sinkage_map", "terrain", _sinkage_maps)
 register("rut_section", "terrain", _rut_section)
 register("animation", "terrain", _animations)
+register("surface", "terrain", _surface)
 register("subsoil", "subsoil", lambda src: terrain_plots.subsoil_pngs(src.study.world, src.study.figures))
 register("passes", "terrain",
          lambda src: {"passes.png": terrain_plots.passes_png(src.study.figures)} if src.multi else {})

@@ -9,7 +9,8 @@ import numpy as np
 
 from .plots import plt, png_bytes
 
-__all__ = ["ANIMATION_MAX_FRAMES", "pass_animation_gif", "passes_png", "rut_section_png", "sinkage_map_png"]
+__all__ = ["ANIMATION_MAX_FRAMES", "pass_animation_gif", "passes_png", "rut_section_png", "sinkage_map_png",
+           "surface_png"]
 
 ANIMATION_MAX_FRAMES = 30  # frames of a pass animation (snapshots are thinned to at most this)
 
@@ -37,6 +38,50 @@ def sinkage_map_png(world, z, pass_no: int, maps=None) -> bytes:
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"terrain sinkage after pass {pass_no} (cell {dx:g} m)")
+    return png_bytes(fig)
+
+
+def surface_png(world, maps, results) -> bytes:
+    """The ground's shape (a field with an elevation): the initial elevation z0 over the field with
+    the driven paths, the surface z0 - z after the last pass around the ruts, and under each track's
+    centre-line along the first pass's path the elevation and the rut after the last pass."""
+    g = world.grid
+    nx, ny = g.shape
+    z0 = world.storage.elevation.reshape(g.shape)
+    z = maps[-1]
+    x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
+    fig, (a1, a2, a3) = plt.subplots(3, 1, figsize=(10, 11))
+    im = a1.imshow(z0.T, origin="lower", extent=(x0, x0 + nx * dx, y0, y0 + ny * dx), aspect="equal", cmap="terrain")
+    fig.colorbar(im, ax=a1, label="elevation z0 [m]")
+    for k, res in enumerate(results):
+        a1.plot(res.X[:, 0], res.X[:, 1], color="k" if k == 0 else "r", lw=1, label=f"pass {k + 1}")
+    a1.set_title(f"initial elevation (cell {dx:g} m) and the driven path")
+    a1.legend(loc="upper right")
+    si, sj = _window(world, maps)
+    ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
+    im = a2.imshow((z0 - z)[si, sj].T, origin="lower", extent=ext, aspect="equal", cmap="terrain")
+    fig.colorbar(im, ax=a2, label="surface z0 - z [m]")
+    a2.set_title(f"surface after pass {len(maps)} (elevation minus sinkage)")
+    for a in (a1, a2):
+        a.set_xlabel("x [m]")
+        a.set_ylabel("y [m]")
+    X = results[0].X
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(X[:, 0]), np.diff(X[:, 1])))])
+    half = 0.5 * float(world.params["track_gauge_m"])
+    a4 = a3.twinx()
+    for side, name, color in ((1.0, "left", "C0"), (-1.0, "right", "C1")):
+        px, py = X[:, 0] - side * half * np.sin(X[:, 2]), X[:, 1] + side * half * np.cos(X[:, 2])
+        i = np.clip(np.floor((px - x0) / dx).astype(int), 0, nx - 1)
+        j = np.clip(np.floor((py - y0) / dx).astype(int), 0, ny - 1)
+        a3.plot(s, z0[i, j], color=color, label=f"elevation z0 under the {name} track")
+        a4.plot(s, -1e3 * z[i, j], color=color, ls="--", label=f"rut -z under the {name} track")
+    a3.set_xlabel("distance along the first pass's path [m]")
+    a3.set_ylabel("elevation z0 [m] (solid)")
+    a4.set_ylabel(f"rut after pass {len(maps)} [mm] (dashed)")
+    a3.set_title("under the tracks' centre-lines: the ground is z0 minus the rut")
+    a3.grid(True)
+    a3.legend(loc="upper left", fontsize=8)
+    a4.legend(loc="lower right", fontsize=8)
     return png_bytes(fig)
 
 

@@ -63,8 +63,8 @@ from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
+from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings, settings_from_dict
-from ..terrain.soil_map import PATH_KEYS as SOIL_MAP_PATH_KEYS
 
 __all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
            "parse_run", "parse_terrain", "scenario_from_dict"]
@@ -334,5 +334,5 @@ def load_scenario(name_or_path, overrides=None) -> Scenario:
     -------
     Scenario
     """
-    doc, default_name = read_document(name_or_path, SCENARIO_PACKAGE, "scenario", overrides, paths=SOIL_MAP_PATH_KEYS)
+    doc, default_name = read_document(name_or_path, SCENARIO_PACKAGE, "scenario", overrides, paths=TERRAIN_PATH_KEYS)
     return scenario_from_dict(doc, default_name)

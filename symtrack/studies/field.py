@@ -57,7 +57,7 @@ from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario_from_dict
 from ..terrain import subsoil
-from ..terrain.soil_map import PATH_KEYS as SOIL_MAP_PATH_KEYS
+from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
 from . import field_plots
@@ -333,7 +333,7 @@ def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
 def load_field_spec(name_or_path, overrides=None) -> FieldSpec:
     """Load a built-in field study (``symtrack/studies/fields/``) or a TOML file, apply the
     overrides (``["field.passes=4", ...]`` as ``--set`` takes them, or a dict), validate."""
-    doc, default_name = read_document(name_or_path, FIELD_PACKAGE, "field study", overrides, paths=SOIL_MAP_PATH_KEYS)
+    doc, default_name = read_document(name_or_path, FIELD_PACKAGE, "field study", overrides, paths=TERRAIN_PATH_KEYS)
     return field_spec_from_dict(doc, default_name)
 
 

@@ -42,11 +42,11 @@ from .subsoil import risk_class
 
 __all__ = ["GEOTIFF_SUFFIXES", "GIS_EXTRA", "GIS_SCHEMA_VERSION", "LAYERS", "Layer", "RasterHeader",
            "check_covers", "crs_label", "crs_wkt", "export_terrain", "field_geometry", "is_geotiff", "layer_arrays",
-           "read_header", "read_soil_raster", "same_crs", "write_geotiffs", "write_netcdf"]
+           "read_band", "read_header", "read_soil_raster", "same_crs", "write_geotiffs", "write_netcdf"]
 
 GIS_EXTRA = "pip install 'symtrack[gis]'"
 GEOTIFF_SUFFIXES = (".tif", ".tiff")
-GIS_SCHEMA_VERSION = 1
+GIS_SCHEMA_VERSION = 2  # 2: the layers elevation_m and surface_m (the ground's shape)
 
 
 def _extra(module: str, feature: str):
@@ -125,9 +125,10 @@ class RasterHeader:
     nodata: float | None
 
 
-def read_header(path, where: str = "terrain.soil_map.raster") -> RasterHeader:
-    """The header of a single-band integer GeoTIFF, north up, in a projected CRS in metres (or
-    none); anything else is a :class:`ScenarioError` naming ``where``."""
+def read_header(path, where: str = "terrain.soil_map.raster", values: str = "integer") -> RasterHeader:
+    """The header of a single-band GeoTIFF, north up, in a projected CRS in metres (or none), of
+    integers (``values = "integer"``: a soil map) or of any numbers (``"real"``: an elevation map,
+    symtrack.terrain.surface); anything else is a :class:`ScenarioError` naming ``where``."""
     rio = _extra("rasterio", f"{where} = {str(path)!r} (a GeoTIFF)")
     p = Path(path)
     if not p.is_file():
@@ -138,9 +139,12 @@ def read_header(path, where: str = "terrain.soil_map.raster") -> RasterHeader:
             width, height = ds.width, ds.height
     except rio.errors.RasterioIOError as err:
         raise ScenarioError(f"{where} = {str(path)!r}: not a raster GDAL reads ({err})") from err
-    if count != 1 or np.dtype(dtype).kind not in "iu":
+    if values == "integer" and (count != 1 or np.dtype(dtype).kind not in "iu"):
         raise ScenarioError(f"{where} = {str(path)!r}: a soil map is one band of integers (the soil of each "
                             f"pixel), the file has {count} band(s) of {dtype}")
+    if values == "real" and (count != 1 or np.dtype(dtype).kind not in "iuf"):
+        raise ScenarioError(f"{where} = {str(path)!r}: an elevation map is one band of heights in m, the file has "
+                            f"{count} band(s) of {dtype}")
     if t.b != 0 or t.d != 0 or not (t.a > 0 and t.e < 0):
         raise ScenarioError(f"{where} = {str(path)!r}: the raster must be north up (transform (dx, 0, x0, 0, -dy, "
                             f"y0), dx, dy > 0), its transform is {tuple(t)[:6]}: warp it first (gdalwarp)")
@@ -171,6 +175,13 @@ def check_covers(h: RasterHeader, grid: Grid, where: str = "terrain.soil_map.ras
             f"{h.top_m:.10g}] m ({crs_label(h.crs_wkt)}); the field is x in [{x0:.10g}, {x1:.10g}] m, y in "
             f"[{y0:.10g}, {y1:.10g}] m: the raster must cover the whole field (move or shrink the field with "
             "terrain.origin_m and size_m, or give a larger raster)")
+
+
+def read_band(path, where: str) -> np.ndarray:
+    """The first band of a GeoTIFF as stored (rows from the top); its header checked by :func:`read_header`."""
+    rio = _extra("rasterio", where)
+    with rio.open(Path(path)) as ds:
+        return ds.read(1)
 
 
 def read_soil_raster(path, grid: Grid, where: str = "terrain.soil_map.raster") -> np.ndarray:
@@ -220,6 +231,9 @@ LAYERS = (
     Layer("soil_index", "the cell's soil: 0 the terrain's soil, k soil k of its soil map", "1", "uint8", "int8"),
     Layer("precompression_stress", "precompression stress sigma_pc of the cell's soil (its strength)", "Pa",
           "float32", "float32"),
+    Layer("elevation_m", "initial elevation z0 of the cell centre (the ground's shape before any pass; 0: flat)",
+          "m", "float64", "float64"),
+    Layer("surface_m", "the ground now: the elevation minus the cell's sinkage (z0 - z)", "m", "float64", "float64"),
     Layer("stress_max", "largest vertical stress at the depth over all passes (the subsoil record)", "Pa", "float32",
           "float32", per_depth=True),
     Layer("risk_class", "compaction risk class at the depth (Terranimo): 0 low, 1 medium, 2 high", "1", "uint8",
@@ -238,6 +252,8 @@ def layer_arrays(terrain: Terrain) -> dict:
     pc = np.asarray(pcs, dtype=float)[terrain.soil_index].reshape(shape)
     out = {"rut_depth": terrain.z, "max_sinkage": terrain.zmax, "max_pressure": terrain.pmax,
            "cycle_sinkage": terrain.zoff, "passes": terrain.cycles, "soil_index": terrain.soil_index}
+    out["elevation_m"] = np.zeros(terrain.grid.n_cells) if terrain.elevation is None else terrain.elevation
+    out["surface_m"] = terrain.surface_m()
     out = {k: v.reshape(shape) for k, v in out.items()}
     out["precompression_stress"] = pc
     if nd:

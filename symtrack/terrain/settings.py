@@ -18,10 +18,15 @@ Schema (every key optional; unknown keys are errors)::
     subsoil_depths_m = [0.1, 0.3, 0.5, 0.8]  # depths of the subsoil stress (docs/subsoil.md),
                                 # increasing, each in (0, 5] m, at most 8; [] switches it off
     [terrain.soil_map]          # a field of several soils (symtrack.terrain.soil_map)
+    [terrain.surface]           # the ground's shape: slopes, furrows, an elevation raster
+                                # (symtrack.terrain.surface)
 
 With a GeoTIFF soil map (``soil_map.raster = "soils.tif"``), origin_m, cell_m and size_m not
 given are the raster's (its lower-left corner, pixel and extent), and the raster must cover the
 field (checked here, before anything is built); the keys it gives count as given (``given``).
+A GeoTIFF elevation raster (``surface.elevation_file``) gives origin_m and size_m the same way
+(the whole cells of cell_m it holds), never cell_m (heights are interpolated at the cell centres,
+whatever the raster's pixel); a soil map's GeoTIFF comes first.
 """
 
 from __future__ import annotations
@@ -33,10 +38,16 @@ from dataclasses import dataclass, field
 from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ScenarioError
 from . import gis
+from .soil_map import PATH_KEYS as SOIL_MAP_PATH_KEYS
 from .soil_map import SoilMap, parse_soil_map
 from .storage import Grid
+from .surface import PATH_KEYS as SURFACE_PATH_KEYS
+from .surface import Surface, parse_surface
 
-__all__ = ["MAX_CELLS", "TerrainSettings", "settings_from_dict"]
+__all__ = ["MAX_CELLS", "PATH_KEYS", "TerrainSettings", "settings_from_dict"]
+
+# the keys of a scenario document that hold the terrain's files (resolved against a scenario file's folder)
+PATH_KEYS = SOIL_MAP_PATH_KEYS + SURFACE_PATH_KEYS
 
 MAX_CELLS = 100_000_000
 MAX_SUBSOIL_DEPTHS = 8
@@ -61,6 +72,7 @@ class TerrainSettings:
     settle_s: float = 0.2
     subsoil_depths_m: tuple = (0.1, 0.3, 0.5, 0.8)
     soil_map: SoilMap | None = None
+    surface: Surface | None = None
     given: frozenset = field(default=frozenset(), compare=False, repr=False)
 
     def __post_init__(self):
@@ -108,6 +120,8 @@ class TerrainSettings:
                 out[k] = list(out[k])
         if out.get("soil_map") is not None:
             out["soil_map"] = dict(self.soil_map.raw)
+        if out.get("surface") is not None:
+            out["surface"] = self.surface.to_dict()
         return out
 
 
@@ -147,9 +161,30 @@ def settings_from_dict(t: dict) -> TerrainSettings:
             for k, v in geometry.items():
                 d.setdefault(k, v)
             filled = frozenset(geometry)  # given by the raster: as if the scenario had
+    if "surface" in d:
+        d["surface"] = parse_surface(d["surface"])
+        r = d["surface"].raster
+        if r is not None and r.crs_wkt is not None and "origin_m" not in d and "size_m" not in d:
+            # a GeoTIFF's extent: the field (its whole cells of cell_m) where nothing else gives it
+            cell = number("terrain.cell_m", d.get("cell_m", TerrainSettings.cell_m), 0.01, 5.0)
+            left, right, bottom, top = r.bounds()
+            d["origin_m"] = (left, bottom)
+            d["size_m"] = tuple(math.floor(e / cell + 1e-9) * cell for e in (right - left, top - bottom))
+            filled = filled | {"origin_m", "size_m"}
+        sm = d.get("soil_map")
+        if r is not None and r.crs_wkt is not None and sm is not None and sm.crs_wkt is not None and \
+                not gis.same_crs(r.crs_wkt, sm.crs_wkt):
+            raise ScenarioError(f"terrain.surface.elevation_file = {r.path!r} is in {gis.crs_label(r.crs_wkt)}, "
+                                f"terrain.soil_map.raster in {gis.crs_label(sm.crs_wkt)}: the maps of one field "
+                                "must share their CRS (reproject one, gdalwarp -t_srs)")
     if isinstance(d.get("passes"), float) and d["passes"].is_integer():
         d["passes"] = int(d["passes"])
     out = TerrainSettings(**d, given=frozenset(t) | filled)
     if out.soil_map is not None and out.soil_map.header is not None:
         gis.check_covers(out.soil_map.header, Grid(out.origin_m, out.cell_m, out.shape))
+    if out.surface is not None:
+        grid = Grid(out.origin_m if out.origin_m is not None else (0.0, 0.0), out.cell_m, out.shape)
+        # checked on the field (where a raster with its own origin lies on a field centred on the start: by the world)
+        if out.origin_m is not None or out.surface.raster is None or out.surface.raster.origin_m is None:
+            out.surface.placed(grid)
     return out

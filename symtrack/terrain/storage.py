@@ -1,7 +1,7 @@
 """The field's cell storage (:class:`Grid`, :class:`Terrain`) and terrain files: the whole cell
 storage in one ``.npz`` file, written atomically.
 
-Schema (``TERRAIN_SCHEMA_VERSION`` = 3), one NumPy array per key:
+Schema (``TERRAIN_SCHEMA_VERSION`` = 4), one NumPy array per key:
 
 - ``kind``: the string "symtrack-terrain"; ``schema_version``: int;
 - ``origin_m`` (2,) float64: world (x, y) of the field's lower-left corner; ``cell_m`` float64;
@@ -31,6 +31,11 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 3), one NumPy array per key:
   ``file_id`` of the terrain file it started from (null for a new field). A file written twice by
   ``--terrain-in F --terrain-out F`` lists both runs, the second's ``input_file_id`` the first's
   file. A schema-1 or -2 file loads with an empty history and no file id.
+- ``elevation_m`` float64 (nx, ny) (schema 4, optional): the initial elevation z0 of each cell's
+  centre, metres (the ground's shape: symtrack/terrain/surface.py); the ground under a track is
+  z0 minus the cell's sinkage z. Absent for a flat field (and in files of schema 1 to 3, which
+  load as flat). float64, not float32: a DEM's absolute heights (hundreds of metres) in float32
+  keep 0.03 to 0.1 mm, the order of the elastic rebound the ruts' next pass rides on.
 
 Values are stored bit for bit, compressed (zip deflate): the default field of a million cells,
 mostly untouched, takes well under its 60 MB in memory (60 bytes per cell: 5 float64, the int8
@@ -59,8 +64,8 @@ __all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "
 STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase", "z_off_m", "load_cycles")
 SCHEMA1_FIELDS = STORAGE_FIELDS[:5]
 
-TERRAIN_SCHEMA_VERSION = 3
-READABLE_SCHEMAS = (1, 2, 3)
+TERRAIN_SCHEMA_VERSION = 4
+READABLE_SCHEMAS = (1, 2, 3, 4)
 HISTORY_KEYS = ("run_id", "time_utc", "scenario", "scenario_sha256", "passes", "input_file_id")
 KIND = "symtrack-terrain"
 
@@ -110,6 +115,8 @@ class Terrain:
         self.crs_wkt: str | None = None  # the CRS of x, y (WKT), from a georeferenced soil map
         self.file_id: str | None = None  # the id of the terrain file this terrain was last read from or written to
         self.history: list[dict] = []  # the runs that produced it (module doc: history_json)
+        # the initial elevation z0 of each cell centre [m], float64 (symtrack/terrain/surface.py); None: flat
+        self.elevation: np.ndarray | None = None
 
     def __repr__(self) -> str:
         g = self.grid
@@ -122,7 +129,23 @@ class Terrain:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in self._all()) + self.sigma_max.nbytes + self.soil_index.nbytes
+        extra = 0 if self.elevation is None else self.elevation.nbytes
+        return sum(a.nbytes for a in self._all()) + self.sigma_max.nbytes + self.soil_index.nbytes + extra
+
+    def set_elevation(self, elevation_m) -> None:
+        """The field's initial elevation per cell (flat i * ny + j, float64), or None for flat."""
+        if elevation_m is None:
+            self.elevation = None
+            return
+        e = np.ascontiguousarray(elevation_m, dtype=np.float64).ravel()
+        if e.size != self.grid.n_cells or not np.all(np.isfinite(e)):
+            raise ScenarioError(f"the terrain's elevation must be {self.grid.n_cells} finite heights in m, got "
+                                f"{e.size} ({int(np.count_nonzero(~np.isfinite(e)))} not finite)")
+        self.elevation = e
+
+    def surface_m(self) -> np.ndarray:
+        """The ground now, per cell (flat): elevation minus sinkage (``-z`` on a flat field)."""
+        return (0.0 if self.elevation is None else self.elevation) - self.z
 
     def arrays(self) -> dict:
         out = dict(zip(STORAGE_FIELDS, self._all(), strict=True))
@@ -192,6 +215,8 @@ def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = No
     arrays["subsoil_depths_m"] = np.array(storage.subsoil_depths_m, dtype=np.float64)
     if storage.crs_wkt is not None:
         arrays["crs_wkt"] = np.array(storage.crs_wkt)
+    if storage.elevation is not None:
+        arrays["elevation_m"] = storage.elevation.reshape(g.shape)
     buf = io.BytesIO()
     np.savez_compressed(
         buf, kind=np.array(KIND), schema_version=np.array(TERRAIN_SCHEMA_VERSION),
@@ -282,6 +307,12 @@ def load(path, soil: dict | None = None) -> Terrain:
         if d["crs_wkt"].ndim != 0 or d["crs_wkt"].dtype.kind != "U":
             raise ScenarioError(f"{path}: crs_wkt must be one string (a WKT); the file is damaged")
         st.crs_wkt = str(d["crs_wkt"])
+    if version >= 4 and "elevation_m" in d:
+        el = d["elevation_m"]
+        if el.shape != shape or el.dtype != np.float64 or not np.all(np.isfinite(el)):
+            raise ScenarioError(f"{path}: elevation_m must be finite float64 of shape {shape}, it is {el.dtype} "
+                                f"{el.shape}: the file is damaged")
+        st.elevation = np.ascontiguousarray(el).ravel().copy()
     if version >= 3:
         if "file_id" not in d or "history_json" not in d:
             raise ScenarioError(f"{path}: the terrain file lacks file_id or history_json (schema 3): "

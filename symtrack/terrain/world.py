@@ -185,6 +185,7 @@ class World:
                                 f"terrain continued is in {gis.crs_label(storage.crs_wkt)}: two maps of one field must "
                                 "share their CRS (reproject the raster, gdalwarp -t_srs)")
         self.storage = storage if storage is not None else Terrain(self.grid)
+        self.surface = self._apply_surface(settings.surface, storage is not None)
         if self.storage.soil is None:
             self.storage.soil = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
         self.storage.set_subsoil_depths(settings.subsoil_depths_m)
@@ -229,6 +230,33 @@ class World:
             raise ScenarioError("this field has a soil map (several soils): it runs on the terrain engine only "
                                 "(run.integrator = \"grid_fast\"); IDAS and the grid Rosenbrock take one soil")
         return SystemModel(self.opts, self.terrain)
+
+    def _apply_surface(self, surface, continued: bool):
+        """The ground's shape (symtrack/terrain/surface.py): a new field takes the scenario's
+        elevation at its cell centres; a continued terrain keeps its own (the scenario's, if given,
+        must give the same heights). Returns the surface placed on the field (None: flat or not given)."""
+        st = self.storage
+        if surface is None or surface.is_flat:
+            if surface is not None and continued and st.elevation is not None:
+                raise ScenarioError("the terrain has an elevation of its own, the scenario's [terrain.surface] is "
+                                    "flat; leave [terrain.surface] out to continue the terrain's")
+            return None
+        surface = surface.placed(self.grid)
+        z0 = surface.cell_elevation(self.grid)
+        if continued:
+            if st.elevation is None or not np.array_equal(st.elevation, z0):
+                what = "is flat" if st.elevation is None else "has another elevation"
+                raise ScenarioError(f"the terrain {what} than the scenario's [terrain.surface] gives; leave "
+                                    "[terrain.surface] out to continue the terrain's")
+        else:
+            st.set_elevation(z0)
+        if surface.crs_wkt is not None:
+            if st.crs_wkt is not None and not gis.same_crs(st.crs_wkt, surface.crs_wkt):
+                raise ScenarioError(f"terrain.surface.elevation_file is in {gis.crs_label(surface.crs_wkt)}, the "
+                                    f"terrain in {gis.crs_label(st.crs_wkt)}: the maps of one field must share "
+                                    "their CRS (reproject the raster, gdalwarp -t_srs)")
+            st.crs_wkt = surface.crs_wkt
+        return surface
 
     def _apply_soil_map(self, settings, params) -> list[dict]:
         """The field's soils: a new field takes the scenario's soil map; a terrain that has one keeps

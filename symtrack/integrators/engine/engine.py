@@ -183,8 +183,8 @@ class TerrainEngine:
             query.cell_of(self.world.grid, x, y)  # the query's error: the first point outside, the field's extent
         shape = x.shape
         return query.SurfaceQuery(cell.reshape(shape), out[:, 0].reshape(shape), out[:, 1].reshape(shape),
-                                  out[:, 2].reshape(shape), out[:, 3:].reshape(shape + (3,)),
-                                  phase.astype(np.int8).reshape(shape))
+                                  out[:, 2].reshape(shape), out[:, 3:6].reshape(shape + (3,)),
+                                  phase.astype(np.int8).reshape(shape), out[:, 6:8].reshape(shape + (2,)))
 
     def active_cells(self) -> np.ndarray:
         """The flat indices of the cells that hold a channel, in channel order (a copy)."""

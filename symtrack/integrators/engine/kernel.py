@@ -140,11 +140,11 @@ class CKernel:
 
     def surface(self, x: np.ndarray, y: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         """The terrain query (terrain_query.h) at the points (x, y) on the engine's storage: (points
-        outside, cell, phase, the (n, 6) rows elevation, sinkage, height, normal x, y, z)."""
+        outside, cell, phase, the (n, 8) rows elevation, sinkage, height, normal x, y, z, gradient x, y)."""
         x = np.ascontiguousarray(x, dtype=float)
         y = np.ascontiguousarray(y, dtype=float)
         n = x.size
-        cell, phase, out = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.intc), np.zeros((n, 6))
+        cell, phase, out = np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.intc), np.zeros((n, 8))
         e = self.s.struct()
         outside = self.lib.eng_surface(ctypes.byref(e), x.ctypes.data, y.ctypes.data, n, cell.ctypes.data,
                                        phase.ctypes.data, out.ctypes.data)

@@ -53,7 +53,7 @@ class EngineStruct(ctypes.Structure):
                 + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
                 + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
                    ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong),
-                   ("ring_tol", ctypes.c_double)])
+                   ("ring_tol", ctypes.c_double), ("elev", ctypes.c_void_p)])
 
 
 def array_address(a: np.ndarray) -> int:
@@ -207,6 +207,8 @@ class EngineState:
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
         e.n_sums = self.n_sums
+        el = st.elevation  # None: a flat field (NULL); read by eng_surface only
+        e.elev = None if el is None else array_address(el)
         return e
 
     def absorb(self, e: EngineStruct) -> None:
