@@ -77,7 +77,7 @@ from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
-from . import gis
+from . import density, gis
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import soil_index
@@ -177,6 +177,8 @@ class World:
         # the largest vertical stress of this pass at each subsoil depth, per cell (the terrain
         # engine writes it; end_pass folds it into the storage's record over all passes)
         self.pass_sigma = np.zeros_like(self.storage.sigma_max)
+        # and of the mean normal stress (the bulk density's; docs/subsoil.md "Bulk density")
+        self.pass_p_mean = np.zeros_like(self.storage.sigma_max)
         if modulus is None:
             modulus = settings.channels if settings.channels != "auto" else derive_modulus(params, settings, dt_s)
         self.M = int(modulus)
@@ -322,6 +324,17 @@ class World:
                                                                               cellpar)
         return {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T, ca.vec(law)),
                 "ode": h * ca.reshape(d, 2 * n, 1)}
+
+    def fold_pass(self) -> None:
+        """At a pass's end: its largest vertical stress into the terrain's record, and its largest
+        mean normal stress into the soil's compression state (the bulk density, terrain/density.py)."""
+        st = self.storage
+        np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
+        density.pass_update(st.specific_volume, self.pass_p_mean, st.soil_index, self.soils)
+
+    def bulk_density_max(self) -> list[float]:
+        """The field's largest bulk density [Mg/m^3] at each subsoil depth (terrain/density.py)."""
+        return density.field_max(self.storage.specific_volume, self.storage.soil_index, self.soils)
 
     def precompression_stress_Pa(self) -> np.ndarray:
         """Each cell's precompression stress [Pa] (its soil's: a soil map gives cells different ones)."""
