@@ -101,17 +101,21 @@ def precompression_stress_kPa(v1, N, lambda_minus_kappa):
     return np.exp((np.asarray(N) - np.asarray(v1)) / np.asarray(lambda_minus_kappa))
 
 
-def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: np.ndarray, soils) -> int:
+def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: np.ndarray, soils,
+                cells: np.ndarray | None = None) -> int:
     """Fold one pass into the terrain's state: ``specific_volume`` (n_cells, n_depths) float32
     (0: the soil's initial state), ``pass_p_Pa`` the pass's largest mean normal stress per cell
-    and depth (0 where the pass did not load). In place; returns the number of (cell, depth)
+    and depth (0 where the pass did not load); ``cells``: the cells the pass may have loaded (a
+    superset; default: every cell with a stress > 0). In place; returns the number of (cell, depth)
     entries that moved down the virgin line. Cells not loaded are not touched."""
     if specific_volume.shape != pass_p_Pa.shape:
         raise ParameterError(f"pass_p_Pa has shape {pass_p_Pa.shape}, the terrain's specific volume "
                              f"{specific_volume.shape}")
     if pass_p_Pa.size == 0:
         return 0
-    cells = np.flatnonzero(np.any(pass_p_Pa > 0, axis=1))
+    if cells is None:
+        cells = np.unique(np.flatnonzero(pass_p_Pa.ravel() > 0) // pass_p_Pa.shape[1])
+    cells = np.asarray(cells, dtype=np.int64)
     if cells.size == 0:
         return 0
     a = soil_arrays(soils)
@@ -122,8 +126,9 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     with np.errstate(divide="ignore"):
         line = a["N"][si][:, None] - a["lambda_minus_kappa"][si][:, None] * np.log(1e-3 * p)
     yielded = (p > 0) & (line < v_old)
-    new = np.where(yielded, line, old).astype(np.float32)
-    specific_volume[cells] = new
+    rows = np.flatnonzero(yielded.any(axis=1))
+    if rows.size:  # only the cells that yielded are written (the others keep their bits)
+        specific_volume[cells[rows]] = np.where(yielded[rows], line[rows], old[rows]).astype(np.float32)
     return int(np.count_nonzero(yielded))
 
 
@@ -144,7 +149,7 @@ def field_max(specific_volume: np.ndarray, soil_index: np.ndarray, soils) -> lis
     a = soil_arrays(soils)
     present = np.flatnonzero(np.bincount(soil_index, minlength=len(soils)) > 0)
     out = np.full(nd, float(np.max(a["rho_s"][present] / a["v0"][present])) if present.size else 0.0)
-    moved = np.flatnonzero(np.any(specific_volume > 0, axis=1))
+    moved = np.unique(np.flatnonzero(specific_volume.ravel() > 0) // nd)
     if moved.size:
         rho = bulk_density(specific_volume[moved], soil_index[moved], soils)
         out = np.maximum(out, rho.max(axis=0))

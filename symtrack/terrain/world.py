@@ -330,7 +330,8 @@ class World:
         mean normal stress into the soil's compression state (the bulk density, terrain/density.py)."""
         st = self.storage
         np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
-        density.pass_update(st.specific_volume, self.pass_p_mean, st.soil_index, self.soils)
+        density.pass_update(st.specific_volume, self.pass_p_mean, st.soil_index, self.soils,
+                            cells=np.flatnonzero(self.touched))
 
     def bulk_density_max(self) -> list[float]:
         """The field's largest bulk density [Mg/m^3] at each subsoil depth (terrain/density.py)."""
