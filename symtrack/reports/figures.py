@@ -133,6 +133,8 @@ register("sinkage_map", "terrain", _sinkage_maps)
 register("rut_section", "terrain", _rut_section)
 register("animation", "terrain", _animations)
 register("subsoil", "subsoil", lambda src: terrain_plots.subsoil_pngs(src.study.world, src.study.figures))
+register("density", "subsoil", lambda src: terrain_plots.density_pngs(src.study.world, src.study.figures,
+                                                                      src.study.bulk_density_initial))
 register("passes", "terrain",
          lambda src: {"passes.png": terrain_plots.passes_png(src.study.figures)} if src.multi else {})
 

@@ -52,11 +52,11 @@ from ..foundations.files import check_output_folder
 from ..foundations.progress import Progress
 from ..integrators import registry
 from ..reports.run_files import TerrainOut, clear_previous_run, terrain_run, write_folder
-from ..reports.subsoil_plots import risk_map_png
+from ..reports.subsoil_plots import density_map_png, risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario_from_dict
-from ..terrain import subsoil
+from ..terrain import density, subsoil
 from ..terrain.soil_map import PATH_KEYS as SOIL_MAP_PATH_KEYS
 from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
@@ -431,6 +431,7 @@ class PatternResult:
     wall_time_s: float = 0.0
     sim_time_s: float = 0.0
     count_source: str = ""
+    soils: list = field(default_factory=list)  # the field's soil parameter sets (its soil_index's)
 
 
 @dataclass
@@ -481,6 +482,9 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
     pr.count_source = ("cells a track's contact overlapped at a macro step's end (World.pass_sigma > 0)"
                        if engine_stress else "cells whose sinkage changed during the pass")
     iu = plant.state_names.index("u_m_s")
+    pr.soils = list(world.soils)
+    # the bulk density (docs/subsoil.md "Bulk density"): the field's largest by depth before the passes
+    density0 = world.bulk_density_max() if engine_stress else None
     t_pat = time.perf_counter()
     try:
         for line in lines:
@@ -505,6 +509,8 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
                                "sim_time_s": float(res.t[-1]), "wall_time_s": wall,
                                "speed_end_m_s": float(res.X[-1, iu]), "cells_loaded": int(mask.sum()),
                                "stopped_by": res.stopped_by})
+            if engine_stress:
+                pr.records[-1]["bulk_density_max_Mg_per_m3"] = world.bulk_density_max()
             pr.sim_time_s += float(res.t[-1])
             bar.update(done_before + line.index + 1, f"{pattern} pass {line.index + 1}/{len(lines)}")
             if failure is None and res.stopped_by != "distance":
@@ -522,6 +528,8 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
         pr.figures = field_figures(pr.terrain, counts, float(world.params["precompression_stress_Pa"]))
         pr.figures.update(passes_done=len(pr.records), wall_time_s=pr.wall_time_s, sim_time_s=pr.sim_time_s,
                           lateral_positions_m=[ln.y_m for ln in lines[:len(pr.records)]])
+        if density0 is not None:
+            pr.figures["bulk_density_initial_Mg_per_m3"] = density0
         if pattern == "controlled":
             pr.figures["lanes"] = int(lane_positions(spec.field, spec.params).size)
         else:
@@ -562,6 +570,13 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult) -> dict[str, bytes]:
         files["risk_map.png"] = risk_map_png(risk, touched, depths, (x0, x0 + risk.shape[0] * f * g.cell_m, y0,
                                                                      y0 + risk.shape[1] * f * g.cell_m),
                                              title=f"compaction risk: {label}{blocks}")
+        if pr.soils and "bulk_density_initial_Mg_per_m3" in pr.figures:
+            rho = density.bulk_density(pr.terrain.specific_volume, pr.terrain.soil_index, pr.soils)
+            rho, f = field_plots.block_max(rho.reshape(*shape, len(depths)), field_plots.RISK_MAP_BLOCKS)
+            blocks = f"\n(blocks of {f * g.cell_m:g} m: the largest)" if f > 1 else ""
+            files["density_map.png"] = density_map_png(
+                rho, depths, (x0, x0 + rho.shape[0] * f * g.cell_m, y0, y0 + rho.shape[1] * f * g.cell_m),
+                title=f"dry bulk density: {label}{blocks}")
     return files
 
 
