@@ -114,14 +114,20 @@ def test_mean_stress_tables_against_the_radial_stress(xi):
     ys = np.arange(-b / 2 + h / 2, b / 2, h)
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     Q = (alpha + beta * (l / 2 - X)) * h * h  # s = l/2 - x (e = 0)
+    ref = np.zeros_like(got)
     for i in range(px.size):
         for k, d in enumerate(depths):
-            tot = 0.0
             for yc in (B / 2, -B / 2):
                 R2 = (px[i] - X) ** 2 + (py[i] - (yc + Y)) ** 2 + d * d
                 cos = d / np.sqrt(R2)
-                tot += np.sum(xi * Q * cos ** (xi - 2) / (2 * np.pi * R2)) / 3
-            assert got[i, k] == pytest.approx(tot, rel=5e-3, abs=1e-3 * alpha), (i, d)
+                ref[i, k] += np.sum(xi * Q * cos ** (xi - 2) / (2 * np.pi * R2)) / 3
+    # the tables' interpolation error: below 1 % of the depth's peak (docs/subsoil.md "Bulk density")
+    err = np.abs(got - ref) / ref.max(axis=0)
+    print(f"\nxi {xi}: max error {100 * err.max():.3f} % of the peak")
+    assert err.max() < 0.01, err
+    # not the vertical stress: p / sigma_z well below 1 under the track at 0.8 m
+    sz = S.stress_at(S.build_tables(depths, xi, l, b, B), px, py, a, geo)
+    assert ref[0, 1] < 0.8 * sz[0, 1]
     with pytest.raises(ParameterError, match="stress_concentration_factor"):
         S.build_mean_stress_tables(depths, 2.5)
 

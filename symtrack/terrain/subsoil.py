@@ -85,7 +85,8 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 
-__all__ = ["DEFAULT_DEPTHS_M", "DEFAULT_REACH_M", "MEAN_STRESS_XI_MIN", "RISK_HIGH_ABOVE", "RISK_LOW_BELOW",
+__all__ = ["DEFAULT_DEPTHS_M", "DEFAULT_REACH_M", "MEAN_STRESS_XI_MIN", "MEAN_T_STEP_PER_DEPTH",
+           "MEAN_X_STEP_PER_DEPTH", "RISK_HIGH_ABOVE", "RISK_LOW_BELOW",
            "RISK_NAMES", "SubsoilTables", "XI_RANGE", "build_mean_stress_tables", "build_tables", "frohlich_point",
            "precompression_stress_kPa", "risk_area_fractions", "risk_class", "stress_at", "stress_bruteforce",
            "track_frame", "update_max"]
@@ -287,6 +288,12 @@ def build_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_
 
 
 MEAN_STRESS_XI_MIN = XI_RANGE[0] + 2.0
+# the mean normal stress tables' steps per depth: twice the vertical stress's (its kernel, of xi - 2,
+# is smoother): a quarter of the memory (248 instead of 964 KiB at xi = 5, the reference crawler),
+# about a third less time per lookup, the interpolation error 0.2-0.7 % of the depth's peak instead
+# of 0.07-0.19 % (measured against steps of 0.03 d; docs/subsoil.md "Bulk density")
+MEAN_X_STEP_PER_DEPTH = 2 * DEFAULT_X_STEP_PER_DEPTH
+MEAN_T_STEP_PER_DEPTH = 2 * DEFAULT_T_STEP_PER_DEPTH
 
 
 def build_mean_stress_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_width_m=0.45,
@@ -294,10 +301,12 @@ def build_mean_stress_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m
     """Tables whose lookup (:func:`stress_at`, subsoil.h) gives the mean normal stress
     p = (sigma_x + sigma_y + sigma_z) / 3 of Fröhlich's radial stress field for concentration
     factor xi (module doc): the vertical-stress tables of xi - 2 scaled by xi / (3 (xi - 2)).
-    Their ``xi`` field is the tables' exponent, xi - 2. xi must be in [3, 10]."""
+    Their ``xi`` field is the tables' exponent, xi - 2; their steps MEAN_X_STEP_PER_DEPTH and
+    MEAN_T_STEP_PER_DEPTH. xi must be in [3, 10]."""
     xi = _check_range("xi (stress_concentration_factor, for the mean normal stress)", xi, MEAN_STRESS_XI_MIN,
                       XI_RANGE[1])
-    T = build_tables(depths_m, xi - 2.0, contact_length_m, track_width_m, track_gauge_m, reach_m)
+    T = build_tables(depths_m, xi - 2.0, contact_length_m, track_width_m, track_gauge_m, reach_m,
+                     MEAN_X_STEP_PER_DEPTH, MEAN_T_STEP_PER_DEPTH)
     return dataclasses.replace(T, data=T.data * (xi / (3.0 * (xi - 2.0))))
 
 
