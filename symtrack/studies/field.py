@@ -461,6 +461,7 @@ def _clear(world) -> None:
     for a in world.storage.arrays().values():
         a[...] = 0
     world.pass_sigma[...] = 0
+    world.pass_p_mean[...] = 0
     world.touched[:] = False
 
 
