@@ -546,6 +546,9 @@ class PyKernel:
                     sig = subsoil.stress_at(s.subsoil, s.ch_cx[act], s.ch_cy[act], a1, s.geo).astype(np.float32)
                     cells = s.ch_cell[act]
                     s.sig_pass[cells] = np.maximum(s.sig_pass[cells], sig)
+                    if s.subsoil_p is not None:  # the mean normal stress of the bulk density
+                        pm = subsoil.stress_at(s.subsoil_p, s.ch_cx[act], s.ch_cy[act], a1, s.geo).astype(np.float32)
+                        s.p_pass[cells] = np.maximum(s.p_pass[cells], pm)
             s.wv[:] = w1
             s.a[:] = a1
             self.sums()

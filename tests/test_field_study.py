@@ -156,8 +156,12 @@ def test_output_files_and_their_schema(study):
         for d in range(len(f["subsoil_depths_m"])):
             assert sum(f[f"risk_fraction_of_trafficked_{c}"][d] for c in subsoil.RISK_NAMES) == pytest.approx(1.0)
             assert f"{name}_risk_fraction_of_field_high_at_{f['subsoil_depths_m'][d]:g}m" in s
-        for png in ("sinkage_map.png", "passes_map.png", "risk_map.png"):
+        for png in ("sinkage_map.png", "passes_map.png", "risk_map.png", "density_map.png"):
             assert (out / name / png).stat().st_size > 1000
+        # the bulk density by depth pass by pass (docs/subsoil.md "Bulk density"): from the initial, monotone
+        table = np.array([f["bulk_density_initial_Mg_per_m3"]] + [r["bulk_density_max_Mg_per_m3"] for r in f["passes"]])
+        assert table.shape == (5, len(f["subsoil_depths_m"])) and np.all(np.diff(table, axis=0) >= 0)
+        assert table[-1, 0] > table[0, 0]
         rows = list(csv.DictReader((out / name / "passes.csv").open()))
         assert [int(r["pass"]) for r in rows] == [1, 2, 3, 4]
         assert [int(r["direction"]) for r in rows] == [1, -1, 1, -1]

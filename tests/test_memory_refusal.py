@@ -15,9 +15,11 @@ from symtrack.terrain.world import world_bytes_per_cell
 
 def test_bytes_per_cell_is_what_the_storage_allocates():
     """The estimate is measured from the storage's own arrays: a 30 x 20 terrain with 4 depths takes
-    600 cells' worth of the storage share, and the world adds 4 bytes per depth and 2 per cell."""
+    600 cells' worth of the storage share, and the world adds 8 bytes per depth and 2 per cell; a
+    shaped field 8 more (its elevation)."""
     t = Terrain(Grid((0.0, 0.0), 0.1, (30, 20)), None, (0.1, 0.3, 0.5, 0.8))
-    assert world_bytes_per_cell(4) == t.nbytes / 600 + 4 * 4 + 2
+    assert world_bytes_per_cell(4) == t.nbytes / 600 + 8 * 4 + 2
+    assert world_bytes_per_cell(4, shaped=True) == world_bytes_per_cell(4) + 8
     assert world_bytes_per_cell(0) < world_bytes_per_cell(4)
 
 
@@ -30,8 +32,8 @@ def test_a_cap_in_the_environment_limits_the_available_memory(monkeypatch):
 
 
 def test_a_field_too_big_for_the_memory_is_refused_before_any_work(monkeypatch, tmp_path, capsys):
-    """The million-cell validation field with 50 MB available: exit 2, the keys, the need (93 B per
-    cell: 0.09 GB) and nothing written."""
+    """The million-cell validation field with 50 MB available: exit 2, the keys, the need (about
+    0.1 GB) and nothing written."""
     monkeypatch.setenv(memory.LIMIT_ENV, "5e7")
     allocated = []
     real_zeros = np.zeros

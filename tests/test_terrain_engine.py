@@ -267,6 +267,10 @@ def test_compiled_equals_interpreted(method):
     assert np.max(np.abs(rc.Y - ri.Y) / np.maximum(1.0, np.abs(ri.Y))) < 1e-9
     assert np.max(np.abs(wc.z_at_pass_end - wi.z_at_pass_end)) < 1e-15
     assert np.array_equal(wc.touched, wi.touched)
+    # the subsoil stress and the bulk density's mean normal stress (C against numpy: 1e-12, then float32)
+    for name in ("pass_sigma", "pass_p_mean"):
+        c, i = getattr(wc, name), getattr(wi, name)
+        assert np.any(c > 0) and np.allclose(c, i, rtol=1e-6, atol=0.0), name
 
 
 def test_pool_equals_one_channel_per_cell_and_brute_force(fast):

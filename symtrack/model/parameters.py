@@ -89,6 +89,18 @@ STRESS_CONCENTRATION_FACTOR_DEFAULT = 5.0  # Soehne's "medium" soil: see presets
 # density of 1.5 Mg/m^3, 20 % clay and field capacity (pF 2): 139 kPa. Not soil-specific: give the
 # soil's own value (or the PTF's at its inputs) where known.
 PRECOMPRESSION_STRESS_DEFAULT_PA = 139.0e3
+# The compression model of the bulk density (O'Sullivan & Robertson 1996; symtrack/terrain/density.py,
+# docs/subsoil.md "Bulk density"). Defaults: particle density 2.65 Mg/m^3 (the usual value for mineral
+# soils; soilphysics' example of Keller & Arvidsson's PTF uses it), initial bulk density 1.5 Mg/m^3 (the
+# one the precompression default above assumes), and N, lambda, kappa of Keller & Arvidsson's (2007,
+# Eur. J. Soil Sci. 58, 1373-1381) pedotransfer function at that specific volume (2.65 / 1.5):
+# N = -0.007 + 1.196 v, lambda = -0.182 + 0.212 v, kappa = 0.042 (terrain.density.keller_arvidsson_2007;
+# a test checks these numbers against it). Not soil-specific: set the soil's own.
+PARTICLE_DENSITY_DEFAULT_MG_PER_M3 = 2.65
+BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3 = 1.5
+VIRGIN_LINE_N_DEFAULT = 2.105933333333333
+COMPRESSION_INDEX_LAMBDA_DEFAULT = 0.19253333333333333
+RECOMPRESSION_INDEX_KAPPA_DEFAULT = 0.042
 SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
     _spec("repeated_loading_exponent", "beta of the cycle law: the rut after N passes is the first pass's N^beta",
           0.0, 1.0, default=REPEATED_LOADING_EXPONENT_DEFAULT),
@@ -96,6 +108,16 @@ SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
           1.0, 10.0, default=STRESS_CONCENTRATION_FACTOR_DEFAULT),
     _spec("precompression_stress_Pa", "the soil's strength against compaction sigma_pc (the subsoil risk classes)",
           0.0, 1e7, False, default=PRECOMPRESSION_STRESS_DEFAULT_PA),
+    _spec("virgin_line_N", "specific volume of the virgin compression line at a mean normal stress of 1 kPa "
+          "(bulk density model)", 1.0, 5.0, False, default=VIRGIN_LINE_N_DEFAULT),
+    _spec("compression_index_lambda", "slope lambda of the virgin compression line v = N - lambda ln(p / kPa)",
+          0.0, 1.0, False, default=COMPRESSION_INDEX_LAMBDA_DEFAULT),
+    _spec("recompression_index_kappa", "slope kappa of the recompression lines (below lambda)",
+          0.0, 1.0, False, default=RECOMPRESSION_INDEX_KAPPA_DEFAULT),
+    _spec("particle_density_Mg_per_m3", "the soil's particle density rho_s", 1.0, 5.0, False,
+          default=PARTICLE_DENSITY_DEFAULT_MG_PER_M3),
+    _spec("bulk_density_initial_Mg_per_m3", "the soil's dry bulk density before any traffic (below rho_s)",
+          0.1, 5.0, False, default=BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3),
 )
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
 

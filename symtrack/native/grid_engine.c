@@ -110,6 +110,10 @@ typedef struct {
   double ring_tol;
   /* the field's initial elevation per cell (terrain_query.h; NULL: flat): read by eng_surface only */
   const double *elev;
+  /* the bulk density's mean normal stress (symtrack/terrain/density.py): tables of p (NULL: off; same
+     depths as subsoil) and this pass's largest p per cell and depth (n_depths per cell) */
+  const subsoil_tables_t *subsoil_p;
+  float *p_pass;
 } eng_t;
 
 static long long now_ns(void) {
@@ -710,6 +714,14 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
         for (long long k = 0; k < E->n_depths; ++k) {
           float v = (float)sig[k];
           if (v > o[k]) o[k] = v;
+        }
+        if (E->subsoil_p) {
+          subsoil_stress(E->subsoil_p, a1, E->geo, E->ch_cx[ch], E->ch_cy[ch], sig);
+          float *op = E->p_pass + E->n_depths * E->ch_cell[ch];
+          for (long long k = 0; k < E->n_depths; ++k) {
+            float v = (float)sig[k];
+            if (v > op[k]) op[k] = v;
+          }
         }
       }
       long long c3b = now_ns();

@@ -28,6 +28,11 @@ Sources:
 - The precompression stress ``precompression_stress_Pa``: no preset has a measured value; all
   take the registry's default (symtrack/model/parameters.py: the Schjoenning & Lamande 2018
   pedotransfer function at typical inputs), which is not soil-specific.
+- The bulk density's compression model (``virgin_line_N``, ``compression_index_lambda``,
+  ``recompression_index_kappa``, ``particle_density_Mg_per_m3``, ``bulk_density_initial_Mg_per_m3``;
+  O'Sullivan & Robertson 1996, symtrack/terrain/density.py): no preset has measured values; all take
+  the registry's defaults (symtrack/model/parameters.py: Keller & Arvidsson's 2007 pedotransfer
+  function at a bulk density of 1.5 Mg/m^3, particle density 2.65), not soil-specific.
 
 Terrain-cell dynamics (seed eq. 4) need an areal mass tau_z and an areal damping c'' that no
 table gives; see the two module constants below.

@@ -142,6 +142,8 @@ register("rut_section", "terrain", _rut_section)
 register("animation", "terrain", _animations)
 register("surface", "terrain", _surface)
 register("subsoil", "subsoil", lambda src: terrain_plots.subsoil_pngs(src.study.world, src.study.figures))
+register("density", "subsoil", lambda src: terrain_plots.density_pngs(src.study.world, src.study.figures,
+                                                                      src.study.bulk_density_initial))
 register("passes", "terrain",
          lambda src: {"passes.png": terrain_plots.passes_png(src.study.figures)} if src.multi else {})
 

@@ -1,6 +1,7 @@
 """Subsoil plots (docs/subsoil.md): the risk map by depth, the stress-against-depth profile under
-the track with the soil's strength, and rut depth and maximum stress against the pass number.
-Pure functions of arrays; each returns PNG bytes."""
+the track with the soil's strength, rut depth and maximum stress against the pass number, and the
+bulk density: its map by depth and the field's largest against the pass number. Pure functions of
+arrays; each returns PNG bytes."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from matplotlib.colors import ListedColormap
 from ..terrain.subsoil import RISK_HIGH_ABOVE, RISK_LOW_BELOW, RISK_NAMES
 from .plots import plt, png_bytes
 
-__all__ = ["RISK_COLOURS", "passes_subsoil_png", "risk_map_png", "stress_profile_png"]
+__all__ = ["RISK_COLOURS", "density_map_png", "density_passes_png", "passes_subsoil_png", "risk_map_png",
+           "stress_profile_png"]
 
 # Terranimo's colours: green, yellow, red
 RISK_COLOURS = ("#2ca02c", "#f2c500", "#d62728")
@@ -90,4 +92,50 @@ def passes_subsoil_png(rut_depth_mm, sigma_max_kPa, depths_m) -> bytes:
     for a in (a1, a2):
         a.grid(True)
     a1.set_title("rut depth and subsoil stress pass by pass")
+    return png_bytes(fig)
+
+
+def density_map_png(rho_Mg_per_m3, depths_m, extent_m, title: str = "dry bulk density") -> bytes:
+    """One panel per depth: the dry bulk density rho (nx, ny, n_depths) [Mg/m^3], one colour scale
+    for all depths, extent_m = (x0, x1, y0, y1) of the grid, x along the first axis."""
+    rho = np.asarray(rho_Mg_per_m3, dtype=float)
+    depths = list(depths_m)
+    if rho.ndim != 3 or rho.shape[2] != len(depths):
+        raise ValueError(f"rho_Mg_per_m3 has shape {rho.shape}; expected (nx, ny, {len(depths)})")
+    lo, hi = float(rho.min()), float(rho.max())
+    hi = hi if hi > lo else lo + 1e-3
+    fig, axes = plt.subplots(len(depths), 1, figsize=(9, 1.0 + 2.2 * len(depths)), squeeze=False)
+    im = None
+    for k, (ax, d) in enumerate(zip(axes[:, 0], depths, strict=True)):
+        im = ax.imshow(rho[:, :, k].T, origin="lower", extent=extent_m, aspect="equal", cmap="cividis_r", vmin=lo,
+                       vmax=hi, interpolation="nearest")
+        ax.set_ylabel("y [m]")
+        ax.set_title(f"depth {d:g} m")
+    axes[-1, 0].set_xlabel("x [m]")
+    fig.suptitle(title)
+    fig.tight_layout(rect=(0.0, 0.0, 0.86, 1.0))
+    cax = fig.add_axes((0.88, 0.12, 0.025, 0.76))
+    fig.colorbar(im, cax=cax, label="dry bulk density [Mg/m$^3$]")
+    return png_bytes(fig, tight=False)
+
+
+def density_passes_png(initial_Mg_per_m3, rho_max_Mg_per_m3, depths_m) -> bytes:
+    """The field's largest dry bulk density by depth against the pass number: initial (n_depths,)
+    at pass 0, rho_max (n_passes, n_depths) after each pass."""
+    r0 = np.asarray(initial_Mg_per_m3, dtype=float)
+    rm = np.asarray(rho_max_Mg_per_m3, dtype=float)
+    if r0.shape != (len(depths_m),) or rm.ndim != 2 or rm.shape[1] != len(depths_m):
+        raise ValueError(f"initial has shape {r0.shape}, rho_max {rm.shape}; expected ({len(depths_m)},) and "
+                         f"(n_passes, {len(depths_m)})")
+    table = np.vstack([r0, rm])
+    k = np.arange(table.shape[0])
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for j, d in enumerate(depths_m):
+        ax.plot(k, table[:, j], "o-", label=f"{d:g} m")
+    ax.set_xlabel("pass number (0: before the first)")
+    ax.set_ylabel("largest dry bulk density [Mg/m$^3$]")
+    ax.set_xticks(k)
+    ax.grid(True)
+    ax.legend(title="depth", fontsize=8)
+    ax.set_title("bulk density by depth pass by pass (O'Sullivan & Robertson 1996)")
     return png_bytes(fig)

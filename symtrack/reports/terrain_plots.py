@@ -7,10 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..terrain.density import bulk_density
 from .plots import plt, png_bytes
+from .subsoil_plots import density_map_png, density_passes_png
 
-__all__ = ["ANIMATION_MAX_FRAMES", "pass_animation_gif", "passes_png", "rut_section_png", "sinkage_map_png",
-           "surface_png"]
+__all__ = ["ANIMATION_MAX_FRAMES", "density_pngs", "pass_animation_gif", "passes_png", "rut_section_png",
+           "sinkage_map_png", "surface_png"]
 
 ANIMATION_MAX_FRAMES = 30  # frames of a pass animation (snapshots are thinned to at most this)
 
@@ -207,4 +209,29 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     if len(figures) > 1 and len(subs) == len(figures):
         out["subsoil_passes.png"] = passes_subsoil_png([f["rut_mean_depth_mm"] for f in figures],
                                                        [f["subsoil_sigma_z_max_kPa"] for f in figures], depths)
+    return out
+
+
+def density_pngs(world, figures: list[dict], initial) -> dict[str, bytes]:
+    """The bulk density plots of a terrain study (docs/subsoil.md "Bulk density"), when it computed
+    the mean normal stress: ``density_map.png`` (the dry bulk density by depth after all passes,
+    around the cells loaded) and ``density_passes.png`` (the field's largest against the pass)."""
+    st = world.storage
+    depths = st.subsoil_depths_m
+    dens = [f for f in figures if "bulk_density_max_Mg_per_m3" in f]
+    if not depths or not dens or initial is None:
+        return {}
+    g = world.grid
+    loaded = (st.sigma_max[:, 0] > 0).reshape(g.shape)
+    si, sj = _window(world, [loaded.astype(float)])
+    x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
+    ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
+    cells = (np.arange(g.n_cells).reshape(g.shape)[si, sj]).ravel()
+    rho = bulk_density(st.specific_volume[cells], st.soil_index[cells], world.soils)
+    shape = (si.stop - si.start, sj.stop - sj.start, len(depths))
+    out = {"density_map.png": density_map_png(rho.reshape(shape), depths, ext,
+                                              title="dry bulk density after all passes")}
+    if len(dens) == len(figures):
+        out["density_passes.png"] = density_passes_png(initial, [f["bulk_density_max_Mg_per_m3"] for f in dens],
+                                                       depths)
     return out

@@ -10,7 +10,10 @@ of travel), ``compaction_resistance_time_mean_N`` (the same, mean over time: dom
 start from rest, where R_c = P / max(v, v0) divides the cells' settling power by the speed floor
 v0; docs/terrain.md "The compaction resistance figure"), ``rut_cells``, ``distance_m``, ``sim_time_s``,
 ``wall_time_s``; with several passes also ``later_passes_add_less_sinkage`` and
-``later_passes_meet_less_resistance``.
+``later_passes_meet_less_resistance``. With the subsoil stress computed (the terrain engine), each
+pass also has ``bulk_density_max_Mg_per_m3``: the field's largest dry bulk density after the pass
+at each depth of ``subsoil_depths_m`` (docs/subsoil.md "Bulk density"), and the summary has
+``bulk_density_initial_Mg_per_m3``: the same before the first pass.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ class PassStudy:
     maps: list
     before: list = field(default_factory=list)
     snapshots: list = field(default_factory=list)
+    bulk_density_initial: list | None = None  # the field's largest bulk density per depth before the passes
 
 
 def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np.ndarray) -> dict:
@@ -56,7 +60,7 @@ def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np
     rc_time = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * np.diff(tt)) / (tt[-1] - tt[0])) if tt[-1] > tt[0] else 0.0
     seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))
     rc_dist = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * seg) / seg.sum()) if seg.sum() > 0 else 0.0
-    return {**_subsoil_figures(world), **{
+    return {**_subsoil_figures(world), **_density_figures(world), **{
         "rut_max_depth_mm": 1e3 * float(z[rut].max()) if rut.any() else 0.0,
         "rut_mean_depth_mm": 1e3 * float(z[rut].mean()) if rut.any() else 0.0,
         "new_sinkage_mean_mm": 1e3 * float(dz[rut].mean()) if rut.any() else 0.0,
@@ -92,6 +96,15 @@ def _subsoil_figures(world: World) -> dict:
     return out
 
 
+def _density_figures(world: World) -> dict:
+    """The field's largest bulk density at each subsoil depth after the pass; empty when the pass's
+    mean normal stress was not computed (only the terrain engine computes it)."""
+    p = world.pass_p_mean
+    if not world.storage.subsoil_depths_m or not p.size or not (p[:, 0] > 0).any():
+        return {}
+    return {"bulk_density_max_Mg_per_m3": world.bulk_density_max()}
+
+
 def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: bool = False) -> PassStudy:
     """All passes of the scenario (``terrain.passes`` unless given) with one grid plant. A pass
     that fails raises :class:`~symtrack.simulation.loop.IncompleteRun` with ``study``: the passes
@@ -99,6 +112,8 @@ def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: 
     world = plant.world
     n = passes if passes is not None else (scenario.terrain.passes if scenario.terrain is not None else 1)
     study = PassStudy(world, [], [], [])
+    if world.storage.subsoil_depths_m:
+        study.bulk_density_initial = world.bulk_density_max()
     for k in range(n):
         z0 = world.storage.z.copy()
         label = scenario.name if n == 1 else f"{scenario.name} pass {k + 1}/{n}"
@@ -127,6 +142,8 @@ def study_summary(study: PassStudy) -> tuple[dict, list[dict]]:
         summaries.append(s)
     top = dict(summaries[-1])
     top["passes"] = list(study.figures)
+    if study.bulk_density_initial is not None and any("bulk_density_max_Mg_per_m3" in f for f in study.figures):
+        top["bulk_density_initial_Mg_per_m3"] = list(study.bulk_density_initial)
     if len(study.runs) > 1:
         pairs = list(zip(study.figures[:-1], study.figures[1:], strict=False))
         top["later_passes_add_less_sinkage"] = all(

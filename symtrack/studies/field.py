@@ -52,11 +52,11 @@ from ..foundations.files import check_output_folder
 from ..foundations.progress import Progress
 from ..integrators import registry
 from ..reports.run_files import TerrainOut, clear_previous_run, terrain_run, write_folder
-from ..reports.subsoil_plots import risk_map_png
+from ..reports.subsoil_plots import density_map_png, risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario_from_dict
-from ..terrain import subsoil
+from ..terrain import density, subsoil
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
@@ -441,6 +441,9 @@ class PatternResult:
     wall_time_s: float = 0.0
     sim_time_s: float = 0.0
     count_source: str = ""
+    soils: list = field(default_factory=list)  # the field's soil parameter sets (its soil_index's)
+    # the bulk density (docs/subsoil.md "Bulk density"): the field's largest by depth before the passes
+    density0: list | None = None
 
 
 @dataclass
@@ -470,6 +473,7 @@ def _clear(world) -> None:
     for a in world.storage.arrays().values():
         a[...] = 0
     world.pass_sigma[...] = 0
+    world.pass_p_mean[...] = 0
     world.touched[:] = False
 
 
@@ -509,6 +513,7 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
     engine_stress = _engine_stress(plant)
     pr.count_source = _count_source(plant)
     iu = plant.state_names.index("u_m_s")
+    pr.soils = list(world.soils)
     t_pat = time.perf_counter()
     try:
         for line in lines[len(pr.records):]:
@@ -534,6 +539,8 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
                                "sim_time_s": float(res.t[-1]), "wall_time_s": wall,
                                "speed_end_m_s": float(res.X[-1, iu]), "cells_loaded": int(mask.sum()),
                                "stopped_by": res.stopped_by})
+            if engine_stress:
+                pr.records[-1]["bulk_density_max_Mg_per_m3"] = world.bulk_density_max()
             pr.sim_time_s += float(res.t[-1])
             _copy_into(whole, world.storage)
             in_pass = False
@@ -563,6 +570,8 @@ def _pattern_figures(spec: FieldSpec, pr: PatternResult) -> dict:
     f = field_figures(pr.terrain, pr.counts, float(spec.params["precompression_stress_Pa"]))
     f.update(passes_done=len(pr.records), wall_time_s=pr.wall_time_s, sim_time_s=pr.sim_time_s,
              lateral_positions_m=[ln.y_m for ln in pr.lines[:len(pr.records)]])
+    if pr.density0 is not None:
+        f["bulk_density_initial_Mg_per_m3"] = pr.density0
     if pr.pattern == "controlled":
         f["lanes"] = int(lane_positions(spec.field, spec.params).size)
     else:
@@ -574,12 +583,19 @@ PASS_COLUMNS = ("pass", "lane", "y_m", "x_start_m", "direction", "distance_m", "
                 "speed_end_m_s", "cells_loaded", "stopped_by")
 
 
+# a pass's largest bulk density by depth (with the engine's stress; the order of subsoil_depths_m):
+# one column, a JSON list (passes.csv is also what a resumed study reads its passes from)
+DENSITY_COLUMN = "bulk_density_max_Mg_per_m3"
+
+
 def _passes_csv(records) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(PASS_COLUMNS)
+    cols = PASS_COLUMNS + ((DENSITY_COLUMN,) if records and DENSITY_COLUMN in records[0] else ())
+    w.writerow(cols)
     for r in records:
-        w.writerow(["" if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else r[c]) for c in PASS_COLUMNS])
+        w.writerow(["" if r[c] is None else (repr(r[c]) if isinstance(r[c], float) else
+                                             json.dumps(r[c]) if isinstance(r[c], list) else r[c]) for c in cols])
     return buf.getvalue()
 
 
@@ -604,6 +620,13 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult) -> dict[str, bytes]:
         files["risk_map.png"] = risk_map_png(risk, touched, depths, (x0, x0 + risk.shape[0] * f * g.cell_m, y0,
                                                                      y0 + risk.shape[1] * f * g.cell_m),
                                              title=f"compaction risk: {label}{blocks}")
+        if pr.soils and "bulk_density_initial_Mg_per_m3" in pr.figures:
+            rho = density.bulk_density(pr.terrain.specific_volume, pr.terrain.soil_index, pr.soils)
+            rho, f = field_plots.block_max(rho.reshape(*shape, len(depths)), field_plots.RISK_MAP_BLOCKS)
+            blocks = f"\n(blocks of {f * g.cell_m:g} m: the largest)" if f > 1 else ""
+            files["density_map.png"] = density_map_png(
+                rho, depths, (x0, x0 + rho.shape[0] * f * g.cell_m, y0, y0 + rho.shape[1] * f * g.cell_m),
+                title=f"dry bulk density: {label}{blocks}")
     return files
 
 
@@ -694,8 +717,11 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
             _clear(plant.world)
             pr = done.get(pattern) or PatternResult(pattern, plan_passes(spec, pattern))
             pending = results[pattern] = pr
+            pr.density0 = plant.world.bulk_density_max() if _engine_stress(plant) else None  # of the new field
             if pr.complete:  # finished before: its folder is whole
                 pr.count_source = _count_source(plant)
+                pr.soils = list(plant.world.soils)
+                pr.figures = _pattern_figures(spec, pr)
                 pending = None
                 continue
             if pr.records:  # resumed: the terrain after its last checkpointed pass
@@ -766,6 +792,8 @@ def _read_records(text: str) -> list[dict]:
             v = row[k]
             r[k] = (None if v == "" else int(v) if k in ("pass", "lane", "cells_loaded") and v not in ("", "None")
                     else v if k in ("direction", "stopped_by") else float(v))
+        if row.get(DENSITY_COLUMN):
+            r[DENSITY_COLUMN] = [float(x) for x in json.loads(row[DENSITY_COLUMN])]
         out.append(r)
     return out
 
@@ -807,8 +835,6 @@ def _resumable(folder, spec: FieldSpec) -> dict:
                            complete=len(records) == len(lines) and (sub / "sinkage_map.png").is_file(),
                            sim_time_s=sum(r["sim_time_s"] for r in records),
                            wall_time_s=sum(r["wall_time_s"] for r in records))
-        if pr.complete:
-            pr.figures = _pattern_figures(spec, pr)
         done[pattern] = pr
     return done
 

@@ -16,6 +16,11 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 4), one NumPy array per key:
 - ``subsoil_depths_m`` float64 (n_depths,) and ``sigma_max_Pa`` float32 (nx, ny, n_depths)
   (schema 2, optional): the largest vertical stress each cell's soil has carried at each depth
   over all passes (symtrack/terrain/subsoil.py; float32: a stress to 7 digits);
+- ``specific_volume`` float32 (nx, ny, n_depths) (schema 4, with ``subsoil_depths_m``): the soil's
+  compression state at each depth, the specific volume v1 of its current recompression line at a
+  mean normal stress of 1 kPa (symtrack/terrain/density.py; the bulk density after the loads so far
+  is rho_s / v1), 0 where the soil is still in its initial state (v1 = rho_s / rho_initial of the
+  cell's soil). A file of schema 1 to 3 loads with every cell in its initial state;
 - ``soil_index`` uint8 (nx, ny) (schema 2): each cell's soil, 0 the soil of ``soil_values``,
   k >= 1 row k - 1 of ``soil_map_values`` (float64 (n, len(soil_map_names))) with its label in
   ``soil_map_labels`` (a soil map: symtrack/terrain/soil_map.py; absent when the field has one soil);
@@ -36,11 +41,13 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 4), one NumPy array per key:
   z0 minus the cell's sinkage z. Absent for a flat field (and in files of schema 1 to 3, which
   load as flat). float64, not float32: a DEM's absolute heights (hundreds of metres) in float32
   keep 0.03 to 0.1 mm, the order of the elastic rebound the ruts' next pass rides on.
+- The soil parameters added since a file was written (a soil map's ``soil_map_names`` too) take
+  the registry's defaults (symtrack/model/parameters.py) on loading.
 
 Values are stored bit for bit, compressed (zip deflate): the default field of a million cells,
-mostly untouched, takes well under its 60 MB in memory (60 bytes per cell: 5 float64, the int8
-phase, the uint16 cycle count, the uint8 soil index and 4 float32 subsoil stresses at the
-default depths).
+mostly untouched, takes well under its 76 MB in memory (76 bytes per cell: 5 float64, the int8
+phase, the uint16 cycle count, the uint8 soil index, and 4 float32 subsoil stresses and 4 float32
+specific volumes at the default depths).
 """
 
 from __future__ import annotations
@@ -56,7 +63,7 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
-from ..model.parameters import SOIL_PARAM_NAMES
+from ..model.parameters import SOIL_PARAM_NAMES, spec
 
 __all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes", "load",
            "save"]
@@ -110,6 +117,8 @@ class Terrain:
         self.cycles = np.zeros(n, dtype=np.uint16)
         self.subsoil_depths_m = tuple(float(d) for d in subsoil_depths_m)
         self.sigma_max = np.zeros((n, len(self.subsoil_depths_m)), dtype=np.float32)
+        # the compression state per depth (module doc: specific_volume; 0 the soil's initial state)
+        self.specific_volume = np.zeros((n, len(self.subsoil_depths_m)), dtype=np.float32)
         self.soil_index = np.zeros(n, dtype=np.uint8)
         self.soil_table: list[tuple[str, dict]] = []  # soils 1, 2, ... of a soil map: (label, parameters)
         self.crs_wkt: str | None = None  # the CRS of x, y (WKT), from a georeferenced soil map
@@ -130,7 +139,8 @@ class Terrain:
     @property
     def nbytes(self) -> int:
         extra = 0 if self.elevation is None else self.elevation.nbytes
-        return sum(a.nbytes for a in self._all()) + self.sigma_max.nbytes + self.soil_index.nbytes + extra
+        return (sum(a.nbytes for a in self._all()) + self.sigma_max.nbytes + self.specific_volume.nbytes
+                + self.soil_index.nbytes + extra)
 
     def set_elevation(self, elevation_m) -> None:
         """The field's initial elevation per cell (flat i * ny + j, float64), or None for flat."""
@@ -150,6 +160,7 @@ class Terrain:
     def arrays(self) -> dict:
         out = dict(zip(STORAGE_FIELDS, self._all(), strict=True))
         out["sigma_max_Pa"] = self.sigma_max
+        out["specific_volume"] = self.specific_volume
         out["soil_index"] = self.soil_index
         return out
 
@@ -159,12 +170,13 @@ class Terrain:
         depths = tuple(float(d) for d in depths_m)
         if depths == self.subsoil_depths_m:
             return
-        if self.sigma_max.size and np.any(self.sigma_max > 0):
+        if (self.sigma_max.size and np.any(self.sigma_max > 0)) or np.any(self.specific_volume > 0):
             raise ScenarioError(f"the terrain recorded subsoil stress at depths {list(self.subsoil_depths_m)} m, the "
                                 f"scenario asks for terrain.subsoil_depths_m = {list(depths)}; use the same depths "
                                 "to continue a terrain")
         self.subsoil_depths_m = depths
         self.sigma_max = np.zeros((self.grid.n_cells, len(depths)), dtype=np.float32)
+        self.specific_volume = np.zeros((self.grid.n_cells, len(depths)), dtype=np.float32)
 
     def copy_z(self):
         """The sinkage as an (nx, ny) array (a copy)."""
@@ -206,12 +218,14 @@ def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = No
                         "input_file_id": storage.file_id})
     file_id = uuid.uuid4().hex
     g = storage.grid
-    arrays = {k: v.reshape(g.shape) for k, v in storage.arrays().items() if k != "sigma_max_Pa"}
+    arrays = {k: v.reshape(g.shape) for k, v in storage.arrays().items()
+              if k not in ("sigma_max_Pa", "specific_volume")}
     if storage.soil_table:
         arrays["soil_map_labels"] = np.array([lab for lab, _ in storage.soil_table])
         arrays["soil_map_names"] = np.array(SOIL_PARAM_NAMES)
         arrays["soil_map_values"] = np.array([[float(v[n]) for n in SOIL_PARAM_NAMES] for _, v in storage.soil_table])
     arrays["sigma_max_Pa"] = storage.sigma_max.reshape(*g.shape, len(storage.subsoil_depths_m))
+    arrays["specific_volume"] = storage.specific_volume.reshape(*g.shape, len(storage.subsoil_depths_m))
     arrays["subsoil_depths_m"] = np.array(storage.subsoil_depths_m, dtype=np.float64)
     if storage.crs_wkt is not None:
         arrays["crs_wkt"] = np.array(storage.crs_wkt)
@@ -286,6 +300,16 @@ def load(path, soil: dict | None = None) -> Terrain:
             raise ScenarioError(f"{path}: sigma_max_Pa holds negative or non-finite values: the file is damaged")
         st.subsoil_depths_m = tuple(float(v) for v in depths)
         st.sigma_max = sig.reshape(grid.n_cells, depths.size).copy()
+        st.specific_volume = np.zeros_like(st.sigma_max)
+        if version >= 4:
+            sv = d.get("specific_volume")
+            if sv is None or sv.dtype != np.float32 or sv.shape != (*shape, depths.size):
+                raise ScenarioError(f"{path}: specific_volume must be float32 of shape {(*shape, depths.size)} for "
+                                    f"{depths.size} subsoil depths (schema 4); the file is damaged")
+            if not (np.all(np.isfinite(sv)) and np.all(sv >= 0)):
+                raise ScenarioError(f"{path}: specific_volume holds negative or non-finite values: the file is "
+                                    "damaged")
+            st.specific_volume = sv.reshape(grid.n_cells, depths.size).copy()
     if version >= 2 and "soil_index" in d:
         si = d["soil_index"]
         if si.shape != shape or si.dtype != np.uint8:
@@ -298,7 +322,10 @@ def load(path, soil: dict | None = None) -> Terrain:
             if vals.ndim != 2 or vals.shape != (len(labels), len(names)):
                 raise ScenarioError(f"{path}: soil_map_values has shape {vals.shape}, expected "
                                     f"({len(labels)}, {len(names)}): the file is damaged")
-            st.soil_table = [(lab, dict(zip(names, (float(x) for x in row), strict=True)))
+            # parameters added since the file was written: the registry's defaults (module doc)
+            added = {n: float(spec(n).default) for n in SOIL_PARAM_NAMES
+                     if n not in names and spec(n).default is not None}
+            st.soil_table = [(lab, {**dict(zip(names, (float(x) for x in row), strict=True)), **added})
                              for lab, row in zip(labels, vals, strict=True)]
         if int(st.soil_index.max(initial=0)) > len(st.soil_table):
             raise ScenarioError(f"{path}: soil_index refers to soil {int(st.soil_index.max())}, the file's soil map "
@@ -335,4 +362,7 @@ def load(path, soil: dict | None = None) -> Terrain:
                                     f"{float(soil[n])!r}; use the same [soil] to continue a terrain")
         # an older file lacks the soil parameters added since: the scenario's complete the set
         st.soil.update({n: float(soil[n]) for n in SOIL_PARAM_NAMES if n not in st.soil and n in soil})
+    # the parameters added since the file was written that no scenario gave: the registry's defaults
+    st.soil.update({n: float(spec(n).default) for n in SOIL_PARAM_NAMES
+                    if n not in st.soil and spec(n).default is not None})
     return st

@@ -78,7 +78,7 @@ from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
-from . import gis
+from . import density, gis
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import soil_index
@@ -145,12 +145,15 @@ def derive_modulus(params: dict, settings: TerrainSettings, dt_s: float) -> int:
     return int(math.floor(math.hypot(W, H) / dx)) + 2
 
 
-def world_bytes_per_cell(n_depths: int) -> int:
+def world_bytes_per_cell(n_depths: int, shaped: bool = False) -> int:
     """The memory a new field takes per cell: the storage's arrays (measured from a one-cell
-    :class:`Terrain`), the pass's stress record per depth (float32), the touched mask and the soil
-    map's index (a byte each)."""
+    :class:`Terrain`; with ``shaped``, its elevation too), the pass's records of the vertical and
+    the mean normal stress per depth (float32 each), the touched mask and the soil map's index (a
+    byte each)."""
     one = Terrain(Grid((0.0, 0.0), 1.0, (1, 1)), None, [0.1 * (k + 1) for k in range(n_depths)])
-    return one.nbytes + 4 * n_depths + 2
+    if shaped:
+        one.set_elevation([0.0])
+    return one.nbytes + 8 * n_depths + 2
 
 
 class World:
@@ -171,9 +174,9 @@ class World:
                 origin = (start_xy[0] - 0.5 * nx * settings.cell_m, start_xy[1] - 0.5 * ny * settings.cell_m)
             self.grid = Grid((float(origin[0]), float(origin[1])), float(settings.cell_m), (nx, ny))
             n, nd = self.grid.n_cells, len(settings.subsoil_depths_m)
-            require_memory(n * world_bytes_per_cell(nd), f"terrain.size_m = {list(settings.size_m)} at terrain.cell_m "
-                           f"= {settings.cell_m} ({nx} x {ny} = {n} cells, {len(settings.subsoil_depths_m)} subsoil "
-                           "depths)", "raise terrain.cell_m, shrink terrain.size_m or drop subsoil depths "
+            shaped = settings.surface is not None and not settings.surface.is_flat
+            require_memory(n * world_bytes_per_cell(nd, shaped), f"terrain.size_m = {list(settings.size_m)} at "
+                           f"terrain.cell_m = {settings.cell_m} ({nx} x {ny} = {n} cells, {nd} subsoil depths)", "raise terrain.cell_m, shrink terrain.size_m or drop subsoil depths "
                            "(terrain.subsoil_depths_m)")
         # the soil map's cells first: a raster that misses the field, or a CRS that is not the
         # terrain's, stops here, before the channel pool is built
@@ -192,6 +195,8 @@ class World:
         # the largest vertical stress of this pass at each subsoil depth, per cell (the terrain
         # engine writes it; end_pass folds it into the storage's record over all passes)
         self.pass_sigma = np.zeros_like(self.storage.sigma_max)
+        # and of the mean normal stress (the bulk density's; docs/subsoil.md "Bulk density")
+        self.pass_p_mean = np.zeros_like(self.storage.sigma_max)
         if modulus is None:
             modulus = settings.channels if settings.channels != "auto" else derive_modulus(params, settings, dt_s)
         self.M = int(modulus)
@@ -364,6 +369,18 @@ class World:
                                                                               cellpar)
         return {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T, ca.vec(law)),
                 "ode": h * ca.reshape(d, 2 * n, 1)}
+
+    def fold_pass(self) -> None:
+        """At a pass's end: its largest vertical stress into the terrain's record, and its largest
+        mean normal stress into the soil's compression state (the bulk density, terrain/density.py)."""
+        st = self.storage
+        np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
+        density.pass_update(st.specific_volume, self.pass_p_mean, st.soil_index, self.soils,
+                            cells=np.flatnonzero(self.touched))
+
+    def bulk_density_max(self) -> list[float]:
+        """The field's largest bulk density [Mg/m^3] at each subsoil depth (terrain/density.py)."""
+        return density.field_max(self.storage.specific_volume, self.storage.soil_index, self.soils)
 
     def precompression_stress_Pa(self) -> np.ndarray:
         """Each cell's precompression stress [Pa] (its soil's: a soil map gives cells different ones)."""

@@ -83,6 +83,7 @@ class TerrainEngine:
         s.peak_active = 0
         s.touched[:] = False
         s.sig_pass[:] = 0.0
+        s.p_pass[:] = 0.0
         s.wv[:] = 0.0
         s.wv[self.fns.layout.pose_index] = x_m, y_m, yaw_rad
         s.a[:] = np.array(self.fns.vehicle_a(s.wv, s.pv)).ravel()
@@ -119,7 +120,7 @@ class TerrainEngine:
                             s.n_act, max_steps * dt_s)
         self.release_all()
         w.release_all()
-        np.maximum(w.storage.sigma_max, w.pass_sigma, out=w.storage.sigma_max)
+        w.fold_pass()
 
     def _call(self, t0, T, U, dist, check_covered):
         n = T.size

@@ -141,6 +141,7 @@ class ChannelManager:
         w.peak_active = 0
         w.touched[:] = False
         w.pass_sigma[:] = 0.0
+        w.pass_p_mean[:] = 0.0
         stepper.reset()
         L = w.layout
         x = np.zeros(L.size)
@@ -204,5 +205,5 @@ class ChannelManager:
                 log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
                             act.size, max_steps * dt_s)
         w.release_all()
-        np.maximum(w.storage.sigma_max, w.pass_sigma, out=w.storage.sigma_max)
+        w.fold_pass()
 

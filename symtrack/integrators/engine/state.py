@@ -4,6 +4,7 @@ the C struct ``eng_t`` of symtrack/native/grid_engine.c that points at them (:cl
 from __future__ import annotations
 
 import ctypes
+import logging
 import math
 
 import numpy as np
@@ -16,7 +17,7 @@ from ..settings import POWER_MODES, EngineSettings, window_substeps
 
 __all__ = ["ERR_COLLISION", "ERR_FIELD", "ERR_NEWTON", "ERR_NONFINITE", "ERR_UNCOVERED", "EngineState", "EngineStruct",
            "NEWTON_ACCEPT_STEP", "NEWTON_MAX_ITER", "SDIRK_GAMMA", "array_address", "engine_error",
-           "subsoil_tables"]
+           "mean_stress_tables", "subsoil_tables"]
 
 ERR_FIELD, ERR_COLLISION, ERR_UNCOVERED, ERR_NONFINITE, ERR_NEWTON = 1, 2, 3, 4, 5
 SDIRK_GAMMA = 1.0 - 1.0 / math.sqrt(2.0)  # Alexander (1977): L-stable two-stage SDIRK
@@ -27,6 +28,7 @@ NEWTON_MAX_ITER = 100
 # (docs/terrain.md, "The terrain engine")
 NEWTON_ACCEPT_STEP = 1e-4
 _TABLES: dict = {}
+log = logging.getLogger("symtrack.terrain")
 
 
 class EngineStruct(ctypes.Structure):
@@ -53,7 +55,8 @@ class EngineStruct(ctypes.Structure):
                 + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
                 + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
                    ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong),
-                   ("ring_tol", ctypes.c_double), ("elev", ctypes.c_void_p)])
+                   ("ring_tol", ctypes.c_double), ("elev", ctypes.c_void_p), ("subsoil_p", ctypes.c_void_p),
+                   ("p_pass", ctypes.c_void_p)])
 
 
 def array_address(a: np.ndarray) -> int:
@@ -103,6 +106,24 @@ def engine_error(code: int, e, state) -> SimulationError:
         return SimulationError(f"the implicit stage of cell {ij(e.err_a)} did not converge in "
                                f"{NEWTON_MAX_ITER} iterations")
     return SimulationError(f"terrain engine error {code}")
+
+
+def mean_stress_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
+    """The mean normal stress tables (subsoil.build_mean_stress_tables) at the depths, cached like
+    :func:`subsoil_tables`; None for no depths, or (with a warning, once per soil) for a
+    concentration factor below subsoil.MEAN_STRESS_XI_MIN, where they do not exist: no bulk density."""
+    if not depths_m:
+        return None
+    key = ("mean", tuple(depths_m), float(params["stress_concentration_factor"]), float(params["contact_length_m"]),
+           float(params["track_width_m"]), float(params["track_gauge_m"]))
+    if key not in _TABLES:
+        if key[2] < subsoil.MEAN_STRESS_XI_MIN:
+            log.warning("stress_concentration_factor = %g: the mean normal stress needs >= %g (docs/subsoil.md, "
+                        "'Bulk density'); no bulk density is computed", key[2], subsoil.MEAN_STRESS_XI_MIN)
+            _TABLES[key] = None
+        else:
+            _TABLES[key] = subsoil.build_mean_stress_tables(key[1], key[2], key[3], key[4], key[5])
+    return _TABLES[key]
 
 
 def subsoil_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
@@ -171,6 +192,10 @@ class EngineState:
         self._addresses = None  # struct(): the arrays and their addresses
         self.subsoil = subsoil_tables(world.params, world.storage.subsoil_depths_m)
         self._subsoil_c = self.subsoil.c_struct() if self.subsoil is not None else None
+        # the mean normal stress of the bulk density (docs/subsoil.md "Bulk density"): this pass's maxima
+        self.p_pass = world.pass_p_mean
+        self.subsoil_p = mean_stress_tables(world.params, world.storage.subsoil_depths_m)
+        self._subsoil_p_c = self.subsoil_p.c_struct() if self.subsoil_p is not None else None
 
     def struct(self) -> EngineStruct:
         g, st, s = self.grid, self.storage, self.settings
@@ -179,7 +204,7 @@ class EngineState:
         e.x0, e.y0, e.dx = g.origin_m[0], g.origin_m[1], g.cell_m
         arrays = [("z", st.z), ("zdot", st.zdot), ("zmax", st.zmax), ("pmax", st.pmax), ("phase", st.phase),
                   ("touched", self.touched), ("zoff", st.zoff), ("cycles", st.cycles), ("sig_pass", self.sig_pass),
-                  ("soil_index", self.soil_index)]
+                  ("soil_index", self.soil_index), ("p_pass", self.p_pass)]
         arrays += [(name, getattr(self, name)) for name in (
             "ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx",
             "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv", "geo", "wv", "a", "work",
@@ -206,6 +231,8 @@ class EngineState:
             setattr(e, k, v)
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
+        e.subsoil_p = (ctypes.addressof(self._subsoil_p_c) if self._subsoil_p_c is not None and self.subsoil is not None
+                       else None)
         e.n_sums = self.n_sums
         el = st.elevation  # None: a flat field (NULL); read by eng_surface only
         e.elev = None if el is None else array_address(el)

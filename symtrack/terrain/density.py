@@ -1,0 +1,157 @@
+"""Bulk density by depth from the stress history: O'Sullivan & Robertson's (1996) compression
+model as SoilFlex (Keller et al. 2007) and COMPSOIL use it (docs/subsoil.md, "Bulk density").
+
+The soil's state at a depth is its specific volume v = 1 + e = rho_s / rho_b (rho_s the particle
+density, rho_b the dry bulk density). Against ln p (p the mean normal stress in kPa):
+
+- the virgin compression line (VCL)   v = N - lambda ln p,
+- a recompression line (RCL)          v = v1 - kappa ln p, v1 the line's specific volume at
+  p = 1 kPa (ln p = 0),
+
+the precompression stress p_c where the current RCL meets the VCL: ln p_c = (N - v1) / (lambda - kappa).
+A load to p > p_c moves the soil down the VCL to p and its RCL to v1 = N - (lambda - kappa) ln p;
+a load to p <= p_c moves it along its RCL and back (no change). So the whole state is v1, and
+a pass that loads the soil to at most p_pass does
+
+    v1 <- min(v1, N - (lambda - kappa) ln p_pass).
+
+The density reported is the soil's after the load, back at the reference stress of the lines,
+p = 1 kPa (ln p = 0): rho_b = rho_s / v1, as soilphysics' ``soilDeformation`` (the O'Sullivan &
+Robertson model's R implementation; its yield-line parameters m and k2 are left out, i.e. m = 0:
+the RCL meets the VCL directly). The initial state: v1 = rho_s / rho_initial (the soil's
+``bulk_density_initial_Mg_per_m3``); the terrain stores v1 = 0 for "still the initial state"
+(a cell never loaded beyond its initial precompression stress keeps 0 bit for bit; a field's
+soils may differ: each cell's initial v1 is its soil's).
+
+p is the traffic's mean normal stress (symtrack/terrain/subsoil.py: the trace of Soehne's
+radial stress over 3); the soil's own weight is left out, as in the vertical stress.
+
+Parameters per soil (symtrack/model/parameters.py, defaults with sources): ``virgin_line_N``,
+``compression_index_lambda``, ``recompression_index_kappa``, ``particle_density_Mg_per_m3``,
+``bulk_density_initial_Mg_per_m3``; :func:`keller_arvidsson_2007` is the pedotransfer function
+of N and lambda from the initial specific volume the defaults come from.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..foundations.errors import ParameterError
+
+__all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "field_max", "initial_specific_volume",
+           "keller_arvidsson_2007",
+           "pass_update", "precompression_stress_kPa", "soil_arrays", "specific_volume_after"]
+
+COMPRESSION_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
+                           "particle_density_Mg_per_m3", "bulk_density_initial_Mg_per_m3")
+
+# Keller & Arvidsson (2007), Eur. J. Soil Sci. 58, 1373-1381, as soilphysics'
+# compressive_properties2 codes it: N and lambda linear in the initial specific volume, kappa one
+# value for all their soils
+_KA_N = (-0.007, 1.196)
+_KA_LAMBDA = (-0.182, 0.212)
+_KA_KAPPA = 0.042
+
+
+def keller_arvidsson_2007(particle_density_Mg_per_m3, bulk_density_Mg_per_m3) -> tuple[float, float, float]:
+    """(N, lambda, kappa) of Keller & Arvidsson's (2007) pedotransfer function at the specific
+    volume v = rho_s / rho_b: N = -0.007 + 1.196 v, lambda = -0.182 + 0.212 v, kappa = 0.042."""
+    rho_s, rho_b = float(particle_density_Mg_per_m3), float(bulk_density_Mg_per_m3)
+    if not (0.0 < rho_b < rho_s):
+        raise ParameterError(f"bulk_density_Mg_per_m3 = {bulk_density_Mg_per_m3!r} must be in (0, "
+                             f"particle_density_Mg_per_m3 = {rho_s!r})")
+    v = rho_s / rho_b
+    return _KA_N[0] + _KA_N[1] * v, _KA_LAMBDA[0] + _KA_LAMBDA[1] * v, _KA_KAPPA
+
+
+def initial_specific_volume(soil: dict) -> float:
+    """rho_s / rho_initial of a soil's parameter set."""
+    return float(soil["particle_density_Mg_per_m3"]) / float(soil["bulk_density_initial_Mg_per_m3"])
+
+
+def _check_soil(soil: dict) -> None:
+    lam, kap = float(soil["compression_index_lambda"]), float(soil["recompression_index_kappa"])
+    if not kap < lam:
+        raise ParameterError(f"recompression_index_kappa = {kap!r} must be below compression_index_lambda = "
+                             f"{lam!r} (the recompression line is flatter than the virgin line)")
+    if not float(soil["bulk_density_initial_Mg_per_m3"]) < float(soil["particle_density_Mg_per_m3"]):
+        raise ParameterError(f"bulk_density_initial_Mg_per_m3 = {soil['bulk_density_initial_Mg_per_m3']!r} must "
+                             f"be below particle_density_Mg_per_m3 = {soil['particle_density_Mg_per_m3']!r}")
+
+
+def soil_arrays(soils) -> dict:
+    """Per soil (index 0, 1, ... as the terrain's soil_index): arrays of N, lambda - kappa,
+    rho_s and the initial specific volume v1_0."""
+    for sp in soils:
+        _check_soil(sp)
+    N = np.array([float(sp["virgin_line_N"]) for sp in soils])
+    lk = np.array([float(sp["compression_index_lambda"]) - float(sp["recompression_index_kappa"]) for sp in soils])
+    rho_s = np.array([float(sp["particle_density_Mg_per_m3"]) for sp in soils])
+    v0 = np.array([initial_specific_volume(sp) for sp in soils])
+    return {"N": N, "lambda_minus_kappa": lk, "rho_s": rho_s, "v0": v0}
+
+
+def specific_volume_after(v1, N, lambda_minus_kappa, p_kPa):
+    """v1 after a load to mean normal stress p_kPa (> 0): min(v1, N - (lambda - kappa) ln p)."""
+    return np.minimum(v1, N - lambda_minus_kappa * np.log(p_kPa))
+
+
+def precompression_stress_kPa(v1, N, lambda_minus_kappa):
+    """The mean normal stress where the recompression line of v1 meets the virgin line [kPa]."""
+    return np.exp((np.asarray(N) - np.asarray(v1)) / np.asarray(lambda_minus_kappa))
+
+
+def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: np.ndarray, soils,
+                cells: np.ndarray | None = None) -> int:
+    """Fold one pass into the terrain's state: ``specific_volume`` (n_cells, n_depths) float32
+    (0: the soil's initial state), ``pass_p_Pa`` the pass's largest mean normal stress per cell
+    and depth (0 where the pass did not load); ``cells``: the cells the pass may have loaded (a
+    superset; default: every cell with a stress > 0). In place; returns the number of (cell, depth)
+    entries that moved down the virgin line. Cells not loaded are not touched."""
+    if specific_volume.shape != pass_p_Pa.shape:
+        raise ParameterError(f"pass_p_Pa has shape {pass_p_Pa.shape}, the terrain's specific volume "
+                             f"{specific_volume.shape}")
+    if pass_p_Pa.size == 0:
+        return 0
+    if cells is None:
+        cells = np.unique(np.flatnonzero(pass_p_Pa.ravel() > 0) // pass_p_Pa.shape[1])
+    cells = np.asarray(cells, dtype=np.int64)
+    if cells.size == 0:
+        return 0
+    a = soil_arrays(soils)
+    si = soil_index[cells]
+    p = pass_p_Pa[cells].astype(np.float64)
+    old = specific_volume[cells].astype(np.float64)
+    v_old = np.where(old > 0, old, a["v0"][si][:, None])
+    with np.errstate(divide="ignore"):
+        line = a["N"][si][:, None] - a["lambda_minus_kappa"][si][:, None] * np.log(1e-3 * p)
+    yielded = (p > 0) & (line < v_old)
+    rows = np.flatnonzero(yielded.any(axis=1))
+    if rows.size:  # only the cells that yielded are written (the others keep their bits)
+        specific_volume[cells[rows]] = np.where(yielded[rows], line[rows], old[rows]).astype(np.float32)
+    return int(np.count_nonzero(yielded))
+
+
+def bulk_density(specific_volume: np.ndarray, soil_index: np.ndarray, soils) -> np.ndarray:
+    """Dry bulk density [Mg/m^3] per cell and depth after the loads so far, at the lines' reference
+    stress (1 kPa): rho_s / v1, v1 the stored one or the soil's initial one where 0."""
+    a = soil_arrays(soils)
+    v = specific_volume.astype(np.float64)
+    v = np.where(v > 0, v, a["v0"][soil_index][:, None])
+    return a["rho_s"][soil_index][:, None] / v
+
+
+def field_max(specific_volume: np.ndarray, soil_index: np.ndarray, soils) -> list[float]:
+    """The field's largest bulk density [Mg/m^3] at each depth: over the cells whose state moved
+    (v1 > 0) and the initial density of every soil the field has (without a pass over the whole
+    field's densities: a million cells, mostly initial)."""
+    nd = specific_volume.shape[1]
+    a = soil_arrays(soils)
+    present = np.flatnonzero(np.bincount(soil_index, minlength=len(soils)) > 0)
+    out = np.full(nd, float(np.max(a["rho_s"][present] / a["v0"][present])) if present.size else 0.0)
+    moved = np.unique(np.flatnonzero(specific_volume.ravel() > 0) // nd)
+    if moved.size:
+        rho = bulk_density(specific_volume[moved], soil_index[moved], soils)
+        out = np.maximum(out, rho.max(axis=0))
+    return [float(v) for v in out]
+

@@ -1,0 +1,208 @@
+"""Bulk density by depth (symtrack/terrain/density.py, docs/subsoil.md "Bulk density"): the
+compression lines' closed forms, the pass update (monotone, saturating, conservative), the mean
+normal stress tables against an independent quadrature of Soehne's radial stress, persistence
+bit for bit and old terrain files, and the multipass density table from the terrain engine."""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+import symtrack
+from symtrack.foundations.errors import ParameterError, ScenarioError
+from symtrack.model import parameters as P
+from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.terrain import density as D
+from symtrack.terrain import subsoil as S
+from symtrack.terrain.storage import Grid, Terrain
+
+SOIL = {"virgin_line_N": P.VIRGIN_LINE_N_DEFAULT, "compression_index_lambda": P.COMPRESSION_INDEX_LAMBDA_DEFAULT,
+        "recompression_index_kappa": P.RECOMPRESSION_INDEX_KAPPA_DEFAULT,
+        "particle_density_Mg_per_m3": P.PARTICLE_DENSITY_DEFAULT_MG_PER_M3,
+        "bulk_density_initial_Mg_per_m3": P.BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3}
+N, LAM, KAP = SOIL["virgin_line_N"], SOIL["compression_index_lambda"], SOIL["recompression_index_kappa"]
+RHO_S, RHO_0 = SOIL["particle_density_Mg_per_m3"], SOIL["bulk_density_initial_Mg_per_m3"]
+
+
+def test_defaults_are_keller_arvidsson_at_the_default_densities():
+    n, lam, kap = D.keller_arvidsson_2007(RHO_S, RHO_0)
+    assert (n, lam, kap) == pytest.approx((N, LAM, KAP), rel=1e-15)
+    with pytest.raises(ParameterError, match="bulk_density_Mg_per_m3"):
+        D.keller_arvidsson_2007(2.65, 2.7)
+
+
+def _element(*p_kPa):
+    """One soil element at one depth loaded in turn to each mean normal stress: v1 after each."""
+    v = np.zeros((1, 1), dtype=np.float32)
+    out = []
+    for p in p_kPa:
+        D.pass_update(v, np.array([[1e3 * p]], dtype=np.float32), np.zeros(1, dtype=np.uint8), [SOIL])
+        out.append(v.copy())
+    return out
+
+
+def test_closed_forms_virgin_and_recompression_lines():
+    v0 = RHO_S / RHO_0
+    pc0 = math.exp((N - v0) / (LAM - KAP))  # the initial precompression stress (9.5 kPa)
+    assert D.precompression_stress_kPa(v0, N, LAM - KAP) == pytest.approx(pc0)
+    # below the precompression stress: the recompression line, no change (still the initial state)
+    (below,) = _element(0.5 * pc0)
+    assert below[0, 0] == 0.0
+    assert D.bulk_density(below, np.zeros(1, np.uint8), [SOIL])[0, 0] == pytest.approx(RHO_0, rel=1e-15)
+    # above it: the virgin line; at the load v = N - lambda ln p, after it (at 1 kPa) v1 = v + kappa ln p
+    p = 80.0
+    loaded, unloaded, reloaded, less = _element(p, 0.3 * p, p, 0.9 * p)
+    v_vcl = N - LAM * math.log(p)
+    v1 = v_vcl + KAP * math.log(p)
+    assert float(loaded[0, 0]) == pytest.approx(v1, rel=1e-7)  # float32 storage
+    rho = D.bulk_density(loaded, np.zeros(1, np.uint8), [SOIL])[0, 0]
+    assert rho == pytest.approx(RHO_S / v1, rel=1e-7)
+    assert rho > RHO_0
+    # unloading to a lower stress, reloading to the old maximum, or less: the same state, bit for bit
+    for v in (unloaded, reloaded, less):
+        assert v.tobytes() == loaded.tobytes()
+    # the precompression stress is now the old maximum
+    assert D.precompression_stress_kPa(float(loaded[0, 0]), N, LAM - KAP) == pytest.approx(p, rel=1e-5)
+    # beyond it: the virgin line again
+    (_, beyond) = _element(p, 2 * p)
+    assert float(beyond[0, 0]) == pytest.approx(N - (LAM - KAP) * math.log(2 * p), rel=1e-7)
+
+
+def test_passes_monotone_saturating_and_conservative():
+    rng = np.random.default_rng(0)
+    n, nd = 50, 4
+    soils = [SOIL, dict(SOIL, bulk_density_initial_Mg_per_m3=1.3, virgin_line_N=2.4)]
+    si = rng.integers(0, 2, n).astype(np.uint8)
+    v = np.zeros((n, nd), dtype=np.float32)
+    loaded = np.arange(n) < 30
+    p = np.where(loaded[:, None], rng.uniform(5e3, 200e3, (n, nd)), 0.0).astype(np.float32)
+    rho = [D.bulk_density(v, si, soils)]
+    for _ in range(4):  # the same traffic four times
+        before = v.copy()
+        D.pass_update(v, p, si, soils)
+        rho.append(D.bulk_density(v, si, soils))
+        # cells the pass did not load keep their state bit for bit
+        assert v[~loaded].tobytes() == before[~loaded].tobytes()
+    assert np.all(np.diff(np.stack(rho), axis=0) >= 0)  # monotone in the number of passes
+    assert np.array_equal(rho[1], rho[4])  # saturated after the first pass of the same stress
+    assert np.any(rho[1] > rho[0])
+    # a heavier pass compacts further; D.field_max is the maximum of the whole field
+    D.pass_update(v, 2 * p, si, soils)
+    assert np.all(D.bulk_density(v, si, soils) >= rho[4]) and np.any(D.bulk_density(v, si, soils) > rho[4])
+    np.testing.assert_array_equal(D.field_max(v, si, soils), D.bulk_density(v, si, soils).max(axis=0))
+    with pytest.raises(ParameterError, match="recompression_index_kappa"):
+        D.pass_update(v, p, si, [dict(SOIL, recompression_index_kappa=0.3), SOIL])
+
+
+@pytest.mark.parametrize("xi", [3.0, 5.0])
+def test_mean_stress_tables_against_the_radial_stress(xi):
+    """p = (sigma_x + sigma_y + sigma_z) / 3 of Soehne's radial point stress
+    xi Q cos^(xi-2) / (2 pi R^2), summed over both tracks by a midpoint rule (independent of the
+    xi - 2 identity the tables use), at points under and beside the tracks."""
+    l, b, B = 2.4, 0.45, 1.5
+    depths = (0.3, 0.8)
+    T = S.build_mean_stress_tables(depths, xi, l, b, B)
+    geo = np.array([l, b, B, 0.0, 0.1, 0.2])
+    alpha, beta = 20e3, 10e3  # p(s) = alpha + beta s [Pa], s from the front end
+    a = np.array([0.0, 0.0, 1.0, 0.0, alpha, beta, alpha, beta])
+    px = np.array([0.0, 0.9, -1.1, 0.3])
+    py = np.array([0.75, 0.75, -0.6, 0.0])
+    got = S.stress_at(T, px, py, a, geo)
+    h = 0.01
+    xs = np.arange(-l / 2 + h / 2, l / 2, h)
+    ys = np.arange(-b / 2 + h / 2, b / 2, h)
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    Q = (alpha + beta * (l / 2 - X)) * h * h  # s = l/2 - x (e = 0)
+    ref = np.zeros_like(got)
+    for i in range(px.size):
+        for k, d in enumerate(depths):
+            for yc in (B / 2, -B / 2):
+                R2 = (px[i] - X) ** 2 + (py[i] - (yc + Y)) ** 2 + d * d
+                cos = d / np.sqrt(R2)
+                ref[i, k] += np.sum(xi * Q * cos ** (xi - 2) / (2 * np.pi * R2)) / 3
+    # the tables' interpolation error: below 1 % of the depth's peak (docs/subsoil.md "Bulk density")
+    err = np.abs(got - ref) / ref.max(axis=0)
+    print(f"\nxi {xi}: max error {100 * err.max():.3f} % of the peak")
+    assert err.max() < 0.01, err
+    # not the vertical stress: p / sigma_z well below 1 under the track at 0.8 m
+    sz = S.stress_at(S.build_tables(depths, xi, l, b, B), px, py, a, geo)
+    assert ref[0, 1] < 0.8 * sz[0, 1]
+    with pytest.raises(ParameterError, match="stress_concentration_factor"):
+        S.build_mean_stress_tables(depths, 2.5)
+
+
+def _terrain(rng):
+    t = Terrain(Grid((0.0, 0.0), 0.1, (6, 5)), {n: 1.0 for n in P.SOIL_PARAM_NAMES}, (0.1, 0.3))
+    t.specific_volume[:] = np.where(rng.random(t.specific_volume.shape) < 0.5, 0.0,
+                                    rng.uniform(1.3, 1.8, t.specific_volume.shape)).astype(np.float32)
+    t.sigma_max[:] = rng.uniform(0, 1e5, t.sigma_max.shape).astype(np.float32)
+    return t
+
+
+def test_persistence_bit_for_bit_and_old_files(tmp_path):
+    t = _terrain(np.random.default_rng(1))
+    f = tmp_path / "t.npz"
+    t.save(f)
+    back = Terrain.load(f)
+    assert back.specific_volume.tobytes() == t.specific_volume.tobytes()
+    # a schema-3 file (no specific_volume) loads with every cell in its initial state
+    with np.load(f) as z:
+        d = {k: z[k] for k in z.files if k != "specific_volume"}
+    d["schema_version"] = np.array(3)
+    old = tmp_path / "old.npz"
+    np.savez_compressed(old, **d)
+    back3 = Terrain.load(old)
+    assert back3.specific_volume.shape == t.specific_volume.shape and not back3.specific_volume.any()
+    # a schema-4 file without it, or with a wrong type, is damaged
+    d["schema_version"] = np.array(4)
+    bad = tmp_path / "bad.npz"
+    np.savez_compressed(bad, **d)
+    with pytest.raises(ScenarioError, match="specific_volume"):
+        Terrain.load(bad)
+    d["specific_volume"] = np.full((6, 5, 2), -1.0, dtype=np.float32)
+    np.savez_compressed(bad, **d)
+    with pytest.raises(ScenarioError, match="specific_volume"):
+        Terrain.load(bad)
+
+
+def test_soil_parameters_added_since_an_old_file_take_the_defaults(tmp_path):
+    t = _terrain(np.random.default_rng(2))
+    f = tmp_path / "t.npz"
+    t.save(f)
+    with np.load(f) as z:
+        d = {k: z[k] for k in z.files}
+    keep = [i for i, n in enumerate(d["soil_names"]) if str(n) not in D.COMPRESSION_PARAM_NAMES]
+    d["soil_names"], d["soil_values"] = d["soil_names"][keep], d["soil_values"][keep]
+    np.savez_compressed(f, **d)
+    back = Terrain.load(f)
+    assert back.soil["virgin_line_N"] == P.VIRGIN_LINE_N_DEFAULT
+    assert back.soil["bulk_density_initial_Mg_per_m3"] == P.BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3
+
+
+# A 12 m x 4 m field at 0.25 m through the terrain engine (tests/test_terrain_engine.py's SMALL), 3 passes
+SMALL = {
+    "name": "density_small",
+    "run": {"duration_s": 5.0, "output_dt_s": 0.01, "integrator": "grid_fast", "stop_after_distance_m": 0.5},
+    "vehicle": {"preset": "reference_crawler"},
+    "soil": {"preset": "clayey_soil_thailand_38"},
+    "start": {"x_m": -3.0},
+    "terrain": {"size_m": [12.0, 4.0], "cell_m": 0.25, "origin_m": [-6.0, -2.0], "settle_s": 0.1, "passes": 3},
+    "torque": [{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0}],
+}
+
+
+def test_multipass_density_table():
+    """The density-against-pass table of a summary: per pass the field's maximum at each depth,
+    not below the initial, monotone over the passes; cells never loaded keep their initial state."""
+    run = symtrack.simulate(scenario_from_dict(copy.deepcopy(SMALL)))
+    s = run.summary
+    init = s["bulk_density_initial_Mg_per_m3"]
+    assert init == pytest.approx([RHO_0] * 4, rel=1e-15)
+    table = np.array([p["bulk_density_max_Mg_per_m3"] for p in s["passes"]])
+    assert table.shape == (3, len(s["subsoil_depths_m"]))
+    assert np.all(table >= np.array(init) - 1e-12) and np.all(np.diff(table, axis=0) >= 0)
+    assert table[0, 0] > RHO_0  # the shallowest depth compacted in the first pass
+    st = run.terrain
+    never = st.zmax == 0
+    assert never.any() and not st.specific_volume[never].any()
