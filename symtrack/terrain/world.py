@@ -176,8 +176,8 @@ class World:
             n, nd = self.grid.n_cells, len(settings.subsoil_depths_m)
             shaped = settings.surface is not None and not settings.surface.is_flat
             require_memory(n * world_bytes_per_cell(nd, shaped), f"terrain.size_m = {list(settings.size_m)} at "
-                           f"terrain.cell_m = {settings.cell_m} ({nx} x {ny} = {n} cells, {nd} subsoil depths)", "raise terrain.cell_m, shrink terrain.size_m or drop subsoil depths "
-                           "(terrain.subsoil_depths_m)")
+                           f"terrain.cell_m = {settings.cell_m} ({nx} x {ny} = {n} cells, {nd} subsoil depths)",
+                           "raise terrain.cell_m, shrink terrain.size_m or drop subsoil depths (terrain.subsoil_depths_m)")
         # the soil map's cells first: a raster that misses the field, or a CRS that is not the
         # terrain's, stops here, before the channel pool is built
         sm = settings.soil_map
