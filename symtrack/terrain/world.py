@@ -177,7 +177,7 @@ class World:
             shaped = settings.surface is not None and not settings.surface.is_flat
             require_memory(n * world_bytes_per_cell(nd, shaped), f"terrain.size_m = {list(settings.size_m)} at "
                            f"terrain.cell_m = {settings.cell_m} ({nx} x {ny} = {n} cells, {nd} subsoil depths)",
-                           "raise terrain.cell_m, shrink terrain.size_m or drop subsoil depths (terrain.subsoil_depths_m)")
+                           "raise terrain.cell_m, shrink terrain.size_m or drop terrain.subsoil_depths_m")
         # the soil map's cells first: a raster that misses the field, or a CRS that is not the
         # terrain's, stops here, before the channel pool is built
         sm = settings.soil_map
