@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from small_field import small_field
 
 import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
@@ -180,16 +181,8 @@ def test_soil_parameters_added_since_an_old_file_take_the_defaults(tmp_path):
     assert back.soil["bulk_density_initial_Mg_per_m3"] == P.BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3
 
 
-# A 12 m x 4 m field at 0.25 m through the terrain engine (tests/test_terrain_engine.py's SMALL), 3 passes
-SMALL = {
-    "name": "density_small",
-    "run": {"duration_s": 5.0, "output_dt_s": 0.01, "integrator": "grid_fast", "stop_after_distance_m": 0.5},
-    "vehicle": {"preset": "reference_crawler"},
-    "soil": {"preset": "clayey_soil_thailand_38"},
-    "start": {"x_m": -3.0},
-    "terrain": {"size_m": [12.0, 4.0], "cell_m": 0.25, "origin_m": [-6.0, -2.0], "settle_s": 0.1, "passes": 3},
-    "torque": [{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0}],
-}
+# the shared small field (tests/small_field.py) through the terrain engine, 3 passes of 0.5 m
+SMALL = small_field("density_small", run={"duration_s": 5.0, "stop_after_distance_m": 0.5}, terrain={"passes": 3})
 
 
 def test_multipass_density_table():

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from small_field import small_field
 
 from symtrack.foundations.errors import ScenarioError
 from symtrack.model.parameters import SOIL_PARAM_NAMES
@@ -214,15 +215,7 @@ def test_terrain_file_round_trip_and_old_files_load_flat(tmp_path):
     np.testing.assert_array_equal(gis.layer_arrays(flat)["elevation_m"], 0.0)
 
 
-SMALL = {
-    "name": "surface_small",
-    "run": {"duration_s": 0.3, "output_dt_s": 0.01, "integrator": "grid_fast"},
-    "vehicle": {"preset": "reference_crawler"},
-    "soil": {"preset": "clayey_soil_thailand_38"},
-    "start": {"x_m": -3.0},
-    "terrain": {"size_m": [12.0, 4.0], "cell_m": 0.25, "origin_m": [-6.0, -2.0], "settle_s": 0.1},
-    "torque": [{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0}],
-}
+SMALL = small_field("surface_small", run={"duration_s": 0.3})  # tests/small_field.py
 
 
 @pytest.mark.skipif(find_compiler() is None, reason="no C compiler")

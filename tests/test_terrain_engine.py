@@ -14,6 +14,7 @@ import pytest
 from conftest import two_passes_against_a_continued_pass
 from engine_oracle import PyKernel, ringing
 from scipy.integrate import solve_ivp
+from small_field import small_field
 
 from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.foundations.errors import ScenarioError, SimulationError
@@ -29,16 +30,8 @@ from symtrack.toolchain import find_compiler
 
 # A 12 m x 4 m field at 0.25 m (768 cells, M = 18): from rest, both sprockets at 2000 N m, then the
 # left one idle at 0.3 s: the vehicle accelerates and begins to turn.
-SMALL = {
-    "name": "engine_small",
-    "run": {"duration_s": 0.6, "output_dt_s": 0.01, "integrator": "grid_fast"},
-    "vehicle": {"preset": "reference_crawler"},
-    "soil": {"preset": "clayey_soil_thailand_38"},
-    "start": {"x_m": -3.0},
-    "terrain": {"size_m": [12.0, 4.0], "cell_m": 0.25, "origin_m": [-6.0, -2.0], "settle_s": 0.1},
-    "torque": [{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0},
-               {"t_s": 0.3, "left_N_m": 0.0, "right_N_m": 2000.0}],
-}
+SMALL = small_field("engine_small", torque=[{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0},
+                                             {"t_s": 0.3, "left_N_m": 0.0, "right_N_m": 2000.0}])
 
 # Stated tolerances against IDAS (reltol 1e-7) on SMALL, default engine settings (measured:
 # pose 0.2 mm, speeds 6e-4 relative, sinkage before the lift 1.3 %, after it 1.1 %): the engine's

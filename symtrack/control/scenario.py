@@ -239,8 +239,6 @@ def _model(t: dict) -> ModelOptions:
 def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
     check_document("MPC scenario", d, TOP_KEYS)
     name, desc = d.get("name", default_name), d.get("description", "")
-    if not isinstance(name, str) or not isinstance(desc, str):
-        raise ScenarioError("name and description must be strings")
     vp, veh = _params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS, "reference_crawler")
     sp, soil = _params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS, "sandy_loam_15")
     st = d.get("start", {})

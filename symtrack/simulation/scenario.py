@@ -297,8 +297,6 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     check_document("scenario", d, TOP_KEYS, arrays=("torque",))
     name = d.get("name", default_name)
     desc = d.get("description", "")
-    if not isinstance(name, str) or not isinstance(desc, str):
-        raise ScenarioError("name and description must be strings")
     run = parse_run(d.get("run", {}))
     model = _parse_model(d.get("model", {}))
     vp, vehicle = parse_params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS)

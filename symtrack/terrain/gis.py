@@ -42,7 +42,7 @@ from .subsoil import risk_class
 
 __all__ = ["GEOTIFF_SUFFIXES", "GIS_EXTRA", "GIS_SCHEMA_VERSION", "LAYERS", "Layer", "RasterHeader",
            "check_covers", "crs_label", "crs_wkt", "export_terrain", "field_geometry", "is_geotiff", "layer_arrays",
-           "read_band", "read_header", "read_soil_raster", "same_crs", "write_geotiffs", "write_netcdf"]
+           "read_band", "read_header", "read_npy", "read_soil_raster", "same_crs", "write_geotiffs", "write_netcdf"]
 
 GIS_EXTRA = "pip install 'symtrack[gis]'"
 GEOTIFF_SUFFIXES = (".tif", ".tiff")
@@ -56,6 +56,18 @@ def _extra(module: str, feature: str):
     except ImportError as err:
         raise MissingExtraError(f"{feature} needs the optional GIS packages ({module} is not installed): "
                                 f"{GIS_EXTRA}") from err
+
+
+def read_npy(path, where: str) -> np.ndarray:
+    """A raster given as a ``.npy`` array (a soil map's indices, an elevation), read without
+    pickles; errors name ``where`` (the scenario key) and the path. The caller checks its shape and type."""
+    p = Path(path)
+    if not p.is_file():
+        raise ScenarioError(f"{where} = {str(path)!r}: no such file")
+    try:
+        return np.load(p, allow_pickle=False)
+    except (OSError, ValueError) as err:
+        raise ScenarioError(f"{where} = {str(path)!r}: not a .npy array ({err})") from err
 
 
 def is_geotiff(path) -> bool:

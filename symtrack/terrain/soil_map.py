@@ -26,7 +26,6 @@ field of several soils.
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 
@@ -137,13 +136,7 @@ def soil_index(grid, sm: SoilMap) -> np.ndarray:
                                 f"[0, {len(sm.soils)}], the raster has {int(r.min())}..{int(r.max())} under the field")
         idx[:] = r.astype(np.uint8)
     elif sm.raster is not None:
-        path = Path(sm.raster)
-        if not path.is_file():
-            raise ScenarioError(f"terrain.soil_map.raster = {sm.raster!r}: no such file")
-        try:
-            r = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as err:
-            raise ScenarioError(f"terrain.soil_map.raster = {sm.raster!r}: not a .npy array ({err})") from err
+        r = gis.read_npy(sm.raster, "terrain.soil_map.raster")
         if r.shape != (nx, ny) or r.dtype.kind not in "iu":
             raise ScenarioError(f"terrain.soil_map.raster = {sm.raster!r}: an integer array of shape {(nx, ny)} "
                                 f"(the field's cells along x, y) is needed, the file holds {r.dtype} {r.shape}")

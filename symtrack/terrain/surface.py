@@ -65,7 +65,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -281,13 +280,7 @@ def _num(key, value, low, high, low_open=False):
 
 
 def _read_npy(path: str, pixel_m: float, origin_m) -> ElevationRaster:
-    p = Path(path)
-    if not p.is_file():
-        raise ScenarioError(f"{WHERE}.elevation_file = {path!r}: no such file")
-    try:
-        a = np.load(p, allow_pickle=False)
-    except (OSError, ValueError) as err:
-        raise ScenarioError(f"{WHERE}.elevation_file = {path!r}: not a .npy array ({err})") from err
+    a = gis.read_npy(path, f"{WHERE}.elevation_file")
     if a.ndim != 2 or a.dtype.kind not in "iuf":
         raise ScenarioError(f"{WHERE}.elevation_file = {path!r}: a 2-D array of heights in m (i along x, j along "
                             f"y) is needed, the file holds {a.dtype} {a.shape}")
