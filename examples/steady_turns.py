@@ -49,7 +49,7 @@ def table(law: str, radii, speeds) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--law", choices=("shear", "creep"), default="shear")
+    ap.add_argument("--law", choices=("shear_quasistatic", "creep"), default="shear_quasistatic")
     ap.add_argument("--radii", type=float, nargs="+", default=[10.0, 15.0, 20.0, 50.0, 100.0])
     ap.add_argument("--speeds", type=float, nargs="+", default=[1.0, 2.0, 3.0])
     a = ap.parse_args(argv)

@@ -42,8 +42,9 @@ def _max_curvature(opts) -> float:
 def test_the_prediction_regularisation_bounds_the_curvature_that_stalls_ipopt():
     # the exact law's tractive force depends on the ratio of the longitudinal to the lateral slip:
     # near straight running (both small) it turns over tiny changes of the sprocket speed
-    exact = _max_curvature(ModelOptions(lateral_law="shear"))
-    pred = _max_curvature(ModelOptions(lateral_law="shear", sliding_smoothing=0.01, sliding_sign="velocity"))
+    exact = _max_curvature(ModelOptions(lateral_law="shear_quasistatic"))
+    pred = _max_curvature(ModelOptions(lateral_law="shear_quasistatic", sliding_smoothing=0.01,
+                                       sliding_sign="velocity"))
     assert exact > 1e9  # measured 2.3e10
     assert pred < 3e6  # measured 1.2e6; the creep law's tractive force does not depend on omega at all
 
@@ -51,10 +52,10 @@ def test_the_prediction_regularisation_bounds_the_curvature_that_stalls_ipopt():
 def test_prediction_model_and_settings():
     creep = SystemModel()
     assert prediction_model(creep, MPCSettings()) is creep  # the creep law's OCP is unchanged
-    shear = SystemModel(ModelOptions(lateral_law="shear"))
+    shear = SystemModel(ModelOptions(lateral_law="shear_quasistatic"))
     pm = prediction_model(shear, MPCSettings())
     assert pm.opts.sliding_smoothing == 0.01 and pm.opts.sliding_sign == "velocity"
-    assert pm.opts.lateral_law == "shear" and shear.opts.sliding_sign == "displacement"
+    assert pm.opts.lateral_law == "shear_quasistatic" and shear.opts.sliding_sign == "displacement"
     same = prediction_model(shear, MPCSettings(prediction_sliding_smoothing=None, prediction_sliding_sign="model"))
     assert same is shear
     with pytest.raises(ParameterError, match="mpc.prediction_sliding_sign"):
@@ -66,17 +67,17 @@ def test_prediction_model_and_settings():
 
 
 def test_mpc_scenario_model_section():
-    sc = S.load("straight_offset", ['model.lateral_law="shear"'])
-    assert sc.model.lateral_law == "shear"
-    assert sc.to_dict()["model"] == {"lateral_law": "shear"}
+    sc = S.load("straight_offset", ['model.lateral_law="shear_quasistatic"'])
+    assert sc.model.lateral_law == "shear_quasistatic"
+    assert sc.to_dict()["model"] == {"lateral_law": "shear_quasistatic"}
     assert "model" not in S.load("straight_offset").to_dict()
     with pytest.raises(ScenarioError, match="unknown key"):
         S.load("straight_offset", ["model.lateral_lw='shear'"])
     with pytest.raises(ScenarioError, match="model.lateral_law"):
         S.load("straight_offset", ["model.lateral_law='coulomb'"])
     # the grid plant's terrain engine: the [engine] section and run.output_dt_s (its macro step)
-    g = S.load("straight_offset", ['model.lateral_law="shear"', "engine.vehicle_substeps=4", "run.output_dt_s=0.002",
-                                   "terrain.cell_m=0.25"])
+    g = S.load("straight_offset", ['model.lateral_law="shear_quasistatic"', "engine.vehicle_substeps=4",
+                                   "run.output_dt_s=0.002", "terrain.cell_m=0.25"])
     assert CL.grid_integrator(g).engine.vehicle_substeps == 4 and g.run.output_dt_s == 0.002
     assert g.to_dict()["engine"]["vehicle_substeps"] == 4
     assert CL.grid_integrator(S.load("straight_offset")).engine is None
@@ -88,7 +89,7 @@ def test_mpc_scenario_model_section():
 def test_shear_law_closed_loop_into_the_u_turn_on_clay():
     # the headland U-turn on the clay with the shear law, shortened to 3 m of straight: the turn
     # enters the horizon at once (where the unregularised prediction hit max_iter on every solve)
-    sc = S.load("headland_uturn", [f"soil.preset='{CLAY}'", 'model.lateral_law="shear"',
+    sc = S.load("headland_uturn", [f"soil.preset='{CLAY}'", 'model.lateral_law="shear_quasistatic"',
                                    "path.segments=[{straight_m=3.0}, {arc_radius_m=4.0, angle_deg=180.0}]"])
     model = SystemModel(sc.model)
     res = CL.run(sc, model=model, max_steps=25)

@@ -1,4 +1,4 @@
-"""The shear law of the tracks (lateral_law = "shear", docs/turning.md) against independent truth:
+"""The shear law of the tracks (lateral_law = "shear_quasistatic", docs/turning.md) against independent truth:
 Wong's M_r in pure yaw, the Coulomb (rigid-plastic) limit of combined slip in closed form, a
 brute-force 1000-point integral of the law's definition at several pivot offsets, the exact
 Janosi integral over a linear pressure, quadrature refinement of a sharp turn, and steady turns
@@ -17,7 +17,7 @@ from symtrack.model.vehicle import GRAVITY_M_S2, PressureDistribution, shear_for
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.reports import validation
 
-SHEAR = ModelOptions(lateral_law="shear")  # the law under test (the model's default is "creep")
+SHEAR = ModelOptions(lateral_law="shear_quasistatic")  # the law under test (the model's default is "creep")
 
 
 def _params(soil="clayey_soil_thailand_38", **over):
@@ -143,7 +143,8 @@ def test_pivot_split_matches_a_brute_force_1000_point_integral(pivot_m, state):
     # the plain composite rule of the old creep law's size (4 x 3) is not that good where the
     # pivot is inside the contact: the split is what makes it independent of the quadrature
     if state == "near_free_rolling" and 0.3 <= pivot_m <= 2.2:
-        plain = _track_function(P, ModelOptions(lateral_law="shear", lateral_split=False))(j, om, vy, rz, M, N)
+        plain = _track_function(P, ModelOptions(lateral_law="shear_quasistatic", lateral_split=False))(
+            j, om, vy, rz, M, N)
         assert (np.abs(plain - ref) / np.array([strength, strength, strength * l / 4])).max() > 5 * err.max()
 
 
@@ -165,7 +166,7 @@ def test_local_pressure_option_is_the_exact_janosi_integral_over_the_linear_dist
     i0 = l - (1 - e) / lam
     i1 = l**2 / 2 - (1 - e * (1 + lam * l)) / lam**2
     exact = b * ((c + A * tphi) * i0 + B * tphi * i1)
-    local_law = _track_function(P, ModelOptions(lateral_law="shear", shear_strength_pressure="local"))
+    local_law = _track_function(P, ModelOptions(lateral_law="shear_quasistatic", shear_strength_pressure="local"))
     local = local_law(slip * l / 2, 8.0, 0.0, 0.0, M, N)
     mean = _track_function(P, SHEAR)(slip * l / 2, 8.0, 0.0, 0.0, M, N)
     # tolerance: the quadrature along the track (7e-5 at 30 % slip, tests/test_vehicle.py)
@@ -180,7 +181,7 @@ def test_local_pressure_raises_the_validation_thrust_by_3_to_5_percent():
     P = _params()
     out = {}
     for mode in ("mean", "local"):
-        model = SystemModel(ModelOptions(lateral_law="shear", shear_strength_pressure=mode))
+        model = SystemModel(ModelOptions(lateral_law="shear_quasistatic", shear_strength_pressure=mode))
         p = model.param_vector(P)
         x = static_state(model, P)
         for k in ("left", "right"):
@@ -212,7 +213,8 @@ def _sharp_turn(opts, duration_s=3.0):
 
 def test_sharp_turn_trajectory_agrees_with_a_64_by_5_quadrature_within_one_percent():
     xs, model = _sharp_turn(SHEAR)
-    xr, _ = _sharp_turn(ModelOptions(lateral_law="shear", lateral_split=False, lateral_segments=64, gauss_points=5))
+    xr, _ = _sharp_turn(ModelOptions(lateral_law="shear_quasistatic", lateral_split=False, lateral_segments=64,
+                                     gauss_points=5))
     names = ("x_m", "y_m", "yaw_rad")
     got, ref = (np.array([x[model.state_index(n)] for n in names]) for x in (xs, xr))
     assert abs(ref[2]) > 0.5  # a sharp turn: more than 30 deg in 3 s

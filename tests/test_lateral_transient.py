@@ -1,4 +1,4 @@
-"""The "shear_transient" lateral law (docs/turning.md section 8): the shear law with the sliding
+"""The "shear" lateral law (docs/turning.md section 8): the shear law with the sliding
 state lagged as seed eq. (2) lags the longitudinal one, a lateral shear state per track (the
 vehicle model "planar_lateral"). Against independent truth: in steady running it is the
 quasi-static shear law exactly (the lagged slips relax to the instantaneous ones), Wong's
@@ -18,8 +18,8 @@ from symtrack.model.vehicle import GRAVITY_M_S2, LATERAL_STATES, VEHICLE_STATES
 from symtrack.native.rosenbrock import consistent_z_expressions, step_expressions
 from symtrack.presets import soil_preset, vehicle_preset
 
-SHEAR = ModelOptions(lateral_law="shear")
-TRANSIENT = ModelOptions(lateral_law="shear_transient")
+SHEAR = ModelOptions(lateral_law="shear_quasistatic")
+TRANSIENT = ModelOptions(lateral_law="shear")
 
 
 def _params(soil="clayey_soil_thailand_38", **over):

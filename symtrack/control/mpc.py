@@ -14,7 +14,7 @@ Prediction model
       difference in the predicted trajectories against ``"full"``.
     - ``prediction = "full"``: all 20 states, cells included.
 
-    On the shear law (``ModelOptions.lateral_law = "shear"``) the prediction is the model with a
+    On the shear law (``ModelOptions.lateral_law = "shear_quasistatic"``) the prediction is the model with a
     regularised sliding direction (:func:`prediction_model`; docs/turning.md section 6).
 
 Discretisation
@@ -221,7 +221,7 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
     the sprocket speed of 1e-3 rad/s; the exact law's curvature then stalls IPOPT
     (docs/turning.md, "Nonlinear MPC on the shear law")."""
     o = model.opts
-    if o.lateral_law != "shear":
+    if o.lateral_law != "shear_quasistatic":
         return model
     changes = {}
     if settings.prediction_sliding_smoothing is not None:

@@ -42,7 +42,7 @@ Schema (unknown keys are errors; ranges in brackets)::
     sample_time_s = 0.1
     solver = "ipopt"
     [model]                           # optional: any field of symtrack.model.options.ModelOptions,
-    lateral_law = "shear"             # for the plant and the prediction (e.g. the soil's shear law,
+    lateral_law = "shear_quasistatic"             # for the plant and the prediction (e.g. the soil's shear law,
                                       # docs/turning.md; default: the creep law)
     [terrain]                         # optional: the plant is then the vehicle on the persistent
     cell_m = 0.25                     # grid terrain (symtrack.control.closedloop.make_grid_plant); keys

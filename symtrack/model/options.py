@@ -9,7 +9,11 @@ from .soil_law import DEFAULT as DEFAULT_SOIL_LAW
 from .soil_law import REGISTRY as SOIL_LAWS
 
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
-LATERAL_LAWS = ("shear", "creep", "shear_transient")
+LATERAL_LAWS = ("shear", "creep", "shear_quasistatic")
+SHEAR_LAWS = ("shear", "shear_quasistatic")  # the laws that take the tracks' forces from the soil's shear law
+# names a scenario may still use, read as the law they now name ("shear_transient" was the lagged shear
+# law's name until it became "shear"; the quasi-static law that was "shear" is "shear_quasistatic")
+LATERAL_LAW_ALIASES = {"shear_transient": "shear"}
 SHEAR_STRENGTH_PRESSURES = ("mean", "local")
 SLIDING_SIGNS = ("displacement", "velocity")
 
@@ -29,25 +33,24 @@ class ModelOptions:
         "sign": the discontinuous sign() everywhere, kept to reproduce the seed's numerical
         oscillations (Coulomb-like chattering of the internal resistance at omega = 0).
     lateral_law: how the tracks meet the soil (docs/turning.md).
-        "shear": the shear stress at each point of the contact from the soil's shear law,
+        "shear_quasistatic": the shear stress at each point of the contact from the soil's shear law,
         Mohr-Coulomb strength c + p tan(phi) with Janosi-Hanamoto shear (modulus K), against the
         local sliding velocity, longitudinal and lateral together (combined slip; after Wong &
-        Chiang 2001). The tractive force of each track is the longitudinal part of the same
-        integral (seed eq. (1) exactly when the track does not slide sideways).
-        "shear_transient": the "shear" law with the sliding state lagged as seed eq. (2) lags the
+        Chiang 2001), with the lateral displacement field computed from the current velocities. The
+        tractive force of each track is the longitudinal part of the same integral (seed eq. (1)
+        exactly when the track does not slide sideways). Its fixed-step integrators need 0.5 ms steps.
+        "shear": the "shear_quasistatic" law with the sliding state lagged as seed eq. (2) lags the
         longitudinal one: each track carries two lateral shear states (the vehicle model
         "planar_lateral", four more states), j_y at the contact centre and the twist theta,
         dj_y/dt = -(2 r |omega| / l) j_y + v + r_z x_c (x_c the contact centre's body x) and
         dtheta/dt = -(2 r |omega| / l) theta + r_z, and the sliding direction and the displacement
         field use the lagged slips: 2 j / l longitudinally, 2 j_y / l + (2 theta / l)(l/2 - s)
-        laterally. In steady running it is the "shear" law exactly; a 10 ms step carries it where
-        the "shear" law needs 0.5 ms (docs/turning.md section 8).
-        "creep" (default): the reconstruction the validation is calibrated on: seed eq. (1) for the tractive
-        force and a lateral resistance -mu_t q tanh((v + r_z x)/eps_v) with the vehicle's
-        lateral_friction_coeff and lateral_creep_speed_m_s (a velocity creep, not a soil property).
-        The shear law is not the default: with it the validation's yaw and lateral deviation
-        leave their bands (14.6 deg, 2.25 m; docs/turning.md); the NLP MPC predicts it with a
-        regularised sliding direction (MPCSettings.prediction_sliding_*, docs/turning.md section 6).
+        laterally. In steady running it is the quasi-static law exactly; a 10 ms step carries it
+        (docs/turning.md section 8). "shear_transient", its earlier name, is read as "shear".
+        "creep": the reconstruction of the seed paper's model, on which the validation is calibrated
+        (the validation scenarios declare it): seed eq. (1) for the tractive force and a lateral
+        resistance -mu_t q tanh((v + r_z x)/eps_v) with the vehicle's lateral_friction_coeff and
+        lateral_creep_speed_m_s (a velocity creep, not a soil property).
     shear_strength_pressure: the pressure in the shear strength c + p tan(phi) of the "shear" law.
         "mean" (default): the track's mean pressure N/(b l), as seed eq. (1) does; the tractive force
         in straight running is then eq. (1) exactly. "local": the linear (or triangular) pressure
@@ -116,6 +119,8 @@ class ModelOptions:
     soil_law: str = DEFAULT_SOIL_LAW
 
     def __post_init__(self):
+        if isinstance(self.lateral_law, str) and self.lateral_law in LATERAL_LAW_ALIASES:
+            object.__setattr__(self, "lateral_law", LATERAL_LAW_ALIASES[self.lateral_law])
         if self.traction_sign not in TRACTION_SIGN_MODES:
             raise ParameterError(
                 f"model.traction_sign = {self.traction_sign!r} is not one of {', '.join(TRACTION_SIGN_MODES)}"

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 from .layout import ContactPose, StateLayout, VehicleState
-from .options import ModelOptions
+from .options import SHEAR_LAWS, ModelOptions
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
            "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SOIL_PARAMS_USED", "TRACKS",
@@ -38,7 +38,7 @@ VEHICLE_STATES = (
 PLANAR_LAYOUT = StateLayout((
     ("pose", VEHICLE_STATES[0:3]), ("velocity", VEHICLE_STATES[3:6]), ("sprockets", VEHICLE_STATES[6:8]),
     ("shear", VEHICLE_STATES[8:10]), ("torque", VEHICLE_STATES[10:12])))
-# the "shear_transient" law's lateral shear states (ModelOptions.lateral_law), after the planar vehicle's
+# the "shear" law's lateral shear states (ModelOptions.lateral_law), after the planar vehicle's
 # 12 (the vehicle model "planar_lateral"): per track the lateral shear displacement at the contact
 # centre and the twist (the hull's rotation while an element crosses half the contact: the gradient
 # of the lateral slip along the track)
@@ -152,7 +152,7 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     halved and integrated by Gauss-Legendre graded towards its ends, so that its accuracy does not
     depend on where the pivot falls.
 
-    ``lagged``: (j_y, theta), the track's lateral shear states of the "shear_transient" law (their
+    ``lagged``: (j_y, theta), the track's lateral shear states of the "shear" law (their
     dynamics: :func:`lateral_shear_rates`): the sliding direction and the displacement field then
     use the lagged slips, longitudinal 2 j / l, lateral 2 j_y / l at the contact centre and its
     slope along the track 2 theta / l, instead of the sliding velocity now. In steady running the
@@ -178,7 +178,7 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     d2 = opts.shear_smoothing_m**2
     # the sliding direction from the track's sliding velocity now: longitudinal r omega - v_k,
     # lateral v + r_z x (per unit tread speed), with the longitudinal sign of seed eq. (1), sign(j)
-    # ("shear_transient": the lagged longitudinal slip 2 j / l, seed eq. (2)'s)
+    # ("shear": the lagged longitudinal slip 2 j / l, seed eq. (2)'s)
     i_x_now = (r * omega - v_k) / tread if lagged is None else i_x
     ax = ca.sqrt(i_x_now**2 + opts.sliding_smoothing**2)  # regularised |i_x|
     if opts.sliding_sign == "velocity":
@@ -230,7 +230,7 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
 
 
 def lateral_shear_rates(j_y, theta, abs_om, vy, rz, x_centre, l, r):
-    """(dj_y/dt, dtheta/dt) of a track's lateral shear states (the "shear_transient" law): seed
+    """(dj_y/dt, dtheta/dt) of a track's lateral shear states (the "shear" law): seed
     eq. (2) written for the lateral sliding velocity at the contact centre, v + r_z x_centre
     (x_centre the centre's body x), and for the yaw rate (the lateral sliding velocity's gradient
     along the track), with eq. (2)'s time constant l / (2 r |omega|). Steady states: j_y = (l/2)
@@ -248,7 +248,7 @@ def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
     W = params["mass_kg"] * GRAVITY_M_S2
     strength = 2 * params["track_width_m"] * params["contact_length_m"] * params["cohesion_Pa"] \
         + W * np.tan(params["friction_angle_rad"])
-    if opts.lateral_law in ("shear", "shear_transient"):
+    if opts.lateral_law in SHEAR_LAWS:
         return float(strength)
     friction = params["lateral_friction_coeff"] * W
     return float(min(friction, strength)) if opts.lateral_shear_cap else float(friction)
@@ -259,7 +259,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     """All vehicle expressions.
 
     xv: the 12 states of VEHICLE_STATES (``layout``: PLANAR_LAYOUT), or with the four lateral shear
-    states of the "shear_transient" law (PLANAR_LATERAL_LAYOUT); u: commanded torques; acc: the body
+    states of the "shear" law (PLANAR_LATERAL_LAYOUT); u: commanded torques; acc: the body
     accelerations (a_x, a_y) assumed for the load transfer; P: parameter name -> symbol; compaction_N: the
     compaction resistance (magnitude) of the left and right track from the terrain; track_soil:
     optional track -> (cohesion, friction angle, shear modulus K) of the soil under that track (a
@@ -269,7 +269,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     acc on the solution of the algebraic loop), the pressure distributions and named signals.
     """
     X, Y, psi, vx, vy, rz, omL, omR, jL, jR, TL, TR = (xv[i] for i in layout.indices(VEHICLE_STATES))
-    transient = opts.lateral_law == "shear_transient"
+    transient = opts.lateral_law == "shear"
     if transient != (tuple(layout.names) == PLANAR_LATERAL_LAYOUT.names):
         raise ParameterError(f"model.lateral_law = {opts.lateral_law!r} needs the vehicle model "
                              f"{'planar_lateral' if transient else 'planar'} (states {', '.join(layout.names)})")
@@ -324,7 +324,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
         Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
         if track_soil is not None:
             c, phi, K = track_soil[k]
-        if opts.lateral_law in ("shear", "shear_transient"):
+        if opts.lateral_law in SHEAR_LAWS:
             F[k], Fy[k], Mz[k] = shear_forces(
                 shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts,
                 lagged[k] if transient else None)
@@ -412,11 +412,11 @@ class PlanarVehicle:
 
 class PlanarLateralVehicle(PlanarVehicle):
     """The planar vehicle with two lateral shear states per track (:data:`LATERAL_STATES`, after the
-    planar vehicle's 12): the vehicle model of the "shear_transient" lateral law (the registry's
+    planar vehicle's 12): the vehicle model of the "shear" lateral law (the registry's
     ``"planar_lateral"``; :func:`symtrack.model.vehicle_registry.for_options` picks it)."""
 
     name = "planar_lateral"
-    lateral_laws = ("shear_transient",)  # the lateral laws whose states it carries (vehicle_registry.for_options)
+    lateral_laws = ("shear",)  # the lateral laws whose states it carries (vehicle_registry.for_options)
     layout = PLANAR_LATERAL_LAYOUT
     state_names = PLANAR_LATERAL_LAYOUT.names
 

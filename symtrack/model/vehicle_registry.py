@@ -63,7 +63,7 @@ def get(vehicle=None):
 def for_options(opts, vehicle=None):
     """The vehicle model for model options ``opts`` when ``vehicle`` is None: the first registered
     model that declares ``opts.lateral_law`` among its ``lateral_laws`` (the laws whose states it
-    carries: ``"planar_lateral"`` for ``"shear_transient"``), else the default; else :func:`get`
+    carries: ``"planar_lateral"`` for ``"shear"``), else the default; else :func:`get`
     (``vehicle``)."""
     if vehicle is None and opts is not None:
         for model in REGISTRY.values():

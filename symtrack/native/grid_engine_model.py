@@ -63,7 +63,7 @@ NA = 8
 NS = 10
 NGEO = 7
 # the engine's vehicle is the planar one: w = its states and its algebraic accelerations (the C reads
-# ENG_NV and ENG_NW: engine_layout_c); NW of the default vehicle (the "shear_transient" law's has two
+# ENG_NV and ENG_NW: engine_layout_c); NW of the default vehicle (the "shear" law's has two
 # more: EngineFunctions.nw)
 NW = PLANAR_LAYOUT.nv + len(ALGEBRAIC)
 
