@@ -9,6 +9,7 @@ import pytest
 from symtrack.codegen import cli as codegen_cli
 from symtrack.model import SystemModel
 from symtrack.native.generate import build, unit_of
+from symtrack.simulation.scenario import load_scenario
 
 GEN = codegen_cli.REPO_GENERATED
 
@@ -36,7 +37,9 @@ def test_generated_files_are_exportable_and_small():
 
 def test_manifest_names_hash_and_units():
     man = json.loads((GEN / "manifest.json").read_text())
-    model = SystemModel()
+    # generated/ holds the validation scenario's model (the creep law it declares), not the default
+    model = SystemModel(load_scenario("validation").model)
+    assert model.opts.lateral_law == "creep" and SystemModel().opts.lateral_law == "shear"
     gen = build(model, "homogeneous")
     assert man["model_hash"] == gen.model_hash
     assert man["casadi_version"] == gen.casadi_version

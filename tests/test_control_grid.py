@@ -181,8 +181,9 @@ def test_engine_plant_starts_from_a_running_state(grid_run):
     plant = CL.make_plant(sc, None)
     from symtrack.model import SystemModel
 
-    xt, ut = CL.initial_state(SystemModel(), sc)
-    xv = xt[:len(VEHICLE_STATES)]
+    model = SystemModel(sc.model)
+    xt, ut = CL.initial_state(model, sc)
+    xv = xt[model.layout.block("vehicle")]
     x, y = plant.start(xv[0], xv[1], xv[2], ut, state=xv)
     assert np.array_equal(x, xv)
     s = plant.engine.state
@@ -195,7 +196,7 @@ def test_engine_plant_starts_from_a_running_state(grid_run):
     assert abs(x1[3] - xv[3]) < 0.02 and 0.19 < x1[0] - xv[0] < 0.21  # running on at the trim speed
     with pytest.raises(SimulationError, match="pose"):
         plant.start(xv[0] + 1.0, xv[1], xv[2], ut, state=xv)
-    with pytest.raises(SimulationError, match="12 vehicle states"):
+    with pytest.raises(SimulationError, match=f"{model.layout.nv} vehicle states"):
         plant.start(xv[0], xv[1], xv[2], ut, state=xv[:6])
 
 
@@ -206,8 +207,9 @@ def test_engine_plant_retry_and_partial_commit_from_checkpoints(grid_run):
     sc = S.load(str(d / "grid_short.toml"))
     from symtrack.model import SystemModel
 
-    xt, ut = CL.initial_state(SystemModel(), sc)
-    xv = xt[:len(VEHICLE_STATES)]
+    model = SystemModel(sc.model)
+    xt, ut = CL.initial_state(model, sc)
+    xv = xt[model.layout.block("vehicle")]
     h = 0.01
 
     def started(checkpoints):

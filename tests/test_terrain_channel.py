@@ -9,6 +9,7 @@ import pytest
 from symtrack.model import cell
 from symtrack.model.options import ModelOptions
 from symtrack.model.soil_law import BekkerWong
+from symtrack.model.vehicle import LATERAL_STATES, VEHICLE_STATES
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions
 
@@ -103,8 +104,9 @@ def _small_system(n=30):
 
 
 def test_the_dae_jacobian_is_an_arrowhead():
-    n, nv = 30, 12
+    n = 30
     m = _small_system(n)
+    nv = m.layout.nv  # the default law's 16 vehicle states
     J = ca.jacobian(ca.vertcat(m.ode_dae_expr, m.alg_expr), ca.vertcat(m.x, m.z)).sparsity()
     rows, cols = J.get_triplet()
     for r, c in zip(rows, cols, strict=True):
@@ -130,7 +132,10 @@ def test_the_block_built_jacobian_equals_casadi_automatic_jacobian():
     qc[:, 3] = rng.uniform(0, 3e4, n)
     qc[:, 4] = rng.integers(0, 2, n)
     p = np.r_[m.param_vector(PARAMS, Q), 0.01]
-    x = np.r_[rng.uniform(0, 2e-3, 2 * n), [0.1, 0.05, 0.02, 2.0, 0.01, 0.03, 5.0, 5.5, 0.01, 0.012, 1900, 2000]]
+    vehicle = dict(zip(VEHICLE_STATES, [0.1, 0.05, 0.02, 2.0, 0.01, 0.03, 5.0, 5.5, 0.01, 0.012, 1900, 2000],
+                       strict=True))
+    vehicle.update(zip(LATERAL_STATES, [0.004, -0.003, 0.01, 0.012], strict=True))  # the default law's
+    x = np.r_[rng.uniform(0, 2e-3, 2 * n), [vehicle[k] for k in m.layout.vehicle_names]]
     z = np.array([0.5, 0.01])
     u = np.array([2000.0, 1800.0])
     xs, zs = ca.MX.sym("x", x.size), ca.MX.sym("z", 2)

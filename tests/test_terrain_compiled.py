@@ -86,7 +86,7 @@ def test_grid_code_is_compiled():
     # the external function runs and equals the interpreted one
     fi, _ = grid_library(ModelOptions(), 64, 2, compiled=False)
     rng = np.random.default_rng(0)
-    args = [rng.uniform(0, 1e-3, 128), np.zeros(14), [100.0, 100.0], None, 1e-4]
+    args = [rng.uniform(0, 1e-3, 128), np.zeros(f.size1_in(1)), [100.0, 100.0], None, 1e-4]  # w: 16 + 2 (default law)
     n_p = fi.size1_in(3)
     p = np.zeros(n_p)
     p[:n_p - 2 - 5 * 64] = 1.0

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import symtrack
-from symtrack.model import SystemModel, vehicle_registry
+from symtrack.model import ModelOptions, SystemModel, vehicle_registry
 from symtrack.model.layout import ContactPose, StateLayout
 from symtrack.model.static import static_state
-from symtrack.model.vehicle import PLANAR_LAYOUT, VEHICLE_STATES, PlanarVehicle, vehicle_equations
+from symtrack.model.vehicle import LATERAL_STATES, PLANAR_LAYOUT, VEHICLE_STATES, PlanarVehicle, vehicle_equations
 from symtrack.simulation import loop
 from symtrack.simulation.plants import make_plant
 
@@ -58,7 +58,11 @@ def test_layout_names_blocks_and_cells():
 
 
 def test_the_default_model_is_the_planar_vehicle():
-    model = SystemModel()
+    """The planar vehicle carries the creep law; the default law ("shear") takes the planar vehicle with
+    its four lateral shear states, "planar_lateral" (docs/turning.md section 8)."""
+    assert SystemModel().vehicle is vehicle_registry.get("planar_lateral")
+    assert SystemModel().layout.vehicle_names == VEHICLE_STATES + LATERAL_STATES
+    model = SystemModel(ModelOptions(lateral_law="creep"))
     assert model.vehicle is vehicle_registry.get("planar")
     assert model.layout.vehicle_names == VEHICLE_STATES and model.state_names == model.layout.names
     pose = model.vehicle.contact_pose(ca.DM(np.arange(12.0)))

@@ -1,6 +1,7 @@
 """``python -m codegen`` / ``symtrack codegen``: write the generated C sources.
 
-Writes, for the homogeneous-terrain system of the default model options, the files listed in
+Writes, for the homogeneous-terrain system of the validation scenario's model options (the creep
+law it declares), the files listed in
 :mod:`symtrack.native.generate` plus ``homogeneous_validation.h`` (the numbers of the built-in validation
 scenario for the standalone C program), and the grid validation's standalone program's
 ``engine_gen.inc``, ``engine_soils.inc`` and ``grid_validation.h`` (:mod:`symtrack.codegen.grid_standalone`)
@@ -30,10 +31,13 @@ def render_all(scratch: Path) -> dict[str, bytes]:
     """Every file of generated/ as name -> bytes."""
     from symtrack.model import SystemModel
     from symtrack.native.generate import build, render
+    from symtrack.simulation.scenario import load_scenario
 
     from . import grid_standalone, standalone
 
-    model = SystemModel()
+    # the validation scenario's model (its declared lateral law, creep), which the standalone
+    # program runs; other options are generated afresh into the cache (native.cache.generated_sources)
+    model = SystemModel(load_scenario("validation").model)
     gen = build(model, model.terrain.name)
     files = render(gen, scratch)
     files[f"{gen.prefix}_validation.h"] = standalone.validation_header(model, gen)

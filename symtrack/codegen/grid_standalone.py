@@ -59,7 +59,7 @@ def render(scratch: Path) -> dict[str, bytes]:
         engine_functions,
         window_substeps,
     )
-    from symtrack.native.grid_engine_model import NA, NGEO, NW, soil_dispatch_c
+    from symtrack.native.grid_engine_model import NA, NGEO, soil_dispatch_c
     from symtrack.simulation.scenario import load_scenario
     from symtrack.terrain.world import open_world
 
@@ -87,7 +87,7 @@ def render(scratch: Path) -> dict[str, bytes]:
         f"#define GV_NX {g.shape[0]}LL", f"#define GV_NY {g.shape[1]}LL", f"#define GV_M {world.M}LL",
         f"#define GV_X0 {c_literal(g.origin_m[0])}", f"#define GV_Y0 {c_literal(g.origin_m[1])}",
         f"#define GV_DX {c_literal(g.cell_m)}",
-        f"#define GV_NA {NA}", f"#define GV_NW {NW}", f"#define GV_NGEO {NGEO}",
+        f"#define GV_NA {NA}", f"#define GV_NW {fns.nw}", f"#define GV_NGEO {NGEO}",
         f"#define GV_N_PV {state.pv.size}LL", f"#define GV_N_SUMS {state.n_sums}LL",
         f"#define GV_NY_OUT {state.ny_out}LL", f"#define GV_WORK {state.work.size}LL",
         f"#define GV_CELL_SUBSTEPS {settings.cell_substeps}LL",
@@ -113,7 +113,7 @@ def render(scratch: Path) -> dict[str, bytes]:
     names = ", ".join(f'"{n}"' for n in fns.output_names)
     text += f"static const char *gv_output_names[{len(fns.output_names)}] = {{{names}}};\n"
     text += "#endif\n"
-    return {"engine_gen.inc": gen, "engine_soils.inc": soil_dispatch_c(fns.n_soils).encode(),
+    return {"engine_gen.inc": gen, "engine_soils.inc": soil_dispatch_c(fns.n_soils, fns.layout).encode(),
             "grid_validation.h": text.encode()}
 
 

@@ -42,8 +42,8 @@ Schema (unknown keys are errors; ranges in brackets)::
     sample_time_s = 0.1
     solver = "ipopt"
     [model]                           # optional: any field of symtrack.model.options.ModelOptions,
-    lateral_law = "shear_quasistatic"             # for the plant and the prediction (e.g. the soil's shear law,
-                                      # docs/turning.md; default: the creep law)
+    lateral_law = "creep"             # for the plant and the prediction (docs/turning.md; default:
+                                      # "shear", the soil's own strength)
     [terrain]                         # optional: the plant is then the vehicle on the persistent
     cell_m = 0.25                     # grid terrain (symtrack.control.closedloop.make_grid_plant); keys
                                       # and ranges of symtrack/terrain/config.py (docs/terrain.md).

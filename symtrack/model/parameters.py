@@ -58,9 +58,9 @@ VEHICLE_PARAMS: tuple[ParamSpec, ...] = (
     _spec("internal_resistance_per_km_h", "Wong's internal resistance R_in/W_k per km/h of track speed",
           0.0, 0.1),
     _spec("lateral_friction_coeff", "lateral friction coefficient mu_t between track and soil "
-          "(lateral_law = \"creep\", the default, only)", 0.0, 5.0),
+          "(lateral_law = \"creep\" only)", 0.0, 5.0),
     _spec("lateral_creep_speed_m_s", "lateral slip speed eps_v at which friction reaches tanh(1) of mu_t "
-          "(lateral_law = \"creep\", the default, only)", 0.0, 10.0, False),
+          "(lateral_law = \"creep\" only)", 0.0, 10.0, False),
     _spec("drawbar_pull_N", "drawbar pull P (external resistance at the hitch)", 0.0, 1e7),
     _spec("hitch_height_m", "height h_d of the drawbar hitch", 0.0, 10.0),
 )

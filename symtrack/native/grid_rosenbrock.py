@@ -39,14 +39,16 @@ from __future__ import annotations
 
 import casadi as ca
 
-# NS: the channel sums S; NW: the 12 vehicle states + 2 algebraic (shared with the terrain engine)
-from .grid_engine_model import NS, NW, SumsTerrain, pressure_line
+# NS: the channel sums S (shared with the terrain engine); the vehicle's states and algebraic
+# accelerations, w, are sized by the vehicle model the options select (12 + 2 planar, 16 + 2 with the
+# "shear" law's lateral shear states)
+from .grid_engine_model import NS, SumsTerrain, pressure_line
 from .rosenbrock import GAMMA, N_STAGES
 from .rosenbrock import A as RB_A
 from .rosenbrock import C as RB_C
 from .rosenbrock import M as RB_M
 
-__all__ = ["NA", "NS", "NW", "build"]
+__all__ = ["NA", "NS", "build"]
 
 NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_right)
 
@@ -54,7 +56,9 @@ NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_
 def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") -> dict[str, ca.Function]:
     """The Functions of the grid Rosenbrock integrator for a pool of n_channels channels.
 
-    ``<name>``: (xc[2n], w[14], u[2], p[np], h) -> (xc, w) after n_steps steps of length h (s),
+    ``<name>``: (xc[2n], w[nw], u[2], p[np], h) -> (xc, w) after n_steps steps of length h (s), w the
+    vehicle's states and its algebraic accelerations (nw = 14 for the planar vehicle, 18 for the
+    "shear" law's),
     p being the grid model's parameter vector (vehicle and soil parameters, then the terrain's Q).
     """
     from symtrack.model import SystemModel
@@ -67,6 +71,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     veh = SystemModel(opts, agg)
     npv = len(PARAM_NAMES)
     xv, z, u, pv = veh.x, veh.z, veh.u, veh.p  # pv = (P, Q globals, S)
+    NW = xv.numel() + z.numel()
     h = ca.SX.sym("h")
     w = ca.vertcat(xv, z)
     Sv = pv[npv + NG:]

@@ -42,8 +42,9 @@ VEHICLES: dict[str, dict[str, float]] = {
         "internal_resistance_const": 0.0222,
         "internal_resistance_per_km_h": 0.0003,
         # calibrated against the validation table with the creep law (range 0.5-0.65); used by
-        # lateral_law = "creep" (the default) only: the "shear" law takes its lateral resistance
-        # from the soil (c, phi, K) and ignores both values below.
+        # lateral_law = "creep" (the paper's law, which the validation scenarios declare) only: the
+        # shear laws (the default "shear", "shear_quasistatic") take their lateral resistance from the
+        # soil (c, phi, K) and ignore both values below.
         "lateral_friction_coeff": 0.55,
         # calibrated against the validation table with the creep law: the yaw drift of 0.4 deg over
         # 20 m is a creep whose rate is proportional to this speed (MODEL.md section 1). Not a soil

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["REPORTED", "check", "table_markdown"]
+__all__ = ["REPORTED", "check", "comparison_markdown", "table_markdown"]
 
 # key in summary.json -> (reported, accepted range (low, high) or None, unit/scale label)
 REPORTED = (
@@ -39,4 +39,17 @@ def table_markdown(summary: dict) -> str:
              "|---|---|---|---|"]
     for key, reported, v, ok in check(summary):
         lines.append(f"| {key} | {reported} | {_fmt(v)} | {'yes' if ok else 'NO'} |")
+    return "\n".join(lines) + "\n"
+
+
+def comparison_markdown(declared: dict, other: dict, other_label: str) -> str:
+    """The validation table with a second run beside the scenario's own: ``declared`` the summary of
+    the scenario as it declares itself (the creep law, the paper's model), ``other`` the summary of
+    the same manoeuvre with another setting, labelled ``other_label`` (the README shows the shear
+    law's prediction this way)."""
+    lines = [f"| quantity | reported (seed / Ferretti & Girelli) | simulated | within | {other_label} | within |",
+             "|---|---|---|---|---|---|"]
+    for (key, reported, v, ok), (_, _, w, ok_w) in zip(check(declared), check(other), strict=True):
+        lines.append(f"| {key} | {reported} | {_fmt(v)} | {'yes' if ok else 'NO'} | {_fmt(w)} "
+                     f"| {'yes' if ok_w else 'NO'} |")
     return "\n".join(lines) + "\n"
