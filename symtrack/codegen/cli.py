@@ -27,8 +27,10 @@ log = logging.getLogger("symtrack.codegen")
 REPO_GENERATED = Path(__file__).resolve().parents[2] / "generated"
 
 
-def render_all(scratch: Path) -> dict[str, bytes]:
-    """Every file of generated/ as name -> bytes."""
+def render_all(scratch: Path, overrides=()) -> dict[str, bytes]:
+    """Every file of generated/ as name -> bytes; ``overrides``: ``--set`` items applied to the
+    validation scenarios (for example ``model.lateral_law=shear``: the standalone programs on the
+    package's default law, into a folder of their own)."""
     from symtrack.model import SystemModel
     from symtrack.native.generate import build, render
     from symtrack.simulation.scenario import load_scenario
@@ -37,20 +39,21 @@ def render_all(scratch: Path) -> dict[str, bytes]:
 
     # the validation scenario's model (its declared lateral law, creep), which the standalone
     # program runs; other options are generated afresh into the cache (native.cache.generated_sources)
-    model = SystemModel(load_scenario("validation").model)
+    sc = load_scenario("validation", list(overrides))
+    model = SystemModel(sc.model)
     gen = build(model, model.terrain.name)
     files = render(gen, scratch)
-    files[f"{gen.prefix}_validation.h"] = standalone.validation_header(model, gen)
-    files.update(grid_standalone.render(scratch))  # the grid validation's standalone program
+    files[f"{gen.prefix}_validation.h"] = standalone.validation_header(model, gen, sc)
+    files.update(grid_standalone.render(scratch, overrides))  # the grid validation's standalone program
     return files
 
 
-def write(out_dir: Path) -> list[str]:
+def write(out_dir: Path, overrides=()) -> list[str]:
     """Generate into out_dir; returns the names of the files that changed."""
     from symtrack.foundations.files import atomic_write_bytes
 
     with tempfile.TemporaryDirectory(prefix="symtrack-codegen-") as scratch:
-        files = render_all(Path(scratch))
+        files = render_all(Path(scratch), overrides)
     changed = []
     for name, data in sorted(files.items()):
         path = out_dir / name
@@ -76,7 +79,9 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     "required with mpc)")
     ap.add_argument("--check", action="store_true", help="write nothing; exit 1 if the folder is out of date")
     ap.add_argument("--solver", choices=("rti",), help="mpc: the controller (only rti: the real-time iteration)")
-    ap.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="mpc: override a scenario value")
+    ap.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                    help="override a scenario value (mpc: of the MPC scenario; else: of the validation scenarios "
+                    "the standalone programs run, for example model.lateral_law=shear; needs --out)")
     ap.add_argument("--no-run", action="store_true", help="mpc: generate and build, do not run the program")
     ap.add_argument("--compare", action="store_true",
                     help="mpc: also run the Python closed loop of the same configuration and print the agreement")
@@ -92,6 +97,12 @@ def run(args) -> int:
         from . import mpc
 
         return mpc.command(args)
+    overrides = tuple(getattr(args, "set", None) or ())
+    if overrides and not args.out:
+        from symtrack.foundations.errors import ScenarioError
+
+        raise ScenarioError("symtrack codegen --set: generated/ holds the validation scenarios as they are; "
+                            "give --out DIR for the programs of a changed scenario")
     out = Path(args.out) if args.out else REPO_GENERATED
     if args.check:
         stale = check(out)
@@ -100,7 +111,8 @@ def run(args) -> int:
             return 1
         log.info("%s is up to date", out)
         return 0
-    changed = write(out)
+    out.mkdir(parents=True, exist_ok=True)
+    changed = write(out, overrides)
     log.info("wrote %d changed file(s) into %s%s", len(changed), out, (": " + ", ".join(changed)) if changed else "")
     return 0
 

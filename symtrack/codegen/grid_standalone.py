@@ -48,8 +48,9 @@ def _time_grid(sc) -> tuple[np.ndarray, np.ndarray]:
     return np.array([t1 for _, t1, _ in ivs]), np.array([u for _, _, u in ivs])
 
 
-def render(scratch: Path) -> dict[str, bytes]:
-    """The generated/ files of the grid standalone program, name -> bytes."""
+def render(scratch: Path, overrides=()) -> dict[str, bytes]:
+    """The generated/ files of the grid standalone program, name -> bytes (``overrides``: ``--set``
+    items applied to the scenario)."""
     from symtrack.integrators.engine import (
         POWER_MODES,
         SDIRK_GAMMA,
@@ -63,7 +64,7 @@ def render(scratch: Path) -> dict[str, bytes]:
     from symtrack.simulation.scenario import load_scenario
     from symtrack.terrain.world import open_world
 
-    sc = load_scenario(SCENARIO)
+    sc = load_scenario(SCENARIO, list(overrides))
     settings = EngineSettings()
     st = sc.start
     world = open_world(sc.terrain, sc.params, sc.model, sc.run.macro_step_s, start_xy=(st.x_m, st.y_m))

@@ -48,8 +48,9 @@ def c_array(name: str, values, ctype: str = "double") -> str:
     return f"static const {ctype} {name}[{len(values)}] = {{\n  {body}\n}};\n"
 
 
-def validation_header(model, gen, scenario_name: str = "validation") -> bytes:
-    sc = load_scenario(scenario_name)
+def validation_header(model, gen, scenario="validation") -> bytes:
+    """The scenario (a built-in name or a loaded Scenario) as C constants for standalone_main.c."""
+    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
     params = sc.params
     p = model.param_vector(params)
     st = sc.start
