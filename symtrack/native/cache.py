@@ -108,8 +108,8 @@ def generated_sources(gen, stem: str) -> dict[str, bytes]:
             if all((REPO_GENERATED / n).exists() for n in names):
                 return {n: (REPO_GENERATED / n).read_bytes() for n in names}
         elif m.get("model") == gen.prefix:
-            log.info("generated/%s.c does not match this %s model (other options, or stale: python -m codegen); "
-                     "generating it afresh", stem, gen.prefix)
+            log.info("generating the C of this %s model (generated/%s.c holds the validation scenario's model, "
+                     "with other options; after a change of that model: python -m codegen)", gen.prefix, stem)
     with tempfile.TemporaryDirectory(prefix="symtrack-codegen-") as scratch:
         files = render(gen, Path(scratch))
     files.pop("manifest.json")
