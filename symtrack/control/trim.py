@@ -14,6 +14,11 @@ two commanded torques; equations: the derivatives of every state except X, Y, ya
 rows give command = actual torque). Same count, so a Newton root-finder (CasADi ``rootfinder``)
 solves it.
 
+The lagged lateral shear states of the "shear" law (symtrack.model.vehicle.LATERAL_STATES) are
+eliminated from the continuation (set to the solution of their own steady equations, which are affine
+in them) and then solved with every other state by a last Newton (:class:`_TrimProblem`); the
+``residual_norm`` of a :class:`TrimPoint` is the largest state derivative except the positions' there.
+
 A steady turn is found by continuation in curvature from the straight trim at the same speed;
 when Newton stops converging before the requested curvature, the last converged point tells which
 physical limit was reached (:func:`trim`): the lateral resistance (the tracks cannot carry the
