@@ -16,7 +16,6 @@ import statistics
 from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import load_scenario
-from .terrain import _clear
 
 __all__ = ["LAWS", "TARGET_RATIO", "TARGET_REAL_TIME_FACTOR", "bench_rows", "law_runs"]
 
@@ -40,8 +39,9 @@ def law_runs(scenario: str = "validation_grid", repeats: int = 3, warm_up: bool 
         for law in LAWS:
             sc, plant = plants[law]
             world = getattr(plant, "world", None)
-            if world is not None:
-                _clear(world)
+            if world is not None:  # a fresh field for every run (as symtrack.bench.terrain's runs)
+                for a in world.storage.arrays().values():
+                    a[:] = 0
             res = loop.run(sc, plant)
             if warm_up and k == 0:
                 continue
