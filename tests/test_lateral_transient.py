@@ -285,3 +285,19 @@ def test_bench_rows_of_the_two_laws(monkeypatch):
     assert fig["yaw_final_deg"] == pytest.approx(15.45215, rel=5e-3)
     assert fig["lateral_deviation_m"] == pytest.approx(2.50376, rel=5e-3)
     assert rows[2]["wall_ratio"] > 0 and rows[2]["cpu_ratio"] > 0
+
+
+def test_trim_reaches_tight_turns_down_to_the_lateral_limit(models):
+    """The continuation's tangent predictor (symtrack.control.trim): a 3 m turn at 3 m/s on sandy loam,
+    which the continuation from straight running missed before (its first curvature steps failed),
+    and a 1.5 m turn at 2 m/s on the clay (the inner track driven) are found; at 2 m and 3 m/s on the
+    clay the centripetal force m V^2 / R exceeds the soil's lateral strength: a TrimError naming it."""
+    from symtrack.control.trim import TrimError, trim
+
+    _, model = models
+    tp = trim(model, _params("sandy_loam_15"), 3.0, 3.0)
+    assert tp.residual_norm < 1e-9 and tp.limits["lateral_usage"] < 1
+    tp = trim(model, _params(), 2.0, 1.5)
+    assert tp.residual_norm < 1e-9 and tp.u[0] > 0 < tp.u[1]
+    with pytest.raises(TrimError, match="lateral resistance limit"):
+        trim(model, _params(), 3.0, 2.0)

@@ -164,6 +164,9 @@ class _TrimProblem:
             res = ode[self.eq_rows]
         g = ca.Function("trim_residual", [w, spec], [res])
         self.residual = g
+        # the tangent of the solution path in the yaw rate, dw/dr_z = -(dg/dw)^-1 dg/dr_z (the predictor)
+        self.tangent = ca.Function("trim_tangent", [w, spec],
+                                   [-ca.solve(ca.jacobian(res, w), ca.jacobian(res, spec[1]))])
         self.assemble = ca.Function("trim_assemble", [w, spec], [x, u])
         self.rf = ca.rootfinder("trim", "newton", g, {"abstol": settings.abstol, "max_iter": settings.max_iter,
                                                       "error_on_fail": True})
@@ -201,6 +204,15 @@ class _TrimProblem:
         if res > 1e3 * self.settings.abstol:
             return None
         return w, res
+
+    def predict(self, w, speed, yaw_rate, yaw_rate_next):
+        """The continuation's predictor: w moved along the solution path's tangent to yaw_rate_next."""
+        d = np.array(self.tangent(w, ca.DM([speed, yaw_rate]))).ravel()
+        if not np.all(np.isfinite(d)):
+            return w
+        wp = w + d * (yaw_rate_next - yaw_rate)
+        ok = np.all(np.isfinite(np.array(self.residual(wp, ca.DM([speed, yaw_rate_next])))))
+        return wp if ok else w
 
     def point(self, w, speed, yaw_rate):
         x, u = self.assemble(w, ca.DM([speed, yaw_rate]))
@@ -315,7 +327,10 @@ def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | N
         last_x, last_u = problem.point(w, speed_m_s, 0.0)
         while frac < 1.0 - 1e-12:
             nxt = min(1.0, frac + step)
-            sol = problem.solve(w, speed_m_s, nxt * target)
+            # from the tangent predictor, else from the last point (corrector: Newton, then KINSOL)
+            sol = problem.solve(problem.predict(w, speed_m_s, frac * target, nxt * target), speed_m_s, nxt * target)
+            if sol is None:
+                sol = problem.solve(w, speed_m_s, nxt * target)
             if sol is None:
                 step *= 0.5
                 if step < settings.min_step_fraction:
