@@ -257,7 +257,7 @@ def test_examples_steady_turns_and_sensitivity_run(capsys):
     import runpy
 
     ns = runpy.run_path("examples/steady_turns.py")
-    ns["main"](["--radii", "10", "--speeds", "2"])
+    ns["main"](["--law", "shear", "--radii", "10", "--speeds", "2"])  # the lagged law (the example's default)
     out = capsys.readouterr().out
     assert out.count("\n| clayey_soil_thailand_38 | 10 | 2 |") == 1 and "no steady turn" not in out
     ns = runpy.run_path("examples/validation_sensitivity.py")

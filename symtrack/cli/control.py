@@ -7,7 +7,8 @@ import json
 import logging
 from pathlib import Path
 
-__all__ = ["DEFAULT_SOIL", "DEFAULT_VEHICLE", "add_parsers", "linearize_command", "mpc_command", "mpc_scenarios_list"]
+__all__ = ["DEFAULT_SOIL", "DEFAULT_VEHICLE", "add_parsers", "linearize_command", "linearize_model_options",
+           "mpc_command", "mpc_scenarios_list"]
 
 log = logging.getLogger("symtrack.control")
 
@@ -28,15 +29,17 @@ def linearize_command(args) -> int:
     from ..model import SystemModel
     from ..reports.run_files import write_folder
 
+    opts = linearize_model_options(args.set)
     out = check_output_folder(args.out)  # before the work (DESIGN.md: outputs checked writable first)
     params = _params(args.vehicle, args.soil)
-    model = SystemModel()
+    model = SystemModel(opts)
     tp = trim(model, params, args.speed, args.radius)
     lin = L.linearize(model, tp, path_frame=args.path_frame)
     mode_list = L.modes(lin)
     ctrb = L.controllability(lin)
     d = L.to_dict(lin)
     d["vehicle_preset"], d["soil_preset"] = args.vehicle, args.soil
+    d["lateral_law"] = opts.lateral_law
     d["modes"] = mode_list
     d["controllability"] = ctrb
     report = L.report_markdown(lin, mode_list, ctrb)
@@ -46,6 +49,29 @@ def linearize_command(args) -> int:
     print(report)
     print(f"linearization written to {out} (linearization.json, linearization.npz, modes.md, bode.png)")
     return 0
+
+
+def linearize_model_options(overrides):
+    """The model options of ``symtrack linearize`` from its ``--set model.KEY=VALUE`` overrides (the
+    ``[model]`` keys of a scenario: any :class:`~symtrack.model.ModelOptions` field, e.g.
+    ``model.lateral_law=shear``); the package's defaults for the rest."""
+    import dataclasses
+
+    from ..foundations.config import apply_overrides, check_keys
+    from ..foundations.errors import ParameterError, ScenarioError
+    from ..model import ModelOptions
+
+    doc = apply_overrides({}, list(overrides or []))
+    other = sorted(set(doc) - {"model"})
+    if other:
+        raise ScenarioError(f"symtrack linearize --set: section(s) {', '.join(other)} not allowed; allowed: model "
+                            "(the soil and vehicle are --soil and --vehicle)")
+    table = doc.get("model", {})
+    check_keys("model", table, [f.name for f in dataclasses.fields(ModelOptions)])
+    try:
+        return ModelOptions(**table)
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
 
 
 def mpc_command(args) -> int:
@@ -119,6 +145,8 @@ def add_parsers(sub) -> None:
     lz.add_argument("--vehicle", default=DEFAULT_VEHICLE, help=f"vehicle preset (default {DEFAULT_VEHICLE})")
     lz.add_argument("--path-frame", action="store_true",
                     help="straight running only: keep y_m and yaw_rad (lateral offset, heading error)")
+    lz.add_argument("--set", action="append", metavar="model.KEY=VALUE",
+                    help="a model option, e.g. model.lateral_law=shear (any [model] key of a scenario)")
     lz.add_argument("--out", required=True, help="output folder")
     lz.set_defaults(func=linearize_command)
     mp = sub.add_parser("mpc", help="closed-loop MPC path tracking (built-in name or TOML file); "

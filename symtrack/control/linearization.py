@@ -39,6 +39,7 @@ MODE_GROUPS = (
     ("yaw", ("yaw_rate_rad_s", "yaw_rad")),
     ("shear/sprocket", ("omega_left_rad_s", "omega_right_rad_s", "shear_left_m", "shear_right_m")),
     ("torque lag", ("torque_left_N_m", "torque_right_N_m")),
+    ("lateral shear", ("lateral_shear_", "shear_twist_")),  # the "shear" law's lagged states
     ("sinkage cells", ("sinkage_",)),
 )
 
@@ -145,7 +146,8 @@ def modes(lin: Linearization) -> list[dict]:
 # Typical magnitudes used to scale states before the controllability test (by name prefix).
 TYPICAL_SCALE = (
     ("u_m_s", 1.0), ("v_m_s", 0.1), ("yaw_rate_rad_s", 0.1), ("y_m", 0.1), ("yaw_rad", 0.01),
-    ("omega_", 1.0), ("shear_", 0.01), ("torque_", 1000.0), ("sinkage_rate_", 0.01), ("sinkage_", 0.001),
+    ("omega_", 1.0), ("lateral_shear_", 0.01), ("shear_twist_", 0.1), ("shear_", 0.01), ("torque_", 1000.0),
+    ("sinkage_rate_", 0.01), ("sinkage_", 0.001),
 )
 INPUT_SCALE_N_M = 1000.0
 

@@ -14,6 +14,11 @@ two commanded torques; equations: the derivatives of every state except X, Y, ya
 rows give command = actual torque). Same count, so a Newton root-finder (CasADi ``rootfinder``)
 solves it.
 
+The lagged lateral shear states of the "shear" law (symtrack.model.vehicle.LATERAL_STATES) are
+eliminated from the continuation (set to the solution of their own steady equations, which are affine
+in them) and then solved with every other state by a last Newton (:class:`_TrimProblem`); the
+``residual_norm`` of a :class:`TrimPoint` is the largest state derivative except the positions' there.
+
 A steady turn is found by continuation in curvature from the straight trim at the same speed;
 when Newton stops converging before the requested curvature, the last converged point tells which
 physical limit was reached (:func:`trim`): the lateral resistance (the tracks cannot carry the
@@ -32,7 +37,7 @@ import numpy as np
 from ..foundations.errors import ParameterError, SymtrackError
 from ..model import SystemModel
 from ..model.static import static_state
-from ..model.vehicle import GRAVITY_M_S2, lateral_resistance_max_N
+from ..model.vehicle import GRAVITY_M_S2, LATERAL_STATES, lateral_resistance_max_N
 
 __all__ = ["POSITION_STATES", "SPECIFIED_STATES", "TrimError", "TrimPoint", "TrimSettings", "limit_usage", "trim"]
 
@@ -110,27 +115,58 @@ class TrimPoint:
 
 
 class _TrimProblem:
-    """The root-finding problem on model.ode, parametrised by (speed, yaw rate)."""
+    """The root-finding problem on model.ode, parametrised by (speed, yaw rate).
+
+    States whose own equations are affine in them (the lagged lateral shear states of the "shear"
+    law, :data:`~symtrack.model.vehicle.LATERAL_STATES`: relaxations towards the current slips) are
+    eliminated from the continuation: they are set to the exact solution of their steady equations
+    for the other states (a linear solve in closed form), so the continuation's unknowns and
+    equations are those of the quasi-static law. Starting them at zero instead, Newton does not reach
+    them (the lagged slips set the sliding direction). :meth:`polish` then runs a Newton on every
+    state and equation from that point.
+    """
 
     def __init__(self, model: SystemModel, p, settings: TrimSettings):
         self.model, self.p, self.settings = model, ca.DM(p), settings
         names = model.state_names
         self.fixed = [names.index(n) for n in POSITION_STATES + SPECIFIED_STATES]
-        self.free = [i for i in range(model.nx) if i not in self.fixed]
-        self.eq_rows = [i for i in range(model.nx) if names[i] not in POSITION_STATES]
-        nf = len(self.free)
-        w = ca.SX.sym("w", nf + model.u.numel())
+        self.free_all = [i for i in range(model.nx) if i not in self.fixed]
+        self.lagged = [i for i in self.free_all if names[i] in LATERAL_STATES]
+        self.free = [i for i in self.free_all if i not in self.lagged]  # the continuation's unknowns
+        self.eq_rows_all = [i for i in range(model.nx) if names[i] not in POSITION_STATES]
+        self.eq_rows = [i for i in self.eq_rows_all if i not in self.lagged]
+        nf, nu = len(self.free), model.u.numel()
+        w = ca.SX.sym("w", nf + nu)
         spec = ca.SX.sym("spec", 2)  # speed, yaw rate
+        lag = ca.SX.sym("lag", len(self.lagged))
         x = [ca.SX(0)] * model.nx
         for k, i in enumerate(self.free):
             x[i] = w[k]
+        for k, i in enumerate(self.lagged):
+            x[i] = lag[k]
         x[names.index("u_m_s")] = spec[0]
         x[names.index("yaw_rate_rad_s")] = spec[1]
         x = ca.vertcat(*x)
         u = w[nf:]
-        res = model.ode(x, u, self.p)[self.eq_rows]
+        ode = model.ode(x, u, self.p)
+        if self.lagged:
+            # the lagged states' rows are affine in them: f = J lag + f0, steady lag = -J^-1 f0
+            f_lag = ode[self.lagged]
+            J = ca.jacobian(f_lag, lag)
+            if ca.depends_on(J, lag):
+                raise SymtrackError("trim: the lagged lateral shear states' equations are not affine in them; "
+                                    "their elimination (symtrack.control.trim) does not apply")
+            f0 = ca.substitute(f_lag, lag, ca.SX.zeros(lag.shape))
+            lag_steady = -ca.solve(J, f0)
+            x = ca.substitute(x, lag, lag_steady)
+            res = ca.substitute(ode[self.eq_rows], lag, lag_steady)
+        else:
+            res = ode[self.eq_rows]
         g = ca.Function("trim_residual", [w, spec], [res])
         self.residual = g
+        # the tangent of the solution path in the yaw rate, dw/dr_z = -(dg/dw)^-1 dg/dr_z (the predictor)
+        self.tangent = ca.Function("trim_tangent", [w, spec],
+                                   [-ca.solve(ca.jacobian(res, w), ca.jacobian(res, spec[1]))])
         self.assemble = ca.Function("trim_assemble", [w, spec], [x, u])
         self.rf = ca.rootfinder("trim", "newton", g, {"abstol": settings.abstol, "max_iter": settings.max_iter,
                                                       "error_on_fail": True})
@@ -139,6 +175,18 @@ class _TrimProblem:
         self.rf_safe = ca.rootfinder("trim_ls", "kinsol", g, {
             "abstol": settings.abstol, "max_iter": settings.max_iter, "error_on_fail": True,
             "strategy": "linesearch", "disable_internal_warnings": True})
+        # the full problem (every free state and every equation), for the polish
+        wa = ca.SX.sym("wa", len(self.free_all) + nu)
+        xa = [ca.SX(0)] * model.nx
+        for k, i in enumerate(self.free_all):
+            xa[i] = wa[k]
+        xa[names.index("u_m_s")] = spec[0]
+        xa[names.index("yaw_rate_rad_s")] = spec[1]
+        xa = ca.vertcat(*xa)
+        self.residual_all = ca.Function("trim_residual_all", [wa, spec],
+                                        [model.ode(xa, wa[len(self.free_all):], self.p)[self.eq_rows_all]])
+        self.rf_all = ca.rootfinder("trim_all", "newton", self.residual_all, {
+            "abstol": settings.abstol, "max_iter": settings.max_iter, "error_on_fail": True})
 
     def solve(self, w0, speed, yaw_rate):
         spec = ca.DM([speed, yaw_rate])
@@ -157,9 +205,41 @@ class _TrimProblem:
             return None
         return w, res
 
+    def predict(self, w, speed, yaw_rate, yaw_rate_next):
+        """The continuation's predictor: w moved along the solution path's tangent to yaw_rate_next."""
+        d = np.array(self.tangent(w, ca.DM([speed, yaw_rate]))).ravel()
+        if not np.all(np.isfinite(d)):
+            return w
+        wp = w + d * (yaw_rate_next - yaw_rate)
+        ok = np.all(np.isfinite(np.array(self.residual(wp, ca.DM([speed, yaw_rate_next])))))
+        return wp if ok else w
+
     def point(self, w, speed, yaw_rate):
         x, u = self.assemble(w, ca.DM([speed, yaw_rate]))
         return np.array(x).ravel(), np.array(u).ravel()
+
+    def polish(self, w, speed, yaw_rate):
+        """Newton on every free state (the eliminated ones too) and every equation, from the
+        continuation's solution w; returns (x, u, residual) with the residual over all the
+        equations (the largest state derivative except the positions'), or None if it fails."""
+        x, u = self.point(w, speed, yaw_rate)
+        spec = ca.DM([speed, yaw_rate])
+        wa0 = np.concatenate([x[self.free_all], u])
+        if self.lagged:
+            try:
+                wa = np.array(self.rf_all(wa0, spec)).ravel()
+            except RuntimeError:
+                return None
+            if not np.all(np.isfinite(wa)):
+                return None
+        else:
+            wa = wa0
+        res = float(np.linalg.norm(np.array(self.residual_all(wa, spec)).ravel(), np.inf))
+        if res > 1e3 * self.settings.abstol:
+            return None
+        x = x.copy()
+        x[self.free_all] = wa[:len(self.free_all)]
+        return x, wa[len(self.free_all):], res
 
 
 def _outputs(model, x, u, p) -> dict:
@@ -247,7 +327,10 @@ def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | N
         last_x, last_u = problem.point(w, speed_m_s, 0.0)
         while frac < 1.0 - 1e-12:
             nxt = min(1.0, frac + step)
-            sol = problem.solve(w, speed_m_s, nxt * target)
+            # from the tangent predictor, else from the last point (corrector: Newton, then KINSOL)
+            sol = problem.solve(problem.predict(w, speed_m_s, frac * target, nxt * target), speed_m_s, nxt * target)
+            if sol is None:
+                sol = problem.solve(w, speed_m_s, nxt * target)
             if sol is None:
                 step *= 0.5
                 if step < settings.min_step_fraction:
@@ -258,7 +341,12 @@ def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | N
             frac = nxt
             last_x, last_u = problem.point(w, speed_m_s, frac * target)
             step = min(2 * step, 1.0 / settings.continuation_steps * 4)
-    x, u = problem.point(w, speed_m_s, 0.0 if radius_m is None else speed_m_s / radius_m)
+    yaw_rate = 0.0 if radius_m is None else speed_m_s / radius_m
+    polished = problem.polish(w, speed_m_s, yaw_rate)
+    if polished is None:
+        raise TrimError(f"trim at speed_m_s = {speed_m_s:g}, radius_m = {radius_m!r}: the Newton on every state "
+                        "(the lagged lateral shear states included) did not converge from the continuation's point")
+    x, u, res = polished
     usage = limit_usage(model, params, x, u, p)
     for k in ("left", "right"):
         om = x[model.state_index(f"omega_{k}_rad_s")]
