@@ -126,16 +126,16 @@ def test_failed_solve_reuses_shifted_plan(model):
     x, u = CL.initial_state(model, sc)
     path = sc.build_path()
     ref = path.reference(0.0, mpc.N, sc.mpc.sample_time_s, 0.0)
-    info = mpc.prepare(x[:12], x[12:], u, ref)
+    info = mpc.prepare(x[:model.layout.nv], x[model.layout.nv:], u, ref)
     assert info.success
     _, plan = mpc.predicted()
     # a reference with NaN makes the solver fail: no exception, the shifted plan is applied
     bad = ref.copy()
     bad[:, 0] = np.nan
-    u1, info1 = mpc.step(x[:12], x[12:], u, bad)
+    u1, info1 = mpc.step(x[:model.layout.nv], x[model.layout.nv:], u, bad)
     assert not info1.success and mpc.stats.failed == 1
     np.testing.assert_allclose(u1, plan[1])
-    u2, _ = mpc.step(x[:12], x[12:], u, bad)
+    u2, _ = mpc.step(x[:model.layout.nv], x[model.layout.nv:], u, bad)
     np.testing.assert_allclose(u2, plan[2])
     assert mpc.stats.failed == 2
 

@@ -56,7 +56,7 @@ def test_least_squares_residuals_are_the_nlp_cost(model, huber):
         us = rng.normal(size=2)
         ks = rng.normal(size=mpc.nk)
         rf = ref[3] + rng.normal(scale=0.3, size=5)
-        cost = float(mpc.stage_fn(xs, us, ks, rf, mpc.p_model, x[12:])[3])
+        cost = float(mpc.stage_fn(xs, us, ks, rf, mpc.p_model, x[model.layout.nv:])[3])
         r = np.asarray(mpc.res_fn(xs, us, rf)[0]).ravel()
         assert float(r @ r) == pytest.approx(cost, rel=1e-10)
         costN = float(mpc._term_fn(xs, rf))
@@ -70,10 +70,10 @@ def test_rti_iterates_converge_to_the_converged_nmpc(model):
     from a perturbed plan already contract."""
     sc, x, u, ref = _problem(model, overrides=["start.y_m=0.3"], tol=1e-9)
     nmpc = PathTrackingMPC(model, sc.params, sc.mpc)
-    assert nmpc.prepare(x[:12], x[12:], u, ref).success
+    assert nmpc.prepare(x[:model.layout.nv], x[model.layout.nv:], u, ref).success
     w_star = nmpc._w.copy()
     rti = PathTrackingMPC(model, sc.params, dataclasses.replace(sc.mpc, solver="rti"))
-    x0s = rti._x0s(x[:12], u)
+    x0s = rti._x0s(x[:model.layout.nv], u)
     # a perturbed plan: torques off by 0.2 kN m (the states and collocation values are then off
     # the dynamics too)
     w0 = w_star.copy()
@@ -81,7 +81,7 @@ def test_rti_iterates_converge_to_the_converged_nmpc(model):
     for k in range(rti.N):
         w0[k * blk + nxa:k * blk + nxa + 2] += 0.2 * np.array([1.0, -1.0])
     steps = []
-    w, ok, iters, status = gn_solve(rti, x0s, x[12:], ref, w0, max_iter=60, tol=1e-9, steps=steps)
+    w, ok, iters, status = gn_solve(rti, x0s, x[model.layout.nv:], ref, w0, max_iter=60, tol=1e-9, steps=steps)
     assert ok, status
     dist0 = np.max(np.abs(w0 - w_star))
     assert np.max(np.abs(w - w_star)) < 1e-5 * dist0
@@ -117,10 +117,10 @@ def test_rti_qp_failure_uses_the_fallback(model, monkeypatch):
     is applied (a fallback, not a failure); when that fails too, the shifted previous plan."""
     sc, x, u, ref = _problem(model, "headland_uturn", solver="rti")
     mpc = PathTrackingMPC(model, sc.params, sc.mpc)
-    assert mpc.prepare(x[:12], x[12:], u, ref).success
+    assert mpc.prepare(x[:model.layout.nv], x[model.layout.nv:], u, ref).success
     _, plan = mpc.predicted()
     monkeypatch.setattr(mpc.rti, "feedback", lambda x0s, ref: (None, False, "forced failure"))
-    u1, info = mpc.step(x[:12], x[12:], u, ref)
+    u1, info = mpc.step(x[:model.layout.nv], x[model.layout.nv:], u, ref)
     assert info.success and "forced failure -> fallback ipopt" in info.status
     assert mpc.stats.fallbacks == 1 and mpc.stats.failed == 0
     # the applied command is the fallback's plan, not a stale one
@@ -130,7 +130,7 @@ def test_rti_qp_failure_uses_the_fallback(model, monkeypatch):
     # both fail (a NaN reference): the shifted previous plan, counted as failed
     bad = ref.copy()
     bad[:, 0] = np.nan
-    u2, info2 = mpc.step(x[:12], x[12:], u, bad)
+    u2, info2 = mpc.step(x[:model.layout.nv], x[model.layout.nv:], u, bad)
     assert not info2.success and mpc.stats.failed == 1
     np.testing.assert_allclose(u2, plan2[1])
     del plan
@@ -164,8 +164,8 @@ CACHE_SCRIPT = textwrap.dedent("""
     mpc = PathTrackingMPC(model, sc.params, sc.mpc)
     x, u = CL.initial_state(model, sc)
     ref = sc.build_path().reference(0.0, mpc.N, 0.1, 0.0)
-    mpc.prepare(x[:12], x[12:], u, ref)
-    u1, info = mpc.step(x[:12], x[12:], u, ref)
+    mpc.prepare(x[:model.layout.nv], x[model.layout.nv:], u, ref)
+    u1, info = mpc.step(x[:model.layout.nv], x[model.layout.nv:], u, ref)
     print(json.dumps({"builds": len(solver_cache.builds), "u": list(u1), "ok": info.success,
                       "external": mpc.rti.coll.class_name() if mpc.rti else None}))
 """)
