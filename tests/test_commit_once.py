@@ -26,10 +26,12 @@ from symtrack.terrain.storage import Grid, Terrain
 ROOT = Path(__file__).resolve().parent.parent
 
 # one pass of 0.5 m on a 32 x 16 field, on the terrain engine: the simulation is milliseconds, the
-# run's seconds are start-up and figures (the moments a kill lands in)
+# run's seconds are start-up and figures (the moments a kill lands in); every figure, the GIF
+# included (the writer's longest phase, and matplotlib's animation line that --quiet must not show)
 SCENARIO = """
 name = "tiny_inplace"
 [run]
+all_figures = true
 duration_s = 5.0
 output_dt_s = 0.01
 integrator = "grid_fast"

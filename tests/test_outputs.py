@@ -1,0 +1,59 @@
+"""What a terrain run writes by default and with ``run.all_figures = true`` (issue 26, item 2):
+the default leaves out the slow figures (the pass animations, the earlier passes' sinkage maps
+and trajectory plots) and report.html says so; every image report.html shows is a file of the
+folder; a bad value is an error naming the key."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from symtrack.cli import main
+from symtrack.foundations.errors import ScenarioError
+
+SHORT = ["--set", "run.stop_after_distance_m=0.3"]
+
+
+def _run(out, *sets) -> str:
+    assert main(["simulate", "multipass", "--out", str(out), "--quiet", *SHORT, *sets]) == 0
+    page = (out / "report.html").read_text()
+    shown = re.findall(r"<figcaption>([^<]+)</figcaption>", page)
+    assert shown and all((out / name).is_file() for name in shown)  # the report shows written files only
+    return page
+
+
+def test_the_default_writes_the_figures_read_first_and_the_report_says_what_it_left_out(tmp_path):
+    out = tmp_path / "two"
+    page = _run(out, "--set", "terrain.passes=2")
+    assert not list(out.rglob("*.gif"))
+    for name in ("passes.png", "sinkage_map_pass_2.png", "rut_section.png", "risk_map.png", "density_map.png",
+                 "pass_2/path.png", "pass_2/torques.png", "pass_1/trajectory.csv", "pass_1/summary.json"):
+        assert (out / name).is_file(), name
+    assert not (out / "sinkage_map_pass_1.png").exists() and not list((out / "pass_1").glob("*.png"))
+    assert "Not drawn" in page and "run.all_figures = true" in page and "passes 1 to 1" in page
+    one = tmp_path / "one"
+    page = _run(one, "--set", "terrain.passes=1")
+    assert (one / "sinkage_map.png").is_file() and (one / "path.png").is_file() and not (one / "animation.gif").exists()
+    assert "pass animations" in page and "passes 1 to" not in page
+
+
+def test_all_figures_writes_the_animations_and_every_pass_plots(tmp_path):
+    out = tmp_path / "all"
+    page = _run(out, "--set", "terrain.passes=2", "--set", "run.all_figures=true")
+    for name in ("animation_pass_1.gif", "animation_pass_2.gif", "sinkage_map_pass_1.png", "sinkage_map_pass_2.png",
+                 "pass_1/path.png", "pass_2/path.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert "Not drawn" not in page and "animation_pass_1.gif" in page
+
+
+def test_all_figures_must_be_true_or_false(tmp_path, capsys):
+    assert main(["simulate", "multipass", "--out", str(tmp_path / "a"), "--quiet", "--set", "run.all_figures=1"]) == 2
+    err = capsys.readouterr().err
+    assert "run.all_figures = 1" in err and "true or false" in err
+    assert not (tmp_path / "a").exists()
+    # a field study draws no per-pass figures: the key is not one of its [run] keys
+    from symtrack.studies.field import load_field_spec
+
+    with pytest.raises(ScenarioError, match="all_figures"):
+        load_field_spec("field_traffic", ["run.all_figures=true"])
