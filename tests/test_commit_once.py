@@ -26,12 +26,10 @@ from symtrack.terrain.storage import Grid, Terrain
 ROOT = Path(__file__).resolve().parent.parent
 
 # one pass of 0.5 m on a 32 x 16 field, on the terrain engine: the simulation is milliseconds, the
-# run's seconds are start-up and figures (the moments a kill lands in); every figure, the GIF
-# included (the writer's longest phase, and matplotlib's animation line that --quiet must not show)
+# run's seconds are start-up and figures (the moments a kill lands in)
 SCENARIO = """
 name = "tiny_inplace"
 [run]
-all_figures = true
 duration_s = 5.0
 output_dt_s = 0.01
 integrator = "grid_fast"
@@ -100,7 +98,7 @@ def setup(tmp_path_factory):
         time.sleep(0.001)
     err = p.stderr.read().decode()
     assert p.returncode == 0, err
-    assert "Animation.save" not in err  # --quiet: no matplotlib line (issue 26, the newcomer's list)
+    # --quiet without matplotlib's animation line: tests/test_outputs.py (the default draws no animation)
     total = time.monotonic() - t0
     write = (t_summary - t_stage) if t_stage is not None and t_summary is not None else 0.05
     return d, sc, f, first_id, total, max(write, 0.005)
