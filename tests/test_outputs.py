@@ -74,3 +74,15 @@ def test_all_figures_must_be_true_or_false(tmp_path, capsys):
 
     with pytest.raises(ScenarioError, match="all_figures"):
         load_field_spec("field_traffic", ["run.all_figures=true"])
+
+
+def test_the_bench_row_of_the_outputs_adds_up():
+    """symtrack bench's output-cost row (symtrack/bench/outputs.py) on a short pass: the command
+    and the timed run ran, the parts add up to the timed run; no wall-time bound."""
+    from symtrack.bench.outputs import case_row
+
+    r = case_row("one short pass", "multipass", ["terrain.passes=1", "run.stop_after_distance_m=0.1"])
+    assert r["images"] == 12 and r["command_wall_s"] > 0 and 0 < r["time_loop_s"] <= r["simulate_s"]
+    parts = r["start_up_s"] + r["simulate_s"] + r["figures_s"] + r["write_s"]
+    assert parts == pytest.approx(r["timed_run_wall_s"]) and r["import_s"] <= r["start_up_s"]
+    assert r["outputs_over_simulate"] > 0 and "x the simulation" in r["note"]
