@@ -1,11 +1,12 @@
 # symtrack: two commands on a fresh clone (Python 3.11+ and a C compiler):
 #   make demo   -> .venv, install, run the validation scenario, plots and summary in out/validation/
-#   make test   -> .venv with the dev extra, ruff, the test suite
+#   make test   -> .venv with the dev extra, ruff, the test suite's fast set (make test-slow: the slow
+#                  physics and build checks; CI runs both)
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test lint clean codegen standalone grid-standalone bench
+.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,7 +24,11 @@ lint: $(VENV)/.installed-dev
 	$(VENV)/bin/ruff check .
 
 test: lint
-	$(PY) -m pytest
+	$(PY) -m pytest -m "not slow"
+
+# the tests marked slow (pyproject.toml: brute-force, IDAS and fixed-step references, large compiles)
+test-slow: $(VENV)/.installed-dev
+	$(PY) -m pytest -m slow
 
 # generated C (docs/codegen.md): regenerate generated/, build and run the standalone program, benchmark
 CC ?= cc

@@ -36,7 +36,8 @@ from .terrain.storage import Terrain
 
 __all__ = ["ANIMATION_EVERY_S", "Built", "IncompleteSimulation", "Result", "build", "simulate"]
 
-# a grid run keeps a snapshot of its loaded cells this often, for the pass animations
+# a grid run keeps a snapshot of its loaded cells this often, for the pass animations (with
+# run.all_figures only: the default draws no animation)
 ANIMATION_EVERY_S = 0.1
 
 
@@ -191,7 +192,8 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
     built = build(scenario.scenario if isinstance(scenario, Built) else scenario, integrator=integrator,
                   terrain=terrain)
     scenario = built.scenario
-    out = built.run(terrain, progress=progress, record_every_s=ANIMATION_EVERY_S)
+    record = ANIMATION_EVERY_S if scenario.run.all_figures else None
+    out = built.run(terrain, progress=progress, record_every_s=record)
     result = Result(scenario, out.runs, out.summary, out.pass_summaries, out.study)
     failure = out.failure
     if failure is not None:

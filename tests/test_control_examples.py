@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from symtrack.control import bench
 
@@ -37,6 +38,7 @@ def test_mpc_example(tmp_path):
     assert (tmp_path / "summary.json").exists()
 
 
+@pytest.mark.slow  # a JIT build: gcc of the fatrop solver every run (make test-slow)
 def test_jit_build_runs(tmp_path, monkeypatch):
     import dataclasses
 

@@ -132,6 +132,7 @@ def idas_run(grid_run):
     return res, plant
 
 
+@pytest.mark.slow  # the IDAS closed loop as the reference (make test-slow)
 def test_engine_plant_is_the_default_and_matches_idas(grid_run, idas_run):
     """The default grid plant is the terrain engine (10 ms macro steps, started from the trim);
     its closed loop and ruts agree with the IDAS plant's (0.02 s world steps)."""
@@ -153,6 +154,7 @@ def test_engine_plant_is_the_default_and_matches_idas(grid_run, idas_run):
     assert s["plant_wall_time_s"] < ref.summary["plant_wall_time_s"] / 20
 
 
+@pytest.mark.slow  # the IDAS closed loop as the reference (make test-slow)
 def test_grid_plant_with_the_compiled_rosenbrock_matches_idas(grid_run, idas_run):
     """run.integrator = "rosenbrock": the compiled grid integrator as the plant's; the closed loop
     and the ruts agree with the IDAS plant's."""

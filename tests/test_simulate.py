@@ -55,6 +55,7 @@ def test_cvodes_and_idas_agree(summaries):
         assert a[key] == pytest.approx(b[key], rel=1e-4), key
 
 
+@pytest.mark.slow  # a fixed-step Radau IIA reference in Python (make test-slow)
 def test_cvodes_and_idas_match_a_fine_fixed_step_reference(model, params):
     """Radau IIA (3 stages, order 5) with fixed 0.5 ms steps over the first second of the
     validation manoeuvre, a scheme independent of the BDF methods of CVODES and IDAS."""

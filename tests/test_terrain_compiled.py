@@ -46,6 +46,7 @@ def runs():
     return {"idas": _run("idas"), "rb": _run("rosenbrock"), "rb_fine": _run("rosenbrock", 0.0003125)}
 
 
+@pytest.mark.slow  # IDAS and two fixed-step runs on 768 cells (make test-slow)
 def test_grid_rosenbrock_matches_idas(runs):
     (wi, ri), (wr, rr) = runs["idas"], runs["rb"]
     assert rr.scenario.run.integrator == "rosenbrock" and rr.stats["n_calls"] > 0 and rr.stats["nsteps"] > 0
@@ -58,6 +59,7 @@ def test_grid_rosenbrock_matches_idas(runs):
     assert np.max(np.abs(wr.storage.z - wi.storage.z)) < SINKAGE_TOL_M  # after the lift as well
 
 
+@pytest.mark.slow  # IDAS and two fixed-step runs on 768 cells (make test-slow)
 def test_grid_rosenbrock_converges_under_step_refinement(runs):
     ri, rr, rf = runs["idas"][1], runs["rb"][1], runs["rb_fine"][1]
     err = np.max(np.abs(rr.X[:, :3] - ri.X[:, :3]))

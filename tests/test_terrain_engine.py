@@ -138,6 +138,7 @@ def _one_cell_reference_and_engine(substeps, h=0.01, t_end=0.9):
     return np.array(mine), np.array(ref)
 
 
+@pytest.mark.slow  # a brute-force / step-refinement reference (make test-slow)
 def test_one_cell_converges_under_step_refinement():
     errs = {}
     for n in (1, 4, 16):
@@ -266,6 +267,7 @@ def test_compiled_equals_interpreted(method):
         assert np.any(c > 0) and np.allclose(c, i, rtol=1e-6, atol=0.0), name
 
 
+@pytest.mark.slow  # a brute-force / step-refinement reference (make test-slow)
 def test_pool_equals_one_channel_per_cell_and_brute_force(fast):
     wf, rf = fast
     sc = _scenario()

@@ -4,6 +4,11 @@ import json
 import runpy
 import sys
 
+import pytest
+
+# the benchmark's smoke run, brute force included: the slow set (make test-slow; CI runs it)
+pytestmark = pytest.mark.slow
+
 
 def test_bench_terrain_quick(monkeypatch, capsys):
     monkeypatch.setattr(sys, "argv", ["bench_terrain.py", "--quick"])

@@ -8,6 +8,9 @@ import pytest
 from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.simulation.scenario import scenario_from_dict
 
+# every cell of the field as its own IDAS state: the slow set (make test-slow; CI runs it)
+pytestmark = pytest.mark.slow
+
 # A 12 m x 4 m field at 0.25 m (768 cells); both sprockets at 2000 N m for 0.5 s, then the left
 # one idle: the vehicle starts from rest, accelerates and begins to turn.
 SMALL = {

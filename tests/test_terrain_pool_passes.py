@@ -1,8 +1,13 @@
 """The bit-exact continuation of a terrain through a file: two passes in one run equal one pass,
 saved, loaded and driven again (on the small field of test_terrain_pool.py)."""
 
+import pytest
 from conftest import two_passes_against_a_continued_pass
 from test_terrain_pool import SMALL
+
+# on IDAS (the same check on the terrain engine is in test_terrain_engine.py, in the fast set): the
+# slow set (make test-slow; CI runs it)
+pytestmark = pytest.mark.slow
 
 
 def test_two_passes_equal_one_pass_save_load_and_a_second_pass(tmp_path):

@@ -30,7 +30,8 @@ __all__ = ["BENCH_SCHEMA_VERSION", "COLUMNS", "PROVIDERS", "add_arguments", "col
 log = logging.getLogger("symtrack.bench")
 
 BENCH_SCHEMA_VERSION = 1
-PROVIDERS = ("symtrack.bench.terrain", "symtrack.bench.laws", "symtrack.control.bench", "symtrack.bench.mpc_c")
+PROVIDERS = ("symtrack.bench.terrain", "symtrack.bench.laws", "symtrack.control.bench", "symtrack.bench.mpc_c",
+             "symtrack.bench.outputs")
 COLUMNS = (("group", "{}"), ("case", "{}"), ("integrator", "{}"), ("sim_time_s", "{:.2f}"),
            ("wall_time_s", "{:.4f}"), ("real_time_factor", "{:.0f}"), ("note", "{}"))
 

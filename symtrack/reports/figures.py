@@ -12,6 +12,13 @@ apply). The kinds and what their functions take:
 
 :func:`figures` draws the figures of some kinds, in the order of registration (the order of the
 files in report.html). Adding a figure is one function and one :func:`register` call.
+
+A figure registered with ``extra`` (what it draws, in words) is slow for what it adds and drawn
+only when asked for (``run.all_figures = true``; docs/terrain.md, "What the outputs cost"): the
+pass animations (a GIF is 20-30 frames, each drawn like a PNG). :func:`extras` names the ones
+left out, for report.html. Of several passes, the sinkage map is the last pass's only unless
+``TerrainRun.all_figures`` (the earlier passes' trajectory plots are the caller's:
+:func:`symtrack.reports.run_files.simulation_files`).
 """
 
 from __future__ import annotations
@@ -24,18 +31,20 @@ import numpy as np
 
 from . import control_plots, plots, terrain_plots
 
-__all__ = ["KINDS", "Figure", "TerrainRun", "figures", "names", "register", "unregister"]
+__all__ = ["KINDS", "Figure", "TerrainRun", "extras", "figures", "names", "register", "unregister"]
 
 KINDS = ("trajectory", "terrain", "subsoil", "control")
 
 
 @dataclass(frozen=True)
 class Figure:
-    """One registered figure: ``make(source) -> {file name: bytes}`` (module doc)."""
+    """One registered figure: ``make(source) -> {file name: bytes}``; ``extra``: None for a figure
+    always drawn, else what it draws (a figure drawn only with ``all_figures``; module doc)."""
 
     name: str
     kind: str
     make: Callable[[object], dict[str, bytes]]
+    extra: str | None = None
 
 
 class TerrainRun(NamedTuple):
@@ -45,6 +54,7 @@ class TerrainRun(NamedTuple):
 
     scenario: object
     study: object
+    all_figures: bool = True  # every pass's sinkage map (else the last pass's)
 
     @property
     def multi(self) -> bool:
@@ -55,13 +65,14 @@ class TerrainRun(NamedTuple):
 _REGISTRY: dict[str, Figure] = {}
 
 
-def register(name: str, kind: str, make: Callable[[object], dict[str, bytes]]) -> Figure:
-    """Register a figure (after the others: its files come after theirs)."""
+def register(name: str, kind: str, make: Callable[[object], dict[str, bytes]], extra: str | None = None) -> Figure:
+    """Register a figure (after the others: its files come after theirs); ``extra``: drawn only
+    with ``all_figures`` (module doc), described in these words."""
     if kind not in KINDS:
         raise KeyError(f"figure kind {kind!r} is not one of {', '.join(KINDS)}")
     if name in _REGISTRY:
         raise KeyError(f"a figure named {name!r} is registered already")
-    fig = _REGISTRY[name] = Figure(name, kind, make)
+    fig = _REGISTRY[name] = Figure(name, kind, make, extra)
     return fig
 
 
@@ -75,18 +86,30 @@ def names(kind: str | None = None) -> list[str]:
     return [f.name for f in _REGISTRY.values() if kind is None or f.kind == kind]
 
 
-def figures(kinds, source) -> dict[str, bytes]:
-    """The files of the registered figures of ``kinds`` (a kind or a tuple of kinds) drawn from
-    ``source``, in registration order."""
+def _kinds(kinds) -> tuple[str, ...]:
     kinds = (kinds,) if isinstance(kinds, str) else tuple(kinds)
     unknown = [k for k in kinds if k not in KINDS]
     if unknown:
         raise KeyError(f"figure kind {unknown[0]!r} is not one of {', '.join(KINDS)}")
+    return kinds
+
+
+def figures(kinds, source, all_figures: bool = True) -> dict[str, bytes]:
+    """The files of the registered figures of ``kinds`` (a kind or a tuple of kinds) drawn from
+    ``source``, in registration order; without ``all_figures`` not the ``extra`` ones."""
+    kinds = _kinds(kinds)
     out: dict[str, bytes] = {}
     for fig in _REGISTRY.values():
-        if fig.kind in kinds:
+        if fig.kind in kinds and (all_figures or fig.extra is None):
             out.update(fig.make(source))
     return out
+
+
+def extras(kinds) -> list[str]:
+    """What the ``extra`` figures of ``kinds`` draw (their descriptions, in registration order):
+    the figures :func:`figures` leaves out without ``all_figures``."""
+    kinds = _kinds(kinds)
+    return [f.extra for f in _REGISTRY.values() if f.kind in kinds and f.extra is not None]
 
 
 # -- the trajectory of a run ------------------------------------------------------------------------------------
@@ -112,8 +135,9 @@ register("torques", "trajectory", _time_series(
 # -- the terrain of a study's passes ----------------------------------------------------------------------------
 def _sinkage_maps(src: TerrainRun) -> dict[str, bytes]:
     st = src.study
+    passes = range(len(st.maps)) if src.all_figures else range(len(st.maps) - 1, len(st.maps))
     return {(f"sinkage_map_pass_{k + 1}.png" if src.multi else "sinkage_map.png"):
-            terrain_plots.sinkage_map_png(st.world, z, k + 1) for k, z in enumerate(st.maps)}
+            terrain_plots.sinkage_map_png(st.world, st.maps[k], k + 1) for k in passes}
 
 
 def _rut_section(src: TerrainRun) -> dict[str, bytes]:
@@ -139,7 +163,8 @@ def _surface(src: TerrainRun) -> dict[str, bytes]:
 
 register("sinkage_map", "terrain", _sinkage_maps)
 register("rut_section", "terrain", _rut_section)
-register("animation", "terrain", _animations)
+register("animation", "terrain", _animations,
+         extra="the pass animations (animation.gif, or animation_pass_<k>.gif per pass)")
 register("surface", "terrain", _surface)
 register("subsoil", "subsoil", lambda src: terrain_plots.subsoil_pngs(src.study.world, src.study.figures))
 register("density", "subsoil", lambda src: terrain_plots.density_pngs(src.study.world, src.study.figures,

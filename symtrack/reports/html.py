@@ -62,9 +62,10 @@ def table_html(rows, header) -> str:
 
 def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_text: str,
                 validation_rows=None, passes: list[dict] | None = None, note: str = "",
-                tables: dict[str, tuple[list, list]] | None = None) -> str:
+                tables: dict[str, tuple[list, list]] | None = None, omitted: str = "") -> str:
     """The page (see the module doc). ``images``: file name -> PNG (or GIF) bytes, shown in
-    order; ``validation_rows``: (key, reported, value, ok) rows; ``passes``: per-pass figures."""
+    order; ``validation_rows``: (key, reported, value, ok) rows; ``passes``: per-pass figures;
+    ``omitted``: which figures the run did not draw (a sentence under the plots' heading)."""
     parts = [f"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
              f"<meta name=\"symtrack-report-schema\" content=\"{REPORT_SCHEMA_VERSION}\">\n"
              f"<title>{html.escape(title)}</title>\n<style>{_STYLE}</style>\n<script>{_CHECK}</script>\n"
@@ -87,8 +88,11 @@ def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_te
         keys = list(passes[0])
         parts.append("<h2>Passes</h2>")
         parts.append(table_html([[k + 1] + [p.get(c) for c in keys] for k, p in enumerate(passes)], ["pass", *keys]))
-    if images:
+    if images or omitted:
         parts.append("<h2>Plots</h2>")
+    if omitted:
+        parts.append(f"<p class=\"omitted\">{html.escape(omitted)}</p>")
+    if images:
         for name, data in images.items():
             mime = "image/gif" if name.endswith(".gif") else "image/png"
             uri = f"data:{mime};base64,{base64.b64encode(data).decode()}"

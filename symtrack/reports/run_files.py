@@ -6,7 +6,8 @@ Files of a ``symtrack simulate`` run (schemas documented in the README):
 - ``trajectory.csv``: one row per output step; header names carry units (t_s, states, commanded
   torques, then the model outputs);
 - ``scenario.resolved.toml``: the scenario with every value after presets and overrides;
-- ``*.png``: plots (the registry of :mod:`symtrack.reports.figures`), ``report.html``;
+- ``*.png``: plots (the registry of :mod:`symtrack.reports.figures`; the slow ones, the pass
+  animations ``*.gif`` and the earlier passes' plots, only with ``run.all_figures``), ``report.html``;
 - ``summary.json``: written last, so that its presence means the run finished.
 
 A run's files appear together or not at all: :func:`write_folder` writes them into a staging
@@ -44,7 +45,7 @@ from ..foundations.files import atomic_write_bytes
 from ..terrain.storage import Terrain, file_bytes
 from ..toolchain import LockBusy, file_lock
 from . import validation
-from .figures import TerrainRun, figures
+from .figures import TerrainRun, extras, figures
 from .html import report_html
 
 __all__ = ["RUN_MARKERS", "RUN_SUFFIXES", "TerrainOut", "clear_previous_run", "run_files", "scenario_sha256",
@@ -93,22 +94,34 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
     trajectory figures; on the grid terrain the terrain and subsoil figures of its passes (a
     :class:`~symtrack.simulation.passes.PassStudy`), and for several passes each pass's run
     files in ``pass_<k>/``; ``validation_table.md`` for a validation scenario; ``report.html``
-    with the figures. Names relative to the folder, in the order of writing."""
+    with the figures. Names relative to the folder, in the order of writing.
+
+    Without ``run.all_figures`` (the default) the slow figures are left out and report.html says
+    which: the pass animations and, of several passes, the earlier passes' sinkage maps and
+    trajectory plots (their ``pass_<k>/`` keep trajectory.csv, the resolved scenario and the
+    summary); docs/terrain.md, "What the outputs cost"."""
     table = validation_table(scenario, summary)
+    every = scenario.run.all_figures
     top: dict[str, bytes] = {}  # the files of the folder's top, besides the run files
     shown: dict[str, bytes] = {}  # the images of report.html
     passes = {}  # the files of each pass's folder (several passes)
+    left_out: list[str] = []  # what report.html says was not drawn
     if study is None:
         run = runs[0]
         top.update(figures("trajectory", run))
         shown.update(top)
     else:
-        src = TerrainRun(scenario, study)
-        top.update(figures(("terrain", "subsoil"), src))
+        src = TerrainRun(scenario, study, every)
+        top.update(figures(("terrain", "subsoil"), src, every))
+        left_out += [] if every else extras(("terrain", "subsoil"))
         if src.multi:
+            last = len(study.runs) - 1
             for k, (res, summ) in enumerate(zip(study.runs, pass_summaries, strict=True)):
-                figs = figures("trajectory", res)
+                figs = figures("trajectory", res) if every or k == last else {}
                 passes.update({f"pass_{k + 1}/{n}": d for n, d in run_files(res, summ, figs).items()})
+            if not every:
+                left_out.append(f"the sinkage maps and the trajectory plots of passes 1 to {last} "
+                                f"(sinkage_map_pass_<k>.png, pass_<k>/*.png; pass_{last + 1}/ has its plots)")
             shown.update(top)
             shown.update({f"pass_{len(study.runs)}/{n}": d for n, d in figs.items()})
         else:
@@ -117,10 +130,14 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
         run = None if src.multi else study.runs[0]
     if table is not None:
         top["validation_table.md"] = table.encode()
+    omitted = ""
+    if left_out:
+        omitted = (f"Not drawn (run.all_figures = false, the default: the slow figures): {'; '.join(left_out)}. "
+                   "Set run.all_figures = true (--set run.all_figures=true) to write them too.")
     top["report.html"] = report_html(
         f"symtrack: {scenario.name}", summary, shown, to_toml(scenario.to_dict()),
         validation.check(summary) if table is not None else None, summary.get("passes"),
-        scenario.description).encode()
+        scenario.description, omitted=omitted).encode()
     if run is not None:
         return run_files(run, summary, top)
     return {**passes, **top, "summary.json": json.dumps(summary, indent=2) + "\n"}

@@ -14,6 +14,7 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     abstol = 1e-9                  # (0, 1e-2]
     stop_after_distance_m = 20.0   # (0, 1e6] or "none": stop once the CG has covered this path length ...
     stop_distance_event = "idle"   # ... counted from this [[torque]] event (default: from t = 0)
+    all_figures = false            # true: also the slow figures (pass animations, earlier passes' plots)
     [model]                        # numerical/structural options, see symtrack.model.ModelOptions
     traction_sign = "smooth"       # smooth | tanh | sign
     tanh_steepness_per_m = 1000.0
@@ -98,6 +99,10 @@ class RunSettings:
     fixed_step_s: float = 0.01
     compiled: bool = False
     rms_exclude_first_m: float = 0.0
+    # the run folder's slow figures too: the pass animations (GIF) and, of several passes, the
+    # earlier passes' trajectory plots and sinkage maps (docs/terrain.md, "What the outputs cost");
+    # the default writes the figures read first, in about a tenth of the time
+    all_figures: bool = False
 
     @property
     def macro_step_s(self) -> float:
@@ -113,7 +118,7 @@ class RunSettings:
 
 
 SIMULATION_RUN_KEYS = ("duration_s", "output_dt_s", "integrator", "reltol", "abstol", "stop_after_distance_m",
-                       "stop_distance_event", "fixed_step_s", "compiled")
+                       "stop_distance_event", "fixed_step_s", "compiled", "all_figures")
 
 
 @dataclass(frozen=True)
@@ -206,7 +211,11 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
     if not isinstance(compiled, bool):
         raise ScenarioError(f"run.compiled = {compiled!r} must be true or false")
     rms = _num("run", "rms_exclude_first_m", t.get("rms_exclude_first_m", d.rms_exclude_first_m), 0, 1e6)
-    return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev, fixed, compiled, rms)
+    all_figures = t.get("all_figures", d.all_figures)
+    if not isinstance(all_figures, bool):
+        raise ScenarioError(f"run.all_figures = {all_figures!r} must be true or false (true: also the pass "
+                            "animations and the earlier passes' plots)")
+    return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev, fixed, compiled, rms, all_figures)
 
 
 def _parse_model(t: dict) -> ModelOptions:
