@@ -50,6 +50,7 @@ def test_the_old_names_are_read_as_the_laws_they_now_name():
         ModelOptions(lateral_law="coulomb")
 
 
+@pytest.mark.slow  # two gcc builds of the default law's C (about 1 min under load)
 @pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 def test_the_standalone_programs_run_the_default_law(tmp_path):
     """`symtrack codegen --set model.lateral_law=shear --out DIR`: the homogeneous and the grid
