@@ -14,8 +14,17 @@ __all__ = ["add_parser", "field_command"]
 def field_command(args) -> int:
     out = check_output_folder(args.out)  # before anything is loaded or built
     from ..studies.field import IncompleteFieldStudy, load_field_spec, run_field_study
+    from ..studies.operations import is_operation_document, load_operation_spec, run_season
 
     overrides = list(args.set or [])
+    if is_operation_document(args.scenario):  # a field operation or a season (docs/studies.md, "Field operations")
+        res = run_season(load_operation_spec(args.scenario, overrides), out, progress=not args.quiet)
+        s = res.summary
+        print(f"{s['name']}: {'complete' if s['complete'] else 'FAILED: ' + str(s['error'])}; trafficked "
+              f"{100 * s['trafficked_fraction']:.1f} % (headland {100 * s['headland_trafficked_fraction']:.1f} %, "
+              f"in-field {100 * s['infield_trafficked_fraction']:.1f} %); turns driven {s['turns_driven']}, lifted 0; "
+              f"{s['sim_time_s']:.0f} s simulated in {s['wall_time_s']:.1f} s; results in {out}")
+        return 0 if s["complete"] else 1
     if args.pattern:
         overrides.append(f"field.pattern={args.pattern}")
     spec = load_field_spec(args.scenario, overrides)

@@ -1,0 +1,1062 @@
+"""Field operations driven end to end (issue 23; docs/studies.md, "Field operations").
+
+A field operation works a rectangular field [0, size_x] x [0, size_y] with an implement of
+``working_width_m``: first ``headland_passes`` rounds around the border (an inward spiral,
+counter-clockwise, each round ``working_width_m`` inside the last, the corners arcs of
+``turn_radius_m``), then the in-field track lines along x between the headlands (the headland is
+``headland_passes * working_width_m`` wide on every side), joined at the headlands by turns driven
+on the soil. The whole operation is **one continuous path** (:class:`OperationPlan`), driven by a
+path-following torque law (:class:`PathFollower`) on the terrain engine from a set-down at its
+start to a lift-off at its end: every turn is driven, its compaction and shear written into the
+cells; nothing is lifted between the lines.
+
+Track lines (``tracks``):
+
+- ``"ab"``: parallel lines one working width apart from the first headland's inner edge (the last
+  line's swath may reach into the far headland, so that every turn spans one working width);
+- ``"controlled"``: permanent traffic lanes ``lane_spacing_m`` apart, centred across the field
+  (the same lanes for every operation of a season, whatever its width); an implement of
+  ``working_width_m`` = k ``lane_spacing_m`` drives every k-th lane;
+- ``"random"``: the AB lines, each moved across by an offset drawn uniformly in
+  [-``random_offset_m``, +``random_offset_m``] (numpy's default generator, ``seed``): the
+  uncoordinated traffic of a field without guidance.
+
+Turns (``turn``): ``"u"`` (quarter arc, straight across, quarter arc: needs a line spacing of at
+least twice the radius), ``"bulb"`` (the omega turn: away by beta, round by 180 + 2 beta, back by
+beta, three arcs of the radius; for spacings below twice the radius), ``"auto"`` (U where it
+fits, else bulb). The radius must be one the vehicle can hold on the field's soil at the turn
+speed: a trim (:func:`symtrack.control.trim.trim`, on the quasi-static shear law, whose steady
+states are those of the lagged shear law: docs/turning.md section 8) is solved before anything
+runs, and its failure refuses the plan with the trim's reason. A plan whose vehicle footprint
+leaves the field anywhere along the path, a working width wider than the field, lanes that do not
+fit: refused before anything runs (:func:`check_plan`).
+
+Passes per cell: a cell counts one pass each time it comes under a track's contact after having
+been out of every track's contact for at least :data:`PASS_GAP_S` (the driven poses sampled every
+:data:`COUNT_SAMPLE_S`; a cell counts when its square overlaps a track's l x b rectangle). The
+trafficked share of the summary is the soil's own record: the cells the engine stressed
+(``World.pass_sigma > 0``: a track's contact overlapped them at a macro step's end).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..control.path import Path, Segment
+from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
+from ..foundations.errors import ScenarioError
+from ..foundations.files import check_output_folder
+from ..simulation import loop
+from ..simulation.plants import make_plant
+from ..simulation.scenario import SIMULATION_RUN_KEYS, scenario_from_dict
+from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
+from ..terrain.storage import Terrain
+from ..terrain.world import padding_m
+
+__all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSettings", "OperationSpec",
+           "PathFollower", "SeasonResult", "check_plan", "footprint_mask", "load_operation_spec", "plan_operation",
+           "run_operation", "run_season", "swath_mask", "traffic_comparison"]
+
+FIELD_PACKAGE = "symtrack.studies.fields"
+SCHEMA_VERSION = 1
+TRACKS = ("ab", "controlled", "random")
+TURNS = ("auto", "u", "bulb")
+OPERATION_KEYS = ("name", "size_m", "cell_m", "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
+                  "random_offset_m", "seed", "turn", "turn_radius_m", "speed_m_s", "turn_speed_m_s",
+                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines")
+TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "engine", "operation", "season")
+SEASON_KEYS = ("operations", "compare")
+OPERATION_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
+TERRAIN_KEYS_OF_OPERATION = ("size_m", "cell_m", "origin_m", "passes", "initial_state")
+
+# the path's sampling (control.path.Path) and the room the footprint check keeps to the border
+PATH_DS_M = 0.05
+# passes per cell: driven poses every COUNT_SAMPLE_S; a cell out of every contact for PASS_GAP_S
+# counts a new pass when a track comes over it again (0.1 s at 3 m/s is 0.3 m, an eighth of the
+# 2.4 m contact, so a cell under a passing track is seen at every sample)
+COUNT_SAMPLE_S = 0.1
+PASS_GAP_S = 1.0
+# the follower's speed profile: the largest deceleration / acceleration it plans with (m/s^2); a
+# moderate value (the crawler's 2000 N m accelerate it at about 1 m/s^2 on the clay)
+PLAN_ACCEL_M_S2 = 0.4
+# the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
+MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
+
+
+@dataclass(frozen=True)
+class OperationSettings:
+    """The ``[operation]`` section (module doc; the built-in ``operation_small.toml`` documents every key)."""
+
+    name: str = "operation"
+    size_m: tuple = (60.0, 40.0)
+    cell_m: float = 0.1
+    working_width_m: float = 3.0
+    headland_passes: int = 2
+    tracks: str = "ab"
+    lane_spacing_m: float | None = None  # None: working_width_m
+    random_offset_m: float = 0.5
+    seed: int = 1
+    turn: str = "auto"
+    turn_radius_m: float = 4.0
+    speed_m_s: float = 2.5
+    turn_speed_m_s: float = 1.0
+    torque_limit_N_m: float = 8000.0
+    max_lateral_error_m: float = 1.0
+    vehicle: dict = dataclasses.field(default_factory=dict)  # overrides of [vehicle] for this operation
+    lines: int | None = None  # None: all that fit; else the first n lines (small tests)
+
+    @property
+    def headland_m(self) -> float:
+        return self.headland_passes * self.working_width_m
+
+    @property
+    def lanes_m(self) -> float:
+        return self.lane_spacing_m if self.lane_spacing_m is not None else self.working_width_m
+
+
+def _num(key, value, low, high, low_open=False):
+    return number(f"operation.{key}", value, low, high, low_open)
+
+
+def parse_operation(t: dict, base: OperationSettings | None = None, where: str = "operation") -> OperationSettings:
+    """An ``[operation]`` table (or a season entry over ``base``) -> :class:`OperationSettings`."""
+    check_keys(where, t, OPERATION_KEYS)
+    d = base or OperationSettings()
+    kw = {}
+    if "name" in t:
+        if not isinstance(t["name"], str) or not t["name"]:
+            raise ScenarioError(f"{where}.name = {t['name']!r} must be a non-empty string")
+        kw["name"] = t["name"]
+    if "size_m" in t:
+        size = t["size_m"]
+        if not isinstance(size, (list, tuple)) or len(size) != 2:
+            raise ScenarioError(f"{where}.size_m = {size!r} must be a pair [x, y] of lengths in m")
+        kw["size_m"] = tuple(_num(f"size_m[{i}]", v, 5.0, 1e4) for i, v in enumerate(size))
+    for k, lo, hi, lo_open in (("cell_m", 0.01, 1.0, False), ("working_width_m", 0.0, 100.0, True),
+                               ("random_offset_m", 0.0, 50.0, False), ("turn_radius_m", 0.5, 100.0, False),
+                               ("speed_m_s", 0.1, 5.0, False), ("turn_speed_m_s", 0.1, 5.0, False),
+                               ("torque_limit_N_m", 0.0, 1e5, True), ("max_lateral_error_m", 0.05, 20.0, False)):
+        if k in t:
+            kw[k] = _num(k, t[k], lo, hi, lo_open)
+    if "lane_spacing_m" in t:
+        v = t["lane_spacing_m"]
+        kw["lane_spacing_m"] = None if v in (None, "none") else _num("lane_spacing_m", v, 0.0, 1e3, True)
+    if "headland_passes" in t:
+        kw["headland_passes"] = integer(f"{where}.headland_passes", t["headland_passes"], 1, 20)
+    if "seed" in t:
+        kw["seed"] = integer(f"{where}.seed", t["seed"], 0, 2 ** 62)
+    if "lines" in t:
+        v = t["lines"]
+        kw["lines"] = None if v in (None, "all") else integer(f"{where}.lines", v, 1, 10_000)
+    for k, choices in (("tracks", TRACKS), ("turn", TURNS)):
+        if k in t:
+            if t[k] not in choices:
+                raise ScenarioError(f"{where}.{k} = {t[k]!r} is not one of {', '.join(choices)}")
+            kw[k] = t[k]
+    if "vehicle" in t:
+        if not isinstance(t["vehicle"], dict):
+            raise ScenarioError(f"{where}.vehicle = {t['vehicle']!r} must be a table of [vehicle] keys")
+        kw["vehicle"] = {**d.vehicle, **t["vehicle"]}
+    return dataclasses.replace(d, **kw)
+
+
+# ---- the plan -------------------------------------------------------------------------------------------
+@dataclass
+class OperationPlan:
+    """One operation's path: the :class:`~symtrack.control.path.Path` (its segments), per segment
+    its role ("headland": a round's straight or corner, "line": a track line, "turn") and, for
+    lines, the line's index and worked x range; the lines' lateral positions; the field."""
+
+    path: Path
+    roles: list
+    line_of_segment: list
+    line_y_m: list
+    worked_x_m: tuple  # the lines' worked range [x0, x1] (between the headlands)
+    turns: int
+    settings: OperationSettings
+
+    @property
+    def start(self) -> tuple[float, float, float]:
+        return float(self.path.x[0]), float(self.path.y[0]), float(self.path.psi[0])
+
+
+def lane_positions_m(fs: OperationSettings) -> np.ndarray:
+    """The permanent lanes (world y) of controlled traffic: ``lane_spacing_m`` apart, centred
+    across the field, as many as fit between the headlands (a lane's swath of one spacing inside)."""
+    H, S = fs.headland_m, fs.lanes_m
+    inner = fs.size_m[1] - 2 * H
+    n = int(math.floor(inner / S + 1e-9))
+    return 0.5 * fs.size_m[1] + (np.arange(n) - 0.5 * (n - 1)) * S
+
+
+def line_positions_m(fs: OperationSettings) -> np.ndarray:
+    """The in-field track lines (world y of the CG), in driving order (increasing y)."""
+    H, w = fs.headland_m, fs.working_width_m
+    lo, hi = H + 0.5 * w, fs.size_m[1] - H - 0.5 * w
+    if fs.tracks == "controlled":
+        lanes = lane_positions_m(fs)
+        k = fs.working_width_m / fs.lanes_m
+        if abs(k - round(k)) > 1e-6 or round(k) < 1:
+            raise ScenarioError(f"operation.working_width_m = {fs.working_width_m:g} must be a whole multiple of "
+                                f"operation.lane_spacing_m = {fs.lanes_m:g} (controlled traffic: the implement spans "
+                                "whole lanes)")
+        k = int(round(k))
+        if lanes.size == 0:
+            raise ScenarioError(f"operation.lane_spacing_m = {fs.lanes_m:g}: no lane fits between the headlands")
+        # an implement of k lanes drives lanes (k - 1)/2, ... : every k-th lane from the first
+        # whose swath stays inside; with k even it straddles two lanes (lanes at the implement's edges)
+        ys = lanes[::k]
+        if not ys.size:
+            ys = lanes[:1]
+        return ys
+    if hi < lo - 1e-9:
+        raise ScenarioError(f"operation.working_width_m = {w:g}: no line fits between the headlands of "
+                            f"operation.headland_passes = {fs.headland_passes} rounds ({H:g} m each side) across a "
+                            f"field {fs.size_m[1]:g} m wide")
+    # one working width apart; the last line's swath may reach into the far headland (worked twice
+    # there) so that every turn has the full spacing
+    n = int(math.ceil((hi - lo) / w - 1e-9)) + 1
+    ys = lo + w * np.arange(n)
+    if fs.tracks == "random":
+        off = np.random.default_rng(fs.seed).uniform(-fs.random_offset_m, fs.random_offset_m, ys.size)
+        ys = np.clip(ys + off, lo - fs.random_offset_m, hi + fs.random_offset_m)
+        ys = np.sort(ys)
+    return ys
+
+
+def _fillet_segments(points, heading0: float, radius: float, speed_line, speed_turn):
+    """Straights between the corners of a polyline of 90 deg turns, each corner an arc of ``radius``;
+    returns (segments, [(kind, index of the corner or leg)], the end heading)."""
+    segs, tags = [], []
+    psi = heading0
+    for i in range(1, len(points)):
+        p0, p1 = np.asarray(points[i - 1], float), np.asarray(points[i], float)
+        L = float(np.hypot(*(p1 - p0)))
+        cut0 = radius if i > 1 else 0.0
+        cut1 = radius if i < len(points) - 1 else 0.0
+        straight = L - cut0 - cut1
+        if straight < -1e-9:
+            raise ScenarioError(f"operation.turn_radius_m = {radius:g}: a headland round's side of {L:g} m is "
+                                f"too short for two corners of that radius; lower the radius or the headland passes")
+        if straight > 1e-9:
+            segs.append(Segment("straight", straight, speed_m_s=speed_line))
+            tags.append(("headland", None))
+        if i < len(points) - 1:
+            q = np.asarray(points[i + 1], float)
+            d0, d1 = p1 - p0, q - p1
+            cross = d0[0] * d1[1] - d0[1] * d1[0]
+            sign = 1.0 if cross > 0 else -1.0
+            segs.append(Segment("arc", radius_m=sign * radius, angle_deg=90.0, speed_m_s=speed_turn))
+            tags.append(("headland", None))
+            psi += sign * math.pi / 2
+    return segs, tags, psi
+
+
+def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: float):
+    """The turn from one line to the next, ``spacing`` across (> 0), to the left or right."""
+    sg = 1.0 if left else -1.0
+    if kind == "auto":
+        kind = "u" if spacing >= 2 * radius - 1e-9 else "bulb"
+    if kind == "u":
+        if spacing < 2 * radius - 1e-9:
+            raise ScenarioError(f"operation.turn = \"u\": lines {spacing:.3g} m apart need a U-turn radius of at most "
+                                f"{0.5 * spacing:.3g} m, operation.turn_radius_m = {radius:g}; use turn = \"bulb\" "
+                                "or \"auto\"")
+        segs = [Segment("arc", radius_m=sg * radius, angle_deg=90.0, speed_m_s=speed)]
+        if spacing - 2 * radius > 1e-9:
+            segs.append(Segment("straight", spacing - 2 * radius, speed_m_s=speed))
+        segs.append(Segment("arc", radius_m=sg * radius, angle_deg=90.0, speed_m_s=speed))
+        return segs, "u"
+    if spacing > 2 * radius + 1e-9:
+        raise ScenarioError(f"operation.turn = \"bulb\": lines {spacing:.3g} m apart are more than twice "
+                            f"operation.turn_radius_m = {radius:g} apart; a bulb turn needs a spacing below 2 R "
+                            "(use turn = \"u\" or \"auto\")")
+    xc = math.sqrt(max(4 * radius ** 2 - (radius + 0.5 * spacing) ** 2, 0.0))
+    beta = 90.0 - math.degrees(math.atan2(radius + 0.5 * spacing, xc))
+    segs = [Segment("arc", radius_m=-sg * radius, angle_deg=beta, speed_m_s=speed)] if beta > 1e-6 else []
+    segs.append(Segment("arc", radius_m=sg * radius, angle_deg=180.0 + 2 * beta, speed_m_s=speed))
+    if beta > 1e-6:
+        segs.append(Segment("arc", radius_m=-sg * radius, angle_deg=beta, speed_m_s=speed))
+    return segs, "bulb"
+
+
+def plan_operation(fs: OperationSettings) -> OperationPlan:
+    """The continuous path of an operation (module doc). Geometry only: :func:`check_plan` checks
+    it against the vehicle and the soil."""
+    Lx, Ly = fs.size_m
+    w, R = fs.working_width_m, fs.turn_radius_m
+    if w > min(Lx, Ly):
+        raise ScenarioError(f"operation.working_width_m = {w:g} is outside the allowed range (0, {min(Lx, Ly):g}] m "
+                            f"(the field is {Lx:g} m x {Ly:g} m)")
+    H = fs.headland_m
+    if 2 * H >= min(Lx, Ly):
+        raise ScenarioError(f"operation.headland_passes = {fs.headland_passes}: {fs.headland_passes} rounds of "
+                            f"{w:g} m make headlands of {H:g} m, which leave no room inside a field of {Lx:g} m x "
+                            f"{Ly:g} m")
+    ys = line_positions_m(fs)
+    if fs.lines is not None:
+        ys = ys[:fs.lines]
+    n = fs.headland_passes
+    d = [(i + 0.5) * w for i in range(n)]
+    pts = [(d[0] + R, d[0])]
+    for i in range(n):
+        nxt = d[i + 1] if i + 1 < n else float(ys[0])
+        pts += [(Lx - d[i], d[i]), (Lx - d[i], Ly - d[i]), (d[i], Ly - d[i]), (d[i], nxt)]
+    # the last corner turns onto the first line: its leg is the line (added below)
+    x_line_end = Lx - H
+    pts.append((x_line_end, float(ys[0])))
+    segs, tags, _ = _fillet_segments(pts, 0.0, R, fs.speed_m_s, fs.turn_speed_m_s)
+    tags[-1] = ("line", 0)  # the last straight: the first line up to its end
+    line_of = [t[1] for t in tags]
+    roles = [t[0] for t in tags]
+    turns = 0
+    for k in range(1, len(ys)):
+        spacing = float(ys[k] - ys[k - 1])
+        east = k % 2 == 1  # line k-1 ran east (+x) when k-1 is even
+        tsegs, _ = _turn_segments(spacing, R, left=east, kind=fs.turn, speed=fs.turn_speed_m_s)
+        segs += tsegs
+        roles += ["turn"] * len(tsegs)
+        line_of += [None] * len(tsegs)
+        turns += 1
+        segs.append(Segment("straight", Lx - 2 * H, speed_m_s=fs.speed_m_s))
+        roles.append("line")
+        line_of.append(k)
+    path = Path(pts[0][0], pts[0][1], 0.0, segs, fs.speed_m_s, fs.turn_speed_m_s, ds_m=PATH_DS_M, extension_m=5.0)
+    return OperationPlan(path, roles, line_of, [float(y) for y in ys], (H, Lx - H), turns, fs)
+
+
+def _sample_roles(plan: OperationPlan) -> np.ndarray:
+    """Per path sample: 0 headland, 1 turn, 2 line outside the worked range, 3 worked line."""
+    seg = plan.path.segment
+    out = np.zeros(seg.size, dtype=np.int8)
+    for i, r in enumerate(plan.roles):
+        m = seg == i
+        if r == "turn":
+            out[m] = 1
+        elif r == "line":
+            x = plan.path.x[m]
+            out[m] = np.where((x >= plan.worked_x_m[0] - 1e-9) & (x <= plan.worked_x_m[1] + 1e-9), 3, 2)
+    out[seg < 0] = 2
+    return out
+
+
+def swath_mask(plan: OperationPlan, shape, cell_m: float) -> np.ndarray:
+    """The cells (nx, ny) bool whose centres the implement's swath covers: the worked lines
+    (between the headlands) and the headland rounds, each ``working_width_m`` wide about the path
+    (a raster of the plan, for the coverage check)."""
+    fs = plan.settings
+    roles = _sample_roles(plan)
+    keep = (roles == 3) | (roles == 0)
+    return _sweep(plan.path.x[keep], plan.path.y[keep], plan.path.psi[keep], shape, cell_m,
+                  [(0.0, PATH_DS_M, 0.5 * fs.working_width_m)], overlap=False)
+
+
+def footprint_mask(x, y, psi, params: dict, shape, cell_m: float) -> np.ndarray:
+    """The cells (nx, ny) bool whose square overlaps a track's l x b contact rectangle at one of the
+    poses (x, y, psi): an independent raster of the tracks' footprint (separating axes)."""
+    half_l = 0.5 * params["contact_length_m"]
+    half_b = 0.5 * params["track_width_m"]
+    e = float(params["cg_ahead_of_contact_centre_m"])
+    off = 0.5 * params["track_gauge_m"]
+    rects = [(-e, half_l, half_b, off), (-e, half_l, half_b, -off)]
+    return _sweep(np.asarray(x, float), np.asarray(y, float), np.asarray(psi, float), shape, cell_m,
+                  [(c, hl, hb) for c, hl, hb, _ in rects], lateral=[r[3] for r in rects], overlap=True)
+
+
+def _sweep(x, y, psi, shape, cell_m, rects, lateral=None, overlap=True) -> np.ndarray:
+    """Union over poses of body-frame rectangles (centre ahead c, half length, half width; centred
+    ``lateral`` to the left): cells whose square overlaps (``overlap``) or whose centre is inside."""
+    nx, ny = shape
+    mask = np.zeros(shape, dtype=bool)
+    lateral = lateral or [0.0] * len(rects)
+    h = 0.5 * cell_m if overlap else 0.0
+    for (c, hl, hb), lat in zip(rects, lateral, strict=True):
+        cx = x + c * np.cos(psi) - lat * np.sin(psi)
+        cy = y + c * np.sin(psi) + lat * np.cos(psi)
+        reach = math.hypot(hl, hb) + cell_m
+        for k in range(x.size):
+            i0 = max(int(math.floor((cx[k] - reach) / cell_m)), 0)
+            i1 = min(int(math.ceil((cx[k] + reach) / cell_m)), nx)
+            j0 = max(int(math.floor((cy[k] - reach) / cell_m)), 0)
+            j1 = min(int(math.ceil((cy[k] + reach) / cell_m)), ny)
+            if i1 <= i0 or j1 <= j0:
+                continue
+            px = (np.arange(i0, i1) + 0.5) * cell_m - cx[k]
+            py = (np.arange(j0, j1) + 0.5) * cell_m - cy[k]
+            ca, sa = math.cos(psi[k]), math.sin(psi[k])
+            u = px[:, None] * ca + py[None, :] * sa
+            v = -px[:, None] * sa + py[None, :] * ca
+            if overlap:
+                ext_x = hl * abs(ca) + hb * abs(sa)
+                ext_y = hl * abs(sa) + hb * abs(ca)
+                rot = h * (abs(ca) + abs(sa))
+                inside = ((np.abs(u) < hl + rot) & (np.abs(v) < hb + rot)
+                          & (np.abs(px)[:, None] < h + ext_x) & (np.abs(py)[None, :] < h + ext_y))
+            else:
+                inside = (np.abs(u) <= hl) & (np.abs(v) <= hb)
+            mask[i0:i1, j0:j1] |= inside
+    return mask
+
+
+def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
+    """The plan against the vehicle and the soil, before anything runs: the footprint stays in
+    the field along the whole path (with the engine's padding and one cell), the turn radius is one
+    the vehicle holds on this soil at the turn speed (a trim). Returns the trims of the steering
+    map's turn points. Raises :class:`ScenarioError` naming the key, the value and the reason."""
+    fs = plan.settings
+    Lx, Ly = fs.size_m
+    p = plan.path
+    n_end = int(np.nonzero(p.segment == -1)[0][0]) + 1
+    x, y, psi = p.x[:n_end], p.y[:n_end], p.psi[:n_end]
+    half_l = 0.5 * params["contact_length_m"] + abs(params["cg_ahead_of_contact_centre_m"])
+    half_w = 0.5 * (params["track_gauge_m"] + params["track_width_m"])
+    room = padding_m(fs.cell_m) + fs.cell_m
+    ext_x = half_l * np.abs(np.cos(psi)) + half_w * np.abs(np.sin(psi)) + room
+    ext_y = half_l * np.abs(np.sin(psi)) + half_w * np.abs(np.cos(psi)) + room
+    out = (x - ext_x < 0) | (x + ext_x > Lx) | (y - ext_y < 0) | (y + ext_y > Ly)
+    if out.any():
+        k = int(np.argmax(out))
+        seg = int(p.segment[k])
+        role = plan.roles[seg] if seg >= 0 else "end"
+        raise ScenarioError(f"the plan leaves the field: at ({x[k]:.2f}, {y[k]:.2f}) m on a {role} segment the "
+                            f"vehicle's footprint (half length {half_l:g} m, half width {half_w:g} m, {room:.3g} m of "
+                            f"the engine's padding) crosses the border of the {Lx:g} m x {Ly:g} m field; with "
+                            f"operation.turn_radius_m = {fs.turn_radius_m:g} and operation.working_width_m = "
+                            f"{fs.working_width_m:g} the headland of {fs.headland_passes} rounds ({fs.headland_m:g} m) "
+                            "is too narrow: raise operation.headland_passes or lower the radius")
+    return {}
+
+
+# ---- the steering map and the follower -------------------------------------------------------------------
+def _trim_model(model_opts):
+    from ..model import SystemModel
+    from ..model.options import ModelOptions
+
+    law = model_opts.lateral_law
+    # the lagged shear law's steady states are the quasi-static law's (docs/turning.md section 8)
+    if law in ("shear", "shear_transient"):
+        model_opts = dataclasses.replace(model_opts, lateral_law="shear_quasistatic")
+    assert isinstance(model_opts, ModelOptions)
+    return SystemModel(model_opts)
+
+
+_MAP_CACHE: dict = {}
+
+
+def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, turn_speed_m_s: float) -> dict:
+    """The steady torques of the vehicle on this soil: per speed, the curvatures of
+    :data:`MAP_CURVATURES` (and the turn's) with their mean torque and torque difference
+    (right - left) from trims. The turn's own trim must exist (else :class:`ScenarioError`: the
+    radius cannot be held on this soil at this speed); curvatures a speed cannot hold are left out
+    of its row. Cached per (params, law, speeds, radius) in the process."""
+    from ..control.trim import TrimError, trim
+
+    key = (tuple(sorted(params.items())), model_opts, tuple(speeds_m_s), turn_radius_m, turn_speed_m_s)
+    if key in _MAP_CACHE:
+        return _MAP_CACHE[key]
+    model = _trim_model(model_opts)
+    try:
+        tp = trim(model, params, turn_speed_m_s, turn_radius_m)
+    except TrimError as err:
+        raise ScenarioError(f"operation.turn_radius_m = {turn_radius_m:g} at operation.turn_speed_m_s = "
+                            f"{turn_speed_m_s:g}: the vehicle cannot hold this turn on this soil ({err})") from err
+    rows = {}
+    for v in sorted(set(speeds_m_s)):
+        ks, mean, diff = [], [], []
+        # the turn's curvature and one 40 % tighter (room for the follower's corrections), where held
+        for kappa in sorted(set(MAP_CURVATURES) | {1.0 / turn_radius_m, 1.4 / turn_radius_m}):
+            if v > turn_speed_m_s + 1e-9 and kappa > 1.0 / 30 + 1e-12:
+                continue  # a line's speed is not driven through tight curves
+            try:
+                t = tp if (v == turn_speed_m_s and kappa == 1.0 / turn_radius_m) else \
+                    trim(model, params, v, None if kappa == 0 else 1.0 / kappa)
+            except TrimError:
+                continue
+            ks.append(kappa)
+            mean.append(0.5 * float(t.u[0] + t.u[1]))
+            diff.append(float(t.u[1] - t.u[0]))
+        rows[v] = (np.array(ks), np.array(mean), np.array(diff))
+    _MAP_CACHE[key] = rows
+    return rows
+
+
+def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float]:
+    """Mean torque and difference at speed v, curvature kappa (odd in kappa), interpolated."""
+    speeds = sorted(rows)
+    a = abs(kappa)
+
+    def at(s):
+        ks, m, dd = rows[s]
+        return float(np.interp(a, ks, m)), float(np.interp(a, ks, dd))
+    if v <= speeds[0] or len(speeds) == 1:
+        m, dd = at(speeds[0])
+    elif v >= speeds[-1]:
+        m, dd = at(speeds[-1])
+    else:
+        i = int(np.searchsorted(speeds, v)) - 1
+        f = (v - speeds[i]) / (speeds[i + 1] - speeds[i])
+        (m0, d0), (m1, d1) = at(speeds[i]), at(speeds[i + 1])
+        m, dd = m0 + f * (m1 - m0), d0 + f * (d1 - d0)
+    return m, math.copysign(dd, kappa)
+
+
+class PathFollower:
+    """The path-following torque law (a :class:`~symtrack.simulation.loop.SampledLaw`, sampled
+    every ``sample_time_s``, held over the engine's macro steps):
+
+    - kinematic outer loop: the yaw rate asked for, r_d = kappa v - (w_n^2 / v) e - 2 zeta w_n e_psi
+      (e: lateral error, positive left of the path; e_psi: heading error), w_n = :attr:`OMEGA_N`,
+      zeta = 1; kappa at a preview of :attr:`PREVIEW_S` ahead (the torque lag and the yaw response);
+    - the torque difference (right - left): the steering map's at the path's curvature (the
+      feed-forward), plus a PI law on the yaw rate, K_r (r_d - r) + K_i integral(r_d - r). The
+      feedback stays in torque and is not passed through the map: the map is nearly a step at
+      zero curvature (the turning resistance must be overcome before the vehicle yaws at all: on the
+      clay 600 N m from 0 to 1/400 1/m, 380 N m from 1/12 to 1/3 1/m), so a correction through it
+      reverses the torques (measured: a bang-bang oscillation in the first headland corner);
+    - a PI law on the speed for the mean torque, over the map's mean torque; the speed reference
+      the path's, limited by :data:`PLAN_ACCEL_M_S2`.
+
+    It ends the run (returns None) at the path's end, or when the lateral error exceeds
+    ``max_lateral_error_m`` (``failure`` says so). The gains: K_r = :attr:`YAW_GAIN_N_M_S`, K_i =
+    :attr:`YAW_INTEGRAL_N_M` (N m per rad/s, N m per rad: chosen on the small operation on clay and
+    sandy loam, docs/studies.md); the speed's r m / (2 :attr:`SPEED_TAU_S`) corrects a speed error
+    in SPEED_TAU_S."""
+
+    SAMPLE_TIME_S = 0.02  # measured: 0.05 s let the yaw loop oscillate in the headland corners
+    OMEGA_N = 0.8  # 1/s: the lateral error's closing rate
+    PREVIEW_S = 0.3
+    WINDOW_S = 1.0  # the feed-forward's curvature: the path's averaged over this time at the speed (0: none)
+    DIFF_SLEW_N_M_S = 1e9  # the torque difference's largest rate of change
+    YAW_GAIN_N_M_S = 6000.0
+    YAW_INTEGRAL_N_M = 4000.0
+    GAIN_SPEED_M_S = 1.0  # the yaw gains grow with the speed above this
+    RESET_INTEGRAL = False
+    CORRECTION_CURVATURE_1_M = 1.0 / 150.0
+    SPEED_TAU_S = 1.0
+
+    def __init__(self, plan: OperationPlan, params: dict, rows: dict, state_names, sample_time_s: float,
+                 substep_s: float, torque_limit_N_m: float, max_lateral_error_m: float):
+        self.plan, self.path, self.rows = plan, plan.path, rows
+        self.sample_time_s, self.substep_s = sample_time_s, substep_s
+        self.limit, self.max_err = torque_limit_N_m, max_lateral_error_m
+        idx = {n: i for i, n in enumerate(state_names)}
+        self.ix, self.iy, self.ipsi = idx["x_m"], idx["y_m"], idx["yaw_rad"]
+        self.iu, self.ir = idx["u_m_s"], idx["yaw_rate_rad_s"]
+        r = params["sprocket_radius_m"]
+        self.kp_v = r * params["mass_kg"] / (2 * self.SPEED_TAU_S)
+        self.ki_v = self.kp_v / (2 * self.SPEED_TAU_S)
+        self.int_r = self.int_v = 0.0
+        self.segment = 0
+        self.diff_prev = None
+        self.s = 0.0
+        self.roles = _sample_roles(plan)
+        # the speed profile: the path's, limited in deceleration before its slow parts
+        v = self.path.speed.copy()
+        ds = np.diff(self.path.s)
+        for i in range(v.size - 2, -1, -1):
+            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
+        self.v_profile = v
+        self.log = []  # (t, s, e_lat, e_psi, role)
+        self.failure = None
+        self.done = False
+
+    def _kappa(self, s: float, window_m: float) -> float:
+        """The path's curvature averaged over [s - window/2, s + window/2] (exactly, piecewise constant)."""
+        p = self.path
+        lo, hi = s - 0.5 * window_m, s + 0.5 * window_m
+        i0 = max(int(np.searchsorted(p.s, lo, side="right")) - 1, 0)
+        i1 = min(int(np.searchsorted(p.s, hi, side="right")), p.s.size - 1)
+        if i1 <= i0 + 1:
+            return float(p.kappa[i0])
+        edges = np.clip(p.s[i0:i1 + 1], lo, hi)
+        return float(np.sum(np.diff(edges) * p.kappa[i0:i1]) / max(hi - lo, 1e-9))
+
+    def __call__(self, t_s, x, final=False):
+        if final:
+            return None
+        X, Y, psi = float(x[self.ix]), float(x[self.iy]), float(x[self.ipsi])
+        u, r = float(x[self.iu]), float(x[self.ir])
+        self.s = self.path.project(X, Y, self.s, window_m=(-1.0, 3.0))
+        e, e_psi = self.path.errors(X, Y, psi, self.s)
+        i = min(int(np.searchsorted(self.path.s, self.s)), self.roles.size - 1)
+        self.log.append((t_s, self.s, e, e_psi, int(self.roles[i])))
+        if self.s >= self.path.length_m - 0.05:
+            self.done = True
+            return None
+        if abs(e) > self.max_err:
+            self.failure = (f"the vehicle left the path: lateral error {e:.2f} m at s = {self.s:.1f} m "
+                            f"(t = {t_s:.1f} s) "
+                            f"exceeds operation.max_lateral_error_m = {self.max_err:g}")
+            return None
+        v = max(abs(u), 0.3)
+        kappa = self._kappa(self.s + v * self.PREVIEW_S, max(v * self.WINDOW_S, 0.05))
+        w = self.OMEGA_N
+        r_d = kappa * v - (w * w / v) * e - 2 * w * e_psi
+        r_d = max(min(r_d, 0.8), -0.8)
+        # the speed reference, ramped from the start
+        v_ref = min(float(np.interp(self.s, self.path.s, self.v_profile)),
+                    0.3 + PLAN_ACCEL_M_S2 * t_s)
+        h = self.sample_time_s
+        er, ev = r_d - r, v_ref - u
+        self.int_r = max(min(self.int_r + h * er, 0.5), -0.5)
+        self.int_v = max(min(self.int_v + h * ev, 2.0), -2.0)
+        seg = int(self.path.segment[i])
+        if self.RESET_INTEGRAL and seg != self.segment:  # a new segment: the integral learnt the last one's map error
+            self.segment, self.int_r = seg, 0.0
+        # the map at the path's curvature plus the correction's, the correction limited to
+        # CORRECTION_CURVATURE_1_M: near straight running it overcomes the turning resistance's step
+        # (the threshold a PI law alone would wait for: a stick-slip weave); in a turn, where the map is
+        # flat, it moves the torques little (unlimited, it reversed them)
+        corr = max(min(r_d / v - kappa, self.CORRECTION_CURVATURE_1_M), -self.CORRECTION_CURVATURE_1_M)
+        mean_ff, diff = _map_eval(self.rows, v_ref, kappa + corr)
+        g = max(v / self.GAIN_SPEED_M_S, 1.0)
+        diff += g * (self.YAW_GAIN_N_M_S * er + self.YAW_INTEGRAL_N_M * self.int_r)
+        mean = mean_ff + self.kp_v * ev + self.ki_v * self.int_v
+        if self.diff_prev is not None:
+            step = self.DIFF_SLEW_N_M_S * h
+            diff = min(max(diff, self.diff_prev - step), self.diff_prev + step)
+        self.diff_prev = diff
+        left, right = mean - 0.5 * diff, mean + 0.5 * diff
+        lim = self.limit
+        return (max(min(left, lim), -lim), max(min(right, lim), -lim))
+
+
+# ---- the spec -------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class OperationSpec:
+    """A validated operation or season: the operations in order (each its settings, its plan, the
+    scenario of its vehicle on the field and its steering map), the traffic systems to compare,
+    the resolved document."""
+
+    name: str
+    description: str
+    operations: tuple  # of (OperationSettings, OperationPlan, Scenario, steering rows)
+    compare: tuple
+    document: dict
+    base_doc: dict
+    base: OperationSettings
+
+
+def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
+    run = dict(doc.get("run", {}))
+    check_keys("run", run, OPERATION_RUN_KEYS)
+    run.setdefault("integrator", "grid_fast")
+    # 5 ms macro steps: at 10 ms the engine's state diverged in the turns of a second operation on the
+    # rutted clay (measured on tests/test_operations.py's two-operation season)
+    run.setdefault("output_dt_s", 0.005)
+    terrain = dict(doc.get("terrain", {}))
+    for k in TERRAIN_KEYS_OF_OPERATION:
+        if k in terrain:
+            raise ScenarioError(f"terrain.{k} = {terrain[k]!r}: the [operation] section sets the field "
+                                "(operation.size_m, operation.cell_m); leave it out of [terrain]")
+    terrain.update(size_m=list(fs.size_m), cell_m=fs.cell_m, origin_m=[0.0, 0.0])
+    terrain.setdefault("max_speed_m_s", max(4.0, fs.speed_m_s + 1.0))
+    vehicle = {**doc.get("vehicle", {}), **fs.vehicle}
+    out = {"name": doc.get("name", "operation"), "run": run, "vehicle": vehicle, "terrain": terrain,
+           "torque": [{"t_s": 0.0, "left_N_m": 0.0, "right_N_m": 0.0}]}
+    for k in ("model", "soil", "engine"):
+        if k in doc:
+            out[k] = doc[k]
+    return out
+
+
+def _operation(doc: dict, fs: OperationSettings):
+    sc = scenario_from_dict(_scenario_doc(doc, fs), fs.name)
+    if sc.model.lateral_law == "creep":
+        raise ScenarioError("model.lateral_law = \"creep\": the creep law holds no turn tighter than about 100 m on "
+                            "these soils (docs/turning.md section 5); a field operation drives its headland turns on "
+                            "the lagged shear law: set [model] lateral_law = \"shear\"")
+    if sc.run.integrator != "grid_fast":
+        raise ScenarioError(f"run.integrator = {sc.run.integrator!r}: a field operation runs on the terrain engine "
+                            "(\"grid_fast\")")
+    if fs.speed_m_s > sc.terrain.max_speed_m_s:
+        raise ScenarioError(f"operation.speed_m_s = {fs.speed_m_s:g} is outside the allowed range (0, "
+                            f"{sc.terrain.max_speed_m_s:g}] (terrain.max_speed_m_s, the speed the channel pool is "
+                            "sized for)")
+    if not fs.cell_m < sc.params["track_width_m"]:
+        raise ScenarioError(f"operation.cell_m = {fs.cell_m:g} must be smaller than the track width "
+                            f"{sc.params['track_width_m']:g} m")
+    plan = plan_operation(fs)
+    check_plan(plan, sc.params, sc.model)
+    rows = steering_map(sc.params, sc.model, (fs.turn_speed_m_s, fs.speed_m_s), fs.turn_radius_m, fs.turn_speed_m_s)
+    return fs, plan, sc, rows
+
+
+def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks: str | None = None) -> OperationSpec:
+    """An operation (``[operation]``) or a season (``[operation]`` the defaults, ``[season]``
+    ``operations`` a list of tables over them) -> :class:`OperationSpec`, every operation planned
+    and checked (footprint in the field, the turn held on the soil) before any work. ``tracks``
+    replaces every operation's track system (the traffic comparison)."""
+    check_document("operation", doc, TOP_KEYS)
+    if "operation" not in doc:
+        raise ScenarioError("a field operation needs an [operation] section (docs/studies.md, \"Field operations\")")
+    base = parse_operation(doc["operation"])
+    season = doc.get("season", {})
+    check_keys("season", season, SEASON_KEYS)
+    entries = season.get("operations", [{}])
+    if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
+        raise ScenarioError(f"season.operations = {entries!r} must be a non-empty list of tables of [operation] keys")
+    compare = tuple(season.get("compare", ()))
+    for c in compare:
+        if c not in TRACKS:
+            raise ScenarioError(f"season.compare = {list(compare)!r}: {c!r} is not one of {', '.join(TRACKS)}")
+    ops = []
+    for k, e in enumerate(entries):
+        fs = parse_operation(e, base, where=f"season.operations[{k}]")
+        if fs.size_m != base.size_m or fs.cell_m != base.cell_m:
+            raise ScenarioError(f"season.operations[{k}]: size_m and cell_m are the field's: set them in [operation]")
+        if tracks is not None:
+            fs = dataclasses.replace(fs, tracks=tracks)
+        if "name" not in e:
+            fs = dataclasses.replace(fs, name=f"{base.name}_{k + 1}" if len(entries) > 1 else base.name)
+        ops.append(_operation(doc, fs))
+    names = [o[0].name for o in ops]
+    if len(set(names)) != len(names):
+        raise ScenarioError(f"season.operations: the names {names} must differ")
+    return OperationSpec(doc.get("name", default_name), doc.get("description", ""), tuple(ops), compare, doc, doc,
+                         base)
+
+
+def load_operation_spec(name_or_path, overrides=None, tracks: str | None = None) -> OperationSpec:
+    """A built-in operation or season (``symtrack/studies/fields/``) or a TOML file, with ``--set`` overrides."""
+    doc, default_name = read_document(name_or_path, FIELD_PACKAGE, "field operation", overrides,
+                                      paths=TERRAIN_PATH_KEYS)
+    return operation_spec_from_dict(doc, default_name, tracks)
+
+
+def is_operation_document(name_or_path) -> bool:
+    """Whether a built-in name or TOML file is a field operation (has an [operation] section)."""
+    try:
+        doc, _ = read_document(name_or_path, FIELD_PACKAGE, "field study")
+    except ScenarioError:
+        return False
+    return "operation" in doc
+
+
+# ---- running it -----------------------------------------------------------------------------------------
+@dataclass
+class OperationResult:
+    """One operation driven: its figures (summary), the passes per cell (nx, ny) uint16, the cells
+    the engine stressed (nx, ny) bool, the follower's log, the terrain after it (shared, not copied)."""
+
+    name: str
+    figures: dict
+    counts: np.ndarray
+    stressed: np.ndarray
+    log: np.ndarray
+    trajectory: np.ndarray  # t, x, y, yaw every COUNT_SAMPLE_S
+    error: str | None = None
+
+
+def count_passes(traj: np.ndarray, params: dict, shape, cell_m: float) -> np.ndarray:
+    """Passes per cell (nx, ny) uint16 from driven poses (t, x, y, yaw) (module doc: a cell counts a
+    pass when a track's contact comes over it after PASS_GAP_S out of every contact)."""
+    counts = np.zeros(shape, dtype=np.uint16)
+    last = np.full(shape, -np.inf, dtype=np.float64)
+    for t, x, y, psi in traj:
+        m = footprint_mask(np.array([x]), np.array([y]), np.array([psi]), params, shape, cell_m)
+        new = m & (t - last > PASS_GAP_S)
+        counts[new] += 1
+        last[m] = t
+    return counts
+
+
+def _headland_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
+    nx, ny = shape
+    xc = (np.arange(nx) + 0.5) * cell_m
+    yc = (np.arange(ny) + 0.5) * cell_m
+    H = fs.headland_m
+    inx = (xc >= H) & (xc <= fs.size_m[0] - H)
+    iny = (yc >= H) & (yc <= fs.size_m[1] - H)
+    return ~(inx[:, None] & iny[None, :])
+
+
+def field_shares(stressed: np.ndarray, counts: np.ndarray, fs: OperationSettings) -> dict:
+    """The trafficked shares (in the field, the headland and the in-field area) and the area run
+    over once, twice, three times or more."""
+    head = _headland_mask(fs, stressed.shape, fs.cell_m)
+    area = fs.cell_m ** 2
+    out = {"trafficked_fraction": float(stressed.mean()),
+           "headland_trafficked_fraction": float(stressed[head].mean()),
+           "infield_trafficked_fraction": float(stressed[~head].mean()),
+           "headland_area_m2": float(head.sum() * area), "field_area_m2": float(stressed.size * area)}
+    c = counts.astype(np.int64)
+    for k, name in ((1, "once"), (2, "twice")):
+        out[f"area_run_over_{name}_m2"] = float((c == k).sum() * area)
+    out["area_run_over_3_or_more_m2"] = float((c >= 3).sum() * area)
+    out["repeated_coverage_fraction"] = float(c.sum() / c.size)  # Kroulik's "repeated coverage": passes x area / field
+    out["passes_per_cell_max"] = int(c.max()) if c.size else 0
+    return out
+
+
+def run_operation(op, plant, progress: bool = False) -> OperationResult:
+    """Drive one planned operation ((settings, plan, scenario, steering rows)) on a plant (not started)
+    from its set-down to its lift-off. The terrain is the plant's world's storage, advanced in place."""
+    fs, plan, sc, rows = op
+    world = plant.world
+    shape, cell = world.grid.shape, world.grid.cell_m
+    law = PathFollower(plan, sc.params, rows, plant.state_names, PathFollower.SAMPLE_TIME_S, sc.run.output_dt_s,
+                       fs.torque_limit_N_m, fs.max_lateral_error_m)
+    # the time limit: the path at a quarter of its speeds
+    limit = 4.0 * float(np.sum(np.diff(plan.path.s) / np.maximum(plan.path.speed[:-1], 0.1))) + 60.0
+    run_sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=limit))
+    x0, y0, psi0 = plan.start
+    t0 = time.perf_counter()
+    cpu0 = time.process_time()
+    error = None
+    try:
+        res = loop.run(run_sc, plant, progress=progress, label=f"operation {fs.name}", torque_law=law,
+                       start=loop.StartPoint(x0, y0, psi0, np.zeros(2)))
+    except loop.IncompleteRun as err:
+        res, error = err.partial, str(err)
+    wall = time.perf_counter() - t0
+    cpu = time.process_time() - cpu0
+    if law.failure:
+        error = law.failure
+    elif error is None and not law.done:
+        error = f"the operation did not reach the path's end in {limit:.0f} s of simulated time"
+    names = plant.state_names
+    X = res.X
+    ix, iy, ipsi = names.index("x_m"), names.index("y_m"), names.index("yaw_rad")
+    every = max(1, int(round(COUNT_SAMPLE_S / sc.run.output_dt_s)))
+    traj = np.column_stack([res.t, X[:, ix], X[:, iy], X[:, ipsi]])[::every]
+    t_count = time.perf_counter()
+    counts = count_passes(traj, sc.params, shape, cell)
+    count_s = time.perf_counter() - t_count
+    stressed = (world.storage.sigma_max[:, 0] > 0).reshape(shape) if world.storage.subsoil_depths_m else \
+        (world.storage.z != 0).reshape(shape)
+    log = np.array(law.log) if law.log else np.zeros((0, 5))
+    dt = np.diff(res.t)
+    om = [names.index(f"omega_{k}_rad_s") for k in ("left", "right")]
+    tq = [names.index(f"torque_{k}_N_m") for k in ("left", "right")]
+    power = X[:-1, tq[0]] * X[:-1, om[0]] + X[:-1, tq[1]] * X[:-1, om[1]]
+    yn = res.output_names
+    comp = res.Y[:-1, yn.index("compaction_power_W")] if "compaction_power_W" in yn else None
+    lines = log[log[:, 4] == 3] if log.size else log
+    turns = log[log[:, 4] == 1] if log.size else log
+    dist = float(np.sum(np.hypot(np.diff(X[:, ix]), np.diff(X[:, iy]))))
+    turns_done = plan.turns if error is None else sum(
+        1 for k in range(plan.turns) if _turn_end_s(plan, k) <= law.s)
+    fig = {"name": fs.name, "complete": error is None, "error": error, "tracks": fs.tracks, "turn": fs.turn,
+           "working_width_m": fs.working_width_m, "headland_passes": fs.headland_passes,
+           "headland_width_m": fs.headland_m, "turn_radius_m": fs.turn_radius_m, "lines": len(plan.line_y_m),
+           "line_y_m": plan.line_y_m, "turns_planned": plan.turns, "turns_driven": turns_done, "turns_lifted": 0,
+           "path_length_m": plan.path.length_m, "distance_m": dist, "sim_time_s": float(res.t[-1]),
+           "energy_sprockets_J": float(np.sum(power * dt)),
+           "energy_compaction_J": float(np.sum(comp * dt)) if comp is not None else None,
+           "rms_lateral_error_lines_m": float(np.sqrt(np.mean(lines[:, 2] ** 2))) if lines.size else None,
+           "max_lateral_error_lines_m": float(np.abs(lines[:, 2]).max()) if lines.size else None,
+           "rms_lateral_error_turns_m": float(np.sqrt(np.mean(turns[:, 2] ** 2))) if turns.size else None,
+           "rms_lateral_error_all_m": float(np.sqrt(np.mean(log[:, 2] ** 2))) if log.size else None,
+           "wall_time_s": wall, "cpu_time_s": cpu, "pass_count_wall_time_s": count_s,
+           "x_real_time_wall": float(res.t[-1]) / wall if wall > 0 else None,
+           "rut_max_depth_mm": 1e3 * float(world.storage.z.max()),
+           "rut_mean_depth_mm": 1e3 * float(world.storage.z[stressed.ravel()].mean()) if stressed.any() else 0.0,
+           "vehicle_mass_kg": sc.params["mass_kg"]}
+    # this operation's own stressed cells (pass_sigma of its one engine pass)
+    own = (world.pass_sigma[:, 0] > 0).reshape(shape) if world.storage.subsoil_depths_m else stressed
+    fig["operation_trafficked_fraction"] = float(own.mean())
+    fig.update({f"operation_{k}": v for k, v in field_shares(own, counts, fs).items()
+                if k in ("headland_trafficked_fraction", "infield_trafficked_fraction")})
+    return OperationResult(fs.name, fig, counts, own, log, traj, error)
+
+
+def _turn_end_s(plan: OperationPlan, k: int) -> float:
+    """The arc length at the end of the k-th turn."""
+    idx = [i for i, r in enumerate(plan.roles) if r == "turn"]
+    # turns are runs of consecutive "turn" segments
+    groups, cur = [], []
+    for i in idx:
+        if cur and i != cur[-1] + 1:
+            groups.append(cur)
+            cur = []
+        cur.append(i)
+    if cur:
+        groups.append(cur)
+    last = groups[k][-1]
+    return float(plan.path.s[np.nonzero(plan.path.segment == last)[0][-1] + 1])
+
+
+@dataclass
+class SeasonResult:
+    spec: OperationSpec
+    operations: list
+    summary: dict
+    counts: np.ndarray
+    terrain: Terrain
+    written: list
+
+
+def _map_pngs(counts, z, fs: OperationSettings, label: str) -> dict:
+    from . import field_plots
+
+    ext = (0.0, fs.size_m[0], 0.0, fs.size_m[1])
+    return {"passes_map.png": field_plots.passes_map_png(counts, ext, f"passes per cell: {label}"),
+            "rut_map.png": field_plots.sinkage_map_png(z, ext, f"rut depth: {label}")}
+
+
+def _counts_npz(counts, cell_m) -> bytes:
+    buf = io.BytesIO()
+    np.savez_compressed(buf, kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
+                        origin_m=np.zeros(2), cell_m=np.array(cell_m), shape=np.array(counts.shape), passes=counts)
+    return buf.getvalue()
+
+
+def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through_files: bool = True,
+               figures: bool = True) -> SeasonResult:
+    """Drive every operation of ``spec`` in order on one persistent field. Between two operations
+    the field is saved (``<op>/field.npz``) and, with ``through_files``, the next operation starts from
+    the file read back (the persistence a season depends on, tested bit for bit); an operation with
+    another vehicle gets a plant of its own on the same field. Writes ``out`` (docs/studies.md)."""
+    import tempfile
+
+    folder = check_output_folder(str(out)) if out is not None else None
+    t_start = time.perf_counter()
+    terrain = None
+    results, files = [], {}
+    total = None
+    build_s = 0.0
+    tmp = tempfile.TemporaryDirectory(prefix="symtrack-season-") if folder is None and through_files else None
+    try:
+        for k, op in enumerate(spec.operations):
+            fs, plan, sc, rows = op
+            tb = time.perf_counter()
+            plant = make_plant(sc, terrain=terrain)
+            build_s += time.perf_counter() - tb
+            r = run_operation(op, plant, progress=progress)
+            terrain = plant.world.storage
+            results.append(r)
+            total = r.counts.astype(np.uint32) if total is None else total + r.counts
+            label = f"{fs.name} ({fs.tracks}, {fs.working_width_m:g} m)"
+            sub = f"{k + 1:02d}_{fs.name}"
+            if folder is not None:
+                op_files = {f"{sub}/summary.json": json.dumps(r.figures, indent=2) + "\n",
+                            f"{sub}/passes_per_cell.npz": _counts_npz(r.counts, fs.cell_m)}
+                if figures:
+                    op_files |= {f"{sub}/{n}": b for n, b in
+                                 _map_pngs(r.counts, terrain.z.reshape(r.counts.shape), fs, label).items()}
+                files |= op_files
+            if r.error:
+                break
+            if through_files and k + 1 < len(spec.operations):
+                path = (folder / sub / "field.npz") if folder is not None else Path_(tmp.name) / f"{sub}.npz"
+                path.parent.mkdir(parents=True, exist_ok=True)
+                terrain.save(path, run={"run_id": f"{spec.name}-{k + 1}", "scenario": fs.name, "passes": 1,
+                                        "scenario_sha256": "", "time_utc": ""})
+                terrain = Terrain.load(path, sc.params)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    fs0 = spec.base
+    counts = np.minimum(total, np.iinfo(np.uint16).max).astype(np.uint16)
+    stressed = (terrain.sigma_max[:, 0] > 0).reshape(counts.shape) if terrain.subsoil_depths_m else \
+        (terrain.z != 0).reshape(counts.shape)
+    summary = {"schema_version": SCHEMA_VERSION, "kind": "symtrack-field-operations", "name": spec.name,
+               "description": spec.description, "complete": all(r.error is None for r in results)
+               and len(results) == len(spec.operations),
+               "error": next((r.error for r in results if r.error), None),
+               "operations_run": [r.name for r in results], "field_size_m": list(fs0.size_m),
+               "field_cell_m": fs0.cell_m,
+               "field_cells": int(counts.size),
+               **field_shares(stressed, counts, fs0),
+               "turns_driven": sum(r.figures["turns_driven"] for r in results), "turns_lifted": 0,
+               "sim_time_s": sum(r.figures["sim_time_s"] for r in results),
+               "distance_m": sum(r.figures["distance_m"] for r in results),
+               "energy_sprockets_J": sum(r.figures["energy_sprockets_J"] for r in results),
+               "energy_compaction_J": sum(r.figures["energy_compaction_J"] or 0.0 for r in results),
+               "rms_lateral_error_lines_m": _rms_of(results, 3), "rms_lateral_error_turns_m": _rms_of(results, 1),
+               "max_lateral_error_lines_m": max((r.figures["max_lateral_error_lines_m"] or 0.0) for r in results),
+               "rut_max_depth_mm": 1e3 * float(terrain.z.max()),
+               "build_s": build_s, "drive_wall_time_s": sum(r.figures["wall_time_s"] for r in results),
+               "wall_time_s": time.perf_counter() - t_start,
+               "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
+               "trafficked_note": "trafficked_fraction: the cells the engine stressed over the season (sigma_max > 0 "
+                                  "at the first subsoil depth: a track's contact overlapped them); passes per cell: "
+                                  "the driven poses' footprints (a new pass after 1 s out of every contact)",
+               "operations": [r.figures for r in results]}
+    written = []
+    if folder is not None:
+        files["operation.resolved.toml"] = to_toml(spec.document)
+        files["passes_per_cell.npz"] = _counts_npz(counts, fs0.cell_m)
+        if figures:
+            files |= _map_pngs(counts, terrain.z.reshape(counts.shape), fs0, f"{spec.name}, {len(results)} operations")
+        files["summary.json"] = json.dumps(summary, indent=2) + "\n"
+        from ..reports.run_files import write_folder
+
+        written = write_folder(folder, files, clear=False)
+        terrain.save(folder / "field.npz")
+        written.append(folder / "field.npz")
+    return SeasonResult(spec, results, summary, counts, terrain, written)
+
+
+def _rms_of(results, role: int):
+    parts = [r.log[r.log[:, 4] == role, 2] for r in results if r.log.size]
+    e = np.concatenate(parts) if parts else np.zeros(0)
+    return float(np.sqrt(np.mean(e ** 2))) if e.size else None
+
+
+def Path_(p):
+    from pathlib import Path as _P
+
+    return _P(p)
+
+
+TRAFFIC_COLUMNS = ("tracks", "trafficked_fraction", "headland_trafficked_fraction", "infield_trafficked_fraction",
+                   "area_run_over_once_m2", "area_run_over_twice_m2", "area_run_over_3_or_more_m2",
+                   "repeated_coverage_fraction", "rut_max_depth_mm", "distance_m", "sim_time_s", "energy_sprockets_J",
+                   "turns_driven", "turns_lifted", "rms_lateral_error_lines_m", "wall_time_s")
+
+
+def traffic_comparison(doc: dict, systems, out=None, progress: bool = False, name: str = "operation") -> dict:
+    """The same season under each traffic system of ``systems`` (e.g. ("random", "controlled")), each
+    on a new field: one table (``traffic.csv``, a row per system) and one figure (``traffic.png``)."""
+    rows = []
+    folder = check_output_folder(str(out)) if out is not None else None
+    for sys_ in systems:
+        spec = operation_spec_from_dict(doc, name, tracks=sys_)
+        res = run_season(spec, None if folder is None else folder / sys_, progress=progress)
+        rows.append({"tracks": sys_, **{k: res.summary.get(k) for k in TRAFFIC_COLUMNS if k != "tracks"}})
+    if folder is not None:
+        import csv
+
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(TRAFFIC_COLUMNS)
+        for r in rows:
+            w.writerow([r[c] for c in TRAFFIC_COLUMNS])
+        from ..reports.run_files import write_folder
+
+        write_folder(folder, {"traffic.csv": buf.getvalue(), "traffic.png": _traffic_png(rows),
+                              "traffic.json": json.dumps(rows, indent=2) + "\n"}, clear=False)
+    return {"rows": rows}
+
+
+def _traffic_png(rows) -> bytes:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    keys = [("trafficked_fraction", "trafficked (whole field)"), ("infield_trafficked_fraction", "in-field"),
+            ("headland_trafficked_fraction", "headland"), ("repeated_coverage_fraction", "repeated coverage")]
+    fig, ax = plt.subplots(figsize=(7.0, 3.6))
+    n = len(rows)
+    width = 0.8 / n
+    for i, r in enumerate(rows):
+        ax.bar(np.arange(len(keys)) + i * width, [r[k] or 0.0 for k, _ in keys], width, label=r["tracks"])
+    ax.set_xticks(np.arange(len(keys)) + 0.4 - width / 2, [lab for _, lab in keys])
+    ax.set_ylabel("share of the area")
+    ax.legend()
+    ax.set_title("traffic systems: the same season on new fields")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return buf.getvalue()
