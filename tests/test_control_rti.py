@@ -19,7 +19,7 @@ from symtrack.control import scenario as S
 from symtrack.control.mpc import MPCSettings, MPCStats, PathTrackingMPC, SolveInfo, realtime_figures
 from symtrack.control.rti import gn_solve
 from symtrack.foundations.errors import ParameterError
-from symtrack.model import SystemModel
+from symtrack.model import ModelOptions, SystemModel
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -64,11 +64,15 @@ def test_least_squares_residuals_are_the_nlp_cost(model, huber):
         assert float(rN @ rN) == pytest.approx(costN, rel=1e-10)
 
 
-def test_rti_iterates_converge_to_the_converged_nmpc(model):
+@pytest.mark.parametrize("law, rate, max_iter", [("shear", 0.95, 150), ("creep", 0.7, 60)])
+def test_rti_iterates_converge_to_the_converged_nmpc(law, rate, max_iter):
     """Repeated RTI steps on one problem (a stationary reference, no shift) converge to the
     solution of the fully converged NMPC (IPOPT at tol 1e-9) of the same NLP; the first steps
-    from a perturbed plan already contract."""
-    sc, x, u, ref = _problem(model, overrides=["start.y_m=0.3"], tol=1e-9)
+    from a perturbed plan already contract. Gauss-Newton converges linearly, at a rate set by the
+    curvature it neglects: measured 0.928 per iteration on the default shear law (100 iterations to
+    1e-9), 0.623 on the creep law (19)."""
+    model = SystemModel(ModelOptions(lateral_law=law))
+    sc, x, u, ref = _problem(model, overrides=["start.y_m=0.3", f"model.lateral_law={law}"], tol=1e-9)
     nmpc = PathTrackingMPC(model, sc.params, sc.mpc)
     assert nmpc.prepare(x[:model.layout.nv], x[model.layout.nv:], u, ref).success
     w_star = nmpc._w.copy()
@@ -81,13 +85,14 @@ def test_rti_iterates_converge_to_the_converged_nmpc(model):
     for k in range(rti.N):
         w0[k * blk + nxa:k * blk + nxa + 2] += 0.2 * np.array([1.0, -1.0])
     steps = []
-    w, ok, iters, status = gn_solve(rti, x0s, x[model.layout.nv:], ref, w0, max_iter=60, tol=1e-9, steps=steps)
+    w, ok, iters, status = gn_solve(rti, x0s, x[model.layout.nv:], ref, w0, max_iter=max_iter, tol=1e-9,
+                                    steps=steps)
     assert ok, status
     dist0 = np.max(np.abs(w0 - w_star))
     assert np.max(np.abs(w - w_star)) < 1e-5 * dist0
     # linear convergence: the later steps shrink by a common factor below 1
     ratios = np.array(steps[3:10]) / np.array(steps[2:9])
-    assert np.all(ratios < 0.9), ratios
+    assert np.all(ratios < rate), ratios
     # the torque plan of the RTI equals the NMPC's
     W = w[:rti.N * blk].reshape(rti.N, blk)
     Ws = w_star[:rti.N * blk].reshape(rti.N, blk)
@@ -158,7 +163,7 @@ CACHE_SCRIPT = textwrap.dedent("""
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     from symtrack.control import solver_cache, scenario as S, closedloop as CL
     from symtrack.control.mpc import PathTrackingMPC
-    from symtrack.model import SystemModel
+    from symtrack.model import ModelOptions, SystemModel
     model = SystemModel()
     sc = S.load("headland_uturn", [f"mpc.solver='{sys.argv[1]}'", "mpc.jit=true", "mpc.horizon_steps=8"])
     mpc = PathTrackingMPC(model, sc.params, sc.mpc)
