@@ -205,7 +205,7 @@ def setup(sc) -> Problem:
     from symtrack.foundations.errors import SimulationError
     from symtrack.model import SystemModel
 
-    model = SystemModel()
+    model = SystemModel(sc.model)  # the scenario's [model] (its lateral law), as the Python closed loop
     mpc = PathTrackingMPC(model, sc.params, sc.mpc)
     x0, u0 = closedloop.initial_state(model, sc)
     path = sc.build_path()
