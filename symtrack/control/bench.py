@@ -261,8 +261,11 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
     out = {}
     traj = {}
     for pred in ("vehicle", "full"):
+        # the exact law in the prediction (no regularisation of the sliding direction): the
+        # comparison is with the plant, started at the exact law's trim
         mpc = PathTrackingMPC(model, params, MPCSettings(horizon_steps=N, sample_time_s=sample_time_s,
-                                                         prediction=pred))
+                                                         prediction=pred, prediction_sliding_smoothing=None,
+                                                         prediction_sliding_sign="model"))
         fn = mpc.stage_fn
         nxp = mpc.nxp
         xs = np.concatenate([st.x[:nxp], st.u]) / mpc.sx

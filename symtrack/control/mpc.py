@@ -219,9 +219,15 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
     ratio of the longitudinal to the lateral sliding velocity, and in the MPC's working range
     (straight running and path corrections, slips 1e-5 ... 1e-2) that ratio turns over changes of
     the sprocket speed of 1e-3 rad/s; the exact law's curvature then stalls IPOPT
-    (docs/turning.md, "Nonlinear MPC on the shear law")."""
+    (docs/turning.md, "Nonlinear MPC on the shear law").
+
+    Which laws: both shear laws for the NLP solvers (on the default lagged "shear" law and the
+    clay, `headland_uturn` with IPOPT had 80 failed solves exact, 0 regularised); for the RTI
+    (solver = "rti") only the quasi-static law: on the lagged law its Gauss-Newton steps do better
+    on the exact law (headland_uturn, clay / sandy loam / grid plant: 1 / 0 / 0-1 failed solves and
+    RMS 0.4-0.5 cm exact, against 0 / 4 / 3 and 1.4-1.8 cm regularised; docs/turning.md section 6)."""
     o = model.opts
-    if o.lateral_law != "shear_quasistatic":
+    if o.lateral_law == "creep" or (o.lateral_law == "shear" and settings.solver == "rti"):
         return model
     changes = {}
     if settings.prediction_sliding_smoothing is not None:
