@@ -111,7 +111,7 @@ def test_rti_closed_loop_preparation_feedback(model):
     res = CL.run(sc, model=model, mpc=mpc, max_steps=25)
     s = res.summary
     assert s["failed_solves"] == 0 and s["fallback_solves"] == 0
-    assert all(i.iterations == 1 and i.status.startswith("rti qrqp") for i in mpc.stats.solves)
+    assert all(i.iterations == 1 and i.status.startswith(f"rti {sc.mpc.rti_qp_solver}") for i in mpc.stats.solves)
     assert all(i.preparation_time_s > 0 for i in mpc.stats.solves)
     assert np.max(np.abs(res.e_lat)) < 0.01
     for key in ("overrun_samples", "overrun_worst_ms", "preparation_time_median_ms",

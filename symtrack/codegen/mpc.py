@@ -256,6 +256,7 @@ def scenario_header(pb: Problem) -> str:
         f"#define MPC_MAX_SAMPLES {max_samples}",
         f"#define MPC_MAX_DEFECT {c_literal(s.rti_max_defect)}",
         f"#define MPC_HALVINGS {s.rti_step_halvings}",
+        f"#define MPC_RELINEARISATIONS {s.rti_relinearisations}",
         f"#define MPC_TORQUE_SCALE_N_M {c_literal(1000.0)}",
         f"#define MPC_TWO_PI {c_literal(2 * math.pi)}",
         f"#define PLANT_NX {model.nx}",
@@ -402,7 +403,13 @@ def load_scenario(name: str, overrides=(), solver: str = "rti"):
     if not name.endswith(".toml") and name not in mpc_names and name in simulation_names():
         raise ScenarioError(f"{name!r} is a simulation scenario (symtrack simulate), not an MPC scenario; "
                             f"MPC scenarios: {', '.join(mpc_names)} or a TOML file")
+    # the C embeds qrqp (the QP solver CasADi generates plain C for): the Python loop it is compared
+    # with runs qrqp too, whatever MPCSettings' default rti_qp_solver is
     sc = scenario.load(name, list(overrides) + [f"mpc.solver={solver}", "run.integrator=rosenbrock"])
+    if sc.mpc.rti_qp_solver != "qrqp" and any(o.replace(" ", "").startswith("mpc.rti_qp_solver=") for o in overrides):
+        raise ScenarioError(f"mpc.rti_qp_solver = {sc.mpc.rti_qp_solver!r}: the C closed loop embeds qrqp (the QP "
+                            "solver CasADi generates dependency-free C for); allowed: qrqp")
+    sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, rti_qp_solver="qrqp"))
     if sc.terrain is not None:
         raise ScenarioError(f"MPC scenario {sc.name!r} runs on the grid terrain ([terrain] section): the C closed "
                             "loop has the homogeneous plant only (add --set or use a scenario without [terrain])")
@@ -474,7 +481,7 @@ def command(args) -> int:
         res = python_closed_loop(sc, pb.model)
         s = res.summary
         agree = compare(res, out / "closed_loop.csv")
-        print(f"Python closed loop (same RTI, Rosenbrock plant{', jit' if sc.mpc.jit else ''}): solve median "
+        print(f"Python closed loop (same RTI, Rosenbrock plant{', jit' if sc.mpc.uses_jit else ''}): solve median "
               f"{s['solve_time_median_ms']:.3f} / p95 {s['solve_time_p95_ms']:.3f} / max "
               f"{s['solve_time_max_ms']:.3f} ms; failed {s['failed_solves']}, fallbacks {s['fallback_solves']}")
         print("agreement: " + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"

@@ -210,7 +210,7 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
             sc = dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, **cfg))
             t0 = time.perf_counter()
             ctrl = PathTrackingMPC(model, sc.params, sc.mpc)
-            desc = (f"NMPC {sc.mpc.solver}{' + jit' if sc.mpc.jit else ''}, Radau-{sc.mpc.collocation_degree} "
+            desc = (f"NMPC {sc.mpc.solver}{' + jit' if sc.mpc.uses_jit else ''}, Radau-{sc.mpc.collocation_degree} "
                     f"collocation, N = {sc.mpc.horizon_steps}")
             if rti:
                 desc = (f"RTI: 1 Gauss-Newton SQP step/sample, {sc.mpc.rti_qp_solver} on the condensed QP, "

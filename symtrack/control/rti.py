@@ -74,9 +74,9 @@ class RTI:
     (cached across processes by :mod:`symtrack.control.solver_cache`)."""
 
     def __init__(self, mpc, qp_solver: str = "qrqp", compiled: bool = False, regularisation: float = 1e-8,
-                 max_defect: float = 0.1, halvings: int = 3, cache=None):
+                 max_defect: float = 0.1, halvings: int = 3, cache=None, relinearisations: int = 1):
         self.m = mpc
-        self.max_defect, self.halvings = max_defect, halvings
+        self.max_defect, self.halvings, self.relinearisations = max_defect, halvings, relinearisations
         self.last_alpha, self.last_defect = 1.0, 0.0
         self._xc = np.zeros(0)
         N = mpc.N
@@ -148,9 +148,13 @@ class RTI:
                     "U": Uk.copy()}
 
     # ------------------------------------------------------------------ feedback
-    def feedback(self, x0s: np.ndarray, ref: np.ndarray):
+    def feedback(self, x0s: np.ndarray, ref: np.ndarray, relinearisations: int | None = None):
         """The QP step from the prepared linearisation for the measured (scaled) x0 and the
-        reference: returns (new w, ok, status)."""
+        reference: returns (new w, ok, status). A step rejected after the halvings is followed by
+        up to ``relinearisations`` (default: the RTI's) Gauss-Newton iterations, each linearised
+        at the shortest step of the one before (see the safeguard below)."""
+        if relinearisations is None:
+            relinearisations = self.relinearisations
         L = self.lin
         N, nxa, nu, nxp = self.N, self.nxa, self.nu, self.nxp
         nzu = nu * N
@@ -220,8 +224,21 @@ class RTI:
             # ... but never a large residual: accepted steps with large residuals let the
             # iteration drift off the dynamics (measured on field_pattern before this bound)
             if defect > 2.0 * defect0 + self.max_defect or defect0 > 10.0 * self.max_defect:
-                return None, False, (f"{status}; defect {defect:.2g} > {self.max_defect:g} after "
-                                     f"{self.halvings} halvings (measurement alone: {defect0:.2g})")
+                why = (f"{status}; defect {defect:.2g} > {self.max_defect:g} after {self.halvings} halvings "
+                       f"(measurement alone: {defect0:.2g})")
+                if relinearisations <= 0:
+                    return None, False, why
+                # Rejected: the linearisation does not describe the dynamics over the step. Where
+                # this happens (the lagged shear law at exactly symmetric straight running, the
+                # turn's curvature entering the horizon: docs/control.md) the defect grows
+                # linearly with the step length (measured 0.92 alpha): the guess sits at the apex
+                # of the law's cone (slips inside sliding_smoothing), where the Jacobian is not
+                # the slope of the forces over the step. One more Gauss-Newton iteration,
+                # linearised at the shortest step (off the apex; x0 already the measurement),
+                # takes the step instead of the NLP fallback.
+                self.prepare_at(w, self.m.p_model, self._xc)
+                w2, ok2, st2 = self.feedback(x0s, ref, relinearisations - 1)
+                return w2, ok2, f"{why}; re-linearised at step {alpha:g}: {st2}"
         self.last_alpha, self.last_defect = alpha, defect
         return w, True, status if alpha == 1.0 else f"{status}; step {alpha:g}"
 
