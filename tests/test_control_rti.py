@@ -239,3 +239,30 @@ def test_mpc_cli_rti(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["solver"] == "rti" and s["failed_solves"] == 0
     assert s["overrun_samples"] >= 0 and s["preparation_time_median_ms"] > 0
+
+
+def test_rti_on_the_lagged_shear_law_relinearises_the_rejected_step():
+    """The RTI on the lagged shear law (the default), clay, a U-turn after 4 m of straight. When
+    the turn's curvature enters the horizon the plan sits at exactly symmetric straight running,
+    the apex of the law's cone, and its Gauss-Newton step is rejected after the halvings (its
+    defect grows linearly with the step: docs/control.md); one more iteration, re-linearised at
+    the shortest step, takes it: no failed solve and no NLP fallback. Without the
+    re-linearisation the same sample goes to the NLP fallback (or fails)."""
+    def run(relin):
+        sc = S.load("headland_uturn", ["soil.preset=clayey_soil_thailand_38", "model.lateral_law=shear",
+                                       "mpc.solver=rti", "mpc.jit=false", f"mpc.rti_relinearisations={relin}",
+                                       "path.segments=[{straight_m=4.0},{arc_radius_m=4.0,angle_deg=180.0}]"])
+        model = SystemModel(sc.model)
+        mpc = PathTrackingMPC(model, sc.params, sc.mpc)
+        return CL.run(sc, model=model, mpc=mpc), mpc
+
+    res, mpc = run(1)
+    s = res.summary
+    assert s["path_completed"] and s["failed_solves"] == 0 and s["fallback_solves"] == 0
+    assert any("re-linearised" in i.status for i in mpc.stats.solves), s["solve_status_counts"]
+    assert np.max(np.abs(res.e_lat)) < 0.05
+    assert abs(res.X[-1, res.state_names.index("yaw_rad")] - np.pi) < 0.2
+    res0, _ = run(0)
+    s0 = res0.summary
+    assert s0["failed_solves"] + s0["fallback_solves"] >= 1
+    assert any("halvings" in k and "re-linearised" not in k for k in s0["solve_status_counts"])

@@ -8,8 +8,8 @@ model equation repeated) and generated with CasADi's code generator into ``DIR/m
   the elimination dK = -G_K^-1 (G + G_x dx + G_u du) (a sparse QR, CasADi's ``qr`` linear solver)
   and the condensing recursion (``RTI.prepare_at``);
 - ``mpc_rti_feedback(w, Phi, Gam, xi, x0s, ref) -> (dU, dxa, GdU)``: the residuals, the dense QP
-  and its solution by **qrqp** (CasADi's active-set QP solver, which generates to plain C: the same
-  solver as the Python RTI's default ``rti_qp_solver``); the Function returns a non-zero flag when
+  and its solution by **qrqp** (CasADi's active-set QP solver, which generates to plain C; the
+  Python loop it is compared with runs qrqp too, :func:`load_scenario`); the Function returns a non-zero flag when
   the QP fails (``RTI.feedback`` up to the step);
 - ``mpc_rti_point(w, M, x0s, dxa, GdU, dU, alpha) -> w`` and ``mpc_rti_defect(w, p, xc) -> d``: a
   step of length alpha and its largest collocation residual (the step halving of ``RTI.feedback``);
@@ -346,20 +346,21 @@ def write(out: Path, files: dict[str, bytes]) -> None:
         atomic_write_bytes(out / name, data)
 
 
-def build_program(out: Path, cc: str) -> float:
+def build_program(out: Path, cc: str, cflags: str = CFLAGS) -> float:
     """Compile DIR/mpc_closed_loop (make -j2 when there is make, else the compiler directly);
-    returns the build time [s]."""
+    returns the build time [s]. ``cflags``: the compiler flags (default CFLAGS, -O2; the tests
+    build with -O1, half the compile time of mpc_rti.c)."""
     from symtrack.foundations.errors import SimulationError
 
     t0 = time.perf_counter()
     make = shutil.which("make")
     if make:
-        cmds = [[make, "-s", "-j2", f"CC={cc}", "mpc_closed_loop"]]
+        cmds = [[make, "-s", "-j2", f"CC={cc}", f"CFLAGS={cflags}", "mpc_closed_loop"]]
     else:
         objs = []
         cmds = []
         for stem in ("mpc_closed_loop", "mpc_rti", PLANT_STEM):
-            cmds.append([cc, *CFLAGS.split(), "-c", f"{stem}.c", "-o", f"{stem}.o"])
+            cmds.append([cc, *cflags.split(), "-c", f"{stem}.c", "-o", f"{stem}.o"])
             objs.append(f"{stem}.o")
         cmds.append([cc, "-o", "mpc_closed_loop", *objs, "-lm"])
     for cmd in cmds:
