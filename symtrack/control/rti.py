@@ -118,8 +118,8 @@ class RTI:
         N = mpc.N
         self.N, self.nxa, self.nu, self.nk, self.nxp = N, mpc.nxa, mpc.nu, mpc.nk, mpc.nxp
         self.reg = regularisation
-        fns = {"mpc_rti_coll": mpc.coll_fn.map(N), "mpc_rti_res": mpc.res_fn.map(N), "mpc_rti_res_term": mpc.res_term_fn,
-               "mpc_rti_coll_res": mpc.coll_res_fn.map(N)}
+        fns = {"mpc_rti_coll": mpc.coll_fn.map(N), "mpc_rti_res": mpc.res_fn.map(N),
+               "mpc_rti_res_term": mpc.res_term_fn, "mpc_rti_coll_res": mpc.coll_res_fn.map(N)}
         calls = []
         for name, f in fns.items():
             # dense outputs, so that the buffer interface fills whole numpy arrays (_Buffered), and the
