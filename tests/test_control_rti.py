@@ -42,7 +42,15 @@ def test_rti_settings_validation():
         MPCSettings(solver="rti", rti_qp_solver="gurobi")
     with pytest.raises(ParameterError, match="mpc.rti_max_defect"):
         MPCSettings(solver="rti", rti_max_defect=0.0)
+    with pytest.raises(ParameterError, match=r"mpc.rti_relinearisations = -1 must be an integer in \[0, 10\]"):
+        MPCSettings(solver="rti", rti_relinearisations=-1)
+    with pytest.raises(ParameterError, match="mpc.jit = 'yes' must be true or false"):
+        MPCSettings(solver="rti", jit="yes")
     assert MPCSettings(solver="rti").solver == "rti"
+    # the RTI's defaults (issue 21): compiled, DAQP; the NLP solvers interpreted unless asked
+    assert MPCSettings(solver="rti").uses_jit and MPCSettings(solver="rti").rti_qp_solver == "daqp"
+    assert not MPCSettings().uses_jit and MPCSettings(jit=True).uses_jit
+    assert not MPCSettings(solver="rti", jit=False).uses_jit
 
 
 @pytest.mark.parametrize("huber", [0.0, 0.2])
