@@ -80,8 +80,7 @@ def test_rti_iterates_converge_to_the_converged_nmpc(law, rate, max_iter):
     curvature it neglects: measured 0.928 per iteration on the default shear law (100 iterations to
     1e-9), 0.623 on the creep law (19)."""
     model = SystemModel(ModelOptions(lateral_law=law))
-    # the NMPC on the RTI's own NLP: the exact law in both (the NLP solvers' default regularises the shear
-    # law's prediction, the RTI's does not: symtrack.control.mpc.prediction_model)
+    # the NMPC on the RTI's own NLP: the exact law in both, said (symtrack.control.mpc.prediction_model)
     sc, x, u, ref = _problem(model, overrides=["start.y_m=0.3", f"model.lateral_law={law}"], tol=1e-9,
                              prediction_sliding_smoothing=None, prediction_sliding_sign="model")
     nmpc = PathTrackingMPC(model, sc.params, sc.mpc)

@@ -238,13 +238,14 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
     the sprocket speed of 1e-3 rad/s; the exact law's curvature then stalls IPOPT
     (docs/turning.md, "Nonlinear MPC on the shear law").
 
-    Which laws: both shear laws for the NLP solvers (on the default lagged "shear" law and the
-    clay, `headland_uturn` with IPOPT had 80 failed solves exact, 0 regularised); for the RTI
-    (solver = "rti") only the quasi-static law: on the lagged law its Gauss-Newton steps do better
-    on the exact law (headland_uturn, clay / sandy loam / grid plant: 1 / 0 / 0-1 failed solves and
-    RMS 0.4-0.5 cm exact, against 0 / 4 / 3 and 1.4-1.8 cm regularised; docs/turning.md section 6)."""
+    Which laws: the quasi-static law only. On the default lagged "shear" law the prediction is
+    the exact law for every solver (measured, docs/turning.md section 6): the RTI does better on it
+    (headland_uturn on clay / sandy loam / the grid: 1 / 0 / 0-1 failed solves, RMS 0.4-0.5 cm,
+    against 0 / 4 / 3 and 1.4-1.8 cm regularised), and so does the lane keeping on the grid
+    (regularised, the second pass did not converge onto the lanes); IPOPT on the clay is the open
+    case (headland_uturn: 80 failed solves exact, 0 regularised)."""
     o = model.opts
-    if o.lateral_law == "creep" or (o.lateral_law == "shear" and settings.solver == "rti"):
+    if o.lateral_law != "shear_quasistatic":
         return model
     changes = {}
     if settings.prediction_sliding_smoothing is not None:
