@@ -107,9 +107,9 @@ class MPCSettings:
     sample_time_s: float = 0.1
     solver: str = "ipopt"
     # compile the solver's functions once into the solver cache; None: the solver's default (see
-    # ``uses_jit``): on for the RTI (its feedback is the real-time path: 1.5 against 2.6 ms median
-    # on the clay U-turn, measured in docs/control.md), off for the NLP solvers (fatrop's build
-    # takes 45 s, and IPOPT's time is spent inside IPOPT and MUMPS)
+    # ``uses_jit``): on for the RTI (its feedback is the real-time path: with DAQP, median / p95
+    # 1.5 / 2.4 ms against 2.6 / 4.6 ms interpreted with qrqp on the clay U-turn, docs/control.md),
+    # off for the NLP solvers (fatrop's build takes 45 s, IPOPT's time is inside IPOPT and MUMPS)
     jit: bool | None = None
     jit_dir: str | None = None
     prediction: str = "vehicle"
