@@ -15,28 +15,32 @@ from symtrack.codegen import mpc as M
 from symtrack.control import closedloop as CL
 from symtrack.toolchain import find_compiler
 
-# The headland U-turn with the cost of the bench's RTI configuration (symtrack.control.bench.RTI_CONFIG
-# without jit: pseudo-Huber 0.2 m, terminal lateral x5) and its straights shortened from 25 + 25 m
-# to 20 + 4 m (the full 180 deg turn of radius 4 m stays: 206 samples instead of 336). On this path
-# the Python RTI needs no IPOPT fallback, which the C loop does not have (docs/codegen.md); with a
-# first straight of 4-16 m it fell back to IPOPT once or twice at the turn entry (measured).
-# On the creep law, named: on the default shear law the C loop and the Python loop part in straight
-# running (the C plant's command 258.35 N m against Python's 256.69 from t = 2.5 s), the C RTI then
-# fails at the turn's entry (no fallback in C) and the vehicle spins off the path; the Python RTI
-# completes the same path with no failed solve (docs/codegen.md, "The MPC as C": open, issue 21).
-UTURN = ["mpc.lateral_huber_m=0.2", "mpc.terminal_lateral_factor=5", "model.lateral_law=creep",
-         "path.segments=[{straight_m=20.0},{arc_radius_m=4.0,angle_deg=180.0},{straight_m=4.0}]"]
+# The headland U-turn with its straights shortened from 25 + 25 m to 20 + 4 m (the full 180 deg turn
+# of radius 4 m stays: 206 samples instead of 336), run on two laws, each named:
+# - the lagged shear law ("shear", the package default) with the scenario's own MPC settings (the
+#   RTI's defaults): its step at the turn's entry is rejected and re-linearised in both loops
+#   (rti_relinearisations; before, the Python RTI fell back to IPOPT there and the C loop, which has
+#   no NLP fallback, applied the shifted plan and spun off: docs/codegen.md);
+# - the creep law, a [model] lateral_law that differs from the default: the C loop must build the
+#   scenario's model, not SystemModel() (a 12-state vehicle against the default's 16), with the cost
+#   of the bench's RTI configuration (pseudo-Huber 0.2 m, terminal lateral x5).
+PATH_SHORT = "path.segments=[{straight_m=20.0},{arc_radius_m=4.0,angle_deg=180.0},{straight_m=4.0}]"
+LAWS = {"shear": ["model.lateral_law=shear", PATH_SHORT],
+        "creep": ["mpc.lateral_huber_m=0.2", "mpc.terminal_lateral_factor=5", "model.lateral_law=creep", PATH_SHORT]}
 
 needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 
 
-@pytest.fixture(scope="module")
-def loops(tmp_path_factory):
-    out = tmp_path_factory.mktemp("mpc_c")
-    sc = M.load_scenario("headland_uturn", UTURN)
+@pytest.fixture(scope="module", params=sorted(LAWS))
+def loops(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp(f"mpc_c_{request.param}")
+    sc = M.load_scenario("headland_uturn", LAWS[request.param])
     pb = M.setup(sc)
+    # the scenario's model, on both sides
+    assert pb.model.opts == sc.model and sc.model.lateral_law == request.param
     M.write(out, M.render(pb))
-    M.build_program(out, find_compiler())
+    assert f"#define PLANT_NX {pb.model.nx}\n" in (out / "mpc_scenario.h").read_text()
+    M.build_program(out, find_compiler(), M.CFLAGS.replace("-O2", "-O1"))  # no timing is asserted
     summary = M.run_program(out)
     py = CL.run(sc, model=pb.model)
     return out, summary, py
@@ -104,6 +108,8 @@ def test_errors_before_any_work(tmp_path, capsys, monkeypatch):
         (["codegen", "mpc", "field_pattern", "--out", str(tmp_path / "c")], "grid terrain"),
         (["codegen", "mpc", "headland_uturn"], "--out DIR is required"),
         (["codegen", "mpc", "headland_uturn", "--out", str(tmp_path / "f" / "x")], "is a file"),
+        (["codegen", "mpc", "headland_uturn", "--out", str(tmp_path / "e"), "--set", "mpc.rti_qp_solver=daqp"],
+         "embeds qrqp"),
     ]
     (tmp_path / "f").write_text("a file")
     for argv, msg in cases:
@@ -113,4 +119,4 @@ def test_errors_before_any_work(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("symtrack.toolchain.cache.find_compiler", lambda: None)
     assert symtrack_main(["codegen", "mpc", "headland_uturn", "--out", str(tmp_path / "d")]) == 2
     assert "no C compiler" in capsys.readouterr().err
-    assert not any((tmp_path / n).exists() for n in ("a", "b", "c", "d"))
+    assert not any((tmp_path / n).exists() for n in ("a", "b", "c", "d", "e"))

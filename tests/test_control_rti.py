@@ -42,7 +42,15 @@ def test_rti_settings_validation():
         MPCSettings(solver="rti", rti_qp_solver="gurobi")
     with pytest.raises(ParameterError, match="mpc.rti_max_defect"):
         MPCSettings(solver="rti", rti_max_defect=0.0)
+    with pytest.raises(ParameterError, match=r"mpc.rti_relinearisations = -1 must be an integer in \[0, 10\]"):
+        MPCSettings(solver="rti", rti_relinearisations=-1)
+    with pytest.raises(ParameterError, match="mpc.jit = 'yes' must be true or false"):
+        MPCSettings(solver="rti", jit="yes")
     assert MPCSettings(solver="rti").solver == "rti"
+    # the RTI's defaults (issue 21): compiled, DAQP; the NLP solvers interpreted unless asked
+    assert MPCSettings(solver="rti").uses_jit and MPCSettings(solver="rti").rti_qp_solver == "daqp"
+    assert not MPCSettings().uses_jit and MPCSettings(jit=True).uses_jit
+    assert not MPCSettings(solver="rti", jit=False).uses_jit
 
 
 @pytest.mark.parametrize("huber", [0.0, 0.2])
@@ -110,7 +118,7 @@ def test_rti_closed_loop_preparation_feedback(model):
     res = CL.run(sc, model=model, mpc=mpc, max_steps=25)
     s = res.summary
     assert s["failed_solves"] == 0 and s["fallback_solves"] == 0
-    assert all(i.iterations == 1 and i.status.startswith("rti qrqp") for i in mpc.stats.solves)
+    assert all(i.iterations == 1 and i.status.startswith(f"rti {sc.mpc.rti_qp_solver}") for i in mpc.stats.solves)
     assert all(i.preparation_time_s > 0 for i in mpc.stats.solves)
     assert np.max(np.abs(res.e_lat)) < 0.01
     for key in ("overrun_samples", "overrun_worst_ms", "preparation_time_median_ms",
@@ -238,3 +246,30 @@ def test_mpc_cli_rti(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["solver"] == "rti" and s["failed_solves"] == 0
     assert s["overrun_samples"] >= 0 and s["preparation_time_median_ms"] > 0
+
+
+def test_rti_on_the_lagged_shear_law_relinearises_the_rejected_step():
+    """The RTI on the lagged shear law (the default), clay, a U-turn after 4 m of straight. When
+    the turn's curvature enters the horizon the plan sits at exactly symmetric straight running,
+    the apex of the law's cone, and its Gauss-Newton step is rejected after the halvings (its
+    defect grows linearly with the step: docs/control.md); one more iteration, re-linearised at
+    the shortest step, takes it: no failed solve and no NLP fallback. Without the
+    re-linearisation the same sample goes to the NLP fallback (or fails)."""
+    def run(relin):
+        sc = S.load("headland_uturn", ["soil.preset=clayey_soil_thailand_38", "model.lateral_law=shear",
+                                       "mpc.solver=rti", "mpc.jit=false", f"mpc.rti_relinearisations={relin}",
+                                       "path.segments=[{straight_m=4.0},{arc_radius_m=4.0,angle_deg=180.0}]"])
+        model = SystemModel(sc.model)
+        mpc = PathTrackingMPC(model, sc.params, sc.mpc)
+        return CL.run(sc, model=model, mpc=mpc), mpc
+
+    res, mpc = run(1)
+    s = res.summary
+    assert s["path_completed"] and s["failed_solves"] == 0 and s["fallback_solves"] == 0
+    assert any("re-linearised" in i.status for i in mpc.stats.solves), s["solve_status_counts"]
+    assert np.max(np.abs(res.e_lat)) < 0.05
+    assert abs(res.X[-1, res.state_names.index("yaw_rad")] - np.pi) < 0.2
+    res0, _ = run(0)
+    s0 = res0.summary
+    assert s0["failed_solves"] + s0["fallback_solves"] >= 1
+    assert any("halvings" in k and "re-linearised" not in k for k in s0["solve_status_counts"])

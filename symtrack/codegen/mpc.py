@@ -8,8 +8,8 @@ model equation repeated) and generated with CasADi's code generator into ``DIR/m
   the elimination dK = -G_K^-1 (G + G_x dx + G_u du) (a sparse QR, CasADi's ``qr`` linear solver)
   and the condensing recursion (``RTI.prepare_at``);
 - ``mpc_rti_feedback(w, Phi, Gam, xi, x0s, ref) -> (dU, dxa, GdU)``: the residuals, the dense QP
-  and its solution by **qrqp** (CasADi's active-set QP solver, which generates to plain C: the same
-  solver as the Python RTI's default ``rti_qp_solver``); the Function returns a non-zero flag when
+  and its solution by **qrqp** (CasADi's active-set QP solver, which generates to plain C; the
+  Python loop it is compared with runs qrqp too, :func:`load_scenario`); the Function returns a non-zero flag when
   the QP fails (``RTI.feedback`` up to the step);
 - ``mpc_rti_point(w, M, x0s, dxa, GdU, dU, alpha) -> w`` and ``mpc_rti_defect(w, p, xc) -> d``: a
   step of length alpha and its largest collocation residual (the step halving of ``RTI.feedback``);
@@ -256,6 +256,7 @@ def scenario_header(pb: Problem) -> str:
         f"#define MPC_MAX_SAMPLES {max_samples}",
         f"#define MPC_MAX_DEFECT {c_literal(s.rti_max_defect)}",
         f"#define MPC_HALVINGS {s.rti_step_halvings}",
+        f"#define MPC_RELINEARISATIONS {s.rti_relinearisations}",
         f"#define MPC_TORQUE_SCALE_N_M {c_literal(1000.0)}",
         f"#define MPC_TWO_PI {c_literal(2 * math.pi)}",
         f"#define PLANT_NX {model.nx}",
@@ -345,20 +346,21 @@ def write(out: Path, files: dict[str, bytes]) -> None:
         atomic_write_bytes(out / name, data)
 
 
-def build_program(out: Path, cc: str) -> float:
+def build_program(out: Path, cc: str, cflags: str = CFLAGS) -> float:
     """Compile DIR/mpc_closed_loop (make -j2 when there is make, else the compiler directly);
-    returns the build time [s]."""
+    returns the build time [s]. ``cflags``: the compiler flags (default CFLAGS, -O2; the tests
+    build with -O1, half the compile time of mpc_rti.c)."""
     from symtrack.foundations.errors import SimulationError
 
     t0 = time.perf_counter()
     make = shutil.which("make")
     if make:
-        cmds = [[make, "-s", "-j2", f"CC={cc}", "mpc_closed_loop"]]
+        cmds = [[make, "-s", "-j2", f"CC={cc}", f"CFLAGS={cflags}", "mpc_closed_loop"]]
     else:
         objs = []
         cmds = []
         for stem in ("mpc_closed_loop", "mpc_rti", PLANT_STEM):
-            cmds.append([cc, *CFLAGS.split(), "-c", f"{stem}.c", "-o", f"{stem}.o"])
+            cmds.append([cc, *cflags.split(), "-c", f"{stem}.c", "-o", f"{stem}.o"])
             objs.append(f"{stem}.o")
         cmds.append([cc, "-o", "mpc_closed_loop", *objs, "-lm"])
     for cmd in cmds:
@@ -402,7 +404,13 @@ def load_scenario(name: str, overrides=(), solver: str = "rti"):
     if not name.endswith(".toml") and name not in mpc_names and name in simulation_names():
         raise ScenarioError(f"{name!r} is a simulation scenario (symtrack simulate), not an MPC scenario; "
                             f"MPC scenarios: {', '.join(mpc_names)} or a TOML file")
+    # the C embeds qrqp (the QP solver CasADi generates plain C for): the Python loop it is compared
+    # with runs qrqp too, whatever MPCSettings' default rti_qp_solver is
     sc = scenario.load(name, list(overrides) + [f"mpc.solver={solver}", "run.integrator=rosenbrock"])
+    if sc.mpc.rti_qp_solver != "qrqp" and any(o.replace(" ", "").startswith("mpc.rti_qp_solver=") for o in overrides):
+        raise ScenarioError(f"mpc.rti_qp_solver = {sc.mpc.rti_qp_solver!r}: the C closed loop embeds qrqp (the QP "
+                            "solver CasADi generates dependency-free C for); allowed: qrqp")
+    sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, rti_qp_solver="qrqp"))
     if sc.terrain is not None:
         raise ScenarioError(f"MPC scenario {sc.name!r} runs on the grid terrain ([terrain] section): the C closed "
                             "loop has the homogeneous plant only (add --set or use a scenario without [terrain])")
@@ -467,14 +475,14 @@ def command(args) -> int:
           f"{out / 'closed_loop.csv'}")
     if summary["failed_solves"]:
         log.warning("%d of %d samples of the C loop failed (QP failure or rejected step) and applied the previous "
-                    "plan: the C loop has no NLP fallback (docs/codegen.md); the cost of symtrack.control.bench."
-                    "RTI_CONFIG (--set mpc.lateral_huber_m=0.2 --set mpc.terminal_lateral_factor=5) needs none on "
-                    "the built-in U-turn", summary["failed_solves"], summary["samples"])
+                    "plan: the C loop has no NLP fallback (docs/codegen.md; with the defaults, one re-linearised "
+                    "Gauss-Newton iteration after a rejected step, the built-in U-turn needs none)",
+                    summary["failed_solves"], summary["samples"])
     if args.compare:
         res = python_closed_loop(sc, pb.model)
         s = res.summary
         agree = compare(res, out / "closed_loop.csv")
-        print(f"Python closed loop (same RTI, Rosenbrock plant{', jit' if sc.mpc.jit else ''}): solve median "
+        print(f"Python closed loop (same RTI, Rosenbrock plant{', jit' if sc.mpc.uses_jit else ''}): solve median "
               f"{s['solve_time_median_ms']:.3f} / p95 {s['solve_time_p95_ms']:.3f} / max "
               f"{s['solve_time_max_ms']:.3f} ms; failed {s['failed_solves']}, fallbacks {s['fallback_solves']}")
         print("agreement: " + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"

@@ -234,8 +234,9 @@ static int point_at(const double *x0s, const double *dxa, const double *GdU, con
   return call(mpc_rti_point, 7, in, 1, o);
 }
 
-/* RTI.feedback: 0 = accepted (w_out), else failed */
-static int feedback(const double *x0s, const double *ref, double *w_out, double *alpha_out) {
+/* RTI.feedback: 0 = accepted (w_out), else failed; a rejected step is followed by up to
+   `relin` Gauss-Newton iterations linearised at its shortest step (RTI.feedback's relinearisations) */
+static int feedback(const double *x0s, const double *ref, double *w_out, double *alpha_out, int relin) {
   static double dU[MPC_NZU], dxa[MPC_NXA * (MPC_N + 1)], GdU[MPC_NXA * (MPC_N + 1)], wb[MPC_NW];
   const double *in[] = {l_w, l_Phi, l_Gam, l_xi, x0s, ref};
   double *o[] = {dU, dxa, GdU};
@@ -252,7 +253,15 @@ static int feedback(const double *x0s, const double *ref, double *w_out, double 
   if (!(d <= MPC_MAX_DEFECT)) {
     if (point_at(x0s, dxa, GdU, dU, 0.0, wb)) return 2;
     double d0 = defect_of(wb);
-    if (d > 2.0 * d0 + MPC_MAX_DEFECT || d0 > 10.0 * MPC_MAX_DEFECT || isnan(d)) return 3;
+    if (d > 2.0 * d0 + MPC_MAX_DEFECT || d0 > 10.0 * MPC_MAX_DEFECT || isnan(d)) {
+      if (relin <= 0 || isnan(d)) return 3;
+      /* re-linearise at the shortest step (w_out) and take one more step from there */
+      memcpy(l_w, w_out, sizeof l_w);
+      const double *inp[] = {l_w, mpc_p, l_xc};
+      double *op[] = {l_M, l_Phi, l_Gam, l_xi};
+      if (call(mpc_rti_prepare, 3, inp, 4, op)) return 3;
+      return feedback(x0s, ref, w_out, alpha_out, relin - 1);
+    }
   }
   *alpha_out = alpha;
   return 0;
@@ -329,7 +338,7 @@ int main(int argc, char **argv) {
     for (int i = 0; i < MPC_NCELL; i++) xc[i] = pl_x[mpc_cell_index[i]];
     double alpha = 1.0;
     double t0 = now_s();
-    int flag = feedback(x0s, ref, wopt, &alpha);
+    int flag = feedback(x0s, ref, wopt, &alpha, MPC_RELINEARISATIONS);
     double t1 = now_s();
     if (flag == 0) {
       accept(wopt);

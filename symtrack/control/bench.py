@@ -43,8 +43,10 @@ __all__ = ["FAST_CONFIG", "LinearMPC", "bench_rows", "prediction_effect", "table
 FAST_CONFIG = {"solver": "fatrop", "jit": True, "lateral_huber_m": 0.2}
 # issue 13: the real-time iteration (symtrack.control.rti) with its functions compiled (cached);
 # the pseudo-Huber lateral penalty and a x5 terminal lateral weight keep its Gauss-Newton steps
-# contracting in the 1 m approach (with x50 they diverge there: docs/control.md)
-RTI_CONFIG = {"solver": "rti", "jit": True, "lateral_huber_m": 0.2, "terminal_lateral_factor": 5.0}
+# contracting in the 1 m approach on the creep law (with x50 they diverge there: docs/control.md).
+# qrqp named: DAQP is the RTI's default QP solver since issue 21 (the row nmpc_rti_daqp adds it).
+RTI_CONFIG = {"solver": "rti", "jit": True, "lateral_huber_m": 0.2, "terminal_lateral_factor": 5.0,
+              "rti_qp_solver": "qrqp"}
 
 
 class LinearMPC:
@@ -182,7 +184,7 @@ def _row(name, description, build_s, res) -> dict:
 
 def timing_comparison(scenario: str = "straight_offset", max_steps: int | None = None, fast_config: dict | None = None,
                       jit_dir: str | None = None, include=("nmpc_ipopt_plain", "nmpc_fast", "linear_mpc", "nmpc_rti",
-                                                         "nmpc_rti_daqp"),
+                                                         "nmpc_rti_daqp", "nmpc_rti_default"),
                       model: SystemModel | None = None, overrides=()) -> list[dict]:
     """Run the scenario (with ``overrides``, 'section.key=value' strings as for ``symtrack mpc
     --set``) with each controller in ``include``; returns one dict per row."""
@@ -205,16 +207,19 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
             cfg = {} if name == "nmpc_ipopt_plain" else (dict(RTI_CONFIG) if rti else fast)
             if name == "nmpc_rti_daqp":  # the same RTI with DAQP (dual active set) on the dense QP
                 cfg["rti_qp_solver"] = "daqp"
+            if name == "nmpc_rti_default":  # the RTI's defaults (jit, DAQP, the scenario's cost: issue 21)
+                cfg = {"solver": "rti"}
             if rti and jit_dir is not None:
                 cfg["jit_dir"] = jit_dir
             sc = dataclasses.replace(base, mpc=dataclasses.replace(base.mpc, **cfg))
             t0 = time.perf_counter()
             ctrl = PathTrackingMPC(model, sc.params, sc.mpc)
-            desc = (f"NMPC {sc.mpc.solver}{' + jit' if sc.mpc.jit else ''}, Radau-{sc.mpc.collocation_degree} "
+            desc = (f"NMPC {sc.mpc.solver}{' + jit' if sc.mpc.uses_jit else ''}, Radau-{sc.mpc.collocation_degree} "
                     f"collocation, N = {sc.mpc.horizon_steps}")
             if rti:
-                desc = (f"RTI: 1 Gauss-Newton SQP step/sample, {sc.mpc.rti_qp_solver} on the condensed QP, "
-                        f"compiled, Huber {sc.mpc.lateral_huber_m:g} m, "
+                desc = (f"RTI{' defaults' if name == 'nmpc_rti_default' else ''}: 1 Gauss-Newton SQP step/sample "
+                        f"(re-linearised once after a rejected step), {sc.mpc.rti_qp_solver} on the condensed QP, "
+                        f"{'compiled' if sc.mpc.uses_jit else 'interpreted'}, Huber {sc.mpc.lateral_huber_m:g} m, "
                         f"terminal lateral x{sc.mpc.terminal_lateral_factor:g}, "
                         f"N = {sc.mpc.horizon_steps}")
         build = time.perf_counter() - t0

@@ -356,7 +356,7 @@ def summarise(res: ClosedLoopResult, wall_s: float, mpc: PathTrackingMPC) -> dic
         "schema_version": SUMMARY_SCHEMA_VERSION,
         "scenario": sc.name,
         "solver": sc.mpc.solver,
-        "jit": sc.mpc.jit,
+        "jit": sc.mpc.uses_jit,
         "prediction": sc.mpc.prediction,
         "horizon_s": sc.mpc.horizon_s,
         "horizon_steps": sc.mpc.horizon_steps,

@@ -106,7 +106,11 @@ class MPCSettings:
     horizon_steps: int = 20
     sample_time_s: float = 0.1
     solver: str = "ipopt"
-    jit: bool = False
+    # compile the solver's functions once into the solver cache; None: the solver's default (see
+    # ``uses_jit``): on for the RTI (its feedback is the real-time path: with DAQP, median / p95
+    # 1.5 / 2.4 ms against 2.6 / 4.6 ms interpreted with qrqp on the clay U-turn, docs/control.md),
+    # off for the NLP solvers (fatrop's build takes 45 s, IPOPT's time is inside IPOPT and MUMPS)
+    jit: bool | None = None
     jit_dir: str | None = None
     prediction: str = "vehicle"
     collocation_degree: int = 2
@@ -132,9 +136,15 @@ class MPCSettings:
     prediction_sliding_sign: str = "velocity"
     fallback_solver: str | None = "auto"
     tol: float = 1e-5
-    rti_qp_solver: str = "qrqp"
+    # the RTI's dense QP solver: DAQP (dual active set) solves the condensed QP in 0.05 ms against
+    # qrqp's 0.35 ms (docs/control.md); the generated C (symtrack codegen mpc) embeds qrqp, the
+    # solver CasADi generates dependency-free C for
+    rti_qp_solver: str = "daqp"
     rti_max_defect: float = 0.1
     rti_step_halvings: int = 3
+    # Gauss-Newton iterations after a rejected RTI step, each linearised at the shortest step of
+    # the one before, before the NLP fallback (symtrack.control.rti.RTI.feedback; docs/control.md)
+    rti_relinearisations: int = 1
 
     def __post_init__(self):
         def rng(name, lo, hi, integer=False, lo_open=False):
@@ -161,6 +171,7 @@ class MPCSettings:
         rng("tol", 0.0, 1.0, lo_open=True)
         rng("rti_max_defect", 0.0, 1e6, lo_open=True)
         rng("rti_step_halvings", 0, 20, integer=True)
+        rng("rti_relinearisations", 0, 10, integer=True)
         if self.prediction_lateral_creep_speed_m_s is not None:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
         if self.prediction_sliding_smoothing is not None:
@@ -177,10 +188,16 @@ class MPCSettings:
                                  f"{', '.join(SOLVERS)}, auto (the other solver), none")
         if self.prediction not in PREDICTIONS:
             raise ParameterError(f"mpc.prediction = {self.prediction!r} is not one of {', '.join(PREDICTIONS)}")
-        if not isinstance(self.jit, bool):
-            raise ParameterError(f"mpc.jit = {self.jit!r} must be true or false")
+        if self.jit is not None and not isinstance(self.jit, bool):
+            raise ParameterError(f"mpc.jit = {self.jit!r} must be true or false (or absent: on for solver = \"rti\", "
+                                 f"off for the NLP solvers)")
         if self.jit_dir is not None and not isinstance(self.jit_dir, str):
             raise ParameterError(f"mpc.jit_dir = {self.jit_dir!r} must be a folder path or None")
+
+    @property
+    def uses_jit(self) -> bool:
+        """Whether the solver's functions are compiled: ``jit`` when given, else on for the RTI only."""
+        return self.jit if self.jit is not None else self.solver == "rti"
 
     @property
     def horizon_s(self) -> float:
@@ -445,16 +462,17 @@ class PathTrackingMPC:
         self.rti = None
         if s.solver == "rti":
             self.solver = None
-            self.rti = RTI(self, s.rti_qp_solver, compiled=s.jit, max_defect=s.rti_max_defect,
-                           halvings=s.rti_step_halvings, cache=Path(s.jit_dir) if s.jit_dir else None)
+            self.rti = RTI(self, s.rti_qp_solver, compiled=s.uses_jit, max_defect=s.rti_max_defect,
+                           halvings=s.rti_step_halvings, cache=Path(s.jit_dir) if s.jit_dir else None,
+                           relinearisations=s.rti_relinearisations)
         else:
-            self.solver = self._nlpsol(nlp, eq, s.solver, s.jit)
+            self.solver = self._nlpsol(nlp, eq, s.solver, s.uses_jit)
         # the fallback: interpreted (no compilation), tried when the primary solver fails
         self.fallback = None
         fb = s.fallback_solver
         if fb == "auto":
             fb = next(x for x in SOLVERS if x != s.solver)
-        if fb not in (None, "none") and (fb, False) != (s.solver, s.jit):
+        if fb not in (None, "none") and (fb, False) != (s.solver, s.uses_jit):
             self.fallback = self._nlpsol(nlp, eq, fb, False)
         self.fallback_name = fb
         # bounds

@@ -68,34 +68,73 @@ def _qp_options(name: str) -> dict:
     return base
 
 
+class _Buffered:
+    """A CasADi Function with dense outputs called through its zero-copy buffer interface
+    (``Function.buffer``, as :class:`symtrack.integrators.fixed_step.Chunk`): the arguments are
+    C-ordered numpy arrays (a matrix argument n x m given as its transpose, m x n, whose rows
+    are the matrix's columns) and the outputs are numpy arrays allocated once, each the transpose
+    of the output matrix (size2 x size1), overwritten by the next call. Converting the sparse DM
+    results of the collocation Jacobians cost about 1 ms of the 1.9 ms preparation (measured,
+    clay U-turn, jit)."""
+
+    def __init__(self, f: ca.Function):
+        self.f = f
+        self.out = [np.zeros((f.size2_out(i), f.size1_out(i))) for i in range(f.n_out())]
+        self.nnz_in = [f.nnz_in(i) for i in range(f.n_in())]
+        self.buf, self._eval = f.buffer()
+        for i, a in enumerate(self.out):
+            self.buf.set_res(i, memoryview(a))
+
+    def __getattr__(self, name):  # class_name(), name(), ... of the Function
+        return getattr(self.f, name)
+
+    def __call__(self, *args):
+        keep = []
+        for i, a in enumerate(args):
+            a = np.ascontiguousarray(a, dtype=float)
+            if a.size != self.nnz_in[i]:
+                raise RuntimeError(f"{self.f.name()}: argument {i} has {a.size} values, expected {self.nnz_in[i]}")
+            if a.size == 0:
+                a = np.zeros(1)  # a valid buffer for an empty argument (nothing is read)
+            keep.append(a)
+            self.buf.set_arg(i, memoryview(a))
+        self._eval()
+        if self.buf.ret() != 0:
+            raise RuntimeError(f"{self.f.name()} failed (status {self.buf.ret()})")
+        return self.out
+
+
 class RTI:
     """The real-time iteration of one :class:`PathTrackingMPC` (``mpc``): its dimensions,
     Functions and bounds. ``compiled`` compiles the mapped linearisation and residual Functions
     (cached across processes by :mod:`symtrack.control.solver_cache`)."""
 
     def __init__(self, mpc, qp_solver: str = "qrqp", compiled: bool = False, regularisation: float = 1e-8,
-                 max_defect: float = 0.1, halvings: int = 3, cache=None):
+                 max_defect: float = 0.1, halvings: int = 3, cache=None, relinearisations: int = 1):
         self.m = mpc
-        self.max_defect, self.halvings = max_defect, halvings
+        self.max_defect, self.halvings, self.relinearisations = max_defect, halvings, relinearisations
         self.last_alpha, self.last_defect = 1.0, 0.0
         self._xc = np.zeros(0)
         N = mpc.N
         self.N, self.nxa, self.nu, self.nk, self.nxp = N, mpc.nxa, mpc.nu, mpc.nk, mpc.nxp
         self.reg = regularisation
-        coll = mpc.coll_fn.map(N)
-        res = mpc.res_fn.map(N)
-        resN = mpc.res_term_fn
-        collg = mpc.coll_res_fn.map(N)
-        if compiled:
-            def renamed(name, f):
-                ins = f.mx_in()
-                return ca.Function(name, ins, f.call(ins), f.name_in(), f.name_out())
-
-            coll = compiled_function(renamed("mpc_rti_coll", coll), root=cache)
-            res = compiled_function(renamed("mpc_rti_res", res), root=cache)
-            resN = compiled_function(renamed("mpc_rti_res_term", resN), root=cache)
-            collg = compiled_function(renamed("mpc_rti_coll_res", collg), root=cache)
-        self.coll, self.res, self.resN, self.collg = coll, res, resN, collg
+        fns = {"mpc_rti_coll": mpc.coll_fn.map(N), "mpc_rti_res": mpc.res_fn.map(N),
+               "mpc_rti_res_term": mpc.res_term_fn, "mpc_rti_coll_res": mpc.coll_res_fn.map(N)}
+        calls = []
+        for name, f in fns.items():
+            # dense outputs, so that the buffer interface fills whole numpy arrays (_Buffered), and the
+            # model's parameters and the frozen cells as one column (the buffer does not broadcast)
+            ins, args = [], []
+            for i in range(f.n_in()):
+                one = f.name_in(i) in ("p", "xc")
+                sym = ca.MX.sym(f.name_in(i), f.size1_in(i), 1 if one else f.size2_in(i))
+                ins.append(sym)
+                args.append(ca.repmat(sym, 1, f.size2_in(i)) if one else sym)
+            f = ca.Function(name, ins, [ca.densify(o) for o in f.call(args)], f.name_in(), f.name_out())
+            if compiled:
+                f = compiled_function(f, root=cache)
+            calls.append(_Buffered(f))
+        self.coll, self.res, self.resN, self.collg = calls
         self.nr = mpc.res_fn.size1_out(0)
         self.nrN = mpc.res_term_fn.size1_out(0)
         nz = self.nu * N
@@ -114,12 +153,12 @@ class RTI:
         Xk, Uk, Kk = W[:, :nxa], W[:, nxa:nxa + nu], W[:, nxa + nu:]
         xc = np.asarray(x_cells, float)
         self._xc = xc
-        g, gk, gx, gu = self.coll(Xk.T, Uk.T, Kk.T, p_model, xc)
-        g = np.asarray(g).T  # N x nk
-        # the mapped Jacobians are horizontally stacked blocks: nk x (N * n)
-        gk = np.asarray(gk).reshape(nk, N, nk).transpose(1, 0, 2)
-        gx = np.asarray(gx).reshape(nk, N, nxa).transpose(1, 0, 2)
-        gu = np.asarray(gu).reshape(nk, N, nu).transpose(1, 0, 2)
+        # (_Buffered returns each output transposed: the N x nk stage values, the mapped Jacobians'
+        # nk x (N n) blocks as N n x nk)
+        g, gk, gx, gu = self.coll(Xk, Uk, Kk, p_model, xc)
+        gk = gk.reshape(N, nk, nk).transpose(0, 2, 1)
+        gx = gx.reshape(N, nxa, nk).transpose(0, 2, 1)
+        gu = gu.reshape(N, nu, nk).transpose(0, 2, 1)
         rhs = np.concatenate([g[:, :, None], gx, gu], axis=2)  # N x nk x (1 + nxa + nu)
         Msol = np.linalg.solve(gk, rhs)  # dK = -(M0 + Mx dx + Mu du)
         # x_{k+1} = [states of the last collocation point; u_k]
@@ -148,22 +187,25 @@ class RTI:
                     "U": Uk.copy()}
 
     # ------------------------------------------------------------------ feedback
-    def feedback(self, x0s: np.ndarray, ref: np.ndarray):
+    def feedback(self, x0s: np.ndarray, ref: np.ndarray, relinearisations: int | None = None):
         """The QP step from the prepared linearisation for the measured (scaled) x0 and the
-        reference: returns (new w, ok, status)."""
+        reference: returns (new w, ok, status). A step rejected after the halvings is followed by
+        up to ``relinearisations`` (default: the RTI's) Gauss-Newton iterations, each linearised
+        at the shortest step of the one before (see the safeguard below)."""
+        if relinearisations is None:
+            relinearisations = self.relinearisations
         L = self.lin
         N, nxa, nu, nxp = self.N, self.nxa, self.nu, self.nxp
         nzu = nu * N
         X, U, Phi, Gam, xi = L["X"], L["U"], L["Phi"], L["Gam"], L["xi"]
         dx0 = x0s - X[0]
-        refT = np.asarray(ref, float).T  # 5 x (N+1)
-        r, rx, ru = self.res(X[:N].T, U.T, refT[:, :N])
-        r = np.asarray(r).T  # N x nr
-        rx = np.asarray(rx).reshape(self.nr, N, nxa).transpose(1, 0, 2)
-        ru = np.asarray(ru).reshape(self.nr, N, nu).transpose(1, 0, 2)
-        rN, rxN = self.resN(X[N], refT[:, N])
-        rN = np.asarray(rN).ravel()
-        rxN = np.asarray(rxN)
+        ref = np.asarray(ref, float)  # (N+1) x 5
+        r, rx, ru = self.res(X[:N], U, ref[:N])  # r: N x nr
+        rx = rx.reshape(N, nxa, self.nr).transpose(0, 2, 1)
+        ru = ru.reshape(N, nu, self.nr).transpose(0, 2, 1)
+        rN, rxN = self.resN(X[N], ref[N])
+        rN = rN.ravel()
+        rxN = rxN.T
         dxa = np.einsum("kij,j->ki", Phi, dx0) + xi  # (N+1) x nxa: the state steps without dU
         # residual rows: r_k + rx_k dx_k + ru_k du_k, dx_k = dxa_k + Gam_k dU
         Mk = np.einsum("kij,kjl->kil", rx, Gam[:N])
@@ -220,8 +262,21 @@ class RTI:
             # ... but never a large residual: accepted steps with large residuals let the
             # iteration drift off the dynamics (measured on field_pattern before this bound)
             if defect > 2.0 * defect0 + self.max_defect or defect0 > 10.0 * self.max_defect:
-                return None, False, (f"{status}; defect {defect:.2g} > {self.max_defect:g} after "
-                                     f"{self.halvings} halvings (measurement alone: {defect0:.2g})")
+                why = (f"{status}; defect {defect:.2g} > {self.max_defect:g} after {self.halvings} halvings "
+                       f"(measurement alone: {defect0:.2g})")
+                if relinearisations <= 0:
+                    return None, False, why
+                # Rejected: the linearisation does not describe the dynamics over the step. Where
+                # this happens (the lagged shear law at exactly symmetric straight running, the
+                # turn's curvature entering the horizon: docs/control.md) the defect grows
+                # linearly with the step length (measured 0.92 alpha): the guess sits at the apex
+                # of the law's cone (slips inside sliding_smoothing), where the Jacobian is not
+                # the slope of the forces over the step. One more Gauss-Newton iteration,
+                # linearised at the shortest step (off the apex; x0 already the measurement),
+                # takes the step instead of the NLP fallback.
+                self.prepare_at(w, self.m.p_model, self._xc)
+                w2, ok2, st2 = self.feedback(x0s, ref, relinearisations - 1)
+                return w2, ok2, f"{why}; re-linearised at step {alpha:g}: {st2}"
         self.last_alpha, self.last_defect = alpha, defect
         return w, True, status if alpha == 1.0 else f"{status}; step {alpha:g}"
 
@@ -248,8 +303,8 @@ class RTI:
         N, nxa, nu = self.N, self.nxa, self.nu
         blk = nxa + nu + self.nk
         W = w[:N * blk].reshape(N, blk)
-        g = self.collg(W[:, :nxa].T, W[:, nxa:nxa + nu].T, W[:, nxa + nu:].T, self.m.p_model, self._xc)
-        return float(np.max(np.abs(np.asarray(g))))
+        (g,) = self.collg(W[:, :nxa], W[:, nxa:nxa + nu], W[:, nxa + nu:], self.m.p_model, self._xc)
+        return float(np.max(np.abs(g)))
 
 
 def shift_guess(mpc, w: np.ndarray) -> np.ndarray:
@@ -285,7 +340,7 @@ def gn_solve(mpc, x0s, x_cells, ref, w0, max_iter: int = 60, tol: float = 1e-8, 
     for it in range(1, max_iter + 1):
         try:
             rti.prepare_at(w, mpc.p_model, x_cells)
-            wn, ok, status = rti.feedback(x0s, ref)
+            wn, ok, status = rti.feedback(x0s, ref, relinearisations=0)
         except (RuntimeError, np.linalg.LinAlgError) as err:
             return w, False, it, f"gauss-newton: exception {err}"
         if not ok:

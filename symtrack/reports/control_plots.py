@@ -68,7 +68,7 @@ def closed_loop_pngs(res) -> dict[str, bytes]:
     ax.plot(res.t[:len(res.solve_ms)][bad], res.solve_ms[bad], "rx", label="failed")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("solve time [ms]")
-    ax.set_title(f"solver {res.scenario.mpc.solver}{' (jit)' if res.scenario.mpc.jit else ''}")
+    ax.set_title(f"solver {res.scenario.mpc.solver}{' (jit)' if res.scenario.mpc.uses_jit else ''}")
     ax.grid(True)
     out["solve_times.png"] = png_bytes(fig)
     return out
