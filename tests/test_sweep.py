@@ -261,10 +261,16 @@ def dask_cluster(tmp_path):
                                "--scheduler-file", str(info), *common], start_new_session=True,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
+        # the scheduler writes its file in more than one step: wait until it reads as JSON (the
+        # file existing but still empty failed the setup once under load)
         deadline = time.monotonic() + 60
-        while not info.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(info.read_text())["address"]
+        address = None
+        while address is None and time.monotonic() < deadline:
+            try:
+                address = json.loads(info.read_text())["address"]
+            except (FileNotFoundError, json.JSONDecodeError, KeyError):
+                time.sleep(0.1)
+        assert address is not None, "the dask scheduler wrote no scheduler file within 60 s"
         procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", "2",
                                        "--nthreads", "1", "--host", "127.0.0.1", *common], start_new_session=True,
                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))

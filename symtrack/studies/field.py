@@ -309,7 +309,8 @@ def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
     any work: errors name the key, the value and the allowed range."""
     check_document("field spec", doc, TOP_KEYS)
     if "field" not in doc:
-        raise ScenarioError("a field study needs a [field] section (docs/studies.md, \"Whole-field traffic study\")")
+        raise ScenarioError("a field study needs a [field] section (docs/studies.md, \"Whole-field traffic study\"),"
+                            " or a field operation an [operation] section (docs/studies.md, \"Field operations\")")
     name = doc.get("name", default_name)
     desc = doc.get("description", "")
     fs = _parse_field(doc["field"])
