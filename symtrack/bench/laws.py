@@ -7,6 +7,11 @@ The two laws' plants are built once each (engine compiled, cached), then the run
 (creep, shear, creep, shear, ...) so that the load of a shared machine falls on both alike; the
 ratio is taken between the medians of one session's runs, for wall and for CPU time. ``quick``: one
 timed run per law and no warm-up run (the suite's smoke run; the ratio is then noisy).
+
+The density rows (issue 24: the million-cell validation with the bulk density's mean normal stress at
+the four subsoil depths stays >= 100 x real time; docs/subsoil.md "Bulk density"): the shear law's
+plant with and without the mean normal stress (``EngineState.compute_density``), alternated the same
+way; the figures of the two runs are the same to the last bit (the stress feeds nothing back).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import load_scenario
 
-__all__ = ["LAWS", "TARGET_RATIO", "TARGET_REAL_TIME_FACTOR", "bench_rows", "law_runs"]
+__all__ = ["LAWS", "TARGET_RATIO", "TARGET_REAL_TIME_FACTOR", "bench_rows", "density_rows", "density_runs", "law_runs"]
 
 LAWS = ("creep", "shear")
 TARGET_RATIO = 1.25  # issue 21: the shear law's run at most 1.25 x the creep law's
@@ -49,8 +54,66 @@ def law_runs(scenario: str = "validation_grid", repeats: int = 3, warm_up: bool 
     return out
 
 
+def _clear(plant) -> None:
+    world = getattr(plant, "world", None)
+    if world is not None:  # a fresh field for every run (as symtrack.bench.terrain's runs)
+        for a in world.storage.arrays().values():
+            a[:] = 0
+
+
+def density_runs(scenario: str = "validation_grid", law: str = "shear", repeats: int = 3, warm_up: bool = True,
+                 overrides=()) -> dict:
+    """{True: [(wall_s, cpu_s, sim_s, result, ns_subsoil_s), ...], False: [...]} of ``scenario`` on the
+    terrain engine with the bulk density's mean normal stress (True) and without it (False), one plant,
+    the runs alternated; the world is cleared before each run."""
+    sc = load_scenario(scenario, [f"model.lateral_law={law}", *overrides])
+    plant = make_plant(sc)
+    state = plant.engine.state
+    out = {True: [], False: []}
+    try:
+        for k in range(repeats + (1 if warm_up else 0)):
+            for on in (True, False):
+                state.compute_density = on
+                _clear(plant)
+                res = loop.run(sc, plant)
+                if warm_up and k == 0:
+                    continue
+                out[on].append((float(res.wall_time_s), float(res.cpu_time_s), float(res.t[-1]), res,
+                                res.stats.get("ns_subsoil", 0) * 1e-9))
+    finally:
+        state.compute_density = True
+    return out
+
+
+def density_rows(quick: bool = False) -> list[dict]:
+    """One row with and one without the bulk density's mean normal stress (the shear law, median CPU and
+    wall time of the alternated runs, the subsoil part's seconds) and their ratio."""
+    repeats = 1 if quick else 5
+    runs = density_runs(repeats=repeats, warm_up=not quick)
+    rows, med = [], {}
+    group = "validation_grid: bulk density"
+    for on in (True, False):
+        rs = runs[on]
+        sim = rs[-1][2]
+        med[on] = (statistics.median(r[0] for r in rs), statistics.median(r[1] for r in rs), sim)
+        rows.append({"group": group, "case": "with the mean normal stress" if on else "without",
+                     "integrator": "grid_fast", "sim_time_s": sim, "wall_time_s": med[on][0],
+                     "real_time_factor": sim / med[on][0], "cpu_time_s": med[on][1],
+                     "real_time_factor_cpu": sim / med[on][1], "cpus_s": [r[1] for r in rs],
+                     "subsoil_s": statistics.median(r[4] for r in rs),
+                     "note": f"median of {repeats} alternated run(s); {sim / med[on][1]:.0f} x real time in CPU time "
+                             f"(target >= {TARGET_REAL_TIME_FACTOR:g} x with the density)"})
+    same = bool(all((runs[True][-1][3].X == r[3].X).all() for r in runs[False]))
+    ratio = med[True][1] / med[False][1]
+    rows.append({"group": group, "case": "with / without", "integrator": "grid_fast", "cpu_ratio": ratio,
+                 "wall_ratio": med[True][0] / med[False][0], "identical_states": same,
+                 "note": f"CPU {ratio:.2f} x; the vehicle's states identical with and without: {same}"})
+    return rows
+
+
 def bench_rows(quick: bool = False) -> list[dict]:
-    """One row per law (median wall and CPU time of the alternated runs) and the ratio row."""
+    """One row per law (median wall and CPU time of the alternated runs) and the ratio row, then
+    :func:`density_rows`."""
     from ..simulation.result import summarise
 
     repeats = 1 if quick else 5
@@ -75,4 +138,4 @@ def bench_rows(quick: bool = False) -> list[dict]:
                  "note": f"wall {wall_ratio:.2f} x, CPU {cpu_ratio:.2f} x (target <= {TARGET_RATIO:g} x; "
                          f"shear law {med['shear'][2] / med['shear'][1]:.0f} x real time in CPU time, "
                          f"target >= {TARGET_REAL_TIME_FACTOR:g} x)"})
-    return rows
+    return rows + density_rows(quick)

@@ -196,6 +196,9 @@ class EngineState:
         self.p_pass = world.pass_p_mean
         self.subsoil_p = mean_stress_tables(world.params, world.storage.subsoil_depths_m)
         self._subsoil_p_c = self.subsoil_p.c_struct() if self.subsoil_p is not None else None
+        # False: the kernel leaves the mean normal stress out (p_pass stays as it is; the bench's density
+        # row, symtrack.bench.laws.density_rows, runs the same plant with and without it)
+        self.compute_density = True
 
     def struct(self) -> EngineStruct:
         g, st, s = self.grid, self.storage, self.settings
@@ -232,7 +235,7 @@ class EngineState:
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
         e.subsoil_p = (ctypes.addressof(self._subsoil_p_c) if self._subsoil_p_c is not None and self.subsoil is not None
-                       else None)
+                       and self.compute_density else None)
         e.n_sums = self.n_sums
         el = st.elevation  # None: a flat field (NULL); read by eng_surface only
         e.elev = None if el is None else array_address(el)
