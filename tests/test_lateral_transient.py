@@ -276,15 +276,19 @@ def test_bench_rows_of_the_two_laws(monkeypatch):
     """symtrack bench's lateral-law rows (symtrack.bench.laws) in quick mode: one run per law of the
     million-cell validation on the terrain engine; the shear law's figures are within 0.5 % of IDAS at
     the scenario's reference tolerances (docs/turning.md section 8: `symtrack simulate validation_grid
-    --set model.lateral_law=shear --integrator idas`, yaw 15.45215 deg, lateral 2.50376 m)."""
+    --set model.lateral_law=shear --integrator idas`, yaw 15.45215 deg, lateral 2.50376 m). The density
+    rows (issue 24): the shear law's run with and without the bulk density's mean normal stress gives
+    the same vehicle states to the last bit (the stress feeds nothing back)."""
     from symtrack.bench import laws
 
     rows = laws.bench_rows(quick=True)
-    assert [r["case"] for r in rows] == ["lateral_law = creep", "lateral_law = shear", "shear / creep"]
+    assert [r["case"] for r in rows] == ["lateral_law = creep", "lateral_law = shear", "shear / creep",
+                                         "with the mean normal stress", "without", "with / without"]
     fig = rows[1]["figures"]
     assert fig["yaw_final_deg"] == pytest.approx(15.45215, rel=5e-3)
     assert fig["lateral_deviation_m"] == pytest.approx(2.50376, rel=5e-3)
     assert rows[2]["wall_ratio"] > 0 and rows[2]["cpu_ratio"] > 0
+    assert rows[5]["identical_states"]
 
 
 def test_trim_reaches_tight_turns_down_to_the_lateral_limit(models):
