@@ -24,18 +24,30 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     x[lay.indices(("x_m", "y_m", "yaw_rad"))] = x_m, y_m, yaw_rad
     cell_idx = lay.cell_indices("sinkage")
     rate_idx = lay.cell_indices("rate")
+    law = make_soil_law(model.opts)
+    p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
+    z_guess = float(law.static_sinkage(p_mean, law.values(params)))
+    hull = getattr(model.vehicle, "own_contact", False)
+    if hull:
+        # the 3D vehicle: its hull settled on the ground (heave, pitch and roll at rest), from the
+        # ground's plane at the CG sunk by the static sinkage of the mean pressure
+        cell_idx = lay.indices(("z_m", "pitch_rad", "roll_rad"))
+        rate_idx = lay.indices(("heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s"))
+        z0, gx, gy = (float(v) for v in model.vehicle.ground(ca.DM(x_m), ca.DM(y_m)))
+        g_along = gx * np.cos(yaw_rad) + gy * np.sin(yaw_rad)
+        g_across = -gx * np.sin(yaw_rad) + gy * np.cos(yaw_rad)
+        pitch0, roll0 = np.arctan(g_along), np.arctan(g_across)
+        guess = np.array([z0 + params["cg_height_m"] * np.cos(pitch0) * np.cos(roll0) - z_guess, pitch0, roll0])
     zc = ca.SX.sym("zc", len(cell_idx))
     xs = ca.SX(ca.DM(x))
     for k, i in enumerate(cell_idx):
         xs[i] = zc[k]
     p = model.param_vector(params)
     resid = model.ode(xs, ca.DM.zeros(2), p)[rate_idx]
-    rf = ca.rootfinder("static", "newton", ca.Function("g", [zc], [resid]), {"abstol": 1e-12, "max_iter": 200})
-    law = make_soil_law(model.opts)
-    p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
-    z_guess = float(law.static_sinkage(p_mean, law.values(params)))
+    rf = ca.rootfinder("static", "newton", ca.Function("g", [zc], [resid]), {"abstol": 1e-12 if not hull else 1e-6,
+                                                                               "max_iter": 200})
     try:
-        sol = np.array(rf(np.full(len(cell_idx), z_guess))).ravel()
+        sol = np.array(rf(guess if hull else np.full(len(cell_idx), z_guess))).ravel()
     except RuntimeError as err:
         raise SimulationError(f"no static equilibrium of the terrain cells: {err}") from err
     x[cell_idx] = sol

@@ -32,6 +32,7 @@ from ..integrators import registry
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..model.options import ModelOptions
+from ..model.vehicle3d import check_terrain
 from ..terrain.storage import Terrain
 from . import loop
 from .passes import PassStudy, run_passes, study_summary
@@ -172,5 +173,6 @@ def build(scenario, terrain=None) -> Built:
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = registry.get(settings.method, "integrator")
     if scenario.terrain is not None or terrain is not None:
+        check_terrain(scenario.model, "grid")
         return Built(scenario, "grid", settings, spec, None)
     return Built(scenario, "homogeneous", settings, spec, system_model(scenario.model))

@@ -62,6 +62,7 @@ from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..model.vehicle3d import check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
@@ -314,6 +315,11 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     torque = _parse_torque(d.get("torque"))
     terrain = parse_terrain(d.get("terrain"))
     engine = parse_engine(d.get("engine"))
+    if terrain is not None:
+        try:
+            check_terrain(model, "grid")
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
     sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain, engine)
     events = [e.event for e in torque if e.event]
     if run.stop_distance_event is not None and run.stop_distance_event not in events:
