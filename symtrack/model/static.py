@@ -37,7 +37,8 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
         g_along = gx * np.cos(yaw_rad) + gy * np.sin(yaw_rad)
         g_across = -gx * np.sin(yaw_rad) + gy * np.cos(yaw_rad)
         pitch0, roll0 = np.arctan(g_along), np.arctan(g_across)
-        guess = np.array([z0 + params["cg_height_m"] * np.cos(pitch0) * np.cos(roll0) - z_guess, pitch0, roll0])
+        # the CG h above the ground plane along its normal: h sqrt(1 + |grad z0|^2) above it vertically
+        guess = np.array([z0 + (params["cg_height_m"] - z_guess) * np.hypot(1.0, np.hypot(gx, gy)), pitch0, roll0])
     zc = ca.SX.sym("zc", len(cell_idx))
     xs = ca.SX(ca.DM(x))
     for k, i in enumerate(cell_idx):
@@ -51,4 +52,9 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     except RuntimeError as err:
         raise SimulationError(f"no static equilibrium of the terrain cells: {err}") from err
     x[cell_idx] = sol
+    if hull:
+        resid_v = np.array(model.ode(x, ca.DM.zeros(2), p)).ravel()[rate_idx]
+        if not np.all(np.abs(resid_v) < 1e-4):
+            raise SimulationError(f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m "
+                                  f"(heave, pitch and roll accelerations {resid_v} after Newton)")
     return x

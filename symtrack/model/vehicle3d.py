@@ -240,7 +240,7 @@ class Vehicle3D:
         depth, v_tracks = {}, {}
         for k in TRACKS:
             yk = B / 2 if k == "left" else -B / 2
-            p_seg, n_sum, pts, normals, deltas = [], 0, [], [], []
+            p_seg, n_sum, pts, normals = [], 0, [], []
             z_hist = 0
             for i, s in enumerate(s_c):
                 pt = world(x_front - s, yk, -h)
@@ -258,7 +258,6 @@ class Vehicle3D:
                 p_seg.append(p)
                 pts.append(pt)
                 normals.append(nrm)
-                deltas.append(delta)
                 n_sum += p * b * ds
             N[k] = n_sum
             depth[k] = ca.fmax(z_hist, 0)
@@ -313,8 +312,11 @@ class Vehicle3D:
             f_shear = (F[k] - Rc[k]) * tx + Fy[k] * ty
             Fw += f_shear
             Mw += ca.cross(centre - cg, f_shear) + (Mz[k] - (-e) * Fy[k]) * nk
-            signals[f"sinkage_idler_{k}_m"] = deltas[0]
-            signals[f"sinkage_sprocket_{k}_m"] = deltas[-1]
+            # the sinkage under the track's ends (the rigid track's penetration there)
+            for end, s_end in (("idler", 0), ("sprocket", l)):
+                pe = world(x_front - s_end, yk, -h)
+                ze = self.ground(pe[0], pe[1])
+                signals[f"sinkage_{end}_{k}_m"] = (ze[0] - pe[2]) / ca.sqrt(1 + ze[1] ** 2 + ze[2] ** 2)
             signals[f"p_idler_{k}_Pa"] = p_seg[0]
             signals[f"p_sprocket_{k}_Pa"] = p_seg[-1]
         # the drawbar pull, horizontal against the heading, at the hitch height
