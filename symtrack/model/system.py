@@ -35,9 +35,9 @@ import functools
 
 import casadi as ca
 
+from ..foundations.errors import ParameterError
 from . import vehicle_registry
 from .homogeneous import HomogeneousTerrain
-from ..foundations.errors import ParameterError
 from .layout import VehicleState
 from .options import ModelOptions
 from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES

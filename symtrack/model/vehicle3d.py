@@ -68,7 +68,6 @@ from .vehicle import (
     LATERAL_STATES,
     PLANAR_LAYOUT,
     TRACKS,
-    VEHICLE_STATES,
     direction,
     lateral_shear_rates,
     shear_forces,
