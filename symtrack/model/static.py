@@ -38,7 +38,32 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
         g_across = -gx * np.sin(yaw_rad) + gy * np.cos(yaw_rad)
         pitch0, roll0 = np.arctan(g_along), np.arctan(g_across)
         # the CG h above the ground plane along its normal: h sqrt(1 + |grad z0|^2) above it vertically
-        guess = np.array([z0 + (params["cg_height_m"] - z_guess) * np.hypot(1.0, np.hypot(gx, gy)), pitch0, roll0])
+        # on uneven ground (furrows), from the highest point under the tracks: in contact, not in the air
+        l, e, B = params["contact_length_m"], params["cg_ahead_of_contact_centre_m"], params["track_gauge_m"]
+        xb, yb = np.meshgrid(np.linspace(l / 2 - e, -l / 2 - e, 4 * model.opts.contact_segments + 1), (-B / 2, B / 2))
+        xw = x_m + xb * np.cos(yaw_rad) - yb * np.sin(yaw_rad)
+        yw = y_m + xb * np.sin(yaw_rad) + yb * np.cos(yaw_rad)
+        plane = z0 + g_along * xb + g_across * yb
+        bump = max(0.0, max(float(model.vehicle.ground(ca.DM(a), ca.DM(c))[0]) - pl
+                            for a, c, pl in zip(xw.ravel(), yw.ravel(), plane.ravel(), strict=True)))
+        guess = np.array([z0 + bump + (params["cg_height_m"] - z_guess) * np.hypot(1.0, np.hypot(gx, gy)),
+                          pitch0, roll0])
+        # the heave alone first, by bisection (its acceleration falls monotonically as the hull sinks),
+        # so that Newton starts in contact
+        xt = x.copy()
+        xt[cell_idx[1:]] = pitch0, roll0
+
+        def heave_acc(zc):
+            xt[cell_idx[0]] = zc
+            return float(np.array(model.ode(xt, ca.DM.zeros(2), p_num)).ravel()[rate_idx[0]])
+
+        p_num = model.param_vector(params)
+        lo, hi = guess[0] - 0.5, guess[0] + 0.05
+        if heave_acc(lo) > 0 > heave_acc(hi):
+            for _ in range(80):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if heave_acc(mid) > 0 else (lo, mid)
+            guess[0] = 0.5 * (lo + hi)
     zc = ca.SX.sym("zc", len(cell_idx))
     xs = ca.SX(ca.DM(x))
     for k, i in enumerate(cell_idx):
