@@ -195,3 +195,16 @@ def test_refusals():
         parse_surface({"slope_x_deg": 25.0})
     with pytest.raises(ScenarioError, match="furrow_depth_m.*clearance"):
         parse_surface({"furrow_depth_m": 0.5, "furrow_spacing_m": 1.0})
+
+
+def test_example_side_slope_3d_runs():
+    """examples/side_slope_3d.py with short runs: the lower track carries more and sinks deeper, the
+    hull rolls with the slope, the furrows pitch it."""
+    import runpy
+
+    ns = runpy.run_path("examples/side_slope_3d.py")
+    out = ns["main"](["--duration", "2", "--slope-deg", "8"])
+    side, furrows = out.values()
+    assert side["load_share_right_final"] > 0.5 and side["sinkage_sprocket_right_mm"] > side["sinkage_sprocket_left_mm"]
+    assert side["roll_deg_final"] == pytest.approx(8.0, rel=0.01) and side["drift_y_m"] < 0
+    assert furrows["pitch_deg_range"][1] - furrows["pitch_deg_range"][0] > 1.0
