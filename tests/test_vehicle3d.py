@@ -238,3 +238,27 @@ def test_linearization_of_the_3d_vehicle_is_finite_and_stable_in_heave():
     z = float(np.array(m.outputs(x, [0, 0], m.param_vector(params))).ravel()[m.output_index("sinkage_idler_left_m")])
     k_heave = params["bekker_n"] * W / z
     assert np.max(np.abs(lam.imag)) == pytest.approx(math.sqrt(k_heave / params["mass_kg"]), rel=0.05)
+
+
+def _ramp_doc(**terrain):
+    return {"name": "ramp_3d", "run": {"duration_s": 4.0, "output_dt_s": 0.05},
+            "model": {"vehicle": "3d", "lateral_law": "creep"}, "vehicle": {"preset": "reference_crawler"},
+            "soil": {"preset": "clayey_soil_thailand_38"},
+            "torque": [{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0}], "terrain": terrain}
+
+
+def test_a_scenario_gives_the_3d_vehicle_its_ground():
+    """[terrain] holding only [terrain.surface] with model.vehicle = "3d": homogeneous soil on that
+    ground (the compiled Rosenbrock, the scenario's default); the CG climbs by dx tan t; the resolved
+    scenario keeps the surface."""
+    sc = scenario_from_dict(_ramp_doc(surface={"slope_x_deg": 8.0}))
+    assert sc.terrain is None and sc.surface is not None
+    res = symtrack.simulate(sc)
+    run = res.runs[0] if hasattr(res, "runs") else res
+    x, z = run.column("x_m"), run.column("z_m")
+    k = 20  # after the set-off (the shear building up, the hull pitching)
+    assert (z[-1] - z[k]) == pytest.approx((x[-1] - x[k]) * math.tan(math.radians(8.0)), rel=1e-3)
+    assert run.column("pitch_rad")[-1] == pytest.approx(math.radians(8.0), abs=2e-3)
+    assert scenario_from_dict(sc.to_dict()).surface.to_dict() == {"slope_x_deg": 8.0}
+    with pytest.raises(ScenarioError, match="model.vehicle = '3d'"):
+        scenario_from_dict(_ramp_doc(surface={"slope_x_deg": 8.0}, cell_m=0.1))

@@ -45,7 +45,7 @@ from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
 from ..model import SystemModel
 from ..model.static import static_state
-from ..model.vehicle3d import check_terrain
+from ..model.vehicle3d import check_terrain, make_vehicle
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import World, open_world
 
@@ -518,7 +518,9 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
                                    scenario.run.macro_step_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
             return make_grid_plant(world, settings, spec)
     with timed_step("building the model and its integrator", log):
-        model = model or SystemModel(scenario.model)
+        surface = getattr(scenario, "surface", None)
+        model = model or (SystemModel(scenario.model) if surface is None else
+                          SystemModel(scenario.model, vehicle=make_vehicle(scenario.model, surface)))
         stepper = spec.stepper("homogeneous", model, settings)
     if "homogeneous" in spec.batch:
         return BatchPlant(model, scenario.params, stepper, scenario.run.output_dt_s)
