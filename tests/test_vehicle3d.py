@@ -262,6 +262,9 @@ def test_a_scenario_gives_the_3d_vehicle_its_ground():
     assert scenario_from_dict(sc.to_dict()).surface.to_dict() == {"slope_x_deg": 8.0}
     with pytest.raises(ScenarioError, match="model.vehicle = '3d'"):
         scenario_from_dict(_ramp_doc(surface={"slope_x_deg": 8.0}, cell_m=0.1))
+    # furrows every 0.5 m under a 2.4 m contact need 20 segments (a quarter of the spacing each)
+    with pytest.raises(ScenarioError, match=r"model.contact_segments = 8 .*\[20, 64\]"):
+        scenario_from_dict(_ramp_doc(surface={"furrow_depth_m": 0.1, "furrow_spacing_m": 0.5}))
 
 
 @pytest.mark.slow

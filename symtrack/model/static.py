@@ -9,6 +9,7 @@ from ..foundations.errors import SimulationError
 from .soil_law import make as make_soil_law
 from .system import SystemModel
 from .vehicle import GRAVITY_M_S2
+from .vehicle3d import check_contact
 
 __all__ = ["static_state"]
 
@@ -29,6 +30,7 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     z_guess = float(law.static_sinkage(p_mean, law.values(params)))
     hull = getattr(model.vehicle, "own_contact", False)
     if hull:
+        check_contact(model.opts, model.vehicle.surface, params)
         # the 3D vehicle: its hull settled on the ground (heave, pitch and roll at rest), from the
         # ground's plane at the CG sunk by the static sinkage of the mean pressure
         cell_idx = lay.indices(("z_m", "pitch_rad", "roll_rad"))

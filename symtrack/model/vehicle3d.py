@@ -55,6 +55,8 @@ penetration is the sinkage); the grid terrain's channels are not coupled to it y
 
 from __future__ import annotations
 
+import math
+
 import casadi as ca
 
 from ..foundations.errors import ParameterError
@@ -75,7 +77,7 @@ from .vehicle import (
 )
 
 __all__ = ["HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain", "SegmentDistribution",
-           "Vehicle3D", "check_terrain", "make_vehicle"]
+           "Vehicle3D", "check_contact", "check_terrain", "make_vehicle"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -383,6 +385,25 @@ class ContactTerrain:
 def make_vehicle(opts: ModelOptions, surface=None) -> Vehicle3D:
     """The 3D vehicle for model options ``opts`` (with the lateral shear states for the "shear" law)."""
     return Vehicle3D(surface, lateral=opts.lateral_law == "shear")
+
+
+# segments per furrow period at least (the same sampling the grid's cells need: MIN_FURROW_CELLS)
+MIN_SEGMENTS_PER_FURROW = 4
+
+
+def check_contact(opts: ModelOptions, surface, params: dict) -> None:
+    """A :class:`ParameterError` naming ``model.contact_segments`` when the track's segments cannot
+    resolve the furrows of ``surface``: a segment at most a quarter of the furrow spacing (furrows
+    running across the track are sampled like the grid's cells, four points a period at least)."""
+    if surface is None or getattr(surface, "furrow_depth_m", 0.0) <= 0.0:
+        return
+    l = float(params["contact_length_m"])
+    need = math.ceil(MIN_SEGMENTS_PER_FURROW * l / surface.furrow_spacing_m - 1e-9)
+    if opts.contact_segments < need:
+        raise ParameterError(
+            f"model.contact_segments = {opts.contact_segments} is too few for furrows every "
+            f"{surface.furrow_spacing_m:g} m under a {l:g} m contact: the allowed range is [{need}, 64] (a segment "
+            f"at most a quarter of the furrow spacing, {MIN_SEGMENTS_PER_FURROW} segments a furrow period)")
 
 
 def check_terrain(opts: ModelOptions, kind: str) -> None:

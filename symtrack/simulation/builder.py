@@ -29,11 +29,12 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
+from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..model.options import ModelOptions
-from ..model.vehicle3d import check_terrain, make_vehicle
+from ..model.vehicle3d import check_contact, check_terrain, make_vehicle
 from ..terrain.storage import Terrain
 from . import loop
 from .passes import PassStudy, run_passes, study_summary
@@ -178,5 +179,10 @@ def build(scenario, terrain=None) -> Built:
     if scenario.terrain is not None or terrain is not None:
         check_terrain(scenario.model, "grid")
         return Built(scenario, "grid", settings, spec, None)
-    model = system_model(scenario.model, getattr(scenario, "surface", None))
+    surface = getattr(scenario, "surface", None)
+    try:
+        check_contact(scenario.model, surface, scenario.params)
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
+    model = system_model(scenario.model, surface)
     return Built(scenario, "homogeneous", settings, spec, model)

@@ -62,7 +62,7 @@ from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
-from ..model.vehicle3d import check_terrain
+from ..model.vehicle3d import check_contact, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
@@ -328,6 +328,10 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
             raise ScenarioError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D "
                                 "vehicle (model.vehicle = '3d') yet; give slopes and furrows")
         terrain = None
+        try:
+            check_contact(model, surface, vehicle)
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
     else:
         terrain = parse_terrain(t_doc)
     engine = parse_engine(d.get("engine"))
