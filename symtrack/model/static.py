@@ -77,7 +77,18 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     try:
         sol = np.array(rf(guess if hull else np.full(len(cell_idx), z_guess))).ravel()
     except RuntimeError as err:
-        raise SimulationError(f"no static equilibrium of the terrain cells: {err}") from err
+        if not hull:
+            raise SimulationError(f"no static equilibrium of the terrain cells: {err}") from err
+        sol = None
+    if hull:
+        x[cell_idx] = guess if sol is None else sol
+        if sol is None or not np.all(np.abs(np.array(model.ode(x, ca.DM.zeros(2), p)).ravel()[rate_idx]) < 1e-4):
+            # uneven ground (a rigid track on a furrow's ridge): let the hull down, then Newton again
+            sol = _settle_hull(model, x, p, cell_idx, rate_idx, guess)
+            try:
+                sol = np.array(rf(sol)).ravel()
+            except RuntimeError:
+                pass  # the settled hull (checked below)
     x[cell_idx] = sol
     if hull:
         resid_v = np.array(model.ode(x, ca.DM.zeros(2), p)).ravel()[rate_idx]
@@ -85,3 +96,28 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
             raise SimulationError(f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m "
                                   f"(heave, pitch and roll accelerations {resid_v} after Newton)")
     return x
+
+
+# the artificial damping of the hull's settling [1/s] and its duration (only the start state's search):
+# about critical for a rocking mode of 2 rad/s (a rigid track on a furrow's ridge), the heave's 60 rad/s
+# decaying at 2 /s
+SETTLE_DAMPING_PER_S = 4.0
+SETTLE_TIME_S = 8.0
+
+
+def _settle_hull(model, x, p, pos_idx, acc_idx, guess):
+    """The 3D hull let down from ``guess`` (heave, pitch, roll) with its planar states frozen and an
+    artificial damping on its three rates, CVODES for SETTLE_TIME_S: a start for Newton that is in
+    contact however uneven the ground (a rigid track resting on a furrow's ridge)."""
+    q = ca.SX.sym("q", 3)
+    w = ca.SX.sym("w", 3)
+    xs = ca.SX(ca.DM(x))
+    for k, i in enumerate(pos_idx):
+        xs[i] = q[k]
+    rate_idx = [model.layout.index(n) for n in ("heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")]
+    for k, i in enumerate(rate_idx):
+        xs[i] = w[k]
+    acc = model.ode(xs, ca.DM.zeros(2), p)[acc_idx] - SETTLE_DAMPING_PER_S * w
+    F = ca.integrator("settle", "cvodes", {"x": ca.vertcat(q, w), "ode": ca.vertcat(w, acc)}, 0.0, SETTLE_TIME_S,
+                      {"abstol": 1e-10, "reltol": 1e-8})
+    return np.array(F(x0=np.concatenate([guess, np.zeros(3)]))["xf"]).ravel()[:3]
