@@ -16,6 +16,7 @@ SHEAR_LAWS = ("shear", "shear_quasistatic")  # the laws that take the tracks' fo
 LATERAL_LAW_ALIASES = {"shear_transient": "shear"}
 SHEAR_STRENGTH_PRESSURES = ("mean", "local")
 SLIDING_SIGNS = ("displacement", "velocity")
+VEHICLES = ("planar", "3d")  # ModelOptions.vehicle
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,12 @@ class ModelOptions:
     soil_law: the terrain cells' soil law, a name of the soil-law registry
         (:mod:`symtrack.model.soil_law`); "bekker_wong" (default): Bekker loading, Wong
         unloading/reloading line and the cycle law of MODEL.md sections 2 and 6.
+    vehicle: the vehicle model (issue 22). "planar" (default): the planar vehicle of MODEL.md
+        section 1 (x, y, yaw; pitch from the quasi-static load transfer). "3d": the rigid hull that
+        heaves, pitches and rolls on the ground's shape (:mod:`symtrack.model.vehicle3d`,
+        docs/vehicle3d.md), on the homogeneous terrain only.
+    contact_segments: ("3d" only) the segments along each track, each pressing on the ground under
+        it (the load split between and along the tracks comes from their penetrations).
     accel_newton_iterations: the body accelerations a_x, a_y enter the pressure distribution
         (load transfer), which sets the forces, which set the accelerations. For the ODE form this
         algebraic loop is solved inside the expression: one fixed-point step from a = 0, then this
@@ -118,6 +125,8 @@ class ModelOptions:
     sliding_sign: str = "displacement"
     pivot_smoothing_rad_s: float = 1e-5
     soil_law: str = DEFAULT_SOIL_LAW
+    vehicle: str = "planar"
+    contact_segments: int = 8
 
     def __post_init__(self):
         if isinstance(self.lateral_law, str) and self.lateral_law in LATERAL_LAW_ALIASES:
@@ -131,6 +140,8 @@ class ModelOptions:
             v = getattr(self, name)
             if v not in allowed:
                 raise ParameterError(f"model.{name} = {v!r} is not one of {', '.join(allowed)}")
+        if self.vehicle not in VEHICLES:
+            raise ParameterError(f"model.vehicle = {self.vehicle!r} is not one of {', '.join(VEHICLES)}")
         if self.soil_law not in SOIL_LAWS:
             raise ParameterError(f"model.soil_law = {self.soil_law!r} is not one of {', '.join(SOIL_LAWS)}")
         for name in ("tanh_steepness_per_m", "shear_smoothing_m", "omega_smoothing_rad_s",
@@ -143,7 +154,7 @@ class ModelOptions:
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"model.{name} = {getattr(self, name)!r} must be true or false")
         for name, lo, hi in (("lateral_segments", 1, 64), ("gauss_points", 1, 16), ("shear_points", 1, 16),
-                             ("shear_grading", 1, 4),
+                             ("shear_grading", 1, 4), ("contact_segments", 1, 64),
                              ("accel_newton_iterations", 0, 20)):
             v = getattr(self, name)
             if not (isinstance(v, int) and lo <= v <= hi):

@@ -9,6 +9,7 @@ from ..foundations.errors import SimulationError
 from .soil_law import make as make_soil_law
 from .system import SystemModel
 from .vehicle import GRAVITY_M_S2
+from .vehicle3d import check_contact
 
 __all__ = ["static_state"]
 
@@ -24,19 +25,99 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     x[lay.indices(("x_m", "y_m", "yaw_rad"))] = x_m, y_m, yaw_rad
     cell_idx = lay.cell_indices("sinkage")
     rate_idx = lay.cell_indices("rate")
+    law = make_soil_law(model.opts)
+    p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
+    z_guess = float(law.static_sinkage(p_mean, law.values(params)))
+    hull = getattr(model.vehicle, "own_contact", False)
+    if hull:
+        check_contact(model.opts, model.vehicle.surface, params)
+        # the 3D vehicle: its hull settled on the ground (heave, pitch and roll at rest), from the
+        # ground's plane at the CG sunk by the static sinkage of the mean pressure
+        cell_idx = lay.indices(("z_m", "pitch_rad", "roll_rad"))
+        rate_idx = lay.indices(("heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s"))
+        z0, gx, gy = (float(v) for v in model.vehicle.ground(ca.DM(x_m), ca.DM(y_m)))
+        g_along = gx * np.cos(yaw_rad) + gy * np.sin(yaw_rad)
+        g_across = -gx * np.sin(yaw_rad) + gy * np.cos(yaw_rad)
+        pitch0, roll0 = np.arctan(g_along), np.arctan(g_across)
+        # the CG h above the ground plane along its normal: h sqrt(1 + |grad z0|^2) above it vertically
+        # on uneven ground (furrows), from the highest point under the tracks: in contact, not in the air
+        l, e, B = params["contact_length_m"], params["cg_ahead_of_contact_centre_m"], params["track_gauge_m"]
+        xb, yb = np.meshgrid(np.linspace(l / 2 - e, -l / 2 - e, 4 * model.opts.contact_segments + 1), (-B / 2, B / 2))
+        xw = x_m + xb * np.cos(yaw_rad) - yb * np.sin(yaw_rad)
+        yw = y_m + xb * np.sin(yaw_rad) + yb * np.cos(yaw_rad)
+        plane = z0 + g_along * xb + g_across * yb
+        bump = max(0.0, max(float(model.vehicle.ground(ca.DM(a), ca.DM(c))[0]) - pl
+                            for a, c, pl in zip(xw.ravel(), yw.ravel(), plane.ravel(), strict=True)))
+        guess = np.array([z0 + bump + (params["cg_height_m"] - z_guess) * np.hypot(1.0, np.hypot(gx, gy)),
+                          pitch0, roll0])
+        # the heave alone first, by bisection (its acceleration falls monotonically as the hull sinks),
+        # so that Newton starts in contact
+        xt = x.copy()
+        xt[cell_idx[1:]] = pitch0, roll0
+
+        def heave_acc(zc):
+            xt[cell_idx[0]] = zc
+            return float(np.array(model.ode(xt, ca.DM.zeros(2), p_num)).ravel()[rate_idx[0]])
+
+        p_num = model.param_vector(params)
+        lo, hi = guess[0] - 0.5, guess[0] + 0.05
+        if heave_acc(lo) > 0 > heave_acc(hi):
+            for _ in range(80):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if heave_acc(mid) > 0 else (lo, mid)
+            guess[0] = 0.5 * (lo + hi)
     zc = ca.SX.sym("zc", len(cell_idx))
     xs = ca.SX(ca.DM(x))
     for k, i in enumerate(cell_idx):
         xs[i] = zc[k]
     p = model.param_vector(params)
     resid = model.ode(xs, ca.DM.zeros(2), p)[rate_idx]
-    rf = ca.rootfinder("static", "newton", ca.Function("g", [zc], [resid]), {"abstol": 1e-12, "max_iter": 200})
-    law = make_soil_law(model.opts)
-    p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
-    z_guess = float(law.static_sinkage(p_mean, law.values(params)))
+    rf = ca.rootfinder("static", "newton", ca.Function("g", [zc], [resid]), {"abstol": 1e-12 if not hull else 1e-6,
+                                                                               "max_iter": 200})
     try:
-        sol = np.array(rf(np.full(len(cell_idx), z_guess))).ravel()
+        sol = np.array(rf(guess if hull else np.full(len(cell_idx), z_guess))).ravel()
     except RuntimeError as err:
-        raise SimulationError(f"no static equilibrium of the terrain cells: {err}") from err
+        if not hull:
+            raise SimulationError(f"no static equilibrium of the terrain cells: {err}") from err
+        sol = None
+    if hull:
+        x[cell_idx] = guess if sol is None else sol
+        if sol is None or not np.all(np.abs(np.array(model.ode(x, ca.DM.zeros(2), p)).ravel()[rate_idx]) < 1e-4):
+            # uneven ground (a rigid track on a furrow's ridge): let the hull down, then Newton again
+            sol = _settle_hull(model, x, p, cell_idx, rate_idx, guess)
+            try:
+                sol = np.array(rf(sol)).ravel()
+            except RuntimeError:
+                pass  # the settled hull (checked below)
     x[cell_idx] = sol
+    if hull:
+        resid_v = np.array(model.ode(x, ca.DM.zeros(2), p)).ravel()[rate_idx]
+        if not np.all(np.abs(resid_v) < 1e-4):
+            raise SimulationError(f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m "
+                                  f"(heave, pitch and roll accelerations {resid_v} after Newton)")
     return x
+
+
+# the artificial damping of the hull's settling [1/s] and its duration (only the start state's search):
+# about critical for a rocking mode of 2 rad/s (a rigid track on a furrow's ridge), the heave's 60 rad/s
+# decaying at 2 /s
+SETTLE_DAMPING_PER_S = 4.0
+SETTLE_TIME_S = 8.0
+
+
+def _settle_hull(model, x, p, pos_idx, acc_idx, guess):
+    """The 3D hull let down from ``guess`` (heave, pitch, roll) with its planar states frozen and an
+    artificial damping on its three rates, CVODES for SETTLE_TIME_S: a start for Newton that is in
+    contact however uneven the ground (a rigid track resting on a furrow's ridge)."""
+    q = ca.SX.sym("q", 3)
+    w = ca.SX.sym("w", 3)
+    xs = ca.SX(ca.DM(x))
+    for k, i in enumerate(pos_idx):
+        xs[i] = q[k]
+    rate_idx = [model.layout.index(n) for n in ("heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")]
+    for k, i in enumerate(rate_idx):
+        xs[i] = w[k]
+    acc = model.ode(xs, ca.DM.zeros(2), p)[acc_idx] - SETTLE_DAMPING_PER_S * w
+    F = ca.integrator("settle", "cvodes", {"x": ca.vertcat(q, w), "ode": ca.vertcat(w, acc)}, 0.0, SETTLE_TIME_S,
+                      {"abstol": 1e-10, "reltol": 1e-8})
+    return np.array(F(x0=np.concatenate([guess, np.zeros(3)]))["xf"]).ravel()[:3]

@@ -35,11 +35,13 @@ import functools
 
 import casadi as ca
 
+from ..foundations.errors import ParameterError
 from . import vehicle_registry
 from .homogeneous import HomogeneousTerrain
 from .layout import VehicleState
 from .options import ModelOptions
 from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
+from .vehicle3d import ContactTerrain, make_vehicle
 
 __all__ = ["PARAM_NAMES", "SystemModel"]
 
@@ -58,9 +60,18 @@ class SystemModel:
 
     def __init__(self, opts: ModelOptions | None = None, terrain=None, vehicle=None):
         self.opts = opts or ModelOptions()
-        self.terrain = terrain or HomogeneousTerrain(self.opts)
+        if vehicle is None and self.opts.vehicle == "3d":
+            vehicle = make_vehicle(self.opts)
         self.vehicle = vehicle_registry.for_options(self.opts, vehicle)
         vm = self.vehicle
+        if getattr(vm, "own_contact", False):
+            # the 3D vehicle: its hull's penetration is the sinkage; no travelling cells
+            if terrain is not None and not isinstance(terrain, ContactTerrain):
+                raise ParameterError(f"model.vehicle = '3d' takes the homogeneous terrain only, not the "
+                                     f"{getattr(terrain, 'name', terrain)!r} terrain (use model.vehicle = 'planar')")
+            self.terrain = terrain or ContactTerrain(self.opts)
+        else:
+            self.terrain = terrain or HomogeneousTerrain(self.opts)
         self.layout = vm.layout.with_cells(self.terrain.state_names)
         self.state_names = self.layout.names
         self.input_names = tuple(vm.input_names)
@@ -102,11 +113,12 @@ class SystemModel:
         for i, name in enumerate(self.alg_names):
             signals[name] = acc[i]
         signals["yaw_moment_N_m"] = veh["yaw_moment_N_m"]
-        pitch = 0
-        tracks = vm.tracks
-        for k in tracks:
-            pitch += (signals[f"sinkage_sprocket_{k}_m"] - signals[f"sinkage_idler_{k}_m"]) / len(tracks)
-        signals["pitch_rad"] = pitch / P["contact_length_m"]
+        if "pitch_rad" not in signals:  # the planar vehicle: pitch from the sinkages (the 3D: its state)
+            pitch = 0
+            tracks = vm.tracks
+            for k in tracks:
+                pitch += (signals[f"sinkage_sprocket_{k}_m"] - signals[f"sinkage_idler_{k}_m"]) / len(tracks)
+            signals["pitch_rad"] = pitch / P["contact_length_m"]
         self.output_names = tuple(signals)
         y = ca.vertcat(*signals.values())
 

@@ -24,14 +24,17 @@ result).
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
+from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..model.options import ModelOptions
+from ..model.vehicle3d import check_contact, check_terrain, make_vehicle
 from ..terrain.storage import Terrain
 from . import loop
 from .passes import PassStudy, run_passes, study_summary
@@ -47,23 +50,25 @@ _lock = threading.Lock()
 _hits = {"hits": 0, "misses": 0}
 
 
-def system_model(opts: ModelOptions | None = None) -> SystemModel:
+def system_model(opts: ModelOptions | None = None, surface=None) -> SystemModel:
     """The homogeneous terrain's model of ``opts`` (default options when None), built on the
     first call for these options and then shared (a SystemModel is not changed after its
     construction; its generated library is cached per model object). The :data:`MAX_MODELS` most
-    recently used are kept."""
+    recently used are kept. ``surface``: the ground's shape under the 3D vehicle
+    (``opts.vehicle = "3d"``; keyed by its table)."""
     opts = ModelOptions() if opts is None else opts
+    key = opts if surface is None else (opts, json.dumps(surface.to_dict(), sort_keys=True))
     with _lock:
-        model = _models.get(opts)
+        model = _models.get(key)
         if model is not None:
-            _models.move_to_end(opts)
+            _models.move_to_end(key)
             _hits["hits"] += 1
             return model
         _hits["misses"] += 1
-    model = SystemModel(opts)
+    model = SystemModel(opts) if surface is None else SystemModel(opts, vehicle=make_vehicle(opts, surface))
     with _lock:
-        model = _models.setdefault(opts, model)
-        _models.move_to_end(opts)
+        model = _models.setdefault(key, model)
+        _models.move_to_end(key)
         while len(_models) > MAX_MODELS:
             _models.popitem(last=False)
         return model
@@ -172,5 +177,12 @@ def build(scenario, terrain=None) -> Built:
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = registry.get(settings.method, "integrator")
     if scenario.terrain is not None or terrain is not None:
+        check_terrain(scenario.model, "grid")
         return Built(scenario, "grid", settings, spec, None)
-    return Built(scenario, "homogeneous", settings, spec, system_model(scenario.model))
+    surface = getattr(scenario, "surface", None)
+    try:
+        check_contact(scenario.model, surface, scenario.params)
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
+    model = system_model(scenario.model, surface)
+    return Built(scenario, "homogeneous", settings, spec, model)

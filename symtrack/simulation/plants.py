@@ -45,6 +45,7 @@ from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
 from ..model import SystemModel
 from ..model.static import static_state
+from ..model.vehicle3d import check_terrain, make_vehicle
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import World, open_world
 
@@ -508,6 +509,7 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = spec or registry.get(settings.method)
     if world is not None or scenario.terrain is not None or terrain is not None:
+        check_terrain(scenario.model, "grid")
         with timed_step("building the grid terrain's model and its integrator", log):
             if world is None:
                 spec.check("grid", settings)
@@ -516,7 +518,9 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
                                    scenario.run.macro_step_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
             return make_grid_plant(world, settings, spec)
     with timed_step("building the model and its integrator", log):
-        model = model or SystemModel(scenario.model)
+        surface = getattr(scenario, "surface", None)
+        model = model or (SystemModel(scenario.model) if surface is None else
+                          SystemModel(scenario.model, vehicle=make_vehicle(scenario.model, surface)))
         stepper = spec.stepper("homogeneous", model, settings)
     if "homogeneous" in spec.batch:
         return BatchPlant(model, scenario.params, stepper, scenario.run.output_dt_s)

@@ -62,10 +62,12 @@ from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..model.vehicle3d import check_contact, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings, settings_from_dict
+from ..terrain.surface import Surface, parse_surface
 
 __all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
            "parse_run", "parse_terrain", "scenario_from_dict"]
@@ -147,6 +149,9 @@ class Scenario:
     torque: tuple[TorqueEntry, ...]
     terrain: TerrainSettings | None = None
     engine: EngineSettings | None = None  # the [engine] section (the terrain engine's scheme), if given
+    # the ground's shape under the 3D vehicle on the homogeneous terrain (model.vehicle = "3d" with a
+    # [terrain] section holding only [terrain.surface]; docs/vehicle3d.md)
+    surface: Surface | None = None
 
     @property
     def params(self) -> dict:
@@ -175,6 +180,8 @@ class Scenario:
              "torque": [{k: v for k, v in dataclasses.asdict(e).items() if v is not None} for e in self.torque]}
         if self.terrain is not None:
             d["terrain"] = self.terrain.to_dict()
+        if self.surface is not None:
+            d["terrain"] = {"surface": self.surface.to_dict()}
         if self.engine is not None:
             d["engine"] = dataclasses.asdict(self.engine)
         return d
@@ -312,9 +319,29 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     sp, soil = parse_params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS)
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
-    terrain = parse_terrain(d.get("terrain"))
+    t_doc = d.get("terrain")
+    surface = None
+    if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
+        # the 3D vehicle on homogeneous soil that follows the ground's shape (docs/vehicle3d.md)
+        surface = parse_surface(t_doc["surface"])
+        if surface.raster is not None:
+            raise ScenarioError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D "
+                                "vehicle (model.vehicle = '3d') yet; give slopes and furrows")
+        terrain = None
+        try:
+            check_contact(model, surface, vehicle)
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
+    else:
+        terrain = parse_terrain(t_doc)
     engine = parse_engine(d.get("engine"))
-    sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain, engine)
+    if terrain is not None:
+        try:
+            check_terrain(model, "grid")
+        except ParameterError as err:
+            raise ScenarioError(f"{err} (a [terrain] section holding only [terrain.surface] gives the 3D vehicle "
+                                "its ground on homogeneous soil)") from err
+    sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain, engine, surface)
     events = [e.event for e in torque if e.event]
     if run.stop_distance_event is not None and run.stop_distance_event not in events:
         raise ScenarioError(f"run.stop_distance_event = {run.stop_distance_event!r} names no [[torque]] event; "

@@ -1,0 +1,416 @@
+"""The 3D tracked vehicle (issue 22 item 2): a rigid hull that heaves, pitches and rolls on the
+ground's shape, written once as CasADi SX expressions (``[model] vehicle = "3d"``).
+
+States: the planar vehicle's (:data:`~symtrack.model.vehicle.VEHICLE_STATES`, and the lateral shear
+states of the "shear" law), then the hull's :data:`HULL_STATES`: the CG's height ``z_m`` (world
+frame, the same datum as the surface's z0), the pitch (nose up positive) and the roll (left side up
+positive), both Euler angles of the hull against the horizontal, and their rates.
+``u_m_s``, ``v_m_s`` stay the CG's horizontal velocity in the yaw frame (x along the heading, y to
+its left), ``x_m``, ``y_m`` its horizontal position.
+
+Contact (reconstruction; the planar model's structure kept): each track's contact of length l is
+``opts.contact_segments`` equal segments; the centre of segment i, at body (x_i, y_k, -h) (x from
+the CG, y_k = +-B/2, h the CG height above the track's ground line), is placed in the world by the
+hull's pose (R = Rz(yaw) Ry(-pitch) Rx(roll)). Its penetration into the ground is the height of the
+surface above it, z0(X_i, Y_i) - Z_i, times the cosine of the ground's inclination there (the depth
+measured normal to the ground: a plate pressed normal to the surface, as Bekker's law is measured).
+Its pressure is the model's soil law at that sinkage, with the history the homogeneous terrain gives
+its sprocket cell (:mod:`symtrack.model.homogeneous`): the front segment meets virgin soil, each
+later segment soil already pressed to the deepest sinkage ahead of it (Bekker loading if it sinks
+deeper, the unloading/reloading line if not), plus the cells' areal damping c'' times the rate of
+penetration (seed eq. (4) without the cell's own areal mass: the soil under the track moves with
+the hull), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
+normal at the segment. So the load split between and along the tracks follows from the hull's
+rigid-body equilibrium on the ground: its shape, the weight's components and the accelerations
+(no algebraic loop: ``accel_x_m_s2``, ``accel_y_m_s2`` are the hull's horizontal accelerations,
+closed trivially).
+
+Shear (the planar laws, in the local ground plane): each track's tractive and lateral forces are
+the planar model's (seed eq. (1) and the creep law, or the shear laws of docs/turning.md) with the
+track's normal load the sum of its segments' and its pressure the segments' (linear between
+segment centres), the track's speed the velocity of its contact centre along the track's tangent in
+the ground plane, its lateral sliding the velocity across it. The thrust acts along that tangent at
+the contact centre, the lateral force across it (with the planar law's yaw moment about the CG).
+Compaction resistance: the soil law's work per metre at the track's deepest penetration, against
+the track's motion (the homogeneous terrain's). The internal running-gear resistance loads the
+sprocket only (as in the planar model).
+
+Body equations (yaw frame x', y', vertical z; forces F, moments M about the CG from every contact
+force and the drawbar pull; W = m g):
+
+    m (du/dt - v r_z) = F_x',   m (dv/dt + u r_z) = F_y',   m dw/dt = F_z - W
+    I_pitch d2(pitch)/dt2 = -M_y',   I_roll d2(roll)/dt2 = M_x',   I_z dr_z/dt = M_z
+
+Approximations (ASSUMED, said where they apply): the Euler angles' rates are taken as the body's
+angular rates and the gyroscopic terms are dropped (pitch and roll rates and the yaw rate of a
+crawler are small: 0.1 rad/s at most in the project's manoeuvres); the pitch and roll inertias are
+:data:`PITCH_INERTIA_PER_YAW` and :data:`ROLL_INERTIA_PER_YAW` times the yaw inertia (no
+parameters of their own yet); the roll and pitch axes are those of the yaw frame (on a ramp of t
+the hull's roll axis is tilted by t: a cos t error on the roll inertia only).
+
+The terrain this vehicle takes is :class:`ContactTerrain` (no travelling cells: the hull's
+penetration is the sinkage); the grid terrain's channels are not coupled to it yet, so
+``model.vehicle = "3d"`` on a ``[terrain]`` grid is refused (:func:`check_terrain`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+from ..foundations.errors import ParameterError
+from . import soil_law
+from .layout import ContactPose, StateLayout, VehicleState
+from .options import SHEAR_LAWS, ModelOptions
+from .vehicle import (
+    ALGEBRAIC,
+    GRAVITY_M_S2,
+    INPUTS,
+    LATERAL_STATES,
+    PLANAR_LAYOUT,
+    TRACKS,
+    direction,
+    lateral_shear_rates,
+    shear_forces,
+    traction_shape,
+)
+
+__all__ = ["HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain", "SegmentDistribution",
+           "Vehicle3D", "check_contact", "check_terrain", "make_vehicle"]
+
+HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
+# ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
+# 1.9 m of its yaw inertia's box) has I_pitch / I_yaw = (L^2 + H^2) / (L^2 + W^2) = 1 and
+# I_roll / I_yaw = (W^2 + H^2) / (L^2 + W^2) = 0.32.
+PITCH_INERTIA_PER_YAW = 1.0
+ROLL_INERTIA_PER_YAW = 0.32
+
+
+def _layout(lateral: bool) -> StateLayout:
+    blocks = [(b, PLANAR_LAYOUT.block_names_of(b)) for b in ("pose", "velocity", "sprockets", "shear", "torque")]
+    if lateral:
+        blocks.append(("lateral_shear", LATERAL_STATES))
+    blocks.append(("hull", HULL_STATES))
+    return StateLayout(tuple(blocks))
+
+
+class SegmentDistribution:
+    """A track's normal pressure from its segments: ``p[i]`` at the segment centres ``s[i]``
+    (from the front, s = 0, to the rear, s = l), linear between centres and constant beyond the
+    first and last (the interface of :class:`~symtrack.model.vehicle.PressureDistribution`:
+    ``N``, ``at(s)``, ``idler``, ``sprocket``)."""
+
+    def __init__(self, p, s, ds, N):
+        self.p, self.s, self.ds, self.N = p, s, ds, N
+
+    def at(self, s):
+        n = len(self.p)
+        if n == 1:
+            return self.p[0]
+        out = 0
+        for i, (pi, si) in enumerate(zip(self.p, self.s, strict=True)):
+            hat = 1 - ca.fabs(s - si) / self.ds
+            if i == 0:
+                hat = ca.if_else(s < si, 1, hat)
+            elif i == n - 1:
+                hat = ca.if_else(s > si, 1, hat)
+            out += pi * ca.fmax(0, hat)
+        return out
+
+    @property
+    def idler(self):
+        return self.p[0]
+
+    @property
+    def sprocket(self):
+        return self.p[-1]
+
+
+def _rotation(yaw, pitch, roll):
+    """R = Rz(yaw) Ry(-pitch) Rx(roll): body -> world (pitch nose up, roll left side up)."""
+    cy, sy, cp, sp, cr, sr = ca.cos(yaw), ca.sin(yaw), ca.cos(pitch), ca.sin(pitch), ca.cos(roll), ca.sin(roll)
+    Rz = ca.SX(3, 3)
+    Rz[0, 0], Rz[0, 1], Rz[1, 0], Rz[1, 1], Rz[2, 2] = cy, -sy, sy, cy, 1
+    Ry = ca.SX(3, 3)  # rotation about y by -pitch
+    Ry[0, 0], Ry[0, 2], Ry[1, 1], Ry[2, 0], Ry[2, 2] = cp, -sp, 1, sp, cp
+    Rx = ca.SX(3, 3)
+    Rx[0, 0], Rx[1, 1], Rx[1, 2], Rx[2, 1], Rx[2, 2] = 1, cr, -sr, sr, cr
+    return Rz, ca.mtimes(Ry, Rx)
+
+
+class Vehicle3D:
+    """The 3D vehicle (module doc) as a vehicle model of :mod:`symtrack.model.vehicle_registry`.
+
+    Parameters
+    ----------
+    surface : symtrack.terrain.surface.Surface or None
+        The ground's shape z0(x, y) (None: flat ground at z0 = 0).
+    lateral : bool
+        True: with the four lateral shear states of the "shear" law (the registry's
+        ``"3d_lateral"``); False: for "creep" and "shear_quasistatic" (``"3d"``).
+    """
+
+    input_names = INPUTS
+    alg_names = ALGEBRAIC
+    tracks = TRACKS
+    own_contact = True  # the hull's penetration is the sinkage: it takes a ContactTerrain
+
+    def __init__(self, surface=None, lateral: bool = False):
+        self.surface = None if surface is None or surface.is_flat else surface
+        self._ground_f = None if self.surface is None or self.surface.raster is not None else self.surface.function()
+        self.lateral = bool(lateral)
+        self.name = "3d_lateral" if lateral else "3d"
+        self.lateral_laws = ()
+        self.layout = _layout(self.lateral)
+        self.state_names = self.layout.names
+
+    # -- the ground ------------------------------------------------------------------------------------
+    def ground(self, x, y):
+        """(z0, dz0/dx, dz0/dy) of the ground at world (x, y) (CasADi)."""
+        if self.surface is None:
+            return 0, 0, 0
+        if self.surface.raster is not None:
+            raise ParameterError("model.vehicle = '3d' takes the analytic [terrain.surface] (slopes, furrows); an "
+                                 "elevation_file raster is not coupled to the 3D vehicle yet")
+        z, gx, gy = self._ground_f(x, y)
+        return z, gx, gy
+
+    def contact_pose(self, xv) -> ContactPose:
+        s = VehicleState(xv, self.layout)
+        return ContactPose(s["x_m"], s["y_m"], s["yaw_rad"], s["z_m"], s["pitch_rad"], s["roll_rad"])
+
+    # -- the equations -----------------------------------------------------------------------------------
+    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
+        """The vehicle's state derivatives and signals (module doc). ``acc`` is not used (no
+        load-transfer loop: ``acc_implied`` returns the accelerations); ``compaction_N`` neither
+        (the contact's own compaction resistance); ``track_soil`` as the planar model's."""
+        if (opts.lateral_law == "shear") != self.lateral:
+            raise ParameterError(f"model.lateral_law = {opts.lateral_law!r} needs the vehicle model "
+                                 f"{'3d_lateral' if opts.lateral_law == 'shear' else '3d'}")
+        lay = self.layout
+        S = VehicleState(xv, lay)
+        X, Y, psi = S["x_m"], S["y_m"], S["yaw_rad"]
+        vx, vy, rz = S["u_m_s"], S["v_m_s"], S["yaw_rate_rad_s"]
+        Z, pitch, roll = S["z_m"], S["pitch_rad"], S["roll_rad"]
+        w, q, pr = S["heave_rate_m_s"], S["pitch_rate_rad_s"], S["roll_rate_rad_s"]
+        m, Iz = P["mass_kg"], P["yaw_inertia_kg_m2"]
+        B, b, l, r, h, e = (P[k] for k in ("track_gauge_m", "track_width_m", "contact_length_m", "sprocket_radius_m",
+                                           "cg_height_m", "cg_ahead_of_contact_centre_m"))
+        J, tauT, mu, eps_v = (P[k] for k in ("sprocket_inertia_kg_m2", "torque_time_constant_s",
+                                             "lateral_friction_coeff", "lateral_creep_speed_m_s"))
+        drawbar, hd = P["drawbar_pull_N"], P["hitch_height_m"]
+        c, phi, K = P["cohesion_Pa"], P["friction_angle_rad"], P["shear_modulus_K_m"]
+        W = m * GRAVITY_M_S2
+        law_obj = soil_law.make(opts)
+        law = law_obj.vector(P)
+        damping = P["cell_damping_Pa_s_per_m"]
+
+        # kinematics: the pose's rates (Euler rates = body rates, module doc)
+        pose_idx = lay.indices(("x_m", "y_m", "yaw_rad", "z_m", "pitch_rad", "roll_rad"))
+        Xdot = vx * ca.cos(psi) - vy * ca.sin(psi)
+        Ydot = vx * ca.sin(psi) + vy * ca.cos(psi)
+        pose_rates = ca.SX.zeros(xv.numel())
+        for i, v in zip(pose_idx, (Xdot, Ydot, rz, w, q, pr), strict=True):
+            pose_rates[i] = v
+        Rz, Rpr = _rotation(psi, pitch, roll)
+        R = ca.mtimes(Rz, Rpr)
+        cg = ca.vertcat(X, Y, Z)
+
+        def world(xb, yb, zb):
+            return cg + ca.mtimes(R, ca.vertcat(xb, yb, zb))
+
+        def rate(expr):
+            return ca.jtimes(expr, xv, pose_rates)
+
+        n_seg = opts.contact_segments
+        ds = l / n_seg
+        x_front = l / 2 - e
+        s_c = [(i + 0.5) * ds for i in range(n_seg)]
+        ex = R[:, 0]  # the hull's forward axis in the world
+        Fw = ca.SX.zeros(3)  # resultant contact force (world)
+        Mw = ca.SX.zeros(3)  # resultant moment about the CG (world)
+        F, R_in, Rc, Fy, Mz, jdot, omdot, N, dist, rates_lat, signals = ({} for _ in range(11))
+        omega = {k: S[f"omega_{k}_rad_s"] for k in TRACKS}
+        shear = {k: S[f"shear_{k}_m"] for k in TRACKS}
+        torque = {k: S[f"torque_{k}_N_m"] for k in TRACKS}
+        if opts.traction_sign == "sign":
+            abs_om = {k: ca.fabs(omega[k]) for k in TRACKS}
+        else:
+            abs_om = {k: ca.sqrt(omega[k] ** 2 + opts.omega_smoothing_rad_s**2) for k in TRACKS}
+        depth, v_tracks = {}, {}
+        for k in TRACKS:
+            yk = B / 2 if k == "left" else -B / 2
+            p_seg, n_sum, pts, normals = [], 0, [], []
+            z_hist = 0
+            for i, s in enumerate(s_c):
+                pt = world(x_front - s, yk, -h)
+                z0, gx, gy = self.ground(pt[0], pt[1])
+                norm = ca.sqrt(1 + gx**2 + gy**2)
+                nrm = ca.vertcat(-gx, -gy, 1) / norm
+                delta = (z0 - pt[2]) / norm  # the penetration normal to the ground
+                ddelta = rate(delta)
+                if i == 0:
+                    p_soil = law_obj.pressure(delta, (0, 0, 0, 0, 0), law)
+                else:
+                    p_soil = law_obj.pressure(delta, (z_hist, law_obj.virgin_pressure(z_hist, law), 0, 0, 0), law)
+                z_hist = ca.fmax(z_hist, ca.fmax(delta, 0))
+                p = ca.fmax(p_soil + damping * ddelta, 0)
+                p_seg.append(p)
+                pts.append(pt)
+                normals.append(nrm)
+                n_sum += p * b * ds
+            N[k] = n_sum
+            depth[k] = ca.fmax(z_hist, 0)
+            dist[k] = SegmentDistribution(p_seg, s_c, ds, n_sum)
+            # the track's ground plane: its mean normal; the tangent along the track and across it
+            nk = sum(normals[1:], normals[0]) / n_seg
+            nk = nk / ca.norm_2(nk)
+            tx = ex - ca.dot(ex, nk) * nk
+            tx = tx / ca.norm_2(tx)
+            ty = ca.cross(nk, tx)
+            centre = world(-e, yk, -h)
+            vel = rate(centre)
+            v_track = ca.dot(vel, tx)
+            v_tracks[k] = v_track
+            v_lat_centre = ca.dot(vel, ty)
+            vy_eff = v_lat_centre + rz * e  # the lateral speed at the CG's x that gives it at the centre (x = -e)
+            if track_soil is not None:
+                c, phi, K = track_soil[k]
+            V_kmh = 3.6 * r * abs_om[k]
+            R_in[k] = N[k] * (P["internal_resistance_const"] + P["internal_resistance_per_km_h"] * V_kmh) \
+                * direction(omega[k], opts.omega_smoothing_rad_s, opts)
+            Rc[k] = law_obj.compaction_work(depth[k], law, b) * direction(v_track, opts.motion_smoothing_m_s, opts)
+            lagged = (S[f"lateral_shear_{k}_m"], S[f"shear_twist_{k}_rad"]) if self.lateral else None
+            if opts.lateral_law in SHEAR_LAWS:
+                F[k], Fy[k], Mz[k] = shear_forces(shear[k], omega[k], abs_om[k], v_track, vy_eff, rz, x_front, dist[k],
+                                                  N[k], b, l, r, c, phi, K, opts, lagged)
+            else:
+                F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
+                fy_sum, mz_sum = 0, 0
+                for s, p in zip(s_c, p_seg, strict=True):
+                    x_body = x_front - s
+                    q_load = p * b * ds
+                    if opts.lateral_shear_cap:
+                        fy = -ca.fmin(mu * q_load, b * ds * c + q_load * ca.tan(phi)) \
+                            * ca.tanh((vy_eff + rz * x_body) / eps_v)
+                    else:
+                        fy = -mu * q_load * ca.tanh((vy_eff + rz * x_body) / eps_v)
+                    fy_sum += fy
+                    mz_sum += x_body * fy
+                Fy[k], Mz[k] = fy_sum, mz_sum
+            jdot[k] = -(2 * r / l) * abs_om[k] * shear[k] + r * omega[k] - v_track
+            omdot[k] = (torque[k] - r * (F[k] + R_in[k])) / J
+            if self.lateral:
+                rates_lat[k] = lateral_shear_rates(*lagged, abs_om[k], vy_eff, rz, -e, l, r)
+            # forces on the hull: the segments' normal loads, the thrust less the compaction
+            # resistance along the track, the lateral force across it at the contact centre with the
+            # rest of the planar law's yaw moment about the normal
+            for pt, nrm, p in zip(pts, normals, p_seg, strict=True):
+                f = p * b * ds * nrm
+                Fw += f
+                Mw += ca.cross(pt - cg, f)
+            f_shear = (F[k] - Rc[k]) * tx + Fy[k] * ty
+            Fw += f_shear
+            Mw += ca.cross(centre - cg, f_shear) + (Mz[k] - (-e) * Fy[k]) * nk
+            # the sinkage under the track's ends (the rigid track's penetration there)
+            for end, s_end in (("idler", 0), ("sprocket", l)):
+                pe = world(x_front - s_end, yk, -h)
+                ze = self.ground(pe[0], pe[1])
+                signals[f"sinkage_{end}_{k}_m"] = (ze[0] - pe[2]) / ca.sqrt(1 + ze[1] ** 2 + ze[2] ** 2)
+            signals[f"p_idler_{k}_Pa"] = p_seg[0]
+            signals[f"p_sprocket_{k}_Pa"] = p_seg[-1]
+        # the drawbar pull, horizontal against the heading, at the hitch height
+        hitch = world(-e, 0, hd - h)
+        f_bar = -drawbar * ca.vertcat(ca.cos(psi), ca.sin(psi), 0)
+        Fw += f_bar
+        Mw += ca.cross(hitch - cg, f_bar)
+        # into the yaw frame
+        Fy_frame = ca.mtimes(Rz.T, Fw)
+        My_frame = ca.mtimes(Rz.T, Mw)
+        ax, ay = Fy_frame[0] / m, Fy_frame[1] / m
+        I_pitch, I_roll = PITCH_INERTIA_PER_YAW * Iz, ROLL_INERTIA_PER_YAW * Iz
+        yaw_moment = My_frame[2]
+        xdot = [None] * lay.size
+        derivs = {
+            "x_m": Xdot, "y_m": Ydot, "yaw_rad": rz,
+            "u_m_s": ax + vy * rz, "v_m_s": ay - vx * rz, "yaw_rate_rad_s": yaw_moment / Iz,
+            "z_m": w, "pitch_rad": q, "roll_rad": pr,
+            "heave_rate_m_s": (Fy_frame[2] - W) / m,
+            "pitch_rate_rad_s": -My_frame[1] / I_pitch,
+            "roll_rate_rad_s": My_frame[0] / I_roll,
+        }
+        for k, ui in zip(TRACKS, (u[0], u[1]), strict=True):
+            derivs[f"omega_{k}_rad_s"] = omdot[k]
+            derivs[f"shear_{k}_m"] = jdot[k]
+            derivs[f"torque_{k}_N_m"] = (ui - torque[k]) / tauT
+            if self.lateral:
+                derivs[f"lateral_shear_{k}_m"], derivs[f"shear_twist_{k}_rad"] = rates_lat[k]
+        for name, v in derivs.items():
+            xdot[lay.index(name)] = v
+        for k in TRACKS:
+            signals[f"tractive_{k}_N"] = F[k]
+            signals[f"internal_resistance_{k}_N"] = R_in[k]
+            signals[f"compaction_resistance_{k}_N"] = Rc[k]
+            signals[f"lateral_force_{k}_N"] = Fy[k]
+            signals[f"normal_load_{k}_N"] = N[k]
+            signals[f"slip_{k}"] = 1 - v_tracks[k] * omega[k] / (r * omega[k] ** 2 + opts.omega_smoothing_rad_s * r)
+        signals["pitch_rad"] = pitch
+        signals["roll_rad"] = roll
+        signals["z_m"] = Z
+        signals["ground_z_m"] = self.ground(X, Y)[0] + 0 * X
+        return {"xdot": ca.vertcat(*xdot), "acc_implied": ca.vertcat(ax, ay), "dist": dist, "signals": signals,
+                "yaw_moment_N_m": yaw_moment}
+
+
+class ContactTerrain:
+    """The homogeneous terrain of the 3D vehicle: virgin soil following the surface, no travelling
+    cells (the hull's penetration is the sinkage, :mod:`symtrack.model.vehicle3d`); the soil law's
+    signals come from the vehicle."""
+
+    name = "homogeneous"
+    param_names = ()
+    state_names = ()
+
+    def __init__(self, opts: ModelOptions):
+        self.opts = opts
+
+    def compaction(self, xv, xc, P, Q):
+        return ca.DM.zeros(len(TRACKS))  # the 3D vehicle computes its own (module doc)
+
+    def equations(self, xv, xc, dist, P, Q):
+        return ca.SX(0, 1), {}
+
+
+def make_vehicle(opts: ModelOptions, surface=None) -> Vehicle3D:
+    """The 3D vehicle for model options ``opts`` (with the lateral shear states for the "shear" law)."""
+    return Vehicle3D(surface, lateral=opts.lateral_law == "shear")
+
+
+# segments per furrow period at least (the same sampling the grid's cells need: MIN_FURROW_CELLS)
+MIN_SEGMENTS_PER_FURROW = 4
+
+
+def check_contact(opts: ModelOptions, surface, params: dict) -> None:
+    """A :class:`ParameterError` naming ``model.contact_segments`` when the track's segments cannot
+    resolve the furrows of ``surface``: a segment at most a quarter of the furrow spacing (furrows
+    running across the track are sampled like the grid's cells, four points a period at least)."""
+    if surface is None or getattr(surface, "furrow_depth_m", 0.0) <= 0.0:
+        return
+    l = float(params["contact_length_m"])
+    need = math.ceil(MIN_SEGMENTS_PER_FURROW * l / surface.furrow_spacing_m - 1e-9)
+    if opts.contact_segments < need:
+        raise ParameterError(
+            f"model.contact_segments = {opts.contact_segments} is too few for furrows every "
+            f"{surface.furrow_spacing_m:g} m under a {l:g} m contact: the allowed range is [{need}, 64] (a segment "
+            f"at most a quarter of the furrow spacing, {MIN_SEGMENTS_PER_FURROW} segments a furrow period)")
+
+
+def check_terrain(opts: ModelOptions, kind: str) -> None:
+    """A :class:`ParameterError` naming ``model.vehicle`` unless the 3D vehicle can run on ``kind``."""
+    if getattr(opts, "vehicle", "planar") == "3d" and kind != "homogeneous":
+        raise ParameterError(f"model.vehicle = '3d' runs on the homogeneous terrain only (this run asks for the "
+                             f"{kind} terrain: its channels and the terrain engine in C are coupled to the planar "
+                             "vehicle): use model.vehicle = 'planar' with [terrain], or drop [terrain] for the 3D "
+                             "vehicle on homogeneous soil")
+
