@@ -122,3 +122,58 @@ def test_uniform_map_run_equals_single_value_and_wet_compacts_more():
     assert np.array_equal(mapped.terrain.specific_volume, wet.terrain.specific_volume)
     assert mapped.summary["passes"][0]["bulk_density_max_Mg_per_m3"] == \
         wet.summary["passes"][0]["bulk_density_max_Mg_per_m3"]
+
+
+def _raster_doc(tmp_path, w_grid, name="w.npy", soil_moisture=DAY):
+    np.save(tmp_path / name, w_grid)
+    d = _doc(soil_moisture)
+    d["terrain"]["moisture"] = {"raster": str(tmp_path / name), "compression_ptf": "defossez_2003_loess",
+                                "clay_percent": 25.0}
+    return d
+
+
+def test_moisture_raster_uniform_equals_single_value_and_split(tmp_path):
+    shape = (48, 16)  # the small field: 12 m x 4 m at 0.25 m
+    single = symtrack.simulate(scenario_from_dict(_doc(DAY)))
+    uni = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, np.full(shape, 0.2))))
+    assert np.array_equal(uni.terrain.specific_volume, single.terrain.specific_volume)
+    assert np.array_equal(uni.terrain.sigma_max, single.terrain.sigma_max)
+    assert not uni.terrain.soil_index.any() and not uni.terrain.soil_table
+    # the cells with y > 0 wet (0.2), the others dry (0.1): two soils, the wet half compacts more
+    w = np.full(shape, 0.1)
+    w[:, 8:] = 0.2
+    split = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w, "split.npy")))
+    st = split.terrain
+    assert len(st.soil_table) == 1 and sorted(np.unique(st.soil_index)) == [0, 1]
+    v = st.specific_volume.reshape(48, 16, -1)[:, :, 0]
+    moved_dry, moved_wet = np.count_nonzero(v[:, :8]), np.count_nonzero(v[:, 8:])
+    assert moved_wet > 0 and moved_dry == 0
+
+
+def test_moisture_raster_refusals(tmp_path):
+    with pytest.raises(ScenarioError, match=r"terrain.moisture.raster = .*shape \(48, 16\).*cover the field"):
+        symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, np.full((40, 16), 0.2))))
+    w = np.full((48, 16), 0.2)
+    w[3, 3] = 0.6
+    with pytest.raises(ScenarioError, match=r"cell water content 0.6.*water_content_kg_per_kg = 0.6 is outside \[0,"):
+        symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w)))
+    w = 0.1 + 0.001 * np.arange(48 * 16).reshape(48, 16) / 48
+    with pytest.raises(ScenarioError, match="distinct .soil, water content. pairs"):
+        symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w)))
+    with pytest.raises(ScenarioError, match="unknown key"):
+        scenario_from_dict({**_doc(DAY), "terrain": {**_doc(DAY)["terrain"], "moisture": {"raster": "w.npy",
+                                                                                         "ptf": 1}}})
+
+
+def test_moisture_geotiff_must_cover_the_field(tmp_path):
+    rasterio = pytest.importorskip("rasterio")
+    from rasterio.transform import from_origin
+    path = tmp_path / "w.tif"
+    # 1 m pixels over x in [-6, 0], y in [-2, 2]: half the field
+    with rasterio.open(path, "w", driver="GTiff", height=4, width=6, count=1, dtype="float32",
+                       transform=from_origin(-6.0, 2.0, 1.0, 1.0)) as ds:
+        ds.write(np.full((1, 4, 6), 0.2, dtype=np.float32))
+    d = _doc(DAY)
+    d["terrain"]["moisture"] = {"raster": str(path), "compression_ptf": "defossez_2003_loess"}
+    with pytest.raises(ScenarioError, match="must cover the whole field"):
+        symtrack.simulate(scenario_from_dict(d))

@@ -38,15 +38,26 @@ soil map's soil)::
 The volumetric water content is w rho_b / rho_w with the soil's initial bulk density; saturation
 is its porosity, w_sat = (1 / rho_b - 1 / rho_s) rho_w. Moisture is the day's, not the field's
 state: it is not stored in the terrain file (the soil parameters it gives are, with a soil map).
+
+A moisture raster (``[terrain.moisture]``: ``raster`` a .npy file of floats (nx, ny) or a GeoTIFF,
+each cell the pixel holding its centre, plus ``compression_ptf`` / ``clay_percent`` as above) gives
+each cell its own water content on a new field: every distinct (soil, water content) pair becomes a
+soil of the field's soil map (at most soil_map.MAX_SOILS), a uniform raster one soil, equal bit for
+bit to the same value given in ``[soil.moisture]`` (folded into soil 0).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
-from ..foundations.errors import ParameterError
+import numpy as np
 
-__all__ = ["COMPRESSION_PTFS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "apply_moisture", "clay_class",
+from ..foundations.errors import ParameterError, ScenarioError
+from . import gis
+
+__all__ = ["COMPRESSION_PTFS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
+           "clay_class", "parse_moisture_map", "read_moisture", "split_soils",
            "defossez_2003", "saturation_water_content_kg_per_kg", "severiano_2013_precompression_kPa",
            "severiano_2013_suction_kPa"]
 
@@ -175,3 +186,82 @@ def apply_moisture(soil: dict, moisture, where: str = "soil.moisture") -> dict:
     except ParameterError as err:
         raise ParameterError(f"{where}: {err}") from err
     return out
+
+
+MAP_KEYS = ("raster", "compression_ptf", "clay_percent")
+PATH_KEYS = (("terrain", "moisture", "raster"),)
+
+
+@dataclasses.dataclass(frozen=True)
+class MoistureMap:
+    """The parsed ``[terrain.moisture]``: the raster's path and the PTF choices (module doc)."""
+
+    raster: str
+    ptf: dict
+    raw: dict = dataclasses.field(compare=False, repr=False, default_factory=dict)
+
+
+def parse_moisture_map(t) -> MoistureMap:
+    """``[terrain.moisture]`` -> :class:`MoistureMap` (unknown keys and bad values raise)."""
+    if not isinstance(t, dict):
+        raise ScenarioError(f"terrain.moisture = {t!r} must be a table ({', '.join(MAP_KEYS)})")
+    unknown = sorted(set(t) - set(MAP_KEYS))
+    if unknown:
+        raise ScenarioError(f"unknown key(s) in [terrain.moisture]: {', '.join(unknown)}; allowed: "
+                            f"{', '.join(MAP_KEYS)}")
+    r = t.get("raster")
+    if not isinstance(r, str) or not (r.endswith(".npy") or gis.is_geotiff(r)):
+        raise ScenarioError(f"terrain.moisture.raster = {r!r} must be the path of a .npy file of water contents "
+                            f"(kg/kg) or of a GeoTIFF ({', '.join(gis.GEOTIFF_SUFFIXES)})")
+    ptf = {k: t[k] for k in ("compression_ptf", "clay_percent") if k in t}
+    if not ptf:
+        raise ScenarioError("terrain.moisture needs compression_ptf or clay_percent (the pedotransfer functions)")
+    return MoistureMap(r, ptf, dict(t))
+
+
+def read_moisture(grid, mm: MoistureMap) -> np.ndarray:
+    """The water content [kg/kg] of every cell (flat, i * ny + j): the .npy array (nx, ny) or the
+    GeoTIFF's pixel holding each cell's centre; the raster must cover the field."""
+    nx, ny = grid.shape
+    where = "terrain.moisture.raster"
+    if gis.is_geotiff(mm.raster):
+        h = gis.read_header(mm.raster, where, values="real")
+        gis.check_covers(h, grid, where)
+        data = gis.read_band(mm.raster, where)
+        xc, yc = grid.centres(np.arange(nx), np.arange(ny))
+        col = np.clip(np.floor((xc - h.left_m) / h.pixel_x_m).astype(np.int64), 0, h.width - 1)
+        row = np.clip(np.floor((h.top_m - yc) / h.pixel_y_m).astype(np.int64), 0, h.height - 1)
+        w = data[row[None, :], col[:, None]].astype(np.float64)
+        if h.nodata is not None and np.any(w == h.nodata):
+            raise ScenarioError(f"{where} = {mm.raster!r}: {int(np.count_nonzero(w == h.nodata))} cell(s) of the "
+                                f"field lie on nodata pixels: the raster must cover the field")
+    else:
+        w = gis.read_npy(mm.raster, where)
+        if w.shape != (nx, ny) or w.dtype.kind not in "iuf":
+            raise ScenarioError(f"{where} = {mm.raster!r}: an array of water contents of shape {(nx, ny)} (the "
+                                f"field's cells along x, y) is needed, the file holds {w.dtype} {w.shape}: the "
+                                f"raster must cover the field")
+        w = w.astype(np.float64)
+    if not np.all(np.isfinite(w)):
+        raise ScenarioError(f"{where} = {mm.raster!r}: water contents must be finite")
+    return w.ravel()
+
+
+def split_soils(soils, labels, index: np.ndarray, water: np.ndarray, mm: MoistureMap, max_soils: int):
+    """Every distinct (soil, water content) pair of the cells as a soil on its day: (labels, soil
+    parameter sets, 1-based index of every cell into them). ``soils``/``labels``: the field's soils
+    before (0 the scenario's), ``index`` each cell's. Refuses more than ``max_soils - 1`` pairs."""
+    pairs, inverse = np.unique(np.column_stack([index.astype(np.float64), water]), axis=0, return_inverse=True)
+    if len(pairs) > max_soils - 1:
+        raise ScenarioError(f"terrain.moisture.raster = {mm.raster!r}: {len(pairs)} distinct (soil, water content) "
+                            f"pairs; a field has at most {max_soils - 1} besides [soil]: round the raster's values "
+                            "(e.g. to 0.01 kg/kg)")
+    out_soils, out_labels = [], []
+    for si, w in pairs:
+        where = f"terrain.moisture (soil {int(si)}, cell water content {float(w)!r})"
+        try:
+            out_soils.append(apply_moisture(soils[int(si)], {**mm.ptf, "water_content_kg_per_kg": float(w)}, where))
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
+        out_labels.append(f"{labels[int(si)]} at w = {float(w):g}")
+    return tuple(out_labels), tuple(out_soils), (inverse.ravel() + 1).astype(np.uint8)
