@@ -177,3 +177,24 @@ def test_moisture_geotiff_must_cover_the_field(tmp_path):
     d["terrain"]["moisture"] = {"raster": str(path), "compression_ptf": "defossez_2003_loess"}
     with pytest.raises(ScenarioError, match="must cover the whole field"):
         symtrack.simulate(scenario_from_dict(d))
+
+
+def test_a_dry_day_then_a_wet_day_on_the_same_field(tmp_path):
+    """A terrain file continues on another day: the moisture's parameters (N, lambda, kappa,
+    sigma_pc) are the new day's, the compression state carries over; any other soil parameter
+    must still match."""
+    dry = symtrack.simulate(scenario_from_dict(_doc({**DAY, "water_content_kg_per_kg": 0.10})))
+    path = tmp_path / "dry.npz"
+    dry.terrain.save(path)
+    d = _doc(DAY)
+    d["terrain"]["initial_state"] = str(path)
+    wet = symtrack.simulate(scenario_from_dict(d))
+    # the dry day compacted nothing, the wet day on its (rutted) field does; the risk's strength is the wet day's
+    assert not dry.terrain.specific_volume.any()
+    assert wet.summary["passes"][0]["bulk_density_max_Mg_per_m3"][0] > 1.21
+    h = M.severiano_2013_suction_kPa(0.2 * 1.2, 25.0)
+    assert wet.summary["subsoil_precompression_stress_kPa"] == pytest.approx(M.severiano_2013_precompression_kPa(25, h))
+    assert wet.terrain.soil["virgin_line_N"] == M.defossez_2003(0.2, "defossez_2003_loess")[0]
+    d["soil"]["cohesion_Pa"] = 4000.0
+    with pytest.raises(ScenarioError, match="the terrain was made with soil cohesion_Pa"):
+        symtrack.simulate(scenario_from_dict(d))
