@@ -120,6 +120,10 @@ SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
           0.1, 5.0, False, default=BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3),
 )
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
+# the soil parameters the day's moisture sets (symtrack/terrain/moisture.py): a terrain file made on
+# another day continues with the scenario's values of these (the compression state carries over)
+SOIL_DAY_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
+                        "precompression_stress_Pa")
 
 VEHICLE_PARAM_NAMES = tuple(s.name for s in VEHICLE_PARAMS)
 SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS)

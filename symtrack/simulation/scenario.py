@@ -65,6 +65,7 @@ from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..model.vehicle3d import check_contact, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
+from ..terrain import moisture
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings, settings_from_dict
 from ..terrain.surface import Surface, parse_surface
@@ -316,7 +317,21 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     run = parse_run(d.get("run", {}))
     model = _parse_model(d.get("model", {}))
     vp, vehicle = parse_params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS)
-    sp, soil = parse_params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS)
+    soil_t = d.get("soil", {})
+    moist = None
+    if isinstance(soil_t, dict) and any(k == "moisture" or k.startswith("moisture.") for k in soil_t):
+        # the day's moisture (symtrack.terrain.moisture): PTFs over the soil's values; --set gives
+        # soil.moisture.KEY=VALUE as the flat key "moisture.KEY"
+        moist = dict(soil_t.get("moisture", {})) if isinstance(soil_t.get("moisture", {}), dict) else soil_t["moisture"]
+        if isinstance(moist, dict):
+            moist.update({k.split(".", 1)[1]: v for k, v in soil_t.items() if k.startswith("moisture.")})
+        soil_t = {k: v for k, v in soil_t.items() if k != "moisture" and not k.startswith("moisture.")}
+    sp, soil = parse_params("soil", soil_t, soil_preset, SOIL_PARAMS)
+    if moist is not None:
+        try:
+            soil = check_set(moisture.apply_moisture(soil, moist, "soil.moisture"), SOIL_PARAMS, "soil")
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
     t_doc = d.get("terrain")

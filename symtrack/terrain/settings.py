@@ -20,6 +20,8 @@ Schema (every key optional; unknown keys are errors)::
     [terrain.soil_map]          # a field of several soils (symtrack.terrain.soil_map)
     [terrain.surface]           # the ground's shape: slopes, furrows, an elevation raster
                                 # (symtrack.terrain.surface)
+    [terrain.moisture]          # each cell's water content on the day, a raster
+                                # (symtrack.terrain.moisture)
 
 With a GeoTIFF soil map (``soil_map.raster = "soils.tif"``), origin_m, cell_m and size_m not
 given are the raster's (its lower-left corner, pixel and extent), and the raster must cover the
@@ -38,6 +40,8 @@ from dataclasses import dataclass, field
 from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ScenarioError
 from . import gis
+from .moisture import PATH_KEYS as MOISTURE_PATH_KEYS
+from .moisture import MoistureMap, parse_moisture_map
 from .soil_map import PATH_KEYS as SOIL_MAP_PATH_KEYS
 from .soil_map import SoilMap, parse_soil_map
 from .storage import Grid
@@ -47,7 +51,7 @@ from .surface import Surface, parse_surface
 __all__ = ["MAX_CELLS", "PATH_KEYS", "TerrainSettings", "settings_from_dict"]
 
 # the keys of a scenario document that hold the terrain's files (resolved against a scenario file's folder)
-PATH_KEYS = SOIL_MAP_PATH_KEYS + SURFACE_PATH_KEYS
+PATH_KEYS = SOIL_MAP_PATH_KEYS + SURFACE_PATH_KEYS + MOISTURE_PATH_KEYS
 
 MAX_CELLS = 100_000_000
 MAX_SUBSOIL_DEPTHS = 8
@@ -73,6 +77,7 @@ class TerrainSettings:
     subsoil_depths_m: tuple = (0.1, 0.3, 0.5, 0.8)
     soil_map: SoilMap | None = None
     surface: Surface | None = None
+    moisture: MoistureMap | None = None
     given: frozenset = field(default=frozenset(), compare=False, repr=False)
 
     def __post_init__(self):
@@ -122,6 +127,8 @@ class TerrainSettings:
             out["soil_map"] = dict(self.soil_map.raw)
         if out.get("surface") is not None:
             out["surface"] = self.surface.to_dict()
+        if out.get("moisture") is not None:
+            out["moisture"] = dict(self.moisture.raw)
         return out
 
 
@@ -177,6 +184,8 @@ def settings_from_dict(t: dict) -> TerrainSettings:
             raise ScenarioError(f"terrain.surface.elevation_file = {r.path!r} is in {gis.crs_label(r.crs_wkt)}, "
                                 f"terrain.soil_map.raster in {gis.crs_label(sm.crs_wkt)}: the maps of one field "
                                 "must share their CRS (reproject one, gdalwarp -t_srs)")
+    if "moisture" in d:
+        d["moisture"] = parse_moisture_map(d["moisture"])
     if isinstance(d.get("passes"), float) and d["passes"].is_integer():
         d["passes"] = int(d["passes"])
     out = TerrainSettings(**d, given=frozenset(t) | filled)

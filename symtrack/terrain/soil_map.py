@@ -34,7 +34,7 @@ from ..foundations.errors import ParameterError, ScenarioError
 from ..model.parameters import SOIL_PARAMS, check_set
 from ..presets.catalog import read_preset_file
 from ..presets.soils import soil_preset
-from . import gis
+from . import gis, moisture
 
 __all__ = ["MAX_SOILS", "PATH_KEYS", "SoilMap", "parse_soil_map", "soil_index"]
 
@@ -71,14 +71,18 @@ def _soil(entry, i: int) -> tuple[str, dict]:
             values = read_preset_file(entry, "soil")[0] if entry.endswith(".toml") else soil_preset(entry)
             return entry, check_set(values, SOIL_PARAMS, where)
         if isinstance(entry, dict):
-            check_keys(where, entry, ["preset", *SOIL_NAMES])
+            check_keys(where, entry, ["preset", "moisture", *SOIL_NAMES])
             preset = entry.get("preset")
             if not isinstance(preset, str):
                 raise ScenarioError(f"{where}.preset is required (a soil preset name or file), got {preset!r}")
             values = read_preset_file(preset, "soil")[0] if preset.endswith(".toml") else soil_preset(preset)
-            values.update({k: v for k, v in entry.items() if k != "preset"})
+            values.update({k: v for k, v in entry.items() if k not in ("preset", "moisture")})
             extra = ", ".join(f"{k}={v}" for k, v in entry.items() if k != "preset")
-            return (f"{preset} ({extra})" if extra else preset), check_set(values, SOIL_PARAMS, where)
+            values = check_set(values, SOIL_PARAMS, where)
+            if "moisture" in entry:  # the day's moisture of this soil (symtrack.terrain.moisture)
+                values = check_set(moisture.apply_moisture(values, entry["moisture"], f"{where}.moisture"),
+                                   SOIL_PARAMS, where)
+            return (f"{preset} ({extra})" if extra else preset), values
     except ParameterError as err:  # the preset lookups name soil.preset: name the soil map's entry instead
         key = where if isinstance(entry, str) else f"{where}.preset"
         raise ScenarioError(str(err).replace("soil.preset", key, 1)) from err

@@ -63,7 +63,7 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
-from ..model.parameters import SOIL_PARAM_NAMES, spec
+from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 
 __all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes", "load",
            "save"]
@@ -357,7 +357,9 @@ def load(path, soil: dict | None = None) -> Terrain:
         raise ScenarioError(f"{path}: z_off_m holds negative values: the file is damaged")
     if soil is not None:
         for n, v in file_soil.items():
-            if n in soil and float(soil[n]) != float(v):
+            if n in soil and n in SOIL_DAY_PARAM_NAMES:  # the day's (moisture): the scenario's
+                st.soil[n] = float(soil[n])
+            elif n in soil and float(soil[n]) != float(v):
                 raise ScenarioError(f"{path}: the terrain was made with soil {n} = {float(v)!r}, the scenario has "
                                     f"{float(soil[n])!r}; use the same [soil] to continue a terrain")
         # an older file lacks the soil parameters added since: the scenario's complete the set

@@ -78,10 +78,10 @@ from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
-from . import density, gis
+from . import density, gis, moisture
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
-from .soil_map import soil_index
+from .soil_map import MAX_SOILS, SoilMap, soil_index
 from .storage import Grid, Terrain
 
 __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "World", "derive_modulus", "open_world", "padding_m",
@@ -212,6 +212,11 @@ class World:
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
         # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
         # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
+        if settings.moisture is not None:  # each cell's water content (symtrack.terrain.moisture)
+            if storage is not None:
+                raise ScenarioError("terrain.moisture (a moisture raster) applies to a new field; a terrain file "
+                                    "keeps the soils it was made with: leave terrain.moisture out to continue it")
+            settings = self._split_by_moisture(settings, params)
         self.soils = self._apply_soil_map(settings, params)
         self.laws = np.column_stack([self.terrain.law.values(sp) for sp in self.soils])
         self.betas = np.array([float(sp["repeated_loading_exponent"]) for sp in self.soils])
@@ -262,6 +267,19 @@ class World:
                                     "their CRS (reproject the raster, gdalwarp -t_srs)")
             st.crs_wkt = surface.crs_wkt
         return surface
+
+    def _split_by_moisture(self, settings, params):
+        """The field's soils on the day of the moisture raster: each distinct (soil, water content)
+        pair a soil of the map (symtrack.terrain.moisture.split_soils); the settings with that map."""
+        mm, sm = settings.moisture, settings.soil_map
+        water = moisture.read_moisture(self.grid, mm)
+        base = [{n: float(params[n]) for n in SOIL_PARAM_NAMES}] + ([] if sm is None else list(sm.soils))
+        labels = ["[soil]"] + ([] if sm is None else list(sm.labels))
+        index = self._map_index if self._map_index is not None else np.zeros(self.grid.n_cells, dtype=np.uint8)
+        new_labels, new_soils, self._map_index = moisture.split_soils(base, labels, index, water, mm, MAX_SOILS)
+        raw = {} if sm is None else sm.raw
+        new = SoilMap(new_labels, new_soils, (), None, raw, None if sm is None else sm.header)
+        return dataclasses.replace(settings, soil_map=new)
 
     def _apply_soil_map(self, settings, params) -> list[dict]:
         """The field's soils: a new field takes the scenario's soil map; a terrain that has one keeps

@@ -1,0 +1,267 @@
+"""The soil's moisture on the day: its compression parameters and strength from pedotransfer
+functions of water content and texture (issue 24 item 2; docs/subsoil.md, "Moisture").
+
+Two pedotransfer functions (PTFs), both as the soilphysics R package (de Lima, da Silva & da Silva;
+github.com/arsilva87/soilphysics, ``R/PredComp.R``) codes them; the papers themselves were not read:
+
+- **Défossez et al. (2003)** (Soil Till. Res. 69, as soilphysics cites it; its comment: "water
+  content range from 5 to 30 %"): the O'Sullivan & Robertson compression parameters of two French
+  soils, a loess and a calcareous soil, as polynomials of the gravimetric water content w [%]:
+
+      loess       N = 1.9997 + 0.2629 w - 0.02753 w^2 + 0.00111 w^3 - 1.6e-5 w^4
+                  lambda = 0.1402 + 0.00192 w + 0.00021 w^2 - 1.3e-5 w^3
+      calcareous  N = 2.4196 + 0.13767 w - 0.02035 w^2 + 0.00121 w^3 - 2.4e-5 w^4
+                  lambda = 0.08051 + 0.03131 w - 0.00502 w^2 + 0.00031 w^3 - 6e-6 w^4
+      kappa = 0.0058 (both)
+
+  They set the bulk-density model's ``virgin_line_N``, ``compression_index_lambda`` and
+  ``recompression_index_kappa`` (symtrack/terrain/density.py). Chosen because it is the one PTF
+  found whose output is the compression model's own parameters (N, lambda, kappa) as a function of
+  water content: the wetter soil has the lower virgin line, so the same stress compacts it more.
+  Its classes are the two soils: any other texture is refused, as is w outside 5-30 %.
+
+- **Severiano et al. (2013)** by clay class (soilphysics' ``soilStrength``): the precompression
+  stress from the matric suction h [kPa], sigma_pc = a h^b kPa, with (a, b) per clay class
+  (< 20 %, 20-31, 31-37, 37-52, > 52 %); from a volumetric water content through each class's
+  van Genuchten curve (theta_s, theta_r, alpha [1/kPa], n; m = 1 - 1/n), the parameters listed in
+  the same code. It sets ``precompression_stress_Pa`` (the risk classes' strength). The suction
+  unit kPa is read from the code (its app divides an hPa input by 10 before the PTF), not the paper.
+
+The moisture input is a soil's table ``moisture`` (``[soil.moisture]``, or ``moisture = {...}`` in a
+soil map's soil)::
+
+    [soil.moisture]
+    water_content_kg_per_kg = 0.22            # gravimetric, on the day of the traffic
+    compression_ptf = "defossez_2003_loess"   # or "defossez_2003_calcareous"; N, lambda, kappa
+    clay_percent = 25.0                       # optional: Severiano et al. 2013's sigma_pc
+
+The volumetric water content is w rho_b / rho_w with the soil's initial bulk density; saturation
+is its porosity, w_sat = (1 / rho_b - 1 / rho_s) rho_w. Moisture is the day's, not the field's
+state: it is not stored in the terrain file (the soil parameters it gives are, with a soil map).
+
+A moisture raster (``[terrain.moisture]``: ``raster`` a .npy file of floats (nx, ny) or a GeoTIFF,
+each cell the pixel holding its centre, plus ``compression_ptf`` / ``clay_percent`` as above) gives
+each cell its own water content on a new field: every distinct (soil, water content) pair becomes a
+soil of the field's soil map (at most soil_map.MAX_SOILS), a uniform raster one soil, equal bit for
+bit to the same value given in ``[soil.moisture]`` (folded into soil 0).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..foundations.errors import ParameterError, ScenarioError
+from . import gis
+
+__all__ = ["COMPRESSION_PTFS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
+           "clay_class", "parse_moisture_map", "read_moisture", "split_soils",
+           "defossez_2003", "saturation_water_content_kg_per_kg", "severiano_2013_precompression_kPa",
+           "severiano_2013_suction_kPa"]
+
+WATER_DENSITY_MG_PER_M3 = 1.0
+MOISTURE_KEYS = ("water_content_kg_per_kg", "compression_ptf", "clay_percent")
+
+# Défossez et al. (2003) as soilphysics' compressive.properties1 codes it: polynomial coefficients
+# in w [%] (ascending powers) of N and lambda; kappa one value
+_DEFOSSEZ = {
+    "defossez_2003_loess": ((1.9997, 0.2629, -0.02753, 0.00111, -1.6e-5), (0.1402, 0.00192, 0.00021, -1.3e-5)),
+    "defossez_2003_calcareous": ((2.4196, 0.13767, -0.02035, 0.00121, -2.4e-5),
+                                 (0.08051, 0.03131, -0.00502, 0.00031, -6e-6)),
+}
+_DEFOSSEZ_KAPPA = 0.0058
+DEFOSSEZ_RANGE_PERCENT = (5.0, 30.0)
+COMPRESSION_PTFS = tuple(_DEFOSSEZ)
+
+# Severiano et al. (2013) as soilphysics' soilStrength (PredComp.R) codes it, per clay class:
+# (upper clay bound %, a, b of sigma_pc = a h^b, theta_s, theta_r, alpha [1/kPa], n)
+SEVERIANO_2013_CLASSES = (
+    (20.0, 129.0, 0.15, 0.42, 0.049356, 0.79, 1.72),
+    (31.0, 123.3, 0.13, 0.45, 0.08689, 0.72, 1.56),
+    (37.0, 85.0, 0.17, 0.46, 0.10696, 1.66, 1.52),
+    (52.0, 70.1, 0.16, 0.50, 0.125941, 2.04, 1.47),
+    (100.0, 62.7, 0.15, 0.51, 0.139358, 2.27, 1.38),
+)
+
+
+def _poly(c, x):
+    return sum(ci * x**i for i, ci in enumerate(c))
+
+
+def defossez_2003(water_content_kg_per_kg, compression_ptf: str) -> tuple[float, float, float]:
+    """(N, lambda, kappa) of Défossez et al. (2003) at the gravimetric water content (module doc)."""
+    if compression_ptf not in _DEFOSSEZ:
+        raise ParameterError(f"compression_ptf = {compression_ptf!r} is not one of the PTF's texture classes "
+                             f"({', '.join(COMPRESSION_PTFS)}): Défossez et al. (2003) fitted a loess and a "
+                             f"calcareous soil only")
+    w = 100.0 * float(water_content_kg_per_kg)
+    lo, hi = DEFOSSEZ_RANGE_PERCENT
+    if not (math.isfinite(w) and lo <= w <= hi):
+        raise ParameterError(f"water_content_kg_per_kg = {water_content_kg_per_kg!r} is outside the range of "
+                             f"{compression_ptf} [{lo / 100}, {hi / 100}] (Défossez et al. 2003: 5-30 %)")
+    cN, cL = _DEFOSSEZ[compression_ptf]
+    return _poly(cN, w), _poly(cL, w), _DEFOSSEZ_KAPPA
+
+
+def clay_class(clay_percent) -> int:
+    """Severiano et al.'s clay class (0..4) of a clay content in %: < 20, 20-31, 31-37, 37-52, > 52."""
+    c = float(clay_percent)
+    if not (math.isfinite(c) and 0.0 <= c <= 100.0):
+        raise ParameterError(f"clay_percent = {clay_percent!r} is outside the allowed range [0, 100] (%)")
+    if c < SEVERIANO_2013_CLASSES[0][0]:
+        return 0
+    for k, row in enumerate(SEVERIANO_2013_CLASSES[1:], start=1):
+        if c <= row[0]:
+            return k
+    return len(SEVERIANO_2013_CLASSES) - 1
+
+
+def severiano_2013_suction_kPa(theta_m3_per_m3, clay_percent) -> float:
+    """Matric suction [kPa] of a volumetric water content on the clay class's van Genuchten curve;
+    theta must lie strictly between the class's residual and saturated water contents."""
+    _, _, _, ts, tr, alpha, n = SEVERIANO_2013_CLASSES[clay_class(clay_percent)]
+    th = float(theta_m3_per_m3)
+    if not (math.isfinite(th) and tr < th < ts):
+        raise ParameterError(f"volumetric water content = {theta_m3_per_m3!r} is outside ({tr}, {ts}) of the "
+                             f"van Genuchten curve of Severiano et al.'s clay class for {clay_percent} % clay")
+    m = 1.0 - 1.0 / n
+    se = (th - tr) / (ts - tr)
+    return (se ** (-1.0 / m) - 1.0) ** (1.0 / n) / alpha
+
+
+def severiano_2013_precompression_kPa(clay_percent, suction_kPa) -> float:
+    """sigma_pc = a h^b [kPa] of Severiano et al. (2013) for the clay class, h in kPa (> 0)."""
+    _, a, b, *_ = SEVERIANO_2013_CLASSES[clay_class(clay_percent)]
+    h = float(suction_kPa)
+    if not (math.isfinite(h) and h > 0.0):
+        raise ParameterError(f"suction_kPa = {suction_kPa!r} must be > 0")
+    return a * h**b
+
+
+def saturation_water_content_kg_per_kg(bulk_density_Mg_per_m3, particle_density_Mg_per_m3) -> float:
+    """The gravimetric water content of the saturated soil: porosity rho_w / rho_b."""
+    rb, rs = float(bulk_density_Mg_per_m3), float(particle_density_Mg_per_m3)
+    return (1.0 / rb - 1.0 / rs) * WATER_DENSITY_MG_PER_M3
+
+
+def apply_moisture(soil: dict, moisture, where: str = "soil.moisture") -> dict:
+    """The soil's parameter set on the day of ``moisture`` (module doc): a new dict with N, lambda,
+    kappa (``compression_ptf``) and ``precompression_stress_Pa`` (``clay_percent``) replaced.
+    Every value is checked before anything is computed; the errors name ``where``'s key."""
+    if not isinstance(moisture, dict):
+        raise ParameterError(f"{where} = {moisture!r} must be a table ({', '.join(MOISTURE_KEYS)})")
+    unknown = sorted(set(moisture) - set(MOISTURE_KEYS))
+    if unknown:
+        raise ParameterError(f"unknown key(s) in {where}: {', '.join(unknown)}; allowed: {', '.join(MOISTURE_KEYS)}")
+    if "water_content_kg_per_kg" not in moisture:
+        raise ParameterError(f"{where}.water_content_kg_per_kg is required")
+    w = moisture["water_content_kg_per_kg"]
+    if isinstance(w, bool) or not isinstance(w, (int, float)):
+        raise ParameterError(f"{where}.water_content_kg_per_kg = {w!r} is not a number")
+    rb, rs = float(soil["bulk_density_initial_Mg_per_m3"]), float(soil["particle_density_Mg_per_m3"])
+    w_sat = saturation_water_content_kg_per_kg(rb, rs)
+    if not (math.isfinite(float(w)) and 0.0 <= float(w) <= w_sat):
+        raise ParameterError(f"{where}.water_content_kg_per_kg = {w!r} is outside [0, {w_sat:.4g}] (0 to saturation: "
+                             f"the porosity of bulk density {rb} in particle density {rs})")
+    ptf = moisture.get("compression_ptf")
+    clay = moisture.get("clay_percent")
+    if ptf is None and clay is None:
+        raise ParameterError(f"{where} needs compression_ptf ({', '.join(COMPRESSION_PTFS)}) or clay_percent "
+                             "(or both): without a pedotransfer function the water content changes nothing")
+    out = dict(soil)
+    try:
+        if ptf is not None:
+            if not isinstance(ptf, str):
+                raise ParameterError(f"compression_ptf = {ptf!r} must be a string ({', '.join(COMPRESSION_PTFS)})")
+            N, lam, kap = defossez_2003(w, ptf)
+            out.update(virgin_line_N=N, compression_index_lambda=lam, recompression_index_kappa=kap)
+        if clay is not None:
+            if isinstance(clay, bool) or not isinstance(clay, (int, float)):
+                raise ParameterError(f"clay_percent = {clay!r} is not a number")
+            theta = float(w) * rb / WATER_DENSITY_MG_PER_M3
+            h = severiano_2013_suction_kPa(theta, clay)
+            out["precompression_stress_Pa"] = 1e3 * severiano_2013_precompression_kPa(clay, h)
+    except ParameterError as err:
+        raise ParameterError(f"{where}: {err}") from err
+    return out
+
+
+MAP_KEYS = ("raster", "compression_ptf", "clay_percent")
+PATH_KEYS = (("terrain", "moisture", "raster"),)
+
+
+@dataclasses.dataclass(frozen=True)
+class MoistureMap:
+    """The parsed ``[terrain.moisture]``: the raster's path and the PTF choices (module doc)."""
+
+    raster: str
+    ptf: dict
+    raw: dict = dataclasses.field(compare=False, repr=False, default_factory=dict)
+
+
+def parse_moisture_map(t) -> MoistureMap:
+    """``[terrain.moisture]`` -> :class:`MoistureMap` (unknown keys and bad values raise)."""
+    if not isinstance(t, dict):
+        raise ScenarioError(f"terrain.moisture = {t!r} must be a table ({', '.join(MAP_KEYS)})")
+    unknown = sorted(set(t) - set(MAP_KEYS))
+    if unknown:
+        raise ScenarioError(f"unknown key(s) in [terrain.moisture]: {', '.join(unknown)}; allowed: "
+                            f"{', '.join(MAP_KEYS)}")
+    r = t.get("raster")
+    if not isinstance(r, str) or not (r.endswith(".npy") or gis.is_geotiff(r)):
+        raise ScenarioError(f"terrain.moisture.raster = {r!r} must be the path of a .npy file of water contents "
+                            f"(kg/kg) or of a GeoTIFF ({', '.join(gis.GEOTIFF_SUFFIXES)})")
+    ptf = {k: t[k] for k in ("compression_ptf", "clay_percent") if k in t}
+    if not ptf:
+        raise ScenarioError("terrain.moisture needs compression_ptf or clay_percent (the pedotransfer functions)")
+    return MoistureMap(r, ptf, dict(t))
+
+
+def read_moisture(grid, mm: MoistureMap) -> np.ndarray:
+    """The water content [kg/kg] of every cell (flat, i * ny + j): the .npy array (nx, ny) or the
+    GeoTIFF's pixel holding each cell's centre; the raster must cover the field."""
+    nx, ny = grid.shape
+    where = "terrain.moisture.raster"
+    if gis.is_geotiff(mm.raster):
+        h = gis.read_header(mm.raster, where, values="real")
+        gis.check_covers(h, grid, where)
+        data = gis.read_band(mm.raster, where)
+        xc, yc = grid.centres(np.arange(nx), np.arange(ny))
+        col = np.clip(np.floor((xc - h.left_m) / h.pixel_x_m).astype(np.int64), 0, h.width - 1)
+        row = np.clip(np.floor((h.top_m - yc) / h.pixel_y_m).astype(np.int64), 0, h.height - 1)
+        w = data[row[None, :], col[:, None]].astype(np.float64)
+        if h.nodata is not None and np.any(w == h.nodata):
+            raise ScenarioError(f"{where} = {mm.raster!r}: {int(np.count_nonzero(w == h.nodata))} cell(s) of the "
+                                f"field lie on nodata pixels: the raster must cover the field")
+    else:
+        w = gis.read_npy(mm.raster, where)
+        if w.shape != (nx, ny) or w.dtype.kind not in "iuf":
+            raise ScenarioError(f"{where} = {mm.raster!r}: an array of water contents of shape {(nx, ny)} (the "
+                                f"field's cells along x, y) is needed, the file holds {w.dtype} {w.shape}: the "
+                                f"raster must cover the field")
+        w = w.astype(np.float64)
+    if not np.all(np.isfinite(w)):
+        raise ScenarioError(f"{where} = {mm.raster!r}: water contents must be finite")
+    return w.ravel()
+
+
+def split_soils(soils, labels, index: np.ndarray, water: np.ndarray, mm: MoistureMap, max_soils: int):
+    """Every distinct (soil, water content) pair of the cells as a soil on its day: (labels, soil
+    parameter sets, 1-based index of every cell into them). ``soils``/``labels``: the field's soils
+    before (0 the scenario's), ``index`` each cell's. Refuses more than ``max_soils - 1`` pairs."""
+    pairs, inverse = np.unique(np.column_stack([index.astype(np.float64), water]), axis=0, return_inverse=True)
+    if len(pairs) > max_soils - 1:
+        raise ScenarioError(f"terrain.moisture.raster = {mm.raster!r}: {len(pairs)} distinct (soil, water content) "
+                            f"pairs; a field has at most {max_soils - 1} besides [soil]: round the raster's values "
+                            "(e.g. to 0.01 kg/kg)")
+    out_soils, out_labels = [], []
+    for si, w in pairs:
+        where = f"terrain.moisture (soil {int(si)}, cell water content {float(w)!r})"
+        try:
+            out_soils.append(apply_moisture(soils[int(si)], {**mm.ptf, "water_content_kg_per_kg": float(w)}, where))
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
+        out_labels.append(f"{labels[int(si)]} at w = {float(w):g}")
+    return tuple(out_labels), tuple(out_soils), (inverse.ravel() + 1).astype(np.uint8)

@@ -1,0 +1,202 @@
+"""A tyre's contact area, its stress distribution and the stress it gives at depth (issue 24 item 3;
+docs/subsoil.md, "Wheeled machines"). numpy only; not in the terrain engine.
+
+Contact model: Keller (2005), Biosyst. Eng. 92, 85-96, as the soilphysics R package codes it
+(``stressTraffic``, github.com/arsilva87/soilphysics; the paper was not read). For a tyre of width
+b and overall diameter D [m], wheel load W [kN], inflation pressure p_i and the recommended
+inflation pressure p_rec for that load [kPa]:
+
+    sigma_max = 34.4 + 1.13 p_i + 0.72 W - 33.4 ln(p_i / p_rec)          [kPa]
+    L = 0.47 + 0.11 D^2 - 0.16 ln(p_i / p_rec)                             [m, contact length]
+    contact: the super-ellipse |2x/L|^n + |2y/b|^n <= 1,  n = 2.1 (b D)^2 + 2
+    sigma(x, y) = sigma_max (1 - (|x| / l(y))^alpha) g(y),  l(y) = L/2 (1 - |2y/b|^n)^(1/n)
+    g(y) = C u exp(-delta u),  u = b/2 - |y|,  delta = 9.3 - 7.3 b,  C such that max g = 1
+
+and alpha such that the stresses carry W. soilphysics searches alpha on a grid of [1, 16]; here the
+integral along x is done in closed form (int (1 - (x/l)^alpha) dx over [-l, l] = 2 l alpha/(alpha+1)),
+so W = sigma_max alpha/(alpha+1) I, I = int 2 l(y) g(y) dy, and alpha = r / (1 - r), r = W/(sigma_max I).
+A load the model cannot carry (r >= 1) is refused.
+
+Stress at depth: the project's Söhne / Fröhlich point formula (:func:`symtrack.terrain.subsoil.frohlich_point`)
+summed over the contact cut into square elements; the mean normal stress is
+xi / (3 (xi - 2)) sigma_z(xi - 2) (subsoil.py's identity for the trace of the radial stress).
+
+Load and inflation: a tyre carries its rated load W_max at its rated pressure p_max (its load index
+and the pressure it is rated at, from the tyre's data sheet); at a lower pressure it carries
+W_max (p / p_max)^0.8, the inverse of the inflation rule p = p_max (W / W_max)^1.25 of tyre
+pressure guides (Agrivi, "Risk of incorrect pressure in agricultural tires"; a practitioners' rule
+at the rated speed, not a standard read here). That rule also gives p_rec for Keller's model.
+A wheel load above what the tyre carries at its inflation pressure is refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..foundations.errors import ParameterError
+from .subsoil import frohlich_point
+
+__all__ = ["INFLATION_RULE_EXPONENT", "Contact", "Tyre", "contact", "footprint_stress_at_depth",
+           "load_capacity_kN", "recommended_inflation_kPa"]
+
+# p = p_max (W / W_max)^1.25 (module doc): the tyre-pressure guides' rule
+INFLATION_RULE_EXPONENT = 1.25
+# Keller (2005) as stressTraffic codes it (module doc)
+_SMAX = (34.4, 1.13, 0.72, -33.4)
+_LEN = (0.47, 0.11, -0.16)
+_N_SHAPE = (2.1, 2.0)
+_DELTA = (9.3, -7.3)
+_N_GAUSS = 64
+
+
+def _num(name, v, lo, hi):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)) or not lo < v <= hi:
+        raise ParameterError(f"{name} = {v!r} is outside the allowed range ({lo}, {hi}]")
+    return float(v)
+
+
+@dataclasses.dataclass(frozen=True)
+class Tyre:
+    """A tyre: section width and overall diameter [m]; its rated load [kN] at its rated inflation
+    pressure [kPa] (the load index's load and pressure). Width up to 1.2 m: delta = 9.3 - 7.3 b of
+    Keller's transverse distribution must stay positive."""
+
+    width_m: float
+    diameter_m: float
+    rated_load_kN: float
+    rated_inflation_kPa: float
+
+    def __post_init__(self):
+        _num("tyre.width_m", self.width_m, 0.1, 1.2)
+        _num("tyre.diameter_m", self.diameter_m, 0.3, 3.0)
+        _num("tyre.rated_load_kN", self.rated_load_kN, 0.0, 500.0)
+        _num("tyre.rated_inflation_kPa", self.rated_inflation_kPa, 0.0, 1000.0)
+
+
+def load_capacity_kN(tyre: Tyre, inflation_kPa) -> float:
+    """The load the tyre carries at an inflation pressure: W_max (p / p_max)^(1 / 1.25)."""
+    p = _num("inflation_kPa", inflation_kPa, 0.0, tyre.rated_inflation_kPa)
+    return tyre.rated_load_kN * (p / tyre.rated_inflation_kPa) ** (1.0 / INFLATION_RULE_EXPONENT)
+
+
+def recommended_inflation_kPa(tyre: Tyre, wheel_load_kN) -> float:
+    """The inflation pressure the rule recommends for a wheel load: p_max (W / W_max)^1.25."""
+    W = _num("wheel_load_kN", wheel_load_kN, 0.0, tyre.rated_load_kN)
+    return tyre.rated_inflation_kPa * (W / tyre.rated_load_kN) ** INFLATION_RULE_EXPONENT
+
+
+@dataclasses.dataclass(frozen=True)
+class Contact:
+    """A tyre's contact: length, width [m], area [m^2], sigma_max [kPa], alpha, the recommended
+    pressure used [kPa]; the elements' centres x, y [m] (x along the driving direction) and their
+    forces [kN] (a square grid of side ``element_m`` over the contact); the super-ellipse's n."""
+
+    length_m: float
+    width_m: float
+    area_m2: float
+    sigma_max_kPa: float
+    alpha: float
+    recommended_inflation_kPa: float
+    element_m: float
+    x_m: np.ndarray
+    y_m: np.ndarray
+    force_kN: np.ndarray
+
+    shape_n: float
+
+    def stress_kPa(self, x, y):
+        """The contact stress [kPa] at surface points (0 outside the contact)."""
+        return _surface_stress(np.asarray(x, float), np.asarray(y, float), self.length_m, self.width_m,
+                               self.shape_n, self.sigma_max_kPa, self.alpha)
+
+
+def _half_length(y, L, b, n):
+    return 0.5 * L * np.clip(1.0 - np.abs(2.0 * y / b) ** n, 0.0, 1.0) ** (1.0 / n)
+
+
+def _transverse(y, b):
+    delta = _DELTA[0] + _DELTA[1] * b
+    u = np.clip(b / 2 - np.abs(y), 0.0, None)
+    u_peak = min(1.0 / delta, b / 2)
+    return u * np.exp(-delta * u) / (u_peak * math.exp(-delta * u_peak))
+
+
+def _surface_stress(x, y, L, b, n, smax, alpha):
+    ly = _half_length(y, L, b, n)
+    inside = (np.abs(x) < ly) & (np.abs(y) < b / 2)
+    ratio = np.where(inside, np.abs(x) / np.where(ly > 0, ly, 1.0), 1.0)
+    return np.where(inside, smax * (1.0 - ratio**alpha) * _transverse(y, b), 0.0)
+
+
+def contact(tyre: Tyre, wheel_load_kN, inflation_kPa, element_m=0.01) -> Contact:
+    """Keller's (2005) contact (module doc) of ``tyre`` at a wheel load [kN] and inflation pressure
+    [kPa]. Refuses a load beyond what the tyre carries at that pressure, and a load the stress model
+    cannot carry."""
+    p = _num("inflation_kPa", inflation_kPa, 0.0, tyre.rated_inflation_kPa)
+    cap = load_capacity_kN(tyre, p)
+    W = float(wheel_load_kN) if isinstance(wheel_load_kN, (int, float)) and not isinstance(wheel_load_kN, bool) \
+        else float("nan")
+    if not (math.isfinite(W) and 0.0 < W <= cap * (1.0 + 1e-12)):  # (the rule's own round trip)
+        raise ParameterError(f"wheel_load_kN = {wheel_load_kN!r} is outside the allowed range (0, {cap:.4g}]: what "
+                             f"the tyre (rated {tyre.rated_load_kN} kN at {tyre.rated_inflation_kPa} kPa) carries at "
+                             f"{p} kPa by the rule W = W_max (p / p_max)^0.8")
+    h = _num("element_m", element_m, 0.0, 0.1)
+    b, D = tyre.width_m, tyre.diameter_m
+    p_rec = recommended_inflation_kPa(tyre, W)
+    lnr = math.log(p / p_rec)
+    smax = _SMAX[0] + _SMAX[1] * p + _SMAX[2] * W + _SMAX[3] * lnr
+    L = _LEN[0] + _LEN[1] * D**2 + _LEN[2] * lnr
+    n = _N_SHAPE[0] * (b * D) ** 2 + _N_SHAPE[1]
+    if not (smax > 0 and L > 0):
+        raise ParameterError(f"inflation_kPa = {p}: Keller's model gives sigma_max = {smax:.4g} kPa, length "
+                             f"{L:.4g} m for this tyre and load (both must be > 0)")
+    g_nodes, g_weights = np.polynomial.legendre.leggauss(_N_GAUSS)
+    # I = int 2 l(y) g(y) dy over [-b/2, b/2]: composite Gauss on 8 panels
+    edges = np.linspace(-b / 2, b / 2, 9)
+    panels = list(zip(edges[:-1], edges[1:], strict=True))
+    yy = np.concatenate([0.5 * (lo + hi) + 0.5 * (hi - lo) * g_nodes for lo, hi in panels])
+    ww = np.concatenate([0.5 * (hi - lo) * g_weights for lo, hi in panels])
+    integral = float(np.sum(ww * 2.0 * _half_length(yy, L, b, n) * _transverse(yy, b)))
+    r = W / (smax * integral)
+    if not r < 1.0:
+        raise ParameterError(f"wheel_load_kN = {W}: Keller's stress distribution cannot carry it on this tyre at "
+                             f"{p} kPa (sigma_max {smax:.4g} kPa over {integral:.4g} m^2 carries at most "
+                             f"{smax * integral:.4g} kN)")
+    alpha = r / (1.0 - r)
+    area = float(np.sum(ww * 2.0 * _half_length(yy, L, b, n)))
+    # the elements: a square grid of side h, centres inside the bounding box; forces from the
+    # stress at the centre, rescaled so that they sum to W exactly (the grid's error is O(h))
+    nx, ny = max(2, int(math.ceil(L / h))), max(2, int(math.ceil(b / h)))
+    xc = (np.arange(nx) + 0.5) * (L / nx) - L / 2
+    yc = (np.arange(ny) + 0.5) * (b / ny) - b / 2
+    X, Y = np.meshgrid(xc, yc, indexing="ij")
+    s = _surface_stress(X, Y, L, b, n, smax, alpha)
+    F = s * (L / nx) * (b / ny)
+    keep = F > 0
+    F = F[keep] * (W / F[keep].sum())
+    return Contact(L, b, area, smax, alpha, p_rec, h, X[keep], Y[keep], F, n)
+
+
+def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=256):
+    """Vertical and mean normal stress [kPa] (two arrays (n_points, n_depths)) at the points (px, py)
+    below a set of surface point forces [kN] at (x_m, y_m): Söhne / Fröhlich summed
+    (:func:`~symtrack.terrain.subsoil.frohlich_point`); the mean normal stress by the identity
+    p(xi) = xi / (3 (xi - 2)) sigma_z(xi - 2) (needs xi >= 3)."""
+    xi = float(xi)
+    if not 3.0 <= xi <= 10.0:
+        raise ParameterError(f"xi = {xi!r} is outside the allowed range [3, 10] (the mean normal stress needs "
+                             "xi - 2 >= 1)")
+    px, py = np.atleast_1d(np.asarray(px, float)), np.atleast_1d(np.asarray(py, float))
+    x, y, F = (np.asarray(v, float).ravel() for v in (x_m, y_m, force_kN))
+    d = np.atleast_1d(np.asarray(depths_m, float))
+    sz = np.zeros((px.size, d.size))
+    pm = np.zeros((px.size, d.size))
+    for a in range(0, px.size, chunk):
+        r = np.hypot(px[a:a + chunk, None] - x[None, :], py[a:a + chunk, None] - y[None, :])
+        for k, z in enumerate(d):
+            sz[a:a + chunk, k] = frohlich_point(F[None, :], r, z, xi).sum(axis=1)
+            pm[a:a + chunk, k] = xi / (3 * (xi - 2)) * frohlich_point(F[None, :], r, z, xi - 2).sum(axis=1)
+    return sz, pm

@@ -1,0 +1,200 @@
+"""The day's moisture (symtrack/terrain/moisture.py, docs/subsoil.md "Moisture"): the pedotransfer
+functions against their published polynomials and curves, the refusals, the scenario and soil-map
+inputs (a uniform map equal to the single value bit for bit), and the same traffic on a dry and a
+wet day through the terrain engine."""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from small_field import small_field
+
+import symtrack
+from symtrack.foundations.errors import ParameterError, ScenarioError
+from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.terrain import moisture as M
+from symtrack.terrain.soil_map import parse_soil_map
+
+
+def test_defossez_polynomials_hand_evaluated():
+    # Défossez et al. (2003) as soilphysics' compressive.properties1 codes it, evaluated by hand at
+    # w = 20 %: N = 1.9997 + 5.258 - 11.012 + 8.88 - 2.56, lambda = 0.1402 + 0.0384 + 0.084 - 0.104
+    N, lam, kap = M.defossez_2003(0.20, "defossez_2003_loess")
+    assert (N, lam, kap) == pytest.approx((2.5657, 0.1586, 0.0058), abs=1e-12)
+    # calcareous at 10 %: 2.4196 + 1.3767 - 2.035 + 1.21 - 0.24; 0.08051 + 0.3131 - 0.502 + 0.31 - 0.06
+    N, lam, _ = M.defossez_2003(0.10, "defossez_2003_calcareous")
+    assert (N, lam) == pytest.approx((2.7313, 0.14161), abs=1e-12)
+
+
+def test_severiano_curve_and_strength():
+    # the van Genuchten curve forward (theta(h) = tr + (ts - tr) (1 + (alpha h)^n)^-m) and back
+    for clay, (_, a, b, ts, tr, alpha, n) in zip((10, 25, 35, 45, 60), M.SEVERIANO_2013_CLASSES, strict=True):
+        for h in (1.0, 10.0, 100.0, 1000.0):
+            theta = tr + (ts - tr) * (1 + (alpha * h) ** n) ** -(1 - 1 / n)
+            assert M.severiano_2013_suction_kPa(theta, clay) == pytest.approx(h, rel=1e-9)
+            assert M.severiano_2013_precompression_kPa(clay, h) == pytest.approx(a * h**b, rel=1e-15)
+    # 129 h^0.15 below 20 % clay, 62.7 h^0.15 above 52 % (shared/REFERENCES.md, soilphysics)
+    assert M.severiano_2013_precompression_kPa(10, 100.0) == pytest.approx(129 * 100**0.15)
+    assert M.severiano_2013_precompression_kPa(60, 100.0) == pytest.approx(62.7 * 100**0.15)
+    # wetter is weaker
+    assert M.severiano_2013_precompression_kPa(25, 5.0) < M.severiano_2013_precompression_kPa(25, 50.0)
+
+
+SOIL = {"bulk_density_initial_Mg_per_m3": 1.2, "particle_density_Mg_per_m3": 2.65, "virgin_line_N": 2.1,
+        "compression_index_lambda": 0.19, "recompression_index_kappa": 0.042, "precompression_stress_Pa": 1.39e5}
+
+
+def test_apply_moisture_and_refusals():
+    out = M.apply_moisture(SOIL, {"water_content_kg_per_kg": 0.2, "compression_ptf": "defossez_2003_loess",
+                                  "clay_percent": 25})
+    assert (out["virgin_line_N"], out["compression_index_lambda"], out["recompression_index_kappa"]) == \
+        M.defossez_2003(0.2, "defossez_2003_loess")
+    h = M.severiano_2013_suction_kPa(0.2 * 1.2, 25)
+    assert out["precompression_stress_Pa"] == 1e3 * M.severiano_2013_precompression_kPa(25, h)
+    w_sat = (1 / 1.2 - 1 / 2.65)
+    with pytest.raises(ParameterError, match=r"soil.moisture.water_content_kg_per_kg = 0.5 is outside \[0, 0.456"):
+        M.apply_moisture(SOIL, {"water_content_kg_per_kg": 0.5, "compression_ptf": "defossez_2003_loess"})
+    assert 0.45 < w_sat < 0.46
+    with pytest.raises(ParameterError, match="water_content_kg_per_kg = -0.01"):
+        M.apply_moisture(SOIL, {"water_content_kg_per_kg": -0.01, "compression_ptf": "defossez_2003_loess"})
+    with pytest.raises(ParameterError, match="texture classes"):
+        M.apply_moisture(SOIL, {"water_content_kg_per_kg": 0.2, "compression_ptf": "defossez_2003_clay"})
+    with pytest.raises(ParameterError, match=r"range of defossez_2003_loess \[0.05, 0.3\]"):
+        M.apply_moisture(SOIL, {"water_content_kg_per_kg": 0.35, "compression_ptf": "defossez_2003_loess"})
+    with pytest.raises(ParameterError, match="clay_percent = 120"):
+        M.apply_moisture(SOIL, {"water_content_kg_per_kg": 0.2, "clay_percent": 120})
+    with pytest.raises(ParameterError, match="unknown key"):
+        M.apply_moisture(SOIL, {"water_content_kg_per_kg": 0.2, "ptf": "x"})
+    with pytest.raises(ParameterError, match="needs compression_ptf"):
+        M.apply_moisture(SOIL, {"water_content_kg_per_kg": 0.2})
+
+
+DAY = {"water_content_kg_per_kg": 0.2, "compression_ptf": "defossez_2003_loess", "clay_percent": 25.0}
+
+
+def _doc(moisture, soil_map=None, passes=1):
+    d = small_field("moisture_small", run={"duration_s": 5.0, "stop_after_distance_m": 0.5},
+                    terrain={"passes": passes})
+    d["soil"]["bulk_density_initial_Mg_per_m3"] = 1.2
+    d["soil"]["moisture"] = copy.deepcopy(moisture)
+    if soil_map is not None:
+        d["terrain"]["soil_map"] = soil_map
+    return d
+
+
+def test_scenario_moisture_and_uniform_soil_map_bit_for_bit():
+    sc = scenario_from_dict(_doc(DAY))
+    want = M.apply_moisture({**sc.soil}, DAY)
+    assert sc.soil == want
+    # --set gives the flat key "moisture.KEY"
+    d = _doc(DAY)
+    d["soil"].pop("moisture")
+    d["soil"].update({f"moisture.{k}": v for k, v in DAY.items()})
+    assert scenario_from_dict(d).soil == sc.soil
+    # a soil map whose soil is the same soil on the same day: the same parameters, bit for bit
+    sm = parse_soil_map({"soils": [{"preset": "clayey_soil_thailand_38", "bulk_density_initial_Mg_per_m3": 1.2,
+                                    "moisture": dict(DAY)}], "zones": [{"soil": 1, "x_m": [-6, 6], "y_m": [-2, 2]}]})
+    assert sm.soils[0] == sc.soil
+    assert all(math.copysign(1, sm.soils[0][k]) == math.copysign(1, v) and sm.soils[0][k] == v
+               for k, v in sc.soil.items())
+    with pytest.raises(ScenarioError, match="soil.moisture.water_content_kg_per_kg = 0.9"):
+        scenario_from_dict(_doc({**DAY, "water_content_kg_per_kg": 0.9}))
+    with pytest.raises(ScenarioError, match=r"soils\[0\].moisture"):
+        parse_soil_map({"soils": [{"preset": "clayey_soil_thailand_38", "moisture": {**DAY, "clay_percent": -1}}],
+                        "zones": [{"soil": 1, "x_m": [-6, 6], "y_m": [-2, 2]}]})
+
+
+def test_uniform_map_run_equals_single_value_and_wet_compacts_more():
+    """The same traffic on a dry (w = 0.10) and a wet day (w = 0.20): the wet soil's virgin line is
+    lower (Défossez's loess), so it compacts where the dry one does not; the risk's strength falls
+    (Severiano). A field whose soil map gives every cell the same soil on the same day equals the
+    single [soil] bit for bit."""
+    dry = symtrack.simulate(scenario_from_dict(_doc({**DAY, "water_content_kg_per_kg": 0.10})))
+    wet = symtrack.simulate(scenario_from_dict(_doc(DAY)))
+    rd = np.array(dry.summary["passes"][0]["bulk_density_max_Mg_per_m3"])
+    rw = np.array(wet.summary["passes"][0]["bulk_density_max_Mg_per_m3"])
+    assert np.all(rw >= rd) and rw[0] > rd[0] + 0.01
+    assert wet.summary["subsoil_precompression_stress_kPa"] < dry.summary["subsoil_precompression_stress_kPa"]
+    sm = {"soils": [{"preset": "clayey_soil_thailand_38", "bulk_density_initial_Mg_per_m3": 1.2,
+                     "moisture": dict(DAY)}], "zones": [{"soil": 1, "x_m": [-6, 6], "y_m": [-2, 2]}]}
+    mapped = symtrack.simulate(scenario_from_dict(_doc(DAY, soil_map=sm)))
+    assert np.array_equal(mapped.terrain.specific_volume, wet.terrain.specific_volume)
+    assert mapped.summary["passes"][0]["bulk_density_max_Mg_per_m3"] == \
+        wet.summary["passes"][0]["bulk_density_max_Mg_per_m3"]
+
+
+def _raster_doc(tmp_path, w_grid, name="w.npy", soil_moisture=DAY):
+    np.save(tmp_path / name, w_grid)
+    d = _doc(soil_moisture)
+    d["terrain"]["moisture"] = {"raster": str(tmp_path / name), "compression_ptf": "defossez_2003_loess",
+                                "clay_percent": 25.0}
+    return d
+
+
+def test_moisture_raster_uniform_equals_single_value_and_split(tmp_path):
+    shape = (48, 16)  # the small field: 12 m x 4 m at 0.25 m
+    single = symtrack.simulate(scenario_from_dict(_doc(DAY)))
+    uni = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, np.full(shape, 0.2))))
+    assert np.array_equal(uni.terrain.specific_volume, single.terrain.specific_volume)
+    assert np.array_equal(uni.terrain.sigma_max, single.terrain.sigma_max)
+    assert not uni.terrain.soil_index.any() and not uni.terrain.soil_table
+    # the cells with y > 0 wet (0.2), the others dry (0.1): two soils, the wet half compacts more
+    w = np.full(shape, 0.1)
+    w[:, 8:] = 0.2
+    split = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w, "split.npy")))
+    st = split.terrain
+    assert len(st.soil_table) == 1 and sorted(np.unique(st.soil_index)) == [0, 1]
+    v = st.specific_volume.reshape(48, 16, -1)[:, :, 0]
+    moved_dry, moved_wet = np.count_nonzero(v[:, :8]), np.count_nonzero(v[:, 8:])
+    assert moved_wet > 0 and moved_dry == 0
+
+
+def test_moisture_raster_refusals(tmp_path):
+    with pytest.raises(ScenarioError, match=r"terrain.moisture.raster = .*shape \(48, 16\).*cover the field"):
+        symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, np.full((40, 16), 0.2))))
+    w = np.full((48, 16), 0.2)
+    w[3, 3] = 0.6
+    with pytest.raises(ScenarioError, match=r"cell water content 0.6.*water_content_kg_per_kg = 0.6 is outside \[0,"):
+        symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w)))
+    w = 0.1 + 0.001 * np.arange(48 * 16).reshape(48, 16) / 48
+    with pytest.raises(ScenarioError, match="distinct .soil, water content. pairs"):
+        symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w)))
+    with pytest.raises(ScenarioError, match="unknown key"):
+        scenario_from_dict({**_doc(DAY), "terrain": {**_doc(DAY)["terrain"], "moisture": {"raster": "w.npy",
+                                                                                         "ptf": 1}}})
+
+
+def test_moisture_geotiff_must_cover_the_field(tmp_path):
+    rasterio = pytest.importorskip("rasterio")
+    from rasterio.transform import from_origin
+    path = tmp_path / "w.tif"
+    # 1 m pixels over x in [-6, 0], y in [-2, 2]: half the field
+    with rasterio.open(path, "w", driver="GTiff", height=4, width=6, count=1, dtype="float32",
+                       transform=from_origin(-6.0, 2.0, 1.0, 1.0)) as ds:
+        ds.write(np.full((1, 4, 6), 0.2, dtype=np.float32))
+    d = _doc(DAY)
+    d["terrain"]["moisture"] = {"raster": str(path), "compression_ptf": "defossez_2003_loess"}
+    with pytest.raises(ScenarioError, match="must cover the whole field"):
+        symtrack.simulate(scenario_from_dict(d))
+
+
+def test_a_dry_day_then_a_wet_day_on_the_same_field(tmp_path):
+    """A terrain file continues on another day: the moisture's parameters (N, lambda, kappa,
+    sigma_pc) are the new day's, the compression state carries over; any other soil parameter
+    must still match."""
+    dry = symtrack.simulate(scenario_from_dict(_doc({**DAY, "water_content_kg_per_kg": 0.10})))
+    path = tmp_path / "dry.npz"
+    dry.terrain.save(path)
+    d = _doc(DAY)
+    d["terrain"]["initial_state"] = str(path)
+    wet = symtrack.simulate(scenario_from_dict(d))
+    # the dry day compacted nothing, the wet day on its (rutted) field does; the risk's strength is the wet day's
+    assert not dry.terrain.specific_volume.any()
+    assert wet.summary["passes"][0]["bulk_density_max_Mg_per_m3"][0] > 1.21
+    h = M.severiano_2013_suction_kPa(0.2 * 1.2, 25.0)
+    assert wet.summary["subsoil_precompression_stress_kPa"] == pytest.approx(M.severiano_2013_precompression_kPa(25, h))
+    assert wet.terrain.soil["virgin_line_N"] == M.defossez_2003(0.2, "defossez_2003_loess")[0]
+    d["soil"]["cohesion_Pa"] = 4000.0
+    with pytest.raises(ScenarioError, match="the terrain was made with soil cohesion_Pa"):
+        symtrack.simulate(scenario_from_dict(d))
