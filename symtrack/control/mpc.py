@@ -114,7 +114,7 @@ class MPCSettings:
     jit_dir: str | None = None
     prediction: str = "vehicle"
     collocation_degree: int = 2
-    torque_max_N_m: float = 8000.0
+    torque_max_N_m: float = 8000.0  # ASSUMED sprocket torque limit (no data sheet); the field operations' too
     torque_rate_max_N_m_s: float = 40000.0
     weight_lateral: float = 10.0
     weight_heading: float = 30.0

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..control.mpc import MPCSettings
 from ..control.path import Path, Segment
 from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError
@@ -108,7 +109,8 @@ class OperationSettings:
     turn_radius_m: float = 4.0
     speed_m_s: float = 2.5
     turn_speed_m_s: float = 1.0
-    torque_limit_N_m: float = 8000.0
+    # the sprocket torque limit: one home, the MPC's (MPCSettings.torque_max_N_m, ASSUMED there)
+    torque_limit_N_m: float = MPCSettings.torque_max_N_m
     max_lateral_error_m: float = 1.0
     vehicle: dict = dataclasses.field(default_factory=dict)  # overrides of [vehicle] for this operation
     lines: int | None = None  # None: all that fit; else the first n lines (small tests)
