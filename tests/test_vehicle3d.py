@@ -290,3 +290,19 @@ def test_trim_takes_the_3d_vehicle():
           for v in ("planar", "3d")}
     assert tp["3d"][0].u == pytest.approx(tp["planar"][0].u, rel=1e-6)
     assert tp["3d"][1].u == pytest.approx(tp["planar"][1].u, rel=0.02)
+
+
+def test_bench_rows_of_the_3d_vehicle():
+    """symtrack bench's 3D rows (symtrack.bench.vehicle3d) in quick mode: one run of the homogeneous
+    validation per vehicle on the compiled Rosenbrock; the 3D run's figures are the planar run's within
+    2 % (the default 8 segments: +1.7 % in yaw and lateral deviation, docs/vehicle3d.md) and its ratio
+    row is filled."""
+    from symtrack.bench import vehicle3d
+
+    rows = vehicle3d.bench_rows(quick=True)
+    assert [r["case"] for r in rows] == ["vehicle = planar", "vehicle = 3d", "3d / planar"]
+    planar, solid = rows[0]["figures"], rows[1]["figures"]
+    for k in ("yaw_final_deg", "lateral_deviation_m", "sinkage_idler_mm"):
+        assert solid[k] == pytest.approx(planar[k], rel=0.02), k
+    assert planar["yaw_final_deg"] == pytest.approx(0.4046, rel=1e-3)  # the planar validation, as ever
+    assert rows[2]["cpu_ratio"] > 0 and rows[2]["wall_ratio"] > 0
