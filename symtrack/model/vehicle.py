@@ -20,8 +20,9 @@ from .options import SHEAR_LAWS, ModelOptions
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
            "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SOIL_PARAMS_USED", "TRACKS",
-           "VEHICLE_STATES", "direction", "gauss_nodes", "graded_nodes", "lateral_resistance_max_N",
-           "lateral_shear_rates", "shear_forces", "traction_shape", "traction_sign", "vehicle_equations"]
+           "VEHICLE_STATES", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes", "internal_resistance_N",
+           "lateral_resistance_max_N", "lateral_shear_rates", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
+           "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # Standard gravity (a true constant: CGPM 1901).
 GRAVITY_M_S2 = 9.80665
@@ -229,6 +230,54 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     return Fx, Fy, Mz
 
 
+def sprocket_speed_abs(omega, opts: ModelOptions):
+    """|omega| as the laws use it: exact in ``traction_sign = "sign"`` mode, else regularised by
+    ``omega_smoothing_rad_s``."""
+    if opts.traction_sign == "sign":
+        return ca.fabs(omega)
+    return ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
+
+
+def internal_resistance_N(N, omega, abs_om, r, P: dict, opts: ModelOptions):
+    """Internal running-gear resistance of a track with normal load N (reconstruction; Wong):
+    N (0.0222 + 0.0003 V[km/h]) against the sprocket's rotation."""
+    V_kmh = 3.6 * r * abs_om
+    return N * (P["internal_resistance_const"] + P["internal_resistance_per_km_h"] * V_kmh) \
+        * direction(omega, opts.omega_smoothing_rad_s, opts)
+
+
+def creep_lateral_force(q, c_line, tan_phi, v_lat, mu, eps_v, opts: ModelOptions):
+    """The creep law's lateral resistance (reconstruction: a velocity creep) of a load q sliding
+    sideways at v_lat; with ``lateral_shear_cap`` at most the soil's strength c_line + q tan(phi)."""
+    if opts.lateral_shear_cap:
+        return -ca.fmin(mu * q, c_line + q * tan_phi) * ca.tanh(v_lat / eps_v)
+    return -mu * q * ca.tanh(v_lat / eps_v)
+
+
+def sprocket_rates(j, omega, abs_om, v_track, torque, F, R_in, r, l, J):
+    """(dj/dt, domega/dt) of a track: seed eq. (2)'s mean shear displacement and the sprocket's
+    rotation driven by its torque against the thrust and the internal resistance."""
+    return -(2 * r / l) * abs_om * j + r * omega - v_track, (torque - r * (F + R_in)) / J
+
+
+def track_slip(v_track, omega, r, opts: ModelOptions):
+    """The track's longitudinal slip 1 - v / (r omega), regularised through omega = 0."""
+    return 1 - v_track * omega / (r * omega**2 + opts.omega_smoothing_rad_s * r)
+
+
+def track_signals(F, R_in, Rc, Fy, N, slip) -> dict:
+    """The per-track output signals of a vehicle model (dicts over TRACKS)."""
+    signals = {}
+    for k in TRACKS:
+        signals[f"tractive_{k}_N"] = F[k]
+        signals[f"internal_resistance_{k}_N"] = R_in[k]
+        signals[f"compaction_resistance_{k}_N"] = Rc[k]
+        signals[f"lateral_force_{k}_N"] = Fy[k]
+        signals[f"normal_load_{k}_N"] = N[k]
+        signals[f"slip_{k}"] = slip[k]
+    return signals
+
+
 def lateral_shear_rates(j_y, theta, abs_om, vy, rz, x_centre, l, r):
     """(dj_y/dt, dtheta/dt) of a track's lateral shear states (the "shear" law): seed
     eq. (2) written for the lateral sliding velocity at the contact centre, v + r_z x_centre
@@ -307,19 +356,13 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     torque = {"left": TL, "right": TR}
     # Track centre-line speeds (not the CG speed).
     v_track = {"left": vx - rz * B / 2, "right": vx + rz * B / 2}
-    if opts.traction_sign == "sign":
-        abs_om = {k: ca.fabs(omega[k]) for k in TRACKS}
-    else:
-        abs_om = {k: ca.sqrt(omega[k] ** 2 + opts.omega_smoothing_rad_s**2) for k in TRACKS}
+    abs_om = {k: sprocket_speed_abs(omega[k], opts) for k in TRACKS}
 
     F, R_in, Rc, Fy, Mz, jdot, omdot = {}, {}, {}, {}, {}, {}, {}
     s_nodes, w_nodes = gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points)
     x_front = l / 2 - e  # body x of the front end of the contact (s = 0)
     for idx, k in enumerate(TRACKS):
-        # Internal running-gear resistance (reconstruction; Wong): W_k (0.0222 + 0.0003 V[km/h]).
-        V_kmh = 3.6 * r * abs_om[k]
-        R_in[k] = N[k] * (P["internal_resistance_const"] + P["internal_resistance_per_km_h"] * V_kmh) \
-            * direction(omega[k], opts.omega_smoothing_rad_s, opts)
+        R_in[k] = internal_resistance_N(N[k], omega[k], abs_om[k], r, P, opts)
         # Compaction resistance from the terrain, opposing the track's motion.
         Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
         if track_soil is not None:
@@ -340,17 +383,12 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
                 s = sn * l
                 x_body = x_front - s
                 q = b * dist[k].at(s)
-                if opts.lateral_shear_cap:
-                    # the lateral shear stress cannot exceed the soil's shear strength c + p tan(phi)
-                    fy = -ca.fmin(mu * q, b * c + q * ca.tan(phi)) * ca.tanh((vy + rz * x_body) / eps_v)
-                else:
-                    fy = -mu * q * ca.tanh((vy + rz * x_body) / eps_v)
+                fy = creep_lateral_force(q, b * c, ca.tan(phi), vy + rz * x_body, mu, eps_v, opts)
                 fy_sum += wn * l * fy
                 mz_sum += wn * l * x_body * fy
             Fy[k], Mz[k] = fy_sum, mz_sum
         # Seed eq. (2): mean shear displacement.
-        jdot[k] = -(2 * r / l) * abs_om[k] * shear[k] + r * omega[k] - v_track[k]
-        omdot[k] = (torque[k] - r * (F[k] + R_in[k])) / J
+        jdot[k], omdot[k] = sprocket_rates(shear[k], omega[k], abs_om[k], v_track[k], torque[k], F[k], R_in[k], r, l, J)
 
     Fx_net = (F["left"] - Rc["left"]) + (F["right"] - Rc["right"]) - drawbar
     acc_implied = ca.vertcat(Fx_net / m, (Fy["left"] + Fy["right"]) / m)
@@ -371,15 +409,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     if transient:
         rates = {k: lateral_shear_rates(*lagged[k], abs_om[k], vy, rz, -e, l, r) for k in TRACKS}
         xdot = ca.vertcat(xdot, *(rates[k][0] for k in TRACKS), *(rates[k][1] for k in TRACKS))
-    slip = {k: 1 - v_track[k] * omega[k] / (r * omega[k] ** 2 + opts.omega_smoothing_rad_s * r) for k in TRACKS}
-    signals = {}
-    for k in TRACKS:
-        signals[f"tractive_{k}_N"] = F[k]
-        signals[f"internal_resistance_{k}_N"] = R_in[k]
-        signals[f"compaction_resistance_{k}_N"] = Rc[k]
-        signals[f"lateral_force_{k}_N"] = Fy[k]
-        signals[f"normal_load_{k}_N"] = N[k]
-        signals[f"slip_{k}"] = slip[k]
+    signals = track_signals(F, R_in, Rc, Fy, N, {k: track_slip(v_track[k], omega[k], r, opts) for k in TRACKS})
     return {
         "xdot": xdot,
         "acc_implied": acc_implied,

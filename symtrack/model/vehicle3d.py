@@ -70,9 +70,15 @@ from .vehicle import (
     LATERAL_STATES,
     PLANAR_LAYOUT,
     TRACKS,
+    creep_lateral_force,
     direction,
+    internal_resistance_N,
     lateral_shear_rates,
     shear_forces,
+    sprocket_rates,
+    sprocket_speed_abs,
+    track_signals,
+    track_slip,
     traction_shape,
 )
 
@@ -234,10 +240,7 @@ class Vehicle3D:
         omega = {k: S[f"omega_{k}_rad_s"] for k in TRACKS}
         shear = {k: S[f"shear_{k}_m"] for k in TRACKS}
         torque = {k: S[f"torque_{k}_N_m"] for k in TRACKS}
-        if opts.traction_sign == "sign":
-            abs_om = {k: ca.fabs(omega[k]) for k in TRACKS}
-        else:
-            abs_om = {k: ca.sqrt(omega[k] ** 2 + opts.omega_smoothing_rad_s**2) for k in TRACKS}
+        abs_om = {k: sprocket_speed_abs(omega[k], opts) for k in TRACKS}
         depth, v_tracks = {}, {}
         for k in TRACKS:
             yk = B / 2 if k == "left" else -B / 2
@@ -277,9 +280,7 @@ class Vehicle3D:
             vy_eff = v_lat_centre + rz * e  # the lateral speed at the CG's x that gives it at the centre (x = -e)
             if track_soil is not None:
                 c, phi, K = track_soil[k]
-            V_kmh = 3.6 * r * abs_om[k]
-            R_in[k] = N[k] * (P["internal_resistance_const"] + P["internal_resistance_per_km_h"] * V_kmh) \
-                * direction(omega[k], opts.omega_smoothing_rad_s, opts)
+            R_in[k] = internal_resistance_N(N[k], omega[k], abs_om[k], r, P, opts)
             Rc[k] = law_obj.compaction_work(depth[k], law, b) * direction(v_track, opts.motion_smoothing_m_s, opts)
             lagged = (S[f"lateral_shear_{k}_m"], S[f"shear_twist_{k}_rad"]) if self.lateral else None
             if opts.lateral_law in SHEAR_LAWS:
@@ -290,17 +291,12 @@ class Vehicle3D:
                 fy_sum, mz_sum = 0, 0
                 for s, p in zip(s_c, p_seg, strict=True):
                     x_body = x_front - s
-                    q_load = p * b * ds
-                    if opts.lateral_shear_cap:
-                        fy = -ca.fmin(mu * q_load, b * ds * c + q_load * ca.tan(phi)) \
-                            * ca.tanh((vy_eff + rz * x_body) / eps_v)
-                    else:
-                        fy = -mu * q_load * ca.tanh((vy_eff + rz * x_body) / eps_v)
+                    fy = creep_lateral_force(p * b * ds, b * ds * c, ca.tan(phi), vy_eff + rz * x_body, mu, eps_v, opts)
                     fy_sum += fy
                     mz_sum += x_body * fy
                 Fy[k], Mz[k] = fy_sum, mz_sum
-            jdot[k] = -(2 * r / l) * abs_om[k] * shear[k] + r * omega[k] - v_track
-            omdot[k] = (torque[k] - r * (F[k] + R_in[k])) / J
+            jdot[k], omdot[k] = sprocket_rates(shear[k], omega[k], abs_om[k], v_track, torque[k], F[k], R_in[k], r, l,
+                                               J)
             if self.lateral:
                 rates_lat[k] = lateral_shear_rates(*lagged, abs_om[k], vy_eff, rz, -e, l, r)
             # forces on the hull: the segments' normal loads, the thrust less the compaction
@@ -348,13 +344,8 @@ class Vehicle3D:
                 derivs[f"lateral_shear_{k}_m"], derivs[f"shear_twist_{k}_rad"] = rates_lat[k]
         for name, v in derivs.items():
             xdot[lay.index(name)] = v
-        for k in TRACKS:
-            signals[f"tractive_{k}_N"] = F[k]
-            signals[f"internal_resistance_{k}_N"] = R_in[k]
-            signals[f"compaction_resistance_{k}_N"] = Rc[k]
-            signals[f"lateral_force_{k}_N"] = Fy[k]
-            signals[f"normal_load_{k}_N"] = N[k]
-            signals[f"slip_{k}"] = 1 - v_tracks[k] * omega[k] / (r * omega[k] ** 2 + opts.omega_smoothing_rad_s * r)
+        signals.update(track_signals(F, R_in, Rc, Fy, N, {k: track_slip(v_tracks[k], omega[k], r, opts)
+                                                          for k in TRACKS}))
         signals["pitch_rad"] = pitch
         signals["roll_rad"] = roll
         signals["z_m"] = Z
