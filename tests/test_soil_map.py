@@ -189,3 +189,30 @@ def test_compiled_equals_interpreted_on_a_field_of_two_soils():
     assert np.max(np.abs(out[0][0] - out[1][0]) / np.maximum(1.0, np.abs(out[1][0]))) < 1e-12
     assert np.max(np.abs(out[0][1] - out[1][1]) / np.maximum(1.0, np.abs(out[1][1]))) < 1e-9
     assert np.max(np.abs(out[0][2] - out[1][2])) < 1e-12
+
+
+def test_a_cleared_world_is_virgin_soil_on_the_same_soils():
+    """World.clear (the field study's next pattern, a benchmark's next run): after a run over a field
+    of two soils every stored state and pass record is zero again (virgin soil: 0 is the initial
+    specific volume), while the soils of its cells are kept; the same run then gives the same field."""
+    from symtrack.simulation import loop
+    from symtrack.simulation.plants import make_plant
+
+    sc = _scenario({"soils": [WET], "zones": [{"soil": 1, "x_m": [-10, 10], "y_m": [0.0, 10]}]})
+    plant = make_plant(sc)
+    world = plant.world
+    idx = world.storage.soil_index.copy()
+    assert set(np.unique(idx)) == {0, 1}
+    loop.run(sc, plant)
+    first = {k: a.copy() for k, a in world.storage.arrays().items()}
+    assert first["z_max_m"].max() > 0  # the run sank cells
+    world.clear()
+    for name, a in world.storage.arrays().items():
+        if name == "soil_index":
+            assert np.array_equal(a, idx)
+        else:
+            assert not a.any(), name
+    assert not world.pass_sigma.any() and not world.pass_p_mean.any() and not world.touched.any()
+    loop.run(sc, plant)
+    for name, a in world.storage.arrays().items():
+        assert np.array_equal(a, first[name]), name

@@ -43,10 +43,7 @@ def law_runs(scenario: str = "validation_grid", repeats: int = 3, warm_up: bool 
     for k in range(repeats + (1 if warm_up else 0)):
         for law in LAWS:
             sc, plant = plants[law]
-            world = getattr(plant, "world", None)
-            if world is not None:  # a fresh field for every run (as symtrack.bench.terrain's runs)
-                for a in world.storage.arrays().values():
-                    a[:] = 0
+            _clear(plant)
             res = loop.run(sc, plant)
             if warm_up and k == 0:
                 continue
@@ -56,9 +53,8 @@ def law_runs(scenario: str = "validation_grid", repeats: int = 3, warm_up: bool 
 
 def _clear(plant) -> None:
     world = getattr(plant, "world", None)
-    if world is not None:  # a fresh field for every run (as symtrack.bench.terrain's runs)
-        for a in world.storage.arrays().values():
-            a[:] = 0
+    if world is not None:  # a fresh field for every run
+        world.clear()
 
 
 def density_runs(scenario: str = "validation_grid", law: str = "shear", repeats: int = 3, warm_up: bool = True,

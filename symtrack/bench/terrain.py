@@ -244,17 +244,12 @@ ENGINE_FIGURES = ("lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm",
                   "compaction_resistance_mean_N", "compaction_resistance_time_mean_N")
 
 
-def _clear(world):
-    for a in world.storage.arrays().values():
-        a[:] = 0
-
-
 def _engine_validation(plant, sc, repeats=2):
     """The scenario through the engine plant on its world (cleared before each run); the best of repeats."""
     world = plant.world
     best = None
     for _ in range(repeats):
-        _clear(world)
+        world.clear()
         z0 = world.storage.z.copy()
         res = loop.run(sc, plant)
         if best is None or res.wall_time_s < best[0].wall_time_s:

@@ -471,14 +471,6 @@ class IncompleteFieldStudy(SimulationError):
         self.result = result
 
 
-def _clear(world) -> None:
-    for a in world.storage.arrays().values():
-        a[...] = 0
-    world.pass_sigma[...] = 0
-    world.pass_p_mean[...] = 0
-    world.touched[:] = False
-
-
 def _engine_stress(plant) -> bool:
     """Whether the plant's engine records each pass's stress (then a pass's cells are those it stressed)."""
     return bool(plant.world.storage.subsoil_depths_m) and hasattr(plant, "engine")
@@ -711,7 +703,7 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     if plant is None:
         plant = make_plant(spec.scenario)
     else:
-        _clear(plant.world)
+        plant.world.clear()
     build_s = time.perf_counter() - t_start
     results: dict[str, PatternResult] = {}
     bar = Progress(fs.passes * len(fs.patterns), f"field {spec.name}", enabled=progress)
@@ -719,7 +711,7 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     checkpoint = None if folder is None else (lambda pr: _write_checkpoint(folder, spec, pr))
     try:
         for k, pattern in enumerate(fs.patterns):
-            _clear(plant.world)
+            plant.world.clear()
             pr = done.get(pattern) or PatternResult(pattern, plan_passes(spec, pattern))
             pending = results[pattern] = pr
             pr.density0 = plant.world.bulk_density_max() if _engine_stress(plant) else None  # of the new field

@@ -359,6 +359,18 @@ class World:
         return self.channel_cell[self.channel_cell >= 0]
 
     # ---- passes ------------------------------------------------------------------------------
+    def clear(self) -> None:
+        """The same field as virgin soil again (a study's next pattern, a benchmark's next run): every
+        cell's stored state zero (sinkage, history, stress record, compression state: 0 is the initial
+        specific volume) and the pass's records empty; the field's soils (soil_index) and its ground's
+        shape are kept."""
+        for name, a in self.storage.arrays().items():
+            if name != "soil_index":
+                a[...] = 0
+        self.pass_sigma[...] = 0
+        self.pass_p_mean[...] = 0
+        self.touched[:] = False
+
     def release_all(self) -> None:
         self.channel_cell[:] = -1
         self.qc[:] = 0.0
