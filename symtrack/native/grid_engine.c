@@ -705,24 +705,38 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     if (E->subsoil && E->n_depths > 0) {
       /* the vertical stress at the subsoil depths below every loaded cell at the step end; each
          cell keeps this pass's largest (float: the stored precision) */
-      double sig[16];
-      for (long long q = 0; q < E->n_act; ++q) {
-        long long ch = E->act[q];
-        if (!(E->ch_g[NGEO * ch] > 0.0)) continue;
-        subsoil_stress(E->subsoil, a1, E->geo, E->ch_cx[ch], E->ch_cy[ch], sig);
-        float *o = E->sig_pass + E->n_depths * E->ch_cell[ch];
-        for (long long k = 0; k < E->n_depths; ++k) {
-          float v = (float)sig[k];
-          if (v > o[k]) o[k] = v;
+      /* in blocks of loaded cells (subsoil_stress_block: SIMD over the cells) */
+      double bx[SUBSOIL_BLOCK], by[SUBSOIL_BLOCK], sig[SUBSOIL_BLOCK * SUBSOIL_MAX_DEPTHS],
+          sigp[SUBSOIL_BLOCK * SUBSOIL_MAX_DEPTHS];
+      long long bcell[SUBSOIL_BLOCK];
+      const long long nd = E->n_depths;
+      int m = 0;
+      for (long long q = 0; q <= E->n_act; ++q) {
+        if (q < E->n_act) {
+          long long ch = E->act[q];
+          if (!(E->ch_g[NGEO * ch] > 0.0)) continue;
+          bx[m] = E->ch_cx[ch];
+          by[m] = E->ch_cy[ch];
+          bcell[m] = E->ch_cell[ch];
+          if (++m < SUBSOIL_BLOCK) continue;
         }
-        if (E->subsoil_p) {
-          subsoil_stress(E->subsoil_p, a1, E->geo, E->ch_cx[ch], E->ch_cy[ch], sig);
-          float *op = E->p_pass + E->n_depths * E->ch_cell[ch];
-          for (long long k = 0; k < E->n_depths; ++k) {
-            float v = (float)sig[k];
-            if (v > op[k]) op[k] = v;
+        if (m == 0) break;
+        subsoil_stress_block(E->subsoil, E->subsoil_p, a1, E->geo, bx, by, m, sig, sigp);
+        for (int n = 0; n < m; ++n) {
+          float *o = E->sig_pass + nd * bcell[n];
+          for (long long k = 0; k < nd; ++k) {
+            float v = (float)sig[n * nd + k];
+            if (v > o[k]) o[k] = v;
+          }
+          if (E->subsoil_p) {
+            float *op = E->p_pass + nd * bcell[n];
+            for (long long k = 0; k < nd; ++k) {
+              float v = (float)sigp[n * nd + k];
+              if (v > op[k]) op[k] = v;
+            }
           }
         }
+        m = 0;
       }
       long long c3b = now_ns();
       E->ns_subsoil += c3b - c3;

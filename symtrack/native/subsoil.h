@@ -36,27 +36,53 @@ static inline int subsoil_row_(const subsoil_tables_t *T, int k, double t, long 
   return 1;
 }
 
-/* (H0, H1) of depth k at (x, row j / weight ft) */
+/* (H0, H1) of depth k at (x, row j / weight ft). Past the grid (|x| saturated at its last node) the
+   weights are (gx, fx) = (0, 1) exactly, so the value is the last column's: read directly (the same
+   value but for the sign of a zero) */
 static inline void subsoil_lookup_(const subsoil_tables_t *T, int k, double x, long long j, double ft, double *h0,
                                    double *h1) {
   const int nx = T->n_x[k], nt = T->n_t[k];
-  double ux = (x < 0 ? -x : x) * T->inv_x_step[k];
-  if (ux > (double)(nx - 1)) ux = (double)(nx - 1);
-  long long i = (long long)ux;
-  if (i > nx - 2) i = nx - 2;
-  const double fx = ux - (double)i;
-  const double gx = 1.0 - fx, gt = 1.0 - ft;
-  const double *r0 = T->data + T->offset[k] + 2 * (i * nt + j);
-  const double *r1 = r0 + 2 * nt;
-  const double v = gx * (gt * r0[0] + ft * r0[2]) + fx * (gt * r1[0] + ft * r1[2]);
-  *h1 = gx * (gt * r0[1] + ft * r0[3]) + fx * (gt * r1[1] + ft * r1[3]);
+  const double ux = (x < 0 ? -x : x) * T->inv_x_step[k];
+  const double gt = 1.0 - ft;
+  double v;
+  if (!(ux < (double)(nx - 1))) {
+    const double *r1 = T->data + T->offset[k] + 2 * ((long long)(nx - 1) * nt + j);
+    v = gt * r1[0] + ft * r1[2];
+    *h1 = gt * r1[1] + ft * r1[3];
+  } else {
+    long long i = (long long)ux;
+    if (i > nx - 2) i = nx - 2;
+    const double fx = ux - (double)i;
+    const double gx = 1.0 - fx;
+    const double *r0 = T->data + T->offset[k] + 2 * (i * nt + j);
+    const double *r1 = r0 + 2 * nt;
+    v = gx * (gt * r0[0] + ft * r0[2]) + fx * (gt * r1[0] + ft * r1[2]);
+    *h1 = gx * (gt * r0[1] + ft * r0[3]) + fx * (gt * r1[1] + ft * r1[3]);
+  }
   *h0 = x < 0 ? -v : v;
 }
 
+/* one track's contribution (lateral offset t, loaded part's ends at x = xa, xe, pressure p_lin at the
+   point and slope beta) added to sigma_out[k] for every depth of T */
+static inline void subsoil_side_(const subsoil_tables_t *T, double t, double xa, double xe, double p_lin, double beta,
+                                 double *sigma_out) {
+  for (int k = 0; k < T->n_depths; ++k) {
+    long long j;
+    double ft, h0a, h1a, h0b, h1b;
+    if (!subsoil_row_(T, k, t, &j, &ft)) continue;
+    subsoil_lookup_(T, k, xa, j, ft, &h0a, &h1a);
+    subsoil_lookup_(T, k, xe, j, ft, &h0b, &h1b);
+    sigma_out[k] += p_lin * (h0a - h0b) - beta * (h1a - h1b);
+  }
+}
+
 /* sigma_out[k] = vertical stress [Pa] at depth k below the world point (px, py) from both tracks;
- * a = (X, Y, cos psi, sin psi, alpha_L, beta_L, alpha_R, beta_R), geo = (l, b, B, e, cell, end strip) */
-static void subsoil_stress(const subsoil_tables_t *T, const double a[8], const double geo[6], double px, double py,
-                           double *sigma_out /* n_depths */) {
+ * a = (X, Y, cos psi, sin psi, alpha_L, beta_L, alpha_R, beta_R), geo = (l, b, B, e, cell, end strip).
+ * P (NULL: none): a second set of tables (the mean normal stress's, the same depths) looked up at the
+ * same point into p_out, sharing the track-frame geometry; each table's sums are those that
+ * subsoil_stress gives it alone. */
+static void subsoil_stress_pair(const subsoil_tables_t *T, const subsoil_tables_t *P, const double a[8],
+                                const double geo[6], double px, double py, double *sigma_out, double *p_out) {
   const double l = geo[0], B = geo[2], e = geo[3];
   const double c = a[2], s = a[3];
   const double ddx = px - a[0], ddy = py - a[1];
@@ -64,6 +90,8 @@ static void subsoil_stress(const subsoil_tables_t *T, const double a[8], const d
   const double yb = -s * ddx + c * ddy;
   const double s_pt = (l / 2 - e) - xb;
   for (int k = 0; k < T->n_depths; ++k) sigma_out[k] = 0.0;
+  if (P)
+    for (int k = 0; k < P->n_depths; ++k) p_out[k] = 0.0;
   for (int side = 0; side < 2; ++side) {
     const double alpha = a[4 + 2 * side], beta = a[5 + 2 * side];
     double sa, sb;
@@ -85,15 +113,120 @@ static void subsoil_stress(const subsoil_tables_t *T, const double a[8], const d
     const double t = yb - (side == 0 ? 1.0 : -1.0) * B / 2;
     const double p_lin = alpha + beta * s_pt;
     const double xa = s_pt - sa, xe = s_pt - sb;
-    for (int k = 0; k < T->n_depths; ++k) {
-      long long j;
-      double ft, h0a, h1a, h0b, h1b;
-      if (!subsoil_row_(T, k, t, &j, &ft)) continue;
-      subsoil_lookup_(T, k, xa, j, ft, &h0a, &h1a);
-      subsoil_lookup_(T, k, xe, j, ft, &h0b, &h1b);
-      sigma_out[k] += p_lin * (h0a - h0b) - beta * (h1a - h1b);
+    subsoil_side_(T, t, xa, xe, p_lin, beta, sigma_out);
+    if (P) subsoil_side_(P, t, xa, xe, p_lin, beta, p_out);
+  }
+}
+
+static void subsoil_stress(const subsoil_tables_t *T, const double a[8], const double geo[6], double px, double py,
+                           double *sigma_out /* n_depths */) {
+  subsoil_stress_pair(T, 0, a, geo, px, py, sigma_out, 0);
+}
+
+
+/* ---- many points at once: the same operations per point as subsoil_stress, in loops over the points
+ * that a vectorising compiler turns into SIMD code (gathers for the table reads; the engine's -O3
+ * -march=native -ffp-contract=off: no contraction, so every point's sums are subsoil_stress's to the
+ * last bit, tested in tests/test_subsoil.py). A point whose row is past the table adds +0.0 instead of
+ * nothing (a difference only in the sign of a zero). */
+#define SUBSOIL_BLOCK 64
+#define SUBSOIL_MAX_DEPTHS 8 /* symtrack/terrain/settings.py MAX_SUBSOIL_DEPTHS */
+
+/* acc[k * SUBSOIL_BLOCK + n] += track's contribution at depth k for points n < m */
+static inline void subsoil_side_block_(const subsoil_tables_t *T, int m, const double *restrict t,
+                                       const double *restrict xa, const double *restrict xe,
+                                       const double *restrict p_lin, double beta, double *restrict acc) {
+  for (int k = 0; k < T->n_depths; ++k) {
+    const int nx = T->n_x[k], nt = T->n_t[k];
+    const double ixs = T->inv_x_step[k], its = T->inv_t_step[k];
+    const double xlast = (double)(nx - 1), tlast = (double)(nt - 1);
+    const double *restrict D = T->data + T->offset[k];
+    double *restrict ak = acc + k * SUBSOIL_BLOCK;
+    for (int n = 0; n < m; ++n) {
+      const double tn = t[n];
+      const double ut = (tn < 0 ? -tn : tn) * its;
+      const int inside = ut < tlast;
+      const double utc = inside ? ut : 0.0;
+      int j = (int)utc;
+      j = j > nt - 2 ? nt - 2 : j;
+      const double ft = utc - (double)j, gt = 1.0 - ft;
+      const double xan = xa[n], xen = xe[n];
+      double ua = (xan < 0 ? -xan : xan) * ixs;
+      ua = ua > xlast ? xlast : ua;
+      int ia = (int)ua;
+      ia = ia > nx - 2 ? nx - 2 : ia;
+      const double fa = ua - (double)ia, ga = 1.0 - fa;
+      double ub = (xen < 0 ? -xen : xen) * ixs;
+      ub = ub > xlast ? xlast : ub;
+      int ib = (int)ub;
+      ib = ib > nx - 2 ? nx - 2 : ib;
+      const double fb = ub - (double)ib, gb = 1.0 - fb;
+      const int oa = 2 * (ia * nt + j), ob = 2 * (ib * nt + j), o1 = 2 * nt;
+      const double va = ga * (gt * D[oa] + ft * D[oa + 2]) + fa * (gt * D[oa + o1] + ft * D[oa + o1 + 2]);
+      const double h1a = ga * (gt * D[oa + 1] + ft * D[oa + 3]) + fa * (gt * D[oa + o1 + 1] + ft * D[oa + o1 + 3]);
+      const double vb = gb * (gt * D[ob] + ft * D[ob + 2]) + fb * (gt * D[ob + o1] + ft * D[ob + o1 + 2]);
+      const double h1b = gb * (gt * D[ob + 1] + ft * D[ob + 3]) + fb * (gt * D[ob + o1 + 1] + ft * D[ob + o1 + 3]);
+      const double h0a = xan < 0 ? -va : va, h0b = xen < 0 ? -vb : vb;
+      const double c = p_lin[n] * (h0a - h0b) - beta * (h1a - h1b);
+      ak[n] += inside ? c : 0.0;
     }
   }
+}
+
+/* sigma_out[n * n_depths + k] (as subsoil_stress at (px[n], py[n])) for n < m <= SUBSOIL_BLOCK;
+ * P (NULL: none) a second set of tables into p_out the same way (subsoil_stress_pair) */
+static void subsoil_stress_block(const subsoil_tables_t *T, const subsoil_tables_t *P, const double a[8],
+                                 const double geo[6], const double *px, const double *py, int m,
+                                 double *sigma_out, double *p_out) {
+  const double l = geo[0], B = geo[2], e = geo[3];
+  const double c = a[2], s = a[3];
+  double s_pt[SUBSOIL_BLOCK], yb[SUBSOIL_BLOCK], t[SUBSOIL_BLOCK], xa[SUBSOIL_BLOCK], xe[SUBSOIL_BLOCK],
+      p_lin[SUBSOIL_BLOCK];
+  double acc[SUBSOIL_MAX_DEPTHS * SUBSOIL_BLOCK], accp[SUBSOIL_MAX_DEPTHS * SUBSOIL_BLOCK];
+  for (int n = 0; n < m; ++n) {
+    const double ddx = px[n] - a[0], ddy = py[n] - a[1];
+    const double xb = c * ddx + s * ddy;
+    yb[n] = -s * ddx + c * ddy;
+    s_pt[n] = (l / 2 - e) - xb;
+  }
+  for (int k = 0; k < T->n_depths; ++k)
+    for (int n = 0; n < m; ++n) acc[k * SUBSOIL_BLOCK + n] = 0.0;
+  if (P)
+    for (int k = 0; k < P->n_depths; ++k)
+      for (int n = 0; n < m; ++n) accp[k * SUBSOIL_BLOCK + n] = 0.0;
+  for (int side = 0; side < 2; ++side) {
+    const double alpha = a[4 + 2 * side], beta = a[5 + 2 * side];
+    double sa, sb;
+    if (beta == 0.0) {
+      if (!(alpha > 0.0)) continue;
+      sa = 0.0;
+      sb = l;
+    } else {
+      const double s0 = -alpha / beta;
+      if (beta < 0.0) {
+        sa = 0.0;
+        sb = l < s0 ? l : s0;
+      } else {
+        sa = s0 > 0.0 ? s0 : 0.0;
+        sb = l;
+      }
+      if (!(sb > sa)) continue;
+    }
+    const double off = (side == 0 ? 1.0 : -1.0) * B / 2;
+    for (int n = 0; n < m; ++n) {
+      t[n] = yb[n] - off;
+      p_lin[n] = alpha + beta * s_pt[n];
+      xa[n] = s_pt[n] - sa;
+      xe[n] = s_pt[n] - sb;
+    }
+    subsoil_side_block_(T, m, t, xa, xe, p_lin, beta, acc);
+    if (P) subsoil_side_block_(P, m, t, xa, xe, p_lin, beta, accp);
+  }
+  for (int n = 0; n < m; ++n)
+    for (int k = 0; k < T->n_depths; ++k) sigma_out[n * T->n_depths + k] = acc[k * SUBSOIL_BLOCK + n];
+  if (P)
+    for (int n = 0; n < m; ++n)
+      for (int k = 0; k < P->n_depths; ++k) p_out[n * P->n_depths + k] = accp[k * SUBSOIL_BLOCK + n];
 }
 
 #endif

@@ -14,9 +14,11 @@ from .cache import (
     digest,
     file_lock,
     find_compiler,
+    native_cflags,
     require_compiler,
     set_require_compiled,
 )
 
 __all__ = ["BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required",
-           "compiler", "digest", "file_lock", "find_compiler", "require_compiler", "set_require_compiled"]
+           "compiler", "digest", "file_lock", "find_compiler", "native_cflags", "require_compiler",
+           "set_require_compiled"]

@@ -46,9 +46,10 @@ import casadi as ca
 
 from ..foundations.errors import SimulationError
 
-__all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_COMPILER", "BuildSpec", "Built",
-           "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required", "compiler", "digest",
-           "file_lock", "find_compiler", "require_compiler", "set_require_compiled"]
+__all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_NATIVE", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_COMPILER",
+           "BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required",
+           "compiler", "digest",
+           "file_lock", "find_compiler", "native_cflags", "require_compiler", "set_require_compiled"]
 
 log = logging.getLogger("symtrack.toolchain")
 
@@ -60,6 +61,14 @@ CFLAGS_BIG = ("-O1",)
 # interposable, which lets the compiler call them directly (-fPIC alone made the integrator
 # 20 % slower than in the standalone program).
 CFLAGS_SHARED = ("-fPIC", "-fvisibility=hidden", "-DGCC_HASCLASSVISIBILITY")
+# The hot kernels' flags (the terrain engine and tests/test_subsoil.py's check library): -O3
+# -march=native lets gcc turn subsoil.h's loops over the loaded cells into SIMD code with gathers;
+# -ffp-contract=off forbids fused multiply-adds, so every sum is rounded as in the scalar code and the
+# figures do not depend on the machine's instruction set (tests/test_subsoil.py: the SIMD block equals
+# the scalar lookup bit for bit; validation_grid's states, rut and stress fields are bit for bit those of
+# -O2); -fno-math-errno only drops errno writes (sqrt inlined, the same correctly rounded result).
+# Measured on validation_grid with the shear law (docs/terrain.md "The engine's compile flags").
+CFLAGS_NATIVE = ("-O3", "-march=native", "-ffp-contract=off", "-fno-math-errno")
 MAX_JOBS = 2  # compilers at a time (2-core machines)
 NO_COMPILER = "no C compiler found (looked for $CC, cc, gcc)"
 
@@ -204,6 +213,32 @@ def compiler() -> str | None:
                         NO_COMPILER)
             _warned_no_compiler = True
     return cc
+
+
+_native: dict[str, tuple[tuple[str, ...], str]] = {}
+
+
+def native_cflags(cc: str) -> tuple[tuple[str, ...], str]:
+    """``(flags, tag)`` of the hot kernels for compiler ``cc``: :data:`CFLAGS_NATIVE` when ``cc`` takes
+    them, else :data:`CFLAGS_SMALL` with ``-ffp-contract=off``. ``tag`` (for the artefact's key): a
+    digest of the compiler's predefined macros under those flags, i.e. of the instruction sets
+    ``-march=native`` chose, so that a cache shared by machines of different processors (a cluster's
+    home folder) never hands one machine another's code. Probed once per compiler and process."""
+    if cc not in _native:
+        flags: tuple[str, ...] = CFLAGS_NATIVE
+        try:
+            res = subprocess.run([cc, *flags, "-dM", "-E", "-x", "c", os.devnull], stdout=subprocess.PIPE,
+                                 stderr=subprocess.DEVNULL, timeout=60)
+            ok = res.returncode == 0
+        except (OSError, subprocess.SubprocessError):
+            ok = False
+        if not ok:
+            flags = (*CFLAGS_SMALL, "-ffp-contract=off")
+            res = subprocess.run([cc, *flags, "-dM", "-E", "-x", "c", os.devnull], stdout=subprocess.PIPE,
+                                 stderr=subprocess.DEVNULL, timeout=60)
+        macros = b"\n".join(sorted(res.stdout.splitlines()))
+        _native[cc] = (flags, digest(" ".join(flags), macros))
+    return _native[cc]
 
 
 def require_compiler(what: str) -> str:

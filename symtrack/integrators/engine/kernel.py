@@ -19,7 +19,7 @@ import numpy as np
 
 from ...foundations.errors import SimulationError
 from ...native.grid_engine_model import soil_dispatch_c
-from ...toolchain import BuildSpec, build, casadi_tag, compiler, digest
+from ...toolchain import BuildSpec, build, casadi_tag, compiler, digest, native_cflags
 from .state import EngineState, EngineStruct
 
 __all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library"]
@@ -50,7 +50,8 @@ def library(fns):
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
     qsrc = resources.files("symtrack.native").joinpath("terrain_query.h").read_bytes()
     dsrc = soil_dispatch_c(fns.n_soils, fns.layout).encode()
-    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dsrc, casadi_tag(BUILD_VERSION))
+    flags, target = native_cflags(cc)
+    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dsrc, casadi_tag(BUILD_VERSION), target)
 
     def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-enginegen-") as scratch:
@@ -65,7 +66,7 @@ def library(fns):
                 "engine_soils.inc": dsrc}
 
     so = build(BuildSpec(kind="engine", key=key, output="libsymtrack_engine.so", sources=sources,
-                         what="the terrain engine"), cc)
+                         what="the terrain engine", cflags=flags), cc)
     lib = ctypes.CDLL(str(so))
     P = ctypes.POINTER(EngineStruct)
     dp, ll = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong)

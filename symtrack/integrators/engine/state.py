@@ -12,6 +12,7 @@ import numpy as np
 from ...foundations.errors import SimulationError
 from ...native.grid_engine_model import NA, NGEO, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
 from ...terrain import subsoil
+from ...terrain.settings import MAX_SUBSOIL_DEPTHS
 from ...terrain.world import END_STRIP_CELLS, padding_m
 from ..settings import POWER_MODES, EngineSettings, window_substeps
 
@@ -233,6 +234,8 @@ class EngineState:
         for k, v in self.stats.items():
             setattr(e, k, v)
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
+        if e.n_depths > MAX_SUBSOIL_DEPTHS:  # subsoil.h's SUBSOIL_MAX_DEPTHS (the scenario's limit)
+            raise SimulationError(f"{e.n_depths} subsoil depths: the engine takes at most {MAX_SUBSOIL_DEPTHS}")
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
         e.subsoil_p = (ctypes.addressof(self._subsoil_p_c) if self._subsoil_p_c is not None and self.subsoil is not None
                        and self.compute_density else None)
