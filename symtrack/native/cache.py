@@ -6,7 +6,10 @@ of :mod:`symtrack.native.generate`, hashes them (SHA-256 of the serialised Funct
 ``<cache>/<prefix>_<file>-<hash>-b<BUILD_VERSION>/lib<prefix>_<file>.so`` once (the cache, its lock,
 its atomic writes and the compiler are :mod:`symtrack.toolchain`'s). The sources are taken from the
 repository's ``generated/`` if its manifest has the same hash, or generated afresh (an installed
-package, or a model that differs from the committed sources).
+package, or a model that differs from the committed sources). A model whose tracks' quadrature
+is large is compiled from its :attr:`~symtrack.model.SystemModel.codegen_twin`, which sums that
+quadrature by one call node (``ModelOptions.quadrature_call``; docs/codegen.md, "Large
+quadratures"); the key hashes the serialised Functions, so the two forms never share a library.
 
 Without a C compiler everything runs on CasADi's interpreter with the same Functions (a warning
 once; an error with ``--require-compiled``: :func:`symtrack.toolchain.set_require_compiled`).
@@ -53,7 +56,9 @@ def interpreter_only():
 class Library:
     """The generated Functions of one model (prefix = its terrain's name), built, compiled and
     loaded file by file (symtrack.native.generate.GROUPS) on first use, so that a simulation pays only
-    for what it calls; interpreted when compiled code is not wanted or there is no compiler."""
+    for what it calls; interpreted when compiled code is not wanted or there is no compiler (then
+    from the model itself, else from its ``codegen_twin``: ``interpreted_f`` of a compiled library
+    with a large quadrature evaluates the call node on CasADi's interpreter)."""
 
     def __init__(self, model, compiled: bool = True):
         self.model, self.prefix, self.want_compiled = model, model.terrain.name, compiled
@@ -69,11 +74,13 @@ class Library:
     def load(self, group: str) -> None:
         if group in self.paths:
             return
-        gen = build_functions(self.model, self.prefix, (group,))
+        cc = compiler() if self.want_compiled else None
+        # generated C gets the model's twin with a large quadrature as one call node (its code does
+        # not grow with the points); the interpreter the expanded model (a call node is slow there)
+        gen = build_functions(self.model if cc is None else self.model.codegen_twin, self.prefix, (group,))
         stem = f"{self.prefix}_{group}"
         interp = {f.name(): f for f in gen.functions()}
         path = None
-        cc = compiler() if self.want_compiled else None
         if cc is not None:
             path = build(BuildSpec(kind=stem, key=gen.file_hash(stem), output=f"lib{stem}.so",
                                    sources=lambda: generated_sources(gen, stem), what=f"the model functions {stem}",
