@@ -16,9 +16,13 @@ from conftest import run_once
 
 from symtrack.foundations.errors import ScenarioError
 from symtrack.integrators import registry
+from symtrack.integrators.grid_rosenbrock import grid_library
 from symtrack.integrators.settings import IntegratorSettings
 from symtrack.model import ModelOptions, SystemModel, vehicle
+from symtrack.model.system import PARAM_NAMES
+from symtrack.model.vehicle import VEHICLE_STATES, codegen_options
 from symtrack.native import cache as compiled
+from symtrack.native.grid_rosenbrock import build as build_step
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
@@ -135,3 +139,26 @@ def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures():
     got, ref = summarise(runs["rosenbrock"]), summarise(runs["cvodes"])
     for k in figures:
         assert got[k] == pytest.approx(ref[k], rel=1e-6, abs=1e-12), k
+
+
+@needs_cc
+@pytest.mark.slow
+def test_the_compiled_grid_rosenbrock_takes_the_call_node_and_matches_the_expanded_step():
+    opts = load_scenario("validation", list(REFINED)).model
+    assert n_calls(build_step(codegen_options(opts), 4, 1)["vehicle_F"]) == 2
+    assert n_calls(build_step(opts, 4, 1)["vehicle_F"]) == 0
+    f, is_compiled = grid_library(opts, 4, 1)
+    fi, _ = grid_library(opts, 4, 1, compiled=False)  # the interpreter's: expanded
+    assert is_compiled and f.class_name() == "External"
+    P = {**vehicle_preset("reference_crawler"), **soil_preset("sandy_loam_15")}
+    p = [float(P[k]) for k in PARAM_NAMES] + [0.25, 0.1]  # the terrain's globals: cell size, end strip (m)
+    p += [0.0] * (fi.size1_in(3) - len(p))  # no channel loaded
+    w = np.zeros(fi.size1_in(1))
+    for name, v in (("u_m_s", 2.0), ("v_m_s", 0.05), ("yaw_rate_rad_s", 0.3), ("omega_left_rad_s", 4.5),
+                    ("omega_right_rad_s", 7.5), ("shear_left_m", -0.02), ("shear_right_m", 0.05)):
+        w[VEHICLE_STATES.index(name)] = v
+    args = [np.full(8, 1e-3), w, [3000.0, 5000.0], p, 1e-3]
+    got, ref = ([np.array(v).ravel() for v in g(*args)] for g in (f, fi))
+    assert np.abs(ref[1] - w).max() > 1e-4  # the step moved the vehicle
+    for a, b in zip(got, ref, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-14)

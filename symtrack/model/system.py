@@ -31,7 +31,6 @@ holds no numbers except true constants and the numerical options of :class:`Mode
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 
 import casadi as ca
@@ -42,7 +41,7 @@ from .homogeneous import HomogeneousTerrain
 from .layout import VehicleState
 from .options import ModelOptions
 from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
-from .vehicle import quadrature_is_mapped
+from .vehicle import codegen_options
 from .vehicle3d import ContactTerrain, make_vehicle
 
 __all__ = ["PARAM_NAMES", "SystemModel"]
@@ -151,12 +150,12 @@ class SystemModel:
     @functools.cached_property
     def codegen_twin(self) -> SystemModel:
         """The model to generate C from: this one, or, when its tracks' quadrature is large
-        (:func:`~symtrack.model.vehicle.quadrature_is_mapped` with ``quadrature_call``), the same
+        (:func:`~symtrack.model.vehicle.codegen_options`), the same
         vehicle and terrain with ``ModelOptions.quadrature_call`` set: the same Functions (names,
         signatures, values) with the quadrature summed by one call node, whose C does not grow with
         the points. Not for CasADi's interpreter (CVODES, IDAS): it evaluates a call node slowly."""
-        twin_opts = dataclasses.replace(self.opts, quadrature_call=True)
-        if self.opts.quadrature_call or not quadrature_is_mapped(twin_opts):
+        twin_opts = codegen_options(self.opts)
+        if twin_opts == self.opts:
             return self
         return SystemModel(twin_opts, self.terrain, self.vehicle)
 

@@ -11,6 +11,8 @@ marked as such; see MODEL.md for their sources.
 
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 
@@ -20,8 +22,9 @@ from .options import SHEAR_LAWS, ModelOptions
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
            "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SOIL_PARAMS_USED", "TRACKS",
-           "VEHICLE_STATES", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes", "internal_resistance_N",
-           "lateral_resistance_max_N", "lateral_shear_rates", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
+           "VEHICLE_STATES", "codegen_options", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes",
+           "integrate_track", "internal_resistance_N", "lateral_resistance_max_N", "lateral_shear_rates",
+           "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
            "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # Standard gravity (a true constant: CGPM 1901).
@@ -281,6 +284,13 @@ def quadrature_points(opts: ModelOptions) -> int:
 def quadrature_is_mapped(opts: ModelOptions) -> bool:
     """Whether a model of these options sums its tracks' quadrature by a call node."""
     return opts.quadrature_call and quadrature_points(opts) > INLINE_QUADRATURE_MAX_POINTS
+
+
+def codegen_options(opts: ModelOptions) -> ModelOptions:
+    """The options to generate C from: ``opts`` with ``quadrature_call`` set when that makes its
+    quadrature a call node (:func:`quadrature_is_mapped`), else ``opts`` itself (the same code)."""
+    mapped = dataclasses.replace(opts, quadrature_call=True)
+    return mapped if quadrature_is_mapped(mapped) else opts
 
 
 def integrate_track(integrand, nodes, rule, q: dict, opts: ModelOptions):
