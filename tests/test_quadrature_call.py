@@ -99,7 +99,9 @@ def test_cvodes_and_idas_with_a_large_quadrature_build_the_expanded_form():
 def test_the_compiled_twin_has_its_own_cache_key_and_matches_the_expanded_model(tmp_path, monkeypatch):
     monkeypatch.setenv("SYMTRACK_CACHE", str(tmp_path))
     m = SystemModel(load_scenario("validation", list(REFINED)).model)
-    lib = compiled.library(m)
+    assert compiled.library(m).source is m  # the compiled CVODES/IDAS: expanded
+    lib = compiled.library(m, quadrature_call=True)  # the compiled Rosenbrock's
+    assert lib.source is m.codegen_twin
     lib.load("dae")
     assert lib.compiled
     gen_twin, gen_expanded = lib.gens["dae"], compiled.build_functions(m, "homogeneous", ("dae",))
@@ -134,7 +136,8 @@ def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures():
                          ("cvodes", ["run.reltol=1e-10", "run.abstol=1e-12"])):
         runs[integ] = run_once(load_scenario("validation", [*REFINED, f"run.integrator={integ}", *extra]), m)
     assert runs["rosenbrock"].stats["compiled"]
-    step = compiled.library(m).gens["rosenbrock"].function("homogeneous_rosenbrock_step")  # what the run used
+    lib = compiled.library(m, quadrature_call=True)  # the run's (one Library per model and mode)
+    step = lib.gens["rosenbrock"].function("homogeneous_rosenbrock_step")
     assert n_calls(step) > 0 and step.n_instructions() < 20_000  # the call node (expanded: about 300,000)
     got, ref = summarise(runs["rosenbrock"]), summarise(runs["cvodes"])
     for k in figures:

@@ -111,9 +111,11 @@ class ModelOptions:
         more than ``symtrack.model.vehicle.INLINE_QUADRATURE_MAX_POINTS`` points is summed by one
         mapped CasADi Function called from the SX graph as a single node instead of being expanded,
         so that the generated C does not grow with the points (issue 26 item 3). Set only by the
-        builders of generated C (:mod:`symtrack.native.cache`, the grid Rosenbrock) on their own
-        copy of the model; CVODES, IDAS, trim and the MPC keep the expanded form, since CasADi's
-        virtual machine evaluates a call node about 50 x slower (docs/codegen.md).
+        builders of the fixed-step integrators' C (the compiled Rosenbrock: ``symtrack.native.cache.
+        library(model, quadrature_call=True)``; the grid Rosenbrock) on their own copy of the model;
+        CVODES, IDAS (interpreted or ``run.compiled``), trim and the MPC keep the expanded form: CasADi's
+        virtual machine evaluates a call node slowly, and its Jacobian at every Newton setup made even
+        the compiled CVODES slower than the interpreted expanded one (docs/codegen.md).
     """
 
     traction_sign: str = "smooth"

@@ -262,7 +262,7 @@ def _creep_integrand(s, q: dict, opts: ModelOptions):
 
 # Quadratures of more points per track than this are summed by one mapped CasADi Function, called
 # from the SX graph as a single node, when the model is built for generated C
-# (ModelOptions.quadrature_call, set by the compiled builders: symtrack.native.cache): the
+# (ModelOptions.quadrature_call, set by the fixed-step integrators' builders of C): the
 # generated code then stays the same size whatever the quadrature, so a refined variant (a 64 x 5
 # reference rule: 320 points) compiles in seconds, where its expanded Rosenbrock step of ~300,000
 # instructions took minutes of gcc (issue 26 item 3; docs/codegen.md). Up to this many the sum is
