@@ -146,7 +146,7 @@ def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures():
 
 @needs_cc
 @pytest.mark.slow
-def test_the_compiled_grid_rosenbrock_takes_the_call_node_and_matches_the_expanded_step():
+def test_the_compiled_grid_step_takes_the_call_node_and_equals_the_expanded_one():
     opts = load_scenario("validation", list(REFINED)).model
     assert n_calls(build_step(codegen_options(opts), 4, 1)["vehicle_F"]) == 2
     assert n_calls(build_step(opts, 4, 1)["vehicle_F"]) == 0
