@@ -58,7 +58,8 @@ def _point(model):
     ModelOptions(lateral_law="creep", lateral_split=False, lateral_segments=64, gauss_points=5),
     # the split rule (its nodes move with the state): 6 x 10 = 60 points
     ModelOptions(lateral_law="shear", shear_points=10, shear_strength_pressure="local"),
-], ids=["shear_quasistatic-local", "shear", "creep", "shear-split"])
+    ModelOptions(vehicle="3d", lateral_split=False, lateral_segments=64, gauss_points=5),  # its shear_forces
+], ids=["shear_quasistatic-local", "shear", "creep", "shear-split", "3d"])
 def test_the_mapped_sum_and_its_jacobian_equal_the_expanded_ones(opts):
     expanded = SystemModel(opts)
     mapped = expanded.codegen_twin
@@ -80,6 +81,10 @@ def test_the_default_quadrature_stays_expanded_and_the_flag_is_no_scenario_key()
     assert m.codegen_twin is m and n_calls(m.dae) == 0
     assert SystemModel(ModelOptions()).codegen_twin.opts.quadrature_call is False  # 24 points: expanded
     assert not vehicle.quadrature_is_mapped(ModelOptions(quadrature_call=True))
+    # the 3D vehicle's creep law sums over its contact segments, not this quadrature: no twin
+    refined_3d_creep = ModelOptions(vehicle="3d", lateral_law="creep", lateral_split=False, lateral_segments=64,
+                                    gauss_points=5)
+    assert vehicle.codegen_options(refined_3d_creep) == refined_3d_creep
     with pytest.raises(ScenarioError, match="quadrature_call"):
         load_scenario("validation", ["model.quadrature_call=true"])
     assert "quadrature_call" not in load_scenario("validation", list(REFINED)).to_dict()["model"]

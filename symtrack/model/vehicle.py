@@ -275,9 +275,12 @@ _MAPPED: dict = {}
 
 def quadrature_points(opts: ModelOptions) -> int:
     """The points per track of the tracks' quadrature under these options (the shear laws' split
-    rule, or the composite rule lateral_segments x gauss_points)."""
+    rule, or the composite rule lateral_segments x gauss_points; 0 for the 3D vehicle's creep law,
+    which sums over its contact segments instead: symtrack.model.vehicle3d)."""
     if opts.lateral_law in SHEAR_LAWS and opts.lateral_split:
         return 6 * opts.shear_points
+    if opts.lateral_law not in SHEAR_LAWS and opts.vehicle == "3d":
+        return 0
     return opts.lateral_segments * opts.gauss_points
 
 
