@@ -78,6 +78,9 @@ SLOW_S = {
     # issue 26 item 2 (load 3: 26 + 25 s, halved as a serial estimate)
     "tests/test_outputs.py::test_the_default_writes_the_figures_read_first_and_the_report_says_what_it_left_out": 13,
     "tests/test_outputs.py::test_all_figures_writes_the_animations_and_every_pass_plots": 12,
+    # issue 26 item 3 (load 2-3: 52 + 17 s, halved as a serial estimate)
+    "tests/test_quadrature_call.py::test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures": 26,
+    "tests/test_quadrature_call.py::test_the_compiled_grid_step_takes_the_call_node_and_equals_the_expanded_one": 9,
 }
 
 

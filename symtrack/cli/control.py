@@ -53,13 +53,12 @@ def linearize_command(args) -> int:
 
 def linearize_model_options(overrides):
     """The model options of ``symtrack linearize`` from its ``--set model.KEY=VALUE`` overrides (the
-    ``[model]`` keys of a scenario: any :class:`~symtrack.model.ModelOptions` field, e.g.
+    ``[model]`` keys of a scenario: any :class:`~symtrack.model.ModelOptions` field but its build flags, e.g.
     ``model.lateral_law=shear``); the package's defaults for the rest."""
-    import dataclasses
-
     from ..foundations.config import apply_overrides, check_keys
     from ..foundations.errors import ParameterError, ScenarioError
     from ..model import ModelOptions
+    from ..model.options import scenario_keys
 
     doc = apply_overrides({}, list(overrides or []))
     other = sorted(set(doc) - {"model"})
@@ -67,7 +66,7 @@ def linearize_model_options(overrides):
         raise ScenarioError(f"symtrack linearize --set: section(s) {', '.join(other)} not allowed; allowed: model "
                             "(the soil and vehicle are --soil and --vehicle)")
     table = doc.get("model", {})
-    check_keys("model", table, [f.name for f in dataclasses.fields(ModelOptions)])
+    check_keys("model", table, scenario_keys())
     try:
         return ModelOptions(**table)
     except ParameterError as err:

@@ -66,7 +66,7 @@ from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_document, check_keys, integer, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators.settings import EngineSettings
-from ..model.options import ModelOptions
+from ..model.options import ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets import soil_preset, vehicle_preset
 from ..simulation.scenario import RunSettings, parse_engine, parse_params, parse_run, parse_terrain
@@ -229,7 +229,7 @@ def _mpc(t: dict) -> MPCSettings:
 
 
 def _model(t: dict) -> ModelOptions:
-    _keys("model", t, [f.name for f in dataclasses.fields(ModelOptions)])
+    _keys("model", t, scenario_keys())
     try:
         return ModelOptions(**t)
     except (ParameterError, TypeError) as err:

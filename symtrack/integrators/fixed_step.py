@@ -49,7 +49,8 @@ class FixedStepper:
 
     def __init__(self, model, settings):
         self.model, self.settings = model, settings
-        self.lib = library(model)
+        # a large track quadrature as one call node: seconds of gcc, not minutes (docs/codegen.md)
+        self.lib = library(model, quadrature_call=True)
         self.method = FIXED_STEP_METHOD
         self.sizes = CHUNK_SIZES
         self.chunk = {n: Chunk(self.lib.f(f"{FIXED_STEP_METHOD}_chunk{n}"), n, model) for n in CHUNK_SIZES}

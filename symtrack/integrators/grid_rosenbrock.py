@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import SimulationError
+from ..model.vehicle import codegen_options
 from ..native.grid_rosenbrock import build as build_step
 from ..terrain.channels import NF, NG
 from ..toolchain import BuildSpec, build, casadi_tag, compiler, digest
@@ -45,12 +46,11 @@ MAX_STEP_S = 0.000625
 
 def grid_library(opts, n_channels: int, n_steps: int, compiled: bool = True):
     """(Function, compiled?) of ``grid_rosenbrock`` for n_channels channels and n_steps steps per call."""
-    f = build_step(opts, n_channels, n_steps)["multi"]
-    if not compiled:
-        return f, False
-    cc = compiler()
+    cc = compiler() if compiled else None
     if cc is None:
-        return f, False
+        return build_step(opts, n_channels, n_steps)["multi"], False
+    # generated C: a large track quadrature as one call node (symtrack.model.vehicle.codegen_options)
+    f = build_step(codegen_options(opts), n_channels, n_steps)["multi"]
 
     def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-gridgen-") as scratch:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from ..foundations.errors import ParameterError
@@ -17,6 +18,8 @@ LATERAL_LAW_ALIASES = {"shear_transient": "shear"}
 SHEAR_STRENGTH_PRESSURES = ("mean", "local")
 SLIDING_SIGNS = ("displacement", "velocity")
 VEHICLES = ("planar", "3d")  # ModelOptions.vehicle
+# the ModelOptions fields that the builders set on their own copy of a model, not scenario keys
+BUILD_FLAGS = ("quadrature_call",)
 
 
 @dataclass(frozen=True)
@@ -104,6 +107,15 @@ class ModelOptions:
         algebraic loop is solved inside the expression: one fixed-point step from a = 0, then this
         many Newton steps on the 2x2 system; the DAE form (IDAS) solves it with algebraic
         variables. tests/test_vehicle.py measures the residual.
+    quadrature_call: (a build flag, not a scenario key: :data:`BUILD_FLAGS`) a track quadrature of
+        more than ``symtrack.model.vehicle.INLINE_QUADRATURE_MAX_POINTS`` points is summed by one
+        mapped CasADi Function called from the SX graph as a single node instead of being expanded,
+        so that the generated C does not grow with the points (issue 26 item 3). Set only by the
+        builders of the fixed-step integrators' C (the compiled Rosenbrock: ``symtrack.native.cache.
+        library(model, quadrature_call=True)``; the grid Rosenbrock) on their own copy of the model;
+        CVODES, IDAS (interpreted or ``run.compiled``), trim and the MPC keep the expanded form: CasADi's
+        virtual machine evaluates a call node slowly, and its Jacobian at every Newton setup made even
+        the compiled CVODES slower than the interpreted expanded one (docs/codegen.md).
     """
 
     traction_sign: str = "smooth"
@@ -127,6 +139,7 @@ class ModelOptions:
     soil_law: str = DEFAULT_SOIL_LAW
     vehicle: str = "planar"
     contact_segments: int = 8
+    quadrature_call: bool = False
 
     def __post_init__(self):
         if isinstance(self.lateral_law, str) and self.lateral_law in LATERAL_LAW_ALIASES:
@@ -150,7 +163,7 @@ class ModelOptions:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and v > 0):
                 raise ParameterError(f"model.{name} = {v!r} must be a number > 0")
-        for name in ("lateral_shear_cap", "lateral_split"):
+        for name in ("lateral_shear_cap", "lateral_split", "quadrature_call"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"model.{name} = {getattr(self, name)!r} must be true or false")
         for name, lo, hi in (("lateral_segments", 1, 64), ("gauss_points", 1, 16), ("shear_points", 1, 16),
@@ -159,3 +172,9 @@ class ModelOptions:
             v = getattr(self, name)
             if not (isinstance(v, int) and lo <= v <= hi):
                 raise ParameterError(f"model.{name} = {v!r} must be an integer in [{lo}, {hi}]")
+
+
+def scenario_keys() -> list[str]:
+    """The ModelOptions fields a scenario's [model] table (or ``--set model.*``) may set: all but
+    the :data:`BUILD_FLAGS`."""
+    return [f.name for f in dataclasses.fields(ModelOptions) if f.name not in BUILD_FLAGS]

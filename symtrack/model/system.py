@@ -41,6 +41,7 @@ from .homogeneous import HomogeneousTerrain
 from .layout import VehicleState
 from .options import ModelOptions
 from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
+from .vehicle import codegen_options
 from .vehicle3d import ContactTerrain, make_vehicle
 
 __all__ = ["PARAM_NAMES", "SystemModel"]
@@ -145,6 +146,18 @@ class SystemModel:
         x, u, p, y = self.x, self.u, self.p, self._y_expr
         return ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x), ca.jacobian(y, u)],
                            ["x", "u", "p"], ["C", "D"], {"cse": True})
+
+    @functools.cached_property
+    def codegen_twin(self) -> SystemModel:
+        """The model to generate C from: this one, or, when its tracks' quadrature is large
+        (:func:`~symtrack.model.vehicle.codegen_options`), the same
+        vehicle and terrain with ``ModelOptions.quadrature_call`` set: the same Functions (names,
+        signatures, values) with the quadrature summed by one call node, whose C does not grow with
+        the points. Not for CasADi's interpreter (CVODES, IDAS): it evaluates a call node slowly."""
+        twin_opts = codegen_options(self.opts)
+        if twin_opts == self.opts:
+            return self
+        return SystemModel(twin_opts, self.terrain, self.vehicle)
 
     @property
     def nx(self):

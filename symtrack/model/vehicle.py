@@ -11,6 +11,8 @@ marked as such; see MODEL.md for their sources.
 
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 
@@ -20,8 +22,9 @@ from .options import SHEAR_LAWS, ModelOptions
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
            "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SOIL_PARAMS_USED", "TRACKS",
-           "VEHICLE_STATES", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes", "internal_resistance_N",
-           "lateral_resistance_max_N", "lateral_shear_rates", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
+           "VEHICLE_STATES", "codegen_options", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes",
+           "integrate_track", "internal_resistance_N", "lateral_resistance_max_N", "lateral_shear_rates",
+           "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
            "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # Standard gravity (a true constant: CGPM 1901).
@@ -176,7 +179,6 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
         vy = a0 * tread - rz * x_front
     JF_l = a0 * l - a1 * l**2 / 2
 
-    d2 = opts.shear_smoothing_m**2
     # the sliding direction from the track's sliding velocity now: longitudinal r omega - v_k,
     # lateral v + r_z x (per unit tread speed), with the longitudinal sign of seed eq. (1), sign(j)
     # ("shear": the lagged longitudinal slip 2 j / l, seed eq. (2)'s)
@@ -189,24 +191,14 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     else:
         sgn_ax = traction_sign(j, opts) * ax
 
-    def field(s):
-        i_y = a0 - a1 * s
-        JF = a0 * s - a1 * s**2 / 2
-        # |j| of an element that entered at the front (moving forward) or at the rear (moving
-        # backward), blended by the direction of motion (at standstill both are large: saturated)
-        j_front = ca.sqrt((i_x * s) ** 2 + JF**2 + d2)
-        j_rear = ca.sqrt((i_x * (l - s)) ** 2 + (JF_l - JF) ** 2 + d2)
-        if opts.shear_strength_pressure == "mean":
-            tau_max = c + N / (b * l) * ca.tan(phi)
-        else:
-            tau_max = c + dist.at(s) * ca.tan(phi)
-        tau = tau_max * (1 - ca.exp(-(fwd * j_front + (1 - fwd) * j_rear) / K))
-        norm = ca.sqrt(ax**2 + i_y**2)
-        return b * tau * sgn_ax / norm, -b * tau * i_y / norm
+    q = {"a0": a0, "a1": a1, "i_x": i_x, "JF_l": JF_l, "fwd": fwd, "K": K, "sgn_ax": sgn_ax, "ax": ax, "b": b,
+         "l": l, "c": c, "phi": phi, "x_front": x_front,
+         **({"N": N} if opts.shear_strength_pressure == "mean" else _distribution_scalars(dist))}
 
     if not opts.lateral_split:
-        nodes = [(sn * l, wn * l) for sn, wn in zip(*gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points),
-                                                     strict=True)]
+        sn, wn = gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points)
+        nodes = [(si * l, wi * l) for si, wi in zip(sn, wn, strict=True)]
+        rule = ((0, l, l, sn, wn),)
     else:
         # features inside the contact: the pivot (i_y = 0) and the zero of j_y
         s_pivot = x_front + vy * rz / (rz**2 + opts.pivot_smoothing_rad_s**2)
@@ -215,19 +207,133 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
         s1 = clip(ca.fmin(s_pivot, s_zero))
         s2 = clip(ca.fmax(s_pivot, s_zero))
         tg, wg = graded_nodes(opts.shear_points, opts.shear_grading)
-        nodes = []
+        nodes, rule = [], []
         for lo, hi in ((0, s1), (s1, s2), (s2, l)):
             half = 0.5 * (hi - lo)
             for t, w in zip(tg, wg, strict=True):
                 nodes.append((lo + half * t, half * w))  # graded towards lo
                 nodes.append((hi - half * t, half * w))  # graded towards hi
-    Fx, Fy, Mz = 0, 0, 0
-    for s, w in nodes:
-        fx, fy = field(s)
-        Fx += w * fx
-        Fy += w * fy
-        Mz += w * (x_front - s) * fy
-    return Fx, Fy, Mz
+            rule += [(lo, half, half, tg, wg), (hi, -half, half, tg, wg)]
+    return integrate_track(_shear_integrand, nodes, rule, q, opts)
+
+
+# the scalars that define a PressureDistribution (its ``at`` reads only these)
+_DIST_FIELDS = ("N", "b", "l", "e_r", "p_mean", "slope", "Lc_front", "Lc_rear")
+
+
+def _distribution_scalars(dist) -> dict:
+    return {f"dist_{k}": getattr(dist, k) for k in _DIST_FIELDS}
+
+
+def _distribution_from(q: dict) -> PressureDistribution:
+    dist = object.__new__(PressureDistribution)
+    for k in _DIST_FIELDS:
+        setattr(dist, k, q[f"dist_{k}"])
+    return dist
+
+
+def _shear_integrand(s, q: dict, opts: ModelOptions):
+    """(f_x, f_y) per unit length at s of the shear law (shear_forces' integrand; q: its scalars)."""
+    a0, a1, i_x, JF_l, fwd, K, b, l, c, phi = (q[k] for k in ("a0", "a1", "i_x", "JF_l", "fwd", "K", "b", "l", "c",
+                                                               "phi"))
+    d2 = opts.shear_smoothing_m**2
+    i_y = a0 - a1 * s
+    JF = a0 * s - a1 * s**2 / 2
+    # |j| of an element that entered at the front (moving forward) or at the rear (moving
+    # backward), blended by the direction of motion (at standstill both are large: saturated)
+    j_front = ca.sqrt((i_x * s) ** 2 + JF**2 + d2)
+    j_rear = ca.sqrt((i_x * (l - s)) ** 2 + (JF_l - JF) ** 2 + d2)
+    if opts.shear_strength_pressure == "mean":
+        tau_max = c + q["N"] / (b * l) * ca.tan(phi)
+    else:
+        tau_max = c + _distribution_from(q).at(s) * ca.tan(phi)
+    tau = tau_max * (1 - ca.exp(-(fwd * j_front + (1 - fwd) * j_rear) / K))
+    norm = ca.sqrt(q["ax"]**2 + i_y**2)
+    return b * tau * q["sgn_ax"] / norm, -b * tau * i_y / norm
+
+
+def _creep_integrand(s, q: dict, opts: ModelOptions):
+    """(0, f_y) per unit length at s of the creep law (vehicle_equations' lateral integrand)."""
+    x_body = q["x_front"] - s
+    line = q["b"] * _distribution_from(q).at(s)
+    return 0, creep_lateral_force(line, q["b"] * q["c"], ca.tan(q["phi"]), q["vy"] + q["rz"] * x_body, q["mu"],
+                                  q["eps_v"], opts)
+
+
+# Quadratures of more points per track than this are summed by one mapped CasADi Function, called
+# from the SX graph as a single node, when the model is built for generated C
+# (ModelOptions.quadrature_call, set by the fixed-step integrators' builders of C): the
+# generated code then stays the same size whatever the quadrature, so a refined variant (a 64 x 5
+# reference rule: 320 points) compiles in seconds, where its expanded Rosenbrock step of ~300,000
+# instructions took minutes of gcc (issue 26 item 3; docs/codegen.md). Up to this many the sum is
+# expanded (the defaults: 24 points of the shear laws, 12 of the creep law; expanded code runs
+# fastest, and CasADi's virtual machine, which CVODES and IDAS use, evaluates a call node slowly).
+# ASSUMED: 48 = twice the default shear rule, a bound with room above the defaults, not a measured optimum.
+INLINE_QUADRATURE_MAX_POINTS = 48
+_MAPPED: dict = {}
+
+
+def quadrature_points(opts: ModelOptions) -> int:
+    """The points per track of the tracks' quadrature under these options (the shear laws' split
+    rule, or the composite rule lateral_segments x gauss_points; 0 for the 3D vehicle's creep law,
+    which sums over its contact segments instead: symtrack.model.vehicle3d)."""
+    if opts.lateral_law in SHEAR_LAWS and opts.lateral_split:
+        return 6 * opts.shear_points
+    if opts.lateral_law not in SHEAR_LAWS and opts.vehicle == "3d":
+        return 0
+    return opts.lateral_segments * opts.gauss_points
+
+
+def quadrature_is_mapped(opts: ModelOptions) -> bool:
+    """Whether a model of these options sums its tracks' quadrature by a call node."""
+    return opts.quadrature_call and quadrature_points(opts) > INLINE_QUADRATURE_MAX_POINTS
+
+
+def codegen_options(opts: ModelOptions) -> ModelOptions:
+    """The options to generate C from: ``opts`` with ``quadrature_call`` set when that makes its
+    quadrature a call node (:func:`quadrature_is_mapped`), else ``opts`` itself (the same code)."""
+    mapped = dataclasses.replace(opts, quadrature_call=True)
+    return mapped if quadrature_is_mapped(mapped) else opts
+
+
+def integrate_track(integrand, nodes, rule, q: dict, opts: ModelOptions):
+    """(sum w f_x, sum w f_y, sum w (x_front - s) f_y) over the nodes (s, w) of integrand(s, q, opts),
+    expanded, or (more than INLINE_QUADRATURE_MAX_POINTS nodes and ``opts.quadrature_call``) one
+    call of a mapped Function of the points. ``rule``: the same nodes as affine images of fixed
+    unit rules, ((a, b, c, t, w), ...) with nodes s = a + b t_i and weights c w_i (a, b, c
+    expressions, t and w sequences of floats): the call takes these few scalars and q, not every
+    node (what the generated C copies into the call per evaluation)."""
+    x_front = q["x_front"]
+    if not (opts.quadrature_call and len(nodes) > INLINE_QUADRATURE_MAX_POINTS):
+        Fx, Fy, Mz = 0, 0, 0
+        for s, w in nodes:
+            fx, fy = integrand(s, q, opts)
+            Fx += w * fx
+            Fy += w * fy
+            Mz += w * (x_front - s) * fy
+        return Fx, Fy, Mz
+    if sum(len(t) for _, _, _, t, _ in rule) != len(nodes):
+        raise ValueError("integrate_track: the rule does not hold the nodes")
+    names = tuple(sorted(q))
+    units = tuple((tuple(map(float, t)), tuple(map(float, w))) for _, _, _, t, w in rule)
+    key = (integrand.__name__, units, names, opts)
+    if key not in _MAPPED:
+        n = len(nodes)
+        s_sym, w_sym = ca.SX.sym("s"), ca.SX.sym("w")
+        q_sym = {k: ca.SX.sym(k) for k in names}
+        fx, fy = integrand(s_sym, q_sym, opts)
+        point = ca.Function(f"{integrand.__name__.strip('_')}_point", [s_sym, w_sym, ca.vertcat(*q_sym.values())],
+                            [ca.vertcat(w_sym * fx, w_sym * fy, w_sym * (q_sym["x_front"] - s_sym) * fy)],
+                            {"cse": True})
+        Q, R = ca.MX.sym("q", len(names)), ca.MX.sym("rule", 3 * len(units))
+        S = ca.horzcat(*(R[3 * g] + R[3 * g + 1] * ca.DM(t).T for g, (t, _) in enumerate(units)))
+        W = ca.horzcat(*(R[3 * g + 2] * ca.DM(w).T for g, (_, w) in enumerate(units)))
+        total = ca.sum2(point.map(n, "serial")(S, W, ca.repmat(Q, 1, n)))
+        _MAPPED[key] = ca.Function(f"{integrand.__name__.strip('_')}_{n}", [Q, R], [total], ["q", "rule"], ["sum"],
+                                   {"never_inline": True})
+    out = _MAPPED[key](ca.vertcat(*(q[k] for k in names)), ca.vertcat(*(v for a, b, c, _, _ in rule
+                                                                        for v in (a, b, c))))
+    return out[0], out[1], out[2]
 
 
 def sprocket_speed_abs(omega, opts: ModelOptions):
@@ -378,15 +484,10 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
             F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
             # Lateral resistance along the track (reconstruction: the velocity-creep law),
             # composite Gauss-Legendre.
-            fy_sum, mz_sum = 0, 0
-            for sn, wn in zip(s_nodes, w_nodes, strict=True):
-                s = sn * l
-                x_body = x_front - s
-                q = b * dist[k].at(s)
-                fy = creep_lateral_force(q, b * c, ca.tan(phi), vy + rz * x_body, mu, eps_v, opts)
-                fy_sum += wn * l * fy
-                mz_sum += wn * l * x_body * fy
-            Fy[k], Mz[k] = fy_sum, mz_sum
+            q = {"x_front": x_front, "b": b, "c": c, "phi": phi, "mu": mu, "vy": vy, "rz": rz, "eps_v": eps_v,
+                 **_distribution_scalars(dist[k])}
+            _, Fy[k], Mz[k] = integrate_track(_creep_integrand, [(sn * l, wn * l) for sn, wn in zip(
+                s_nodes, w_nodes, strict=True)], ((0, l, l, s_nodes, w_nodes),), q, opts)
         # Seed eq. (2): mean shear displacement.
         jdot[k], omdot[k] = sprocket_rates(shear[k], omega[k], abs_om[k], v_track[k], torque[k], F[k], R_in[k], r, l, J)
 

@@ -6,7 +6,13 @@ of :mod:`symtrack.native.generate`, hashes them (SHA-256 of the serialised Funct
 ``<cache>/<prefix>_<file>-<hash>-b<BUILD_VERSION>/lib<prefix>_<file>.so`` once (the cache, its lock,
 its atomic writes and the compiler are :mod:`symtrack.toolchain`'s). The sources are taken from the
 repository's ``generated/`` if its manifest has the same hash, or generated afresh (an installed
-package, or a model that differs from the committed sources).
+package, or a model that differs from the committed sources). ``library(model, quadrature_call=True)``
+(the compiled Rosenbrock's) compiles a model whose tracks' quadrature is large from its
+:attr:`~symtrack.model.SystemModel.codegen_twin`, which sums that quadrature by one call node
+(``ModelOptions.quadrature_call``; docs/codegen.md, "Large quadratures"): seconds of gcc instead of
+minutes. The compiled CVODES/IDAS (``run.compiled``) keep the expanded form: their Jacobian of the
+call node, evaluated at every Newton setup, made the 64 x 5 validation run 1.8 x slower than on the
+interpreter. The key hashes the serialised Functions, so the two forms never share a library.
 
 Without a C compiler everything runs on CasADi's interpreter with the same Functions (a warning
 once; an error with ``--require-compiled``: :func:`symtrack.toolchain.set_require_compiled`).
@@ -35,7 +41,7 @@ BUILD_VERSION = 2
 REPO_GENERATED = Path(__file__).resolve().parents[2] / "generated"
 
 _force_interpreter = False
-_cache: dict[tuple[int, bool], tuple[object, Library]] = {}
+_cache: dict[tuple[int, bool, bool], tuple[object, Library]] = {}
 
 
 @contextlib.contextmanager
@@ -53,14 +59,24 @@ def interpreter_only():
 class Library:
     """The generated Functions of one model (prefix = its terrain's name), built, compiled and
     loaded file by file (symtrack.native.generate.GROUPS) on first use, so that a simulation pays only
-    for what it calls; interpreted when compiled code is not wanted or there is no compiler."""
+    for what it calls; interpreted when compiled code is not wanted or there is no compiler.
+    ``quadrature_call``: compile from the model's ``codegen_twin`` (:attr:`source`; the interpreted
+    fallback without a compiler stays on the expanded model, where a call node would be slow;
+    ``interpreted_f`` of a compiled twin evaluates its call node on CasADi's interpreter)."""
 
-    def __init__(self, model, compiled: bool = True):
+    def __init__(self, model, compiled: bool = True, quadrature_call: bool = False):
         self.model, self.prefix, self.want_compiled = model, model.terrain.name, compiled
+        self.quadrature_call = quadrature_call
         self.functions: dict[str, ca.Function] = {}  # what f() returns: external or interpreted
         self.interpreted: dict[str, ca.Function] = {}
         self.paths: dict[str, Path | None] = {}  # group -> shared library (None: interpreted)
         self.gens: dict = {}  # group -> symtrack.native.generate.Generated
+
+    @property
+    def source(self):
+        """The model whose Functions are compiled: the model, or (``quadrature_call``) its
+        ``codegen_twin`` (the model itself unless its quadrature is large)."""
+        return self.model.codegen_twin if self.quadrature_call else self.model
 
     @property
     def compiled(self) -> bool:
@@ -69,11 +85,11 @@ class Library:
     def load(self, group: str) -> None:
         if group in self.paths:
             return
-        gen = build_functions(self.model, self.prefix, (group,))
+        cc = compiler() if self.want_compiled else None
+        gen = build_functions(self.model if cc is None else self.source, self.prefix, (group,))
         stem = f"{self.prefix}_{group}"
         interp = {f.name(): f for f in gen.functions()}
         path = None
-        cc = compiler() if self.want_compiled else None
         if cc is not None:
             path = build(BuildSpec(kind=stem, key=gen.file_hash(stem), output=f"lib{stem}.so",
                                    sources=lambda: generated_sources(gen, stem), what=f"the model functions {stem}",
@@ -116,13 +132,14 @@ def generated_sources(gen, stem: str) -> dict[str, bytes]:
     return files
 
 
-def library(model, compiled: bool = True) -> Library:
-    """The generated Functions of ``model`` (one Library per model object and mode)."""
+def library(model, compiled: bool = True, quadrature_call: bool = False) -> Library:
+    """The generated Functions of ``model`` (one Library per model object and mode);
+    ``quadrature_call``: a large track quadrature compiled as one call node (:class:`Library`)."""
     compiled = compiled and not _force_interpreter
-    key = (id(model), compiled)
+    key = (id(model), compiled, quadrature_call)
     hit = _cache.get(key)
     if hit is not None and hit[0] is model:
         return hit[1]
-    lib = Library(model, compiled)
+    lib = Library(model, compiled, quadrature_call)
     _cache[key] = (model, lib)
     return lib

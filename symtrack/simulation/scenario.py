@@ -60,7 +60,7 @@ from ..foundations.config import check_document, check_keys, number, read_docume
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
-from ..model.options import ModelOptions
+from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..model.vehicle3d import check_contact, check_terrain
 from ..presets import soil_preset, vehicle_preset
@@ -174,7 +174,7 @@ class Scenario:
     def to_dict(self) -> dict:
         run = {k: v for k, v in dataclasses.asdict(self.run).items() if v is not None and k in SIMULATION_RUN_KEYS}
         d = {"name": self.name, "description": self.description, "run": run,
-             "model": dataclasses.asdict(self.model),
+             "model": {k: v for k, v in dataclasses.asdict(self.model).items() if k not in BUILD_FLAGS},
              "vehicle": {"preset": self.vehicle_preset, **self.vehicle},
              "soil": {"preset": self.soil_preset, **self.soil},
              "start": dataclasses.asdict(self.start),
@@ -227,7 +227,7 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
 
 
 def _parse_model(t: dict) -> ModelOptions:
-    fields = [f.name for f in dataclasses.fields(ModelOptions)]
+    fields = scenario_keys()
     check_keys("model", t, fields)
     try:
         return ModelOptions(**t)
