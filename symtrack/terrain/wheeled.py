@@ -41,12 +41,15 @@ def terrain_soils(terrain: Terrain) -> list[dict]:
     return [dict(terrain.soil)] + [{**terrain.soil, **sp} for _, sp in terrain.soil_table]
 
 
-def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DEFAULT_REACH_M) -> dict:
+def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DEFAULT_REACH_M,
+                 soils=None) -> dict:
     """Drive the machine of ``wheels`` through ``poses`` (n, 3): world (X, Y, psi) of its frame,
     spaced at most a quarter of the cell size apart along the path for the maxima to be sampled.
     Updates ``terrain.sigma_max`` (Pa) and ``terrain.specific_volume`` in place; returns the pass's
     figures: ``subsoil_sigma_z_max_kPa`` and ``bulk_density_max_Mg_per_m3`` per depth, the cells
-    loaded."""
+    loaded. ``soils``: the field's soil parameter sets by soil index (a World's ``soils``: the day's
+    moisture applied); default :func:`terrain_soils`. Each wheel at each pose looks only at the cells
+    of the index window around it (the same cells within ``reach_m`` as over the whole field)."""
     depths = terrain.subsoil_depths_m
     if not depths:
         raise ParameterError("the terrain has no subsoil depths (terrain.subsoil_depths_m is empty)")
@@ -62,9 +65,24 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
         raise ParameterError("wheels is empty: a machine needs at least one wheel")
     g = terrain.grid
     nx, ny = g.shape
-    xc, yc = g.centres(np.arange(nx), np.arange(ny))
-    XC, YC = np.meshgrid(xc, yc, indexing="ij")
-    XC, YC = XC.ravel(), YC.ravel()
+    (x0, y0), dx = g.origin_m, g.cell_m
+
+    def window(wx, wy):
+        """(flat indices, centre x, centre y) of the cells within reach_m of (wx, wy)."""
+        i0 = max(0, int(math.floor((wx - reach_m - x0) / dx)) - 1)
+        i1 = min(nx, int(math.ceil((wx + reach_m - x0) / dx)) + 1)
+        j0 = max(0, int(math.floor((wy - reach_m - y0) / dx)) - 1)
+        j1 = min(ny, int(math.ceil((wy + reach_m - y0) / dx)) + 1)
+        if i0 >= i1 or j0 >= j1:
+            return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0)
+        ii, jj = np.arange(i0, i1), np.arange(j0, j1)
+        xc, yc = g.centres(ii, jj)
+        XC, YC = np.meshgrid(xc, yc, indexing="ij")
+        K = (ii[:, None] * ny + jj[None, :]).ravel()
+        XC, YC = XC.ravel(), YC.ravel()
+        inside = np.hypot(XC - wx, YC - wy) <= reach_m
+        return K[inside], XC[inside], YC[inside]
+
     n_d = len(depths)
     sig = np.zeros((g.n_cells, n_d))
     pm = np.zeros((g.n_cells, n_d))
@@ -72,7 +90,7 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
         c, s = math.cos(psi), math.sin(psi)
         for w in wheels:
             wx, wy = X + c * w.x_m - s * w.y_m, Y + s * w.x_m + c * w.y_m
-            near = np.flatnonzero(np.hypot(XC - wx, YC - wy) <= reach_m)
+            near, nxc, nyc = window(wx, wy)
             if near.size == 0:
                 continue
             ex = wx + c * w.contact.x_m - s * w.contact.y_m
@@ -90,12 +108,12 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
                     fy.append(oy + s * o.contact.x_m + c * o.contact.y_m)
                     ff.append(o.contact.force_kN)
             sz, p = footprint_stress_at_depth(np.concatenate(fx), np.concatenate(fy), np.concatenate(ff),
-                                              XC[near], YC[near], depths, xi)
+                                              nxc, nyc, depths, xi)
             np.maximum.at(sig, near, sz)
             np.maximum.at(pm, near, p)
     loaded = np.flatnonzero(sig.max(axis=1) > 0)
     np.maximum(terrain.sigma_max, (1e3 * sig).astype(np.float32), out=terrain.sigma_max)
-    soils = terrain_soils(terrain)
+    soils = terrain_soils(terrain) if soils is None else soils
     density.pass_update(terrain.specific_volume, (1e3 * pm).astype(np.float32), terrain.soil_index, soils,
                         cells=loaded)
     return {"subsoil_depths_m": list(depths),
