@@ -242,6 +242,17 @@ def test_refusals_on_parsing(change, match):
         towed.parse_towed({**TOWED, **change})
 
 
+def test_example_scenario_loads():
+    """examples/scenarios/multipass_trailer.toml: its cart is what the comments say, and one tonne
+    more on the axle than its tyres carry at 200 kPa is refused, naming the key and the range."""
+    sc = symtrack.load_scenario("examples/scenarios/multipass_trailer.toml")
+    tw = sc.terrain.towed
+    assert tw.wheel_load_kN == 50.0 and tw.contact.force_kN.sum() == pytest.approx(50.0, rel=1e-12)
+    assert tyre.load_capacity_kN(tw.tyre, 200.0) == pytest.approx(58.9 * (200 / 240) ** 0.8, rel=1e-12)
+    with pytest.raises(ScenarioError, match=r"axle_load_kN = 110.0 is outside the allowed range \(0, 101.\d\]"):
+        symtrack.load_scenario("examples/scenarios/multipass_trailer.toml", {"terrain.towed.axle_load_kN": 110.0})
+
+
 def test_refusals_before_the_run():
     t = dict(TOWED)
     del t["drawbar_length_m"]
