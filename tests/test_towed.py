@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import symtrack
+from symtrack.api import IncompleteSimulation
 from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model.parameters import SOIL_PARAMS
 from symtrack.simulation.scenario import scenario_from_dict
@@ -270,3 +271,22 @@ def test_refusals_before_the_run():
     d["soil"]["stress_concentration_factor"] = 2.5
     with pytest.raises(ScenarioError, match=r"stress_concentration_factor = 2.5 is outside the allowed range \[3, 10"):
         symtrack.simulate(scenario_from_dict(d))
+
+
+def test_trailer_pushed_out_of_the_field():
+    """The crawler reversing 1.5 m pushes the aligned trailer straight back, 0.9 m beyond the field's
+    edge: the pass fails with the crawler's part kept (its figures, no towed ones) and no cell loaded
+    by the trailer."""
+    d = _document(TOWED)
+    d["terrain"]["origin_m"] = [-6.9, -3.0]  # the cart's contact reaches -6.0 - 0.37 at the start
+    d["torque"] = [{"t_s": 0.0, "left_N_m": -1500.0, "right_N_m": -1500.0}]
+    d["run"]["stop_after_distance_m"] = 1.5
+    with pytest.raises(IncompleteSimulation, match="pass 1: terrain.towed: the towed axle's wheel") as e:
+        symtrack.simulate(scenario_from_dict(d))
+    r = e.value.result
+    p = r.summary["passes"][0]
+    assert "towed_cells_loaded" not in p and p["distance_m"] > 1.4
+    alone = symtrack.simulate(scenario_from_dict({**d, "terrain": {k: v for k, v in d["terrain"].items()
+                                                                    if k != "towed"}}))
+    for name, a in alone.terrain.arrays().items():
+        assert np.array_equal(a, r.terrain.arrays()[name]), name

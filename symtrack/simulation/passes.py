@@ -22,7 +22,8 @@ compression state; the pass then also has the trailer's figures ``towed_subsoil_
 ``towed_offtracking_max_m``, ``towed_wheel_load_kN``, ``towed_inflation_kPa`` and
 ``towed_bulk_density_max_Mg_per_m3``, and ``crawler_bulk_density_max_Mg_per_m3`` (the field's
 largest after the crawler, before the trailer); ``bulk_density_max_Mg_per_m3`` is the field's after
-both. The subsoil_* figures stay the crawler's. A pass that fails has no towed part.
+both. The subsoil_* figures stay the crawler's. A pass that fails has no towed part; a trailer
+whose wheels would leave the field fails its pass (before loading any cell).
 """
 
 from __future__ import annotations
@@ -139,8 +140,11 @@ def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: 
         if trailer is not None and failure is None:
             if _density_figures(world):
                 extra["crawler_bulk_density_max_Mg_per_m3"] = world.bulk_density_max()
-            extra.update(towed.towed_pass(world.storage, trailer, res.X[:, :3],
-                                          float(world.params["cg_ahead_of_contact_centre_m"]), world.soils, xi))
+            try:
+                extra.update(towed.towed_pass(world.storage, trailer, res.X[:, :3],
+                                              float(world.params["cg_ahead_of_contact_centre_m"]), world.soils, xi))
+            except ScenarioError as err:  # the trailer's path left the field (checked before it loads a cell)
+                failure = loop.IncompleteRun(f"pass {k + 1}: {err}", res)
         study.figures.append({**pass_figures(world, z0, res, world.touched.copy()), **extra})
         study.maps.append(world.storage.copy_z())
         study.runs.append(res)
