@@ -142,7 +142,8 @@ def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: 
                 extra["crawler_bulk_density_max_Mg_per_m3"] = world.bulk_density_max()
             try:
                 extra.update(towed.towed_pass(world.storage, trailer, res.X[:, :3],
-                                              float(world.params["cg_ahead_of_contact_centre_m"]), world.soils, xi))
+                                              float(world.params["cg_ahead_of_contact_centre_m"]), world.soils, xi,
+                                              world.cell_day))
             except ScenarioError as err:  # the trailer's path left the field (checked before it loads a cell)
                 failure = loop.IncompleteRun(f"pass {k + 1}: {err}", res)
         study.figures.append({**pass_figures(world, z0, res, world.touched.copy()), **extra})

@@ -43,7 +43,12 @@ A moisture raster (``[terrain.moisture]``: ``raster`` a .npy file of floats (nx,
 each cell the pixel holding its centre, plus ``compression_ptf`` / ``clay_percent`` as above) gives
 each cell its own water content on a new field: every distinct (soil, water content) pair becomes a
 soil of the field's soil map (at most soil_map.MAX_SOILS), a uniform raster one soil, equal bit for
-bit to the same value given in ``[soil.moisture]`` (folded into soil 0).
+bit to the same value given in ``[soil.moisture]`` (folded into soil 0). A raster of more distinct
+pairs than a soil map holds gives each cell its own day parameters instead
+(:func:`cell_day_parameters`: N, lambda, kappa and sigma_pc per cell, float64, in the world, not in
+the terrain file): the PTFs set only parameters the terrain engine never reads (the compression
+update and the risk figures run in Python at the pass end), so the engine's soils stay the field's
+soils and its speed is unchanged (docs/subsoil.md, "Moisture maps of many values").
 """
 
 from __future__ import annotations
@@ -56,8 +61,8 @@ import numpy as np
 from ..foundations.errors import ParameterError, ScenarioError
 from . import gis
 
-__all__ = ["COMPRESSION_PTFS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
-           "clay_class", "parse_moisture_map", "read_moisture", "split_soils",
+__all__ = ["COMPRESSION_PTFS", "DAY_KEYS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
+           "cell_day_parameters", "clay_class", "distinct_pairs", "parse_moisture_map", "read_moisture", "split_soils",
            "defossez_2003", "saturation_water_content_kg_per_kg", "severiano_2013_precompression_kPa",
            "severiano_2013_suction_kPa"]
 
@@ -247,11 +252,42 @@ def read_moisture(grid, mm: MoistureMap) -> np.ndarray:
     return w.ravel()
 
 
+DAY_KEYS = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa", "precompression_stress_Pa")
+
+
+def distinct_pairs(index: np.ndarray, water: np.ndarray):
+    """(the distinct (soil, water content) pairs (n, 2), each cell's row in them)."""
+    pairs, inverse = np.unique(np.column_stack([index.astype(np.float64), water]), axis=0, return_inverse=True)
+    return pairs, inverse.ravel()
+
+
+def cell_day_parameters(soils, index: np.ndarray, water: np.ndarray, mm: MoistureMap, pairs=None) -> dict:
+    """Each cell's parameters on the day (``DAY_KEYS``, float64 arrays over the cells): the PTFs of
+    ``mm`` at each distinct (soil, water content) pair by :func:`apply_moisture`, so that a cell has
+    bit for bit the numbers a soil of its pair would have. ``soils``: the field's soils before (0 the
+    scenario's), ``index`` each cell's; ``pairs``: :func:`distinct_pairs`' result if already made."""
+    pairs, inverse = distinct_pairs(index, water) if pairs is None else pairs
+    vals = {k: np.empty(len(pairs)) for k in DAY_KEYS}
+    for n, (si, w) in enumerate(pairs):
+        where = f"terrain.moisture (soil {int(si)}, cell water content {float(w)!r})"
+        try:
+            sp = apply_moisture(soils[int(si)], {**mm.ptf, "water_content_kg_per_kg": float(w)}, where)
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
+        for k in DAY_KEYS:
+            vals[k][n] = float(sp[k])
+    bad = np.flatnonzero(~(vals["recompression_index_kappa"] < vals["compression_index_lambda"]))
+    if bad.size:
+        si, w = pairs[bad[0]]
+        raise ScenarioError(f"terrain.moisture (soil {int(si)}, cell water content {float(w)!r}): kappa >= lambda")
+    return {k: v[inverse] for k, v in vals.items()}
+
+
 def split_soils(soils, labels, index: np.ndarray, water: np.ndarray, mm: MoistureMap, max_soils: int):
     """Every distinct (soil, water content) pair of the cells as a soil on its day: (labels, soil
     parameter sets, 1-based index of every cell into them). ``soils``/``labels``: the field's soils
     before (0 the scenario's), ``index`` each cell's. Refuses more than ``max_soils - 1`` pairs."""
-    pairs, inverse = np.unique(np.column_stack([index.astype(np.float64), water]), axis=0, return_inverse=True)
+    pairs, inverse = distinct_pairs(index, water)
     if len(pairs) > max_soils - 1:
         raise ScenarioError(f"terrain.moisture.raster = {mm.raster!r}: {len(pairs)} distinct (soil, water content) "
                             f"pairs; a field has at most {max_soils - 1} besides [soil]: round the raster's values "

@@ -196,21 +196,23 @@ def start_pose(x_m: float, y_m: float, psi: float, cg_ahead_of_contact_centre_m:
 
 
 def towed_pass(terrain: Terrain, towed: Towed, crawler_poses, cg_ahead_of_contact_centre_m: float, soils,
-               xi: float) -> dict:
+               xi: float, cell_params=None) -> dict:
     """The towed axle's pass behind the crawler's poses (n, 3) (X, Y, psi of its CG at the run's
     output times): its path (:func:`axle_path`, poses a quarter cell apart), the field coverage
     checked, then :func:`~symtrack.terrain.wheeled.wheeled_pass` into the terrain's stress record and
     compression state, with the wheel's stress tabulated once per process
     (:func:`~symtrack.terrain.tyre.footprint_table`). Returns wheeled_pass's figures with the
     prefix ``towed_`` and the axle's largest distance inside the hitch's path
-    (``towed_offtracking_max_m``: how far the axle cuts inside on a turn)."""
+    (``towed_offtracking_max_m``: how far the axle cuts inside on a turn). ``cell_params``: the
+    cells' own compression parameters (a World's ``cell_day``; None: their soils')."""
     P = np.asarray(crawler_poses, dtype=float)
     H = hitch_path(P, cg_ahead_of_contact_centre_m, towed)
     A = axle_path(H, towed.drawbar_length_m, float(P[0, 2]), spacing_m=terrain.grid.cell_m / 4)
     check_inside(terrain, towed, A, "terrain.towed")
     _, table = tyre.footprint_table(towed.tyre, towed.wheel_load_kN, towed.inflation_kPa, towed.element_m,
                                     tuple(terrain.subsoil_depths_m), float(xi), 2 * wheeled.DEFAULT_REACH_M)
-    out = wheeled.wheeled_pass(terrain, towed.wheels(), A, xi, soils=soils, tables=[table, table])
+    out = wheeled.wheeled_pass(terrain, towed.wheels(), A, xi, soils=soils, tables=[table, table],
+                               cell_params=cell_params)
     # the hitch's path with the straight line it came along before the pass (the trailer starts aligned)
     off = _offtracking_max(np.concatenate([A[:1, :2], H]), A[:, :2])
     figs = {f"towed_{k}": v for k, v in out.items() if k != "subsoil_depths_m"}

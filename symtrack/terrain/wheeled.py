@@ -42,7 +42,7 @@ def terrain_soils(terrain: Terrain) -> list[dict]:
 
 
 def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DEFAULT_REACH_M,
-                 soils=None, tables=None) -> dict:
+                 soils=None, tables=None, cell_params=None) -> dict:
     """Drive the machine of ``wheels`` through ``poses`` (n, 3): world (X, Y, psi) of its frame,
     spaced at most a quarter of the cell size apart along the path for the maxima to be sampled.
     Updates ``terrain.sigma_max`` (Pa) and ``terrain.specific_volume`` in place; returns the pass's
@@ -53,7 +53,8 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
     ``tables``: one :class:`~symtrack.terrain.tyre.FootprintTable` per wheel (of its contact, the
     terrain's depths and ``xi``): the stress at a cell is then the sum of every wheel's table value
     there (bilinear; 0 beyond a table), tens of microseconds per wheel and pose instead of tens of
-    milliseconds for the direct sum over the contact's elements."""
+    milliseconds for the direct sum over the contact's elements. ``cell_params``: each cell's own
+    compression parameters (:func:`symtrack.terrain.density.pass_update`; a World's ``cell_day``)."""
     depths = terrain.subsoil_depths_m
     if not depths:
         raise ParameterError("the terrain has no subsoil depths (terrain.subsoil_depths_m is empty)")
@@ -144,7 +145,7 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
     np.maximum(terrain.sigma_max, (1e3 * sig).astype(np.float32), out=terrain.sigma_max)
     soils = terrain_soils(terrain) if soils is None else soils
     density.pass_update(terrain.specific_volume, (1e3 * pm).astype(np.float32), terrain.soil_index, soils,
-                        cells=loaded)
+                        cells=loaded, cell_params=cell_params)
     return {"subsoil_depths_m": list(depths),
             "subsoil_sigma_z_max_kPa": [float(v) for v in sig.max(axis=0)],
             "bulk_density_max_Mg_per_m3": density.field_max(terrain.specific_volume, terrain.soil_index, soils),
