@@ -48,7 +48,8 @@ pairs than a soil map holds gives each cell its own day parameters instead
 (:func:`cell_day_parameters`: N, lambda, kappa and sigma_pc per cell, float64, in the world, not in
 the terrain file): the PTFs set only parameters the terrain engine never reads (the compression
 update and the risk figures run in Python at the pass end), so the engine's soils stay the field's
-soils and its speed is unchanged (docs/subsoil.md, "Moisture maps of many values").
+soils and its speed is unchanged (docs/subsoil.md, "Moisture maps of many values"). Up to
+MAX_SOILS - 1 pairs the soil-map path is kept (:func:`split_soils`).
 """
 
 from __future__ import annotations
