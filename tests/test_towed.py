@@ -263,14 +263,19 @@ def test_refusals_before_the_run():
     d["terrain"]["subsoil_depths_m"] = []
     with pytest.raises(ScenarioError, match="terrain.towed needs the subsoil stress"):
         scenario_from_dict(d)
-    # the trailer behind the field's edge at the start: refused before the first pass
+    # the trailer behind the field's edge at the start: refused with the scenario, before anything is built
     d = _document({**TOWED, "drawbar_length_m": 8.0})
     with pytest.raises(ScenarioError, match="terrain.towed at the start: the towed axle's wheel contact reaches"):
-        symtrack.simulate(scenario_from_dict(d))
+        scenario_from_dict(d)
+    d["terrain"].pop("origin_m")  # the field centred on the start (20 m long): the cart fits
+    assert scenario_from_dict(d).terrain.towed.drawbar_length_m == 8.0
+    d["terrain"]["size_m"] = [12.0, 6.0]  # 6 m behind the start: it does not
+    with pytest.raises(ScenarioError, match=r"outside the field x \[-6, 6\]"):
+        scenario_from_dict(d)
     d = _document(TOWED)
     d["soil"]["stress_concentration_factor"] = 2.5
     with pytest.raises(ScenarioError, match=r"stress_concentration_factor = 2.5 is outside the allowed range \[3, 10"):
-        symtrack.simulate(scenario_from_dict(d))
+        scenario_from_dict(d)
 
 
 def test_trailer_pushed_out_of_the_field():

@@ -168,7 +168,7 @@ def _check_towed(scenario, world: World, trailer) -> float:
     st = scenario.start
     pose = towed.start_pose(st.x_m, st.y_m, np.radians(st.yaw_deg), float(world.params["cg_ahead_of_contact_centre_m"]),
                             trailer)
-    towed.check_inside(world.storage, trailer, pose, "terrain.towed at the start")
+    towed.check_inside(world.grid, trailer, pose, "terrain.towed at the start")
     return xi
 
 

@@ -64,9 +64,10 @@ import numpy as np
 from ..foundations.config import check_keys, number
 from ..foundations.errors import ParameterError, ScenarioError
 from . import tyre, wheeled
-from .storage import Terrain
+from .storage import Grid, Terrain
 
-__all__ = ["KEYS", "Towed", "axle_path", "check_inside", "hitch_path", "parse_towed", "towed_pass"]
+__all__ = ["KEYS", "Towed", "axle_path", "check_inside", "check_scenario", "hitch_path", "parse_towed", "start_pose",
+           "towed_pass"]
 
 KEYS = ("axle_load_kN", "wheel_gauge_m", "tyre_width_m", "tyre_diameter_m", "tyre_rated_load_kN",
         "tyre_rated_inflation_kPa", "inflation_kPa", "hitch_behind_track_centre_m", "drawbar_length_m", "element_m")
@@ -167,11 +168,11 @@ def axle_path(hitch_xy, drawbar_length_m: float, theta0: float, spacing_m: float
     return np.column_stack([H[:, 0] - L * np.cos(theta), H[:, 1] - L * np.sin(theta), theta])
 
 
-def check_inside(terrain: Terrain, towed: Towed, poses, where: str) -> None:
-    """Every wheel's contact (its bounding box) inside the field at every axle pose, else a
+def check_inside(grid: Grid, towed: Towed, poses, where: str) -> None:
+    """Every wheel's contact (its bounding box) inside the field ``grid`` at every axle pose, else a
     ScenarioError naming ``where`` and the first pose that leaves it."""
     poses = np.atleast_2d(np.asarray(poses, dtype=float))
-    x0, x1, y0, y1 = terrain.grid.bounds()
+    x0, x1, y0, y1 = grid.bounds()
     c = towed.contact
     hl, hw = 0.5 * c.length_m, 0.5 * c.width_m
     for w in towed.wheels():
@@ -186,6 +187,29 @@ def check_inside(terrain: Terrain, towed: Towed, poses, where: str) -> None:
                                     f"outside the field x [{x0:g}, {x1:g}], y [{y0:g}, {y1:g}] m (axle at "
                                     f"({poses[k, 0]:.3f}, {poses[k, 1]:.3f})): enlarge terrain.size_m or move "
                                     "terrain.origin_m")
+
+
+def check_scenario(settings, start_x_m: float, start_y_m: float, yaw_deg: float, soil: dict,
+                   cg_ahead_of_contact_centre_m: float) -> None:
+    """A scenario's towed load before anything is built: the stress concentration factor of its soil
+    within [3, 10] (the mean normal stress needs xi - 2 >= 1) and, on a new field (no
+    ``initial_state``: a terrain file brings its own geometry, checked before its first pass), the
+    wheels inside the field at the start (the field centred on the start when ``origin_m`` is not
+    given, as the world places it)."""
+    tw = settings.towed
+    xi = float(soil["stress_concentration_factor"])
+    if not 3.0 <= xi <= 10.0:
+        raise ScenarioError(f"terrain.towed: soil.stress_concentration_factor = {xi!r} is outside the allowed range "
+                            "[3, 10] for the towed load's stress (its mean normal stress needs xi - 2 >= 1)")
+    if settings.initial_state is not None:
+        return
+    nx, ny = settings.shape
+    origin = settings.origin_m
+    if origin is None:
+        origin = (start_x_m - 0.5 * nx * settings.cell_m, start_y_m - 0.5 * ny * settings.cell_m)
+    pose = start_pose(start_x_m, start_y_m, math.radians(yaw_deg), cg_ahead_of_contact_centre_m, tw)
+    check_inside(Grid((float(origin[0]), float(origin[1])), float(settings.cell_m), (nx, ny)), tw, pose,
+                 "terrain.towed at the start")
 
 
 def start_pose(x_m: float, y_m: float, psi: float, cg_ahead_of_contact_centre_m: float, towed: Towed) -> np.ndarray:
@@ -208,7 +232,7 @@ def towed_pass(terrain: Terrain, towed: Towed, crawler_poses, cg_ahead_of_contac
     P = np.asarray(crawler_poses, dtype=float)
     H = hitch_path(P, cg_ahead_of_contact_centre_m, towed)
     A = axle_path(H, towed.drawbar_length_m, float(P[0, 2]), spacing_m=terrain.grid.cell_m / 4)
-    check_inside(terrain, towed, A, "terrain.towed")
+    check_inside(terrain.grid, towed, A, "terrain.towed")
     _, table = tyre.footprint_table(towed.tyre, towed.wheel_load_kN, towed.inflation_kPa, towed.element_m,
                                     tuple(terrain.subsoil_depths_m), float(xi), 2 * wheeled.DEFAULT_REACH_M)
     out = wheeled.wheeled_pass(terrain, towed.wheels(), A, xi, soils=soils, tables=[table, table],
