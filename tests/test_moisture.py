@@ -157,12 +157,93 @@ def test_moisture_raster_refusals(tmp_path):
     w[3, 3] = 0.6
     with pytest.raises(ScenarioError, match=r"cell water content 0.6.*water_content_kg_per_kg = 0.6 is outside \[0,"):
         symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w)))
+    # split_soils refuses more pairs than a soil map holds (the world then keeps each cell's own day
+    # parameters instead: test_moisture_raster_of_many_values)
     w = 0.1 + 0.001 * np.arange(48 * 16).reshape(48, 16) / 48
+    mm = M.parse_moisture_map({"raster": "w.npy", "compression_ptf": "defossez_2003_loess"})
     with pytest.raises(ScenarioError, match="distinct .soil, water content. pairs"):
-        symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w)))
+        M.split_soils([SOIL], ["[soil]"], np.zeros(w.size, dtype=np.uint8), w.ravel(), mm, 16)
     with pytest.raises(ScenarioError, match="unknown key"):
         scenario_from_dict({**_doc(DAY), "terrain": {**_doc(DAY)["terrain"], "moisture": {"raster": "w.npy",
                                                                                          "ptf": 1}}})
+
+
+def test_moisture_raster_of_many_values(tmp_path, monkeypatch):
+    """More distinct water contents than a soil map holds: each cell keeps its own day parameters
+    (N, lambda, kappa, sigma_pc) and the engine its one soil. (a) Six values across the field run both
+    ways (soils of a map; per cell, the map's limit lowered to force it): each cell's day parameters
+    equal its map soil's bit for bit (the fold of the same pass's stresses gives the same compression
+    state, the same precompression stress per cell); the engine's numbers agree to 1e-7 of their
+    largest (not bit for bit: the engine's soil-map path sums per soil). (b) Every cell its own
+    value (768): each cell's compression state is the virgin line's closed form at its own water
+    content and the pass's mean normal stress, and the precompression figure the weakest loaded
+    cell's own."""
+    from symtrack.terrain import density, world
+    w6 = np.ones((48, 1)) * np.linspace(0.12, 0.22, 6)[np.arange(16) % 6][None, :]
+    split = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w6, "w6.npy")))
+    ws = split._study.world
+    # (0.20 is [soil.moisture]'s day: folded into soil 0, so five soils besides it)
+    assert len(split.terrain.soil_table) == 5 and ws.cell_day is None
+    monkeypatch.setattr(world, "MAX_SOILS", 2)
+    cell = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w6, "w6.npy")))
+    wc = cell._study.world
+    assert wc.cell_day is not None and not cell.terrain.soil_table and len(wc.soils) == 1
+    assert np.array_equal(wc.precompression_stress_Pa(), ws.precompression_stress_Pa())
+    v = np.zeros_like(split.terrain.specific_volume)
+    density.pass_update(v, ws.pass_p_mean, np.zeros_like(split.terrain.soil_index), wc.soils,
+                        cells=np.flatnonzero(ws.touched), cell_params=wc.cell_day)
+    assert np.count_nonzero(v) > 20 and np.array_equal(v, split.terrain.specific_volume)
+    for name, a in split.terrain.arrays().items():
+        if name != "soil_index":
+            b = cell.terrain.arrays()[name].astype(float)
+            assert np.allclose(a.astype(float), b, rtol=0, atol=1e-7 * max(np.abs(a).max(), 1e-30)), name
+    monkeypatch.undo()
+    # (b) every cell its own water content
+    w = 0.12 + 0.1 * np.arange(48 * 16).reshape(16, 48).T / (48 * 16)  # wetter with y, every cell its own
+    res = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w, "many.npy")))
+    wd = res._study.world
+    assert len(wd.soils) == 1 and not res.terrain.soil_table
+    soil = res.scenario.soil
+    v = res.terrain.specific_volume
+    moved = np.flatnonzero(v.any(axis=1))
+    assert moved.size > 15  # (19: the wetter track of a 0.5 m run)
+    p = wd.pass_p_mean
+    v0 = density.initial_specific_volume(soil)
+    for c in moved:
+        day = M.apply_moisture(soil, {"water_content_kg_per_kg": float(w.ravel()[c]),
+                                      "compression_ptf": "defossez_2003_loess", "clay_percent": 25.0})
+        line = day["virgin_line_N"] - (day["compression_index_lambda"] - day["recompression_index_kappa"]) * \
+            np.log(1e-3 * p[c].astype(np.float64))
+        want = np.where((p[c] > 0) & (line < v0), line, 0.0).astype(np.float32)
+        assert np.array_equal(v[c], want), c
+    loaded = wd.pass_sigma[:, 0] > 0
+    pc = [M.apply_moisture(soil, {"water_content_kg_per_kg": float(x), "clay_percent": 25.0})[
+        "precompression_stress_Pa"] for x in w.ravel()[loaded]]
+    assert res.summary["subsoil_precompression_stress_kPa"] == 1e-3 * min(pc)
+
+
+@pytest.mark.parametrize("ptf, lo, hi", [({"compression_ptf": "defossez_2003_loess", "clay_percent": 25.0}, 0.073, 0.3),
+                                         ({"compression_ptf": "defossez_2003_calcareous"}, 0.05, 0.3),
+                                         ({"clay_percent": 45.0}, 0.106, 0.41)])
+def test_cell_day_parameters_equal_apply_moisture_bit_for_bit(ptf, lo, hi):
+    """The vectorised per-cell PTFs against apply_moisture's scalar ones at 20 000 random water contents
+    (numpy's own pow would differ in the last bit for a few % of them); a value apply_moisture refuses
+    is refused with its message."""
+    soil = {**SOIL, "bulk_density_initial_Mg_per_m3": 1.2}
+    w = np.concatenate([lo + (hi - lo) * np.random.default_rng(5).random(20000), [lo, hi]])
+    mm = M.MoistureMap("w.npy", ptf)
+    day = M.cell_day_parameters([soil], np.zeros(w.size, dtype=np.uint8), w, mm)
+    for k in range(w.size):
+        sp = M.apply_moisture(soil, {**ptf, "water_content_kg_per_kg": float(w[k])})
+        assert all(sp[key] == day[key][k] for key in M.DAY_KEYS), k
+    bad = w.copy()
+    bad[17] = 0.04 if "compression_ptf" in ptf else 0.6
+    where = f"terrain.moisture (soil 0, cell water content {float(bad[17])!r})"
+    with pytest.raises(ParameterError) as want:
+        M.apply_moisture(soil, {**ptf, "water_content_kg_per_kg": float(bad[17])}, where)
+    with pytest.raises(ScenarioError) as got:
+        M.cell_day_parameters([soil], np.zeros(w.size, dtype=np.uint8), bad, mm)
+    assert str(got.value) == str(want.value)
 
 
 def test_moisture_geotiff_must_cover_the_field(tmp_path):

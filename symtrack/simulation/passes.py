@@ -14,6 +14,16 @@ v0; docs/terrain.md "The compaction resistance figure"), ``rut_cells``, ``distan
 pass also has ``bulk_density_max_Mg_per_m3``: the field's largest dry bulk density after the pass
 at each depth of ``subsoil_depths_m`` (docs/subsoil.md "Bulk density"), and the summary has
 ``bulk_density_initial_Mg_per_m3``: the same before the first pass.
+
+With a towed load (``[terrain.towed]``, symtrack/terrain/towed.py) each pass is the crawler's run
+followed by the trailer's wheels along the path it drove, into the same cells' stress record and
+compression state; the pass then also has the trailer's figures ``towed_subsoil_sigma_z_max_kPa``
+(its largest vertical stress per depth), ``towed_cells_loaded``, ``towed_axle_poses``,
+``towed_offtracking_max_m``, ``towed_wheel_load_kN``, ``towed_inflation_kPa`` and
+``towed_bulk_density_max_Mg_per_m3``, and ``crawler_bulk_density_max_Mg_per_m3`` (the field's
+largest after the crawler, before the trailer); ``bulk_density_max_Mg_per_m3`` is the field's after
+both. The subsoil_* figures stay the crawler's. A pass that fails has no towed part; a trailer
+whose wheels would leave the field fails its pass (before loading any cell).
 """
 
 from __future__ import annotations
@@ -22,7 +32,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..terrain import subsoil
+from ..foundations.errors import ScenarioError
+from ..terrain import subsoil, towed
 from ..terrain.world import World
 from . import loop
 from .plants import GridPlant
@@ -112,6 +123,9 @@ def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: 
     world = plant.world
     n = passes if passes is not None else (scenario.terrain.passes if scenario.terrain is not None else 1)
     study = PassStudy(world, [], [], [])
+    trailer = scenario.terrain.towed if scenario.terrain is not None else None
+    if trailer is not None:
+        xi = _check_towed(scenario, world, trailer)
     if world.storage.subsoil_depths_m:
         study.bulk_density_initial = world.bulk_density_max()
     for k in range(n):
@@ -122,7 +136,17 @@ def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: 
             res = loop.run(scenario, plant, progress=progress, label=label)
         except loop.IncompleteRun as err:
             res, failure = err.partial, err  # the failed pass up to where it failed: kept, with its figures
-        study.figures.append(pass_figures(world, z0, res, world.touched.copy()))
+        extra = {}
+        if trailer is not None and failure is None:
+            if _density_figures(world):
+                extra["crawler_bulk_density_max_Mg_per_m3"] = world.bulk_density_max()
+            try:
+                extra.update(towed.towed_pass(world.storage, trailer, res.X[:, :3],
+                                              float(world.params["cg_ahead_of_contact_centre_m"]), world.soils, xi,
+                                              world.cell_day))
+            except ScenarioError as err:  # the trailer's path left the field (checked before it loads a cell)
+                failure = loop.IncompleteRun(f"pass {k + 1}: {err}", res)
+        study.figures.append({**pass_figures(world, z0, res, world.touched.copy()), **extra})
         study.maps.append(world.storage.copy_z())
         study.runs.append(res)
         study.before.append(z0.reshape(world.grid.shape))
@@ -131,6 +155,21 @@ def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: 
             failure.study = study
             raise failure
     return study
+
+
+def _check_towed(scenario, world: World, trailer) -> float:
+    """Before the first pass: the trailer's stress concentration factor (the field's soil 0's,
+    within [3, 10]: the mean normal stress needs xi - 2 >= 1) and its wheels inside the field at the
+    start. Returns xi."""
+    xi = float(world.soils[0]["stress_concentration_factor"])
+    if not 3.0 <= xi <= 10.0:
+        raise ScenarioError(f"terrain.towed: soil.stress_concentration_factor = {xi!r} is outside the allowed range "
+                            "[3, 10] for the towed load's stress (its mean normal stress needs xi - 2 >= 1)")
+    st = scenario.start
+    pose = towed.start_pose(st.x_m, st.y_m, np.radians(st.yaw_deg), float(world.params["cg_ahead_of_contact_centre_m"]),
+                            trailer)
+    towed.check_inside(world.grid, trailer, pose, "terrain.towed at the start")
+    return xi
 
 
 def study_summary(study: PassStudy) -> tuple[dict, list[dict]]:

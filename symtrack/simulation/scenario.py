@@ -65,7 +65,7 @@ from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..model.vehicle3d import check_contact, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
-from ..terrain import moisture
+from ..terrain import moisture, towed
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings, settings_from_dict
 from ..terrain.surface import Surface, parse_surface
@@ -356,6 +356,9 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
         except ParameterError as err:
             raise ScenarioError(f"{err} (a [terrain] section holding only [terrain.surface] gives the 3D vehicle "
                                 "its ground on homogeneous soil)") from err
+    if terrain is not None and terrain.towed is not None:  # (symtrack.terrain.towed; again before the first pass)
+        towed.check_scenario(terrain, start.x_m, start.y_m, start.yaw_deg, soil,
+                             float(vehicle["cg_ahead_of_contact_centre_m"]))
     sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain, engine, surface)
     events = [e.event for e in torque if e.event]
     if run.stop_distance_event is not None and run.stop_distance_event not in events:

@@ -102,12 +102,15 @@ def precompression_stress_kPa(v1, N, lambda_minus_kappa):
 
 
 def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: np.ndarray, soils,
-                cells: np.ndarray | None = None) -> int:
+                cells: np.ndarray | None = None, cell_params: dict | None = None) -> int:
     """Fold one pass into the terrain's state: ``specific_volume`` (n_cells, n_depths) float32
     (0: the soil's initial state), ``pass_p_Pa`` the pass's largest mean normal stress per cell
     and depth (0 where the pass did not load); ``cells``: the cells the pass may have loaded (a
     superset; default: every cell with a stress > 0). In place; returns the number of (cell, depth)
-    entries that moved down the virgin line. Cells not loaded are not touched."""
+    entries that moved down the virgin line. Cells not loaded are not touched. ``cell_params``: each
+    cell's own ``virgin_line_N``, ``compression_index_lambda`` and ``recompression_index_kappa``
+    (float64 arrays over all cells: a moisture map of many values, terrain/moisture.py) instead of its
+    soil's; the initial state (rho_s / rho_initial) stays the soil's."""
     if specific_volume.shape != pass_p_Pa.shape:
         raise ParameterError(f"pass_p_Pa has shape {pass_p_Pa.shape}, the terrain's specific volume "
                              f"{specific_volume.shape}")
@@ -123,8 +126,13 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     p = pass_p_Pa[cells].astype(np.float64)
     old = specific_volume[cells].astype(np.float64)
     v_old = np.where(old > 0, old, a["v0"][si][:, None])
+    if cell_params is None:
+        N, lk = a["N"][si], a["lambda_minus_kappa"][si]
+    else:
+        N = cell_params["virgin_line_N"][cells]
+        lk = cell_params["compression_index_lambda"][cells] - cell_params["recompression_index_kappa"][cells]
     with np.errstate(divide="ignore"):
-        line = a["N"][si][:, None] - a["lambda_minus_kappa"][si][:, None] * np.log(1e-3 * p)
+        line = N[:, None] - lk[:, None] * np.log(1e-3 * p)
     yielded = (p > 0) & (line < v_old)
     rows = np.flatnonzero(yielded.any(axis=1))
     if rows.size:  # only the cells that yielded are written (the others keep their bits)

@@ -43,21 +43,28 @@ A moisture raster (``[terrain.moisture]``: ``raster`` a .npy file of floats (nx,
 each cell the pixel holding its centre, plus ``compression_ptf`` / ``clay_percent`` as above) gives
 each cell its own water content on a new field: every distinct (soil, water content) pair becomes a
 soil of the field's soil map (at most soil_map.MAX_SOILS), a uniform raster one soil, equal bit for
-bit to the same value given in ``[soil.moisture]`` (folded into soil 0).
+bit to the same value given in ``[soil.moisture]`` (folded into soil 0). A raster of more distinct
+pairs than a soil map holds gives each cell its own day parameters instead
+(:func:`cell_day_parameters`: N, lambda, kappa and sigma_pc per cell, float64, in the world, not in
+the terrain file): the PTFs set only parameters the terrain engine never reads (the compression
+update and the risk figures run in Python at the pass end), so the engine's soils stay the field's
+soils and its speed is unchanged (docs/subsoil.md, "Moisture maps of many values"). Up to
+MAX_SOILS - 1 pairs the soil-map path is kept (:func:`split_soils`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 
 import numpy as np
 
 from ..foundations.errors import ParameterError, ScenarioError
 from . import gis
 
-__all__ = ["COMPRESSION_PTFS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
-           "clay_class", "parse_moisture_map", "read_moisture", "split_soils",
+__all__ = ["COMPRESSION_PTFS", "DAY_KEYS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
+           "cell_day_parameters", "clay_class", "distinct_pairs", "parse_moisture_map", "read_moisture", "split_soils",
            "defossez_2003", "saturation_water_content_kg_per_kg", "severiano_2013_precompression_kPa",
            "severiano_2013_suction_kPa"]
 
@@ -247,11 +254,105 @@ def read_moisture(grid, mm: MoistureMap) -> np.ndarray:
     return w.ravel()
 
 
+DAY_KEYS = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa", "precompression_stress_Pa")
+
+
+def distinct_pairs(index: np.ndarray, water: np.ndarray):
+    """(the distinct (soil, water content) pairs (n, 2), each cell's row in them)."""
+    pairs, inverse = np.unique(np.column_stack([index.astype(np.float64), water]), axis=0, return_inverse=True)
+    return pairs, inverse.ravel()
+
+
+# Python's float power elementwise: numpy's own pow differs from the C library's in the last bit for
+# a few % of values (measured: numpy 2.4, x**3 on 1e5 values in [5, 30]: 5 % differ), and the per-cell
+# parameters must equal apply_moisture's scalar ones bit for bit
+_POW = np.frompyfunc(operator.pow, 2, 1)
+
+
+def _pow(x, e):
+    return _POW(np.asarray(x, dtype=np.float64), e).astype(np.float64)
+
+
+def _poly_array(c, x):
+    """:func:`_poly` over an array, in the same order of operations (the same numbers bit for bit)."""
+    acc = 0.0
+    for i, ci in enumerate(c):
+        acc = acc + ci * _pow(x, i)
+    return acc
+
+
+def _day_arrays(soil: dict, w: np.ndarray, ptf: dict, where) -> dict:
+    """:func:`apply_moisture`'s four day parameters over an array of water contents of one soil,
+    vectorised in apply_moisture's order of operations. A value apply_moisture refuses is refused by
+    it (called on the first such value, so the message is the same)."""
+    rb, rs = float(soil["bulk_density_initial_Mg_per_m3"]), float(soil["particle_density_Mg_per_m3"])
+    w_sat = saturation_water_content_kg_per_kg(rb, rs)
+    name, clay = ptf.get("compression_ptf"), ptf.get("clay_percent")
+    ok = np.isfinite(w) & (w >= 0.0) & (w <= w_sat)
+    known = (name is None or name in _DEFOSSEZ) and (clay is None or (isinstance(clay, (int, float))
+                                                                     and not isinstance(clay, bool)))
+    out = {}
+    if known and name is not None:
+        lo, hi = DEFOSSEZ_RANGE_PERCENT
+        wp = 100.0 * w
+        ok &= (wp >= lo) & (wp <= hi)
+        cN, cL = _DEFOSSEZ[name]
+        out.update(virgin_line_N=_poly_array(cN, wp), compression_index_lambda=_poly_array(cL, wp),
+                   recompression_index_kappa=np.full(w.shape, _DEFOSSEZ_KAPPA))
+    if known and clay is not None:
+        _, a, b, ts, tr, alpha, n = SEVERIANO_2013_CLASSES[clay_class(clay)]
+        theta = w * rb / WATER_DENSITY_MG_PER_M3
+        ok &= (theta > tr) & (theta < ts)
+        m = 1.0 - 1.0 / n
+        with np.errstate(all="ignore"):
+            se = (theta - tr) / (ts - tr)
+            se = np.where(ok, se, 0.5)  # (refused below; a value the power takes)
+            h = _pow(_pow(se, -1.0 / m) - 1.0, 1.0 / n) / alpha
+            ok &= np.isfinite(h) & (h > 0.0)
+            out["precompression_stress_Pa"] = 1e3 * (a * _pow(np.where(ok, h, 1.0), b))
+    bad = np.flatnonzero(~ok)
+    if not known or bad.size:
+        k = int(bad[0]) if bad.size else 0
+        apply_moisture(soil, {**ptf, "water_content_kg_per_kg": float(w[k])}, where(float(w[k])))
+        raise ParameterError(f"{where(float(w[k]))}: refused")  # (apply_moisture refuses it first)
+    for k in DAY_KEYS:
+        if k not in out:
+            out[k] = np.full(w.shape, float(soil[k]))
+    return out
+
+
+def cell_day_parameters(soils, index: np.ndarray, water: np.ndarray, mm: MoistureMap, pairs=None) -> dict:
+    """Each cell's parameters on the day (``DAY_KEYS``, float64 arrays over the cells): the PTFs of
+    ``mm`` at each distinct (soil, water content) pair, vectorised in :func:`apply_moisture`'s order of
+    operations, so that a cell has bit for bit the numbers a soil of its pair would have
+    (tests/test_moisture.py). ``soils``: the field's soils before (0 the scenario's), ``index`` each
+    cell's; ``pairs``: :func:`distinct_pairs`' result if already made."""
+    pairs, inverse = distinct_pairs(index, water) if pairs is None else pairs
+    vals = {k: np.empty(len(pairs)) for k in DAY_KEYS}
+    for si in np.unique(pairs[:, 0]):
+        rows = np.flatnonzero(pairs[:, 0] == si)
+
+        def where(w, si=si):
+            return f"terrain.moisture (soil {int(si)}, cell water content {w!r})"
+
+        try:
+            day = _day_arrays(soils[int(si)], pairs[rows, 1], mm.ptf, where)
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
+        for k in DAY_KEYS:
+            vals[k][rows] = day[k]
+    bad = np.flatnonzero(~(vals["recompression_index_kappa"] < vals["compression_index_lambda"]))
+    if bad.size:
+        si, w = pairs[bad[0]]
+        raise ScenarioError(f"terrain.moisture (soil {int(si)}, cell water content {float(w)!r}): kappa >= lambda")
+    return {k: v[inverse] for k, v in vals.items()}
+
+
 def split_soils(soils, labels, index: np.ndarray, water: np.ndarray, mm: MoistureMap, max_soils: int):
     """Every distinct (soil, water content) pair of the cells as a soil on its day: (labels, soil
     parameter sets, 1-based index of every cell into them). ``soils``/``labels``: the field's soils
     before (0 the scenario's), ``index`` each cell's. Refuses more than ``max_soils - 1`` pairs."""
-    pairs, inverse = np.unique(np.column_stack([index.astype(np.float64), water]), axis=0, return_inverse=True)
+    pairs, inverse = distinct_pairs(index, water)
     if len(pairs) > max_soils - 1:
         raise ScenarioError(f"terrain.moisture.raster = {mm.raster!r}: {len(pairs)} distinct (soil, water content) "
                             f"pairs; a field has at most {max_soils - 1} besides [soil]: round the raster's values "

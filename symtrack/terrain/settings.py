@@ -22,6 +22,8 @@ Schema (every key optional; unknown keys are errors)::
                                 # (symtrack.terrain.surface)
     [terrain.moisture]          # each cell's water content on the day, a raster
                                 # (symtrack.terrain.moisture)
+    [terrain.towed]             # a trailer on one axle of tyres behind the crawler, loading the
+                                # same cells in the same run (symtrack.terrain.towed)
 
 With a GeoTIFF soil map (``soil_map.raster = "soils.tif"``), origin_m, cell_m and size_m not
 given are the raster's (its lower-left corner, pixel and extent), and the raster must cover the
@@ -47,6 +49,7 @@ from .soil_map import SoilMap, parse_soil_map
 from .storage import Grid
 from .surface import PATH_KEYS as SURFACE_PATH_KEYS
 from .surface import Surface, parse_surface
+from .towed import Towed, parse_towed
 
 __all__ = ["MAX_CELLS", "PATH_KEYS", "TerrainSettings", "settings_from_dict"]
 
@@ -78,6 +81,7 @@ class TerrainSettings:
     soil_map: SoilMap | None = None
     surface: Surface | None = None
     moisture: MoistureMap | None = None
+    towed: Towed | None = None
     given: frozenset = field(default=frozenset(), compare=False, repr=False)
 
     def __post_init__(self):
@@ -129,6 +133,8 @@ class TerrainSettings:
             out["surface"] = self.surface.to_dict()
         if out.get("moisture") is not None:
             out["moisture"] = dict(self.moisture.raw)
+        if out.get("towed") is not None:
+            out["towed"] = dict(self.towed.raw)
         return out
 
 
@@ -145,6 +151,13 @@ def _pair(key, value):
 def settings_from_dict(t: dict) -> TerrainSettings:
     """The ``[terrain]`` table -> :class:`TerrainSettings` (unknown keys and bad values raise)."""
     names = [f.name for f in dataclasses.fields(TerrainSettings) if f.name != "given"]
+    if isinstance(t, dict) and any(k.startswith("towed.") for k in t):
+        # --set terrain.towed.KEY=VALUE arrives as the flat key "towed.KEY": into [terrain.towed]
+        tw = t.get("towed", {})
+        if not isinstance(tw, dict):
+            raise ScenarioError(f"terrain.towed = {tw!r} must be a table (symtrack.terrain.towed)")
+        tw = {**tw, **{k.split(".", 1)[1]: v for k, v in t.items() if k.startswith("towed.")}}
+        t = {**{k: v for k, v in t.items() if not k.startswith("towed.")}, "towed": tw}
     check_keys("terrain", t, names)
     d = dict(t)
     if "size_m" in d:
@@ -186,6 +199,11 @@ def settings_from_dict(t: dict) -> TerrainSettings:
                                 "must share their CRS (reproject one, gdalwarp -t_srs)")
     if "moisture" in d:
         d["moisture"] = parse_moisture_map(d["moisture"])
+    if "towed" in d:
+        d["towed"] = parse_towed(d["towed"])
+        if not d.get("subsoil_depths_m", TerrainSettings.subsoil_depths_m):
+            raise ScenarioError("terrain.towed needs the subsoil stress: terrain.subsoil_depths_m = [] switches it "
+                                "off (give at least one depth)")
     if isinstance(d.get("passes"), float) and d["passes"].is_integer():
         d["passes"] = int(d["passes"])
     out = TerrainSettings(**d, given=frozenset(t) | filled)

@@ -212,6 +212,9 @@ class World:
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
         # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
         # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
+        # each cell's own day parameters (N, lambda, kappa, sigma_pc; None: its soil's): a moisture raster of
+        # more distinct values than a soil map holds (symtrack.terrain.moisture.cell_day_parameters)
+        self.cell_day = None
         if settings.moisture is not None:  # each cell's water content (symtrack.terrain.moisture)
             if storage is not None:
                 raise ScenarioError("terrain.moisture (a moisture raster) applies to a new field; a terrain file "
@@ -270,12 +273,17 @@ class World:
 
     def _split_by_moisture(self, settings, params):
         """The field's soils on the day of the moisture raster: each distinct (soil, water content)
-        pair a soil of the map (symtrack.terrain.moisture.split_soils); the settings with that map."""
+        pair a soil of the map (symtrack.terrain.moisture.split_soils); the settings with that map. More
+        pairs than a map holds: each cell's day parameters in ``cell_day``, the settings unchanged."""
         mm, sm = settings.moisture, settings.soil_map
         water = moisture.read_moisture(self.grid, mm)
         base = [{n: float(params[n]) for n in SOIL_PARAM_NAMES}] + ([] if sm is None else list(sm.soils))
         labels = ["[soil]"] + ([] if sm is None else list(sm.labels))
         index = self._map_index if self._map_index is not None else np.zeros(self.grid.n_cells, dtype=np.uint8)
+        pairs = moisture.distinct_pairs(index, water)
+        if len(pairs[0]) > MAX_SOILS - 1:  # per cell: the field's soils stay what they were
+            self.cell_day = moisture.cell_day_parameters(base, index, water, mm, pairs)
+            return settings
         new_labels, new_soils, self._map_index = moisture.split_soils(base, labels, index, water, mm, MAX_SOILS)
         raw = {} if sm is None else sm.raw
         new = SoilMap(new_labels, new_soils, (), None, raw, None if sm is None else sm.header)
@@ -406,14 +414,17 @@ class World:
         st = self.storage
         np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
         density.pass_update(st.specific_volume, self.pass_p_mean, st.soil_index, self.soils,
-                            cells=np.flatnonzero(self.touched))
+                            cells=np.flatnonzero(self.touched), cell_params=self.cell_day)
 
     def bulk_density_max(self) -> list[float]:
         """The field's largest bulk density [Mg/m^3] at each subsoil depth (terrain/density.py)."""
         return density.field_max(self.storage.specific_volume, self.storage.soil_index, self.soils)
 
     def precompression_stress_Pa(self) -> np.ndarray:
-        """Each cell's precompression stress [Pa] (its soil's: a soil map gives cells different ones)."""
+        """Each cell's precompression stress [Pa] (its soil's: a soil map gives cells different ones; or
+        its own on the day of a moisture map of many values)."""
+        if self.cell_day is not None:
+            return self.cell_day["precompression_stress_Pa"]
         table = np.array([float(sp["precompression_stress_Pa"]) for sp in self.soils])
         return table[self.storage.soil_index]
 
