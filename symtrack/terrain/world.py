@@ -210,11 +210,11 @@ class World:
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
-        # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
-        # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
         # each cell's own day parameters (N, lambda, kappa, sigma_pc; None: its soil's): a moisture raster of
         # more distinct values than a soil map holds (symtrack.terrain.moisture.cell_day_parameters)
         self.cell_day = None
+        # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
+        # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
         if settings.moisture is not None:  # each cell's water content (symtrack.terrain.moisture)
             if storage is not None:
                 raise ScenarioError("terrain.moisture (a moisture raster) applies to a new field; a terrain file "
