@@ -247,30 +247,6 @@ def test_fast_law_equals_the_model_law(n_exp):
     assert not missing, missing
 
 
-def test_the_split_law_of_the_c_equals_the_law_bit_for_bit():
-    """eng_cell_aux + eng_cell_lawx (the engine's C evaluates the law's history part once per cell step)
-    give eng_cell_law's p and dp/dz to the last bit, on a field of two soils whose laws differ in form
-    (n = 0.5 written with sqrt, n = 0.73 with pow) and so in their auxiliaries' count (padded)."""
-    sc = load_scenario("validation_grid")
-    soils = (sc.params, {**sc.params, "bekker_n": 0.73, "k_phi_N_per_m_n2": 0.8 * sc.params["k_phi_N_per_m_n2"]})
-    f = build_engine_functions(sc.model, sc.params, 1, soils)
-    assert f.n_aux >= 2 and len(f.cell_aux) == len(f.cell_lawx) == 2
-    assert all(fx.size1_in(1) == 5 + f.n_aux for fx in f.cell_lawx)
-    zm = 1.5e-3
-    rng = np.random.default_rng(5)
-    n_checked = 0
-    for k in range(2):
-        pmax = float(f.cell_law[k](zm, [0, 0, 0, 0, 0])[0])
-        for hh in ((0, 0, 0, 0, 0), (zm, pmax, 0, 0, 0), (zm, pmax, 2e-4, 1e-4, 3e-5)):
-            aux = np.array(f.cell_aux[k](hh)).ravel()
-            for zz in np.concatenate([np.linspace(-1.03e-4, 2.21e-3, 41), rng.uniform(0, 3e-3, 20)]):
-                want = [float(v) for v in f.cell_law[k](zz, hh)]
-                got = [float(v) for v in f.cell_lawx[k](zz, [*hh, *aux])]
-                assert got == want, (k, hh, zz, got, want)
-                n_checked += want[0] > 0
-    assert n_checked > 100  # most points loaded
-
-
 @pytest.mark.parametrize("method", STEADY_METHODS)
 def test_compiled_equals_interpreted(method):
     if find_compiler() is None:

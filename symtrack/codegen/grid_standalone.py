@@ -114,7 +114,7 @@ def render(scratch: Path, overrides=()) -> dict[str, bytes]:
     names = ", ".join(f'"{n}"' for n in fns.output_names)
     text += f"static const char *gv_output_names[{len(fns.output_names)}] = {{{names}}};\n"
     text += "#endif\n"
-    return {"engine_gen.inc": gen, "engine_soils.inc": soil_dispatch_c(fns.n_soils, fns.layout, fns.n_aux).encode(),
+    return {"engine_gen.inc": gen, "engine_soils.inc": soil_dispatch_c(fns.n_soils, fns.layout).encode(),
             "grid_validation.h": text.encode()}
 
 

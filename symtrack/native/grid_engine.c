@@ -125,26 +125,11 @@ static long long now_ns(void) {
 /* ---- calls of the generated Functions (no integer work, no extra arguments: checked in engine.py) */
 static double *WORK;
 
-/* hist: (z_max, p_max, z_off, delta, d_c), then (where the law is evaluated) its ENG_NAUX auxiliaries
-   (law_aux: the law's subexpressions of the history alone, grid_engine_model's eng_cell_aux) */
-#define NH 5
-#define NHL (NH + ENG_NAUX)
+/* hist: (z_max, p_max, z_off, delta, d_c) */
 static void law(double z, const double *hist, int soil, double *p, double *dp) {
   const double *arg[2] = {&z, hist};
   double *res[2] = {p, dp};
-  ENG_SOIL_CALL(eng_cell_lawx, soil, arg, res);
-}
-
-/* hist[NH ..] from hist[0 .. NH): once per history, before law() is evaluated on it */
-static void law_aux(int soil, double *hist) {
-#if ENG_NAUX > 0
-  const double *arg[1] = {hist};
-  double *res[1] = {hist + NH};
-  ENG_SOIL_CALL(eng_cell_aux, soil, arg, res);
-#else
-  (void)soil;
-  (void)hist;
-#endif
+  ENG_SOIL_CALL(eng_cell_law, soil, arg, res);
 }
 
 static void channel_hist(const eng_t *E, long long ch, double *hist) {
@@ -315,7 +300,7 @@ EXPORT int eng_assign(eng_t *E, double h) {
     E->ch_counted[ch] = 0;
     E->ch_soil[ch] = E->soil_index[cell];
     {
-      double hist[NHL], ncyc = (double)E->cycles[cell], zc = E->ch_z[ch];
+      double hist[5], ncyc = (double)E->cycles[cell], zc = E->ch_z[ch];
       channel_hist(E, ch, hist);
       const double *arg[3] = {&zc, hist, &ncyc};
       double *res[1] = {E->ch_delta + ch};
@@ -326,9 +311,8 @@ EXPORT int eng_assign(eng_t *E, double h) {
     E->ch_pw[2 * ch + 1] = 0.0;
     E->ch_vr[ch] = E->ch_v[ch];
     {
-      double hist[NHL];
+      double hist[5];
       channel_hist(E, ch, hist);
-      law_aux(E->ch_soil[ch], hist);
       law(E->ch_z[ch], hist, E->ch_soil[ch], &E->ch_p[ch], &E->ch_dp[ch]);
     }
     E->touched[cell] = 1;
@@ -521,7 +505,7 @@ EXPORT void eng_info_out(eng_t *E) {
   WORK = E->work;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
-    double hist[NH];
+    double hist[5];
     channel_hist(E, ch, hist);
     info_out(E, ch, hist);
   }
@@ -703,9 +687,8 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       pl[ns] = plB;
       fr[2 * ns] = gB[1];
       fr[2 * ns + 1] = gB[2];
-      double work[2] = {0.0, 0.0}, hist[NHL];
+      double work[2] = {0.0, 0.0}, hist[5];
       channel_hist(E, ch, hist);
-      law_aux(E->ch_soil[ch], hist);
       if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, E->ch_soil[ch], h, ns,
                     work, E->ch_vr + ch, !wgrid && E->steady_euler)) {
         E->err_code = ERR_NEWTON;
@@ -809,9 +792,8 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
       double pe = p_end[ch];
       if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && pe == 0.0) continue;
       for (long long j = 0; j <= n; ++j) pl[j] = pe * fmax(0.0, 1.0 - (t0 + h * (double)j / (double)n) / T);
-      double work[2] = {0.0, 0.0}, hist[NHL], vr;
+      double work[2] = {0.0, 0.0}, hist[5], vr;
       channel_hist(E, ch, hist);
-      law_aux(E->ch_soil[ch], hist);
       if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, E->ch_soil[ch], h, n,
                     work, &vr, 0)) {
         E->err_code = ERR_NEWTON;
@@ -833,9 +815,8 @@ EXPORT void eng_static(eng_t *E) {
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     int soil = E->ch_soil[ch];
-    double hist[NHL], p, dp, z0 = E->ch_z[ch], pl = E->ch_g[NGEO * ch];
+    double hist[5], p, dp, z0 = E->ch_z[ch], pl = E->ch_g[NGEO * ch];
     channel_hist(E, ch, hist);
-    law_aux(soil, hist);
     law(z0, hist, soil, &p, &dp);
     if (pl != p) {
       int up = pl > p;

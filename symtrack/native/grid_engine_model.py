@@ -29,13 +29,6 @@ interpolated between the step's two poses. So the Functions are:
   With numeric constants the Bekker/Wong law writes the regularised Bekker term
   k z+ (z+ + d)^(n-1) for n = 0.5 as k z+ / sqrt(z+ + d) (the same number; libm's pow is about
   20 x slower than sqrt).
-- ``eng_cell_aux(hist[5]) -> aux[n_aux]`` and ``eng_cell_lawx(z, [hist; aux]) -> (p, dp/dz)``: the
-  same law split in two for the C (``ca.extract_parametric``): ``aux`` holds the law's subexpressions
-  of the history alone (two of its divisions), evaluated once per cell step instead of at every
-  Newton iteration; ``eng_cell_lawx`` is the rest. The same operations on the same operands, so the
-  same numbers to the last bit (tests/test_terrain_engine.py); the engine's C calls only this pair,
-  Python (the tests' oracle) calls ``eng_cell_law``. ``n_aux``, the same for every soil of a field
-  (padded), is ``ENG_NAUX`` in engine_soils.inc.
 - ``eng_cell_history(z, p, hist[5]) -> (z_max', p_max', d_c', plastic, phase)``: the law's
   ``history_update`` (INFO_OUT).
 - ``eng_cell_entry(z, hist[5], cycles) -> delta``: the law's ``cycle_increment`` with the soil's
@@ -198,9 +191,6 @@ class EngineFunctions:
     n_pv: int
     n_sums: int  # NS, or NS + NS_SOIL with a soil map
     layout: StateLayout = PLANAR_LAYOUT  # the vehicle's states (w = these, then its accelerations)
-    cell_aux: tuple = ()  # per soil eng_cell_aux_<k> (the module doc)
-    cell_lawx: tuple = ()  # per soil eng_cell_lawx_<k>
-    n_aux: int = 0
 
     @property
     def nw(self) -> int:
@@ -212,9 +202,8 @@ class EngineFunctions:
         return len(self.cell_law)
 
     def all(self):
-        """The Functions of the engine's C (generated into engine_gen.inc)."""
-        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, *self.cell_aux, *self.cell_lawx,
-                *self.cell_history, *self.cell_entry)
+        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, *self.cell_law, *self.cell_history,
+                *self.cell_entry)
 
 
 def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = ()) -> EngineFunctions:
@@ -295,34 +284,9 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
         laws.append(law_k)
         histories.append(hist_k)
         entries.append(entry_k)
-    auxes, lawxs, n_aux = _split_laws(laws, fo)
     n_sums = NS + (NS_SOIL if len(soils) > 1 else 0)
     return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, tuple(laws), tuple(histories), tuple(entries),
-                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums, veh.layout, auxes, lawxs,
-                           n_aux)
-
-
-def _split_laws(laws, fo: dict):
-    """(eng_cell_aux_<k>, eng_cell_lawx_<k> per soil, n_aux): each law split by ``ca.extract_parametric``
-    into its history's subexpressions and the rest (the module doc), padded to one n_aux."""
-    parts = []
-    for law in laws:
-        z, hist = ca.SX.sym("z"), ca.SX.sym("hist", NH)
-        p, dp = law(z, hist)
-        rest, syms, par = ca.extract_parametric(ca.vertcat(p, dp), hist)
-        syms = ca.vertcat(*syms) if isinstance(syms, list) else syms
-        par = ca.vertcat(*par) if isinstance(par, list) else par
-        parts.append((z, hist, rest, syms, par))
-    n_aux = max(int(syms.numel()) for *_, syms, _ in parts)
-    auxes, lawxs = [], []
-    for k, (z, hist, rest, syms, par) in enumerate(parts):
-        pad = n_aux - int(syms.numel())
-        syms_all = ca.vertcat(syms, ca.SX.sym("unused", pad)) if pad else syms
-        par_all = ca.vertcat(par, ca.DM.zeros(pad)) if pad else par
-        auxes.append(ca.Function(f"eng_cell_aux_{k}", [hist], [par_all], ["hist"], ["aux"], fo))
-        lawxs.append(ca.Function(f"eng_cell_lawx_{k}", [z, ca.vertcat(hist, syms_all)], [rest[0], rest[1]],
-                                 ["z", "hist_aux"], ["p", "dp_dz"], fo))
-    return tuple(auxes), tuple(lawxs), n_aux
+                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums, veh.layout)
 
 
 def _cell_functions(opts, params: dict, k: int, fo: dict):
@@ -349,14 +313,12 @@ def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT) -> list[str]:
             f"#define ENG_NW {layout.nv + len(ALGEBRAIC)} /* and its algebraic accelerations */"]
 
 
-def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, n_aux: int = 0) -> str:
+def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT) -> str:
     """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c` (of the vehicle's
-    ``layout``), the law's auxiliary count ENG_NAUX (``EngineFunctions.n_aux``), and
-    ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch the compiler can inline; one
-    soil: a plain call)."""
+    ``layout``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch the compiler can
+    inline; one soil: a plain call)."""
     lines = engine_layout_c(layout)
-    lines += [f"#define ENG_NAUX {int(n_aux)}", f"#define ENG_N_SOILS {n_soils}",
-              "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
+    lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
     if n_soils == 1:
         lines.append("  fn##_0(arg, res, 0, WORK, 0)")
     else:
