@@ -185,7 +185,7 @@ static fmi2Status read_field(Instance *c, const char *path) {
   if (!f) return FAIL(c, "field_file '%s': cannot open it", path);
   fmi2Status st = fmi2Error;
   if (fread(h, 1, sizeof h, f) != sizeof h || memcmp(h, "SYMFIELD", 8) != 0) {
-    FAIL(c, "field_file '%s': not a symtrack field file (no SYMFIELD header; `symtrack terrain convert IN.npz "
+    (void)FAIL(c, "field_file '%s': not a symtrack field file (no SYMFIELD header; `symtrack terrain convert IN.npz "
          "OUT.field` writes one)", path);
     goto done;
   }
@@ -197,36 +197,36 @@ static fmi2Status read_field(Instance *c, const char *path) {
   memcpy(&x0, h + 32, 8); memcpy(&y0, h + 40, 8); memcpy(&dx, h + 48, 8);
   memcpy(&n_soil, h + 56, 4); memcpy(&flags, h + 60, 4);
   if (version != 1) {
-    FAIL(c, "field_file '%s': field file version %u, this FMU reads 1", path, (unsigned)version);
+    (void)FAIL(c, "field_file '%s': field file version %u, this FMU reads 1", path, (unsigned)version);
     goto done;
   }
   if (flags != 0 || hbytes != FIELD_HEADER_BYTES + 8u * n_soil) {
-    FAIL(c, "field_file '%s': malformed header (header bytes %u for %u soil values, flags %u)", path,
+    (void)FAIL(c, "field_file '%s': malformed header (header bytes %u for %u soil values, flags %u)", path,
          (unsigned)hbytes, (unsigned)n_soil, (unsigned)flags);
     goto done;
   }
   if (nx != EF_NX || ny != EF_NY) {
-    FAIL(c, "field_file '%s': a field of %lld x %lld cells; this FMU's field has %lld x %lld (terrain.size_m and "
+    (void)FAIL(c, "field_file '%s': a field of %lld x %lld cells; this FMU's field has %lld x %lld (terrain.size_m and "
          "terrain.cell_m of scenario %s)", path, (long long)nx, (long long)ny, EF_NX, EF_NY, EF_SCENARIO);
     goto done;
   }
   if (x0 != EF_X0 || y0 != EF_Y0 || dx != EF_DX) {
-    FAIL(c, "field_file '%s': origin (%.17g, %.17g) m and cell %.17g m; this FMU's field has (%.17g, %.17g) m and "
+    (void)FAIL(c, "field_file '%s': origin (%.17g, %.17g) m and cell %.17g m; this FMU's field has (%.17g, %.17g) m and "
          "%.17g m", path, x0, y0, dx, EF_X0, EF_Y0, EF_DX);
     goto done;
   }
   if (n_soil != EF_N_SOIL) {
-    FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters", path, (unsigned)n_soil, EF_N_SOIL);
+    (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters", path, (unsigned)n_soil, EF_N_SOIL);
     goto done;
   }
   double soil[EF_N_SOIL];
   if (fread(soil, 8, EF_N_SOIL, f) != (size_t)EF_N_SOIL) {
-    FAIL(c, "field_file '%s': truncated in the soil values", path);
+    (void)FAIL(c, "field_file '%s': truncated in the soil values", path);
     goto done;
   }
   for (int i = 0; i < EF_N_SOIL; ++i)
     if (ef_soil_checked[i] && soil[i] != ef_soil_values[i]) {
-      FAIL(c, "field_file '%s': the field was made with soil %s = %.17g, this FMU has %.17g (the soil of scenario "
+      (void)FAIL(c, "field_file '%s': the field was made with soil %s = %.17g, this FMU has %.17g (the soil of scenario "
            "%s)", path, ef_soil_names[i], soil[i], ef_soil_values[i], EF_SCENARIO);
       goto done;
     }
@@ -235,7 +235,7 @@ static fmi2Status read_field(Instance *c, const char *path) {
   if (fseek(f, 0, SEEK_END) != 0) goto io;
   long long size = (long long)ftell(f);
   if (size != expect) {
-    FAIL(c, "field_file '%s': %lld bytes, a field of %lld x %lld cells takes %lld: the file is truncated or "
+    (void)FAIL(c, "field_file '%s': %lld bytes, a field of %lld x %lld cells takes %lld: the file is truncated or "
          "damaged", path, size, EF_NX, EF_NY, expect);
     goto done;
   }
@@ -247,25 +247,25 @@ static fmi2Status read_field(Instance *c, const char *path) {
   if (fread(E->phase, 1, (size_t)n, f) != (size_t)n) goto io;
   char trailer[8];
   if (fread(trailer, 1, 8, f) != 8 || memcmp(trailer, "ENDFIELD", 8) != 0) {
-    FAIL(c, "field_file '%s': no ENDFIELD trailer: the file is damaged", path);
+    (void)FAIL(c, "field_file '%s': no ENDFIELD trailer: the file is damaged", path);
     goto done;
   }
   static const char *names[5] = {"z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "z_off_m"};
   for (int i = 0; i < 5; ++i)
     for (long long q = 0; q < n; ++q)
       if (!isfinite(fl[i][q]) || (i == 4 && fl[i][q] < 0.0)) {
-        FAIL(c, "field_file '%s': %s of cell %lld is %.17g: the file is damaged", path, names[i], q, fl[i][q]);
+        (void)FAIL(c, "field_file '%s': %s of cell %lld is %.17g: the file is damaged", path, names[i], q, fl[i][q]);
         goto done;
       }
   for (long long q = 0; q < n; ++q)
     if (E->phase[q] < 0 || E->phase[q] > 2) {
-      FAIL(c, "field_file '%s': phase of cell %lld is %d (0, 1 or 2): the file is damaged", path, q, E->phase[q]);
+      (void)FAIL(c, "field_file '%s': phase of cell %lld is %d (0, 1 or 2): the file is damaged", path, q, E->phase[q]);
       goto done;
     }
   st = fmi2OK;
   goto done;
 io:
-  FAIL(c, "field_file '%s': read error", path);
+  (void)FAIL(c, "field_file '%s': read error", path);
 done:
   fclose(f);
   return st;
