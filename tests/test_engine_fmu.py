@@ -274,6 +274,9 @@ def test_field_files_convert_both_ways_bit_for_bit_and_refuse_what_they_cannot_c
             st, name).dtype, name
     assert back.grid == st.grid and back.soil == {k: float(sc.params[k]) for k in back.soil}
     assert (tmp_path / "a.field").stat().st_size == 64 + 8 * len(back.soil) + 43 * st.grid.n_cells + 8
+    fieldfile.convert(tmp_path / "a.field", tmp_path / "a.npz")  # and back through npz: the same bytes
+    fieldfile.convert(tmp_path / "a.npz", tmp_path / "a2.field")
+    assert (tmp_path / "a2.field").read_bytes() == (tmp_path / "a.field").read_bytes()
     st.set_subsoil_depths([0.3])
     st.sigma_max[5, 0] = 1.0
     with pytest.raises(ScenarioError, match="subsoil stress"):
@@ -307,3 +310,29 @@ def test_what_the_engine_fmu_cannot_represent_is_refused_before_any_build(tmp_pa
         fmu_export.export_fmu(sc, out)
     assert message in str(info.value)
     assert not out.exists() and len(toolchain.builds) == n_builds
+
+
+def test_reset_reruns_the_same_pass_and_an_unwritable_field_file_out_is_an_fmi2_error(exported, tmp_path, capsys):
+    slave, vr = _slave(exported)
+    slave.instantiate()
+    try:
+        runs = []
+        for out in (tmp_path / "a.field", tmp_path / "no" / "such" / "folder" / "b.field"):
+            slave.setupExperiment(startTime=0.0)
+            slave.enterInitializationMode()
+            slave.setString([vr["field_file_out"]], [str(out)])
+            slave.exitInitializationMode()
+            for k in range(50):
+                slave.doStep(0.01 * k, 0.01)
+            runs.append(slave.getReal([vr["x_m"], vr["sinkage_idler_left_m"], vr["compaction_power_W"]]))
+            if out.parent == tmp_path:
+                slave.terminate()
+                assert fieldfile.read_field(out).phase.any()
+            else:
+                with pytest.raises(FMICallException):
+                    slave.terminate()
+                assert "field_file_out" in capsys.readouterr().out and not out.exists()
+            slave.reset()
+        assert runs[0] == runs[1] and runs[0][0] > 0
+    finally:
+        slave.freeInstance()

@@ -280,8 +280,9 @@ static fmi2Status write_field(Instance *c, const char *path) {
   snprintf(tmp, len + 16, "%s.tmp", path);
   FILE *f = fopen(tmp, "wb");
   if (!f) {
+    (void)FAIL(c, "field_file_out '%s': cannot create '%s' (no such folder, or not writable)", path, tmp);
     c->cb.freeMemory(tmp);
-    return FAIL(c, "field_file_out '%s': cannot create '%s'", path, tmp);
+    return fmi2Error;
   }
   unsigned char h[FIELD_HEADER_BYTES];
   uint32_t version = 1, n_soil = EF_N_SOIL, hbytes = FIELD_HEADER_BYTES + 8u * EF_N_SOIL, flags = 0;

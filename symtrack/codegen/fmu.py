@@ -23,10 +23,11 @@ those that repeat a state's name (the four sinkages, which are the states). Unit
 suffixes (:func:`symtrack.native.generate.unit_of`), each declared in ``<UnitDefinitions>`` with its SI
 base units where it has fixed ones.
 
-What cannot be exported is refused before anything is built (:func:`check_exportable`): a grid terrain
-scenario, an integrator other than ``rosenbrock``, a torque change or an output step off the grid of
-``run.fixed_step_s`` (the FMU's communication step is a whole number of fixed steps), an unwritable
-``--out``.
+A scenario with a ``[terrain]`` section is handed to :func:`symtrack.codegen.engine_fmu.export_engine_fmu`
+(the vehicle on the terrain engine, the field as a file parameter). What cannot be exported here is
+refused before anything is built (:func:`check_exportable`): a grid terrain scenario, an integrator
+other than ``rosenbrock``, a torque change or an output step off the grid of ``run.fixed_step_s`` (the
+FMU's communication step is a whole number of fixed steps), an unwritable ``--out``.
 """
 
 from __future__ import annotations
