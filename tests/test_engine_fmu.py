@@ -33,17 +33,17 @@ from symtrack.toolchain import find_compiler
 
 pytestmark = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 
-SUBSOIL_OFF = ["terrain.subsoil_depths_m=[]"]
 # a pass without the distance stop (the FMU's master ends the run): 4 s at 2000 N m, 2 s with the left idle
-PASS = [*SUBSOIL_OFF, "run.duration_s=6.0", "run.stop_after_distance_m=1000"]
+PASS = ["run.duration_s=6.0", "run.stop_after_distance_m=1000"]
 REL_TOL = 1e-6
-STORAGE = ("z", "zdot", "zmax", "pmax", "zoff", "cycles", "phase")
+# the engine's storage arrays, then the subsoil records a pass's end folds into (stress, compression state)
+STORAGE = ("z", "zdot", "zmax", "pmax", "zoff", "cycles", "phase", "sigma_max", "specific_volume")
 
 
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     out = tmp_path_factory.mktemp("enginefmu") / "validation_grid.fmu"
-    return fmu_export.export_fmu("validation_grid", out, SUBSOIL_OFF)
+    return fmu_export.export_fmu("validation_grid", out)  # as shipped: four subsoil depths, the bulk density
 
 
 def _torque_signal(sc, stop_s):
@@ -135,7 +135,7 @@ def test_fmpy_validation_finds_no_problem_and_it_links_only_libc_and_libm(export
 
 
 def test_fmpy_cosimulation_is_the_python_engine_run(exported):
-    sc = load_scenario("validation_grid", SUBSOIL_OFF)
+    sc = load_scenario("validation_grid")
     run = simulate(sc).runs[0]
     # Python stops 20 m after the idle event, its last step shortened (secant); the FMU runs the whole
     # macro steps before it (its master decides when to stop)
@@ -171,7 +171,8 @@ def test_the_field_written_at_terminate_is_the_python_runs_and_a_second_pass_fro
     for name in STORAGE:
         a, b = getattr(mine, name), getattr(theirs, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert np.count_nonzero(theirs.phase) > 1000 and mine.grid == theirs.grid
+    assert np.count_nonzero(theirs.phase) > 1000 and np.count_nonzero(theirs.specific_volume) > 1000
+    assert mine.grid == theirs.grid and mine.subsoil_depths_m == theirs.subsoil_depths_m == (0.1, 0.3, 0.5, 0.8)
     # the second pass: the FMU from its own field file, Python from its own terrain file
     ref2 = simulate(sc, terrain=py_npz)
     out2 = tmp_path / "pass2.field"
@@ -184,6 +185,8 @@ def test_the_field_written_at_terminate_is_the_python_runs_and_a_second_pass_fro
     second = fieldfile.read_field(out2)
     for name in STORAGE:
         assert np.array_equal(getattr(second, name), getattr(ref2.terrain, name)), name
+    # the second pass compacted the subsoil further
+    assert np.count_nonzero(second.specific_volume != mine.specific_volume) > 0
 
 
 def test_the_start_pose_is_a_parameter(exported):
@@ -215,15 +218,18 @@ def _start_with_field(exported, path):
         slave.freeInstance()
 
 
-@pytest.mark.parametrize("damage", ["shape", "origin", "magic", "truncated", "soil", "phase", "missing"])
+@pytest.mark.parametrize("damage", ["shape", "origin", "magic", "truncated", "soil", "phase", "depths", "stress",
+                                    "missing"])
 def test_a_bad_field_file_is_an_fmi2_error_with_a_logged_message(exported, tmp_path, capsys, damage):
-    sc = load_scenario("validation_grid", SUBSOIL_OFF)
+    sc = load_scenario("validation_grid")
     g = storage.Grid((-50.0, -50.0), 0.1, (1000, 1000))
     path = tmp_path / "bad.field"
     expect = {"shape": "a field of 10 x 1000 cells; this FMU's field has 1000 x 1000",
               "origin": "origin (-40, -50) m", "magic": "not a symtrack field file",
               "truncated": "the file is truncated or damaged", "soil": "the field was made with soil bekker_n",
-              "phase": "phase of cell 7 is 3", "missing": "cannot open it"}[damage]
+              "phase": "phase of cell 7 is 3", "depths": "1 subsoil depths, this FMU has 4",
+              "stress": "sigma_max_Pa of cell 2 at depth 1 is -1", "missing": "cannot open it"}[damage]
+    depths = (0.2,) if damage == "depths" else sc.terrain.subsoil_depths_m
     if damage == "missing":
         path = tmp_path / "none.field"
     else:
@@ -234,13 +240,17 @@ def test_a_bad_field_file_is_an_fmi2_error_with_a_logged_message(exported, tmp_p
         soil = dict(sc.params)
         if damage == "soil":
             soil["bekker_n"] *= 1.01
-        data = bytearray(fieldfile.field_bytes(storage.Terrain(g), soil))
+        field = storage.Terrain(g, subsoil_depths_m=depths)
+        if damage == "stress":
+            field.sigma_max[2, 1] = -1.0
+            # written past the Python writer's checks: what a damaged or foreign file holds
+        data = bytearray(fieldfile.field_bytes(field, soil))
         if damage == "magic":
             data[:8] = b"NOTFIELD"
         if damage == "truncated":
             data = data[:-9]
         if damage == "phase":
-            data[-8 - g.n_cells + 7] = 3
+            data[-8 - 8 * 4 * g.n_cells - g.n_cells + 7] = 3
         path.write_bytes(bytes(data))
     _start_with_field(exported, path)
     assert expect in capsys.readouterr().out
@@ -267,28 +277,28 @@ def test_a_step_off_the_macro_step_grid_is_an_fmi2_error(exported, capsys):
 def test_field_files_convert_both_ways_bit_for_bit_and_refuse_what_they_cannot_carry(tmp_path):
     sc = load_scenario("validation_grid", [*PASS, "run.duration_s=2.0"])
     st = simulate(sc).terrain
+    assert np.count_nonzero(st.sigma_max) > 1000
     fieldfile.write_field(tmp_path / "a.field", st, sc.params)
     back = fieldfile.read_field(tmp_path / "a.field")
     for name in STORAGE:
         assert np.array_equal(getattr(back, name), getattr(st, name)) and getattr(back, name).dtype == getattr(
             st, name).dtype, name
     assert back.grid == st.grid and back.soil == {k: float(sc.params[k]) for k in back.soil}
-    assert (tmp_path / "a.field").stat().st_size == 64 + 8 * len(back.soil) + 43 * st.grid.n_cells + 8
+    assert back.subsoil_depths_m == st.subsoil_depths_m == (0.1, 0.3, 0.5, 0.8)
+    assert (tmp_path / "a.field").stat().st_size == 64 + 8 * (len(back.soil) + 4) + (43 + 32) * st.grid.n_cells + 8
     fieldfile.convert(tmp_path / "a.field", tmp_path / "a.npz")  # and back through npz: the same bytes
     fieldfile.convert(tmp_path / "a.npz", tmp_path / "a2.field")
     assert (tmp_path / "a2.field").read_bytes() == (tmp_path / "a.field").read_bytes()
-    st.set_subsoil_depths([0.3])
-    st.sigma_max[5, 0] = 1.0
-    with pytest.raises(ScenarioError, match="subsoil stress"):
+    st.set_elevation(np.zeros(st.grid.n_cells))
+    with pytest.raises(ScenarioError, match="elevation"):
         fieldfile.write_field(tmp_path / "b.field", st, sc.params)
     with pytest.raises(ScenarioError, match="by the suffixes"):
         fieldfile.convert(tmp_path / "a.field", tmp_path / "c.field")
 
 
 @pytest.mark.parametrize(("overrides", "message"), [
-    ([], "terrain.subsoil_depths_m = [0.1, 0.3, 0.5, 0.8]"),
-    ([*SUBSOIL_OFF, "run.integrator=idas"], "run.integrator = 'idas'"),
-    ([*SUBSOIL_OFF, "terrain.passes=2"], "terrain.passes = 2"),
+    (["run.integrator=idas"], "run.integrator = 'idas'"),
+    (["terrain.passes=2"], "terrain.passes = 2"),
     ("soil map", "terrain.soil_map is set"),
     ("initial state", "terrain.initial_state = 'x.npz'"),
     ("torque at 4.005 s", "torque[1].t_s = 4.005"),
@@ -297,7 +307,7 @@ def test_what_the_engine_fmu_cannot_represent_is_refused_before_any_build(tmp_pa
     n_builds = len(toolchain.builds)
     out = tmp_path / "x.fmu"
     if isinstance(overrides, str):
-        sc = load_scenario("validation_grid", SUBSOIL_OFF)
+        sc = load_scenario("validation_grid")
         if overrides == "soil map":
             sc = dataclasses.replace(sc, terrain=dataclasses.replace(sc.terrain, soil_map="map.toml"))
         elif overrides == "initial state":

@@ -111,10 +111,6 @@ def check_exportable(sc: Scenario) -> None:
         raise ScenarioError("[terrain.surface] is set: the engine FMU carries a flat field")
     if t.moisture is not None:
         raise ScenarioError("[terrain.moisture] is set: the engine FMU's soil is fixed at export")
-    if t.subsoil_depths_m:
-        raise ScenarioError(f"terrain.subsoil_depths_m = {list(t.subsoil_depths_m)!r}: the engine FMU does not carry "
-                            "the subsoil stress and bulk density records (they feed nothing back to the vehicle); "
-                            "export with --set 'terrain.subsoil_depths_m=[]'")
     if t.initial_state:
         raise ScenarioError(f"terrain.initial_state = {t.initial_state!r}: the engine FMU takes its start field as the "
                             "string parameter field_file (symtrack terrain convert IN.npz OUT.field); drop "
@@ -251,8 +247,34 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
     body += c_array("ef_soil_values", soil_values)
     # the day's soil parameters (moisture) are the scenario's on loading a terrain (storage.load): not compared
     body += c_array("ef_soil_checked", [0 if n in SOIL_DAY_PARAM_NAMES else 1 for n in SOIL_PARAM_NAMES], "int")
+    body += _subsoil_constants(parts)
     body += "#endif\n"
     return body.encode()
+
+
+def _tables(tag: str, tables) -> str:
+    """A subsoil.h subsoil_tables_t's arrays as C constants ef_<tag>_*."""
+    return (c_array(f"ef_{tag}_inv_x", tables.inv_x_step) + c_array(f"ef_{tag}_inv_t", tables.inv_t_step)
+            + c_array(f"ef_{tag}_n_x", tables.n_x, "int") + c_array(f"ef_{tag}_n_t", tables.n_t, "int")
+            + c_array(f"ef_{tag}_offset", tables.offset, "long long") + c_array(f"ef_{tag}_data", tables.data))
+
+
+def _subsoil_constants(parts: dict) -> str:
+    """The subsoil stress (the tables of the vertical and the mean normal stress, as EngineState builds
+    them) and the bulk density's constants (density.soil_arrays of the one soil), or EF_N_DEPTHS 0."""
+    from ..terrain import density
+
+    world, state = parts["world"], parts["state"]
+    depths = world.storage.subsoil_depths_m
+    if state.subsoil is None:
+        return "#define EF_N_DEPTHS 0\n#define EF_DENSITY 0\n"
+    out = f"#define EF_N_DEPTHS {len(depths)}\n" + c_array("ef_depths", depths) + _tables("sub", state.subsoil)
+    if state.subsoil_p is None:  # the concentration factor admits no mean normal stress: no bulk density
+        return out + "#define EF_DENSITY 0\n"
+    a = density.soil_arrays(world.soils)
+    return (out + "#define EF_DENSITY 1\n" + _tables("subp", state.subsoil_p)
+            + f"#define EF_DENS_N {c_literal(a['N'][0])}\n#define EF_DENS_LMK {c_literal(a['lambda_minus_kappa'][0])}\n"
+            + f"#define EF_DENS_V0 {c_literal(a['v0'][0])}\n")
 
 
 def _documentation(sc: Scenario, variables) -> bytes:

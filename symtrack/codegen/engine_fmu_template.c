@@ -60,7 +60,17 @@ typedef struct {
   int y_valid;
   double dist[3];
   double *p_end;
+  float *sigma_max, *specific_volume; /* the subsoil records (n_depths per cell; NULL without depths) */
 } Instance;
+
+#if EF_N_DEPTHS > 0
+static const subsoil_tables_t ef_subsoil = {EF_N_DEPTHS, ef_sub_inv_x, ef_sub_inv_t, ef_sub_n_x, ef_sub_n_t,
+                                            ef_sub_offset, ef_sub_data};
+#if EF_DENSITY
+static const subsoil_tables_t ef_subsoil_p = {EF_N_DEPTHS, ef_subp_inv_x, ef_subp_inv_t, ef_subp_n_x, ef_subp_n_t,
+                                              ef_subp_offset, ef_subp_data};
+#endif
+#endif
 
 static void logf_(Instance *c, fmi2Status status, const char *category, const char *fmt, ...) {
   char buf[1024];
@@ -108,8 +118,11 @@ static void engine_free(Instance *c) {
   void **a = engine_arrays(&c->E, &n);
   for (size_t i = 0; i < n; ++i)
     if (a[i]) c->cb.freeMemory(a[i]);
-  if (c->p_end) c->cb.freeMemory(c->p_end);
+  void *more[] = {c->p_end, c->E.sig_pass, c->E.p_pass, c->sigma_max, c->specific_volume};
+  for (size_t i = 0; i < sizeof more / sizeof more[0]; ++i)
+    if (more[i]) c->cb.freeMemory(more[i]);
   c->p_end = NULL;
+  c->sigma_max = c->specific_volume = NULL;
   memset(&c->E, 0, sizeof c->E);
   c->allocated = 0;
 }
@@ -142,6 +155,21 @@ static int engine_alloc(Instance *c) {
   E->plbuf = zalloc(c, nmax + 1, sizeof(double));
   E->frbuf = zalloc(c, 2 * (nmax + 1), sizeof(double));
   c->p_end = zalloc(c, nch, sizeof(double));
+  int sub_ok = 1;
+#if EF_N_DEPTHS > 0
+  /* the subsoil stress (TerrainEngine: this pass's largest vertical and mean normal stress per cell and
+     depth) and the field's records of them */
+  E->sig_pass = zalloc(c, (size_t)(n * EF_N_DEPTHS), sizeof(float));
+  E->p_pass = zalloc(c, (size_t)(n * EF_N_DEPTHS), sizeof(float));
+  c->sigma_max = zalloc(c, (size_t)(n * EF_N_DEPTHS), sizeof(float));
+  c->specific_volume = zalloc(c, (size_t)(n * EF_N_DEPTHS), sizeof(float));
+  sub_ok = E->sig_pass && E->p_pass && c->sigma_max && c->specific_volume;
+  E->subsoil = &ef_subsoil;
+  E->n_depths = EF_N_DEPTHS;
+#if EF_DENSITY
+  E->subsoil_p = &ef_subsoil_p;
+#endif
+#endif
   c->allocated = 1;
   size_t na;
   void **a = engine_arrays(E, &na);
@@ -150,7 +178,7 @@ static int engine_alloc(Instance *c) {
       engine_free(c);
       return 1;
     }
-  if (!c->p_end) {
+  if (!c->p_end || !sub_ok) {
     engine_free(c);
     return 1;
   }
@@ -189,20 +217,20 @@ static fmi2Status read_field(Instance *c, const char *path) {
          "OUT.field` writes one)", path);
     goto done;
   }
-  uint32_t version, hbytes, n_soil, flags;
+  uint32_t version, hbytes, n_soil, n_depths;
   int64_t nx, ny;
   double x0, y0, dx;
   memcpy(&version, h + 8, 4); memcpy(&hbytes, h + 12, 4);
   memcpy(&nx, h + 16, 8); memcpy(&ny, h + 24, 8);
   memcpy(&x0, h + 32, 8); memcpy(&y0, h + 40, 8); memcpy(&dx, h + 48, 8);
-  memcpy(&n_soil, h + 56, 4); memcpy(&flags, h + 60, 4);
+  memcpy(&n_soil, h + 56, 4); memcpy(&n_depths, h + 60, 4);
   if (version != 1) {
     (void)FAIL(c, "field_file '%s': field file version %u, this FMU reads 1", path, (unsigned)version);
     goto done;
   }
-  if (flags != 0 || hbytes != FIELD_HEADER_BYTES + 8u * n_soil) {
-    (void)FAIL(c, "field_file '%s': malformed header (header bytes %u for %u soil values, flags %u)", path,
-         (unsigned)hbytes, (unsigned)n_soil, (unsigned)flags);
+  if (n_soil > 1000 || n_depths > 64 || hbytes != FIELD_HEADER_BYTES + 8u * (n_soil + n_depths)) {
+    (void)FAIL(c, "field_file '%s': malformed header (header bytes %u for %u soil values and %u subsoil depths)",
+         path, (unsigned)hbytes, (unsigned)n_soil, (unsigned)n_depths);
     goto done;
   }
   if (nx != EF_NX || ny != EF_NY) {
@@ -230,8 +258,23 @@ static fmi2Status read_field(Instance *c, const char *path) {
            "%s)", path, ef_soil_names[i], soil[i], ef_soil_values[i], EF_SCENARIO);
       goto done;
     }
+  if (n_depths != EF_N_DEPTHS) {
+    (void)FAIL(c, "field_file '%s': %u subsoil depths, this FMU has %d (terrain.subsoil_depths_m of scenario %s)", path,
+         (unsigned)n_depths, EF_N_DEPTHS, EF_SCENARIO);
+    goto done;
+  }
+#if EF_N_DEPTHS > 0
+  double depths[EF_N_DEPTHS];
+  if (fread(depths, 8, EF_N_DEPTHS, f) != (size_t)EF_N_DEPTHS) goto io;
+  for (int k = 0; k < EF_N_DEPTHS; ++k)
+    if (depths[k] != ef_depths[k]) {
+      (void)FAIL(c, "field_file '%s': subsoil depth %d is %.17g m, this FMU's is %.17g m (terrain.subsoil_depths_m)",
+           path, k, depths[k], ef_depths[k]);
+      goto done;
+    }
+#endif
   long long n = EF_NX * EF_NY;
-  long long expect = (long long)hbytes + FIELD_CELL_BYTES * n + 8;
+  long long expect = (long long)hbytes + (FIELD_CELL_BYTES + 8LL * EF_N_DEPTHS) * n + 8;
   if (fseek(f, 0, SEEK_END) != 0) goto io;
   long long size = (long long)ftell(f);
   if (size != expect) {
@@ -245,6 +288,19 @@ static fmi2Status read_field(Instance *c, const char *path) {
     if (fread(fl[i], sizeof(double), (size_t)n, f) != (size_t)n) goto io;
   if (fread(E->cycles, sizeof(unsigned short), (size_t)n, f) != (size_t)n) goto io;
   if (fread(E->phase, 1, (size_t)n, f) != (size_t)n) goto io;
+#if EF_N_DEPTHS > 0
+  float *sub[2] = {c->sigma_max, c->specific_volume};
+  static const char *sub_names[2] = {"sigma_max_Pa", "specific_volume"};
+  for (int i = 0; i < 2; ++i) {
+    if (fread(sub[i], sizeof(float), (size_t)(n * EF_N_DEPTHS), f) != (size_t)(n * EF_N_DEPTHS)) goto io;
+    for (long long q = 0; q < n * EF_N_DEPTHS; ++q)
+      if (!isfinite(sub[i][q]) || sub[i][q] < 0.0f) {
+        (void)FAIL(c, "field_file '%s': %s of cell %lld at depth %lld is %g: the file is damaged", path, sub_names[i],
+             q / EF_N_DEPTHS, q % EF_N_DEPTHS, (double)sub[i][q]);
+        goto done;
+      }
+  }
+#endif
   char trailer[8];
   if (fread(trailer, 1, 8, f) != 8 || memcmp(trailer, "ENDFIELD", 8) != 0) {
     (void)FAIL(c, "field_file '%s': no ENDFIELD trailer: the file is damaged", path);
@@ -285,19 +341,27 @@ static fmi2Status write_field(Instance *c, const char *path) {
     return fmi2Error;
   }
   unsigned char h[FIELD_HEADER_BYTES];
-  uint32_t version = 1, n_soil = EF_N_SOIL, hbytes = FIELD_HEADER_BYTES + 8u * EF_N_SOIL, flags = 0;
+  uint32_t version = 1, n_soil = EF_N_SOIL, n_depths = EF_N_DEPTHS;
+  uint32_t hbytes = FIELD_HEADER_BYTES + 8u * (EF_N_SOIL + EF_N_DEPTHS);
   int64_t nx = EF_NX, ny = EF_NY;
   double x0 = EF_X0, y0 = EF_Y0, dx = EF_DX;
   memcpy(h, "SYMFIELD", 8); memcpy(h + 8, &version, 4); memcpy(h + 12, &hbytes, 4);
   memcpy(h + 16, &nx, 8); memcpy(h + 24, &ny, 8);
   memcpy(h + 32, &x0, 8); memcpy(h + 40, &y0, 8); memcpy(h + 48, &dx, 8);
-  memcpy(h + 56, &n_soil, 4); memcpy(h + 60, &flags, 4);
+  memcpy(h + 56, &n_soil, 4); memcpy(h + 60, &n_depths, 4);
   long long n = EF_NX * EF_NY;
   int ok = fwrite(h, 1, sizeof h, f) == sizeof h && fwrite(ef_soil_values, 8, EF_N_SOIL, f) == (size_t)EF_N_SOIL;
+#if EF_N_DEPTHS > 0
+  ok = ok && fwrite(ef_depths, 8, EF_N_DEPTHS, f) == (size_t)EF_N_DEPTHS;
+#endif
   const double *fl[] = {E->z, E->zdot, E->zmax, E->pmax, E->zoff};
   for (int i = 0; i < 5 && ok; ++i) ok = fwrite(fl[i], sizeof(double), (size_t)n, f) == (size_t)n;
   ok = ok && fwrite(E->cycles, sizeof(unsigned short), (size_t)n, f) == (size_t)n;
   ok = ok && fwrite(E->phase, 1, (size_t)n, f) == (size_t)n;
+#if EF_N_DEPTHS > 0
+  ok = ok && fwrite(c->sigma_max, sizeof(float), (size_t)(n * EF_N_DEPTHS), f) == (size_t)(n * EF_N_DEPTHS);
+  ok = ok && fwrite(c->specific_volume, sizeof(float), (size_t)(n * EF_N_DEPTHS), f) == (size_t)(n * EF_N_DEPTHS);
+#endif
   ok = ok && fwrite("ENDFIELD", 1, 8, f) == 8;
   ok = (fclose(f) == 0) && ok;
   if (!ok || rename(tmp, path) != 0) {
@@ -384,6 +448,30 @@ static fmi2Status end_pass(Instance *c) {
       logf_(c, fmi2Warning, "logStatusWarning", "%lld cells had not unloaded %g s after the vehicle was lifted; "
             "their state is stored", E->n_act, EF_LIFT_MAX_STEPS * EF_SETTLE_STEP_S);
   }
+#if EF_N_DEPTHS > 0
+  /* World.fold_pass: the pass's largest vertical stress into the record (np.maximum), its largest mean
+     normal stress into the compression state (density.pass_update over the cells the pass touched: a
+     depth yields where p > 0 and the virgin line N - (lambda - kappa) ln(p / 1 kPa) is below the
+     current v1, the soil's initial v1_0 where the record is 0) */
+  {
+    long long n = EF_NX * EF_NY, m = n * EF_N_DEPTHS;
+    for (long long q = 0; q < m; ++q)
+      if (E->sig_pass[q] > c->sigma_max[q]) c->sigma_max[q] = E->sig_pass[q];
+#if EF_DENSITY
+    for (long long cell = 0; cell < n; ++cell) {
+      if (!E->touched[cell]) continue;
+      for (long long k = 0; k < EF_N_DEPTHS; ++k) {
+        const long long q = cell * EF_N_DEPTHS + k;
+        const double p = (double)E->p_pass[q], old = (double)c->specific_volume[q];
+        const double v_old = old > 0 ? old : EF_DENS_V0;
+        if (!(p > 0)) continue;
+        const double line = EF_DENS_N - EF_DENS_LMK * log(1e-3 * p);
+        if (line < v_old) c->specific_volume[q] = (float)line;
+      }
+    }
+#endif
+  }
+#endif
   const char *out = c->str[1];
   if (out && *out) return write_field(c, out);
   return fmi2OK;
