@@ -346,3 +346,23 @@ def test_reset_reruns_the_same_pass_and_an_unwritable_field_file_out_is_an_fmi2_
         assert runs[0] == runs[1] and runs[0][0] > 0
     finally:
         slave.freeInstance()
+
+
+def test_without_the_subsoil_stress_the_fmu_and_its_field_file_leave_it_out(tmp_path):
+    """The FMU of a scenario with terrain.subsoil_depths_m = [] (no tables compiled, a field file of 43
+    bytes per cell): still the Python run, outputs and field, bit for bit."""
+    off = ["terrain.subsoil_depths_m=[]"]
+    exported = fmu_export.export_fmu("validation_grid", tmp_path / "off.fmu", off)
+    sc = load_scenario("validation_grid", [*PASS, *off, "run.duration_s=2.0"])
+    ref = simulate(sc)
+    out = tmp_path / "off.field"
+    res = _master(exported, sc, 2.0, {"field_file_out": str(out)})
+    assert _worst(res, ref.runs[0], _outputs(exported.path)) == dict.fromkeys(_outputs(exported.path), 0.0)
+    field = fieldfile.read_field(out)
+    assert field.subsoil_depths_m == () and out.stat().st_size == 64 + 8 * len(field.soil) + 43 * 10**6 + 8
+    for name in STORAGE:
+        assert np.array_equal(getattr(field, name), getattr(ref.terrain, name)), name
+    # a field file with the subsoil records does not fit this FMU
+    rich = storage.Terrain(field.grid, subsoil_depths_m=(0.1, 0.3, 0.5, 0.8))
+    (tmp_path / "rich.field").write_bytes(fieldfile.field_bytes(rich, sc.params))
+    _start_with_field(exported, tmp_path / "rich.field")
