@@ -256,6 +256,20 @@ def test_a_bad_field_file_is_an_fmi2_error_with_a_logged_message(exported, tmp_p
     assert expect in capsys.readouterr().out
 
 
+def test_a_start_pose_off_the_field_is_an_fmi2_error_at_initialisation(exported, capsys):
+    slave, vr = _slave(exported)
+    slave.instantiate()
+    try:
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.setReal([vr["start_x_m"]], [49.5])  # the field ends at x = 50 m: the tracks reach past it
+        with pytest.raises(FMICallException):
+            slave.exitInitializationMode()
+        assert "the set-down at t = 0 s: the vehicle left the terrain field" in capsys.readouterr().out
+    finally:
+        slave.freeInstance()
+
+
 def test_a_step_off_the_macro_step_grid_is_an_fmi2_error(exported, capsys):
     slave, vr = _slave(exported)
     slave.instantiate()

@@ -94,8 +94,9 @@ class ExportedFmu:
 def check_exportable(sc: Scenario) -> None:
     """A ScenarioError (naming the field, its value and what is allowed) when the FMU cannot represent sc."""
     if sc.terrain is not None:
-        raise ScenarioError(f"scenario {sc.name!r} has a [terrain] section (the persistent grid terrain): the FMU "
-                            "carries the homogeneous terrain only; drop [terrain] to export the vehicle on the "
+        raise ScenarioError(f"scenario {sc.name!r} has a [terrain] section (the persistent grid terrain): this FMU "
+                            "carries the homogeneous terrain only (export_fmu exports a grid scenario as the engine "
+                            "FMU, symtrack.codegen.engine_fmu); drop [terrain] to export the vehicle on the "
                             "homogeneous soil")
     if sc.engine is not None:
         raise ScenarioError(f"scenario {sc.name!r} has an [engine] section (the grid terrain engine): the FMU carries "
