@@ -111,6 +111,9 @@ def check_exportable(sc: Scenario) -> None:
         raise ScenarioError("[terrain.surface] is set: the engine FMU carries a flat field")
     if t.moisture is not None:
         raise ScenarioError("[terrain.moisture] is set: the engine FMU's soil is fixed at export")
+    if getattr(t, "towed", None) is not None:  # [terrain.towed] (a trailer behind the crawler, on main since)
+        raise ScenarioError("[terrain.towed] is set: the engine FMU carries the crawler alone (the trailer's tyres "
+                            "are run by Python, symtrack.terrain.towed)")
     if t.initial_state:
         raise ScenarioError(f"terrain.initial_state = {t.initial_state!r}: the engine FMU takes its start field as the "
                             "string parameter field_file (symtrack terrain convert IN.npz OUT.field); drop "
