@@ -28,9 +28,10 @@ not FMU parameters.
 
 What cannot be exported is refused before anything is built (:func:`check_exportable`): another vehicle
 than the planar one, an integrator other than the engine (``grid_fast``), a soil map, an elevation, a
-moisture programme, the subsoil stress on (the FMU does not carry its records: export with
-``--set 'terrain.subsoil_depths_m=[]'``), a start terrain in the scenario (give it as ``field_file``),
-more than one pass, a torque change off the macro-step grid.
+moisture programme, a towed trailer, a start terrain in the scenario (give it as ``field_file``), more
+than one pass, a torque change off the macro-step grid. The subsoil stress and the bulk density are
+carried: their tables as C constants, this pass's maxima computed by the engine, the pass's end folding
+them into the field's records as World.fold_pass does (fmi2Terminate).
 """
 
 from __future__ import annotations
