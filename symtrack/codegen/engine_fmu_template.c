@@ -20,7 +20,9 @@
  * - outputs are computed on demand from the state and the current inputs (eng_outputs after the
  *   channel sums), as eng_run records them at each step's end;
  * - fmi2Terminate: the vehicle lifted off (TerrainEngine.end_pass: eng_lift, each loaded cell's load
- *   falling to zero over EF_LIFT_TIME_S), then, when field_file_out is not empty, the field written to it
+ *   falling to zero over EF_LIFT_TIME_S), the pass folded into the subsoil records (World.fold_pass: the
+ *   largest vertical stress, the compression state of density.pass_update; with EF_N_DEPTHS > 0), then,
+ *   when field_file_out is not empty, the field written to it
  *   (through a temporary file renamed over it: field_file_out may be field_file). A write error is
  *   fmi2Error with its message.
  *
