@@ -67,7 +67,8 @@ def test_manifest_names_hash_and_units():
 @pytest.mark.parametrize("name, unit", [("k_c_N_per_m_n1", "N/m^(n+1)"), ("cell_damping_Pa_s_per_m", "Pa s/m"),
                                         ("accel_x_m_s2", "m/s^2"), ("omega_left_rad_s", "rad/s"),
                                         ("slip_left", "1"), ("bekker_n", "1"), ("mass_kg", "kg"),
-                                        ("internal_resistance_per_km_h", "h/km"), ("step_s", "s")])
+                                        ("internal_resistance_per_km_h", "h/km"), ("step_s", "s"),
+                                        ("compaction_power_W", "W")])
 def test_unit_of(name, unit):
     assert unit_of(name) == unit
 

@@ -1,13 +1,15 @@
 """``symtrack terrain export``: a terrain file's layers as GeoTIFF and NetCDF (docs/terrain.md,
-"GIS rasters"); argument parsing only, the export is :func:`symtrack.terrain.gis.export_terrain`
-(imported by the command, not here, so that ``symtrack --help`` answers at once)."""
+"GIS rasters"); ``symtrack terrain convert``: a terrain file (.npz) to the raw field file (.field) the
+engine FMU reads and writes, or back (docs/terrain.md, "Files"). Argument parsing only, the work is
+:func:`symtrack.terrain.gis.export_terrain` and :func:`symtrack.terrain.fieldfile.convert` (imported by
+the commands, not here, so that ``symtrack --help`` answers at once)."""
 
 from __future__ import annotations
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import check_output_file, check_output_folder
 
-__all__ = ["add_parser", "export_command"]
+__all__ = ["add_parser", "convert_command", "export_command"]
 
 
 def export_command(args) -> int:
@@ -28,6 +30,15 @@ def export_command(args) -> int:
     return 0
 
 
+def convert_command(args) -> int:
+    check_output_file(args.out, "OUT")  # before anything is read
+    from ..terrain.fieldfile import convert
+
+    st = convert(args.src, args.out)
+    print(f"wrote {args.out} ({st.grid.shape[0]} x {st.grid.shape[1]} cells)")
+    return 0
+
+
 def add_parser(sub) -> None:
     """Register ``symtrack terrain`` on the argparse subparsers of symtrack.cli."""
     tp = sub.add_parser("terrain", help="work with terrain files: export their layers for GIS tools")
@@ -43,3 +54,10 @@ def add_parser(sub) -> None:
     ex.add_argument("--crs", metavar="CRS", help="the CRS of a terrain that has none, e.g. EPSG:32633 (projected, "
                     "in metres); a terrain with a CRS keeps it")
     ex.set_defaults(func=export_command)
+    cv = tsub.add_parser(
+        "convert", help="a terrain file (.npz) to a raw field file (.field, the engine FMU's field_file) or back",
+        description="Convert by the suffixes: FILE.npz -> FILE.field or FILE.field -> FILE.npz (docs/terrain.md, "
+        "\"Files\"). A field file carries one soil, no subsoil records, no elevation, no history.")
+    cv.add_argument("src", metavar="IN", help="FILE.npz or FILE.field")
+    cv.add_argument("out", metavar="OUT", help="FILE.field or FILE.npz")
+    cv.set_defaults(func=convert_command)

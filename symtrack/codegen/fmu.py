@@ -23,22 +23,20 @@ those that repeat a state's name (the four sinkages, which are the states). Unit
 suffixes (:func:`symtrack.native.generate.unit_of`), each declared in ``<UnitDefinitions>`` with its SI
 base units where it has fixed ones.
 
-What cannot be exported is refused before anything is built (:func:`check_exportable`): a grid terrain
-scenario, an integrator other than ``rosenbrock``, a torque change or an output step off the grid of
-``run.fixed_step_s`` (the FMU's communication step is a whole number of fixed steps), an unwritable
-``--out``.
+A scenario with a ``[terrain]`` section is handed to :func:`symtrack.codegen.engine_fmu.export_engine_fmu`
+(the vehicle on the terrain engine, the field as a file parameter). What cannot be exported here is
+refused before anything is built (:func:`check_exportable`): a grid terrain scenario, an integrator
+other than ``rosenbrock``, a torque change or an output step off the grid of ``run.fixed_step_s`` (the
+FMU's communication step is a whole number of fixed steps), an unwritable ``--out``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import io
 import logging
 import math
-import os
 import tempfile
 import uuid
-import zipfile
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
 
@@ -55,6 +53,16 @@ from ..native.generate import build as generate_functions
 from ..simulation.builder import system_model
 from ..simulation.scenario import Scenario, load_scenario
 from ..toolchain import BuildSpec, build, casadi_tag, digest
+from .fmu_common import (
+    BASE_UNITS,
+    FMI2_HEADERS,
+    LOG_CATEGORIES,
+    FmuVariable,
+    probe_writable,
+    unit_definitions,
+    xml_number,
+    zip_bytes,
+)
 from .standalone import c_array, c_literal
 
 __all__ = ["BASE_UNITS", "FMU_BUILD_VERSION", "FMU_CFLAGS", "FMU_TEMPLATE", "FMI2_HEADERS", "LOG_CATEGORIES",
@@ -67,38 +75,10 @@ MODEL_IDENTIFIER = "symtrack_homogeneous"
 # bumped when the FMU's layout (template, header, variable order) changes: part of the binary's cache key
 FMU_BUILD_VERSION = 1
 FMU_TEMPLATE = Path(__file__).resolve().parent / "fmu_template.c"
-FMI2_HEADERS = tuple(Path(__file__).resolve().parent / "fmi2" / n
-                     for n in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"))
 # -fvisibility=hidden without GCC_HASCLASSVISIBILITY: only the fmi2 functions (FMI2_Export) are exported
 FMU_CFLAGS = ("-O2", "-std=c99", "-Wall")
 FMU_SHARED_CFLAGS = ("-fPIC", "-fvisibility=hidden")
-LOG_CATEGORIES = ("logStatusError", "logAll")
 START_POSE = ("start_x_m", "start_y_m", "start_yaw_rad")
-
-# SI base units of the units the names carry (FMI 2.0 <BaseUnit>); "N/m^(n+1)" and "N/m^(n+2)" depend on
-# the Bekker exponent n and are declared without one
-BASE_UNITS = {
-    "m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s^2": {"m": 1, "s": -2}, "rad": {"rad": 1},
-    "rad/s": {"rad": 1, "s": -1}, "N m": {"kg": 1, "m": 2, "s": -2}, "N": {"kg": 1, "m": 1, "s": -2},
-    "Pa": {"kg": 1, "m": -1, "s": -2}, "kg": {"kg": 1}, "kg m^2": {"kg": 1, "m": 2}, "s": {"s": 1},
-    "h/km": {"s": 1, "m": -1, "factor": 3.6}, "Pa/m": {"kg": 1, "m": -2, "s": -2}, "kg/m^2": {"kg": 1, "m": -2},
-    "Pa s/m": {"kg": 1, "m": -2, "s": -1},
-}
-
-
-@dataclasses.dataclass(frozen=True)
-class FmuVariable:
-    """One scalar variable of the FMU (a ScalarVariable of modelDescription.xml)."""
-
-    name: str
-    value_reference: int
-    causality: str  # input, parameter, output
-    variability: str  # continuous, fixed
-    start: float | None
-    unit: str  # "1": dimensionless (no unit attribute)
-    description: str
-    initial: str | None = None
-
 
 @dataclasses.dataclass(frozen=True)
 class ExportedFmu:
@@ -114,8 +94,9 @@ class ExportedFmu:
 def check_exportable(sc: Scenario) -> None:
     """A ScenarioError (naming the field, its value and what is allowed) when the FMU cannot represent sc."""
     if sc.terrain is not None:
-        raise ScenarioError(f"scenario {sc.name!r} has a [terrain] section (the persistent grid terrain): the FMU "
-                            "carries the homogeneous terrain only; drop [terrain] to export the vehicle on the "
+        raise ScenarioError(f"scenario {sc.name!r} has a [terrain] section (the persistent grid terrain): this FMU "
+                            "carries the homogeneous terrain only (export_fmu exports a grid scenario as the engine "
+                            "FMU, symtrack.codegen.engine_fmu); drop [terrain] to export the vehicle on the "
                             "homogeneous soil")
     if sc.engine is not None:
         raise ScenarioError(f"scenario {sc.name!r} has an [engine] section (the grid terrain engine): the FMU carries "
@@ -173,13 +154,8 @@ def fmu_variables(model, sc: Scenario) -> tuple[FmuVariable, ...]:
     return tuple(out)
 
 
-def _xml_number(v: float) -> str:
-    return repr(float(v))
-
-
 def model_description(sc: Scenario, variables, guid: str, model_hash: str, prefix: str = "homogeneous") -> str:
     """modelDescription.xml (FMI 2.0, co-simulation); ``prefix``: the generated files' prefix."""
-    units = sorted({v.unit for v in variables if v.unit != "1"})
     desc = (f"symtrack {sc.name}: tracked vehicle on homogeneous deformable soil, compiled fixed-step Rosenbrock "
             f"(model hash {model_hash[:16]})")
     lines = [
@@ -200,19 +176,11 @@ def model_description(sc: Scenario, variables, guid: str, model_hash: str, prefi
     ]
     lines += [f'      <File name="{n}"/>' for n in ("symtrack_fmu.c", f"{prefix}_{FIXED_STEP_METHOD}.c",
                                                    f"{prefix}_outputs.c", f"{prefix}_fmu_init.c")]
-    lines += ["    </SourceFiles>", "  </CoSimulation>", "  <UnitDefinitions>"]
-    for u in units:
-        base = BASE_UNITS.get(u)
-        if base is None:
-            lines.append(f"    <Unit name={quoteattr(u)}/>")
-        else:
-            attrs = " ".join(f'{k}="{v}"' for k, v in base.items())
-            lines.append(f"    <Unit name={quoteattr(u)}><BaseUnit {attrs}/></Unit>")
-    lines += ["  </UnitDefinitions>", "  <LogCategories>"]
+    lines += ["    </SourceFiles>", "  </CoSimulation>", *unit_definitions(variables), "  <LogCategories>"]
     lines += [f'    <Category name="{c}"/>' for c in LOG_CATEGORIES]
     lines += ["  </LogCategories>",
-              f'  <DefaultExperiment startTime="0.0" stopTime="{_xml_number(sc.run.duration_s)}" '
-              f'stepSize="{_xml_number(sc.run.output_dt_s)}"/>',
+              f'  <DefaultExperiment startTime="0.0" stopTime="{xml_number(sc.run.duration_s)}" '
+              f'stepSize="{xml_number(sc.run.output_dt_s)}"/>',
               "  <ModelVariables>"]
     for v in variables:
         attrs = [f"name={quoteattr(v.name)}", f'valueReference="{v.value_reference}"',
@@ -222,7 +190,7 @@ def model_description(sc: Scenario, variables, guid: str, model_hash: str, prefi
             attrs.append(f'initial="{v.initial}"')
         real = [f"unit={quoteattr(v.unit)}"] if v.unit != "1" else []
         if v.start is not None:
-            real.append(f'start="{_xml_number(v.start)}"')
+            real.append(f'start="{xml_number(v.start)}"')
         lines.append(f"    <!-- {v.value_reference + 1} -->")
         lines.append(f"    <ScalarVariable {' '.join(attrs)}>")
         lines.append(f"      <Real {' '.join(real)}/>".replace("<Real />", "<Real/>"))
@@ -340,18 +308,6 @@ def _documentation(sc: Scenario, variables) -> bytes:
             f"<th>unit</th><th>start</th><th>description</th></tr>\n{rows}\n</table></body></html>\n").encode()
 
 
-def _probe_writable(path: Path) -> None:
-    """Create and remove a file beside ``path`` (permission bits do not tell for root or special file systems)."""
-    folder = path.parent
-    folder.mkdir(parents=True, exist_ok=True)
-    try:
-        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
-    except OSError as err:
-        raise ScenarioError(f"--out {str(path)!r}: cannot write into {str(folder)!r} ({err.strerror})") from err
-    os.close(fd)
-    os.unlink(probe)
-
-
 def export_fmu(scenario, out, overrides=None) -> ExportedFmu:
     """Write the FMU of ``scenario`` (a name, a TOML path or a Scenario) to ``out`` (a .fmu file, written
     atomically). The scenario and the output path are checked before anything is built."""
@@ -359,8 +315,12 @@ def export_fmu(scenario, out, overrides=None) -> ExportedFmu:
     if out_path.suffix != ".fmu":
         raise ScenarioError(f"--out {str(out)!r}: an FMU file name ends in .fmu")
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides)
+    if sc.terrain is not None:  # the grid terrain: the vehicle on the terrain engine
+        from .engine_fmu import export_engine_fmu
+
+        return export_engine_fmu(sc, out_path)
     check_exportable(sc)
-    _probe_writable(out_path)  # the scenario first: a refused scenario creates no folder
+    probe_writable(out_path)  # the scenario first: a refused scenario creates no folder
     model = system_model(sc.model)
     prefix = model.terrain.name  # the generated files' prefix
     variables = fmu_variables(model, sc)
@@ -388,14 +348,7 @@ def export_fmu(scenario, out, overrides=None) -> ExportedFmu:
                f"binaries/linux64/{MODEL_IDENTIFIER}.so": binary.read_bytes(),
                "documentation/index.html": _documentation(sc, variables),
                **{f"sources/{n}": sources[n] for n in sorted(sources)}}
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
-        for name, data in members.items():
-            info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED
-            info.external_attr = (0o755 if name.endswith(".so") else 0o644) << 16
-            zf.writestr(info, data)
-    atomic_write_bytes(out_path, buf.getvalue())
+    atomic_write_bytes(out_path, zip_bytes(members))
     return ExportedFmu(out_path, guid, variables, binary, tuple(members))
 
 
@@ -403,8 +356,10 @@ def command(args) -> int:
     """``symtrack export fmu SCENARIO --out FILE.fmu [--set ...]``."""
     res = export_fmu(args.scenario, args.out, args.set)
     n = {c: sum(v.causality == c for v in res.variables) for c in ("input", "parameter", "output")}
-    log.info("wrote %s (FMI 2.0 co-simulation, GUID %s): %d inputs, %d parameters, %d outputs; binary "
-             "binaries/linux64/%s.so (linux64), C sources in sources/", res.path, res.guid, n["input"],
-             n["parameter"], n["output"], MODEL_IDENTIFIER)
+    strings = getattr(res, "strings", ())
+    binary = next(f for f in res.files if f.startswith("binaries/"))
+    log.info("wrote %s (FMI 2.0 co-simulation, GUID %s): %d inputs, %d parameters%s, %d outputs; binary "
+             "%s (linux64), C sources in sources/", res.path, res.guid, n["input"], n["parameter"] + len(strings),
+             f" ({', '.join(strings)} among them)" if strings else "", n["output"], binary)
     return 0
 

@@ -30,7 +30,8 @@ from ..foundations.errors import SimulationError
 from ..native.cache import REPO_GENERATED
 from .standalone import build_program, c_array, c_literal
 
-__all__ = ["CFLAGS", "FILES", "MAIN_C", "NATIVE", "SCENARIO", "build", "render", "run"]
+__all__ = ["CFLAGS", "FILES", "MAIN_C", "NATIVE", "SCENARIO", "build", "engine_constants", "engine_parts", "render",
+           "run"]
 
 SCENARIO = "validation_grid"
 MAIN_C = Path(__file__).resolve().parent / "grid_standalone_main.c"
@@ -48,58 +49,78 @@ def _time_grid(sc) -> tuple[np.ndarray, np.ndarray]:
     return np.array([t1 for _, t1, _ in ivs]), np.array([u for _, _, u in ivs])
 
 
-def render(scratch: Path, overrides=()) -> dict[str, bytes]:
-    """The generated/ files of the grid standalone program, name -> bytes (``overrides``: ``--set``
-    items applied to the scenario)."""
-    from symtrack.integrators.engine import (
-        POWER_MODES,
-        SDIRK_GAMMA,
-        SETTLE_STEP_S,
-        EngineSettings,
-        EngineState,
-        engine_functions,
-        window_substeps,
-    )
-    from symtrack.native.grid_engine_model import NA, NGEO, soil_dispatch_c
-    from symtrack.simulation.scenario import load_scenario
+def engine_parts(sc, scratch: Path) -> dict:
+    """What the engine of the grid scenario ``sc`` runs on (as TerrainEngine sets it up): ``world``,
+    ``settings`` (the scenario's [engine] or the defaults), ``fns``, ``state`` (an EngineState on the
+    scenario's new field) and the generated C, ``gen`` (engine_gen.inc) and ``soils``
+    (engine_soils.inc) as bytes; ``scratch``: a folder for the code generator."""
+    from symtrack.integrators.engine import EngineSettings, EngineState, engine_functions
+    from symtrack.native.grid_engine_model import soil_dispatch_c
     from symtrack.terrain.world import open_world
 
-    sc = load_scenario(SCENARIO, list(overrides))
-    settings = EngineSettings()
+    settings = sc.engine or EngineSettings()
     st = sc.start
     world = open_world(sc.terrain, sc.params, sc.model, sc.run.macro_step_s, start_xy=(st.x_m, st.y_m))
-    fns = engine_functions(sc.model, sc.params, settings.vehicle_substeps)
+    fns = engine_functions(sc.model, sc.params, settings.vehicle_substeps, world.soils)
     state = EngineState(world, settings, fns)
     cg = ca.CodeGenerator("engine_gen.c", {"with_header": False})
     for f in fns.all():
         cg.add(f)
     cg.generate(str(scratch) + "/")
-    gen = (scratch / "engine_gen.c").read_bytes()
+    gen = (Path(scratch) / "engine_gen.c").read_bytes()
+    return {"world": world, "settings": settings, "fns": fns, "state": state, "gen": gen,
+            "soils": soil_dispatch_c(fns.n_soils, fns.layout).encode()}
+
+
+def engine_constants(tag: str, parts: dict) -> list[str]:
+    """The engine's constants as C macros ``<tag>_NAME`` (the field, M, the struct's sizes and
+    settings) for a program that fills grid_engine.c's eng_t itself."""
+    from symtrack.integrators.engine import POWER_MODES, SDIRK_GAMMA, window_substeps
+    from symtrack.native.grid_engine_model import NA, NGEO
+
+    world, settings, fns, state = parts["world"], parts["settings"], parts["fns"], parts["state"]
+    g = world.grid
+    return [
+        f"#define {tag}_NX {g.shape[0]}LL", f"#define {tag}_NY {g.shape[1]}LL", f"#define {tag}_M {world.M}LL",
+        f"#define {tag}_X0 {c_literal(g.origin_m[0])}", f"#define {tag}_Y0 {c_literal(g.origin_m[1])}",
+        f"#define {tag}_DX {c_literal(g.cell_m)}",
+        f"#define {tag}_NA {NA}", f"#define {tag}_NW {fns.nw}", f"#define {tag}_NGEO {NGEO}",
+        f"#define {tag}_N_PV {state.pv.size}LL", f"#define {tag}_N_SUMS {state.n_sums}LL",
+        f"#define {tag}_NY_OUT {state.ny_out}LL", f"#define {tag}_WORK {state.work.size}LL",
+        f"#define {tag}_CELL_SUBSTEPS {settings.cell_substeps}LL",
+        f"#define {tag}_ENTRY_SUBSTEPS {window_substeps(settings)[0]}LL",
+        f"#define {tag}_EXIT_SUBSTEPS {window_substeps(settings)[1]}LL",
+        f"#define {tag}_STEADY_EULER {int(settings.steady_method == 'euler')}LL",
+        f"#define {tag}_POWER_MODE {POWER_MODES.index(settings.power)}LL",
+        f"#define {tag}_PAD {c_literal(state.pad)}", f"#define {tag}_RELEASE_RATE {c_literal(state.release_rate)}",
+        f"#define {tag}_AREAL_MASS {c_literal(state.areal_mass)}",
+        f"#define {tag}_DAMPING {c_literal(state.damping)}",
+        f"#define {tag}_GAMMA {c_literal(SDIRK_GAMMA)}",
+        f"#define {tag}_ENTRY_FRACTION {c_literal(settings.entry_fraction)}",
+        f"#define {tag}_RING_TOL {c_literal(settings.ring_tolerance)}",
+    ]
+
+
+def render(scratch: Path, overrides=()) -> dict[str, bytes]:
+    """The generated/ files of the grid standalone program, name -> bytes (``overrides``: ``--set``
+    items applied to the scenario)."""
+    from symtrack.integrators.engine import SETTLE_STEP_S
+    from symtrack.simulation.scenario import load_scenario
+
+    sc = load_scenario(SCENARIO, list(overrides))
+    parts = engine_parts(sc, scratch)
+    world, fns, state = parts["world"], parts["fns"], parts["state"]
+    st = sc.start
     T, U = _time_grid(sc)
     run = sc.run
     te = sc.event_time(run.stop_distance_event) if run.stop_distance_event else 0.0
-    g = world.grid
     lines = [
         f"/* grid_validation.h: the built-in '{sc.name}' scenario as C constants, for",
         " * codegen/grid_standalone_main.c. Generated by python -m codegen; do not edit. */",
         "#ifndef GRID_VALIDATION_H",
         "#define GRID_VALIDATION_H",
         f'#define GV_SCENARIO "{sc.name}"',
-        f"#define GV_NX {g.shape[0]}LL", f"#define GV_NY {g.shape[1]}LL", f"#define GV_M {world.M}LL",
-        f"#define GV_X0 {c_literal(g.origin_m[0])}", f"#define GV_Y0 {c_literal(g.origin_m[1])}",
-        f"#define GV_DX {c_literal(g.cell_m)}",
-        f"#define GV_NA {NA}", f"#define GV_NW {fns.nw}", f"#define GV_NGEO {NGEO}",
-        f"#define GV_N_PV {state.pv.size}LL", f"#define GV_N_SUMS {state.n_sums}LL",
-        f"#define GV_NY_OUT {state.ny_out}LL", f"#define GV_WORK {state.work.size}LL",
-        f"#define GV_CELL_SUBSTEPS {settings.cell_substeps}LL",
-        f"#define GV_ENTRY_SUBSTEPS {window_substeps(settings)[0]}LL",
-        f"#define GV_EXIT_SUBSTEPS {window_substeps(settings)[1]}LL",
-        f"#define GV_STEADY_EULER {int(settings.steady_method == 'euler')}LL",
-        f"#define GV_POWER_MODE {POWER_MODES.index(settings.power)}LL",
-        f"#define GV_PAD {c_literal(state.pad)}", f"#define GV_RELEASE_RATE {c_literal(state.release_rate)}",
-        f"#define GV_AREAL_MASS {c_literal(state.areal_mass)}", f"#define GV_DAMPING {c_literal(state.damping)}",
-        f"#define GV_GAMMA {c_literal(SDIRK_GAMMA)}", f"#define GV_ENTRY_FRACTION {c_literal(settings.entry_fraction)}",
-        f"#define GV_RING_TOL {c_literal(settings.ring_tolerance)}",
+        *engine_constants("GV", parts),
         f"#define GV_START_X {c_literal(st.x_m)}", f"#define GV_START_Y {c_literal(st.y_m)}",
         f"#define GV_START_YAW {c_literal(np.radians(st.yaw_deg))}",
         f"#define GV_SETTLE_STEPS {int(round(world.settings.settle_s / SETTLE_STEP_S))}LL",
@@ -114,8 +135,7 @@ def render(scratch: Path, overrides=()) -> dict[str, bytes]:
     names = ", ".join(f'"{n}"' for n in fns.output_names)
     text += f"static const char *gv_output_names[{len(fns.output_names)}] = {{{names}}};\n"
     text += "#endif\n"
-    return {"engine_gen.inc": gen, "engine_soils.inc": soil_dispatch_c(fns.n_soils, fns.layout).encode(),
-            "grid_validation.h": text.encode()}
+    return {"engine_gen.inc": parts["gen"], "engine_soils.inc": parts["soils"], "grid_validation.h": text.encode()}
 
 
 def build(src_dir: Path | None = None) -> Path:

@@ -49,7 +49,7 @@ _UNIT_SUFFIXES = (
     ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
     ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_per_km_h", "h/km"),
     ("_rad_s", "rad/s"), ("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_N_m", "N m"), ("_rad", "rad"),
-    ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_m", "m"), ("_s", "s"),
+    ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_W", "W"), ("_m", "m"), ("_s", "s"),
 )
 
 
