@@ -86,3 +86,69 @@ def test_the_bench_row_of_the_outputs_adds_up():
     parts = r["start_up_s"] + r["simulate_s"] + r["figures_s"] + r["write_s"]
     assert parts == pytest.approx(r["timed_run_wall_s"]) and r["import_s"] <= r["start_up_s"]
     assert r["outputs_over_simulate"] > 0 and "x the simulation" in r["note"]
+
+
+def _fixed_layout_figures(monkeypatch) -> list:
+    """The figures that fixed_layout lays out (instead of tight_layout), drawn with long tick labels
+    (values like -12345.678 and 0.0012345), captured before they become PNG bytes."""
+    import types
+
+    import numpy as np
+
+    from symtrack.reports import plots, subsoil_plots, terrain_plots
+
+    figs = []
+
+    def capture(fig, tight=True):
+        assert not tight  # the figures below are laid out by fixed_layout
+        figs.append(fig)
+        return b""
+
+    for mod in (plots, subsoil_plots, terrain_plots):
+        monkeypatch.setattr(mod, "png_bytes", capture)
+    t = np.linspace(0.0, 123.4, 400)
+    wide = -12345.678 + 0.0012345 * np.sin(t)
+    cols = {"a": wide, "b": 1e4 * np.cos(t), "x_m": 1234.5 + t, "y_m": -987.6 + 0.01 * t, "yaw_rad": 0 * t}
+    ev = [types.SimpleNamespace(t_s=0.0), types.SimpleNamespace(t_s=50.0)]
+    res = types.SimpleNamespace(t=t, column=cols.__getitem__, state=cols.__getitem__,
+                                X=np.column_stack([cols["x_m"], cols["y_m"], cols["yaw_rad"]]),
+                                scenario=types.SimpleNamespace(torque=ev))
+    plots.time_plot(res, [("a", "left (actual)"), ("b", "right (actual)")], "torque [N m]", "sprocket torques")
+    plots.path_plot(res)
+    k = 12
+    figures = [{"rut_max_depth_mm": 1234.567 + i, "rut_mean_depth_mm": 0.0012345 * i, "new_sinkage_mean_mm": -0.5 * i,
+                "compaction_resistance_mean_N": 12345.678 * i} for i in range(k)]
+    terrain_plots.passes_png(figures)
+    subsoil_plots.passes_subsoil_png(np.arange(k) * 1.2345, np.outer(np.arange(k), [123.456, 98.7, 6.5, 0.4]) + 1e3,
+                                     [0.1, 0.3, 0.5, 0.8])
+    subsoil_plots.density_passes_png([1.2345, 1.3, 1.4, 1.5], np.full((k, 4), 1.56789), [0.1, 0.3, 0.5, 0.8])
+    subsoil_plots.stress_profile_png([0.1, 0.3, 0.5, 0.8], [1234.5, 987.6, 654.3, 321.0], 1500.0)
+    grid = types.SimpleNamespace(cell_m=0.1, origin_m=(0.0, 0.0), shape=(100, 100))
+    maps = [np.full((100, 100), -12.345678 * (i + 1)) for i in range(3)]
+    X = np.column_stack([np.linspace(2, 8, 50), np.full(50, 5.0), np.zeros(50)])
+    terrain_plots.rut_section_png(types.SimpleNamespace(grid=grid), maps, [types.SimpleNamespace(X=X)], None)
+    return figs
+
+
+def test_the_fixed_layouts_keep_every_text_on_the_canvas_and_off_the_other_axes(monkeypatch):
+    """fixed_layout (reports/plots.py) replaces tight_layout in the run folder's line plots: with long
+    tick labels every visible text lies on the canvas (1 px slack) and no axes' text runs into
+    another axes' frame."""
+    from matplotlib.text import Text
+
+    from symtrack.reports.plots import plt
+
+    figs = _fixed_layout_figures(monkeypatch)
+    assert len(figs) == 7
+    for fig in figs:
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        W, H = fig.bbox.width, fig.bbox.height
+        for ax in fig.axes:
+            assert any(t.get_visible() and t.get_text().strip() for t in ax.findobj(Text))
+            bb = ax.get_tightbbox(r)  # what is drawn of the axes: frame, ticks, labels, title, legend
+            assert bb.x0 >= -1 and bb.y0 >= -1 and bb.x1 <= W + 1 and bb.y1 <= H + 1, (ax.get_title(), bb, W, H)
+            for other in fig.axes:
+                if other is not ax:
+                    assert not bb.overlaps(other.get_window_extent(r)), (ax.get_title(), other.get_title())
+        plt.close(fig)

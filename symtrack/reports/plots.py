@@ -11,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["LATERAL_SCALE_FLOOR_M", "path_plot", "plt", "png_bytes", "time_plot"]
+__all__ = ["LATERAL_SCALE_FLOOR_M", "fixed_layout", "path_plot", "plt", "png_bytes", "time_plot"]
 
 # smallest half-range of the magnified lateral-deviation axis (1 mm)
 LATERAL_SCALE_FLOOR_M = 1e-3
@@ -26,6 +26,21 @@ def png_bytes(fig, tight: bool = True) -> bytes:
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
     return buf.getvalue()
+
+
+def fixed_layout(fig, left_in: float = 1.0, right_in: float = 0.25, bottom_in: float = 0.65, top_in: float = 0.45,
+                 hspace_in: float = 0.6) -> None:
+    """Lay out a figure of one column of axes with fixed margins in inches (left for the y label and
+    tick labels of up to 8 characters, bottom for the x label, top for a title, ``hspace_in``
+    between the rows), instead of tight_layout, which measures every tick label once more before the
+    drawing does: a third of the figure's time (issue 26 item 2, docs/terrain.md "What the outputs
+    cost"). tests/test_outputs.py draws every figure laid out so with long tick labels and checks
+    that no text leaves the canvas or runs into another axes."""
+    w, h = fig.get_size_inches()
+    rows = max(ax.get_subplotspec().get_gridspec().nrows for ax in fig.axes if ax.get_subplotspec() is not None)
+    axes_h = (h - bottom_in - top_in - (rows - 1) * hspace_in) / rows
+    fig.subplots_adjust(left=left_in / w, right=1 - right_in / w, bottom=bottom_in / h, top=1 - top_in / h,
+                        hspace=hspace_in / axes_h if rows > 1 else 0.2)
 
 
 def _events(ax, res):
@@ -51,7 +66,8 @@ def path_plot(res) -> bytes:
     a2.set_ylabel("lateral deviation [cm] (left +)")
     a2.set_title("lateral deviation from the initial straight line (magnified)")
     a2.grid(True)
-    return png_bytes(fig)
+    fixed_layout(fig, hspace_in=0.95)
+    return png_bytes(fig, tight=False)
 
 
 def time_plot(res, series, ylabel, title, scale=1.0) -> bytes:
@@ -66,4 +82,5 @@ def time_plot(res, series, ylabel, title, scale=1.0) -> bytes:
     ax.set_title(title)
     ax.grid(True)
     ax.legend()
-    return png_bytes(fig)
+    fixed_layout(fig)
+    return png_bytes(fig, tight=False)

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.colors import ListedColormap
 
 from ..terrain.subsoil import RISK_HIGH_ABOVE, RISK_LOW_BELOW, RISK_NAMES
-from .plots import plt, png_bytes
+from .plots import fixed_layout, plt, png_bytes
 
 __all__ = ["RISK_COLOURS", "density_map_png", "density_passes_png", "passes_subsoil_png", "risk_map_png",
            "stress_profile_png"]
@@ -69,7 +69,8 @@ def stress_profile_png(depths_m, sigma_kPa, sigma_pc_kPa, label: str = "maximum 
     ax.grid(True)
     ax.legend(fontsize=8, loc="lower right")
     ax.set_title("stress against strength by depth")
-    return png_bytes(fig)
+    fixed_layout(fig, left_in=0.8)
+    return png_bytes(fig, tight=False)
 
 
 def passes_subsoil_png(rut_depth_mm, sigma_max_kPa, depths_m) -> bytes:
@@ -92,7 +93,8 @@ def passes_subsoil_png(rut_depth_mm, sigma_max_kPa, depths_m) -> bytes:
     for a in (a1, a2):
         a.grid(True)
     a1.set_title("rut depth and subsoil stress pass by pass")
-    return png_bytes(fig)
+    fixed_layout(fig, hspace_in=0.25)
+    return png_bytes(fig, tight=False)
 
 
 def density_map_png(rho_Mg_per_m3, depths_m, extent_m, title: str = "dry bulk density") -> bytes:
@@ -138,4 +140,5 @@ def density_passes_png(initial_Mg_per_m3, rho_max_Mg_per_m3, depths_m) -> bytes:
     ax.grid(True)
     ax.legend(title="depth", fontsize=8)
     ax.set_title("bulk density by depth pass by pass (O'Sullivan & Robertson 1996)")
-    return png_bytes(fig)
+    fixed_layout(fig)
+    return png_bytes(fig, tight=False)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..terrain.density import bulk_density
-from .plots import plt, png_bytes
+from .plots import fixed_layout, plt, png_bytes
 from .subsoil_plots import density_map_png, density_passes_png
 
 __all__ = ["ANIMATION_MAX_FRAMES", "density_pngs", "pass_animation_gif", "passes_png", "rut_section_png",
@@ -106,7 +106,8 @@ def rut_section_png(world, maps, results, line) -> bytes:
     ax.set_title(f"rut cross-section at x = {xm:.2f} m, y = {ym:.2f} m")
     ax.grid(True)
     ax.legend()
-    return png_bytes(fig)
+    fixed_layout(fig)
+    return png_bytes(fig, tight=False)
 
 
 def passes_png(figures: list[dict]) -> bytes:
@@ -127,7 +128,8 @@ def passes_png(figures: list[dict]) -> bytes:
     for a in (a1, a2, a3):
         a.grid(True)
     a1.set_title("the rut pass by pass")
-    return png_bytes(fig)
+    fixed_layout(fig, hspace_in=0.25)
+    return png_bytes(fig, tight=False)
 
 
 def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 6) -> bytes:
