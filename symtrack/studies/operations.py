@@ -608,6 +608,11 @@ class PathFollower:
         self.failure = None
         self.done = False
 
+    @property
+    def progress_fraction(self) -> float:
+        """The share of the path driven (the run's progress bar: the time limit is 4 x the plan's)."""
+        return min(self.s / max(self.path.length_m, 1e-9), 1.0)
+
     def _kappa(self, s: float, window_m: float) -> float:
         """The path's curvature averaged over [s - window/2, s + window/2] (exactly, piecewise constant)."""
         p = self.path
