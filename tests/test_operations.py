@@ -172,3 +172,25 @@ def test_operation_gif_reveals_the_field_over_time():
         a = np.asarray(im.convert("RGB"))[22:]
         grey.append(int(np.all(a == 225, axis=2).sum()))
     assert all(g1 < g0 for g0, g1 in zip(grey, grey[1:], strict=False))  # more of the field shown each frame
+
+
+@pytest.mark.slow
+def test_season_4ha_reduced_writes_its_summary_and_animation(tmp_path):
+    """The built-in season on an 80 m x 80 m field (the 4 ha run takes about 5 minutes: docs/studies.md):
+    every operation complete, every turn driven, the summary's keys, the GIF's frames."""
+    from PIL import Image
+
+    spec = op.load_operation_spec("season_4ha", ["operation.size_m=[80.0, 80.0]"])
+    assert [o[0].name for o in spec.operations] == ["tillage", "drilling", "spraying", "harvest"]
+    res = op.run_season(spec, tmp_path / "s")
+    s = res.summary
+    assert s["complete"], s["error"]
+    assert s["turns_driven"] == sum(o[1].turns for o in spec.operations) > 0 and s["turns_lifted"] == 0
+    for k in ("trafficked_fraction", "headland_trafficked_fraction"):
+        assert 0.0 < s[k] < 1.0
+    # the season's union is at least each operation's own share and at most their sum
+    own = [o["operation_trafficked_fraction"] for o in s["operations"]]
+    assert max(own) <= s["trafficked_fraction"] <= sum(own) + 1e-9
+    gif = Image.open(tmp_path / "s" / s["animation_gif"])
+    assert gif.n_frames == 60
+    assert (tmp_path / "s" / "04_harvest" / "animation.gif").is_file()
