@@ -552,7 +552,12 @@ class PathFollower:
       clay 600 N m from 0 to 1/400 1/m, 380 N m from 1/12 to 1/3 1/m), so a correction through it
       reverses the torques (measured: a bang-bang oscillation in the first headland corner);
     - a PI law on the speed for the mean torque, over the map's mean torque; the speed reference
-      the path's, limited by :data:`PLAN_ACCEL_M_S2`.
+      the path's, limited by :data:`PLAN_ACCEL_M_S2` in deceleration before its slow parts and in
+      acceleration after them;
+    - each sprocket's speed held to the steering map's trim speed at the same curvature,
+      :attr:`SPROCKET_GAIN_N_M_S` per rad/s: in a tight turn the braked inner track's soil force is
+      at its saturation (dF/dj ~ 0), so without it the sprocket's speed integrates the torque error
+      (measured: it stuck at 0 and slipped, period 1 s; docs/studies.md).
 
     It ends the run (returns None) at the path's end, or when the lateral error exceeds
     ``max_lateral_error_m`` (``failure`` says so). The gains: K_r = :attr:`YAW_GAIN_N_M_S`, K_i =
