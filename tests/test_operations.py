@@ -89,7 +89,8 @@ def test_small_operation_driven_every_turn(driven):
     assert 0 < s["trafficked_fraction"] < 1
     assert s["headland_trafficked_fraction"] > s["infield_trafficked_fraction"]
     assert s["energy_sprockets_J"] > 0 and s["distance_m"] > 0.9 * spec.operations[0][1].path.length_m
-    assert s["rms_lateral_error_lines_m"] < 0.5  # measured 0.17 m on operation_small: the 5 cm target is not met
+    # measured 0.09 m (clay) and 0.11 m (sandy loam) on operation_small: the 5 cm target is not met
+    assert s["rms_lateral_error_lines_m"] < 0.2
 
 
 def test_trafficked_share_against_independent_rasters(driven):
@@ -120,3 +121,76 @@ def test_field_persists_bit_for_bit_through_save_and_load(tmp_path):
     assert np.array_equal(mem.counts, disk.counts)
     assert (tmp_path / "s" / "summary.json").is_file()
     assert dataclasses.is_dataclass(spec.base)
+
+
+@pytest.mark.slow
+def test_operation_small_completes_on_sandy_loam():
+    """The built-in operation on the sandy loam (it failed at t = 222 s: the braked inner track's
+    stick-slip in a U-turn and the line's speed asked for at once at the exit; docs/studies.md)."""
+    spec = op.load_operation_spec("operation_small", ["soil.preset=\"sandy_loam_15\""])
+    res = op.run_season(spec, None, through_files=False, figures=False)
+    s = res.summary
+    assert s["complete"], s["error"]
+    assert s["turns_driven"] == spec.operations[0][1].turns == 2 and s["turns_lifted"] == 0
+    # measured 0.111 m (max 0.29 m): the 5 cm target is not met; this bounds a regression
+    assert s["rms_lateral_error_lines_m"] < 0.15
+    assert s["max_lateral_error_lines_m"] < 0.5
+
+
+def test_pass_counts_and_first_contact_times():
+    """count_passes_and_times against a hand case: a track parked over cells for 2 s, moved off for
+    2 s (more than PASS_GAP_S) and back is two passes there; the first contact is when it arrived."""
+    traj = [(0.1 * k, 10.0, 10.0, 0.0) for k in range(20)] + [(2.0 + 0.1 * k, 30.0, 10.0, 0.0) for k in range(20)] \
+        + [(4.0 + 0.1 * k, 10.0, 10.0, 0.0) for k in range(5)]
+    counts, first = op.count_passes_and_times(np.array(traj), PARAMS, (400, 200), 0.1)
+    left_track = (100, 107)  # x = 10 m, y = 10 + 0.75 m: the left track's centre cell
+    assert counts[left_track] == 2 and first[left_track] == 0.0
+    assert counts[300, 107] == 1 and abs(first[300, 107] - 2.0) < 1e-6
+    assert counts[200, 107] == 0 and np.isinf(first[200, 107])
+    assert np.array_equal(counts, op.count_passes(np.array(traj), PARAMS, (400, 200), 0.1))
+    # the footprint of a pose is the independent raster's
+    assert np.array_equal(first < 1.0, op.footprint_mask(np.array([10.0]), np.array([10.0]), np.array([0.0]),
+                                                        PARAMS, (400, 200), 0.1))
+
+
+def test_operation_gif_reveals_the_field_over_time():
+    from PIL import Image
+
+    from symtrack.studies import field_plots
+
+    z = np.zeros((200, 100))
+    z[50:150, 40:60] = 0.01
+    first = np.full((200, 100), np.inf, dtype=np.float32)
+    first[50:150, 40:60] = np.linspace(0.0, 10.0, 100)[:, None]
+    traj = np.array([(t, 5.0 + t, 5.0, 0.0) for t in np.linspace(0.0, 10.0, 11)])
+    gif = field_plots.operation_gif(z, first, traj, (0.0, 20.0, 0.0, 10.0), "t", frames=5, blocks=100)
+    im = Image.open(__import__("io").BytesIO(gif))
+    assert im.n_frames == 5
+    grey = []
+    for k in range(5):
+        im.seek(k)
+        a = np.asarray(im.convert("RGB"))[22:]
+        grey.append(int(np.all(a == 225, axis=2).sum()))
+    assert all(g1 < g0 for g0, g1 in zip(grey, grey[1:], strict=False))  # more of the field shown each frame
+
+
+@pytest.mark.slow
+def test_season_4ha_reduced_writes_its_summary_and_animation(tmp_path):
+    """The built-in season on an 80 m x 80 m field (the 4 ha run takes about 5 minutes: docs/studies.md):
+    every operation complete, every turn driven, the summary's keys, the GIF's frames."""
+    from PIL import Image
+
+    spec = op.load_operation_spec("season_4ha", ["operation.size_m=[80.0, 80.0]"])
+    assert [o[0].name for o in spec.operations] == ["tillage", "drilling", "spraying", "harvest"]
+    res = op.run_season(spec, tmp_path / "s")
+    s = res.summary
+    assert s["complete"], s["error"]
+    assert s["turns_driven"] == sum(o[1].turns for o in spec.operations) > 0 and s["turns_lifted"] == 0
+    for k in ("trafficked_fraction", "headland_trafficked_fraction"):
+        assert 0.0 < s[k] < 1.0
+    # the season's union is at least each operation's own share and at most their sum
+    own = [o["operation_trafficked_fraction"] for o in s["operations"]]
+    assert max(own) <= s["trafficked_fraction"] <= sum(own) + 1e-9
+    gif = Image.open(tmp_path / "s" / s["animation_gif"])
+    assert gif.n_frames == 60
+    assert (tmp_path / "s" / "04_harvest" / "animation.gif").is_file()

@@ -18,7 +18,20 @@ def field_command(args) -> int:
 
     overrides = list(args.set or [])
     if is_operation_document(args.scenario):  # a field operation or a season (docs/studies.md, "Field operations")
-        res = run_season(load_operation_spec(args.scenario, overrides), out, progress=not args.quiet)
+        spec = load_operation_spec(args.scenario, overrides)
+        if spec.compare:  # [season] compare: the same season under each traffic system, on new fields
+            from ..studies.operations import traffic_comparison
+
+            table = traffic_comparison(spec.document, spec.compare, out, progress=not args.quiet, name=spec.name)
+            for r in table["rows"]:
+                print(f"{r['tracks']}: trafficked {100 * r['trafficked_fraction']:.1f} % (headland "
+                      f"{100 * r['headland_trafficked_fraction']:.1f} %, in-field "
+                      f"{100 * r['infield_trafficked_fraction']:.1f} %), repeated coverage "
+                      f"{100 * r['repeated_coverage_fraction']:.1f} %, turns driven "
+                      f"{r['turns_driven']}, {r['wall_time_s']:.0f} s")
+            print(f"{spec.name}: {len(table['rows'])} traffic systems; table traffic.csv, figure traffic.png in {out}")
+            return 0 if all(r["complete"] for r in table["rows"]) else 1
+        res = run_season(spec, out, progress=not args.quiet)
         s = res.summary
         print(f"{s['name']}: {'complete' if s['complete'] else 'FAILED: ' + str(s['error'])}; trafficked "
               f"{100 * s['trafficked_fraction']:.1f} % (headland {100 * s['headland_trafficked_fraction']:.1f} %, "

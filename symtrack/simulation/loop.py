@@ -296,6 +296,8 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 ys.append(np.array(Y[:k]))
                 t, x = float(times[-1]), xs[-1][-1]
                 frac = t / run_cfg.duration_s
+                # a law that knows how far it is (a path follower: the arc length driven) says so
+                frac = max(frac, float(getattr(torque_law, "progress_fraction", 0.0) or 0.0))
                 if dist_from is not None:
                     frac = max(frac, dist / target)
                 bar.update(frac, f"t={t:.2f} s" + (f" d={dist:.2f} m" if dist_from is not None else ""))

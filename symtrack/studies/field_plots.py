@@ -5,6 +5,8 @@ arrays and figures; each returns PNG bytes. (The risk map by depth is
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
@@ -12,7 +14,8 @@ from ..reports.plots import plt, png_bytes
 from ..reports.subsoil_plots import RISK_COLOURS
 from ..terrain.subsoil import RISK_NAMES
 
-__all__ = ["RISK_MAP_BLOCKS", "PASSES_MAP_BLOCKS", "block_max", "comparison_png", "passes_map_png", "sinkage_map_png"]
+__all__ = ["RISK_MAP_BLOCKS", "PASSES_MAP_BLOCKS", "block_max", "comparison_png", "operation_gif", "passes_map_png",
+           "sinkage_map_png"]
 
 PATTERN_COLOURS = {"random": "C1", "controlled": "C0"}
 # a field of many cells is drawn in at most this many blocks along each axis, each block showing
@@ -130,3 +133,62 @@ def comparison_png(figures: dict) -> bytes:
     ax.set_title("subsoil compaction risk by depth (Terranimo classes)")
     fig.suptitle("traffic patterns compared")
     return png_bytes(fig)
+
+
+# the animation of an operation (operation_gif): at most this many frames, this many blocks across
+ANIMATION_FRAMES = 60
+ANIMATION_BLOCKS = 300
+ANIMATION_FRAME_MS = 120
+
+
+def operation_gif(z_m, first_contact_s, trajectory, extent_m, title: str, frames: int = ANIMATION_FRAMES,
+                  blocks: int = ANIMATION_BLOCKS, progress=None) -> bytes:
+    """An animated GIF of an operation over its rut map: frame k shows the rut depth (the
+    operation's final sinkage ``z_m``, (nx, ny) m) of the cells a track had come over by the frame's
+    time (``first_contact_s``, (nx, ny), inf: never), the rest of the field grey, the driven path up
+    to then and the vehicle's position (``trajectory``: rows t, x, y, yaw). The field is drawn in
+    blocks (:func:`block_max`, at most ``blocks`` along a side); ``progress(k, n)`` is called per frame."""
+    from PIL import Image, ImageDraw
+
+    z, f = block_max(np.asarray(z_m, dtype=np.float32), blocks)
+    # a block is revealed when its first cell is: the smallest first-contact time of its cells
+    tfirst, _ = block_max(-np.asarray(first_contact_s, dtype=np.float32), blocks)
+    tfirst = -tfirst
+    traj = np.asarray(trajectory, dtype=float)
+    t0, t1 = float(traj[0, 0]), float(traj[-1, 0])
+    top = max(float(np.nanmax(z)), 1e-6)
+    cmap = plt.get_cmap("viridis")
+    nx, ny = z.shape
+    scale = max(1, int(round(480 / max(nx, ny))))
+    x0, x1, y0, y1 = extent_m
+    header = 22
+
+    def to_px(x, y):
+        return ((x - x0) / (x1 - x0) * nx * scale, header + (1 - (y - y0) / (y1 - y0)) * ny * scale)
+
+    rgb_rut = (cmap(np.clip(z / top, 0, 1))[..., :3] * 255).astype(np.uint8)
+    grey = np.full_like(rgb_rut, 225)
+    images = []
+    n = max(1, min(frames, traj.shape[0]))
+    for k in range(n):
+        tk = t0 + (t1 - t0) * (k + 1) / n
+        shown = (tfirst <= tk)[..., None]
+        img = np.where(shown, rgb_rut, grey).transpose(1, 0, 2)[::-1]  # (ny, nx, 3), y up
+        img = np.repeat(np.repeat(img, scale, axis=0), scale, axis=1)
+        canvas = Image.new("RGB", (img.shape[1], img.shape[0] + header), (255, 255, 255))
+        canvas.paste(Image.fromarray(np.ascontiguousarray(img)), (0, header))
+        draw = ImageDraw.Draw(canvas)
+        upto = traj[traj[:, 0] <= tk]
+        if upto.shape[0] > 1:
+            pts = [to_px(x, y) for x, y in upto[:: max(1, upto.shape[0] // 2000), 1:3]]
+            draw.line(pts, fill=(200, 30, 30), width=1)
+        if upto.shape[0]:
+            px, py = to_px(upto[-1, 1], upto[-1, 2])
+            draw.ellipse([px - 4, py - 4, px + 4, py + 4], fill=(255, 60, 0), outline=(0, 0, 0))
+        draw.text((4, 4), f"{title}: t = {tk:.0f} s, rut depth 0-{1e3 * top:.1f} mm (viridis)", fill=(0, 0, 0))
+        images.append(canvas.convert("P", palette=Image.ADAPTIVE, colors=128))
+        if progress is not None:
+            progress(k + 1, n)
+    buf = io.BytesIO()
+    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=ANIMATION_FRAME_MS, loop=0)
+    return buf.getvalue()

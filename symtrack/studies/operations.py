@@ -88,6 +88,15 @@ PASS_GAP_S = 1.0
 # the follower's speed profile: the largest deceleration / acceleration it plans with (m/s^2); a
 # moderate value (the crawler's 2000 N m accelerate it at about 1 m/s^2 on the clay)
 PLAN_ACCEL_M_S2 = 0.4
+# the defaults of an operation's vehicle step (at most 2.5 ms: run.output_dt_s = 0.01 s split in four) and of
+# the model's omega_smoothing_rad_s (ModelOptions: the package's 0.01 rad/s resolves the sprocket's
+# direction, its |omega| and the end where the track enters the contact over 0.004 m/s of tread
+# speed; with it, sprockets passing through zero under load in the turns made the 2.5 ms step diverge
+# too). ASSUMED, chosen on operation_small (both soils): 0.1 rad/s is 0.038 m/s of tread speed; the
+# trims of 2 m and 4 m turns at 1 m/s and of straight running at 2.5 m/s move by at most 0.1 N m and
+# 1e-4 rad/s (both soils, measured against 0.01)
+OPERATION_VEHICLE_STEP_S = 0.0025
+OPERATION_OMEGA_SMOOTHING_RAD_S = 0.1
 # the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
 MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
 
@@ -229,8 +238,10 @@ def line_positions_m(fs: OperationSettings) -> np.ndarray:
     ys = lo + w * np.arange(n)
     if fs.tracks == "random":
         off = np.random.default_rng(fs.seed).uniform(-fs.random_offset_m, fs.random_offset_m, ys.size)
-        ys = np.clip(ys + off, lo - fs.random_offset_m, hi + fs.random_offset_m)
-        ys = np.sort(ys)
+        # not clipped back to the headland's edge: the last AB line may lie beyond it (its swath reaches
+        # into the far headland), and pulling it back brought it within a turn's diameter of the line
+        # before (a plan refused on every field whose width is not a whole number of swaths)
+        ys = np.sort(ys + off)
     return ys
 
 
@@ -364,27 +375,42 @@ def swath_mask(plan: OperationPlan, shape, cell_m: float) -> np.ndarray:
 def footprint_mask(x, y, psi, params: dict, shape, cell_m: float) -> np.ndarray:
     """The cells (nx, ny) bool whose square overlaps a track's l x b contact rectangle at one of the
     poses (x, y, psi): an independent raster of the tracks' footprint (separating axes)."""
+    rects, lateral = _track_rects(params)
+    return _sweep(np.asarray(x, float), np.asarray(y, float), np.asarray(psi, float), shape, cell_m,
+                  rects, lateral=lateral, overlap=True)
+
+
+def _track_rects(params: dict):
+    """The two tracks' contact rectangles in the body frame: [(centre ahead, half l, half b)], [lateral]."""
     half_l = 0.5 * params["contact_length_m"]
     half_b = 0.5 * params["track_width_m"]
     e = float(params["cg_ahead_of_contact_centre_m"])
     off = 0.5 * params["track_gauge_m"]
-    rects = [(-e, half_l, half_b, off), (-e, half_l, half_b, -off)]
-    return _sweep(np.asarray(x, float), np.asarray(y, float), np.asarray(psi, float), shape, cell_m,
-                  [(c, hl, hb) for c, hl, hb, _ in rects], lateral=[r[3] for r in rects], overlap=True)
+    return [(-e, half_l, half_b), (-e, half_l, half_b)], [off, -off]
 
 
 def _sweep(x, y, psi, shape, cell_m, rects, lateral=None, overlap=True) -> np.ndarray:
     """Union over poses of body-frame rectangles (centre ahead c, half length, half width; centred
     ``lateral`` to the left): cells whose square overlaps (``overlap``) or whose centre is inside."""
-    nx, ny = shape
     mask = np.zeros(shape, dtype=bool)
+    for _, (i0, i1, j0, j1), inside in _sweep_windows(x, y, psi, shape, cell_m, rects, lateral, overlap):
+        mask[i0:i1, j0:j1] |= inside
+    return mask
+
+
+def _sweep_windows(x, y, psi, shape, cell_m, rects, lateral=None, overlap=True):
+    """Per pose k and rectangle: (k, (i0, i1, j0, j1), the window's bool cells inside), the window
+    the rectangle's bounding box in the grid (poses whose rectangle is off the grid give none)."""
+    nx, ny = shape
     lateral = lateral or [0.0] * len(rects)
     h = 0.5 * cell_m if overlap else 0.0
+    centres = []
     for (c, hl, hb), lat in zip(rects, lateral, strict=True):
-        cx = x + c * np.cos(psi) - lat * np.sin(psi)
-        cy = y + c * np.sin(psi) + lat * np.cos(psi)
-        reach = math.hypot(hl, hb) + cell_m
-        for k in range(x.size):
+        centres.append((x + c * np.cos(psi) - lat * np.sin(psi), y + c * np.sin(psi) + lat * np.cos(psi), hl, hb))
+    for k in range(x.size):
+        ca_, sa = math.cos(psi[k]), math.sin(psi[k])
+        for cx, cy, hl, hb in centres:
+            reach = math.hypot(hl, hb) + cell_m
             i0 = max(int(math.floor((cx[k] - reach) / cell_m)), 0)
             i1 = min(int(math.ceil((cx[k] + reach) / cell_m)), nx)
             j0 = max(int(math.floor((cy[k] - reach) / cell_m)), 0)
@@ -393,19 +419,17 @@ def _sweep(x, y, psi, shape, cell_m, rects, lateral=None, overlap=True) -> np.nd
                 continue
             px = (np.arange(i0, i1) + 0.5) * cell_m - cx[k]
             py = (np.arange(j0, j1) + 0.5) * cell_m - cy[k]
-            ca, sa = math.cos(psi[k]), math.sin(psi[k])
-            u = px[:, None] * ca + py[None, :] * sa
-            v = -px[:, None] * sa + py[None, :] * ca
+            u = px[:, None] * ca_ + py[None, :] * sa
+            v = -px[:, None] * sa + py[None, :] * ca_
             if overlap:
-                ext_x = hl * abs(ca) + hb * abs(sa)
-                ext_y = hl * abs(sa) + hb * abs(ca)
-                rot = h * (abs(ca) + abs(sa))
+                ext_x = hl * abs(ca_) + hb * abs(sa)
+                ext_y = hl * abs(sa) + hb * abs(ca_)
+                rot = h * (abs(ca_) + abs(sa))
                 inside = ((np.abs(u) < hl + rot) & (np.abs(v) < hb + rot)
                           & (np.abs(px)[:, None] < h + ext_x) & (np.abs(py)[None, :] < h + ext_y))
             else:
                 inside = (np.abs(u) <= hl) & (np.abs(v) <= hb)
-            mask[i0:i1, j0:j1] |= inside
-    return mask
+            yield k, (i0, i1, j0, j1), inside
 
 
 def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
@@ -472,7 +496,7 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
                             f"{turn_speed_m_s:g}: the vehicle cannot hold this turn on this soil ({err})") from err
     rows = {}
     for v in sorted(set(speeds_m_s)):
-        ks, mean, diff = [], [], []
+        ks, mean, diff, om_mean, om_diff = [], [], [], [], []
         # the turn's curvature and one 40 % tighter (room for the follower's corrections), where held
         for kappa in sorted(set(MAP_CURVATURES) | {1.0 / turn_radius_m, 1.4 / turn_radius_m}):
             if v > turn_speed_m_s + 1e-9 and kappa > 1.0 / 30 + 1e-12:
@@ -485,29 +509,33 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
             ks.append(kappa)
             mean.append(0.5 * float(t.u[0] + t.u[1]))
             diff.append(float(t.u[1] - t.u[0]))
-        rows[v] = (np.array(ks), np.array(mean), np.array(diff))
+            om_l, om_r = t.state("omega_left_rad_s"), t.state("omega_right_rad_s")
+            om_mean.append(0.5 * (om_l + om_r))
+            om_diff.append(om_r - om_l)
+        rows[v] = (np.array(ks), np.array(mean), np.array(diff), np.array(om_mean), np.array(om_diff))
     _MAP_CACHE[key] = rows
     return rows
 
 
-def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float]:
-    """Mean torque and difference at speed v, curvature kappa (odd in kappa), interpolated."""
+def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, float]:
+    """Mean torque, torque difference, mean sprocket speed and speed difference (right - left) at
+    speed v, curvature kappa (the differences odd in kappa), interpolated."""
     speeds = sorted(rows)
     a = abs(kappa)
 
     def at(s):
-        ks, m, dd = rows[s]
-        return float(np.interp(a, ks, m)), float(np.interp(a, ks, dd))
+        ks = rows[s][0]
+        return np.array([float(np.interp(a, ks, col)) for col in rows[s][1:]])
     if v <= speeds[0] or len(speeds) == 1:
-        m, dd = at(speeds[0])
+        out = at(speeds[0])
     elif v >= speeds[-1]:
-        m, dd = at(speeds[-1])
+        out = at(speeds[-1])
     else:
         i = int(np.searchsorted(speeds, v)) - 1
         f = (v - speeds[i]) / (speeds[i + 1] - speeds[i])
-        (m0, d0), (m1, d1) = at(speeds[i]), at(speeds[i + 1])
-        m, dd = m0 + f * (m1 - m0), d0 + f * (d1 - d0)
-    return m, math.copysign(dd, kappa)
+        out = at(speeds[i]) + f * (at(speeds[i + 1]) - at(speeds[i]))
+    m, dd, om, dom = (float(z) for z in out)
+    return m, math.copysign(dd, kappa), om, math.copysign(dom, kappa)
 
 
 class PathFollower:
@@ -524,7 +552,12 @@ class PathFollower:
       clay 600 N m from 0 to 1/400 1/m, 380 N m from 1/12 to 1/3 1/m), so a correction through it
       reverses the torques (measured: a bang-bang oscillation in the first headland corner);
     - a PI law on the speed for the mean torque, over the map's mean torque; the speed reference
-      the path's, limited by :data:`PLAN_ACCEL_M_S2`.
+      the path's, limited by :data:`PLAN_ACCEL_M_S2` in deceleration before its slow parts and in
+      acceleration after them;
+    - each sprocket's speed held to the steering map's trim speed at the same curvature,
+      :attr:`SPROCKET_GAIN_N_M_S` per rad/s: in a tight turn the braked inner track's soil force is
+      at its saturation (dF/dj ~ 0), so without it the sprocket's speed integrates the torque error
+      (measured: it stuck at 0 and slipped, period 1 s; docs/studies.md).
 
     It ends the run (returns None) at the path's end, or when the lateral error exceeds
     ``max_lateral_error_m`` (``failure`` says so). The gains: K_r = :attr:`YAW_GAIN_N_M_S`, K_i =
@@ -533,7 +566,7 @@ class PathFollower:
     in SPEED_TAU_S."""
 
     SAMPLE_TIME_S = 0.02  # measured: 0.05 s let the yaw loop oscillate in the headland corners
-    OMEGA_N = 0.8  # 1/s: the lateral error's closing rate
+    OMEGA_N = 1.2  # 1/s: the lateral error's closing rate (0.8: RMS 0.17 / 0.22 m on the lines, clay / sandy loam)
     PREVIEW_S = 0.3
     WINDOW_S = 1.0  # the feed-forward's curvature: the path's averaged over this time at the speed (0: none)
     DIFF_SLEW_N_M_S = 1e9  # the torque difference's largest rate of change
@@ -543,6 +576,10 @@ class PathFollower:
     RESET_INTEGRAL = False
     CORRECTION_CURVATURE_1_M = 1.0 / 150.0
     SPEED_TAU_S = 1.0
+    # the sprockets' speed loop: N m per rad/s of sprocket speed below the steering map's (ASSUMED,
+    # chosen on operation_small, both soils: K / J = 10 1/s, the torque lag's bandwidth; 600 gave the
+    # same figures, 0 let the braked inner track stick and slip in the turns)
+    SPROCKET_GAIN_N_M_S = 300.0
 
     def __init__(self, plan: OperationPlan, params: dict, rows: dict, state_names, sample_time_s: float,
                  substep_s: float, torque_limit_N_m: float, max_lateral_error_m: float):
@@ -552,6 +589,7 @@ class PathFollower:
         idx = {n: i for i, n in enumerate(state_names)}
         self.ix, self.iy, self.ipsi = idx["x_m"], idx["y_m"], idx["yaw_rad"]
         self.iu, self.ir = idx["u_m_s"], idx["yaw_rate_rad_s"]
+        self.iom = (idx["omega_left_rad_s"], idx["omega_right_rad_s"])
         r = params["sprocket_radius_m"]
         self.kp_v = r * params["mass_kg"] / (2 * self.SPEED_TAU_S)
         self.ki_v = self.kp_v / (2 * self.SPEED_TAU_S)
@@ -565,10 +603,20 @@ class PathFollower:
         ds = np.diff(self.path.s)
         for i in range(v.size - 2, -1, -1):
             v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
+        # and in acceleration after them: the line's speed asked for at once after a turn made the mean
+        # torque and the sprockets' speed references step, and the tracks spin (measured: the state
+        # diverged at the exit of a U-turn on the sandy loam)
+        for i in range(1, v.size):
+            v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i - 1]))
         self.v_profile = v
         self.log = []  # (t, s, e_lat, e_psi, role)
         self.failure = None
         self.done = False
+
+    @property
+    def progress_fraction(self) -> float:
+        """The share of the path driven (the run's progress bar: the time limit is 4 x the plan's)."""
+        return min(self.s / max(self.path.length_m, 1e-9), 1.0)
 
     def _kappa(self, s: float, window_m: float) -> float:
         """The path's curvature averaged over [s - window/2, s + window/2] (exactly, piecewise constant)."""
@@ -618,7 +666,7 @@ class PathFollower:
         # (the threshold a PI law alone would wait for: a stick-slip weave); in a turn, where the map is
         # flat, it moves the torques little (unlimited, it reversed them)
         corr = max(min(r_d / v - kappa, self.CORRECTION_CURVATURE_1_M), -self.CORRECTION_CURVATURE_1_M)
-        mean_ff, diff = _map_eval(self.rows, v_ref, kappa + corr)
+        mean_ff, diff, om_mean, om_diff = _map_eval(self.rows, v_ref, kappa + corr)
         g = max(v / self.GAIN_SPEED_M_S, 1.0)
         diff += g * (self.YAW_GAIN_N_M_S * er + self.YAW_INTEGRAL_N_M * self.int_r)
         mean = mean_ff + self.kp_v * ev + self.ki_v * self.int_v
@@ -627,6 +675,10 @@ class PathFollower:
             diff = min(max(diff, self.diff_prev - step), self.diff_prev + step)
         self.diff_prev = diff
         left, right = mean - 0.5 * diff, mean + 0.5 * diff
+        if self.SPROCKET_GAIN_N_M_S:
+            k = self.SPROCKET_GAIN_N_M_S
+            left += k * (om_mean - 0.5 * om_diff - float(x[self.iom[0]]))
+            right += k * (om_mean + 0.5 * om_diff - float(x[self.iom[1]]))
         lim = self.limit
         return (max(min(left, lim), -lim), max(min(right, lim), -lim))
 
@@ -651,9 +703,9 @@ def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     run = dict(doc.get("run", {}))
     check_keys("run", run, OPERATION_RUN_KEYS)
     run.setdefault("integrator", "grid_fast")
-    # 5 ms macro steps: at 10 ms the engine's state diverged in the turns of a second operation on the
-    # rutted clay (measured on tests/test_operations.py's two-operation season)
-    run.setdefault("output_dt_s", 0.005)
+    # 10 ms macro steps of OPERATION_VEHICLE_STEP_S vehicle steps (below): the same figures as 5 ms macro
+    # steps (operation_small, both soils: RMS on the lines within 1e-6 m) in 0.58 of the time
+    run.setdefault("output_dt_s", 0.01)
     terrain = dict(doc.get("terrain", {}))
     for k in TERRAIN_KEYS_OF_OPERATION:
         if k in terrain:
@@ -666,7 +718,15 @@ def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
            "torque": [{"t_s": 0.0, "left_N_m": 0.0, "right_N_m": 0.0}]}
     for k in ("model", "soil", "engine"):
         if k in doc:
-            out[k] = doc[k]
+            out[k] = dict(doc[k])
+    # The vehicle's 5 ms step diverged (the state at 1e25 m in one step) where the braked or spinning
+    # sprockets of a tight turn swing (docs/studies.md, "Field operations": an open-loop replay of the
+    # follower's commands diverges at 5 ms and agrees within 2 mm at 2.5 and 1.25 ms): vehicle steps of
+    # at most OPERATION_VEHICLE_STEP_S, and the sprocket's direction regularised over
+    # OPERATION_OMEGA_SMOOTHING_RAD_S
+    out.setdefault("engine", {}).setdefault(
+        "vehicle_substeps", max(1, math.ceil(float(run["output_dt_s"]) / OPERATION_VEHICLE_STEP_S - 1e-9)))
+    out.setdefault("model", {}).setdefault("omega_smoothing_rad_s", OPERATION_OMEGA_SMOOTHING_RAD_S)
     return out
 
 
@@ -756,19 +816,34 @@ class OperationResult:
     log: np.ndarray
     trajectory: np.ndarray  # t, x, y, yaw every COUNT_SAMPLE_S
     error: str | None = None
+    first_contact_s: np.ndarray | None = None  # (nx, ny) float32: when a track first came over the cell (inf: never)
 
 
 def count_passes(traj: np.ndarray, params: dict, shape, cell_m: float) -> np.ndarray:
     """Passes per cell (nx, ny) uint16 from driven poses (t, x, y, yaw) (module doc: a cell counts a
     pass when a track's contact comes over it after PASS_GAP_S out of every contact)."""
+    return count_passes_and_times(traj, params, shape, cell_m)[0]
+
+
+def count_passes_and_times(traj: np.ndarray, params: dict, shape, cell_m: float):
+    """:func:`count_passes` and, per cell, the time a track's contact first came over it (float32,
+    inf where none did): the animation's reveal time."""
     counts = np.zeros(shape, dtype=np.uint16)
     last = np.full(shape, -np.inf, dtype=np.float64)
-    for t, x, y, psi in traj:
-        m = footprint_mask(np.array([x]), np.array([y]), np.array([psi]), params, shape, cell_m)
-        new = m & (t - last > PASS_GAP_S)
-        counts[new] += 1
-        last[m] = t
-    return counts
+    first = np.full(shape, np.inf, dtype=np.float32)
+    rects, lateral = _track_rects(params)
+    traj = np.asarray(traj, dtype=float)
+    # per pose, the window of each track (the work is local: a 4-million-cell field is not swept per pose)
+    for k, (i0, i1, j0, j1), inside in _sweep_windows(traj[:, 1], traj[:, 2], traj[:, 3], shape, cell_m, rects,
+                                                      lateral, overlap=True):
+        t = traj[k, 0]
+        lw = last[i0:i1, j0:j1]
+        new = inside & (t - lw > PASS_GAP_S)
+        counts[i0:i1, j0:j1][new] += 1
+        fw = first[i0:i1, j0:j1]
+        fw[inside & np.isinf(fw)] = t
+        lw[inside] = t
+    return counts, first
 
 
 def _headland_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
@@ -831,7 +906,7 @@ def run_operation(op, plant, progress: bool = False) -> OperationResult:
     every = max(1, int(round(COUNT_SAMPLE_S / sc.run.output_dt_s)))
     traj = np.column_stack([res.t, X[:, ix], X[:, iy], X[:, ipsi]])[::every]
     t_count = time.perf_counter()
-    counts = count_passes(traj, sc.params, shape, cell)
+    counts, first = count_passes_and_times(traj, sc.params, shape, cell)
     count_s = time.perf_counter() - t_count
     stressed = (world.storage.sigma_max[:, 0] > 0).reshape(shape) if world.storage.subsoil_depths_m else \
         (world.storage.z != 0).reshape(shape)
@@ -868,7 +943,7 @@ def run_operation(op, plant, progress: bool = False) -> OperationResult:
     fig["operation_trafficked_fraction"] = float(own.mean())
     fig.update({f"operation_{k}": v for k, v in field_shares(own, counts, fs).items()
                 if k in ("headland_trafficked_fraction", "infield_trafficked_fraction")})
-    return OperationResult(fs.name, fig, counts, own, log, traj, error)
+    return OperationResult(fs.name, fig, counts, own, log, traj, error, first)
 
 
 def _turn_end_s(plan: OperationPlan, k: int) -> float:
@@ -903,6 +978,19 @@ def _map_pngs(counts, z, fs: OperationSettings, label: str) -> dict:
     ext = (0.0, fs.size_m[0], 0.0, fs.size_m[1])
     return {"passes_map.png": field_plots.passes_map_png(counts, ext, f"passes per cell: {label}"),
             "rut_map.png": field_plots.sinkage_map_png(z, ext, f"rut depth: {label}")}
+
+
+def _animation(r: OperationResult, terrain: Terrain, fs: OperationSettings, label: str, progress: bool) -> bytes:
+    """The operation's GIF over the rut map (:func:`symtrack.studies.field_plots.operation_gif`), with progress."""
+    from ..foundations.progress import Progress
+    from . import field_plots
+
+    bar = Progress(1.0, f"animation {fs.name}", enabled=progress)
+    gif = field_plots.operation_gif(terrain.z.reshape(r.counts.shape), r.first_contact_s, r.trajectory,
+                                    (0.0, fs.size_m[0], 0.0, fs.size_m[1]), label,
+                                    progress=lambda k, n: bar.update(k / n, f"frame {k}/{n}"))
+    bar.close()
+    return gif
 
 
 def _counts_npz(counts, cell_m) -> bytes:
@@ -945,6 +1033,9 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
                 if figures:
                     op_files |= {f"{sub}/{n}": b for n, b in
                                  _map_pngs(r.counts, terrain.z.reshape(r.counts.shape), fs, label).items()}
+                    op_files[f"{sub}/animation.gif"] = _animation(r, terrain, fs, label, progress)
+                    if k == 0:
+                        op_files["animation.gif"] = op_files[f"{sub}/animation.gif"]
                 files |= op_files
             if r.error:
                 break
@@ -983,6 +1074,7 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
                "trafficked_note": "trafficked_fraction: the cells the engine stressed over the season (sigma_max > 0 "
                                   "at the first subsoil depth: a track's contact overlapped them); passes per cell: "
                                   "the driven poses' footprints (a new pass after 1 s out of every contact)",
+               "animation_gif": "animation.gif" if (folder is not None and figures and results) else None,
                "operations": [r.figures for r in results]}
     written = []
     if folder is not None:
@@ -1011,7 +1103,8 @@ def Path_(p):
     return _P(p)
 
 
-TRAFFIC_COLUMNS = ("tracks", "trafficked_fraction", "headland_trafficked_fraction", "infield_trafficked_fraction",
+TRAFFIC_COLUMNS = ("tracks", "complete", "trafficked_fraction", "headland_trafficked_fraction",
+                   "infield_trafficked_fraction",
                    "area_run_over_once_m2", "area_run_over_twice_m2", "area_run_over_3_or_more_m2",
                    "repeated_coverage_fraction", "rut_max_depth_mm", "distance_m", "sim_time_s", "energy_sprockets_J",
                    "turns_driven", "turns_lifted", "rms_lateral_error_lines_m", "wall_time_s")
@@ -1022,8 +1115,9 @@ def traffic_comparison(doc: dict, systems, out=None, progress: bool = False, nam
     on a new field: one table (``traffic.csv``, a row per system) and one figure (``traffic.png``)."""
     rows = []
     folder = check_output_folder(str(out)) if out is not None else None
-    for sys_ in systems:
-        spec = operation_spec_from_dict(doc, name, tracks=sys_)
+    # every system's season planned and checked before any runs
+    specs = [(sys_, operation_spec_from_dict(doc, name, tracks=sys_)) for sys_ in systems]
+    for sys_, spec in specs:
         res = run_season(spec, None if folder is None else folder / sys_, progress=progress)
         rows.append({"tracks": sys_, **{k: res.summary.get(k) for k in TRAFFIC_COLUMNS if k != "tracks"}})
     if folder is not None:
@@ -1054,9 +1148,13 @@ def _traffic_png(rows) -> bytes:
     width = 0.8 / n
     for i, r in enumerate(rows):
         ax.bar(np.arange(len(keys)) + i * width, [r[k] or 0.0 for k, _ in keys], width, label=r["tracks"])
+    # Kroulik et al. 2009 (REFERENCES.md): the share run over at least once in their DGPS-logged seasons
+    for share, lab, ls in ((0.953, "Kroulik 2009: conventional 95.3 %", "-"), (0.728, "minimum tillage 72.8 %", "--"),
+                           (0.557, "direct seeding 55.7 %", ":")):
+        ax.hlines(share, -0.5 * width, 0.8 - 0.5 * width, colors="k", linestyles=ls, linewidth=1.0, label=lab)
     ax.set_xticks(np.arange(len(keys)) + 0.4 - width / 2, [lab for _, lab in keys])
     ax.set_ylabel("share of the area")
-    ax.legend()
+    ax.legend(fontsize=7)
     ax.set_title("traffic systems: the same season on new fields")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
