@@ -63,7 +63,8 @@ from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
 
 __all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSettings", "OperationSpec",
-           "PathFollower", "SeasonResult", "check_plan", "footprint_mask", "load_operation_spec", "plan_operation",
+           "PathFollower", "SeasonResult", "check_plan", "footprint_mask", "is_operation_doc", "is_operation_document",
+           "load_operation_spec", "operation_spec_from_dict", "plan_operation",
            "run_operation", "run_season", "swath_mask", "traffic_comparison"]
 
 FIELD_PACKAGE = "symtrack.studies.fields"
@@ -199,11 +200,17 @@ class OperationPlan:
         return float(self.path.x[0]), float(self.path.y[0]), float(self.path.psi[0])
 
 
+MAX_TRACK_LINES = 10_000  # an operation's plan holds at most this many lines or lanes (a bound, not physics)
+
+
 def lane_positions_m(fs: OperationSettings) -> np.ndarray:
     """The permanent lanes (world y) of controlled traffic: ``lane_spacing_m`` apart, centred
     across the field, as many as fit between the headlands (a lane's swath of one spacing inside)."""
     H, S = fs.headland_m, fs.lanes_m
     inner = fs.size_m[1] - 2 * H
+    if not inner / S <= MAX_TRACK_LINES:
+        raise ScenarioError(f"operation.lane_spacing_m = {S:g}: {inner / S:.3g} lanes across the field, more than "
+                            f"{MAX_TRACK_LINES} (the allowed range is [{inner / MAX_TRACK_LINES:.3g}, 1000] m here)")
     n = int(math.floor(inner / S + 1e-9))
     return 0.5 * fs.size_m[1] + (np.arange(n) - 0.5 * (n - 1)) * S
 
@@ -234,10 +241,16 @@ def line_positions_m(fs: OperationSettings) -> np.ndarray:
                             f"field {fs.size_m[1]:g} m wide")
     # one working width apart; the last line's swath may reach into the far headland (worked twice
     # there) so that every turn has the full spacing
-    n = int(math.ceil((hi - lo) / w - 1e-9)) + 1
+    n_f = (hi - lo) / w
+    if not n_f <= MAX_TRACK_LINES:
+        raise ScenarioError(f"operation.working_width_m = {w:g}: {n_f:.3g} track lines across a field "
+                            f"{fs.size_m[1]:g} m wide, more than {MAX_TRACK_LINES} (the allowed range is "
+                            f"[{(hi - lo) / MAX_TRACK_LINES:.3g}, {min(fs.size_m):g}] m here)")
+    n = int(math.ceil(n_f - 1e-9)) + 1
     ys = lo + w * np.arange(n)
     if fs.tracks == "random":
-        off = np.random.default_rng(fs.seed).uniform(-fs.random_offset_m, fs.random_offset_m, ys.size)
+        r = abs(fs.random_offset_m)  # (a -0.0 as 0.0: numpy refuses the interval [0, -0])
+        off = np.random.default_rng(fs.seed).uniform(-r, r, ys.size)
         # not clipped back to the headland's edge: the last AB line may lie beyond it (its swath reaches
         # into the far headland), and pulling it back brought it within a turn's diameter of the line
         # before (a plan refused on every field whose width is not a whole number of swaths)
@@ -699,6 +712,9 @@ class OperationSpec:
     base: OperationSettings
 
 
+MAX_VEHICLE_SUBSTEPS = 64  # EngineSettings.vehicle_substeps' upper bound (integrators/settings.py)
+
+
 def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     run = dict(doc.get("run", {}))
     check_keys("run", run, OPERATION_RUN_KEYS)
@@ -724,9 +740,20 @@ def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     # follower's commands diverges at 5 ms and agrees within 2 mm at 2.5 and 1.25 ms): vehicle steps of
     # at most OPERATION_VEHICLE_STEP_S, and the sprocket's direction regularised over
     # OPERATION_OMEGA_SMOOTHING_RAD_S
-    out.setdefault("engine", {}).setdefault(
-        "vehicle_substeps", max(1, math.ceil(float(run["output_dt_s"]) / OPERATION_VEHICLE_STEP_S - 1e-9)))
-    out.setdefault("model", {}).setdefault("omega_smoothing_rad_s", OPERATION_OMEGA_SMOOTHING_RAD_S)
+    dt = run.get("output_dt_s")
+    if isinstance(dt, (int, float)) and not isinstance(dt, bool) and math.isfinite(dt) and dt > 0:
+        # (any other value: scenario_from_dict refuses it, naming run.output_dt_s)
+        engine = out.setdefault("engine", {})
+        if isinstance(engine, dict) and "vehicle_substeps" not in engine:
+            n = dt / OPERATION_VEHICLE_STEP_S
+            if n > MAX_VEHICLE_SUBSTEPS:
+                raise ScenarioError(f"run.output_dt_s = {dt!r}: a field operation's macro step holds at most "
+                                    f"{MAX_VEHICLE_SUBSTEPS} vehicle steps of {OPERATION_VEHICLE_STEP_S:g} s, so the "
+                                    f"allowed range is (0, {MAX_VEHICLE_SUBSTEPS * OPERATION_VEHICLE_STEP_S:g}] s")
+            engine["vehicle_substeps"] = max(1, math.ceil(n - 1e-9))
+    model = out.setdefault("model", {})
+    if isinstance(model, dict):
+        model.setdefault("omega_smoothing_rad_s", OPERATION_OMEGA_SMOOTHING_RAD_S)
     return out
 
 
@@ -743,6 +770,11 @@ def _operation(doc: dict, fs: OperationSettings):
         raise ScenarioError(f"operation.speed_m_s = {fs.speed_m_s:g} is outside the allowed range (0, "
                             f"{sc.terrain.max_speed_m_s:g}] (terrain.max_speed_m_s, the speed the channel pool is "
                             "sized for)")
+    half_gauge = 0.5 * float(sc.params["track_gauge_m"])
+    if not fs.turn_radius_m > half_gauge:
+        raise ScenarioError(f"operation.turn_radius_m = {fs.turn_radius_m:g} is outside the allowed range "
+                            f"({half_gauge:g}, 100] m: a turn must be wider than half the track gauge (a tighter one "
+                            "turns on the spot, without a steady forward speed)")
     if not fs.cell_m < sc.params["track_width_m"]:
         raise ScenarioError(f"operation.cell_m = {fs.cell_m:g} must be smaller than the track width "
                             f"{sc.params['track_width_m']:g} m")
@@ -766,7 +798,10 @@ def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks:
     entries = season.get("operations", [{}])
     if not isinstance(entries, list) or not entries or not all(isinstance(e, dict) for e in entries):
         raise ScenarioError(f"season.operations = {entries!r} must be a non-empty list of tables of [operation] keys")
-    compare = tuple(season.get("compare", ()))
+    compare = season.get("compare", ())
+    if not isinstance(compare, (list, tuple)):
+        raise ScenarioError(f"season.compare = {compare!r} must be a list of track systems ({', '.join(TRACKS)})")
+    compare = tuple(compare)
     for c in compare:
         if c not in TRACKS:
             raise ScenarioError(f"season.compare = {list(compare)!r}: {c!r} is not one of {', '.join(TRACKS)}")
@@ -779,7 +814,12 @@ def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks:
             fs = dataclasses.replace(fs, tracks=tracks)
         if "name" not in e:
             fs = dataclasses.replace(fs, name=f"{base.name}_{k + 1}" if len(entries) > 1 else base.name)
-        ops.append(_operation(doc, fs))
+        try:
+            ops.append(_operation(doc, fs))
+        except ScenarioError as err:
+            if "season" not in doc:
+                raise
+            raise ScenarioError(f"season.operations[{k}] ({fs.name!r}, over [operation]): {err}") from err
     names = [o[0].name for o in ops]
     if len(set(names)) != len(names):
         raise ScenarioError(f"season.operations: the names {names} must differ")
@@ -794,13 +834,19 @@ def load_operation_spec(name_or_path, overrides=None, tracks: str | None = None)
     return operation_spec_from_dict(doc, default_name, tracks)
 
 
+def is_operation_doc(doc) -> bool:
+    """Whether a document is a field operation or a season (an [operation] or a [season] section;
+    the latter without the former is then refused naming [operation])."""
+    return isinstance(doc, dict) and ("operation" in doc or "season" in doc)
+
+
 def is_operation_document(name_or_path) -> bool:
-    """Whether a built-in name or TOML file is a field operation (has an [operation] section)."""
+    """Whether a built-in name or TOML file is a field operation or a season (:func:`is_operation_doc`)."""
     try:
         doc, _ = read_document(name_or_path, FIELD_PACKAGE, "field study")
     except ScenarioError:
         return False
-    return "operation" in doc
+    return is_operation_doc(doc)
 
 
 # ---- running it -----------------------------------------------------------------------------------------

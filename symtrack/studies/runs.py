@@ -73,6 +73,10 @@ def load(kind: str, text: str, name: str, overrides: dict | None = None):
 
         return mpc_from_dict(doc, name)
     if kind == "field":
+        from .operations import is_operation_doc, operation_spec_from_dict
+
+        if is_operation_doc(doc):  # a field operation or a season (docs/studies.md, "Field operations")
+            return operation_spec_from_dict(doc, name)
         from .field import field_spec_from_dict
 
         return field_spec_from_dict(doc, name)
