@@ -71,6 +71,7 @@ from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
 from ..model.homogeneous import HomogeneousTerrain
 from ..model.options import SLIDING_SIGNS
+from ..model.vehicle3d import ContactTerrain, make_vehicle
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
@@ -261,11 +262,15 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
         changes["sliding_sign"] = settings.prediction_sliding_sign
     if all(getattr(o, k) == v for k, v in changes.items()):
         return model
+    opts = dataclasses.replace(o, **changes)
+    if isinstance(model.terrain, ContactTerrain):
+        # the 3D vehicle: the same ground under the prediction (its surface kept)
+        return SystemModel(opts, vehicle=make_vehicle(opts, model.vehicle.surface))
     if not isinstance(model.terrain, HomogeneousTerrain):
         raise ParameterError("mpc.prediction_sliding_*: the prediction's regularisation needs the homogeneous "
                              "terrain's model (set prediction_sliding_smoothing = None and "
                              "prediction_sliding_sign = \"model\" for another terrain)")
-    return SystemModel(dataclasses.replace(o, **changes))
+    return SystemModel(opts)
 
 
 @dataclass
