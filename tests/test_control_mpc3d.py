@@ -74,3 +74,31 @@ def test_no_nan_in_the_mpc_s_derivatives_for_the_3d_vehicle():
             assert np.all(np.isfinite(np.array(v.full()))), lift_m
     # the trim on the slope: the hull rolled by the slope, the lower (right) track the more loaded
     assert math.degrees(xt[model.state_index("roll_rad")]) == pytest.approx(8.0, abs=0.1)
+
+
+@pytest.mark.slow
+def test_the_3d_closed_loop_converges_onto_the_line_on_flat_ground():
+    """``symtrack mpc straight_offset --set model.vehicle=3d`` (IPOPT, the "shear" law): from the 1 m
+    offset onto the line; from 20 m of path on the RMS lateral error is within 5 cm (planar: 0.01 cm;
+    the 3D run's failed solves in the approach apply the shifted plan, docs/vehicle3d.md)."""
+    sc = S.load("straight_offset", ["model.vehicle=3d"])
+    res = CL.run(sc)
+    s = res.summary
+    assert s["path_completed"] and s["rms_lateral_error_m"] <= 0.05
+    assert abs(res.e_lat[-1]) <= 0.05
+
+
+@pytest.mark.slow
+def test_the_3d_closed_loop_keeps_the_line_along_a_side_slope():
+    """examples/mpc_side_slope_3d.py on an 8 deg side slope: the MPC holds the line within 5 cm RMS
+    (measured 0.07 cm) where the open loop drifts downhill (0.16 m over 60 m), the lower track
+    carries more and its sprocket drives harder than the upper one."""
+    import runpy
+
+    ns = runpy.run_path("examples/mpc_side_slope_3d.py")
+    out = ns["main"](["--slope-deg", "8"])
+    assert out["rms_lateral_error_m"] <= 0.05 and out["distance_m"] >= 59.0
+    assert out["open_loop_drift_downhill_m"] > 0.05 > abs(out["lateral_error_last_half_mean_m"])
+    assert out["normal_load_right_last_half_N"] > out["normal_load_left_last_half_N"]
+    assert out["torque_right_last_half_N_m"] > out["torque_left_last_half_N_m"]
+    assert out["roll_last_half_deg"] == pytest.approx(8.0, abs=0.1)
