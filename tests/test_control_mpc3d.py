@@ -77,10 +77,13 @@ def test_no_nan_in_the_mpc_s_derivatives_for_the_3d_vehicle():
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 22, open: in the 1 m approach IPOPT hits max_iter on the 3D "
+                   "contact's kinks and the loop drifts away (measured: 55 failed solves and 1.33 m off the "
+                   "line at t = 7.9 s; docs/vehicle3d.md, 'The MPC on the 3D vehicle')")
 def test_the_3d_closed_loop_converges_onto_the_line_on_flat_ground():
     """``symtrack mpc straight_offset --set model.vehicle=3d`` (IPOPT, the "shear" law): from the 1 m
-    offset onto the line; from 20 m of path on the RMS lateral error is within 5 cm (planar: 0.01 cm;
-    the 3D run's failed solves in the approach apply the shifted plan, docs/vehicle3d.md)."""
+    offset onto the line; from 20 m of path on the RMS lateral error within 5 cm (planar: 0.01 cm).
+    Strict xfail: it fails as soon as the 3D closed loop converges, so the marker is then removed."""
     sc = S.load("straight_offset", ["model.vehicle=3d"])
     res = CL.run(sc)
     s = res.summary
