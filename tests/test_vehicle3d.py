@@ -306,3 +306,31 @@ def test_bench_rows_of_the_3d_vehicle():
         assert solid[k] == pytest.approx(planar[k], rel=0.02), k
     assert planar["yaw_final_deg"] == pytest.approx(0.4046, rel=1e-3)  # the planar validation, as ever
     assert rows[2]["cpu_ratio"] > 0 and rows[2]["wall_ratio"] > 0
+
+
+@pytest.mark.parametrize("floor_m", [None, 0.0])
+def test_derivatives_are_finite_with_a_track_lifted_off(floor_m, monkeypatch):
+    """Issue 22, the MPC on the 3D vehicle: an NLP iterate may lift a track off the ground (every
+    segment's penetration <= 0). Bekker's compaction work z^(n+1) / (n+1) at z = 0 has a NaN
+    derivative in n (W ln z) and an infinite second derivative in z: IPOPT's "NaN detected for
+    output grad_gamma_p / hess_gamma_x_x". With the depth's floor (COMPACTION_DEPTH_FLOOR_M) the
+    DAE's Jacobians in x and p and the Hessian of its sum in x are finite there; with the floor at
+    0 (the model before) they are not: the test's own control."""
+    import casadi as ca
+
+    from symtrack.model import vehicle3d
+    if floor_m is not None:
+        monkeypatch.setattr(vehicle3d, "COMPACTION_DEPTH_FLOOR_M", floor_m)
+    params = _params(soil="sandy_loam_15")
+    opts = ModelOptions(lateral_law="creep", vehicle="3d", contact_segments=2)
+    m = SystemModel(opts)
+    x0 = static_state(m, params)
+    x0[m.layout.index("z_m")] += 0.01  # the hull 1 cm above its rest: both tracks in the air
+    x0[m.layout.index("u_m_s")] = 2.0
+    x, z, u, p = (ca.SX.sym(n, k) for n, k in (("x", m.nx), ("z", 2), ("u", 2), ("p", len(m.param_vector(params)))))
+    ode, alg = m.dae(x, z, u, p)
+    tot = ca.sum1(ode) + ca.sum1(alg)
+    f = ca.Function("d", [x, z, u, p], [ca.jacobian(ode, x), ca.jacobian(ode, p), ca.hessian(tot, x)[0]])
+    vals = [np.array(v.full()) for v in f(x0, [0, 0], [500.0, 500.0], m.param_vector(params))]
+    finite = all(np.all(np.isfinite(v)) for v in vals)
+    assert finite == (floor_m is None)

@@ -100,8 +100,13 @@ class ClosedLoopResult:
 
 
 def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
-    """Steady straight running at the start speed (trim), placed at the start pose."""
-    tp = trim(model, sc.params, sc.start.speed_m_s)
+    """Steady straight running at the start speed (trim), placed at the start pose. The 3D
+    vehicle's trim is taken at the start pose (its hull settled on the ground there)."""
+    if getattr(model.vehicle, "own_contact", False):
+        tp = trim(model, sc.params, sc.start.speed_m_s,
+                  pose=(sc.start.x_m, sc.start.y_m, math.radians(sc.start.yaw_deg)))
+    else:
+        tp = trim(model, sc.params, sc.start.speed_m_s)
     x = tp.x.copy()
     x[model.state_index("x_m")] = sc.start.x_m
     x[model.state_index("y_m")] = sc.start.y_m
@@ -288,7 +293,7 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
     straight running (or at ``x0``, values of the plant's ``state_names``); with ``finish``
     (default) the plant is finished after the loop (the grid lifts the vehicle off)."""
     with timed_step("building the vehicle model", log):
-        model = model or system_model(sc.model)
+        model = model or system_model(sc.model, sc.surface)
     if model.opts != sc.model:
         raise ScenarioError(f"the model's options ({model.opts}) differ from the scenario's [model] section "
                             f"({sc.model}): build the model as SystemModel(scenario.model)")

@@ -71,6 +71,7 @@ from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
 from ..model.homogeneous import HomogeneousTerrain
 from ..model.options import SLIDING_SIGNS
+from ..model.vehicle3d import ContactTerrain, make_vehicle
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
@@ -88,6 +89,14 @@ PREDICTIONS = ("vehicle", "full")
 _SCALES = (
     ("x_m", 1.0), ("y_m", 1.0), ("yaw_rad", 0.1), ("u_m_s", 1.0), ("v_m_s", 0.05), ("yaw_rate_rad_s", 0.1),
     ("omega_", 5.0), ("shear_", 0.02), ("torque_", 1000.0), ("sinkage_rate_", 0.01), ("sinkage_", 0.002),
+    # The 3D vehicle's hull states (symtrack.model.vehicle3d.HULL_STATES) keep the scale 1: z_m is a
+    # position (0.6 m on flat ground, metres on a slope) and the angles and rates are small, but scaling
+    # the rates to 0.01 makes their collocation rows 100 x larger, and the hull's bounce in the plant
+    # (heave, pitch, roll near 7 Hz, lightly damped) then puts the measurement itself far outside the
+    # RTI's defect bound: headland_uturn on the 3D vehicle, RTI, with z 1, angles 0.1, rates 0.01: 37
+    # failed solves before the run was stopped, against 7 over the whole path with all at 1
+    # (measured, issue 22; docs/vehicle3d.md). IPOPT: 5 and 6 failed in the first 30 samples of
+    # straight_offset (no difference).
 )
 TORQUE_SCALE_N_M = 1000.0
 
@@ -254,11 +263,15 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
         changes["sliding_sign"] = settings.prediction_sliding_sign
     if all(getattr(o, k) == v for k, v in changes.items()):
         return model
+    opts = dataclasses.replace(o, **changes)
+    if isinstance(model.terrain, ContactTerrain):
+        # the 3D vehicle: the same ground under the prediction (its surface kept)
+        return SystemModel(opts, vehicle=make_vehicle(opts, model.vehicle.surface))
     if not isinstance(model.terrain, HomogeneousTerrain):
         raise ParameterError("mpc.prediction_sliding_*: the prediction's regularisation needs the homogeneous "
                              "terrain's model (set prediction_sliding_smoothing = None and "
                              "prediction_sliding_sign = \"model\" for another terrain)")
-    return SystemModel(dataclasses.replace(o, **changes))
+    return SystemModel(opts)
 
 
 @dataclass

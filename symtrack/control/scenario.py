@@ -68,10 +68,12 @@ from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators.settings import EngineSettings
 from ..model.options import ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
+from ..model.vehicle3d import check_contact, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..simulation.scenario import RunSettings, parse_engine, parse_params, parse_run, parse_terrain
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings
+from ..terrain.surface import Surface, parse_surface
 from .mpc import MPCSettings
 from .path import Path as RefPath
 from .path import Segment, field_segments
@@ -114,6 +116,9 @@ class MPCScenario:
     terrain: TerrainSettings | None = None  # the [terrain] section (None: homogeneous plant)
     model: ModelOptions = ModelOptions()  # the [model] section (plant and prediction)
     engine: EngineSettings | None = None  # the [engine] section (the grid plant's terrain engine)
+    # the ground's shape under the 3D vehicle (model.vehicle = "3d" and a [terrain] section holding
+    # only [terrain.surface]: homogeneous soil following it, as symtrack simulate; docs/vehicle3d.md)
+    surface: Surface | None = None
 
     @property
     def plant(self) -> str:
@@ -141,6 +146,7 @@ class MPCScenario:
                 "run": {k: getattr(self.run, k) for k in MPC_RUN_KEYS},
                 "mpc": {k: v for k, v in dataclasses.asdict(self.mpc).items() if v is not None},
                 **({} if self.terrain is None else {"terrain": self.terrain.to_dict()}),
+                **({} if self.surface is None else {"terrain": {"surface": self.surface.to_dict()}}),
                 **({} if self.engine is None else {"engine": dataclasses.asdict(self.engine)}),
                 **({} if self.model == ModelOptions() else {"model": {
                     k: v for k, v in dataclasses.asdict(self.model).items()
@@ -248,9 +254,30 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
                           _num("start.yaw_deg", st.get("yaw_deg", 0.0), -360, 360),
                           _num("start.speed_m_s", st.get("speed_m_s", 2.0), 0.1, 10))
     run = parse_run(d.get("run", {}), MPC_RUN_KEYS, MPC_RUN_DEFAULTS)
-    terrain = parse_terrain(d.get("terrain"))
+    model = _model(d.get("model", {}))
+    t_doc = d.get("terrain")
+    surface = None
+    if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
+        surface = parse_surface(t_doc["surface"])
+        if surface.raster is not None:
+            raise ScenarioError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D "
+                                "vehicle (model.vehicle = '3d') yet; give slopes and furrows")
+        try:
+            check_contact(model, surface, veh)
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
+        terrain = None
+    else:
+        terrain = parse_terrain(t_doc)
+    if terrain is not None:
+        try:
+            check_terrain(model, "grid")
+        except ParameterError as err:
+            raise ScenarioError(f"{err} (the MPC's grid plant: --plant grid or [terrain]; a [terrain] section "
+                                "holding only [terrain.surface] gives the 3D vehicle its ground on homogeneous "
+                                "soil)") from err
     return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
-                       _mpc(d.get("mpc", {})), terrain, _model(d.get("model", {})), parse_engine(d.get("engine")))
+                       _mpc(d.get("mpc", {})), terrain, model, parse_engine(d.get("engine")), surface)
 
 
 def builtin_names() -> list[str]:
@@ -268,7 +295,9 @@ def load(name_or_path: str, overrides=None, plant: str | None = None) -> MPCScen
         raise ScenarioError(f"plant = {plant!r} is not one of homogeneous, grid")
     d, default = read_document(name_or_path, SCENARIO_PACKAGE, "MPC scenario", overrides, paths=TERRAIN_PATH_KEYS)
     if plant == "homogeneous":
-        d.pop("terrain", None)
+        t = d.get("terrain")
+        if not (isinstance(t, dict) and set(t) == {"surface"}):  # the 3D vehicle's ground stays
+            d.pop("terrain", None)
     elif plant == "grid":
         d.setdefault("terrain", dict(GRID_DEFAULT_TERRAIN))
     return scenario_from_dict(d, default)

@@ -270,8 +270,9 @@ def limit_usage(model: SystemModel, params: dict, x, u, p) -> dict:
     return out
 
 
-def _straight_guess(model: SystemModel, params: dict, problem: _TrimProblem, speed: float) -> np.ndarray:
-    x0 = static_state(model, params)
+def _straight_guess(model: SystemModel, params: dict, problem: _TrimProblem, speed: float,
+                    pose=(0.0, 0.0, 0.0)) -> np.ndarray:
+    x0 = static_state(model, params, *pose)
     names = model.state_names
     r = params["sprocket_radius_m"]
     W = params["mass_kg"] * GRAVITY_M_S2
@@ -287,10 +288,15 @@ def _straight_guess(model: SystemModel, params: dict, problem: _TrimProblem, spe
 
 
 def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | None = None,
-         settings: TrimSettings | None = None) -> TrimPoint:
+         settings: TrimSettings | None = None, pose=(0.0, 0.0, 0.0)) -> TrimPoint:
     """Steady straight running (radius_m None or infinite) or a steady turn at radius_m
     (positive: left turn) at speed_m_s, on the soil in params. Raises :class:`TrimError` when no
-    steady motion exists, naming the limit."""
+    steady motion exists, naming the limit.
+
+    ``pose``: (x_m, y_m, yaw_rad) at which the trim is taken (X, Y and yaw are not unknowns: they
+    stay there). The planar vehicle's trim does not depend on it; the 3D vehicle's hull is settled
+    on the ground under that pose (on a side slope the straight trim is the instantaneous
+    equilibrium there: its drift downhill, v_m_s, is one of the unknowns)."""
     settings = settings or TrimSettings()
     if isinstance(speed_m_s, bool) or not isinstance(speed_m_s, (int, float)) or not math.isfinite(speed_m_s):
         raise ParameterError(f"trim speed_m_s = {speed_m_s!r} must be a finite number")
@@ -307,7 +313,7 @@ def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | N
                 f"({0.5 * params['track_gauge_m']:g} m); turning on the spot has no steady forward speed")
     p = np.asarray(model.param_vector(params), dtype=float)
     problem = _TrimProblem(model, p, settings)
-    w0 = _straight_guess(model, params, problem, speed_m_s)
+    w0 = _straight_guess(model, params, problem, speed_m_s, tuple(float(v) for v in pose))
     sol = problem.solve(w0, speed_m_s, 0.0)
     if sol is None:
         raise TrimError(f"no steady straight running found at speed_m_s = {speed_m_s:g} on this soil "

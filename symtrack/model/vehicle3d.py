@@ -82,8 +82,8 @@ from .vehicle import (
     traction_shape,
 )
 
-__all__ = ["HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain", "SegmentDistribution",
-           "Vehicle3D", "check_contact", "check_terrain", "make_vehicle"]
+__all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
+           "SegmentDistribution", "Vehicle3D", "check_contact", "check_terrain", "make_vehicle"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -91,6 +91,15 @@ HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad
 # I_roll / I_yaw = (W^2 + H^2) / (L^2 + W^2) = 0.32.
 PITCH_INERTIA_PER_YAW = 1.0
 ROLL_INERTIA_PER_YAW = 0.32
+# The compaction resistance's depth is held at least this [m] (issue 22, the MPC on the 3D vehicle):
+# Bekker's work b k z^(n+1) / (n+1) has d/dn = W ln z and d2/dz2 = b k n z^(n-1), both NaN or infinite
+# at z = 0, where a track whose every segment has lifted off (an NLP iterate) puts it; the NaN went
+# into IPOPT's Hessian and the parameter gradient ("NaN detected for output hess_gamma_x_x",
+# "grad_gamma_p") and failed every MPC solve. The value is the Bekker law's own regularisation cap
+# (ModelOptions.bekker_regularisation_m, 1e-6 m): the work is unchanged wherever the track sinks at
+# least 1 um (every run on the ground: 1-2 mm), and below it is W(1 um) = b k_eq (1e-6 m)^(n+1) / (n+1),
+# at most 0.01 N over the soil presets (heavy_clay_wes_40, n = 0.11; 2.5e-5 N on sandy_loam_15), not 0.
+COMPACTION_DEPTH_FLOOR_M = 1e-6
 
 
 def _layout(lateral: bool) -> StateLayout:
@@ -264,7 +273,7 @@ class Vehicle3D:
                 normals.append(nrm)
                 n_sum += p * b * ds
             N[k] = n_sum
-            depth[k] = ca.fmax(z_hist, 0)
+            depth[k] = ca.fmax(z_hist, COMPACTION_DEPTH_FLOOR_M)  # (not 0: the NaN of its derivatives)
             dist[k] = SegmentDistribution(p_seg, s_c, ds, n_sum)
             # the track's ground plane: its mean normal; the tangent along the track and across it
             nk = sum(normals[1:], normals[0]) / n_seg
