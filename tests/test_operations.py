@@ -109,6 +109,7 @@ def test_trafficked_share_against_independent_rasters(driven):
     assert abs(got - planned.mean()) <= 0.25 * planned.mean(), (got, planned.mean())
 
 
+@pytest.mark.slow  # a two-operation season driven twice (about 40 s; make test-slow)
 def test_field_persists_bit_for_bit_through_save_and_load(tmp_path):
     two = {**SMALL, "season": {"operations": [{"name": "a", "lines": 1}, {"name": "b", "lines": 1,
                                                                            "tracks": "random", "seed": 3}]}}

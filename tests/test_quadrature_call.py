@@ -100,6 +100,7 @@ def test_cvodes_and_idas_with_a_large_quadrature_build_the_expanded_form():
         assert oracle.n_instructions() > 10_000, method  # the 2 x 320 points expanded (about 18,000 in dae)
 
 
+@pytest.mark.slow  # compiles the 64 x 5 twin (about 20 s; make test-slow)
 @needs_cc
 def test_the_compiled_twin_has_its_own_cache_key_and_matches_the_expanded_model(tmp_path, monkeypatch):
     monkeypatch.setenv("SYMTRACK_CACHE", str(tmp_path))

@@ -11,6 +11,11 @@ import pytest
 EX = runpy.run_path("examples/tracks_against_wheels.py")
 
 
+# slow (make test-slow, CI runs it): the fixture drives the crawler through the engine and three tyre set-ups
+# (about 45 s)
+pytestmark = pytest.mark.slow
+
+
 @pytest.fixture(scope="module")
 def table():
     return EX["compare"](4.0)
