@@ -77,21 +77,6 @@ def test_no_nan_in_the_mpc_s_derivatives_for_the_3d_vehicle():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="issue 22, open: in the 1 m approach IPOPT hits max_iter on the 3D "
-                   "contact's kinks and the loop drifts away (measured: 55 failed solves and 1.33 m off the "
-                   "line at t = 7.9 s; docs/vehicle3d.md, 'The MPC on the 3D vehicle')")
-def test_the_3d_closed_loop_converges_onto_the_line_on_flat_ground():
-    """``symtrack mpc straight_offset --set model.vehicle=3d`` (IPOPT, the "shear" law): from the 1 m
-    offset onto the line; from 20 m of path on the RMS lateral error within 5 cm (planar: 0.01 cm).
-    Strict xfail: it fails as soon as the 3D closed loop converges, so the marker is then removed."""
-    sc = S.load("straight_offset", ["model.vehicle=3d"])
-    res = CL.run(sc)
-    s = res.summary
-    assert s["path_completed"] and s["rms_lateral_error_m"] <= 0.05
-    assert abs(res.e_lat[-1]) <= 0.05
-
-
-@pytest.mark.slow
 def test_the_3d_closed_loop_keeps_the_line_along_a_side_slope():
     """examples/mpc_side_slope_3d.py on an 8 deg side slope: the MPC holds the line within 5 cm RMS
     (measured 0.07 cm) where the open loop drifts downhill (0.16 m over 60 m), the lower track
