@@ -48,8 +48,8 @@ from ..foundations.errors import SimulationError
 
 __all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_NATIVE", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_COMPILER",
            "BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required",
-           "compiler", "digest",
-           "file_lock", "find_compiler", "native_cflags", "require_compiler", "set_require_compiled"]
+           "compiler", "digest", "file_lock", "find_compiler", "native_cflags", "require_compiler",
+           "set_require_compiled"]
 
 log = logging.getLogger("symtrack.toolchain")
 
@@ -67,7 +67,7 @@ CFLAGS_SHARED = ("-fPIC", "-fvisibility=hidden", "-DGCC_HASCLASSVISIBILITY")
 # figures do not depend on the machine's instruction set (tests/test_subsoil.py: the SIMD block equals
 # the scalar lookup bit for bit; validation_grid's states, rut and stress fields are bit for bit those of
 # -O2); -fno-math-errno only drops errno writes (sqrt inlined, the same correctly rounded result).
-# Measured on validation_grid with the shear law (docs/terrain.md "The engine's compile flags").
+# Measured on validation_grid with the shear law (docs/turning.md section 8, "Session 7").
 CFLAGS_NATIVE = ("-O3", "-march=native", "-ffp-contract=off", "-fno-math-errno")
 MAX_JOBS = 2  # compilers at a time (2-core machines)
 NO_COMPILER = "no C compiler found (looked for $CC, cc, gcc)"
