@@ -1,4 +1,5 @@
-"""A second, independent FMI importer for the FMU tests: Renault's fmu-manipulation-toolbox (the dev
+"""What both FMU test files share: the scenario's torque programme as fmpy's input table
+(:func:`torque_signal`), and a second, independent FMI importer: Renault's fmu-manipulation-toolbox (the dev
 extra; https://github.com/grouperenault/fmu_manipulation_toolbox). Its checker validates an FMU's
 modelDescription.xml against the FMI 2.0 XSD and its semantic rules; its container is an FMU whose
 own C runtime loads another FMU's binary and steps it through the FMI calling sequence (instantiate,
@@ -11,6 +12,8 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import numpy as np
 
 CONTAINER_CLI = "from fmu_manipulation_toolbox.cli.fmucontainer import fmucontainer; fmucontainer()"
 
@@ -39,3 +42,16 @@ def container(fmu_path, step_s: float, folder: Path) -> Path:
     out = folder / "container.fmu"
     assert res.returncode == 0 and out.is_file(), res.stdout + res.stderr
     return out
+
+
+def torque_signal(sc, stop_s):
+    """The scenario's piecewise-constant torque programme as fmpy's input table: a repeated time is a step
+    (fmpy applies the right-hand value at the step's time, after_event=True)."""
+    rows = []
+    for i, e in enumerate(sc.torque):
+        if i > 0:
+            prev = sc.torque[i - 1]
+            rows.append((e.t_s, prev.left_N_m, prev.right_N_m))
+        rows.append((e.t_s, e.left_N_m, e.right_N_m))
+    rows.append((stop_s + 1.0, sc.torque[-1].left_N_m, sc.torque[-1].right_N_m))
+    return np.array(rows, dtype=[("time", float), ("torque_cmd_left_N_m", float), ("torque_cmd_right_N_m", float)])

@@ -20,7 +20,7 @@ import fmpy  # the dev extra's independent FMI importer
 import fmpy.fmi2
 import numpy as np
 import pytest
-from fmi_second_importer import check, container
+from fmi_second_importer import check, container, torque_signal
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
@@ -47,16 +47,6 @@ def exported(tmp_path_factory):
     return fmu_export.export_fmu("validation_grid", out)  # as shipped: four subsoil depths, the bulk density
 
 
-def _torque_signal(sc, stop_s):
-    """The scenario's torque programme as fmpy's input table (a repeated time is a step)."""
-    rows = []
-    for i, e in enumerate(sc.torque):
-        if i > 0:
-            prev = sc.torque[i - 1]
-            rows.append((e.t_s, prev.left_N_m, prev.right_N_m))
-        rows.append((e.t_s, e.left_N_m, e.right_N_m))
-    rows.append((stop_s + 1.0, sc.torque[-1].left_N_m, sc.torque[-1].right_N_m))
-    return np.array(rows, dtype=[("time", float), ("torque_cmd_left_N_m", float), ("torque_cmd_right_N_m", float)])
 
 
 def _outputs(path):
@@ -66,7 +56,7 @@ def _outputs(path):
 
 def _cosimulate(exported, sc, stop_s, **start):
     return fmpy.simulate_fmu(str(exported.path), start_time=0.0, stop_time=stop_s, output_interval=sc.run.macro_step_s,
-                             input=_torque_signal(sc, stop_s), output=_outputs(exported.path),
+                             input=torque_signal(sc, stop_s), output=_outputs(exported.path),
                              start_values=start)
 
 
@@ -167,7 +157,7 @@ def test_a_second_importer_finds_it_compliant_and_its_container_steps_it_as_fmpy
     stop, dt = 2.0, sc.run.macro_step_s
     outs = _outputs(exported.path)
     direct, via = (fmpy.simulate_fmu(str(p), start_time=0.0, stop_time=stop, output_interval=dt,
-                                     input=_torque_signal(sc, stop), output=outs) for p in (exported.path, wrapped))
+                                     input=torque_signal(sc, stop), output=outs) for p in (exported.path, wrapped))
     assert len(direct) == len(via) == round(stop / dt) + 1
     worst = {n: float(np.max(np.abs(via[n] - direct[n])) / max(float(np.max(np.abs(direct[n]))), 1e-300))
              for n in outs}

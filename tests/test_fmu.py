@@ -17,7 +17,7 @@ import fmpy  # the dev extra's independent FMI importer
 import fmpy.fmi2
 import numpy as np
 import pytest
-from fmi_second_importer import check, container
+from fmi_second_importer import check, container, torque_signal
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
@@ -39,17 +39,6 @@ def exported(tmp_path_factory):
     return res
 
 
-def _torque_signal(sc, stop_s):
-    """The scenario's piecewise-constant torque programme as fmpy's input table: a repeated time is a step
-    (fmpy applies the right-hand value at the step's time, after_event=True)."""
-    rows = []
-    for i, e in enumerate(sc.torque):
-        if i > 0:
-            prev = sc.torque[i - 1]
-            rows.append((e.t_s, prev.left_N_m, prev.right_N_m))
-        rows.append((e.t_s, e.left_N_m, e.right_N_m))
-    rows.append((stop_s + 1.0, sc.torque[-1].left_N_m, sc.torque[-1].right_N_m))
-    return np.array(rows, dtype=[("time", float), ("torque_cmd_left_N_m", float), ("torque_cmd_right_N_m", float)])
 
 
 def test_fmpy_validation_finds_no_problem(exported):
@@ -78,7 +67,7 @@ def test_fmpy_cosimulation_agrees_with_the_python_run(exported):
     md = fmpy.read_model_description(str(exported.path))
     outs = [v.name for v in md.modelVariables if v.causality == "output"]
     res = fmpy.simulate_fmu(str(exported.path), start_time=0.0, stop_time=stop, output_interval=dt,
-                            input=_torque_signal(sc, stop), output=outs)
+                            input=torque_signal(sc, stop), output=outs)
     t_fmu = res["time"]
     assert len(t_fmu) == n_full + 1
     # align: the Python rows whose time is an FMU output time (all but the shortened last one)
@@ -107,7 +96,7 @@ def test_a_second_importer_finds_it_compliant_and_its_container_steps_it_as_fmpy
     md = fmpy.read_model_description(str(exported.path))
     outs = [v.name for v in md.modelVariables if v.causality == "output"]
     direct, via = (fmpy.simulate_fmu(str(p), start_time=0.0, stop_time=stop, output_interval=dt,
-                                     input=_torque_signal(sc, stop), output=outs) for p in (exported.path, wrapped))
+                                     input=torque_signal(sc, stop), output=outs) for p in (exported.path, wrapped))
     assert len(direct) == len(via) == round(stop / dt) + 1
     worst = {n: float(np.max(np.abs(via[n] - direct[n])) / max(float(np.max(np.abs(direct[n]))), 1e-300))
              for n in outs}

@@ -51,7 +51,15 @@ from ..model.vehicle import INPUTS
 from ..native.generate import unit_of
 from ..simulation.scenario import Scenario
 from ..toolchain import BuildSpec, build, casadi_tag, digest
-from .fmu_common import FMI2_HEADERS, FmuVariable, probe_writable, unit_definitions, xml_number, zip_bytes
+from .fmu_common import (
+    FMI2_HEADERS,
+    FmuVariable,
+    probe_writable,
+    scalar_variable_xml,
+    unit_definitions,
+    xml_number,
+    zip_bytes,
+)
 from .grid_standalone import NATIVE, engine_constants, engine_parts
 from .standalone import c_array, c_literal
 
@@ -112,7 +120,7 @@ def check_exportable(sc: Scenario) -> None:
         raise ScenarioError("[terrain.surface] is set: the engine FMU carries a flat field")
     if t.moisture is not None:
         raise ScenarioError("[terrain.moisture] is set: the engine FMU's soil is fixed at export")
-    if getattr(t, "towed", None) is not None:  # [terrain.towed] (a trailer behind the crawler, on main since)
+    if t.towed is not None:  # [terrain.towed] (a trailer behind the crawler)
         raise ScenarioError("[terrain.towed] is set: the engine FMU carries the crawler alone (the trailer's tyres "
                             "are run by Python, symtrack.terrain.towed)")
     if t.initial_state:
@@ -186,18 +194,7 @@ def model_description(sc: Scenario, variables, guid: str, world) -> str:
         "  <ModelVariables>",
     ]
     for v in variables:
-        attrs = [f"name={quoteattr(v.name)}", f'valueReference="{v.value_reference}"',
-                 f"description={quoteattr(v.description)}", f'causality="{v.causality}"',
-                 f'variability="{v.variability}"']
-        if v.initial:
-            attrs.append(f'initial="{v.initial}"')
-        real = [f"unit={quoteattr(v.unit)}"] if v.unit != "1" else []
-        if v.start is not None:
-            real.append(f'start="{xml_number(v.start)}"')
-        lines.append(f"    <!-- {v.value_reference + 1} -->")
-        lines.append(f"    <ScalarVariable {' '.join(attrs)}>")
-        lines.append(f"      <Real {' '.join(real)}/>".replace("<Real />", "<Real/>"))
-        lines.append("    </ScalarVariable>")
+        lines += scalar_variable_xml(v)
     for k, (name, text) in enumerate(FIELD_PARAMETERS):
         lines.append(f"    <!-- {len(variables) + k + 1} -->")
         lines.append(f'    <ScalarVariable name="{name}" valueReference="{len(variables) + k}" '

@@ -59,6 +59,7 @@ from .fmu_common import (
     LOG_CATEGORIES,
     FmuVariable,
     probe_writable,
+    scalar_variable_xml,
     unit_definitions,
     xml_number,
     zip_bytes,
@@ -183,18 +184,7 @@ def model_description(sc: Scenario, variables, guid: str, model_hash: str, prefi
               f'stepSize="{xml_number(sc.run.output_dt_s)}"/>',
               "  <ModelVariables>"]
     for v in variables:
-        attrs = [f"name={quoteattr(v.name)}", f'valueReference="{v.value_reference}"',
-                 f"description={quoteattr(v.description)}", f'causality="{v.causality}"',
-                 f'variability="{v.variability}"']
-        if v.initial:
-            attrs.append(f'initial="{v.initial}"')
-        real = [f"unit={quoteattr(v.unit)}"] if v.unit != "1" else []
-        if v.start is not None:
-            real.append(f'start="{xml_number(v.start)}"')
-        lines.append(f"    <!-- {v.value_reference + 1} -->")
-        lines.append(f"    <ScalarVariable {' '.join(attrs)}>")
-        lines.append(f"      <Real {' '.join(real)}/>".replace("<Real />", "<Real/>"))
-        lines.append("    </ScalarVariable>")
+        lines += scalar_variable_xml(v)
     lines += ["  </ModelVariables>", "  <ModelStructure>", "    <Outputs>"]
     outs = [v for v in variables if v.causality == "output"]
     lines += [f'      <Unknown index="{v.value_reference + 1}"/>' for v in outs]

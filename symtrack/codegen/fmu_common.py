@@ -14,8 +14,8 @@ from xml.sax.saxutils import quoteattr
 
 from ..foundations.errors import ScenarioError
 
-__all__ = ["BASE_UNITS", "FMI2_HEADERS", "LOG_CATEGORIES", "FmuVariable", "probe_writable", "unit_definitions",
-           "xml_number", "zip_bytes"]
+__all__ = ["BASE_UNITS", "FMI2_HEADERS", "LOG_CATEGORIES", "FmuVariable", "probe_writable", "scalar_variable_xml",
+           "unit_definitions", "xml_number", "zip_bytes"]
 
 FMI2_HEADERS = tuple(Path(__file__).resolve().parent / "fmi2" / n
                      for n in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"))
@@ -61,6 +61,20 @@ def unit_definitions(variables) -> list[str]:
             attrs = " ".join(f'{k}="{v}"' for k, v in base.items())
             lines.append(f"    <Unit name={quoteattr(u)}><BaseUnit {attrs}/></Unit>")
     return lines + ["  </UnitDefinitions>"]
+
+
+def scalar_variable_xml(v) -> list[str]:
+    """The modelDescription lines of one Real :class:`FmuVariable` (both FMUs' ``<ModelVariables>``)."""
+    attrs = [f"name={quoteattr(v.name)}", f'valueReference="{v.value_reference}"',
+             f"description={quoteattr(v.description)}", f'causality="{v.causality}"',
+             f'variability="{v.variability}"']
+    if v.initial:
+        attrs.append(f'initial="{v.initial}"')
+    real = [f"unit={quoteattr(v.unit)}"] if v.unit != "1" else []
+    if v.start is not None:
+        real.append(f'start="{xml_number(v.start)}"')
+    return [f"    <!-- {v.value_reference + 1} -->", f"    <ScalarVariable {' '.join(attrs)}>",
+            f"      <Real {' '.join(real)}/>".replace("<Real />", "<Real/>"), "    </ScalarVariable>"]
 
 
 def zip_bytes(members: dict[str, bytes]) -> bytes:

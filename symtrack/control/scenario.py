@@ -68,12 +68,11 @@ from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators.settings import EngineSettings
 from ..model.options import ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
-from ..model.vehicle3d import check_contact, check_terrain
 from ..presets import soil_preset, vehicle_preset
-from ..simulation.scenario import RunSettings, parse_engine, parse_params, parse_run, parse_terrain
+from ..simulation.scenario import RunSettings, parse_engine, parse_ground, parse_params, parse_run
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings
-from ..terrain.surface import Surface, parse_surface
+from ..terrain.surface import Surface
 from .mpc import MPCSettings
 from .path import Path as RefPath
 from .path import Segment, field_segments
@@ -255,27 +254,8 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
                           _num("start.speed_m_s", st.get("speed_m_s", 2.0), 0.1, 10))
     run = parse_run(d.get("run", {}), MPC_RUN_KEYS, MPC_RUN_DEFAULTS)
     model = _model(d.get("model", {}))
-    t_doc = d.get("terrain")
-    surface = None
-    if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
-        surface = parse_surface(t_doc["surface"])
-        if surface.raster is not None:
-            raise ScenarioError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D "
-                                "vehicle (model.vehicle = '3d') yet; give slopes and furrows")
-        try:
-            check_contact(model, surface, veh)
-        except ParameterError as err:
-            raise ScenarioError(str(err)) from err
-        terrain = None
-    else:
-        terrain = parse_terrain(t_doc)
-    if terrain is not None:
-        try:
-            check_terrain(model, "grid")
-        except ParameterError as err:
-            raise ScenarioError(f"{err} (the MPC's grid plant: --plant grid or [terrain]; a [terrain] section "
-                                "holding only [terrain.surface] gives the 3D vehicle its ground on homogeneous "
-                                "soil)") from err
+    terrain, surface = parse_ground(d.get("terrain"), model, veh,
+                                    "the MPC's grid plant: --plant grid or [terrain]")
     return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
                        _mpc(d.get("mpc", {})), terrain, model, parse_engine(d.get("engine")), surface)
 

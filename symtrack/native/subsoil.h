@@ -36,53 +36,47 @@ static inline int subsoil_row_(const subsoil_tables_t *T, int k, double t, long 
   return 1;
 }
 
-/* (H0, H1) of depth k at (x, row j / weight ft). Past the grid (|x| saturated at its last node) the
-   weights are (gx, fx) = (0, 1) exactly, so the value is the last column's: read directly (the same
-   value but for the sign of a zero) */
+/* (H0, H1) of depth k at (x, row j / weight ft) */
 static inline void subsoil_lookup_(const subsoil_tables_t *T, int k, double x, long long j, double ft, double *h0,
                                    double *h1) {
   const int nx = T->n_x[k], nt = T->n_t[k];
-  const double ux = (x < 0 ? -x : x) * T->inv_x_step[k];
-  const double gt = 1.0 - ft;
-  double v;
-  if (!(ux < (double)(nx - 1))) {
-    const double *r1 = T->data + T->offset[k] + 2 * ((long long)(nx - 1) * nt + j);
-    v = gt * r1[0] + ft * r1[2];
-    *h1 = gt * r1[1] + ft * r1[3];
-  } else {
-    long long i = (long long)ux;
-    if (i > nx - 2) i = nx - 2;
-    const double fx = ux - (double)i;
-    const double gx = 1.0 - fx;
-    const double *r0 = T->data + T->offset[k] + 2 * (i * nt + j);
-    const double *r1 = r0 + 2 * nt;
-    v = gx * (gt * r0[0] + ft * r0[2]) + fx * (gt * r1[0] + ft * r1[2]);
-    *h1 = gx * (gt * r0[1] + ft * r0[3]) + fx * (gt * r1[1] + ft * r1[3]);
-  }
+  double ux = (x < 0 ? -x : x) * T->inv_x_step[k];
+  if (ux > (double)(nx - 1)) ux = (double)(nx - 1);
+  long long i = (long long)ux;
+  if (i > nx - 2) i = nx - 2;
+  const double fx = ux - (double)i;
+  const double gx = 1.0 - fx, gt = 1.0 - ft;
+  const double *r0 = T->data + T->offset[k] + 2 * (i * nt + j);
+  const double *r1 = r0 + 2 * nt;
+  const double v = gx * (gt * r0[0] + ft * r0[2]) + fx * (gt * r1[0] + ft * r1[2]);
+  *h1 = gx * (gt * r0[1] + ft * r0[3]) + fx * (gt * r1[1] + ft * r1[3]);
   *h0 = x < 0 ? -v : v;
 }
 
-/* one track's contribution (lateral offset t, loaded part's ends at x = xa, xe, pressure p_lin at the
-   point and slope beta) added to sigma_out[k] for every depth of T */
-static inline void subsoil_side_(const subsoil_tables_t *T, double t, double xa, double xe, double p_lin, double beta,
-                                 double *sigma_out) {
-  for (int k = 0; k < T->n_depths; ++k) {
-    long long j;
-    double ft, h0a, h1a, h0b, h1b;
-    if (!subsoil_row_(T, k, t, &j, &ft)) continue;
-    subsoil_lookup_(T, k, xa, j, ft, &h0a, &h1a);
-    subsoil_lookup_(T, k, xe, j, ft, &h0b, &h1b);
-    sigma_out[k] += p_lin * (h0a - h0b) - beta * (h1a - h1b);
+/* the loaded part [*sa, *sb] of [0, l] of the pressure line p = max(0, alpha + beta s); 0 when unloaded */
+static inline int subsoil_active_(double alpha, double beta, double l, double *sa, double *sb) {
+  if (beta == 0.0) {
+    if (!(alpha > 0.0)) return 0;
+    *sa = 0.0;
+    *sb = l;
+    return 1;
   }
+  const double s0 = -alpha / beta;
+  if (beta < 0.0) {
+    *sa = 0.0;
+    *sb = l < s0 ? l : s0;
+  } else {
+    *sa = s0 > 0.0 ? s0 : 0.0;
+    *sb = l;
+  }
+  return *sb > *sa;
 }
 
 /* sigma_out[k] = vertical stress [Pa] at depth k below the world point (px, py) from both tracks;
- * a = (X, Y, cos psi, sin psi, alpha_L, beta_L, alpha_R, beta_R), geo = (l, b, B, e, cell, end strip).
- * P (NULL: none): a second set of tables (the mean normal stress's, the same depths) looked up at the
- * same point into p_out, sharing the track-frame geometry; each table's sums are those that
- * subsoil_stress gives it alone. */
-static void subsoil_stress_pair(const subsoil_tables_t *T, const subsoil_tables_t *P, const double a[8],
-                                const double geo[6], double px, double py, double *sigma_out, double *p_out) {
+ * a = (X, Y, cos psi, sin psi, alpha_L, beta_L, alpha_R, beta_R), geo = (l, b, B, e, cell, end strip)
+ * (the scalar reference of subsoil_stress_block, which the engine uses) */
+static void subsoil_stress(const subsoil_tables_t *T, const double a[8], const double geo[6], double px, double py,
+                           double *sigma_out /* n_depths */) {
   const double l = geo[0], B = geo[2], e = geo[3];
   const double c = a[2], s = a[3];
   const double ddx = px - a[0], ddy = py - a[1];
@@ -90,39 +84,23 @@ static void subsoil_stress_pair(const subsoil_tables_t *T, const subsoil_tables_
   const double yb = -s * ddx + c * ddy;
   const double s_pt = (l / 2 - e) - xb;
   for (int k = 0; k < T->n_depths; ++k) sigma_out[k] = 0.0;
-  if (P)
-    for (int k = 0; k < P->n_depths; ++k) p_out[k] = 0.0;
   for (int side = 0; side < 2; ++side) {
     const double alpha = a[4 + 2 * side], beta = a[5 + 2 * side];
     double sa, sb;
-    if (beta == 0.0) {
-      if (!(alpha > 0.0)) continue;
-      sa = 0.0;
-      sb = l;
-    } else {
-      const double s0 = -alpha / beta;
-      if (beta < 0.0) {
-        sa = 0.0;
-        sb = l < s0 ? l : s0;
-      } else {
-        sa = s0 > 0.0 ? s0 : 0.0;
-        sb = l;
-      }
-      if (!(sb > sa)) continue;
-    }
+    if (!subsoil_active_(alpha, beta, l, &sa, &sb)) continue;
     const double t = yb - (side == 0 ? 1.0 : -1.0) * B / 2;
     const double p_lin = alpha + beta * s_pt;
     const double xa = s_pt - sa, xe = s_pt - sb;
-    subsoil_side_(T, t, xa, xe, p_lin, beta, sigma_out);
-    if (P) subsoil_side_(P, t, xa, xe, p_lin, beta, p_out);
+    for (int k = 0; k < T->n_depths; ++k) {
+      long long j;
+      double ft, h0a, h1a, h0b, h1b;
+      if (!subsoil_row_(T, k, t, &j, &ft)) continue;
+      subsoil_lookup_(T, k, xa, j, ft, &h0a, &h1a);
+      subsoil_lookup_(T, k, xe, j, ft, &h0b, &h1b);
+      sigma_out[k] += p_lin * (h0a - h0b) - beta * (h1a - h1b);
+    }
   }
 }
-
-static void subsoil_stress(const subsoil_tables_t *T, const double a[8], const double geo[6], double px, double py,
-                           double *sigma_out /* n_depths */) {
-  subsoil_stress_pair(T, 0, a, geo, px, py, sigma_out, 0);
-}
-
 
 /* ---- many points at once: the same operations per point as subsoil_stress, in loops over the points
  * that a vectorising compiler turns into SIMD code (gathers for the table reads; the engine's -O3
@@ -174,7 +152,7 @@ static inline void subsoil_side_block_(const subsoil_tables_t *T, int m, const d
 }
 
 /* sigma_out[n * n_depths + k] (as subsoil_stress at (px[n], py[n])) for n < m <= SUBSOIL_BLOCK;
- * P (NULL: none) a second set of tables into p_out the same way (subsoil_stress_pair) */
+ * P (NULL: none) a second set of tables (the same depths) into p_out the same way */
 static void subsoil_stress_block(const subsoil_tables_t *T, const subsoil_tables_t *P, const double a[8],
                                  const double geo[6], const double *px, const double *py, int m,
                                  double *sigma_out, double *p_out) {
@@ -197,21 +175,7 @@ static void subsoil_stress_block(const subsoil_tables_t *T, const subsoil_tables
   for (int side = 0; side < 2; ++side) {
     const double alpha = a[4 + 2 * side], beta = a[5 + 2 * side];
     double sa, sb;
-    if (beta == 0.0) {
-      if (!(alpha > 0.0)) continue;
-      sa = 0.0;
-      sb = l;
-    } else {
-      const double s0 = -alpha / beta;
-      if (beta < 0.0) {
-        sa = 0.0;
-        sb = l < s0 ? l : s0;
-      } else {
-        sa = s0 > 0.0 ? s0 : 0.0;
-        sb = l;
-      }
-      if (!(sb > sa)) continue;
-    }
+    if (!subsoil_active_(alpha, beta, l, &sa, &sb)) continue;
     const double off = (side == 0 ? 1.0 : -1.0) * B / 2;
     for (int n = 0; n < m; ++n) {
       t[n] = yb[n] - off;

@@ -71,7 +71,7 @@ from ..terrain.settings import TerrainSettings, settings_from_dict
 from ..terrain.surface import Surface, parse_surface
 
 __all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
-           "parse_run", "parse_terrain", "scenario_from_dict"]
+           "parse_ground", "parse_run", "parse_terrain", "scenario_from_dict"]
 
 SCENARIO_PACKAGE = "symtrack.simulation.scenarios"
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "start", "torque", "terrain", "engine")
@@ -256,6 +256,32 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
     return preset, values
 
 
+def parse_ground(t_doc, model, vehicle: dict, plant: str = "") -> tuple:
+    """``(terrain, surface)`` of a scenario's ``[terrain]`` table (the simulation's and the MPC's
+    loaders): with ``model.vehicle = "3d"`` a table holding only ``[terrain.surface]`` is homogeneous
+    soil following that ground (docs/vehicle3d.md: ``(None, Surface)``, its contact checked against
+    the vehicle); anything else is the grid terrain (``(TerrainSettings or None, None)``), refused for a
+    vehicle model that cannot take it (``plant``: what in the message asked for the grid)."""
+    if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
+        surface = parse_surface(t_doc["surface"])
+        if surface.raster is not None:
+            raise ScenarioError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D "
+                                "vehicle (model.vehicle = '3d') yet; give slopes and furrows")
+        try:
+            check_contact(model, surface, vehicle)
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
+        return None, surface
+    terrain = parse_terrain(t_doc)
+    if terrain is not None:
+        try:
+            check_terrain(model, "grid")
+        except ParameterError as err:
+            raise ScenarioError(f"{err} ({plant + '; ' if plant else ''}a [terrain] section holding only "
+                                "[terrain.surface] gives the 3D vehicle its ground on homogeneous soil)") from err
+    return terrain, None
+
+
 def parse_engine(t) -> EngineSettings | None:
     """The optional ``[engine]`` table: the terrain engine's scheme (docs/terrain.md, "The terrain
     engine"; keys and ranges: :class:`~symtrack.integrators.settings.EngineSettings`)."""
@@ -334,28 +360,8 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
             raise ScenarioError(str(err)) from err
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
-    t_doc = d.get("terrain")
-    surface = None
-    if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
-        # the 3D vehicle on homogeneous soil that follows the ground's shape (docs/vehicle3d.md)
-        surface = parse_surface(t_doc["surface"])
-        if surface.raster is not None:
-            raise ScenarioError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D "
-                                "vehicle (model.vehicle = '3d') yet; give slopes and furrows")
-        terrain = None
-        try:
-            check_contact(model, surface, vehicle)
-        except ParameterError as err:
-            raise ScenarioError(str(err)) from err
-    else:
-        terrain = parse_terrain(t_doc)
+    terrain, surface = parse_ground(d.get("terrain"), model, vehicle)
     engine = parse_engine(d.get("engine"))
-    if terrain is not None:
-        try:
-            check_terrain(model, "grid")
-        except ParameterError as err:
-            raise ScenarioError(f"{err} (a [terrain] section holding only [terrain.surface] gives the 3D vehicle "
-                                "its ground on homogeneous soil)") from err
     if terrain is not None and terrain.towed is not None:  # (symtrack.terrain.towed; again before the first pass)
         towed.check_scenario(terrain, start.x_m, start.y_m, start.yaw_deg, soil,
                              float(vehicle["cg_ahead_of_contact_centre_m"]))
