@@ -359,3 +359,33 @@ def test_the_engines_terrain_query_is_the_numpy_query():
     with pytest.raises(SimulationError, match=r"terrain query at \(100, 0\) m: outside the field"):
         plant.engine.surface(100.0, 0.0)
 
+
+
+def test_cells_in_lanes_equal_one_cell_at_a_time(tmp_path, monkeypatch):
+    """grid_engine.c integrates the cells in batches of CELL_LANES interleaved lanes (cell_step_block):
+    every lane runs the one-cell sequence of operations, so the engine built with one lane gives the
+    same run to the last bit (states, outputs, stored cells, subsoil and mean-stress maxima)."""
+    if find_compiler() is None:
+        pytest.skip("no C compiler")
+    import importlib.resources
+    from pathlib import Path
+
+    from symtrack.integrators.engine import kernel as engine_kernel
+    native = importlib.resources.files("symtrack.native")
+    for name in ("grid_engine.c", "subsoil.h", "terrain_query.h"):
+        (tmp_path / name).write_bytes(native.joinpath(name).read_bytes())
+    src = (tmp_path / "grid_engine.c").read_text()
+    assert "#define CELL_LANES 8\n" in src
+    (tmp_path / "grid_engine.c").write_text(src.replace("#define CELL_LANES 8\n", "#define CELL_LANES 1\n"))
+    sc = _scenario(duration_s=1.0)
+    wa, ra = _engine_run(sc)
+    monkeypatch.setattr(engine_kernel, "resources", types.SimpleNamespace(files=lambda pkg: Path(tmp_path)))
+    wb, rb = _engine_run(sc)
+    assert ra.stats["n_cell_stages"] == rb.stats["n_cell_stages"] > 0
+    assert np.array_equal(ra.X, rb.X) and np.array_equal(ra.Y, rb.Y)
+    sa, sb = wa.storage.arrays(), wb.storage.arrays()
+    assert sa.keys() == sb.keys() and np.any(sa["z_m"] > 0)
+    for name in sa:
+        assert np.array_equal(sa[name], sb[name]), name
+    for name in ("pass_sigma", "pass_p_mean"):
+        assert np.array_equal(getattr(wa, name), getattr(wb, name)), name
