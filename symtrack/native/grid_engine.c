@@ -932,10 +932,16 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       long long bcell[SUBSOIL_BLOCK];
       const long long nd = E->n_depths;
       int m = 0;
+      /* two sweeps over the loaded cells: those on the left track's side of the centre line, then the
+         others (a block then lies under one track, and subsoil_side_block_ skips the depths that the
+         other track's stress does not reach) */
+      for (int sweep = 0; sweep < 2; ++sweep)
       for (long long q = 0; q <= E->n_act; ++q) {
         if (q < E->n_act) {
           long long ch = E->act[q];
           if (!(E->ch_g[NGEO * ch] > 0.0)) continue;
+          const double ybl = -a1[3] * (E->ch_cx[ch] - a1[0]) + a1[2] * (E->ch_cy[ch] - a1[1]);
+          if ((ybl > 0.0) != (sweep == 0)) continue;
           bx[m] = E->ch_cx[ch];
           by[m] = E->ch_cy[ch];
           bcell[m] = E->ch_cell[ch];

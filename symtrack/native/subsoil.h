@@ -120,6 +120,15 @@ static inline void subsoil_side_block_(const subsoil_tables_t *T, int m, const d
     const double xlast = (double)(nx - 1), tlast = (double)(nt - 1);
     const double *restrict D = T->data + T->offset[k];
     double *restrict ak = acc + k * SUBSOIL_BLOCK;
+    /* no point of the block within the table's reach of this track at this depth: nothing to add
+       (the engine groups the points by the track they lie under, so that the other track's shallow
+       depths are skipped whole) */
+    double tmin = INFINITY;
+    for (int n = 0; n < m; ++n) {
+      const double ta = t[n] < 0 ? -t[n] : t[n];
+      tmin = ta < tmin ? ta : tmin;
+    }
+    if (!(tmin * its < tlast)) continue;
     for (int n = 0; n < m; ++n) {
       const double tn = t[n];
       const double ut = (tn < 0 ? -tn : tn) * its;
