@@ -25,7 +25,7 @@ from symtrack.integrators.engine.state import (
     SDIRK_GAMMA,
     EngineState,
 )
-from symtrack.integrators.settings import window_substeps
+from symtrack.integrators.settings import VEHICLE_ATOL, VEHICLE_MAX_HALVINGS, window_substeps
 from symtrack.native.grid_engine_model import NS
 from symtrack.terrain import query, subsoil
 
@@ -435,9 +435,22 @@ class PyKernel:
         return missing
 
     def _vehicle_step(self, u, h):
-        w1, a1 = self.f.vehicle_step(self.s.wv, u, self.s.pv, h)
+        return self._vehicle_step_controlled(np.array(self.s.wv, dtype=float), u, h, 0)
+
+    def _vehicle_step_controlled(self, w0, u, h, depth):
+        """engine.c vehicle_step_controlled: the step, halved while its error estimate is too large."""
+        w1, a1, e1 = (np.array(v).ravel() for v in self.f.vehicle_step(w0, u, self.s.pv, h))
         self.s.stats["n_vehicle_steps"] += 1
-        return np.array(w1).ravel(), np.array(a1).ravel()
+        rtol = self.s.settings.vehicle_tolerance
+        if not rtol > 0.0 or depth >= VEHICLE_MAX_HALVINGS:
+            return w1, a1
+        nv = self.f.layout.nv
+        scale = VEHICLE_ATOL + rtol * np.maximum(np.abs(w0[:nv]), np.abs(w1[:nv]))
+        if np.all(np.abs(e1[:nv]) <= scale):
+            return w1, a1
+        self.s.stats["n_vehicle_halved"] += 1
+        wm, _ = self._vehicle_step_controlled(w0, u, 0.5 * h, depth + 1)
+        return self._vehicle_step_controlled(wm, u, 0.5 * h, depth + 1)
 
     def _pose_grid(self, a1, psi1, n):
         """engine.c pose_grid: the pose and pressure lines at the ends of n equal substeps."""

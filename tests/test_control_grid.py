@@ -192,7 +192,7 @@ def test_engine_plant_starts_from_a_running_state(grid_run):
     act = s.active_channels()
     loaded = act[s.ch_g[act, 0] > 0.0]  # the cells under the tracks (the others: the footprint's padding)
     assert loaded.size > 0 and np.all(s.ch_z[loaded] > 1e-4)  # they carry the vehicle
-    w1, _ = plant.engine.fns.vehicle_step(s.wv, ut, s.pv, 0.0)  # consistent: a zero step changes nothing
+    w1, _, _ = plant.engine.fns.vehicle_step(s.wv, ut, s.pv, 0.0)  # consistent: a zero step changes nothing
     assert np.max(np.abs(np.array(w1).ravel() - s.wv)) < 1e-9
     x1, _ = advance_plant(plant, ut, 0.1, plant.macro_step_s)
     assert abs(x1[3] - xv[3]) < 0.02 and 0.19 < x1[0] - xv[0] < 0.21  # running on at the trim speed

@@ -76,6 +76,7 @@ def engine_constants(tag: str, parts: dict) -> list[str]:
     """The engine's constants as C macros ``<tag>_NAME`` (the field, M, the struct's sizes and
     settings) for a program that fills grid_engine.c's eng_t itself."""
     from symtrack.integrators.engine import POWER_MODES, SDIRK_GAMMA, window_substeps
+    from symtrack.integrators.settings import VEHICLE_ATOL, VEHICLE_MAX_HALVINGS
     from symtrack.native.grid_engine_model import NA, NGEO
 
     world, settings, fns, state = parts["world"], parts["settings"], parts["fns"], parts["state"]
@@ -98,6 +99,9 @@ def engine_constants(tag: str, parts: dict) -> list[str]:
         f"#define {tag}_GAMMA {c_literal(SDIRK_GAMMA)}",
         f"#define {tag}_ENTRY_FRACTION {c_literal(settings.entry_fraction)}",
         f"#define {tag}_RING_TOL {c_literal(settings.ring_tolerance)}",
+        f"#define {tag}_VEHICLE_RTOL {c_literal(settings.vehicle_tolerance)}",
+        f"#define {tag}_VEHICLE_ATOL {c_literal(VEHICLE_ATOL)}",
+        f"#define {tag}_VEHICLE_MAX_HALVINGS {VEHICLE_MAX_HALVINGS}LL",
     ]
 
 

@@ -13,8 +13,8 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 
-__all__ = ["EngineSettings", "IntegratorSettings", "POWER_MODES", "STEADY_METHODS", "Stepper", "substeps",
-           "window_substeps"]
+__all__ = ["EngineSettings", "IntegratorSettings", "POWER_MODES", "STEADY_METHODS", "Stepper", "VEHICLE_ATOL",
+           "VEHICLE_MAX_HALVINGS", "substeps", "window_substeps"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,13 @@ POWER_MODES = ("step_mean", "instantaneous")
 STEADY_METHODS = ("sdirk2", "euler")
 
 
+# the absolute part of the vehicle step's error control (EngineSettings.vehicle_tolerance), in the SI unit of
+# each state (m, rad, m/s, rad/s, N m): 1 um or 1 urad, below every figure the validation reports
+VEHICLE_ATOL = 1e-6
+# the error control halves a vehicle step at most this many times (1/64 of the macro step)
+VEHICLE_MAX_HALVINGS = 6
+
+
 @dataclass(frozen=True)
 class EngineSettings:
     """How the engine integrates (docs/terrain.md, "The terrain engine": the measured choices).
@@ -74,6 +81,13 @@ class EngineSettings:
     The defaults of the windows (entry 8, exit 8, ring_tolerance 5e-3, steady_method "euler") were
     calibrated against IDAS on validation_grid: every figure of its summary within 0.5 % at the
     fewest cell stages measured (docs/terrain.md, "The cells' ringing", the variants' table).
+    vehicle_tolerance: the vehicle step's error control (grid_engine.c ``vehicle_step_controlled``): a
+        vehicle step whose error estimate (the embedded solution of the stiffly accurate Rosenbrock
+        method) exceeds vehicle_tolerance |w| + VEHICLE_ATOL in any differential state is replaced by
+        two half steps, each controlled the same way (down to 1/64 of the step), [0, 0.1]; 0: off.
+        The default 1e-3 halves 5 of the 688 steps of validation_grid on the shear law and carries the
+        replayed field-operation input of tests/test_vehicle_step_replay.py that diverged without it
+        (docs/turning.md s. 8, "The vehicle step's error control").
     power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
         absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
         max(dz/dt, 0) at the step end, the channel model's expression).
@@ -86,6 +100,7 @@ class EngineSettings:
     steady_method: str = "euler"
     entry_fraction: float = 0.5
     ring_tolerance: float = 5e-3
+    vehicle_tolerance: float = 1e-3
     power: str = "step_mean"
 
     def __post_init__(self):
@@ -99,6 +114,10 @@ class EngineSettings:
         if not (isinstance(self.ring_tolerance, (int, float)) and not isinstance(self.ring_tolerance, bool)
                 and 0.0 <= self.ring_tolerance <= 1.0):
             raise ScenarioError(f"engine.ring_tolerance = {self.ring_tolerance!r} must be a number in [0, 1]")
+        if not (isinstance(self.vehicle_tolerance, (int, float)) and not isinstance(self.vehicle_tolerance, bool)
+                and 0.0 <= self.vehicle_tolerance <= 0.1):
+            raise ScenarioError(f"engine.vehicle_tolerance = {self.vehicle_tolerance!r} must be a number in [0, 0.1]"
+                                " (0: no error control)")
         if self.steady_method not in STEADY_METHODS:
             raise ScenarioError(f"engine.steady_method = {self.steady_method!r} is not one of "
                                 f"{', '.join(STEADY_METHODS)}")

@@ -114,6 +114,9 @@ typedef struct {
      depths as subsoil) and this pass's largest p per cell and depth (n_depths per cell) */
   const subsoil_tables_t *subsoil_p;
   float *p_pass;
+  /* the vehicle step's error control (vehicle_step_controlled; 0: off) and how many steps it halved */
+  double vehicle_rtol, vehicle_atol;
+  long long vehicle_max_halvings, n_vehicle_halved;
 } eng_t;
 
 static long long now_ns(void) {
@@ -748,12 +751,41 @@ EXPORT void eng_sums(eng_t *E) {
   sums(E);
 }
 
-static void vehicle_step(eng_t *E, const double *u, double h, double *w1, double *a1) {
+/* the vehicle's step from w0 over h (eng_vehicle_step): w1, the pressure lines a1 and the step's error
+   estimate e1 (the last stage's increment: the difference from the embedded solution of the
+   stiffly accurate Rosenbrock method, symtrack/native/rosenbrock.py) */
+static void vehicle_step_from(eng_t *E, const double *w0, const double *u, double h, double *w1, double *a1,
+                              double *e1) {
   double hh = h;
-  const double *arg[4] = {E->wv, u, E->pv, &hh};
-  double *res[2] = {w1, a1};
+  const double *arg[4] = {w0, u, E->pv, &hh};
+  double *res[3] = {w1, a1, e1};
   eng_vehicle_step(arg, res, 0, WORK, 0);
   E->n_vehicle_steps += 1;
+}
+
+/* The vehicle's step with its error controlled (symtrack/integrators/settings.py EngineSettings.vehicle_tolerance): a step
+ * whose estimate exceeds vehicle_rtol max(|w0|, |w1|) + vehicle_atol in a differential state is
+ * replaced by two steps of half its length, each controlled the same way, down to 2^-vehicle_max_halvings
+ * of the macro step (a NaN estimate is halved too). vehicle_rtol = 0: every step taken as it is. */
+static void vehicle_step_controlled(eng_t *E, const double *w0, const double *u, double h, int depth, double *w1,
+                                    double *a1) {
+  double e1[NW];
+  vehicle_step_from(E, w0, u, h, w1, a1, e1);
+  if (!(E->vehicle_rtol > 0.0) || depth >= E->vehicle_max_halvings) return;
+  int ok = 1;
+  for (int i = 0; i < NV && ok; ++i) {
+    double sc = E->vehicle_atol + E->vehicle_rtol * fmax(fabs(w0[i]), fabs(w1[i]));
+    ok = fabs(e1[i]) <= sc;
+  }
+  if (ok) return;
+  E->n_vehicle_halved += 1;
+  double wm[NW], am[NA];
+  vehicle_step_controlled(E, w0, u, 0.5 * h, depth + 1, wm, am);
+  vehicle_step_controlled(E, wm, u, 0.5 * h, depth + 1, w1, a1);
+}
+
+static void vehicle_step(eng_t *E, const double *u, double h, double *w1, double *a1) {
+  vehicle_step_controlled(E, E->wv, u, h, 0, w1, a1);
 }
 
 /* ag[NA j], j = 0..n: the pose and pressure lines at the ends of n equal substeps from a0 (yaw psi0)

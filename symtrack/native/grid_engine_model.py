@@ -6,13 +6,16 @@ The engine integrates the vehicle and the active cells *staggered* over each mac
 held at their values at the step start, then every active cell on its own, with its load
 interpolated between the step's two poses. So the Functions are:
 
-- ``eng_vehicle_step(w[14], u[2], pv, h) -> (w1[14], a1[8])``: w = the 12 vehicle states and the
+- ``eng_vehicle_step(w[14], u[2], pv, h) -> (w1[14], a1[8], e1[14])``: w = the 12 vehicle states and the
   two body accelerations of the DAE form (the load-transfer loop as algebraic equations, as IDAS
   sees it); the accelerations made consistent with the channel sums (two Newton steps), then
   ``vehicle_substeps`` steps of the 8-stage, order-5, L-stable Rosenbrock method of CasADi's
   ``rosenbrock`` plugin (the tableau of :mod:`symtrack.native.rosenbrock`) with the exact Jacobian, and
   the pressure line ``a`` of both tracks at the end state. ``pv`` = vehicle and soil parameters,
   the terrain's two globals (cell size, end strip) and the 10 channel sums S (:data:`SUM_NAMES`).
+  ``e1``: the last stage's increment, the method's error estimate (the difference from its embedded
+  solution), which grid_engine.c's ``vehicle_step_controlled`` compares with
+  ``EngineSettings.vehicle_tolerance``.
 - ``eng_vehicle_a(w[14], pv) -> a[8]``: a = (X, Y, cos psi, sin psi, alpha_L, beta_L, alpha_R,
   beta_R) with each track's pressure p(s) = max(0, alpha + beta s) (the linear and both
   triangular distributions of :class:`~symtrack.model.vehicle.PressureDistribution` are of
@@ -261,8 +264,8 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
             Us.append(solve(r))
         for mi, Ui in zip(RB_M, Us, strict=True):
             ws = ws + mi * Ui
-    vehicle_step = ca.Function("eng_vehicle_step", [w, u, pv, h], [ws, vehicle_a(ws, pv)],
-                               ["w", "u", "pv", "h"], ["w1", "a1"], fo)
+    vehicle_step = ca.Function("eng_vehicle_step", [w, u, pv, h], [ws, vehicle_a(ws, pv), Us[-1]],
+                               ["w", "u", "pv", "h"], ["w1", "a1", "e1"], fo)
 
     # one cell: load and weights
     fn = build_cell_functions(opts, cell_reciprocal=True)

@@ -222,7 +222,7 @@ class TerrainEngine:
         s.wv[vs] = xv
         act = s.active_channels()
         for _ in range(2):  # accelerations <-> pressure lines <-> channel sums: a fixed point, 2 passes
-            w1, a1 = fns.vehicle_step(s.wv, u, s.pv, 0.0)  # h = 0: the states stay, the algebraic ones settle
+            w1, a1, _ = fns.vehicle_step(s.wv, u, s.pv, 0.0)  # h = 0: the states stay, the algebraic ones settle
             s.wv[vs.stop:] = np.array(w1).ravel()[vs.stop:]  # the accelerations
             s.a[:] = np.array(a1).ravel()
             if act.size:

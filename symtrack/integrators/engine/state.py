@@ -14,7 +14,7 @@ from ...native.grid_engine_model import NA, NGEO, TRACK_SOIL_PARAMS, cell_consta
 from ...terrain import subsoil
 from ...terrain.settings import MAX_SUBSOIL_DEPTHS
 from ...terrain.world import END_STRIP_CELLS, padding_m
-from ..settings import POWER_MODES, EngineSettings, window_substeps
+from ..settings import POWER_MODES, VEHICLE_ATOL, VEHICLE_MAX_HALVINGS, EngineSettings, window_substeps
 
 __all__ = ["ERR_COLLISION", "ERR_FIELD", "ERR_NEWTON", "ERR_NONFINITE", "ERR_UNCOVERED", "EngineState", "EngineStruct",
            "NEWTON_ACCEPT_STEP", "NEWTON_MAX_ITER", "SDIRK_GAMMA", "array_address", "engine_error",
@@ -57,7 +57,9 @@ class EngineStruct(ctypes.Structure):
                 + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
                    ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong),
                    ("ring_tol", ctypes.c_double), ("elev", ctypes.c_void_p), ("subsoil_p", ctypes.c_void_p),
-                   ("p_pass", ctypes.c_void_p)])
+                   ("p_pass", ctypes.c_void_p), ("vehicle_rtol", ctypes.c_double),
+                   ("vehicle_atol", ctypes.c_double), ("vehicle_max_halvings", ctypes.c_longlong),
+                   ("n_vehicle_halved", ctypes.c_longlong)])
 
 
 def array_address(a: np.ndarray) -> int:
@@ -186,8 +188,9 @@ class EngineState:
         self.areal_mass, self.damping = cell_constants(world.params)
         self.settings = settings
         self.ny_out = len(fns.output_names)
-        self.stats = {"n_newton": 0, "n_cell_stages": 0, "n_vehicle_steps": 0, "ns_manager": 0, "ns_vehicle": 0,
-                      "ns_cells": 0, "ns_outputs": 0, "ns_subsoil": 0}  # ns_*: the C kernel's parts (0: interpreted)
+        # ns_*: the C kernel's parts (0: interpreted); n_vehicle_halved: the vehicle steps its error control halved
+        self.stats = {"n_newton": 0, "n_cell_stages": 0, "n_vehicle_steps": 0, "n_vehicle_halved": 0, "ns_manager": 0,
+                      "ns_vehicle": 0, "ns_cells": 0, "ns_outputs": 0, "ns_subsoil": 0}
         # the subsoil stress (docs/subsoil.md): tables for the vehicle and soil, this pass's maxima
         self.sig_pass = world.pass_sigma
         self._addresses = None  # struct(): the arrays and their addresses
@@ -231,6 +234,8 @@ class EngineState:
         e.pad, e.release_rate, e.areal_mass, e.damping = self.pad, self.release_rate, self.areal_mass, self.damping
         e.gamma, e.entry_fraction = SDIRK_GAMMA, float(s.entry_fraction)
         e.ring_tol = float(s.ring_tolerance)
+        e.vehicle_rtol, e.vehicle_atol, e.vehicle_max_halvings = float(s.vehicle_tolerance), VEHICLE_ATOL, \
+            VEHICLE_MAX_HALVINGS
         for k, v in self.stats.items():
             setattr(e, k, v)
         e.n_depths = self.sig_pass.shape[1] if self.subsoil is not None else 0
