@@ -389,3 +389,31 @@ def test_without_the_subsoil_stress_the_fmu_and_its_field_file_leave_it_out(tmp_
     rich = storage.Terrain(field.grid, subsoil_depths_m=(0.1, 0.3, 0.5, 0.8))
     (tmp_path / "rich.field").write_bytes(fieldfile.field_bytes(rich, sc.params))
     _start_with_field(exported, tmp_path / "rich.field")
+
+
+# a soil with O'Sullivan & Robertson's yield line and a saturation bound that binds under the crawler
+# (test values for the validation soil's lines: k2 between its kappa 0.042 and lambda 0.193)
+YIELD = ["soil.yield_line_offset_ln_p=1.3", "soil.yield_compression_index_k2=0.09", "soil.specific_volume_min=1.6"]
+
+
+def test_the_yield_line_and_the_saturation_bound_fold_as_python_does_bit_for_bit(tmp_path):
+    """The C port of density.load_update (the yield line's k2 path, the saturation bound) in the FMU's
+    end of pass: two passes, the compression state equal to the Python run's to the last bit."""
+    sc = load_scenario("validation_grid", PASS + YIELD)
+    exported = fmu_export.export_fmu(sc, tmp_path / "yield.fmu")
+    ref = simulate(sc)
+    py_npz = tmp_path / "python.npz"
+    ref.terrain.save(py_npz, soil=sc.params)
+    ref2 = simulate(sc, terrain=py_npz)
+    field = tmp_path / "pass.field"
+    _master(exported, sc, sc.run.duration_s, {"field_file_out": str(field)})
+    first = fieldfile.read_field(field)
+    assert np.array_equal(first.specific_volume, ref.terrain.specific_volume)
+    _master(exported, sc, sc.run.duration_s, {"field_file": str(field), "field_file_out": str(field)})
+    second = fieldfile.read_field(field)
+    assert np.array_equal(second.specific_volume, ref2.terrain.specific_volume)
+    # both branches were taken: the second pass at the same stress compacted further (the yield line),
+    # and some states sit on the saturation bound's rebound line (v1 = v_min + kappa ln p > the k2 path)
+    moved = ref2.terrain.specific_volume != ref.terrain.specific_volume
+    assert np.count_nonzero(moved) > 100
+    assert np.all(second.specific_volume[second.specific_volume > 0] >= 1.6)

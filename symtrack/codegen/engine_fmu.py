@@ -275,7 +275,10 @@ def _subsoil_constants(parts: dict) -> str:
     a = density.soil_arrays(world.soils)
     return (out + "#define EF_DENSITY 1\n" + _tables("subp", state.subsoil_p)
             + f"#define EF_DENS_N {c_literal(a['N'][0])}\n#define EF_DENS_LMK {c_literal(a['lambda_minus_kappa'][0])}\n"
-            + f"#define EF_DENS_V0 {c_literal(a['v0'][0])}\n")
+            + f"#define EF_DENS_V0 {c_literal(a['v0'][0])}\n#define EF_DENS_LAMBDA {c_literal(a['lambda'][0])}\n"
+            + f"#define EF_DENS_KAPPA {c_literal(a['kappa'][0])}\n#define EF_DENS_M {c_literal(a['m'][0])}\n"
+            + f"#define EF_DENS_K2 {c_literal(a['k2'][0])}\n#define EF_DENS_VMIN {c_literal(a['v_min'][0])}\n"
+            + f"#define EF_DENS_YIELD {1 if a['m'][0] > 0 else 0}\n")
 
 
 def _documentation(sc: Scenario, variables) -> bytes:
