@@ -12,7 +12,9 @@ with a logged message."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import shutil
+import struct
 import subprocess
 import zipfile
 
@@ -417,3 +419,43 @@ def test_the_yield_line_and_the_saturation_bound_fold_as_python_does_bit_for_bit
     moved = ref2.terrain.specific_volume != ref.terrain.specific_volume
     assert np.count_nonzero(moved) > 100
     assert np.all(second.specific_volume[second.specific_volume > 0] >= 1.6)
+
+
+def _older_field(src, dst, drop):
+    """A field file as a symtrack before the last ``drop`` soil parameters were added wrote it: those
+    values cut from the header (n_soil and the header's size adjusted), the arrays as they were."""
+    data = bytes(src.read_bytes())
+    hbytes, n_soil = struct.unpack_from("<I", data, 12)[0], struct.unpack_from("<I", data, 56)[0]
+    out = bytearray(data[:64 + 8 * (n_soil - drop)] + data[64 + 8 * n_soil:])
+    struct.pack_into("<I", out, 12, hbytes - 8 * drop)
+    struct.pack_into("<I", out, 56, n_soil - drop)
+    dst.write_bytes(bytes(out))
+
+
+def test_a_field_file_written_before_the_yield_line_loads_with_the_defaults(exported, tmp_path):
+    """Field files of an older symtrack (without the three soil parameters of the yield line and the
+    saturation bound, appended to the list) load in Python and in the FMU with the registry's defaults;
+    a file lacking a parameter that has no default is refused."""
+    from symtrack.model.parameters import SOIL_PARAM_NAMES
+
+    sc = load_scenario("validation_grid", PASS)
+    full = tmp_path / "full.field"
+    _master(exported, sc, 1.0, {"field_file_out": str(full)})
+    old = tmp_path / "old.field"
+    _older_field(full, old, 3)
+    a, b = fieldfile.read_field(full), fieldfile.read_field(old)
+    assert a.soil == b.soil and b.soil["yield_line_offset_ln_p"] == 0.0 and b.soil["specific_volume_min"] == 1.0
+    for name in STORAGE:
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    r_full = _master(exported, sc, 1.0, {"field_file": str(full)})
+    r_old = _master(exported, sc, 1.0, {"field_file": str(old)})
+    assert all(np.array_equal(r_full[k], r_old[k]) for k in r_full)
+    # cut further, into parameters without a default: refused by both
+    n_defaulted = len(list(itertools.takewhile(lambda n: storage.spec(n).default is not None,
+                                               reversed(SOIL_PARAM_NAMES))))
+    bad = tmp_path / "bad.field"
+    _older_field(full, bad, n_defaulted + 1)
+    with pytest.raises(ScenarioError, match="soil values"):
+        fieldfile.read_field(bad)
+    with pytest.raises(FMICallException):
+        _master(exported, sc, 1.0, {"field_file": str(bad)})

@@ -245,14 +245,24 @@ static fmi2Status read_field(Instance *c, const char *path) {
          "%.17g m", path, x0, y0, dx, EF_X0, EF_Y0, EF_DX);
     goto done;
   }
-  if (n_soil != EF_N_SOIL) {
+  /* a file written before soil parameters were added (they are appended to the list) has fewer values:
+     the missing ones take the registry's defaults (fieldfile.read_field does the same); none may lack one */
+  if (n_soil > EF_N_SOIL || n_soil < 1) {
     (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters", path, (unsigned)n_soil, EF_N_SOIL);
     goto done;
   }
   double soil[EF_N_SOIL];
-  if (fread(soil, 8, EF_N_SOIL, f) != (size_t)EF_N_SOIL) {
+  if (fread(soil, 8, n_soil, f) != (size_t)n_soil) {
     (void)FAIL(c, "field_file '%s': truncated in the soil values", path);
     goto done;
+  }
+  for (int i = (int)n_soil; i < EF_N_SOIL; ++i) {
+    if (!ef_soil_has_default[i]) {
+      (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters and %s has no default", path,
+                 (unsigned)n_soil, EF_N_SOIL, ef_soil_names[i]);
+      goto done;
+    }
+    soil[i] = ef_soil_defaults[i];
   }
   for (int i = 0; i < EF_N_SOIL; ++i)
     if (ef_soil_checked[i] && soil[i] != ef_soil_values[i]) {
