@@ -52,7 +52,9 @@ radial stress over 3); the soil's own weight is left out, as in the vertical str
 
 Parameters per soil (symtrack/model/parameters.py, defaults with sources): ``virgin_line_N``,
 ``compression_index_lambda``, ``recompression_index_kappa``, ``particle_density_Mg_per_m3``,
-``bulk_density_initial_Mg_per_m3``; :func:`keller_arvidsson_2007` is the pedotransfer function
+``bulk_density_initial_Mg_per_m3``, ``yield_line_offset_ln_p`` (m; 0: no yield line, the default),
+``yield_compression_index_k2``, ``specific_volume_min`` (the saturation bound; 1 by default);
+:func:`keller_arvidsson_2007` is the pedotransfer function
 of N and lambda from the initial specific volume the defaults come from.
 """
 
@@ -148,12 +150,13 @@ def load_update(v_old, ln_p, N, lam, kap, lk, m, k2, v_min):
     (module doc): the virgin line's N - (lambda - kappa) ln p, with m > 0 the yield line's k2 path, the
     saturation bound v_min + kappa ln p, and never above v_old. Where m == 0 and the bound is not
     reached, exactly the model without them (the same operations)."""
-    line = N - lk * ln_p
-    with np.errstate(invalid="ignore"):
-        xy = np.maximum((N - lam * m - v_old) / lk, 0.0)
-        k2line = v_old - (k2 - kap) * (ln_p - xy)
-    yl = np.where(ln_p > xy, np.minimum(line, k2line), v_old)
-    cand = np.where(m > 0, yl, line)
+    cand = N - lk * ln_p
+    if np.any(np.asarray(m) > 0):  # (without a yield line anywhere, skip its arithmetic: the same result)
+        with np.errstate(invalid="ignore"):
+            xy = np.maximum((N - lam * m - v_old) / lk, 0.0)
+            k2line = v_old - (k2 - kap) * (ln_p - xy)
+        yl = np.where(ln_p > xy, np.minimum(cand, k2line), v_old)
+        cand = np.where(m > 0, yl, cand)
     cand = np.maximum(cand, v_min + kap * ln_p)
     return np.minimum(cand, v_old)
 
