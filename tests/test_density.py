@@ -328,3 +328,21 @@ def test_yield_line_soil_persists_bit_for_bit(tmp_path):
     assert back.specific_volume.tobytes() == t.specific_volume.tobytes()
     for k in ("yield_line_offset_ln_p", "yield_compression_index_k2", "specific_volume_min"):
         assert back.soil[k] == t.soil[k]
+
+
+def test_saturation_bound_per_cell_with_a_moisture_map_of_many_values():
+    """With each cell's own day parameters (a moisture raster of many values, World.cell_day) each cell
+    takes its own saturation bound; a cell_params without the bound (older callers) takes its soil's."""
+    p = np.full((3, 1), 130e3, dtype=np.float32)
+    vmin = np.array([1.0, 1.45, 1.50])
+    cp = {"virgin_line_N": np.full(3, N), "compression_index_lambda": np.full(3, LAM),
+          "recompression_index_kappa": np.full(3, KAP), "specific_volume_min": vmin}
+    v = np.zeros((3, 1), np.float32)
+    D.pass_update(v, p, np.zeros(3, np.uint8), [SOIL], cell_params=cp)
+    lnp = math.log(130.0)
+    expect = [max(N - (LAM - KAP) * lnp, b + KAP * lnp) for b in vmin]
+    assert v[:, 0] == pytest.approx(expect, rel=1e-7)
+    assert v[0, 0] < v[1, 0] < v[2, 0]
+    v2 = np.zeros((3, 1), np.float32)
+    D.pass_update(v2, p, np.zeros(3, np.uint8), [SOIL], cell_params={k: cp[k] for k in list(cp)[:3]})
+    assert np.all(v2[:, 0] == v[0, 0])
