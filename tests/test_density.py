@@ -15,6 +15,7 @@ from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model import parameters as P
 from symtrack.simulation.scenario import scenario_from_dict
 from symtrack.terrain import density as D
+from symtrack.terrain import moisture as M
 from symtrack.terrain import subsoil as S
 from symtrack.terrain.storage import Grid, Terrain
 
@@ -179,6 +180,9 @@ def test_soil_parameters_added_since_an_old_file_take_the_defaults(tmp_path):
     back = Terrain.load(f)
     assert back.soil["virgin_line_N"] == P.VIRGIN_LINE_N_DEFAULT
     assert back.soil["bulk_density_initial_Mg_per_m3"] == P.BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3
+    # the yield line and the saturation bound (added later) take theirs: no yield line, zero porosity
+    assert back.soil["yield_line_offset_ln_p"] == 0.0 and back.soil["specific_volume_min"] == 1.0
+    assert back.soil["yield_compression_index_k2"] == P.YIELD_COMPRESSION_INDEX_K2_DEFAULT
 
 
 # the shared small field (tests/small_field.py) through the terrain engine, 3 passes of 0.5 m
@@ -199,3 +203,146 @@ def test_multipass_density_table():
     st = run.terrain
     never = st.zmax == 0
     assert never.any() and not st.specific_volume[never].any()
+
+
+# O'Sullivan & Robertson's model with its yield line, the parameter set of soilphysics' documented
+# example (README and man/soilDeformation.Rd: soilDeformation(stress = 300, p.density = 2.67, iBD = 1.55,
+# N = 1.9392, CI = 0.06037, k = 0.00608, k2 = 0.01916, m = 1.3) -> fBD 1.6385, vf 1.6295, I% 5.71)
+OSR = {"virgin_line_N": 1.9392, "compression_index_lambda": 0.06037, "recompression_index_kappa": 0.00608,
+       "particle_density_Mg_per_m3": 2.67, "bulk_density_initial_Mg_per_m3": 1.55,
+       "yield_line_offset_ln_p": 1.3, "yield_compression_index_k2": 0.01916}
+
+
+def _soildeformation(p_kPa, s=OSR):
+    """soilphysics' soilDeformation (R/soilDeformation.R), transcribed step by step: the specific volume
+    after one load from the initial state (the independent oracle of the first pass)."""
+    N, CI, k, k2, m = (s[n] for n in ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
+                                      "yield_compression_index_k2", "yield_line_offset_ln_p"))
+    lp, Vi = math.log(p_kPa), s["particle_density_Mg_per_m3"] / s["bulk_density_initial_Mg_per_m3"]
+    NYL = N + CI * (0 - m)
+    XRCL2 = (NYL - Vi) / (-k + CI)
+    NRCL2 = (Vi - k * XRCL2) + k2 * XRCL2
+    XRCL2_VCL = (N - NRCL2) / (-k2 + CI)
+    if lp <= XRCL2:
+        return Vi
+    if lp <= XRCL2_VCL:
+        return NRCL2 - k2 * lp + k * lp
+    return N - CI * lp + k * lp
+
+
+def _loads(soil, p_kPa, n):
+    v = np.zeros((1, 1), dtype=np.float32)
+    out = []
+    for _ in range(n):
+        D.pass_update(v, np.array([[1e3 * p_kPa]], dtype=np.float32), np.zeros(1, dtype=np.uint8), [soil])
+        out.append(float(v[0, 0]) if v[0, 0] > 0 else D.initial_specific_volume(soil))
+    return np.array(out)
+
+
+def test_yield_line_first_load_is_soilphysics_worked_example_and_its_three_zones():
+    (v,) = _loads(OSR, 300.0, 1)
+    assert round(2.67 / v, 4) == 1.6385 and round(2.67 / round(2.67 / v, 4), 4) == 1.6295
+    assert round(100 * round(2.67 / v, 4) / 1.55 - 100, 2) == 5.71
+    # every zone: on the recompression line (no change), on the k2 line, on the virgin line
+    for p in (5.0, 12.0, 20.0, 50.0, 84.0, 86.0, 300.0, 900.0):
+        assert _loads(OSR, p, 1)[0] == pytest.approx(_soildeformation(p), rel=1e-7, abs=0), p
+    assert _loads(OSR, 5.0, 1)[0] == OSR["particle_density_Mg_per_m3"] / OSR["bulk_density_initial_Mg_per_m3"]
+
+
+@pytest.mark.parametrize("p_kPa", [20.0, 50.0, 300.0])
+def test_yield_line_n_passes_at_a_constant_stress_closed_form(p_kPa):
+    """n loads to the same p: the gap to the yield line's v1 shrinks by r = (lambda - k2)/(lambda - kappa)
+    per pass (density.passes_at_constant_stress); the engine's pass update equals it to float32."""
+    n = 12
+    got = _loads(OSR, p_kPa, n)
+    lam, kap, k2, m, N = 0.06037, 0.00608, 0.01916, 1.3, 1.9392
+    r = (lam - k2) / (lam - kap)
+    v_yl = N - lam * m - (lam - kap) * math.log(p_kPa)
+    closed = v_yl + (_soildeformation(p_kPa) - v_yl) * r ** np.arange(n)
+    assert got == pytest.approx(closed, rel=2e-7 * n)
+    assert D.passes_at_constant_stress(OSR, p_kPa, n) == pytest.approx(closed, rel=1e-12)
+    assert np.all(np.diff(got) < 0) and np.all(got > v_yl)  # denser every pass, never past the yield line
+    inc = -np.diff(got)
+    assert inc[1:] / inc[:-1] == pytest.approx(np.full(n - 2, r), rel=1e-3)
+
+
+def test_without_a_yield_line_the_old_model_bit_for_bit_and_no_cyclic_term():
+    soil = {**SOIL, "yield_line_offset_ln_p": 0.0, "yield_compression_index_k2": 0.1}
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0, 200e3, (200, 4)).astype(np.float32)
+    v = np.zeros_like(p)
+    D.pass_update(v, p, np.zeros(200, np.uint8), [soil])
+    with np.errstate(divide="ignore"):
+        line = N - (LAM - KAP) * np.log(1e-3 * p.astype(np.float64))
+    old = np.where((p > 0) & (line < RHO_S / RHO_0), line, 0.0).astype(np.float32)
+    assert v.tobytes() == old.tobytes()
+    again = v.copy()
+    D.pass_update(again, p, np.zeros(200, np.uint8), [soil])
+    assert again.tobytes() == v.tobytes()  # the same stress again adds nothing
+
+
+def test_saturation_bound_and_the_moisture_day_sets_it():
+    w, rs = 0.18, 2.65
+    day = M.apply_moisture({**SOIL, "precompression_stress_Pa": 1e5},
+                           {"water_content_kg_per_kg": w, "compression_ptf": "defossez_2003_loess"})
+    vsat = 1 + w * rs / 1.0
+    assert day["specific_volume_min"] == vsat == M.saturation_specific_volume(w, rs)
+    # the grain cart's 130 kPa mean normal stress on the default lines: v under load 1.17 (rho 2.26
+    # under it, 1.91 after) without the bound; with it, the loaded state stops at saturation
+    soil = {**SOIL, "specific_volume_min": vsat}
+    p = 130.0
+    (free,) = _loads(SOIL, p, 1)
+    (bound,) = _loads(soil, p, 1)
+    assert free == pytest.approx(N - (LAM - KAP) * math.log(p), rel=1e-7)
+    assert free - KAP * math.log(p) < vsat  # the free virgin line goes past saturation here
+    assert bound == pytest.approx(vsat + KAP * math.log(p), rel=1e-7)  # at saturation under the load
+    assert RHO_S / bound < RHO_S / free
+    # a load that stays above saturation is not touched by the bound, bit for bit
+    low = np.array([[12e3]], dtype=np.float32)
+    a, b = np.zeros((1, 1), np.float32), np.zeros((1, 1), np.float32)
+    D.pass_update(a, low, np.zeros(1, np.uint8), [SOIL])
+    D.pass_update(b, low, np.zeros(1, np.uint8), [soil])
+    assert a.tobytes() == b.tobytes() and a[0, 0] > 0
+
+
+def test_yield_line_and_bound_refused_outside_their_ranges():
+    with pytest.raises(ParameterError, match="yield_compression_index_k2 = 0.005 is outside the allowed range"):
+        D.soil_arrays([{**OSR, "yield_compression_index_k2": 0.005}])
+    with pytest.raises(ParameterError, match="yield_compression_index_k2"):
+        D.soil_arrays([{**OSR, "yield_compression_index_k2": 0.07}])
+    with pytest.raises(ParameterError, match="specific_volume_min = 1.8 is above the initial specific volume"):
+        D.soil_arrays([{**OSR, "specific_volume_min": 1.8}])
+    with pytest.raises(ParameterError, match="yield_line_offset_ln_p = -1 is outside the allowed range"):
+        P.spec("yield_line_offset_ln_p").check(-1)
+
+
+def test_yield_line_soil_persists_bit_for_bit(tmp_path):
+    t = _terrain(np.random.default_rng(4))
+    t.soil = {**t.soil, "yield_line_offset_ln_p": 1.3, "yield_compression_index_k2": 0.01916,
+              "specific_volume_min": 1.4321}
+    p = np.random.default_rng(5).uniform(0, 3e5, t.specific_volume.shape).astype(np.float32)
+    D.pass_update(t.specific_volume, p, t.soil_index, [{**OSR, "specific_volume_min": 1.4321}])
+    f = tmp_path / "y.npz"
+    t.save(f)
+    back = Terrain.load(f)
+    assert back.specific_volume.tobytes() == t.specific_volume.tobytes()
+    for k in ("yield_line_offset_ln_p", "yield_compression_index_k2", "specific_volume_min"):
+        assert back.soil[k] == t.soil[k]
+
+
+def test_saturation_bound_per_cell_with_a_moisture_map_of_many_values():
+    """With each cell's own day parameters (a moisture raster of many values, World.cell_day) each cell
+    takes its own saturation bound; a cell_params without the bound (older callers) takes its soil's."""
+    p = np.full((3, 1), 130e3, dtype=np.float32)
+    vmin = np.array([1.0, 1.45, 1.50])
+    cp = {"virgin_line_N": np.full(3, N), "compression_index_lambda": np.full(3, LAM),
+          "recompression_index_kappa": np.full(3, KAP), "specific_volume_min": vmin}
+    v = np.zeros((3, 1), np.float32)
+    D.pass_update(v, p, np.zeros(3, np.uint8), [SOIL], cell_params=cp)
+    lnp = math.log(130.0)
+    expect = [max(N - (LAM - KAP) * lnp, b + KAP * lnp) for b in vmin]
+    assert v[:, 0] == pytest.approx(expect, rel=1e-7)
+    assert v[0, 0] < v[1, 0] < v[2, 0]
+    v2 = np.zeros((3, 1), np.float32)
+    D.pass_update(v2, p, np.zeros(3, np.uint8), [SOIL], cell_params={k: cp[k] for k in list(cp)[:3]})
+    assert np.all(v2[:, 0] == v[0, 0])

@@ -12,7 +12,9 @@ with a logged message."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import shutil
+import struct
 import subprocess
 import zipfile
 
@@ -389,3 +391,71 @@ def test_without_the_subsoil_stress_the_fmu_and_its_field_file_leave_it_out(tmp_
     rich = storage.Terrain(field.grid, subsoil_depths_m=(0.1, 0.3, 0.5, 0.8))
     (tmp_path / "rich.field").write_bytes(fieldfile.field_bytes(rich, sc.params))
     _start_with_field(exported, tmp_path / "rich.field")
+
+
+# a soil with O'Sullivan & Robertson's yield line and a saturation bound that binds under the crawler
+# (test values for the validation soil's lines: k2 between its kappa 0.042 and lambda 0.193)
+YIELD = ["soil.yield_line_offset_ln_p=1.3", "soil.yield_compression_index_k2=0.09", "soil.specific_volume_min=1.6"]
+
+
+def test_the_yield_line_and_the_saturation_bound_fold_as_python_does_bit_for_bit(tmp_path):
+    """The C port of density.load_update (the yield line's k2 path, the saturation bound) in the FMU's
+    end of pass: two passes, the compression state equal to the Python run's to the last bit."""
+    sc = load_scenario("validation_grid", PASS + YIELD)
+    exported = fmu_export.export_fmu(sc, tmp_path / "yield.fmu")
+    ref = simulate(sc)
+    py_npz = tmp_path / "python.npz"
+    ref.terrain.save(py_npz, soil=sc.params)
+    ref2 = simulate(sc, terrain=py_npz)
+    field = tmp_path / "pass.field"
+    _master(exported, sc, sc.run.duration_s, {"field_file_out": str(field)})
+    first = fieldfile.read_field(field)
+    assert np.array_equal(first.specific_volume, ref.terrain.specific_volume)
+    _master(exported, sc, sc.run.duration_s, {"field_file": str(field), "field_file_out": str(field)})
+    second = fieldfile.read_field(field)
+    assert np.array_equal(second.specific_volume, ref2.terrain.specific_volume)
+    # both branches were taken: the second pass at the same stress compacted further (the yield line),
+    # and some states sit on the saturation bound's rebound line (v1 = v_min + kappa ln p > the k2 path)
+    moved = ref2.terrain.specific_volume != ref.terrain.specific_volume
+    assert np.count_nonzero(moved) > 100
+    assert np.all(second.specific_volume[second.specific_volume > 0] >= 1.6)
+
+
+def _older_field(src, dst, drop):
+    """A field file as a symtrack before the last ``drop`` soil parameters were added wrote it: those
+    values cut from the header (n_soil and the header's size adjusted), the arrays as they were."""
+    data = bytes(src.read_bytes())
+    hbytes, n_soil = struct.unpack_from("<I", data, 12)[0], struct.unpack_from("<I", data, 56)[0]
+    out = bytearray(data[:64 + 8 * (n_soil - drop)] + data[64 + 8 * n_soil:])
+    struct.pack_into("<I", out, 12, hbytes - 8 * drop)
+    struct.pack_into("<I", out, 56, n_soil - drop)
+    dst.write_bytes(bytes(out))
+
+
+def test_a_field_file_written_before_the_yield_line_loads_with_the_defaults(exported, tmp_path):
+    """Field files of an older symtrack (without the three soil parameters of the yield line and the
+    saturation bound, appended to the list) load in Python and in the FMU with the registry's defaults;
+    a file lacking a parameter that has no default is refused."""
+    from symtrack.model.parameters import SOIL_PARAM_NAMES
+
+    sc = load_scenario("validation_grid", PASS)
+    full = tmp_path / "full.field"
+    _master(exported, sc, 1.0, {"field_file_out": str(full)})
+    old = tmp_path / "old.field"
+    _older_field(full, old, 3)
+    a, b = fieldfile.read_field(full), fieldfile.read_field(old)
+    assert a.soil == b.soil and b.soil["yield_line_offset_ln_p"] == 0.0 and b.soil["specific_volume_min"] == 1.0
+    for name in STORAGE:
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    r_full = _master(exported, sc, 1.0, {"field_file": str(full)})
+    r_old = _master(exported, sc, 1.0, {"field_file": str(old)})
+    assert all(np.array_equal(r_full[k], r_old[k]) for k in r_full)
+    # cut further, into parameters without a default: refused by both
+    n_defaulted = len(list(itertools.takewhile(lambda n: storage.spec(n).default is not None,
+                                               reversed(SOIL_PARAM_NAMES))))
+    bad = tmp_path / "bad.field"
+    _older_field(full, bad, n_defaulted + 1)
+    with pytest.raises(ScenarioError, match="soil values"):
+        fieldfile.read_field(bad)
+    with pytest.raises(FMICallException):
+        _master(exported, sc, 1.0, {"field_file": str(bad)})

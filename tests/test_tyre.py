@@ -112,3 +112,22 @@ def test_arvidsson_2011_tracks_duals_singles():
     single, dual = single.max(axis=0), dual.max(axis=0)
     assert np.all(track < 0.8 * single) and np.all(dual < 0.8 * single)
     assert np.all(track / dual > 0.6) and np.all(track / dual < 1.1)
+
+
+def test_soilflex_worked_example_as_soilphysics_prints_it():
+    """SoilFlex's tyre and stress model (Keller 2005 contact, Soehne's point load) as the soilphysics R
+    package implements it ("based on the SoilFlex model"), its README's worked example:
+    stressTraffic(inflation.pressure = 200, recommended.pressure = 200, tyre.diameter = 1.8,
+    tyre.width = 0.4, wheel.load = 4000 [kg], conc.factor = c(4, 5, 5, 5, 5, 5), layers = c(0.05, 0.1,
+    0.3, 0.5, 0.7, 1)) prints max stress 289 kPa, contact area 0.29 m^2, length 0.83 m, and below the
+    tyre's centre sigma_z = 275, 262, 154, 85, 51, 28 kPa and p = 169, 132, 62, 31, 18, 10 kPa (its
+    rounding to 1 kPa; its alpha on a grid of 100 values in [1, 16], ours exact)."""
+    W = 4000 * 9.81 / 1e3
+    c = T.contact(T.Tyre(0.4, 1.8, W, 200.0), W, 200.0)  # rated so that p_rec = 200 kPa at this load
+    assert round(c.sigma_max_kPa) == 289 and round(c.area_m2, 2) == 0.29 and round(c.length_m, 2) == 0.83
+    depths, xis = (0.05, 0.1, 0.3, 0.5, 0.7, 1.0), (4, 5, 5, 5, 5, 5)
+    sz_ref, p_ref = (275, 262, 154, 85, 51, 28), (169, 132, 62, 31, 18, 10)
+    for d, xi, s_r, p_r in zip(depths, xis, sz_ref, p_ref, strict=True):
+        sz, pm = T.footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, [0.0], [0.0], [d], xi)
+        assert float(sz[0, 0]) == pytest.approx(s_r, abs=1.5), d
+        assert float(pm[0, 0]) == pytest.approx(p_r, abs=1.0), d

@@ -46,7 +46,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
-from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES
+from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 from ..model.vehicle import INPUTS
 from ..native.generate import unit_of
 from ..simulation.scenario import Scenario
@@ -246,6 +246,11 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
     body += c_array("ef_u_start", [v.start for v in variables[:vr_pose]])
     body += c_array("ef_pose_start", [v.start for v in variables[vr_pose:vr_x]])
     body += c_array("ef_soil_values", soil_values)
+    # the registry's defaults (ef_soil_has_default 0: none): the values of the soil parameters added since an
+    # older field file was written
+    body += c_array("ef_soil_defaults", [0.0 if spec(n).default is None else float(spec(n).default)
+                                         for n in SOIL_PARAM_NAMES])
+    body += c_array("ef_soil_has_default", [spec(n).default is not None for n in SOIL_PARAM_NAMES], "int")
     # the day's soil parameters (moisture) are the scenario's on loading a terrain (storage.load): not compared
     body += c_array("ef_soil_checked", [0 if n in SOIL_DAY_PARAM_NAMES else 1 for n in SOIL_PARAM_NAMES], "int")
     body += _subsoil_constants(parts)
@@ -275,7 +280,10 @@ def _subsoil_constants(parts: dict) -> str:
     a = density.soil_arrays(world.soils)
     return (out + "#define EF_DENSITY 1\n" + _tables("subp", state.subsoil_p)
             + f"#define EF_DENS_N {c_literal(a['N'][0])}\n#define EF_DENS_LMK {c_literal(a['lambda_minus_kappa'][0])}\n"
-            + f"#define EF_DENS_V0 {c_literal(a['v0'][0])}\n")
+            + f"#define EF_DENS_V0 {c_literal(a['v0'][0])}\n#define EF_DENS_LAMBDA {c_literal(a['lambda'][0])}\n"
+            + f"#define EF_DENS_KAPPA {c_literal(a['kappa'][0])}\n#define EF_DENS_M {c_literal(a['m'][0])}\n"
+            + f"#define EF_DENS_K2 {c_literal(a['k2'][0])}\n#define EF_DENS_VMIN {c_literal(a['v_min'][0])}\n"
+            + f"#define EF_DENS_YIELD {1 if a['m'][0] > 0 else 0}\n")
 
 
 def _documentation(sc: Scenario, variables) -> bytes:

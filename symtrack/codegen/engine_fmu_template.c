@@ -246,14 +246,24 @@ static fmi2Status read_field(Instance *c, const char *path) {
          "%.17g m", path, x0, y0, dx, EF_X0, EF_Y0, EF_DX);
     goto done;
   }
-  if (n_soil != EF_N_SOIL) {
+  /* a file written before soil parameters were added (they are appended to the list) has fewer values:
+     the missing ones take the registry's defaults (fieldfile.read_field does the same); none may lack one */
+  if (n_soil > EF_N_SOIL || n_soil < 1) {
     (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters", path, (unsigned)n_soil, EF_N_SOIL);
     goto done;
   }
   double soil[EF_N_SOIL];
-  if (fread(soil, 8, EF_N_SOIL, f) != (size_t)EF_N_SOIL) {
+  if (fread(soil, 8, n_soil, f) != (size_t)n_soil) {
     (void)FAIL(c, "field_file '%s': truncated in the soil values", path);
     goto done;
+  }
+  for (int i = (int)n_soil; i < EF_N_SOIL; ++i) {
+    if (!ef_soil_has_default[i]) {
+      (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters and %s has no default", path,
+                 (unsigned)n_soil, EF_N_SOIL, ef_soil_names[i]);
+      goto done;
+    }
+    soil[i] = ef_soil_defaults[i];
   }
   for (int i = 0; i < EF_N_SOIL; ++i)
     if (ef_soil_checked[i] && soil[i] != ef_soil_values[i]) {
@@ -454,8 +464,10 @@ static fmi2Status end_pass(Instance *c) {
 #if EF_N_DEPTHS > 0
   /* World.fold_pass: the pass's largest vertical stress into the record (np.maximum), its largest mean
      normal stress into the compression state (density.pass_update over the cells the pass touched: a
-     depth yields where p > 0 and the virgin line N - (lambda - kappa) ln(p / 1 kPa) is below the
-     current v1, the soil's initial v1_0 where the record is 0) */
+     depth yields where p > 0 and density.load_update's new v1 is below the current v1, the soil's
+     initial v1_0 where the record is 0: the virgin line N - (lambda - kappa) ln(p / 1 kPa), with a
+     yield line (m > 0) the k2 line from where the current recompression line meets it, the saturation
+     bound v_min + kappa ln p; the same operations in the same order, so the same bits) */
   {
     long long n = EF_NX * EF_NY, m = n * EF_N_DEPTHS;
     for (long long q = 0; q < m; ++q)
@@ -468,7 +480,20 @@ static fmi2Status end_pass(Instance *c) {
         const double p = (double)E->p_pass[q], old = (double)c->specific_volume[q];
         const double v_old = old > 0 ? old : EF_DENS_V0;
         if (!(p > 0)) continue;
-        const double line = EF_DENS_N - EF_DENS_LMK * log(1e-3 * p);
+        const double lnp = log(1e-3 * p);
+        double line = EF_DENS_N - EF_DENS_LMK * lnp;
+#if EF_DENS_YIELD
+        {
+          double xy = (EF_DENS_N - EF_DENS_LAMBDA * EF_DENS_M - v_old) / EF_DENS_LMK;
+          if (!(xy > 0.0)) xy = 0.0;
+          const double k2line = v_old - (EF_DENS_K2 - EF_DENS_KAPPA) * (lnp - xy);
+          line = lnp > xy ? (k2line < line ? k2line : line) : v_old;
+        }
+#endif
+        {
+          const double bound = EF_DENS_VMIN + EF_DENS_KAPPA * lnp;
+          if (bound > line) line = bound;
+        }
         if (line < v_old) c->specific_volume[q] = (float)line;
       }
     }

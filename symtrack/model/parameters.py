@@ -101,6 +101,18 @@ BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3 = 1.5
 VIRGIN_LINE_N_DEFAULT = 2.105933333333333
 COMPRESSION_INDEX_LAMBDA_DEFAULT = 0.19253333333333333
 RECOMPRESSION_INDEX_KAPPA_DEFAULT = 0.042
+# O'Sullivan & Robertson's (1996, Soil Till. Res. 39, 161-173) yield line, as SoilFlex (Keller et al.
+# 2007) and soilphysics' soilDeformation code it (terrain/density.py): m = 0 (no yield line: the
+# recompression line meets the virgin line directly, the model as it was) is the default because the
+# default lines (Keller & Arvidsson's PTF) were fitted without one; the only published m, k2 found
+# (soilphysics' example, m = 1.3, k2 = 0.01916) belong to other N, lambda, kappa (docs/subsoil.md,
+# "Repeated passes"). k2 is used only with m > 0 and must then lie in (kappa, lambda).
+YIELD_LINE_OFFSET_DEFAULT = 0.0
+YIELD_COMPRESSION_INDEX_K2_DEFAULT = RECOMPRESSION_INDEX_KAPPA_DEFAULT
+# the smallest specific volume the soil reaches under load: 1 (zero porosity, rho_b = rho_s) unless the
+# day's water content w is known ([soil.moisture]), then 1 + w rho_s / rho_w, the specific volume at zero
+# air-filled porosity (saturation; terrain/moisture.py)
+SPECIFIC_VOLUME_MIN_DEFAULT = 1.0
 SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
     _spec("repeated_loading_exponent", "beta of the cycle law: the rut after N passes is the first pass's N^beta",
           0.0, 1.0, default=REPEATED_LOADING_EXPONENT_DEFAULT),
@@ -118,12 +130,18 @@ SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
           default=PARTICLE_DENSITY_DEFAULT_MG_PER_M3),
     _spec("bulk_density_initial_Mg_per_m3", "the soil's dry bulk density before any traffic (below rho_s)",
           0.1, 5.0, False, default=BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3),
+    _spec("yield_line_offset_ln_p", "O'Sullivan & Robertson's m: the yield line is the virgin line moved by m "
+          "along ln(p / kPa) (0: no yield line)", 0.0, 10.0, default=YIELD_LINE_OFFSET_DEFAULT),
+    _spec("yield_compression_index_k2", "slope k2 of the line from the yield line to the virgin line (with "
+          "m > 0: in (kappa, lambda))", 0.0, 1.0, False, default=YIELD_COMPRESSION_INDEX_K2_DEFAULT),
+    _spec("specific_volume_min", "the smallest specific volume under load (1: zero porosity; the day's "
+          "saturation 1 + w rho_s / rho_w with [soil.moisture])", 1.0, 5.0, default=SPECIFIC_VOLUME_MIN_DEFAULT),
 )
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
 # the soil parameters the day's moisture sets (symtrack/terrain/moisture.py): a terrain file made on
 # another day continues with the scenario's values of these (the compression state carries over)
 SOIL_DAY_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
-                        "precompression_stress_Pa")
+                        "precompression_stress_Pa", "specific_volume_min")
 
 VEHICLE_PARAM_NAMES = tuple(s.name for s in VEHICLE_PARAMS)
 SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS)

@@ -32,7 +32,11 @@ Sources:
   ``recompression_index_kappa``, ``particle_density_Mg_per_m3``, ``bulk_density_initial_Mg_per_m3``;
   O'Sullivan & Robertson 1996, symtrack/terrain/density.py): no preset has measured values; all take
   the registry's defaults (symtrack/model/parameters.py: Keller & Arvidsson's 2007 pedotransfer
-  function at a bulk density of 1.5 Mg/m^3, particle density 2.65), not soil-specific.
+  function at a bulk density of 1.5 Mg/m^3, particle density 2.65), not soil-specific. No compression
+  test of these soils was found (docs/subsoil.md, "A credible upper bound"). The yield line
+  (``yield_line_offset_ln_p``, ``yield_compression_index_k2``) is off (m = 0: the default lines were
+  fitted without one) and the saturation bound (``specific_volume_min``) is 1 (zero porosity) unless
+  a [soil.moisture] day gives the water content.
 
 Terrain-cell dynamics (seed eq. 4) need an areal mass tau_z and an areal damping c'' that no
 table gives; see the two module constants below.

@@ -23,27 +23,56 @@ the RCL meets the VCL directly). The initial state: v1 = rho_s / rho_initial (th
 (a cell never loaded beyond its initial precompression stress keeps 0 bit for bit; a field's
 soils may differ: each cell's initial v1 is its soil's).
 
+**The yield line (repeated passes).** O'Sullivan & Robertson's model has a third line, the yield
+line (YL) v = N - lambda m - lambda ln p (the VCL moved by m along ln p, to lower stress), and a
+steeper recompression slope k2 (kappa < k2 < lambda): an element on its RCL yields where the RCL meets
+the YL, ln p_y = (N - lambda m - v1) / (lambda - kappa) (below the precompression stress p_c), and then
+follows the k2 line from there, v = v1 - kappa ln p_y - k2 (ln p - ln p_y), until that meets the VCL
+(beyond, the VCL). soilphysics' ``soilDeformation`` codes this for one load from the initial state
+(parameters ``m``, ``k2``); here every load starts from the current RCL (the state is still v1 alone),
+so a load to the same p again yields again at the new p_y: after a load to ln p = x,
+
+    v1 <- v1 - (k2 - kappa) (x - ln p_y)     (ln p_y < x, on the k2 line),
+
+and with d = v1 - v1_YL(x), v1_YL(x) = N - lambda m - (lambda - kappa) x (the RCL through the YL at x),
+each pass at x multiplies d by r = (lambda - k2) / (lambda - kappa): n passes at a constant stress give
+v1_n = v1_YL(x) + d_0 r^n (d_0 the initial state's, or lambda m after a first pass onto the VCL),
+approaching the YL's density geometrically. m = 0 is the model without the yield line (the default;
+the same numbers bit for bit). ln p_y is taken >= 0 (loads below the lines' reference stress of 1 kPa
+change nothing, as without the yield line).
+
+**The saturation bound.** Under load the soil cannot be denser than at zero air-filled porosity
+(its water stays in it over a pass): v - kappa ln p >= v_min, v_min = 1 + w rho_s / rho_w for the
+day's gravimetric water content w (``specific_volume_min``, set by [soil.moisture]; 1, zero
+porosity, when the day's water content is not known), i.e. rho_b <= rho_s / (1 + w rho_s / rho_w)
+under the load (after it, the recompression line's rebound).
+
 p is the traffic's mean normal stress (symtrack/terrain/subsoil.py: the trace of Soehne's
 radial stress over 3); the soil's own weight is left out, as in the vertical stress.
 
 Parameters per soil (symtrack/model/parameters.py, defaults with sources): ``virgin_line_N``,
 ``compression_index_lambda``, ``recompression_index_kappa``, ``particle_density_Mg_per_m3``,
-``bulk_density_initial_Mg_per_m3``; :func:`keller_arvidsson_2007` is the pedotransfer function
+``bulk_density_initial_Mg_per_m3``, ``yield_line_offset_ln_p`` (m; 0: no yield line, the default),
+``yield_compression_index_k2``, ``specific_volume_min`` (the saturation bound; 1 by default);
+:func:`keller_arvidsson_2007` is the pedotransfer function
 of N and lambda from the initial specific volume the defaults come from.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from ..foundations.errors import ParameterError
 
 __all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "field_max", "initial_specific_volume",
-           "keller_arvidsson_2007",
+           "keller_arvidsson_2007", "load_update", "passes_at_constant_stress",
            "pass_update", "precompression_stress_kPa", "soil_arrays", "specific_volume_after"]
 
 COMPRESSION_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
-                           "particle_density_Mg_per_m3", "bulk_density_initial_Mg_per_m3")
+                           "particle_density_Mg_per_m3", "bulk_density_initial_Mg_per_m3", "yield_line_offset_ln_p",
+                           "yield_compression_index_k2", "specific_volume_min")
 
 # Keller & Arvidsson (2007), Eur. J. Soil Sci. 58, 1373-1381, as soilphysics'
 # compressive_properties2 codes it: N and lambda linear in the initial specific volume, kappa one
@@ -69,11 +98,32 @@ def initial_specific_volume(soil: dict) -> float:
     return float(soil["particle_density_Mg_per_m3"]) / float(soil["bulk_density_initial_Mg_per_m3"])
 
 
+def _yield_params(soil: dict) -> tuple[float, float, float]:
+    """(m, k2, v_min) of a soil (the registry's defaults where a parameter set lacks them)."""
+    from ..model.parameters import (
+        SPECIFIC_VOLUME_MIN_DEFAULT,
+        YIELD_COMPRESSION_INDEX_K2_DEFAULT,
+        YIELD_LINE_OFFSET_DEFAULT,
+    )
+    return (float(soil.get("yield_line_offset_ln_p", YIELD_LINE_OFFSET_DEFAULT)),
+            float(soil.get("yield_compression_index_k2", YIELD_COMPRESSION_INDEX_K2_DEFAULT)),
+            float(soil.get("specific_volume_min", SPECIFIC_VOLUME_MIN_DEFAULT)))
+
+
 def _check_soil(soil: dict) -> None:
     lam, kap = float(soil["compression_index_lambda"]), float(soil["recompression_index_kappa"])
     if not kap < lam:
         raise ParameterError(f"recompression_index_kappa = {kap!r} must be below compression_index_lambda = "
                              f"{lam!r} (the recompression line is flatter than the virgin line)")
+    m, k2, vmin = _yield_params(soil)
+    if m > 0 and not kap < k2 < lam:
+        raise ParameterError(f"yield_compression_index_k2 = {k2!r} is outside the allowed range ({kap!r}, {lam!r}) "
+                             f"(between recompression_index_kappa and compression_index_lambda) with "
+                             f"yield_line_offset_ln_p = {m!r} > 0")
+    v0 = initial_specific_volume(soil)
+    if not vmin <= v0:
+        raise ParameterError(f"specific_volume_min = {vmin!r} is above the initial specific volume {v0!r} "
+                             f"(rho_s / bulk_density_initial_Mg_per_m3): the soil would start beyond saturation")
     if not float(soil["bulk_density_initial_Mg_per_m3"]) < float(soil["particle_density_Mg_per_m3"]):
         raise ParameterError(f"bulk_density_initial_Mg_per_m3 = {soil['bulk_density_initial_Mg_per_m3']!r} must "
                              f"be below particle_density_Mg_per_m3 = {soil['particle_density_Mg_per_m3']!r}")
@@ -88,7 +138,27 @@ def soil_arrays(soils) -> dict:
     lk = np.array([float(sp["compression_index_lambda"]) - float(sp["recompression_index_kappa"]) for sp in soils])
     rho_s = np.array([float(sp["particle_density_Mg_per_m3"]) for sp in soils])
     v0 = np.array([initial_specific_volume(sp) for sp in soils])
-    return {"N": N, "lambda_minus_kappa": lk, "rho_s": rho_s, "v0": v0}
+    lam = np.array([float(sp["compression_index_lambda"]) for sp in soils])
+    kap = np.array([float(sp["recompression_index_kappa"]) for sp in soils])
+    y = np.array([_yield_params(sp) for sp in soils]).reshape(len(soils), 3)
+    return {"N": N, "lambda_minus_kappa": lk, "rho_s": rho_s, "v0": v0, "lambda": lam, "kappa": kap,
+            "m": y[:, 0], "k2": y[:, 1], "v_min": y[:, 2]}
+
+
+def load_update(v_old, ln_p, N, lam, kap, lk, m, k2, v_min):
+    """The new v1 (float64 arrays, broadcast) after a load to ln(p / kPa) = ``ln_p`` from v1 = ``v_old``
+    (module doc): the virgin line's N - (lambda - kappa) ln p, with m > 0 the yield line's k2 path, the
+    saturation bound v_min + kappa ln p, and never above v_old. Where m == 0 and the bound is not
+    reached, exactly the model without them (the same operations)."""
+    cand = N - lk * ln_p
+    if np.any(np.asarray(m) > 0):  # (without a yield line anywhere, skip its arithmetic: the same result)
+        with np.errstate(invalid="ignore"):
+            xy = np.maximum((N - lam * m - v_old) / lk, 0.0)
+            k2line = v_old - (k2 - kap) * (ln_p - xy)
+        yl = np.where(ln_p > xy, np.minimum(cand, k2line), v_old)
+        cand = np.where(m > 0, yl, cand)
+    cand = np.maximum(cand, v_min + kap * ln_p)
+    return np.minimum(cand, v_old)
 
 
 def specific_volume_after(v1, N, lambda_minus_kappa, p_kPa):
@@ -128,11 +198,18 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     v_old = np.where(old > 0, old, a["v0"][si][:, None])
     if cell_params is None:
         N, lk = a["N"][si], a["lambda_minus_kappa"][si]
+        lam, kap, vmin = a["lambda"][si], a["kappa"][si], a["v_min"][si]
     else:
         N = cell_params["virgin_line_N"][cells]
-        lk = cell_params["compression_index_lambda"][cells] - cell_params["recompression_index_kappa"][cells]
+        lam, kap = cell_params["compression_index_lambda"][cells], cell_params["recompression_index_kappa"][cells]
+        lk = lam - kap
+        vmin = cell_params["specific_volume_min"][cells] if "specific_volume_min" in cell_params else a["v_min"][si]
     with np.errstate(divide="ignore"):
-        line = N[:, None] - lk[:, None] * np.log(1e-3 * p)
+        lnp = np.log(1e-3 * p)
+    col = (lambda q: q[:, None])  # noqa: E731
+    with np.errstate(invalid="ignore"):
+        line = load_update(v_old, lnp, col(N), col(lam), col(kap), col(lk), col(a["m"][si]), col(a["k2"][si]),
+                           col(vmin))
     yielded = (p > 0) & (line < v_old)
     rows = np.flatnonzero(yielded.any(axis=1))
     if rows.size:  # only the cells that yielded are written (the others keep their bits)
@@ -163,3 +240,33 @@ def field_max(specific_volume: np.ndarray, soil_index: np.ndarray, soils) -> lis
         out = np.maximum(out, rho.max(axis=0))
     return [float(v) for v in out]
 
+
+
+def passes_at_constant_stress(soil: dict, p_kPa: float, n: int) -> list[float]:
+    """The closed form of ``n`` loads to the same mean normal stress p from the soil's initial state
+    (module doc), float64, without the saturation bound: v1 after each load. The first load by the
+    three lines (RCL, k2 line, VCL, as soilphysics' soilDeformation); after it, on the k2 line,
+    v1_n = v1_YL + (v1_1 - v1_YL) r^(n - 1), r = (lambda - k2) / (lambda - kappa). Needs the yield
+    point of every later load above 1 kPa (ln p_y > 0), which holds for ln p > lambda m / (lambda - kappa)."""
+    _check_soil(soil)
+    N, lam, kap = (float(soil[k]) for k in ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa"))
+    m, k2, _ = _yield_params(soil)
+    x, v0 = math.log(p_kPa), initial_specific_volume(soil)
+    if m == 0:
+        return [min(v0, N - (lam - kap) * x)] * n
+    if not x > lam * m / (lam - kap):
+        raise ParameterError(f"p_kPa = {p_kPa!r}: the closed form needs ln p > lambda m / (lambda - kappa) = "
+                             f"{lam * m / (lam - kap):.6g}")
+    xy = (N - lam * m - v0) / (lam - kap)  # the initial RCL meets the YL
+    xj = (N - v0 - (k2 - kap) * xy) / (lam - k2)  # the k2 line meets the VCL
+    if x <= xy:
+        v1 = v0
+    elif x <= xj:
+        v1 = v0 - (k2 - kap) * (x - xy)
+    else:
+        v1 = N - (lam - kap) * x
+    v_yl = N - lam * m - (lam - kap) * x
+    r = (lam - k2) / (lam - kap)
+    if v1 == v0:
+        return [v0] * n
+    return [v_yl + (v1 - v_yl) * r**k for k in range(n)]

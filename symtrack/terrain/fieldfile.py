@@ -43,7 +43,7 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
-from ..model.parameters import SOIL_PARAM_NAMES
+from ..model.parameters import SOIL_PARAM_NAMES, spec
 from .storage import Grid, Terrain, load, save
 
 __all__ = ["FIELD_ARRAYS", "FIELD_HEADER", "FIELD_MAGIC", "FIELD_TRAILER", "FIELD_VERSION", "convert", "field_bytes",
@@ -110,7 +110,10 @@ def read_field(path) -> Terrain:
     if hbytes != FIELD_HEADER.size + 8 * (n_soil + n_depths) or nx < 1 or ny < 1 or not dx > 0 or n_depths > 64:
         raise ScenarioError(f"{path}: malformed field header (header bytes {hbytes}, nx {nx}, ny {ny}, cell {dx} m, "
                             f"{n_soil} soil values, {n_depths} subsoil depths)")
-    if n_soil != len(SOIL_PARAM_NAMES):
+    # a file written before soil parameters were added (appended to the list) has fewer values: the
+    # missing ones take the registry's defaults, as a terrain file's do (storage.load)
+    missing = SOIL_PARAM_NAMES[n_soil:]
+    if n_soil > len(SOIL_PARAM_NAMES) or n_soil < 1 or any(spec(n).default is None for n in missing):
         raise ScenarioError(f"{path}: {n_soil} soil values, this symtrack has {len(SOIL_PARAM_NAMES)} soil "
                             "parameters (the file was written by another version)")
     n = nx * ny
@@ -121,7 +124,8 @@ def read_field(path) -> Terrain:
     soil_values = np.frombuffer(data, "<f8", n_soil, FIELD_HEADER.size)
     depths = np.frombuffer(data, "<f8", n_depths, FIELD_HEADER.size + 8 * n_soil)
     st = Terrain(Grid((float(x0), float(y0)), float(dx), (int(nx), int(ny))),
-                 dict(zip(SOIL_PARAM_NAMES, (float(v) for v in soil_values), strict=True)),
+                 {**dict(zip(SOIL_PARAM_NAMES[:n_soil], (float(v) for v in soil_values), strict=True)),
+                  **{n: float(spec(n).default) for n in missing}},
                  tuple(float(d) for d in depths))
     off = hbytes
     for attr, dt, name in FIELD_ARRAYS:

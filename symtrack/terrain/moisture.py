@@ -65,7 +65,8 @@ from . import gis
 
 __all__ = ["COMPRESSION_PTFS", "DAY_KEYS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
            "cell_day_parameters", "clay_class", "distinct_pairs", "parse_moisture_map", "read_moisture", "split_soils",
-           "defossez_2003", "saturation_water_content_kg_per_kg", "severiano_2013_precompression_kPa",
+           "defossez_2003", "saturation_specific_volume", "saturation_water_content_kg_per_kg",
+           "severiano_2013_precompression_kPa",
            "severiano_2013_suction_kPa"]
 
 WATER_DENSITY_MG_PER_M3 = 1.0
@@ -153,6 +154,15 @@ def saturation_water_content_kg_per_kg(bulk_density_Mg_per_m3, particle_density_
     return (1.0 / rb - 1.0 / rs) * WATER_DENSITY_MG_PER_M3
 
 
+def saturation_specific_volume(water_content_kg_per_kg, particle_density_Mg_per_m3):
+    """The specific volume at zero air-filled porosity (saturation) of a gravimetric water content w:
+    v_sat = 1 + e_sat = 1 + w rho_s / rho_w (every pore full of the water w). The bound of the
+    compression model under load (terrain/density.py, ``specific_volume_min``): the densest the soil
+    can be made by a pass, rho_max = rho_s / (1 + w rho_s / rho_w) (the zero-air-voids line of the
+    Proctor test). Works on floats and arrays (the same operations)."""
+    return 1.0 + water_content_kg_per_kg * particle_density_Mg_per_m3 / WATER_DENSITY_MG_PER_M3
+
+
 def apply_moisture(soil: dict, moisture, where: str = "soil.moisture") -> dict:
     """The soil's parameter set on the day of ``moisture`` (module doc): a new dict with N, lambda,
     kappa (``compression_ptf``) and ``precompression_stress_Pa`` (``clay_percent``) replaced.
@@ -178,6 +188,7 @@ def apply_moisture(soil: dict, moisture, where: str = "soil.moisture") -> dict:
         raise ParameterError(f"{where} needs compression_ptf ({', '.join(COMPRESSION_PTFS)}) or clay_percent "
                              "(or both): without a pedotransfer function the water content changes nothing")
     out = dict(soil)
+    out["specific_volume_min"] = saturation_specific_volume(float(w), rs)
     try:
         if ptf is not None:
             if not isinstance(ptf, str):
@@ -254,7 +265,8 @@ def read_moisture(grid, mm: MoistureMap) -> np.ndarray:
     return w.ravel()
 
 
-DAY_KEYS = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa", "precompression_stress_Pa")
+DAY_KEYS = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa", "precompression_stress_Pa",
+            "specific_volume_min")
 
 
 def distinct_pairs(index: np.ndarray, water: np.ndarray):
@@ -282,7 +294,7 @@ def _poly_array(c, x):
 
 
 def _day_arrays(soil: dict, w: np.ndarray, ptf: dict, where) -> dict:
-    """:func:`apply_moisture`'s four day parameters over an array of water contents of one soil,
+    """:func:`apply_moisture`'s five day parameters over an array of water contents of one soil,
     vectorised in apply_moisture's order of operations. A value apply_moisture refuses is refused by
     it (called on the first such value, so the message is the same)."""
     rb, rs = float(soil["bulk_density_initial_Mg_per_m3"]), float(soil["particle_density_Mg_per_m3"])
@@ -291,7 +303,7 @@ def _day_arrays(soil: dict, w: np.ndarray, ptf: dict, where) -> dict:
     ok = np.isfinite(w) & (w >= 0.0) & (w <= w_sat)
     known = (name is None or name in _DEFOSSEZ) and (clay is None or (isinstance(clay, (int, float))
                                                                      and not isinstance(clay, bool)))
-    out = {}
+    out = {"specific_volume_min": saturation_specific_volume(w, rs)}
     if known and name is not None:
         lo, hi = DEFOSSEZ_RANGE_PERCENT
         wp = 100.0 * w
