@@ -93,3 +93,15 @@ def test_the_engine_section_reaches_the_terrain_engine_and_bad_values_are_refuse
         _load("multipass", ["engine.entry_fraction=2"])
     with _pytest.raises(_SE, match="unknown key"):
         _load("multipass", ["engine.substeps=2"])
+
+
+def test_set_reaches_nested_tables():
+    """--set section.table.key=value: [terrain.surface] and [terrain.towed] from the command line."""
+    sc = load_scenario("validation", ["terrain.surface.slope_y_deg=5", "model.vehicle=3d"])
+    assert sc.terrain is None and sc.surface.slope_y_deg == 5.0  # homogeneous soil on that ground
+    sc = load_scenario("examples/scenarios/multipass_trailer.toml", ["terrain.towed.axle_load_kN=90.0"])
+    assert sc.terrain.towed.raw["axle_load_kN"] == 90.0
+    with pytest.raises(ScenarioError, match=r"\[terrain.surface\] is not a table"):
+        load_scenario("validation", ["terrain.surface=1", "terrain.surface.slope_y_deg=5"])
+    with pytest.raises(ScenarioError, match="empty name"):
+        load_scenario("validation", ["terrain..slope_y_deg=5"])

@@ -70,7 +70,9 @@ def check_document(kind: str, doc, top_keys: Iterable[str], arrays: Iterable[str
 
 
 def parse_override(item: str) -> tuple[str, str, object]:
-    """``section.key=value`` -> (section, key, value); the value is read as TOML, else as a string."""
+    """``section.key=value`` -> (section, key, value); the value is read as TOML, else as a string.
+    ``key`` may hold dots (``terrain.surface.slope_y_deg=5``: the key ``surface.slope_y_deg`` of
+    [terrain], which :func:`apply_overrides` puts into the nested table [terrain.surface])."""
     if not isinstance(item, str) or "=" not in item or "." not in item.split("=", 1)[0]:
         raise ScenarioError(f"--set {item!r}: expected section.key=value, e.g. run.integrator=idas")
     key, raw = item.split("=", 1)
@@ -101,10 +103,18 @@ def apply_overrides(doc: dict, overrides) -> dict:
     for item, section, key, value in items:
         if section == "torque":
             raise ScenarioError("--set cannot change [[torque]] entries; write a scenario file instead")
-        doc.setdefault(section, {})
-        if not isinstance(doc[section], dict):
-            raise ScenarioError(f"--set {item!r}: [{section}] is not a table")
-        doc[section][key] = value
+        # section.table.key=value reaches a nested table ([terrain.surface], [terrain.towed], ...),
+        # made where it is missing
+        path = [section, *(k.strip() for k in key.split("."))]
+        if any(not k for k in path):
+            raise ScenarioError(f"--set {item!r}: an empty name in {'.'.join(path)!r}")
+        table = doc
+        for depth, name in enumerate(path[:-1]):
+            table.setdefault(name, {})
+            if not isinstance(table[name], dict):
+                raise ScenarioError(f"--set {item!r}: [{'.'.join(path[:depth + 1])}] is not a table")
+            table = table[name]
+        table[path[-1]] = value
     return doc
 
 

@@ -151,13 +151,6 @@ def _pair(key, value):
 def settings_from_dict(t: dict) -> TerrainSettings:
     """The ``[terrain]`` table -> :class:`TerrainSettings` (unknown keys and bad values raise)."""
     names = [f.name for f in dataclasses.fields(TerrainSettings) if f.name != "given"]
-    if isinstance(t, dict) and any(k.startswith("towed.") for k in t):
-        # --set terrain.towed.KEY=VALUE arrives as the flat key "towed.KEY": into [terrain.towed]
-        tw = t.get("towed", {})
-        if not isinstance(tw, dict):
-            raise ScenarioError(f"terrain.towed = {tw!r} must be a table (symtrack.terrain.towed)")
-        tw = {**tw, **{k.split(".", 1)[1]: v for k, v in t.items() if k.startswith("towed.")}}
-        t = {**{k: v for k, v in t.items() if not k.startswith("towed.")}, "towed": tw}
     check_keys("terrain", t, names)
     d = dict(t)
     if "size_m" in d:
