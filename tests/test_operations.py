@@ -195,3 +195,81 @@ def test_season_4ha_reduced_writes_its_summary_and_animation(tmp_path):
     gif = Image.open(tmp_path / "s" / s["animation_gif"])
     assert gif.n_frames == 60
     assert (tmp_path / "s" / "04_harvest" / "animation.gif").is_file()
+
+
+# ---- K-turns -------------------------------------------------------------------------------------------
+def _turn_groups(plan):
+    idx = [i for i, r in enumerate(plan.roles) if r == "turn"]
+    return [idx[k:k + 3] for k in range(0, len(idx), 3)]
+
+
+@pytest.mark.parametrize("R, w", [(3.0, 4.0), (4.0, 4.0), (2.5, 1.0), (6.0, 3.0)])
+def test_k_turn_geometry_against_the_closed_form(R, w):
+    """Each K-turn: forward, backwards, forward arcs of R, tangent at the cusps (the motion reverses
+    along one tangent line), ending on the next line heading back; its reach into the headland (the
+    footprint's largest x on the sampled path) is the closed form of k_turn_headland_m."""
+    fs = settings(turn="k", turn_radius_m=R, working_width_m=w, headland_passes=int(np.ceil(8.0 / w)), lines=3)
+    plan = op.plan_operation(fs)
+    p = plan.path
+    assert plan.turns == 2 and p.cusps_s.size == 4
+    alpha = np.arccos((2 * R - w) / (4 * R))  # cos a = (2R - S) / 4R, independent of the code's degrees
+    hl, hw = 1.2, 0.975
+    for k, g in enumerate(_turn_groups(plan)):
+        assert [p.segments[i].reverse for i in g] == [False, True, False]
+        ii = np.nonzero(np.isin(p.segment, g))[0]
+        a, b = ii[0], ii[-1] + 1
+        # it ends on the next line, heading the other way, where that line starts (x of the last line's end)
+        assert abs(p.y[b] - plan.line_y_m[k + 1]) < 1e-9 and abs(p.x[b] - p.x[a]) < 1e-9
+        assert abs(np.cos(p.psi[b] - p.psi[a]) + 1) < 1e-12
+        sgn = np.sign(np.cos(p.psi[a]))
+        # the cusps: tangent (heading continuous, the displacement reverses along it) at x0 + R sin a
+        for c in p.cusps_s[2 * k:2 * k + 2]:
+            j = int(np.searchsorted(p.s, c))
+            before, after = np.array([p.x[j] - p.x[j - 1], p.y[j] - p.y[j - 1]]), \
+                np.array([p.x[j + 1] - p.x[j], p.y[j + 1] - p.y[j]])
+            cosang = before @ after / np.linalg.norm(before) / np.linalg.norm(after)
+            assert cosang < -0.999, cosang
+            assert abs(sgn * (p.x[j] - p.x[a]) - R * np.sin(alpha)) < 1e-6
+        ext = hl * np.abs(np.cos(p.psi[a:b + 1])) + hw * np.abs(np.sin(p.psi[a:b + 1]))
+        reach = np.max(sgn * (p.x[a:b + 1] - p.x[a]) + ext)
+        assert abs(reach - op.k_turn_headland_m(w, R, hl, hw)) < 2e-4, (reach, op.k_turn_headland_m(w, R, hl, hw))
+
+
+def test_k_turn_refused_when_it_does_not_fit_the_headland():
+    # R = 4 m, lines 4 m apart: the turn reaches 4.40 m (footprint and padding included) beyond a 4 m headland
+    doc = {**BASE, "operation": {"size_m": [60.0, 48.0], "working_width_m": 4.0, "headland_passes": 1, "turn": "k",
+                                 "turn_radius_m": 4.0, "lines": 2}}
+    with pytest.raises(ScenarioError, match=r"operation.turn = \"k\".*allowed range of operation.turn_radius_m is "
+                                            r"\(2, ([0-9.]+)\] m here, or operation.headland_passes >= 2") as err:
+        op.operation_spec_from_dict(doc)
+    r_max = float(err.value.args[0].split("(2, ")[1].split("]")[0])
+    room = op.padding_m(0.1) + 0.1
+    # the largest radius that fits: its closed-form reach is the headland (to the 3 digits the message gives)
+    assert abs(op.k_turn_headland_m(4.0, r_max, 1.2, 0.975) + room - 4.0) < 5e-3
+    doc["operation"]["turn_radius_m"] = r_max - 0.01
+    op.operation_spec_from_dict(doc)  # and fits
+    with pytest.raises(ScenarioError, match="a K-turn needs a spacing below 2 R"):
+        op.plan_operation(settings(turn="k", turn_radius_m=2.0))
+
+
+@pytest.mark.slow  # one K-turn driven (about 35 s)
+def test_k_turn_driven_on_clay():
+    doc = {**BASE, "operation": {"size_m": [36.0, 30.0], "working_width_m": 4.0, "headland_passes": 2, "turn": "k",
+                                 "turn_radius_m": 4.0, "lines": 2}}
+    spec = op.operation_spec_from_dict(doc)
+    plan = spec.operations[0][1]
+    res = op.run_season(spec, None, through_files=False, figures=False)
+    s = res.summary
+    assert s["complete"], s["error"]
+    assert s["turns_driven"] == 1 and s["turns_lifted"] == 0
+    # it drove backwards over the reverse arc (the poses' displacement against the heading), about its length
+    tr = res.operations[0].trajectory
+    d = np.diff(tr[:, 1:3], axis=0)
+    along = d[:, 0] * np.cos(tr[:-1, 3]) + d[:, 1] * np.sin(tr[:-1, 3])
+    planned = plan.path.cusps_s[1] - plan.path.cusps_s[0]
+    back = -along[along < 0].sum()
+    assert 0.8 * planned < back < 1.5 * planned, (back, planned)
+    turn = res.operations[0].log
+    turn = turn[turn[:, 4] == 1]
+    # measured 0.052 m RMS, at most 0.15 m in the turn
+    assert np.sqrt(np.mean(turn[:, 2] ** 2)) < 0.1 and np.abs(turn[:, 2]).max() < 0.3

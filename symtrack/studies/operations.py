@@ -21,7 +21,8 @@ Track lines (``tracks``):
   [-``random_offset_m``, +``random_offset_m``] (numpy's default generator, ``seed``): the
   uncoordinated traffic of a field without guidance.
 
-Turns (``turn``): ``"u"`` (quarter arc, straight across, quarter arc: needs a line spacing of at
+Turns (``turn``): ``"k"`` (the K-turn: forward, backwards, forward, :func:`k_turn_angles_deg`),
+``"u"`` (quarter arc, straight across, quarter arc: needs a line spacing of at
 least twice the radius), ``"bulb"`` (the omega turn: away by beta, round by 180 + 2 beta, back by
 beta, three arcs of the radius; for spacings below twice the radius), ``"auto"`` (U where it
 fits, else bulb). The radius must be one the vehicle can hold on the field's soil at the turn
@@ -70,7 +71,7 @@ __all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSetti
 FIELD_PACKAGE = "symtrack.studies.fields"
 SCHEMA_VERSION = 1
 TRACKS = ("ab", "controlled", "random")
-TURNS = ("auto", "u", "bulb")
+TURNS = ("auto", "u", "bulb", "k")
 OPERATION_KEYS = ("name", "size_m", "cell_m", "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
                   "random_offset_m", "seed", "turn", "turn_radius_m", "speed_m_s", "turn_speed_m_s",
                   "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines")
@@ -286,8 +287,39 @@ def _fillet_segments(points, heading0: float, radius: float, speed_line, speed_t
     return segs, tags, psi
 
 
+def k_turn_angles_deg(spacing: float, radius: float) -> tuple[float, float]:
+    """The K-turn (three-point turn) between lines ``spacing`` apart (0 <= spacing < 2 R), three
+    arcs of ``radius``: forward by alpha, backwards by beta (the heading turning on the same way,
+    the arc's centre on the other side), forward by alpha onto the next line, alpha + beta + alpha
+    = 180 deg. With the line's end at the origin heading +x and the centres C1 = (0, R),
+    C2 = C1 + 2 R (sin a, -cos a), C3 = C2 + 2 R (-sin(pi - a), cos(pi - a)), the end
+    C3 + (0, R) lies on the next line, y = spacing, when cos a = (2 R - spacing) / (4 R); it is
+    then at x = 0 (the next line starts where the last ended) and both cusps are at x = R sin a,
+    the turn's reach into the headland."""
+    ca_ = (2.0 * radius - spacing) / (4.0 * radius)
+    alpha = math.degrees(math.acos(ca_))
+    return alpha, 180.0 - 2.0 * alpha
+
+
+def k_turn_headland_m(spacing: float, radius: float, half_length_m: float, half_width_m: float) -> float:
+    """How far beyond a line's end the K-turn's footprint reaches (a rectangle of half length
+    ``half_length_m`` along the heading and ``half_width_m`` across): the maximum over the first
+    arc (heading theta in [0, alpha], the centre at (R sin theta, R (1 - cos theta))) of
+    (R + half_width) sin theta + half_length cos theta; the reverse arc and the last arc reach no
+    further (the last mirrors the first; the reverse arc's x falls from both cusps, for R >
+    half_width). Closed form: sqrt((R + b)^2 + l^2) when the maximising heading atan((R + b) / l)
+    is within the arc, else its value at alpha."""
+    alpha = math.radians(k_turn_angles_deg(spacing, radius)[0])
+    a = radius + half_width_m
+    theta = math.atan2(a, half_length_m)
+    if theta <= alpha:
+        return math.hypot(a, half_length_m)
+    return a * math.sin(alpha) + half_length_m * math.cos(alpha)
+
+
 def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: float):
-    """The turn from one line to the next, ``spacing`` across (> 0), to the left or right."""
+    """The turn from one line to the next, ``spacing`` across (> 0), to the left or right: "u",
+    "bulb" (module doc) or "k" (:func:`k_turn_angles_deg`)."""
     sg = 1.0 if left else -1.0
     if kind == "auto":
         kind = "u" if spacing >= 2 * radius - 1e-9 else "bulb"
@@ -301,6 +333,17 @@ def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: 
             segs.append(Segment("straight", spacing - 2 * radius, speed_m_s=speed))
         segs.append(Segment("arc", radius_m=sg * radius, angle_deg=90.0, speed_m_s=speed))
         return segs, "u"
+    if kind == "k":
+        if not spacing < 2 * radius - 1e-9:
+            raise ScenarioError(f"operation.turn = \"k\": lines {spacing:.3g} m apart are at least twice "
+                                f"operation.turn_radius_m = {radius:g} apart; a K-turn needs a spacing below 2 R, so "
+                                f"the allowed range of operation.turn_radius_m is ({0.5 * spacing:.3g}, 100] m here "
+                                "(or use turn = \"u\")")
+        alpha, beta = k_turn_angles_deg(spacing, radius)
+        segs = [Segment("arc", radius_m=sg * radius, angle_deg=alpha, speed_m_s=speed),
+                Segment("arc", radius_m=sg * radius, angle_deg=beta, speed_m_s=speed, reverse=True),
+                Segment("arc", radius_m=sg * radius, angle_deg=alpha, speed_m_s=speed)]
+        return segs, "k"
     if spacing > 2 * radius + 1e-9:
         raise ScenarioError(f"operation.turn = \"bulb\": lines {spacing:.3g} m apart are more than twice "
                             f"operation.turn_radius_m = {radius:g} apart; a bulb turn needs a spacing below 2 R "
@@ -458,6 +501,8 @@ def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
     half_l = 0.5 * params["contact_length_m"] + abs(params["cg_ahead_of_contact_centre_m"])
     half_w = 0.5 * (params["track_gauge_m"] + params["track_width_m"])
     room = padding_m(fs.cell_m) + fs.cell_m
+    if fs.turn == "k" and len(plan.line_y_m) > 1:
+        _check_k_turns(plan, half_l, half_w, room, 0.5 * float(params["track_gauge_m"]))
     ext_x = half_l * np.abs(np.cos(psi)) + half_w * np.abs(np.sin(psi)) + room
     ext_y = half_l * np.abs(np.sin(psi)) + half_w * np.abs(np.cos(psi)) + room
     out = (x - ext_x < 0) | (x + ext_x > Lx) | (y - ext_y < 0) | (y + ext_y > Ly)
@@ -472,6 +517,35 @@ def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
                             f"{fs.working_width_m:g} the headland of {fs.headland_passes} rounds ({fs.headland_m:g} m) "
                             "is too narrow: raise operation.headland_passes or lower the radius")
     return {}
+
+
+def _check_k_turns(plan: OperationPlan, half_l: float, half_w: float, room: float, half_gauge: float) -> None:
+    """A K-turn whose footprint reaches beyond the headland (:func:`k_turn_headland_m`, plus the
+    engine's padding ``room``) is refused, naming the key and the radii that fit."""
+    fs = plan.settings
+    S = float(np.max(np.diff(plan.line_y_m)))  # the reach grows with the spacing: the widest turn decides
+    R, H = fs.turn_radius_m, fs.headland_m
+
+    def need(r):
+        return k_turn_headland_m(S, r, half_l, half_w) + room
+
+    if need(R) <= H + 1e-9:
+        return
+    lo = max(0.5 * S, half_gauge)  # a K-turn needs 2 R > S; a turn, R > half the gauge
+    if need(lo * (1 + 1e-9)) > H:
+        fit = f"no K-turn radius fits this headland (even R -> {lo:.3g} m reaches {need(lo * (1 + 1e-9)):.3g} m)"
+    else:
+        a, b = lo, R  # need() grows with R (R sin alpha does): bisect need(r) = H
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            a, b = (m, b) if need(m) <= H else (a, m)
+        fit = f"the allowed range of operation.turn_radius_m is ({lo:.3g}, {a:.3g}] m here"
+    passes = int(math.ceil(need(R) / fs.working_width_m - 1e-9))
+    raise ScenarioError(f"operation.turn = \"k\": a K-turn of operation.turn_radius_m = {R:g} between lines {S:.3g} m "
+                        f"apart reaches {need(R):.3g} m beyond the line's end (the path {R:g} sin alpha, the "
+                        f"vehicle's footprint and {room:.3g} m of the engine's padding), more than the headland's "
+                        f"{H:g} m (operation.headland_passes = {fs.headland_passes} x operation.working_width_m = "
+                        f"{fs.working_width_m:g}): {fit}, or operation.headland_passes >= {passes}")
 
 
 # ---- the steering map and the follower -------------------------------------------------------------------
@@ -515,9 +589,14 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
             if v > turn_speed_m_s + 1e-9 and kappa > 1.0 / 30 + 1e-12:
                 continue  # a line's speed is not driven through tight curves
             try:
+                # backwards (v < 0: a K-turn's reverse arc) the same yaw rate kappa |v| is a trim radius of -1/kappa
                 t = tp if (v == turn_speed_m_s and kappa == 1.0 / turn_radius_m) else \
-                    trim(model, params, v, None if kappa == 0 else 1.0 / kappa)
-            except TrimError:
+                    trim(model, params, v, None if kappa == 0 else math.copysign(1.0, v) / kappa)
+            except TrimError as err:
+                if v < 0 and kappa == 1.0 / turn_radius_m:
+                    raise ScenarioError(f"operation.turn_radius_m = {turn_radius_m:g} at operation.turn_speed_m_s = "
+                                        f"{turn_speed_m_s:g} backwards (a K-turn's reverse arc): the vehicle cannot "
+                                        f"hold this turn on this soil ({err})") from err
                 continue
             ks.append(kappa)
             mean.append(0.5 * float(t.u[0] + t.u[1]))
@@ -532,8 +611,9 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
 
 def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, float]:
     """Mean torque, torque difference, mean sprocket speed and speed difference (right - left) at
-    speed v, curvature kappa (the differences odd in kappa), interpolated."""
-    speeds = sorted(rows)
+    speed v, curvature kappa (the differences odd in kappa), interpolated; v < 0 (backwards) from
+    the rows of negative speeds."""
+    speeds = sorted(s for s in rows if (s < 0) == (v < 0))  # backwards (v < 0): the reverse rows
     a = abs(kappa)
 
     def at(s):
@@ -593,6 +673,10 @@ class PathFollower:
     # chosen on operation_small, both soils: K / J = 10 1/s, the torque lag's bandwidth; 600 gave the
     # same figures, 0 let the braked inner track stick and slip in the turns)
     SPROCKET_GAIN_N_M_S = 300.0
+    # a K-turn's cusps: the cusp counts as reached this close to it (the speed profile is 0 there), and the
+    # profile's floor about it (ASSUMED: a creep that reaches the cusp and starts back; chosen on the K-turn test)
+    CUSP_TOL_M = 0.1
+    CUSP_CREEP_M_S = 0.15
 
     def __init__(self, plan: OperationPlan, params: dict, rows: dict, state_names, sample_time_s: float,
                  substep_s: float, torque_limit_N_m: float, max_lateral_error_m: float):
@@ -614,14 +698,25 @@ class PathFollower:
         # the speed profile: the path's, limited in deceleration before its slow parts
         v = self.path.speed.copy()
         ds = np.diff(self.path.s)
-        for i in range(v.size - 2, -1, -1):
-            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
         # and in acceleration after them: the line's speed asked for at once after a turn made the mean
         # torque and the sprockets' speed references step, and the tracks spin (measured: the state
         # diverged at the exit of a U-turn on the sandy loam)
+        # the cusps of a K-turn (where the path's direction reverses): the vehicle stops there (the
+        # profile 0 at the cusp, a creep floor so that it gets there and starts back)
+        cusp_idx = np.searchsorted(self.path.s, self.path.cusps_s)
+        v[cusp_idx] = 0.0
+        for i in range(v.size - 2, -1, -1):
+            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
         for i in range(1, v.size):
             v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i - 1]))
+        if cusp_idx.size:
+            v = np.maximum(v, np.minimum(self.CUSP_CREEP_M_S, self.path.speed))
         self.v_profile = v
+        # the path between cusps: one direction each; the projection never crosses a cusp it has not reached
+        self.phase_s = np.concatenate([[-np.inf], self.path.cusps_s, [np.inf]])
+        self.phase_dir = [float(self.path.direction[min(int(np.searchsorted(self.path.s, a)), self.path.s.size - 1)])
+                          for a in np.concatenate([[0.0], self.path.cusps_s])]
+        self.phase = 0
         self.log = []  # (t, s, e_lat, e_psi, role)
         self.failure = None
         self.done = False
@@ -647,7 +742,12 @@ class PathFollower:
             return None
         X, Y, psi = float(x[self.ix]), float(x[self.iy]), float(x[self.ipsi])
         u, r = float(x[self.iu]), float(x[self.ir])
-        self.s = self.path.project(X, Y, self.s, window_m=(-1.0, 3.0))
+        lo, hi = self.phase_s[self.phase], self.phase_s[self.phase + 1]
+        self.s = self.path.project(X, Y, self.s, window_m=(max(-1.0, lo - self.s), min(3.0, hi - self.s)))
+        if self.s >= hi - self.CUSP_TOL_M:  # a cusp reached: on to the next direction
+            self.phase += 1
+            self.int_v = 0.0
+        d = self.phase_dir[self.phase]
         e, e_psi = self.path.errors(X, Y, psi, self.s)
         i = min(int(np.searchsorted(self.path.s, self.s)), self.roles.size - 1)
         self.log.append((t_s, self.s, e, e_psi, int(self.roles[i])))
@@ -660,13 +760,15 @@ class PathFollower:
                             f"exceeds operation.max_lateral_error_m = {self.max_err:g}")
             return None
         v = max(abs(u), 0.3)
-        kappa = self._kappa(self.s + v * self.PREVIEW_S, max(v * self.WINDOW_S, 0.05))
+        ahead = min(self.s + v * self.PREVIEW_S, self.phase_s[self.phase + 1])  # not past a cusp
+        kappa = self._kappa(ahead, max(v * self.WINDOW_S, 0.05))
         w = self.OMEGA_N
-        r_d = kappa * v - (w * w / v) * e - 2 * w * e_psi
+        # backwards (d = -1) de/dt = -v e_psi: the lateral term's sign turns so that e closes as forwards
+        r_d = kappa * v - d * (w * w / v) * e - 2 * w * e_psi
         r_d = max(min(r_d, 0.8), -0.8)
         # the speed reference, ramped from the start
-        v_ref = min(float(np.interp(self.s, self.path.s, self.v_profile)),
-                    0.3 + PLAN_ACCEL_M_S2 * t_s)
+        v_ref = d * min(float(np.interp(self.s, self.path.s, self.v_profile)),
+                        0.3 + PLAN_ACCEL_M_S2 * t_s)
         h = self.sample_time_s
         er, ev = r_d - r, v_ref - u
         self.int_r = max(min(self.int_r + h * er, 0.5), -0.5)
@@ -780,7 +882,8 @@ def _operation(doc: dict, fs: OperationSettings):
                             f"{sc.params['track_width_m']:g} m")
     plan = plan_operation(fs)
     check_plan(plan, sc.params, sc.model)
-    rows = steering_map(sc.params, sc.model, (fs.turn_speed_m_s, fs.speed_m_s), fs.turn_radius_m, fs.turn_speed_m_s)
+    speeds = (fs.turn_speed_m_s, fs.speed_m_s) + ((-fs.turn_speed_m_s,) if plan.path.cusps_s.size else ())
+    rows = steering_map(sc.params, sc.model, speeds, fs.turn_radius_m, fs.turn_speed_m_s)
     return fs, plan, sc, rows
 
 
