@@ -62,6 +62,8 @@ from ..simulation.scenario import SIMULATION_RUN_KEYS, scenario_from_dict
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
+from . import boundary as bnd
+from .boundary import read_boundary
 
 __all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSettings", "OperationSpec",
            "PathFollower", "SeasonResult", "check_plan", "footprint_mask", "is_operation_doc", "is_operation_document",
@@ -72,7 +74,8 @@ FIELD_PACKAGE = "symtrack.studies.fields"
 SCHEMA_VERSION = 1
 TRACKS = ("ab", "controlled", "random")
 TURNS = ("auto", "u", "bulb", "k")
-OPERATION_KEYS = ("name", "size_m", "cell_m", "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
+OPERATION_KEYS = ("name", "size_m", "boundary_file", "cell_m",
+                  "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
                   "random_offset_m", "seed", "turn", "turn_radius_m", "speed_m_s", "turn_speed_m_s",
                   "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "engine", "operation", "season")
@@ -125,6 +128,9 @@ class OperationSettings:
     max_lateral_error_m: float = 1.0
     vehicle: dict = dataclasses.field(default_factory=dict)  # overrides of [vehicle] for this operation
     lines: int | None = None  # None: all that fit; else the first n lines (small tests)
+    # a polygon field (symtrack.studies.boundary): the file and its ring (counter-clockwise, m); None: the rectangle
+    boundary_file: str | None = None
+    boundary: tuple | None = None
 
     @property
     def headland_m(self) -> float:
@@ -174,6 +180,16 @@ def parse_operation(t: dict, base: OperationSettings | None = None, where: str =
             if t[k] not in choices:
                 raise ScenarioError(f"{where}.{k} = {t[k]!r} is not one of {', '.join(choices)}")
             kw[k] = t[k]
+    if "boundary_file" in t:
+        v = t["boundary_file"]
+        if v in (None, "none"):
+            kw.update(boundary_file=None, boundary=None)
+        elif not isinstance(v, str) or not v:
+            raise ScenarioError(f"{where}.boundary_file = {v!r} must be the path of a GeoJSON or CSV boundary "
+                                "(docs/studies.md, \"A polygon field\") or \"none\"")
+        else:
+            ring = read_boundary(v, kw.get("size_m", d.size_m), kw.get("working_width_m", d.working_width_m))
+            kw.update(boundary_file=v, boundary=tuple(map(tuple, ring.tolist())))
     if "vehicle" in t:
         if not isinstance(t["vehicle"], dict):
             raise ScenarioError(f"{where}.vehicle = {t['vehicle']!r} must be a table of [vehicle] keys")
@@ -195,6 +211,7 @@ class OperationPlan:
     worked_x_m: tuple  # the lines' worked range [x0, x1] (between the headlands)
     turns: int
     settings: OperationSettings
+    worked_x_of_line: list | None = None  # per line its own range (a polygon field); None: worked_x_m for all
 
     @property
     def start(self) -> tuple[float, float, float]:
@@ -204,22 +221,44 @@ class OperationPlan:
 MAX_TRACK_LINES = 10_000  # an operation's plan holds at most this many lines or lanes (a bound, not physics)
 
 
+def _band(fs: OperationSettings) -> tuple[float, float, float]:
+    """The in-field area's y range (the headlands' inner edges) and the field's centre y."""
+    if fs.boundary is not None:
+        ring = np.array(fs.boundary)
+        inner = _inner_ring(fs)
+        return float(inner[:, 1].min()), float(inner[:, 1].max()), 0.5 * float(ring[:, 1].min() + ring[:, 1].max())
+    return fs.headland_m, fs.size_m[1] - fs.headland_m, 0.5 * fs.size_m[1]
+
+
+def _inner_ring(fs: OperationSettings) -> np.ndarray:
+    """A polygon field's in-field ring: the boundary offset inward by the headland (refused, naming
+    the key, when the headland leaves no polygon)."""
+    try:
+        return bnd.offset_ring(np.array(fs.boundary), fs.headland_m)
+    except ScenarioError as err:
+        raise ScenarioError(f"operation.headland_passes = {fs.headland_passes}: the headland of {fs.headland_m:g} m "
+                            f"inside {bnd.BOUNDARY_KEY} = {fs.boundary_file!r} leaves no in-field polygon ({err}); "
+                            "fewer headland passes or a narrower implement") from None
+
+
 def lane_positions_m(fs: OperationSettings) -> np.ndarray:
     """The permanent lanes (world y) of controlled traffic: ``lane_spacing_m`` apart, centred
     across the field, as many as fit between the headlands (a lane's swath of one spacing inside)."""
-    H, S = fs.headland_m, fs.lanes_m
-    inner = fs.size_m[1] - 2 * H
+    S = fs.lanes_m
+    lo_edge, hi_edge, centre = _band(fs)
+    inner = hi_edge - lo_edge
     if not inner / S <= MAX_TRACK_LINES:
         raise ScenarioError(f"operation.lane_spacing_m = {S:g}: {inner / S:.3g} lanes across the field, more than "
                             f"{MAX_TRACK_LINES} (the allowed range is [{inner / MAX_TRACK_LINES:.3g}, 1000] m here)")
     n = int(math.floor(inner / S + 1e-9))
-    return 0.5 * fs.size_m[1] + (np.arange(n) - 0.5 * (n - 1)) * S
+    return centre + (np.arange(n) - 0.5 * (n - 1)) * S
 
 
 def line_positions_m(fs: OperationSettings) -> np.ndarray:
     """The in-field track lines (world y of the CG), in driving order (increasing y)."""
     H, w = fs.headland_m, fs.working_width_m
-    lo, hi = H + 0.5 * w, fs.size_m[1] - H - 0.5 * w
+    lo_edge, hi_edge, _ = _band(fs)
+    lo, hi = lo_edge + 0.5 * w, hi_edge - 0.5 * w
     if fs.tracks == "controlled":
         lanes = lane_positions_m(fs)
         k = fs.working_width_m / fs.lanes_m
@@ -264,11 +303,20 @@ def _fillet_segments(points, heading0: float, radius: float, speed_line, speed_t
     returns (segments, [(kind, index of the corner or leg)], the end heading)."""
     segs, tags = [], []
     psi = heading0
+    pts = [np.asarray(q, float) for q in points]
+    # per corner its turn (signed, rad) and how far the arc cuts back along its legs: R tan(|turn| / 2)
+    # (R at a right angle, exactly: the rectangle's corners)
+    turn, cut = [0.0] * len(pts), [0.0] * len(pts)
+    for i in range(1, len(pts) - 1):
+        d0, d1 = pts[i] - pts[i - 1], pts[i + 1] - pts[i]
+        cross, dot = d0[0] * d1[1] - d0[1] * d1[0], d0[0] * d1[0] + d0[1] * d1[1]
+        turn[i] = math.atan2(cross, dot)
+        cut[i] = radius if dot == 0.0 else radius * math.tan(0.5 * abs(turn[i]))
     for i in range(1, len(points)):
-        p0, p1 = np.asarray(points[i - 1], float), np.asarray(points[i], float)
+        p0, p1 = pts[i - 1], pts[i]
         L = float(np.hypot(*(p1 - p0)))
-        cut0 = radius if i > 1 else 0.0
-        cut1 = radius if i < len(points) - 1 else 0.0
+        cut0 = cut[i - 1] if i > 1 else 0.0
+        cut1 = cut[i] if i < len(points) - 1 else 0.0
         straight = L - cut0 - cut1
         if straight < -1e-9:
             raise ScenarioError(f"operation.turn_radius_m = {radius:g}: a headland round's side of {L:g} m is "
@@ -276,14 +324,12 @@ def _fillet_segments(points, heading0: float, radius: float, speed_line, speed_t
         if straight > 1e-9:
             segs.append(Segment("straight", straight, speed_m_s=speed_line))
             tags.append(("headland", None))
-        if i < len(points) - 1:
-            q = np.asarray(points[i + 1], float)
-            d0, d1 = p1 - p0, q - p1
-            cross = d0[0] * d1[1] - d0[1] * d1[0]
-            sign = 1.0 if cross > 0 else -1.0
-            segs.append(Segment("arc", radius_m=sign * radius, angle_deg=90.0, speed_m_s=speed_turn))
+        if i < len(points) - 1 and abs(turn[i]) > 1e-12:
+            sign = 1.0 if turn[i] > 0 else -1.0
+            segs.append(Segment("arc", radius_m=sign * radius, angle_deg=math.degrees(abs(turn[i])),
+                                speed_m_s=speed_turn))
             tags.append(("headland", None))
-            psi += sign * math.pi / 2
+            psi += turn[i]
     return segs, tags, psi
 
 
@@ -357,6 +403,108 @@ def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: 
     return segs, "bulb"
 
 
+def _plan_polygon(fs: OperationSettings) -> OperationPlan:
+    """A polygon field's path (docs/studies.md, "A polygon field"): the headland rounds are the
+    boundary's mitred offsets at (i + 1/2) w, driven counter-clockwise as one inward spiral (the
+    last edge of round i meets the first edge of round i + 1; the last round's meets the first
+    line), every corner an arc of ``turn_radius_m``; the track lines along x, spaced as on the
+    rectangle across the inner ring's y range, each worked between its crossings with the inner
+    ring (the boundary offset by the headland), the turns at the headland end of the longer of the
+    two lines they join (the shorter extended, unworked, to it)."""
+    w, R, n = fs.working_width_m, fs.turn_radius_m, fs.headland_passes
+    key = f"{bnd.BOUNDARY_KEY} = {fs.boundary_file!r}"
+    ring0 = np.array(fs.boundary)
+    rings = []
+    for i in range(n):
+        try:
+            rings.append(bnd.offset_ring(ring0, (i + 0.5) * w))
+        except ScenarioError as err:
+            raise ScenarioError(f"operation.headland_passes = {n}: headland round {i + 1} ({(i + 0.5) * w:g} m inside "
+                                f"{key}) is not a polygon like the boundary ({err}); fewer headland passes, a "
+                                "narrower implement or a simpler boundary") from None
+    inner = _inner_ring(fs)
+    ys = line_positions_m(fs)
+    if fs.lines is not None:
+        ys = ys[:fs.lines]
+    # a line beyond the inner ring's top (the last line's centre may lie up to a width beyond the
+    # in-field edge, as on the rectangle) is left out: its swath would work only the headland
+    ys = ys[ys < inner[:, 1].max()]
+    spans = []
+    for y in ys:
+        xs = bnd.line_crossings(inner, float(y))
+        if xs.size != 2:
+            raise ScenarioError(f"{key}: the track line at y = {y:.3g} m crosses the in-field polygon in "
+                                f"{xs.size // 2} pieces; a plan drives one piece per line (a boundary whose inner "
+                                "polygon every horizontal line crosses once: convex along y)")
+        spans.append((float(xs[0]), float(xs[1])))
+    # the spiral starts where the last round's downward (west) edge crosses the first line
+    last = rings[-1]
+    q = np.roll(last, -1, axis=0)
+    y0 = float(ys[0])
+    down = np.nonzero((q[:, 1] < last[:, 1]) & (np.minimum(last[:, 1], q[:, 1]) <= y0)
+                      & (y0 < np.maximum(last[:, 1], q[:, 1])))[0]
+    if down.size == 0:
+        raise ScenarioError(f"{key}: no edge of the last headland round crosses the first line at y = {y0:.3g} m")
+    xcross = last[down, 0] + (y0 - last[down, 1]) / (q[down, 1] - last[down, 1]) * (q[down, 0] - last[down, 0])
+    e = int(down[np.argmin(xcross)])
+    order = (np.arange(len(ring0)) + e + 1) % len(ring0)  # edge e the last: v0 its end
+    rings = [r[order] for r in rings]
+
+    def meet(p0, p1, q0, q1):  # the crossing of the lines p0-p1 and q0-q1
+        d, f = p1 - p0, q1 - q0
+        den = d[0] * f[1] - d[1] * f[0]
+        if abs(den) < 1e-12:
+            raise ScenarioError(f"{key}: two consecutive headland legs are parallel; a simpler boundary")
+        t = ((q0[0] - p0[0]) * f[1] - (q0[1] - p0[1]) * f[0]) / den
+        return p0 + t * d
+
+    v0, v1 = rings[0][0], rings[0][1]
+    pts = [tuple(v0 + R * bnd.unit(v1 - v0))]
+    for i in range(n):
+        r = rings[i]
+        pts += [tuple(v) for v in r[1:]]
+        if i + 1 < n:
+            pts.append(tuple(meet(r[-1], r[0], rings[i + 1][0], rings[i + 1][1])))
+        else:
+            pts.append(tuple(meet(r[-1], r[0], np.array([0.0, y0]), np.array([1.0, y0]))))
+    # the turn points: east ends (even lines run east) at the longer line's end, west ends likewise
+    ends = []
+    for k in range(len(ys)):
+        east = k % 2 == 0
+        if k + 1 < len(ys):
+            ends.append(max(spans[k][1], spans[k + 1][1]) if east else min(spans[k][0], spans[k + 1][0]))
+        else:
+            ends.append(spans[k][1] if east else spans[k][0])
+    if ends[0] <= pts[-1][0] + 1e-6:
+        raise ScenarioError(f"{key}: the first line ends at x = {ends[0]:.3g} m, before the headland's corner onto it")
+    pts.append((ends[0], y0))
+    segs, tags, _ = _fillet_segments(pts, math.atan2(v1[1] - v0[1], v1[0] - v0[0]), R, fs.speed_m_s,
+                                     fs.turn_speed_m_s)
+    tags[-1] = ("line", 0)
+    line_of = [t[1] for t in tags]
+    roles = [t[0] for t in tags]
+    turns = 0
+    for k in range(1, len(ys)):
+        spacing = float(ys[k] - ys[k - 1])
+        tsegs, _ = _turn_segments(spacing, R, left=k % 2 == 1, kind=fs.turn, speed=fs.turn_speed_m_s)
+        segs += tsegs
+        roles += ["turn"] * len(tsegs)
+        line_of += [None] * len(tsegs)
+        turns += 1
+        L = abs(ends[k] - ends[k - 1])
+        if L <= 1e-6:
+            raise ScenarioError(f"{key}: the track line at y = {ys[k]:.3g} m has no length between its turns")
+        segs.append(Segment("straight", L, speed_m_s=fs.speed_m_s))
+        roles.append("line")
+        line_of.append(k)
+    heading0 = math.atan2(v1[1] - v0[1], v1[0] - v0[0])
+    path = Path(pts[0][0], pts[0][1], heading0, segs, fs.speed_m_s, fs.turn_speed_m_s, ds_m=PATH_DS_M,
+                extension_m=5.0)
+    lo = min(a for a, _ in spans)
+    hi = max(b for _, b in spans)
+    return OperationPlan(path, roles, line_of, [float(y) for y in ys], (lo, hi), turns, fs, spans)
+
+
 def plan_operation(fs: OperationSettings) -> OperationPlan:
     """The continuous path of an operation (module doc). Geometry only: :func:`check_plan` checks
     it against the vehicle and the soil."""
@@ -365,6 +513,8 @@ def plan_operation(fs: OperationSettings) -> OperationPlan:
     if w > min(Lx, Ly):
         raise ScenarioError(f"operation.working_width_m = {w:g} is outside the allowed range (0, {min(Lx, Ly):g}] m "
                             f"(the field is {Lx:g} m x {Ly:g} m)")
+    if fs.boundary is not None:
+        return _plan_polygon(fs)
     H = fs.headland_m
     if 2 * H >= min(Lx, Ly):
         raise ScenarioError(f"operation.headland_passes = {fs.headland_passes}: {fs.headland_passes} rounds of "
@@ -412,7 +562,9 @@ def _sample_roles(plan: OperationPlan) -> np.ndarray:
             out[m] = 1
         elif r == "line":
             x = plan.path.x[m]
-            out[m] = np.where((x >= plan.worked_x_m[0] - 1e-9) & (x <= plan.worked_x_m[1] + 1e-9), 3, 2)
+            k = plan.line_of_segment[i]
+            x0, x1 = plan.worked_x_m if plan.worked_x_of_line is None else plan.worked_x_of_line[k]
+            out[m] = np.where((x >= x0 - 1e-9) & (x <= x1 + 1e-9), 3, 2)
     out[seg < 0] = 2
     return out
 
@@ -501,8 +653,11 @@ def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
     half_l = 0.5 * params["contact_length_m"] + abs(params["cg_ahead_of_contact_centre_m"])
     half_w = 0.5 * (params["track_gauge_m"] + params["track_width_m"])
     room = padding_m(fs.cell_m) + fs.cell_m
-    if fs.turn == "k" and len(plan.line_y_m) > 1:
+    if fs.turn == "k" and len(plan.line_y_m) > 1 and fs.boundary is None:  # (a polygon's: the footprint check)
         _check_k_turns(plan, half_l, half_w, room, 0.5 * float(params["track_gauge_m"]))
+    if fs.boundary is not None:
+        _check_in_polygon(plan, x, y, psi, half_l + room, half_w + room)
+        return {}
     ext_x = half_l * np.abs(np.cos(psi)) + half_w * np.abs(np.sin(psi)) + room
     ext_y = half_l * np.abs(np.sin(psi)) + half_w * np.abs(np.cos(psi)) + room
     out = (x - ext_x < 0) | (x + ext_x > Lx) | (y - ext_y < 0) | (y + ext_y > Ly)
@@ -517,6 +672,33 @@ def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
                             f"{fs.working_width_m:g} the headland of {fs.headland_passes} rounds ({fs.headland_m:g} m) "
                             "is too narrow: raise operation.headland_passes or lower the radius")
     return {}
+
+
+def _check_in_polygon(plan: OperationPlan, x, y, psi, hl: float, hw: float) -> None:
+    """The footprint (a rectangle of half length ``hl``, half width ``hw`` about each pose) inside
+    the boundary: its corners and the midpoints of its sides inside, and no boundary vertex inside
+    it (a reflex vertex poking into the footprint)."""
+    fs = plan.settings
+    ring = np.array(fs.boundary)
+    c, s_ = np.cos(psi), np.sin(psi)
+    pts = []
+    for a, b in ((1, 1), (1, -1), (-1, 1), (-1, -1), (1, 0), (-1, 0), (0, 1), (0, -1)):
+        pts.append(np.column_stack([x + a * hl * c - b * hw * s_, y + a * hl * s_ + b * hw * c]))
+    inside = np.all(np.stack([bnd.contains(ring, q) for q in pts]), axis=0)
+    for vx, vy in ring:
+        u = (vx - x) * c + (vy - y) * s_
+        v = -(vx - x) * s_ + (vy - y) * c
+        inside &= ~((np.abs(u) < hl) & (np.abs(v) < hw))
+    if not inside.all():
+        k = int(np.argmax(~inside))
+        seg = int(plan.path.segment[k])
+        role = plan.roles[seg] if seg >= 0 else "end"
+        raise ScenarioError(f"the plan leaves the field: at ({x[k]:.2f}, {y[k]:.2f}) m on a {role} segment the "
+                            f"vehicle's footprint (half length {hl:.3g} m, half width {hw:.3g} m with the engine's "
+                            f"padding) crosses the boundary of {bnd.BOUNDARY_KEY} = {fs.boundary_file!r}; with "
+                            f"operation.turn_radius_m = {fs.turn_radius_m:g} the headland of {fs.headland_passes} "
+                            f"rounds ({fs.headland_m:g} m) is too narrow there: raise operation.headland_passes or "
+                            "lower the radius")
 
 
 def _check_k_turns(plan: OperationPlan, half_l: float, half_w: float, room: float, half_gauge: float) -> None:
@@ -911,8 +1093,9 @@ def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks:
     ops = []
     for k, e in enumerate(entries):
         fs = parse_operation(e, base, where=f"season.operations[{k}]")
-        if fs.size_m != base.size_m or fs.cell_m != base.cell_m:
-            raise ScenarioError(f"season.operations[{k}]: size_m and cell_m are the field's: set them in [operation]")
+        if fs.size_m != base.size_m or fs.cell_m != base.cell_m or fs.boundary != base.boundary:
+            raise ScenarioError(f"season.operations[{k}]: size_m, cell_m and boundary_file are the field's: set them "
+                                "in [operation]")
         if tracks is not None:
             fs = dataclasses.replace(fs, tracks=tracks)
         if "name" not in e:
@@ -933,7 +1116,7 @@ def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks:
 def load_operation_spec(name_or_path, overrides=None, tracks: str | None = None) -> OperationSpec:
     """A built-in operation or season (``symtrack/studies/fields/``) or a TOML file, with ``--set`` overrides."""
     doc, default_name = read_document(name_or_path, FIELD_PACKAGE, "field operation", overrides,
-                                      paths=TERRAIN_PATH_KEYS)
+                                      paths=TERRAIN_PATH_KEYS + (("operation", "boundary_file"),))
     return operation_spec_from_dict(doc, default_name, tracks)
 
 
@@ -995,7 +1178,17 @@ def count_passes_and_times(traj: np.ndarray, params: dict, shape, cell_m: float)
     return counts, first
 
 
+def field_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
+    """The grid's cells (nx, ny) that are the field: all of them on a rectangle, those whose centre
+    is inside the boundary on a polygon field."""
+    if fs.boundary is None:
+        return np.ones(shape, dtype=bool)
+    return bnd.cell_mask(np.array(fs.boundary), shape, cell_m)
+
+
 def _headland_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
+    if fs.boundary is not None:  # the field's cells outside the in-field ring
+        return field_mask(fs, shape, cell_m) & ~bnd.cell_mask(_inner_ring(fs), shape, cell_m)
     nx, ny = shape
     xc = (np.arange(nx) + 0.5) * cell_m
     yc = (np.arange(ny) + 0.5) * cell_m
@@ -1009,16 +1202,19 @@ def field_shares(stressed: np.ndarray, counts: np.ndarray, fs: OperationSettings
     """The trafficked shares (in the field, the headland and the in-field area) and the area run
     over once, twice, three times or more."""
     head = _headland_mask(fs, stressed.shape, fs.cell_m)
+    field = field_mask(fs, stressed.shape, fs.cell_m)
     area = fs.cell_m ** 2
-    out = {"trafficked_fraction": float(stressed.mean()),
+    out = {"trafficked_fraction": float(stressed[field].mean()),
            "headland_trafficked_fraction": float(stressed[head].mean()),
-           "infield_trafficked_fraction": float(stressed[~head].mean()),
-           "headland_area_m2": float(head.sum() * area), "field_area_m2": float(stressed.size * area)}
-    c = counts.astype(np.int64)
+           "infield_trafficked_fraction": float(stressed[field & ~head].mean()),
+           "headland_area_m2": float(head.sum() * area), "field_area_m2": float(field.sum() * area)}
+    c = counts.astype(np.int64)[field]
     for k, name in ((1, "once"), (2, "twice")):
         out[f"area_run_over_{name}_m2"] = float((c == k).sum() * area)
     out["area_run_over_3_or_more_m2"] = float((c >= 3).sum() * area)
     out["repeated_coverage_fraction"] = float(c.sum() / c.size)  # Kroulik's "repeated coverage": passes x area / field
+    if fs.boundary is not None:  # (a polygon field's grid holds cells outside it: traffic there is outside the field)
+        out["outside_field_trafficked_m2"] = float((stressed & ~field).sum() * area)
     out["passes_per_cell_max"] = int(c.max()) if c.size else 0
     return out
 
