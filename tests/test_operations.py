@@ -412,3 +412,29 @@ def test_polygon_operation_driven_on_clay(tmp_path):
     # the engine's record against the raster of the driven poses, over the polygon's cells (measured 0.3059
     # against 0.3051)
     assert abs(s["trafficked_fraction"] - drv[field].mean()) <= 0.01 * s["trafficked_fraction"]
+
+
+def test_controlled_turns_cross_the_headland_on_one_lane():
+    """turn_lane_m = "auto": the drill's (4 m, radius 1.5 m, headland 8 m) and the sprayer's (12 m,
+    radius 4 m, headland 12 m) U-turns cross their headland on the same lane, 6 m = (1 + 1/2) x 4 m
+    from the border; the lines run on, unworked, to it."""
+    across = []
+    for w, n, R in ((4.0, 2, 1.5), (12.0, 1, 4.0)):
+        fs = settings(tracks="controlled", lane_spacing_m=4.0, working_width_m=w, headland_passes=n, turn_radius_m=R,
+                      turn_lane_m="auto", lines=3)
+        plan = op.plan_operation(fs)
+        p = plan.path
+        turn = op._sample_roles(plan) == 1
+        # the across leg: where the turn heads along y, x is the lane's
+        leg = turn & (np.abs(np.cos(p.psi)) < 1e-9)
+        xs = sorted({round(float(x), 6) for x in p.x[leg]})
+        across.append(xs)
+        assert xs == ([6.0, 54.0] if w == 4.0 else [54.0]), xs  # (the sprayer's two lines: one turn, east)
+        # the worked lines are unchanged; the extension is a line outside the worked range (role 2)
+        assert ((op._sample_roles(plan) == 2) & (p.segment >= 0) & (np.abs(p.x - 30) < 30 - fs.headland_m)).sum() == 0
+    with pytest.raises(ScenarioError, match="operation.turn_lane_m = 5 is not a headland lane"):
+        op.plan_operation(settings(tracks="controlled", lane_spacing_m=4.0, turn_radius_m=1.5, turn_lane_m=5.0))
+    with pytest.raises(ScenarioError, match=r"operation.turn_lane_m = 10 is outside the allowed range \(0, 6.5\]"):
+        op.plan_operation(settings(tracks="controlled", lane_spacing_m=4.0, turn_radius_m=1.5, turn_lane_m=10.0))
+    with pytest.raises(ScenarioError, match="headland lanes are controlled traffic's"):
+        op.plan_operation(settings(turn_lane_m="auto"))

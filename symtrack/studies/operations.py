@@ -68,7 +68,7 @@ from .boundary import read_boundary
 __all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSettings", "OperationSpec",
            "PathFollower", "SeasonResult", "check_plan", "footprint_mask", "is_operation_doc", "is_operation_document",
            "load_operation_spec", "operation_spec_from_dict", "plan_operation",
-           "run_operation", "run_season", "swath_mask", "traffic_comparison"]
+           "run_operation", "run_season", "swath_mask", "traffic_comparison", "traffic_files", "traffic_row"]
 
 FIELD_PACKAGE = "symtrack.studies.fields"
 SCHEMA_VERSION = 1
@@ -77,9 +77,9 @@ TURNS = ("auto", "u", "bulb", "k")
 OPERATION_KEYS = ("name", "size_m", "boundary_file", "cell_m",
                   "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
                   "random_offset_m", "seed", "turn", "turn_radius_m", "speed_m_s", "turn_speed_m_s",
-                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines")
+                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines", "turn_lane_m")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "engine", "operation", "season")
-SEASON_KEYS = ("operations", "compare")
+SEASON_KEYS = ("operations", "compare", "tracks")
 OPERATION_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
 TERRAIN_KEYS_OF_OPERATION = ("size_m", "cell_m", "origin_m", "passes", "initial_state")
 
@@ -131,6 +131,9 @@ class OperationSettings:
     # a polygon field (symtrack.studies.boundary): the file and its ring (counter-clockwise, m); None: the rectangle
     boundary_file: str | None = None
     boundary: tuple | None = None
+    # controlled traffic: the depth from the border of the headland lane the U-turns cross on (m; "auto": the
+    # deepest lane the turn reaches from the headland's inner edge); None: the turns at the headland's edge
+    turn_lane_m: float | str | None = None
 
     @property
     def headland_m(self) -> float:
@@ -180,6 +183,10 @@ def parse_operation(t: dict, base: OperationSettings | None = None, where: str =
             if t[k] not in choices:
                 raise ScenarioError(f"{where}.{k} = {t[k]!r} is not one of {', '.join(choices)}")
             kw[k] = t[k]
+    if "turn_lane_m" in t:
+        v = t["turn_lane_m"]
+        kw["turn_lane_m"] = None if v in (None, "none") else "auto" if v == "auto" else \
+            _num("turn_lane_m", v, 0.0, 1e3, True)
     if "boundary_file" in t:
         v = t["boundary_file"]
         if v in (None, "none"):
@@ -403,6 +410,46 @@ def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: 
     return segs, "bulb"
 
 
+def _turn_lane_extension_m(fs: OperationSettings, ys) -> float:
+    """How far the lines run on (unworked) into the headland so that the U-turns cross it on the
+    headland lane ``turn_lane_m`` deep from the border (controlled traffic; a lane is (j + 1/2)
+    ``lane_spacing_m`` deep, as the headland rounds of an implement of an odd number of lanes are):
+    headland - radius - depth, at least 0. 0 without ``turn_lane_m``."""
+    if fs.turn_lane_m is None:
+        return 0.0
+    S, H, R = fs.lanes_m, fs.headland_m, fs.turn_radius_m
+    where = "operation.turn_lane_m"
+    if fs.tracks != "controlled":
+        raise ScenarioError(f"{where} = {fs.turn_lane_m!r}: headland lanes are controlled traffic's "
+                            f"(operation.tracks = \"controlled\"), not {fs.tracks!r}; set it to \"none\"")
+    if fs.boundary is not None:
+        raise ScenarioError(f"{where} = {fs.turn_lane_m!r}: headland lanes are planned on the rectangle only, not on "
+                            f"{bnd.BOUNDARY_KEY}; set it to \"none\"")
+    spacings = np.diff(np.asarray(ys, float))
+    kinds = {("u" if fs.turn == "auto" and sp >= 2 * R - 1e-9 else fs.turn) for sp in spacings}
+    if kinds - {"u"}:
+        raise ScenarioError(f"{where} = {fs.turn_lane_m!r}: the turns crossing a headland lane are U-turns; "
+                            f"operation.turn = {fs.turn!r} gives {', '.join(sorted(kinds - {'u'}))} turns here")
+    deepest = H - R  # a U-turn from the headland's inner edge crosses it this deep from the border
+    if fs.turn_lane_m == "auto":
+        j = math.floor(deepest / S - 0.5 + 1e-9)
+        if j < 0:
+            raise ScenarioError(f"{where} = \"auto\": no headland lane ((j + 1/2) x {S:g} m deep) is within the "
+                                f"{deepest:g} m a U-turn of radius {R:g} reaches into the {H:g} m headland")
+        depth = (j + 0.5) * S
+    else:
+        depth = float(fs.turn_lane_m)
+        j = depth / S - 0.5
+        if abs(j - round(j)) > 1e-6 or round(j) < 0:
+            raise ScenarioError(f"{where} = {depth:g} is not a headland lane: the lanes are (j + 1/2) x "
+                                f"operation.lane_spacing_m = {S:g} m deep ({0.5 * S:g}, {1.5 * S:g}, ...)")
+        if depth > deepest + 1e-9:
+            raise ScenarioError(f"{where} = {depth:g} is outside the allowed range (0, {deepest:g}] m: a U-turn of "
+                                f"operation.turn_radius_m = {R:g} from the headland's inner edge ({H:g} m) crosses "
+                                f"at most {deepest:g} m deep")
+    return deepest - depth
+
+
 def _plan_polygon(fs: OperationSettings) -> OperationPlan:
     """A polygon field's path (docs/studies.md, "A polygon field"): the headland rounds are the
     boundary's mitred offsets at (i + 1/2) w, driven counter-clockwise as one inward spiral (the
@@ -537,14 +584,23 @@ def plan_operation(fs: OperationSettings) -> OperationPlan:
     line_of = [t[1] for t in tags]
     roles = [t[0] for t in tags]
     turns = 0
+    ext = _turn_lane_extension_m(fs, ys)
     for k in range(1, len(ys)):
         spacing = float(ys[k] - ys[k - 1])
         east = k % 2 == 1  # line k-1 ran east (+x) when k-1 is even
         tsegs, _ = _turn_segments(spacing, R, left=east, kind=fs.turn, speed=fs.turn_speed_m_s)
+        if ext > 1e-9:  # on into the headland to the turn lane, and back out (unworked, the line's own)
+            segs.append(Segment("straight", ext, speed_m_s=fs.turn_speed_m_s))
+            roles.append("line")
+            line_of.append(k - 1)
         segs += tsegs
         roles += ["turn"] * len(tsegs)
         line_of += [None] * len(tsegs)
         turns += 1
+        if ext > 1e-9:
+            segs.append(Segment("straight", ext, speed_m_s=fs.turn_speed_m_s))
+            roles.append("line")
+            line_of.append(k)
         segs.append(Segment("straight", Lx - 2 * H, speed_m_s=fs.speed_m_s))
         roles.append("line")
         line_of.append(k)
@@ -1090,6 +1146,12 @@ def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks:
     for c in compare:
         if c not in TRACKS:
             raise ScenarioError(f"season.compare = {list(compare)!r}: {c!r} is not one of {', '.join(TRACKS)}")
+    if "tracks" in season:  # every operation under one system: a case of the comparison (traffic_sweep)
+        if season["tracks"] not in TRACKS:
+            raise ScenarioError(f"season.tracks = {season['tracks']!r} is not one of {', '.join(TRACKS)}")
+        if tracks is None:
+            tracks = season["tracks"]
+        compare = ()
     ops = []
     for k, e in enumerate(entries):
         fs = parse_operation(e, base, where=f"season.operations[{k}]")
@@ -1455,28 +1517,42 @@ TRAFFIC_COLUMNS = ("tracks", "complete", "trafficked_fraction", "headland_traffi
                    "turns_driven", "turns_lifted", "rms_lateral_error_lines_m", "wall_time_s")
 
 
+def traffic_row(system: str, summary: dict | None) -> dict:
+    """A row of the traffic table (:data:`TRAFFIC_COLUMNS`) from a system's season summary (None:
+    the season did not finish: complete false, the figures empty)."""
+    summary = summary or {"complete": False}
+    return {"tracks": system, **{k: summary.get(k) for k in TRAFFIC_COLUMNS if k != "tracks"}}
+
+
+def traffic_files(rows) -> dict:
+    """The comparison's table and figure: ``traffic.csv``, ``traffic.png``, ``traffic.json``."""
+    import csv
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(TRAFFIC_COLUMNS)
+    for r in rows:
+        w.writerow(["" if r[c] is None else r[c] for c in TRAFFIC_COLUMNS])
+    return {"traffic.csv": buf.getvalue(), "traffic.png": _traffic_png(rows),
+            "traffic.json": json.dumps(rows, indent=2) + "\n"}
+
+
 def traffic_comparison(doc: dict, systems, out=None, progress: bool = False, name: str = "operation") -> dict:
     """The same season under each traffic system of ``systems`` (e.g. ("random", "controlled")), each
-    on a new field: one table (``traffic.csv``, a row per system) and one figure (``traffic.png``)."""
+    on a new field, one after another in this process: one table (``traffic.csv``, a row per system)
+    and one figure (``traffic.png``). :func:`symtrack.studies.traffic.traffic_sweep` runs the same
+    comparison as a resumable sweep on Dask."""
     rows = []
     folder = check_output_folder(str(out)) if out is not None else None
     # every system's season planned and checked before any runs
     specs = [(sys_, operation_spec_from_dict(doc, name, tracks=sys_)) for sys_ in systems]
     for sys_, spec in specs:
         res = run_season(spec, None if folder is None else folder / sys_, progress=progress)
-        rows.append({"tracks": sys_, **{k: res.summary.get(k) for k in TRAFFIC_COLUMNS if k != "tracks"}})
+        rows.append(traffic_row(sys_, res.summary))
     if folder is not None:
-        import csv
-
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(TRAFFIC_COLUMNS)
-        for r in rows:
-            w.writerow([r[c] for c in TRAFFIC_COLUMNS])
         from ..reports.run_files import write_folder
 
-        write_folder(folder, {"traffic.csv": buf.getvalue(), "traffic.png": _traffic_png(rows),
-                              "traffic.json": json.dumps(rows, indent=2) + "\n"}, clear=False)
+        write_folder(folder, traffic_files(rows), clear=False)
     return {"rows": rows}
 
 
