@@ -1,6 +1,7 @@
 """Field operations driven end to end (issue 23; docs/studies.md, "Field operations").
 
-A field operation works a rectangular field [0, size_x] x [0, size_y] with an implement of
+A field operation works a rectangular field [0, size_x] x [0, size_y] (or a polygon inside that
+grid, ``boundary_file``: :func:`_plan_polygon`, :mod:`symtrack.studies.boundary`) with an implement of
 ``working_width_m``: first ``headland_passes`` rounds around the border (an inward spiral,
 counter-clockwise, each round ``working_width_m`` inside the last, the corners arcs of
 ``turn_radius_m``), then the in-field track lines along x between the headlands (the headland is
@@ -1240,17 +1241,29 @@ def count_passes_and_times(traj: np.ndarray, params: dict, shape, cell_m: float)
     return counts, first
 
 
+_MASK_CACHE: dict = {}  # a polygon field's cell masks (point-in-polygon over every cell: about 1 s at 4 million)
+
+
+def _ring_mask(ring: np.ndarray, shape, cell_m: float) -> np.ndarray:
+    key = (ring.tobytes(), tuple(shape), cell_m)
+    if key not in _MASK_CACHE:
+        if len(_MASK_CACHE) > 8:
+            _MASK_CACHE.clear()
+        _MASK_CACHE[key] = bnd.cell_mask(ring, shape, cell_m)
+    return _MASK_CACHE[key]
+
+
 def field_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
     """The grid's cells (nx, ny) that are the field: all of them on a rectangle, those whose centre
     is inside the boundary on a polygon field."""
     if fs.boundary is None:
         return np.ones(shape, dtype=bool)
-    return bnd.cell_mask(np.array(fs.boundary), shape, cell_m)
+    return _ring_mask(np.array(fs.boundary), shape, cell_m).copy()
 
 
 def _headland_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
     if fs.boundary is not None:  # the field's cells outside the in-field ring
-        return field_mask(fs, shape, cell_m) & ~bnd.cell_mask(_inner_ring(fs), shape, cell_m)
+        return field_mask(fs, shape, cell_m) & ~_ring_mask(_inner_ring(fs), shape, cell_m)
     nx, ny = shape
     xc = (np.arange(nx) + 0.5) * cell_m
     yc = (np.arange(ny) + 0.5) * cell_m
