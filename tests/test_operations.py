@@ -195,3 +195,246 @@ def test_season_4ha_reduced_writes_its_summary_and_animation(tmp_path):
     gif = Image.open(tmp_path / "s" / s["animation_gif"])
     assert gif.n_frames == 60
     assert (tmp_path / "s" / "04_harvest" / "animation.gif").is_file()
+
+
+# ---- K-turns -------------------------------------------------------------------------------------------
+def _turn_groups(plan):
+    idx = [i for i, r in enumerate(plan.roles) if r == "turn"]
+    return [idx[k:k + 3] for k in range(0, len(idx), 3)]
+
+
+@pytest.mark.parametrize("R, w", [(3.0, 4.0), (4.0, 4.0), (2.5, 1.0), (6.0, 3.0)])
+def test_k_turn_geometry_against_the_closed_form(R, w):
+    """Each K-turn: forward, backwards, forward arcs of R, tangent at the cusps (the motion reverses
+    along one tangent line), ending on the next line heading back; its reach into the headland (the
+    footprint's largest x on the sampled path) is the closed form of k_turn_headland_m."""
+    fs = settings(turn="k", turn_radius_m=R, working_width_m=w, headland_passes=int(np.ceil(8.0 / w)), lines=3)
+    plan = op.plan_operation(fs)
+    p = plan.path
+    assert plan.turns == 2 and p.cusps_s.size == 4
+    alpha = np.arccos((2 * R - w) / (4 * R))  # cos a = (2R - S) / 4R, independent of the code's degrees
+    hl, hw = 1.2, 0.975
+    for k, g in enumerate(_turn_groups(plan)):
+        assert [p.segments[i].reverse for i in g] == [False, True, False]
+        ii = np.nonzero(np.isin(p.segment, g))[0]
+        a, b = ii[0], ii[-1] + 1
+        # it ends on the next line, heading the other way, where that line starts (x of the last line's end)
+        assert abs(p.y[b] - plan.line_y_m[k + 1]) < 1e-9 and abs(p.x[b] - p.x[a]) < 1e-9
+        assert abs(np.cos(p.psi[b] - p.psi[a]) + 1) < 1e-12
+        sgn = np.sign(np.cos(p.psi[a]))
+        # the cusps: tangent (heading continuous, the displacement reverses along it) at x0 + R sin a
+        for c in p.cusps_s[2 * k:2 * k + 2]:
+            j = int(np.searchsorted(p.s, c))
+            before, after = np.array([p.x[j] - p.x[j - 1], p.y[j] - p.y[j - 1]]), \
+                np.array([p.x[j + 1] - p.x[j], p.y[j + 1] - p.y[j]])
+            cosang = before @ after / np.linalg.norm(before) / np.linalg.norm(after)
+            assert cosang < -0.999, cosang
+            assert abs(sgn * (p.x[j] - p.x[a]) - R * np.sin(alpha)) < 1e-6
+        ext = hl * np.abs(np.cos(p.psi[a:b + 1])) + hw * np.abs(np.sin(p.psi[a:b + 1]))
+        reach = np.max(sgn * (p.x[a:b + 1] - p.x[a]) + ext)
+        assert abs(reach - op.k_turn_headland_m(w, R, hl, hw)) < 2e-4, (reach, op.k_turn_headland_m(w, R, hl, hw))
+
+
+def test_k_turn_refused_when_it_does_not_fit_the_headland():
+    # R = 4 m, lines 4 m apart: the turn reaches 4.40 m (footprint and padding included) beyond a 4 m headland
+    doc = {**BASE, "operation": {"size_m": [60.0, 48.0], "working_width_m": 4.0, "headland_passes": 1, "turn": "k",
+                                 "turn_radius_m": 4.0, "lines": 2}}
+    with pytest.raises(ScenarioError, match=r"operation.turn = \"k\".*allowed range of operation.turn_radius_m is "
+                                            r"\(2, ([0-9.]+)\] m here, or operation.headland_passes >= 2") as err:
+        op.operation_spec_from_dict(doc)
+    r_max = float(err.value.args[0].split("(2, ")[1].split("]")[0])
+    room = op.padding_m(0.1) + 0.1
+    # the largest radius that fits: its closed-form reach is the headland (to the 3 digits the message gives)
+    assert abs(op.k_turn_headland_m(4.0, r_max, 1.2, 0.975) + room - 4.0) < 5e-3
+    doc["operation"]["turn_radius_m"] = r_max - 0.01
+    op.operation_spec_from_dict(doc)  # and fits
+    with pytest.raises(ScenarioError, match="a K-turn needs a spacing below 2 R"):
+        op.plan_operation(settings(turn="k", turn_radius_m=2.0))
+
+
+@pytest.mark.slow  # one K-turn driven (about 35 s)
+def test_k_turn_driven_on_clay():
+    doc = {**BASE, "operation": {"size_m": [36.0, 30.0], "working_width_m": 4.0, "headland_passes": 2, "turn": "k",
+                                 "turn_radius_m": 4.0, "lines": 2}}
+    spec = op.operation_spec_from_dict(doc)
+    plan = spec.operations[0][1]
+    res = op.run_season(spec, None, through_files=False, figures=False)
+    s = res.summary
+    assert s["complete"], s["error"]
+    assert s["turns_driven"] == 1 and s["turns_lifted"] == 0
+    # it drove backwards over the reverse arc (the poses' displacement against the heading), about its length
+    tr = res.operations[0].trajectory
+    d = np.diff(tr[:, 1:3], axis=0)
+    along = d[:, 0] * np.cos(tr[:-1, 3]) + d[:, 1] * np.sin(tr[:-1, 3])
+    planned = plan.path.cusps_s[1] - plan.path.cusps_s[0]
+    back = -along[along < 0].sum()
+    assert 0.8 * planned < back < 1.5 * planned, (back, planned)
+    turn = res.operations[0].log
+    turn = turn[turn[:, 4] == 1]
+    # measured 0.052 m RMS, at most 0.15 m in the turn
+    assert np.sqrt(np.mean(turn[:, 2] ** 2)) < 0.1 and np.abs(turn[:, 2]).max() < 0.3
+
+
+# ---- polygon fields ------------------------------------------------------------------------------------
+POLYGON = [[2.0, 2.0], [56.0, 5.0], [58.0, 40.0], [30.0, 47.0], [3.0, 38.0], [2.0, 2.0]]
+
+
+def _write_geojson(path, ring, **extra):
+    import json
+
+    geom = {"type": "Polygon", "coordinates": [ring], **extra}
+    path.write_text(json.dumps({"type": "Feature", "properties": {}, "geometry": geom}))
+    return str(path)
+
+
+def polygon_settings(tmp_path, **kw):
+    f = _write_geojson(tmp_path / "field.geojson", POLYGON)
+    return op.parse_operation({"size_m": [60.0, 50.0], "boundary_file": f, "working_width_m": 4.0,
+                               "headland_passes": 2, "turn": "u", "turn_radius_m": 2.0, **kw})
+
+
+def _shoelace(ring):
+    x, y = np.array(ring)[:-1].T
+    return 0.5 * abs(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def test_polygon_plan_covers_the_field_within_one_working_width(tmp_path):
+    for w, n in ((4.0, 2), (3.0, 2), (6.0, 1)):
+        fs = polygon_settings(tmp_path, working_width_m=w, headland_passes=n, turn="auto",
+                              turn_radius_m=min(0.5 * w, 3.0))
+        plan = op.plan_operation(fs)
+        cov = op.swath_mask(plan, (600, 500), 0.1)
+        field = op.field_mask(fs, (600, 500), 0.1)
+        area = _shoelace(POLYGON)  # 2151.5 m^2
+        assert abs(field.sum() * 0.01 - area) < 0.005 * area  # the field's cells are its area
+        covered = (cov & field).sum() * 0.01
+        # within one working width along the field's length (56 m): the unworked rest is the
+        # rounded corners and the slivers where the lines meet slanted in-field edges
+        assert area - covered <= w * 56.0, (w, area, covered)
+        assert (cov & ~field).sum() * 0.01 <= 0.01 * area  # the swath stays in the field
+
+
+def _independent_footprint_raster(x, y, psi, params, shape, cell):
+    """Cells whose square overlaps a track's contact rectangle, by another method than
+    footprint_mask's separating axes: the rectangle grown by the cell's square (their Minkowski sum,
+    the convex hull of the 16 vertex sums) tested on the cell centres by matplotlib's point-in-polygon."""
+    from matplotlib.path import Path as MPath
+    from scipy.spatial import ConvexHull
+
+    mask = np.zeros(shape, dtype=bool)
+    hl, hb, off = 0.5 * params["contact_length_m"], 0.5 * params["track_width_m"], 0.5 * params["track_gauge_m"]
+    sq = 0.5 * cell * np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]])
+    for xk, yk, pk in zip(x, y, psi, strict=True):
+        c, s = np.cos(pk), np.sin(pk)
+        for lat in (off, -off):
+            cx, cy = xk - lat * s, yk + lat * c
+            corners = np.array([[cx + a * hl * c - b * hb * s, cy + a * hl * s + b * hb * c]
+                                for a in (1, -1) for b in (1, -1)])
+            pts = (corners[:, None, :] + sq[None, :, :]).reshape(-1, 2)
+            hull = pts[ConvexHull(pts).vertices]
+            i0, j0 = np.maximum(np.floor(hull.min(0) / cell).astype(int), 0)
+            i1, j1 = np.minimum(np.ceil(hull.max(0) / cell).astype(int) + 1, shape)
+            gx, gy = np.meshgrid((np.arange(i0, i1) + 0.5) * cell, (np.arange(j0, j1) + 0.5) * cell, indexing="ij")
+            inside = MPath(hull).contains_points(np.column_stack([gx.ravel(), gy.ravel()]))
+            mask[i0:i1, j0:j1] |= inside.reshape(gx.shape)
+    return mask
+
+
+def test_polygon_plan_trafficked_share_against_an_independent_raster(tmp_path):
+    fs = polygon_settings(tmp_path)
+    plan = op.plan_operation(fs)
+    p = plan.path
+    end = int(np.nonzero(p.segment == -1)[0][0]) + 1
+    x, y, psi = p.x[:end:2], p.y[:end:2], p.psi[:end:2]  # every 0.1 m
+    shape = (600, 500)
+    field = op.field_mask(fs, shape, 0.1)
+    ours = op.footprint_mask(x, y, psi, PARAMS, shape, 0.1)
+    other = _independent_footprint_raster(x, y, psi, PARAMS, shape, 0.1)
+    a, b = (ours & field).sum() / field.sum(), (other & field).sum() / field.sum()
+    assert 0.2 < a < 0.8
+    assert abs(a - b) <= 0.01 * b, (a, b)  # measured 0.33173 both: the same cells
+    # and the plan's shares through field_shares (in-field and headland apart) are those of the raster
+    sh = op.field_shares(ours, ours.astype(np.uint16), fs)
+    assert sh["trafficked_fraction"] == pytest.approx(a)
+    assert sh["field_area_m2"] == pytest.approx(field.sum() * 0.01)
+
+
+def test_polygon_boundary_csv_is_the_geojson(tmp_path):
+    csv_file = tmp_path / "field.csv"
+    csv_file.write_text("x_m,y_m\n" + "\n".join(f"{x},{y}" for x, y in POLYGON) + "\n")
+    a = op.plan_operation(polygon_settings(tmp_path))
+    b = op.plan_operation(polygon_settings(tmp_path, boundary_file=str(csv_file)))
+    assert np.array_equal(a.path.x, b.path.x) and np.array_equal(a.path.y, b.path.y)
+    # clockwise is the same field
+    _write_geojson(tmp_path / "cw.geojson", POLYGON[::-1])
+    c = op.plan_operation(polygon_settings(tmp_path, boundary_file=str(tmp_path / "cw.geojson")))
+    assert np.allclose(a.path.x, c.path.x) and np.allclose(a.path.y, c.path.y)
+
+
+def test_bad_boundaries_are_refused_naming_the_key(tmp_path):
+    def refused(ring, match, name="b.geojson", **kw):
+        f = _write_geojson(tmp_path / name, ring, **kw)
+        with pytest.raises(ScenarioError, match=r"operation.boundary_file = .*" + match):
+            op.parse_operation({"size_m": [60.0, 50.0], "boundary_file": f, "working_width_m": 4.0})
+
+    refused([[2, 2], [50, 2], [2, 40], [50, 40], [2, 2]], "not a simple polygon: edge")  # a bow tie
+    refused([[2, 2], [50, 2], [50, 40], [2, 40]], "not closed")
+    refused(None, "hole", coordinates=[[[2, 2], [50, 2], [50, 40], [2, 40], [2, 2]], [[5, 5], [6, 5], [6, 6], [5, 5]]])
+    refused([[2, 2], [70, 2], [50, 40], [2, 2]], "vertex 1 at \\(70, 2\\) m is outside the grid")
+    refused([[2, 2], [5, 2], [5, 5], [2, 5], [2, 2]], "too small for one working width of 4 m")
+    refused([[2, 2], [50, 2], [50, 2], [2, 40], [2, 2]], "not a simple polygon: vertex 2 repeats vertex 1")
+    (tmp_path / "b.csv").write_text("x,y\n2,2\n")
+    with pytest.raises(ScenarioError, match="operation.boundary_file = .*header x_m,y_m"):
+        op.parse_operation({"size_m": [60.0, 50.0], "boundary_file": str(tmp_path / "b.csv")})
+    with pytest.raises(ScenarioError, match="operation.boundary_file = .*no such file"):
+        op.parse_operation({"size_m": [60.0, 50.0], "boundary_file": str(tmp_path / "none.geojson")})
+    # a headland too deep for the polygon: named by its own key
+    with pytest.raises(ScenarioError, match="operation.headland_passes = 6"):
+        op.plan_operation(polygon_settings(tmp_path, headland_passes=6))
+
+
+@pytest.mark.slow  # a polygon field driven: headland rounds, two lines, one U-turn (about 20 s)
+def test_polygon_operation_driven_on_clay(tmp_path):
+    ring = [[1.0, 1.0], [38.0, 3.0], [36.5, 31.0], [2.0, 29.0], [1.0, 1.0]]
+    f = _write_geojson(tmp_path / "small.geojson", ring)
+    doc = {**BASE, "operation": {"size_m": [40.0, 32.0], "boundary_file": f, "working_width_m": 4.0,
+                                 "headland_passes": 2, "turn": "u", "turn_radius_m": 2.0, "lines": 2}}
+    spec = op.operation_spec_from_dict(doc)
+    res = op.run_season(spec, None, through_files=False, figures=False)
+    s = res.summary
+    assert s["complete"], s["error"]
+    assert s["turns_driven"] == 1 and s["outside_field_trafficked_m2"] == 0.0
+    assert s["field_area_m2"] == pytest.approx(_shoelace(ring), rel=0.005)
+    fs, prm = spec.operations[0][0], spec.operations[0][2].params
+    tr = res.operations[0].trajectory
+    field = op.field_mask(fs, res.counts.shape, 0.1)
+    drv = op.footprint_mask(tr[:, 1], tr[:, 2], tr[:, 3], prm, res.counts.shape, 0.1)
+    # the engine's record against the raster of the driven poses, over the polygon's cells (measured 0.3059
+    # against 0.3051)
+    assert abs(s["trafficked_fraction"] - drv[field].mean()) <= 0.01 * s["trafficked_fraction"]
+
+
+def test_controlled_turns_cross_the_headland_on_one_lane():
+    """turn_lane_m = "auto": the drill's (4 m, radius 1.5 m, headland 8 m) and the sprayer's (12 m,
+    radius 4 m, headland 12 m) U-turns cross their headland on the same lane, 6 m = (1 + 1/2) x 4 m
+    from the border; the lines run on, unworked, to it."""
+    across = []
+    for w, n, R in ((4.0, 2, 1.5), (12.0, 1, 4.0)):
+        fs = settings(tracks="controlled", lane_spacing_m=4.0, working_width_m=w, headland_passes=n, turn_radius_m=R,
+                      turn_lane_m="auto", lines=3)
+        plan = op.plan_operation(fs)
+        p = plan.path
+        turn = op._sample_roles(plan) == 1
+        # the across leg: where the turn heads along y, x is the lane's
+        leg = turn & (np.abs(np.cos(p.psi)) < 1e-9)
+        xs = sorted({round(float(x), 6) for x in p.x[leg]})
+        across.append(xs)
+        assert xs == ([6.0, 54.0] if w == 4.0 else [54.0]), xs  # (the sprayer's two lines: one turn, east)
+        # the worked lines are unchanged; the extension is a line outside the worked range (role 2)
+        assert ((op._sample_roles(plan) == 2) & (p.segment >= 0) & (np.abs(p.x - 30) < 30 - fs.headland_m)).sum() == 0
+    with pytest.raises(ScenarioError, match="operation.turn_lane_m = 5 is not a headland lane"):
+        op.plan_operation(settings(tracks="controlled", lane_spacing_m=4.0, turn_radius_m=1.5, turn_lane_m=5.0))
+    with pytest.raises(ScenarioError, match=r"operation.turn_lane_m = 10 is outside the allowed range \(0, 6.5\]"):
+        op.plan_operation(settings(tracks="controlled", lane_spacing_m=4.0, turn_radius_m=1.5, turn_lane_m=10.0))
+    with pytest.raises(ScenarioError, match="headland lanes are controlled traffic's"):
+        op.plan_operation(settings(turn_lane_m="auto"))

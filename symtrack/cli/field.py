@@ -20,10 +20,24 @@ def field_command(args) -> int:
     if is_operation_document(args.scenario):  # a field operation or a season (docs/studies.md, "Field operations")
         spec = load_operation_spec(args.scenario, overrides)
         if spec.compare:  # [season] compare: the same season under each traffic system, on new fields
-            from ..studies.operations import traffic_comparison
+            if args.workers == 0:  # one after another in this process
+                from ..studies.operations import traffic_comparison
 
-            table = traffic_comparison(spec.document, spec.compare, out, progress=not args.quiet, name=spec.name)
+                table = traffic_comparison(spec.document, spec.compare, out, progress=not args.quiet, name=spec.name)
+            else:  # a resumable sweep on Dask, a case per system (docs/studies.md, "Traffic systems on Dask")
+                from ..studies.traffic import traffic_sweep
+
+                try:
+                    table = traffic_sweep(args.scenario, out, overrides=overrides, workers=args.workers,
+                                          scheduler=args.scheduler, progress=not args.quiet)
+                except KeyboardInterrupt:
+                    print(f"symtrack: interrupted (Ctrl-C); the systems finished are kept in {out} (results.csv); "
+                          "run the same command again to do the rest", file=sys.stderr)
+                    return 130
             for r in table["rows"]:
+                if not r["complete"]:
+                    print(f"{r['tracks']}: FAILED (its run in {out}: results.csv, runs/)")
+                    continue
                 print(f"{r['tracks']}: trafficked {100 * r['trafficked_fraction']:.1f} % (headland "
                       f"{100 * r['headland_trafficked_fraction']:.1f} %, in-field "
                       f"{100 * r['infield_trafficked_fraction']:.1f} %), repeated coverage "
@@ -90,5 +104,10 @@ def add_parser(sub) -> None:
                     help="override a value, e.g. field.passes=4, vehicle.mass_kg=8000")
     fp.add_argument("--pattern", choices=("random", "controlled", "both"),
                     help="shorthand for --set field.pattern=...")
+    fp.add_argument("--workers", type=int, default=2, metavar="N",
+                    help="a traffic comparison ([season] compare): worker processes of the local Dask cluster, a "
+                    "system per case, resumable (default 2); 0 runs the systems one after another in this process")
+    fp.add_argument("--scheduler", metavar="ADDRESS",
+                    help="a traffic comparison on a running Dask scheduler, e.g. tcp://127.0.0.1:8786")
     fp.add_argument("--quiet", action="store_true", help="no progress bar")
     fp.set_defaults(func=field_command)

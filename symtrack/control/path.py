@@ -5,6 +5,12 @@ A path starts at a pose (x_m, y_m, heading) and chains segments; the heading is 
 heading, curvature (1/m, positive to the left), the segment index and whether it is straight.
 A straight extension is appended after the last segment so that a horizon reaching past the end
 still has a reference; it is not part of the path's length.
+
+A segment with ``reverse`` is driven backwards (a K-turn's middle arc): the heading stays the
+vehicle's, the position moves against it, s still grows with the distance travelled and the
+curvature is d(heading)/ds (a reverse arc of positive radius turns the vehicle counter-clockwise,
+its centre on the vehicle's right). ``direction`` holds +1 or -1 per sample, ``cusps_s`` the arc
+lengths where it changes.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ class Segment:
     radius_m: float = 0.0  # arcs: positive = left turn
     angle_deg: float = 0.0  # arcs: positive sweep
     speed_m_s: float | None = None
+    reverse: bool = False  # driven backwards (module doc)
 
 
 class Path:
@@ -34,7 +41,7 @@ class Path:
         if not segments:
             raise ScenarioError("path: at least one segment is required")
         self.segments = tuple(segments)
-        xs, ys, ps, ks, si, st, vs = [x_m], [y_m], [heading_rad], [], [], [], []
+        xs, ys, ps, ks, si, st, vs, ds = [x_m], [y_m], [heading_rad], [], [], [], [], []
         x, y, psi = x_m, y_m, heading_rad
         all_segs = list(self.segments) + [Segment("straight", extension_m)]
         for idx, seg in enumerate(all_segs):
@@ -46,18 +53,20 @@ class Path:
             v = seg.speed_m_s or (speed_m_s if seg.kind == "straight" else (turn_speed_m_s or speed_m_s))
             n = max(1, int(math.ceil(L / ds_m)))
             h = L / n
+            sgn = -1.0 if seg.reverse else 1.0
             for _ in range(n):
                 ks.append(kappa)
                 si.append(idx if idx < len(self.segments) else -1)
                 st.append(seg.kind == "straight")
                 vs.append(v)
+                ds.append(sgn)
                 if kappa == 0.0:
-                    x += h * math.cos(psi)
-                    y += h * math.sin(psi)
+                    x += sgn * h * math.cos(psi)
+                    y += sgn * h * math.sin(psi)
                 else:
                     dpsi = h * kappa
-                    x += (math.sin(psi + dpsi) - math.sin(psi)) / kappa
-                    y -= (math.cos(psi + dpsi) - math.cos(psi)) / kappa
+                    x += sgn * (math.sin(psi + dpsi) - math.sin(psi)) / kappa
+                    y -= sgn * (math.cos(psi + dpsi) - math.cos(psi)) / kappa
                     psi += dpsi
                 xs.append(x)
                 ys.append(y)
@@ -66,6 +75,8 @@ class Path:
         si.append(-1)
         st.append(True)
         vs.append(vs[-1])
+        ds.append(ds[-1])
+        self.direction = np.array(ds)
         self.x, self.y, self.psi = np.array(xs), np.array(ys), np.array(ps)
         self.kappa, self.segment, self.straight = np.array(ks), np.array(si), np.array(st)
         self.speed = np.array(vs)
@@ -73,6 +84,7 @@ class Path:
         self.s = np.concatenate([[0.0], np.cumsum(seg_len)])
         # the path ends where the extension's first interval starts
         self.length_m = float(self.s[np.nonzero(self.segment == -1)[0][0]])
+        self.cusps_s = self.s[1:-1][np.diff(self.direction[:-1]) != 0] if self.direction.size > 2 else np.zeros(0)
 
     def project(self, x: float, y: float, s_hint: float | None = None, window_m: tuple = (-3.0, 12.0)) -> float:
         """Arc length of the closest path point; with s_hint, searched only in

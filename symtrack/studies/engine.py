@@ -217,7 +217,7 @@ def _store(out: Path, run: dict, result: dict, kind: str) -> dict:
 # the modules a worker needs for a run of each kind, imported once by the fork server of the local
 # cluster's workers (:func:`_start_fork_server`), never by each worker
 WORKER_MODULES = {"simulate": ("symtrack.api",), "mpc": ("symtrack.control.closedloop",),
-                  "field": ("symtrack.studies.field",)}
+                  "field": ("symtrack.studies.field", "symtrack.studies.operations")}
 MP_METHOD_KEY = "distributed.worker.multiprocessing-method"
 # Dask's defaults of distributed.nanny.pre-spawn-environ: what a nanny sets before it spawns a worker
 WORKER_ENVIRON = {"MALLOC_TRIM_THRESHOLD_": 65536, "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,

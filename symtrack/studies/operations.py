@@ -1,6 +1,7 @@
 """Field operations driven end to end (issue 23; docs/studies.md, "Field operations").
 
-A field operation works a rectangular field [0, size_x] x [0, size_y] with an implement of
+A field operation works a rectangular field [0, size_x] x [0, size_y] (or a polygon inside that
+grid, ``boundary_file``: :func:`_plan_polygon`, :mod:`symtrack.studies.boundary`) with an implement of
 ``working_width_m``: first ``headland_passes`` rounds around the border (an inward spiral,
 counter-clockwise, each round ``working_width_m`` inside the last, the corners arcs of
 ``turn_radius_m``), then the in-field track lines along x between the headlands (the headland is
@@ -21,7 +22,8 @@ Track lines (``tracks``):
   [-``random_offset_m``, +``random_offset_m``] (numpy's default generator, ``seed``): the
   uncoordinated traffic of a field without guidance.
 
-Turns (``turn``): ``"u"`` (quarter arc, straight across, quarter arc: needs a line spacing of at
+Turns (``turn``): ``"k"`` (the K-turn: forward, backwards, forward, :func:`k_turn_angles_deg`),
+``"u"`` (quarter arc, straight across, quarter arc: needs a line spacing of at
 least twice the radius), ``"bulb"`` (the omega turn: away by beta, round by 180 + 2 beta, back by
 beta, three arcs of the radius; for spacings below twice the radius), ``"auto"`` (U where it
 fits, else bulb). The radius must be one the vehicle can hold on the field's soil at the turn
@@ -61,21 +63,24 @@ from ..simulation.scenario import SIMULATION_RUN_KEYS, scenario_from_dict
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
+from . import boundary as bnd
+from .boundary import read_boundary
 
 __all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSettings", "OperationSpec",
            "PathFollower", "SeasonResult", "check_plan", "footprint_mask", "is_operation_doc", "is_operation_document",
            "load_operation_spec", "operation_spec_from_dict", "plan_operation",
-           "run_operation", "run_season", "swath_mask", "traffic_comparison"]
+           "run_operation", "run_season", "swath_mask", "traffic_comparison", "traffic_files", "traffic_row"]
 
 FIELD_PACKAGE = "symtrack.studies.fields"
 SCHEMA_VERSION = 1
 TRACKS = ("ab", "controlled", "random")
-TURNS = ("auto", "u", "bulb")
-OPERATION_KEYS = ("name", "size_m", "cell_m", "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
+TURNS = ("auto", "u", "bulb", "k")
+OPERATION_KEYS = ("name", "size_m", "boundary_file", "cell_m",
+                  "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
                   "random_offset_m", "seed", "turn", "turn_radius_m", "speed_m_s", "turn_speed_m_s",
-                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines")
+                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines", "turn_lane_m")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "engine", "operation", "season")
-SEASON_KEYS = ("operations", "compare")
+SEASON_KEYS = ("operations", "compare", "tracks")
 OPERATION_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
 TERRAIN_KEYS_OF_OPERATION = ("size_m", "cell_m", "origin_m", "passes", "initial_state")
 
@@ -124,6 +129,12 @@ class OperationSettings:
     max_lateral_error_m: float = 1.0
     vehicle: dict = dataclasses.field(default_factory=dict)  # overrides of [vehicle] for this operation
     lines: int | None = None  # None: all that fit; else the first n lines (small tests)
+    # a polygon field (symtrack.studies.boundary): the file and its ring (counter-clockwise, m); None: the rectangle
+    boundary_file: str | None = None
+    boundary: tuple | None = None
+    # controlled traffic: the depth from the border of the headland lane the U-turns cross on (m; "auto": the
+    # deepest lane the turn reaches from the headland's inner edge); None: the turns at the headland's edge
+    turn_lane_m: float | str | None = None
 
     @property
     def headland_m(self) -> float:
@@ -173,6 +184,20 @@ def parse_operation(t: dict, base: OperationSettings | None = None, where: str =
             if t[k] not in choices:
                 raise ScenarioError(f"{where}.{k} = {t[k]!r} is not one of {', '.join(choices)}")
             kw[k] = t[k]
+    if "turn_lane_m" in t:
+        v = t["turn_lane_m"]
+        kw["turn_lane_m"] = None if v in (None, "none") else "auto" if v == "auto" else \
+            _num("turn_lane_m", v, 0.0, 1e3, True)
+    if "boundary_file" in t:
+        v = t["boundary_file"]
+        if v in (None, "none"):
+            kw.update(boundary_file=None, boundary=None)
+        elif not isinstance(v, str) or not v:
+            raise ScenarioError(f"{where}.boundary_file = {v!r} must be the path of a GeoJSON or CSV boundary "
+                                "(docs/studies.md, \"A polygon field\") or \"none\"")
+        else:
+            ring = read_boundary(v, kw.get("size_m", d.size_m), kw.get("working_width_m", d.working_width_m))
+            kw.update(boundary_file=v, boundary=tuple(map(tuple, ring.tolist())))
     if "vehicle" in t:
         if not isinstance(t["vehicle"], dict):
             raise ScenarioError(f"{where}.vehicle = {t['vehicle']!r} must be a table of [vehicle] keys")
@@ -194,6 +219,7 @@ class OperationPlan:
     worked_x_m: tuple  # the lines' worked range [x0, x1] (between the headlands)
     turns: int
     settings: OperationSettings
+    worked_x_of_line: list | None = None  # per line its own range (a polygon field); None: worked_x_m for all
 
     @property
     def start(self) -> tuple[float, float, float]:
@@ -203,22 +229,44 @@ class OperationPlan:
 MAX_TRACK_LINES = 10_000  # an operation's plan holds at most this many lines or lanes (a bound, not physics)
 
 
+def _band(fs: OperationSettings) -> tuple[float, float, float]:
+    """The in-field area's y range (the headlands' inner edges) and the field's centre y."""
+    if fs.boundary is not None:
+        ring = np.array(fs.boundary)
+        inner = _inner_ring(fs)
+        return float(inner[:, 1].min()), float(inner[:, 1].max()), 0.5 * float(ring[:, 1].min() + ring[:, 1].max())
+    return fs.headland_m, fs.size_m[1] - fs.headland_m, 0.5 * fs.size_m[1]
+
+
+def _inner_ring(fs: OperationSettings) -> np.ndarray:
+    """A polygon field's in-field ring: the boundary offset inward by the headland (refused, naming
+    the key, when the headland leaves no polygon)."""
+    try:
+        return bnd.offset_ring(np.array(fs.boundary), fs.headland_m)
+    except ScenarioError as err:
+        raise ScenarioError(f"operation.headland_passes = {fs.headland_passes}: the headland of {fs.headland_m:g} m "
+                            f"inside {bnd.BOUNDARY_KEY} = {fs.boundary_file!r} leaves no in-field polygon ({err}); "
+                            "fewer headland passes or a narrower implement") from None
+
+
 def lane_positions_m(fs: OperationSettings) -> np.ndarray:
     """The permanent lanes (world y) of controlled traffic: ``lane_spacing_m`` apart, centred
     across the field, as many as fit between the headlands (a lane's swath of one spacing inside)."""
-    H, S = fs.headland_m, fs.lanes_m
-    inner = fs.size_m[1] - 2 * H
+    S = fs.lanes_m
+    lo_edge, hi_edge, centre = _band(fs)
+    inner = hi_edge - lo_edge
     if not inner / S <= MAX_TRACK_LINES:
         raise ScenarioError(f"operation.lane_spacing_m = {S:g}: {inner / S:.3g} lanes across the field, more than "
                             f"{MAX_TRACK_LINES} (the allowed range is [{inner / MAX_TRACK_LINES:.3g}, 1000] m here)")
     n = int(math.floor(inner / S + 1e-9))
-    return 0.5 * fs.size_m[1] + (np.arange(n) - 0.5 * (n - 1)) * S
+    return centre + (np.arange(n) - 0.5 * (n - 1)) * S
 
 
 def line_positions_m(fs: OperationSettings) -> np.ndarray:
     """The in-field track lines (world y of the CG), in driving order (increasing y)."""
     H, w = fs.headland_m, fs.working_width_m
-    lo, hi = H + 0.5 * w, fs.size_m[1] - H - 0.5 * w
+    lo_edge, hi_edge, _ = _band(fs)
+    lo, hi = lo_edge + 0.5 * w, hi_edge - 0.5 * w
     if fs.tracks == "controlled":
         lanes = lane_positions_m(fs)
         k = fs.working_width_m / fs.lanes_m
@@ -263,11 +311,20 @@ def _fillet_segments(points, heading0: float, radius: float, speed_line, speed_t
     returns (segments, [(kind, index of the corner or leg)], the end heading)."""
     segs, tags = [], []
     psi = heading0
+    pts = [np.asarray(q, float) for q in points]
+    # per corner its turn (signed, rad) and how far the arc cuts back along its legs: R tan(|turn| / 2)
+    # (R at a right angle, exactly: the rectangle's corners)
+    turn, cut = [0.0] * len(pts), [0.0] * len(pts)
+    for i in range(1, len(pts) - 1):
+        d0, d1 = pts[i] - pts[i - 1], pts[i + 1] - pts[i]
+        cross, dot = d0[0] * d1[1] - d0[1] * d1[0], d0[0] * d1[0] + d0[1] * d1[1]
+        turn[i] = math.atan2(cross, dot)
+        cut[i] = radius if dot == 0.0 else radius * math.tan(0.5 * abs(turn[i]))
     for i in range(1, len(points)):
-        p0, p1 = np.asarray(points[i - 1], float), np.asarray(points[i], float)
+        p0, p1 = pts[i - 1], pts[i]
         L = float(np.hypot(*(p1 - p0)))
-        cut0 = radius if i > 1 else 0.0
-        cut1 = radius if i < len(points) - 1 else 0.0
+        cut0 = cut[i - 1] if i > 1 else 0.0
+        cut1 = cut[i] if i < len(points) - 1 else 0.0
         straight = L - cut0 - cut1
         if straight < -1e-9:
             raise ScenarioError(f"operation.turn_radius_m = {radius:g}: a headland round's side of {L:g} m is "
@@ -275,19 +332,48 @@ def _fillet_segments(points, heading0: float, radius: float, speed_line, speed_t
         if straight > 1e-9:
             segs.append(Segment("straight", straight, speed_m_s=speed_line))
             tags.append(("headland", None))
-        if i < len(points) - 1:
-            q = np.asarray(points[i + 1], float)
-            d0, d1 = p1 - p0, q - p1
-            cross = d0[0] * d1[1] - d0[1] * d1[0]
-            sign = 1.0 if cross > 0 else -1.0
-            segs.append(Segment("arc", radius_m=sign * radius, angle_deg=90.0, speed_m_s=speed_turn))
+        if i < len(points) - 1 and abs(turn[i]) > 1e-12:
+            sign = 1.0 if turn[i] > 0 else -1.0
+            segs.append(Segment("arc", radius_m=sign * radius, angle_deg=math.degrees(abs(turn[i])),
+                                speed_m_s=speed_turn))
             tags.append(("headland", None))
-            psi += sign * math.pi / 2
+            psi += turn[i]
     return segs, tags, psi
 
 
+def k_turn_angles_deg(spacing: float, radius: float) -> tuple[float, float]:
+    """The K-turn (three-point turn) between lines ``spacing`` apart (0 <= spacing < 2 R), three
+    arcs of ``radius``: forward by alpha, backwards by beta (the heading turning on the same way,
+    the arc's centre on the other side), forward by alpha onto the next line, alpha + beta + alpha
+    = 180 deg. With the line's end at the origin heading +x and the centres C1 = (0, R),
+    C2 = C1 + 2 R (sin a, -cos a), C3 = C2 + 2 R (-sin(pi - a), cos(pi - a)), the end
+    C3 + (0, R) lies on the next line, y = spacing, when cos a = (2 R - spacing) / (4 R); it is
+    then at x = 0 (the next line starts where the last ended) and both cusps are at x = R sin a,
+    the turn's reach into the headland."""
+    ca_ = (2.0 * radius - spacing) / (4.0 * radius)
+    alpha = math.degrees(math.acos(ca_))
+    return alpha, 180.0 - 2.0 * alpha
+
+
+def k_turn_headland_m(spacing: float, radius: float, half_length_m: float, half_width_m: float) -> float:
+    """How far beyond a line's end the K-turn's footprint reaches (a rectangle of half length
+    ``half_length_m`` along the heading and ``half_width_m`` across): the maximum over the first
+    arc (heading theta in [0, alpha], the centre at (R sin theta, R (1 - cos theta))) of
+    (R + half_width) sin theta + half_length cos theta; the reverse arc and the last arc reach no
+    further (the last mirrors the first; the reverse arc's x falls from both cusps, for R >
+    half_width). Closed form: sqrt((R + b)^2 + l^2) when the maximising heading atan((R + b) / l)
+    is within the arc, else its value at alpha."""
+    alpha = math.radians(k_turn_angles_deg(spacing, radius)[0])
+    a = radius + half_width_m
+    theta = math.atan2(a, half_length_m)
+    if theta <= alpha:
+        return math.hypot(a, half_length_m)
+    return a * math.sin(alpha) + half_length_m * math.cos(alpha)
+
+
 def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: float):
-    """The turn from one line to the next, ``spacing`` across (> 0), to the left or right."""
+    """The turn from one line to the next, ``spacing`` across (> 0), to the left or right: "u",
+    "bulb" (module doc) or "k" (:func:`k_turn_angles_deg`)."""
     sg = 1.0 if left else -1.0
     if kind == "auto":
         kind = "u" if spacing >= 2 * radius - 1e-9 else "bulb"
@@ -301,6 +387,17 @@ def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: 
             segs.append(Segment("straight", spacing - 2 * radius, speed_m_s=speed))
         segs.append(Segment("arc", radius_m=sg * radius, angle_deg=90.0, speed_m_s=speed))
         return segs, "u"
+    if kind == "k":
+        if not spacing < 2 * radius - 1e-9:
+            raise ScenarioError(f"operation.turn = \"k\": lines {spacing:.3g} m apart are at least twice "
+                                f"operation.turn_radius_m = {radius:g} apart; a K-turn needs a spacing below 2 R, so "
+                                f"the allowed range of operation.turn_radius_m is ({0.5 * spacing:.3g}, 100] m here "
+                                "(or use turn = \"u\")")
+        alpha, beta = k_turn_angles_deg(spacing, radius)
+        segs = [Segment("arc", radius_m=sg * radius, angle_deg=alpha, speed_m_s=speed),
+                Segment("arc", radius_m=sg * radius, angle_deg=beta, speed_m_s=speed, reverse=True),
+                Segment("arc", radius_m=sg * radius, angle_deg=alpha, speed_m_s=speed)]
+        return segs, "k"
     if spacing > 2 * radius + 1e-9:
         raise ScenarioError(f"operation.turn = \"bulb\": lines {spacing:.3g} m apart are more than twice "
                             f"operation.turn_radius_m = {radius:g} apart; a bulb turn needs a spacing below 2 R "
@@ -314,6 +411,148 @@ def _turn_segments(spacing: float, radius: float, left: bool, kind: str, speed: 
     return segs, "bulb"
 
 
+def _turn_lane_extension_m(fs: OperationSettings, ys) -> float:
+    """How far the lines run on (unworked) into the headland so that the U-turns cross it on the
+    headland lane ``turn_lane_m`` deep from the border (controlled traffic; a lane is (j + 1/2)
+    ``lane_spacing_m`` deep, as the headland rounds of an implement of an odd number of lanes are):
+    headland - radius - depth, at least 0. 0 without ``turn_lane_m``."""
+    if fs.turn_lane_m is None:
+        return 0.0
+    S, H, R = fs.lanes_m, fs.headland_m, fs.turn_radius_m
+    where = "operation.turn_lane_m"
+    if fs.tracks != "controlled":
+        raise ScenarioError(f"{where} = {fs.turn_lane_m!r}: headland lanes are controlled traffic's "
+                            f"(operation.tracks = \"controlled\"), not {fs.tracks!r}; set it to \"none\"")
+    if fs.boundary is not None:
+        raise ScenarioError(f"{where} = {fs.turn_lane_m!r}: headland lanes are planned on the rectangle only, not on "
+                            f"{bnd.BOUNDARY_KEY}; set it to \"none\"")
+    spacings = np.diff(np.asarray(ys, float))
+    kinds = {("u" if fs.turn == "auto" and sp >= 2 * R - 1e-9 else fs.turn) for sp in spacings}
+    if kinds - {"u"}:
+        raise ScenarioError(f"{where} = {fs.turn_lane_m!r}: the turns crossing a headland lane are U-turns; "
+                            f"operation.turn = {fs.turn!r} gives {', '.join(sorted(kinds - {'u'}))} turns here")
+    deepest = H - R  # a U-turn from the headland's inner edge crosses it this deep from the border
+    if fs.turn_lane_m == "auto":
+        j = math.floor(deepest / S - 0.5 + 1e-9)
+        if j < 0:
+            raise ScenarioError(f"{where} = \"auto\": no headland lane ((j + 1/2) x {S:g} m deep) is within the "
+                                f"{deepest:g} m a U-turn of radius {R:g} reaches into the {H:g} m headland")
+        depth = (j + 0.5) * S
+    else:
+        depth = float(fs.turn_lane_m)
+        j = depth / S - 0.5
+        if abs(j - round(j)) > 1e-6 or round(j) < 0:
+            raise ScenarioError(f"{where} = {depth:g} is not a headland lane: the lanes are (j + 1/2) x "
+                                f"operation.lane_spacing_m = {S:g} m deep ({0.5 * S:g}, {1.5 * S:g}, ...)")
+        if depth > deepest + 1e-9:
+            raise ScenarioError(f"{where} = {depth:g} is outside the allowed range (0, {deepest:g}] m: a U-turn of "
+                                f"operation.turn_radius_m = {R:g} from the headland's inner edge ({H:g} m) crosses "
+                                f"at most {deepest:g} m deep")
+    return deepest - depth
+
+
+def _plan_polygon(fs: OperationSettings) -> OperationPlan:
+    """A polygon field's path (docs/studies.md, "A polygon field"): the headland rounds are the
+    boundary's mitred offsets at (i + 1/2) w, driven counter-clockwise as one inward spiral (the
+    last edge of round i meets the first edge of round i + 1; the last round's meets the first
+    line), every corner an arc of ``turn_radius_m``; the track lines along x, spaced as on the
+    rectangle across the inner ring's y range, each worked between its crossings with the inner
+    ring (the boundary offset by the headland), the turns at the headland end of the longer of the
+    two lines they join (the shorter extended, unworked, to it)."""
+    w, R, n = fs.working_width_m, fs.turn_radius_m, fs.headland_passes
+    key = f"{bnd.BOUNDARY_KEY} = {fs.boundary_file!r}"
+    ring0 = np.array(fs.boundary)
+    rings = []
+    for i in range(n):
+        try:
+            rings.append(bnd.offset_ring(ring0, (i + 0.5) * w))
+        except ScenarioError as err:
+            raise ScenarioError(f"operation.headland_passes = {n}: headland round {i + 1} ({(i + 0.5) * w:g} m inside "
+                                f"{key}) is not a polygon like the boundary ({err}); fewer headland passes, a "
+                                "narrower implement or a simpler boundary") from None
+    inner = _inner_ring(fs)
+    ys = line_positions_m(fs)
+    if fs.lines is not None:
+        ys = ys[:fs.lines]
+    # a line beyond the inner ring's top (the last line's centre may lie up to a width beyond the
+    # in-field edge, as on the rectangle) is left out: its swath would work only the headland
+    ys = ys[ys < inner[:, 1].max()]
+    spans = []
+    for y in ys:
+        xs = bnd.line_crossings(inner, float(y))
+        if xs.size != 2:
+            raise ScenarioError(f"{key}: the track line at y = {y:.3g} m crosses the in-field polygon in "
+                                f"{xs.size // 2} pieces; a plan drives one piece per line (a boundary whose inner "
+                                "polygon every horizontal line crosses once: convex along y)")
+        spans.append((float(xs[0]), float(xs[1])))
+    # the spiral starts where the last round's downward (west) edge crosses the first line
+    last = rings[-1]
+    q = np.roll(last, -1, axis=0)
+    y0 = float(ys[0])
+    down = np.nonzero((q[:, 1] < last[:, 1]) & (np.minimum(last[:, 1], q[:, 1]) <= y0)
+                      & (y0 < np.maximum(last[:, 1], q[:, 1])))[0]
+    if down.size == 0:
+        raise ScenarioError(f"{key}: no edge of the last headland round crosses the first line at y = {y0:.3g} m")
+    xcross = last[down, 0] + (y0 - last[down, 1]) / (q[down, 1] - last[down, 1]) * (q[down, 0] - last[down, 0])
+    e = int(down[np.argmin(xcross)])
+    order = (np.arange(len(ring0)) + e + 1) % len(ring0)  # edge e the last: v0 its end
+    rings = [r[order] for r in rings]
+
+    def meet(p0, p1, q0, q1):  # the crossing of the lines p0-p1 and q0-q1
+        d, f = p1 - p0, q1 - q0
+        den = d[0] * f[1] - d[1] * f[0]
+        if abs(den) < 1e-12:
+            raise ScenarioError(f"{key}: two consecutive headland legs are parallel; a simpler boundary")
+        t = ((q0[0] - p0[0]) * f[1] - (q0[1] - p0[1]) * f[0]) / den
+        return p0 + t * d
+
+    v0, v1 = rings[0][0], rings[0][1]
+    pts = [tuple(v0 + R * bnd.unit(v1 - v0))]
+    for i in range(n):
+        r = rings[i]
+        pts += [tuple(v) for v in r[1:]]
+        if i + 1 < n:
+            pts.append(tuple(meet(r[-1], r[0], rings[i + 1][0], rings[i + 1][1])))
+        else:
+            pts.append(tuple(meet(r[-1], r[0], np.array([0.0, y0]), np.array([1.0, y0]))))
+    # the turn points: east ends (even lines run east) at the longer line's end, west ends likewise
+    ends = []
+    for k in range(len(ys)):
+        east = k % 2 == 0
+        if k + 1 < len(ys):
+            ends.append(max(spans[k][1], spans[k + 1][1]) if east else min(spans[k][0], spans[k + 1][0]))
+        else:
+            ends.append(spans[k][1] if east else spans[k][0])
+    if ends[0] <= pts[-1][0] + 1e-6:
+        raise ScenarioError(f"{key}: the first line ends at x = {ends[0]:.3g} m, before the headland's corner onto it")
+    pts.append((ends[0], y0))
+    segs, tags, _ = _fillet_segments(pts, math.atan2(v1[1] - v0[1], v1[0] - v0[0]), R, fs.speed_m_s,
+                                     fs.turn_speed_m_s)
+    tags[-1] = ("line", 0)
+    line_of = [t[1] for t in tags]
+    roles = [t[0] for t in tags]
+    turns = 0
+    for k in range(1, len(ys)):
+        spacing = float(ys[k] - ys[k - 1])
+        tsegs, _ = _turn_segments(spacing, R, left=k % 2 == 1, kind=fs.turn, speed=fs.turn_speed_m_s)
+        segs += tsegs
+        roles += ["turn"] * len(tsegs)
+        line_of += [None] * len(tsegs)
+        turns += 1
+        L = abs(ends[k] - ends[k - 1])
+        if L <= 1e-6:
+            raise ScenarioError(f"{key}: the track line at y = {ys[k]:.3g} m has no length between its turns")
+        segs.append(Segment("straight", L, speed_m_s=fs.speed_m_s))
+        roles.append("line")
+        line_of.append(k)
+    heading0 = math.atan2(v1[1] - v0[1], v1[0] - v0[0])
+    path = Path(pts[0][0], pts[0][1], heading0, segs, fs.speed_m_s, fs.turn_speed_m_s, ds_m=PATH_DS_M,
+                extension_m=5.0)
+    lo = min(a for a, _ in spans)
+    hi = max(b for _, b in spans)
+    return OperationPlan(path, roles, line_of, [float(y) for y in ys], (lo, hi), turns, fs, spans)
+
+
 def plan_operation(fs: OperationSettings) -> OperationPlan:
     """The continuous path of an operation (module doc). Geometry only: :func:`check_plan` checks
     it against the vehicle and the soil."""
@@ -322,6 +561,8 @@ def plan_operation(fs: OperationSettings) -> OperationPlan:
     if w > min(Lx, Ly):
         raise ScenarioError(f"operation.working_width_m = {w:g} is outside the allowed range (0, {min(Lx, Ly):g}] m "
                             f"(the field is {Lx:g} m x {Ly:g} m)")
+    if fs.boundary is not None:
+        return _plan_polygon(fs)
     H = fs.headland_m
     if 2 * H >= min(Lx, Ly):
         raise ScenarioError(f"operation.headland_passes = {fs.headland_passes}: {fs.headland_passes} rounds of "
@@ -344,14 +585,23 @@ def plan_operation(fs: OperationSettings) -> OperationPlan:
     line_of = [t[1] for t in tags]
     roles = [t[0] for t in tags]
     turns = 0
+    ext = _turn_lane_extension_m(fs, ys)
     for k in range(1, len(ys)):
         spacing = float(ys[k] - ys[k - 1])
         east = k % 2 == 1  # line k-1 ran east (+x) when k-1 is even
         tsegs, _ = _turn_segments(spacing, R, left=east, kind=fs.turn, speed=fs.turn_speed_m_s)
+        if ext > 1e-9:  # on into the headland to the turn lane, and back out (unworked, the line's own)
+            segs.append(Segment("straight", ext, speed_m_s=fs.turn_speed_m_s))
+            roles.append("line")
+            line_of.append(k - 1)
         segs += tsegs
         roles += ["turn"] * len(tsegs)
         line_of += [None] * len(tsegs)
         turns += 1
+        if ext > 1e-9:
+            segs.append(Segment("straight", ext, speed_m_s=fs.turn_speed_m_s))
+            roles.append("line")
+            line_of.append(k)
         segs.append(Segment("straight", Lx - 2 * H, speed_m_s=fs.speed_m_s))
         roles.append("line")
         line_of.append(k)
@@ -369,7 +619,9 @@ def _sample_roles(plan: OperationPlan) -> np.ndarray:
             out[m] = 1
         elif r == "line":
             x = plan.path.x[m]
-            out[m] = np.where((x >= plan.worked_x_m[0] - 1e-9) & (x <= plan.worked_x_m[1] + 1e-9), 3, 2)
+            k = plan.line_of_segment[i]
+            x0, x1 = plan.worked_x_m if plan.worked_x_of_line is None else plan.worked_x_of_line[k]
+            out[m] = np.where((x >= x0 - 1e-9) & (x <= x1 + 1e-9), 3, 2)
     out[seg < 0] = 2
     return out
 
@@ -458,6 +710,11 @@ def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
     half_l = 0.5 * params["contact_length_m"] + abs(params["cg_ahead_of_contact_centre_m"])
     half_w = 0.5 * (params["track_gauge_m"] + params["track_width_m"])
     room = padding_m(fs.cell_m) + fs.cell_m
+    if fs.turn == "k" and len(plan.line_y_m) > 1 and fs.boundary is None:  # (a polygon's: the footprint check)
+        _check_k_turns(plan, half_l, half_w, room, 0.5 * float(params["track_gauge_m"]))
+    if fs.boundary is not None:
+        _check_in_polygon(plan, x, y, psi, half_l + room, half_w + room)
+        return {}
     ext_x = half_l * np.abs(np.cos(psi)) + half_w * np.abs(np.sin(psi)) + room
     ext_y = half_l * np.abs(np.sin(psi)) + half_w * np.abs(np.cos(psi)) + room
     out = (x - ext_x < 0) | (x + ext_x > Lx) | (y - ext_y < 0) | (y + ext_y > Ly)
@@ -472,6 +729,62 @@ def check_plan(plan: OperationPlan, params: dict, model_opts) -> dict:
                             f"{fs.working_width_m:g} the headland of {fs.headland_passes} rounds ({fs.headland_m:g} m) "
                             "is too narrow: raise operation.headland_passes or lower the radius")
     return {}
+
+
+def _check_in_polygon(plan: OperationPlan, x, y, psi, hl: float, hw: float) -> None:
+    """The footprint (a rectangle of half length ``hl``, half width ``hw`` about each pose) inside
+    the boundary: its corners and the midpoints of its sides inside, and no boundary vertex inside
+    it (a reflex vertex poking into the footprint)."""
+    fs = plan.settings
+    ring = np.array(fs.boundary)
+    c, s_ = np.cos(psi), np.sin(psi)
+    pts = []
+    for a, b in ((1, 1), (1, -1), (-1, 1), (-1, -1), (1, 0), (-1, 0), (0, 1), (0, -1)):
+        pts.append(np.column_stack([x + a * hl * c - b * hw * s_, y + a * hl * s_ + b * hw * c]))
+    inside = np.all(np.stack([bnd.contains(ring, q) for q in pts]), axis=0)
+    for vx, vy in ring:
+        u = (vx - x) * c + (vy - y) * s_
+        v = -(vx - x) * s_ + (vy - y) * c
+        inside &= ~((np.abs(u) < hl) & (np.abs(v) < hw))
+    if not inside.all():
+        k = int(np.argmax(~inside))
+        seg = int(plan.path.segment[k])
+        role = plan.roles[seg] if seg >= 0 else "end"
+        raise ScenarioError(f"the plan leaves the field: at ({x[k]:.2f}, {y[k]:.2f}) m on a {role} segment the "
+                            f"vehicle's footprint (half length {hl:.3g} m, half width {hw:.3g} m with the engine's "
+                            f"padding) crosses the boundary of {bnd.BOUNDARY_KEY} = {fs.boundary_file!r}; with "
+                            f"operation.turn_radius_m = {fs.turn_radius_m:g} the headland of {fs.headland_passes} "
+                            f"rounds ({fs.headland_m:g} m) is too narrow there: raise operation.headland_passes or "
+                            "lower the radius")
+
+
+def _check_k_turns(plan: OperationPlan, half_l: float, half_w: float, room: float, half_gauge: float) -> None:
+    """A K-turn whose footprint reaches beyond the headland (:func:`k_turn_headland_m`, plus the
+    engine's padding ``room``) is refused, naming the key and the radii that fit."""
+    fs = plan.settings
+    S = float(np.max(np.diff(plan.line_y_m)))  # the reach grows with the spacing: the widest turn decides
+    R, H = fs.turn_radius_m, fs.headland_m
+
+    def need(r):
+        return k_turn_headland_m(S, r, half_l, half_w) + room
+
+    if need(R) <= H + 1e-9:
+        return
+    lo = max(0.5 * S, half_gauge)  # a K-turn needs 2 R > S; a turn, R > half the gauge
+    if need(lo * (1 + 1e-9)) > H:
+        fit = f"no K-turn radius fits this headland (even R -> {lo:.3g} m reaches {need(lo * (1 + 1e-9)):.3g} m)"
+    else:
+        a, b = lo, R  # need() grows with R (R sin alpha does): bisect need(r) = H
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            a, b = (m, b) if need(m) <= H else (a, m)
+        fit = f"the allowed range of operation.turn_radius_m is ({lo:.3g}, {a:.3g}] m here"
+    passes = int(math.ceil(need(R) / fs.working_width_m - 1e-9))
+    raise ScenarioError(f"operation.turn = \"k\": a K-turn of operation.turn_radius_m = {R:g} between lines {S:.3g} m "
+                        f"apart reaches {need(R):.3g} m beyond the line's end (the path {R:g} sin alpha, the "
+                        f"vehicle's footprint and {room:.3g} m of the engine's padding), more than the headland's "
+                        f"{H:g} m (operation.headland_passes = {fs.headland_passes} x operation.working_width_m = "
+                        f"{fs.working_width_m:g}): {fit}, or operation.headland_passes >= {passes}")
 
 
 # ---- the steering map and the follower -------------------------------------------------------------------
@@ -515,9 +828,14 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
             if v > turn_speed_m_s + 1e-9 and kappa > 1.0 / 30 + 1e-12:
                 continue  # a line's speed is not driven through tight curves
             try:
+                # backwards (v < 0: a K-turn's reverse arc) the same yaw rate kappa |v| is a trim radius of -1/kappa
                 t = tp if (v == turn_speed_m_s and kappa == 1.0 / turn_radius_m) else \
-                    trim(model, params, v, None if kappa == 0 else 1.0 / kappa)
-            except TrimError:
+                    trim(model, params, v, None if kappa == 0 else math.copysign(1.0, v) / kappa)
+            except TrimError as err:
+                if v < 0 and kappa == 1.0 / turn_radius_m:
+                    raise ScenarioError(f"operation.turn_radius_m = {turn_radius_m:g} at operation.turn_speed_m_s = "
+                                        f"{turn_speed_m_s:g} backwards (a K-turn's reverse arc): the vehicle cannot "
+                                        f"hold this turn on this soil ({err})") from err
                 continue
             ks.append(kappa)
             mean.append(0.5 * float(t.u[0] + t.u[1]))
@@ -532,8 +850,9 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
 
 def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, float]:
     """Mean torque, torque difference, mean sprocket speed and speed difference (right - left) at
-    speed v, curvature kappa (the differences odd in kappa), interpolated."""
-    speeds = sorted(rows)
+    speed v, curvature kappa (the differences odd in kappa), interpolated; v < 0 (backwards) from
+    the rows of negative speeds."""
+    speeds = sorted(s for s in rows if (s < 0) == (v < 0))  # backwards (v < 0): the reverse rows
     a = abs(kappa)
 
     def at(s):
@@ -593,6 +912,10 @@ class PathFollower:
     # chosen on operation_small, both soils: K / J = 10 1/s, the torque lag's bandwidth; 600 gave the
     # same figures, 0 let the braked inner track stick and slip in the turns)
     SPROCKET_GAIN_N_M_S = 300.0
+    # a K-turn's cusps: the cusp counts as reached this close to it (the speed profile is 0 there), and the
+    # profile's floor about it (ASSUMED: a creep that reaches the cusp and starts back; chosen on the K-turn test)
+    CUSP_TOL_M = 0.1
+    CUSP_CREEP_M_S = 0.15
 
     def __init__(self, plan: OperationPlan, params: dict, rows: dict, state_names, sample_time_s: float,
                  substep_s: float, torque_limit_N_m: float, max_lateral_error_m: float):
@@ -614,14 +937,25 @@ class PathFollower:
         # the speed profile: the path's, limited in deceleration before its slow parts
         v = self.path.speed.copy()
         ds = np.diff(self.path.s)
-        for i in range(v.size - 2, -1, -1):
-            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
         # and in acceleration after them: the line's speed asked for at once after a turn made the mean
         # torque and the sprockets' speed references step, and the tracks spin (measured: the state
         # diverged at the exit of a U-turn on the sandy loam)
+        # the cusps of a K-turn (where the path's direction reverses): the vehicle stops there (the
+        # profile 0 at the cusp, a creep floor so that it gets there and starts back)
+        cusp_idx = np.searchsorted(self.path.s, self.path.cusps_s)
+        v[cusp_idx] = 0.0
+        for i in range(v.size - 2, -1, -1):
+            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
         for i in range(1, v.size):
             v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i - 1]))
+        if cusp_idx.size:
+            v = np.maximum(v, np.minimum(self.CUSP_CREEP_M_S, self.path.speed))
         self.v_profile = v
+        # the path between cusps: one direction each; the projection never crosses a cusp it has not reached
+        self.phase_s = np.concatenate([[-np.inf], self.path.cusps_s, [np.inf]])
+        self.phase_dir = [float(self.path.direction[min(int(np.searchsorted(self.path.s, a)), self.path.s.size - 1)])
+                          for a in np.concatenate([[0.0], self.path.cusps_s])]
+        self.phase = 0
         self.log = []  # (t, s, e_lat, e_psi, role)
         self.failure = None
         self.done = False
@@ -647,7 +981,12 @@ class PathFollower:
             return None
         X, Y, psi = float(x[self.ix]), float(x[self.iy]), float(x[self.ipsi])
         u, r = float(x[self.iu]), float(x[self.ir])
-        self.s = self.path.project(X, Y, self.s, window_m=(-1.0, 3.0))
+        lo, hi = self.phase_s[self.phase], self.phase_s[self.phase + 1]
+        self.s = self.path.project(X, Y, self.s, window_m=(max(-1.0, lo - self.s), min(3.0, hi - self.s)))
+        if self.s >= hi - self.CUSP_TOL_M:  # a cusp reached: on to the next direction
+            self.phase += 1
+            self.int_v = 0.0
+        d = self.phase_dir[self.phase]
         e, e_psi = self.path.errors(X, Y, psi, self.s)
         i = min(int(np.searchsorted(self.path.s, self.s)), self.roles.size - 1)
         self.log.append((t_s, self.s, e, e_psi, int(self.roles[i])))
@@ -660,13 +999,15 @@ class PathFollower:
                             f"exceeds operation.max_lateral_error_m = {self.max_err:g}")
             return None
         v = max(abs(u), 0.3)
-        kappa = self._kappa(self.s + v * self.PREVIEW_S, max(v * self.WINDOW_S, 0.05))
+        ahead = min(self.s + v * self.PREVIEW_S, self.phase_s[self.phase + 1])  # not past a cusp
+        kappa = self._kappa(ahead, max(v * self.WINDOW_S, 0.05))
         w = self.OMEGA_N
-        r_d = kappa * v - (w * w / v) * e - 2 * w * e_psi
+        # backwards (d = -1) de/dt = -v e_psi: the lateral term's sign turns so that e closes as forwards
+        r_d = kappa * v - d * (w * w / v) * e - 2 * w * e_psi
         r_d = max(min(r_d, 0.8), -0.8)
         # the speed reference, ramped from the start
-        v_ref = min(float(np.interp(self.s, self.path.s, self.v_profile)),
-                    0.3 + PLAN_ACCEL_M_S2 * t_s)
+        v_ref = d * min(float(np.interp(self.s, self.path.s, self.v_profile)),
+                        0.3 + PLAN_ACCEL_M_S2 * t_s)
         h = self.sample_time_s
         er, ev = r_d - r, v_ref - u
         self.int_r = max(min(self.int_r + h * er, 0.5), -0.5)
@@ -780,7 +1121,8 @@ def _operation(doc: dict, fs: OperationSettings):
                             f"{sc.params['track_width_m']:g} m")
     plan = plan_operation(fs)
     check_plan(plan, sc.params, sc.model)
-    rows = steering_map(sc.params, sc.model, (fs.turn_speed_m_s, fs.speed_m_s), fs.turn_radius_m, fs.turn_speed_m_s)
+    speeds = (fs.turn_speed_m_s, fs.speed_m_s) + ((-fs.turn_speed_m_s,) if plan.path.cusps_s.size else ())
+    rows = steering_map(sc.params, sc.model, speeds, fs.turn_radius_m, fs.turn_speed_m_s)
     return fs, plan, sc, rows
 
 
@@ -805,11 +1147,18 @@ def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks:
     for c in compare:
         if c not in TRACKS:
             raise ScenarioError(f"season.compare = {list(compare)!r}: {c!r} is not one of {', '.join(TRACKS)}")
+    if "tracks" in season:  # every operation under one system: a case of the comparison (traffic_sweep)
+        if season["tracks"] not in TRACKS:
+            raise ScenarioError(f"season.tracks = {season['tracks']!r} is not one of {', '.join(TRACKS)}")
+        if tracks is None:
+            tracks = season["tracks"]
+        compare = ()
     ops = []
     for k, e in enumerate(entries):
         fs = parse_operation(e, base, where=f"season.operations[{k}]")
-        if fs.size_m != base.size_m or fs.cell_m != base.cell_m:
-            raise ScenarioError(f"season.operations[{k}]: size_m and cell_m are the field's: set them in [operation]")
+        if fs.size_m != base.size_m or fs.cell_m != base.cell_m or fs.boundary != base.boundary:
+            raise ScenarioError(f"season.operations[{k}]: size_m, cell_m and boundary_file are the field's: set them "
+                                "in [operation]")
         if tracks is not None:
             fs = dataclasses.replace(fs, tracks=tracks)
         if "name" not in e:
@@ -830,7 +1179,7 @@ def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks:
 def load_operation_spec(name_or_path, overrides=None, tracks: str | None = None) -> OperationSpec:
     """A built-in operation or season (``symtrack/studies/fields/``) or a TOML file, with ``--set`` overrides."""
     doc, default_name = read_document(name_or_path, FIELD_PACKAGE, "field operation", overrides,
-                                      paths=TERRAIN_PATH_KEYS)
+                                      paths=TERRAIN_PATH_KEYS + (("operation", "boundary_file"),))
     return operation_spec_from_dict(doc, default_name, tracks)
 
 
@@ -892,7 +1241,29 @@ def count_passes_and_times(traj: np.ndarray, params: dict, shape, cell_m: float)
     return counts, first
 
 
+_MASK_CACHE: dict = {}  # a polygon field's cell masks (point-in-polygon over every cell: about 1 s at 4 million)
+
+
+def _ring_mask(ring: np.ndarray, shape, cell_m: float) -> np.ndarray:
+    key = (ring.tobytes(), tuple(shape), cell_m)
+    if key not in _MASK_CACHE:
+        if len(_MASK_CACHE) > 8:
+            _MASK_CACHE.clear()
+        _MASK_CACHE[key] = bnd.cell_mask(ring, shape, cell_m)
+    return _MASK_CACHE[key]
+
+
+def field_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
+    """The grid's cells (nx, ny) that are the field: all of them on a rectangle, those whose centre
+    is inside the boundary on a polygon field."""
+    if fs.boundary is None:
+        return np.ones(shape, dtype=bool)
+    return _ring_mask(np.array(fs.boundary), shape, cell_m).copy()
+
+
 def _headland_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
+    if fs.boundary is not None:  # the field's cells outside the in-field ring
+        return field_mask(fs, shape, cell_m) & ~_ring_mask(_inner_ring(fs), shape, cell_m)
     nx, ny = shape
     xc = (np.arange(nx) + 0.5) * cell_m
     yc = (np.arange(ny) + 0.5) * cell_m
@@ -906,16 +1277,19 @@ def field_shares(stressed: np.ndarray, counts: np.ndarray, fs: OperationSettings
     """The trafficked shares (in the field, the headland and the in-field area) and the area run
     over once, twice, three times or more."""
     head = _headland_mask(fs, stressed.shape, fs.cell_m)
+    field = field_mask(fs, stressed.shape, fs.cell_m)
     area = fs.cell_m ** 2
-    out = {"trafficked_fraction": float(stressed.mean()),
+    out = {"trafficked_fraction": float(stressed[field].mean()),
            "headland_trafficked_fraction": float(stressed[head].mean()),
-           "infield_trafficked_fraction": float(stressed[~head].mean()),
-           "headland_area_m2": float(head.sum() * area), "field_area_m2": float(stressed.size * area)}
-    c = counts.astype(np.int64)
+           "infield_trafficked_fraction": float(stressed[field & ~head].mean()),
+           "headland_area_m2": float(head.sum() * area), "field_area_m2": float(field.sum() * area)}
+    c = counts.astype(np.int64)[field]
     for k, name in ((1, "once"), (2, "twice")):
         out[f"area_run_over_{name}_m2"] = float((c == k).sum() * area)
     out["area_run_over_3_or_more_m2"] = float((c >= 3).sum() * area)
     out["repeated_coverage_fraction"] = float(c.sum() / c.size)  # Kroulik's "repeated coverage": passes x area / field
+    if fs.boundary is not None:  # (a polygon field's grid holds cells outside it: traffic there is outside the field)
+        out["outside_field_trafficked_m2"] = float((stressed & ~field).sum() * area)
     out["passes_per_cell_max"] = int(c.max()) if c.size else 0
     return out
 
@@ -1156,28 +1530,42 @@ TRAFFIC_COLUMNS = ("tracks", "complete", "trafficked_fraction", "headland_traffi
                    "turns_driven", "turns_lifted", "rms_lateral_error_lines_m", "wall_time_s")
 
 
+def traffic_row(system: str, summary: dict | None) -> dict:
+    """A row of the traffic table (:data:`TRAFFIC_COLUMNS`) from a system's season summary (None:
+    the season did not finish: complete false, the figures empty)."""
+    summary = summary or {"complete": False}
+    return {"tracks": system, **{k: summary.get(k) for k in TRAFFIC_COLUMNS if k != "tracks"}}
+
+
+def traffic_files(rows) -> dict:
+    """The comparison's table and figure: ``traffic.csv``, ``traffic.png``, ``traffic.json``."""
+    import csv
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(TRAFFIC_COLUMNS)
+    for r in rows:
+        w.writerow(["" if r[c] is None else r[c] for c in TRAFFIC_COLUMNS])
+    return {"traffic.csv": buf.getvalue(), "traffic.png": _traffic_png(rows),
+            "traffic.json": json.dumps(rows, indent=2) + "\n"}
+
+
 def traffic_comparison(doc: dict, systems, out=None, progress: bool = False, name: str = "operation") -> dict:
     """The same season under each traffic system of ``systems`` (e.g. ("random", "controlled")), each
-    on a new field: one table (``traffic.csv``, a row per system) and one figure (``traffic.png``)."""
+    on a new field, one after another in this process: one table (``traffic.csv``, a row per system)
+    and one figure (``traffic.png``). :func:`symtrack.studies.traffic.traffic_sweep` runs the same
+    comparison as a resumable sweep on Dask."""
     rows = []
     folder = check_output_folder(str(out)) if out is not None else None
     # every system's season planned and checked before any runs
     specs = [(sys_, operation_spec_from_dict(doc, name, tracks=sys_)) for sys_ in systems]
     for sys_, spec in specs:
         res = run_season(spec, None if folder is None else folder / sys_, progress=progress)
-        rows.append({"tracks": sys_, **{k: res.summary.get(k) for k in TRAFFIC_COLUMNS if k != "tracks"}})
+        rows.append(traffic_row(sys_, res.summary))
     if folder is not None:
-        import csv
-
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(TRAFFIC_COLUMNS)
-        for r in rows:
-            w.writerow([r[c] for c in TRAFFIC_COLUMNS])
         from ..reports.run_files import write_folder
 
-        write_folder(folder, {"traffic.csv": buf.getvalue(), "traffic.png": _traffic_png(rows),
-                              "traffic.json": json.dumps(rows, indent=2) + "\n"}, clear=False)
+        write_folder(folder, traffic_files(rows), clear=False)
     return {"rows": rows}
 
 

@@ -128,9 +128,18 @@ def run_one(task: dict) -> dict:
 
                 simulate(sc).write(folder)
             elif task["kind"] == "field":
-                from .field import run_field_study
+                from .operations import OperationSpec, run_season
 
-                run_field_study(sc, out=folder)
+                if isinstance(sc, OperationSpec):  # a field operation or a season (one traffic system)
+                    if sc.compare:
+                        raise ScenarioError("season.compare: a traffic comparison is a sweep of its own "
+                                            "(symtrack field ... --workers N, or vary season.tracks); "
+                                            "a sweep run drives one system: set season.tracks")
+                    run_season(sc, out=folder)
+                else:
+                    from .field import run_field_study
+
+                    run_field_study(sc, out=folder)
             else:
                 from ..control.closedloop import run, write
 
