@@ -189,7 +189,8 @@ def test_refusals():
     doc = {"run": {"integrator": "cvodes"}, "model": {"vehicle": "3d"}, "vehicle": {"preset": "reference_crawler"},
            "soil": {"preset": "clayey_soil_thailand_38"}, "torque": [{"t_s": 0.0, "left_N_m": 0.0, "right_N_m": 0.0}],
            "terrain": {}}
-    with pytest.raises(ScenarioError, match="model.vehicle = '3d'.*homogeneous terrain only"):
+    with pytest.raises(ScenarioError, match="model.vehicle = '3d'.*homogeneous terrain or on the grid through the "
+                       "terrain engine.*run.integrator = 'grid_fast'"):
         scenario_from_dict(doc)
     with pytest.raises(ScenarioError, match="slope_x_deg.*20"):
         parse_surface({"slope_x_deg": 25.0})

@@ -1,0 +1,77 @@
+"""The 3D vehicle on the grid terrain through the terrain engine (issue 22; docs/vehicle3d.md, "The grid
+under the 3D vehicle"): the flat virgin field against the homogeneous 3D run (the same law in two places),
+the cells' sinkage against the hull's penetration, the subsoil fields, the refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import symtrack
+from symtrack.simulation.plants import advance_plant, make_plant
+from symtrack.simulation.scenario import load_scenario
+
+FIGURES = ("distance_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm", "sinkage_idler_mm",
+           "speed_final_m_s", "shear_driven_max_m", "shear_idle_min_m")
+
+
+pytestmark = pytest.mark.slow  # the 3D engine's first compile: about 30 s of CPU (more under load)
+
+
+@pytest.fixture(scope="module")
+def flat_runs():
+    grid = symtrack.simulate(load_scenario("validation_grid", ["model.vehicle=3d"]))
+    homo = symtrack.simulate(load_scenario("validation", ["model.vehicle=3d"]))
+    return grid, homo
+
+
+def test_flat_virgin_field_matches_the_homogeneous_3d_run(flat_runs):
+    """One law in two places: on the flat virgin field every validation figure of the grid run is within
+    1 % of the homogeneous 3D run's (the hull meets virgin soil along the whole track in both)."""
+    grid, homo = flat_runs
+    for k in FIGURES:
+        a, b = homo.summary[k], grid.summary[k]
+        assert abs(b / a - 1) < 0.01, (k, a, b)
+    # the grid's own figures: the subsoil stress and the bulk density are filled under the tracks
+    s = grid.summary
+    assert s["subsoil_loaded_area_m2"] > 30.0 and s["rut_cells"] > 3000
+    st = grid.terrain
+    touched = st.zmax > 0
+    assert np.all(st.sigma_max[touched].max(axis=1) > 0)
+    assert np.count_nonzero(st.specific_volume[touched] != st.specific_volume[~touched][:1]) > 0
+    # the cells' work is the compaction resistance: positive, below the homogeneous hull's Bekker work at its
+    # deepest penetration (as the planar engine's against the planar homogeneous run: docs/vehicle3d.md)
+    rc_grid = grid.runs[-1].output("compaction_resistance_left_N")[-1]
+    rc_homo = homo.runs[-1].output("compaction_resistance_left_N")[-1]
+    assert 0.4 * rc_homo < rc_grid < rc_homo
+
+
+def test_the_cells_sink_as_deep_as_the_hull_penetrates():
+    """The coupling's consistency: under the tracks (cells wholly inside a contact) each cell's sinkage is
+    the hull's penetration at that cell within 1 % (the cells integrate their own sinkage under the segment
+    pressures; the hull's pressure is the law on the cells' history)."""
+    sc = load_scenario("validation_grid", ["model.vehicle=3d"])
+    plant = make_plant(sc)
+    plant.world.clear()
+    plant.start(0.0, 0.0, 0.0, [2000.0, 2000.0])
+    # 2 s: the vehicle has left the cells it was set down on (they keep the start's deeper static sinkage)
+    x, _ = advance_plant(plant, [2000.0, 2000.0], 2.0, sc.run.output_dt_s)
+    X = dict(zip(plant.engine.fns.layout.vehicle_names, x, strict=True))
+    P = sc.params
+    l, e, h, B = (P[k] for k in ("contact_length_m", "cg_ahead_of_contact_centre_m", "cg_height_m", "track_gauge_m"))
+    st = plant.engine.state
+    act = st.active_channels()
+    c, s = np.cos(X["yaw_rad"]), np.sin(X["yaw_rad"])
+    dx, dy = st.ch_cx[act] - X["x_m"], st.ch_cy[act] - X["y_m"]
+    xb, yb = c * dx + s * dy, -s * dx + c * dy
+    # cells wholly inside a contact, between the first and the last segment centre (beyond them the
+    # pieces are constant: the front's entering cells take the first segment's pressure)
+    ds = l / sc.model.contact_segments
+    s_track = (l / 2 - e) - xb
+    full = (st.ch_g[act, 1] + st.ch_g[act, 2] > 0.999) & (s_track > ds / 2) & (s_track < l - ds / 2)
+    # the track's ground line below the hull at the cell (small angles: the pose's own rotation, first order)
+    z_line = X["z_m"] - h + xb * np.sin(X["pitch_rad"]) + np.sign(yb) * B / 2 * np.sin(X["roll_rad"])
+    pen = -z_line
+    z = st.ch_z[act]
+    assert full.sum() > 100
+    assert np.all(np.abs(z[full] / pen[full] - 1) < 0.01), np.max(np.abs(z[full] / pen[full] - 1))
