@@ -69,6 +69,7 @@ class TerrainEngine:
         self.kernel = CKernel(library(self.fns), self.state) if kernel is None else kernel(self.fns, self.state)
         self.compiled = self.kernel.compiled
         self.timing = {"kernel_s": 0.0, "kernel_cpu_s": 0.0, "calls": 0}
+        self._hull_model = None  # the 3D vehicle's homogeneous model of its start (_hull_start)
 
     # -- passes ---------------------------------------------------------------------------------------------
     def release_all(self) -> None:
@@ -115,7 +116,9 @@ class TerrainEngine:
         set-down (the cells' static sinkage) and the settling then bring onto the field as it is
         (on the ruts of an earlier pass, lower)."""
         w = self.world
-        model = SystemModel(w.opts, vehicle=make_vehicle(w.opts, getattr(w, "surface", None)))
+        if self._hull_model is None:  # built once per engine (every pass starts from it)
+            self._hull_model = SystemModel(w.opts, vehicle=make_vehicle(w.opts, getattr(w, "surface", None)))
+        model = self._hull_model
         x = static_state(model, w.params, x_m, y_m, yaw_rad)
         return np.asarray(x, dtype=float)[model.layout.block("vehicle")]
 
