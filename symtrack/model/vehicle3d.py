@@ -83,7 +83,8 @@ from .vehicle import (
 )
 
 __all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
-           "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_terrain", "make_vehicle"]
+           "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_terrain", "hull_rotation",
+           "make_vehicle"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -142,7 +143,7 @@ class SegmentDistribution:
         return self.p[-1]
 
 
-def _rotation(yaw, pitch, roll):
+def hull_rotation(yaw, pitch, roll):
     """R = Rz(yaw) Ry(-pitch) Rx(roll): body -> world (pitch nose up, roll left side up)."""
     cy, sy, cp, sp, cr, sr = ca.cos(yaw), ca.sin(yaw), ca.cos(pitch), ca.sin(pitch), ca.cos(roll), ca.sin(roll)
     Rz = ca.SX(3, 3)
@@ -234,7 +235,7 @@ class Vehicle3D:
         pose_rates = ca.SX.zeros(xv.numel())
         for i, v in zip(pose_idx, (Xdot, Ydot, rz, w, q, pr), strict=True):
             pose_rates[i] = v
-        Rz, Rpr = _rotation(psi, pitch, roll)
+        Rz, Rpr = hull_rotation(psi, pitch, roll)
         R = ca.mtimes(Rz, Rpr)
         cg = ca.vertcat(X, Y, Z)
 

@@ -46,7 +46,7 @@ from ..model import SystemModel, soil_law
 from ..model.layout import StateLayout
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
-from ..model.vehicle3d import SegmentDistribution, make_vehicle
+from ..model.vehicle3d import SegmentDistribution, hull_rotation, make_vehicle
 from ..terrain.channels import (
     COMPACTION_SPEED_FLOOR_M_S,
     GLOBAL_FIELDS,
@@ -311,7 +311,15 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     na = NA + 2 * n_seg
     w = ca.vertcat(x, zacc)
     pose = veh.vehicle.contact_pose(x[veh.layout.block("vehicle")])
-    a = ca.vertcat(pose.x_m, pose.y_m, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D, *Dseg)
+    ax, ay = pose.x_m, pose.y_m
+    if n_seg:
+        # the 3D hull: the cells' frame is centred below the CG on the tracks' ground line, (0, 0, -h) in
+        # the body placed by the hull's pitch and roll (on a side slope of t the tracks' contact lies
+        # h sin t across from the CG: 7 cm at 5 deg), so the cells loaded are those under the segments
+        Rz, Rpr = hull_rotation(pose.yaw_rad, pose.pitch_rad, pose.roll_rad)
+        foot = ca.mtimes(ca.mtimes(Rz, Rpr), ca.vertcat(0, 0, -pv[veh.param_names.index("cg_height_m")]))
+        ax, ay = ax + foot[0], ay + foot[1]
+    a = ca.vertcat(ax, ay, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D, *Dseg)
     fo = {"cse": True}
     vehicle_a = ca.Function("eng_vehicle_a", [w, pv], [a], ["w", "pv"], ["a"], fo)
     outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo)
