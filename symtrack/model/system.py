@@ -69,8 +69,9 @@ class SystemModel:
             # the 3D vehicle: its hull's penetration is the sinkage; no travelling cells
             if terrain is not None and not isinstance(terrain, ContactTerrain) and \
                     not hasattr(terrain, "contact_history"):
-                raise ParameterError(f"model.vehicle = '3d' takes the homogeneous terrain only, not the "
-                                     f"{getattr(terrain, 'name', terrain)!r} terrain (use model.vehicle = 'planar')")
+                raise ParameterError(f"model.vehicle = '3d' takes the homogeneous terrain or the terrain engine's "
+                                     f"segment sums only, not the {getattr(terrain, 'name', terrain)!r} terrain (use "
+                                     "model.vehicle = 'planar')")
             self.terrain = terrain or ContactTerrain(self.opts)
         else:
             self.terrain = terrain or HomogeneousTerrain(self.opts)

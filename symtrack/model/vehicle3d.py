@@ -49,8 +49,11 @@ parameters of their own yet); the roll and pitch axes are those of the yaw frame
 the hull's roll axis is tilted by t: a cos t error on the roll inertia only).
 
 The terrain this vehicle takes is :class:`ContactTerrain` (no travelling cells: the hull's
-penetration is the sinkage); the grid terrain's channels are not coupled to it yet, so
-``model.vehicle = "3d"`` on a ``[terrain]`` grid is refused (:func:`check_terrain`).
+penetration is the sinkage), or on the grid the terrain engine's
+:class:`~symtrack.native.grid_engine_model.SegmentSumsTerrain` (``contact_history``: the soil history
+of the cells under each segment; docs/vehicle3d.md "The grid under the 3D vehicle"); the channel pool
+of IDAS and the grid Rosenbrock is refused (:func:`check_terrain`), and what the grid path cannot take
+(:func:`check_grid`).
 """
 
 from __future__ import annotations
