@@ -119,3 +119,36 @@ def test_bench_rows_of_the_3d_vehicle_on_the_grid():
     ratio = rows[2]
     assert ratio["cpu_ratio"] > 0 and ratio["real_time_factor_cpu_3d"] > 0
     assert ratio["target_ratio"] == 1.5 and ratio["target_real_time_factor"] == 100.0
+
+
+def test_the_segment_sums_against_numpy():
+    """grid_engine.c's seg_sums (the cells -> vehicle coupling) against the same rule written here in numpy
+    from the channel tables: per track and segment the load fraction times the hat function about the
+    segment centres of the cell's position along the track, then the weighted z and soil history."""
+    from symtrack.native.grid_engine_model import SEG_FIELDS
+
+    sc = load_scenario("validation_grid", ["model.vehicle=3d"])
+    plant = make_plant(sc)
+    plant.world.clear()
+    plant.start(0.0, 0.0, 0.0, [2000.0, 2000.0])
+    advance_plant(plant, [2000.0, 1000.0], 2.5, sc.run.output_dt_s)  # turning: the pose's yaw in the weights
+    eng = plant.engine
+    st, n = eng.state, eng.fns.n_seg
+    eng.kernel.sums()
+    S = st.pv[-2 * n * len(SEG_FIELDS):].reshape(2, n, len(SEG_FIELDS))
+    act = st.active_channels()
+    l, e = st.geo[0], st.geo[3]
+    a = st.a
+    s = (l / 2 - e) - (a[2] * (st.ch_cx[act] - a[0]) + a[3] * (st.ch_cy[act] - a[1]))
+    u = s * n / l - 0.5
+    centres = np.arange(n)
+    hat = np.clip(1 - np.abs(u[:, None] - centres[None, :]), 0, 1)
+    hat[:, 0] = np.where(u < 0, 1.0, hat[:, 0])
+    hat[:, -1] = np.where(u > n - 1, 1.0, hat[:, -1])
+    q = np.stack([np.ones(act.size), st.ch_z[act], st.ch_zmax[act], st.ch_pmax[act], st.ch_zoff[act],
+                  st.ch_delta[act], st.ch_dc[act]], axis=1)
+    for t in range(2):
+        w = st.ch_g[act, 1 + t][:, None] * hat
+        ref = w.T @ q
+        assert ref[:, 0].sum() > 10  # cells under the track
+        np.testing.assert_allclose(S[t], ref, rtol=1e-12, atol=1e-18)

@@ -46,7 +46,7 @@ from ..model import SystemModel, soil_law
 from ..model.layout import StateLayout
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
-from ..model.vehicle3d import SegmentDistribution, hull_rotation, make_vehicle
+from ..model.vehicle3d import hull_rotation, make_vehicle
 from ..terrain.channels import (
     COMPACTION_SPEED_FLOOR_M_S,
     GLOBAL_FIELDS,
@@ -191,6 +191,22 @@ class SegmentSumsTerrain(SumsTerrain):
                 signals[f"cell_sinkage_segment_{end}_{k}_m"] = self._mean(S, "z", k, i)
         signals["compaction_power_W"] = Q[0] ** 2 * (S["sum_power_left"] + S["sum_power_right"])
         return ca.SX(0, 1), signals
+
+
+def piecewise_linear(p, l, s):
+    """The pressure at s of n equal segments' pressures ``p`` at their centres over a contact of length
+    ``l``: linear between the centres, constant beyond the first and the last (the value of
+    :meth:`SegmentDistribution.at <symtrack.model.vehicle3d.SegmentDistribution.at>`), written as
+    p_0 + sum_j (p_j+1 - p_j) clamp((s - s_j) / ds, 0, 1): n - 1 clamps, where the hat functions cost n
+    absolute values, clamps and branches (the engine evaluates it for every loaded cell)."""
+    n = len(p)
+    if n == 1:
+        return p[0]
+    u = s * (n / l) - 0.5  # the position in segments from the first centre
+    out = p[0]
+    for j in range(n - 1):
+        out = out + (p[j + 1] - p[j]) * ca.fmin(ca.fmax(u - j, 0), 1)
+    return out
 
 
 def least_squares_line(dist):
@@ -374,10 +390,8 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     p_load = 0
     for i in range(2):
         if n_seg:  # the 3D vehicle's segments: piecewise linear between their centres (SegmentDistribution)
-            ds = geo[0] / n_seg
-            pieces = SegmentDistribution([av[NA + i * n_seg + j] for j in range(n_seg)],
-                                         [(j + 0.5) * ds for j in range(n_seg)], ds, None)
-            p_load = p_load + g[i] * ca.fmax(0, pieces.at(g[2 + i]))
+            p_load = p_load + g[i] * ca.fmax(0, piecewise_linear([av[NA + i * n_seg + j] for j in range(n_seg)],
+                                                                 geo[0], g[2 + i]))
         else:
             p_load = p_load + g[i] * ca.fmax(0, av[4 + 2 * i] + av[5 + 2 * i] * g[2 + i])
     cell_geo = ca.Function("eng_cell_geo", [c, av, geo], [ca.vertcat(p_load, g[0], g[1], g[4], g[5], g[6], g[7])],
@@ -457,5 +471,5 @@ def cell_constants(params: dict) -> tuple[float, float]:
 
 
 __all__ = ["EngineFunctions", "SEG_FIELDS", "SegmentSumsTerrain", "build_engine_functions", "least_squares_line",
-           "segment_sum_names", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
+           "piecewise_linear", "segment_sum_names", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
            "NF", "TRACK_SOIL_PARAMS", "soil_dispatch_c"]
