@@ -278,14 +278,21 @@ def parse_ground(t_doc, model, vehicle: dict, plant: str = "", engine: bool = Fa
     if terrain is not None:
         try:
             check_terrain(model, "engine" if engine else "grid")
+        except ParameterError as err:
+            if plant:  # the MPC: its grid plant is the planar vehicle's
+                raise ScenarioError(f"model.vehicle = '3d' runs on the homogeneous terrain only in the MPC ({plant} "
+                                    "asks for the grid, whose MPC plant carries the planar vehicle; the 3D vehicle on "
+                                    "the grid is symtrack simulate's, run.integrator = 'grid_fast'); a [terrain] "
+                                    "section holding only [terrain.surface] gives it its ground on homogeneous soil, "
+                                    "or use model.vehicle = 'planar'") from err
+            raise ScenarioError(f"{err} (a [terrain] section holding only [terrain.surface] gives the 3D vehicle "
+                                "its ground on homogeneous soil)") from err
+        try:  # the 3D vehicle on the terrain engine: what its grid path cannot take
             check_grid(model, terrain)
             if model.vehicle == "3d":
                 check_contact(model, terrain.surface, vehicle)
         except ParameterError as err:
-            if engine:
-                raise ScenarioError(str(err)) from err
-            raise ScenarioError(f"{err} ({plant + '; ' if plant else ''}a [terrain] section holding only "
-                                "[terrain.surface] gives the 3D vehicle its ground on homogeneous soil)") from err
+            raise ScenarioError(str(err)) from err
     return terrain, None
 
 
