@@ -33,7 +33,7 @@ def test_an_mpc_scenario_gives_the_3d_vehicle_its_ground():
 
 
 def test_the_3d_vehicle_on_the_grid_plant_is_refused_at_load():
-    with pytest.raises(ScenarioError, match=r"model.vehicle = '3d' runs on the homogeneous terrain only.*--plant grid"):
+    with pytest.raises(ScenarioError, match=r"model.vehicle = '3d' runs on the homogeneous .*--plant grid"):
         S.load("straight_offset", ["model.vehicle=3d"], plant="grid")
     # furrows finer than the segments resolve: the key and the allowed range
     d, default = _doc(surface={"furrow_spacing_m": 0.5, "furrow_depth_m": 0.05})

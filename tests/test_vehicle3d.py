@@ -189,7 +189,8 @@ def test_refusals():
     doc = {"run": {"integrator": "cvodes"}, "model": {"vehicle": "3d"}, "vehicle": {"preset": "reference_crawler"},
            "soil": {"preset": "clayey_soil_thailand_38"}, "torque": [{"t_s": 0.0, "left_N_m": 0.0, "right_N_m": 0.0}],
            "terrain": {}}
-    with pytest.raises(ScenarioError, match="model.vehicle = '3d'.*homogeneous terrain only"):
+    with pytest.raises(ScenarioError, match="model.vehicle = '3d'.*homogeneous terrain or on the grid through the "
+                       "terrain engine.*run.integrator = 'grid_fast'"):
         scenario_from_dict(doc)
     with pytest.raises(ScenarioError, match="slope_x_deg.*20"):
         parse_surface({"slope_x_deg": 25.0})
@@ -299,7 +300,7 @@ def test_bench_rows_of_the_3d_vehicle():
     row is filled."""
     from symtrack.bench import vehicle3d
 
-    rows = vehicle3d.bench_rows(quick=True)
+    rows = vehicle3d.bench_rows(quick=True, grid=False)  # (the grid rows: tests/test_grid3d.py)
     assert [r["case"] for r in rows] == ["vehicle = planar", "vehicle = 3d", "3d / planar"]
     planar, solid = rows[0]["figures"], rows[1]["figures"]
     for k in ("yaw_final_deg", "lateral_deviation_m", "sinkage_idler_mm"):

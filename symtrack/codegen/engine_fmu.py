@@ -108,7 +108,8 @@ def check_exportable(sc: Scenario) -> None:
         raise ScenarioError(f"scenario {sc.name!r} has no [terrain] section: the engine FMU is of the grid terrain "
                             "(the homogeneous vehicle's FMU is symtrack.codegen.fmu)")
     if sc.model.vehicle != "planar":
-        raise ScenarioError(f"model.vehicle = {sc.model.vehicle!r}: the engine FMU carries the planar vehicle only")
+        raise ScenarioError(f"model.vehicle = {sc.model.vehicle!r}: the engine FMU carries the planar vehicle only "
+                            "(allowed: 'planar'; the 3D vehicle on the grid runs in the package: symtrack simulate)")
     if sc.run.integrator != ENGINE_INTEGRATOR:
         raise ScenarioError(f"run.integrator = {sc.run.integrator!r}: the FMU of a grid scenario runs the terrain "
                             f"engine ({ENGINE_INTEGRATOR!r}; its results are `symtrack simulate` with it); export "

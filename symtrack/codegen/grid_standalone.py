@@ -54,10 +54,14 @@ def engine_parts(sc, scratch: Path) -> dict:
     ``settings`` (the scenario's [engine] or the defaults), ``fns``, ``state`` (an EngineState on the
     scenario's new field) and the generated C, ``gen`` (engine_gen.inc) and ``soils``
     (engine_soils.inc) as bytes; ``scratch``: a folder for the code generator."""
+    from symtrack.foundations.errors import ScenarioError
     from symtrack.integrators.engine import EngineSettings, EngineState, engine_functions
     from symtrack.native.grid_engine_model import soil_dispatch_c
     from symtrack.terrain.world import open_world
 
+    if sc.model.vehicle != "planar":  # (the 3D hull's engine variant runs in the package only)
+        raise ScenarioError(f"model.vehicle = {sc.model.vehicle!r}: the standalone engine (its program and the "
+                            "engine FMU) carries the planar vehicle only; allowed: model.vehicle = 'planar'")
     settings = sc.engine or EngineSettings()
     st = sc.start
     world = open_world(sc.terrain, sc.params, sc.model, sc.run.macro_step_s, start_xy=(st.x_m, st.y_m))

@@ -99,7 +99,7 @@ class ModelOptions:
     vehicle: the vehicle model (issue 22). "planar" (default): the planar vehicle of MODEL.md
         section 1 (x, y, yaw; pitch from the quasi-static load transfer). "3d": the rigid hull that
         heaves, pitches and rolls on the ground's shape (:mod:`symtrack.model.vehicle3d`,
-        docs/vehicle3d.md), on the homogeneous terrain only.
+        docs/vehicle3d.md), on the homogeneous terrain or on the grid through the terrain engine.
     contact_segments: ("3d" only) the segments along each track, each pressing on the ground under
         it (the load split between and along the tracks comes from their penetrations).
     accel_newton_iterations: the body accelerations a_x, a_y enter the pressure distribution

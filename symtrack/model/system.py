@@ -67,9 +67,11 @@ class SystemModel:
         vm = self.vehicle
         if getattr(vm, "own_contact", False):
             # the 3D vehicle: its hull's penetration is the sinkage; no travelling cells
-            if terrain is not None and not isinstance(terrain, ContactTerrain):
-                raise ParameterError(f"model.vehicle = '3d' takes the homogeneous terrain only, not the "
-                                     f"{getattr(terrain, 'name', terrain)!r} terrain (use model.vehicle = 'planar')")
+            if terrain is not None and not isinstance(terrain, ContactTerrain) and \
+                    not hasattr(terrain, "contact_history"):
+                raise ParameterError(f"model.vehicle = '3d' takes the homogeneous terrain or the terrain engine's "
+                                     f"segment sums only, not the {getattr(terrain, 'name', terrain)!r} terrain (use "
+                                     "model.vehicle = 'planar')")
             self.terrain = terrain or ContactTerrain(self.opts)
         else:
             self.terrain = terrain or HomogeneousTerrain(self.opts)
@@ -91,8 +93,12 @@ class SystemModel:
         compaction = self.terrain.compaction(xs_v, xc, P, Q)
         track_soil = self.terrain.track_soil(xs_v, xc, P, Q) if hasattr(self.terrain, "track_soil") else None
 
+        # the grid under the 3D hull (the terrain engine's segment sums): the soil history under each segment
+        history = {"contact_history": self.terrain.contact_history(P, Q)} if hasattr(self.terrain,
+                                                                                     "contact_history") else {}
+
         def evaluate(acc):
-            veh = vm.equations(xv, u, acc, P, compaction, self.opts, track_soil)
+            veh = vm.equations(xv, u, acc, P, compaction, self.opts, track_soil, **history)
             cdot, csig = self.terrain.equations(xs_v, xc, veh["dist"], P, Q)
             return veh, ca.vertcat(veh["xdot"], cdot), csig
 

@@ -49,8 +49,11 @@ parameters of their own yet); the roll and pitch axes are those of the yaw frame
 the hull's roll axis is tilted by t: a cos t error on the roll inertia only).
 
 The terrain this vehicle takes is :class:`ContactTerrain` (no travelling cells: the hull's
-penetration is the sinkage); the grid terrain's channels are not coupled to it yet, so
-``model.vehicle = "3d"`` on a ``[terrain]`` grid is refused (:func:`check_terrain`).
+penetration is the sinkage), or on the grid the terrain engine's
+:class:`~symtrack.native.grid_engine_model.SegmentSumsTerrain` (``contact_history``: the soil history
+of the cells under each segment; docs/vehicle3d.md "The grid under the 3D vehicle"); the channel pool
+of IDAS and the grid Rosenbrock is refused (:func:`check_terrain`), and what the grid path cannot take
+(:func:`check_grid`).
 """
 
 from __future__ import annotations
@@ -83,7 +86,8 @@ from .vehicle import (
 )
 
 __all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
-           "SegmentDistribution", "Vehicle3D", "check_contact", "check_terrain", "make_vehicle"]
+           "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_terrain", "hull_rotation",
+           "make_vehicle"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -142,7 +146,7 @@ class SegmentDistribution:
         return self.p[-1]
 
 
-def _rotation(yaw, pitch, roll):
+def hull_rotation(yaw, pitch, roll):
     """R = Rz(yaw) Ry(-pitch) Rx(roll): body -> world (pitch nose up, roll left side up)."""
     cy, sy, cp, sp, cr, sr = ca.cos(yaw), ca.sin(yaw), ca.cos(pitch), ca.sin(pitch), ca.cos(roll), ca.sin(roll)
     Rz = ca.SX(3, 3)
@@ -196,10 +200,16 @@ class Vehicle3D:
         return ContactPose(s["x_m"], s["y_m"], s["yaw_rad"], s["z_m"], s["pitch_rad"], s["roll_rad"])
 
     # -- the equations -----------------------------------------------------------------------------------
-    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
+    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None,
+                  contact_history=None) -> dict:
         """The vehicle's state derivatives and signals (module doc). ``acc`` is not used (no
         load-transfer loop: ``acc_implied`` returns the accelerations); ``compaction_N`` neither
-        (the contact's own compaction resistance); ``track_soil`` as the planar model's."""
+        (the contact's own compaction resistance) unless ``contact_history`` is given; ``track_soil``
+        as the planar model's. ``contact_history``: the grid under the hull (the terrain engine,
+        docs/vehicle3d.md "The grid under the 3D vehicle"): track -> the soil history (the
+        :data:`~symtrack.model.soil_law.HISTORY_NAMES`) of the cells under each segment; each segment's
+        pressure is then the law on that history (not the homogeneous rule of the segments ahead) and
+        the compaction resistance is ``compaction_N``, the cells' own work."""
         if (opts.lateral_law == "shear") != self.lateral:
             raise ParameterError(f"model.lateral_law = {opts.lateral_law!r} needs the vehicle model "
                                  f"{'3d_lateral' if opts.lateral_law == 'shear' else '3d'}")
@@ -228,7 +238,7 @@ class Vehicle3D:
         pose_rates = ca.SX.zeros(xv.numel())
         for i, v in zip(pose_idx, (Xdot, Ydot, rz, w, q, pr), strict=True):
             pose_rates[i] = v
-        Rz, Rpr = _rotation(psi, pitch, roll)
+        Rz, Rpr = hull_rotation(psi, pitch, roll)
         R = ca.mtimes(Rz, Rpr)
         cg = ca.vertcat(X, Y, Z)
 
@@ -262,7 +272,9 @@ class Vehicle3D:
                 nrm = ca.vertcat(-gx, -gy, 1) / norm
                 delta = (z0 - pt[2]) / norm  # the penetration normal to the ground
                 ddelta = rate(delta)
-                if i == 0:
+                if contact_history is not None:
+                    p_soil = law_obj.pressure(delta, contact_history[k][i], law)
+                elif i == 0:
                     p_soil = law_obj.pressure(delta, (0, 0, 0, 0, 0), law)
                 else:
                     p_soil = law_obj.pressure(delta, (z_hist, law_obj.virgin_pressure(z_hist, law), 0, 0, 0), law)
@@ -290,7 +302,10 @@ class Vehicle3D:
             if track_soil is not None:
                 c, phi, K = track_soil[k]
             R_in[k] = internal_resistance_N(N[k], omega[k], abs_om[k], r, P, opts)
-            Rc[k] = law_obj.compaction_work(depth[k], law, b) * direction(v_track, opts.motion_smoothing_m_s, opts)
+            if contact_history is not None:
+                Rc[k] = compaction_N[TRACKS.index(k)] * direction(v_track, opts.motion_smoothing_m_s, opts)
+            else:
+                Rc[k] = law_obj.compaction_work(depth[k], law, b) * direction(v_track, opts.motion_smoothing_m_s, opts)
             lagged = (S[f"lateral_shear_{k}_m"], S[f"shear_twist_{k}_rad"]) if self.lateral else None
             if opts.lateral_law in SHEAR_LAWS:
                 F[k], Fy[k], Mz[k] = shear_forces(shear[k], omega[k], abs_om[k], v_track, vy_eff, rz, x_front, dist[k],
@@ -407,10 +422,34 @@ def check_contact(opts: ModelOptions, surface, params: dict) -> None:
 
 
 def check_terrain(opts: ModelOptions, kind: str) -> None:
-    """A :class:`ParameterError` naming ``model.vehicle`` unless the 3D vehicle can run on ``kind``."""
-    if getattr(opts, "vehicle", "planar") == "3d" and kind != "homogeneous":
-        raise ParameterError(f"model.vehicle = '3d' runs on the homogeneous terrain only (this run asks for the "
-                             f"{kind} terrain: its channels and the terrain engine in C are coupled to the planar "
-                             "vehicle): use model.vehicle = 'planar' with [terrain], or drop [terrain] for the 3D "
-                             "vehicle on homogeneous soil")
+    """A :class:`ParameterError` naming ``model.vehicle`` unless the 3D vehicle can run on ``kind``:
+    "homogeneous", "engine" (the grid through the terrain engine, ``run.integrator = "grid_fast"``:
+    its segment sums, docs/vehicle3d.md "The grid under the 3D vehicle") or "grid" (the channel pool
+    of IDAS and the grid Rosenbrock, refused: their channels are coupled to the planar vehicle)."""
+    if getattr(opts, "vehicle", "planar") == "3d" and kind not in ("homogeneous", "engine"):
+        raise ParameterError(f"model.vehicle = '3d' runs on the homogeneous terrain or on the grid through the "
+                             f"terrain engine (run.integrator = 'grid_fast') only; this run asks for the {kind} "
+                             "terrain's channel pool, which is coupled to the planar vehicle: use run.integrator = "
+                             "'grid_fast', or model.vehicle = 'planar'")
 
+
+def check_grid(opts: ModelOptions, terrain) -> None:
+    """A :class:`ParameterError` naming the key for what the 3D vehicle on the grid cannot take (before
+    any work): ``terrain`` a :class:`~symtrack.terrain.settings.TerrainSettings`; a soil map or a
+    moisture raster (the segments take one soil: the traction's soil means are the planar sums'), a
+    towed trailer (its tyres load the cells through the planar vehicle's pass), an elevation raster
+    (the hull's ground is the analytic surface's)."""
+    if getattr(opts, "vehicle", "planar") != "3d" or terrain is None:
+        return
+    refused = (("soil_map", "terrain.soil_map", "a field of several soils"),
+               ("moisture", "terrain.moisture", "a moisture raster (a soil per cell)"),
+               ("towed", "terrain.towed", "a towed trailer"))
+    for attr, key, what in refused:
+        if getattr(terrain, attr, None) is not None:
+            raise ParameterError(f"{key}: {what} is not coupled to the 3D vehicle on the grid (model.vehicle = "
+                                 "'3d' takes one soil and no trailer; allowed: leave it out, or model.vehicle = "
+                                 "'planar')")
+    surface = getattr(terrain, "surface", None)
+    if surface is not None and surface.raster is not None:
+        raise ParameterError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D vehicle "
+                             "(model.vehicle = '3d') yet; allowed: the analytic slopes and furrows")

@@ -35,7 +35,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #define EXPORT __attribute__((visibility("default")))
 #define NV ENG_NV /* generated: engine_soils.inc (grid_engine_model.engine_layout_c) */
 #define NW ENG_NW
-#define NA 8
+#define NA ENG_NA /* 8: the pose and the pressure lines; the 3D vehicle adds its segment pressures (engine_soils.inc) */
 #define NS 10     /* the cell sums */
 #define NS_MAX 18 /* with a soil map: + the soil under each track (grid_engine_model.SOIL_SUM_NAMES) */
 #define NGEO 7
@@ -714,11 +714,51 @@ EXPORT void eng_info_out(eng_t *E) {
   }
 }
 
+#if ENG_NSEG > 0
+/* The 3D vehicle's segment sums of one cell (grid_engine_model.SegmentSumsTerrain, SEG_FIELDS): the
+ * cell's load fraction under track t times the hat function of its position s along the track about
+ * the centres of the equal segments (constant beyond the first and last centre), then per segment the
+ * weight and the weight times (z, z_max, p_max, z_off, delta, d_c); S: the 2 ENG_NSEG ENG_SEG_NF sums */
+#define NSEG_SUMS (2 * ENG_NSEG * ENG_SEG_NF)
+static void seg_sums(const eng_t *E, long long ch, const double *g, double *S) {
+  if (!(g[1] > 0.0) && !(g[2] > 0.0)) return;
+  const double *a = E->a, *geo = E->geo;
+  const double l = geo[0], e = geo[3];
+  const double xb = a[2] * (E->ch_cx[ch] - a[0]) + a[3] * (E->ch_cy[ch] - a[1]);
+  const double u = ((l / 2 - e) - xb) * (double)ENG_NSEG / l - 0.5; /* in segments from the first centre */
+  long long i0 = (long long)floor(u);
+  double th = u - (double)i0;
+  if (i0 < 0) {
+    i0 = 0;
+    th = 0.0;
+  } else if (i0 >= ENG_NSEG - 1) {
+    i0 = ENG_NSEG - 1;
+    th = 0.0;
+  }
+  const double q[ENG_SEG_NF] = {1.0, E->ch_z[ch], E->ch_zmax[ch], E->ch_pmax[ch], E->ch_zoff[ch], E->ch_delta[ch],
+                                E->ch_dc[ch]};
+  for (int t = 0; t < 2; ++t) {
+    const double f = g[1 + t];
+    if (!(f > 0.0)) continue;
+    double *St = S + (long long)t * ENG_NSEG * ENG_SEG_NF;
+    for (int r = 0; r < 2; ++r) {
+      const double w = f * (r == 0 ? 1.0 - th : th);
+      if (!(w > 0.0)) continue;
+      double *Si = St + (i0 + r) * ENG_SEG_NF;
+      for (int m = 0; m < ENG_SEG_NF; ++m) Si[m] += w * q[m];
+    }
+  }
+}
+#else
+#define NSEG_SUMS 0
+#endif
+
 /* The channel sums (the vehicle's view of the terrain) into pv's last NS: the compaction power of
- * each track over the last step (energy-consistent), the end-strip sinkages at the current state. */
+ * each track over the last step (energy-consistent), the end-strip sinkages at the current state
+ * (and with the 3D vehicle its segment sums after them: seg_sums). */
 static void sums(eng_t *E) {
-  double S[NS_MAX];
-  for (int i = 0; i < NS_MAX; ++i) S[i] = 0.0;
+  double S[NS_MAX + NSEG_SUMS];
+  for (int i = 0; i < NS_MAX + NSEG_SUMS; ++i) S[i] = 0.0;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     const double *g = E->ch_g + NGEO * ch;
@@ -735,7 +775,10 @@ static void sums(eng_t *E) {
       S[2 + r] += g[3 + r] * zc;
       S[6 + r] += g[3 + r];
     }
-    if (E->n_sums > NS) { /* the soil under each track, weighted by the load fraction */
+#if ENG_NSEG > 0
+    seg_sums(E, ch, g, S + NS);
+#endif
+    if (NSEG_SUMS == 0 && E->n_sums > NS) { /* the soil under each track, weighted by the load fraction */
       const double *sv = E->soil_veh + 3 * E->ch_soil[ch];
       for (int t = 0; t < 2; ++t) {
         S[NS + t] += g[1 + t];

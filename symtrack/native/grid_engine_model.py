@@ -44,10 +44,12 @@ import dataclasses
 
 import casadi as ca
 
+from ..foundations.errors import ParameterError
 from ..model import SystemModel, soil_law
 from ..model.layout import StateLayout
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
+from ..model.vehicle3d import hull_rotation, make_vehicle
 from ..terrain.channels import (
     COMPACTION_SPEED_FLOOR_M_S,
     GLOBAL_FIELDS,
@@ -139,6 +141,92 @@ class SumsTerrain:
         return ca.SX(0, 1), signals
 
 
+# the 3D vehicle on the grid (docs/vehicle3d.md, "The grid under the 3D vehicle"): per track and
+# segment, the sums over the cells under it (weights: the cell's load fraction under the track times
+# the hat function of its position along the track about the segment's centre) of the weight and of
+# the weight times the cell's sinkage and its soil history (soil_law.HISTORY_NAMES), grid_engine.c's
+# seg_sums (this order: index ((track n + segment) SEG_NF + field))
+SEG_FIELDS = ("w", "z", "zmax", "pmax", "zoff", "delta", "dc")
+SEG_NF = len(SEG_FIELDS)
+# a segment whose weight is below this has no cell under it: its history is the virgin soil's
+SEG_WEIGHT_FLOOR = 1e-9
+
+
+def segment_sum_names(n_seg: int) -> tuple[str, ...]:
+    return tuple(f"sum_seg_{f}_{k}_{i}" for k in TRACKS for i in range(n_seg) for f in SEG_FIELDS)
+
+
+class SegmentSumsTerrain(SumsTerrain):
+    """The grid terrain seen from the 3D vehicle (:class:`~symtrack.model.vehicle3d.Vehicle3D`): the
+    planar sums (the cells' compaction power per track, the end strips) and per segment of each
+    track the load-weighted means of the cells' sinkage and history (:data:`SEG_FIELDS`), so each
+    segment's pressure is the soil law on the history of the cells under it (:meth:`contact_history`;
+    the ruts of an earlier pass are its reload line) and the compaction resistance is the cells' work."""
+
+    def __init__(self, n_seg: int):
+        super().__init__(soil_sums=False)
+        self.n_seg = int(n_seg)
+        self.names = SUM_NAMES + segment_sum_names(self.n_seg)
+        self.param_names = GLOBAL_FIELDS + self.names
+
+    def _mean(self, S, field, k, i):
+        w = S[f"sum_seg_w_{k}_{i}"]
+        return S[f"sum_seg_{field}_{k}_{i}"] / ca.fmax(w, SEG_WEIGHT_FLOOR)
+
+    def contact_history(self, P, Q):
+        """track -> per segment (z_max, p_max, z_off, delta, d_c): the weighted means of the cells
+        under it (all 0, the virgin soil's, where no cell is)."""
+        S = self._S(Q)
+        return {k: [tuple(self._mean(S, f, k, i) for f in SEG_FIELDS[2:]) for i in range(self.n_seg)]
+                for k in TRACKS}
+
+    def equations(self, xv, xc, dist, P, Q):
+        if self.dist_dae is None:
+            self.dist_dae = dist
+        S = self._S(Q)
+        signals = {}
+        # the cells' sinkage (the end strips, as the planar engine's sinkage outputs) beside the hull's
+        # penetration (the vehicle's sinkage_* outputs), and the mean of the cells under each end segment
+        for k in TRACKS:
+            for end in ENDS:
+                signals[f"cell_sinkage_{end}_{k}_m"] = S[f"sum_wz_{end}_{k}"] / (S[f"sum_w_{end}_{k}"] + 1e-9)
+            for end, i in (("idler", 0), ("sprocket", self.n_seg - 1)):
+                signals[f"cell_sinkage_segment_{end}_{k}_m"] = self._mean(S, "z", k, i)
+        signals["compaction_power_W"] = Q[0] ** 2 * (S["sum_power_left"] + S["sum_power_right"])
+        return ca.SX(0, 1), signals
+
+
+def piecewise_linear(p, l, s):
+    """The pressure at s of n equal segments' pressures ``p`` at their centres over a contact of length
+    ``l``: linear between the centres, constant beyond the first and the last (the value of
+    :meth:`SegmentDistribution.at <symtrack.model.vehicle3d.SegmentDistribution.at>`), written as
+    p_0 + sum_j (p_j+1 - p_j) clamp((s - s_j) / ds, 0, 1): n - 1 clamps, where the hat functions cost n
+    absolute values, clamps and branches (the engine evaluates it for every loaded cell)."""
+    n = len(p)
+    if n == 1:
+        return p[0]
+    u = s * (n / l) - 0.5  # the position in segments from the first centre
+    out = p[0]
+    for j in range(n - 1):
+        out = out + (p[j + 1] - p[j]) * ca.fmin(ca.fmax(u - j, 0), 1)
+    return out
+
+
+def least_squares_line(dist):
+    """(alpha, beta): the least-squares line p = alpha + beta s through a
+    :class:`~symtrack.model.vehicle3d.SegmentDistribution`'s segment pressures (at the centres of
+    equal segments its integral over the contact is the pieces' own: the load is kept). The subsoil
+    stress takes it (subsoil.h's strip tables are for a linear line per track)."""
+    n = len(dist.p)
+    if n == 1:
+        return dist.p[0], 0
+    sbar = sum(dist.s) / n
+    pbar = sum(dist.p) / n
+    sxx = sum((si - sbar) ** 2 for si in dist.s)
+    beta = sum((si - sbar) * (pi - pbar) for si, pi in zip(dist.s, dist.p, strict=True)) / sxx
+    return pbar - beta * sbar, beta
+
+
 def pressure_line(dist):
     """(alpha, beta) with the track's pressure p(s) = max(0, alpha + beta s) on the contact."""
     b, l, N = dist.b, dist.l, dist.N
@@ -194,6 +282,8 @@ class EngineFunctions:
     n_pv: int
     n_sums: int  # NS, or NS + NS_SOIL with a soil map
     layout: StateLayout = PLANAR_LAYOUT  # the vehicle's states (w = these, then its accelerations)
+    na: int = NA  # the length of a: 8, or 8 + 2 n_seg for the 3D vehicle (its segment pressures)
+    n_seg: int = 0  # the 3D vehicle's segments per track (0: the planar vehicle)
 
     @property
     def nw(self) -> int:
@@ -209,21 +299,46 @@ class EngineFunctions:
                 *self.cell_entry)
 
 
-def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = ()) -> EngineFunctions:
+def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (),
+                           surface=None) -> EngineFunctions:
     """The Functions of the module doc for model options ``opts`` and the soil in ``params``;
     ``soils``: with a soil map, the parameter dicts (vehicle and soil) of every soil of the field,
-    index 0 the scenario's: a cell law per soil, and the sums carry the soil under each track."""
+    index 0 the scenario's: a cell law per soil, and the sums carry the soil under each track.
+    With ``opts.vehicle = "3d"`` the vehicle is the 3D hull on the ground ``surface`` (None: flat)
+    over :class:`SegmentSumsTerrain`; its ``a`` is the pose, the least-squares line of each track
+    (the subsoil's) and then the segment pressures (n per track, left then right), and
+    ``eng_cell_geo`` loads a cell with the piecewise-linear pressure between segment centres."""
     soils = tuple(soils) or (params,)
-    terr = SumsTerrain(soil_sums=len(soils) > 1)
-    veh = SystemModel(opts, terr)
+    n_seg = 0
+    if getattr(opts, "vehicle", "planar") == "3d":
+        if len(soils) > 1:
+            raise ParameterError("model.vehicle = '3d' on the grid takes one soil: a soil map (terrain.soil_map, "
+                                 "terrain.moisture) is not coupled to the 3D vehicle's segments")
+        n_seg = opts.contact_segments
+        terr = SegmentSumsTerrain(n_seg)
+        veh = SystemModel(opts, terr, vehicle=make_vehicle(opts, surface))
+    else:
+        terr = SumsTerrain(soil_sums=len(soils) > 1)
+        veh = SystemModel(opts, terr)
     x, zacc, u, pv = veh.x, veh.z, veh.u, veh.p
     dist = terr.dist_dae
-    D = []
+    D, Dseg = [], []
     for k in TRACKS:
-        D += list(pressure_line(dist[k]))
+        D += list(pressure_line(dist[k]) if not n_seg else least_squares_line(dist[k]))
+        if n_seg:
+            Dseg += list(dist[k].p)
+    na = NA + 2 * n_seg
     w = ca.vertcat(x, zacc)
     pose = veh.vehicle.contact_pose(x[veh.layout.block("vehicle")])
-    a = ca.vertcat(pose.x_m, pose.y_m, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D)
+    ax, ay = pose.x_m, pose.y_m
+    if n_seg:
+        # the 3D hull: the cells' frame is centred below the CG on the tracks' ground line, (0, 0, -h) in
+        # the body placed by the hull's pitch and roll (on a side slope of t the tracks' contact lies
+        # h sin t across from the CG: 7 cm at 5 deg), so the cells loaded are those under the segments
+        Rz, Rpr = hull_rotation(pose.yaw_rad, pose.pitch_rad, pose.roll_rad)
+        foot = ca.mtimes(ca.mtimes(Rz, Rpr), ca.vertcat(0, 0, -pv[veh.param_names.index("cg_height_m")]))
+        ax, ay = ax + foot[0], ay + foot[1]
+    a = ca.vertcat(ax, ay, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D, *Dseg)
     fo = {"cse": True}
     vehicle_a = ca.Function("eng_vehicle_a", [w, pv], [a], ["w", "pv"], ["a"], fo)
     outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo)
@@ -270,14 +385,18 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     # one cell: load and weights
     fn = build_cell_functions(opts, cell_reciprocal=True)
     c = ca.SX.sym("c", 2)
-    av = ca.SX.sym("a", NA)
+    av = ca.SX.sym("a", na)
     geo = ca.SX.sym("geo", 7)
     ddx, ddy = c[0] - av[0], c[1] - av[1]
     qb = ca.vertcat(av[2] * ddx + av[3] * ddy, -av[3] * ddx + av[2] * ddy, 0, 0, 1, ca.DM.zeros(NF - 5))
     g = fn["geometry"](qb, ca.DM.zeros(3), geo)
     p_load = 0
     for i in range(2):
-        p_load = p_load + g[i] * ca.fmax(0, av[4 + 2 * i] + av[5 + 2 * i] * g[2 + i])
+        if n_seg:  # the 3D vehicle's segments: piecewise linear between their centres (SegmentDistribution)
+            p_load = p_load + g[i] * ca.fmax(0, piecewise_linear([av[NA + i * n_seg + j] for j in range(n_seg)],
+                                                                 geo[0], g[2 + i]))
+        else:
+            p_load = p_load + g[i] * ca.fmax(0, av[4 + 2 * i] + av[5 + 2 * i] * g[2 + i])
     cell_geo = ca.Function("eng_cell_geo", [c, av, geo], [ca.vertcat(p_load, g[0], g[1], g[4], g[5], g[6], g[7])],
                            ["c", "a", "geo"], ["g"], fo)
 
@@ -288,8 +407,10 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
         histories.append(hist_k)
         entries.append(entry_k)
     n_sums = NS + (NS_SOIL if len(soils) > 1 else 0)
+    if n_seg:
+        n_sums = len(terr.names)
     return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, tuple(laws), tuple(histories), tuple(entries),
-                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums, veh.layout)
+                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums, veh.layout, na, n_seg)
 
 
 def _cell_functions(opts, params: dict, k: int, fo: dict):
@@ -309,18 +430,22 @@ def _cell_functions(opts, params: dict, k: int, fo: dict):
     return cell_law, cell_history, cell_entry
 
 
-def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT) -> list[str]:
+def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0) -> list[str]:
     """The engine's state sizes as C defines, from the vehicle's layout (grid_engine.c reads them):
-    ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations."""
+    ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations; ENG_NA, the length of a;
+    ENG_NSEG, the 3D vehicle's segments per track (0: planar, its code compiled out)."""
     return [f"#define ENG_NV {layout.nv} /* the vehicle's states (symtrack.model.layout) */",
-            f"#define ENG_NW {layout.nv + len(ALGEBRAIC)} /* and its algebraic accelerations */"]
+            f"#define ENG_NW {layout.nv + len(ALGEBRAIC)} /* and its algebraic accelerations */",
+            f"#define ENG_NA {na} /* the pose and pressure lines (and the 3D vehicle's segment pressures) */",
+            f"#define ENG_NSEG {n_seg} /* the 3D vehicle's segments per track (0: planar) */",
+            f"#define ENG_SEG_NF {SEG_NF} /* its sums per segment (grid_engine_model.SEG_FIELDS) */"]
 
 
-def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT) -> str:
+def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0) -> str:
     """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c` (of the vehicle's
-    ``layout``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch the compiler can
-    inline; one soil: a plain call)."""
-    lines = engine_layout_c(layout)
+    ``layout``, ``na``, ``n_seg``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch
+    the compiler can inline; one soil: a plain call)."""
+    lines = engine_layout_c(layout, na, n_seg)
     lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
     if n_soils == 1:
         lines.append("  fn##_0(arg, res, 0, WORK, 0)")
@@ -348,5 +473,6 @@ def cell_constants(params: dict) -> tuple[float, float]:
     return float(params["cell_areal_mass_kg_per_m2"]), float(params["cell_damping_Pa_s_per_m"])
 
 
-__all__ = ["EngineFunctions", "build_engine_functions", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
+__all__ = ["EngineFunctions", "SEG_FIELDS", "SegmentSumsTerrain", "build_engine_functions", "least_squares_line",
+           "piecewise_linear", "segment_sum_names", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
            "NF", "TRACK_SOIL_PARAMS", "soil_dispatch_c"]

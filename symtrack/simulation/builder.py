@@ -177,7 +177,7 @@ def build(scenario, terrain=None) -> Built:
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = registry.get(settings.method, "integrator")
     if scenario.terrain is not None or terrain is not None:
-        check_terrain(scenario.model, "grid")
+        check_terrain(scenario.model, "engine" if spec.grid_engine is not None else "grid")
         return Built(scenario, "grid", settings, spec, None)
     surface = getattr(scenario, "surface", None)
     try:

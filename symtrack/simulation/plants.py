@@ -509,7 +509,7 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = spec or registry.get(settings.method)
     if world is not None or scenario.terrain is not None or terrain is not None:
-        check_terrain(scenario.model, "grid")
+        check_terrain(scenario.model, "engine" if spec.grid_engine is not None else "grid")
         with timed_step("building the grid terrain's model and its integrator", log):
             if world is None:
                 spec.check("grid", settings)

@@ -62,7 +62,7 @@ from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
-from ..model.vehicle3d import check_contact, check_terrain
+from ..model.vehicle3d import check_contact, check_grid, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..terrain import moisture, towed
@@ -256,12 +256,14 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
     return preset, values
 
 
-def parse_ground(t_doc, model, vehicle: dict, plant: str = "") -> tuple:
+def parse_ground(t_doc, model, vehicle: dict, plant: str = "", engine: bool = False) -> tuple:
     """``(terrain, surface)`` of a scenario's ``[terrain]`` table (the simulation's and the MPC's
     loaders): with ``model.vehicle = "3d"`` a table holding only ``[terrain.surface]`` is homogeneous
     soil following that ground (docs/vehicle3d.md: ``(None, Surface)``, its contact checked against
     the vehicle); anything else is the grid terrain (``(TerrainSettings or None, None)``), refused for a
-    vehicle model that cannot take it (``plant``: what in the message asked for the grid)."""
+    vehicle model that cannot take it (``plant``: what in the message asked for the grid; ``engine``:
+    the run's integrator is the terrain engine, which takes the 3D vehicle: then what its grid path
+    cannot take is refused, :func:`~symtrack.model.vehicle3d.check_grid`)."""
     if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
         surface = parse_surface(t_doc["surface"])
         if surface.raster is not None:
@@ -275,10 +277,22 @@ def parse_ground(t_doc, model, vehicle: dict, plant: str = "") -> tuple:
     terrain = parse_terrain(t_doc)
     if terrain is not None:
         try:
-            check_terrain(model, "grid")
+            check_terrain(model, "engine" if engine else "grid")
         except ParameterError as err:
-            raise ScenarioError(f"{err} ({plant + '; ' if plant else ''}a [terrain] section holding only "
-                                "[terrain.surface] gives the 3D vehicle its ground on homogeneous soil)") from err
+            if plant:  # the MPC: its grid plant is the planar vehicle's
+                raise ScenarioError(f"model.vehicle = '3d' runs on the homogeneous terrain only in the MPC ({plant} "
+                                    "asks for the grid, whose MPC plant carries the planar vehicle; the 3D vehicle on "
+                                    "the grid is symtrack simulate's, run.integrator = 'grid_fast'); a [terrain] "
+                                    "section holding only [terrain.surface] gives it its ground on homogeneous soil, "
+                                    "or use model.vehicle = 'planar'") from err
+            raise ScenarioError(f"{err} (a [terrain] section holding only [terrain.surface] gives the 3D vehicle "
+                                "its ground on homogeneous soil)") from err
+        try:  # the 3D vehicle on the terrain engine: what its grid path cannot take
+            check_grid(model, terrain)
+            if model.vehicle == "3d":
+                check_contact(model, terrain.surface, vehicle)
+        except ParameterError as err:
+            raise ScenarioError(str(err)) from err
     return terrain, None
 
 
@@ -360,7 +374,8 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
             raise ScenarioError(str(err)) from err
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
-    terrain, surface = parse_ground(d.get("terrain"), model, vehicle)
+    terrain, surface = parse_ground(d.get("terrain"), model, vehicle,
+                                    engine=registry.get(run.integrator, "run.integrator").grid_engine is not None)
     engine = parse_engine(d.get("engine"))
     if terrain is not None and terrain.towed is not None:  # (symtrack.terrain.towed; again before the first pass)
         towed.check_scenario(terrain, start.x_m, start.y_m, start.yaw_deg, soil,

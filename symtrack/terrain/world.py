@@ -78,6 +78,7 @@ from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
+from ..model.vehicle3d import make_vehicle
 from . import density, gis, moisture
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
@@ -233,6 +234,8 @@ class World:
     def layout(self) -> StateLayout:
         """The state layout of :attr:`model` (the options' vehicle's, then this pool's channels),
         without building the model."""
+        if getattr(self.opts, "vehicle", "planar") == "3d":  # the 3D hull (on the terrain engine only)
+            return make_vehicle(self.opts).layout.with_cells(self.terrain.state_names)
         return vehicle_registry.for_options(self.opts).layout.with_cells(self.terrain.state_names)
 
     @functools.cached_property

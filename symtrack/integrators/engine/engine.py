@@ -11,7 +11,9 @@ from collections.abc import Callable
 import numpy as np
 
 from ...foundations.errors import SimulationError
-from ...model import soil_law
+from ...model import SystemModel, soil_law
+from ...model.static import static_state
+from ...model.vehicle3d import make_vehicle
 from ...native.grid_engine_model import TRACK_SOIL_PARAMS, build_engine_functions
 from ...terrain import query
 from ...terrain.world import LIFT_TIME_S
@@ -32,15 +34,18 @@ STORAGE_ARRAYS = ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles", "sigma
 _FUNCTIONS: dict = {}
 
 
-def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = ()):
-    """build_engine_functions, cached per (options, soil laws, substeps) in this process;
-    ``soils``: the parameter dicts of a soil map's soils (index 0 the scenario's)."""
+def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (), surface=None):
+    """build_engine_functions, cached per (options, soil laws, substeps, the 3D vehicle's ground) in
+    this process; ``soils``: the parameter dicts of a soil map's soils (index 0 the scenario's);
+    ``surface``: the ground's shape under the 3D vehicle (analytic; None: flat)."""
     soils = tuple(soils) or (params,)
+    ground = None if surface is None or surface.is_flat else surface._coefficients()
     key = (opts, vehicle_substeps, tuple(
         (tuple(soil_law.make(opts).values(sp)), float(sp["repeated_loading_exponent"]),
-         tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils))
+         tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils), ground)
     if key not in _FUNCTIONS:
-        _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps, soils if len(soils) > 1 else ())
+        _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps, soils if len(soils) > 1 else (),
+                                                 surface)
     return _FUNCTIONS[key]
 
 
@@ -53,7 +58,8 @@ class TerrainEngine:
     def __init__(self, world, settings: EngineSettings | None = None, kernel: Callable | None = None):
         self.world = world
         self.settings = settings or EngineSettings()
-        self.fns = engine_functions(world.opts, world.params, self.settings.vehicle_substeps, world.soils)
+        self.fns = engine_functions(world.opts, world.params, self.settings.vehicle_substeps, world.soils,
+                                    getattr(world, "surface", None))
         # the channel model's outputs, when it was built (World.model is built on first use)
         names = getattr(vars(world).get("model"), "output_names", None)
         if names is not None and tuple(names) != tuple(self.fns.output_names):
@@ -63,6 +69,7 @@ class TerrainEngine:
         self.kernel = CKernel(library(self.fns), self.state) if kernel is None else kernel(self.fns, self.state)
         self.compiled = self.kernel.compiled
         self.timing = {"kernel_s": 0.0, "kernel_cpu_s": 0.0, "calls": 0}
+        self._hull_model = None  # the 3D vehicle's homogeneous model of its start (_hull_start)
 
     # -- passes ---------------------------------------------------------------------------------------------
     def release_all(self) -> None:
@@ -86,6 +93,8 @@ class TerrainEngine:
         s.p_pass[:] = 0.0
         s.wv[:] = 0.0
         s.wv[self.fns.layout.pose_index] = x_m, y_m, yaw_rad
+        if self.fns.n_seg:  # the 3D hull: first at rest on the virgin ground (then settled on the cells below)
+            s.wv[self.fns.layout.block("vehicle")] = self._hull_start(x_m, y_m, yaw_rad)
         s.a[:] = np.array(self.fns.vehicle_a(s.wv, s.pv)).ravel()
         # the cells under the vehicle at their static sinkage first (World.begin_pass)
         rc, e = self.kernel.assign(0.0)
@@ -100,6 +109,18 @@ class TerrainEngine:
         if rc:
             raise engine_error(abs(rc), e, s)
         return s.wv[self.fns.layout.block("vehicle")].copy()
+
+    def _hull_start(self, x_m: float, y_m: float, yaw_rad: float) -> np.ndarray:
+        """The 3D vehicle's static state at the pose on homogeneous virgin soil following the ground
+        (:func:`symtrack.model.static.static_state`): the hull's start above the cells, which the
+        set-down (the cells' static sinkage) and the settling then bring onto the field as it is
+        (on the ruts of an earlier pass, lower)."""
+        w = self.world
+        if self._hull_model is None:  # built once per engine (every pass starts from it)
+            self._hull_model = SystemModel(w.opts, vehicle=make_vehicle(w.opts, getattr(w, "surface", None)))
+        model = self._hull_model
+        x = static_state(model, w.params, x_m, y_m, yaw_rad)
+        return np.asarray(x, dtype=float)[model.layout.block("vehicle")]
 
     def end_pass(self, dt_s: float = SETTLE_STEP_S, max_steps: int = 300) -> None:
         """World.end_pass in the engine: the vehicle lifted off (each active cell's load falls from its

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from ...foundations.errors import SimulationError
-from ...native.grid_engine_model import NA, NGEO, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
+from ...native.grid_engine_model import NGEO, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
 from ...terrain import subsoil
 from ...terrain.settings import MAX_SUBSOIL_DEPTHS
 from ...terrain.world import END_STRIP_CELLS, padding_m
@@ -177,11 +177,11 @@ class EngineState:
         self.soil_veh = np.array([[float(sp[k]) for k in TRACK_SOIL_PARAMS] for sp in world.soils]).ravel()
         self.geo = np.array(geo_vector(world.params, g.cell_m, strip))
         self.wv = np.zeros(fns.nw)
-        self.a = np.zeros(NA)
+        self.a = np.zeros(fns.na)
         self.work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
         n_entry, n_exit = window_substeps(settings)
         nmax = max(n_entry, n_exit)
-        self.agrid, self.agrid_entry = np.zeros(NA * (n_exit + 1)), np.zeros(NA * (n_entry + 1))
+        self.agrid, self.agrid_entry = np.zeros(fns.na * (n_exit + 1)), np.zeros(fns.na * (n_entry + 1))
         self.plbuf, self.frbuf = np.zeros(nmax + 1), np.zeros(2 * (nmax + 1))
         self.pad = padding_m(g.cell_m)
         self.release_rate = float(world.settings.release_rate_m_s)
