@@ -361,6 +361,7 @@ def test_the_engines_terrain_query_is_the_numpy_query():
 
 
 
+@pytest.mark.slow  # a second engine build (about 10 s)
 def test_cells_in_lanes_equal_one_cell_at_a_time(tmp_path, monkeypatch):
     """grid_engine.c integrates the cells in batches of CELL_LANES interleaved lanes (cell_step_block):
     every lane runs the one-cell sequence of operations, so the engine built with one lane gives the
