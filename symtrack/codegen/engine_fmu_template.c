@@ -108,7 +108,7 @@ static void **engine_arrays(eng_t *E, size_t *count) {
                   E->ch_cell, E->ch_foot, E->ch_new_stamp, E->ch_new_cell, E->ch_z, E->ch_v, E->ch_zmax, E->ch_pmax,
                   E->ch_p, E->ch_cx, E->ch_cy, E->ch_dp, E->ch_vr, E->ch_zoff, E->ch_delta, E->ch_dc, E->ch_g,
                   E->ch_pw, E->ch_new, E->ch_counted, E->ch_soil, E->act, E->new_list, E->pv, E->wv, E->a, E->work,
-                  E->agrid, E->agrid_entry, E->plbuf, E->frbuf};
+                  E->agrid, E->agrid_entry};
   *count = sizeof list / sizeof list[0];
   memcpy(slots, list, sizeof list);
   return slots;
@@ -134,7 +134,6 @@ static int engine_alloc(Instance *c) {
   eng_t *E = &c->E;
   memset(E, 0, sizeof *E);
   long long n = EF_NX * EF_NY, nch = EF_M * EF_M;
-  long long nmax = EF_ENTRY_SUBSTEPS > EF_EXIT_SUBSTEPS ? EF_ENTRY_SUBSTEPS : EF_EXIT_SUBSTEPS;
   E->nx = EF_NX; E->ny = EF_NY; E->M = EF_M; E->n_ch = nch;
   E->x0 = EF_X0; E->y0 = EF_Y0; E->dx = EF_DX;
   E->z = zalloc(c, n, sizeof(double)); E->zdot = zalloc(c, n, sizeof(double));
@@ -154,8 +153,6 @@ static int engine_alloc(Instance *c) {
   E->work = zalloc(c, EF_WORK, sizeof(double));
   E->agrid = zalloc(c, NA * (EF_EXIT_SUBSTEPS + 1), sizeof(double));
   E->agrid_entry = zalloc(c, NA * (EF_ENTRY_SUBSTEPS + 1), sizeof(double));
-  E->plbuf = zalloc(c, nmax + 1, sizeof(double));
-  E->frbuf = zalloc(c, 2 * (nmax + 1), sizeof(double));
   c->p_end = zalloc(c, nch, sizeof(double));
   int sub_ok = 1;
 #if EF_N_DEPTHS > 0

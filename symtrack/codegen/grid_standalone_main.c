@@ -44,7 +44,6 @@ int main(int argc, char **argv) {
   eng_t E;
   memset(&E, 0, sizeof E);
   long long n = GV_NX * GV_NY, nch = GV_M * GV_M;
-  long long nmax = GV_ENTRY_SUBSTEPS > GV_EXIT_SUBSTEPS ? GV_ENTRY_SUBSTEPS : GV_EXIT_SUBSTEPS; /* both >= cell */
   E.nx = GV_NX; E.ny = GV_NY; E.M = GV_M; E.n_ch = nch;
   E.x0 = GV_X0; E.y0 = GV_Y0; E.dx = GV_DX;
   E.z = zalloc(n, sizeof(double)); E.zdot = zalloc(n, sizeof(double));
@@ -66,8 +65,7 @@ int main(int argc, char **argv) {
   E.wv = zalloc(NW, sizeof(double)); E.a = zalloc(NA, sizeof(double));
   E.work = zalloc(GV_WORK, sizeof(double));
   E.agrid = zalloc(NA * (GV_EXIT_SUBSTEPS + 1), sizeof(double));
-  E.agrid_entry = zalloc(NA * (GV_ENTRY_SUBSTEPS + 1), sizeof(double)); E.plbuf = zalloc(nmax + 1, sizeof(double));
-  E.frbuf = zalloc(2 * (nmax + 1), sizeof(double));
+  E.agrid_entry = zalloc(NA * (GV_ENTRY_SUBSTEPS + 1), sizeof(double));
   E.n_pv = GV_N_PV; E.ny_out = GV_NY_OUT; E.cell_substeps = GV_CELL_SUBSTEPS; E.entry_substeps = GV_ENTRY_SUBSTEPS;
   E.exit_substeps = GV_EXIT_SUBSTEPS;
   E.steady_euler = GV_STEADY_EULER;

@@ -71,8 +71,7 @@ typedef struct {
   double *wv;     /* NW: the vehicle's states and accelerations */
   double *a;      /* NA: pose and pressure lines at wv */
   double *work;   /* the generated Functions' work vector (the largest sz_w) */
-  double *agrid, *plbuf, *frbuf; /* scratch: NA (n + 1) for n = exit_substeps; n + 1, 2 (n + 1) for n = the largest
-                                    substep count */
+  double *agrid; /* scratch: NA (n + 1) for n = exit_substeps */
   /* substeps: every cell's, the entry windows' (both not below cell_substeps; engine.py) */
   long long n_pv, ny_out, cell_substeps, entry_substeps, power_mode; /* 0: step mean, 1: instantaneous */
   double pad, release_rate, areal_mass, damping, gamma, entry_fraction;
@@ -337,120 +336,6 @@ static inline void stage_coefficients(const eng_t *E, double gh, double *a, doub
   *g = gh / m;
 }
 
-/* The implicit stage Z = zeta + gh V, V = omega + gh (pl - p(Z) - c V) / m as one monotone scalar
- * equation F(Z) = a (Z - zeta) + g p(Z) - omega - g pl = 0 (a = (1 + gh c / m) / gh, g = gh / m;
- * F' >= a > 0 as p is nondecreasing). The root lies in [hi - g p(hi) / a, hi] with
- * hi = zeta + (omega + g pl) / a (p >= 0). Newton from the root of F linearised at zs (the last
- * solution of this cell: its slope there is known), each iterate kept in the bracket (bisection
- * otherwise; the lower end is evaluated only when a step needs it); converged when the Newton
- * step from Z is below 1e-13 |Z| + 1e-18 m, or, in the quadratic regime, when a Newton step
- * inside the bracket is below NEWTON_ACCEPT |Z| (its result is then within about NEWTON_ACCEPT^2 |Z| of the
- * root, and p is extended linearly to it; engine.py's NEWTON_ACCEPT_STEP). Z, p(Z), p'(Z) are returned. */
-static int stage(eng_t *E, double zeta, double omega, double pl, double a, double ia, double g, const double *hist, int soil,
-                 double zs, double ps, double dps, double *Z, double *pz, double *dpz) {
-  double hi = zeta + (omega + g * pl) * ia, lo = -INFINITY;
-  double x = (a * zeta + omega + g * (pl - ps + dps * zs)) / (a + g * dps);
-  if (!(x < hi)) x = hi;
-  double p, dp;
-  for (int it = 0; it < 100; ++it) {
-    E->n_newton += 1;
-    law(x, hist, soil, &p, &dp);
-    double F = a * (x - zeta) + g * p - omega - g * pl;
-    if (F > 0.0) hi = x;
-    else if (F < 0.0) lo = x;
-    else break;
-    double xn = x - F / (a + g * dp);
-    if (fabs(xn - x) <= 1e-13 * fabs(xn) + 1e-18) break; /* x solves the stage to that tolerance */
-    if (fabs(xn - x) <= NEWTON_ACCEPT * fabs(xn) && xn < hi && xn > lo) {
-      /* quadratic convergence: xn is within about NEWTON_ACCEPT^2 |Z| of the root; take it, with the law
-         extended linearly from x (an error of the same order; p = 0 stays exactly 0 on the clipped
-         branch, where dp = 0) */
-      p = fmax(0.0, p + dp * (xn - x));
-      x = xn;
-      break;
-    }
-    if (!(xn < hi && xn > lo)) {
-      if (lo == -INFINITY) {
-        double ph, dph;
-        law(hi, hist, soil, &ph, &dph);
-        lo = hi - g * ph * ia;
-      }
-      if (!(xn < hi && xn > lo)) xn = 0.5 * (lo + hi);
-    }
-    x = xn;
-  }
-  {
-    /* the Newton step from x, F / F', below 1e-6 |x| + 1e-18 m */
-    if (!(fabs(a * (x - zeta) + g * p - omega - g * pl) <= (1e-6 * fabs(x) + 1e-18) * (a + g * dp))) return 1;
-  }
-  *Z = x;
-  *pz = p;
-  *dpz = dp;
-  return 0;
-}
-
-/* (z, v) over one macro step of length h in n equal substeps (Alexander's two-stage SDIRK,
- * L-stable, order 2, stiffly accurate), the load linear in time within each substep between its
- * values pl[k], pl[k + 1] at the substep ends. p, dp: the law at z on entry and on exit.
- * work[t] += the compaction work per unit area under track t over the step: the sum over the
- * stage segments of frac_t(mid) (p_a + p_b) / 2 max(z_b - z_a, 0), frac_t linear within each
- * substep between f[2k + t] and f[2k + 2 + t] (the energy-consistent compaction power is work / h). */
-static int cell_step(eng_t *E, double *z, double *v, double *p, double *dp, const double *pl, const double *f,
-                     const double *hist, int soil, double h, long long n, double *work, double *vr, int euler) {
-  double gam = E->gamma, hs = h / (double)n, gh = gam * hs;
-  double z0 = *z, v0 = *v, pz = *p, dpz = *dp;
-  if (euler) {
-    /* implicit Euler (L-stable, order 1, one stage a substep): V = (Z - z0) / hs, the load at the
-       substep end, the work by one trapezoid per substep, the fractions at its middle */
-    double ae, iae, ge, ihs = 1.0 / hs;
-    stage_coefficients(E, hs, &ae, &iae, &ge);
-    for (long long k = 0; k < n; ++k) {
-      double Z1, p0 = pz;
-      if (stage(E, z0, v0, pl[k + 1], ae, iae, ge, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
-      double w1 = 0.5 * (p0 + pz) * fmax(Z1 - z0, 0.0);
-      for (int t = 0; t < 2; ++t) work[t] += 0.5 * (f[2 * k + t] + f[2 * k + 2 + t]) * w1;
-      v0 = (Z1 - z0) * ihs;
-      *vr = v0;
-      z0 = Z1;
-      E->n_cell_stages += 1;
-    }
-    *z = z0;
-    *v = v0;
-    *p = pz;
-    *dp = dpz;
-    return 0;
-  }
-  double a, ia, g, igh = 1.0 / gh, ihs = 1.0 / hs;
-  stage_coefficients(E, gh, &a, &ia, &g);
-  /* the rate at a substep end from the quadratic through (0, z0), (gamma, Z1), (1, Z2) */
-  const double q0 = (1.0 - gam) / gam * ihs, q1 = ihs / (gam * (gam - 1.0)), q2 = (2.0 - gam) / (1.0 - gam) * ihs;
-  for (long long k = 0; k < n; ++k) {
-    double Z1, Z2, p0 = pz, p1;
-    double plA = pl[k], plB = pl[k + 1];
-    if (stage(E, z0, v0, plA + (plB - plA) * gam, a, ia, g, hist, soil, z0, pz, dpz, &Z1, &pz, &dpz)) return 1;
-    p1 = pz;
-    double V1 = (Z1 - z0) * igh;
-    double A1 = (V1 - v0) * igh;
-    double zeta = z0 + hs * (1.0 - gam) * V1, omega = v0 + hs * (1.0 - gam) * A1;
-    if (stage(E, zeta, omega, plB, a, ia, g, hist, soil, Z1, pz, dpz, &Z2, &pz, &dpz)) return 1;
-    double m1 = 0.5 * gam, m2 = 0.5 * (gam + 1.0);
-    double w1 = 0.5 * (p0 + p1) * fmax(Z1 - z0, 0.0), w2 = 0.5 * (p1 + pz) * fmax(Z2 - Z1, 0.0);
-    for (int t = 0; t < 2; ++t) {
-      double fa = f[2 * k + t], fb = f[2 * k + 2 + t];
-      work[t] += (fa + (fb - fa) * m1) * w1 + (fa + (fb - fa) * m2) * w2;
-    }
-    v0 = (Z2 - zeta) * igh;
-    *vr = z0 * q0 + Z1 * q1 + Z2 * q2;
-    z0 = Z2;
-    E->n_cell_stages += 2;
-  }
-  *z = z0;
-  *v = v0;
-  *p = pz;
-  *dp = dpz;
-  return 0;
-}
-
 /* INFO_OUT of one channel after its step: the history (cell.history_update, generated:
  * eng_cell_history) and the storage; hist: the history the step was integrated with */
 static void info_out(eng_t *E, long long ch, const double *hist) {
@@ -654,9 +539,9 @@ static int cell_step_block(eng_t *E, cell_batch_t *B, double h, double *work) {
   return -1;
 }
 
-/* integrate the batch, then each lane's compaction power and INFO_OUT (cell_step's caller's tail);
-   0, or -ERR_NEWTON with err_a the cell */
-static int cell_batch_flush(eng_t *E, cell_batch_t *B, double h, double ih) {
+/* integrate the batch, then each lane's compaction power (power: 1) and INFO_OUT; 0, or -ERR_NEWTON
+   with err_a the cell */
+static int cell_batch_flush(eng_t *E, cell_batch_t *B, double h, double ih, int power) {
   if (B->m == 0) return 0;
   double work[2 * CELL_LANES];
   int bad = cell_step_block(E, B, h, work);
@@ -668,9 +553,11 @@ static int cell_batch_flush(eng_t *E, cell_batch_t *B, double h, double ih) {
   }
   for (int i = 0; i < B->m; ++i) {
     const long long ch = B->ch[i];
-    double *pw = E->ch_pw + 2 * ch;
-    pw[0] = work[2 * i] * ih;
-    pw[1] = work[2 * i + 1] * ih;
+    if (power) {
+      double *pw = E->ch_pw + 2 * ch;
+      pw[0] = work[2 * i] * ih;
+      pw[1] = work[2 * i + 1] * ih;
+    }
     info_out(E, ch, B->hist + 5 * i);
   }
   B->m = 0;
@@ -988,12 +875,12 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       channel_hist(E, ch, B->hist + 5 * lane);
       memcpy(g, gB, sizeof gB);
       if (++B->m == CELL_LANES) {
-        int rc = cell_batch_flush(E, B, h, ih);
+        int rc = cell_batch_flush(E, B, h, ih, 1);
         if (rc) return rc;
       }
     }
     for (int b = 0; b < 3; ++b) {
-      int rc = cell_batch_flush(E, batches + b, h, ih);
+      int rc = cell_batch_flush(E, batches + b, h, ih, 1);
       if (rc) return rc;
     }
     long long c3 = now_ns();
@@ -1074,8 +961,15 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
                           int *settled) {
   WORK = E->work;
   *settled = 0;
-  double *pl = E->plbuf, *fr = E->frbuf;
-  for (long long j = 0; j <= n; ++j) fr[2 * j] = fr[2 * j + 1] = 0.0;
+  /* the cells in batches (cell_step_block, SDIRK, n substeps), no overlap fractions (no work) */
+  double lift_buf[CELL_LANES * 3 * (n + 1)];
+  cell_batch_t B;
+  B.m = 0;
+  B.n = n;
+  B.euler = 0;
+  B.pl = lift_buf;
+  B.fr = lift_buf + CELL_LANES * (n + 1);
+  memset(B.fr, 0, CELL_LANES * 2 * (n + 1) * sizeof(double));
   for (long long k = 0; k < max_steps; ++k) {
     double t0 = (double)k * h;
     if (t0 >= T) {
@@ -1089,20 +983,19 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
         return k;
       }
     }
-    for (long long q = 0; q < E->n_act; ++q) {
-      long long ch = E->act[q];
-      double pe = p_end[ch];
-      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && pe == 0.0) continue;
-      for (long long j = 0; j <= n; ++j) pl[j] = pe * fmax(0.0, 1.0 - (t0 + h * (double)j / (double)n) / T);
-      double work[2] = {0.0, 0.0}, hist[5], vr;
-      channel_hist(E, ch, hist);
-      if (cell_step(E, E->ch_z + ch, E->ch_v + ch, E->ch_p + ch, E->ch_dp + ch, pl, fr, hist, E->ch_soil[ch], h, n,
-                    work, &vr, 0)) {
-        E->err_code = ERR_NEWTON;
-        E->err_a = E->ch_cell[ch];
-        return -ERR_NEWTON;
+    for (long long q = 0; q <= E->n_act; ++q) {
+      if (q < E->n_act) {
+        long long ch = E->act[q];
+        double pe = p_end[ch];
+        if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && pe == 0.0) continue;
+        double *pl = B.pl + B.m * (n + 1);
+        for (long long j = 0; j <= n; ++j) pl[j] = pe * fmax(0.0, 1.0 - (t0 + h * (double)j / (double)n) / T);
+        B.ch[B.m] = ch;
+        B.soil[B.m] = E->ch_soil[ch];
+        channel_hist(E, ch, B.hist + 5 * B.m);
+        if (++B.m < CELL_LANES) continue;
       }
-      info_out(E, ch, hist);
+      if (cell_batch_flush(E, &B, h, 0.0, 0)) return -ERR_NEWTON;
     }
   }
   return max_steps;

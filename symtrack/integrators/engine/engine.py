@@ -28,7 +28,7 @@ log = logging.getLogger("symtrack.terrain")
 SETTLE_STEP_S = 0.01  # the settling steps of World.begin_pass
 # the engine state's scalars besides its arrays (EngineState), and its scratch arrays (not saved)
 STATE_SCALARS = ("n_act", "peak_active", "stamp")
-STATE_SCRATCH = ("work", "agrid", "plbuf", "frbuf", "new_list", "geo")
+STATE_SCRATCH = ("work", "agrid", "new_list", "geo")
 STORAGE_ARRAYS = ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles", "sigma_max")
 
 _FUNCTIONS: dict = {}

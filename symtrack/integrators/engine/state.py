@@ -42,7 +42,7 @@ class EngineStruct(ctypes.Structure):
                                                   "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx", "ch_cy",
                                                   "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list")]
                 + [(n, ctypes.c_longlong) for n in ("n_act", "n_new", "peak_active", "stamp")]
-                + [(n, ctypes.c_void_p) for n in ("pv", "geo", "wv", "a", "work", "agrid", "plbuf", "frbuf")]
+                + [(n, ctypes.c_void_p) for n in ("pv", "geo", "wv", "a", "work", "agrid")]
                 + [(n, ctypes.c_longlong) for n in ("n_pv", "ny_out", "cell_substeps", "entry_substeps", "power_mode")]
                 + [(n, ctypes.c_double) for n in ("pad", "release_rate", "areal_mass", "damping", "gamma",
                                                   "entry_fraction")]
@@ -180,9 +180,7 @@ class EngineState:
         self.a = np.zeros(fns.na)
         self.work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
         n_entry, n_exit = window_substeps(settings)
-        nmax = max(n_entry, n_exit)
         self.agrid, self.agrid_entry = np.zeros(fns.na * (n_exit + 1)), np.zeros(fns.na * (n_entry + 1))
-        self.plbuf, self.frbuf = np.zeros(nmax + 1), np.zeros(2 * (nmax + 1))
         self.pad = padding_m(g.cell_m)
         self.release_rate = float(world.settings.release_rate_m_s)
         self.areal_mass, self.damping = cell_constants(world.params)
@@ -215,7 +213,7 @@ class EngineState:
         arrays += [(name, getattr(self, name)) for name in (
             "ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx",
             "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv", "geo", "wv", "a", "work",
-            "agrid", "agrid_entry", "plbuf", "frbuf", "ch_zoff", "ch_delta", "ch_dc", "ch_counted", "ch_soil",
+            "agrid", "agrid_entry", "ch_zoff", "ch_delta", "ch_dc", "ch_counted", "ch_soil",
             "soil_veh")]
         # the addresses, taken again only when an array was replaced (a call runs 100 macro steps:
         # ctypes' data_as for the 43 arrays was a few percent of a call)
