@@ -130,3 +130,17 @@ def test_the_built_in_machines_and_seasons_are_valid():
         ts.machine_from_dict(t, where=name)
     for k, v in ts.SEASONS.items():
         assert ts.build_season(v, where=k)
+
+
+def test_the_example_prints_the_table_and_draws_the_figure(tmp_path, capsys):
+    import runpy
+
+    ns = runpy.run_path("examples/kroulik_seasons.py")
+    png = tmp_path / "k.png"
+    rows = ns["main"](["--size", "120", "100", "--cell", "0.2", "--plot", str(png)])
+    assert png.stat().st_size > 10_000
+    out = capsys.readouterr().out
+    assert "| conventional tillage |" in out and "95.3 %" in out
+    shares = {r["system"]: r["trafficked_fraction"] for r in rows}
+    # more tillage, more traffic: the order of Kroulik's three systems
+    assert shares["conventional"] > shares["minimum"] > shares["direct"]

@@ -116,9 +116,11 @@ def _pair(name, lateral, width):
 _TRACTOR_LARGE = _pair("front 600/70R30", 1.0, 0.60) + _pair("rear 710/70R42", 1.0, 0.71)  # ~200 kW, gauge 2.0 m
 _TRACTOR_MEDIUM = _pair("front 480/70R28", 0.9, 0.48) + _pair("rear 580/70R38", 0.9, 0.58)  # ~110 kW, gauge 1.8 m
 MACHINES = {
-    # a 5-furrow reversible mounted plough, 5 x 0.40 m; the tractor wider than its swath (in-furrow
-    # ploughing: its wheels run on the last furrow and on the land to be ploughed next)
-    "plough": {"working_width_m": 2.0, "outer_width_m": 2.8, "turn_radius_m": 5.0, "wheels": _TRACTOR_LARGE},
+    # a 6-furrow reversible semi-mounted plough, 6 x 0.45 m (the ~200 kW class); the tractor centred on
+    # the swath (in-furrow ploughing's offset not modelled), the plough's own depth wheel not counted.
+    # Sensitive: a 5 x 0.40 m plough (2.0 m, the tractor's gauge) puts each pass's land wheel in the
+    # next pass's furrow-wheel track, and ploughing alone then runs over about 36 % instead of 53 %
+    "plough": {"working_width_m": 2.7, "outer_width_m": 2.8, "turn_radius_m": 5.0, "wheels": _TRACTOR_LARGE},
     # a trailed short-disc harrow / stubble cultivator, 6 m (its roller not counted)
     "disc_6m": {"working_width_m": 6.0, "turn_radius_m": 5.0, "wheels": _TRACTOR_LARGE},
     # a mounted chisel cultivator, 4.5 m (minimum tillage's deeper loosening)
