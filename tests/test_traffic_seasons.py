@@ -70,6 +70,7 @@ def test_season_share_equals_an_independent_polygon_test():
     machines = {"two": TWO, "wide": WIDE}
     ops = [{"name": "a", "machine": "two", "seed": 3, "random_offset_m": 0.5},
            {"name": "b", "machine": "wide", "seed": 4},
+           {"name": "across", "machine": "two", "seed": 5, "direction": "y"},
            {"name": "c", "machine": "wide", "same_lines_as": "tram", "repeat": 2}]
     season = ts.build_season(ops, size_m=(70.0, 50.0), cell_m=0.1, machines=machines)
     counts = ts.season_counts(season)
@@ -80,13 +81,14 @@ def test_season_share_equals_an_independent_polygon_test():
     hit = np.zeros(pts.shape[0], dtype=bool)
     passes = np.zeros(pts.shape[0], dtype=np.int64)
     for s in season:
+        xy = pts[:, ::-1] if s.direction == "y" else pts  # a turned plan's x is the field's y
         for polys in _polygons(op.plan_operation(s.settings), s.machine):
             seg_hit = np.zeros(pts.shape[0], dtype=bool)
             for poly in polys:
                 ext = poly.get_extents()
-                sel = np.nonzero((pts[:, 0] >= ext.x0) & (pts[:, 0] <= ext.x1)
-                                 & (pts[:, 1] >= ext.y0) & (pts[:, 1] <= ext.y1))[0]
-                seg_hit[sel] |= poly.contains_points(pts[sel])
+                sel = np.nonzero((xy[:, 0] >= ext.x0) & (xy[:, 0] <= ext.x1)
+                                 & (xy[:, 1] >= ext.y0) & (xy[:, 1] <= ext.y1))[0]
+                seg_hit[sel] |= poly.contains_points(xy[sel])
             hit |= seg_hit
             passes += s.repeat * seg_hit
     assert abs(sh["trafficked_fraction"] / hit.mean() - 1) < 0.01, (sh["trafficked_fraction"], hit.mean())
@@ -103,6 +105,16 @@ def test_a_repeated_operation_adds_passes_not_area():
     a, b = ts.season_shares(one, 0.1), ts.season_shares(three, 0.1)
     assert a["trafficked_fraction"] == b["trafficked_fraction"]
     assert b["repeated_excess_fraction"] == pytest.approx(a["repeated_excess_fraction"] + 2 * a["trafficked_fraction"])
+
+
+def test_an_operation_across_is_the_one_along_turned():
+    machines = {"two": TWO}
+    a = ts.season_counts(ts.build_season([{"machine": "two", "seed": 2}], size_m=(50.0, 50.0), machines=machines))
+    b = ts.season_counts(ts.build_season([{"machine": "two", "seed": 2, "direction": "y"}], size_m=(50.0, 50.0),
+                                         machines=machines))
+    assert np.array_equal(b, a.T) and not np.array_equal(a, b)
+    with pytest.raises(ScenarioError, match=r"season\[0\]\.direction = 'z' is not one of x, y"):
+        ts.build_season([{"machine": "two", "direction": "z"}], machines=machines)
 
 
 def test_bad_machines_and_seasons_are_refused_naming_key_and_range():

@@ -46,7 +46,9 @@ KROULIK_2009 = {"conventional": (0.953, 1.456), "minimum": (0.728, 0.448), "dire
 SYSTEM_LABELS = {"conventional": "conventional tillage", "minimum": "minimum tillage", "direct": "direct seeding"}
 MACHINE_KEYS = ("name", "working_width_m", "outer_width_m", "turn_radius_m", "wheels")
 WHEEL_KEYS = ("name", "lateral_m", "width_m")
-OP_KEYS = ("name", "machine", "repeat", "tracks", "random_offset_m", "seed", "headland_passes", "same_lines_as")
+OP_KEYS = ("name", "machine", "repeat", "tracks", "random_offset_m", "seed", "headland_passes", "same_lines_as",
+           "direction")
+DIRECTIONS = ("x", "y")  # the track lines along the field's x (its length) or across, along y
 
 
 @dataclass(frozen=True)
@@ -152,6 +154,7 @@ class SeasonOp:
     machine: Machine
     settings: OperationSettings
     repeat: int  # how many times this operation is driven on the same plan (tramline operations)
+    direction: str = "x"  # "y": planned on the field turned (x and y exchanged), its lines along y
 
 
 # ---- the three seasons (winter cereal; the sequences ASSUMED as typical Czech practice of the
@@ -236,27 +239,31 @@ def build_season(ops, size_m=FIELD_SIZE_M, cell_m=FIELD_CELL_M, machines=None, w
             hp = _auto_headland_passes(m, m.working_width_m)
         else:
             hp = integer(f"{wh}.headland_passes", hp, 1, 20)
+        direction = t.get("direction", "x")
+        if direction not in DIRECTIONS:
+            raise ScenarioError(f"{wh}.direction = {direction!r} is not one of {', '.join(DIRECTIONS)}")
+        size = [Lx, Ly] if direction == "x" else [Ly, Lx]
         tracks = t.get("tracks", "random")
         seed = t.get("seed", i + 1)
         key = t.get("same_lines_as")
         if key is not None:
             seed = TRAMLINE_SEED
-        doc = {"name": str(t.get("name", name)), "size_m": [Lx, Ly], "cell_m": cell,
+        doc = {"name": str(t.get("name", name)), "size_m": size, "cell_m": cell,
                "working_width_m": m.working_width_m, "headland_passes": hp, "tracks": tracks,
                "random_offset_m": t.get("random_offset_m", RANDOM_OFFSET_M), "seed": seed, "turn": "auto",
                "turn_radius_m": m.turn_radius_m}
         fs = parse_operation(doc, where=wh)
         if key is not None:
             if key in shared:
-                if shared[key].working_width_m != fs.working_width_m:
+                if shared[key].working_width_m != fs.working_width_m or shared[key].size_m != fs.size_m:
                     raise ScenarioError(f"{wh}.same_lines_as = {key!r}: machines.{name}.working_width_m = "
-                                        f"{fs.working_width_m:g} differs from the first of those lines' "
-                                        f"{shared[key].working_width_m:g} m")
+                                        f"{fs.working_width_m:g} or its direction differs from the "
+                                        f"first of those lines' ({shared[key].working_width_m:g} m)")
                 fs = dataclasses.replace(shared[key], name=fs.name)
             else:
                 shared[key] = fs
         plan_operation(fs)  # refuses bad plans (width, headlands, turns) before any raster
-        out.append(SeasonOp(fs.name, m, fs, repeat))
+        out.append(SeasonOp(fs.name, m, fs, repeat, direction))
     return out
 
 
@@ -330,20 +337,23 @@ def segment_counts(geometry, machine: Machine, shape, cell_m: float, counts=None
 
 
 def operation_counts(op: SeasonOp, shape=None, counts=None) -> np.ndarray:
-    """Passes per cell of one season operation (its plan, its repeats)."""
+    """Passes per cell (the field's (nx, ny)) of one season operation (its plan, its repeats)."""
     fs = op.settings
+    turned = op.direction == "y"
     if shape is None:
-        shape = (int(round(fs.size_m[0] / fs.cell_m)), int(round(fs.size_m[1] / fs.cell_m)))
+        n0, n1 = int(round(fs.size_m[0] / fs.cell_m)), int(round(fs.size_m[1] / fs.cell_m))
+        shape = (n1, n0) if turned else (n0, n1)
     counts = np.zeros(shape, dtype=np.int32) if counts is None else counts
     geo = _segment_geometry(plan_operation(fs))
-    one = segment_counts(geo, op.machine, shape, fs.cell_m)
-    counts += op.repeat * one
+    one = segment_counts(geo, op.machine, (shape[1], shape[0]) if turned else shape, fs.cell_m)
+    counts += op.repeat * (one.T if turned else one)  # turned: the plan's x is the field's y and back
     return counts
 
 
 def season_counts(ops) -> np.ndarray:
-    fs = ops[0].settings
-    shape = (int(round(fs.size_m[0] / fs.cell_m)), int(round(fs.size_m[1] / fs.cell_m)))
+    fs, op0 = ops[0].settings, ops[0]
+    n0, n1 = int(round(fs.size_m[0] / fs.cell_m)), int(round(fs.size_m[1] / fs.cell_m))
+    shape = (n1, n0) if op0.direction == "y" else (n0, n1)
     counts = np.zeros(shape, dtype=np.int32)
     for op in ops:
         operation_counts(op, shape, counts)
