@@ -92,6 +92,23 @@ def figure(rows, maps, cell_m, path):
     plt.close(fig)
 
 
+def variant(seasons, random_offset=None, across=()):
+    """The seasons with every random-traffic offset bound replaced (not the plough's) and the named
+    operations turned across the field (the tramline operations only all together)."""
+    out = {}
+    for k, ops in seasons.items():
+        rows = []
+        for o in ops:
+            o = dict(o)
+            if random_offset is not None and "same_lines_as" not in o and "random_offset_m" not in o:
+                o["random_offset_m"] = random_offset
+            if o.get("name") in across:
+                o["direction"] = "y"
+            rows.append(o)
+        out[k] = rows
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", type=float, nargs=2, default=ts.FIELD_SIZE_M, metavar=("X_M", "Y_M"))
@@ -99,8 +116,14 @@ def main(argv=None):
     ap.add_argument("--plot", help="the figure (PNG): the three maps of passes per cell")
     ap.add_argument("--json", help="the rows as JSON")
     ap.add_argument("--operations", action="store_true", help="also each operation's own share")
+    ap.add_argument("--random-offset", type=float, metavar="M",
+                    help=f"every random-traffic line's offset bound (default {ts.RANDOM_OFFSET_M:g} m; the plough's "
+                         f"{ts.PLOUGH_OFFSET_M:g} m kept)")
+    ap.add_argument("--across", nargs="+", default=(), metavar="OPERATION",
+                    help="operations (by name, e.g. 'harvest') driven across the field (direction y)")
     a = ap.parse_args(argv)
-    rows, maps = ts.system_table(tuple(a.size), a.cell)
+    systems = variant(ts.SEASONS, a.random_offset, a.across)
+    rows, maps = ts.system_table(tuple(a.size), a.cell, systems)
     print(f"field {a.size[0]:g} m x {a.size[1]:g} m, cells {a.cell:g} m")
     print(table(rows))
     if a.operations:
