@@ -839,18 +839,7 @@ class PathTrackingMPC:
         info = SolveInfo(ok, time.perf_counter() - t0, iters, status)
         if ok:
             self._accept(w)
-            # linearised at the plan itself, not at the plan shifted one sample ahead: the first
-            # feedback comes at the cold start's own time and state (the closed loop calls prepare,
-            # then step, with the same measurement). Shifted, the guess's first stage is the plan's
-            # state 0.1 s later, the measurement looked like a jump of the previous command from the
-            # trim torques to the plan's first (4.1 / -3.0 kN m on straight_offset) and the first
-            # step was rejected (defect 1.1 > 0.1, measurement alone 3.7; planar: 0.7 and 1.9),
-            # then IPOPT from that guess (issue 22, docs/vehicle3d.md).
-            try:
-                self.rti.prepare_at(w, self.p_model, self._cells(x_cells))
-            except (RuntimeError, np.linalg.LinAlgError) as err:
-                log.warning("RTI preparation failed (%s); the first sample prepares again", err)
-                self.rti.lin = None
+            self._prepare_next_rti(x_cells)
         return info
 
     def _accept(self, wopt):
