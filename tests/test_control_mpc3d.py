@@ -1,6 +1,7 @@
 """The MPC on the 3D vehicle (issue 22: ``model.vehicle = "3d"``; docs/vehicle3d.md, "The MPC on the
 3D vehicle"): the scenario's ground, refusals, finite derivatives of the NLP, the closed loop."""
 
+import dataclasses
 import math
 
 import casadi as ca
@@ -104,8 +105,8 @@ def test_prediction_hull_is_checked_against_the_model():
 
 
 def test_the_quasi_static_hull_is_the_trim_s_hull_on_a_side_slope():
-    """The prediction's quasi-static hull (the hull's balances at zero acceleration, the default on the
-    3D vehicle) under the straight trim's planar state on an 8 deg side slope is the trim's own hull
+    """The prediction's quasi-static hull (``mpc.prediction_hull = "quasi_static"``: the hull's balances at
+    zero acceleration) under the straight trim's planar state on an 8 deg side slope is the trim's own hull
     (the full 3D model's steady state, solved by Newton on all its state derivatives): the same height
     above the ground, pitch and roll; the roll is the slope's and the hull's states are not states of
     the prediction. Creep law, 2 steps (a fast build)."""
@@ -113,7 +114,8 @@ def test_the_quasi_static_hull_is_the_trim_s_hull_on_a_side_slope():
                       surface={"slope_y_deg": 8.0})
     sc = S.scenario_from_dict(d, default)
     model = system_model(sc.model, sc.surface)
-    mpc = PathTrackingMPC(model, sc.params, sc.mpc)
+    assert not PathTrackingMPC(model, sc.params, sc.mpc).hull_quasi_static  # "auto": the dynamic hull
+    mpc = PathTrackingMPC(model, sc.params, dataclasses.replace(sc.mpc, prediction_hull="quasi_static"))
     assert mpc.hull_quasi_static and not set(HULL_STATES) & set(mpc.pred_names)
     assert mpc.nz == len(model.alg_names) + len(QS_HULL_VARIABLES)
     xt, _ = CL.initial_state(model, sc)
@@ -132,15 +134,15 @@ def test_the_quasi_static_hull_is_the_trim_s_hull_on_a_side_slope():
 @pytest.mark.slow
 def test_the_3d_straight_offset_approach_without_failed_solves():
     """The first 3 s of `symtrack mpc straight_offset --solver rti --set model.vehicle=3d` (the 1 m
-    approach, where the RTI steps are largest) without a failed solve with the quasi-static hull
-    (the default), and its control: the hull's six states in the prediction ("dynamic", what the MPC
-    predicted before) fail solves there (measured: 0 against 9 of 30; docs/vehicle3d.md)."""
+    approach, where the RTI steps are largest) without a failed solve with the quasi-static hull,
+    and its control: the hull's six states in the prediction ("dynamic", the default) fail solves
+    there (docs/vehicle3d.md, "The MPC on the 3D vehicle")."""
     failed = {}
-    for hull in ("auto", "dynamic"):
+    for hull in ("quasi_static", "dynamic"):
         sc = S.load("straight_offset", ["model.vehicle=3d", "mpc.solver=rti", "mpc.jit=false",
                                         f"mpc.prediction_hull={hull}"])
         res = CL.run(sc, max_steps=30)
         failed[hull] = res.summary["failed_solves"]
-        if hull == "auto":
+        if hull == "quasi_static":
             assert abs(res.e_lat[-1]) < 0.1  # the approach goes on: 1 m -> a few cm in 3 s
-    assert failed["auto"] == 0 < failed["dynamic"]
+    assert failed["quasi_static"] == 0 < failed["dynamic"]
