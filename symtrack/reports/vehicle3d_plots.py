@@ -114,7 +114,7 @@ def run_surface(res):
 def path_elevation_png(res, surface, margin_m: float = 3.0, samples: int = 240) -> bytes:
     """The CG's path (start and end marked) over the ground's elevation z0 (``surface``:
     :class:`~symtrack.terrain.surface.Surface`), the map extended to the axes' aspect so that it is
-    drawn to scale."""
+    drawn to scale; blank beyond an elevation raster."""
     x, y = res.column("x_m"), res.column("y_m")
     fig, ax = plt.subplots(figsize=(8, 5))
     fixed_layout(fig, right_in=1.35)
@@ -130,6 +130,10 @@ def path_elevation_png(res, surface, margin_m: float = 3.0, samples: int = 240) 
     gx, gy = np.meshgrid(np.linspace(cx - half_w, cx + half_w, samples),
                          np.linspace(cy - half_h, cy + half_h, max(int(samples / box), 20)))
     z = surface.elevation(gx, gy)
+    raster = getattr(surface, "raster", None)
+    if raster is not None and raster.origin_m is not None:  # beyond the raster the heights are not the ground's
+        rx0, rx1, ry0, ry1 = raster.bounds()
+        z = np.where((gx >= rx0) & (gx <= rx1) & (gy >= ry0) & (gy <= ry1), z, np.nan)
     cs = ax.contourf(gx, gy, z, 30, cmap="terrain")
     ax.plot(x, y, "k-", lw=2, label="CG path")
     ax.plot(x[0], y[0], "o", color="k", ms=6, label="start")
