@@ -108,3 +108,18 @@ def test_a_standing_vehicle_is_drawn_against_time():
     cols["x_m"] = 3.0 * t
     s, label = vehicle3d_plots.abscissa(res)
     assert label == "distance travelled [m]" and s[-1] == pytest.approx(6.0)
+
+
+@pytest.mark.slow
+def test_a_3d_terrain_study_writes_them_per_pass(tmp_path):
+    """On the grid (the terrain engine; slow: its 3D variant's first compile) each pass's folder has the
+    hull's figures with its trajectory plots; the field's elevation map is the terrain figure surface.png
+    (none here: a flat field), not path_elevation.png."""
+    out = tmp_path / "mp"
+    assert main(["simulate", "multipass", "--out", str(out), "--quiet", "--set", "model.vehicle=3d", "--set",
+                 "terrain.passes=2", "--set", "terrain.size_m=[20.0, 8.0]", "--set",
+                 "run.stop_after_distance_m=2"]) == 0
+    for name in ("attitude.png", "load_split.png"):
+        assert (out / "pass_2" / name).stat().st_size > 1000
+        assert f"pass_2/{name}" in _shown(out)
+    assert not list(out.rglob("path_elevation.png"))
