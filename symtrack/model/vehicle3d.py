@@ -62,7 +62,7 @@ import math
 
 import casadi as ca
 
-from ..foundations.errors import ParameterError
+from ..foundations.errors import ParameterError, SimulationError
 from . import soil_law
 from .layout import ContactPose, StateLayout, VehicleState
 from .options import SHEAR_LAWS, ModelOptions
@@ -86,8 +86,8 @@ from .vehicle import (
 )
 
 __all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
-           "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_terrain", "hull_rotation",
-           "make_vehicle"]
+           "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_raster",
+           "check_terrain", "footprint_radius_m", "hull_rotation", "make_vehicle"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -177,7 +177,8 @@ class Vehicle3D:
 
     def __init__(self, surface=None, lateral: bool = False):
         self.surface = None if surface is None or surface.is_flat else surface
-        self._ground_f = None if self.surface is None or self.surface.raster is not None else self.surface.function()
+        # (z0, dz0/dx, dz0/dy); an elevation raster is a B-spline of degree 1 (bilinear), a call node in SX
+        self._ground_f = None if self.surface is None else self.surface.function()
         self.lateral = bool(lateral)
         self.name = "3d_lateral" if lateral else "3d"
         self.lateral_laws = ()
@@ -189,9 +190,6 @@ class Vehicle3D:
         """(z0, dz0/dx, dz0/dy) of the ground at world (x, y) (CasADi)."""
         if self.surface is None:
             return 0, 0, 0
-        if self.surface.raster is not None:
-            raise ParameterError("model.vehicle = '3d' takes the analytic [terrain.surface] (slopes, furrows); an "
-                                 "elevation_file raster is not coupled to the 3D vehicle yet")
         z, gx, gy = self._ground_f(x, y)
         return z, gx, gy
 
@@ -419,6 +417,82 @@ def check_contact(opts: ModelOptions, surface, params: dict) -> None:
             f"model.contact_segments = {opts.contact_segments} is too few for furrows every "
             f"{surface.furrow_spacing_m:g} m under a {l:g} m contact: the allowed range is [{need}, 64] (a segment "
             f"at most a quarter of the furrow spacing, {MIN_SEGMENTS_PER_FURROW} segments a furrow period)")
+
+
+def footprint_radius_m(params: dict) -> float:
+    """The radius [m] of a horizontal circle about the CG that holds every point of the tracks' contact
+    whatever the hull's attitude: hypot(l/2 + |e|, (B + b)/2), the contact's corners, plus h, the
+    largest horizontal offset of the ground line below the CG when the hull tilts."""
+    l, e, B, b, h = (float(params[k]) for k in ("contact_length_m", "cg_ahead_of_contact_centre_m", "track_gauge_m",
+                                                "track_width_m", "cg_height_m"))
+    return math.hypot(l / 2 + abs(e), (B + b) / 2) + h
+
+
+def _raster_area(raster, radius_m: float) -> tuple[float, float, float, float]:
+    """Where the CG may be on ``raster``: its pixel centres' hull (between them the heights are bilinear,
+    beyond it they would be the edge's) less ``radius_m`` on every side."""
+    x0, x1, y0, y1 = raster.bounds()
+    half = 0.5 * raster.pixel_m
+    return x0 + half + radius_m, x1 - half - radius_m, y0 + half + radius_m, y1 - half - radius_m
+
+
+def check_raster(surface, params: dict, x_m: float, y_m: float, where: str = "terrain.surface") -> None:
+    """A :class:`ParameterError` naming the key unless the 3D vehicle on homogeneous soil can start on
+    ``surface``'s elevation raster at (``x_m``, ``y_m``): the raster needs its place (a .npy's
+    ``elevation_origin_m``: there is no field to put it at) and must hold the vehicle's footprint
+    (:func:`footprint_radius_m` about the CG) inside its pixel centres' hull. NaN and the slope limit are
+    checked when the raster is read (:func:`~symtrack.terrain.surface.parse_surface`); leaving the
+    raster during a run is :class:`RasterGuard`'s."""
+    raster = getattr(surface, "raster", None)
+    if raster is None:
+        return
+    if raster.origin_m is None:
+        raise ParameterError(f"{where}.elevation_origin_m is needed with elevation_file = {raster.path!r} under the "
+                             "3D vehicle on homogeneous soil (model.vehicle = '3d' without a grid): there is no field "
+                             "to put the raster at; give the world [x, y] of its lower-left corner")
+    radius = footprint_radius_m(params)
+    ax0, ax1, ay0, ay1 = _raster_area(raster, radius)
+    if not (ax0 <= x_m <= ax1 and ay0 <= y_m <= ay1):
+        rx0, rx1, ry0, ry1 = raster.bounds()
+        raise ParameterError(
+            f"{where}.elevation_file = {raster.path!r} covers x in [{rx0:.10g}, {rx1:.10g}] m, y in [{ry0:.10g}, "
+            f"{ry1:.10g}] m: the start (x, y) = ({x_m:g}, {y_m:g}) m must lie in x in [{ax0:.10g}, {ax1:.10g}], y in "
+            f"[{ay0:.10g}, {ay1:.10g}] (the raster's pixel centres less the vehicle's footprint, {radius:.3g} m): "
+            "move the start or the raster (elevation_origin_m)")
+
+
+class RasterGuard:
+    """Stops a run of the 3D vehicle on homogeneous soil (a :class:`SimulationError`, the run kept up to
+    there) when its CG comes within the footprint (:func:`footprint_radius_m`) of its elevation raster's
+    edge: beyond the pixel centres the heights would be the edge's, a ground that is not the raster's.
+    ``guard(X)`` checks the rows of states ``X`` (columns ``state_names``)."""
+
+    def __init__(self, surface, params: dict, state_names):
+        raster = surface.raster
+        self.path, self.bounds = raster.path, raster.bounds()
+        self.radius = footprint_radius_m(params)
+        self.area = _raster_area(raster, self.radius)
+        self.ix, self.iy = list(state_names).index("x_m"), list(state_names).index("y_m")
+
+    @classmethod
+    def of(cls, model, params: dict):
+        """The guard of ``model``'s 3D vehicle on a raster, else None."""
+        surface = getattr(getattr(model, "vehicle", None), "surface", None)
+        if surface is None or getattr(surface, "raster", None) is None:
+            return None
+        return cls(surface, params, model.state_names)
+
+    def __call__(self, X) -> None:
+        ax0, ax1, ay0, ay1 = self.area
+        for row in X:
+            x, y = float(row[self.ix]), float(row[self.iy])
+            if not (ax0 <= x <= ax1 and ay0 <= y <= ay1):
+                rx0, rx1, ry0, ry1 = self.bounds
+                raise SimulationError(
+                    f"the vehicle left terrain.surface.elevation_file = {self.path!r} at (x, y) = ({x:.4g}, {y:.4g}) "
+                    f"m: the raster covers x in [{rx0:.10g}, {rx1:.10g}] m, y in [{ry0:.10g}, {ry1:.10g}] m and the "
+                    f"CG must stay {self.radius:.3g} m (the footprint) inside its pixel centres; a larger raster, or "
+                    "a shorter run (run.duration_s, run.stop_after_distance_m)")
 
 
 def check_terrain(opts: ModelOptions, kind: str) -> None:
