@@ -94,14 +94,12 @@ PASS_GAP_S = 1.0
 # the follower's speed profile: the largest deceleration / acceleration it plans with (m/s^2); a
 # moderate value (the crawler's 2000 N m accelerate it at about 1 m/s^2 on the clay)
 PLAN_ACCEL_M_S2 = 0.4
-# the defaults of an operation's vehicle step (at most 2.5 ms: run.output_dt_s = 0.01 s split in four) and of
-# the model's omega_smoothing_rad_s (ModelOptions: the package's 0.01 rad/s resolves the sprocket's
-# direction, its |omega| and the end where the track enters the contact over 0.004 m/s of tread
-# speed; with it, sprockets passing through zero under load in the turns made the 2.5 ms step diverge
-# too). ASSUMED, chosen on operation_small (both soils): 0.1 rad/s is 0.038 m/s of tread speed; the
-# trims of 2 m and 4 m turns at 1 m/s and of straight running at 2.5 m/s move by at most 0.1 N m and
-# 1e-4 rad/s (both soils, measured against 0.01)
-OPERATION_VEHICLE_STEP_S = 0.0025
+# the model's omega_smoothing_rad_s of an operation (ModelOptions: the package's 0.01 rad/s resolves the
+# sprocket's direction, its |omega| and the end where the track enters the contact over 0.004 m/s of
+# tread speed). ASSUMED, chosen on operation_small (both soils): 0.1 rad/s is 0.038 m/s of tread speed;
+# the trims of 2 m and 4 m turns at 1 m/s and of straight running at 2.5 m/s move by at most 0.1 N m and
+# 1e-4 rad/s (both soils, measured against 0.01). The vehicle step is the engine's own (one per macro
+# step, halved by its error control: EngineSettings.vehicle_tolerance; docs/studies.md)
 OPERATION_OMEGA_SMOOTHING_RAD_S = 0.1
 # the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
 MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
@@ -959,6 +957,8 @@ class PathFollower:
         self.log = []  # (t, s, e_lat, e_psi, role)
         self.failure = None
         self.done = False
+        # the law's signals per sample (a list to append to: the diagnosis of docs/studies.md), None: not kept
+        self.trace = None
 
     @property
     def progress_fraction(self) -> float:
@@ -1021,6 +1021,7 @@ class PathFollower:
         # flat, it moves the torques little (unlimited, it reversed them)
         corr = max(min(r_d / v - kappa, self.CORRECTION_CURVATURE_1_M), -self.CORRECTION_CURVATURE_1_M)
         mean_ff, diff, om_mean, om_diff = _map_eval(self.rows, v_ref, kappa + corr)
+        diff_ff, int_r_now = diff, self.int_r
         g = max(v / self.GAIN_SPEED_M_S, 1.0)
         diff += g * (self.YAW_GAIN_N_M_S * er + self.YAW_INTEGRAL_N_M * self.int_r)
         mean = mean_ff + self.kp_v * ev + self.ki_v * self.int_v
@@ -1034,6 +1035,10 @@ class PathFollower:
             left += k * (om_mean - 0.5 * om_diff - float(x[self.iom[0]]))
             right += k * (om_mean + 0.5 * om_diff - float(x[self.iom[1]]))
         lim = self.limit
+        if self.trace is not None:
+            self.trace.append((t_s, self.s, e, e_psi, r_d, r, kappa, diff_ff, diff, int_r_now, v_ref, u, mean_ff, mean,
+                               om_mean - 0.5 * om_diff, om_mean + 0.5 * om_diff, float(x[self.iom[0]]),
+                               float(x[self.iom[1]]), left, right, seg))
         return (max(min(left, lim), -lim), max(min(right, lim), -lim))
 
 
@@ -1053,15 +1058,11 @@ class OperationSpec:
     base: OperationSettings
 
 
-MAX_VEHICLE_SUBSTEPS = 64  # EngineSettings.vehicle_substeps' upper bound (integrators/settings.py)
-
-
 def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     run = dict(doc.get("run", {}))
     check_keys("run", run, OPERATION_RUN_KEYS)
     run.setdefault("integrator", "grid_fast")
-    # 10 ms macro steps of OPERATION_VEHICLE_STEP_S vehicle steps (below): the same figures as 5 ms macro
-    # steps (operation_small, both soils: RMS on the lines within 1e-6 m) in 0.58 of the time
+    # 10 ms macro steps, one vehicle step each (the engine's error control halves where needed)
     run.setdefault("output_dt_s", 0.01)
     terrain = dict(doc.get("terrain", {}))
     for k in TERRAIN_KEYS_OF_OPERATION:
@@ -1076,22 +1077,7 @@ def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     for k in ("model", "soil", "engine"):
         if k in doc:
             out[k] = dict(doc[k])
-    # The vehicle's 5 ms step diverged (the state at 1e25 m in one step) where the braked or spinning
-    # sprockets of a tight turn swing (docs/studies.md, "Field operations": an open-loop replay of the
-    # follower's commands diverges at 5 ms and agrees within 2 mm at 2.5 and 1.25 ms): vehicle steps of
-    # at most OPERATION_VEHICLE_STEP_S, and the sprocket's direction regularised over
-    # OPERATION_OMEGA_SMOOTHING_RAD_S
-    dt = run.get("output_dt_s")
-    if isinstance(dt, (int, float)) and not isinstance(dt, bool) and math.isfinite(dt) and dt > 0:
-        # (any other value: scenario_from_dict refuses it, naming run.output_dt_s)
-        engine = out.setdefault("engine", {})
-        if isinstance(engine, dict) and "vehicle_substeps" not in engine:
-            n = dt / OPERATION_VEHICLE_STEP_S
-            if n > MAX_VEHICLE_SUBSTEPS:
-                raise ScenarioError(f"run.output_dt_s = {dt!r}: a field operation's macro step holds at most "
-                                    f"{MAX_VEHICLE_SUBSTEPS} vehicle steps of {OPERATION_VEHICLE_STEP_S:g} s, so the "
-                                    f"allowed range is (0, {MAX_VEHICLE_SUBSTEPS * OPERATION_VEHICLE_STEP_S:g}] s")
-            engine["vehicle_substeps"] = max(1, math.ceil(n - 1e-9))
+    # the sprocket's direction regularised over OPERATION_OMEGA_SMOOTHING_RAD_S (above)
     model = out.setdefault("model", {})
     if isinstance(model, dict):
         model.setdefault("omega_smoothing_rad_s", OPERATION_OMEGA_SMOOTHING_RAD_S)
@@ -1357,7 +1343,10 @@ def run_operation(op, plant, progress: bool = False) -> OperationResult:
            "x_real_time_wall": float(res.t[-1]) / wall if wall > 0 else None,
            "rut_max_depth_mm": 1e3 * float(world.storage.z.max()),
            "rut_mean_depth_mm": 1e3 * float(world.storage.z[stressed.ravel()].mean()) if stressed.any() else 0.0,
-           "vehicle_mass_kg": sc.params["mass_kg"]}
+           "vehicle_mass_kg": sc.params["mass_kg"],
+           # the engine's vehicle steps and how many its error control halved (EngineSettings.vehicle_tolerance)
+           "vehicle_steps": int(res.stats.get("n_vehicle_steps", 0)),
+           "vehicle_steps_halved": int(res.stats.get("n_vehicle_halved", 0))}
     # this operation's own stressed cells (pass_sigma of its one engine pass)
     own = (world.pass_sigma[:, 0] > 0).reshape(shape) if world.storage.subsoil_depths_m else stressed
     fig["operation_trafficked_fraction"] = float(own.mean())
