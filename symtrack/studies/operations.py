@@ -868,6 +868,19 @@ def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, 
     return m, math.copysign(dd, kappa), om, math.copysign(dom, kappa)
 
 
+def _map_stiffness(rows: dict, v: float) -> float:
+    """The soil's steering stiffness at speed v: the steering map's torque difference per curvature at
+    straight running (N m per 1/m: its first step, 0 to 1/400 1/m), interpolated in the speed; v < 0 from
+    the reverse rows. Measured: 2.4e5 on the clay, 4.7e5 on the sandy loam (1 and 2.5 m/s)."""
+    speeds = sorted(s for s in rows if (s < 0) == (v < 0))
+    vals = []
+    for sp in speeds:
+        ks, diff = rows[sp][0], rows[sp][2]
+        j = int(np.nonzero(ks > 0)[0][0])
+        vals.append(float(diff[j] / ks[j]))
+    return float(np.interp(v, speeds, vals))
+
+
 class PathFollower:
     """The path-following torque law (a :class:`~symtrack.simulation.loop.SampledLaw`, sampled
     every ``sample_time_s``, held over the engine's macro steps):
@@ -876,11 +889,16 @@ class PathFollower:
       (e: lateral error, positive left of the path; e_psi: heading error), w_n = :attr:`OMEGA_N`,
       zeta = 1; kappa at a preview of :attr:`PREVIEW_S` ahead (the torque lag and the yaw response);
     - the torque difference (right - left): the steering map's at the path's curvature (the
-      feed-forward), plus a PI law on the yaw rate, K_r (r_d - r) + K_i integral(r_d - r). The
-      feedback stays in torque and is not passed through the map: the map is nearly a step at
-      zero curvature (the turning resistance must be overcome before the vehicle yaws at all: on the
-      clay 600 N m from 0 to 1/400 1/m, 380 N m from 1/12 to 1/3 1/m), so a correction through it
-      reverses the torques (measured: a bang-bang oscillation in the first headland corner);
+      feed-forward), plus a PI law on the yaw rate, K_r (r_d - r) + K_i integral(r_d - r), both
+      gains proportional to the soil's steering stiffness (the map's torque per curvature at straight
+      running, twice as large on the sandy loam as on the clay) and to the speed above
+      :attr:`GAIN_SPEED_M_S`; the integral is held in N m (a gain that grows with the speed does not
+      scale what it learnt at a lower one) and limited to the map's torque at a curvature of
+      :attr:`YAW_INTEGRAL_LIMIT_1_M`. The feedback stays in torque and is not passed through the
+      map: the map is nearly a step at zero curvature (the turning resistance must be overcome
+      before the vehicle yaws at all: on the clay 600 N m from 0 to 1/400 1/m, 380 N m from 1/12
+      to 1/3 1/m), so a correction through it reverses the torques (measured: a bang-bang
+      oscillation in the first headland corner);
     - a PI law on the speed for the mean torque, over the map's mean torque; the speed reference
       the path's, limited by :data:`PLAN_ACCEL_M_S2` in deceleration before its slow parts and in
       acceleration after them;
@@ -890,9 +908,9 @@ class PathFollower:
       (measured: it stuck at 0 and slipped, period 1 s; docs/studies.md).
 
     It ends the run (returns None) at the path's end, or when the lateral error exceeds
-    ``max_lateral_error_m`` (``failure`` says so). The gains: K_r = :attr:`YAW_GAIN_N_M_S`, K_i =
-    :attr:`YAW_INTEGRAL_N_M` (N m per rad/s, N m per rad: chosen on the small operation on clay and
-    sandy loam, docs/studies.md); the speed's r m / (2 :attr:`SPEED_TAU_S`) corrects a speed error
+    ``max_lateral_error_m`` (``failure`` says so). The yaw gains: :attr:`YAW_GAIN_S_M`,
+    :attr:`YAW_INTEGRAL_1_M` (chosen on the small operation on clay and sandy loam, docs/studies.md);
+    the speed's r m / (2 :attr:`SPEED_TAU_S`) corrects a speed error
     in SPEED_TAU_S."""
 
     SAMPLE_TIME_S = 0.02  # measured: 0.05 s let the yaw loop oscillate in the headland corners
@@ -900,8 +918,14 @@ class PathFollower:
     PREVIEW_S = 0.3
     WINDOW_S = 1.0  # the feed-forward's curvature: the path's averaged over this time at the speed (0: none)
     DIFF_SLEW_N_M_S = 1e9  # the torque difference's largest rate of change
-    YAW_GAIN_N_M_S = 6000.0
-    YAW_INTEGRAL_N_M = 4000.0
+    # the yaw-rate PI law in units of the soil's steering stiffness S (:func:`_map_stiffness`, N m per 1/m),
+    # so that it is the same loop on every soil: K_r = YAW_GAIN_S_M S g (N m per rad/s), the integral
+    # K_i = YAW_INTEGRAL_1_M S g (N m per rad), held in N m and limited to the torque of a curvature of
+    # YAW_INTEGRAL_LIMIT_1_M (the map's error it is there to learn). ASSUMED, chosen on operation_small
+    # (both soils; docs/studies.md): on the clay K_r = 13500 N m per rad/s at 1 m/s
+    YAW_GAIN_S_M = 0.055
+    YAW_INTEGRAL_1_M = 0.025
+    YAW_INTEGRAL_LIMIT_1_M = 0.018
     GAIN_SPEED_M_S = 1.0  # the yaw gains grow with the speed above this
     RESET_INTEGRAL = False
     CORRECTION_CURVATURE_1_M = 1.0 / 150.0
@@ -1010,7 +1034,11 @@ class PathFollower:
                         0.3 + PLAN_ACCEL_M_S2 * t_s)
         h = self.sample_time_s
         er, ev = r_d - r, v_ref - u
-        self.int_r = max(min(self.int_r + h * er, 0.5), -0.5)
+        # the yaw law's gains: the soil's steering stiffness at this speed times the law's own (class doc)
+        g = max(v / self.GAIN_SPEED_M_S, 1.0)
+        stiff = _map_stiffness(self.rows, v_ref)
+        lim_i = stiff * self.YAW_INTEGRAL_LIMIT_1_M
+        self.int_r = max(min(self.int_r + h * g * stiff * self.YAW_INTEGRAL_1_M * er, lim_i), -lim_i)
         self.int_v = max(min(self.int_v + h * ev, 2.0), -2.0)
         seg = int(self.path.segment[i])
         if self.RESET_INTEGRAL and seg != self.segment:  # a new segment: the integral learnt the last one's map error
@@ -1022,8 +1050,7 @@ class PathFollower:
         corr = max(min(r_d / v - kappa, self.CORRECTION_CURVATURE_1_M), -self.CORRECTION_CURVATURE_1_M)
         mean_ff, diff, om_mean, om_diff = _map_eval(self.rows, v_ref, kappa + corr)
         diff_ff, int_r_now = diff, self.int_r
-        g = max(v / self.GAIN_SPEED_M_S, 1.0)
-        diff += g * (self.YAW_GAIN_N_M_S * er + self.YAW_INTEGRAL_N_M * self.int_r)
+        diff += g * stiff * self.YAW_GAIN_S_M * er + self.int_r
         mean = mean_ff + self.kp_v * ev + self.ki_v * self.int_v
         if self.diff_prev is not None:
             step = self.DIFF_SLEW_N_M_S * h
