@@ -94,13 +94,9 @@ PASS_GAP_S = 1.0
 # the follower's speed profile: the largest deceleration / acceleration it plans with (m/s^2); a
 # moderate value (the crawler's 2000 N m accelerate it at about 1 m/s^2 on the clay)
 PLAN_ACCEL_M_S2 = 0.4
-# the model's omega_smoothing_rad_s of an operation (ModelOptions: the package's 0.01 rad/s resolves the
-# sprocket's direction, its |omega| and the end where the track enters the contact over 0.004 m/s of
-# tread speed). ASSUMED, chosen on operation_small (both soils): 0.1 rad/s is 0.038 m/s of tread speed;
-# the trims of 2 m and 4 m turns at 1 m/s and of straight running at 2.5 m/s move by at most 0.1 N m and
-# 1e-4 rad/s (both soils, measured against 0.01). The vehicle step is the engine's own (one per macro
-# step, halved by its error control: EngineSettings.vehicle_tolerance; docs/studies.md)
-OPERATION_OMEGA_SMOOTHING_RAD_S = 0.1
+# An operation's vehicle step and omega_smoothing_rad_s are the package's (one vehicle step per macro step,
+# halved by the engine's error control, EngineSettings.vehicle_tolerance; ModelOptions' 0.01 rad/s):
+# the 2.5 ms substeps and 0.1 rad/s that operations once forced are no longer needed (docs/studies.md)
 # the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
 MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
 
@@ -1104,10 +1100,6 @@ def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     for k in ("model", "soil", "engine"):
         if k in doc:
             out[k] = dict(doc[k])
-    # the sprocket's direction regularised over OPERATION_OMEGA_SMOOTHING_RAD_S (above)
-    model = out.setdefault("model", {})
-    if isinstance(model, dict):
-        model.setdefault("omega_smoothing_rad_s", OPERATION_OMEGA_SMOOTHING_RAD_S)
     return out
 
 
