@@ -42,6 +42,7 @@ trafficked share of the summary is the soil's own record: the cells the engine s
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import io
 import json
@@ -75,10 +76,11 @@ FIELD_PACKAGE = "symtrack.studies.fields"
 SCHEMA_VERSION = 1
 TRACKS = ("ab", "controlled", "random")
 TURNS = ("auto", "u", "bulb", "k")
+FOLLOWERS = ("law", "rti")  # PathFollower | the project's MPC in real-time iteration (MPCFollower)
 OPERATION_KEYS = ("name", "size_m", "boundary_file", "cell_m",
                   "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
                   "random_offset_m", "seed", "turn", "turn_radius_m", "speed_m_s", "turn_speed_m_s",
-                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines", "turn_lane_m")
+                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines", "turn_lane_m", "follower")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "engine", "operation", "season")
 SEASON_KEYS = ("operations", "compare", "tracks")
 OPERATION_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
@@ -129,6 +131,8 @@ class OperationSettings:
     # controlled traffic: the depth from the border of the headland lane the U-turns cross on (m; "auto": the
     # deepest lane the turn reaches from the headland's inner edge); None: the turns at the headland's edge
     turn_lane_m: float | str | None = None
+    # who drives the path: "law" (PathFollower) or "rti" (the path-tracking MPC, real-time iteration: MPCFollower)
+    follower: str = "law"
 
     @property
     def headland_m(self) -> float:
@@ -173,7 +177,7 @@ def parse_operation(t: dict, base: OperationSettings | None = None, where: str =
     if "lines" in t:
         v = t["lines"]
         kw["lines"] = None if v in (None, "all") else integer(f"{where}.lines", v, 1, 10_000)
-    for k, choices in (("tracks", TRACKS), ("turn", TURNS)):
+    for k, choices in (("tracks", TRACKS), ("turn", TURNS), ("follower", FOLLOWERS)):
         if k in t:
             if t[k] not in choices:
                 raise ScenarioError(f"{where}.{k} = {t[k]!r} is not one of {', '.join(choices)}")
@@ -864,6 +868,26 @@ def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, 
     return m, math.copysign(dd, kappa), om, math.copysign(dom, kappa)
 
 
+def _speed_profile(path: Path, creep_m_s: float) -> np.ndarray:
+    """The followers' speed profile: the path's, limited by :data:`PLAN_ACCEL_M_S2` in deceleration before
+    its slow parts and in acceleration after them (the line's speed asked for at once after a turn made
+    the mean torque and the sprockets' speed references step, and the tracks spin: measured, the state
+    diverged at the exit of a U-turn on the sandy loam); 0 at a K-turn's cusps (where the path's direction
+    reverses: the vehicle stops there) with a creep floor of ``creep_m_s`` so that it gets there and
+    starts back."""
+    v = path.speed.copy()
+    ds = np.diff(path.s)
+    cusp_idx = np.searchsorted(path.s, path.cusps_s)
+    v[cusp_idx] = 0.0
+    for i in range(v.size - 2, -1, -1):
+        v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
+    for i in range(1, v.size):
+        v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i - 1]))
+    if cusp_idx.size:
+        v = np.maximum(v, np.minimum(creep_m_s, path.speed))
+    return v
+
+
 def _map_stiffness(rows: dict, v: float) -> float:
     """The soil's steering stiffness at speed v: the steering map's torque difference per curvature at
     straight running (N m per 1/m: its first step, 0 to 1/400 1/m), interpolated in the speed; v < 0 from
@@ -952,23 +976,7 @@ class PathFollower:
         self.diff_prev = None
         self.s = 0.0
         self.roles = _sample_roles(plan)
-        # the speed profile: the path's, limited in deceleration before its slow parts
-        v = self.path.speed.copy()
-        ds = np.diff(self.path.s)
-        # and in acceleration after them: the line's speed asked for at once after a turn made the mean
-        # torque and the sprockets' speed references step, and the tracks spin (measured: the state
-        # diverged at the exit of a U-turn on the sandy loam)
-        # the cusps of a K-turn (where the path's direction reverses): the vehicle stops there (the
-        # profile 0 at the cusp, a creep floor so that it gets there and starts back)
-        cusp_idx = np.searchsorted(self.path.s, self.path.cusps_s)
-        v[cusp_idx] = 0.0
-        for i in range(v.size - 2, -1, -1):
-            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
-        for i in range(1, v.size):
-            v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i - 1]))
-        if cusp_idx.size:
-            v = np.maximum(v, np.minimum(self.CUSP_CREEP_M_S, self.path.speed))
-        self.v_profile = v
+        self.v_profile = _speed_profile(self.path, self.CUSP_CREEP_M_S)
         # the path between cusps: one direction each; the projection never crosses a cusp it has not reached
         self.phase_s = np.concatenate([[-np.inf], self.path.cusps_s, [np.inf]])
         self.phase_dir = [float(self.path.direction[min(int(np.searchsorted(self.path.s, a)), self.path.s.size - 1)])
@@ -1065,6 +1073,87 @@ class PathFollower:
         return (max(min(left, lim), -lim), max(min(right, lim), -lim))
 
 
+class MPCFollower:
+    """The project's path-tracking MPC (:class:`symtrack.control.mpc.PathTrackingMPC`, real-time
+    iteration on the scenario's lateral law, the settings of ``symtrack mpc --solver rti``) as an
+    operation's follower: :class:`symtrack.control.closedloop.TrackingLaw` sampled every
+    ``mpc.sample_time_s`` on the operation's path, with the follower's bookkeeping of
+    :class:`PathFollower` (``log``, ``s``, ``done``, ``failure``, ``progress_fraction``). The
+    prediction's cells are those of steady straight running at the first line's speed (the grid
+    plant carries no homogeneous cells), as ``symtrack mpc --plant grid`` has them."""
+
+    def __init__(self, plan: OperationPlan, law, max_lateral_error_m: float):
+        self.plan, self.path, self.law, self.max_err = plan, plan.path, law, max_lateral_error_m
+        self.sample_time_s, self.substep_s = law.sample_time_s, law.substep_s
+        self.roles = _sample_roles(plan)
+        self.log, self.failure, self.done, self.s = [], None, False, 0.0
+
+    @property
+    def progress_fraction(self) -> float:
+        return min(self.s / max(self.path.length_m, 1e-9), 1.0)
+
+    def __call__(self, t_s, x, final=False):
+        u = self.law(t_s, x, final)
+        r = self.law.rows
+        if final or not r["s"]:
+            return u
+        self.s, e, e_psi = r["s"][-1], r["e_lat"][-1], r["e_psi"][-1]
+        i = min(int(np.searchsorted(self.path.s, self.s)), self.roles.size - 1)
+        self.log.append((t_s, self.s, e, e_psi, int(self.roles[i])))
+        if self.s >= self.path.length_m - 0.05 or u is None:
+            self.done = self.s >= self.path.length_m - 0.05
+            return None
+        if abs(e) > self.max_err:
+            self.failure = (f"the vehicle left the path: lateral error {e:.2f} m at s = {self.s:.1f} m "
+                            f"(t = {t_s:.1f} s) exceeds operation.max_lateral_error_m = {self.max_err:g}")
+            return None
+        return u
+
+
+def _mpc_follower(plan: OperationPlan, sc, plant, fs: OperationSettings, duration_s: float):
+    """The :class:`MPCFollower` of an operation and the plant's start state (trim of straight running
+    at the first segment's speed, placed at the path's start)."""
+    from ..control.closedloop import TrackingLaw
+    from ..control.mpc import PathTrackingMPC
+    from ..control.trim import trim
+    from ..simulation.builder import system_model
+
+    model = system_model(sc.model, sc.surface)
+    settings = MPCSettings(solver="rti", torque_max_N_m=fs.torque_limit_N_m)
+    mpc = PathTrackingMPC(model, sc.params, settings)
+    v0 = float(plan.path.speed[0])
+    tp = trim(model, sc.params, v0)
+    xv = tp.x[model.layout.block("vehicle")].copy()
+    names = tuple(plant.state_names)
+    if names != tuple(model.layout.vehicle_names):
+        raise ScenarioError("operation.follower = \"rti\": the plant's state is not the vehicle's (the MPC reads it)")
+    x0, y0, psi0 = plan.start
+    for n, val in (("x_m", x0), ("y_m", y0), ("yaw_rad", psi0)):
+        xv[names.index(n)] = val
+    cells = tp.x[model.layout.block("cells")]
+    # the MPC's reference at the followers' speed profile (the path's own steps from the lines' speed to
+    # the turns')
+    path = copy.copy(plan.path)
+    path.speed = _speed_profile(plan.path, 0.0)
+    path.speed[0] = v0
+    # TrackingLaw reads the scenario's mpc settings, run.duration_s and name only
+    view = _MPCView(fs.name, settings, duration_s)
+    law = TrackingLaw(view, mpc, path, names, tp.u.copy(), cells, getattr(plant, "macro_step_s", None))
+    return MPCFollower(plan, law, fs.max_lateral_error_m), loop.StartPoint(x0, y0, psi0, tp.u.copy(), xv), mpc
+
+
+@dataclass(frozen=True)
+class _RunView:
+    duration_s: float
+
+
+class _MPCView:
+    """What :class:`~symtrack.control.closedloop.TrackingLaw` reads of an MPC scenario: name, mpc, run.duration_s."""
+
+    def __init__(self, name: str, mpc: MPCSettings, duration_s: float):
+        self.name, self.mpc, self.run = name, mpc, _RunView(duration_s)
+
+
 # ---- the spec -------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class OperationSpec:
@@ -1126,6 +1215,10 @@ def _operation(doc: dict, fs: OperationSettings):
                             f"{sc.params['track_width_m']:g} m")
     plan = plan_operation(fs)
     check_plan(plan, sc.params, sc.model)
+    if fs.follower == "rti" and plan.path.cusps_s.size:
+        raise ScenarioError("operation.follower = \"rti\" with operation.turn = \"k\": the MPC's reference "
+                            "(control.path.Path.reference) and its prediction run forwards only, a K-turn's "
+                            "reverse arc is not taken; use operation.follower = \"law\" or a \"u\" or \"bulb\" turn")
     speeds = (fs.turn_speed_m_s, fs.speed_m_s) + ((-fs.turn_speed_m_s,) if plan.path.cusps_s.size else ())
     rows = steering_map(sc.params, sc.model, speeds, fs.turn_radius_m, fs.turn_speed_m_s)
     return fs, plan, sc, rows
@@ -1305,18 +1398,23 @@ def run_operation(op, plant, progress: bool = False) -> OperationResult:
     fs, plan, sc, rows = op
     world = plant.world
     shape, cell = world.grid.shape, world.grid.cell_m
-    law = PathFollower(plan, sc.params, rows, plant.state_names, PathFollower.SAMPLE_TIME_S, sc.run.output_dt_s,
-                       fs.torque_limit_N_m, fs.max_lateral_error_m)
     # the time limit: the path at a quarter of its speeds
     limit = 4.0 * float(np.sum(np.diff(plan.path.s) / np.maximum(plan.path.speed[:-1], 0.1))) + 60.0
     run_sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=limit))
     x0, y0, psi0 = plan.start
+    mpc = None
+    if fs.follower == "rti":
+        law, start, mpc = _mpc_follower(plan, sc, plant, fs, limit)
+    else:
+        law = PathFollower(plan, sc.params, rows, plant.state_names, PathFollower.SAMPLE_TIME_S, sc.run.output_dt_s,
+                           fs.torque_limit_N_m, fs.max_lateral_error_m)
+        start = loop.StartPoint(x0, y0, psi0, np.zeros(2))
     t0 = time.perf_counter()
     cpu0 = time.process_time()
     error = None
     try:
         res = loop.run(run_sc, plant, progress=progress, label=f"operation {fs.name}", torque_law=law,
-                       start=loop.StartPoint(x0, y0, psi0, np.zeros(2)))
+                       start=start)
     except loop.IncompleteRun as err:
         res, error = err.partial, str(err)
     wall = time.perf_counter() - t0
@@ -1366,6 +1464,12 @@ def run_operation(op, plant, progress: bool = False) -> OperationResult:
            # the engine's vehicle steps and how many its error control halved (EngineSettings.vehicle_tolerance)
            "vehicle_steps": int(res.stats.get("n_vehicle_steps", 0)),
            "vehicle_steps_halved": int(res.stats.get("n_vehicle_halved", 0))}
+    fig["follower"] = fs.follower
+    if mpc is not None:  # the MPC's solves (closedloop.summarise's figures)
+        ms = mpc.stats.solve_times_ms() if mpc.stats.solves else np.array([np.nan])
+        fig.update(solves=len(mpc.stats.solves), failed_solves=int(mpc.stats.failed),
+                   fallback_solves=int(mpc.stats.fallbacks), solve_time_median_ms=float(np.median(ms)),
+                   solve_time_p95_ms=float(np.percentile(ms, 95)), solve_time_max_ms=float(np.max(ms)))
     # this operation's own stressed cells (pass_sigma of its one engine pass)
     own = (world.pass_sigma[:, 0] > 0).reshape(shape) if world.storage.subsoil_depths_m else stressed
     fig["operation_trafficked_fraction"] = float(own.mean())
