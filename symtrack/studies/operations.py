@@ -99,6 +99,12 @@ PLAN_ACCEL_M_S2 = 0.4
 # An operation's vehicle step and omega_smoothing_rad_s are the package's (one vehicle step per macro step,
 # halved by the engine's error control, EngineSettings.vehicle_tolerance; ModelOptions' 0.01 rad/s):
 # the 2.5 ms substeps and 0.1 rad/s that operations once forced are no longer needed (docs/studies.md)
+# the MPC follower's (operation.follower = "rti") step halvings on the collocation defect before a
+# relinearisation and the NLP fallback (MPCSettings.rti_step_halvings, 3 there). Measured on
+# operation_small (one run each, clay / sandy loam): 3 gives 2 / 1 failed solves and 4 / 5 IPOPT
+# fallbacks (the slowest solve 1.7 s) at the 2 m corners' and U-turns' entries; 5 on the clay 0 failed,
+# 1 fallback (1.2 s); 6 none of either on both soils (the slowest solve 11 / 10 ms)
+OPERATION_RTI_STEP_HALVINGS = 6
 # the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
 MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
 
@@ -1075,7 +1081,8 @@ class PathFollower:
 
 class MPCFollower:
     """The project's path-tracking MPC (:class:`symtrack.control.mpc.PathTrackingMPC`, real-time
-    iteration on the scenario's lateral law, the settings of ``symtrack mpc --solver rti``) as an
+    iteration on the scenario's lateral law, the settings of ``symtrack mpc --solver rti`` but
+    :data:`OPERATION_RTI_STEP_HALVINGS`) as an
     operation's follower: :class:`symtrack.control.closedloop.TrackingLaw` sampled every
     ``mpc.sample_time_s`` on the operation's path, with the follower's bookkeeping of
     :class:`PathFollower` (``log``, ``s``, ``done``, ``failure``, ``progress_fraction``). The
@@ -1119,7 +1126,8 @@ def _mpc_follower(plan: OperationPlan, sc, plant, fs: OperationSettings, duratio
     from ..simulation.builder import system_model
 
     model = system_model(sc.model, sc.surface)
-    settings = MPCSettings(solver="rti", torque_max_N_m=fs.torque_limit_N_m)
+    settings = MPCSettings(solver="rti", torque_max_N_m=fs.torque_limit_N_m,
+                           rti_step_halvings=OPERATION_RTI_STEP_HALVINGS)
     mpc = PathTrackingMPC(model, sc.params, settings)
     v0 = float(plan.path.speed[0])
     tp = trim(model, sc.params, v0)
