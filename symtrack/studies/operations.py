@@ -101,9 +101,9 @@ PLAN_ACCEL_M_S2 = 0.4
 # the 2.5 ms substeps and 0.1 rad/s that operations once forced are no longer needed (docs/studies.md)
 # the MPC follower's (operation.follower = "rti") step halvings on the collocation defect before a
 # relinearisation and the NLP fallback (MPCSettings.rti_step_halvings, 3 there). Measured on
-# operation_small (one run each, clay / sandy loam): 3 gives 2 / 1 failed solves and 4 / 5 IPOPT
-# fallbacks (the slowest solve 1.7 s) at the 2 m corners' and U-turns' entries; 5 on the clay 0 failed,
-# 1 fallback (1.2 s); 6 none of either on both soils (the slowest solve 11 / 10 ms)
+# operation_small (one run each, clay / sandy loam): 3 gives 1 / 4 failed solves and 5 / 3 IPOPT
+# fallbacks (the slowest solve 1.6 / 1.7 s) at the U-turns' entries; 6 none of either on both soils
+# (the slowest solve 5.5 / 6.1 ms)
 OPERATION_RTI_STEP_HALVINGS = 6
 # the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
 MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
@@ -1146,7 +1146,8 @@ def _mpc_follower(plan: OperationPlan, sc, plant, fs: OperationSettings, duratio
     path.speed[0] = v0
     # TrackingLaw reads the scenario's mpc settings, run.duration_s and name only
     view = _MPCView(fs.name, settings, duration_s)
-    law = TrackingLaw(view, mpc, path, names, tp.u.copy(), cells, getattr(plant, "macro_step_s", None))
+    # the engine's macro step is the operation's run.output_dt_s (each 0.1 s sample held over them)
+    law = TrackingLaw(view, mpc, path, names, tp.u.copy(), cells, sc.run.output_dt_s)
     return MPCFollower(plan, law, fs.max_lateral_error_m), loop.StartPoint(x0, y0, psi0, tp.u.copy(), xv), mpc
 
 
