@@ -299,6 +299,8 @@ def test_the_mpc_drives_a_small_operation_on_clay():
     # measured 0.014 m on the lines, 0.010 m in the turn, 0 failed of 1352
     assert s["rms_lateral_error_lines_m"] < 0.03 and s["rms_lateral_error_turns_m"] < 0.03
     assert o["failed_solves"] == 0
+    # held over the engine's 10 ms macro steps, one vehicle step each at least (not one per 0.1 s sample)
+    assert o["vehicle_steps"] >= 0.99 * o["sim_time_s"] / 0.01
 
 
 # ---- polygon fields ------------------------------------------------------------------------------------
