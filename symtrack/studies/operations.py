@@ -53,12 +53,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..control.mpc import MPCSettings
+from ..control.closedloop import TrackingLaw
+from ..control.mpc import MPCSettings, PathTrackingMPC
 from ..control.path import Path, Segment
+from ..control.trim import TrimError, trim
 from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError
 from ..foundations.files import check_output_folder
 from ..simulation import loop
+from ..simulation.builder import system_model
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, scenario_from_dict
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
@@ -98,7 +101,8 @@ PASS_GAP_S = 1.0
 PLAN_ACCEL_M_S2 = 0.4
 # An operation's vehicle step and omega_smoothing_rad_s are the package's (one vehicle step per macro step,
 # halved by the engine's error control, EngineSettings.vehicle_tolerance; ModelOptions' 0.01 rad/s):
-# the 2.5 ms substeps and 0.1 rad/s that operations once forced are no longer needed (docs/studies.md)
+# the 2.5 ms substeps and 0.1 rad/s that operations once forced are no longer needed (docs/studies.md).
+
 # the MPC follower's (operation.follower = "rti") step halvings on the collocation defect before a
 # relinearisation and the NLP fallback (MPCSettings.rti_step_halvings, 3 there). Measured on
 # operation_small (one run each, clay / sandy loam): 3 gives 1 / 4 failed solves and 5 / 3 IPOPT
@@ -813,8 +817,6 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
     (right - left) from trims. The turn's own trim must exist (else :class:`ScenarioError`: the
     radius cannot be held on this soil at this speed); curvatures a speed cannot hold are left out
     of its row. Cached per (params, law, speeds, radius) in the process."""
-    from ..control.trim import TrimError, trim
-
     key = (tuple(sorted(params.items())), model_opts, tuple(speeds_m_s), turn_radius_m, turn_speed_m_s)
     if key in _MAP_CACHE:
         return _MAP_CACHE[key]
@@ -1082,9 +1084,9 @@ class PathFollower:
 class MPCFollower:
     """The project's path-tracking MPC (:class:`symtrack.control.mpc.PathTrackingMPC`, real-time
     iteration on the scenario's lateral law, the settings of ``symtrack mpc --solver rti`` but
-    :data:`OPERATION_RTI_STEP_HALVINGS`) as an
-    operation's follower: :class:`symtrack.control.closedloop.TrackingLaw` sampled every
-    ``mpc.sample_time_s`` on the operation's path, with the follower's bookkeeping of
+    :data:`OPERATION_RTI_STEP_HALVINGS`) as an operation's follower:
+    :class:`symtrack.control.closedloop.TrackingLaw` sampled every ``mpc.sample_time_s`` (held over
+    the engine's macro steps) on the operation's path, with the follower's bookkeeping of
     :class:`PathFollower` (``log``, ``s``, ``done``, ``failure``, ``progress_fraction``). The
     prediction's cells are those of steady straight running at the first line's speed (the grid
     plant carries no homogeneous cells), as ``symtrack mpc --plant grid`` has them."""
@@ -1120,11 +1122,6 @@ class MPCFollower:
 def _mpc_follower(plan: OperationPlan, sc, plant, fs: OperationSettings, duration_s: float):
     """The :class:`MPCFollower` of an operation and the plant's start state (trim of straight running
     at the first segment's speed, placed at the path's start)."""
-    from ..control.closedloop import TrackingLaw
-    from ..control.mpc import PathTrackingMPC
-    from ..control.trim import trim
-    from ..simulation.builder import system_model
-
     model = system_model(sc.model, sc.surface)
     settings = MPCSettings(solver="rti", torque_max_N_m=fs.torque_limit_N_m,
                            rti_step_halvings=OPERATION_RTI_STEP_HALVINGS)
