@@ -70,8 +70,10 @@ def test_bad_plans_are_refused_before_anything_runs():
         op.operation_spec_from_dict({**BASE, "model": {"lateral_law": "creep"}, "operation": {}})
 
 
+# the path-following law (the tests of what the engine keeps and of the law's own tracking; the default follower,
+# the MPC, drives test_the_mpc_drives_a_small_operation_on_clay and the built-in seasons)
 SMALL = {**BASE, "operation": {"size_m": [36.0, 30.0], "working_width_m": 4.0, "headland_passes": 2, "turn": "u",
-                               "turn_radius_m": 2.0, "lines": 2}}
+                               "turn_radius_m": 2.0, "lines": 2, "follower": "law"}}
 
 
 @pytest.fixture(scope="module")
@@ -279,18 +281,29 @@ def test_k_turn_driven_on_clay():
     assert np.sqrt(np.mean(turn[:, 2] ** 2)) < 0.06 and np.abs(turn[:, 2]).max() < 0.2
 
 
+def test_the_default_follower_is_the_mpc_and_the_law_on_k_turns():
+    fs = op.parse_operation({"size_m": [60.0, 48.0], "working_width_m": 4.0, "turn_radius_m": 1.5, "lines": 2})
+    assert fs.follower == "auto" and op.follower_of(fs, op.plan_operation(fs)) == "rti"
+    fk = op.parse_operation({"size_m": [60.0, 48.0], "working_width_m": 4.0, "turn": "k", "turn_radius_m": 4.0,
+                             "lines": 2})
+    plan = op.plan_operation(fk)
+    assert plan.path.cusps_s.size and op.follower_of(fk, plan) == "law"
+    assert op.follower_of(dataclasses.replace(fs, follower="law"), op.plan_operation(fs)) == "law"
+
+
 def test_the_mpc_follower_refuses_k_turns():
     doc = {**BASE, "operation": {"size_m": [36.0, 30.0], "working_width_m": 4.0, "headland_passes": 2, "turn": "k",
                                  "turn_radius_m": 4.0, "lines": 2, "follower": "rti"}}
     with pytest.raises(ScenarioError, match="operation.follower = \"rti\" with operation.turn = \"k\""):
         op.operation_spec_from_dict(doc)
-    with pytest.raises(ScenarioError, match="operation.follower = 'mpc' is not one of law, rti"):
+    with pytest.raises(ScenarioError, match="operation.follower = 'mpc' is not one of auto, law, rti"):
         op.parse_operation({"follower": "mpc"})
 
 
 @pytest.mark.slow  # the MPC's build (cached) and one small operation (about 30 s)
 def test_the_mpc_drives_a_small_operation_on_clay():
-    spec = op.operation_spec_from_dict({**SMALL, "operation": {**SMALL["operation"], "follower": "rti"}})
+    spec = op.operation_spec_from_dict({**SMALL, "operation": {**SMALL["operation"], "follower": "auto"}})
+    assert op.follower_of(spec.operations[0][0], spec.operations[0][1]) == "rti"  # the default: the MPC
     res = op.run_season(spec, None, through_files=False, figures=False)
     s, o = res.summary, res.operations[0].figures
     assert s["complete"], s["error"]
