@@ -71,8 +71,8 @@ from . import boundary as bnd
 from .boundary import read_boundary
 
 __all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSettings", "OperationSpec",
-           "PathFollower", "SeasonResult", "check_plan", "follower_of", "footprint_mask", "is_operation_doc", "is_operation_document",
-           "load_operation_spec", "operation_spec_from_dict", "plan_operation",
+           "PathFollower", "SeasonResult", "check_plan", "follower_of", "footprint_mask", "is_operation_doc",
+           "is_operation_document", "load_operation_spec", "operation_spec_from_dict", "plan_operation",
            "run_operation", "run_season", "swath_mask", "traffic_comparison", "traffic_files", "traffic_row"]
 
 FIELD_PACKAGE = "symtrack.studies.fields"
