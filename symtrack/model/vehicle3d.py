@@ -87,7 +87,8 @@ from .vehicle import (
 
 __all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
            "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_raster",
-           "check_terrain", "footprint_radius_m", "hull_rotation", "make_vehicle"]
+           "check_terrain", "footprint_radius_m", "hull_rotation", "make_vehicle",
+           "running_gear_momentum_ratio"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -144,6 +145,19 @@ class SegmentDistribution:
     @property
     def sprocket(self):
         return self.p[-1]
+
+
+def running_gear_momentum_ratio(contact_length_m, sprocket_radius_m):
+    """kappa = H / (J_eq omega): the running gear's angular momentum about its axle's axis over the equivalent
+    inertia's J_eq omega, for a track whose J_eq is its belt's m_track r^2 (the reference crawler's preset:
+    "track mass about 200 kg, m_track r^2 ~ 29 kg m^2" of J_eq = 30) looped around a sprocket and an idler
+    of radius r whose centres are the contact length l apart (ASSUMED: the simplest loop; no parameters of
+    the loop's shape exist). A belt of mass per length lambda moving at v along a closed plane loop has
+    the angular momentum lambda v oint(rho x d rho) = lambda v 2 A about any point (A the loop's area,
+    Green's theorem), so with L = 2 l + 2 pi r, A = 2 r l + pi r^2 and v = r omega:
+    H = m_track (2 A / L) r omega = J_eq omega (2 l + pi r) / (l + pi r). A round loop (l = 0) gives 1
+    (a wheel); the reference crawler 1.668."""
+    return (2 * contact_length_m + math.pi * sprocket_radius_m) / (contact_length_m + math.pi * sprocket_radius_m)
 
 
 def hull_rotation(yaw, pitch, roll):
@@ -349,17 +363,22 @@ class Vehicle3D:
         ax, ay = Fy_frame[0] / m, Fy_frame[1] / m
         I_pitch, I_roll = PITCH_INERTIA_PER_YAW * Iz, ROLL_INERTIA_PER_YAW * Iz
         yaw_moment = My_frame[2]
+        # the running gear's angular momentum kappa J omega about the pitch axis (module doc, "Running
+        # gear"): (I_pitch - 2 kappa^2 J) dq/dt = -M_y' + kappa sum_k J_eq f_k, domega_k/dt = f_k + kappa dq/dt,
+        # f_k = (T_k - r (F_k + R_in,k)) / J the sprocket's own rate
+        kappa = running_gear_momentum_ratio(l, r)
+        pitch_acc = (-My_frame[1] + kappa * J * sum(omdot[k] for k in TRACKS)) / (I_pitch - 2 * kappa**2 * J)
         xdot = [None] * lay.size
         derivs = {
             "x_m": Xdot, "y_m": Ydot, "yaw_rad": rz,
             "u_m_s": ax + vy * rz, "v_m_s": ay - vx * rz, "yaw_rate_rad_s": yaw_moment / Iz,
             "z_m": w, "pitch_rad": q, "roll_rad": pr,
             "heave_rate_m_s": (Fy_frame[2] - W) / m,
-            "pitch_rate_rad_s": -My_frame[1] / I_pitch,
+            "pitch_rate_rad_s": pitch_acc,
             "roll_rate_rad_s": My_frame[0] / I_roll,
         }
         for k, ui in zip(TRACKS, (u[0], u[1]), strict=True):
-            derivs[f"omega_{k}_rad_s"] = omdot[k]
+            derivs[f"omega_{k}_rad_s"] = omdot[k] + kappa * pitch_acc
             derivs[f"shear_{k}_m"] = jdot[k]
             derivs[f"torque_{k}_N_m"] = (ui - torque[k]) / tauT
             if self.lateral:
