@@ -72,9 +72,11 @@ def test_flat_ground_reproduces_the_planar_validation():
     # quasi-static: +1.3 % and -4 % here
     assert s3["shear_driven_max_m"] == pytest.approx(planar["shear_driven_max_m"], rel=0.02)
     assert s3["shear_idle_min_m"] == pytest.approx(planar["shear_idle_min_m"], rel=0.05)
-    # the rigid track on Bekker soil (n = 1/2) has a linear sinkage, not the planar model's linear
-    # pressure: to carry the same pitching moment its rear end sinks deeper (+6.6 % here)
-    assert 1.0 < s3["sinkage_sprocket_mm"] / planar["sinkage_sprocket_mm"] < 1.1
+    # the sprocket sinkage is the run's maximum, near the torque step (planar 1.892 mm at 0.53 s): -0.4 %
+    # here. Before the running gear's angular momentum was in the hull's pitch (issue 22, the braked
+    # chatter) it was +6.6 %: the step's thrust pitched the hull with the lever h (not h - kappa r), an
+    # overshoot (2.017 mm at 0.29 s, CVODES) above the quasi-static 1.775 mm at 3.9 s (now 1.822, planar 1.817)
+    assert s3["sinkage_sprocket_mm"] == pytest.approx(planar["sinkage_sprocket_mm"], rel=0.01)
 
 
 def _rigid_plate(W_track, e, h, b, l, keq, n):
