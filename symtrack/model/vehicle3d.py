@@ -19,7 +19,8 @@ its sprocket cell (:mod:`symtrack.model.homogeneous`): the front segment meets v
 later segment soil already pressed to the deepest sinkage ahead of it (Bekker loading if it sinks
 deeper, the unloading/reloading line if not), plus the cells' areal damping c'' times the rate of
 penetration (seed eq. (4) without the cell's own areal mass: the soil under the track moves with
-the hull), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
+the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
+feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
 normal at the segment. So the load split between and along the tracks follows from the hull's
 rigid-body equilibrium on the ground: its shape, the weight's components and the accelerations
 (no algebraic loop: ``accel_x_m_s2``, ``accel_y_m_s2`` are the hull's horizontal accelerations,
@@ -40,6 +41,23 @@ force and the drawbar pull; W = m g):
 
     m (du/dt - v r_z) = F_x',   m (dv/dt + u r_z) = F_y',   m dw/dt = F_z - W
     I_pitch d2(pitch)/dt2 = -M_y',   I_roll d2(roll)/dt2 = M_x',   I_z dr_z/dt = M_z
+
+Running gear (issue 22, the braked chatter): the sprockets, idlers, rollers and tracks spin about the
+hull's y axis with the angular momentum kappa J_eq omega_k (:func:`running_gear_momentum_ratio`), so the
+hull's pitch and the sprockets share an inertia coupling (the equations of a gyrostat: Euler's second law
+for the hull with internal rotors; the kinetic energy 1/2 I q^2 + 1/2 J sum omega^2 - kappa J q sum omega,
+omega the sprockets' rates relative to the hull, q the pitch rate nose up):
+
+    (I_pitch - 2 kappa^2 J) dq/dt = -M_y' + kappa sum_k (T_k - r (F_k + R_in,k))
+    J domega_k/dt = T_k - r (F_k + R_in,k) + kappa J dq/dt
+
+At steady speed nothing changes; when the thrust varies the running gear takes the reaction of its
+spin-up: a fluctuating thrust dF at the ground pitches the hull with the lever h - kappa r (-0.03 m on the
+reference crawler), not h (0.6 m). Without it the braked vehicle chattered: the sprocket's shear mode
+(about 40 rad/s) drove the hull's pitch through h dF, the pitch moved the track's normal load, and the
+traction's Mohr-Coulomb strength b l c + N tan(phi) times its (negative, braking) shear shape fed it back
+to the sprocket (docs/vehicle3d.md, "Studies: a ramp"). The coupling is taken about the pitch axis only
+(the roll's tilt of the axle axis, a cos(roll) factor, and the gyroscopic terms are dropped, as below).
 
 Approximations (ASSUMED, said where they apply): the Euler angles' rates are taken as the body's
 angular rates and the gyroscopic terms are dropped (pitch and roll rates and the yaw rate of a
@@ -291,7 +309,9 @@ class Vehicle3D:
                 else:
                     p_soil = law_obj.pressure(delta, (z_hist, law_obj.virgin_pressure(z_hist, law), 0, 0, 0), law)
                 z_hist = ca.fmax(z_hist, ca.fmax(delta, 0))
-                p = ca.fmax(p_soil + damping * ddelta, 0)
+                # the cells' damping only where the segment touches the soil (p_soil > 0): above the ground
+                # (or above the rebound of soil pressed ahead) a segment moving toward it feels nothing
+                p = ca.fmax(p_soil + ca.if_else(p_soil > 0, damping * ddelta, 0), 0)
                 p_seg.append(p)
                 pts.append(pt)
                 normals.append(nrm)
