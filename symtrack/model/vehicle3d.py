@@ -40,7 +40,8 @@ Body equations (yaw frame x', y', vertical z; forces F, moments M about the CG f
 force and the drawbar pull; W = m g):
 
     m (du/dt - v r_z) = F_x',   m (dv/dt + u r_z) = F_y',   m dw/dt = F_z - W
-    I_pitch d2(pitch)/dt2 = -M_y',   I_roll d2(roll)/dt2 = M_x',   I_z dr_z/dt = M_z
+    I_pitch d2(pitch)/dt2 = -M_y' (+ the running gear's term below),   I_roll d2(roll)/dt2 = M_x',
+    I_z dr_z/dt = M_z
 
 Running gear (issue 22, the braked chatter): the sprockets, idlers, rollers and tracks spin about the
 hull's y axis with the angular momentum kappa J_eq omega_k (:func:`running_gear_momentum_ratio`), so the
@@ -54,9 +55,10 @@ omega the sprockets' rates relative to the hull, q the pitch rate nose up):
 At steady speed nothing changes; when the thrust varies the running gear takes the reaction of its
 spin-up: a fluctuating thrust dF at the ground pitches the hull with the lever h - kappa r (-0.03 m on the
 reference crawler), not h (0.6 m). Without it the braked vehicle chattered: the sprocket's shear mode
-(about 40 rad/s) drove the hull's pitch through h dF, the pitch moved the track's normal load, and the
-traction's Mohr-Coulomb strength b l c + N tan(phi) times its (negative, braking) shear shape fed it back
-to the sprocket (docs/vehicle3d.md, "Studies: a ramp"). The coupling is taken about the pitch axis only
+(about 40 rad/s) drove the hull through the moment h dF, the hull's pitch and heave (coupled by the
+contact, loaded off its centre when braking) moved the tracks' normal load, and the traction's
+Mohr-Coulomb strength b l c + N tan(phi) times its (negative, braking) shear shape fed it back to the
+sprocket (docs/vehicle3d.md, "Studies: a ramp"). The coupling is taken about the pitch axis only
 (the roll's tilt of the axle axis, a cos(roll) factor, and the gyroscopic terms are dropped, as below).
 
 Approximations (ASSUMED, said where they apply): the Euler angles' rates are taken as the body's
