@@ -34,6 +34,7 @@ import numpy as np
 
 import symtrack
 from symtrack.model.vehicle import GRAVITY_M_S2
+from symtrack.model.vehicle3d import running_gear_momentum_ratio
 from symtrack.simulation.scenario import scenario_from_dict
 
 SOIL = "clayey_soil_thailand_38"
@@ -73,8 +74,9 @@ def drive(slope_deg: float, torque_N_m: float, duration_s: float) -> dict:
 
 def summary(r: dict) -> dict:
     """The checks' figures: the CG's rise over the run after the set-off against s sin t, the pitch and
-    the loads as means over the last :data:`TAIL_S` (a braked descent chatters: docs/vehicle3d.md) with
-    the idler pressure's range there."""
+    the loads as means over the last :data:`TAIL_S` with the idler pressure's range there (a braked
+    descent chattered before the running gear's angular momentum was in the hull's pitch:
+    docs/vehicle3d.md, "Studies: a ramp")."""
     c, t, P = r["cols"], r["slope_rad"], r["params"]
     W = P["mass_kg"] * GRAVITY_M_S2
     k = int(np.searchsorted(c["t_s"], SETTLE_S))
@@ -112,19 +114,23 @@ def pressure_centre(r: dict, tail) -> dict:
     """The load's centre behind the contact centre two ways, as means over ``tail``: from the rigid
     track's Bekker pressures k z^n at its segment centres, z linear between the measured end sinkages
     (the model's contact on virgin soil: right where every segment sinks deeper than those ahead, the
-    climb), and from the statics of the hull on the ground line, x_p = h (W sin t + m a) / (W cos t) + e
-    (the weight's component along the slope and the inertial force at the CG's height h, the thrust
-    and the resistances on the ground line; a the acceleration along the slope)."""
+    climb), and from the statics of the hull on the ground line,
+    x_p = [h (W sin t + m a) + 2 kappa J a / r] / (W cos t) + e (the weight's component along the slope and
+    the inertial force at the CG's height h, the thrust and the resistances on the ground line; a the
+    acceleration along the slope; 2 kappa J a / r the reaction of the two tracks' running gear spinning up,
+    nose up: :func:`~symtrack.model.vehicle3d.running_gear_momentum_ratio`)."""
     c, t, P = r["cols"], r["slope_rad"], r["params"]
     W, m = P["mass_kg"] * GRAVITY_M_S2, P["mass_kg"]
     l, h, e, n = P["contact_length_m"], P["cg_height_m"], P["cg_ahead_of_contact_centre_m"], P["bekker_n"]
+    spin = 2 * running_gear_momentum_ratio(l, P["sprocket_radius_m"]) * P["sprocket_inertia_kg_m2"] \
+        / P["sprocket_radius_m"]
     n_seg = 8  # the model's default contact_segments (ramp_scenario does not change it)
     s = (np.arange(n_seg) + 0.5) * l / n_seg  # from the front
     zi, zs = float(np.mean(c["sinkage_idler_left_m"][tail])), float(np.mean(c["sinkage_sprocket_left_m"][tail]))
     p = np.maximum(zi + (zs - zi) * s / l, 0.0) ** n
     a = float(np.mean(np.gradient(c["u_m_s"], c["t_s"])[tail])) / math.cos(t)
     return {"pressure_centre_behind_m": float(np.sum((s - l / 2) * p) / np.sum(p)),
-            "pressure_centre_statics_m": h * (W * math.sin(t) + m * a) / (W * math.cos(t)) + e,
+            "pressure_centre_statics_m": (h * (W * math.sin(t) + m * a) + spin * a) / (W * math.cos(t)) + e,
             "accel_along_slope_m_s2": a}
 
 
@@ -162,7 +168,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--slope-deg", type=float, default=10.0, help="the ramp, (0, 20] deg")
     ap.add_argument("--climb-factor", type=float, default=1.4, help="climb torque / holding torque")
-    ap.add_argument("--brake-factor", type=float, default=0.5, help="descent's braking torque / holding torque")
+    ap.add_argument("--brake-factor", type=float, default=0.75, help="descent's braking torque / holding torque")
     ap.add_argument("--duration", type=float, default=8.0, help="each run [s]")
     ap.add_argument("--plot", default=None, help="write the figure here (.png)")
     a = ap.parse_args(argv)

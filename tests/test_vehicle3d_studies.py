@@ -16,20 +16,24 @@ def test_example_ramp_3d_climb_and_descent():
     measured 1e-5), the pitch is the ramp's less the ends' sinkage difference
     over the contact, the tracks carry W cos t, and on the climb the load's centre lies behind the
     contact centre by the statics' h (W sin t + m a) / (W cos t) (2 %; measured 0.2 % over 8 s).
-    The braked descent's hull chatters (docs/vehicle3d.md "Studies: a ramp"): its CG rise within 1 %."""
+    The descent brakes at 0.75 x the holding torque and rolls down smoothly (it chattered before the
+    running gear's angular momentum was in the hull's pitch, docs/vehicle3d.md "Studies: a ramp"): the
+    idler pressure's range over the last 2 s within 1 kPa (measured 8 s: 29.713-29.732 kPa; before,
+    0-170 kPa)."""
     ns = runpy.run_path("examples/ramp_3d.py")
     out = ns["main"](["--duration", "3"])
     climb, descent = out["climb"], out["descent"]
     assert climb["distance_along_slope_m"] > 1.0 and descent["distance_along_slope_m"] > 1.0
-    # the braked descent's hull chatters (docs/vehicle3d.md: heave +-2 mm), hence its 1 %
-    for r, tol in ((climb, 1e-3), (descent, 1e-2)):
-        assert abs(r["cg_rise_error_rel"]) < tol, r
+    for r in (climb, descent):
+        assert abs(r["cg_rise_error_rel"]) < 1e-3, r
         assert r["pitch_mean_deg"] == pytest.approx(r["pitch_expected_deg"], abs=0.01)
         assert r["roll_max_abs_deg"] < 1e-6
         assert r["normal_load_sum_over_W_cos_t"] == pytest.approx(1.0, abs=0.01)
     assert climb["pitch_mean_deg"] > 9.9 and descent["pitch_mean_deg"] < -9.9
     assert climb["pressure_centre_behind_m"] == pytest.approx(climb["pressure_centre_statics_m"], rel=0.02)
     assert climb["p_sprocket_kPa"] > 1.5 * climb["p_idler_kPa"]  # the climb loads the rear
+    lo, hi = descent["p_idler_range_kPa"]
+    assert hi - lo < 1.0 and descent["p_idler_kPa"] > descent["p_sprocket_kPa"]  # smooth; braking loads the front
 
 
 def test_example_furrows_3d_across_and_along():

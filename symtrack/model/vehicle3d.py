@@ -19,7 +19,8 @@ its sprocket cell (:mod:`symtrack.model.homogeneous`): the front segment meets v
 later segment soil already pressed to the deepest sinkage ahead of it (Bekker loading if it sinks
 deeper, the unloading/reloading line if not), plus the cells' areal damping c'' times the rate of
 penetration (seed eq. (4) without the cell's own areal mass: the soil under the track moves with
-the hull), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
+the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
+feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
 normal at the segment. So the load split between and along the tracks follows from the hull's
 rigid-body equilibrium on the ground: its shape, the weight's components and the accelerations
 (no algebraic loop: ``accel_x_m_s2``, ``accel_y_m_s2`` are the hull's horizontal accelerations,
@@ -39,7 +40,26 @@ Body equations (yaw frame x', y', vertical z; forces F, moments M about the CG f
 force and the drawbar pull; W = m g):
 
     m (du/dt - v r_z) = F_x',   m (dv/dt + u r_z) = F_y',   m dw/dt = F_z - W
-    I_pitch d2(pitch)/dt2 = -M_y',   I_roll d2(roll)/dt2 = M_x',   I_z dr_z/dt = M_z
+    I_pitch d2(pitch)/dt2 = -M_y' (+ the running gear's term below),   I_roll d2(roll)/dt2 = M_x',
+    I_z dr_z/dt = M_z
+
+Running gear (issue 22, the braked chatter): the sprockets, idlers, rollers and tracks spin about the
+hull's y axis with the angular momentum kappa J_eq omega_k (:func:`running_gear_momentum_ratio`), so the
+hull's pitch and the sprockets share an inertia coupling (the equations of a gyrostat: Euler's second law
+for the hull with internal rotors; the kinetic energy 1/2 I q^2 + 1/2 J sum omega^2 - kappa J q sum omega,
+omega the sprockets' rates relative to the hull, q the pitch rate nose up):
+
+    (I_pitch - 2 kappa^2 J) dq/dt = -M_y' + kappa sum_k (T_k - r (F_k + R_in,k))
+    J domega_k/dt = T_k - r (F_k + R_in,k) + kappa J dq/dt
+
+At steady speed nothing changes; when the thrust varies the running gear takes the reaction of its
+spin-up: a fluctuating thrust dF at the ground pitches the hull with the lever h - kappa r (-0.03 m on the
+reference crawler), not h (0.6 m). Without it the braked vehicle chattered: the sprocket's shear mode
+(about 40 rad/s) drove the hull through the moment h dF, the hull's pitch and heave (coupled by the
+contact, loaded off its centre when braking) moved the tracks' normal load, and the traction's
+Mohr-Coulomb strength b l c + N tan(phi) times its (negative, braking) shear shape fed it back to the
+sprocket (docs/vehicle3d.md, "Studies: a ramp"). The coupling is taken about the pitch axis only
+(the roll's tilt of the axle axis, a cos(roll) factor, and the gyroscopic terms are dropped, as below).
 
 Approximations (ASSUMED, said where they apply): the Euler angles' rates are taken as the body's
 angular rates and the gyroscopic terms are dropped (pitch and roll rates and the yaw rate of a
@@ -87,7 +107,8 @@ from .vehicle import (
 
 __all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
            "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_raster",
-           "check_terrain", "footprint_radius_m", "hull_rotation", "make_vehicle"]
+           "check_terrain", "footprint_radius_m", "hull_rotation", "make_vehicle",
+           "running_gear_momentum_ratio"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -144,6 +165,19 @@ class SegmentDistribution:
     @property
     def sprocket(self):
         return self.p[-1]
+
+
+def running_gear_momentum_ratio(contact_length_m, sprocket_radius_m):
+    """kappa = H / (J_eq omega): the running gear's angular momentum about its axle's axis over the equivalent
+    inertia's J_eq omega, for a track whose J_eq is its belt's m_track r^2 (the reference crawler's preset:
+    "track mass about 200 kg, m_track r^2 ~ 29 kg m^2" of J_eq = 30) looped around a sprocket and an idler
+    of radius r whose centres are the contact length l apart (ASSUMED: the simplest loop; no parameters of
+    the loop's shape exist). A belt of mass per length lambda moving at v along a closed plane loop has
+    the angular momentum lambda v oint(rho x d rho) = lambda v 2 A about any point (A the loop's area,
+    Green's theorem), so with L = 2 l + 2 pi r, A = 2 r l + pi r^2 and v = r omega:
+    H = m_track (2 A / L) r omega = J_eq omega (2 l + pi r) / (l + pi r). A round loop (l = 0) gives 1
+    (a wheel); the reference crawler 1.668."""
+    return (2 * contact_length_m + math.pi * sprocket_radius_m) / (contact_length_m + math.pi * sprocket_radius_m)
 
 
 def hull_rotation(yaw, pitch, roll):
@@ -277,7 +311,9 @@ class Vehicle3D:
                 else:
                     p_soil = law_obj.pressure(delta, (z_hist, law_obj.virgin_pressure(z_hist, law), 0, 0, 0), law)
                 z_hist = ca.fmax(z_hist, ca.fmax(delta, 0))
-                p = ca.fmax(p_soil + damping * ddelta, 0)
+                # the cells' damping only where the segment touches the soil (p_soil > 0): above the ground
+                # (or above the rebound of soil pressed ahead) a segment moving toward it feels nothing
+                p = ca.fmax(p_soil + ca.if_else(p_soil > 0, damping * ddelta, 0), 0)
                 p_seg.append(p)
                 pts.append(pt)
                 normals.append(nrm)
@@ -349,17 +385,22 @@ class Vehicle3D:
         ax, ay = Fy_frame[0] / m, Fy_frame[1] / m
         I_pitch, I_roll = PITCH_INERTIA_PER_YAW * Iz, ROLL_INERTIA_PER_YAW * Iz
         yaw_moment = My_frame[2]
+        # the running gear's angular momentum kappa J omega about the pitch axis (module doc, "Running
+        # gear"): (I_pitch - 2 kappa^2 J) dq/dt = -M_y' + kappa sum_k J_eq f_k, domega_k/dt = f_k + kappa dq/dt,
+        # f_k = (T_k - r (F_k + R_in,k)) / J the sprocket's own rate
+        kappa = running_gear_momentum_ratio(l, r)
+        pitch_acc = (-My_frame[1] + kappa * J * sum(omdot[k] for k in TRACKS)) / (I_pitch - 2 * kappa**2 * J)
         xdot = [None] * lay.size
         derivs = {
             "x_m": Xdot, "y_m": Ydot, "yaw_rad": rz,
             "u_m_s": ax + vy * rz, "v_m_s": ay - vx * rz, "yaw_rate_rad_s": yaw_moment / Iz,
             "z_m": w, "pitch_rad": q, "roll_rad": pr,
             "heave_rate_m_s": (Fy_frame[2] - W) / m,
-            "pitch_rate_rad_s": -My_frame[1] / I_pitch,
+            "pitch_rate_rad_s": pitch_acc,
             "roll_rate_rad_s": My_frame[0] / I_roll,
         }
         for k, ui in zip(TRACKS, (u[0], u[1]), strict=True):
-            derivs[f"omega_{k}_rad_s"] = omdot[k]
+            derivs[f"omega_{k}_rad_s"] = omdot[k] + kappa * pitch_acc
             derivs[f"shear_{k}_m"] = jdot[k]
             derivs[f"torque_{k}_N_m"] = (ui - torque[k]) / tauT
             if self.lateral:
