@@ -31,7 +31,11 @@ def test_flat_virgin_field_matches_the_homogeneous_3d_run(flat_runs):
     grid, homo = flat_runs
     for k in FIGURES:
         a, b = homo.summary[k], grid.summary[k]
-        assert abs(b / a - 1) < 0.01, (k, a, b)
+        # the sprocket sinkage is the run's largest: since the running gear's momentum in the hull's pitch
+        # (the chatter's fix) the quasi-static peak, where the grid's start (set down in its own static rut)
+        # shows: -1.20 % (1.8724 against 1.8952 mm); it moves by -4.6 ... +2.9 % under cell refinement
+        # (docs/vehicle3d.md, "Under cell refinement"), so 2 % for it, 1 % for every other figure
+        assert abs(b / a - 1) < (0.02 if k == "sinkage_sprocket_mm" else 0.01), (k, a, b)
     # the grid's own figures: the subsoil stress and the bulk density are filled under the tracks
     s = grid.summary
     assert s["subsoil_loaded_area_m2"] > 30.0 and s["rut_cells"] > 3000
@@ -205,3 +209,18 @@ def test_the_subsoil_s_fitted_line_against_the_segment_pieces():
             px, py = X + c * bx - s * by, Y + s * bx + c * by
             ref = sigma(pieces, px, py, depth)
             assert abs(sigma(line, px, py, depth) / ref - 1) < tol, (depth, sp)
+
+
+def test_example_second_pass_3d_runs():
+    """examples/second_pass_3d.py on a 20 m x 8 m field, 8 m a pass: the hull of pass 2 rides lower than
+    pass 1's over the middle of the line, by more than its new sinkage and less than the first rut; the
+    rut deepens by the cycle law's closed form (20 %); the attitude flattens; the cells' work falls."""
+    import runpy
+
+    ns = runpy.run_path("examples/second_pass_3d.py")
+    out = ns["main"](["--size-m", "20", "8", "--stop-m", "8"])
+    lo, hi = out["hull_drop_mm"]
+    assert out["new_sinkage_pass_2_mean_mm"] < lo and hi < out["rut_after_pass_1_max_mm"], out
+    assert out["deepening"] == pytest.approx(out["deepening_closed_form"], rel=0.2)
+    assert 0 < out["pitch_pass_2_mrad"] < out["pitch_pass_1_mrad"]
+    assert out["compaction_resistance_pass_2_N"] < 0.5 * out["compaction_resistance_pass_1_N"]

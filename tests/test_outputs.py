@@ -95,7 +95,8 @@ def _fixed_layout_figures(monkeypatch) -> list:
 
     import numpy as np
 
-    from symtrack.reports import plots, subsoil_plots, terrain_plots
+    from symtrack.reports import plots, subsoil_plots, terrain_plots, vehicle3d_plots
+    from symtrack.terrain.surface import parse_surface
 
     figs = []
 
@@ -104,7 +105,7 @@ def _fixed_layout_figures(monkeypatch) -> list:
         figs.append(fig)
         return b""
 
-    for mod in (plots, subsoil_plots, terrain_plots):
+    for mod in (plots, subsoil_plots, terrain_plots, vehicle3d_plots):
         monkeypatch.setattr(mod, "png_bytes", capture)
     t = np.linspace(0.0, 123.4, 400)
     wide = -12345.678 + 0.0012345 * np.sin(t)
@@ -115,6 +116,13 @@ def _fixed_layout_figures(monkeypatch) -> list:
                                 scenario=types.SimpleNamespace(torque=ev))
     plots.time_plot(res, [("a", "left (actual)"), ("b", "right (actual)")], "torque [N m]", "sprocket torques")
     plots.path_plot(res)
+    # the 3D vehicle's (reports/vehicle3d_plots.py): long heights, loads and angles
+    cols.update({"z_m": 1234.5678 + 0.0012345 * t, "ground_z_m": 1233.9 + 0 * t, "roll_rad": 0.0012345 * t,
+                 "pitch_rad": -0.0012345 * t, "normal_load_left_N": 12345678.9 + t, "normal_load_right_N": 2e4 + t})
+    vehicle3d_plots.attitude_png(res)
+    vehicle3d_plots.load_split_png(res)
+    vehicle3d_plots.path_elevation_png(res, parse_surface({"slope_x_deg": 5.0, "furrow_depth_m": 0.1,
+                                                           "furrow_spacing_m": 1.5}))
     k = 12
     figures = [{"rut_max_depth_mm": 1234.567 + i, "rut_mean_depth_mm": 0.0012345 * i, "new_sinkage_mean_mm": -0.5 * i,
                 "compaction_resistance_mean_N": 12345.678 * i} for i in range(k)]
@@ -139,7 +147,7 @@ def test_the_fixed_layouts_keep_every_text_on_the_canvas_and_off_the_other_axes(
     from symtrack.reports.plots import plt
 
     figs = _fixed_layout_figures(monkeypatch)
-    assert len(figs) == 7
+    assert len(figs) == 10
     for fig in figs:
         fig.canvas.draw()
         r = fig.canvas.get_renderer()

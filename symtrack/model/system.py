@@ -131,12 +131,21 @@ class SystemModel:
 
         self.x, self.z, self.u, self.p = x, z, u, p
         self.ode_expr, self.alg_expr, self.ode_dae_expr = ode, alg, ode_z
-        fo = {"cse": True}
+        fo = {"cse": self.cse}
         self.dae = ca.Function("dae", [x, z, u, p], [ode_z, alg], ["x", "z", "u", "p"], ["ode", "alg"], fo)
         self.ode = ca.Function("ode", [x, u, p], [ode], ["x", "u", "p"], ["ode"], fo)
         self.outputs = ca.Function("outputs", [x, u, p], [y], ["x", "u", "p"], ["y"], fo)
         self.accel = ca.Function("accel", [x, u, p], [acc], ["x", "u", "p"], ["z"], fo)
         self._y_expr = y
+
+    @property
+    def cse(self) -> bool:
+        """Whether the model's Functions eliminate common subexpressions (CasADi's ``cse``): yes, unless the
+        vehicle's ground is an elevation raster: CSE hashes each call node to the raster's interpolant with
+        its data (measured: 100 call nodes to a 300 x 100 raster's B-spline, 2.9 s; the 3D vehicle's
+        unrolled Rosenbrock step, 156 s), where the graph already shares its nodes."""
+        surface = getattr(self.vehicle, "surface", None)
+        return getattr(surface, "raster", None) is None
 
     # The Jacobian Functions are built on first use: for the grid terrain the ODE form's
     # Jacobian is dense (see symtrack/terrain/channels.py) and costly to build, and the
@@ -145,13 +154,13 @@ class SystemModel:
     def jac_ode(self) -> ca.Function:
         x, u, p, ode = self.x, self.u, self.p, self.ode_expr
         return ca.Function("jac_ode", [x, u, p], [ca.jacobian(ode, x), ca.jacobian(ode, u)],
-                           ["x", "u", "p"], ["A", "B"], {"cse": True})
+                           ["x", "u", "p"], ["A", "B"], {"cse": self.cse})
 
     @functools.cached_property
     def jac_outputs(self) -> ca.Function:
         x, u, p, y = self.x, self.u, self.p, self._y_expr
         return ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x), ca.jacobian(y, u)],
-                           ["x", "u", "p"], ["C", "D"], {"cse": True})
+                           ["x", "u", "p"], ["C", "D"], {"cse": self.cse})
 
     @functools.cached_property
     def codegen_twin(self) -> SystemModel:

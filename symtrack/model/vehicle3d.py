@@ -19,7 +19,8 @@ its sprocket cell (:mod:`symtrack.model.homogeneous`): the front segment meets v
 later segment soil already pressed to the deepest sinkage ahead of it (Bekker loading if it sinks
 deeper, the unloading/reloading line if not), plus the cells' areal damping c'' times the rate of
 penetration (seed eq. (4) without the cell's own areal mass: the soil under the track moves with
-the hull), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
+the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
+feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
 normal at the segment. So the load split between and along the tracks follows from the hull's
 rigid-body equilibrium on the ground: its shape, the weight's components and the accelerations
 (no algebraic loop: ``accel_x_m_s2``, ``accel_y_m_s2`` are the hull's horizontal accelerations,
@@ -39,7 +40,26 @@ Body equations (yaw frame x', y', vertical z; forces F, moments M about the CG f
 force and the drawbar pull; W = m g):
 
     m (du/dt - v r_z) = F_x',   m (dv/dt + u r_z) = F_y',   m dw/dt = F_z - W
-    I_pitch d2(pitch)/dt2 = -M_y',   I_roll d2(roll)/dt2 = M_x',   I_z dr_z/dt = M_z
+    I_pitch d2(pitch)/dt2 = -M_y' (+ the running gear's term below),   I_roll d2(roll)/dt2 = M_x',
+    I_z dr_z/dt = M_z
+
+Running gear (issue 22, the braked chatter): the sprockets, idlers, rollers and tracks spin about the
+hull's y axis with the angular momentum kappa J_eq omega_k (:func:`running_gear_momentum_ratio`), so the
+hull's pitch and the sprockets share an inertia coupling (the equations of a gyrostat: Euler's second law
+for the hull with internal rotors; the kinetic energy 1/2 I q^2 + 1/2 J sum omega^2 - kappa J q sum omega,
+omega the sprockets' rates relative to the hull, q the pitch rate nose up):
+
+    (I_pitch - 2 kappa^2 J) dq/dt = -M_y' + kappa sum_k (T_k - r (F_k + R_in,k))
+    J domega_k/dt = T_k - r (F_k + R_in,k) + kappa J dq/dt
+
+At steady speed nothing changes; when the thrust varies the running gear takes the reaction of its
+spin-up: a fluctuating thrust dF at the ground pitches the hull with the lever h - kappa r (-0.03 m on the
+reference crawler), not h (0.6 m). Without it the braked vehicle chattered: the sprocket's shear mode
+(about 40 rad/s) drove the hull through the moment h dF, the hull's pitch and heave (coupled by the
+contact, loaded off its centre when braking) moved the tracks' normal load, and the traction's
+Mohr-Coulomb strength b l c + N tan(phi) times its (negative, braking) shear shape fed it back to the
+sprocket (docs/vehicle3d.md, "Studies: a ramp"). The coupling is taken about the pitch axis only
+(the roll's tilt of the axle axis, a cos(roll) factor, and the gyroscopic terms are dropped, as below).
 
 Approximations (ASSUMED, said where they apply): the Euler angles' rates are taken as the body's
 angular rates and the gyroscopic terms are dropped (pitch and roll rates and the yaw rate of a
@@ -62,7 +82,7 @@ import math
 
 import casadi as ca
 
-from ..foundations.errors import ParameterError
+from ..foundations.errors import ParameterError, SimulationError
 from . import soil_law
 from .layout import ContactPose, StateLayout, VehicleState
 from .options import SHEAR_LAWS, ModelOptions
@@ -86,8 +106,9 @@ from .vehicle import (
 )
 
 __all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
-           "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_terrain", "hull_rotation",
-           "make_vehicle"]
+           "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_raster",
+           "check_terrain", "footprint_radius_m", "hull_rotation", "make_vehicle",
+           "running_gear_momentum_ratio"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -146,6 +167,19 @@ class SegmentDistribution:
         return self.p[-1]
 
 
+def running_gear_momentum_ratio(contact_length_m, sprocket_radius_m):
+    """kappa = H / (J_eq omega): the running gear's angular momentum about its axle's axis over the equivalent
+    inertia's J_eq omega, for a track whose J_eq is its belt's m_track r^2 (the reference crawler's preset:
+    "track mass about 200 kg, m_track r^2 ~ 29 kg m^2" of J_eq = 30) looped around a sprocket and an idler
+    of radius r whose centres are the contact length l apart (ASSUMED: the simplest loop; no parameters of
+    the loop's shape exist). A belt of mass per length lambda moving at v along a closed plane loop has
+    the angular momentum lambda v oint(rho x d rho) = lambda v 2 A about any point (A the loop's area,
+    Green's theorem), so with L = 2 l + 2 pi r, A = 2 r l + pi r^2 and v = r omega:
+    H = m_track (2 A / L) r omega = J_eq omega (2 l + pi r) / (l + pi r). A round loop (l = 0) gives 1
+    (a wheel); the reference crawler 1.668."""
+    return (2 * contact_length_m + math.pi * sprocket_radius_m) / (contact_length_m + math.pi * sprocket_radius_m)
+
+
 def hull_rotation(yaw, pitch, roll):
     """R = Rz(yaw) Ry(-pitch) Rx(roll): body -> world (pitch nose up, roll left side up)."""
     cy, sy, cp, sp, cr, sr = ca.cos(yaw), ca.sin(yaw), ca.cos(pitch), ca.sin(pitch), ca.cos(roll), ca.sin(roll)
@@ -177,7 +211,8 @@ class Vehicle3D:
 
     def __init__(self, surface=None, lateral: bool = False):
         self.surface = None if surface is None or surface.is_flat else surface
-        self._ground_f = None if self.surface is None or self.surface.raster is not None else self.surface.function()
+        # (z0, dz0/dx, dz0/dy); an elevation raster is a B-spline of degree 1 (bilinear), a call node in SX
+        self._ground_f = None if self.surface is None else self.surface.function()
         self.lateral = bool(lateral)
         self.name = "3d_lateral" if lateral else "3d"
         self.lateral_laws = ()
@@ -189,9 +224,6 @@ class Vehicle3D:
         """(z0, dz0/dx, dz0/dy) of the ground at world (x, y) (CasADi)."""
         if self.surface is None:
             return 0, 0, 0
-        if self.surface.raster is not None:
-            raise ParameterError("model.vehicle = '3d' takes the analytic [terrain.surface] (slopes, furrows); an "
-                                 "elevation_file raster is not coupled to the 3D vehicle yet")
         z, gx, gy = self._ground_f(x, y)
         return z, gx, gy
 
@@ -279,7 +311,9 @@ class Vehicle3D:
                 else:
                     p_soil = law_obj.pressure(delta, (z_hist, law_obj.virgin_pressure(z_hist, law), 0, 0, 0), law)
                 z_hist = ca.fmax(z_hist, ca.fmax(delta, 0))
-                p = ca.fmax(p_soil + damping * ddelta, 0)
+                # the cells' damping only where the segment touches the soil (p_soil > 0): above the ground
+                # (or above the rebound of soil pressed ahead) a segment moving toward it feels nothing
+                p = ca.fmax(p_soil + ca.if_else(p_soil > 0, damping * ddelta, 0), 0)
                 p_seg.append(p)
                 pts.append(pt)
                 normals.append(nrm)
@@ -351,17 +385,22 @@ class Vehicle3D:
         ax, ay = Fy_frame[0] / m, Fy_frame[1] / m
         I_pitch, I_roll = PITCH_INERTIA_PER_YAW * Iz, ROLL_INERTIA_PER_YAW * Iz
         yaw_moment = My_frame[2]
+        # the running gear's angular momentum kappa J omega about the pitch axis (module doc, "Running
+        # gear"): (I_pitch - 2 kappa^2 J) dq/dt = -M_y' + kappa sum_k J_eq f_k, domega_k/dt = f_k + kappa dq/dt,
+        # f_k = (T_k - r (F_k + R_in,k)) / J the sprocket's own rate
+        kappa = running_gear_momentum_ratio(l, r)
+        pitch_acc = (-My_frame[1] + kappa * J * sum(omdot[k] for k in TRACKS)) / (I_pitch - 2 * kappa**2 * J)
         xdot = [None] * lay.size
         derivs = {
             "x_m": Xdot, "y_m": Ydot, "yaw_rad": rz,
             "u_m_s": ax + vy * rz, "v_m_s": ay - vx * rz, "yaw_rate_rad_s": yaw_moment / Iz,
             "z_m": w, "pitch_rad": q, "roll_rad": pr,
             "heave_rate_m_s": (Fy_frame[2] - W) / m,
-            "pitch_rate_rad_s": -My_frame[1] / I_pitch,
+            "pitch_rate_rad_s": pitch_acc,
             "roll_rate_rad_s": My_frame[0] / I_roll,
         }
         for k, ui in zip(TRACKS, (u[0], u[1]), strict=True):
-            derivs[f"omega_{k}_rad_s"] = omdot[k]
+            derivs[f"omega_{k}_rad_s"] = omdot[k] + kappa * pitch_acc
             derivs[f"shear_{k}_m"] = jdot[k]
             derivs[f"torque_{k}_N_m"] = (ui - torque[k]) / tauT
             if self.lateral:
@@ -419,6 +458,82 @@ def check_contact(opts: ModelOptions, surface, params: dict) -> None:
             f"model.contact_segments = {opts.contact_segments} is too few for furrows every "
             f"{surface.furrow_spacing_m:g} m under a {l:g} m contact: the allowed range is [{need}, 64] (a segment "
             f"at most a quarter of the furrow spacing, {MIN_SEGMENTS_PER_FURROW} segments a furrow period)")
+
+
+def footprint_radius_m(params: dict) -> float:
+    """The radius [m] of a horizontal circle about the CG that holds every point of the tracks' contact
+    whatever the hull's attitude: hypot(l/2 + |e|, (B + b)/2), the contact's corners, plus h, the
+    largest horizontal offset of the ground line below the CG when the hull tilts."""
+    l, e, B, b, h = (float(params[k]) for k in ("contact_length_m", "cg_ahead_of_contact_centre_m", "track_gauge_m",
+                                                "track_width_m", "cg_height_m"))
+    return math.hypot(l / 2 + abs(e), (B + b) / 2) + h
+
+
+def _raster_area(raster, radius_m: float) -> tuple[float, float, float, float]:
+    """Where the CG may be on ``raster``: its pixel centres' hull (between them the heights are bilinear,
+    beyond it they would be the edge's) less ``radius_m`` on every side."""
+    x0, x1, y0, y1 = raster.bounds()
+    half = 0.5 * raster.pixel_m
+    return x0 + half + radius_m, x1 - half - radius_m, y0 + half + radius_m, y1 - half - radius_m
+
+
+def check_raster(surface, params: dict, x_m: float, y_m: float, where: str = "terrain.surface") -> None:
+    """A :class:`ParameterError` naming the key unless the 3D vehicle on homogeneous soil can start on
+    ``surface``'s elevation raster at (``x_m``, ``y_m``): the raster needs its place (a .npy's
+    ``elevation_origin_m``: there is no field to put it at) and must hold the vehicle's footprint
+    (:func:`footprint_radius_m` about the CG) inside its pixel centres' hull. NaN and the slope limit are
+    checked when the raster is read (:func:`~symtrack.terrain.surface.parse_surface`); leaving the
+    raster during a run is :class:`RasterGuard`'s."""
+    raster = getattr(surface, "raster", None)
+    if raster is None:
+        return
+    if raster.origin_m is None:
+        raise ParameterError(f"{where}.elevation_origin_m is needed with elevation_file = {raster.path!r} under the "
+                             "3D vehicle on homogeneous soil (model.vehicle = '3d' without a grid): there is no field "
+                             "to put the raster at; give the world [x, y] of its lower-left corner")
+    radius = footprint_radius_m(params)
+    ax0, ax1, ay0, ay1 = _raster_area(raster, radius)
+    if not (ax0 <= x_m <= ax1 and ay0 <= y_m <= ay1):
+        rx0, rx1, ry0, ry1 = raster.bounds()
+        raise ParameterError(
+            f"{where}.elevation_file = {raster.path!r} covers x in [{rx0:.10g}, {rx1:.10g}] m, y in [{ry0:.10g}, "
+            f"{ry1:.10g}] m: the start (x, y) = ({x_m:g}, {y_m:g}) m must lie in x in [{ax0:.10g}, {ax1:.10g}], y in "
+            f"[{ay0:.10g}, {ay1:.10g}] (the raster's pixel centres less the vehicle's footprint, {radius:.3g} m): "
+            "move the start or the raster (elevation_origin_m)")
+
+
+class RasterGuard:
+    """Stops a run of the 3D vehicle on homogeneous soil (a :class:`SimulationError`, the run kept up to
+    there) when its CG comes within the footprint (:func:`footprint_radius_m`) of its elevation raster's
+    edge: beyond the pixel centres the heights would be the edge's, a ground that is not the raster's.
+    ``guard(X)`` checks the rows of states ``X`` (columns ``state_names``)."""
+
+    def __init__(self, surface, params: dict, state_names):
+        raster = surface.raster
+        self.path, self.bounds = raster.path, raster.bounds()
+        self.radius = footprint_radius_m(params)
+        self.area = _raster_area(raster, self.radius)
+        self.ix, self.iy = list(state_names).index("x_m"), list(state_names).index("y_m")
+
+    @classmethod
+    def of(cls, model, params: dict):
+        """The guard of ``model``'s 3D vehicle on a raster, else None."""
+        surface = getattr(getattr(model, "vehicle", None), "surface", None)
+        if surface is None or getattr(surface, "raster", None) is None:
+            return None
+        return cls(surface, params, model.state_names)
+
+    def __call__(self, X) -> None:
+        ax0, ax1, ay0, ay1 = self.area
+        for row in X:
+            x, y = float(row[self.ix]), float(row[self.iy])
+            if not (ax0 <= x <= ax1 and ay0 <= y <= ay1):
+                rx0, rx1, ry0, ry1 = self.bounds
+                raise SimulationError(
+                    f"the vehicle left terrain.surface.elevation_file = {self.path!r} at (x, y) = ({x:.4g}, {y:.4g}) "
+                    f"m: the raster covers x in [{rx0:.10g}, {rx1:.10g}] m, y in [{ry0:.10g}, {ry1:.10g}] m and the "
+                    f"CG must stay {self.radius:.3g} m (the footprint) inside its pixel centres; a larger raster, or "
+                    "a shorter run (run.duration_s, run.stop_after_distance_m)")
 
 
 def check_terrain(opts: ModelOptions, kind: str) -> None:

@@ -102,11 +102,11 @@ class Generated:
         return h.hexdigest()
 
 
-def _rename(f: ca.Function, name: str) -> ca.Function:
+def _rename(f: ca.Function, name: str, cse: bool = True) -> ca.Function:
     """A copy of the SX Function f under another name (same expressions, common subexpressions
-    eliminated)."""
+    eliminated unless ``cse`` is False: a model on an elevation raster, ``SystemModel.cse``)."""
     args = f.sx_in()
-    return ca.Function(name, args, f.call(args), f.name_in(), f.name_out(), {"cse": True})
+    return ca.Function(name, args, f.call(args), f.name_in(), f.name_out(), {"cse": cse})
 
 
 def fixed_step_functions(model, prefix: str):
@@ -115,11 +115,12 @@ def fixed_step_functions(model, prefix: str):
     x0, z0 = ca.SX.sym("x0", model.x.sparsity()), ca.SX.sym("z0", model.z.sparsity())
     u, p, h = ca.SX.sym("u", model.u.sparsity()), ca.SX.sym("p", model.p.sparsity()), ca.SX.sym("h")
     x1, z1 = rosenbrock.step_expressions(model.dae, x0, z0, u, p, h)
+    cse = getattr(model, "cse", True)
     step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [x0, z0, u, p, h], [x1, z1],
-                       ["x0", "z0", "u", "p", "h"], ["xf", "zf"], {"cse": True})
+                       ["x0", "z0", "u", "p", "h"], ["xf", "zf"], {"cse": cse})
     zc = rosenbrock.consistent_z_expressions(model.dae, x0, z0, u, p)
     consistent = ca.Function(f"{prefix}_consistent_z", [x0, z0, u, p], [zc], ["x", "z0", "u", "p"], ["z"],
-                             {"cse": True})
+                             {"cse": cse})
     # one column of a chunk: a step, then the outputs at its end (an MX Function calling the two)
     X0, Z0 = ca.MX.sym("x0", model.x.sparsity()), ca.MX.sym("z0", model.z.sparsity())
     U, P, H = ca.MX.sym("u", model.u.sparsity()), ca.MX.sym("p", model.p.sparsity()), ca.MX.sym("h")
@@ -149,7 +150,7 @@ GROUP_OF = {"ode": "ode", "linearize": "ode", "dae": "dae", "accel": "dae", "out
 
 def _group(model, prefix: str, group: str) -> tuple:
     if group == "ode":
-        ode = _rename(model.ode, f"{prefix}_ode")
+        ode = _rename(model.ode, f"{prefix}_ode", getattr(model, "cse", True))
         jac_ode = ode.jacobian()  # named jac_<prefix>_ode: casadi.external finds it
         x, u, p = (ca.MX.sym(n, s) for n, s in (("x", model.x.sparsity()), ("u", model.u.sparsity()),
                                                   ("p", model.p.sparsity())))
@@ -157,12 +158,13 @@ def _group(model, prefix: str, group: str) -> tuple:
         lin = ca.Function(f"{prefix}_linearize", [x, u, p], [J[0], J[1]], ["x", "u", "p"], ["A", "B"])
         return ode, jac_ode, lin
     if group == "dae":
-        dae = _rename(model.dae, f"{prefix}_dae")
-        return dae, dae.jacobian(), _rename(model.accel, f"{prefix}_accel")
+        cse = getattr(model, "cse", True)
+        dae = _rename(model.dae, f"{prefix}_dae", cse)
+        return dae, dae.jacobian(), _rename(model.accel, f"{prefix}_accel", cse)
     if group == "outputs":
-        return (_rename(model.outputs, f"{prefix}_outputs"),)
+        return (_rename(model.outputs, f"{prefix}_outputs", getattr(model, "cse", True)),)
     if group == "linearize_outputs":
-        return (_rename(model.jac_outputs, f"{prefix}_linearize_outputs"),)
+        return (_rename(model.jac_outputs, f"{prefix}_linearize_outputs", getattr(model, "cse", True)),)
     if group == FIXED_STEP_METHOD:
         step, consistent, chunks = fixed_step_functions(model, prefix)
         return step, consistent, *chunks

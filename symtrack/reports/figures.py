@@ -29,7 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import control_plots, plots, terrain_plots
+from . import control_plots, plots, terrain_plots, vehicle3d_plots
 
 __all__ = ["KINDS", "Figure", "TerrainRun", "extras", "figures", "names", "register", "unregister"]
 
@@ -130,6 +130,19 @@ register("torques", "trajectory", _time_series(
     "torques.png", [("torque_left_N_m", "left (actual)"), ("torque_right_N_m", "right (actual)"),
                     ("torque_cmd_left_N_m", "left (command)"), ("torque_cmd_right_N_m", "right (command)")],
     "torque [N m]", "sprocket torques"))
+
+
+# the 3D vehicle's (model.vehicle = "3d"; none for a planar run: symtrack.reports.vehicle3d_plots)
+def _path_elevation(res) -> dict[str, bytes]:
+    surface = vehicle3d_plots.run_surface(res) if vehicle3d_plots.is_3d(res) else None
+    return {} if surface is None else {"path_elevation.png": vehicle3d_plots.path_elevation_png(res, surface)}
+
+
+register("attitude", "trajectory",
+         lambda res: {"attitude.png": vehicle3d_plots.attitude_png(res)} if vehicle3d_plots.is_3d(res) else {})
+register("load_split", "trajectory",
+         lambda res: {"load_split.png": vehicle3d_plots.load_split_png(res)} if vehicle3d_plots.is_3d(res) else {})
+register("path_elevation", "trajectory", _path_elevation)
 
 
 # -- the terrain of a study's passes ----------------------------------------------------------------------------

@@ -24,10 +24,13 @@ result).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
+
+import numpy as np
 
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
@@ -50,6 +53,17 @@ _lock = threading.Lock()
 _hits = {"hits": 0, "misses": 0}
 
 
+def _raster_key(surface) -> str | None:
+    """An elevation raster's identity for the model cache: its heights, pixel and origin (the table names
+    only its file, which may be rewritten between two runs of one process)."""
+    r = getattr(surface, "raster", None)
+    if r is None:
+        return None
+    h = hashlib.sha256(np.ascontiguousarray(r.values).tobytes())
+    h.update(repr((r.values.shape, r.pixel_m, r.origin_m)).encode())
+    return h.hexdigest()
+
+
 def system_model(opts: ModelOptions | None = None, surface=None) -> SystemModel:
     """The homogeneous terrain's model of ``opts`` (default options when None), built on the
     first call for these options and then shared (a SystemModel is not changed after its
@@ -57,7 +71,7 @@ def system_model(opts: ModelOptions | None = None, surface=None) -> SystemModel:
     recently used are kept. ``surface``: the ground's shape under the 3D vehicle
     (``opts.vehicle = "3d"``; keyed by its table)."""
     opts = ModelOptions() if opts is None else opts
-    key = opts if surface is None else (opts, json.dumps(surface.to_dict(), sort_keys=True))
+    key = opts if surface is None else (opts, json.dumps(surface.to_dict(), sort_keys=True), _raster_key(surface))
     with _lock:
         model = _models.get(key)
         if model is not None:

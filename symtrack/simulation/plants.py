@@ -45,7 +45,7 @@ from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
 from ..model import SystemModel
 from ..model.static import static_state
-from ..model.vehicle3d import check_terrain, make_vehicle
+from ..model.vehicle3d import RasterGuard, check_terrain, make_vehicle
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import World, open_world
 
@@ -101,6 +101,7 @@ class StepPlant:
     def __init__(self, model: SystemModel, params: dict, stepper):
         self.model, self.params, self.stepper = model, dict(params), stepper
         self.p = model.param_vector(params)
+        self.guard = RasterGuard.of(model, params)  # the 3D vehicle on an elevation raster: stay on it
         self.state_names = tuple(model.state_names)
         self.output_names = tuple(model.output_names)
         self.x = None
@@ -129,6 +130,8 @@ class StepPlant:
 
     def advance(self):
         self.x_new = self.stepper.step(self.x, self.u, self.p, self.h)
+        if self.guard is not None:
+            self.guard(self.x_new[None, :])
         return self.x_new[None, :]
 
     def retry(self, k, length_s):
@@ -159,6 +162,7 @@ class BatchPlant:
     def __init__(self, model: SystemModel, params: dict, stepper, output_dt_s: float):
         self.model, self.params, self.stepper = model, dict(params), stepper
         self.p = np.array(model.param_vector(params), dtype=float)
+        self.guard = RasterGuard.of(model, params)  # the 3D vehicle on an elevation raster: stay on it
         self.state_names = tuple(model.state_names)
         self.output_names = tuple(model.output_names)
         self.big, self.short = max(stepper.sizes), min(stepper.sizes)
@@ -204,6 +208,8 @@ class BatchPlant:
             i0, i1 = np.searchsorted(ends, c0), np.searchsorted(ends, c1)
             rows = ends[i0:i1] - c0
             self.Xe[i0:i1], self.Ze[i0:i1], self.Ye[i0:i1] = X[rows], Z[rows], Y[rows]
+        if self.guard is not None:
+            self.guard(self.Xe)
         return self.Xe
 
     def retry(self, k, length_s):

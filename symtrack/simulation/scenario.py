@@ -62,7 +62,7 @@ from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
-from ..model.vehicle3d import check_contact, check_grid, check_terrain
+from ..model.vehicle3d import check_contact, check_grid, check_raster, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..terrain import moisture, towed
@@ -256,21 +256,25 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
     return preset, values
 
 
-def parse_ground(t_doc, model, vehicle: dict, plant: str = "", engine: bool = False) -> tuple:
+def parse_ground(t_doc, model, vehicle: dict, plant: str = "", engine: bool = False, start=None) -> tuple:
     """``(terrain, surface)`` of a scenario's ``[terrain]`` table (the simulation's and the MPC's
     loaders): with ``model.vehicle = "3d"`` a table holding only ``[terrain.surface]`` is homogeneous
     soil following that ground (docs/vehicle3d.md: ``(None, Surface)``, its contact checked against
     the vehicle); anything else is the grid terrain (``(TerrainSettings or None, None)``), refused for a
     vehicle model that cannot take it (``plant``: what in the message asked for the grid; ``engine``:
     the run's integrator is the terrain engine, which takes the 3D vehicle: then what its grid path
-    cannot take is refused, :func:`~symtrack.model.vehicle3d.check_grid`)."""
+    cannot take is refused, :func:`~symtrack.model.vehicle3d.check_grid`; ``start``: the start's (x, y),
+    where an elevation raster under the 3D vehicle on homogeneous soil must hold its footprint,
+    :func:`~symtrack.model.vehicle3d.check_raster`)."""
     if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
         surface = parse_surface(t_doc["surface"])
-        if surface.raster is not None:
-            raise ScenarioError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D "
-                                "vehicle (model.vehicle = '3d') yet; give slopes and furrows")
+        if surface.raster is not None and plant:
+            raise ScenarioError("terrain.surface.elevation_file: an elevation raster under the 3D vehicle is "
+                                "symtrack simulate's (homogeneous soil), not the MPC's yet; give slopes and furrows")
         try:
             check_contact(model, surface, vehicle)
+            if start is not None:
+                check_raster(surface, vehicle, *start)
         except ParameterError as err:
             raise ScenarioError(str(err)) from err
         return None, surface
@@ -375,7 +379,8 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
     terrain, surface = parse_ground(d.get("terrain"), model, vehicle,
-                                    engine=registry.get(run.integrator, "run.integrator").grid_engine is not None)
+                                    engine=registry.get(run.integrator, "run.integrator").grid_engine is not None,
+                                    start=(start.x_m, start.y_m))
     engine = parse_engine(d.get("engine"))
     if terrain is not None and terrain.towed is not None:  # (symtrack.terrain.towed; again before the first pass)
         towed.check_scenario(terrain, start.x_m, start.y_m, start.yaw_deg, soil,

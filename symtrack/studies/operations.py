@@ -42,6 +42,7 @@ trafficked share of the summary is the soil's own record: the cells the engine s
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import io
 import json
@@ -52,12 +53,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..control.mpc import MPCSettings
+from ..control.closedloop import TrackingLaw
+from ..control.mpc import MPCSettings, PathTrackingMPC
 from ..control.path import Path, Segment
+from ..control.trim import TrimError, trim
 from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError
 from ..foundations.files import check_output_folder
 from ..simulation import loop
+from ..simulation.builder import system_model
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, scenario_from_dict
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
@@ -67,18 +71,19 @@ from . import boundary as bnd
 from .boundary import read_boundary
 
 __all__ = ["OPERATION_KEYS", "OperationPlan", "OperationResult", "OperationSettings", "OperationSpec",
-           "PathFollower", "SeasonResult", "check_plan", "footprint_mask", "is_operation_doc", "is_operation_document",
-           "load_operation_spec", "operation_spec_from_dict", "plan_operation",
+           "PathFollower", "SeasonResult", "check_plan", "follower_of", "footprint_mask", "is_operation_doc",
+           "is_operation_document", "load_operation_spec", "operation_spec_from_dict", "plan_operation",
            "run_operation", "run_season", "swath_mask", "traffic_comparison", "traffic_files", "traffic_row"]
 
 FIELD_PACKAGE = "symtrack.studies.fields"
 SCHEMA_VERSION = 1
 TRACKS = ("ab", "controlled", "random")
 TURNS = ("auto", "u", "bulb", "k")
+FOLLOWERS = ("auto", "law", "rti")  # follower_of: the MPC, the law where the plan reverses | PathFollower | MPCFollower
 OPERATION_KEYS = ("name", "size_m", "boundary_file", "cell_m",
                   "working_width_m", "headland_passes", "tracks", "lane_spacing_m",
                   "random_offset_m", "seed", "turn", "turn_radius_m", "speed_m_s", "turn_speed_m_s",
-                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines", "turn_lane_m")
+                  "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines", "turn_lane_m", "follower")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "engine", "operation", "season")
 SEASON_KEYS = ("operations", "compare", "tracks")
 OPERATION_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
@@ -94,15 +99,16 @@ PASS_GAP_S = 1.0
 # the follower's speed profile: the largest deceleration / acceleration it plans with (m/s^2); a
 # moderate value (the crawler's 2000 N m accelerate it at about 1 m/s^2 on the clay)
 PLAN_ACCEL_M_S2 = 0.4
-# the defaults of an operation's vehicle step (at most 2.5 ms: run.output_dt_s = 0.01 s split in four) and of
-# the model's omega_smoothing_rad_s (ModelOptions: the package's 0.01 rad/s resolves the sprocket's
-# direction, its |omega| and the end where the track enters the contact over 0.004 m/s of tread
-# speed; with it, sprockets passing through zero under load in the turns made the 2.5 ms step diverge
-# too). ASSUMED, chosen on operation_small (both soils): 0.1 rad/s is 0.038 m/s of tread speed; the
-# trims of 2 m and 4 m turns at 1 m/s and of straight running at 2.5 m/s move by at most 0.1 N m and
-# 1e-4 rad/s (both soils, measured against 0.01)
-OPERATION_VEHICLE_STEP_S = 0.0025
-OPERATION_OMEGA_SMOOTHING_RAD_S = 0.1
+# An operation's vehicle step and omega_smoothing_rad_s are the package's (one vehicle step per macro step,
+# halved by the engine's error control, EngineSettings.vehicle_tolerance; ModelOptions' 0.01 rad/s):
+# the 2.5 ms substeps and 0.1 rad/s that operations once forced are no longer needed (docs/studies.md).
+
+# the MPC follower's (operation.follower = "rti") step halvings on the collocation defect before a
+# relinearisation and the NLP fallback (MPCSettings.rti_step_halvings, 3 there). Measured on
+# operation_small (one run each, clay / sandy loam): 3 gives 1 / 4 failed solves and 5 / 3 IPOPT
+# fallbacks (the slowest solve 1.6 / 1.7 s) at the U-turns' entries; 6 none of either on both soils
+# (the slowest solve 5.5 / 6.1 ms)
+OPERATION_RTI_STEP_HALVINGS = 6
 # the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
 MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
 
@@ -135,6 +141,9 @@ class OperationSettings:
     # controlled traffic: the depth from the border of the headland lane the U-turns cross on (m; "auto": the
     # deepest lane the turn reaches from the headland's inner edge); None: the turns at the headland's edge
     turn_lane_m: float | str | None = None
+    # who drives the path: "rti" (the path-tracking MPC, real-time iteration: MPCFollower), "law" (PathFollower) or
+    # "auto" (follower_of: the MPC, except on a plan with K-turns, whose reverse arcs only the law drives)
+    follower: str = "auto"
 
     @property
     def headland_m(self) -> float:
@@ -179,7 +188,7 @@ def parse_operation(t: dict, base: OperationSettings | None = None, where: str =
     if "lines" in t:
         v = t["lines"]
         kw["lines"] = None if v in (None, "all") else integer(f"{where}.lines", v, 1, 10_000)
-    for k, choices in (("tracks", TRACKS), ("turn", TURNS)):
+    for k, choices in (("tracks", TRACKS), ("turn", TURNS), ("follower", FOLLOWERS)):
         if k in t:
             if t[k] not in choices:
                 raise ScenarioError(f"{where}.{k} = {t[k]!r} is not one of {', '.join(choices)}")
@@ -809,8 +818,6 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
     (right - left) from trims. The turn's own trim must exist (else :class:`ScenarioError`: the
     radius cannot be held on this soil at this speed); curvatures a speed cannot hold are left out
     of its row. Cached per (params, law, speeds, radius) in the process."""
-    from ..control.trim import TrimError, trim
-
     key = (tuple(sorted(params.items())), model_opts, tuple(speeds_m_s), turn_radius_m, turn_speed_m_s)
     if key in _MAP_CACHE:
         return _MAP_CACHE[key]
@@ -870,6 +877,39 @@ def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, 
     return m, math.copysign(dd, kappa), om, math.copysign(dom, kappa)
 
 
+def _speed_profile(path: Path, creep_m_s: float) -> np.ndarray:
+    """The followers' speed profile: the path's, limited by :data:`PLAN_ACCEL_M_S2` in deceleration before
+    its slow parts and in acceleration after them (the line's speed asked for at once after a turn made
+    the mean torque and the sprockets' speed references step, and the tracks spin: measured, the state
+    diverged at the exit of a U-turn on the sandy loam); 0 at a K-turn's cusps (where the path's direction
+    reverses: the vehicle stops there) with a creep floor of ``creep_m_s`` so that it gets there and
+    starts back."""
+    v = path.speed.copy()
+    ds = np.diff(path.s)
+    cusp_idx = np.searchsorted(path.s, path.cusps_s)
+    v[cusp_idx] = 0.0
+    for i in range(v.size - 2, -1, -1):
+        v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
+    for i in range(1, v.size):
+        v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i - 1]))
+    if cusp_idx.size:
+        v = np.maximum(v, np.minimum(creep_m_s, path.speed))
+    return v
+
+
+def _map_stiffness(rows: dict, v: float) -> float:
+    """The soil's steering stiffness at speed v: the steering map's torque difference per curvature at
+    straight running (N m per 1/m: its first step, 0 to 1/400 1/m), interpolated in the speed; v < 0 from
+    the reverse rows. Measured: 2.4e5 on the clay, 4.7e5 on the sandy loam (1 and 2.5 m/s)."""
+    speeds = sorted(s for s in rows if (s < 0) == (v < 0))
+    vals = []
+    for sp in speeds:
+        ks, diff = rows[sp][0], rows[sp][2]
+        j = int(np.nonzero(ks > 0)[0][0])
+        vals.append(float(diff[j] / ks[j]))
+    return float(np.interp(v, speeds, vals))
+
+
 class PathFollower:
     """The path-following torque law (a :class:`~symtrack.simulation.loop.SampledLaw`, sampled
     every ``sample_time_s``, held over the engine's macro steps):
@@ -878,11 +918,16 @@ class PathFollower:
       (e: lateral error, positive left of the path; e_psi: heading error), w_n = :attr:`OMEGA_N`,
       zeta = 1; kappa at a preview of :attr:`PREVIEW_S` ahead (the torque lag and the yaw response);
     - the torque difference (right - left): the steering map's at the path's curvature (the
-      feed-forward), plus a PI law on the yaw rate, K_r (r_d - r) + K_i integral(r_d - r). The
-      feedback stays in torque and is not passed through the map: the map is nearly a step at
-      zero curvature (the turning resistance must be overcome before the vehicle yaws at all: on the
-      clay 600 N m from 0 to 1/400 1/m, 380 N m from 1/12 to 1/3 1/m), so a correction through it
-      reverses the torques (measured: a bang-bang oscillation in the first headland corner);
+      feed-forward), plus a PI law on the yaw rate, K_r (r_d - r) + K_i integral(r_d - r), both
+      gains proportional to the soil's steering stiffness (the map's torque per curvature at straight
+      running, twice as large on the sandy loam as on the clay) and to the speed above
+      :attr:`GAIN_SPEED_M_S`; the integral is held in N m (a gain that grows with the speed does not
+      scale what it learnt at a lower one) and limited to the map's torque at a curvature of
+      :attr:`YAW_INTEGRAL_LIMIT_1_M`. The feedback stays in torque and is not passed through the
+      map: the map is nearly a step at zero curvature (the turning resistance must be overcome
+      before the vehicle yaws at all: on the clay 600 N m from 0 to 1/400 1/m, 380 N m from 1/12
+      to 1/3 1/m), so a correction through it reverses the torques (measured: a bang-bang
+      oscillation in the first headland corner);
     - a PI law on the speed for the mean torque, over the map's mean torque; the speed reference
       the path's, limited by :data:`PLAN_ACCEL_M_S2` in deceleration before its slow parts and in
       acceleration after them;
@@ -892,9 +937,9 @@ class PathFollower:
       (measured: it stuck at 0 and slipped, period 1 s; docs/studies.md).
 
     It ends the run (returns None) at the path's end, or when the lateral error exceeds
-    ``max_lateral_error_m`` (``failure`` says so). The gains: K_r = :attr:`YAW_GAIN_N_M_S`, K_i =
-    :attr:`YAW_INTEGRAL_N_M` (N m per rad/s, N m per rad: chosen on the small operation on clay and
-    sandy loam, docs/studies.md); the speed's r m / (2 :attr:`SPEED_TAU_S`) corrects a speed error
+    ``max_lateral_error_m`` (``failure`` says so). The yaw gains: :attr:`YAW_GAIN_S_M`,
+    :attr:`YAW_INTEGRAL_1_M` (chosen on the small operation on clay and sandy loam, docs/studies.md);
+    the speed's r m / (2 :attr:`SPEED_TAU_S`) corrects a speed error
     in SPEED_TAU_S."""
 
     SAMPLE_TIME_S = 0.02  # measured: 0.05 s let the yaw loop oscillate in the headland corners
@@ -902,8 +947,14 @@ class PathFollower:
     PREVIEW_S = 0.3
     WINDOW_S = 1.0  # the feed-forward's curvature: the path's averaged over this time at the speed (0: none)
     DIFF_SLEW_N_M_S = 1e9  # the torque difference's largest rate of change
-    YAW_GAIN_N_M_S = 6000.0
-    YAW_INTEGRAL_N_M = 4000.0
+    # the yaw-rate PI law in units of the soil's steering stiffness S (:func:`_map_stiffness`, N m per 1/m),
+    # so that it is the same loop on every soil: K_r = YAW_GAIN_S_M S g (N m per rad/s), the integral
+    # K_i = YAW_INTEGRAL_1_M S g (N m per rad), held in N m and limited to the torque of a curvature of
+    # YAW_INTEGRAL_LIMIT_1_M (the map's error it is there to learn). ASSUMED, chosen on operation_small
+    # (both soils; docs/studies.md): on the clay K_r = 13500 N m per rad/s at 1 m/s
+    YAW_GAIN_S_M = 0.055
+    YAW_INTEGRAL_1_M = 0.025
+    YAW_INTEGRAL_LIMIT_1_M = 0.018
     GAIN_SPEED_M_S = 1.0  # the yaw gains grow with the speed above this
     RESET_INTEGRAL = False
     CORRECTION_CURVATURE_1_M = 1.0 / 150.0
@@ -934,23 +985,7 @@ class PathFollower:
         self.diff_prev = None
         self.s = 0.0
         self.roles = _sample_roles(plan)
-        # the speed profile: the path's, limited in deceleration before its slow parts
-        v = self.path.speed.copy()
-        ds = np.diff(self.path.s)
-        # and in acceleration after them: the line's speed asked for at once after a turn made the mean
-        # torque and the sprockets' speed references step, and the tracks spin (measured: the state
-        # diverged at the exit of a U-turn on the sandy loam)
-        # the cusps of a K-turn (where the path's direction reverses): the vehicle stops there (the
-        # profile 0 at the cusp, a creep floor so that it gets there and starts back)
-        cusp_idx = np.searchsorted(self.path.s, self.path.cusps_s)
-        v[cusp_idx] = 0.0
-        for i in range(v.size - 2, -1, -1):
-            v[i] = min(v[i], math.sqrt(v[i + 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i]))
-        for i in range(1, v.size):
-            v[i] = min(v[i], math.sqrt(v[i - 1] ** 2 + 2 * PLAN_ACCEL_M_S2 * ds[i - 1]))
-        if cusp_idx.size:
-            v = np.maximum(v, np.minimum(self.CUSP_CREEP_M_S, self.path.speed))
-        self.v_profile = v
+        self.v_profile = _speed_profile(self.path, self.CUSP_CREEP_M_S)
         # the path between cusps: one direction each; the projection never crosses a cusp it has not reached
         self.phase_s = np.concatenate([[-np.inf], self.path.cusps_s, [np.inf]])
         self.phase_dir = [float(self.path.direction[min(int(np.searchsorted(self.path.s, a)), self.path.s.size - 1)])
@@ -959,6 +994,8 @@ class PathFollower:
         self.log = []  # (t, s, e_lat, e_psi, role)
         self.failure = None
         self.done = False
+        # the law's signals per sample (a list to append to: the diagnosis of docs/studies.md), None: not kept
+        self.trace = None
 
     @property
     def progress_fraction(self) -> float:
@@ -1010,7 +1047,11 @@ class PathFollower:
                         0.3 + PLAN_ACCEL_M_S2 * t_s)
         h = self.sample_time_s
         er, ev = r_d - r, v_ref - u
-        self.int_r = max(min(self.int_r + h * er, 0.5), -0.5)
+        # the yaw law's gains: the soil's steering stiffness at this speed times the law's own (class doc)
+        g = max(v / self.GAIN_SPEED_M_S, 1.0)
+        stiff = _map_stiffness(self.rows, v_ref)
+        lim_i = stiff * self.YAW_INTEGRAL_LIMIT_1_M
+        self.int_r = max(min(self.int_r + h * g * stiff * self.YAW_INTEGRAL_1_M * er, lim_i), -lim_i)
         self.int_v = max(min(self.int_v + h * ev, 2.0), -2.0)
         seg = int(self.path.segment[i])
         if self.RESET_INTEGRAL and seg != self.segment:  # a new segment: the integral learnt the last one's map error
@@ -1021,8 +1062,8 @@ class PathFollower:
         # flat, it moves the torques little (unlimited, it reversed them)
         corr = max(min(r_d / v - kappa, self.CORRECTION_CURVATURE_1_M), -self.CORRECTION_CURVATURE_1_M)
         mean_ff, diff, om_mean, om_diff = _map_eval(self.rows, v_ref, kappa + corr)
-        g = max(v / self.GAIN_SPEED_M_S, 1.0)
-        diff += g * (self.YAW_GAIN_N_M_S * er + self.YAW_INTEGRAL_N_M * self.int_r)
+        diff_ff, int_r_now = diff, self.int_r
+        diff += g * stiff * self.YAW_GAIN_S_M * er + self.int_r
         mean = mean_ff + self.kp_v * ev + self.ki_v * self.int_v
         if self.diff_prev is not None:
             step = self.DIFF_SLEW_N_M_S * h
@@ -1034,7 +1075,99 @@ class PathFollower:
             left += k * (om_mean - 0.5 * om_diff - float(x[self.iom[0]]))
             right += k * (om_mean + 0.5 * om_diff - float(x[self.iom[1]]))
         lim = self.limit
+        if self.trace is not None:
+            self.trace.append((t_s, self.s, e, e_psi, r_d, r, kappa, diff_ff, diff, int_r_now, v_ref, u, mean_ff, mean,
+                               om_mean - 0.5 * om_diff, om_mean + 0.5 * om_diff, float(x[self.iom[0]]),
+                               float(x[self.iom[1]]), left, right, seg))
         return (max(min(left, lim), -lim), max(min(right, lim), -lim))
+
+
+class MPCFollower:
+    """The project's path-tracking MPC (:class:`symtrack.control.mpc.PathTrackingMPC`, real-time
+    iteration on the scenario's lateral law, the settings of ``symtrack mpc --solver rti`` but
+    :data:`OPERATION_RTI_STEP_HALVINGS`) as an operation's follower:
+    :class:`symtrack.control.closedloop.TrackingLaw` sampled every ``mpc.sample_time_s`` (held over
+    the engine's macro steps) on the operation's path, with the follower's bookkeeping of
+    :class:`PathFollower` (``log``, ``s``, ``done``, ``failure``, ``progress_fraction``). The
+    prediction's cells are those of steady straight running at the first line's speed (the grid
+    plant carries no homogeneous cells), as ``symtrack mpc --plant grid`` has them."""
+
+    def __init__(self, plan: OperationPlan, law, max_lateral_error_m: float):
+        self.plan, self.path, self.law, self.max_err = plan, plan.path, law, max_lateral_error_m
+        self.sample_time_s, self.substep_s = law.sample_time_s, law.substep_s
+        self.roles = _sample_roles(plan)
+        self.log, self.failure, self.done, self.s = [], None, False, 0.0
+
+    @property
+    def progress_fraction(self) -> float:
+        return min(self.s / max(self.path.length_m, 1e-9), 1.0)
+
+    def __call__(self, t_s, x, final=False):
+        u = self.law(t_s, x, final)
+        r = self.law.rows
+        if final or not r["s"]:
+            return u
+        self.s, e, e_psi = r["s"][-1], r["e_lat"][-1], r["e_psi"][-1]
+        i = min(int(np.searchsorted(self.path.s, self.s)), self.roles.size - 1)
+        self.log.append((t_s, self.s, e, e_psi, int(self.roles[i])))
+        if self.s >= self.path.length_m - 0.05 or u is None:
+            self.done = self.s >= self.path.length_m - 0.05
+            return None
+        if abs(e) > self.max_err:
+            self.failure = (f"the vehicle left the path: lateral error {e:.2f} m at s = {self.s:.1f} m "
+                            f"(t = {t_s:.1f} s) exceeds operation.max_lateral_error_m = {self.max_err:g}")
+            return None
+        return u
+
+
+def follower_of(fs: OperationSettings, plan: OperationPlan) -> str:
+    """Who drives ``plan``: ``fs.follower``, or for "auto" the project's MPC ("rti": issue 23, the path follower
+    is the MPC; measured on season_4ha: 0 failed solves of 71 935, RMS 1.9 mm on the lines, docs/studies.md)
+    except on a plan with K-turns, whose reverse arcs the MPC's forward-only reference does not take ("law")."""
+    if fs.follower != "auto":
+        return fs.follower
+    return "law" if plan.path.cusps_s.size else "rti"
+
+
+def _mpc_follower(plan: OperationPlan, sc, plant, fs: OperationSettings, duration_s: float):
+    """The :class:`MPCFollower` of an operation and the plant's start state (trim of straight running
+    at the first segment's speed, placed at the path's start)."""
+    model = system_model(sc.model, sc.surface)
+    settings = MPCSettings(solver="rti", torque_max_N_m=fs.torque_limit_N_m,
+                           rti_step_halvings=OPERATION_RTI_STEP_HALVINGS)
+    mpc = PathTrackingMPC(model, sc.params, settings)
+    v0 = float(plan.path.speed[0])
+    tp = trim(model, sc.params, v0)
+    xv = tp.x[model.layout.block("vehicle")].copy()
+    names = tuple(plant.state_names)
+    if names != tuple(model.layout.vehicle_names):
+        raise ScenarioError("operation.follower = \"rti\": the plant's state is not the vehicle's (the MPC reads it)")
+    x0, y0, psi0 = plan.start
+    for n, val in (("x_m", x0), ("y_m", y0), ("yaw_rad", psi0)):
+        xv[names.index(n)] = val
+    cells = tp.x[model.layout.block("cells")]
+    # the MPC's reference at the followers' speed profile (the path's own steps from the lines' speed to
+    # the turns')
+    path = copy.copy(plan.path)
+    path.speed = _speed_profile(plan.path, 0.0)
+    path.speed[0] = v0
+    # TrackingLaw reads the scenario's mpc settings, run.duration_s and name only
+    view = _MPCView(fs.name, settings, duration_s)
+    # the engine's macro step is the operation's run.output_dt_s (each 0.1 s sample held over them)
+    law = TrackingLaw(view, mpc, path, names, tp.u.copy(), cells, sc.run.output_dt_s)
+    return MPCFollower(plan, law, fs.max_lateral_error_m), loop.StartPoint(x0, y0, psi0, tp.u.copy(), xv), mpc
+
+
+@dataclass(frozen=True)
+class _RunView:
+    duration_s: float
+
+
+class _MPCView:
+    """What :class:`~symtrack.control.closedloop.TrackingLaw` reads of an MPC scenario: name, mpc, run.duration_s."""
+
+    def __init__(self, name: str, mpc: MPCSettings, duration_s: float):
+        self.name, self.mpc, self.run = name, mpc, _RunView(duration_s)
 
 
 # ---- the spec -------------------------------------------------------------------------------------------
@@ -1053,15 +1186,11 @@ class OperationSpec:
     base: OperationSettings
 
 
-MAX_VEHICLE_SUBSTEPS = 64  # EngineSettings.vehicle_substeps' upper bound (integrators/settings.py)
-
-
 def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     run = dict(doc.get("run", {}))
     check_keys("run", run, OPERATION_RUN_KEYS)
     run.setdefault("integrator", "grid_fast")
-    # 10 ms macro steps of OPERATION_VEHICLE_STEP_S vehicle steps (below): the same figures as 5 ms macro
-    # steps (operation_small, both soils: RMS on the lines within 1e-6 m) in 0.58 of the time
+    # 10 ms macro steps, one vehicle step each (the engine's error control halves where needed)
     run.setdefault("output_dt_s", 0.01)
     terrain = dict(doc.get("terrain", {}))
     for k in TERRAIN_KEYS_OF_OPERATION:
@@ -1076,25 +1205,6 @@ def _scenario_doc(doc: dict, fs: OperationSettings) -> dict:
     for k in ("model", "soil", "engine"):
         if k in doc:
             out[k] = dict(doc[k])
-    # The vehicle's 5 ms step diverged (the state at 1e25 m in one step) where the braked or spinning
-    # sprockets of a tight turn swing (docs/studies.md, "Field operations": an open-loop replay of the
-    # follower's commands diverges at 5 ms and agrees within 2 mm at 2.5 and 1.25 ms): vehicle steps of
-    # at most OPERATION_VEHICLE_STEP_S, and the sprocket's direction regularised over
-    # OPERATION_OMEGA_SMOOTHING_RAD_S
-    dt = run.get("output_dt_s")
-    if isinstance(dt, (int, float)) and not isinstance(dt, bool) and math.isfinite(dt) and dt > 0:
-        # (any other value: scenario_from_dict refuses it, naming run.output_dt_s)
-        engine = out.setdefault("engine", {})
-        if isinstance(engine, dict) and "vehicle_substeps" not in engine:
-            n = dt / OPERATION_VEHICLE_STEP_S
-            if n > MAX_VEHICLE_SUBSTEPS:
-                raise ScenarioError(f"run.output_dt_s = {dt!r}: a field operation's macro step holds at most "
-                                    f"{MAX_VEHICLE_SUBSTEPS} vehicle steps of {OPERATION_VEHICLE_STEP_S:g} s, so the "
-                                    f"allowed range is (0, {MAX_VEHICLE_SUBSTEPS * OPERATION_VEHICLE_STEP_S:g}] s")
-            engine["vehicle_substeps"] = max(1, math.ceil(n - 1e-9))
-    model = out.setdefault("model", {})
-    if isinstance(model, dict):
-        model.setdefault("omega_smoothing_rad_s", OPERATION_OMEGA_SMOOTHING_RAD_S)
     return out
 
 
@@ -1121,6 +1231,10 @@ def _operation(doc: dict, fs: OperationSettings):
                             f"{sc.params['track_width_m']:g} m")
     plan = plan_operation(fs)
     check_plan(plan, sc.params, sc.model)
+    if fs.follower == "rti" and plan.path.cusps_s.size:
+        raise ScenarioError("operation.follower = \"rti\" with operation.turn = \"k\": the MPC's reference "
+                            "(control.path.Path.reference) and its prediction run forwards only, a K-turn's "
+                            "reverse arc is not taken; use operation.follower = \"law\" or a \"u\" or \"bulb\" turn")
     speeds = (fs.turn_speed_m_s, fs.speed_m_s) + ((-fs.turn_speed_m_s,) if plan.path.cusps_s.size else ())
     rows = steering_map(sc.params, sc.model, speeds, fs.turn_radius_m, fs.turn_speed_m_s)
     return fs, plan, sc, rows
@@ -1300,18 +1414,24 @@ def run_operation(op, plant, progress: bool = False) -> OperationResult:
     fs, plan, sc, rows = op
     world = plant.world
     shape, cell = world.grid.shape, world.grid.cell_m
-    law = PathFollower(plan, sc.params, rows, plant.state_names, PathFollower.SAMPLE_TIME_S, sc.run.output_dt_s,
-                       fs.torque_limit_N_m, fs.max_lateral_error_m)
     # the time limit: the path at a quarter of its speeds
     limit = 4.0 * float(np.sum(np.diff(plan.path.s) / np.maximum(plan.path.speed[:-1], 0.1))) + 60.0
     run_sc = dataclasses.replace(sc, run=dataclasses.replace(sc.run, duration_s=limit))
     x0, y0, psi0 = plan.start
+    mpc = None
+    follower = follower_of(fs, plan)
+    if follower == "rti":
+        law, start, mpc = _mpc_follower(plan, sc, plant, fs, limit)
+    else:
+        law = PathFollower(plan, sc.params, rows, plant.state_names, PathFollower.SAMPLE_TIME_S, sc.run.output_dt_s,
+                           fs.torque_limit_N_m, fs.max_lateral_error_m)
+        start = loop.StartPoint(x0, y0, psi0, np.zeros(2))
     t0 = time.perf_counter()
     cpu0 = time.process_time()
     error = None
     try:
         res = loop.run(run_sc, plant, progress=progress, label=f"operation {fs.name}", torque_law=law,
-                       start=loop.StartPoint(x0, y0, psi0, np.zeros(2)))
+                       start=start)
     except loop.IncompleteRun as err:
         res, error = err.partial, str(err)
     wall = time.perf_counter() - t0
@@ -1357,7 +1477,16 @@ def run_operation(op, plant, progress: bool = False) -> OperationResult:
            "x_real_time_wall": float(res.t[-1]) / wall if wall > 0 else None,
            "rut_max_depth_mm": 1e3 * float(world.storage.z.max()),
            "rut_mean_depth_mm": 1e3 * float(world.storage.z[stressed.ravel()].mean()) if stressed.any() else 0.0,
-           "vehicle_mass_kg": sc.params["mass_kg"]}
+           "vehicle_mass_kg": sc.params["mass_kg"],
+           # the engine's vehicle steps and how many its error control halved (EngineSettings.vehicle_tolerance)
+           "vehicle_steps": int(res.stats.get("n_vehicle_steps", 0)),
+           "vehicle_steps_halved": int(res.stats.get("n_vehicle_halved", 0))}
+    fig["follower"] = follower
+    if mpc is not None:  # the MPC's solves (closedloop.summarise's figures)
+        ms = mpc.stats.solve_times_ms() if mpc.stats.solves else np.array([np.nan])
+        fig.update(solves=len(mpc.stats.solves), failed_solves=int(mpc.stats.failed),
+                   fallback_solves=int(mpc.stats.fallbacks), solve_time_median_ms=float(np.median(ms)),
+                   solve_time_p95_ms=float(np.percentile(ms, 95)), solve_time_max_ms=float(np.max(ms)))
     # this operation's own stressed cells (pass_sigma of its one engine pass)
     own = (world.pass_sigma[:, 0] > 0).reshape(shape) if world.storage.subsoil_depths_m else stressed
     fig["operation_trafficked_fraction"] = float(own.mean())

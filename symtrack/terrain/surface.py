@@ -135,12 +135,19 @@ class ElevationRaster:
         return z, gx, gy
 
     def casadi(self, x, y):
-        """The bilinear height as a CasADi expression of x, y (SX or MX): CasADi's linear
-        interpolant on the pixel centres, the point clamped to their hull as in :meth:`sample`."""
+        """The bilinear height as a CasADi expression of x, y (SX or MX): CasADi's B-spline interpolant of
+        degree 1 on the pixel centres (the bilinear interpolation itself), the point clamped to their hull
+        as in :meth:`sample`. Not the "linear" interpolant: the same heights, but its second derivatives
+        are wrong (its d2z/dxdy is 0; a Jacobian of its Jacobian gave NaN in the 3D vehicle's static
+        settle and 1.0 where 0 was due, measured with CasADi 3.8), and the 3D vehicle's Jacobian takes
+        second derivatives of the ground (the penetration's rate); the B-spline's derivatives are B-splines
+        of lower degree (the bilinear patch's gradient, its cross derivative, 0 along each axis) and are
+        code-generated."""
         nx, ny = self.values.shape
         xc = self.origin_m[0] + (np.arange(nx) + 0.5) * self.pixel_m
         yc = self.origin_m[1] + (np.arange(ny) + 0.5) * self.pixel_m
-        f = ca.interpolant("elevation_raster", "linear", [xc, yc], self.values.ravel(order="F"))
+        f = ca.interpolant("elevation_raster", "bspline", [xc, yc], self.values.ravel(order="F"),
+                           {"degree": [1, 1]})
         xs = ca.fmin(ca.fmax(x, xc[0]), xc[-1])
         ys = ca.fmin(ca.fmax(y, yc[0]), yc[-1])
         return f(ca.vertcat(xs, ys))
@@ -236,8 +243,7 @@ class Surface:
     def function(self) -> ca.Function:
         """``surface_elevation(x, y) -> (z0, dz0_dx, dz0_dy)`` (a 3D vehicle's contact: the height
         and the gradient of the ground at a point, by CasADi's algorithmic differentiation)."""
-        sym = ca.MX if self.raster is not None else ca.SX  # the raster's interpolant is an MX node
-        x, y = sym.sym("x_m"), sym.sym("y_m")
+        x, y = ca.SX.sym("x_m"), ca.SX.sym("y_m")  # (a raster's interpolant is a call node in SX)
         z = self.casadi(x, y)
         return ca.Function("surface_elevation", [x, y], [z, ca.jacobian(z, x), ca.jacobian(z, y)],
                            ["x_m", "y_m"], ["z0_m", "dz0_dx", "dz0_dy"])
