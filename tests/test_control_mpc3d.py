@@ -134,15 +134,13 @@ def test_the_quasi_static_hull_is_the_trim_s_hull_on_a_side_slope():
 @pytest.mark.slow
 def test_the_3d_straight_offset_approach_without_failed_solves():
     """The first 3 s of `symtrack mpc straight_offset --solver rti --set model.vehicle=3d` (the 1 m
-    approach, where the RTI steps are largest) without a failed solve with the quasi-static hull,
-    and its control: the hull's six states in the prediction ("dynamic", the default) fail solves
-    there (docs/vehicle3d.md, "The MPC on the 3D vehicle")."""
-    failed = {}
+    approach, where the RTI steps and the torques, +-3-6 kN m, are largest) without a failed solve,
+    with either hull in the prediction. Before the running gear's angular momentum entered the hull's
+    pitch (the chatter fix) the plant's hull bounced under skid steering and the dynamic hull failed 9
+    of these 30 samples (the quasi-static hull 0); docs/vehicle3d.md, "The MPC on the 3D vehicle"."""
     for hull in ("quasi_static", "dynamic"):
         sc = S.load("straight_offset", ["model.vehicle=3d", "mpc.solver=rti", "mpc.jit=false",
                                         f"mpc.prediction_hull={hull}"])
         res = CL.run(sc, max_steps=30)
-        failed[hull] = res.summary["failed_solves"]
-        if hull == "quasi_static":
-            assert abs(res.e_lat[-1]) < 0.1  # the approach goes on: 1 m -> a few cm in 3 s
-    assert failed["quasi_static"] == 0 < failed["dynamic"]
+        assert res.summary["failed_solves"] == 0, hull
+        assert abs(res.e_lat[-1]) < 0.1  # the approach goes on: 1 m -> a few cm in 3 s
