@@ -105,8 +105,8 @@ def test_prediction_hull_is_checked_against_the_model():
 
 
 def test_the_quasi_static_hull_is_the_trim_s_hull_on_a_side_slope():
-    """The prediction's quasi-static hull (``mpc.prediction_hull = "quasi_static"``: the hull's balances at
-    zero acceleration) under the straight trim's planar state on an 8 deg side slope is the trim's own hull
+    """The prediction's quasi-static hull (``mpc.prediction_hull``'s default on the 3D vehicle: the hull's
+    balances at zero acceleration) under the straight trim's planar state on an 8 deg side slope is the trim's own hull
     (the full 3D model's steady state, solved by Newton on all its state derivatives): the same height
     above the ground, pitch and roll; the roll is the slope's and the hull's states are not states of
     the prediction. Creep law, 2 steps (a fast build)."""
@@ -114,8 +114,9 @@ def test_the_quasi_static_hull_is_the_trim_s_hull_on_a_side_slope():
                       surface={"slope_y_deg": 8.0})
     sc = S.scenario_from_dict(d, default)
     model = system_model(sc.model, sc.surface)
-    assert not PathTrackingMPC(model, sc.params, sc.mpc).hull_quasi_static  # "auto": the dynamic hull
-    mpc = PathTrackingMPC(model, sc.params, dataclasses.replace(sc.mpc, prediction_hull="quasi_static"))
+    dynamic = dataclasses.replace(sc.mpc, prediction_hull="dynamic")
+    assert not PathTrackingMPC(model, sc.params, dynamic).hull_quasi_static
+    mpc = PathTrackingMPC(model, sc.params, sc.mpc)  # "auto": the quasi-static hull on the 3D vehicle
     assert mpc.hull_quasi_static and not set(HULL_STATES) & set(mpc.pred_names)
     assert mpc.nz == len(model.alg_names) + len(QS_HULL_VARIABLES)
     xt, _ = CL.initial_state(model, sc)

@@ -130,17 +130,14 @@ class MPCSettings:
     jit_dir: str | None = None
     prediction: str = "vehicle"
     # the 3D vehicle's hull in the prediction (symtrack.model.vehicle3d.HULL_STATES; docs/vehicle3d.md,
-    # "The MPC on the 3D vehicle"): "dynamic" (the hull's six states predicted, as the plant's),
-    # "quasi_static" (the singular-perturbation reduction: the hull's height, pitch and roll are
-    # algebraic variables of the prediction's DAE, fixed by its vertical force and pitch and roll moment
-    # balances at zero hull acceleration, its rates those of the ground pose under the moving hull; the
-    # measured hull states are not read). "auto": "dynamic" on the 3D vehicle. Why not quasi_static
-    # (measured, issue 22): it removes the failed solves of the straight_offset approach's first 3 s
-    # (RTI: 0 against 9 of 30) and of the side slope (1 against 6 of 300), but where the plant's own hull
-    # bounces (its self-excited heave/pitch under skid steering on the lagged shear law: the U-turn's
-    # exit) the measured planar states leave the settled-hull prediction and the RTI and IPOPT fail
-    # sample after sample (headland_uturn, RTI: diverged, against 7 failed with the dynamic hull).
-    # The planar vehicle has no hull and takes "auto" only.
+    # "The MPC on the 3D vehicle"): "quasi_static" (the singular-perturbation reduction: the hull's height,
+    # pitch and roll are algebraic variables of the prediction's DAE, fixed by its vertical force and pitch
+    # and roll moment balances at zero hull acceleration, its rates those of the ground pose under the
+    # moving hull; the measured hull states are not read), "dynamic" (the hull's six states predicted, as
+    # the plant's). "auto": quasi_static on the 3D vehicle (measured, issue 22: `symtrack mpc
+    # straight_offset --set model.vehicle=3d`, IPOPT, 0 failed of 299 against 96 failed before the dynamic
+    # hull's run was stopped at 7 min; RTI 0 against 1; headland_uturn RTI 0 and 0). The planar vehicle
+    # has no hull and takes "auto" only.
     prediction_hull: str = "auto"
     collocation_degree: int = 2
     torque_max_N_m: float = 8000.0  # ASSUMED sprocket torque limit (no data sheet); the field operations' too
@@ -307,7 +304,7 @@ def _hull_quasi_static(model: SystemModel, settings: MPCSettings) -> bool:
             raise ParameterError(f"mpc.prediction_hull = {choice!r} needs the 3D vehicle (model.vehicle = '3d'); the "
                                  "planar vehicle has no hull states: allowed is 'auto'")
         return False
-    return choice == "quasi_static"  # "auto": the dynamic hull (MPCSettings.prediction_hull)
+    return choice in ("auto", "quasi_static")  # "auto": the quasi-static hull (MPCSettings.prediction_hull)
 
 
 @dataclass
