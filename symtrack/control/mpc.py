@@ -17,6 +17,11 @@ Prediction model
     On the shear law (``ModelOptions.lateral_law = "shear_quasistatic"``) the prediction is the model with a
     regularised sliding direction (:func:`prediction_model`; docs/turning.md section 6).
 
+    On the 3D vehicle the hull is quasi-static by default (``prediction_hull``): its height above the
+    ground, pitch and roll are algebraic variables fixed by the hull's force and moment balances at zero
+    hull acceleration (the singular-perturbation reduction of its 7 Hz heave, pitch and roll modes, far
+    faster than the 0.1 s element); the measured hull states are not read (docs/vehicle3d.md).
+
 Discretisation
     The model is stiff even without the cells (lateral creep mode about -600 1/s, yaw -225 1/s,
     shear/sprocket oscillation about 80 rad/s), so explicit Runge-Kutta would need millisecond
