@@ -17,6 +17,11 @@ Prediction model
     On the shear law (``ModelOptions.lateral_law = "shear_quasistatic"``) the prediction is the model with a
     regularised sliding direction (:func:`prediction_model`; docs/turning.md section 6).
 
+    On the 3D vehicle the hull is quasi-static by default (``prediction_hull``): its height above the
+    ground, pitch and roll are algebraic variables fixed by the hull's force and moment balances at zero
+    hull acceleration (the singular-perturbation reduction of its 7 Hz heave, pitch and roll modes, far
+    faster than the 0.1 s element); the measured hull states are not read (docs/vehicle3d.md).
+
 Discretisation
     The model is stiff even without the cells (lateral creep mode about -600 1/s, yaw -225 1/s,
     shear/sprocket oscillation about 80 rad/s), so explicit Runge-Kutta would need millisecond
@@ -71,19 +76,26 @@ from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
 from ..model.homogeneous import HomogeneousTerrain
 from ..model.options import SLIDING_SIGNS
-from ..model.vehicle3d import ContactTerrain, make_vehicle
+from ..model.vehicle3d import HULL_STATES, PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW, ContactTerrain, make_vehicle
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
 
-__all__ = ["MPCSettings", "MPCStats", "PREDICTIONS", "PathTrackingMPC", "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M",
-           "realtime_figures"]
+__all__ = ["MPCSettings", "MPCStats", "PREDICTIONS", "PREDICTION_HULLS", "PathTrackingMPC", "QS_HULL_VARIABLES",
+           "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M", "realtime_figures"]
 
 log = logging.getLogger("symtrack.control.mpc")
 
 SOLVERS = ("ipopt", "fatrop")  # the NLP solvers (also the fallbacks)
 SOLVER_CHOICES = SOLVERS + ("rti",)  # rti: real-time iteration (symtrack.control.rti)
 PREDICTIONS = ("vehicle", "full")
+PREDICTION_HULLS = ("auto", "quasi_static", "dynamic")
+# The quasi-static hull's algebraic variables (mpc.prediction_hull = "quasi_static"): the CG's height
+# above the ground under it [m], the pitch and the roll [rad], each scaled by 1 mm (1 mrad): the hull's
+# contact stiffness (heave, pitch, roll near 7 Hz: (44 rad/s)^2 per m) then gives their balance rows
+# derivatives of order 1 per scaled unit.
+QS_HULL_VARIABLES = ("clearance_m", "pitch_rad", "roll_rad")
+QS_HULL_SCALE = 1e-3
 
 # Typical magnitudes (scaling of the NLP variables), by state name prefix.
 _SCALES = (
@@ -122,6 +134,16 @@ class MPCSettings:
     jit: bool | None = None
     jit_dir: str | None = None
     prediction: str = "vehicle"
+    # the 3D vehicle's hull in the prediction (symtrack.model.vehicle3d.HULL_STATES; docs/vehicle3d.md,
+    # "The MPC on the 3D vehicle"): "quasi_static" (the singular-perturbation reduction: the hull's height,
+    # pitch and roll are algebraic variables of the prediction's DAE, fixed by its vertical force and pitch
+    # and roll moment balances at zero hull acceleration, its rates those of the ground pose under the
+    # moving hull; the measured hull states are not read), "dynamic" (the hull's six states predicted, as
+    # the plant's). "auto": quasi_static on the 3D vehicle (measured, issue 22: `symtrack mpc
+    # straight_offset --set model.vehicle=3d`, IPOPT, 0 failed of 299 against 96 failed before the dynamic
+    # hull's run was stopped at 7 min; RTI 0 against 1; headland_uturn RTI 0 and 0). The planar vehicle
+    # has no hull and takes "auto" only.
+    prediction_hull: str = "auto"
     collocation_degree: int = 2
     torque_max_N_m: float = 8000.0  # ASSUMED sprocket torque limit (no data sheet); the field operations' too
     torque_rate_max_N_m_s: float = 40000.0
@@ -195,6 +217,9 @@ class MPCSettings:
         if self.fallback_solver is not None and self.fallback_solver not in SOLVERS + ("auto", "none"):
             raise ParameterError(f"mpc.fallback_solver = {self.fallback_solver!r} is not one of "
                                  f"{', '.join(SOLVERS)}, auto (the other solver), none")
+        if self.prediction_hull not in PREDICTION_HULLS:
+            raise ParameterError(f"mpc.prediction_hull = {self.prediction_hull!r} is not one of "
+                                 f"{', '.join(PREDICTION_HULLS)}")
         if self.prediction not in PREDICTIONS:
             raise ParameterError(f"mpc.prediction = {self.prediction!r} is not one of {', '.join(PREDICTIONS)}")
         if self.jit is not None and not isinstance(self.jit, bool):
@@ -274,6 +299,19 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
     return SystemModel(opts)
 
 
+def _hull_quasi_static(model: SystemModel, settings: MPCSettings) -> bool:
+    """Whether the prediction takes the 3D hull as quasi-static (``prediction_hull``); a
+    :class:`ParameterError` for a choice the model cannot take (the planar vehicle has no hull)."""
+    has_hull = all(n in model.state_names for n in HULL_STATES)
+    choice = settings.prediction_hull
+    if not has_hull:
+        if choice != "auto":
+            raise ParameterError(f"mpc.prediction_hull = {choice!r} needs the 3D vehicle (model.vehicle = '3d'); the "
+                                 "planar vehicle has no hull states: allowed is 'auto'")
+        return False
+    return choice in ("auto", "quasi_static")  # "auto": the quasi-static hull (MPCSettings.prediction_hull)
+
+
 @dataclass
 class SolveInfo:
     success: bool
@@ -313,17 +351,24 @@ class PathTrackingMPC:
             self.params["lateral_creep_speed_m_s"] = s.prediction_lateral_creep_speed_m_s
         self.p_model = np.asarray(model.param_vector(self.params), dtype=float)
         names, lay = model.state_names, model.layout
-        self.pred_names = lay.vehicle_names if s.prediction == "vehicle" else tuple(names)
+        self.hull_quasi_static = _hull_quasi_static(model, s)
+        pred = lay.vehicle_names if s.prediction == "vehicle" else tuple(names)
+        if self.hull_quasi_static:  # the hull's states are not states of the prediction
+            pred = tuple(n for n in pred if n not in HULL_STATES)
+        self.pred_names = pred
         self.cell_names = lay.cell_names if s.prediction == "vehicle" else ()
         self.nxp = len(self.pred_names)
         self.nu = 2
         self.nxa = self.nxp + self.nu  # + previous command
         self.N = s.horizon_steps
         self.d = s.collocation_degree
-        self.nz = len(model.alg_names)  # body accelerations of the DAE form
+        self.nza = len(model.alg_names)  # body accelerations of the DAE form
+        # + the quasi-static hull's algebraic variables (QS_HULL_VARIABLES)
+        self.nz = self.nza + (len(QS_HULL_VARIABLES) if self.hull_quasi_static else 0)
         self.nc = self.nxp + self.nz  # one collocation point: states and accelerations
         self.nk = self.d * self.nc
         self.sx = np.array([_scale(n) for n in self.pred_names] + [TORQUE_SCALE_N_M] * 2)
+        self._hull_fn = self._hull_function() if self.hull_quasi_static else None
         self._build()
         self.stats = MPCStats()
         self._w = None
@@ -348,6 +393,8 @@ class PathTrackingMPC:
             # the DAE form: the load-transfer loop closed by algebraic accelerations (one
             # evaluation of the vehicle equations instead of the ODE form's fixed-point
             # iterations: its Hessian has 9x fewer instructions)
+            if self.hull_quasi_static:
+                return self._quasi_static_dae(xp, zp, u, P)
             if self.cell_names:
                 ode, alg = model.dae(ca.vertcat(xp, XC), zp, u, P)
                 return ode[:nxp], alg
@@ -407,6 +454,99 @@ class PathTrackingMPC:
         self.coll_res_fn = ca.Function("mpc_coll_res", [Xs, Us, Ks, P, XC], [g_c], ["x", "u", "k", "p", "xc"], ["g"],
                                        {"cse": True})
         return stage, term
+
+    # ------------------------------------------------------------------ the quasi-static hull
+    def _ground_pose_function(self) -> ca.Function:
+        """(X, Y, yaw, dX/dt, dY/dt, yaw rate) -> the ground under the CG: its height z0, the pitch
+        and roll of a hull lying on its plane there (R = Rz(yaw) Ry(-pitch) Rx(roll) with the body's
+        x and y axes in the plane: tan(pitch) = a, tan(roll) = b cos(pitch), a and b the ground's
+        rise along the heading and to its left), the rates of the three along the motion, and
+        sqrt(1 + |grad z0|^2) (1 / the cosine of the ground's inclination)."""
+        X, Y, psi, Xd, Yd, rd = (ca.SX.sym(n) for n in ("X", "Y", "psi", "Xd", "Yd", "rd"))
+        z0, gx, gy = (ca.SX(v) if not isinstance(v, ca.SX) else v for v in self.model.vehicle.ground(X, Y))
+        a = gx * ca.cos(psi) + gy * ca.sin(psi)
+        pitch = ca.atan(a)
+        roll = ca.atan((-gx * ca.sin(psi) + gy * ca.cos(psi)) * ca.cos(pitch))
+        pose, rates = ca.vertcat(X, Y, psi), ca.vertcat(Xd, Yd, rd)
+        geo = ca.vertcat(z0, pitch, roll)
+        return ca.Function("ground_pose", [X, Y, psi, Xd, Yd, rd],
+                           [geo, ca.jtimes(geo, pose, rates), ca.sqrt(1 + gx**2 + gy**2)])
+
+    def _quasi_static_full_state(self, xp, hull):
+        """The model's full state from the prediction's states ``xp`` and the quasi-static hull
+        ``hull`` = (clearance [m], pitch, roll [rad]): the CG at the clearance above the ground under
+        it; the hull's rates those of the ground pose along the motion (zero on flat ground; on a
+        plane the hull keeps its penetration, so the soil's damping c'' dz/dt is not excited)."""
+        i = {n: k for k, n in enumerate(self.pred_names)}
+        X, Y, psi, vx, vy, rz = (xp[i[n]] for n in ("x_m", "y_m", "yaw_rad", "u_m_s", "v_m_s", "yaw_rate_rad_s"))
+        geo, geo_rate, _ = self._ground_pose(X, Y, psi, vx * ca.cos(psi) - vy * ca.sin(psi),
+                                             vx * ca.sin(psi) + vy * ca.cos(psi), rz)
+        hull = {"z_m": geo[0] + hull[0], "pitch_rad": hull[1], "roll_rad": hull[2], "heave_rate_m_s": geo_rate[0],
+                "pitch_rate_rad_s": geo_rate[1], "roll_rate_rad_s": geo_rate[2]}
+        return ca.vertcat(*[xp[i[n]] if n in i else hull[n] for n in self.model.state_names])
+
+    def _quasi_static_dae(self, xp, zp, u, P):
+        """The prediction's DAE with the quasi-static hull (``prediction_hull``): the model's ODE rows
+        of the predicted states, its algebraic rows, then the hull's vertical force, pitch moment
+        and roll moment balances at zero hull accelerations, each as an acceleration of the
+        vehicle's mass [m/s^2]: the heave acceleration, the pitch moment over (m l/2) and the roll
+        moment over (m B/2) (rows of the size of the acceleration rows)."""
+        model = self.model
+        za, hull = zp[:self.nza], zp[self.nza:] * QS_HULL_SCALE
+        ode, alg = model.dae(self._quasi_static_full_state(xp, hull), za, u, P)
+        pn = model.param_names
+        m, Iz, l, B = (P[pn.index(n)] for n in ("mass_kg", "yaw_inertia_kg_m2", "contact_length_m", "track_gauge_m"))
+        keep = [model.state_index(n) for n in self.pred_names]
+        balance = ca.vertcat(ode[model.state_index("heave_rate_m_s")],
+                             ode[model.state_index("pitch_rate_rad_s")] * PITCH_INERTIA_PER_YAW * Iz / (m * l / 2),
+                             ode[model.state_index("roll_rate_rad_s")] * ROLL_INERTIA_PER_YAW * Iz / (m * B / 2))
+        return ode[keep], ca.vertcat(alg, balance)
+
+    def _hull_function(self) -> ca.Function:
+        """(prediction states [SI], scaled hull variables, model parameters) -> the hull's balance
+        rows, their Jacobian in the hull variables, the ground pose (z0, pitch, roll) and
+        sqrt(1 + |grad z0|^2): the Newton of the guess (:meth:`_hull_guess`)."""
+        self._ground_pose = self._ground_pose_function()
+        xp = ca.SX.sym("xp", self.nxp)
+        hv = ca.SX.sym("hull", len(QS_HULL_VARIABLES))
+        P = ca.SX.sym("p", len(self.p_model))
+        u = xp[[self.pred_names.index(f"torque_{k}_N_m") for k in ("left", "right")]]
+        _, alg = self._quasi_static_dae(xp, ca.vertcat(ca.SX.zeros(self.nza), hv), u, P)
+        rows = alg[self.nza:]
+        i = {n: k for k, n in enumerate(self.pred_names)}
+        geo, _, secant = self._ground_pose(xp[i["x_m"]], xp[i["y_m"]], xp[i["yaw_rad"]], 0, 0, 0)
+        return ca.Function("mpc_hull", [xp, hv, P], [rows, ca.jacobian(rows, hv), geo, secant])
+
+    def _hull_guess(self, xp_si: np.ndarray, start: np.ndarray | None = None) -> np.ndarray:
+        """The quasi-static hull (scaled QS_HULL_VARIABLES) under the prediction state ``xp_si``:
+        Newton with backtracking on its three balances from ``start``, or from the hull lying on the
+        ground's plane with the CG at cg_height_m less 3 mm of sinkage above it (every segment
+        pressed: the balances' Jacobian is singular with a track in the air)."""
+        f = self._hull_fn
+        _, _, geo, secant = f(xp_si, np.zeros(3), self.p_model)
+        geo = np.array(geo).ravel()
+        first = np.array([(self.params["cg_height_m"] - 3e-3) * float(secant), geo[1], geo[2]]) / QS_HULL_SCALE
+        hv = first if start is None else np.asarray(start, float).copy()
+        for _ in range(60):
+            r, J, _, _ = f(xp_si, hv, self.p_model)
+            r, J = np.array(r).ravel(), np.array(J)
+            nr = float(np.linalg.norm(r))
+            if nr < 1e-10:
+                break
+            try:
+                step = -np.linalg.solve(J, r)
+            except np.linalg.LinAlgError:
+                break
+            alpha = 1.0
+            while alpha > 1e-4:
+                trial = hv + alpha * step
+                if float(np.linalg.norm(np.array(f(xp_si, trial, self.p_model)[0]).ravel())) < nr:
+                    hv = trial
+                    break
+                alpha *= 0.5
+            else:
+                break
+        return hv
 
     def _lateral_residual(self, e):
         """r with r^2 = the lateral penalty: e, or for the pseudo-Huber penalty
@@ -538,6 +678,7 @@ class PathTrackingMPC:
         N, blk, nxa, nu, nxp = self.N, self.block, self.nxa, self.nu, self.nxp
         w = np.zeros(N * blk + nxa)
         i = {n: k for k, n in enumerate(self.pred_names)}
+        hull = None
         for k in range(N + 1):
             xs = x0s.copy()
             xs[i["x_m"]] = ref[k, 0] / self.sx[i["x_m"]]
@@ -547,8 +688,13 @@ class PathTrackingMPC:
             w[o:o + nxa] = xs
             if k < N:
                 w[o + nxa:o + nxa + nu] = x0s[nxp:]
+                if self.hull_quasi_static:  # the hull settled under the stage's pose
+                    hull = self._hull_guess(xs[:nxp] * self.sx[:nxp], hull)
                 for j in range(self.d):
-                    w[o + nxa + nu + j * self.nc:o + nxa + nu + j * self.nc + nxp] = xs[:nxp]
+                    a = o + nxa + nu + j * self.nc
+                    w[a:a + nxp] = xs[:nxp]
+                    if hull is not None:
+                        w[a + nxp + self.nza:a + self.nc] = hull
         return w
 
     def _shift(self, v, block, tail):
