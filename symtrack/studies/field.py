@@ -48,7 +48,7 @@ import numpy as np
 
 from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError, SimulationError
-from ..foundations.files import check_output_folder
+from ..foundations.files import check_output_folder, npz_bytes
 from ..foundations.progress import Progress
 from ..integrators import registry
 from ..reports.run_files import TerrainOut, clear_previous_run, terrain_run, write_folder
@@ -754,11 +754,9 @@ def passes_per_cell_npz(pr: PatternResult) -> bytes:
     ``cell_m``, ``shape`` (as the terrain file) and ``passes`` uint16 (nx, ny): the passes that
     loaded each cell (the counts of docs/studies.md)."""
     g = pr.terrain.grid
-    buf = io.BytesIO()
-    np.savez_compressed(buf, kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
-                        origin_m=np.array(g.origin_m, dtype=float), cell_m=np.array(g.cell_m), shape=np.array(g.shape),
-                        passes=pr.counts.reshape(g.shape))
-    return buf.getvalue()
+    return npz_bytes(kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
+                     origin_m=np.array(g.origin_m, dtype=float), cell_m=np.array(g.cell_m), shape=np.array(g.shape),
+                     passes=pr.counts.reshape(g.shape))
 TOP_FILES = ("summary.json", "field.resolved.toml", "comparison.png")
 
 

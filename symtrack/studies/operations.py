@@ -59,7 +59,7 @@ from ..control.path import Path, Segment
 from ..control.trim import TrimError, trim
 from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError
-from ..foundations.files import check_output_folder
+from ..foundations.files import check_output_folder, npz_bytes
 from ..simulation import loop
 from ..simulation.builder import system_model
 from ..simulation.plants import make_plant
@@ -1543,10 +1543,8 @@ def _animation(r: OperationResult, terrain: Terrain, fs: OperationSettings, labe
 
 
 def _counts_npz(counts, cell_m) -> bytes:
-    buf = io.BytesIO()
-    np.savez_compressed(buf, kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
-                        origin_m=np.zeros(2), cell_m=np.array(cell_m), shape=np.array(counts.shape), passes=counts)
-    return buf.getvalue()
+    return npz_bytes(kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
+                     origin_m=np.zeros(2), cell_m=np.array(cell_m), shape=np.array(counts.shape), passes=counts)
 
 
 def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through_files: bool = True,

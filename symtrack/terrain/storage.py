@@ -52,7 +52,6 @@ specific volumes at the default depths).
 
 from __future__ import annotations
 
-import io
 import json
 import uuid
 import zipfile
@@ -62,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError
-from ..foundations.files import atomic_write_bytes
+from ..foundations.files import atomic_write_bytes, npz_bytes
 from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 
 __all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes", "load",
@@ -231,14 +230,14 @@ def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = No
         arrays["crs_wkt"] = np.array(storage.crs_wkt)
     if storage.elevation is not None:
         arrays["elevation_m"] = storage.elevation.reshape(g.shape)
-    buf = io.BytesIO()
-    np.savez_compressed(
-        buf, kind=np.array(KIND), schema_version=np.array(TERRAIN_SCHEMA_VERSION),
+    data = npz_bytes(
+        kind=np.array(KIND), schema_version=np.array(TERRAIN_SCHEMA_VERSION),
         origin_m=np.array(g.origin_m, dtype=np.float64), cell_m=np.array(g.cell_m, dtype=np.float64),
         shape=np.array(g.shape, dtype=np.int64),
         soil_names=np.array(SOIL_PARAM_NAMES), soil_values=np.array([float(soil[n]) for n in SOIL_PARAM_NAMES]),
         file_id=np.array(file_id), history_json=np.array(json.dumps(history)), **arrays)
-    return buf.getvalue(), file_id, history
+    return data, file_id, history
+
 
 
 def load(path, soil: dict | None = None) -> Terrain:
