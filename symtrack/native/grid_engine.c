@@ -27,6 +27,10 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 
 /* the generated Functions in this translation unit, internal: the compiler inlines the small ones */
 #define CASADI_SYMBOL_EXPORT static
+/* the cells' lanes (cell_step_block below; engine_soils.inc's laws over the lanes) */
+#ifndef CELL_LANES
+#define CELL_LANES 8
+#endif
 #include "engine_gen.inc"
 #include "engine_soils.inc" /* ENG_SOIL_CALL: the Function of a cell's soil (generated: a soil map's soils) */
 #include "subsoil.h" /* the subsoil stress below the tracks (symtrack/terrain/subsoil.py) */
@@ -369,9 +373,66 @@ static void info_out(eng_t *E, long long ch, const double *hist) {
  * results are theirs to the last bit: tests/test_terrain_engine.py builds the engine with one lane and
  * compares every state, output and stored field bit for bit (measured: the cells' time per macro step
  * of validation_grid 64 -> 47 us at 8 lanes; docs/turning.md s. 8). */
-#ifndef CELL_LANES
-#define CELL_LANES 8
+
+/* law() for CELL_LANES lanes, all on soil ``soil``: z[i], hist[c CELL_LANES + i] (by component) -> p[i],
+   dp[i]. engine_soils.inc's ENG_LAW_LANES (grid_engine_model.law_lanes_c): the generated law in a loop
+   over the lanes that the compiler turns into SIMD code, each lane's result law()'s to the last bit;
+   without it, law() lane by lane. */
+static void law_lanes(const double *z, const double *hist, int soil, double *p, double *dp) {
+#ifdef ENG_LAW_LANES
+  ENG_LAW_LANES(soil, z, hist, p, dp);
+#else
+  for (int i = 0; i < CELL_LANES; ++i) {
+    double h[5];
+    for (int c = 0; c < 5; ++c) h[c] = hist[c * CELL_LANES + i];
+    law(z[i], h, soil, p + i, dp + i);
+  }
 #endif
+}
+
+/* one Newton update of every lane of stage_block's one-soil iteration (the scalar iteration's
+   operations as selects; a function of its own so that the compiler vectorises the loop) */
+static __attribute__((noinline)) void newton_lanes(double a, double g, double *restrict x, double *restrict p,
+                                                   double *restrict dp, double *restrict hi, double *restrict lo,
+                                                   const double *restrict pv, const double *restrict dpv,
+                                                   const double *restrict zl, const double *restrict ol,
+                                                   const double *restrict pll, int *restrict runv, int *restrict fix,
+                                                   int *restrict mv, double *restrict xs) {
+  for (int i = 0; i < CELL_LANES; ++i) {
+    const int r = runv[i];
+    const double pi = r ? pv[i] : p[i], dpi = r ? dpv[i] : dp[i];
+    const double F = a * (x[i] - zl[i]) + g * pi - ol[i] - g * pll[i];
+    const int up = F > 0.0, down = F < 0.0;
+    const double h2 = (r & up) ? x[i] : hi[i];
+    const double l2 = (r & down) ? x[i] : lo[i];
+    const double xn = x[i] - F / (a + g * dpi);
+    const double dx = fabs(xn - x[i]);
+    const int moving = up | down;
+    const int conv = moving & (dx <= 1e-13 * fabs(xn) + 1e-18);
+    const int inside = (xn < h2) & (xn > l2);
+    const int acc = moving & !conv & (dx <= NEWTON_ACCEPT * fabs(xn)) & inside;
+    const int step = moving & !conv & !acc;
+    p[i] = r ? (acc ? fmax(0.0, pi + dpi * (xn - x[i])) : pi) : p[i];
+    dp[i] = dpi;
+    hi[i] = h2;
+    lo[i] = l2;
+    xs[i] = xn;
+    fix[i] = r & step & !inside & (l2 == -INFINITY);
+    mv[i] = r & (acc | step);
+    runv[i] = r & step;
+  }
+}
+
+/* the lanes' new iterates after newton_lanes (and the rare bracket of stage_block): a step that left
+   the bracket [lo, hi] is replaced by its midpoint */
+static __attribute__((noinline)) void newton_lanes_x(double *restrict x, const double *restrict hi,
+                                                     const double *restrict lo, const int *restrict runv,
+                                                     const int *restrict mv, const double *restrict xs) {
+  for (int i = 0; i < CELL_LANES; ++i) {
+    const double xn = (runv[i] & !((xs[i] < hi[i]) & (xs[i] > lo[i]))) ? 0.5 * (lo[i] + hi[i]) : xs[i];
+    x[i] = mv[i] ? xn : x[i];
+  }
+}
 
 /* stage() for lanes i < m: zeta, omega, pl, zs, ps, dps per lane, (a, ia, g) shared; Z, pz, dpz
    written after every read of ps, dps (they may alias). Returns the first lane whose stage did not
@@ -388,42 +449,82 @@ static int stage_block(eng_t *E, int m, const double *zeta, const double *omega,
     if (!(x[i] < hi[i])) x[i] = hi[i];
     run[i] = 1;
   }
-  for (int it = 0; it < 100 && left > 0; ++it) {
-    for (int i = 0; i < m; ++i)
-      if (run[i]) law(x[i], hist + 5 * i, soil[i], p + i, dp + i);
-    for (int i = 0; i < m; ++i) {
-      if (!run[i]) continue;
-      E->n_newton += 1;
-      double F = a * (x[i] - zeta[i]) + g * p[i] - omega[i] - g * pl[i];
-      if (F > 0.0) hi[i] = x[i];
-      else if (F < 0.0) lo[i] = x[i];
-      else {
-        run[i] = 0;
-        --left;
-        continue;
-      }
-      double xn = x[i] - F / (a + g * dp[i]);
-      if (fabs(xn - x[i]) <= 1e-13 * fabs(xn) + 1e-18) {
-        run[i] = 0;
-        --left;
-        continue;
-      }
-      if (fabs(xn - x[i]) <= NEWTON_ACCEPT * fabs(xn) && xn < hi[i] && xn > lo[i]) {
-        p[i] = fmax(0.0, p[i] + dp[i] * (xn - x[i]));
-        x[i] = xn;
-        run[i] = 0;
-        --left;
-        continue;
-      }
-      if (!(xn < hi[i] && xn > lo[i])) {
-        if (lo[i] == -INFINITY) {
+  int same_soil = 1;
+  for (int i = 1; i < m; ++i) same_soil &= soil[i] == soil[0];
+  if (same_soil) {
+    /* the lanes on one soil (always without a soil map): every lane's iteration at once, in loops over
+       all CELL_LANES lanes without branches that the compiler turns into SIMD code (law_lanes, then the
+       Newton update as selects): a lane that has stopped, or past m, computes numbers that are not used,
+       and every running lane does the scalar iteration's operations in its order (the same bits) */
+    double hl[5 * CELL_LANES], zl[CELL_LANES], ol[CELL_LANES], pll[CELL_LANES];
+    int runv[CELL_LANES];
+    for (int i = 0; i < CELL_LANES; ++i) {
+      const int k = i < m ? i : 0;
+      for (int c = 0; c < 5; ++c) hl[c * CELL_LANES + i] = hist[5 * k + c];
+      zl[i] = zeta[k];
+      ol[i] = omega[k];
+      pll[i] = pl[k];
+      x[i] = x[k];
+      hi[i] = hi[k];
+      lo[i] = lo[k];
+      p[i] = dp[i] = 0.0;
+      runv[i] = i < m;
+    }
+    for (int it = 0; it < 100 && left > 0; ++it) {
+      double pv[CELL_LANES], dpv[CELL_LANES], xs[CELL_LANES];
+      int fix[CELL_LANES], mv[CELL_LANES];
+      law_lanes(x, hl, soil[0], pv, dpv);
+      E->n_newton += left;
+      newton_lanes(a, g, x, p, dp, hi, lo, pv, dpv, zl, ol, pll, runv, fix, mv, xs);
+      left = 0;
+      for (int i = 0; i < m; ++i) {
+        left += runv[i];
+        if (fix[i]) { /* rare: no bracket below yet (the scalar iteration's law at hi) */
           double ph, dph;
           law(hi[i], hist + 5 * i, soil[i], &ph, &dph);
           lo[i] = hi[i] - g * ph * ia;
         }
-        if (!(xn < hi[i] && xn > lo[i])) xn = 0.5 * (lo[i] + hi[i]);
       }
-      x[i] = xn;
+      newton_lanes_x(x, hi, lo, runv, mv, xs);
+    }
+  } else {
+    for (int it = 0; it < 100 && left > 0; ++it) {
+      for (int i = 0; i < m; ++i)
+        if (run[i]) law(x[i], hist + 5 * i, soil[i], p + i, dp + i);
+      for (int i = 0; i < m; ++i) {
+        if (!run[i]) continue;
+        E->n_newton += 1;
+        double F = a * (x[i] - zeta[i]) + g * p[i] - omega[i] - g * pl[i];
+        if (F > 0.0) hi[i] = x[i];
+        else if (F < 0.0) lo[i] = x[i];
+        else {
+          run[i] = 0;
+          --left;
+          continue;
+        }
+        double xn = x[i] - F / (a + g * dp[i]);
+        if (fabs(xn - x[i]) <= 1e-13 * fabs(xn) + 1e-18) {
+          run[i] = 0;
+          --left;
+          continue;
+        }
+        if (fabs(xn - x[i]) <= NEWTON_ACCEPT * fabs(xn) && xn < hi[i] && xn > lo[i]) {
+          p[i] = fmax(0.0, p[i] + dp[i] * (xn - x[i]));
+          x[i] = xn;
+          run[i] = 0;
+          --left;
+          continue;
+        }
+        if (!(xn < hi[i] && xn > lo[i])) {
+          if (lo[i] == -INFINITY) {
+            double ph, dph;
+            law(hi[i], hist + 5 * i, soil[i], &ph, &dph);
+            lo[i] = hi[i] - g * ph * ia;
+          }
+          if (!(xn < hi[i] && xn > lo[i])) xn = 0.5 * (lo[i] + hi[i]);
+        }
+        x[i] = xn;
+      }
     }
   }
   int bad = -1;

@@ -41,6 +41,7 @@ interpolated between the step's two poses. So the Functions are:
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import casadi as ca
 
@@ -441,10 +442,12 @@ def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: in
             f"#define ENG_SEG_NF {SEG_NF} /* its sums per segment (grid_engine_model.SEG_FIELDS) */"]
 
 
-def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0) -> str:
+def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0,
+                    cell_law: tuple = ()) -> str:
     """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c` (of the vehicle's
     ``layout``, ``na``, ``n_seg``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch
-    the compiler can inline; one soil: a plain call)."""
+    the compiler can inline; one soil: a plain call). With ``cell_law`` (EngineFunctions.cell_law, one
+    Function per soil) also the laws over CELL_LANES lanes (:func:`law_lanes_c`)."""
     lines = engine_layout_c(layout, na, n_seg)
     lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
     if n_soils == 1:
@@ -454,6 +457,60 @@ def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int =
         for k in range(1, n_soils):
             lines.append(f"    case {k}: fn##_{k}(arg, res, 0, WORK, 0); break; \\")
         lines.append("    default: fn##_0(arg, res, 0, WORK, 0); } } while (0)")
+    text = "\n".join(lines) + "\n"
+    if cell_law:
+        if len(cell_law) != n_soils:
+            raise ValueError(f"soil_dispatch_c: {len(cell_law)} cell laws for {n_soils} soils")
+        text += law_lanes_c(cell_law)
+    return text
+
+
+_LAW_LANES_BODY = re.compile(
+    r"/\* (eng_cell_law_\d+):\(z,hist\[5\]\)->\(p,dp_dz\) \*/\n"
+    r"static int \w+\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, casadi_real\* w, int mem\) \{\n"
+    r"(.*?)\n  return 0;\n\}", re.S)
+
+
+def law_lanes_c(cell_law: tuple) -> str:
+    """The cell laws (eng_cell_law_<k>, one per soil) over the CELL_LANES lanes of grid_engine.c's
+    stage_block: ``eng_cell_law_<k>_lanes(z[L], hist[5 L], p[L], dp[L])``, ``hist`` by component
+    (``hist[c L + i]``), and ENG_LAW_LANES(soil, z, hist, p, dp) that calls soil's.
+
+    Each function is CasADi's generated body of that law, unchanged but for its inputs and outputs
+    (``arg``/``res`` become the lanes' arrays) and casadi_fmax/fmin (the fmax/fmin that CasADi's own
+    helpers call), in a loop over the lanes with a fixed count: the generated law is branch-free (its
+    if_else are selects), so the compiler turns the loop into SIMD code, every lane running the law's
+    operations in the law's order (-ffp-contract=off: no contraction): each lane's result is the
+    scalar law's to the last bit (tests/test_terrain_engine.py, the one-lane build). A law whose
+    generated body has another form (a call of another CasADi helper, work vectors) gives no
+    ENG_LAW_LANES, and grid_engine.c calls the scalar law lane by lane."""
+    out = []
+    for k, f in enumerate(cell_law):
+        cg = ca.CodeGenerator(f"eng_lanes_{k}.c", {"with_header": False})
+        cg.add(f)
+        m = _LAW_LANES_BODY.search(cg.dump())
+        if m is None or m.group(1) != f"eng_cell_law_{k}":
+            return ""
+        body = m.group(2)
+        body = body.replace("arg[0]? arg[0][0] : 0", "z[i]")
+        body = re.sub(r"arg\[1\]\? arg\[1\]\[(\d)\] : 0", lambda g: f"hist[{g.group(1)} * CELL_LANES + i]", body)
+        body = body.replace("if (res[0]!=0) res[0][0]=", "p[i]=").replace("if (res[1]!=0) res[1][0]=", "dp[i]=")
+        body = body.replace("casadi_fmax(", "fmax(").replace("casadi_fmin(", "fmin(")
+        if re.search(r"\b(arg|res|w|iw)\[|\bcasadi_\w+\(|\bif \(|\bfor \(", body):
+            return ""
+        out.append(f"static void eng_cell_law_{k}_lanes(const double *restrict z, const double *restrict hist,\n"
+                   f"                                  double *restrict p, double *restrict dp) {{\n"
+                   f"  for (int i = 0; i < CELL_LANES; ++i) {{\n"
+                   + "\n".join("  " + ln for ln in body.splitlines()) + "\n  }\n}\n")
+    lines = ["/* the cell laws over CELL_LANES lanes (grid_engine_model.law_lanes_c) */", *out,
+             "#define ENG_LAW_LANES(soil, z, hist, p, dp) \\"]
+    if len(cell_law) == 1:
+        lines.append("  eng_cell_law_0_lanes(z, hist, p, dp)")
+    else:
+        lines.append("  do { switch (soil) { \\")
+        for k in range(1, len(cell_law)):
+            lines.append(f"    case {k}: eng_cell_law_{k}_lanes(z, hist, p, dp); break; \\")
+        lines.append("    default: eng_cell_law_0_lanes(z, hist, p, dp); } } while (0)")
     return "\n".join(lines) + "\n"
 
 
