@@ -835,6 +835,38 @@ static void pose_grid(double *ag, const double *a0, const double *a1, double psi
   memcpy(ag + NA * n, a1, NA * sizeof(double));
 }
 
+/* agT[k (n + 1) + j] = ag[NA j + k]: pose_grid's n + 1 poses by component */
+static void transpose_grid(const double *ag, long long n, double *agT) {
+  for (long long j = 0; j <= n; ++j)
+    for (int k = 0; k < NA; ++k) agT[k * (n + 1) + j] = ag[NA * j + k];
+}
+
+/* the load pl[j] and fractions fr[2 j], fr[2 j + 1] of the cell centred at cc at the inner poses
+   j = 1 .. ns - 1 of a window's grid (ag by pose, agT by component: transpose_grid): eng_cell_geo at
+   each pose, all poses at once with engine_soils.inc's eng_cell_geo_lanes (the same bits) */
+static void geo_window(const eng_t *E, const double *cc, const double *ag, const double *agT, long long ns,
+                       double *pl, double *fr) {
+#ifdef ENG_GEO_LANES
+  (void)ag;
+  double gT[3 * ns];
+  eng_cell_geo_lanes((int)(ns - 1), cc, agT + 1, ns + 1, E->geo, gT, ns);
+  for (long long j = 1; j < ns; ++j) {
+    pl[j] = gT[j - 1];
+    fr[2 * j] = gT[ns + j - 1];
+    fr[2 * j + 1] = gT[2 * ns + j - 1];
+  }
+#else
+  (void)agT;
+  for (long long j = 1; j < ns; ++j) {
+    double gj[NGEO];
+    cell_geo(cc, ag + NA * j, E->geo, gj);
+    pl[j] = gj[0];
+    fr[2 * j] = gj[1];
+    fr[2 * j + 1] = gj[2];
+  }
+#endif
+}
+
 /* n macro steps: step k ends at T[k] (the step starts at t0, then at T[k-1]) with the inputs
  * U[2k..2k+1]. dist[0]: distance covered so far, dist[1]: the stop distance (< 0: none), dist[2]:
  * the time from which distance counts. Writes T_out (the step's end time, shortened on the
@@ -888,6 +920,10 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       pose_grid(E->agrid_entry, E->a, a1, E->wv[2], w1[2], E->entry_substeps);
       grid_entry = E->agrid_entry;
     }
+    /* the same grids by component (geo_window) */
+    double gridT_exit[NA * (E->exit_substeps + 1)], gridT_entry[NA * (E->entry_substeps + 1)];
+    transpose_grid(E->agrid, E->exit_substeps, gridT_exit);
+    transpose_grid(grid_entry, E->entry_substeps, gridT_entry);
     /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end, in
        batches of cells that take the same step (cell_batch_t: the steady cells, the exit windows, the
        entry windows), each integrated by cell_step_block when full and at the end */
@@ -954,14 +990,10 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       pl[0] = plA;
       fr[0] = g[1];
       fr[1] = g[2];
-      for (long long j = 1; j < ns; ++j) {
-        if (wgrid) {
-          double gj[NGEO];
-          cell_geo(cc, wgrid + NA * j, E->geo, gj);
-          pl[j] = gj[0];
-          fr[2 * j] = gj[1];
-          fr[2 * j + 1] = gj[2];
-        } else {
+      if (wgrid) {
+        geo_window(E, cc, wgrid, wgrid == E->agrid ? gridT_exit : gridT_entry, ns, pl, fr);
+      } else {
+        for (long long j = 1; j < ns; ++j) {
           double th = (double)j / (double)ns;
           pl[j] = plA + (plB - plA) * th;
           fr[2 * j] = g[1] + (gB[1] - g[1]) * th;
