@@ -867,6 +867,21 @@ static void geo_window(const eng_t *E, const double *cc, const double *ag, const
 #endif
 }
 
+/* gT[k GEO_CHUNK + i] = eng_cell_geo's output k for the cell centred at (cT[i], cT[GEO_CHUNK + i]), i < n,
+   at the pose a (engine_soils.inc's eng_cell_geo_cells: all cells at once, the same bits) */
+#define GEO_CHUNK 64
+static void cells_geo(int n, const double *cT, const double *a, const double *geo, double *gT) {
+#ifdef ENG_GEO_LANES
+  eng_cell_geo_cells(n, cT, GEO_CHUNK, a, geo, gT, GEO_CHUNK);
+#else
+  for (int i = 0; i < n; ++i) {
+    double c[2] = {cT[i], cT[GEO_CHUNK + i]}, g[NGEO];
+    cell_geo(c, a, geo, g);
+    for (int k = 0; k < NGEO; ++k) gT[k * GEO_CHUNK + i] = g[k];
+  }
+#endif
+}
+
 /* n macro steps: step k ends at T[k] (the step starts at t0, then at T[k-1]) with the inputs
  * U[2k..2k+1]. dist[0]: distance covered so far, dist[1]: the stop distance (< 0: none), dist[2]:
  * the time from which distance counts. Writes T_out (the step's end time, shortened on the
@@ -943,73 +958,93 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     batches[1].euler = 0;
     batches[2].n = E->entry_substeps;
     batches[2].euler = 0;
-    for (long long q = 0; q < E->n_act; ++q) {
-      long long ch = E->act[q];
-      double *g = E->ch_g + NGEO * ch;
-      double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
-      double *pw = E->ch_pw + 2 * ch;
-      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && g[0] == 0.0 && outside_tracks(E->geo, cc, a1)) {
-        /* an unloaded cell at rest, outside both tracks at the step end: it stays so and its
-           geometry is zero (the case below, without evaluating eng_cell_geo) */
-        memset(g, 0, NGEO * sizeof(double));
+    /* in chunks of active cells: first the step-end geometry of the chunk's cells that need it, all at
+       once (cells_geo), then each cell */
+    for (long long q0 = 0; q0 < E->n_act; q0 += GEO_CHUNK) {
+      const long long q1 = q0 + GEO_CHUNK < E->n_act ? q0 + GEO_CHUNK : E->n_act;
+      double cT[2 * GEO_CHUNK], gBT[NGEO * GEO_CHUNK];
+      int slot[GEO_CHUNK], nn = 0;
+      for (long long q = q0; q < q1; ++q) {
+        long long ch = E->act[q];
+        double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+        int skip = E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && E->ch_g[NGEO * ch] == 0.0 &&
+                   outside_tracks(E->geo, cc, a1);
+        slot[q - q0] = skip ? -1 : nn;
+        if (!skip) {
+          cT[nn] = cc[0];
+          cT[GEO_CHUNK + nn] = cc[1];
+          ++nn;
+        }
+      }
+      cells_geo(nn, cT, a1, E->geo, gBT);
+      for (long long q = q0; q < q1; ++q) {
+        long long ch = E->act[q];
+        double *g = E->ch_g + NGEO * ch;
+        double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+        double *pw = E->ch_pw + 2 * ch;
+        if (slot[q - q0] < 0) {
+          /* an unloaded cell at rest, outside both tracks at the step end: it stays so and its
+             geometry is zero (the case below, without evaluating eng_cell_geo) */
+          memset(g, 0, NGEO * sizeof(double));
+          pw[0] = pw[1] = 0.0;
+          E->ch_p[ch] = 0.0;
+          E->ch_vr[ch] = 0.0;
+          continue;
+        }
+        for (int k = 0; k < NGEO; ++k) gB[k] = gBT[k * GEO_CHUNK + slot[q - q0]];
+        double plA = g[0], plB = gB[0];
         pw[0] = pw[1] = 0.0;
-        E->ch_p[ch] = 0.0;
-        E->ch_vr[ch] = 0.0;
-        continue;
-      }
-      cell_geo(cc, a1, E->geo, gB);
-      double plA = g[0], plB = gB[0];
-      pw[0] = pw[1] = 0.0;
-      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && plA == 0.0 && plB == 0.0) {
-        /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
+        if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && plA == 0.0 && plB == 0.0) {
+          /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
+          memcpy(g, gB, sizeof gB);
+          E->ch_p[ch] = 0.0;
+          E->ch_vr[ch] = 0.0;
+          continue;
+        }
+        int b = 0;
+        const double *wgrid = 0;
+        /* the transient windows, substeps with the geometry evaluated at each substep end (the overlap's
+           kinks resolved to a substep): exit (the cell leaving a track's contact, its load falling, on
+           its unloading line), else entry (soil reaction below entry_fraction of the load, or ringing) */
+        if (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch]) {
+          if (E->exit_substeps > E->cell_substeps) {
+            b = 1;
+            wgrid = E->agrid;
+          }
+        } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, ih)) {
+          if (E->entry_substeps > E->cell_substeps) {
+            b = 2;
+            wgrid = grid_entry;
+          }
+        }
+        cell_batch_t *B = batches + b;
+        const long long ns = B->n;
+        const int lane = B->m;
+        double *pl = B->pl + lane * (ns + 1), *fr = B->fr + 2 * (ns + 1) * lane;
+        pl[0] = plA;
+        fr[0] = g[1];
+        fr[1] = g[2];
+        if (wgrid) {
+          geo_window(E, cc, wgrid, wgrid == E->agrid ? gridT_exit : gridT_entry, ns, pl, fr);
+        } else {
+          for (long long j = 1; j < ns; ++j) {
+            double th = (double)j / (double)ns;
+            pl[j] = plA + (plB - plA) * th;
+            fr[2 * j] = g[1] + (gB[1] - g[1]) * th;
+            fr[2 * j + 1] = g[2] + (gB[2] - g[2]) * th;
+          }
+        }
+        pl[ns] = plB;
+        fr[2 * ns] = gB[1];
+        fr[2 * ns + 1] = gB[2];
+        B->ch[lane] = ch;
+        B->soil[lane] = E->ch_soil[ch];
+        channel_hist(E, ch, B->hist + 5 * lane);
         memcpy(g, gB, sizeof gB);
-        E->ch_p[ch] = 0.0;
-        E->ch_vr[ch] = 0.0;
-        continue;
-      }
-      int b = 0;
-      const double *wgrid = 0;
-      /* the transient windows, substeps with the geometry evaluated at each substep end (the overlap's
-         kinks resolved to a substep): exit (the cell leaving a track's contact, its load falling, on
-         its unloading line), else entry (soil reaction below entry_fraction of the load, or ringing) */
-      if (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch]) {
-        if (E->exit_substeps > E->cell_substeps) {
-          b = 1;
-          wgrid = E->agrid;
+        if (++B->m == CELL_LANES) {
+          int rc = cell_batch_flush(E, B, h, ih, 1);
+          if (rc) return rc;
         }
-      } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, ih)) {
-        if (E->entry_substeps > E->cell_substeps) {
-          b = 2;
-          wgrid = grid_entry;
-        }
-      }
-      cell_batch_t *B = batches + b;
-      const long long ns = B->n;
-      const int lane = B->m;
-      double *pl = B->pl + lane * (ns + 1), *fr = B->fr + 2 * (ns + 1) * lane;
-      pl[0] = plA;
-      fr[0] = g[1];
-      fr[1] = g[2];
-      if (wgrid) {
-        geo_window(E, cc, wgrid, wgrid == E->agrid ? gridT_exit : gridT_entry, ns, pl, fr);
-      } else {
-        for (long long j = 1; j < ns; ++j) {
-          double th = (double)j / (double)ns;
-          pl[j] = plA + (plB - plA) * th;
-          fr[2 * j] = g[1] + (gB[1] - g[1]) * th;
-          fr[2 * j + 1] = g[2] + (gB[2] - g[2]) * th;
-        }
-      }
-      pl[ns] = plB;
-      fr[2 * ns] = gB[1];
-      fr[2 * ns + 1] = gB[2];
-      B->ch[lane] = ch;
-      B->soil[lane] = E->ch_soil[ch];
-      channel_hist(E, ch, B->hist + 5 * lane);
-      memcpy(g, gB, sizeof gB);
-      if (++B->m == CELL_LANES) {
-        int rc = cell_batch_flush(E, B, h, ih, 1);
-        if (rc) return rc;
       }
     }
     for (int b = 0; b < 3; ++b) {

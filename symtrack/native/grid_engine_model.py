@@ -537,20 +537,35 @@ def law_lanes_c(cell_law: tuple) -> str:
 
 
 def geo_lanes_c(cell_geo: ca.Function) -> str:
-    """eng_cell_geo over the substeps of a transient window (grid_engine.c ``geo_window``):
-    ``eng_cell_geo_lanes(n, c[2], aT, as, geo[7], gT, gs)`` writes the load and the two fractions
-    (outputs 0-2; the rest are not used there) of the poses ``aT[k as + i]``, i < n, to ``gT[k gs + i]``,
-    with ENG_GEO_LANES defined; the same operations per pose as eng_cell_geo (:func:`law_lanes_c`'s
-    argument). Empty (the scalar Function pose by pose) for a body of another form."""
-    body = _lanes_body(cell_geo, [lambda k: f"c[{k}]", lambda k: f"aT[{k} * as + i]", lambda k: f"geo[{k}]"],
-                       [lambda k: f"gT[{k} * gs + i]" if k < 3 else None])
-    if body is None:
+    """eng_cell_geo over many poses or many cells at once (grid_engine.c ``geo_window`` and the cells'
+    loop of ``eng_run``), with ENG_GEO_LANES defined:
+
+    - ``eng_cell_geo_lanes(n, c[2], aT, as, geo[7], gT, gs)``: one cell at the poses ``aT[k as + i]``,
+      i < n (a transient window's substeps): the load and the two fractions (outputs 0-2, the rest not
+      used there) to ``gT[k gs + i]``;
+    - ``eng_cell_geo_cells(n, cT, cs, a, geo[7], gT, gs)``: the cells centred at ``cT[k cs + i]``, i < n,
+      at one pose ``a``: all NGEO outputs to ``gT[k gs + i]``.
+
+    The same operations per pose or cell as eng_cell_geo (:func:`law_lanes_c`'s argument: the same
+    bits). Empty (the scalar Function one at a time) for a body of another form."""
+    window = _lanes_body(cell_geo, [lambda k: f"c[{k}]", lambda k: f"aT[{k} * as + i]", lambda k: f"geo[{k}]"],
+                         [lambda k: f"gT[{k} * gs + i]" if k < 3 else None])
+    cells = _lanes_body(cell_geo, [lambda k: f"cT[{k} * cs + i]", lambda k: f"a[{k}]", lambda k: f"geo[{k}]"],
+                        [lambda k: f"gT[{k} * gs + i]"])
+    if window is None or cells is None:
         return ""
-    return ("/* the cell geometry over a window's poses (grid_engine_model.geo_lanes_c) */\n"
+
+    def loop(body: str) -> str:
+        return "  for (int i = 0; i < n; ++i) {\n" + "\n".join("  " + ln for ln in body.splitlines()) + "\n  }\n}\n"
+
+    return ("/* the cell geometry over a window's poses and over many cells (grid_engine_model.geo_lanes_c) */\n"
             "#define ENG_GEO_LANES 1\n"
             "static void eng_cell_geo_lanes(int n, const double *restrict c, const double *restrict aT, long long as,\n"
             "                               const double *restrict geo, double *restrict gT, long long gs) {\n"
-            "  for (int i = 0; i < n; ++i) {\n" + "\n".join("  " + ln for ln in body.splitlines()) + "\n  }\n}\n")
+            + loop(window) +
+            "static void eng_cell_geo_cells(int n, const double *restrict cT, long long cs, const double *restrict a,\n"
+            "                               const double *restrict geo, double *restrict gT, long long gs) {\n"
+            + loop(cells))
 
 
 def pv_base(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
