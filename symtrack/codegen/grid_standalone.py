@@ -73,7 +73,7 @@ def engine_parts(sc, scratch: Path) -> dict:
     cg.generate(str(scratch) + "/")
     gen = (Path(scratch) / "engine_gen.c").read_bytes()
     return {"world": world, "settings": settings, "fns": fns, "state": state, "gen": gen,
-            "soils": soil_dispatch_c(fns.n_soils, fns.layout).encode()}
+            "soils": soil_dispatch_c(fns.n_soils, fns.layout, cell_law=fns.cell_law, cell_geo=fns.cell_geo).encode()}
 
 
 def engine_constants(tag: str, parts: dict) -> list[str]:

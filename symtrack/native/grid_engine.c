@@ -27,6 +27,10 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 
 /* the generated Functions in this translation unit, internal: the compiler inlines the small ones */
 #define CASADI_SYMBOL_EXPORT static
+/* the cells' lanes (cell_step_block below; engine_soils.inc's laws over the lanes) */
+#ifndef CELL_LANES
+#define CELL_LANES 8
+#endif
 #include "engine_gen.inc"
 #include "engine_soils.inc" /* ENG_SOIL_CALL: the Function of a cell's soil (generated: a soil map's soils) */
 #include "subsoil.h" /* the subsoil stress below the tracks (symtrack/terrain/subsoil.py) */
@@ -369,9 +373,66 @@ static void info_out(eng_t *E, long long ch, const double *hist) {
  * results are theirs to the last bit: tests/test_terrain_engine.py builds the engine with one lane and
  * compares every state, output and stored field bit for bit (measured: the cells' time per macro step
  * of validation_grid 64 -> 47 us at 8 lanes; docs/turning.md s. 8). */
-#ifndef CELL_LANES
-#define CELL_LANES 8
+
+/* law() for CELL_LANES lanes, all on soil ``soil``: z[i], hist[c CELL_LANES + i] (by component) -> p[i],
+   dp[i]. engine_soils.inc's ENG_LAW_LANES (grid_engine_model.law_lanes_c): the generated law in a loop
+   over the lanes that the compiler turns into SIMD code, each lane's result law()'s to the last bit;
+   without it, law() lane by lane. */
+static void law_lanes(const double *z, const double *hist, int soil, double *p, double *dp) {
+#ifdef ENG_LAW_LANES
+  ENG_LAW_LANES(soil, z, hist, p, dp);
+#else
+  for (int i = 0; i < CELL_LANES; ++i) {
+    double h[5];
+    for (int c = 0; c < 5; ++c) h[c] = hist[c * CELL_LANES + i];
+    law(z[i], h, soil, p + i, dp + i);
+  }
 #endif
+}
+
+/* one Newton update of every lane of stage_block's one-soil iteration (the scalar iteration's
+   operations as selects; a function of its own so that the compiler vectorises the loop) */
+static __attribute__((noinline)) void newton_lanes(double a, double g, double *restrict x, double *restrict p,
+                                                   double *restrict dp, double *restrict hi, double *restrict lo,
+                                                   const double *restrict pv, const double *restrict dpv,
+                                                   const double *restrict zl, const double *restrict ol,
+                                                   const double *restrict pll, int *restrict runv, int *restrict fix,
+                                                   int *restrict mv, double *restrict xs) {
+  for (int i = 0; i < CELL_LANES; ++i) {
+    const int r = runv[i];
+    const double pi = r ? pv[i] : p[i], dpi = r ? dpv[i] : dp[i];
+    const double F = a * (x[i] - zl[i]) + g * pi - ol[i] - g * pll[i];
+    const int up = F > 0.0, down = F < 0.0;
+    const double h2 = (r & up) ? x[i] : hi[i];
+    const double l2 = (r & down) ? x[i] : lo[i];
+    const double xn = x[i] - F / (a + g * dpi);
+    const double dx = fabs(xn - x[i]);
+    const int moving = up | down;
+    const int conv = moving & (dx <= 1e-13 * fabs(xn) + 1e-18);
+    const int inside = (xn < h2) & (xn > l2);
+    const int acc = moving & !conv & (dx <= NEWTON_ACCEPT * fabs(xn)) & inside;
+    const int step = moving & !conv & !acc;
+    p[i] = r ? (acc ? fmax(0.0, pi + dpi * (xn - x[i])) : pi) : p[i];
+    dp[i] = dpi;
+    hi[i] = h2;
+    lo[i] = l2;
+    xs[i] = xn;
+    fix[i] = r & step & !inside & (l2 == -INFINITY);
+    mv[i] = r & (acc | step);
+    runv[i] = r & step;
+  }
+}
+
+/* the lanes' new iterates after newton_lanes (and the rare bracket of stage_block): a step that left
+   the bracket [lo, hi] is replaced by its midpoint */
+static __attribute__((noinline)) void newton_lanes_x(double *restrict x, const double *restrict hi,
+                                                     const double *restrict lo, const int *restrict runv,
+                                                     const int *restrict mv, const double *restrict xs) {
+  for (int i = 0; i < CELL_LANES; ++i) {
+    const double xn = (runv[i] & !((xs[i] < hi[i]) & (xs[i] > lo[i]))) ? 0.5 * (lo[i] + hi[i]) : xs[i];
+    x[i] = mv[i] ? xn : x[i];
+  }
+}
 
 /* stage() for lanes i < m: zeta, omega, pl, zs, ps, dps per lane, (a, ia, g) shared; Z, pz, dpz
    written after every read of ps, dps (they may alias). Returns the first lane whose stage did not
@@ -388,42 +449,82 @@ static int stage_block(eng_t *E, int m, const double *zeta, const double *omega,
     if (!(x[i] < hi[i])) x[i] = hi[i];
     run[i] = 1;
   }
-  for (int it = 0; it < 100 && left > 0; ++it) {
-    for (int i = 0; i < m; ++i)
-      if (run[i]) law(x[i], hist + 5 * i, soil[i], p + i, dp + i);
-    for (int i = 0; i < m; ++i) {
-      if (!run[i]) continue;
-      E->n_newton += 1;
-      double F = a * (x[i] - zeta[i]) + g * p[i] - omega[i] - g * pl[i];
-      if (F > 0.0) hi[i] = x[i];
-      else if (F < 0.0) lo[i] = x[i];
-      else {
-        run[i] = 0;
-        --left;
-        continue;
-      }
-      double xn = x[i] - F / (a + g * dp[i]);
-      if (fabs(xn - x[i]) <= 1e-13 * fabs(xn) + 1e-18) {
-        run[i] = 0;
-        --left;
-        continue;
-      }
-      if (fabs(xn - x[i]) <= NEWTON_ACCEPT * fabs(xn) && xn < hi[i] && xn > lo[i]) {
-        p[i] = fmax(0.0, p[i] + dp[i] * (xn - x[i]));
-        x[i] = xn;
-        run[i] = 0;
-        --left;
-        continue;
-      }
-      if (!(xn < hi[i] && xn > lo[i])) {
-        if (lo[i] == -INFINITY) {
+  int same_soil = 1;
+  for (int i = 1; i < m; ++i) same_soil &= soil[i] == soil[0];
+  if (same_soil) {
+    /* the lanes on one soil (always without a soil map): every lane's iteration at once, in loops over
+       all CELL_LANES lanes without branches that the compiler turns into SIMD code (law_lanes, then the
+       Newton update as selects): a lane that has stopped, or past m, computes numbers that are not used,
+       and every running lane does the scalar iteration's operations in its order (the same bits) */
+    double hl[5 * CELL_LANES], zl[CELL_LANES], ol[CELL_LANES], pll[CELL_LANES];
+    int runv[CELL_LANES];
+    for (int i = 0; i < CELL_LANES; ++i) {
+      const int k = i < m ? i : 0;
+      for (int c = 0; c < 5; ++c) hl[c * CELL_LANES + i] = hist[5 * k + c];
+      zl[i] = zeta[k];
+      ol[i] = omega[k];
+      pll[i] = pl[k];
+      x[i] = x[k];
+      hi[i] = hi[k];
+      lo[i] = lo[k];
+      p[i] = dp[i] = 0.0;
+      runv[i] = i < m;
+    }
+    for (int it = 0; it < 100 && left > 0; ++it) {
+      double pv[CELL_LANES], dpv[CELL_LANES], xs[CELL_LANES];
+      int fix[CELL_LANES], mv[CELL_LANES];
+      law_lanes(x, hl, soil[0], pv, dpv);
+      E->n_newton += left;
+      newton_lanes(a, g, x, p, dp, hi, lo, pv, dpv, zl, ol, pll, runv, fix, mv, xs);
+      left = 0;
+      for (int i = 0; i < m; ++i) {
+        left += runv[i];
+        if (fix[i]) { /* rare: no bracket below yet (the scalar iteration's law at hi) */
           double ph, dph;
           law(hi[i], hist + 5 * i, soil[i], &ph, &dph);
           lo[i] = hi[i] - g * ph * ia;
         }
-        if (!(xn < hi[i] && xn > lo[i])) xn = 0.5 * (lo[i] + hi[i]);
       }
-      x[i] = xn;
+      newton_lanes_x(x, hi, lo, runv, mv, xs);
+    }
+  } else {
+    for (int it = 0; it < 100 && left > 0; ++it) {
+      for (int i = 0; i < m; ++i)
+        if (run[i]) law(x[i], hist + 5 * i, soil[i], p + i, dp + i);
+      for (int i = 0; i < m; ++i) {
+        if (!run[i]) continue;
+        E->n_newton += 1;
+        double F = a * (x[i] - zeta[i]) + g * p[i] - omega[i] - g * pl[i];
+        if (F > 0.0) hi[i] = x[i];
+        else if (F < 0.0) lo[i] = x[i];
+        else {
+          run[i] = 0;
+          --left;
+          continue;
+        }
+        double xn = x[i] - F / (a + g * dp[i]);
+        if (fabs(xn - x[i]) <= 1e-13 * fabs(xn) + 1e-18) {
+          run[i] = 0;
+          --left;
+          continue;
+        }
+        if (fabs(xn - x[i]) <= NEWTON_ACCEPT * fabs(xn) && xn < hi[i] && xn > lo[i]) {
+          p[i] = fmax(0.0, p[i] + dp[i] * (xn - x[i]));
+          x[i] = xn;
+          run[i] = 0;
+          --left;
+          continue;
+        }
+        if (!(xn < hi[i] && xn > lo[i])) {
+          if (lo[i] == -INFINITY) {
+            double ph, dph;
+            law(hi[i], hist + 5 * i, soil[i], &ph, &dph);
+            lo[i] = hi[i] - g * ph * ia;
+          }
+          if (!(xn < hi[i] && xn > lo[i])) xn = 0.5 * (lo[i] + hi[i]);
+        }
+        x[i] = xn;
+      }
     }
   }
   int bad = -1;
@@ -734,6 +835,53 @@ static void pose_grid(double *ag, const double *a0, const double *a1, double psi
   memcpy(ag + NA * n, a1, NA * sizeof(double));
 }
 
+/* agT[k (n + 1) + j] = ag[NA j + k]: pose_grid's n + 1 poses by component */
+static void transpose_grid(const double *ag, long long n, double *agT) {
+  for (long long j = 0; j <= n; ++j)
+    for (int k = 0; k < NA; ++k) agT[k * (n + 1) + j] = ag[NA * j + k];
+}
+
+/* the load pl[j] and fractions fr[2 j], fr[2 j + 1] of the cell centred at cc at the inner poses
+   j = 1 .. ns - 1 of a window's grid (ag by pose, agT by component: transpose_grid): eng_cell_geo at
+   each pose, all poses at once with engine_soils.inc's eng_cell_geo_lanes (the same bits) */
+static void geo_window(const eng_t *E, const double *cc, const double *ag, const double *agT, long long ns,
+                       double *pl, double *fr) {
+#ifdef ENG_GEO_LANES
+  (void)ag;
+  double gT[3 * ns];
+  eng_cell_geo_lanes((int)(ns - 1), cc, agT + 1, ns + 1, E->geo, gT, ns);
+  for (long long j = 1; j < ns; ++j) {
+    pl[j] = gT[j - 1];
+    fr[2 * j] = gT[ns + j - 1];
+    fr[2 * j + 1] = gT[2 * ns + j - 1];
+  }
+#else
+  (void)agT;
+  for (long long j = 1; j < ns; ++j) {
+    double gj[NGEO];
+    cell_geo(cc, ag + NA * j, E->geo, gj);
+    pl[j] = gj[0];
+    fr[2 * j] = gj[1];
+    fr[2 * j + 1] = gj[2];
+  }
+#endif
+}
+
+/* gT[k GEO_CHUNK + i] = eng_cell_geo's output k for the cell centred at (cT[i], cT[GEO_CHUNK + i]), i < n,
+   at the pose a (engine_soils.inc's eng_cell_geo_cells: all cells at once, the same bits) */
+#define GEO_CHUNK 64
+static void cells_geo(int n, const double *cT, const double *a, const double *geo, double *gT) {
+#ifdef ENG_GEO_LANES
+  eng_cell_geo_cells(n, cT, GEO_CHUNK, a, geo, gT, GEO_CHUNK);
+#else
+  for (int i = 0; i < n; ++i) {
+    double c[2] = {cT[i], cT[GEO_CHUNK + i]}, g[NGEO];
+    cell_geo(c, a, geo, g);
+    for (int k = 0; k < NGEO; ++k) gT[k * GEO_CHUNK + i] = g[k];
+  }
+#endif
+}
+
 /* n macro steps: step k ends at T[k] (the step starts at t0, then at T[k-1]) with the inputs
  * U[2k..2k+1]. dist[0]: distance covered so far, dist[1]: the stop distance (< 0: none), dist[2]:
  * the time from which distance counts. Writes T_out (the step's end time, shortened on the
@@ -787,6 +935,10 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
       pose_grid(E->agrid_entry, E->a, a1, E->wv[2], w1[2], E->entry_substeps);
       grid_entry = E->agrid_entry;
     }
+    /* the same grids by component (geo_window) */
+    double gridT_exit[NA * (E->exit_substeps + 1)], gridT_entry[NA * (E->entry_substeps + 1)];
+    transpose_grid(E->agrid, E->exit_substeps, gridT_exit);
+    transpose_grid(grid_entry, E->entry_substeps, gridT_entry);
     /* the cells: load from the geometry at the step start (ch_g) to the geometry at its end, in
        batches of cells that take the same step (cell_batch_t: the steady cells, the exit windows, the
        entry windows), each integrated by cell_step_block when full and at the end */
@@ -806,77 +958,93 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     batches[1].euler = 0;
     batches[2].n = E->entry_substeps;
     batches[2].euler = 0;
-    for (long long q = 0; q < E->n_act; ++q) {
-      long long ch = E->act[q];
-      double *g = E->ch_g + NGEO * ch;
-      double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
-      double *pw = E->ch_pw + 2 * ch;
-      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && g[0] == 0.0 && outside_tracks(E->geo, cc, a1)) {
-        /* an unloaded cell at rest, outside both tracks at the step end: it stays so and its
-           geometry is zero (the case below, without evaluating eng_cell_geo) */
-        memset(g, 0, NGEO * sizeof(double));
+    /* in chunks of active cells: first the step-end geometry of the chunk's cells that need it, all at
+       once (cells_geo), then each cell */
+    for (long long q0 = 0; q0 < E->n_act; q0 += GEO_CHUNK) {
+      const long long q1 = q0 + GEO_CHUNK < E->n_act ? q0 + GEO_CHUNK : E->n_act;
+      double cT[2 * GEO_CHUNK], gBT[NGEO * GEO_CHUNK];
+      int slot[GEO_CHUNK], nn = 0;
+      for (long long q = q0; q < q1; ++q) {
+        long long ch = E->act[q];
+        double cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+        int skip = E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && E->ch_g[NGEO * ch] == 0.0 &&
+                   outside_tracks(E->geo, cc, a1);
+        slot[q - q0] = skip ? -1 : nn;
+        if (!skip) {
+          cT[nn] = cc[0];
+          cT[GEO_CHUNK + nn] = cc[1];
+          ++nn;
+        }
+      }
+      cells_geo(nn, cT, a1, E->geo, gBT);
+      for (long long q = q0; q < q1; ++q) {
+        long long ch = E->act[q];
+        double *g = E->ch_g + NGEO * ch;
+        double gB[NGEO], cc[2] = {E->ch_cx[ch], E->ch_cy[ch]};
+        double *pw = E->ch_pw + 2 * ch;
+        if (slot[q - q0] < 0) {
+          /* an unloaded cell at rest, outside both tracks at the step end: it stays so and its
+             geometry is zero (the case below, without evaluating eng_cell_geo) */
+          memset(g, 0, NGEO * sizeof(double));
+          pw[0] = pw[1] = 0.0;
+          E->ch_p[ch] = 0.0;
+          E->ch_vr[ch] = 0.0;
+          continue;
+        }
+        for (int k = 0; k < NGEO; ++k) gB[k] = gBT[k * GEO_CHUNK + slot[q - q0]];
+        double plA = g[0], plB = gB[0];
         pw[0] = pw[1] = 0.0;
-        E->ch_p[ch] = 0.0;
-        E->ch_vr[ch] = 0.0;
-        continue;
-      }
-      cell_geo(cc, a1, E->geo, gB);
-      double plA = g[0], plB = gB[0];
-      pw[0] = pw[1] = 0.0;
-      if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && plA == 0.0 && plB == 0.0) {
-        /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
-        memcpy(g, gB, sizeof gB);
-        E->ch_p[ch] = 0.0;
-        E->ch_vr[ch] = 0.0;
-        continue;
-      }
-      int b = 0;
-      const double *wgrid = 0;
-      /* the transient windows, substeps with the geometry evaluated at each substep end (the overlap's
-         kinks resolved to a substep): exit (the cell leaving a track's contact, its load falling, on
-         its unloading line), else entry (soil reaction below entry_fraction of the load, or ringing) */
-      if (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch]) {
-        if (E->exit_substeps > E->cell_substeps) {
-          b = 1;
-          wgrid = E->agrid;
+        if (E->ch_z[ch] == 0.0 && E->ch_v[ch] == 0.0 && plA == 0.0 && plB == 0.0) {
+          /* an unloaded cell at rest stays so (law(0) = 0 on every branch): nothing to integrate */
+          memcpy(g, gB, sizeof gB);
+          E->ch_p[ch] = 0.0;
+          E->ch_vr[ch] = 0.0;
+          continue;
         }
-      } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, ih)) {
-        if (E->entry_substeps > E->cell_substeps) {
-          b = 2;
-          wgrid = grid_entry;
+        int b = 0;
+        const double *wgrid = 0;
+        /* the transient windows, substeps with the geometry evaluated at each substep end (the overlap's
+           kinks resolved to a substep): exit (the cell leaving a track's contact, its load falling, on
+           its unloading line), else entry (soil reaction below entry_fraction of the load, or ringing) */
+        if (plB < plA && gB[1] + gB[2] < g[1] + g[2] && E->ch_z[ch] < E->ch_zmax[ch] + E->ch_zoff[ch] + E->ch_dc[ch]) {
+          if (E->exit_substeps > E->cell_substeps) {
+            b = 1;
+            wgrid = E->agrid;
+          }
+        } else if (E->ch_p[ch] < E->entry_fraction * fmax(plA, plB) || ringing(E, ch, plA, plB, ih)) {
+          if (E->entry_substeps > E->cell_substeps) {
+            b = 2;
+            wgrid = grid_entry;
+          }
         }
-      }
-      cell_batch_t *B = batches + b;
-      const long long ns = B->n;
-      const int lane = B->m;
-      double *pl = B->pl + lane * (ns + 1), *fr = B->fr + 2 * (ns + 1) * lane;
-      pl[0] = plA;
-      fr[0] = g[1];
-      fr[1] = g[2];
-      for (long long j = 1; j < ns; ++j) {
+        cell_batch_t *B = batches + b;
+        const long long ns = B->n;
+        const int lane = B->m;
+        double *pl = B->pl + lane * (ns + 1), *fr = B->fr + 2 * (ns + 1) * lane;
+        pl[0] = plA;
+        fr[0] = g[1];
+        fr[1] = g[2];
         if (wgrid) {
-          double gj[NGEO];
-          cell_geo(cc, wgrid + NA * j, E->geo, gj);
-          pl[j] = gj[0];
-          fr[2 * j] = gj[1];
-          fr[2 * j + 1] = gj[2];
+          geo_window(E, cc, wgrid, wgrid == E->agrid ? gridT_exit : gridT_entry, ns, pl, fr);
         } else {
-          double th = (double)j / (double)ns;
-          pl[j] = plA + (plB - plA) * th;
-          fr[2 * j] = g[1] + (gB[1] - g[1]) * th;
-          fr[2 * j + 1] = g[2] + (gB[2] - g[2]) * th;
+          for (long long j = 1; j < ns; ++j) {
+            double th = (double)j / (double)ns;
+            pl[j] = plA + (plB - plA) * th;
+            fr[2 * j] = g[1] + (gB[1] - g[1]) * th;
+            fr[2 * j + 1] = g[2] + (gB[2] - g[2]) * th;
+          }
         }
-      }
-      pl[ns] = plB;
-      fr[2 * ns] = gB[1];
-      fr[2 * ns + 1] = gB[2];
-      B->ch[lane] = ch;
-      B->soil[lane] = E->ch_soil[ch];
-      channel_hist(E, ch, B->hist + 5 * lane);
-      memcpy(g, gB, sizeof gB);
-      if (++B->m == CELL_LANES) {
-        int rc = cell_batch_flush(E, B, h, ih, 1);
-        if (rc) return rc;
+        pl[ns] = plB;
+        fr[2 * ns] = gB[1];
+        fr[2 * ns + 1] = gB[2];
+        B->ch[lane] = ch;
+        B->soil[lane] = E->ch_soil[ch];
+        channel_hist(E, ch, B->hist + 5 * lane);
+        memcpy(g, gB, sizeof gB);
+        if (++B->m == CELL_LANES) {
+          int rc = cell_batch_flush(E, B, h, ih, 1);
+          if (rc) return rc;
+        }
       }
     }
     for (int b = 0; b < 3; ++b) {

@@ -41,6 +41,7 @@ interpolated between the step's two poses. So the Functions are:
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import casadi as ca
 
@@ -441,10 +442,13 @@ def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: in
             f"#define ENG_SEG_NF {SEG_NF} /* its sums per segment (grid_engine_model.SEG_FIELDS) */"]
 
 
-def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0) -> str:
+def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0,
+                    cell_law: tuple = (), cell_geo: ca.Function | None = None) -> str:
     """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c` (of the vehicle's
     ``layout``, ``na``, ``n_seg``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch
-    the compiler can inline; one soil: a plain call)."""
+    the compiler can inline; one soil: a plain call). With ``cell_law`` (EngineFunctions.cell_law, one
+    Function per soil) also the laws over CELL_LANES lanes (:func:`law_lanes_c`); with ``cell_geo`` the
+    geometry over a window's poses (:func:`geo_lanes_c`)."""
     lines = engine_layout_c(layout, na, n_seg)
     lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
     if n_soils == 1:
@@ -454,7 +458,114 @@ def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int =
         for k in range(1, n_soils):
             lines.append(f"    case {k}: fn##_{k}(arg, res, 0, WORK, 0); break; \\")
         lines.append("    default: fn##_0(arg, res, 0, WORK, 0); } } while (0)")
+    text = "\n".join(lines) + "\n"
+    if cell_law:
+        if len(cell_law) != n_soils:
+            raise ValueError(f"soil_dispatch_c: {len(cell_law)} cell laws for {n_soils} soils")
+        text += law_lanes_c(cell_law)
+    if cell_geo is not None:
+        text += geo_lanes_c(cell_geo)
+    return text
+
+
+_GENERATED_BODY = re.compile(
+    r"/\* (\w+):\(.*?\)->\(.*?\) \*/\n"
+    r"static int \w+\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, casadi_real\* w, int mem\) \{\n"
+    r"(.*?)\n  return 0;\n\}", re.S)
+
+
+def _lanes_body(f: ca.Function, args: list, results: list) -> str | None:
+    """The body of CasADi's generated C of ``f`` (an SX Function of scalars and vectors) for one lane
+    ``i`` of a loop: input ``arg[a][k]`` becomes ``args[a](k)``, output ``res[r][k] = v`` becomes
+    ``results[r](k) = v`` (a result of None: that output is dropped, and the compiler drops what only
+    it needed), casadi_fmax/fmin the fmax/fmin that CasADi's helpers call. The operations and their order
+    are the generated code's. None when the body has another form (a call of another CasADi helper,
+    work vectors, a branch or a loop): the caller keeps the scalar Function."""
+    cg = ca.CodeGenerator(f"{f.name()}_lanes.c", {"with_header": False})
+    cg.add(f)
+    m = _GENERATED_BODY.search(cg.dump())
+    if m is None or m.group(1) != f.name():
+        return None
+    body = re.sub(r"arg\[(\d+)\]\? arg\[\1\]\[(\d+)\] : 0", lambda g: args[int(g.group(1))](int(g.group(2))),
+                  m.group(2))
+    lines = []
+    for ln in body.splitlines():
+        r = re.fullmatch(r"  if \(res\[(\d+)\]!=0\) res\[\1\]\[(\d+)\]=(\w+);", ln)
+        if r:
+            target = results[int(r.group(1))](int(r.group(2)))
+            if target is not None:
+                lines.append(f"  {target}={r.group(3)};")
+        else:
+            lines.append(ln)
+    body = "\n".join(lines).replace("casadi_fmax(", "fmax(").replace("casadi_fmin(", "fmin(")
+    if re.search(r"\b(arg|res|w|iw)\[|\bcasadi_\w+\(|\bif \(|\bfor \(|\bwhile \(", body):
+        return None
+    return body
+
+
+def law_lanes_c(cell_law: tuple) -> str:
+    """The cell laws (eng_cell_law_<k>, one per soil) over the CELL_LANES lanes of grid_engine.c's
+    stage_block: ``eng_cell_law_<k>_lanes(z[L], hist[5 L], p[L], dp[L])``, ``hist`` by component
+    (``hist[c L + i]``), and ENG_LAW_LANES(soil, z, hist, p, dp) that calls soil's.
+
+    Each function is CasADi's generated body of that law (:func:`_lanes_body`) in a loop over the lanes
+    with a fixed count: the generated law is branch-free (its if_else are selects), so the compiler
+    turns the loop into SIMD code, every lane running the law's operations in the law's order
+    (-ffp-contract=off: no contraction): each lane's result is the scalar law's to the last bit
+    (tests/test_terrain_engine.py, the one-lane build and the stored SHA). A law of another form gives
+    no ENG_LAW_LANES, and grid_engine.c calls the scalar law lane by lane."""
+    out = []
+    for k, f in enumerate(cell_law):
+        body = _lanes_body(f, [lambda c: "z[i]", lambda c: f"hist[{c} * CELL_LANES + i]"],
+                           [lambda c: "p[i]", lambda c: "dp[i]"])
+        if body is None:
+            return ""
+        out.append(f"static void eng_cell_law_{k}_lanes(const double *restrict z, const double *restrict hist,\n"
+                   f"                                  double *restrict p, double *restrict dp) {{\n"
+                   f"  for (int i = 0; i < CELL_LANES; ++i) {{\n"
+                   + "\n".join("  " + ln for ln in body.splitlines()) + "\n  }\n}\n")
+    lines = ["/* the cell laws over CELL_LANES lanes (grid_engine_model.law_lanes_c) */", *out,
+             "#define ENG_LAW_LANES(soil, z, hist, p, dp) \\"]
+    if len(cell_law) == 1:
+        lines.append("  eng_cell_law_0_lanes(z, hist, p, dp)")
+    else:
+        lines.append("  do { switch (soil) { \\")
+        for k in range(1, len(cell_law)):
+            lines.append(f"    case {k}: eng_cell_law_{k}_lanes(z, hist, p, dp); break; \\")
+        lines.append("    default: eng_cell_law_0_lanes(z, hist, p, dp); } } while (0)")
     return "\n".join(lines) + "\n"
+
+
+def geo_lanes_c(cell_geo: ca.Function) -> str:
+    """eng_cell_geo over many poses or many cells at once (grid_engine.c ``geo_window`` and the cells'
+    loop of ``eng_run``), with ENG_GEO_LANES defined:
+
+    - ``eng_cell_geo_lanes(n, c[2], aT, as, geo[7], gT, gs)``: one cell at the poses ``aT[k as + i]``,
+      i < n (a transient window's substeps): the load and the two fractions (outputs 0-2, the rest not
+      used there) to ``gT[k gs + i]``;
+    - ``eng_cell_geo_cells(n, cT, cs, a, geo[7], gT, gs)``: the cells centred at ``cT[k cs + i]``, i < n,
+      at one pose ``a``: all NGEO outputs to ``gT[k gs + i]``.
+
+    The same operations per pose or cell as eng_cell_geo (:func:`law_lanes_c`'s argument: the same
+    bits). Empty (the scalar Function one at a time) for a body of another form."""
+    window = _lanes_body(cell_geo, [lambda k: f"c[{k}]", lambda k: f"aT[{k} * as + i]", lambda k: f"geo[{k}]"],
+                         [lambda k: f"gT[{k} * gs + i]" if k < 3 else None])
+    cells = _lanes_body(cell_geo, [lambda k: f"cT[{k} * cs + i]", lambda k: f"a[{k}]", lambda k: f"geo[{k}]"],
+                        [lambda k: f"gT[{k} * gs + i]"])
+    if window is None or cells is None:
+        return ""
+
+    def loop(body: str) -> str:
+        return "  for (int i = 0; i < n; ++i) {\n" + "\n".join("  " + ln for ln in body.splitlines()) + "\n  }\n}\n"
+
+    return ("/* the cell geometry over a window's poses and over many cells (grid_engine_model.geo_lanes_c) */\n"
+            "#define ENG_GEO_LANES 1\n"
+            "static void eng_cell_geo_lanes(int n, const double *restrict c, const double *restrict aT, long long as,\n"
+            "                               const double *restrict geo, double *restrict gT, long long gs) {\n"
+            + loop(window) +
+            "static void eng_cell_geo_cells(int n, const double *restrict cT, long long cs, const double *restrict a,\n"
+            "                               const double *restrict geo, double *restrict gT, long long gs) {\n"
+            + loop(cells))
 
 
 def pv_base(params: dict, cell_m: float, end_strip_m: float) -> list[float]:

@@ -49,7 +49,7 @@ def library(fns):
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
     qsrc = resources.files("symtrack.native").joinpath("terrain_query.h").read_bytes()
-    dsrc = soil_dispatch_c(fns.n_soils, fns.layout, fns.na, fns.n_seg).encode()
+    dsrc = soil_dispatch_c(fns.n_soils, fns.layout, fns.na, fns.n_seg, fns.cell_law, fns.cell_geo).encode()
     flags, target = native_cflags(cc)
     key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dsrc, casadi_tag(BUILD_VERSION), target)
 
