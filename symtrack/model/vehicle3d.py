@@ -552,8 +552,8 @@ def check_grid(opts: ModelOptions, terrain) -> None:
     """A :class:`ParameterError` naming the key for what the 3D vehicle on the grid cannot take (before
     any work): ``terrain`` a :class:`~symtrack.terrain.settings.TerrainSettings`; a soil map or a
     moisture raster (the segments take one soil: the traction's soil means are the planar sums'), a
-    towed trailer (its tyres load the cells through the planar vehicle's pass), an elevation raster
-    (the hull's ground is the analytic surface's)."""
+    towed trailer (its tyres load the cells through the planar vehicle's pass). (An elevation raster is
+    taken: the hull's ground is its bilinear surface, the cells' elevations are sampled from the same.)"""
     if getattr(opts, "vehicle", "planar") != "3d" or terrain is None:
         return
     refused = (("soil_map", "terrain.soil_map", "a field of several soils"),
@@ -564,7 +564,3 @@ def check_grid(opts: ModelOptions, terrain) -> None:
             raise ParameterError(f"{key}: {what} is not coupled to the 3D vehicle on the grid (model.vehicle = "
                                  "'3d' takes one soil and no trailer; allowed: leave it out, or model.vehicle = "
                                  "'planar')")
-    surface = getattr(terrain, "surface", None)
-    if surface is not None and surface.raster is not None:
-        raise ParameterError("terrain.surface.elevation_file: an elevation raster is not coupled to the 3D vehicle "
-                             "(model.vehicle = '3d') yet; allowed: the analytic slopes and furrows")

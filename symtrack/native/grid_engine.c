@@ -120,6 +120,8 @@ typedef struct {
   /* the vehicle step's error control (vehicle_step_controlled; 0: off) and how many steps it halved */
   double vehicle_rtol, vehicle_atol;
   long long vehicle_max_halvings, n_vehicle_halved;
+  /* the integer work of the vehicle's Functions (ENG_SZ_IW: an elevation raster's interpolant) */
+  long long *iwork;
 } eng_t;
 
 static long long now_ns(void) {
@@ -128,8 +130,16 @@ static long long now_ns(void) {
   return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
 }
 
-/* ---- calls of the generated Functions (no integer work, no extra arguments: checked in engine.py) */
+/* ---- calls of the generated Functions. The cells' take no integer work and no extra arguments
+   (kernel.py check_no_work); the vehicle's (eng_vehicle_step, eng_outputs) may, when the ground is an
+   elevation raster (CasADi's B-spline interpolant, a call node): engine_soils.inc sizes their arg and
+   res arrays (ENG_SZ_ARG, ENG_SZ_RES) and eng_t.iwork their integer work (ENG_SZ_IW). */
+#ifndef ENG_SZ_ARG
+#define ENG_SZ_ARG 4
+#define ENG_SZ_RES 3
+#endif
 static double *WORK;
+static casadi_int *IWORK;
 
 /* hist: (z_max, p_max, z_off, delta, d_c) */
 static void law(double z, const double *hist, int soil, double *p, double *dp) {
@@ -256,6 +266,7 @@ static void mark_footprint(eng_t *E, long long cell, long long ch, void *ctx) {
 /* Release and assignment for a step of length h from the current state (the ChannelManager of the IDAS path calls it too: integrators/engine/manager.py). */
 EXPORT int eng_assign(eng_t *E, double h) {
   WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
   const double *w = E->wv;
   double X = w[0], Y = w[1], psi = w[2], u = w[3], v = w[4], r = w[5];
   double c = cos(psi), s = sin(psi);
@@ -694,6 +705,7 @@ EXPORT long long eng_uncovered(eng_t *E, double X, double Y, double psi) {
  * with (given by the caller). The engine's own steps call info_out with their cell step's last stage. */
 EXPORT void eng_info_out(eng_t *E) {
   WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     double hist[5];
@@ -779,6 +791,7 @@ static void sums(eng_t *E) {
 
 EXPORT void eng_sums(eng_t *E) {
   WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
   sums(E);
 }
 
@@ -788,9 +801,9 @@ EXPORT void eng_sums(eng_t *E) {
 static void vehicle_step_from(eng_t *E, const double *w0, const double *u, double h, double *w1, double *a1,
                               double *e1) {
   double hh = h;
-  const double *arg[4] = {w0, u, E->pv, &hh};
-  double *res[3] = {w1, a1, e1};
-  eng_vehicle_step(arg, res, 0, WORK, 0);
+  const double *arg[ENG_SZ_ARG] = {w0, u, E->pv, &hh};
+  double *res[ENG_SZ_RES] = {w1, a1, e1};
+  eng_vehicle_step(arg, res, IWORK, WORK, 0);
   E->n_vehicle_steps += 1;
 }
 
@@ -892,6 +905,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
   double w1[NW], a1[NA];
   double t = t0;
   WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
   *n_done = 0;
   for (long long k = 0; k < n; ++k) {
     double t_next = T[k], h = t_next - t;
@@ -900,6 +914,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     long long c0 = now_ns();
     if (eng_assign(E, h)) return -(int)E->err_code;
     WORK = E->work;
+    IWORK = (casadi_int *)E->iwork;
     long long c1 = now_ns();
     E->ns_manager += c1 - c0;
     vehicle_step(E, u, h, w1, a1);
@@ -1106,9 +1121,9 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     T_out[k] = t;
     memcpy(X + NV * k, w1, NV * sizeof(double));
     {
-      const double *arg[3] = {w1, u, E->pv};
-      double *res[1] = {Y + E->ny_out * k};
-      eng_outputs(arg, res, 0, WORK, 0);
+      const double *arg[ENG_SZ_ARG] = {w1, u, E->pv};
+      double *res[ENG_SZ_RES] = {Y + E->ny_out * k};
+      eng_outputs(arg, res, IWORK, WORK, 0);
     }
     *n_done = k + 1;
     long long c4 = now_ns();
@@ -1128,6 +1143,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
 EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, long long n, long long max_steps,
                           int *settled) {
   WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
   *settled = 0;
   /* the cells in batches (cell_step_block, SDIRK, n substeps), no overlap fractions (no work) */
   double lift_buf[CELL_LANES * 3 * (n + 1)];
@@ -1175,6 +1191,7 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
  * rule; the top of the unloaded set for p_load = 0); rate 0. */
 EXPORT void eng_static(eng_t *E) {
   WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     int soil = E->ch_soil[ch];

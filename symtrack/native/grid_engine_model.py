@@ -340,9 +340,13 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
         foot = ca.mtimes(ca.mtimes(Rz, Rpr), ca.vertcat(0, 0, -pv[veh.param_names.index("cg_height_m")]))
         ax, ay = ax + foot[0], ay + foot[1]
     a = ca.vertcat(ax, ay, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D, *Dseg)
-    fo = {"cse": True}
-    vehicle_a = ca.Function("eng_vehicle_a", [w, pv], [a], ["w", "pv"], ["a"], fo)
-    outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo)
+    # common subexpressions merged (CasADi's cse), except over an elevation raster's interpolant: with its
+    # call nodes the merge of eng_vehicle_step took 83 s of the plant's build (a 200 x 100 raster, measured
+    # 2026-12-04), without it well under a second (docs/vehicle3d.md, "An elevation raster on the grid")
+    raster = getattr(surface, "raster", None) if n_seg else None
+    fo, fo_vehicle = {"cse": True}, {"cse": raster is None}
+    vehicle_a = ca.Function("eng_vehicle_a", [w, pv], [a], ["w", "pv"], ["a"], fo_vehicle)
+    outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo_vehicle)
 
     # The 8-stage, order-5, L-stable, stiffly accurate Rosenbrock method of CasADi 3.8's plugin
     # (codegen/rosenbrock.py's tableau) on the time-scaled DAE F = (h f, alg), unit step,
@@ -381,7 +385,7 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
         for mi, Ui in zip(RB_M, Us, strict=True):
             ws = ws + mi * Ui
     vehicle_step = ca.Function("eng_vehicle_step", [w, u, pv, h], [ws, vehicle_a(ws, pv), Us[-1]],
-                               ["w", "u", "pv", "h"], ["w1", "a1", "e1"], fo)
+                               ["w", "u", "pv", "h"], ["w1", "a1", "e1"], fo_vehicle)
 
     # one cell: load and weights
     fn = build_cell_functions(opts, cell_reciprocal=True)
@@ -443,12 +447,15 @@ def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: in
 
 
 def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0,
-                    cell_law: tuple = (), cell_geo: ca.Function | None = None) -> str:
+                    cell_law: tuple = (), cell_geo: ca.Function | None = None,
+                    vehicle_sizes: tuple[int, int, int] | None = None) -> str:
     """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c` (of the vehicle's
     ``layout``, ``na``, ``n_seg``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch
     the compiler can inline; one soil: a plain call). With ``cell_law`` (EngineFunctions.cell_law, one
     Function per soil) also the laws over CELL_LANES lanes (:func:`law_lanes_c`); with ``cell_geo`` the
-    geometry over a window's poses (:func:`geo_lanes_c`)."""
+    geometry over a window's poses (:func:`geo_lanes_c`); with ``vehicle_sizes`` (kernel.vehicle_work_sizes)
+    ENG_SZ_ARG and ENG_SZ_RES, the arg and res sizes of the vehicle's Functions (grid_engine.c's
+    defaults, 4 and 3, without)."""
     lines = engine_layout_c(layout, na, n_seg)
     lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
     if n_soils == 1:
@@ -458,6 +465,9 @@ def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int =
         for k in range(1, n_soils):
             lines.append(f"    case {k}: fn##_{k}(arg, res, 0, WORK, 0); break; \\")
         lines.append("    default: fn##_0(arg, res, 0, WORK, 0); } } while (0)")
+    if vehicle_sizes is not None:
+        lines += [f"#define ENG_SZ_ARG {int(vehicle_sizes[0])} /* the vehicle's Functions' arg, res sizes */",
+                  f"#define ENG_SZ_RES {int(vehicle_sizes[1])}"]
     text = "\n".join(lines) + "\n"
     if cell_law:
         if len(cell_law) != n_soils:

@@ -4,6 +4,7 @@ methods the plant (:class:`symtrack.simulation.plants.EnginePlant`) drives it by
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import time
 from collections.abc import Callable
@@ -40,6 +41,10 @@ def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (
     ``surface``: the ground's shape under the 3D vehicle (analytic; None: flat)."""
     soils = tuple(soils) or (params,)
     ground = None if surface is None or surface.is_flat else surface._coefficients()
+    raster = getattr(surface, "raster", None)
+    if raster is not None:  # the raster's heights and place are part of the ground
+        ground = (ground, hashlib.sha256(np.ascontiguousarray(raster.values, dtype=np.float64).tobytes()).hexdigest(),
+                  raster.values.shape, tuple(raster.origin_m or ()), float(raster.pixel_m))
     key = (opts, vehicle_substeps, tuple(
         (tuple(soil_law.make(opts).values(sp)), float(sp["repeated_loading_exponent"]),
          tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils), ground)

@@ -22,7 +22,7 @@ from ...native.grid_engine_model import soil_dispatch_c
 from ...toolchain import BuildSpec, build, casadi_tag, compiler, digest, native_cflags
 from .state import EngineState, EngineStruct
 
-__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library"]
+__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library", "vehicle_work_sizes"]
 
 log = logging.getLogger("symtrack.terrain")
 
@@ -33,10 +33,19 @@ NO_COMPILER = ("the terrain engine (run.integrator = \"grid_fast\") is compiled 
 
 
 def check_no_work(fns):
-    """Raise when a Function needs integer work or extra arguments (engine.c passes neither)."""
+    """Raise when a Function needs integer work or extra arguments (engine.c passes neither to the
+    cells' Functions)."""
     for f in fns:
         if f.sz_iw() or f.sz_arg() != f.n_in() or f.sz_res() != f.n_out():
             raise SimulationError(f"{f.name()} needs integer work or extra arguments; engine.c passes neither")
+
+
+def vehicle_work_sizes(fns) -> tuple[int, int, int]:
+    """(arg, res, integer work) sizes of the vehicle's Functions as engine.c calls them (eng_vehicle_step,
+    eng_outputs: ENG_SZ_ARG, ENG_SZ_RES, eng_t.iwork); more than their inputs and outputs when they hold
+    call nodes (an elevation raster's interpolant under the 3D vehicle)."""
+    vf = (fns.vehicle_step, fns.outputs)
+    return (max(4, *(f.sz_arg() for f in vf)), max(3, *(f.sz_res() for f in vf)), max(1, *(f.sz_iw() for f in vf)))
 
 
 def library(fns):
@@ -45,11 +54,12 @@ def library(fns):
     cc = compiler()
     if cc is None:
         raise SimulationError(NO_COMPILER)
-    check_no_work(fns.all())
+    check_no_work((fns.cell_geo, *fns.cell_law, *fns.cell_history, *fns.cell_entry))
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
     qsrc = resources.files("symtrack.native").joinpath("terrain_query.h").read_bytes()
-    dsrc = soil_dispatch_c(fns.n_soils, fns.layout, fns.na, fns.n_seg, fns.cell_law, fns.cell_geo).encode()
+    dsrc = soil_dispatch_c(fns.n_soils, fns.layout, fns.na, fns.n_seg, fns.cell_law, fns.cell_geo,
+                           vehicle_work_sizes(fns)).encode()
     flags, target = native_cflags(cc)
     key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dsrc, casadi_tag(BUILD_VERSION), target)
 

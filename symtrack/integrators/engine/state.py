@@ -59,7 +59,7 @@ class EngineStruct(ctypes.Structure):
                    ("ring_tol", ctypes.c_double), ("elev", ctypes.c_void_p), ("subsoil_p", ctypes.c_void_p),
                    ("p_pass", ctypes.c_void_p), ("vehicle_rtol", ctypes.c_double),
                    ("vehicle_atol", ctypes.c_double), ("vehicle_max_halvings", ctypes.c_longlong),
-                   ("n_vehicle_halved", ctypes.c_longlong)])
+                   ("n_vehicle_halved", ctypes.c_longlong), ("iwork", ctypes.c_void_p)])
 
 
 def array_address(a: np.ndarray) -> int:
@@ -179,6 +179,8 @@ class EngineState:
         self.wv = np.zeros(fns.nw)
         self.a = np.zeros(fns.na)
         self.work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
+        # the vehicle's Functions' integer work (an elevation raster's interpolant; kernel.vehicle_work_sizes)
+        self.iwork = np.zeros(max(1, fns.vehicle_step.sz_iw(), fns.outputs.sz_iw()), dtype=np.int64)
         n_entry, n_exit = window_substeps(settings)
         self.agrid, self.agrid_entry = np.zeros(fns.na * (n_exit + 1)), np.zeros(fns.na * (n_entry + 1))
         self.pad = padding_m(g.cell_m)
@@ -214,7 +216,7 @@ class EngineState:
             "ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx",
             "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv", "geo", "wv", "a", "work",
             "agrid", "agrid_entry", "ch_zoff", "ch_delta", "ch_dc", "ch_counted", "ch_soil",
-            "soil_veh")]
+            "soil_veh", "iwork")]
         # the addresses, taken again only when an array was replaced (a call runs 100 macro steps:
         # ctypes' data_as for the 43 arrays was a few percent of a call)
         cached = self._addresses
