@@ -51,3 +51,31 @@ def test_an_elevation_raster_is_taken_and_coarse_segments_are_refused(tmp_path):
     assert sc.terrain.surface.raster is not None  # (the run: tests/test_grid3d.py, the raster of a plane)
     with pytest.raises(ScenarioError, match=r"model.contact_segments = 8 .* allowed range is \[20, 64\]"):
         scenario_from_dict(_doc(surface={"furrow_spacing_m": 0.5, "furrow_depth_m": 0.05}))
+
+
+def test_a_continued_shaped_terrain_without_its_surface_is_refused(tmp_path):
+    """A terrain file with an elevation of its own, continued by the 3D vehicle without the
+    [terrain.surface] that made it: refused when the engine is built, before the run (the hull's ground
+    is the surface's, the cells keep only their heights); with the surface given it is checked against
+    the file's elevation (symtrack/terrain/world.py), and the planar vehicle takes the file as it is."""
+    import numpy as np
+
+    from symtrack.presets import soil_preset
+    from symtrack.simulation.plants import make_plant
+    from symtrack.terrain import storage as persist
+    from symtrack.terrain.storage import Grid, Terrain
+
+    g = Grid((-5.0, -5.0), 0.1, (200, 100))
+    t = Terrain(g)
+    xc, yc = g.centres(np.arange(200), np.arange(100))
+    t.set_elevation(np.ascontiguousarray((0.05 * yc[None, :] + 0.0 * xc[:, None]).ravel()))
+    f = tmp_path / "sloped.npz"
+    persist.save(f, t, soil_preset("clayey_soil_thailand_38"))
+    doc = _doc(initial_state=str(f))
+    del doc["terrain"]["size_m"], doc["terrain"]["cell_m"]
+    sc = scenario_from_dict(doc)
+    with pytest.raises(ScenarioError, match=r"elevation of its own .*3D vehicle's ground .*\[terrain.surface\] that "
+                                            r"made the terrain.*model.vehicle = 'planar'"):
+        make_plant(sc)
+    planar = make_plant(scenario_from_dict({**doc, "model": {"vehicle": "planar"}}))
+    assert planar.world.storage.elevation is not None

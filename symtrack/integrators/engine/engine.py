@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ...foundations.errors import SimulationError
+from ...foundations.errors import ScenarioError, SimulationError
 from ...model import SystemModel, soil_law
 from ...model.static import static_state
 from ...model.vehicle3d import make_vehicle
@@ -63,6 +63,12 @@ class TerrainEngine:
     def __init__(self, world, settings: EngineSettings | None = None, kernel: Callable | None = None):
         self.world = world
         self.settings = settings or EngineSettings()
+        if getattr(world.opts, "vehicle", "planar") == "3d" and getattr(world, "surface", None) is None and \
+                getattr(world.storage, "elevation", None) is not None:
+            raise ScenarioError("the terrain continued has an elevation of its own and the scenario no "
+                                "[terrain.surface]: the 3D vehicle's ground is the surface's (the cells keep only their "
+                                "heights at their centres); give the [terrain.surface] that made the terrain (it is "
+                                "checked against the terrain's elevation), or model.vehicle = 'planar'")
         self.fns = engine_functions(world.opts, world.params, self.settings.vehicle_substeps, world.soils,
                                     getattr(world, "surface", None))
         # the channel model's outputs, when it was built (World.model is built on first use)
