@@ -66,9 +66,9 @@ class TerrainEngine:
         if getattr(world.opts, "vehicle", "planar") == "3d" and getattr(world, "surface", None) is None and \
                 getattr(world.storage, "elevation", None) is not None:
             raise ScenarioError("the terrain continued has an elevation of its own and the scenario no "
-                                "[terrain.surface]: the 3D vehicle's ground is the surface's (the cells keep only their "
-                                "heights at their centres); give the [terrain.surface] that made the terrain (it is "
-                                "checked against the terrain's elevation), or model.vehicle = 'planar'")
+                                "[terrain.surface]: the 3D vehicle's ground is the surface's (the cells keep only "
+                                "their heights at their centres); give the [terrain.surface] that made the terrain "
+                                "(it is checked against the terrain's elevation), or model.vehicle = 'planar'")
         self.fns = engine_functions(world.opts, world.params, self.settings.vehicle_substeps, world.soils,
                                     getattr(world, "surface", None))
         # the channel model's outputs, when it was built (World.model is built on first use)
