@@ -120,7 +120,7 @@ typedef struct {
   /* the vehicle step's error control (vehicle_step_controlled; 0: off) and how many steps it halved */
   double vehicle_rtol, vehicle_atol;
   long long vehicle_max_halvings, n_vehicle_halved;
-  /* the vehicle's Functions' integer work (a raster's interpolant; sized by kernel.vehicle_work_sizes) */
+  /* the vehicle's Functions' integer work (a raster's interpolant; sized by state.py vehicle_work_sizes) */
   long long *iwork;
 } eng_t;
 
@@ -133,7 +133,7 @@ static long long now_ns(void) {
 /* ---- calls of the generated Functions. The cells' take no integer work and no extra arguments
    (kernel.py check_no_work); the vehicle's (eng_vehicle_step, eng_outputs) may, when the ground is an
    elevation raster (CasADi's B-spline interpolant, a call node): engine_soils.inc sizes their arg and
-   res arrays (ENG_SZ_ARG, ENG_SZ_RES) and eng_t.iwork their integer work (kernel.vehicle_work_sizes). */
+   res arrays (ENG_SZ_ARG, ENG_SZ_RES) and eng_t.iwork their integer work (state.py vehicle_work_sizes). */
 #ifndef ENG_SZ_ARG
 #define ENG_SZ_ARG 4
 #define ENG_SZ_RES 3

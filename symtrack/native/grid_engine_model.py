@@ -453,7 +453,7 @@ def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int =
     ``layout``, ``na``, ``n_seg``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch
     the compiler can inline; one soil: a plain call). With ``cell_law`` (EngineFunctions.cell_law, one
     Function per soil) also the laws over CELL_LANES lanes (:func:`law_lanes_c`); with ``cell_geo`` the
-    geometry over a window's poses (:func:`geo_lanes_c`); with ``vehicle_sizes`` (kernel.vehicle_work_sizes)
+    geometry over a window's poses (:func:`geo_lanes_c`); with ``vehicle_sizes`` (engine.state.vehicle_work_sizes)
     ENG_SZ_ARG and ENG_SZ_RES, the arg and res sizes of the vehicle's Functions (grid_engine.c's
     defaults, 4 and 3, without)."""
     lines = engine_layout_c(layout, na, n_seg)

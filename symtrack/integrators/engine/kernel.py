@@ -20,9 +20,9 @@ import numpy as np
 from ...foundations.errors import SimulationError
 from ...native.grid_engine_model import soil_dispatch_c
 from ...toolchain import BuildSpec, build, casadi_tag, compiler, digest, native_cflags
-from .state import EngineState, EngineStruct
+from .state import EngineState, EngineStruct, vehicle_work_sizes
 
-__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library", "vehicle_work_sizes"]
+__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library"]
 
 log = logging.getLogger("symtrack.terrain")
 
@@ -38,14 +38,6 @@ def check_no_work(fns):
     for f in fns:
         if f.sz_iw() or f.sz_arg() != f.n_in() or f.sz_res() != f.n_out():
             raise SimulationError(f"{f.name()} needs integer work or extra arguments; engine.c passes neither")
-
-
-def vehicle_work_sizes(fns) -> tuple[int, int, int]:
-    """(arg, res, integer work) sizes of the vehicle's Functions as engine.c calls them (eng_vehicle_step,
-    eng_outputs: ENG_SZ_ARG, ENG_SZ_RES, eng_t.iwork); more than their inputs and outputs when they hold
-    call nodes (an elevation raster's interpolant under the 3D vehicle)."""
-    vf = (fns.vehicle_step, fns.outputs)
-    return (max(4, *(f.sz_arg() for f in vf)), max(3, *(f.sz_res() for f in vf)), max(1, *(f.sz_iw() for f in vf)))
 
 
 def library(fns):

@@ -16,9 +16,9 @@ from ...terrain.settings import MAX_SUBSOIL_DEPTHS
 from ...terrain.world import END_STRIP_CELLS, padding_m
 from ..settings import POWER_MODES, VEHICLE_ATOL, VEHICLE_MAX_HALVINGS, EngineSettings, window_substeps
 
-__all__ = ["ERR_COLLISION", "ERR_FIELD", "ERR_NEWTON", "ERR_NONFINITE", "ERR_UNCOVERED", "EngineState", "EngineStruct",
-           "NEWTON_ACCEPT_STEP", "NEWTON_MAX_ITER", "SDIRK_GAMMA", "array_address", "engine_error",
-           "mean_stress_tables", "subsoil_tables"]
+__all__ = ["ERR_COLLISION", "ERR_FIELD", "ERR_NEWTON", "ERR_NONFINITE", "ERR_UNCOVERED", "EngineState",
+           "EngineStruct", "NEWTON_ACCEPT_STEP", "NEWTON_MAX_ITER", "SDIRK_GAMMA", "array_address", "engine_error",
+           "mean_stress_tables", "subsoil_tables", "vehicle_work_sizes"]
 
 ERR_FIELD, ERR_COLLISION, ERR_UNCOVERED, ERR_NONFINITE, ERR_NEWTON = 1, 2, 3, 4, 5
 SDIRK_GAMMA = 1.0 - 1.0 / math.sqrt(2.0)  # Alexander (1977): L-stable two-stage SDIRK
@@ -60,6 +60,14 @@ class EngineStruct(ctypes.Structure):
                    ("p_pass", ctypes.c_void_p), ("vehicle_rtol", ctypes.c_double),
                    ("vehicle_atol", ctypes.c_double), ("vehicle_max_halvings", ctypes.c_longlong),
                    ("n_vehicle_halved", ctypes.c_longlong), ("iwork", ctypes.c_void_p)])
+
+
+def vehicle_work_sizes(fns) -> tuple[int, int, int]:
+    """(arg, res, integer work) sizes of the vehicle's Functions as engine.c calls them (eng_vehicle_step,
+    eng_outputs: ENG_SZ_ARG, ENG_SZ_RES, eng_t.iwork); more than their inputs and outputs when they hold
+    call nodes (an elevation raster's interpolant under the 3D vehicle)."""
+    vf = (fns.vehicle_step, fns.outputs)
+    return (max(4, *(f.sz_arg() for f in vf)), max(3, *(f.sz_res() for f in vf)), max(1, *(f.sz_iw() for f in vf)))
 
 
 def array_address(a: np.ndarray) -> int:
@@ -179,8 +187,8 @@ class EngineState:
         self.wv = np.zeros(fns.nw)
         self.a = np.zeros(fns.na)
         self.work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
-        # the vehicle's Functions' integer work (an elevation raster's interpolant; kernel.vehicle_work_sizes)
-        self.iwork = np.zeros(max(1, fns.vehicle_step.sz_iw(), fns.outputs.sz_iw()), dtype=np.int64)
+        # the vehicle's Functions' integer work (an elevation raster's interpolant: vehicle_work_sizes)
+        self.iwork = np.zeros(vehicle_work_sizes(fns)[2], dtype=np.int64)
         n_entry, n_exit = window_substeps(settings)
         self.agrid, self.agrid_entry = np.zeros(fns.na * (n_exit + 1)), np.zeros(fns.na * (n_entry + 1))
         self.pad = padding_m(g.cell_m)
