@@ -284,7 +284,9 @@ def _subsoil_constants(parts: dict) -> str:
             + f"#define EF_DENS_V0 {c_literal(a['v0'][0])}\n#define EF_DENS_LAMBDA {c_literal(a['lambda'][0])}\n"
             + f"#define EF_DENS_KAPPA {c_literal(a['kappa'][0])}\n#define EF_DENS_M {c_literal(a['m'][0])}\n"
             + f"#define EF_DENS_K2 {c_literal(a['k2'][0])}\n#define EF_DENS_VMIN {c_literal(a['v_min'][0])}\n"
-            + f"#define EF_DENS_YIELD {1 if a['m'][0] > 0 else 0}\n")
+            + f"#define EF_DENS_YIELD {1 if a['m'][0] > 0 else 0}\n"
+            + "static const double ef_dens_geo[EF_N_DEPTHS] = {"
+            + ", ".join(c_literal(v) for v in density.geostatic_table(world.soils[:1], depths)[0]) + "};\n")
 
 
 def _documentation(sc: Scenario, variables) -> bytes:

@@ -459,8 +459,8 @@ static fmi2Status end_pass(Instance *c) {
             "their state is stored", E->n_act, EF_LIFT_MAX_STEPS * EF_SETTLE_STEP_S);
   }
 #if EF_N_DEPTHS > 0
-  /* World.fold_pass: the pass's largest vertical stress into the record (np.maximum), its largest mean
-     normal stress into the compression state (density.pass_update over the cells the pass touched: a
+  /* World.fold_pass: the pass's largest vertical stress into the record (np.maximum), the same stress
+     plus the soil's own weight into the compression state (density.pass_update over the cells the pass touched: a
      depth yields where p > 0 and density.load_update's new v1 is below the current v1, the soil's
      initial v1_0 where the record is 0: the virgin line N - (lambda - kappa) ln(p / 1 kPa), with a
      yield line (m > 0) the k2 line from where the current recompression line meets it, the saturation
@@ -474,9 +474,10 @@ static fmi2Status end_pass(Instance *c) {
       if (!E->touched[cell]) continue;
       for (long long k = 0; k < EF_N_DEPTHS; ++k) {
         const long long q = cell * EF_N_DEPTHS + k;
-        const double p = (double)E->p_pass[q], old = (double)c->specific_volume[q];
+        const double s = (double)E->sig_pass[q], old = (double)c->specific_volume[q];
         const double v_old = old > 0 ? old : EF_DENS_V0;
-        if (!(p > 0)) continue;
+        if (!(s > 0)) continue;
+        const double p = s + ef_dens_geo[k]; /* the soil's own weight (density.geostatic_table) */
         const double lnp = log(1e-3 * p);
         double line = EF_DENS_N - EF_DENS_LMK * lnp;
 #if EF_DENS_YIELD

@@ -22,6 +22,7 @@ class ParamSpec:
     high: float
     low_inclusive: bool = True
     default: float | None = None  # used when a parameter set leaves it out (terrain-only soil parameters)
+    derived: bool = False  # filled by the soil's pedotransfer functions when a set leaves it out
 
     def check(self, value: object, where: str = "") -> float:
         label = f"{where}.{self.name}" if where else self.name
@@ -38,8 +39,8 @@ class ParamSpec:
         return v
 
 
-def _spec(name, description, low, high, low_inclusive=True, default=None):
-    return ParamSpec(name, description, low, high, low_inclusive, default)
+def _spec(name, description, low, high, low_inclusive=True, default=None, derived=False):
+    return ParamSpec(name, description, low, high, low_inclusive, default, derived)
 
 
 VEHICLE_PARAMS: tuple[ParamSpec, ...] = (
@@ -81,34 +82,27 @@ SOIL_MODEL_PARAMS: tuple[ParamSpec, ...] = (
 )
 
 # Soil parameters only the grid terrain's cells use (its world manager and engine): not in the
-# vehicle model's parameter vector. A parameter set may leave them out; the default is then used
-# (its source is in symtrack/presets/soils.py, where the presets' values are).
+# vehicle model's parameter vector. A parameter set may leave them out: a registry default (its source
+# here) or, for the compression and strength parameters marked derived, the pedotransfer functions of
+# the soil's description (symtrack/soil/pedotransfer.py, docs/subsoil.md "One soil") fill them.
 REPEATED_LOADING_EXPONENT_DEFAULT = 0.16  # Li & Selig 1996, lean clay (CL): see presets/soils.py
 STRESS_CONCENTRATION_FACTOR_DEFAULT = 5.0  # Soehne's "medium" soil: see presets/soils.py
-# The pedotransfer function of Schjoenning & Lamande (2018) (symtrack.terrain.subsoil) at a bulk
-# density of 1.5 Mg/m^3, 20 % clay and field capacity (pF 2): 139 kPa. Not soil-specific: give the
-# soil's own value (or the PTF's at its inputs) where known.
-PRECOMPRESSION_STRESS_DEFAULT_PA = 139.0e3
-# The compression model of the bulk density (O'Sullivan & Robertson 1996; symtrack/terrain/density.py,
-# docs/subsoil.md "Bulk density"). Defaults: particle density 2.65 Mg/m^3 (the usual value for mineral
-# soils; soilphysics' example of Keller & Arvidsson's PTF uses it), initial bulk density 1.5 Mg/m^3 (the
-# one the precompression default above assumes), and N, lambda, kappa of Keller & Arvidsson's (2007,
-# Eur. J. Soil Sci. 58, 1373-1381) pedotransfer function at that specific volume (2.65 / 1.5):
-# N = -0.007 + 1.196 v, lambda = -0.182 + 0.212 v, kappa = 0.042 (terrain.density.keller_arvidsson_2007;
-# a test checks these numbers against it). Not soil-specific: set the soil's own.
+# The soil's description when a parameter set gives none (a user preset file with Bekker values only):
+# a loam (USDA texture triangle: 20 % clay, 40 % silt, 40 % sand) at field capacity (pF 2, 10 kPa), with
+# a bulk density of 1.5 Mg/m^3 and the usual particle density of mineral soils, 2.65 Mg/m^3. At these
+# inputs the Schjoenning & Lamande (2018) PTF gives sigma_pc = 141 kPa.
+CLAY_DEFAULT_KG_PER_KG = 0.20
+SILT_DEFAULT_KG_PER_KG = 0.40
+SAND_DEFAULT_KG_PER_KG = 0.40
+MATRIC_SUCTION_DEFAULT_KPA = 10.0
 PARTICLE_DENSITY_DEFAULT_MG_PER_M3 = 2.65
 BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3 = 1.5
-VIRGIN_LINE_N_DEFAULT = 2.105933333333333
-COMPRESSION_INDEX_LAMBDA_DEFAULT = 0.19253333333333333
-RECOMPRESSION_INDEX_KAPPA_DEFAULT = 0.042
 # O'Sullivan & Robertson's (1996, Soil Till. Res. 39, 161-173) yield line, as SoilFlex (Keller et al.
-# 2007) and soilphysics' soilDeformation code it (terrain/density.py): m = 0 (no yield line: the
-# recompression line meets the virgin line directly, the model as it was) is the default because the
-# default lines (Keller & Arvidsson's PTF) were fitted without one; the only published m, k2 found
-# (soilphysics' example, m = 1.3, k2 = 0.01916) belong to other N, lambda, kappa (docs/subsoil.md,
-# "Repeated passes"). k2 is used only with m > 0 and must then lie in (kappa, lambda).
-YIELD_LINE_OFFSET_DEFAULT = 0.0
-YIELD_COMPRESSION_INDEX_K2_DEFAULT = RECOMPRESSION_INDEX_KAPPA_DEFAULT
+# 2007) and soilphysics' soilDeformation code it (terrain/density.py): m = 1.3, the value of the one
+# complete published set found (soilphysics' soilDeformation example, docs/subsoil.md "Repeated
+# passes"); with it every pass at a stress above the yield line's (about 0.2 of the precompression
+# stress) adds a little density, less each time. 0 switches the yield line off.
+YIELD_LINE_OFFSET_DEFAULT = 1.3
 # the smallest specific volume the soil reaches under load: 1 (zero porosity, rho_b = rho_s) unless the
 # day's water content w is known ([soil.moisture]), then 1 + w rho_s / rho_w, the specific volume at zero
 # air-filled porosity (saturation; terrain/moisture.py)
@@ -118,14 +112,15 @@ SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
           0.0, 1.0, default=REPEATED_LOADING_EXPONENT_DEFAULT),
     _spec("stress_concentration_factor", "Froehlich's concentration factor xi of the subsoil stress (3: Boussinesq)",
           1.0, 10.0, default=STRESS_CONCENTRATION_FACTOR_DEFAULT),
-    _spec("precompression_stress_Pa", "the soil's strength against compaction sigma_pc (the subsoil risk classes)",
-          0.0, 1e7, False, default=PRECOMPRESSION_STRESS_DEFAULT_PA),
-    _spec("virgin_line_N", "specific volume of the virgin compression line at a mean normal stress of 1 kPa "
-          "(bulk density model)", 1.0, 5.0, False, default=VIRGIN_LINE_N_DEFAULT),
-    _spec("compression_index_lambda", "slope lambda of the virgin compression line v = N - lambda ln(p / kPa)",
-          0.0, 1.0, False, default=COMPRESSION_INDEX_LAMBDA_DEFAULT),
-    _spec("recompression_index_kappa", "slope kappa of the recompression lines (below lambda)",
-          0.0, 1.0, False, default=RECOMPRESSION_INDEX_KAPPA_DEFAULT),
+    _spec("precompression_stress_Pa", "the soil's strength against compaction sigma_pc: where the density model "
+          "yields and what the risk classes grade against (derived: Schjoenning & Lamande 2018)", 0.0, 1e7, False,
+          derived=True),
+    _spec("virgin_line_N", "specific volume of the virgin compression line at a vertical stress of 1 kPa (derived, "
+          "never given: v0 + (lambda - kappa) ln(sigma_pc / kPa))", 1.0, 5.0, False, derived=True),
+    _spec("compression_index_lambda", "slope lambda of the virgin compression line v = N - lambda ln(p / kPa) "
+          "(derived: Keller & Arvidsson 2007)", 0.0, 1.0, False, derived=True),
+    _spec("recompression_index_kappa", "slope kappa of the recompression lines, below lambda (derived: Keller & "
+          "Arvidsson 2007)", 0.0, 1.0, False, derived=True),
     _spec("particle_density_Mg_per_m3", "the soil's particle density rho_s", 1.0, 5.0, False,
           default=PARTICLE_DENSITY_DEFAULT_MG_PER_M3),
     _spec("bulk_density_initial_Mg_per_m3", "the soil's dry bulk density before any traffic (below rho_s)",
@@ -133,9 +128,18 @@ SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
     _spec("yield_line_offset_ln_p", "O'Sullivan & Robertson's m: the yield line is the virgin line moved by m "
           "along ln(p / kPa) (0: no yield line)", 0.0, 10.0, default=YIELD_LINE_OFFSET_DEFAULT),
     _spec("yield_compression_index_k2", "slope k2 of the line from the yield line to the virgin line (with "
-          "m > 0: in (kappa, lambda))", 0.0, 1.0, False, default=YIELD_COMPRESSION_INDEX_K2_DEFAULT),
+          "m > 0: in (kappa, lambda); derived: the published set's position between kappa and lambda)",
+          0.0, 1.0, False, derived=True),
     _spec("specific_volume_min", "the smallest specific volume under load (1: zero porosity; the day's "
           "saturation 1 + w rho_s / rho_w with [soil.moisture])", 1.0, 5.0, default=SPECIFIC_VOLUME_MIN_DEFAULT),
+    _spec("clay_kg_per_kg", "clay fraction of the fine earth (< 2 um; mass fraction)", 0.0, 1.0,
+          default=CLAY_DEFAULT_KG_PER_KG),
+    _spec("silt_kg_per_kg", "silt fraction of the fine earth (2-50 um; mass fraction)", 0.0, 1.0,
+          default=SILT_DEFAULT_KG_PER_KG),
+    _spec("sand_kg_per_kg", "sand fraction of the fine earth (50-2000 um; mass fraction)", 0.0, 1.0,
+          default=SAND_DEFAULT_KG_PER_KG),
+    _spec("matric_suction_kPa", "the soil water's matric suction (10 kPa: field capacity, pF 2)", 0.0, 1e6, False,
+          default=MATRIC_SUCTION_DEFAULT_KPA),
 )
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
 # the soil parameters the day's moisture sets (symtrack/terrain/moisture.py): a terrain file made on
@@ -153,19 +157,44 @@ def spec(name: str) -> ParamSpec:
     return _ALL[name]
 
 
-def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str) -> dict[str, float]:
-    """Validate a complete parameter set: no unknown key, no missing key, every value in range."""
+class ParamSet(dict):
+    """A complete, checked parameter set that remembers which values the soil's pedotransfer functions
+    derived (``derived``: name -> value). A copy updated with new values and checked again re-derives
+    every derived value that was not replaced, so that changing a soil's texture or density moves its
+    strength and compression lines with it."""
+
+    derived: dict
+
+    def __init__(self, *args, derived=None, **kw):
+        super().__init__(*args, **kw)
+        self.derived = dict(derived or {})
+
+
+DERIVED_SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS if s.derived)
+
+
+def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str) -> ParamSet:
+    """Validate a complete parameter set: no unknown key, no missing key, every value in range. A soil
+    set gets its derived parameters from its description (symtrack/soil/pedotransfer.py)."""
+    from ..soil.pedotransfer import derive_soil
+
     names = [s.name for s in specs]
     unknown = sorted(set(values) - set(names))
     if unknown:
         raise ParameterError(
             f"unknown parameter(s) in {where}: {', '.join(unknown)}; allowed: {', '.join(names)}"
         )
-    values = dict(values)
+    earlier = getattr(values, "derived", {})
+    values = {k: v for k, v in values.items() if not (k in earlier and v == earlier[k])}
     for s in specs:
         if s.name not in values and s.default is not None:
             values[s.name] = s.default
+    derived = [s.name for s in specs if s.derived]
+    missing_before = {n for n in derived if n not in values}
+    if derived:
+        values = derive_soil({**{n: None for n in derived}, **values}, where)
     missing = [n for n in names if n not in values]
     if missing:
         raise ParameterError(f"missing parameter(s) in {where}: {', '.join(missing)}")
-    return {s.name: s.check(values[s.name], where) for s in specs}
+    out = {s.name: s.check(values[s.name], where) for s in specs}
+    return ParamSet(out, derived={n: out[n] for n in derived if n in missing_before or n == "virgin_line_N"})

@@ -25,18 +25,21 @@ Sources:
   measured xi: each takes Soehne's class from its description (dry sand hard, wet soils soft),
   a judgement, marked so. (A second-hand source, the soilphysics R package's documentation,
   states the opposite order; docs/subsoil.md.)
-- The precompression stress ``precompression_stress_Pa``: no preset has a measured value; all
-  take the registry's default (symtrack/model/parameters.py: the Schjoenning & Lamande 2018
-  pedotransfer function at typical inputs), which is not soil-specific.
-- The bulk density's compression model (``virgin_line_N``, ``compression_index_lambda``,
-  ``recompression_index_kappa``, ``particle_density_Mg_per_m3``, ``bulk_density_initial_Mg_per_m3``;
-  O'Sullivan & Robertson 1996, symtrack/terrain/density.py): no preset has measured values; all take
-  the registry's defaults (symtrack/model/parameters.py: Keller & Arvidsson's 2007 pedotransfer
-  function at a bulk density of 1.5 Mg/m^3, particle density 2.65), not soil-specific. No compression
-  test of these soils was found (docs/subsoil.md, "A credible upper bound"). The yield line
-  (``yield_line_offset_ln_p``, ``yield_compression_index_k2``) is off (m = 0: the default lines were
-  fitted without one) and the saturation bound (``specific_volume_min``) is 1 (zero porosity) unless
-  a [soil.moisture] day gives the water content.
+- The soil's description (symtrack/soil/pedotransfer.py, docs/subsoil.md "One soil"): texture
+  (clay, silt, sand mass fractions), dry bulk density before traffic and matric suction. Wong's
+  table gives the soils' names and moisture contents only, so each preset's texture is the centre
+  of the texture class its name gives (USDA texture triangle; "clayey soil" and "heavy clay" taken
+  as clay, "clayey loam" as clay loam) and its bulk density a typical value for that texture
+  (USDA-NRCS Soil Quality Indicators, "Bulk Density" (2008): ideal below 1.60 Mg/m^3 for sands,
+  1.40 for silt loams, 1.10 for clays; restrictive above 1.80, 1.65, 1.47), kept below the
+  saturation density of the named moisture content. ASSUMED, not measured with Wong's data.
+  Where the name gives a moisture content w (dry basis), the suction is w's on the van Genuchten
+  curve of the clay class (Severiano et al. 2013; ``suction_from_water_content_kPa``) and the
+  saturation bound ``specific_volume_min`` is 1 + w rho_s / rho_w; the dry sands and Chrono's soils
+  take an ASSUMED suction (dry: 100 kPa, pF 3; moist: 10-30 kPa).
+- From the description the pedotransfer functions derive the precompression stress, the
+  compression lines and the yield line's k2 (symtrack/soil/pedotransfer.py; ``symtrack presets
+  NAME`` shows each derived value with its function): no two presets share a strength.
 
 Terrain-cell dynamics (seed eq. 4) need an areal mass tau_z and an areal damping c'' that no
 table gives; see the two module constants below.
@@ -47,7 +50,8 @@ from __future__ import annotations
 import math
 
 from ..foundations.errors import ParameterError
-from ..model.parameters import SOIL_PARAMS, check_set
+from ..model.parameters import PARTICLE_DENSITY_DEFAULT_MG_PER_M3, SOIL_PARAMS, check_set
+from ..soil.pedotransfer import suction_from_water_content_kPa
 
 # Areal damping c'' of a cell: Project Chrono SCM's default damping (3e4 Pa s/m).
 CELL_DAMPING_PA_S_PER_M = 3.0e4
@@ -69,8 +73,21 @@ BETA_ML, BETA_MH, BETA_CL, BETA_CH = 0.10, 0.13, 0.16, 0.18
 XI_HARD, XI_FIRM, XI_SOFT = 4.0, 5.0, 6.0
 
 
-def _wong(n, k_c_kN, k_phi_kN, c_kPa, phi_deg, K_m, beta, xi):
-    return {
+def _describe(clay, silt, sand, rho_b, *, w=None, suction_kPa=None):
+    """The description keys of a preset: texture, bulk density, and the suction given or that of the
+    moisture content w (with w also the saturation bound; module doc)."""
+    out = {"clay_kg_per_kg": clay, "silt_kg_per_kg": silt, "sand_kg_per_kg": sand,
+           "bulk_density_initial_Mg_per_m3": rho_b}
+    if w is not None:
+        out["matric_suction_kPa"] = suction_from_water_content_kPa(w, rho_b, clay)
+        out["specific_volume_min"] = 1.0 + w * PARTICLE_DENSITY_DEFAULT_MG_PER_M3
+    else:
+        out["matric_suction_kPa"] = suction_kPa
+    return out
+
+
+def _wong(n, k_c_kN, k_phi_kN, c_kPa, phi_deg, K_m, beta, xi, description):
+    return {**description,
         "bekker_n": n,
         "k_c_N_per_m_n1": k_c_kN * 1e3,
         "k_phi_N_per_m_n2": k_phi_kN * 1e3,
@@ -86,8 +103,8 @@ def _wong(n, k_c_kN, k_phi_kN, c_kPa, phi_deg, K_m, beta, xi):
     }
 
 
-def _chrono(k_phi, n, phi_deg, K_m, K_e, beta, xi):
-    return {
+def _chrono(k_phi, n, phi_deg, K_m, K_e, beta, xi, description):
+    return {**description,
         "bekker_n": n,
         "k_c_N_per_m_n1": 0.0,
         "k_phi_N_per_m_n2": k_phi,
@@ -106,33 +123,43 @@ def _chrono(k_phi, n, phi_deg, K_m, K_e, beta, xi):
 # name -> (values, source note)
 SOILS: dict[str, dict[str, float]] = {
     # Wong Table 2.3; K: Wong's guidance for sand (2.5 cm); beta: ML's, extrapolated to sand
-    "dry_sand": _wong(1.10, 0.99, 1528.43, 1.04, 28.0, 0.025, BETA_ML, XI_HARD),
+    "dry_sand": _wong(1.10, 0.99, 1528.43, 1.04, 28.0, 0.025, BETA_ML, XI_HARD,
+                      _describe(0.03, 0.05, 0.92, 1.60, suction_kPa=100.0)),
     # Wong Table 2.3; K: guidance value between clay and sand (1.2 cm, as LETE sand)
     # beta: Li & Selig's silt (ML)
-    "sandy_loam_15": _wong(0.70, 5.27, 1515.04, 1.72, 29.0, 0.012, BETA_ML, XI_FIRM),
+    "sandy_loam_15": _wong(0.70, 5.27, 1515.04, 1.72, 29.0, 0.012, BETA_ML, XI_FIRM,
+                           _describe(0.10, 0.25, 0.65, 1.55, w=0.15)),
     # Wong Table 2.3; K = 1.5 cm calibrated against the seed's validation table (MODEL.md s. 4
     # allows 0.6-2.5 cm): gives a driven-track shear of order 1 cm at 2000 N m.
     # beta: Li & Selig's lean clay (CL); xi: firm (its sinkage under the crawler is millimetres)
-    "clayey_soil_thailand_38": _wong(0.50, 13.19, 692.15, 4.14, 13.0, 0.015, BETA_CL, XI_FIRM),
+    "clayey_soil_thailand_38": _wong(0.50, 13.19, 692.15, 4.14, 13.0, 0.015, BETA_CL, XI_FIRM,
+                                     _describe(0.45, 0.30, 0.25, 1.25, w=0.38)),
     # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
     # beta: Li & Selig's lean clay (CL)
-    "clayey_soil_thailand_55": _wong(0.70, 16.03, 1262.53, 2.07, 10.0, 0.006, BETA_CL, XI_SOFT),
+    "clayey_soil_thailand_55": _wong(0.70, 16.03, 1262.53, 2.07, 10.0, 0.006, BETA_CL, XI_SOFT,
+                                     _describe(0.55, 0.30, 0.15, 1.00, w=0.55)),
     # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
     # beta: Li & Selig's fat clay (CH)
-    "heavy_clay_wes_40": _wong(0.11, 1.84, 103.27, 20.69, 6.0, 0.006, BETA_CH, XI_SOFT),
+    "heavy_clay_wes_40": _wong(0.11, 1.84, 103.27, 20.69, 6.0, 0.006, BETA_CH, XI_SOFT,
+                               _describe(0.60, 0.25, 0.15, 1.20, w=0.40)),
     # Wong Table 2.3; K = 1.2 cm measured for LETE sand (Wong)
     # beta: ML's, extrapolated to sand
-    "lete_sand": _wong(0.79, 102.0, 5301.0, 1.3, 31.1, 0.012, BETA_ML, XI_HARD),
+    "lete_sand": _wong(0.79, 102.0, 5301.0, 1.3, 31.1, 0.012, BETA_ML, XI_HARD,
+                       _describe(0.03, 0.05, 0.92, 1.65, suction_kPa=20.0)),
     # Wong Table 2.3; K: Wong's guidance for clay (0.6 cm)
     # beta: Li & Selig's lean clay (CL)
-    "north_gower_clayey_loam_46": _wong(0.73, 41.6, 2471.0, 6.1, 26.6, 0.006, BETA_CL, XI_SOFT),
+    "north_gower_clayey_loam_46": _wong(0.73, 41.6, 2471.0, 6.1, 26.6, 0.006, BETA_CL, XI_SOFT,
+                                        _describe(0.35, 0.35, 0.30, 1.15, w=0.46)),
     # Wong Table 2.3; K: guidance value between clay and sand (1.2 cm)
     # beta: Li & Selig's silt (ML)
-    "upland_sandy_loam_51": _wong(1.10, 74.6, 2080.0, 3.3, 33.7, 0.012, BETA_ML, XI_SOFT),
+    "upland_sandy_loam_51": _wong(1.10, 74.6, 2080.0, 3.3, 33.7, 0.012, BETA_ML, XI_SOFT,
+                                  _describe(0.15, 0.25, 0.60, 1.10, w=0.51)),
     # Project Chrono SCM demo presets; beta: no source for these generic soils, Li & Selig's lean
     # clay (CL) as the registry's default
-    "chrono_soft": _chrono(2e6, 1.1, 30.0, 0.01, 4e7, BETA_CL, XI_SOFT),
-    "chrono_hard": _chrono(2e7, 1.1, 20.0, 0.01, 2e8, BETA_CL, XI_HARD),
+    "chrono_soft": _chrono(2e6, 1.1, 30.0, 0.01, 4e7, BETA_CL, XI_SOFT,
+                           _describe(0.20, 0.40, 0.40, 1.30, suction_kPa=10.0)),
+    "chrono_hard": _chrono(2e7, 1.1, 20.0, 0.01, 2e8, BETA_CL, XI_HARD,
+                           _describe(0.20, 0.40, 0.40, 1.60, suction_kPa=30.0)),
 }
 
 

@@ -195,6 +195,8 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     pc = world.precompression_stress_Pa().reshape(g.shape)
     sig = st.sigma_max.reshape(*g.shape, len(depths))
     loaded = sig[:, :, 0] > 0
+    # the risk grades the traffic's stress plus the soil's own weight (terrain/density.py)
+    sig = np.where(loaded[:, :, None], sig + world.geostatic_Pa()[st.soil_index].reshape(sig.shape), sig)
     si, sj = _window(world, [loaded.astype(float)])
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)

@@ -97,7 +97,8 @@ def _subsoil_figures(world: World) -> dict:
     if not depths or not loaded.any():
         return {}
     pc = world.precompression_stress_Pa()
-    fr = subsoil.risk_area_fractions(sig.astype(np.float64), pc[:, None], loaded, world.grid.cell_m ** 2)
+    total = sig.astype(np.float64) + world.geostatic_Pa()[world.storage.soil_index]
+    fr = subsoil.risk_area_fractions(total, pc[:, None], loaded, world.grid.cell_m ** 2)
     out = {"subsoil_depths_m": list(depths),
            "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig[loaded].max(axis=0)],
            "subsoil_precompression_stress_kPa": 1e-3 * float(pc[loaded].min()),
@@ -110,7 +111,7 @@ def _subsoil_figures(world: World) -> dict:
 def _density_figures(world: World) -> dict:
     """The field's largest bulk density at each subsoil depth after the pass; empty when the pass's
     mean normal stress was not computed (only the terrain engine computes it)."""
-    p = world.pass_p_mean
+    p = world.pass_sigma
     if not world.storage.subsoil_depths_m or not p.size or not (p[:, 0] > 0).any():
         return {}
     return {"bulk_density_max_Mg_per_m3": world.bulk_density_max()}

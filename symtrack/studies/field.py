@@ -59,6 +59,7 @@ from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario
 from ..terrain import density, subsoil
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
+from ..terrain.wheeled import terrain_soils
 from ..terrain.world import padding_m
 from . import field_plots
 
@@ -373,6 +374,14 @@ def _copy_into(dst: Terrain, src: Terrain) -> None:
         dst.arrays()[name][...] = a
 
 
+def _with_own_weight(terrain: Terrain) -> np.ndarray:
+    """The terrain's largest vertical stress plus the soil's own weight where traffic loaded it: the
+    stress the risk grades (terrain/density.py)."""
+    sm = terrain.sigma_max.astype(np.float64)
+    geo = density.geostatic_table(terrain_soils(terrain), terrain.subsoil_depths_m)[terrain.soil_index]
+    return np.where(sm > 0, sm + geo, sm)
+
+
 def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa: float) -> dict:
     """The figures of one pattern's field (docs/studies.md): from the terrain after the passes and
     the passes-per-cell counts (n_cells,)."""
@@ -398,7 +407,7 @@ def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa
     depths = list(terrain.subsoil_depths_m)
     if depths:
         sm = terrain.sigma_max
-        fr = subsoil.risk_area_fractions(sm, precompression_stress_Pa, traff, area)
+        fr = subsoil.risk_area_fractions(_with_own_weight(terrain), precompression_stress_Pa, traff, area)
         out["subsoil_depths_m"] = depths
         out["subsoil_precompression_stress_kPa"] = 1e-3 * float(precompression_stress_Pa)
         out["subsoil_sigma_z_max_kPa"] = [1e-3 * float(v) for v in (sm[traff].max(axis=0) if n_t
@@ -610,7 +619,7 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult, figures: bool = True) -> 
     if depths:
         pc = float(spec.params["precompression_stress_Pa"])
         # a field of many cells in blocks, each its highest class (a rut of a few cells stays visible)
-        risk = subsoil.risk_class(pr.terrain.sigma_max, pc).reshape(*shape, len(depths))
+        risk = subsoil.risk_class(_with_own_weight(pr.terrain), pc).reshape(*shape, len(depths))
         risk, f = field_plots.block_max(risk, field_plots.RISK_MAP_BLOCKS)
         touched, _ = field_plots.block_max((pr.counts > 0).reshape(shape), field_plots.RISK_MAP_BLOCKS)
         blocks = f"\n(blocks of {f * g.cell_m:g} m: the highest class)" if f > 1 else ""

@@ -65,33 +65,16 @@ import math
 import numpy as np
 
 from ..foundations.errors import ParameterError
+from ..soil.pedotransfer import geostatic_vertical_stress_Pa
+from ..soil.pedotransfer import keller_arvidsson_2007 as keller_arvidsson_2007
 
 __all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "field_max", "initial_specific_volume",
-           "keller_arvidsson_2007", "load_update", "passes_at_constant_stress",
+           "geostatic_table", "keller_arvidsson_2007", "load_update", "passes_at_constant_stress",
            "pass_update", "precompression_stress_kPa", "soil_arrays", "specific_volume_after"]
 
 COMPRESSION_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
                            "particle_density_Mg_per_m3", "bulk_density_initial_Mg_per_m3", "yield_line_offset_ln_p",
                            "yield_compression_index_k2", "specific_volume_min")
-
-# Keller & Arvidsson (2007), Eur. J. Soil Sci. 58, 1373-1381, as soilphysics'
-# compressive_properties2 codes it: N and lambda linear in the initial specific volume, kappa one
-# value for all their soils
-_KA_N = (-0.007, 1.196)
-_KA_LAMBDA = (-0.182, 0.212)
-_KA_KAPPA = 0.042
-
-
-def keller_arvidsson_2007(particle_density_Mg_per_m3, bulk_density_Mg_per_m3) -> tuple[float, float, float]:
-    """(N, lambda, kappa) of Keller & Arvidsson's (2007) pedotransfer function at the specific
-    volume v = rho_s / rho_b: N = -0.007 + 1.196 v, lambda = -0.182 + 0.212 v, kappa = 0.042."""
-    rho_s, rho_b = float(particle_density_Mg_per_m3), float(bulk_density_Mg_per_m3)
-    if not (0.0 < rho_b < rho_s):
-        raise ParameterError(f"bulk_density_Mg_per_m3 = {bulk_density_Mg_per_m3!r} must be in (0, "
-                             f"particle_density_Mg_per_m3 = {rho_s!r})")
-    v = rho_s / rho_b
-    return _KA_N[0] + _KA_N[1] * v, _KA_LAMBDA[0] + _KA_LAMBDA[1] * v, _KA_KAPPA
-
 
 def initial_specific_volume(soil: dict) -> float:
     """rho_s / rho_initial of a soil's parameter set."""
@@ -100,13 +83,12 @@ def initial_specific_volume(soil: dict) -> float:
 
 def _yield_params(soil: dict) -> tuple[float, float, float]:
     """(m, k2, v_min) of a soil (the registry's defaults where a parameter set lacks them)."""
-    from ..model.parameters import (
-        SPECIFIC_VOLUME_MIN_DEFAULT,
-        YIELD_COMPRESSION_INDEX_K2_DEFAULT,
-        YIELD_LINE_OFFSET_DEFAULT,
-    )
+    from ..model.parameters import SPECIFIC_VOLUME_MIN_DEFAULT, YIELD_LINE_OFFSET_DEFAULT
+    from ..soil.pedotransfer import K2_POSITION_OSR
+
+    lam, kap = float(soil["compression_index_lambda"]), float(soil["recompression_index_kappa"])
     return (float(soil.get("yield_line_offset_ln_p", YIELD_LINE_OFFSET_DEFAULT)),
-            float(soil.get("yield_compression_index_k2", YIELD_COMPRESSION_INDEX_K2_DEFAULT)),
+            float(soil.get("yield_compression_index_k2", kap + K2_POSITION_OSR * (lam - kap))),
             float(soil.get("specific_volume_min", SPECIFIC_VOLUME_MIN_DEFAULT)))
 
 
@@ -172,7 +154,8 @@ def precompression_stress_kPa(v1, N, lambda_minus_kappa):
 
 
 def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: np.ndarray, soils,
-                cells: np.ndarray | None = None, cell_params: dict | None = None) -> int:
+                cells: np.ndarray | None = None, cell_params: dict | None = None,
+                geostatic_Pa: np.ndarray | None = None) -> int:
     """Fold one pass into the terrain's state: ``specific_volume`` (n_cells, n_depths) float32
     (0: the soil's initial state), ``pass_p_Pa`` the pass's largest mean normal stress per cell
     and depth (0 where the pass did not load); ``cells``: the cells the pass may have loaded (a
@@ -180,7 +163,9 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     entries that moved down the virgin line. Cells not loaded are not touched. ``cell_params``: each
     cell's own ``virgin_line_N``, ``compression_index_lambda`` and ``recompression_index_kappa``
     (float64 arrays over all cells: a moisture map of many values, terrain/moisture.py) instead of its
-    soil's; the initial state (rho_s / rho_initial) stays the soil's."""
+    soil's; the initial state (rho_s / rho_initial) stays the soil's. ``geostatic_Pa`` (n_soils,
+    n_depths): the soil's own weight at each depth, added to the pass's stress where the pass loaded
+    (:func:`geostatic_table`)."""
     if specific_volume.shape != pass_p_Pa.shape:
         raise ParameterError(f"pass_p_Pa has shape {pass_p_Pa.shape}, the terrain's specific volume "
                              f"{specific_volume.shape}")
@@ -194,6 +179,8 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     a = soil_arrays(soils)
     si = soil_index[cells]
     p = pass_p_Pa[cells].astype(np.float64)
+    if geostatic_Pa is not None:
+        p = np.where(p > 0, p + np.asarray(geostatic_Pa, dtype=np.float64)[si], p)
     old = specific_volume[cells].astype(np.float64)
     v_old = np.where(old > 0, old, a["v0"][si][:, None])
     if cell_params is None:
@@ -215,6 +202,17 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     if rows.size:  # only the cells that yielded are written (the others keep their bits)
         specific_volume[cells[rows]] = np.where(yielded[rows], line[rows], old[rows]).astype(np.float32)
     return int(np.count_nonzero(yielded))
+
+
+def geostatic_table(soils, depths_m) -> np.ndarray:
+    """(n_soils, n_depths) float64: each soil's own weight at each depth [Pa] (the vertical stress of
+    the moist soil above, symtrack/soil/pedotransfer.py), which :func:`pass_update` and the risk add
+    to the traffic's vertical stress."""
+    from ..model.parameters import SOIL_PARAMS  # the registry's description defaults (files written before it)
+
+    defaults = {s.name: s.default for s in SOIL_PARAMS if s.default is not None}
+    return np.array([geostatic_vertical_stress_Pa({**defaults, **sp}, depths_m) for sp in soils],
+                    dtype=np.float64).reshape(len(soils), len(depths_m))
 
 
 def bulk_density(specific_volume: np.ndarray, soil_index: np.ndarray, soils) -> np.ndarray:

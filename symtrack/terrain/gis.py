@@ -37,6 +37,7 @@ import numpy as np
 
 from ..foundations.errors import MissingExtraError, ScenarioError
 from ..foundations.files import atomic_write_bytes
+from . import density
 from .storage import Grid, Terrain
 from .subsoil import risk_class
 
@@ -253,6 +254,12 @@ LAYERS = (
 )
 
 
+def _soils(terrain: Terrain) -> list[dict]:
+    """The terrain's soils, soil 0 its own, then its soil map's (as terrain/wheeled.py's terrain_soils)."""
+    soil = terrain.soil or {}
+    return [dict(soil)] + [{**soil, **sp} for _, sp in terrain.soil_table]
+
+
 def layer_arrays(terrain: Terrain) -> dict:
     """The layers of :data:`LAYERS` of a terrain: name -> array (nx, ny) or (nx, ny, n_depths) in
     the layer's GeoTIFF type (the depth layers only when the terrain has subsoil depths)."""
@@ -271,7 +278,9 @@ def layer_arrays(terrain: Terrain) -> dict:
     if nd:
         sig = terrain.sigma_max.reshape(*shape, nd)
         out["stress_max"] = sig
-        out["risk_class"] = risk_class(sig, pc[..., None])
+        # the risk grades the traffic's stress plus the soil's own weight (terrain/density.py)
+        geo = density.geostatic_table(_soils(terrain), terrain.subsoil_depths_m)[terrain.soil_index].reshape(sig.shape)
+        out["risk_class"] = risk_class(np.where(sig > 0, sig + geo, sig), pc[..., None])
     types = {layer.name: layer.dtype for layer in LAYERS}
     return {k: v.astype(types[k]) for k, v in out.items()}
 

@@ -61,6 +61,8 @@ import operator
 import numpy as np
 
 from ..foundations.errors import ParameterError, ScenarioError
+from ..model.parameters import SOIL_PARAMS, check_set
+from ..soil.pedotransfer import precompression_from_virgin_line_kPa, virgin_line_N_from_precompression
 from . import gis
 
 __all__ = ["COMPRESSION_PTFS", "DAY_KEYS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
@@ -187,23 +189,28 @@ def apply_moisture(soil: dict, moisture, where: str = "soil.moisture") -> dict:
     if ptf is None and clay is None:
         raise ParameterError(f"{where} needs compression_ptf ({', '.join(COMPRESSION_PTFS)}) or clay_percent "
                              "(or both): without a pedotransfer function the water content changes nothing")
-    out = dict(soil)
+    derived = getattr(soil, "derived", {})
+    # what the soil's PTFs derived is derived again from the day's values (the k2 of new lines)
+    out = {k: v for k, v in soil.items() if not (k in derived and v == derived[k])}
+    out.pop("virgin_line_N", None)  # follows from the day's strength (symtrack/soil/pedotransfer.py)
     out["specific_volume_min"] = saturation_specific_volume(float(w), rs)
     try:
         if ptf is not None:
             if not isinstance(ptf, str):
                 raise ParameterError(f"compression_ptf = {ptf!r} must be a string ({', '.join(COMPRESSION_PTFS)})")
             N, lam, kap = defossez_2003(w, ptf)
-            out.update(virgin_line_N=N, compression_index_lambda=lam, recompression_index_kappa=kap)
+            out.update(compression_index_lambda=lam, recompression_index_kappa=kap)
+            if clay is None:  # Défossez's virgin line sets the day's strength
+                out["precompression_stress_Pa"] = 1e3 * float(precompression_from_virgin_line_kPa(rs / rb, N, lam, kap))
         if clay is not None:
             if isinstance(clay, bool) or not isinstance(clay, (int, float)):
                 raise ParameterError(f"clay_percent = {clay!r} is not a number")
             theta = float(w) * rb / WATER_DENSITY_MG_PER_M3
             h = severiano_2013_suction_kPa(theta, clay)
             out["precompression_stress_Pa"] = 1e3 * severiano_2013_precompression_kPa(clay, h)
+        return check_set(out, SOIL_PARAMS, where)
     except ParameterError as err:
         raise ParameterError(f"{where}: {err}") from err
-    return out
 
 
 MAP_KEYS = ("raster", "compression_ptf", "clay_percent")
@@ -330,6 +337,13 @@ def _day_arrays(soil: dict, w: np.ndarray, ptf: dict, where) -> dict:
     for k in DAY_KEYS:
         if k not in out:
             out[k] = np.full(w.shape, float(soil[k]))
+    # the one strength (apply_moisture's order): Défossez's virgin line sets it where no clay_percent
+    # does, and the virgin line always follows from it
+    v0 = rs / rb
+    lam, kap = out["compression_index_lambda"], out["recompression_index_kappa"]
+    if name is not None and clay is None:
+        out["precompression_stress_Pa"] = 1e3 * precompression_from_virgin_line_kPa(v0, out["virgin_line_N"], lam, kap)
+    out["virgin_line_N"] = virgin_line_N_from_precompression(v0, lam, kap, out["precompression_stress_Pa"])
     return out
 
 

@@ -412,12 +412,20 @@ class World:
                 "ode": h * ca.reshape(d, 2 * n, 1)}
 
     def fold_pass(self) -> None:
-        """At a pass's end: its largest vertical stress into the terrain's record, and its largest
-        mean normal stress into the soil's compression state (the bulk density, terrain/density.py)."""
+        """At a pass's end: its largest vertical stress into the terrain's record, and the same stress
+        plus the soil's own weight into the soil's compression state (the bulk density,
+        terrain/density.py): the density model and the risk grade one stress against one strength."""
         st = self.storage
         np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
-        density.pass_update(st.specific_volume, self.pass_p_mean, st.soil_index, self.soils,
-                            cells=np.flatnonzero(self.touched), cell_params=self.cell_day)
+        density.pass_update(st.specific_volume, self.pass_sigma, st.soil_index, self.soils,
+                            cells=np.flatnonzero(self.touched), cell_params=self.cell_day,
+                            geostatic_Pa=self.geostatic_Pa())
+
+    def geostatic_Pa(self) -> np.ndarray:
+        """(n_soils, n_depths): each soil's own weight at the subsoil depths [Pa] (density.geostatic_table)."""
+        if getattr(self, "_geostatic", None) is None:
+            self._geostatic = density.geostatic_table(self.soils, self.storage.subsoil_depths_m)
+        return self._geostatic
 
     def bulk_density_max(self) -> list[float]:
         """The field's largest bulk density [Mg/m^3] at each subsoil depth (terrain/density.py)."""
