@@ -79,6 +79,8 @@ def main(argv=None) -> int:
             print(f"| {soil} | {r['clay']:.2f} | {r['rho0']:.2f} | {r['suction_kPa']:.3g} | {r['pc_kPa']:.1f} "
                   f"({r['ptf']}) | {r['sigma01_kPa']:.1f} | {r['low01']:.2f}/{r['high01']:.2f} | {r['rut_mm']:.3f} "
                   f"| {r['comp_mm']:.3f} | {ratio:.3g} | {r['drho01']:.4f} |", flush=True)
+        if a.passes < 1:
+            return 0
         res, world = run(a.soil, a.passes)
         st = world.storage
         cells = np.flatnonzero(st.z > RUT_MIN_M)

@@ -495,6 +495,27 @@ static fmi2Status end_pass(Instance *c) {
         if (line < v_old) c->specific_volume[q] = (float)line;
       }
     }
+    /* density.cap_to_rut: the rut bounds the compression below it (the same operations) */
+    for (long long cell = 0; cell < n; ++cell) {
+      if (!E->touched[cell]) continue;
+      double v[EF_N_DEPTHS], strain[EF_N_DEPTHS];
+      for (long long k = 0; k < EF_N_DEPTHS; ++k) {
+        const double old = (double)c->specific_volume[cell * EF_N_DEPTHS + k];
+        v[k] = old > 0 ? old : EF_DENS_V0;
+        strain[k] = 1.0 - v[k] / EF_DENS_V0;
+      }
+      double total = strain[0] * ef_depths[0];
+      for (long long k = 1; k < EF_N_DEPTHS; ++k)
+        total = total + 0.5 * (strain[k - 1] + strain[k]) * (ef_depths[k] - ef_depths[k - 1]);
+      const double rut = E->z[cell] > 0.0 ? E->z[cell] : 0.0;
+      if (total > rut) {
+        const double f = rut / total;
+        for (long long k = 0; k < EF_N_DEPTHS; ++k) {
+          const long long q = cell * EF_N_DEPTHS + k;
+          if (c->specific_volume[q] > 0) c->specific_volume[q] = (float)(EF_DENS_V0 - f * (EF_DENS_V0 - v[k]));
+        }
+      }
+    }
 #endif
   }
 #endif

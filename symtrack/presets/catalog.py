@@ -22,13 +22,15 @@ from pathlib import Path
 
 from ..foundations.errors import ParameterError
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..soil.pedotransfer import derivation_note
 from . import soils, vehicles
 
 __all__ = ["PRESET_FILE_KEYS", "describe", "preset_file_kind", "preset_names", "preset_sources", "read_preset_file",
            "unit_of"]
 
 PRESET_FILE_KEYS = ("base", "description", "sources")
-_UNITS = (("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
+_UNITS = (("_kg_per_kg", "kg/kg"), ("_Mg_per_m3", "Mg/m^3"), ("_kPa", "kPa"),
+          ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
           ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_N_m", "N m"),
           ("_m_s", "m/s"), ("_rad", "rad"), ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_s", "s"), ("_m", "m"))
 
@@ -147,8 +149,12 @@ def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
               "elastic_stiffness_Pa_per_m": "#WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M",
               "unloading_stiffness_floor": "#UNLOADING_STIFFNESS_FLOOR"}
     raw = {} if name.endswith(".toml") or kind == "vehicle" else soils.SOILS.get(name, {})
+    derived = getattr(values, "derived", {})
     for s in specs:
         src = sources.get(s.name) or base.get(s.name) or base.get(consts.get(s.name, ""), "") or base.get("*", "")
+        if s.name in derived:
+            rows.append((s.name, values[s.name], unit_of(s.name), s.description, derivation_note(s.name, values)))
+            continue
         if s.default is not None and kind == "soil" and s.name not in raw and not sources.get(s.name):
             src = f"the registry's default (symtrack/model/parameters.py): {_default_source(s.name)}"
         rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
@@ -161,7 +167,7 @@ def _default_source(name: str) -> str:
 
     const = {"repeated_loading_exponent": "REPEATED_LOADING_EXPONENT_DEFAULT",
              "stress_concentration_factor": "STRESS_CONCENTRATION_FACTOR_DEFAULT",
-             "precompression_stress_Pa": "PRECOMPRESSION_STRESS_DEFAULT_PA"}.get(name)
+             "yield_line_offset_ln_p": "YIELD_LINE_OFFSET_DEFAULT"}.get(name)
     lines = inspect.getsource(parameters).splitlines()
     for k, line in enumerate(lines):
         if const and line.startswith(const):

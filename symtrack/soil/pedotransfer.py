@@ -219,6 +219,21 @@ def precompression_from_virgin_line_kPa(v0, N, lambda_, kappa):
     return np.exp((np.asarray(N, dtype=np.float64) - v0) / (lambda_ - kappa))
 
 
+def derivation_note(name: str, soil: dict) -> str:
+    """How a derived parameter of a described soil was derived (``symtrack presets`` shows it)."""
+    if name == "precompression_stress_Pa":
+        ptf = precompression_ptf_kPa(soil)[1]
+        inputs = "clay, bulk density and suction" if ptf.startswith("Schj") else "clay class and suction"
+        return f"derived from {inputs} by {ptf}"
+    if name in ("compression_index_lambda", "recompression_index_kappa"):
+        return "derived from the initial specific volume (rho_s / rho_b) by Keller & Arvidsson (2007)"
+    if name == "virgin_line_N":
+        return "derived: the virgin line through the initial state at the precompression stress (one strength)"
+    if name == "yield_compression_index_k2":
+        return "derived: kappa + 0.241 (lambda - kappa), the published set's position (O'Sullivan & Robertson 1996)"
+    return ""
+
+
 def derive_soil(values: dict, where: str = "soil") -> dict:
     """The soil's derived parameters (module doc) filled into a copy of ``values``, which holds the
     description (texture, bulk density, particle density, suction) and any given values; the virgin

@@ -69,7 +69,7 @@ from ..soil.pedotransfer import geostatic_vertical_stress_Pa
 from ..soil.pedotransfer import keller_arvidsson_2007 as keller_arvidsson_2007
 
 __all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "field_max", "initial_specific_volume",
-           "geostatic_table", "keller_arvidsson_2007", "load_update", "passes_at_constant_stress",
+           "cap_to_rut", "column_compression_m", "geostatic_table", "keller_arvidsson_2007", "load_update", "passes_at_constant_stress",
            "pass_update", "precompression_stress_kPa", "soil_arrays", "specific_volume_after"]
 
 COMPRESSION_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
@@ -202,6 +202,44 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     if rows.size:  # only the cells that yielded are written (the others keep their bits)
         specific_volume[cells[rows]] = np.where(yielded[rows], line[rows], old[rows]).astype(np.float32)
     return int(np.count_nonzero(yielded))
+
+
+def column_compression_m(v1, v0, depths_m) -> np.ndarray:
+    """How far each cell's column has shortened [m]: the integral over depth of its vertical strain
+    1 - rho0/rho = 1 - v1/v0 (mass conservation of a column that densifies from rho0 to rho), by the
+    trapezoid rule over (0, depths), the strain at the surface taken as at the first depth and none
+    below the last. ``v1`` (n_cells, n_depths) float64 (the state, the initial v0 where unmoved),
+    ``v0`` (n_cells,)."""
+    v0 = np.asarray(v0, dtype=np.float64)[:, None]
+    strain = 1.0 - v1 / v0
+    total = strain[:, 0] * float(depths_m[0])
+    for k in range(1, len(depths_m)):
+        total = total + 0.5 * (strain[:, k - 1] + strain[:, k]) * (float(depths_m[k]) - float(depths_m[k - 1]))
+    return total
+
+
+def cap_to_rut(specific_volume: np.ndarray, cells: np.ndarray, v0: np.ndarray, depths_m, rut_m: np.ndarray) -> int:
+    """The rut bounds the compression below it (docs/subsoil.md, "One soil"): a column cannot shorten
+    more than its surface sank (nothing heaves under the track; the rest of the rut is soil that flowed
+    aside). Where a cell's :func:`column_compression_m` exceeds its plastic rut ``rut_m`` (its stored
+    sinkage, >= 0), its compression at every depth is scaled by rut / compression towards the initial
+    state v0. ``cells``, ``v0`` (per cell) and ``rut_m`` aligned. In place; returns the number of cells
+    scaled. A depth at its initial state keeps its stored value (0) bit for bit."""
+    cells = np.asarray(cells, dtype=np.int64)
+    if cells.size == 0 or specific_volume.shape[1] == 0:
+        return 0
+    old = specific_volume[cells].astype(np.float64)
+    v0 = np.asarray(v0, dtype=np.float64)
+    v = np.where(old > 0, old, v0[:, None])
+    comp = column_compression_m(v, v0, depths_m)
+    rut = np.maximum(np.asarray(rut_m, dtype=np.float64), 0.0)
+    over = np.flatnonzero(comp > rut)
+    if over.size == 0:
+        return 0
+    f = rut[over] / comp[over]
+    scaled = v0[over, None] - f[:, None] * (v0[over, None] - v[over])
+    specific_volume[cells[over]] = np.where(old[over] > 0, scaled, old[over]).astype(np.float32)
+    return int(over.size)
 
 
 def geostatic_table(soils, depths_m) -> np.ndarray:

@@ -62,7 +62,8 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, npz_bytes
-from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
+from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
+from ..soil.pedotransfer import derive_soil, precompression_from_virgin_line_kPa
 
 __all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes", "load",
            "save"]
@@ -366,4 +367,25 @@ def load(path, soil: dict | None = None) -> Terrain:
     # the parameters added since the file was written that no scenario gave: the registry's defaults
     st.soil.update({n: float(spec(n).default) for n in SOIL_PARAM_NAMES
                     if n not in st.soil and spec(n).default is not None})
+    st.soil.update(_derived_missing(st.soil))
     return st
+
+
+def _derived_missing(soil: dict) -> dict:
+    """The derived soil parameters (symtrack/soil/pedotransfer.py) a file written before them lacks:
+    derived from its description (the registry's defaults where it has none); the file's own virgin
+    line, if it has one, sets the strength."""
+    missing = [n for n in DERIVED_SOIL_PARAM_NAMES if n not in soil]
+    if not missing:
+        return {}
+    vals = {**soil, **{n: None for n in missing}}
+    if "precompression_stress_Pa" in missing and soil.get("virgin_line_N") is not None:
+        v0 = float(soil["particle_density_Mg_per_m3"]) / float(soil["bulk_density_initial_Mg_per_m3"])
+        lam = vals["compression_index_lambda"]
+        kap = vals["recompression_index_kappa"]
+        if lam is not None and kap is not None:
+            vals["precompression_stress_Pa"] = 1e3 * float(precompression_from_virgin_line_kPa(
+                v0, float(soil["virgin_line_N"]), float(lam), float(kap)))
+    vals["virgin_line_N"] = None
+    out = derive_soil(vals, "terrain file soil")
+    return {n: float(out[n]) for n in missing}

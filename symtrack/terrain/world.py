@@ -417,9 +417,13 @@ class World:
         terrain/density.py): the density model and the risk grade one stress against one strength."""
         st = self.storage
         np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
+        cells = np.flatnonzero(self.touched)
         density.pass_update(st.specific_volume, self.pass_sigma, st.soil_index, self.soils,
-                            cells=np.flatnonzero(self.touched), cell_params=self.cell_day,
-                            geostatic_Pa=self.geostatic_Pa())
+                            cells=cells, cell_params=self.cell_day, geostatic_Pa=self.geostatic_Pa())
+        # the rut bounds the compression below it: one deformation (density.cap_to_rut)
+        if st.subsoil_depths_m:
+            v0 = density.soil_arrays(self.soils)["v0"][st.soil_index[cells]]
+            density.cap_to_rut(st.specific_volume, cells, v0, st.subsoil_depths_m, st.z[cells])
 
     def geostatic_Pa(self) -> np.ndarray:
         """(n_soils, n_depths): each soil's own weight at the subsoil depths [Pa] (density.geostatic_table)."""
