@@ -40,7 +40,7 @@ Schema (unknown keys are errors; ranges in brackets)::
     [mpc]                             # any field of symtrack.control.mpc.MPCSettings
     horizon_steps = 20
     sample_time_s = 0.1
-    solver = "ipopt"
+    solver = "rti"                    # rti (default) | ipopt | fatrop
     [model]                           # optional: any field of symtrack.model.options.ModelOptions,
     lateral_law = "creep"             # for the plant and the prediction (docs/turning.md; default:
                                       # "shear", the soil's own strength)
