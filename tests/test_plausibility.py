@@ -3,8 +3,8 @@
 import logging
 
 import pytest
-
 from conftest import run_once
+
 from symtrack.control import scenario as mpc_scenario
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.model import plausibility
