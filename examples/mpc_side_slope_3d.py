@@ -7,7 +7,7 @@
 
 The built-in MPC scenario ``straight_offset`` (60 m along +x at 2 m/s, sandy loam 15 %, the default
 "shear" law) with ``model.vehicle = "3d"``, solved by the RTI (``--solver``, default "rti": the
-real-time solver; the scenario's own is IPOPT), on a ground rising toward +y (``[terrain.surface]
+real-time solver, the package's default), on a ground rising toward +y (``[terrain.surface]
 slope_y_deg``): the right track is the lower one. Beside the closed loop, the open loop: the start's
 trim torques held for the same time on the same plant (CVODES), which drifts downhill.
 

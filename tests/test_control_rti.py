@@ -49,8 +49,29 @@ def test_rti_settings_validation():
     assert MPCSettings(solver="rti").solver == "rti"
     # the RTI's defaults (issue 21): compiled, DAQP; the NLP solvers interpreted unless asked
     assert MPCSettings(solver="rti").uses_jit and MPCSettings(solver="rti").rti_qp_solver == "daqp"
-    assert not MPCSettings().uses_jit and MPCSettings(jit=True).uses_jit
+    assert not MPCSettings(solver="ipopt").uses_jit and MPCSettings(solver="ipopt", jit=True).uses_jit
     assert not MPCSettings(solver="rti", jit=False).uses_jit
+
+
+def test_the_default_solver_is_the_rti():
+    """The solver that meets the sample time is the default, of MPCSettings and of every built-in
+    scenario (issue 37: IPOPT, the default before, failed solves and overran the sample time)."""
+    assert MPCSettings().solver == "rti" and MPCSettings().uses_jit
+    for name in S.builtin_names():
+        assert S.load(name).mpc.solver == "rti", name
+
+
+def test_the_cold_start_prepares_the_first_feedback_at_its_own_measurement(model):
+    """The closed loop steps on the measurement the cold start solved for: the first feedback is
+    linearised at the cold solution (the measurement's own state), not at its shift one sample
+    ahead, which started straight_offset's first sample (1 m offset) 1.9 off the dynamics and failed."""
+    sc, x, u, ref = _problem(model, solver="rti", jit=False)
+    mpc = PathTrackingMPC(model, sc.params, sc.mpc)
+    assert mpc.prepare(x[:model.layout.nv], x[model.layout.nv:], u, ref).success
+    x0s = mpc._x0s(x[:model.layout.nv], u)
+    np.testing.assert_allclose(mpc.rti.lin["X"][0], x0s, rtol=0, atol=1e-12)
+    u1, info = mpc.step(x[:model.layout.nv], x[model.layout.nv:], u, ref)
+    assert info.success and "fallback" not in info.status and "re-linearised" not in info.status, info.status
 
 
 @pytest.mark.parametrize("huber", [0.0, 0.2])

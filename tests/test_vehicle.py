@@ -183,3 +183,27 @@ def test_with_the_cap_the_creep_law_turns_on_clay(params):
         trim(SystemModel(ModelOptions(lateral_law="creep")), params, 2.0, 20.0)
     tp = trim(SystemModel(ModelOptions(lateral_law="creep", lateral_shear_cap=True)), params, 2.0, 20.0)
     assert tp.u[0] < 0 < tp.u[1]  # a left turn: the inner (left) sprocket brakes
+
+
+@pytest.mark.parametrize("speed_m_s", [0.3, 1.0, 4.0])
+def test_reported_slip_is_the_true_slip_in_straight_running(model, params, speed_m_s):
+    """slip = 1 - v / (r omega): a true slip of 1e-5 (straight running) is reported as 1e-5, not with
+    the offset of a dimensionally inconsistent regularisation (which gave 1.45e-3 at 1 m/s)."""
+    r = params["sprocket_radius_m"]
+    omega = speed_m_s / (r * (1 - 1e-5))
+    x = _state(model, u_m_s=speed_m_s, omega_left_rad_s=omega, omega_right_rad_s=omega)
+    for k in ("left", "right"):
+        # the regularisation's relative error (eps / (r omega))^2: 1.1e-3 at 0.3 m/s, 1e-4 at 1 m/s
+        assert _out(model, x, model.param_vector(params), f"slip_{k}") == pytest.approx(1e-5, rel=1.2e-3)
+
+
+def test_reported_slip_is_regularised_through_omega_zero():
+    """track_slip is 0 at omega = 0, bounded near it, and the exact slip once r omega >> SLIP_SPEED_SCALE_M_S;
+    it depends on r omega and v only (dimensionally consistent: r scaled at fixed tread speed is the same)."""
+    from symtrack.model.vehicle import SLIP_SPEED_SCALE_M_S, track_slip
+    assert float(track_slip(1.0, 0.0, 0.38)) == 0.0
+    eps = SLIP_SPEED_SCALE_M_S
+    assert abs(float(track_slip(1.0, eps / 0.38, 0.38))) <= 1.0 / (2 * eps) + 1e-9
+    assert float(track_slip(0.7, 2.0, 0.5)) == pytest.approx(0.3, rel=1e-4)
+    assert float(track_slip(0.7, 2.0, 0.5)) == pytest.approx(float(track_slip(0.7, 1.0, 1.0)), rel=1e-12)
+    assert float(track_slip(-0.7, -2.0, 0.5)) == pytest.approx(0.3, rel=1e-4)  # reversing: the same slip

@@ -154,7 +154,8 @@ def add_parsers(sub) -> None:
     mp.add_argument("--out", required=True, help="output folder")
     mp.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="override a scenario value")
     mp.add_argument("--solver", choices=("ipopt", "fatrop", "rti"),
-                    help="shorthand for --set mpc.solver=... (rti: real-time iteration, docs/control.md)")
+                    help="shorthand for --set mpc.solver=... (default rti, the real-time iteration; ipopt and fatrop "
+                    "solve the NLP to convergence, not in real time: docs/control.md)")
     mp.add_argument("--jit", action="store_true",
                     help="compile the solver's functions (gcc; cached across runs under ~/.cache/symtrack)")
     mp.add_argument("--plant", choices=("homogeneous", "grid"),

@@ -200,10 +200,13 @@ static void accept(const double *w) {
   plan_age = 0;
 }
 
-static int prepare_next(const double *xc) {
+/* linearise at the plan shifted one sample ahead (shift = 1: the next sample's guess), or at the plan itself
+ * (shift = 0: the cold start, whose first feedback comes on the measurement it was solved for; as
+ * PathTrackingMPC._prepare_rti) */
+static int prepare_next(const double *xc, int shift) {
   double *o1[] = {l_w};
   const double *in1[] = {c_w};
-  if (plan_age == 0) {
+  if (shift && plan_age == 0) {
     if (call(mpc_rti_shift_guess, 1, in1, 1, o1)) return 1;
   } else {
     memcpy(l_w, c_w, sizeof l_w);
@@ -315,7 +318,7 @@ int main(int argc, char **argv) {
   for (int i = 0; i < MPC_NCELL; i++) xc[i] = pl_x[mpc_cell_index[i]];
   /* the cold start (solved by the codegen command, as the Python loop solves it before it engages) */
   accept(mpc_w_cold);
-  if (prepare_next(xc)) {
+  if (prepare_next(xc, 0)) {
     fprintf(stderr, "mpc_closed_loop: the first preparation failed\n");
     return 1;
   }
@@ -355,7 +358,7 @@ int main(int argc, char **argv) {
       memcpy(c_w, ws, sizeof c_w);
     }
     /* the preparation of the next sample: shift, linearise, condense (no measurement) */
-    if (prepare_next(xc)) {
+    if (prepare_next(xc, 1)) {
       fprintf(stderr, "mpc_closed_loop: preparation failed at t = %g s\n", t);
       return 1;
     }

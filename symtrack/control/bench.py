@@ -204,7 +204,7 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
             desc = f"linear MPC (OSQP) on the linearization at straight running, N = {sc.mpc.horizon_steps}"
         else:
             rti = name.startswith("nmpc_rti")
-            cfg = {} if name == "nmpc_ipopt_plain" else (dict(RTI_CONFIG) if rti else fast)
+            cfg = {"solver": "ipopt"} if name == "nmpc_ipopt_plain" else (dict(RTI_CONFIG) if rti else fast)
             if name == "nmpc_rti_daqp":  # the same RTI with DAQP (dual active set) on the dense QP
                 cfg["rti_qp_solver"] = "daqp"
             if name == "nmpc_rti_default":  # the RTI's defaults (jit, DAQP, the scenario's cost: issue 21)
@@ -268,7 +268,7 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
     for pred in ("vehicle", "full"):
         # the exact law in the prediction (no regularisation of the sliding direction): the
         # comparison is with the plant, started at the exact law's trim
-        mpc = PathTrackingMPC(model, params, MPCSettings(horizon_steps=N, sample_time_s=sample_time_s,
+        mpc = PathTrackingMPC(model, params, MPCSettings(horizon_steps=N, sample_time_s=sample_time_s, solver="ipopt",
                                                          prediction=pred, prediction_sliding_smoothing=None,
                                                          prediction_sliding_sign="model"))
         fn = mpc.stage_fn

@@ -126,7 +126,11 @@ class MPCSettings:
 
     horizon_steps: int = 20
     sample_time_s: float = 0.1
-    solver: str = "ipopt"
+    # the real-time iteration by default: it meets the 0.1 s sample time with margin (feedback about
+    # 1 ms) and fails no solve on the built-in scenarios, where IPOPT took a median 127.5 ms on the
+    # U-turn (222 of 336 samples over the sample time) and failed 4 solves there (docs/control.md,
+    # "The default solver"); "ipopt" and "fatrop" solve the NLP to convergence
+    solver: str = "rti"
     # compile the solver's functions once into the solver cache; None: the solver's default (see
     # ``uses_jit``): on for the RTI (its feedback is the real-time path: with DAQP, median / p95
     # 1.5 / 2.4 ms against 2.6 / 4.6 ms interpreted with qrqp on the clay U-turn, docs/control.md),
@@ -174,8 +178,11 @@ class MPCSettings:
     rti_max_defect: float = 0.1
     rti_step_halvings: int = 3
     # Gauss-Newton iterations after a rejected RTI step, each linearised at the shortest step of
-    # the one before, before the NLP fallback (symtrack.control.rti.RTI.feedback; docs/control.md)
-    rti_relinearisations: int = 1
+    # the one before, before the NLP fallback (symtrack.control.rti.RTI.feedback; docs/control.md).
+    # 3: straight_offset's 1 m approach needs 2 at its hardest samples (1 left 6 failed solves
+    # there, IPOPT's fallback hitting max_iter; measured, docs/control.md); each costs about 2 ms
+    # and only on a rejected step
+    rti_relinearisations: int = 3
 
     def __post_init__(self):
         def rng(name, lo, hi, integer=False, lo_open=False):
@@ -846,7 +853,16 @@ class PathTrackingMPC:
         info = SolveInfo(ok, time.perf_counter() - t0, iters, status)
         if ok:
             self._accept(w)
-            self._prepare_next_rti(x_cells)
+            # the first feedback comes on the measurement the cold start solved for (the closed loop
+            # prepares and steps at one instant): linearise at the cold solution itself, not at its
+            # shift one sample ahead. From the shift, straight_offset's first sample (1 m offset, the
+            # torques swinging by 4 kN m in the first sample) started 1.9 (scaled) off the measurement
+            # and failed (the RTI step and IPOPT's fallback).
+            try:
+                self.rti.prepare_at(w, self.p_model, self._cells(x_cells))
+            except (RuntimeError, np.linalg.LinAlgError) as err:
+                log.warning("RTI preparation failed (%s); the first sample prepares again", err)
+                self.rti.lin = None
         return info
 
     def _accept(self, wopt):

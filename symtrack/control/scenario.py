@@ -40,7 +40,7 @@ Schema (unknown keys are errors; ranges in brackets)::
     [mpc]                             # any field of symtrack.control.mpc.MPCSettings
     horizon_steps = 20
     sample_time_s = 0.1
-    solver = "ipopt"
+    solver = "rti"                    # rti (default) | ipopt | fatrop
     [model]                           # optional: any field of symtrack.model.options.ModelOptions,
     lateral_law = "creep"             # for the plant and the prediction (docs/turning.md; default:
                                       # "shear", the soil's own strength)
@@ -66,6 +66,7 @@ from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_document, check_keys, integer, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators.settings import EngineSettings
+from ..model import plausibility
 from ..model.options import ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets import soil_preset, vehicle_preset
@@ -256,8 +257,14 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
     model = _model(d.get("model", {}))
     terrain, surface = parse_ground(d.get("terrain"), model, veh,
                                     "the MPC's grid plant: --plant grid or [terrain]")
+    mpc = _mpc(d.get("mpc", {}))
+    try:  # what no crawler has (symtrack.model.plausibility): refused, or warned in one line
+        plausibility.check_vehicle(veh)
+        plausibility.check_torque(veh, mpc.torque_max_N_m, "mpc.torque_max_N_m")
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
     return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
-                       _mpc(d.get("mpc", {})), terrain, model, parse_engine(d.get("engine")), surface)
+                       mpc, terrain, model, parse_engine(d.get("engine")), surface)
 
 
 def builtin_names() -> list[str]:

@@ -21,11 +21,11 @@ from .layout import ContactPose, StateLayout, VehicleState
 from .options import SHEAR_LAWS, ModelOptions
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
-           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SOIL_PARAMS_USED", "TRACKS",
-           "VEHICLE_STATES", "codegen_options", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes",
-           "integrate_track", "internal_resistance_N", "lateral_resistance_max_N", "lateral_shear_rates",
-           "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
-           "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
+           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SLIP_SPEED_SCALE_M_S", "SOIL_PARAMS_USED",
+           "TRACKS", "VEHICLE_STATES", "codegen_options", "creep_lateral_force", "direction", "gauss_nodes",
+           "graded_nodes", "integrate_track", "internal_resistance_N", "lateral_resistance_max_N",
+           "lateral_shear_rates", "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates",
+           "sprocket_speed_abs", "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # Standard gravity (a true constant: CGPM 1901).
 GRAVITY_M_S2 = 9.80665
@@ -52,6 +52,12 @@ PLANAR_LATERAL_LAYOUT = StateLayout(tuple((b, PLANAR_LAYOUT.block_names_of(b)) f
                                     + (("lateral_shear", LATERAL_STATES),))
 INPUTS = ("torque_cmd_left_N_m", "torque_cmd_right_N_m")
 ALGEBRAIC = ("accel_x_m_s2", "accel_y_m_s2")
+
+# The tread speed r |omega| below which the reported slip (track_slip) fades to 0 instead of growing
+# without bound (1 - v / (r omega) has a pole at omega = 0). 1 cm/s lies far below any working speed
+# (crawlers work at 0.3-4 m/s): the slip is reported (r omega)^2 / ((r omega)^2 + eps^2) of its true value,
+# 1 - 1e-4 at a tread speed of 1 m/s, 0.99 at 0.1 m/s. An output only: no equation uses it.
+SLIP_SPEED_SCALE_M_S = 0.01
 
 # Vehicle-side parameters the equations use from the soil set.
 SOIL_PARAMS_USED = ("cohesion_Pa", "friction_angle_rad", "shear_modulus_K_m")
@@ -366,9 +372,13 @@ def sprocket_rates(j, omega, abs_om, v_track, torque, F, R_in, r, l, J):
     return -(2 * r / l) * abs_om * j + r * omega - v_track, (torque - r * (F + R_in)) / J
 
 
-def track_slip(v_track, omega, r, opts: ModelOptions):
-    """The track's longitudinal slip 1 - v / (r omega), regularised through omega = 0."""
-    return 1 - v_track * omega / (r * omega**2 + opts.omega_smoothing_rad_s * r)
+def track_slip(v_track, omega, r):
+    """The track's longitudinal slip i = 1 - v / (r omega), written (r omega - v) r omega / ((r omega)^2
+    + eps^2) with eps = SLIP_SPEED_SCALE_M_S: dimensionally consistent, exactly i times (r omega)^2 /
+    ((r omega)^2 + eps^2) (a relative error, never an offset: straight running at 1 m/s reports its true
+    slip), and 0 through r omega = 0 instead of a pole."""
+    tread = r * omega
+    return (tread - v_track) * tread / (tread**2 + SLIP_SPEED_SCALE_M_S**2)
 
 
 def track_signals(F, R_in, Rc, Fy, N, slip) -> dict:
@@ -510,7 +520,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     if transient:
         rates = {k: lateral_shear_rates(*lagged[k], abs_om[k], vy, rz, -e, l, r) for k in TRACKS}
         xdot = ca.vertcat(xdot, *(rates[k][0] for k in TRACKS), *(rates[k][1] for k in TRACKS))
-    signals = track_signals(F, R_in, Rc, Fy, N, {k: track_slip(v_track[k], omega[k], r, opts) for k in TRACKS})
+    signals = track_signals(F, R_in, Rc, Fy, N, {k: track_slip(v_track[k], omega[k], r) for k in TRACKS})
     return {
         "xdot": xdot,
         "acc_implied": acc_implied,

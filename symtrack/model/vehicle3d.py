@@ -407,7 +407,7 @@ class Vehicle3D:
                 derivs[f"lateral_shear_{k}_m"], derivs[f"shear_twist_{k}_rad"] = rates_lat[k]
         for name, v in derivs.items():
             xdot[lay.index(name)] = v
-        signals.update(track_signals(F, R_in, Rc, Fy, N, {k: track_slip(v_tracks[k], omega[k], r, opts)
+        signals.update(track_signals(F, R_in, Rc, Fy, N, {k: track_slip(v_tracks[k], omega[k], r)
                                                           for k in TRACKS}))
         signals["pitch_rad"] = pitch
         signals["roll_rad"] = roll

@@ -35,6 +35,7 @@ import numpy as np
 from ..foundations.errors import SimulationError
 from ..foundations.interrupt import raise_if_interrupted, watch_interrupts
 from ..foundations.progress import Progress
+from ..model.plausibility import check_speed
 from .result import RunResult
 
 __all__ = ["IncompleteRun", "OutputGrid", "SampleGrid", "SampledLaw", "StartPoint", "run"]
@@ -295,6 +296,12 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 us.append(np.array([u for _, _, _, u in ivs[:k]]))
                 ys.append(np.array(Y[:k]))
                 t, x = float(times[-1]), xs[-1][-1]
+                speeds = np.hypot(xs[-1][:, iu], xs[-1][:, iv])
+                try:  # faster than any crawler: stopped (symtrack.model.plausibility.MAX_SPEED_M_S)
+                    check_speed(float(np.max(speeds)), float(times[int(np.argmax(speeds))]))
+                except SimulationError as err:
+                    failure = err
+                    break
                 frac = t / run_cfg.duration_s
                 # a law that knows how far it is (a path follower: the arc length driven) says so
                 frac = max(frac, float(getattr(torque_law, "progress_fraction", 0.0) or 0.0))

@@ -60,6 +60,7 @@ from ..foundations.config import check_document, check_keys, number, read_docume
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
 from ..integrators.settings import EngineSettings, IntegratorSettings
+from ..model import plausibility
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..model.vehicle3d import check_contact, check_grid, check_raster, check_terrain
@@ -378,6 +379,11 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
             raise ScenarioError(str(err)) from err
     start = _parse_start(d.get("start", {}))
     torque = _parse_torque(d.get("torque"))
+    try:  # what no crawler has (symtrack.model.plausibility): refused, or warned in one line
+        plausibility.check_vehicle(vehicle)
+        plausibility.check_torque(vehicle, max(max(abs(e.left_N_m), abs(e.right_N_m)) for e in torque), "torque")
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
     terrain, surface = parse_ground(d.get("terrain"), model, vehicle,
                                     engine=registry.get(run.integrator, "run.integrator").grid_engine is not None,
                                     start=(start.x_m, start.y_m))

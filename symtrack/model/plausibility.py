@@ -1,0 +1,109 @@
+"""Plausibility of a vehicle and of a run: what no agricultural or construction crawler has.
+
+The parameter registry (:mod:`symtrack.model.parameters`) bounds each value on its own (a mass
+above 0, a radius below 5 m). The rules here bound what a value means together with the others,
+so that a unit typed wrong (tonnes where kg are meant: ``mass_kg = 7.0``) or a geometry no
+crawler has is caught before a run reports it as complete. Each rule's numbers live here, with
+their reasoning; the scenario checks (:mod:`symtrack.simulation.scenario`,
+:mod:`symtrack.control.scenario`) call :func:`check_vehicle` and :func:`check_torque`, the time loop
+(:mod:`symtrack.simulation.loop`) :func:`check_speed`.
+
+Refused (:class:`~symtrack.foundations.errors.ParameterError`, named as the registry's messages:
+the key, the value, the allowed range):
+
+- mean ground pressure m g / (2 b l) outside :data:`GROUND_PRESSURE_RANGE_KPA`;
+- a track as wide as the gauge or wider (:data:`TRACK_WIDTH_OVER_GAUGE_MAX`): the tracks overlap.
+
+Warned (one line, the run goes on): a contact length outside :data:`CONTACT_LENGTH_OVER_GAUGE_RANGE`
+times the gauge, and a torque programme that pushes more than :data:`TRACTION_OVER_WEIGHT_MAX`
+times the vehicle's weight.
+
+Stopped (:class:`~symtrack.foundations.errors.SimulationError`): a run whose speed exceeds
+:data:`MAX_SPEED_M_S`.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from ..foundations.errors import ParameterError, SimulationError
+from .vehicle import GRAVITY_M_S2
+
+__all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S",
+           "TRACK_WIDTH_OVER_GAUGE_MAX", "TRACTION_OVER_WEIGHT_MAX", "check_speed", "check_torque", "check_vehicle",
+           "ground_pressure_kPa"]
+
+log = logging.getLogger("symtrack.plausibility")
+
+# The mean ground pressure m g / (2 b l) of a crawler. Typical published values: the reference
+# crawler 25 kPa, rubber-tracked farm tractors and crawler dozers some tens of kPa to about 150 kPa,
+# low-ground-pressure (swamp) machines down to about 15-20 kPa. 5 and 300 kPa lie well outside what
+# any agricultural or construction crawler has (issue 37's bounds): below 5 kPa is a mass typed in
+# tonnes (7 kg on the reference tracks: 0.03 kPa), above 300 kPa a contact typed too small.
+GROUND_PRESSURE_RANGE_KPA = (5.0, 300.0)
+# track_gauge_m is the distance between the track centre-lines: the tracks are apart only while
+# the width b is below the gauge B (the gap between them is B - b).
+TRACK_WIDTH_OVER_GAUGE_MAX = 1.0
+# Contact length over gauge, l / B: Wong (Theory of Ground Vehicles) gives about 0.9-1.8 for
+# steerable tracked vehicles (the reference crawler 1.6). Outside 0.5-3 a skid-steered crawler
+# turns badly or not at all: warned, not refused (a study may explore it on purpose).
+CONTACT_LENGTH_OVER_GAUGE_RANGE = (0.5, 3.0)
+# The commanded thrust 2 |T| / r of both sprockets over the weight m g. The soil carries at most
+# about its friction and cohesion times the load (a drawbar pull near the weight on firm soil);
+# a torque programme asking more than twice the weight spins the tracks or, with a light mass,
+# accelerates the vehicle to speeds no crawler reaches: warned.
+TRACTION_OVER_WEIGHT_MAX = 2.0
+# The fastest tracked vehicles run at about 20 m/s (70 km/h, military); agricultural crawlers
+# 11 m/s (40 km/h) at most. A run faster than 30 m/s (108 km/h) is an implausible input (the mass
+# in tonnes, a torque in the wrong unit) or a numerical failure: it is stopped.
+MAX_SPEED_M_S = 30.0
+
+
+def ground_pressure_kPa(vehicle: dict) -> float:
+    """The mean ground pressure m g / (2 b l) [kPa] of a vehicle parameter set."""
+    return vehicle["mass_kg"] * GRAVITY_M_S2 / (2 * vehicle["track_width_m"] * vehicle["contact_length_m"]) / 1e3
+
+
+def check_vehicle(vehicle: dict, where: str = "vehicle") -> None:
+    """Refuse (ParameterError) or warn (one log line) where ``vehicle`` (a checked parameter set)
+    is outside what any agricultural or construction crawler has (module doc)."""
+    m, b, B, l = (float(vehicle[k]) for k in ("mass_kg", "track_width_m", "track_gauge_m", "contact_length_m"))
+    p = ground_pressure_kPa(vehicle)
+    lo, hi = GROUND_PRESSURE_RANGE_KPA
+    if not lo <= p <= hi:
+        hint = ""
+        if p < lo and lo <= 1e3 * p <= hi:
+            hint = f"; {where}.mass_kg is in kg ({m:g} t is mass_kg = {1e3 * m:g})"
+        elif p > hi:
+            hint = f"; {where}.track_width_m and {where}.contact_length_m are in m"
+        raise ParameterError(
+            f"{where}: mean ground pressure m g / (2 b l) = {p:.3g} kPa (mass_kg = {m:g}, track_width_m = {b:g}, "
+            f"contact_length_m = {l:g}) is outside the allowed range [{lo:g}, {hi:g}] kPa (no agricultural or "
+            f"construction crawler has it){hint}")
+    if b >= TRACK_WIDTH_OVER_GAUGE_MAX * B:
+        raise ParameterError(
+            f"{where}.track_width_m = {b:g} is outside the allowed range (0, {where}.track_gauge_m = {B:g}) "
+            f"(the gauge is the distance between the track centre-lines: the tracks would overlap)")
+    lo, hi = CONTACT_LENGTH_OVER_GAUGE_RANGE
+    if not lo <= l / B <= hi:
+        log.warning("%s: contact_length_m / track_gauge_m = %.3g is outside [%g, %g] (crawlers: about 0.9-1.8); "
+                    "the run goes on", where, l / B, lo, hi)
+
+
+def check_torque(vehicle: dict, torque_max_N_m: float, where: str = "torque") -> None:
+    """Warn (one log line) when commanded torques of ``torque_max_N_m`` on both sprockets push more
+    than :data:`TRACTION_OVER_WEIGHT_MAX` times the vehicle's weight."""
+    ratio = 2 * abs(torque_max_N_m) / float(vehicle["sprocket_radius_m"]) / (float(vehicle["mass_kg"]) * GRAVITY_M_S2)
+    if ratio > TRACTION_OVER_WEIGHT_MAX:
+        log.warning("%s: the largest torque %g N m on both sprockets pushes 2 T / r = %.3g x the weight m g "
+                    "(allowed up to %g; mass_kg = %g is in kg, torques in N m); the run goes on",
+                    where, torque_max_N_m, ratio, TRACTION_OVER_WEIGHT_MAX, float(vehicle["mass_kg"]))
+
+
+def check_speed(speed_m_s: float, t_s: float) -> None:
+    """Stop (SimulationError) a run whose speed exceeds :data:`MAX_SPEED_M_S`."""
+    if speed_m_s > MAX_SPEED_M_S:
+        raise SimulationError(
+            f"speed = {speed_m_s:.4g} m/s ({3.6 * speed_m_s:.4g} km/h) at t = {t_s:.3f} s is outside the allowed range "
+            f"[0, {MAX_SPEED_M_S:g}] m/s (faster than any crawler: check that vehicle.mass_kg is in kg and the "
+            f"torques in N m)")
