@@ -312,24 +312,41 @@ class LockBusy(Exception):
 
 
 @contextlib.contextmanager
-def file_lock(path, wait: bool = True):
+def file_lock(path, wait: bool = True, remove: bool = False):
     """An exclusive lock on the file ``path`` (created if missing; ``flock``: released when the
     holder exits or dies, so a killed holder never leaves it taken). The holder writes its process
     id into the file. ``wait=False``: :class:`LockBusy` at once when another process holds it.
-    Yields the process id written, or False where flock is missing (not POSIX: no lock).
-    The one lock of symtrack (the cache's entries, terrain files)."""
+    ``remove``: the holder removes the file when it lets go (on any exit but a kill; a file a killed
+    holder left is taken over by the next one); a process that locked a file its holder had just removed
+    sees it is gone and locks the path's new file. Yields the process id written, or False where flock is
+    missing (not POSIX: no lock). The one lock of symtrack (the cache's entries, terrain files, run folders)."""
     try:
         import fcntl
     except ImportError:  # not POSIX
         yield False
         return
     path = Path(path)
-    with open(path, "a+b") as fh:
+    while True:
+        fh = open(path, "a+b")  # noqa: SIM115 (closed below)
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except BlockingIOError:
             fh.seek(0)
-            raise LockBusy(path, fh.read(64).decode(errors="replace").strip()) from None
+            holder = fh.read(64).decode(errors="replace").strip()
+            fh.close()
+            raise LockBusy(path, holder) from None
+        except BaseException:
+            fh.close()
+            raise
+        if not remove:
+            break
+        try:  # still the file at ``path`` (not one its last holder removed meanwhile)?
+            if os.path.samestat(os.fstat(fh.fileno()), os.stat(path)):
+                break
+        except FileNotFoundError:
+            pass
+        fh.close()
+    with fh:
         try:
             fh.seek(0)
             fh.truncate()
@@ -337,6 +354,9 @@ def file_lock(path, wait: bool = True):
             fh.flush()
             yield os.getpid()
         finally:
+            if remove:
+                with contextlib.suppress(OSError):
+                    path.unlink()
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
