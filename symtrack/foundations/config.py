@@ -16,6 +16,7 @@ from importlib import resources
 from pathlib import Path
 
 from .errors import ScenarioError
+from .files import read_text
 
 __all__ = ["number", "integer", "check_document", "check_keys", "parse_override", "apply_overrides", "builtin_names",
            "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
@@ -150,7 +151,7 @@ def read_document(name_or_path: str, package: str, kind: str = "scenario", overr
     if path.suffix == ".toml" or (name_or_path not in names and path.exists()):
         if not path.is_file():
             raise ScenarioError(f"{kind} file {str(path)!r} does not exist")
-        text, default_name = path.read_text(), path.stem
+        text, default_name = read_text(path, f"{kind} file"), path.stem
         folder = path.resolve().parent
     elif name_or_path in names:
         text = resources.files(package).joinpath(name_or_path + ".toml").read_text()

@@ -3,6 +3,8 @@
 A reader never sees a half-written file: either the old content or the new. Every result file
 of symtrack is written through these functions. :func:`check_output_folder` and
 :func:`check_output_file` refuse, before any computation, an output that cannot be written.
+:func:`read_text` reads a user's text file (a scenario, a preset, a boundary) as UTF-8, or raises an
+error naming the file and what it holds instead (Latin-1, UTF-16, binary).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from pathlib import Path
 from .errors import ScenarioError
 
 __all__ = ["DEFLATE_LEVEL", "atomic_write_bytes", "atomic_write_text", "check_output_file", "check_output_folder",
-           "npz_bytes"]
+           "npz_bytes", "read_text"]
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -88,3 +90,30 @@ def check_output_file(path: str, option: str) -> Path:
         raise ScenarioError(f"{option} {path!r} is a folder: give a file name (e.g. out/terrain.npz)")
     check_output_folder(str(p.parent) if str(p.parent) else ".", option)
     return p
+
+
+def read_text(path, what: str = "file", error: type[Exception] = ScenarioError) -> str:
+    """The text of the UTF-8 file ``path`` (a UTF-8 byte-order mark dropped). A file that cannot be read
+    or is not UTF-8 text raises ``error`` (a :class:`ScenarioError` unless told) with one line naming
+    ``what`` and the file, and what it holds instead: UTF-16 (a byte-order mark, or a NUL in every other
+    byte), binary data (NUL bytes, which no text file holds), or another 8-bit encoding such as Latin-1
+    (the first byte that is not UTF-8, and its line)."""
+    label = f"{what} {str(path)!r}"
+    try:
+        data = Path(path).read_bytes()
+    except OSError as err:
+        raise error(f"{label}: cannot be read ({err.strerror or err})") from None
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    head = data[:4096]
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")) or (len(head) >= 2 and max(
+            head[0::2].count(0), head[1::2].count(0)) >= 0.4 * len(head)):
+        raise error(f"{label} is UTF-16 text; save it as UTF-8 text")
+    if b"\x00" in data:
+        raise error(f"{label} holds NUL bytes: binary data, not a text file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = data.count(b"\n", 0, err.start) + 1
+        raise error(f"{label} is not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}, line {line}: "
+                    "Latin-1 or another 8-bit encoding?); save it as UTF-8 text") from None

@@ -797,7 +797,7 @@ def _resumable(folder, spec: FieldSpec) -> dict:
     try:
         if (folder / "field.resolved.toml").read_text() != to_toml(spec.document):
             return {}
-    except OSError:
+    except (OSError, ValueError):  # gone, unreadable, not UTF-8: nothing to resume
         return {}
     try:
         summary = json.loads((folder / "summary.json").read_text())
