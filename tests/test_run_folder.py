@@ -1,13 +1,15 @@
-"""A run's folder holds the user's files too (issue 38, items 1 and 4): a run removes or replaces only
-the files an earlier symtrack run recorded in the folder's manifest (``.symtrack-manifest.json``),
+"""A run's folder holds the user's files too (issue 38, items 1, 4 and 5): a run removes or replaces
+only the files an earlier symtrack run recorded in the folder's manifest (``.symtrack-manifest.json``),
 anything else stays with a one-line warning; two runs into one folder are refused at once by a lock
-on the folder's real path that is removed on every exit."""
+on the folder's real path that is removed on every exit; a terrain file replaced in place keeps its
+mode and owner, and a read-only one is refused before any work."""
 
 from __future__ import annotations
 
 import json
 import logging
 import os
+import stat
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +18,7 @@ import pytest
 
 from symtrack.cli.main import main
 from symtrack.foundations.errors import ScenarioError
+from symtrack.foundations.files import atomic_write_bytes
 from symtrack.reports import run_files
 from symtrack.reports.run_files import MANIFEST, OUTPUT_LOCK, output_lock, read_manifest, write_folder
 
@@ -145,3 +148,86 @@ def test_the_folder_lock_is_removed_on_an_error_and_on_ctrl_c(tmp_path):
     with pytest.raises(KeyboardInterrupt), output_lock(out):
         raise KeyboardInterrupt
     assert out.is_dir() and not any(out.iterdir())
+
+
+# one pass of 0.5 m on a 32 x 16 field on the terrain engine (tests/test_commit_once.py's)
+TINY = """
+name = "tiny_inplace"
+[run]
+duration_s = 5.0
+output_dt_s = 0.05
+integrator = "grid_fast"
+stop_after_distance_m = 0.3
+[vehicle]
+preset = "reference_crawler"
+[soil]
+preset = "clayey_soil_thailand_38"
+[terrain]
+size_m = [8.0, 4.0]
+origin_m = [-2.0, -2.0]
+cell_m = 0.25
+[[torque]]
+t_s = 0.0
+left_N_m = 1500.0
+right_N_m = 1500.0
+"""
+
+
+@pytest.fixture()
+def terrain_file(tmp_path):
+    from symtrack.presets import soil_preset
+    from symtrack.terrain import storage
+    from symtrack.terrain.storage import Grid, Terrain
+
+    f = tmp_path / "F.npz"
+    storage.save(f, Terrain(Grid((-2.0, -2.0), 0.25, (32, 16))), soil_preset("clayey_soil_thailand_38"))
+    sc = tmp_path / "tiny.toml"
+    sc.write_text(TINY)
+    return sc, f
+
+
+def _mode(p: Path) -> int:
+    return stat.S_IMODE(p.stat().st_mode)
+
+
+def test_a_terrain_file_replaced_in_place_keeps_its_mode_and_owner(terrain_file, tmp_path):
+    sc, f = terrain_file
+    f.chmod(0o640)
+    owner = None
+    if os.geteuid() == 0:  # root may give the file away: the run gives it back to its owner
+        os.chown(f, 12345, 23456)
+        owner = (12345, 23456)
+    before = f.read_bytes()
+    assert main(["simulate", str(sc), "--out", str(tmp_path / "o"), "--quiet", "--terrain-in", str(f),
+                 "--terrain-out", str(f)]) == 0
+    assert f.read_bytes() != before and _mode(f) == 0o640
+    if owner is not None:
+        assert (f.stat().st_uid, f.stat().st_gid) == owner
+    f.chmod(0o600)  # and any atomic write (Terrain.save, terrain convert) keeps it
+    atomic_write_bytes(f, before)
+    assert _mode(f) == 0o600 and f.read_bytes() == before
+    atomic_write_bytes(tmp_path / "new.txt", b"x")  # a new file: the umask's mode
+    assert _mode(tmp_path / "new.txt") == 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
+
+
+def test_a_read_only_terrain_file_is_refused_before_any_work(terrain_file, tmp_path, monkeypatch, capsys):
+    import symtrack
+
+    sc, f = terrain_file
+    f.chmod(0o444)
+    before = f.read_bytes()
+    monkeypatch.setattr(symtrack, "simulate", lambda *a, **k: pytest.fail("simulated onto a read-only file"))
+    for command in (["simulate", str(sc)], ["mpc", "straight_offset", "--plant", "grid"]):
+        assert main([*command, "--out", str(tmp_path / "o"), "--quiet", "--terrain-in", str(f),
+                     "--terrain-out", str(f)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"--terrain-out {str(f)!r} is read-only (mode 0444)" in err
+    assert main(["terrain", "convert", str(f), str(f)]) == 2  # any output file
+    assert "is read-only" in capsys.readouterr().err
+    assert f.read_bytes() == before and _mode(f) == 0o444 and not (tmp_path / "o").exists()

@@ -49,7 +49,7 @@ import numpy as np
 
 from ..foundations.config import to_toml
 from ..foundations.errors import ScenarioError
-from ..foundations.files import atomic_write_bytes
+from ..foundations.files import atomic_write_bytes, check_output_file, keep_mode
 from ..foundations.version import __version__
 from ..terrain.storage import Terrain, file_bytes
 from ..toolchain import LockBusy, file_lock
@@ -366,6 +366,8 @@ def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
     ``terrain`` file inside the folder that is the run's own, ``lock=False``). Returns the paths
     written, sorted."""
     out = Path(out_dir)
+    if terrain is not None:
+        check_output_file(str(terrain.path), "terrain_out")  # a read-only file is refused, not replaced
     try:
         with (output_lock(out), terrain_lock(terrain.path) if terrain is not None and terrain.lock
               else contextlib.nullcontext()):
@@ -393,6 +395,7 @@ def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | Non
             tpath = Path(terrain.path)
             terrain_tmp = tpath.with_name(f".{tpath.name}.{os.getpid()}.tmp")
             atomic_write_bytes(terrain_tmp, data)
+            keep_mode(tpath, terrain_tmp)  # replaced in place: the file keeps its mode and owner
         # commit: nothing above touched the output or the terrain file
         owned = read_manifest(out) or []
         if clear:
