@@ -5,7 +5,8 @@ Files of a ``symtrack simulate`` run (schemas documented in the README):
 
 - ``trajectory.csv``: one row per output step; header names carry units (t_s, states, commanded
   torques, then the model outputs);
-- ``scenario.resolved.toml``: the scenario with every value after presets and overrides;
+- ``scenario.resolved.toml``: the scenario with every value after presets and overrides, and the
+  ``symtrack_version`` that ran it;
 - ``*.png``: plots (the registry of :mod:`symtrack.reports.figures`; the slow ones, the pass
   animations ``*.gif`` and the earlier passes' plots, only with ``run.all_figures``), ``report.html``;
 - ``summary.json``: written last, so that its presence means the run finished.
@@ -47,7 +48,7 @@ from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from ..foundations.config import to_toml
+from ..foundations.config import to_toml, with_version
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, check_output_file, keep_mode
 from ..foundations.version import __version__
@@ -92,8 +93,9 @@ def trajectory_csv(res) -> str:
 def run_files(res, summary: dict, plots: dict[str, bytes]) -> dict[str, bytes | str]:
     """The files of one run: trajectory.csv, scenario.resolved.toml, ``plots`` (any further
     files, in order), summary.json."""
-    return {"trajectory.csv": trajectory_csv(res), "scenario.resolved.toml": to_toml(res.scenario.to_dict()),
-            **plots, "summary.json": json.dumps(summary, indent=2) + "\n"}
+    return {"trajectory.csv": trajectory_csv(res),
+            "scenario.resolved.toml": to_toml(with_version(res.scenario.to_dict())), **plots,
+            "summary.json": json.dumps(summary, indent=2) + "\n"}
 
 
 def validation_table(scenario, summary: dict) -> str | None:
@@ -173,7 +175,8 @@ class TerrainOut:
 
 
 def scenario_sha256(scenario) -> str:
-    """SHA-256 (hexadecimal) of the scenario's resolved TOML (scenario.resolved.toml)."""
+    """SHA-256 (hexadecimal) of the scenario's resolved TOML (scenario.resolved.toml without its
+    ``symtrack_version`` line: the same scenario hashes the same under every version)."""
     return hashlib.sha256(to_toml(scenario.to_dict()).encode()).hexdigest()
 
 
