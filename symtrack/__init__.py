@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import importlib
 
-__version__ = "0.1.0"
+from .foundations.version import __version__
 
 __all__ = ["Built", "Result", "Scenario", "SystemModel", "Terrain", "__version__", "build", "control",
            "export_terrain", "load_scenario", "simulate"]

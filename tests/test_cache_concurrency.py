@@ -63,4 +63,4 @@ def test_two_concurrent_builds_of_one_key_both_succeed_and_compile_once(tmp_path
     assert sum("-c" in line.split() for line in lines) == 1 and sum("-shared" in line.split() for line in lines) == 1
     assert ctypes.CDLL(str(out_so)).symtrack_race_answer() == 42
     assert not list(out_so.parent.glob(".build-*"))  # no temporary folder left behind
-    assert sorted(p.name for p in out_so.parent.iterdir()) == [".lock", "librace.so"]
+    assert sorted(p.name for p in out_so.parent.iterdir()) == [".lock", "librace.so", "librace.so.sha256.json"]

@@ -156,3 +156,29 @@ def test_result_and_terrain_show_what_they_are_and_column_names_each_once(tmp_pa
     else:
         df = res.to_pandas()
         assert list(df.columns)[0] == "t_s" and len(df) == len(res.t)
+
+
+def test_an_mpc_resolved_scenario_holds_every_model_option_and_the_version(tmp_path):
+    # issue 38, item 10: nobody could tell from an MPC run's folder which lateral law or vehicle ran
+    import tomllib
+
+    from symtrack import __version__
+    from symtrack.control import closedloop
+    from symtrack.model import ModelOptions
+    from symtrack.model.options import scenario_keys
+
+    sc = mpc_scenario.load("straight_offset")  # the defaults: no [model] section in the file
+    res = closedloop.run(sc, max_steps=2)
+    text = closedloop.closed_loop_files(res)["scenario.resolved.toml"]
+    doc = tomllib.loads(text)
+    assert doc["symtrack_version"] == __version__
+    defaults = ModelOptions()
+    assert set(doc["model"]) == {k for k in scenario_keys() if getattr(defaults, k) is not None}
+    assert doc["model"]["lateral_law"] == defaults.lateral_law and doc["model"]["vehicle"] == defaults.vehicle
+    f = tmp_path / "scenario.resolved.toml"
+    f.write_text(text)
+    assert mpc_scenario.load(str(f)).to_dict() == sc.to_dict()  # it loads back as the scenario run
+    # a simulate run's records the version too (its [model] held every option already)
+    sim = symtrack.simulate(symtrack.load_scenario("validation", {"run.duration_s": 0.2}))
+    doc = tomllib.loads(run_files.run_files(sim.runs[0], sim.summary, {})["scenario.resolved.toml"])
+    assert doc["symtrack_version"] == __version__ and doc["model"]["lateral_law"] == sim.scenario.model.lateral_law

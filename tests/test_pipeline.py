@@ -110,9 +110,8 @@ def test_a_figure_registered_in_a_test_is_drawn_and_written(tmp_path):
 def test_the_one_writer_writes_summary_last_and_clears_a_previous_run(tmp_path, monkeypatch):
     from symtrack.reports import run_files
 
-    (tmp_path / "summary.json").write_text("{}")
-    (tmp_path / "old.png").write_text("x")
-    (tmp_path / "pass_2").mkdir()
+    # a previous run's files (recorded in the folder's manifest), and the user's (not recorded)
+    run_files.write_folder(tmp_path, {"old.png": "x", "pass_2/summary.json": "{}", "summary.json": "{}"})
     (tmp_path / "notes.txt").write_text("mine")
     order = []  # the files as they arrive in the folder (moved from the staging folder beside it)
     real = run_files.os.replace
@@ -121,11 +120,13 @@ def test_the_one_writer_writes_summary_last_and_clears_a_previous_run(tmp_path, 
         real(a, b)))
     files = {"pass_1/summary.json": "{}", "summary.json": "{}\n", "pass_1/a.csv": "1", "b.png": b"png"}
     written = run_files.write_folder(tmp_path, files)
+    order = [n for n in order if n != run_files.MANIFEST]
     assert order == ["pass_1/a.csv", "b.png", "pass_1/summary.json", "summary.json"]
     assert not list(tmp_path.parent.glob(f".{tmp_path.name}.staging-*"))
     assert written == sorted(tmp_path / n for n in files)
     assert not (tmp_path / "old.png").exists() and not (tmp_path / "pass_2").exists()
     assert (tmp_path / "notes.txt").read_text() == "mine"
+    assert run_files.read_manifest(tmp_path) == sorted(files)
 
 
 def test_a_sampled_law_runs_on_its_own_clock():

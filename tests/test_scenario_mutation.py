@@ -4,22 +4,26 @@ validated scenario or the package's own error with a message, never a traceback 
 
 Mutations: a value replaced (wrong type, NaN, infinities, huge or negative numbers, unicode text,
 empty containers), a key deleted, an unknown key added, at any depth (arrays of tables too); and
-the whole text mangled (truncated, unicode inserted). A scenario that is accepted must also write
-itself back as TOML that reads back to the same document (scenario.resolved.toml)."""
+the whole text mangled (truncated, unicode inserted); the file saved in another encoding (Latin-1,
+cp1252, UTF-16, with a UTF-8 byte-order mark) or binary noise, through every file loader (issue 38,
+item 7: a one-line error naming the file, not a UnicodeDecodeError). A scenario that is accepted must
+also write itself back as TOML that reads back to the same document (scenario.resolved.toml)."""
 
 from __future__ import annotations
 
 import math
 import os
+import tempfile
 import tomllib
 from importlib import resources
+from pathlib import Path
 
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from symtrack.foundations.config import to_toml
 from symtrack.foundations.errors import SymtrackError
-from symtrack.studies.runs import KINDS, PACKAGES, load, package_names
+from symtrack.studies.runs import KINDS, PACKAGES, load, package_names, scenario_text
 
 BUILTINS = [(kind, name) for kind in KINDS for name in package_names(PACKAGES[kind])]
 
@@ -140,3 +144,73 @@ def test_the_writer_round_trips_strings_a_user_may_write():
     scenario.resolved.toml."""
     doc = {"name": "n", "description": 'two\nlines, a "quote", a\ttab, a \\ and 🚜\x7f\x01', "run": {"x": 1.0}}
     assert tomllib.loads(to_toml(doc)) == doc
+
+
+def _file_loaders(kind: str):
+    """The loaders of a scenario file of ``kind``: its own (``symtrack simulate / mpc / field``) and the
+    sweep's (:func:`symtrack.studies.runs.scenario_text`)."""
+    from symtrack.control.scenario import load as load_mpc
+    from symtrack.simulation.scenario import load_scenario
+    from symtrack.studies.field import load_field_spec
+    from symtrack.studies.operations import is_operation_document, load_operation_spec
+
+    def field(path):
+        return load_operation_spec(path) if is_operation_document(path) else load_field_spec(path)
+
+    def sweep(path):
+        text, name = scenario_text(path, PACKAGES[kind])
+        return load(kind, text, name)
+
+    return [{"simulate": load_scenario, "mpc": load_mpc, "field": field}[kind], sweep]
+
+
+ENCODINGS = ["latin-1", "cp1252", "utf-16", "utf-16-be", "utf-8-sig", "binary"]
+
+
+@settings(max_examples=int(os.environ.get("SYMTRACK_FUZZ_EXAMPLES", "60")), deadline=None)
+@given(st.sampled_from(BUILTINS), st.sampled_from(ENCODINGS), st.binary(min_size=1, max_size=64), st.data())
+def test_a_scenario_file_in_another_encoding_is_a_one_line_error_naming_it(builtin, encoding, noise, data):
+    kind, name = builtin
+    text, _ = _doc(kind, name)
+    text = "# Feld über der Straße, 3 °C\n" + text  # a comment a user writes, not ASCII
+    if encoding == "binary":
+        cut = data.draw(st.integers(0, len(text)))
+        raw = text.encode()[:cut] + noise + b"\x00" + text.encode()[cut:]
+    else:
+        raw = text.encode(encoding)
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / f"{name}.toml"
+        path.write_bytes(raw)
+        for loader in _file_loaders(kind):
+            try:
+                res = loader(str(path))
+            except SymtrackError as err:
+                msg = str(err)
+                assert "\n" not in msg and str(path) in msg, f"{kind} {name} {encoding}: {msg}"
+                assert encoding != "utf-8-sig", msg  # a UTF-8 byte-order mark is only dropped
+                assert ("NUL bytes" if encoding == "binary" else "UTF-16" if "16" in encoding else "not UTF-8") in msg
+                event(f"{encoding}: error")
+                continue
+            assert encoding == "utf-8-sig", f"{kind} {name}: {encoding} accepted"
+            event(f"{encoding}: accepted")
+            assert res is not None
+
+
+def test_the_cli_names_a_scenario_and_a_preset_file_that_are_not_utf8(tmp_path, capsys):
+    from symtrack.cli.main import main
+
+    text, _ = _doc("simulate", "validation")
+    sc = tmp_path / "latin.toml"
+    sc.write_bytes(("# über\n" + text).encode("latin-1"))
+    assert main(["simulate", str(sc), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"scenario file {str(sc)!r} is not UTF-8 text (byte 0xfc at offset 2, line 1" in err
+    assert not (tmp_path / "o").exists()
+    preset = tmp_path / "heavy.toml"
+    preset.write_bytes('base = "reference_crawler"\nmass_kg = 7000.0\ndescription = "Rüttler"\n'.encode("utf-16"))
+    sc.write_text(text.replace('preset = "reference_crawler"', f'preset = "{preset}"'))
+    assert main(["simulate", str(sc), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"vehicle.preset file {str(preset)!r} is UTF-16 text" in err
+    assert main(["presets", str(preset)]) == 2
+    assert "is UTF-16 text" in capsys.readouterr().err

@@ -49,7 +49,8 @@ def test_a_second_build_is_a_cache_hit_and_the_key_follows_the_sources(tmp_path,
         so = build.build(_spec(tmp_path, 42, calls))
     assert ctypes.CDLL(str(so)).symtrack_answer() == 42
     assert so.parent.parent == tmp_path and so.parent.name == f"answer-{build.digest(ANSWER % 42, '')[:16]}"
-    assert sorted(p.name for p in so.parent.iterdir()) == [".lock", "libanswer.so"]  # no temporary folder left
+    # no temporary folder left; the artefact's size and SHA-256 recorded beside it
+    assert sorted(p.name for p in so.parent.iterdir()) == [".lock", "libanswer.so", "libanswer.so.sha256.json"]
     assert any(f"compiling the answer 42 (first run; cached in {so.parent})" in r.getMessage()
                for r in caplog.records)
     assert len(build.builds) == n0 + 1 and build.builds[-1].path == so and build.builds[-1].kind == "answer"
@@ -132,7 +133,8 @@ def test_an_interrupted_build_leaves_no_half_written_library(tmp_path, sig):
                                      sources=lambda: {"answer.c": b"int symtrack_answer(void) { return 3; }\n"},
                                      shared_cflags=("-fPIC",)))
     assert so.parent == entry and ctypes.CDLL(str(so)).symtrack_answer() == 3
-    assert sorted(q.name for q in entry.iterdir()) == [".lock", "libanswer.so"]  # the killed build's folder is gone
+    # the killed build's folder is gone
+    assert sorted(q.name for q in entry.iterdir()) == [".lock", "libanswer.so", "libanswer.so.sha256.json"]
 
 
 def test_a_missing_compiler_is_a_clear_error(tmp_path, monkeypatch, caplog):
@@ -167,3 +169,81 @@ def test_the_cache_root_is_the_environment_variable_or_the_user_cache(monkeypatc
     assert spec.path == tmp_path / "mpc" / "k-0123456789abcdef0123-b2" / "x"
     monkeypatch.delenv("SYMTRACK_CACHE")
     assert build.cache_root() == Path.home() / ".cache" / "symtrack"
+
+
+@pytest.mark.parametrize("damage", ["truncated", "overwritten", "no record"])
+def test_a_damaged_cached_library_is_rebuilt_not_loaded(tmp_path, caplog, damage):
+    # a truncated shared library crashed the loader ("Bus error", exit 135): the cache checks the size
+    # and SHA-256 recorded when it was written, and builds a damaged one again
+    so = build.build(_spec(tmp_path, 42))
+    good = so.read_bytes()
+    record = so.with_name(so.name + ".sha256.json")
+    if damage == "truncated":
+        so.write_bytes(good[: len(good) // 3])
+    elif damage == "overwritten":
+        so.write_bytes(bytes(len(good)))
+    else:
+        record.unlink()
+    n0 = len(build.builds)
+    with caplog.at_level(logging.INFO, logger="symtrack.toolchain"):
+        assert build.build(_spec(tmp_path, 42)) == so
+    assert len(build.builds) == n0 + 1 and so.read_bytes() == good and record.exists()
+    assert f"the cached {so} is not used" in caplog.text
+    # and a subprocess loads it (a damaged library would kill it with SIGBUS)
+    code = f"import ctypes; print(ctypes.CDLL({str(so)!r}).symtrack_answer())"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True).stdout.strip() == b"42"
+
+
+@pytest.mark.parametrize("how", ["a file", "under a file", "read-only"])
+def test_an_unwritable_cache_folder_falls_back_to_a_private_one_with_a_warning(tmp_path, monkeypatch, caplog, how):
+    if how == "read-only" and os.geteuid() == 0:  # root writes into a 0555 folder: make the probe fail instead
+        monkeypatch.setattr(build_cache.tempfile, "mkstemp", _refuse(build_cache.tempfile.mkstemp, tmp_path))
+    bad = tmp_path / "cache"
+    if how == "a file":
+        bad.write_text("not a folder")
+    elif how == "under a file":
+        (tmp_path / "file").write_text("x")
+        bad = tmp_path / "file" / "cache"
+    else:
+        bad.mkdir()
+        bad.chmod(0o555)
+    monkeypatch.setenv("SYMTRACK_CACHE", str(bad))
+    with caplog.at_level(logging.WARNING, logger="symtrack.toolchain"):
+        root = build.cache_root()
+        assert build.cache_root() == root  # decided once
+    assert root != bad and root.is_dir() and os.access(root, os.W_OK)
+    warnings = [r.getMessage() for r in caplog.records]
+    assert len(warnings) == 1 and f"SYMTRACK_CACHE {bad} cannot be written" in warnings[0]
+    assert "private temporary cache" in warnings[0]
+    spec = build.BuildSpec(kind="answer", key=build.digest(ANSWER % 5), output="libanswer.so", what="the answer 5",
+                           sources=lambda: {"answer.c": ANSWER % 5})
+    assert ctypes.CDLL(str(build.build(spec))).symtrack_answer() == 5 and spec.path.is_relative_to(root)
+    if how == "read-only":
+        bad.chmod(0o755)
+
+
+def _refuse(mkstemp, below: Path):
+    def refused(*a, dir=None, **k):
+        if dir is not None and Path(dir).is_relative_to(below / "cache"):
+            raise PermissionError(13, "Permission denied")
+        return mkstemp(*a, dir=dir, **k)
+    return refused
+
+
+def test_a_file_as_cache_is_a_warning_in_a_fresh_process_not_a_traceback(tmp_path):
+    bad = tmp_path / "cache"
+    bad.write_text("x")
+    code = textwrap.dedent(f"""
+        import logging
+        from symtrack import toolchain as build
+        logging.basicConfig(level=logging.WARNING, format="%(message)s")
+        src = {ANSWER % 9!r}
+        spec = build.BuildSpec(kind="answer", key=build.digest(src), output="libanswer.so", what="the answer",
+                               sources=lambda: {{"answer.c": src}})
+        print(build.build(spec))
+    """)
+    env = {**os.environ, "SYMTRACK_CACHE": str(bad), "PYTHONPATH": str(REPO)}
+    res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    assert res.stderr.strip().startswith(f"SYMTRACK_CACHE {bad} cannot be written (a file, not a folder)")
+    assert not Path(res.stdout.strip()).exists()  # the private cache is removed at exit

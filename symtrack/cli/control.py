@@ -23,14 +23,21 @@ def _params(vehicle: str, soil: str) -> dict:
 
 
 def linearize_command(args) -> int:
-    from ..control import linearization as L
-    from ..control.trim import trim
     from ..foundations.files import check_output_folder
-    from ..model import SystemModel
-    from ..reports.run_files import write_folder
+    from ..reports.run_files import output_lock
 
     opts = linearize_model_options(args.set)
     out = check_output_folder(args.out)  # before the work (DESIGN.md: outputs checked writable first)
+    with output_lock(out):  # a second run into the folder fails at once
+        return _linearize(args, opts, out)
+
+
+def _linearize(args, opts, out) -> int:
+    from ..control import linearization as L
+    from ..control.trim import trim
+    from ..model import SystemModel
+    from ..reports.run_files import write_folder
+
     params = _params(args.vehicle, args.soil)
     model = SystemModel(opts)
     tp = trim(model, params, args.speed, args.radius)
@@ -74,7 +81,6 @@ def linearize_model_options(overrides):
 
 
 def mpc_command(args) -> int:
-    from ..control import closedloop, scenario
     from ..foundations.errors import ScenarioError
     from .simulate import check_output_file, check_output_folder
 
@@ -90,10 +96,20 @@ def mpc_command(args) -> int:
         plant_kind = "grid"
     if plant_kind == "homogeneous" and (terrain_in or terrain_out):
         raise ScenarioError("--terrain-in / --terrain-out need the grid plant; drop --plant homogeneous")
-    sc = scenario.load(args.scenario, overrides, plant_kind)
     out = check_output_folder(args.out)
     if terrain_out:
         check_output_file(terrain_out, "--terrain-out")
+    from ..reports.run_files import output_lock
+
+    with output_lock(out):  # before any work: a second run into the folder fails at once
+        return _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out)
+
+
+def _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out) -> int:
+    from ..control import closedloop, scenario
+    from ..foundations.errors import ScenarioError
+
+    sc = scenario.load(args.scenario, overrides, plant_kind)
     if terrain_out and sc.terrain is None:
         raise ScenarioError(f"--terrain-out: scenario {sc.name!r} runs on the homogeneous plant (no [terrain] "
                             "section); add --plant grid")

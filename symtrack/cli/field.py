@@ -13,6 +13,13 @@ __all__ = ["add_parser", "field_command"]
 
 def field_command(args) -> int:
     out = check_output_folder(args.out)  # before anything is loaded or built
+    from ..reports.run_files import output_lock
+
+    with output_lock(out):  # a second study into the folder fails at once
+        return _field(args, out)
+
+
+def _field(args, out) -> int:
     from ..studies.field import IncompleteFieldStudy, load_field_spec, run_field_study
     from ..studies.operations import is_operation_document, load_operation_spec, run_season
 

@@ -14,6 +14,14 @@ def simulate_command(args) -> int:
     # the outputs first: a bad --out fails at once, before CasADi is even imported
     out = check_output_folder(args.out)
     terrain_out = check_output_file(args.terrain_out, "--terrain-out") if args.terrain_out else None
+    from ..reports.run_files import output_lock
+
+    # the folder is locked before any work: a second run into it fails at once (it names this one's pid)
+    with output_lock(out):
+        return _simulate(args, out, terrain_out)
+
+
+def _simulate(args, out, terrain_out) -> int:
     from ..api import IncompleteSimulation, simulate
     from ..reports.run_files import terrain_lock
     from ..simulation.scenario import load_scenario

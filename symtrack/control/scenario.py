@@ -63,7 +63,7 @@ import math
 from dataclasses import dataclass
 
 from ..foundations.config import builtin_names as _package_names
-from ..foundations.config import check_document, check_keys, integer, number, read_document
+from ..foundations.config import check_document, check_keys, integer, number, read_document, with_version
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators.settings import EngineSettings
 from ..model import plausibility
@@ -154,12 +154,15 @@ class MPCScenario:
 
     def resolved_dict(self) -> dict:
         """The scenario after presets and overrides, as a scenario document (``scenario.resolved.toml``:
-        :func:`load` reads it back to the same scenario): the parameters in [vehicle] and [soil]."""
+        :func:`load` reads it back to the same scenario): the parameters in [vehicle] and [soil], every
+        [model] option in effect (defaults included: the lateral law, the vehicle, ...) and the
+        package's version (``symtrack_version``)."""
         d = self.to_dict()
         params = d.pop("parameters")
         d["vehicle"] = {"preset": self.vehicle_preset, **{s.name: params[s.name] for s in VEHICLE_PARAMS}}
         d["soil"] = {"preset": self.soil_preset, **{s.name: params[s.name] for s in SOIL_PARAMS if s.name in params}}
-        return d
+        d["model"] = {k: getattr(self.model, k) for k in scenario_keys()}
+        return with_version(d)
 
 
 _int = integer

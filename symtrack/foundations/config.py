@@ -16,6 +16,7 @@ from importlib import resources
 from pathlib import Path
 
 from .errors import ScenarioError
+from .files import read_text
 
 __all__ = ["number", "integer", "check_document", "check_keys", "parse_override", "apply_overrides", "builtin_names",
            "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
@@ -54,12 +55,13 @@ def check_keys(section: str, table, allowed: Iterable[str]) -> None:
 
 
 def check_document(kind: str, doc, top_keys: Iterable[str], arrays: Iterable[str] = ()) -> None:
-    """A document's top level: a table with only ``top_keys``; ``name`` and ``description``
-    strings; every other key a table, those of ``arrays`` arrays of tables ([[key]])."""
-    check_keys(kind, doc, top_keys)
+    """A document's top level: a table with only ``top_keys`` (and :data:`VERSION_KEY`, which every
+    document may hold); ``name``, ``description`` and the version strings; every other key a table,
+    those of ``arrays`` arrays of tables ([[key]])."""
+    check_keys(kind, doc, (*top_keys, VERSION_KEY))
     arrays = tuple(arrays)
     for k, v in doc.items():
-        if k in ("name", "description"):
+        if k in ("name", "description", VERSION_KEY):
             if not isinstance(v, str):
                 raise ScenarioError(f"{k} = {v!r} must be a string")
         elif k in arrays:
@@ -150,7 +152,7 @@ def read_document(name_or_path: str, package: str, kind: str = "scenario", overr
     if path.suffix == ".toml" or (name_or_path not in names and path.exists()):
         if not path.is_file():
             raise ScenarioError(f"{kind} file {str(path)!r} does not exist")
-        text, default_name = path.read_text(), path.stem
+        text, default_name = read_text(path, f"{kind} file"), path.stem
         folder = path.resolve().parent
     elif name_or_path in names:
         text = resources.files(package).joinpath(name_or_path + ".toml").read_text()
@@ -227,6 +229,19 @@ def _toml_value(v) -> str:
     if isinstance(v, dict):  # an inline table
         return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items() if x is not None) + "}"
     raise TypeError(f"cannot write {v!r} as TOML")
+
+
+# the key of a resolved scenario that records the symtrack that wrote it (:func:`with_version`); every
+# document may hold it (:func:`check_document`) and the loaders ignore it
+VERSION_KEY = "symtrack_version"
+
+
+def with_version(doc: dict) -> dict:
+    """``doc`` with the package's version first (:data:`VERSION_KEY`): a resolved scenario's record of
+    the symtrack that ran it (scenario.resolved.toml)."""
+    from .version import __version__
+
+    return {VERSION_KEY: __version__, **{k: v for k, v in doc.items() if k != VERSION_KEY}}
 
 
 def to_toml(d: dict) -> str:

@@ -1,14 +1,19 @@
 """Atomic file writing: a temporary file in the same folder, fsync, then rename.
 
 A reader never sees a half-written file: either the old content or the new. Every result file
-of symtrack is written through these functions. :func:`check_output_folder` and
+of symtrack is written through these functions; a file replaced keeps its mode and, where the
+process may set it, its owner and group (:func:`keep_mode`). :func:`check_output_folder` and
 :func:`check_output_file` refuse, before any computation, an output that cannot be written.
+:func:`read_text` reads a user's text file (a scenario, a preset, a boundary) as UTF-8, or raises an
+error naming the file and what it holds instead (Latin-1, UTF-16, binary).
 """
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
+import stat
 import tempfile
 import zipfile
 from pathlib import Path
@@ -16,7 +21,7 @@ from pathlib import Path
 from .errors import ScenarioError
 
 __all__ = ["DEFLATE_LEVEL", "atomic_write_bytes", "atomic_write_text", "check_output_file", "check_output_folder",
-           "npz_bytes"]
+           "keep_mode", "npz_bytes", "read_text"]
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -54,11 +59,30 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; results are ordinary files
+        keep_mode(path, Path(tmp))  # a file replaced keeps its mode and owner
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def keep_mode(old: Path, new: Path) -> None:
+    """Give ``new`` (the temporary file about to replace ``old``) the mode of ``old`` and, where this
+    process may set them (root, or a group it is in), its owner and group; nothing when ``old`` does not
+    exist. A private terrain file (0600, 0640) stays private after a run replaced it."""
+    try:
+        st = os.stat(old)
+    except OSError:
+        return
+    os.chmod(new, stat.S_IMODE(st.st_mode))
+    cur = os.stat(new)
+    if (cur.st_uid, cur.st_gid) != (st.st_uid, st.st_gid):
+        try:
+            os.chown(new, st.st_uid, st.st_gid)
+        except OSError:  # not allowed: the owner stays this process's
+            with contextlib.suppress(OSError):
+                os.chown(new, -1, st.st_gid)
 
 
 def atomic_write_text(path: Path, text: str) -> None:
@@ -82,9 +106,45 @@ def check_output_folder(path: str, option: str = "--out") -> Path:
 
 
 def check_output_file(path: str, option: str) -> Path:
-    """Refuse, before any computation, an output file that cannot be written."""
+    """Refuse, before any computation, an output file that cannot be written: a folder, in a folder that
+    cannot be written, or an existing file that is read-only (no write permission for anybody, or not for
+    this process), which a rename would otherwise replace."""
     p = Path(path)
     if p.is_dir():
         raise ScenarioError(f"{option} {path!r} is a folder: give a file name (e.g. out/terrain.npz)")
     check_output_folder(str(p.parent) if str(p.parent) else ".", option)
+    try:
+        mode = stat.S_IMODE(p.stat().st_mode)
+    except OSError:
+        return p  # a new file
+    if not mode & 0o222 or not os.access(p, os.W_OK):
+        raise ScenarioError(f"{option} {path!r} is read-only (mode {mode:04o}): symtrack does not replace a file its "
+                            "owner protected; make it writable (chmod u+w) or give another file")
     return p
+
+
+def read_text(path, what: str = "file", error: type[Exception] = ScenarioError) -> str:
+    """The text of the UTF-8 file ``path`` (a UTF-8 byte-order mark dropped). A file that cannot be read
+    or is not UTF-8 text raises ``error`` (a :class:`ScenarioError` unless told) with one line naming
+    ``what`` and the file, and what it holds instead: UTF-16 (a byte-order mark, or a NUL in every other
+    byte), binary data (NUL bytes, which no text file holds), or another 8-bit encoding such as Latin-1
+    (the first byte that is not UTF-8, and its line)."""
+    label = f"{what} {str(path)!r}"
+    try:
+        data = Path(path).read_bytes()
+    except OSError as err:
+        raise error(f"{label}: cannot be read ({err.strerror or err})") from None
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    head = data[:4096]
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")) or (len(head) >= 2 and max(
+            head[0::2].count(0), head[1::2].count(0)) >= 0.4 * len(head)):
+        raise error(f"{label} is UTF-16 text; save it as UTF-8 text")
+    if b"\x00" in data:
+        raise error(f"{label} holds NUL bytes: binary data, not a text file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = data.count(b"\n", 0, err.start) + 1
+        raise error(f"{label} is not UTF-8 text (byte 0x{data[err.start]:02x} at offset {err.start}, line {line}: "
+                    "Latin-1 or another 8-bit encoding?); save it as UTF-8 text") from None

@@ -21,6 +21,7 @@ import tomllib
 from pathlib import Path
 
 from ..foundations.errors import ParameterError
+from ..foundations.files import read_text
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
 from ..soil.pedotransfer import derivation_note
 from . import soils, vehicles
@@ -93,7 +94,7 @@ def preset_file_kind(path) -> str:
     if not path.is_file():
         raise ParameterError(f"preset file {str(path)!r}: no such file")
     try:
-        d = tomllib.loads(path.read_text())
+        d = tomllib.loads(read_text(path, "preset file", ParameterError))
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{path}: not valid TOML: {err}") from err
     kinds = set()
@@ -112,7 +113,7 @@ def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str],
     if not path.is_file():
         raise ParameterError(f"{kind}.preset = {str(path)!r}: no such preset file")
     try:
-        d = tomllib.loads(path.read_text())
+        d = tomllib.loads(read_text(path, f"{kind}.preset file", ParameterError))
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{path}: not valid TOML: {err}") from err
     specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS

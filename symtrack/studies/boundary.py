@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError
+from ..foundations.files import read_text
 
 __all__ = ["BOUNDARY_KEY", "area_m2", "contains", "is_simple", "line_crossings", "offset_ring", "read_boundary"]
 
@@ -148,7 +149,7 @@ def read_boundary(path, size_m, min_width_m: float = 0.0) -> np.ndarray:
     p = Path(path)
     if not p.is_file():
         raise ScenarioError(f"{label}: no such file")
-    text = p.read_text()
+    text = read_text(p, BOUNDARY_KEY + " file")
     if p.suffix.lower() in (".geojson", ".json"):
         try:
             doc = json.loads(text)

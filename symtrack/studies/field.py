@@ -806,7 +806,7 @@ def _resumable(folder, spec: FieldSpec) -> dict:
     try:
         if (folder / "field.resolved.toml").read_text() != to_toml(spec.document):
             return {}
-    except OSError:
+    except (OSError, ValueError):  # gone, unreadable, not UTF-8: nothing to resume
         return {}
     try:
         summary = json.loads((folder / "summary.json").read_text())
@@ -845,7 +845,8 @@ def _write_pattern(folder, spec: FieldSpec, pr: PatternResult, figures: bool = T
     # field.npz with the pattern's files, through the one writer (its history: this study's passes)
     field = TerrainOut(sub / "field.npz", pr.terrain, spec.scenario.soil, terrain_run(spec.scenario, len(pr.records)),
                        lock=False)
-    write_folder(sub, files, clear=False, terrain=field)
+    # written as the study folder's files (its manifest records them: symtrack.reports.run_files)
+    write_folder(folder, {f"{pr.pattern}/{n}": d for n, d in files.items()}, clear=False, terrain=field)
     return [sub / "field.npz", *(sub / n for n in files)]
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 from ..foundations.config import apply_overrides
 from ..foundations.config import builtin_names as package_names
 from ..foundations.errors import ScenarioError
+from ..foundations.files import read_text
 
 __all__ = ["KINDS", "Source", "load", "resolve_source", "run_one", "scenario_text"]
 
@@ -49,7 +50,7 @@ def scenario_text(name_or_path, package: str) -> tuple[str, str] | None:
     if p.suffix == ".toml" or (s not in package_names(package) and p.exists()):
         if not p.is_file():
             raise ScenarioError(f"scenario file {s!r} does not exist")
-        return p.read_text(), p.stem
+        return read_text(p, "scenario file"), p.stem
     if s in package_names(package):
         return resources.files(package).joinpath(s + ".toml").read_text(), s
     return None

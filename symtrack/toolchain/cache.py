@@ -8,7 +8,9 @@ describes one artefact with a :class:`BuildSpec` (what identifies it: its key, m
 :func:`digest`; how to get its sources, called only when it is missing; how to compile them) and gets
 its path. This module alone owns:
 
-- the cache's location, :func:`cache_root`: ``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``;
+- the cache's location, :func:`cache_root`: ``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``; a folder that
+  cannot be written (read-only, a file, under a file) is replaced, with a warning, by a private temporary
+  cache removed when the process exits;
 - the entry's folder, ``<root>[/<group>]/<kind>-<key[:digits]><suffix>/``, and the artefact in it;
 - the lock: processes that build one entry at once (parallel test workers, sweep workers) take
   turns on ``<entry>/.lock`` (``flock``, released when its holder exits or dies): the first
@@ -17,6 +19,10 @@ its path. This module alone owns:
   and the artefact is renamed into place, so that an interrupted build (Ctrl-C, a killed worker)
   leaves no half-written library; a temporary folder a killed build left behind is removed by the
   next build of the entry;
+- the check: the artefact's size and SHA-256 are recorded beside it (``<artefact>.sha256.json``) before
+  it is renamed into place and checked before it is handed out (once per process and artefact); a
+  damaged artefact (truncated, overwritten, no record) is rebuilt instead of being loaded (a damaged
+  shared library crashes the loader: "Bus error");
 - the compiler lookup (``$CC``, ``cc``, ``gcc``) and its messages: :func:`compiler` for callers that
   can fall back on CasADi's interpreter (a warning once; an error with :func:`set_require_compiled`,
   ``--require-compiled`` or ``SYMTRACK_REQUIRE_COMPILED=1``), :func:`require_compiler` and
@@ -25,14 +31,17 @@ its path. This module alone owns:
   at INFO on the ``symtrack.toolchain`` logger (a user who waits minutes for the compiler is told why),
   and :data:`builds`, every compilation of this process.
 
-A cache hit costs one ``stat``: no lock, no source generation, no compiler lookup.
+A cache hit costs a ``stat`` and, the first time in a process, reading and hashing the artefact: no
+lock, no source generation, no compiler lookup.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import dataclasses
 import hashlib
+import json
 import logging
 import os
 import shutil
@@ -164,10 +173,35 @@ class BuildSpec:
         return self.folder / self.output
 
 
+_roots: dict[Path, Path] = {}  # the cache folder asked for -> the one used (itself, or a private one)
+
+
 def cache_root() -> Path:
-    """The cache's folder: ``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``."""
+    """The cache's folder: ``$SYMTRACK_CACHE`` or ``~/.cache/symtrack``, created; when it cannot be
+    written (read-only, a file, under a file) a private temporary folder instead, with a warning (once
+    per process and folder; removed when the process exits)."""
     env = os.environ.get("SYMTRACK_CACHE")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "symtrack"
+    want = Path(env).expanduser() if env else Path.home() / ".cache" / "symtrack"
+    if want not in _roots:
+        _roots[want] = _usable(want, "SYMTRACK_CACHE" if env else "the default cache folder")
+    return _roots[want]
+
+
+def _usable(want: Path, what: str) -> Path:
+    try:
+        want.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".probe-", dir=want)
+        os.close(fd)
+        os.unlink(probe)
+        return want
+    except OSError as err:
+        problem = "a file, not a folder" if want.exists() and not want.is_dir() else err.strerror or str(err)
+    private = Path(tempfile.mkdtemp(prefix="symtrack-cache-"))
+    atexit.register(shutil.rmtree, private, ignore_errors=True)
+    log.warning("%s %s cannot be written (%s): compiling into a private temporary cache %s instead, removed at "
+                "exit (set SYMTRACK_CACHE to a writable folder to keep the compiled code)", what, want, problem,
+                private)
+    return private
 
 
 def digest(*parts: bytes | str) -> str:
@@ -274,14 +308,19 @@ def build(spec: BuildSpec, cc: str | None = None) -> Path:
         No C compiler; the sources or the compiler failed (the compiler's output in the message).
     """
     out = spec.path
-    if out.exists():
+    if out.exists() and _intact(out) is None:
         return out
     cc = cc or require_compiler(spec.what)
     out.parent.mkdir(parents=True, exist_ok=True)
     with _entry_lock(out.parent) as locked:
-        if out.exists():  # built by another process while this one waited for the lock
+        damage = _intact(out) if out.exists() else None
+        if out.exists() and damage is None:  # built by another process while this one waited for the lock
             log.info("%s: built by another process meanwhile (%s)", spec.what, out.parent)
             return out
+        if damage is not None:
+            (log.info if damage == NO_RECORD else log.warning)(
+                "%s: the cached %s is not used (%s); building it again", spec.what, out, damage)
+            out.unlink()
         if locked:  # no other build of the entry runs: a temporary folder is a killed build's
             for stale in out.parent.glob(".build-*"):
                 shutil.rmtree(stale, ignore_errors=True)
@@ -292,6 +331,51 @@ def build(spec: BuildSpec, cc: str | None = None) -> Path:
         builds.append(Built(spec.kind, spec.what, out, seconds))
         log.info("compiled %s in %.1f s", spec.what, seconds)
     return out
+
+
+NO_RECORD = "no size and SHA-256 recorded beside it (built by an older symtrack)"
+_checked: dict[Path, tuple[int, int, int]] = {}  # artefacts found intact in this process: (inode, size, mtime)
+
+
+def _record_path(out: Path) -> Path:
+    """The record of an artefact's size and SHA-256: ``<artefact>.sha256.json`` beside it."""
+    return out.with_name(out.name + ".sha256.json")
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _intact(out: Path) -> str | None:
+    """None when the artefact ``out`` has the size and SHA-256 recorded when it was written; else what is
+    wrong (checked once per process while the file stays the same)."""
+    try:
+        st = out.stat()
+    except OSError as err:
+        return f"cannot read it: {err.strerror or err}"
+    stamp = (st.st_ino, st.st_size, st.st_mtime_ns)
+    if _checked.get(out) == stamp:
+        return None
+    try:
+        rec = json.loads(_record_path(out).read_text())
+        size, sha = int(rec["size_bytes"]), str(rec["sha256"])
+    except FileNotFoundError:
+        return NO_RECORD
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        return f"its record {_record_path(out).name} is unreadable ({err})"
+    if st.st_size != size:
+        return f"{st.st_size} bytes, {size} recorded: damaged"
+    try:
+        if _sha256_file(out) != sha:
+            return "its SHA-256 differs from the one recorded: damaged"
+    except OSError as err:
+        return f"cannot read it: {err.strerror or err}"
+    _checked[out] = stamp
+    return None
 
 
 @contextlib.contextmanager
@@ -312,24 +396,41 @@ class LockBusy(Exception):
 
 
 @contextlib.contextmanager
-def file_lock(path, wait: bool = True):
+def file_lock(path, wait: bool = True, remove: bool = False):
     """An exclusive lock on the file ``path`` (created if missing; ``flock``: released when the
     holder exits or dies, so a killed holder never leaves it taken). The holder writes its process
     id into the file. ``wait=False``: :class:`LockBusy` at once when another process holds it.
-    Yields the process id written, or False where flock is missing (not POSIX: no lock).
-    The one lock of symtrack (the cache's entries, terrain files)."""
+    ``remove``: the holder removes the file when it lets go (on any exit but a kill; a file a killed
+    holder left is taken over by the next one); a process that locked a file its holder had just removed
+    sees it is gone and locks the path's new file. Yields the process id written, or False where flock is
+    missing (not POSIX: no lock). The one lock of symtrack (the cache's entries, terrain files, run folders)."""
     try:
         import fcntl
     except ImportError:  # not POSIX
         yield False
         return
     path = Path(path)
-    with open(path, "a+b") as fh:
+    while True:
+        fh = open(path, "a+b")  # noqa: SIM115 (closed below)
         try:
             fcntl.flock(fh.fileno(), fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         except BlockingIOError:
             fh.seek(0)
-            raise LockBusy(path, fh.read(64).decode(errors="replace").strip()) from None
+            holder = fh.read(64).decode(errors="replace").strip()
+            fh.close()
+            raise LockBusy(path, holder) from None
+        except BaseException:
+            fh.close()
+            raise
+        if not remove:
+            break
+        try:  # still the file at ``path`` (not one its last holder removed meanwhile)?
+            if os.path.samestat(os.fstat(fh.fileno()), os.stat(path)):
+                break
+        except FileNotFoundError:
+            pass
+        fh.close()
+    with fh:
         try:
             fh.seek(0)
             fh.truncate()
@@ -337,6 +438,9 @@ def file_lock(path, wait: bool = True):
             fh.flush()
             yield os.getpid()
         finally:
+            if remove:
+                with contextlib.suppress(OSError):
+                    path.unlink()
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
@@ -386,6 +490,10 @@ def _compile(spec: BuildSpec, sources: dict[str, bytes], out: Path, cc: str) -> 
                     raise SimulationError(f"compiling {name} of {spec.what} failed ({cc}):\n"
                                           f"{text.decode(errors='replace')[-2000:]}")
             _run([cc, *link, "-o", tmp_out.name, *objs, "-lm"], work, spec.what, cc)
+        # the record first: an artefact in place always has one (a kill between the two: rebuilt next time)
+        record = json.dumps({"size_bytes": tmp_out.stat().st_size, "sha256": _sha256_file(tmp_out)}) + "\n"
+        (work / "record").write_text(record)
+        os.replace(work / "record", _record_path(out))
         os.replace(tmp_out, out)
     finally:
         for _, proc in jobs:  # an error or an interrupt: no compiler outlives the build
