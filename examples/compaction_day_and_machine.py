@@ -7,8 +7,10 @@ largest vertical stress and bulk density by depth.
 Soil: the validation clay's surface (clayey soil, Thailand, 38 %) over a loose tilled subsoil
 (initial bulk density 1.2 Mg/m^3), whose compression parameters are Défossez et al.'s (2003) loess
 at the day's gravimetric water content (0.10 dry, 0.20 wet) and whose strength is Severiano et
-al.'s (2013) for 25 % clay (symtrack/terrain/moisture.py). The crawler is the reference crawler
-(5.5 t) through the terrain engine; the tractor (5.5 t, 40 % on the front axle, wheelbase 2.4 m,
+al.'s (2013) for 25 % clay (symtrack/terrain/moisture.py). The days' traffic is the reference
+crawler loaded to 11 t (50 kPa mean ground pressure: the 5.5 t crawler's 25 kPa stays below the
+yield line of both days' strengths, 156 and 224 kPa, and compacts neither); the crawler against the
+tractor is the reference crawler (5.5 t) through the terrain engine; the tractor (5.5 t, 40 % on the front axle, wheelbase 2.4 m,
 gauge 1.5 m; ASSUMED tyres: front 380/85R28, load index 133, 2060 kg; rear 480/80R38, load index
 149, 3250 kg; both rated at 160 kPa, inflated to the rule's recommended pressure) drives the same
 line over a fresh copy of the field, its footprints in Python (symtrack/terrain/wheeled.py).
@@ -40,11 +42,14 @@ REAR_TYRE = tyre.Tyre(0.48, 1.76, 3250.0 * G / 1e3, 160.0)  # 480/80R38 149 (ASS
 ELEMENT_M = 0.025
 
 
-def document(day: str, passes: int, length_m: float) -> dict:
+DAY_CRAWLER_MASS_KG = 11000.0
+
+
+def document(day: str, passes: int, length_m: float, mass_kg: float = MASS_KG) -> dict:
     return {
         "name": f"compaction_{day}",
         "run": {"duration_s": 30.0, "output_dt_s": 0.01, "integrator": "grid_fast", "stop_after_distance_m": length_m},
-        "vehicle": {"preset": "reference_crawler"},
+        "vehicle": {"preset": "reference_crawler", "mass_kg": mass_kg},
         "soil": {"preset": "clayey_soil_thailand_38", "bulk_density_initial_Mg_per_m3": 1.2,
                  "moisture": {"water_content_kg_per_kg": DAYS[day], **MOISTURE}},
         "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0},
@@ -71,7 +76,7 @@ def main(argv=None) -> int:
     try:
         days = {}
         for day in DAYS:
-            res = symtrack.simulate(scenario_from_dict(document(day, a.passes, a.length)))
+            res = symtrack.simulate(scenario_from_dict(document(day, a.passes, a.length, DAY_CRAWLER_MASS_KG)))
             s = res.summary
             days[day] = {"water_content_kg_per_kg": DAYS[day],
                          "precompression_stress_kPa": s["subsoil_precompression_stress_kPa"],

@@ -5,11 +5,11 @@ map by depth.
 
     python examples/wet_headland.py --out out/wet_headland [--passes 2] [--length 14]
 
-The field's soil is the validation clay (clayey soil, Thailand, 38 % moisture; precompression
-stress the registry's default, 139 kPa); the headland is the same clay at 55 % moisture (Wong
-Table 2.3) with the precompression stress of the Schjønning & Lamandé (2018) pedotransfer
-function for a wet, loosened soil: bulk density 1.35 Mg/m^3, 25 % clay, pF 1 (10 hPa suction):
-30 kPa. Both values are illustrations of the PTF at stated inputs, not measurements of these soils.
+The field's soil is the validation clay (clayey soil, Thailand) on a drier day, a matric suction
+of 100 kPa (pF 3): its precompression stress from the Schjønning & Lamandé (2018) pedotransfer
+function, 102 kPa; the headland is the clay at 55 % moisture (Wong Table 2.3) as its preset
+describes it, nearly saturated: 44 kPa (Severiano et al. 2013). Both are the soils' descriptions
+through the pedotransfer functions (docs/subsoil.md, "One soil"), not measurements of these soils.
 """
 
 from __future__ import annotations
@@ -22,23 +22,21 @@ import symtrack
 from symtrack.foundations.errors import SymtrackError
 from symtrack.foundations.files import check_output_folder
 from symtrack.simulation.scenario import scenario_from_dict
-from symtrack.terrain.subsoil import precompression_stress_kPa
 
-WET_PTF = {"bulk_density_Mg_m3": 1.35, "matric_suction_hPa": 10.0, "clay_kg_kg": 0.25}
+DRY_SUCTION_KPA = 100.0
 
 
 def scenario(passes: int, length_m: float):
-    wet_pc_Pa = 1e3 * float(precompression_stress_kPa(**WET_PTF))
     d = {
         "name": "wet_headland",
         "description": "two passes over a field with a wet headland (a soil map)",
         "run": {"duration_s": 30.0, "output_dt_s": 0.01, "integrator": "grid_fast", "stop_after_distance_m": length_m},
         "vehicle": {"preset": "reference_crawler"},
-        "soil": {"preset": "clayey_soil_thailand_38"},
+        "soil": {"preset": "clayey_soil_thailand_38", "matric_suction_kPa": DRY_SUCTION_KPA},
         "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0},
         "terrain": {
             "size_m": [length_m + 8.0, 8.0], "origin_m": [-4.0, -4.0], "cell_m": 0.1, "passes": passes,
-            "soil_map": {"soils": [{"preset": "clayey_soil_thailand_55", "precompression_stress_Pa": wet_pc_Pa}],
+            "soil_map": {"soils": ["clayey_soil_thailand_55"],
                          "zones": [{"soil": 1, "x_m": [length_m - 8.0, length_m + 4.0], "y_m": [-4.0, 4.0]}]},
         },
         "torque": [{"t_s": 0.0, "left_N_m": 1500.0, "right_N_m": 1500.0}],

@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # layer of each top-level part of symtrack, bottom first; a module may import its own layer or below
 LAYERS = {
-    "foundations": 1, "model": 2, "presets": 2, "terrain": 3, "toolchain": 4, "native": 4, "integrators": 5,
+    "foundations": 1, "model": 2, "presets": 2, "soil": 2, "terrain": 3, "toolchain": 4, "native": 4, "integrators": 5,
     "simulation": 6, "control": 7, "reports": 7, "api": 7, "studies": 7, "codegen": 7, "bench": 8, "cli": 9,
     "__main__": 9, "": 9,
 }

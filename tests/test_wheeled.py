@@ -22,6 +22,7 @@ DEPTHS = (0.1, 0.3, 0.5, 0.8)
 def _terrain():
     soil = {s.name: s.default for s in SOIL_PARAMS if s.default is not None}
     soil["bulk_density_initial_Mg_per_m3"] = 1.2
+    soil["yield_line_offset_ln_p"] = 0.0  # the virgin line alone: its closed form, nothing added by a second pass
     soil = moisture.apply_moisture(soil, {"water_content_kg_per_kg": 0.2, "compression_ptf": "defossez_2003_loess"})
     return Terrain(Grid((-2.0, -2.0), 0.1, (40, 40)), soil, DEPTHS)
 

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 from ..foundations.errors import ParameterError
+from ..soil.pedotransfer import derive_soil
 
 
 @dataclass(frozen=True)
@@ -145,7 +146,8 @@ SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
 # the soil parameters the day's moisture sets (symtrack/terrain/moisture.py): a terrain file made on
 # another day continues with the scenario's values of these (the compression state carries over)
 SOIL_DAY_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
-                        "precompression_stress_Pa", "specific_volume_min")
+                        "precompression_stress_Pa", "specific_volume_min", "yield_compression_index_k2",
+                        "matric_suction_kPa")
 
 VEHICLE_PARAM_NAMES = tuple(s.name for s in VEHICLE_PARAMS)
 SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS)
@@ -176,8 +178,6 @@ DERIVED_SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS if s.derived)
 def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str) -> ParamSet:
     """Validate a complete parameter set: no unknown key, no missing key, every value in range. A soil
     set gets its derived parameters from its description (symtrack/soil/pedotransfer.py)."""
-    from ..soil.pedotransfer import derive_soil
-
     names = [s.name for s in specs]
     unknown = sorted(set(values) - set(names))
     if unknown:

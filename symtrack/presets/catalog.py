@@ -124,8 +124,8 @@ def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str],
                              f"and the {kind} parameters ({', '.join(names)})")
     values: dict[str, float] = {}
     base = d.get("base")
-    if base is not None:
-        values.update(vehicles.vehicle_preset(base) if kind == "vehicle" else soils.soil_preset(base))
+    if base is not None:  # (the base's set as it is: what its description derived is derived again)
+        values = vehicles.vehicle_preset(base) if kind == "vehicle" else soils.soil_preset(base)
     values.update({k: v for k, v in d.items() if k in names})
     sources = d.get("sources", {})
     if not isinstance(sources, dict) or set(sources) - set(names):

@@ -54,7 +54,8 @@ GRAVITY_M_S2 = 9.81
 WATER_DENSITY_MG_PER_M3 = 1.0
 TEXTURE_KEYS = ("clay_kg_per_kg", "silt_kg_per_kg", "sand_kg_per_kg")
 DESCRIPTION_KEYS = TEXTURE_KEYS + ("matric_suction_kPa",)
-# a soil must carry its own weight down to this depth (the deepest subsoil records are at 0.8 m)
+# Schjønning & Lamandé's strength is taken where it carries the soil's own weight down to this depth
+# (the deepest subsoil records are at 0.8 m); below that, Severiano et al.'s (precompression_ptf_kPa)
 GEOSTATIC_CHECK_DEPTH_M = 1.0
 # the suction of a soil whose water content is at the van Genuchten curve's saturation: 0.1 kPa (pF 0)
 SUCTION_WET_KPA = 0.1
@@ -270,10 +271,6 @@ def derive_soil(values: dict, where: str = "soil") -> dict:
                              f"strength (N = v0 + (lambda - kappa) ln(sigma_pc / kPa) = {N:.6g}); to move the virgin "
                              f"line give precompression_stress_Pa (this N is sigma_pc = {1e3 * pc_given:.6g} Pa)")
     out["virgin_line_N"] = N
-    geo = float(geostatic_vertical_stress_Pa(out, [GEOSTATIC_CHECK_DEPTH_M])[0])
-    if not pc > geo:
-        raise ParameterError(f"{where}.precompression_stress_Pa = {pc!r} is below the soil's own weight at "
-                             f"{GEOSTATIC_CHECK_DEPTH_M} m ({geo:.4g} Pa): such a soil would compact under itself")
     if out.get("yield_compression_index_k2") is None:
         out["yield_compression_index_k2"] = kap + K2_POSITION_OSR * (lam - kap)
     return out

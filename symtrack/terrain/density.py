@@ -65,12 +65,13 @@ import math
 import numpy as np
 
 from ..foundations.errors import ParameterError
-from ..soil.pedotransfer import geostatic_vertical_stress_Pa
+from ..model.parameters import SOIL_PARAMS, SPECIFIC_VOLUME_MIN_DEFAULT, YIELD_LINE_OFFSET_DEFAULT
+from ..soil.pedotransfer import K2_POSITION_OSR, geostatic_vertical_stress_Pa
 from ..soil.pedotransfer import keller_arvidsson_2007 as keller_arvidsson_2007
 
-__all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "field_max", "initial_specific_volume",
-           "cap_to_rut", "column_compression_m", "geostatic_table", "keller_arvidsson_2007", "load_update", "passes_at_constant_stress",
-           "pass_update", "precompression_stress_kPa", "soil_arrays", "specific_volume_after"]
+__all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "cap_to_rut", "column_compression_m", "field_max",
+           "geostatic_table", "initial_specific_volume", "keller_arvidsson_2007", "load_update", "pass_update",
+           "passes_at_constant_stress", "precompression_stress_kPa", "soil_arrays", "specific_volume_after"]
 
 COMPRESSION_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
                            "particle_density_Mg_per_m3", "bulk_density_initial_Mg_per_m3", "yield_line_offset_ln_p",
@@ -83,9 +84,6 @@ def initial_specific_volume(soil: dict) -> float:
 
 def _yield_params(soil: dict) -> tuple[float, float, float]:
     """(m, k2, v_min) of a soil (the registry's defaults where a parameter set lacks them)."""
-    from ..model.parameters import SPECIFIC_VOLUME_MIN_DEFAULT, YIELD_LINE_OFFSET_DEFAULT
-    from ..soil.pedotransfer import K2_POSITION_OSR
-
     lam, kap = float(soil["compression_index_lambda"]), float(soil["recompression_index_kappa"])
     return (float(soil.get("yield_line_offset_ln_p", YIELD_LINE_OFFSET_DEFAULT)),
             float(soil.get("yield_compression_index_k2", kap + K2_POSITION_OSR * (lam - kap))),
@@ -246,8 +244,6 @@ def geostatic_table(soils, depths_m) -> np.ndarray:
     """(n_soils, n_depths) float64: each soil's own weight at each depth [Pa] (the vertical stress of
     the moist soil above, symtrack/soil/pedotransfer.py), which :func:`pass_update` and the risk add
     to the traffic's vertical stress."""
-    from ..model.parameters import SOIL_PARAMS  # the registry's description defaults (files written before it)
-
     defaults = {s.name: s.default for s in SOIL_PARAMS if s.default is not None}
     return np.array([geostatic_vertical_stress_Pa({**defaults, **sp}, depths_m) for sp in soils],
                     dtype=np.float64).reshape(len(soils), len(depths_m))

@@ -61,8 +61,13 @@ import operator
 import numpy as np
 
 from ..foundations.errors import ParameterError, ScenarioError
-from ..model.parameters import SOIL_PARAMS, check_set
-from ..soil.pedotransfer import precompression_from_virgin_line_kPa, virgin_line_N_from_precompression
+from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_PARAMS
+from ..soil.pedotransfer import (
+    DESCRIPTION_KEYS,
+    derive_soil,
+    precompression_from_virgin_line_kPa,
+    virgin_line_N_from_precompression,
+)
 from . import gis
 
 __all__ = ["COMPRESSION_PTFS", "DAY_KEYS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
@@ -208,7 +213,10 @@ def apply_moisture(soil: dict, moisture, where: str = "soil.moisture") -> dict:
             theta = float(w) * rb / WATER_DENSITY_MG_PER_M3
             h = severiano_2013_suction_kPa(theta, clay)
             out["precompression_stress_Pa"] = 1e3 * severiano_2013_precompression_kPa(clay, h)
-        return check_set(out, SOIL_PARAMS, where)
+        # the derived parameters from the day's values (the description's defaults where the set has none)
+        desc = {s.name: s.default for s in SOIL_PARAMS if s.name in DESCRIPTION_KEYS}
+        full = derive_soil({**desc, **{n: None for n in DERIVED_SOIL_PARAM_NAMES}, **out}, where)
+        return {k: v for k, v in full.items() if k in out or k in DERIVED_SOIL_PARAM_NAMES}
     except ParameterError as err:
         raise ParameterError(f"{where}: {err}") from err
 
