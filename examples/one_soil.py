@@ -10,6 +10,8 @@ The column's compression of a cell is the integral over depth of its vertical st
 by the trapezoid rule over the subsoil depths (0.1, 0.3, 0.5, 0.8 m), the strain at the surface taken
 as at 0.1 m and none below 0.8 m (:func:`column_compression_m`). The rut is the cell's plastic
 sinkage after the pass (its stored z). Both are averaged over the cells the pass left a rut in.
+The second table: one run of ``--passes`` passes on one soil, the field's largest bulk density by
+pass (the summary's ``bulk_density_max_Mg_per_m3``).
 """
 
 from __future__ import annotations
@@ -82,23 +84,18 @@ def main(argv=None) -> int:
         if a.passes < 1:
             return 0
         res, world = run(a.soil, a.passes)
-        st = world.storage
-        cells = np.flatnonzero(st.z > RUT_MIN_M)
-        print(f"\n## {a.soil}: {a.passes} passes, the mean over the rut's cells\n")
-        print("| pass | rut mm | rho 0.1 m | rise 0.1 m | rise / first rise | rho 0.3 m |")
+        rho0 = float(world.soils[0]["bulk_density_initial_Mg_per_m3"])
+        print(f"\n## {a.soil}: {a.passes} passes on one line, the field's largest bulk density after each pass\n")
+        print("| pass | rut max mm | rho 0.1 m | rise 0.1 m | rise / first rise | rho 0.3 m |")
         print("|---|---|---|---|---|---|")
-        # replay the passes' folds is not possible afterwards: run 1..n passes (each a fresh field)
-        prev, first = float(world.soils[0]["bulk_density_initial_Mg_per_m3"]), None
-        for n in range(1, a.passes + 1):
-            r, w = run(a.soil, n)
-            s = w.storage
-            rho = density.bulk_density(s.specific_volume[cells], s.soil_index[cells], w.soils)
-            rise = rho[:, 0].mean() - prev
+        prev, first = rho0, None
+        for n, p in enumerate(res.summary["passes"], start=1):
+            rho = p["bulk_density_max_Mg_per_m3"]
+            rise = rho[0] - prev
             first = rise if first is None else first
-            print(f"| {n} | {1e3 * s.z[cells].mean():.3f} | {rho[:, 0].mean():.5f} | {rise:.2e} | "
-                  f"{rise / first if first else float('nan'):.3f} | {rho[:, 1].mean():.5f} |", flush=True)
-            prev = rho[:, 0].mean()
-        del res
+            print(f"| {n} | {p['rut_max_depth_mm']:.3f} | {rho[0]:.5f} | {rise:.2e} | "
+                  f"{rise / first if first else float('nan'):.3f} | {rho[1]:.5f} |", flush=True)
+            prev = rho[0]
     except SymtrackError as err:
         print(f"error: {err}", file=sys.stderr)
         return 1

@@ -182,7 +182,7 @@ def test_the_field_written_at_terminate_is_the_python_runs_and_a_second_pass_fro
     for name in STORAGE:
         a, b = getattr(mine, name), getattr(theirs, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
-    assert np.count_nonzero(theirs.phase) > 1000 and np.count_nonzero(theirs.specific_volume) > 50
+    assert np.count_nonzero(theirs.phase) > 1000 and np.count_nonzero(theirs.specific_volume) > 1000
     assert mine.grid == theirs.grid and mine.subsoil_depths_m == theirs.subsoil_depths_m == (0.1, 0.3, 0.5, 0.8)
     # the second pass: the FMU from its own field file, Python from its own terrain file
     ref2 = simulate(sc, terrain=py_npz)

@@ -34,10 +34,7 @@ from symtrack.terrain.world import padding_m
 
 CELL = 0.15
 SMALL = ["field.size_m=[14.4, 8.1]", f"field.cell_m={CELL}", "field.passes=4", "field.headland_m=3.0",
-         "field.lanes=2", "field.lane_spacing_m=3.0", "field.seed=3", "terrain.max_speed_m_s=3.0",
-         # without the saturation bound of the clay's 38 % moisture (nearly saturated, it keeps its volume
-         # under the crawler: docs/subsoil.md "One soil"), so that the density table moves
-         "soil.specific_volume_min=1.0"]
+         "field.lanes=2", "field.lane_spacing_m=3.0", "field.seed=3", "terrain.max_speed_m_s=3.0"]
 
 
 @pytest.fixture(scope="module")

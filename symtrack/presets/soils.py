@@ -34,9 +34,11 @@ Sources:
   1.40 for silt loams, 1.10 for clays; restrictive above 1.80, 1.65, 1.47), kept below the
   saturation density of the named moisture content. ASSUMED, not measured with Wong's data.
   Where the name gives a moisture content w (dry basis), the suction is w's on the van Genuchten
-  curve of the clay class (Severiano et al. 2013; ``suction_from_water_content_kPa``) and the
-  saturation bound ``specific_volume_min`` is 1 + w rho_s / rho_w; the dry sands and Chrono's soils
-  take an ASSUMED suction (dry: 100 kPa, pF 3; moist: 10-30 kPa).
+  curve of the clay class (Severiano et al. 2013; ``suction_from_water_content_kPa``); the dry sands
+  and Chrono's soils take an ASSUMED suction (dry: 100 kPa, pF 3; moist: 10-30 kPa). The saturation
+  bound (``specific_volume_min``) is left to a ``[soil.moisture]`` day: with the assumed densities
+  the named water contents put the wet soils at 90-100 % saturation, where the bound would forbid
+  any compaction and rest on the assumed density alone.
 - From the description the pedotransfer functions derive the precompression stress, the
   compression lines and the yield line's k2 (symtrack/soil/pedotransfer.py; ``symtrack presets
   NAME`` shows each derived value with its function): no two presets share a strength.
@@ -50,7 +52,7 @@ from __future__ import annotations
 import math
 
 from ..foundations.errors import ParameterError
-from ..model.parameters import PARTICLE_DENSITY_DEFAULT_MG_PER_M3, SOIL_PARAMS, check_set
+from ..model.parameters import SOIL_PARAMS, check_set
 from ..soil.pedotransfer import suction_from_water_content_kPa
 
 # Areal damping c'' of a cell: Project Chrono SCM's default damping (3e4 Pa s/m).
@@ -80,7 +82,6 @@ def _describe(clay, silt, sand, rho_b, *, w=None, suction_kPa=None):
            "bulk_density_initial_Mg_per_m3": rho_b}
     if w is not None:
         out["matric_suction_kPa"] = suction_from_water_content_kPa(w, rho_b, clay)
-        out["specific_volume_min"] = 1.0 + w * PARTICLE_DENSITY_DEFAULT_MG_PER_M3
     else:
         out["matric_suction_kPa"] = suction_kPa
     return out
