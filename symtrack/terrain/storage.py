@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError
-from ..foundations.files import atomic_write_bytes, npz_bytes
+from ..foundations.files import atomic_write_bytes, npz_bytes, real_path
 from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 from ..soil.pedotransfer import derive_soil, precompression_from_virgin_line_kPa
 
@@ -196,9 +196,10 @@ class Terrain:
 
 def save(path, storage: Terrain, soil: dict | None = None, run: dict | None = None) -> None:
     """Write ``storage`` with the soil parameters ``soil`` as a terrain file, atomically
-    (:func:`file_bytes`; ``storage`` takes the file's id and history once it is written)."""
+    (:func:`file_bytes`; ``storage`` takes the file's id and history once it is written). Through a
+    symbolic link the link's target is replaced, the link stays."""
     data, file_id, history = file_bytes(storage, soil, run)
-    atomic_write_bytes(Path(path), data)
+    atomic_write_bytes(real_path(path), data)
     storage.file_id, storage.history = file_id, history
 
 
