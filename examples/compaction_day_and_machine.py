@@ -10,10 +10,10 @@ at the day's gravimetric water content (0.10 dry, 0.20 wet) and whose strength i
 al.'s (2013) for 25 % clay (symtrack/terrain/moisture.py). The days' traffic is the reference
 crawler loaded to 11 t (50 kPa mean ground pressure: the 5.5 t crawler's 25 kPa stays below the
 yield line of both days' strengths, 156 and 224 kPa, and compacts neither); the crawler against the
-tractor is the reference crawler (5.5 t) through the terrain engine; the tractor (5.5 t, 40 % on the front axle, wheelbase 2.4 m,
-gauge 1.5 m; ASSUMED tyres: front 380/85R28, load index 133, 2060 kg; rear 480/80R38, load index
-149, 3250 kg; both rated at 160 kPa, inflated to the rule's recommended pressure) drives the same
-line over a fresh copy of the field, its footprints in Python (symtrack/terrain/wheeled.py).
+tractor is the reference crawler (5.5 t) through the terrain engine; the tractor (5.5 t, 40 % on the
+front axle, wheelbase 2.4 m, gauge 1.5 m; ASSUMED tyres: front 380/85R28, load index 133, 2060 kg;
+rear 480/80R38, load index 149, 3250 kg; both rated at 160 kPa, inflated to the rule's recommended
+pressure) drives the same line over a fresh copy of the field, its footprints in Python (symtrack/terrain/wheeled.py).
 """
 
 from __future__ import annotations

@@ -13,8 +13,8 @@ from small_field import small_field
 import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model import parameters as P
-from symtrack.soil.pedotransfer import K2_POSITION_OSR
 from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.soil.pedotransfer import K2_POSITION_OSR
 from symtrack.terrain import density as D
 from symtrack.terrain import moisture as M
 from symtrack.terrain import subsoil as S
@@ -190,7 +190,8 @@ def test_soil_parameters_added_since_an_old_file_take_the_defaults(tmp_path):
     assert back.soil["virgin_line_N"] == pytest.approx(
         v0 + (lam - kap) * math.log(back.soil["precompression_stress_Pa"] / 1e3), rel=1e-15)
     # the yield line and the saturation bound take theirs: the registry's m, k2 at its position, zero porosity
-    assert back.soil["yield_line_offset_ln_p"] == P.YIELD_LINE_OFFSET_DEFAULT and back.soil["specific_volume_min"] == 1.0
+    assert back.soil["yield_line_offset_ln_p"] == P.YIELD_LINE_OFFSET_DEFAULT
+    assert back.soil["specific_volume_min"] == 1.0
     assert back.soil["yield_compression_index_k2"] == pytest.approx(kap + K2_POSITION_OSR * (lam - kap), rel=1e-15)
 
 
