@@ -2,7 +2,7 @@
 independent importer, fmpy: its validation finds no problem; its co-simulation of the validation scenario
 (the torque programme as an input signal) agrees with `symtrack simulate validation --integrator
 rosenbrock` within 1e-6 relative on every column; a changed parameter gives Python's static start
-state; a communication step off the fixed-step grid is an fmi2Error; what cannot be exported is refused
+state; any communication step is taken (whole fixed steps, then a shorter one); what cannot be exported is refused
 before anything is built; a second importer (fmu-manipulation-toolbox: the FMI 2.0 XSD and semantic
 checks, and its C container stepping the FMU) agrees. The binary is compiled once into the cache (about
 10-20 s the first time)."""
@@ -117,8 +117,30 @@ def test_a_changed_parameter_gives_pythons_static_start_state(exported):
     assert res["sinkage_sprocket_left_m"][0] > base[model.state_index("sinkage_sprocket_left_m")] * 1.05
 
 
-def test_a_step_off_the_fixed_step_grid_is_an_fmi2_error(exported):
+def test_any_communication_step_takes_whole_fixed_steps_then_a_shorter_one(exported):
+    """A step that is not a whole multiple of the fixed step (a master's last step to its stop time, a
+    variable-step master's) takes the whole fixed steps and one shorter Rosenbrock step: fmpy to the Python
+    run's own last sample (6.8719... s, its distance stop's shortened interval) gives every row of that run,
+    the last one too; at an output interval of 0.0137 s to 6.8719 s, the Python run's pose and speed."""
+    sc = load_scenario("validation", ["run.integrator=rosenbrock"])
+    ref = simulate(sc)
     md = fmpy.read_model_description(str(exported.path))
+    outs = [v.name for v in md.modelVariables if v.causality == "output"]
+    stop = float(ref.t[-1])
+    assert 6.8719 < stop < 6.872
+    res = fmpy.simulate_fmu(str(exported.path), start_time=0.0, stop_time=stop, output_interval=sc.run.output_dt_s,
+                            input=torque_signal(sc, stop), output=outs)
+    assert len(res) == len(ref.t) and np.allclose(res["time"], ref.t, rtol=0, atol=1e-9)
+    worst = {n: float(np.max(np.abs(res[n] - ref.column(n))) / max(float(np.max(np.abs(ref.column(n)))), 1e-300))
+             for n in outs}
+    assert max(worst.values()) <= REL_TOL, {k: v for k, v in worst.items() if not v <= REL_TOL}  # measured 8.7e-14
+    odd = fmpy.simulate_fmu(str(exported.path), start_time=0.0, stop_time=6.8719, output_interval=0.0137,
+                            input=torque_signal(sc, 6.8719), output=outs)
+    assert odd["time"][-1] == pytest.approx(6.8719, abs=1e-12) and len(odd) > 500
+    for name in ("x_m", "y_m", "yaw_rad", "u_m_s"):  # other steps, the same motion (measured 2.3e-6 relative)
+        col = ref.column(name)
+        assert odd[name][-1] == pytest.approx(np.interp(6.8719, ref.t, col), abs=1e-4 * np.max(np.abs(col))), name
+    # one step shorter than a fixed step, one of 1.5: fine; a step that is not a positive time is fmi2Error
     unzipped = fmpy.extract(str(exported.path))
     slave = fmpy.fmi2.FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName="a")
@@ -127,9 +149,11 @@ def test_a_step_off_the_fixed_step_grid_is_an_fmi2_error(exported):
         slave.setupExperiment(startTime=0.0)
         slave.enterInitializationMode()
         slave.exitInitializationMode()
-        slave.doStep(0.0, 0.02)  # two fixed steps: fine
+        slave.doStep(0.0, 0.004)
+        slave.doStep(0.004, 0.015)
+        assert slave.getRealStatus(fmpy.fmi2.fmi2LastSuccessfulTime) == pytest.approx(0.019, abs=1e-15)
         with pytest.raises(FMICallException):
-            slave.doStep(0.02, 0.015)  # 1.5 fixed steps
+            slave.doStep(0.019, 0.0)
     finally:
         slave.freeInstance()
 

@@ -234,10 +234,11 @@ def test_a_raster_that_does_not_cover_the_field_is_refused_before_anything_is_bu
     with pytest.raises(ScenarioError, match=r"soil_map.raster = .*covers x in \[-3, 3\] m.*the field is x in "
                                             r"\[-3, 5\] m.*must cover the whole field"):
         _raster_scenario(small, geometry=True)
-    # a terrain file (its own geometry) that the raster does not cover: refused when the world opens
+    # a terrain file (its own geometry) elsewhere than the raster's field (whose origin the scenario takes):
+    # refused when the world opens
     t = Terrain(Grid((10.0, 10.0), CELL, SHAPE))
     sc = _raster_scenario(_write_raster(tmp_path / "ok.tif", _zone_index()))
-    with pytest.raises(ScenarioError, match="must cover the whole field"):
+    with pytest.raises(ScenarioError, match=r"origin_m = \[10.0, 10.0\].*asks for terrain.origin_m = \[-3.0, -2.5\]"):
         world_module.open_world(sc.terrain, sc.params, sc.model, sc.run.output_dt_s, terrain=t)
 
 

@@ -32,9 +32,13 @@ def export_command(args) -> int:
 
 def convert_command(args) -> int:
     check_output_file(args.out, "OUT")  # before anything is read
+    from ..reports.run_files import terrain_lock
     from ..terrain.fieldfile import convert
 
-    st = convert(args.src, args.out)
+    # the writer takes the file's lock (a run's --terrain-out takes the same): while a run holds it,
+    # the conversion is refused instead of being overwritten by the run
+    with terrain_lock(args.out, "OUT"):
+        st = convert(args.src, args.out)
     print(f"wrote {args.out} ({st.grid.shape[0]} x {st.grid.shape[1]} cells)")
     return 0
 

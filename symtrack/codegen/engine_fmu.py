@@ -297,8 +297,9 @@ def _documentation(sc: Scenario, variables) -> bytes:
                              f"<td>\"\"</td><td>{escape(t)}</td></tr>" for k, (n, t) in enumerate(FIELD_PARAMETERS))
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>symtrack {escape(sc.name)} engine FMU</title>"
             f"</head><body><h1>symtrack {escape(sc.name)}: FMI 2.0 co-simulation FMU of the terrain engine</h1>"
-            f"<p>The vehicle on the million-cell terrain engine; a communication step is a whole number of macro "
-            f"steps of {sc.run.macro_step_s} s. See symtrack's docs/codegen.md, section \"The FMU\", and "
+            f"<p>The vehicle on the million-cell terrain engine; a communication step takes whole macro steps of "
+            f"{sc.run.macro_step_s} s, then a shorter one for the rest. See symtrack's docs/codegen.md, section "
+            "\"The FMU\", and "
             "docs/terrain.md, \"Files\" (the field file).</p><table border=\"1\"><tr><th>value reference</th>"
             "<th>name</th><th>causality</th><th>unit</th><th>start</th><th>description</th></tr>\n"
             f"{rows}\n</table></body></html>\n").encode()

@@ -12,11 +12,14 @@
  *   docs/terrain.md "Files"; empty: a virgin field), then what TerrainEngine.begin_pass does: the vehicle
  *   set down at rest at the start pose, the cells under it at their static sinkage (eng_assign,
  *   eng_static), the settling with zero torque, the channels assigned again;
- * - fmi2DoStep: a communication step must be a whole number n >= 1 of macro steps (EF_MACRO_STEP_S,
- *   relative tolerance 1e-9) starting on the macro-step grid; it runs n macro steps of eng_run with the
- *   inputs held, the step k ending at (k + 1) EF_MACRO_STEP_S as the Python time loop's output grid;
- *   anything else is fmi2Error. An engine error (the vehicle left the field, a channel collision, ...)
- *   is fmi2Error with its message; the instance then accepts only free/reset;
+ * - fmi2DoStep: any communication step h > 0. A whole number n >= 1 of macro steps (EF_MACRO_STEP_S,
+ *   relative tolerance 1e-9) runs n macro steps of eng_run with the inputs held, on the macro-step grid
+ *   (the step k ending at (k + 1) EF_MACRO_STEP_S after the grid's origin, the start: the Python time
+ *   loop's output grid); any other h runs floor(h / EF_MACRO_STEP_S) macro steps and then one shorter
+ *   step of eng_run to the communication point, which becomes the grid's origin for the next steps (a
+ *   master's last step to its stop time, a variable-step master's steps); h <= 0 is fmi2Error. An
+ *   engine error (the vehicle left the field, a channel collision, ...) is fmi2Error with its message;
+ *   the instance then accepts only free/reset;
  * - outputs are computed on demand from the state and the current inputs (eng_outputs after the
  *   channel sums), as eng_run records them at each step's end;
  * - fmi2Terminate: the vehicle lifted off (TerrainEngine.end_pass: eng_lift, each loaded cell's load
@@ -52,8 +55,9 @@ typedef struct {
   int logging;
   Phase phase;
   double t;
-  long long k; /* macro steps done: the time is k EF_MACRO_STEP_S after the start */
+  long long k; /* macro steps done since t_grid: the time is t_grid + k EF_MACRO_STEP_S */
   double t_start;
+  double t_grid; /* the macro-step grid's origin: the start, or the end of the last shorter step */
   double u[2], pose[3];
   char *str[N_STR];
   eng_t E;
@@ -431,7 +435,7 @@ static fmi2Status begin_pass(Instance *c) {
   eng_sums(E); /* TerrainEngine.outputs_now */
   c->dist[0] = 0.0; c->dist[1] = -1.0; c->dist[2] = 0.0; /* no distance stop: the master ends the run */
   c->k = 0;
-  c->t = c->t_start;
+  c->t = c->t_grid = c->t_start;
   c->y_valid = 0;
   return fmi2OK;
 }
@@ -559,7 +563,7 @@ static void set_start_values(Instance *c) {
   memcpy(c->pose, ef_pose_start, sizeof c->pose);
   set_string(c, 0, "");
   set_string(c, 1, "");
-  c->t = c->t_start = 0.0;
+  c->t = c->t_start = c->t_grid = 0.0;
   c->k = 0;
   c->y_valid = 0;
 }
@@ -816,27 +820,42 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
   if (fabs(currentCommunicationPoint - c->t) > 1e-9 * fmax(1.0, fabs(c->t)))
     return FAIL(c, "fmi2DoStep: currentCommunicationPoint = %.17g is not this FMU's time %.17g",
                 currentCommunicationPoint, c->t);
+  if (!(h > 0.0) || !isfinite(h))
+    return FAIL(c, "fmi2DoStep: communicationStepSize = %.17g s must be a positive time", h);
   double ratio = h / EF_MACRO_STEP_S;
   long long n = (long long)floor(ratio + 0.5);
-  if (!(h > 0.0) || n < 1 || fabs(ratio - (double)n) > 1e-9 * ratio)
-    return FAIL(c, "fmi2DoStep: communicationStepSize = %.17g s is not a whole multiple of the macro step %.17g s "
-                "(run.macro_step_s of the exported scenario: the terrain engine advances in whole macro steps)", h,
-                EF_MACRO_STEP_S);
-  /* in chunks of CHUNK macro steps; each step ends on the Python output grid: (k + 1) dt from the start
-     (simulation/loop.py OutputGrid) */
+  int shorter = 0; /* a shorter last step to the communication point */
+  if (n < 1 || fabs(ratio - (double)n) > 1e-9 * ratio) {
+    n = (long long)floor(ratio);
+    shorter = 1;
+  }
+  /* in chunks of CHUNK macro steps; each step ends on the grid: (k + 1) dt from its origin, the start
+     (the Python output grid: simulation/loop.py OutputGrid) */
   enum { CHUNK = 32 };
   double T[CHUNK], U[2 * CHUNK], To[CHUNK], X[NV * CHUNK], Y[EF_NY_OUT * CHUNK];
   int rc = 0;
   for (long long j0 = 0; j0 < n && rc == 0; j0 += CHUNK) {
     long long m = n - j0 < CHUNK ? n - j0 : CHUNK, done = 0;
     for (long long j = 0; j < m; ++j) {
-      T[j] = c->t_start + (double)(c->k + j + 1) * EF_MACRO_STEP_S;
+      T[j] = c->t_grid + (double)(c->k + j + 1) * EF_MACRO_STEP_S;
       U[2 * j] = c->u[0];
       U[2 * j + 1] = c->u[1];
     }
     rc = eng_run(&c->E, m, c->t, T, U, c->dist, 1, To, X, Y, &done);
     c->k += done;
     if (done) c->t = T[done - 1];
+  }
+  if (rc == 0 && shorter && currentCommunicationPoint + h > c->t) {
+    /* the rest, shorter than a macro step: its end is the communication point and the grid's new origin */
+    long long done = 0;
+    T[0] = currentCommunicationPoint + h;
+    U[0] = c->u[0];
+    U[1] = c->u[1];
+    rc = eng_run(&c->E, 1, c->t, T, U, c->dist, 1, To, X, Y, &done);
+    if (done) {
+      c->t = c->t_grid = T[0];
+      c->k = 0;
+    }
   }
   c->y_valid = 0;
   if (rc < 0) return engine_error(c, "fmi2DoStep");

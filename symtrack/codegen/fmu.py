@@ -27,7 +27,8 @@ A scenario with a ``[terrain]`` section is handed to :func:`symtrack.codegen.eng
 (the vehicle on the terrain engine, the field as a file parameter). What cannot be exported here is
 refused before anything is built (:func:`check_exportable`): a grid terrain scenario, an integrator
 other than ``rosenbrock``, a torque change or an output step off the grid of ``run.fixed_step_s`` (the
-FMU's communication step is a whole number of fixed steps), an unwritable ``--out``.
+FMU reproduces the run on that grid; a communication step off it ends with a shorter step), an
+unwritable ``--out``.
 """
 
 from __future__ import annotations
@@ -293,8 +294,9 @@ def _documentation(sc: Scenario, variables) -> bytes:
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>symtrack {escape(sc.name)} FMU</title></head>"
             f"<body><h1>symtrack {escape(sc.name)}: FMI 2.0 co-simulation FMU</h1><p>The vehicle on the homogeneous "
             f"soil, integrated by the compiled fixed-step Rosenbrock method (fixed step {sc.run.fixed_step_s} s; a "
-            "communication step must be a whole multiple of it). See symtrack's docs/codegen.md, section "
-            "\"The FMU\".</p><table border=\"1\"><tr><th>value reference</th><th>name</th><th>causality</th>"
+            "communication step takes whole fixed steps, then a shorter one for the rest). See symtrack's "
+            "docs/codegen.md, section \"The FMU\".</p><table border=\"1\"><tr><th>value reference</th><th>name</th>"
+            "<th>causality</th>"
             f"<th>unit</th><th>start</th><th>description</th></tr>\n{rows}\n</table></body></html>\n").encode()
 
 

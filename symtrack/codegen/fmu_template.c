@@ -12,9 +12,11 @@
  * Association's, 2-clause BSD licence, as shipped by fmpy. Links libc and libm only.
  *
  * Semantics:
- * - a communication step must be a whole number n >= 1 of fixed steps (FMU_FIXED_STEP_S, relative
- *   tolerance 1e-9); doStep advances n equal Rosenbrock steps of h / n with the inputs held, as the
- *   Python time loop advances an output interval; any other step size is fmi2Error;
+ * - any communication step h > 0: a whole number n >= 1 of fixed steps (FMU_FIXED_STEP_S, relative
+ *   tolerance 1e-9) advances n equal Rosenbrock steps of h / n with the inputs held, as the Python time
+ *   loop advances an output interval; any other h advances floor(h / FMU_FIXED_STEP_S) fixed steps and
+ *   then one shorter Rosenbrock step to the communication point (a master's last step to its stop
+ *   time, a variable-step master's steps); h <= 0 is fmi2Error;
  * - the parameters (vehicle, soil, start pose) have variability "fixed": settable until
  *   fmi2ExitInitializationMode, which computes the start state from them;
  * - outputs are computed on demand from the state and the current inputs (the model's outputs depend on
@@ -423,25 +425,32 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
   if (fabs(currentCommunicationPoint - c->t) > 1e-9 * fmax(1.0, fabs(c->t)))
     return FAIL(c, "fmi2DoStep: currentCommunicationPoint = %.17g is not this FMU's time %.17g",
                 currentCommunicationPoint, c->t);
+  if (!(h > 0.0) || !isfinite(h))
+    return FAIL(c, "fmi2DoStep: communicationStepSize = %.17g s must be a positive time", h);
   double ratio = h / FMU_FIXED_STEP_S;
   long n = (long)floor(ratio + 0.5);
-  if (!(h > 0.0) || n < 1 || fabs(ratio - (double)n) > 1e-9 * ratio)
-    return FAIL(c, "fmi2DoStep: communicationStepSize = %.17g s is not a whole multiple of the fixed step %.17g s "
-                "(run.fixed_step_s of the exported scenario)", h, FMU_FIXED_STEP_S);
-  double hs = h / (double)n;
+  double hs = h / (double)n, last = 0.0; /* n steps of hs, then one of last (0: none) */
+  if (n < 1 || fabs(ratio - (double)n) > 1e-9 * ratio) {
+    /* not a whole multiple: whole fixed steps, then the shorter rest */
+    n = (long)floor(ratio);
+    hs = FMU_FIXED_STEP_S;
+    last = h - (double)n * FMU_FIXED_STEP_S;
+  }
   double xn[FMU_NX], zn[FMU_NZ];
-  for (long k = 0; k < n; k++) {
-    c->arg[0] = c->x; c->arg[1] = c->z; c->arg[2] = c->u; c->arg[3] = c->p; c->arg[4] = &hs;
+  for (long k = 0; k <= n; k++) {
+    double hk = k < n ? hs : last, tk = c->t + (double)k * hs;
+    if (!(hk > 0.0)) break;
+    c->arg[0] = c->x; c->arg[1] = c->z; c->arg[2] = c->u; c->arg[3] = c->p; c->arg[4] = &hk;
     c->res[0] = xn; c->res[1] = zn;
     if (call(c, F_STEP)) {
       c->phase = ST_ERROR;
-      return FAIL(c, "fmi2DoStep: the Rosenbrock step failed at t = %.17g s", c->t + k * hs);
+      return FAIL(c, "fmi2DoStep: the Rosenbrock step failed at t = %.17g s", tk);
     }
     for (int i = 0; i < FMU_NX; i++)
       if (!isfinite(xn[i])) {
         c->phase = ST_ERROR;
         return FAIL(c, "fmi2DoStep: non-finite state %s at t = %.17g s (the fixed step does not resolve the "
-                    "dynamics or the vehicle left the model's domain)", fmu_state_names[i], c->t + (k + 1) * hs);
+                    "dynamics or the vehicle left the model's domain)", fmu_state_names[i], tk + hk);
       }
     memcpy(c->x, xn, sizeof xn);
     memcpy(c->z, zn, sizeof zn);

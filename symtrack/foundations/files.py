@@ -21,7 +21,7 @@ from pathlib import Path
 from .errors import ScenarioError
 
 __all__ = ["DEFLATE_LEVEL", "atomic_write_bytes", "atomic_write_text", "check_output_file", "check_output_folder",
-           "keep_mode", "npz_bytes", "read_text"]
+           "keep_mode", "npz_bytes", "read_text", "real_path"]
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -65,6 +65,13 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def real_path(path) -> Path:
+    """The file ``path`` names, symbolic links resolved (a missing file: its would-be real path). A
+    terrain file given through a link is locked, written and replaced where it really is: the link
+    stays a link and its target advances."""
+    return Path(path).expanduser().resolve()
 
 
 def keep_mode(old: Path, new: Path) -> None:

@@ -50,7 +50,7 @@ import numpy as np
 
 from ..foundations.config import to_toml, with_version
 from ..foundations.errors import ScenarioError
-from ..foundations.files import atomic_write_bytes, check_output_file, keep_mode
+from ..foundations.files import atomic_write_bytes, check_output_file, keep_mode, real_path
 from ..foundations.version import __version__
 from ..terrain.storage import Terrain, file_bytes
 from ..toolchain import LockBusy, file_lock
@@ -193,26 +193,29 @@ _HELD: set[str] = set()  # the terrain files whose lock this process holds
 
 @contextlib.contextmanager
 def terrain_lock(path, option: str = "--terrain-out"):
-    """Hold ``<terrain file>.lock`` (beside the file) while a run reads and writes the terrain
-    file ``path``: a second process that would write the same file fails at once with a message
-    naming the holder, instead of the two runs' results mixing (the lock goes with its holder,
-    killed or not; the empty ``.lock`` file may stay)."""
+    """Hold ``<terrain file>.lock`` (beside the file, on its real path: links resolved) while a
+    process reads and writes the terrain file ``path`` (a run, ``symtrack terrain convert``): a second
+    process that would write the same file, under any name, fails at once with a message naming the
+    holder, instead of the two writers' results mixing. The lock goes with its holder, killed or not;
+    the ``.lock`` file is removed on every exit but a kill (a killed holder's is taken over by the next)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    key = str(path.resolve())
+    real = real_path(path)
+    real.parent.mkdir(parents=True, exist_ok=True)
+    key = str(real)
     if key in _HELD:  # this process holds it already (the CLI around Result.write): re-entrant
         yield path
         return
     try:
-        with file_lock(path.with_name(path.name + ".lock"), wait=False):
+        with file_lock(real.with_name(real.name + ".lock"), wait=False, remove=True):
             _HELD.add(key)
             try:
                 yield path
             finally:
                 _HELD.discard(key)
     except LockBusy as err:
-        raise ScenarioError(f"{option} {str(path)!r}: another symtrack process (pid {err.holder or 'unknown'}) is "
-                            "writing this terrain file; wait for it to finish, or give another file") from None
+        where = "" if real == path.absolute() else f" ({real})"
+        raise ScenarioError(f"{option} {str(path)!r}{where}: another symtrack process (pid {err.holder or 'unknown'}) "
+                            "is writing this terrain file; wait for it to finish, or give another file") from None
 
 
 @contextlib.contextmanager
@@ -395,7 +398,7 @@ def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | Non
             atomic_write_bytes(stage / name, data.encode() if isinstance(data, str) else data)
         if terrain is not None:
             data, file_id, history = file_bytes(terrain.terrain, terrain.soil, terrain.run)
-            tpath = Path(terrain.path)
+            tpath = real_path(terrain.path)  # through a link: its target is replaced, the link stays
             terrain_tmp = tpath.with_name(f".{tpath.name}.{os.getpid()}.tmp")
             atomic_write_bytes(terrain_tmp, data)
             keep_mode(tpath, terrain_tmp)  # replaced in place: the file keeps its mode and owner
@@ -420,7 +423,7 @@ def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | Non
             (out / name).parent.mkdir(parents=True, exist_ok=True)
             os.replace(stage / name, out / name)
         if terrain_tmp is not None:
-            os.replace(terrain_tmp, terrain.path)
+            os.replace(terrain_tmp, tpath)
             terrain_tmp = None
             terrain.terrain.file_id, terrain.terrain.history = file_id, history
         if final is not None:

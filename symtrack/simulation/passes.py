@@ -1,7 +1,9 @@
 """Passes over the grid terrain: one world, several runs, the figures of each pass.
 
 summary.json of a terrain study (``schema_version`` 1): the run's summary keys of the last
-pass, the terrain figures (``terrain_*``), and ``passes``: a list with, per pass,
+pass, but ``sim_time_s``, ``wall_time_s`` and ``real_time_factor``, which are the whole run's (the
+sums over the passes, and total simulated time over total wall time), the terrain figures
+(``terrain_*``), and ``passes``: a list with, per pass,
 ``rut_max_depth_mm``, ``rut_mean_depth_mm`` (mean sinkage over the rut: the cells loaded in
 the pass, z_max > 1 um), ``new_sinkage_mean_mm`` (mean sinkage added by the pass over the rut),
 ``new_sinkage_volume_m3``, ``compaction_resistance_mean_N`` (the sum of both tracks'
@@ -9,7 +11,7 @@ compaction resistance, mean over the distance the CG travelled: the compaction w
 of travel), ``compaction_resistance_time_mean_N`` (the same, mean over time: dominated by the
 start from rest, where R_c = P / max(v, v0) divides the cells' settling power by the speed floor
 v0; docs/terrain.md "The compaction resistance figure"), ``rut_cells``, ``distance_m``, ``sim_time_s``,
-``wall_time_s``; with several passes also ``later_passes_add_less_sinkage`` and
+``wall_time_s``, ``real_time_factor`` (the pass's own); with several passes also ``later_passes_add_less_sinkage`` and
 ``later_passes_meet_less_resistance``. With the subsoil stress computed (the terrain engine), each
 pass also has ``bulk_density_max_Mg_per_m3``: the field's largest dry bulk density after the pass
 at each depth of ``subsoil_depths_m`` (docs/subsoil.md "Bulk density"), and the summary has
@@ -82,6 +84,7 @@ def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np
         "distance_m": float(seg.sum()),
         "sim_time_s": float(res.t[-1]),
         "wall_time_s": float(res.wall_time_s),
+        "real_time_factor": float(res.t[-1] / res.wall_time_s) if res.wall_time_s > 0 else None,
     }}
 
 
@@ -181,6 +184,10 @@ def study_summary(study: PassStudy) -> tuple[dict, list[dict]]:
         s.update(fig)
         summaries.append(s)
     top = dict(summaries[-1])
+    # the whole run's times at the top (each pass's own are in ``passes``)
+    sim = sum(float(s["sim_time_s"]) for s in summaries)
+    wall = sum(float(s["wall_time_s"]) for s in summaries)
+    top.update(sim_time_s=sim, wall_time_s=wall, real_time_factor=sim / wall if wall > 0 else None)
     top["passes"] = list(study.figures)
     if study.bulk_density_initial is not None and any("bulk_density_max_Mg_per_m3" in f for f in study.figures):
         top["bulk_density_initial_Mg_per_m3"] = list(study.bulk_density_initial)

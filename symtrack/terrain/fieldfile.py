@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError
-from ..foundations.files import atomic_write_bytes
+from ..foundations.files import atomic_write_bytes, real_path
 from ..model.parameters import SOIL_PARAM_NAMES, spec
 from .storage import Grid, Terrain, load, save
 
@@ -91,8 +91,8 @@ def field_bytes(st: Terrain, soil: dict | None = None, where: str = "field file"
 
 
 def write_field(path, st: Terrain, soil: dict | None = None) -> None:
-    """Write the terrain ``st`` as a field file (atomically)."""
-    atomic_write_bytes(Path(path), field_bytes(st, soil, str(path)))
+    """Write the terrain ``st`` as a field file (atomically; through a symbolic link, its target)."""
+    atomic_write_bytes(real_path(path), field_bytes(st, soil, str(path)))
 
 
 def read_field(path) -> Terrain:

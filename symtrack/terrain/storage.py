@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError
-from ..foundations.files import atomic_write_bytes, npz_bytes
+from ..foundations.files import atomic_write_bytes, npz_bytes, real_path
 from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 from ..soil.pedotransfer import derive_soil, precompression_from_virgin_line_kPa
 
@@ -75,6 +75,23 @@ TERRAIN_SCHEMA_VERSION = 4
 READABLE_SCHEMAS = (1, 2, 3, 4)
 HISTORY_KEYS = ("run_id", "time_utc", "scenario", "scenario_sha256", "passes", "input_file_id")
 KIND = "symtrack-terrain"
+
+# The bounds of a terrain file's values: :func:`load` refuses a file beyond them with a message naming
+# the array (a damaged file, or one symtrack did not write: never a field's state). Each with its reason.
+# |z_m|, z_max_m, z_off_m at most 10 m: no tracked machine sinks deeper than its hull (under 2 m for any
+# of them) nor heaves the soil higher; 10 m leaves room for every vehicle and keeps out -1e6 m.
+SINKAGE_LIMIT_M = 10.0
+# z_m <= z_max_m + z_off_m: a cell's sinkage never exceeds the deepest point of its loading plus the
+# plastic sinkage of its later cycles (symtrack/model/cell.py); the margin, a micrometre, is far above
+# the rounding of float64 metres (1e-16 m at 1 m) and far below a rut (millimetres).
+SINKAGE_ORDER_TOLERANCE_M = 1e-6
+# p_max_Pa in [0, 100 MPa]: a pressure the soil carried; 100 MPa is a strong rock's compressive
+# strength, some 500 times the ground pressure of the heaviest tracked machines (20-200 kPa).
+PRESSURE_LIMIT_PA = 1e8
+# load_cycles at most 10 000: a cell under a headland sees some 50 passes a year, so 10 000 load
+# cycles are two centuries of them; the terrain engine's counter stops at 65535 (grid_engine.c), the
+# mark of a wrapped or uninitialised count, not of a field.
+LOAD_CYCLES_LIMIT = 10_000
 
 
 @dataclass(frozen=True)
@@ -196,9 +213,10 @@ class Terrain:
 
 def save(path, storage: Terrain, soil: dict | None = None, run: dict | None = None) -> None:
     """Write ``storage`` with the soil parameters ``soil`` as a terrain file, atomically
-    (:func:`file_bytes`; ``storage`` takes the file's id and history once it is written)."""
+    (:func:`file_bytes`; ``storage`` takes the file's id and history once it is written). Through a
+    symbolic link the link's target is replaced, the link stays."""
     data, file_id, history = file_bytes(storage, soil, run)
-    atomic_write_bytes(Path(path), data)
+    atomic_write_bytes(real_path(path), data)
     storage.file_id, storage.history = file_id, history
 
 
@@ -355,6 +373,7 @@ def load(path, soil: dict | None = None) -> Terrain:
         st.cycles[:] = (st.phase > 0).astype(np.uint16)
     elif not np.all(st.zoff >= 0):
         raise ScenarioError(f"{path}: z_off_m holds negative values: the file is damaged")
+    _check_bounds(path, st)
     if soil is not None:
         for n, v in file_soil.items():
             if n in soil and n in SOIL_DAY_PARAM_NAMES:  # the day's (moisture): the scenario's
@@ -369,6 +388,43 @@ def load(path, soil: dict | None = None) -> Terrain:
                     if n not in st.soil and spec(n).default is not None})
     st.soil.update(_derived_missing(st.soil))
     return st
+
+
+def _first_bad(st: Terrain, bad: np.ndarray) -> tuple[str, int]:
+    """How many cells ``bad`` marks and the first one: ("N cell(s), e.g. cell (i, j)", its flat index)."""
+    k = int(np.flatnonzero(bad)[0])
+    i, j = divmod(k, st.grid.shape[1])
+    return f"{int(np.count_nonzero(bad))} cell(s), e.g. cell ({i}, {j})", k
+
+
+def _check_bounds(path, st: Terrain) -> None:
+    """Refuse the physically impossible values of a terrain file (the bounds above :func:`load`: each
+    named with its array, its value and the allowed range)."""
+    for name, arr, low in (("z_m", st.z, -SINKAGE_LIMIT_M), ("z_max_m", st.zmax, -SINKAGE_LIMIT_M),
+                           ("z_off_m", st.zoff, 0.0)):
+        bad = (arr < low) | (arr > SINKAGE_LIMIT_M)
+        if bad.any():
+            where, k = _first_bad(st, bad)
+            raise ScenarioError(f"{path}: {name} = {float(arr[k])!r} m at {where}, outside [{low:g}, "
+                                f"{SINKAGE_LIMIT_M:g}] m (no vehicle sinks deeper): the file is damaged")
+    bad = st.z > st.zmax + st.zoff + SINKAGE_ORDER_TOLERANCE_M
+    if bad.any():
+        where, k = _first_bad(st, bad)
+        raise ScenarioError(f"{path}: z_max_m = {float(st.zmax[k])!r} m is below z_m = {float(st.z[k])!r} m (z_off_m "
+                            f"{float(st.zoff[k])!r} m) at {where}; a cell never sinks below its deepest loading "
+                            f"plus its cycles' sinkage (z_m <= z_max_m + z_off_m + {SINKAGE_ORDER_TOLERANCE_M:g} m): "
+                            "the file is damaged")
+    bad = (st.pmax < 0) | (st.pmax > PRESSURE_LIMIT_PA)
+    if bad.any():
+        where, k = _first_bad(st, bad)
+        raise ScenarioError(f"{path}: p_max_Pa = {float(st.pmax[k])!r} Pa at {where}, outside "
+                            f"[0, {PRESSURE_LIMIT_PA:g}] Pa (a pressure the soil carried): the file is damaged")
+    bad = st.cycles > LOAD_CYCLES_LIMIT
+    if bad.any():
+        where, k = _first_bad(st, bad)
+        raise ScenarioError(f"{path}: load_cycles = {int(st.cycles[k])} at {where}, above {LOAD_CYCLES_LIMIT} "
+                            "(two centuries of headland traffic; 65535 is a saturated or uninitialised counter): "
+                            "the file is damaged")
 
 
 def _derived_missing(soil: dict) -> dict:

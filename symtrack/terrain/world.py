@@ -90,6 +90,9 @@ __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "World", "derive_modulus", "open_wo
 
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
 LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
+# A scenario's terrain.origin_m agrees with its continued terrain file's within a micrometre: far below
+# a cell (at least 1 cm), above the rounding of a coordinate of 1e7 m (2e-9 m in float64)
+ORIGIN_TOLERANCE_M = 1e-6
 
 
 def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarray) -> np.ndarray:
@@ -484,6 +487,12 @@ def open_world(settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s
             raise ScenarioError(f"{label}: the terrain file has cells of {g.cell_m} m, the scenario's {where} asks "
                                 f"for terrain.cell_m = {settings.cell_m}; make them agree (or leave cell_m out to "
                                 "take the file's)")
+        origin = settings.origin_m
+        if "origin_m" in settings.given and origin is not None and max(
+                abs(a - b) for a, b in zip(origin, g.origin_m, strict=True)) > ORIGIN_TOLERANCE_M:
+            raise ScenarioError(f"{label}: the terrain file's field starts at origin_m = {list(g.origin_m)}, the "
+                                f"scenario's {where} asks for terrain.origin_m = {list(origin)}; make them agree (or "
+                                "leave origin_m out to take the file's)")
         if shape_differs:
             raise ScenarioError(
                 f"{label}: the terrain file has {g.shape[0]} x {g.shape[1]} cells of {g.cell_m} m, the scenario's "

@@ -1,0 +1,54 @@
+"""The summary of several passes gives the whole run's times at the top (issue 38, item 9):
+``sim_time_s`` and ``wall_time_s`` the sums over the passes, ``real_time_factor`` the total simulated
+time over the total wall time; each pass's own figures are in ``passes`` (and its ``pass_<k>/``)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from symtrack.cli.main import main
+
+# three passes of 0.3 m on a 32 x 16 field on the terrain engine
+THREE_PASSES = """
+name = "tiny_three"
+[run]
+duration_s = 5.0
+output_dt_s = 0.05
+integrator = "grid_fast"
+stop_after_distance_m = 0.3
+[vehicle]
+preset = "reference_crawler"
+[soil]
+preset = "clayey_soil_thailand_38"
+[terrain]
+size_m = [8.0, 4.0]
+origin_m = [-2.0, -2.0]
+cell_m = 0.25
+passes = 3
+[[torque]]
+t_s = 0.0
+left_N_m = 1500.0
+right_N_m = 1500.0
+"""
+
+
+def test_a_multi_pass_summary_gives_whole_run_times_at_the_top(tmp_path):
+    sc = tmp_path / "three.toml"
+    sc.write_text(THREE_PASSES)
+    out = tmp_path / "o"
+    assert main(["simulate", str(sc), "--out", str(out), "--quiet"]) == 0
+    top = json.loads((out / "summary.json").read_text())
+    passes = top["passes"]
+    assert len(passes) == 3
+    sim = sum(p["sim_time_s"] for p in passes)
+    wall = sum(p["wall_time_s"] for p in passes)
+    assert top["sim_time_s"] == pytest.approx(sim, rel=1e-12) and top["wall_time_s"] == pytest.approx(wall, rel=1e-12)
+    assert top["sim_time_s"] > 2.5 * passes[-1]["sim_time_s"]  # not the last pass's alone
+    assert top["real_time_factor"] == pytest.approx(sim / wall, rel=1e-12)
+    for k, p in enumerate(passes, start=1):  # each pass's own, as in its folder's summary
+        own = json.loads((out / f"pass_{k}" / "summary.json").read_text())
+        assert p["real_time_factor"] == pytest.approx(p["sim_time_s"] / p["wall_time_s"], rel=1e-12)
+        for key in ("sim_time_s", "wall_time_s", "real_time_factor"):
+            assert own[key] == p[key], (k, key)
