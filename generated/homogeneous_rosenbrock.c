@@ -60,24 +60,15 @@ extern "C" {
 #define casadi_f33 CASADI_PREFIX(f33)
 #define casadi_f34 CASADI_PREFIX(f34)
 #define casadi_f35 CASADI_PREFIX(f35)
-#define casadi_f36 CASADI_PREFIX(f36)
-#define casadi_f37 CASADI_PREFIX(f37)
-#define casadi_f38 CASADI_PREFIX(f38)
-#define casadi_f39 CASADI_PREFIX(f39)
 #define casadi_f4 CASADI_PREFIX(f4)
-#define casadi_f40 CASADI_PREFIX(f40)
-#define casadi_f41 CASADI_PREFIX(f41)
-#define casadi_f42 CASADI_PREFIX(f42)
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
 #define casadi_f8 CASADI_PREFIX(f8)
 #define casadi_f9 CASADI_PREFIX(f9)
 #define casadi_fabs CASADI_PREFIX(fabs)
-#define casadi_fill CASADI_PREFIX(fill)
 #define casadi_fmax CASADI_PREFIX(fmax)
 #define casadi_fmin CASADI_PREFIX(fmin)
-#define casadi_mmax CASADI_PREFIX(mmax)
 #define casadi_s0 CASADI_PREFIX(s0)
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s10 CASADI_PREFIX(s10)
@@ -91,7 +82,6 @@ extern "C" {
 #define casadi_s8 CASADI_PREFIX(s8)
 #define casadi_s9 CASADI_PREFIX(s9)
 #define casadi_sq CASADI_PREFIX(sq)
-#define casadi_vfmax CASADI_PREFIX(vfmax)
 #define casadi_zeros CASADI_PREFIX(zeros)
 
 /* Symbol visibility in DLLs */
@@ -147,29 +137,6 @@ void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
       for (i=0; i<n; ++i) *y++ = 0.;
     }
   }
-}
-
-void casadi_fill(casadi_real* x, casadi_int n, casadi_real alpha) {
-  casadi_int i;
-  if (x) {
-    for (i=0; i<n; ++i) *x++ = alpha;
-  }
-}
-
-casadi_real casadi_vfmax(const casadi_real* x, casadi_int n, casadi_real r) {
-  casadi_int i;
-  for (i=0; i<n; ++i) r = casadi_fmax(r, x[i]);
-  return r;
-}
-
-#ifndef casadi_inf
-  #define casadi_inf INFINITY
-#endif
-
-casadi_real casadi_mmax(const casadi_real* x, casadi_int n, casadi_int is_dense) {
-  casadi_real r = is_dense ? -casadi_inf : 0;
-  if (!x) return r;
-  return casadi_vfmax(x, n, r);
 }
 
 #define casadi_to_int(x) ((casadi_int) x)
@@ -18286,8 +18253,1217 @@ CASADI_SYMBOL_EXPORT int homogeneous_consistent_z_work_bytes(casadi_int *sz_arg,
   return 0;
 }
 
-/* outputs:(x[20],u[2],p[26])->(y[24]) */
+/* homogeneous_rosenbrock_error_ratio:(x0[20],x1[20],e1[20],ctl[2])->(r) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a0, a1, a2, a3, a4, a5;
+  a0=arg[2]? arg[2][0] : 0;
+  a0=casadi_fabs(a0);
+  a1=9.9999999999999995e-07;
+  a2=arg[3]? arg[3][0] : 0;
+  a3=arg[0]? arg[0][0] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[1]? arg[1][0] : 0;
+  a4=casadi_fabs(a4);
+  a3=casadi_fmax(a3,a4);
+  a3=(a2*a3);
+  a3=(a1+a3);
+  a0=(a0/a3);
+  a3=arg[2]? arg[2][1] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][1] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][1] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][2] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][2] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][2] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][3] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][3] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][3] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][4] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][4] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][4] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][5] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][5] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][5] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][6] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][6] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][6] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][7] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][7] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][7] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][8] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][8] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][8] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][9] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][9] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][9] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][10] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][10] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][10] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][11] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][11] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][11] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][12] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][12] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][12] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][13] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][13] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][13] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][14] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][14] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][14] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][15] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][15] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][15] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][16] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][16] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][16] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][17] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][17] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][17] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][18] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][18] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][18] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][19] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][19] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][19] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a2=(a2*a4);
+  a1=(a1+a2);
+  a3=(a3/a1);
+  a0=casadi_fmax(a0,a3);
+  if (res[0]!=0) res[0][0]=a0;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled6:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w1=w+533, *w2=w+535, w4, *w5=w+537, *w6=w+557, *w7=w+559;
+  const casadi_real **arg1=arg+6, *wr0, *wr3;
+  /* #0: @0 = input[0][0] */
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w1);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w2);
+  /* #3: @3 = input[3][0] */
+  wr3 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w4 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr0;
+  arg1[1]=w1;
+  arg1[2]=w2;
+  arg1[3]=wr3;
+  arg1[4]=(&w4);
+  res1[0]=w5;
+  res1[1]=w6;
+  res1[2]=w7;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: output[0][0] = @5 */
+  casadi_copy(w5, 20, res[0]);
+  /* #7: output[1][0] = @6 */
+  casadi_copy(w6, 2, res[1]);
+  /* #8: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w6);
+  /* #9: @4 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @6) */
+  arg1[0]=wr0;
+  arg1[1]=w5;
+  arg1[2]=w7;
+  arg1[3]=w6;
+  res1[0]=(&w4);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #10: output[2][0] = @4 */
+  if (res[2]) res[2][0] = w4;
+  /* #11: @4 = 0 */
+  w4 = 0.;
+  /* #12: output[3][0] = @4 */
+  if (res[3]) res[3][0] = w4;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+626, *w01=w+646, *w02=w+648, w04, w05, *w06=w+650, *w07=w+652, *w08=w+672, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled6(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled6(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch5:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f28(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f27(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled5:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+705, *w02=w+707, w04, *w05=w+709, *w06=w+729, *w07=w+731, *w08=w+751, w09, w10, *w11=w+753;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch5(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f26(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+806, *w01=w+826, *w02=w+828, w04, w05, *w06=w+830, *w07=w+832, *w08=w+852, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled5(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled5(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch4:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f24(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f23(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled4:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+885, *w02=w+887, w04, *w05=w+889, *w06=w+909, *w07=w+911, *w08=w+931, w09, w10, *w11=w+933;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch4(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f22(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+986, *w01=w+1006, *w02=w+1008, w04, w05, *w06=w+1010, *w07=w+1012, *w08=w+1032, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled4(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled4(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch3:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f20(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f19(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled3:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1065, *w02=w+1067, w04, *w05=w+1069, *w06=w+1089, *w07=w+1091, *w08=w+1111, w09, w10, *w11=w+1113;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch3(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f18(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+1166, *w01=w+1186, *w02=w+1188, w04, w05, *w06=w+1190, *w07=w+1192, *w08=w+1212, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled3(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled3(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch2:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f16(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f15(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled2:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1245, *w02=w+1247, w04, *w05=w+1249, *w06=w+1269, *w07=w+1271, *w08=w+1291, w09, w10, *w11=w+1293;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch2(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+1346, *w01=w+1366, *w02=w+1368, w04, w05, *w06=w+1370, *w07=w+1372, *w08=w+1392, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled2(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled2(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch1:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f12(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f11(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled1:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1425, *w02=w+1427, w04, *w05=w+1429, *w06=w+1449, *w07=w+1451, *w08=w+1471, w09, w10, *w11=w+1473;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch1(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+1526, *w01=w+1546, *w02=w+1548, w04, w05, *w06=w+1550, *w07=w+1552, *w08=w+1572, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled1(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled1(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch0:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f8(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f7(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* outputs:(x[20],u[2],p[26])->(y[24]) */
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -21604,2581 +22780,11 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   return 0;
 }
 
-/* homogeneous_rosenbrock_column:(x0[20],z0[2],u[2],p[26],h)->(xf[20],zf[2],y[24]) */
-static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w1=w+533, *w2=w+535, w4, *w5=w+537, *w6=w+557, *w7=w+559;
-  const casadi_real **arg1=arg+5, *wr0, *wr3;
-  /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w1);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w2);
-  /* #3: @3 = input[3][0] */
-  wr3 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w4 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, NULL} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  arg1[3]=wr3;
-  arg1[4]=(&w4);
-  res1[0]=w5;
-  res1[1]=w6;
-  res1[2]=0;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w5, 20, res[0]);
-  /* #7: output[1][0] = @6 */
-  casadi_copy(w6, 2, res[1]);
-  /* #8: @7 = outputs(@5, @2, @3) */
-  arg1[0]=w5;
-  arg1[1]=w2;
-  arg1[2]=wr3;
-  res1[0]=w7;
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[2][0] = @7 */
-  casadi_copy(w7, 24, res[2]);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10])->(xf[20x10],zf[2x10],y[24x10]) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+630, *w01=w+650, *w02=w+652, w04, *w05=w+654, *w06=w+674, *w07=w+676, *w08=w+700, *w09=w+724, *w10=w+726, *w11=w+750;
-  casadi_real *w12=w+752, *w13=w+776, *w14=w+778, *w15=w+802, *w16=w+804, *w17=w+828, *w18=w+830, *w19=w+854, *w20=w+856, *w21=w+880, *w22=w+882, *w23=w+906;
-  casadi_real *w24=w+908;
-  const casadi_real **arg1=arg+5, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
-  res1[2]=w08;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
-  casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
-  wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
-  w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w02;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
-  casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
-  wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
-  w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w11;
-  res1[2]=w12;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
-  casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
-  wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
-  w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w11;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
-  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
-  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
-  w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @1 = input[2][6] */
-  casadi_copy(arg[2] ? arg[2]+12 : 0, 2, w01);
-  /* #33: @3 = input[3][6] */
-  wr03 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @4 = input[4][6] */
-  w04 = arg[4] ? arg[4][6] : 0;
-  /* #35: {@5, @17, @18} = homogeneous_rosenbrock_column(@0, @15, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w15;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w17;
-  res1[2]=w18;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+120);
-  /* #37: @1 = input[2][7] */
-  casadi_copy(arg[2] ? arg[2]+14 : 0, 2, w01);
-  /* #38: @3 = input[3][7] */
-  wr03 = arg[3] ? arg[3]+182 : casadi_zeros;
-  /* #39: @4 = input[4][7] */
-  w04 = arg[4] ? arg[4][7] : 0;
-  /* #40: {@0, @19, @20} = homogeneous_rosenbrock_column(@5, @17, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w17;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w19;
-  res1[2]=w20;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #41: output[0][7] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+140);
-  /* #42: @1 = input[2][8] */
-  casadi_copy(arg[2] ? arg[2]+16 : 0, 2, w01);
-  /* #43: @3 = input[3][8] */
-  wr03 = arg[3] ? arg[3]+208 : casadi_zeros;
-  /* #44: @4 = input[4][8] */
-  w04 = arg[4] ? arg[4][8] : 0;
-  /* #45: {@5, @21, @22} = homogeneous_rosenbrock_column(@0, @19, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w19;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w21;
-  res1[2]=w22;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #46: output[0][8] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+160);
-  /* #47: @1 = input[2][9] */
-  casadi_copy(arg[2] ? arg[2]+18 : 0, 2, w01);
-  /* #48: @3 = input[3][9] */
-  wr03 = arg[3] ? arg[3]+234 : casadi_zeros;
-  /* #49: @4 = input[4][9] */
-  w04 = arg[4] ? arg[4][9] : 0;
-  /* #50: {@0, @23, @24} = homogeneous_rosenbrock_column(@5, @21, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w21;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w23;
-  res1[2]=w24;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #51: output[0][9] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+180);
-  /* #52: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #53: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #54: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #55: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #56: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #57: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #58: output[1][6] = @17 */
-  if (res[1]) casadi_copy(w17, 2, res[1]+12);
-  /* #59: output[1][7] = @19 */
-  if (res[1]) casadi_copy(w19, 2, res[1]+14);
-  /* #60: output[1][8] = @21 */
-  if (res[1]) casadi_copy(w21, 2, res[1]+16);
-  /* #61: output[1][9] = @23 */
-  if (res[1]) casadi_copy(w23, 2, res[1]+18);
-  /* #62: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #63: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #64: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #65: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #66: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #67: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #68: output[2][6] = @18 */
-  if (res[2]) casadi_copy(w18, 24, res[2]+144);
-  /* #69: output[2][7] = @20 */
-  if (res[2]) casadi_copy(w20, 24, res[2]+168);
-  /* #70: output[2][8] = @22 */
-  if (res[2]) casadi_copy(w22, 24, res[2]+192);
-  /* #71: output[2][9] = @24 */
-  if (res[2]) casadi_copy(w24, 24, res[2]+216);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_column_acc10_acc10:(x0[20],z0[2],u[2x100],p[26x100],h[1x100])->(xf[20x100],zf[2x100],y[24x100]) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+959, *w01=w+979, *w05=w+981, *w06=w+1181, *w07=w+1201, *w08=w+1441, *w09=w+1461, *w10=w+1701, *w11=w+1721, *w12=w+1961, *w13=w+1981;
-  casadi_real *w14=w+2221, *w15=w+2241, *w16=w+2481, *w17=w+2501, *w18=w+2741, *w19=w+2761, *w20=w+3001, *w21=w+3021, *w22=w+3261, *w23=w+3281, *w24=w+3521, *w25=w+3541;
-  const casadi_real **arg1=arg+5, *wr00, *wr02, *wr03, *wr04;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  wr02 = arg[2] ? arg[2] : casadi_zeros;
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  wr04 = arg[4] ? arg[4] : casadi_zeros;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 200, res[0]);
-  /* #7: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #8: {NULL, @1} = horzsplit(@6) */
-  casadi_copy(w06+18, 2, w01);
-  /* #9: @2 = input[2][1] */
-  wr02 = arg[2] ? arg[2]+20 : casadi_zeros;
-  /* #10: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+260 : casadi_zeros;
-  /* #11: @4 = input[4][1] */
-  wr04 = arg[4] ? arg[4]+10 : casadi_zeros;
-  /* #12: {@5, @8, @9} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w08;
-  res1[2]=w09;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #13: output[0][1] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+200);
-  /* #14: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #15: {NULL, @1} = horzsplit(@8) */
-  casadi_copy(w08+18, 2, w01);
-  /* #16: @2 = input[2][2] */
-  wr02 = arg[2] ? arg[2]+40 : casadi_zeros;
-  /* #17: @3 = input[3][2] */
-  wr03 = arg[3] ? arg[3]+520 : casadi_zeros;
-  /* #18: @4 = input[4][2] */
-  wr04 = arg[4] ? arg[4]+20 : casadi_zeros;
-  /* #19: {@5, @10, @11} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w10;
-  res1[2]=w11;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #20: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+400);
-  /* #21: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #22: {NULL, @1} = horzsplit(@10) */
-  casadi_copy(w10+18, 2, w01);
-  /* #23: @2 = input[2][3] */
-  wr02 = arg[2] ? arg[2]+60 : casadi_zeros;
-  /* #24: @3 = input[3][3] */
-  wr03 = arg[3] ? arg[3]+780 : casadi_zeros;
-  /* #25: @4 = input[4][3] */
-  wr04 = arg[4] ? arg[4]+30 : casadi_zeros;
-  /* #26: {@5, @12, @13} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w12;
-  res1[2]=w13;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #27: output[0][3] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+600);
-  /* #28: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #29: {NULL, @1} = horzsplit(@12) */
-  casadi_copy(w12+18, 2, w01);
-  /* #30: @2 = input[2][4] */
-  wr02 = arg[2] ? arg[2]+80 : casadi_zeros;
-  /* #31: @3 = input[3][4] */
-  wr03 = arg[3] ? arg[3]+1040 : casadi_zeros;
-  /* #32: @4 = input[4][4] */
-  wr04 = arg[4] ? arg[4]+40 : casadi_zeros;
-  /* #33: {@5, @14, @15} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w14;
-  res1[2]=w15;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #34: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+800);
-  /* #35: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #36: {NULL, @1} = horzsplit(@14) */
-  casadi_copy(w14+18, 2, w01);
-  /* #37: @2 = input[2][5] */
-  wr02 = arg[2] ? arg[2]+100 : casadi_zeros;
-  /* #38: @3 = input[3][5] */
-  wr03 = arg[3] ? arg[3]+1300 : casadi_zeros;
-  /* #39: @4 = input[4][5] */
-  wr04 = arg[4] ? arg[4]+50 : casadi_zeros;
-  /* #40: {@5, @16, @17} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w16;
-  res1[2]=w17;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #41: output[0][5] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1000);
-  /* #42: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #43: {NULL, @1} = horzsplit(@16) */
-  casadi_copy(w16+18, 2, w01);
-  /* #44: @2 = input[2][6] */
-  wr02 = arg[2] ? arg[2]+120 : casadi_zeros;
-  /* #45: @3 = input[3][6] */
-  wr03 = arg[3] ? arg[3]+1560 : casadi_zeros;
-  /* #46: @4 = input[4][6] */
-  wr04 = arg[4] ? arg[4]+60 : casadi_zeros;
-  /* #47: {@5, @18, @19} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w18;
-  res1[2]=w19;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #48: output[0][6] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1200);
-  /* #49: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #50: {NULL, @1} = horzsplit(@18) */
-  casadi_copy(w18+18, 2, w01);
-  /* #51: @2 = input[2][7] */
-  wr02 = arg[2] ? arg[2]+140 : casadi_zeros;
-  /* #52: @3 = input[3][7] */
-  wr03 = arg[3] ? arg[3]+1820 : casadi_zeros;
-  /* #53: @4 = input[4][7] */
-  wr04 = arg[4] ? arg[4]+70 : casadi_zeros;
-  /* #54: {@5, @20, @21} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w20;
-  res1[2]=w21;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #55: output[0][7] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1400);
-  /* #56: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #57: {NULL, @1} = horzsplit(@20) */
-  casadi_copy(w20+18, 2, w01);
-  /* #58: @2 = input[2][8] */
-  wr02 = arg[2] ? arg[2]+160 : casadi_zeros;
-  /* #59: @3 = input[3][8] */
-  wr03 = arg[3] ? arg[3]+2080 : casadi_zeros;
-  /* #60: @4 = input[4][8] */
-  wr04 = arg[4] ? arg[4]+80 : casadi_zeros;
-  /* #61: {@5, @22, @23} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w22;
-  res1[2]=w23;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #62: output[0][8] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1600);
-  /* #63: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #64: {NULL, @1} = horzsplit(@22) */
-  casadi_copy(w22+18, 2, w01);
-  /* #65: @2 = input[2][9] */
-  wr02 = arg[2] ? arg[2]+180 : casadi_zeros;
-  /* #66: @3 = input[3][9] */
-  wr03 = arg[3] ? arg[3]+2340 : casadi_zeros;
-  /* #67: @4 = input[4][9] */
-  wr04 = arg[4] ? arg[4]+90 : casadi_zeros;
-  /* #68: {@5, @24, @25} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr02;
-  arg1[3]=wr03;
-  arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w24;
-  res1[2]=w25;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #69: output[0][9] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1800);
-  /* #70: output[1][0] = @6 */
-  casadi_copy(w06, 20, res[1]);
-  /* #71: output[1][1] = @8 */
-  if (res[1]) casadi_copy(w08, 20, res[1]+20);
-  /* #72: output[1][2] = @10 */
-  if (res[1]) casadi_copy(w10, 20, res[1]+40);
-  /* #73: output[1][3] = @12 */
-  if (res[1]) casadi_copy(w12, 20, res[1]+60);
-  /* #74: output[1][4] = @14 */
-  if (res[1]) casadi_copy(w14, 20, res[1]+80);
-  /* #75: output[1][5] = @16 */
-  if (res[1]) casadi_copy(w16, 20, res[1]+100);
-  /* #76: output[1][6] = @18 */
-  if (res[1]) casadi_copy(w18, 20, res[1]+120);
-  /* #77: output[1][7] = @20 */
-  if (res[1]) casadi_copy(w20, 20, res[1]+140);
-  /* #78: output[1][8] = @22 */
-  if (res[1]) casadi_copy(w22, 20, res[1]+160);
-  /* #79: output[1][9] = @24 */
-  if (res[1]) casadi_copy(w24, 20, res[1]+180);
-  /* #80: output[2][0] = @7 */
-  casadi_copy(w07, 240, res[2]);
-  /* #81: output[2][1] = @9 */
-  if (res[2]) casadi_copy(w09, 240, res[2]+240);
-  /* #82: output[2][2] = @11 */
-  if (res[2]) casadi_copy(w11, 240, res[2]+480);
-  /* #83: output[2][3] = @13 */
-  if (res[2]) casadi_copy(w13, 240, res[2]+720);
-  /* #84: output[2][4] = @15 */
-  if (res[2]) casadi_copy(w15, 240, res[2]+960);
-  /* #85: output[2][5] = @17 */
-  if (res[2]) casadi_copy(w17, 240, res[2]+1200);
-  /* #86: output[2][6] = @19 */
-  if (res[2]) casadi_copy(w19, 240, res[2]+1440);
-  /* #87: output[2][7] = @21 */
-  if (res[2]) casadi_copy(w21, 240, res[2]+1680);
-  /* #88: output[2][8] = @23 */
-  if (res[2]) casadi_copy(w23, 240, res[2]+1920);
-  /* #89: output[2][9] = @25 */
-  if (res[2]) casadi_copy(w25, 240, res[2]+2160);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_acc256:(x0[20],z0[2],u[2x256],p[26x256],h[1x256])->(xf[20x256],zf[2x256],y[24x256]) */
-static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+4071, *w01=w+4091, *w02=w+4093, w04, *w05=w+4095, *w06=w+4115, *w07=w+4117, *w08=w+4141, *w09=w+4165, *w10=w+4167, *w11=w+4191;
-  casadi_real *w12=w+4193, *w13=w+4217, *w14=w+4219, *w15=w+4243, *w16=w+4245, *w19=w+4269, *w20=w+4469, *w21=w+4489, *w22=w+4729, *w23=w+4749, *w24=w+4989, *w25=w+5009;
-  casadi_real *w26=w+5249, *w27=w+5269, *w28=w+5509, *w29=w+5529, *w32=w+5769, *w33=w+7769, *w34=w+7969, *w35=w+10369, *w36=w+10569;
-  const casadi_real **arg1=arg+5, *wr00, *wr03, *wr05, *wr17, *wr18, *wr19, *wr30, *wr31;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
-  res1[2]=w08;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
-  casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
-  wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
-  w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w02;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
-  casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
-  wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
-  w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w11;
-  res1[2]=w12;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
-  casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
-  wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
-  w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w11;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
-  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
-  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
-  w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @5 = input[2][6] */
-  wr05 = arg[2] ? arg[2]+12 : casadi_zeros;
-  /* #33: @17 = input[3][6] */
-  wr17 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @18 = input[4][6] */
-  wr18 = arg[4] ? arg[4]+6 : casadi_zeros;
-  /* #35: {@19, @20, @21} = homogeneous_rosenbrock_column_acc10(@0, @15, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w15;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w20;
-  res1[2]=w21;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+120);
-  /* #37: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #38: {NULL, @1} = horzsplit(@20) */
-  casadi_copy(w20+18, 2, w01);
-  /* #39: @5 = input[2][7] */
-  wr05 = arg[2] ? arg[2]+32 : casadi_zeros;
-  /* #40: @17 = input[3][7] */
-  wr17 = arg[3] ? arg[3]+416 : casadi_zeros;
-  /* #41: @18 = input[4][7] */
-  wr18 = arg[4] ? arg[4]+16 : casadi_zeros;
-  /* #42: {@19, @22, @23} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w22;
-  res1[2]=w23;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #43: output[0][7] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+320);
-  /* #44: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #45: {NULL, @1} = horzsplit(@22) */
-  casadi_copy(w22+18, 2, w01);
-  /* #46: @5 = input[2][8] */
-  wr05 = arg[2] ? arg[2]+52 : casadi_zeros;
-  /* #47: @17 = input[3][8] */
-  wr17 = arg[3] ? arg[3]+676 : casadi_zeros;
-  /* #48: @18 = input[4][8] */
-  wr18 = arg[4] ? arg[4]+26 : casadi_zeros;
-  /* #49: {@19, @24, @25} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w24;
-  res1[2]=w25;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #50: output[0][8] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+520);
-  /* #51: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #52: {NULL, @1} = horzsplit(@24) */
-  casadi_copy(w24+18, 2, w01);
-  /* #53: @5 = input[2][9] */
-  wr05 = arg[2] ? arg[2]+72 : casadi_zeros;
-  /* #54: @17 = input[3][9] */
-  wr17 = arg[3] ? arg[3]+936 : casadi_zeros;
-  /* #55: @18 = input[4][9] */
-  wr18 = arg[4] ? arg[4]+36 : casadi_zeros;
-  /* #56: {@19, @26, @27} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w26;
-  res1[2]=w27;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #57: output[0][9] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+720);
-  /* #58: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #59: {NULL, @1} = horzsplit(@26) */
-  casadi_copy(w26+18, 2, w01);
-  /* #60: @5 = input[2][10] */
-  wr05 = arg[2] ? arg[2]+92 : casadi_zeros;
-  /* #61: @17 = input[3][10] */
-  wr17 = arg[3] ? arg[3]+1196 : casadi_zeros;
-  /* #62: @18 = input[4][10] */
-  wr18 = arg[4] ? arg[4]+46 : casadi_zeros;
-  /* #63: {@19, @28, @29} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w28;
-  res1[2]=w29;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #64: output[0][10] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+920);
-  /* #65: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #66: {NULL, @1} = horzsplit(@28) */
-  casadi_copy(w28+18, 2, w01);
-  /* #67: @19 = input[2][11] */
-  wr19 = arg[2] ? arg[2]+112 : casadi_zeros;
-  /* #68: @30 = input[3][11] */
-  wr30 = arg[3] ? arg[3]+1456 : casadi_zeros;
-  /* #69: @31 = input[4][11] */
-  wr31 = arg[4] ? arg[4]+56 : casadi_zeros;
-  /* #70: {@32, @33, @34} = homogeneous_rosenbrock_column_acc10_acc10(@0, @1, @19, @30, @31) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr19;
-  arg1[3]=wr30;
-  arg1[4]=wr31;
-  res1[0]=w32;
-  res1[1]=w33;
-  res1[2]=w34;
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
-  /* #71: output[0][11] = @32 */
-  if (res[0]) casadi_copy(w32, 2000, res[0]+1120);
-  /* #72: {NULL, @0} = horzsplit(@32) */
-  casadi_copy(w32+1980, 20, w00);
-  /* #73: {NULL, @1} = horzsplit(@33) */
-  casadi_copy(w33+198, 2, w01);
-  /* #74: @19 = input[2][12] */
-  wr19 = arg[2] ? arg[2]+312 : casadi_zeros;
-  /* #75: @30 = input[3][12] */
-  wr30 = arg[3] ? arg[3]+4056 : casadi_zeros;
-  /* #76: @31 = input[4][12] */
-  wr31 = arg[4] ? arg[4]+156 : casadi_zeros;
-  /* #77: {@32, @35, @36} = homogeneous_rosenbrock_column_acc10_acc10(@0, @1, @19, @30, @31) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr19;
-  arg1[3]=wr30;
-  arg1[4]=wr31;
-  res1[0]=w32;
-  res1[1]=w35;
-  res1[2]=w36;
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
-  /* #78: output[0][12] = @32 */
-  if (res[0]) casadi_copy(w32, 2000, res[0]+3120);
-  /* #79: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #80: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #81: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #82: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #83: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #84: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #85: output[1][6] = @20 */
-  if (res[1]) casadi_copy(w20, 20, res[1]+12);
-  /* #86: output[1][7] = @22 */
-  if (res[1]) casadi_copy(w22, 20, res[1]+32);
-  /* #87: output[1][8] = @24 */
-  if (res[1]) casadi_copy(w24, 20, res[1]+52);
-  /* #88: output[1][9] = @26 */
-  if (res[1]) casadi_copy(w26, 20, res[1]+72);
-  /* #89: output[1][10] = @28 */
-  if (res[1]) casadi_copy(w28, 20, res[1]+92);
-  /* #90: output[1][11] = @33 */
-  if (res[1]) casadi_copy(w33, 200, res[1]+112);
-  /* #91: output[1][12] = @35 */
-  if (res[1]) casadi_copy(w35, 200, res[1]+312);
-  /* #92: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #93: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #94: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #95: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #96: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #97: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #98: output[2][6] = @21 */
-  if (res[2]) casadi_copy(w21, 240, res[2]+144);
-  /* #99: output[2][7] = @23 */
-  if (res[2]) casadi_copy(w23, 240, res[2]+384);
-  /* #100: output[2][8] = @25 */
-  if (res[2]) casadi_copy(w25, 240, res[2]+624);
-  /* #101: output[2][9] = @27 */
-  if (res[2]) casadi_copy(w27, 240, res[2]+864);
-  /* #102: output[2][10] = @29 */
-  if (res[2]) casadi_copy(w29, 240, res[2]+1104);
-  /* #103: output[2][11] = @34 */
-  if (res[2]) casadi_copy(w34, 2400, res[2]+1344);
-  /* #104: output[2][12] = @36 */
-  if (res[2]) casadi_copy(w36, 2400, res[2]+3744);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_chunk256:(x0[20],z0[2],U[2x256],H[1x256],p[26])->(X[20x256],Z[2x256],Y[24x256]) */
-static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+3, *w1=w+15966, *w4=w+15968, *w6=w+22624, *w7=w+27744, *w8=w+28256;
-  const casadi_real **arg1=arg+5, *wr0, *wr2, *wr3, *wr5;
-  /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w1);
-  /* #2: @2 = input[2][0] */
-  wr2 = arg[2] ? arg[2] : casadi_zeros;
-  /* #3: @3 = input[4][0] */
-  wr3 = arg[4] ? arg[4] : casadi_zeros;
-  /* #4: @4 = repmat(@3, 256) */
-  for (i=0;i<256;++i) {
-    casadi_copy(wr3, 26, w4+ i*26);
-  }
-  /* #5: @5 = input[3][0] */
-  wr5 = arg[3] ? arg[3] : casadi_zeros;
-  /* #6: {@6, @7, @8} = homogeneous_rosenbrock_acc256(@0, @1, @2, @4, @5) */
-  arg1[0]=wr0;
-  arg1[1]=w1;
-  arg1[2]=wr2;
-  arg1[3]=w4;
-  arg1[4]=wr5;
-  res1[0]=w6;
-  res1[1]=w7;
-  res1[2]=w8;
-  if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
-  /* #7: output[0][0] = @6 */
-  casadi_copy(w6, 5120, res[0]);
-  /* #8: output[1][0] = @7 */
-  casadi_copy(w7, 512, res[1]);
-  /* #9: output[2][0] = @8 */
-  casadi_copy(w8, 6144, res[2]);
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f2(arg, res, iw, w, mem);
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256_checkout(void) {
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk256_release(int mem) {
-}
-
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk256_incref(void) {
-}
-
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk256_decref(void) {
-}
-
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk256_n_in(void) { return 5;}
-
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk256_n_out(void) { return 3;}
-
-CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_chunk256_default_in(casadi_int i) {
-  switch (i) {
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk256_name_in(casadi_int i) {
-  switch (i) {
-    case 0: return "x0";
-    case 1: return "z0";
-    case 2: return "U";
-    case 3: return "H";
-    case 4: return "p";
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk256_name_out(casadi_int i) {
-  switch (i) {
-    case 0: return "X";
-    case 1: return "Z";
-    case 2: return "Y";
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_in(casadi_int i) {
-  switch (i) {
-    case 0: return casadi_s0;
-    case 1: return casadi_s1;
-    case 2: return casadi_s4;
-    case 3: return casadi_s5;
-    case 4: return casadi_s2;
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_out(casadi_int i) {
-  switch (i) {
-    case 0: return casadi_s6;
-    case 1: return casadi_s4;
-    case 2: return casadi_s7;
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 30;
-  if (sz_res) *sz_res = 18;
-  if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 34400;
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 30*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 18*sizeof(casadi_real*);
-  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 34400*sizeof(casadi_real);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10])->(xf[20x10],zf[2x10],y[24x10]) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+630, *w01=w+650, *w02=w+652, w04, *w05=w+654, *w06=w+674, *w07=w+676, *w08=w+700, *w09=w+724, *w10=w+726, *w11=w+750;
-  casadi_real *w12=w+752, *w13=w+776, *w14=w+778, *w15=w+802, *w16=w+804, *w17=w+828, *w18=w+830, *w19=w+854, *w20=w+856, *w21=w+880, *w22=w+882, *w23=w+906;
-  casadi_real *w24=w+908;
-  const casadi_real **arg1=arg+5, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
-  res1[2]=w08;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
-  casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
-  wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
-  w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w02;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
-  casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
-  wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
-  w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w11;
-  res1[2]=w12;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
-  casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
-  wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
-  w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w11;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
-  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
-  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
-  w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @1 = input[2][6] */
-  casadi_copy(arg[2] ? arg[2]+12 : 0, 2, w01);
-  /* #33: @3 = input[3][6] */
-  wr03 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @4 = input[4][6] */
-  w04 = arg[4] ? arg[4][6] : 0;
-  /* #35: {@5, @17, @18} = homogeneous_rosenbrock_column(@0, @15, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w15;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w17;
-  res1[2]=w18;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+120);
-  /* #37: @1 = input[2][7] */
-  casadi_copy(arg[2] ? arg[2]+14 : 0, 2, w01);
-  /* #38: @3 = input[3][7] */
-  wr03 = arg[3] ? arg[3]+182 : casadi_zeros;
-  /* #39: @4 = input[4][7] */
-  w04 = arg[4] ? arg[4][7] : 0;
-  /* #40: {@0, @19, @20} = homogeneous_rosenbrock_column(@5, @17, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w17;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w19;
-  res1[2]=w20;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #41: output[0][7] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+140);
-  /* #42: @1 = input[2][8] */
-  casadi_copy(arg[2] ? arg[2]+16 : 0, 2, w01);
-  /* #43: @3 = input[3][8] */
-  wr03 = arg[3] ? arg[3]+208 : casadi_zeros;
-  /* #44: @4 = input[4][8] */
-  w04 = arg[4] ? arg[4][8] : 0;
-  /* #45: {@5, @21, @22} = homogeneous_rosenbrock_column(@0, @19, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w19;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w21;
-  res1[2]=w22;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #46: output[0][8] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+160);
-  /* #47: @1 = input[2][9] */
-  casadi_copy(arg[2] ? arg[2]+18 : 0, 2, w01);
-  /* #48: @3 = input[3][9] */
-  wr03 = arg[3] ? arg[3]+234 : casadi_zeros;
-  /* #49: @4 = input[4][9] */
-  w04 = arg[4] ? arg[4][9] : 0;
-  /* #50: {@0, @23, @24} = homogeneous_rosenbrock_column(@5, @21, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w21;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w23;
-  res1[2]=w24;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #51: output[0][9] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+180);
-  /* #52: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #53: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #54: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #55: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #56: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #57: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #58: output[1][6] = @17 */
-  if (res[1]) casadi_copy(w17, 2, res[1]+12);
-  /* #59: output[1][7] = @19 */
-  if (res[1]) casadi_copy(w19, 2, res[1]+14);
-  /* #60: output[1][8] = @21 */
-  if (res[1]) casadi_copy(w21, 2, res[1]+16);
-  /* #61: output[1][9] = @23 */
-  if (res[1]) casadi_copy(w23, 2, res[1]+18);
-  /* #62: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #63: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #64: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #65: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #66: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #67: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #68: output[2][6] = @18 */
-  if (res[2]) casadi_copy(w18, 24, res[2]+144);
-  /* #69: output[2][7] = @20 */
-  if (res[2]) casadi_copy(w20, 24, res[2]+168);
-  /* #70: output[2][8] = @22 */
-  if (res[2]) casadi_copy(w22, 24, res[2]+192);
-  /* #71: output[2][9] = @24 */
-  if (res[2]) casadi_copy(w24, 24, res[2]+216);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_acc16:(x0[20],z0[2],u[2x16],p[26x16],h[1x16])->(xf[20x16],zf[2x16],y[24x16]) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+959, *w01=w+979, *w02=w+981, w04, *w05=w+983, *w06=w+1003, *w07=w+1005, *w08=w+1029, *w09=w+1053, *w10=w+1055, *w11=w+1079;
-  casadi_real *w12=w+1081, *w13=w+1105, *w14=w+1107, *w15=w+1131, *w16=w+1133, *w19=w+1157, *w20=w+1357, *w21=w+1377;
-  const casadi_real **arg1=arg+5, *wr00, *wr03, *wr05, *wr17, *wr18;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
-  res1[2]=w08;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
-  casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
-  wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
-  w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w02;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
-  casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
-  wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
-  w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w11;
-  res1[2]=w12;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
-  casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
-  wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
-  w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w11;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
-  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
-  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
-  w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @5 = input[2][6] */
-  wr05 = arg[2] ? arg[2]+12 : casadi_zeros;
-  /* #33: @17 = input[3][6] */
-  wr17 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @18 = input[4][6] */
-  wr18 = arg[4] ? arg[4]+6 : casadi_zeros;
-  /* #35: {@19, @20, @21} = homogeneous_rosenbrock_column_acc10(@0, @15, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w15;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w20;
-  res1[2]=w21;
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+120);
-  /* #37: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #38: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #39: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #40: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #41: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #42: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #43: output[1][6] = @20 */
-  if (res[1]) casadi_copy(w20, 20, res[1]+12);
-  /* #44: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #45: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #46: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #47: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #48: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #49: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #50: output[2][6] = @21 */
-  if (res[2]) casadi_copy(w21, 240, res[2]+144);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_chunk16:(x0[20],z0[2],U[2x16],H[1x16],p[26])->(X[20x16],Z[2x16],Y[24x16]) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+3, *w1=w+1914, *w4=w+1916, *w6=w+2332, *w7=w+2652, *w8=w+2684;
-  const casadi_real **arg1=arg+5, *wr0, *wr2, *wr3, *wr5;
-  /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w1);
-  /* #2: @2 = input[2][0] */
-  wr2 = arg[2] ? arg[2] : casadi_zeros;
-  /* #3: @3 = input[4][0] */
-  wr3 = arg[4] ? arg[4] : casadi_zeros;
-  /* #4: @4 = repmat(@3, 16) */
-  for (i=0;i<16;++i) {
-    casadi_copy(wr3, 26, w4+ i*26);
-  }
-  /* #5: @5 = input[3][0] */
-  wr5 = arg[3] ? arg[3] : casadi_zeros;
-  /* #6: {@6, @7, @8} = homogeneous_rosenbrock_acc16(@0, @1, @2, @4, @5) */
-  arg1[0]=wr0;
-  arg1[1]=w1;
-  arg1[2]=wr2;
-  arg1[3]=w4;
-  arg1[4]=wr5;
-  res1[0]=w6;
-  res1[1]=w7;
-  res1[2]=w8;
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #7: output[0][0] = @6 */
-  casadi_copy(w6, 320, res[0]);
-  /* #8: output[1][0] = @7 */
-  casadi_copy(w7, 32, res[1]);
-  /* #9: output[2][0] = @8 */
-  casadi_copy(w8, 384, res[2]);
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f8(arg, res, iw, w, mem);
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16_checkout(void) {
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk16_release(int mem) {
-}
-
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk16_incref(void) {
-}
-
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk16_decref(void) {
-}
-
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk16_n_in(void) { return 5;}
-
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk16_n_out(void) { return 3;}
-
-CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_chunk16_default_in(casadi_int i) {
-  switch (i) {
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk16_name_in(casadi_int i) {
-  switch (i) {
-    case 0: return "x0";
-    case 1: return "z0";
-    case 2: return "U";
-    case 3: return "H";
-    case 4: return "p";
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk16_name_out(casadi_int i) {
-  switch (i) {
-    case 0: return "X";
-    case 1: return "Z";
-    case 2: return "Y";
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_in(casadi_int i) {
-  switch (i) {
-    case 0: return casadi_s0;
-    case 1: return casadi_s1;
-    case 2: return casadi_s8;
-    case 3: return casadi_s9;
-    case 4: return casadi_s2;
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_out(casadi_int i) {
-  switch (i) {
-    case 0: return casadi_s10;
-    case 1: return casadi_s8;
-    case 2: return casadi_s11;
-    default: return 0;
-  }
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 25;
-  if (sz_res) *sz_res = 15;
-  if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 3068;
-  return 0;
-}
-
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 25*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 15*sizeof(casadi_real*);
-  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 3068*sizeof(casadi_real);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_keep0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real *w1=w+0, w2;
-  const casadi_real *wr0;
-  /* #0: @0 = input[6][0] */
-  wr0 = arg[6] ? arg[6] : casadi_zeros;
-  /* #1: output[0][0] = @0 */
-  casadi_copy(wr0, 20, res[0]);
-  /* #2: @1 = input[7][0] */
-  casadi_copy(arg[7], 2, w1);
-  /* #3: output[1][0] = @1 */
-  casadi_copy(w1, 2, res[1]);
-  /* #4: @2 = input[8][0] */
-  w2 = arg[8] ? arg[8][0] : 0;
-  /* #5: output[2][0] = @2 */
-  if (res[2]) res[2][0] = w2;
-  /* #6: @2 = 0 */
-  w2 = 0.;
-  /* #7: output[3][0] = @2 */
-  if (res[3]) res[3][0] = w2;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_keep1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real *w1=w+0, w2;
-  const casadi_real *wr0;
-  /* #0: @0 = input[6][0] */
-  wr0 = arg[6] ? arg[6] : casadi_zeros;
-  /* #1: output[0][0] = @0 */
-  casadi_copy(wr0, 20, res[0]);
-  /* #2: @1 = input[7][0] */
-  casadi_copy(arg[7], 2, w1);
-  /* #3: output[1][0] = @1 */
-  casadi_copy(w1, 2, res[1]);
-  /* #4: @2 = input[8][0] */
-  w2 = arg[8] ? arg[8][0] : 0;
-  /* #5: output[2][0] = @2 */
-  if (res[2]) res[2][0] = w2;
-  /* #6: @2 = 0 */
-  w2 = 0.;
-  /* #7: output[3][0] = @2 */
-  if (res[3]) res[3][0] = w2;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_keep2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real *w1=w+0, w2;
-  const casadi_real *wr0;
-  /* #0: @0 = input[6][0] */
-  wr0 = arg[6] ? arg[6] : casadi_zeros;
-  /* #1: output[0][0] = @0 */
-  casadi_copy(wr0, 20, res[0]);
-  /* #2: @1 = input[7][0] */
-  casadi_copy(arg[7], 2, w1);
-  /* #3: output[1][0] = @1 */
-  casadi_copy(w1, 2, res[1]);
-  /* #4: @2 = input[8][0] */
-  w2 = arg[8] ? arg[8][0] : 0;
-  /* #5: output[2][0] = @2 */
-  if (res[2]) res[2][0] = w2;
-  /* #6: @2 = 0 */
-  w2 = 0.;
-  /* #7: output[3][0] = @2 */
-  if (res[3]) res[3][0] = w2;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_keep3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real *w1=w+0, w2;
-  const casadi_real *wr0;
-  /* #0: @0 = input[6][0] */
-  wr0 = arg[6] ? arg[6] : casadi_zeros;
-  /* #1: output[0][0] = @0 */
-  casadi_copy(wr0, 20, res[0]);
-  /* #2: @1 = input[7][0] */
-  casadi_copy(arg[7], 2, w1);
-  /* #3: output[1][0] = @1 */
-  casadi_copy(w1, 2, res[1]);
-  /* #4: @2 = input[8][0] */
-  w2 = arg[8] ? arg[8][0] : 0;
-  /* #5: output[2][0] = @2 */
-  if (res[2]) res[2][0] = w2;
-  /* #6: @2 = 0 */
-  w2 = 0.;
-  /* #7: output[3][0] = @2 */
-  if (res[3]) res[3][0] = w2;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_keep4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real *w1=w+0, w2;
-  const casadi_real *wr0;
-  /* #0: @0 = input[6][0] */
-  wr0 = arg[6] ? arg[6] : casadi_zeros;
-  /* #1: output[0][0] = @0 */
-  casadi_copy(wr0, 20, res[0]);
-  /* #2: @1 = input[7][0] */
-  casadi_copy(arg[7], 2, w1);
-  /* #3: output[1][0] = @1 */
-  casadi_copy(w1, 2, res[1]);
-  /* #4: @2 = input[8][0] */
-  w2 = arg[8] ? arg[8][0] : 0;
-  /* #5: output[2][0] = @2 */
-  if (res[2]) res[2][0] = w2;
-  /* #6: @2 = 0 */
-  w2 = 0.;
-  /* #7: output[3][0] = @2 */
-  if (res[3]) res[3][0] = w2;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_keep5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real *w1=w+0, w2;
-  const casadi_real *wr0;
-  /* #0: @0 = input[6][0] */
-  wr0 = arg[6] ? arg[6] : casadi_zeros;
-  /* #1: output[0][0] = @0 */
-  casadi_copy(wr0, 20, res[0]);
-  /* #2: @1 = input[7][0] */
-  casadi_copy(arg[7], 2, w1);
-  /* #3: output[1][0] = @1 */
-  casadi_copy(w1, 2, res[1]);
-  /* #4: @2 = input[8][0] */
-  w2 = arg[8] ? arg[8][0] : 0;
-  /* #5: output[2][0] = @2 */
-  if (res[2]) res[2][0] = w2;
-  /* #6: @2 = 0 */
-  w2 = 0.;
-  /* #7: output[3][0] = @2 */
-  if (res[3]) res[3][0] = w2;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_controlled6:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f37(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+4, *rr, *w0=w+533, *w1=w+553, *w2=w+555, w4, *w5=w+557, *w6=w+577, *w7=w+579, *w8=w+599;
-  const casadi_real **arg1=arg+6, *cr, *cs, *wr0, *wr3;
-  /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w1);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w2);
-  /* #3: @3 = input[3][0] */
-  wr3 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w4 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  arg1[3]=wr3;
-  arg1[4]=(&w4);
-  res1[0]=w5;
-  res1[1]=w6;
-  res1[2]=w7;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w5, 20, res[0]);
-  /* #7: output[1][0] = @6 */
-  casadi_copy(w6, 2, res[1]);
-  /* #8: @7 = fabs(@7) */
-  for (i=0, rr=w7, cs=w7; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #9: @8 = all_1e-06(20x1) */
-  casadi_fill(w8, 20, 9.9999999999999995e-07);
-  /* #10: @6 = input[5][0] */
-  casadi_copy(arg[5], 2, w6);
-  /* #11: @4 = @6[0] */
-  for (rr=(&w4), cs=w6+0; cs!=w6+1; cs+=1) *rr++ = *cs;
-  /* #12: @0 = fabs(@0) */
-  for (i=0, rr=w0, cs=wr0; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #13: @5 = fabs(@5) */
-  for (i=0, rr=w5, cs=w5; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #14: @0 = fmax(@0,@5) */
-  for (i=0, rr=w0, cr=w0, cs=w5; i<20; ++i) (*rr++)  = casadi_fmax((*cr++),(*cs++));
-  /* #15: @0 = (@4*@0) */
-  for (i=0, rr=w0, cs=w0; i<20; ++i) (*rr++)  = (w4*(*cs++));
-  /* #16: @8 = (@8+@0) */
-  for (i=0, rr=w8, cs=w0; i<20; ++i) (*rr++) += (*cs++);
-  /* #17: @7 = (@7/@8) */
-  for (i=0, rr=w7, cs=w8; i<20; ++i) (*rr++) /= (*cs++);
-  /* #18: @4 = max(@7) */
-  w4 = casadi_mmax(w7, 20, 1);
-  /* #19: output[2][0] = @4 */
-  if (res[2]) res[2][0] = w4;
-  /* #20: @4 = 0 */
-  w4 = 0.;
-  /* #21: output[3][0] = @4 */
-  if (res[3]) res[3][0] = w4;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_halve5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+646, *w01=w+666, *w02=w+668, w04, w05, *w06=w+670, *w07=w+672, *w08=w+692, w09, w10, w11;
-  const casadi_real **arg1=arg+9, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #5: @5 = input[4][0] */
-  w05 = arg[4] ? arg[4][0] : 0;
-  /* #6: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #7: @6 = input[5][0] */
-  casadi_copy(arg[5], 2, w06);
-  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled6(@0, @1, @2, @3, @4, @6) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w07;
-  res1[1]=w08;
-  res1[2]=(&w09);
-  res1[3]=(&w10);
-  if (casadi_f37(arg1, res1, iw, w, 0)) return 1;
-  /* #9: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #10: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled6(@7, @8, @2, @3, @4, @6) */
-  arg1[0]=w07;
-  arg1[1]=w08;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w00;
-  res1[1]=w01;
-  res1[2]=(&w05);
-  res1[3]=(&w11);
-  if (casadi_f37(arg1, res1, iw, w, 0)) return 1;
-  /* #12: output[0][0] = @0 */
-  casadi_copy(w00, 20, res[0]);
-  /* #13: output[1][0] = @1 */
-  casadi_copy(w01, 2, res[1]);
-  /* #14: @9 = fmax(@9,@5) */
-  w09  = casadi_fmax(w09,w05);
-  /* #15: output[2][0] = @9 */
-  if (res[2]) res[2][0] = w09;
-  /* #16: @9 = 1 */
-  w09 = 1.;
-  /* #17: @9 = (@9+@10) */
-  w09 += w10;
-  /* #18: @9 = (@9+@11) */
-  w09 += w11;
-  /* #19: output[3][0] = @9 */
-  if (res[3]) res[3][0] = w09;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_branch5:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f36(arg+1, res, iw, w, 0)) return 1;
-  } else {
-    if (casadi_f35(arg+1, res, iw, w, 0)) return 1;
-  }
-  return 0;
-}
-
-/* homogeneous_rosenbrock_controlled5:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+4, *rr, *w01=w+725, *w02=w+727, w04, *w05=w+729, *w06=w+749, *w07=w+751, *w08=w+771, *w09=w+791, w10, *w11=w+793;
-  casadi_real *w12=w+813, w13, *w14=w+833, w15, w16;
-  const casadi_real **arg1=arg+6, *cr, *cs, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: @7 = fabs(@7) */
-  for (i=0, rr=w07, cs=w07; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #7: @8 = all_1e-06(20x1) */
-  casadi_fill(w08, 20, 9.9999999999999995e-07);
-  /* #8: @9 = input[5][0] */
-  casadi_copy(arg[5], 2, w09);
-  /* #9: @10 = @9[0] */
-  for (rr=(&w10), cs=w09+0; cs!=w09+1; cs+=1) *rr++ = *cs;
-  /* #10: @11 = fabs(@0) */
-  for (i=0, rr=w11, cs=wr00; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #11: @12 = fabs(@5) */
-  for (i=0, rr=w12, cs=w05; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #12: @11 = fmax(@11,@12) */
-  for (i=0, rr=w11, cr=w11, cs=w12; i<20; ++i) (*rr++)  = casadi_fmax((*cr++),(*cs++));
-  /* #13: @11 = (@10*@11) */
-  for (i=0, rr=w11, cs=w11; i<20; ++i) (*rr++)  = (w10*(*cs++));
-  /* #14: @8 = (@8+@11) */
-  for (i=0, rr=w08, cs=w11; i<20; ++i) (*rr++) += (*cs++);
-  /* #15: @7 = (@7/@8) */
-  for (i=0, rr=w07, cs=w08; i<20; ++i) (*rr++) /= (*cs++);
-  /* #16: @10 = max(@7) */
-  w10 = casadi_mmax(w07, 20, 1);
-  /* #17: @13 = @9[1] */
-  for (rr=(&w13), cs=w09+1; cs!=w09+2; cs+=1) *rr++ = *cs;
-  /* #18: @13 = (@10<=@13) */
-  w13  = (w10<=w13);
-  /* #19: @13 = (!@13) */
-  w13 = (! w13 );
-  /* #20: {@7, @14, @15, @16} = homogeneous_rosenbrock_branch5(@13, @0, @1, @2, @3, @4, @9, @5, @6, @10) */
-  arg1[0]=(&w13);
-  arg1[1]=wr00;
-  arg1[2]=w01;
-  arg1[3]=w02;
-  arg1[4]=wr03;
-  arg1[5]=(&w04);
-  arg1[6]=w09;
-  arg1[7]=w05;
-  arg1[8]=w06;
-  arg1[9]=(&w10);
-  res1[0]=w07;
-  res1[1]=w14;
-  res1[2]=(&w15);
-  res1[3]=(&w16);
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][0] = @7 */
-  casadi_copy(w07, 20, res[0]);
-  /* #22: output[1][0] = @14 */
-  casadi_copy(w14, 2, res[1]);
-  /* #23: output[2][0] = @15 */
-  if (res[2]) res[2][0] = w15;
-  /* #24: output[3][0] = @16 */
-  if (res[3]) res[3][0] = w16;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_halve4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+886, *w01=w+906, *w02=w+908, w04, w05, *w06=w+910, *w07=w+912, *w08=w+932, w09, w10, w11;
-  const casadi_real **arg1=arg+9, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #5: @5 = input[4][0] */
-  w05 = arg[4] ? arg[4][0] : 0;
-  /* #6: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #7: @6 = input[5][0] */
-  casadi_copy(arg[5], 2, w06);
-  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled5(@0, @1, @2, @3, @4, @6) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w07;
-  res1[1]=w08;
-  res1[2]=(&w09);
-  res1[3]=(&w10);
-  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
-  /* #9: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #10: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled5(@7, @8, @2, @3, @4, @6) */
-  arg1[0]=w07;
-  arg1[1]=w08;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w00;
-  res1[1]=w01;
-  res1[2]=(&w05);
-  res1[3]=(&w11);
-  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
-  /* #12: output[0][0] = @0 */
-  casadi_copy(w00, 20, res[0]);
-  /* #13: output[1][0] = @1 */
-  casadi_copy(w01, 2, res[1]);
-  /* #14: @9 = fmax(@9,@5) */
-  w09  = casadi_fmax(w09,w05);
-  /* #15: output[2][0] = @9 */
-  if (res[2]) res[2][0] = w09;
-  /* #16: @9 = 1 */
-  w09 = 1.;
-  /* #17: @9 = (@9+@10) */
-  w09 += w10;
-  /* #18: @9 = (@9+@11) */
-  w09 += w11;
-  /* #19: output[3][0] = @9 */
-  if (res[3]) res[3][0] = w09;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_branch4:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f32(arg+1, res, iw, w, 0)) return 1;
-  } else {
-    if (casadi_f31(arg+1, res, iw, w, 0)) return 1;
-  }
-  return 0;
-}
-
-/* homogeneous_rosenbrock_controlled4:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+4, *rr, *w01=w+965, *w02=w+967, w04, *w05=w+969, *w06=w+989, *w07=w+991, *w08=w+1011, *w09=w+1031, w10, *w11=w+1033;
-  casadi_real *w12=w+1053, w13, *w14=w+1073, w15, w16;
-  const casadi_real **arg1=arg+6, *cr, *cs, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: @7 = fabs(@7) */
-  for (i=0, rr=w07, cs=w07; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #7: @8 = all_1e-06(20x1) */
-  casadi_fill(w08, 20, 9.9999999999999995e-07);
-  /* #8: @9 = input[5][0] */
-  casadi_copy(arg[5], 2, w09);
-  /* #9: @10 = @9[0] */
-  for (rr=(&w10), cs=w09+0; cs!=w09+1; cs+=1) *rr++ = *cs;
-  /* #10: @11 = fabs(@0) */
-  for (i=0, rr=w11, cs=wr00; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #11: @12 = fabs(@5) */
-  for (i=0, rr=w12, cs=w05; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #12: @11 = fmax(@11,@12) */
-  for (i=0, rr=w11, cr=w11, cs=w12; i<20; ++i) (*rr++)  = casadi_fmax((*cr++),(*cs++));
-  /* #13: @11 = (@10*@11) */
-  for (i=0, rr=w11, cs=w11; i<20; ++i) (*rr++)  = (w10*(*cs++));
-  /* #14: @8 = (@8+@11) */
-  for (i=0, rr=w08, cs=w11; i<20; ++i) (*rr++) += (*cs++);
-  /* #15: @7 = (@7/@8) */
-  for (i=0, rr=w07, cs=w08; i<20; ++i) (*rr++) /= (*cs++);
-  /* #16: @10 = max(@7) */
-  w10 = casadi_mmax(w07, 20, 1);
-  /* #17: @13 = @9[1] */
-  for (rr=(&w13), cs=w09+1; cs!=w09+2; cs+=1) *rr++ = *cs;
-  /* #18: @13 = (@10<=@13) */
-  w13  = (w10<=w13);
-  /* #19: @13 = (!@13) */
-  w13 = (! w13 );
-  /* #20: {@7, @14, @15, @16} = homogeneous_rosenbrock_branch4(@13, @0, @1, @2, @3, @4, @9, @5, @6, @10) */
-  arg1[0]=(&w13);
-  arg1[1]=wr00;
-  arg1[2]=w01;
-  arg1[3]=w02;
-  arg1[4]=wr03;
-  arg1[5]=(&w04);
-  arg1[6]=w09;
-  arg1[7]=w05;
-  arg1[8]=w06;
-  arg1[9]=(&w10);
-  res1[0]=w07;
-  res1[1]=w14;
-  res1[2]=(&w15);
-  res1[3]=(&w16);
-  if (casadi_f30(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][0] = @7 */
-  casadi_copy(w07, 20, res[0]);
-  /* #22: output[1][0] = @14 */
-  casadi_copy(w14, 2, res[1]);
-  /* #23: output[2][0] = @15 */
-  if (res[2]) res[2][0] = w15;
-  /* #24: output[3][0] = @16 */
-  if (res[3]) res[3][0] = w16;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_halve3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1126, *w01=w+1146, *w02=w+1148, w04, w05, *w06=w+1150, *w07=w+1152, *w08=w+1172, w09, w10, w11;
-  const casadi_real **arg1=arg+9, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #5: @5 = input[4][0] */
-  w05 = arg[4] ? arg[4][0] : 0;
-  /* #6: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #7: @6 = input[5][0] */
-  casadi_copy(arg[5], 2, w06);
-  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled4(@0, @1, @2, @3, @4, @6) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w07;
-  res1[1]=w08;
-  res1[2]=(&w09);
-  res1[3]=(&w10);
-  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
-  /* #9: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #10: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled4(@7, @8, @2, @3, @4, @6) */
-  arg1[0]=w07;
-  arg1[1]=w08;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w00;
-  res1[1]=w01;
-  res1[2]=(&w05);
-  res1[3]=(&w11);
-  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
-  /* #12: output[0][0] = @0 */
-  casadi_copy(w00, 20, res[0]);
-  /* #13: output[1][0] = @1 */
-  casadi_copy(w01, 2, res[1]);
-  /* #14: @9 = fmax(@9,@5) */
-  w09  = casadi_fmax(w09,w05);
-  /* #15: output[2][0] = @9 */
-  if (res[2]) res[2][0] = w09;
-  /* #16: @9 = 1 */
-  w09 = 1.;
-  /* #17: @9 = (@9+@10) */
-  w09 += w10;
-  /* #18: @9 = (@9+@11) */
-  w09 += w11;
-  /* #19: output[3][0] = @9 */
-  if (res[3]) res[3][0] = w09;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_branch3:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f28(arg+1, res, iw, w, 0)) return 1;
-  } else {
-    if (casadi_f27(arg+1, res, iw, w, 0)) return 1;
-  }
-  return 0;
-}
-
-/* homogeneous_rosenbrock_controlled3:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+4, *rr, *w01=w+1205, *w02=w+1207, w04, *w05=w+1209, *w06=w+1229, *w07=w+1231, *w08=w+1251, *w09=w+1271, w10, *w11=w+1273;
-  casadi_real *w12=w+1293, w13, *w14=w+1313, w15, w16;
-  const casadi_real **arg1=arg+6, *cr, *cs, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: @7 = fabs(@7) */
-  for (i=0, rr=w07, cs=w07; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #7: @8 = all_1e-06(20x1) */
-  casadi_fill(w08, 20, 9.9999999999999995e-07);
-  /* #8: @9 = input[5][0] */
-  casadi_copy(arg[5], 2, w09);
-  /* #9: @10 = @9[0] */
-  for (rr=(&w10), cs=w09+0; cs!=w09+1; cs+=1) *rr++ = *cs;
-  /* #10: @11 = fabs(@0) */
-  for (i=0, rr=w11, cs=wr00; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #11: @12 = fabs(@5) */
-  for (i=0, rr=w12, cs=w05; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #12: @11 = fmax(@11,@12) */
-  for (i=0, rr=w11, cr=w11, cs=w12; i<20; ++i) (*rr++)  = casadi_fmax((*cr++),(*cs++));
-  /* #13: @11 = (@10*@11) */
-  for (i=0, rr=w11, cs=w11; i<20; ++i) (*rr++)  = (w10*(*cs++));
-  /* #14: @8 = (@8+@11) */
-  for (i=0, rr=w08, cs=w11; i<20; ++i) (*rr++) += (*cs++);
-  /* #15: @7 = (@7/@8) */
-  for (i=0, rr=w07, cs=w08; i<20; ++i) (*rr++) /= (*cs++);
-  /* #16: @10 = max(@7) */
-  w10 = casadi_mmax(w07, 20, 1);
-  /* #17: @13 = @9[1] */
-  for (rr=(&w13), cs=w09+1; cs!=w09+2; cs+=1) *rr++ = *cs;
-  /* #18: @13 = (@10<=@13) */
-  w13  = (w10<=w13);
-  /* #19: @13 = (!@13) */
-  w13 = (! w13 );
-  /* #20: {@7, @14, @15, @16} = homogeneous_rosenbrock_branch3(@13, @0, @1, @2, @3, @4, @9, @5, @6, @10) */
-  arg1[0]=(&w13);
-  arg1[1]=wr00;
-  arg1[2]=w01;
-  arg1[3]=w02;
-  arg1[4]=wr03;
-  arg1[5]=(&w04);
-  arg1[6]=w09;
-  arg1[7]=w05;
-  arg1[8]=w06;
-  arg1[9]=(&w10);
-  res1[0]=w07;
-  res1[1]=w14;
-  res1[2]=(&w15);
-  res1[3]=(&w16);
-  if (casadi_f26(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][0] = @7 */
-  casadi_copy(w07, 20, res[0]);
-  /* #22: output[1][0] = @14 */
-  casadi_copy(w14, 2, res[1]);
-  /* #23: output[2][0] = @15 */
-  if (res[2]) res[2][0] = w15;
-  /* #24: output[3][0] = @16 */
-  if (res[3]) res[3][0] = w16;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_halve2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1366, *w01=w+1386, *w02=w+1388, w04, w05, *w06=w+1390, *w07=w+1392, *w08=w+1412, w09, w10, w11;
-  const casadi_real **arg1=arg+9, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #5: @5 = input[4][0] */
-  w05 = arg[4] ? arg[4][0] : 0;
-  /* #6: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #7: @6 = input[5][0] */
-  casadi_copy(arg[5], 2, w06);
-  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled3(@0, @1, @2, @3, @4, @6) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w07;
-  res1[1]=w08;
-  res1[2]=(&w09);
-  res1[3]=(&w10);
-  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
-  /* #9: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #10: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled3(@7, @8, @2, @3, @4, @6) */
-  arg1[0]=w07;
-  arg1[1]=w08;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w00;
-  res1[1]=w01;
-  res1[2]=(&w05);
-  res1[3]=(&w11);
-  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
-  /* #12: output[0][0] = @0 */
-  casadi_copy(w00, 20, res[0]);
-  /* #13: output[1][0] = @1 */
-  casadi_copy(w01, 2, res[1]);
-  /* #14: @9 = fmax(@9,@5) */
-  w09  = casadi_fmax(w09,w05);
-  /* #15: output[2][0] = @9 */
-  if (res[2]) res[2][0] = w09;
-  /* #16: @9 = 1 */
-  w09 = 1.;
-  /* #17: @9 = (@9+@10) */
-  w09 += w10;
-  /* #18: @9 = (@9+@11) */
-  w09 += w11;
-  /* #19: output[3][0] = @9 */
-  if (res[3]) res[3][0] = w09;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_branch2:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f24(arg+1, res, iw, w, 0)) return 1;
-  } else {
-    if (casadi_f23(arg+1, res, iw, w, 0)) return 1;
-  }
-  return 0;
-}
-
-/* homogeneous_rosenbrock_controlled2:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+4, *rr, *w01=w+1445, *w02=w+1447, w04, *w05=w+1449, *w06=w+1469, *w07=w+1471, *w08=w+1491, *w09=w+1511, w10, *w11=w+1513;
-  casadi_real *w12=w+1533, w13, *w14=w+1553, w15, w16;
-  const casadi_real **arg1=arg+6, *cr, *cs, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: @7 = fabs(@7) */
-  for (i=0, rr=w07, cs=w07; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #7: @8 = all_1e-06(20x1) */
-  casadi_fill(w08, 20, 9.9999999999999995e-07);
-  /* #8: @9 = input[5][0] */
-  casadi_copy(arg[5], 2, w09);
-  /* #9: @10 = @9[0] */
-  for (rr=(&w10), cs=w09+0; cs!=w09+1; cs+=1) *rr++ = *cs;
-  /* #10: @11 = fabs(@0) */
-  for (i=0, rr=w11, cs=wr00; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #11: @12 = fabs(@5) */
-  for (i=0, rr=w12, cs=w05; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #12: @11 = fmax(@11,@12) */
-  for (i=0, rr=w11, cr=w11, cs=w12; i<20; ++i) (*rr++)  = casadi_fmax((*cr++),(*cs++));
-  /* #13: @11 = (@10*@11) */
-  for (i=0, rr=w11, cs=w11; i<20; ++i) (*rr++)  = (w10*(*cs++));
-  /* #14: @8 = (@8+@11) */
-  for (i=0, rr=w08, cs=w11; i<20; ++i) (*rr++) += (*cs++);
-  /* #15: @7 = (@7/@8) */
-  for (i=0, rr=w07, cs=w08; i<20; ++i) (*rr++) /= (*cs++);
-  /* #16: @10 = max(@7) */
-  w10 = casadi_mmax(w07, 20, 1);
-  /* #17: @13 = @9[1] */
-  for (rr=(&w13), cs=w09+1; cs!=w09+2; cs+=1) *rr++ = *cs;
-  /* #18: @13 = (@10<=@13) */
-  w13  = (w10<=w13);
-  /* #19: @13 = (!@13) */
-  w13 = (! w13 );
-  /* #20: {@7, @14, @15, @16} = homogeneous_rosenbrock_branch2(@13, @0, @1, @2, @3, @4, @9, @5, @6, @10) */
-  arg1[0]=(&w13);
-  arg1[1]=wr00;
-  arg1[2]=w01;
-  arg1[3]=w02;
-  arg1[4]=wr03;
-  arg1[5]=(&w04);
-  arg1[6]=w09;
-  arg1[7]=w05;
-  arg1[8]=w06;
-  arg1[9]=(&w10);
-  res1[0]=w07;
-  res1[1]=w14;
-  res1[2]=(&w15);
-  res1[3]=(&w16);
-  if (casadi_f22(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][0] = @7 */
-  casadi_copy(w07, 20, res[0]);
-  /* #22: output[1][0] = @14 */
-  casadi_copy(w14, 2, res[1]);
-  /* #23: output[2][0] = @15 */
-  if (res[2]) res[2][0] = w15;
-  /* #24: output[3][0] = @16 */
-  if (res[3]) res[3][0] = w16;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_halve1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1606, *w01=w+1626, *w02=w+1628, w04, w05, *w06=w+1630, *w07=w+1632, *w08=w+1652, w09, w10, w11;
-  const casadi_real **arg1=arg+9, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #5: @5 = input[4][0] */
-  w05 = arg[4] ? arg[4][0] : 0;
-  /* #6: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #7: @6 = input[5][0] */
-  casadi_copy(arg[5], 2, w06);
-  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled2(@0, @1, @2, @3, @4, @6) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w07;
-  res1[1]=w08;
-  res1[2]=(&w09);
-  res1[3]=(&w10);
-  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
-  /* #9: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #10: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled2(@7, @8, @2, @3, @4, @6) */
-  arg1[0]=w07;
-  arg1[1]=w08;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w00;
-  res1[1]=w01;
-  res1[2]=(&w05);
-  res1[3]=(&w11);
-  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
-  /* #12: output[0][0] = @0 */
-  casadi_copy(w00, 20, res[0]);
-  /* #13: output[1][0] = @1 */
-  casadi_copy(w01, 2, res[1]);
-  /* #14: @9 = fmax(@9,@5) */
-  w09  = casadi_fmax(w09,w05);
-  /* #15: output[2][0] = @9 */
-  if (res[2]) res[2][0] = w09;
-  /* #16: @9 = 1 */
-  w09 = 1.;
-  /* #17: @9 = (@9+@10) */
-  w09 += w10;
-  /* #18: @9 = (@9+@11) */
-  w09 += w11;
-  /* #19: output[3][0] = @9 */
-  if (res[3]) res[3][0] = w09;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_branch1:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f20(arg+1, res, iw, w, 0)) return 1;
-  } else {
-    if (casadi_f19(arg+1, res, iw, w, 0)) return 1;
-  }
-  return 0;
-}
-
-/* homogeneous_rosenbrock_controlled1:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+4, *rr, *w01=w+1685, *w02=w+1687, w04, *w05=w+1689, *w06=w+1709, *w07=w+1711, *w08=w+1731, *w09=w+1751, w10, *w11=w+1753;
-  casadi_real *w12=w+1773, w13, *w14=w+1793, w15, w16;
-  const casadi_real **arg1=arg+6, *cr, *cs, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: @7 = fabs(@7) */
-  for (i=0, rr=w07, cs=w07; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #7: @8 = all_1e-06(20x1) */
-  casadi_fill(w08, 20, 9.9999999999999995e-07);
-  /* #8: @9 = input[5][0] */
-  casadi_copy(arg[5], 2, w09);
-  /* #9: @10 = @9[0] */
-  for (rr=(&w10), cs=w09+0; cs!=w09+1; cs+=1) *rr++ = *cs;
-  /* #10: @11 = fabs(@0) */
-  for (i=0, rr=w11, cs=wr00; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #11: @12 = fabs(@5) */
-  for (i=0, rr=w12, cs=w05; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #12: @11 = fmax(@11,@12) */
-  for (i=0, rr=w11, cr=w11, cs=w12; i<20; ++i) (*rr++)  = casadi_fmax((*cr++),(*cs++));
-  /* #13: @11 = (@10*@11) */
-  for (i=0, rr=w11, cs=w11; i<20; ++i) (*rr++)  = (w10*(*cs++));
-  /* #14: @8 = (@8+@11) */
-  for (i=0, rr=w08, cs=w11; i<20; ++i) (*rr++) += (*cs++);
-  /* #15: @7 = (@7/@8) */
-  for (i=0, rr=w07, cs=w08; i<20; ++i) (*rr++) /= (*cs++);
-  /* #16: @10 = max(@7) */
-  w10 = casadi_mmax(w07, 20, 1);
-  /* #17: @13 = @9[1] */
-  for (rr=(&w13), cs=w09+1; cs!=w09+2; cs+=1) *rr++ = *cs;
-  /* #18: @13 = (@10<=@13) */
-  w13  = (w10<=w13);
-  /* #19: @13 = (!@13) */
-  w13 = (! w13 );
-  /* #20: {@7, @14, @15, @16} = homogeneous_rosenbrock_branch1(@13, @0, @1, @2, @3, @4, @9, @5, @6, @10) */
-  arg1[0]=(&w13);
-  arg1[1]=wr00;
-  arg1[2]=w01;
-  arg1[3]=w02;
-  arg1[4]=wr03;
-  arg1[5]=(&w04);
-  arg1[6]=w09;
-  arg1[7]=w05;
-  arg1[8]=w06;
-  arg1[9]=(&w10);
-  res1[0]=w07;
-  res1[1]=w14;
-  res1[2]=(&w15);
-  res1[3]=(&w16);
-  if (casadi_f18(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][0] = @7 */
-  casadi_copy(w07, 20, res[0]);
-  /* #22: output[1][0] = @14 */
-  casadi_copy(w14, 2, res[1]);
-  /* #23: output[2][0] = @15 */
-  if (res[2]) res[2][0] = w15;
-  /* #24: output[3][0] = @16 */
-  if (res[3]) res[3][0] = w16;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_halve0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1846, *w01=w+1866, *w02=w+1868, w04, w05, *w06=w+1870, *w07=w+1872, *w08=w+1892, w09, w10, w11;
-  const casadi_real **arg1=arg+9, *wr00, *wr03;
-  /* #0: @0 = input[0][0] */
-  wr00 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w01);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w02);
-  /* #3: @3 = input[3][0] */
-  wr03 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #5: @5 = input[4][0] */
-  w05 = arg[4] ? arg[4][0] : 0;
-  /* #6: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #7: @6 = input[5][0] */
-  casadi_copy(arg[5], 2, w06);
-  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled1(@0, @1, @2, @3, @4, @6) */
-  arg1[0]=wr00;
-  arg1[1]=w01;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w07;
-  res1[1]=w08;
-  res1[2]=(&w09);
-  res1[3]=(&w10);
-  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
-  /* #9: @4 = 0.5 */
-  w04 = 5.0000000000000000e-01;
-  /* #10: @4 = (@4*@5) */
-  w04 *= w05;
-  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled1(@7, @8, @2, @3, @4, @6) */
-  arg1[0]=w07;
-  arg1[1]=w08;
-  arg1[2]=w02;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  arg1[5]=w06;
-  res1[0]=w00;
-  res1[1]=w01;
-  res1[2]=(&w05);
-  res1[3]=(&w11);
-  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
-  /* #12: output[0][0] = @0 */
-  casadi_copy(w00, 20, res[0]);
-  /* #13: output[1][0] = @1 */
-  casadi_copy(w01, 2, res[1]);
-  /* #14: @9 = fmax(@9,@5) */
-  w09  = casadi_fmax(w09,w05);
-  /* #15: output[2][0] = @9 */
-  if (res[2]) res[2][0] = w09;
-  /* #16: @9 = 1 */
-  w09 = 1.;
-  /* #17: @9 = (@9+@10) */
-  w09 += w10;
-  /* #18: @9 = (@9+@11) */
-  w09 += w11;
-  /* #19: output[3][0] = @9 */
-  if (res[3]) res[3][0] = w09;
-  return 0;
-}
-
-/* homogeneous_rosenbrock_branch0:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f16(arg+1, res, iw, w, 0)) return 1;
-  } else {
-    if (casadi_f15(arg+1, res, iw, w, 0)) return 1;
-  }
-  return 0;
-}
-
 /* homogeneous_rosenbrock_controlled_column:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
-static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_int i;
-  casadi_real **res1=res+5, *rr, *w01=w+1925, *w02=w+1927, w04, *w05=w+1929, *w06=w+1949, *w07=w+1951, *w08=w+1971, *w09=w+1991, w10, *w11=w+1993;
-  casadi_real *w12=w+2013, w13, *w14=w+2033, w15, w16, *w17=w+2035;
-  const casadi_real **arg1=arg+6, *cr, *cs, *wr00, *wr03;
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *rr, *w01=w+1605, *w02=w+1607, w04, *w05=w+1609, *w06=w+1629, *w07=w+1631, *w08=w+1651, w09, w10, *w11=w+1653;
+  casadi_real w12, w13, *w14=w+1655;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
@@ -24199,75 +22805,62 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w06;
   res1[2]=w07;
   if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: @7 = fabs(@7) */
-  for (i=0, rr=w07, cs=w07; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #7: @8 = all_1e-06(20x1) */
-  casadi_fill(w08, 20, 9.9999999999999995e-07);
-  /* #8: @9 = input[5][0] */
-  casadi_copy(arg[5], 2, w09);
-  /* #9: @10 = @9[0] */
-  for (rr=(&w10), cs=w09+0; cs!=w09+1; cs+=1) *rr++ = *cs;
-  /* #10: @11 = fabs(@0) */
-  for (i=0, rr=w11, cs=wr00; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #11: @12 = fabs(@5) */
-  for (i=0, rr=w12, cs=w05; i<20; ++i) *rr++ = casadi_fabs( *cs++ );
-  /* #12: @11 = fmax(@11,@12) */
-  for (i=0, rr=w11, cr=w11, cs=w12; i<20; ++i) (*rr++)  = casadi_fmax((*cr++),(*cs++));
-  /* #13: @11 = (@10*@11) */
-  for (i=0, rr=w11, cs=w11; i<20; ++i) (*rr++)  = (w10*(*cs++));
-  /* #14: @8 = (@8+@11) */
-  for (i=0, rr=w08, cs=w11; i<20; ++i) (*rr++) += (*cs++);
-  /* #15: @7 = (@7/@8) */
-  for (i=0, rr=w07, cs=w08; i<20; ++i) (*rr++) /= (*cs++);
-  /* #16: @10 = max(@7) */
-  w10 = casadi_mmax(w07, 20, 1);
-  /* #17: @13 = @9[1] */
-  for (rr=(&w13), cs=w09+1; cs!=w09+2; cs+=1) *rr++ = *cs;
-  /* #18: @13 = (@10<=@13) */
-  w13  = (w10<=w13);
-  /* #19: @13 = (!@13) */
-  w13 = (! w13 );
-  /* #20: {@7, @14, @15, @16} = homogeneous_rosenbrock_branch0(@13, @0, @1, @2, @3, @4, @9, @5, @6, @10) */
-  arg1[0]=(&w13);
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch0(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
   arg1[1]=wr00;
   arg1[2]=w01;
   arg1[3]=w02;
   arg1[4]=wr03;
   arg1[5]=(&w04);
-  arg1[6]=w09;
+  arg1[6]=w08;
   arg1[7]=w05;
   arg1[8]=w06;
-  arg1[9]=(&w10);
+  arg1[9]=(&w09);
   res1[0]=w07;
-  res1[1]=w14;
-  res1[2]=(&w15);
-  res1[3]=(&w16);
-  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][0] = @7 */
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
   casadi_copy(w07, 20, res[0]);
-  /* #22: output[1][0] = @14 */
-  casadi_copy(w14, 2, res[1]);
-  /* #23: @17 = outputs(@7, @2, @3) */
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: @14 = outputs(@7, @2, @3) */
   arg1[0]=w07;
   arg1[1]=w02;
   arg1[2]=wr03;
-  res1[0]=w17;
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
-  /* #24: output[2][0] = @17 */
-  casadi_copy(w17, 24, res[2]);
-  /* #25: output[3][0] = @15 */
-  if (res[3]) res[3][0] = w15;
-  /* #26: output[4][0] = @16 */
-  if (res[4]) res[4][0] = w16;
+  res1[0]=w14;
+  if (casadi_f30(arg1, res1, iw, w, 0)) return 1;
+  /* #15: output[2][0] = @14 */
+  casadi_copy(w14, 24, res[2]);
+  /* #16: output[3][0] = @12 */
+  if (res[3]) res[3][0] = w12;
+  /* #17: output[4][0] = @13 */
+  if (res[4]) res[4][0] = w13;
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
-static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2110, *w01=w+2130, *w02=w+2132, w04, *w05=w+2134, *w06=w+2136, *w07=w+2156, *w08=w+2158, w09, w10, *w11=w+2182;
-  casadi_real w12, w13, *w14=w+2206, *w15=w+2208, w16, w17, *w18=w+2232, *w19=w+2234, w20, w21, *w22=w+2258, *w23=w+2260;
-  casadi_real w24, w25, *w26=w+2284, *w27=w+2286, w28, w29, *w30=w+2310, *w31=w+2312, w32, w33, *w34=w+2336, *w35=w+2338;
-  casadi_real w36, w37, *w38=w+2362, *w39=w+2364, w40, w41, *w42=w+2388, *w43=w+2390, w44, w45;
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+1730, *w01=w+1750, *w02=w+1752, w04, *w05=w+1754, *w06=w+1756, *w07=w+1776, *w08=w+1778, w09, w10, *w11=w+1802;
+  casadi_real w12, w13, *w14=w+1826, *w15=w+1828, w16, w17, *w18=w+1852, *w19=w+1854, w20, w21, *w22=w+1878, *w23=w+1880;
+  casadi_real w24, w25, *w26=w+1904, *w27=w+1906, w28, w29, *w30=w+1930, *w31=w+1932, w32, w33, *w34=w+1956, *w35=w+1958;
+  casadi_real w36, w37, *w38=w+1982, *w39=w+1984, w40, w41, *w42=w+2008, *w43=w+2010, w44, w45;
   const casadi_real **arg1=arg+6, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24293,7 +22886,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w08;
   res1[3]=(&w09);
   res1[4]=(&w10);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #7: output[0][0] = @6 */
   casadi_copy(w06, 20, res[0]);
   /* #8: @1 = input[2][1] */
@@ -24316,7 +22909,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w11;
   res1[3]=(&w12);
   res1[4]=(&w13);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #13: output[0][1] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+20);
   /* #14: @1 = input[2][2] */
@@ -24339,7 +22932,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w15;
   res1[3]=(&w16);
   res1[4]=(&w17);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #19: output[0][2] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+40);
   /* #20: @1 = input[2][3] */
@@ -24362,7 +22955,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w19;
   res1[3]=(&w20);
   res1[4]=(&w21);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #25: output[0][3] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+60);
   /* #26: @1 = input[2][4] */
@@ -24385,7 +22978,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w23;
   res1[3]=(&w24);
   res1[4]=(&w25);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #31: output[0][4] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+80);
   /* #32: @1 = input[2][5] */
@@ -24408,7 +23001,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w27;
   res1[3]=(&w28);
   res1[4]=(&w29);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #37: output[0][5] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+100);
   /* #38: @1 = input[2][6] */
@@ -24431,7 +23024,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w31;
   res1[3]=(&w32);
   res1[4]=(&w33);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+120);
   /* #44: @1 = input[2][7] */
@@ -24454,7 +23047,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w35;
   res1[3]=(&w36);
   res1[4]=(&w37);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #49: output[0][7] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+140);
   /* #50: @1 = input[2][8] */
@@ -24477,7 +23070,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w39;
   res1[3]=(&w40);
   res1[4]=(&w41);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #55: output[0][8] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+160);
   /* #56: @1 = input[2][9] */
@@ -24500,7 +23093,7 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w43;
   res1[3]=(&w44);
   res1[4]=(&w45);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #61: output[0][9] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+180);
   /* #62: output[1][0] = @7 */
@@ -24587,11 +23180,11 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10_acc10:(x0[20],z0[2],u[2x100],p[26x100],h[1x100],ctl[2x100])->(xf[20x100],zf[2x100],y[24x100],r[1x100],nh[1x100]) */
-static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2461, *w01=w+2481, *w06=w+2483, *w07=w+2683, *w08=w+2703, *w09=w+2943, *w10=w+2953, *w11=w+2963, *w12=w+2983, *w13=w+3223, *w14=w+3233;
-  casadi_real *w15=w+3243, *w16=w+3263, *w17=w+3503, *w18=w+3513, *w19=w+3523, *w20=w+3543, *w21=w+3783, *w22=w+3793, *w23=w+3803, *w24=w+3823, *w25=w+4063, *w26=w+4073;
-  casadi_real *w27=w+4083, *w28=w+4103, *w29=w+4343, *w30=w+4353, *w31=w+4363, *w32=w+4383, *w33=w+4623, *w34=w+4633, *w35=w+4643, *w36=w+4663, *w37=w+4903, *w38=w+4913;
-  casadi_real *w39=w+4923, *w40=w+4943, *w41=w+5183, *w42=w+5193, *w43=w+5203, *w44=w+5223, *w45=w+5463, *w46=w+5473;
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2081, *w01=w+2101, *w06=w+2103, *w07=w+2303, *w08=w+2323, *w09=w+2563, *w10=w+2573, *w11=w+2583, *w12=w+2603, *w13=w+2843, *w14=w+2853;
+  casadi_real *w15=w+2863, *w16=w+2883, *w17=w+3123, *w18=w+3133, *w19=w+3143, *w20=w+3163, *w21=w+3403, *w22=w+3413, *w23=w+3423, *w24=w+3443, *w25=w+3683, *w26=w+3693;
+  casadi_real *w27=w+3703, *w28=w+3723, *w29=w+3963, *w30=w+3973, *w31=w+3983, *w32=w+4003, *w33=w+4243, *w34=w+4253, *w35=w+4263, *w36=w+4283, *w37=w+4523, *w38=w+4533;
+  casadi_real *w39=w+4543, *w40=w+4563, *w41=w+4803, *w42=w+4813, *w43=w+4823, *w44=w+4843, *w45=w+5083, *w46=w+5093;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr04, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24617,7 +23210,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w08;
   res1[3]=w09;
   res1[4]=w10;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #7: output[0][0] = @6 */
   casadi_copy(w06, 200, res[0]);
   /* #8: {NULL, @0} = horzsplit(@6) */
@@ -24644,7 +23237,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w12;
   res1[3]=w13;
   res1[4]=w14;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #15: output[0][1] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+200);
   /* #16: {NULL, @0} = horzsplit(@6) */
@@ -24671,7 +23264,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w16;
   res1[3]=w17;
   res1[4]=w18;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #23: output[0][2] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+400);
   /* #24: {NULL, @0} = horzsplit(@6) */
@@ -24698,7 +23291,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w20;
   res1[3]=w21;
   res1[4]=w22;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #31: output[0][3] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+600);
   /* #32: {NULL, @0} = horzsplit(@6) */
@@ -24725,7 +23318,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w24;
   res1[3]=w25;
   res1[4]=w26;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #39: output[0][4] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+800);
   /* #40: {NULL, @0} = horzsplit(@6) */
@@ -24752,7 +23345,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w28;
   res1[3]=w29;
   res1[4]=w30;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #47: output[0][5] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1000);
   /* #48: {NULL, @0} = horzsplit(@6) */
@@ -24779,7 +23372,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w32;
   res1[3]=w33;
   res1[4]=w34;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #55: output[0][6] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1200);
   /* #56: {NULL, @0} = horzsplit(@6) */
@@ -24806,7 +23399,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w36;
   res1[3]=w37;
   res1[4]=w38;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #63: output[0][7] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1400);
   /* #64: {NULL, @0} = horzsplit(@6) */
@@ -24833,7 +23426,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w40;
   res1[3]=w41;
   res1[4]=w42;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #71: output[0][8] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1600);
   /* #72: {NULL, @0} = horzsplit(@6) */
@@ -24860,7 +23453,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w44;
   res1[3]=w45;
   res1[4]=w46;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #79: output[0][9] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1800);
   /* #80: output[1][0] = @7 */
@@ -24947,12 +23540,12 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_acc256:(x0[20],z0[2],u[2x256],p[26x256],h[1x256],ctl[2x256])->(xf[20x256],zf[2x256],y[24x256],r[1x256],nh[1x256]) */
-static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+5793, *w01=w+5813, *w02=w+5815, w04, *w05=w+5817, *w06=w+5819, *w07=w+5839, *w08=w+5841, w09, w10, *w11=w+5865;
-  casadi_real w12, w13, *w14=w+5889, *w15=w+5891, w16, w17, *w18=w+5915, *w19=w+5917, w20, w21, *w22=w+5941, *w23=w+5943;
-  casadi_real w24, w25, *w26=w+5967, *w27=w+5969, w28, w29, *w33=w+5993, *w34=w+6193, *w35=w+6213, *w36=w+6453, *w37=w+6463, *w38=w+6473;
-  casadi_real *w39=w+6493, *w40=w+6733, *w41=w+6743, *w42=w+6753, *w43=w+6773, *w44=w+7013, *w45=w+7023, *w46=w+7033, *w47=w+7053, *w48=w+7293, *w49=w+7303, *w50=w+7313;
-  casadi_real *w51=w+7333, *w52=w+7573, *w53=w+7583, *w57=w+7593, *w58=w+9593, *w59=w+9793, *w60=w+12193, *w61=w+12293, *w62=w+12393, *w63=w+12593, *w64=w+14993, *w65=w+15093;
+static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+5413, *w01=w+5433, *w02=w+5435, w04, *w05=w+5437, *w06=w+5439, *w07=w+5459, *w08=w+5461, w09, w10, *w11=w+5485;
+  casadi_real w12, w13, *w14=w+5509, *w15=w+5511, w16, w17, *w18=w+5535, *w19=w+5537, w20, w21, *w22=w+5561, *w23=w+5563;
+  casadi_real w24, w25, *w26=w+5587, *w27=w+5589, w28, w29, *w33=w+5613, *w34=w+5813, *w35=w+5833, *w36=w+6073, *w37=w+6083, *w38=w+6093;
+  casadi_real *w39=w+6113, *w40=w+6353, *w41=w+6363, *w42=w+6373, *w43=w+6393, *w44=w+6633, *w45=w+6643, *w46=w+6653, *w47=w+6673, *w48=w+6913, *w49=w+6923, *w50=w+6933;
+  casadi_real *w51=w+6953, *w52=w+7193, *w53=w+7203, *w57=w+7213, *w58=w+9213, *w59=w+9413, *w60=w+11813, *w61=w+11913, *w62=w+12013, *w63=w+12213, *w64=w+14613, *w65=w+14713;
   const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32, *wr33, *wr54, *wr55, *wr56;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24978,7 +23571,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w08;
   res1[3]=(&w09);
   res1[4]=(&w10);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #7: output[0][0] = @6 */
   casadi_copy(w06, 20, res[0]);
   /* #8: @1 = input[2][1] */
@@ -25001,7 +23594,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w11;
   res1[3]=(&w12);
   res1[4]=(&w13);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #13: output[0][1] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+20);
   /* #14: @1 = input[2][2] */
@@ -25024,7 +23617,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w15;
   res1[3]=(&w16);
   res1[4]=(&w17);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #19: output[0][2] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+40);
   /* #20: @1 = input[2][3] */
@@ -25047,7 +23640,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w19;
   res1[3]=(&w20);
   res1[4]=(&w21);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #25: output[0][3] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+60);
   /* #26: @1 = input[2][4] */
@@ -25070,7 +23663,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w23;
   res1[3]=(&w24);
   res1[4]=(&w25);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #31: output[0][4] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+80);
   /* #32: @1 = input[2][5] */
@@ -25093,7 +23686,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w27;
   res1[3]=(&w28);
   res1[4]=(&w29);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #37: output[0][5] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+100);
   /* #38: @6 = input[2][6] */
@@ -25116,7 +23709,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w35;
   res1[3]=w36;
   res1[4]=w37;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+120);
   /* #44: {NULL, @0} = horzsplit(@33) */
@@ -25143,7 +23736,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w39;
   res1[3]=w40;
   res1[4]=w41;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #51: output[0][7] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+320);
   /* #52: {NULL, @0} = horzsplit(@33) */
@@ -25170,7 +23763,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w43;
   res1[3]=w44;
   res1[4]=w45;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #59: output[0][8] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+520);
   /* #60: {NULL, @0} = horzsplit(@33) */
@@ -25197,7 +23790,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w47;
   res1[3]=w48;
   res1[4]=w49;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #67: output[0][9] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+720);
   /* #68: {NULL, @0} = horzsplit(@33) */
@@ -25224,7 +23817,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w51;
   res1[3]=w52;
   res1[4]=w53;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
   /* #75: output[0][10] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+920);
   /* #76: {NULL, @0} = horzsplit(@33) */
@@ -25251,7 +23844,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w59;
   res1[3]=w60;
   res1[4]=w61;
-  if (casadi_f39(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
   /* #83: output[0][11] = @57 */
   if (res[0]) casadi_copy(w57, 2000, res[0]+1120);
   /* #84: {NULL, @0} = horzsplit(@57) */
@@ -25278,7 +23871,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w63;
   res1[3]=w64;
   res1[4]=w65;
-  if (casadi_f39(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
   /* #91: output[0][12] = @57 */
   if (res[0]) casadi_copy(w57, 2000, res[0]+3120);
   /* #92: output[1][0] = @7 */
@@ -25389,9 +23982,9 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_chunk256:(x0[20],z0[2],U[2x256],H[1x256],p[26],ctl[2])->(X[20x256],Z[2x256],Y[24x256],R[1x256],NH[1x256]) */
-static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+5, *w01=w+18422, *w04=w+18424, *w06=w+25080, *w07=w+25082, *w08=w+25594, *w09=w+30714, *w10=w+31226, *w11=w+37370, *w12=w+37626;
+  casadi_real **res1=res+5, *w01=w+18042, *w04=w+18044, *w06=w+24700, *w07=w+24702, *w08=w+25214, *w09=w+30334, *w10=w+30846, *w11=w+36990, *w12=w+37246;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -25425,7 +24018,7 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w10;
   res1[3]=w11;
   res1[4]=w12;
-  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
   /* #9: output[0][0] = @8 */
   casadi_copy(w08, 5120, res[0]);
   /* #10: output[1][0] = @9 */
@@ -25440,7 +24033,7 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f11(arg, res, iw, w, mem);
+  return casadi_f2(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_checkout(void) {
@@ -25516,7 +24109,7 @@ CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work(casadi_
   if (sz_arg) *sz_arg = 185;
   if (sz_res) *sz_res = 100;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 37882;
+  if (sz_w) *sz_w = 37502;
   return 0;
 }
 
@@ -25524,16 +24117,16 @@ CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work_bytes(c
   if (sz_arg) *sz_arg = 185*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 100*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 37882*sizeof(casadi_real);
+  if (sz_w) *sz_w = 37502*sizeof(casadi_real);
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
-static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2110, *w01=w+2130, *w02=w+2132, w04, *w05=w+2134, *w06=w+2136, *w07=w+2156, *w08=w+2158, w09, w10, *w11=w+2182;
-  casadi_real w12, w13, *w14=w+2206, *w15=w+2208, w16, w17, *w18=w+2232, *w19=w+2234, w20, w21, *w22=w+2258, *w23=w+2260;
-  casadi_real w24, w25, *w26=w+2284, *w27=w+2286, w28, w29, *w30=w+2310, *w31=w+2312, w32, w33, *w34=w+2336, *w35=w+2338;
-  casadi_real w36, w37, *w38=w+2362, *w39=w+2364, w40, w41, *w42=w+2388, *w43=w+2390, w44, w45;
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+1730, *w01=w+1750, *w02=w+1752, w04, *w05=w+1754, *w06=w+1756, *w07=w+1776, *w08=w+1778, w09, w10, *w11=w+1802;
+  casadi_real w12, w13, *w14=w+1826, *w15=w+1828, w16, w17, *w18=w+1852, *w19=w+1854, w20, w21, *w22=w+1878, *w23=w+1880;
+  casadi_real w24, w25, *w26=w+1904, *w27=w+1906, w28, w29, *w30=w+1930, *w31=w+1932, w32, w33, *w34=w+1956, *w35=w+1958;
+  casadi_real w36, w37, *w38=w+1982, *w39=w+1984, w40, w41, *w42=w+2008, *w43=w+2010, w44, w45;
   const casadi_real **arg1=arg+6, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -25559,7 +24152,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w08;
   res1[3]=(&w09);
   res1[4]=(&w10);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #7: output[0][0] = @6 */
   casadi_copy(w06, 20, res[0]);
   /* #8: @1 = input[2][1] */
@@ -25582,7 +24175,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w11;
   res1[3]=(&w12);
   res1[4]=(&w13);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #13: output[0][1] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+20);
   /* #14: @1 = input[2][2] */
@@ -25605,7 +24198,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w15;
   res1[3]=(&w16);
   res1[4]=(&w17);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #19: output[0][2] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+40);
   /* #20: @1 = input[2][3] */
@@ -25628,7 +24221,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w19;
   res1[3]=(&w20);
   res1[4]=(&w21);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #25: output[0][3] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+60);
   /* #26: @1 = input[2][4] */
@@ -25651,7 +24244,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w23;
   res1[3]=(&w24);
   res1[4]=(&w25);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #31: output[0][4] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+80);
   /* #32: @1 = input[2][5] */
@@ -25674,7 +24267,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w27;
   res1[3]=(&w28);
   res1[4]=(&w29);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #37: output[0][5] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+100);
   /* #38: @1 = input[2][6] */
@@ -25697,7 +24290,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w31;
   res1[3]=(&w32);
   res1[4]=(&w33);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+120);
   /* #44: @1 = input[2][7] */
@@ -25720,7 +24313,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w35;
   res1[3]=(&w36);
   res1[4]=(&w37);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #49: output[0][7] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+140);
   /* #50: @1 = input[2][8] */
@@ -25743,7 +24336,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w39;
   res1[3]=(&w40);
   res1[4]=(&w41);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #55: output[0][8] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+160);
   /* #56: @1 = input[2][9] */
@@ -25766,7 +24359,7 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w43;
   res1[3]=(&w44);
   res1[4]=(&w45);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #61: output[0][9] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+180);
   /* #62: output[1][0] = @7 */
@@ -25853,10 +24446,10 @@ static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_acc16:(x0[20],z0[2],u[2x16],p[26x16],h[1x16],ctl[2x16])->(xf[20x16],zf[2x16],y[24x16],r[1x16],nh[1x16]) */
-static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2461, *w01=w+2481, *w02=w+2483, w04, *w05=w+2485, *w06=w+2487, *w07=w+2507, *w08=w+2509, w09, w10, *w11=w+2533;
-  casadi_real w12, w13, *w14=w+2557, *w15=w+2559, w16, w17, *w18=w+2583, *w19=w+2585, w20, w21, *w22=w+2609, *w23=w+2611;
-  casadi_real w24, w25, *w26=w+2635, *w27=w+2637, w28, w29, *w33=w+2661, *w34=w+2861, *w35=w+2881, *w36=w+3121, *w37=w+3131;
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2081, *w01=w+2101, *w02=w+2103, w04, *w05=w+2105, *w06=w+2107, *w07=w+2127, *w08=w+2129, w09, w10, *w11=w+2153;
+  casadi_real w12, w13, *w14=w+2177, *w15=w+2179, w16, w17, *w18=w+2203, *w19=w+2205, w20, w21, *w22=w+2229, *w23=w+2231;
+  casadi_real w24, w25, *w26=w+2255, *w27=w+2257, w28, w29, *w33=w+2281, *w34=w+2481, *w35=w+2501, *w36=w+2741, *w37=w+2751;
   const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -25882,7 +24475,7 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w08;
   res1[3]=(&w09);
   res1[4]=(&w10);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #7: output[0][0] = @6 */
   casadi_copy(w06, 20, res[0]);
   /* #8: @1 = input[2][1] */
@@ -25905,7 +24498,7 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w11;
   res1[3]=(&w12);
   res1[4]=(&w13);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #13: output[0][1] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+20);
   /* #14: @1 = input[2][2] */
@@ -25928,7 +24521,7 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w15;
   res1[3]=(&w16);
   res1[4]=(&w17);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #19: output[0][2] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+40);
   /* #20: @1 = input[2][3] */
@@ -25951,7 +24544,7 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w19;
   res1[3]=(&w20);
   res1[4]=(&w21);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #25: output[0][3] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+60);
   /* #26: @1 = input[2][4] */
@@ -25974,7 +24567,7 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w23;
   res1[3]=(&w24);
   res1[4]=(&w25);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #31: output[0][4] = @6 */
   if (res[0]) casadi_copy(w06, 20, res[0]+80);
   /* #32: @1 = input[2][5] */
@@ -25997,7 +24590,7 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w27;
   res1[3]=(&w28);
   res1[4]=(&w29);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
   /* #37: output[0][5] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+100);
   /* #38: @6 = input[2][6] */
@@ -26020,7 +24613,7 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w35;
   res1[3]=w36;
   res1[4]=w37;
-  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+120);
   /* #44: output[1][0] = @7 */
@@ -26083,9 +24676,9 @@ static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_chunk16:(x0[20],z0[2],U[2x16],H[1x16],p[26],ctl[2])->(X[20x16],Z[2x16],Y[24x16],R[1x16],NH[1x16]) */
-static int casadi_f40(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+5, *w01=w+3470, *w04=w+3472, *w06=w+3888, *w07=w+3890, *w08=w+3922, *w09=w+4242, *w10=w+4274, *w11=w+4658, *w12=w+4674;
+  casadi_real **res1=res+5, *w01=w+3090, *w04=w+3092, *w06=w+3508, *w07=w+3510, *w08=w+3542, *w09=w+3862, *w10=w+3894, *w11=w+4278, *w12=w+4294;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -26119,7 +24712,7 @@ static int casadi_f40(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w10;
   res1[3]=w11;
   res1[4]=w12;
-  if (casadi_f41(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #9: output[0][0] = @8 */
   casadi_copy(w08, 320, res[0]);
   /* #10: output[1][0] = @9 */
@@ -26134,7 +24727,7 @@ static int casadi_f40(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f40(arg, res, iw, w, mem);
+  return casadi_f33(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_checkout(void) {
@@ -26210,7 +24803,7 @@ CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work(casadi_i
   if (sz_arg) *sz_arg = 179;
   if (sz_res) *sz_res = 95;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 4690;
+  if (sz_w) *sz_w = 4310;
   return 0;
 }
 
@@ -26218,7 +24811,7 @@ CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work_bytes(ca
   if (sz_arg) *sz_arg = 179*sizeof(const casadi_real*);
   if (sz_res) *sz_res = 95*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 4690*sizeof(casadi_real);
+  if (sz_w) *sz_w = 4310*sizeof(casadi_real);
   return 0;
 }
 

@@ -46,8 +46,7 @@ def test_manifest_names_hash_and_units():
     funcs = man["functions"]
     for name in ("homogeneous_ode", "jac_homogeneous_ode", "homogeneous_dae", "jac_homogeneous_dae",
                  "homogeneous_outputs", "homogeneous_linearize", "homogeneous_linearize_outputs",
-                 "homogeneous_accel", "homogeneous_rosenbrock_step", "homogeneous_rosenbrock_chunk256",
-                 "homogeneous_rosenbrock_chunk16", "homogeneous_rosenbrock_controlled_chunk256",
+                 "homogeneous_accel", "homogeneous_rosenbrock_step", "homogeneous_rosenbrock_controlled_chunk256",
                  "homogeneous_rosenbrock_controlled_chunk16"):
         assert name in funcs, name
     x_in = funcs["homogeneous_ode"]["inputs"][0]

@@ -17,12 +17,12 @@ Files written for a model with prefix ``<m>`` (fixed, predictable names, like ac
   advances one step of length h (``ef``: the step's local error estimate of each differential
   state, the difference from the method's embedded solution,
   :func:`symtrack.native.rosenbrock.step_and_error_expressions`), and
-  ``<m>_rosenbrock_chunk<N>(x0,z0,U,H,p)->(X,Z,Y)``
-  advances N steps in one call (column k of U and H are the input and the length of step k;
-  a step of length 0 leaves the state unchanged; column k of X, Z, Y is the state,
-  algebraic state and outputs after step k); ``<m>_rosenbrock_controlled_chunk<N>(x0,z0,U,H,p,ctl)
-  ->(X,Z,Y,R,NH)`` the same with each step's error controlled (:func:`controlled_chunks`: the
-  step halved where its estimate exceeds the tolerance); ``<m>_consistent_z(x,z0,u,p)->z`` solves the
+  ``<m>_rosenbrock_controlled_chunk<N>(x0,z0,U,H,p,ctl)->(X,Z,Y,R,NH)`` advances N steps in one
+  call, each error-controlled (:func:`controlled_chunks`: halved where its estimate exceeds the
+  tolerance ctl[0]; column k of U and H are the input and the length of step k, a step of length
+  0 leaves the state unchanged; column k of X, Z, Y is the state, algebraic state and outputs
+  after step k, of R and NH its largest error ratio and how many steps were halved);
+  ``<m>_consistent_z(x,z0,u,p)->z`` solves the
   algebraic equations for z by Newton steps from z0 (the steps start from the z they are given);
 - ``manifest.json``: model hash (SHA-256 over the files' hashes of their serialised Functions;
   each file's own hash is its key in the compiled-library cache), CasADi version, and the names
@@ -115,8 +115,8 @@ def _rename(f: ca.Function, name: str, cse: bool = True) -> ca.Function:
 
 
 def fixed_step_functions(model, prefix: str):
-    """One step of the unrolled Rosenbrock method (:mod:`symtrack.native.rosenbrock`) on the DAE form,
-    and chunks of many steps per call."""
+    """One step of the unrolled Rosenbrock method (:mod:`symtrack.native.rosenbrock`) on the DAE form
+    with its error estimate, the consistent z, and chunks of many error-controlled steps per call."""
     x0, z0 = ca.SX.sym("x0", model.x.sparsity()), ca.SX.sym("z0", model.z.sparsity())
     u, p, h = ca.SX.sym("u", model.u.sparsity()), ca.SX.sym("p", model.p.sparsity()), ca.SX.sym("h")
     x1, z1, e1 = rosenbrock.step_and_error_expressions(model.dae, x0, z0, u, p, h)
@@ -126,21 +126,7 @@ def fixed_step_functions(model, prefix: str):
     zc = rosenbrock.consistent_z_expressions(model.dae, x0, z0, u, p)
     consistent = ca.Function(f"{prefix}_consistent_z", [x0, z0, u, p], [zc], ["x", "z0", "u", "p"], ["z"],
                              {"cse": cse})
-    # one column of a chunk: a step, then the outputs at its end (an MX Function calling the two)
-    X0, Z0 = ca.MX.sym("x0", model.x.sparsity()), ca.MX.sym("z0", model.z.sparsity())
-    U, P, H = ca.MX.sym("u", model.u.sparsity()), ca.MX.sym("p", model.p.sparsity()), ca.MX.sym("h")
-    xf, zf, _ = step(X0, Z0, U, P, H)
-    col = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_column", [X0, Z0, U, P, H], [xf, zf, model.outputs(xf, U, P)],
-                      ["x0", "z0", "u", "p", "h"], ["xf", "zf", "y"])
-    chunks = []
-    for n in CHUNK_SIZES:
-        acc = col.mapaccum(f"{prefix}_{FIXED_STEP_METHOD}_acc{n}", n, 2)
-        Us = ca.MX.sym("U", model.u.numel(), n)
-        Hs = ca.MX.sym("H", 1, n)
-        Xs, Zs, Ys = acc(X0, Z0, Us, ca.repmat(P, 1, n), Hs)
-        chunks.append(ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_chunk{n}", [X0, Z0, Us, Hs, P], [Xs, Zs, Ys],
-                                  ["x0", "z0", "U", "H", "p"], ["X", "Z", "Y"]))
-    return step, consistent, chunks, controlled_chunks(model, prefix, step)
+    return step, consistent, controlled_chunks(model, prefix, step)
 
 
 def controlled_chunks(model, prefix: str, step: ca.Function):
@@ -162,10 +148,19 @@ def controlled_chunks(model, prefix: str, step: ca.Function):
     X1, Z1, R = ca.MX.sym("x1", model.x.sparsity()), ca.MX.sym("z1", model.z.sparsity()), ca.MX.sym("r")
     ins, in_names = [X0, Z0, U, P, H, ctl], ["x0", "z0", "u", "p", "h", "ctl"]
     out_names = ["xf", "zf", "r", "nh"]
+    # the ratio as one straight-line SX function (its MX form was a loop and a copy per operation)
+    xa, xb, ea = (ca.SX.sym(n, model.x.sparsity()) for n in ("xa", "xb", "ea"))
+    cs = ca.SX.sym("ctl", 2)
+    terms = [ca.fabs(ea[i]) / (rosenbrock.FIXED_STEP_ATOL + cs[0] * ca.fmax(ca.fabs(xa[i]), ca.fabs(xb[i])))
+             for i in range(model.nx)]
+    rmax = terms[0]
+    for t in terms[1:]:
+        rmax = ca.fmax(rmax, t)
+    ratio = ca.Function(f"{name}_error_ratio", [xa, xb, ea, cs], [rmax], ["x0", "x1", "e1", "ctl"], ["r"])
     below = None
     for depth in reversed(range(rosenbrock.FIXED_STEP_MAX_HALVINGS + 1)):
         x1, z1, e1 = step(X0, Z0, U, P, H)
-        r = ca.mmax(ca.fabs(e1) / (rosenbrock.FIXED_STEP_ATOL + ctl[0] * ca.fmax(ca.fabs(X0), ca.fabs(x1))))
+        r = ratio(X0, x1, e1, ctl)
         if below is None:
             level = ca.Function(f"{name}_controlled{depth}", ins, [x1, z1, r, 0], in_names, out_names)
         else:
@@ -200,7 +195,6 @@ GROUPS = ("ode", "dae", "outputs", "linearize_outputs", FIXED_STEP_METHOD)
 GROUP_OF = {"ode": "ode", "linearize": "ode", "dae": "dae", "accel": "dae", "outputs": "outputs",
             "linearize_outputs": "linearize_outputs", f"{FIXED_STEP_METHOD}_step": FIXED_STEP_METHOD,
             "consistent_z": FIXED_STEP_METHOD,
-            **{f"{FIXED_STEP_METHOD}_chunk{n}": FIXED_STEP_METHOD for n in CHUNK_SIZES},
             **{f"{FIXED_STEP_METHOD}_controlled_chunk{n}": FIXED_STEP_METHOD for n in CHUNK_SIZES}}
 
 
@@ -222,8 +216,8 @@ def _group(model, prefix: str, group: str) -> tuple:
     if group == "linearize_outputs":
         return (_rename(model.jac_outputs, f"{prefix}_linearize_outputs", getattr(model, "cse", True)),)
     if group == FIXED_STEP_METHOD:
-        step, consistent, chunks, controlled = fixed_step_functions(model, prefix)
-        return step, consistent, *chunks, *controlled
+        step, consistent, controlled = fixed_step_functions(model, prefix)
+        return step, consistent, *controlled
     raise ValueError(f"unknown group {group!r}; groups: {', '.join(GROUPS)}")
 
 
