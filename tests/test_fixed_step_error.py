@@ -1,13 +1,15 @@
 """The compiled Rosenbrock's error control (run.fixed_step_tolerance, symtrack/integrators/fixed_step.py):
 the drive-and-coast case that a 10 ms step got silently wrong, the summary's error figures, the
-refusal when the halvings run out."""
+warning when the halvings run out."""
 
 from __future__ import annotations
+
+import re
 
 import pytest
 from conftest import run_once
 
-from symtrack.foundations.errors import ScenarioError, SimulationError
+from symtrack.foundations.errors import ScenarioError
 from symtrack.model import SystemModel
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
@@ -45,12 +47,17 @@ def test_without_the_error_control_the_coast_is_wrong_and_says_so(model, cvodes)
     assert got["fixed_step_error_max"] > 100.0 and got["fixed_step_steps_halved"] == 0
 
 
-def test_a_step_still_above_its_tolerance_after_the_halvings_stops_the_run(model):
-    """A tolerance no step of 10 ms / 64 meets in the release transient: the run stops there with
-    a message that says what to change."""
+def test_a_step_still_above_its_tolerance_after_the_halvings_is_kept_and_said(model, caplog):
+    """A tolerance that no step of 10 ms / 64 meets in the release transient (1e-9: the absolute part,
+    1e-6, decides): the step is kept, one warning names the time and what to compare with, and the
+    summary's error figure is above 1."""
     sc = load_scenario(COAST, ["run.fixed_step_tolerance=1e-9"])
-    with pytest.raises(SimulationError, match=r"error estimate at t = .* x its tolerance .*--integrator cvodes"):
-        run_once(sc, model)
+    with caplog.at_level("WARNING", logger="symtrack.integrators"):
+        got = summarise(run_once(sc, model))
+    warnings = [r.getMessage() for r in caplog.records if r.name == "symtrack.integrators"]
+    assert len(warnings) == 1
+    assert re.search(r"error estimate at t = \S+ s stays .* x its tolerance .*--integrator cvodes", warnings[0])
+    assert got["complete"] and got["fixed_step_error_max"] > 1.0
 
 
 def test_the_tolerance_is_checked():
