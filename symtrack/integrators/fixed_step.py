@@ -115,8 +115,9 @@ class FixedStepper:
         ratio = c.R[:k]
         if not np.all(np.isfinite(ratio)) or not np.all(np.isfinite(c.X[k - 1])):
             j = int(np.nonzero(~np.isfinite(ratio))[0][0]) if not np.all(np.isfinite(ratio)) else k - 1
+            h_min = float(H[j]) / 2 ** FIXED_STEP_MAX_HALVINGS
             raise SimulationError(f"{self.method} returned a non-finite state{self._at(t0_s, H, j)} even in steps of "
-                                  f"{float(H[j]) / 2 ** FIXED_STEP_MAX_HALVINGS:.3g} s: run it with --integrator cvodes")
+                                  f"{h_min:.3g} s: run it with --integrator cvodes")
         if self.tolerance > 0 and not np.all(ratio <= 1.0) and not self.warned:
             # a step still above its tolerance at 1/64 of its length: kept (a kink of the dynamics, where the
             # estimate does not fall with the step, would otherwise stop a sound run), said once per run
