@@ -33,8 +33,33 @@ extern "C" {
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_f1 CASADI_PREFIX(f1)
 #define casadi_f10 CASADI_PREFIX(f10)
+#define casadi_f11 CASADI_PREFIX(f11)
+#define casadi_f12 CASADI_PREFIX(f12)
+#define casadi_f13 CASADI_PREFIX(f13)
+#define casadi_f14 CASADI_PREFIX(f14)
+#define casadi_f15 CASADI_PREFIX(f15)
+#define casadi_f16 CASADI_PREFIX(f16)
+#define casadi_f17 CASADI_PREFIX(f17)
+#define casadi_f18 CASADI_PREFIX(f18)
+#define casadi_f19 CASADI_PREFIX(f19)
 #define casadi_f2 CASADI_PREFIX(f2)
+#define casadi_f20 CASADI_PREFIX(f20)
+#define casadi_f21 CASADI_PREFIX(f21)
+#define casadi_f22 CASADI_PREFIX(f22)
+#define casadi_f23 CASADI_PREFIX(f23)
+#define casadi_f24 CASADI_PREFIX(f24)
+#define casadi_f25 CASADI_PREFIX(f25)
+#define casadi_f26 CASADI_PREFIX(f26)
+#define casadi_f27 CASADI_PREFIX(f27)
+#define casadi_f28 CASADI_PREFIX(f28)
+#define casadi_f29 CASADI_PREFIX(f29)
 #define casadi_f3 CASADI_PREFIX(f3)
+#define casadi_f30 CASADI_PREFIX(f30)
+#define casadi_f31 CASADI_PREFIX(f31)
+#define casadi_f32 CASADI_PREFIX(f32)
+#define casadi_f33 CASADI_PREFIX(f33)
+#define casadi_f34 CASADI_PREFIX(f34)
+#define casadi_f35 CASADI_PREFIX(f35)
 #define casadi_f4 CASADI_PREFIX(f4)
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
@@ -114,6 +139,8 @@ void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
   }
 }
 
+#define casadi_to_int(x) ((casadi_int) x)
+
 /* Configuration this file was compiled with */
 CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_casadi_version(int* major, int* minor, int* patch) {
   *major = 3;
@@ -139,7 +166,7 @@ static const casadi_int casadi_s11[3] = {24, 16, 1};
 static const casadi_real casadi_zeros[2600] = 
   {0.};
 
-/* homogeneous_rosenbrock_step:(x0[20],z0[2],u[2],p[26],h)->(xf[20],zf[2]) */
+/* homogeneous_rosenbrock_step:(x0[20],z0[2],u[2],p[26],h)->(xf[20],zf[2],ef[20]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
@@ -13620,8 +13647,8 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   if (res[0]!=0) res[0][5]=a011;
   a431=(a431*a293);
   a019=(a019+a431);
-  a315=(a002*a315);
-  a467=(a467-a315);
+  a431=(a002*a315);
+  a467=(a467-a431);
   a417=(a417*a293);
   a467=(a467+a417);
   a066=(a066*a331);
@@ -13632,7 +13659,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a019=(a019/a521);
   a420=(a420+a019);
   if (res[0]!=0) res[0][6]=a420;
-  a155=(a155-a315);
+  a155=(a155-a431);
   a446=(a446*a293);
   a155=(a155-a446);
   a155=(a155-a066);
@@ -13722,6 +13749,26 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   if (res[1]!=0) res[1][0]=a014;
   a010=(a010+a293);
   if (res[1]!=0) res[1][1]=a010;
+  if (res[2]!=0) res[2][0]=a289;
+  if (res[2]!=0) res[2][1]=a359;
+  if (res[2]!=0) res[2][2]=a439;
+  if (res[2]!=0) res[2][3]=a315;
+  if (res[2]!=0) res[2][4]=a234;
+  if (res[2]!=0) res[2][5]=a331;
+  if (res[2]!=0) res[2][6]=a019;
+  if (res[2]!=0) res[2][7]=a330;
+  if (res[2]!=0) res[2][8]=a467;
+  if (res[2]!=0) res[2][9]=a155;
+  if (res[2]!=0) res[2][10]=a501;
+  if (res[2]!=0) res[2][11]=a526;
+  if (res[2]!=0) res[2][12]=a025;
+  if (res[2]!=0) res[2][13]=a290;
+  if (res[2]!=0) res[2][14]=a474;
+  if (res[2]!=0) res[2][15]=a276;
+  if (res[2]!=0) res[2][16]=a464;
+  if (res[2]!=0) res[2][17]=a047;
+  if (res[2]!=0) res[2][18]=a283;
+  if (res[2]!=0) res[2][19]=a023;
   return 0;
 }
 
@@ -13744,7 +13791,7 @@ CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_step_decref(void) {
 
 CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_step_n_in(void) { return 5;}
 
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_step_n_out(void) { return 2;}
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_step_n_out(void) { return 3;}
 
 CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_step_default_in(casadi_int i) {
   switch (i) {
@@ -13767,6 +13814,7 @@ CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_step_name_out(casadi_int
   switch (i) {
     case 0: return "xf";
     case 1: return "zf";
+    case 2: return "ef";
     default: return 0;
   }
 }
@@ -13786,13 +13834,14 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_step_sparsity_out(
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s1;
+    case 2: return casadi_s0;
     default: return 0;
   }
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_step_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 5;
-  if (sz_res) *sz_res = 2;
+  if (sz_res) *sz_res = 3;
   if (sz_iw) *sz_iw = 0;
   if (sz_w) *sz_w = 0;
   return 0;
@@ -13800,7 +13849,7 @@ CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_step_work(casadi_int *sz_arg, ca
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
   if (sz_arg) *sz_arg = 5*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 2*sizeof(casadi_real*);
+  if (sz_res) *sz_res = 3*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
   if (sz_w) *sz_w = 0*sizeof(casadi_real);
   return 0;
@@ -18204,8 +18253,1217 @@ CASADI_SYMBOL_EXPORT int homogeneous_consistent_z_work_bytes(casadi_int *sz_arg,
   return 0;
 }
 
-/* outputs:(x[20],u[2],p[26])->(y[24]) */
+/* homogeneous_rosenbrock_error_ratio:(x0[20],x1[20],e1[20],ctl[2])->(r) */
 static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real a0, a1, a2, a3, a4, a5;
+  a0=arg[2]? arg[2][0] : 0;
+  a0=casadi_fabs(a0);
+  a1=9.9999999999999995e-07;
+  a2=arg[3]? arg[3][0] : 0;
+  a3=arg[0]? arg[0][0] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[1]? arg[1][0] : 0;
+  a4=casadi_fabs(a4);
+  a3=casadi_fmax(a3,a4);
+  a3=(a2*a3);
+  a3=(a1+a3);
+  a0=(a0/a3);
+  a3=arg[2]? arg[2][1] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][1] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][1] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][2] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][2] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][2] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][3] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][3] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][3] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][4] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][4] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][4] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][5] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][5] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][5] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][6] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][6] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][6] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][7] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][7] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][7] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][8] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][8] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][8] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][9] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][9] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][9] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][10] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][10] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][10] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][11] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][11] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][11] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][12] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][12] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][12] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][13] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][13] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][13] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][14] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][14] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][14] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][15] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][15] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][15] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][16] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][16] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][16] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][17] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][17] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][17] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][18] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][18] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][18] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a4=(a2*a4);
+  a4=(a1+a4);
+  a3=(a3/a4);
+  a0=casadi_fmax(a0,a3);
+  a3=arg[2]? arg[2][19] : 0;
+  a3=casadi_fabs(a3);
+  a4=arg[0]? arg[0][19] : 0;
+  a4=casadi_fabs(a4);
+  a5=arg[1]? arg[1][19] : 0;
+  a5=casadi_fabs(a5);
+  a4=casadi_fmax(a4,a5);
+  a2=(a2*a4);
+  a1=(a1+a2);
+  a3=(a3/a1);
+  a0=casadi_fmax(a0,a3);
+  if (res[0]!=0) res[0][0]=a0;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled6:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w1=w+533, *w2=w+535, w4, *w5=w+537, *w6=w+557, *w7=w+559;
+  const casadi_real **arg1=arg+6, *wr0, *wr3;
+  /* #0: @0 = input[0][0] */
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w1);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w2);
+  /* #3: @3 = input[3][0] */
+  wr3 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w4 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr0;
+  arg1[1]=w1;
+  arg1[2]=w2;
+  arg1[3]=wr3;
+  arg1[4]=(&w4);
+  res1[0]=w5;
+  res1[1]=w6;
+  res1[2]=w7;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: output[0][0] = @5 */
+  casadi_copy(w5, 20, res[0]);
+  /* #7: output[1][0] = @6 */
+  casadi_copy(w6, 2, res[1]);
+  /* #8: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w6);
+  /* #9: @4 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @6) */
+  arg1[0]=wr0;
+  arg1[1]=w5;
+  arg1[2]=w7;
+  arg1[3]=w6;
+  res1[0]=(&w4);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #10: output[2][0] = @4 */
+  if (res[2]) res[2][0] = w4;
+  /* #11: @4 = 0 */
+  w4 = 0.;
+  /* #12: output[3][0] = @4 */
+  if (res[3]) res[3][0] = w4;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+626, *w01=w+646, *w02=w+648, w04, w05, *w06=w+650, *w07=w+652, *w08=w+672, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled6(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled6(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch5:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f28(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f27(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled5:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+705, *w02=w+707, w04, *w05=w+709, *w06=w+729, *w07=w+731, *w08=w+751, w09, w10, *w11=w+753;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch5(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f26(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+806, *w01=w+826, *w02=w+828, w04, w05, *w06=w+830, *w07=w+832, *w08=w+852, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled5(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled5(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch4:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f24(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f23(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled4:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+885, *w02=w+887, w04, *w05=w+889, *w06=w+909, *w07=w+911, *w08=w+931, w09, w10, *w11=w+933;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch4(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f22(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+986, *w01=w+1006, *w02=w+1008, w04, w05, *w06=w+1010, *w07=w+1012, *w08=w+1032, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled4(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled4(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch3:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f20(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f19(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled3:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1065, *w02=w+1067, w04, *w05=w+1069, *w06=w+1089, *w07=w+1091, *w08=w+1111, w09, w10, *w11=w+1113;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch3(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f18(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+1166, *w01=w+1186, *w02=w+1188, w04, w05, *w06=w+1190, *w07=w+1192, *w08=w+1212, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled3(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled3(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch2:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f16(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f15(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled2:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1245, *w02=w+1247, w04, *w05=w+1249, *w06=w+1269, *w07=w+1271, *w08=w+1291, w09, w10, *w11=w+1293;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch2(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+1346, *w01=w+1366, *w02=w+1368, w04, w05, *w06=w+1370, *w07=w+1372, *w08=w+1392, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled2(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled2(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch1:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f12(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f11(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled1:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1425, *w02=w+1427, w04, *w05=w+1429, *w06=w+1449, *w07=w+1451, *w08=w+1471, w09, w10, *w11=w+1473;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch1(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+1526, *w01=w+1546, *w02=w+1548, w04, w05, *w06=w+1550, *w07=w+1552, *w08=w+1572, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled1(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled1(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch0:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f8(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f7(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* outputs:(x[20],u[2],p[26])->(y[24]) */
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -21522,50 +22780,11 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   return 0;
 }
 
-/* homogeneous_rosenbrock_column:(x0[20],z0[2],u[2],p[26],h)->(xf[20],zf[2],y[24]) */
+/* homogeneous_rosenbrock_controlled_column:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w1=w+533, *w2=w+535, w4, *w5=w+537, *w6=w+557, *w7=w+559;
-  const casadi_real **arg1=arg+5, *wr0, *wr3;
-  /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
-  /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w1);
-  /* #2: @2 = input[2][0] */
-  casadi_copy(arg[2], 2, w2);
-  /* #3: @3 = input[3][0] */
-  wr3 = arg[3] ? arg[3] : casadi_zeros;
-  /* #4: @4 = input[4][0] */
-  w4 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
-  arg1[0]=wr0;
-  arg1[1]=w1;
-  arg1[2]=w2;
-  arg1[3]=wr3;
-  arg1[4]=(&w4);
-  res1[0]=w5;
-  res1[1]=w6;
-  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w5, 20, res[0]);
-  /* #7: output[1][0] = @6 */
-  casadi_copy(w6, 2, res[1]);
-  /* #8: @7 = outputs(@5, @2, @3) */
-  arg1[0]=w5;
-  arg1[1]=w2;
-  arg1[2]=wr3;
-  res1[0]=w7;
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
-  /* #9: output[2][0] = @7 */
-  casadi_copy(w7, 24, res[2]);
-  return 0;
-}
-
-/* homogeneous_rosenbrock_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10])->(xf[20x10],zf[2x10],y[24x10]) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+630, *w01=w+650, *w02=w+652, w04, *w05=w+654, *w06=w+674, *w07=w+676, *w08=w+700, *w09=w+724, *w10=w+726, *w11=w+750;
-  casadi_real *w12=w+752, *w13=w+776, *w14=w+778, *w15=w+802, *w16=w+804, *w17=w+828, *w18=w+830, *w19=w+854, *w20=w+856, *w21=w+880, *w22=w+882, *w23=w+906;
-  casadi_real *w24=w+908;
-  const casadi_real **arg1=arg+5, *wr00, *wr03;
+  casadi_real **res1=res+5, *rr, *w01=w+1605, *w02=w+1607, w04, *w05=w+1609, *w06=w+1629, *w07=w+1631, *w08=w+1651, w09, w10, *w11=w+1653;
+  casadi_real w12, w13, *w14=w+1655;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
@@ -21576,7 +22795,7 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   wr03 = arg[3] ? arg[3] : casadi_zeros;
   /* #4: @4 = input[4][0] */
   w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
   arg1[0]=wr00;
   arg1[1]=w01;
   arg1[2]=w02;
@@ -21585,219 +22804,388 @@ static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[0]=w05;
   res1[1]=w06;
   res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch0(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
   arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
-  res1[2]=w08;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
-  casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
-  wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
-  w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w02;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
-  casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
-  wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
-  w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
   res1[1]=w11;
-  res1[2]=w12;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
-  casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
-  wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
-  w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w11;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
-  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
-  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
-  w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @1 = input[2][6] */
-  casadi_copy(arg[2] ? arg[2]+12 : 0, 2, w01);
-  /* #33: @3 = input[3][6] */
-  wr03 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @4 = input[4][6] */
-  w04 = arg[4] ? arg[4][6] : 0;
-  /* #35: {@5, @17, @18} = homogeneous_rosenbrock_column(@0, @15, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w15;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w17;
-  res1[2]=w18;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+120);
-  /* #37: @1 = input[2][7] */
-  casadi_copy(arg[2] ? arg[2]+14 : 0, 2, w01);
-  /* #38: @3 = input[3][7] */
-  wr03 = arg[3] ? arg[3]+182 : casadi_zeros;
-  /* #39: @4 = input[4][7] */
-  w04 = arg[4] ? arg[4][7] : 0;
-  /* #40: {@0, @19, @20} = homogeneous_rosenbrock_column(@5, @17, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w17;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w19;
-  res1[2]=w20;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #41: output[0][7] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+140);
-  /* #42: @1 = input[2][8] */
-  casadi_copy(arg[2] ? arg[2]+16 : 0, 2, w01);
-  /* #43: @3 = input[3][8] */
-  wr03 = arg[3] ? arg[3]+208 : casadi_zeros;
-  /* #44: @4 = input[4][8] */
-  w04 = arg[4] ? arg[4][8] : 0;
-  /* #45: {@5, @21, @22} = homogeneous_rosenbrock_column(@0, @19, @1, @3, @4) */
-  arg1[0]=w00;
-  arg1[1]=w19;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w21;
-  res1[2]=w22;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #46: output[0][8] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+160);
-  /* #47: @1 = input[2][9] */
-  casadi_copy(arg[2] ? arg[2]+18 : 0, 2, w01);
-  /* #48: @3 = input[3][9] */
-  wr03 = arg[3] ? arg[3]+234 : casadi_zeros;
-  /* #49: @4 = input[4][9] */
-  w04 = arg[4] ? arg[4][9] : 0;
-  /* #50: {@0, @23, @24} = homogeneous_rosenbrock_column(@5, @21, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w21;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w23;
-  res1[2]=w24;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #51: output[0][9] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+180);
-  /* #52: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #53: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #54: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #55: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #56: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #57: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #58: output[1][6] = @17 */
-  if (res[1]) casadi_copy(w17, 2, res[1]+12);
-  /* #59: output[1][7] = @19 */
-  if (res[1]) casadi_copy(w19, 2, res[1]+14);
-  /* #60: output[1][8] = @21 */
-  if (res[1]) casadi_copy(w21, 2, res[1]+16);
-  /* #61: output[1][9] = @23 */
-  if (res[1]) casadi_copy(w23, 2, res[1]+18);
-  /* #62: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #63: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #64: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #65: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #66: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #67: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #68: output[2][6] = @18 */
-  if (res[2]) casadi_copy(w18, 24, res[2]+144);
-  /* #69: output[2][7] = @20 */
-  if (res[2]) casadi_copy(w20, 24, res[2]+168);
-  /* #70: output[2][8] = @22 */
-  if (res[2]) casadi_copy(w22, 24, res[2]+192);
-  /* #71: output[2][9] = @24 */
-  if (res[2]) casadi_copy(w24, 24, res[2]+216);
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: @14 = outputs(@7, @2, @3) */
+  arg1[0]=w07;
+  arg1[1]=w02;
+  arg1[2]=wr03;
+  res1[0]=w14;
+  if (casadi_f30(arg1, res1, iw, w, 0)) return 1;
+  /* #15: output[2][0] = @14 */
+  casadi_copy(w14, 24, res[2]);
+  /* #16: output[3][0] = @12 */
+  if (res[3]) res[3][0] = w12;
+  /* #17: output[4][0] = @13 */
+  if (res[4]) res[4][0] = w13;
   return 0;
 }
 
-/* homogeneous_rosenbrock_column_acc10_acc10:(x0[20],z0[2],u[2x100],p[26x100],h[1x100])->(xf[20x100],zf[2x100],y[24x100]) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+959, *w01=w+979, *w05=w+981, *w06=w+1181, *w07=w+1201, *w08=w+1441, *w09=w+1461, *w10=w+1701, *w11=w+1721, *w12=w+1961, *w13=w+1981;
-  casadi_real *w14=w+2221, *w15=w+2241, *w16=w+2481, *w17=w+2501, *w18=w+2741, *w19=w+2761, *w20=w+3001, *w21=w+3021, *w22=w+3261, *w23=w+3281, *w24=w+3521, *w25=w+3541;
-  const casadi_real **arg1=arg+5, *wr00, *wr02, *wr03, *wr04;
+/* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+1730, *w01=w+1750, *w02=w+1752, w04, *w05=w+1754, *w06=w+1756, *w07=w+1776, *w08=w+1778, w09, w10, *w11=w+1802;
+  casadi_real w12, w13, *w14=w+1826, *w15=w+1828, w16, w17, *w18=w+1852, *w19=w+1854, w20, w21, *w22=w+1878, *w23=w+1880;
+  casadi_real w24, w25, *w26=w+1904, *w27=w+1906, w28, w29, *w30=w+1930, *w31=w+1932, w32, w33, *w34=w+1956, *w35=w+1958;
+  casadi_real w36, w37, *w38=w+1982, *w39=w+1984, w40, w41, *w42=w+2008, *w43=w+2010, w44, w45;
+  const casadi_real **arg1=arg+6, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: @5 = input[5][0] */
+  casadi_copy(arg[5], 2, w05);
+  /* #6: {@6, @7, @8, @9, @10} = homogeneous_rosenbrock_controlled_column(@0, @1, @2, @3, @4, @5) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w05;
+  res1[0]=w06;
+  res1[1]=w07;
+  res1[2]=w08;
+  res1[3]=(&w09);
+  res1[4]=(&w10);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #7: output[0][0] = @6 */
+  casadi_copy(w06, 20, res[0]);
+  /* #8: @1 = input[2][1] */
+  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
+  /* #9: @3 = input[3][1] */
+  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
+  /* #10: @4 = input[4][1] */
+  w04 = arg[4] ? arg[4][1] : 0;
+  /* #11: @2 = input[5][1] */
+  casadi_copy(arg[5] ? arg[5]+2 : 0, 2, w02);
+  /* #12: {@0, @5, @11, @12, @13} = homogeneous_rosenbrock_controlled_column(@6, @7, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w07;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w05;
+  res1[2]=w11;
+  res1[3]=(&w12);
+  res1[4]=(&w13);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #13: output[0][1] = @0 */
+  if (res[0]) casadi_copy(w00, 20, res[0]+20);
+  /* #14: @1 = input[2][2] */
+  casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
+  /* #15: @3 = input[3][2] */
+  wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
+  /* #16: @4 = input[4][2] */
+  w04 = arg[4] ? arg[4][2] : 0;
+  /* #17: @2 = input[5][2] */
+  casadi_copy(arg[5] ? arg[5]+4 : 0, 2, w02);
+  /* #18: {@6, @14, @15, @16, @17} = homogeneous_rosenbrock_controlled_column(@0, @5, @1, @3, @4, @2) */
+  arg1[0]=w00;
+  arg1[1]=w05;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w14;
+  res1[2]=w15;
+  res1[3]=(&w16);
+  res1[4]=(&w17);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #19: output[0][2] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+40);
+  /* #20: @1 = input[2][3] */
+  casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
+  /* #21: @3 = input[3][3] */
+  wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
+  /* #22: @4 = input[4][3] */
+  w04 = arg[4] ? arg[4][3] : 0;
+  /* #23: @2 = input[5][3] */
+  casadi_copy(arg[5] ? arg[5]+6 : 0, 2, w02);
+  /* #24: {@0, @18, @19, @20, @21} = homogeneous_rosenbrock_controlled_column(@6, @14, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w14;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w18;
+  res1[2]=w19;
+  res1[3]=(&w20);
+  res1[4]=(&w21);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #25: output[0][3] = @0 */
+  if (res[0]) casadi_copy(w00, 20, res[0]+60);
+  /* #26: @1 = input[2][4] */
+  casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
+  /* #27: @3 = input[3][4] */
+  wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
+  /* #28: @4 = input[4][4] */
+  w04 = arg[4] ? arg[4][4] : 0;
+  /* #29: @2 = input[5][4] */
+  casadi_copy(arg[5] ? arg[5]+8 : 0, 2, w02);
+  /* #30: {@6, @22, @23, @24, @25} = homogeneous_rosenbrock_controlled_column(@0, @18, @1, @3, @4, @2) */
+  arg1[0]=w00;
+  arg1[1]=w18;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w22;
+  res1[2]=w23;
+  res1[3]=(&w24);
+  res1[4]=(&w25);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #31: output[0][4] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+80);
+  /* #32: @1 = input[2][5] */
+  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
+  /* #33: @3 = input[3][5] */
+  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
+  /* #34: @4 = input[4][5] */
+  w04 = arg[4] ? arg[4][5] : 0;
+  /* #35: @2 = input[5][5] */
+  casadi_copy(arg[5] ? arg[5]+10 : 0, 2, w02);
+  /* #36: {@0, @26, @27, @28, @29} = homogeneous_rosenbrock_controlled_column(@6, @22, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w22;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w26;
+  res1[2]=w27;
+  res1[3]=(&w28);
+  res1[4]=(&w29);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #37: output[0][5] = @0 */
+  if (res[0]) casadi_copy(w00, 20, res[0]+100);
+  /* #38: @1 = input[2][6] */
+  casadi_copy(arg[2] ? arg[2]+12 : 0, 2, w01);
+  /* #39: @3 = input[3][6] */
+  wr03 = arg[3] ? arg[3]+156 : casadi_zeros;
+  /* #40: @4 = input[4][6] */
+  w04 = arg[4] ? arg[4][6] : 0;
+  /* #41: @2 = input[5][6] */
+  casadi_copy(arg[5] ? arg[5]+12 : 0, 2, w02);
+  /* #42: {@6, @30, @31, @32, @33} = homogeneous_rosenbrock_controlled_column(@0, @26, @1, @3, @4, @2) */
+  arg1[0]=w00;
+  arg1[1]=w26;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w30;
+  res1[2]=w31;
+  res1[3]=(&w32);
+  res1[4]=(&w33);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #43: output[0][6] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+120);
+  /* #44: @1 = input[2][7] */
+  casadi_copy(arg[2] ? arg[2]+14 : 0, 2, w01);
+  /* #45: @3 = input[3][7] */
+  wr03 = arg[3] ? arg[3]+182 : casadi_zeros;
+  /* #46: @4 = input[4][7] */
+  w04 = arg[4] ? arg[4][7] : 0;
+  /* #47: @2 = input[5][7] */
+  casadi_copy(arg[5] ? arg[5]+14 : 0, 2, w02);
+  /* #48: {@0, @34, @35, @36, @37} = homogeneous_rosenbrock_controlled_column(@6, @30, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w30;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w34;
+  res1[2]=w35;
+  res1[3]=(&w36);
+  res1[4]=(&w37);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #49: output[0][7] = @0 */
+  if (res[0]) casadi_copy(w00, 20, res[0]+140);
+  /* #50: @1 = input[2][8] */
+  casadi_copy(arg[2] ? arg[2]+16 : 0, 2, w01);
+  /* #51: @3 = input[3][8] */
+  wr03 = arg[3] ? arg[3]+208 : casadi_zeros;
+  /* #52: @4 = input[4][8] */
+  w04 = arg[4] ? arg[4][8] : 0;
+  /* #53: @2 = input[5][8] */
+  casadi_copy(arg[5] ? arg[5]+16 : 0, 2, w02);
+  /* #54: {@6, @38, @39, @40, @41} = homogeneous_rosenbrock_controlled_column(@0, @34, @1, @3, @4, @2) */
+  arg1[0]=w00;
+  arg1[1]=w34;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w38;
+  res1[2]=w39;
+  res1[3]=(&w40);
+  res1[4]=(&w41);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #55: output[0][8] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+160);
+  /* #56: @1 = input[2][9] */
+  casadi_copy(arg[2] ? arg[2]+18 : 0, 2, w01);
+  /* #57: @3 = input[3][9] */
+  wr03 = arg[3] ? arg[3]+234 : casadi_zeros;
+  /* #58: @4 = input[4][9] */
+  w04 = arg[4] ? arg[4][9] : 0;
+  /* #59: @2 = input[5][9] */
+  casadi_copy(arg[5] ? arg[5]+18 : 0, 2, w02);
+  /* #60: {@0, @42, @43, @44, @45} = homogeneous_rosenbrock_controlled_column(@6, @38, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w38;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w42;
+  res1[2]=w43;
+  res1[3]=(&w44);
+  res1[4]=(&w45);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #61: output[0][9] = @0 */
+  if (res[0]) casadi_copy(w00, 20, res[0]+180);
+  /* #62: output[1][0] = @7 */
+  casadi_copy(w07, 2, res[1]);
+  /* #63: output[1][1] = @5 */
+  if (res[1]) casadi_copy(w05, 2, res[1]+2);
+  /* #64: output[1][2] = @14 */
+  if (res[1]) casadi_copy(w14, 2, res[1]+4);
+  /* #65: output[1][3] = @18 */
+  if (res[1]) casadi_copy(w18, 2, res[1]+6);
+  /* #66: output[1][4] = @22 */
+  if (res[1]) casadi_copy(w22, 2, res[1]+8);
+  /* #67: output[1][5] = @26 */
+  if (res[1]) casadi_copy(w26, 2, res[1]+10);
+  /* #68: output[1][6] = @30 */
+  if (res[1]) casadi_copy(w30, 2, res[1]+12);
+  /* #69: output[1][7] = @34 */
+  if (res[1]) casadi_copy(w34, 2, res[1]+14);
+  /* #70: output[1][8] = @38 */
+  if (res[1]) casadi_copy(w38, 2, res[1]+16);
+  /* #71: output[1][9] = @42 */
+  if (res[1]) casadi_copy(w42, 2, res[1]+18);
+  /* #72: output[2][0] = @8 */
+  casadi_copy(w08, 24, res[2]);
+  /* #73: output[2][1] = @11 */
+  if (res[2]) casadi_copy(w11, 24, res[2]+24);
+  /* #74: output[2][2] = @15 */
+  if (res[2]) casadi_copy(w15, 24, res[2]+48);
+  /* #75: output[2][3] = @19 */
+  if (res[2]) casadi_copy(w19, 24, res[2]+72);
+  /* #76: output[2][4] = @23 */
+  if (res[2]) casadi_copy(w23, 24, res[2]+96);
+  /* #77: output[2][5] = @27 */
+  if (res[2]) casadi_copy(w27, 24, res[2]+120);
+  /* #78: output[2][6] = @31 */
+  if (res[2]) casadi_copy(w31, 24, res[2]+144);
+  /* #79: output[2][7] = @35 */
+  if (res[2]) casadi_copy(w35, 24, res[2]+168);
+  /* #80: output[2][8] = @39 */
+  if (res[2]) casadi_copy(w39, 24, res[2]+192);
+  /* #81: output[2][9] = @43 */
+  if (res[2]) casadi_copy(w43, 24, res[2]+216);
+  /* #82: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  /* #83: output[3][1] = @12 */
+  if (res[3]) res[3][1] = w12;
+  /* #84: output[3][2] = @16 */
+  if (res[3]) res[3][2] = w16;
+  /* #85: output[3][3] = @20 */
+  if (res[3]) res[3][3] = w20;
+  /* #86: output[3][4] = @24 */
+  if (res[3]) res[3][4] = w24;
+  /* #87: output[3][5] = @28 */
+  if (res[3]) res[3][5] = w28;
+  /* #88: output[3][6] = @32 */
+  if (res[3]) res[3][6] = w32;
+  /* #89: output[3][7] = @36 */
+  if (res[3]) res[3][7] = w36;
+  /* #90: output[3][8] = @40 */
+  if (res[3]) res[3][8] = w40;
+  /* #91: output[3][9] = @44 */
+  if (res[3]) res[3][9] = w44;
+  /* #92: output[4][0] = @10 */
+  if (res[4]) res[4][0] = w10;
+  /* #93: output[4][1] = @13 */
+  if (res[4]) res[4][1] = w13;
+  /* #94: output[4][2] = @17 */
+  if (res[4]) res[4][2] = w17;
+  /* #95: output[4][3] = @21 */
+  if (res[4]) res[4][3] = w21;
+  /* #96: output[4][4] = @25 */
+  if (res[4]) res[4][4] = w25;
+  /* #97: output[4][5] = @29 */
+  if (res[4]) res[4][5] = w29;
+  /* #98: output[4][6] = @33 */
+  if (res[4]) res[4][6] = w33;
+  /* #99: output[4][7] = @37 */
+  if (res[4]) res[4][7] = w37;
+  /* #100: output[4][8] = @41 */
+  if (res[4]) res[4][8] = w41;
+  /* #101: output[4][9] = @45 */
+  if (res[4]) res[4][9] = w45;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled_column_acc10_acc10:(x0[20],z0[2],u[2x100],p[26x100],h[1x100],ctl[2x100])->(xf[20x100],zf[2x100],y[24x100],r[1x100],nh[1x100]) */
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2081, *w01=w+2101, *w06=w+2103, *w07=w+2303, *w08=w+2323, *w09=w+2563, *w10=w+2573, *w11=w+2583, *w12=w+2603, *w13=w+2843, *w14=w+2853;
+  casadi_real *w15=w+2863, *w16=w+2883, *w17=w+3123, *w18=w+3133, *w19=w+3143, *w20=w+3163, *w21=w+3403, *w22=w+3413, *w23=w+3423, *w24=w+3443, *w25=w+3683, *w26=w+3693;
+  casadi_real *w27=w+3703, *w28=w+3723, *w29=w+3963, *w30=w+3973, *w31=w+3983, *w32=w+4003, *w33=w+4243, *w34=w+4253, *w35=w+4263, *w36=w+4283, *w37=w+4523, *w38=w+4533;
+  casadi_real *w39=w+4543, *w40=w+4563, *w41=w+4803, *w42=w+4813, *w43=w+4823, *w44=w+4843, *w45=w+5083, *w46=w+5093;
+  const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr04, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
@@ -21808,265 +23196,357 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   wr03 = arg[3] ? arg[3] : casadi_zeros;
   /* #4: @4 = input[4][0] */
   wr04 = arg[4] ? arg[4] : casadi_zeros;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #5: @5 = input[5][0] */
+  wr05 = arg[5] ? arg[5] : casadi_zeros;
+  /* #6: {@6, @7, @8, @9, @10} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=wr00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 200, res[0]);
-  /* #7: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #8: {NULL, @1} = horzsplit(@6) */
-  casadi_copy(w06+18, 2, w01);
-  /* #9: @2 = input[2][1] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w07;
+  res1[2]=w08;
+  res1[3]=w09;
+  res1[4]=w10;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #7: output[0][0] = @6 */
+  casadi_copy(w06, 200, res[0]);
+  /* #8: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #9: {NULL, @1} = horzsplit(@7) */
+  casadi_copy(w07+18, 2, w01);
+  /* #10: @2 = input[2][1] */
   wr02 = arg[2] ? arg[2]+20 : casadi_zeros;
-  /* #10: @3 = input[3][1] */
+  /* #11: @3 = input[3][1] */
   wr03 = arg[3] ? arg[3]+260 : casadi_zeros;
-  /* #11: @4 = input[4][1] */
+  /* #12: @4 = input[4][1] */
   wr04 = arg[4] ? arg[4]+10 : casadi_zeros;
-  /* #12: {@5, @8, @9} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #13: @5 = input[5][1] */
+  wr05 = arg[5] ? arg[5]+20 : casadi_zeros;
+  /* #14: {@6, @11, @12, @13, @14} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w08;
-  res1[2]=w09;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #13: output[0][1] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+200);
-  /* #14: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #15: {NULL, @1} = horzsplit(@8) */
-  casadi_copy(w08+18, 2, w01);
-  /* #16: @2 = input[2][2] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w11;
+  res1[2]=w12;
+  res1[3]=w13;
+  res1[4]=w14;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #15: output[0][1] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+200);
+  /* #16: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #17: {NULL, @1} = horzsplit(@11) */
+  casadi_copy(w11+18, 2, w01);
+  /* #18: @2 = input[2][2] */
   wr02 = arg[2] ? arg[2]+40 : casadi_zeros;
-  /* #17: @3 = input[3][2] */
+  /* #19: @3 = input[3][2] */
   wr03 = arg[3] ? arg[3]+520 : casadi_zeros;
-  /* #18: @4 = input[4][2] */
+  /* #20: @4 = input[4][2] */
   wr04 = arg[4] ? arg[4]+20 : casadi_zeros;
-  /* #19: {@5, @10, @11} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #21: @5 = input[5][2] */
+  wr05 = arg[5] ? arg[5]+40 : casadi_zeros;
+  /* #22: {@6, @15, @16, @17, @18} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w10;
-  res1[2]=w11;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #20: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+400);
-  /* #21: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #22: {NULL, @1} = horzsplit(@10) */
-  casadi_copy(w10+18, 2, w01);
-  /* #23: @2 = input[2][3] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w15;
+  res1[2]=w16;
+  res1[3]=w17;
+  res1[4]=w18;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #23: output[0][2] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+400);
+  /* #24: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #25: {NULL, @1} = horzsplit(@15) */
+  casadi_copy(w15+18, 2, w01);
+  /* #26: @2 = input[2][3] */
   wr02 = arg[2] ? arg[2]+60 : casadi_zeros;
-  /* #24: @3 = input[3][3] */
+  /* #27: @3 = input[3][3] */
   wr03 = arg[3] ? arg[3]+780 : casadi_zeros;
-  /* #25: @4 = input[4][3] */
+  /* #28: @4 = input[4][3] */
   wr04 = arg[4] ? arg[4]+30 : casadi_zeros;
-  /* #26: {@5, @12, @13} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #29: @5 = input[5][3] */
+  wr05 = arg[5] ? arg[5]+60 : casadi_zeros;
+  /* #30: {@6, @19, @20, @21, @22} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w12;
-  res1[2]=w13;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #27: output[0][3] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+600);
-  /* #28: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #29: {NULL, @1} = horzsplit(@12) */
-  casadi_copy(w12+18, 2, w01);
-  /* #30: @2 = input[2][4] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w19;
+  res1[2]=w20;
+  res1[3]=w21;
+  res1[4]=w22;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #31: output[0][3] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+600);
+  /* #32: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #33: {NULL, @1} = horzsplit(@19) */
+  casadi_copy(w19+18, 2, w01);
+  /* #34: @2 = input[2][4] */
   wr02 = arg[2] ? arg[2]+80 : casadi_zeros;
-  /* #31: @3 = input[3][4] */
+  /* #35: @3 = input[3][4] */
   wr03 = arg[3] ? arg[3]+1040 : casadi_zeros;
-  /* #32: @4 = input[4][4] */
+  /* #36: @4 = input[4][4] */
   wr04 = arg[4] ? arg[4]+40 : casadi_zeros;
-  /* #33: {@5, @14, @15} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #37: @5 = input[5][4] */
+  wr05 = arg[5] ? arg[5]+80 : casadi_zeros;
+  /* #38: {@6, @23, @24, @25, @26} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w14;
-  res1[2]=w15;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #34: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+800);
-  /* #35: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #36: {NULL, @1} = horzsplit(@14) */
-  casadi_copy(w14+18, 2, w01);
-  /* #37: @2 = input[2][5] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w23;
+  res1[2]=w24;
+  res1[3]=w25;
+  res1[4]=w26;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #39: output[0][4] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+800);
+  /* #40: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #41: {NULL, @1} = horzsplit(@23) */
+  casadi_copy(w23+18, 2, w01);
+  /* #42: @2 = input[2][5] */
   wr02 = arg[2] ? arg[2]+100 : casadi_zeros;
-  /* #38: @3 = input[3][5] */
+  /* #43: @3 = input[3][5] */
   wr03 = arg[3] ? arg[3]+1300 : casadi_zeros;
-  /* #39: @4 = input[4][5] */
+  /* #44: @4 = input[4][5] */
   wr04 = arg[4] ? arg[4]+50 : casadi_zeros;
-  /* #40: {@5, @16, @17} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #45: @5 = input[5][5] */
+  wr05 = arg[5] ? arg[5]+100 : casadi_zeros;
+  /* #46: {@6, @27, @28, @29, @30} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w16;
-  res1[2]=w17;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #41: output[0][5] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1000);
-  /* #42: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #43: {NULL, @1} = horzsplit(@16) */
-  casadi_copy(w16+18, 2, w01);
-  /* #44: @2 = input[2][6] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w27;
+  res1[2]=w28;
+  res1[3]=w29;
+  res1[4]=w30;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #47: output[0][5] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+1000);
+  /* #48: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #49: {NULL, @1} = horzsplit(@27) */
+  casadi_copy(w27+18, 2, w01);
+  /* #50: @2 = input[2][6] */
   wr02 = arg[2] ? arg[2]+120 : casadi_zeros;
-  /* #45: @3 = input[3][6] */
+  /* #51: @3 = input[3][6] */
   wr03 = arg[3] ? arg[3]+1560 : casadi_zeros;
-  /* #46: @4 = input[4][6] */
+  /* #52: @4 = input[4][6] */
   wr04 = arg[4] ? arg[4]+60 : casadi_zeros;
-  /* #47: {@5, @18, @19} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #53: @5 = input[5][6] */
+  wr05 = arg[5] ? arg[5]+120 : casadi_zeros;
+  /* #54: {@6, @31, @32, @33, @34} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w18;
-  res1[2]=w19;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #48: output[0][6] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1200);
-  /* #49: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #50: {NULL, @1} = horzsplit(@18) */
-  casadi_copy(w18+18, 2, w01);
-  /* #51: @2 = input[2][7] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w31;
+  res1[2]=w32;
+  res1[3]=w33;
+  res1[4]=w34;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #55: output[0][6] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+1200);
+  /* #56: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #57: {NULL, @1} = horzsplit(@31) */
+  casadi_copy(w31+18, 2, w01);
+  /* #58: @2 = input[2][7] */
   wr02 = arg[2] ? arg[2]+140 : casadi_zeros;
-  /* #52: @3 = input[3][7] */
+  /* #59: @3 = input[3][7] */
   wr03 = arg[3] ? arg[3]+1820 : casadi_zeros;
-  /* #53: @4 = input[4][7] */
+  /* #60: @4 = input[4][7] */
   wr04 = arg[4] ? arg[4]+70 : casadi_zeros;
-  /* #54: {@5, @20, @21} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #61: @5 = input[5][7] */
+  wr05 = arg[5] ? arg[5]+140 : casadi_zeros;
+  /* #62: {@6, @35, @36, @37, @38} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w20;
-  res1[2]=w21;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #55: output[0][7] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1400);
-  /* #56: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #57: {NULL, @1} = horzsplit(@20) */
-  casadi_copy(w20+18, 2, w01);
-  /* #58: @2 = input[2][8] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w35;
+  res1[2]=w36;
+  res1[3]=w37;
+  res1[4]=w38;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #63: output[0][7] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+1400);
+  /* #64: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #65: {NULL, @1} = horzsplit(@35) */
+  casadi_copy(w35+18, 2, w01);
+  /* #66: @2 = input[2][8] */
   wr02 = arg[2] ? arg[2]+160 : casadi_zeros;
-  /* #59: @3 = input[3][8] */
+  /* #67: @3 = input[3][8] */
   wr03 = arg[3] ? arg[3]+2080 : casadi_zeros;
-  /* #60: @4 = input[4][8] */
+  /* #68: @4 = input[4][8] */
   wr04 = arg[4] ? arg[4]+80 : casadi_zeros;
-  /* #61: {@5, @22, @23} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #69: @5 = input[5][8] */
+  wr05 = arg[5] ? arg[5]+160 : casadi_zeros;
+  /* #70: {@6, @39, @40, @41, @42} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w22;
-  res1[2]=w23;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #62: output[0][8] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1600);
-  /* #63: {NULL, @0} = horzsplit(@5) */
-  casadi_copy(w05+180, 20, w00);
-  /* #64: {NULL, @1} = horzsplit(@22) */
-  casadi_copy(w22+18, 2, w01);
-  /* #65: @2 = input[2][9] */
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w39;
+  res1[2]=w40;
+  res1[3]=w41;
+  res1[4]=w42;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #71: output[0][8] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+1600);
+  /* #72: {NULL, @0} = horzsplit(@6) */
+  casadi_copy(w06+180, 20, w00);
+  /* #73: {NULL, @1} = horzsplit(@39) */
+  casadi_copy(w39+18, 2, w01);
+  /* #74: @2 = input[2][9] */
   wr02 = arg[2] ? arg[2]+180 : casadi_zeros;
-  /* #66: @3 = input[3][9] */
+  /* #75: @3 = input[3][9] */
   wr03 = arg[3] ? arg[3]+2340 : casadi_zeros;
-  /* #67: @4 = input[4][9] */
+  /* #76: @4 = input[4][9] */
   wr04 = arg[4] ? arg[4]+90 : casadi_zeros;
-  /* #68: {@5, @24, @25} = homogeneous_rosenbrock_column_acc10(@0, @1, @2, @3, @4) */
+  /* #77: @5 = input[5][9] */
+  wr05 = arg[5] ? arg[5]+180 : casadi_zeros;
+  /* #78: {@6, @43, @44, @45, @46} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @2, @3, @4, @5) */
   arg1[0]=w00;
   arg1[1]=w01;
   arg1[2]=wr02;
   arg1[3]=wr03;
   arg1[4]=wr04;
-  res1[0]=w05;
-  res1[1]=w24;
-  res1[2]=w25;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #69: output[0][9] = @5 */
-  if (res[0]) casadi_copy(w05, 200, res[0]+1800);
-  /* #70: output[1][0] = @6 */
-  casadi_copy(w06, 20, res[1]);
-  /* #71: output[1][1] = @8 */
-  if (res[1]) casadi_copy(w08, 20, res[1]+20);
-  /* #72: output[1][2] = @10 */
-  if (res[1]) casadi_copy(w10, 20, res[1]+40);
-  /* #73: output[1][3] = @12 */
-  if (res[1]) casadi_copy(w12, 20, res[1]+60);
-  /* #74: output[1][4] = @14 */
-  if (res[1]) casadi_copy(w14, 20, res[1]+80);
-  /* #75: output[1][5] = @16 */
-  if (res[1]) casadi_copy(w16, 20, res[1]+100);
-  /* #76: output[1][6] = @18 */
-  if (res[1]) casadi_copy(w18, 20, res[1]+120);
-  /* #77: output[1][7] = @20 */
-  if (res[1]) casadi_copy(w20, 20, res[1]+140);
-  /* #78: output[1][8] = @22 */
-  if (res[1]) casadi_copy(w22, 20, res[1]+160);
-  /* #79: output[1][9] = @24 */
-  if (res[1]) casadi_copy(w24, 20, res[1]+180);
-  /* #80: output[2][0] = @7 */
-  casadi_copy(w07, 240, res[2]);
-  /* #81: output[2][1] = @9 */
-  if (res[2]) casadi_copy(w09, 240, res[2]+240);
-  /* #82: output[2][2] = @11 */
-  if (res[2]) casadi_copy(w11, 240, res[2]+480);
-  /* #83: output[2][3] = @13 */
-  if (res[2]) casadi_copy(w13, 240, res[2]+720);
-  /* #84: output[2][4] = @15 */
-  if (res[2]) casadi_copy(w15, 240, res[2]+960);
-  /* #85: output[2][5] = @17 */
-  if (res[2]) casadi_copy(w17, 240, res[2]+1200);
-  /* #86: output[2][6] = @19 */
-  if (res[2]) casadi_copy(w19, 240, res[2]+1440);
-  /* #87: output[2][7] = @21 */
-  if (res[2]) casadi_copy(w21, 240, res[2]+1680);
-  /* #88: output[2][8] = @23 */
-  if (res[2]) casadi_copy(w23, 240, res[2]+1920);
-  /* #89: output[2][9] = @25 */
-  if (res[2]) casadi_copy(w25, 240, res[2]+2160);
+  arg1[5]=wr05;
+  res1[0]=w06;
+  res1[1]=w43;
+  res1[2]=w44;
+  res1[3]=w45;
+  res1[4]=w46;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #79: output[0][9] = @6 */
+  if (res[0]) casadi_copy(w06, 200, res[0]+1800);
+  /* #80: output[1][0] = @7 */
+  casadi_copy(w07, 20, res[1]);
+  /* #81: output[1][1] = @11 */
+  if (res[1]) casadi_copy(w11, 20, res[1]+20);
+  /* #82: output[1][2] = @15 */
+  if (res[1]) casadi_copy(w15, 20, res[1]+40);
+  /* #83: output[1][3] = @19 */
+  if (res[1]) casadi_copy(w19, 20, res[1]+60);
+  /* #84: output[1][4] = @23 */
+  if (res[1]) casadi_copy(w23, 20, res[1]+80);
+  /* #85: output[1][5] = @27 */
+  if (res[1]) casadi_copy(w27, 20, res[1]+100);
+  /* #86: output[1][6] = @31 */
+  if (res[1]) casadi_copy(w31, 20, res[1]+120);
+  /* #87: output[1][7] = @35 */
+  if (res[1]) casadi_copy(w35, 20, res[1]+140);
+  /* #88: output[1][8] = @39 */
+  if (res[1]) casadi_copy(w39, 20, res[1]+160);
+  /* #89: output[1][9] = @43 */
+  if (res[1]) casadi_copy(w43, 20, res[1]+180);
+  /* #90: output[2][0] = @8 */
+  casadi_copy(w08, 240, res[2]);
+  /* #91: output[2][1] = @12 */
+  if (res[2]) casadi_copy(w12, 240, res[2]+240);
+  /* #92: output[2][2] = @16 */
+  if (res[2]) casadi_copy(w16, 240, res[2]+480);
+  /* #93: output[2][3] = @20 */
+  if (res[2]) casadi_copy(w20, 240, res[2]+720);
+  /* #94: output[2][4] = @24 */
+  if (res[2]) casadi_copy(w24, 240, res[2]+960);
+  /* #95: output[2][5] = @28 */
+  if (res[2]) casadi_copy(w28, 240, res[2]+1200);
+  /* #96: output[2][6] = @32 */
+  if (res[2]) casadi_copy(w32, 240, res[2]+1440);
+  /* #97: output[2][7] = @36 */
+  if (res[2]) casadi_copy(w36, 240, res[2]+1680);
+  /* #98: output[2][8] = @40 */
+  if (res[2]) casadi_copy(w40, 240, res[2]+1920);
+  /* #99: output[2][9] = @44 */
+  if (res[2]) casadi_copy(w44, 240, res[2]+2160);
+  /* #100: output[3][0] = @9 */
+  casadi_copy(w09, 10, res[3]);
+  /* #101: output[3][1] = @13 */
+  if (res[3]) casadi_copy(w13, 10, res[3]+10);
+  /* #102: output[3][2] = @17 */
+  if (res[3]) casadi_copy(w17, 10, res[3]+20);
+  /* #103: output[3][3] = @21 */
+  if (res[3]) casadi_copy(w21, 10, res[3]+30);
+  /* #104: output[3][4] = @25 */
+  if (res[3]) casadi_copy(w25, 10, res[3]+40);
+  /* #105: output[3][5] = @29 */
+  if (res[3]) casadi_copy(w29, 10, res[3]+50);
+  /* #106: output[3][6] = @33 */
+  if (res[3]) casadi_copy(w33, 10, res[3]+60);
+  /* #107: output[3][7] = @37 */
+  if (res[3]) casadi_copy(w37, 10, res[3]+70);
+  /* #108: output[3][8] = @41 */
+  if (res[3]) casadi_copy(w41, 10, res[3]+80);
+  /* #109: output[3][9] = @45 */
+  if (res[3]) casadi_copy(w45, 10, res[3]+90);
+  /* #110: output[4][0] = @10 */
+  casadi_copy(w10, 10, res[4]);
+  /* #111: output[4][1] = @14 */
+  if (res[4]) casadi_copy(w14, 10, res[4]+10);
+  /* #112: output[4][2] = @18 */
+  if (res[4]) casadi_copy(w18, 10, res[4]+20);
+  /* #113: output[4][3] = @22 */
+  if (res[4]) casadi_copy(w22, 10, res[4]+30);
+  /* #114: output[4][4] = @26 */
+  if (res[4]) casadi_copy(w26, 10, res[4]+40);
+  /* #115: output[4][5] = @30 */
+  if (res[4]) casadi_copy(w30, 10, res[4]+50);
+  /* #116: output[4][6] = @34 */
+  if (res[4]) casadi_copy(w34, 10, res[4]+60);
+  /* #117: output[4][7] = @38 */
+  if (res[4]) casadi_copy(w38, 10, res[4]+70);
+  /* #118: output[4][8] = @42 */
+  if (res[4]) casadi_copy(w42, 10, res[4]+80);
+  /* #119: output[4][9] = @46 */
+  if (res[4]) casadi_copy(w46, 10, res[4]+90);
   return 0;
 }
 
-/* homogeneous_rosenbrock_acc256:(x0[20],z0[2],u[2x256],p[26x256],h[1x256])->(xf[20x256],zf[2x256],y[24x256]) */
+/* homogeneous_rosenbrock_controlled_acc256:(x0[20],z0[2],u[2x256],p[26x256],h[1x256],ctl[2x256])->(xf[20x256],zf[2x256],y[24x256],r[1x256],nh[1x256]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+4071, *w01=w+4091, *w02=w+4093, w04, *w05=w+4095, *w06=w+4115, *w07=w+4117, *w08=w+4141, *w09=w+4165, *w10=w+4167, *w11=w+4191;
-  casadi_real *w12=w+4193, *w13=w+4217, *w14=w+4219, *w15=w+4243, *w16=w+4245, *w19=w+4269, *w20=w+4469, *w21=w+4489, *w22=w+4729, *w23=w+4749, *w24=w+4989, *w25=w+5009;
-  casadi_real *w26=w+5249, *w27=w+5269, *w28=w+5509, *w29=w+5529, *w32=w+5769, *w33=w+7769, *w34=w+7969, *w35=w+10369, *w36=w+10569;
-  const casadi_real **arg1=arg+5, *wr00, *wr03, *wr05, *wr17, *wr18, *wr19, *wr30, *wr31;
+  casadi_real **res1=res+5, *w00=w+5413, *w01=w+5433, *w02=w+5435, w04, *w05=w+5437, *w06=w+5439, *w07=w+5459, *w08=w+5461, w09, w10, *w11=w+5485;
+  casadi_real w12, w13, *w14=w+5509, *w15=w+5511, w16, w17, *w18=w+5535, *w19=w+5537, w20, w21, *w22=w+5561, *w23=w+5563;
+  casadi_real w24, w25, *w26=w+5587, *w27=w+5589, w28, w29, *w33=w+5613, *w34=w+5813, *w35=w+5833, *w36=w+6073, *w37=w+6083, *w38=w+6093;
+  casadi_real *w39=w+6113, *w40=w+6353, *w41=w+6363, *w42=w+6373, *w43=w+6393, *w44=w+6633, *w45=w+6643, *w46=w+6653, *w47=w+6673, *w48=w+6913, *w49=w+6923, *w50=w+6933;
+  casadi_real *w51=w+6953, *w52=w+7193, *w53=w+7203, *w57=w+7213, *w58=w+9213, *w59=w+9413, *w60=w+11813, *w61=w+11913, *w62=w+12013, *w63=w+12213, *w64=w+14613, *w65=w+14713;
+  const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32, *wr33, *wr54, *wr55, *wr56;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
@@ -22077,440 +23557,577 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   wr03 = arg[3] ? arg[3] : casadi_zeros;
   /* #4: @4 = input[4][0] */
   w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
+  /* #5: @5 = input[5][0] */
+  casadi_copy(arg[5], 2, w05);
+  /* #6: {@6, @7, @8, @9, @10} = homogeneous_rosenbrock_controlled_column(@0, @1, @2, @3, @4, @5) */
   arg1[0]=wr00;
   arg1[1]=w01;
   arg1[2]=w02;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
+  arg1[5]=w05;
+  res1[0]=w06;
+  res1[1]=w07;
   res1[2]=w08;
+  res1[3]=(&w09);
+  res1[4]=(&w10);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
+  /* #7: output[0][0] = @6 */
+  casadi_copy(w06, 20, res[0]);
+  /* #8: @1 = input[2][1] */
+  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
+  /* #9: @3 = input[3][1] */
+  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
+  /* #10: @4 = input[4][1] */
+  w04 = arg[4] ? arg[4][1] : 0;
+  /* #11: @2 = input[5][1] */
+  casadi_copy(arg[5] ? arg[5]+2 : 0, 2, w02);
+  /* #12: {@0, @5, @11, @12, @13} = homogeneous_rosenbrock_controlled_column(@6, @7, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w07;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w05;
+  res1[2]=w11;
+  res1[3]=(&w12);
+  res1[4]=(&w13);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #13: output[0][1] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
+  /* #14: @1 = input[2][2] */
   casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
+  /* #15: @3 = input[3][2] */
   wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
+  /* #16: @4 = input[4][2] */
   w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
+  /* #17: @2 = input[5][2] */
+  casadi_copy(arg[5] ? arg[5]+4 : 0, 2, w02);
+  /* #18: {@6, @14, @15, @16, @17} = homogeneous_rosenbrock_controlled_column(@0, @5, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w02;
+  arg1[1]=w05;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w14;
+  res1[2]=w15;
+  res1[3]=(&w16);
+  res1[4]=(&w17);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
+  /* #19: output[0][2] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+40);
+  /* #20: @1 = input[2][3] */
   casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
+  /* #21: @3 = input[3][3] */
   wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
+  /* #22: @4 = input[4][3] */
   w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
+  /* #23: @2 = input[5][3] */
+  casadi_copy(arg[5] ? arg[5]+6 : 0, 2, w02);
+  /* #24: {@0, @18, @19, @20, @21} = homogeneous_rosenbrock_controlled_column(@6, @14, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w14;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
+  arg1[5]=w02;
   res1[0]=w00;
-  res1[1]=w11;
-  res1[2]=w12;
+  res1[1]=w18;
+  res1[2]=w19;
+  res1[3]=(&w20);
+  res1[4]=(&w21);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
+  /* #25: output[0][3] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
+  /* #26: @1 = input[2][4] */
   casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
+  /* #27: @3 = input[3][4] */
   wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
+  /* #28: @4 = input[4][4] */
   w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
+  /* #29: @2 = input[5][4] */
+  casadi_copy(arg[5] ? arg[5]+8 : 0, 2, w02);
+  /* #30: {@6, @22, @23, @24, @25} = homogeneous_rosenbrock_controlled_column(@0, @18, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w11;
+  arg1[1]=w18;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
-  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
-  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
-  w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
-  if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @5 = input[2][6] */
-  wr05 = arg[2] ? arg[2]+12 : casadi_zeros;
-  /* #33: @17 = input[3][6] */
-  wr17 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @18 = input[4][6] */
-  wr18 = arg[4] ? arg[4]+6 : casadi_zeros;
-  /* #35: {@19, @20, @21} = homogeneous_rosenbrock_column_acc10(@0, @15, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w15;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w20;
-  res1[2]=w21;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+120);
-  /* #37: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #38: {NULL, @1} = horzsplit(@20) */
-  casadi_copy(w20+18, 2, w01);
-  /* #39: @5 = input[2][7] */
-  wr05 = arg[2] ? arg[2]+32 : casadi_zeros;
-  /* #40: @17 = input[3][7] */
-  wr17 = arg[3] ? arg[3]+416 : casadi_zeros;
-  /* #41: @18 = input[4][7] */
-  wr18 = arg[4] ? arg[4]+16 : casadi_zeros;
-  /* #42: {@19, @22, @23} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
+  arg1[5]=w02;
+  res1[0]=w06;
   res1[1]=w22;
   res1[2]=w23;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #43: output[0][7] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+320);
-  /* #44: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #45: {NULL, @1} = horzsplit(@22) */
-  casadi_copy(w22+18, 2, w01);
-  /* #46: @5 = input[2][8] */
-  wr05 = arg[2] ? arg[2]+52 : casadi_zeros;
-  /* #47: @17 = input[3][8] */
-  wr17 = arg[3] ? arg[3]+676 : casadi_zeros;
-  /* #48: @18 = input[4][8] */
-  wr18 = arg[4] ? arg[4]+26 : casadi_zeros;
-  /* #49: {@19, @24, @25} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w24;
-  res1[2]=w25;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #50: output[0][8] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+520);
-  /* #51: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #52: {NULL, @1} = horzsplit(@24) */
-  casadi_copy(w24+18, 2, w01);
-  /* #53: @5 = input[2][9] */
-  wr05 = arg[2] ? arg[2]+72 : casadi_zeros;
-  /* #54: @17 = input[3][9] */
-  wr17 = arg[3] ? arg[3]+936 : casadi_zeros;
-  /* #55: @18 = input[4][9] */
-  wr18 = arg[4] ? arg[4]+36 : casadi_zeros;
-  /* #56: {@19, @26, @27} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
+  res1[3]=(&w24);
+  res1[4]=(&w25);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #31: output[0][4] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+80);
+  /* #32: @1 = input[2][5] */
+  casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
+  /* #33: @3 = input[3][5] */
+  wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
+  /* #34: @4 = input[4][5] */
+  w04 = arg[4] ? arg[4][5] : 0;
+  /* #35: @2 = input[5][5] */
+  casadi_copy(arg[5] ? arg[5]+10 : 0, 2, w02);
+  /* #36: {@0, @26, @27, @28, @29} = homogeneous_rosenbrock_controlled_column(@6, @22, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w22;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
   res1[1]=w26;
   res1[2]=w27;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #57: output[0][9] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+720);
-  /* #58: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #59: {NULL, @1} = horzsplit(@26) */
-  casadi_copy(w26+18, 2, w01);
-  /* #60: @5 = input[2][10] */
-  wr05 = arg[2] ? arg[2]+92 : casadi_zeros;
-  /* #61: @17 = input[3][10] */
-  wr17 = arg[3] ? arg[3]+1196 : casadi_zeros;
-  /* #62: @18 = input[4][10] */
-  wr18 = arg[4] ? arg[4]+46 : casadi_zeros;
-  /* #63: {@19, @28, @29} = homogeneous_rosenbrock_column_acc10(@0, @1, @5, @17, @18) */
+  res1[3]=(&w28);
+  res1[4]=(&w29);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #37: output[0][5] = @0 */
+  if (res[0]) casadi_copy(w00, 20, res[0]+100);
+  /* #38: @6 = input[2][6] */
+  wr06 = arg[2] ? arg[2]+12 : casadi_zeros;
+  /* #39: @30 = input[3][6] */
+  wr30 = arg[3] ? arg[3]+156 : casadi_zeros;
+  /* #40: @31 = input[4][6] */
+  wr31 = arg[4] ? arg[4]+6 : casadi_zeros;
+  /* #41: @32 = input[5][6] */
+  wr32 = arg[5] ? arg[5]+12 : casadi_zeros;
+  /* #42: {@33, @34, @35, @36, @37} = homogeneous_rosenbrock_controlled_column_acc10(@0, @26, @6, @30, @31, @32) */
   arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w28;
-  res1[2]=w29;
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
-  /* #64: output[0][10] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+920);
-  /* #65: {NULL, @0} = horzsplit(@19) */
-  casadi_copy(w19+180, 20, w00);
-  /* #66: {NULL, @1} = horzsplit(@28) */
-  casadi_copy(w28+18, 2, w01);
-  /* #67: @19 = input[2][11] */
-  wr19 = arg[2] ? arg[2]+112 : casadi_zeros;
-  /* #68: @30 = input[3][11] */
-  wr30 = arg[3] ? arg[3]+1456 : casadi_zeros;
-  /* #69: @31 = input[4][11] */
-  wr31 = arg[4] ? arg[4]+56 : casadi_zeros;
-  /* #70: {@32, @33, @34} = homogeneous_rosenbrock_column_acc10_acc10(@0, @1, @19, @30, @31) */
-  arg1[0]=w00;
-  arg1[1]=w01;
-  arg1[2]=wr19;
+  arg1[1]=w26;
+  arg1[2]=wr06;
   arg1[3]=wr30;
   arg1[4]=wr31;
-  res1[0]=w32;
-  res1[1]=w33;
-  res1[2]=w34;
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
-  /* #71: output[0][11] = @32 */
-  if (res[0]) casadi_copy(w32, 2000, res[0]+1120);
-  /* #72: {NULL, @0} = horzsplit(@32) */
-  casadi_copy(w32+1980, 20, w00);
-  /* #73: {NULL, @1} = horzsplit(@33) */
-  casadi_copy(w33+198, 2, w01);
-  /* #74: @19 = input[2][12] */
-  wr19 = arg[2] ? arg[2]+312 : casadi_zeros;
-  /* #75: @30 = input[3][12] */
-  wr30 = arg[3] ? arg[3]+4056 : casadi_zeros;
-  /* #76: @31 = input[4][12] */
-  wr31 = arg[4] ? arg[4]+156 : casadi_zeros;
-  /* #77: {@32, @35, @36} = homogeneous_rosenbrock_column_acc10_acc10(@0, @1, @19, @30, @31) */
+  arg1[5]=wr32;
+  res1[0]=w33;
+  res1[1]=w34;
+  res1[2]=w35;
+  res1[3]=w36;
+  res1[4]=w37;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #43: output[0][6] = @33 */
+  if (res[0]) casadi_copy(w33, 200, res[0]+120);
+  /* #44: {NULL, @0} = horzsplit(@33) */
+  casadi_copy(w33+180, 20, w00);
+  /* #45: {NULL, @1} = horzsplit(@34) */
+  casadi_copy(w34+18, 2, w01);
+  /* #46: @6 = input[2][7] */
+  wr06 = arg[2] ? arg[2]+32 : casadi_zeros;
+  /* #47: @30 = input[3][7] */
+  wr30 = arg[3] ? arg[3]+416 : casadi_zeros;
+  /* #48: @31 = input[4][7] */
+  wr31 = arg[4] ? arg[4]+16 : casadi_zeros;
+  /* #49: @32 = input[5][7] */
+  wr32 = arg[5] ? arg[5]+32 : casadi_zeros;
+  /* #50: {@33, @38, @39, @40, @41} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @6, @30, @31, @32) */
   arg1[0]=w00;
   arg1[1]=w01;
-  arg1[2]=wr19;
+  arg1[2]=wr06;
   arg1[3]=wr30;
   arg1[4]=wr31;
-  res1[0]=w32;
-  res1[1]=w35;
-  res1[2]=w36;
-  if (casadi_f7(arg1, res1, iw, w, 0)) return 1;
-  /* #78: output[0][12] = @32 */
-  if (res[0]) casadi_copy(w32, 2000, res[0]+3120);
-  /* #79: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #80: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #81: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #82: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #83: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #84: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #85: output[1][6] = @20 */
-  if (res[1]) casadi_copy(w20, 20, res[1]+12);
-  /* #86: output[1][7] = @22 */
-  if (res[1]) casadi_copy(w22, 20, res[1]+32);
-  /* #87: output[1][8] = @24 */
-  if (res[1]) casadi_copy(w24, 20, res[1]+52);
-  /* #88: output[1][9] = @26 */
-  if (res[1]) casadi_copy(w26, 20, res[1]+72);
-  /* #89: output[1][10] = @28 */
-  if (res[1]) casadi_copy(w28, 20, res[1]+92);
-  /* #90: output[1][11] = @33 */
-  if (res[1]) casadi_copy(w33, 200, res[1]+112);
-  /* #91: output[1][12] = @35 */
-  if (res[1]) casadi_copy(w35, 200, res[1]+312);
-  /* #92: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #93: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #94: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #95: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #96: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #97: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #98: output[2][6] = @21 */
-  if (res[2]) casadi_copy(w21, 240, res[2]+144);
-  /* #99: output[2][7] = @23 */
-  if (res[2]) casadi_copy(w23, 240, res[2]+384);
-  /* #100: output[2][8] = @25 */
-  if (res[2]) casadi_copy(w25, 240, res[2]+624);
-  /* #101: output[2][9] = @27 */
-  if (res[2]) casadi_copy(w27, 240, res[2]+864);
-  /* #102: output[2][10] = @29 */
-  if (res[2]) casadi_copy(w29, 240, res[2]+1104);
-  /* #103: output[2][11] = @34 */
-  if (res[2]) casadi_copy(w34, 2400, res[2]+1344);
-  /* #104: output[2][12] = @36 */
-  if (res[2]) casadi_copy(w36, 2400, res[2]+3744);
+  arg1[5]=wr32;
+  res1[0]=w33;
+  res1[1]=w38;
+  res1[2]=w39;
+  res1[3]=w40;
+  res1[4]=w41;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #51: output[0][7] = @33 */
+  if (res[0]) casadi_copy(w33, 200, res[0]+320);
+  /* #52: {NULL, @0} = horzsplit(@33) */
+  casadi_copy(w33+180, 20, w00);
+  /* #53: {NULL, @1} = horzsplit(@38) */
+  casadi_copy(w38+18, 2, w01);
+  /* #54: @6 = input[2][8] */
+  wr06 = arg[2] ? arg[2]+52 : casadi_zeros;
+  /* #55: @30 = input[3][8] */
+  wr30 = arg[3] ? arg[3]+676 : casadi_zeros;
+  /* #56: @31 = input[4][8] */
+  wr31 = arg[4] ? arg[4]+26 : casadi_zeros;
+  /* #57: @32 = input[5][8] */
+  wr32 = arg[5] ? arg[5]+52 : casadi_zeros;
+  /* #58: {@33, @42, @43, @44, @45} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @6, @30, @31, @32) */
+  arg1[0]=w00;
+  arg1[1]=w01;
+  arg1[2]=wr06;
+  arg1[3]=wr30;
+  arg1[4]=wr31;
+  arg1[5]=wr32;
+  res1[0]=w33;
+  res1[1]=w42;
+  res1[2]=w43;
+  res1[3]=w44;
+  res1[4]=w45;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #59: output[0][8] = @33 */
+  if (res[0]) casadi_copy(w33, 200, res[0]+520);
+  /* #60: {NULL, @0} = horzsplit(@33) */
+  casadi_copy(w33+180, 20, w00);
+  /* #61: {NULL, @1} = horzsplit(@42) */
+  casadi_copy(w42+18, 2, w01);
+  /* #62: @6 = input[2][9] */
+  wr06 = arg[2] ? arg[2]+72 : casadi_zeros;
+  /* #63: @30 = input[3][9] */
+  wr30 = arg[3] ? arg[3]+936 : casadi_zeros;
+  /* #64: @31 = input[4][9] */
+  wr31 = arg[4] ? arg[4]+36 : casadi_zeros;
+  /* #65: @32 = input[5][9] */
+  wr32 = arg[5] ? arg[5]+72 : casadi_zeros;
+  /* #66: {@33, @46, @47, @48, @49} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @6, @30, @31, @32) */
+  arg1[0]=w00;
+  arg1[1]=w01;
+  arg1[2]=wr06;
+  arg1[3]=wr30;
+  arg1[4]=wr31;
+  arg1[5]=wr32;
+  res1[0]=w33;
+  res1[1]=w46;
+  res1[2]=w47;
+  res1[3]=w48;
+  res1[4]=w49;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #67: output[0][9] = @33 */
+  if (res[0]) casadi_copy(w33, 200, res[0]+720);
+  /* #68: {NULL, @0} = horzsplit(@33) */
+  casadi_copy(w33+180, 20, w00);
+  /* #69: {NULL, @1} = horzsplit(@46) */
+  casadi_copy(w46+18, 2, w01);
+  /* #70: @6 = input[2][10] */
+  wr06 = arg[2] ? arg[2]+92 : casadi_zeros;
+  /* #71: @30 = input[3][10] */
+  wr30 = arg[3] ? arg[3]+1196 : casadi_zeros;
+  /* #72: @31 = input[4][10] */
+  wr31 = arg[4] ? arg[4]+46 : casadi_zeros;
+  /* #73: @32 = input[5][10] */
+  wr32 = arg[5] ? arg[5]+92 : casadi_zeros;
+  /* #74: {@33, @50, @51, @52, @53} = homogeneous_rosenbrock_controlled_column_acc10(@0, @1, @6, @30, @31, @32) */
+  arg1[0]=w00;
+  arg1[1]=w01;
+  arg1[2]=wr06;
+  arg1[3]=wr30;
+  arg1[4]=wr31;
+  arg1[5]=wr32;
+  res1[0]=w33;
+  res1[1]=w50;
+  res1[2]=w51;
+  res1[3]=w52;
+  res1[4]=w53;
+  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  /* #75: output[0][10] = @33 */
+  if (res[0]) casadi_copy(w33, 200, res[0]+920);
+  /* #76: {NULL, @0} = horzsplit(@33) */
+  casadi_copy(w33+180, 20, w00);
+  /* #77: {NULL, @1} = horzsplit(@50) */
+  casadi_copy(w50+18, 2, w01);
+  /* #78: @33 = input[2][11] */
+  wr33 = arg[2] ? arg[2]+112 : casadi_zeros;
+  /* #79: @54 = input[3][11] */
+  wr54 = arg[3] ? arg[3]+1456 : casadi_zeros;
+  /* #80: @55 = input[4][11] */
+  wr55 = arg[4] ? arg[4]+56 : casadi_zeros;
+  /* #81: @56 = input[5][11] */
+  wr56 = arg[5] ? arg[5]+112 : casadi_zeros;
+  /* #82: {@57, @58, @59, @60, @61} = homogeneous_rosenbrock_controlled_column_acc10_acc10(@0, @1, @33, @54, @55, @56) */
+  arg1[0]=w00;
+  arg1[1]=w01;
+  arg1[2]=wr33;
+  arg1[3]=wr54;
+  arg1[4]=wr55;
+  arg1[5]=wr56;
+  res1[0]=w57;
+  res1[1]=w58;
+  res1[2]=w59;
+  res1[3]=w60;
+  res1[4]=w61;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
+  /* #83: output[0][11] = @57 */
+  if (res[0]) casadi_copy(w57, 2000, res[0]+1120);
+  /* #84: {NULL, @0} = horzsplit(@57) */
+  casadi_copy(w57+1980, 20, w00);
+  /* #85: {NULL, @1} = horzsplit(@58) */
+  casadi_copy(w58+198, 2, w01);
+  /* #86: @33 = input[2][12] */
+  wr33 = arg[2] ? arg[2]+312 : casadi_zeros;
+  /* #87: @54 = input[3][12] */
+  wr54 = arg[3] ? arg[3]+4056 : casadi_zeros;
+  /* #88: @55 = input[4][12] */
+  wr55 = arg[4] ? arg[4]+156 : casadi_zeros;
+  /* #89: @56 = input[5][12] */
+  wr56 = arg[5] ? arg[5]+312 : casadi_zeros;
+  /* #90: {@57, @62, @63, @64, @65} = homogeneous_rosenbrock_controlled_column_acc10_acc10(@0, @1, @33, @54, @55, @56) */
+  arg1[0]=w00;
+  arg1[1]=w01;
+  arg1[2]=wr33;
+  arg1[3]=wr54;
+  arg1[4]=wr55;
+  arg1[5]=wr56;
+  res1[0]=w57;
+  res1[1]=w62;
+  res1[2]=w63;
+  res1[3]=w64;
+  res1[4]=w65;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
+  /* #91: output[0][12] = @57 */
+  if (res[0]) casadi_copy(w57, 2000, res[0]+3120);
+  /* #92: output[1][0] = @7 */
+  casadi_copy(w07, 2, res[1]);
+  /* #93: output[1][1] = @5 */
+  if (res[1]) casadi_copy(w05, 2, res[1]+2);
+  /* #94: output[1][2] = @14 */
+  if (res[1]) casadi_copy(w14, 2, res[1]+4);
+  /* #95: output[1][3] = @18 */
+  if (res[1]) casadi_copy(w18, 2, res[1]+6);
+  /* #96: output[1][4] = @22 */
+  if (res[1]) casadi_copy(w22, 2, res[1]+8);
+  /* #97: output[1][5] = @26 */
+  if (res[1]) casadi_copy(w26, 2, res[1]+10);
+  /* #98: output[1][6] = @34 */
+  if (res[1]) casadi_copy(w34, 20, res[1]+12);
+  /* #99: output[1][7] = @38 */
+  if (res[1]) casadi_copy(w38, 20, res[1]+32);
+  /* #100: output[1][8] = @42 */
+  if (res[1]) casadi_copy(w42, 20, res[1]+52);
+  /* #101: output[1][9] = @46 */
+  if (res[1]) casadi_copy(w46, 20, res[1]+72);
+  /* #102: output[1][10] = @50 */
+  if (res[1]) casadi_copy(w50, 20, res[1]+92);
+  /* #103: output[1][11] = @58 */
+  if (res[1]) casadi_copy(w58, 200, res[1]+112);
+  /* #104: output[1][12] = @62 */
+  if (res[1]) casadi_copy(w62, 200, res[1]+312);
+  /* #105: output[2][0] = @8 */
+  casadi_copy(w08, 24, res[2]);
+  /* #106: output[2][1] = @11 */
+  if (res[2]) casadi_copy(w11, 24, res[2]+24);
+  /* #107: output[2][2] = @15 */
+  if (res[2]) casadi_copy(w15, 24, res[2]+48);
+  /* #108: output[2][3] = @19 */
+  if (res[2]) casadi_copy(w19, 24, res[2]+72);
+  /* #109: output[2][4] = @23 */
+  if (res[2]) casadi_copy(w23, 24, res[2]+96);
+  /* #110: output[2][5] = @27 */
+  if (res[2]) casadi_copy(w27, 24, res[2]+120);
+  /* #111: output[2][6] = @35 */
+  if (res[2]) casadi_copy(w35, 240, res[2]+144);
+  /* #112: output[2][7] = @39 */
+  if (res[2]) casadi_copy(w39, 240, res[2]+384);
+  /* #113: output[2][8] = @43 */
+  if (res[2]) casadi_copy(w43, 240, res[2]+624);
+  /* #114: output[2][9] = @47 */
+  if (res[2]) casadi_copy(w47, 240, res[2]+864);
+  /* #115: output[2][10] = @51 */
+  if (res[2]) casadi_copy(w51, 240, res[2]+1104);
+  /* #116: output[2][11] = @59 */
+  if (res[2]) casadi_copy(w59, 2400, res[2]+1344);
+  /* #117: output[2][12] = @63 */
+  if (res[2]) casadi_copy(w63, 2400, res[2]+3744);
+  /* #118: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  /* #119: output[3][1] = @12 */
+  if (res[3]) res[3][1] = w12;
+  /* #120: output[3][2] = @16 */
+  if (res[3]) res[3][2] = w16;
+  /* #121: output[3][3] = @20 */
+  if (res[3]) res[3][3] = w20;
+  /* #122: output[3][4] = @24 */
+  if (res[3]) res[3][4] = w24;
+  /* #123: output[3][5] = @28 */
+  if (res[3]) res[3][5] = w28;
+  /* #124: output[3][6] = @36 */
+  if (res[3]) casadi_copy(w36, 10, res[3]+6);
+  /* #125: output[3][7] = @40 */
+  if (res[3]) casadi_copy(w40, 10, res[3]+16);
+  /* #126: output[3][8] = @44 */
+  if (res[3]) casadi_copy(w44, 10, res[3]+26);
+  /* #127: output[3][9] = @48 */
+  if (res[3]) casadi_copy(w48, 10, res[3]+36);
+  /* #128: output[3][10] = @52 */
+  if (res[3]) casadi_copy(w52, 10, res[3]+46);
+  /* #129: output[3][11] = @60 */
+  if (res[3]) casadi_copy(w60, 100, res[3]+56);
+  /* #130: output[3][12] = @64 */
+  if (res[3]) casadi_copy(w64, 100, res[3]+156);
+  /* #131: output[4][0] = @10 */
+  if (res[4]) res[4][0] = w10;
+  /* #132: output[4][1] = @13 */
+  if (res[4]) res[4][1] = w13;
+  /* #133: output[4][2] = @17 */
+  if (res[4]) res[4][2] = w17;
+  /* #134: output[4][3] = @21 */
+  if (res[4]) res[4][3] = w21;
+  /* #135: output[4][4] = @25 */
+  if (res[4]) res[4][4] = w25;
+  /* #136: output[4][5] = @29 */
+  if (res[4]) res[4][5] = w29;
+  /* #137: output[4][6] = @37 */
+  if (res[4]) casadi_copy(w37, 10, res[4]+6);
+  /* #138: output[4][7] = @41 */
+  if (res[4]) casadi_copy(w41, 10, res[4]+16);
+  /* #139: output[4][8] = @45 */
+  if (res[4]) casadi_copy(w45, 10, res[4]+26);
+  /* #140: output[4][9] = @49 */
+  if (res[4]) casadi_copy(w49, 10, res[4]+36);
+  /* #141: output[4][10] = @53 */
+  if (res[4]) casadi_copy(w53, 10, res[4]+46);
+  /* #142: output[4][11] = @61 */
+  if (res[4]) casadi_copy(w61, 100, res[4]+56);
+  /* #143: output[4][12] = @65 */
+  if (res[4]) casadi_copy(w65, 100, res[4]+156);
   return 0;
 }
 
-/* homogeneous_rosenbrock_chunk256:(x0[20],z0[2],U[2x256],H[1x256],p[26])->(X[20x256],Z[2x256],Y[24x256]) */
+/* homogeneous_rosenbrock_controlled_chunk256:(x0[20],z0[2],U[2x256],H[1x256],p[26],ctl[2])->(X[20x256],Z[2x256],Y[24x256],R[1x256],NH[1x256]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+3, *w1=w+15966, *w4=w+15968, *w6=w+22624, *w7=w+27744, *w8=w+28256;
-  const casadi_real **arg1=arg+5, *wr0, *wr2, *wr3, *wr5;
+  casadi_real **res1=res+5, *w01=w+18042, *w04=w+18044, *w06=w+24700, *w07=w+24702, *w08=w+25214, *w09=w+30334, *w10=w+30846, *w11=w+36990, *w12=w+37246;
+  const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w1);
+  casadi_copy(arg[1], 2, w01);
   /* #2: @2 = input[2][0] */
-  wr2 = arg[2] ? arg[2] : casadi_zeros;
+  wr02 = arg[2] ? arg[2] : casadi_zeros;
   /* #3: @3 = input[4][0] */
-  wr3 = arg[4] ? arg[4] : casadi_zeros;
+  wr03 = arg[4] ? arg[4] : casadi_zeros;
   /* #4: @4 = repmat(@3, 256) */
   for (i=0;i<256;++i) {
-    casadi_copy(wr3, 26, w4+ i*26);
+    casadi_copy(wr03, 26, w04+ i*26);
   }
   /* #5: @5 = input[3][0] */
-  wr5 = arg[3] ? arg[3] : casadi_zeros;
-  /* #6: {@6, @7, @8} = homogeneous_rosenbrock_acc256(@0, @1, @2, @4, @5) */
-  arg1[0]=wr0;
-  arg1[1]=w1;
-  arg1[2]=wr2;
-  arg1[3]=w4;
-  arg1[4]=wr5;
-  res1[0]=w6;
-  res1[1]=w7;
-  res1[2]=w8;
+  wr05 = arg[3] ? arg[3] : casadi_zeros;
+  /* #6: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #7: @7 = repmat(@6, 256) */
+  for (i=0;i<256;++i) {
+    casadi_copy(w06, 2, w07+ i*2);
+  }
+  /* #8: {@8, @9, @10, @11, @12} = homogeneous_rosenbrock_controlled_acc256(@0, @1, @2, @4, @5, @7) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=wr02;
+  arg1[3]=w04;
+  arg1[4]=wr05;
+  arg1[5]=w07;
+  res1[0]=w08;
+  res1[1]=w09;
+  res1[2]=w10;
+  res1[3]=w11;
+  res1[4]=w12;
   if (casadi_f3(arg1, res1, iw, w, 0)) return 1;
-  /* #7: output[0][0] = @6 */
-  casadi_copy(w6, 5120, res[0]);
-  /* #8: output[1][0] = @7 */
-  casadi_copy(w7, 512, res[1]);
-  /* #9: output[2][0] = @8 */
-  casadi_copy(w8, 6144, res[2]);
+  /* #9: output[0][0] = @8 */
+  casadi_copy(w08, 5120, res[0]);
+  /* #10: output[1][0] = @9 */
+  casadi_copy(w09, 512, res[1]);
+  /* #11: output[2][0] = @10 */
+  casadi_copy(w10, 6144, res[2]);
+  /* #12: output[3][0] = @11 */
+  casadi_copy(w11, 256, res[3]);
+  /* #13: output[4][0] = @12 */
+  casadi_copy(w12, 256, res[4]);
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
   return casadi_f2(arg, res, iw, w, mem);
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256_checkout(void) {
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_checkout(void) {
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk256_release(int mem) {
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_chunk256_release(int mem) {
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk256_incref(void) {
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_chunk256_incref(void) {
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk256_decref(void) {
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_chunk256_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk256_n_in(void) { return 5;}
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_controlled_chunk256_n_in(void) { return 6;}
 
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk256_n_out(void) { return 3;}
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_controlled_chunk256_n_out(void) { return 5;}
 
-CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_chunk256_default_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_controlled_chunk256_default_in(casadi_int i) {
   switch (i) {
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk256_name_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_controlled_chunk256_name_in(casadi_int i) {
   switch (i) {
     case 0: return "x0";
     case 1: return "z0";
     case 2: return "U";
     case 3: return "H";
     case 4: return "p";
+    case 5: return "ctl";
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk256_name_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_controlled_chunk256_name_out(casadi_int i) {
   switch (i) {
     case 0: return "X";
     case 1: return "Z";
     case 2: return "Y";
+    case 3: return "R";
+    case 4: return "NH";
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s1;
     case 2: return casadi_s4;
     case 3: return casadi_s5;
     case 4: return casadi_s2;
+    case 5: return casadi_s1;
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s6;
     case 1: return casadi_s4;
     case 2: return casadi_s7;
+    case 3: return casadi_s5;
+    case 4: return casadi_s5;
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 30;
-  if (sz_res) *sz_res = 17;
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 185;
+  if (sz_res) *sz_res = 100;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 34400;
+  if (sz_w) *sz_w = 37502;
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 30*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 17*sizeof(casadi_real*);
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 185*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 100*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 34400*sizeof(casadi_real);
+  if (sz_w) *sz_w = 37502*sizeof(casadi_real);
   return 0;
 }
 
-/* homogeneous_rosenbrock_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10])->(xf[20x10],zf[2x10],y[24x10]) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+630, *w01=w+650, *w02=w+652, w04, *w05=w+654, *w06=w+674, *w07=w+676, *w08=w+700, *w09=w+724, *w10=w+726, *w11=w+750;
-  casadi_real *w12=w+752, *w13=w+776, *w14=w+778, *w15=w+802, *w16=w+804, *w17=w+828, *w18=w+830, *w19=w+854, *w20=w+856, *w21=w+880, *w22=w+882, *w23=w+906;
-  casadi_real *w24=w+908;
-  const casadi_real **arg1=arg+5, *wr00, *wr03;
+/* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+1730, *w01=w+1750, *w02=w+1752, w04, *w05=w+1754, *w06=w+1756, *w07=w+1776, *w08=w+1778, w09, w10, *w11=w+1802;
+  casadi_real w12, w13, *w14=w+1826, *w15=w+1828, w16, w17, *w18=w+1852, *w19=w+1854, w20, w21, *w22=w+1878, *w23=w+1880;
+  casadi_real w24, w25, *w26=w+1904, *w27=w+1906, w28, w29, *w30=w+1930, *w31=w+1932, w32, w33, *w34=w+1956, *w35=w+1958;
+  casadi_real w36, w37, *w38=w+1982, *w39=w+1984, w40, w41, *w42=w+2008, *w43=w+2010, w44, w45;
+  const casadi_real **arg1=arg+6, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
@@ -22521,228 +24138,319 @@ static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw
   wr03 = arg[3] ? arg[3] : casadi_zeros;
   /* #4: @4 = input[4][0] */
   w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
+  /* #5: @5 = input[5][0] */
+  casadi_copy(arg[5], 2, w05);
+  /* #6: {@6, @7, @8, @9, @10} = homogeneous_rosenbrock_controlled_column(@0, @1, @2, @3, @4, @5) */
   arg1[0]=wr00;
   arg1[1]=w01;
   arg1[2]=w02;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
+  arg1[5]=w05;
+  res1[0]=w06;
+  res1[1]=w07;
   res1[2]=w08;
+  res1[3]=(&w09);
+  res1[4]=(&w10);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
+  /* #7: output[0][0] = @6 */
+  casadi_copy(w06, 20, res[0]);
+  /* #8: @1 = input[2][1] */
+  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
+  /* #9: @3 = input[3][1] */
+  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
+  /* #10: @4 = input[4][1] */
+  w04 = arg[4] ? arg[4][1] : 0;
+  /* #11: @2 = input[5][1] */
+  casadi_copy(arg[5] ? arg[5]+2 : 0, 2, w02);
+  /* #12: {@0, @5, @11, @12, @13} = homogeneous_rosenbrock_controlled_column(@6, @7, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w07;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w05;
+  res1[2]=w11;
+  res1[3]=(&w12);
+  res1[4]=(&w13);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #13: output[0][1] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
+  /* #14: @1 = input[2][2] */
   casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
+  /* #15: @3 = input[3][2] */
   wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
+  /* #16: @4 = input[4][2] */
   w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
+  /* #17: @2 = input[5][2] */
+  casadi_copy(arg[5] ? arg[5]+4 : 0, 2, w02);
+  /* #18: {@6, @14, @15, @16, @17} = homogeneous_rosenbrock_controlled_column(@0, @5, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w02;
+  arg1[1]=w05;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w14;
+  res1[2]=w15;
+  res1[3]=(&w16);
+  res1[4]=(&w17);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
+  /* #19: output[0][2] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+40);
+  /* #20: @1 = input[2][3] */
   casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
+  /* #21: @3 = input[3][3] */
   wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
+  /* #22: @4 = input[4][3] */
   w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
+  /* #23: @2 = input[5][3] */
+  casadi_copy(arg[5] ? arg[5]+6 : 0, 2, w02);
+  /* #24: {@0, @18, @19, @20, @21} = homogeneous_rosenbrock_controlled_column(@6, @14, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w14;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
+  arg1[5]=w02;
   res1[0]=w00;
-  res1[1]=w11;
-  res1[2]=w12;
+  res1[1]=w18;
+  res1[2]=w19;
+  res1[3]=(&w20);
+  res1[4]=(&w21);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
+  /* #25: output[0][3] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
+  /* #26: @1 = input[2][4] */
   casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
+  /* #27: @3 = input[3][4] */
   wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
+  /* #28: @4 = input[4][4] */
   w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
+  /* #29: @2 = input[5][4] */
+  casadi_copy(arg[5] ? arg[5]+8 : 0, 2, w02);
+  /* #30: {@6, @22, @23, @24, @25} = homogeneous_rosenbrock_controlled_column(@0, @18, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w11;
+  arg1[1]=w18;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w22;
+  res1[2]=w23;
+  res1[3]=(&w24);
+  res1[4]=(&w25);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
+  /* #31: output[0][4] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+80);
+  /* #32: @1 = input[2][5] */
   casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
+  /* #33: @3 = input[3][5] */
   wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
+  /* #34: @4 = input[4][5] */
   w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
+  /* #35: @2 = input[5][5] */
+  casadi_copy(arg[5] ? arg[5]+10 : 0, 2, w02);
+  /* #36: {@0, @26, @27, @28, @29} = homogeneous_rosenbrock_controlled_column(@6, @22, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w22;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
+  arg1[5]=w02;
   res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
+  res1[1]=w26;
+  res1[2]=w27;
+  res1[3]=(&w28);
+  res1[4]=(&w29);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
+  /* #37: output[0][5] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @1 = input[2][6] */
+  /* #38: @1 = input[2][6] */
   casadi_copy(arg[2] ? arg[2]+12 : 0, 2, w01);
-  /* #33: @3 = input[3][6] */
+  /* #39: @3 = input[3][6] */
   wr03 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @4 = input[4][6] */
+  /* #40: @4 = input[4][6] */
   w04 = arg[4] ? arg[4][6] : 0;
-  /* #35: {@5, @17, @18} = homogeneous_rosenbrock_column(@0, @15, @1, @3, @4) */
+  /* #41: @2 = input[5][6] */
+  casadi_copy(arg[5] ? arg[5]+12 : 0, 2, w02);
+  /* #42: {@6, @30, @31, @32, @33} = homogeneous_rosenbrock_controlled_column(@0, @26, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w15;
+  arg1[1]=w26;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w17;
-  res1[2]=w18;
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w30;
+  res1[2]=w31;
+  res1[3]=(&w32);
+  res1[4]=(&w33);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+120);
-  /* #37: @1 = input[2][7] */
+  /* #43: output[0][6] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+120);
+  /* #44: @1 = input[2][7] */
   casadi_copy(arg[2] ? arg[2]+14 : 0, 2, w01);
-  /* #38: @3 = input[3][7] */
+  /* #45: @3 = input[3][7] */
   wr03 = arg[3] ? arg[3]+182 : casadi_zeros;
-  /* #39: @4 = input[4][7] */
+  /* #46: @4 = input[4][7] */
   w04 = arg[4] ? arg[4][7] : 0;
-  /* #40: {@0, @19, @20} = homogeneous_rosenbrock_column(@5, @17, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w17;
+  /* #47: @2 = input[5][7] */
+  casadi_copy(arg[5] ? arg[5]+14 : 0, 2, w02);
+  /* #48: {@0, @34, @35, @36, @37} = homogeneous_rosenbrock_controlled_column(@6, @30, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w30;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
+  arg1[5]=w02;
   res1[0]=w00;
-  res1[1]=w19;
-  res1[2]=w20;
+  res1[1]=w34;
+  res1[2]=w35;
+  res1[3]=(&w36);
+  res1[4]=(&w37);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #41: output[0][7] = @0 */
+  /* #49: output[0][7] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+140);
-  /* #42: @1 = input[2][8] */
+  /* #50: @1 = input[2][8] */
   casadi_copy(arg[2] ? arg[2]+16 : 0, 2, w01);
-  /* #43: @3 = input[3][8] */
+  /* #51: @3 = input[3][8] */
   wr03 = arg[3] ? arg[3]+208 : casadi_zeros;
-  /* #44: @4 = input[4][8] */
+  /* #52: @4 = input[4][8] */
   w04 = arg[4] ? arg[4][8] : 0;
-  /* #45: {@5, @21, @22} = homogeneous_rosenbrock_column(@0, @19, @1, @3, @4) */
+  /* #53: @2 = input[5][8] */
+  casadi_copy(arg[5] ? arg[5]+16 : 0, 2, w02);
+  /* #54: {@6, @38, @39, @40, @41} = homogeneous_rosenbrock_controlled_column(@0, @34, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w19;
+  arg1[1]=w34;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w21;
-  res1[2]=w22;
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w38;
+  res1[2]=w39;
+  res1[3]=(&w40);
+  res1[4]=(&w41);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #46: output[0][8] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+160);
-  /* #47: @1 = input[2][9] */
+  /* #55: output[0][8] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+160);
+  /* #56: @1 = input[2][9] */
   casadi_copy(arg[2] ? arg[2]+18 : 0, 2, w01);
-  /* #48: @3 = input[3][9] */
+  /* #57: @3 = input[3][9] */
   wr03 = arg[3] ? arg[3]+234 : casadi_zeros;
-  /* #49: @4 = input[4][9] */
+  /* #58: @4 = input[4][9] */
   w04 = arg[4] ? arg[4][9] : 0;
-  /* #50: {@0, @23, @24} = homogeneous_rosenbrock_column(@5, @21, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w21;
+  /* #59: @2 = input[5][9] */
+  casadi_copy(arg[5] ? arg[5]+18 : 0, 2, w02);
+  /* #60: {@0, @42, @43, @44, @45} = homogeneous_rosenbrock_controlled_column(@6, @38, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w38;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
+  arg1[5]=w02;
   res1[0]=w00;
-  res1[1]=w23;
-  res1[2]=w24;
+  res1[1]=w42;
+  res1[2]=w43;
+  res1[3]=(&w44);
+  res1[4]=(&w45);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #51: output[0][9] = @0 */
+  /* #61: output[0][9] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+180);
-  /* #52: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #53: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #54: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #55: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #56: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #57: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #58: output[1][6] = @17 */
-  if (res[1]) casadi_copy(w17, 2, res[1]+12);
-  /* #59: output[1][7] = @19 */
-  if (res[1]) casadi_copy(w19, 2, res[1]+14);
-  /* #60: output[1][8] = @21 */
-  if (res[1]) casadi_copy(w21, 2, res[1]+16);
-  /* #61: output[1][9] = @23 */
-  if (res[1]) casadi_copy(w23, 2, res[1]+18);
-  /* #62: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #63: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #64: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #65: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #66: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #67: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #68: output[2][6] = @18 */
-  if (res[2]) casadi_copy(w18, 24, res[2]+144);
-  /* #69: output[2][7] = @20 */
-  if (res[2]) casadi_copy(w20, 24, res[2]+168);
-  /* #70: output[2][8] = @22 */
-  if (res[2]) casadi_copy(w22, 24, res[2]+192);
-  /* #71: output[2][9] = @24 */
-  if (res[2]) casadi_copy(w24, 24, res[2]+216);
+  /* #62: output[1][0] = @7 */
+  casadi_copy(w07, 2, res[1]);
+  /* #63: output[1][1] = @5 */
+  if (res[1]) casadi_copy(w05, 2, res[1]+2);
+  /* #64: output[1][2] = @14 */
+  if (res[1]) casadi_copy(w14, 2, res[1]+4);
+  /* #65: output[1][3] = @18 */
+  if (res[1]) casadi_copy(w18, 2, res[1]+6);
+  /* #66: output[1][4] = @22 */
+  if (res[1]) casadi_copy(w22, 2, res[1]+8);
+  /* #67: output[1][5] = @26 */
+  if (res[1]) casadi_copy(w26, 2, res[1]+10);
+  /* #68: output[1][6] = @30 */
+  if (res[1]) casadi_copy(w30, 2, res[1]+12);
+  /* #69: output[1][7] = @34 */
+  if (res[1]) casadi_copy(w34, 2, res[1]+14);
+  /* #70: output[1][8] = @38 */
+  if (res[1]) casadi_copy(w38, 2, res[1]+16);
+  /* #71: output[1][9] = @42 */
+  if (res[1]) casadi_copy(w42, 2, res[1]+18);
+  /* #72: output[2][0] = @8 */
+  casadi_copy(w08, 24, res[2]);
+  /* #73: output[2][1] = @11 */
+  if (res[2]) casadi_copy(w11, 24, res[2]+24);
+  /* #74: output[2][2] = @15 */
+  if (res[2]) casadi_copy(w15, 24, res[2]+48);
+  /* #75: output[2][3] = @19 */
+  if (res[2]) casadi_copy(w19, 24, res[2]+72);
+  /* #76: output[2][4] = @23 */
+  if (res[2]) casadi_copy(w23, 24, res[2]+96);
+  /* #77: output[2][5] = @27 */
+  if (res[2]) casadi_copy(w27, 24, res[2]+120);
+  /* #78: output[2][6] = @31 */
+  if (res[2]) casadi_copy(w31, 24, res[2]+144);
+  /* #79: output[2][7] = @35 */
+  if (res[2]) casadi_copy(w35, 24, res[2]+168);
+  /* #80: output[2][8] = @39 */
+  if (res[2]) casadi_copy(w39, 24, res[2]+192);
+  /* #81: output[2][9] = @43 */
+  if (res[2]) casadi_copy(w43, 24, res[2]+216);
+  /* #82: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  /* #83: output[3][1] = @12 */
+  if (res[3]) res[3][1] = w12;
+  /* #84: output[3][2] = @16 */
+  if (res[3]) res[3][2] = w16;
+  /* #85: output[3][3] = @20 */
+  if (res[3]) res[3][3] = w20;
+  /* #86: output[3][4] = @24 */
+  if (res[3]) res[3][4] = w24;
+  /* #87: output[3][5] = @28 */
+  if (res[3]) res[3][5] = w28;
+  /* #88: output[3][6] = @32 */
+  if (res[3]) res[3][6] = w32;
+  /* #89: output[3][7] = @36 */
+  if (res[3]) res[3][7] = w36;
+  /* #90: output[3][8] = @40 */
+  if (res[3]) res[3][8] = w40;
+  /* #91: output[3][9] = @44 */
+  if (res[3]) res[3][9] = w44;
+  /* #92: output[4][0] = @10 */
+  if (res[4]) res[4][0] = w10;
+  /* #93: output[4][1] = @13 */
+  if (res[4]) res[4][1] = w13;
+  /* #94: output[4][2] = @17 */
+  if (res[4]) res[4][2] = w17;
+  /* #95: output[4][3] = @21 */
+  if (res[4]) res[4][3] = w21;
+  /* #96: output[4][4] = @25 */
+  if (res[4]) res[4][4] = w25;
+  /* #97: output[4][5] = @29 */
+  if (res[4]) res[4][5] = w29;
+  /* #98: output[4][6] = @33 */
+  if (res[4]) res[4][6] = w33;
+  /* #99: output[4][7] = @37 */
+  if (res[4]) res[4][7] = w37;
+  /* #100: output[4][8] = @41 */
+  if (res[4]) res[4][8] = w41;
+  /* #101: output[4][9] = @45 */
+  if (res[4]) res[4][9] = w45;
   return 0;
 }
 
-/* homogeneous_rosenbrock_acc16:(x0[20],z0[2],u[2x16],p[26x16],h[1x16])->(xf[20x16],zf[2x16],y[24x16]) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+3, *w00=w+959, *w01=w+979, *w02=w+981, w04, *w05=w+983, *w06=w+1003, *w07=w+1005, *w08=w+1029, *w09=w+1053, *w10=w+1055, *w11=w+1079;
-  casadi_real *w12=w+1081, *w13=w+1105, *w14=w+1107, *w15=w+1131, *w16=w+1133, *w19=w+1157, *w20=w+1357, *w21=w+1377;
-  const casadi_real **arg1=arg+5, *wr00, *wr03, *wr05, *wr17, *wr18;
+/* homogeneous_rosenbrock_controlled_acc16:(x0[20],z0[2],u[2x16],p[26x16],h[1x16],ctl[2x16])->(xf[20x16],zf[2x16],y[24x16],r[1x16],nh[1x16]) */
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2081, *w01=w+2101, *w02=w+2103, w04, *w05=w+2105, *w06=w+2107, *w07=w+2127, *w08=w+2129, w09, w10, *w11=w+2153;
+  casadi_real w12, w13, *w14=w+2177, *w15=w+2179, w16, w17, *w18=w+2203, *w19=w+2205, w20, w21, *w22=w+2229, *w23=w+2231;
+  casadi_real w24, w25, *w26=w+2255, *w27=w+2257, w28, w29, *w33=w+2281, *w34=w+2481, *w35=w+2501, *w36=w+2741, *w37=w+2751;
+  const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
@@ -22753,275 +24461,357 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   wr03 = arg[3] ? arg[3] : casadi_zeros;
   /* #4: @4 = input[4][0] */
   w04 = arg[4] ? arg[4][0] : 0;
-  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_column(@0, @1, @2, @3, @4) */
+  /* #5: @5 = input[5][0] */
+  casadi_copy(arg[5], 2, w05);
+  /* #6: {@6, @7, @8, @9, @10} = homogeneous_rosenbrock_controlled_column(@0, @1, @2, @3, @4, @5) */
   arg1[0]=wr00;
   arg1[1]=w01;
   arg1[2]=w02;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w06;
-  res1[2]=w07;
-  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #6: output[0][0] = @5 */
-  casadi_copy(w05, 20, res[0]);
-  /* #7: @1 = input[2][1] */
-  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
-  /* #8: @3 = input[3][1] */
-  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
-  /* #9: @4 = input[4][1] */
-  w04 = arg[4] ? arg[4][1] : 0;
-  /* #10: {@0, @2, @8} = homogeneous_rosenbrock_column(@5, @6, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w06;
-  arg1[2]=w01;
-  arg1[3]=wr03;
-  arg1[4]=(&w04);
-  res1[0]=w00;
-  res1[1]=w02;
+  arg1[5]=w05;
+  res1[0]=w06;
+  res1[1]=w07;
   res1[2]=w08;
+  res1[3]=(&w09);
+  res1[4]=(&w10);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #11: output[0][1] = @0 */
+  /* #7: output[0][0] = @6 */
+  casadi_copy(w06, 20, res[0]);
+  /* #8: @1 = input[2][1] */
+  casadi_copy(arg[2] ? arg[2]+2 : 0, 2, w01);
+  /* #9: @3 = input[3][1] */
+  wr03 = arg[3] ? arg[3]+26 : casadi_zeros;
+  /* #10: @4 = input[4][1] */
+  w04 = arg[4] ? arg[4][1] : 0;
+  /* #11: @2 = input[5][1] */
+  casadi_copy(arg[5] ? arg[5]+2 : 0, 2, w02);
+  /* #12: {@0, @5, @11, @12, @13} = homogeneous_rosenbrock_controlled_column(@6, @7, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w07;
+  arg1[2]=w01;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w02;
+  res1[0]=w00;
+  res1[1]=w05;
+  res1[2]=w11;
+  res1[3]=(&w12);
+  res1[4]=(&w13);
+  if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
+  /* #13: output[0][1] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+20);
-  /* #12: @1 = input[2][2] */
+  /* #14: @1 = input[2][2] */
   casadi_copy(arg[2] ? arg[2]+4 : 0, 2, w01);
-  /* #13: @3 = input[3][2] */
+  /* #15: @3 = input[3][2] */
   wr03 = arg[3] ? arg[3]+52 : casadi_zeros;
-  /* #14: @4 = input[4][2] */
+  /* #16: @4 = input[4][2] */
   w04 = arg[4] ? arg[4][2] : 0;
-  /* #15: {@5, @9, @10} = homogeneous_rosenbrock_column(@0, @2, @1, @3, @4) */
+  /* #17: @2 = input[5][2] */
+  casadi_copy(arg[5] ? arg[5]+4 : 0, 2, w02);
+  /* #18: {@6, @14, @15, @16, @17} = homogeneous_rosenbrock_controlled_column(@0, @5, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w02;
+  arg1[1]=w05;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w09;
-  res1[2]=w10;
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w14;
+  res1[2]=w15;
+  res1[3]=(&w16);
+  res1[4]=(&w17);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #16: output[0][2] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+40);
-  /* #17: @1 = input[2][3] */
+  /* #19: output[0][2] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+40);
+  /* #20: @1 = input[2][3] */
   casadi_copy(arg[2] ? arg[2]+6 : 0, 2, w01);
-  /* #18: @3 = input[3][3] */
+  /* #21: @3 = input[3][3] */
   wr03 = arg[3] ? arg[3]+78 : casadi_zeros;
-  /* #19: @4 = input[4][3] */
+  /* #22: @4 = input[4][3] */
   w04 = arg[4] ? arg[4][3] : 0;
-  /* #20: {@0, @11, @12} = homogeneous_rosenbrock_column(@5, @9, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w09;
+  /* #23: @2 = input[5][3] */
+  casadi_copy(arg[5] ? arg[5]+6 : 0, 2, w02);
+  /* #24: {@0, @18, @19, @20, @21} = homogeneous_rosenbrock_controlled_column(@6, @14, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w14;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
+  arg1[5]=w02;
   res1[0]=w00;
-  res1[1]=w11;
-  res1[2]=w12;
+  res1[1]=w18;
+  res1[2]=w19;
+  res1[3]=(&w20);
+  res1[4]=(&w21);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #21: output[0][3] = @0 */
+  /* #25: output[0][3] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+60);
-  /* #22: @1 = input[2][4] */
+  /* #26: @1 = input[2][4] */
   casadi_copy(arg[2] ? arg[2]+8 : 0, 2, w01);
-  /* #23: @3 = input[3][4] */
+  /* #27: @3 = input[3][4] */
   wr03 = arg[3] ? arg[3]+104 : casadi_zeros;
-  /* #24: @4 = input[4][4] */
+  /* #28: @4 = input[4][4] */
   w04 = arg[4] ? arg[4][4] : 0;
-  /* #25: {@5, @13, @14} = homogeneous_rosenbrock_column(@0, @11, @1, @3, @4) */
+  /* #29: @2 = input[5][4] */
+  casadi_copy(arg[5] ? arg[5]+8 : 0, 2, w02);
+  /* #30: {@6, @22, @23, @24, @25} = homogeneous_rosenbrock_controlled_column(@0, @18, @1, @3, @4, @2) */
   arg1[0]=w00;
-  arg1[1]=w11;
+  arg1[1]=w18;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
-  res1[0]=w05;
-  res1[1]=w13;
-  res1[2]=w14;
+  arg1[5]=w02;
+  res1[0]=w06;
+  res1[1]=w22;
+  res1[2]=w23;
+  res1[3]=(&w24);
+  res1[4]=(&w25);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #26: output[0][4] = @5 */
-  if (res[0]) casadi_copy(w05, 20, res[0]+80);
-  /* #27: @1 = input[2][5] */
+  /* #31: output[0][4] = @6 */
+  if (res[0]) casadi_copy(w06, 20, res[0]+80);
+  /* #32: @1 = input[2][5] */
   casadi_copy(arg[2] ? arg[2]+10 : 0, 2, w01);
-  /* #28: @3 = input[3][5] */
+  /* #33: @3 = input[3][5] */
   wr03 = arg[3] ? arg[3]+130 : casadi_zeros;
-  /* #29: @4 = input[4][5] */
+  /* #34: @4 = input[4][5] */
   w04 = arg[4] ? arg[4][5] : 0;
-  /* #30: {@0, @15, @16} = homogeneous_rosenbrock_column(@5, @13, @1, @3, @4) */
-  arg1[0]=w05;
-  arg1[1]=w13;
+  /* #35: @2 = input[5][5] */
+  casadi_copy(arg[5] ? arg[5]+10 : 0, 2, w02);
+  /* #36: {@0, @26, @27, @28, @29} = homogeneous_rosenbrock_controlled_column(@6, @22, @1, @3, @4, @2) */
+  arg1[0]=w06;
+  arg1[1]=w22;
   arg1[2]=w01;
   arg1[3]=wr03;
   arg1[4]=(&w04);
+  arg1[5]=w02;
   res1[0]=w00;
-  res1[1]=w15;
-  res1[2]=w16;
+  res1[1]=w26;
+  res1[2]=w27;
+  res1[3]=(&w28);
+  res1[4]=(&w29);
   if (casadi_f4(arg1, res1, iw, w, 0)) return 1;
-  /* #31: output[0][5] = @0 */
+  /* #37: output[0][5] = @0 */
   if (res[0]) casadi_copy(w00, 20, res[0]+100);
-  /* #32: @5 = input[2][6] */
-  wr05 = arg[2] ? arg[2]+12 : casadi_zeros;
-  /* #33: @17 = input[3][6] */
-  wr17 = arg[3] ? arg[3]+156 : casadi_zeros;
-  /* #34: @18 = input[4][6] */
-  wr18 = arg[4] ? arg[4]+6 : casadi_zeros;
-  /* #35: {@19, @20, @21} = homogeneous_rosenbrock_column_acc10(@0, @15, @5, @17, @18) */
+  /* #38: @6 = input[2][6] */
+  wr06 = arg[2] ? arg[2]+12 : casadi_zeros;
+  /* #39: @30 = input[3][6] */
+  wr30 = arg[3] ? arg[3]+156 : casadi_zeros;
+  /* #40: @31 = input[4][6] */
+  wr31 = arg[4] ? arg[4]+6 : casadi_zeros;
+  /* #41: @32 = input[5][6] */
+  wr32 = arg[5] ? arg[5]+12 : casadi_zeros;
+  /* #42: {@33, @34, @35, @36, @37} = homogeneous_rosenbrock_controlled_column_acc10(@0, @26, @6, @30, @31, @32) */
   arg1[0]=w00;
-  arg1[1]=w15;
-  arg1[2]=wr05;
-  arg1[3]=wr17;
-  arg1[4]=wr18;
-  res1[0]=w19;
-  res1[1]=w20;
-  res1[2]=w21;
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
-  /* #36: output[0][6] = @19 */
-  if (res[0]) casadi_copy(w19, 200, res[0]+120);
-  /* #37: output[1][0] = @6 */
-  casadi_copy(w06, 2, res[1]);
-  /* #38: output[1][1] = @2 */
-  if (res[1]) casadi_copy(w02, 2, res[1]+2);
-  /* #39: output[1][2] = @9 */
-  if (res[1]) casadi_copy(w09, 2, res[1]+4);
-  /* #40: output[1][3] = @11 */
-  if (res[1]) casadi_copy(w11, 2, res[1]+6);
-  /* #41: output[1][4] = @13 */
-  if (res[1]) casadi_copy(w13, 2, res[1]+8);
-  /* #42: output[1][5] = @15 */
-  if (res[1]) casadi_copy(w15, 2, res[1]+10);
-  /* #43: output[1][6] = @20 */
-  if (res[1]) casadi_copy(w20, 20, res[1]+12);
-  /* #44: output[2][0] = @7 */
-  casadi_copy(w07, 24, res[2]);
-  /* #45: output[2][1] = @8 */
-  if (res[2]) casadi_copy(w08, 24, res[2]+24);
-  /* #46: output[2][2] = @10 */
-  if (res[2]) casadi_copy(w10, 24, res[2]+48);
-  /* #47: output[2][3] = @12 */
-  if (res[2]) casadi_copy(w12, 24, res[2]+72);
-  /* #48: output[2][4] = @14 */
-  if (res[2]) casadi_copy(w14, 24, res[2]+96);
-  /* #49: output[2][5] = @16 */
-  if (res[2]) casadi_copy(w16, 24, res[2]+120);
-  /* #50: output[2][6] = @21 */
-  if (res[2]) casadi_copy(w21, 240, res[2]+144);
+  arg1[1]=w26;
+  arg1[2]=wr06;
+  arg1[3]=wr30;
+  arg1[4]=wr31;
+  arg1[5]=wr32;
+  res1[0]=w33;
+  res1[1]=w34;
+  res1[2]=w35;
+  res1[3]=w36;
+  res1[4]=w37;
+  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
+  /* #43: output[0][6] = @33 */
+  if (res[0]) casadi_copy(w33, 200, res[0]+120);
+  /* #44: output[1][0] = @7 */
+  casadi_copy(w07, 2, res[1]);
+  /* #45: output[1][1] = @5 */
+  if (res[1]) casadi_copy(w05, 2, res[1]+2);
+  /* #46: output[1][2] = @14 */
+  if (res[1]) casadi_copy(w14, 2, res[1]+4);
+  /* #47: output[1][3] = @18 */
+  if (res[1]) casadi_copy(w18, 2, res[1]+6);
+  /* #48: output[1][4] = @22 */
+  if (res[1]) casadi_copy(w22, 2, res[1]+8);
+  /* #49: output[1][5] = @26 */
+  if (res[1]) casadi_copy(w26, 2, res[1]+10);
+  /* #50: output[1][6] = @34 */
+  if (res[1]) casadi_copy(w34, 20, res[1]+12);
+  /* #51: output[2][0] = @8 */
+  casadi_copy(w08, 24, res[2]);
+  /* #52: output[2][1] = @11 */
+  if (res[2]) casadi_copy(w11, 24, res[2]+24);
+  /* #53: output[2][2] = @15 */
+  if (res[2]) casadi_copy(w15, 24, res[2]+48);
+  /* #54: output[2][3] = @19 */
+  if (res[2]) casadi_copy(w19, 24, res[2]+72);
+  /* #55: output[2][4] = @23 */
+  if (res[2]) casadi_copy(w23, 24, res[2]+96);
+  /* #56: output[2][5] = @27 */
+  if (res[2]) casadi_copy(w27, 24, res[2]+120);
+  /* #57: output[2][6] = @35 */
+  if (res[2]) casadi_copy(w35, 240, res[2]+144);
+  /* #58: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  /* #59: output[3][1] = @12 */
+  if (res[3]) res[3][1] = w12;
+  /* #60: output[3][2] = @16 */
+  if (res[3]) res[3][2] = w16;
+  /* #61: output[3][3] = @20 */
+  if (res[3]) res[3][3] = w20;
+  /* #62: output[3][4] = @24 */
+  if (res[3]) res[3][4] = w24;
+  /* #63: output[3][5] = @28 */
+  if (res[3]) res[3][5] = w28;
+  /* #64: output[3][6] = @36 */
+  if (res[3]) casadi_copy(w36, 10, res[3]+6);
+  /* #65: output[4][0] = @10 */
+  if (res[4]) res[4][0] = w10;
+  /* #66: output[4][1] = @13 */
+  if (res[4]) res[4][1] = w13;
+  /* #67: output[4][2] = @17 */
+  if (res[4]) res[4][2] = w17;
+  /* #68: output[4][3] = @21 */
+  if (res[4]) res[4][3] = w21;
+  /* #69: output[4][4] = @25 */
+  if (res[4]) res[4][4] = w25;
+  /* #70: output[4][5] = @29 */
+  if (res[4]) res[4][5] = w29;
+  /* #71: output[4][6] = @37 */
+  if (res[4]) casadi_copy(w37, 10, res[4]+6);
   return 0;
 }
 
-/* homogeneous_rosenbrock_chunk16:(x0[20],z0[2],U[2x16],H[1x16],p[26])->(X[20x16],Z[2x16],Y[24x16]) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+/* homogeneous_rosenbrock_controlled_chunk16:(x0[20],z0[2],U[2x16],H[1x16],p[26],ctl[2])->(X[20x16],Z[2x16],Y[24x16],R[1x16],NH[1x16]) */
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+3, *w1=w+1914, *w4=w+1916, *w6=w+2332, *w7=w+2652, *w8=w+2684;
-  const casadi_real **arg1=arg+5, *wr0, *wr2, *wr3, *wr5;
+  casadi_real **res1=res+5, *w01=w+3090, *w04=w+3092, *w06=w+3508, *w07=w+3510, *w08=w+3542, *w09=w+3862, *w10=w+3894, *w11=w+4278, *w12=w+4294;
+  const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
-  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
   /* #1: @1 = input[1][0] */
-  casadi_copy(arg[1], 2, w1);
+  casadi_copy(arg[1], 2, w01);
   /* #2: @2 = input[2][0] */
-  wr2 = arg[2] ? arg[2] : casadi_zeros;
+  wr02 = arg[2] ? arg[2] : casadi_zeros;
   /* #3: @3 = input[4][0] */
-  wr3 = arg[4] ? arg[4] : casadi_zeros;
+  wr03 = arg[4] ? arg[4] : casadi_zeros;
   /* #4: @4 = repmat(@3, 16) */
   for (i=0;i<16;++i) {
-    casadi_copy(wr3, 26, w4+ i*26);
+    casadi_copy(wr03, 26, w04+ i*26);
   }
   /* #5: @5 = input[3][0] */
-  wr5 = arg[3] ? arg[3] : casadi_zeros;
-  /* #6: {@6, @7, @8} = homogeneous_rosenbrock_acc16(@0, @1, @2, @4, @5) */
-  arg1[0]=wr0;
-  arg1[1]=w1;
-  arg1[2]=wr2;
-  arg1[3]=w4;
-  arg1[4]=wr5;
-  res1[0]=w6;
-  res1[1]=w7;
-  res1[2]=w8;
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
-  /* #7: output[0][0] = @6 */
-  casadi_copy(w6, 320, res[0]);
-  /* #8: output[1][0] = @7 */
-  casadi_copy(w7, 32, res[1]);
-  /* #9: output[2][0] = @8 */
-  casadi_copy(w8, 384, res[2]);
+  wr05 = arg[3] ? arg[3] : casadi_zeros;
+  /* #6: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #7: @7 = repmat(@6, 16) */
+  for (i=0;i<16;++i) {
+    casadi_copy(w06, 2, w07+ i*2);
+  }
+  /* #8: {@8, @9, @10, @11, @12} = homogeneous_rosenbrock_controlled_acc16(@0, @1, @2, @4, @5, @7) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=wr02;
+  arg1[3]=w04;
+  arg1[4]=wr05;
+  arg1[5]=w07;
+  res1[0]=w08;
+  res1[1]=w09;
+  res1[2]=w10;
+  res1[3]=w11;
+  res1[4]=w12;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  /* #9: output[0][0] = @8 */
+  casadi_copy(w08, 320, res[0]);
+  /* #10: output[1][0] = @9 */
+  casadi_copy(w09, 32, res[1]);
+  /* #11: output[2][0] = @10 */
+  casadi_copy(w10, 384, res[2]);
+  /* #12: output[3][0] = @11 */
+  casadi_copy(w11, 16, res[3]);
+  /* #13: output[4][0] = @12 */
+  casadi_copy(w12, 16, res[4]);
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f8(arg, res, iw, w, mem);
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f33(arg, res, iw, w, mem);
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16_checkout(void) {
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_checkout(void) {
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk16_release(int mem) {
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_chunk16_release(int mem) {
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk16_incref(void) {
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_chunk16_incref(void) {
 }
 
-CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_chunk16_decref(void) {
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_chunk16_decref(void) {
 }
 
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk16_n_in(void) { return 5;}
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_controlled_chunk16_n_in(void) { return 6;}
 
-CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_chunk16_n_out(void) { return 3;}
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_controlled_chunk16_n_out(void) { return 5;}
 
-CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_chunk16_default_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_controlled_chunk16_default_in(casadi_int i) {
   switch (i) {
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk16_name_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_controlled_chunk16_name_in(casadi_int i) {
   switch (i) {
     case 0: return "x0";
     case 1: return "z0";
     case 2: return "U";
     case 3: return "H";
     case 4: return "p";
+    case 5: return "ctl";
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_chunk16_name_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_controlled_chunk16_name_out(casadi_int i) {
   switch (i) {
     case 0: return "X";
     case 1: return "Z";
     case 2: return "Y";
+    case 3: return "R";
+    case 4: return "NH";
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_in(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_in(casadi_int i) {
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s1;
     case 2: return casadi_s8;
     case 3: return casadi_s9;
     case 4: return casadi_s2;
+    case 5: return casadi_s1;
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_out(casadi_int i) {
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s10;
     case 1: return casadi_s8;
     case 2: return casadi_s11;
+    case 3: return casadi_s9;
+    case 4: return casadi_s9;
     default: return 0;
   }
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 25;
-  if (sz_res) *sz_res = 14;
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 179;
+  if (sz_res) *sz_res = 95;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 3068;
+  if (sz_w) *sz_w = 4310;
   return 0;
 }
 
-CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 25*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 14*sizeof(casadi_real*);
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 179*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 95*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 3068*sizeof(casadi_real);
+  if (sz_w) *sz_w = 4310*sizeof(casadi_real);
   return 0;
 }
 

@@ -32,7 +32,7 @@ const casadi_int* homogeneous_rosenbrock_step_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_step_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 #define homogeneous_rosenbrock_step_SZ_ARG 5
-#define homogeneous_rosenbrock_step_SZ_RES 2
+#define homogeneous_rosenbrock_step_SZ_RES 3
 #define homogeneous_rosenbrock_step_SZ_IW 0
 #define homogeneous_rosenbrock_step_SZ_W 0
 int homogeneous_consistent_z(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
@@ -53,42 +53,42 @@ int homogeneous_consistent_z_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, 
 #define homogeneous_consistent_z_SZ_RES 1
 #define homogeneous_consistent_z_SZ_IW 0
 #define homogeneous_consistent_z_SZ_W 0
-int homogeneous_rosenbrock_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int homogeneous_rosenbrock_chunk256_checkout(void);
-void homogeneous_rosenbrock_chunk256_release(int mem);
-void homogeneous_rosenbrock_chunk256_incref(void);
-void homogeneous_rosenbrock_chunk256_decref(void);
-casadi_int homogeneous_rosenbrock_chunk256_n_in(void);
-casadi_int homogeneous_rosenbrock_chunk256_n_out(void);
-casadi_real homogeneous_rosenbrock_chunk256_default_in(casadi_int i);
-const char* homogeneous_rosenbrock_chunk256_name_in(casadi_int i);
-const char* homogeneous_rosenbrock_chunk256_name_out(casadi_int i);
-const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_in(casadi_int i);
-const casadi_int* homogeneous_rosenbrock_chunk256_sparsity_out(casadi_int i);
-int homogeneous_rosenbrock_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int homogeneous_rosenbrock_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_chunk256_SZ_ARG 30
-#define homogeneous_rosenbrock_chunk256_SZ_RES 17
-#define homogeneous_rosenbrock_chunk256_SZ_IW 0
-#define homogeneous_rosenbrock_chunk256_SZ_W 34400
-int homogeneous_rosenbrock_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
-int homogeneous_rosenbrock_chunk16_checkout(void);
-void homogeneous_rosenbrock_chunk16_release(int mem);
-void homogeneous_rosenbrock_chunk16_incref(void);
-void homogeneous_rosenbrock_chunk16_decref(void);
-casadi_int homogeneous_rosenbrock_chunk16_n_in(void);
-casadi_int homogeneous_rosenbrock_chunk16_n_out(void);
-casadi_real homogeneous_rosenbrock_chunk16_default_in(casadi_int i);
-const char* homogeneous_rosenbrock_chunk16_name_in(casadi_int i);
-const char* homogeneous_rosenbrock_chunk16_name_out(casadi_int i);
-const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_in(casadi_int i);
-const casadi_int* homogeneous_rosenbrock_chunk16_sparsity_out(casadi_int i);
-int homogeneous_rosenbrock_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-int homogeneous_rosenbrock_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_chunk16_SZ_ARG 25
-#define homogeneous_rosenbrock_chunk16_SZ_RES 14
-#define homogeneous_rosenbrock_chunk16_SZ_IW 0
-#define homogeneous_rosenbrock_chunk16_SZ_W 3068
+int homogeneous_rosenbrock_controlled_chunk256(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int homogeneous_rosenbrock_controlled_chunk256_checkout(void);
+void homogeneous_rosenbrock_controlled_chunk256_release(int mem);
+void homogeneous_rosenbrock_controlled_chunk256_incref(void);
+void homogeneous_rosenbrock_controlled_chunk256_decref(void);
+casadi_int homogeneous_rosenbrock_controlled_chunk256_n_in(void);
+casadi_int homogeneous_rosenbrock_controlled_chunk256_n_out(void);
+casadi_real homogeneous_rosenbrock_controlled_chunk256_default_in(casadi_int i);
+const char* homogeneous_rosenbrock_controlled_chunk256_name_in(casadi_int i);
+const char* homogeneous_rosenbrock_controlled_chunk256_name_out(casadi_int i);
+const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_in(casadi_int i);
+const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_out(casadi_int i);
+int homogeneous_rosenbrock_controlled_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int homogeneous_rosenbrock_controlled_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_ARG 185
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_RES 100
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_IW 0
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_W 37502
+int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int homogeneous_rosenbrock_controlled_chunk16_checkout(void);
+void homogeneous_rosenbrock_controlled_chunk16_release(int mem);
+void homogeneous_rosenbrock_controlled_chunk16_incref(void);
+void homogeneous_rosenbrock_controlled_chunk16_decref(void);
+casadi_int homogeneous_rosenbrock_controlled_chunk16_n_in(void);
+casadi_int homogeneous_rosenbrock_controlled_chunk16_n_out(void);
+casadi_real homogeneous_rosenbrock_controlled_chunk16_default_in(casadi_int i);
+const char* homogeneous_rosenbrock_controlled_chunk16_name_in(casadi_int i);
+const char* homogeneous_rosenbrock_controlled_chunk16_name_out(casadi_int i);
+const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_in(casadi_int i);
+const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_out(casadi_int i);
+int homogeneous_rosenbrock_controlled_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int homogeneous_rosenbrock_controlled_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_ARG 179
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_RES 95
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_IW 0
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_W 4310
 void homogeneous_rosenbrock_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_rosenbrock_casadi_int_size(void);
 int homogeneous_rosenbrock_casadi_real_size(void);

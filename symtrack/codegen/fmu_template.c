@@ -441,7 +441,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     double hk = k < n ? hs : last, tk = c->t + (double)k * hs;
     if (!(hk > 0.0)) break;
     c->arg[0] = c->x; c->arg[1] = c->z; c->arg[2] = c->u; c->arg[3] = c->p; c->arg[4] = &hk;
-    c->res[0] = xn; c->res[1] = zn;
+    c->res[0] = xn; c->res[1] = zn; c->res[2] = NULL; /* the step's error estimate: not used */
     if (call(c, F_STEP)) {
       c->phase = ST_ERROR;
       return FAIL(c, "fmi2DoStep: the Rosenbrock step failed at t = %.17g s", tk);

@@ -18,9 +18,11 @@ model equation repeated) and generated with CasADi's code generator into ``DIR/m
 - ``mpc_plant_accel(x, u, p) -> z``: the first algebraic state of the plant.
 
 The plant is the compiled homogeneous Rosenbrock integrator that ``python -m codegen`` already
-writes (``homogeneous_rosenbrock.c``: ``consistent_z`` and ``rosenbrock_chunk16``), driven as
+writes (``homogeneous_rosenbrock.c``: ``consistent_z`` and ``rosenbrock_controlled_chunk16``), driven as
 ``FixedStepper.step`` drives it in the Python closed loop (``run.integrator = "rosenbrock"``):
-z re-solved when the command changes, each sample cut into equal steps of at most 10 ms.
+z re-solved when the command changes, each sample cut into equal steps of at most 10 ms, each step
+halved where its error estimate exceeds the default ``run.fixed_step_tolerance`` (a step still above
+it after the halvings is kept, where the Python loop stops).
 
 ``mpc_scenario.h`` carries the numbers: dimensions, scalings, the MPC's and the plant's parameter
 vectors, the densely sampled reference path (the arrays of :class:`symtrack.control.path.Path`),
@@ -225,7 +227,7 @@ def setup(sc) -> Problem:
 
 def scenario_header(pb: Problem) -> str:
     sc, model, mpc = pb.scenario, pb.model, pb.mpc
-    from symtrack.integrators.settings import IntegratorSettings
+    from symtrack.integrators.settings import FIXED_STEP_TOLERANCE, IntegratorSettings
     from symtrack.native.generate import CHUNK_SIZES
 
     path = sc.build_path()
@@ -264,6 +266,7 @@ def scenario_header(pb: Problem) -> str:
         f"#define PLANT_NU {model.u.numel()}",
         f"#define PLANT_FIXED_STEP_S {c_literal(fixed_step)}",
         f"#define PLANT_CHUNK {min(CHUNK_SIZES)}",
+        f"#define PLANT_FIXED_STEP_TOLERANCE {c_literal(FIXED_STEP_TOLERANCE)}",
         f"#define PLANT_I_X_M {names.index('x_m')}",
         f"#define PLANT_I_Y_M {names.index('y_m')}",
         f"#define PLANT_I_YAW_RAD {names.index('yaw_rad')}",

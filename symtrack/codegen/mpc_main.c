@@ -44,7 +44,7 @@ static int call(cfun f, int n_in, const double **in, int n_out, double **out) {
 static int alloc_work(void) {
   wfun works[] = {mpc_rti_prepare_work, mpc_rti_feedback_work, mpc_rti_point_work, mpc_rti_defect_work,
                   mpc_rti_shift_guess_work, mpc_rti_shift_plan_work, mpc_plant_accel_work,
-                  homogeneous_consistent_z_work, homogeneous_rosenbrock_chunk16_work};
+                  homogeneous_consistent_z_work, homogeneous_rosenbrock_controlled_chunk16_work};
   casadi_int na = 0, nr = 0, ni = 0, nw = 0;
   for (size_t k = 0; k < sizeof works / sizeof works[0]; k++) {
     casadi_int a, r, i, w;
@@ -166,15 +166,17 @@ static int plant_step(const double *u) {
   if (n < 1) n = 1;
   double h = MPC_DT_S / (double)n;
   static double U[PLANT_NU * PLANT_CHUNK], H[PLANT_CHUNK], X[PLANT_NX * PLANT_CHUNK], Z[PLANT_NZ * PLANT_CHUNK];
+  /* the steps' error control: tolerance, largest error ratio kept (symtrack/integrators/fixed_step.py) */
+  static const double ctl[2] = {PLANT_FIXED_STEP_TOLERANCE, 1.0};
   while (n > 0) {
     long k = n < PLANT_CHUNK ? n : PLANT_CHUNK;
     for (long j = 0; j < PLANT_CHUNK; j++) {
       for (int i = 0; i < PLANT_NU; i++) U[j * PLANT_NU + i] = j < k ? u[i] : 0.0;
       H[j] = j < k ? h : 0.0;
     }
-    const double *in[] = {pl_x, pl_z, U, H, plant_p};
-    double *o[] = {X, Z, NULL};
-    if (call(homogeneous_rosenbrock_chunk16, 5, in, 3, o)) return 1;
+    const double *in[] = {pl_x, pl_z, U, H, plant_p, ctl};
+    double *o[] = {X, Z, NULL, NULL, NULL}; /* the outputs, error ratios and halvings: not used here */
+    if (call(homogeneous_rosenbrock_controlled_chunk16, 6, in, 5, o)) return 1;
     memcpy(pl_x, X + (k - 1) * PLANT_NX, sizeof pl_x);
     memcpy(pl_z, Z + (k - 1) * PLANT_NZ, sizeof pl_z);
     n -= k;

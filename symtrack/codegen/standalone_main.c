@@ -36,7 +36,7 @@ static long g_nsteps;
 /* One step of length h from (x, z) with input u; results in xf, zf. */
 static int step(const double *x, const double *z, const double *u, double h, double *xf, double *zf) {
   g_arg[0] = x; g_arg[1] = z; g_arg[2] = u; g_arg[3] = sym_p; g_arg[4] = &h;
-  g_res[0] = xf; g_res[1] = zf;
+  g_res[0] = xf; g_res[1] = zf; g_res[2] = NULL; /* the error estimate: not used here */
   g_nsteps++;
   return STEP(g_arg, g_res, g_iw, g_w, g_mem);
 }

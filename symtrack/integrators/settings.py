@@ -13,8 +13,18 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 
-__all__ = ["EngineSettings", "IntegratorSettings", "POWER_MODES", "STEADY_METHODS", "Stepper", "VEHICLE_ATOL",
-           "VEHICLE_MAX_HALVINGS", "substeps", "window_substeps"]
+__all__ = ["EngineSettings", "FIXED_STEP_TOLERANCE", "IntegratorSettings", "POWER_MODES", "STEADY_METHODS", "Stepper",
+           "VEHICLE_ATOL", "VEHICLE_MAX_HALVINGS", "substeps", "window_substeps"]
+
+
+# The relative tolerance of the compiled Rosenbrock's error control (IntegratorSettings.fixed_step_tolerance,
+# run.fixed_step_tolerance): a step whose local error estimate exceeds
+# FIXED_STEP_TOLERANCE max(|x0|, |x1|) + FIXED_STEP_ATOL in any differential state is halved.
+# Calibrated on examples/scenarios/drive_and_coast.toml (every summary figure within 2 % of CVODES) and
+# the validation scenario (its figures and wall time unchanged): README, "Error control of the fixed step".
+FIXED_STEP_TOLERANCE = 1e-3
+# (its absolute part FIXED_STEP_ATOL and the halvings' limit FIXED_STEP_MAX_HALVINGS are in the generated C:
+# symtrack.native.rosenbrock)
 
 
 @dataclass(frozen=True)
@@ -22,7 +32,9 @@ class IntegratorSettings:
     """How to integrate: the method (a name of :mod:`symtrack.integrators.registry`) and its
     options. ``reltol``/``abstol``/``max_num_steps``: the adaptive integrators; ``compiled``:
     CVODES/IDAS on the compiled dynamics; ``fixed_step_s``: the step bound of the fixed-step
-    integrators (each requested length is cut into equal steps no longer than this)."""
+    integrators (each requested length is cut into equal steps no longer than this);
+    ``fixed_step_tolerance``: the homogeneous terrain's compiled Rosenbrock halves a step whose
+    error estimate exceeds it (:class:`~symtrack.integrators.fixed_step.FixedStepper`; 0: off)."""
 
     method: str = "cvodes"
     reltol: float = 1e-7
@@ -30,6 +42,7 @@ class IntegratorSettings:
     max_num_steps: int = 200000
     compiled: bool = False
     fixed_step_s: float = 0.01
+    fixed_step_tolerance: float = FIXED_STEP_TOLERANCE
     engine: object = None  # the terrain engine's settings (EngineSettings; None: its defaults)
 
 

@@ -13,11 +13,16 @@ Files written for a model with prefix ``<m>`` (fixed, predictable names, like ac
 - ``<m>_dae.c/.h``: ``<m>_dae(x,z,u,p)->(ode,alg)``, ``jac_<m>_dae``, ``<m>_accel(x,u,p)->z``;
 - ``<m>_rosenbrock.c/.h``: the fixed-step integrator (the 8-stage, L-stable, order-5 Rosenbrock
   method of CasADi's ``rosenbrock`` plugin, unrolled with a sparse LU in :mod:`symtrack.native.rosenbrock`,
-  on the index-1 DAE form): ``<m>_rosenbrock_step(x0,z0,u,p,h)->(xf,zf)``
-  advances one step of length h, and ``<m>_rosenbrock_chunk<N>(x0,z0,U,H,p)->(X,Z,Y)``
-  advances N steps in one call (column k of U and H are the input and the length of step k;
-  a step of length 0 leaves the state unchanged; column k of X, Z, Y is the state,
-  algebraic state and outputs after step k); ``<m>_consistent_z(x,z0,u,p)->z`` solves the
+  on the index-1 DAE form): ``<m>_rosenbrock_step(x0,z0,u,p,h)->(xf,zf,ef)``
+  advances one step of length h (``ef``: the step's local error estimate of each differential
+  state, the difference from the method's embedded solution,
+  :func:`symtrack.native.rosenbrock.step_and_error_expressions`), and
+  ``<m>_rosenbrock_controlled_chunk<N>(x0,z0,U,H,p,ctl)->(X,Z,Y,R,NH)`` advances N steps in one
+  call, each error-controlled (:func:`controlled_chunks`: halved where its estimate exceeds the
+  tolerance ctl[0]; column k of U and H are the input and the length of step k, a step of length
+  0 leaves the state unchanged; column k of X, Z, Y is the state, algebraic state and outputs
+  after step k, of R and NH its largest error ratio and how many steps were halved);
+  ``<m>_consistent_z(x,z0,u,p)->z`` solves the
   algebraic equations for z by Newton steps from z0 (the steps start from the z they are given);
 - ``manifest.json``: model hash (SHA-256 over the files' hashes of their serialised Functions;
   each file's own hash is its key in the compiled-library cache), CasADi version, and the names
@@ -110,32 +115,77 @@ def _rename(f: ca.Function, name: str, cse: bool = True) -> ca.Function:
 
 
 def fixed_step_functions(model, prefix: str):
-    """One step of the unrolled Rosenbrock method (:mod:`symtrack.native.rosenbrock`) on the DAE form,
-    and chunks of many steps per call."""
+    """One step of the unrolled Rosenbrock method (:mod:`symtrack.native.rosenbrock`) on the DAE form
+    with its error estimate, the consistent z, and chunks of many error-controlled steps per call."""
     x0, z0 = ca.SX.sym("x0", model.x.sparsity()), ca.SX.sym("z0", model.z.sparsity())
     u, p, h = ca.SX.sym("u", model.u.sparsity()), ca.SX.sym("p", model.p.sparsity()), ca.SX.sym("h")
-    x1, z1 = rosenbrock.step_expressions(model.dae, x0, z0, u, p, h)
+    x1, z1, e1 = rosenbrock.step_and_error_expressions(model.dae, x0, z0, u, p, h)
     cse = getattr(model, "cse", True)
-    step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [x0, z0, u, p, h], [x1, z1],
-                       ["x0", "z0", "u", "p", "h"], ["xf", "zf"], {"cse": cse})
+    step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [x0, z0, u, p, h], [x1, z1, e1],
+                       ["x0", "z0", "u", "p", "h"], ["xf", "zf", "ef"], {"cse": cse})
     zc = rosenbrock.consistent_z_expressions(model.dae, x0, z0, u, p)
     consistent = ca.Function(f"{prefix}_consistent_z", [x0, z0, u, p], [zc], ["x", "z0", "u", "p"], ["z"],
                              {"cse": cse})
-    # one column of a chunk: a step, then the outputs at its end (an MX Function calling the two)
+    return step, consistent, controlled_chunks(model, prefix, step)
+
+
+def controlled_chunks(model, prefix: str, step: ca.Function):
+    """Chunks of error-controlled steps: ``<m>_rosenbrock_controlled_chunk<N>(x0,z0,U,H,p,ctl)->(X,Z,Y,R,NH)``.
+
+    Each step of length H[k] is taken, and its error ratio r = max_i |ef_i| / (FIXED_STEP_ATOL +
+    rtol max(|x0_i|, |xf_i|)) over the differential states is computed (ctl = (rtol, r_limit)); where
+    r > r_limit (or is not a number) the step is replaced by two steps of half its length, each
+    controlled the same way, down to 2^-FIXED_STEP_MAX_HALVINGS of H[k] (both in
+    :mod:`symtrack.native.rosenbrock`). Column k of R is the
+    largest ratio of the steps kept in step k (above r_limit only where the halvings ran out), of
+    NH how many steps were halved. The recursion is one C function per depth, each calling the
+    one below twice behind a branch (CasADi's ``Function.conditional``): the halvings cost only
+    where they are taken. r_limit = inf: no step halved, the ratios measured."""
+    name = f"{prefix}_{FIXED_STEP_METHOD}"
     X0, Z0 = ca.MX.sym("x0", model.x.sparsity()), ca.MX.sym("z0", model.z.sparsity())
     U, P, H = ca.MX.sym("u", model.u.sparsity()), ca.MX.sym("p", model.p.sparsity()), ca.MX.sym("h")
-    xf, zf = step(X0, Z0, U, P, H)
-    col = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_column", [X0, Z0, U, P, H], [xf, zf, model.outputs(xf, U, P)],
-                      ["x0", "z0", "u", "p", "h"], ["xf", "zf", "y"])
+    ctl = ca.MX.sym("ctl", 2)
+    X1, Z1, R = ca.MX.sym("x1", model.x.sparsity()), ca.MX.sym("z1", model.z.sparsity()), ca.MX.sym("r")
+    ins, in_names = [X0, Z0, U, P, H, ctl], ["x0", "z0", "u", "p", "h", "ctl"]
+    out_names = ["xf", "zf", "r", "nh"]
+    # the ratio as one straight-line SX function (its MX form was a loop and a copy per operation)
+    xa, xb, ea = (ca.SX.sym(n, model.x.sparsity()) for n in ("xa", "xb", "ea"))
+    cs = ca.SX.sym("ctl", 2)
+    terms = [ca.fabs(ea[i]) / (rosenbrock.FIXED_STEP_ATOL + cs[0] * ca.fmax(ca.fabs(xa[i]), ca.fabs(xb[i])))
+             for i in range(model.nx)]
+    rmax = terms[0]
+    for t in terms[1:]:
+        rmax = ca.fmax(rmax, t)
+    ratio = ca.Function(f"{name}_error_ratio", [xa, xb, ea, cs], [rmax], ["x0", "x1", "e1", "ctl"], ["r"])
+    below = None
+    for depth in reversed(range(rosenbrock.FIXED_STEP_MAX_HALVINGS + 1)):
+        x1, z1, e1 = step(X0, Z0, U, P, H)
+        r = ratio(X0, x1, e1, ctl)
+        if below is None:
+            level = ca.Function(f"{name}_controlled{depth}", ins, [x1, z1, r, 0], in_names, out_names)
+        else:
+            keep = ca.Function(f"{name}_keep{depth}", ins + [X1, Z1, R], [X1, Z1, R, 0],
+                               in_names + ["x1", "z1", "r1"], out_names)
+            xm, zm, ra, na = below(X0, Z0, U, P, 0.5 * H, ctl)
+            xe, ze, rb, nb = below(xm, zm, U, P, 0.5 * H, ctl)
+            halve = ca.Function(f"{name}_halve{depth}", ins + [X1, Z1, R], [xe, ze, ca.fmax(ra, rb), 1 + na + nb],
+                                in_names + ["x1", "z1", "r1"], out_names)
+            branch = ca.Function.conditional(f"{name}_branch{depth}", [keep], halve)
+            res = branch(ca.logic_not(r <= ctl[1]), X0, Z0, U, P, H, ctl, x1, z1, r)
+            level = ca.Function(f"{name}_controlled{depth}", ins, res, in_names, out_names)
+        below = level
+    xf, zf, r, nh = below(X0, Z0, U, P, H, ctl)
+    col = ca.Function(f"{name}_controlled_column", [X0, Z0, U, P, H, ctl], [xf, zf, model.outputs(xf, U, P), r, nh],
+                      in_names, ["xf", "zf", "y", "r", "nh"])
     chunks = []
     for n in CHUNK_SIZES:
-        acc = col.mapaccum(f"{prefix}_{FIXED_STEP_METHOD}_acc{n}", n, 2)
+        acc = col.mapaccum(f"{name}_controlled_acc{n}", n, 2)
         Us = ca.MX.sym("U", model.u.numel(), n)
         Hs = ca.MX.sym("H", 1, n)
-        Xs, Zs, Ys = acc(X0, Z0, Us, ca.repmat(P, 1, n), Hs)
-        chunks.append(ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_chunk{n}", [X0, Z0, Us, Hs, P], [Xs, Zs, Ys],
-                                  ["x0", "z0", "U", "H", "p"], ["X", "Z", "Y"]))
-    return step, consistent, chunks
+        Xs, Zs, Ys, Rs, NHs = acc(X0, Z0, Us, ca.repmat(P, 1, n), Hs, ca.repmat(ctl, 1, n))
+        chunks.append(ca.Function(f"{name}_controlled_chunk{n}", [X0, Z0, Us, Hs, P, ctl], [Xs, Zs, Ys, Rs, NHs],
+                                  ["x0", "z0", "U", "H", "p", "ctl"], ["X", "Z", "Y", "R", "NH"]))
+    return chunks
 
 
 # The files, each a group of Functions that is compiled and loaded on its own: a simulation
@@ -145,7 +195,7 @@ GROUPS = ("ode", "dae", "outputs", "linearize_outputs", FIXED_STEP_METHOD)
 GROUP_OF = {"ode": "ode", "linearize": "ode", "dae": "dae", "accel": "dae", "outputs": "outputs",
             "linearize_outputs": "linearize_outputs", f"{FIXED_STEP_METHOD}_step": FIXED_STEP_METHOD,
             "consistent_z": FIXED_STEP_METHOD,
-            **{f"{FIXED_STEP_METHOD}_chunk{n}": FIXED_STEP_METHOD for n in CHUNK_SIZES}}
+            **{f"{FIXED_STEP_METHOD}_controlled_chunk{n}": FIXED_STEP_METHOD for n in CHUNK_SIZES}}
 
 
 def _group(model, prefix: str, group: str) -> tuple:
@@ -166,8 +216,8 @@ def _group(model, prefix: str, group: str) -> tuple:
     if group == "linearize_outputs":
         return (_rename(model.jac_outputs, f"{prefix}_linearize_outputs", getattr(model, "cse", True)),)
     if group == FIXED_STEP_METHOD:
-        step, consistent, chunks = fixed_step_functions(model, prefix)
-        return step, consistent, *chunks
+        step, consistent, controlled = fixed_step_functions(model, prefix)
+        return step, consistent, *controlled
     raise ValueError(f"unknown group {group!r}; groups: {', '.join(GROUPS)}")
 
 
@@ -178,7 +228,9 @@ def build(model, prefix: str = "homogeneous", groups=GROUPS) -> Generated:
                           tuple(model.param_names), tuple(model.output_names))
     signals = {"x": sx, "x0": sx, "xf": sx, "ode": tuple(f"d_{n}_dt" for n in sx), "X": sx,
                "u": su, "U": su, "z": sz, "z0": sz, "zf": sz, "Z": sz, "alg": tuple(f"res_{n}" for n in sz),
-               "p": sp, "y": sy, "Y": sy, "h": ("step_s",), "H": ("step_s",)}
+               "p": sp, "y": sy, "Y": sy, "h": ("step_s",), "H": ("step_s",),
+               "ef": tuple(f"err_{n}" for n in sx), "ctl": ("fixed_step_tolerance", "error_ratio_limit"),
+               "R": ("error_ratio",), "NH": ("steps_halved",)}
     files = {f"{prefix}_{g}": _group(model, prefix, g) for g in groups}
     return Generated(prefix, files, signals, ca.__version__)
 

@@ -25,10 +25,17 @@ from __future__ import annotations
 
 import casadi as ca
 
-__all__ = ["A", "C", "GAMMA", "M", "N_STAGES", "SparseLU", "consistent_z_expressions", "plugin_step",
-           "step_expressions"]
+__all__ = ["A", "C", "FIXED_STEP_ATOL", "FIXED_STEP_MAX_HALVINGS", "GAMMA", "M", "N_STAGES", "SparseLU",
+           "consistent_z_expressions", "plugin_step", "step_and_error_expressions", "step_expressions"]
 
 N_STAGES = 8
+# The error control of the compiled step (symtrack.native.generate.controlled_chunks, FixedStepper): the
+# absolute part of a step's tolerance, in the SI unit of each differential state (m, rad, m/s, rad/s, N m;
+# the terrain cells' sinkage in m and its rate in m/s): 1 um, below every figure the validation reports (as
+# the terrain engine's VEHICLE_ATOL); and how many times a step is halved at most (to 1/64 of it, as the
+# engine's vehicle step).
+FIXED_STEP_ATOL = 1e-6
+FIXED_STEP_MAX_HALVINGS = 6
 GAMMA = 3.3233404432797148e-01
 # a[i][j], c[i][j] (j < i) and m[i] of CasADi 3.8.2's rosenbrock plugin (generated C: p.a, pe.c, p.m)
 A = (
@@ -129,6 +136,19 @@ def step_expressions(dae: ca.Function, x0, z0, u, p, h):
     """(x1, z1) after one step of length h from (x0, z0): SX expressions.
 
     dae(x, z, u, p) -> (ode, alg) is an SX Function of the semi-explicit DAE."""
+    x1, z1, _ = step_and_error_expressions(dae, x0, z0, u, p, h)
+    return x1, z1
+
+
+def step_and_error_expressions(dae: ca.Function, x0, z0, u, p, h):
+    """(x1, z1, e1): :func:`step_expressions` and the step's local error estimate e1 of the
+    differential states, in their units.
+
+    The method is stiffly accurate with an embedded solution: its last stage's argument
+    y0 + sum_{j<8} a_8j U_j (order 4) is the step's result without the last increment, since
+    m_i = a_8i for i < 8 and m_8 = 1. So e1 = U_8 (its differential part) is the difference between
+    the order-5 result and the embedded order-4 one (as in Hairer & Wanner's RODAS), computed with
+    the step at no extra cost."""
     nx = x0.numel()
 
     def F(y):
@@ -159,7 +179,7 @@ def step_expressions(dae: ca.Function, x0, z0, u, p, h):
     y1 = y0
     for mi, Ui in zip(M, U, strict=True):
         y1 = y1 + mi * Ui
-    return y1[:nx], y1[nx:]
+    return y1[:nx], y1[nx:], U[-1][:nx]
 
 
 def consistent_z_expressions(dae: ca.Function, x, z0, u, p, iterations: int = 2):

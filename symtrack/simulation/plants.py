@@ -155,7 +155,8 @@ class StepPlant:
 class BatchPlant:
     """The homogeneous terrain with a batch stepper (:class:`~symtrack.integrators.fixed_step.FixedStepper`):
     many output intervals per advance, their equal steps of at most ``fixed_step_s`` packed into
-    calls of the generated C (256 steps per call, 16 for a short batch)."""
+    calls of the generated C (256 steps per call, 16 for a short batch), each step error-controlled
+    (:mod:`symtrack.integrators.fixed_step`)."""
 
     kind = "homogeneous"
 
@@ -184,6 +185,7 @@ class BatchPlant:
     def synchronize(self, intervals):
         if self.x is None:
             raise SimulationError("BatchPlant: start the plant before stepping it")
+        self.t0 = float(intervals[0][0])
         self.lengths = np.array([h for _, h, _ in intervals], dtype=float)
         self.inputs = np.array([u for _, _, u in intervals], dtype=float)
 
@@ -200,9 +202,10 @@ class BatchPlant:
         self.Ze = np.empty((m, self.model.z.numel()))
         self.Ye = np.empty((m, len(self.output_names)))
         x, z = self.x, self.z
+        t0 = np.concatenate([[self.t0], self.t0 + np.cumsum(H_all)])
         for c0 in range(0, total, n_cols):
             c1 = min(c0 + n_cols, total)
-            X, Z, Y = self.stepper.run_chunk(n_cols, x, z, U_all[c0:c1], H_all[c0:c1], self.p)
+            X, Z, Y = self.stepper.run_chunk(n_cols, x, z, U_all[c0:c1], H_all[c0:c1], self.p, t0[c0])
             k = c1 - c0
             x, z = X[k - 1].copy(), Z[k - 1].copy()
             i0, i1 = np.searchsorted(ends, c0), np.searchsorted(ends, c1)

@@ -95,6 +95,9 @@ def summarise(res: RunResult) -> dict:
     out["sim_time_s"] = float(res.t[-1])
     out["wall_time_s"] = float(res.wall_time_s)
     out["real_time_factor"] = float(res.t[-1] / res.wall_time_s) if res.wall_time_s > 0 else None
+    if "fixed_step_error_max" in res.stats:  # the compiled Rosenbrock's error control (FixedStepper)
+        out["fixed_step_error_max"] = float(res.stats["fixed_step_error_max"])
+        out["fixed_step_steps_halved"] = int(res.stats["fixed_step_steps_halved"])
     if res.terrain:
         out.update(res.terrain)
     return out

@@ -9,6 +9,7 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     output_dt_s = 0.01             # (0, duration] output (and macro) step
     integrator = "cvodes"          # a name of symtrack.integrators.registry: cvodes | idas | rosenbrock
     fixed_step_s = 0.01            # [1e-5, 0.1] rosenbrock: each output step is split into equal steps <= this
+    fixed_step_tolerance = 1e-3    # [0, 0.1] rosenbrock: a step whose error estimate exceeds it is halved (0: off)
     compiled = false               # cvodes/idas on the compiled dynamics and Jacobian (docs/codegen.md)
     reltol = 1e-7                  # (0, 1e-2]
     abstol = 1e-9                  # (0, 1e-2]
@@ -59,7 +60,7 @@ from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_document, check_keys, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
-from ..integrators.settings import EngineSettings, IntegratorSettings
+from ..integrators.settings import FIXED_STEP_TOLERANCE, EngineSettings, IntegratorSettings
 from ..model import plausibility
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
@@ -107,6 +108,7 @@ class RunSettings:
     # earlier passes' trajectory plots and sinkage maps (docs/terrain.md, "What the outputs cost");
     # the default writes the figures read first, in about a tenth of the time
     all_figures: bool = False
+    fixed_step_tolerance: float = FIXED_STEP_TOLERANCE
 
     @property
     def macro_step_s(self) -> float:
@@ -118,11 +120,11 @@ class RunSettings:
 
     def integrator_settings(self) -> IntegratorSettings:
         return IntegratorSettings(self.integrator, self.reltol, self.abstol, compiled=self.compiled,
-                                  fixed_step_s=self.fixed_step_s)
+                                  fixed_step_s=self.fixed_step_s, fixed_step_tolerance=self.fixed_step_tolerance)
 
 
 SIMULATION_RUN_KEYS = ("duration_s", "output_dt_s", "integrator", "reltol", "abstol", "stop_after_distance_m",
-                       "stop_distance_event", "fixed_step_s", "compiled", "all_figures")
+                       "stop_distance_event", "fixed_step_s", "fixed_step_tolerance", "compiled", "all_figures")
 
 
 @dataclass(frozen=True)
@@ -216,6 +218,7 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
     if ev is not None and stop is None:
         raise ScenarioError("run.stop_distance_event is set but run.stop_after_distance_m is not")
     fixed = _num("run", "fixed_step_s", t.get("fixed_step_s", d.fixed_step_s), 1e-5, 0.1)
+    fixed_tol = _num("run", "fixed_step_tolerance", t.get("fixed_step_tolerance", d.fixed_step_tolerance), 0, 0.1)
     compiled = t.get("compiled", d.compiled)
     if not isinstance(compiled, bool):
         raise ScenarioError(f"run.compiled = {compiled!r} must be true or false")
@@ -224,7 +227,8 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
     if not isinstance(all_figures, bool):
         raise ScenarioError(f"run.all_figures = {all_figures!r} must be true or false (true: also the pass "
                             "animations and the earlier passes' plots)")
-    return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev, fixed, compiled, rms, all_figures)
+    return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev, fixed, compiled, rms, all_figures,
+                       fixed_step_tolerance=fixed_tol)
 
 
 def _parse_model(t: dict) -> ModelOptions:
