@@ -17,6 +17,7 @@ Laws (symtrack/terrain/density.py):
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 import numpy as np
@@ -26,7 +27,10 @@ from symtrack.foundations.errors import SymtrackError
 from symtrack.simulation.scenario import load_scenario
 from symtrack.terrain import density, tyre
 
-OSR = ["soil.virgin_line_N=1.9392", "soil.compression_index_lambda=0.06037", "soil.recompression_index_kappa=0.00608",
+# the set's N as its strength (the virgin line follows from the strength: docs/subsoil.md "One soil")
+OSR_PC_PA = 1e3 * math.exp((1.9392 - 2.67 / 1.55) / (0.06037 - 0.00608))
+OSR = [f"soil.precompression_stress_Pa={OSR_PC_PA!r}", "soil.compression_index_lambda=0.06037",
+       "soil.recompression_index_kappa=0.00608",
        "soil.yield_compression_index_k2=0.01916", "soil.yield_line_offset_ln_p=1.3",
        "soil.particle_density_Mg_per_m3=2.67", "soil.bulk_density_initial_Mg_per_m3=1.55"]
 WET = ["soil.moisture.water_content_kg_per_kg=0.2", "soil.moisture.clay_percent=25.0"]

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import math
 import sys
 
 import numpy as np
@@ -50,13 +51,17 @@ ELEMENT_M = 0.025
 
 
 def document(length_m: float) -> dict:
+    # Keller & Arvidsson's lines at the field's density; the strength (and so the virgin line's N, which
+    # follows from it) is the one of Keller & Arvidsson's own N: where their virgin line meets the initial
+    # recompression line (one strength, docs/subsoil.md "One soil")
     N, lam, kap = density.keller_arvidsson_2007(2.65, RHO_INITIAL)
+    pc_Pa = 1e3 * math.exp((N - 2.65 / RHO_INITIAL) / (lam - kap))
     return {
         "name": "tracks_against_wheels",
         "run": {"duration_s": 30.0, "output_dt_s": 0.01, "integrator": "grid_fast", "stop_after_distance_m": length_m},
         "vehicle": {"preset": "reference_crawler", "mass_kg": MASS_KG},
         "soil": {"preset": "clayey_soil_thailand_38", "bulk_density_initial_Mg_per_m3": RHO_INITIAL,
-                 "virgin_line_N": N, "compression_index_lambda": lam, "recompression_index_kappa": kap},
+                 "precompression_stress_Pa": pc_Pa, "compression_index_lambda": lam, "recompression_index_kappa": kap},
         "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 0.0},
         "terrain": {"size_m": [length_m + 8.0, 6.0], "origin_m": [-4.0, -3.0], "cell_m": 0.1, "passes": 1,
                     "subsoil_depths_m": list(DEPTHS)},

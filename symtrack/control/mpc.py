@@ -82,13 +82,14 @@ from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
 
 __all__ = ["MPCSettings", "MPCStats", "PREDICTIONS", "PREDICTION_HULLS", "PathTrackingMPC", "QS_HULL_VARIABLES",
-           "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M", "realtime_figures"]
+           "RTI_COLD_STARTS", "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M", "realtime_figures"]
 
 log = logging.getLogger("symtrack.control.mpc")
 
 SOLVERS = ("ipopt", "fatrop")  # the NLP solvers (also the fallbacks)
 SOLVER_CHOICES = SOLVERS + ("rti",)  # rti: real-time iteration (symtrack.control.rti)
 PREDICTIONS = ("vehicle", "full")
+RTI_COLD_STARTS = ("solution", "shift")  # MPCSettings.rti_cold_start
 PREDICTION_HULLS = ("auto", "quasi_static", "dynamic")
 # The quasi-static hull's algebraic variables (mpc.prediction_hull = "quasi_static"): the CG's height
 # above the ground under it [m], the pitch and the roll [rad], each scaled by 1 mm (1 mrad): the hull's
@@ -183,6 +184,11 @@ class MPCSettings:
     # there, IPOPT's fallback hitting max_iter; measured, docs/control.md); each costs about 2 ms
     # and only on a rejected step
     rti_relinearisations: int = 3
+    # where the RTI prepares its first feedback after the cold start: "solution" linearises at the
+    # cold solution itself (the measurement it solved for; straight_offset's 1 m approach needs it),
+    # "shift" at its shift one sample ahead (what an operation's follower keeps: from "solution" the
+    # random-traffic season of tests/test_traffic_sweep.py left its path at t = 46.9 s, measured)
+    rti_cold_start: str = "solution"
 
     def __post_init__(self):
         def rng(name, lo, hi, integer=False, lo_open=False):
@@ -210,6 +216,9 @@ class MPCSettings:
         rng("rti_max_defect", 0.0, 1e6, lo_open=True)
         rng("rti_step_halvings", 0, 20, integer=True)
         rng("rti_relinearisations", 0, 10, integer=True)
+        if self.rti_cold_start not in RTI_COLD_STARTS:
+            raise ParameterError(f"mpc.rti_cold_start = {self.rti_cold_start!r} is not one of "
+                                 f"{', '.join(RTI_COLD_STARTS)}")
         if self.prediction_lateral_creep_speed_m_s is not None:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
         if self.prediction_sliding_smoothing is not None:
@@ -858,11 +867,14 @@ class PathTrackingMPC:
             # shift one sample ahead. From the shift, straight_offset's first sample (1 m offset, the
             # torques swinging by 4 kN m in the first sample) started 1.9 (scaled) off the measurement
             # and failed (the RTI step and IPOPT's fallback).
-            try:
-                self.rti.prepare_at(w, self.p_model, self._cells(x_cells))
-            except (RuntimeError, np.linalg.LinAlgError) as err:
-                log.warning("RTI preparation failed (%s); the first sample prepares again", err)
-                self.rti.lin = None
+            if self.settings.rti_cold_start == "shift":
+                self._prepare_next_rti(x_cells)
+            else:
+                try:
+                    self.rti.prepare_at(w, self.p_model, self._cells(x_cells))
+                except (RuntimeError, np.linalg.LinAlgError) as err:
+                    log.warning("RTI preparation failed (%s); the first sample prepares again", err)
+                    self.rti.lin = None
         return info
 
     def _accept(self, wopt):

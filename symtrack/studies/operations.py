@@ -109,6 +109,8 @@ PLAN_ACCEL_M_S2 = 0.4
 # fallbacks (the slowest solve 1.6 / 1.7 s) at the U-turns' entries; 6 none of either on both soils
 # (the slowest solve 5.5 / 6.1 ms)
 OPERATION_RTI_STEP_HALVINGS = 6
+# (the follower keeps one relinearisation and the cold start's shifted preparation, as it was measured
+# with; MPCSettings' defaults for the MPC scenarios are 3 and "solution")
 # the steering map's curvatures (1/m) besides the turn's own: straight running to a 12 m radius
 MAP_CURVATURES = (0.0, 1 / 400, 1 / 150, 1 / 60, 1 / 30, 1 / 12)
 
@@ -1134,7 +1136,8 @@ def _mpc_follower(plan: OperationPlan, sc, plant, fs: OperationSettings, duratio
     at the first segment's speed, placed at the path's start)."""
     model = system_model(sc.model, sc.surface)
     settings = MPCSettings(solver="rti", torque_max_N_m=fs.torque_limit_N_m,
-                           rti_step_halvings=OPERATION_RTI_STEP_HALVINGS)
+                           rti_step_halvings=OPERATION_RTI_STEP_HALVINGS, rti_relinearisations=1,
+                           rti_cold_start="shift")
     mpc = PathTrackingMPC(model, sc.params, settings)
     v0 = float(plan.path.speed[0])
     tp = trim(model, sc.params, v0)
