@@ -1,7 +1,7 @@
 """A wheeled machine's pass over a field: the tyres' footprints (symtrack/terrain/tyre.py) moved
-along a path, the largest vertical and mean normal stress each cell's soil carries at the
-terrain's subsoil depths, folded into the terrain's record and compression state as a crawler's
-pass is (docs/subsoil.md, "Wheeled machines"). Python/numpy over the terrain's arrays; the terrain
+along a path, the largest vertical stress each cell's soil carries at the terrain's subsoil depths,
+folded into the terrain's record and, with the soil's own weight, into its compression state as a
+crawler's pass is (docs/subsoil.md, "Wheeled machines" and "One soil"; no rut, so no rut bound). Python/numpy over the terrain's arrays; the terrain
 engine is not involved, and the surface (sinkage, ruts) is not changed.
 """
 
@@ -89,8 +89,7 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
         return K[inside], XC[inside], YC[inside]
 
     n_d = len(depths)
-    sig = np.zeros((g.n_cells, n_d))
-    pm = np.zeros((g.n_cells, n_d))
+    sig = np.zeros((g.n_cells, n_d))  # the pass's largest vertical stress (the density's and the risk's)
     if tables is not None:
         if len(tables) != len(wheels):
             raise ParameterError(f"tables has {len(tables)} entries for {len(wheels)} wheels")
@@ -109,14 +108,10 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
                 continue
             nxc, nyc = np.concatenate([f[1] for f in found])[first], np.concatenate([f[2] for f in found])[first]
             sz = np.zeros((near.size, n_d))
-            p = np.zeros((near.size, n_d))
             for (wx, wy), tb in zip(centres, tables, strict=True):
                 dxw, dyw = nxc - wx, nyc - wy
-                a, b = tb.at(c * dxw + s * dyw, -s * dxw + c * dyw)
-                sz += a
-                p += b
+                sz += tb.at(c * dxw + s * dyw, -s * dxw + c * dyw)[0]
             sig[near] = np.maximum(sig[near], sz)
-            pm[near] = np.maximum(pm[near], p)
             continue
         for w in wheels:
             wx, wy = X + c * w.x_m - s * w.y_m, Y + s * w.x_m + c * w.y_m
@@ -137,10 +132,9 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
                     fx.append(ox + c * o.contact.x_m - s * o.contact.y_m)
                     fy.append(oy + s * o.contact.x_m + c * o.contact.y_m)
                     ff.append(o.contact.force_kN)
-            sz, p = footprint_stress_at_depth(np.concatenate(fx), np.concatenate(fy), np.concatenate(ff),
+            sz, _ = footprint_stress_at_depth(np.concatenate(fx), np.concatenate(fy), np.concatenate(ff),
                                               nxc, nyc, depths, xi)
             np.maximum.at(sig, near, sz)
-            np.maximum.at(pm, near, p)
     loaded = np.flatnonzero(sig.max(axis=1) > 0)
     np.maximum(terrain.sigma_max, (1e3 * sig).astype(np.float32), out=terrain.sigma_max)
     soils = terrain_soils(terrain) if soils is None else soils
