@@ -1,8 +1,9 @@
-"""A wheeled machine's pass over a field: the tyres' footprints (symtrack/terrain/tyre.py) moved
-along a path, the largest vertical stress each cell's soil carries at the terrain's subsoil depths,
-folded into the terrain's record and, with the soil's own weight, into its compression state as a
-crawler's pass is (docs/subsoil.md, "Wheeled machines" and "One soil"; no rut, so no rut bound). Python/numpy over the terrain's arrays; the terrain
-engine is not involved, and the surface (sinkage, ruts) is not changed.
+"""A wheeled machine's pass over a field: the tyres' footprints (symtrack/terrain/tyre.py) moved along
+a path, the largest vertical stress each cell's soil carries at the terrain's subsoil depths, folded
+into the terrain's record and, with the soil's own weight, into its compression state as a crawler's
+pass is (docs/subsoil.md, "Wheeled machines" and "One soil"; no rut, so no rut bound). Python/numpy
+over the terrain's arrays; the terrain engine is not involved, and the surface (sinkage, ruts) is
+not changed.
 """
 
 from __future__ import annotations
