@@ -64,6 +64,8 @@ from ..foundations.errors import ParameterError, ScenarioError
 from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_PARAMS
 from ..soil.pedotransfer import (
     DESCRIPTION_KEYS,
+    SEVERIANO_2013_CLASSES,
+    clay_class,
     derive_soil,
     precompression_from_virgin_line_kPa,
     virgin_line_N_from_precompression,
@@ -90,15 +92,8 @@ _DEFOSSEZ_KAPPA = 0.0058
 DEFOSSEZ_RANGE_PERCENT = (5.0, 30.0)
 COMPRESSION_PTFS = tuple(_DEFOSSEZ)
 
-# Severiano et al. (2013) as soilphysics' soilStrength (PredComp.R) codes it, per clay class:
-# (upper clay bound %, a, b of sigma_pc = a h^b, theta_s, theta_r, alpha [1/kPa], n)
-SEVERIANO_2013_CLASSES = (
-    (20.0, 129.0, 0.15, 0.42, 0.049356, 0.79, 1.72),
-    (31.0, 123.3, 0.13, 0.45, 0.08689, 0.72, 1.56),
-    (37.0, 85.0, 0.17, 0.46, 0.10696, 1.66, 1.52),
-    (52.0, 70.1, 0.16, 0.50, 0.125941, 2.04, 1.47),
-    (100.0, 62.7, 0.15, 0.51, 0.139358, 2.27, 1.38),
-)
+# Severiano et al.'s (2013) table per clay class (a, b of sigma_pc = a h^b, the van Genuchten curve):
+# its one home is symtrack/soil/pedotransfer.py (SEVERIANO_2013_CLASSES, clay_class)
 
 
 def _poly(c, x):
@@ -118,19 +113,6 @@ def defossez_2003(water_content_kg_per_kg, compression_ptf: str) -> tuple[float,
                              f"{compression_ptf} [{lo / 100}, {hi / 100}] (Défossez et al. 2003: 5-30 %)")
     cN, cL = _DEFOSSEZ[compression_ptf]
     return _poly(cN, w), _poly(cL, w), _DEFOSSEZ_KAPPA
-
-
-def clay_class(clay_percent) -> int:
-    """Severiano et al.'s clay class (0..4) of a clay content in %: < 20, 20-31, 31-37, 37-52, > 52."""
-    c = float(clay_percent)
-    if not (math.isfinite(c) and 0.0 <= c <= 100.0):
-        raise ParameterError(f"clay_percent = {clay_percent!r} is outside the allowed range [0, 100] (%)")
-    if c < SEVERIANO_2013_CLASSES[0][0]:
-        return 0
-    for k, row in enumerate(SEVERIANO_2013_CLASSES[1:], start=1):
-        if c <= row[0]:
-            return k
-    return len(SEVERIANO_2013_CLASSES) - 1
 
 
 def severiano_2013_suction_kPa(theta_m3_per_m3, clay_percent) -> float:

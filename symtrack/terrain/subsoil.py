@@ -84,6 +84,7 @@ import math
 import numpy as np
 
 from ..foundations.errors import ParameterError
+from ..soil.pedotransfer import SL2018
 
 __all__ = ["DEFAULT_DEPTHS_M", "DEFAULT_REACH_M", "MEAN_STRESS_XI_MIN", "MEAN_T_STEP_PER_DEPTH",
            "MEAN_X_STEP_PER_DEPTH", "RISK_HIGH_ABOVE", "RISK_LOW_BELOW",
@@ -432,9 +433,8 @@ def update_max(sigma_max, cells, sigma):
     return sigma_max
 
 
-# Schjønning & Lamandé (2018), as implemented by the soilphysics R package (soilStrength2):
-# sqrt(sigma_pc / kPa) = c0 + c_rho rho_b + c_clay clay + c_clay_pF clay pF, floored at 0
-PTF_SL2018 = {"c0": -26.51, "c_rho": 25.57, "c_clay": -20.40, "c_clay_pF": 10.26}
+# Schjønning & Lamandé's (2018) coefficients: their one home is symtrack/soil/pedotransfer.py
+PTF_SL2018 = SL2018
 
 
 def precompression_stress_kPa(bulk_density_Mg_m3, matric_suction_hPa, clay_kg_kg):
