@@ -29,3 +29,27 @@ def small_field(name: str, run: dict | None = None, terrain: dict | None = None,
     if torque is not None:
         d["torque"] = copy.deepcopy(torque)
     return d
+
+
+# one pass of 0.3 m on an 8 m x 4 m field at 0.25 m on the terrain engine: the in-place terrain runs of
+# the file-safety tests (test_run_folder, test_terrain_file_checks, test_terrain_locks)
+TINY_INPLACE_TOML = """
+name = "tiny_inplace"
+[run]
+duration_s = 5.0
+output_dt_s = 0.05
+integrator = "grid_fast"
+stop_after_distance_m = 0.3
+[vehicle]
+preset = "reference_crawler"
+[soil]
+preset = "clayey_soil_thailand_38"
+[terrain]
+size_m = [8.0, 4.0]
+origin_m = [-2.0, -2.0]
+cell_m = 0.25
+[[torque]]
+t_s = 0.0
+left_N_m = 1500.0
+right_N_m = 1500.0
+"""

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from small_field import TINY_INPLACE_TOML
 
 from symtrack.cli.main import main
 from symtrack.foundations.errors import ScenarioError
@@ -150,27 +151,7 @@ def test_the_folder_lock_is_removed_on_an_error_and_on_ctrl_c(tmp_path):
     assert out.is_dir() and not any(out.iterdir())
 
 
-# one pass of 0.5 m on a 32 x 16 field on the terrain engine (tests/test_commit_once.py's)
-TINY = """
-name = "tiny_inplace"
-[run]
-duration_s = 5.0
-output_dt_s = 0.05
-integrator = "grid_fast"
-stop_after_distance_m = 0.3
-[vehicle]
-preset = "reference_crawler"
-[soil]
-preset = "clayey_soil_thailand_38"
-[terrain]
-size_m = [8.0, 4.0]
-origin_m = [-2.0, -2.0]
-cell_m = 0.25
-[[torque]]
-t_s = 0.0
-left_N_m = 1500.0
-right_N_m = 1500.0
-"""
+TINY = TINY_INPLACE_TOML
 
 
 @pytest.fixture()

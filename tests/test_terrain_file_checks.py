@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from small_field import TINY_INPLACE_TOML
 
 from symtrack.cli.main import main
 from symtrack.foundations.errors import ScenarioError
@@ -19,27 +20,7 @@ from symtrack.terrain.storage import Grid, Terrain
 SOIL = "clayey_soil_thailand_38"
 SHAPE = (32, 16)
 
-# one pass of 0.3 m on a 32 x 16 field on the terrain engine (tests/test_run_folder.py's)
-TINY = """
-name = "tiny_inplace"
-[run]
-duration_s = 5.0
-output_dt_s = 0.05
-integrator = "grid_fast"
-stop_after_distance_m = 0.3
-[vehicle]
-preset = "reference_crawler"
-[soil]
-preset = "clayey_soil_thailand_38"
-[terrain]
-size_m = [8.0, 4.0]
-origin_m = [-2.0, -2.0]
-cell_m = 0.25
-[[torque]]
-t_s = 0.0
-left_N_m = 1500.0
-right_N_m = 1500.0
-"""
+TINY = TINY_INPLACE_TOML
 
 
 def _field(path: Path, **arrays) -> Path:
