@@ -14,7 +14,7 @@ import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model import parameters as P
 from symtrack.simulation.scenario import scenario_from_dict
-from symtrack.soil.pedotransfer import K2_POSITION_OSR
+from symtrack.soil.pedotransfer import K2_POSITION_OSR, SUBSOIL_KEYS
 from symtrack.terrain import density as D
 from symtrack.terrain import moisture as M
 from symtrack.terrain import subsoil as S
@@ -139,6 +139,7 @@ def test_mean_stress_tables_against_the_radial_stress(xi):
 
 def _terrain(rng):
     soil = {n: 1.0 for n in P.SOIL_PARAM_NAMES} | {"clay_kg_per_kg": 0.2, "silt_kg_per_kg": 0.4, "sand_kg_per_kg": 0.4}
+    soil |= {sub: soil[top] for top, sub in SUBSOIL_KEYS.items()}  # one layer
     t = Terrain(Grid((0.0, 0.0), 0.1, (6, 5)), soil, (0.1, 0.3))
     t.specific_volume[:] = np.where(rng.random(t.specific_volume.shape) < 0.5, 0.0,
                                     rng.uniform(1.3, 1.8, t.specific_volume.shape)).astype(np.float32)
@@ -178,7 +179,8 @@ def test_soil_parameters_added_since_an_old_file_take_the_defaults(tmp_path):
     t.save(f)
     with np.load(f) as z:
         d = {k: z[k] for k in z.files}
-    keep = [i for i, n in enumerate(d["soil_names"]) if str(n) not in D.COMPRESSION_PARAM_NAMES]
+    keep = [i for i, n in enumerate(d["soil_names"]) if str(n) not in D.COMPRESSION_PARAM_NAMES
+            and not str(n).startswith("subsoil_")]  # (a file before the subsoil layer has none)
     d["soil_names"], d["soil_values"] = d["soil_names"][keep], d["soil_values"][keep]
     np.savez_compressed(f, **d)
     back = Terrain.load(f)
@@ -193,6 +195,8 @@ def test_soil_parameters_added_since_an_old_file_take_the_defaults(tmp_path):
     assert back.soil["yield_line_offset_ln_p"] == P.YIELD_LINE_OFFSET_DEFAULT
     assert back.soil["specific_volume_min"] == 1.0
     assert back.soil["yield_compression_index_k2"] == pytest.approx(kap + K2_POSITION_OSR * (lam - kap), rel=1e-15)
+    # a file before the subsoil layer: a soil of one layer (its subsoil's description the topsoil's)
+    assert all(back.soil[sub] == back.soil[top] for top, sub in SUBSOIL_KEYS.items())
 
 
 # the shared small field (tests/small_field.py) through the terrain engine, 3 passes of 0.5 m
@@ -214,6 +218,36 @@ def test_multipass_density_table():
     st = run.terrain
     never = st.zmax == 0
     assert never.any() and not st.specific_volume[never].any()
+
+
+def test_a_soil_of_two_layers_through_a_run_and_its_terrain_file(tmp_path):
+    """A denser, drier subsoil below 0.3 m on the small field: the summary's initial density and the
+    risk's strength by depth are each layer's; the densities after the passes are at least each layer's
+    initial; the terrain file keeps the layered soil (schema 5) and a continued pass folds on it."""
+    from symtrack.soil.pedotransfer import is_layered, subsoil_set
+
+    d = copy.deepcopy(SMALL)
+    d["terrain"]["passes"] = 2
+    d["soil"].update(subsoil_bulk_density_initial_Mg_per_m3=1.45, subsoil_matric_suction_kPa=8.0)
+    run = symtrack.simulate(scenario_from_dict(d))
+    soil = run.scenario.params
+    assert is_layered(soil)
+    sub = subsoil_set(soil)
+    s = run.summary
+    assert s["subsoil_depths_m"] == [0.1, 0.3, 0.5, 0.8]
+    rho0, rho_sub = soil["bulk_density_initial_Mg_per_m3"], sub["bulk_density_initial_Mg_per_m3"]
+    assert s["bulk_density_initial_Mg_per_m3"] == pytest.approx([rho0, rho_sub, rho_sub, rho_sub], rel=1e-15)
+    pcs = [1e-3 * soil["precompression_stress_Pa"]] + [1e-3 * sub["precompression_stress_Pa"]] * 3
+    for p in s["passes"]:
+        assert p["subsoil_precompression_stress_by_depth_kPa"] == pytest.approx(pcs, rel=1e-15)
+        assert np.all(np.array(p["bulk_density_max_Mg_per_m3"]) >= np.array(s["bulk_density_initial_Mg_per_m3"]))
+    f = tmp_path / "layered.npz"
+    run.terrain.save(f, soil=soil)
+    with np.load(f) as z:
+        assert int(z["schema_version"]) == 5
+    back = Terrain.load(f)
+    assert is_layered(back.soil) and back.soil["subsoil_bulk_density_initial_Mg_per_m3"] == 1.45
+    assert np.array_equal(back.specific_volume, run.terrain.specific_volume)
 
 
 # O'Sullivan & Robertson's model with its yield line, the parameter set of soilphysics' documented

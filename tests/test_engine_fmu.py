@@ -417,14 +417,21 @@ def test_without_the_subsoil_stress_the_fmu_and_its_field_file_leave_it_out(tmp_
 
 
 # a soil with O'Sullivan & Robertson's yield line and a saturation bound that binds under the crawler
-# (test values for the validation soil's lines: k2 between its kappa 0.042 and lambda 0.193)
-YIELD = ["soil.yield_line_offset_ln_p=1.3", "soil.yield_compression_index_k2=0.09", "soil.specific_volume_min=1.6"]
+# (test values for the validation soil's lines: k2 between its kappa 0.042 and lambda 0.193), and a denser,
+# drier subsoil layer below 0.3 m (its own initial state, lines and strength at the deeper depths)
+YIELD = ["soil.yield_line_offset_ln_p=1.3", "soil.yield_compression_index_k2=0.09", "soil.specific_volume_min=1.6",
+         "soil.subsoil_bulk_density_initial_Mg_per_m3=1.4", "soil.subsoil_matric_suction_kPa=6"]
 
 
 def test_the_yield_line_and_the_saturation_bound_fold_as_python_does_bit_for_bit(tmp_path):
-    """The C port of density.load_update (the yield line's k2 path, the saturation bound) in the FMU's
-    end of pass: two passes, the compression state equal to the Python run's to the last bit."""
+    """The C port of density.load_update (the yield line's k2 path, the saturation bound, each depth's
+    layer) in the FMU's end of pass: two passes, the compression state equal to the Python run's to the
+    last bit."""
     sc = load_scenario("validation_grid", PASS + YIELD)
+    from symtrack.terrain import density
+
+    layers = density.soil_arrays([sc.params], sc.terrain.subsoil_depths_m)
+    assert not layers["top"][0].all() and len(set(layers["v0"][0])) == 2 and len(set(layers["pc"][0])) == 2
     exported = fmu_export.export_fmu(sc, tmp_path / "yield.fmu")
     ref = simulate(sc)
     py_npz = tmp_path / "python.npz"
@@ -456,26 +463,29 @@ def _older_field(src, dst, drop):
 
 
 def test_a_field_file_written_before_the_soil_description_loads_with_the_defaults(exported, tmp_path):
-    """Field files of an older symtrack (without the four parameters of the soil's description, appended
-    to the list) load in Python with the registry's defaults of those, every other value and array the
-    same; a file lacking a parameter that has no default is refused."""
+    """Field files of an older symtrack (without the four parameters of the soil's description and the
+    subsoil layer's, appended to the list) load in Python with the registry's defaults of those and the
+    subsoil's description its topsoil's, every other value and array the same; a file lacking a parameter
+    that has neither is refused."""
     from symtrack.model.parameters import SOIL_PARAM_NAMES
-    from symtrack.soil.pedotransfer import DESCRIPTION_KEYS
+    from symtrack.soil.pedotransfer import DESCRIPTION_KEYS, SUBSOIL_KEYS
 
     sc = load_scenario("validation_grid", PASS)
     full = tmp_path / "full.field"
     _master(exported, sc, 1.0, {"field_file_out": str(full)})
     old = tmp_path / "old.field"
-    _older_field(full, old, len(DESCRIPTION_KEYS))
+    added = SOIL_PARAM_NAMES[SOIL_PARAM_NAMES.index(DESCRIPTION_KEYS[0]):]
+    assert set(added) == set(DESCRIPTION_KEYS) | set(SUBSOIL_KEYS.values()) | {"subsoil_top_m"}
+    _older_field(full, old, len(added))
     a, b = fieldfile.read_field(full), fieldfile.read_field(old)
-    assert {k: v for k, v in a.soil.items() if k not in DESCRIPTION_KEYS} == \
-        {k: v for k, v in b.soil.items() if k not in DESCRIPTION_KEYS}
-    assert all(b.soil[k] == storage.spec(k).default for k in DESCRIPTION_KEYS)
+    assert {k: v for k, v in a.soil.items() if k not in added} == {k: v for k, v in b.soil.items() if k not in added}
+    assert all(b.soil[k] == storage.spec(k).default for k in DESCRIPTION_KEYS + ("subsoil_top_m",))
+    assert all(b.soil[sub] == b.soil[top] for top, sub in SUBSOIL_KEYS.items())
     for name in STORAGE:
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
     # cut further, into parameters without a default: refused by both
-    n_defaulted = len(list(itertools.takewhile(lambda n: storage.spec(n).default is not None,
-                                               reversed(SOIL_PARAM_NAMES))))
+    n_defaulted = len(list(itertools.takewhile(lambda n: storage.spec(n).default is not None
+                                               or n in fieldfile.SAME_AS_TOPSOIL, reversed(SOIL_PARAM_NAMES))))
     bad = tmp_path / "bad.field"
     _older_field(full, bad, n_defaulted + 1)
     with pytest.raises(ScenarioError, match="soil values"):

@@ -127,3 +127,81 @@ def test_risk_and_density_agree(name):
     assert np.all(v0 - v1[low] <= bound * (1 + 1e-12))
     # the stated amount: at most 2.5 % of the initial density on every preset
     assert bound / (v0 - bound) < 0.025
+
+
+# ---- two layers: a subsoil described apart from the topsoil (pedotransfer.SUBSOIL_KEYS) -------------------
+
+def _layered(**kw):
+    """The loam with a denser, drier subsoil below 0.3 m (or ``kw``)."""
+    return _loam(**{"subsoil_bulk_density_initial_Mg_per_m3": 1.65, "subsoil_matric_suction_kPa": 30.0, **kw})
+
+
+def test_a_soil_is_one_layer_unless_its_subsoil_is_described():
+    s = _loam()
+    assert not PT.is_layered(s) and PT.subsoil_set(s) is s
+    assert all(s[sub] == s[top] for top, sub in PT.SUBSOIL_KEYS.items())
+    # one layer: the per-depth tables are the per-soil values at every depth, bit for bit
+    a, b = D.soil_arrays([s]), D.soil_arrays([s], DEPTHS)
+    assert b["top"].all() and all(np.array_equal(b[k][0], np.full(4, a[k][0])) for k in a)
+    # a changed topsoil moves the subsoil with it while the subsoil is not described
+    denser = _loam()
+    denser.update(bulk_density_initial_Mg_per_m3=1.6)  # (a set's update keeps what was derived)
+    denser = check_set(denser, SOIL_PARAMS, "soil")
+    assert denser["subsoil_bulk_density_initial_Mg_per_m3"] == 1.6 and not PT.is_layered(denser)
+
+
+def test_a_described_subsoil_has_its_own_lines_strength_and_weight():
+    s = _layered()
+    assert PT.is_layered(s)
+    sub = PT.subsoil_set(s)
+    # the subsoil's own PTFs: Schjoenning & Lamande at its density and suction, Keller & Arvidsson at its v0
+    assert sub["precompression_stress_Pa"] == pytest.approx(1e3 * PT.schjonning_lamande_2018_kPa(1.65, 30.0, 0.10),
+                                                            rel=1e-15)
+    assert sub["compression_index_lambda"] == pytest.approx(PT.keller_arvidsson_2007(2.65, 1.65)[1], rel=1e-15)
+    assert sub["precompression_stress_Pa"] > s["precompression_stress_Pa"]
+    a = D.soil_arrays([s], DEPTHS)
+    assert list(a["top"][0]) == [True, False, False, False]  # 0.3 m is the subsoil's top
+    assert a["pc"][0, 0] == s["precompression_stress_Pa"] and np.all(a["pc"][0, 1:] == sub["precompression_stress_Pa"])
+    assert a["v0"][0, 0] == pytest.approx(2.65 / 1.55) and np.all(a["v0"][0, 1:] == pytest.approx(2.65 / 1.65))
+    # the own weight: the topsoil's moist weight to 0.3 m, the subsoil's below
+    g_top = 1e3 * PT.moist_bulk_density_Mg_per_m3(s) * 9.81
+    g_sub = 1e3 * PT.moist_bulk_density_Mg_per_m3(sub) * 9.81
+    assert D.geostatic_table([s], DEPTHS)[0] == pytest.approx(
+        [0.1 * g_top, 0.3 * g_top, 0.3 * g_top + 0.2 * g_sub, 0.3 * g_top + 0.5 * g_sub], rel=1e-15)
+    # a user's topsoil strength is the topsoil's: the subsoil keeps its PTF strength
+    weak = _layered(precompression_stress_Pa=40e3)
+    assert PT.subsoil_set(weak)["precompression_stress_Pa"] == sub["precompression_stress_Pa"]
+
+
+def test_bad_subsoil_descriptions_are_refused_naming_the_key():
+    with pytest.raises(ParameterError, match=r"subsoil_clay_kg_per_kg \+ subsoil_silt_kg_per_kg"):
+        _loam(subsoil_clay_kg_per_kg=0.5)
+    with pytest.raises(ParameterError, match="subsoil_bulk_density_initial_Mg_per_m3 = 2.8 must be in"):
+        _loam(subsoil_bulk_density_initial_Mg_per_m3=2.8)
+    with pytest.raises(ParameterError, match="subsoil_matric_suction_kPa = -2"):
+        _loam(subsoil_matric_suction_kPa=-2.0)
+    with pytest.raises(ParameterError, match="subsoil_top_m = 0"):
+        _layered(subsoil_top_m=0.0)
+
+
+def test_a_pass_folds_each_depth_on_its_layers_lines():
+    """The same stress on a one-layer and a two-layer soil: the topsoil's depth moves the same, the
+    subsoil's depths move by their own lines from their own initial state (the fold equals
+    density.load_update with the subsoil's arrays), and the cap keeps the column within the rut."""
+    one, two = _loam(), _layered()
+    p = np.full((1, 4), 150e3, dtype=np.float32)
+    sv1, sv2 = np.zeros((1, 4), np.float32), np.zeros((1, 4), np.float32)
+    si = np.zeros(1, dtype=np.intp)
+    D.pass_update(sv1, p, si, [one], depths_m=DEPTHS, geostatic_Pa=D.geostatic_table([one], DEPTHS))
+    geo2 = D.geostatic_table([two], DEPTHS)
+    D.pass_update(sv2, p, si, [two], depths_m=DEPTHS, geostatic_Pa=geo2)
+    assert sv2[0, 0] == sv1[0, 0] > 0
+    b = D.soil_arrays([PT.subsoil_set(two)])
+    lnp = np.log(1e-3 * (150e3 + geo2[0, 1:]))
+    want = D.load_update(np.full(3, b["v0"][0]), lnp, *(b[k][0] for k in (
+        "N", "lambda", "kappa", "lambda_minus_kappa", "m", "k2", "v_min")))
+    assert np.array_equal(sv2[0, 1:], np.where(want < b["v0"][0], want, 0.0).astype(np.float32))
+    rho = D.bulk_density(sv2, si, [two], DEPTHS)[0]
+    assert rho[1] > 1.65 and rho[0] > 1.55
+    with pytest.raises(ParameterError, match="depths"):
+        D.pass_update(sv2, p, si, [two])

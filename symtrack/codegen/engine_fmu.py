@@ -50,6 +50,7 @@ from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 from ..model.vehicle import INPUTS
 from ..native.generate import unit_of
 from ..simulation.scenario import Scenario
+from ..terrain import fieldfile
 from ..toolchain import BuildSpec, build, casadi_tag, digest
 from .fmu_common import (
     FMI2_HEADERS,
@@ -252,6 +253,9 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
     body += c_array("ef_soil_defaults", [0.0 if spec(n).default is None else float(spec(n).default)
                                          for n in SOIL_PARAM_NAMES])
     body += c_array("ef_soil_has_default", [spec(n).default is not None for n in SOIL_PARAM_NAMES], "int")
+    # a subsoil value that a file lacks is its topsoil's (fieldfile.SAME_AS_TOPSOIL): that value's index, else -1
+    body += c_array("ef_soil_same_as", [SOIL_PARAM_NAMES.index(fieldfile.SAME_AS_TOPSOIL[n])
+                                        if n in fieldfile.SAME_AS_TOPSOIL else -1 for n in SOIL_PARAM_NAMES], "int")
     # the day's soil parameters (moisture) are the scenario's on loading a terrain (storage.load): not compared
     body += c_array("ef_soil_checked", [0 if n in SOIL_DAY_PARAM_NAMES else 1 for n in SOIL_PARAM_NAMES], "int")
     body += _subsoil_constants(parts)
@@ -278,15 +282,14 @@ def _subsoil_constants(parts: dict) -> str:
     out = f"#define EF_N_DEPTHS {len(depths)}\n" + c_array("ef_depths", depths) + _tables("sub", state.subsoil)
     if state.subsoil_p is None:  # the concentration factor admits no mean normal stress: no bulk density
         return out + "#define EF_DENSITY 0\n"
-    a = density.soil_arrays(world.soils)
+    # each depth's layer's lines (a soil of two layers: its subsoil's below subsoil_top_m)
+    a = density.soil_arrays(world.soils[:1], depths)
+    arrays = "".join(c_array(f"ef_dens_{name}", a[key][0]) for name, key in (
+        ("N", "N"), ("lmk", "lambda_minus_kappa"), ("v0", "v0"), ("lambda", "lambda"), ("kappa", "kappa"),
+        ("m", "m"), ("k2", "k2"), ("vmin", "v_min"))) + c_array(
+        "ef_dens_geo", density.geostatic_table(world.soils[:1], depths)[0])
     return (out + "#define EF_DENSITY 1\n" + _tables("subp", state.subsoil_p)
-            + f"#define EF_DENS_N {c_literal(a['N'][0])}\n#define EF_DENS_LMK {c_literal(a['lambda_minus_kappa'][0])}\n"
-            + f"#define EF_DENS_V0 {c_literal(a['v0'][0])}\n#define EF_DENS_LAMBDA {c_literal(a['lambda'][0])}\n"
-            + f"#define EF_DENS_KAPPA {c_literal(a['kappa'][0])}\n#define EF_DENS_M {c_literal(a['m'][0])}\n"
-            + f"#define EF_DENS_K2 {c_literal(a['k2'][0])}\n#define EF_DENS_VMIN {c_literal(a['v_min'][0])}\n"
-            + f"#define EF_DENS_YIELD {1 if a['m'][0] > 0 else 0}\n"
-            + "static const double ef_dens_geo[EF_N_DEPTHS] = {"
-            + ", ".join(c_literal(v) for v in density.geostatic_table(world.soils[:1], depths)[0]) + "};\n")
+            + f"#define EF_DENS_YIELD {1 if (a['m'][0] > 0).any() else 0}\n" + arrays)
 
 
 def _documentation(sc: Scenario, variables) -> bytes:

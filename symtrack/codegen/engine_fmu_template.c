@@ -248,7 +248,8 @@ static fmi2Status read_field(Instance *c, const char *path) {
     goto done;
   }
   /* a file written before soil parameters were added (they are appended to the list) has fewer values:
-     the missing ones take the registry's defaults (fieldfile.read_field does the same); none may lack one */
+     the missing ones take the registry's defaults, a subsoil value its topsoil's (fieldfile.read_field does
+     the same); none may lack both */
   if (n_soil > EF_N_SOIL || n_soil < 1) {
     (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters", path, (unsigned)n_soil, EF_N_SOIL);
     goto done;
@@ -259,6 +260,10 @@ static fmi2Status read_field(Instance *c, const char *path) {
     goto done;
   }
   for (int i = (int)n_soil; i < EF_N_SOIL; ++i) {
+    if (ef_soil_same_as[i] >= 0) { /* a subsoil value of a file written before the subsoil layer: its topsoil's */
+      soil[i] = soil[ef_soil_same_as[i]];
+      continue;
+    }
     if (!ef_soil_has_default[i]) {
       (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters and %s has no default", path,
                  (unsigned)n_soil, EF_N_SOIL, ef_soil_names[i]);
@@ -479,21 +484,21 @@ static fmi2Status end_pass(Instance *c) {
       for (long long k = 0; k < EF_N_DEPTHS; ++k) {
         const long long q = cell * EF_N_DEPTHS + k;
         const double s = (double)E->sig_pass[q], old = (double)c->specific_volume[q];
-        const double v_old = old > 0 ? old : EF_DENS_V0;
+        const double v_old = old > 0 ? old : ef_dens_v0[k];
         if (!(s > 0)) continue;
         const double p = s + ef_dens_geo[k]; /* the soil's own weight (density.geostatic_table) */
         const double lnp = log(1e-3 * p);
-        double line = EF_DENS_N - EF_DENS_LMK * lnp;
+        double line = ef_dens_N[k] - ef_dens_lmk[k] * lnp;
 #if EF_DENS_YIELD
-        {
-          double xy = (EF_DENS_N - EF_DENS_LAMBDA * EF_DENS_M - v_old) / EF_DENS_LMK;
+        if (ef_dens_m[k] > 0) {
+          double xy = (ef_dens_N[k] - ef_dens_lambda[k] * ef_dens_m[k] - v_old) / ef_dens_lmk[k];
           if (!(xy > 0.0)) xy = 0.0;
-          const double k2line = v_old - (EF_DENS_K2 - EF_DENS_KAPPA) * (lnp - xy);
+          const double k2line = v_old - (ef_dens_k2[k] - ef_dens_kappa[k]) * (lnp - xy);
           line = lnp > xy ? (k2line < line ? k2line : line) : v_old;
         }
 #endif
         {
-          const double bound = EF_DENS_VMIN + EF_DENS_KAPPA * lnp;
+          const double bound = ef_dens_vmin[k] + ef_dens_kappa[k] * lnp;
           if (bound > line) line = bound;
         }
         if (line < v_old) c->specific_volume[q] = (float)line;
@@ -505,8 +510,8 @@ static fmi2Status end_pass(Instance *c) {
       double v[EF_N_DEPTHS], strain[EF_N_DEPTHS];
       for (long long k = 0; k < EF_N_DEPTHS; ++k) {
         const double old = (double)c->specific_volume[cell * EF_N_DEPTHS + k];
-        v[k] = old > 0 ? old : EF_DENS_V0;
-        strain[k] = 1.0 - v[k] / EF_DENS_V0;
+        v[k] = old > 0 ? old : ef_dens_v0[k];
+        strain[k] = 1.0 - v[k] / ef_dens_v0[k];
       }
       double total = strain[0] * ef_depths[0];
       for (long long k = 1; k < EF_N_DEPTHS; ++k)
@@ -516,7 +521,7 @@ static fmi2Status end_pass(Instance *c) {
         const double f = rut / total;
         for (long long k = 0; k < EF_N_DEPTHS; ++k) {
           const long long q = cell * EF_N_DEPTHS + k;
-          if (c->specific_volume[q] > 0) c->specific_volume[q] = (float)(EF_DENS_V0 - f * (EF_DENS_V0 - v[k]));
+          if (c->specific_volume[q] > 0) c->specific_volume[q] = (float)(ef_dens_v0[k] - f * (ef_dens_v0[k] - v[k]));
         }
       }
     }

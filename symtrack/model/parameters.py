@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from ..foundations.errors import ParameterError
-from ..soil.pedotransfer import derive_soil
+from ..soil.pedotransfer import SUBSOIL_TOP_DEFAULT_M, derive_soil
 
 
 @dataclass(frozen=True)
@@ -141,6 +141,19 @@ SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
           default=SAND_DEFAULT_KG_PER_KG),
     _spec("matric_suction_kPa", "the soil water's matric suction (10 kPa: field capacity, pF 2)", 0.0, 1e6, False,
           default=MATRIC_SUCTION_DEFAULT_KPA),
+    # the subsoil layer (symtrack/soil/pedotransfer.py, SUBSOIL_KEYS): each the topsoil's unless given
+    _spec("subsoil_top_m", "depth where the subsoil layer begins (the tillage depth; with a subsoil described "
+          "differently from the topsoil)", 0.0, 5.0, False, default=SUBSOIL_TOP_DEFAULT_M),
+    _spec("subsoil_bulk_density_initial_Mg_per_m3", "the subsoil's dry bulk density before any traffic (the "
+          "topsoil's unless given)", 0.1, 5.0, False, derived=True),
+    _spec("subsoil_clay_kg_per_kg", "the subsoil's clay fraction (the topsoil's unless given)", 0.0, 1.0,
+          derived=True),
+    _spec("subsoil_silt_kg_per_kg", "the subsoil's silt fraction (the topsoil's unless given)", 0.0, 1.0,
+          derived=True),
+    _spec("subsoil_sand_kg_per_kg", "the subsoil's sand fraction (the topsoil's unless given)", 0.0, 1.0,
+          derived=True),
+    _spec("subsoil_matric_suction_kPa", "the subsoil's matric suction (the topsoil's unless given)", 0.0, 1e6,
+          False, derived=True),
 )
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
 # the soil parameters the day's moisture sets (symtrack/terrain/moisture.py): a terrain file made on

@@ -165,11 +165,14 @@ def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
 def _default_source(name: str) -> str:
     """The comment above the registry's default constant of a parameter (parameters.py)."""
     from ..model import parameters
+    from ..soil import pedotransfer
 
     const = {"repeated_loading_exponent": "REPEATED_LOADING_EXPONENT_DEFAULT",
              "stress_concentration_factor": "STRESS_CONCENTRATION_FACTOR_DEFAULT",
-             "yield_line_offset_ln_p": "YIELD_LINE_OFFSET_DEFAULT"}.get(name)
-    lines = inspect.getsource(parameters).splitlines()
+             "yield_line_offset_ln_p": "YIELD_LINE_OFFSET_DEFAULT",
+             "specific_volume_min": "SPECIFIC_VOLUME_MIN_DEFAULT",
+             "subsoil_top_m": "SUBSOIL_TOP_DEFAULT_M"}.get(name)
+    lines = inspect.getsource(parameters).splitlines() + inspect.getsource(pedotransfer).splitlines()
     for k, line in enumerate(lines):
         if const and line.startswith(const):
             notes = []

@@ -192,7 +192,7 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     if not depths or not any("subsoil_sigma_z_max_kPa" in f for f in figures):
         return {}
     g = world.grid
-    pc = world.precompression_stress_Pa().reshape(g.shape)
+    pc = world.precompression_stress_Pa().reshape(*g.shape, len(depths))
     sig = st.sigma_max.reshape(*g.shape, len(depths))
     loaded = sig[:, :, 0] > 0
     # the risk grades the traffic's stress plus the soil's own weight (terrain/density.py)
@@ -200,12 +200,12 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     si, sj = _window(world, [loaded.astype(float)])
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
-    strengths = sorted({float(v) for v in pc[loaded]})
-    label = ", ".join(f"{1e-3 * v:.3g}" for v in strengths)
+    strengths = sorted({float(v) for v in pc[loaded].ravel()})
+    label = ", ".join(f"{1e-3 * v:.3g}" for v in strengths[:6]) + (", ..." if len(strengths) > 6 else "")
     # the profile where the stress is largest against its strength
-    ratio = (sig / pc[:, :, None]).max(axis=2)
+    ratio = (sig / pc).max(axis=2)
     worst = np.unravel_index(np.argmax(np.where(loaded, ratio, -1.0)), g.shape)
-    out = {"risk_map.png": risk_map_png(risk_class(sig[si, sj], pc[si, sj, None]), loaded[si, sj], depths, ext,
+    out = {"risk_map.png": risk_map_png(risk_class(sig[si, sj], pc[si, sj]), loaded[si, sj], depths, ext,
                                         title=f"compaction risk after all passes (strength {label} kPa)"),
            "stress_profile.png": stress_profile_png(depths, 1e-3 * sig[worst], 1e-3 * pc[worst],
                                                     label="the cell nearest its strength")}
@@ -231,7 +231,7 @@ def density_pngs(world, figures: list[dict], initial) -> dict[str, bytes]:
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
     cells = (np.arange(g.n_cells).reshape(g.shape)[si, sj]).ravel()
-    rho = bulk_density(st.specific_volume[cells], st.soil_index[cells], world.soils)
+    rho = bulk_density(st.specific_volume[cells], st.soil_index[cells], world.soils, depths)
     shape = (si.stop - si.start, sj.stop - sj.start, len(depths))
     out = {"density_map.png": density_map_png(rho.reshape(shape), depths, ext,
                                               title="dry bulk density after all passes")}

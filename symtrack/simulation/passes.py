@@ -93,7 +93,8 @@ def _subsoil_figures(world: World) -> dict:
     over the field at each, and the area fraction of each risk class at each over the cells the
     pass loaded (Terranimo's classes of stress / precompression stress). Empty when the stress
     is off or was not computed (only the terrain engine computes it). The precompression stress
-    figure is the weakest loaded cell's (a soil map gives cells different soils)."""
+    figure is the weakest loaded cell's at any depth (a soil map gives cells different soils, a
+    subsoil layer its own strength), and by depth the weakest loaded cell's at each."""
     depths = world.storage.subsoil_depths_m
     sig = world.pass_sigma
     loaded = sig[:, 0] > 0 if sig.size else np.zeros(0, dtype=bool)
@@ -101,10 +102,11 @@ def _subsoil_figures(world: World) -> dict:
         return {}
     pc = world.precompression_stress_Pa()
     total = sig.astype(np.float64) + world.geostatic_Pa()[world.storage.soil_index]
-    fr = subsoil.risk_area_fractions(total, pc[:, None], loaded, world.grid.cell_m ** 2)
+    fr = subsoil.risk_area_fractions(total, pc, loaded, world.grid.cell_m ** 2)
     out = {"subsoil_depths_m": list(depths),
            "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig[loaded].max(axis=0)],
            "subsoil_precompression_stress_kPa": 1e-3 * float(pc[loaded].min()),
+           "subsoil_precompression_stress_by_depth_kPa": [1e-3 * float(v) for v in pc[loaded].min(axis=0)],
            "subsoil_loaded_area_m2": float(fr["touched_area_m2"])}
     for name in subsoil.RISK_NAMES:
         out[f"subsoil_risk_fraction_{name}"] = [float(v) for v in fr[f"fraction_{name}"]]

@@ -44,8 +44,10 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 
-__all__ = ["DESCRIPTION_KEYS", "GRAVITY_M_S2", "K2_POSITION_OSR", "SEVERIANO_2013_CLASSES", "TEXTURE_KEYS",
-           "TEXTURE_SUM_TOLERANCE", "clay_class", "derive_soil", "geostatic_vertical_stress_Pa",
+__all__ = ["DESCRIPTION_KEYS", "GRAVITY_M_S2", "K2_POSITION_OSR", "LAYER_COMPRESSION_KEYS", "SEVERIANO_2013_CLASSES",
+           "SUBSOIL_KEYS", "SUBSOIL_TOP_DEFAULT_M", "TEXTURE_KEYS", "TEXTURE_SUM_TOLERANCE", "clay_class",
+           "derive_soil", "geostatic_profile_Pa", "geostatic_vertical_stress_Pa", "is_layered", "layer_sets",
+           "subsoil_set",
            "keller_arvidsson_2007", "moist_bulk_density_Mg_per_m3", "precompression_from_virgin_line_kPa",
            "precompression_ptf_kPa", "severiano_2013_kPa", "suction_from_water_content_kPa",
            "schjonning_lamande_2018_kPa", "van_genuchten_water_content", "virgin_line_N_from_precompression"]
@@ -54,6 +56,19 @@ GRAVITY_M_S2 = 9.81
 WATER_DENSITY_MG_PER_M3 = 1.0
 TEXTURE_KEYS = ("clay_kg_per_kg", "silt_kg_per_kg", "sand_kg_per_kg")
 DESCRIPTION_KEYS = TEXTURE_KEYS + ("matric_suction_kPa",)
+# A soil of two layers: a topsoil to the tillage depth and the subsoil below it (SoilFlex, Keller et al.
+# 2007, takes a profile of layers, each with its own compression properties; two is the profile an
+# agronomist describes from a tilled field): the soil's description is the topsoil's; these keys describe
+# the subsoil below ``subsoil_top_m``. Each is the topsoil's value unless given (then the soil is one layer).
+SUBSOIL_KEYS = {"bulk_density_initial_Mg_per_m3": "subsoil_bulk_density_initial_Mg_per_m3",
+                "clay_kg_per_kg": "subsoil_clay_kg_per_kg", "silt_kg_per_kg": "subsoil_silt_kg_per_kg",
+                "sand_kg_per_kg": "subsoil_sand_kg_per_kg", "matric_suction_kPa": "subsoil_matric_suction_kPa"}
+# the usual depth of primary tillage (mouldboard ploughing to 0.25-0.30 m): an assumption where a layered
+# soil gives no depth of its own
+SUBSOIL_TOP_DEFAULT_M = 0.3
+# the parameters a layer derives from its own description (the layer's compression line and strength)
+LAYER_COMPRESSION_KEYS = ("precompression_stress_Pa", "compression_index_lambda", "recompression_index_kappa",
+                          "virgin_line_N", "yield_compression_index_k2")
 # Schjønning & Lamandé's strength is taken where it carries the soil's own weight down to this depth
 # (the deepest subsoil records are at 0.8 m); below that, Severiano et al.'s (precompression_ptf_kPa)
 GEOSTATIC_CHECK_DEPTH_M = 1.0
@@ -208,6 +223,45 @@ def geostatic_vertical_stress_Pa(soil: dict, depths_m) -> np.ndarray:
     return 1e3 * moist_bulk_density_Mg_per_m3(soil) * GRAVITY_M_S2 * np.asarray(depths_m, dtype=np.float64)
 
 
+def is_layered(soil: dict) -> bool:
+    """True when the soil's subsoil is described differently from its topsoil (SUBSOIL_KEYS)."""
+    return any(soil.get(sub) is not None and float(soil[sub]) != float(soil[top]) for top, sub in SUBSOIL_KEYS.items())
+
+
+def subsoil_set(soil: dict) -> dict:
+    """The parameter set of the soil's subsoil layer: the soil itself when it is one layer; else its
+    description with the subsoil's density, texture and suction, and the compression line and strength
+    derived from them by the same PTFs (:func:`derive_soil`; a topsoil's given lambda, kappa or
+    sigma_pc are the topsoil's, not carried down)."""
+    if not is_layered(soil):
+        return soil
+    sub = {k: v for k, v in soil.items() if k not in LAYER_COMPRESSION_KEYS}
+    sub.update({top: soil[s] for top, s in SUBSOIL_KEYS.items()})
+    return derive_soil({**sub, **{k: None for k in LAYER_COMPRESSION_KEYS}}, "soil (its subsoil layer)")
+
+
+def layer_sets(soil: dict, depths_m) -> list[dict]:
+    """The parameter set that holds at each depth: the topsoil's above ``subsoil_top_m``, the
+    subsoil's (:func:`subsoil_set`) from it down."""
+    if not is_layered(soil):
+        return [soil] * len(depths_m)
+    top_m, sub = float(soil["subsoil_top_m"]), subsoil_set(soil)
+    return [sub if float(z) >= top_m else soil for z in depths_m]
+
+
+def geostatic_profile_Pa(soil: dict, depths_m) -> np.ndarray:
+    """The vertical stress of the soil's own weight at each depth [Pa] through its layers: the
+    topsoil's moist weight down to ``subsoil_top_m``, the subsoil's below (one layer:
+    :func:`geostatic_vertical_stress_Pa`)."""
+    z = np.asarray(depths_m, dtype=np.float64)
+    if not is_layered(soil):
+        return geostatic_vertical_stress_Pa(soil, z)
+    top_m = float(soil["subsoil_top_m"])
+    g_top = 1e3 * moist_bulk_density_Mg_per_m3(soil) * GRAVITY_M_S2
+    g_sub = 1e3 * moist_bulk_density_Mg_per_m3(subsoil_set(soil)) * GRAVITY_M_S2
+    return np.where(z < top_m, g_top * z, g_top * top_m + g_sub * (z - top_m))
+
+
 def virgin_line_N_from_precompression(v0, lambda_, kappa, precompression_stress_Pa):
     """N of the virgin line v = N - lambda ln(p / kPa) that meets the recompression line through the
     initial state (v = v0 - kappa ln p) at the precompression stress: v0 + (lambda - kappa) ln(p_c / kPa).
@@ -232,7 +286,32 @@ def derivation_note(name: str, soil: dict) -> str:
         return "derived: the virgin line through the initial state at the precompression stress (one strength)"
     if name == "yield_compression_index_k2":
         return "derived: kappa + 0.241 (lambda - kappa), the published set's position (O'Sullivan & Robertson 1996)"
+    if name.startswith("subsoil_"):
+        return "the topsoil's (one layer) unless given"
     return ""
+
+
+def _check_subsoil(out: dict, where: str) -> None:
+    """Fill the subsoil's description with the topsoil's where not given; check a given one (its
+    texture, density and suction as the topsoil's, and its derived strength) before any work."""
+    for top, sub in SUBSOIL_KEYS.items():
+        if out.get(sub) is None:
+            out[sub] = out[top]
+    if not is_layered(out):
+        return
+    _num(f"{where}.subsoil_top_m", out["subsoil_top_m"], 0.0, 5.0, lo_open=True)
+    tex = [_num(f"{where}.{SUBSOIL_KEYS[k]}", out[SUBSOIL_KEYS[k]], 0.0, 1.0, why=" (a mass fraction, not %)")
+           for k in TEXTURE_KEYS]
+    if abs(sum(tex) - 1.0) > TEXTURE_SUM_TOLERANCE:
+        raise ParameterError(f"{where}: subsoil_clay_kg_per_kg + subsoil_silt_kg_per_kg + subsoil_sand_kg_per_kg = "
+                             f"{sum(tex):.4g}; the subsoil's texture fractions must sum to 1 (within "
+                             f"{TEXTURE_SUM_TOLERANCE:g})")
+    rb, rs = float(out["subsoil_bulk_density_initial_Mg_per_m3"]), float(out["particle_density_Mg_per_m3"])
+    if not 0.0 < rb < rs:
+        raise ParameterError(f"{where}.subsoil_bulk_density_initial_Mg_per_m3 = {rb!r} must be in (0, "
+                             f"particle_density_Mg_per_m3 = {rs!r})")
+    _num(f"{where}.subsoil_matric_suction_kPa", out["subsoil_matric_suction_kPa"], 0.0, 1e6, lo_open=True,
+         why=" (suction is > 0 in an unsaturated soil)")
 
 
 def derive_soil(values: dict, where: str = "soil") -> dict:
@@ -244,6 +323,8 @@ def derive_soil(values: dict, where: str = "soil") -> dict:
     if abs(sum(tex) - 1.0) > TEXTURE_SUM_TOLERANCE:
         raise ParameterError(f"{where}: clay_kg_per_kg + silt_kg_per_kg + sand_kg_per_kg = {sum(tex):.4g}; the "
                              f"texture fractions must sum to 1 (within {TEXTURE_SUM_TOLERANCE:g})")
+    if "subsoil_top_m" in out:  # a parameter set of the registry: the subsoil layer's description
+        _check_subsoil(out, where)
     rb = float(out["bulk_density_initial_Mg_per_m3"])
     rs = float(out["particle_density_Mg_per_m3"])
     if not rb < rs:

@@ -382,9 +382,18 @@ def _with_own_weight(terrain: Terrain) -> np.ndarray:
     return np.where(sm > 0, sm + geo, sm)
 
 
-def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa: float) -> dict:
+def precompression_cells_Pa(terrain: Terrain, soils=None) -> np.ndarray:
+    """(n_cells, n_depths): each cell's precompression stress at each subsoil depth [Pa], its soil's
+    layer's (``soils``: the field's soils by soil index, e.g. a world's with the day's moisture;
+    default the terrain's own)."""
+    soils = terrain_soils(terrain) if soils is None else soils
+    return density.precompression_table(soils, terrain.subsoil_depths_m)[terrain.soil_index]
+
+
+def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa) -> dict:
     """The figures of one pattern's field (docs/studies.md): from the terrain after the passes and
-    the passes-per-cell counts (n_cells,)."""
+    the passes-per-cell counts (n_cells,); ``precompression_stress_Pa``: a strength the risk grades
+    against, broadcast against (n_cells, n_depths) (:func:`precompression_cells_Pa`)."""
     g = terrain.grid
     area = g.cell_m ** 2
     counts = np.asarray(counts).ravel()
@@ -408,8 +417,11 @@ def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa
     if depths:
         sm = terrain.sigma_max
         fr = subsoil.risk_area_fractions(_with_own_weight(terrain), precompression_stress_Pa, traff, area)
+        pc = np.broadcast_to(np.asarray(precompression_stress_Pa, dtype=np.float64), sm.shape)
         out["subsoil_depths_m"] = depths
-        out["subsoil_precompression_stress_kPa"] = 1e-3 * float(precompression_stress_Pa)
+        # the weakest cell's (at any depth; by depth: at each)
+        out["subsoil_precompression_stress_kPa"] = 1e-3 * float(pc.min())
+        out["subsoil_precompression_stress_by_depth_kPa"] = [1e-3 * float(v) for v in pc.min(axis=0)]
         out["subsoil_sigma_z_max_kPa"] = [1e-3 * float(v) for v in (sm[traff].max(axis=0) if n_t
                                                                      else np.zeros(len(depths)))]
         field_area = g.n_cells * area
@@ -568,9 +580,19 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
         pr.figures = _pattern_figures(spec, pr)
 
 
+def _strength(spec: FieldSpec, pr: PatternResult):
+    """The strength the risk grades a pattern's field against: each cell's at each depth from the
+    field's soils (the world's, with the day's moisture), or the study's soil's where none are known."""
+    if not pr.terrain.subsoil_depths_m:
+        return float(spec.params["precompression_stress_Pa"])
+    if pr.soils:
+        return precompression_cells_Pa(pr.terrain, pr.soils)
+    return density.precompression_table([spec.params], pr.terrain.subsoil_depths_m)[0]
+
+
 def _pattern_figures(spec: FieldSpec, pr: PatternResult) -> dict:
     """The figures of a pattern's passes done (its terrain, counts and records)."""
-    f = field_figures(pr.terrain, pr.counts, float(spec.params["precompression_stress_Pa"]))
+    f = field_figures(pr.terrain, pr.counts, _strength(spec, pr))
     f.update(passes_done=len(pr.records), wall_time_s=pr.wall_time_s, sim_time_s=pr.sim_time_s,
              lateral_positions_m=[ln.y_m for ln in pr.lines[:len(pr.records)]])
     if pr.density0 is not None:
@@ -617,7 +639,7 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult, figures: bool = True) -> 
               "passes_map.png": field_plots.passes_map_png(pr.counts.reshape(shape), ext, label)}
     depths = pr.terrain.subsoil_depths_m
     if depths:
-        pc = float(spec.params["precompression_stress_Pa"])
+        pc = _strength(spec, pr)
         # a field of many cells in blocks, each its highest class (a rut of a few cells stays visible)
         risk = subsoil.risk_class(_with_own_weight(pr.terrain), pc).reshape(*shape, len(depths))
         risk, f = field_plots.block_max(risk, field_plots.RISK_MAP_BLOCKS)
@@ -627,7 +649,7 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult, figures: bool = True) -> 
                                                                      y0 + risk.shape[1] * f * g.cell_m),
                                              title=f"compaction risk: {label}{blocks}")
         if pr.soils and "bulk_density_initial_Mg_per_m3" in pr.figures:
-            rho = density.bulk_density(pr.terrain.specific_volume, pr.terrain.soil_index, pr.soils)
+            rho = density.bulk_density(pr.terrain.specific_volume, pr.terrain.soil_index, pr.soils, depths)
             rho, f = field_plots.block_max(rho.reshape(*shape, len(depths)), field_plots.RISK_MAP_BLOCKS)
             blocks = f"\n(blocks of {f * g.cell_m:g} m: the largest)" if f > 1 else ""
             files["density_map.png"] = density_map_png(

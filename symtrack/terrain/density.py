@@ -48,7 +48,13 @@ porosity, when the day's water content is not known), i.e. rho_b <= rho_s / (1 +
 under the load (after it, the recompression line's rebound).
 
 p is the traffic's mean normal stress (symtrack/terrain/subsoil.py: the trace of Soehne's
-radial stress over 3); the soil's own weight is left out, as in the vertical stress.
+radial stress over 3) plus the soil's own weight above the depth (:func:`geostatic_table`), and the
+rut bounds the column's compression (:func:`cap_to_rut`).
+
+**Layers.** A soil with a subsoil described apart from its topsoil (``subsoil_*`` keys below
+``subsoil_top_m``; symtrack/soil/pedotransfer.py) has at each depth its layer's lines, initial state
+and strength (:func:`soil_arrays` with the depths): the state v1 = 0 stands for each depth's own
+initial state, and the own weight sums the layers above.
 
 Parameters per soil (symtrack/model/parameters.py, defaults with sources): ``virgin_line_N``,
 ``compression_index_lambda``, ``recompression_index_kappa``, ``particle_density_Mg_per_m3``,
@@ -66,12 +72,13 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 from ..model.parameters import SOIL_PARAMS, SPECIFIC_VOLUME_MIN_DEFAULT, YIELD_LINE_OFFSET_DEFAULT
-from ..soil.pedotransfer import K2_POSITION_OSR, geostatic_vertical_stress_Pa
+from ..soil.pedotransfer import K2_POSITION_OSR, geostatic_profile_Pa, is_layered, layer_sets
 from ..soil.pedotransfer import keller_arvidsson_2007 as keller_arvidsson_2007
 
 __all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "cap_to_rut", "column_compression_m", "field_max",
-           "geostatic_table", "initial_specific_volume", "keller_arvidsson_2007", "load_update", "pass_update",
-           "passes_at_constant_stress", "precompression_stress_kPa", "soil_arrays", "specific_volume_after"]
+           "geostatic_table", "initial_specific_volume", "keller_arvidsson_2007", "layered", "load_update",
+           "pass_update", "passes_at_constant_stress", "precompression_stress_kPa", "precompression_table",
+           "soil_arrays", "specific_volume_after"]
 
 COMPRESSION_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
                            "particle_density_Mg_per_m3", "bulk_density_initial_Mg_per_m3", "yield_line_offset_ln_p",
@@ -109,20 +116,42 @@ def _check_soil(soil: dict) -> None:
                              f"be below particle_density_Mg_per_m3 = {soil['particle_density_Mg_per_m3']!r}")
 
 
-def soil_arrays(soils) -> dict:
-    """Per soil (index 0, 1, ... as the terrain's soil_index): arrays of N, lambda - kappa,
-    rho_s and the initial specific volume v1_0."""
-    for sp in soils:
-        _check_soil(sp)
-    N = np.array([float(sp["virgin_line_N"]) for sp in soils])
-    lk = np.array([float(sp["compression_index_lambda"]) - float(sp["recompression_index_kappa"]) for sp in soils])
-    rho_s = np.array([float(sp["particle_density_Mg_per_m3"]) for sp in soils])
-    v0 = np.array([initial_specific_volume(sp) for sp in soils])
-    lam = np.array([float(sp["compression_index_lambda"]) for sp in soils])
-    kap = np.array([float(sp["recompression_index_kappa"]) for sp in soils])
-    y = np.array([_yield_params(sp) for sp in soils]).reshape(len(soils), 3)
-    return {"N": N, "lambda_minus_kappa": lk, "rho_s": rho_s, "v0": v0, "lambda": lam, "kappa": kap,
-            "m": y[:, 0], "k2": y[:, 1], "v_min": y[:, 2]}
+def soil_arrays(soils, depths_m=None) -> dict:
+    """Per soil (index 0, 1, ... as the terrain's soil_index): arrays of N, lambda - kappa, lambda,
+    kappa, m, k2, v_min, rho_s, the initial specific volume v1_0 (``v0``) and the precompression
+    stress [Pa] (``pc``). Without ``depths_m`` one value per soil (n_soils,), its topsoil's; with them
+    (n_soils, n_depths), each depth's layer (symtrack/soil/pedotransfer.py, ``layer_sets``), and
+    ``top`` (bool): the depths in the soil's topsoil (every depth of a soil of one layer)."""
+    if depths_m is None:
+        sets = [[sp] for sp in soils]
+    else:
+        sets = [layer_sets(sp, depths_m) for sp in soils]
+    for layers in sets:
+        for sp in {id(x): x for x in layers}.values():
+            _check_soil(sp)
+
+    def table(f):
+        t = np.array([[f(x) for x in layers] for layers in sets], dtype=np.float64).reshape(len(sets), -1)
+        return t[:, 0] if depths_m is None else t
+
+    lam = table(lambda x: float(x["compression_index_lambda"]))
+    kap = table(lambda x: float(x["recompression_index_kappa"]))
+    out = {"N": table(lambda x: float(x["virgin_line_N"])),
+           "lambda_minus_kappa": table(lambda x: float(x["compression_index_lambda"])
+                                       - float(x["recompression_index_kappa"])),
+           "rho_s": table(lambda x: float(x["particle_density_Mg_per_m3"])), "v0": table(initial_specific_volume),
+           "lambda": lam, "kappa": kap, "m": table(lambda x: _yield_params(x)[0]),
+           "k2": table(lambda x: _yield_params(x)[1]), "v_min": table(lambda x: _yield_params(x)[2]),
+           "pc": table(lambda x: float(x.get("precompression_stress_Pa", np.nan)))}
+    if depths_m is not None:
+        out["top"] = np.array([[x is sp for x in layers] for sp, layers in zip(soils, sets, strict=True)],
+                              dtype=bool).reshape(len(sets), -1)
+    return out
+
+
+def layered(soils) -> bool:
+    """True when any of the soils has a subsoil layer of its own."""
+    return any(is_layered(sp) for sp in soils)
 
 
 def load_update(v_old, ln_p, N, lam, kap, lk, m, k2, v_min):
@@ -153,7 +182,7 @@ def precompression_stress_kPa(v1, N, lambda_minus_kappa):
 
 def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: np.ndarray, soils,
                 cells: np.ndarray | None = None, cell_params: dict | None = None,
-                geostatic_Pa: np.ndarray | None = None) -> int:
+                geostatic_Pa: np.ndarray | None = None, depths_m=None) -> int:
     """Fold one pass into the terrain's state: ``specific_volume`` (n_cells, n_depths) float32
     (0: the soil's initial state), ``pass_p_Pa`` the pass's largest mean normal stress per cell
     and depth (0 where the pass did not load); ``cells``: the cells the pass may have loaded (a
@@ -163,7 +192,8 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     (float64 arrays over all cells: a moisture map of many values, terrain/moisture.py) instead of its
     soil's; the initial state (rho_s / rho_initial) stays the soil's. ``geostatic_Pa`` (n_soils,
     n_depths): the soil's own weight at each depth, added to the pass's stress where the pass loaded
-    (:func:`geostatic_table`)."""
+    (:func:`geostatic_table`). ``depths_m``: the terrain's subsoil depths, needed for a layered soil
+    (each depth's layer's lines; :func:`soil_arrays`)."""
     if specific_volume.shape != pass_p_Pa.shape:
         raise ParameterError(f"pass_p_Pa has shape {pass_p_Pa.shape}, the terrain's specific volume "
                              f"{specific_volume.shape}")
@@ -174,27 +204,29 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     cells = np.asarray(cells, dtype=np.int64)
     if cells.size == 0:
         return 0
-    a = soil_arrays(soils)
+    nd = pass_p_Pa.shape[1]
+    # per (soil, depth): a layered soil's subsoil has its own lines (depths_m needed then)
+    a = soil_arrays(soils, depths_m) if depths_m is not None else _per_depth(soil_arrays(soils), nd, soils)
     si = soil_index[cells]
     p = pass_p_Pa[cells].astype(np.float64)
     if geostatic_Pa is not None:
         p = np.where(p > 0, p + np.asarray(geostatic_Pa, dtype=np.float64)[si], p)
     old = specific_volume[cells].astype(np.float64)
-    v_old = np.where(old > 0, old, a["v0"][si][:, None])
-    if cell_params is None:
-        N, lk = a["N"][si], a["lambda_minus_kappa"][si]
-        lam, kap, vmin = a["lambda"][si], a["kappa"][si], a["v_min"][si]
-    else:
-        N = cell_params["virgin_line_N"][cells]
-        lam, kap = cell_params["compression_index_lambda"][cells], cell_params["recompression_index_kappa"][cells]
+    v_old = np.where(old > 0, old, a["v0"][si])
+    N, lk = a["N"][si], a["lambda_minus_kappa"][si]
+    lam, kap, vmin = a["lambda"][si], a["kappa"][si], a["v_min"][si]
+    if cell_params is not None:  # the day's values of each cell: its topsoil's depths
+        top = a["top"][si]
+        N = np.where(top, cell_params["virgin_line_N"][cells][:, None], N)
+        lam = np.where(top, cell_params["compression_index_lambda"][cells][:, None], lam)
+        kap = np.where(top, cell_params["recompression_index_kappa"][cells][:, None], kap)
         lk = lam - kap
-        vmin = cell_params["specific_volume_min"][cells] if "specific_volume_min" in cell_params else a["v_min"][si]
+        if "specific_volume_min" in cell_params:
+            vmin = np.where(top, cell_params["specific_volume_min"][cells][:, None], vmin)
     with np.errstate(divide="ignore"):
         lnp = np.log(1e-3 * p)
-    col = (lambda q: q[:, None])  # noqa: E731
     with np.errstate(invalid="ignore"):
-        line = load_update(v_old, lnp, col(N), col(lam), col(kap), col(lk), col(a["m"][si]), col(a["k2"][si]),
-                           col(vmin))
+        line = load_update(v_old, lnp, N, lam, kap, lk, a["m"][si], a["k2"][si], vmin)
     yielded = (p > 0) & (line < v_old)
     rows = np.flatnonzero(yielded.any(axis=1))
     if rows.size:  # only the cells that yielded are written (the others keep their bits)
@@ -202,14 +234,24 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     return int(np.count_nonzero(yielded))
 
 
+def _per_depth(a: dict, nd: int, soils) -> dict:
+    """:func:`soil_arrays` without depths, spread to (n_soils, nd) (every depth the topsoil's); refuses
+    a layered soil (its depths are needed)."""
+    if layered(soils):
+        raise ParameterError("a soil with a subsoil layer needs the subsoil depths (depths_m) to fold a pass")
+    out = {k: np.repeat(v[:, None], nd, axis=1) for k, v in a.items()}
+    out["top"] = np.ones((len(soils), nd), dtype=bool)
+    return out
+
+
 def column_compression_m(v1, v0, depths_m) -> np.ndarray:
     """How far each cell's column has shortened [m]: the integral over depth of its vertical strain
     1 - rho0/rho = 1 - v1/v0 (mass conservation of a column that densifies from rho0 to rho), by the
     trapezoid rule over (0, depths), the strain at the surface taken as at the first depth and none
     below the last. ``v1`` (n_cells, n_depths) float64 (the state, the initial v0 where unmoved),
-    ``v0`` (n_cells,)."""
-    v0 = np.asarray(v0, dtype=np.float64)[:, None]
-    strain = 1.0 - v1 / v0
+    ``v0`` (n_cells,) or per cell and depth (n_cells, n_depths) (a layered soil)."""
+    v0 = np.asarray(v0, dtype=np.float64)
+    strain = 1.0 - v1 / (v0 if v0.ndim == 2 else v0[:, None])
     total = strain[:, 0] * float(depths_m[0])
     for k in range(1, len(depths_m)):
         total = total + 0.5 * (strain[:, k - 1] + strain[:, k]) * (float(depths_m[k]) - float(depths_m[k - 1]))
@@ -221,54 +263,64 @@ def cap_to_rut(specific_volume: np.ndarray, cells: np.ndarray, v0: np.ndarray, d
     more than its surface sank (nothing heaves under the track; the rest of the rut is soil that flowed
     aside). Where a cell's :func:`column_compression_m` exceeds its plastic rut ``rut_m`` (its stored
     sinkage, >= 0), its compression at every depth is scaled by rut / compression towards the initial
-    state v0. ``cells``, ``v0`` (per cell) and ``rut_m`` aligned. In place; returns the number of cells
-    scaled. A depth at its initial state keeps its stored value (0) bit for bit."""
+    state v0. ``cells``, ``v0`` (per cell, or per cell and depth for a layered soil) and ``rut_m``
+    aligned. In place; returns the number of cells scaled. A depth at its initial state keeps its stored
+    value (0) bit for bit."""
     cells = np.asarray(cells, dtype=np.int64)
     if cells.size == 0 or specific_volume.shape[1] == 0:
         return 0
     old = specific_volume[cells].astype(np.float64)
     v0 = np.asarray(v0, dtype=np.float64)
-    v = np.where(old > 0, old, v0[:, None])
+    v0 = v0 if v0.ndim == 2 else np.repeat(v0[:, None], old.shape[1], axis=1)
+    v = np.where(old > 0, old, v0)
     comp = column_compression_m(v, v0, depths_m)
     rut = np.maximum(np.asarray(rut_m, dtype=np.float64), 0.0)
     over = np.flatnonzero(comp > rut)
     if over.size == 0:
         return 0
     f = rut[over] / comp[over]
-    scaled = v0[over, None] - f[:, None] * (v0[over, None] - v[over])
+    scaled = v0[over] - f[:, None] * (v0[over] - v[over])
     specific_volume[cells[over]] = np.where(old[over] > 0, scaled, old[over]).astype(np.float32)
     return int(over.size)
 
 
 def geostatic_table(soils, depths_m) -> np.ndarray:
     """(n_soils, n_depths) float64: each soil's own weight at each depth [Pa] (the vertical stress of
-    the moist soil above, symtrack/soil/pedotransfer.py), which :func:`pass_update` and the risk add
-    to the traffic's vertical stress."""
+    the moist soil above, through its layers: symtrack/soil/pedotransfer.py), which :func:`pass_update`
+    and the risk add to the traffic's vertical stress."""
     defaults = {s.name: s.default for s in SOIL_PARAMS if s.default is not None}
-    return np.array([geostatic_vertical_stress_Pa({**defaults, **sp}, depths_m) for sp in soils],
+    return np.array([geostatic_profile_Pa({**defaults, **sp}, depths_m) for sp in soils],
                     dtype=np.float64).reshape(len(soils), len(depths_m))
 
 
-def bulk_density(specific_volume: np.ndarray, soil_index: np.ndarray, soils) -> np.ndarray:
+def precompression_table(soils, depths_m) -> np.ndarray:
+    """(n_soils, n_depths) float64: each soil's precompression stress at each depth [Pa] (its layer's:
+    the strength the risk grades against and where the density model yields)."""
+    return soil_arrays(soils, depths_m)["pc"]
+
+
+def bulk_density(specific_volume: np.ndarray, soil_index: np.ndarray, soils, depths_m=None) -> np.ndarray:
     """Dry bulk density [Mg/m^3] per cell and depth after the loads so far, at the lines' reference
-    stress (1 kPa): rho_s / v1, v1 the stored one or the soil's initial one where 0."""
-    a = soil_arrays(soils)
+    stress (1 kPa): rho_s / v1, v1 the stored one or the soil's initial one where 0 (at each depth its
+    layer's: ``depths_m`` needed for a layered soil)."""
+    nd = specific_volume.shape[1]
+    a = soil_arrays(soils, depths_m) if depths_m is not None else _per_depth(soil_arrays(soils), nd, soils)
     v = specific_volume.astype(np.float64)
-    v = np.where(v > 0, v, a["v0"][soil_index][:, None])
-    return a["rho_s"][soil_index][:, None] / v
+    v = np.where(v > 0, v, a["v0"][soil_index])
+    return a["rho_s"][soil_index] / v
 
 
-def field_max(specific_volume: np.ndarray, soil_index: np.ndarray, soils) -> list[float]:
+def field_max(specific_volume: np.ndarray, soil_index: np.ndarray, soils, depths_m=None) -> list[float]:
     """The field's largest bulk density [Mg/m^3] at each depth: over the cells whose state moved
     (v1 > 0) and the initial density of every soil the field has (without a pass over the whole
-    field's densities: a million cells, mostly initial)."""
+    field's densities: a million cells, mostly initial). ``depths_m`` as in :func:`bulk_density`."""
     nd = specific_volume.shape[1]
-    a = soil_arrays(soils)
+    a = soil_arrays(soils, depths_m) if depths_m is not None else _per_depth(soil_arrays(soils), nd, soils)
     present = np.flatnonzero(np.bincount(soil_index, minlength=len(soils)) > 0)
-    out = np.full(nd, float(np.max(a["rho_s"][present] / a["v0"][present])) if present.size else 0.0)
+    out = ((a["rho_s"][present] / a["v0"][present]).max(axis=0) if present.size else np.zeros(nd))
     moved = np.unique(np.flatnonzero(specific_volume.ravel() > 0) // nd)
     if moved.size:
-        rho = bulk_density(specific_volume[moved], soil_index[moved], soils)
+        rho = bulk_density(specific_volume[moved], soil_index[moved], soils, depths_m)
         out = np.maximum(out, rho.max(axis=0))
     return [float(v) for v in out]
 

@@ -44,6 +44,7 @@ import numpy as np
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, real_path
 from ..model.parameters import SOIL_PARAM_NAMES, spec
+from ..soil.pedotransfer import SUBSOIL_KEYS
 from .storage import Grid, Terrain, load, save
 
 __all__ = ["FIELD_ARRAYS", "FIELD_HEADER", "FIELD_MAGIC", "FIELD_TRAILER", "FIELD_VERSION", "convert", "field_bytes",
@@ -52,6 +53,9 @@ __all__ = ["FIELD_ARRAYS", "FIELD_HEADER", "FIELD_MAGIC", "FIELD_TRAILER", "FIEL
 FIELD_MAGIC = b"SYMFIELD"
 FIELD_TRAILER = b"ENDFIELD"
 FIELD_VERSION = 1
+# the soil values a file may lack that take another's: a subsoil layer's description is its topsoil's
+# in a file written before the subsoil layer (a soil of one layer)
+SAME_AS_TOPSOIL = {sub: top for top, sub in SUBSOIL_KEYS.items()}
 FIELD_HEADER = struct.Struct("<8sIIqqdddII")  # 64 bytes, before the soil values
 # (Terrain attribute, dtype, npz name) in file order
 FIELD_ARRAYS = (("z", "<f8", "z_m"), ("zdot", "<f8", "z_rate_m_s"), ("zmax", "<f8", "z_max_m"),
@@ -113,7 +117,8 @@ def read_field(path) -> Terrain:
     # a file written before soil parameters were added (appended to the list) has fewer values: the
     # missing ones take the registry's defaults, as a terrain file's do (storage.load)
     missing = SOIL_PARAM_NAMES[n_soil:]
-    if n_soil > len(SOIL_PARAM_NAMES) or n_soil < 1 or any(spec(n).default is None for n in missing):
+    if n_soil > len(SOIL_PARAM_NAMES) or n_soil < 1 or any(spec(n).default is None and n not in SAME_AS_TOPSOIL
+                                                            for n in missing):
         raise ScenarioError(f"{path}: {n_soil} soil values, this symtrack has {len(SOIL_PARAM_NAMES)} soil "
                             "parameters (the file was written by another version)")
     n = nx * ny
@@ -123,9 +128,10 @@ def read_field(path) -> Terrain:
                             f"takes {size} ending in ENDFIELD: the file is truncated or damaged")
     soil_values = np.frombuffer(data, "<f8", n_soil, FIELD_HEADER.size)
     depths = np.frombuffer(data, "<f8", n_depths, FIELD_HEADER.size + 8 * n_soil)
-    st = Terrain(Grid((float(x0), float(y0)), float(dx), (int(nx), int(ny))),
-                 {**dict(zip(SOIL_PARAM_NAMES[:n_soil], (float(v) for v in soil_values), strict=True)),
-                  **{n: float(spec(n).default) for n in missing}},
+    soil = dict(zip(SOIL_PARAM_NAMES[:n_soil], (float(v) for v in soil_values), strict=True))
+    for name in missing:  # (in the list's order: a subsoil value is its topsoil's, filled before it)
+        soil[name] = float(spec(name).default) if name not in SAME_AS_TOPSOIL else soil[SAME_AS_TOPSOIL[name]]
+    st = Terrain(Grid((float(x0), float(y0)), float(dx), (int(nx), int(ny))), soil,
                  tuple(float(d) for d in depths))
     off = hbytes
     for attr, dt, name in FIELD_ARRAYS:

@@ -242,7 +242,8 @@ LAYERS = (
           "float32"),
     Layer("passes", "load cycles the cell has seen (its passes)", "1", "uint16", "int32"),
     Layer("soil_index", "the cell's soil: 0 the terrain's soil, k soil k of its soil map", "1", "uint8", "int8"),
-    Layer("precompression_stress", "precompression stress sigma_pc of the cell's soil (its strength)", "Pa",
+    Layer("precompression_stress", "precompression stress sigma_pc of the cell's soil (its strength; a soil of two "
+          "layers: its topsoil's)", "Pa",
           "float32", "float32"),
     Layer("elevation_m", "initial elevation z0 of the cell centre (the ground's shape before any pass; 0: flat)",
           "m", "float64", "float64"),
@@ -280,7 +281,10 @@ def layer_arrays(terrain: Terrain) -> dict:
         out["stress_max"] = sig
         # the risk grades the traffic's stress plus the soil's own weight (terrain/density.py)
         geo = density.geostatic_table(_soils(terrain), terrain.subsoil_depths_m)[terrain.soil_index].reshape(sig.shape)
-        out["risk_class"] = risk_class(np.where(sig > 0, sig + geo, sig), pc[..., None])
+        # against each depth's strength (a subsoil layer has its own)
+        pcd = (density.precompression_table(_soils(terrain), terrain.subsoil_depths_m)[terrain.soil_index]
+               .reshape(sig.shape) if terrain.soil else pc[..., None])
+        out["risk_class"] = risk_class(np.where(sig > 0, sig + geo, sig), pcd)
     types = {layer.name: layer.dtype for layer in LAYERS}
     return {k: v.astype(types[k]) for k, v in out.items()}
 

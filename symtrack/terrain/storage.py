@@ -1,7 +1,7 @@
 """The field's cell storage (:class:`Grid`, :class:`Terrain`) and terrain files: the whole cell
 storage in one ``.npz`` file, written atomically.
 
-Schema (``TERRAIN_SCHEMA_VERSION`` = 4), one NumPy array per key:
+Schema (``TERRAIN_SCHEMA_VERSION`` = 5), one NumPy array per key:
 
 - ``kind``: the string "symtrack-terrain"; ``schema_version``: int;
 - ``origin_m`` (2,) float64: world (x, y) of the field's lower-left corner; ``cell_m`` float64;
@@ -20,7 +20,9 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 4), one NumPy array per key:
   compression state at each depth, the specific volume v1 of its current recompression line at a
   mean normal stress of 1 kPa (symtrack/terrain/density.py; the bulk density after the loads so far
   is rho_s / v1), 0 where the soil is still in its initial state (v1 = rho_s / rho_initial of the
-  cell's soil). A file of schema 1 to 3 loads with every cell in its initial state;
+  cell's soil; from schema 5, of the soil's layer at that depth: a soil whose ``subsoil_*`` values
+  differ from its topsoil's has its own initial density, lines and strength below ``subsoil_top_m``,
+  symtrack/soil/pedotransfer.py). A file of schema 1 to 3 loads with every cell in its initial state;
 - ``soil_index`` uint8 (nx, ny) (schema 2): each cell's soil, 0 the soil of ``soil_values``,
   k >= 1 row k - 1 of ``soil_map_values`` (float64 (n, len(soil_map_names))) with its label in
   ``soil_map_labels`` (a soil map: symtrack/terrain/soil_map.py; absent when the field has one soil);
@@ -42,7 +44,9 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 4), one NumPy array per key:
   load as flat). float64, not float32: a DEM's absolute heights (hundreds of metres) in float32
   keep 0.03 to 0.1 mm, the order of the elastic rebound the ruts' next pass rides on.
 - The soil parameters added since a file was written (a soil map's ``soil_map_names`` too) take
-  the registry's defaults (symtrack/model/parameters.py) on loading.
+  the registry's defaults (symtrack/model/parameters.py) on loading, or are derived from the file's
+  soil description (the compression lines and strength; a file before schema 5 has soils of one
+  layer: its subsoil values are its topsoil's).
 
 Values are stored bit for bit, compressed (zip deflate): the default field of a million cells,
 mostly untouched, takes well under its 76 MB in memory (76 bytes per cell: 5 float64, the int8
@@ -71,8 +75,8 @@ __all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "
 STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase", "z_off_m", "load_cycles")
 SCHEMA1_FIELDS = STORAGE_FIELDS[:5]
 
-TERRAIN_SCHEMA_VERSION = 4
-READABLE_SCHEMAS = (1, 2, 3, 4)
+TERRAIN_SCHEMA_VERSION = 5
+READABLE_SCHEMAS = (1, 2, 3, 4, 5)
 HISTORY_KEYS = ("run_id", "time_utc", "scenario", "scenario_sha256", "passes", "input_file_id")
 KIND = "symtrack-terrain"
 

@@ -141,8 +141,9 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
     soils = terrain_soils(terrain) if soils is None else soils
     density.pass_update(terrain.specific_volume, (1e3 * sig).astype(np.float32), terrain.soil_index, soils,
                         cells=loaded, cell_params=cell_params,
-                        geostatic_Pa=density.geostatic_table(soils, depths))
+                        geostatic_Pa=density.geostatic_table(soils, depths), depths_m=depths)
     return {"subsoil_depths_m": list(depths),
             "subsoil_sigma_z_max_kPa": [float(v) for v in sig.max(axis=0)],
-            "bulk_density_max_Mg_per_m3": density.field_max(terrain.specific_volume, terrain.soil_index, soils),
+            "bulk_density_max_Mg_per_m3": density.field_max(terrain.specific_volume, terrain.soil_index, soils,
+                                                            depths),
             "cells_loaded": int(loaded.size)}

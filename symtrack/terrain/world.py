@@ -422,11 +422,19 @@ class World:
         np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
         cells = np.flatnonzero(self.touched)
         density.pass_update(st.specific_volume, self.pass_sigma, st.soil_index, self.soils,
-                            cells=cells, cell_params=self.cell_day, geostatic_Pa=self.geostatic_Pa())
+                            cells=cells, cell_params=self.cell_day, geostatic_Pa=self.geostatic_Pa(),
+                            depths_m=st.subsoil_depths_m)
         # the rut bounds the compression below it: one deformation (density.cap_to_rut)
         if st.subsoil_depths_m:
-            v0 = density.soil_arrays(self.soils)["v0"][st.soil_index[cells]]
+            v0 = self.layer_arrays()["v0"][st.soil_index[cells]]
             density.cap_to_rut(st.specific_volume, cells, v0, st.subsoil_depths_m, st.z[cells])
+
+    def layer_arrays(self) -> dict:
+        """density.soil_arrays of the field's soils at the subsoil depths ((n_soils, n_depths): each
+        depth's layer)."""
+        if getattr(self, "_layer_arrays", None) is None:
+            self._layer_arrays = density.soil_arrays(self.soils, self.storage.subsoil_depths_m)
+        return self._layer_arrays
 
     def geostatic_Pa(self) -> np.ndarray:
         """(n_soils, n_depths): each soil's own weight at the subsoil depths [Pa] (density.geostatic_table)."""
@@ -436,15 +444,19 @@ class World:
 
     def bulk_density_max(self) -> list[float]:
         """The field's largest bulk density [Mg/m^3] at each subsoil depth (terrain/density.py)."""
-        return density.field_max(self.storage.specific_volume, self.storage.soil_index, self.soils)
+        return density.field_max(self.storage.specific_volume, self.storage.soil_index, self.soils,
+                                 self.storage.subsoil_depths_m)
 
     def precompression_stress_Pa(self) -> np.ndarray:
-        """Each cell's precompression stress [Pa] (its soil's: a soil map gives cells different ones; or
-        its own on the day of a moisture map of many values)."""
+        """Each cell's precompression stress at each subsoil depth [Pa], (n_cells, n_depths): its soil's
+        layer's (a soil map gives cells different ones; a subsoil layer its own below the topsoil), or,
+        in the topsoil, its own on the day of a moisture map of many values."""
+        st = self.storage
+        a = self.layer_arrays()
+        pc = a["pc"][st.soil_index]
         if self.cell_day is not None:
-            return self.cell_day["precompression_stress_Pa"]
-        table = np.array([float(sp["precompression_stress_Pa"]) for sp in self.soils])
-        return table[self.storage.soil_index]
+            pc = np.where(a["top"][st.soil_index], self.cell_day["precompression_stress_Pa"][:, None], pc)
+        return pc
 
     # ---- figures -----------------------------------------------------------------------------
     def figures(self) -> dict:
