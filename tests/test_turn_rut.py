@@ -20,8 +20,7 @@ def test_turn_rut_is_deeper_outside_shallower_inside_and_wider(rut):
     inner shallower than the straight pass's, by (N_k / N_straight)^(1/n) - 1 (the cells' soil law; speed
     alone moves the straight rut by 0.1 % between 1.85 and 2.15 m/s, measured). And a rigid track turning
     on a circle sweeps a band wider than its width b: its ends lie (l/2)^2 / (2 r_k) outside its centre
-    line's
-    circle, so both turn ruts are wider and carry more soil per metre than the straight one. Every
+    line's circle, so both turn ruts are wider and carry more soil per metre than the straight one. Every
     cell is loaded once (one pass) in both."""
     inner, outer = rut["turn"]["inner"], rut["turn"]["outer"]
     straight = rut["straight"]["left"]
