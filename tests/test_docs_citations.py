@@ -57,3 +57,20 @@ def test_the_model_is_documented_in_the_repository():
                     "## Subsoil stress", "## One soil: pedotransfer functions", "## References"):
         assert section in text, f"docs/model.md has no section {section!r}"
     assert "Ferretti, G. & Girelli, R. (1999)" in text
+
+
+def test_citations_of_docs_model_name_its_sections():
+    """A citation 'docs/model.md, "Section"' names a section the page has (wrapped lines and comment
+    markers between its words allowed)."""
+    text = (ROOT / "docs" / "model.md").read_text(encoding="utf-8")
+    sections = {line[3:].strip() for line in text.splitlines() if line.startswith("## ")}
+    bad = []
+    me = Path(__file__).resolve()
+    for path in _tracked_files():
+        if path.resolve() == me or not path.is_file() or path.suffix not in (".py", ".md", ".toml", ".c", ".h"):
+            continue
+        flat = re.sub(r"[ \t]*\n[ \t]*(?:#[ \t]*)?", " ", path.read_text(encoding="utf-8"))
+        for m in re.finditer(r'docs/model\.md, "([^"]+)"', flat):
+            if m.group(1) not in sections:
+                bad.append(f"{path.relative_to(ROOT)}: {m.group(1)!r}")
+    assert not bad, "citations of sections docs/model.md does not have:\n" + "\n".join(bad)

@@ -47,9 +47,9 @@ VEHICLES: dict[str, dict[str, float]] = {
         # shear laws (the default "shear", "shear_quasistatic") take their lateral resistance from the
         # soil (c, phi, K) and ignore both values below.
         "lateral_friction_coeff": 0.55,
-        # calibrated against the validation table with the creep law: the yaw drift of 0.4 deg over
-        # 20 m is a creep whose rate is proportional to this speed (docs/model.md, "Lateral resistance"). Not a soil
-        # property; docs/turning.md.
+        # calibrated against the validation table with the creep law: the yaw drift of 0.4 deg over 20 m is a
+        # creep whose rate is proportional to this speed (docs/model.md, "Lateral resistance and turning").
+        # Not a soil property; docs/turning.md.
         "lateral_creep_speed_m_s": 0.009,
         # the validation run pulls no implement.
         "drawbar_pull_N": 0.0,
