@@ -20,6 +20,7 @@ OUTSIDE = (
     ("review notes", re.compile(r"\bREVIEW\.md", re.I)),
     ("a sibling folder", re.compile(r"\.\./shared\b|\bshared/", re.I)),
     ("the source papers' text files", re.compile(r"\bseeds/", re.I)),
+    ("a folder of the development machine", re.compile(r"(?<![\w.~])/work/")),
     # "the seed": the source papers by a nickname (cite them by their authors); "the seed of" a random generator is fine
     ("a paper by a nickname", re.compile(r"\bseed(?:'s)? (?:eq|section|paper)|\bseed's\b|\bthe seed\b(?! of\b)", re.I)),
 )
