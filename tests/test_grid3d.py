@@ -34,7 +34,7 @@ def test_flat_virgin_field_matches_the_homogeneous_3d_run(flat_runs):
         # the sprocket sinkage is the run's largest: since the running gear's momentum in the hull's pitch
         # (the chatter's fix) the quasi-static peak, where the grid's start (set down in its own static rut)
         # shows: -1.20 % (1.8724 against 1.8952 mm); it moves by -4.6 ... +2.9 % under cell refinement
-        # (docs/vehicle3d.md, "Under cell refinement"), so 2 % for it, 1 % for every other figure
+        # (docs/vehicle3d.md, "Accuracy on the grid"), so 2 % for it, 1 % for every other figure
         assert abs(b / a - 1) < (0.02 if k == "sinkage_sprocket_mm" else 0.01), (k, a, b)
     # the grid's own figures: the subsoil stress and the bulk density are filled under the tracks
     s = grid.summary
