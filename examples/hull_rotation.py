@@ -1,5 +1,5 @@
-"""What the hull-frame rotation that the shear law neglects changes (docs/turning.md, "What is not
-done"; issue 21): a brute-force numpy reference at the steady turns of symtrack.control.trim.
+"""What the hull-frame rotation that the shear law neglects changes (docs/turning.md, "The hull-frame
+rotation"): a brute-force numpy reference at the steady turns of symtrack.control.trim.
 
     python examples/hull_rotation.py
     python examples/hull_rotation.py --soil clayey_soil_thailand_38 --radii 5 10 20 --speeds 1 3

@@ -1,14 +1,16 @@
-"""The seed's oscillation study: torque step vs filtered torque, and sign() vs tanh.
+"""The oscillation study of the Politecnico di Milano thesis "Model of a Tracked Vehicle for
+Agricultural Applications" (docs/model.md, "References"): torque step vs filtered torque, and sign()
+vs tanh.
 
-The seed (section 2) reports two kinds of oscillation of the shear displacement:
+The thesis (section 2) reports two kinds of oscillation of the shear displacement:
 - numerical, from the sign() functions, reduced by approximating sign() with tanh;
 - model-related, from the coupling torque -> tractive effort -> shear -> motion, excited by a
   torque step and reduced by a first-order torque filter (realistic: no actuator is instantaneous).
 
 This runs the validation manoeuvre (both sprockets 2000 N m, left idle at t = 4 s) four times:
-sign() with a torque step, the seed's tanh with a torque step, the smooth form with a torque
+sign() with a torque step, the thesis's tanh with a torque step, the smooth form with a torque
 step, and the smooth form with the 0.1 s torque filter of the reference crawler. Like the
-seed's Simulink runs, it integrates with a fixed step (classic Runge-Kutta 4, 0.5 ms, CasADi's
+thesis's Simulink runs, it integrates with a fixed step (classic Runge-Kutta 4, 0.5 ms, CasADi's
 ``rk`` integrator on the model's own ODE), because the error-controlled CVODES gives up on the
 discontinuous sign() (``CV_TOO_MUCH_WORK`` within 2 ms: the Coulomb-like switch of the internal
 resistance at omega = 0 is exactly the source of the numerical oscillations). It writes
@@ -41,7 +43,7 @@ STEP_TIME_CONSTANT_S = 0.001
 VARIANTS = (
     ("sign(), torque step", "sign", STEP_TIME_CONSTANT_S),
     ("sign(), filtered torque", "sign", None),
-    ("tanh (seed), torque step", "tanh", STEP_TIME_CONSTANT_S),
+    ("tanh (thesis), torque step", "tanh", STEP_TIME_CONSTANT_S),
     ("smooth, torque step", "smooth", STEP_TIME_CONSTANT_S),
     ("smooth, filtered torque", "smooth", None),
 )

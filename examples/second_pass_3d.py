@@ -7,10 +7,11 @@ second pass").
 
 The built-in ``multipass`` scenario (clayey soil, 1500 N m a sprocket, the grid's 0.1 m cells) on a
 small field: two passes on one line, the second over the cells the first left. The soil remembers its
-compaction (MODEL.md 2 and 6): the second pass reloads the cells along Wong's reloading line to about
-the first pass's loaded depth and adds the cycle law's plastic increment rut_1 (2^beta - 1), so the
-hull sits lower by more than that increment and less than the first rut, its front (the lightest
-segment) in the rut, and the cells' work (the compaction resistance) falls.
+compaction (docs/model.md, "Pressure-sinkage" and "Repeated loading"): the second pass reloads the
+cells along Wong's reloading line to about the first pass's loaded depth and adds the cycle law's
+plastic increment rut_1 (2^beta - 1), so the hull sits lower by more than that increment and less
+than the first rut, its front (the lightest segment) in the rut, and the cells' work (the compaction
+resistance) falls.
 
 Prints a JSON summary (the ruts, the deepening against the closed form, the hull's drop and pitch in
 both passes over the middle of the line); ``--plot`` writes the hull's height and pitch in both passes

@@ -3,7 +3,7 @@ several radii and speeds on the validation clay and on sandy loam, printed as a 
 
     python examples/steady_turns.py                            # the lagged shear law "shear" (this example's default)
     python examples/steady_turns.py --law shear_quasistatic    # the quasi-static shear law
-    python examples/steady_turns.py --law creep                # the seed paper's velocity-creep law
+    python examples/steady_turns.py --law creep                # the velocity-creep law (Ferretti & Girelli's model)
 
 Sinkages: under the sprocket (rear) / the idler (front) of each track, homogeneous soil. Max Re eig:
 the largest real part of the eigenvalues of the linearisation at the trim (symtrack.control.linearization;

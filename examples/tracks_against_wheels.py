@@ -6,8 +6,8 @@ their inflation pressure; a table as JSON.
 
     python examples/tracks_against_wheels.py [--length 8]
 
-The comparison of Arvidsson, Westlin, Keller & Gilbertsson (2011), Soil Till. Res. 117:103-109 (as
-shared/REFERENCES.md gives it; the paper not read): a 7.7 t tractor on rubber tracks, single and
+The comparison of Arvidsson, Westlin, Keller & Gilbertsson (2011), Soil Till. Res. 117:103-109 (from
+its abstract; the paper's tables not read): a 7.7 t tractor on rubber tracks, single and
 dual wheels, on two Swedish clays; stress at 0.15, 0.3, 0.5 m: tracks about equal to duals, below
 singles; under singles the bulk density rose from 1.24 to 1.36 Mg/m^3.
 
@@ -45,7 +45,7 @@ FRONT_SHARE = 0.4
 WHEELBASE_M, GAUGE_M, DUAL_GAP_M = 2.8, 1.8, 0.1
 FRONT_TYRE = tyre.Tyre(0.54, 1.42, 2650.0 * G / 1e3, 160.0)  # 540/65R28 142 (ASSUMED)
 REAR_TYRE = tyre.Tyre(0.65, 1.85, 4125.0 * G / 1e3, 160.0)  # 650/65R38 157 (ASSUMED)
-RHO_INITIAL = 1.24  # Arvidsson et al. 2011 (shared/REFERENCES.md)
+RHO_INITIAL = 1.24  # Arvidsson et al. 2011, Soil Till. Res. 117
 DEPTHS = (0.1, 0.15, 0.3, 0.5)
 ELEMENT_M = 0.025
 

@@ -51,7 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--length", type=float, default=14.0, help="distance of each pass [m]")
     a = ap.parse_args(argv)
     try:
-        out = check_output_folder(a.out)  # before the work (DESIGN.md): a bad --out fails at once
+        out = check_output_folder(a.out)  # before the work: a bad --out fails at once
         res = symtrack.simulate(scenario(a.passes, a.length), progress=True)
         res.write(out)
     except SymtrackError as err:

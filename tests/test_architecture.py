@@ -1,4 +1,4 @@
-"""The package's structure, read from the source (nothing imported): the layers of DESIGN.md,
+"""The package's structure, read from the source (nothing imported): the layers of LAYERS below,
 no import circle (imports inside functions count), no private name imported across modules,
 nothing below the CLI and the bench imports symtrack.codegen (and nothing in the package the top-level
 codegen/ entry point), no module outside the compile-and-cache API (symtrack.toolchain) composes a

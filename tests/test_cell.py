@@ -17,7 +17,8 @@ LAW = dict(keq=KEQ, n=N, elastic_stiffness=SOIL["elastic_stiffness_Pa_per_m"],
 
 
 def _cell_integrator(dt):
-    """A single cell, seed eq. (4), with the history updated between steps (as the world manager does)."""
+    """A single cell (docs/model.md, "Cell dynamics"), with the history updated between steps (as the world
+    manager does)."""
     z, zd, pl, zmax, pmax = (ca.SX.sym(n) for n in ("z", "zd", "p_load", "z_max", "p_max"))
     p = cell.reaction_pressure(z, zmax, pmax, **LAW)
     acc = cell.cell_acceleration(zd, pl, p, SOIL["cell_areal_mass_kg_per_m2"], SOIL["cell_damping_Pa_s_per_m"])

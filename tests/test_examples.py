@@ -14,7 +14,7 @@ def test_oscillation_study(tmp_path, monkeypatch, capsys):
         assert e.code == 0
     data = json.loads((tmp_path / "oscillation_study.json").read_text())
     osc = {v["variant"]: v for v in data["variants"]}
-    # the seed's findings: the torque filter damps the model-related oscillations ...
+    # the thesis's findings (docs/model.md): the torque filter damps the model-related oscillations ...
     assert osc["smooth, filtered torque"]["oscillation_right_mm"] < 0.5 * osc["smooth, torque step"][
         "oscillation_right_mm"]
     # ... and sign() chatters at start-up where the smooth form does not

@@ -34,7 +34,7 @@ def test_flat_virgin_field_matches_the_homogeneous_3d_run(flat_runs):
         # the sprocket sinkage is the run's largest: since the running gear's momentum in the hull's pitch
         # (the chatter's fix) the quasi-static peak, where the grid's start (set down in its own static rut)
         # shows: -1.20 % (1.8724 against 1.8952 mm); it moves by -4.6 ... +2.9 % under cell refinement
-        # (docs/vehicle3d.md, "Under cell refinement"), so 2 % for it, 1 % for every other figure
+        # (docs/vehicle3d.md, "Accuracy on the grid"), so 2 % for it, 1 % for every other figure
         assert abs(b / a - 1) < (0.02 if k == "sinkage_sprocket_mm" else 0.01), (k, a, b)
     # the grid's own figures: the subsoil stress and the bulk density are filled under the tracks
     s = grid.summary
@@ -84,7 +84,7 @@ def test_the_cells_sink_as_deep_as_the_hull_penetrates():
 def test_a_second_pass_rides_in_the_ruts_of_the_first():
     """Two passes on one line (issue 22's second pass): pass 2 rides on the ruts of pass 1 and reloads
     the cells to the pressures they carried, so the rut deepens by the cycle law's closed form
-    rut_1 (2^beta - 1) (MODEL.md 6, cell.rut_after_cycles; 20 % allowed), the hull sits lower at every
+    rut_1 (2^beta - 1) (docs/model.md, cell.rut_after_cycles; 20 % allowed), the hull sits lower at every
     point of the line, its front (the lightest segment) below the first rut's depth, and the cells' work
     (the compaction resistance) falls. Not the heights-only soil's 'lower by the whole rut': the soil
     remembers its compaction (docs/vehicle3d.md, measured: the hull 0.22 mm lower on a 1.0 mm rut)."""

@@ -33,7 +33,7 @@ def _track_function(P, opts):
     x_front = l / 2 - P["cg_ahead_of_contact_centre_m"]
     dist = PressureDistribution(N, M, b, l)
     abs_om = ca.sqrt(om**2 + opts.omega_smoothing_rad_s**2)
-    v_k = r * om * (1 - 2 * j / l)  # the track speed whose steady shear is j (seed eq. 2)
+    v_k = r * om * (1 - 2 * j / l)  # the track speed whose steady shear is j (Ferretti & Girelli)
     out = shear_forces(j, om, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, P["cohesion_Pa"],
                        P["friction_angle_rad"], P["shear_modulus_K_m"], opts)
     return lambda *a: np.array(ca.Function("f", [q], [ca.vertcat(*out)])(a)).ravel()
@@ -151,8 +151,8 @@ def test_pivot_split_matches_a_brute_force_1000_point_integral(pivot_m, state):
 @pytest.mark.parametrize("slip", [0.03, 0.3])
 def test_local_pressure_option_is_the_exact_janosi_integral_over_the_linear_distribution(slip):
     """shear_strength_pressure = "local": integral of b (c + p(s) tan phi)(1 - exp(-i s / K)) over
-    a linear p(s), in closed form; seed eq. (1) (the default, mean pressure) is below it when the
-    rear carries more (traction at ground level moves load rearwards): REVIEW.md defect 7."""
+    a linear p(s), in closed form; Ferretti & Girelli's tractive effort (the default, mean pressure) is
+    below it when the rear carries more (traction at ground level moves load rearwards)."""
     P = _params()
     b, l = P["track_width_m"], P["contact_length_m"]
     c, tphi, K = P["cohesion_Pa"], math.tan(P["friction_angle_rad"]), P["shear_modulus_K_m"]
@@ -177,7 +177,8 @@ def test_local_pressure_option_is_the_exact_janosi_integral_over_the_linear_dist
 
 
 def test_local_pressure_raises_the_validation_thrust_by_3_to_5_percent():
-    """REVIEW.md defect 7 at the validation's own state (accelerating on the clay at 2000 N m)."""
+    """The mean-pressure thrust against the local one at the validation's own state (accelerating on the
+    clay at 2000 N m)."""
     P = _params()
     out = {}
     for mode in ("mean", "local"):
@@ -266,4 +267,4 @@ def test_examples_steady_turns_and_sensitivity_run(capsys):
     cells = [c.strip() for c in out[2].strip("|").split("|")]
     assert cells[0] == 'model.lateral_law="creep"'
     band = dict((k, rng) for k, _, rng in validation.REPORTED)["lateral_deviation_m"]
-    assert band[0] <= float(cells[1]) <= band[1]  # the creep law gives the seed's lateral deviation
+    assert band[0] <= float(cells[1]) <= band[1]  # the creep law gives Ferretti & Girelli's lateral deviation

@@ -1,5 +1,5 @@
 """The "shear" lateral law (docs/turning.md section 8): the shear law with the sliding
-state lagged as seed eq. (2) lags the longitudinal one, a lateral shear state per track (the
+state lagged as Ferretti & Girelli's shear law lags the longitudinal one, a lateral shear state per track (the
 vehicle model "planar_lateral"). Against independent truth: in steady running it is the
 quasi-static shear law exactly (the lagged slips relax to the instantaneous ones), Wong's
 M_r = mu W l / 4 in pure yaw, and a 10 ms step of the project's Rosenbrock method carries the
@@ -32,8 +32,8 @@ def models():
 
 
 def _steady_shear_states(model, x, P):
-    """Set the shear states of x (in place) to their steady values for x's velocities: seed eq. (2)'s
-    j = (l/2)(r omega - v_k)/(r |omega|) and the lateral j_y = (l/2)(v + r_z x_c)/(r |omega|), with the
+    """Set the shear states of x (in place) to their steady values for x's velocities: the shear
+    law's j = (l/2)(r omega - v_k)/(r |omega|) and the lateral j_y = (l/2)(v + r_z x_c)/(r |omega|), with the
     model's regularised |omega| (the same in both laws), and the twist theta = (l/2) r_z / (r |omega|)."""
     idx = model.state_index
     l, r, B = P["contact_length_m"], P["sprocket_radius_m"], P["track_gauge_m"]
@@ -188,7 +188,7 @@ def test_trim_of_the_lagged_law_in_a_steady_turn(models, soil, radius_m, speed_m
     """symtrack.control.trim on the lagged law: every state derivative except the positions' vanishes
     (the model's own ode, evaluated again here), the lagged states are at their steady values
     (written out independently: _steady_shear_states), the body's force and moment balances of a
-    steady turn hold (MODEL.md section 1 with du/dt = dv/dt = dr_z/dt = 0), the torques are those
+    steady turn hold (docs/model.md, "Body equations", with du/dt = dv/dt = dr_z/dt = 0), the torques are those
     of the quasi-static law's trim (their steady turns are the same) and the turn is stable, with
     the quasi-static law's slowest mode."""
     from symtrack.control.linearization import linearize

@@ -34,7 +34,7 @@ def test_severiano_curve_and_strength():
             theta = tr + (ts - tr) * (1 + (alpha * h) ** n) ** -(1 - 1 / n)
             assert M.severiano_2013_suction_kPa(theta, clay) == pytest.approx(h, rel=1e-9)
             assert M.severiano_2013_precompression_kPa(clay, h) == pytest.approx(a * h**b, rel=1e-15)
-    # 129 h^0.15 below 20 % clay, 62.7 h^0.15 above 52 % (shared/REFERENCES.md, soilphysics)
+    # 129 h^0.15 below 20 % clay, 62.7 h^0.15 above 52 % (Severiano et al. 2013 as soilphysics codes it)
     assert M.severiano_2013_precompression_kPa(10, 100.0) == pytest.approx(129 * 100**0.15)
     assert M.severiano_2013_precompression_kPa(60, 100.0) == pytest.approx(62.7 * 100**0.15)
     # wetter is weaker

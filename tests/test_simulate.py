@@ -31,8 +31,8 @@ def test_validation_meets_the_reported_figures(summaries):
 def test_the_default_shear_law_turns_the_crawler_where_the_papers_creep_law_does_not():
     """The package's default law (lateral_law = "shear", the soil's own strength) on the validation
     manoeuvre: the yaw and lateral deviation are set by K and the soil's strength, and no parameter
-    set in the plausible ranges of MODEL.md section 4 brings them into the seed's bands, which come
-    from the paper's creep law (docs/turning.md section 4); the scenario declares that law. The
+    set in the plausible ranges of a medium crawler brings them into Ferretti & Girelli's bands, which
+    come from the paper's creep law (docs/turning.md section 4); the scenario declares that law. The
     other figures stay in band. CVODES (its reference) against the compiled Rosenbrock at its 10 ms
     steps (the README's column)."""
     sc = load_scenario("validation", ["model.lateral_law=shear", "run.integrator=cvodes"])

@@ -1,4 +1,4 @@
-"""A field of several soils (issue 10 part 4, MODEL.md section 8): the soil map's parsing, a
+"""A field of several soils (docs/model.md, "Soil that varies over the field"): the soil map's parsing, a
 uniform map equal to the single soil bit for bit, each cell's law its own soil's, the traction
 from the soil under each track, persistence, and the integrators that take one soil only."""
 
@@ -87,7 +87,7 @@ def test_each_cell_sinks_by_its_own_soil_and_the_traction_uses_the_soil_under_ea
     layout = eng.fns.layout
     x = s.wv[:layout.nv].copy()
     js = {"left": 0.01, "right": 0.012}  # shear displacements
-    # straight running at 2 m/s with each track at the steady slip of its shear, i = 2 j / l (seed eq. (2))
+    # straight running at 2 m/s with each track at the steady slip of its shear, i = 2 j / l (Ferretti & Girelli)
     r, l = sc.params["sprocket_radius_m"], sc.params["contact_length_m"]
     x[layout.index("u_m_s")] = 2.0
     for track, j in js.items():
@@ -102,7 +102,7 @@ def test_each_cell_sinks_by_its_own_soil_and_the_traction_uses_the_soil_under_ea
         return float(traction_shape(js[track], soil["shear_modulus_K_m"], opts)) * (
             P["track_width_m"] * P["contact_length_m"] * soil["cohesion_Pa"] + N * math.tan(soil["friction_angle_rad"]))
 
-    # the default law's thrust in straight running is seed eq. (1) by its quadrature along
+    # the default law's thrust in straight running is Ferretti & Girelli's by its quadrature along
     # the track (docs/turning.md section 1: within 1e-4); the other soil is 3.7 % (left) and 1.6 % (right) off
     for track, soil, other in (("left", world.soils[1], world.soils[0]), ("right", world.soils[0], world.soils[1])):
         assert y[f"tractive_{track}_N"] == pytest.approx(eq1(track, soil), rel=2e-4), track

@@ -29,7 +29,7 @@ def _at(table, machine, what, depths):
 def test_arvidsson_2011_tracks_about_duals_below_singles(table):
     """Arvidsson, J., Westlin, H., Keller, T., Gilbertsson, M., 2011. Rubber track systems for
     conventional tractors: effects on soil compaction and traction. Soil & Tillage Research 117,
-    103-109 (not read; its figures as shared/REFERENCES.md gives them): "a 7.7 t tractor on rubber
+    103-109 (not read; its figures from the abstract): "a 7.7 t tractor on rubber
     tracks vs single vs dual wheels on two clays, stress at 0.15, 0.3, 0.5 m: tracks about equal to
     duals, below singles; under singles bulk density 1.24 -> 1.36 Mg/m3"."""
     z = (0.15, 0.3, 0.5)

@@ -15,12 +15,12 @@ def rut():
 
 def test_turn_rut_is_deeper_outside_shallower_inside_and_wider(rut):
     """The physics: a left turn's centripetal force m V^2 / R acts at the CG height, so the outer
-    (right) track carries more of the weight and the inner less (N = W/2 +- m a_y h / B, MODEL.md
-    section 1); Bekker's z ~ p^(1/n) then makes the outer rut deeper and the inner shallower than the
-    straight pass's, by (N_k / N_straight)^(1/n) - 1 (the cells' soil law; speed alone moves the
-    straight rut by 0.1 % between 1.85 and 2.15 m/s, measured). And a rigid track turning on a circle
-    sweeps a band wider than its width b: its ends lie (l/2)^2 / (2 r_k) outside its centre line's
-    circle, so both turn ruts are wider and carry more soil per metre than the straight one. Every
+    (right) track carries more of the weight and the inner less (N = W/2 +- m a_y h / B, docs/model.md,
+    "Normal pressure and load transfer"); Bekker's z ~ p^(1/n) then makes the outer rut deeper and the
+    inner shallower than the straight pass's, by (N_k / N_straight)^(1/n) - 1 (the cells' soil law; speed
+    alone moves the straight rut by 0.1 % between 1.85 and 2.15 m/s, measured). And a rigid track turning
+    on a circle sweeps a band wider than its width b: its ends lie (l/2)^2 / (2 r_k) outside its centre
+    line's circle, so both turn ruts are wider and carry more soil per metre than the straight one. Every
     cell is loaded once (one pass) in both."""
     inner, outer = rut["turn"]["inner"], rut["turn"]["outer"]
     straight = rut["straight"]["left"]

@@ -87,8 +87,8 @@ def test_arvidsson_keller_2007():
 
 
 def test_arvidsson_2011_tracks_duals_singles():
-    """Arvidsson, Westlin, Keller, Gilbertsson (2011), Soil Till. Res. 117:103-109 (as
-    shared/REFERENCES.md gives it): a 7.7 t tractor on rubber tracks, single and dual wheels, stress
+    """Arvidsson, Westlin, Keller, Gilbertsson (2011), Soil Till. Res. 117:103-109 (from
+    its abstract): a 7.7 t tractor on rubber tracks, single and dual wheels, stress
     at 0.15, 0.3, 0.5 m: tracks about equal to duals, below singles. ASSUMED here: the rear axle
     carries 60 % of the weight; 650/65R38 tyres (0.65 m, 1.85 m, load index 157: 4125 kg at
     160 kPa) at the rule's recommended pressure, duals 0.1 m apart; the tracks of the reference

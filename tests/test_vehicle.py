@@ -38,8 +38,8 @@ _MODELS: dict = {}
 @pytest.mark.parametrize("slip", [0.02, 0.1, 0.3])
 @pytest.mark.parametrize("law, rel", [("creep", 1e-5), ("shear", 1e-4)])
 def test_steady_shear_is_i_l_over_2_and_traction_is_wongs(params, slip, law, rel):
-    """Seed eq. (1) is Wong's closed form; the shear law's straight-running thrust is eq. (1) by its
-    quadrature along the track (docs/turning.md section 1: 4e-5 at 10 %, 7e-5 at 30 % slip)."""
+    """Ferretti & Girelli's tractive effort is Wong's closed form; the shear law's straight-running thrust
+    is eq. (1) by its quadrature along the track (docs/turning.md section 1: 4e-5 at 10 %, 7e-5 at 30 % slip)."""
     model = _MODELS.setdefault(law, SystemModel(ModelOptions(lateral_law=law)))
     p = model.param_vector(params)
     r, l = params["sprocket_radius_m"], params["contact_length_m"]

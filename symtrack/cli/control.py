@@ -27,7 +27,7 @@ def linearize_command(args) -> int:
     from ..reports.run_files import output_lock
 
     opts = linearize_model_options(args.set)
-    out = check_output_folder(args.out)  # before the work (DESIGN.md: outputs checked writable first)
+    out = check_output_folder(args.out)  # before the work: outputs checked writable first
     with output_lock(out):  # a second run into the folder fails at once
         return _linearize(args, opts, out)
 

@@ -31,7 +31,7 @@ Discretisation
     end point is the last collocation value, the gap constraint is x_{k+1} - F(x_k, w_k) with F
     linear, as fatrop's structure detection requires.
 
-NLP layout (stage ordered, as CASADI_NOTES section 6 prescribes)
+NLP layout (stage ordered, as fatrop's structure detection needs)
     w = [x_0, u_0, K_0, x_1, u_1, K_1, ..., x_N]; x_k = [vehicle states, previous command] (the
     previous command makes the torque-rate bound and its penalty stage-local); u_k the two torque
     commands in kN m; K_k the collocation states and accelerations. All variables are scaled to O(1). The stage

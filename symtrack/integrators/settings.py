@@ -100,7 +100,7 @@ class EngineSettings:
         two half steps, each controlled the same way (down to 1/64 of the step), [0, 0.1]; 0: off.
         The default 1e-3 halves 5 of the 688 steps of validation_grid on the shear law and carries the
         replayed field-operation input of tests/test_vehicle_step_replay.py that diverged without it
-        (docs/turning.md s. 8, "The vehicle step's error control").
+        (docs/terrain.md, "The vehicle step's error control").
     power: the compaction power the vehicle and the outputs see: "step_mean" (the work the cells
         absorbed over the last step / its length: energy-consistent) or "instantaneous" (p
         max(dz/dt, 0) at the step end, the channel model's expression).

@@ -1,4 +1,5 @@
-"""One terrain cell: MODEL.md sections 2 and 6 and seed eq. (4), written once in CasADi.
+"""One terrain cell, written once in CasADi: docs/model.md, "Pressure-sinkage", "Repeated loading" and
+"Cell dynamics".
 
 Pressure-sinkage law (z positive down):
 
@@ -8,11 +9,10 @@ Pressure-sinkage law (z positive down):
   so d is set per soil (:func:`bekker_regularisation_length`): at most the model option
   ``bekker_regularisation_m`` (1 um) and at most what keeps the error below
   ``BEKKER_REG_RELATIVE_ERROR`` at ``BEKKER_REG_REFERENCE_PRESSURE_PA``. A fixed 1 um gave 3.5 x
-  Bekker's static sinkage on heavy clay (n = 0.11, sinkage of micrometres: shared/REVIEW.md,
-  defect 3).
+  Bekker's static sinkage on heavy clay (n = 0.11, sinkage of micrometres).
 - unloading and reloading (Wong; reconstruction): below the top of the history the soil follows
   the straight line of slope k_u = max(K_e, kappa p_max / z_max) through it, clipped at p >= 0.
-- repeated loading (MODEL.md section 6; the cycle law of this module): a cell counts its plastic
+- repeated loading (the cycle law of this module): a cell counts its plastic
   load cycles N. The first cycle is the virgin Bekker loading. Each later cycle, one stay of
   the cell under a track, may add a plastic increment delta_{N+1} = z_p1 ((N+1)^beta - N^beta)
   (Monismith et al. 1975, Li & Selig 1996: plastic strain ~ N^beta), z_p1 = z_max - p_max / k_u
@@ -38,7 +38,8 @@ below p_max). Z = z_max + z_off is the top of the elastic line at the start of t
 With delta = z_off = d_c = 0 this is the law of the first wave exactly: R = L.
 :func:`history_update` moves the history after each step (INFO_OUT) so that p stays continuous.
 
-- dynamics (seed eq. 4): tau_z d2z/dt2 = p_load - p - c'' dz/dt.
+- dynamics (the cell equation of the Politecnico di Milano thesis, docs/model.md):
+  tau_z d2z/dt2 = p_load - p - c'' dz/dt.
 
 The history enters as inputs: inside one integration step it is constant and the law above
 switches branch by itself; the world manager updates it between steps.
@@ -185,5 +186,5 @@ def rut_after_cycles(rut_first_m, cycles, beta):
 
 
 def cell_acceleration(zdot, p_load, p, areal_mass, damping):
-    """Seed eq. (4): d2z/dt2 = (p_load - p - c'' dz/dt) / tau_z."""
+    """The cell equation (docs/model.md, "Cell dynamics"): d2z/dt2 = (p_load - p - c'' dz/dt) / tau_z."""
     return (p_load - p - damping * zdot) / areal_mass

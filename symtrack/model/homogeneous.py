@@ -1,7 +1,7 @@
 """Homogeneous-soil terrain: four terrain cells that travel with the vehicle on virgin soil.
 
 Under each track's sprocket end and idler end sits one cell with the dynamics and the
-loading/unloading law of MODEL.md section 2 (:mod:`symtrack.model.cell`):
+loading/unloading law of docs/model.md, "Pressure-sinkage" (:mod:`symtrack.model.cell`):
 
 - the idler cell (front) meets virgin soil at every instant: its history is empty
   (z_max = p_max = 0), so it follows the Bekker loading branch;

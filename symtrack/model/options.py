@@ -26,41 +26,43 @@ BUILD_FLAGS = ("quadrature_call",)
 class ModelOptions:
     """How the equations are written.
 
-    traction_sign: how the sign functions of the model are evaluated: sign(j) of seed eq. (1),
+    traction_sign: how the sign functions of the model are evaluated: sign(j) of the tractive effort,
         and the direction sign(omega) of the internal resistance and sign(v_k) of the compaction
         resistance.
         "smooth" (default): sign(j) = j/sqrt(j^2 + d^2) with d = shear_smoothing_m (the product
         with the bracket of eq. (1) is then smooth and odd and differs from the exact law only
         for |j| ~ d); the directions are tanh(omega/omega_smoothing), tanh(v/motion_smoothing).
-        "tanh": the seed's approximation, sign(j) = tanh(k j) with k = tanh_steepness_per_m;
-        directions as in "smooth".
-        "sign": the discontinuous sign() everywhere, kept to reproduce the seed's numerical
+        "tanh": the approximation of the Politecnico di Milano thesis (docs/model.md), sign(j) =
+        tanh(k j) with k = tanh_steepness_per_m; directions as in "smooth".
+        "sign": the discontinuous sign() everywhere, kept to reproduce the thesis's numerical
         oscillations (Coulomb-like chattering of the internal resistance at omega = 0).
     lateral_law: how the tracks meet the soil (docs/turning.md).
         "shear_quasistatic": the shear stress at each point of the contact from the soil's shear law,
         Mohr-Coulomb strength c + p tan(phi) with Janosi-Hanamoto shear (modulus K), against the
         local sliding velocity, longitudinal and lateral together (combined slip; after Wong &
         Chiang 2001), with the lateral displacement field computed from the current velocities. The
-        tractive force of each track is the longitudinal part of the same integral (seed eq. (1)
-        exactly when the track does not slide sideways). Its fixed-step integrators need 0.5 ms steps.
-        "shear" (default): the "shear_quasistatic" law with the sliding state lagged as seed eq. (2) lags the
-        longitudinal one: each track carries two lateral shear states (the vehicle model
+        tractive force of each track is the longitudinal part of the same integral (Ferretti & Girelli's
+        tractive effort exactly when the track does not slide sideways). Its fixed-step integrators
+        need 0.5 ms steps.
+        "shear" (default): the "shear_quasistatic" law with the sliding state lagged as the shear
+        displacement's law lags the longitudinal one: each track carries two lateral shear states (the vehicle model
         "planar_lateral", four more states), j_y at the contact centre and the twist theta,
         dj_y/dt = -(2 r |omega| / l) j_y + v + r_z x_c (x_c the contact centre's body x) and
         dtheta/dt = -(2 r |omega| / l) theta + r_z, and the sliding direction and the displacement
         field use the lagged slips: 2 j / l longitudinally, 2 j_y / l + (2 theta / l)(l/2 - s)
         laterally. In steady running it is the quasi-static law exactly; a 10 ms step carries it
         (docs/turning.md section 8). "shear_transient", its earlier name, is read as "shear".
-        "creep": the reconstruction of the seed paper's model, on which the validation is calibrated
+        "creep": the reconstruction of Ferretti & Girelli's (1999) model, on which the validation is calibrated
         (the validation scenarios declare it; with the shear law the validation's yaw is 15.5 deg
-        against the paper's 0.4, docs/turning.md section 4): seed eq. (1) for the tractive force and a lateral
+        against the paper's 0.4, docs/turning.md section 4): their tractive effort for the tractive force and a lateral
         resistance -mu_t q tanh((v + r_z x)/eps_v) with the vehicle's lateral_friction_coeff and
         lateral_creep_speed_m_s (a velocity creep, not a soil property).
     shear_strength_pressure: the pressure in the shear strength c + p tan(phi) of the "shear" law.
-        "mean" (default): the track's mean pressure N/(b l), as seed eq. (1) does; the tractive force
-        in straight running is then eq. (1) exactly. "local": the linear (or triangular) pressure
-        p(s): the exact Janosi integral over the pressure distribution (3-5 % more thrust than eq. (1)
-        on the validation clay when traction loads the rear; REVIEW.md defect 7).
+        "mean" (default): the track's mean pressure N/(b l), as Ferretti & Girelli's tractive effort
+        does; the tractive force in straight running is then eq. (1) exactly. "local": the linear
+        (or triangular) pressure p(s): the exact Janosi integral over the pressure distribution (3-5
+        % more thrust than eq. (1) on the validation clay when traction loads the rear;
+        docs/turning.md section 3).
     shear_points, shear_grading: the "shear" law's integral along each track is split at the pivot
         (where the lateral sliding velocity changes sign) and at the zero of the lateral shear
         displacement, each of the three pieces halved, and each half integrated by shear_points
@@ -74,7 +76,7 @@ class ModelOptions:
         pivot; in straight running the tractive force is eq. (1) for every slip (sign form as
         traction_sign says).
     sliding_sign: ("shear" law only) where the sign of the longitudinal stress comes from.
-        "displacement" (default): sign(j) of seed eq. (1) times the regularised |i_x| of the sliding
+        "displacement" (default): sign(j) of the tractive effort times the regularised |i_x| of the sliding
         velocity (eq. (1) exactly in straight running for every slip). "velocity": the sliding
         velocity's own i_x, so that the stress is -b tau (i_x, i_y)/sqrt(i_x^2 + i_y^2 + d^2): smooth
         where the track's longitudinal sliding changes sign while it slides sideways (sign(j) there
@@ -88,16 +90,16 @@ class ModelOptions:
         Gauss-Legendre quadrature (segments x points per segment); the "shear" law too when
         lateral_split is false.
     lateral_shear_cap: ("creep" law only) when true, the lateral resistance per unit area, mu_t p, is capped at
-        the soil's shear strength c + p tan(phi) (reconstruction, not in MODEL.md). Without the cap
+        the soil's shear strength c + p tan(phi) (reconstruction). Without the cap
         the reference crawler on clayey soil (Thailand, 38 %) meets a turning resistance larger
         than the soil lets its tracks push (mu_t W = 29.7 kN > b l c + W tan(phi) = 21.4 kN) and
         holds no steady turn tighter than about 100 m. Off by default: the validation was
         calibrated without it (its lateral creep is far from either limit).
     soil_law: the terrain cells' soil law, a name of the soil-law registry
         (:mod:`symtrack.model.soil_law`); "bekker_wong" (default): Bekker loading, Wong
-        unloading/reloading line and the cycle law of MODEL.md sections 2 and 6.
-    vehicle: the vehicle model (issue 22). "planar" (default): the planar vehicle of MODEL.md
-        section 1 (x, y, yaw; pitch from the quasi-static load transfer). "3d": the rigid hull that
+        unloading/reloading line and the cycle law of docs/model.md, "Pressure-sinkage".
+    vehicle: the vehicle model (issue 22). "planar" (default): the planar vehicle of
+        docs/model.md (x, y, yaw; pitch from the quasi-static load transfer). "3d": the rigid hull that
         heaves, pitches and rolls on the ground's shape (:mod:`symtrack.model.vehicle3d`,
         docs/vehicle3d.md), on the homogeneous terrain or on the grid through the terrain engine.
     contact_segments: ("3d" only) the segments along each track, each pressing on the ground under

@@ -78,8 +78,8 @@ SOIL_MODEL_PARAMS: tuple[ParamSpec, ...] = (
           0.0, 1e12, False),
     _spec("unloading_stiffness_floor", "kappa: the unloading slope is at least kappa * p_max / z_max",
           1.0, 100.0),
-    _spec("cell_areal_mass_kg_per_m2", "tau_z of seed eq. (4): areal mass of a terrain cell", 0.0, 1e5, False),
-    _spec("cell_damping_Pa_s_per_m", "c'' of seed eq. (4): areal damping of a terrain cell", 0.0, 1e9),
+    _spec("cell_areal_mass_kg_per_m2", "tau_z of the cell equation: areal mass of a terrain cell", 0.0, 1e5, False),
+    _spec("cell_damping_Pa_s_per_m", "c'' of the cell equation: areal damping of a terrain cell", 0.0, 1e9),
 )
 
 # Soil parameters only the grid terrain's cells use (its world manager and engine): not in the

@@ -127,7 +127,7 @@ class SoilLaw(abc.ABC):
 
 class BekkerWong(SoilLaw):
     """Bekker's virgin loading, Wong's unloading/reloading line and the cycle law of
-    :mod:`symtrack.model.cell` (MODEL.md sections 2 and 6); the mathematics lives there.
+    :mod:`symtrack.model.cell` (docs/model.md, "Pressure-sinkage"); the mathematics lives there.
 
     Law vector: k_eq = k_c / b + k_phi [N/m^(n+2)], n, the elastic stiffness K_e [Pa/m], kappa
     (the unloading-stiffness floor) and the regularisation length d [m] of the Bekker term
@@ -136,7 +136,7 @@ class BekkerWong(SoilLaw):
     """
 
     name = "bekker_wong"
-    description = "Bekker loading, Wong unloading/reloading line, plastic load cycles (MODEL.md 2, 6)"
+    description = "Bekker loading, Wong unloading/reloading line, plastic load cycles (docs/model.md)"
     param_names = ("k_c_N_per_m_n1", "k_phi_N_per_m_n2", "track_width_m", "bekker_n", "elastic_stiffness_Pa_per_m",
                    "unloading_stiffness_floor")
     vector_names = ("k_eq", "n", "elastic_stiffness_Pa_per_m", "kappa", "regularisation_m")

@@ -1,12 +1,12 @@
-"""The planar tracked vehicle of MODEL.md section 1, written once as CasADi SX expressions.
+"""The planar tracked vehicle of docs/model.md, written once as CasADi SX expressions.
 
 Body frame at the CG: x forward, y left, yaw counter-clockwise. Left track at y = +B/2, right
 track at y = -B/2; each has its driven sprocket at the rear and its idler at the front.
 
 The equations here need from the terrain only the compaction resistance of each track
 (the terrain gets from here the pressure under each track), so the same vehicle serves the
-homogeneous terrain and the channel-pool grid terrain. Reconstructions (not in the seed) are
-marked as such; see MODEL.md for their sources.
+homogeneous terrain and the channel-pool grid terrain. Reconstructions (not in Ferretti & Girelli
+1999) are marked as such; docs/model.md gives their sources.
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ class PressureDistribution:
 
 
 def traction_sign(j, opts: ModelOptions):
-    """sign(j) of seed eq. (1) in the chosen form (ModelOptions.traction_sign)."""
+    """sign(j) of Ferretti & Girelli's tractive effort in the chosen form (ModelOptions.traction_sign)."""
     if opts.traction_sign == "smooth":
         return j / ca.sqrt(j**2 + opts.shear_smoothing_m**2)
     if opts.traction_sign == "tanh":
@@ -118,7 +118,7 @@ def traction_sign(j, opts: ModelOptions):
 
 
 def traction_shape(j, K, opts: ModelOptions):
-    """sign(j) [1 + K/(2|j|) (exp(-2|j|/K) - 1)] of seed eq. (1), in the chosen form."""
+    """sign(j) [1 + K/(2|j|) (exp(-2|j|/K) - 1)] of Ferretti & Girelli's tractive effort, in the chosen form."""
     a = ca.sqrt(j**2 + opts.shear_smoothing_m**2)
     bracket = 1 + K / (2 * a) * (ca.exp(-2 * a / K) - 1)
     return traction_sign(j, opts) * bracket
@@ -147,13 +147,13 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     soil with, per unit of tread speed r|omega|, the longitudinal slip (r omega - v_k)/(r|omega|)
     and the lateral slip i_y(s) = (v + r_z x(s)) / (r|omega|). The shear displacement is accumulated
     from the end where the track element entered the contact (the front when omega > 0):
-    longitudinally j_x(s) = i_x s with i_x = 2 j / l from the state of seed eq. (2) (its steady
+    longitudinally j_x(s) = i_x s with i_x = 2 j / l from the state of the shear law (its steady
     state is Wong's j = i s), laterally j_y(s) = integral of i_y from 0 to s (quasi-static). The
     shear stress has the Mohr-Coulomb / Janosi magnitude (c + p tan phi)(1 - exp(-|j|/K)) and acts
     against the local sliding velocity (combined slip: a track that slips longitudinally resists
-    less laterally, and the other way round), with the longitudinal sign of eq. (1), sign(j).
+    less laterally, and the other way round), with the longitudinal sign of the tractive effort, sign(j).
 
-    With no lateral sliding the longitudinal force is seed eq. (1) (mean-pressure strength, the
+    With no lateral sliding the longitudinal force is Ferretti & Girelli's tractive effort (mean-pressure strength, the
     default; to the quadrature's accuracy, 7e-5 at 30 % slip) or the exact Janosi integral over p(s)
     (``shear_strength_pressure = "local"``).
 
@@ -186,8 +186,8 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
     JF_l = a0 * l - a1 * l**2 / 2
 
     # the sliding direction from the track's sliding velocity now: longitudinal r omega - v_k,
-    # lateral v + r_z x (per unit tread speed), with the longitudinal sign of seed eq. (1), sign(j)
-    # ("shear": the lagged longitudinal slip 2 j / l, seed eq. (2)'s)
+    # lateral v + r_z x (per unit tread speed), with the longitudinal sign of the tractive effort, sign(j)
+    # ("shear": the lagged longitudinal slip 2 j / l of the shear displacement's law)
     i_x_now = (r * omega - v_k) / tread if lagged is None else i_x
     ax = ca.sqrt(i_x_now**2 + opts.sliding_smoothing**2)  # regularised |i_x|
     if opts.sliding_sign == "velocity":
@@ -367,7 +367,7 @@ def creep_lateral_force(q, c_line, tan_phi, v_lat, mu, eps_v, opts: ModelOptions
 
 
 def sprocket_rates(j, omega, abs_om, v_track, torque, F, R_in, r, l, J):
-    """(dj/dt, domega/dt) of a track: seed eq. (2)'s mean shear displacement and the sprocket's
+    """(dj/dt, domega/dt) of a track: Ferretti & Girelli's mean shear displacement and the sprocket's
     rotation driven by its torque against the thrust and the internal resistance."""
     return -(2 * r / l) * abs_om * j + r * omega - v_track, (torque - r * (F + R_in)) / J
 
@@ -395,8 +395,8 @@ def track_signals(F, R_in, Rc, Fy, N, slip) -> dict:
 
 
 def lateral_shear_rates(j_y, theta, abs_om, vy, rz, x_centre, l, r):
-    """(dj_y/dt, dtheta/dt) of a track's lateral shear states (the "shear" law): seed
-    eq. (2) written for the lateral sliding velocity at the contact centre, v + r_z x_centre
+    """(dj_y/dt, dtheta/dt) of a track's lateral shear states (the "shear" law): Ferretti
+    & Girelli's shear law written for the lateral sliding velocity at the contact centre, v + r_z x_centre
     (x_centre the centre's body x), and for the yaw rate (the lateral sliding velocity's gradient
     along the track), with eq. (2)'s time constant l / (2 r |omega|). Steady states: j_y = (l/2)
     i_y(l/2), half the contact times the lateral slip, as eq. (2)'s j = i l / 2; theta = r_z l /
@@ -488,7 +488,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
                 shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts,
                 lagged[k] if transient else None)
         else:
-            # Seed eq. (1): b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
+            # Ferretti & Girelli's tractive effort: b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
             # integral of the shear strength over the contact, b l c + N tan phi, used here so that
             # the triangular case is right too.
             F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
@@ -498,7 +498,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
                  **_distribution_scalars(dist[k])}
             _, Fy[k], Mz[k] = integrate_track(_creep_integrand, [(sn * l, wn * l) for sn, wn in zip(
                 s_nodes, w_nodes, strict=True)], ((0, l, l, s_nodes, w_nodes),), q, opts)
-        # Seed eq. (2): mean shear displacement.
+        # Ferretti & Girelli's mean shear displacement.
         jdot[k], omdot[k] = sprocket_rates(shear[k], omega[k], abs_om[k], v_track[k], torque[k], F[k], R_in[k], r, l, J)
 
     Fx_net = (F["left"] - Rc["left"]) + (F["right"] - Rc["right"]) - drawbar

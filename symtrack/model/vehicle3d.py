@@ -18,7 +18,7 @@ Its pressure is the model's soil law at that sinkage, with the history the homog
 its sprocket cell (:mod:`symtrack.model.homogeneous`): the front segment meets virgin soil, each
 later segment soil already pressed to the deepest sinkage ahead of it (Bekker loading if it sinks
 deeper, the unloading/reloading line if not), plus the cells' areal damping c'' times the rate of
-penetration (seed eq. (4) without the cell's own areal mass: the soil under the track moves with
+penetration (the cell equation without the cell's own areal mass: the soil under the track moves with
 the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
 feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
 normal at the segment. So the load split between and along the tracks follows from the hull's
@@ -27,8 +27,8 @@ rigid-body equilibrium on the ground: its shape, the weight's components and the
 closed trivially).
 
 Shear (the planar laws, in the local ground plane): each track's tractive and lateral forces are
-the planar model's (seed eq. (1) and the creep law, or the shear laws of docs/turning.md) with the
-track's normal load the sum of its segments' and its pressure the segments' (linear between
+the planar model's (Ferretti & Girelli's tractive effort and the creep law, or the shear laws of
+docs/turning.md) with the track's normal load the sum of its segments' and its pressure the segments' (linear between
 segment centres), the track's speed the velocity of its contact centre along the track's tangent in
 the ground plane, its lateral sliding the velocity across it. The thrust acts along that tangent at
 the contact centre, the lateral force across it (with the planar law's yaw moment about the CG).

@@ -383,7 +383,7 @@ static void info_out(eng_t *E, long long ch, const double *hist) {
  * Every lane runs exactly the scalar functions' sequence of operations on its own numbers, so the
  * results are theirs to the last bit: tests/test_terrain_engine.py builds the engine with one lane and
  * compares every state, output and stored field bit for bit (measured: the cells' time per macro step
- * of validation_grid 64 -> 47 us at 8 lanes; docs/turning.md s. 8). */
+ * of validation_grid 64 -> 47 us at 8 lanes; docs/terrain.md, "Speed"). */
 
 /* law() for CELL_LANES lanes, all on soil ``soil``: z[i], hist[c CELL_LANES + i] (by component) -> p[i],
    dp[i]. engine_soils.inc's ENG_LAW_LANES (grid_engine_model.law_lanes_c): the generated law in a loop

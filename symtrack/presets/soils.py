@@ -2,7 +2,7 @@
 
 Sources:
 - Wong, J.Y., *Theory of Ground Vehicles*, Table 2.3 (Bekker n, k_c, k_phi, c, phi), quoted in
-  ``shared/MODEL.md`` section 5. The table gives k_c in kN/m^(n+1), k_phi in kN/m^(n+2) and c in
+  docs/model.md, "Soil parameter sets". The table gives k_c in kN/m^(n+1), k_phi in kN/m^(n+2) and c in
   kPa; the ``* 1e3`` below is that conversion.
 - Janosi-Hanamoto K is not in that table: LETE sand 1.2 cm (Wong); "typical" clay 0.6 cm and
   loose sand 2.5 cm (Wong's guidance). Where a soil has no measured K, the guidance value is
@@ -43,7 +43,7 @@ Sources:
   compression lines and the yield line's k2 (symtrack/soil/pedotransfer.py; ``symtrack presets
   NAME`` shows each derived value with its function): no two presets share a strength.
 
-Terrain-cell dynamics (seed eq. 4) need an areal mass tau_z and an areal damping c'' that no
+Terrain-cell dynamics (docs/model.md, "Cell dynamics") need an areal mass tau_z and an areal damping c'' that no
 table gives; see the two module constants below.
 """
 
@@ -57,14 +57,14 @@ from ..soil.pedotransfer import suction_from_water_content_kPa
 
 # Areal damping c'' of a cell: Project Chrono SCM's default damping (3e4 Pa s/m).
 CELL_DAMPING_PA_S_PER_M = 3.0e4
-# Areal mass tau_z of a cell: calibrated against MODEL.md section 2 (natural frequency of a cell
-# 200-1500 rad/s): at the validation load (about 28 kPa, 1.5 mm on clayey soil, dp/dz ~ 9e6 Pa/m)
+# Areal mass tau_z of a cell: calibrated for a natural frequency of a cell of 200-1500 rad/s
+# (docs/model.md, "Cell dynamics"): at the validation load (about 28 kPa, 1.5 mm on clayey soil, dp/dz ~ 9e6 Pa/m)
 # 50 kg/m^2 gives about 430 rad/s and, with c'' above, a damping ratio of about 0.7.
 CELL_AREAL_MASS_KG_PER_M2 = 50.0
 # Unloading/reloading stiffness for the Wong soils, which have no measured K_e: Chrono SCM's
-# "soft" elastic stiffness (4e7 Pa/m), the lower end of the range MODEL.md section 2 allows.
+# "soft" elastic stiffness (4e7 Pa/m), the lower end of SCM's range (4e7-4e8 Pa/m).
 WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M = 4.0e7
-# Floor of the unloading slope, k_u >= kappa * p_max / z_max (MODEL.md section 2 allows 2-5):
+# Floor of the unloading slope, k_u >= kappa * p_max / z_max (docs/model.md, "Pressure-sinkage"; 2-5):
 # keeps millimetre-sinkage unloading lines from rebounding above the original surface.
 UNLOADING_STIFFNESS_FLOOR = 3.0
 
@@ -130,8 +130,8 @@ SOILS: dict[str, dict[str, float]] = {
     # beta: Li & Selig's silt (ML)
     "sandy_loam_15": _wong(0.70, 5.27, 1515.04, 1.72, 29.0, 0.012, BETA_ML, XI_FIRM,
                            _describe(0.10, 0.25, 0.65, 1.55, w=0.15)),
-    # Wong Table 2.3; K = 1.5 cm calibrated against the seed's validation table (MODEL.md s. 4
-    # allows 0.6-2.5 cm): gives a driven-track shear of order 1 cm at 2000 N m.
+    # Wong Table 2.3; K = 1.5 cm calibrated against Ferretti & Girelli's (1999) validation table
+    # (within Wong's 0.6-2.5 cm): gives a driven-track shear of order 1 cm at 2000 N m.
     # beta: Li & Selig's lean clay (CL); xi: firm (its sinkage under the crawler is millimetres)
     "clayey_soil_thailand_38": _wong(0.50, 13.19, 692.15, 4.14, 13.0, 0.015, BETA_CL, XI_FIRM,
                                      _describe(0.45, 0.30, 0.25, 1.25, w=0.38)),

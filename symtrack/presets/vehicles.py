@@ -1,8 +1,9 @@
 """Vehicle parameter sets.
 
 The vehicle data of Ferretti & Girelli (1999) are NOT public. The reference crawler below is a
-medium agricultural crawler whose every value lies in the plausible ranges of MODEL.md section 4
-and whose free values were calibrated against the seed's validation table (MODEL.md section 4),
+medium agricultural crawler whose every value lies in the plausible ranges of such machines
+and whose free values were calibrated against Ferretti & Girelli's validation table (docs/model.md,
+"Validation case and calibrated values"),
 as marked on each line. Wong's internal-resistance coefficients are from Wong, *Theory of Ground
 Vehicles* (tracked vehicles: R_in = W (0.0222 + 0.0003 V[km/h])).
 """
@@ -35,8 +36,8 @@ VEHICLES: dict[str, dict[str, float]] = {
         "cg_ahead_of_contact_centre_m": 0.0,
         # estimated: track mass about 200 kg, m_track r^2 ~ 29 kg m^2 (range 10-60 per side).
         "sprocket_inertia_kg_m2": 30.0,
-        # calibrated against the seed's oscillation study: a 0.1 s actuator lag removes the
-        # model-related shear oscillations that a torque step excites.
+        # calibrated against the oscillation study of the Politecnico di Milano thesis (docs/model.md):
+        # a 0.1 s actuator lag removes the model-related shear oscillations that a torque step excites.
         "torque_time_constant_s": 0.1,
         # Wong, Theory of Ground Vehicles (tracked vehicles).
         "internal_resistance_const": 0.0222,
@@ -46,9 +47,9 @@ VEHICLES: dict[str, dict[str, float]] = {
         # shear laws (the default "shear", "shear_quasistatic") take their lateral resistance from the
         # soil (c, phi, K) and ignore both values below.
         "lateral_friction_coeff": 0.55,
-        # calibrated against the validation table with the creep law: the yaw drift of 0.4 deg over
-        # 20 m is a creep whose rate is proportional to this speed (MODEL.md section 1). Not a soil
-        # property; docs/turning.md.
+        # calibrated against the validation table with the creep law: the yaw drift of 0.4 deg over 20 m is a
+        # creep whose rate is proportional to this speed (docs/model.md, "Lateral resistance and turning").
+        # Not a soil property; docs/turning.md.
         "lateral_creep_speed_m_s": 0.009,
         # the validation run pulls no implement.
         "drawbar_pull_N": 0.0,

@@ -75,7 +75,7 @@ def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_te
     if note:
         parts.append(f"<p>{html.escape(note)}</p>")
     if validation_rows:
-        parts.append("<h2>Validation (seed / Ferretti &amp; Girelli)</h2>")
+        parts.append("<h2>Validation (Ferretti &amp; Girelli 1999)</h2>")
         parts.append(table_html([(k, rep, v, "yes" if ok else "NO") for k, rep, v, ok in validation_rows],
                             ["quantity", "reported", "simulated", "within"]))
     scalars = [(k, v) for k, v in summary.items() if not isinstance(v, (list, dict))]

@@ -1,4 +1,5 @@
-"""Terrain plots: the sinkage map (top view, like the seed's figure 7) and the rut cross-section."""
+"""Terrain plots: the sinkage map (top view, like figure 7 of the Politecnico di Milano thesis, docs/model.md)
+and the rut cross-section."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The seed's reported validation figures (MODEL.md section 4) and the check against them."""
+"""Ferretti & Girelli's (1999) reported validation figures (docs/model.md, "Validation case and calibrated
+values") and the check against them."""
 
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ def _fmt(v):
 
 
 def table_markdown(summary: dict) -> str:
-    lines = ["| quantity | reported (seed / Ferretti & Girelli) | simulated | within |",
+    lines = ["| quantity | reported (Ferretti & Girelli 1999) | simulated | within |",
              "|---|---|---|---|"]
     for key, reported, v, ok in check(summary):
         lines.append(f"| {key} | {reported} | {_fmt(v)} | {'yes' if ok else 'NO'} |")
@@ -47,7 +48,7 @@ def comparison_markdown(declared: dict, other: dict, other_label: str) -> str:
     the scenario as it declares itself (the creep law, the paper's model), ``other`` the summary of
     the same manoeuvre with another setting, labelled ``other_label`` (the README shows the shear
     law's prediction this way)."""
-    lines = [f"| quantity | reported (seed / Ferretti & Girelli) | simulated | within | {other_label} | within |",
+    lines = [f"| quantity | reported (Ferretti & Girelli 1999) | simulated | within | {other_label} | within |",
              "|---|---|---|---|---|---|"]
     for (key, reported, v, ok), (_, _, w, ok_w) in zip(check(declared), check(other), strict=True):
         lines.append(f"| {key} | {reported} | {_fmt(v)} | {'yes' if ok else 'NO'} | {_fmt(w)} "

@@ -1712,7 +1712,7 @@ def _traffic_png(rows) -> bytes:
     width = 0.8 / n
     for i, r in enumerate(rows):
         ax.bar(np.arange(len(keys)) + i * width, [r[k] or 0.0 for k, _ in keys], width, label=r["tracks"])
-    # Kroulik et al. 2009 (REFERENCES.md): the share run over at least once in their DGPS-logged seasons
+    # Kroulik et al. 2009 (Soil & Tillage Research): the share run over at least once in their DGPS-logged seasons
     for share, lab, ls in ((0.953, "Kroulik 2009: conventional 95.3 %", "-"), (0.728, "minimum tillage 72.8 %", "--"),
                            (0.557, "direct seeding 55.7 %", ":")):
         ax.hlines(share, -0.5 * width, 0.8 - 0.5 * width, colors="k", linestyles=ls, linewidth=1.0, label=lab)

@@ -1,7 +1,7 @@
 """Seasons of wheeled machines as footprints: the field's trafficked share, geometrically (issue 23,
 "Published figures"; docs/studies.md, "Kroulik's three seasons as wheel footprints").
 
-Kroulik, Kumhala, Hula, Honzik (Soil & Tillage Research 2009; REFERENCES.md "Field traffic")
+Kroulik, Kumhala, Hula, Honzik (Soil & Tillage Research 2009)
 logged every machine of a season by DGPS (every 2 s), marked each machine's tyre widths and wheel
 spacing, and reported the share of the field run over at least once: 95.3 % conventional
 tillage, 72.8 % minimum tillage, 55.7 % direct seeding, and the "repeated" coverage 145.6 %,
@@ -41,7 +41,7 @@ from .operations import OperationSettings, parse_operation, plan_operation
 __all__ = ["KROULIK_2009", "MACHINES", "Machine", "SEASONS", "SeasonOp", "Wheel", "build_season", "machine_from_dict",
            "operation_counts", "season_counts", "season_shares", "segment_counts", "system_table"]
 
-# Kroulik et al. 2009 (REFERENCES.md "Field traffic"): run over at least once, "repeated coverage" (0-1)
+# Kroulik et al. 2009 (Soil & Tillage Research): run over at least once, "repeated coverage" (0-1)
 KROULIK_2009 = {"conventional": (0.953, 1.456), "minimum": (0.728, 0.448), "direct": (0.557, 0.184)}
 SYSTEM_LABELS = {"conventional": "conventional tillage", "minimum": "minimum tillage", "direct": "direct seeding"}
 MACHINE_KEYS = ("name", "working_width_m", "outer_width_m", "turn_radius_m", "wheels")

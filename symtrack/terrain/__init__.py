@@ -1,6 +1,6 @@
 """The persistent grid terrain: Bekker cells simulated through a fixed pool of channels.
 
-MODEL.md sections 2 and 3; user documentation in docs/terrain.md. This layer knows no
+The model: docs/model.md; user documentation in docs/terrain.md. This layer knows no
 integrator: the world manager is driven by a plant of :mod:`symtrack.simulation.plants`.
 
 - :mod:`.settings`: the ``[terrain]`` scenario section (:class:`TerrainSettings`);

@@ -1,14 +1,15 @@
-"""The channel pool: a fixed number of copies of the cell equations (MODEL.md section 3).
+"""The channel pool: a fixed number of copies of the cell equations (docs/model.md, "Terrain cells,
+channels and the world manager").
 
-A channel is one copy of the cell law of :mod:`symtrack.model.cell` (seed eq. 4, Bekker
+A channel is one copy of the cell law of :mod:`symtrack.model.cell` (the cell equation, Bekker
 loading, Wong unloading/reloading line). It does not know which cell it simulates: the world
 manager (:mod:`symtrack.terrain.world`) writes the cell's identity and history into the
 channel's entries of the terrain parameter vector Q before every macro step and reads the
-channel's states back after it (the seed's INFO_IN / INFO_OUT).
+channel's states back after it (the thesis's INFO_IN / INFO_OUT, docs/model.md).
 
 Layout
 ------
-States, per channel c: ``ch{c}_sinkage_m``, ``ch{c}_sinkage_rate_m_s`` (the seed's int_1_state
+States, per channel c: ``ch{c}_sinkage_m``, ``ch{c}_sinkage_rate_m_s`` (the thesis's int_1_state
 and int_2_state).
 
 Q (the terrain's own parameters, appended to the vehicle and soil parameters):
@@ -37,7 +38,7 @@ Coupling with the vehicle
   would otherwise bias a rigid track's sinkage low (at dx = 0.1 m and b = 0.45 m, by about
   15 %). The weights are continuous in the pose; with no cell under a strip its sinkage is 0.
   Needs dx < b (checked by the world manager).
-- **Compaction resistance** (MODEL.md section 1, reconstruction): the power the track spends
+- **Compaction resistance** (docs/model.md, reconstruction): the power the track spends
   pressing the soil, divided by the track speed,
   R_c,k = sum_c A_cell frac_k,c p_c max(dz_c/dt, 0) / sqrt(v_k^2 + v0^2),
   with p_c the soil's reaction pressure and v0 = :data:`COMPACTION_SPEED_FLOOR_M_S`. It
@@ -89,7 +90,7 @@ NG = len(GLOBAL_FIELDS)
 # not a travel resistance anyway.
 COMPACTION_SPEED_FLOOR_M_S = 0.1
 
-# Phase flag of a cell (the seed's ``state``): untouched, loading on the Bekker curve,
+# Phase flag of a cell (the thesis's ``state``): untouched, loading on the Bekker curve,
 # unloading/reloading on the line through (z_max, p_max).
 PHASE_VIRGIN, PHASE_LOADING, PHASE_UNLOADING = 0, 1, 2
 

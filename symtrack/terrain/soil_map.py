@@ -1,5 +1,5 @@
-"""A field whose soil varies (MODEL.md section 8): the ``[terrain.soil_map]`` table and the
-per-cell soil index it gives.
+"""A field whose soil varies (docs/model.md, "Soil that varies over the field"): the ``[terrain.soil_map]``
+table and the per-cell soil index it gives.
 
 Schema (docs/terrain.md, "Soil maps")::
 

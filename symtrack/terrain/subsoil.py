@@ -1,6 +1,6 @@
 """Subsoil vertical stress under the tracks (Söhne / Fröhlich) and the compaction risk.
 
-MODEL.md section 7, issue 10 part 3; user documentation and sources in docs/subsoil.md.
+The model: docs/model.md, "Subsoil stress"; user documentation and sources in docs/subsoil.md.
 numpy only: the terrain engine does the same lookup in C (symtrack/native/subsoil.h).
 
 Stress propagation

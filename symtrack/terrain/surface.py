@@ -37,7 +37,7 @@ Limits (checked before anything is built, each naming the key, the value and the
 
 - the steepest slope of the ground's plane, atan(|grad z0|) of the slopes and the raster (not the
   furrows': below), at most :data:`MAX_SLOPE_DEG` = 20 deg. Why: the terrain's cells are vertical
-  columns (MODEL.md section 2: the sinkage measured vertically, the pressure the vertical load over
+  columns (docs/model.md: the sinkage measured vertically, the pressure the vertical load over
   the horizontal cell area), while Bekker's law is a plate's pressed normal to the ground; on ground
   inclined by t they differ by cos t (the sinkage) and cos^2 t (the pressure: the load's normal
   component, cos t, over an area 1 / cos t larger): 6 % and 12 % at 20 deg, 13 % and 25 % at 30 deg.

@@ -1,10 +1,11 @@
-"""The world manager: the cell storage Cell[N, N] and the channel assignment (MODEL.md s. 3).
+"""The world manager: the cell storage Cell[N, N] and the channel assignment (docs/model.md).
 
 Storage
 -------
-Seven values per cell, as the seed's INFO_IN / INFO_OUT: sinkage z [m], sinkage rate dz/dt [m/s],
-history z_max [m] and p_max [Pa] (float64: the integrator's values are stored to the last
-bit, which the bit-exact continuation needs), the phase flag (int8, see
+Seven values per cell, as the INFO_IN / INFO_OUT of the Politecnico di Milano thesis
+(docs/model.md): sinkage z [m], sinkage rate dz/dt [m/s], history z_max [m] and p_max [Pa] (float64:
+the integrator's values are stored to the last bit, which the bit-exact continuation needs), the
+phase flag (int8, see
 :data:`~symtrack.terrain.channels.PHASE_VIRGIN`), and the cycle law's z_off [m] (float64) and
 load-cycle count (uint16) (symtrack/model/cell.py), the soil index (uint8, a soil map) and the
 subsoil stress record (float32 per depth): 60 bytes per cell with the four default depths, 60 MB
@@ -26,7 +27,7 @@ constants of the rules (:func:`padding_m`, :func:`derive_modulus`), not a second
    footprint, its reaction pressure is exactly 0 (clipped line: the soil has let go of the
    track) and |dz/dt| <= ``release_rate_m_s``. Its state was already written back. All
    other active cells stay active (still unloading).
-3. Assignment by the seed's sector rule, Cell[i, j] -> CHANNEL[i mod M, j mod M], with no search.
+3. Assignment by the thesis's sector rule, Cell[i, j] -> CHANNEL[i mod M, j mod M], with no search.
    A newly active cell whose channel is held by another active cell stops the run
    (:class:`~symtrack.foundations.errors.SimulationError` naming both cells and the M that the active set
    needs); so does a footprint that leaves the field.

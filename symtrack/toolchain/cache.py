@@ -76,11 +76,11 @@ CFLAGS_SHARED = ("-fPIC", "-fvisibility=hidden", "-DGCC_HASCLASSVISIBILITY")
 # figures do not depend on the machine's instruction set (tests/test_subsoil.py: the SIMD block equals
 # the scalar lookup bit for bit; validation_grid's states, rut and stress fields are bit for bit those of
 # -O2); -fno-math-errno only drops errno writes (sqrt inlined, the same correctly rounded result).
-# Measured on validation_grid with the shear law (docs/turning.md section 8, "Session 7").
+# Measured on validation_grid with the shear law (docs/terrain.md, "Speed").
 # -mprefer-vector-width=256: 256-bit vectors even where the processor has 512-bit ones (gcc's own
 # default when it tunes for Intel's AVX-512 processors; gcc 12 tunes AMD's Zen 4 as znver3 and
 # then used 512-bit gathers, which cost the subsoil stress 38 instead of 33 us per macro step there:
-# docs/turning.md section 8, "Session 9"); the same operations per lane, so the same bits.
+# docs/terrain.md, "Speed"); the same operations per lane, so the same bits.
 CFLAGS_NATIVE = ("-O3", "-march=native", "-mprefer-vector-width=256", "-ffp-contract=off", "-fno-math-errno")
 MAX_JOBS = 2  # compilers at a time (2-core machines)
 NO_COMPILER = "no C compiler found (looked for $CC, cc, gcc)"

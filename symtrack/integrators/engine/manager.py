@@ -1,7 +1,8 @@
-"""The world manager's per-step work for the IDAS reference path (IDAS, the compiled grid Rosenbrock,
-the brute-force runs): :class:`ChannelManager` runs the rules of symtrack/native/grid_engine.c, their
-one home, on a :class:`~symtrack.terrain.world.World`'s channel tables (MODEL.md s. 3; the rules:
-the module doc of :mod:`symtrack.terrain.world`).
+"""The world manager's per-step work for the IDAS reference path (IDAS, the compiled grid
+Rosenbrock, the brute-force runs): :class:`ChannelManager` runs the rules of
+symtrack/native/grid_engine.c, their one home, on a :class:`~symtrack.terrain.world.World`'s channel
+tables (docs/model.md, "Terrain cells, channels and the world manager"; the rules: the module doc of
+:mod:`symtrack.terrain.world`).
 
 Per macro step, :meth:`ChannelManager.before_step` loads the World's channel tables (which cell each
 channel holds, its Q entries, its reaction p_soil, the channel states of the DAE's state vector x)
