@@ -121,7 +121,8 @@ def density_change_vs_contact_pressure(setup: dict, a: dict, pressures_kPa) -> n
     ``FOOTPRINT_ELEMENT_M`` squares) plus the soil's own weight, folded into O'Sullivan & Robertson's
     compression model (:func:`symtrack.terrain.density.pass_update`) of the soil given by the virgin
     line (``virgin_line_N``, ``compression_index_lambda``), kappa, the particle and initial densities,
-    and the saturation bound of the water content."""
+    the saturation bound of the water content, and the yield line of the package's defaults (or the
+    setup's ``yield_line_offset_ln_p``)."""
     rho0 = float(a["bulk_density_initial_Mg_per_m3"])
     w = float(setup["gravimetric_water_content"])
     soil = density_soil(setup, a)
@@ -154,7 +155,11 @@ def density_soil(setup: dict, a: dict) -> dict:
             "recompression_index_kappa": float(a["recompression_index_kappa"]),
             "particle_density_Mg_per_m3": rho_s,
             "bulk_density_initial_Mg_per_m3": float(a["bulk_density_initial_Mg_per_m3"]),
-            "specific_volume_min": 1.0 + float(setup["gravimetric_water_content"]) * rho_s / WATER_DENSITY_MG_PER_M3}
+            "specific_volume_min": 1.0 + float(setup["gravimetric_water_content"]) * rho_s / WATER_DENSITY_MG_PER_M3,
+            # O'Sullivan & Robertson's yield line: the package's default (model/parameters.py) unless the setup
+            # gives one (a case's alternative)
+            **({"yield_line_offset_ln_p": float(setup["yield_line_offset_ln_p"])}
+               if "yield_line_offset_ln_p" in setup else {})}
 
 
 def profile_depths(setup: dict, a: dict) -> np.ndarray:

@@ -11,8 +11,8 @@ import json
 import textwrap
 import time
 
-from .. import __version__
 from ..foundations.progress import Progress
+from ..foundations.version import __version__
 from ..reports.html import report_html, table_html
 from ..reports.plots import plt, png_bytes
 from ..reports.run_files import output_lock, write_folder
