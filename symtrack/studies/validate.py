@@ -4,11 +4,13 @@ by the package's own models (docs/validation.md; ``symtrack validate``).
 A **case** is a TOML file in ``symtrack/studies/validation_cases/`` (or any file given by path):
 
 - ``title``, ``model`` (a name of :data:`MODELS`), ``kind`` (the kind of quantity the summary groups
-  errors by), ``calibration`` (true when a parameter was fitted to this case's own data);
+  errors by), ``calibration`` (true when a parameter was fitted to this case's own data),
+  ``findings`` (what the comparison shows: where it misses by more than the spread and the band,
+  whether the physics or an assumption seems at fault);
 - ``[source]``: ``citation``, ``page``, ``table`` and ``measured_as`` (what the number is);
 - ``[measured]``: ``quantity``, ``unit``, ``x_name`` (what the points are taken at, with its unit),
-  ``x`` and ``values`` (the measured points) and ``spread`` (one per point where the source gives
-  one, else empty);
+  ``x`` and ``values`` (the measured points), ``spread`` (one per point where the source gives
+  one, else empty) and, for points that are categories, ``x_labels`` (their names; x then 1, 2, ...);
 - ``[reference.NAME]``: other models' predictions printed beside the measurements (``x``, ``values``
   in the measured unit), shown, never used;
 - ``[setup]``: the values the source gives (the model's fixed inputs);
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import io
 import math
 import tomllib
@@ -39,6 +42,7 @@ from ..foundations.errors import ScenarioError
 from ..foundations.files import read_text
 from ..soil.pedotransfer import GRAVITY_M_S2, WATER_DENSITY_MG_PER_M3
 from ..terrain import density, subsoil, tyre
+from . import traffic_seasons
 
 __all__ = ["CASES_DIR", "CSV_COLUMNS", "MODELS", "SCHEMA_VERSION", "SENSITIVITY_COLUMNS", "Case", "CaseResult",
            "case_names", "density_change_vs_contact_pressure", "load_case", "resolve_cases", "run_case",
@@ -53,9 +57,10 @@ CSV_COLUMNS = ("case", "quantity", "depth_or_pass", "x_name", "measured", "predi
                "band_low", "band_high", "unit", "kind", "calibration")
 SENSITIVITY_COLUMNS = ("case", "assumption", "end", "assumed", "depth_or_pass", "predicted", "unit")
 
-CASE_KEYS = ("title", "model", "kind", "calibration", "source", "measured", "reference", "setup", "assumptions")
+CASE_KEYS = ("title", "model", "kind", "calibration", "findings", "source", "measured", "reference", "setup",
+             "assumptions")
 SOURCE_KEYS = ("citation", "page", "table", "measured_as")
-MEASURED_KEYS = ("quantity", "unit", "x_name", "x", "values", "spread")
+MEASURED_KEYS = ("quantity", "unit", "x_name", "x", "x_labels", "values", "spread")
 ASSUMPTION_KEYS = ("value", "range", "unit", "reason", "choices", "alternatives")
 # the points a prediction line is drawn through (figures), per case
 LINE_POINTS = 25
@@ -167,10 +172,34 @@ def profile_depths(setup: dict, a: dict) -> np.ndarray:
     return np.linspace(float(setup["profile_top_m"]), float(a["profile_bottom_m"]), int(setup["profile_points"]))
 
 
+@functools.lru_cache(maxsize=16)
+def _season_shares(length_m: float, width_m: float, cell_m: float, random_offset_m: float) -> dict:
+    """{system: its row of :func:`symtrack.studies.traffic_seasons.system_table`} for one field and
+    random offset (the operations that keep their own offset, the plough's, keep it)."""
+    systems = {k: [op if "random_offset_m" in op else {**op, "random_offset_m": random_offset_m} for op in ops]
+               for k, ops in traffic_seasons.SEASONS.items()}
+    rows, _ = traffic_seasons.system_table((length_m, width_m), cell_m, systems)
+    return {r["system"]: r for r in rows}
+
+
+def traffic_shares(setup: dict, a: dict, x) -> np.ndarray:
+    """The share of the field [%] a season's wheels run over (``setup["share"]``, a figure of
+    :func:`symtrack.studies.traffic_seasons.season_shares`) for the systems ``setup["systems"][x - 1]``:
+    the package's seasons of wheeled machines (:data:`traffic_seasons.SEASONS`, every machine and
+    sequence assumed there) on a ``a["field_length_m"]`` field, ``setup["field_aspect"]`` times as long as
+    wide, with every operation's lines moved by up to ``a["random_offset_m"]``."""
+    length = float(a["field_length_m"])
+    rows = _season_shares(length, length / float(setup["field_aspect"]), float(setup["cell_m"]),
+                          float(a["random_offset_m"]))
+    systems = list(setup["systems"])
+    return np.array([100.0 * float(rows[systems[int(round(k)) - 1]][setup["share"]]) for k in np.atleast_1d(x)])
+
+
 MODELS: dict[str, Callable] = {
     "track_stress_by_depth": track_stress_by_depth,
     "tyre_stress_by_depth": tyre_stress_by_depth,
     "density_change_vs_contact_pressure": density_change_vs_contact_pressure,
+    "traffic_shares": traffic_shares,
 }
 
 
@@ -203,6 +232,7 @@ class Case:
     model: str
     kind: str
     calibration: bool
+    findings: str
     source: dict
     quantity: str
     unit: str
@@ -210,6 +240,7 @@ class Case:
     x: np.ndarray
     measured: np.ndarray
     spread: np.ndarray | None
+    x_labels: tuple | None  # names of the points when they are categories (x then 1, 2, ...)
     references: dict  # name -> (x array, values array)
     setup: dict
     assumptions: tuple[Assumption, ...]
@@ -287,6 +318,10 @@ def load_case(path) -> Case:
     values = _numbers(f"{name}: measured.values", m.get("values"), x.size)
     spread = m.get("spread", [])
     spread_arr = _numbers(f"{name}: measured.spread", spread, x.size) if spread else None
+    labels = m.get("x_labels")
+    if labels is not None and (not isinstance(labels, list) or len(labels) != x.size
+                               or not all(isinstance(v, str) for v in labels)):
+        raise ScenarioError(f"{name}: measured.x_labels = {labels!r} must be one name per measured point")
     refs = {}
     for rname, rt in doc.get("reference", {}).items():
         check_keys(f"reference.{rname}", rt, ("x", "values"))
@@ -298,9 +333,11 @@ def load_case(path) -> Case:
     setup = doc.get("setup", {})
     if not isinstance(setup, dict):
         raise ScenarioError(f"{name}: [setup] must be a table")
-    return Case(name, path, title, model, kind, calibration, dict(src), _text(f"{name}: measured.quantity",
+    findings = _text(f"{name}: findings", doc.get("findings"))
+    return Case(name, path, title, model, kind, calibration, findings, dict(src), _text(f"{name}: measured.quantity",
                 m.get("quantity")), _text(f"{name}: measured.unit", m.get("unit")),
-                _text(f"{name}: measured.x_name", m.get("x_name")), x, values, spread_arr, refs, dict(setup),
+                _text(f"{name}: measured.x_name", m.get("x_name")), x, values, spread_arr,
+                None if labels is None else tuple(labels), refs, dict(setup),
                 assumptions)
 
 
@@ -373,7 +410,7 @@ def run_case(case: Case, line: bool = True) -> CaseResult:
     """The prediction at the measured points with every assumption at its value, and the band: the
     same at each end of each assumption's range (or each alternative), the others at their values.
     ``line``: also on :data:`LINE_POINTS` points over the measured range (for the figure)."""
-    lx = _line_x(case) if line else case.x[:0]
+    lx = _line_x(case) if line and case.x_labels is None else case.x[:0]  # categories: no line between them
     xs = np.concatenate([case.x, lx])
     nominal = case.nominal()
     base = _evaluate(case, nominal, xs)
@@ -397,6 +434,11 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _point(c: Case, i: int) -> str:
+    """The i-th measured point as the tables name it: its label, or its x."""
+    return c.x_labels[i] if c.x_labels else _fmt(float(c.x[i]))
+
+
 def reference_names(results) -> list[str]:
     names: list[str] = []
     for r in results:
@@ -413,7 +455,7 @@ def validation_csv(results) -> str:
     for r in results:
         c = r.case
         for i, x in enumerate(c.x):
-            row = [c.name, c.quantity, float(x), c.x_name, float(c.measured[i]), float(r.predicted[i]),
+            row = [c.name, c.quantity, _point(c, i), c.x_name, float(c.measured[i]), float(r.predicted[i]),
                    float(r.error[i]), float(r.relative_error[i]), float(r.band_low[i]), float(r.band_high[i]), c.unit,
                    c.kind, "true" if c.calibration else "false"]
             for n in refs:
@@ -432,12 +474,12 @@ def sensitivity_csv(results) -> str:
     w.writerow(SENSITIVITY_COLUMNS)
     for r in results:
         c = r.case
-        for i, x in enumerate(c.x):
-            w.writerow([c.name, "(all at their values)", "nominal", "", _fmt(float(x)), _fmt(float(r.predicted[i])),
+        for i in range(c.x.size):
+            w.writerow([c.name, "(all at their values)", "nominal", "", _point(c, i), _fmt(float(r.predicted[i])),
                         c.unit])
         for name, label, v, pred, _ in r.runs:
-            for i, x in enumerate(c.x):
-                w.writerow([c.name, name, label, _fmt(v if isinstance(v, str) else float(v)), _fmt(float(x)),
+            for i in range(c.x.size):
+                w.writerow([c.name, name, label, _fmt(v if isinstance(v, str) else float(v)), _point(c, i),
                             _fmt(float(pred[i])), c.unit])
     return buf.getvalue()
 
@@ -453,12 +495,12 @@ def summary_rows(results) -> list[dict]:
     for kind, rs in kinds.items():
         err = np.concatenate([r.error for r in rs])
         rel = np.concatenate([r.relative_error for r in rs])
-        where = [(r.case.name, float(x)) for r in rs for x in r.case.x]
+        where = [(r.case.name, _point(r.case, i)) for r in rs for i in range(r.case.x.size)]
         k = int(np.argmax(np.abs(rel)))
         inside = sum(int(np.sum((r.case.measured >= r.band_low) & (r.case.measured <= r.band_high))) for r in rs)
         units = sorted({r.case.unit for r in rs})
         out.append({"kind": kind, "unit": "/".join(units), "cases": len(rs), "points": int(err.size),
                     "mean_abs_error": float(np.mean(np.abs(err))), "worst_relative_error": float(rel[k]),
-                    "worst_at": f"{where[k][0]} @ {where[k][1]:g}", "points_in_band": inside,
+                    "worst_at": f"{where[k][0]} @ {where[k][1]}", "points_in_band": inside,
                     "calibrations": sum(r.case.calibration for r in rs)})
     return out

@@ -39,6 +39,8 @@ def case_figure(r: CaseResult) -> bytes:
     is drawn with depth downwards."""
     c = r.case
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    if c.x_labels is not None:
+        return _categories_figure(fig, ax, r)
     by_depth = c.x_name.startswith("depth")
     scale = 1000.0 if c.x_name.endswith("_m") and by_depth else 1.0
     xl = "depth [mm]" if scale == 1000.0 else c.x_name
@@ -78,6 +80,29 @@ def case_figure(r: CaseResult) -> bytes:
     return png_bytes(fig)
 
 
+def _categories_figure(fig, ax, r: CaseResult) -> bytes:
+    """A case whose points are categories: the band as a bar from its low to its high end at each, the
+    prediction and the measured value as markers."""
+    c = r.case
+    ax.bar(c.x, r.band_high - r.band_low, bottom=r.band_low, width=0.5, color="tab:blue", alpha=0.18,
+           label="band of the assumptions")
+    ax.plot(c.x, r.predicted, "_", color="tab:blue", ms=30, mew=2.5, label="symtrack")
+    for k, (name, (rx, rv)) in enumerate(c.references.items()):
+        ax.plot(rx, rv, _REF_MARKERS[k % len(_REF_MARKERS)], mfc="none", color="0.35", ms=7, label=name)
+    if c.spread is not None:
+        ax.errorbar(c.x, c.measured, yerr=c.spread, fmt="o", color="k", label="measured")
+    else:
+        ax.plot(c.x, c.measured, "o", color="k", ms=8, label="measured")
+    ax.set_xticks(c.x, c.x_labels)
+    ax.set_xlim(float(c.x.min()) - 0.7, float(c.x.max()) + 0.7)
+    ax.set_ylim(bottom=0.0)
+    ax.set_ylabel(f"{c.quantity} [{c.unit}]")
+    ax.set_title("\n".join(textwrap.wrap(c.title, 80)), fontsize=8.5)
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7.5, loc="best")
+    return png_bytes(fig)
+
+
 def summary_table(rows: list[dict]) -> str:
     """The printed summary: one line per kind of quantity."""
     head = (f"{'kind':<16} {'cases':>5} {'points':>6} {'mean |error|':>14} {'worst relative':>15}  "
@@ -109,13 +134,15 @@ class ValidationRun:
 
 def _case_section(r: CaseResult) -> str:
     c = r.case
-    rows = [(float(x), float(m), float(p), float(e), f"{100 * re:+.0f} %", float(lo), float(hi))
-            for x, m, p, e, re, lo, hi in zip(c.x, c.measured, r.predicted, r.error, r.relative_error, r.band_low,
+    xs = c.x_labels if c.x_labels else [float(x) for x in c.x]
+    rows = [(x, float(m), float(p), float(e), f"{100 * re:+.0f} %", float(lo), float(hi))
+            for x, m, p, e, re, lo, hi in zip(xs, c.measured, r.predicted, r.error, r.relative_error, r.band_low,
                                               r.band_high, strict=True)]
     parts = [f"<h2>{html.escape(c.name)}: {html.escape(c.title)}</h2>",
              f"<p>Source: {html.escape(c.source['citation'])} {html.escape(c.source['table'])}; "
              f"{html.escape(c.source['page'])}. Measured as {html.escape(c.source['measured_as'])}."
              f"{' <b>Calibration</b>: a parameter was fitted to these data.' if c.calibration else ''}</p>",
+             f"<p><b>Findings.</b> {html.escape(c.findings)}</p>",
              table_html(rows, [c.x_name, f"measured [{c.unit}]", f"predicted [{c.unit}]", f"error [{c.unit}]",
                                "relative", "band low", "band high"])]
     if c.references:
