@@ -23,8 +23,8 @@ def validate_command(args) -> int:
 
     run = run_validation(args.cases, out, progress=not args.quiet)
     print(summary_table(run.summary))
-    print(f"{len(run.results)} case(s) in {run.wall_time_s:.1f} s; validation.csv, sensitivity.csv, report.html and "
-          f"one figure per case in {out}")
+    print(f"{len(run.results)} case(s) in {run.wall_time_s:.1f} s; validation.csv, sensitivity.csv, validation.md, "
+          f"report.html and one figure per case in {out}")
     return 0
 
 
@@ -35,7 +35,8 @@ def add_parser(sub) -> None:
         description="Run validation cases (built-in names or case files; none: every built-in case): each is "
         "measured data from a publication, its setup and its assumptions with their ranges. Writes "
         "DIR/validation.csv (measured, predicted, error per point), DIR/sensitivity.csv (each assumption at the "
-        "ends of its range), one figure per case, DIR/report.html and DIR/summary.json, and prints the mean "
+        "ends of its range), DIR/validation.md (the same as Markdown tables), one figure per case, "
+        "DIR/report.html and DIR/summary.json, and prints the mean "
         "absolute and the worst relative error per kind of quantity.")
     v.add_argument("cases", nargs="*", metavar="CASE", help="a built-in case name (symtrack validate --list) or a "
                    "case file (*.toml); none: every built-in case")

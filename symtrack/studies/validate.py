@@ -45,8 +45,9 @@ from ..terrain import density, subsoil, tyre
 from . import traffic_seasons
 
 __all__ = ["CASES_DIR", "CSV_COLUMNS", "MODELS", "SCHEMA_VERSION", "SENSITIVITY_COLUMNS", "Case", "CaseResult",
-           "case_names", "density_change_vs_contact_pressure", "load_case", "resolve_cases", "run_case",
-           "sensitivity_csv", "summary_rows", "track_stress_by_depth", "tyre_stress_by_depth", "validation_csv"]
+           "case_names", "density_change_vs_contact_pressure", "load_case", "markdown_tables", "resolve_cases",
+           "run_case", "sensitivity_csv", "summary_rows", "track_stress_by_depth", "traffic_shares",
+           "tyre_stress_by_depth", "validation_csv"]
 
 SCHEMA_VERSION = 1
 CASES_DIR = Path(__file__).resolve().parent / "validation_cases"
@@ -504,3 +505,39 @@ def summary_rows(results) -> list[dict]:
                     "worst_at": f"{where[k][0]} @ {where[k][1]}", "points_in_band": inside,
                     "calibrations": sum(r.case.calibration for r in rs)})
     return out
+
+
+def _g(v) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def markdown_tables(results, rows: list[dict]) -> str:
+    """validation.md: the tables of docs/validation.md, as the command computed them: every point, the
+    errors by kind, and each assumption's effect at the ends of its range."""
+    out = ["| case | point | measured | predicted | error | band of the assumptions | unit | calibration |",
+           "|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        c = r.case
+        for i in range(c.x.size):
+            out.append(f"| {c.name} | {_point(c, i)} | {_g(float(c.measured[i]))} | {_g(float(r.predicted[i]))} | "
+                       f"{100 * float(r.relative_error[i]):+.0f} % | {_g(float(r.band_low[i]))} - "
+                       f"{_g(float(r.band_high[i]))} | {c.unit} | {'yes' if c.calibration else 'no'} |")
+    out += ["", "| kind | cases | points | mean absolute error | worst relative error | measured inside the band |",
+            "|---|---|---|---|---|---|"]
+    for s in rows:
+        out.append(f"| {s['kind']} | {s['cases']} | {s['points']} | {_g(s['mean_abs_error'])} {s['unit']} | "
+                   f"{100 * s['worst_relative_error']:+.0f} % ({s['worst_at']}) | {s['points_in_band']} of "
+                   f"{s['points']} |")
+    out += ["", "| case | assumption | value | range | predicted at the ends (at each measured point) |",
+            "|---|---|---|---|---|"]
+    for r in results:
+        c = r.case
+        for a in c.assumptions:
+            unit = "" if a.unit == "-" else f" {a.unit}"
+            span = (f"{_g(a.range[0])} - {_g(a.range[1])}{unit}" if a.range
+                    else " / ".join([a.value, *a.alternatives]))
+            ends = "; ".join(f"{label if isinstance(v, str) and label == v else f'{label} ({_g(v)})'}: "
+                             + ", ".join(_g(float(p)) for p in pred)
+                             for name, label, v, pred, _ in r.runs if name == a.name)
+            out.append(f"| {c.name} | {a.name} | {_g(a.value)} | {span} | {ends} |")
+    return "\n".join(out) + "\n"

@@ -1,5 +1,5 @@
 """The output folder of ``symtrack validate`` (docs/validation.md): one figure per case, validation.csv,
-sensitivity.csv, report.html and summary.json, written all or nothing through
+sensitivity.csv, validation.md, report.html and summary.json, written all or nothing through
 :func:`symtrack.reports.run_files.write_folder` (a manifest, the folder's lock, atomic renames,
 summary.json last)."""
 
@@ -20,6 +20,7 @@ from .validate import (
     SCHEMA_VERSION,
     CaseResult,
     load_case,
+    markdown_tables,
     resolve_cases,
     run_case,
     sensitivity_csv,
@@ -199,6 +200,7 @@ def run_validation(names, out, progress: bool = True) -> ValidationRun:
         page = page.replace("<h2>Summary</h2>", "<h2>Errors by kind of quantity</h2>\n" + table + "\n" + body +
                             "\n<h2>Summary</h2>", 1).replace("<h2>Scenario (resolved)</h2>", "<h2>Case files</h2>", 1)
         files = {"validation.csv": validation_csv(results), "sensitivity.csv": sensitivity_csv(results),
+                 "validation.md": markdown_tables(results, rows),
                  "report.html": page, **images,
                  "summary.json": json.dumps(summary, indent=1, default=float) + "\n"}
         written = write_folder(out, files)
