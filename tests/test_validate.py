@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -104,8 +105,13 @@ def test_validate_writes_the_table_figures_and_report(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["kind"] == "symtrack-validate" and summary["cases"] == list(FAST)
     manifest = json.loads((out / ".symtrack-manifest.json").read_text())
-    assert set(manifest["files"]) == {"validation.csv", "sensitivity.csv", "report.html", "summary.json",
-                                      *(f"{n}.png" for n in FAST)}
+    assert set(manifest["files"]) == {"validation.csv", "sensitivity.csv", "validation.md", "report.html",
+                                      "summary.json", *(f"{n}.png" for n in FAST)}
+    # docs/validation.md's tables are this command's validation.md (make validate); its rows of these cases agree
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "validation.md").read_text()
+    heads = tuple(f"| {n} |" for n in FAST)
+    ours = [ln for ln in (out / "validation.md").read_text().splitlines() if ln.startswith(heads)]
+    assert len(ours) > 7 and [ln for ln in ours if ln not in docs] == []
     sens = list(csv.DictReader((out / "sensitivity.csv").open()))
     assert {(r["assumption"], r["end"]) for r in sens if r["case"] == FAST[0]} >= {("xi", "low"), ("xi", "high")}
 
