@@ -194,3 +194,20 @@ def test_traffic_shares_are_the_seasons_shares_of_each_system(cases):
     rows, _ = traffic_seasons.system_table((120.0, 80.0), 0.5, systems)
     by = {r["system"]: r for r in rows}
     assert list(got) == [100 * by[s]["trafficked_fraction"] for s in c.x_labels]
+
+
+@pytest.mark.parametrize("xi", [3.0, 5.0, 8.0])
+def test_below_a_uniform_footprint_the_log_slope_steepens_with_depth(xi):
+    """The stress cases' finding (docs/validation.md): below any uniform rectangle on a homogeneous
+    half-space the stress's log-log slope steepens with depth, so the track's measured profile, whose
+    slope flattens (-1.04 then -0.52 over 250-400-650 mm), is out of the model's reach."""
+    depths = (0.25, 0.40, 0.65)
+    for l_m in (0.3, 1.6, 4.0):
+        for b_m in (0.2, 1.0):
+            pose, geo = (0, 0, 1, 0, 1e5, 0, 0, 0), (l_m, b_m, b_m, 0, 0.1, 0)
+            s = [subsoil.stress_bruteforce([0.0], [b_m / 2], pose, geo, d, xi)[0] for d in depths]
+            slope1 = math.log(s[1] / s[0]) / math.log(depths[1] / depths[0])
+            slope2 = math.log(s[2] / s[1]) / math.log(depths[2] / depths[1])
+            assert slope2 < slope1 < 0
+    m = (80.0, 49.0, 38.0)  # the track case's measured profile (kPa)
+    assert math.log(m[2] / m[1]) / math.log(0.65 / 0.40) > math.log(m[1] / m[0]) / math.log(0.40 / 0.25)
