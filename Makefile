@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench
+.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench validate
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -49,6 +49,10 @@ build/symtrack_grid_standalone: symtrack/codegen/grid_standalone_main.c symtrack
 
 grid-standalone: build/symtrack_grid_standalone
 	./build/symtrack_grid_standalone build/grid_validation.csv
+
+# the gallery of published measurements against the models (docs/validation.md): every case, into out/validate
+validate: $(VENV)/.installed
+	$(VENV)/bin/symtrack validate --out out/validate
 
 bench: $(VENV)/.installed build/symtrack_standalone
 	$(VENV)/bin/symtrack bench --out out/bench.json

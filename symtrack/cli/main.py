@@ -139,6 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .terrain import add_parser as add_terrain_parser
 
     add_terrain_parser(sub)  # symtrack terrain export (docs/terrain.md, "GIS rasters")
+    from .validate import add_parser as add_validate_parser
+
+    add_validate_parser(sub)  # symtrack validate (docs/validation.md)
     return ap
 
 

@@ -1,0 +1,213 @@
+"""``symtrack validate`` (docs/validation.md): the case files' schema, the command's folder, and the
+fast cases' predictions against the package's functions computed here another way (not against
+numbers the command printed once)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from symtrack.cli.main import main
+from symtrack.foundations.errors import ScenarioError
+from symtrack.studies import traffic_seasons
+from symtrack.studies import validate as V
+from symtrack.terrain import density, subsoil, tyre
+
+FAST = ("ansorge2007_stress_tyre", "ansorge2007_density_pressure")
+
+
+@pytest.fixture(scope="module")
+def cases():
+    return {n: V.load_case(V.CASES_DIR / f"{n}.toml") for n in V.case_names()}
+
+
+# ---- the case files --------------------------------------------------------------------------
+
+def test_every_case_file_has_its_source_and_assumptions_with_ranges(cases):
+    assert len(cases) >= 3
+    for name, c in cases.items():
+        for key in V.SOURCE_KEYS:
+            assert c.source[key].strip(), (name, key)
+        assert c.x.size == c.measured.size > 0
+        assert c.kind and c.unit and c.x_name
+        assert c.assumptions, name
+        assert len(c.findings) > 80, name  # what the comparison shows, in words
+        for a in c.assumptions:
+            assert len(a.reason) > 40, (name, a.name)  # a reason, not a label
+            if a.range is not None:
+                assert a.range[0] <= a.value <= a.range[1] and a.range[0] < a.range[1], (name, a.name)
+                assert a.unit, (name, a.name)
+            else:
+                assert a.alternatives and a.value not in a.alternatives, (name, a.name)
+        for rname, (rx, rv) in c.references.items():
+            assert rx.size == rv.size and set(rx) <= set(c.x), (name, rname)
+        # no parameter of these cases was fitted to their data
+        assert c.calibration is False, name
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda t: t.replace('reason = "Concentration factor.', 'why = "Concentration factor.'), "why"),
+    (lambda t: t.replace("range = [4.0, 6.0]", "range = [5.5, 6.0]"), "assumptions.xi.value"),
+    (lambda t: t.replace('page = "appendix', 'pages = "appendix'), "pages"),
+    (lambda t: t.replace("values = [118.0, 88.0, 50.0]", "values = [118.0, 88.0]"), "measured.values"),
+    (lambda t: t.replace('model = "tyre_stress_by_depth"', 'model = "tyre"'), "model"),
+])
+def test_a_bad_case_file_is_refused_naming_the_field(tmp_path, edit, field):
+    text = (V.CASES_DIR / "ansorge2007_stress_tyre.toml").read_text()
+    bad = tmp_path / "bad_case.toml"
+    bad.write_text(edit(text))
+    with pytest.raises(ScenarioError, match=field.replace(".", r"\.")) as err:
+        V.load_case(bad)
+    assert "\n" not in str(err.value)
+
+
+# ---- the command -----------------------------------------------------------------------------
+
+def test_list_shows_every_case_with_its_source(capsys, cases):
+    assert main(["validate", "--list"]) == 0
+    text = capsys.readouterr().out
+    for name, c in cases.items():
+        assert name in text and c.source["table"] in text
+        assert c.source["citation"].split(")")[0] in text
+
+
+def test_an_unknown_case_is_one_line_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "v"
+    assert main(["validate", "no_such_case", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no_such_case" in err and "ansorge2007_stress_track" in err
+    assert not out.exists()
+
+
+def test_validate_writes_the_table_figures_and_report(tmp_path, capsys):
+    out = tmp_path / "v"
+    assert main(["validate", *FAST, "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "stress" in printed and "density_change" in printed and "worst relative" in printed
+    rows = list(csv.DictReader((out / "validation.csv").open()))
+    assert list(rows[0])[:len(V.CSV_COLUMNS)] == list(V.CSV_COLUMNS)
+    assert {r["case"] for r in rows} == set(FAST) and len(rows) == 7
+    for r in rows:
+        m, p, e = float(r["measured"]), float(r["predicted"]), float(r["error"])
+        assert math.isclose(e, p - m, rel_tol=1e-4, abs_tol=1e-4)
+        assert float(r["band_low"]) <= p <= float(r["band_high"])
+    tyre_rows = [r for r in rows if r["case"] == "ansorge2007_stress_tyre"]
+    assert [float(r["ref_SOCOMO"]) for r in tyre_rows] == [134.0, 124.0, 102.0]  # the thesis' SOCOMO column
+    for name in FAST:
+        assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    page = (out / "report.html").read_text()
+    assert all(n in page for n in FAST) and "Errors by kind of quantity" in page
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["kind"] == "symtrack-validate" and summary["cases"] == list(FAST)
+    manifest = json.loads((out / ".symtrack-manifest.json").read_text())
+    assert set(manifest["files"]) == {"validation.csv", "sensitivity.csv", "validation.md", "report.html",
+                                      "summary.json", *(f"{n}.png" for n in FAST)}
+    # docs/validation.md's tables are this command's validation.md (make validate); its rows of these cases agree
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "validation.md").read_text()
+    heads = tuple(f"| {n} |" for n in FAST)
+    ours = [ln for ln in (out / "validation.md").read_text().splitlines() if ln.startswith(heads)]
+    assert len(ours) > 7 and [ln for ln in ours if ln not in docs] == []
+    sens = list(csv.DictReader((out / "sensitivity.csv").open()))
+    assert {(r["assumption"], r["end"]) for r in sens if r["case"] == FAST[0]} >= {("xi", "low"), ("xi", "high")}
+
+
+# ---- the predictions, computed here another way ------------------------------------------------
+
+def test_track_stress_is_the_brute_force_sum_over_the_track(cases):
+    c = cases["ansorge2007_stress_track"]
+    a = c.nominal()
+    got = V.track_stress_by_depth(c.setup, a, c.x)
+    l_m, b_m, W = a["contact_length_m"], a["track_width_m"], c.setup["load_kN"]
+    # the point-load sum over the rectangle (subsoil.stress_bruteforce), averaged over the contact length
+    px = np.linspace(-l_m / 2, l_m / 2, 61)
+    pose = (0.0, 0.0, 1.0, 0.0, W * 1e3 / (l_m * b_m), 0.0, 0.0, 0.0)
+    geo = (l_m, b_m, 1.0 + b_m, 0.0, 0.1, 0.0)  # another gauge: the second track unloaded either way
+    for k, d in enumerate(c.x):
+        s = subsoil.stress_bruteforce(px, np.full(px.shape, geo[2] / 2), pose, geo, d, a["xi"]) / 1e3
+        want = np.trapezoid(s, px) / l_m
+        assert got[k] == pytest.approx(want, rel=5e-3)
+
+
+def test_tyre_stress_is_froehlichs_sum_over_kellers_contact(cases):
+    c = cases["ansorge2007_stress_tyre"]
+    a = c.nominal()
+    got = V.tyre_stress_by_depth(c.setup, a, c.x)
+    # the nominal case: the rig's 2 bar is the recommended pressure, so the tyre is rated at the wheel load
+    W, p = c.setup["wheel_load_kN"], c.setup["inflation_kPa"]
+    con = tyre.contact(tyre.Tyre(c.setup["tyre_width_m"], a["tyre_diameter_m"], W, p), W, p)
+    xs = np.linspace(-con.length_m / 2, con.length_m / 2, 81)
+    for k, d in enumerate(c.x):
+        s = [float(np.sum(subsoil.frohlich_point(con.force_kN, np.hypot(x - con.x_m, con.y_m), d, a["xi"])))
+             for x in xs]
+        assert got[k] == pytest.approx(np.trapezoid(s, xs) / con.length_m, rel=5e-3)
+
+
+@pytest.mark.parametrize("yield_line", ["package_default", "none"])
+def test_density_change_is_the_compression_lines_under_the_mean_stress(cases, yield_line):
+    c = cases["ansorge2007_density_pressure"]
+    a = {**c.nominal(), "yield_line": yield_line}
+    setup = {**c.setup, **({"yield_line_offset_ln_p": 0.0} if yield_line == "none" else {})}
+    got = V.density_change_vs_contact_pressure(setup, a, c.x)
+    N, lam = c.setup["virgin_line_N"], c.setup["compression_index_lambda"]
+    kap, rho_s, rho0 = a["recompression_index_kappa"], a["particle_density_Mg_per_m3"], \
+        a["bulk_density_initial_Mg_per_m3"]
+    w = c.setup["gravimetric_water_content"]
+    v0, v_min = rho_s / rho0, 1.0 + w * rho_s
+    soil = {"virgin_line_N": N, "compression_index_lambda": lam, "recompression_index_kappa": kap,
+            "particle_density_Mg_per_m3": rho_s, "bulk_density_initial_Mg_per_m3": rho0,
+            **({"yield_line_offset_ln_p": 0.0} if yield_line == "none" else {})}
+    depths = np.linspace(c.setup["profile_top_m"], a["profile_bottom_m"], c.setup["profile_points"])
+    b_m = a["footprint_width_m"]
+    for k, p_kPa in enumerate(c.x):
+        l_m = a["load_kN"] / (p_kPa * b_m)
+        # the mean normal stress by the engine's tables (another path than the command's point sum)
+        T = subsoil.build_mean_stress_tables(tuple(depths), a["xi"], l_m, b_m, b_m)
+        pm = subsoil.stress_at(T, [0.0], [b_m / 2], (0, 0, 1, 0, p_kPa * 1e3, 0, 0, 0), (l_m, b_m, b_m, 0, 0.1, 0))[0]
+        p_total = pm / 1e3 + rho0 * (1 + w) * 9.81 * depths
+        # one load from the initial state by the three lines' closed form (density.passes_at_constant_stress)
+        v1 = np.array([density.passes_at_constant_stress(soil, float(p), 1)[0] for p in p_total])
+        assert np.all(v1 > v_min + kap * np.log(p_total))  # the saturation bound is not reached here
+        inc = 100 * (v0 / v1 - 1)
+        assert got[k] == pytest.approx(np.trapezoid(inc, depths) / (depths[-1] - depths[0]), rel=1e-2, abs=0.02)
+
+
+def test_the_band_holds_the_prediction_and_each_assumption_moves_it(cases):
+    r = V.run_case(cases["ansorge2007_stress_tyre"], line=False)
+    assert np.all(r.band_low <= r.predicted) and np.all(r.predicted <= r.band_high)
+    xi_low = next(p for n, end, _, p, _ in r.runs if n == "xi" and end == "low")
+    xi_high = next(p for n, end, _, p, _ in r.runs if n == "xi" and end == "high")
+    assert np.all(xi_high > xi_low)  # a higher concentration factor: more stress below the centre
+
+
+def test_traffic_shares_are_the_seasons_shares_of_each_system(cases):
+    c = cases["kroulik2009_trafficked_once"]
+    setup = {**c.setup, "cell_m": 0.5}  # a small field at coarse cells: the wiring, not the figures
+    a = {**c.nominal(), "field_length_m": 120.0}
+    got = V.traffic_shares(setup, a, c.x)
+    systems = {k: [op if "random_offset_m" in op else {**op, "random_offset_m": a["random_offset_m"]} for op in ops]
+               for k, ops in traffic_seasons.SEASONS.items()}
+    rows, _ = traffic_seasons.system_table((120.0, 80.0), 0.5, systems)
+    by = {r["system"]: r for r in rows}
+    assert list(got) == [100 * by[s]["trafficked_fraction"] for s in c.x_labels]
+
+
+@pytest.mark.parametrize("xi", [3.0, 5.0, 8.0])
+def test_below_a_uniform_footprint_the_log_slope_steepens_with_depth(xi):
+    """The stress cases' finding (docs/validation.md): below any uniform rectangle on a homogeneous
+    half-space the stress's log-log slope steepens with depth, so the track's measured profile, whose
+    slope flattens (-1.04 then -0.52 over 250-400-650 mm), is out of the model's reach."""
+    depths = (0.25, 0.40, 0.65)
+    for l_m in (0.3, 1.6, 4.0):
+        for b_m in (0.2, 1.0):
+            pose, geo = (0, 0, 1, 0, 1e5, 0, 0, 0), (l_m, b_m, b_m, 0, 0.1, 0)
+            s = [subsoil.stress_bruteforce([0.0], [b_m / 2], pose, geo, d, xi)[0] for d in depths]
+            slope1 = math.log(s[1] / s[0]) / math.log(depths[1] / depths[0])
+            slope2 = math.log(s[2] / s[1]) / math.log(depths[2] / depths[1])
+            assert slope2 < slope1 < 0
+    m = (80.0, 49.0, 38.0)  # the track case's measured profile (kPa)
+    assert math.log(m[2] / m[1]) / math.log(0.65 / 0.40) > math.log(m[1] / m[0]) / math.log(0.40 / 0.25)
