@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+from pathlib import Path
 
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_file, check_output_folder
@@ -33,6 +34,11 @@ def _simulate(args, out, terrain_out) -> int:
     # the terrain file is locked from before it is read (--terrain-in F --terrain-out F) until the
     # run's files and it are in place: a second writer fails at once, the two never mix
     with terrain_lock(terrain_out) if terrain_out is not None else contextlib.nullcontext():
+        done = _finished_before(args, sc, out, terrain_out)
+        if done is not None:
+            print(f"{sc.name}: this run (run id {done['run_id']}) was stopped after it had updated {terrain_out}; "
+                  f"its files are now complete and its passes were not applied again; results in {out}")
+            return 0
         try:
             res = simulate(sc, terrain=args.terrain_in, progress=not args.quiet)
         except IncompleteSimulation as err:
@@ -59,3 +65,21 @@ def _simulate(args, out, terrain_out) -> int:
         print(f"{sc.name}: {summ['sim_time_s']:.2f} s simulated in {summ['wall_time_s']:.2f} s "
               f"({summ['real_time_factor']:.1f} x real time); results in {out}")
     return 0
+
+
+def _finished_before(args, sc, out, terrain_out) -> dict | None:
+    """The terrain record of the journal of this same run (this scenario, terrain file in and out) that
+    was killed after its commit point in ``out``, whose files :func:`~symtrack.reports.run_files.recover`
+    has just completed; None when there was none (the run goes ahead)."""
+    from ..foundations.files import real_path
+    from ..reports.run_files import recover, scenario_sha256
+    from ..terrain.storage import file_identity
+
+    journal = recover(out)
+    t = None if journal is None else journal.get("terrain")
+    if t is None or terrain_out is None or Path(t["path"]) != real_path(terrain_out) \
+            or t.get("scenario_sha256") != scenario_sha256(sc):
+        return None
+    start = file_identity(args.terrain_in)[0] if args.terrain_in else None
+    # the rerun starts from the file that run started from, or from the file it wrote (in place)
+    return t if start in (t.get("input_file_id"), t["file_id"]) else None

@@ -65,8 +65,8 @@ from ..foundations.files import atomic_write_bytes, npz_bytes, real_path
 from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 from ..soil.pedotransfer import derive_soil, precompression_from_virgin_line_kPa
 
-__all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes", "load",
-           "save"]
+__all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes",
+           "file_identity", "load", "save"]
 
 STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase", "z_off_m", "load_cycles")
 SCHEMA1_FIELDS = STORAGE_FIELDS[:5]
@@ -257,6 +257,20 @@ def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = No
         file_id=np.array(file_id), history_json=np.array(json.dumps(history)), **arrays)
     return data, file_id, history
 
+
+def file_identity(path) -> tuple[str | None, list[str]]:
+    """The ``file_id`` of the terrain file ``path`` and the run ids of its history, oldest first, read
+    without its arrays; ``(None, [])`` for a missing file, one that is no terrain file, or one of
+    schema 1 or 2 (no history). The check of a run's commit (symtrack/reports/run_files.py)."""
+    try:
+        with np.load(Path(path), allow_pickle=False) as f:
+            if "file_id" not in f.files or "history_json" not in f.files:
+                return None, []
+            file_id, history = str(f["file_id"]), json.loads(str(f["history_json"]))
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+        return None, []
+    runs = [str(h.get("run_id")) for h in history if isinstance(h, dict)] if isinstance(history, list) else []
+    return file_id, runs
 
 
 def load(path, soil: dict | None = None) -> Terrain:
