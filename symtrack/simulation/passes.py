@@ -102,15 +102,17 @@ def _subsoil_figures(world: World) -> dict:
     figure is the weakest loaded cell's (a soil map gives cells different soils)."""
     depths = world.storage.subsoil_depths_m
     sig = world.pass_sigma
-    loaded = sig[:, 0] > 0 if sig.size else np.zeros(0, dtype=bool)
-    if not depths or not loaded.any():
+    # the loaded cells only (a pass loads a few of a field's cells: no temporary of the whole field's size)
+    loaded = np.flatnonzero(sig[:, 0] > 0) if sig.size else np.zeros(0, dtype=np.int64)
+    if not depths or not loaded.size:
         return {}
-    pc = world.precompression_stress_Pa()
-    total = sig.astype(np.float64) + world.geostatic_Pa()[world.storage.soil_index]
-    fr = subsoil.risk_area_fractions(total, pc[:, None], loaded, world.grid.cell_m ** 2)
+    pc = world.precompression_stress_Pa(loaded)
+    sig = sig[loaded]
+    total = sig.astype(np.float64) + world.geostatic_Pa()[world.storage.soil_index[loaded]]
+    fr = subsoil.risk_area_fractions(total, pc[:, None], np.ones(loaded.size, dtype=bool), world.grid.cell_m ** 2)
     out = {"subsoil_depths_m": list(depths),
-           "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig[loaded].max(axis=0)],
-           "subsoil_precompression_stress_kPa": 1e-3 * float(pc[loaded].min()),
+           "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig.max(axis=0)],
+           "subsoil_precompression_stress_kPa": 1e-3 * float(pc.min()),
            "subsoil_loaded_area_m2": float(fr["touched_area_m2"])}
     for name in subsoil.RISK_NAMES:
         out[f"subsoil_risk_fraction_{name}"] = [float(v) for v in fr[f"fraction_{name}"]]
