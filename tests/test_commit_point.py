@@ -104,7 +104,7 @@ def _argv(sc: Path, case: Path) -> list[str]:
             "--terrain-out", str(case / "F.npz")]
 
 
-def test_killed_at_every_commit_step_the_state_is_old_or_new_and_the_rerun_equals_one_run(base):
+def test_kill_at_each_commit_step_leaves_old_or_new_and_the_rerun_equals_one_run(base):
     d, sc, f0, out0, ref_arrays, ref_names, steps = base
     assert 15 <= len(steps) <= 60, steps  # every staged file, the terrain, the journal, the renames
     commit = steps.index("terrain file renamed into place (the commit point)") + 1

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-from pathlib import Path
 
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_file, check_output_folder
@@ -24,7 +23,7 @@ def simulate_command(args) -> int:
 
 def _simulate(args, out, terrain_out) -> int:
     from ..api import IncompleteSimulation, simulate
-    from ..reports.run_files import terrain_lock
+    from ..reports.run_files import finished_before, terrain_lock
     from ..simulation.scenario import load_scenario
 
     sc = load_scenario(args.scenario, args.set or [])
@@ -34,7 +33,7 @@ def _simulate(args, out, terrain_out) -> int:
     # the terrain file is locked from before it is read (--terrain-in F --terrain-out F) until the
     # run's files and it are in place: a second writer fails at once, the two never mix
     with terrain_lock(terrain_out) if terrain_out is not None else contextlib.nullcontext():
-        done = _finished_before(args, sc, out, terrain_out)
+        done = finished_before(out, sc, args.terrain_in, terrain_out)
         if done is not None:
             print(f"{sc.name}: this run (run id {done['run_id']}) was stopped after it had updated {terrain_out}; "
                   f"its files are now complete and its passes were not applied again; results in {out}")
@@ -66,20 +65,3 @@ def _simulate(args, out, terrain_out) -> int:
               f"({summ['real_time_factor']:.1f} x real time); results in {out}")
     return 0
 
-
-def _finished_before(args, sc, out, terrain_out) -> dict | None:
-    """The terrain record of the journal of this same run (this scenario, terrain file in and out) that
-    was killed after its commit point in ``out``, whose files :func:`~symtrack.reports.run_files.recover`
-    has just completed; None when there was none (the run goes ahead)."""
-    from ..foundations.files import real_path
-    from ..reports.run_files import recover, scenario_sha256
-    from ..terrain.storage import file_identity
-
-    journal = recover(out)
-    t = None if journal is None else journal.get("terrain")
-    if t is None or terrain_out is None or Path(t["path"]) != real_path(terrain_out) \
-            or t.get("scenario_sha256") != scenario_sha256(sc):
-        return None
-    start = file_identity(args.terrain_in)[0] if args.terrain_in else None
-    # the rerun starts from the file that run started from, or from the file it wrote (in place)
-    return t if start in (t.get("input_file_id"), t["file_id"]) else None

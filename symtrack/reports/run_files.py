@@ -81,9 +81,9 @@ from .figures import TerrainRun, extras, figures
 from .html import report_html
 
 __all__ = ["COMMIT_STEPS", "JOURNAL", "KILL_AT_STEP_ENV", "MANIFEST", "MANIFEST_KIND", "MANIFEST_VERSION",
-           "OUTPUT_LOCK", "RUN_MARKERS", "TerrainOut", "clear_previous_run", "output_lock", "read_manifest", "recover",
-           "run_files", "scenario_sha256", "simulation_files", "terrain_lock", "terrain_run", "trajectory_columns",
-           "trajectory_csv", "validation_table", "write_folder"]
+           "OUTPUT_LOCK", "RUN_MARKERS", "TerrainOut", "clear_previous_run", "finished_before", "output_lock",
+           "read_manifest", "recover", "run_files", "scenario_sha256", "simulation_files", "terrain_lock",
+           "terrain_run", "trajectory_columns", "trajectory_csv", "validation_table", "write_folder"]
 
 log = logging.getLogger("symtrack.files")
 
@@ -482,6 +482,22 @@ def recover(out_dir) -> dict | None:
         return None
     with output_lock(out):
         return _recover(out)
+
+
+def finished_before(out_dir, scenario, terrain_in, terrain_out) -> dict | None:
+    """For a command about to run ``scenario`` from ``terrain_in`` (a terrain file, or None for a new
+    field) into ``out_dir`` and ``terrain_out``: :func:`recover` the folder, and when the journal it
+    completed is this same run's (the same scenario hash and terrain file, started from the file that
+    run started from or wrote: a rerun after a kill past the commit point), that journal's terrain
+    record; the command then stops there instead of applying the passes again. None otherwise (the
+    run goes ahead)."""
+    journal = recover(out_dir)
+    t = None if journal is None else journal.get("terrain")
+    if t is None or terrain_out is None or Path(t["path"]) != real_path(terrain_out) \
+            or t.get("scenario_sha256") != scenario_sha256(scenario):
+        return None
+    start = file_identity(terrain_in)[0] if terrain_in else None
+    return t if start in (t.get("input_file_id"), t["file_id"]) else None
 
 
 def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
