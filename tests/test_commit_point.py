@@ -159,3 +159,30 @@ def test_a_temporary_terrain_file_of_a_killed_write_is_removed_by_the_next_run(b
     assert _fork_cli(_argv(sc, tmp_path)) == 0  # and the folder's next run removes the staging folder
     assert _leftovers(tmp_path) == []
     assert len(persist.load(tmp_path / "F.npz").history) == len(persist.load(f0).history) + 2
+
+
+def test_a_journal_that_names_anything_outside_its_own_files_moves_and_removes_nothing(tmp_path, caplog):
+    """A journal (someone else's file of that name, or a damaged one) naming a folder, a file or a
+    temporary file that are not its commit's is removed with a warning; what it names stays."""
+    out = tmp_path / "out"
+    out.mkdir()
+    precious = tmp_path / "precious"
+    precious.mkdir()
+    (precious / "thesis.md").write_text("x")
+    (tmp_path / "data.csv").write_text("y")
+    stage = tmp_path / ".out.staging-1-abc"
+    stage.mkdir()
+    bad = [
+        {"staging": str(precious)},  # not a staging folder of this folder
+        {"staging": str(stage), "files": ["../data.csv"]},  # a name outside the folder
+        {"staging": str(stage), "terrain": {"path": str(tmp_path / "F.npz"), "tmp": str(tmp_path / "data.csv"),
+                                            "run_id": "a" * 32, "file_id": "b" * 32}},  # not its temporary file
+    ]
+    for change in bad:
+        journal = {"kind": "symtrack-commit", "schema_version": 1, "staging": str(stage), "files": ["a.csv"],
+                   "manifest": ["a.csv"], "clear": False, "terrain": None, **change}
+        (out / run_files.JOURNAL).write_text(json.dumps(journal))
+        assert run_files.recover(out) is None
+        assert not (out / run_files.JOURNAL).exists() and "not a symtrack commit journal" in caplog.text
+        assert (precious / "thesis.md").is_file() and (tmp_path / "data.csv").is_file() and stage.is_dir()
+        caplog.clear()

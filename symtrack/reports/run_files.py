@@ -31,7 +31,9 @@ After it, the terrain file holds the run: the next writer of the folder (every :
 :func:`recover`) takes the journal's remaining steps first, so that the folder becomes that run's
 whole folder; ``symtrack simulate`` does this before its run and, when the journal is that of the
 same command (the scenario's hash, the terrain file, the file it starts from), stops there instead of
-applying the passes again. The temporary files of killed writes (``.<file>.*.tmp`` beside a terrain
+applying the passes again. A journal that names anything but its own commit's files (a name outside
+the folder, a staging folder not beside it, a temporary file not the terrain file's) is removed with
+a warning and nothing it names is touched. The temporary files of killed writes (``.<file>.*.tmp`` beside a terrain
 file or the manifest) are removed by the next holder of that file's lock. :func:`terrain_lock` keeps
 two processes from writing one terrain file, :func:`output_lock` two runs from writing one folder.
 With :data:`KILL_AT_STEP_ENV` = k in the environment a process kills itself before the k-th step of
@@ -434,15 +436,35 @@ def _read_journal(out: Path) -> dict | None:
         with contextlib.suppress(OSError):
             path.unlink()
         return None
-    keys = ("staging", "files", "manifest", "clear", "terrain")
-    t = j.get("terrain") if isinstance(j, dict) else None
-    if not (isinstance(j, dict) and j.get("kind") == JOURNAL_KIND and all(k in j for k in keys)
-            and (t is None or (isinstance(t, dict) and all(k in t for k in ("path", "tmp", "run_id", "file_id"))))):
-        log.warning("%s: not a symtrack commit journal of schema_version 1; removed", path)
+    if not _journal_ok(out, j):
+        log.warning("%s: not a symtrack commit journal of schema_version 1 for this folder; removed", path)
         with contextlib.suppress(OSError):
             path.unlink()
         return None
     return j
+
+
+def _journal_ok(out: Path, j) -> bool:
+    """A journal of this folder's commit: its keys, its names inside the folder, its staging folder beside
+    the folder (with the staging prefix) and its temporary terrain file beside the terrain file (with the
+    run's name): nothing a journal names outside those is ever moved or removed."""
+    keys = ("staging", "files", "manifest", "clear", "terrain")
+    if not (isinstance(j, dict) and j.get("kind") == JOURNAL_KIND and all(k in j for k in keys)
+            and isinstance(j["files"], list) and isinstance(j["manifest"], list) and isinstance(j["staging"], str)):
+        return False
+    if any(_safe_name(n) is None for n in (*j["files"], *j["manifest"])):
+        return False
+    real = out.resolve()
+    stage = Path(j["staging"])
+    if stage.parent != real.parent or not stage.name.startswith(_staging_prefix(real)):
+        return False
+    t = j["terrain"]
+    if t is None:
+        return True
+    if not (isinstance(t, dict) and all(isinstance(t.get(k), str) for k in ("path", "tmp", "run_id", "file_id"))):
+        return False
+    tpath, tmp = Path(t["path"]), Path(t["tmp"])
+    return tmp.parent == tpath.parent and tmp.name == f".{tpath.name}.{t['run_id']}.tmp"
 
 
 def _recover(out: Path) -> dict | None:
