@@ -25,20 +25,20 @@ it, the earlier run's files are removed, the staged files moved into place (ever
 the files it vouches for, the folder's own last), the staging folder and then the journal removed.
 
 Killed at any step, a run leaves the old state or the new one. Before the commit point the terrain
-file and the folder's files are as they were: the next writer of the folder finds a journal whose run
-its terrain file does not hold and removes the journal, the staging folder and the temporary file.
-After it, the terrain file holds the run: the next writer of the folder (every :func:`write_folder`,
-:func:`recover`) takes the journal's remaining steps first, so that the folder becomes that run's
-whole folder; ``symtrack simulate`` does this before its run and, when the journal is that of the
-same command (the scenario's hash, the terrain file, the file it starts from), stops there instead of
-applying the passes again. A journal that names anything but its own commit's files (a name outside
-the folder, a staging folder not beside it, a temporary file not the terrain file's) is removed with
-a warning and nothing it names is touched. The temporary files of killed writes (``.<file>.*.tmp`` beside a terrain
-file or the manifest) are removed by the next holder of that file's lock. :func:`terrain_lock` keeps
-two processes from writing one terrain file, :func:`output_lock` two runs from writing one folder.
-With :data:`KILL_AT_STEP_ENV` = k in the environment a process kills itself before the k-th step of
-its commits (each write, rename and removal; :data:`COMMIT_STEPS` names them): the tests' fault
-injection (tests/test_commit_point.py).
+file and the folder's files are as they were: the next writer of the folder finds a journal whose
+run its terrain file does not hold and removes the journal, the staging folder and the temporary
+file. After it, the terrain file holds the run: the next writer of the folder (every
+:func:`write_folder`, :func:`recover`) takes the journal's remaining steps first, so that the folder
+becomes that run's whole folder; ``symtrack simulate`` and ``symtrack mpc`` do this before their
+run and, when the journal is that of the same command (the scenario's hash, the terrain file, the file it starts
+from), stops there instead of applying the passes again. A journal that names anything but its own
+commit's files (a name outside the folder, a staging folder not beside it, a temporary file not the
+terrain file's) is removed with a warning and nothing it names is touched. The temporary files of
+killed writes (``.<file>.*.tmp`` beside a terrain file or the manifest) are removed by the next
+holder of that file's lock. :func:`terrain_lock` keeps two processes from writing one terrain file,
+:func:`output_lock` two runs from writing one folder. With :data:`KILL_AT_STEP_ENV` = k in the
+environment a process kills itself before the k-th step of its commits (each write, rename and
+removal; :data:`COMMIT_STEPS` names them): the tests' fault injection (tests/test_commit_point.py).
 
 A run owns only what it writes: every write records the files it put in the folder in the folder's
 manifest, ``.symtrack-manifest.json`` (:func:`read_manifest`; schema: ``kind``
