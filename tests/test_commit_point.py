@@ -27,6 +27,8 @@ from symtrack.cli.main import main
 from symtrack.reports import run_files
 from symtrack.terrain import storage as persist
 
+pytestmark = pytest.mark.skipif(not hasattr(os, "fork"), reason="the runs are forked (POSIX)")
+
 
 def _fork_cli(argv: list[str], kill_at: int | None = None) -> int:
     """Run ``symtrack argv`` in a forked child (killed at its ``kill_at``-th commit step); the exit
