@@ -13,14 +13,15 @@ turns are the trim points of :func:`symtrack.control.trim.trim`.
 
 **The soil from a cone index (reconstruction).** The traction cases give the soil by its cone index
 only; no published relation from a cone index to Janosi-Hanamoto's c, phi, K and Bekker's k, n was
-retrieved (docs/validation.md, "What could not be retrieved"). :func:`cone_index_soil` reads the
-cone index instead as two things a cone measures, each with its assumptions:
+retrieved (docs/validation.md, "Measured data not yet cases, and what could not be retrieved").
+:func:`cone_index_soil` reads the cone index instead as two things a cone measures, each with its
+assumptions:
 
-- the **bearing capacity** of the cone: CI = s (c N_c + sigma_v N_q), Terzaghi's bearing-capacity
-  equation with Prandtl and Reissner's factors N_q = e^(pi tan phi) tan^2(45 deg + phi/2),
-  N_c = (N_q - 1) cot phi, s a multiplier for the cone's shape and depth over a strip footing and
-  sigma_v the overburden where the index is read; with phi assumed from the texture, this gives c
-  (at least 0);
+- the **bearing capacity** of the cone: CI = s (c N_c + sigma_v N_q), the bearing-capacity
+  equation (Terzaghi 1943) with Prandtl's (1921) and Reissner's (1924) closed-form factors of a strip
+  footing, N_q = e^(pi tan phi) tan^2(45 deg + phi/2), N_c = (N_q - 1) cot phi; s a multiplier for
+  the cone's shape and depth over the strip footing and sigma_v the overburden where the index is
+  read; with phi assumed from the texture, this gives c (at least 0);
 - a **point of the pressure-sinkage curve**: Bekker's k_eq z^n passes through the cone index at a
   sinkage z_CI, k_eq = CI / z_CI^n, n assumed.
 
