@@ -250,6 +250,26 @@ def test_a_soil_of_two_layers_through_a_run_and_its_terrain_file(tmp_path):
     assert np.array_equal(back.specific_volume, run.terrain.specific_volume)
 
 
+def test_the_homogeneous_runs_column_is_the_terrain_engines_stress():
+    """The same drive on homogeneous soil (compiled Rosenbrock) and on the small field (terrain engine):
+    the column under the tracks of the homogeneous run (simulation/column.py) carries the engine's
+    largest vertical stress within 3 % at every depth, and its density rises as the engine's does."""
+    d = copy.deepcopy(SMALL)
+    d["terrain"]["passes"] = 1
+    d["run"]["stop_after_distance_m"] = 3.0  # longer than the contact: cells that see the whole passage
+    d["terrain"]["cell_m"] = 0.1  # (at 0.25 m a 0.45 m wide track is two or three cells: 14 % off at 0.3 m)
+    grid = symtrack.simulate(scenario_from_dict(d)).summary
+    h = copy.deepcopy(d)
+    del h["terrain"]
+    h["run"]["integrator"] = "rosenbrock"
+    hom = symtrack.simulate(scenario_from_dict(h)).summary
+    assert hom["subsoil_depths_m"] == grid["subsoil_depths_m"]
+    assert hom["subsoil_sigma_z_max_kPa"] == pytest.approx(grid["subsoil_sigma_z_max_kPa"], rel=0.03)
+    assert hom["subsoil_precompression_stress_by_depth_kPa"] == grid["subsoil_precompression_stress_by_depth_kPa"]
+    assert hom["bulk_density_initial_Mg_per_m3"] == grid["bulk_density_initial_Mg_per_m3"]
+    assert hom["bulk_density_after_Mg_per_m3"][0] > hom["bulk_density_initial_Mg_per_m3"][0]
+
+
 # O'Sullivan & Robertson's model with its yield line, the parameter set of soilphysics' documented
 # example (README and man/soilDeformation.Rd: soilDeformation(stress = 300, p.density = 2.67, iBD = 1.55,
 # N = 1.9392, CI = 0.06037, k = 0.00608, k2 = 0.01916, m = 1.3) -> fBD 1.6385, vf 1.6295, I% 5.71)

@@ -205,3 +205,51 @@ def test_a_pass_folds_each_depth_on_its_layers_lines():
     assert rho[1] > 1.65 and rho[0] > 1.55
     with pytest.raises(ParameterError, match="depths"):
         D.pass_update(sv2, p, si, [two])
+
+
+# ---- the column under the tracks of a homogeneous run (symtrack/simulation/column.py) ------------------------
+
+class _OneStep:
+    """A homogeneous run's result of one output step with the given contact pressures and loads."""
+
+    def __init__(self, scenario, p_idler, p_sprocket, sinkage_m=0.002):
+        from symtrack.presets import vehicle_preset
+
+        self.scenario = scenario
+        self.t = np.array([0.0])
+        b, l_m = scenario.params["track_width_m"], scenario.params["contact_length_m"]
+        load = 0.5 * (p_idler + p_sprocket) * b * l_m  # a linear pressure's load (none of it below 0)
+        self.output_names = tuple(f"{w}_{s}_{u}" for s in ("left", "right") for w, u in (
+            ("p_idler", "Pa"), ("p_sprocket", "Pa"), ("normal_load", "N"), ("sinkage_idler", "m"),
+            ("sinkage_sprocket", "m")))
+        self.Y = np.array([[p_idler, p_sprocket, load, sinkage_m, sinkage_m] * 2])
+        assert vehicle_preset  # (the scenario's vehicle)
+
+    def output(self, name):
+        return self.Y[:, self.output_names.index(name)]
+
+
+@pytest.mark.parametrize("p_idler, p_sprocket", [(40e3, 40e3), (20e3, 55e3)])
+def test_the_column_stress_is_the_contacts_integral(p_idler, p_sprocket):
+    """The column's vertical stress under a track's centre-line equals the largest over that line of
+    subsoil.stress_bruteforce (Gauss-Legendre over both contacts) within 0.5 % at every depth."""
+    from symtrack.simulation.column import POINTS_ALONG, column_figures
+    from symtrack.simulation.scenario import load_scenario
+
+    sc = load_scenario("validation")
+    f = column_figures(_OneStep(sc, p_idler, p_sprocket))
+    p = sc.params
+    l_m, b, B = p["contact_length_m"], p["track_width_m"], p["track_gauge_m"]
+    a = (0.0, 0.0, 1.0, 0.0, p_idler, (p_sprocket - p_idler) / l_m, p_idler, (p_sprocket - p_idler) / l_m)
+    geo = (l_m, b, B, 0.0)
+    px = np.linspace(-0.5 * l_m, 0.5 * l_m, POINTS_ALONG)
+    for z, got in zip(f["subsoil_depths_m"], f["subsoil_sigma_z_max_kPa"], strict=True):
+        ref = S.stress_bruteforce(px, np.full(px.size, 0.5 * B), a, geo, z, p["stress_concentration_factor"])
+        assert got == pytest.approx(1e-3 * ref.max(), rel=5e-3), z
+    # the fold from the stress and the own weight: the density model's own numbers at each depth
+    soil = sc.params
+    a2 = D.soil_arrays([soil], f["subsoil_depths_m"])
+    total = 1e3 * np.array(f["subsoil_sigma_z_max_kPa"]) + D.geostatic_table([soil], f["subsoil_depths_m"])[0]
+    assert [r for r in f["subsoil_risk_by_depth"]] == [S.RISK_NAMES[c] for c in S.risk_class(total, a2["pc"][0])]
+    assert np.all(np.array(f["bulk_density_after_Mg_per_m3"]) >= np.array(f["bulk_density_initial_Mg_per_m3"]))
+    assert f["column_compression_mm"] <= 2.0 + 1e-9  # the rut (2 mm here) bounds it

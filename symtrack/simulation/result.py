@@ -100,4 +100,8 @@ def summarise(res: RunResult) -> dict:
         out["fixed_step_steps_halved"] = int(res.stats["fixed_step_steps_halved"])
     if res.terrain:
         out.update(res.terrain)
+    elif res.scenario.terrain is None:  # homogeneous soil: the column under the tracks (simulation/column.py)
+        from .column import column_figures
+
+        out.update(column_figures(res))
     return out
