@@ -91,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="symtrack", description="Tracked vehicle on soil that remembers.")
     ap.add_argument("--version", action="version", version=f"symtrack {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True)
+    from .run import add_parsers as add_run_parsers
+
+    add_run_parsers(sub)  # symtrack run FILE, symtrack new KIND: the front door (README, "Run files")
     s = sub.add_parser("simulate", help="run a scenario (built-in name or TOML file)")
     s.add_argument("scenario")
     s.add_argument("--out", required=True, help="output folder")
