@@ -97,3 +97,26 @@ def test_python_front_door_and_overrides(tmp_path):
     assert isinstance(res, symtrack.Result) and res.summary["sim_time_s"] == pytest.approx(0.5)
     with pytest.raises(ScenarioError, match="writes its folder as it goes: give out="):
         symtrack.run(tomllib.loads(template_text("field")))
+
+
+def test_a_sweep_file_names_its_scenario_or_is_it(tmp_path):
+    from symtrack.studies import plan
+    from symtrack.studies.runfile import sweep_arguments
+
+    named = {"sweep": {"scenario": "validation", "vary": {"vehicle.mass_kg": [5000.0, 6000.0]}}}
+    args = sweep_arguments(read_run_file(named, {"sweep.seed": 2, "run.duration_s": 0.5}))
+    assert args["scenario"] == "validation" and args["seed"] == 2 and args["overrides"] == {"run.duration_s": 0.5}
+    p = plan(args["scenario"], args["vary"], overrides=args["overrides"])
+    assert len(p.runs) == 2 and p.source.kind == "simulate"
+    inline = tomllib.loads(template_text("sweep"))
+    args = sweep_arguments(read_run_file(inline, ["run.duration_s=0.5"]))
+    assert args["kind"] == "simulate" and "[[torque]]" in args["scenario"].text and "[sweep" not in args["scenario"].text
+    assert plan(args["scenario"], args["vary"], overrides=args["overrides"]).source.name == "my_sweep"
+    with pytest.raises(ScenarioError, match=r"sweep.scenario names the scenario, so the file holds only \[sweep\]"):
+        sweep_arguments(read_run_file({**named, "vehicle": {"mass_kg": 6000.0}}))
+    with pytest.raises(ScenarioError, match="varies nothing"):
+        sweep_arguments(read_run_file({"sweep": {"scenario": "validation"}}))
+    with pytest.raises(ScenarioError, match=r"unknown key\(s\) in \[sweep\]: vary_me"):
+        sweep_arguments(read_run_file({"sweep": {"vary_me": 1}}))
+    with pytest.raises(ScenarioError, match=r"its scenario: the file without \[sweep\]\): none of the sections"):
+        sweep_arguments(read_run_file({"sweep": {"vary": {"a.b": [1]}}, "name": "x"}))

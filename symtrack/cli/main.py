@@ -50,6 +50,7 @@ def scenarios_command(args) -> int:
         width = max(len(n) for n, _ in rows)
         for name, desc in rows:
             print(f"  {name:<{width}}  {desc}")
+    print("symtrack run NAME (or FILE.toml) runs any of them; symtrack new KIND writes a starting file of a kind")
     return 0
 
 

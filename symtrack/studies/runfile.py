@@ -150,7 +150,8 @@ def read_run_file(spec_or_path, overrides=None) -> RunFile:
     else:
         if not path.is_file():
             every = sorted(n for k in KINDS.values() if k.package for n in builtin_names(k.package))
-            raise ScenarioError(f"run file {s!r} does not exist (nor is it a built-in run: {', '.join(every)})")
+            raise ScenarioError(f"run file {s!r} does not exist" + ("" if path.suffix == ".toml" else
+                                f" and is no built-in run ({', '.join(every)})"))
         try:
             raw = tomllib.loads(read_text(path, "run file"))
         except tomllib.TOMLDecodeError as err:
@@ -233,8 +234,6 @@ def sweep_arguments(rf: RunFile) -> dict:
                                     paths=(*PATH_KEYS, ("operation", "boundary_file")))
             rest.pop("sweep", None)
         base_kind = detect_kind(rest, f"{rf.label} (its scenario: the file without [sweep])")
-        if base_kind == "sweep":
-            raise ScenarioError(f"{rf.label}: a sweep of a sweep")
         scenario = Source(SWEEP_KIND[base_kind], to_toml(rest), rf.name, rf.label)
         kind = SWEEP_KIND[base_kind]
     return {"scenario": scenario, "vary": vary, "ranges": {k: tuple(v) for k, v in ranges.items()} or None,
