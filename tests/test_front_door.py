@@ -110,7 +110,8 @@ def test_a_sweep_file_names_its_scenario_or_is_it(tmp_path):
     assert len(p.runs) == 2 and p.source.kind == "simulate"
     inline = tomllib.loads(template_text("sweep"))
     args = sweep_arguments(read_run_file(inline, ["run.duration_s=0.5"]))
-    assert args["kind"] == "simulate" and "[[torque]]" in args["scenario"].text and "[sweep" not in args["scenario"].text
+    text = args["scenario"].text
+    assert args["kind"] == "simulate" and "[[torque]]" in text and "[sweep" not in text
     assert plan(args["scenario"], args["vary"], overrides=args["overrides"]).source.name == "my_sweep"
     with pytest.raises(ScenarioError, match=r"sweep.scenario names the scenario, so the file holds only \[sweep\]"):
         sweep_arguments(read_run_file({**named, "vehicle": {"mass_kg": 6000.0}}))
