@@ -94,3 +94,14 @@ def test_codegen_mpc_says_what_it_waits_for(monkeypatch, tmp_path, caplog):
     with caplog.at_level(logging.INFO, logger="symtrack.codegen.mpc"), pytest.raises(Stop):
         M.command(args)
     assert "compiling " in caplog.text and "mpc_closed_loop" in caplog.text
+
+
+def test_the_bench_says_what_it_measures(monkeypatch, caplog):
+    from symtrack.bench import homogeneous as H
+
+    monkeypatch.setattr(H, "homogeneous_rows", lambda quick, repeats: [{"case": "x"}])
+    monkeypatch.setattr(H, "PROVIDERS", ("symtrack.bench.no_such_provider",))
+    with caplog.at_level(logging.INFO, logger="symtrack.bench"):
+        assert H.collect(quick=True, repeats=1) == [{"case": "x"}]
+    assert "measuring the homogeneous terrain's integrators" in caplog.text
+    assert "measuring the rows of symtrack.bench.no_such_provider ... (1 row(s) so far" in caplog.text
