@@ -149,7 +149,7 @@ def read_run_file(spec_or_path, overrides=None) -> RunFile:
         raw = tomllib.loads(resources.files(package).joinpath(name + ".toml").read_text())
     else:
         if not path.is_file():
-            every = sorted(n for k in KINDS.values() if k.package for n in builtin_names(k.package))
+            every = sorted({n for k in KINDS.values() if k.package for n in builtin_names(k.package)})
             raise ScenarioError(f"run file {s!r} does not exist" + ("" if path.suffix == ".toml" else
                                 f" and is no built-in run ({', '.join(every)})"))
         try:
