@@ -82,11 +82,11 @@ def detect_kind(doc, label: str = "run file") -> str:
         raise ScenarioError(f"{label}: a run file is a TOML table of sections, got {type(doc).__name__}")
     if "sweep" in doc:
         return "sweep"
+    key = {"[[torque]]": "torque", "[path]": "path", "[mpc]": "mpc", "[field]": "field",
+           "[operation]": "operation", "[season]": "season"}  # the deciding sections' keys in the document
     found = {}  # kind -> the deciding sections the document holds
-    present = {"[[torque]]": "torque", "[path]": "path", "[mpc]": "mpc", "[field]": "field",
-               "[operation]": "operation", "[season]": "season"}
     for kind in KINDS.values():
-        have = [s for s in kind.sections if present.get(s) in doc]
+        have = [s for s in kind.sections if s in key and key[s] in doc]
         if have:
             found[kind.name] = have
     if "season" in found:  # a season's operations are laid over its [operation] section
@@ -95,13 +95,9 @@ def detect_kind(doc, label: str = "run file") -> str:
         return next(iter(found))
     rules = f"a run file has the sections of one kind: {kind_rules()} (symtrack new KIND writes one)"
     if not found:
-        return _refuse(f"{label}: none of the sections that decide the kind of run; {rules}")
+        raise ScenarioError(f"{label}: none of the sections that decide the kind of run; {rules}")
     both = ", ".join(f"{' and '.join(s)} ({KINDS[k].what})" for k, s in found.items())
-    return _refuse(f"{label}: sections of several kinds of run: {both}; {rules}")
-
-
-def _refuse(message: str):
-    raise ScenarioError(message)
+    raise ScenarioError(f"{label}: sections of several kinds of run: {both}; {rules}")
 
 
 @dataclass(frozen=True)
