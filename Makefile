@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench validate
+.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,10 @@ test: lint
 # the tests marked slow (pyproject.toml: brute-force, IDAS and fixed-step references, large compiles)
 test-slow: $(VENV)/.installed-dev
 	$(PY) -m pytest -m slow
+
+# the scenario loader's fuzz tests with a longer search than the test suite's (100 mutated documents)
+fuzz: $(VENV)/.installed-dev
+	SYMTRACK_FUZZ_EXAMPLES=3000 $(PY) -m pytest -n 0 tests/test_scenario_mutation.py
 
 # generated C (docs/codegen.md): regenerate generated/, build and run the standalone program, benchmark
 CC ?= cc

@@ -59,8 +59,8 @@ class Result:
     runs : list of RunResult
         One per pass (one for the homogeneous terrain).
     summary : dict
-        The summary.json of the run (README: "Output files"); for several passes the last
-        pass's figures with ``passes``, the per-pass figures.
+        The summary.json of the run (README: "Output files"); for several passes the whole run's
+        figures (symtrack/simulation/passes.py) with ``passes``, the per-pass figures.
     pass_summaries : list of dict
         The summary of each pass (what ``pass_<k>/summary.json`` holds).
     terrain : Terrain or None

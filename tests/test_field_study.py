@@ -378,3 +378,63 @@ def test_a_killed_study_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
     a, b = _arrays(out / "random" / "field.npz"), _arrays(tmp_path / "ref" / "random" / "field.npz")
     assert all(np.array_equal(a[k], b[k]) for k in b)
     assert res.summary["random_trafficked_area_fraction"] == ref.summary["random_trafficked_area_fraction"]
+
+
+def test_ctrl_c_between_a_pass_and_its_record_exits_130_and_keeps_the_passes_done(tmp_path, monkeypatch, capsys):
+    """Ctrl-C in the moment after a pass, while its record is made (the field's bulk density taken):
+    `symtrack field` exits 130 with one line, no traceback; the folder holds the whole passes before
+    it (passes.csv, field.npz and the counts agree), and the same command again runs the rest only."""
+    from symtrack.studies import field as field_module
+
+    args = ["field", "field_traffic", "--out", str(tmp_path / "out"), "--quiet",
+            *(a for s in [*SMALL, "field.pattern=random", "field.passes=3"] for a in ("--set", s))]
+    plants = []
+
+    def make_plant_interrupted(scenario):  # Ctrl-C at the third density: pattern start, pass 1, pass 2
+        plant = make_plant(scenario)
+        density, calls = plant.world.bulk_density_max, []
+
+        def density_then_interrupt():
+            calls.append(1)
+            if len(calls) == 3 and len(plants) == 1:
+                raise KeyboardInterrupt
+            return density()
+
+        plant.world.bulk_density_max = density_then_interrupt
+        plants.append(calls)
+        return plant
+
+    monkeypatch.setattr(field_module, "make_plant", make_plant_interrupted)
+    assert cli_main(args) == 130
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.count("\n") == 1 and "interrupted (Ctrl-C)" in err
+    out = tmp_path / "out"
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] is False and s["interrupted"] is True and s["patterns"]["random"]["passes_done"] == 1
+    rows = list(csv.DictReader((out / "random" / "passes.csv").open()))
+    assert [r["pass"] for r in rows] == ["1"] and rows[0]["bulk_density_max_Mg_per_m3"]
+    t = Terrain.load(out / "random" / "field.npz")
+    assert t.history[-1]["passes"] == 1
+    with np.load(out / "random" / "passes_per_cell.npz") as z:
+        assert int(z["passes"].max()) == 1
+    capsys.readouterr()
+    assert cli_main(args) == 0  # resumed: passes 2 and 3
+    s = json.loads((out / "summary.json").read_text())
+    assert s["complete"] and s["patterns"]["random"]["passes_done"] == 3
+    assert len(plants[1]) == 1 + 2  # the pattern's start, then passes 2 and 3
+    assert Terrain.load(out / "random" / "field.npz").history[-1]["passes"] == 3
+
+
+def test_defer_interrupts_raises_a_ctrl_c_after_the_block():
+    import os
+    import signal
+
+    from symtrack.foundations.interrupt import defer_interrupts
+
+    done = []
+    with pytest.raises(KeyboardInterrupt), defer_interrupts():
+        os.kill(os.getpid(), signal.SIGINT)
+        done.append("the rest of the block")
+    assert done == ["the rest of the block"]
+    with defer_interrupts():  # none: nothing raised
+        done.append(1)

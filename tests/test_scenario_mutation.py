@@ -90,7 +90,7 @@ def _outcome(kind: str, text: str, name: str):
 
 
 # SYMTRACK_FUZZ_EXAMPLES=5000 for a longer search (5000 passed when the test was written)
-@settings(max_examples=int(os.environ.get("SYMTRACK_FUZZ_EXAMPLES", "300")), deadline=None,
+@settings(max_examples=int(os.environ.get("SYMTRACK_FUZZ_EXAMPLES", "100")), deadline=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(mutated())
 def test_mutated_document_is_a_scenario_or_a_clear_error(case):

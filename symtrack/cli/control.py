@@ -118,10 +118,15 @@ def _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out) -> int:
 
     model = system_model(sc.model)  # the cached build (symtrack.simulation.builder)
     from ..foundations.interrupt import InterruptWatch
-    from ..reports.run_files import terrain_lock
+    from ..reports.run_files import finished_before, terrain_lock
 
     # the terrain file is locked from before it is read until it is replaced (as symtrack simulate)
     with terrain_lock(terrain_out) if terrain_out else contextlib.nullcontext():
+        done = finished_before(out, sc, terrain_in, terrain_out or None)
+        if done is not None:  # the same run, killed after its commit point: completed, not run again
+            print(f"{sc.name}: this run (run id {done['run_id']}) was stopped after it had updated {terrain_out}; "
+                  f"its files are now complete and it was not run again; results in {args.out}")
+            return 0
         plant = closedloop.make_plant(sc, model, terrain_in)
         try:
             with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error

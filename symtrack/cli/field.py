@@ -65,8 +65,12 @@ def _field(args, out) -> int:
     try:
         res = run_field_study(spec, out=out, progress=not args.quiet)
     except KeyboardInterrupt:
-        print(f"symtrack: interrupted (Ctrl-C); the whole passes done are kept in {out} (summary.json: complete = "
-              "false); run the same command again to resume from them", file=sys.stderr)
+        if (out / "summary.json").is_file():
+            print(f"symtrack: interrupted (Ctrl-C); the whole passes done are kept in {out} (summary.json: complete "
+                  "= false); run the same command again to resume from them", file=sys.stderr)
+        else:  # stopped while the plant was built, before its first pass
+            print(f"symtrack: interrupted (Ctrl-C) before the study's first pass; nothing was run (in {out}: "
+                  "field.resolved.toml); run the same command again to start it", file=sys.stderr)
         return 130
     except IncompleteFieldStudy as err:
         print(f"symtrack: error: {err}; what was computed up to there is in {out} (summary.json: complete = "

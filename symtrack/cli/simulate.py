@@ -34,7 +34,7 @@ def simulate_command(args) -> int:
 
 def _simulate(args, out, terrain_out) -> int:
     from ..api import IncompleteSimulation, simulate
-    from ..reports.run_files import terrain_lock
+    from ..reports.run_files import finished_before, terrain_lock
     from ..simulation.scenario import load_scenario
 
     sc = load_scenario(args.scenario, args.set or [])
@@ -44,6 +44,11 @@ def _simulate(args, out, terrain_out) -> int:
     # the terrain file is locked from before it is read (--terrain-in F --terrain-out F) until the
     # run's files and it are in place: a second writer fails at once, the two never mix
     with terrain_lock(terrain_out) if terrain_out is not None else contextlib.nullcontext():
+        done = finished_before(out, sc, args.terrain_in, terrain_out)
+        if done is not None:
+            print(f"{sc.name}: this run (run id {done['run_id']}) was stopped after it had updated {terrain_out}; "
+                  f"its files are now complete and its passes were not applied again; results in {out}")
+            return 0
         try:
             res = simulate(sc, terrain=args.terrain_in, progress=not args.quiet)
         except IncompleteSimulation as err:
@@ -70,3 +75,4 @@ def _simulate(args, out, terrain_out) -> int:
         print(f"{sc.name}: {summ['sim_time_s']:.2f} s simulated in {summ['wall_time_s']:.2f} s "
               f"({summ['real_time_factor']:.1f} x real time); results in {out}")
     return 0
+

@@ -21,7 +21,7 @@ from pathlib import Path
 from .errors import ScenarioError
 
 __all__ = ["DEFLATE_LEVEL", "atomic_write_bytes", "atomic_write_text", "check_output_file", "check_output_folder",
-           "keep_mode", "npz_bytes", "read_text", "real_path"]
+           "keep_mode", "npz_bytes", "read_text", "real_path", "write_new_file"]
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -48,8 +48,10 @@ def npz_bytes(**arrays) -> bytes:
     return buf.getvalue()
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (the folder is created if needed)."""
+def atomic_write_bytes(path: Path, data: bytes, before_rename=None) -> None:
+    """Write ``data`` to ``path`` atomically (the folder is created if needed); ``before_rename()``, when
+    given, is called between the temporary file's write and its rename (the commit's fault injection:
+    symtrack/reports/run_files.py)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", suffix=".tmp", dir=path.parent)
@@ -60,10 +62,34 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
             os.fsync(f.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp creates 0600; results are ordinary files
         keep_mode(path, Path(tmp))  # a file replaced keeps its mode and owner
+        if before_rename is not None:
+            before_rename()
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        raise
+
+
+def write_new_file(path: Path, data: bytes, mode_of: Path | None = None) -> None:
+    """Write ``data`` into the new file ``path`` (an error if it exists; its folder is created if needed)
+    and fsync it: a temporary file that is renamed later (a terrain file's, at a run's commit point). Its
+    mode is that of ``mode_of`` when that file exists (the file it will replace), else an ordinary file's;
+    a failed write removes it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(path, 0o666 & ~_UMASK)
+        if mode_of is not None:
+            keep_mode(mode_of, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            path.unlink()
         raise
 
 

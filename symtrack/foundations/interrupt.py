@@ -6,14 +6,18 @@ an :class:`InterruptWatch` block a SIGINT handler records the signal and still c
 handler (which raises :class:`KeyboardInterrupt` as usual); code that catches a solver failure
 calls :func:`raise_if_interrupted`, and on leaving the block a recorded SIGINT raises
 KeyboardInterrupt whatever the solver made of it. Outside the main thread it does nothing.
+
+:func:`defer_interrupts` holds Ctrl-C back over a few lines that must run whole (a pass counted in
+every record of a study, or in none): a SIGINT inside the block raises KeyboardInterrupt when it ends.
 """
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 
-__all__ = ["InterruptWatch", "interrupted", "raise_if_interrupted", "watch_interrupts"]
+__all__ = ["InterruptWatch", "defer_interrupts", "interrupted", "raise_if_interrupted", "watch_interrupts"]
 
 _active: list[InterruptWatch] = []
 
@@ -59,4 +63,21 @@ def interrupted() -> bool:
 def raise_if_interrupted() -> None:
     """Raise KeyboardInterrupt when SIGINT arrived (call it where a solver failure is caught)."""
     if interrupted():
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def defer_interrupts():
+    """Run the block whole: a SIGINT that arrives inside it is recorded and raised as
+    KeyboardInterrupt when the block ends (module doc). Outside the main thread it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    hit = []
+    prev = signal.signal(signal.SIGINT, lambda signum, frame: hit.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, prev if prev is not None else signal.default_int_handler)
+    if hit:
         raise KeyboardInterrupt

@@ -12,7 +12,7 @@ import os
 
 from .errors import ScenarioError
 
-__all__ = ["LIMIT_ENV", "available_bytes", "require_memory"]
+__all__ = ["LIMIT_ENV", "available_bytes", "require_memory", "resident_bytes"]
 
 LIMIT_ENV = "SYMTRACK_MEMORY_LIMIT_BYTES"
 
@@ -43,10 +43,32 @@ def available_bytes() -> int | None:
     return avail
 
 
-def require_memory(need_bytes: int, what: str, advice: str) -> None:
-    """Raise :class:`ScenarioError` when ``need_bytes`` exceeds the available memory: the message
-    names ``what`` needs it (the keys that set it), both figures, and ``advice``."""
+def resident_bytes() -> int:
+    """The memory this process holds now (its resident set, /proc/self/statm on Linux; elsewhere its
+    peak so far, ``getrusage``), in bytes."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError, AttributeError):
+        pass
+    try:
+        import resource
+        import sys
+
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return int(peak if sys.platform == "darwin" else peak * 1024)  # bytes on macOS, KiB elsewhere
+    except (ImportError, OSError):
+        return 0
+
+
+def require_memory(need_bytes: int, what: str, advice: str) -> int:
+    """Raise :class:`ScenarioError` when ``need_bytes`` (the memory the work will take beyond what the
+    process holds now) exceeds the available memory: the message names ``what`` needs it (the keys that
+    set it), the need, the peak it makes for this process, what is available, and ``advice``. Returns the
+    estimated peak of the process, in bytes."""
+    peak = resident_bytes() + int(need_bytes)
     avail = available_bytes()
     if avail is not None and need_bytes > avail:
-        raise ScenarioError(f"{what} needs {need_bytes / 1e9:.2f} GB of memory, this machine has "
-                            f"{avail / 1e9:.2f} GB available; {advice}")
+        raise ScenarioError(f"{what} needs {need_bytes / 1e9:.2f} GB of memory (a peak of about {peak / 1e9:.2f} GB "
+                            f"for this process), this machine has {avail / 1e9:.2f} GB available; {advice}")
+    return peak

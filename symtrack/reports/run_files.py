@@ -11,12 +11,34 @@ Files of a ``symtrack simulate`` run (schemas documented in the README):
   animations ``*.gif`` and the earlier passes' plots, only with ``run.all_figures``), ``report.html``;
 - ``summary.json``: written last, so that its presence means the run finished.
 
-A run's files appear together or not at all: :func:`write_folder` writes them into a staging
-folder beside the output (``.<name>.staging-<pid>-*``), then moves them into place, replaces the
-run's terrain file (``--terrain-out``) after them and moves summary.json in last. Killed before the
-end, the output has no summary.json and the terrain file is the one it was; a later writer of the
-same output removes the staging folders of dead processes. :func:`terrain_lock` keeps two
-processes from writing one terrain file, :func:`output_lock` two runs from writing one folder.
+A run commits once: its files, its terrain file's update and its summary become the run's in one
+atomic step. :func:`write_folder` writes the files into a staging folder beside the output
+(``.<name>.staging-<pid>-*``) and the terrain file (``--terrain-out``, the run in its history) into a
+temporary file beside it (``.<file>.<run id>.tmp``); then it writes the folder's journal,
+``.symtrack-commit.json`` (schema: ``kind`` "symtrack-commit", ``schema_version`` 1,
+``symtrack_version``, ``pid``, ``staging``: the staging folder, ``files``: the names in the order of
+writing, ``manifest``: the names the manifest will list, ``clear``, ``terrain``: null, or the terrain
+file's ``path``, ``tmp``, the run's ``run_id``, the new ``file_id``, the ``input_file_id`` it started
+from, ``scenario``, ``scenario_sha256``, ``passes``). The commit point is the rename of the
+temporary terrain file over the terrain file (without a terrain file: the journal's rename). After
+it, the earlier run's files are removed, the staged files moved into place (every summary.json after
+the files it vouches for, the folder's own last), the staging folder and then the journal removed.
+
+Killed at any step, a run leaves the old state or the new one. Before the commit point the terrain
+file and the folder's files are as they were: the next writer of the folder finds a journal whose
+run its terrain file does not hold and removes the journal, the staging folder and the temporary
+file. After it, the terrain file holds the run: the next writer of the folder (every
+:func:`write_folder`, :func:`recover`) takes the journal's remaining steps first, so that the folder
+becomes that run's whole folder; ``symtrack simulate`` and ``symtrack mpc`` do this before their
+run and, when the journal is that of the same command (the scenario's hash, the terrain file, the file it starts
+from), stops there instead of applying the passes again. A journal that names anything but its own
+commit's files (a name outside the folder, a staging folder not beside it, a temporary file not the
+terrain file's) is removed with a warning and nothing it names is touched. The temporary files of
+killed writes (``.<file>.*.tmp`` beside a terrain file or the manifest) are removed by the next
+holder of that file's lock. :func:`terrain_lock` keeps two processes from writing one terrain file,
+:func:`output_lock` two runs from writing one folder. With :data:`KILL_AT_STEP_ENV` = k in the
+environment a process kills itself before the k-th step of its commits (each write, rename and
+removal; :data:`COMMIT_STEPS` names them): the tests' fault injection (tests/test_commit_point.py).
 
 A run owns only what it writes: every write records the files it put in the folder in the folder's
 manifest, ``.symtrack-manifest.json`` (:func:`read_manifest`; schema: ``kind``
@@ -35,12 +57,14 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import glob
 import hashlib
 import io
 import json
 import logging
 import os
 import shutil
+import signal
 import tempfile
 import uuid
 from dataclasses import dataclass
@@ -50,18 +74,18 @@ import numpy as np
 
 from ..foundations.config import to_toml, with_version
 from ..foundations.errors import ScenarioError
-from ..foundations.files import atomic_write_bytes, check_output_file, keep_mode, real_path
+from ..foundations.files import atomic_write_bytes, check_output_file, real_path, write_new_file
 from ..foundations.version import __version__
-from ..terrain.storage import Terrain, file_bytes
+from ..terrain.storage import Terrain, file_bytes, file_identity
 from ..toolchain import LockBusy, file_lock
 from . import validation
 from .figures import TerrainRun, extras, figures
 from .html import report_html
 
-__all__ = ["MANIFEST", "MANIFEST_KIND", "MANIFEST_VERSION", "OUTPUT_LOCK", "RUN_MARKERS", "TerrainOut",
-           "clear_previous_run", "output_lock", "read_manifest", "run_files", "scenario_sha256", "simulation_files",
-           "is_validation", "terrain_lock", "terrain_run", "trajectory_columns", "trajectory_csv", "validation_table",
-           "write_folder"]
+__all__ = ["COMMIT_STEPS", "JOURNAL", "KILL_AT_STEP_ENV", "MANIFEST", "MANIFEST_KIND", "MANIFEST_VERSION",
+           "OUTPUT_LOCK", "RUN_MARKERS", "TerrainOut", "clear_previous_run", "finished_before", "is_validation",
+           "output_lock", "read_manifest", "recover", "run_files", "scenario_sha256", "simulation_files",
+           "terrain_lock", "terrain_run", "trajectory_columns", "trajectory_csv", "validation_table", "write_folder"]
 
 log = logging.getLogger("symtrack.files")
 
@@ -73,6 +97,16 @@ MANIFEST_KIND = "symtrack-run-manifest"
 MANIFEST_VERSION = 1
 # the lock of a run's folder (output_lock), inside the folder while a run writes it
 OUTPUT_LOCK = ".symtrack.lock"
+# the journal of a run's commit (module doc), in the folder from just before the commit point until the
+# run's files are in place
+JOURNAL = ".symtrack-commit.json"
+JOURNAL_KIND = "symtrack-commit"
+JOURNAL_VERSION = 1
+# fault injection (the tests): with this variable = k in the environment, the process kills itself
+# (SIGKILL) at the k-th step of its commits (:func:`_step`); COMMIT_STEPS names the steps taken so far
+KILL_AT_STEP_ENV = "SYMTRACK_KILL_AT_COMMIT_STEP"
+COMMIT_STEPS: list[str] = []
+_step_count = 0
 
 
 def trajectory_columns(res) -> tuple[list[str], np.ndarray]:
@@ -217,6 +251,7 @@ def terrain_lock(path, option: str = "--terrain-out"):
         return
     try:
         with file_lock(real.with_name(real.name + ".lock"), wait=False, remove=True):
+            _remove_stale_tmp(real)  # a killed writer's temporary files: no other writer now
             _HELD.add(key)
             try:
                 yield path
@@ -299,12 +334,15 @@ def _write_manifest(folder: Path, names) -> None:
     path = folder / MANIFEST
     names = sorted(set(names))
     if not names:
+        if path.exists():
+            _step("removed the manifest")
         with contextlib.suppress(FileNotFoundError):
             path.unlink()
         return
     doc = {"kind": MANIFEST_KIND, "schema_version": MANIFEST_VERSION, "symtrack_version": __version__,
            "written_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"), "files": names}
-    atomic_write_bytes(path, (json.dumps(doc, indent=1) + "\n").encode())
+    atomic_write_bytes(path, (json.dumps(doc, indent=1) + "\n").encode(),
+                       before_rename=lambda: _step("manifest written, not yet renamed"))
 
 
 def _inside(folder: Path, name: str) -> bool:
@@ -317,7 +355,7 @@ def _inside(folder: Path, name: str) -> bool:
 
 def _foreign(folder: Path, owned) -> list[str]:
     """The top-level entries of ``folder`` that no symtrack manifest lists (nor its manifest and lock)."""
-    ours = {PurePosixPath(n).parts[0] for n in owned} | {MANIFEST, OUTPUT_LOCK}
+    ours = {PurePosixPath(n).parts[0] for n in owned} | {MANIFEST, OUTPUT_LOCK, JOURNAL}
     try:
         return sorted(p.name for p in folder.iterdir() if p.name not in ours)
     except OSError:
@@ -365,18 +403,147 @@ def _remove_dead_staging(out: Path) -> None:
             shutil.rmtree(p, ignore_errors=True)
 
 
+def _step(what: str) -> None:
+    """One step of a commit (a write, a rename, a removal), about to be taken: counted, and with
+    :data:`KILL_AT_STEP_ENV` = k in the environment the k-th step of the process kills it (SIGKILL)
+    before it is taken (the tests' fault injection; module doc)."""
+    global _step_count
+    _step_count += 1
+    if len(COMMIT_STEPS) < 100_000:
+        COMMIT_STEPS.append(what)
+    at = os.environ.get(KILL_AT_STEP_ENV, "")
+    if at.isdigit() and int(at) == _step_count:
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _remove_stale_tmp(path: Path) -> None:
+    """Remove the temporary files beside the file ``path`` that a killed writer left
+    (``.<name>.*.tmp``: a terrain file's at a run's commit, :func:`atomic_write_bytes`'s); called by the
+    holder of its lock (the file's own, or the run folder's), so no writer is using them."""
+    with contextlib.suppress(OSError):
+        for p in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+            with contextlib.suppress(OSError):
+                p.unlink()
+
+
+def _terrain_committed(record: dict) -> bool:
+    """Whether the terrain file of a journal's ``record`` holds its run (the run's commit point passed)."""
+    file_id, runs = file_identity(record["path"])
+    return file_id == record["file_id"] or record["run_id"] in runs
+
+
+def _read_journal(out: Path) -> dict | None:
+    """The journal of an interrupted commit in ``out`` (module doc), or None; a damaged one is removed
+    with a warning (it was written atomically: only someone else's file of that name can be damaged)."""
+    path = out / JOURNAL
+    try:
+        j = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as err:
+        log.warning("%s: not a symtrack commit journal (%s); removed", path, err)
+        with contextlib.suppress(OSError):
+            path.unlink()
+        return None
+    if not _journal_ok(out, j):
+        log.warning("%s: not a symtrack commit journal of schema_version 1 for this folder; removed", path)
+        with contextlib.suppress(OSError):
+            path.unlink()
+        return None
+    return j
+
+
+def _journal_ok(out: Path, j) -> bool:
+    """A journal of this folder's commit: its keys, its names inside the folder, its staging folder beside
+    the folder (with the staging prefix) and its temporary terrain file beside the terrain file (with the
+    run's name): nothing a journal names outside those is ever moved or removed."""
+    keys = ("staging", "files", "manifest", "clear", "terrain")
+    if not (isinstance(j, dict) and j.get("kind") == JOURNAL_KIND and all(k in j for k in keys)
+            and isinstance(j["files"], list) and isinstance(j["manifest"], list) and isinstance(j["staging"], str)):
+        return False
+    if any(_safe_name(n) is None for n in (*j["files"], *j["manifest"])):
+        return False
+    real = out.resolve()
+    stage = Path(j["staging"])
+    if stage.parent != real.parent or not stage.name.startswith(_staging_prefix(real)):
+        return False
+    t = j["terrain"]
+    if t is None:
+        return True
+    if not (isinstance(t, dict) and all(isinstance(t.get(k), str) for k in ("path", "tmp", "run_id", "file_id"))):
+        return False
+    tpath, tmp = Path(t["path"]), Path(t["tmp"])
+    return tmp.parent == tpath.parent and tmp.name == f".{tpath.name}.{t['run_id']}.tmp"
+
+
+def _recover(out: Path) -> dict | None:
+    """Finish or undo the commit a killed run left in ``out`` (held by this process's
+    :func:`output_lock`; module doc): with a journal whose commit point passed (no terrain file, or the
+    terrain file holds the run), its staged files are moved into place and the journal is returned;
+    otherwise its staging folder and temporary terrain file are removed (the folder and the terrain file
+    are as before that run) and None is returned. The temporary files of killed writes of the folder's
+    manifest and journal are removed either way."""
+    for name in (MANIFEST, JOURNAL):
+        _remove_stale_tmp(out / name)
+    j = _read_journal(out)
+    if j is None:
+        return None
+    t = j["terrain"]
+    if t is None or _terrain_committed(t):
+        log.warning("%s: completing the files of the run that was stopped after its commit point%s", out,
+                    f" (run {t['run_id']}; the terrain file {t['path']} holds it)" if t else "")
+        _apply(out, j)
+        return j
+    with contextlib.suppress(OSError):
+        Path(t["tmp"]).unlink()
+    shutil.rmtree(j["staging"], ignore_errors=True)
+    with contextlib.suppress(FileNotFoundError):
+        (out / JOURNAL).unlink()
+    return None
+
+
+def recover(out_dir) -> dict | None:
+    """Finish or undo the commit of a run killed in ``out_dir`` (module doc), under the folder's lock:
+    the journal (a dict; ``terrain``: the terrain file's path, the run's ``run_id``, ``scenario_sha256``,
+    ``input_file_id`` and the new ``file_id``) of a run whose files this call completed, else None.
+    Every write into the folder does this first; ``symtrack simulate`` does it before its run, to know
+    a rerun of a run that was killed after its commit point (it does not apply the passes again)."""
+    out = Path(out_dir)
+    if not (out / JOURNAL).is_file() and not any(out.glob(f".{glob.escape(MANIFEST)}.*.tmp")):
+        return None
+    with output_lock(out):
+        return _recover(out)
+
+
+def finished_before(out_dir, scenario, terrain_in, terrain_out) -> dict | None:
+    """For a command about to run ``scenario`` from ``terrain_in`` (a terrain file, or None for a new
+    field) into ``out_dir`` and ``terrain_out``: :func:`recover` the folder, and when the journal it
+    completed is this same run's (the same scenario hash and terrain file, started from the file that
+    run started from or wrote: a rerun after a kill past the commit point), that journal's terrain
+    record; the command then stops there instead of applying the passes again. None otherwise (the
+    run goes ahead)."""
+    journal = recover(out_dir)
+    t = None if journal is None else journal.get("terrain")
+    if t is None or terrain_out is None or Path(t["path"]) != real_path(terrain_out) \
+            or t.get("scenario_sha256") != scenario_sha256(scenario):
+        return None
+    start = file_identity(terrain_in)[0] if terrain_in else None
+    return t if start in (t.get("input_file_id"), t["file_id"]) else None
+
+
 def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
                  terrain: TerrainOut | None = None) -> list[Path]:
-    """The one writer of a run's folder, all or nothing: ``files`` (names relative to the folder,
-    sub-folders created; str written as UTF-8) are written into a staging folder beside
-    ``out_dir``; then, with ``clear``, the files of a previous run are removed
+    """The one writer of a run's folder, committed once (module doc): ``files`` (names relative to
+    the folder, sub-folders created; str written as UTF-8) are written into a staging folder beside
+    ``out_dir`` and ``terrain`` (its file, with the run in its history) into a temporary file beside
+    its file; then the journal; then the commit point: the terrain file's rename (without ``terrain``,
+    the journal's); then, with ``clear``, the files of a previous run are removed
     (:func:`clear_previous_run`: those its manifest lists, its summary.json first; anything else stays,
-    a warning names it); the staged files are moved into place,
-    every ``summary.json`` after the other files; ``terrain`` (its file, with the run in its
-    history) replaces its file next, and the folder's own ``summary.json`` comes last, so that its
-    presence means the folder is whole and the terrain file advanced. Interrupted or killed before
-    that, the terrain file is untouched. The terrain file's lock (:func:`terrain_lock`) is held
-    while it is written (a caller that read it holds it from before), and the folder's
+    a warning names it); the staged files are moved into place, every ``summary.json`` after the other
+    files and the folder's own last; the journal goes last of all. Interrupted or killed before the
+    commit point, the folder and the terrain file are as they were; after it, the next writer of the
+    folder (or :func:`recover`) completes the files. The terrain file's lock (:func:`terrain_lock`) is
+    held while it is written (a caller that read it holds it from before), and the folder's
     (:func:`output_lock`) while it is written. The folder's manifest records the files written (with
     ``clear``: this write's; without: added to those of the earlier writes still there; and a
     ``terrain`` file inside the folder that is the run's own, ``lock=False``). Returns the paths
@@ -390,59 +557,104 @@ def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
             return _write_folder(out, files, clear, terrain)
     except OSError as err:  # a folder made read-only, a full disk: an error naming the file, no traceback
         what = err.filename if err.filename is not None else out
+        done = ("the run's commit point had passed: the next symtrack run into this folder completes its files"
+                if (out / JOURNAL).is_file() else "nothing of this run was put in place")
         raise ScenarioError(f"cannot write the run's files into {str(out)!r}: {err.strerror or err} ({what}); "
-                            "nothing of this run was put in place") from err
+                            f"{done}") from err
 
 
 def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | None) -> list[Path]:
     real = out.resolve()  # the staging folder beside the real folder (``--out .``, a link: its file system)
     real.parent.mkdir(parents=True, exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
+    _recover(out)  # a killed run's commit: completed or undone first
     _remove_dead_staging(real)
     stage = Path(tempfile.mkdtemp(prefix=f"{_staging_prefix(real)}{os.getpid()}-", dir=real.parent))
     terrain_tmp = None
+    committed = False
     names = list(files)
     if terrain is not None and not terrain.lock and Path(terrain.path).resolve().is_relative_to(out.resolve()):
         names.append(Path(terrain.path).resolve().relative_to(out.resolve()).as_posix())  # the run's own file
     try:
         for name, data in files.items():
             atomic_write_bytes(stage / name, data.encode() if isinstance(data, str) else data)
+            _step(f"staged {name}")
+        record = None
         if terrain is not None:
             data, file_id, history = file_bytes(terrain.terrain, terrain.soil, terrain.run)
             tpath = real_path(terrain.path)  # through a link: its target is replaced, the link stays
-            terrain_tmp = tpath.with_name(f".{tpath.name}.{os.getpid()}.tmp")
-            atomic_write_bytes(terrain_tmp, data)
-            keep_mode(tpath, terrain_tmp)  # replaced in place: the file keeps its mode and owner
-        # commit: nothing above touched the output or the terrain file
-        owned = read_manifest(out) or []
+            _remove_stale_tmp(tpath)  # a killed writer's (this process holds the file's lock, or its folder's)
+            terrain_tmp = tpath.with_name(f".{tpath.name}.{terrain.run['run_id']}.tmp")
+            write_new_file(terrain_tmp, data, mode_of=tpath)  # replaced in place: it keeps its mode and owner
+            _step("terrain file written to its temporary file")
+            record = {"path": str(tpath), "tmp": str(terrain_tmp), "run_id": terrain.run["run_id"],
+                      "file_id": file_id, "input_file_id": terrain.terrain.file_id,
+                      "scenario": terrain.run.get("scenario"), "scenario_sha256": terrain.run.get("scenario_sha256"),
+                      "passes": terrain.run.get("passes")}
+        # nothing above touched the folder or the terrain file
         if clear:
-            _warn_foreign(out, _foreign(out, owned), names)
-            # every file owned before stays recorded until it is gone (a kill here: the next run removes it)
-            _write_manifest(out, [*owned, *names])
-            clear_previous_run(out, keep=names)  # its summary.json first
-            _write_manifest(out, names)
-        else:
-            out.mkdir(parents=True, exist_ok=True)
-            _write_manifest(out, [*(n for n in owned if (out / n).exists()), *names])
-        for name in (n for n in files if Path(n).name == "summary.json" and (out / n).is_file()):
-            (out / name).unlink()  # replaced below, after the files it vouches for
-        out.mkdir(parents=True, exist_ok=True)
-        last = [n for n in files if Path(n).name == "summary.json"]
-        last.sort(key=lambda n: n == "summary.json")
-        final = "summary.json" if "summary.json" in files else None
-        for name in [n for n in files if n not in last] + [n for n in last if n != final]:
-            (out / name).parent.mkdir(parents=True, exist_ok=True)
-            os.replace(stage / name, out / name)
+            _warn_foreign(out, _foreign(out, read_manifest(out) or []), names)
+        journal = {"kind": JOURNAL_KIND, "schema_version": JOURNAL_VERSION, "symtrack_version": __version__,
+                   "pid": os.getpid(), "staging": str(stage), "files": list(files), "manifest": names,
+                   "clear": bool(clear), "terrain": record}
+        atomic_write_bytes(out / JOURNAL, (json.dumps(journal, indent=1) + "\n").encode(),
+                           before_rename=lambda: _step("journal written, not yet renamed"))
+        committed = terrain is None
         if terrain_tmp is not None:
+            _step("terrain file renamed into place (the commit point)")
             os.replace(terrain_tmp, tpath)
+            committed = True
             terrain_tmp = None
             terrain.terrain.file_id, terrain.terrain.history = file_id, history
-        if final is not None:
-            os.replace(stage / final, out / final)
+        _apply(out, journal)
     finally:
-        if terrain_tmp is not None and terrain_tmp.exists():
-            terrain_tmp.unlink()
-        shutil.rmtree(stage, ignore_errors=True)
+        if not committed:  # stopped before the commit point: nothing of this run stays
+            if terrain_tmp is not None:
+                with contextlib.suppress(OSError):
+                    terrain_tmp.unlink()
+            with contextlib.suppress(OSError, ValueError, AttributeError):
+                if json.loads((out / JOURNAL).read_text()).get("staging") == str(stage):  # this write's
+                    (out / JOURNAL).unlink()
+            shutil.rmtree(stage, ignore_errors=True)
     return sorted(out / n for n in files)
+
+
+def _apply(out: Path, journal: dict) -> None:
+    """The commit's second half, from the journal (module doc): the previous run's files removed
+    (``clear``), the manifest written, the staged files moved into place (every summary.json after the
+    others, the folder's own last), the staging folder and the journal removed. Taken again from any
+    point it was stopped at, it gives the same folder (a file staged and not yet moved is moved; one
+    moved is left)."""
+    stage = Path(journal["staging"])
+    files, names = list(journal["files"]), list(journal["manifest"])
+    owned = read_manifest(out) or []
+    if journal["clear"]:
+        # every file owned before stays recorded until it is gone (stopped here: the next write removes it)
+        _write_manifest(out, [*owned, *names])
+        clear_previous_run(out, keep=names)  # its summary.json first
+        _write_manifest(out, names)
+    else:
+        _write_manifest(out, [*(n for n in owned if (out / n).exists()), *names])
+    last = [n for n in files if Path(n).name == "summary.json"]
+    last.sort(key=lambda n: n == "summary.json")
+    final = "summary.json" if "summary.json" in files else None
+    for name in last:  # an earlier summary.json goes before the files it would vouch for change
+        if (stage / name).is_file() and (out / name).is_file():
+            _step(f"removed the earlier {name}")
+            (out / name).unlink()
+    for name in [n for n in files if n not in last] + [n for n in last if n != final] + ([final] if final else []):
+        if (stage / name).is_file():
+            (out / name).parent.mkdir(parents=True, exist_ok=True)
+            _step(f"renamed {name} into place")
+            os.replace(stage / name, out / name)
+    missing = [n for n in files if not (out / n).is_file()]
+    if missing:
+        log.warning("%s: the staged files of its last run are gone (%s ...); the folder lacks them", out, missing[0])
+    _step("removed the staging folder")
+    shutil.rmtree(stage, ignore_errors=True)
+    _step("removed the journal")
+    with contextlib.suppress(FileNotFoundError):
+        (out / JOURNAL).unlink()
 
 
 def clear_previous_run(out_dir, files=None, kind: str | None = None, keep=()) -> list[Path]:
@@ -471,6 +683,7 @@ def clear_previous_run(out_dir, files=None, kind: str | None = None, keep=()) ->
         for name in gone:
             p = out_dir / name
             if p.is_file() or p.is_symlink():
+                _step(f"removed the earlier run's {name}")
                 p.unlink()
                 removed.append(p)
         _remove_empty_parents(out_dir, gone)

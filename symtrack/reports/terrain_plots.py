@@ -193,20 +193,24 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     if not depths or not any("subsoil_sigma_z_max_kPa" in f for f in figures):
         return {}
     g = world.grid
-    pc = world.precompression_stress_Pa().reshape(*g.shape, len(depths))
-    sig = st.sigma_max.reshape(*g.shape, len(depths))
-    loaded = sig[:, :, 0] > 0
+    loaded = (st.sigma_max[:, 0] > 0).reshape(g.shape)
+    # the window around the loaded cells (every loaded cell is in it): no array of the whole field's size
+    # and the depths (a field of millions of cells, a few of them loaded)
+    si, sj = _window(world, [loaded])
+    cells = np.arange(g.n_cells).reshape(g.shape)[si, sj]
+    loaded = loaded[si, sj]
+    pc = world.precompression_stress_Pa(cells.ravel()).reshape(*cells.shape, len(depths))
+    sig = st.sigma_max[cells]
     # the risk grades the traffic's stress plus the soil's own weight (terrain/density.py)
-    sig = np.where(loaded[:, :, None], sig + world.geostatic_Pa()[st.soil_index].reshape(sig.shape), sig)
-    si, sj = _window(world, [loaded.astype(float)])
+    sig = np.where(loaded[:, :, None], sig + world.geostatic_Pa()[st.soil_index[cells]], sig)
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
     strengths = sorted({float(v) for v in pc[loaded].ravel()})
     label = ", ".join(f"{1e-3 * v:.3g}" for v in strengths[:6]) + (", ..." if len(strengths) > 6 else "")
     # the profile where the stress is largest against its strength
     ratio = (sig / pc).max(axis=2)
-    worst = np.unravel_index(np.argmax(np.where(loaded, ratio, -1.0)), g.shape)
-    out = {"risk_map.png": risk_map_png(risk_class(sig[si, sj], pc[si, sj]), loaded[si, sj], depths, ext,
+    worst = np.unravel_index(np.argmax(np.where(loaded, ratio, -1.0)), loaded.shape)
+    out = {"risk_map.png": risk_map_png(risk_class(sig, pc), loaded, depths, ext,
                                         title=f"compaction risk after all passes (strength {label} kPa)"),
            "stress_profile.png": stress_profile_png(depths, 1e-3 * sig[worst], 1e-3 * pc[worst],
                                                     label="the cell nearest its strength")}
@@ -228,7 +232,7 @@ def density_pngs(world, figures: list[dict], initial) -> dict[str, bytes]:
         return {}
     g = world.grid
     loaded = (st.sigma_max[:, 0] > 0).reshape(g.shape)
-    si, sj = _window(world, [loaded.astype(float)])
+    si, sj = _window(world, [loaded])
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
     cells = (np.arange(g.n_cells).reshape(g.shape)[si, sj]).ravel()

@@ -110,7 +110,7 @@ class Outcome:
     runs : list of RunResult
         One per pass (one for the homogeneous terrain).
     summary : dict
-        The run's summary.json (a terrain study's: the last pass's figures with ``passes``).
+        The run's summary.json (a terrain study's: the whole run's figures, each pass's in ``passes``).
     pass_summaries : list of dict
         The summary of each pass.
     study : PassStudy or None

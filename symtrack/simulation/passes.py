@@ -1,9 +1,15 @@
 """Passes over the grid terrain: one world, several runs, the figures of each pass.
 
-summary.json of a terrain study (``schema_version`` 1): the run's summary keys of the last
-pass, but ``sim_time_s``, ``wall_time_s`` and ``real_time_factor``, which are the whole run's (the
-sums over the passes, and total simulated time over total wall time), the terrain figures
-(``terrain_*``), and ``passes``: a list with, per pass,
+summary.json of a terrain study (``schema_version`` 1): the run's summary keys, each over the whole
+run (:func:`whole_run`): the sums over the passes of ``distance_m``, ``distance_after_<event>_m``,
+``sim_time_s``, ``wall_time_s`` and ``fixed_step_steps_halved`` (``real_time_factor``: total simulated
+time over total wall time); the largest of ``sinkage_sprocket_mm``, ``sinkage_idler_mm``,
+``shear_driven_max_m``, ``fixed_step_error_max`` and ``terrain_peak_active_cells``, the smallest
+``shear_idle_min_m``; ``lateral_deviation_m`` and ``lateral_deviation_signed_m`` of the pass that
+deviated most; ``complete`` and ``distance_stop_reached`` true when they are for every pass;
+``nose_up`` from the largest sinkages; the figures of the run's end (``stopped_by``,
+``speed_final_m_s``, ``yaw_final_deg``) and of the field after it (the terrain figures
+``terrain_*``, the rut figures) the last pass's. Then ``passes``: a list with, per pass,
 ``rut_max_depth_mm``, ``rut_mean_depth_mm`` (mean sinkage over the rut: the cells loaded in
 the pass, z_max > 1 um), ``new_sinkage_mean_mm`` (mean sinkage added by the pass over the rut),
 ``new_sinkage_volume_m3``, ``compaction_resistance_mean_N`` (the sum of both tracks'
@@ -97,16 +103,18 @@ def _subsoil_figures(world: World) -> dict:
     subsoil layer its own strength), and by depth the weakest loaded cell's at each."""
     depths = world.storage.subsoil_depths_m
     sig = world.pass_sigma
-    loaded = sig[:, 0] > 0 if sig.size else np.zeros(0, dtype=bool)
-    if not depths or not loaded.any():
+    # the loaded cells only (a pass loads a few of a field's cells: no temporary of the whole field's size)
+    loaded = np.flatnonzero(sig[:, 0] > 0) if sig.size else np.zeros(0, dtype=np.int64)
+    if not depths or not loaded.size:
         return {}
-    pc = world.precompression_stress_Pa()
-    total = sig.astype(np.float64) + world.geostatic_Pa()[world.storage.soil_index]
-    fr = subsoil.risk_area_fractions(total, pc, loaded, world.grid.cell_m ** 2)
+    pc = world.precompression_stress_Pa(loaded)
+    sig = sig[loaded]
+    total = sig.astype(np.float64) + world.geostatic_Pa()[world.storage.soil_index[loaded]]
+    fr = subsoil.risk_area_fractions(total, pc, np.ones(loaded.size, dtype=bool), world.grid.cell_m ** 2)
     out = {"subsoil_depths_m": list(depths),
-           "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig[loaded].max(axis=0)],
-           "subsoil_precompression_stress_kPa": 1e-3 * float(pc[loaded].min()),
-           "subsoil_precompression_stress_by_depth_kPa": [1e-3 * float(v) for v in pc[loaded].min(axis=0)],
+           "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig.max(axis=0)],
+           "subsoil_precompression_stress_kPa": 1e-3 * float(pc.min()),
+           "subsoil_precompression_stress_by_depth_kPa": [1e-3 * float(v) for v in pc.min(axis=0)],
            "subsoil_loaded_area_m2": float(fr["touched_area_m2"])}
     for name in subsoil.RISK_NAMES:
         out[f"subsoil_risk_fraction_{name}"] = [float(v) for v in fr[f"fraction_{name}"]]
@@ -178,6 +186,41 @@ def _check_towed(scenario, world: World, trailer) -> float:
     return xi
 
 
+# the top-level figures of several passes (module doc): sums, largest, smallest over the passes
+SUMMED = ("distance_m", "sim_time_s", "wall_time_s", "fixed_step_steps_halved")
+LARGEST = ("sinkage_sprocket_mm", "sinkage_idler_mm", "shear_driven_max_m", "fixed_step_error_max",
+           "terrain_peak_active_cells")
+SMALLEST = ("shear_idle_min_m",)
+
+
+def whole_run(summaries: list[dict]) -> dict:
+    """The summary of a run of several passes from the passes' own (module doc): the last pass's keys,
+    with every figure that adds up or has an extreme taken over the whole run."""
+    top = dict(summaries[-1])
+
+    def numbers(key):
+        return [float(s[key]) for s in summaries
+                if isinstance(s.get(key), int | float) and not isinstance(s[key], bool)]
+
+    summed = [*SUMMED, *(k for k in top if k.startswith("distance_after_") and k.endswith("_m"))]
+    for key, how in [*((k, sum) for k in summed), *((k, max) for k in LARGEST), *((k, min) for k in SMALLEST)]:
+        xs = numbers(key)
+        if xs and key in top:
+            top[key] = int(how(xs)) if isinstance(top[key], int) and not isinstance(top[key], bool) else how(xs)
+    wall = top["wall_time_s"]
+    top["real_time_factor"] = top["sim_time_s"] / wall if wall and wall > 0 else None
+    worst = max(summaries, key=lambda s: abs(float(s.get("lateral_deviation_m") or 0.0)))
+    for key in ("lateral_deviation_m", "lateral_deviation_signed_m"):
+        if key in worst:
+            top[key] = worst[key]
+    for key in ("distance_stop_reached", "complete"):
+        if key in top:
+            top[key] = all(bool(s.get(key)) for s in summaries)
+    if "sinkage_sprocket_mm" in top and "sinkage_idler_mm" in top:
+        top["nose_up"] = bool(top["sinkage_sprocket_mm"] > top["sinkage_idler_mm"])
+    return top
+
+
 def study_summary(study: PassStudy) -> tuple[dict, list[dict]]:
     """(the study's summary.json, the summary of each pass)."""
     summaries = []
@@ -185,11 +228,7 @@ def study_summary(study: PassStudy) -> tuple[dict, list[dict]]:
         s = summarise(res)
         s.update(fig)
         summaries.append(s)
-    top = dict(summaries[-1])
-    # the whole run's times at the top (each pass's own are in ``passes``)
-    sim = sum(float(s["sim_time_s"]) for s in summaries)
-    wall = sum(float(s["wall_time_s"]) for s in summaries)
-    top.update(sim_time_s=sim, wall_time_s=wall, real_time_factor=sim / wall if wall > 0 else None)
+    top = whole_run(summaries)  # the whole run's figures at the top (each pass's own are in ``passes``)
     top["passes"] = list(study.figures)
     if study.bulk_density_initial is not None and any("bulk_density_max_Mg_per_m3" in f for f in study.figures):
         top["bulk_density_initial_Mg_per_m3"] = list(study.bulk_density_initial)

@@ -6,7 +6,7 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     description = "..."
     [run]
     duration_s = 30.0              # (0, 1e6]      simulated time limit
-    output_dt_s = 0.01             # (0, duration] output (and macro) step
+    output_dt_s = 0.01             # [duration / 1e6, duration] output (and macro) step (at most 1e6 steps)
     integrator = "cvodes"          # a name of symtrack.integrators.registry: cvodes | idas | rosenbrock
     fixed_step_s = 0.01            # [1e-5, 0.1] rosenbrock: each output step is split into equal steps <= this
     fixed_step_tolerance = 1e-3    # [0, 0.1] rosenbrock: a step whose error estimate exceeds it is halved (0: off)
@@ -191,6 +191,12 @@ class Scenario:
         return d
 
 
+# the most output steps a run may ask for (run.duration_s / run.output_dt_s): a run keeps each in memory
+# (its states, torques and outputs, some 100 float64, and trajectory.csv's line of text, some 1.5 kB), so
+# a million steps take a few GB; the built-in scenarios ask for at most 30 000
+MAX_OUTPUT_STEPS = 1_000_000
+
+
 def _num(section, key, value, low, high, low_open=False):
     return number(f"{section}.{key}", value, low, high, low_open)
 
@@ -201,6 +207,11 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
     d = defaults
     duration = _num("run", "duration_s", t.get("duration_s", d.duration_s), 0, 1e6, True)
     out_dt = _num("run", "output_dt_s", t.get("output_dt_s", d.output_dt_s), 0, duration, True)
+    if duration / out_dt > MAX_OUTPUT_STEPS:  # refused before any work: a run keeps every output step in memory
+        raise ScenarioError(f"run.output_dt_s = {out_dt!r} s gives {duration / out_dt:.3g} output steps over "
+                            f"run.duration_s = {duration:g} s, more than the {MAX_OUTPUT_STEPS} a run keeps in memory; "
+                            f"the allowed range is [{duration / MAX_OUTPUT_STEPS:.3g}, {duration:g}] s (raise "
+                            "run.output_dt_s or shorten run.duration_s)")
     integ = t.get("integrator", d.integrator)
     if not isinstance(integ, str):
         raise ScenarioError(f"run.integrator = {integ!r} is not one of {', '.join(registry.names())}")

@@ -49,9 +49,10 @@ import numpy as np
 from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_folder, npz_bytes
+from ..foundations.interrupt import defer_interrupts
 from ..foundations.progress import Progress
 from ..integrators import registry
-from ..reports.run_files import TerrainOut, clear_previous_run, terrain_run, write_folder
+from ..reports.run_files import TerrainOut, clear_previous_run, recover, terrain_run, write_folder
 from ..reports.subsoil_plots import density_map_png, risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
@@ -547,18 +548,22 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
                 res, failure = err.partial, err
             wall = time.perf_counter() - t0
             mask = _pass_mask(world, engine_stress, z0)
-            counts += mask
-            pr.records.append({"pass": line.index + 1, "lane": line.lane, "y_m": line.y_m, "x_start_m": line.x_start_m,
-                               "direction": line.direction, "distance_m": float(np.sum(np.hypot(
-                                   np.diff(res.X[:, 0]), np.diff(res.X[:, 1])))),
-                               "sim_time_s": float(res.t[-1]), "wall_time_s": wall,
-                               "speed_end_m_s": float(res.X[-1, iu]), "cells_loaded": int(mask.sum()),
-                               "stopped_by": res.stopped_by})
+            record = {"pass": line.index + 1, "lane": line.lane, "y_m": line.y_m, "x_start_m": line.x_start_m,
+                      "direction": line.direction, "distance_m": float(np.sum(np.hypot(
+                          np.diff(res.X[:, 0]), np.diff(res.X[:, 1])))),
+                      "sim_time_s": float(res.t[-1]), "wall_time_s": wall,
+                      "speed_end_m_s": float(res.X[-1, iu]), "cells_loaded": int(mask.sum()),
+                      "stopped_by": res.stopped_by}
             if engine_stress:
-                pr.records[-1]["bulk_density_max_Mg_per_m3"] = world.bulk_density_max()
-            pr.sim_time_s += float(res.t[-1])
-            _copy_into(whole, world.storage)
-            in_pass = False
+                record[DENSITY_COLUMN] = world.bulk_density_max()
+            # the pass is counted whole (its record, counts, time and terrain) or not at all: a Ctrl-C
+            # in these lines is raised after them
+            with defer_interrupts():
+                counts += mask
+                pr.records.append(record)
+                pr.sim_time_s += float(res.t[-1])
+                _copy_into(whole, world.storage)
+                in_pass = False
             bar.update(done_before + line.index + 1, f"{pattern} pass {line.index + 1}/{len(lines)}")
             if checkpoint is not None and time.perf_counter() - last_checkpoint >= CHECKPOINT_EVERY_S \
                     and len(pr.records) < len(lines):
@@ -723,6 +728,8 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
     folder = check_output_folder(str(out)) if out is not None else None
     t_start = time.perf_counter()
     fs = spec.field
+    if folder is not None:
+        recover(folder)  # a killed write's commit completed (or undone) before the folder is read
     done = _resumable(folder, spec) if folder is not None else {}
     if folder is not None and not done:
         clear_previous_study(folder)

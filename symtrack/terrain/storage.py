@@ -69,10 +69,11 @@ from ..foundations.files import atomic_write_bytes, npz_bytes, real_path
 from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
 from ..soil.pedotransfer import derive_soil, precompression_from_virgin_line_kPa
 
-__all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes", "load",
-           "save"]
+__all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes",
+           "file_geometry", "file_identity", "load", "save"]
 
 STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase", "z_off_m", "load_cycles")
+STORAGE_ATTRS = ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles")  # the Terrain's attributes of them
 SCHEMA1_FIELDS = STORAGE_FIELDS[:5]
 
 TERRAIN_SCHEMA_VERSION = 5
@@ -269,6 +270,35 @@ def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = No
     return data, file_id, history
 
 
+def file_geometry(path) -> tuple[tuple[int, int], int, bool] | None:
+    """A terrain file's ``shape`` (cells along x and y), its number of subsoil depths and whether it has
+    an elevation, read from its header without its arrays; None when they cannot be read."""
+    try:
+        with np.load(Path(path), allow_pickle=False) as f:
+            shape = tuple(int(v) for v in f["shape"])
+            nd = int(f["subsoil_depths_m"].size) if "subsoil_depths_m" in f.files else 0
+            shaped = "elevation_m" in f.files
+    except (OSError, ValueError, EOFError, KeyError, TypeError, zipfile.BadZipFile):
+        return None
+    if len(shape) != 2 or min(shape) < 1:
+        return None
+    return (shape[0], shape[1]), nd, shaped
+
+
+def file_identity(path) -> tuple[str | None, list[str]]:
+    """The ``file_id`` of the terrain file ``path`` and the run ids of its history, oldest first, read
+    without its arrays; ``(None, [])`` for a missing file, one that is no terrain file, or one of
+    schema 1 or 2 (no history). The check of a run's commit (symtrack/reports/run_files.py)."""
+    try:
+        with np.load(Path(path), allow_pickle=False) as f:
+            if "file_id" not in f.files or "history_json" not in f.files:
+                return None, []
+            file_id, history = str(f["file_id"]), json.loads(str(f["history_json"]))
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+        return None, []
+    runs = [str(h.get("run_id")) for h in history if isinstance(h, dict)] if isinstance(history, list) else []
+    return file_id, runs
+
 
 def load(path, soil: dict | None = None) -> Terrain:
     """Read a terrain file; with ``soil`` given, check that it is the soil of the file."""
@@ -306,17 +336,17 @@ def load(path, soil: dict | None = None) -> Terrain:
         raise ScenarioError(f"{path}: malformed terrain geometry: shape {shape}, cell_m {grid.cell_m}, "
                             f"origin_m {grid.origin_m}")
     st = Terrain(grid, file_soil)
-    for name, arr in zip(STORAGE_FIELDS, st._all(), strict=True):
+    for name, attr, arr in zip(STORAGE_FIELDS, STORAGE_ATTRS, st._all(), strict=True):
         if name not in fields:
             continue
-        a = d[name]
+        a = d.pop(name)  # the file's array becomes the terrain's (no second copy of the field in memory)
         if a.shape != shape or a.dtype != arr.dtype:
             raise ScenarioError(f"{path}: {name} has shape {a.shape} and type {a.dtype}, "
                                 f"expected {shape} and {arr.dtype}")
         if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
             bad = int(np.count_nonzero(~np.isfinite(a)))
             raise ScenarioError(f"{path}: {name} holds {bad} non-finite value(s) (NaN or inf): the file is damaged")
-        arr[:] = a.ravel()
+        setattr(st, attr, np.ascontiguousarray(a).reshape(-1))
     if not np.all((st.phase >= 0) & (st.phase <= 2)):
         raise ScenarioError(f"{path}: phase holds values outside 0, 1, 2: the file is damaged")
     if version >= 2 and "subsoil_depths_m" in d:
@@ -328,8 +358,8 @@ def load(path, soil: dict | None = None) -> Terrain:
         if not (np.all(np.isfinite(sig)) and np.all(sig >= 0)):
             raise ScenarioError(f"{path}: sigma_max_Pa holds negative or non-finite values: the file is damaged")
         st.subsoil_depths_m = tuple(float(v) for v in depths)
-        st.sigma_max = sig.reshape(grid.n_cells, depths.size).copy()
-        st.specific_volume = np.zeros_like(st.sigma_max)
+        st.sigma_max = np.ascontiguousarray(sig).reshape(grid.n_cells, depths.size)
+        st.specific_volume = np.zeros(st.sigma_max.shape, dtype=np.float32)
         if version >= 4:
             sv = d.get("specific_volume")
             if sv is None or sv.dtype != np.float32 or sv.shape != (*shape, depths.size):
@@ -338,12 +368,12 @@ def load(path, soil: dict | None = None) -> Terrain:
             if not (np.all(np.isfinite(sv)) and np.all(sv >= 0)):
                 raise ScenarioError(f"{path}: specific_volume holds negative or non-finite values: the file is "
                                     "damaged")
-            st.specific_volume = sv.reshape(grid.n_cells, depths.size).copy()
+            st.specific_volume = np.ascontiguousarray(sv).reshape(grid.n_cells, depths.size)
     if version >= 2 and "soil_index" in d:
         si = d["soil_index"]
         if si.shape != shape or si.dtype != np.uint8:
             raise ScenarioError(f"{path}: soil_index has shape {si.shape} and type {si.dtype}, expected {shape} uint8")
-        st.soil_index[:] = si.ravel()
+        st.soil_index = np.ascontiguousarray(si).reshape(-1)
         if "soil_map_values" in d:
             names = [str(n) for n in d["soil_map_names"]]
             vals = d["soil_map_values"]
@@ -368,7 +398,7 @@ def load(path, soil: dict | None = None) -> Terrain:
         if el.shape != shape or el.dtype != np.float64 or not np.all(np.isfinite(el)):
             raise ScenarioError(f"{path}: elevation_m must be finite float64 of shape {shape}, it is {el.dtype} "
                                 f"{el.shape}: the file is damaged")
-        st.elevation = np.ascontiguousarray(el).ravel().copy()
+        st.elevation = np.ascontiguousarray(el).reshape(-1)
     if version >= 3:
         if "file_id" not in d or "history_json" not in d:
             raise ScenarioError(f"{path}: the terrain file lacks file_id or history_json (schema 3): "

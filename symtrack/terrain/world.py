@@ -84,10 +84,11 @@ from . import density, gis, moisture
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import MAX_SOILS, SoilMap, soil_index
-from .storage import Grid, Terrain
+from .storage import Grid, Terrain, file_geometry
 
 __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "World", "derive_modulus", "open_world", "padding_m",
-           "static_sinkage", "world_bytes_per_cell"]
+           "run_memory_bytes", "static_sinkage", "world_storage_bytes_per_cell",
+           "zero_in_place"]
 
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
 LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pass
@@ -150,15 +151,57 @@ def derive_modulus(params: dict, settings: TerrainSettings, dt_s: float) -> int:
     return int(math.floor(math.hypot(W, H) / dx)) + 2
 
 
-def world_bytes_per_cell(n_depths: int, shaped: bool = False) -> int:
-    """The memory a new field takes per cell: the storage's arrays (measured from a one-cell
-    :class:`Terrain`; with ``shaped``, its elevation too), the pass's records of the vertical and
-    the mean normal stress per depth (float32 each), the touched mask and the soil map's index (a
-    byte each)."""
+# The memory of a run on the grid terrain beyond what the process holds when its field is made
+# (docs/terrain.md, "Memory"): :func:`run_memory_bytes`. Its parts:
+# - the field's arrays as they come into memory: a continued field's all of them (read from its file),
+#   a new field's subsoil stress record (every pass's end writes all of it) and its elevation; a new
+#   field's other arrays are zeros whose pages the kernel maps only where a pass writes them;
+# - PASS_BYTES_PER_CELL: the sinkage before and after each pass, kept for the figures (float64 each);
+# - RUN_BYTES_PER_CELL: the rest that grows with the field, measured: the engine's records of the pass's
+#   stresses as it writes them, the sinkage at the pass's end, the pass figures', the plots' and the
+#   terrain file's temporaries;
+# - RUN_FIXED_BYTES: what the run loads after the field is made, measured: the engine's functions, the
+#   plotting library and its figures.
+# Measured as the peak resident set of `symtrack simulate` runs on 1e4 to 3e6 cells (new and continued
+# fields, one and three passes): the estimate is within 5 % of each (tests/test_memory_refusal.py).
+RUN_FIXED_BYTES = 48_000_000
+RUN_BYTES_PER_CELL = 55
+PASS_BYTES_PER_CELL = 16
+
+
+def run_memory_bytes(n_cells: int, n_depths: int, passes: int = 1, continued: bool = False,
+                     shaped: bool = False) -> int:
+    """The memory a run of ``passes`` passes over a field of ``n_cells`` cells with ``n_depths``
+    subsoil depths takes beyond what the process holds before the field is made (the comment above):
+    a new field, or with ``continued`` one read from a terrain file; ``shaped``: the field has an
+    elevation."""
+    if continued:
+        field = world_storage_bytes_per_cell(n_depths, shaped)
+    else:
+        field = 4 * n_depths + (8 if shaped else 0)
+    return int(RUN_FIXED_BYTES + n_cells * (RUN_BYTES_PER_CELL + field + PASS_BYTES_PER_CELL * passes))
+
+
+def world_storage_bytes_per_cell(n_depths: int, shaped: bool = False) -> int:
+    """The bytes per cell of a terrain's arrays (measured from a one-cell :class:`Terrain`)."""
     one = Terrain(Grid((0.0, 0.0), 1.0, (1, 1)), None, [0.1 * (k + 1) for k in range(n_depths)])
     if shaped:
         one.set_elevation([0.0])
-    return one.nbytes + 8 * n_depths + 2
+    return one.nbytes
+
+
+def zero_in_place(a: np.ndarray, block: int = 1 << 16) -> None:
+    """Set the contiguous array ``a`` to 0, writing only its blocks that hold a value other than 0: a
+    field's arrays start as pages the kernel has not mapped (np.zeros), and a pass writes a few of them;
+    writing zeros over the whole array would map every page (the whole field's memory) for nothing."""
+    if not a.flags.c_contiguous:
+        a[...] = 0
+        return
+    flat = a.reshape(-1)
+    for i in range(0, flat.size, block):
+        b = flat[i:i + block]
+        if b.any():
+            b[...] = 0
 
 
 class World:
@@ -167,6 +210,8 @@ class World:
     def __init__(self, settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s: float,
                  start_xy=(0.0, 0.0), modulus: int | None = None, storage: Terrain | None = None):
         self.settings, self.params, self.opts = settings, dict(params), opts
+        # the estimated peak memory of the process (run_memory_bytes; open_world's, for a terrain file)
+        self.memory_estimate_bytes: int | None = None
         if not settings.cell_m < params["track_width_m"]:
             raise ScenarioError(f"terrain.cell_m = {settings.cell_m!r} must be smaller than the track width "
                                 f"{params['track_width_m']!r} m (cells resolve the contact patch)")
@@ -180,9 +225,11 @@ class World:
             self.grid = Grid((float(origin[0]), float(origin[1])), float(settings.cell_m), (nx, ny))
             n, nd = self.grid.n_cells, len(settings.subsoil_depths_m)
             shaped = settings.surface is not None and not settings.surface.is_flat
-            require_memory(n * world_bytes_per_cell(nd, shaped), f"terrain.size_m = {list(settings.size_m)} at "
-                           f"terrain.cell_m = {settings.cell_m} ({nx} x {ny} = {n} cells, {nd} subsoil depths)",
-                           "raise terrain.cell_m, shrink terrain.size_m or drop terrain.subsoil_depths_m")
+            self.memory_estimate_bytes = require_memory(
+                run_memory_bytes(n, nd, settings.passes, shaped=shaped), f"terrain.size_m = {list(settings.size_m)} "
+                f"at terrain.cell_m = {settings.cell_m} ({nx} x {ny} = {n} cells, {nd} subsoil depths, "
+                f"terrain.passes = {settings.passes})",
+                "raise terrain.cell_m, shrink terrain.size_m or drop terrain.subsoil_depths_m")
         # the soil map's cells first: a raster that misses the field, or a CRS that is not the
         # terrain's, stops here, before the channel pool is built
         sm = settings.soil_map
@@ -199,9 +246,10 @@ class World:
         self.storage.set_subsoil_depths(settings.subsoil_depths_m)
         # the largest vertical stress of this pass at each subsoil depth, per cell (the terrain
         # engine writes it; end_pass folds it into the storage's record over all passes)
-        self.pass_sigma = np.zeros_like(self.storage.sigma_max)
+        # (np.zeros, not zeros_like: the kernel maps the pages the engine writes, not the whole field's)
+        self.pass_sigma = np.zeros(self.storage.sigma_max.shape, dtype=self.storage.sigma_max.dtype)
         # and of the mean normal stress (the bulk density's; docs/subsoil.md "Bulk density")
-        self.pass_p_mean = np.zeros_like(self.storage.sigma_max)
+        self.pass_p_mean = np.zeros(self.storage.sigma_max.shape, dtype=self.storage.sigma_max.dtype)
         if modulus is None:
             modulus = settings.channels if settings.channels != "auto" else derive_modulus(params, settings, dt_s)
         self.M = int(modulus)
@@ -381,9 +429,9 @@ class World:
         shape are kept."""
         for name, a in self.storage.arrays().items():
             if name != "soil_index":
-                a[...] = 0
-        self.pass_sigma[...] = 0
-        self.pass_p_mean[...] = 0
+                zero_in_place(a)
+        zero_in_place(self.pass_sigma)
+        zero_in_place(self.pass_p_mean)
         self.touched[:] = False
 
     def release_all(self) -> None:
@@ -448,15 +496,18 @@ class World:
         return density.field_max(self.storage.specific_volume, self.storage.soil_index, self.soils,
                                  self.storage.subsoil_depths_m)
 
-    def precompression_stress_Pa(self) -> np.ndarray:
+    def precompression_stress_Pa(self, cells=None) -> np.ndarray:
         """Each cell's precompression stress at each subsoil depth [Pa], (n_cells, n_depths): its soil's
         layer's (a soil map gives cells different ones; a subsoil layer its own below the topsoil), or,
-        in the topsoil, its own on the day of a moisture map of many values."""
+        in the topsoil, its own on the day of a moisture map of many values; of the cells ``cells``
+        (indices) only when given."""
         st = self.storage
+        sel = slice(None) if cells is None else cells
         a = self.layer_arrays()
-        pc = a["pc"][st.soil_index]
+        si = st.soil_index[sel]
+        pc = a["pc"][si]
         if self.cell_day is not None:
-            pc = np.where(a["top"][st.soil_index], self.cell_day["precompression_stress_Pa"][:, None], pc)
+            pc = np.where(a["top"][si], self.cell_day["precompression_stress_Pa"][sel][:, None], pc)
         return pc
 
     # ---- figures -----------------------------------------------------------------------------
@@ -470,6 +521,9 @@ class World:
             "terrain_storage_MB": self.storage.nbytes / 1e6,
             "terrain_cells_touched": int(np.count_nonzero(self.storage.zmax > 0)),
             "terrain_max_sinkage_mm": 1e3 * float(self.storage.z.max()),
+            # the memory check's estimate of the process's peak (docs/terrain.md "Memory"; None: not checked)
+            "terrain_memory_estimate_MB": None if self.memory_estimate_bytes is None else
+            self.memory_estimate_bytes / 1e6,
         }
 
 
@@ -492,6 +546,7 @@ def open_world(settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s
                         raise ScenarioError(f"{label} was made with soil {n} = {v!r}, the scenario has "
                                             f"{float(params[n])!r}; use the same [soil] to continue a terrain")
         else:
+            estimate = _check_file_memory(terrain, settings)  # before the file is read
             storage = Terrain.load(terrain, params)
         g = storage.grid
         cell_differs = "cell_m" in settings.given and abs(g.cell_m - settings.cell_m) > 1e-12
@@ -513,4 +568,22 @@ def open_world(settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s
                 f"{settings.shape[1]} cells); make them agree (or leave size_m out to take the file's)")
         settings = dataclasses.replace(settings, cell_m=g.cell_m, size_m=(g.shape[0] * g.cell_m,
                                                                           g.shape[1] * g.cell_m))
-    return World(settings, params, opts, dt_s, start_xy=start_xy, storage=storage)
+    world = World(settings, params, opts, dt_s, start_xy=start_xy, storage=storage)
+    if terrain is not None and not isinstance(terrain, Terrain):
+        world.memory_estimate_bytes = estimate
+    return world
+
+
+def _check_file_memory(path, settings: TerrainSettings) -> int | None:
+    """Refuse a terrain file whose run would not fit in memory, before it is read (its size from the
+    file's header); the estimated peak of the process, None when the header cannot be read (loading
+    the file then says what is wrong with it)."""
+    head = file_geometry(path)
+    if head is None:
+        return None
+    shape, nd, shaped = head
+    n = shape[0] * shape[1]
+    return require_memory(run_memory_bytes(n, nd, settings.passes, continued=True, shaped=shaped),
+                          f"the terrain file {str(path)!r} ({shape[0]} x {shape[1]} = {n} cells, {nd} subsoil "
+                          f"depths, terrain.passes = {settings.passes})",
+                          "continue it on a machine with more memory (or close other programs)")

@@ -24,7 +24,7 @@ import logging
 import numpy as np
 
 from ...terrain.channels import HIST_ROWS
-from ...terrain.world import LIFT_TIME_S, World, static_sinkage
+from ...terrain.world import LIFT_TIME_S, World, static_sinkage, zero_in_place
 from ..settings import EngineSettings
 from .engine import engine_functions
 from .kernel import CKernel, library
@@ -141,8 +141,8 @@ class ChannelManager:
         w.release_all()
         w.peak_active = 0
         w.touched[:] = False
-        w.pass_sigma[:] = 0.0
-        w.pass_p_mean[:] = 0.0
+        zero_in_place(w.pass_sigma)  # only the pages the last pass wrote (terrain/world.py)
+        zero_in_place(w.pass_p_mean)
         stepper.reset()
         L = w.layout
         x = np.zeros(L.size)
