@@ -195,8 +195,10 @@ CACHE_SCRIPT = textwrap.dedent("""
     from symtrack.control import solver_cache, scenario as S, closedloop as CL
     from symtrack.control.mpc import PathTrackingMPC
     from symtrack.model import ModelOptions, SystemModel
-    model = SystemModel()
-    sc = S.load("headland_uturn", [f"mpc.solver='{sys.argv[1]}'", "mpc.jit=true", "mpc.horizon_steps=8"])
+    # (the paper's creep law and a short horizon: the smallest generated C that exercises the cache)
+    model = SystemModel(ModelOptions(lateral_law="creep"))
+    sc = S.load("headland_uturn", [f"mpc.solver='{sys.argv[1]}'", "mpc.jit=true", "mpc.horizon_steps=4",
+                                   "model.lateral_law='creep'"])
     mpc = PathTrackingMPC(model, sc.params, sc.mpc)
     x, u = CL.initial_state(model, sc)
     ref = sc.build_path().reference(0.0, mpc.N, 0.1, 0.0)
@@ -207,7 +209,7 @@ CACHE_SCRIPT = textwrap.dedent("""
 """)
 
 
-# IPOPT's NLP functions are one large C file (about 40 s of gcc, twice: a fresh cache per run):
+# IPOPT's NLP functions are one large C file (gcc's longest compile of the MPC; once, in the first process):
 # the slow set (make test-slow; CI runs it)
 @pytest.mark.parametrize("solver, n_libs", [("rti", 4), pytest.param("ipopt", 1, marks=pytest.mark.slow)])
 def test_compiled_mpc_cached_across_processes(tmp_path, solver, n_libs):

@@ -84,6 +84,16 @@ def test_an_unknown_case_is_one_line_and_writes_nothing(tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.parametrize("args, words", [(["--scheduler", "no-port-here"], ("--scheduler", "no-port-here")),
+                                         (["--dask", "--workers", "0"], ("--workers",))])
+def test_a_bad_dask_option_is_one_line_and_writes_nothing(tmp_path, capsys, args, words):
+    out = tmp_path / "v"
+    assert main(["validate", "rasool2018_motion_resistance", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and all(w in err for w in words)
+    assert not out.exists()
+
+
 def test_validate_writes_the_table_figures_and_report(tmp_path, capsys):
     out = tmp_path / "v"
     assert main(["validate", *FAST, "--out", str(out), "--quiet"]) == 0
@@ -211,3 +221,109 @@ def test_below_a_uniform_footprint_the_log_slope_steepens_with_depth(xi):
             assert slope2 < slope1 < 0
     m = (80.0, 49.0, 38.0)  # the track case's measured profile (kPa)
     assert math.log(m[2] / m[1]) / math.log(0.65 / 0.40) > math.log(m[1] / m[0]) / math.log(0.40 / 0.25)
+
+
+# ---- the vehicle's cases: traction, motion resistance, turning ------------------------------------
+
+def _fg_traction(setup, a, ci_kPa, slips):
+    """The traction of one straight track in closed form (docs/model.md): Ferretti & Girelli's tractive
+    effort with the Janosi-Hanamoto shape at j = i l / 2, Wong's internal resistance at the tread speed,
+    Bekker's rut work at the static sinkage; the soil by the cone-bearing relation written out here."""
+    phi = math.radians(a["friction_angle_deg"])
+    nq = math.exp(math.pi * math.tan(phi)) * math.tan(math.pi / 4 + phi / 2) ** 2
+    nc = (nq - 1) / math.tan(phi)
+    c = max(0.0, (ci_kPa * 1e3 / a["cone_factor_multiplier"] - a["overburden_kPa"] * 1e3 * nq) / nc)
+    N, b, l, K, n = a["normal_load_N"], setup["track_width_m"], setup["contact_length_m"], a["shear_modulus_K_m"], \
+        a["bekker_n"]
+    F = (b * l * c + N * math.tan(phi)) * (1 + K / (slips * l) * (np.exp(-slips * l / K) - 1))
+    R_in = N * (setup["internal_resistance_const"] + setup["internal_resistance_per_km_h"] * 3.6 * a["speed_m_s"]
+                / (1 - slips))
+    k_eq = ci_kPa * 1e3 / a["cone_index_sinkage_m"] ** n
+    z = (N / (b * l) / k_eq) ** (1 / n)
+    R_c = b * k_eq * z ** (n + 1) / (n + 1)
+    ntr, gtr = (F - R_c) / N, (F + R_in) / N
+    return ntr, ntr / gtr * (1 - slips)
+
+
+def test_traction_at_max_efficiency_is_ferretti_girellis_tractive_effort_in_closed_form(cases):
+    slips = np.linspace(0.003, 0.3, 60001)
+    for name, what in (("rasool2016_max_tractive_efficiency", "tractive_efficiency_pct"),
+                       ("rasool2016_travel_reduction_at_max_efficiency", "travel_reduction"),
+                       ("rasool2016_net_traction_at_max_efficiency", "net_traction_ratio")):
+        c = cases[name]
+        assert c.setup["quantity_at_max"] == what
+        got = V.MODELS[c.model](c.setup, c.nominal(), c.x)
+        for k, ci in enumerate(c.x):
+            ntr, te = _fg_traction(c.setup, c.nominal(), ci, slips)
+            best = int(np.argmax(te))
+            want = {"tractive_efficiency_pct": 100 * te[best], "travel_reduction": slips[best],
+                    "net_traction_ratio": ntr[best]}[what]
+            assert got[k] == pytest.approx(want, rel=2e-3, abs=5e-4), (name, ci)
+
+
+def test_traction_at_the_measured_slip_and_the_fixed_strength_alternative(cases):
+    c = cases["rasool2016_net_traction_at_slip"]
+    a = c.nominal()
+    got = V.MODELS[c.model](c.setup, a, c.x)
+    for k in range(c.x.size):
+        s = np.array([c.setup["travel_reduction"][k]])
+        assert got[k] == pytest.approx(_fg_traction(c.setup, a, c.setup["cone_index_kPa"][k], s)[0][0], rel=1e-3)
+    # Wong's sandy loam instead of the cone-bearing strength: c and phi the same at every cone index
+    r = V.run_case(c, line=False)
+    fixed = next(p for n, end, _, p, _ in r.runs if n == "strength_relation")
+    a_fixed = {**a, "friction_angle_deg": 29.0, "cone_factor_multiplier": 1e9, "overburden_kPa": 0.0}
+    s = np.array(c.setup["travel_reduction"])
+    want = [_fg_traction(c.setup, a_fixed, ci, s[k:k + 1])[0][0] for k, ci in enumerate(c.setup["cone_index_kPa"])]
+    # with c = 0 from the relation, add the sandy loam's cohesion (1.72 kPa) by hand
+    want = np.array(want) + 1.72e3 * c.setup["track_width_m"] * c.setup["contact_length_m"] / a["normal_load_N"] \
+        * (1 + a["shear_modulus_K_m"] / (s * c.setup["contact_length_m"])
+           * (np.exp(-s * c.setup["contact_length_m"] / a["shear_modulus_K_m"]) - 1))
+    assert fixed == pytest.approx(want, rel=1e-3)
+
+
+def test_motion_resistance_is_wongs_internal_resistance_plus_bekkers_rut(cases):
+    c = cases["rasool2018_motion_resistance"]
+    a = c.nominal()
+    got = V.MODELS[c.model](c.setup, a, c.x)
+    N = c.setup["weight_N"] / c.setup["tracks"]
+    b, l, n = a["track_width_m"], a["contact_length_m"], a["bekker_n"]
+    for k, ci in enumerate(c.x):
+        k_eq = ci * 1e3 / a["cone_index_sinkage_m"] ** n
+        z = (N / (b * l) / k_eq) ** (1 / n)
+        r_in = N * (c.setup["internal_resistance_const"]
+                    + c.setup["internal_resistance_per_km_h"] * 3.6 * a["speed_m_s"])
+        assert got[k] == pytest.approx(100 * (b * k_eq * z ** (n + 1) / (n + 1) + r_in) / N, rel=1e-4)
+
+
+def test_turning_coefficient_is_the_trim_points_thrust_difference():
+    """Wong's coefficient of lateral resistance 4 M_r / (W l) from the package's steady turn, with M_r the
+    yaw moment of the tracks' net thrusts; it falls with the radius (the relation's direction)."""
+    from symtrack.control.trim import trim
+    from symtrack.model import ModelOptions, SystemModel
+    from symtrack.presets import soil_preset, vehicle_preset
+
+    p = {**vehicle_preset("reference_crawler"), **soil_preset("sandy_loam_15")}
+    B, l, W = p["track_gauge_m"], p["contact_length_m"], p["mass_kg"] * 9.80665
+    mu = [V.validate_vehicle.turning_resistance_coefficient("reference_crawler", "sandy_loam_15", "shear",
+                                                            p["shear_modulus_K_m"], 0.5, x) for x in (1.0, 5.0, 20.0)]
+    y = trim(SystemModel(ModelOptions(lateral_law="shear")), p, 0.5, 5.0 * B).outputs
+    moment = B / 2 * ((y["tractive_right_N"] - y["compaction_resistance_right_N"])
+                      - (y["tractive_left_N"] - y["compaction_resistance_left_N"]))
+    assert mu[1] == pytest.approx(4 * moment / (W * l), rel=1e-9)
+    assert mu[0] > mu[1] > mu[2] > 0
+
+
+def test_an_empirical_case_is_marked_so(cases):
+    c = cases["nikitin_sergeev_turning_resistance"]
+    assert c.kind.endswith("_empirical") and "not a measurement" in c.source["measured_as"].lower()
+    # its values are the relation's, relative to R/B = 1
+    assert c.measured == pytest.approx((0.925 + 0.15) / (0.925 + 0.15 * c.x), abs=1e-4)
+
+
+def test_line_points_must_be_a_whole_number(tmp_path):
+    text = (V.CASES_DIR / "rasool2018_motion_resistance.toml").read_text().replace("line_points = 15",
+                                                                                   "line_points = 1.5")
+    bad = tmp_path / "bad_case.toml"
+    bad.write_text(text)
+    with pytest.raises(ScenarioError, match="line_points"):
+        V.load_case(bad)

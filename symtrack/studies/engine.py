@@ -39,7 +39,8 @@ from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
 from .plots import comparison_png
 from .runs import Source, load, resolve_source, run_one
 
-__all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "plan", "results_csv", "scalar_figures", "sweep"]
+__all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "check_scheduler_address", "dask_client", "plan",
+           "results_csv", "scalar_figures", "sweep"]
 
 log = logging.getLogger("symtrack.studies")
 
@@ -217,7 +218,8 @@ def _store(out: Path, run: dict, result: dict, kind: str) -> dict:
 # the modules a worker needs for a run of each kind, imported once by the fork server of the local
 # cluster's workers (:func:`_start_fork_server`), never by each worker
 WORKER_MODULES = {"simulate": ("symtrack.api",), "mpc": ("symtrack.control.closedloop",),
-                  "field": ("symtrack.studies.field", "symtrack.studies.operations")}
+                  "field": ("symtrack.studies.field", "symtrack.studies.operations"),
+                  "validate": ("symtrack.studies.validate",)}
 MP_METHOD_KEY = "distributed.worker.multiprocessing-method"
 # Dask's defaults of distributed.nanny.pre-spawn-environ: what a nanny sets before it spawns a worker
 WORKER_ENVIRON = {"MALLOC_TRIM_THRESHOLD_": 65536, "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
@@ -269,6 +271,30 @@ def _worker_start(kind: str):
 
     return dask.config.set({"distributed.worker.profile.enabled": False,
                             **({MP_METHOD_KEY: "forkserver"} if forked else {})})
+
+
+@contextlib.contextmanager
+def dask_client(kind: str, workers: int = 2, scheduler: str | None = None):
+    """A Dask client for tasks of ``kind`` (a key of :data:`WORKER_MODULES`) other than a sweep's
+    runs (``symtrack validate --dask``): on the scheduler at ``scheduler``, or on a new local cluster
+    of ``workers`` processes started as a sweep's are (:func:`_worker_start`, :func:`_client`).
+    Closed, and the local cluster stopped, on leaving."""
+    if scheduler:
+        _check_scheduler_address(scheduler)
+    with _worker_start(kind) if not scheduler else contextlib.nullcontext():
+        client, cluster = _client(workers, scheduler)
+        try:
+            yield client
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def check_scheduler_address(address: str) -> None:
+    """Refuse a scheduler address that is not ``[protocol://]host:port`` (:func:`_check_scheduler_address`),
+    before anything runs."""
+    _check_scheduler_address(address)
 
 
 def _check_scheduler_address(address: str) -> None:

@@ -4,9 +4,11 @@ by the package's own models (docs/validation.md; ``symtrack validate``).
 A **case** is a TOML file in ``symtrack/studies/validation_cases/`` (or any file given by path):
 
 - ``title``, ``model`` (a name of :data:`MODELS`), ``kind`` (the kind of quantity the summary groups
-  errors by), ``calibration`` (true when a parameter was fitted to this case's own data),
+  errors by; a kind ending in ``_empirical`` compares with a published empirical relation, not a
+  measurement), ``calibration`` (true when a parameter was fitted to this case's own data),
   ``findings`` (what the comparison shows: where it misses by more than the spread and the band,
-  whether the physics or an assumption seems at fault);
+  whether the physics or an assumption seems at fault), ``line_points`` (optional: the points of
+  the figure's prediction line, :data:`LINE_POINTS` unless given; fewer for a costly model);
 - ``[source]``: ``citation``, ``page``, ``table`` and ``measured_as`` (what the number is);
 - ``[measured]``: ``quantity``, ``unit``, ``x_name`` (what the points are taken at, with its unit),
   ``x`` and ``values`` (the measured points), ``spread`` (one per point where the source gives
@@ -32,6 +34,7 @@ import functools
 import io
 import math
 import tomllib
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -42,10 +45,11 @@ from ..foundations.errors import ScenarioError
 from ..foundations.files import read_text
 from ..soil.pedotransfer import GRAVITY_M_S2, WATER_DENSITY_MG_PER_M3
 from ..terrain import density, subsoil, tyre
-from . import traffic_seasons
+from . import traffic_seasons, validate_vehicle
 
-__all__ = ["CASES_DIR", "CSV_COLUMNS", "MODELS", "SCHEMA_VERSION", "SENSITIVITY_COLUMNS", "Case", "CaseResult",
-           "case_names", "density_change_vs_contact_pressure", "load_case", "markdown_tables", "resolve_cases",
+__all__ = ["CASES_DIR", "CSV_COLUMNS", "LINE_POINTS", "MODELS", "SCHEMA_VERSION", "SENSITIVITY_COLUMNS", "Case",
+           "CaseResult", "case_names", "density_change_vs_contact_pressure", "load_case", "markdown_tables",
+           "resolve_cases",
            "run_case", "sensitivity_csv", "summary_rows", "track_stress_by_depth", "traffic_shares",
            "tyre_stress_by_depth", "validation_csv"]
 
@@ -58,8 +62,8 @@ CSV_COLUMNS = ("case", "quantity", "depth_or_pass", "x_name", "measured", "predi
                "band_low", "band_high", "unit", "kind", "calibration")
 SENSITIVITY_COLUMNS = ("case", "assumption", "end", "assumed", "depth_or_pass", "predicted", "unit")
 
-CASE_KEYS = ("title", "model", "kind", "calibration", "findings", "source", "measured", "reference", "setup",
-             "assumptions")
+CASE_KEYS = ("title", "model", "kind", "calibration", "findings", "line_points", "source", "measured", "reference",
+             "setup", "assumptions")
 SOURCE_KEYS = ("citation", "page", "table", "measured_as")
 MEASURED_KEYS = ("quantity", "unit", "x_name", "x", "x_labels", "values", "spread")
 ASSUMPTION_KEYS = ("value", "range", "unit", "reason", "choices", "alternatives")
@@ -201,6 +205,10 @@ MODELS: dict[str, Callable] = {
     "tyre_stress_by_depth": tyre_stress_by_depth,
     "density_change_vs_contact_pressure": density_change_vs_contact_pressure,
     "traffic_shares": traffic_shares,
+    "track_traction_at_max_efficiency": validate_vehicle.track_traction_at_max_efficiency,
+    "track_traction_at_slip": validate_vehicle.track_traction_at_slip,
+    "track_motion_resistance": validate_vehicle.track_motion_resistance,
+    "steady_turn_resistance_ratio": validate_vehicle.steady_turn_resistance_ratio,
 }
 
 
@@ -245,6 +253,7 @@ class Case:
     references: dict  # name -> (x array, values array)
     setup: dict
     assumptions: tuple[Assumption, ...]
+    line_points: int = LINE_POINTS
 
     def nominal(self) -> dict:
         return {a.name: a.value for a in self.assumptions}
@@ -335,11 +344,14 @@ def load_case(path) -> Case:
     if not isinstance(setup, dict):
         raise ScenarioError(f"{name}: [setup] must be a table")
     findings = _text(f"{name}: findings", doc.get("findings"))
+    line_points = doc.get("line_points", LINE_POINTS)
+    if isinstance(line_points, bool) or not isinstance(line_points, int) or not 2 <= line_points <= 200:
+        raise ScenarioError(f"{name}: line_points = {line_points!r} must be a whole number in 2-200")
     return Case(name, path, title, model, kind, calibration, findings, dict(src), _text(f"{name}: measured.quantity",
                 m.get("quantity")), _text(f"{name}: measured.unit", m.get("unit")),
                 _text(f"{name}: measured.x_name", m.get("x_name")), x, values, spread_arr,
                 None if labels is None else tuple(labels), refs, dict(setup),
-                assumptions)
+                assumptions, line_points)
 
 
 def case_names() -> list[str]:
@@ -393,7 +405,7 @@ class CaseResult:
 def _line_x(case: Case) -> np.ndarray:
     lo, hi = float(case.x.min()), float(case.x.max())
     pad = 0.25 * (hi - lo) if hi > lo else 0.25 * abs(hi)
-    return np.linspace(max(lo - pad, 0.4 * lo), hi + pad, LINE_POINTS)
+    return np.linspace(max(lo - pad, 0.4 * lo), hi + pad, case.line_points)
 
 
 def _evaluate(case: Case, values: dict, xs: np.ndarray) -> np.ndarray:
@@ -421,7 +433,10 @@ def run_case(case: Case, line: bool = True) -> CaseResult:
             pred = _evaluate(case, {**nominal, asm.name: v}, xs)
             runs.append((asm.name, label, v, pred[:case.x.size], pred[case.x.size:]))
     allp = np.array([base] + [np.concatenate([r[3], r[4]]) for r in runs])
-    low, high = allp.min(axis=0), allp.max(axis=0)
+    # a run with no prediction at a point (NaN: e.g. no steady turn there) leaves the band to the others
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        low, high = np.nanmin(allp, axis=0), np.nanmax(allp, axis=0)
     n = case.x.size
     return CaseResult(case, base[:n], low[:n], high[:n], runs, lx, base[n:], low[n:], high[n:])
 

@@ -34,6 +34,11 @@ SUMMARY_KIND = "symtrack-validate"
 _REF_MARKERS = ("s", "^", "v", "D", "P", "X")
 
 
+def _measured_label(c) -> str:
+    """The legend of a case's points: measured, or an empirical relation's values (a kind ending in _empirical)."""
+    return "empirical relation (not measured)" if c.kind.endswith("_empirical") else "measured"
+
+
 def case_figure(r: CaseResult) -> bytes:
     """PNG: the measured points (with their spread where given), the prediction as a line, the band
     of the assumptions' ends, and the reference models' predictions as open markers. A case by depth
@@ -60,11 +65,11 @@ def case_figure(r: CaseResult) -> bytes:
         put(rx, rv, _REF_MARKERS[k % len(_REF_MARKERS)], mfc="none", color="0.35", ms=7, label=name)
     if c.spread is not None:
         if by_depth:
-            ax.errorbar(c.measured, c.x * scale, xerr=c.spread, fmt="o", color="k", label="measured")
+            ax.errorbar(c.measured, c.x * scale, xerr=c.spread, fmt="o", color="k", label=_measured_label(c))
         else:
-            ax.errorbar(c.x, c.measured, yerr=c.spread, fmt="o", color="k", label="measured")
+            ax.errorbar(c.x, c.measured, yerr=c.spread, fmt="o", color="k", label=_measured_label(c))
     else:
-        put(c.x, c.measured, "o", color="k", ms=8, label="measured")
+        put(c.x, c.measured, "o", color="k", ms=8, label=_measured_label(c))
     yl = f"{c.quantity} [{c.unit}]"
     if by_depth:
         ax.set_xlabel(yl)
@@ -91,9 +96,9 @@ def _categories_figure(fig, ax, r: CaseResult) -> bytes:
     for k, (name, (rx, rv)) in enumerate(c.references.items()):
         ax.plot(rx, rv, _REF_MARKERS[k % len(_REF_MARKERS)], mfc="none", color="0.35", ms=7, label=name)
     if c.spread is not None:
-        ax.errorbar(c.x, c.measured, yerr=c.spread, fmt="o", color="k", label="measured")
+        ax.errorbar(c.x, c.measured, yerr=c.spread, fmt="o", color="k", label=_measured_label(c))
     else:
-        ax.plot(c.x, c.measured, "o", color="k", ms=8, label="measured")
+        ax.plot(c.x, c.measured, "o", color="k", ms=8, label=_measured_label(c))
     ax.set_xticks(c.x, c.x_labels)
     ax.set_xlim(float(c.x.min()) - 0.7, float(c.x.max()) + 0.7)
     ax.set_ylim(bottom=0.0)
@@ -106,11 +111,12 @@ def _categories_figure(fig, ax, r: CaseResult) -> bytes:
 
 def summary_table(rows: list[dict]) -> str:
     """The printed summary: one line per kind of quantity."""
-    head = (f"{'kind':<16} {'cases':>5} {'points':>6} {'mean |error|':>14} {'worst relative':>15}  "
+    w = max([16, *(len(s["kind"]) for s in rows)])
+    head = (f"{'kind':<{w}} {'cases':>5} {'points':>6} {'mean |error|':>14} {'worst relative':>15}  "
             f"{'in band':>7}  worst at")
     lines = [head, "-" * len(head)]
     for s in rows:
-        lines.append(f"{s['kind']:<16} {s['cases']:>5} {s['points']:>6} {s['mean_abs_error']:>9.3g} {s['unit']:<4} "
+        lines.append(f"{s['kind']:<{w}} {s['cases']:>5} {s['points']:>6} {s['mean_abs_error']:>9.3g} {s['unit']:<4} "
                      f"{100 * s['worst_relative_error']:>+14.0f}%  {s['points_in_band']:>3}/{s['points']:<3}  "
                      f"{s['worst_at']}")
     return "\n".join(lines)
@@ -164,21 +170,44 @@ def _case_section(r: CaseResult) -> str:
     return "\n".join(parts)
 
 
-def run_validation(names, out, progress: bool = True) -> ValidationRun:
+def _run_cases(cases, bar, dask: bool, workers: int, scheduler: str | None) -> list[CaseResult]:
+    """Each case's :func:`run_case`, in order: here one after another, or on Dask (``dask``, or a
+    ``scheduler`` given) as one task per case on a local cluster of ``workers`` processes or on the
+    running scheduler, as ``symtrack sweep`` runs its runs (:func:`symtrack.studies.engine.dask_client`)."""
+    if not (dask or scheduler):
+        results = []
+        for k, c in enumerate(cases):
+            bar.update(k, c.name)
+            results.append(run_case(c))
+        return results
+    from distributed import as_completed
+
+    from .engine import dask_client
+
+    with dask_client("validate", workers, scheduler) as client:
+        futures = client.map(run_case, cases, pure=False)
+        index = {f.key: k for k, f in enumerate(futures)}
+        results = [None] * len(cases)
+        for done, f in enumerate(as_completed(futures)):
+            results[index[f.key]] = f.result()
+            bar.update(done + 1, cases[index[f.key]].name)
+    return results
+
+
+def run_validation(names, out, progress: bool = True, dask: bool = False, workers: int = 2,
+                   scheduler: str | None = None) -> ValidationRun:
     """Run the cases ``names`` (built-in names or case files; none: all), write the folder ``out``
     (docs/validation.md, "The output folder") and return the results. The folder is locked from
-    before the first case; an unknown case or a bad case file fails before anything runs."""
+    before the first case; an unknown case or a bad case file fails before anything runs. ``dask``
+    (or a ``scheduler`` address): the cases run on Dask, one task each (:func:`_run_cases`); the
+    figures and files are made here, the same as without."""
     t0 = time.perf_counter()
     paths = resolve_cases(names)
     cases = [load_case(p) for p in paths]  # every case file checked before the first runs
     with output_lock(out):
         bar = Progress(len(cases), "validate", enabled=progress)
-        results, images = [], {}
-        for k, c in enumerate(cases):
-            bar.update(k, c.name)
-            r = run_case(c)
-            results.append(r)
-            images[f"{c.name}.png"] = case_figure(r)
+        results = _run_cases(cases, bar, dask, workers, scheduler)
+        images = {f"{r.case.name}.png": case_figure(r) for r in results}
         bar.close()
         rows = summary_rows(results)
         summary = {"kind": SUMMARY_KIND, "schema_version": SCHEMA_VERSION, "symtrack_version": __version__,
