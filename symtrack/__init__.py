@@ -9,6 +9,8 @@ The public API (one import is enough in a notebook)::
 
 - :func:`load_scenario`, :class:`Scenario`: built-in scenarios by name or TOML files, with
   overrides in the grammar of ``--set``;
+- :func:`run`: any run file (a simulation, an MPC run, a field study, an operation, a season, a
+  sweep; the kind told by its sections) -> that kind's result, as ``symtrack run FILE``;
 - :func:`simulate` -> :class:`Result` (``summary``, ``column``, ``write``, ``terrain``);
 - :func:`build` -> :class:`Built`: the explicit, cached build of a scenario's plant (``simulate``
   builds through it: a second run of the same model costs its time loop);
@@ -27,13 +29,14 @@ import importlib
 from .foundations.version import __version__
 
 __all__ = ["Built", "Result", "Scenario", "SystemModel", "Terrain", "__version__", "build", "control",
-           "export_terrain", "load_scenario", "simulate"]
+           "export_terrain", "load_scenario", "run", "simulate"]
 
 _LAZY = {
     "Result": ("symtrack.api", "Result"),
     "build": ("symtrack.api", "build"),
     "Built": ("symtrack.api", "Built"),
     "simulate": ("symtrack.api", "simulate"),
+    "run": ("symtrack.studies.runfile", "run"),
     "load_scenario": ("symtrack.simulation.scenario", "load_scenario"),
     "Scenario": ("symtrack.simulation.scenario", "Scenario"),
     "Terrain": ("symtrack.terrain.storage", "Terrain"),

@@ -120,3 +120,16 @@ def test_errors_before_any_work(tmp_path, capsys, monkeypatch):
     assert symtrack_main(["codegen", "mpc", "headland_uturn", "--out", str(tmp_path / "d")]) == 2
     assert "no C compiler" in capsys.readouterr().err
     assert not any((tmp_path / n).exists() for n in ("a", "b", "c", "d", "e"))
+
+
+@needs_cc
+def test_help_prints_the_usage_and_writes_no_file(loops, tmp_path):
+    """./mpc_closed_loop --help answers with its usage (once it wrote a CSV file named --help); an
+    unknown option is refused, exit code 2, and nothing is written either."""
+    out, _, _ = loops
+    binary = out / "mpc_closed_loop"
+    for arg, code in (("--help", 0), ("-h", 0), ("--verbose", 2)):
+        got = subprocess.run([str(binary), arg], cwd=tmp_path, capture_output=True, text=True, timeout=30)
+        assert got.returncode == code, (arg, got)
+        assert "usage:" in (got.stdout if code == 0 else got.stderr)
+        assert list(tmp_path.iterdir()) == [], arg

@@ -144,6 +144,9 @@ def test_result_and_terrain_show_what_they_are_and_column_names_each_once(tmp_pa
     assert r.startswith("<Result 'tiny': 1 pass") and "sim_time_s" in r and "0x" not in r
     t = repr(res.terrain)
     assert t.startswith("<Terrain 24 x 16 cells of 0.25 m") and "loaded" in t
+    assert "not saved yet" in t  # after a run (it said "0 run(s) in its history")
+    res.write(tmp_path / "o", terrain_out=tmp_path / "field.npz")
+    assert "1 saved run(s) in the history of its file" in repr(res.terrain)
     with pytest.raises(KeyError) as err:
         res.column("nope")
     listed = str(err.value).split("columns: ")[1].rstrip("\"'").split(", ")

@@ -87,8 +87,12 @@ def standalone_row(repeats: int = 20) -> dict:
 
 
 def collect(quick: bool = False, repeats: int = 3) -> list[dict]:
+    # each provider measures for a while (minutes for the grids): it says what it measures first, and the
+    # table is printed once every row is in
+    log.info("measuring the homogeneous terrain's integrators (%d repeats) ...", repeats)
     rows = homogeneous_rows(quick, repeats)
     for name in PROVIDERS:
+        log.info("measuring the rows of %s ... (%d row(s) so far; the table comes at the end)", name, len(rows))
         try:
             mod = importlib.import_module(name)
         except ModuleNotFoundError as err:

@@ -82,7 +82,7 @@ def linearize_model_options(overrides):
 
 def mpc_command(args) -> int:
     from ..foundations.errors import ScenarioError
-    from .simulate import check_output_file, check_output_folder
+    from .simulate import check_output_file, check_output_folder, check_terrain_in
 
     overrides = list(args.set or [])
     if args.solver:
@@ -97,6 +97,7 @@ def mpc_command(args) -> int:
     if plant_kind == "homogeneous" and (terrain_in or terrain_out):
         raise ScenarioError("--terrain-in / --terrain-out need the grid plant; drop --plant homogeneous")
     out = check_output_folder(args.out)
+    check_terrain_in(terrain_in)
     if terrain_out:
         check_output_file(terrain_out, "--terrain-out")
     from ..reports.run_files import output_lock

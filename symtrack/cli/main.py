@@ -50,6 +50,7 @@ def scenarios_command(args) -> int:
         width = max(len(n) for n, _ in rows)
         for name, desc in rows:
             print(f"  {name:<{width}}  {desc}")
+    print("symtrack run NAME (or FILE.toml) runs any of them; symtrack new KIND writes a starting file of a kind")
     return 0
 
 
@@ -91,6 +92,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="symtrack", description="Tracked vehicle on soil that remembers.")
     ap.add_argument("--version", action="version", version=f"symtrack {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True)
+    from .run import add_parsers as add_run_parsers
+
+    add_run_parsers(sub)  # symtrack run FILE, symtrack new KIND: the front door (README, "Run files")
     s = sub.add_parser("simulate", help="run a scenario (built-in name or TOML file)")
     s.add_argument("scenario")
     s.add_argument("--out", required=True, help="output folder")

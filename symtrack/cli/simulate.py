@@ -7,12 +7,23 @@ import contextlib
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_file, check_output_folder
 
-__all__ = ["check_output_file", "check_output_folder", "simulate_command"]
+__all__ = ["check_output_file", "check_output_folder", "check_terrain_in", "simulate_command"]
+
+
+def check_terrain_in(path) -> None:
+    """A ``--terrain-in`` file that is not there is refused before any work, naming the option typed."""
+    from pathlib import Path
+
+    if path and not Path(path).is_file():
+        what = "is a folder" if Path(path).is_dir() else "does not exist"
+        raise ScenarioError(f"--terrain-in {str(path)!r} {what}: give a terrain file (the .npz that --terrain-out "
+                            "writes)")
 
 
 def simulate_command(args) -> int:
     # the outputs first: a bad --out fails at once, before CasADi is even imported
     out = check_output_folder(args.out)
+    check_terrain_in(args.terrain_in)
     terrain_out = check_output_file(args.terrain_out, "--terrain-out") if args.terrain_out else None
     from ..reports.run_files import output_lock
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["add_parser", "sweep_command"]
+__all__ = ["add_parser", "report", "sweep_command"]
 
 
 def sweep_command(args) -> int:
@@ -20,6 +20,11 @@ def sweep_command(args) -> int:
         print(f"symtrack: interrupted (Ctrl-C); the runs in flight were cancelled, the finished ones are kept "
               f"in {args.out} (results.csv); run the same command again to do the rest", file=sys.stderr)
         return 130
+    return report(res)
+
+
+def report(res) -> int:
+    """Print a finished sweep's failed runs and its one-line summary; the exit code."""
     for f in res.failed:
         values = ", ".join(f"{k}={v!r}" for k, v in f["values"].items())
         print(f"failed: run {f['id']} ({values}): {f['error']}", file=sys.stderr)

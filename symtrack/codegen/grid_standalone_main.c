@@ -40,6 +40,16 @@ static const char *errname(long long code) {
 }
 
 int main(int argc, char **argv) {
+  /* an option is never taken for the CSV's name: --help prints the usage, another option is refused */
+  if (argc > 2 || (argc == 2 && argv[1][0] == '-')) {
+    int help = argc == 2 && (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help"));
+    if (!help) fprintf(stderr, "grid_standalone: unknown option or extra argument: %s\n", argv[argc - 1]);
+    fprintf(help ? stdout : stderr,
+            "usage: %s [CSV]\n  Runs the grid validation on the terrain engine and writes CSV (default\n"
+            "  grid_validation.csv) and a JSON line of its figures on stdout.\n  -h, --help  print this and exit\n",
+            argv[0]);
+    return help ? 0 : 2;
+  }
   const char *csv = argc > 1 ? argv[1] : "grid_validation.csv";
   eng_t E;
   memset(&E, 0, sizeof E);

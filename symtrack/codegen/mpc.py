@@ -460,16 +460,22 @@ def command(args) -> int:
     out = check_output_folder(args.out)
     cc = require_compiler("mpc_closed_loop")
     t0 = time.perf_counter()
+    # every wait of more than a couple of seconds says first what it waits for
+    log.info("generating the C code of %s's MPC: the model, the real-time iteration's functions and the cold "
+             "start's solve (several seconds) ...", sc.name)
     pb = setup(sc)
     files = render(pb)
     write(out, files)
     t_gen = time.perf_counter() - t0
     log.info("wrote %s into %s in %.1f s (cold start %.2f s: %s)", ", ".join(sorted(files)), out, t_gen,
              pb.cold_time_s, pb.cold_status)
+    log.info("compiling %s with %s (mpc_rti.c is large: about half a minute on two cores) ...",
+             out / "mpc_closed_loop", cc)
     t_build = build_program(out, cc)
     log.info("built %s in %.1f s", out / "mpc_closed_loop", t_build)
     if args.no_run:
         return 0
+    log.info("running %s ...", out / "mpc_closed_loop")
     summary = run_program(out)
     ms = {k: 1e-3 * summary[f"solve_time_{k}_us"] for k in ("median", "p95", "max")}
     print(f"C closed loop ({sc.name}, {summary['samples']} samples): solve median {ms['median']:.3f} / p95 "
@@ -482,6 +488,7 @@ def command(args) -> int:
                     "Gauss-Newton iteration after a rejected step, the built-in U-turn needs none)",
                     summary["failed_solves"], summary["samples"])
     if args.compare:
+        log.info("running the Python closed loop of the same configuration, to compare ...")
         res = python_closed_loop(sc, pb.model)
         s = res.summary
         agree = compare(res, out / "closed_loop.csv")

@@ -296,8 +296,21 @@ static double percentile(const double *v, int n, double q) { /* numpy's default 
   return r;
 }
 
+static const char USAGE[] =
+    "usage: %s [CSV]\n"
+    "  Runs the MPC closed loop of the scenario it was generated from (symtrack codegen mpc NAME)\n"
+    "  and writes CSV (default: closed_loop.csv beside the program) and a JSON summary on stdout.\n"
+    "  -h, --help  print this and exit\n";
+
 int main(int argc, char **argv) {
   char csv_path[4096];
+  /* an option is never taken for the CSV's name: --help prints the usage, another option is refused */
+  if (argc > 2 || (argc == 2 && argv[1][0] == '-')) {
+    int help = argc == 2 && (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help"));
+    if (!help) fprintf(stderr, "mpc_closed_loop: unknown option or extra argument: %s\n", argv[argc - 1]);
+    fprintf(help ? stdout : stderr, USAGE, argv[0]);
+    return help ? 0 : 2;
+  }
   if (argc > 1) {
     snprintf(csv_path, sizeof csv_path, "%s", argv[1]);
   } else { /* beside the program */

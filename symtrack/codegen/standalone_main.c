@@ -166,6 +166,15 @@ static int run(Summary *s) {
 }
 
 int main(int argc, char **argv) {
+  /* one optional argument, the number of repeats: --help prints the usage, anything else is refused */
+  if (argc > 2 || (argc == 2 && (argv[1][0] < '0' || argv[1][0] > '9'))) {
+    int help = argc == 2 && (!strcmp(argv[1], "-h") || !strcmp(argv[1], "--help"));
+    if (!help) fprintf(stderr, "standalone: not a number of repeats: %s\n", argv[argc - 1]);
+    fprintf(help ? stdout : stderr,
+            "usage: %s [REPEATS]\n  Runs the validation scenario REPEATS times (default 1) and prints a JSON line\n"
+            "  of its figures and the wall time.\n  -h, --help  print this and exit\n", argv[0]);
+    return help ? 0 : 2;
+  }
   int repeats = argc > 1 ? atoi(argv[1]) : 1;
   if (repeats < 1) repeats = 1;
   casadi_int sz_arg, sz_res, sz_iw, sz_w;

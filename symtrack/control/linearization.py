@@ -56,6 +56,21 @@ class Linearization:
     u0: np.ndarray
     y0: np.ndarray
 
+    def __repr__(self) -> str:
+        """The sizes, the names (with their units) and the slowest modes; the matrices are ``A``,
+        ``B``, ``C``, ``D`` (and ``sys``, the named python-control StateSpace)."""
+        import numpy as np
+
+        eig = np.linalg.eigvals(np.asarray(self.A, dtype=float)) if len(self.state_names) else np.array([])
+        slow = sorted(eig, key=lambda z: (abs(z.real), abs(z.imag)))[:4]
+        modes = ", ".join(f"{z.real:.4g}{z.imag:+.4g}j" if abs(z.imag) > 0 else f"{z.real:.4g}" for z in slow)
+        trim = repr(self.trim).split("\n")[0].removeprefix("TrimPoint: ")
+        dropped = f"; left out (no restoring dynamics): {', '.join(self.dropped_states)}" if self.dropped_states else ""
+        return (f"Linearization at {trim}: {len(self.state_names)} states, {len(self.input_names)} inputs, "
+                f"{len(self.output_names)} outputs{dropped}\n  states: {', '.join(self.state_names)}\n"
+                f"  inputs: {', '.join(self.input_names)}\n  outputs: {', '.join(self.output_names)}\n"
+                f"  slowest eigenvalues [1/s]: {modes or 'none'}")
+
     @property
     def A(self):
         return self.sys.A

@@ -101,6 +101,19 @@ class TrimPoint:
     def state(self, name: str) -> float:
         return float(self.x[self.state_names.index(name)])
 
+    def __repr__(self) -> str:
+        """The motion, the commands and the states by name with their units (the names carry them);
+        the arrays themselves are ``x``, ``u`` and ``p``."""
+        motion = (f"straight running at {self.speed_m_s:g} m/s" if self.radius_m is None else
+                  f"a turn of radius {self.radius_m:g} m at {self.speed_m_s:g} m/s "
+                  f"(yaw rate {self.yaw_rate_rad_s:.4g} rad/s)")
+        inputs = ", ".join(f"{n} = {float(v):.6g}" for n, v in zip(self.input_names, self.u, strict=True))
+        states = "\n".join(f"    {n} = {float(v):.6g}" for n, v in zip(self.state_names, self.x, strict=True))
+        usage = {k: float(v) for k, v in self.limits.items() if k.endswith("usage") or "usage_" in k}
+        limits = (", ".join(f"{k} = {v:.3g}" for k, v in usage.items())) if usage else "n/a"
+        return (f"TrimPoint: {motion}, residual {self.residual_norm:.2g}\n  inputs: {inputs}\n"
+                f"  share of the soil's strength used: {limits}\n  states:\n{states}")
+
     def to_dict(self) -> dict:
         return {
             "speed_m_s": self.speed_m_s,

@@ -83,9 +83,9 @@ from .figures import TerrainRun, extras, figures
 from .html import report_html
 
 __all__ = ["COMMIT_STEPS", "JOURNAL", "KILL_AT_STEP_ENV", "MANIFEST", "MANIFEST_KIND", "MANIFEST_VERSION",
-           "OUTPUT_LOCK", "RUN_MARKERS", "TerrainOut", "clear_previous_run", "finished_before", "output_lock",
-           "read_manifest", "recover", "run_files", "scenario_sha256", "simulation_files", "terrain_lock",
-           "terrain_run", "trajectory_columns", "trajectory_csv", "validation_table", "write_folder"]
+           "OUTPUT_LOCK", "RUN_MARKERS", "TerrainOut", "clear_previous_run", "finished_before", "is_validation",
+           "output_lock", "read_manifest", "recover", "run_files", "scenario_sha256", "simulation_files",
+           "terrain_lock", "terrain_run", "trajectory_columns", "trajectory_csv", "validation_table", "write_folder"]
 
 log = logging.getLogger("symtrack.files")
 
@@ -133,10 +133,18 @@ def run_files(res, summary: dict, plots: dict[str, bytes]) -> dict[str, bytes | 
             "summary.json": json.dumps(summary, indent=2) + "\n"}
 
 
+def is_validation(scenario) -> bool:
+    """Whether ``scenario`` is a run of the validation manoeuvre (a scenario named after it that stops
+    counting from its idle event): its folder gets ``validation_table.md``."""
+    return scenario.run.stop_distance_event == "idle" and "validation" in scenario.name
+
+
 def validation_table(scenario, summary: dict) -> str | None:
-    """The reported-vs-simulated table (Markdown) of a validation scenario, else None."""
-    if scenario.run.stop_distance_event == "idle" and "validation" in scenario.name:
-        return validation.table_markdown(summary)
+    """The reported-vs-simulated table (Markdown) of a validation scenario, else None. A run whose
+    settings differ from the case as published (:func:`symtrack.reports.validation.differences`) gets
+    the table with those settings named first, and no grade."""
+    if is_validation(scenario):
+        return validation.table_markdown(summary, validation.differences(scenario))
     return None
 
 
@@ -188,7 +196,8 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
                    "Set run.all_figures = true (--set run.all_figures=true) to write them too.")
     top["report.html"] = report_html(
         f"symtrack: {scenario.name}", summary, shown, to_toml(scenario.to_dict()),
-        validation.check(summary) if table is not None else None, summary.get("passes"),
+        validation.check(summary) if table is not None and not validation.differences(scenario) else None,
+        summary.get("passes"),
         scenario.description, omitted=omitted).encode()
     if run is not None:
         return run_files(run, summary, top)

@@ -151,6 +151,15 @@ class Built:
     spec: registry.IntegratorSpec
     model: SystemModel | None
 
+    @property
+    def params(self) -> dict:
+        """The scenario's parameter values (vehicle and soil, SI units, by name), as ``scenario.params``."""
+        return self.scenario.params
+
+    def __repr__(self) -> str:
+        return (f"<Built {getattr(self.scenario, 'name', '?')!r}: {self.kind} terrain, integrator "
+                f"{self.settings.method}, {len(self.params)} parameters (.params)>")
+
     def plant(self, terrain=None):
         """A fresh plant of the scenario (:func:`symtrack.simulation.plants.make_plant` on the
         built model): a new stepper, and for the grid a new world (on ``terrain``, a

@@ -294,6 +294,15 @@ def parse_ground(t_doc, model, vehicle: dict, plant: str = "", engine: bool = Fa
         except ParameterError as err:
             raise ScenarioError(str(err)) from err
         return None, surface
+    if model.vehicle != "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
+        # the ground's shape alone: what the 3D vehicle drives on (homogeneous soil following it); the
+        # planar vehicle feels no slope, and on its own the table would ask for a grid of default size
+        raise ScenarioError(f"terrain.surface: the ground's shape (a slope, furrows, an elevation raster) under "
+                            f"homogeneous soil needs model.vehicle = '3d' (this run has model.vehicle = "
+                            f"{model.vehicle!r}, which moves in the plane and feels no slope): add --set "
+                            "model.vehicle=3d (docs/vehicle3d.md), or give the grid terrain its keys "
+                            "(terrain.size_m, terrain.cell_m) to carry the surface's elevation under the planar "
+                            "vehicle")
     terrain = parse_terrain(t_doc)
     if terrain is not None:
         try:

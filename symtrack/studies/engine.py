@@ -96,7 +96,7 @@ def plan(scenario, vary=None, *, ranges=None, samples: int | None = None, seed: 
     """Build and validate a sweep without running it: every value of every axis, then every
     run's scenario, is checked by the scenario's loader; the first error is raised as a
     :class:`ScenarioError` naming the key and the value."""
-    source = resolve_source(scenario, kind)
+    source = scenario if isinstance(scenario, Source) else resolve_source(scenario, kind)
     fixed = normalise_overrides(overrides)
     axes = axes_from(vary, ranges)
     for a in axes:
@@ -356,8 +356,10 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
 
     Parameters
     ----------
-    scenario : str or path
-        A built-in scenario (of ``symtrack simulate`` or ``symtrack mpc``) or a TOML file.
+    scenario : str, path or Source
+        A built-in scenario (of ``symtrack simulate``, ``symtrack mpc`` or ``symtrack field``) or a TOML
+        file; or a :class:`~symtrack.studies.runs.Source` (its kind and TOML text: a sweep file's own
+        scenario, :mod:`symtrack.studies.runfile`).
     vary : list of str or dict
         ``["vehicle.mass_kg=5000,6000", "soil.bekker_n=0.6:1.1"]`` as ``--vary`` takes them, or
         ``{"vehicle.mass_kg": [5000, 6000]}``; the full grid of the listed values.

@@ -153,7 +153,14 @@ class Terrain:
         g = self.grid
         loaded = int(np.count_nonzero(self.phase))
         return (f"<Terrain {g.shape[0]} x {g.shape[1]} cells of {g.cell_m} m from {g.origin_m}, {loaded} loaded, "
-                f"z max {1000 * float(self.z.max(initial=0.0)):.2f} mm, {len(self.history)} run(s) in its history>")
+                f"z max {1000 * float(self.z.max(initial=0.0)):.2f} mm, {self._history_text()}>")
+
+    def _history_text(self) -> str:
+        """What the history holds: the runs saved with the terrain's file (a run that was not saved
+        with it is not in it)."""
+        if self.file_id is None:
+            return "not saved yet (a run enters the history when the terrain is saved with it)"
+        return f"{len(self.history)} saved run(s) in the history of its file"
 
     def _all(self):
         return (self.z, self.zdot, self.zmax, self.pmax, self.phase, self.zoff, self.cycles)

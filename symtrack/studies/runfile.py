@@ -1,0 +1,303 @@
+"""One front door: any run file of symtrack (a simulation, an MPC run, a field study, a field
+operation, a season or a sweep), its kind told by its sections, run by one call
+(``symtrack run FILE.toml``; :func:`symtrack.run` from Python).
+
+The sections that decide the kind (:data:`KINDS`)::
+
+    [[torque]]          a simulation      (as symtrack simulate; symtrack/simulation/scenario.py)
+    [path] or [mpc]     an MPC run        (as symtrack mpc; symtrack/control/scenario.py)
+    [field]             a field study     (as symtrack field; symtrack/studies/field.py)
+    [operation]         a field operation (as symtrack field; symtrack/studies/operations.py)
+    [season]            a season of operations over an [operation] section (as symtrack field)
+    [sweep]             a sweep of any of the above (as symtrack sweep; symtrack/studies/engine.py)
+
+A file with sections of two kinds, or of none, is refused in one line naming these sections.
+Every other section ([run], [vehicle], [soil], [model], [terrain], ...) belongs to the kind's
+own schema and is checked by its loader, with the loader's messages.
+
+A sweep file holds the ``[sweep]`` section::
+
+    [sweep]
+    scenario = "validation"       # optional: a built-in name or a run file (relative to this file);
+                                  # without it the sweep's scenario is the rest of this file
+    workers = 2                   # processes of the local Dask cluster (docs/studies.md)
+    scheduler = "tcp://HOST:8786" # optional: a running Dask scheduler instead
+    samples = 8                   # optional: Latin hypercube points over [sweep.ranges]
+    seed = 0
+    [sweep.vary]                  # the full grid of these values ("KEY" = [values])
+    "vehicle.mass_kg" = [5000.0, 6000.0]
+    [sweep.ranges]                # optional: "KEY" = [low, high], sampled by the Latin hypercube
+    "soil.bekker_n" = [0.6, 1.1]
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..foundations.config import apply_overrides, builtin_names, check_keys, integer, read_document, to_toml
+from ..foundations.errors import ScenarioError
+from ..foundations.files import read_text
+
+__all__ = ["KINDS", "RunFile", "SWEEP_KEYS", "detect_kind", "kind_rules", "read_run_file", "run", "split_overrides",
+           "sweep_arguments"]
+
+
+@dataclass(frozen=True)
+class Kind:
+    """A kind of run file: the sections that decide it, what it is, the command it shares its schema
+    with, the package of its built-in files."""
+
+    name: str
+    sections: tuple[str, ...]
+    what: str
+    command: str
+    package: str | None
+
+
+KINDS = {k.name: k for k in (
+    Kind("simulation", ("[[torque]]",), "a simulation", "symtrack simulate", "symtrack.simulation.scenarios"),
+    Kind("mpc", ("[path]", "[mpc]"), "an MPC run", "symtrack mpc", "symtrack.control.scenarios"),
+    Kind("field", ("[field]",), "a field study", "symtrack field", "symtrack.studies.fields"),
+    Kind("operation", ("[operation]",), "a field operation", "symtrack field", "symtrack.studies.fields"),
+    Kind("season", ("[season]",), "a season", "symtrack field", "symtrack.studies.fields"),
+    Kind("sweep", ("[sweep]",), "a sweep", "symtrack sweep", None),
+)}
+# the kind of a sweep's scenario as the sweep engine names it (symtrack.studies.runs.KINDS)
+SWEEP_KIND = {"simulation": "simulate", "mpc": "mpc", "field": "field", "operation": "field", "season": "field"}
+SWEEP_KEYS = ("scenario", "vary", "ranges", "samples", "seed", "workers", "scheduler")
+
+
+def kind_rules() -> str:
+    """The rule of the kinds in one clause, for messages."""
+    return "; ".join(f"{' or '.join(k.sections)} makes {k.what}" for k in KINDS.values())
+
+
+def detect_kind(doc, label: str = "run file") -> str:
+    """The kind of a run document from its sections (:data:`KINDS`); a :class:`ScenarioError` in one
+    line naming the deciding sections when it has those of none or of several kinds."""
+    if not isinstance(doc, dict):
+        raise ScenarioError(f"{label}: a run file is a TOML table of sections, got {type(doc).__name__}")
+    if "sweep" in doc:
+        return "sweep"
+    key = {"[[torque]]": "torque", "[path]": "path", "[mpc]": "mpc", "[field]": "field",
+           "[operation]": "operation", "[season]": "season"}  # the deciding sections' keys in the document
+    found = {}  # kind -> the deciding sections the document holds
+    for kind in KINDS.values():
+        have = [s for s in kind.sections if s in key and key[s] in doc]
+        if have:
+            found[kind.name] = have
+    if "season" in found:  # a season's operations are laid over its [operation] section
+        found.pop("operation", None)
+    if len(found) == 1:
+        return next(iter(found))
+    rules = f"a run file has the sections of one kind: {kind_rules()} (symtrack new KIND writes one)"
+    if not found:
+        raise ScenarioError(f"{label}: none of the sections that decide the kind of run; {rules}")
+    both = ", ".join(f"{' and '.join(s)} ({KINDS[k].what})" for k, s in found.items())
+    raise ScenarioError(f"{label}: sections of several kinds of run: {both}; {rules}")
+
+
+@dataclass(frozen=True)
+class RunFile:
+    """A run file as read: its kind, its document (overrides applied: the kind is that of the
+    document that runs), the name or path to hand to the kind's loader, and the overrides."""
+
+    kind: str
+    document: dict
+    source: object  # a built-in name or a path (str), or None for a document given as a dict
+    name: str
+    overrides: list | dict
+    raw: dict  # the document as written, before the overrides
+
+    @property
+    def label(self) -> str:
+        return str(self.source) if self.source is not None else self.name
+
+
+def _builtin(name: str) -> tuple[str, str] | None:
+    """(package, name) of a built-in run file of any kind, or None."""
+    for kind in KINDS.values():
+        if kind.package and name in builtin_names(kind.package):
+            return kind.package, name
+    return None
+
+
+def read_run_file(spec_or_path, overrides=None) -> RunFile:
+    """Read a run file (a path, a built-in name of any kind, or a document as a dict), apply the
+    overrides (``["run.duration_s=2"]`` as ``--set``, or a dict) to a copy and tell its kind."""
+    overrides = overrides if overrides is not None else []
+    if isinstance(spec_or_path, dict):
+        doc = apply_overrides(copy.deepcopy(spec_or_path), overrides)
+        name = str(doc.get("name", "run"))
+        return RunFile(detect_kind(doc, f"run {name!r}"), doc, None, name, overrides, copy.deepcopy(spec_or_path))
+    if not isinstance(spec_or_path, (str, Path)):
+        raise ScenarioError(f"run file {spec_or_path!r}: give a TOML file path, a built-in name or a document (dict)")
+    s = str(spec_or_path)
+    path = Path(s)
+    found = None if path.suffix == ".toml" or path.exists() else _builtin(s)
+    if found is not None:
+        from importlib import resources
+
+        package, name = found
+        raw = tomllib.loads(resources.files(package).joinpath(name + ".toml").read_text())
+    else:
+        if not path.is_file():
+            every = sorted({n for k in KINDS.values() if k.package for n in builtin_names(k.package)})
+            raise ScenarioError(f"run file {s!r} does not exist" + ("" if path.suffix == ".toml" else
+                                f" and is no built-in run ({', '.join(every)})"))
+        try:
+            raw = tomllib.loads(read_text(path, "run file"))
+        except tomllib.TOMLDecodeError as err:
+            raise ScenarioError(f"{s}: not valid TOML: {err}") from err
+        name = path.stem
+    doc = apply_overrides(copy.deepcopy(raw), overrides)
+    return RunFile(detect_kind(doc, s), doc, s, str(doc.get("name", name)), overrides, raw)
+
+
+def split_overrides(overrides) -> tuple[list | dict, list | dict]:
+    """(the ``sweep.*`` overrides, the others) of a sweep file's ``--set`` list or dict: the first edit
+    the [sweep] section, the others are fixed overrides of every run of the sweep."""
+    if isinstance(overrides, dict):
+        return ({k: v for k, v in overrides.items() if k.startswith("sweep.")},
+                {k: v for k, v in overrides.items() if not k.startswith("sweep.")})
+    items = list(overrides or [])
+    own = [it for it in items if str(it).split("=", 1)[0].strip().startswith("sweep.")]
+    return own, [it for it in items if it not in own]
+
+
+def _sweep_table(t, key: str) -> dict:
+    if t is None:
+        return {}
+    if not isinstance(t, dict) or not t:
+        raise ScenarioError(f"sweep.{key} = {t!r} must be a table of \"SECTION.KEY\" = [values]")
+    return t
+
+
+def sweep_arguments(rf: RunFile) -> dict:
+    """The arguments of :func:`symtrack.studies.sweep` from a sweep file (its [sweep] section and,
+    without ``sweep.scenario``, the rest of the file as the scenario): ``scenario`` (a name, a
+    path or a :class:`~symtrack.studies.runs.Source`), ``vary``, ``ranges``, ``samples``, ``seed``,
+    ``overrides``, ``workers``, ``scheduler``, ``kind``."""
+    from .runs import Source
+
+    doc = rf.document
+    sw = doc["sweep"]
+    if not isinstance(sw, dict):
+        raise ScenarioError(f"[sweep] = {sw!r} must be a table")
+    check_keys("sweep", sw, SWEEP_KEYS)
+    vary = _sweep_table(sw.get("vary"), "vary")
+    ranges = _sweep_table(sw.get("ranges"), "ranges")
+    if not vary and not ranges:
+        raise ScenarioError("[sweep] varies nothing: give [sweep.vary] (\"SECTION.KEY\" = [values]) or "
+                            "[sweep.ranges] (\"SECTION.KEY\" = [low, high]) with samples")
+    for key, v in vary.items():
+        if not isinstance(v, list) or not v:
+            raise ScenarioError(f"sweep.vary.\"{key}\" = {v!r} must be a non-empty list of values")
+    for key, v in ranges.items():
+        if not isinstance(v, list) or len(v) != 2:
+            raise ScenarioError(f"sweep.ranges.\"{key}\" = {v!r} must be [low, high]")
+    samples = sw.get("samples")
+    if ranges and samples is None:
+        raise ScenarioError("sweep.ranges needs sweep.samples, the number of Latin hypercube points")
+    samples = None if samples is None else integer("sweep.samples", samples, 1, 100000)
+    seed = integer("sweep.seed", sw.get("seed", 0), 0, 2**31 - 1)
+    workers = integer("sweep.workers", sw.get("workers", 2), 1, 1024)
+    scheduler = sw.get("scheduler")
+    if scheduler is not None and not isinstance(scheduler, str):
+        raise ScenarioError(f"sweep.scheduler = {scheduler!r} must be an address, e.g. \"tcp://127.0.0.1:8786\"")
+    _, fixed = split_overrides(rf.overrides)
+    rest = {k: v for k, v in rf.raw.items() if k != "sweep"}
+    if "scenario" in sw:
+        scenario = sw["scenario"]
+        if not isinstance(scenario, str) or not scenario:
+            raise ScenarioError(f"sweep.scenario = {scenario!r} must be a built-in name or a run file path")
+        own = {k for k in rest if k not in ("name", "description", "symtrack_version")}
+        if own:
+            raise ScenarioError(f"{rf.label}: sweep.scenario names the scenario, so the file holds only [sweep] "
+                                f"(found {', '.join(sorted(own))}); put those in the scenario, or drop sweep.scenario")
+        if scenario.endswith(".toml") and rf.source is not None and not Path(scenario).is_absolute():
+            scenario = str(Path(rf.source).resolve().parent / scenario)
+        kind = "auto"
+    else:
+        # the rest of the file is the scenario (the overrides fixed over it, as --set of symtrack sweep)
+        if rf.source is not None and Path(str(rf.source)).is_file():
+            from ..terrain.settings import PATH_KEYS  # the file paths, relative to the file
+
+            rest, _ = read_document(str(rf.source), "symtrack.simulation.scenarios", "run file",
+                                    paths=(*PATH_KEYS, ("operation", "boundary_file")))
+            rest.pop("sweep", None)
+        base_kind = detect_kind(rest, f"{rf.label} (its scenario: the file without [sweep])")
+        scenario = Source(SWEEP_KIND[base_kind], to_toml(rest), rf.name, rf.label)
+        kind = SWEEP_KIND[base_kind]
+    return {"scenario": scenario, "vary": vary, "ranges": {k: tuple(v) for k, v in ranges.items()} or None,
+            "samples": samples, "seed": seed, "overrides": fixed, "workers": workers, "scheduler": scheduler,
+            "kind": kind}
+
+
+def run(spec_or_path, out=None, *, overrides=None, progress: bool = False):
+    """Run any run file and return its result (the kind told by its sections, :data:`KINDS`).
+
+    Parameters
+    ----------
+    spec_or_path : str, path or dict
+        A run file (TOML), a built-in name of any kind (``symtrack scenarios``) or a document.
+    out : path, optional
+        The folder to write (a simulation and an MPC run: written only when given; a field study,
+        an operation, a season and a sweep write their folder as they go and need it).
+    overrides : list of str or dict, optional
+        ``["vehicle.mass_kg=6000"]`` as ``--set`` takes them, or ``{"vehicle.mass_kg": 6000}``.
+    progress : bool
+        A progress bar.
+
+    Returns
+    -------
+    The kind's result: :class:`symtrack.Result` (simulation),
+    :class:`symtrack.control.closedloop.ClosedLoopResult` (MPC), a field study's
+    ``FieldStudyResult``, an operation's or season's ``SeasonResult`` (a traffic comparison: its
+    table as a dict), a sweep's ``SweepResult``.
+    """
+    rf = read_run_file(spec_or_path, overrides)
+    if rf.kind in ("field", "operation", "season", "sweep") and out is None:
+        raise ScenarioError(f"{rf.label} is {KINDS[rf.kind].what}, which writes its folder as it goes: give out=")
+    if rf.kind == "simulation":
+        from ..api import simulate
+        from ..simulation.scenario import load_scenario, scenario_from_dict
+
+        sc = load_scenario(rf.source, rf.overrides) if rf.source is not None else scenario_from_dict(rf.document,
+                                                                                                      rf.name)
+        res = simulate(sc, progress=progress)
+        if out is not None:
+            res.write(out)
+        return res
+    if rf.kind == "mpc":
+        from ..control import closedloop
+        from ..control.scenario import load, scenario_from_dict
+        from ..simulation.builder import system_model
+
+        sc = load(rf.source, rf.overrides) if rf.source is not None else scenario_from_dict(rf.document, rf.name)
+        model = system_model(sc.model)
+        plant = closedloop.make_plant(sc, model)
+        res = closedloop.run(sc, plant=plant, model=model, progress=progress)
+        if out is not None:
+            closedloop.write(out, res, plant=plant)
+        return res
+    if rf.kind == "field":
+        from .field import field_spec_from_dict, load_field_spec, run_field_study
+
+        spec = load_field_spec(rf.source, rf.overrides) if rf.source is not None else \
+            field_spec_from_dict(rf.document, rf.name)
+        return run_field_study(spec, out=out, progress=progress)
+    if rf.kind in ("operation", "season"):
+        from .operations import load_operation_spec, operation_spec_from_dict, run_season, traffic_comparison
+
+        spec = load_operation_spec(rf.source, rf.overrides) if rf.source is not None else \
+            operation_spec_from_dict(rf.document, rf.name)
+        if spec.compare:
+            return traffic_comparison(spec.document, spec.compare, out, progress=progress, name=spec.name)
+        return run_season(spec, out, progress=progress)
+    from .engine import sweep
+
+    return sweep(out=out, progress=progress, **sweep_arguments(rf))
