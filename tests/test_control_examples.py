@@ -38,7 +38,7 @@ def test_mpc_example(tmp_path):
     assert (tmp_path / "summary.json").exists()
 
 
-@pytest.mark.slow  # a JIT build: gcc of the fatrop solver every run (make test-slow)
+@pytest.mark.slow  # a JIT build: gcc of the fatrop solver every run (a short horizon: the smallest C; make test-slow)
 def test_jit_build_runs(tmp_path, monkeypatch):
     import dataclasses
 
@@ -46,7 +46,7 @@ def test_jit_build_runs(tmp_path, monkeypatch):
     from symtrack.model import SystemModel
 
     sc = scenario.load("headland_uturn")
-    sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, solver="fatrop", jit=True, horizon_steps=20,
+    sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, solver="fatrop", jit=True, horizon_steps=6,
                                                          jit_dir=str(tmp_path / "jit")))
     # a working directory of this test's own: the repository's is shared with the tests that run
     # at the same time on the other worker (a first Hypothesis run creates .hypothesis/ there)
