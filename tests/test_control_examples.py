@@ -36,6 +36,9 @@ def test_mpc_example(tmp_path):
     assert s["solves"] == 15 and s["failed_solves"] == 0
     assert s["max_lateral_error_m"] < 0.05  # the run starts on the path
     assert (tmp_path / "summary.json").exists()
+    # the report: what ran and how it went, its figures embedded
+    page = (tmp_path / "report.html").read_text()
+    assert "symtrack mpc: headland_uturn" in page and "15 solves, 0 failed" in page and "data:image/png" in page
 
 
 @pytest.mark.slow  # a JIT build: gcc of the fatrop solver every run (a short horizon: the smallest C; make test-slow)
