@@ -57,6 +57,7 @@ from ..control.closedloop import TrackingLaw
 from ..control.mpc import MPCSettings, PathTrackingMPC
 from ..control.path import Path, Segment
 from ..control.trim import TrimError, trim
+from ..foundations import caches
 from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
 from ..foundations.errors import ScenarioError
 from ..foundations.files import check_output_folder, npz_bytes
@@ -811,7 +812,7 @@ def _trim_model(model_opts):
     return SystemModel(model_opts)
 
 
-_MAP_CACHE: dict = {}
+_MAP_CACHE = caches.cache("steering_maps", 16)  # symtrack.foundations.caches
 
 
 def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, turn_speed_m_s: float) -> dict:
@@ -821,8 +822,9 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
     radius cannot be held on this soil at this speed); curvatures a speed cannot hold are left out
     of its row. Cached per (params, law, speeds, radius) in the process."""
     key = (tuple(sorted(params.items())), model_opts, tuple(speeds_m_s), turn_radius_m, turn_speed_m_s)
-    if key in _MAP_CACHE:
-        return _MAP_CACHE[key]
+    hit = _MAP_CACHE.get(key)
+    if hit is not None:
+        return hit
     model = _trim_model(model_opts)
     try:
         tp = trim(model, params, turn_speed_m_s, turn_radius_m)
@@ -853,8 +855,7 @@ def steering_map(params: dict, model_opts, speeds_m_s, turn_radius_m: float, tur
             om_mean.append(0.5 * (om_l + om_r))
             om_diff.append(om_r - om_l)
         rows[v] = (np.array(ks), np.array(mean), np.array(diff), np.array(om_mean), np.array(om_diff))
-    _MAP_CACHE[key] = rows
-    return rows
+    return _MAP_CACHE.put(key, rows)
 
 
 def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, float]:
@@ -1358,16 +1359,13 @@ def count_passes_and_times(traj: np.ndarray, params: dict, shape, cell_m: float)
     return counts, first
 
 
-_MASK_CACHE: dict = {}  # a polygon field's cell masks (point-in-polygon over every cell: about 1 s at 4 million)
+# a polygon field's cell masks (point-in-polygon over every cell: about 1 s at 4 million; symtrack.foundations.caches)
+_MASK_CACHE = caches.cache("field_masks", 8)
 
 
 def _ring_mask(ring: np.ndarray, shape, cell_m: float) -> np.ndarray:
     key = (ring.tobytes(), tuple(shape), cell_m)
-    if key not in _MASK_CACHE:
-        if len(_MASK_CACHE) > 8:
-            _MASK_CACHE.clear()
-        _MASK_CACHE[key] = bnd.cell_mask(ring, shape, cell_m)
-    return _MASK_CACHE[key]
+    return _MASK_CACHE.get_or_build(key, lambda: bnd.cell_mask(ring, shape, cell_m))
 
 
 def field_mask(fs: OperationSettings, shape, cell_m: float) -> np.ndarray:
