@@ -357,6 +357,7 @@ POSITIONAL_STATE = {
     # the prediction's states as the head of a state vector (the MPC names that block: PathTrackingMPC.pred,
     # pred_index)
     "a head at the prediction's size ([:nxp])": re.compile(r"\[\s*:\s*nxp\s*\]"),
+    "a cell field by stride (xc[1::2])": re.compile(r"\b" + _STATE_NAMES + r"\[\s*\d\s*::\s*\d\s*\]"),
     # the engine's C reads each state through the generated ENG_W_<NAME> (grid_engine_model.engine_layout_c)
     "a vehicle state by position in C (w[k])": re.compile(r"(?:\b(?:w|w0|w1|ws|wv)|->wv|\.wv)\[\s*\d+\s*\]"),
 }
@@ -396,7 +397,7 @@ def test_the_positional_scan_catches_todays_forms(tmp_path, monkeypatch):
               "nv = len(VEHICLE_STATES)", "#define NV 12", "self.x_new[None, :NV]", "xs.append(x[:nv].copy())",
               "seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))", "prev = X[:-1, :2]",
               "d = X[:, 0] - prev[:, 0]", "psi0 = res.X[0, 2]", "xm, ym = X[mid, 0], X[mid, 1]",
-              "xs = np.concatenate([st.x[:nxp], st.u])", "return ode[:nxp], alg"]
+              "xs = np.concatenate([st.x[:nxp], st.u])", "return ode[:nxp], alg", "rates = xc[1::2][act]"]
     (pkg / "old.py").write_text("\n".join(before) + "\n")
     (pkg / "old.c").write_text("#define NV 12\nscan(E, w1[0], w1[1], w1[2]);\ndouble u = w[3], r = w[5];\n"
                                "pose_grid(E->agrid, E->a, a1, E->wv[2], w1[2], n);\nE.wv[0] = GV_START_X;\n"
