@@ -28,8 +28,8 @@ import importlib
 
 from .foundations.version import __version__
 
-__all__ = ["Built", "Result", "Scenario", "SystemModel", "Terrain", "__version__", "build", "control",
-           "export_terrain", "load_scenario", "run", "simulate"]
+__all__ = ["Built", "Result", "Scenario", "SystemModel", "Terrain", "__version__", "build", "cache_info",
+           "clear_caches", "control", "export_terrain", "load_scenario", "run", "simulate"]
 
 _LAZY = {
     "Result": ("symtrack.api", "Result"),
@@ -42,6 +42,8 @@ _LAZY = {
     "Terrain": ("symtrack.terrain.storage", "Terrain"),
     "export_terrain": ("symtrack.terrain.gis", "export_terrain"),
     "SystemModel": ("symtrack.model.system", "SystemModel"),
+    "clear_caches": ("symtrack.foundations.caches", "clear_caches"),
+    "cache_info": ("symtrack.foundations.caches", "cache_info"),
 }
 
 

@@ -352,10 +352,19 @@ POSITIONAL_STATE = {
     "the pose by position (x[0], x[1], x[2])": re.compile(_STATE_NAMES + r"\[0\],\s*" + _STATE_NAMES + r"\[1\],\s*"
                                                          + _STATE_NAMES + r"\[2\]"),
     "a state's head sliced by position": re.compile(r"\b" + _STATE_NAMES + r"\[:[36]\]"),
+    # a trajectory's (rows: times, columns: states) column or head by position: res.X[:, 0], X[:, :2], X[-1, 2]
+    "a trajectory column by position (X[:, k])": re.compile(r"(?:(?<![\w.])(?:X|prev)|\.X)\[[^\]\n]*,\s*:?\s*\d+\s*\]"),
+    # the prediction's states as the head of a state vector (the MPC names that block: PathTrackingMPC.pred,
+    # pred_index)
+    "a head at the prediction's size ([:nxp])": re.compile(r"\[\s*:\s*nxp\s*\]"),
+    "a cell field by stride (xc[1::2])": re.compile(r"\b" + _STATE_NAMES + r"\[\s*\d\s*::\s*\d\s*\]"),
+    # the engine's C reads each state through the generated ENG_W_<NAME> (grid_engine_model.engine_layout_c)
+    "a vehicle state by position in C (w[k])": re.compile(r"(?:\b(?:w|w0|w1|ws|wv)|->wv|\.wv)\[\s*\d+\s*\]"),
 }
-# the C engine's vehicle is the planar one: it reads the pose as w[0], w[1], w[2] by contract (its sizes
-# come from the generated ENG_NV / ENG_NW); the Python reads every state through a layout
-C_CHECKS = ("an NV constant", "a slice at the vehicle's size")
+# the C sees the state's sizes and positions through the generated ENG_NV, ENG_NW and ENG_W_<NAME>; the
+# Python reads every state through a layout
+C_CHECKS = ("an NV constant", "a slice at the vehicle's size", "a vehicle state by position in C (w[k])")
+PY_ONLY = ("a vehicle state by position in C (w[k])",)
 LAYOUT_MODULE = "symtrack/model/layout.py"
 
 
@@ -365,7 +374,8 @@ def _positional_state_reads(root: Path):
         rel = f.relative_to(ROOT).as_posix()
         if rel == LAYOUT_MODULE:
             continue
-        checks = {w: rx for w, rx in POSITIONAL_STATE.items() if f.suffix == ".py" or w in C_CHECKS}
+        checks = {w: rx for w, rx in POSITIONAL_STATE.items()
+                  if (f.suffix == ".py" and w not in PY_ONLY) or (f.suffix != ".py" and w in C_CHECKS)}
         for n, line in enumerate(f.read_text().splitlines(), 1):
             for what, rx in checks.items():
                 if rx.search(line):
@@ -384,13 +394,18 @@ def test_the_positional_scan_catches_todays_forms(tmp_path, monkeypatch):
     pkg.mkdir()
     before = ["NV = len(VEHICLE_STATES)", "xc, xv = x[NV:], x[:NV]", "x[0], x[1], x[2] = x_m, y_m, yaw_rad",
               "mass_w[:12] = 1.0", "zc = x[NV::2]", "x[NV + 2 * act + 1]", "X, Y, psi = x[:3]",
-              "nv = len(VEHICLE_STATES)", "#define NV 12", "self.x_new[None, :NV]", "xs.append(x[:nv].copy())"]
+              "nv = len(VEHICLE_STATES)", "#define NV 12", "self.x_new[None, :NV]", "xs.append(x[:nv].copy())",
+              "seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))", "prev = X[:-1, :2]",
+              "d = X[:, 0] - prev[:, 0]", "psi0 = res.X[0, 2]", "xm, ym = X[mid, 0], X[mid, 1]",
+              "xs = np.concatenate([st.x[:nxp], st.u])", "return ode[:nxp], alg", "rates = xc[1::2][act]"]
     (pkg / "old.py").write_text("\n".join(before) + "\n")
-    (pkg / "old.c").write_text("#define NV 12\nscan(E, w1[0], w1[1], w1[2]);\n")
+    (pkg / "old.c").write_text("#define NV 12\nscan(E, w1[0], w1[1], w1[2]);\ndouble u = w[3], r = w[5];\n"
+                               "pose_grid(E->agrid, E->a, a1, E->wv[2], w1[2], n);\nE.wv[0] = GV_START_X;\n"
+                               "double X = w[ENG_W_X];\n")
     monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
     found = _positional_state_reads(pkg)
     assert {int(f.split(":")[1]) for f in found if "old.py" in f} == set(range(1, len(before) + 1)), "\n".join(found)
-    assert [f.split(":")[1] for f in found if "old.c" in f] == ["1"]
+    assert sorted({f.split(":")[1] for f in found if "old.c" in f}) == ["1", "2", "3", "4", "5"]
     assert "hexdigest()[:12]" not in "".join(found)
 # The world manager's rules (footprint, release, sector assignment Cell[i, j] -> CHANNEL[i mod M, j mod M],
 # INFO_IN / INFO_OUT, the collision and coverage errors) have one home: symtrack/native/grid_engine.c

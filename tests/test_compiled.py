@@ -114,7 +114,7 @@ def test_library_is_cached_and_reused(lib, model, monkeypatch):
         raise AssertionError("compiled again although the cache holds the library")
 
     monkeypatch.setattr(build_cache, "_compile", no_compile)
-    compiled._cache.clear()
+    compiled.LIBRARIES.clear()
     again = compiled.library(model)
     again.f("rosenbrock_step")
     again.f("ode")
@@ -126,21 +126,21 @@ def test_library_is_cached_and_reused(lib, model, monkeypatch):
 def test_no_compiler_falls_back_once_or_fails_when_required(model, monkeypatch, caplog):
     monkeypatch.setattr(build_cache, "find_compiler", lambda: None)
     monkeypatch.setattr(build_cache, "_warned_no_compiler", False)
-    compiled._cache.clear()
+    compiled.LIBRARIES.clear()
     try:
         with caplog.at_level(logging.WARNING, logger="symtrack.toolchain"):
             lib = compiled.library(model)
             y = lib.f("outputs")
-            compiled._cache.clear()
+            compiled.LIBRARIES.clear()
             compiled.library(model).f("accel")
         assert not lib.compiled and y.class_name() != "External"
         assert sum("no C compiler" in r.message for r in caplog.records) == 1
         monkeypatch.setattr(build_cache, "_require", True)
-        compiled._cache.clear()
+        compiled.LIBRARIES.clear()
         with pytest.raises(SimulationError, match="no C compiler"):
             compiled.library(model).f("outputs")
     finally:
-        compiled._cache.clear()
+        compiled.LIBRARIES.clear()
 
 
 def test_cvodes_and_idas_on_compiled_model_match_interpreted(model):

@@ -1,4 +1,4 @@
-"""Field operations (issue 23; symtrack/studies/operations.py): the plan's geometry against
+"""Field operations (issue 23; symtrack/studies/operations/): the plan's geometry against
 independent truth, the plan's refusals, one small operation driven on the terrain engine (every
 turn driven, nothing lifted) and the field's persistence through save and load."""
 
@@ -11,6 +11,7 @@ import pytest
 
 from symtrack.foundations.errors import ScenarioError
 from symtrack.studies import operations as op
+from symtrack.terrain.world import padding_m
 
 BASE = {"name": "t", "model": {"lateral_law": "shear"}, "vehicle": {"preset": "reference_crawler"},
         "soil": {"preset": "clayey_soil_thailand_38"}}
@@ -39,9 +40,9 @@ def test_controlled_lanes_share_is_the_lanes_share():
     ys = op.lane_positions_m(fs)[::2]
     assert np.allclose(plan.line_y_m, ys)
     p = plan.path
-    worked = op._sample_roles(plan) == 3
+    worked = op.sample_roles(plan) == 3
     mask = op.footprint_mask(p.x[worked], p.y[worked], p.psi[worked], PARAMS, (600, 480), 0.1)
-    head = op._headland_mask(fs, (600, 480), 0.1)
+    head = op.headland_mask(fs, (600, 480), 0.1)
     # the lanes' share of the in-field area: per lane two tracks over the worked length; a 0.45 m track
     # off the cell lines touches 5 cells of 0.1 m across (0.5 m), so that is the raster's track width
     x0, x1 = plan.worked_x_m
@@ -252,7 +253,7 @@ def test_k_turn_refused_when_it_does_not_fit_the_headland():
                                             r"\(2, ([0-9.]+)\] m here, or operation.headland_passes >= 2") as err:
         op.operation_spec_from_dict(doc)
     r_max = float(err.value.args[0].split("(2, ")[1].split("]")[0])
-    room = op.padding_m(0.1) + 0.1
+    room = padding_m(0.1) + 0.1
     # the largest radius that fits: its closed-form reach is the headland (to the 3 digits the message gives)
     assert abs(op.k_turn_headland_m(4.0, r_max, 1.2, 0.975) + room - 4.0) < 5e-3
     doc["operation"]["turn_radius_m"] = r_max - 0.01
@@ -468,14 +469,14 @@ def test_controlled_turns_cross_the_headland_on_one_lane():
                       turn_lane_m="auto", lines=3)
         plan = op.plan_operation(fs)
         p = plan.path
-        turn = op._sample_roles(plan) == 1
+        turn = op.sample_roles(plan) == 1
         # the across leg: where the turn heads along y, x is the lane's
         leg = turn & (np.abs(np.cos(p.psi)) < 1e-9)
         xs = sorted({round(float(x), 6) for x in p.x[leg]})
         across.append(xs)
         assert xs == ([6.0, 54.0] if w == 4.0 else [54.0]), xs  # (the sprayer's two lines: one turn, east)
         # the worked lines are unchanged; the extension is a line outside the worked range (role 2)
-        assert ((op._sample_roles(plan) == 2) & (p.segment >= 0) & (np.abs(p.x - 30) < 30 - fs.headland_m)).sum() == 0
+        assert ((op.sample_roles(plan) == 2) & (p.segment >= 0) & (np.abs(p.x - 30) < 30 - fs.headland_m)).sum() == 0
     with pytest.raises(ScenarioError, match="operation.turn_lane_m = 5 is not a headland lane"):
         op.plan_operation(settings(tracks="controlled", lane_spacing_m=4.0, turn_radius_m=1.5, turn_lane_m=5.0))
     with pytest.raises(ScenarioError, match=r"operation.turn_lane_m = 10 is outside the allowed range \(0, 6.5\]"):

@@ -41,7 +41,7 @@ def test_other_model_options_build_another_model():
 
 def test_the_model_cache_keeps_the_most_recently_used(monkeypatch):
     clear_build_cache()
-    monkeypatch.setattr(build_module, "MAX_MODELS", 2)
+    monkeypatch.setattr(build_module.MODELS, "max_entries", 2)
     opts = [dataclasses.replace(ModelOptions(), gauss_points=n) for n in (3, 4, 5)]
     first = system_model(opts[0])
     system_model(opts[1])

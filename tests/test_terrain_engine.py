@@ -390,3 +390,40 @@ def test_cells_in_lanes_equal_one_cell_at_a_time(tmp_path, monkeypatch):
         assert np.array_equal(sa[name], sb[name]), name
     for name in ("pass_sigma", "pass_p_mean"):
         assert np.array_equal(getattr(wa, name), getattr(wb, name)), name
+
+
+def test_the_ctypes_binding_is_checked_against_the_c_struct():
+    """The ctypes EngineStruct is compared with the eng_t the library was compiled with (the field table
+    grid_engine.c exports) when the library is loaded: a binding with a field moved, retyped, renamed,
+    missing or extra stops with an error naming the first field that differs."""
+    if find_compiler() is None:
+        pytest.skip("no C compiler")
+    import ctypes
+
+    from symtrack.integrators.engine.kernel import check_struct
+    from symtrack.integrators.engine.state import EngineStruct
+
+    lib = make_plant(_scenario()).engine.kernel.lib
+    check_struct(lib)  # the package's binding agrees
+    assert int(lib.eng_field_count()) == len(EngineStruct._fields_) > 80
+    fields = list(EngineStruct._fields_)
+
+    def perturbed(new_fields):
+        return type("EngineStruct", (ctypes.Structure,), {"_fields_": new_fields})
+
+    i = next(k for k, (n, _) in enumerate(fields) if n == "zdot")
+    swapped = fields[:i] + [fields[i + 1], fields[i]] + fields[i + 2:]
+    with pytest.raises(SimulationError, match=r"at field \d+: binding 'zmax'.*eng_t: 'zdot', double \*"):
+        check_struct(lib, perturbed(swapped))
+    j = next(k for k, (n, _) in enumerate(fields) if n == "ring_tol")
+    retyped = fields[:j] + [("ring_tol", ctypes.c_longlong)] + fields[j + 1:]
+    with pytest.raises(SimulationError, match="binding 'ring_tol', c_long.*eng_t: 'ring_tol', double,"):
+        check_struct(lib, perturbed(retyped))
+    with pytest.raises(SimulationError, match="lacks field .* 'iwork'"):
+        check_struct(lib, perturbed(fields[:-1]))
+    with pytest.raises(SimulationError, match="has field 'extra'"):
+        check_struct(lib, perturbed(fields + [("extra", ctypes.c_double)]))
+    k = next(k for k, (n, _) in enumerate(fields) if n == "err_x")
+    shorter = fields[:k] + [("err_x", ctypes.c_double * 3)] + fields[k + 1:]
+    with pytest.raises(SimulationError, match=r"'err_x', c_double_Array_3.*'err_x', double\[2\]"):
+        check_struct(lib, perturbed(shorter))

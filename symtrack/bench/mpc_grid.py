@@ -68,7 +68,7 @@ def comparison(scenario: str = "field_pattern", integrators=("grid_fast", "idas"
         ref_name, ref, z_ref = kept[0]
         for name, res, z in kept[1:]:
             n = min(len(ref.t), len(res.t))
-            d = np.hypot(res.X[:n, 0] - ref.X[:n, 0], res.X[:n, 1] - ref.X[:n, 1])
+            d = np.hypot(res.state("x_m")[:n] - ref.state("x_m")[:n], res.state("y_m")[:n] - ref.state("y_m")[:n])
             agreement.append({"integrator": name, "against": ref_name, "max_position_difference_m": float(d.max()),
                               "final_position_difference_m": float(d[-1]),
                               "terrain_max_abs_dz_mm": 1e3 * float(np.max(np.abs(z - z_ref))),

@@ -158,7 +158,7 @@ def benchmark(big_size_m=(100.0, 100.0), big_cell_m=0.1, small_size_m=(12.0, 4.0
     out["small_pool_wall_s"] = float(pres.wall_time_s)
     out["small_brute_wall_s"] = float(b.wall_time_s)
     out["small_speed_ratio_brute_over_pool"] = float(b.wall_time_s / pres.wall_time_s)
-    out["small_pose_difference_m"] = float(np.max(np.abs(pres.X[:, :2] - b.X[:, :2])))
+    out["small_pose_difference_m"] = float(max(np.max(np.abs(pres.state(n) - b.state(n))) for n in ("x_m", "y_m")))
     return out
 
 

@@ -222,7 +222,6 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
     vr_y = vr_x + nv
     if variables[vr_x].name != fns.layout.names[0] or len(variables) != vr_y + state.ny_out:
         raise RuntimeError("fmu_variables and engine_fmu_model.h disagree on the value reference layout")
-    pose = fns.layout.pose_index
     soil_values = [float(sc.params[n]) for n in SOIL_PARAM_NAMES]
     lines = [
         f"/* engine_fmu_model.h: the numbers of the engine FMU of scenario '{sc.name}'.",
@@ -234,7 +233,6 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
         f"#define EF_SETTLE_STEPS {int(round(world.settings.settle_s / SETTLE_STEP_S))}LL",
         f"#define EF_SETTLE_STEP_S {c_literal(SETTLE_STEP_S)}",
         f"#define EF_LIFT_TIME_S {c_literal(LIFT_TIME_S)}", f"#define EF_LIFT_MAX_STEPS {LIFT_MAX_STEPS}LL",
-        f"#define EF_POSE_X {pose[0]}", f"#define EF_POSE_Y {pose[1]}", f"#define EF_POSE_YAW {pose[2]}",
         "#define EF_VR_U 0", f"#define EF_VR_POSE {vr_pose}", f"#define EF_VR_X {vr_x}", f"#define EF_VR_Y {vr_y}",
         f"#define EF_VR_END {len(variables)}", f"#define EF_VR_STR {len(variables)}",
         f"#define EF_N_SOIL {len(soil_values)}",

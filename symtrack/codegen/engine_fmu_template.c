@@ -404,7 +404,7 @@ static fmi2Status begin_pass(Instance *c) {
   const char *in = c->str[0];
   if (in && *in && read_field(c, in) != fmi2OK) return fmi2Error;
   eng_t *E = &c->E;
-  E->wv[EF_POSE_X] = c->pose[0]; E->wv[EF_POSE_Y] = c->pose[1]; E->wv[EF_POSE_YAW] = c->pose[2];
+  E->wv[ENG_W_X] = c->pose[0]; E->wv[ENG_W_Y] = c->pose[1]; E->wv[ENG_W_YAW] = c->pose[2];
   WORK = E->work;
   {
     const double *arg[2] = {E->wv, E->pv};

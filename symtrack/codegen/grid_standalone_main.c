@@ -84,7 +84,7 @@ int main(int argc, char **argv) {
   E.vehicle_rtol = GV_VEHICLE_RTOL; E.vehicle_atol = GV_VEHICLE_ATOL; E.vehicle_max_halvings = GV_VEHICLE_MAX_HALVINGS;
   E.soil_veh = gv_soil_veh; E.n_sums = GV_N_SUMS;
   /* TerrainEngine.begin_pass: set down at rest, the cells at their static sinkage, the settling */
-  E.wv[0] = GV_START_X; E.wv[1] = GV_START_Y; E.wv[2] = GV_START_YAW;
+  E.wv[ENG_W_X] = GV_START_X; E.wv[ENG_W_Y] = GV_START_Y; E.wv[ENG_W_YAW] = GV_START_YAW;
   WORK = E.work;
   {
     const double *arg[2] = {E.wv, E.pv};

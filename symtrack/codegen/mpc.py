@@ -98,7 +98,7 @@ def rti_functions(mpc) -> list[ca.Function]:
     last = slice(nk - nc, nk - nc + nxp)
     A = ca.vertcat(-Msol[last, 1:1 + nxa], ca.MX(nu, nxa))
     B = ca.vertcat(-Msol[last, 1 + nxa:], ca.MX.eye(nu))
-    c = ca.vertcat(kk[last] - Msol[last, 0] - xn[:nxp], uk - xn[nxp:])
+    c = ca.vertcat(kk[last] - Msol[last, 0] - xn[mpc.pred], uk - xn[nxp:])
     stage = ca.Function("mpc_rti_stage", [xk, uk, kk, xn, P, XC], [Msol, A, B, c])
 
     # preparation
@@ -125,11 +125,11 @@ def rti_functions(mpc) -> list[ca.Function]:
     xiS = ca.MX.sym("xi", nxa, N + 1)
     x0s = ca.MX.sym("x0s", nxa)
     ref = ca.MX.sym("ref", 5, N + 1)  # column k: [x, y, yaw, speed, curvature] of stage k
-    X = ca.horzcat(Xk, w[N * blk:])
-    dx0 = x0s - X[:, 0]
+    Xn = ca.horzcat(Xk, w[N * blk:])  # the horizon's nodes, one per column
+    dx0 = x0s - Xn[:, 0]
     dxa = ca.horzcat(*[ca.mtimes(PhiS[:, k * nxa:(k + 1) * nxa], dx0) + xiS[:, k] for k in range(N + 1)])
-    r, rx, ru = mpc.res_fn.map(N)(X[:, :N], Uk, ref[:, :N])
-    rN, rxN = mpc.res_term_fn(X[:, N], ref[:, N])
+    r, rx, ru = mpc.res_fn.map(N)(Xn[:, :N], Uk, ref[:, :N])
+    rN, rxN = mpc.res_term_fn(Xn[:, N], ref[:, N])
     nr = mpc.res_fn.size1_out(0)
     rows, vals = [], []
     for k in range(N):

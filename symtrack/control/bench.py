@@ -272,20 +272,19 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
                                                          prediction=pred, prediction_sliding_smoothing=None,
                                                          prediction_sliding_sign="model"))
         fn = mpc.stage_fn
-        nxp = mpc.nxp
-        xs = np.concatenate([st.x[:nxp], st.u]) / mpc.sx
+        xs = np.concatenate([st.x[mpc.pred_index], st.u]) / mpc.sx
         xc = st.x[model.layout.block("cells")] if pred == "vehicle" else np.zeros(0)
-        X = [xs[:nxp] * mpc.sx[:nxp]]
+        X = [xs[mpc.pred] * mpc.sx[mpc.pred]]
         Kv = ca.SX.sym("k", mpc.nk)
         for k in range(N):
             us = U[k] / TORQUE_SCALE_N_M
             g = fn(xs, us, Kv, np.zeros(5), mpc.p_model, xc)[1]
             rf = ca.rootfinder("coll", "newton", ca.Function("g", [Kv], [g]), {"abstol": 1e-10})
-            k0 = np.tile(np.concatenate([xs[:nxp], np.zeros(mpc.nz)]), mpc.d)
+            k0 = np.tile(np.concatenate([xs[mpc.pred], np.zeros(mpc.nz)]), mpc.d)
             Ksol = np.array(rf(k0)).ravel()
             xn = np.array(fn(xs, us, Ksol, np.zeros(5), mpc.p_model, xc)[0]).ravel()
             xs = xn
-            X.append(xs[:nxp] * mpc.sx[:nxp])
+            X.append(xs[mpc.pred] * mpc.sx[mpc.pred])
         traj[pred] = np.array(X)[:, model.layout.block("vehicle")]
     stepper = SundialsStepper(model, IntegratorSettings("cvodes"))
     x = st.x.copy()

@@ -98,6 +98,10 @@ class ClosedLoopResult:
     path: object
     plant: object = None
 
+    def state(self, name: str) -> np.ndarray:
+        """The plant state ``name`` at the samples (a column of X, by name)."""
+        return self.X[:, self.state_names.index(name)]
+
 
 def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
     """Steady straight running at the start speed (trim), placed at the start pose. The 3D

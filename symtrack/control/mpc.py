@@ -374,6 +374,10 @@ class PathTrackingMPC:
         self.pred_names = pred
         self.cell_names = lay.cell_names if s.prediction == "vehicle" else ()
         self.nxp = len(self.pred_names)
+        # the prediction's states: their positions in the model's state (pred_index) and their block at the
+        # head of the augmented state and of each collocation point (pred)
+        self.pred_index = lay.indices(self.pred_names)
+        self.pred = slice(0, self.nxp)
         self.nu = 2
         self.nxa = self.nxp + self.nu  # + previous command
         self.N = s.horizon_steps
@@ -401,8 +405,8 @@ class PathTrackingMPC:
         ref = ca.SX.sym("ref", 5)
         P = ca.SX.sym("p", len(self.p_model))
         XC = ca.SX.sym("xc", len(self.cell_names))
-        Sx = ca.DM(self.sx[:nxp])
-        x = Xs[:nxp] * Sx
+        Sx = ca.DM(self.sx[self.pred])
+        x = Xs[self.pred] * Sx
         u = Us * TORQUE_SCALE_N_M
 
         def f(xp, zp):
@@ -413,7 +417,7 @@ class PathTrackingMPC:
                 return self._quasi_static_dae(xp, zp, u, P)
             if self.cell_names:
                 ode, alg = model.dae(ca.vertcat(xp, XC), zp, u, P)
-                return ode[:nxp], alg
+                return ode[self.pred_index], alg
             return model.dae(xp, zp, u, P)
 
         # Radau IIA collocation (Lagrange basis on [0, tau_1..tau_d]).
@@ -447,7 +451,7 @@ class PathTrackingMPC:
                             ["x", "u", "k", "ref", "p", "xc"], ["x_next", "g_coll", "g_rate", "cost"],
                             {"cse": True})
         XN = ca.SX.sym("xN", self.nxa)
-        resN = self._residuals(XN[:nxp] * Sx, ref)
+        resN = self._residuals(XN[self.pred] * Sx, ref)
         tf_lat = s.terminal_factor if s.terminal_lateral_factor is None else s.terminal_lateral_factor
         costN = tf_lat * s.weight_lateral * self._lateral_penalty(resN[0]) + s.terminal_factor * ca.sumsqr(resN[1:])
         term = ca.Function("mpc_terminal", [XN, ref], [costN], ["x", "ref"], ["cost"])
@@ -705,10 +709,10 @@ class PathTrackingMPC:
             if k < N:
                 w[o + nxa:o + nxa + nu] = x0s[nxp:]
                 if self.hull_quasi_static:  # the hull settled under the stage's pose
-                    hull = self._hull_guess(xs[:nxp] * self.sx[:nxp], hull)
+                    hull = self._hull_guess(xs[self.pred] * self.sx[self.pred], hull)
                 for j in range(self.d):
                     a = o + nxa + nu + j * self.nc
-                    w[a:a + nxp] = xs[:nxp]
+                    w[a:a + nxp] = xs[self.pred]
                     if hull is not None:
                         w[a + nxp + self.nza:a + self.nc] = hull
         return w
@@ -923,6 +927,6 @@ class PathTrackingMPC:
         """The last accepted plan: (N+1) x nxp states [SI] and N x 2 commands [N m]."""
         if self._w is None:
             return None, None
-        N, blk, nxa, nxp = self.N, self.block, self.nxa, self.nxp
+        N, blk, nxa = self.N, self.block, self.nxa
         X = np.vstack([self._w[k * blk:k * blk + nxa] for k in range(N)] + [self._w[N * blk:]]) * self.sx
-        return X[:, :nxp], self._plan_u
+        return X[:, self.pred], self._plan_u

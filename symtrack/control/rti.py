@@ -323,8 +323,8 @@ def shift_guess(mpc, w: np.ndarray) -> np.ndarray:
     out[o + nxa:o + nxa + nu] = last[nxa:nxa + nu]
     for j in range(d):
         a = o + nxa + nu + j * nc
-        out[a:a + nxp] = last[nxa + nu + j * nc:nxa + nu + j * nc + nxp] + delta[:nxp]
-    out[N * blk:N * blk + nxp] = xN[:nxp] + delta[:nxp]
+        out[a:a + nxp] = last[nxa + nu + j * nc:nxa + nu + j * nc + nxp] + delta[mpc.pred]
+    out[N * blk:N * blk + nxp] = xN[mpc.pred] + delta[mpc.pred]
     out[N * blk + nxp:] = last[nxa:nxa + nu]
     return out
 

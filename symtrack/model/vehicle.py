@@ -16,6 +16,7 @@ import dataclasses
 import casadi as ca
 import numpy as np
 
+from ..foundations import caches
 from ..foundations.errors import ParameterError
 from .layout import ContactPose, StateLayout, VehicleState
 from .options import SHEAR_LAWS, ModelOptions
@@ -276,7 +277,7 @@ def _creep_integrand(s, q: dict, opts: ModelOptions):
 # fastest, and CasADi's virtual machine, which CVODES and IDAS use, evaluates a call node slowly).
 # ASSUMED: 48 = twice the default shear rule, a bound with room above the defaults, not a measured optimum.
 INLINE_QUADRATURE_MAX_POINTS = 48
-_MAPPED: dict = {}
+_MAPPED = caches.cache("quadrature_call_nodes", 16)  # symtrack.foundations.caches
 
 
 def quadrature_points(opts: ModelOptions) -> int:
@@ -323,7 +324,8 @@ def integrate_track(integrand, nodes, rule, q: dict, opts: ModelOptions):
     names = tuple(sorted(q))
     units = tuple((tuple(map(float, t)), tuple(map(float, w))) for _, _, _, t, w in rule)
     key = (integrand.__name__, units, names, opts)
-    if key not in _MAPPED:
+    mapped = _MAPPED.get(key)
+    if mapped is None:
         n = len(nodes)
         s_sym, w_sym = ca.SX.sym("s"), ca.SX.sym("w")
         q_sym = {k: ca.SX.sym(k) for k in names}
@@ -335,9 +337,9 @@ def integrate_track(integrand, nodes, rule, q: dict, opts: ModelOptions):
         S = ca.horzcat(*(R[3 * g] + R[3 * g + 1] * ca.DM(t).T for g, (t, _) in enumerate(units)))
         W = ca.horzcat(*(R[3 * g + 2] * ca.DM(w).T for g, (_, w) in enumerate(units)))
         total = ca.sum2(point.map(n, "serial")(S, W, ca.repmat(Q, 1, n)))
-        _MAPPED[key] = ca.Function(f"{integrand.__name__.strip('_')}_{n}", [Q, R], [total], ["q", "rule"], ["sum"],
-                                   {"never_inline": True})
-    out = _MAPPED[key](ca.vertcat(*(q[k] for k in names)), ca.vertcat(*(v for a, b, c, _, _ in rule
+        mapped = _MAPPED.put(key, ca.Function(f"{integrand.__name__.strip('_')}_{n}", [Q, R], [total], ["q", "rule"],
+                                              ["sum"], {"never_inline": True}))
+    out = mapped(ca.vertcat(*(q[k] for k in names)), ca.vertcat(*(v for a, b, c, _, _ in rule
                                                                         for v in (a, b, c))))
     return out[0], out[1], out[2]
 

@@ -28,20 +28,25 @@ from pathlib import Path
 
 import casadi as ca
 
+from ..foundations import caches
 from ..toolchain import BuildSpec, build, compiler
 from .generate import GROUP_OF, render
 from .generate import build as build_functions
 
 log = logging.getLogger("symtrack.native")
 
-__all__ = ["BUILD_VERSION", "REPO_GENERATED", "Library", "generated_sources", "interpreter_only", "library"]
+__all__ = ["BUILD_VERSION", "LIBRARIES", "REPO_GENERATED", "Library", "generated_sources", "interpreter_only",
+           "library"]
 
 # bump when the compile flags or the library layout change (part of the cache folder's name)
 BUILD_VERSION = 2
 REPO_GENERATED = Path(__file__).resolve().parents[2] / "generated"
 
 _force_interpreter = False
-_cache: dict[tuple[int, bool, bool], tuple[object, Library]] = {}
+# the libraries of the most recently used models (symtrack.foundations.caches): a library holds its model,
+# so the bound frees the models the build cache let go of
+MAX_LIBRARIES = 8
+LIBRARIES = caches.cache("model_libraries", MAX_LIBRARIES)
 
 
 @contextlib.contextmanager
@@ -137,9 +142,10 @@ def library(model, compiled: bool = True, quadrature_call: bool = False) -> Libr
     ``quadrature_call``: a large track quadrature compiled as one call node (:class:`Library`)."""
     compiled = compiled and not _force_interpreter
     key = (id(model), compiled, quadrature_call)
-    hit = _cache.get(key)
-    if hit is not None and hit[0] is model:
-        return hit[1]
+    hit = LIBRARIES.get(key)
+    if hit is not None and hit.model is model:
+        return hit
     lib = Library(model, compiled, quadrature_call)
-    _cache[key] = (model, lib)
-    return lib
+    if hit is not None:  # another model at the same id (the first one freed): replace its entry
+        LIBRARIES.drop(key)
+    return LIBRARIES.put(key, lib)

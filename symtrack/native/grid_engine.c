@@ -14,6 +14,7 @@
  * Compiled with the CasADi-generated C of the eng_* Functions included (engine_gen.inc).
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -53,76 +54,109 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #define ERR_NONFINITE 4   /* the vehicle step returned a non-finite state */
 #define ERR_NEWTON 5      /* a cell's stage equation did not converge; err_a: the cell */
 
+/* eng_t, the engine's struct, written once as this list: F(type, name) a field, A(type, name, n) an
+ * array of n. The struct below and the table of its fields that the library exports (eng_struct_size,
+ * eng_field_*) are both made from it; the ctypes binding (symtrack/integrators/engine/state.py
+ * EngineStruct) is checked against that table when the library is loaded (kernel.check_struct). */
+#define ENG_FIELDS(F, A) \
+  /* grid */ \
+  F(long long, nx) F(long long, ny) F(long long, M) F(long long, n_ch) \
+  F(double, x0) F(double, y0) F(double, dx) \
+  /* storage, flat i * ny + j */ \
+  F(double *, z) F(double *, zdot) F(double *, zmax) F(double *, pmax) \
+  F(signed char *, phase) \
+  F(unsigned char *, touched) \
+  /* channels */ \
+  F(long long *, ch_cell) F(long long *, ch_foot) F(long long *, ch_new_stamp) F(long long *, ch_new_cell) \
+  F(double *, ch_z) F(double *, ch_v) F(double *, ch_zmax) F(double *, ch_pmax) F(double *, ch_p) \
+  F(double *, ch_cx) F(double *, ch_cy) \
+  F(double *, ch_g) /* NGEO per channel */ \
+  F(double *, ch_dp) /* dp/dz at the channel's state */ \
+  F(double *, ch_pw) /* its compaction power over the last step (2) */ \
+  F(double *, ch_vr) /* dz/dt at the step end from the quadratic through the last substep's stages */ \
+  F(unsigned char *, ch_new) /* 1: assigned at this step's start (its first geometry is evaluated here) */ \
+  F(long long *, act) F(long long *, new_list) \
+  F(long long, n_act) F(long long, n_new) F(long long, peak_active) F(long long, stamp) \
+  /* constants */ \
+  F(double *, pv) /* parameters of the vehicle Functions; the last NS entries are the channel sums */ \
+  F(double *, geo) /* 7: l, b, B, e, dx, end strip, 1 / dx */ \
+  F(double *, wv) /* NW: the vehicle's states and accelerations */ \
+  F(double *, a) /* NA: pose and pressure lines at wv */ \
+  F(double *, work) /* the generated Functions' work vector (the largest sz_w) */ \
+  F(double *, agrid) /* scratch: NA (n + 1) for n = exit_substeps */ \
+  /* substeps: every cell's, the entry windows' (both not below cell_substeps; engine.py) */ \
+  F(long long, n_pv) F(long long, ny_out) F(long long, cell_substeps) F(long long, entry_substeps) \
+  F(long long, power_mode) /* 0: step mean, 1: instantaneous */ \
+  F(double, pad) F(double, release_rate) F(double, areal_mass) F(double, damping) F(double, gamma) \
+  F(double, entry_fraction) \
+  /* error and statistics */ \
+  F(long long, err_code) F(long long, err_a) F(long long, err_b) F(long long, err_ch) \
+  A(double, err_x, 2) \
+  F(long long, n_newton) F(long long, n_cell_stages) F(long long, n_vehicle_steps) \
+  /* wall time (ns) of the parts: world manager (footprint, release, assignment, INFO_IN; coverage \
+     check), vehicle step, cells (geometry, integration, INFO_OUT), sums and outputs */ \
+  F(long long, ns_manager) F(long long, ns_vehicle) F(long long, ns_cells) F(long long, ns_outputs) \
+  /* the cycle law (symtrack/model/cell.py): storage z_off and cycle count per cell; per channel the \
+     stay's z_off at its start, its increment delta, its progress d_c, and whether it has counted */ \
+  F(double *, zoff) \
+  F(unsigned short *, cycles) \
+  F(double *, ch_zoff) F(double *, ch_delta) F(double *, ch_dc) \
+  F(unsigned char *, ch_counted) \
+  /* the subsoil stress: tables (NULL: off), this pass's largest stress per cell and depth \
+     (n_depths per cell), and the time spent on it */ \
+  F(const subsoil_tables_t *, subsoil) \
+  F(float *, sig_pass) \
+  F(long long, n_depths) F(long long, ns_subsoil) \
+  /* the soil map: each cell's soil (storage), each channel's, and per soil the cohesion, friction \
+     angle and shear modulus the traction uses; n_sums = NS, or NS_MAX with a soil map */ \
+  F(unsigned char *, soil_index) F(unsigned char *, ch_soil) \
+  F(const double *, soil_veh) \
+  F(long long, n_sums) \
+  /* the exit windows' substeps (not below cell_substeps; their poses: agrid), the entry windows' poses: \
+     NA (entry_substeps + 1) */ \
+  F(long long, exit_substeps) \
+  F(double *, agrid_entry) \
+  /* 1: the cells outside the windows by implicit Euler (engine.py EngineSettings.steady_method) */ \
+  F(long long, steady_euler) \
+  /* a cell whose transient about its quasi-static path exceeds ring_tol |z| takes an entry window \
+     (ringing below; 0: off) */ \
+  F(double, ring_tol) \
+  /* the field's initial elevation per cell (terrain_query.h; NULL: flat): read by eng_surface only */ \
+  F(const double *, elev) \
+  /* the bulk density's mean normal stress (symtrack/terrain/density.py): tables of p (NULL: off; same \
+     depths as subsoil) and this pass's largest p per cell and depth (n_depths per cell) */ \
+  F(const subsoil_tables_t *, subsoil_p) \
+  F(float *, p_pass) \
+  /* the vehicle step's error control (vehicle_step_controlled; 0: off) and how many steps it halved */ \
+  F(double, vehicle_rtol) F(double, vehicle_atol) \
+  F(long long, vehicle_max_halvings) F(long long, n_vehicle_halved) \
+  /* the vehicle's Functions' integer work (a raster's interpolant; sized by state.py vehicle_work_sizes) */ \
+  F(long long *, iwork)
+
+#define ENG_DECLARE_(type, name) type name;
+#define ENG_DECLARE_ARRAY_(type, name, n) type name[n];
 typedef struct {
-  /* grid */
-  long long nx, ny, M, n_ch;
-  double x0, y0, dx;
-  /* storage, flat i * ny + j */
-  double *z, *zdot, *zmax, *pmax;
-  signed char *phase;
-  unsigned char *touched;
-  /* channels */
-  long long *ch_cell, *ch_foot, *ch_new_stamp, *ch_new_cell;
-  double *ch_z, *ch_v, *ch_zmax, *ch_pmax, *ch_p, *ch_cx, *ch_cy, *ch_g; /* ch_g: NGEO per channel */
-  double *ch_dp, *ch_pw; /* dp/dz at the channel's state; its compaction power over the last step (2) */
-  double *ch_vr;         /* dz/dt at the step end from the quadratic through the last substep's stages */
-  unsigned char *ch_new; /* 1: assigned at this step's start (its first geometry is evaluated here) */
-  long long *act, *new_list;
-  long long n_act, n_new, peak_active, stamp;
-  /* constants */
-  double *pv;     /* parameters of the vehicle Functions; the last NS entries are the channel sums */
-  double *geo;    /* 7: l, b, B, e, dx, end strip, 1 / dx */
-  double *wv;     /* NW: the vehicle's states and accelerations */
-  double *a;      /* NA: pose and pressure lines at wv */
-  double *work;   /* the generated Functions' work vector (the largest sz_w) */
-  double *agrid; /* scratch: NA (n + 1) for n = exit_substeps */
-  /* substeps: every cell's, the entry windows' (both not below cell_substeps; engine.py) */
-  long long n_pv, ny_out, cell_substeps, entry_substeps, power_mode; /* 0: step mean, 1: instantaneous */
-  double pad, release_rate, areal_mass, damping, gamma, entry_fraction;
-  /* error and statistics */
-  long long err_code, err_a, err_b, err_ch;
-  double err_x[2];
-  long long n_newton, n_cell_stages, n_vehicle_steps;
-  /* wall time (ns) of the parts: world manager (footprint, release, assignment, INFO_IN; coverage
-     check), vehicle step, cells (geometry, integration, INFO_OUT), sums and outputs */
-  long long ns_manager, ns_vehicle, ns_cells, ns_outputs;
-  /* the cycle law (symtrack/model/cell.py): storage z_off and cycle count per cell; per channel the
-     stay's z_off at its start, its increment delta, its progress d_c, and whether it has counted */
-  double *zoff;
-  unsigned short *cycles;
-  double *ch_zoff, *ch_delta, *ch_dc;
-  unsigned char *ch_counted;
-  /* the subsoil stress: tables (NULL: off), this pass's largest stress per cell and depth
-     (n_depths per cell), and the time spent on it */
-  const subsoil_tables_t *subsoil;
-  float *sig_pass;
-  long long n_depths, ns_subsoil;
-  /* the soil map: each cell's soil (storage), each channel's, and per soil the cohesion, friction
-     angle and shear modulus the traction uses; n_sums = NS, or NS_MAX with a soil map */
-  unsigned char *soil_index, *ch_soil;
-  const double *soil_veh;
-  long long n_sums;
-  /* the exit windows' substeps (not below cell_substeps; their poses: agrid), the entry windows' poses:
-     NA (entry_substeps + 1) */
-  long long exit_substeps;
-  double *agrid_entry;
-  /* 1: the cells outside the windows by implicit Euler (engine.py EngineSettings.steady_method) */
-  long long steady_euler;
-  /* a cell whose transient about its quasi-static path exceeds ring_tol |z| takes an entry window
-     (ringing below; 0: off) */
-  double ring_tol;
-  /* the field's initial elevation per cell (terrain_query.h; NULL: flat): read by eng_surface only */
-  const double *elev;
-  /* the bulk density's mean normal stress (symtrack/terrain/density.py): tables of p (NULL: off; same
-     depths as subsoil) and this pass's largest p per cell and depth (n_depths per cell) */
-  const subsoil_tables_t *subsoil_p;
-  float *p_pass;
-  /* the vehicle step's error control (vehicle_step_controlled; 0: off) and how many steps it halved */
-  double vehicle_rtol, vehicle_atol;
-  long long vehicle_max_halvings, n_vehicle_halved;
-  /* the vehicle's Functions' integer work (a raster's interpolant; sized by state.py vehicle_work_sizes) */
-  long long *iwork;
+  ENG_FIELDS(ENG_DECLARE_, ENG_DECLARE_ARRAY_)
 } eng_t;
+
+/* the struct's layout as the compiler made it: per field its name, C type, offset and size (in
+   ENG_FIELDS's order), read by the ctypes binding at load (kernel.check_struct) */
+typedef struct {
+  const char *name, *type;
+  long long offset, size;
+} eng_field_t;
+#define ENG_ROW_(type, name) {#name, #type, (long long)offsetof(eng_t, name), (long long)sizeof(((eng_t *)0)->name)},
+#define ENG_ROW_ARRAY_(type, name, n) \
+  {#name, #type "[" #n "]", (long long)offsetof(eng_t, name), (long long)sizeof(((eng_t *)0)->name)},
+static const eng_field_t eng_fields[] = {ENG_FIELDS(ENG_ROW_, ENG_ROW_ARRAY_)};
+#define ENG_N_FIELDS ((long long)(sizeof eng_fields / sizeof eng_fields[0]))
+EXPORT long long eng_struct_size(void) { return (long long)sizeof(eng_t); }
+EXPORT long long eng_field_count(void) { return ENG_N_FIELDS; }
+/* field i's name, C type, offset and size (NULL, -1 beyond the table) */
+EXPORT const char *eng_field_name(long long i) { return i >= 0 && i < ENG_N_FIELDS ? eng_fields[i].name : 0; }
+EXPORT const char *eng_field_type(long long i) { return i >= 0 && i < ENG_N_FIELDS ? eng_fields[i].type : 0; }
+EXPORT long long eng_field_offset(long long i) { return i >= 0 && i < ENG_N_FIELDS ? eng_fields[i].offset : -1; }
+EXPORT long long eng_field_size(long long i) { return i >= 0 && i < ENG_N_FIELDS ? eng_fields[i].size : -1; }
 
 static long long now_ns(void) {
   struct timespec ts;
@@ -268,7 +302,7 @@ EXPORT int eng_assign(eng_t *E, double h) {
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
   const double *w = E->wv;
-  double X = w[0], Y = w[1], psi = w[2], u = w[3], v = w[4], r = w[5];
+  double X = w[ENG_W_X], Y = w[ENG_W_Y], psi = w[ENG_W_YAW], u = w[ENG_W_U], v = w[ENG_W_V], r = w[ENG_W_R];
   double c = cos(psi), s = sin(psi);
   double X1 = X + h * (u * c - v * s), Y1 = Y + h * (u * s + v * c), psi1 = psi + h * r;
   E->stamp += 1;
@@ -919,13 +953,13 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     E->ns_manager += c1 - c0;
     vehicle_step(E, u, h, w1, a1);
     if (dist[1] >= 0.0 && t_next > dist[2] + 1e-12) {
-      double d_step = hypot(w1[0] - E->wv[0], w1[1] - E->wv[1]);
+      double d_step = hypot(w1[ENG_W_X] - E->wv[ENG_W_X], w1[ENG_W_Y] - E->wv[ENG_W_Y]);
       if (dist[0] + d_step >= dist[1]) {
         for (int it = 0; it < 3; ++it) { /* three secant refinements (runner.run) */
           if (d_step <= 0) break;
           h *= (dist[1] - dist[0]) / d_step;
           vehicle_step(E, u, h, w1, a1);
-          d_step = hypot(w1[0] - E->wv[0], w1[1] - E->wv[1]);
+          d_step = hypot(w1[ENG_W_X] - E->wv[ENG_W_X], w1[ENG_W_Y] - E->wv[ENG_W_Y]);
         }
         t_next = t + h;
         done = 1;
@@ -944,10 +978,10 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
        the exit windows' (agrid) and the entry windows' (agrid_entry; the same grid when the counts
        are equal, as by default) */
     const double ih = h > 0.0 ? 1.0 / h : 0.0; /* the step's reciprocal (0: a zero step) */
-    pose_grid(E->agrid, E->a, a1, E->wv[2], w1[2], E->exit_substeps);
+    pose_grid(E->agrid, E->a, a1, E->wv[ENG_W_YAW], w1[ENG_W_YAW], E->exit_substeps);
     const double *grid_entry = E->agrid;
     if (E->entry_substeps != E->exit_substeps) {
-      pose_grid(E->agrid_entry, E->a, a1, E->wv[2], w1[2], E->entry_substeps);
+      pose_grid(E->agrid_entry, E->a, a1, E->wv[ENG_W_YAW], w1[ENG_W_YAW], E->entry_substeps);
       grid_entry = E->agrid_entry;
     }
     /* the same grids by component (geo_window) */
@@ -1128,7 +1162,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     *n_done = k + 1;
     long long c4 = now_ns();
     E->ns_outputs += c4 - c3;
-    if (check_covered && eng_uncovered(E, w1[0], w1[1], w1[2])) return -ERR_UNCOVERED;
+    if (check_covered && eng_uncovered(E, w1[ENG_W_X], w1[ENG_W_Y], w1[ENG_W_YAW])) return -ERR_UNCOVERED;
     E->ns_manager += now_ns() - c4;
     if (done) return 1;
   }

@@ -435,15 +435,22 @@ def _cell_functions(opts, params: dict, k: int, fo: dict):
     return cell_law, cell_history, cell_entry
 
 
+# the vehicle states the C reads (grid_engine.c, the standalone program, the engine FMU): C name ->
+# state name; engine_layout_c defines ENG_W_<C name> as the state's position in w from the layout
+ENGINE_STATE_READS = {"X": "x_m", "Y": "y_m", "YAW": "yaw_rad", "U": "u_m_s", "V": "v_m_s", "R": "yaw_rate_rad_s"}
+
+
 def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0) -> list[str]:
-    """The engine's state sizes as C defines, from the vehicle's layout (grid_engine.c reads them):
-    ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations; ENG_NA, the length of a;
-    ENG_NSEG, the 3D vehicle's segments per track (0: planar, its code compiled out)."""
+    """The engine's state sizes and positions as C defines, from the vehicle's layout (grid_engine.c
+    reads them): ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations; ENG_NA, the
+    length of a; ENG_NSEG, the 3D vehicle's segments per track (0: planar, its code compiled out);
+    ENG_W_X, ENG_W_Y, ... the position in w of each state the C reads (:data:`ENGINE_STATE_READS`)."""
     return [f"#define ENG_NV {layout.nv} /* the vehicle's states (symtrack.model.layout) */",
             f"#define ENG_NW {layout.nv + len(ALGEBRAIC)} /* and its algebraic accelerations */",
             f"#define ENG_NA {na} /* the pose and pressure lines (and the 3D vehicle's segment pressures) */",
             f"#define ENG_NSEG {n_seg} /* the 3D vehicle's segments per track (0: planar) */",
-            f"#define ENG_SEG_NF {SEG_NF} /* its sums per segment (grid_engine_model.SEG_FIELDS) */"]
+            f"#define ENG_SEG_NF {SEG_NF} /* its sums per segment (grid_engine_model.SEG_FIELDS) */",
+            *(f"#define ENG_W_{c} {layout.index(name)} /* {name} */" for c, name in ENGINE_STATE_READS.items())]
 
 
 def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0,
@@ -596,4 +603,4 @@ def cell_constants(params: dict) -> tuple[float, float]:
 
 __all__ = ["EngineFunctions", "SEG_FIELDS", "SegmentSumsTerrain", "build_engine_functions", "least_squares_line",
            "piecewise_linear", "segment_sum_names", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
-           "NF", "TRACK_SOIL_PARAMS", "soil_dispatch_c"]
+           "NF", "TRACK_SOIL_PARAMS", "ENGINE_STATE_READS", "engine_layout_c", "soil_dispatch_c"]

@@ -49,7 +49,7 @@ def _events(ax, res):
 
 
 def path_plot(res) -> bytes:
-    X, Y, psi0 = res.state("x_m"), res.state("y_m"), res.X[0, 2]
+    X, Y, psi0 = res.state("x_m"), res.state("y_m"), res.state("yaw_rad")[0]
     along = (X - X[0]) * np.cos(psi0) + (Y - Y[0]) * np.sin(psi0)
     lateral = -(X - X[0]) * np.sin(psi0) + (Y - Y[0]) * np.cos(psi0)
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6))

@@ -57,7 +57,7 @@ def surface_png(world, maps, results) -> bytes:
     im = a1.imshow(z0.T, origin="lower", extent=(x0, x0 + nx * dx, y0, y0 + ny * dx), aspect="equal", cmap="terrain")
     fig.colorbar(im, ax=a1, label="elevation z0 [m]")
     for k, res in enumerate(results):
-        a1.plot(res.X[:, 0], res.X[:, 1], color="k" if k == 0 else "r", lw=1, label=f"pass {k + 1}")
+        a1.plot(res.state("x_m"), res.state("y_m"), color="k" if k == 0 else "r", lw=1, label=f"pass {k + 1}")
     a1.set_title(f"initial elevation (cell {dx:g} m) and the driven path")
     a1.legend(loc="upper right")
     si, sj = _window(world, maps)
@@ -68,12 +68,12 @@ def surface_png(world, maps, results) -> bytes:
     for a in (a1, a2):
         a.set_xlabel("x [m]")
         a.set_ylabel("y [m]")
-    X = results[0].X
-    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(X[:, 0]), np.diff(X[:, 1])))])
+    xs, ys, psis = (results[0].state(n) for n in ("x_m", "y_m", "yaw_rad"))
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(xs), np.diff(ys)))])
     half = 0.5 * float(world.params["track_gauge_m"])
     a4 = a3.twinx()
     for side, name, color in ((1.0, "left", "C0"), (-1.0, "right", "C1")):
-        px, py = X[:, 0] - side * half * np.sin(X[:, 2]), X[:, 1] + side * half * np.cos(X[:, 2])
+        px, py = xs - side * half * np.sin(psis), ys + side * half * np.cos(psis)
         i = np.clip(np.floor((px - x0) / dx).astype(int), 0, nx - 1)
         j = np.clip(np.floor((py - y0) / dx).astype(int), 0, ny - 1)
         a3.plot(s, z0[i, j], color=color, label=f"elevation z0 under the {name} track")
@@ -91,9 +91,9 @@ def surface_png(world, maps, results) -> bytes:
 def rut_section_png(world, maps, results, line) -> bytes:
     """Sinkage across the driven line, at the middle of the path of the first pass."""
     g = world.grid
-    X = results[0].X
-    mid = len(X) // 2
-    xm, ym, psi = X[mid, 0], X[mid, 1], X[mid, 2]
+    pose = results[0].pose()
+    mid = len(pose) // 2
+    xm, ym, psi = pose[mid]
     # sample along the body's lateral axis at the mid point
     across = np.arange(-1.5, 1.5 + 1e-9, g.cell_m / 2)
     px, py = xm - np.sin(psi) * across, ym + np.cos(psi) * across

@@ -26,12 +26,11 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..foundations import caches
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
 from ..integrators.settings import IntegratorSettings
@@ -44,13 +43,12 @@ from .passes import PassStudy, run_passes, study_summary
 from .plants import make_plant
 from .result import summarise
 
-__all__ = ["MAX_MODELS", "Built", "Outcome", "build", "build_cache_info", "clear_build_cache", "system_model"]
+__all__ = ["MAX_MODELS", "MODELS", "Built", "Outcome", "build", "build_cache_info", "clear_build_cache", "system_model"]
 
-# the most recently used models, at most MAX_MODELS (a sweep over model options does not keep them all)
+# the most recently used models, at most MAX_MODELS (a sweep over model options does not keep them all;
+# symtrack.foundations.caches, emptied by symtrack.clear_caches())
 MAX_MODELS = 8
-_models: OrderedDict[ModelOptions, SystemModel] = OrderedDict()
-_lock = threading.Lock()
-_hits = {"hits": 0, "misses": 0}
+MODELS = caches.cache("models", MAX_MODELS)
 
 
 def _raster_key(surface) -> str | None:
@@ -72,33 +70,20 @@ def system_model(opts: ModelOptions | None = None, surface=None) -> SystemModel:
     (``opts.vehicle = "3d"``; keyed by its table)."""
     opts = ModelOptions() if opts is None else opts
     key = opts if surface is None else (opts, json.dumps(surface.to_dict(), sort_keys=True), _raster_key(surface))
-    with _lock:
-        model = _models.get(key)
-        if model is not None:
-            _models.move_to_end(key)
-            _hits["hits"] += 1
-            return model
-        _hits["misses"] += 1
-    model = SystemModel(opts) if surface is None else SystemModel(opts, vehicle=make_vehicle(opts, surface))
-    with _lock:
-        model = _models.setdefault(key, model)
-        _models.move_to_end(key)
-        while len(_models) > MAX_MODELS:
-            _models.popitem(last=False)
-        return model
+    return MODELS.get_or_build(key, lambda: SystemModel(opts) if surface is None else
+                               SystemModel(opts, vehicle=make_vehicle(opts, surface)))
 
 
 def clear_build_cache() -> None:
-    """Forget every cached model (the next build builds them again)."""
-    with _lock:
-        _models.clear()
-        _hits.update(hits=0, misses=0)
+    """Forget every cached model (the next build builds them again; :func:`symtrack.clear_caches`
+    empties every cache of the package)."""
+    MODELS.clear()
 
 
 def build_cache_info() -> dict:
     """``{"models": n, "hits": h, "misses": m}``: the cached models and the lookups so far."""
-    with _lock:
-        return {"models": len(_models), **_hits}
+    i = MODELS.info()
+    return {"models": i["entries"], "hits": i["hits"], "misses": i["misses"]}
 
 
 @dataclass

@@ -194,6 +194,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
         dist_from = scenario.event_time(run_cfg.stop_distance_event) if run_cfg.stop_distance_event else 0.0
     names = plant.state_names
     iu, iv = names.index("u_m_s"), names.index("v_m_s")
+    ixy = [names.index("x_m"), names.index("y_m")]
     sampled = torque_law is not None and hasattr(torque_law, "sample_time_s")
     if start is None:
         st = scenario.start
@@ -253,8 +254,9 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                             stopped_by = "distance"
                     elif dist_from is not None:
                         t1s = np.array([t1 for _, t1, _, _ in ivs])
-                        prev = np.vstack([x[None, :2], X[:-1, :2]])
-                        d = np.hypot(X[:, 0] - prev[:, 0], X[:, 1] - prev[:, 1])
+                        xy = X[:, ixy]
+                        xy_prev = np.vstack([np.asarray(x)[ixy][None, :], xy[:-1]])
+                        d = np.hypot(xy[:, 0] - xy_prev[:, 0], xy[:, 1] - xy_prev[:, 1])
                         active = t1s > dist_from + 1e-12
                         # the sequential sums dist_k = dist_(k-1) + d_k (np.cumsum adds in order)
                         cum = np.cumsum(np.concatenate(([dist], np.where(active, d, 0.0))))[1:]

@@ -77,7 +77,7 @@ def pass_figures(world: World, z_before: np.ndarray, res: RunResult, touched: np
     rc = res.output("compaction_resistance_left_N") + res.output("compaction_resistance_right_N")
     tt = res.t
     rc_time = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * np.diff(tt)) / (tt[-1] - tt[0])) if tt[-1] > tt[0] else 0.0
-    seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))
+    seg = np.hypot(np.diff(res.state("x_m")), np.diff(res.state("y_m")))
     rc_dist = float(np.sum(0.5 * (rc[1:] + rc[:-1]) * seg) / seg.sum()) if seg.sum() > 0 else 0.0
     return {**_subsoil_figures(world), **_density_figures(world), **{
         "rut_max_depth_mm": 1e3 * float(z[rut].max()) if rut.any() else 0.0,
@@ -155,7 +155,7 @@ def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: 
             if _density_figures(world):
                 extra["crawler_bulk_density_max_Mg_per_m3"] = world.bulk_density_max()
             try:
-                extra.update(towed.towed_pass(world.storage, trailer, res.X[:, :3],
+                extra.update(towed.towed_pass(world.storage, trailer, res.pose(),
                                               float(world.params["cg_ahead_of_contact_centre_m"]), world.soils, xi,
                                               world.cell_day))
             except ScenarioError as err:  # the trailer's path left the field (checked before it loads a cell)

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..model.layout import POSE_NAMES
 from .scenario import Scenario
 
 __all__ = ["INPUT_COLUMNS", "SUMMARY_SCHEMA_VERSION", "RunResult", "summarise"]
@@ -35,6 +36,10 @@ class RunResult:
     def state(self, name):
         return self.X[:, self.state_names.index(name)]
 
+    def pose(self) -> np.ndarray:
+        """The pose at the output times: columns x_m, y_m, yaw_rad (by name, whatever the state order)."""
+        return self.X[:, [self.state_names.index(n) for n in POSE_NAMES]]
+
     def output(self, name):
         return self.Y[:, self.output_names.index(name)]
 
@@ -54,10 +59,11 @@ class RunResult:
 def summarise(res: RunResult) -> dict:
     """The summary figures of a run (summary.json keys, README)."""
     sc = res.scenario
-    X0, Y0, psi0 = res.X[0, 0], res.X[0, 1], res.X[0, 2]
-    xe, ye, psie = res.X[-1, 0], res.X[-1, 1], res.X[-1, 2]
+    x, y, psi = res.state("x_m"), res.state("y_m"), res.state("yaw_rad")
+    X0, Y0, psi0 = x[0], y[0], psi[0]
+    xe, ye, psie = x[-1], y[-1], psi[-1]
     lateral = -(xe - X0) * np.sin(psi0) + (ye - Y0) * np.cos(psi0)
-    seg = np.hypot(np.diff(res.X[:, 0]), np.diff(res.X[:, 1]))
+    seg = np.hypot(np.diff(x), np.diff(y))
     out = {
         "schema_version": SUMMARY_SCHEMA_VERSION,
         "scenario": sc.name,

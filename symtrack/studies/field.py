@@ -550,7 +550,7 @@ def _run_pattern(spec: FieldSpec, plant, pr: PatternResult, bar: Progress, done_
             mask = _pass_mask(world, engine_stress, z0)
             record = {"pass": line.index + 1, "lane": line.lane, "y_m": line.y_m, "x_start_m": line.x_start_m,
                       "direction": line.direction, "distance_m": float(np.sum(np.hypot(
-                          np.diff(res.X[:, 0]), np.diff(res.X[:, 1])))),
+                          np.diff(res.state("x_m")), np.diff(res.state("y_m"))))),
                       "sim_time_s": float(res.t[-1]), "wall_time_s": wall,
                       "speed_end_m_s": float(res.X[-1, iu]), "cells_loaded": int(mask.sum()),
                       "stopped_by": res.stopped_by}

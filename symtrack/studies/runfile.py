@@ -7,7 +7,7 @@ The sections that decide the kind (:data:`KINDS`)::
     [[torque]]          a simulation      (as symtrack simulate; symtrack/simulation/scenario.py)
     [path] or [mpc]     an MPC run        (as symtrack mpc; symtrack/control/scenario.py)
     [field]             a field study     (as symtrack field; symtrack/studies/field.py)
-    [operation]         a field operation (as symtrack field; symtrack/studies/operations.py)
+    [operation]         a field operation (as symtrack field; symtrack/studies/operations/)
     [season]            a season of operations over an [operation] section (as symtrack field)
     [sweep]             a sweep of any of the above (as symtrack sweep; symtrack/studies/engine.py)
 

@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..foundations import caches
 from ..foundations.config import check_keys, number
 from ..foundations.errors import ScenarioError
 from ..foundations.files import read_text
@@ -556,3 +557,7 @@ def markdown_tables(results, rows: list[dict]) -> str:
                              for name, label, v, pred, _ in r.runs if name == a.name)
             out.append(f"| {c.name} | {a.name} | {_g(a.value)} | {span} | {ends} |")
     return "\n".join(out) + "\n"
+
+
+# bounded by their maxsize; emptied by symtrack.clear_caches() (symtrack.foundations.caches)
+caches.register_clear("validate.season_shares", _season_shares)

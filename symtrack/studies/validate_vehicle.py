@@ -37,6 +37,7 @@ import casadi as ca
 import numpy as np
 
 from ..control.trim import TrimError, trim
+from ..foundations import caches
 from ..model import ModelOptions, SystemModel
 from ..model import soil_law as soil_laws
 from ..model import vehicle as veh
@@ -233,3 +234,10 @@ def steady_turn_resistance_ratio(setup: dict, a: dict, radii_over_gauge) -> np.n
     ref = turning_resistance_coefficient(*key, float(setup["reference_radius_over_gauge"]))
     return np.array([turning_resistance_coefficient(*key, float(x)) / ref
                      for x in np.atleast_1d(np.asarray(radii_over_gauge, dtype=float))])
+
+
+# bounded by their maxsize; emptied by symtrack.clear_caches() (symtrack.foundations.caches)
+caches.register_clear("validate_vehicle.straight_track", _straight_track)
+caches.register_clear("validate_vehicle.straight_track_map", _straight_track_map)
+caches.register_clear("validate_vehicle.turn_model", _turn_model)
+caches.register_clear("validate_vehicle.turning_resistance_coefficient", turning_resistance_coefficient)

@@ -37,6 +37,7 @@ import math
 
 import numpy as np
 
+from ..foundations import caches
 from ..foundations.errors import ParameterError
 from .subsoil import frohlich_point
 
@@ -248,3 +249,7 @@ def footprint_table(tyre: Tyre, wheel_load_kN: float, inflation_kPa: float, elem
     sz, pm = footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, X.ravel(), Y.ravel(), depths, xi)
     nd = len(depths)
     return c, FootprintTable(h, depths, float(xi), sz.reshape(n, n, nd), pm.reshape(n, n, nd))
+
+
+# bounded by their maxsize; emptied by symtrack.clear_caches() (symtrack.foundations.caches)
+caches.register_clear("tyre.footprint_table", footprint_table)

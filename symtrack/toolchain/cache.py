@@ -53,6 +53,7 @@ from pathlib import Path
 
 import casadi as ca
 
+from ..foundations import caches
 from ..foundations.errors import SimulationError
 
 __all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_NATIVE", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_COMPILER",
@@ -253,7 +254,7 @@ def compiler() -> str | None:
     return cc
 
 
-_native: dict[str, tuple[tuple[str, ...], str]] = {}
+_native = caches.cache("compiler_flags", 4)  # per compiler (symtrack.foundations.caches)
 
 
 def native_cflags(cc: str) -> tuple[tuple[str, ...], str]:
@@ -262,7 +263,8 @@ def native_cflags(cc: str) -> tuple[tuple[str, ...], str]:
     digest of the compiler's predefined macros under those flags, i.e. of the instruction sets
     ``-march=native`` chose, so that a cache shared by machines of different processors (a cluster's
     home folder) never hands one machine another's code. Probed once per compiler and process."""
-    if cc not in _native:
+    hit = _native.get(cc)
+    if hit is None:
         flags: tuple[str, ...] = CFLAGS_NATIVE
         try:
             res = subprocess.run([cc, *flags, "-dM", "-E", "-x", "c", os.devnull], stdout=subprocess.PIPE,
@@ -275,8 +277,8 @@ def native_cflags(cc: str) -> tuple[tuple[str, ...], str]:
             res = subprocess.run([cc, *flags, "-dM", "-E", "-x", "c", os.devnull], stdout=subprocess.PIPE,
                                  stderr=subprocess.DEVNULL, timeout=60)
         macros = b"\n".join(sorted(res.stdout.splitlines()))
-        _native[cc] = (flags, digest(" ".join(flags), macros))
-    return _native[cc]
+        hit = _native.put(cc, (flags, digest(" ".join(flags), macros)))
+    return hit
 
 
 def require_compiler(what: str) -> str:
@@ -334,7 +336,8 @@ def build(spec: BuildSpec, cc: str | None = None) -> Path:
 
 
 NO_RECORD = "no size and SHA-256 recorded beside it (built by an older symtrack)"
-_checked: dict[Path, tuple[int, int, int]] = {}  # artefacts found intact in this process: (inode, size, mtime)
+# artefacts found intact in this process: (inode, size, mtime) (symtrack.foundations.caches)
+_checked = caches.cache("artefact_checks", 1024)
 
 
 def _record_path(out: Path) -> Path:
@@ -374,7 +377,7 @@ def _intact(out: Path) -> str | None:
             return "its SHA-256 differs from the one recorded: damaged"
     except OSError as err:
         return f"cannot read it: {err.strerror or err}"
-    _checked[out] = stamp
+    _checked.put(out, stamp)
     return None
 
 

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ...foundations import caches
 from ...foundations.errors import ScenarioError, SimulationError
 from ...model import SystemModel, soil_law
 from ...model.static import static_state
@@ -32,7 +33,7 @@ STATE_SCALARS = ("n_act", "peak_active", "stamp")
 STATE_SCRATCH = ("work", "agrid", "new_list", "geo")
 STORAGE_ARRAYS = ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles", "sigma_max")
 
-_FUNCTIONS: dict = {}
+_FUNCTIONS = caches.cache("engine_functions", 8)  # symtrack.foundations.caches
 
 
 def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (), surface=None):
@@ -48,10 +49,8 @@ def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (
     key = (opts, vehicle_substeps, tuple(
         (tuple(soil_law.make(opts).values(sp)), float(sp["repeated_loading_exponent"]),
          tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils), ground)
-    if key not in _FUNCTIONS:
-        _FUNCTIONS[key] = build_engine_functions(opts, params, vehicle_substeps, soils if len(soils) > 1 else (),
-                                                 surface)
-    return _FUNCTIONS[key]
+    return _FUNCTIONS.get_or_build(key, lambda: build_engine_functions(
+        opts, params, vehicle_substeps, soils if len(soils) > 1 else (), surface))
 
 
 class TerrainEngine:

@@ -22,7 +22,7 @@ from ...native.grid_engine_model import soil_dispatch_c
 from ...toolchain import BuildSpec, build, casadi_tag, compiler, digest, native_cflags
 from .state import EngineState, EngineStruct, vehicle_work_sizes
 
-__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "dptr", "library"]
+__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "check_struct", "dptr", "library"]
 
 log = logging.getLogger("symtrack.terrain")
 
@@ -38,6 +38,52 @@ def check_no_work(fns):
     for f in fns:
         if f.sz_iw() or f.sz_arg() != f.n_in() or f.sz_res() != f.n_out():
             raise SimulationError(f"{f.name()} needs integer work or extra arguments; engine.c passes neither")
+
+
+# grid_engine.c's field types (eng_field_type) -> the ctypes type the binding must give them (every
+# pointer an address)
+_C_SCALARS = {"double": ctypes.c_double, "long long": ctypes.c_longlong}
+
+
+def _ctype_of(c_type: str):
+    """The ctypes type of an eng_t field of C type ``c_type`` ("double", "long long", a pointer, "double[2]")."""
+    base, _, n = c_type.partition("[")
+    base = base.strip()
+    t = ctypes.c_void_p if base.endswith("*") else _C_SCALARS.get(base)
+    if t is None:
+        return None
+    return t * int(n.rstrip("]")) if n else t  # (ctypes makes one class per element type and length)
+
+
+def check_struct(lib, struct=EngineStruct) -> None:
+    """Compare the ctypes binding ``struct`` with the eng_t that ``lib`` was compiled with (the table the
+    library exports: eng_struct_size, eng_field_count, eng_field_name, eng_field_type, eng_field_offset,
+    eng_field_size): field by field the name, the type, the offset and the size, then the struct's size.
+    A :class:`SimulationError` naming the first field that differs."""
+    for name, res in (("eng_struct_size", ctypes.c_longlong), ("eng_field_count", ctypes.c_longlong),
+                      ("eng_field_offset", ctypes.c_longlong), ("eng_field_size", ctypes.c_longlong),
+                      ("eng_field_name", ctypes.c_char_p), ("eng_field_type", ctypes.c_char_p)):
+        getattr(lib, name).restype = res
+        getattr(lib, name).argtypes = [] if name in ("eng_struct_size", "eng_field_count") else [ctypes.c_longlong]
+    py = struct._fields_
+    n_c = int(lib.eng_field_count())
+    for i in range(max(n_c, len(py))):
+        if i >= n_c:
+            raise SimulationError(f"the engine's ctypes binding {struct.__name__} has field {py[i][0]!r} (number {i}) "
+                                  f"that grid_engine.c's eng_t does not have ({n_c} fields)")
+        c_name, c_type = lib.eng_field_name(i).decode(), lib.eng_field_type(i).decode()
+        c_off, c_size = int(lib.eng_field_offset(i)), int(lib.eng_field_size(i))
+        where = f"grid_engine.c's eng_t: {c_name!r}, {c_type}, offset {c_off}, {c_size} bytes"
+        if i >= len(py):
+            raise SimulationError(f"the engine's ctypes binding {struct.__name__} lacks field {i} of {where}")
+        name, t = py[i][0], py[i][1]
+        d = getattr(struct, name)
+        if name != c_name or t is not _ctype_of(c_type) or d.offset != c_off or d.size != c_size:
+            raise SimulationError(f"the engine's ctypes binding {struct.__name__} differs from grid_engine.c at field "
+                                  f"{i}: binding {name!r}, {t.__name__}, offset {d.offset}, {d.size} bytes; {where}")
+    if ctypes.sizeof(struct) != int(lib.eng_struct_size()):
+        raise SimulationError(f"the engine's ctypes binding {struct.__name__} is {ctypes.sizeof(struct)} bytes, "
+                              f"grid_engine.c's eng_t {int(lib.eng_struct_size())}")
 
 
 def library(fns):
@@ -70,6 +116,7 @@ def library(fns):
     so = build(BuildSpec(kind="engine", key=key, output="libsymtrack_engine.so", sources=sources,
                          what="the terrain engine", cflags=flags), cc)
     lib = ctypes.CDLL(str(so))
+    check_struct(lib)
     P = ctypes.POINTER(EngineStruct)
     dp, ll = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_longlong)
     lib.eng_assign.argtypes = [P, ctypes.c_double]

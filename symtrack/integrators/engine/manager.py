@@ -194,7 +194,7 @@ class ChannelManager:
             p_end = w.p_soil.copy()
             for k in range(max_steps):
                 t0 = k * dt_s
-                rates = xc[1::2][act]
+                rates = xc[L.cell_index(act, "rate") - L.nv]  # (xc: the cells block)
                 if t0 >= LIFT_TIME_S and np.all((w.p_soil[act] <= 0.0)
                                                 & (np.abs(rates) <= w.settings.release_rate_m_s)):
                     break

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from ...foundations import caches
 from ...foundations.errors import SimulationError
 from ...native.grid_engine_model import NGEO, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
 from ...terrain import subsoil
@@ -28,7 +29,7 @@ NEWTON_MAX_ITER = 100
 # smooth there; at a kink of the law between the iterate and the root, within this fraction
 # (docs/terrain.md, "The terrain engine")
 NEWTON_ACCEPT_STEP = 1e-4
-_TABLES: dict = {}
+_TABLES = caches.cache("subsoil_tables", 16)  # symtrack.foundations.caches
 log = logging.getLogger("symtrack.terrain")
 
 
@@ -127,14 +128,13 @@ def mean_stress_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
         return None
     key = ("mean", tuple(depths_m), float(params["stress_concentration_factor"]), float(params["contact_length_m"]),
            float(params["track_width_m"]), float(params["track_gauge_m"]))
-    if key not in _TABLES:
+    def build():
         if key[2] < subsoil.MEAN_STRESS_XI_MIN:
             log.warning("stress_concentration_factor = %g: the mean normal stress needs >= %g (docs/subsoil.md, "
                         "'Bulk density'); no bulk density is computed", key[2], subsoil.MEAN_STRESS_XI_MIN)
-            _TABLES[key] = None
-        else:
-            _TABLES[key] = subsoil.build_mean_stress_tables(key[1], key[2], key[3], key[4], key[5])
-    return _TABLES[key]
+            return None
+        return subsoil.build_mean_stress_tables(key[1], key[2], key[3], key[4], key[5])
+    return _TABLES.get_or_build(key, build)
 
 
 def subsoil_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
@@ -144,9 +144,7 @@ def subsoil_tables(params: dict, depths_m) -> subsoil.SubsoilTables | None:
         return None
     key = (tuple(depths_m), float(params["stress_concentration_factor"]), float(params["contact_length_m"]),
            float(params["track_width_m"]), float(params["track_gauge_m"]))
-    if key not in _TABLES:
-        _TABLES[key] = subsoil.build_tables(key[0], key[1], key[2], key[3], key[4])
-    return _TABLES[key]
+    return _TABLES.get_or_build(key, lambda: subsoil.build_tables(key[0], key[1], key[2], key[3], key[4]))
 
 
 class EngineState:
