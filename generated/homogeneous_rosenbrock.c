@@ -29,6 +29,7 @@ extern "C" {
 #endif
 
 /* Add prefix to internal symbols */
+#define casadi_clear CASADI_PREFIX(clear)
 #define casadi_copy CASADI_PREFIX(copy)
 #define casadi_f0 CASADI_PREFIX(f0)
 #define casadi_f1 CASADI_PREFIX(f1)
@@ -60,6 +61,10 @@ extern "C" {
 #define casadi_f33 CASADI_PREFIX(f33)
 #define casadi_f34 CASADI_PREFIX(f34)
 #define casadi_f35 CASADI_PREFIX(f35)
+#define casadi_f36 CASADI_PREFIX(f36)
+#define casadi_f37 CASADI_PREFIX(f37)
+#define casadi_f38 CASADI_PREFIX(f38)
+#define casadi_f39 CASADI_PREFIX(f39)
 #define casadi_f4 CASADI_PREFIX(f4)
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
@@ -136,6 +141,13 @@ void casadi_copy(const casadi_real* x, casadi_int n, casadi_real* y) {
     } else {
       for (i=0; i<n; ++i) *y++ = 0.;
     }
+  }
+}
+
+void casadi_clear(casadi_real* x, casadi_int n) {
+  casadi_int i;
+  if (x) {
+    for (i=0; i<n; ++i) *x++ = 0;
   }
 }
 
@@ -18253,8 +18265,35 @@ CASADI_SYMBOL_EXPORT int homogeneous_consistent_z_work_bytes(casadi_int *sz_arg,
   return 0;
 }
 
+/* homogeneous_rosenbrock_idle:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
+static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, *w2=w+2, w3;
+  const casadi_real *wr0;
+  /* #0: @0 = input[0][0] */
+  wr0 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = zeros(24x1) */
+  casadi_clear(w2, 24);
+  /* #5: output[2][0] = @2 */
+  casadi_copy(w2, 24, res[2]);
+  /* #6: @3 = 0 */
+  w3 = 0.;
+  /* #7: output[3][0] = @3 */
+  if (res[3]) res[3][0] = w3;
+  /* #8: @3 = 0 */
+  w3 = 0.;
+  /* #9: output[4][0] = @3 */
+  if (res[4]) res[4][0] = w3;
+  return 0;
+}
+
 /* homogeneous_rosenbrock_error_ratio:(x0[20],x1[20],e1[20],ctl[2])->(r) */
-static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a0, a1, a2, a3, a4, a5;
   a0=arg[2]? arg[2][0] : 0;
   a0=casadi_fabs(a0);
@@ -18482,7 +18521,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* homogeneous_rosenbrock_keep0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real *w1=w+0, w2;
   const casadi_real *wr0;
   /* #0: @0 = input[6][0] */
@@ -18505,7 +18544,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* homogeneous_rosenbrock_keep1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real *w1=w+0, w2;
   const casadi_real *wr0;
   /* #0: @0 = input[6][0] */
@@ -18528,7 +18567,7 @@ static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_keep2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real *w1=w+0, w2;
   const casadi_real *wr0;
   /* #0: @0 = input[6][0] */
@@ -18551,7 +18590,7 @@ static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_keep3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real *w1=w+0, w2;
   const casadi_real *wr0;
   /* #0: @0 = input[6][0] */
@@ -18574,7 +18613,7 @@ static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_keep4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real *w1=w+0, w2;
   const casadi_real *wr0;
   /* #0: @0 = input[6][0] */
@@ -18597,7 +18636,7 @@ static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_keep5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real *w1=w+0, w2;
   const casadi_real *wr0;
   /* #0: @0 = input[6][0] */
@@ -18620,7 +18659,7 @@ static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled6:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w1=w+533, *w2=w+535, w4, *w5=w+537, *w6=w+557, *w7=w+559;
   const casadi_real **arg1=arg+6, *wr0, *wr3;
   /* #0: @0 = input[0][0] */
@@ -18655,7 +18694,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[2]=w7;
   arg1[3]=w6;
   res1[0]=(&w4);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #10: output[2][0] = @4 */
   if (res[2]) res[2][0] = w4;
   /* #11: @4 = 0 */
@@ -18666,7 +18705,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_halve5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w00=w+626, *w01=w+646, *w02=w+648, w04, w05, *w06=w+650, *w07=w+652, *w08=w+672, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -18696,7 +18735,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w08;
   res1[2]=(&w09);
   res1[3]=(&w10);
-  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
   /* #9: @4 = 0.5 */
   w04 = 5.0000000000000000e-01;
   /* #10: @4 = (@4*@5) */
@@ -18712,7 +18751,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w01;
   res1[2]=(&w05);
   res1[3]=(&w11);
-  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @0 */
   casadi_copy(w00, 20, res[0]);
   /* #13: output[1][0] = @1 */
@@ -18733,17 +18772,17 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_branch5:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f26(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f28(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f31(arg+1, res, iw, w, 0)) return 1;
   } else {
-    if (casadi_f27(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f30(arg+1, res, iw, w, 0)) return 1;
   }
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled5:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *rr, *w01=w+705, *w02=w+707, w04, *w05=w+709, *w06=w+729, *w07=w+731, *w08=w+751, w09, w10, *w11=w+753;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
@@ -18775,7 +18814,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[2]=w07;
   arg1[3]=w08;
   res1[0]=(&w09);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #8: @10 = @8[1] */
   for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
   /* #9: @10 = (@9<=@10) */
@@ -18797,7 +18836,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w11;
   res1[2]=(&w12);
   res1[3]=(&w13);
-  if (casadi_f26(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f29(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @7 */
   casadi_copy(w07, 20, res[0]);
   /* #13: output[1][0] = @11 */
@@ -18810,7 +18849,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_halve4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w00=w+806, *w01=w+826, *w02=w+828, w04, w05, *w06=w+830, *w07=w+832, *w08=w+852, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -18840,7 +18879,7 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w08;
   res1[2]=(&w09);
   res1[3]=(&w10);
-  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f28(arg1, res1, iw, w, 0)) return 1;
   /* #9: @4 = 0.5 */
   w04 = 5.0000000000000000e-01;
   /* #10: @4 = (@4*@5) */
@@ -18856,7 +18895,7 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w01;
   res1[2]=(&w05);
   res1[3]=(&w11);
-  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f28(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @0 */
   casadi_copy(w00, 20, res[0]);
   /* #13: output[1][0] = @1 */
@@ -18877,17 +18916,17 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_branch4:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f22(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f24(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f27(arg+1, res, iw, w, 0)) return 1;
   } else {
-    if (casadi_f23(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f26(arg+1, res, iw, w, 0)) return 1;
   }
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled4:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *rr, *w01=w+885, *w02=w+887, w04, *w05=w+889, *w06=w+909, *w07=w+911, *w08=w+931, w09, w10, *w11=w+933;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
@@ -18919,7 +18958,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[2]=w07;
   arg1[3]=w08;
   res1[0]=(&w09);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #8: @10 = @8[1] */
   for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
   /* #9: @10 = (@9<=@10) */
@@ -18941,7 +18980,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w11;
   res1[2]=(&w12);
   res1[3]=(&w13);
-  if (casadi_f22(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f25(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @7 */
   casadi_copy(w07, 20, res[0]);
   /* #13: output[1][0] = @11 */
@@ -18954,7 +18993,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_halve3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w00=w+986, *w01=w+1006, *w02=w+1008, w04, w05, *w06=w+1010, *w07=w+1012, *w08=w+1032, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -18984,7 +19023,7 @@ static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w08;
   res1[2]=(&w09);
   res1[3]=(&w10);
-  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f24(arg1, res1, iw, w, 0)) return 1;
   /* #9: @4 = 0.5 */
   w04 = 5.0000000000000000e-01;
   /* #10: @4 = (@4*@5) */
@@ -19000,7 +19039,7 @@ static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w01;
   res1[2]=(&w05);
   res1[3]=(&w11);
-  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f24(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @0 */
   casadi_copy(w00, 20, res[0]);
   /* #13: output[1][0] = @1 */
@@ -19021,17 +19060,17 @@ static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_branch3:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f18(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f20(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f23(arg+1, res, iw, w, 0)) return 1;
   } else {
-    if (casadi_f19(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f22(arg+1, res, iw, w, 0)) return 1;
   }
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled3:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *rr, *w01=w+1065, *w02=w+1067, w04, *w05=w+1069, *w06=w+1089, *w07=w+1091, *w08=w+1111, w09, w10, *w11=w+1113;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
@@ -19063,7 +19102,7 @@ static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[2]=w07;
   arg1[3]=w08;
   res1[0]=(&w09);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #8: @10 = @8[1] */
   for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
   /* #9: @10 = (@9<=@10) */
@@ -19085,7 +19124,7 @@ static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w11;
   res1[2]=(&w12);
   res1[3]=(&w13);
-  if (casadi_f18(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f21(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @7 */
   casadi_copy(w07, 20, res[0]);
   /* #13: output[1][0] = @11 */
@@ -19098,7 +19137,7 @@ static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_halve2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w00=w+1166, *w01=w+1186, *w02=w+1188, w04, w05, *w06=w+1190, *w07=w+1192, *w08=w+1212, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -19128,7 +19167,7 @@ static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w08;
   res1[2]=(&w09);
   res1[3]=(&w10);
-  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f20(arg1, res1, iw, w, 0)) return 1;
   /* #9: @4 = 0.5 */
   w04 = 5.0000000000000000e-01;
   /* #10: @4 = (@4*@5) */
@@ -19144,7 +19183,7 @@ static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w01;
   res1[2]=(&w05);
   res1[3]=(&w11);
-  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f20(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @0 */
   casadi_copy(w00, 20, res[0]);
   /* #13: output[1][0] = @1 */
@@ -19165,17 +19204,17 @@ static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_branch2:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f14(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f16(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f19(arg+1, res, iw, w, 0)) return 1;
   } else {
-    if (casadi_f15(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f18(arg+1, res, iw, w, 0)) return 1;
   }
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled2:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *rr, *w01=w+1245, *w02=w+1247, w04, *w05=w+1249, *w06=w+1269, *w07=w+1271, *w08=w+1291, w09, w10, *w11=w+1293;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
@@ -19207,7 +19246,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
   arg1[2]=w07;
   arg1[3]=w08;
   res1[0]=(&w09);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #8: @10 = @8[1] */
   for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
   /* #9: @10 = (@9<=@10) */
@@ -19229,7 +19268,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w11;
   res1[2]=(&w12);
   res1[3]=(&w13);
-  if (casadi_f14(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f17(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @7 */
   casadi_copy(w07, 20, res[0]);
   /* #13: output[1][0] = @11 */
@@ -19242,7 +19281,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_halve1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w00=w+1346, *w01=w+1366, *w02=w+1368, w04, w05, *w06=w+1370, *w07=w+1372, *w08=w+1392, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -19272,7 +19311,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w08;
   res1[2]=(&w09);
   res1[3]=(&w10);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f16(arg1, res1, iw, w, 0)) return 1;
   /* #9: @4 = 0.5 */
   w04 = 5.0000000000000000e-01;
   /* #10: @4 = (@4*@5) */
@@ -19288,7 +19327,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[1]=w01;
   res1[2]=(&w05);
   res1[3]=(&w11);
-  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f16(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @0 */
   casadi_copy(w00, 20, res[0]);
   /* #13: output[1][0] = @1 */
@@ -19309,17 +19348,17 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_branch1:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f10(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f12(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f15(arg+1, res, iw, w, 0)) return 1;
   } else {
-    if (casadi_f11(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f14(arg+1, res, iw, w, 0)) return 1;
   }
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled1:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *rr, *w01=w+1425, *w02=w+1427, w04, *w05=w+1429, *w06=w+1449, *w07=w+1451, *w08=w+1471, w09, w10, *w11=w+1473;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
@@ -19351,7 +19390,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[2]=w07;
   arg1[3]=w08;
   res1[0]=(&w09);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #8: @10 = @8[1] */
   for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
   /* #9: @10 = (@9<=@10) */
@@ -19373,7 +19412,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[1]=w11;
   res1[2]=(&w12);
   res1[3]=(&w13);
-  if (casadi_f10(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f13(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @7 */
   casadi_copy(w07, 20, res[0]);
   /* #13: output[1][0] = @11 */
@@ -19386,7 +19425,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* homogeneous_rosenbrock_halve0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
-static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w00=w+1526, *w01=w+1546, *w02=w+1548, w04, w05, *w06=w+1550, *w07=w+1552, *w08=w+1572, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -19416,7 +19455,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[1]=w08;
   res1[2]=(&w09);
   res1[3]=(&w10);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
   /* #9: @4 = 0.5 */
   w04 = 5.0000000000000000e-01;
   /* #10: @4 = (@4*@5) */
@@ -19432,7 +19471,7 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[1]=w01;
   res1[2]=(&w05);
   res1[3]=(&w11);
-  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f12(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @0 */
   casadi_copy(w00, 20, res[0]);
   /* #13: output[1][0] = @1 */
@@ -19453,17 +19492,17 @@ static int casadi_f8(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* homogeneous_rosenbrock_branch0:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
-static int casadi_f6(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
-    if (casadi_f8(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f11(arg+1, res, iw, w, 0)) return 1;
   } else {
-    if (casadi_f7(arg+1, res, iw, w, 0)) return 1;
+    if (casadi_f10(arg+1, res, iw, w, 0)) return 1;
   }
   return 0;
 }
 
 /* outputs:(x[20],u[2],p[26])->(y[24]) */
-static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -22780,8 +22819,8 @@ static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw
   return 0;
 }
 
-/* homogeneous_rosenbrock_controlled_column:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
-static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+/* homogeneous_rosenbrock_controlled_column_step:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
+static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+5, *rr, *w01=w+1605, *w02=w+1607, w04, *w05=w+1609, *w06=w+1629, *w07=w+1631, *w08=w+1651, w09, w10, *w11=w+1653;
   casadi_real w12, w13, *w14=w+1655;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
@@ -22813,7 +22852,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[2]=w07;
   arg1[3]=w08;
   res1[0]=(&w09);
-  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
   /* #8: @10 = @8[1] */
   for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
   /* #9: @10 = (@9<=@10) */
@@ -22835,7 +22874,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[1]=w11;
   res1[2]=(&w12);
   res1[3]=(&w13);
-  if (casadi_f6(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
   /* #12: output[0][0] = @7 */
   casadi_copy(w07, 20, res[0]);
   /* #13: output[1][0] = @11 */
@@ -22845,7 +22884,7 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[1]=w02;
   arg1[2]=wr03;
   res1[0]=w14;
-  if (casadi_f30(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
   /* #15: output[2][0] = @14 */
   casadi_copy(w14, 24, res[2]);
   /* #16: output[3][0] = @12 */
@@ -22855,12 +22894,69 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   return 0;
 }
 
+/* homogeneous_rosenbrock_step_or_idle:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2])->(o0[20],o1[2],o2[24],o3,o4) */
+static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f7(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f6(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled_column:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
+static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, w00, w01, *w03=w+1730, *w04=w+1732, *w06=w+1734, *w07=w+1736, *w08=w+1756, *w09=w+1758, w10, w11;
+  const casadi_real **arg1=arg+6, *wr02, *wr05;
+  /* #0: @0 = 0 */
+  w00 = 0.;
+  /* #1: @1 = input[4][0] */
+  w01 = arg[4] ? arg[4][0] : 0;
+  /* #2: @0 = (@0<@1) */
+  w00  = (w00<w01);
+  /* #3: @2 = input[0][0] */
+  wr02 = arg[0] ? arg[0] : casadi_zeros;
+  /* #4: @3 = input[1][0] */
+  casadi_copy(arg[1], 2, w03);
+  /* #5: @4 = input[2][0] */
+  casadi_copy(arg[2], 2, w04);
+  /* #6: @5 = input[3][0] */
+  wr05 = arg[3] ? arg[3] : casadi_zeros;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10, @11} = homogeneous_rosenbrock_step_or_idle(@0, @2, @3, @4, @5, @1, @6) */
+  arg1[0]=(&w00);
+  arg1[1]=wr02;
+  arg1[2]=w03;
+  arg1[3]=w04;
+  arg1[4]=wr05;
+  arg1[5]=(&w01);
+  arg1[6]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=w09;
+  res1[3]=(&w10);
+  res1[4]=(&w11);
+  if (casadi_f5(arg1, res1, iw, w, 0)) return 1;
+  /* #9: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #10: output[1][0] = @8 */
+  casadi_copy(w08, 2, res[1]);
+  /* #11: output[2][0] = @9 */
+  casadi_copy(w09, 24, res[2]);
+  /* #12: output[3][0] = @10 */
+  if (res[3]) res[3][0] = w10;
+  /* #13: output[4][0] = @11 */
+  if (res[4]) res[4][0] = w11;
+  return 0;
+}
+
 /* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
-static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+1730, *w01=w+1750, *w02=w+1752, w04, *w05=w+1754, *w06=w+1756, *w07=w+1776, *w08=w+1778, w09, w10, *w11=w+1802;
-  casadi_real w12, w13, *w14=w+1826, *w15=w+1828, w16, w17, *w18=w+1852, *w19=w+1854, w20, w21, *w22=w+1878, *w23=w+1880;
-  casadi_real w24, w25, *w26=w+1904, *w27=w+1906, w28, w29, *w30=w+1930, *w31=w+1932, w32, w33, *w34=w+1956, *w35=w+1958;
-  casadi_real w36, w37, *w38=w+1982, *w39=w+1984, w40, w41, *w42=w+2008, *w43=w+2010, w44, w45;
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+1832, *w01=w+1852, *w02=w+1854, w04, *w05=w+1856, *w06=w+1858, *w07=w+1878, *w08=w+1880, w09, w10, *w11=w+1904;
+  casadi_real w12, w13, *w14=w+1928, *w15=w+1930, w16, w17, *w18=w+1954, *w19=w+1956, w20, w21, *w22=w+1980, *w23=w+1982;
+  casadi_real w24, w25, *w26=w+2006, *w27=w+2008, w28, w29, *w30=w+2032, *w31=w+2034, w32, w33, *w34=w+2058, *w35=w+2060;
+  casadi_real w36, w37, *w38=w+2084, *w39=w+2086, w40, w41, *w42=w+2110, *w43=w+2112, w44, w45;
   const casadi_real **arg1=arg+6, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -23180,11 +23276,11 @@ static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10_acc10:(x0[20],z0[2],u[2x100],p[26x100],h[1x100],ctl[2x100])->(xf[20x100],zf[2x100],y[24x100],r[1x100],nh[1x100]) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2081, *w01=w+2101, *w06=w+2103, *w07=w+2303, *w08=w+2323, *w09=w+2563, *w10=w+2573, *w11=w+2583, *w12=w+2603, *w13=w+2843, *w14=w+2853;
-  casadi_real *w15=w+2863, *w16=w+2883, *w17=w+3123, *w18=w+3133, *w19=w+3143, *w20=w+3163, *w21=w+3403, *w22=w+3413, *w23=w+3423, *w24=w+3443, *w25=w+3683, *w26=w+3693;
-  casadi_real *w27=w+3703, *w28=w+3723, *w29=w+3963, *w30=w+3973, *w31=w+3983, *w32=w+4003, *w33=w+4243, *w34=w+4253, *w35=w+4263, *w36=w+4283, *w37=w+4523, *w38=w+4533;
-  casadi_real *w39=w+4543, *w40=w+4563, *w41=w+4803, *w42=w+4813, *w43=w+4823, *w44=w+4843, *w45=w+5083, *w46=w+5093;
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2183, *w01=w+2203, *w06=w+2205, *w07=w+2405, *w08=w+2425, *w09=w+2665, *w10=w+2675, *w11=w+2685, *w12=w+2705, *w13=w+2945, *w14=w+2955;
+  casadi_real *w15=w+2965, *w16=w+2985, *w17=w+3225, *w18=w+3235, *w19=w+3245, *w20=w+3265, *w21=w+3505, *w22=w+3515, *w23=w+3525, *w24=w+3545, *w25=w+3785, *w26=w+3795;
+  casadi_real *w27=w+3805, *w28=w+3825, *w29=w+4065, *w30=w+4075, *w31=w+4085, *w32=w+4105, *w33=w+4345, *w34=w+4355, *w35=w+4365, *w36=w+4385, *w37=w+4625, *w38=w+4635;
+  casadi_real *w39=w+4645, *w40=w+4665, *w41=w+4905, *w42=w+4915, *w43=w+4925, *w44=w+4945, *w45=w+5185, *w46=w+5195;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr04, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -23210,7 +23306,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w08;
   res1[3]=w09;
   res1[4]=w10;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #7: output[0][0] = @6 */
   casadi_copy(w06, 200, res[0]);
   /* #8: {NULL, @0} = horzsplit(@6) */
@@ -23237,7 +23333,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w12;
   res1[3]=w13;
   res1[4]=w14;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #15: output[0][1] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+200);
   /* #16: {NULL, @0} = horzsplit(@6) */
@@ -23264,7 +23360,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w16;
   res1[3]=w17;
   res1[4]=w18;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #23: output[0][2] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+400);
   /* #24: {NULL, @0} = horzsplit(@6) */
@@ -23291,7 +23387,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w20;
   res1[3]=w21;
   res1[4]=w22;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #31: output[0][3] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+600);
   /* #32: {NULL, @0} = horzsplit(@6) */
@@ -23318,7 +23414,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w24;
   res1[3]=w25;
   res1[4]=w26;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #39: output[0][4] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+800);
   /* #40: {NULL, @0} = horzsplit(@6) */
@@ -23345,7 +23441,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w28;
   res1[3]=w29;
   res1[4]=w30;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #47: output[0][5] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1000);
   /* #48: {NULL, @0} = horzsplit(@6) */
@@ -23372,7 +23468,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w32;
   res1[3]=w33;
   res1[4]=w34;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #55: output[0][6] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1200);
   /* #56: {NULL, @0} = horzsplit(@6) */
@@ -23399,7 +23495,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w36;
   res1[3]=w37;
   res1[4]=w38;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #63: output[0][7] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1400);
   /* #64: {NULL, @0} = horzsplit(@6) */
@@ -23426,7 +23522,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w40;
   res1[3]=w41;
   res1[4]=w42;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #71: output[0][8] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1600);
   /* #72: {NULL, @0} = horzsplit(@6) */
@@ -23453,7 +23549,7 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w44;
   res1[3]=w45;
   res1[4]=w46;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #79: output[0][9] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1800);
   /* #80: output[1][0] = @7 */
@@ -23541,11 +23637,11 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled_acc256:(x0[20],z0[2],u[2x256],p[26x256],h[1x256],ctl[2x256])->(xf[20x256],zf[2x256],y[24x256],r[1x256],nh[1x256]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+5413, *w01=w+5433, *w02=w+5435, w04, *w05=w+5437, *w06=w+5439, *w07=w+5459, *w08=w+5461, w09, w10, *w11=w+5485;
-  casadi_real w12, w13, *w14=w+5509, *w15=w+5511, w16, w17, *w18=w+5535, *w19=w+5537, w20, w21, *w22=w+5561, *w23=w+5563;
-  casadi_real w24, w25, *w26=w+5587, *w27=w+5589, w28, w29, *w33=w+5613, *w34=w+5813, *w35=w+5833, *w36=w+6073, *w37=w+6083, *w38=w+6093;
-  casadi_real *w39=w+6113, *w40=w+6353, *w41=w+6363, *w42=w+6373, *w43=w+6393, *w44=w+6633, *w45=w+6643, *w46=w+6653, *w47=w+6673, *w48=w+6913, *w49=w+6923, *w50=w+6933;
-  casadi_real *w51=w+6953, *w52=w+7193, *w53=w+7203, *w57=w+7213, *w58=w+9213, *w59=w+9413, *w60=w+11813, *w61=w+11913, *w62=w+12013, *w63=w+12213, *w64=w+14613, *w65=w+14713;
+  casadi_real **res1=res+5, *w00=w+5515, *w01=w+5535, *w02=w+5537, w04, *w05=w+5539, *w06=w+5541, *w07=w+5561, *w08=w+5563, w09, w10, *w11=w+5587;
+  casadi_real w12, w13, *w14=w+5611, *w15=w+5613, w16, w17, *w18=w+5637, *w19=w+5639, w20, w21, *w22=w+5663, *w23=w+5665;
+  casadi_real w24, w25, *w26=w+5689, *w27=w+5691, w28, w29, *w33=w+5715, *w34=w+5915, *w35=w+5935, *w36=w+6175, *w37=w+6185, *w38=w+6195;
+  casadi_real *w39=w+6215, *w40=w+6455, *w41=w+6465, *w42=w+6475, *w43=w+6495, *w44=w+6735, *w45=w+6745, *w46=w+6755, *w47=w+6775, *w48=w+7015, *w49=w+7025, *w50=w+7035;
+  casadi_real *w51=w+7055, *w52=w+7295, *w53=w+7305, *w57=w+7315, *w58=w+9315, *w59=w+9515, *w60=w+11915, *w61=w+12015, *w62=w+12115, *w63=w+12315, *w64=w+14715, *w65=w+14815;
   const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32, *wr33, *wr54, *wr55, *wr56;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -23709,7 +23805,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w35;
   res1[3]=w36;
   res1[4]=w37;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+120);
   /* #44: {NULL, @0} = horzsplit(@33) */
@@ -23736,7 +23832,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w39;
   res1[3]=w40;
   res1[4]=w41;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #51: output[0][7] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+320);
   /* #52: {NULL, @0} = horzsplit(@33) */
@@ -23763,7 +23859,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w43;
   res1[3]=w44;
   res1[4]=w45;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #59: output[0][8] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+520);
   /* #60: {NULL, @0} = horzsplit(@33) */
@@ -23790,7 +23886,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w47;
   res1[3]=w48;
   res1[4]=w49;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #67: output[0][9] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+720);
   /* #68: {NULL, @0} = horzsplit(@33) */
@@ -23817,7 +23913,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w51;
   res1[3]=w52;
   res1[4]=w53;
-  if (casadi_f31(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
   /* #75: output[0][10] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+920);
   /* #76: {NULL, @0} = horzsplit(@33) */
@@ -23844,7 +23940,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w59;
   res1[3]=w60;
   res1[4]=w61;
-  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
   /* #83: output[0][11] = @57 */
   if (res[0]) casadi_copy(w57, 2000, res[0]+1120);
   /* #84: {NULL, @0} = horzsplit(@57) */
@@ -23871,7 +23967,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w63;
   res1[3]=w64;
   res1[4]=w65;
-  if (casadi_f32(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
   /* #91: output[0][12] = @57 */
   if (res[0]) casadi_copy(w57, 2000, res[0]+3120);
   /* #92: output[1][0] = @7 */
@@ -23984,7 +24080,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 /* homogeneous_rosenbrock_controlled_chunk256:(x0[20],z0[2],U[2x256],H[1x256],p[26],ctl[2])->(X[20x256],Z[2x256],Y[24x256],R[1x256],NH[1x256]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+5, *w01=w+18042, *w04=w+18044, *w06=w+24700, *w07=w+24702, *w08=w+25214, *w09=w+30334, *w10=w+30846, *w11=w+36990, *w12=w+37246;
+  casadi_real **res1=res+5, *w01=w+18144, *w04=w+18146, *w06=w+24802, *w07=w+24804, *w08=w+25316, *w09=w+30436, *w10=w+30948, *w11=w+37092, *w12=w+37348;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24106,27 +24202,27 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk25
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 185;
-  if (sz_res) *sz_res = 100;
+  if (sz_arg) *sz_arg = 198;
+  if (sz_res) *sz_res = 110;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 37502;
+  if (sz_w) *sz_w = 37604;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 185*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 100*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 198*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 110*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 37502*sizeof(casadi_real);
+  if (sz_w) *sz_w = 37604*sizeof(casadi_real);
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
-static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+1730, *w01=w+1750, *w02=w+1752, w04, *w05=w+1754, *w06=w+1756, *w07=w+1776, *w08=w+1778, w09, w10, *w11=w+1802;
-  casadi_real w12, w13, *w14=w+1826, *w15=w+1828, w16, w17, *w18=w+1852, *w19=w+1854, w20, w21, *w22=w+1878, *w23=w+1880;
-  casadi_real w24, w25, *w26=w+1904, *w27=w+1906, w28, w29, *w30=w+1930, *w31=w+1932, w32, w33, *w34=w+1956, *w35=w+1958;
-  casadi_real w36, w37, *w38=w+1982, *w39=w+1984, w40, w41, *w42=w+2008, *w43=w+2010, w44, w45;
+static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+1832, *w01=w+1852, *w02=w+1854, w04, *w05=w+1856, *w06=w+1858, *w07=w+1878, *w08=w+1880, w09, w10, *w11=w+1904;
+  casadi_real w12, w13, *w14=w+1928, *w15=w+1930, w16, w17, *w18=w+1954, *w19=w+1956, w20, w21, *w22=w+1980, *w23=w+1982;
+  casadi_real w24, w25, *w26=w+2006, *w27=w+2008, w28, w29, *w30=w+2032, *w31=w+2034, w32, w33, *w34=w+2058, *w35=w+2060;
+  casadi_real w36, w37, *w38=w+2084, *w39=w+2086, w40, w41, *w42=w+2110, *w43=w+2112, w44, w45;
   const casadi_real **arg1=arg+6, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24446,10 +24542,10 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_acc16:(x0[20],z0[2],u[2x16],p[26x16],h[1x16],ctl[2x16])->(xf[20x16],zf[2x16],y[24x16],r[1x16],nh[1x16]) */
-static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2081, *w01=w+2101, *w02=w+2103, w04, *w05=w+2105, *w06=w+2107, *w07=w+2127, *w08=w+2129, w09, w10, *w11=w+2153;
-  casadi_real w12, w13, *w14=w+2177, *w15=w+2179, w16, w17, *w18=w+2203, *w19=w+2205, w20, w21, *w22=w+2229, *w23=w+2231;
-  casadi_real w24, w25, *w26=w+2255, *w27=w+2257, w28, w29, *w33=w+2281, *w34=w+2481, *w35=w+2501, *w36=w+2741, *w37=w+2751;
+static int casadi_f37(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2183, *w01=w+2203, *w02=w+2205, w04, *w05=w+2207, *w06=w+2209, *w07=w+2229, *w08=w+2231, w09, w10, *w11=w+2255;
+  casadi_real w12, w13, *w14=w+2279, *w15=w+2281, w16, w17, *w18=w+2305, *w19=w+2307, w20, w21, *w22=w+2331, *w23=w+2333;
+  casadi_real w24, w25, *w26=w+2357, *w27=w+2359, w28, w29, *w33=w+2383, *w34=w+2583, *w35=w+2603, *w36=w+2843, *w37=w+2853;
   const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24613,7 +24709,7 @@ static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w35;
   res1[3]=w36;
   res1[4]=w37;
-  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+120);
   /* #44: output[1][0] = @7 */
@@ -24676,9 +24772,9 @@ static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_chunk16:(x0[20],z0[2],U[2x16],H[1x16],p[26],ctl[2])->(X[20x16],Z[2x16],Y[24x16],R[1x16],NH[1x16]) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+5, *w01=w+3090, *w04=w+3092, *w06=w+3508, *w07=w+3510, *w08=w+3542, *w09=w+3862, *w10=w+3894, *w11=w+4278, *w12=w+4294;
+  casadi_real **res1=res+5, *w01=w+3192, *w04=w+3194, *w06=w+3610, *w07=w+3612, *w08=w+3644, *w09=w+3964, *w10=w+3996, *w11=w+4380, *w12=w+4396;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24712,7 +24808,7 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w10;
   res1[3]=w11;
   res1[4]=w12;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f37(arg1, res1, iw, w, 0)) return 1;
   /* #9: output[0][0] = @8 */
   casadi_copy(w08, 320, res[0]);
   /* #10: output[1][0] = @9 */
@@ -24727,7 +24823,7 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f33(arg, res, iw, w, mem);
+  return casadi_f36(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_checkout(void) {
@@ -24800,18 +24896,172 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk16
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 179;
-  if (sz_res) *sz_res = 95;
+  if (sz_arg) *sz_arg = 192;
+  if (sz_res) *sz_res = 105;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 4310;
+  if (sz_w) *sz_w = 4412;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 179*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 95*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 192*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 105*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 4310*sizeof(casadi_real);
+  if (sz_w) *sz_w = 4412*sizeof(casadi_real);
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled_step:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1605, *w02=w+1607, w04, *w05=w+1609, *w06=w+1629, *w07=w+1631, *w08=w+1651, w09, w10, *w11=w+1653;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch0(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f9(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
+  return casadi_f39(arg, res, iw, w, mem);
+}
+
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step_checkout(void) {
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_step_release(int mem) {
+}
+
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_step_incref(void) {
+}
+
+CASADI_SYMBOL_EXPORT void homogeneous_rosenbrock_controlled_step_decref(void) {
+}
+
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_controlled_step_n_in(void) { return 6;}
+
+CASADI_SYMBOL_EXPORT casadi_int homogeneous_rosenbrock_controlled_step_n_out(void) { return 4;}
+
+CASADI_SYMBOL_EXPORT casadi_real homogeneous_rosenbrock_controlled_step_default_in(casadi_int i) {
+  switch (i) {
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_controlled_step_name_in(casadi_int i) {
+  switch (i) {
+    case 0: return "x0";
+    case 1: return "z0";
+    case 2: return "u";
+    case 3: return "p";
+    case 4: return "h";
+    case 5: return "ctl";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const char* homogeneous_rosenbrock_controlled_step_name_out(casadi_int i) {
+  switch (i) {
+    case 0: return "xf";
+    case 1: return "zf";
+    case 2: return "r";
+    case 3: return "nh";
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_step_sparsity_in(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    case 1: return casadi_s1;
+    case 2: return casadi_s1;
+    case 3: return casadi_s2;
+    case 4: return casadi_s3;
+    case 5: return casadi_s1;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_step_sparsity_out(casadi_int i) {
+  switch (i) {
+    case 0: return casadi_s0;
+    case 1: return casadi_s1;
+    case 2: return casadi_s3;
+    case 3: return casadi_s3;
+    default: return 0;
+  }
+}
+
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 161;
+  if (sz_res) *sz_res = 79;
+  if (sz_iw) *sz_iw = 0;
+  if (sz_w) *sz_w = 1655;
+  return 0;
+}
+
+CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
+  if (sz_arg) *sz_arg = 161*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 79*sizeof(casadi_real*);
+  if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
+  if (sz_w) *sz_w = 1655*sizeof(casadi_real);
   return 0;
 }
 

@@ -67,10 +67,10 @@ const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_in(casadi_
 const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_controlled_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_controlled_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_controlled_chunk256_SZ_ARG 185
-#define homogeneous_rosenbrock_controlled_chunk256_SZ_RES 100
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_ARG 198
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_RES 110
 #define homogeneous_rosenbrock_controlled_chunk256_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_chunk256_SZ_W 37502
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_W 37604
 int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_controlled_chunk16_checkout(void);
 void homogeneous_rosenbrock_controlled_chunk16_release(int mem);
@@ -85,10 +85,28 @@ const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_in(casadi_i
 const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_controlled_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_controlled_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_controlled_chunk16_SZ_ARG 179
-#define homogeneous_rosenbrock_controlled_chunk16_SZ_RES 95
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_ARG 192
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_RES 105
 #define homogeneous_rosenbrock_controlled_chunk16_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_chunk16_SZ_W 4310
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_W 4412
+int homogeneous_rosenbrock_controlled_step(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
+int homogeneous_rosenbrock_controlled_step_checkout(void);
+void homogeneous_rosenbrock_controlled_step_release(int mem);
+void homogeneous_rosenbrock_controlled_step_incref(void);
+void homogeneous_rosenbrock_controlled_step_decref(void);
+casadi_int homogeneous_rosenbrock_controlled_step_n_in(void);
+casadi_int homogeneous_rosenbrock_controlled_step_n_out(void);
+casadi_real homogeneous_rosenbrock_controlled_step_default_in(casadi_int i);
+const char* homogeneous_rosenbrock_controlled_step_name_in(casadi_int i);
+const char* homogeneous_rosenbrock_controlled_step_name_out(casadi_int i);
+const casadi_int* homogeneous_rosenbrock_controlled_step_sparsity_in(casadi_int i);
+const casadi_int* homogeneous_rosenbrock_controlled_step_sparsity_out(casadi_int i);
+int homogeneous_rosenbrock_controlled_step_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+int homogeneous_rosenbrock_controlled_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
+#define homogeneous_rosenbrock_controlled_step_SZ_ARG 161
+#define homogeneous_rosenbrock_controlled_step_SZ_RES 79
+#define homogeneous_rosenbrock_controlled_step_SZ_IW 0
+#define homogeneous_rosenbrock_controlled_step_SZ_W 1655
 void homogeneous_rosenbrock_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_rosenbrock_casadi_int_size(void);
 int homogeneous_rosenbrock_casadi_real_size(void);

@@ -80,7 +80,6 @@ FMU_BUILD_VERSION = 1
 FMU_TEMPLATE = Path(__file__).resolve().parent / "fmu_template.c"
 # -fvisibility=hidden without GCC_HASCLASSVISIBILITY: only the fmi2 functions (FMI2_Export) are exported
 FMU_CFLAGS = ("-O2", "-std=c99", "-Wall")
-FMU_CHUNK = 16  # fixed steps per call of the generated controlled chunk (native.generate.CHUNK_SIZES)
 FMU_SHARED_CFLAGS = ("-fPIC", "-fvisibility=hidden")
 START_POSE = ("start_x_m", "start_y_m", "start_yaw_rad")
 
@@ -247,9 +246,9 @@ def _model_header(model, sc: Scenario, variables, guid: str, prefix: str) -> byt
     vr_y = vr_x + model.nx
     if variables[vr_x].name != model.state_names[0] or len(variables) != vr_y + len(outs):
         raise RuntimeError("fmu_variables and fmu_model.h disagree on the value reference layout")
-    fnames = [f"{prefix}_{FIXED_STEP_METHOD}_controlled_chunk{FMU_CHUNK}", f"{prefix}_outputs",
+    fnames = [f"{prefix}_{FIXED_STEP_METHOD}_controlled_step", f"{prefix}_outputs",
               f"{prefix}_consistent_z", f"{prefix}_accel", f"{prefix}_fmu_static_newton", f"{prefix}_fmu_static_guess"]
-    macros = ["F_CHUNK", "F_OUTPUTS", "F_CONSISTENT_Z", "F_ACCEL", "F_STATIC_NEWTON", "F_STATIC_GUESS"]
+    macros = ["F_STEP", "F_OUTPUTS", "F_CONSISTENT_Z", "F_ACCEL", "F_STATIC_NEWTON", "F_STATIC_GUESS"]
     tol = float(sc.run.fixed_step_tolerance)
     text = [
         f"/* fmu_model.h: the numbers of the FMU of scenario '{sc.name}'.",
@@ -265,7 +264,6 @@ def _model_header(model, sc: Scenario, variables, guid: str, prefix: str) -> byt
         # the steps' error control (symtrack/integrators/fixed_step.py): the tolerance and the largest ratio
         # of the estimate to it before a step is halved (off, run.fixed_step_tolerance = 0: never halved,
         # the ratio against the default tolerance still reported)
-        f"#define FMU_CHUNK {FMU_CHUNK}",
         f"#define FMU_TOLERANCE {c_literal(tol if tol > 0 else FIXED_STEP_TOLERANCE)}",
         f"#define FMU_TOLERANCE_ON {1 if tol > 0 else 0}",
         "#define FMU_VR_U 0", f"#define FMU_VR_P {vr_p}", f"#define FMU_VR_POSE {vr_pose}", f"#define FMU_VR_X {vr_x}",

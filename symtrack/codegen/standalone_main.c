@@ -25,10 +25,9 @@
 #include "homogeneous_rosenbrock.h"
 #include "homogeneous_validation.h"
 
-/* the steps, 16 per call, each error-controlled as the Python run's (symtrack/integrators/fixed_step.py:
-   halved while its estimate exceeds the tolerance, down to 1/64 of its length) */
-#define CHUNK 16
-#define F(name) homogeneous_rosenbrock_controlled_chunk16##name
+/* each step error-controlled as the Python run's (symtrack/integrators/fixed_step.py: halved while its
+   estimate exceeds the tolerance, down to 1/64 of its length) */
+#define F(name) homogeneous_rosenbrock_controlled_step##name
 
 static const casadi_real **g_arg;
 static casadi_real **g_res;
@@ -42,29 +41,20 @@ static double g_error_max;
 static int advance(const double *x0, const double *z0, const double *u, double length_s, double *x, double *z) {
   static const double ctl[2] = {SYM_FIXED_STEP_TOLERANCE, SYM_FIXED_STEP_CONTROL ? 1.0 : INFINITY};
   long n = (long)ceil(length_s / SYM_FIXED_STEP_S - 1e-9);
-  double U[SYM_NU * CHUNK], H[CHUNK], X[SYM_NX * CHUNK], Z[SYM_NZ * CHUNK], R[CHUNK], NH[CHUNK];
+  double xt[SYM_NX], zt[SYM_NZ], r, nh;
   if (n < 1) n = 1;
   double h = length_s / (double)n;
   memcpy(x, x0, SYM_NX * sizeof *x);
   memcpy(z, z0, SYM_NZ * sizeof *z);
-  while (n > 0) {
-    long k = n < CHUNK ? n : CHUNK;
-    for (long j = 0; j < CHUNK; j++) {
-      for (int i = 0; i < SYM_NU; i++) U[j * SYM_NU + i] = j < k ? u[i] : 0.0;
-      H[j] = j < k ? h : 0.0;
-    }
-    g_arg[0] = x; g_arg[1] = z; g_arg[2] = U; g_arg[3] = H; g_arg[4] = sym_p; g_arg[5] = ctl;
-    g_res[0] = X; g_res[1] = Z; g_res[2] = NULL; g_res[3] = R; g_res[4] = NH; /* (no outputs here) */
-    if (F()(g_arg, g_res, g_iw, g_w, g_mem)) return 1;
-    for (long j = 0; j < k; j++) {
-      if (!isfinite(R[j])) return 1;
-      if (R[j] > g_error_max) g_error_max = R[j];
-      g_halved += (long)NH[j];
-      g_nsteps += 1 + 2 * (long)NH[j];
-    }
-    memcpy(x, X + (k - 1) * SYM_NX, SYM_NX * sizeof *x);
-    memcpy(z, Z + (k - 1) * SYM_NZ, SYM_NZ * sizeof *z);
-    n -= k;
+  for (long k = 0; k < n; k++) {
+    g_arg[0] = x; g_arg[1] = z; g_arg[2] = u; g_arg[3] = sym_p; g_arg[4] = &h; g_arg[5] = ctl;
+    g_res[0] = xt; g_res[1] = zt; g_res[2] = &r; g_res[3] = &nh;
+    if (F()(g_arg, g_res, g_iw, g_w, g_mem) || !isfinite(r)) return 1;
+    if (r > g_error_max) g_error_max = r;
+    g_halved += (long)nh;
+    g_nsteps += 1 + 2 * (long)nh;
+    memcpy(x, xt, sizeof xt);
+    memcpy(z, zt, sizeof zt);
   }
   return 0;
 }

@@ -130,7 +130,8 @@ def fixed_step_functions(model, prefix: str):
 
 
 def controlled_chunks(model, prefix: str, step: ca.Function):
-    """Chunks of error-controlled steps: ``<m>_rosenbrock_controlled_chunk<N>(x0,z0,U,H,p,ctl)->(X,Z,Y,R,NH)``.
+    """Chunks of error-controlled steps: ``<m>_rosenbrock_controlled_chunk<N>(x0,z0,U,H,p,ctl)->(X,Z,Y,R,NH)``,
+    and one such step without the outputs, ``<m>_rosenbrock_controlled_step(x0,z0,u,p,h,ctl)->(xf,zf,r,nh)``.
 
     Each step of length H[k] is taken, and its error ratio r = max_i |ef_i| / (FIXED_STEP_ATOL +
     rtol max(|x0_i|, |xf_i|)) over the differential states is computed (ctl = (rtol, r_limit)); where
@@ -140,7 +141,8 @@ def controlled_chunks(model, prefix: str, step: ca.Function):
     largest ratio of the steps kept in step k (above r_limit only where the halvings ran out), of
     NH how many steps were halved. The recursion is one C function per depth, each calling the
     one below twice behind a branch (CasADi's ``Function.conditional``): the halvings cost only
-    where they are taken. r_limit = inf: no step halved, the ratios measured."""
+    where they are taken. r_limit = inf: no step halved, the ratios measured. A column with H[k] = 0 is
+    not computed (a branch: X, Z keep the column before, Y, R, NH are 0)."""
     name = f"{prefix}_{FIXED_STEP_METHOD}"
     X0, Z0 = ca.MX.sym("x0", model.x.sparsity()), ca.MX.sym("z0", model.z.sparsity())
     U, P, H = ca.MX.sym("u", model.u.sparsity()), ca.MX.sym("p", model.p.sparsity()), ca.MX.sym("h")
@@ -175,8 +177,18 @@ def controlled_chunks(model, prefix: str, step: ca.Function):
             level = ca.Function(f"{name}_controlled{depth}", ins, res, in_names, out_names)
         below = level
     xf, zf, r, nh = below(X0, Z0, U, P, H, ctl)
-    col = ca.Function(f"{name}_controlled_column", [X0, Z0, U, P, H, ctl], [xf, zf, model.outputs(xf, U, P), r, nh],
-                      in_names, ["xf", "zf", "y", "r", "nh"])
+    # one controlled step without the outputs (the C programs and the FMU: their outputs on demand)
+    single = ca.Function(f"{name}_controlled_step", ins, [xf, zf, r, nh], in_names, out_names)
+    col_names = ["xf", "zf", "y", "r", "nh"]
+    stepped = ca.Function(f"{name}_controlled_column_step", [X0, Z0, U, P, H, ctl],
+                          [xf, zf, model.outputs(xf, U, P), r, nh], in_names, col_names)
+    # a column of length 0 (a chunk's unused columns: a run's last steps, one communication step of an FMU)
+    # costs nothing: a branch around the step, which is the same code as without it
+    idle = ca.Function(f"{name}_idle", [X0, Z0, U, P, H, ctl],
+                       [X0, Z0, ca.MX.zeros(len(model.output_names), 1), 0, 0], in_names, col_names)
+    skip = ca.Function.conditional(f"{name}_step_or_idle", [idle], stepped)
+    col = ca.Function(f"{name}_controlled_column", [X0, Z0, U, P, H, ctl], skip(H > 0, X0, Z0, U, P, H, ctl),
+                      in_names, col_names)
     chunks = []
     for n in CHUNK_SIZES:
         acc = col.mapaccum(f"{name}_controlled_acc{n}", n, 2)
@@ -185,7 +197,7 @@ def controlled_chunks(model, prefix: str, step: ca.Function):
         Xs, Zs, Ys, Rs, NHs = acc(X0, Z0, Us, ca.repmat(P, 1, n), Hs, ca.repmat(ctl, 1, n))
         chunks.append(ca.Function(f"{name}_controlled_chunk{n}", [X0, Z0, Us, Hs, P, ctl], [Xs, Zs, Ys, Rs, NHs],
                                   ["x0", "z0", "U", "H", "p", "ctl"], ["X", "Z", "Y", "R", "NH"]))
-    return chunks
+    return [*chunks, single]
 
 
 # The files, each a group of Functions that is compiled and loaded on its own: a simulation
@@ -195,6 +207,7 @@ GROUPS = ("ode", "dae", "outputs", "linearize_outputs", FIXED_STEP_METHOD)
 GROUP_OF = {"ode": "ode", "linearize": "ode", "dae": "dae", "accel": "dae", "outputs": "outputs",
             "linearize_outputs": "linearize_outputs", f"{FIXED_STEP_METHOD}_step": FIXED_STEP_METHOD,
             "consistent_z": FIXED_STEP_METHOD,
+            f"{FIXED_STEP_METHOD}_controlled_step": FIXED_STEP_METHOD,
             **{f"{FIXED_STEP_METHOD}_controlled_chunk{n}": FIXED_STEP_METHOD for n in CHUNK_SIZES}}
 
 
