@@ -559,7 +559,7 @@ class PyKernel:
                     sig = subsoil.stress_at(s.subsoil, s.ch_cx[act], s.ch_cy[act], a1, s.geo).astype(np.float32)
                     cells = s.ch_cell[act]
                     s.sig_pass[cells] = np.maximum(s.sig_pass[cells], sig)
-                    if s.subsoil_p is not None:  # the mean normal stress of the bulk density
+                    if s.compute_mean_stress and s.subsoil_p is not None:  # the mean normal stress (when asked)
                         pm = subsoil.stress_at(s.subsoil_p, s.ch_cx[act], s.ch_cy[act], a1, s.geo).astype(np.float32)
                         s.p_pass[cells] = np.maximum(s.p_pass[cells], pm)
             s.wv[:] = w1

@@ -210,7 +210,21 @@ class EngineState:
         self._world_for_tables = world
         self.subsoil_p = None
         self._subsoil_p_c = None
-        self.compute_mean_stress = False
+        self._compute_mean_stress = False
+
+    @property
+    def compute_mean_stress(self) -> bool:
+        """Whether the kernel records the mean normal stress at the depths (``p_pass``; off by default:
+        nothing uses it). Switched on, the tables are built (once) and both kernels fill ``p_pass``."""
+        return self._compute_mean_stress
+
+    @compute_mean_stress.setter
+    def compute_mean_stress(self, on: bool) -> None:
+        self._compute_mean_stress = bool(on)
+        if on and self.subsoil_p is None and self.subsoil is not None:
+            w = self._world_for_tables
+            self.subsoil_p = mean_stress_tables(w.params, w.storage.subsoil_depths_m)
+            self._subsoil_p_c = self.subsoil_p.c_struct() if self.subsoil_p is not None else None
 
     def struct(self) -> EngineStruct:
         g, st, s = self.grid, self.storage, self.settings
@@ -250,10 +264,6 @@ class EngineState:
         if e.n_depths > MAX_SUBSOIL_DEPTHS:  # subsoil.h's SUBSOIL_MAX_DEPTHS (the scenario's limit)
             raise SimulationError(f"{e.n_depths} subsoil depths: the engine takes at most {MAX_SUBSOIL_DEPTHS}")
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
-        if self.compute_mean_stress and self.subsoil_p is None and self.subsoil is not None:
-            w = self._world_for_tables
-            self.subsoil_p = mean_stress_tables(w.params, w.storage.subsoil_depths_m)
-            self._subsoil_p_c = self.subsoil_p.c_struct() if self.subsoil_p is not None else None
         e.subsoil_p = (ctypes.addressof(self._subsoil_p_c) if self._subsoil_p_c is not None and self.subsoil is not None
                        and self.compute_mean_stress else None)
         e.n_sums = self.n_sums
