@@ -201,7 +201,7 @@ def test_history_chains_and_older_schemas_load_with_an_empty_history(tmp_path):
     second = persist.load(f)
     assert [h["run_id"] for h in second.history] == ["a" * 32, "b" * 32]
     assert second.history[1]["input_file_id"] == first_id != second.file_id == first.file_id
-    assert "2 run(s)" in repr(second) and "4 x 3 cells" in repr(second)
+    assert "2 saved run(s)" in repr(second) and "4 x 3 cells" in repr(second)
     # a schema-2 file (as the last symtrack wrote it): no history, no id
     with np.load(f) as z:
         d = {k: z[k] for k in z.files if k not in ("file_id", "history_json")}
