@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate
+.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -61,5 +61,24 @@ validate: $(VENV)/.installed
 bench: $(VENV)/.installed build/symtrack_standalone
 	$(VENV)/bin/symtrack bench --out out/bench.json
 
+# the documentation site (docs/index.md): Sphinx over docs/*.md, warnings as errors, into docs/_build/html
+$(VENV)/.installed-docs: $(VENV)/.installed
+	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[docs]'
+	touch $@
+
+docs: $(VENV)/.installed-docs
+	$(PY) -m sphinx -b html -W --keep-going docs docs/_build/html
+	@echo "the site: docs/_build/html/index.html"
+
+# the examples the docs show that run in about a minute or less each, into out/examples (the slower ones:
+# docs/howto.md and the pages they belong to)
+DOCS_EXAMPLES ?= oscillation_study lqr_speed_yaw one_soil steady_turns hull_rotation
+docs-examples: $(VENV)/.installed
+	@for e in $(DOCS_EXAMPLES); do echo "examples/$$e.py"; $(PY) examples/$$e.py --out out/examples/$$e || exit 1; done
+
+# today's speed figures: measures and rewrites the tables of docs/performance.md (a few minutes)
+performance: $(VENV)/.installed
+	$(PY) docs/performance.py
+
 clean:
-	rm -rf out build *.egg-info
+	rm -rf out build *.egg-info docs/_build

@@ -59,7 +59,7 @@ class Result:
     runs : list of RunResult
         One per pass (one for the homogeneous terrain).
     summary : dict
-        The summary.json of the run (README: "Output files"); for several passes the whole run's
+        The summary.json of the run (docs/outputs.md); for several passes the whole run's
         figures (symtrack/simulation/passes.py) with ``passes``, the per-pass figures.
     pass_summaries : list of dict
         The summary of each pass (what ``pass_<k>/summary.json`` holds).

@@ -56,7 +56,7 @@ def test_fmpy_validation_finds_no_problem(exported):
 
 
 def test_fmpy_cosimulation_agrees_with_the_python_run(exported):
-    # the FMU takes every step as it is: the Python run without the error control (README, "Error control
+    # the FMU takes every step as it is: the Python run without the error control (docs/scenarios.md, "Error control
     # of the fixed step")
     sc = load_scenario("validation", ["run.integrator=rosenbrock", "run.fixed_step_tolerance=0"])
     ref = simulate(sc)

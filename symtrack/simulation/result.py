@@ -1,4 +1,4 @@
-"""The result of one run (one pass) and its summary figures (summary.json, schema in the README)."""
+"""The result of one run (one pass) and its summary figures (summary.json, schema in docs/outputs.md)."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ class RunResult:
 
 
 def summarise(res: RunResult) -> dict:
-    """The summary figures of a run (summary.json keys, README)."""
+    """The summary figures of a run (summary.json keys, docs/outputs.md)."""
     sc = res.scenario
     X0, Y0, psi0 = res.X[0, 0], res.X[0, 1], res.X[0, 2]
     xe, ye, psie = res.X[-1, 0], res.X[-1, 1], res.X[-1, 2]
