@@ -1,6 +1,7 @@
 """The documentation site builds with no warning (``make docs``: Sphinx over docs/*.md, the API reference
-from the docstrings), every page of docs/ is in a table of contents, and the commands the README and the
-tutorial name exist. The examples are not run here (the example tests run them; ``make docs-examples``)."""
+from the docstrings), every page of docs/ is in a table of contents, the measured tables are the ones a
+command writes, and every `symtrack ...` command the README and the docs show is one the command line
+accepts. Nothing is run here (the example tests run the examples; ``make docs-examples``)."""
 
 from __future__ import annotations
 
@@ -73,3 +74,72 @@ def test_the_changelog_has_one_entry_per_release():
     releases = re.findall(r"^## (\S+)", text, re.M)
     assert releases and releases[0] == version, (releases, version)
     assert len(releases) == len(set(releases))
+
+
+def _doc_commands():
+    """(file, line, argv) of every `symtrack ...` line of a code block (```sh, ```text or no language) of
+    README.md and docs/*.md: a trailing comment dropped, `&&` chains split, backslash continuations joined,
+    a synopsis's optional parts (`[--set KEY=VALUE ...]`) taken as given."""
+    import shlex
+
+    files = [ROOT / "README.md", *sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.parts)]
+    for path in files:
+        fence, pending = None, ""
+        for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+            m = re.match(r"^(\s*)(```+)(\S*)", raw)
+            if m and fence is None:
+                fence = (m.group(2), m.group(3) in ("", "sh", "bash", "console", "shell", "text"))
+                continue
+            if m and fence is not None and raw.strip() == fence[0]:
+                fence = None
+                continue
+            if fence is None or not fence[1]:
+                continue
+            line = pending + raw
+            if line.endswith("\\"):
+                pending = line[:-1] + " "
+                continue
+            pending = ""
+            for part in line.split("&&"):
+                part = part.strip().removeprefix("$ ")
+                if part.startswith(".venv/bin/symtrack "):
+                    part = part[len(".venv/bin/"):]
+                if not part.startswith("symtrack "):
+                    continue
+                argv = shlex.split(part.replace("[", " ").replace("]", " "), comments=True)
+                yield path.relative_to(ROOT).as_posix(), lineno, [a for a in argv[1:] if a != "..."]
+
+
+def test_every_command_in_the_docs_parses():
+    """Each `symtrack ...` command the README and the docs show is one the command line accepts (its
+    subcommand and options), and a `symtrack simulate` of a built-in scenario loads with the `--set` values
+    it shows: a renamed option or key fails here, not in a reader's shell. Nothing is run."""
+    import contextlib
+    import io
+
+    from symtrack.cli.main import build_parser
+    from symtrack.simulation.scenario import builtin_names, load_scenario
+
+    parser = build_parser()
+    builtin = set(builtin_names())
+    bad, n = [], 0
+    for where, line, argv in _doc_commands():
+        n += 1
+        err = io.StringIO()
+        try:
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                args = parser.parse_args(argv)
+        except SystemExit as e:
+            if e.code not in (0, None):  # --help and --version exit 0
+                bad.append(f"{where}:{line}: symtrack {' '.join(argv)}: {err.getvalue().strip().splitlines()[-1]}")
+            continue
+        if args.cmd == "simulate" and args.scenario in builtin:
+            sets = list(args.set or [])
+            if args.integrator:
+                sets.append(f"run.integrator={args.integrator}")
+            try:
+                load_scenario(args.scenario, sets)
+            except Exception as e:  # noqa: BLE001 - any refusal is a finding
+                bad.append(f"{where}:{line}: symtrack {' '.join(argv)}: {e}")
+    assert n > 50, f"only {n} commands found in the docs"
+    assert not bad, "commands in the docs that the command line refuses:\n" + "\n".join(bad)
