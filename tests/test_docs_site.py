@@ -143,3 +143,42 @@ def test_every_command_in_the_docs_parses():
                 bad.append(f"{where}:{line}: symtrack {' '.join(argv)}: {e}")
     assert n > 50, f"only {n} commands found in the docs"
     assert not bad, "commands in the docs that the command line refuses:\n" + "\n".join(bad)
+
+
+def test_the_tutorial_files_load(tmp_path):
+    """The files of the getting-started tutorial, as it has the reader write them (the starting files of
+    `symtrack new` with its TOML snippets applied, its soil file as shown), load and validate: a renamed
+    key or preset fails here. Nothing is run (the tutorial's runs take a minute)."""
+    import tomllib
+
+    from symtrack.foundations.config import to_toml
+    from symtrack.simulation.scenario import load_scenario
+    from symtrack.studies.field import load_field_spec
+
+    text = (DOCS / "getting-started.md").read_text(encoding="utf-8")
+    snippets = [tomllib.loads(b) for b in re.findall(r"```toml\n(.*?)```", text, re.S)]
+    soil_file = [s for s in snippets if "base" in s]
+    assert len(soil_file) == 1, "the tutorial shows one soil file (with base = ...)"
+    (tmp_path / "wet_clay.toml").write_text(to_toml(soil_file[0]))
+    named = re.search(r"Write `(\w+\.toml)` next to `my_run\.toml`", text)
+    assert named and named.group(1) == "wet_clay.toml"
+
+    def merged(template: str, parts: list[dict]) -> dict:
+        doc = tomllib.loads((ROOT / "symtrack" / "cli" / "templates" / template).read_text())
+        for part in parts:
+            for section, values in part.items():
+                doc.setdefault(section, {}).update(values)
+        return doc
+
+    step5 = text.index("## 5.")
+    sim_parts = [s for s in snippets if "base" not in s and "field" not in s]
+    field_parts = [tomllib.loads(b) for b in re.findall(r"```toml\n(.*?)```", text[step5:], re.S)]
+    assert sim_parts and field_parts
+    (tmp_path / "my_run.toml").write_text(to_toml(merged("simulation.toml", sim_parts)))
+    sc = load_scenario(str(tmp_path / "my_run.toml"))
+    assert sc.vehicle["mass_kg"] == 6500.0 and sc.soil["cohesion_Pa"] == soil_file[0]["cohesion_Pa"]
+    (tmp_path / "my_field.toml").write_text(to_toml(merged("field.toml", field_parts)))
+    spec = load_field_spec(str(tmp_path / "my_field.toml"))
+    assert spec.scenario.vehicle["mass_kg"] == 6500.0
+    assert spec.scenario.soil["cohesion_Pa"] == soil_file[0]["cohesion_Pa"]
+    assert list(spec.field.size_m) == [20.0, 9.0]
