@@ -36,9 +36,12 @@ def test_mpc_example(tmp_path):
     assert s["solves"] == 15 and s["failed_solves"] == 0
     assert s["max_lateral_error_m"] < 0.05  # the run starts on the path
     assert (tmp_path / "summary.json").exists()
+    # the report: what ran and how it went, its figures embedded
+    page = (tmp_path / "report.html").read_text()
+    assert "symtrack mpc: headland_uturn" in page and "15 solves, 0 failed" in page and "data:image/png" in page
 
 
-@pytest.mark.slow  # a JIT build: gcc of the fatrop solver every run (make test-slow)
+@pytest.mark.slow  # a JIT build: gcc of the fatrop solver every run (a short horizon: the smallest C; make test-slow)
 def test_jit_build_runs(tmp_path, monkeypatch):
     import dataclasses
 
@@ -46,7 +49,7 @@ def test_jit_build_runs(tmp_path, monkeypatch):
     from symtrack.model import SystemModel
 
     sc = scenario.load("headland_uturn")
-    sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, solver="fatrop", jit=True, horizon_steps=20,
+    sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, solver="fatrop", jit=True, horizon_steps=6,
                                                          jit_dir=str(tmp_path / "jit")))
     # a working directory of this test's own: the repository's is shared with the tests that run
     # at the same time on the other worker (a first Hypothesis run creates .hypothesis/ there)

@@ -143,6 +143,9 @@ def test_output_files_and_their_schema(study):
         assert key in s
     assert (out / "comparison.png").stat().st_size > 1000
     assert "[field]" in (out / "field.resolved.toml").read_text()
+    page = (out / "report.html").read_text()  # what ran, the patterns side by side, every map embedded
+    assert "symtrack field:" in page and "<h2>Patterns</h2>" in page and "trafficked_area_fraction" in page
+    assert page.count("data:image/png") >= 1 + 2 * len(PATTERNS)
     for name in PATTERNS:
         f = s["patterns"][name]
         hist = f["passes_per_cell_histogram"]

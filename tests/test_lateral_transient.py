@@ -278,13 +278,14 @@ def test_bench_rows_of_the_two_laws(monkeypatch):
     million-cell validation on the terrain engine; the shear law's figures are within 0.5 % of IDAS at
     the scenario's reference tolerances (docs/turning.md section 8: `symtrack simulate validation_grid
     --set model.lateral_law=shear --integrator idas`, yaw 15.45215 deg, lateral 2.50376 m). The density
-    rows (issue 24): the shear law's run with and without the bulk density's mean normal stress gives
-    the same vehicle states to the last bit (the stress feeds nothing back)."""
+    rows: the shear law's run with and without the mean normal stress at the subsoil depths (unused: the
+    default leaves it out) gives the same vehicle states to the last bit (the stress feeds nothing back)."""
     from symtrack.bench import laws
 
     rows = laws.bench_rows(quick=True)
     assert [r["case"] for r in rows] == ["lateral_law = creep", "lateral_law = shear", "shear / creep",
-                                         "with the mean normal stress", "without", "with / without"]
+                                         "with the mean normal stress (unused)", "without (the default)",
+                                         "with / without"]
     fig = rows[1]["figures"]
     assert fig["yaw_final_deg"] == pytest.approx(15.45215, rel=5e-3)
     assert fig["lateral_deviation_m"] == pytest.approx(2.50376, rel=5e-3)

@@ -124,6 +124,8 @@ def test_field_persists_bit_for_bit_through_save_and_load(tmp_path):
         assert np.array_equal(a, disk.terrain.arrays()[name]), name
     assert np.array_equal(mem.counts, disk.counts)
     assert (tmp_path / "s" / "summary.json").is_file()
+    page = (tmp_path / "s" / "report.html").read_text()  # each operation's figures side by side
+    assert "<h2>Operations</h2>" in page and "2 operation(s)" in page
     assert dataclasses.is_dataclass(spec.base)
 
 

@@ -11,7 +11,7 @@ from symtrack.simulation.scenario import scenario_from_dict
 # every cell of the field as its own IDAS state: the slow set (make test-slow; CI runs it)
 pytestmark = pytest.mark.slow
 
-# A 12 m x 4 m field at 0.25 m (768 cells); both sprockets at 2000 N m for 0.5 s, then the left
+# An 8 m x 4 m field at 0.25 m (512 cells); both sprockets at 2000 N m for 0.5 s, then the left
 # one idle: the vehicle starts from rest, accelerates and begins to turn.
 SMALL = {
     "name": "pool_vs_brute",
@@ -19,7 +19,7 @@ SMALL = {
     "vehicle": {"preset": "reference_crawler"},
     "soil": {"preset": "clayey_soil_thailand_38"},
     "start": {"x_m": -3.0},
-    "terrain": {"size_m": [12.0, 4.0], "cell_m": 0.25, "origin_m": [-6.0, -2.0], "settle_s": 0.1},
+    "terrain": {"size_m": [8.0, 4.0], "cell_m": 0.25, "origin_m": [-6.0, -2.0], "settle_s": 0.1},
     "torque": [{"t_s": 0.0, "left_N_m": 2000.0, "right_N_m": 2000.0},
                {"t_s": 0.5, "left_N_m": 0.0, "right_N_m": 2000.0}],
 }

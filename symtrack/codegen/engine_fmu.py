@@ -271,8 +271,8 @@ def _tables(tag: str, tables) -> str:
 
 
 def _subsoil_constants(parts: dict) -> str:
-    """The subsoil stress (the tables of the vertical and the mean normal stress, as EngineState builds
-    them) and the bulk density's constants (density.soil_arrays of the one soil), or EF_N_DEPTHS 0."""
+    """The subsoil stress (the tables of the vertical stress, as EngineState builds them) and the bulk
+    density's constants (density.soil_arrays of the one soil at each depth), or EF_N_DEPTHS 0."""
     from ..terrain import density
 
     world, state = parts["world"], parts["state"]
@@ -280,15 +280,14 @@ def _subsoil_constants(parts: dict) -> str:
     if state.subsoil is None:
         return "#define EF_N_DEPTHS 0\n#define EF_DENSITY 0\n"
     out = f"#define EF_N_DEPTHS {len(depths)}\n" + c_array("ef_depths", depths) + _tables("sub", state.subsoil)
-    if state.subsoil_p is None:  # the concentration factor admits no mean normal stress: no bulk density
-        return out + "#define EF_DENSITY 0\n"
+
     # each depth's layer's lines (a soil of two layers: its subsoil's below subsoil_top_m)
     a = density.soil_arrays(world.soils[:1], depths)
     arrays = "".join(c_array(f"ef_dens_{name}", a[key][0]) for name, key in (
         ("N", "N"), ("lmk", "lambda_minus_kappa"), ("v0", "v0"), ("lambda", "lambda"), ("kappa", "kappa"),
         ("m", "m"), ("k2", "k2"), ("vmin", "v_min"))) + c_array(
         "ef_dens_geo", density.geostatic_table(world.soils[:1], depths)[0])
-    return (out + "#define EF_DENSITY 1\n" + _tables("subp", state.subsoil_p)
+    return (out + "#define EF_DENSITY 1\n"
             + f"#define EF_DENS_YIELD {1 if (a['m'][0] > 0).any() else 0}\n" + arrays)
 
 

@@ -72,10 +72,6 @@ typedef struct {
 #if EF_N_DEPTHS > 0
 static const subsoil_tables_t ef_subsoil = {EF_N_DEPTHS, ef_sub_inv_x, ef_sub_inv_t, ef_sub_n_x, ef_sub_n_t,
                                             ef_sub_offset, ef_sub_data};
-#if EF_DENSITY
-static const subsoil_tables_t ef_subsoil_p = {EF_N_DEPTHS, ef_subp_inv_x, ef_subp_inv_t, ef_subp_n_x, ef_subp_n_t,
-                                              ef_subp_offset, ef_subp_data};
-#endif
 #endif
 
 static void logf_(Instance *c, fmi2Status status, const char *category, const char *fmt, ...) {
@@ -169,9 +165,6 @@ static int engine_alloc(Instance *c) {
   sub_ok = E->sig_pass && E->p_pass && c->sigma_max && c->specific_volume;
   E->subsoil = &ef_subsoil;
   E->n_depths = EF_N_DEPTHS;
-#if EF_DENSITY
-  E->subsoil_p = &ef_subsoil_p;
-#endif
 #endif
   c->allocated = 1;
   size_t na;

@@ -45,6 +45,7 @@ import casadi as ca
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, check_output_file
+from ..integrators.settings import FIXED_STEP_TOLERANCE
 from ..model.soil_law import make as make_soil_law
 from ..model.system import PARAM_NAMES
 from ..model.vehicle import GRAVITY_M_S2
@@ -79,6 +80,7 @@ FMU_BUILD_VERSION = 1
 FMU_TEMPLATE = Path(__file__).resolve().parent / "fmu_template.c"
 # -fvisibility=hidden without GCC_HASCLASSVISIBILITY: only the fmi2 functions (FMI2_Export) are exported
 FMU_CFLAGS = ("-O2", "-std=c99", "-Wall")
+FMU_CHUNK = 16  # fixed steps per call of the generated controlled chunk (native.generate.CHUNK_SIZES)
 FMU_SHARED_CFLAGS = ("-fPIC", "-fvisibility=hidden")
 START_POSE = ("start_x_m", "start_y_m", "start_yaw_rad")
 
@@ -245,9 +247,10 @@ def _model_header(model, sc: Scenario, variables, guid: str, prefix: str) -> byt
     vr_y = vr_x + model.nx
     if variables[vr_x].name != model.state_names[0] or len(variables) != vr_y + len(outs):
         raise RuntimeError("fmu_variables and fmu_model.h disagree on the value reference layout")
-    fnames = [f"{prefix}_{FIXED_STEP_METHOD}_step", f"{prefix}_outputs", f"{prefix}_consistent_z", f"{prefix}_accel",
-              f"{prefix}_fmu_static_newton", f"{prefix}_fmu_static_guess"]
-    macros = ["F_STEP", "F_OUTPUTS", "F_CONSISTENT_Z", "F_ACCEL", "F_STATIC_NEWTON", "F_STATIC_GUESS"]
+    fnames = [f"{prefix}_{FIXED_STEP_METHOD}_controlled_chunk{FMU_CHUNK}", f"{prefix}_outputs",
+              f"{prefix}_consistent_z", f"{prefix}_accel", f"{prefix}_fmu_static_newton", f"{prefix}_fmu_static_guess"]
+    macros = ["F_CHUNK", "F_OUTPUTS", "F_CONSISTENT_Z", "F_ACCEL", "F_STATIC_NEWTON", "F_STATIC_GUESS"]
+    tol = float(sc.run.fixed_step_tolerance)
     text = [
         f"/* fmu_model.h: the numbers of the FMU of scenario '{sc.name}'.",
         " * Written by symtrack export fmu; do not edit. */",
@@ -259,6 +262,12 @@ def _model_header(model, sc: Scenario, variables, guid: str, prefix: str) -> byt
         f"#define FMU_NP {n_p}", f"#define FMU_NY {len(model.output_names)}",
         f"#define FMU_NCELL {len(lay.cell_indices('sinkage'))}",
         f"#define FMU_FIXED_STEP_S {c_literal(sc.run.fixed_step_s)}",
+        # the steps' error control (symtrack/integrators/fixed_step.py): the tolerance and the largest ratio
+        # of the estimate to it before a step is halved (off, run.fixed_step_tolerance = 0: never halved,
+        # the ratio against the default tolerance still reported)
+        f"#define FMU_CHUNK {FMU_CHUNK}",
+        f"#define FMU_TOLERANCE {c_literal(tol if tol > 0 else FIXED_STEP_TOLERANCE)}",
+        f"#define FMU_TOLERANCE_ON {1 if tol > 0 else 0}",
         "#define FMU_VR_U 0", f"#define FMU_VR_P {vr_p}", f"#define FMU_VR_POSE {vr_pose}", f"#define FMU_VR_X {vr_x}",
         f"#define FMU_VR_Y {vr_y}", f"#define FMU_VR_END {len(variables)}",
         f"#define FMU_NF {len(fnames)}",

@@ -19,7 +19,7 @@ __all__ = ["BASE_UNITS", "FMI2_HEADERS", "LOG_CATEGORIES", "FmuVariable", "probe
 
 FMI2_HEADERS = tuple(Path(__file__).resolve().parent / "fmi2" / n
                      for n in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"))
-LOG_CATEGORIES = ("logStatusError", "logAll")
+LOG_CATEGORIES = ("logStatusError", "logStatusWarning", "logAll")
 
 # SI base units of the units the names carry (FMI 2.0 <BaseUnit>); "N/m^(n+1)" and "N/m^(n+2)" depend on
 # the Bekker exponent n and are declared without one

@@ -17,6 +17,9 @@
  *   loop advances an output interval; any other h advances floor(h / FMU_FIXED_STEP_S) fixed steps and
  *   then one shorter Rosenbrock step to the communication point (a master's last step to its stop
  *   time, a variable-step master's steps); h <= 0 is fmi2Error;
+ * - every step is error-controlled as the Python run's (FMU_TOLERANCE, the scenario's
+ *   run.fixed_step_tolerance): halved while its error estimate exceeds the tolerance, down to 1/64 of
+ *   its length; a step still above it is kept, reported once and the fmi2DoStep returns fmi2Warning;
  * - the parameters (vehicle, soil, start pose) have variability "fixed": settable until
  *   fmi2ExitInitializationMode, which computes the start state from them;
  * - outputs are computed on demand from the state and the current inputs (the model's outputs depend on
@@ -43,6 +46,9 @@ typedef struct {
   double u[FMU_NU], p[FMU_NP], pose[3];
   double x[FMU_NX], z[FMU_NZ], y[FMU_NY];
   int y_valid, x_valid;
+  double error_max; /* the largest error estimate of a step kept, as a fraction of the tolerance */
+  long n_halved;    /* the steps the error control halved */
+  int warned;       /* a step above its tolerance at the smallest length was reported */
   const casadi_real **arg;
   casadi_real **res;
   casadi_int *iw;
@@ -75,6 +81,9 @@ static void set_start_values(Instance *c) {
   memset(c->z, 0, sizeof c->z);
   c->t = 0.0;
   c->y_valid = c->x_valid = 0;
+  c->error_max = 0.0;
+  c->n_halved = 0;
+  c->warned = 0;
 }
 
 /* Solve the small dense system A d = b (column-major A, n <= FMU_NCELL) by LU with partial pivoting. */
@@ -436,28 +445,54 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     hs = FMU_FIXED_STEP_S;
     last = h - (double)n * FMU_FIXED_STEP_S;
   }
-  double xn[FMU_NX], zn[FMU_NZ];
-  for (long k = 0; k <= n; k++) {
-    double hk = k < n ? hs : last, tk = c->t + (double)k * hs;
-    if (!(hk > 0.0)) break;
-    c->arg[0] = c->x; c->arg[1] = c->z; c->arg[2] = c->u; c->arg[3] = c->p; c->arg[4] = &hk;
-    c->res[0] = xn; c->res[1] = zn; c->res[2] = NULL; /* the step's error estimate: not used */
-    if (call(c, F_STEP)) {
+  /* the steps (n of hs, then the shorter one, last, when > 0), FMU_CHUNK per call of the generated
+     controlled chunk: each step error-controlled as the Python run's (symtrack/integrators/fixed_step.py:
+     halved while its estimate exceeds the tolerance, down to 1/64; a step still above it is kept and
+     reported once, fmi2Warning) */
+  static const double ctl[2] = {FMU_TOLERANCE, FMU_TOLERANCE_ON ? 1.0 : INFINITY};
+  double U[FMU_NU * FMU_CHUNK], H[FMU_CHUNK], X[FMU_NX * FMU_CHUNK], Z[FMU_NZ * FMU_CHUNK];
+  double R[FMU_CHUNK], NH[FMU_CHUNK];
+  fmi2Status status = fmi2OK;
+  long total = n + (last > 0.0 ? 1 : 0), done = 0;
+  while (done < total) {
+    long k = total - done < FMU_CHUNK ? total - done : FMU_CHUNK;
+    for (long j = 0; j < FMU_CHUNK; j++) {
+      for (int i = 0; i < FMU_NU; i++) U[j * FMU_NU + i] = j < k ? c->u[i] : 0.0;
+      H[j] = j < k ? (done + j < n ? hs : last) : 0.0;
+    }
+    double tk = c->t + (double)done * hs;
+    c->arg[0] = c->x; c->arg[1] = c->z; c->arg[2] = U; c->arg[3] = H; c->arg[4] = c->p; c->arg[5] = ctl;
+    c->res[0] = X; c->res[1] = Z; c->res[2] = NULL; c->res[3] = R; c->res[4] = NH; /* (no outputs here) */
+    if (call(c, F_CHUNK)) {
       c->phase = ST_ERROR;
       return FAIL(c, "fmi2DoStep: the Rosenbrock step failed at t = %.17g s", tk);
     }
-    for (int i = 0; i < FMU_NX; i++)
-      if (!isfinite(xn[i])) {
-        c->phase = ST_ERROR;
-        return FAIL(c, "fmi2DoStep: non-finite state %s at t = %.17g s (the fixed step does not resolve the "
-                    "dynamics or the vehicle left the model's domain)", fmu_state_names[i], tk + hk);
+    for (long j = 0; j < k; j++) {
+      for (int i = 0; i < FMU_NX; i++)
+        if (!isfinite(X[j * FMU_NX + i]) || !isfinite(R[j])) {
+          c->phase = ST_ERROR;
+          return FAIL(c, "fmi2DoStep: non-finite state %s at t = %.17g s even in steps of 1/64 of the fixed step "
+                      "(the vehicle left the model's domain)", fmu_state_names[i], tk + (double)(j + 1) * hs);
+        }
+      if (R[j] > c->error_max) c->error_max = R[j];
+      c->n_halved += (long)NH[j];
+      if (FMU_TOLERANCE_ON && !(R[j] <= 1.0)) {
+        status = fmi2Warning;
+        if (!c->warned) {
+          logf_(c, fmi2Warning, "logStatusWarning", "fmi2DoStep: the error estimate of the step at t = %.17g s stays "
+                "%.3g x its tolerance %g at 1/64 of the fixed step; the step was kept (compare with a variable-step "
+                "integrator)", tk + (double)j * hs, R[j], FMU_TOLERANCE);
+          c->warned = 1;
+        }
       }
-    memcpy(c->x, xn, sizeof xn);
-    memcpy(c->z, zn, sizeof zn);
+    }
+    memcpy(c->x, X + (k - 1) * FMU_NX, sizeof c->x);
+    memcpy(c->z, Z + (k - 1) * FMU_NZ, sizeof c->z);
+    done += k;
   }
   c->t = currentCommunicationPoint + h;
   c->y_valid = 0;
-  return fmi2OK;
+  return status;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component comp) {

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import SimulationError
+from ..integrators.settings import FIXED_STEP_TOLERANCE
 from ..model.static import static_state
 from ..native.cache import REPO_GENERATED
 from ..simulation.scenario import load_scenario
@@ -75,6 +76,10 @@ def validation_header(model, gen, scenario="validation") -> bytes:
         f"#define SYM_DURATION_S {c_literal(run.duration_s)}",
         f"#define SYM_OUTPUT_DT_S {c_literal(run.output_dt_s)}",
         f"#define SYM_FIXED_STEP_S {c_literal(run.fixed_step_s)}",
+        # the steps' error control (symtrack/integrators/fixed_step.py): the tolerance (0: off, the ratio
+        # then against the default tolerance and no step halved)
+        f"#define SYM_FIXED_STEP_TOLERANCE {c_literal(run.fixed_step_tolerance or FIXED_STEP_TOLERANCE)}",
+        f"#define SYM_FIXED_STEP_CONTROL {1 if run.fixed_step_tolerance > 0 else 0}",
         f"#define SYM_HAS_STOP_DISTANCE {int(run.stop_after_distance_m is not None)}",
         f"#define SYM_STOP_DISTANCE_M {c_literal(run.stop_after_distance_m or 0.0)}",
         f"#define SYM_STOP_FROM_T_S {c_literal(te)}",

@@ -5,11 +5,12 @@
  *                                 generated/homogeneous_rosenbrock.c -lm -o build/symtrack_standalone)
  *   build/symtrack_standalone [repeats]
  *
- * It runs the same time loop as symtrack.runner.run with the fixed-step integrator
- * (symtrack.compiled.run_fixed_step): output steps of SYM_OUTPUT_DT_S split at the torque
- * changes, each advanced in ceil(length / SYM_FIXED_STEP_S) equal Rosenbrock steps, and the
+ * It runs the same time loop as symtrack.simulation.loop.run with the fixed-step integrator
+ * (symtrack.integrators.fixed_step.FixedStepper): output steps of SYM_OUTPUT_DT_S split at the torque
+ * changes, each advanced in ceil(length / SYM_FIXED_STEP_S) equal Rosenbrock steps (each
+ * error-controlled: halved while its estimate exceeds SYM_FIXED_STEP_TOLERANCE), and the
  * run stopped SYM_STOP_DISTANCE_M after the event by shortening the last output step (three
- * secant refinements). It prints the figures of symtrack.runner.summarise as JSON on stdout.
+ * secant refinements). It prints the figures of symtrack.simulation.result.summarise as JSON on stdout.
  * The scenario's numbers (parameters, static initial state, torque schedule) come from
  * generated/homogeneous_validation.h, written by python -m codegen.
  * With repeats > 1 the run is repeated and the fastest wall time is reported.
@@ -24,35 +25,46 @@
 #include "homogeneous_rosenbrock.h"
 #include "homogeneous_validation.h"
 
-#define STEP homogeneous_rosenbrock_step
+/* the steps, 16 per call, each error-controlled as the Python run's (symtrack/integrators/fixed_step.py:
+   halved while its estimate exceeds the tolerance, down to 1/64 of its length) */
+#define CHUNK 16
+#define F(name) homogeneous_rosenbrock_controlled_chunk16##name
 
 static const casadi_real **g_arg;
 static casadi_real **g_res;
 static casadi_int *g_iw;
 static casadi_real *g_w;
 static int g_mem;
-static long g_nsteps;
-
-/* One step of length h from (x, z) with input u; results in xf, zf. */
-static int step(const double *x, const double *z, const double *u, double h, double *xf, double *zf) {
-  g_arg[0] = x; g_arg[1] = z; g_arg[2] = u; g_arg[3] = sym_p; g_arg[4] = &h;
-  g_res[0] = xf; g_res[1] = zf; g_res[2] = NULL; /* the error estimate: not used here */
-  g_nsteps++;
-  return STEP(g_arg, g_res, g_iw, g_w, g_mem);
-}
+static long g_nsteps, g_halved;
+static double g_error_max;
 
 /* Advance (x, z) over length_s with ceil(length_s / SYM_FIXED_STEP_S - 1e-9) equal steps. */
 static int advance(const double *x0, const double *z0, const double *u, double length_s, double *x, double *z) {
+  static const double ctl[2] = {SYM_FIXED_STEP_TOLERANCE, SYM_FIXED_STEP_CONTROL ? 1.0 : INFINITY};
   long n = (long)ceil(length_s / SYM_FIXED_STEP_S - 1e-9);
-  double xt[SYM_NX], zt[SYM_NZ];
+  double U[SYM_NU * CHUNK], H[CHUNK], X[SYM_NX * CHUNK], Z[SYM_NZ * CHUNK], R[CHUNK], NH[CHUNK];
   if (n < 1) n = 1;
   double h = length_s / (double)n;
-  memcpy(x, x0, sizeof xt);
-  memcpy(z, z0, sizeof zt);
-  for (long k = 0; k < n; k++) {
-    if (step(x, z, u, h, xt, zt)) return 1;
-    memcpy(x, xt, sizeof xt);
-    memcpy(z, zt, sizeof zt);
+  memcpy(x, x0, SYM_NX * sizeof *x);
+  memcpy(z, z0, SYM_NZ * sizeof *z);
+  while (n > 0) {
+    long k = n < CHUNK ? n : CHUNK;
+    for (long j = 0; j < CHUNK; j++) {
+      for (int i = 0; i < SYM_NU; i++) U[j * SYM_NU + i] = j < k ? u[i] : 0.0;
+      H[j] = j < k ? h : 0.0;
+    }
+    g_arg[0] = x; g_arg[1] = z; g_arg[2] = U; g_arg[3] = H; g_arg[4] = sym_p; g_arg[5] = ctl;
+    g_res[0] = X; g_res[1] = Z; g_res[2] = NULL; g_res[3] = R; g_res[4] = NH; /* (no outputs here) */
+    if (F()(g_arg, g_res, g_iw, g_w, g_mem)) return 1;
+    for (long j = 0; j < k; j++) {
+      if (!isfinite(R[j])) return 1;
+      if (R[j] > g_error_max) g_error_max = R[j];
+      g_halved += (long)NH[j];
+      g_nsteps += 1 + 2 * (long)NH[j];
+    }
+    memcpy(x, X + (k - 1) * SYM_NX, SYM_NX * sizeof *x);
+    memcpy(z, Z + (k - 1) * SYM_NZ, SYM_NZ * sizeof *z);
+    n -= k;
   }
   return 0;
 }
@@ -178,19 +190,20 @@ int main(int argc, char **argv) {
   int repeats = argc > 1 ? atoi(argv[1]) : 1;
   if (repeats < 1) repeats = 1;
   casadi_int sz_arg, sz_res, sz_iw, sz_w;
-  homogeneous_rosenbrock_step_incref();
-  homogeneous_rosenbrock_step_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  F(_incref)();
+  F(_work)(&sz_arg, &sz_res, &sz_iw, &sz_w);
   g_arg = malloc((size_t)(sz_arg + 1) * sizeof *g_arg);
   g_res = malloc((size_t)(sz_res + 1) * sizeof *g_res);
   g_iw = malloc((size_t)(sz_iw + 1) * sizeof *g_iw);
   g_w = malloc((size_t)(sz_w + 1) * sizeof *g_w);
   if (!g_arg || !g_res || !g_iw || !g_w) return 4;
-  g_mem = homogeneous_rosenbrock_step_checkout();
+  g_mem = F(_checkout)();
   Summary s;
   double best = INFINITY;
   for (int r = 0; r < repeats; r++) {
     struct timespec t0, t1;
-    g_nsteps = 0;
+    g_nsteps = g_halved = 0;
+    g_error_max = 0.0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     int flag = run(&s);
     clock_gettime(CLOCK_MONOTONIC, &t1);
@@ -201,8 +214,8 @@ int main(int argc, char **argv) {
     double wall = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
     if (wall < best) best = wall;
   }
-  homogeneous_rosenbrock_step_release(g_mem);
-  homogeneous_rosenbrock_step_decref();
+  F(_release)(g_mem);
+  F(_decref)();
   printf("{\n");
   printf("  \"scenario\": \"%s\",\n", SYM_SCENARIO);
   printf("  \"integrator\": \"rosenbrock\",\n");
@@ -225,6 +238,8 @@ int main(int argc, char **argv) {
   printf("  \"sim_time_s\": %.17g,\n", s.sim_time_s);
   printf("  \"wall_time_s\": %.9g,\n", best);
   printf("  \"real_time_factor\": %.9g,\n", best > 0 ? s.sim_time_s / best : 0.0);
+  printf("  \"fixed_step_error_max\": %.17g,\n", g_error_max);
+  printf("  \"fixed_step_steps_halved\": %ld,\n", g_halved);
   printf("  \"steps\": %ld,\n", g_nsteps);
   printf("  \"repeats\": %d\n", repeats);
   printf("}\n");

@@ -437,10 +437,20 @@ def rut_figures(plant) -> dict:
 def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
     """The folder of a closed loop: trajectory.csv, path.csv, scenario.resolved.toml (as
     ``symtrack simulate``'s: a scenario file that loads back to the scenario as run), the
-    ``control`` figures of :mod:`symtrack.reports.figures`, summary.json."""
-    return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res),
-            "scenario.resolved.toml": to_toml(res.scenario.resolved_dict()),
-            **figures("control", res), "summary.json": json.dumps(res.summary, indent=2) + "\n"}
+    ``control`` figures of :mod:`symtrack.reports.figures`, report.html (what ran, the summary, the
+    figures and the scenario on one page), summary.json."""
+    from ..reports.html import report_html
+
+    scenario_toml = to_toml(res.scenario.resolved_dict())
+    images = figures("control", res)
+    sm = res.summary
+    note = (f"The {sm.get('solver')} MPC ({sm.get('horizon_steps')} steps of {sm.get('sample_time_s')} s) tracking "
+            f"the path of scenario '{sm.get('scenario')}': {sm.get('solves')} solves, {sm.get('failed_solves')} "
+            f"failed, median {sm.get('solve_time_median_ms', float('nan')):.3g} ms.")
+    return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res), "scenario.resolved.toml": scenario_toml,
+            **images, "report.html": report_html(f"symtrack mpc: {sm.get('scenario')}", sm, images, scenario_toml,
+                                                 note=note).encode(),
+            "summary.json": json.dumps(sm, indent=2) + "\n"}
 
 
 def write(out_dir, res: ClosedLoopResult, terrain_out=None, plant=None) -> list:

@@ -795,7 +795,7 @@ def passes_per_cell_npz(pr: PatternResult) -> bytes:
     return npz_bytes(kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
                      origin_m=np.array(g.origin_m, dtype=float), cell_m=np.array(g.cell_m), shape=np.array(g.shape),
                      passes=pr.counts.reshape(g.shape))
-TOP_FILES = ("summary.json", "field.resolved.toml", "comparison.png")
+TOP_FILES = ("summary.json", "field.resolved.toml", "comparison.png", "report.html")
 
 
 def clear_previous_study(folder) -> list:
@@ -887,7 +887,29 @@ def _write_top(folder, spec: FieldSpec, results: dict, summary: dict) -> list:
     if len(results) == 2:
         files["comparison.png"] = field_plots.comparison_png({k: r.figures for k, r in results.items()})
         written.append(folder / "comparison.png")
+    files["report.html"] = _report(folder, spec, results, summary, files).encode()
+    written.append(folder / "report.html")
     files["summary.json"] = json.dumps(summary, indent=2) + "\n"
     write_folder(folder, files, clear=False)  # summary.json last
     written.append(folder / "summary.json")
     return written
+
+
+def _report(folder, spec: FieldSpec, results: dict, summary: dict, files: dict) -> str:
+    """report.html of a field study: what ran, each pattern's scalar figures side by side, the maps of
+    every pattern (read from its folder, written before) and the comparison, the resolved study."""
+    from ..reports.html import report_html
+
+    images = {"comparison.png": files["comparison.png"]} if "comparison.png" in files else {}
+    for pr in results.values():
+        for n in ("sinkage_map.png", "passes_map.png", "risk_map.png", "density_map.png"):
+            if (folder / pr.pattern / n).is_file():
+                images[f"{pr.pattern}/{n}"] = (folder / pr.pattern / n).read_bytes()
+    names = list(results)
+    keys = [k for k, v in results[names[0]].figures.items() if isinstance(v, (bool, int, float, str))] if names else []
+    rows = [[k, *(results[n].figures.get(k) for n in names)] for k in keys]
+    done = ", ".join(f"{n}: {len(results[n].records)} passes" for n in names)
+    note = (f"Field study '{spec.name}': the patterns {done}; "
+            f"{'complete' if summary.get('complete', True) else 'incomplete'}.")
+    return report_html(f"symtrack field: {spec.name}", summary, images, files["field.resolved.toml"], note=note,
+                       tables={"Patterns": (["figure", *names], rows)} if names else None)

@@ -1545,6 +1545,22 @@ def _animation(r: OperationResult, terrain: Terrain, fs: OperationSettings, labe
     return gif
 
 
+def _season_report(spec, summary: dict, files: dict, results) -> str:
+    """report.html of an operation or a season: what ran, each operation's scalar figures, the season's
+    maps (the animation is its own file), the resolved run file."""
+    from ..reports.html import report_html
+
+    images = {n: d for n, d in files.items() if n.endswith(".png") and "/" not in n}
+    names = [r.figures.get("name", f"operation {k + 1}") for k, r in enumerate(results)]
+    keys = [k for k, v in results[0].figures.items() if isinstance(v, (bool, int, float, str))] if results else []
+    rows = [[k, *(r.figures.get(k) for r in results)] for k in keys]
+    note = (f"'{spec.name}': {len(results)} operation(s), {summary.get('turns_driven', 0)} turns driven; "
+            f"{'complete' if summary.get('complete') else 'incomplete: ' + str(summary.get('error'))}."
+            + (f" The animation: {summary['animation_gif']}." if summary.get("animation_gif") else ""))
+    return report_html(f"symtrack field: {spec.name}", summary, images, files["operation.resolved.toml"], note=note,
+                       tables={"Operations": (["figure", *map(str, names)], rows)} if results else None)
+
+
 def _counts_npz(counts, cell_m) -> bytes:
     return npz_bytes(kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
                      origin_m=np.zeros(2), cell_m=np.array(cell_m), shape=np.array(counts.shape), passes=counts)
@@ -1632,6 +1648,7 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
         files["passes_per_cell.npz"] = _counts_npz(counts, fs0.cell_m)
         if figures:
             files |= _map_pngs(counts, terrain.z.reshape(counts.shape), fs0, f"{spec.name}, {len(results)} operations")
+        files["report.html"] = _season_report(spec, summary, files, results).encode()
         files["summary.json"] = json.dumps(summary, indent=2) + "\n"
         from ..reports.run_files import write_folder
 

@@ -204,13 +204,15 @@ class EngineState:
         self._addresses = None  # struct(): the arrays and their addresses
         self.subsoil = subsoil_tables(world.params, world.storage.subsoil_depths_m)
         self._subsoil_c = self.subsoil.c_struct() if self.subsoil is not None else None
-        # the mean normal stress of the bulk density (docs/subsoil.md "Bulk density"): this pass's maxima
+        # the mean normal stress at the depths (this pass's maxima into p_pass): nothing uses it (the bulk
+        # density and the risk take the vertical stress and the soil's own weight: docs/subsoil.md "One
+        # soil"), so the kernel leaves it out unless asked (the bench's density rows,
+        # symtrack.bench.laws.density_rows, measure what it costs)
         self.p_pass = world.pass_p_mean
-        self.subsoil_p = mean_stress_tables(world.params, world.storage.subsoil_depths_m)
-        self._subsoil_p_c = self.subsoil_p.c_struct() if self.subsoil_p is not None else None
-        # False: the kernel leaves the mean normal stress out (p_pass stays as it is; the bench's density
-        # row, symtrack.bench.laws.density_rows, runs the same plant with and without it)
-        self.compute_density = True
+        self._world_for_tables = world
+        self.subsoil_p = None
+        self._subsoil_p_c = None
+        self.compute_mean_stress = False
 
     def struct(self) -> EngineStruct:
         g, st, s = self.grid, self.storage, self.settings
@@ -250,8 +252,12 @@ class EngineState:
         if e.n_depths > MAX_SUBSOIL_DEPTHS:  # subsoil.h's SUBSOIL_MAX_DEPTHS (the scenario's limit)
             raise SimulationError(f"{e.n_depths} subsoil depths: the engine takes at most {MAX_SUBSOIL_DEPTHS}")
         e.subsoil = ctypes.addressof(self._subsoil_c) if self._subsoil_c is not None else None
+        if self.compute_mean_stress and self.subsoil_p is None and self.subsoil is not None:
+            w = self._world_for_tables
+            self.subsoil_p = mean_stress_tables(w.params, w.storage.subsoil_depths_m)
+            self._subsoil_p_c = self.subsoil_p.c_struct() if self.subsoil_p is not None else None
         e.subsoil_p = (ctypes.addressof(self._subsoil_p_c) if self._subsoil_p_c is not None and self.subsoil is not None
-                       and self.compute_density else None)
+                       and self.compute_mean_stress else None)
         e.n_sums = self.n_sums
         el = st.elevation  # None: a flat field (NULL); read by eng_surface only
         e.elev = None if el is None else array_address(el)
