@@ -47,7 +47,8 @@ def homogeneous_table() -> str:
     from symtrack.bench.homogeneous import homogeneous_rows
 
     rows = homogeneous_rows(quick=True, repeats=3)
-    lines = ["| case | integrator | wall [s] (best) | real-time factor (wall) | real-time factor (CPU) |",
+    lines = ["| case | integrator | wall [s] (best) | real-time factor (wall) | real-time factor (CPU, with the "
+             "run's setup) |",
              "|---|---|---|---|---|"]
     for r in rows:
         cpu = r.get("cpu_time_s_incl_setup")  # the time loop's process time (the C program: none)
