@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate
+.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -61,5 +61,44 @@ validate: $(VENV)/.installed
 bench: $(VENV)/.installed build/symtrack_standalone
 	$(VENV)/bin/symtrack bench --out out/bench.json
 
+# the documentation site (docs/index.md): Sphinx over docs/*.md, warnings as errors, into docs/_build/html
+$(VENV)/.installed-docs: $(VENV)/.installed
+	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[docs]'
+	touch $@
+
+docs: $(VENV)/.installed-docs
+	$(PY) -m sphinx -b html -W --keep-going docs docs/_build/html
+	@echo "the site: docs/_build/html/index.html"
+
+# the examples the pages cite that take under a minute each on a 2-core machine, from the checkout, figures
+# into out/examples (about 7 min in all); the slower ones (oscillation_study, one_soil, mpc_headland_uturn,
+# bench_terrain, density_passes) say at their top how to run them
+EX := out/examples
+docs-examples: $(VENV)/.installed
+	mkdir -p $(EX)
+	$(PY) examples/ramp_3d.py --plot $(EX)/ramp_3d.png
+	$(PY) examples/side_slope_3d.py --plot $(EX)/side_slope_3d.png
+	$(PY) examples/furrows_3d.py --plot $(EX)/furrows_3d.png
+	$(PY) examples/second_pass_3d.py --plot $(EX)/second_pass_3d.png
+	$(PY) examples/mpc_side_slope_3d.py --plot $(EX)/mpc_side_slope_3d.png
+	$(PY) examples/turn_rut.py --plot $(EX)/turn_rut.png
+	$(PY) examples/steady_turns.py
+	$(PY) examples/hull_rotation.py
+	$(PY) examples/kroulik_seasons.py --plot $(EX)/kroulik_seasons.png
+	$(PY) examples/gis_field.py --out $(EX)/gis_field --png $(EX)/gis_field/rut_depth.png
+	$(PY) examples/wet_headland.py --out $(EX)/wet_headland
+	$(PY) examples/lqr_speed_yaw.py --out $(EX)/lqr_speed_yaw
+	$(PY) examples/lane_keeping_ruts.py --out $(EX)/lane_keeping_ruts
+	$(PY) examples/compaction_reference.py
+	$(PY) examples/compaction_day_and_machine.py
+	$(PY) examples/tracks_against_wheels.py
+	$(PY) examples/engine_variants.py
+	$(PY) examples/engine_clocks.py
+	$(PY) examples/validation_sensitivity.py
+
+# today's speed figures: measures and rewrites the tables of docs/performance.md (a few minutes)
+performance: $(VENV)/.installed
+	$(PY) docs/performance.py
+
 clean:
-	rm -rf out build *.egg-info
+	rm -rf out build *.egg-info docs/_build

@@ -42,6 +42,7 @@ SLOW_S = {
     "tests/test_terrain_compiled.py::test_grid_rosenbrock_matches_idas": 19,
     "tests/test_terrain_engine.py::test_engine_matches_idas_on_a_small_field": 18,
     "tests/test_control_grid.py::test_grid_plant_with_the_compiled_rosenbrock_matches_idas": 18,
+    "tests/test_docs_site.py::test_the_site_builds_with_no_warning": 18,
     "tests/test_cli.py::test_simulate_writes_summary_trajectory_scenario_and_plots": 16,
     "tests/test_readme.py::test_readme_api_example_runs_and_agrees_with_the_cli": 15,
     "tests/test_first_hour.py::test_a_run_that_leaves_the_field_keeps_what_it_computed": 15,

@@ -71,7 +71,7 @@ def test_the_standalone_programs_run_the_default_law(tmp_path):
     for k in ("yaw_final_deg", "lateral_deviation_m", "distance_m", "sinkage_sprocket_mm", "shear_driven_max_m",
               "fixed_step_error_max"):
         assert got[k] == pytest.approx(ref[k], rel=1e-9, abs=1e-12), k
-    assert 10.0 < got["yaw_final_deg"] < 20.0  # the default law's turn (README)
+    assert 10.0 < got["yaw_final_deg"] < 20.0  # the default law's turn (docs/validation-run.md)
     rows = grid_standalone.run(grid_standalone.build(tmp_path))
     res = symtrack.simulate(sim_scenario.load_scenario("validation_grid", over)).runs[0]
     X = res.X[1:]

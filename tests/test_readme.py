@@ -1,4 +1,7 @@
-"""The README's validation table is the code's own output."""
+"""The README and the pages its content moved to say what the code does: the validation table
+(docs/validation-run.md) is the code's own output, the Python examples (the README's three lines,
+docs/python.md) run and agree with the command line, the README's quick start says how to call the
+CLI after `make demo`, and the README stays a front page (at most 150 lines)."""
 
 import re
 from pathlib import Path
@@ -9,13 +12,15 @@ from symtrack.reports import validation
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
 
+ROOT = Path(__file__).resolve().parent.parent
+
 
 def test_readme_validation_table_matches_the_code():
-    """The README's table: the validation as it declares itself (the creep law, what `make demo`
-    prints) and beside it the same manoeuvre on the package's default law (issue 21)."""
-    text = Path("README.md").read_text()
+    """The validation table (docs/validation-run.md): the validation as it declares itself (the creep law,
+    what `make demo` prints) and beside it the same manoeuvre on the package's default law."""
+    text = (ROOT / "docs" / "validation-run.md").read_text()
     m = re.search(r"<!-- validation-table:start -->\n(.*?)<!-- validation-table:end -->", text, re.S)
-    assert m, "README has no validation table markers"
+    assert m, "docs/validation-run.md has no validation table markers"
     declared = load_scenario("validation")
     assert declared.model.lateral_law == "creep"
     shear = load_scenario("validation", ["model.lateral_law=shear"])
@@ -28,16 +33,17 @@ def test_readme_validation_table_matches_the_code():
 
 
 def test_readme_api_example_runs_and_agrees_with_the_cli(tmp_path, monkeypatch):
+    """The API example of docs/python.md runs and writes what `symtrack simulate validation` writes."""
     import json
 
     from symtrack.cli import main
 
-    text = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    text = (ROOT / "docs" / "python.md").read_text()
     m = re.search(r"<!-- api-example:start -->\n```python\n(.*?)```\n<!-- api-example:end -->", text, re.S)
-    assert m, "README has no API example markers"
+    assert m, "docs/python.md has no API example markers"
     monkeypatch.chdir(tmp_path)
     ns = {}
-    exec(compile(m.group(1), "README.md (API example)", "exec"), ns)
+    exec(compile(m.group(1), "docs/python.md (API example)", "exec"), ns)
     res, files = ns["res"], ns["files"]
     assert Path("out/api_validation/summary.json") in files
     assert main(["simulate", "validation", "--integrator", "rosenbrock", "--quiet", "--out", "cli"]) == 0
@@ -54,10 +60,40 @@ def test_readme_api_example_runs_and_agrees_with_the_cli(tmp_path, monkeypatch):
         "new_sinkage_mean_mm"]
 
 
+def test_readme_three_line_example_runs(tmp_path, monkeypatch, capsys):
+    """The README's Python example: three lines that run as written and print the figures they name."""
+    import symtrack
+
+    text = (ROOT / "README.md").read_text()
+    m = re.search(r"<!-- readme-example:start -->\n```python\n(.*?)```\n<!-- readme-example:end -->", text, re.S)
+    assert m, "README has no Python example markers"
+    code = m.group(1)
+    assert len(code.strip().splitlines()) == 3
+    monkeypatch.chdir(tmp_path)
+    ns = {}
+    exec(compile(code, "README.md (Python example)", "exec"), ns)
+    res = ns["res"]
+    assert isinstance(res, symtrack.Result) and res.scenario.vehicle["mass_kg"] == 6000.0
+    printed = capsys.readouterr().out.split()
+    assert float(printed[0]) == res.summary["yaw_final_deg"]
+
+
 def test_readme_says_how_to_call_the_cli_after_make_demo():
-    """After `make demo` the CLI is in .venv, not on PATH (issue 26): the quick start says so, and the
-    Makefile's venv is the one it names."""
-    root = Path(__file__).resolve().parent.parent
-    quick = (root / "README.md").read_text().split("## The validation run")[0]
+    """After `make demo` the CLI is in .venv, not on PATH: the quick start says so, and the Makefile's
+    venv is the one it names."""
+    text = (ROOT / "README.md").read_text()
+    quick = text.split("## Quick start", 1)[1].split("\n## ", 1)[0]
+    assert "make demo" in quick and "make test" in quick
     assert ".venv/bin/symtrack" in quick and "source .venv/bin/activate" in quick
-    assert "VENV ?= .venv" in (root / "Makefile").read_text()
+    assert "VENV ?= .venv" in (ROOT / "Makefile").read_text()
+
+
+def test_readme_is_a_front_page():
+    """At most 150 lines: what it is, a picture, the commands, a Python example, links; every link to a
+    file of the repository names a file that exists."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 150
+    assert re.search(r"!\[[^\]]*\]\(docs/[^)]+\.png\)", text), "README has no picture"
+    for target in re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", text):
+        if "://" not in target:
+            assert (ROOT / target).exists(), f"README links to {target}, which does not exist"

@@ -34,7 +34,7 @@ def test_the_default_shear_law_turns_the_crawler_where_the_papers_creep_law_does
     set in the plausible ranges of a medium crawler brings them into Ferretti & Girelli's bands, which
     come from the paper's creep law (docs/turning.md section 4); the scenario declares that law. The
     other figures stay in band. CVODES (its reference) against the compiled Rosenbrock at its 10 ms
-    steps (the README's column)."""
+    steps (the shear-law column of docs/validation-run.md)."""
     sc = load_scenario("validation", ["model.lateral_law=shear", "run.integrator=cvodes"])
     assert load_scenario("validation").model.lateral_law == "creep" and sc.model.lateral_law == "shear"
     s = summarise(run(sc))

@@ -94,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest="cmd", required=True)
     from .run import add_parsers as add_run_parsers
 
-    add_run_parsers(sub)  # symtrack run FILE, symtrack new KIND: the front door (README, "Run files")
+    add_run_parsers(sub)  # symtrack run FILE, symtrack new KIND: the front door (docs/scenarios.md)
     s = sub.add_parser("simulate", help="run a scenario (built-in name or TOML file)")
     s.add_argument("scenario")
     s.add_argument("--out", required=True, help="output folder")

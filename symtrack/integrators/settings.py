@@ -21,7 +21,7 @@ __all__ = ["EngineSettings", "FIXED_STEP_TOLERANCE", "IntegratorSettings", "POWE
 # run.fixed_step_tolerance): a step whose local error estimate exceeds
 # FIXED_STEP_TOLERANCE max(|x0|, |x1|) + FIXED_STEP_ATOL in any differential state is halved.
 # Calibrated on examples/scenarios/drive_and_coast.toml (every summary figure within 2 % of CVODES) and
-# the validation scenario (its figures and wall time unchanged): README, "Error control of the fixed step".
+# the validation scenario (its figures and wall time unchanged): docs/scenarios.md, "Error control of the fixed step".
 FIXED_STEP_TOLERANCE = 1e-3
 # (its absolute part FIXED_STEP_ATOL and the halvings' limit FIXED_STEP_MAX_HALVINGS are in the generated C:
 # symtrack.native.rosenbrock)

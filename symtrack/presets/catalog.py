@@ -7,7 +7,7 @@ stiffness and the unloading floor) have theirs above their definitions.
 User preset files (``[vehicle] preset = "my_crawler.toml"``): a TOML file with an optional
 ``base`` (a built-in preset the file starts from), an optional ``description``, any parameters
 (SI values, names with units as in ``symtrack presets``) and an optional ``[sources]`` table
-(parameter -> where the value comes from); the format is documented in the README ("Preset
+(parameter -> where the value comes from); the format is documented in docs/scenarios.md ("Preset
 files"). :func:`preset_file_kind` tells a vehicle file from a soil file by its keys.
 """
 

@@ -1,7 +1,7 @@
 """The files of a run, and the one writer of a run's folder (atomic files: a temporary file in
 the same folder, then a rename).
 
-Files of a ``symtrack simulate`` run (schemas documented in the README):
+Files of a ``symtrack simulate`` run (schemas documented in docs/outputs.md):
 
 - ``trajectory.csv``: one row per output step; header names carry units (t_s, states, commanded
   torques, then the model outputs);
@@ -150,7 +150,7 @@ def validation_table(scenario, summary: dict) -> str | None:
 
 def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[dict],
                      study=None) -> dict[str, bytes | str]:
-    """The folder of a ``symtrack simulate`` run (README "Output files"): the run's files with its
+    """The folder of a ``symtrack simulate`` run (docs/outputs.md): the run's files with its
     trajectory figures; on the grid terrain the terrain and subsoil figures of its passes (a
     :class:`~symtrack.simulation.passes.PassStudy`), and for several passes each pass's run
     files in ``pass_<k>/``; ``validation_table.md`` for a validation scenario; ``report.html``

@@ -93,8 +93,8 @@ def table_markdown(summary: dict, differ: list[str] | None = None) -> str:
 def comparison_markdown(declared: dict, other: dict, other_label: str) -> str:
     """The validation table with a second run beside the scenario's own: ``declared`` the summary of
     the scenario as it declares itself (the creep law, the paper's model), ``other`` the summary of
-    the same manoeuvre with another setting, labelled ``other_label`` (the README shows the shear
-    law's prediction this way)."""
+    the same manoeuvre with another setting, labelled ``other_label`` (docs/validation-run.md shows the
+    shear law's prediction this way)."""
     lines = [f"| quantity | reported (Ferretti & Girelli 1999) | simulated | within | {other_label} | within |",
              "|---|---|---|---|---|---|"]
     for (key, reported, v, ok), (_, _, w, ok_w) in zip(check(declared), check(other), strict=True):

@@ -1,4 +1,4 @@
-"""The result of one run (one pass) and its summary figures (summary.json, schema in the README)."""
+"""The result of one run (one pass) and its summary figures (summary.json, schema in docs/outputs.md)."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ class RunResult:
 
 
 def summarise(res: RunResult) -> dict:
-    """The summary figures of a run (summary.json keys, README)."""
+    """The summary figures of a run (summary.json keys, docs/outputs.md)."""
     sc = res.scenario
     x, y, psi = res.state("x_m"), res.state("y_m"), res.state("yaw_rad")
     X0, Y0, psi0 = x[0], y[0], psi[0]

@@ -1,5 +1,5 @@
 """Studies at scale: parameter sweeps of any scenario (``symtrack simulate`` or ``symtrack mpc``)
-on Dask distributed, a local cluster or an existing scheduler (docs/studies.md).
+on Dask distributed, a local cluster or an existing scheduler (docs/studies.md)::
 
     from symtrack import studies
     res = studies.sweep("validation", ["vehicle.mass_kg=5000,6000", "soil.bekker_n=0.6,0.8"], out="out/sweep",

@@ -196,7 +196,7 @@ class Surface:
         return gx, gy, 0.0, 0.0, 0.0, 0.0
 
     def plane_steepest(self) -> float:
-        """An upper bound of the ground plane's |grad z0| (the slopes and the raster; not the furrows,
+        """An upper bound of the ground plane's ``|grad z0|`` (the slopes and the raster; not the furrows,
         module doc): hypot(tan sx, tan sy) + the raster's steepest gradient."""
         gx, gy = math.tan(math.radians(self.slope_x_deg)), math.tan(math.radians(self.slope_y_deg))
         return math.hypot(gx, gy) + (self.raster.steepest_gradient() if self.raster is not None else 0.0)

@@ -1,0 +1,184 @@
+"""The documentation site builds with no warning (``make docs``: Sphinx over docs/*.md, the API reference
+from the docstrings), every page of docs/ is in a table of contents, the measured tables are the ones a
+command writes, and every `symtrack ...` command the README and the docs show is one the command line
+accepts. Nothing is run here (the example tests run the examples; ``make docs-examples``)."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+
+
+def test_the_site_builds_with_no_warning(tmp_path):
+    pytest.importorskip("sphinx")
+    pytest.importorskip("myst_parser")
+    pytest.importorskip("furo")
+    # a fresh output and doctree folder: every page read, every docstring imported
+    proc = subprocess.run([sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q",
+                           "-d", str(tmp_path / "doctrees"), str(DOCS), str(tmp_path / "html")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"sphinx failed (warnings are errors):\n{proc.stderr[-6000:]}"
+    for page in ("index", "getting-started", "howto", "model", "scenarios", "outputs", "performance",
+                 "api/symtrack", "changelog"):
+        assert (tmp_path / "html" / f"{page}.html").is_file(), page
+    # the API reference has the docstrings of the front door
+    api = (tmp_path / "html" / "api" / "symtrack.html").read_text(encoding="utf-8")
+    for name in ("symtrack.simulate", "symtrack.load_scenario", "symtrack.Result", "symtrack.run"):
+        assert f'id="{name}"' in api, name
+
+
+def test_every_page_is_in_a_table_of_contents():
+    """A Markdown file of docs/ that no toctree names would be a page no reader finds (Sphinx warns too;
+    this names the file)."""
+    named = set()
+    for md in DOCS.rglob("*.md"):
+        if "_build" in md.parts:
+            continue
+        for block in re.findall(r"```\{toctree\}\n(.*?)```", md.read_text(encoding="utf-8"), re.S):
+            for line in block.splitlines():
+                line = line.strip()
+                if line and not line.startswith(":"):
+                    named.add((md.parent / line).relative_to(DOCS).as_posix())
+    pages = {md.relative_to(DOCS).with_suffix("").as_posix() for md in DOCS.rglob("*.md") if "_build" not in md.parts}
+    assert pages - named == {"index"}, f"pages in no toctree: {sorted(pages - named - {'index'})}"
+
+
+def test_performance_tables_name_their_command_machine_and_date():
+    """docs/performance.md holds only tables that docs/performance.py writes, each with the command,
+    the machine and the date above it."""
+    text = (DOCS / "performance.md").read_text(encoding="utf-8")
+    script = (DOCS / "performance.py").read_text(encoding="utf-8")
+    names = re.findall(r"<!-- perf:([\w-]+):start -->\n(.*?)<!-- perf:\1:end -->", text, re.S)
+    assert names, "docs/performance.md has no generated tables"
+    for name, body in names:
+        assert f'"{name}":' in script, f"table {name!r} is not one docs/performance.py writes"
+        assert re.match(r"Measured \d{4}-\d\d-\d\d on .+; regenerate with `make performance`\.", body), name
+    # every table of the page is inside the markers
+    outside = re.sub(r"<!-- perf:([\w-]+):start -->.*?<!-- perf:\1:end -->", "", text, flags=re.S)
+    assert "|---" not in outside, "a table of docs/performance.md that docs/performance.py does not write"
+    assert "performance:" in (ROOT / "Makefile").read_text()
+
+
+def test_the_changelog_has_one_entry_per_release():
+    text = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
+    import tomllib
+
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    releases = re.findall(r"^## (\S+)", text, re.M)
+    assert releases and releases[0] == version, (releases, version)
+    assert len(releases) == len(set(releases))
+
+
+def _doc_commands():
+    """(file, line, argv) of every `symtrack ...` line of a code block (```sh, ```text or no language) of
+    README.md and docs/*.md: a trailing comment dropped, `&&` chains split, backslash continuations joined,
+    a synopsis's optional parts (`[--set KEY=VALUE ...]`) taken as given."""
+    import shlex
+
+    files = [ROOT / "README.md", *sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.parts)]
+    for path in files:
+        fence, pending = None, ""
+        for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+            m = re.match(r"^(\s*)(```+)(\S*)", raw)
+            if m and fence is None:
+                fence = (m.group(2), m.group(3) in ("", "sh", "bash", "console", "shell", "text"))
+                continue
+            if m and fence is not None and raw.strip() == fence[0]:
+                fence = None
+                continue
+            if fence is None or not fence[1]:
+                continue
+            line = pending + raw
+            if line.endswith("\\"):
+                pending = line[:-1] + " "
+                continue
+            pending = ""
+            for part in line.split("&&"):
+                part = part.strip().removeprefix("$ ")
+                if part.startswith(".venv/bin/symtrack "):
+                    part = part[len(".venv/bin/"):]
+                if not part.startswith("symtrack "):
+                    continue
+                argv = shlex.split(part.replace("[", " ").replace("]", " "), comments=True)
+                yield path.relative_to(ROOT).as_posix(), lineno, [a for a in argv[1:] if a != "..."]
+
+
+def test_every_command_in_the_docs_parses():
+    """Each `symtrack ...` command the README and the docs show is one the command line accepts (its
+    subcommand and options), and a `symtrack simulate` of a built-in scenario loads with the `--set` values
+    it shows: a renamed option or key fails here, not in a reader's shell. Nothing is run."""
+    import contextlib
+    import io
+
+    from symtrack.cli.main import build_parser
+    from symtrack.simulation.scenario import builtin_names, load_scenario
+
+    parser = build_parser()
+    builtin = set(builtin_names())
+    bad, n = [], 0
+    for where, line, argv in _doc_commands():
+        n += 1
+        err = io.StringIO()
+        try:
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                args = parser.parse_args(argv)
+        except SystemExit as e:
+            if e.code not in (0, None):  # --help and --version exit 0
+                bad.append(f"{where}:{line}: symtrack {' '.join(argv)}: {err.getvalue().strip().splitlines()[-1]}")
+            continue
+        if args.cmd == "simulate" and args.scenario in builtin:
+            sets = list(args.set or [])
+            if args.integrator:
+                sets.append(f"run.integrator={args.integrator}")
+            try:
+                load_scenario(args.scenario, sets)
+            except Exception as e:  # noqa: BLE001 - any refusal is a finding
+                bad.append(f"{where}:{line}: symtrack {' '.join(argv)}: {e}")
+    assert n > 50, f"only {n} commands found in the docs"
+    assert not bad, "commands in the docs that the command line refuses:\n" + "\n".join(bad)
+
+
+def test_the_tutorial_files_load(tmp_path):
+    """The files of the getting-started tutorial, as it has the reader write them (the starting files of
+    `symtrack new` with its TOML snippets applied, its soil file as shown), load and validate: a renamed
+    key or preset fails here. Nothing is run (the tutorial's runs take a minute)."""
+    import tomllib
+
+    from symtrack.foundations.config import to_toml
+    from symtrack.simulation.scenario import load_scenario
+    from symtrack.studies.field import load_field_spec
+
+    text = (DOCS / "getting-started.md").read_text(encoding="utf-8")
+    snippets = [tomllib.loads(b) for b in re.findall(r"```toml\n(.*?)```", text, re.S)]
+    soil_file = [s for s in snippets if "base" in s]
+    assert len(soil_file) == 1, "the tutorial shows one soil file (with base = ...)"
+    (tmp_path / "wet_clay.toml").write_text(to_toml(soil_file[0]))
+    named = re.search(r"Write `(\w+\.toml)` next to `my_run\.toml`", text)
+    assert named and named.group(1) == "wet_clay.toml"
+
+    def merged(template: str, parts: list[dict]) -> dict:
+        doc = tomllib.loads((ROOT / "symtrack" / "cli" / "templates" / template).read_text())
+        for part in parts:
+            for section, values in part.items():
+                doc.setdefault(section, {}).update(values)
+        return doc
+
+    step5 = text.index("## 5.")
+    sim_parts = [s for s in snippets if "base" not in s and "field" not in s]
+    field_parts = [tomllib.loads(b) for b in re.findall(r"```toml\n(.*?)```", text[step5:], re.S)]
+    assert sim_parts and field_parts
+    (tmp_path / "my_run.toml").write_text(to_toml(merged("simulation.toml", sim_parts)))
+    sc = load_scenario(str(tmp_path / "my_run.toml"))
+    assert sc.vehicle["mass_kg"] == 6500.0 and sc.soil["cohesion_Pa"] == soil_file[0]["cohesion_Pa"]
+    (tmp_path / "my_field.toml").write_text(to_toml(merged("field.toml", field_parts)))
+    spec = load_field_spec(str(tmp_path / "my_field.toml"))
+    assert spec.scenario.vehicle["mass_kg"] == 6500.0
+    assert spec.scenario.soil["cohesion_Pa"] == soil_file[0]["cohesion_Pa"]
+    assert list(spec.field.size_m) == [20.0, 9.0]

@@ -1,0 +1,56 @@
+"""A Result's named series: ``res["yaw_rad"]``, the names with their units, and ``to_xarray`` with units and
+descriptions in the attributes (xarray optional, a clear error without it)."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+import symtrack
+from symtrack.api import describe_series
+from symtrack.foundations.errors import ScenarioError
+
+
+@pytest.fixture(scope="module")
+def res():
+    return symtrack.simulate(symtrack.load_scenario("validation", {"run.integrator": "rosenbrock",
+                                                                   "run.duration_s": 1.0}))
+
+
+def test_series_by_name(res):
+    assert np.array_equal(res["yaw_rad"], res.column("yaw_rad"))
+    assert np.array_equal(res["t_s"], res.t)
+    assert res.columns[0] == "t_s" and "yaw_rad" in res and "nothere" not in res
+    assert len(res.columns) == len(set(res.columns))
+    with pytest.raises(KeyError, match="no column 'yaw_deg'.*yaw_rad"):
+        res["yaw_deg"]
+    with pytest.raises(KeyError):
+        res[3]
+    units = res.units()
+    assert units["yaw_rad"] == "rad" and units["p_sprocket_left_Pa"] == "Pa" and units["slip_left"] == "1"
+    assert units["torque_cmd_left_N_m"] == "N m" and units["accel_x_m_s2"] == "m/s^2"
+
+
+def test_every_series_is_described(res):
+    for name in res.columns:
+        unit, text = describe_series(name)
+        assert text != "model output", f"{name} has no description of its own"
+
+
+def test_to_xarray_carries_units_and_descriptions(res):
+    pytest.importorskip("xarray")
+    ds = res.to_xarray()
+    assert np.array_equal(ds["t"].values, res.t) and ds["t"].attrs["units"] == "s"
+    assert np.array_equal(ds["yaw_rad"].values, res["yaw_rad"])
+    assert ds["yaw_rad"].attrs == {"units": "rad", "description": "yaw angle (heading) in the world frame"}
+    assert ds["sinkage_idler_right_m"].attrs["description"] == "sinkage under the idler end of the right track"
+    assert set(ds.data_vars) == set(res.columns) - {"t_s"}
+    assert ds.attrs["scenario"] == "validation" and ds.attrs["integrator"] == "rosenbrock"
+
+
+def test_to_xarray_without_xarray_says_what_to_install(res, monkeypatch):
+    monkeypatch.setitem(sys.modules, "xarray", None)
+    with pytest.raises(ScenarioError, match="pip install xarray"):
+        res.to_xarray()
