@@ -61,7 +61,7 @@ from ..simulation.scenario import scenario_from_dict
 
 __all__ = ["ACCURACY_RTOL", "COAST_SETTLE_TAU", "CSV_COLUMNS", "ENERGY_RTOL", "FIGURES", "PROPERTIES", "REFERENCE",
            "REST_SPEED_M_S", "REST_TRAVEL_M", "REST_YAW_RAD", "SYMMETRY_RTOL", "VARIANTS", "CaseOutcome",
-           "RandomDraw", "case_document", "check_case", "main", "mirrored", "run_fuzz"]
+           "RandomDraw", "case_document", "check_case", "main", "mirrored", "run_fuzz", "shrink"]
 
 log = logging.getLogger("symtrack.bench.fuzz")
 
@@ -90,6 +90,10 @@ SOIL_PERTURBED = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "cohesion_Pa
 # steerable tracked vehicles, inside the rule's warning range).
 VEHICLE_PRESSURE_KPA = (15.0, 120.0)
 assert GROUND_PRESSURE_RANGE_KPA[0] < VEHICLE_PRESSURE_KPA[0] < VEHICLE_PRESSURE_KPA[1] < GROUND_PRESSURE_RANGE_KPA[1]
+# The generator keeps the static sinkage z = (p / k)^(1/n) of the mean ground pressure below this: a
+# crawler's ground clearance. (The plausibility rules bound the pressure alone: on the WES heavy clay,
+# n = 0.11, a 122 kPa crawler sinks tens of metres; docs/model.md, "The physics fuzzer".)
+STATIC_SINKAGE_MAX_M = 0.2
 # The largest torque of a programme as a fraction of the torque whose thrust 2 T / r equals the weight
 # (the plausibility rule warns above 2): from gentle driving to what spins the tracks on soft soil.
 TORQUE_FRACTION = (0.03, 0.6)
@@ -173,11 +177,15 @@ def _soil(draw) -> dict:
     return out
 
 
-def _vehicle(draw) -> dict:
+def _vehicle(draw, soil: dict) -> dict:
     gauge = draw.uniform(1.1, 2.2)
     width = draw.uniform(0.3, min(0.75, 0.45 * gauge))
     length = gauge * draw.uniform(0.9, 1.8)
     pressure = _log_uniform(draw, *VEHICLE_PRESSURE_KPA) * 1e3
+    # no deeper than STATIC_SINKAGE_MAX_M at rest on this soil (Bekker: z = (p / k)^(1/n), k = k_c / b + k_phi)
+    s = {**SOILS[soil["preset"]], **soil}
+    k = s["k_c_N_per_m_n1"] / width + s["k_phi_N_per_m_n2"]
+    pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"])
     mass = pressure * 2 * width * length / GRAVITY_M_S2
     hull_l, hull_w = 1.4 * length, gauge + width
     v = {"preset": "reference_crawler",
@@ -236,8 +244,8 @@ def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S) -
     else:
         kind = draw.choice([k for k in kinds if k != "hold"] or kinds)
     duration = _round(draw.uniform(*duration_s), 3)
-    vehicle = _vehicle(draw)
     soil = _soil(draw)
+    vehicle = _vehicle(draw, soil)
     flat = surface is None
     start_yaw = 0.0 if flat else _round(draw.choice([0.0, 30.0, 90.0, 180.0, -90.0]))
     doc = {"name": f"fuzz-{variant}-{kind}", "description": "a physics-fuzzer case (symtrack.bench.fuzz)",
@@ -443,6 +451,7 @@ SIGNED = ("lateral_deviation_signed_m", "yaw_final_deg")
 
 
 def _check_symmetry(run, mir, out: CaseOutcome) -> None:
+    flagged = max(float(r.summary.get("fixed_step_error_max", 0.0)) for r in (run, mir)) > 1.0
     bad = []
     for k, atol in FIGURES.items():
         a, b = run.summary[k], mir.summary[k]
@@ -451,11 +460,66 @@ def _check_symmetry(run, mir, out: CaseOutcome) -> None:
         ok, _ = _within(a, b, SYMMETRY_RTOL, SYMMETRY_FLOOR * atol)
         if not ok:
             bad.append(f"{k} {a:.9g} against {'-' if k in SIGNED else ''}({mir.summary[k]:.9g}) mirrored")
-    if bad:
+    if bad and flagged:  # the run said it is wrong there (a step kept above its tolerance)
+        out.status["symmetry"] = "flagged"
+        out.messages["symmetry (flagged)"] = "; ".join(bad)
+    elif bad:
         out.fail("symmetry", "the mirrored programme's run is not the mirror image: " + "; ".join(bad) +
                  f" (allowed {SYMMETRY_RTOL:g} relative plus {SYMMETRY_FLOOR:g} of the accuracy's floors)")
     else:
         out.status["symmetry"] = "pass"
+
+
+# ---- shrinking ----------------------------------------------------------------------------------------------------
+def _simpler(doc: dict):
+    """Candidate simplifications of a document, simplest first: the soil's and the vehicle's drawn values
+    back to their preset's, the duration halved, torques rounded to 2 significant digits."""
+    for section in ("soil", "vehicle"):
+        for key in [k for k in doc[section] if k != "preset"]:
+            out = json.loads(json.dumps(doc))
+            del out[section][key]
+            yield f"{section}.{key} as the preset's", out
+    if doc["run"]["duration_s"] > 0.2:
+        last = doc["torque"][-1]["t_s"]
+        d = _round(max(doc["run"]["duration_s"] / 2, last + 0.1), 3)
+        if d < doc["run"]["duration_s"]:
+            yield f"run.duration_s = {d:g}", _with_run(doc, duration_s=d)
+    for section in ("soil", "vehicle"):
+        for key, v in doc[section].items():
+            if key != "preset" and _round(v, 2) != v:
+                out = json.loads(json.dumps(doc))
+                out[section][key] = _round(v, 2)
+                yield f"{section}.{key} = {_round(v, 2):g}", out
+    for i, e in enumerate(doc["torque"]):
+        for side in ("left_N_m", "right_N_m"):
+            r = _round(e[side], 2)
+            if r != e[side]:
+                out = json.loads(json.dumps(doc))
+                out["torque"][i][side] = r
+                yield f"torque[{i}].{side} = {r:g}", out
+
+
+def shrink(doc: dict, meta: dict, properties, max_checks: int = 200, stream=None) -> tuple[dict, list[str]]:
+    """A simpler document that still fails one of ``properties`` (greedy: each simplification of
+    :func:`_simpler` is kept when the case still fails so), and the simplifications kept."""
+    kept, checks, changed = [], 0, True
+    while changed and checks < max_checks:
+        changed = False
+        for what, cand in _simpler(doc):
+            checks += 1
+            try:
+                fails = set(check_case(cand, meta).failed)
+            except Exception:  # noqa: BLE001 -- a candidate that the checks cannot even run is not simpler
+                fails = set()
+            if fails & set(properties):
+                doc, changed = cand, True
+                kept.append(what)
+                if stream is not None:
+                    print(f"  shrink: {what}", file=stream, flush=True)
+                break
+            if checks >= max_checks:
+                break
+    return doc, kept
 
 
 # ---- the long run ----------------------------------------------------------------------------------------------
@@ -471,11 +535,15 @@ def _row(i: int, seed: int, out: CaseOutcome) -> dict:
             "worst_figure": out.worst[0], "worst_ratio": round(out.worst[1], 4),
             "fixed_step_error_max": out.figures.get("fixed_step_error_max"),
             "fixed_step_steps_halved": out.figures.get("fixed_step_steps_halved"),
-            "energy_rise_J": out.figures.get("energy_rise_J"), "distance_m": out.figures.get("distance_m"), "wall_s": round(out.wall_s, 3), "message": msg}
+            "energy_rise_J": out.figures.get("energy_rise_J"), "distance_m": out.figures.get("distance_m"),
+            "wall_s": round(out.wall_s, 3), "message": msg}
+
+
+SHRINK_PER_CLASS = 2
 
 
 def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None, variants=None,
-             stream=sys.stdout) -> int:
+             stream=sys.stdout, shrink_failures: bool = True) -> int:
     """Draw and check ``budget`` cases (case i from the seed ``seed * 1_000_003 + i``, so that a case is
     redrawn alone by its seed); write ``cases.csv`` and ``failures.json`` into ``out_dir`` as it goes.
     Stops early after ``time_limit_s``. Returns the number of cases with a failed property."""
@@ -508,6 +576,19 @@ def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None,
             print(f"[{i + 1}/{budget}] {meta['variant']:15s} {meta['programme']:8s} {out.outcome:7s} "
                   f"{' '.join(out.failed) or '-':20s} {out.wall_s:6.2f} s  "
                   f"({time.perf_counter() - t0:.0f} s; failures {sum(counts.values())})", file=stream, flush=True)
+    if shrink_failures:
+        seen: dict = {}
+        for f in failures:  # the first SHRINK_PER_CLASS of each class (variant and failed properties)
+            cls = (f["variant"], tuple(f["failed"]))
+            seen[cls] = seen.get(cls, 0) + 1
+            if seen[cls] > SHRINK_PER_CLASS:
+                continue
+            print(f"shrinking case {f['case']} ({' '.join(f['failed'])})", file=stream, flush=True)
+            meta = {"variant": f["variant"], "programme": f["programme"], "flat": VARIANTS[f["variant"]][1] is None}
+            small, kept = shrink(f["scenario"], meta, f["failed"], stream=stream)
+            redo = check_case(small, meta)
+            f["shrunk"] = {"scenario": small, "simplified": kept, "failed": redo.failed, "messages": redo.messages}
+            (out_dir / "failures.json").write_text(json.dumps(failures, indent=1))
     (out_dir / "failures.json").write_text(json.dumps(failures, indent=1))
     print(f"cases: {sum(outcomes.values())} ({outcomes['ok']} ok, {outcomes['refused']} refused, "
           f"{outcomes['failed']} failed); failures by property: "
@@ -521,6 +602,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="the seed of the draws (default 0)")
     ap.add_argument("--out", required=True, help="folder for cases.csv and failures.json")
     ap.add_argument("--time-limit", type=float, default=None, help="stop after this many seconds (wall)")
+    ap.add_argument("--no-shrink", action="store_true", help="do not shrink the failures at the end")
     ap.add_argument("--variants", default=None, help=f"comma-separated subset of {', '.join(VARIANTS)}")
     args = ap.parse_args(argv)
     variants = None if args.variants is None else [v.strip() for v in args.variants.split(",")]
@@ -530,7 +612,8 @@ def main(argv=None) -> int:
     # the runs' own warnings (a step kept above its tolerance, an implausible input) go to the CSV's
     # columns; stderr keeps the progress readable
     logging.getLogger("symtrack").setLevel(logging.ERROR)
-    failed = run_fuzz(args.budget, args.seed, args.out, args.time_limit, variants)
+    failed = run_fuzz(args.budget, args.seed, args.out, args.time_limit, variants,
+                      shrink_failures=not args.no_shrink)
     return 1 if failed else 0
 
 
