@@ -418,8 +418,9 @@ def check_case(doc: dict, meta: dict, reference: dict | None = None, symmetry: b
             if not ok:
                 bad.append(f"{k} {fixed.summary[k]:.6g} against {ref.summary[k]:.6g}")
         out.worst = worst
-        if bad and flagged:
+        if bad and flagged:  # outside the tolerance, and the run's own estimate said so
             out.status["accuracy"] = "flagged"
+            out.messages["accuracy (flagged)"] = "; ".join(bad)
         elif bad:
             out.fail("accuracy", f"{doc['run']['integrator']} against {ref_run['integrator']} (reltol "
                                  f"{ref_run['reltol']:g}): {'; '.join(bad)} (allowed {ACCURACY_RTOL:g} relative plus "
