@@ -22,10 +22,10 @@ reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`che
 - ``symmetry`` (flat ground): the programme mirrored (left and right swapped) gives the mirrored
   run: yaw and lateral deviation with the sign flipped, the other figures equal, within
   :data:`SYMMETRY_RTOL` and floors 1000 x finer than the accuracy's;
-- ``energy`` (flat ground, a programme that ends with zero torque): once the actuators' torque has
-  decayed (:data:`COAST_SETTLE_TAU` time constants after the release), the kinetic energy of the
-  body, its yaw and the running gear never rises by more than :data:`ENERGY_RTOL` of its value at
-  the start of that window (both integrators);
+- ``energy`` (flat ground, a programme that ends with zero torque): from the release on, the kinetic
+  energy of the body, its yaw and the running gears never rises by more than the motors' work plus
+  the elastic energy the tracks' shear displacement held (:func:`_elastic`), within
+  :data:`ENERGY_RTOL` of the kinetic energy (both integrators);
 - ``rest`` (flat ground, zero torque throughout): the vehicle at rest stays at rest: speed, travel
   and yaw below :data:`REST_SPEED_M_S`, :data:`REST_TRAVEL_M`, :data:`REST_YAW_RAD` (both
   integrators).
@@ -59,7 +59,7 @@ from ..model.vehicle import GRAVITY_M_S2
 from ..presets.soils import SOILS
 from ..simulation.scenario import scenario_from_dict
 
-__all__ = ["ACCURACY_RTOL", "COAST_SETTLE_TAU", "CSV_COLUMNS", "ENERGY_RTOL", "FIGURES", "PROPERTIES", "REFERENCE",
+__all__ = ["ACCURACY_RTOL", "CSV_COLUMNS", "ENERGY_RTOL", "FIGURES", "PROPERTIES", "REFERENCE",
            "REST_SPEED_M_S", "REST_TRAVEL_M", "REST_YAW_RAD", "SYMMETRY_RTOL", "VARIANTS", "CaseOutcome",
            "RandomDraw", "case_document", "check_case", "main", "mirrored", "run_fuzz", "shrink"]
 
@@ -118,12 +118,9 @@ ACCURACY_RTOL = 0.02
 # error a user would see.
 SYMMETRY_RTOL = 1e-4
 SYMMETRY_FLOOR = 1e-3
-# Energy: after the release the actuators' torque decays as exp(-t / tau_T); after COAST_SETTLE_TAU
-# time constants it is below 1e-4 of what it was, and its work is negligible. The kinetic energy may
-# then still rise by what the tracks' shear displacement returns as it relaxes (the shear law's lagged
-# displacement is a spring of some tens of J against a kinetic energy of kJ) and by the rounding of
-# the 10 ms samples: ENERGY_RTOL of the energy at the window's start, plus ENERGY_ATOL_J.
-COAST_SETTLE_TAU = 10.0
+# Energy: the motors' work after the release is integrated by trapezoids over the 10 ms outputs, whose
+# error while the actuators' torque decays (tau_T >= 0.05 s) is some 1e-4 of the kinetic energy;
+# ENERGY_RTOL of the largest kinetic energy of the coast, plus ENERGY_ATOL_J for a vehicle nearly at rest.
 ENERGY_RTOL = 1e-3
 ENERGY_ATOL_J = 1e-2
 # At rest: the soil settles under the tracks (mm of sinkage, no travel). A speed of 0.1 mm/s or a
@@ -248,6 +245,8 @@ def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S) -
     vehicle = _vehicle(draw, soil)
     flat = surface is None
     start_yaw = 0.0 if flat else _round(draw.choice([0.0, 30.0, 90.0, 180.0, -90.0]))
+    if kind == "hold":  # facing up the ramp, where the programme's torque holds the vehicle
+        start_yaw = 0.0
     doc = {"name": f"fuzz-{variant}-{kind}", "description": "a physics-fuzzer case (symtrack.bench.fuzz)",
            "run": {"duration_s": duration, "output_dt_s": 0.01, "integrator": "rosenbrock"},
            "model": dict(model), "vehicle": vehicle, "soil": soil,
