@@ -30,7 +30,7 @@ reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`che
   and yaw below :data:`REST_SPEED_M_S`, :data:`REST_TRAVEL_M`, :data:`REST_YAW_RAD` (both
   integrators).
 
-``python -m symtrack.bench.fuzz --budget N [--seed S] --out DIR`` draws N cases from the seed,
+``python -m symtrack.bench.fuzz --budget N [--seed S] --out DIR`` draws N cases (from S),
 prints one progress line per case, writes ``DIR/cases.csv`` (:data:`CSV_COLUMNS`) and
 ``DIR/failures.json`` (each failure with its scenario document, reproducible with
 ``symtrack simulate``) and exits 1 if any property failed. The test suite runs the same checks
@@ -544,7 +544,7 @@ SHRINK_PER_CLASS = 2
 
 def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None, variants=None,
              stream=sys.stdout, shrink_failures: bool = True) -> int:
-    """Draw and check ``budget`` cases (case i from the seed ``seed * 1_000_003 + i``, so that a case is
+    """Draw and check ``budget`` cases (case i from its own seed ``seed * 1_000_003 + i``, so that a case is
     redrawn alone by its seed); write ``cases.csv`` and ``failures.json`` into ``out_dir`` as it goes.
     Stops early after ``time_limit_s``. Returns the number of cases with a failed property."""
     out_dir = Path(out_dir)
