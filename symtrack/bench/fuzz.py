@@ -45,7 +45,9 @@ import json
 import logging
 import math
 import random
+import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -128,6 +130,11 @@ ENERGY_ATOL_J = 1e-2
 REST_SPEED_M_S = 1e-4
 REST_TRAVEL_M = 1e-4
 REST_YAW_RAD = 1e-5
+
+# A run (one integrator) that takes longer than this (wall) is stopped and fails ``finite``: a 1-3 s run takes
+# well under 2 s on every integrator here, even on a loaded machine; 30 s is an integrator that is stuck
+# (a fixed step halved to its limit at every step, CVODES creeping).
+RUN_TIMEOUT_S = 30.0
 
 PROPERTIES = ("finite", "accuracy", "symmetry", "energy", "rest")
 CSV_COLUMNS = ("case", "seed", "variant", "programme", "soil", "duration_s", "mass_kg", "ground_pressure_kPa",
@@ -297,18 +304,46 @@ def _with_run(doc: dict, **run) -> dict:
     return {**doc, "run": {**doc["run"], **run}}
 
 
+class _RunTimeout(BaseException):
+    """Raised by the alarm in :func:`_run` (a BaseException: the package's own handlers do not take it)."""
+
+
+_EXPIRED: list = []  # the alarm went off (casadi may turn the exception into a solver failure of its own)
+
+
+def _alarm(signum, frame):
+    _EXPIRED.append(signum)
+    raise _RunTimeout
+
+
 def _run(doc: dict, out: CaseOutcome, label: str):
-    """The Result of the document's scenario, or None after recording a failure of ``finite``."""
+    """The Result of the document's scenario, or None after recording a failure of ``finite`` (also when it
+    takes longer than :data:`RUN_TIMEOUT_S`)."""
+    timeout_s = RUN_TIMEOUT_S
+    timed = timeout_s is not None and threading.current_thread() is threading.main_thread()
+    _EXPIRED.clear()
+    if timed:
+        prev = signal.signal(signal.SIGALRM, _alarm)
+        signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
-        res = simulate(scenario_from_dict(doc, doc.get("name", "fuzz")))
-    except IncompleteSimulation as err:
-        out.fail("finite", f"{label}: {err}")
-        return None
-    except SymtrackError as err:
-        out.fail("finite", f"{label}: {type(err).__name__}: {err}")
-        return None
-    except Exception as err:  # noqa: BLE001 -- a traceback of any other kind is what the property forbids
-        out.fail("finite", f"{label}: traceback {type(err).__name__}: {err}")
+        try:
+            res = simulate(scenario_from_dict(doc, doc.get("name", "fuzz")))
+        finally:
+            if timed:
+                signal.setitimer(signal.ITIMER_REAL, 0.0)
+                signal.signal(signal.SIGALRM, prev)
+    except BaseException as err:
+        if _EXPIRED:  # casadi may have turned the alarm into a solver failure of its own
+            out.fail("finite", f"{label}: did not finish within {timeout_s:g} s (wall)")
+            return None
+        if not isinstance(err, Exception):
+            raise  # Ctrl-C
+        if isinstance(err, IncompleteSimulation):
+            out.fail("finite", f"{label}: {err}")
+        elif isinstance(err, SymtrackError):
+            out.fail("finite", f"{label}: {type(err).__name__}: {err}")
+        else:  # a traceback of any other kind is what the property forbids
+            out.fail("finite", f"{label}: traceback {type(err).__name__}: {err}")
         return None
     run = res.runs[-1]
     if not (np.all(np.isfinite(run.X)) and np.all(np.isfinite(run.Y))):
