@@ -13,8 +13,9 @@ to build once, cached on disk), while the soil, the vehicle and the programme ar
 Each case runs on the default compiled Rosenbrock (10 ms steps with error control) and on the
 reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`check_case`):
 
-- ``finite``: every integrator completes with finite states and outputs, or the scenario is refused
-  on load with the package's own error (an acceptable outcome, counted as ``refused``);
+- ``finite``: every integrator completes with finite and bounded states (:data:`TREAD_SPEED_MAX_M_S`,
+  :data:`TILT_MAX_DEG`) within :data:`RUN_TIMEOUT_S`, or the scenario is refused on load with the
+  package's own error (an acceptable outcome, counted as ``refused``);
 - ``accuracy``: the Rosenbrock run's summary figures (:data:`FIGURES`) within
   :data:`ACCURACY_RTOL` of the reference plus each figure's absolute floor, or the run's own error
   estimate flags it (``fixed_step_error_max`` above 1: the run warned that a step was kept above its
@@ -56,7 +57,7 @@ import numpy as np
 
 from ..api import IncompleteSimulation, simulate
 from ..foundations.errors import SymtrackError
-from ..model.plausibility import GROUND_PRESSURE_RANGE_KPA
+from ..model.plausibility import GROUND_PRESSURE_RANGE_KPA, MAX_SPEED_M_S
 from ..model.vehicle import GRAVITY_M_S2
 from ..presets.soils import SOILS
 from ..simulation.scenario import scenario_from_dict
@@ -135,6 +136,13 @@ REST_YAW_RAD = 1e-5
 # well under 2 s on every integrator here, even on a loaded machine; 30 s is an integrator that is stuck
 # (a fixed step halved to its limit at every step, CVODES creeping).
 RUN_TIMEOUT_S = 30.0
+
+# Bounded: a run reported complete stays where a crawler can be. The tread speed r |omega| may exceed the
+# vehicle's speed limit (MAX_SPEED_M_S, which the run itself checks on the body) when the tracks spin on
+# soft soil, but not twice it; on the 8 deg slopes here, or on flat ground, the hull does not pitch or roll
+# 45 deg (it would have turned over). Beyond either a run has diverged, whatever its figures say.
+TREAD_SPEED_MAX_M_S = 2 * MAX_SPEED_M_S
+TILT_MAX_DEG = 45.0
 
 PROPERTIES = ("finite", "accuracy", "symmetry", "energy", "rest")
 CSV_COLUMNS = ("case", "seed", "variant", "programme", "soil", "duration_s", "mass_kg", "ground_pressure_kPa",
@@ -348,6 +356,16 @@ def _run(doc: dict, out: CaseOutcome, label: str):
     run = res.runs[-1]
     if not (np.all(np.isfinite(run.X)) and np.all(np.isfinite(run.Y))):
         out.fail("finite", f"{label}: a non-finite state or output in a run reported complete")
+        return None
+    r = doc["vehicle"].get("sprocket_radius_m", res.scenario.vehicle["sprocket_radius_m"])
+    tread = r * float(np.max(np.abs(run.X[:, [run.state_names.index(f"omega_{k}_rad_s") for k in ("left", "right")]])))
+    tilt = max((float(np.max(np.abs(run.state(k)))) for k in ("pitch_rad", "roll_rad") if k in run.state_names),
+               default=0.0)
+    if tread > TREAD_SPEED_MAX_M_S or tilt > math.radians(TILT_MAX_DEG):
+        out.fail("finite", f"{label}: a run reported complete left what any crawler does: tread speed up to "
+                           f"{tread:.4g} m/s (allowed {TREAD_SPEED_MAX_M_S:g}), pitch or roll up to "
+                           f"{math.degrees(tilt):.4g} deg (allowed {TILT_MAX_DEG:g}; fixed_step_error_max "
+                           f"{res.summary.get('fixed_step_error_max', float('nan')):.3g})")
         return None
     return res
 
