@@ -552,11 +552,14 @@ def _simpler(doc: dict):
                 yield f"torque[{i}].{side} = {r:g}", out
 
 
-def shrink(doc: dict, meta: dict, properties, max_checks: int = 200, stream=None) -> tuple[dict, list[str]]:
+def shrink(doc: dict, meta: dict, properties, max_checks: int = 200, time_limit_s: float = 120.0,
+           stream=None) -> tuple[dict, list[str]]:
     """A simpler document that still fails one of ``properties`` (greedy: each simplification of
-    :func:`_simpler` is kept when the case still fails so), and the simplifications kept."""
+    :func:`_simpler` is kept when the case still fails so), and the simplifications kept; at most
+    ``max_checks`` checks and ``time_limit_s`` seconds."""
     kept, checks, changed = [], 0, True
-    while changed and checks < max_checks:
+    t0 = time.perf_counter()
+    while changed and checks < max_checks and time.perf_counter() - t0 < time_limit_s:
         changed = False
         for what, cand in _simpler(doc):
             checks += 1
@@ -570,7 +573,7 @@ def shrink(doc: dict, meta: dict, properties, max_checks: int = 200, stream=None
                 if stream is not None:
                     print(f"  shrink: {what}", file=stream, flush=True)
                 break
-            if checks >= max_checks:
+            if checks >= max_checks or time.perf_counter() - t0 > time_limit_s:
                 break
     return doc, kept
 
