@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from symtrack.bench import fuzz
@@ -22,6 +22,11 @@ from symtrack.bench import fuzz
 VARIANTS = ("planar-creep", "planar-shear", "3d-creep")
 # CVODES on CasADi's interpreter: the compiled reference would compile each variant once more
 REFERENCE = {"compiled": False}
+# Outside the model's known limits, each kept by a shrunk case below or in docs/model.md ("The physics
+# fuzzer"): no WES heavy clay (n = 0.11), and torques that do not spin the tracks up (at most 0.3 of the
+# torque whose thrust is the weight).
+SOILS = tuple(s for s in fuzz.SOILS if s != "heavy_clay_wes_40")
+TORQUE_FRACTION = (0.03, 0.3)
 
 
 class HypothesisDraw:
@@ -39,11 +44,14 @@ class HypothesisDraw:
 
 
 # SYMTRACK_FUZZ_EXAMPLES=200 for a longer search here; the long run is python -m symtrack.bench.fuzz
+# (no shrinking here: a failure prints its scenario document, python -m symtrack.bench.fuzz shrinks)
 @settings(max_examples=int(os.environ.get("SYMTRACK_FUZZ_EXAMPLES", "8")), deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+          phases=[Phase.explicit, Phase.generate], suppress_health_check=[HealthCheck.too_slow,
+                                                                          HealthCheck.data_too_large])
 @given(st.data())
 def test_a_random_plausible_scenario_keeps_every_property(data):
-    doc, meta = fuzz.case_document(HypothesisDraw(data), VARIANTS, duration_s=(0.5, 1.0))
+    doc, meta = fuzz.case_document(HypothesisDraw(data), VARIANTS, duration_s=(0.5, 1.0), soils=SOILS,
+                                   torque_fraction=TORQUE_FRACTION)
     out = fuzz.check_case(doc, meta, reference=REFERENCE)
     assert not out.failed, f"{meta}: {out.messages}\n{doc}"
 
@@ -117,3 +125,20 @@ def test_a_coast_after_spinning_tracks_gains_no_energy():
     out = fuzz.check_case(doc, {"variant": "planar-shear", "programme": "coast", "flat": True}, reference=REFERENCE,
                           symmetry=False)
     assert out.status["energy"] == "pass", out.messages
+
+
+@pytest.mark.xfail(strict=True, reason="defect: the compiled Rosenbrock diverges on the 3D shear law at rest across "
+                                       "a side slope, where CVODES holds the vehicle")
+def test_3d_at_rest_across_a_side_slope_stays_bounded_on_the_fixed_step():
+    """Shrunk from the long run (8 cases of 2000, all this variant): the reference crawler (CG 6.4 cm ahead of the
+    contact centre, J_eq 10 kg m^2) parked across an 8 deg side slope of the 15 % sandy loam on the "shear" law,
+    zero torque. CVODES keeps it within centimetres; the compiled Rosenbrock at 10 ms keeps steps whose error
+    estimate stays above its tolerance after the halvings, and the run diverges (here stopped by the speed
+    limit at 2.6e6 m/s; in the other cases complete with tread speeds of hundreds of m/s and the hull rolled
+    over, or stopped on a non-finite state)."""
+    doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 0.0, 0.0)], soil="sandy_loam_15", duration=0.855,
+               vehicle={"cg_ahead_of_contact_centre_m": 0.063973, "sprocket_inertia_kg_m2": 10.0},
+               surface={"slope_y_deg": 8.0})
+    doc["start"] = {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 180.0}
+    out = fuzz.check_case(doc, {"variant": "3d-shear-side8", "programme": "zero", "flat": False}, reference=REFERENCE)
+    assert not out.failed, out.messages

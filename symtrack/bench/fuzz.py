@@ -174,8 +174,8 @@ def _log_uniform(draw, lo: float, hi: float) -> float:
     return math.exp(draw.uniform(math.log(lo), math.log(hi)))
 
 
-def _soil(draw) -> dict:
-    preset = draw.choice(sorted(SOILS))
+def _soil(draw, soils=None) -> dict:
+    preset = draw.choice(sorted(soils or SOILS))
     base = SOILS[preset]
     out = {"preset": preset}
     for k in SOIL_PERTURBED:
@@ -210,11 +210,12 @@ def _vehicle(draw, soil: dict) -> dict:
     return {k: (x if isinstance(x, str) else _round(x)) for k, x in v.items()}
 
 
-def _programme(draw, kind: str, vehicle: dict, duration: float, ramp_deg: float) -> list[dict]:
+def _programme(draw, kind: str, vehicle: dict, duration: float, ramp_deg: float,
+               torque_fraction=TORQUE_FRACTION) -> list[dict]:
     """The [[torque]] entries of a programme kind."""
     r, m = vehicle["sprocket_radius_m"], vehicle["mass_kg"]
     full = m * GRAVITY_M_S2 * r / 2  # each sprocket's torque whose thrust, both together, is the weight
-    top = full * draw.uniform(*TORQUE_FRACTION)
+    top = full * draw.uniform(*torque_fraction)
 
     def e(t, left, right):
         return {"t_s": _round(t, 4), "left_N_m": _round(left), "right_N_m": _round(right)}
@@ -242,11 +243,13 @@ def _programme(draw, kind: str, vehicle: dict, duration: float, ramp_deg: float)
     raise ValueError(kind)
 
 
-def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S) -> tuple[dict, dict]:
+def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S, soils=None,
+                  torque_fraction=TORQUE_FRACTION) -> tuple[dict, dict]:
     """``(document, meta)``: a scenario document drawn with ``draw`` (:class:`RandomDraw` or the test
     suite's hypothesis draw) and what the checks need to know of it (``variant``, ``programme``,
-    ``flat``). ``variants``, ``programmes``: the names to draw from (default all; "hold" only on a
-    ramp, where it is the programme drawn half of the time)."""
+    ``flat``). ``variants``, ``programmes``, ``soils``: the names to draw from (default all; "hold" only
+    on a ramp, where it is the programme drawn half of the time); ``torque_fraction``: the range of the
+    largest torque over the one whose thrust is the weight."""
     variant = draw.choice(list(variants or VARIANTS))
     model, surface = VARIANTS[variant]
     ramp_deg = (surface or {}).get("slope_x_deg", 0.0)
@@ -256,7 +259,7 @@ def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S) -
     else:
         kind = draw.choice([k for k in kinds if k != "hold"] or kinds)
     duration = _round(draw.uniform(*duration_s), 3)
-    soil = _soil(draw)
+    soil = _soil(draw, soils)
     vehicle = _vehicle(draw, soil)
     flat = surface is None
     start_yaw = 0.0 if flat else _round(draw.choice([0.0, 30.0, 90.0, 180.0, -90.0]))
@@ -266,7 +269,7 @@ def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S) -
            "run": {"duration_s": duration, "output_dt_s": 0.01, "integrator": "rosenbrock"},
            "model": dict(model), "vehicle": vehicle, "soil": soil,
            "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": start_yaw},
-           "torque": _programme(draw, kind, vehicle, duration, ramp_deg)}
+           "torque": _programme(draw, kind, vehicle, duration, ramp_deg, torque_fraction)}
     if surface is not None:
         doc["terrain"] = {"surface": dict(surface)}
     return doc, {"variant": variant, "programme": kind, "flat": flat}
