@@ -1,0 +1,680 @@
+"""The physics fuzzer: random but plausible homogeneous scenarios, each run and checked against
+properties that any correct run has (docs/model.md, "Integrators", "The physics fuzzer").
+
+A case is a scenario document (:func:`case_document`): a soil preset with each Bekker and
+Mohr-Coulomb value perturbed, a crawler whose mass and geometry stay inside the plausibility rules
+(:mod:`symtrack.model.plausibility`: no refusal, no warning), a torque programme (a step, a
+staircase ramp, a reversal, a turn, a drive then a coast, zero torque, or the exact holding torque
+on a ramp), one of the lateral laws ("creep", "shear") and one of the vehicle variants of
+:data:`VARIANTS` (the planar model, the 3D hull on flat ground, across a side slope or on a ramp),
+simulated for 1-3 s. The variants are few on purpose: each is one compiled model (tens of seconds
+to build once, cached on disk), while the soil, the vehicle and the programme are parameters.
+
+Each case runs on the default compiled Rosenbrock (10 ms steps with error control) and on the
+reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`check_case`):
+
+- ``finite``: every integrator completes with finite and bounded states (:data:`TREAD_SPEED_MAX_M_S`,
+  :data:`TILT_MAX_DEG`) within :data:`RUN_TIMEOUT_S`, or the scenario is refused on load with the
+  package's own error (an acceptable outcome, counted as ``refused``);
+- ``accuracy``: the Rosenbrock run's summary figures (:data:`FIGURES`) within
+  :data:`ACCURACY_RTOL` of the reference plus each figure's absolute floor, or the run's own error
+  estimate flags it (``fixed_step_error_max`` above 1: the run warned that a step was kept above its
+  tolerance);
+- ``symmetry`` (flat ground): the programme mirrored (left and right swapped) gives the mirrored
+  run: yaw and lateral deviation with the sign flipped, the other figures equal, within
+  :data:`SYMMETRY_RTOL` and floors 1000 x finer than the accuracy's;
+- ``energy`` (flat ground, a programme that ends with zero torque): from the release on, the kinetic
+  energy of the body, its yaw and the running gears never rises by more than the motors' work plus
+  the elastic energy the tracks' shear displacement held (:func:`_elastic`), within
+  :data:`ENERGY_RTOL` of the kinetic energy (both integrators);
+- ``rest`` (flat ground, zero torque throughout): the vehicle at rest stays at rest: speed, travel
+  and yaw below :data:`REST_SPEED_M_S`, :data:`REST_TRAVEL_M`, :data:`REST_YAW_RAD` (both
+  integrators).
+
+``python -m symtrack.bench.fuzz --budget N [--seed S] --out DIR`` draws N cases (from S),
+prints one progress line per case, writes ``DIR/cases.csv`` (:data:`CSV_COLUMNS`) and
+``DIR/failures.json`` (each failure with its scenario document, reproducible with
+``symtrack simulate``) and exits 1 if any property failed. The test suite runs the same checks
+through hypothesis with a small budget (tests/test_physics_fuzz.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import logging
+import math
+import random
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..api import IncompleteSimulation, simulate
+from ..foundations.errors import SymtrackError
+from ..model.plausibility import GROUND_PRESSURE_RANGE_KPA, MAX_SPEED_M_S
+from ..model.vehicle import GRAVITY_M_S2
+from ..presets.soils import SOILS
+from ..simulation.scenario import scenario_from_dict
+
+__all__ = ["ACCURACY_RTOL", "CSV_COLUMNS", "ENERGY_RTOL", "FIGURES", "PROPERTIES", "REFERENCE",
+           "REST_SPEED_M_S", "REST_TRAVEL_M", "REST_YAW_RAD", "SYMMETRY_RTOL", "VARIANTS", "CaseOutcome",
+           "RandomDraw", "case_document", "check_case", "main", "mirrored", "run_fuzz", "shrink"]
+
+log = logging.getLogger("symtrack.bench.fuzz")
+
+# ---- what a case may be ----------------------------------------------------------------------------------
+# name -> ([model] table, [terrain.surface] table or None). Each is one compiled model (the surface is
+# part of the 3D model's expressions): few variants, so that a long run compiles each once.
+VARIANTS: dict[str, tuple[dict, dict | None]] = {
+    "planar-creep": ({"lateral_law": "creep"}, None),
+    "planar-shear": ({"lateral_law": "shear"}, None),
+    "3d-creep": ({"lateral_law": "creep", "vehicle": "3d"}, None),
+    "3d-shear": ({"lateral_law": "shear", "vehicle": "3d"}, None),
+    "3d-creep-side8": ({"lateral_law": "creep", "vehicle": "3d"}, {"slope_y_deg": 8.0}),
+    "3d-shear-side8": ({"lateral_law": "shear", "vehicle": "3d"}, {"slope_y_deg": 8.0}),
+    "3d-creep-ramp8": ({"lateral_law": "creep", "vehicle": "3d"}, {"slope_x_deg": 8.0}),
+}
+PROGRAMMES = ("step", "ramp", "reversal", "turn", "coast", "zero", "hold")
+# Soil values perturbed by a factor in [1 / SOIL_FACTOR, SOIL_FACTOR] (log-uniform) around a preset: the
+# spread of Wong's Table 2.3 between soils of one kind, without leaving the kind (a stiff sand's n on a
+# soft clay's k_phi is no soil).
+SOIL_FACTOR = 1.3
+SOIL_PERTURBED = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "cohesion_Pa", "friction_angle_rad",
+                  "shear_modulus_K_m")
+# Vehicle ranges: medium agricultural and construction crawlers (the reference crawler's comments in
+# symtrack/presets/vehicles.py give its ranges); the mean ground pressure is kept inside
+# VEHICLE_PRESSURE_KPA, within the plausibility rule's range, and l / B inside 0.9-1.8 (Wong's range for
+# steerable tracked vehicles, inside the rule's warning range).
+VEHICLE_PRESSURE_KPA = (15.0, 120.0)
+assert GROUND_PRESSURE_RANGE_KPA[0] < VEHICLE_PRESSURE_KPA[0] < VEHICLE_PRESSURE_KPA[1] < GROUND_PRESSURE_RANGE_KPA[1]
+# The generator keeps the static sinkage z = (p / k)^(1/n) of the mean ground pressure below this: a
+# crawler's ground clearance. (The plausibility rules bound the pressure alone: on the WES heavy clay,
+# n = 0.11, a 122 kPa crawler sinks tens of metres; docs/model.md, "The physics fuzzer".)
+STATIC_SINKAGE_MAX_M = 0.2
+# The largest torque of a programme as a fraction of the torque whose thrust 2 T / r equals the weight
+# (the plausibility rule warns above 2): from gentle driving to what spins the tracks on soft soil.
+TORQUE_FRACTION = (0.03, 0.6)
+DURATION_S = (1.0, 3.0)
+
+# ---- the reference and the tolerances ----------------------------------------------------------------------
+# CVODES at tight tolerances: its own error is some 1e-6 relative, far below the tolerance it checks.
+REFERENCE = {"integrator": "cvodes", "reltol": 1e-8, "abstol": 1e-10, "compiled": True}
+# Summary figures compared, each with its absolute floor: well below what a user reads from the figure,
+# and what keeps a figure that is nearly zero (the yaw of a straight run, 1e-4 deg) from failing on
+# a relative difference of two tiny numbers.
+FIGURES = {"distance_m": 1e-3, "lateral_deviation_signed_m": 1e-3, "yaw_final_deg": 0.01, "sinkage_sprocket_mm": 0.01,
+           "sinkage_idler_mm": 0.01, "speed_final_m_s": 1e-3}
+# The fixed step against the reference: issue 37's target for the drive-and-coast case (every summary
+# figure within 2 % of CVODES). The error control's tolerance (1e-3 per step) leaves a run's figures
+# within some 1e-4 where it holds; 2 % is what the user is promised.
+ACCURACY_RTOL = 0.02
+# Mirror symmetry: the equations are exactly symmetric; a mirrored run differs by rounding (sums taken
+# in the other order, 1e-16) amplified over some thousands of steps, and by the odd step-halving
+# decision that rounding tips at the error control's threshold (a local error below 1e-3 of a state).
+# 1e-4 relative and floors 1000 x finer than the accuracy's are far above the first and below any
+# error a user would see.
+SYMMETRY_RTOL = 1e-4
+SYMMETRY_FLOOR = 1e-3
+# Energy: the motors' work after the release is integrated by trapezoids over the 10 ms outputs, whose
+# error while the actuators' torque decays (tau_T >= 0.05 s) is some 1e-4 of the kinetic energy;
+# ENERGY_RTOL of the largest kinetic energy of the coast, plus ENERGY_ATOL_J for a vehicle nearly at rest.
+ENERGY_RTOL = 1e-3
+ENERGY_ATOL_J = 1e-2
+# At rest: the soil settles under the tracks (mm of sinkage, no travel). A speed of 0.1 mm/s or a
+# travel of 0.1 mm over 3 s is no visible motion; anything a drift would give exceeds it.
+REST_SPEED_M_S = 1e-4
+REST_TRAVEL_M = 1e-4
+REST_YAW_RAD = 1e-5
+
+# A run (one integrator) that takes longer than this (wall) is stopped and fails ``finite``: a 1-3 s run takes
+# well under 2 s on every integrator here, even on a loaded machine; 30 s is an integrator that is stuck
+# (a fixed step halved to its limit at every step, CVODES creeping).
+RUN_TIMEOUT_S = 30.0
+
+# Bounded: a run reported complete stays where a crawler can be. The tread speed r |omega| may exceed the
+# vehicle's speed limit (MAX_SPEED_M_S, which the run itself checks on the body) when the tracks spin on
+# soft soil, but not twice it; on the 8 deg slopes here, or on flat ground, the hull does not pitch or roll
+# 45 deg (it would have turned over). Beyond either a run has diverged, whatever its figures say.
+TREAD_SPEED_MAX_M_S = 2 * MAX_SPEED_M_S
+TILT_MAX_DEG = 45.0
+
+PROPERTIES = ("finite", "accuracy", "symmetry", "energy", "rest")
+CSV_COLUMNS = ("case", "seed", "variant", "programme", "soil", "duration_s", "mass_kg", "ground_pressure_kPa",
+               "torque_max_N_m", "outcome", "failed", *PROPERTIES, "worst_figure", "worst_ratio",
+               "fixed_step_error_max", "fixed_step_steps_halved", "energy_rise_J", "distance_m", "wall_s", "message")
+
+
+# ---- drawing ---------------------------------------------------------------------------------------------------
+class RandomDraw:
+    """The draws of :func:`case_document` from a seeded :class:`random.Random` (the CLI); the test
+    suite passes an object with the same two methods that draws through hypothesis."""
+
+    def __init__(self, seed: int):
+        self.rng = random.Random(seed)
+
+    def uniform(self, lo: float, hi: float) -> float:
+        return self.rng.uniform(lo, hi)
+
+    def choice(self, seq):
+        return seq[self.rng.randrange(len(seq))]
+
+
+def _round(x: float, digits: int = 5) -> float:
+    """A drawn value to ``digits`` significant digits: the documents read well and reproduce exactly."""
+    return 0.0 if x == 0 else float(f"{x:.{digits}g}")
+
+
+def _log_uniform(draw, lo: float, hi: float) -> float:
+    return math.exp(draw.uniform(math.log(lo), math.log(hi)))
+
+
+def _soil(draw, soils=None) -> dict:
+    preset = draw.choice(sorted(soils or SOILS))
+    base = SOILS[preset]
+    out = {"preset": preset}
+    for k in SOIL_PERTURBED:
+        v = base[k] * _log_uniform(draw, 1 / SOIL_FACTOR, SOIL_FACTOR)
+        if k == "bekker_n":
+            v = min(v, 1.4)
+        if k == "friction_angle_rad":
+            v = min(v, math.radians(40.0))
+        if base[k] > 0:
+            out[k] = _round(v)
+    return out
+
+
+def _vehicle(draw, soil: dict) -> dict:
+    gauge = draw.uniform(1.1, 2.2)
+    width = draw.uniform(0.3, min(0.75, 0.45 * gauge))
+    length = gauge * draw.uniform(0.9, 1.8)
+    pressure = _log_uniform(draw, *VEHICLE_PRESSURE_KPA) * 1e3
+    # no deeper than STATIC_SINKAGE_MAX_M at rest on this soil (Bekker: z = (p / k)^(1/n), k = k_c / b + k_phi)
+    s = {**SOILS[soil["preset"]], **soil}
+    k = s["k_c_N_per_m_n1"] / width + s["k_phi_N_per_m_n2"]
+    pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"])
+    mass = pressure * 2 * width * length / GRAVITY_M_S2
+    hull_l, hull_w = 1.4 * length, gauge + width
+    v = {"preset": "reference_crawler",
+         "mass_kg": mass, "track_gauge_m": gauge, "track_width_m": width, "contact_length_m": length,
+         "yaw_inertia_kg_m2": mass * (hull_l ** 2 + hull_w ** 2) / 12 * draw.uniform(0.8, 1.2),
+         "sprocket_radius_m": draw.uniform(0.25, 0.45), "cg_height_m": draw.uniform(0.5, 1.1),
+         "cg_ahead_of_contact_centre_m": draw.uniform(-0.06, 0.06) * length,
+         "sprocket_inertia_kg_m2": draw.uniform(10.0, 60.0), "torque_time_constant_s": draw.uniform(0.05, 0.2),
+         "lateral_friction_coeff": draw.uniform(0.5, 0.65), "lateral_creep_speed_m_s": draw.uniform(0.005, 0.02)}
+    return {k: (x if isinstance(x, str) else _round(x)) for k, x in v.items()}
+
+
+def _programme(draw, kind: str, vehicle: dict, duration: float, ramp_deg: float,
+               torque_fraction=TORQUE_FRACTION) -> list[dict]:
+    """The [[torque]] entries of a programme kind."""
+    r, m = vehicle["sprocket_radius_m"], vehicle["mass_kg"]
+    full = m * GRAVITY_M_S2 * r / 2  # each sprocket's torque whose thrust, both together, is the weight
+    top = full * draw.uniform(*torque_fraction)
+
+    def e(t, left, right):
+        return {"t_s": _round(t, 4), "left_N_m": _round(left), "right_N_m": _round(right)}
+
+    if kind == "zero":
+        return [e(0.0, 0.0, 0.0)]
+    if kind == "hold":  # the exact holding torque on the ramp: W sin(t) / 2 of thrust per track at rest
+        hold = m * GRAVITY_M_S2 * math.sin(math.radians(ramp_deg)) * r / 2
+        return [e(0.0, hold, hold)]
+    if kind == "step":
+        return [e(0.0, top, top * draw.uniform(0.8, 1.0))]
+    if kind == "turn":
+        return [e(0.0, top, top), e(duration * draw.uniform(0.2, 0.6), top * draw.uniform(-0.3, 0.5), top)]
+    if kind == "ramp":  # a staircase of n steps up to the top (the programme is piecewise constant)
+        n = int(draw.uniform(3, 9))
+        dt = duration * draw.uniform(0.4, 0.9) / n
+        ratio = draw.uniform(0.7, 1.0)
+        return [e(i * dt, top * (i + 1) / n, top * ratio * (i + 1) / n) for i in range(n)]
+    if kind == "reversal":
+        t1 = duration * draw.uniform(0.2, 0.6)
+        return [e(0.0, top, top), e(t1, -top * draw.uniform(0.5, 1.0), -top * draw.uniform(0.5, 1.0))]
+    if kind == "coast":
+        t1 = duration * draw.uniform(0.2, 0.5)
+        return [e(0.0, top, top * draw.uniform(0.6, 1.0)), {**e(t1, 0.0, 0.0), "event": "coast"}]
+    raise ValueError(kind)
+
+
+def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S, soils=None,
+                  torque_fraction=TORQUE_FRACTION) -> tuple[dict, dict]:
+    """``(document, meta)``: a scenario document drawn with ``draw`` (:class:`RandomDraw` or the test
+    suite's hypothesis draw) and what the checks need to know of it (``variant``, ``programme``,
+    ``flat``). ``variants``, ``programmes``, ``soils``: the names to draw from (default all; "hold" only
+    on a ramp, where it is the programme drawn half of the time); ``torque_fraction``: the range of the
+    largest torque over the one whose thrust is the weight."""
+    variant = draw.choice(list(variants or VARIANTS))
+    model, surface = VARIANTS[variant]
+    ramp_deg = (surface or {}).get("slope_x_deg", 0.0)
+    kinds = [k for k in (programmes or PROGRAMMES) if k != "hold" or ramp_deg]
+    if ramp_deg and "hold" in kinds and draw.uniform(0.0, 1.0) < 0.5:
+        kind = "hold"
+    else:
+        kind = draw.choice([k for k in kinds if k != "hold"] or kinds)
+    duration = _round(draw.uniform(*duration_s), 3)
+    soil = _soil(draw, soils)
+    vehicle = _vehicle(draw, soil)
+    flat = surface is None
+    start_yaw = 0.0 if flat else _round(draw.choice([0.0, 30.0, 90.0, 180.0, -90.0]))
+    if kind == "hold":  # facing up the ramp, where the programme's torque holds the vehicle
+        start_yaw = 0.0
+    doc = {"name": f"fuzz-{variant}-{kind}", "description": "a physics-fuzzer case (symtrack.bench.fuzz)",
+           "run": {"duration_s": duration, "output_dt_s": 0.01, "integrator": "rosenbrock"},
+           "model": dict(model), "vehicle": vehicle, "soil": soil,
+           "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": start_yaw},
+           "torque": _programme(draw, kind, vehicle, duration, ramp_deg, torque_fraction)}
+    if surface is not None:
+        doc["terrain"] = {"surface": dict(surface)}
+    return doc, {"variant": variant, "programme": kind, "flat": flat}
+
+
+def mirrored(doc: dict) -> dict:
+    """The document with left and right swapped: torques exchanged, the start mirrored about the x axis."""
+    out = json.loads(json.dumps(doc))
+    out["name"] = doc["name"] + "-mirrored"
+    out["torque"] = [{**e, "left_N_m": e["right_N_m"], "right_N_m": e["left_N_m"]} for e in doc["torque"]]
+    st = out.get("start", {})
+    out["start"] = {**st, "y_m": -st.get("y_m", 0.0), "yaw_deg": -st.get("yaw_deg", 0.0)}
+    return out
+
+
+# ---- checking ----------------------------------------------------------------------------------------------------
+@dataclass
+class CaseOutcome:
+    """What one case gave: ``outcome`` "ok", "refused" (the scenario was refused on load: acceptable) or
+    "failed"; ``status`` per property of :data:`PROPERTIES` ("pass", "fail", "flagged": outside the
+    tolerance but the run's error estimate said so, or "n/a"); ``messages`` per failed property."""
+
+    document: dict
+    meta: dict
+    outcome: str = "ok"
+    status: dict = field(default_factory=lambda: dict.fromkeys(PROPERTIES, "n/a"))
+    messages: dict = field(default_factory=dict)
+    figures: dict = field(default_factory=dict)
+    worst: tuple = ("", 0.0)
+    wall_s: float = 0.0
+
+    @property
+    def failed(self) -> list[str]:
+        return [p for p in PROPERTIES if self.status[p] == "fail"]
+
+    def fail(self, prop: str, message: str) -> None:
+        self.status[prop] = "fail"
+        self.messages[prop] = f"{self.messages[prop]}; {message}" if prop in self.messages else message
+        self.outcome = "failed"
+
+
+def _with_run(doc: dict, **run) -> dict:
+    return {**doc, "run": {**doc["run"], **run}}
+
+
+class _RunTimeout(BaseException):
+    """Raised by the alarm in :func:`_run` (a BaseException: the package's own handlers do not take it)."""
+
+
+_EXPIRED: list = []  # the alarm went off (casadi may turn the exception into a solver failure of its own)
+
+
+def _alarm(signum, frame):
+    _EXPIRED.append(signum)
+    raise _RunTimeout
+
+
+def _run(doc: dict, out: CaseOutcome, label: str):
+    """The Result of the document's scenario, or None after recording a failure of ``finite`` (also when it
+    takes longer than :data:`RUN_TIMEOUT_S`)."""
+    timeout_s = RUN_TIMEOUT_S
+    timed = timeout_s is not None and threading.current_thread() is threading.main_thread()
+    _EXPIRED.clear()
+    if timed:
+        prev = signal.signal(signal.SIGALRM, _alarm)
+        signal.setitimer(signal.ITIMER_REAL, timeout_s)
+    try:
+        try:
+            res = simulate(scenario_from_dict(doc, doc.get("name", "fuzz")))
+        finally:
+            if timed:
+                signal.setitimer(signal.ITIMER_REAL, 0.0)
+                signal.signal(signal.SIGALRM, prev)
+    except BaseException as err:
+        if _EXPIRED:  # casadi may have turned the alarm into a solver failure of its own
+            out.fail("finite", f"{label}: did not finish within {timeout_s:g} s (wall)")
+            return None
+        if not isinstance(err, Exception):
+            raise  # Ctrl-C
+        if isinstance(err, IncompleteSimulation):
+            out.fail("finite", f"{label}: {err}")
+        elif isinstance(err, SymtrackError):
+            out.fail("finite", f"{label}: {type(err).__name__}: {err}")
+        else:  # a traceback of any other kind is what the property forbids
+            out.fail("finite", f"{label}: traceback {type(err).__name__}: {err}")
+        return None
+    run = res.runs[-1]
+    if not (np.all(np.isfinite(run.X)) and np.all(np.isfinite(run.Y))):
+        out.fail("finite", f"{label}: a non-finite state or output in a run reported complete")
+        return None
+    r = doc["vehicle"].get("sprocket_radius_m", res.scenario.vehicle["sprocket_radius_m"])
+    tread = r * float(np.max(np.abs(run.X[:, [run.state_names.index(f"omega_{k}_rad_s") for k in ("left", "right")]])))
+    tilt = max((float(np.max(np.abs(run.state(k)))) for k in ("pitch_rad", "roll_rad") if k in run.state_names),
+               default=0.0)
+    if tread > TREAD_SPEED_MAX_M_S or tilt > math.radians(TILT_MAX_DEG):
+        out.fail("finite", f"{label}: a run reported complete left what any crawler does: tread speed up to "
+                           f"{tread:.4g} m/s (allowed {TREAD_SPEED_MAX_M_S:g}), pitch or roll up to "
+                           f"{math.degrees(tilt):.4g} deg (allowed {TILT_MAX_DEG:g}; fixed_step_error_max "
+                           f"{res.summary.get('fixed_step_error_max', float('nan')):.3g})")
+        return None
+    return res
+
+
+def _within(a: float, b: float, rtol: float, atol: float) -> tuple[bool, float]:
+    """(|a - b| <= rtol |b| + atol, that difference over the allowance)."""
+    allow = rtol * abs(b) + atol
+    d = abs(a - b)
+    return d <= allow, d / allow
+
+
+def _kinetic(res, params: dict) -> np.ndarray:
+    """Kinetic energy [J] of the body's plane motion, its yaw and both running gears at the output times
+    (the 3D hull's heave, pitch and roll exchange energy with the soil's elastic unloading: left out)."""
+    s = res.runs[-1].state
+    m, iz, j = params["mass_kg"], params["yaw_inertia_kg_m2"], params["sprocket_inertia_kg_m2"]
+    e = 0.5 * m * (s("u_m_s") ** 2 + s("v_m_s") ** 2) + 0.5 * iz * s("yaw_rate_rad_s") ** 2
+    return e + 0.5 * j * (s("omega_left_rad_s") ** 2 + s("omega_right_rad_s") ** 2)
+
+
+def _elastic(res, soil: dict) -> np.ndarray:
+    """An upper bound [J] of the energy the tracks' shear displacement holds elastically: |F| min(|j|, K) per
+    track and direction (Janosi-Hanamoto's K is the displacement of the soil's elastic build-up; beyond it
+    the soil shears plastically and its work is dissipated)."""
+    run = res.runs[-1]
+    K = soil["shear_modulus_K_m"]
+    out = np.zeros(len(run.t))
+    for side in ("left", "right"):
+        out += np.abs(run.output(f"tractive_{side}_N")) * np.minimum(np.abs(run.state(f"shear_{side}_m")), K)
+        if f"lateral_shear_{side}_m" in run.state_names:
+            out += (np.abs(run.output(f"lateral_force_{side}_N"))
+                    * np.minimum(np.abs(run.state(f"lateral_shear_{side}_m")), K))
+    return out
+
+
+def _check_energy(res, sc, out: CaseOutcome, label: str) -> None:
+    run = res.runs[-1]
+    t = run.t
+    window = t >= sc.torque[-1].t_s - 1e-12
+    if window.sum() < 2:
+        return
+    s = run.state
+    power = (s("torque_left_N_m") * s("omega_left_rad_s") + s("torque_right_N_m") * s("omega_right_rad_s"))[window]
+    tw = t[window]
+    work = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(tw))])
+    e = _kinetic(res, sc.vehicle)[window]
+    gain = e - e[0] - work  # the kinetic energy gained beyond the motors' work since the release
+    # from any t1 to a later t2 the gain may rise by at most the elastic energy held at t1
+    rise = gain - np.minimum.accumulate(gain + _elastic(res, sc.soil)[window])
+    allow = ENERGY_RTOL * float(e.max()) + ENERGY_ATOL_J
+    k = int(np.argmax(rise))
+    if rise[k] > allow:
+        out.fail("energy", f"{label}: coasting at zero torque the kinetic energy rose by {rise[k]:.4g} J beyond the "
+                           f"motors' work and the shear's elastic energy (allowed {allow:.3g} J) by t = {tw[k]:.3f} s "
+                           f"(the release at t = {tw[0]:.3f} s, {e[0]:.6g} J)")
+    elif out.status["energy"] == "n/a":
+        out.status["energy"] = "pass"
+    out.figures["energy_rise_J"] = max(float(rise[k]), out.figures.get("energy_rise_J", -np.inf))
+
+
+def _check_rest(res, out: CaseOutcome, label: str) -> None:
+    run = res.runs[-1]
+    s = run.state
+    speed = float(np.max(np.hypot(s("u_m_s"), s("v_m_s"))))
+    travel = float(np.max(np.hypot(s("x_m") - s("x_m")[0], s("y_m") - s("y_m")[0])))
+    yaw = float(np.max(np.abs(s("yaw_rad") - s("yaw_rad")[0])))
+    if speed > REST_SPEED_M_S or travel > REST_TRAVEL_M or yaw > REST_YAW_RAD:
+        out.fail("rest", f"{label}: at rest with zero torque on flat ground the vehicle moved: speed up to "
+                         f"{speed:.3g} m/s (allowed {REST_SPEED_M_S:g}), travel {travel:.3g} m (allowed "
+                         f"{REST_TRAVEL_M:g}), yaw {yaw:.3g} rad (allowed {REST_YAW_RAD:g})")
+    elif out.status["rest"] == "n/a":
+        out.status["rest"] = "pass"
+
+
+def check_case(doc: dict, meta: dict, reference: dict | None = None, symmetry: bool = True) -> CaseOutcome:
+    """Run a case (the document on its own integrator, the compiled Rosenbrock, and on ``reference``,
+    default :data:`REFERENCE`; the mirrored document on flat ground) and check the properties of the
+    module doc."""
+    t_start = time.perf_counter()
+    out = CaseOutcome(doc, meta)
+    try:
+        sc = scenario_from_dict(doc, doc.get("name", "fuzz"))
+    except SymtrackError as err:  # a clear refusal is an acceptable outcome
+        out.outcome = "refused"
+        out.messages["refused"] = str(err)
+        out.wall_s = time.perf_counter() - t_start
+        return out
+    ref_run = {**REFERENCE, **(reference or {})}
+    fixed = _run(doc, out, doc["run"]["integrator"])
+    ref = _run(_with_run(doc, **ref_run), out, ref_run["integrator"])
+    if fixed is not None and ref is not None:
+        out.status["finite"] = "pass"
+    if fixed is not None:
+        out.figures = {k: fixed.summary.get(k) for k in (*FIGURES, "fixed_step_error_max", "fixed_step_steps_halved")}
+    if fixed is not None and ref is not None:
+        worst, flagged = ("", 0.0), float(fixed.summary.get("fixed_step_error_max", 0.0)) > 1.0
+        bad = []
+        for k, atol in FIGURES.items():
+            ok, ratio = _within(fixed.summary[k], ref.summary[k], ACCURACY_RTOL, atol)
+            if ratio > worst[1]:
+                worst = (k, ratio)
+            if not ok:
+                bad.append(f"{k} {fixed.summary[k]:.6g} against {ref.summary[k]:.6g}")
+        out.worst = worst
+        if bad and flagged:  # outside the tolerance, and the run's own estimate said so
+            out.status["accuracy"] = "flagged"
+            out.messages["accuracy (flagged)"] = "; ".join(bad)
+        elif bad:
+            out.fail("accuracy", f"{doc['run']['integrator']} against {ref_run['integrator']} (reltol "
+                                 f"{ref_run['reltol']:g}): {'; '.join(bad)} (allowed {ACCURACY_RTOL:g} relative plus "
+                                 f"each figure's floor; fixed_step_error_max "
+                                 f"{fixed.summary.get('fixed_step_error_max', 0.0):.3g} did not flag it)")
+        else:
+            out.status["accuracy"] = "pass"
+    if meta.get("flat"):
+        if symmetry and fixed is not None and any(e["left_N_m"] != e["right_N_m"] for e in doc["torque"]):
+            mir = _run(mirrored(doc), out, "mirrored")
+            if mir is not None:
+                _check_symmetry(fixed, mir, out)
+        elif symmetry and fixed is not None:
+            _check_symmetry(fixed, fixed, out)  # a symmetric programme is its own mirror: straight ahead
+        zero_end = sc.torque[-1].left_N_m == 0.0 and sc.torque[-1].right_N_m == 0.0
+        if zero_end and len(sc.torque) > 1:
+            for res, label in ((fixed, "rosenbrock"), (ref, ref_run["integrator"])):
+                if res is not None:
+                    _check_energy(res, sc, out, label)
+        if zero_end and all(e.left_N_m == 0.0 and e.right_N_m == 0.0 for e in sc.torque):
+            for res, label in ((fixed, "rosenbrock"), (ref, ref_run["integrator"])):
+                if res is not None:
+                    _check_rest(res, out, label)
+    out.wall_s = time.perf_counter() - t_start
+    return out
+
+
+SIGNED = ("lateral_deviation_signed_m", "yaw_final_deg")
+
+
+def _check_symmetry(run, mir, out: CaseOutcome) -> None:
+    flagged = max(float(r.summary.get("fixed_step_error_max", 0.0)) for r in (run, mir)) > 1.0
+    bad = []
+    for k, atol in FIGURES.items():
+        a, b = run.summary[k], mir.summary[k]
+        if k in SIGNED:
+            b = -b
+        ok, _ = _within(a, b, SYMMETRY_RTOL, SYMMETRY_FLOOR * atol)
+        if not ok:
+            bad.append(f"{k} {a:.9g} against {'-' if k in SIGNED else ''}({mir.summary[k]:.9g}) mirrored")
+    if bad and flagged:  # the run said it is wrong there (a step kept above its tolerance)
+        out.status["symmetry"] = "flagged"
+        out.messages["symmetry (flagged)"] = "; ".join(bad)
+    elif bad:
+        out.fail("symmetry", "the mirrored programme's run is not the mirror image: " + "; ".join(bad) +
+                 f" (allowed {SYMMETRY_RTOL:g} relative plus {SYMMETRY_FLOOR:g} of the accuracy's floors)")
+    else:
+        out.status["symmetry"] = "pass"
+
+
+# ---- shrinking ----------------------------------------------------------------------------------------------------
+def _simpler(doc: dict):
+    """Candidate simplifications of a document, simplest first: the soil's and the vehicle's drawn values
+    back to their preset's, the duration halved, torques rounded to 2 significant digits."""
+    for section in ("soil", "vehicle"):
+        for key in [k for k in doc[section] if k != "preset"]:
+            out = json.loads(json.dumps(doc))
+            del out[section][key]
+            yield f"{section}.{key} as the preset's", out
+    if doc["run"]["duration_s"] > 0.2:
+        last = doc["torque"][-1]["t_s"]
+        d = _round(max(doc["run"]["duration_s"] / 2, last + 0.1), 3)
+        if d < doc["run"]["duration_s"]:
+            yield f"run.duration_s = {d:g}", _with_run(doc, duration_s=d)
+    for section in ("soil", "vehicle"):
+        for key, v in doc[section].items():
+            if key != "preset" and _round(v, 2) != v:
+                out = json.loads(json.dumps(doc))
+                out[section][key] = _round(v, 2)
+                yield f"{section}.{key} = {_round(v, 2):g}", out
+    for i, e in enumerate(doc["torque"]):
+        for side in ("left_N_m", "right_N_m"):
+            r = _round(e[side], 2)
+            if r != e[side]:
+                out = json.loads(json.dumps(doc))
+                out["torque"][i][side] = r
+                yield f"torque[{i}].{side} = {r:g}", out
+
+
+def shrink(doc: dict, meta: dict, properties, max_checks: int = 200, time_limit_s: float = 120.0,
+           stream=None) -> tuple[dict, list[str]]:
+    """A simpler document that still fails one of ``properties`` (greedy: each simplification of
+    :func:`_simpler` is kept when the case still fails so), and the simplifications kept; at most
+    ``max_checks`` checks and ``time_limit_s`` seconds."""
+    kept, checks, changed = [], 0, True
+    t0 = time.perf_counter()
+    while changed and checks < max_checks and time.perf_counter() - t0 < time_limit_s:
+        changed = False
+        for what, cand in _simpler(doc):
+            checks += 1
+            try:
+                fails = set(check_case(cand, meta).failed)
+            except Exception:  # noqa: BLE001 -- a candidate that the checks cannot even run is not simpler
+                fails = set()
+            if fails & set(properties):
+                doc, changed = cand, True
+                kept.append(what)
+                if stream is not None:
+                    print(f"  shrink: {what}", file=stream, flush=True)
+                break
+            if checks >= max_checks or time.perf_counter() - t0 > time_limit_s:
+                break
+    return doc, kept
+
+
+# ---- the long run ----------------------------------------------------------------------------------------------
+def _row(i: int, seed: int, out: CaseOutcome) -> dict:
+    d, m = out.document, out.meta
+    v = d["vehicle"]
+    p = v["mass_kg"] * GRAVITY_M_S2 / (2 * v["track_width_m"] * v["contact_length_m"]) / 1e3
+    tmax = max(max(abs(e["left_N_m"]), abs(e["right_N_m"])) for e in d["torque"])
+    msg = " | ".join(f"{k}: {x}" for k, x in out.messages.items())
+    return {"case": i, "seed": seed, "variant": m["variant"], "programme": m["programme"], "soil": d["soil"]["preset"],
+            "duration_s": d["run"]["duration_s"], "mass_kg": v["mass_kg"], "ground_pressure_kPa": round(p, 2),
+            "torque_max_N_m": tmax, "outcome": out.outcome, "failed": " ".join(out.failed), **out.status,
+            "worst_figure": out.worst[0], "worst_ratio": round(out.worst[1], 4),
+            "fixed_step_error_max": out.figures.get("fixed_step_error_max"),
+            "fixed_step_steps_halved": out.figures.get("fixed_step_steps_halved"),
+            "energy_rise_J": out.figures.get("energy_rise_J"), "distance_m": out.figures.get("distance_m"),
+            "wall_s": round(out.wall_s, 3), "message": msg}
+
+
+SHRINK_PER_CLASS = 2
+
+
+def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None, variants=None,
+             stream=sys.stdout, shrink_failures: bool = True) -> int:
+    """Draw and check ``budget`` cases (case i from its own seed ``seed * 1_000_003 + i``, so that a case is
+    redrawn alone by its seed); write ``cases.csv`` and ``failures.json`` into ``out_dir`` as it goes.
+    Stops early after ``time_limit_s``. Returns the number of cases with a failed property."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    failures, counts = [], {p: 0 for p in PROPERTIES}
+    outcomes = {"ok": 0, "refused": 0, "failed": 0}
+    t0 = time.perf_counter()
+    with open(out_dir / "cases.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
+        writer.writeheader()
+        for i in range(budget):
+            if time_limit_s is not None and time.perf_counter() - t0 > time_limit_s:
+                print(f"time limit of {time_limit_s:g} s reached after {i} cases", file=stream, flush=True)
+                break
+            case_seed = seed * 1_000_003 + i
+            doc, meta = case_document(RandomDraw(case_seed), variants)
+            doc["name"] = f"fuzz-{case_seed}"
+            out = check_case(doc, meta)
+            outcomes[out.outcome] += 1
+            for p in out.failed:
+                counts[p] += 1
+            writer.writerow(_row(i, case_seed, out))
+            fh.flush()
+            if out.failed:
+                failures.append({"case": i, "seed": case_seed, "variant": meta["variant"],
+                                 "programme": meta["programme"], "failed": out.failed, "messages": out.messages,
+                                 "scenario": doc})
+                (out_dir / "failures.json").write_text(json.dumps(failures, indent=1))
+            print(f"[{i + 1}/{budget}] {meta['variant']:15s} {meta['programme']:8s} {out.outcome:7s} "
+                  f"{' '.join(out.failed) or '-':20s} {out.wall_s:6.2f} s  "
+                  f"({time.perf_counter() - t0:.0f} s; failures {sum(counts.values())})", file=stream, flush=True)
+    if shrink_failures:
+        seen: dict = {}
+        for f in failures:  # the first SHRINK_PER_CLASS of each class (variant and failed properties)
+            cls = (f["variant"], tuple(f["failed"]))
+            seen[cls] = seen.get(cls, 0) + 1
+            if seen[cls] > SHRINK_PER_CLASS:
+                continue
+            print(f"shrinking case {f['case']} ({' '.join(f['failed'])})", file=stream, flush=True)
+            meta = {"variant": f["variant"], "programme": f["programme"], "flat": VARIANTS[f["variant"]][1] is None}
+            small, kept = shrink(f["scenario"], meta, f["failed"], stream=stream)
+            redo = check_case(small, meta)
+            f["shrunk"] = {"scenario": small, "simplified": kept, "failed": redo.failed, "messages": redo.messages}
+            (out_dir / "failures.json").write_text(json.dumps(failures, indent=1))
+    (out_dir / "failures.json").write_text(json.dumps(failures, indent=1))
+    print(f"cases: {sum(outcomes.values())} ({outcomes['ok']} ok, {outcomes['refused']} refused, "
+          f"{outcomes['failed']} failed); failures by property: "
+          + ", ".join(f"{p} {n}" for p, n in counts.items()), file=stream, flush=True)
+    return outcomes["failed"]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m symtrack.bench.fuzz", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--budget", type=int, required=True, help="number of cases to draw and check")
+    ap.add_argument("--seed", type=int, default=0, help="the seed of the draws (default 0)")
+    ap.add_argument("--out", required=True, help="folder for cases.csv and failures.json")
+    ap.add_argument("--time-limit", type=float, default=None, help="stop after this many seconds (wall)")
+    ap.add_argument("--no-shrink", action="store_true", help="do not shrink the failures at the end")
+    ap.add_argument("--variants", default=None, help=f"comma-separated subset of {', '.join(VARIANTS)}")
+    args = ap.parse_args(argv)
+    variants = None if args.variants is None else [v.strip() for v in args.variants.split(",")]
+    unknown = [v for v in variants or [] if v not in VARIANTS]
+    if unknown:
+        ap.error(f"--variants: unknown {', '.join(unknown)}; known: {', '.join(VARIANTS)}")
+    # the runs' own warnings (a step kept above its tolerance, an implausible input) go to the CSV's
+    # columns; stderr keeps the progress readable
+    logging.getLogger("symtrack").setLevel(logging.ERROR)
+    failed = run_fuzz(args.budget, args.seed, args.out, args.time_limit, variants,
+                      shrink_failures=not args.no_shrink)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
