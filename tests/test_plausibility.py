@@ -2,6 +2,7 @@
 
 import logging
 
+import numpy as np
 import pytest
 from conftest import run_once
 
@@ -71,3 +72,24 @@ def test_a_run_faster_than_any_crawler_stops_with_a_message(monkeypatch):
     with pytest.raises(SimulationError, match=r"speed = 100\.6 m/s \(362\.2 km/h\) at t = 3\.000 s .* \[0, 30\] m/s"):
         monkeypatch.undo()
         plausibility.check_speed(100.6, 3.0)
+
+
+def test_tracks_that_spin_faster_than_any_crawler_stop_the_run():
+    """The physics fuzzer's shrunk case (docs/model.md, "The physics fuzzer"): 14 000 N m on the
+    validation clay spins the tracks up without bound (the sprocket torque has no speed limit); the run
+    stops at a tread speed of 30 m/s with a message, its trajectory kept up to the last sample within
+    the limit."""
+    sc = sim_scenario.scenario_from_dict({
+        "name": "spin", "run": {"duration_s": 3.0, "output_dt_s": 0.01, "integrator": "rosenbrock"},
+        "model": {"lateral_law": "creep"}, "vehicle": {"preset": "reference_crawler"},
+        "soil": {"preset": "clayey_soil_thailand_38"},
+        "torque": [{"t_s": 0.0, "left_N_m": 14000.0, "right_N_m": 14000.0}]})
+    with pytest.raises(IncompleteRun) as e:
+        run_once(sc)
+    msg = str(e.value)
+    assert "tread speed = " in msg and "[0, 30] m/s" in msg and "the tracks spin" in msg
+    part = e.value.partial
+    r = sc.params["sprocket_radius_m"]
+    tread = r * np.max(np.abs(np.column_stack([part.state("omega_left_rad_s"), part.state("omega_right_rad_s")])))
+    assert tread <= plausibility.MAX_TREAD_SPEED_M_S and part.t[-1] < 3.0
+    assert f"kept up to t = {part.t[-1]:.3f} s" in msg

@@ -29,9 +29,9 @@ import logging
 from ..foundations.errors import ParameterError, SimulationError
 from .vehicle import GRAVITY_M_S2
 
-__all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S",
-           "TRACK_WIDTH_OVER_GAUGE_MAX", "TRACTION_OVER_WEIGHT_MAX", "check_speed", "check_torque", "check_vehicle",
-           "ground_pressure_kPa"]
+__all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S",
+           "TRACK_WIDTH_OVER_GAUGE_MAX", "TRACTION_OVER_WEIGHT_MAX", "check_speed", "check_torque", "check_tread_speed",
+           "check_vehicle", "ground_pressure_kPa"]
 
 log = logging.getLogger("symtrack.plausibility")
 
@@ -57,6 +57,9 @@ TRACTION_OVER_WEIGHT_MAX = 2.0
 # 11 m/s (40 km/h) at most. A run faster than 30 m/s (108 km/h) is an implausible input (the mass
 # in tonnes, a torque in the wrong unit) or a numerical failure: it is stopped.
 MAX_SPEED_M_S = 30.0
+# A sprocket's tread speed r |omega| above the same 30 m/s: the tracks spin on the soil (a torque far above
+# what it carries; the sprocket torque has no speed limit of its own): stopped.
+MAX_TREAD_SPEED_M_S = 30.0
 
 
 def ground_pressure_kPa(vehicle: dict) -> float:
@@ -98,6 +101,16 @@ def check_torque(vehicle: dict, torque_max_N_m: float, where: str = "torque") ->
         log.warning("%s: the largest torque %g N m on both sprockets pushes 2 T / r = %.3g x the weight m g "
                     "(allowed up to %g; mass_kg = %g is in kg, torques in N m); the run goes on",
                     where, torque_max_N_m, ratio, TRACTION_OVER_WEIGHT_MAX, float(vehicle["mass_kg"]))
+
+
+def check_tread_speed(tread_m_s: float, t_s: float) -> None:
+    """Stop (SimulationError) a run whose track tread runs faster than :data:`MAX_TREAD_SPEED_M_S` (r |omega|
+    of a sprocket: the tracks spin, a torque far above what the soil carries)."""
+    if tread_m_s > MAX_TREAD_SPEED_M_S:
+        raise SimulationError(
+            f"tread speed = {tread_m_s:.4g} m/s (sprocket_radius_m x |omega|) at t = {t_s:.3f} s is outside the "
+            f"allowed range [0, {MAX_TREAD_SPEED_M_S:g}] m/s (the tracks spin: the torque exceeds what the soil "
+            f"carries; check the torques in N m)")
 
 
 def check_speed(speed_m_s: float, t_s: float) -> None:

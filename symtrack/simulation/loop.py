@@ -35,7 +35,7 @@ import numpy as np
 from ..foundations.errors import SimulationError
 from ..foundations.interrupt import raise_if_interrupted, watch_interrupts
 from ..foundations.progress import Progress
-from ..model.plausibility import check_speed
+from ..model import plausibility
 from .result import RunResult
 
 __all__ = ["IncompleteRun", "OutputGrid", "SampleGrid", "SampledLaw", "StartPoint", "run"]
@@ -195,6 +195,9 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
     names = plant.state_names
     iu, iv = names.index("u_m_s"), names.index("v_m_s")
     ixy = [names.index("x_m"), names.index("y_m")]
+    # the sprockets' tread speed r |omega| (a vehicle with sprockets: the tracks' spin is stopped too)
+    iw = [names.index(n) for n in ("omega_left_rad_s", "omega_right_rad_s") if n in names]
+    r_sprocket = float(scenario.params.get("sprocket_radius_m", 0.0)) if iw else 0.0
     sampled = torque_law is not None and hasattr(torque_law, "sample_time_s")
     if start is None:
         st = scenario.start
@@ -299,9 +302,19 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 ys.append(np.array(Y[:k]))
                 t, x = float(times[-1]), xs[-1][-1]
                 speeds = np.hypot(xs[-1][:, iu], xs[-1][:, iv])
+                treads = r_sprocket * np.max(np.abs(xs[-1][:, iw]), axis=1) if iw else np.zeros(len(times))
                 try:  # faster than any crawler: stopped (symtrack.model.plausibility.MAX_SPEED_M_S)
-                    check_speed(float(np.max(speeds)), float(times[int(np.argmax(speeds))]))
+                    plausibility.check_speed(float(np.max(speeds)), float(times[int(np.argmax(speeds))]))
+                    plausibility.check_tread_speed(float(np.max(treads)), float(times[int(np.argmax(treads))]))
                 except SimulationError as err:
+                    # the run is kept up to the last sample within the limits
+                    bad = int(np.argmax((speeds > plausibility.MAX_SPEED_M_S)
+                                        | (treads > plausibility.MAX_TREAD_SPEED_M_S)))
+                    ts[-1], xs[-1], us[-1], ys[-1] = ts[-1][:bad], xs[-1][:bad], us[-1][:bad], ys[-1][:bad]
+                    if bad > 0:
+                        t = float(ts[-1][-1])
+                    elif len(ts) > 1:
+                        t = float(ts[-2][-1])
                     failure = err
                     break
                 frac = t / run_cfg.duration_s
@@ -322,7 +335,7 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                     tuple(plant.state_names), tuple(plant.output_names), wall,
                     "error" if failure is not None else stopped_by, plant.stats(), plant.figures() or None, cpu)
     if failure is not None:
-        raise IncompleteRun(f"{failure} (at t = {t:.3f} s; the run up to there is kept)", res) from failure
+        raise IncompleteRun(f"{failure} (the run is kept up to t = {t:.3f} s)", res) from failure
     if dist_from is not None and stopped_by != "distance":
         log.warning("%s: the run reached run.duration_s = %g s before covering run.stop_after_distance_m = %g m "
                     "(covered %.2f m); it ended by duration", scenario.name, run_cfg.duration_s, target, dist)
