@@ -134,7 +134,8 @@ def _fixed_layout_figures(monkeypatch) -> list:
     grid = types.SimpleNamespace(cell_m=0.1, origin_m=(0.0, 0.0), shape=(100, 100))
     maps = [np.full((100, 100), -12.345678 * (i + 1)) for i in range(3)]
     X = np.column_stack([np.linspace(2, 8, 50), np.full(50, 5.0), np.zeros(50)])
-    terrain_plots.rut_section_png(types.SimpleNamespace(grid=grid), maps, [types.SimpleNamespace(X=X, pose=lambda: X)], None)
+    run = types.SimpleNamespace(X=X, pose=lambda: X)  # (the pose by name: x_m, y_m, yaw_rad)
+    terrain_plots.rut_section_png(types.SimpleNamespace(grid=grid), maps, [run], None)
     return figs
 
 
