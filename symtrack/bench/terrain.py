@@ -36,10 +36,15 @@ __all__ = ["BruteResult", "GRID_FIXED_STEP_S", "bench_rows", "benchmark", "brute
 @dataclasses.dataclass
 class BruteResult:
     t: np.ndarray
-    X: np.ndarray  # vehicle states per output time
+    X: np.ndarray  # vehicle states per output time (columns: state_names)
     z: np.ndarray  # final sinkage of every cell (nx, ny)
     wall_time_s: float
     n_states: int
+    state_names: tuple = ()
+
+    def state(self, name) -> np.ndarray:
+        """A vehicle state by name at the output times."""
+        return self.X[:, self.state_names.index(name)]
 
 
 def brute_force_run(scenario, duration_s: float) -> BruteResult:
@@ -101,8 +106,9 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
         ts.append(t)
         xs.append(x[vs].copy())
     wall = time.perf_counter() - wall0
+    names = tuple(np.asarray(model.state_names, dtype=object)[vs])
     return BruteResult(np.array(ts), np.array(xs), x[L.cell_field("sinkage")].reshape(grid.shape).copy(), wall,
-                       model.nx)
+                       model.nx, names)
 
 
 def pool_run(scenario, duration_s: float):
