@@ -93,3 +93,24 @@ def test_tracks_that_spin_faster_than_any_crawler_stop_the_run():
     tread = r * np.max(np.abs(np.column_stack([part.state("omega_left_rad_s"), part.state("omega_right_rad_s")])))
     assert tread <= plausibility.MAX_TREAD_SPEED_M_S and part.t[-1] < 3.0
     assert f"kept up to t = {part.t[-1]:.3f} s" in msg
+
+
+def test_a_track_sunk_deeper_than_the_cg_height_stops_the_run(monkeypatch):
+    """The hull in the soil is out of the model's domain (no hull contact): a run stops when a track end
+    sinks deeper than SINKAGE_OVER_CG_HEIGHT_MAX x the CG height. Here the limit is lowered to 1/400 of
+    the reference crawler's 0.6 m CG height (1.5 mm: above its 1.2 mm at rest), which the validation's
+    1.9 mm crosses."""
+    monkeypatch.setattr(plausibility, "SINKAGE_OVER_CG_HEIGHT_MAX", 1.0 / 400.0)
+    sc = sim_scenario.load_scenario("validation", ["run.integrator=rosenbrock"])
+    with pytest.raises(IncompleteRun) as e:
+        run_once(sc)
+    msg = str(e.value)
+    assert "sinkage = " in msg and "vehicle.cg_height_m = 0.6 m" in msg and "hull would be in the soil" in msg
+    part = e.value.partial
+    deepest = max(float(np.max(part.state(n))) for n in part.state_names if n.startswith("sinkage_")
+                  and n.endswith("_m") and "rate" not in n)
+    assert deepest <= 0.0015 + 1e-12 and part.t[-1] > 0
+    monkeypatch.undo()
+    with pytest.raises(SimulationError, match=r"sinkage = 93 m at t = 1\.000 s is outside the allowed range "
+                                              r"\[0, 0\.6\]"):
+        plausibility.check_sinkage(93.0, 0.6, 1.0)

@@ -198,6 +198,9 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
     # the sprockets' tread speed r |omega| (a vehicle with sprockets: the tracks' spin is stopped too)
     iw = [names.index(n) for n in ("omega_left_rad_s", "omega_right_rad_s") if n in names]
     r_sprocket = float(scenario.params.get("sprocket_radius_m", 0.0)) if iw else 0.0
+    # the track ends' sinkages (the hull in the soil is out of the model's domain)
+    isk = [k for k, n in enumerate(names) if n.startswith("sinkage_") and n.endswith("_m") and "rate" not in n]
+    cg_height = float(scenario.params.get("cg_height_m", 0.0)) if isk else 0.0
     sampled = torque_law is not None and hasattr(torque_law, "sample_time_s")
     if start is None:
         st = scenario.start
@@ -303,13 +306,17 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 t, x = float(times[-1]), xs[-1][-1]
                 speeds = np.hypot(xs[-1][:, iu], xs[-1][:, iv])
                 treads = r_sprocket * np.max(np.abs(xs[-1][:, iw]), axis=1) if iw else np.zeros(len(times))
-                try:  # faster than any crawler: stopped (symtrack.model.plausibility.MAX_SPEED_M_S)
+                sinks = np.max(xs[-1][:, isk], axis=1) if isk else np.zeros(len(times))
+                try:  # faster than any crawler, or the hull in the soil: stopped (symtrack.model.plausibility)
                     plausibility.check_speed(float(np.max(speeds)), float(times[int(np.argmax(speeds))]))
                     plausibility.check_tread_speed(float(np.max(treads)), float(times[int(np.argmax(treads))]))
+                    plausibility.check_sinkage(float(np.max(sinks)), cg_height, float(times[int(np.argmax(sinks))]))
                 except SimulationError as err:
                     # the run is kept up to the last sample within the limits
                     bad = int(np.argmax((speeds > plausibility.MAX_SPEED_M_S)
-                                        | (treads > plausibility.MAX_TREAD_SPEED_M_S)))
+                                        | (treads > plausibility.MAX_TREAD_SPEED_M_S)
+                                        | ((cg_height > 0) & (sinks > plausibility.SINKAGE_OVER_CG_HEIGHT_MAX
+                                                              * cg_height))))
                     ts[-1], xs[-1], us[-1], ys[-1] = ts[-1][:bad], xs[-1][:bad], us[-1][:bad], ys[-1][:bad]
                     if bad > 0:
                         t = float(ts[-1][-1])
