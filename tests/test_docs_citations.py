@@ -21,6 +21,9 @@ OUTSIDE = (
     ("a sibling folder", re.compile(r"\.\./shared\b|\bshared/", re.I)),
     ("the source papers' text files", re.compile(r"\bseeds/", re.I)),
     ("a folder of the development machine", re.compile(r"(?<![\w.~])/work/")),
+    # the development's own retrieval of sources (a reader has the published sources, not that material)
+    ("the development's search tool or its stored pages",
+     re.compile(r"search tool|stored (?:text|pages?|material)|page-by-page copy|\b(?:scribd|yumpu)\b", re.I)),
     # "the seed": the source papers by a nickname (cite them by their authors); "the seed of" a random generator is fine
     ("a paper by a nickname", re.compile(r"\bseed(?:'s)? (?:eq|section|paper)|\bseed's\b|\bthe seed\b(?! of\b)", re.I)),
 )
