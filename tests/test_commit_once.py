@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from small_field import TINY_INPLACE_TOML
 
 from symtrack.presets import soil_preset
 from symtrack.reports import run_files
@@ -29,26 +30,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # one pass of 0.5 m on a 32 x 16 field, on the terrain engine: the simulation is milliseconds, the
 # run's seconds are start-up and figures (the moments a kill lands in)
-SCENARIO = """
-name = "tiny_inplace"
-[run]
-duration_s = 5.0
-output_dt_s = 0.01
-integrator = "grid_fast"
-stop_after_distance_m = 0.5
-[vehicle]
-preset = "reference_crawler"
-[soil]
-preset = "clayey_soil_thailand_38"
-[terrain]
-size_m = [8.0, 4.0]
-origin_m = [-2.0, -2.0]
-cell_m = 0.25
-[[torque]]
-t_s = 0.0
-left_N_m = 1500.0
-right_N_m = 1500.0
-"""
+SCENARIO = TINY_INPLACE_TOML.replace("output_dt_s = 0.05", "output_dt_s = 0.01").replace(
+    "stop_after_distance_m = 0.3", "stop_after_distance_m = 0.5")
+assert "output_dt_s = 0.01" in SCENARIO and "stop_after_distance_m = 0.5" in SCENARIO
 
 
 def _cmd(scenario: Path, out: Path, f: Path) -> list[str]:

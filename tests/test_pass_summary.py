@@ -9,31 +9,14 @@ from __future__ import annotations
 import json
 
 import pytest
+from small_field import TINY_INPLACE_TOML
 
 from symtrack.cli.main import main
 
-# three passes of 0.3 m on a 32 x 16 field on the terrain engine
-THREE_PASSES = """
-name = "tiny_three"
-[run]
-duration_s = 5.0
-output_dt_s = 0.05
-integrator = "grid_fast"
-stop_after_distance_m = 0.3
-[vehicle]
-preset = "reference_crawler"
-[soil]
-preset = "clayey_soil_thailand_38"
-[terrain]
-size_m = [8.0, 4.0]
-origin_m = [-2.0, -2.0]
-cell_m = 0.25
-passes = 3
-[[torque]]
-t_s = 0.0
-left_N_m = 1500.0
-right_N_m = 1500.0
-"""
+# three passes of 0.3 m on a 32 x 16 field on the terrain engine (the file-safety tests' tiny field)
+THREE_PASSES = TINY_INPLACE_TOML.replace('name = "tiny_inplace"', 'name = "tiny_three"').replace(
+    "cell_m = 0.25\n", "cell_m = 0.25\npasses = 3\n")
+assert "passes = 3" in THREE_PASSES
 
 
 def test_a_multi_pass_summary_gives_whole_run_figures_at_the_top(tmp_path):
