@@ -6,7 +6,6 @@ kind (``symtrack/cli/templates/``) that runs as written."""
 from __future__ import annotations
 
 import argparse
-import sys
 from importlib import resources
 from pathlib import Path
 
@@ -65,18 +64,10 @@ def run_command(args) -> int:
 
 
 def _sweep(args, rf) -> int:
-    from ..studies import sweep
     from ..studies.runfile import sweep_arguments
-    from .sweep import report
+    from .sweep import run_sweep
 
-    kw = sweep_arguments(rf)
-    try:
-        res = sweep(out=args.out, progress=not args.quiet, **kw)
-    except KeyboardInterrupt:
-        print(f"symtrack: interrupted (Ctrl-C); the runs in flight were cancelled, the finished ones are kept "
-              f"in {args.out} (results.csv); run the same command again to do the rest", file=sys.stderr)
-        return 130
-    return report(res)
+    return run_sweep(args.out, args.quiet, **sweep_arguments(rf))
 
 
 def add_parsers(sub) -> None:

@@ -10,15 +10,21 @@ __all__ = ["add_parser", "report", "sweep_command"]
 
 
 def sweep_command(args) -> int:
+    return run_sweep(args.out, args.quiet, scenario=args.scenario, vary=args.vary, samples=args.sample,
+                     seed=args.seed, overrides=args.set or [], kind=args.kind, workers=args.workers,
+                     scheduler=args.scheduler)
+
+
+def run_sweep(out, quiet: bool, **kw) -> int:
+    """Run a sweep (symtrack.studies.sweep with ``kw``) into ``out``: its report and exit code; Ctrl-C
+    exits 130 saying what is kept (symtrack sweep, and symtrack run of a sweep file)."""
     from ..studies import sweep
 
     try:
-        res = sweep(args.scenario, args.vary, out=args.out, samples=args.sample, seed=args.seed,
-                    overrides=args.set or [], kind=args.kind, workers=args.workers, scheduler=args.scheduler,
-                    progress=not args.quiet)
+        res = sweep(out=out, progress=not quiet, **kw)
     except KeyboardInterrupt:
         print(f"symtrack: interrupted (Ctrl-C); the runs in flight were cancelled, the finished ones are kept "
-              f"in {args.out} (results.csv); run the same command again to do the rest", file=sys.stderr)
+              f"in {out} (results.csv); run the same command again to do the rest", file=sys.stderr)
         return 130
     return report(res)
 
