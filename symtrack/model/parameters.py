@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from ..foundations.errors import ParameterError
-from ..soil.pedotransfer import SUBSOIL_TOP_DEFAULT_M, derive_soil
+from ..soil.pedotransfer import SUBSOIL_KEYS, SUBSOIL_TOP_DEFAULT_M, derive_soil
 
 
 @dataclass(frozen=True)
@@ -144,17 +144,12 @@ SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
     # the subsoil layer (symtrack/soil/pedotransfer.py, SUBSOIL_KEYS): each the topsoil's unless given
     _spec("subsoil_top_m", "depth where the subsoil layer begins (the tillage depth; with a subsoil described "
           "differently from the topsoil)", 0.0, 5.0, False, default=SUBSOIL_TOP_DEFAULT_M),
-    _spec("subsoil_bulk_density_initial_Mg_per_m3", "the subsoil's dry bulk density before any traffic (the "
-          "topsoil's unless given)", 0.1, 5.0, False, derived=True),
-    _spec("subsoil_clay_kg_per_kg", "the subsoil's clay fraction (the topsoil's unless given)", 0.0, 1.0,
-          derived=True),
-    _spec("subsoil_silt_kg_per_kg", "the subsoil's silt fraction (the topsoil's unless given)", 0.0, 1.0,
-          derived=True),
-    _spec("subsoil_sand_kg_per_kg", "the subsoil's sand fraction (the topsoil's unless given)", 0.0, 1.0,
-          derived=True),
-    _spec("subsoil_matric_suction_kPa", "the subsoil's matric suction (the topsoil's unless given)", 0.0, 1e6,
-          False, derived=True),
 )
+# the subsoil's description: the topsoil's keys' ranges, each the topsoil's value unless given (derived)
+_TOPSOIL = {s.name: s for s in SOIL_TERRAIN_PARAMS}
+SOIL_TERRAIN_PARAMS += tuple(
+    _spec(sub, f"subsoil layer: {_TOPSOIL[top].description} (the topsoil's unless given)", _TOPSOIL[top].low,
+          _TOPSOIL[top].high, _TOPSOIL[top].low_inclusive, derived=True) for top, sub in SUBSOIL_KEYS.items())
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
 # the soil parameters the day's moisture sets (symtrack/terrain/moisture.py): a terrain file made on
 # another day continues with the scenario's values of these (the compression state carries over)
