@@ -182,7 +182,7 @@ def precompression_stress_kPa(v1, N, lambda_minus_kappa):
 
 def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: np.ndarray, soils,
                 cells: np.ndarray | None = None, cell_params: dict | None = None,
-                geostatic_Pa: np.ndarray | None = None, depths_m=None) -> int:
+                geostatic_Pa: np.ndarray | None = None, depths_m=None, arrays: dict | None = None) -> int:
     """Fold one pass into the terrain's state: ``specific_volume`` (n_cells, n_depths) float32
     (0: the soil's initial state), ``pass_p_Pa`` the pass's largest mean normal stress per cell
     and depth (0 where the pass did not load); ``cells``: the cells the pass may have loaded (a
@@ -193,7 +193,8 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     soil's; the initial state (rho_s / rho_initial) stays the soil's. ``geostatic_Pa`` (n_soils,
     n_depths): the soil's own weight at each depth, added to the pass's stress where the pass loaded
     (:func:`geostatic_table`). ``depths_m``: the terrain's subsoil depths, needed for a layered soil
-    (each depth's layer's lines; :func:`soil_arrays`)."""
+    (each depth's layer's lines; :func:`soil_arrays`); ``arrays``: :func:`soil_arrays` of ``soils`` at the
+    depths when the caller keeps them (a world: once per field, not per pass)."""
     if specific_volume.shape != pass_p_Pa.shape:
         raise ParameterError(f"pass_p_Pa has shape {pass_p_Pa.shape}, the terrain's specific volume "
                              f"{specific_volume.shape}")
@@ -204,9 +205,8 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     cells = np.asarray(cells, dtype=np.int64)
     if cells.size == 0:
         return 0
-    nd = pass_p_Pa.shape[1]
     # per (soil, depth): a layered soil's subsoil has its own lines (depths_m needed then)
-    a = soil_arrays(soils, depths_m) if depths_m is not None else _per_depth(soil_arrays(soils), nd, soils)
+    a = arrays if arrays is not None else _depth_arrays(soils, depths_m, pass_p_Pa.shape[1])
     si = soil_index[cells]
     p = pass_p_Pa[cells].astype(np.float64)
     if geostatic_Pa is not None:
@@ -232,6 +232,12 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     if rows.size:  # only the cells that yielded are written (the others keep their bits)
         specific_volume[cells[rows]] = np.where(yielded[rows], line[rows], old[rows]).astype(np.float32)
     return int(np.count_nonzero(yielded))
+
+
+def _depth_arrays(soils, depths_m, nd: int) -> dict:
+    """:func:`soil_arrays` as (n_soils, nd) tables: at ``depths_m`` (each depth's layer), or without depths
+    every depth the topsoil's (:func:`_per_depth`)."""
+    return soil_arrays(soils, depths_m) if depths_m is not None else _per_depth(soil_arrays(soils), nd, soils)
 
 
 def _per_depth(a: dict, nd: int, soils) -> dict:
@@ -304,7 +310,7 @@ def bulk_density(specific_volume: np.ndarray, soil_index: np.ndarray, soils, dep
     stress (1 kPa): rho_s / v1, v1 the stored one or the soil's initial one where 0 (at each depth its
     layer's: ``depths_m`` needed for a layered soil)."""
     nd = specific_volume.shape[1]
-    a = soil_arrays(soils, depths_m) if depths_m is not None else _per_depth(soil_arrays(soils), nd, soils)
+    a = _depth_arrays(soils, depths_m, nd)
     v = specific_volume.astype(np.float64)
     v = np.where(v > 0, v, a["v0"][soil_index])
     return a["rho_s"][soil_index] / v
@@ -315,7 +321,7 @@ def field_max(specific_volume: np.ndarray, soil_index: np.ndarray, soils, depths
     (v1 > 0) and the initial density of every soil the field has (without a pass over the whole
     field's densities: a million cells, mostly initial). ``depths_m`` as in :func:`bulk_density`."""
     nd = specific_volume.shape[1]
-    a = soil_arrays(soils, depths_m) if depths_m is not None else _per_depth(soil_arrays(soils), nd, soils)
+    a = _depth_arrays(soils, depths_m, nd)
     present = np.flatnonzero(np.bincount(soil_index, minlength=len(soils)) > 0)
     out = ((a["rho_s"][present] / a["v0"][present]).max(axis=0) if present.size else np.zeros(nd))
     moved = np.unique(np.flatnonzero(specific_volume.ravel() > 0) // nd)

@@ -472,7 +472,7 @@ class World:
         cells = np.flatnonzero(self.touched)
         density.pass_update(st.specific_volume, self.pass_sigma, st.soil_index, self.soils,
                             cells=cells, cell_params=self.cell_day, geostatic_Pa=self.geostatic_Pa(),
-                            depths_m=st.subsoil_depths_m)
+                            depths_m=st.subsoil_depths_m, arrays=self.layer_arrays())
         # the rut bounds the compression below it: one deformation (density.cap_to_rut)
         if st.subsoil_depths_m:
             v0 = self.layer_arrays()["v0"][st.soil_index[cells]]
