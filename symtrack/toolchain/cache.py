@@ -332,7 +332,21 @@ def build(spec: BuildSpec, cc: str | None = None) -> Path:
         seconds = time.perf_counter() - t0
         builds.append(Built(spec.kind, spec.what, out, seconds))
         log.info("compiled %s in %.1f s", spec.what, seconds)
+        _log_build(spec, seconds)
     return out
+
+
+def _log_build(spec: BuildSpec, seconds: float) -> None:
+    """One JSON line per compilation appended to ``$SYMTRACK_BUILD_LOG`` when it is set (the
+    kind, what, seconds and the test that asked for it): how the test suite's time splits between
+    compiling and running."""
+    dest = os.environ.get("SYMTRACK_BUILD_LOG")
+    if not dest:
+        return
+    row = {"kind": spec.kind, "what": spec.what, "seconds": round(seconds, 2),
+           "test": os.environ.get("PYTEST_CURRENT_TEST", "").rsplit(" ", 1)[0], "pid": os.getpid()}
+    with open(dest, "a", encoding="utf-8") as f:  # one short write per line: lines do not interleave
+        f.write(json.dumps(row) + "\n")
 
 
 NO_RECORD = "no size and SHA-256 recorded beside it (built by an older symtrack)"
