@@ -23,6 +23,7 @@ import symtrack
 from symtrack import studies
 from symtrack.cli import main
 from symtrack.foundations.errors import ScenarioError, SymtrackError
+from symtrack.reports.run_files import read_manifest
 from symtrack.studies import design, latin_hypercube, plan
 from symtrack.studies import engine as sweep_module
 
@@ -181,6 +182,31 @@ def test_a_failing_run_is_recorded_and_a_rerun_redoes_only_it(tmp_path, monkeypa
     assert submitted == [rows[1]["run_id"]]
     assert {k: (out / "runs" / k / "summary.json").stat().st_mtime_ns for k in good} == good
     assert [r["status"] for r in _table(out / "results.csv")] == ["ok", "failed", "ok"]
+    # each run's folder is committed whole, with the manifest of the files it owns
+    failed_folder = out / "runs" / rows[1]["run_id"]
+    assert read_manifest(failed_folder) == ["run.json"]
+    assert sorted(p.name for p in failed_folder.iterdir()) == [".symtrack-manifest.json", "run.json"]
+    ok_folder = out / "runs" / rows[0]["run_id"]
+    assert "summary.json" in read_manifest(ok_folder)
+    assert not list((out / "runs").glob(".*")), "no staging folder outlives the sweep"
+
+
+def test_a_second_sweep_into_a_folder_being_written_is_refused(tmp_path, capsys):
+    out = tmp_path / "busy"
+    holder = subprocess.Popen([sys.executable, "-c", (
+        "import sys, time; from symtrack.reports.run_files import output_lock\n"
+        f"with output_lock({str(out)!r}):\n    print('held', flush=True); time.sleep(60)")],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        code = main(["sweep", "validation", "--vary", "vehicle.mass_kg=5000,6500", "--out", str(out), "--quiet",
+                     *_sets(FAST)])
+        err = capsys.readouterr().err
+        assert code != 0 and f"pid {holder.pid}" in err and "another symtrack run" in err
+        assert not (out / "sweep.json").exists()
+    finally:
+        holder.kill()
+        holder.wait()
 
 
 @pytest.mark.parametrize("vary, extra, words", [

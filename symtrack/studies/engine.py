@@ -12,10 +12,13 @@ The folder (schema version :data:`SCHEMA_VERSION`)::
     DIR/comparison.png        each figure against each varied key (symtrack.studies.plots)
     DIR/results.csv           one row per run: the varied keys, run_id, status, error, run_wall_time_s,
                               every scalar figure of the run's summary.json
-    DIR/runs/<id>/            the files of a single run (summary.json last: it means the run finished)
+    DIR/runs/<id>/            the files of a single run, committed once (staged, then put in place with
+                              summary.json last: it means the run finished), and their manifest
     DIR/runs/<id>/run.json    the run's record: status, error, overrides, worker host, wall time
 
-A rerun into the same folder skips the runs whose ``summary.json`` is there and redoes the rest.
+A rerun into the same folder skips the runs whose ``summary.json`` is there and redoes the rest
+(a run's folder is replaced whole: nothing of a failed or killed attempt is left beside the new
+files). The folder is locked while the sweep runs: a second sweep into it is refused at once.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from ..foundations.errors import ScenarioError, SymtrackError
 from ..foundations.files import atomic_write_bytes, atomic_write_text, check_output_folder
 from ..foundations.progress import Progress
 from ..reports.html import report_html
+from ..reports.run_files import output_lock, write_folder
 from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
 from .plots import comparison_png
 from .runs import Source, load, resolve_source, run_one
@@ -197,22 +201,23 @@ def _write_table(out: Path, p: Plan, rows: dict) -> list[dict]:
 
 
 def _store(out: Path, run: dict, result: dict, kind: str) -> dict:
-    """The files of a finished run into DIR/runs/<id>/ (summary.json last) and its record;
-    returns its row of results.csv."""
+    """The files of a finished run into DIR/runs/<id>/, committed once (:func:`symtrack.reports.run_files.
+    write_folder`: staged beside the folder, then put in place, summary.json last, with the folder's
+    manifest; a kill leaves the earlier attempt's folder or the whole new one, never a mix), with its
+    record run.json; returns its row of results.csv."""
     folder = out / "runs" / run["id"]
     files = dict(result.get("files") or {})
     summary = files.pop("summary.json", None)
-    for name, data in files.items():
-        atomic_write_bytes(folder / name, data)
     record = {"schema_version": SCHEMA_VERSION, "id": run["id"], "kind": kind, "values": run["values"],
               "overrides": run["overrides"], "status": result["status"], "error": result["error"],
               "wall_time_s": result.get("wall_time_s"), "cpu_time_s": result.get("cpu_time_s"),
               "host": result.get("host"), "pid": result.get("pid")}
-    atomic_write_text(folder / "run.json", json.dumps(record, indent=2, default=repr) + "\n")
-    if summary is not None and result["status"] == "ok":
-        atomic_write_bytes(folder / "summary.json", summary)
-        return _row(run, json.loads(summary), record)
-    return _row(run, None, record)
+    files["run.json"] = json.dumps(record, indent=2, default=repr) + "\n"
+    ok = summary is not None and result["status"] == "ok"
+    if ok:
+        files["summary.json"] = summary
+    write_folder(folder, files, clear=True)
+    return _row(run, json.loads(summary), record) if ok else _row(run, None, record)
 
 
 # the modules a worker needs for a run of each kind, imported once by the fork server of the local
@@ -411,18 +416,19 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     for r in todo:
         rows[r["id"]] = _row(r, None, {})  # to be (re)done: not_run until this sweep has run it
     failed = []
-    # the cluster first: a scheduler that cannot be reached leaves nothing written
-    with _worker_start(p.source.kind) if todo and not scheduler else contextlib.nullcontext():
+    # the folder's lock (a second sweep into it is refused at once), then the cluster: a scheduler that
+    # cannot be reached leaves nothing written
+    with (output_lock(out), _worker_start(p.source.kind) if todo and not scheduler else contextlib.nullcontext()):
         client, cluster = _client(workers, scheduler) if todo else (None, None)
         out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(out / "sweep.json", json.dumps(p.describe(), indent=2, default=repr) + "\n")
         if todo:
             failed = _run_all(out, p, todo, rows, client, cluster, progress)
-    table = _write_table(out, p, rows)
-    png = comparison_png(table, [a.key for a in p.axes])
-    if png is not None:
-        atomic_write_bytes(out / "comparison.png", png)
-    atomic_write_text(out / "report.html", _report(p, table, png))
+        table = _write_table(out, p, rows)
+        png = comparison_png(table, [a.key for a in p.axes])
+        if png is not None:
+            atomic_write_bytes(out / "comparison.png", png)
+        atomic_write_text(out / "report.html", _report(p, table, png))
     return SweepResult(out, table, len(todo), skipped, time.perf_counter() - t0, failed)
 
 
