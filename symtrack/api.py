@@ -222,6 +222,25 @@ class Result:
         tail = "" if s.get("complete", True) else ", incomplete"
         return f"{head}{', ' if figs else ''}{', '.join(figs)}{tail}>"
 
+    def _repr_html_(self) -> str:
+        """The view in a notebook: what ran (scenario, vehicle, soil, integrator, passes), the summary's
+        figures with their units, the validation table of a validation scenario."""
+        from .reports.html import notebook_html
+
+        sc = self.scenario
+        facts = [("scenario", sc.name), ("integrator", self.summary.get("integrator", sc.run.integrator)),
+                 ("passes", len(self.runs)), ("terrain", "grid" if self.terrain is not None else "homogeneous")]
+        facts += [("vehicle", sc.vehicle_preset + (" (with overrides)" if sc.vehicle else "")),
+                  ("soil", sc.soil_preset + (" (with overrides)" if sc.soil else ""))]
+        rows = None
+        table = self.validation_table
+        if table:  # Markdown rows "| quantity | reported | simulated | within |" -> cells
+            lines = [ln for ln in table.splitlines() if ln.startswith("|") and not set(ln) <= set("|-: ")]
+            rows = [[c.strip() for c in ln.strip("|").split("|")] for ln in lines[1:]]
+            header = [c.strip() for c in lines[0].strip("|").split("|")] if lines else None
+        return notebook_html(repr(self).strip("<>"), self.summary, facts, rows=rows,
+                             row_header=header if rows else None)
+
     def to_pandas(self, pass_no: int | None = None):
         """The trajectory (the columns of trajectory.csv) of the last pass, or of pass ``pass_no``,
         as a pandas DataFrame; pandas is optional (not a dependency of symtrack)."""

@@ -54,3 +54,29 @@ def test_to_xarray_without_xarray_says_what_to_install(res, monkeypatch):
     monkeypatch.setitem(sys.modules, "xarray", None)
     with pytest.raises(ScenarioError, match="pip install xarray"):
         res.to_xarray()
+
+
+def test_the_notebook_view_says_what_ran_and_gives_the_figures_with_units(res):
+    import xml.etree.ElementTree as ET
+
+    page = res._repr_html_()
+    root = ET.fromstring(page)  # a well-formed fragment (every cell escaped)
+    assert root.tag == "div"
+    text = "".join(root.itertext())
+    for fact in ("scenario: validation", "integrator: rosenbrock", "terrain: homogeneous",
+                 "vehicle: reference_crawler", "soil: clayey_soil_thailand_38"):
+        assert fact in text.replace("\n", ""), fact
+    tables = root.findall("table")
+    rows = {tr[0].text: (tr[1].text, tr[2].text) for tr in tables[0].iter("tr") if tr[0].tag == "td"}
+    assert rows["sinkage_sprocket_mm"] == (f"{res.summary['sinkage_sprocket_mm']:.6g}", "mm")
+    assert rows["speed_final_m_s"][1] == "m/s" and rows["yaw_final_deg"][1] == "deg"
+    assert rows["sim_time_s"] == (f"{res.summary['sim_time_s']:.6g}", "s")
+    # the validation scenario's reported-against-simulated table, as the Markdown table has it
+    graded = [[td.text for td in tr] for tr in tables[1].iter("tr") if tr[0].tag == "td"]
+    md_rows = [ln for ln in res.validation_table.splitlines() if ln.startswith("|")]
+    assert len(tables) == 2 and graded and len(graded) == len(md_rows) - 2
+    assert all(len(row) == 4 for row in graded)
+    # an incomplete run says so first
+    broken = symtrack.api.Result(res.scenario, res.runs, {**res.summary, "complete": False, "error": "boom"},
+                                 res.pass_summaries)
+    assert "Incomplete run: boom" in broken._repr_html_()

@@ -102,6 +102,16 @@ class ClosedLoopResult:
         """The plant state ``name`` at the samples (a column of X, by name)."""
         return self.X[:, self.state_names.index(name)]
 
+    def _repr_html_(self) -> str:
+        """The view in a notebook: what ran (scenario, plant, solver, machine, soil) and the summary's
+        figures with their units."""
+        from ..reports.html import notebook_html
+
+        sc = self.scenario
+        facts = [("scenario", sc.name), ("plant", sc.plant), ("solver", sc.mpc.solver),
+                 ("vehicle", sc.vehicle_preset), ("soil", sc.soil_preset), ("samples", len(self.t))]
+        return notebook_html(f"MPC run {sc.name!r}", self.summary, facts)
+
 
 def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
     """Steady straight running at the start speed (trim), placed at the start pose. The 3D

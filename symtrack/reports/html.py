@@ -13,7 +13,7 @@ import base64
 import html
 import json
 
-__all__ = ["REPORT_SCHEMA_VERSION", "report_html", "table_html"]
+__all__ = ["REPORT_SCHEMA_VERSION", "notebook_html", "report_html", "table_html"]
 
 REPORT_SCHEMA_VERSION = 1
 
@@ -103,4 +103,44 @@ def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_te
     parts.append("<h2>summary.json</h2>")
     parts.append(f"<pre>{html.escape(json.dumps(summary, indent=2, default=str))}</pre>")
     parts.append("</body>\n</html>\n")
+    return "\n".join(parts)
+
+
+# the units of the summaries' figures that the model's signals do not use (the signals' own:
+# symtrack.native.generate's unit suffixes); the longest matching suffix wins (``_kPa`` over ``_Pa``)
+_SUMMARY_UNITS = (("_Mg_per_m3", "Mg/m^3"), ("_kg_per_kg", "kg/kg"), ("_kPa", "kPa"), ("_MPa", "MPa"),
+                  ("_mm", "mm"), ("_cm", "cm"), ("_km", "km"), ("_km_h", "km/h"), ("_deg", "deg"), ("_ms", "ms"),
+                  ("_percent", "%"), ("_ha", "ha"), ("_m2", "m^2"), ("_m3", "m^3"), ("_kJ", "kJ"), ("_J", "J"),
+                  ("_kW", "kW"), ("_h", "h"))
+
+
+def _unit(key: str) -> str:
+    """The unit a summary key names in its suffix (``_mm`` -> mm, ``_N_m`` -> N m), or ""."""
+    from ..native.generate import _UNIT_SUFFIXES
+
+    hits = [(len(sfx), unit) for sfx, unit in (*_SUMMARY_UNITS, *_UNIT_SUFFIXES) if key.endswith(sfx)]
+    return max(hits)[1] if hits else ""
+
+
+def notebook_html(title: str, summary: dict, facts: list[tuple[str, object]],
+                  keys: tuple[str, ...] = (), rows: list[tuple] | None = None, row_header=None) -> str:
+    """A result's view in a notebook (Jupyter's ``_repr_html_``): an HTML fragment, no script, no
+    image (a notebook renders it inline): the title; ``facts`` (what ran: scenario, soil, machine,
+    integrator, ...) as one line; the summary's figures ``keys`` (default: every scalar of the
+    summary but the schema's bookkeeping) in a table with their units; optionally a second table
+    (``rows`` under ``row_header``). An incomplete run says so first, in red, with its error."""
+    esc = html.escape
+    parts = [f"<div class=\"symtrack-result\"><strong>{esc(title)}</strong>"]
+    if summary.get("complete") is False:
+        parts.append(f"<p style=\"color:#b00\">Incomplete run: {esc(str(summary.get('error', '')))}</p>")
+    if facts:
+        parts.append("<p>" + "; ".join(f"{esc(k)}: <code>{esc(_fmt(v))}</code>" for k, v in facts) + "</p>")
+    skip = {"schema_version", "scenario", "error", "complete"}
+    chosen = [k for k in (keys or summary) if k in summary and k not in skip
+              and not isinstance(summary[k], (list, dict))]
+    if chosen:
+        parts.append(table_html([(k, summary[k], _unit(k)) for k in chosen], ["figure", "value", "unit"]))
+    if rows:
+        parts.append(table_html(rows, row_header))
+    parts.append("</div>")
     return "\n".join(parts)

@@ -144,7 +144,11 @@ def validation_table(scenario, summary: dict) -> str | None:
     settings differ from the case as published (:func:`symtrack.reports.validation.differences`) gets
     the table with those settings named first, and no grade."""
     if is_validation(scenario):
-        return validation.table_markdown(summary, validation.differences(scenario))
+        differ = validation.differences(scenario)
+        if summary.get("distance_stop_reached") is False:  # stopped by run.duration_s (or an error) first
+            differ.append(f"the run ended by {summary.get('stopped_by', 'its duration')} before its distance "
+                          f"stop (published: {scenario.run.stop_after_distance_m} m after the idle event)")
+        return validation.table_markdown(summary, differ)
     return None
 
 
