@@ -7,14 +7,14 @@ largest vertical stress and bulk density by depth.
 Soil: the validation clay's surface (clayey soil, Thailand, 38 %) over a loose tilled subsoil
 (initial bulk density 1.2 Mg/m^3), whose compression parameters are Défossez et al.'s (2003) loess
 at the day's gravimetric water content (0.10 dry, 0.20 wet) and whose strength is Severiano et al.'s
-(2013) for 25 % clay (symtrack/terrain/moisture.py). The days' traffic is the reference crawler
+(2013) for 25 % clay (symtrack/soil/moisture.py). The days' traffic is the reference crawler
 loaded to 11 t (50 kPa mean ground pressure: the 5.5 t crawler's 25 kPa stays below the yield line
 of both days' strengths, 156 and 224 kPa, and compacts neither); the crawler against the tractor is
 the reference crawler (5.5 t) through the terrain engine; the tractor (5.5 t, 40 % on the front
 axle, wheelbase 2.4 m, gauge 1.5 m; ASSUMED tyres: front 380/85R28, load index 133, 2060 kg; rear
 480/80R38, load index 149, 3250 kg; both rated at 160 kPa, inflated to the rule's recommended
 pressure) drives the same line over a fresh copy of the field, its footprints in Python
-(symtrack/terrain/wheeled.py).
+(symtrack/vehicles/wheeled.py).
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ import numpy as np
 import symtrack
 from symtrack.foundations.errors import SymtrackError
 from symtrack.simulation.scenario import scenario_from_dict
-from symtrack.terrain import tyre, wheeled
 from symtrack.terrain.storage import Terrain
+from symtrack.vehicles import tyre, wheeled
 
 G = 9.81
 DAYS = {"dry": 0.10, "wet": 0.20}

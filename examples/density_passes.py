@@ -5,7 +5,7 @@ the saturation bound. Prints markdown tables of the field's largest bulk density
 
     python examples/density_passes.py [--passes 12]
 
-Laws (symtrack/terrain/density.py):
+Laws (symtrack/soil/density.py):
 - "default": the registry's lines (Keller & Arvidsson's 2007 PTF at 1.5 Mg/m^3), no yield line;
 - "osr": O'Sullivan & Robertson's (1996) model with its yield line, the complete parameter set of
   soilphysics' documented soilDeformation example (N 1.9392, lambda 0.06037, kappa 0.00608,
@@ -25,7 +25,8 @@ import numpy as np
 import symtrack
 from symtrack.foundations.errors import SymtrackError
 from symtrack.simulation.scenario import load_scenario
-from symtrack.terrain import density, tyre
+from symtrack.soil import density
+from symtrack.vehicles import tyre
 
 # the set's N as its strength (the virgin line follows from the strength: docs/subsoil.md "One soil")
 OSR_PC_PA = 1e3 * math.exp((1.9392 - 2.67 / 1.55) / (0.06037 - 0.00608))

@@ -37,8 +37,8 @@ import math
 import numpy as np
 
 import symtrack
-from symtrack.model.vehicle import GRAVITY_M_S2
 from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.vehicles.planar import GRAVITY_M_S2
 
 SOIL = "clayey_soil_thailand_38"
 SETTLE_M = 1.0  # the stretch compared starts after this distance (the set-off)

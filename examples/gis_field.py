@@ -28,8 +28,8 @@ from rasterio.transform import from_origin  # noqa: E402
 
 import symtrack  # noqa: E402
 from symtrack.simulation.scenario import load_scenario  # noqa: E402
+from symtrack.soil.subsoil import precompression_stress_kPa  # noqa: E402
 from symtrack.terrain.gis import export_terrain  # noqa: E402
-from symtrack.terrain.subsoil import precompression_stress_kPa  # noqa: E402
 
 CRS = "EPSG:32632"
 CORNER_M = (530_000.0, 6_250_000.0)  # lower-left corner of the field (illustrative)

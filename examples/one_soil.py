@@ -25,8 +25,8 @@ import symtrack
 from symtrack.foundations.errors import SymtrackError
 from symtrack.presets.soils import SOILS
 from symtrack.simulation.scenario import load_scenario
+from symtrack.soil import density
 from symtrack.soil.pedotransfer import precompression_ptf_kPa
-from symtrack.terrain import density
 
 RUT_MIN_M = 1e-6  # a cell with a rut (its plastic sinkage above a micrometre)
 

@@ -33,9 +33,9 @@ import math
 import numpy as np
 
 import symtrack
-from symtrack.model.vehicle import GRAVITY_M_S2
-from symtrack.model.vehicle3d import running_gear_momentum_ratio
 from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.vehicles.planar import GRAVITY_M_S2
+from symtrack.vehicles.vehicle3d import running_gear_momentum_ratio
 
 SOIL = "clayey_soil_thailand_38"
 SETTLE_S = 1.0  # the stretch for the checks starts after the set-off (the shear building up)
@@ -118,7 +118,7 @@ def pressure_centre(r: dict, tail) -> dict:
     x_p = [h (W sin t + m a) + 2 kappa J a / r] / (W cos t) + e (the weight's component along the slope and
     the inertial force at the CG's height h, the thrust and the resistances on the ground line; a the
     acceleration along the slope; 2 kappa J a / r the reaction of the two tracks' running gear spinning up,
-    nose up: :func:`~symtrack.model.vehicle3d.running_gear_momentum_ratio`)."""
+    nose up: :func:`~symtrack.vehicles.vehicle3d.running_gear_momentum_ratio`)."""
     c, t, P = r["cols"], r["slope_rad"], r["params"]
     W, m = P["mass_kg"] * GRAVITY_M_S2, P["mass_kg"]
     l, h, e, n = P["contact_length_m"], P["cg_height_m"], P["cg_ahead_of_contact_centre_m"], P["bekker_n"]

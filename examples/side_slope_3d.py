@@ -28,10 +28,10 @@ from symtrack.integrators.sundials import SundialsStepper
 from symtrack.model import SystemModel
 from symtrack.model.options import ModelOptions
 from symtrack.model.static import static_state
-from symtrack.model.vehicle import GRAVITY_M_S2
-from symtrack.model.vehicle3d import make_vehicle
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.terrain.surface import parse_surface
+from symtrack.vehicles.planar import GRAVITY_M_S2
+from symtrack.vehicles.vehicle3d import make_vehicle
 
 
 def drive(surface: dict, torque_N_m: float, duration_s: float, law: str = "creep", dt_s: float = 0.02,

@@ -1,7 +1,7 @@
 """A crawler and a wheeled tractor of the same mass on the same field (docs/subsoil.md, "Tracks
 against wheels"): the largest vertical stress at 0.1, 0.15, 0.3 and 0.5 m and the bulk density after
 one pass, for the crawler on its tracks (terrain engine), the tractor on single wheels and on dual
-wheels (symtrack/terrain/wheeled.py, along the crawler's driven path), and the singles at 1.5 x
+wheels (symtrack/vehicles/wheeled.py, along the crawler's driven path), and the singles at 1.5 x
 their inflation pressure; a table as JSON.
 
     python examples/tracks_against_wheels.py [--length 8]
@@ -36,8 +36,9 @@ import numpy as np
 import symtrack
 from symtrack.foundations.errors import SymtrackError
 from symtrack.simulation.scenario import scenario_from_dict
-from symtrack.terrain import density, tyre, wheeled
+from symtrack.soil import density
 from symtrack.terrain.storage import Terrain
+from symtrack.vehicles import tyre, wheeled
 
 G = 9.81
 MASS_KG = 7700.0

@@ -27,7 +27,8 @@ from symtrack.integrators.engine.state import (
 )
 from symtrack.integrators.settings import VEHICLE_ATOL, VEHICLE_MAX_HALVINGS, window_substeps
 from symtrack.native.grid_engine_model import NS
-from symtrack.terrain import query, subsoil
+from symtrack.soil import subsoil
+from symtrack.terrain import query
 
 __all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "outside_tracks", "ringing"]
 

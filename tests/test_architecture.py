@@ -3,7 +3,7 @@ no import circle (imports inside functions count), no private name imported acro
 nothing below the CLI and the bench imports symtrack.codegen (and nothing in the package the top-level
 codegen/ entry point), no module outside the compile-and-cache API (symtrack.toolchain) composes a
 cache path or takes a lock, and the soil law is reached only through its object
-(symtrack.model.soil_law). Also: adding an integrator is one class and one registry entry (adding a
+(symtrack.soil.law). Also: adding an integrator is one class and one registry entry (adding a
 soil law: tests/test_soil_law.py)."""
 
 from __future__ import annotations
@@ -22,10 +22,13 @@ ROOT = Path(__file__).resolve().parent.parent
 
 # layer of each top-level part of symtrack, bottom first; a module may import its own layer or below
 LAYERS = {
-    "foundations": 1, "model": 2, "presets": 2, "soil": 2, "terrain": 3, "toolchain": 4, "native": 4, "integrators": 5,
-    "simulation": 6, "control": 7, "reports": 7, "api": 7, "studies": 7, "codegen": 7, "bench": 8, "cli": 9,
-    "__main__": 9, "": 9,
+    "foundations": 1, "model": 2, "presets": 2, "soil": 2, "vehicles": 2, "terrain": 3, "toolchain": 4, "native": 4,
+    "integrators": 5, "simulation": 6, "control": 7, "reports": 7, "api": 7, "studies": 7, "codegen": 7, "bench": 8,
+    "cli": 9, "__main__": 9, "": 9,
 }
+# a module of the soil's or the vehicles' room that acts on the field (reads its rasters, passes over its
+# storage) sits with the field: nothing of the model's layer may import it
+MODULE_LAYERS = {"soil.moisture": 3, "vehicles.wheeled": 3, "vehicles.towed": 3}
 CODEGEN_ALLOWED = ("cli", "bench")
 STUDIES_ALLOWED = ("cli", "bench", "studies")  # the studies are an application: only the CLI and the bench use them
 
@@ -76,7 +79,7 @@ def _edges(mods):
 
 def _layer(mod: str) -> int:
     parts = mod.split(".")
-    return LAYERS[parts[1] if len(parts) > 1 else ""]
+    return MODULE_LAYERS.get(".".join(parts[1:3]), LAYERS[parts[1] if len(parts) > 1 else ""])
 
 
 @pytest.fixture(scope="module")
@@ -215,10 +218,10 @@ def test_the_reader_sees_a_circle_and_a_private_import(tmp_path, monkeypatch):
     assert ("symtrack.b", "_hidden") in e["symtrack.a"] and ("symtrack.a", None) in e["symtrack.b"]
 
 
-# The soil law's mathematics (symtrack.model.cell) and its parameter vector belong to the law
+# The soil law's mathematics (symtrack.soil.cell) and its parameter vector belong to the law
 # object: no other module calls the law's functions of cell.py, makes a law vector symbol of a
 # fixed length, or brings back the positional vector's old helpers.
-LAW_MODULES = ("symtrack.model.cell", "symtrack.model.soil_law")
+LAW_MODULES = ("symtrack.soil.cell", "symtrack.soil.law")
 LAW_FUNCTIONS = frozenset({"k_eq", "bekker_regularisation_length", "bekker_pressure", "unloading_slope",
                            "reaction_pressure", "reaction_pressure_and_slope", "history_update", "cycle_increment"})
 OLD_LAW_NAMES = frozenset({"NLAW", "law_vector", "soil_law_values", "_law_dict", "_law_symbols",
@@ -237,7 +240,7 @@ def _soil_law_misuses(mods, check_cell=True):
             if isinstance(node, ast.ImportFrom):
                 base = _resolve(m, is_pkg, node.level, node.module or "")
                 names = [a.name for a in node.names]
-                if check_cell and base == "symtrack.model.cell":
+                if check_cell and base == "symtrack.soil.cell":
                     bad += [(m, f"from cell import {n}") for n in names if n in LAW_FUNCTIONS]
                 names += [a.asname for a in node.names if a.asname]
             elif isinstance(node, ast.Attribute):
@@ -268,11 +271,11 @@ def test_the_soil_law_check_can_fail(tmp_path):
     """The check above sees the old positional vector, a law function of cell.py called from a
     consumer and a law symbol of a fixed length, in a throwaway package."""
     pkg = tmp_path / "symtrack"
-    (pkg / "model").mkdir(parents=True)
+    (pkg / "soil").mkdir(parents=True)
     (pkg / "terrain").mkdir()
-    (pkg / "terrain" / "a.py").write_text("from ..model import cell\nimport casadi as ca\n"
+    (pkg / "terrain" / "a.py").write_text("from ..soil import cell\nimport casadi as ca\n"
                                           "law = ca.SX.sym('law', 5)\np = cell.reaction_pressure(0, 0, 0, *law)\n")
-    (pkg / "terrain" / "b.py").write_text("from ..model.cell import k_eq\nNLAW = 5\n")
+    (pkg / "terrain" / "b.py").write_text("from ..soil.cell import k_eq\nNLAW = 5\n")
     mods = {"symtrack.terrain.a": pkg / "terrain" / "a.py", "symtrack.terrain.b": pkg / "terrain" / "b.py"}
     assert sorted(_soil_law_misuses(mods)) == [
         ("symtrack.terrain.a", "a law vector symbol of a fixed length"),

@@ -4,8 +4,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from symtrack.model import cell
 from symtrack.presets import soil_preset
+from symtrack.soil import cell
 
 SOIL = soil_preset("clayey_soil_thailand_38")
 B = 0.45

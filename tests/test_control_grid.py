@@ -12,9 +12,9 @@ from symtrack.control import closedloop as CL
 from symtrack.control import scenario as S
 from symtrack.control.closedloop import field_from_path
 from symtrack.foundations.errors import ScenarioError, SimulationError
-from symtrack.model.vehicle import VEHICLE_STATES
 from symtrack.simulation.plants import EnginePlant, GridPlant, advance_plant
 from symtrack.terrain import storage as persist
+from symtrack.vehicles.planar import VEHICLE_STATES
 
 # a short straight run on a small field: 6 m of path at 2 m/s, 3 s simulated
 SHORT = """

@@ -13,8 +13,8 @@ from symtrack.foundations.errors import ParameterError
 from symtrack.integrators.settings import IntegratorSettings
 from symtrack.integrators.sundials import SundialsStepper as Stepper
 from symtrack.model import ModelOptions, SystemModel
-from symtrack.model.vehicle import LATERAL_STATES, VEHICLE_STATES
 from symtrack.presets import soil_preset, vehicle_preset
+from symtrack.vehicles.planar import LATERAL_STATES, VEHICLE_STATES
 
 
 @pytest.fixture(scope="module")

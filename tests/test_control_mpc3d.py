@@ -13,8 +13,8 @@ from symtrack.control import scenario as S
 from symtrack.control.mpc import QS_HULL_SCALE, QS_HULL_VARIABLES, MPCSettings, PathTrackingMPC
 from symtrack.foundations.config import read_document
 from symtrack.foundations.errors import ParameterError, ScenarioError
-from symtrack.model.vehicle3d import HULL_STATES
 from symtrack.simulation.builder import system_model
+from symtrack.vehicles.vehicle3d import HULL_STATES
 
 
 def _doc(overrides=(), surface=None):

@@ -14,8 +14,8 @@ from symtrack.control.mpc import MPCSettings, prediction_model
 from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model import SystemModel
 from symtrack.model.options import ModelOptions
-from symtrack.model.vehicle import PressureDistribution, shear_forces
 from symtrack.presets import soil_preset, vehicle_preset
+from symtrack.vehicles.planar import PressureDistribution, shear_forces
 
 CLAY = "clayey_soil_thailand_38"
 

@@ -1,4 +1,4 @@
-"""Bulk density by depth (symtrack/terrain/density.py, docs/subsoil.md "Bulk density"): the
+"""Bulk density by depth (symtrack/soil/density.py, docs/subsoil.md "Bulk density"): the
 compression lines' closed forms, the pass update (monotone, saturating, conservative), the mean
 normal stress tables against an independent quadrature of Soehne's radial stress, persistence
 bit for bit and old terrain files, and the multipass density table from the terrain engine."""
@@ -14,10 +14,10 @@ import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model import parameters as P
 from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.soil import density as D
+from symtrack.soil import moisture as M
+from symtrack.soil import subsoil as S
 from symtrack.soil.pedotransfer import K2_POSITION_OSR, SUBSOIL_KEYS
-from symtrack.terrain import density as D
-from symtrack.terrain import moisture as M
-from symtrack.terrain import subsoil as S
 from symtrack.terrain.storage import Grid, Terrain
 
 # Keller & Arvidsson's (2007) lines at the registry's default densities, without the yield line (m = 0:

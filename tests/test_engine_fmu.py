@@ -428,7 +428,7 @@ def test_the_yield_line_and_the_saturation_bound_fold_as_python_does_bit_for_bit
     layer) in the FMU's end of pass: two passes, the compression state equal to the Python run's to the
     last bit."""
     sc = load_scenario("validation_grid", PASS + YIELD)
-    from symtrack.terrain import density
+    from symtrack.soil import density
 
     layers = density.soil_arrays([sc.params], sc.terrain.subsoil_depths_m)
     assert not layers["top"][0].all() and len(set(layers["v0"][0])) == 2 and len(set(layers["pc"][0])) == 2

@@ -15,6 +15,7 @@ import pytest
 from symtrack.cli.main import main as cli_main
 from symtrack.foundations.errors import ScenarioError
 from symtrack.simulation.plants import make_plant
+from symtrack.soil import subsoil
 from symtrack.studies import plan
 from symtrack.studies.field import (
     PATTERNS,
@@ -28,7 +29,6 @@ from symtrack.studies.field import (
 )
 from symtrack.studies.field_plots import block_max
 from symtrack.studies.runs import run_one
-from symtrack.terrain import subsoil
 from symtrack.terrain.storage import Terrain
 from symtrack.terrain.world import padding_m
 

@@ -170,7 +170,7 @@ def test_the_subsoil_s_fitted_line_against_the_segment_pieces():
     track's centre line is the pieces' within 3 % at 0.1 m and 2 % at 0.3 m (Froehlich's point load
     summed over both contacts by the same quadrature for both; measured 2.2 % and 1.6 %, docs/vehicle3d.md),
     and the line carries the pieces' load."""
-    from symtrack.terrain.subsoil import frohlich_point
+    from symtrack.soil.subsoil import frohlich_point
 
     sc = load_scenario("validation_grid", ["model.vehicle=3d"])
     plant = make_plant(sc)

@@ -13,9 +13,9 @@ import pytest
 from symtrack.control.trim import trim
 from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.static import static_state
-from symtrack.model.vehicle import GRAVITY_M_S2, PressureDistribution, shear_forces
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.reports import validation
+from symtrack.vehicles.planar import GRAVITY_M_S2, PressureDistribution, shear_forces
 
 SHEAR = ModelOptions(lateral_law="shear_quasistatic")  # the law under test (the model's default is "creep")
 

@@ -14,9 +14,9 @@ import pytest
 from symtrack.foundations.errors import ParameterError
 from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.static import static_state
-from symtrack.model.vehicle import GRAVITY_M_S2, LATERAL_STATES, VEHICLE_STATES
 from symtrack.native.rosenbrock import consistent_z_expressions, step_expressions
 from symtrack.presets import soil_preset, vehicle_preset
+from symtrack.vehicles.planar import GRAVITY_M_S2, LATERAL_STATES, VEHICLE_STATES
 
 SHEAR = ModelOptions(lateral_law="shear_quasistatic")
 TRANSIENT = ModelOptions(lateral_law="shear")

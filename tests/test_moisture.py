@@ -1,4 +1,4 @@
-"""The day's moisture (symtrack/terrain/moisture.py, docs/subsoil.md "Moisture"): the pedotransfer
+"""The day's moisture (symtrack/soil/moisture.py, docs/subsoil.md "Moisture"): the pedotransfer
 functions against their published polynomials and curves, the refusals, the scenario and soil-map
 inputs (a uniform map equal to the single value bit for bit), and the same traffic on a dry and a
 wet day through the terrain engine."""
@@ -13,7 +13,7 @@ from small_field import small_field
 import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.simulation.scenario import scenario_from_dict
-from symtrack.terrain import moisture as M
+from symtrack.soil import moisture as M
 from symtrack.terrain.soil_map import parse_soil_map
 
 
@@ -188,7 +188,8 @@ def test_moisture_raster_of_many_values(tmp_path, monkeypatch):
     value (768): each cell's compression state is the virgin line's closed form at its own water
     content and the pass's mean normal stress, and the precompression figure the weakest loaded
     cell's own."""
-    from symtrack.terrain import density, world
+    from symtrack.soil import density
+    from symtrack.terrain import world
     w2 = np.ones((48, 1)) * np.where(np.arange(16) % 3 == 0, 0.1, 0.2)[None, :]
     split = symtrack.simulate(scenario_from_dict(_raster_doc(tmp_path, w2, "w2.npy")))
     ws = split._study.world

@@ -12,9 +12,9 @@ from symtrack.model.parameters import SOIL_PARAMS, check_set
 from symtrack.presets import soil_preset
 from symtrack.presets.catalog import describe
 from symtrack.presets.soils import SOILS
+from symtrack.soil import density as D
 from symtrack.soil import pedotransfer as PT
-from symtrack.terrain import density as D
-from symtrack.terrain import subsoil as S
+from symtrack.soil import subsoil as S
 
 DEPTHS = (0.1, 0.3, 0.5, 0.8)
 

@@ -18,15 +18,16 @@ from symtrack.foundations.errors import ScenarioError
 from symtrack.integrators import registry
 from symtrack.integrators.grid_rosenbrock import grid_library
 from symtrack.integrators.settings import IntegratorSettings
-from symtrack.model import ModelOptions, SystemModel, vehicle
+from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.system import PARAM_NAMES
-from symtrack.model.vehicle import VEHICLE_STATES, codegen_options
 from symtrack.native import cache as compiled
 from symtrack.native.grid_rosenbrock import build as build_step
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
 from symtrack.toolchain import cache as build_cache
+from symtrack.vehicles import planar as vehicle
+from symtrack.vehicles.planar import VEHICLE_STATES, codegen_options
 
 REFINED = ("model.lateral_split=false", "model.lateral_segments=64", "model.gauss_points=5")  # 320 points
 needs_cc = pytest.mark.skipif(build_cache.find_compiler() is None, reason="no C compiler")

@@ -1,4 +1,4 @@
-"""The soil-law registry (symtrack.model.soil_law): adding a law is one class and one registry
+"""The soil-law registry (symtrack.soil.law): adding a law is one class and one registry
 entry. A toy law registered here (linear loading, an elastic line on unloading) runs through the
 paths the Bekker/Wong law takes -- the homogeneous model's static state and compaction, a scenario
 simulated with ``model.soil_law``, one channel loaded, unloaded and reloaded with its history kept
@@ -10,11 +10,12 @@ import pytest
 
 import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
-from symtrack.model import SystemModel, soil_law
+from symtrack.model import SystemModel
 from symtrack.model.homogeneous import HomogeneousTerrain
 from symtrack.model.options import ModelOptions
 from symtrack.model.static import static_state
 from symtrack.presets import soil_preset, vehicle_preset
+from symtrack.soil import law as soil_law
 from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions
 
 PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}

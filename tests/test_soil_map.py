@@ -13,11 +13,11 @@ import symtrack
 from symtrack.foundations.errors import ScenarioError
 from symtrack.integrators.engine import TerrainEngine
 from symtrack.model.options import ModelOptions
-from symtrack.model.vehicle import traction_shape
 from symtrack.presets import soil_preset
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
 from symtrack.terrain.storage import Terrain
 from symtrack.terrain.world import open_world
+from symtrack.vehicles.planar import traction_shape
 
 WET = "clayey_soil_thailand_55"
 BASE = {

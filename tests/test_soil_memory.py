@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 
 from symtrack import api
-from symtrack.model import SystemModel, cell
+from symtrack.model import SystemModel
 from symtrack.model.options import ModelOptions
-from symtrack.model.soil_law import BekkerWong
 from symtrack.model.static import static_state
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.presets.soils import SOILS
 from symtrack.simulation.scenario import load_scenario
+from symtrack.soil import cell
+from symtrack.soil.law import BekkerWong
 from symtrack.terrain.channels import build_cell_functions
 from symtrack.terrain.storage import Grid, Terrain
 from symtrack.terrain.world import static_sinkage

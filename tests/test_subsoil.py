@@ -1,4 +1,4 @@
-"""Subsoil stress and compaction risk (symtrack/terrain/subsoil.py, symtrack/native/subsoil.h),
+"""Subsoil stress and compaction risk (symtrack/soil/subsoil.py, symtrack/native/subsoil.h),
 each against an independent truth: closed forms (uniform circle, Boussinesq/Newmark rectangle),
 a brute-force integration of the point-load formula, a refined table, and numpy for the C."""
 
@@ -14,7 +14,7 @@ import pytest
 from symtrack import toolchain as build
 from symtrack.foundations.errors import ParameterError
 from symtrack.native import cache
-from symtrack.terrain import subsoil as S
+from symtrack.soil import subsoil as S
 
 GEO = (2.4, 0.45, 1.5, 0.1, 0.1, 0.2)  # l, b, B, e (CG 0.1 m ahead of the contact centre), cell, end strip
 DEPTHS = S.DEFAULT_DEPTHS_M

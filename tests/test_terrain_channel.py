@@ -6,12 +6,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from symtrack.model import cell
 from symtrack.model.options import ModelOptions
-from symtrack.model.soil_law import BekkerWong
-from symtrack.model.vehicle import LATERAL_STATES, VEHICLE_STATES
 from symtrack.presets import soil_preset, vehicle_preset
+from symtrack.soil import cell
+from symtrack.soil.law import BekkerWong
 from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions
+from symtrack.vehicles.planar import LATERAL_STATES, VEHICLE_STATES
 
 PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
 FN = build_cell_functions(ModelOptions())

@@ -48,7 +48,7 @@ def test_simulate_with_terrain_out_and_in(tmp_path):
     a, b = persist.load(t1), persist.load(t2)
     assert np.all(b.zmax >= a.zmax) and np.all(b.z >= a.z - 1e-6)  # the second run continued the first's terrain
     sb = json.loads((tmp_path / "b" / "summary.json").read_text())
-    # on the compacted rut the second run adds the cycle law's share of the first (model/cell.py:
+    # on the compacted rut the second run adds the cycle law's share of the first (soil/cell.py:
     # 2^beta - 1 of the rut, 12 % for the clay; docs/terrain.md "Soil memory")
     first, second = s["passes"][0]["new_sinkage_mean_mm"], sb["passes"][0]["new_sinkage_mean_mm"]
     assert 0.05 * first < second < 0.5 * first

@@ -20,11 +20,11 @@ from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.integrators import engine
 from symtrack.integrators.settings import STEADY_METHODS
-from symtrack.model.soil_law import BekkerWong
 from symtrack.native.grid_engine_model import build_engine_functions
 from symtrack.simulation import loop
 from symtrack.simulation.plants import EnginePlant, make_plant
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
+from symtrack.soil.law import BekkerWong
 from symtrack.terrain import query
 from symtrack.toolchain import find_compiler
 
@@ -212,7 +212,7 @@ def test_the_ringing_after_the_entry_is_resolved():
 def test_fast_law_equals_the_model_law(n_exp):
     """The engine's law (p and its slope by branch) against the model's law and its Jacobian, on
     every piece: below the surface, virgin, elastic line, reload line of a cycle, clipped at 0."""
-    from symtrack.model import cell
+    from symtrack.soil import cell
 
     sc = load_scenario("validation_grid")
     soil = BekkerWong(sc.model)

@@ -1,4 +1,4 @@
-"""A towed load following the crawler (symtrack/terrain/towed.py, ``[terrain.towed]``): the towed
+"""A towed load following the crawler (symtrack/vehicles/towed.py, ``[terrain.towed]``): the towed
 axle's kinematics against the steady circle's closed form r_axle = sqrt(r_hitch^2 - L^2) and against
 an independent integration of dtheta/dt = (dH/dt . n) / L; the tabulated footprint against the direct
 sum over the contact's elements; a straight run whose trailer wheels land on the crawler's ruts
@@ -16,8 +16,9 @@ from symtrack.api import IncompleteSimulation
 from symtrack.foundations.errors import ParameterError, ScenarioError
 from symtrack.model.parameters import SOIL_PARAMS
 from symtrack.simulation.scenario import scenario_from_dict
-from symtrack.terrain import moisture, towed, tyre, wheeled
+from symtrack.soil import moisture
 from symtrack.terrain.storage import Grid, Terrain
+from symtrack.vehicles import towed, tyre, wheeled
 
 DEPTHS = (0.1, 0.3, 0.5, 0.8)
 TOWED = {"axle_load_kN": 60.0, "wheel_gauge_m": 1.5, "tyre_width_m": 0.6, "tyre_diameter_m": 1.6,
@@ -184,7 +185,7 @@ def test_wheels_on_the_ruts_and_beside_them(runs):
     rut = mid & (np.abs(np.abs(Y) - 0.75) < 0.2)
     beside = mid & (np.abs(np.abs(Y) - 1.5) < 0.1)
     soils = both._study.world.soils
-    from symtrack.terrain import density
+    from symtrack.soil import density
 
     def rho(t):
         return density.bulk_density(t.specific_volume, t.soil_index, soils)

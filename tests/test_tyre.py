@@ -1,4 +1,4 @@
-"""Tyres (symtrack/terrain/tyre.py, docs/subsoil.md "Wheeled machines"): Keller's (2005) contact
+"""Tyres (symtrack/vehicles/tyre.py, docs/subsoil.md "Wheeled machines"): Keller's (2005) contact
 against its own closed forms, the load rule's refusals, and the stress at depth against two
 published field measurements (Arvidsson & Keller 2007; Arvidsson et al. 2011)."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from symtrack.foundations.errors import ParameterError
-from symtrack.terrain import subsoil
-from symtrack.terrain import tyre as T
+from symtrack.soil import subsoil
+from symtrack.vehicles import tyre as T
 
 G = 9.81
 

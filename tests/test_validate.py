@@ -14,9 +14,10 @@ import pytest
 
 from symtrack.cli.main import main
 from symtrack.foundations.errors import ScenarioError
+from symtrack.soil import density, subsoil
 from symtrack.studies import traffic_seasons
 from symtrack.studies import validate as V
-from symtrack.terrain import density, subsoil, tyre
+from symtrack.vehicles import tyre
 
 FAST = ("ansorge2007_stress_tyre", "ansorge2007_density_pressure")
 

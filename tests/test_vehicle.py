@@ -8,7 +8,7 @@ import pytest
 
 from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.static import static_state
-from symtrack.model.vehicle import GRAVITY_M_S2
+from symtrack.vehicles.planar import GRAVITY_M_S2
 
 
 def _state(model, **values):
@@ -200,7 +200,7 @@ def test_reported_slip_is_the_true_slip_in_straight_running(model, params, speed
 def test_reported_slip_is_regularised_through_omega_zero():
     """track_slip is 0 at omega = 0, bounded near it, and the exact slip once r omega >> SLIP_SPEED_SCALE_M_S;
     it depends on r omega and v only (dimensionally consistent: r scaled at fixed tread speed is the same)."""
-    from symtrack.model.vehicle import SLIP_SPEED_SCALE_M_S, track_slip
+    from symtrack.vehicles.planar import SLIP_SPEED_SCALE_M_S, track_slip
     assert float(track_slip(1.0, 0.0, 0.38)) == 0.0
     eps = SLIP_SPEED_SCALE_M_S
     assert abs(float(track_slip(1.0, eps / 0.38, 0.38))) <= 1.0 / (2 * eps) + 1e-9

@@ -1,4 +1,4 @@
-"""The 3D vehicle (model.vehicle = "3d", symtrack/model/vehicle3d.py; issue 22 item 2) against
+"""The 3D vehicle (model.vehicle = "3d", symtrack/vehicles/vehicle3d.py; issue 22 item 2) against
 independent truth: the planar validation on flat ground, a rigid plate on Bekker soil, the rigid
 body's load split across a side slope, the holding torque on a ramp, the climb's geometry, the
 soil's lateral strength on a side slope, and refusals."""
@@ -18,10 +18,10 @@ from symtrack.integrators.sundials import SundialsStepper
 from symtrack.model import SystemModel
 from symtrack.model.options import ModelOptions
 from symtrack.model.static import static_state
-from symtrack.model.vehicle import GRAVITY_M_S2
-from symtrack.model.vehicle3d import make_vehicle
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
 from symtrack.terrain.surface import parse_surface
+from symtrack.vehicles.planar import GRAVITY_M_S2
+from symtrack.vehicles.vehicle3d import make_vehicle
 
 FIGURES = ("distance_m", "distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_idler_mm",
            "speed_final_m_s")
@@ -322,7 +322,7 @@ def test_derivatives_are_finite_with_a_track_lifted_off(floor_m, monkeypatch):
     0 (the model before) they are not: the test's own control."""
     import casadi as ca
 
-    from symtrack.model import vehicle3d
+    from symtrack.vehicles import vehicle3d
     if floor_m is not None:
         monkeypatch.setattr(vehicle3d, "COMPACTION_DEPTH_FLOOR_M", floor_m)
     params = _params(soil="sandy_loam_15")
@@ -367,7 +367,7 @@ def test_braked_descent_is_smooth(kappa, monkeypatch):
     about its trend 0.081 m/s in 0.2-1 s, 0.024 m/s in 4-6 s; the largest real part -0.227 1/s at t = 1 s).
     The control, kappa = 0 (the model before: the running gear's angular momentum left out of the hull's
     pitch), grows (0.22 -> 2.86 m/s; +1.50 1/s)."""
-    from symtrack.model import vehicle3d
+    from symtrack.vehicles import vehicle3d
     if kappa is not None:
         monkeypatch.setattr(vehicle3d, "running_gear_momentum_ratio", lambda l, r: kappa)
     m, X, T, p = _braked_descent(0.75, 6.0)
@@ -400,7 +400,7 @@ def test_in_the_air_the_running_gear_s_angular_momentum_is_conserved():
     energy 1/2 I q^2 + 1/2 J sum omega^2 - kappa J q sum omega equals the motors' work sum T dphi (their
     torque turns the sprocket against the hull). The model before (no running gear's momentum) kept the
     hull still: q = 0."""
-    from symtrack.model.vehicle3d import PITCH_INERTIA_PER_YAW, running_gear_momentum_ratio
+    from symtrack.vehicles.vehicle3d import PITCH_INERTIA_PER_YAW, running_gear_momentum_ratio
     params = _params()
     params["cohesion_Pa"] = 0.0
     opts = ModelOptions(lateral_law="creep", vehicle="3d")

@@ -19,9 +19,9 @@ from symtrack.foundations.errors import ScenarioError, SimulationError
 from symtrack.model import SystemModel
 from symtrack.model.options import ModelOptions
 from symtrack.model.static import static_state
-from symtrack.model.vehicle3d import footprint_radius_m, make_vehicle
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
 from symtrack.terrain.surface import parse_surface
+from symtrack.vehicles.vehicle3d import footprint_radius_m, make_vehicle
 
 
 def _raster(tmp_path, surface: dict, pixel_m: float, origin, size_m, name="dem.npy") -> dict:

@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 import symtrack
-from symtrack.model import ModelOptions, SystemModel, vehicle_registry
+from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.layout import ContactPose, StateLayout
 from symtrack.model.static import static_state
-from symtrack.model.vehicle import LATERAL_STATES, PLANAR_LAYOUT, VEHICLE_STATES, PlanarVehicle, vehicle_equations
 from symtrack.simulation import loop
 from symtrack.simulation.plants import make_plant
+from symtrack.vehicles import registry as vehicle_registry
+from symtrack.vehicles.planar import LATERAL_STATES, PLANAR_LAYOUT, VEHICLE_STATES, PlanarVehicle, vehicle_equations
 
 
 class OdometerVehicle(PlanarVehicle):

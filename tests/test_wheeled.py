@@ -1,4 +1,4 @@
-"""A wheeled machine's pass over a field (symtrack/terrain/wheeled.py): the footprint's stress
+"""A wheeled machine's pass over a field (symtrack/vehicles/wheeled.py): the footprint's stress
 moved along a path into the terrain's record (against the footprint evaluated directly at a
 cell's centre), the same pass turned by 90 degrees giving the transposed field, cells out of
 reach untouched bit for bit, the compression state by the virgin line's closed form, refusals;
@@ -13,8 +13,9 @@ import pytest
 
 from symtrack.foundations.errors import ParameterError
 from symtrack.model.parameters import SOIL_PARAMS
-from symtrack.terrain import density, moisture, tyre, wheeled
+from symtrack.soil import density, moisture
 from symtrack.terrain.storage import Grid, Terrain
+from symtrack.vehicles import tyre, wheeled
 
 DEPTHS = (0.1, 0.3, 0.5, 0.8)
 

@@ -58,9 +58,9 @@ import numpy as np
 from ..api import IncompleteSimulation, simulate
 from ..foundations.errors import SymtrackError
 from ..model.plausibility import GROUND_PRESSURE_RANGE_KPA, MAX_SPEED_M_S
-from ..model.vehicle import GRAVITY_M_S2
 from ..presets.soils import SOILS
 from ..simulation.scenario import scenario_from_dict
+from ..vehicles.planar import GRAVITY_M_S2
 
 __all__ = ["ACCURACY_RTOL", "CSV_COLUMNS", "ENERGY_RTOL", "FIGURES", "PROPERTIES", "REFERENCE",
            "REST_SPEED_M_S", "REST_TRAVEL_M", "REST_YAW_RAD", "SYMMETRY_RTOL", "VARIANTS", "CaseOutcome",

@@ -47,11 +47,11 @@ from xml.sax.saxutils import escape, quoteattr
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
 from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
-from ..model.vehicle import INPUTS
 from ..native.generate import unit_of
 from ..simulation.scenario import Scenario
 from ..terrain import fieldfile
 from ..toolchain import BuildSpec, build, casadi_tag, digest
+from ..vehicles.planar import INPUTS
 from .fmu_common import (
     FMI2_HEADERS,
     FmuVariable,
@@ -124,7 +124,7 @@ def check_exportable(sc: Scenario) -> None:
         raise ScenarioError("[terrain.moisture] is set: the engine FMU's soil is fixed at export")
     if t.towed is not None:  # [terrain.towed] (a trailer behind the crawler)
         raise ScenarioError("[terrain.towed] is set: the engine FMU carries the crawler alone (the trailer's tyres "
-                            "are run by Python, symtrack.terrain.towed)")
+                            "are run by Python, symtrack.vehicles.towed)")
     if t.initial_state:
         raise ScenarioError(f"terrain.initial_state = {t.initial_state!r}: the engine FMU takes its start field as the "
                             "string parameter field_file (symtrack terrain convert IN.npz OUT.field); drop "
@@ -271,7 +271,7 @@ def _tables(tag: str, tables) -> str:
 def _subsoil_constants(parts: dict) -> str:
     """The subsoil stress (the tables of the vertical stress, as EngineState builds them) and the bulk
     density's constants (density.soil_arrays of the one soil at each depth), or EF_N_DEPTHS 0."""
-    from ..terrain import density
+    from ..soil import density
 
     world, state = parts["world"], parts["state"]
     depths = world.storage.subsoil_depths_m

@@ -46,15 +46,15 @@ import casadi as ca
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, check_output_file
 from ..integrators.settings import FIXED_STEP_TOLERANCE
-from ..model.soil_law import make as make_soil_law
 from ..model.system import PARAM_NAMES
-from ..model.vehicle import GRAVITY_M_S2
 from ..native.cache import generated_sources
 from ..native.generate import FIXED_STEP_METHOD, unit_of
 from ..native.generate import build as generate_functions
 from ..simulation.builder import system_model
 from ..simulation.scenario import Scenario, load_scenario
+from ..soil.law import make as make_soil_law
 from ..toolchain import BuildSpec, build, casadi_tag, digest
+from ..vehicles.planar import GRAVITY_M_S2
 from .fmu_common import (
     BASE_UNITS,
     FMI2_HEADERS,

@@ -4,7 +4,7 @@ The loop is the simulation's one time loop (:func:`symtrack.simulation.loop.run`
 as its sampled torque law (:class:`TrackingLaw`). The plant is any plant of
 :mod:`symtrack.simulation.plants` (the protocol :class:`~symtrack.simulation.plants.Plant`): its
 ``state_names`` must contain the vehicle states of the model's layout
-(``model.layout.vehicle_names``: the 12 of :data:`symtrack.model.vehicle.VEHICLE_STATES`). Each
+(``model.layout.vehicle_names``: the 12 of :data:`symtrack.vehicles.planar.VEHICLE_STATES`). Each
 sample the loop advances it by the sample time with the commands held (in sub-steps of the
 plant's ``macro_step_s`` when it has one: the grid's world-manager step).
 

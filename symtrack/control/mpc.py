@@ -76,7 +76,7 @@ from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
 from ..model.homogeneous import HomogeneousTerrain
 from ..model.options import SLIDING_SIGNS
-from ..model.vehicle3d import HULL_STATES, PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW, ContactTerrain, make_vehicle
+from ..vehicles.vehicle3d import HULL_STATES, PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW, ContactTerrain, make_vehicle
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
@@ -102,7 +102,7 @@ QS_HULL_SCALE = 1e-3
 _SCALES = (
     ("x_m", 1.0), ("y_m", 1.0), ("yaw_rad", 0.1), ("u_m_s", 1.0), ("v_m_s", 0.05), ("yaw_rate_rad_s", 0.1),
     ("omega_", 5.0), ("shear_", 0.02), ("torque_", 1000.0), ("sinkage_rate_", 0.01), ("sinkage_", 0.002),
-    # The 3D vehicle's hull states (symtrack.model.vehicle3d.HULL_STATES) keep the scale 1: z_m is a
+    # The 3D vehicle's hull states (symtrack.vehicles.vehicle3d.HULL_STATES) keep the scale 1: z_m is a
     # position (0.6 m on flat ground, metres on a slope) and the angles and rates are small, but scaling
     # the rates to 0.01 makes their collocation rows 100 x larger, and the hull's bounce in the plant
     # (heave, pitch, roll near 7 Hz, lightly damped) then puts the measurement itself far outside the
@@ -139,7 +139,7 @@ class MPCSettings:
     jit: bool | None = None
     jit_dir: str | None = None
     prediction: str = "vehicle"
-    # the 3D vehicle's hull in the prediction (symtrack.model.vehicle3d.HULL_STATES; docs/vehicle3d.md,
+    # the 3D vehicle's hull in the prediction (symtrack.vehicles.vehicle3d.HULL_STATES; docs/vehicle3d.md,
     # "The MPC on the 3D vehicle"): "quasi_static" (the singular-perturbation reduction: the hull's height,
     # pitch and roll are algebraic variables of the prediction's DAE, fixed by its vertical force and pitch
     # and roll moment balances at zero hull acceleration, its rates those of the ground pose under the

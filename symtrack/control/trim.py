@@ -14,7 +14,7 @@ two commanded torques; equations: the derivatives of every state except X, Y, ya
 rows give command = actual torque). Same count, so a Newton root-finder (CasADi ``rootfinder``)
 solves it.
 
-The lagged lateral shear states of the "shear" law (symtrack.model.vehicle.LATERAL_STATES) are
+The lagged lateral shear states of the "shear" law (symtrack.vehicles.planar.LATERAL_STATES) are
 eliminated from the continuation (set to the solution of their own steady equations, which are affine
 in them) and then solved with every other state by a last Newton (:class:`_TrimProblem`); the
 ``residual_norm`` of a :class:`TrimPoint` is the largest state derivative except the positions' there.
@@ -37,7 +37,7 @@ import numpy as np
 from ..foundations.errors import ParameterError, SymtrackError
 from ..model import SystemModel
 from ..model.static import static_state
-from ..model.vehicle import GRAVITY_M_S2, LATERAL_STATES, lateral_resistance_max_N
+from ..vehicles.planar import GRAVITY_M_S2, LATERAL_STATES, lateral_resistance_max_N
 
 __all__ = ["POSITION_STATES", "SPECIFIED_STATES", "TrimError", "TrimPoint", "TrimSettings", "limit_usage", "trim"]
 
@@ -131,7 +131,7 @@ class _TrimProblem:
     """The root-finding problem on model.ode, parametrised by (speed, yaw rate).
 
     States whose own equations are affine in them (the lagged lateral shear states of the "shear"
-    law, :data:`~symtrack.model.vehicle.LATERAL_STATES`: relaxations towards the current slips) are
+    law, :data:`~symtrack.vehicles.planar.LATERAL_STATES`: relaxations towards the current slips) are
     eliminated from the continuation: they are set to the exact solution of their steady equations
     for the other states (a linear solve in closed form), so the continuation's unknowns and
     equations are those of the quasi-static law. Starting them at zero instead, Newton does not reach
@@ -266,7 +266,7 @@ def limit_usage(model: SystemModel, params: dict, x, u, p) -> dict:
     traction_usage_{left,right}: |F_k| / F_max,k, with F_max,k = b l c + N_k tan(phi) the
     fully-developed shear strength of the contact patch (N_k from the model's output).
     lateral_usage: |sum F_y| over the largest lateral resistance the tracks can give
-    (:func:`symtrack.model.vehicle.lateral_resistance_max_N`: the soil's shear strength for the
+    (:func:`symtrack.vehicles.planar.lateral_resistance_max_N`: the soil's shear strength for the
     "shear" law, mu_t W for the "creep" law).
     """
     y = _outputs(model, x, u, p)

@@ -23,10 +23,10 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import SimulationError
-from ..model.vehicle import codegen_options
 from ..native.grid_rosenbrock import build as build_step
 from ..terrain.channels import NF, NG
 from ..toolchain import BuildSpec, build, casadi_tag, compiler, digest
+from ..vehicles.planar import codegen_options
 from .settings import substeps
 
 __all__ = ["MAX_STEP_S", "PACK_SLOTS", "GridRosenbrockStepper", "grid_library"]
@@ -49,7 +49,7 @@ def grid_library(opts, n_channels: int, n_steps: int, compiled: bool = True):
     cc = compiler() if compiled else None
     if cc is None:
         return build_step(opts, n_channels, n_steps)["multi"], False
-    # generated C: a large track quadrature as one call node (symtrack.model.vehicle.codegen_options)
+    # generated C: a large track quadrature as one call node (symtrack.vehicles.planar.codegen_options)
     f = build_step(codegen_options(opts), n_channels, n_steps)["multi"]
 
     def sources():

@@ -1,7 +1,7 @@
 """Homogeneous-soil terrain: four terrain cells that travel with the vehicle on virgin soil.
 
 Under each track's sprocket end and idler end sits one cell with the dynamics and the
-loading/unloading law of docs/model.md, "Pressure-sinkage" (:mod:`symtrack.model.cell`):
+loading/unloading law of docs/model.md, "Pressure-sinkage" (:mod:`symtrack.soil.cell`):
 
 - the idler cell (front) meets virgin soil at every instant: its history is empty
   (z_max = p_max = 0), so it follows the Bekker loading branch;
@@ -10,7 +10,7 @@ loading/unloading law of docs/model.md, "Pressure-sinkage" (:mod:`symtrack.model
   pressure exceeds the front pressure (nose up) it continues on the Bekker branch; when it is
   lower it sits on the unloading line through the front's (z, p).
 
-The soil law is the model's (:mod:`symtrack.model.soil_law`, ``opts.soil_law``); above, the
+The soil law is the model's (:mod:`symtrack.soil.law`, ``opts.soil_law``); above, the
 default Bekker/Wong law.
 
 Compaction resistance: the soil law's work per metre to press a rut of depth z (Bekker/Wong:
@@ -23,9 +23,10 @@ from __future__ import annotations
 
 import casadi as ca
 
-from . import cell, soil_law
+from ..soil import cell
+from ..soil import law as soil_law
+from ..vehicles.planar import ENDS, TRACKS
 from .options import ModelOptions
-from .vehicle import ENDS, TRACKS
 
 __all__ = ["HomogeneousTerrain", "cell_state_names"]
 

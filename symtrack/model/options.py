@@ -6,8 +6,8 @@ import dataclasses
 from dataclasses import dataclass
 
 from ..foundations.errors import ParameterError
-from .soil_law import DEFAULT as DEFAULT_SOIL_LAW
-from .soil_law import REGISTRY as SOIL_LAWS
+from ..soil.law import DEFAULT as DEFAULT_SOIL_LAW
+from ..soil.law import REGISTRY as SOIL_LAWS
 
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
 LATERAL_LAWS = ("shear", "creep", "shear_quasistatic")
@@ -96,11 +96,11 @@ class ModelOptions:
         holds no steady turn tighter than about 100 m. Off by default: the validation was
         calibrated without it (its lateral creep is far from either limit).
     soil_law: the terrain cells' soil law, a name of the soil-law registry
-        (:mod:`symtrack.model.soil_law`); "bekker_wong" (default): Bekker loading, Wong
+        (:mod:`symtrack.soil.law`); "bekker_wong" (default): Bekker loading, Wong
         unloading/reloading line and the cycle law of docs/model.md, "Pressure-sinkage".
     vehicle: the vehicle model (issue 22). "planar" (default): the planar vehicle of
         docs/model.md (x, y, yaw; pitch from the quasi-static load transfer). "3d": the rigid hull that
-        heaves, pitches and rolls on the ground's shape (:mod:`symtrack.model.vehicle3d`,
+        heaves, pitches and rolls on the ground's shape (:mod:`symtrack.vehicles.vehicle3d`,
         docs/vehicle3d.md), on the homogeneous terrain or on the grid through the terrain engine.
     contact_segments: ("3d" only) the segments along each track, each pressing on the ground under
         it (the load split between and along the tracks comes from their penetrations).
@@ -110,7 +110,7 @@ class ModelOptions:
         many Newton steps on the 2x2 system; the DAE form (IDAS) solves it with algebraic
         variables. tests/test_vehicle.py measures the residual.
     quadrature_call: (a build flag, not a scenario key: :data:`BUILD_FLAGS`) a track quadrature of
-        more than ``symtrack.model.vehicle.INLINE_QUADRATURE_MAX_POINTS`` points is summed by one
+        more than ``symtrack.vehicles.planar.INLINE_QUADRATURE_MAX_POINTS`` points is summed by one
         mapped CasADi Function called from the SX graph as a single node instead of being expanded,
         so that the generated C does not grow with the points (issue 26 item 3). Set only by the
         builders of the fixed-step integrators' C (the compiled Rosenbrock: ``symtrack.native.cache.

@@ -99,14 +99,14 @@ MATRIC_SUCTION_DEFAULT_KPA = 10.0
 PARTICLE_DENSITY_DEFAULT_MG_PER_M3 = 2.65
 BULK_DENSITY_INITIAL_DEFAULT_MG_PER_M3 = 1.5
 # O'Sullivan & Robertson's (1996, Soil Till. Res. 39, 161-173) yield line, as SoilFlex (Keller et al.
-# 2007) and soilphysics' soilDeformation code it (terrain/density.py): m = 1.3, the value of the one
+# 2007) and soilphysics' soilDeformation code it (soil/density.py): m = 1.3, the value of the one
 # complete published set found (soilphysics' soilDeformation example, docs/subsoil.md "Repeated
 # passes"); with it every pass at a stress above the yield line's (about 0.2 of the precompression
 # stress) adds a little density, less each time. 0 switches the yield line off.
 YIELD_LINE_OFFSET_DEFAULT = 1.3
 # the smallest specific volume the soil reaches under load: 1 (zero porosity, rho_b = rho_s) unless the
 # day's water content w is known ([soil.moisture]), then 1 + w rho_s / rho_w, the specific volume at zero
-# air-filled porosity (saturation; terrain/moisture.py)
+# air-filled porosity (saturation; soil/moisture.py)
 SPECIFIC_VOLUME_MIN_DEFAULT = 1.0
 SOIL_TERRAIN_PARAMS: tuple[ParamSpec, ...] = (
     _spec("repeated_loading_exponent", "beta of the cycle law: the rut after N passes is the first pass's N^beta",
@@ -151,7 +151,7 @@ SOIL_TERRAIN_PARAMS += tuple(
     _spec(sub, f"subsoil layer: {_TOPSOIL[top].description} (the topsoil's unless given)", _TOPSOIL[top].low,
           _TOPSOIL[top].high, _TOPSOIL[top].low_inclusive, derived=True) for top, sub in SUBSOIL_KEYS.items())
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
-# the soil parameters the day's moisture sets (symtrack/terrain/moisture.py): a terrain file made on
+# the soil parameters the day's moisture sets (symtrack/soil/moisture.py): a terrain file made on
 # another day continues with the scenario's values of these (the compression state carries over)
 SOIL_DAY_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
                         "precompression_stress_Pa", "specific_volume_min", "yield_compression_index_k2",

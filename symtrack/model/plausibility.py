@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 
 from ..foundations.errors import ParameterError, SimulationError
-from .vehicle import GRAVITY_M_S2
+from ..vehicles.planar import GRAVITY_M_S2
 
 __all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S",
            "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX", "TRACTION_OVER_WEIGHT_MAX", "check_sinkage",

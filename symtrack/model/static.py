@@ -6,10 +6,10 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import SimulationError
-from .soil_law import make as make_soil_law
+from ..soil.law import make as make_soil_law
+from ..vehicles.planar import GRAVITY_M_S2
+from ..vehicles.vehicle3d import check_contact
 from .system import SystemModel
-from .vehicle import GRAVITY_M_S2
-from .vehicle3d import check_contact
 
 __all__ = ["static_state"]
 

@@ -11,8 +11,8 @@ signature, which the integrators, the linearization and the MPC all reuse:
 - ``jac_ode(x, u, p) -> (A, B)``: the exact Jacobians of ``ode``;
 - ``accel(x, u, p) -> z``: the ODE form's accelerations (a consistent z for IDAS).
 
-The vehicle is a vehicle model of :mod:`symtrack.model.vehicle_registry` (``vehicle=``, default
-the planar vehicle, or the one the options need: :func:`~symtrack.model.vehicle_registry.for_options`);
+The vehicle is a vehicle model of :mod:`symtrack.vehicles.registry` (``vehicle=``, default
+the planar vehicle, or the one the options need: :func:`~symtrack.vehicles.registry.for_options`);
 the state vector's layout is :attr:`SystemModel.layout` (the vehicle's blocks, then the terrain's
 ``cells``: :mod:`symtrack.model.layout`).
 
@@ -22,7 +22,7 @@ parameters), ``compaction(xv, xc, P, Q) -> (2,)`` compaction resistance per trac
 vehicle's :class:`~symtrack.model.layout.VehicleState`, its states by name and its contact pose
 ``xv.pose``), and
 ``equations(xv, xc, dist, P, Q) -> (xc_dot, signals)`` where ``dist`` are the tracks'
-:class:`~symtrack.model.vehicle.PressureDistribution` and ``signals`` must contain
+:class:`~symtrack.vehicles.planar.PressureDistribution` and ``signals`` must contain
 ``sinkage_{sprocket,idler}_{left,right}_m`` and ``p_{sprocket,idler}_{left,right}_Pa``.
 
 States, inputs, parameters and outputs are named symbols whose names carry units; the model
@@ -36,13 +36,13 @@ import functools
 import casadi as ca
 
 from ..foundations.errors import ParameterError
-from . import vehicle_registry
+from ..vehicles import registry as vehicle_registry
+from ..vehicles.planar import codegen_options
+from ..vehicles.vehicle3d import ContactTerrain, make_vehicle
 from .homogeneous import HomogeneousTerrain
 from .layout import VehicleState
 from .options import ModelOptions
 from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
-from .vehicle import codegen_options
-from .vehicle3d import ContactTerrain, make_vehicle
 
 __all__ = ["PARAM_NAMES", "SystemModel"]
 
@@ -165,7 +165,7 @@ class SystemModel:
     @functools.cached_property
     def codegen_twin(self) -> SystemModel:
         """The model to generate C from: this one, or, when its tracks' quadrature is large
-        (:func:`~symtrack.model.vehicle.codegen_options`), the same
+        (:func:`~symtrack.vehicles.planar.codegen_options`), the same
         vehicle and terrain with ``ModelOptions.quadrature_call`` set: the same Functions (names,
         signatures, values) with the quadrature summed by one call node, whose C does not grow with
         the points. Not for CasADi's interpreter (CVODES, IDAS): it evaluates a call node slowly."""

@@ -34,7 +34,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #endif
 #include "engine_gen.inc"
 #include "engine_soils.inc" /* ENG_SOIL_CALL: the Function of a cell's soil (generated: a soil map's soils) */
-#include "subsoil.h" /* the subsoil stress below the tracks (symtrack/terrain/subsoil.py) */
+#include "subsoil.h" /* the subsoil stress below the tracks (symtrack/soil/subsoil.py) */
 #include "terrain_query.h" /* the ground's height, normal and cell under a point (symtrack/terrain/query.py) */
 
 #define EXPORT __attribute__((visibility("default")))
@@ -96,7 +96,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
   /* wall time (ns) of the parts: world manager (footprint, release, assignment, INFO_IN; coverage \
      check), vehicle step, cells (geometry, integration, INFO_OUT), sums and outputs */ \
   F(long long, ns_manager) F(long long, ns_vehicle) F(long long, ns_cells) F(long long, ns_outputs) \
-  /* the cycle law (symtrack/model/cell.py): storage z_off and cycle count per cell; per channel the \
+  /* the cycle law (symtrack/soil/cell.py): storage z_off and cycle count per cell; per channel the \
      stay's z_off at its start, its increment delta, its progress d_c, and whether it has counted */ \
   F(double *, zoff) \
   F(unsigned short *, cycles) \
@@ -123,7 +123,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
   F(double, ring_tol) \
   /* the field's initial elevation per cell (terrain_query.h; NULL: flat): read by eng_surface only */ \
   F(const double *, elev) \
-  /* the bulk density's mean normal stress (symtrack/terrain/density.py): tables of p (NULL: off; same \
+  /* the bulk density's mean normal stress (symtrack/soil/density.py): tables of p (NULL: off; same \
      depths as subsoil) and this pass's largest p per cell and depth (n_depths per cell) */ \
   F(const subsoil_tables_t *, subsoil_p) \
   F(float *, p_pass) \

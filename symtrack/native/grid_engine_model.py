@@ -18,7 +18,7 @@ interpolated between the step's two poses. So the Functions are:
   ``EngineSettings.vehicle_tolerance``.
 - ``eng_vehicle_a(w[14], pv) -> a[8]``: a = (X, Y, cos psi, sin psi, alpha_L, beta_L, alpha_R,
   beta_R) with each track's pressure p(s) = max(0, alpha + beta s) (the linear and both
-  triangular distributions of :class:`~symtrack.model.vehicle.PressureDistribution` are of
+  triangular distributions of :class:`~symtrack.vehicles.planar.PressureDistribution` are of
   this form).
 - ``eng_outputs(x[12], u[2], pv) -> y``: the model's outputs (same names and order as the
   channel model's) from the vehicle state and the channel sums.
@@ -26,7 +26,7 @@ interpolated between the step's two poses. So the Functions are:
   p_k(s_mid,k), its overlap fractions (left, right) and its four end-strip weights, from
   :func:`symtrack.terrain.channels.build_cell_functions`'s geometry.
 - ``eng_cell_law(z, hist[5]) -> (p, dp/dz)``: the reaction pressure of the model's soil law
-  (:mod:`symtrack.model.soil_law`) with the soil's law constants baked in, and its exact
+  (:mod:`symtrack.soil.law`) with the soil's law constants baked in, and its exact
   derivative (the Newton iteration of each implicit stage), written by branch (the law's
   ``pressure_and_slope``); hist = (z_max, p_max, z_off, delta, d_c), the cycle law's history.
   With numeric constants the Bekker/Wong law writes the regularised Bekker term
@@ -46,11 +46,10 @@ import re
 import casadi as ca
 
 from ..foundations.errors import ParameterError
-from ..model import SystemModel, soil_law
+from ..model import SystemModel
 from ..model.layout import StateLayout
 from ..model.system import PARAM_NAMES
-from ..model.vehicle import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
-from ..model.vehicle3d import hull_rotation, make_vehicle
+from ..soil import law as soil_law
 from ..terrain.channels import (
     COMPACTION_SPEED_FLOOR_M_S,
     GLOBAL_FIELDS,
@@ -59,6 +58,8 @@ from ..terrain.channels import (
     NH,
     build_cell_functions,
 )
+from ..vehicles.planar import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
+from ..vehicles.vehicle3d import hull_rotation, make_vehicle
 from .rosenbrock import GAMMA as RB_GAMMA
 from .rosenbrock import N_STAGES as RB_STAGES
 from .rosenbrock import A as RB_A
@@ -158,7 +159,7 @@ def segment_sum_names(n_seg: int) -> tuple[str, ...]:
 
 
 class SegmentSumsTerrain(SumsTerrain):
-    """The grid terrain seen from the 3D vehicle (:class:`~symtrack.model.vehicle3d.Vehicle3D`): the
+    """The grid terrain seen from the 3D vehicle (:class:`~symtrack.vehicles.vehicle3d.Vehicle3D`): the
     planar sums (the cells' compaction power per track, the end strips) and per segment of each
     track the load-weighted means of the cells' sinkage and history (:data:`SEG_FIELDS`), so each
     segment's pressure is the soil law on the history of the cells under it (:meth:`contact_history`;
@@ -200,7 +201,7 @@ class SegmentSumsTerrain(SumsTerrain):
 def piecewise_linear(p, l, s):
     """The pressure at s of n equal segments' pressures ``p`` at their centres over a contact of length
     ``l``: linear between the centres, constant beyond the first and the last (the value of
-    :meth:`SegmentDistribution.at <symtrack.model.vehicle3d.SegmentDistribution.at>`), written as
+    :meth:`SegmentDistribution.at <symtrack.vehicles.vehicle3d.SegmentDistribution.at>`), written as
     p_0 + sum_j (p_j+1 - p_j) clamp((s - s_j) / ds, 0, 1): n - 1 clamps, where the hat functions cost n
     absolute values, clamps and branches (the engine evaluates it for every loaded cell)."""
     n = len(p)
@@ -215,7 +216,7 @@ def piecewise_linear(p, l, s):
 
 def least_squares_line(dist):
     """(alpha, beta): the least-squares line p = alpha + beta s through a
-    :class:`~symtrack.model.vehicle3d.SegmentDistribution`'s segment pressures (at the centres of
+    :class:`~symtrack.vehicles.vehicle3d.SegmentDistribution`'s segment pressures (at the centres of
     equal segments its integral over the contact is the pieces' own: the load is kept). The subsoil
     stress takes it (subsoil.h's strip tables are for a linear line per track)."""
     n = len(dist.p)

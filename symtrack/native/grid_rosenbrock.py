@@ -62,10 +62,10 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     p being the grid model's parameter vector (vehicle and soil parameters, then the terrain's Q).
     """
     from symtrack.model import SystemModel
-    from symtrack.model.soil_law import make as make_soil_law
     from symtrack.model.system import PARAM_NAMES
-    from symtrack.model.vehicle import ENDS, TRACKS
+    from symtrack.soil.law import make as make_soil_law
     from symtrack.terrain.channels import HIST_ROWS, NF, NG, build_cell_functions
+    from symtrack.vehicles.planar import ENDS, TRACKS
 
     agg = SumsTerrain()
     veh = SystemModel(opts, agg)

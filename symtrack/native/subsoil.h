@@ -1,5 +1,5 @@
 /* Subsoil vertical stress below the two tracks (Söhne / Fröhlich): the table lookup and
- * superposition of symtrack/terrain/subsoil.py's stress_at for one point, the same operations in
+ * superposition of symtrack/soil/subsoil.py's stress_at for one point, the same operations in
  * the same order (tested to 1e-12 against numpy in tests/test_subsoil.py; docs/subsoil.md).
  *
  * Per depth k a table of the prefix integrals of the strip kernel, H0(x, t) (odd in x) and

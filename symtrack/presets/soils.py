@@ -11,7 +11,7 @@ Sources:
   elastic (unloading) stiffness K_e and the damping 3e4 Pa s/m.
 
 - The cycle law's exponent ``repeated_loading_exponent`` beta (rut after N passes = first rut
-  N^beta, symtrack/model/cell.py): Li, D. & Selig, E.T. (1996), "Cumulative plastic deformation
+  N^beta, symtrack/soil/cell.py): Li, D. & Selig, E.T. (1996), "Cumulative plastic deformation
   for fine-grained subgrade soils", J. Geotech. Eng. 122(12), 1006-1013, who fitted
   eps_p = a (sigma_d / sigma_s)^m N^b to repeated-load triaxial tests and give b by soil group:
   0.10 (ML, silt), 0.13 (MH), 0.16 (CL, lean clay), 0.18 (CH, fat clay). The power law in N is

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.colors import ListedColormap
 
-from ..terrain.subsoil import RISK_HIGH_ABOVE, RISK_LOW_BELOW, RISK_NAMES
+from ..soil.subsoil import RISK_HIGH_ABOVE, RISK_LOW_BELOW, RISK_NAMES
 from .plots import fixed_layout, plt, png_bytes
 
 __all__ = ["RISK_COLOURS", "density_map_png", "density_passes_png", "passes_subsoil_png", "risk_map_png",

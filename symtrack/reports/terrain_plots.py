@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..terrain.density import bulk_density
+from ..soil.density import bulk_density
 from .plots import fixed_layout, plt, png_bytes
 from .subsoil_plots import density_map_png, density_passes_png
 
@@ -185,7 +185,7 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     ``risk_map.png`` (the risk class by depth over the field's record of all passes),
     ``stress_profile.png`` (the field's largest stress against depth with the soil's strength) and,
     for several passes, ``subsoil_passes.png`` (rut depth and largest stress against the pass)."""
-    from ..terrain.subsoil import risk_class
+    from ..soil.subsoil import risk_class
     from .subsoil_plots import passes_subsoil_png, risk_map_png, stress_profile_png
 
     st = world.storage
@@ -201,7 +201,7 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
     loaded = loaded[si, sj]
     pc = world.precompression_stress_Pa(cells.ravel()).reshape(*cells.shape, len(depths))
     sig = st.sigma_max[cells]
-    # the risk grades the traffic's stress plus the soil's own weight (terrain/density.py)
+    # the risk grades the traffic's stress plus the soil's own weight (soil/density.py)
     sig = np.where(loaded[:, :, None], sig + world.geostatic_Pa()[st.soil_index[cells]], sig)
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)

@@ -23,7 +23,7 @@ from .plots import fixed_layout, plt, png_bytes
 __all__ = ["ATTITUDE_COLUMNS", "LOAD_COLUMNS", "STANDSTILL_DISTANCE_M", "abscissa", "attitude_png", "is_3d",
            "load_split_data", "load_split_png", "path_elevation_png", "run_surface"]
 
-# the outputs of a 3D run these figures draw (symtrack.model.vehicle3d)
+# the outputs of a 3D run these figures draw (symtrack.vehicles.vehicle3d)
 ATTITUDE_COLUMNS = ("z_m", "ground_z_m", "roll_rad", "pitch_rad")
 LOAD_COLUMNS = ("normal_load_left_N", "normal_load_right_N")
 # a run whose CG travels less than this [m] is drawn against time (a vehicle standing still)

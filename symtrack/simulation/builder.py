@@ -36,8 +36,8 @@ from ..integrators import registry
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..model.options import ModelOptions
-from ..model.vehicle3d import check_contact, check_terrain, make_vehicle
 from ..terrain.storage import Terrain
+from ..vehicles.vehicle3d import check_contact, check_terrain, make_vehicle
 from . import loop
 from .passes import PassStudy, run_passes, study_summary
 from .plants import make_plant

@@ -6,12 +6,12 @@ A homogeneous run has no cells to keep the soil's state in; its tracks pass once
 under their centre-lines. At the output steps of the largest contact pressure each track's contact is
 cut into elements carrying its pressure, linear between the idler's and the sprocket's (the outputs
 ``p_idler_*_Pa``, ``p_sprocket_*_Pa``), scaled so that the elements carry the track's normal load
-(``normal_load_*_N``); Fröhlich's point load (symtrack/terrain/subsoil.py, with the soil's
+(``normal_load_*_N``); Fröhlich's point load (symtrack/soil/subsoil.py, with the soil's
 ``stress_concentration_factor``) sums their vertical stress at points along each track's centre-line
 (a point under the track sees every position of the contact as the track passes over it) and at the
 subsoil depths. The largest over those steps and points, under the more loaded track, is the pass's
 vertical stress; the density model folds it with the soil's own weight from the initial state at
-each depth (symtrack/terrain/density.py, each depth's layer), the rut (the deepest sinkage of a track
+each depth (symtrack/soil/density.py, each depth's layer), the rut (the deepest sinkage of a track
 end over the run) bounds the column's compression, and the risk grades the stress with the own
 weight against each depth's precompression stress.
 
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..terrain import density, subsoil
+from ..soil import density, subsoil
 
 __all__ = ["ELEMENTS_PER_DEPTH", "PEAK_STEPS", "POINTS_ALONG", "column_figures"]
 

@@ -23,7 +23,7 @@ pass also has ``bulk_density_max_Mg_per_m3``: the field's largest dry bulk densi
 at each depth of ``subsoil_depths_m`` (docs/subsoil.md "Bulk density"), and the summary has
 ``bulk_density_initial_Mg_per_m3``: the same before the first pass.
 
-With a towed load (``[terrain.towed]``, symtrack/terrain/towed.py) each pass is the crawler's run
+With a towed load (``[terrain.towed]``, symtrack/vehicles/towed.py) each pass is the crawler's run
 followed by the trailer's wheels along the path it drove, into the same cells' stress record and
 compression state; the pass then also has the trailer's figures ``towed_subsoil_sigma_z_max_kPa``
 (its largest vertical stress per depth), ``towed_cells_loaded``, ``towed_axle_poses``,
@@ -41,8 +41,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..foundations.errors import ScenarioError
-from ..terrain import subsoil, towed
+from ..soil import subsoil
 from ..terrain.world import World
+from ..vehicles import towed
 from . import loop
 from .plants import GridPlant
 from .result import RunResult, summarise

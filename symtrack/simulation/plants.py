@@ -45,9 +45,9 @@ from ..integrators.settings import IntegratorSettings, substeps
 from ..integrators.unload import unloader
 from ..model import SystemModel
 from ..model.static import static_state
-from ..model.vehicle3d import RasterGuard, check_terrain, make_vehicle
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import World, open_world
+from ..vehicles.vehicle3d import RasterGuard, check_terrain, make_vehicle
 
 __all__ = ["BatchPlant", "EnginePlant", "GridPlant", "Plant", "StepPlant", "advance_plant", "make_grid_plant",
            "make_plant"]

@@ -64,13 +64,14 @@ from ..integrators.settings import FIXED_STEP_TOLERANCE, EngineSettings, Integra
 from ..model import plausibility
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
-from ..model.vehicle3d import check_contact, check_grid, check_raster, check_terrain
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
-from ..terrain import moisture, towed
+from ..soil import moisture
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings, settings_from_dict
 from ..terrain.surface import Surface, parse_surface
+from ..vehicles import towed
+from ..vehicles.vehicle3d import check_contact, check_grid, check_raster, check_terrain
 
 __all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
            "parse_ground", "parse_run", "parse_terrain", "scenario_from_dict"]
@@ -279,9 +280,9 @@ def parse_ground(t_doc, model, vehicle: dict, plant: str = "", engine: bool = Fa
     the vehicle); anything else is the grid terrain (``(TerrainSettings or None, None)``), refused for a
     vehicle model that cannot take it (``plant``: what in the message asked for the grid; ``engine``:
     the run's integrator is the terrain engine, which takes the 3D vehicle: then what its grid path
-    cannot take is refused, :func:`~symtrack.model.vehicle3d.check_grid`; ``start``: the start's (x, y),
+    cannot take is refused, :func:`~symtrack.vehicles.vehicle3d.check_grid`; ``start``: the start's (x, y),
     where an elevation raster under the 3D vehicle on homogeneous soil must hold its footprint,
-    :func:`~symtrack.model.vehicle3d.check_raster`)."""
+    :func:`~symtrack.vehicles.vehicle3d.check_raster`)."""
     if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
         surface = parse_surface(t_doc["surface"])
         if surface.raster is not None and plant:
@@ -389,7 +390,7 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     soil_t = d.get("soil", {})
     moist = None
     if isinstance(soil_t, dict) and any(k == "moisture" or k.startswith("moisture.") for k in soil_t):
-        # the day's moisture (symtrack.terrain.moisture): PTFs over the soil's values; --set gives
+        # the day's moisture (symtrack.soil.moisture): PTFs over the soil's values; --set gives
         # soil.moisture.KEY=VALUE as the flat key "moisture.KEY"
         moist = dict(soil_t.get("moisture", {})) if isinstance(soil_t.get("moisture", {}), dict) else soil_t["moisture"]
         if isinstance(moist, dict):
@@ -412,7 +413,7 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
                                     engine=registry.get(run.integrator, "run.integrator").grid_engine is not None,
                                     start=(start.x_m, start.y_m))
     engine = parse_engine(d.get("engine"))
-    if terrain is not None and terrain.towed is not None:  # (symtrack.terrain.towed; again before the first pass)
+    if terrain is not None and terrain.towed is not None:  # (symtrack.vehicles.towed; again before the first pass)
         towed.check_scenario(terrain, start.x_m, start.y_m, start.yaw_deg, soil,
                              float(vehicle["cg_ahead_of_contact_centre_m"]))
     sc = Scenario(name, desc, run, model, vp, vehicle, sp, soil, start, torque, terrain, engine, surface)

@@ -1,6 +1,18 @@
-"""The soil as an agronomist describes it: texture, dry bulk density and matric suction, and the
-pedotransfer functions that turn that description into every parameter the rut, the stress, the
-density and the risk need (docs/subsoil.md, "One soil")."""
+"""The soil: what it is and what it does under load (docs/subsoil.md, "One soil"; docs/model.md,
+"Pressure-sinkage").
+
+- :mod:`.pedotransfer`: the soil as an agronomist describes it (texture, dry bulk density, matric
+  suction) and the pedotransfer functions that turn that description into every parameter the rut,
+  the stress, the density and the risk need (the names below);
+- :mod:`.law`: the surface law as an object and the menu of laws (the reaction pressure under a
+  track, its history, the work to press a rut); :mod:`.cell`: its mathematics, one terrain cell's
+  pressure-sinkage law and cell equation, in CasADi;
+- :mod:`.subsoil`: the vertical stress by depth under the tracks (Söhne / Fröhlich) and the
+  compaction risk against the soil's strength;
+- :mod:`.density`: compression, the bulk density by depth from the stress history;
+- :mod:`.moisture`: the soil on the day, its compression parameters and strength from its water
+  content (``[soil.moisture]``).
+"""
 
 from .pedotransfer import (
     DESCRIPTION_KEYS,

@@ -8,7 +8,7 @@ A soil is described by what an agronomist knows:
 - its dry bulk density before any traffic, ``bulk_density_initial_Mg_per_m3``, and its particle
   density ``particle_density_Mg_per_m3``;
 - its moisture as the matric suction ``matric_suction_kPa`` (or, on a day of a study, the
-  ``[soil.moisture]`` water content: symtrack/terrain/moisture.py).
+  ``[soil.moisture]`` water content: symtrack/soil/moisture.py).
 
 From these, :func:`derive_soil` gives every compression and strength parameter that the parameter
 set does not give itself (a value given always wins, except the virgin line's N, which is never an
@@ -101,7 +101,7 @@ K2_POSITION_OSR = (0.01916 - 0.00608) / (0.06037 - 0.00608)
 
 # Severiano et al. (2013) by clay class, as soilphysics' soilStrength (PredComp.R) codes it:
 # (upper clay bound %, a, b of sigma_pc = a h^b, theta_s, theta_r, alpha [1/kPa], n) -- the van
-# Genuchten curves give the water content at a suction (terrain/moisture.py uses the whole rows)
+# Genuchten curves give the water content at a suction (soil/moisture.py uses the whole rows)
 SEVERIANO_2013_CLASSES = (
     (20.0, 129.0, 0.15, 0.42, 0.049356, 0.79, 1.72),
     (31.0, 123.3, 0.13, 0.45, 0.08689, 0.72, 1.56),

@@ -57,11 +57,11 @@ from ..reports.subsoil_plots import density_map_png, risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario_from_dict
-from ..terrain import density, subsoil
+from ..soil import density, subsoil
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
-from ..terrain.wheeled import terrain_soils
 from ..terrain.world import padding_m
+from ..vehicles.wheeled import terrain_soils
 from . import field_plots
 
 __all__ = ["FIELD_KEYS", "FIELD_PACKAGE", "PATTERNS", "SCHEMA_VERSION", "FieldSettings", "FieldSpec",
@@ -377,7 +377,7 @@ def _copy_into(dst: Terrain, src: Terrain) -> None:
 
 def _with_own_weight(terrain: Terrain) -> np.ndarray:
     """The terrain's largest vertical stress plus the soil's own weight where traffic loaded it: the
-    stress the risk grades (terrain/density.py)."""
+    stress the risk grades (soil/density.py)."""
     sm = terrain.sigma_max.astype(np.float64)
     geo = density.geostatic_table(terrain_soils(terrain), terrain.subsoil_depths_m)[terrain.soil_index]
     return np.where(sm > 0, sm + geo, sm)

@@ -12,7 +12,7 @@ from matplotlib.colors import BoundaryNorm, ListedColormap
 
 from ..reports.plots import plt, png_bytes
 from ..reports.subsoil_plots import RISK_COLOURS
-from ..terrain.subsoil import RISK_NAMES
+from ..soil.subsoil import RISK_NAMES
 
 __all__ = ["RISK_MAP_BLOCKS", "PASSES_MAP_BLOCKS", "block_max", "comparison_png", "operation_gif", "passes_map_png",
            "sinkage_map_png"]

@@ -44,8 +44,9 @@ from ..foundations import caches
 from ..foundations.config import check_keys, number
 from ..foundations.errors import ScenarioError
 from ..foundations.files import read_text
+from ..soil import density, subsoil
 from ..soil.pedotransfer import GRAVITY_M_S2, WATER_DENSITY_MG_PER_M3
-from ..terrain import density, subsoil, tyre
+from ..vehicles import tyre
 from . import traffic_seasons, validate_vehicle
 
 __all__ = ["CASES_DIR", "CSV_COLUMNS", "LINE_POINTS", "MODELS", "SCHEMA_VERSION", "SENSITIVITY_COLUMNS", "Case",
@@ -90,7 +91,7 @@ def track_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
     """Vertical stress [kPa] at ``depths_m`` below the middle of one rigid track unit of length
     ``a["contact_length_m"]`` and width ``a["track_width_m"]`` carrying ``setup["load_kN"]`` at uniform
     pressure, averaged over the passage window (``a["averaging_window_fraction"]`` of the contact
-    length, centred on the track): :func:`symtrack.terrain.subsoil.stress_at` on the engine's tables
+    length, centred on the track): :func:`symtrack.soil.subsoil.stress_at` on the engine's tables
     (concentration factor ``a["xi"]``); the second track of the tables is left unloaded."""
     l_m, b_m = float(a["contact_length_m"]), float(a["track_width_m"])
     p_Pa = float(setup["load_kN"]) * KPA / (l_m * b_m)
@@ -105,7 +106,7 @@ def track_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
 
 def tyre_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
     """Vertical stress [kPa] at ``depths_m`` below the middle of a tyre (Keller's 2005 contact,
-    :func:`symtrack.terrain.tyre.contact`; Söhne / Fröhlich summed over it with concentration factor
+    :func:`symtrack.vehicles.tyre.contact`; Söhne / Fröhlich summed over it with concentration factor
     ``a["xi"]``), averaged over the passage window (``a["averaging_window_fraction"]`` of the contact
     length). The tyre is rated so that ``a["recommended_inflation_kPa"]`` is its recommended pressure at
     the wheel load."""
@@ -128,9 +129,9 @@ def density_change_vs_contact_pressure(setup: dict, a: dict, pressures_kPa) -> n
     below the middle of a uniform rectangular contact of ``a["load_kN"]`` at each mean contact
     pressure (width ``a["footprint_width_m"]``, length load / (pressure width)), after one pass:
     the mean normal stress below the contact's centre (the largest of the pass; Fröhlich's radial
-    stress, :func:`symtrack.terrain.tyre.footprint_stress_at_depth` over the contact cut into
+    stress, :func:`symtrack.vehicles.tyre.footprint_stress_at_depth` over the contact cut into
     ``FOOTPRINT_ELEMENT_M`` squares) plus the soil's own weight, folded into O'Sullivan & Robertson's
-    compression model (:func:`symtrack.terrain.density.pass_update`) of the soil given by the virgin
+    compression model (:func:`symtrack.soil.density.pass_update`) of the soil given by the virgin
     line (``virgin_line_N``, ``compression_index_lambda``), kappa, the particle and initial densities,
     the saturation bound of the water content, and the yield line of the package's defaults (or the
     setup's ``yield_line_offset_ln_p``)."""
@@ -159,7 +160,7 @@ def density_change_vs_contact_pressure(setup: dict, a: dict, pressures_kPa) -> n
 
 
 def density_soil(setup: dict, a: dict) -> dict:
-    """The density model's soil (:mod:`symtrack.terrain.density`) of a density case's setup and assumptions."""
+    """The density model's soil (:mod:`symtrack.soil.density`) of a density case's setup and assumptions."""
     rho_s = float(a["particle_density_Mg_per_m3"])
     return {"virgin_line_N": float(setup["virgin_line_N"]),
             "compression_index_lambda": float(setup["compression_index_lambda"]),

@@ -4,7 +4,7 @@ the crawler in steady turns. Each is a model of :data:`symtrack.studies.validate
 a case's setup, its assumptions' values and the measured points' x, and returns the prediction in
 the measured unit.
 
-The track's forces are the package's own (:mod:`symtrack.model.vehicle`): the tractive force of the
+The track's forces are the package's own (:mod:`symtrack.vehicles.planar`): the tractive force of the
 default lateral law (``shear_forces``, no lateral sliding, the steady shear displacement
 j = i l / 2, so Ferretti & Girelli's tractive effort with the Janosi-Hanamoto shear law), Wong's
 internal resistance of the running gear (``internal_resistance_N``) and Bekker's compaction
@@ -39,9 +39,9 @@ import numpy as np
 from ..control.trim import TrimError, trim
 from ..foundations import caches
 from ..model import ModelOptions, SystemModel
-from ..model import soil_law as soil_laws
-from ..model import vehicle as veh
 from ..presets import soil_preset, vehicle_preset
+from ..soil import law as soil_laws
+from ..vehicles import planar as veh
 
 __all__ = ["REFINE_POINTS", "TRACTION_SLIPS", "cone_index_sinkage_law", "cone_index_soil",
            "steady_turn_resistance_ratio", "straight_track_performance", "track_motion_resistance",

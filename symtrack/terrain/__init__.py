@@ -6,15 +6,32 @@ integrator: the world manager is driven by a plant of :mod:`symtrack.simulation.
 - :mod:`.settings`: the ``[terrain]`` scenario section (:class:`TerrainSettings`);
 - :mod:`.storage`: :class:`Grid`, :class:`Terrain` (the cell storage Cell[N, N]) and terrain files;
 - :mod:`.channels`: :class:`ChannelTerrain`, the symbolic part (a fixed number of channels,
-  each one copy of the cell equations of :mod:`symtrack.model.cell`);
+  each one copy of the cell equations of :mod:`symtrack.soil.cell`);
 - :mod:`.surface`: :class:`Surface`, the ground's shape (``[terrain.surface]``: slopes, furrows, an
   elevation raster), the initial elevation z0 in numpy and CasADi;
 - :mod:`.query`: the terrain query (the ground's height z0 - sinkage, gradient and normal under points);
-- :mod:`.world`: :class:`World`, the world manager (footprint, sector rule, INFO_IN / INFO_OUT).
+- :mod:`.world`: :class:`World`, the world manager (footprint, sector rule, INFO_IN / INFO_OUT);
+- :mod:`.soil_map`: a field of several soils, the per-cell soil index (``[terrain.soil_map]``);
+- :mod:`.fieldfile`: the raw ``.field`` file that C reads; :mod:`.gis`: GIS rasters in and out.
+
+The field holds cells; what their soil does under load is :mod:`symtrack.soil`'s, the machines that
+cross it are :mod:`symtrack.vehicles`'.
 """
 
-from .settings import TerrainSettings
-from .storage import Grid, Terrain
-from .surface import Surface
+from __future__ import annotations
+
+import importlib
 
 __all__ = ["Grid", "Surface", "Terrain", "TerrainSettings"]
+
+_LAZY = {"Grid": "storage", "Surface": "surface", "Terrain": "storage", "TerrainSettings": "settings"}
+
+
+def __getattr__(name: str):
+    # imported on first use, so that a module of a room below (a vehicle, a soil law) may import one
+    # module of this package without running the whole of it
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

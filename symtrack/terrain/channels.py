@@ -1,7 +1,7 @@
 """The channel pool: a fixed number of copies of the cell equations (docs/model.md, "Terrain cells,
 channels and the world manager").
 
-A channel is one copy of the cell law of :mod:`symtrack.model.cell` (the cell equation, Bekker
+A channel is one copy of the cell law of :mod:`symtrack.soil.cell` (the cell equation, Bekker
 loading, Wong unloading/reloading line). It does not know which cell it simulates: the world
 manager (:mod:`symtrack.terrain.world`) writes the cell's identity and history into the
 channel's entries of the terrain parameter vector Q before every macro step and reads the
@@ -16,7 +16,7 @@ Q (the terrain's own parameters, appended to the vehicle and soil parameters):
 ``cell_size_m``, ``end_strip_m``, then per channel c the :data:`CHANNEL_FIELDS`: the cell
 centre (world x, y), the history z_max, p_max of the cell, the active flag (1 active,
 0 idle), and the cycle law's z_off (plastic sinkage of the cell's earlier load cycles), delta (the
-increment this stay may add) and d_c (what it has added so far): symtrack/model/cell.py. An idle
+increment this stay may add) and d_c (what it has added so far): symtrack/soil/cell.py. An idle
 channel is inert: zero derivatives, no load, no weight, no work.
 
 Coupling with the vehicle
@@ -28,7 +28,7 @@ Coupling with the vehicle
   overlaps, a continuous (piecewise linear) function of the pose, so the integrator meets no
   discontinuity when a cell enters or leaves the footprint. The load is
   p_load = sum_k frac_k * p_k(s_mid,k), with p_k the track's linear (or triangular) pressure
-  distribution of :class:`~symtrack.model.vehicle.PressureDistribution` evaluated at the
+  distribution of :class:`~symtrack.vehicles.planar.PressureDistribution` evaluated at the
   middle of the overlapped interval of s.
 - **Sinkage under the track ends.** The sprocket (idler) sinkage of track k is the mean of the
   channels' sinkages weighted by the area each cell shares with a strip of length
@@ -65,9 +65,10 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..model import cell, soil_law
 from ..model.options import ModelOptions
-from ..model.vehicle import ENDS, TRACKS
+from ..soil import cell
+from ..soil import law as soil_law
+from ..vehicles.planar import ENDS, TRACKS
 
 __all__ = ["CHANNEL_FIELDS", "COMPACTION_SPEED_FLOOR_M_S", "ChannelTerrain", "GLOBAL_FIELDS", "HIST_ROWS", "NF",
            "NG", "NH", "build_cell_functions", "channel_param_names", "channel_state_names"]
@@ -128,7 +129,7 @@ def build_cell_functions(opts: ModelOptions, cell_reciprocal: bool = False) -> d
       1 / cell size, and the overlaps are products with it (one division instead of seven; the
       terrain engine's geometry, within an ulp of the quotients).
     - ``soil(z, hist[5], law) -> p``: the reaction pressure of the model's soil law
-      (:mod:`symtrack.model.soil_law`, ``opts.soil_law``); hist = (z_max, p_max, z_off, delta, d_c)
+      (:mod:`symtrack.soil.law`, ``opts.soil_law``); hist = (z_max, p_max, z_off, delta, d_c)
       (:data:`HIST_ROWS` of the channel fields), law = the law's vector (its ``values`` of a
       parameter dict).
     - ``dynamics(z_dot, p_load, p, active, cellpar[2]) -> xc_dot[2]`` (cell.cell_acceleration),

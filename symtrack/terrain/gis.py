@@ -37,9 +37,9 @@ import numpy as np
 
 from ..foundations.errors import MissingExtraError, ScenarioError
 from ..foundations.files import atomic_write_bytes
-from . import density
+from ..soil import density
+from ..soil.subsoil import risk_class
 from .storage import Grid, Terrain
-from .subsoil import risk_class
 
 __all__ = ["GEOTIFF_SUFFIXES", "GIS_EXTRA", "GIS_SCHEMA_VERSION", "LAYERS", "Layer", "RasterHeader",
            "check_covers", "crs_label", "crs_wkt", "export_terrain", "field_geometry", "is_geotiff", "layer_arrays",
@@ -256,7 +256,7 @@ LAYERS = (
 
 
 def _soils(terrain: Terrain) -> list[dict]:
-    """The terrain's soils, soil 0 its own, then its soil map's (as terrain/wheeled.py's terrain_soils)."""
+    """The terrain's soils, soil 0 its own, then its soil map's (as vehicles/wheeled.py's terrain_soils)."""
     soil = terrain.soil or {}
     return [dict(soil)] + [{**soil, **sp} for _, sp in terrain.soil_table]
 
@@ -279,7 +279,7 @@ def layer_arrays(terrain: Terrain) -> dict:
     if nd:
         sig = terrain.sigma_max.reshape(*shape, nd)
         out["stress_max"] = sig
-        # the risk grades the traffic's stress plus the soil's own weight (terrain/density.py)
+        # the risk grades the traffic's stress plus the soil's own weight (soil/density.py)
         geo = density.geostatic_table(_soils(terrain), terrain.subsoil_depths_m)[terrain.soil_index].reshape(sig.shape)
         # against each depth's strength (a subsoil layer has its own)
         pcd = (density.precompression_table(_soils(terrain), terrain.subsoil_depths_m)[terrain.soil_index]

@@ -21,9 +21,9 @@ Schema (every key optional; unknown keys are errors)::
     [terrain.surface]           # the ground's shape: slopes, furrows, an elevation raster
                                 # (symtrack.terrain.surface)
     [terrain.moisture]          # each cell's water content on the day, a raster
-                                # (symtrack.terrain.moisture)
+                                # (symtrack.soil.moisture)
     [terrain.towed]             # a trailer on one axle of tyres behind the crawler, loading the
-                                # same cells in the same run (symtrack.terrain.towed)
+                                # same cells in the same run (symtrack.vehicles.towed)
 
 With a GeoTIFF soil map (``soil_map.raster = "soils.tif"``), origin_m, cell_m and size_m not
 given are the raster's (its lower-left corner, pixel and extent), and the raster must cover the
@@ -41,15 +41,15 @@ from dataclasses import dataclass, field
 
 from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ScenarioError
+from ..soil.moisture import PATH_KEYS as MOISTURE_PATH_KEYS
+from ..soil.moisture import MoistureMap, parse_moisture_map
+from ..vehicles.towed import Towed, parse_towed
 from . import gis
-from .moisture import PATH_KEYS as MOISTURE_PATH_KEYS
-from .moisture import MoistureMap, parse_moisture_map
 from .soil_map import PATH_KEYS as SOIL_MAP_PATH_KEYS
 from .soil_map import SoilMap, parse_soil_map
 from .storage import Grid
 from .surface import PATH_KEYS as SURFACE_PATH_KEYS
 from .surface import Surface, parse_surface
-from .towed import Towed, parse_towed
 
 __all__ = ["MAX_CELLS", "PATH_KEYS", "TerrainSettings", "settings_from_dict"]
 

@@ -34,7 +34,8 @@ from ..foundations.errors import ParameterError, ScenarioError
 from ..model.parameters import SOIL_PARAMS, check_set
 from ..presets.catalog import read_preset_file
 from ..presets.soils import soil_preset
-from . import gis, moisture
+from ..soil import moisture
+from . import gis
 
 __all__ = ["MAX_SOILS", "PATH_KEYS", "SoilMap", "parse_soil_map", "soil_index"]
 
@@ -79,7 +80,7 @@ def _soil(entry, i: int) -> tuple[str, dict]:
             values.update({k: v for k, v in entry.items() if k not in ("preset", "moisture")})
             extra = ", ".join(f"{k}={v}" for k, v in entry.items() if k != "preset")
             values = check_set(values, SOIL_PARAMS, where)
-            if "moisture" in entry:  # the day's moisture of this soil (symtrack.terrain.moisture)
+            if "moisture" in entry:  # the day's moisture of this soil (symtrack.soil.moisture)
                 values = check_set(moisture.apply_moisture(values, entry["moisture"], f"{where}.moisture"),
                                    SOIL_PARAMS, where)
             return (f"{preset} ({extra})" if extra else preset), values

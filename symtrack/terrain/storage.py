@@ -11,14 +11,14 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 5), one NumPy array per key:
   every cell's five stored values (phase 0 untouched, 1 loading, 2 unloading/reloading);
 - ``z_off_m`` float64 (nx, ny) and ``load_cycles`` uint16 (nx, ny) (schema 2): the cycle law's
   plastic sinkage of the cell's later load cycles and the number of load cycles it has seen
-  (symtrack/model/cell.py). A schema-1 file loads with z_off = 0 and the count inferred from its
+  (symtrack/soil/cell.py). A schema-1 file loads with z_off = 0 and the count inferred from its
   phase: 1 for a loaded cell (phase 1 or 2), 0 for an untouched one;
 - ``subsoil_depths_m`` float64 (n_depths,) and ``sigma_max_Pa`` float32 (nx, ny, n_depths)
   (schema 2, optional): the largest vertical stress each cell's soil has carried at each depth
-  over all passes (symtrack/terrain/subsoil.py; float32: a stress to 7 digits);
+  over all passes (symtrack/soil/subsoil.py; float32: a stress to 7 digits);
 - ``specific_volume`` float32 (nx, ny, n_depths) (schema 4, with ``subsoil_depths_m``): the soil's
   compression state at each depth, the specific volume v1 of its current recompression line at a
-  mean normal stress of 1 kPa (symtrack/terrain/density.py; the bulk density after the loads so far
+  mean normal stress of 1 kPa (symtrack/soil/density.py; the bulk density after the loads so far
   is rho_s / v1), 0 where the soil is still in its initial state (v1 = rho_s / rho_initial of the
   cell's soil; from schema 5, of the soil's layer at that depth: a soil whose ``subsoil_*`` values
   differ from its topsoil's has its own initial density, lines and strength below ``subsoil_top_m``,
@@ -87,7 +87,7 @@ KIND = "symtrack-terrain"
 # of them) nor heaves the soil higher; 10 m leaves room for every vehicle and keeps out -1e6 m.
 SINKAGE_LIMIT_M = 10.0
 # z_m <= z_max_m + z_off_m: a cell's sinkage never exceeds the deepest point of its loading plus the
-# plastic sinkage of its later cycles (symtrack/model/cell.py); the margin, a micrometre, is far above
+# plastic sinkage of its later cycles (symtrack/soil/cell.py); the margin, a micrometre, is far above
 # the rounding of float64 metres (1e-16 m at 1 m) and far below a rut (millimetres).
 SINKAGE_ORDER_TOLERANCE_M = 1e-6
 # p_max_Pa in [0, 100 MPa]: a pressure the soil carried; 100 MPa is a strong rock's compressive

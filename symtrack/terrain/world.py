@@ -7,7 +7,7 @@ Seven values per cell, as the INFO_IN / INFO_OUT of the Politecnico di Milano th
 the integrator's values are stored to the last bit, which the bit-exact continuation needs), the
 phase flag (int8, see
 :data:`~symtrack.terrain.channels.PHASE_VIRGIN`), and the cycle law's z_off [m] (float64) and
-load-cycle count (uint16) (symtrack/model/cell.py), the soil index (uint8, a soil map) and the
+load-cycle count (uint16) (symtrack/soil/cell.py), the soil index (uint8, a soil map) and the
 subsoil stress record (float32 per depth): 60 bytes per cell with the four default depths, 60 MB
 for the default million-cell field. Cell (i, j) has its centre at world (x0 + (i + 1/2) dx, y0 + (j + 1/2) dx).
 
@@ -74,13 +74,15 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 from ..foundations.memory import require_memory
-from ..model import SystemModel, vehicle_registry
+from ..model import SystemModel
 from ..model.layout import StateLayout
 from ..model.options import ModelOptions
 from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
-from ..model.vehicle3d import make_vehicle
-from . import density, gis, moisture
+from ..soil import density, moisture
+from ..vehicles import registry as vehicle_registry
+from ..vehicles.vehicle3d import make_vehicle
+from . import gis
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import MAX_SOILS, SoilMap, soil_index
@@ -264,11 +266,11 @@ class World:
         self.p_soil = np.zeros(n)
         self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
         # each cell's own day parameters (N, lambda, kappa, sigma_pc; None: its soil's): a moisture raster of
-        # more distinct values than a soil map holds (symtrack.terrain.moisture.cell_day_parameters)
+        # more distinct values than a soil map holds (symtrack.soil.moisture.cell_day_parameters)
         self.cell_day = None
         # the field's soils (a soil map: docs/terrain.md "Soil maps"; index 0 the scenario's [soil]):
         # their parameter sets, cell laws (5 x n_soils) and cycle-law exponents; each channel's soil
-        if settings.moisture is not None:  # each cell's water content (symtrack.terrain.moisture)
+        if settings.moisture is not None:  # each cell's water content (symtrack.soil.moisture)
             if storage is not None:
                 raise ScenarioError("terrain.moisture (a moisture raster) applies to a new field; a terrain file "
                                     "keeps the soils it was made with: leave terrain.moisture out to continue it")
@@ -328,7 +330,7 @@ class World:
 
     def _split_by_moisture(self, settings, params):
         """The field's soils on the day of the moisture raster: each distinct (soil, water content)
-        pair a soil of the map (symtrack.terrain.moisture.split_soils); the settings with that map. More
+        pair a soil of the map (symtrack.soil.moisture.split_soils); the settings with that map. More
         pairs than a map holds: each cell's day parameters in ``cell_day``, the settings unchanged."""
         mm, sm = settings.moisture, settings.soil_map
         water = moisture.read_moisture(self.grid, mm)
@@ -466,7 +468,7 @@ class World:
     def fold_pass(self) -> None:
         """At a pass's end: its largest vertical stress into the terrain's record, and the same stress
         plus the soil's own weight into the soil's compression state (the bulk density,
-        terrain/density.py): the density model and the risk grade one stress against one strength."""
+        soil/density.py): the density model and the risk grade one stress against one strength."""
         st = self.storage
         np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
         cells = np.flatnonzero(self.touched)
@@ -492,7 +494,7 @@ class World:
         return self._geostatic
 
     def bulk_density_max(self) -> list[float]:
-        """The field's largest bulk density [Mg/m^3] at each subsoil depth (terrain/density.py)."""
+        """The field's largest bulk density [Mg/m^3] at each subsoil depth (soil/density.py)."""
         return density.field_max(self.storage.specific_volume, self.storage.soil_index, self.soils,
                                  self.storage.subsoil_depths_m)
 

@@ -13,12 +13,13 @@ import numpy as np
 
 from ...foundations import caches
 from ...foundations.errors import ScenarioError, SimulationError
-from ...model import SystemModel, soil_law
+from ...model import SystemModel
 from ...model.static import static_state
-from ...model.vehicle3d import make_vehicle
 from ...native.grid_engine_model import TRACK_SOIL_PARAMS, build_engine_functions
+from ...soil import law as soil_law
 from ...terrain import query
 from ...terrain.world import LIFT_TIME_S
+from ...vehicles.vehicle3d import make_vehicle
 from ..settings import EngineSettings, window_substeps
 from .kernel import CKernel, library
 from .state import EngineState, engine_error

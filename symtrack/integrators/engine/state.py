@@ -12,7 +12,7 @@ import numpy as np
 from ...foundations import caches
 from ...foundations.errors import SimulationError
 from ...native.grid_engine_model import NGEO, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
-from ...terrain import subsoil
+from ...soil import subsoil
 from ...terrain.settings import MAX_SUBSOIL_DEPTHS
 from ...terrain.world import END_STRIP_CELLS, padding_m
 from ..settings import POWER_MODES, VEHICLE_ATOL, VEHICLE_MAX_HALVINGS, EngineSettings, window_substeps

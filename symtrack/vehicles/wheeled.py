@@ -1,4 +1,4 @@
-"""A wheeled machine's pass over a field: the tyres' footprints (symtrack/terrain/tyre.py) moved along
+"""A wheeled machine's pass over a field: the tyres' footprints (symtrack/vehicles/tyre.py) moved along
 a path, the largest vertical stress each cell's soil carries at the terrain's subsoil depths, folded
 into the terrain's record and, with the soil's own weight, into its compression state as a crawler's
 pass is (docs/subsoil.md, "Wheeled machines" and "One soil"; no rut, so no rut bound). Python/numpy
@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from ..foundations.errors import ParameterError
-from . import density
-from .storage import Terrain
+from ..soil import density
+from ..terrain.storage import Terrain
 from .tyre import Contact, footprint_stress_at_depth
 
 __all__ = ["Wheel", "terrain_soils", "wheeled_pass"]
@@ -51,11 +51,11 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
     loaded. ``soils``: the field's soil parameter sets by soil index (a World's ``soils``: the day's
     moisture applied); default :func:`terrain_soils`. Each wheel at each pose looks only at the cells
     of the index window around it (the same cells within ``reach_m`` as over the whole field).
-    ``tables``: one :class:`~symtrack.terrain.tyre.FootprintTable` per wheel (of its contact, the
+    ``tables``: one :class:`~symtrack.vehicles.tyre.FootprintTable` per wheel (of its contact, the
     terrain's depths and ``xi``): the stress at a cell is then the sum of every wheel's table value
     there (bilinear; 0 beyond a table), tens of microseconds per wheel and pose instead of tens of
     milliseconds for the direct sum over the contact's elements. ``cell_params``: each cell's own
-    compression parameters (:func:`symtrack.terrain.density.pass_update`; a World's ``cell_day``)."""
+    compression parameters (:func:`symtrack.soil.density.pass_update`; a World's ``cell_day``)."""
     depths = terrain.subsoil_depths_m
     if not depths:
         raise ParameterError("the terrain has no subsoil depths (terrain.subsoil_depths_m is empty)")

@@ -127,11 +127,11 @@ class SoilLaw(abc.ABC):
 
 class BekkerWong(SoilLaw):
     """Bekker's virgin loading, Wong's unloading/reloading line and the cycle law of
-    :mod:`symtrack.model.cell` (docs/model.md, "Pressure-sinkage"); the mathematics lives there.
+    :mod:`symtrack.soil.cell` (docs/model.md, "Pressure-sinkage"); the mathematics lives there.
 
     Law vector: k_eq = k_c / b + k_phi [N/m^(n+2)], n, the elastic stiffness K_e [Pa/m], kappa
     (the unloading-stiffness floor) and the regularisation length d [m] of the Bekker term
-    (:func:`~symtrack.model.cell.bekker_regularisation_length`, capped at the model option
+    (:func:`~symtrack.soil.cell.bekker_regularisation_length`, capped at the model option
     ``bekker_regularisation_m``).
     """
 

@@ -10,8 +10,8 @@ A vehicle model is an object with
   ``acc_implied``); ``tracks``: the names of its tracks (the terrain's signals are per track);
 - ``equations(xv, u, acc, P, compaction_N, opts, track_soil=None) -> dict`` with ``xdot`` (as
   many rows as its states), ``acc_implied`` (as many as ``alg_names``), ``dist`` (track ->
-  :class:`~symtrack.model.vehicle.PressureDistribution`: what the terrain's cells carry),
-  ``signals`` (named outputs) and ``yaw_moment_N_m`` (:func:`symtrack.model.vehicle.vehicle_equations`
+  :class:`~symtrack.vehicles.planar.PressureDistribution`: what the terrain's cells carry),
+  ``signals`` (named outputs) and ``yaw_moment_N_m`` (:func:`symtrack.vehicles.planar.vehicle_equations`
   documents the arguments);
 - ``contact_pose(xv) -> ContactPose``: the pose handed to the terrain's geometry.
 
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from ..foundations.errors import ParameterError
 from ..foundations.registry import Registry
-from .vehicle import PlanarLateralVehicle, PlanarVehicle
+from .planar import PlanarLateralVehicle, PlanarVehicle
 
 __all__ = ["DEFAULT_VEHICLE", "REGISTRY", "for_options", "get", "names", "register", "unregister"]
 

@@ -47,7 +47,7 @@ day's gravimetric water content w (``specific_volume_min``, set by [soil.moistur
 porosity, when the day's water content is not known), i.e. rho_b <= rho_s / (1 + w rho_s / rho_w)
 under the load (after it, the recompression line's rebound).
 
-p is the traffic's mean normal stress (symtrack/terrain/subsoil.py: the trace of Soehne's
+p is the traffic's mean normal stress (symtrack/soil/subsoil.py: the trace of Soehne's
 radial stress over 3) plus the soil's own weight above the depth (:func:`geostatic_table`), and the
 rut bounds the column's compression (:func:`cap_to_rut`).
 
@@ -72,8 +72,8 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 from ..model.parameters import SOIL_PARAMS, SPECIFIC_VOLUME_MIN_DEFAULT, YIELD_LINE_OFFSET_DEFAULT
-from ..soil.pedotransfer import K2_POSITION_OSR, geostatic_profile_Pa, is_layered, layer_sets
-from ..soil.pedotransfer import keller_arvidsson_2007 as keller_arvidsson_2007
+from .pedotransfer import K2_POSITION_OSR, geostatic_profile_Pa, is_layered, layer_sets
+from .pedotransfer import keller_arvidsson_2007 as keller_arvidsson_2007
 
 __all__ = ["COMPRESSION_PARAM_NAMES", "bulk_density", "cap_to_rut", "column_compression_m", "field_max",
            "geostatic_table", "initial_specific_volume", "keller_arvidsson_2007", "layered", "load_update",
@@ -189,7 +189,7 @@ def pass_update(specific_volume: np.ndarray, pass_p_Pa: np.ndarray, soil_index: 
     superset; default: every cell with a stress > 0). In place; returns the number of (cell, depth)
     entries that moved down the virgin line. Cells not loaded are not touched. ``cell_params``: each
     cell's own ``virgin_line_N``, ``compression_index_lambda`` and ``recompression_index_kappa``
-    (float64 arrays over all cells: a moisture map of many values, terrain/moisture.py) instead of its
+    (float64 arrays over all cells: a moisture map of many values, soil/moisture.py) instead of its
     soil's; the initial state (rho_s / rho_initial) stays the soil's. ``geostatic_Pa`` (n_soils,
     n_depths): the soil's own weight at each depth, added to the pass's stress where the pass loaded
     (:func:`geostatic_table`). ``depths_m``: the terrain's subsoil depths, needed for a layered soil

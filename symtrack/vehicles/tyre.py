@@ -17,7 +17,7 @@ integral along x is done in closed form (int (1 - (x/l)^alpha) dx over [-l, l] =
 so W = sigma_max alpha/(alpha+1) I, I = int 2 l(y) g(y) dy, and alpha = r / (1 - r), r = W/(sigma_max I).
 A load the model cannot carry (r >= 1) is refused.
 
-Stress at depth: the project's Söhne / Fröhlich point formula (:func:`symtrack.terrain.subsoil.frohlich_point`)
+Stress at depth: the project's Söhne / Fröhlich point formula (:func:`symtrack.soil.subsoil.frohlich_point`)
 summed over the contact cut into square elements; the mean normal stress is
 xi / (3 (xi - 2)) sigma_z(xi - 2) (subsoil.py's identity for the trace of the radial stress).
 
@@ -39,7 +39,7 @@ import numpy as np
 
 from ..foundations import caches
 from ..foundations.errors import ParameterError
-from .subsoil import frohlich_point
+from ..soil.subsoil import frohlich_point
 
 __all__ = ["INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "Tyre", "contact", "footprint_stress_at_depth",
            "footprint_table", "load_capacity_kN", "recommended_inflation_kPa"]
@@ -185,7 +185,7 @@ def contact(tyre: Tyre, wheel_load_kN, inflation_kPa, element_m=0.01) -> Contact
 def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=256):
     """Vertical and mean normal stress [kPa] (two arrays (n_points, n_depths)) at the points (px, py)
     below a set of surface point forces [kN] at (x_m, y_m): Söhne / Fröhlich summed
-    (:func:`~symtrack.terrain.subsoil.frohlich_point`); the mean normal stress by the identity
+    (:func:`~symtrack.soil.subsoil.frohlich_point`); the mean normal stress by the identity
     p(xi) = xi / (3 (xi - 2)) sigma_z(xi - 2) (needs xi >= 3)."""
     xi = float(xi)
     if not 3.0 <= xi <= 10.0:

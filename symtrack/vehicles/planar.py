@@ -18,8 +18,8 @@ import numpy as np
 
 from ..foundations import caches
 from ..foundations.errors import ParameterError
-from .layout import ContactPose, StateLayout, VehicleState
-from .options import SHEAR_LAWS, ModelOptions
+from ..model.layout import ContactPose, StateLayout, VehicleState
+from ..model.options import SHEAR_LAWS, ModelOptions
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
            "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SLIP_SPEED_SCALE_M_S", "SOIL_PARAMS_USED",
@@ -283,7 +283,7 @@ _MAPPED = caches.cache("quadrature_call_nodes", 16)  # symtrack.foundations.cach
 def quadrature_points(opts: ModelOptions) -> int:
     """The points per track of the tracks' quadrature under these options (the shear laws' split
     rule, or the composite rule lateral_segments x gauss_points; 0 for the 3D vehicle's creep law,
-    which sums over its contact segments instead: symtrack.model.vehicle3d)."""
+    which sums over its contact segments instead: symtrack.vehicles.vehicle3d)."""
     if opts.lateral_law in SHEAR_LAWS and opts.lateral_split:
         return 6 * opts.shear_points
     if opts.lateral_law not in SHEAR_LAWS and opts.vehicle == "3d":
@@ -534,7 +534,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
 
 class PlanarVehicle:
     """The planar tracked vehicle of this module as a vehicle model (the registry's ``"planar"``,
-    :mod:`symtrack.model.vehicle_registry`, which says what a vehicle model provides)."""
+    :mod:`symtrack.vehicles.registry`, which says what a vehicle model provides)."""
 
     name = "planar"
     layout = PLANAR_LAYOUT
@@ -556,7 +556,7 @@ class PlanarVehicle:
 class PlanarLateralVehicle(PlanarVehicle):
     """The planar vehicle with two lateral shear states per track (:data:`LATERAL_STATES`, after the
     planar vehicle's 12): the vehicle model of the "shear" lateral law (the registry's
-    ``"planar_lateral"``; :func:`symtrack.model.vehicle_registry.for_options` picks it)."""
+    ``"planar_lateral"``; :func:`symtrack.vehicles.registry.for_options` picks it)."""
 
     name = "planar_lateral"
     lateral_laws = ("shear",)  # the lateral laws whose states it carries (vehicle_registry.for_options)

@@ -17,8 +17,8 @@ The scenario's ``[terrain.towed]`` (every key required but ``element_m``)::
     drawbar_length_m = 4.0           # hitch to the axle's centre
     element_m = 0.025                # the contact's elements (tyre.contact), (0, 0.1]
 
-Each wheel's contact and stress are Keller's (2005) of symtrack/terrain/tyre.py at a wheel load of
-half the axle load; the machine's pass is :func:`symtrack.terrain.wheeled.wheeled_pass`. Refused on
+Each wheel's contact and stress are Keller's (2005) of symtrack/vehicles/tyre.py at a wheel load of
+half the axle load; the machine's pass is :func:`symtrack.vehicles.wheeled.wheeled_pass`. Refused on
 parsing, before anything is built: a key missing or unknown, a value outside its range, a wheel
 load beyond what the tyre carries at the inflation pressure (tyre.load_capacity_kN), a load
 Keller's distribution cannot carry, wheels that overlap (gauge below the tyre's width).
@@ -63,8 +63,8 @@ import numpy as np
 
 from ..foundations.config import check_keys, number
 from ..foundations.errors import ParameterError, ScenarioError
+from ..terrain.storage import Grid, Terrain
 from . import tyre, wheeled
-from .storage import Grid, Terrain
 
 __all__ = ["KEYS", "Towed", "axle_path", "check_inside", "check_scenario", "hitch_path", "parse_towed", "start_pose",
            "towed_pass"]
@@ -104,7 +104,7 @@ def parse_towed(t) -> Towed:
     check_keys("terrain.towed", t, KEYS)
     missing = [k for k in KEYS if k != "element_m" and k not in t]
     if missing:
-        raise ScenarioError(f"[terrain.towed] needs {', '.join(missing)} (module symtrack.terrain.towed)")
+        raise ScenarioError(f"[terrain.towed] needs {', '.join(missing)} (module symtrack.vehicles.towed)")
 
     def num(k, lo, hi, low_open=True):
         return number(f"terrain.towed.{k}", t[k], lo, hi, low_open)
@@ -119,7 +119,7 @@ def parse_towed(t) -> Towed:
         raise ScenarioError(f"terrain.towed.axle_load_kN = {t['axle_load_kN']!r} is outside the allowed range (0, "
                             f"{2 * cap:.4g}]: two tyres (rated {rated_load:g} kN at {rated_p:g} kPa) carry "
                             f"{cap:.4g} kN each at terrain.towed.inflation_kPa = {p:g} (W = W_max (p / p_max)^0.8, "
-                            "symtrack/terrain/tyre.py)")
+                            "symtrack/vehicles/tyre.py)")
     gauge = num("wheel_gauge_m", width, 10.0, low_open=False)
     hitch = num("hitch_behind_track_centre_m", 0.0, 20.0, low_open=False)
     L = num("drawbar_length_m", 0.0, 20.0)
@@ -223,9 +223,9 @@ def towed_pass(terrain: Terrain, towed: Towed, crawler_poses, cg_ahead_of_contac
                xi: float, cell_params=None) -> dict:
     """The towed axle's pass behind the crawler's poses (n, 3) (X, Y, psi of its CG at the run's
     output times): its path (:func:`axle_path`, poses a quarter cell apart), the field coverage
-    checked, then :func:`~symtrack.terrain.wheeled.wheeled_pass` into the terrain's stress record and
+    checked, then :func:`~symtrack.vehicles.wheeled.wheeled_pass` into the terrain's stress record and
     compression state, with the wheel's stress tabulated once per process
-    (:func:`~symtrack.terrain.tyre.footprint_table`). Returns wheeled_pass's figures with the
+    (:func:`~symtrack.vehicles.tyre.footprint_table`). Returns wheeled_pass's figures with the
     prefix ``towed_`` and the axle's largest distance inside the hitch's path
     (``towed_offtracking_max_m``: how far the axle cuts inside on a turn). ``cell_params``: the
     cells' own compression parameters (a World's ``cell_day``; None: their soils')."""

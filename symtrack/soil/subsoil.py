@@ -84,7 +84,7 @@ import math
 import numpy as np
 
 from ..foundations.errors import ParameterError
-from ..soil.pedotransfer import SL2018
+from .pedotransfer import SL2018
 
 __all__ = ["DEFAULT_DEPTHS_M", "DEFAULT_REACH_M", "MEAN_STRESS_XI_MIN", "MEAN_T_STEP_PER_DEPTH",
            "MEAN_X_STEP_PER_DEPTH", "RISK_HIGH_ABOVE", "RISK_LOW_BELOW",

@@ -1,7 +1,7 @@
 """The 3D tracked vehicle (issue 22 item 2): a rigid hull that heaves, pitches and rolls on the
 ground's shape, written once as CasADi SX expressions (``[model] vehicle = "3d"``).
 
-States: the planar vehicle's (:data:`~symtrack.model.vehicle.VEHICLE_STATES`, and the lateral shear
+States: the planar vehicle's (:data:`~symtrack.vehicles.planar.VEHICLE_STATES`, and the lateral shear
 states of the "shear" law), then the hull's :data:`HULL_STATES`: the CG's height ``z_m`` (world
 frame, the same datum as the surface's z0), the pitch (nose up positive) and the roll (left side up
 positive), both Euler angles of the hull against the horizontal, and their rates.
@@ -83,10 +83,10 @@ import math
 import casadi as ca
 
 from ..foundations.errors import ParameterError, SimulationError
-from . import soil_law
-from .layout import ContactPose, StateLayout, VehicleState
-from .options import SHEAR_LAWS, ModelOptions
-from .vehicle import (
+from ..model.layout import ContactPose, StateLayout, VehicleState
+from ..model.options import SHEAR_LAWS, ModelOptions
+from ..soil import law as soil_law
+from .planar import (
     ALGEBRAIC,
     GRAVITY_M_S2,
     INPUTS,
@@ -138,7 +138,7 @@ def _layout(lateral: bool) -> StateLayout:
 class SegmentDistribution:
     """A track's normal pressure from its segments: ``p[i]`` at the segment centres ``s[i]``
     (from the front, s = 0, to the rear, s = l), linear between centres and constant beyond the
-    first and last (the interface of :class:`~symtrack.model.vehicle.PressureDistribution`:
+    first and last (the interface of :class:`~symtrack.vehicles.planar.PressureDistribution`:
     ``N``, ``at(s)``, ``idler``, ``sprocket``)."""
 
     def __init__(self, p, s, ds, N):
@@ -193,7 +193,7 @@ def hull_rotation(yaw, pitch, roll):
 
 
 class Vehicle3D:
-    """The 3D vehicle (module doc) as a vehicle model of :mod:`symtrack.model.vehicle_registry`.
+    """The 3D vehicle (module doc) as a vehicle model of :mod:`symtrack.vehicles.registry`.
 
     Parameters
     ----------
@@ -239,7 +239,7 @@ class Vehicle3D:
         (the contact's own compaction resistance) unless ``contact_history`` is given; ``track_soil``
         as the planar model's. ``contact_history``: the grid under the hull (the terrain engine,
         docs/vehicle3d.md "The grid under the 3D vehicle"): track -> the soil history (the
-        :data:`~symtrack.model.soil_law.HISTORY_NAMES`) of the cells under each segment; each segment's
+        :data:`~symtrack.soil.law.HISTORY_NAMES`) of the cells under each segment; each segment's
         pressure is then the law on that history (not the homogeneous rule of the segments ahead) and
         the compaction resistance is ``compaction_N``, the cells' own work."""
         if (opts.lateral_law == "shear") != self.lateral:
@@ -419,7 +419,7 @@ class Vehicle3D:
 
 class ContactTerrain:
     """The homogeneous terrain of the 3D vehicle: virgin soil following the surface, no travelling
-    cells (the hull's penetration is the sinkage, :mod:`symtrack.model.vehicle3d`); the soil law's
+    cells (the hull's penetration is the sinkage, :mod:`symtrack.vehicles.vehicle3d`); the soil law's
     signals come from the vehicle."""
 
     name = "homogeneous"

@@ -15,7 +15,7 @@ github.com/arsilva87/soilphysics, ``R/PredComp.R``) codes them; the papers thems
       kappa = 0.0058 (both)
 
   They set the bulk-density model's ``virgin_line_N``, ``compression_index_lambda`` and
-  ``recompression_index_kappa`` (symtrack/terrain/density.py). Chosen because it is the one PTF
+  ``recompression_index_kappa`` (symtrack/soil/density.py). Chosen because it is the one PTF
   found whose output is the compression model's own parameters (N, lambda, kappa) as a function of
   water content: the wetter soil has the lower virgin line, so the same stress compacts it more.
   Its classes are the two soils: any other texture is refused, as is w outside 5-30 %.
@@ -62,7 +62,8 @@ import numpy as np
 
 from ..foundations.errors import ParameterError, ScenarioError
 from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_PARAMS
-from ..soil.pedotransfer import (
+from ..terrain import gis
+from .pedotransfer import (
     DESCRIPTION_KEYS,
     SEVERIANO_2013_CLASSES,
     clay_class,
@@ -70,7 +71,6 @@ from ..soil.pedotransfer import (
     precompression_from_virgin_line_kPa,
     virgin_line_N_from_precompression,
 )
-from . import gis
 
 __all__ = ["COMPRESSION_PTFS", "DAY_KEYS", "MOISTURE_KEYS", "SEVERIANO_2013_CLASSES", "MoistureMap", "apply_moisture",
            "cell_day_parameters", "clay_class", "distinct_pairs", "parse_moisture_map", "read_moisture", "split_soils",
@@ -146,7 +146,7 @@ def saturation_water_content_kg_per_kg(bulk_density_Mg_per_m3, particle_density_
 def saturation_specific_volume(water_content_kg_per_kg, particle_density_Mg_per_m3):
     """The specific volume at zero air-filled porosity (saturation) of a gravimetric water content w:
     v_sat = 1 + e_sat = 1 + w rho_s / rho_w (every pore full of the water w). The bound of the
-    compression model under load (terrain/density.py, ``specific_volume_min``): the densest the soil
+    compression model under load (soil/density.py, ``specific_volume_min``): the densest the soil
     can be made by a pass, rho_max = rho_s / (1 + w rho_s / rho_w) (the zero-air-voids line of the
     Proctor test). Works on floats and arrays (the same operations)."""
     return 1.0 + water_content_kg_per_kg * particle_density_Mg_per_m3 / WATER_DENSITY_MG_PER_M3
