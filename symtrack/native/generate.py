@@ -40,8 +40,8 @@ import casadi as ca
 
 from . import rosenbrock
 
-__all__ = ["CHUNK_SIZES", "FIXED_STEP_METHOD", "GROUPS", "GROUP_OF", "Generated", "MANIFEST_SCHEMA_VERSION", "build",
-           "fixed_step_functions", "manifest", "render", "unit_of", "write_sources"]
+__all__ = ["CHUNK_SIZES", "FIXED_STEP_METHOD", "GROUPS", "GROUP_OF", "Generated", "MANIFEST_SCHEMA_VERSION",
+           "UNIT_SUFFIXES", "build", "fixed_step_functions", "manifest", "render", "unit_of", "write_sources"]
 
 MANIFEST_SCHEMA_VERSION = 1
 # Steps per call of the chunk functions: a long chunk for the bulk of a run and a short one
@@ -50,7 +50,7 @@ CHUNK_SIZES = (256, 16)
 FIXED_STEP_METHOD = "rosenbrock"
 
 # Unit of a name from its suffix (longest match first); names without one are dimensionless.
-_UNIT_SUFFIXES = (
+UNIT_SUFFIXES = (
     ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
     ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_per_km_h", "h/km"),
     ("_rad_s", "rad/s"), ("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_N_m", "N m"), ("_rad", "rad"),
@@ -60,7 +60,7 @@ _UNIT_SUFFIXES = (
 
 def unit_of(name: str) -> str:
     """The unit a symtrack name carries in its suffix ("1" when it has none)."""
-    for suffix, unit in _UNIT_SUFFIXES:
+    for suffix, unit in UNIT_SUFFIXES:
         if name.endswith(suffix):
             return unit
     return "1"

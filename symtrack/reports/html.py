@@ -116,9 +116,9 @@ _SUMMARY_UNITS = (("_Mg_per_m3", "Mg/m^3"), ("_kg_per_kg", "kg/kg"), ("_kPa", "k
 
 def _unit(key: str) -> str:
     """The unit a summary key names in its suffix (``_mm`` -> mm, ``_N_m`` -> N m), or ""."""
-    from ..native.generate import _UNIT_SUFFIXES
+    from ..native.generate import UNIT_SUFFIXES
 
-    hits = [(len(sfx), unit) for sfx, unit in (*_SUMMARY_UNITS, *_UNIT_SUFFIXES) if key.endswith(sfx)]
+    hits = [(len(sfx), unit) for sfx, unit in (*_SUMMARY_UNITS, *UNIT_SUFFIXES) if key.endswith(sfx)]
     return max(hits)[1] if hits else ""
 
 
