@@ -468,3 +468,67 @@ def test_the_one_home_check_sees_a_second_copy(tmp_path):
     other = tmp_path / "symtrack" / "native" / "other.c"
     other.write_text("static long long scan(eng_t *E) { return E->n % E->M; }\n")
     assert len(_world_manager_copies(tmp_path)) == 2
+
+
+# A vehicle is chosen by the registry and read through its capabilities (symtrack.vehicles.base): no code
+# outside the vehicles' own modules compares a value with a vehicle model's name or asks for an attribute
+# that stood for one.
+VEHICLE_HOME = "symtrack/vehicles/"
+OLD_VEHICLE_FLAGS = frozenset({"own_contact"})
+
+
+def _vehicle_name_branches(root: Path, names) -> list[str]:
+    found = []
+    for f in sorted((root / "symtrack").rglob("*.py")):
+        rel = f.relative_to(root).as_posix()
+        if rel.startswith(VEHICLE_HOME):
+            continue
+        for node in ast.walk(ast.parse(f.read_text(), str(f))):
+            if isinstance(node, ast.Compare):
+                sides = [node.left, *node.comparators]
+                consts = [c.value for side in sides for c in ast.walk(side)
+                          if isinstance(c, ast.Constant) and isinstance(c.value, str)]
+                hit = [c for c in consts if c in names]
+                if hit:
+                    found.append(f"{rel}:{node.lineno}: a comparison with the vehicle name {hit[0]!r}")
+            elif isinstance(node, ast.Attribute) and node.attr in OLD_VEHICLE_FLAGS:
+                found.append(f"{rel}:{node.lineno}: {node.attr}")
+            elif isinstance(node, ast.Constant) and node.value in OLD_VEHICLE_FLAGS:
+                found.append(f"{rel}:{node.lineno}: {node.value!r}")
+    return found
+
+
+def _vehicle_names():
+    from symtrack.vehicles import registry
+
+    return {n for v in registry.REGISTRY.values() for n in (v.name, v.entry_name,
+                                                             v.for_options(_options("shear")).name)}
+
+
+def _options(lateral_law):
+    from symtrack.model.options import ModelOptions
+
+    return ModelOptions(lateral_law=lateral_law)
+
+
+def test_no_branch_on_a_vehicle_name_outside_the_vehicles():
+    names = _vehicle_names()
+    assert {"planar", "planar_lateral", "3d", "3d_lateral"} <= names  # the reader knows the menu
+    assert _vehicle_name_branches(ROOT, names) == []
+
+
+def test_the_vehicle_name_check_sees_todays_old_forms(tmp_path):
+    """The check above finds the branches the package held before the vehicle plug-in."""
+    pkg = tmp_path / "symtrack" / "simulation"
+    pkg.mkdir(parents=True)
+    (pkg / "a.py").write_text(
+        "def f(opts, model, sc):\n"
+        "    if opts.vehicle == '3d':\n        pass\n"
+        "    if getattr(opts, 'vehicle', 'planar') == '3d':\n        pass\n"
+        "    if sc.model.vehicle != 'planar':\n        pass\n"
+        "    if getattr(model.vehicle, 'own_contact', False):\n        pass\n"
+        "    return model.vehicle.own_contact or opts.vehicle in ('planar_lateral',)\n")
+    (tmp_path / "symtrack" / "vehicles").mkdir()
+    (tmp_path / "symtrack" / "vehicles" / "ok.py").write_text("name = 'x' if 1 == 2 else '3d'\nb = 'planar' == name\n")
+    found = _vehicle_name_branches(tmp_path, {"planar", "planar_lateral", "3d", "3d_lateral"})
+    assert sorted(int(f.split(":")[1]) for f in found) == [2, 4, 6, 8, 10, 10], found

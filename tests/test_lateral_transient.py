@@ -16,6 +16,7 @@ from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.static import static_state
 from symtrack.native.rosenbrock import consistent_z_expressions, step_expressions
 from symtrack.presets import soil_preset, vehicle_preset
+from symtrack.vehicles import registry as vehicle_registry
 from symtrack.vehicles.planar import GRAVITY_M_S2, LATERAL_STATES, VEHICLE_STATES
 
 SHEAR = ModelOptions(lateral_law="shear_quasistatic")
@@ -125,8 +126,10 @@ def test_the_layout_follows_the_law(models):
     assert shear.layout.vehicle_names == VEHICLE_STATES
     assert trans.layout.vehicle_names == VEHICLE_STATES + LATERAL_STATES
     assert trans.layout.block_names_of("lateral_shear") == LATERAL_STATES
+    # the entry "planar" gives the law's variant; its 12-state model itself refuses the law
+    assert SystemModel(TRANSIENT, vehicle="planar").layout.vehicle_names == VEHICLE_STATES + LATERAL_STATES
     with pytest.raises(ParameterError, match="planar_lateral"):
-        SystemModel(TRANSIENT, vehicle="planar")
+        SystemModel(TRANSIENT, vehicle=vehicle_registry.get("planar"))
 
 
 def _validation_at_10_ms(model, t_end_s):

@@ -51,6 +51,7 @@ from ..native.generate import unit_of
 from ..simulation.scenario import Scenario
 from ..terrain import fieldfile
 from ..toolchain import BuildSpec, build, casadi_tag, digest
+from ..vehicles import registry as vehicle_registry
 from ..vehicles.planar import INPUTS
 from .fmu_common import (
     FMI2_HEADERS,
@@ -108,9 +109,11 @@ def check_exportable(sc: Scenario) -> None:
     if t is None:
         raise ScenarioError(f"scenario {sc.name!r} has no [terrain] section: the engine FMU is of the grid terrain "
                             "(the homogeneous vehicle's FMU is symtrack.codegen.fmu)")
-    if sc.model.vehicle != "planar":
-        raise ScenarioError(f"model.vehicle = {sc.model.vehicle!r}: the engine FMU carries the planar vehicle only "
-                            "(allowed: 'planar'; the 3D vehicle on the grid runs in the package: symtrack simulate)")
+    if not vehicle_registry.get(sc.model.vehicle).standalone_engine:
+        carried = [n for n, v in vehicle_registry.REGISTRY.items() if v.standalone_engine]
+        raise ScenarioError(f"model.vehicle = {sc.model.vehicle!r}: the engine FMU carries "
+                            f"{' or '.join(repr(n) for n in carried)} only (allowed: {', '.join(carried)}; the "
+                            "others on the grid run in the package: symtrack simulate)")
     if sc.run.integrator != ENGINE_INTEGRATOR:
         raise ScenarioError(f"run.integrator = {sc.run.integrator!r}: the FMU of a grid scenario runs the terrain "
                             f"engine ({ENGINE_INTEGRATOR!r}; its results are `symtrack simulate` with it); export "

@@ -58,10 +58,13 @@ def engine_parts(sc, scratch: Path) -> dict:
     from symtrack.integrators.engine import EngineSettings, EngineState, engine_functions
     from symtrack.native.grid_engine_model import soil_dispatch_c
     from symtrack.terrain.world import open_world
+    from symtrack.vehicles import registry as vehicle_registry
 
-    if sc.model.vehicle != "planar":  # (the 3D hull's engine variant runs in the package only)
+    if not vehicle_registry.get(sc.model.vehicle).standalone_engine:  # (the 3D hull's runs in the package only)
+        carried = [n for n, v in vehicle_registry.REGISTRY.items() if v.standalone_engine]
         raise ScenarioError(f"model.vehicle = {sc.model.vehicle!r}: the standalone engine (its program and the "
-                            "engine FMU) carries the planar vehicle only; allowed: model.vehicle = 'planar'")
+                            f"engine FMU) carries {', '.join(carried)} only; allowed: model.vehicle = "
+                            f"{' or '.join(repr(n) for n in carried)}")
     settings = sc.engine or EngineSettings()
     st = sc.start
     world = open_world(sc.terrain, sc.params, sc.model, sc.run.macro_step_s, start_xy=(st.x_m, st.y_m))

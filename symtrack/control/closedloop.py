@@ -55,6 +55,7 @@ from ..simulation.plants import StepPlant
 from ..simulation.plants import make_grid_plant as plant_for_world
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import open_world
+from ..vehicles.base import CONTACT_HULL
 from .mpc import PathTrackingMPC, realtime_figures
 from .scenario import MPCScenario
 from .trim import trim
@@ -116,7 +117,7 @@ class ClosedLoopResult:
 def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
     """Steady straight running at the start speed (trim), placed at the start pose. The 3D
     vehicle's trim is taken at the start pose (its hull settled on the ground there)."""
-    if getattr(model.vehicle, "own_contact", False):
+    if model.vehicle.contact == CONTACT_HULL:  # a hull settles on the ground at the start pose
         tp = trim(model, sc.params, sc.start.speed_m_s,
                   pose=(sc.start.x_m, sc.start.y_m, math.radians(sc.start.yaw_deg)))
     else:

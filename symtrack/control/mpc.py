@@ -76,7 +76,8 @@ from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
 from ..model.homogeneous import HomogeneousTerrain
 from ..model.options import SLIDING_SIGNS
-from ..vehicles.vehicle3d import HULL_STATES, PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW, ContactTerrain, make_vehicle
+from ..vehicles.base import CONTACT_HULL
+from ..vehicles.vehicle3d import PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
@@ -102,7 +103,7 @@ QS_HULL_SCALE = 1e-3
 _SCALES = (
     ("x_m", 1.0), ("y_m", 1.0), ("yaw_rad", 0.1), ("u_m_s", 1.0), ("v_m_s", 0.05), ("yaw_rate_rad_s", 0.1),
     ("omega_", 5.0), ("shear_", 0.02), ("torque_", 1000.0), ("sinkage_rate_", 0.01), ("sinkage_", 0.002),
-    # The 3D vehicle's hull states (symtrack.vehicles.vehicle3d.HULL_STATES) keep the scale 1: z_m is a
+    # The 3D vehicle's hull states (its hull_states, symtrack.vehicles.vehicle3d.HULL_STATES) keep the scale 1: z_m is a
     # position (0.6 m on flat ground, metres on a slope) and the angles and rates are small, but scaling
     # the rates to 0.01 makes their collocation rows 100 x larger, and the hull's bounce in the plant
     # (heave, pitch, roll near 7 Hz, lightly damped) then puts the measurement itself far outside the
@@ -305,9 +306,9 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
     if all(getattr(o, k) == v for k, v in changes.items()):
         return model
     opts = dataclasses.replace(o, **changes)
-    if isinstance(model.terrain, ContactTerrain):
-        # the 3D vehicle: the same ground under the prediction (its surface kept)
-        return SystemModel(opts, vehicle=make_vehicle(opts, model.vehicle.surface))
+    if model.vehicle.contact == CONTACT_HULL:
+        # a hull of its own (the 3D vehicle): the same ground under the prediction (its surface kept)
+        return SystemModel(opts, vehicle=model.vehicle.for_options(opts, model.vehicle.surface))
     if not isinstance(model.terrain, HomogeneousTerrain):
         raise ParameterError("mpc.prediction_sliding_*: the prediction's regularisation needs the homogeneous "
                              "terrain's model (set prediction_sliding_smoothing = None and "
@@ -318,7 +319,7 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
 def _hull_quasi_static(model: SystemModel, settings: MPCSettings) -> bool:
     """Whether the prediction takes the 3D hull as quasi-static (``prediction_hull``); a
     :class:`ParameterError` for a choice the model cannot take (the planar vehicle has no hull)."""
-    has_hull = all(n in model.state_names for n in HULL_STATES)
+    has_hull = bool(model.vehicle.hull_states)
     choice = settings.prediction_hull
     if not has_hull:
         if choice != "auto":
@@ -370,7 +371,7 @@ class PathTrackingMPC:
         self.hull_quasi_static = _hull_quasi_static(model, s)
         pred = lay.vehicle_names if s.prediction == "vehicle" else tuple(names)
         if self.hull_quasi_static:  # the hull's states are not states of the prediction
-            pred = tuple(n for n in pred if n not in HULL_STATES)
+            pred = tuple(n for n in pred if n not in model.vehicle.hull_states)
         self.pred_names = pred
         self.cell_names = lay.cell_names if s.prediction == "vehicle" else ()
         self.nxp = len(self.pred_names)

@@ -8,16 +8,15 @@ from dataclasses import dataclass
 from ..foundations.errors import ParameterError
 from ..soil.law import DEFAULT as DEFAULT_SOIL_LAW
 from ..soil.law import REGISTRY as SOIL_LAWS
+from ..vehicles import registry as vehicle_registry
 
 TRACTION_SIGN_MODES = ("smooth", "tanh", "sign")
 LATERAL_LAWS = ("shear", "creep", "shear_quasistatic")
-SHEAR_LAWS = ("shear", "shear_quasistatic")  # the laws that take the tracks' forces from the soil's shear law
 # names a scenario may still use, read as the law they now name ("shear_transient" was the lagged shear
 # law's name until it became "shear"; the quasi-static law that was "shear" is "shear_quasistatic")
 LATERAL_LAW_ALIASES = {"shear_transient": "shear"}
 SHEAR_STRENGTH_PRESSURES = ("mean", "local")
 SLIDING_SIGNS = ("displacement", "velocity")
-VEHICLES = ("planar", "3d")  # ModelOptions.vehicle
 # the ModelOptions fields that the builders set on their own copy of a model, not scenario keys
 BUILD_FLAGS = ("quadrature_call",)
 
@@ -155,8 +154,7 @@ class ModelOptions:
             v = getattr(self, name)
             if v not in allowed:
                 raise ParameterError(f"model.{name} = {v!r} is not one of {', '.join(allowed)}")
-        if self.vehicle not in VEHICLES:
-            raise ParameterError(f"model.vehicle = {self.vehicle!r} is not one of {', '.join(VEHICLES)}")
+        vehicle_registry.get(self.vehicle)  # an unknown name: the error names the value and the menu
         if self.soil_law not in SOIL_LAWS:
             raise ParameterError(f"model.soil_law = {self.soil_law!r} is not one of {', '.join(SOIL_LAWS)}")
         for name in ("tanh_steepness_per_m", "shear_smoothing_m", "omega_smoothing_rad_s",

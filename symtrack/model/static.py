@@ -7,8 +7,8 @@ import numpy as np
 
 from ..foundations.errors import SimulationError
 from ..soil.law import make as make_soil_law
+from ..vehicles.base import CONTACT_HULL
 from ..vehicles.planar import GRAVITY_M_S2
-from ..vehicles.vehicle3d import check_contact
 from .system import SystemModel
 
 __all__ = ["static_state"]
@@ -28,9 +28,9 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     law = make_soil_law(model.opts)
     p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
     z_guess = float(law.static_sinkage(p_mean, law.values(params)))
-    hull = getattr(model.vehicle, "own_contact", False)
+    hull = model.vehicle.contact == CONTACT_HULL
     if hull:
-        check_contact(model.opts, model.vehicle.surface, params)
+        model.vehicle.check_ground(model.opts, model.vehicle.surface, params)
         # the 3D vehicle: its hull settled on the ground (heave, pitch and roll at rest), from the
         # ground's plane at the CG sunk by the static sinkage of the mean pressure
         cell_idx = lay.indices(("z_m", "pitch_rad", "roll_rad"))

@@ -37,8 +37,9 @@ import casadi as ca
 
 from ..foundations.errors import ParameterError
 from ..vehicles import registry as vehicle_registry
+from ..vehicles.base import CONTACT_HULL
 from ..vehicles.planar import codegen_options
-from ..vehicles.vehicle3d import ContactTerrain, make_vehicle
+from ..vehicles.vehicle3d import ContactTerrain
 from .homogeneous import HomogeneousTerrain
 from .layout import VehicleState
 from .options import ModelOptions
@@ -61,17 +62,21 @@ class SystemModel:
 
     def __init__(self, opts: ModelOptions | None = None, terrain=None, vehicle=None):
         self.opts = opts or ModelOptions()
-        if vehicle is None and self.opts.vehicle == "3d":
-            vehicle = make_vehicle(self.opts)
         self.vehicle = vehicle_registry.for_options(self.opts, vehicle)
         vm = self.vehicle
-        if getattr(vm, "own_contact", False):
-            # the 3D vehicle: its hull's penetration is the sinkage; no travelling cells
+        unknown = [n for n in vm.param_names if n not in PARAM_NAMES]
+        if unknown:
+            raise ParameterError(f"vehicle model {vm.name!r} reads parameters the parameter set lacks: "
+                                 f"{', '.join(unknown)}")
+        if vm.contact == CONTACT_HULL:
+            # a hull's own contact (the 3D vehicle): its penetration is the sinkage; no travelling cells
             if terrain is not None and not isinstance(terrain, ContactTerrain) and \
                     not hasattr(terrain, "contact_history"):
-                raise ParameterError(f"model.vehicle = '3d' takes the homogeneous terrain or the terrain engine's "
-                                     f"segment sums only, not the {getattr(terrain, 'name', terrain)!r} terrain (use "
-                                     "model.vehicle = 'planar')")
+                cells = [n for n, v in vehicle_registry.REGISTRY.items() if v.contact != CONTACT_HULL]
+                raise ParameterError(f"the vehicle model {vm.name!r} (its own contact) takes the homogeneous terrain "
+                                     f"or the terrain engine's segment sums only, not the "
+                                     f"{getattr(terrain, 'name', terrain)!r} terrain (use model.vehicle = one of "
+                                     f"{', '.join(cells)})")
             self.terrain = terrain or ContactTerrain(self.opts)
         else:
             self.terrain = terrain or HomogeneousTerrain(self.opts)

@@ -58,8 +58,10 @@ from ..terrain.channels import (
     NH,
     build_cell_functions,
 )
+from ..vehicles import registry as vehicle_registry
+from ..vehicles.base import CONTACT_HULL
 from ..vehicles.planar import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
-from ..vehicles.vehicle3d import hull_rotation, make_vehicle
+from ..vehicles.vehicle3d import hull_rotation
 from .rosenbrock import GAMMA as RB_GAMMA
 from .rosenbrock import N_STAGES as RB_STAGES
 from .rosenbrock import A as RB_A
@@ -306,22 +308,24 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     """The Functions of the module doc for model options ``opts`` and the soil in ``params``;
     ``soils``: with a soil map, the parameter dicts (vehicle and soil) of every soil of the field,
     index 0 the scenario's: a cell law per soil, and the sums carry the soil under each track.
-    With ``opts.vehicle = "3d"`` the vehicle is the 3D hull on the ground ``surface`` (None: flat)
-    over :class:`SegmentSumsTerrain`; its ``a`` is the pose, the least-squares line of each track
+    The vehicle is the one ``opts.vehicle`` names (:func:`symtrack.vehicles.registry.for_options`); with
+    a hull of its own (the 3D vehicle, ``opts.vehicle = "3d"``) it is the hull on the ground ``surface``
+    (None: flat) over :class:`SegmentSumsTerrain`; its ``a`` is the pose, the least-squares line of each track
     (the subsoil's) and then the segment pressures (n per track, left then right), and
     ``eng_cell_geo`` loads a cell with the piecewise-linear pressure between segment centres."""
     soils = tuple(soils) or (params,)
     n_seg = 0
-    if getattr(opts, "vehicle", "planar") == "3d":
+    vehicle = vehicle_registry.for_options(opts, surface=surface)
+    vehicle_registry.check_plant(vehicle, "engine")
+    if vehicle.contact == CONTACT_HULL:
         if len(soils) > 1:
-            raise ParameterError("model.vehicle = '3d' on the grid takes one soil: a soil map (terrain.soil_map, "
-                                 "terrain.moisture) is not coupled to the 3D vehicle's segments")
+            raise ParameterError(f"model.vehicle = {vehicle.entry_name!r} on the grid takes one soil: a soil map "
+                                 "(terrain.soil_map, terrain.moisture) is not coupled to its hull's segments")
         n_seg = opts.contact_segments
         terr = SegmentSumsTerrain(n_seg)
-        veh = SystemModel(opts, terr, vehicle=make_vehicle(opts, surface))
     else:
         terr = SumsTerrain(soil_sums=len(soils) > 1)
-        veh = SystemModel(opts, terr)
+    veh = SystemModel(opts, terr, vehicle=vehicle)
     x, zacc, u, pv = veh.x, veh.z, veh.u, veh.p
     dist = terr.dist_dae
     D, Dseg = [], []

@@ -29,6 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..vehicles import registry as vehicle_registry
 from . import control_plots, plots, terrain_plots, vehicle3d_plots
 
 __all__ = ["KINDS", "Figure", "TerrainRun", "extras", "figures", "names", "register", "unregister"]
@@ -132,16 +133,21 @@ register("torques", "trajectory", _time_series(
     "torque [N m]", "sprocket torques"))
 
 
-# the 3D vehicle's (model.vehicle = "3d"; none for a planar run: symtrack.reports.vehicle3d_plots)
+# the figures a vehicle declares its own (its ``figures``: symtrack.vehicles.base; the 3D vehicle's,
+# model.vehicle = "3d", symtrack.reports.vehicle3d_plots; none for a planar run)
+def _declared(res, name: str) -> bool:
+    return name in vehicle_registry.get(res.scenario.model.vehicle).figures
+
+
 def _path_elevation(res) -> dict[str, bytes]:
-    surface = vehicle3d_plots.run_surface(res) if vehicle3d_plots.is_3d(res) else None
+    surface = vehicle3d_plots.run_surface(res) if _declared(res, "path_elevation") else None
     return {} if surface is None else {"path_elevation.png": vehicle3d_plots.path_elevation_png(res, surface)}
 
 
 register("attitude", "trajectory",
-         lambda res: {"attitude.png": vehicle3d_plots.attitude_png(res)} if vehicle3d_plots.is_3d(res) else {})
+         lambda res: {"attitude.png": vehicle3d_plots.attitude_png(res)} if _declared(res, "attitude") else {})
 register("load_split", "trajectory",
-         lambda res: {"load_split.png": vehicle3d_plots.load_split_png(res)} if vehicle3d_plots.is_3d(res) else {})
+         lambda res: {"load_split.png": vehicle3d_plots.load_split_png(res)} if _declared(res, "load_split") else {})
 register("path_elevation", "trajectory", _path_elevation)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from .plots import fixed_layout, plt, png_bytes
 
-__all__ = ["ATTITUDE_COLUMNS", "LOAD_COLUMNS", "STANDSTILL_DISTANCE_M", "abscissa", "attitude_png", "is_3d",
+__all__ = ["ATTITUDE_COLUMNS", "LOAD_COLUMNS", "STANDSTILL_DISTANCE_M", "abscissa", "attitude_png",
            "load_split_data", "load_split_png", "path_elevation_png", "run_surface"]
 
 # the outputs of a 3D run these figures draw (symtrack.vehicles.vehicle3d)
@@ -28,12 +28,6 @@ ATTITUDE_COLUMNS = ("z_m", "ground_z_m", "roll_rad", "pitch_rad")
 LOAD_COLUMNS = ("normal_load_left_N", "normal_load_right_N")
 # a run whose CG travels less than this [m] is drawn against time (a vehicle standing still)
 STANDSTILL_DISTANCE_M = 0.05
-
-
-def is_3d(res) -> bool:
-    """True for a run of the 3D vehicle (its outputs hold the hull's attitude)."""
-    names = set(res.output_names) | set(res.state_names)
-    return all(n in names for n in (*ATTITUDE_COLUMNS, *LOAD_COLUMNS))
 
 
 def abscissa(res) -> tuple[np.ndarray, str]:

@@ -37,7 +37,7 @@ from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..model.options import ModelOptions
 from ..terrain.storage import Terrain
-from ..vehicles.vehicle3d import check_contact, check_terrain, make_vehicle
+from ..vehicles import registry as vehicle_registry
 from . import loop
 from .passes import PassStudy, run_passes, study_summary
 from .plants import make_plant
@@ -66,12 +66,12 @@ def system_model(opts: ModelOptions | None = None, surface=None) -> SystemModel:
     """The homogeneous terrain's model of ``opts`` (default options when None), built on the
     first call for these options and then shared (a SystemModel is not changed after its
     construction; its generated library is cached per model object). The :data:`MAX_MODELS` most
-    recently used are kept. ``surface``: the ground's shape under the 3D vehicle
-    (``opts.vehicle = "3d"``; keyed by its table)."""
+    recently used are kept. ``surface``: the ground's shape under a vehicle with a hull of its own
+    (the 3D vehicle; keyed by its table)."""
     opts = ModelOptions() if opts is None else opts
     key = opts if surface is None else (opts, json.dumps(surface.to_dict(), sort_keys=True), _raster_key(surface))
-    return MODELS.get_or_build(key, lambda: SystemModel(opts) if surface is None else
-                               SystemModel(opts, vehicle=make_vehicle(opts, surface)))
+    return MODELS.get_or_build(key, lambda: SystemModel(opts,
+                                                        vehicle=vehicle_registry.for_options(opts, surface=surface)))
 
 
 def clear_build_cache() -> None:
@@ -184,12 +184,14 @@ def build(scenario, terrain=None) -> Built:
     the grid's)."""
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = registry.get(settings.method, "integrator")
-    if scenario.terrain is not None or terrain is not None:
-        check_terrain(scenario.model, "engine" if spec.grid_engine is not None else "grid")
-        return Built(scenario, "grid", settings, spec, None)
     surface = getattr(scenario, "surface", None)
+    vehicle = vehicle_registry.for_options(scenario.model, surface=surface)
+    if scenario.terrain is not None or terrain is not None:
+        vehicle_registry.check_plant(vehicle, "engine" if spec.grid_engine is not None else "grid", settings.method)
+        return Built(scenario, "grid", settings, spec, None)
     try:
-        check_contact(scenario.model, surface, scenario.params)
+        vehicle_registry.check_plant(vehicle, "homogeneous", settings.method)
+        vehicle.check_ground(scenario.model, surface, scenario.params)
     except ParameterError as err:
         raise ScenarioError(str(err)) from err
     model = system_model(scenario.model, surface)

@@ -47,7 +47,8 @@ from ..model import SystemModel
 from ..model.static import static_state
 from ..terrain.settings import TerrainSettings
 from ..terrain.world import World, open_world
-from ..vehicles.vehicle3d import RasterGuard, check_terrain, make_vehicle
+from ..vehicles import registry as vehicle_registry
+from ..vehicles.vehicle3d import RasterGuard
 
 __all__ = ["BatchPlant", "EnginePlant", "GridPlant", "Plant", "StepPlant", "advance_plant", "make_grid_plant",
            "make_plant"]
@@ -517,8 +518,10 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
     its registry entry, as :class:`~symtrack.simulation.builder.Built` holds it; looked up when None)."""
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = spec or registry.get(settings.method)
+    surface = getattr(scenario, "surface", None)
+    vehicle = model.vehicle if model is not None else vehicle_registry.for_options(scenario.model, surface=surface)
     if world is not None or scenario.terrain is not None or terrain is not None:
-        check_terrain(scenario.model, "engine" if spec.grid_engine is not None else "grid")
+        vehicle_registry.check_plant(vehicle, "engine" if spec.grid_engine is not None else "grid", settings.method)
         with timed_step("building the grid terrain's model and its integrator", log):
             if world is None:
                 spec.check("grid", settings)
@@ -526,10 +529,9 @@ def make_plant(scenario, *, terrain=None, world: World | None = None, model: Sys
                 world = open_world(scenario.terrain or TerrainSettings(), scenario.params, scenario.model,
                                    scenario.run.macro_step_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
             return make_grid_plant(world, settings, spec)
+    vehicle_registry.check_plant(vehicle, "homogeneous", settings.method)
     with timed_step("building the model and its integrator", log):
-        surface = getattr(scenario, "surface", None)
-        model = model or (SystemModel(scenario.model) if surface is None else
-                          SystemModel(scenario.model, vehicle=make_vehicle(scenario.model, surface)))
+        model = model or SystemModel(scenario.model, vehicle=vehicle)
         stepper = spec.stepper("homogeneous", model, settings)
     if "homogeneous" in spec.batch:
         return BatchPlant(model, scenario.params, stepper, scenario.run.output_dt_s)

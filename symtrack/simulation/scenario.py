@@ -70,8 +70,9 @@ from ..soil import moisture
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings, settings_from_dict
 from ..terrain.surface import Surface, parse_surface
+from ..vehicles import registry as vehicle_registry
 from ..vehicles import towed
-from ..vehicles.vehicle3d import check_contact, check_grid, check_raster, check_terrain
+from ..vehicles.base import CONTACT_HULL
 
 __all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
            "parse_ground", "parse_run", "parse_terrain", "scenario_from_dict"]
@@ -275,52 +276,53 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
 
 def parse_ground(t_doc, model, vehicle: dict, plant: str = "", engine: bool = False, start=None) -> tuple:
     """``(terrain, surface)`` of a scenario's ``[terrain]`` table (the simulation's and the MPC's
-    loaders): with ``model.vehicle = "3d"`` a table holding only ``[terrain.surface]`` is homogeneous
-    soil following that ground (docs/vehicle3d.md: ``(None, Surface)``, its contact checked against
-    the vehicle); anything else is the grid terrain (``(TerrainSettings or None, None)``), refused for a
-    vehicle model that cannot take it (``plant``: what in the message asked for the grid; ``engine``:
-    the run's integrator is the terrain engine, which takes the 3D vehicle: then what its grid path
-    cannot take is refused, :func:`~symtrack.vehicles.vehicle3d.check_grid`; ``start``: the start's (x, y),
-    where an elevation raster under the 3D vehicle on homogeneous soil must hold its footprint,
-    :func:`~symtrack.vehicles.vehicle3d.check_raster`)."""
-    if model.vehicle == "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
+    loaders): under a vehicle with a hull of its own (the 3D vehicle, ``model.vehicle = "3d"``) a table
+    holding only ``[terrain.surface]`` is homogeneous soil following that ground (docs/vehicle3d.md:
+    ``(None, Surface)``, its contact checked against the vehicle); anything else is the grid terrain
+    (``(TerrainSettings or None, None)``), refused for a vehicle model that cannot take it (``plant``:
+    what in the message asked for the grid; ``engine``: the run's integrator is the terrain engine: then
+    what the vehicle's grid path cannot take is refused, its ``check_grid``; ``start``: the start's
+    (x, y), where an elevation raster under a hull on homogeneous soil must hold its footprint, its
+    ``check_start``: :mod:`symtrack.vehicles.base`)."""
+    vm = vehicle_registry.for_options(model)
+    hull = vm.contact == CONTACT_HULL  # a hull of its own drives on the ground's shape
+    hulls = [n for n, v in vehicle_registry.REGISTRY.items() if v.contact == CONTACT_HULL]
+    if hull and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
         surface = parse_surface(t_doc["surface"])
         if surface.raster is not None and plant:
             raise ScenarioError("terrain.surface.elevation_file: an elevation raster under the 3D vehicle is "
                                 "symtrack simulate's (homogeneous soil), not the MPC's yet; give slopes and furrows")
         try:
-            check_contact(model, surface, vehicle)
+            vm.check_ground(model, surface, vehicle)
             if start is not None:
-                check_raster(surface, vehicle, *start)
+                vm.check_start(surface, vehicle, *start)
         except ParameterError as err:
             raise ScenarioError(str(err)) from err
         return None, surface
-    if model.vehicle != "3d" and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
-        # the ground's shape alone: what the 3D vehicle drives on (homogeneous soil following it); the
-        # planar vehicle feels no slope, and on its own the table would ask for a grid of default size
+    if not hull and isinstance(t_doc, dict) and set(t_doc) == {"surface"}:
+        # the ground's shape alone: what a hull drives on (homogeneous soil following it); a vehicle moving
+        # in the plane feels no slope, and on its own the table would ask for a grid of default size
         raise ScenarioError(f"terrain.surface: the ground's shape (a slope, furrows, an elevation raster) under "
-                            f"homogeneous soil needs model.vehicle = '3d' (this run has model.vehicle = "
-                            f"{model.vehicle!r}, which moves in the plane and feels no slope): add --set "
-                            "model.vehicle=3d (docs/vehicle3d.md), or give the grid terrain its keys "
-                            "(terrain.size_m, terrain.cell_m) to carry the surface's elevation under the planar "
-                            "vehicle")
+                            f"homogeneous soil needs model.vehicle = {' or '.join(repr(n) for n in hulls)} (this "
+                            f"run has model.vehicle = {model.vehicle!r}, which moves in the plane and feels no "
+                            f"slope): add --set model.vehicle={hulls[0]} (docs/vehicle3d.md), or give the grid "
+                            "terrain its keys (terrain.size_m, terrain.cell_m) to carry the surface's elevation under "
+                            "the planar vehicle")
     terrain = parse_terrain(t_doc)
     if terrain is not None:
         try:
-            check_terrain(model, "engine" if engine else "grid")
+            vehicle_registry.check_plant(vm, "engine" if engine else "grid")
         except ParameterError as err:
-            if plant:  # the MPC: its grid plant is the planar vehicle's
-                raise ScenarioError(f"model.vehicle = '3d' runs on the homogeneous terrain only in the MPC ({plant} "
-                                    "asks for the grid, whose MPC plant carries the planar vehicle; the 3D vehicle on "
-                                    "the grid is symtrack simulate's, run.integrator = 'grid_fast'); a [terrain] "
-                                    "section holding only [terrain.surface] gives it its ground on homogeneous soil, "
-                                    "or use model.vehicle = 'planar'") from err
-            raise ScenarioError(f"{err} (a [terrain] section holding only [terrain.surface] gives the 3D vehicle "
-                                "its ground on homogeneous soil)") from err
-        try:  # the 3D vehicle on the terrain engine: what its grid path cannot take
-            check_grid(model, terrain)
-            if model.vehicle == "3d":
-                check_contact(model, terrain.surface, vehicle)
+            if plant:  # the MPC: its grid plant is the channel pool's
+                raise ScenarioError(f"model.vehicle = {model.vehicle!r} runs on the homogeneous terrain only in the "
+                                    f"MPC ({plant} asks for the grid, whose MPC plant is the channel pool: {err}); a "
+                                    "[terrain] section holding only [terrain.surface] gives it its ground on "
+                                    "homogeneous soil") from err
+            raise ScenarioError(f"{err}" + (" (a [terrain] section holding only [terrain.surface] gives it its ground "
+                                            "on homogeneous soil)" if hull else "")) from err
+        try:  # what the vehicle's grid path cannot take
+            vm.check_grid(terrain)
+            vm.check_ground(model, terrain.surface, vehicle)
         except ParameterError as err:
             raise ScenarioError(str(err)) from err
     return terrain, None

@@ -81,7 +81,6 @@ from ..model.parameters import SOIL_PARAM_NAMES
 from ..model.system import PARAM_NAMES
 from ..soil import density, moisture
 from ..vehicles import registry as vehicle_registry
-from ..vehicles.vehicle3d import make_vehicle
 from . import gis
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
@@ -288,8 +287,6 @@ class World:
     def layout(self) -> StateLayout:
         """The state layout of :attr:`model` (the options' vehicle's, then this pool's channels),
         without building the model."""
-        if getattr(self.opts, "vehicle", "planar") == "3d":  # the 3D hull (on the terrain engine only)
-            return make_vehicle(self.opts).layout.with_cells(self.terrain.state_names)
         return vehicle_registry.for_options(self.opts).layout.with_cells(self.terrain.state_names)
 
     @functools.cached_property

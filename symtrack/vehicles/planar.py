@@ -19,14 +19,19 @@ import numpy as np
 from ..foundations import caches
 from ..foundations.errors import ParameterError
 from ..model.layout import ContactPose, StateLayout, VehicleState
-from ..model.options import SHEAR_LAWS, ModelOptions
+from ..model.parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
+from .base import VehicleModel
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
-           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SLIP_SPEED_SCALE_M_S", "SOIL_PARAMS_USED",
+           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SHEAR_LAWS", "SLIP_SPEED_SCALE_M_S",
+           "SOIL_PARAMS_USED",
            "TRACKS", "VEHICLE_STATES", "codegen_options", "creep_lateral_force", "direction", "gauss_nodes",
            "graded_nodes", "integrate_track", "internal_resistance_N", "lateral_resistance_max_N",
            "lateral_shear_rates", "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates",
            "sprocket_speed_abs", "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
+
+# the lateral laws that take the tracks' forces from the soil's shear law (ModelOptions.lateral_law)
+SHEAR_LAWS = ("shear", "shear_quasistatic")
 
 # Standard gravity (a true constant: CGPM 1901).
 GRAVITY_M_S2 = 9.80665
@@ -109,7 +114,7 @@ class PressureDistribution:
         return self.at(self.l)
 
 
-def traction_sign(j, opts: ModelOptions):
+def traction_sign(j, opts):
     """sign(j) of Ferretti & Girelli's tractive effort in the chosen form (ModelOptions.traction_sign)."""
     if opts.traction_sign == "smooth":
         return j / ca.sqrt(j**2 + opts.shear_smoothing_m**2)
@@ -118,14 +123,14 @@ def traction_sign(j, opts: ModelOptions):
     return ca.sign(j)
 
 
-def traction_shape(j, K, opts: ModelOptions):
+def traction_shape(j, K, opts):
     """sign(j) [1 + K/(2|j|) (exp(-2|j|/K) - 1)] of Ferretti & Girelli's tractive effort, in the chosen form."""
     a = ca.sqrt(j**2 + opts.shear_smoothing_m**2)
     bracket = 1 + K / (2 * a) * (ca.exp(-2 * a / K) - 1)
     return traction_sign(j, opts) * bracket
 
 
-def direction(x, eps, opts: ModelOptions):
+def direction(x, eps, opts):
     """sign(x) of a resistance's direction: tanh(x/eps), or the exact sign() in "sign" mode."""
     return ca.sign(x) if opts.traction_sign == "sign" else ca.tanh(x / eps)
 
@@ -139,7 +144,7 @@ def graded_nodes(n_points: int, grading: int):
     return [float(ti**grading) for ti in t], weights
 
 
-def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, phi, K, opts: ModelOptions,
+def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, phi, K, opts,
                  lagged=None):
     """Tractive force, lateral force and yaw moment (about the CG) of one track from the soil's
     shear law (reconstruction after Wong & Chiang 2001; docs/turning.md).
@@ -239,7 +244,7 @@ def _distribution_from(q: dict) -> PressureDistribution:
     return dist
 
 
-def _shear_integrand(s, q: dict, opts: ModelOptions):
+def _shear_integrand(s, q: dict, opts):
     """(f_x, f_y) per unit length at s of the shear law (shear_forces' integrand; q: its scalars)."""
     a0, a1, i_x, JF_l, fwd, K, b, l, c, phi = (q[k] for k in ("a0", "a1", "i_x", "JF_l", "fwd", "K", "b", "l", "c",
                                                                "phi"))
@@ -259,7 +264,7 @@ def _shear_integrand(s, q: dict, opts: ModelOptions):
     return b * tau * q["sgn_ax"] / norm, -b * tau * i_y / norm
 
 
-def _creep_integrand(s, q: dict, opts: ModelOptions):
+def _creep_integrand(s, q: dict, opts):
     """(0, f_y) per unit length at s of the creep law (vehicle_equations' lateral integrand)."""
     x_body = q["x_front"] - s
     line = q["b"] * _distribution_from(q).at(s)
@@ -280,7 +285,7 @@ INLINE_QUADRATURE_MAX_POINTS = 48
 _MAPPED = caches.cache("quadrature_call_nodes", 16)  # symtrack.foundations.caches
 
 
-def quadrature_points(opts: ModelOptions) -> int:
+def quadrature_points(opts) -> int:
     """The points per track of the tracks' quadrature under these options (the shear laws' split
     rule, or the composite rule lateral_segments x gauss_points; 0 for the 3D vehicle's creep law,
     which sums over its contact segments instead: symtrack.vehicles.vehicle3d)."""
@@ -291,19 +296,19 @@ def quadrature_points(opts: ModelOptions) -> int:
     return opts.lateral_segments * opts.gauss_points
 
 
-def quadrature_is_mapped(opts: ModelOptions) -> bool:
+def quadrature_is_mapped(opts) -> bool:
     """Whether a model of these options sums its tracks' quadrature by a call node."""
     return opts.quadrature_call and quadrature_points(opts) > INLINE_QUADRATURE_MAX_POINTS
 
 
-def codegen_options(opts: ModelOptions) -> ModelOptions:
+def codegen_options(opts):
     """The options to generate C from: ``opts`` with ``quadrature_call`` set when that makes its
     quadrature a call node (:func:`quadrature_is_mapped`), else ``opts`` itself (the same code)."""
     mapped = dataclasses.replace(opts, quadrature_call=True)
     return mapped if quadrature_is_mapped(mapped) else opts
 
 
-def integrate_track(integrand, nodes, rule, q: dict, opts: ModelOptions):
+def integrate_track(integrand, nodes, rule, q: dict, opts):
     """(sum w f_x, sum w f_y, sum w (x_front - s) f_y) over the nodes (s, w) of integrand(s, q, opts),
     expanded, or (more than INLINE_QUADRATURE_MAX_POINTS nodes and ``opts.quadrature_call``) one
     call of a mapped Function of the points. ``rule``: the same nodes as affine images of fixed
@@ -344,7 +349,7 @@ def integrate_track(integrand, nodes, rule, q: dict, opts: ModelOptions):
     return out[0], out[1], out[2]
 
 
-def sprocket_speed_abs(omega, opts: ModelOptions):
+def sprocket_speed_abs(omega, opts):
     """|omega| as the laws use it: exact in ``traction_sign = "sign"`` mode, else regularised by
     ``omega_smoothing_rad_s``."""
     if opts.traction_sign == "sign":
@@ -352,7 +357,7 @@ def sprocket_speed_abs(omega, opts: ModelOptions):
     return ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
 
 
-def internal_resistance_N(N, omega, abs_om, r, P: dict, opts: ModelOptions):
+def internal_resistance_N(N, omega, abs_om, r, P: dict, opts):
     """Internal running-gear resistance of a track with normal load N (reconstruction; Wong):
     N (0.0222 + 0.0003 V[km/h]) against the sprocket's rotation."""
     V_kmh = 3.6 * r * abs_om
@@ -360,7 +365,7 @@ def internal_resistance_N(N, omega, abs_om, r, P: dict, opts: ModelOptions):
         * direction(omega, opts.omega_smoothing_rad_s, opts)
 
 
-def creep_lateral_force(q, c_line, tan_phi, v_lat, mu, eps_v, opts: ModelOptions):
+def creep_lateral_force(q, c_line, tan_phi, v_lat, mu, eps_v, opts):
     """The creep law's lateral resistance (reconstruction: a velocity creep) of a load q sliding
     sideways at v_lat; with ``lateral_shear_cap`` at most the soil's strength c_line + q tan(phi)."""
     if opts.lateral_shear_cap:
@@ -407,7 +412,7 @@ def lateral_shear_rates(j_y, theta, abs_om, vy, rz, x_centre, l, r):
     return -decay * j_y + vy + rz * x_centre, -decay * theta + rz
 
 
-def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
+def lateral_resistance_max_N(params: dict, opts) -> float:
     """The largest lateral force the two tracks can carry on level ground (for trim's limit
     checks): the soil's shear strength over both contacts, 2 b l c + W tan(phi), for the "shear"
     law (mean pressure or not, the integral of c + p tan(phi) is the same); mu_t W for the "creep"
@@ -421,7 +426,7 @@ def lateral_resistance_max_N(params: dict, opts: ModelOptions) -> float:
     return float(min(friction, strength)) if opts.lateral_shear_cap else float(friction)
 
 
-def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None,
+def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts, track_soil=None,
                       layout: StateLayout = PLANAR_LAYOUT) -> dict:
     """All vehicle expressions.
 
@@ -532,9 +537,17 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts: ModelOptions, tra
     }
 
 
-class PlanarVehicle:
+class PlanarVehicle(VehicleModel):
     """The planar tracked vehicle of this module as a vehicle model (the registry's ``"planar"``,
-    :mod:`symtrack.vehicles.registry`, which says what a vehicle model provides)."""
+    :mod:`symtrack.vehicles.registry`, which says what a vehicle model provides): its tracks load the
+    terrain's cells, on every plant; the standalone engine carries it.
+
+    Parameters
+    ----------
+    lateral : PlanarVehicle or None
+        The variant with the lateral shear states that :meth:`for_options` gives for the lateral laws
+        it carries (its ``lateral_laws``); None: this model for every law.
+    """
 
     name = "planar"
     layout = PLANAR_LAYOUT
@@ -542,8 +555,20 @@ class PlanarVehicle:
     input_names = INPUTS
     alg_names = ALGEBRAIC
     tracks = TRACKS
+    standalone_engine = True
+    param_names = VEHICLE_PARAM_NAMES + SOIL_MODEL_PARAM_NAMES
 
-    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
+    def __init__(self, lateral: PlanarVehicle | None = None):
+        self.lateral = lateral
+
+    def for_options(self, opts, surface=None) -> PlanarVehicle:
+        """The variant with the lateral shear states for the laws it carries, else this model (the
+        planar vehicle feels no ground's shape: ``surface`` is not read)."""
+        if self.lateral is not None and opts.lateral_law in self.lateral.lateral_laws:
+            return self.lateral
+        return self
+
+    def equations(self, xv, u, acc, P: dict, compaction_N, opts, track_soil=None) -> dict:
         """:func:`vehicle_equations`."""
         return vehicle_equations(xv, u, acc, P, compaction_N, opts, track_soil)
 
@@ -559,10 +584,11 @@ class PlanarLateralVehicle(PlanarVehicle):
     ``"planar_lateral"``; :func:`symtrack.vehicles.registry.for_options` picks it)."""
 
     name = "planar_lateral"
-    lateral_laws = ("shear",)  # the lateral laws whose states it carries (vehicle_registry.for_options)
+    menu_name = "planar"
+    lateral_laws = ("shear",)  # the lateral laws whose states it carries (PlanarVehicle.for_options)
     layout = PLANAR_LATERAL_LAYOUT
     state_names = PLANAR_LATERAL_LAYOUT.names
 
-    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None) -> dict:
+    def equations(self, xv, u, acc, P: dict, compaction_N, opts, track_soil=None) -> dict:
         """:func:`vehicle_equations` on :data:`PLANAR_LATERAL_LAYOUT`."""
         return vehicle_equations(xv, u, acc, P, compaction_N, opts, track_soil, PLANAR_LATERAL_LAYOUT)

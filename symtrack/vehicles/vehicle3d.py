@@ -72,8 +72,8 @@ The terrain this vehicle takes is :class:`ContactTerrain` (no travelling cells: 
 penetration is the sinkage), or on the grid the terrain engine's
 :class:`~symtrack.native.grid_engine_model.SegmentSumsTerrain` (``contact_history``: the soil history
 of the cells under each segment; docs/vehicle3d.md "The grid under the 3D vehicle"); the channel pool
-of IDAS and the grid Rosenbrock is refused (:func:`check_terrain`), and what the grid path cannot take
-(:func:`check_grid`).
+of IDAS and the grid Rosenbrock is refused (:func:`symtrack.vehicles.registry.check_plant` on its
+``plants``), and what the grid path cannot take (:func:`check_grid`).
 """
 
 from __future__ import annotations
@@ -84,14 +84,16 @@ import casadi as ca
 
 from ..foundations.errors import ParameterError, SimulationError
 from ..model.layout import ContactPose, StateLayout, VehicleState
-from ..model.options import SHEAR_LAWS, ModelOptions
+from ..model.parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
 from ..soil import law as soil_law
+from .base import CONTACT_HULL, VehicleModel
 from .planar import (
     ALGEBRAIC,
     GRAVITY_M_S2,
     INPUTS,
     LATERAL_STATES,
     PLANAR_LAYOUT,
+    SHEAR_LAWS,
     TRACKS,
     creep_lateral_force,
     direction,
@@ -107,7 +109,7 @@ from .planar import (
 
 __all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
            "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_raster",
-           "check_terrain", "footprint_radius_m", "hull_rotation", "make_vehicle",
+           "footprint_radius_m", "hull_rotation", "make_vehicle",
            "running_gear_momentum_ratio"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
@@ -192,8 +194,11 @@ def hull_rotation(yaw, pitch, roll):
     return Rz, ca.mtimes(Ry, Rx)
 
 
-class Vehicle3D:
-    """The 3D vehicle (module doc) as a vehicle model of :mod:`symtrack.vehicles.registry`.
+class Vehicle3D(VehicleModel):
+    """The 3D vehicle (module doc) as a vehicle model of :mod:`symtrack.vehicles.registry`: its own
+    contact (the hull's penetration is the sinkage), on the homogeneous terrain and the terrain engine;
+    the MPC's prediction may take its hull quasi-static; its figures are the attitude, the load split
+    and the path's elevation.
 
     Parameters
     ----------
@@ -207,7 +212,13 @@ class Vehicle3D:
     input_names = INPUTS
     alg_names = ALGEBRAIC
     tracks = TRACKS
-    own_contact = True  # the hull's penetration is the sinkage: it takes a ContactTerrain
+    contact = CONTACT_HULL  # the hull's penetration is the sinkage: it takes a ContactTerrain
+    # the channel pool of IDAS and the grid Rosenbrock is coupled to the tracks' pressure lines, not to
+    # segments; the standalone engine program and the engine FMU carry the planar vehicle's sums only
+    plants = frozenset({"homogeneous", "engine"})
+    hull_states = HULL_STATES
+    figures = ("attitude", "load_split", "path_elevation")
+    param_names = VEHICLE_PARAM_NAMES + SOIL_MODEL_PARAM_NAMES
 
     def __init__(self, surface=None, lateral: bool = False):
         self.surface = None if surface is None or surface.is_flat else surface
@@ -215,9 +226,26 @@ class Vehicle3D:
         self._ground_f = None if self.surface is None else self.surface.function()
         self.lateral = bool(lateral)
         self.name = "3d_lateral" if lateral else "3d"
-        self.lateral_laws = ()
+        self.menu_name = "3d"
         self.layout = _layout(self.lateral)
         self.state_names = self.layout.names
+
+    # -- the capabilities (symtrack.vehicles.base) ---------------------------------------------------------
+    def for_options(self, opts, surface=None) -> Vehicle3D:
+        """The 3D vehicle for ``opts`` (:func:`make_vehicle`) on the ground ``surface``."""
+        return make_vehicle(opts, surface)
+
+    def check_ground(self, opts, surface, params: dict) -> None:
+        """:func:`check_contact`."""
+        check_contact(opts, surface, params)
+
+    def check_start(self, surface, params: dict, x_m: float, y_m: float) -> None:
+        """:func:`check_raster`."""
+        check_raster(surface, params, x_m, y_m)
+
+    def check_grid(self, terrain) -> None:
+        """:func:`check_grid`."""
+        check_grid(terrain)
 
     # -- the ground ------------------------------------------------------------------------------------
     def ground(self, x, y):
@@ -232,7 +260,7 @@ class Vehicle3D:
         return ContactPose(s["x_m"], s["y_m"], s["yaw_rad"], s["z_m"], s["pitch_rad"], s["roll_rad"])
 
     # -- the equations -----------------------------------------------------------------------------------
-    def equations(self, xv, u, acc, P: dict, compaction_N, opts: ModelOptions, track_soil=None,
+    def equations(self, xv, u, acc, P: dict, compaction_N, opts, track_soil=None,
                   contact_history=None) -> dict:
         """The vehicle's state derivatives and signals (module doc). ``acc`` is not used (no
         load-transfer loop: ``acc_implied`` returns the accelerations); ``compaction_N`` neither
@@ -426,7 +454,7 @@ class ContactTerrain:
     param_names = ()
     state_names = ()
 
-    def __init__(self, opts: ModelOptions):
+    def __init__(self, opts):
         self.opts = opts
 
     def compaction(self, xv, xc, P, Q):
@@ -436,7 +464,7 @@ class ContactTerrain:
         return ca.SX(0, 1), {}
 
 
-def make_vehicle(opts: ModelOptions, surface=None) -> Vehicle3D:
+def make_vehicle(opts, surface=None) -> Vehicle3D:
     """The 3D vehicle for model options ``opts`` (with the lateral shear states for the "shear" law)."""
     return Vehicle3D(surface, lateral=opts.lateral_law == "shear")
 
@@ -445,7 +473,7 @@ def make_vehicle(opts: ModelOptions, surface=None) -> Vehicle3D:
 MIN_SEGMENTS_PER_FURROW = 4
 
 
-def check_contact(opts: ModelOptions, surface, params: dict) -> None:
+def check_contact(opts, surface, params: dict) -> None:
     """A :class:`ParameterError` naming ``model.contact_segments`` when the track's segments cannot
     resolve the furrows of ``surface``: a segment at most a quarter of the furrow spacing (furrows
     running across the track are sampled like the grid's cells, four points a period at least)."""
@@ -536,25 +564,13 @@ class RasterGuard:
                     "a shorter run (run.duration_s, run.stop_after_distance_m)")
 
 
-def check_terrain(opts: ModelOptions, kind: str) -> None:
-    """A :class:`ParameterError` naming ``model.vehicle`` unless the 3D vehicle can run on ``kind``:
-    "homogeneous", "engine" (the grid through the terrain engine, ``run.integrator = "grid_fast"``:
-    its segment sums, docs/vehicle3d.md "The grid under the 3D vehicle") or "grid" (the channel pool
-    of IDAS and the grid Rosenbrock, refused: their channels are coupled to the planar vehicle)."""
-    if getattr(opts, "vehicle", "planar") == "3d" and kind not in ("homogeneous", "engine"):
-        raise ParameterError(f"model.vehicle = '3d' runs on the homogeneous terrain or on the grid through the "
-                             f"terrain engine (run.integrator = 'grid_fast') only; this run asks for the {kind} "
-                             "terrain's channel pool, which is coupled to the planar vehicle: use run.integrator = "
-                             "'grid_fast', or model.vehicle = 'planar'")
-
-
-def check_grid(opts: ModelOptions, terrain) -> None:
+def check_grid(terrain) -> None:
     """A :class:`ParameterError` naming the key for what the 3D vehicle on the grid cannot take (before
     any work): ``terrain`` a :class:`~symtrack.terrain.settings.TerrainSettings`; a soil map or a
     moisture raster (the segments take one soil: the traction's soil means are the planar sums'), a
     towed trailer (its tyres load the cells through the planar vehicle's pass). (An elevation raster is
     taken: the hull's ground is its bilinear surface, the cells' elevations are sampled from the same.)"""
-    if getattr(opts, "vehicle", "planar") != "3d" or terrain is None:
+    if terrain is None:
         return
     refused = (("soil_map", "terrain.soil_map", "a field of several soils"),
                ("moisture", "terrain.moisture", "a moisture raster (a soil per cell)"),

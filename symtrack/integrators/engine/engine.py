@@ -19,7 +19,8 @@ from ...native.grid_engine_model import TRACK_SOIL_PARAMS, build_engine_function
 from ...soil import law as soil_law
 from ...terrain import query
 from ...terrain.world import LIFT_TIME_S
-from ...vehicles.vehicle3d import make_vehicle
+from ...vehicles import registry as vehicle_registry
+from ...vehicles.base import CONTACT_HULL
 from ..settings import EngineSettings, window_substeps
 from .kernel import CKernel, library
 from .state import EngineState, engine_error
@@ -63,7 +64,8 @@ class TerrainEngine:
     def __init__(self, world, settings: EngineSettings | None = None, kernel: Callable | None = None):
         self.world = world
         self.settings = settings or EngineSettings()
-        if getattr(world.opts, "vehicle", "planar") == "3d" and getattr(world, "surface", None) is None and \
+        vehicle = vehicle_registry.for_options(world.opts, surface=getattr(world, "surface", None))
+        if vehicle.contact == CONTACT_HULL and getattr(world, "surface", None) is None and \
                 getattr(world.storage, "elevation", None) is not None:
             raise ScenarioError("the terrain continued has an elevation of its own and the scenario no "
                                 "[terrain.surface]: the 3D vehicle's ground is the surface's (the cells keep only "
@@ -128,7 +130,8 @@ class TerrainEngine:
         (on the ruts of an earlier pass, lower)."""
         w = self.world
         if self._hull_model is None:  # built once per engine (every pass starts from it)
-            self._hull_model = SystemModel(w.opts, vehicle=make_vehicle(w.opts, getattr(w, "surface", None)))
+            self._hull_model = SystemModel(w.opts, vehicle=vehicle_registry.for_options(
+                w.opts, surface=getattr(w, "surface", None)))
         model = self._hull_model
         x = static_state(model, w.params, x_m, y_m, yaw_rad)
         return np.asarray(x, dtype=float)[model.layout.block("vehicle")]
