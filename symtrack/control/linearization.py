@@ -17,14 +17,17 @@ names are not state names (the homogeneous terrain reports its sinkage states as
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import control
 import numpy as np
 
 from ..foundations.errors import ParameterError
 from ..model import SystemModel
 from ..reports.plots import plt, png_bytes
 from .trim import POSITION_STATES, TrimPoint
+
+if TYPE_CHECKING:
+    import control
 
 __all__ = ["INPUT_SCALE_N_M", "Linearization", "MODE_GROUPS", "SCHEMA_VERSION", "TYPICAL_SCALE", "bode_png",
            "controllability", "linearize", "load_npz", "modes", "npz_bytes", "report_markdown", "scale_by_name",
@@ -106,6 +109,7 @@ def linearize(model: SystemModel, tp: TrimPoint, path_frame: bool = False) -> Li
     D = np.vstack([np.zeros((nk, B.shape[1])), Dy[out_extra, :]])
     state_names = tuple(names[i] for i in keep)
     output_names = state_names + tuple(model.output_names[i] for i in out_extra)
+    import control  # python-control, imported on first use: its scipy.signal import takes seconds
     sys = control.ss(A, B, C, D, states=list(state_names), inputs=list(model.input_names),
                      outputs=list(output_names), name="symtrack_linear")
     y0 = np.concatenate([tp.x[keep], y_all[out_extra]])
@@ -210,6 +214,7 @@ def controllability(lin: Linearization, rtol: float = 1e-9) -> dict:
         top = lin.state_names[int(np.argmax(np.abs(V[:, k])))]
         per_mode.append({"eigenvalue": [float(lam.real), float(lam.imag)], "relative_input_gain": rel,
                          "largest_state": top, "controllable": bool(rel > rtol)})
+    import control  # python-control, imported on first use: its scipy.signal import takes seconds
     Wc = control.ctrb(As / max(np.linalg.norm(As, 2), 1e-12), Bs)
     sv = np.linalg.svd(Wc, compute_uv=False)
     rank = int(np.sum(sv > sv[0] * 1e-12))
@@ -246,6 +251,7 @@ def statespace_from_dict(d: dict) -> control.StateSpace:
     if int(d.get("schema_version", -1)) != SCHEMA_VERSION:
         raise ParameterError(f"linearization schema_version = {d.get('schema_version')!r}; "
                              f"this symtrack reads version {SCHEMA_VERSION}")
+    import control  # python-control, imported on first use: its scipy.signal import takes seconds
     return control.ss(np.array(d["A"], float), np.array(d["B"], float), np.array(d["C"], float),
                       np.array(d["D"], float), states=list(d["state_names"]), inputs=list(d["input_names"]),
                       outputs=list(d["output_names"]), name="symtrack_linear")
@@ -273,6 +279,7 @@ def load_npz(path) -> control.StateSpace:
 
 def bode_png(lin: Linearization, omega_rad_s=None) -> bytes:
     """Bode plots of the yaw-rate and speed responses to the two commanded torques."""
+    import control  # python-control, imported on first use: its scipy.signal import takes seconds
     omega = np.logspace(-3, 3, 400) if omega_rad_s is None else omega_rad_s
     outs = ("u_m_s", "yaw_rate_rad_s")
     fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
