@@ -148,8 +148,8 @@ def test_a_reused_out_is_cleared_of_the_previous_run(tmp_path):
 
 def test_a_run_that_leaves_the_field_keeps_what_it_computed(tmp_path, capsys):
     tiny = tmp_path / "tiny.toml"
-    # on the terrain engine (on IDAS the channel pool takes about 30 s to get there; its run that leaves the
-    # field at once: tests/test_sweep.py's grid_fault)
+    # on the terrain engine (on IDAS the channel pool takes about 30 s to get there; the pool's own check of
+    # the field's edge: tests/test_terrain_world.py)
     tiny.write_text(TINY_GRID.replace("duration_s = 0.3", "duration_s = 6.0")
                     .replace('integrator = "idas"', 'integrator = "grid_fast"'))
     out = tmp_path / "o"

@@ -124,9 +124,7 @@ GRID_FAULT = """
 name = "grid_fault"
 [run]
 duration_s = 0.05
-integrator = "idas"
-reltol = 1e-5
-abstol = 1e-8
+integrator = "grid_fast"
 [vehicle]
 preset = "reference_crawler"
 [soil]
