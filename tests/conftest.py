@@ -1,3 +1,12 @@
+import os
+
+# The generated model code compiled at -O0 for the tests (symtrack/toolchain/cache.py, OPT_LEVEL_ENV): the
+# same arithmetic as the tuned flags for a seventh of gcc's time on the large Jacobians; the tuned kernels
+# (the terrain engine, the SIMD check) keep their flags. Set before anything is built; the processes the
+# tests start (the CLI, Dask workers) inherit it. SYMTRACK_OPT_LEVEL= (empty) runs the tests on the tuned
+# flags.
+os.environ.setdefault("SYMTRACK_OPT_LEVEL", "0")
+
 import pytest
 
 from symtrack.model import SystemModel

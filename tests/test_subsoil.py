@@ -122,7 +122,8 @@ def clib():
     so = build.build(build.BuildSpec(kind="subsoil_check",
                                      key=build.digest(*(sources[n] for n in sorted(sources)), target),
                                      output="libsubsoil_check.so", sources=lambda: sources, cflags=flags,
-                                     what="the subsoil check library", suffix=f"-b{cache.BUILD_VERSION}"))
+                                     what="the subsoil check library", suffix=f"-b{cache.BUILD_VERSION}",
+                                     tuned=True))  # its SIMD code is what is checked: never $SYMTRACK_OPT_LEVEL's
     lib = ctypes.CDLL(str(so))
     lib.subsoil_stress_bench.restype = ctypes.c_longlong
     return lib

@@ -57,6 +57,7 @@ from ..foundations import caches
 from ..foundations.errors import SimulationError
 
 __all__ = ["BIG_FILE_BYTES", "CFLAGS_BIG", "CFLAGS_NATIVE", "CFLAGS_SHARED", "CFLAGS_SMALL", "NO_COMPILER",
+           "OPT_LEVEL_ENV", "opt_level",
            "BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required",
            "compiler", "digest", "file_lock", "find_compiler", "native_cflags", "require_compiler",
            "set_require_compiled"]
@@ -84,6 +85,13 @@ CFLAGS_SHARED = ("-fPIC", "-fvisibility=hidden", "-DGCC_HASCLASSVISIBILITY")
 # docs/terrain.md, "Speed"); the same operations per lane, so the same bits.
 CFLAGS_NATIVE = ("-O3", "-march=native", "-mprefer-vector-width=256", "-ffp-contract=off", "-fno-math-errno")
 MAX_JOBS = 2  # compilers at a time (2-core machines)
+# $SYMTRACK_OPT_LEVEL (0, 1, 2 or 3; unset: the flags above): the optimisation level of every artefact
+# that is not ``tuned`` (the tuned ones are the hot kernels whose speed or vector code is the point: the
+# terrain engine, the SIMD check library). The test suite sets 0 (tests/conftest.py): gcc then spends a
+# seventh of its -O2 time on the large generated Jacobians (9.4 s -> 1.3 s of CPU for the compiled
+# Rosenbrock), and the arithmetic is the same (no fast-math, no contraction at any level on x86-64).
+# The level enters the artefacts' folder names, so the two builds never share a cache entry.
+OPT_LEVEL_ENV = "SYMTRACK_OPT_LEVEL"
 NO_COMPILER = "no C compiler found (looked for $CC, cc, gcc)"
 
 _require = os.environ.get("SYMTRACK_REQUIRE_COMPILED", "") not in ("", "0")
@@ -160,13 +168,15 @@ class BuildSpec:
     suffix: str = ""
     group: str = ""
     root: Path | None = None
+    tuned: bool = False
 
     @property
     def folder(self) -> Path:
-        """The entry's folder."""
+        """The entry's folder (``-O<n>`` after the key when :func:`opt_level` overrides the flags)."""
         base = Path(self.root) if self.root is not None else (cache_root() / self.group if self.group
                                                               else cache_root())
-        return base / f"{self.kind}-{self.key[:self.digits]}{self.suffix}"
+        level = "" if self.tuned or opt_level() is None else f"-O{opt_level()}"
+        return base / f"{self.kind}-{self.key[:self.digits]}{self.suffix}{level}"
 
     @property
     def path(self) -> Path:
@@ -461,8 +471,23 @@ def file_lock(path, wait: bool = True, remove: bool = False):
             fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
 
 
+def opt_level() -> int | None:
+    """The optimisation level ``$SYMTRACK_OPT_LEVEL`` sets for the artefacts that are not tuned (None:
+    unset, each artefact's own flags); a value other than 0-3 is a :class:`SimulationError`."""
+    value = os.environ.get(OPT_LEVEL_ENV, "").strip()
+    if not value:
+        return None
+    if value not in ("0", "1", "2", "3"):
+        raise SimulationError(f"${OPT_LEVEL_ENV} = {value!r} is not one of 0, 1, 2, 3 (or unset: the tuned flags)")
+    return int(value)
+
+
 def _unit_flags(spec: BuildSpec, size: int) -> tuple[str, ...]:
     flags = spec.cflags if spec.cflags is not None else (CFLAGS_BIG if size > BIG_FILE_BYTES else CFLAGS_SMALL)
+    level = None if spec.tuned else opt_level()
+    if level is not None:
+        flags = tuple(f"-O{level}" if f.startswith("-O") else f for f in flags)
+        flags = flags if f"-O{level}" in flags else (f"-O{level}", *flags)
     return (*flags, *spec.shared_cflags) if spec.shared else tuple(flags)
 
 

@@ -114,7 +114,7 @@ def library(fns):
                 "engine_soils.inc": dsrc}
 
     so = build(BuildSpec(kind="engine", key=key, output="libsymtrack_engine.so", sources=sources,
-                         what="the terrain engine", cflags=flags), cc)
+                         what="the terrain engine", cflags=flags, tuned=True), cc)
     lib = ctypes.CDLL(str(so))
     check_struct(lib)
     P = ctypes.POINTER(EngineStruct)
