@@ -15,3 +15,24 @@ def test_the_pattern_line_counts_cells_by_pass_count():
     assert "cells by pass count {0: 9048, 1: 17, 2: 7, 3: 2592}" in lines[0]
     assert "per pass count" not in lines[0]
     assert lines[1] == "  medium risk (% of the field): 0.1 m 6.10 %, 0.3 m 2.80 %"
+
+
+def test_a_value_given_equal_to_the_bases_derived_one_is_kept(tmp_path):
+    """sandy_loam_15's topsoil is 1.55 Mg/m^3, so its derived subsoil density is 1.55 too: a file (or a
+    scenario) that loosens the topsoil to 1.35 and gives the subsoil 1.55 keeps its subsoil at 1.55, not
+    re-derived to the new topsoil's 1.35."""
+    from symtrack.presets.catalog import read_preset_file
+    from symtrack.simulation.scenario import load_scenario
+
+    path = tmp_path / "two_layers.toml"
+    path.write_text('base = "sandy_loam_15"\nsubsoil_top_m = 0.25\nbulk_density_initial_Mg_per_m3 = 1.35\n'
+                    "subsoil_bulk_density_initial_Mg_per_m3 = 1.55\n")
+    values, _, _ = read_preset_file(path, "soil")
+    assert values["bulk_density_initial_Mg_per_m3"] == 1.35
+    assert values["subsoil_bulk_density_initial_Mg_per_m3"] == 1.55
+    sc = load_scenario("validation", ["soil.preset=sandy_loam_15", "soil.bulk_density_initial_Mg_per_m3=1.35",
+                                      "soil.subsoil_bulk_density_initial_Mg_per_m3=1.55"])
+    assert sc.soil["subsoil_bulk_density_initial_Mg_per_m3"] == 1.55
+    # what is not given is still derived from the new values
+    sc = load_scenario("validation", ["soil.preset=sandy_loam_15", "soil.bulk_density_initial_Mg_per_m3=1.35"])
+    assert sc.soil["subsoil_bulk_density_initial_Mg_per_m3"] == 1.35

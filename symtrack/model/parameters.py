@@ -179,6 +179,14 @@ class ParamSet(dict):
         super().__init__(*args, **kw)
         self.derived = dict(derived or {})
 
+    def with_given(self, values: dict) -> ParamSet:
+        """A copy with ``values`` set as given: each no longer counts as derived, even where it equals the
+        value derived before (a preset file's or a scenario's subsoil density equal to its base's topsoil
+        density is the user's, not re-derived), and the rest as it was (checked again by :func:`check_set`)."""
+        out = ParamSet(self, derived={k: v for k, v in self.derived.items() if k not in values})
+        out.update(values)
+        return out
+
 
 DERIVED_SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS if s.derived)
 

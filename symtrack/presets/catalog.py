@@ -22,7 +22,7 @@ from pathlib import Path
 
 from ..foundations.errors import ParameterError
 from ..foundations.files import read_text
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set
 from ..soil.pedotransfer import derivation_note
 from . import soils, vehicles
 
@@ -122,11 +122,11 @@ def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str],
     if unknown:
         raise ParameterError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(PRESET_FILE_KEYS)} "
                              f"and the {kind} parameters ({', '.join(names)})")
-    values: dict[str, float] = {}
+    values = ParamSet()
     base = d.get("base")
     if base is not None:  # (the base's set as it is: what its description derived is derived again)
         values = vehicles.vehicle_preset(base) if kind == "vehicle" else soils.soil_preset(base)
-    values.update({k: v for k, v in d.items() if k in names})
+    values = values.with_given({k: v for k, v in d.items() if k in names})
     sources = d.get("sources", {})
     if not isinstance(sources, dict) or set(sources) - set(names):
         raise ParameterError(f"{path}: [sources] must map {kind} parameter names to text")

@@ -63,7 +63,7 @@ from ..integrators import registry
 from ..integrators.settings import FIXED_STEP_TOLERANCE, EngineSettings, IntegratorSettings
 from ..model import plausibility
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..soil import moisture
@@ -266,8 +266,8 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
         else:
             values = preset_fn(preset)
         overrides = {k: v for k, v in t.items() if k != "preset"}
-        values.update(overrides)
-        values = check_set(values, specs, section)
+        values = check_set(ParamSet(values, derived=getattr(values, "derived", {})).with_given(overrides), specs,
+                           section)
     except ParameterError as err:
         raise ScenarioError(str(err)) from err
     return preset, values
