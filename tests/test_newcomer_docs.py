@@ -4,6 +4,8 @@ their compact view, the field study's soil record, its per-depth strength and it
 
 from __future__ import annotations
 
+import pytest
+
 from symtrack.cli.field import pattern_lines
 
 
@@ -36,3 +38,61 @@ def test_a_value_given_equal_to_the_bases_derived_one_is_kept(tmp_path):
     # what is not given is still derived from the new values
     sc = load_scenario("validation", ["soil.preset=sandy_loam_15", "soil.bulk_density_initial_Mg_per_m3=1.35"])
     assert sc.soil["subsoil_bulk_density_initial_Mg_per_m3"] == 1.35
+
+
+def _two_layer_soil(tmp_path):
+    from symtrack.presets.catalog import read_preset_file
+
+    path = tmp_path / "two_layers.toml"
+    path.write_text('base = "clayey_soil_thailand_38"\nsubsoil_top_m = 0.25\nbulk_density_initial_Mg_per_m3 = 1.35\n'
+                    "subsoil_bulk_density_initial_Mg_per_m3 = 1.55\n")
+    return read_preset_file(path, "soil")[0]
+
+
+def test_a_further_pass_never_loosens_a_depth(tmp_path):
+    """The rut bounds the column's compression (density.cap_to_rut); a later pass that compresses the
+    topsoil more than its rut deepens must not undo what an earlier pass compressed at 0.3 m (the field's
+    bulk_density_max_Mg_per_m3 fell from one pass to the next, 1.5505 -> 1.5505): World.fold_pass on one
+    cell, the first pass loading every depth, the next ones the topsoil alone, the rut growing little."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from symtrack.soil import density
+    from symtrack.terrain.world import World
+
+    soil = _two_layer_soil(tmp_path)
+    depths = [0.1, 0.3, 0.5, 0.8]
+    storage = SimpleNamespace(sigma_max=np.zeros((1, 4), np.float32), specific_volume=np.zeros((1, 4), np.float32),
+                              soil_index=np.zeros(1, np.int64), subsoil_depths_m=depths, z=np.zeros(1))
+    world = SimpleNamespace(storage=storage, touched=np.ones(1, bool), soils=[soil], cell_day=None,
+                            geostatic_Pa=lambda: density.geostatic_table([soil], depths),
+                            layer_arrays=lambda: density.soil_arrays([soil], depths))
+    v0 = density.soil_arrays([soil], depths)["v0"]
+    previous = density.bulk_density(storage.specific_volume, storage.soil_index, [soil], depths)[0]
+    for k in range(6):
+        world.pass_sigma = np.array([[60e3, 40e3, 25e3, 15e3] if k == 0 else [60e3, 5e3, 3e3, 2e3]], np.float32)
+        # the rut: below the first pass's column compression (the cap binds), then growing by little
+        storage.z[0] = 0.01 if k == 0 else storage.z[0] + 2e-5
+        World.fold_pass(world)
+        rho = density.bulk_density(storage.specific_volume, storage.soil_index, [soil], depths)[0]
+        assert np.all(rho >= previous - 1e-6), (k, previous, rho)  # (float32 state)
+        v = np.where(storage.specific_volume > 0, storage.specific_volume, v0).astype(float)
+        assert density.column_compression_m(v, v0, depths)[0] <= storage.z[0] * (1 + 1e-6)  # the rut's bound holds
+        previous = rho
+    assert rho[0] > 1.36  # the topsoil kept compacting
+
+
+def test_the_rut_bound_of_a_first_pass_is_unchanged():
+    """From the initial state (no earlier pass) the cap is the compression scaled to the rut, as before."""
+    import numpy as np
+
+    from symtrack.soil import density
+
+    v0 = np.array([[2.0, 1.7]])
+    state = np.array([[1.9, 1.65]], np.float32)
+    assert density.cap_to_rut(state, np.array([0]), v0, [0.1, 0.3], np.array([0.002])) == 1
+    v = state.astype(float)
+    assert density.column_compression_m(v, v0, [0.1, 0.3])[0] == pytest.approx(0.002, rel=1e-5)
+    assert (2.0 - v[0, 0]) / (2.0 - 1.9) == pytest.approx((1.7 - v[0, 1]) / (1.7 - 1.65), rel=1e-5)
+
