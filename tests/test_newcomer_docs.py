@@ -96,3 +96,46 @@ def test_the_rut_bound_of_a_first_pass_is_unchanged():
     assert density.column_compression_m(v, v0, [0.1, 0.3])[0] == pytest.approx(0.002, rel=1e-5)
     assert (2.0 - v[0, 0]) / (2.0 - 1.9) == pytest.approx((1.7 - v[0, 1]) / (1.7 - 1.65), rel=1e-5)
 
+
+def test_a_preset_files_sources_say_where_each_value_comes_from(tmp_path):
+    from symtrack.presets.catalog import describe
+
+    path = tmp_path / "two_layers.toml"
+    path.write_text('base = "clayey_soil_thailand_38"\nsubsoil_top_m = 0.25\nbulk_density_initial_Mg_per_m3 = 1.35\n'
+                    "subsoil_bulk_density_initial_Mg_per_m3 = 1.55\n[sources]\n"
+                    'bulk_density_initial_Mg_per_m3 = "core samples, 2025"\n')
+    rows = {r[0]: r[4] for r in describe("soil", str(path))}
+    base = {r[0]: r[4] for r in describe("soil", "clayey_soil_thailand_38")}
+    assert rows["bekker_n"] == f"from clayey_soil_thailand_38: {base['bekker_n']}" and base["bekker_n"]
+    assert rows["subsoil_top_m"] == "set in two_layers.toml"
+    assert rows["subsoil_bulk_density_initial_Mg_per_m3"] == "set in two_layers.toml"
+    assert rows["bulk_density_initial_Mg_per_m3"] == "set in two_layers.toml: core samples, 2025"
+    assert rows["compression_index_lambda"].startswith("derived from the initial specific volume")
+    assert rows["particle_density_Mg_per_m3"] == \
+        "from clayey_soil_thailand_38: default: the usual particle density of mineral soils"
+    for name, src in {**rows, **base}.items():  # every value has a source, none a path into the code
+        assert src and "n/a" not in src and "symtrack/" not in src and ".py" not in src, (name, src)
+
+
+def test_every_registry_default_says_where_it_comes_from():
+    from symtrack.model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
+
+    for s in SOIL_PARAMS + VEHICLE_PARAMS:
+        assert (s.default is None) == (not s.default_source), s.name
+
+
+def test_the_presets_default_view_fits_100_columns_with_each_source_once(tmp_path, capsys):
+    from symtrack.cli.main import main
+
+    assert main(["presets", "clayey_soil_thailand_38"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert max(len(line) for line in lines) <= 100
+    friction = next(line for line in lines if line.startswith("friction_angle_rad"))
+    assert "0.226893 (13 deg)" in friction
+    note = next(line for line in lines if line.startswith("[1] "))
+    assert out.count(note) == 1  # the long source once, by its number
+    assert sum(line.endswith(" [1]") for line in lines) > 5
+    assert main(["presets", "clayey_soil_thailand_38", "--wide"]) == 0
+    wide = capsys.readouterr().out
+    assert "| friction_angle_rad | 0.226893 (13 deg) | rad | Mohr-Coulomb internal friction angle phi |" in wide
