@@ -4,6 +4,8 @@ their compact view, the field study's soil record, its per-depth strength and it
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from symtrack.cli.field import pattern_lines
@@ -139,3 +141,77 @@ def test_the_presets_default_view_fits_100_columns_with_each_source_once(tmp_pat
     assert main(["presets", "clayey_soil_thailand_38", "--wide"]) == 0
     wide = capsys.readouterr().out
     assert "| friction_angle_rad | 0.226893 (13 deg) | rad | Mohr-Coulomb internal friction angle phi |" in wide
+
+
+# ---- the keys of a simulation: one table per section in docs/scenarios.md, made from the loader's checks ----
+
+def test_the_docs_key_tables_are_the_loaders():
+    """docs/scenarios.md holds what symtrack.simulation.keys makes (make keys writes it again)."""
+    from pathlib import Path
+
+    from symtrack.simulation import keys
+
+    text = (Path(__file__).parent.parent / "docs" / "scenarios.md").read_text()
+    block = text.split(keys.BEGIN, 1)[1].split(keys.END, 1)[0]
+    assert block.strip() == keys.key_tables().strip(), "docs/scenarios.md's key tables are stale: run make keys"
+
+
+def test_the_key_declarations_cover_every_key_the_loader_takes():
+    import dataclasses
+
+    from symtrack.model.options import MODEL_KEYS, scenario_keys
+    from symtrack.simulation.scenario import RUN_KEYS, SIMULATION_RUN_KEYS, START_KEYS, TORQUE_KEYS, Start
+    from symtrack.terrain.settings import TERRAIN_KEYS, TerrainSettings
+
+    assert set(SIMULATION_RUN_KEYS) <= set(RUN_KEYS)
+    assert list(MODEL_KEYS) == scenario_keys()
+    assert list(START_KEYS) == [f.name for f in dataclasses.fields(Start)]
+    assert list(TORQUE_KEYS) == ["t_s", "left_N_m", "right_N_m", "event"]
+    assert list(TERRAIN_KEYS) == [f.name for f in dataclasses.fields(TerrainSettings) if f.name != "given"]
+
+
+def _numeric(keys):
+    return [k for k in keys.values() if k.low is not None and math.isfinite(k.high) and not k.allowed]
+
+
+def test_the_declared_ranges_are_the_ones_the_loader_enforces():
+    """Each declared bound of [run], [model], [start] and [terrain]: a value just beyond it is refused naming
+    the key, a value at it (where closed) is taken."""
+    from symtrack.foundations.errors import ScenarioError
+    from symtrack.model.options import MODEL_KEYS
+    from symtrack.simulation.scenario import RUN_KEYS, START_KEYS, load_scenario
+    from symtrack.terrain.settings import TERRAIN_KEYS
+
+    base = ["run.duration_s=1", "run.output_dt_s=0.001"]
+    for section, keys in (("run", RUN_KEYS), ("model", MODEL_KEYS), ("start", START_KEYS),
+                          ("terrain", TERRAIN_KEYS)):
+        for k in _numeric(keys):
+            if section == "run" and k.name in ("duration_s", "rms_exclude_first_m"):
+                continue  # (the run's length bounds the output step; rms_exclude_first_m is an MPC run's)
+            extra = ["run.integrator=grid_fast"] if section == "terrain" else []
+            beyond = k.high + max(1.0, abs(k.high)) if k.integer else k.high * 1.5 + 1e-9
+            with pytest.raises(ScenarioError, match=f"{section}.{k.name} = "):
+                load_scenario("validation", [*base, *extra, f"{section}.{k.name}={beyond!r}"])
+            below = k.low - 1 if k.integer else (k.low if k.low_open else k.low - 1e-3 - abs(k.low) * 0.5)
+            with pytest.raises(ScenarioError, match=f"{section}.{k.name} = "):
+                load_scenario("validation", [*base, *extra, f"{section}.{k.name}={below!r}"])
+
+
+def test_a_starting_file_names_itself_and_points_at_the_docs_not_the_code(tmp_path, capsys):
+    from pathlib import Path
+
+    from symtrack.cli.main import main
+    from symtrack.cli.run import NEW_KINDS
+
+    docs = Path(__file__).parent.parent / "docs"
+    for kind in NEW_KINDS:
+        out = tmp_path / f"my_{kind}_run.toml"
+        assert main(["new", kind, "--out", str(out)]) == 0
+        text = out.read_text()
+        assert f"symtrack run {out} --out out/my_{kind}_run" in text
+        assert f"{kind}.toml" not in text and "symtrack/" not in text and ".py" not in text
+        for page, heading in (("scenarios.md", "Keys of a simulation"), ("studies.md", "The spec"),
+                              ("studies.md", "Field operations"), ("control.md", "")):
+            if page in text and heading and f'"{heading}"' in text.replace("\n# ", " "):
+                assert f"## {heading}" in (docs / page).read_text()
+    assert '"Keys of a simulation"' in (tmp_path / "my_simulation_run.toml").read_text().replace("\n# ", " ")
