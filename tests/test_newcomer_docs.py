@@ -215,3 +215,90 @@ def test_a_starting_file_names_itself_and_points_at_the_docs_not_the_code(tmp_pa
             if page in text and heading and f'"{heading}"' in text.replace("\n# ", " "):
                 assert f"## {heading}" in (docs / page).read_text()
     assert '"Keys of a simulation"' in (tmp_path / "my_simulation_run.toml").read_text().replace("\n# ", " ")
+
+
+# ---- a field study of a two-layer soil: its record of the soil, the strength by depth, the density's change ----
+
+FIELD_TOML = """
+name = "two_layers"
+[run]
+output_dt_s = 0.01
+integrator = "grid_fast"
+duration_s = 60.0
+[vehicle]
+preset = "reference_crawler"
+[soil]
+preset = "two_layers.toml"
+[terrain]
+max_speed_m_s = 3.0
+[field]
+size_m = [14.4, 8.1]
+cell_m = 0.1
+pattern = "controlled"
+passes = 2
+lane_spacing_m = 3.0
+lanes = 2
+headland_m = 3.0
+speed_m_s = 2.5
+torque_N_m = 2000.0
+"""
+
+
+@pytest.fixture(scope="module")
+def two_layer_field(tmp_path_factory):
+    from symtrack.cli.main import main
+
+    folder = tmp_path_factory.mktemp("field")
+    _two_layer_soil(folder)
+    (folder / "f.toml").write_text(FIELD_TOML)
+    assert main(["run", str(folder / "f.toml"), "--out", str(folder / "out"), "--quiet"]) == 0
+    return folder / "out"
+
+
+def test_the_field_records_the_resolved_soil_and_its_report_describes_it(two_layer_field):
+    import tomllib
+
+    resolved = tomllib.loads((two_layer_field / "field.resolved.toml").read_text())
+    soil = resolved["soil"]
+    assert soil["preset"].endswith("two_layers.toml")
+    assert soil["bulk_density_initial_Mg_per_m3"] == 1.35 and soil["subsoil_bulk_density_initial_Mg_per_m3"] == 1.55
+    assert soil["subsoil_top_m"] == 0.25 and soil["precompression_stress_Pa"] > 0 and soil["bekker_n"] == 0.5
+    assert resolved["vehicle"]["mass_kg"] > 0
+    report = (two_layer_field / "report.html").read_text()
+    for text in ("topsoil: initial dry bulk density", "subsoil (from 0.25 m): initial dry bulk density",
+                 "clay / silt / sand", "matric suction", "precompression stress at 0.3 m"):
+        assert text in report, text
+
+
+def test_the_field_summary_gives_the_strength_by_depth(two_layer_field):
+    import json
+
+    s = json.loads((two_layer_field / "summary.json").read_text())
+    by_depth = s["patterns"]["controlled"]["subsoil_precompression_stress_by_depth_kPa"]
+    assert "controlled_subsoil_precompression_stress_kPa" not in s  # (it was the weakest depth's, unnamed)
+    assert s["controlled_subsoil_precompression_stress_min_kPa"] == min(by_depth)
+    for d, v in zip(s["patterns"]["controlled"]["subsoil_depths_m"], by_depth, strict=True):
+        assert s[f"controlled_subsoil_precompression_stress_at_{d:g}m_kPa"] == v
+    report = (two_layer_field / "report.html").read_text()
+    assert "subsoil_precompression_stress_by_depth_kPa at 0.3 m" in report
+    assert "bulk_density_initial_Mg_per_m3 at 0.1 m" in report
+
+
+def test_the_density_map_draws_the_change_from_the_initial_density(monkeypatch):
+    import matplotlib.axes
+    import numpy as np
+
+    from symtrack.reports.subsoil_plots import density_map_png
+
+    shown = []
+    imshow = matplotlib.axes.Axes.imshow
+    monkeypatch.setattr(matplotlib.axes.Axes, "imshow",
+                        lambda self, data, **kw: shown.append((np.array(data), kw)) or imshow(self, data, **kw))
+    rho0 = np.broadcast_to(np.array([1.35, 1.55]), (4, 3, 2)).copy()
+    rho = rho0.copy()
+    rho[1, 1, 0] = 1.37  # the topsoil's compaction: 0.02 on 1.35
+    rho[1, 1, 1] = 1.555
+    density_map_png(rho, [0.1, 0.3], (0, 4, 0, 3), initial_Mg_per_m3=rho0)
+    (top, kw), (sub, _) = shown
+    assert kw["vmin"] == 0.0 and kw["vmax"] == pytest.approx(0.02)
+    assert top.max() == pytest.approx(0.02) and sub.max() == pytest.approx(0.005) and top.min() == 0.0
