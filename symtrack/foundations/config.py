@@ -20,7 +20,7 @@ from .errors import ScenarioError
 from .files import read_text
 
 __all__ = ["Key", "number", "integer", "check_document", "check_keys", "key_table", "parse_override", "apply_overrides",
-           "builtin_names", "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
+           "short_number", "builtin_names", "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
 
 
 def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
@@ -64,12 +64,12 @@ class Key:
             return " or ".join(_default_text(c) for c in self.choices)
         if self.low is not None:
             if self.integer:
-                return f"integer in [{_g(self.low)}, {_g(self.high)}]"
-            return f"{'(' if self.low_open else '['}{_g(self.low)}, {_g(self.high)}]"
+                return f"integer in [{short_number(self.low)}, {short_number(self.high)}]"
+            return f"{'(' if self.low_open else '['}{short_number(self.low)}, {short_number(self.high)}]"
         return ""
 
 
-def _g(v: float) -> str:
+def short_number(v: float) -> str:
     """A number as the key tables write it: 1e6, not 1e+06."""
     return f"{v:g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
 
@@ -82,9 +82,9 @@ def _default_text(value) -> str:
     if isinstance(value, str):
         return f'`"{value}"`'
     if isinstance(value, (tuple, list)):
-        return "`[" + ", ".join(_g(v) if isinstance(v, float) else str(v) for v in value) + "]`"
+        return "`[" + ", ".join(short_number(v) if isinstance(v, float) else str(v) for v in value) + "]`"
     if isinstance(value, float):
-        return f"`{_g(value)}`"
+        return f"`{short_number(value)}`"
     return f"`{value}`"
 
 

@@ -12,7 +12,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from ..foundations.config import _g, key_table
+from ..foundations.config import key_table, short_number
 from ..model.options import MODEL_KEYS, ModelOptions, scenario_keys
 from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
 from ..presets.catalog import unit_of
@@ -35,7 +35,8 @@ def _param_rows(specs):
     for s in specs:
         lb = "[" if s.low_inclusive else "("
         default = s.default if s.default is not None else ("- derived" if s.derived else "- the preset's")
-        rows.append((s.name, default, f"{lb}{_g(s.low)}, {_g(s.high)}] {unit_of(s.name)}".rstrip(" -"), s.description))
+        allowed = f"{lb}{short_number(s.low)}, {short_number(s.high)}] {unit_of(s.name)}".rstrip(" -")
+        rows.append((s.name, default, allowed, s.description))
     return rows
 
 
@@ -58,7 +59,7 @@ def key_tables() -> str:
                                   for r in _rows(TORQUE_KEYS, {})])),
         ("[terrain]", key_table(_rows(TERRAIN_KEYS, terrain))),
     ]
-    return "\n".join(f"#### `{title}`\n\n{table}" for title, table in parts)
+    return "\n".join(f"### `{title}`\n\n{table}" for title, table in parts)
 
 
 def write_into(path) -> bool:
