@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance
+.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance keys
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -65,6 +65,10 @@ bench: $(VENV)/.installed build/symtrack_standalone
 $(VENV)/.installed-docs: $(VENV)/.installed
 	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[docs]'
 	touch $@
+
+# the key tables of docs/scenarios.md ("Keys of a simulation"), made from the loader's own declarations
+keys: $(VENV)/.installed
+	$(PY) -m symtrack.simulation.keys docs/scenarios.md
 
 docs: $(VENV)/.installed-docs
 	$(PY) -m sphinx -b html -W --keep-going docs docs/_build/html

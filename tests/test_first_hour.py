@@ -223,11 +223,11 @@ def test_presets_list_and_show_units_and_sources(capsys):
     assert main(["presets"]) == 0
     out = capsys.readouterr().out
     assert "reference_crawler" in out and "heavy_clay_wes_40" in out
-    assert main(["presets", "reference_crawler"]) == 0
+    assert main(["presets", "reference_crawler", "--wide"]) == 0
     out = capsys.readouterr().out
     row = next(line for line in out.splitlines() if line.startswith("| mass_kg |"))
     assert "| kg |" in row and "calibrated against the validation table" in row
-    assert main(["presets", "clayey_soil_thailand_38"]) == 0
+    assert main(["presets", "clayey_soil_thailand_38", "--wide"]) == 0
     out = capsys.readouterr().out
     assert "Wong Table 2.3" in next(line for line in out.splitlines() if line.startswith("| bekker_n |"))
     assert "Chrono SCM's default damping" in next(line for line in out.splitlines()

@@ -56,7 +56,7 @@ def test_no_kind_or_several_kinds_is_one_line_naming_the_sections(tmp_path):
 def test_new_writes_the_file_and_never_replaces_one(tmp_path, capsys):
     out = tmp_path / "mine.toml"
     assert main(["new", "mpc", "--out", str(out)]) == 0
-    assert out.read_text() == template_text("mpc")
+    assert out.read_text() == template_text("mpc", out)
     assert f"symtrack run {out}" in capsys.readouterr().out
     out.write_text("# my own edits\n")
     assert main(["new", "mpc", "--out", str(out)]) == 2

@@ -116,7 +116,7 @@ def test_paths_in_a_scenario_file_are_relative_to_the_file(tmp_path, monkeypatch
 def test_presets_tells_a_vehicle_file_from_a_soil_file(tmp_path, capsys):
     f = tmp_path / "my_crawler.toml"
     f.write_text('base = "reference_crawler"\nmass_kg = 6150.0\n[sources]\nmass_kg = "weighbridge"\n')
-    assert main(["presets", str(f)]) == 0
+    assert main(["presets", str(f), "--wide"]) == 0
     out = capsys.readouterr().out
     assert out.startswith("vehicle preset") and "| mass_kg | 6150 |" in out and "weighbridge" in out
     g = tmp_path / "odd.toml"

@@ -78,18 +78,25 @@ def _field(args, out) -> int:
         return 1
     s = res.summary
     for name, f in s["patterns"].items():
-        hist = f["passes_per_cell_histogram"]
-        print(f"{name}: {100 * f['trafficked_area_fraction']:.2f} % of the field trafficked; cells per pass count "
-              f"{dict(enumerate(hist))}; rut mean {f['rut_mean_depth_mm']:.3f} mm, max {f['rut_max_depth_mm']:.3f} "
-              f"mm; {f['passes_done']} passes in {f['wall_time_s']:.1f} s")
-        for risk in ("medium", "high"):
-            if f"risk_fraction_of_field_{risk}" in f:
-                by = ", ".join(f"{d:g} m {100 * v:.2f} %" for d, v in zip(
-                    f["subsoil_depths_m"], f[f"risk_fraction_of_field_{risk}"], strict=True))
-                print(f"  {risk} risk (% of the field): {by}")
+        for line in pattern_lines(name, f):
+            print(line)
     print(f"{spec.name}: {s['sim_time_s']:.0f} s simulated in {s['wall_time_s']:.1f} s of wall time (the passes "
           f"{s['passes_wall_time_s']:.1f} s, building {s['build_s']:.1f} s); results in {out}")
     return 0
+
+
+def pattern_lines(name: str, f: dict) -> list[str]:
+    """The console lines of one pattern's figures (``f``: its entry of summary.json's ``patterns``)."""
+    hist = f["passes_per_cell_histogram"]
+    lines = [f"{name}: {100 * f['trafficked_area_fraction']:.2f} % of the field trafficked; cells by pass count "
+             f"{dict(enumerate(hist))}; rut mean {f['rut_mean_depth_mm']:.3f} mm, max {f['rut_max_depth_mm']:.3f} "
+             f"mm; {f['passes_done']} passes in {f['wall_time_s']:.1f} s"]
+    for risk in ("medium", "high"):
+        if f"risk_fraction_of_field_{risk}" in f:
+            by = ", ".join(f"{d:g} m {100 * v:.2f} %" for d, v in zip(
+                f["subsoil_depths_m"], f[f"risk_fraction_of_field_{risk}"], strict=True))
+            lines.append(f"  {risk} risk (% of the field): {by}")
+    return lines
 
 
 def add_parser(sub) -> None:

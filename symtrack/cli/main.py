@@ -56,7 +56,7 @@ def scenarios_command(args) -> int:
 
 def presets_command(args) -> int:
     """The built-in presets, or one preset's parameters with units, meaning and source."""
-    from ..presets.catalog import describe, preset_file_kind, preset_names
+    from ..presets.catalog import format_preset, preset_file_kind, preset_names
 
     if args.name is None:
         for kind in ("vehicle", "soil"):
@@ -68,11 +68,7 @@ def presets_command(args) -> int:
         kind = preset_file_kind(args.name)  # a preset file says by its keys which kind it is
     if kind is None:
         kind = "vehicle" if args.name in preset_names("vehicle") else "soil"
-    rows = describe(kind, args.name)
-    print(f"{kind} preset {args.name}:")
-    print("| parameter | value | unit | meaning | source |\n|---|---|---|---|---|")
-    for name, value, unit, meaning, source in rows:
-        print(f"| {name} | {value:.6g} | {unit} | {meaning} | {source or 'n/a'} |")
+    print(format_preset(kind, args.name, wide=args.wide), end="")
     return 0
 
 
@@ -116,6 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     pr = sub.add_parser("presets", help="list the vehicle and soil presets, or one preset's parameters with sources")
     pr.add_argument("name", nargs="?", help="a preset name or a preset file (*.toml)")
     pr.add_argument("--kind", choices=("vehicle", "soil"), help="for a preset file: which kind it is")
+    pr.add_argument("--wide", action="store_true", help="a Markdown table with each parameter's meaning and its "
+                    "source in full (the default view fits 100 columns, the sources listed once below it)")
     pr.set_defaults(func=presets_command)
     cg = sub.add_parser("codegen", help="write the generated C sources (as python -m codegen)")
     from ..codegen.cli import add_arguments as codegen_arguments

@@ -19,18 +19,21 @@ TEMPLATES = "symtrack.cli.templates"
 NEW_KINDS = ("simulation", "mpc", "field", "operation", "season", "sweep")
 
 
-def template_text(kind: str) -> str:
-    """The starting file of ``kind`` (one of :data:`NEW_KINDS`)."""
+def template_text(kind: str, file: str | Path | None = None) -> str:
+    """The starting file of ``kind`` (one of :data:`NEW_KINDS`), its header's command naming ``file``
+    (the file it is written to; default ``KIND.toml``)."""
     if kind not in NEW_KINDS:
         raise ScenarioError(f"symtrack new {kind!r}: the kinds are {', '.join(NEW_KINDS)}")
-    return resources.files(TEMPLATES).joinpath(f"{kind}.toml").read_text()
+    file = Path(file if file is not None else f"{kind}.toml")
+    text = resources.files(TEMPLATES).joinpath(f"{kind}.toml").read_text()
+    return text.replace("@FILE@", str(file)).replace("@STEM@", file.stem)
 
 
 def new_command(args) -> int:
     from ..foundations.files import atomic_write_text, check_output_file
 
     out = Path(args.out or f"{args.kind}.toml")
-    text = template_text(args.kind)
+    text = template_text(args.kind, out)
     if out.exists():  # a file of the user's is never replaced
         raise ScenarioError(f"--out {str(out)!r} exists; give another file name (symtrack new never replaces a file)")
     check_output_file(str(out), "--out")

@@ -474,6 +474,12 @@ static fmi2Status end_pass(Instance *c) {
 #if EF_DENSITY
     for (long long cell = 0; cell < n; ++cell) {
       if (!E->touched[cell]) continue;
+      /* the state before the pass: what the earlier passes compressed, which the rut's cap keeps */
+      double vb[EF_N_DEPTHS];
+      for (long long k = 0; k < EF_N_DEPTHS; ++k) {
+        const double b = (double)c->specific_volume[cell * EF_N_DEPTHS + k];
+        vb[k] = b > 0 ? b : ef_dens_v0[k];
+      }
       for (long long k = 0; k < EF_N_DEPTHS; ++k) {
         const long long q = cell * EF_N_DEPTHS + k;
         const double s = (double)E->sig_pass[q], old = (double)c->specific_volume[q];
@@ -496,10 +502,8 @@ static fmi2Status end_pass(Instance *c) {
         }
         if (line < v_old) c->specific_volume[q] = (float)line;
       }
-    }
-    /* density.cap_to_rut: the rut bounds the compression below it (the same operations) */
-    for (long long cell = 0; cell < n; ++cell) {
-      if (!E->touched[cell]) continue;
+      /* density.cap_to_rut: the rut bounds the compression below it, the pass's added compression scaled
+         back from the state before it (the same operations; each cell's update and cap touch it alone) */
       double v[EF_N_DEPTHS], strain[EF_N_DEPTHS];
       for (long long k = 0; k < EF_N_DEPTHS; ++k) {
         const double old = (double)c->specific_volume[cell * EF_N_DEPTHS + k];
@@ -511,10 +515,20 @@ static fmi2Status end_pass(Instance *c) {
         total = total + 0.5 * (strain[k - 1] + strain[k]) * (ef_depths[k] - ef_depths[k - 1]);
       const double rut = E->z[cell] > 0.0 ? E->z[cell] : 0.0;
       if (total > rut) {
-        const double f = rut / total;
+        double sb[EF_N_DEPTHS];
+        for (long long k = 0; k < EF_N_DEPTHS; ++k) sb[k] = 1.0 - vb[k] / ef_dens_v0[k];
+        double tb = sb[0] * ef_depths[0];
+        for (long long k = 1; k < EF_N_DEPTHS; ++k)
+          tb = tb + 0.5 * (sb[k - 1] + sb[k]) * (ef_depths[k] - ef_depths[k - 1]);
+        double f = 0.0;
+        if (total > tb) {
+          f = (rut - tb) / (total - tb);
+          if (f < 0.0) f = 0.0;
+          if (f > 1.0) f = 1.0;
+        }
         for (long long k = 0; k < EF_N_DEPTHS; ++k) {
           const long long q = cell * EF_N_DEPTHS + k;
-          if (c->specific_volume[q] > 0) c->specific_volume[q] = (float)(ef_dens_v0[k] - f * (ef_dens_v0[k] - v[k]));
+          if (c->specific_volume[q] > 0) c->specific_volume[q] = (float)(vb[k] - f * (vb[k] - v[k]));
         }
       }
     }

@@ -12,14 +12,15 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 from .errors import ScenarioError
 from .files import read_text
 
-__all__ = ["number", "integer", "check_document", "check_keys", "parse_override", "apply_overrides", "builtin_names",
-           "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
+__all__ = ["Key", "number", "integer", "check_document", "check_keys", "key_table", "parse_override", "apply_overrides",
+           "short_number", "builtin_names", "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
 
 
 def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
@@ -32,6 +33,70 @@ def number(where: str, value, low: float, high: float, low_open: bool = False) -
         lb = "(" if low_open else "["
         raise ScenarioError(f"{where} = {value!r} is outside the allowed range {lb}{low:g}, {high:g}]")
     return v
+
+
+@dataclass(frozen=True)
+class Key:
+    """One key of a scenario section as the loader checks it and the documentation's key tables show it
+    (docs/scenarios.md, "Keys of a simulation"; :func:`key_table`): its meaning, and for a number its
+    range ([low, high], or (low, high] with ``low_open``) or for a choice its ``choices``; ``allowed``
+    replaces the range's text where the check is more than a range (a bound that depends on another key)."""
+
+    name: str
+    meaning: str
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    choices: tuple = ()
+    allowed: str = ""
+    integer: bool = False
+
+    def check(self, section: str, value):
+        """The value checked against the declared range (an error names the key, the value and the range)."""
+        if self.integer:
+            return integer(f"{section}.{self.name}", value, int(self.low), int(self.high))
+        return number(f"{section}.{self.name}", value, self.low, self.high, self.low_open)
+
+    def range_text(self) -> str:
+        if self.allowed:
+            return self.allowed
+        if self.choices:
+            return " or ".join(_default_text(c) for c in self.choices)
+        if self.low is not None:
+            if self.integer:
+                return f"integer in [{short_number(self.low)}, {short_number(self.high)}]"
+            return f"{'(' if self.low_open else '['}{short_number(self.low)}, {short_number(self.high)}]"
+        return ""
+
+
+def short_number(v: float) -> str:
+    """A number as the key tables write it: 1e6, not 1e+06."""
+    return f"{v:g}".replace("e+0", "e").replace("e+", "e").replace("e-0", "e-")
+
+
+def _default_text(value) -> str:
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return "`true`" if value else "`false`"
+    if isinstance(value, str):
+        return f'`"{value}"`'
+    if isinstance(value, (tuple, list)):
+        return "`[" + ", ".join(short_number(v) if isinstance(v, float) else str(v) for v in value) + "]`"
+    if isinstance(value, float):
+        return f"`{short_number(value)}`"
+    return f"`{value}`"
+
+
+def key_table(rows) -> str:
+    """A Markdown table of (key, default, allowed, meaning) rows: the default a value (written as TOML
+    writes it) or, as a ``str`` starting with "-", a word ("- required"); allowed and meaning text."""
+    lines = ["| key | default | allowed | meaning |", "|---|---|---|---|"]
+    for name, default, allowed, meaning in rows:
+        d = default[2:] if isinstance(default, str) and default.startswith("- ") else _default_text(default)
+        cells = (f"`{name}`", d, allowed, meaning)
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def integer(where: str, value, low: int, high: int) -> int:

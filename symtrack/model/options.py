@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
+from ..foundations.config import Key
 from ..foundations.errors import ParameterError
 from ..soil.law import DEFAULT as DEFAULT_SOIL_LAW
 from ..soil.law import REGISTRY as SOIL_LAWS
@@ -19,6 +21,41 @@ SHEAR_STRENGTH_PRESSURES = ("mean", "local")
 SLIDING_SIGNS = ("displacement", "velocity")
 # the ModelOptions fields that the builders set on their own copy of a model, not scenario keys
 BUILD_FLAGS = ("quadrature_call",)
+
+
+# the [model] keys as ModelOptions checks them (the meanings in full: ModelOptions' docstring; docs/scenarios.md's
+# table is made from these and the defaults)
+_POSITIVE = dict(low=0.0, high=math.inf, low_open=True, allowed="> 0")
+_BOOL = dict(choices=(True, False))
+MODEL_KEYS = {k.name: k for k in (
+    Key("traction_sign", "how the sign functions are evaluated (smooth: regularised; tanh: the thesis's; sign: "
+        "discontinuous)", choices=TRACTION_SIGN_MODES),
+    Key("tanh_steepness_per_m", "the steepness k of tanh(k j) (traction_sign = \"tanh\") [1/m]", **_POSITIVE),
+    Key("shear_smoothing_m", "the smoothing d of sign(j) = j / sqrt(j^2 + d^2) [m]", **_POSITIVE),
+    Key("omega_smoothing_rad_s", "the smoothing of the internal resistance's direction [rad/s]", **_POSITIVE),
+    Key("motion_smoothing_m_s", "the smoothing of the compaction resistance's direction [m/s]", **_POSITIVE),
+    Key("bekker_regularisation_m", "the regularisation of Bekker's z^n at zero sinkage [m]", **_POSITIVE),
+    Key("lateral_segments", "creep law: Gauss-Legendre segments along each track", 1, 64, integer=True),
+    Key("gauss_points", "creep law: Gauss-Legendre points per segment", 1, 16, integer=True),
+    Key("accel_newton_iterations", "Newton steps on the load transfer's acceleration loop", 0, 20, integer=True),
+    Key("lateral_shear_cap", "creep law: the lateral resistance capped at the soil's shear strength", **_BOOL),
+    Key("lateral_law", "how the tracks meet the soil: shear (lagged shear law), shear_quasistatic, creep (the "
+        "validation's reconstruction)", choices=LATERAL_LAWS),
+    Key("shear_strength_pressure", "the pressure in the shear strength c + p tan(phi): the track's mean or the "
+        "local one", choices=SHEAR_STRENGTH_PRESSURES),
+    Key("shear_points", "shear law: Gauss-Legendre points per half piece of the track", 1, 16, integer=True),
+    Key("shear_grading", "shear law: the points graded as t^grading towards each piece's outer end", 1, 4,
+        integer=True),
+    Key("lateral_split", "shear law: split the integral at the pivot and at the shear's zero (false: the plain "
+        "composite rule)", **_BOOL),
+    Key("sliding_smoothing", "the regularisation of the sliding direction (a slip ratio)", **_POSITIVE),
+    Key("sliding_sign", "shear law: where the longitudinal stress's sign comes from", choices=SLIDING_SIGNS),
+    Key("pivot_smoothing_rad_s", "the regularisation of the pivot's position [rad/s]", **_POSITIVE),
+    Key("soil_law", "the terrain cells' soil law", choices=tuple(SOIL_LAWS)),
+    Key("vehicle", "the vehicle model: planar, or 3d (heave, pitch and roll on the ground's shape)",
+        choices=VEHICLES),
+    Key("contact_segments", "3d: the segments along each track", 1, 64, integer=True),
+)}
 
 
 @dataclass(frozen=True)
@@ -157,21 +194,15 @@ class ModelOptions:
         vehicle_registry.get(self.vehicle)  # an unknown name: the error names the value and the menu
         if self.soil_law not in SOIL_LAWS:
             raise ParameterError(f"model.soil_law = {self.soil_law!r} is not one of {', '.join(SOIL_LAWS)}")
-        for name in ("tanh_steepness_per_m", "shear_smoothing_m", "omega_smoothing_rad_s",
-                     "motion_smoothing_m_s", "bekker_regularisation_m", "sliding_smoothing",
-                     "pivot_smoothing_rad_s"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and v > 0):
-                raise ParameterError(f"model.{name} = {v!r} must be a number > 0")
+        for key in MODEL_KEYS.values():
+            v = getattr(self, key.name)
+            if key.allowed == "> 0" and not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0):
+                raise ParameterError(f"model.{key.name} = {v!r} must be a number > 0")
+            if key.integer and not (isinstance(v, int) and not isinstance(v, bool) and key.low <= v <= key.high):
+                raise ParameterError(f"model.{key.name} = {v!r} must be an integer in [{key.low:g}, {key.high:g}]")
         for name in ("lateral_shear_cap", "lateral_split", "quadrature_call"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"model.{name} = {getattr(self, name)!r} must be true or false")
-        for name, lo, hi in (("lateral_segments", 1, 64), ("gauss_points", 1, 16), ("shear_points", 1, 16),
-                             ("shear_grading", 1, 4), ("contact_segments", 1, 64),
-                             ("accel_newton_iterations", 0, 20)):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and lo <= v <= hi):
-                raise ParameterError(f"model.{name} = {v!r} must be an integer in [{lo}, {hi}]")
 
 
 def scenario_keys() -> list[str]:

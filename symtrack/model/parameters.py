@@ -8,6 +8,7 @@ and the allowed range.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -24,6 +25,7 @@ class ParamSpec:
     low_inclusive: bool = True
     default: float | None = None  # used when a parameter set leaves it out (terrain-only soil parameters)
     derived: bool = False  # filled by the soil's pedotransfer functions when a set leaves it out
+    default_source: str = ""  # where the default comes from (symtrack presets shows it)
 
     def check(self, value: object, where: str = "") -> float:
         label = f"{where}.{self.name}" if where else self.name
@@ -40,8 +42,26 @@ class ParamSpec:
         return v
 
 
-def _spec(name, description, low, high, low_inclusive=True, default=None, derived=False):
-    return ParamSpec(name, description, low, high, low_inclusive, default, derived)
+def _spec(name, description, low, high, low_inclusive=True, default=None, derived=False, default_source=""):
+    return ParamSpec(name, description, low, high, low_inclusive, default, derived, default_source)
+
+
+# where each default of the registry comes from, for a reader of symtrack presets (the reasoning in full is in
+# the comments above the constants below)
+_LOAM = "a loam (USDA texture triangle: 20 % clay, 40 % silt, 40 % sand), the description of a soil that gives none"
+DEFAULT_SOURCES = {
+    "repeated_loading_exponent": "Li & Selig (1996), lean clay (CL)",
+    "stress_concentration_factor": "Soehne's concentration factor of a \"medium\" soil",
+    "particle_density_Mg_per_m3": "the usual particle density of mineral soils",
+    "bulk_density_initial_Mg_per_m3": f"{_LOAM}, at 1.5 Mg/m^3",
+    "yield_line_offset_ln_p": "O'Sullivan & Robertson (1996): m = 1.3, the one complete published set (soilphysics' "
+                              "soilDeformation example)",
+    "specific_volume_min": "zero porosity (the day's saturation with [soil.moisture])",
+    "clay_kg_per_kg": _LOAM, "silt_kg_per_kg": _LOAM, "sand_kg_per_kg": _LOAM,
+    "matric_suction_kPa": "field capacity (pF 2, 10 kPa)",
+    "subsoil_top_m": "the usual depth of primary tillage (mouldboard ploughing to 0.25-0.30 m), an assumption where a "
+                     "layered soil gives no depth",
+}
 
 
 VEHICLE_PARAMS: tuple[ParamSpec, ...] = (
@@ -150,6 +170,8 @@ _TOPSOIL = {s.name: s for s in SOIL_TERRAIN_PARAMS}
 SOIL_TERRAIN_PARAMS += tuple(
     _spec(sub, f"subsoil layer: {_TOPSOIL[top].description} (the topsoil's unless given)", _TOPSOIL[top].low,
           _TOPSOIL[top].high, _TOPSOIL[top].low_inclusive, derived=True) for top, sub in SUBSOIL_KEYS.items())
+SOIL_TERRAIN_PARAMS = tuple(dataclasses.replace(sp, default_source=DEFAULT_SOURCES[sp.name])
+                            if sp.default is not None else sp for sp in SOIL_TERRAIN_PARAMS)
 SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
 # the soil parameters the day's moisture sets (symtrack/soil/moisture.py): a terrain file made on
 # another day continues with the scenario's values of these (the compression state carries over)
@@ -178,6 +200,14 @@ class ParamSet(dict):
     def __init__(self, *args, derived=None, **kw):
         super().__init__(*args, **kw)
         self.derived = dict(derived or {})
+
+    def with_given(self, values: dict) -> ParamSet:
+        """A copy with ``values`` set as given: each no longer counts as derived, even where it equals the
+        value derived before (a preset file's or a scenario's subsoil density equal to its base's topsoil
+        density is the user's, not re-derived), and the rest as it was (checked again by :func:`check_set`)."""
+        out = ParamSet(self, derived={k: v for k, v in self.derived.items() if k not in values})
+        out.update(values)
+        return out
 
 
 DERIVED_SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS if s.derived)

@@ -16,18 +16,20 @@ from __future__ import annotations
 import ast
 import inspect
 import io
+import math
+import textwrap
 import tokenize
 import tomllib
 from pathlib import Path
 
 from ..foundations.errors import ParameterError
 from ..foundations.files import read_text
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set
 from ..soil.pedotransfer import derivation_note
 from . import soils, vehicles
 
-__all__ = ["PRESET_FILE_KEYS", "describe", "preset_file_kind", "preset_names", "preset_sources", "read_preset_file",
-           "unit_of"]
+__all__ = ["PRESET_FILE_KEYS", "describe", "format_preset", "preset_file_kind", "preset_names", "preset_sources",
+           "read_preset_file", "unit_of"]
 
 PRESET_FILE_KEYS = ("base", "description", "sources")
 _UNITS = (("_kg_per_kg", "kg/kg"), ("_Mg_per_m3", "Mg/m^3"), ("_kPa", "kPa"),
@@ -107,8 +109,8 @@ def preset_file_kind(path) -> str:
     return kinds.pop()
 
 
-def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str], str]:
-    """A user preset file -> (values, sources, description), checked as a complete set."""
+def _preset_file_doc(path, kind: str) -> dict:
+    """A user preset file's TOML document, its keys checked."""
     path = Path(path)
     if not path.is_file():
         raise ParameterError(f"{kind}.preset = {str(path)!r}: no such preset file")
@@ -116,70 +118,117 @@ def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str],
         d = tomllib.loads(read_text(path, f"{kind}.preset file", ParameterError))
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{path}: not valid TOML: {err}") from err
-    specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS
-    names = [s.name for s in specs]
+    names = [s.name for s in (VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS)]
     unknown = sorted(set(d) - set(names) - set(PRESET_FILE_KEYS))
     if unknown:
         raise ParameterError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(PRESET_FILE_KEYS)} "
                              f"and the {kind} parameters ({', '.join(names)})")
-    values: dict[str, float] = {}
-    base = d.get("base")
-    if base is not None:  # (the base's set as it is: what its description derived is derived again)
-        values = vehicles.vehicle_preset(base) if kind == "vehicle" else soils.soil_preset(base)
-    values.update({k: v for k, v in d.items() if k in names})
     sources = d.get("sources", {})
     if not isinstance(sources, dict) or set(sources) - set(names):
         raise ParameterError(f"{path}: [sources] must map {kind} parameter names to text")
-    return check_set(values, specs, f"{kind} preset file {str(path)!r}"), dict(sources), str(d.get("description", ""))
+    return d
+
+
+def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str], str]:
+    """A user preset file -> (values, sources, description), checked as a complete set."""
+    d = _preset_file_doc(path, kind)
+    specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS
+    names = [s.name for s in specs]
+    values = ParamSet()
+    base = d.get("base")
+    if base is not None:  # (the base's set as it is: what its description derived is derived again)
+        values = vehicles.vehicle_preset(base) if kind == "vehicle" else soils.soil_preset(base)
+    values = values.with_given({k: v for k, v in d.items() if k in names})
+    return (check_set(values, specs, f"{kind} preset file {str(path)!r}"), dict(d.get("sources", {})),
+            str(d.get("description", "")))
+
+
+_CONSTS = {"cell_areal_mass_kg_per_m2": "#CELL_AREAL_MASS_KG_PER_M2",
+           "cell_damping_Pa_s_per_m": "#CELL_DAMPING_PA_S_PER_M",
+           "elastic_stiffness_Pa_per_m": "#WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M",
+           "unloading_stiffness_floor": "#UNLOADING_STIFFNESS_FLOOR"}
+
+
+def _default_note(spec) -> str:
+    return f"default: {spec.default_source}" if spec.default_source else "default"
 
 
 def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
     """(parameter, value, unit, meaning, source) of every parameter of a built-in preset or a
-    user preset file."""
+    user preset file. The source says where the value comes from: a built-in preset's source; in a
+    preset file "set in FILE" (with the file's own [sources] entry), "from BASE: ..." (the base's
+    source) for a value the file inherits; "derived ..." (how) for a value derived from the soil's
+    description; "default: ..." for the registry's default."""
     specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS
-    if name.endswith(".toml"):
-        values, sources, _ = read_preset_file(name, kind)
-        base = {}
-    else:
-        values = vehicles.vehicle_preset(name) if kind == "vehicle" else soils.soil_preset(name)
-        sources = {}
-        base = preset_sources(kind, name)
-    rows = []
-    consts = {"cell_areal_mass_kg_per_m2": "#CELL_AREAL_MASS_KG_PER_M2",
-              "cell_damping_Pa_s_per_m": "#CELL_DAMPING_PA_S_PER_M",
-              "elastic_stiffness_Pa_per_m": "#WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M",
-              "unloading_stiffness_floor": "#UNLOADING_STIFFNESS_FLOOR"}
-    raw = {} if name.endswith(".toml") or kind == "vehicle" else soils.SOILS.get(name, {})
+    if str(name).endswith(".toml"):
+        return _describe_file(kind, name, specs)
+    values = vehicles.vehicle_preset(name) if kind == "vehicle" else soils.soil_preset(name)
+    notes = preset_sources(kind, name)
+    raw = vehicles.VEHICLES[name] if kind == "vehicle" else soils.SOILS[name]
     derived = getattr(values, "derived", {})
+    rows = []
     for s in specs:
-        src = sources.get(s.name) or base.get(s.name) or base.get(consts.get(s.name, ""), "") or base.get("*", "")
         if s.name in derived:
-            rows.append((s.name, values[s.name], unit_of(s.name), s.description, derivation_note(s.name, values)))
-            continue
-        if s.default is not None and kind == "soil" and s.name not in raw and not sources.get(s.name):
-            src = f"the registry's default (symtrack/model/parameters.py): {_default_source(s.name)}"
+            src = derivation_note(s.name, values)
+        elif s.name not in raw and s.default is not None:
+            src = _default_note(s)
+        else:
+            src = notes.get(s.name) or notes.get(_CONSTS.get(s.name, ""), "") or notes.get("*", "")
         rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
     return rows
 
 
-def _default_source(name: str) -> str:
-    """The comment above the registry's default constant of a parameter (parameters.py)."""
-    from ..model import parameters
-    from ..soil import pedotransfer
+def _describe_file(kind: str, path, specs) -> list[tuple[str, float, str, str, str]]:
+    d = _preset_file_doc(path, kind)
+    values, sources, _ = read_preset_file(path, kind)
+    base = d.get("base")
+    base_rows = {r[0]: r for r in describe(kind, base)} if base is not None else {}
+    derived = getattr(values, "derived", {})
+    label = Path(path).name
+    rows = []
+    for s in specs:
+        if s.name in d:
+            src = f"set in {label}" + (f": {sources[s.name]}" if sources.get(s.name) else "")
+        elif sources.get(s.name):
+            src = sources[s.name]
+        elif s.name in derived:
+            src = derivation_note(s.name, values)
+        elif s.name in base_rows:
+            src = f"from {base}: {base_rows[s.name][4]}" if base_rows[s.name][4] else f"from {base}"
+        elif s.default is not None:
+            src = _default_note(s)
+        else:
+            src = ""
+        rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
+    return rows
 
-    const = {"repeated_loading_exponent": "REPEATED_LOADING_EXPONENT_DEFAULT",
-             "stress_concentration_factor": "STRESS_CONCENTRATION_FACTOR_DEFAULT",
-             "yield_line_offset_ln_p": "YIELD_LINE_OFFSET_DEFAULT",
-             "specific_volume_min": "SPECIFIC_VOLUME_MIN_DEFAULT",
-             "subsoil_top_m": "SUBSOIL_TOP_DEFAULT_M"}.get(name)
-    lines = inspect.getsource(parameters).splitlines() + inspect.getsource(pedotransfer).splitlines()
-    for k, line in enumerate(lines):
-        if const and line.startswith(const):
-            notes = []
-            j = k - 1
-            while j >= 0 and lines[j].lstrip().startswith("#"):
-                notes.insert(0, lines[j].lstrip("# ").strip())
-                j -= 1
-            tail = line.split("#", 1)[1].strip() if "#" in line else ""
-            return " ".join(notes + ([tail] if tail else []))
-    return ""
+
+def _value_text(name: str, value: float) -> str:
+    """A value as symtrack presets prints it; an angle also in degrees."""
+    text = f"{value:.6g}"
+    return f"{text} ({math.degrees(value):.4g} deg)" if name.endswith("_rad") else text
+
+
+def format_preset(kind: str, name: str, wide: bool = False, width: int = 100) -> str:
+    """What ``symtrack presets NAME`` prints. The default view fits ``width`` columns: parameter, value
+    (angles also in degrees), unit and a footnote number per row, each source written once below the table,
+    wrapped. ``wide``: the Markdown table with every row's meaning and source in full."""
+    rows = describe(kind, name)
+    head = f"{kind} preset {name}:"
+    if wide:
+        lines = [head, "| parameter | value | unit | meaning | source |", "|---|---|---|---|---|"]
+        lines += [f"| {n} | {_value_text(n, v)} | {u} | {m} | {src or 'n/a'} |" for n, v, u, m, src in rows]
+        return "\n".join(lines) + "\n"
+    notes: dict[str, int] = {}
+    for *_, src in rows:
+        if src and src not in notes:
+            notes[src] = len(notes) + 1
+    cells = [(n, _value_text(n, v), u, f"[{notes[src]}]" if src else "-") for n, v, u, _, src in rows]
+    w = [max(len(c[i]) for c in [("parameter", "value", "unit", "source"), *cells]) for i in range(3)]
+    lines = [head] + [f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}".rstrip()
+                      for a, b, c, d in [("parameter", "value", "unit", "source"), *cells]]
+    lines += ["", "sources:"]
+    for src, k in notes.items():
+        lines += textwrap.wrap(src, width, initial_indent=f"[{k}] ", subsequent_indent=" " * (len(str(k)) + 3))
+    lines += ["", "--wide: the table with each parameter's meaning and its source in full"]
+    return "\n".join(lines) + "\n"

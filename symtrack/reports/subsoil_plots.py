@@ -97,27 +97,44 @@ def passes_subsoil_png(rut_depth_mm, sigma_max_kPa, depths_m) -> bytes:
     return png_bytes(fig, tight=False)
 
 
-def density_map_png(rho_Mg_per_m3, depths_m, extent_m, title: str = "dry bulk density") -> bytes:
-    """One panel per depth: the dry bulk density rho (nx, ny, n_depths) [Mg/m^3], one colour scale
-    for all depths, extent_m = (x0, x1, y0, y1) of the grid, x along the first axis."""
+def density_map_png(rho_Mg_per_m3, depths_m, extent_m, title: str = "dry bulk density",
+                    initial_Mg_per_m3=None) -> bytes:
+    """One panel per depth, x along the first axis, extent_m = (x0, x1, y0, y1) of the grid. ``rho_Mg_per_m3``
+    (nx, ny, n_depths): the dry bulk density [Mg/m^3]; with ``initial_Mg_per_m3`` (the same shape, or per depth)
+    the map is the change from it, rho - rho_0, on one scale from 0 (a 1.35 topsoil's 0.02 and a 1.55 subsoil's
+    show side by side; each panel's title gives the depth's initial and largest density); without it the
+    density itself, one colour scale for all depths."""
     rho = np.asarray(rho_Mg_per_m3, dtype=float)
     depths = list(depths_m)
     if rho.ndim != 3 or rho.shape[2] != len(depths):
         raise ValueError(f"rho_Mg_per_m3 has shape {rho.shape}; expected (nx, ny, {len(depths)})")
-    lo, hi = float(rho.min()), float(rho.max())
-    hi = hi if hi > lo else lo + 1e-3
+    change = initial_Mg_per_m3 is not None
+    if change:
+        rho0 = np.broadcast_to(np.asarray(initial_Mg_per_m3, dtype=float), rho.shape)
+        shown = rho - rho0
+        lo, hi = 0.0, max(float(shown.max()), 1e-4)
+        label, cmap = "increase of the dry bulk density [Mg/m$^3$]", "viridis"
+    else:
+        shown = rho
+        lo, hi = float(rho.min()), float(rho.max())
+        hi = hi if hi > lo else lo + 1e-3
+        label, cmap = "dry bulk density [Mg/m$^3$]", "cividis_r"
     fig, axes = plt.subplots(len(depths), 1, figsize=(9, 1.0 + 2.2 * len(depths)), squeeze=False)
     im = None
     for k, (ax, d) in enumerate(zip(axes[:, 0], depths, strict=True)):
-        im = ax.imshow(rho[:, :, k].T, origin="lower", extent=extent_m, aspect="equal", cmap="cividis_r", vmin=lo,
+        im = ax.imshow(shown[:, :, k].T, origin="lower", extent=extent_m, aspect="equal", cmap=cmap, vmin=lo,
                        vmax=hi, interpolation="nearest")
         ax.set_ylabel("y [m]")
-        ax.set_title(f"depth {d:g} m")
+        if change:
+            ax.set_title(f"depth {d:g} m: initial {float(rho0[:, :, k].min()):.3f}, largest "
+                         f"{float(rho[:, :, k].max()):.3f} Mg/m$^3$")
+        else:
+            ax.set_title(f"depth {d:g} m")
     axes[-1, 0].set_xlabel("x [m]")
     fig.suptitle(title)
     fig.tight_layout(rect=(0.0, 0.0, 0.86, 1.0))
     cax = fig.add_axes((0.88, 0.12, 0.025, 0.76))
-    fig.colorbar(im, cax=cax, label="dry bulk density [Mg/m$^3$]")
+    fig.colorbar(im, cax=cax, label=label)
     return png_bytes(fig, tight=False)
 
 

@@ -223,8 +223,8 @@ def subsoil_pngs(world, figures: list[dict]) -> dict[str, bytes]:
 
 def density_pngs(world, figures: list[dict], initial) -> dict[str, bytes]:
     """The bulk density plots of a terrain study (docs/subsoil.md "Bulk density"), when it computed
-    the mean normal stress: ``density_map.png`` (the dry bulk density by depth after all passes,
-    around the cells loaded) and ``density_passes.png`` (the field's largest against the pass)."""
+    the mean normal stress: ``density_map.png`` (the dry bulk density's increase over the initial by depth
+    after all passes, around the cells loaded) and ``density_passes.png`` (the field's largest against the pass)."""
     st = world.storage
     depths = st.subsoil_depths_m
     dens = [f for f in figures if "bulk_density_max_Mg_per_m3" in f]
@@ -237,9 +237,10 @@ def density_pngs(world, figures: list[dict], initial) -> dict[str, bytes]:
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
     cells = (np.arange(g.n_cells).reshape(g.shape)[si, sj]).ravel()
     rho = bulk_density(st.specific_volume[cells], st.soil_index[cells], world.soils, depths)
+    rho0 = bulk_density(np.zeros_like(st.specific_volume[cells]), st.soil_index[cells], world.soils, depths)
     shape = (si.stop - si.start, sj.stop - sj.start, len(depths))
-    out = {"density_map.png": density_map_png(rho.reshape(shape), depths, ext,
-                                              title="dry bulk density after all passes")}
+    out = {"density_map.png": density_map_png(rho.reshape(shape), depths, ext, initial_Mg_per_m3=rho0.reshape(shape),
+                                              title="dry bulk density after all passes, increase over the initial")}
     if len(dens) == len(figures):
         out["density_passes.png"] = density_passes_png(initial, [f["bulk_density_max_Mg_per_m3"] for f in dens],
                                                        depths)

@@ -56,14 +56,14 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+from ..foundations.config import Key, check_document, check_keys, number, read_document
 from ..foundations.config import builtin_names as _package_names
-from ..foundations.config import check_document, check_keys, number, read_document
 from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators import registry
 from ..integrators.settings import FIXED_STEP_TOLERANCE, EngineSettings, IntegratorSettings
 from ..model import plausibility
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, check_set
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..soil import moisture
@@ -127,6 +127,29 @@ class RunSettings:
 
 SIMULATION_RUN_KEYS = ("duration_s", "output_dt_s", "integrator", "reltol", "abstol", "stop_after_distance_m",
                        "stop_distance_event", "fixed_step_s", "fixed_step_tolerance", "compiled", "all_figures")
+
+# the [run] keys as parse_run checks them (their defaults: RunSettings; docs/scenarios.md's table is made from both)
+RUN_KEYS = {k.name: k for k in (
+    Key("duration_s", "simulated time limit [s]", 0, 1e6, low_open=True),
+    Key("output_dt_s", "output step [s]: one row of trajectory.csv per step (and the grid terrain's macro step)",
+        allowed="(0, duration_s], at most 1e6 steps"),
+    Key("integrator", "the integrator: cvodes, idas (variable step, no build), rosenbrock (compiled fixed step: "
+        "a first build of about half a minute, cached), grid_fast (the terrain engine, with [terrain])",
+        choices=registry.names()),
+    Key("reltol", "relative tolerance of cvodes and idas", 0, 1e-2, low_open=True),
+    Key("abstol", "absolute tolerance of cvodes and idas", 0, 1e-2, low_open=True),
+    Key("stop_after_distance_m", "stop once the centre of gravity has covered this path length [m]; \"none\": no "
+        "distance stop", 0, 1e6, low_open=True, allowed="(0, 1e6] or `\"none\"`"),
+    Key("stop_distance_event", "count the stop distance from this [[torque]] event (default: from t = 0)",
+        allowed="a [[torque]] event's name"),
+    Key("fixed_step_s", "rosenbrock: each output step is split into equal steps of at most this [s]", 1e-5, 0.1),
+    Key("fixed_step_tolerance", "rosenbrock: a step whose error estimate exceeds it is halved (0: no control)",
+        0, 0.1),
+    Key("compiled", "cvodes and idas on the compiled dynamics and Jacobian", choices=(True, False)),
+    Key("all_figures", "also the slow figures of a terrain run (pass animations, earlier passes' plots)",
+        choices=(True, False)),
+    Key("rms_exclude_first_m", "(an MPC run's) the path length before the RMS tracking error is counted [m]", 0, 1e6),
+)}
 
 
 @dataclass(frozen=True)
@@ -207,7 +230,8 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
     """A ``[run]`` table with the given keys allowed, on the given defaults."""
     check_keys("run", t, keys)
     d = defaults
-    duration = _num("run", "duration_s", t.get("duration_s", d.duration_s), 0, 1e6, True)
+    R = RUN_KEYS
+    duration = R["duration_s"].check("run", t.get("duration_s", d.duration_s))
     out_dt = _num("run", "output_dt_s", t.get("output_dt_s", d.output_dt_s), 0, duration, True)
     if duration / out_dt > MAX_OUTPUT_STEPS:  # refused before any work: a run keeps every output step in memory
         raise ScenarioError(f"run.output_dt_s = {out_dt!r} s gives {duration / out_dt:.3g} output steps over "
@@ -218,24 +242,24 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
     if not isinstance(integ, str):
         raise ScenarioError(f"run.integrator = {integ!r} is not one of {', '.join(registry.names())}")
     registry.get(integ)
-    reltol = _num("run", "reltol", t.get("reltol", d.reltol), 0, 1e-2, True)
-    abstol = _num("run", "abstol", t.get("abstol", d.abstol), 0, 1e-2, True)
+    reltol = R["reltol"].check("run", t.get("reltol", d.reltol))
+    abstol = R["abstol"].check("run", t.get("abstol", d.abstol))
     stop = t.get("stop_after_distance_m", d.stop_after_distance_m)
     ev = t.get("stop_distance_event", d.stop_distance_event)
     if isinstance(stop, str) and stop.lower() == "none":
         stop = ev = None  # the distance stop switched off (--set run.stop_after_distance_m=none)
     if stop is not None:
-        stop = _num("run", "stop_after_distance_m", stop, 0, 1e6, True)
+        stop = R["stop_after_distance_m"].check("run", stop)
     if ev is not None and not isinstance(ev, str):
         raise ScenarioError(f"run.stop_distance_event = {ev!r} must be the name of a [[torque]] event")
     if ev is not None and stop is None:
         raise ScenarioError("run.stop_distance_event is set but run.stop_after_distance_m is not")
-    fixed = _num("run", "fixed_step_s", t.get("fixed_step_s", d.fixed_step_s), 1e-5, 0.1)
-    fixed_tol = _num("run", "fixed_step_tolerance", t.get("fixed_step_tolerance", d.fixed_step_tolerance), 0, 0.1)
+    fixed = R["fixed_step_s"].check("run", t.get("fixed_step_s", d.fixed_step_s))
+    fixed_tol = R["fixed_step_tolerance"].check("run", t.get("fixed_step_tolerance", d.fixed_step_tolerance))
     compiled = t.get("compiled", d.compiled)
     if not isinstance(compiled, bool):
         raise ScenarioError(f"run.compiled = {compiled!r} must be true or false")
-    rms = _num("run", "rms_exclude_first_m", t.get("rms_exclude_first_m", d.rms_exclude_first_m), 0, 1e6)
+    rms = R["rms_exclude_first_m"].check("run", t.get("rms_exclude_first_m", d.rms_exclude_first_m))
     all_figures = t.get("all_figures", d.all_figures)
     if not isinstance(all_figures, bool):
         raise ScenarioError(f"run.all_figures = {all_figures!r} must be true or false (true: also the pass "
@@ -267,8 +291,8 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
         else:
             values = preset_fn(preset)
         overrides = {k: v for k, v in t.items() if k != "preset"}
-        values.update(overrides)
-        values = check_set(values, specs, section)
+        values = check_set(ParamSet(values, derived=getattr(values, "derived", {})).with_given(overrides), specs,
+                           section)
     except ParameterError as err:
         raise ScenarioError(str(err)) from err
     return preset, values
@@ -344,19 +368,31 @@ def parse_terrain(t) -> TerrainSettings | None:
     return None if t is None else settings_from_dict(t)
 
 
+START_KEYS = {k.name: k for k in (
+    Key("x_m", "the start position's world x [m]", -1e7, 1e7),
+    Key("y_m", "the start position's world y [m]", -1e7, 1e7),
+    Key("yaw_deg", "the start heading [deg], 0 along world x, counter-clockwise", -360, 360),
+)}
+TORQUE_KEYS = {k.name: k for k in (
+    Key("t_s", "from this time on [s] (the first entry at 0, then strictly increasing)", 0, 1e6),
+    Key("left_N_m", "the left sprocket's torque command [N m]", -1e6, 1e6),
+    Key("right_N_m", "the right sprocket's torque command [N m]", -1e6, 1e6),
+    Key("event", "a name for this instant (unique; run.stop_distance_event may count from it)",
+        allowed="a non-empty string"),
+)}
+
+
 def _parse_torque(entries) -> tuple[TorqueEntry, ...]:
     if not isinstance(entries, list) or not entries:
         raise ScenarioError("[[torque]] is required: at least one entry with t_s, left_N_m, right_N_m")
     out, events = [], set()
     for i, e in enumerate(entries):
         sec = f"torque[{i}]"
-        check_keys(sec, e, ["t_s", "left_N_m", "right_N_m", "event"])
+        check_keys(sec, e, list(TORQUE_KEYS))
         for k in ("t_s", "left_N_m", "right_N_m"):
             if k not in e:
                 raise ScenarioError(f"{sec}.{k} is required")
-        t = _num(sec, "t_s", e["t_s"], 0, 1e6)
-        left = _num(sec, "left_N_m", e["left_N_m"], -1e6, 1e6)
-        right = _num(sec, "right_N_m", e["right_N_m"], -1e6, 1e6)
+        t, left, right = (TORQUE_KEYS[k].check(sec, e[k]) for k in ("t_s", "left_N_m", "right_N_m"))
         if i == 0 and t != 0.0:
             raise ScenarioError(f"{sec}.t_s = {e['t_s']!r}: the first torque entry must be at t_s = 0")
         if out and t <= out[-1].t_s:
@@ -375,10 +411,8 @@ def _parse_torque(entries) -> tuple[TorqueEntry, ...]:
 
 
 def _parse_start(t) -> Start:
-    check_keys("start", t, ["x_m", "y_m", "yaw_deg"])
-    return Start(_num("start", "x_m", t.get("x_m", 0.0), -1e7, 1e7),
-                 _num("start", "y_m", t.get("y_m", 0.0), -1e7, 1e7),
-                 _num("start", "yaw_deg", t.get("yaw_deg", 0.0), -360, 360))
+    check_keys("start", t, list(START_KEYS))
+    return Start(*(START_KEYS[k].check("start", t.get(k, getattr(Start, k))) for k in ("x_m", "y_m", "yaw_deg")))
 
 
 def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:

@@ -264,14 +264,18 @@ def column_compression_m(v1, v0, depths_m) -> np.ndarray:
     return total
 
 
-def cap_to_rut(specific_volume: np.ndarray, cells: np.ndarray, v0: np.ndarray, depths_m, rut_m: np.ndarray) -> int:
+def cap_to_rut(specific_volume: np.ndarray, cells: np.ndarray, v0: np.ndarray, depths_m, rut_m: np.ndarray,
+               before: np.ndarray | None = None) -> int:
     """The rut bounds the compression below it (docs/subsoil.md, "One soil"): a column cannot shorten
     more than its surface sank (nothing heaves under the track; the rest of the rut is soil that flowed
     aside). Where a cell's :func:`column_compression_m` exceeds its plastic rut ``rut_m`` (its stored
-    sinkage, >= 0), its compression at every depth is scaled by rut / compression towards the initial
-    state v0. ``cells``, ``v0`` (per cell, or per cell and depth for a layered soil) and ``rut_m``
-    aligned. In place; returns the number of cells scaled. A depth at its initial state keeps its stored
-    value (0) bit for bit."""
+    sinkage, >= 0), the compression the pass added is scaled back, at every depth by the same fraction,
+    until the column's compression is the rut: from the state ``before`` the pass (the stored values of
+    ``cells`` before :func:`pass_update`; None: the initial state), so that what an earlier pass compressed
+    is never undone (a depth's density never decreases under a further load; where the column was at its
+    rut already, the pass adds nothing). ``cells``, ``v0`` (per cell, or per cell and depth for a layered
+    soil), ``rut_m`` and ``before`` aligned. In place; returns the number of cells scaled. A depth at its
+    initial state keeps its stored value (0) bit for bit."""
     cells = np.asarray(cells, dtype=np.int64)
     if cells.size == 0 or specific_volume.shape[1] == 0:
         return 0
@@ -284,8 +288,15 @@ def cap_to_rut(specific_volume: np.ndarray, cells: np.ndarray, v0: np.ndarray, d
     over = np.flatnonzero(comp > rut)
     if over.size == 0:
         return 0
-    f = rut[over] / comp[over]
-    scaled = v0[over] - f[:, None] * (v0[over] - v[over])
+    if before is None:
+        vb, cb = v0[over], np.zeros(over.size)
+    else:
+        b = np.asarray(before)[over].astype(np.float64)
+        vb = np.where(b > 0, b, v0[over])
+        cb = column_compression_m(vb, v0[over], depths_m)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(comp[over] > cb, np.clip((rut[over] - cb) / (comp[over] - cb), 0.0, 1.0), 0.0)
+    scaled = vb - f[:, None] * (vb - v[over])
     specific_volume[cells[over]] = np.where(old[over] > 0, scaled, old[over]).astype(np.float32)
     return int(over.size)
 

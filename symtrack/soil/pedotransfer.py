@@ -287,7 +287,7 @@ def derivation_note(name: str, soil: dict) -> str:
     if name == "yield_compression_index_k2":
         return "derived: kappa + 0.241 (lambda - kappa), the published set's position (O'Sullivan & Robertson 1996)"
     if name.startswith("subsoil_"):
-        return "the topsoil's (one layer) unless given"
+        return "the topsoil's value (the subsoil is given none of its own)"
     return ""
 
 

@@ -327,8 +327,11 @@ def field_spec_from_dict(doc: dict, default_name: str = "field") -> FieldSpec:
         raise ScenarioError(f"field.speed_m_s = {fs.speed_m_s!r} is outside the allowed range (0, "
                             f"{sc.terrain.max_speed_m_s:g}] m/s (terrain.max_speed_m_s, the speed the channel pool "
                             "is sized for)")
-    resolved = {"name": name, "description": desc, **{k: doc[k] for k in ("run", "model", "vehicle", "soil", "terrain")
-                                                       if k in doc}}
+    resolved = {"name": name, "description": desc, **{k: doc[k] for k in ("run", "model", "terrain") if k in doc}}
+    # the vehicle and the soil with every value after the presets, the files and the overrides (as simulate's
+    # scenario.resolved.toml: a preset file's values are in the record, not only its path)
+    resolved["vehicle"] = {"preset": sc.vehicle_preset, **sc.vehicle}
+    resolved["soil"] = {"preset": sc.soil_preset, **sc.soil}
     resolved["field"] = {k: (list(v) if isinstance(v, tuple) else ("none" if v is None else v))
                          for k, v in dataclasses.asdict(fs).items()}
     return FieldSpec(name, desc, fs, sc, resolved)
@@ -420,8 +423,8 @@ def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa
         fr = subsoil.risk_area_fractions(_with_own_weight(terrain), precompression_stress_Pa, traff, area)
         pc = np.broadcast_to(np.asarray(precompression_stress_Pa, dtype=np.float64), sm.shape)
         out["subsoil_depths_m"] = depths
-        # the weakest cell's (at any depth; by depth: at each)
-        out["subsoil_precompression_stress_kPa"] = 1e-3 * float(pc.min())
+        # the weakest cell's at any depth (named so: a two-layer soil's depths differ), and at each depth
+        out["subsoil_precompression_stress_min_kPa"] = 1e-3 * float(pc.min())
         out["subsoil_precompression_stress_by_depth_kPa"] = [1e-3 * float(v) for v in pc.min(axis=0)]
         out["subsoil_sigma_z_max_kPa"] = [1e-3 * float(v) for v in (sm[traff].max(axis=0) if n_t
                                                                      else np.zeros(len(depths)))]
@@ -435,8 +438,9 @@ def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa
 
 def flat_figures(pattern: str, figures: dict) -> dict:
     """The scalar figures of a pattern under ``<pattern>_<name>`` (the per-depth risk fractions of
-    the field as ``<pattern>_risk_fraction_of_field_<class>_at_<depth>m``): the top-level keys of
-    summary.json that a sweep's results.csv takes."""
+    the field as ``<pattern>_risk_fraction_of_field_<class>_at_<depth>m``, the precompression stress as
+    ``<pattern>_subsoil_precompression_stress_at_<depth>m_kPa``): the top-level keys of summary.json that a
+    sweep's results.csv takes."""
     out = {}
     for k, v in figures.items():
         if isinstance(v, (bool, int, float, str)) or v is None:
@@ -445,6 +449,9 @@ def flat_figures(pattern: str, figures: dict) -> dict:
         for d, v in zip(figures.get("subsoil_depths_m", []), figures.get(f"risk_fraction_of_field_{name}", []),
                         strict=True):
             out[f"{pattern}_risk_fraction_of_field_{name}_at_{d:g}m"] = v
+    for d, v in zip(figures.get("subsoil_depths_m", []), figures.get("subsoil_precompression_stress_by_depth_kPa", []),
+                    strict=True):
+        out[f"{pattern}_subsoil_precompression_stress_at_{d:g}m_kPa"] = v
     return out
 
 
@@ -655,11 +662,16 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult, figures: bool = True) -> 
                                              title=f"compaction risk: {label}{blocks}")
         if pr.soils and "bulk_density_initial_Mg_per_m3" in pr.figures:
             rho = density.bulk_density(pr.terrain.specific_volume, pr.terrain.soil_index, pr.soils, depths)
-            rho, f = field_plots.block_max(rho.reshape(*shape, len(depths)), field_plots.RISK_MAP_BLOCKS)
+            rho0 = density.bulk_density(np.zeros_like(pr.terrain.specific_volume), pr.terrain.soil_index, pr.soils,
+                                        depths)
+            # the change from the initial density, blocks their largest (a 1.35 topsoil's compaction shows
+            # beside a 1.55 subsoil's)
+            change, f = field_plots.block_max((rho - rho0).reshape(*shape, len(depths)), field_plots.RISK_MAP_BLOCKS)
+            rho, _ = field_plots.block_max(rho.reshape(*shape, len(depths)), field_plots.RISK_MAP_BLOCKS)
             blocks = f"\n(blocks of {f * g.cell_m:g} m: the largest)" if f > 1 else ""
             files["density_map.png"] = density_map_png(
                 rho, depths, (x0, x0 + rho.shape[0] * f * g.cell_m, y0, y0 + rho.shape[1] * f * g.cell_m),
-                title=f"dry bulk density: {label}{blocks}")
+                title=f"dry bulk density, increase over the initial: {label}{blocks}", initial_Mg_per_m3=rho - change)
     return files
 
 
@@ -908,8 +920,43 @@ def _report(folder, spec: FieldSpec, results: dict, summary: dict, files: dict) 
     names = list(results)
     keys = [k for k, v in results[names[0]].figures.items() if isinstance(v, (bool, int, float, str))] if names else []
     rows = [[k, *(results[n].figures.get(k) for n in names)] for k in keys]
+    # the figures by depth, a row per depth (the strength, the stress, the density, the risk)
+    depths = results[names[0]].figures.get("subsoil_depths_m", []) if names else []
+    for k, v in (results[names[0]].figures.items() if names else ()):
+        if k != "subsoil_depths_m" and isinstance(v, list) and len(v) == len(depths) and \
+                all(isinstance(x, (int, float)) for x in v):
+            rows += [[f"{k} at {d:g} m", *(_at(results[n].figures.get(k), j) for n in names)]
+                     for j, d in enumerate(depths)]
+    tables = {"Soil": soil_table(spec.scenario.soil, depths, spec.scenario.soil_preset)}
+    if names:
+        tables["Patterns"] = (["figure", *names], rows)
     done = ", ".join(f"{n}: {len(results[n].records)} passes" for n in names)
     note = (f"Field study '{spec.name}': the patterns {done}; "
             f"{'complete' if summary.get('complete', True) else 'incomplete'}.")
     return report_html(f"symtrack field: {spec.name}", summary, images, files["field.resolved.toml"], note=note,
-                       tables={"Patterns": (["figure", *names], rows)} if names else None)
+                       tables=tables)
+
+
+def _at(v, j):
+    return v[j] if isinstance(v, list) and j < len(v) else None
+
+
+def soil_table(soil: dict, depths_m, preset: str = "") -> tuple[list, list]:
+    """The report's description of the soil (``preset``: what it was made from): per layer its texture, initial
+    dry bulk density and matric suction, and at each subsoil depth the precompression stress (header, rows)."""
+    from ..soil.pedotransfer import is_layered, subsoil_set
+
+    layers = [("topsoil" if is_layered(soil) else "the soil", soil)]
+    if is_layered(soil):
+        layers.append((f"subsoil (from {float(soil['subsoil_top_m']):g} m)", subsoil_set(soil)))
+    rows = [["preset", preset]] if preset else []
+    rows += [[f"{name}: clay / silt / sand [kg/kg]", f"{sp['clay_kg_per_kg']:.3g} / {sp['silt_kg_per_kg']:.3g} / "
+             f"{sp['sand_kg_per_kg']:.3g}"] for name, sp in layers]
+    rows += [[f"{name}: initial dry bulk density [Mg/m^3]", f"{sp['bulk_density_initial_Mg_per_m3']:.4g}"]
+             for name, sp in layers]
+    rows += [[f"{name}: matric suction [kPa]", f"{sp['matric_suction_kPa']:.4g}"] for name, sp in layers]
+    if depths_m:
+        pc = density.precompression_table([soil], list(depths_m))[0]
+        rows += [[f"precompression stress at {d:g} m [kPa]", f"{1e-3 * float(v):.4g}"] for d, v in zip(
+            depths_m, pc, strict=True)]
+    return ["soil", "value"], rows

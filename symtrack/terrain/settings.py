@@ -39,7 +39,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from ..foundations.config import check_keys, integer, number
+from ..foundations.config import Key, check_keys, number
 from ..foundations.errors import ScenarioError
 from ..soil.moisture import PATH_KEYS as MOISTURE_PATH_KEYS
 from ..soil.moisture import MoistureMap, parse_moisture_map
@@ -58,6 +58,32 @@ PATH_KEYS = SOIL_MAP_PATH_KEYS + SURFACE_PATH_KEYS + MOISTURE_PATH_KEYS
 
 MAX_CELLS = 100_000_000
 MAX_SUBSOIL_DEPTHS = 8
+
+
+# the [terrain] keys as TerrainSettings checks them (docs/scenarios.md's table is made from these and the defaults)
+TERRAIN_KEYS = {k.name: k for k in (
+    Key("size_m", "the field's size along world x and y [m]", 0.5, 1e4, allowed="[x, y], each in [0.5, 1e4]"),
+    Key("cell_m", "the cell's side [m] (at most 1e8 cells)", 0.01, 5.0),
+    Key("origin_m", "world (x, y) of the field's lower-left corner [m] (none: the field centred on the start)",
+        -1e7, 1e7, allowed="[x, y], each in [-1e7, 1e7]"),
+    Key("channels", "the channel pool is M x M channels (\"auto\": M from the speed bound)",
+        allowed='`"auto"` or an integer M in [2, 400]'),
+    Key("initial_state", "a terrain file to continue from", allowed="a terrain file's path"),
+    Key("passes", "passes over the same terrain in one run", 1, 100, integer=True),
+    Key("max_speed_m_s", "the speed bound M is derived from (\"auto\") [m/s]", 0, 100, low_open=True),
+    Key("release_time_s", "bound on the time a cell takes to unload, for M [s]", 0, 10, low_open=True),
+    Key("release_rate_m_s", "|dz/dt| below which an unloaded cell is released [m/s]", 0, 1, low_open=True),
+    Key("settle_s", "settling of the cells under the vehicle at rest before each pass [s]", 0, 10),
+    Key("subsoil_depths_m", "depths of the subsoil stress and the bulk density [m] ([]: off)", 0, 5, low_open=True,
+        allowed=f"increasing, each in (0, 5], at most {MAX_SUBSOIL_DEPTHS}"),
+    Key("soil_map", "a field of several soils (docs/terrain.md)", allowed="a table [terrain.soil_map]"),
+    Key("surface", "the ground's shape: slopes, furrows, an elevation raster (docs/vehicle3d.md)",
+        allowed="a table [terrain.surface]"),
+    Key("moisture", "each cell's water content on the day, a raster (docs/subsoil.md)",
+        allowed="a table [terrain.moisture]"),
+    Key("towed", "a trailer on one axle of tyres behind the crawler (docs/subsoil.md)",
+        allowed="a table [terrain.towed]"),
+)}
 
 
 @dataclass(frozen=True)
@@ -85,9 +111,10 @@ class TerrainSettings:
     given: frozenset = field(default=frozenset(), compare=False, repr=False)
 
     def __post_init__(self):
+        K = TERRAIN_KEYS
         for i, v in enumerate(self.size_m):
-            _num(f"size_m[{i}]", v, 0.5, 1e4)
-        _num("cell_m", self.cell_m, 0.01, 5.0)
+            _num(f"size_m[{i}]", v, K["size_m"].low, K["size_m"].high)
+        K["cell_m"].check("terrain", self.cell_m)
         n = self.shape[0] * self.shape[1]
         if n > MAX_CELLS:
             raise ScenarioError(f"terrain: size_m = {list(self.size_m)} at cell_m = {self.cell_m} gives {n} cells; "
@@ -101,17 +128,14 @@ class TerrainSettings:
                                     "in [2, 400] (the pool has M x M channels)")
         if self.initial_state is not None and (not isinstance(self.initial_state, str) or not self.initial_state):
             raise ScenarioError(f"terrain.initial_state = {self.initial_state!r} must be a terrain file path")
-        integer("terrain.passes", self.passes, 1, 100)
-        _num("max_speed_m_s", self.max_speed_m_s, 0, 100, low_open=True)
-        _num("release_time_s", self.release_time_s, 0, 10, low_open=True)
-        _num("release_rate_m_s", self.release_rate_m_s, 0, 1, low_open=True)
-        _num("settle_s", self.settle_s, 0, 10)
+        for name in ("passes", "max_speed_m_s", "release_time_s", "release_rate_m_s", "settle_s"):
+            K[name].check("terrain", getattr(self, name))
         d = self.subsoil_depths_m
         if not isinstance(d, (list, tuple)) or len(d) > MAX_SUBSOIL_DEPTHS:
             raise ScenarioError(f"terrain.subsoil_depths_m = {d!r} must be a list of at most {MAX_SUBSOIL_DEPTHS} "
                                 "depths in m (an empty list switches the subsoil stress off)")
         for i, v in enumerate(d):
-            _num(f"subsoil_depths_m[{i}]", v, 0, 5, low_open=True)
+            _num(f"subsoil_depths_m[{i}]", v, K["subsoil_depths_m"].low, K["subsoil_depths_m"].high, low_open=True)
             if i and not v > d[i - 1]:
                 raise ScenarioError(f"terrain.subsoil_depths_m = {list(d)!r} must increase (entry {i} is {v!r})")
 

@@ -469,13 +469,14 @@ class World:
         st = self.storage
         np.maximum(st.sigma_max, self.pass_sigma, out=st.sigma_max)
         cells = np.flatnonzero(self.touched)
+        before = st.specific_volume[cells].copy()  # what the earlier passes compressed (kept: density.cap_to_rut)
         density.pass_update(st.specific_volume, self.pass_sigma, st.soil_index, self.soils,
                             cells=cells, cell_params=self.cell_day, geostatic_Pa=self.geostatic_Pa(),
                             depths_m=st.subsoil_depths_m, arrays=self.layer_arrays())
         # the rut bounds the compression below it: one deformation (density.cap_to_rut)
         if st.subsoil_depths_m:
             v0 = self.layer_arrays()["v0"][st.soil_index[cells]]
-            density.cap_to_rut(st.specific_volume, cells, v0, st.subsoil_depths_m, st.z[cells])
+            density.cap_to_rut(st.specific_volume, cells, v0, st.subsoil_depths_m, st.z[cells], before)
 
     def layer_arrays(self) -> dict:
         """density.soil_arrays of the field's soils at the subsoil depths ((n_soils, n_depths): each
