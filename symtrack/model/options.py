@@ -53,7 +53,7 @@ MODEL_KEYS = {k.name: k for k in (
     Key("pivot_smoothing_rad_s", "the regularisation of the pivot's position [rad/s]", **_POSITIVE),
     Key("soil_law", "the terrain cells' soil law", choices=tuple(SOIL_LAWS)),
     Key("vehicle", "the vehicle model: planar, or 3d (heave, pitch and roll on the ground's shape)",
-        choices=VEHICLES),
+        choices=tuple(vehicle_registry.names())),  # the built-in menu (a plug-in registers later)
     Key("contact_segments", "3d: the segments along each track", 1, 64, integer=True),
 )}
 
