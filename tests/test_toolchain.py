@@ -42,7 +42,8 @@ def _spec(root: Path, value: int, calls: list | None = None, **kw) -> build.Buil
                            output="libanswer.so", sources=sources, what=f"the answer {value}", root=root, **kw)
 
 
-def test_a_second_build_is_a_cache_hit_and_the_key_follows_the_sources(tmp_path, caplog):
+def test_a_second_build_is_a_cache_hit_and_the_key_follows_the_sources(tmp_path, caplog, monkeypatch):
+    monkeypatch.delenv(build.OPT_LEVEL_ENV, raising=False)  # the folder names of the tuned flags
     calls: list[int] = []
     n0 = len(build.builds)
     with caplog.at_level(logging.INFO, logger="symtrack.toolchain"):
@@ -61,6 +62,34 @@ def test_a_second_build_is_a_cache_hit_and_the_key_follows_the_sources(tmp_path,
     other = build.build(_spec(tmp_path, 7, calls))  # other sources: another entry
     assert other.parent != so.parent and ctypes.CDLL(str(other)).symtrack_answer() == 7
     assert calls == [42, 7]
+
+
+def test_the_opt_level_overrides_the_flags_but_not_a_tuned_build_s_and_has_its_own_entries(tmp_path, monkeypatch):
+    seen = []
+    real_run = build_cache.subprocess.Popen
+
+    def spy(cmd, *a, **k):
+        if "-c" in cmd:  # the compile commands (not the link's)
+            seen.append(cmd)
+        return real_run(cmd, *a, **k)
+
+    monkeypatch.setattr(build_cache.subprocess, "Popen", spy)
+    monkeypatch.delenv(build.OPT_LEVEL_ENV, raising=False)
+    tuned_flags = build.build(_spec(tmp_path, 3, cflags=("-O2", "-Wall")))
+    assert "-O2" in seen[-1] and "-O0" not in seen[-1]
+    monkeypatch.setenv(build.OPT_LEVEL_ENV, "0")
+    assert build.opt_level() == 0
+    at_0 = build.build(_spec(tmp_path, 3, cflags=("-O2", "-Wall")))
+    assert "-O0" in seen[-1] and "-O2" not in seen[-1] and "-Wall" in seen[-1]
+    assert at_0.parent.name == tuned_flags.parent.name + "-O0" and ctypes.CDLL(str(at_0)).symtrack_answer() == 3
+    default = build.build(_spec(tmp_path, 4))  # the default flags (no cflags) too
+    assert "-O0" in seen[-1] and "-O2" not in seen[-1]
+    tuned = build.build(_spec(tmp_path, 5, cflags=("-O2",), tuned=True))  # a tuned build keeps its flags
+    assert "-O2" in seen[-1] and "-O0" not in seen[-1] and not tuned.parent.name.endswith("-O0")
+    assert default.exists() and tuned.exists()
+    monkeypatch.setenv(build.OPT_LEVEL_ENV, "fast")
+    with pytest.raises(SimulationError, match="SYMTRACK_OPT_LEVEL = 'fast' is not one of 0, 1, 2, 3"):
+        build.opt_level()
 
 
 def test_the_key_follows_the_flags(tmp_path):
@@ -162,6 +191,7 @@ def test_a_compiler_error_names_the_build_and_leaves_nothing(tmp_path):
 
 
 def test_the_cache_root_is_the_environment_variable_or_the_user_cache(monkeypatch, tmp_path):
+    monkeypatch.delenv(build.OPT_LEVEL_ENV, raising=False)
     monkeypatch.setenv("SYMTRACK_CACHE", str(tmp_path))
     assert build.cache_root() == tmp_path
     spec = build.BuildSpec(kind="k", key="0123456789abcdef0123", output="x", sources=dict, what="x", group="mpc",

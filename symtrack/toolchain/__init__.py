@@ -2,6 +2,7 @@
 through :func:`build` (:mod:`symtrack.toolchain.cache`)."""
 
 from .cache import (
+    OPT_LEVEL_ENV,
     BuildSpec,
     Built,
     LockBusy,
@@ -15,10 +16,11 @@ from .cache import (
     file_lock,
     find_compiler,
     native_cflags,
+    opt_level,
     require_compiler,
     set_require_compiled,
 )
 
-__all__ = ["BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag", "compiled_required",
-           "compiler", "digest", "file_lock", "find_compiler", "native_cflags", "require_compiler",
-           "set_require_compiled"]
+__all__ = ["OPT_LEVEL_ENV", "BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag",
+           "compiled_required", "compiler", "digest", "file_lock", "find_compiler", "native_cflags", "opt_level",
+           "require_compiler", "set_require_compiled"]
