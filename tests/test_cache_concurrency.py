@@ -45,7 +45,7 @@ def test_two_concurrent_builds_of_one_key_both_succeed_and_compile_once(tmp_path
     cc.chmod(0o755)
     out_so = tmp_path / "cache" / "race-0123456789abcdef" / "librace.so"
     go = tmp_path / "go"
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(REPO), SYMTRACK_OPT_LEVEL="")  # the tuned flags' folder name
     procs = [subprocess.Popen([sys.executable, "-c", BUILD, str(out_so.parent.parent), str(cc), str(go)], env=env,
                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
              for _ in range(2)]
