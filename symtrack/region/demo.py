@@ -79,10 +79,14 @@ SYSTEMS = {
 # 1.40 Mg/m^3), over presets of the package for what the fast fidelity does not use (Bekker's and Janosi's
 # parameters) and for the stress concentration factor (5 and 6). Over the demo's suctions (pF 1.0-3.4) both are
 # inside Schjønning & Lamandé's (2018) range, where their strength grows with the suction
+# Each has a denser subsoil below the plough's 0.3 m (1.55 Mg/m^3, ASSUMED: a typical plough-pan subsoil), with
+# its own texture and strength, and the topsoil's suction of the day
 SOILS = {"silt_loam": {"preset": "sandy_loam_15", "clay_kg_per_kg": 0.18, "silt_kg_per_kg": 0.62,
-                       "sand_kg_per_kg": 0.20, "bulk_density_initial_Mg_per_m3": 1.40},
+                       "sand_kg_per_kg": 0.20, "bulk_density_initial_Mg_per_m3": 1.40, "subsoil_top_m": 0.3,
+                       "subsoil_bulk_density_initial_Mg_per_m3": 1.55},
          "clay_loam": {"preset": "north_gower_clayey_loam_46", "clay_kg_per_kg": 0.32, "silt_kg_per_kg": 0.40,
-                       "sand_kg_per_kg": 0.28, "bulk_density_initial_Mg_per_m3": 1.40}}
+                       "sand_kg_per_kg": 0.28, "bulk_density_initial_Mg_per_m3": 1.40, "subsoil_top_m": 0.3,
+                       "subsoil_bulk_density_initial_Mg_per_m3": 1.55}}
 # the years: one wet (the suction pF 0.4 lower all year) and one dry (pF 0.3 higher)
 YEARS = {2021: -0.4, 2022: 0.3}
 

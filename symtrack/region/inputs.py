@@ -123,6 +123,7 @@ class RegionSpec:
     moisture_class_pF: float
     crs: str | None
     document: dict = field(default_factory=dict)
+    margin_m: float = DEFAULT_MARGIN_M
 
     @property
     def area_ha(self) -> float:
@@ -145,7 +146,8 @@ def _soil(name: str, t: dict):
             preset = soil_preset(t["preset"])
         except ParameterError as err:
             raise ScenarioError(f"{where}.preset: {err}") from None
-        values, derived = dict(preset), preset.derived
+        # a key the region file gives is given, never derived (even where it equals the preset's derived value)
+        values, derived = dict(preset), {k: v for k, v in preset.derived.items() if k not in t}
     values.update({k: v for k, v in t.items() if k in names})
     try:  # (the preset's derived values derived again from a changed description: ParamSet)
         return check_set(ParamSet(values, derived=derived), SOIL_PARAMS, where)
@@ -295,19 +297,26 @@ def read_fields(path, margin_m: float, where: str = "fields_file") -> list[dict]
         elif theta <= -math.pi / 2:
             theta += math.pi
         ring = np.asarray(geom.exterior.coords)[:-1, :2]
-        origin = ring.mean(axis=0)
-        c, s = math.cos(theta), math.sin(theta)
-        d = ring - origin
-        local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
-        offset = -local.min(axis=0) + margin_m
-        local = local + offset
-        size = local.max(axis=0) + margin_m
         out.append({"field_id": fid, "index": i, "soil": props["soil"], "system": props["system"],
                     "area_m2": float(geom.area), "world_ring": tuple(map(tuple, ring.tolist())),
-                    "ring": tuple(map(tuple, local.tolist())), "size_m": (float(size[0]), float(size[1])),
-                    "theta_rad": theta, "origin": (float(origin[0]), float(origin[1])),
-                    "offset": (float(offset[0]), float(offset[1]))})
+                    **field_frame(ring, theta, margin_m)})
     return out
+
+
+def field_frame(ring, theta: float, margin_m: float) -> dict:
+    """The field's frame for track lines at ``theta`` (module doc of :class:`FieldShape`): its local ring, its
+    grid's size, theta, the origin and the offset."""
+    ring = np.asarray(ring, dtype=float)
+    origin = ring.mean(axis=0)
+    c, s = math.cos(theta), math.sin(theta)
+    d = ring - origin
+    local = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]])
+    offset = -local.min(axis=0) + margin_m
+    local = local + offset
+    size = local.max(axis=0) + margin_m
+    return {"ring": tuple(map(tuple, local.tolist())), "size_m": (float(size[0]), float(size[1])),
+            "theta_rad": float(theta), "origin": (float(origin[0]), float(origin[1])),
+            "offset": (float(offset[0]), float(offset[1]))}
 
 
 # ---- the calendar -----------------------------------------------------------------------------------------
@@ -441,7 +450,7 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
                                 f"[systems] ({', '.join(systems)})")
         fields.append(FieldShape(**f))
     return RegionSpec(doc.get("name", name), doc.get("description", ""), folder, fields, soils, suction, fleet, systems,
-                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc)
+                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin)
 
 
 def load_region(path) -> RegionSpec:
