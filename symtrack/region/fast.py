@@ -21,6 +21,11 @@ For each operation of the season, in the order of the days they are worked:
    with) with the soil of the day's matric suction (its moisture class, :mod:`symtrack.region.inputs`) and
    the soil's own weight (:func:`~symtrack.terrain.density.geostatic_table`): an operation that passes a
    cell k times folds it k times at the operation's stress there.
+   4b. A tracked machine leaves a rut, and the rut bounds the compression below it, as the terrain engine's
+   world bounds it (:func:`symtrack.terrain.density.cap_to_rut`): after each tracked pass the cells it passed
+   get the rut of their N tracked passes so far, the first pass's quasi-static plastic rut
+   (:func:`symtrack.region.fleet.first_pass_rut_m`) times N^beta (the engine's cycle law). Wheels leave no rut
+   here, as in the package's wheeled pass (symtrack/terrain/wheeled.py), so their compression is not bounded.
 5. **The risk**: (traffic stress + own weight) / the day's precompression stress, graded by
    :func:`symtrack.terrain.subsoil.risk_class`; the season keeps each cell's largest ratio.
 6. **Tillage** (an operation with ``loosens_to_m``): after it, every cell of the field above that depth is
@@ -71,6 +76,10 @@ class FastOp:
     profile: StressProfile
     soil_day: dict
     day: int = 0
+    # a tracked machine's first-pass plastic rut [m] (fleet.first_pass_rut_m) and the soil's repeated-loading
+    # exponent: the rut after N passes, rut_first_m N^beta, bounds the column's compression (step 4b); None: wheels
+    rut_first_m: float | None = None
+    rut_exponent: float = 0.0
 
 
 @dataclass
@@ -174,9 +183,11 @@ def _arc(x0, y0, c, s, g, strips, reach, pad, profile, shape, cell_m, counts, si
 
 
 def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: FastOp, depths_m, arrays: dict,
-                   geostatic_Pa: np.ndarray) -> int:
+                   geostatic_Pa: np.ndarray, track_passes: np.ndarray | None = None) -> int:
     """Fold an operation's passes into the compression state (module doc, step 4): cells passed k times are
-    folded k times at the operation's stress there. Returns the (cell, depth) entries that yielded."""
+    folded k times at the operation's stress there; after each pass of a tracked machine, the column's
+    compression of the cells it passed is bounded by their rut (step 4b), ``track_passes`` (n_cells,) the
+    tracked passes each cell has had so far (updated in place). Returns the (cell, depth) entries that yielded."""
     flat_c = counts.ravel()
     p = sig.reshape(-1, sig.shape[-1])
     si = np.zeros(flat_c.size, dtype=np.int32)
@@ -185,6 +196,11 @@ def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: F
         cells = np.flatnonzero(flat_c >= k)
         moved += density.pass_update(state, p, si, [op.soil_day], cells=cells, geostatic_Pa=geostatic_Pa,
                                      depths_m=list(depths_m), arrays=arrays)
+        if op.rut_first_m is not None and track_passes is not None:
+            track_passes[cells] += 1
+            rut = op.rut_first_m * track_passes[cells].astype(np.float64) ** op.rut_exponent
+            v0 = np.broadcast_to(arrays["v0"][0], (cells.size, len(depths_m)))
+            density.cap_to_rut(state, cells, v0, list(depths_m), rut)
     return moved
 
 
@@ -204,13 +220,14 @@ def run_season_fast(ops, shape, cell_m: float, depths_m, state: np.ndarray | Non
     ratio_max = np.zeros((nx, ny, nd), dtype=np.float32)
     figs = []
     depths = np.asarray(depths_m, dtype=float)
+    track_passes = np.zeros(nx * ny, dtype=np.int32)
     for op in ops:
         t0 = time.perf_counter()
         c1, sig = sweep_operation(op, shape, cell_m, rule)
         c = c1 * op.repeat
         arrays = density.soil_arrays([op.soil_day], list(depths_m))
         geo = density.geostatic_table([op.soil_day], list(depths_m))
-        moved = fold_operation(state, c, sig, op, depths_m, arrays, geo)
+        moved = fold_operation(state, c, sig, op, depths_m, arrays, geo, track_passes)
         loaded = sig > 0
         ratio = np.where(loaded, (sig + geo[0]) / arrays["pc"][0], 0.0).astype(np.float32)
         np.maximum(ratio_max, ratio, out=ratio_max)

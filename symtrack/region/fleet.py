@@ -36,8 +36,8 @@ from ..foundations.errors import ScenarioError
 from ..terrain import subsoil
 from ..terrain.tyre import Tyre, footprint_table, load_capacity_kN, recommended_inflation_kPa
 
-__all__ = ["BUILTIN_FLEET", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec", "load_fleet",
-           "parse_fleet", "stress_profile", "track_machine"]
+__all__ = ["BUILTIN_FLEET", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec", "first_pass_rut_m",
+           "load_fleet", "parse_fleet", "stress_profile", "track_machine"]
 
 BUILTIN_FLEET = "builtin"
 GRAVITY_M_S2 = 9.81
@@ -342,3 +342,25 @@ def stress_profile(machine: Machine, depths_m, xi: float, step_m: float = PROFIL
     per process for these arguments."""
     depths = tuple(float(d) for d in depths_m)
     return _profile_cached(machine.key(), machine, depths, float(xi), float(step_m), float(reach_m))
+
+
+def first_pass_rut_m(machine: Machine, soil: dict) -> float | None:
+    """The plastic rut a tracked machine's first quasi-static pass leaves [m] (None for wheels: the package's
+    wheeled pass leaves no rut, terrain/wheeled.py): the package's soil law (symtrack.model.soil_law, Bekker's
+    virgin loading) loaded to the track's static pressure p, z_max = (p / k_eq)^(1/n), then unloaded on its
+    elastic line, k_u = max(K_e, kappa p / z_max) (symtrack.model.cell.unloading_slope): z_max - p / k_u. After N
+    passes the terrain engine's rut is this N^beta (the soil's ``repeated_loading_exponent``); the density
+    fold's column compression is bounded by it as the world bounds it (terrain/density.py, cap_to_rut)."""
+    if machine.tracks is None:
+        return None
+    from ..model import soil_law
+    from ..model.options import ModelOptions
+
+    law_obj = soil_law.make(ModelOptions())
+    law = law_obj.values({**soil, "track_width_m": machine.tracks.track_width_m})
+    p = machine.tracks.pressure_Pa
+    z_max = float(law_obj.static_sinkage(p, law))
+    named = law_obj.named(law)
+    k_e, kappa = float(named["elastic_stiffness_Pa_per_m"]), float(named["kappa"])
+    k_u = max(k_e, kappa * p / max(z_max, 1e-12))
+    return max(z_max - p / k_u, 0.0)

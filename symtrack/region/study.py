@@ -68,6 +68,8 @@ class RegionResult:
     skipped: int
     wall_time_s: float
     summary: dict
+    # the phases' wall times [s]: the plans' check, the cluster's start and the tables, the tasks, the outputs
+    phases_s: dict = dataclasses.field(default_factory=dict)
 
 
 def _settings(spec: RegionSpec, f, op, machine, seed: int) -> OperationSettings:
@@ -320,8 +322,9 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
         check_scheduler_address(scheduler)
     out = check_output_folder(str(out))
     _check_same_study(out, spec)
-    check_plans(spec, progress=False)
     t0 = time.perf_counter()
+    check_plans(spec, progress=False)
+    phases = {"plans_s": time.perf_counter() - t0}
     todo = [(fi, y) for fi, f in enumerate(spec.fields) for y in spec.years if not _done(out, f, y)]
     n_all = len(spec.fields) * len(spec.years)
     skipped = n_all - len(todo)
@@ -332,19 +335,25 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "region.json", json.dumps(_describe(spec), indent=2, default=str) + "\n")
     if todo:
+        t1 = time.perf_counter()
         with dask_client("region", workers, scheduler) as client:
             t_tables = time.perf_counter()
             ctx = build_context(spec, client)
             say("the tables (%d stress profiles, %d soils by moisture class) in %.1f s", len(ctx.profiles),
                 len(ctx.class_soils), time.perf_counter() - t_tables)
+            t2 = time.perf_counter()
             _run_all(out, spec, ctx, todo, client, progress)
+            t3 = time.perf_counter()
+        phases.update(cluster_s=t_tables - t1, tables_s=t2 - t_tables, tasks_s=t3 - t2)
     rows = [json.loads((_season_dir(out, f, y) / "summary.json").read_text()) for f in spec.fields for y in spec.years]
     summary = {}
     if outputs:
         from .outputs import write_outputs
 
+        t4 = time.perf_counter()
         summary = write_outputs(spec, out, rows)
-    return RegionResult(out, rows, len(todo), skipped, time.perf_counter() - t0, summary)
+        phases["outputs_s"] = time.perf_counter() - t4
+    return RegionResult(out, rows, len(todo), skipped, time.perf_counter() - t0, summary, phases)
 
 
 def _scheduler_lost(client, err: BaseException) -> bool:
