@@ -175,3 +175,14 @@ def test_a_killed_worker_loses_no_field_season(reference, tmp_path):
         assert not errors, errors
     assert _hashes(tmp_path / "o") == _hashes(out)
     assert _figures(tmp_path / "o") == _figures(out)
+
+
+def test_the_command_refuses_bad_inputs_before_any_work(tmp_path, capsys):
+    from symtrack.cli.main import main
+
+    p = _small(tmp_path / "in", n=2)
+    p.write_text(p.read_text().replace('machine = "disc_6m"', 'machine = "disc_9m"'))
+    assert main(["region", str(p), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "systems.mini.operations[1].machine = 'disc_9m' is not a machine of the built-in fleet" in err
+    assert not (tmp_path / "o" / "fields").exists()

@@ -228,10 +228,14 @@ def run_season_fast(ops, shape, cell_m: float, depths_m, state: np.ndarray | Non
         arrays = density.soil_arrays([op.soil_day], list(depths_m))
         geo = density.geostatic_table([op.soil_day], list(depths_m))
         moved = fold_operation(state, c, sig, op, depths_m, arrays, geo, track_passes)
-        loaded = sig > 0
-        ratio = np.where(loaded, (sig + geo[0]) / arrays["pc"][0], 0.0).astype(np.float32)
-        np.maximum(ratio_max, ratio, out=ratio_max)
-        np.maximum(sig_max, sig, out=sig_max)
+        # the season's records, on the cells the operation passed (the stress is recorded there only)
+        idx = np.flatnonzero(c1.ravel())
+        s_op = sig.reshape(-1, nd)[idx]
+        # (graded where the traffic loaded the depth, as the terrain's risk layer: terrain/gis.py)
+        ratio = np.where(s_op > 0, (s_op + geo[0]) / arrays["pc"][0], 0.0).astype(np.float32)
+        rm, sm = ratio_max.reshape(-1, nd), sig_max.reshape(-1, nd)
+        rm[idx] = np.maximum(rm[idx], ratio)
+        sm[idx] = np.maximum(sm[idx], s_op)
         counts += c
         if op.loosens_to_m is not None:
             above = depths < op.loosens_to_m
