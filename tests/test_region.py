@@ -84,7 +84,7 @@ def test_the_centre_rule_counts_are_traffic_seasons_counts(fleet):
                            headland_passes=3, tracks="random", seed=4, turn="auto", turn_radius_m=m.turn_radius_m)
     op = FastOp("p", fs, m, 1, None, stress_profile(m, DEPTHS, 5.0), dict(soil_preset("sandy_loam_15")))
     shape = (320, 200)
-    counts, sig = sweep_operation(op, shape, 0.25, "centre")
+    counts, sig, cover = sweep_operation(op, shape, 0.25, "centre")
     from symtrack.studies.operations import plan_operation
 
     ts = TSMachine("p", m.working_width_m, m.outer_width_m, m.turn_radius_m,
@@ -93,7 +93,10 @@ def test_the_centre_rule_counts_are_traffic_seasons_counts(fleet):
     assert np.array_equal(counts, ref)
     assert np.array_equal(sig[..., 0] > 0, counts > 0)  # the stress is recorded under the footprint, only there
     # the overlap rule covers more: every centre-rule cell and a rim
-    c2, _ = sweep_operation(op, shape, 0.25, "overlap")
+    # (the centre rule's cells are at least half under a strip; the overlap rule's rim, less)
+    assert cover[counts > 0].min() >= 0.5 - 1e-6 and np.all(cover[counts == 0] == 0)
+    c2, _, cover2 = sweep_operation(op, shape, 0.25, "overlap")
+    assert cover2[(c2 > 0) & (counts == 0)].max() <= 0.5 + 1e-6
     assert np.all(c2[counts > 0] > 0) and (c2 > 0).sum() > (counts > 0).sum()
 
 
@@ -105,7 +108,7 @@ def test_a_drive_covers_its_strips_area():
                            tracks="ab", turn="u", turn_radius_m=4.0, lines=1)
     op = FastOp("s", fs, m, 1, None, stress_profile(m, DEPTHS, 5.0), dict(soil_preset("sandy_loam_15")))
     shape = (int(60 / 0.07) + 1, int(40 / 0.07) + 1)
-    counts, _ = sweep_operation(op, shape, 0.07, "centre")
+    counts, _, _ = sweep_operation(op, shape, 0.07, "centre")
     from symtrack.studies.operations import plan_operation
 
     plan = plan_operation(fs)
@@ -125,7 +128,7 @@ def test_n_passes_fold_as_the_closed_form_of_n_loads():
     n = 4
     op = FastOp("s", fs, m, n, None, prof, soil)
     res = run_season_fast([op], (600, 400), 0.1, DEPTHS)
-    counts1, sig = sweep_operation(op, (600, 400), 0.1, "centre")
+    counts1, sig, _ = sweep_operation(op, (600, 400), 0.1, "centre")
     cell = np.flatnonzero(counts1.ravel() == 1)[len(np.flatnonzero(counts1.ravel() == 1)) // 2]
     geo = density.geostatic_table([soil], list(DEPTHS))[0]
     for k in range(len(DEPTHS)):

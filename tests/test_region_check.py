@@ -9,7 +9,7 @@ import pytest
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.region.check import fast_twin, soil_of
 from symtrack.region.fast import run_season_fast
-from symtrack.region.fleet import first_pass_rut_m, track_machine
+from symtrack.region.fleet import COVER_FRACTIONS, first_pass_rut_m, rut_table_m, track_machine
 from symtrack.terrain import density
 
 
@@ -22,6 +22,12 @@ def test_the_first_pass_rut_is_the_soil_laws_load_and_rebound():
     k_u = max(soil["elastic_stiffness_Pa_per_m"], soil["unloading_stiffness_floor"] * p / z_max)
     assert first_pass_rut_m(m, dict(soil)) == pytest.approx(z_max - p / k_u, rel=1e-9)
     assert first_pass_rut_m(m, dict(soil)) > 0
+    table = rut_table_m(m, dict(soil))
+    assert table[0] == 0.0 and table[-1] == first_pass_rut_m(m, dict(soil)) and np.all(np.diff(table) >= 0)
+    half = COVER_FRACTIONS.index(0.5)
+    z_half = (0.5 * p / k_eq) ** (1 / soil["bekker_n"])
+    k_half = max(soil["elastic_stiffness_Pa_per_m"], soil["unloading_stiffness_floor"] * 0.5 * p / z_half)
+    assert table[half] == pytest.approx(z_half - 0.5 * p / k_half, rel=1e-9)
 
 
 def test_the_tracked_columns_compression_is_bounded_by_the_rut():
@@ -34,12 +40,13 @@ def test_the_tracked_columns_compression_is_bounded_by_the_rut():
     capped = run_season_fast(ops, shape, fs.cell_m, depths)
     import dataclasses
 
-    free = run_season_fast([dataclasses.replace(o, rut_first_m=None) for o in ops], shape, fs.cell_m, depths)
+    free = run_season_fast([dataclasses.replace(o, rut_table_m=None) for o in ops], shape, fs.cell_m, depths)
     a = density.soil_arrays([soil], list(depths))
     v0 = np.broadcast_to(a["v0"][0], capped.state.shape)
     comp = density.column_compression_m(np.where(capped.state > 0, capped.state, v0), v0, depths)
     n = capped.counts.ravel().astype(float)
-    bound = ops[0].rut_first_m * np.where(n > 0, n, 1.0) ** ops[0].rut_exponent
+    # at most the full track's rut (a cell partly under the track carries part of its pressure: less)
+    bound = ops[0].rut_table_m[-1] * np.where(n > 0, n, 1.0) ** ops[0].rut_exponent
     # (the state is float32: v to 1e-7 of itself, the column of 0.8 m to 1e-7 m)
     assert np.all(comp <= bound + 1e-7)
     comp_free = density.column_compression_m(np.where(free.state > 0, free.state, v0), v0, depths)
@@ -67,5 +74,5 @@ def test_fast_agrees_with_full_on_operation_small():
     t = full.terrain
     once = (t.sigma_max[:, 0] > 0) & (t.cycles == 1)
     ops, soil, _ = fast_twin(spec)
-    assert float(np.median(t.z[once])) == pytest.approx(ops[0].rut_first_m, rel=0.05)
+    assert float(np.median(t.z[once])) == pytest.approx(ops[0].rut_table_m[-1], rel=0.05)
     assert soil == soil_of(spec.operations[0][2].params)

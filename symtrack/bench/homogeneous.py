@@ -140,6 +140,8 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     "only; --large: and a 1,000 ha region)")
     ap.add_argument("--out", default="out/bench.json", help="JSON file to write (default out/bench.json)")
     ap.add_argument("--large", action="store_true", help="bench region: also a generated 1,000 ha region, one season")
+    ap.add_argument("--keep", metavar="DIR", help="bench region: keep the full fidelity's runs in DIR/<case> and "
+                    "reuse them when their inputs are the same (they take minutes)")
     ap.add_argument("--quick", action="store_true", help="fewer rows and sizes (providers decide what to skip)")
     ap.add_argument("--repeats", type=int, default=3, help="timed runs per row after a warm-up (best is kept)")
     ap.add_argument("--sweep", action="store_true",
@@ -159,7 +161,7 @@ def run_cli(args) -> int:
         from ..region.check import bench_rows as region_rows
         from ..region.check import bench_table as region_table
 
-        rep = region_rows(args.quick, args.large)
+        rep = region_rows(args.quick, args.large, keep=args.keep)
         rep.update(load_average=list(os.getloadavg()), cpus=os.cpu_count())
         atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
         print(region_table(rep))

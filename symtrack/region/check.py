@@ -19,9 +19,10 @@ import numpy as np
 
 from ..model.parameters import SOIL_PARAMS
 from .fast import FastOp, density_change, run_season_fast
-from .fleet import first_pass_rut_m, stress_profile, track_machine
+from .fleet import rut_table_m, stress_profile, track_machine
 
-__all__ = ["CASES", "bench_rows", "bench_table", "compare", "fast_twin", "full_and_fast", "large_region_row",
+__all__ = ["CASES", "bench_rows", "bench_table", "compare", "fast_twin", "full_and_fast", "full_season",
+           "large_region_row",
            "run_fast_twin", "soil_of", "workers_rows"]
 
 SOIL_NAMES = frozenset(s.name for s in SOIL_PARAMS)
@@ -44,7 +45,7 @@ def fast_twin(opspec) -> tuple:
                           sc.params, fs.working_width_m, fs.turn_radius_m)
         sp = soil_of(sc.params)
         ops.append(FastOp(fs.name, fs, m, 1, None, stress_profile(m, depths, xi), sp,
-                          rut_first_m=first_pass_rut_m(m, sp), rut_exponent=float(sp["repeated_loading_exponent"])))
+                          rut_table_m=rut_table_m(m, sp), rut_exponent=float(sp["repeated_loading_exponent"])))
     return ops, soil, depths
 
 
@@ -117,23 +118,42 @@ CASES = {
 QUICK_CASES = ("operation_small",)
 
 
-def full_and_fast(case: str, cell_m: float | None = None) -> dict:
-    """One case: the full fidelity's season (the terrain engine, one process), then its fast twin on the same
-    cells (centre and overlap rules) and on the region's 0.5 m cells; the comparison rows."""
+def full_season(case: str, keep=None):
+    """(terrain, summary) of the case's full-fidelity season: run here (one process, minutes), or read back
+    from ``keep``/<case> (``field.npz`` and ``summary.json`` of a complete run, as ``symtrack field`` writes
+    them) where a run of the same inputs is kept; a run done here is kept there when ``keep`` is given."""
+    import json
+    from pathlib import Path
+
+    from ..foundations.config import to_toml
     from ..studies.operations import load_operation_spec, run_season
+    from ..terrain.storage import Terrain
 
     name, overrides = CASES[case]
     spec = load_operation_spec(name, overrides)
-    fs0 = spec.base
-    area_ha = fs0.size_m[0] * fs0.size_m[1] / 1e4
-    full = run_season(spec, None, figures=False)
+    folder = Path(keep) / case if keep is not None else None
+    if folder is not None and (folder / "summary.json").is_file() and (folder / "field.npz").is_file():
+        summary = json.loads((folder / "summary.json").read_text())
+        same = (folder / "operation.resolved.toml").is_file() and \
+            (folder / "operation.resolved.toml").read_text() == to_toml(spec.document)
+        if summary.get("complete") and same:
+            return spec, Terrain.load(folder / "field.npz"), summary
+    full = run_season(spec, folder, figures=False)
     if not full.summary["complete"]:
         raise RuntimeError(f"{case}: the full fidelity's season failed: {full.summary['error']}")
+    return spec, full.terrain, full.summary
+
+
+def full_and_fast(case: str, keep=None) -> list:
+    """One case: the full fidelity's season (:func:`full_season`), then its fast twin on the same cells (the
+    overlap and centre rules) and on the region's 0.25 m and 0.5 m cells; the comparison rows."""
+    spec, terrain, summary = full_season(case, keep)
+    fs0 = spec.base
+    area_ha = fs0.size_m[0] * fs0.size_m[1] / 1e4
     rows = []
     for rule in ("overlap", "centre"):
         fast = run_fast_twin(spec, rule=rule)
-        rows.append({"case": case, "rule": rule, **compare(full.terrain, full.summary, fast, fast[1], fast[2],
-                                                           area_ha)})
+        rows.append({"case": case, "rule": rule, **compare(terrain, summary, fast, fast[1], fast[2], area_ha)})
     for coarse in (0.25, 0.5):  # the cost on the region's cells, and what the coarser cells change
         fast = run_fast_twin(spec, cell_m=coarse, rule="centre")
         maps, soil, depths = fast[0], fast[1], fast[2]
@@ -199,11 +219,12 @@ def large_region_row(target_ha: float = 1000.0, workers: int = 2, seed: int = 13
                 "s_per_ha_season_per_core": workers * res.phases_s["tasks_s"] / spec.area_ha}
 
 
-def bench_rows(quick: bool = False, large: bool = False, cases=None) -> dict:
+def bench_rows(quick: bool = False, large: bool = False, cases=None, keep=None) -> dict:
     """``symtrack bench region``: the cases' comparisons, 1 against 2 workers, and with ``large`` the 1,000 ha
-    region; ``quick``: the smallest case only."""
+    region; ``quick``: the smallest case only; ``keep``: a folder of the full fidelity's runs (reused, or
+    written there: :func:`full_season`)."""
     cases = cases or (QUICK_CASES if quick else tuple(CASES))
-    out = {"fast_vs_full": [r for c in cases for r in full_and_fast(c)]}
+    out = {"fast_vs_full": [r for c in cases for r in full_and_fast(c, keep)]}
     if not quick:
         out["workers"] = workers_rows()
     if large:

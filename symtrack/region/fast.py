@@ -24,8 +24,10 @@ For each operation of the season, in the order of the days they are worked:
    4b. A tracked machine leaves a rut, and the rut bounds the compression below it, as the terrain engine's
    world bounds it (:func:`symtrack.terrain.density.cap_to_rut`): after each tracked pass the cells it passed
    get the rut of their N tracked passes so far, the first pass's quasi-static plastic rut
-   (:func:`symtrack.region.fleet.first_pass_rut_m`) times N^beta (the engine's cycle law). Wheels leave no rut
-   here, as in the package's wheeled pass (symtrack/terrain/wheeled.py), so their compression is not bounded.
+   (:func:`symtrack.region.fleet.first_pass_rut_m`) times N^beta (the engine's cycle law). A cell the track
+   covers in part carries that share of its pressure (the engine's channel weight) and gets the smaller rut.
+   Wheels leave no rut here, as in the package's wheeled pass (symtrack/terrain/wheeled.py), so their
+   compression is not bounded.
 5. **The risk**: (traffic stress + own weight) / the day's precompression stress, graded by
    :func:`symtrack.terrain.subsoil.risk_class`; the season keeps each cell's largest ratio.
 6. **Tillage** (an operation with ``loosens_to_m``): after it, every cell of the field above that depth is
@@ -76,9 +78,10 @@ class FastOp:
     profile: StressProfile
     soil_day: dict
     day: int = 0
-    # a tracked machine's first-pass plastic rut [m] (fleet.first_pass_rut_m) and the soil's repeated-loading
-    # exponent: the rut after N passes, rut_first_m N^beta, bounds the column's compression (step 4b); None: wheels
-    rut_first_m: float | None = None
+    # a tracked machine's first-pass plastic rut [m] at each share of a cell under the track
+    # (fleet.rut_table_m, at fleet.COVER_FRACTIONS) and the soil's repeated-loading exponent: the rut after N
+    # passes, the first pass's N^beta, bounds the column's compression (step 4b); None: wheels
+    rut_table_m: tuple | None = None
     rut_exponent: float = 0.0
 
 
@@ -96,14 +99,18 @@ class SeasonMaps:
 
 
 def sweep_operation(op: FastOp, shape, cell_m: float, rule: str = "centre"):
-    """The operation's passes per cell (nx, ny) int32 and its largest stress per cell (nx, ny, n_depths)
-    float32 [Pa] from one drive of its plan (module doc, steps 1-3; the repeats not applied)."""
+    """The operation's passes per cell (nx, ny) int32, its largest stress per cell (nx, ny, n_depths) float32
+    [Pa] and the largest share of each cell under a strip (nx, ny) float32 (its width across the path under the
+    strip over its width: the terrain engine's channel weight) from one drive of its plan (module doc, steps
+    1-3; the repeats not applied)."""
     plan = plan_operation(op.settings, ds_m=PLAN_DS_M)
     geo = segment_geometry(plan)
     nx, ny = shape
     nd = op.profile.sigma_Pa.shape[1]
     counts = np.zeros(shape, dtype=np.int32)
     sig = np.zeros((nx, ny, nd), dtype=np.float32)
+    cover = np.zeros(shape, dtype=np.float32)
+    out = (counts, sig, cover)
     strips = op.machine.strips()
     reach = op.machine.reach_m
     pad = 0.5 * cell_m if rule == "overlap" else 0.0
@@ -114,10 +121,10 @@ def sweep_operation(op: FastOp, shape, cell_m: float, rule: str = "centre"):
             for k in range(n_pieces):
                 u0, u1 = g * k / n_pieces, g * (k + 1) / n_pieces
                 px0, py0 = x0 + u0 * c, y0 + u0 * s
-                _straight(px0, py0, c, s, u1 - u0, strips, reach, pad, op.profile, shape, cell_m, counts, sig)
+                _straight(px0, py0, c, s, u1 - u0, strips, reach, pad, op.profile, shape, cell_m, out)
         else:
-            _arc(x0, y0, c, s, g, strips, reach, pad, op.profile, shape, cell_m, counts, sig)
-    return counts, sig
+            _arc(x0, y0, c, s, g, strips, reach, pad, op.profile, shape, cell_m, out)
+    return counts, sig, cover
 
 
 def _window(xs, ys, shape, cell_m):
@@ -129,17 +136,25 @@ def _window(xs, ys, shape, cell_m):
     return i0, i1, j0, j1
 
 
-def _apply(i0, i1, j0, j1, under, v, profile, counts, sig):
+def _apply(i0, i1, j0, j1, under, v, hv, strips, profile, out):
+    counts, sig, cover = out
     if not under.any():
         return
     counts[i0:i1, j0:j1] += under
     ii, jj = np.nonzero(under)
-    st = profile.at(v[ii, jj]).astype(np.float32)
+    vv = v[ii, jj]
+    st = profile.at(vv).astype(np.float32)
     w = sig[i0:i1, j0:j1]
     w[ii, jj] = np.maximum(w[ii, jj], st)
+    f = np.zeros(vv.size)
+    for lat, b in strips:  # the cell's extent across the path, [v - hv, v + hv], under the strip
+        f = np.maximum(f, np.clip((np.minimum(vv + hv, lat + 0.5 * b) - np.maximum(vv - hv, lat - 0.5 * b))
+                                  / (2 * hv), 0.0, 1.0))
+    cw = cover[i0:i1, j0:j1]
+    cw[ii, jj] = np.maximum(cw[ii, jj], f.astype(np.float32))
 
 
-def _straight(x0, y0, c, s, L, strips, reach, pad, profile, shape, cell_m, counts, sig):
+def _straight(x0, y0, c, s, L, strips, reach, pad, profile, shape, cell_m, out):
     r = reach + pad
     xs = [x0 - r * s, x0 + r * s, x0 + L * c - r * s, x0 + L * c + r * s]
     ys = [y0 + r * c, y0 - r * c, y0 + L * s + r * c, y0 + L * s - r * c]
@@ -156,10 +171,11 @@ def _straight(x0, y0, c, s, L, strips, reach, pad, profile, shape, cell_m, count
     under = np.zeros(u.shape, dtype=bool)
     for lat, b in strips:
         under |= (v >= lat - 0.5 * b - pv) & (v < lat + 0.5 * b + pv)
-    _apply(i0, i1, j0, j1, under & along, v, profile, counts, sig)
+    # the cell's half-width across the path: its square's projection
+    _apply(i0, i1, j0, j1, under & along, v, 0.5 * cell_m * (abs(c) + abs(s)), strips, profile, out)
 
 
-def _arc(x0, y0, c, s, g, strips, reach, pad, profile, shape, cell_m, counts, sig):
+def _arc(x0, y0, c, s, g, strips, reach, pad, profile, shape, cell_m, out):
     R, sweep = g
     sg = 1.0 if R > 0 else -1.0
     cx, cy = x0 - R * s, y0 + R * c
@@ -179,15 +195,18 @@ def _arc(x0, y0, c, s, g, strips, reach, pad, profile, shape, cell_m, counts, si
     under = np.zeros(r.shape, dtype=bool)
     for lat, b in strips:
         under |= (v >= lat - 0.5 * b - pv) & (v < lat + 0.5 * b + pv)
-    _apply(i0, i1, j0, j1, under & along, v, profile, counts, sig)
+    _apply(i0, i1, j0, j1, under & along, v, 0.5 * cell_m, strips, profile, out)
 
 
 def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: FastOp, depths_m, arrays: dict,
-                   geostatic_Pa: np.ndarray, track_passes: np.ndarray | None = None) -> int:
+                   geostatic_Pa: np.ndarray, track_passes: np.ndarray | None = None, cover: np.ndarray | None = None,
+                   rut_first: np.ndarray | None = None) -> int:
     """Fold an operation's passes into the compression state (module doc, step 4): cells passed k times are
     folded k times at the operation's stress there; after each pass of a tracked machine, the column's
-    compression of the cells it passed is bounded by their rut (step 4b), ``track_passes`` (n_cells,) the
-    tracked passes each cell has had so far (updated in place). Returns the (cell, depth) entries that yielded."""
+    compression of the cells it passed is bounded by their rut (step 4b): ``track_passes`` (n_cells,) the
+    tracked passes each cell has had so far, ``rut_first`` (n_cells,) the largest first-pass rut a track has
+    left in it (both updated in place), ``cover`` (nx, ny) the share of each cell under the machine's tracks.
+    Returns the (cell, depth) entries that yielded."""
     flat_c = counts.ravel()
     p = sig.reshape(-1, sig.shape[-1])
     si = np.zeros(flat_c.size, dtype=np.int32)
@@ -196,9 +215,13 @@ def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: F
         cells = np.flatnonzero(flat_c >= k)
         moved += density.pass_update(state, p, si, [op.soil_day], cells=cells, geostatic_Pa=geostatic_Pa,
                                      depths_m=list(depths_m), arrays=arrays)
-        if op.rut_first_m is not None and track_passes is not None:
+        if op.rut_table_m is not None and track_passes is not None:
+            from .fleet import COVER_FRACTIONS
+
             track_passes[cells] += 1
-            rut = op.rut_first_m * track_passes[cells].astype(np.float64) ** op.rut_exponent
+            r1 = np.interp(cover.ravel()[cells], COVER_FRACTIONS, op.rut_table_m)
+            rut_first[cells] = np.maximum(rut_first[cells], r1)
+            rut = rut_first[cells] * track_passes[cells].astype(np.float64) ** op.rut_exponent
             v0 = np.broadcast_to(arrays["v0"][0], (cells.size, len(depths_m)))
             density.cap_to_rut(state, cells, v0, list(depths_m), rut)
     return moved
@@ -221,13 +244,14 @@ def run_season_fast(ops, shape, cell_m: float, depths_m, state: np.ndarray | Non
     figs = []
     depths = np.asarray(depths_m, dtype=float)
     track_passes = np.zeros(nx * ny, dtype=np.int32)
+    rut_first = np.zeros(nx * ny, dtype=np.float64)
     for op in ops:
         t0 = time.perf_counter()
-        c1, sig = sweep_operation(op, shape, cell_m, rule)
+        c1, sig, cover = sweep_operation(op, shape, cell_m, rule)
         c = c1 * op.repeat
         arrays = density.soil_arrays([op.soil_day], list(depths_m))
         geo = density.geostatic_table([op.soil_day], list(depths_m))
-        moved = fold_operation(state, c, sig, op, depths_m, arrays, geo, track_passes)
+        moved = fold_operation(state, c, sig, op, depths_m, arrays, geo, track_passes, cover, rut_first)
         # the season's records, on the cells the operation passed (the stress is recorded there only)
         idx = np.flatnonzero(c1.ravel())
         s_op = sig.reshape(-1, nd)[idx]

@@ -36,8 +36,8 @@ from ..foundations.errors import ScenarioError
 from ..terrain import subsoil
 from ..terrain.tyre import Tyre, footprint_table, load_capacity_kN, recommended_inflation_kPa
 
-__all__ = ["BUILTIN_FLEET", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec", "first_pass_rut_m",
-           "load_fleet", "parse_fleet", "stress_profile", "track_machine"]
+__all__ = ["BUILTIN_FLEET", "COVER_FRACTIONS", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec",
+           "first_pass_rut_m", "load_fleet", "parse_fleet", "rut_table_m", "stress_profile", "track_machine"]
 
 BUILTIN_FLEET = "builtin"
 GRAVITY_M_S2 = 9.81
@@ -344,13 +344,15 @@ def stress_profile(machine: Machine, depths_m, xi: float, step_m: float = PROFIL
     return _profile_cached(machine.key(), machine, depths, float(xi), float(step_m), float(reach_m))
 
 
-def first_pass_rut_m(machine: Machine, soil: dict) -> float | None:
+def first_pass_rut_m(machine: Machine, soil: dict, pressure_fraction: float = 1.0) -> float | None:
     """The plastic rut a tracked machine's first quasi-static pass leaves [m] (None for wheels: the package's
     wheeled pass leaves no rut, terrain/wheeled.py): the package's soil law (symtrack.model.soil_law, Bekker's
     virgin loading) loaded to the track's static pressure p, z_max = (p / k_eq)^(1/n), then unloaded on its
     elastic line, k_u = max(K_e, kappa p / z_max) (symtrack.model.cell.unloading_slope): z_max - p / k_u. After N
     passes the terrain engine's rut is this N^beta (the soil's ``repeated_loading_exponent``); the density
-    fold's column compression is bounded by it as the world bounds it (terrain/density.py, cap_to_rut)."""
+    fold's column compression is bounded by it as the world bounds it (terrain/density.py, cap_to_rut).
+    ``pressure_fraction``: of a cell the track covers in part, the share of its area under the track (the
+    terrain engine's channel weight: the cell carries that share of the pressure)."""
     if machine.tracks is None:
         return None
     from ..model import soil_law
@@ -358,9 +360,22 @@ def first_pass_rut_m(machine: Machine, soil: dict) -> float | None:
 
     law_obj = soil_law.make(ModelOptions())
     law = law_obj.values({**soil, "track_width_m": machine.tracks.track_width_m})
-    p = machine.tracks.pressure_Pa
+    p = machine.tracks.pressure_Pa * float(pressure_fraction)
+    if p <= 0:
+        return 0.0
     z_max = float(law_obj.static_sinkage(p, law))
     named = law_obj.named(law)
     k_e, kappa = float(named["elastic_stiffness_Pa_per_m"]), float(named["kappa"])
     k_u = max(k_e, kappa * p / max(z_max, 1e-12))
     return max(z_max - p / k_u, 0.0)
+
+
+# the shares of a cell under a track at which the first-pass rut is tabulated (linear in between)
+COVER_FRACTIONS = tuple(k / 20 for k in range(21))
+
+
+def rut_table_m(machine: Machine, soil: dict) -> tuple | None:
+    """:func:`first_pass_rut_m` at each share of :data:`COVER_FRACTIONS` (None for wheels)."""
+    if machine.tracks is None:
+        return None
+    return tuple(first_pass_rut_m(machine, soil, f) for f in COVER_FRACTIONS)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -119,81 +120,134 @@ def _canvas(nd: int, ny: int, nx: int) -> dict:
     return out
 
 
-def _write_cog(path: Path, arr: np.ndarray, name: str, spec, grid, depths) -> None:
-    """One layer as a Cloud-Optimized GeoTIFF (GDAL's COG driver: tiled, overviews, deflate), atomically."""
+# the maps are painted and written in tiles of this many map cells a side: the memory is bounded whatever the
+# region's size (a 2,000 km^2 region at 1 m is 2e9 cells a layer)
+TILE_CELLS = 1024
+# the report's maps: at most this many pixels across (the region's maps decimated)
+PREVIEW_PX = 1200
+
+
+def _open_layer(path: Path, name: str, spec, grid, depths):
+    """A scratch GeoTIFF for one layer (tiled, deflate), with its bands' descriptions and tags."""
     import rasterio
-    from rasterio.shutil import copy as rio_copy
     from rasterio.transform import from_origin
 
     dtype, nodata, per_depth, unit, long_name = LAYERS[name]
     x0, y1, nx, ny = grid
-    bands = arr if per_depth else arr[None]
     path.parent.mkdir(parents=True, exist_ok=True)
-    # GDAL's COG driver writes a file: a scratch one, then its bytes written atomically where they belong
     fd, tmp = tempfile.mkstemp(prefix="." + path.name + ".", suffix=".scratch.tif", dir=path.parent)
     os.close(fd)
+    ds = rasterio.open(tmp, "w", driver="GTiff", width=nx, height=ny, count=len(depths) if per_depth else 1,
+                       dtype=dtype, crs=spec.crs, transform=from_origin(x0, y1, spec.map_cell_m, spec.map_cell_m),
+                       nodata=nodata, tiled=True, blockxsize=512, blockysize=512, compress="deflate",
+                       BIGTIFF="IF_SAFER")
+    for b in range(ds.count):
+        at = f" at {depths[b]:g} m" if per_depth else ""
+        ds.set_band_description(b + 1, f"{name}{at} [{unit}]")
+        ds.update_tags(b + 1, units=unit, long_name=long_name + at, **({"depth_m": repr(depths[b])} if per_depth
+                                                                      else {}))
+    ds.update_tags(symtrack_kind="symtrack-region-layer", layer=name, units=unit, long_name=long_name)
+    return ds, tmp
+
+
+def _finish_cog(ds, tmp: str, path: Path) -> None:
+    """The scratch GeoTIFF copied as a Cloud-Optimized GeoTIFF (GDAL's COG driver: tiled, overviews) and its
+    bytes written atomically to ``path``; the scratch removed."""
+    from rasterio.shutil import copy as rio_copy
+
+    ds.close()
+    fd, cog = tempfile.mkstemp(prefix="." + path.name + ".", suffix=".cog.tif", dir=path.parent)
+    os.close(fd)
     try:
-        profile = {"driver": "GTiff", "width": nx, "height": ny, "count": bands.shape[0], "dtype": dtype,
-                   "crs": spec.crs, "transform": from_origin(x0, y1, spec.map_cell_m, spec.map_cell_m),
-                   "nodata": nodata}
-        with rasterio.io.MemoryFile() as mem:
-            with mem.open(**profile) as ds:
-                for b in range(bands.shape[0]):
-                    ds.write(bands[b], b + 1)
-                    at = f" at {depths[b]:g} m" if per_depth else ""
-                    ds.set_band_description(b + 1, f"{name}{at} [{unit}]")
-                    ds.update_tags(b + 1, units=unit, long_name=long_name + at,
-                                   **({"depth_m": repr(depths[b])} if per_depth else {}))
-                ds.update_tags(symtrack_kind="symtrack-region-layer", layer=name, units=unit, long_name=long_name)
-            with mem.open() as src:
-                rio_copy(src, tmp, driver="COG", compress="DEFLATE", overview_resampling="NEAREST")
-        with open(tmp, "rb") as fh:
+        rio_copy(tmp, cog, driver="COG", compress="DEFLATE", overview_resampling="NEAREST", BIGTIFF="IF_SAFER")
+        with open(cog, "rb") as fh:
             atomic_write_bytes(path, fh.read())
     finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        for t in (tmp, cog):
+            if os.path.exists(t):
+                os.unlink(t)
 
 
 def _read_maps(path: Path) -> dict:
     with np.load(path) as z:
-        return {k: z[k] for k in ("counts", "sigma_max_kPa", "density_change_Mg_per_m3", "risk_class",
-                                  "field_mask", "cell_m")}
+        return {"trafficked_count": z["counts"], "stress_max_kPa": z["sigma_max_kPa"],
+                "density_change_Mg_per_m3": z["density_change_Mg_per_m3"], "risk_class": z["risk_class"],
+                "field_mask": z["field_mask"], "cell_m": z["cell_m"]}
 
 
-def write_maps(spec, out: Path) -> list[Path]:
-    """The region's maps per season and over the years (module doc); returns the files."""
-    grid = region_grid(spec)
-    _, _, nx, ny = grid
-    nd = len(spec.depths_m)
-    years = {y: _canvas(nd, ny, nx) for y in spec.years}
-    written = []
-    for y in spec.years:
-        canvas = years[y]
-        for f in spec.fields:
-            m = _read_maps(out / "fields" / f.field_id / str(y) / "maps.npz")
-            maps = {"trafficked_count": m["counts"], "stress_max_kPa": m["sigma_max_kPa"],
-                    "density_change_Mg_per_m3": m["density_change_Mg_per_m3"], "risk_class": m["risk_class"],
-                    "field_mask": m["field_mask"], "cell_m": m["cell_m"]}
-            _paint(spec, f, maps, canvas, grid)
-        for name, arr in canvas.items():
-            p = out / "maps" / str(y) / f"{name}.tif"
-            _write_cog(p, arr, name, spec, grid, spec.depths_m)
-            written.append(p)
-    # over the years: passes summed, the largest stress and class, the density after the last season
-    allc = _canvas(nd, ny, nx)
-    cs = [years[y] for y in spec.years]
+def _combine(cs: list) -> dict:
+    """Over the years: passes summed, the largest stress and class, the density after the last season."""
     inside = cs[0]["risk_class"][0] != 255
     tc = np.sum([c["trafficked_count"].astype(np.int64) for c in cs], axis=0)
-    allc["trafficked_count"] = np.where(inside, np.minimum(tc, 65534), 65535).astype(np.uint16)
-    allc["stress_max_kPa"] = np.fmax.reduce([c["stress_max_kPa"] for c in cs])
-    allc["risk_class"] = np.where(cs[0]["risk_class"] == 255, 255,
-                                  np.max([c["risk_class"] for c in cs], axis=0)).astype(np.uint8)
-    allc["density_change_Mg_per_m3"] = cs[-1]["density_change_Mg_per_m3"]
-    for name, arr in allc.items():
-        p = out / "maps" / "all_years" / f"{name}.tif"
-        _write_cog(p, arr, name, spec, grid, spec.depths_m)
-        written.append(p)
-    return written, years, allc
+    return {"trafficked_count": np.where(inside, np.minimum(tc, 65534), 65535).astype(np.uint16),
+            "stress_max_kPa": np.fmax.reduce([c["stress_max_kPa"] for c in cs]),
+            "density_change_Mg_per_m3": cs[-1]["density_change_Mg_per_m3"],
+            "risk_class": np.where(cs[0]["risk_class"] == 255, 255,
+                                   np.max([c["risk_class"] for c in cs], axis=0)).astype(np.uint8)}
+
+
+def write_maps(spec, out: Path):
+    """The region's maps per season and over the years (module doc), painted and written tile by tile;
+    returns (the files, the decimated maps of each season and over the years for the report)."""
+    from rasterio.windows import Window
+
+    grid = region_grid(spec)
+    x0, y1, nx, ny = grid
+    c = spec.map_cell_m
+    nd = len(spec.depths_m)
+    keys = [str(y) for y in spec.years] + ["all_years"]
+    step = max(1, int(math.ceil(max(nx, ny) / PREVIEW_PX)))
+    previews = {k: _canvas(nd, (ny + step - 1) // step, (nx + step - 1) // step) for k in keys}
+    files = {(k, name): _open_layer(out / "maps" / k / f"{name}.tif", name, spec, grid, spec.depths_m)
+             for k in keys for name in LAYERS}
+    boxes = []
+    for f in spec.fields:
+        ring = np.array(f.world_ring)
+        lo, hi = ring.min(axis=0), ring.max(axis=0)
+        boxes.append((int((lo[0] - x0) / c) - 1, int((hi[0] - x0) / c) + 2, int((y1 - hi[1]) / c) - 1,
+                      int((y1 - lo[1]) / c) + 2))
+    cache: dict = {}
+    try:
+        for r0 in range(0, ny, TILE_CELLS):
+            for c0 in range(0, nx, TILE_CELLS):
+                th, tw = min(TILE_CELLS, ny - r0), min(TILE_CELLS, nx - c0)
+                tile = (x0 + c0 * c, y1 - r0 * c, tw, th)
+                inside = [k for k, (i0, i1, j0, j1) in enumerate(boxes)
+                          if i1 > c0 and i0 < c0 + tw and j1 > r0 and j0 < r0 + th]
+                canv = {}
+                for y in spec.years:
+                    cv = _canvas(nd, th, tw)
+                    for k in inside:
+                        key = (k, y)
+                        if key not in cache:
+                            if len(cache) > 64:  # the fields of a row of tiles, at most
+                                cache.pop(next(iter(cache)))
+                            cache[key] = _read_maps(out / "fields" / spec.fields[k].field_id / str(y) / "maps.npz")
+                        _paint(spec, spec.fields[k], cache[key], cv, tile)
+                    canv[str(y)] = cv
+                canv["all_years"] = _combine([canv[str(y)] for y in spec.years])
+                win = Window(c0, r0, tw, th)
+                pr, pc = (-r0) % step, (-c0) % step
+                for k in keys:
+                    for name, arr in canv[k].items():
+                        ds, _ = files[(k, name)]
+                        ds.write(arr if arr.ndim == 3 else arr[None], window=win)
+                        pv = previews[k][name]
+                        sub = arr[..., pr::step, pc::step]
+                        R0, C0 = (r0 + pr) // step, (c0 + pc) // step
+                        pv[..., R0:R0 + sub.shape[-2], C0:C0 + sub.shape[-1]] = sub
+        written = []
+        for (k, name), (ds, tmp) in files.items():
+            p = out / "maps" / k / f"{name}.tif"
+            _finish_cog(ds, tmp, p)
+            written.append(p)
+    finally:
+        for ds, tmp in files.values():
+            if not ds.closed:
+                ds.close()
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+    return written, {y: previews[str(y)] for y in spec.years}, previews["all_years"]
 
 
 # ---- the figures and the report ---------------------------------------------------------------------------------
