@@ -16,12 +16,12 @@ from symtrack.region import demo
 from symtrack.region.fast import FastOp, density_change, run_season_fast, sweep_operation
 from symtrack.region.fleet import load_fleet, parse_fleet, stress_profile, track_machine
 from symtrack.region.inputs import class_soil, draw_day, load_region, moisture_class, read_suction_csv
+from symtrack.soil import density, subsoil
 from symtrack.studies.operations import OperationSettings
 from symtrack.studies.traffic_seasons import Machine as TSMachine
 from symtrack.studies.traffic_seasons import Wheel as TSWheel
 from symtrack.studies.traffic_seasons import segment_counts, segment_geometry
-from symtrack.terrain import density, subsoil
-from symtrack.terrain.tyre import contact, footprint_stress_at_depth
+from symtrack.vehicles.tyre import contact, footprint_stress_at_depth
 
 DEPTHS = (0.1, 0.3, 0.5)
 

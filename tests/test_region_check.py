@@ -10,7 +10,7 @@ from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.region.check import fast_twin, soil_of
 from symtrack.region.fast import run_season_fast
 from symtrack.region.fleet import COVER_FRACTIONS, first_pass_rut_m, rut_table_m, track_machine
-from symtrack.terrain import density
+from symtrack.soil import density
 
 
 def test_the_first_pass_rut_is_the_soil_laws_load_and_rebound():

@@ -17,19 +17,19 @@ For each operation of the season, in the order of the days they are worked:
    cell's lateral distance from the path line (on an arc, its radial distance from the path's circle). As in
    the terrain engine, the stress is recorded under the footprint only.
 4. **The density**: each pass is folded into the cells' compression state by
-   :func:`symtrack.terrain.density.pass_update` (the function the full fidelity's world folds its passes
+   :func:`symtrack.soil.density.pass_update` (the function the full fidelity's world folds its passes
    with) with the soil of the day's matric suction (its moisture class, :mod:`symtrack.region.inputs`) and
-   the soil's own weight (:func:`~symtrack.terrain.density.geostatic_table`): an operation that passes a
+   the soil's own weight (:func:`~symtrack.soil.density.geostatic_table`): an operation that passes a
    cell k times folds it k times at the operation's stress there.
    4b. A tracked machine leaves a rut, and the rut bounds the compression below it, as the terrain engine's
-   world bounds it (:func:`symtrack.terrain.density.cap_to_rut`): after each tracked pass the cells it passed
+   world bounds it (:func:`symtrack.soil.density.cap_to_rut`): after each tracked pass the cells it passed
    get the rut of their N tracked passes so far, the first pass's quasi-static plastic rut
    (:func:`symtrack.region.fleet.first_pass_rut_m`) times N^beta (the engine's cycle law). A cell the track
    covers in part carries that share of its pressure (the engine's channel weight) and gets the smaller rut.
-   Wheels leave no rut here, as in the package's wheeled pass (symtrack/terrain/wheeled.py), so their
+   Wheels leave no rut here, as in the package's wheeled pass (symtrack/vehicles/wheeled.py), so their
    compression is not bounded.
 5. **The risk**: (traffic stress + own weight) / the day's precompression stress, graded by
-   :func:`symtrack.terrain.subsoil.risk_class`; the season keeps each cell's largest ratio.
+   :func:`symtrack.soil.subsoil.risk_class`; the season keeps each cell's largest ratio.
 6. **Tillage** (an operation with ``loosens_to_m``): after it, every cell of the field above that depth is
    back at the soil's initial state (ASSUMED: tillage restores the initial bulk density of the layer it
    works; no source gives the density a tilled layer returns to). Below it the state persists from season
@@ -48,9 +48,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..soil import density, subsoil
 from ..studies.operations import OperationSettings, plan_operation
 from ..studies.traffic_seasons import segment_geometry
-from ..terrain import density, subsoil
 from .fleet import Machine, StressProfile
 
 __all__ = ["RULES", "FastOp", "SeasonMaps", "fold_operation", "run_season_fast", "sweep_operation"]
@@ -213,6 +213,7 @@ def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: F
     moved = 0
     for k in range(1, int(flat_c.max(initial=0)) + 1):
         cells = np.flatnonzero(flat_c >= k)
+        before = state[cells].copy()  # what the earlier passes compressed (kept by the rut's cap, as in the world)
         moved += density.pass_update(state, p, si, [op.soil_day], cells=cells, geostatic_Pa=geostatic_Pa,
                                      depths_m=list(depths_m), arrays=arrays)
         if op.rut_table_m is not None and track_passes is not None:
@@ -223,7 +224,7 @@ def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: F
             rut_first[cells] = np.maximum(rut_first[cells], r1)
             rut = rut_first[cells] * track_passes[cells].astype(np.float64) ** op.rut_exponent
             v0 = np.broadcast_to(arrays["v0"][0], (cells.size, len(depths_m)))
-            density.cap_to_rut(state, cells, v0, list(depths_m), rut)
+            density.cap_to_rut(state, cells, v0, list(depths_m), rut, before)
     return moved
 
 

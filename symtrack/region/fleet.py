@@ -14,9 +14,9 @@ built once per machine and concentration factor xi (a soil property), from the p
 models, the same ones the full fidelity uses:
 
 - wheels: Keller's (2005) contact and Söhne / Fröhlich's stress at depth, tabulated by
-  :func:`symtrack.terrain.tyre.footprint_table` (the wheeled pass's tables);
-- tracks: the terrain engine's strip tables (:func:`symtrack.terrain.subsoil.build_tables`,
-  :func:`~symtrack.terrain.subsoil.stress_at`) under the static pressure line of a track whose centre of
+  :func:`symtrack.vehicles.tyre.footprint_table` (the wheeled pass's tables);
+- tracks: the terrain engine's strip tables (:func:`symtrack.soil.subsoil.build_tables`,
+  :func:`~symtrack.soil.subsoil.stress_at`) under the static pressure line of a track whose centre of
   gravity is over its contact's centre: p = m g / (2 l b), uniform (the engine's line with no
   acceleration, no drawbar pull and no pitch: the quasi-static part of its load).
 """
@@ -33,8 +33,8 @@ import numpy as np
 
 from ..foundations.config import check_keys, number
 from ..foundations.errors import ScenarioError
-from ..terrain import subsoil
-from ..terrain.tyre import Tyre, footprint_table, load_capacity_kN, recommended_inflation_kPa
+from ..soil import subsoil
+from ..vehicles.tyre import Tyre, footprint_table, load_capacity_kN, recommended_inflation_kPa
 
 __all__ = ["BUILTIN_FLEET", "COVER_FRACTIONS", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec",
            "first_pass_rut_m", "load_fleet", "parse_fleet", "rut_table_m", "stress_profile", "track_machine"]
@@ -51,7 +51,7 @@ TRACK_KEYS = ("contact_length_m", "track_width_m", "track_gauge_m", "mass_kg")
 # peak +0.6 % and its mean over the strips +0.6 % at 0.1 m depth, below 0.1 % at 0.3-0.8 m; 0.5 s against 52 s
 # (tests/test_region.py keeps the bound)
 PROFILE_STEP_M = 0.03
-# how far beside and ahead of a wheel or track its stress is kept (terrain/wheeled.py's reach: below 1 % of the
+# how far beside and ahead of a wheel or track its stress is kept (vehicles/wheeled.py's reach: below 1 % of the
 # peak 1.5 m beside a contact at 0.1-0.8 m depth for xi >= 3)
 PROFILE_REACH_M = 1.5
 TYRE_ELEMENT_M = 0.03
@@ -346,17 +346,17 @@ def stress_profile(machine: Machine, depths_m, xi: float, step_m: float = PROFIL
 
 def first_pass_rut_m(machine: Machine, soil: dict, pressure_fraction: float = 1.0) -> float | None:
     """The plastic rut a tracked machine's first quasi-static pass leaves [m] (None for wheels: the package's
-    wheeled pass leaves no rut, terrain/wheeled.py): the package's soil law (symtrack.model.soil_law, Bekker's
+    wheeled pass leaves no rut, vehicles/wheeled.py): the package's soil law (symtrack.soil.law, Bekker's
     virgin loading) loaded to the track's static pressure p, z_max = (p / k_eq)^(1/n), then unloaded on its
-    elastic line, k_u = max(K_e, kappa p / z_max) (symtrack.model.cell.unloading_slope): z_max - p / k_u. After N
+    elastic line, k_u = max(K_e, kappa p / z_max) (symtrack.soil.cell.unloading_slope): z_max - p / k_u. After N
     passes the terrain engine's rut is this N^beta (the soil's ``repeated_loading_exponent``); the density
-    fold's column compression is bounded by it as the world bounds it (terrain/density.py, cap_to_rut).
+    fold's column compression is bounded by it as the world bounds it (soil/density.py, cap_to_rut).
     ``pressure_fraction``: of a cell the track covers in part, the share of its area under the track (the
     terrain engine's channel weight: the cell carries that share of the pressure)."""
     if machine.tracks is None:
         return None
-    from ..model import soil_law
     from ..model.options import ModelOptions
+    from ..soil import law as soil_law
 
     law_obj = soil_law.make(ModelOptions())
     law = law_obj.values({**soil, "track_width_m": machine.tracks.track_width_m})
