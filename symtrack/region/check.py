@@ -38,7 +38,7 @@ def fast_twin(opspec) -> tuple:
     ops = []
     fs0, _, sc0, _ = opspec.operations[0]
     soil = soil_of(sc0.params)
-    depths = tuple(sc0.soil.subsoil_depths_m)
+    depths = tuple(sc0.terrain.subsoil_depths_m)
     xi = float(soil["stress_concentration_factor"])
     for fs, _plan, sc, _rows in opspec.operations:
         m = track_machine(sc.params.get("name", "vehicle") if isinstance(sc.params.get("name"), str) else "vehicle",
