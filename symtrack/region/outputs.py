@@ -220,7 +220,7 @@ def write_maps(spec, out: Path):
                     for k in inside:
                         key = (k, y)
                         if key not in cache:
-                            if len(cache) > 64:  # the fields of a row of tiles, at most
+                            if len(cache) > 32:  # the fields of a row of tiles (their seasons), at most
                                 cache.pop(next(iter(cache)))
                             cache[key] = _read_maps(out / "fields" / spec.fields[k].field_id / str(y) / "maps.npz")
                         _paint(spec, spec.fields[k], cache[key], cv, tile)
