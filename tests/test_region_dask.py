@@ -186,3 +186,24 @@ def test_the_command_refuses_bad_inputs_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "systems.mini.operations[1].machine = 'disc_9m' is not a machine of the built-in fleet" in err
     assert not (tmp_path / "o" / "fields").exists()
+
+
+def test_a_field_no_plan_fits_is_refused_or_left_out(tmp_path):
+    p = _small(tmp_path / "in", n=2)
+    geo = json.loads((tmp_path / "in" / "fields.geojson").read_text())
+    x, y = 600_000.0, 5_600_000.0  # a strip 12 m wide: no headland round of a 7.5 m header fits in it
+    strip = [[x, y], [x + 200.0, y], [x + 200.0, y + 12.0], [x, y + 12.0], [x, y]]
+    geo["features"].append({"type": "Feature", "properties": {"field_id": "strip", "soil": "silt_loam",
+                                                              "system": "mini"},
+                            "geometry": {"type": "Polygon", "coordinates": [strip]}})
+    (tmp_path / "in" / "fields.geojson").write_text(json.dumps(geo))
+    from symtrack.region.study import check_plans
+
+    spec = load_region(p)
+    with pytest.raises(ScenarioError, match=r"field 'strip' \(system 'mini'\): no direction of the track lines fits"):
+        check_plans(spec)
+    p.write_text(p.read_text().replace("seed = 7", 'seed = 7\nunplannable_fields = "skip"'))
+    spec = load_region(p)
+    check_plans(spec)
+    assert [f.field_id for f in spec.fields] == ["F001", "F002"]
+    assert spec.skipped[0]["field_id"] == "strip" and "operation.headland_passes" in spec.skipped[0]["reason"]

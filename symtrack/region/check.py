@@ -190,10 +190,15 @@ def workers_rows(n_fields: int = 24, seed: int = 11, folder=None) -> list:
             spec = load_region(path)
             res = run_region(spec, Path(tmp) / f"out{w}", workers=w, progress=False, outputs=False)
             ph = res.phases_s
+            cpu = sum(r.get("cpu_time_s", 0.0) for r in res.rows)
             rows.append({"case": f"region_{n_fields}_fields", "workers": w, "area_ha": spec.area_ha,
                          "field_seasons": res.ran, "wall_time_s": res.wall_time_s, **ph,
                          "ha_seasons_per_s": spec.area_ha / ph["tasks_s"],
-                         "s_per_ha_season_per_core": w * ph["tasks_s"] / spec.area_ha})
+                         "s_per_ha_season_per_core": w * ph["tasks_s"] / spec.area_ha,
+                         # the tasks' own CPU time: on a machine shared with other work, the cores the workers
+                         # got (tasks_cpu_s / tasks_s) tell a lack of cores from a lack of parallelism
+                         "tasks_cpu_s": cpu, "cpu_s_per_ha_season": cpu / spec.area_ha,
+                         "cores_used": cpu / ph["tasks_s"]})
     if len(rows) == 2:
         rows[1]["speedup_vs_1_worker"] = rows[0]["tasks_s"] / rows[1]["tasks_s"]
     return rows

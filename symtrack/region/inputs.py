@@ -36,7 +36,8 @@ __all__ = ["FieldShape", "OpEntry", "RegionSpec", "class_soil", "draw_day", "loa
 
 SCHEMA_VERSION = 1
 TOP_KEYS = ("schema_version", "name", "description", "fields_file", "crs", "fleet", "years", "seed", "cell_m",
-            "map_cell_m", "depths_m", "rule", "workable_suction_kPa", "moisture_class_pF", "margin_m", "soils",
+            "map_cell_m", "depths_m", "rule", "workable_suction_kPa", "moisture_class_pF", "margin_m",
+            "unplannable_fields", "soils",
             "systems")
 SOIL_ENTRY_KEYS = ("preset", "suction_file")  # and any soil parameter (symtrack presets NAME lists them)
 SYSTEM_KEYS = ("operations",)
@@ -56,6 +57,9 @@ DEFAULT_CLASS_PF = 0.25
 # the room around a field's polygon in its grid (the headland turns' and the wheels' reach stay on the grid)
 DEFAULT_MARGIN_M = 8.0
 RULES = ("centre", "overlap")
+# a field no direction of the track lines fits (module doc of symtrack.region.study.check_plans): the study is
+# refused, or the field is left out and listed in the study's region.json and report
+UNPLANNABLE = ("refuse", "skip")
 TRACK_CHOICES = ("random", "ab")
 MAX_FIELDS = 100_000
 
@@ -124,6 +128,8 @@ class RegionSpec:
     crs: str | None
     document: dict = field(default_factory=dict)
     margin_m: float = DEFAULT_MARGIN_M
+    unplannable_fields: str = "refuse"
+    skipped: list = field(default_factory=list)  # [{"field_id", "reason"}] of the fields left out
 
     @property
     def area_ha(self) -> float:
@@ -399,6 +405,9 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
     workable = number("workable_suction_kPa", doc.get("workable_suction_kPa", DEFAULT_WORKABLE_SUCTION_KPA), 0.0, 1e4)
     width = number("moisture_class_pF", doc.get("moisture_class_pF", DEFAULT_CLASS_PF), 0.01, 2.0)
     margin = number("margin_m", doc.get("margin_m", DEFAULT_MARGIN_M), 0.0, 100.0)
+    unplannable = doc.get("unplannable_fields", "refuse")
+    if unplannable not in UNPLANNABLE:
+        raise ScenarioError(f"unplannable_fields = {unplannable!r} is not one of {', '.join(UNPLANNABLE)}")
     crs = doc.get("crs")
     if crs is not None:
         from ..terrain.gis import crs_wkt
@@ -450,7 +459,7 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
                                 f"[systems] ({', '.join(systems)})")
         fields.append(FieldShape(**f))
     return RegionSpec(doc.get("name", name), doc.get("description", ""), folder, fields, soils, suction, fleet, systems,
-                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin)
+                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin, unplannable)
 
 
 def load_region(path) -> RegionSpec:

@@ -220,7 +220,7 @@ def write_maps(spec, out: Path):
                     for k in inside:
                         key = (k, y)
                         if key not in cache:
-                            if len(cache) > 64:  # the fields of a row of tiles, at most
+                            if len(cache) > 32:  # the fields of a row of tiles (their seasons), at most
                                 cache.pop(next(iter(cache)))
                             cache[key] = _read_maps(out / "fields" / spec.fields[k].field_id / str(y) / "maps.npz")
                         _paint(spec, spec.fields[k], cache[key], cv, tile)
@@ -276,6 +276,7 @@ def region_figures(spec, rows: list[dict]) -> dict:
                            for r in worst]
     out["worst_fields_by"] = f"{key} in {spec.years[-1]}"
     out["wall_time_s_sum"] = float(sum(r.get("wall_time_s", 0.0) for r in rows))
+    out["fields_left_out"] = list(spec.skipped)
     return out
 
 
@@ -379,7 +380,8 @@ def write_outputs(spec, out: Path, rows: list[dict]) -> dict:
     note = (f"{len(spec.fields)} fields, {spec.area_ha:.1f} ha, seasons {', '.join(map(str, spec.years))}; the fast "
             f"fidelity on {spec.cell_m:g} m cells ({spec.rule} rule). Shares are of the fields' area (a cell no "
             "machine passed is low risk). The maps are Cloud-Optimized GeoTIFFs in maps/; the per-field table is "
-            "fields.csv.")
+            "fields.csv." + (f" Left out (no plan fits them): {', '.join(x['field_id'] for x in spec.skipped)}; "
+                             "their reasons are in summary.json." if spec.skipped else ""))
     text = (spec.folder / "region.toml").read_text() if (spec.folder / "region.toml").is_file() else \
         json.dumps(spec.document, indent=2, default=str)
     html = report_html(f"symtrack region: {spec.name}", summary, images, text, note=note, tables={

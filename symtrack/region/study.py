@@ -132,8 +132,10 @@ def check_plans(spec: RegionSpec, progress: bool = False) -> None:
     longer side (its minimum rotated rectangle's); where a machine's plan does not fit that way (the polygon
     planner refuses a headland round or a line), across it, then along each of the field's edges in turn (the
     first direction every plan fits is kept: ``lines_direction_deg`` in the field's summary). A field no
-    direction fits is refused naming the field and the reason."""
+    direction fits is refused naming the field and the reason, or, with ``unplannable_fields = "skip"``, left
+    out of the study and listed in ``spec.skipped`` (the study's region.json and report)."""
     bar = Progress(len(spec.fields), "checking the fields' plans", enabled=progress)
+    kept = []
     for i, f in enumerate(spec.fields):
         err = _plan_error(spec, f)
         if err is not None:
@@ -143,13 +145,23 @@ def check_plans(spec: RegionSpec, progress: bool = False) -> None:
             for theta in candidates:
                 g = dataclasses.replace(f, **field_frame(ring, theta, spec.margin_m))
                 if _plan_error(spec, g) is None:
-                    spec.fields[i] = g
+                    f, err = g, None
                     break
-            else:
-                raise ScenarioError(f"field {f.field_id!r} (system {f.system!r}): no direction of the track lines fits "
-                                    f"every plan; along its longer side: {err}")
+        if err is None:
+            kept.append(f)
+        elif spec.unplannable_fields == "skip":
+            spec.skipped.append({"field_id": f.field_id, "reason": f"no direction of the track lines fits every "
+                                 f"plan; along its longer side: {err}"})
+        else:
+            raise ScenarioError(f"field {f.field_id!r} (system {f.system!r}): no direction of the track lines fits "
+                                f"every plan; along its longer side: {err} (unplannable_fields = \"skip\" leaves such "
+                                "fields out)")
         bar.update(i + 1)
     bar.close()
+    if not kept:
+        raise ScenarioError("no field of the region can be planned (unplannable_fields = \"skip\" left out all of "
+                            "them)")
+    spec.fields[:] = kept
 
 
 def build_context(spec: RegionSpec, client=None) -> Context:
@@ -291,6 +303,7 @@ def _describe(spec: RegionSpec) -> dict:
             "fleet": spec.fleet.label, "soils": sorted(spec.soils), "systems": sorted(spec.systems),
             "fields": [{"field_id": f.field_id, "soil": f.soil, "system": f.system, "area_ha": f.area_m2 / 1e4}
                        for f in spec.fields],
+            "fields_left_out": spec.skipped,
             "document": spec.document}
 
 
@@ -321,10 +334,10 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
     if scheduler:
         check_scheduler_address(scheduler)
     out = check_output_folder(str(out))
-    _check_same_study(out, spec)
     t0 = time.perf_counter()
     check_plans(spec, progress=False)
     phases = {"plans_s": time.perf_counter() - t0}
+    _check_same_study(out, spec)
     todo = [(fi, y) for fi, f in enumerate(spec.fields) for y in spec.years if not _done(out, f, y)]
     n_all = len(spec.fields) * len(spec.years)
     skipped = n_all - len(todo)
