@@ -23,14 +23,17 @@ ROOT = Path(__file__).resolve().parent.parent
 # layer of each top-level part of symtrack, bottom first; a module may import its own layer or below
 LAYERS = {
     "foundations": 1, "model": 2, "presets": 2, "soil": 2, "vehicles": 2, "terrain": 3, "toolchain": 4, "native": 4,
-    "integrators": 5, "simulation": 6, "control": 7, "reports": 7, "api": 7, "studies": 7, "codegen": 7, "bench": 8,
+    "integrators": 5, "simulation": 6, "control": 7, "reports": 7, "api": 7, "studies": 7, "region": 7, "codegen": 7,
+    "bench": 8,
     "cli": 9, "__main__": 9, "": 9,
 }
 # a module of the soil's or the vehicles' room that acts on the field (reads its rasters, passes over its
 # storage) sits with the field: nothing of the model's layer may import it
 MODULE_LAYERS = {"soil.moisture": 3, "vehicles.wheeled": 3, "vehicles.towed": 3}
 CODEGEN_ALLOWED = ("cli", "bench")
-STUDIES_ALLOWED = ("cli", "bench", "studies")  # the studies are an application: only the CLI and the bench use them
+# the studies are an application: only the CLI, the bench and the region study (built on the studies' operations
+# and sweeps) use them
+STUDIES_ALLOWED = ("cli", "bench", "studies", "region")
 
 
 def _modules():

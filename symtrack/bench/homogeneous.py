@@ -134,7 +134,14 @@ def report(rows: list[dict]) -> dict:
 
 
 def add_arguments(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("what", nargs="?", choices=("region",),
+                    help="region: the region study's fast fidelity against the full one on the built-in seasons, "
+                    "the cost per hectare-season and 1 against 2 workers (docs/region.md; --quick: operation_small "
+                    "only; --large: and a 1,000 ha region)")
     ap.add_argument("--out", default="out/bench.json", help="JSON file to write (default out/bench.json)")
+    ap.add_argument("--large", action="store_true", help="bench region: also a generated 1,000 ha region, one season")
+    ap.add_argument("--keep", metavar="DIR", help="bench region: keep the full fidelity's runs in DIR/<case> and "
+                    "reuse them when their inputs are the same (they take minutes)")
     ap.add_argument("--quick", action="store_true", help="fewer rows and sizes (providers decide what to skip)")
     ap.add_argument("--repeats", type=int, default=3, help="timed runs per row after a warm-up (best is kept)")
     ap.add_argument("--sweep", action="store_true",
@@ -148,6 +155,18 @@ def run_cli(args) -> int:
 
     if args.repeats < 1:
         raise ScenarioError(f"--repeats = {args.repeats} must be >= 1")
+    if getattr(args, "what", None) == "region":
+        import os
+
+        from ..region.check import bench_rows as region_rows
+        from ..region.check import bench_table as region_table
+
+        rep = region_rows(args.quick, args.large, keep=args.keep)
+        rep.update(load_average=list(os.getloadavg()), cpus=os.cpu_count())
+        atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
+        print(region_table(rep))
+        print(f"load average {rep['load_average'][0]:.2f} on {rep['cpus']} CPUs; JSON in {args.out}")
+        return 0
     if getattr(args, "sweep", False):
         from .sweep import bench_rows as sweep_rows
 

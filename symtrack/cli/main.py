@@ -134,6 +134,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .field import add_parser as add_field_parser
 
     add_field_parser(sub)  # symtrack field (docs/studies.md, "Whole-field traffic study")
+    from .region import add_parser as add_region_parser
+
+    add_region_parser(sub)  # symtrack region (docs/region.md)
     from .export import add_parser as add_export_parser
 
     add_export_parser(sub)  # symtrack export fmu (docs/codegen.md, "The FMU")

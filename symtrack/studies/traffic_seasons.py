@@ -38,8 +38,9 @@ from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ScenarioError
 from .operations import OperationSettings, parse_operation, plan_operation
 
-__all__ = ["KROULIK_2009", "MACHINES", "Machine", "SEASONS", "SeasonOp", "Wheel", "build_season", "machine_from_dict",
-           "operation_counts", "season_counts", "season_shares", "segment_counts", "system_table"]
+__all__ = ["KROULIK_2009", "MACHINES", "Machine", "SEASONS", "SeasonOp", "Wheel", "auto_headland_passes",
+           "build_season", "machine_from_dict", "operation_counts", "season_counts", "season_shares", "segment_counts",
+           "segment_geometry", "system_table"]
 
 # Kroulik et al. 2009 (Soil & Tillage Research): run over at least once, "repeated coverage" (0-1)
 KROULIK_2009 = {"conventional": (0.953, 1.456), "minimum": (0.728, 0.448), "direct": (0.557, 0.184)}
@@ -205,7 +206,7 @@ FIELD_CELL_M = 0.1
 TRAMLINE_SEED = 99
 
 
-def _auto_headland_passes(machine: Machine, width_m: float) -> int:
+def auto_headland_passes(machine: Machine, width_m: float) -> int:
     """The fewest headland rounds whose band holds the turns between lines one width apart (a U-turn
     reaches R beyond the line's end, a bulb sqrt(4R^2 - (R + s/2)^2) + R; the wheels' reach besides)."""
     R, s = machine.turn_radius_m, 0.5 * width_m  # random offsets: lines as close as half a width
@@ -237,7 +238,7 @@ def build_season(ops, size_m=FIELD_SIZE_M, cell_m=FIELD_CELL_M, machines=None, w
         repeat = integer(f"{wh}.repeat", t.get("repeat", 1), 1, 100)
         hp = t.get("headland_passes", "auto")
         if hp == "auto":
-            hp = _auto_headland_passes(m, m.working_width_m)
+            hp = auto_headland_passes(m, m.working_width_m)
         else:
             hp = integer(f"{wh}.headland_passes", hp, 1, 20)
         direction = t.get("direction", "x")
@@ -269,7 +270,7 @@ def build_season(ops, size_m=FIELD_SIZE_M, cell_m=FIELD_CELL_M, machines=None, w
 
 
 # ---- the raster --------------------------------------------------------------------------------------
-def _segment_geometry(plan):
+def segment_geometry(plan):
     """Per segment of the plan's path: (kind, x0, y0, psi0, length or (centre, radius, sweep))."""
     p = plan.path
     x, y, psi = float(p.x[0]), float(p.y[0]), float(p.psi[0])
@@ -345,7 +346,7 @@ def operation_counts(op: SeasonOp, shape=None, counts=None) -> np.ndarray:
         n0, n1 = int(round(fs.size_m[0] / fs.cell_m)), int(round(fs.size_m[1] / fs.cell_m))
         shape = (n1, n0) if turned else (n0, n1)
     counts = np.zeros(shape, dtype=np.int32) if counts is None else counts
-    geo = _segment_geometry(plan_operation(fs))
+    geo = segment_geometry(plan_operation(fs))
     one = segment_counts(geo, op.machine, (shape[1], shape[0]) if turned else shape, fs.cell_m)
     counts += op.repeat * (one.T if turned else one)  # turned: the plan's x is the field's y and back
     return counts

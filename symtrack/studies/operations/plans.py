@@ -262,7 +262,7 @@ def _turn_lane_extension_m(fs: OperationSettings, ys) -> float:
     return deepest - depth
 
 
-def _plan_polygon(fs: OperationSettings) -> OperationPlan:
+def _plan_polygon(fs: OperationSettings, ds_m: float = PATH_DS_M) -> OperationPlan:
     """A polygon field's path (docs/studies.md, "A polygon field"): the headland rounds are the
     boundary's mitred offsets at (i + 1/2) w, driven counter-clockwise as one inward spiral (the
     last edge of round i meets the first edge of round i + 1; the last round's meets the first
@@ -357,23 +357,24 @@ def _plan_polygon(fs: OperationSettings) -> OperationPlan:
         roles.append("line")
         line_of.append(k)
     heading0 = math.atan2(v1[1] - v0[1], v1[0] - v0[0])
-    path = Path(pts[0][0], pts[0][1], heading0, segs, fs.speed_m_s, fs.turn_speed_m_s, ds_m=PATH_DS_M,
+    path = Path(pts[0][0], pts[0][1], heading0, segs, fs.speed_m_s, fs.turn_speed_m_s, ds_m=ds_m,
                 extension_m=5.0)
     lo = min(a for a, _ in spans)
     hi = max(b for _, b in spans)
     return OperationPlan(path, roles, line_of, [float(y) for y in ys], (lo, hi), turns, fs, spans)
 
 
-def plan_operation(fs: OperationSettings) -> OperationPlan:
+def plan_operation(fs: OperationSettings, ds_m: float = PATH_DS_M) -> OperationPlan:
     """The continuous path of an operation (module doc). Geometry only: :func:`check_plan` checks
-    it against the vehicle and the soil."""
+    it against the vehicle and the soil. ``ds_m``: the path's sampling (the followers drive the samples;
+    a user of the segments alone, the region's fast fidelity, samples it coarsely)."""
     Lx, Ly = fs.size_m
     w, R = fs.working_width_m, fs.turn_radius_m
     if w > min(Lx, Ly):
         raise ScenarioError(f"operation.working_width_m = {w:g} is outside the allowed range (0, {min(Lx, Ly):g}] m "
                             f"(the field is {Lx:g} m x {Ly:g} m)")
     if fs.boundary is not None:
-        return _plan_polygon(fs)
+        return _plan_polygon(fs, ds_m)
     H = fs.headland_m
     if 2 * H >= min(Lx, Ly):
         raise ScenarioError(f"operation.headland_passes = {fs.headland_passes}: {fs.headland_passes} rounds of "
@@ -416,7 +417,7 @@ def plan_operation(fs: OperationSettings) -> OperationPlan:
         segs.append(Segment("straight", Lx - 2 * H, speed_m_s=fs.speed_m_s))
         roles.append("line")
         line_of.append(k)
-    path = Path(pts[0][0], pts[0][1], 0.0, segs, fs.speed_m_s, fs.turn_speed_m_s, ds_m=PATH_DS_M, extension_m=5.0)
+    path = Path(pts[0][0], pts[0][1], 0.0, segs, fs.speed_m_s, fs.turn_speed_m_s, ds_m=ds_m, extension_m=5.0)
     return OperationPlan(path, roles, line_of, [float(y) for y in ys], (H, Lx - H), turns, fs)
 
 

@@ -1,0 +1,381 @@
+"""The fleet of a region study: tyres, machines (wheels or tracks) and each machine's quasi-static stress
+profile across its path (docs/region.md, "The fleet" and "The fast fidelity").
+
+A machine is a working width (its plan's line spacing), an outer width, a headland turn radius and a
+carrier: **wheels** (each a tyre of the catalog at a position in the machine's frame, x ahead, y left,
+with its wheel load) or **tracks** (two rubber tracks of contact length l, width b and gauge B carrying the
+machine's mass). Every machine and tyre of a catalog has a ``source``: a citation, or a sentence that
+starts with ``ASSUMED`` and says why (refused otherwise).
+
+The stress profile (:func:`stress_profile`): the largest vertical stress [Pa] at each depth of a cell at a
+lateral distance v from the machine's path line while the machine drives by in a straight line, the
+maximum over the positions along its path of the superposed stresses of all its wheels or tracks. It is
+built once per machine and concentration factor xi (a soil property), from the package's own stress
+models, the same ones the full fidelity uses:
+
+- wheels: Keller's (2005) contact and Söhne / Fröhlich's stress at depth, tabulated by
+  :func:`symtrack.vehicles.tyre.footprint_table` (the wheeled pass's tables);
+- tracks: the terrain engine's strip tables (:func:`symtrack.soil.subsoil.build_tables`,
+  :func:`~symtrack.soil.subsoil.stress_at`) under the static pressure line of a track whose centre of
+  gravity is over its contact's centre: p = m g / (2 l b), uniform (the engine's line with no
+  acceleration, no drawbar pull and no pitch: the quasi-static part of its load).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+
+import numpy as np
+
+from ..foundations.config import check_keys, number
+from ..foundations.errors import ScenarioError
+from ..soil import subsoil
+from ..vehicles.tyre import Tyre, footprint_table, load_capacity_kN, recommended_inflation_kPa
+
+__all__ = ["BUILTIN_FLEET", "COVER_FRACTIONS", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec",
+           "first_pass_rut_m", "load_fleet", "parse_fleet", "rut_table_m", "stress_profile", "track_machine"]
+
+BUILTIN_FLEET = "builtin"
+GRAVITY_M_S2 = 9.81
+FLEET_KEYS = ("schema_version", "tyres", "machines")
+TYRE_KEYS = ("width_m", "diameter_m", "rated_load_kN", "rated_inflation_kPa", "source")
+MACHINE_KEYS = ("working_width_m", "outer_width_m", "turn_radius_m", "wheels", "tracks", "source")
+WHEEL_KEYS = ("name", "x_m", "y_m", "tyre", "load_kN", "inflation_kPa")
+TRACK_KEYS = ("contact_length_m", "track_width_m", "track_gauge_m", "mass_kg")
+# the profile's sampling, lateral and along the path, and the tyre contact's elements (tyre.contact: the forces
+# of a square grid of this side): 3 cm. Measured on the combine (the largest loads) against 1 cm: the profile's
+# peak +0.6 % and its mean over the strips +0.6 % at 0.1 m depth, below 0.1 % at 0.3-0.8 m; 0.5 s against 52 s
+# (tests/test_region.py keeps the bound)
+PROFILE_STEP_M = 0.03
+# how far beside and ahead of a wheel or track its stress is kept (vehicles/wheeled.py's reach: below 1 % of the
+# peak 1.5 m beside a contact at 0.1-0.8 m depth for xi >= 3)
+PROFILE_REACH_M = 1.5
+TYRE_ELEMENT_M = 0.03
+
+
+@dataclass(frozen=True)
+class WheelSpec:
+    name: str
+    x_m: float
+    y_m: float
+    tyre: Tyre
+    tyre_name: str
+    load_kN: float
+    inflation_kPa: float
+
+    @property
+    def width_m(self) -> float:
+        return self.tyre.width_m
+
+
+@dataclass(frozen=True)
+class TrackSet:
+    contact_length_m: float
+    track_width_m: float
+    track_gauge_m: float
+    mass_kg: float
+
+    @property
+    def pressure_Pa(self) -> float:
+        """The static contact pressure m g / (2 l b) (module doc)."""
+        return self.mass_kg * GRAVITY_M_S2 / (2.0 * self.contact_length_m * self.track_width_m)
+
+
+@dataclass(frozen=True)
+class Machine:
+    """A machine of the fleet (module doc): ``wheels`` (tuple of :class:`WheelSpec`) or ``tracks``."""
+
+    name: str
+    working_width_m: float
+    outer_width_m: float
+    turn_radius_m: float
+    wheels: tuple = ()
+    tracks: TrackSet | None = None
+    source: str = ""
+
+    def strips(self) -> tuple:
+        """The strips its tyres or tracks run on: ((lateral_m, width_m), ...), left positive."""
+        if self.tracks is not None:
+            t = self.tracks
+            return ((0.5 * t.track_gauge_m, t.track_width_m), (-0.5 * t.track_gauge_m, t.track_width_m))
+        return tuple((w.y_m, w.width_m) for w in self.wheels)
+
+    @property
+    def reach_m(self) -> float:
+        return max(abs(lat) + 0.5 * b for lat, b in self.strips())
+
+    @property
+    def mass_kg(self) -> float:
+        if self.tracks is not None:
+            return self.tracks.mass_kg
+        return sum(w.load_kN for w in self.wheels) * 1e3 / GRAVITY_M_S2
+
+    def key(self) -> tuple:
+        """What its stress profile depends on (for the tables' cache)."""
+        if self.tracks is not None:
+            t = self.tracks
+            return ("tracks", t.contact_length_m, t.track_width_m, t.track_gauge_m, t.mass_kg)
+        return ("wheels",) + tuple((w.x_m, w.y_m, w.tyre, w.load_kN, w.inflation_kPa) for w in self.wheels)
+
+
+@dataclass(frozen=True)
+class Fleet:
+    machines: dict  # name -> Machine
+    tyres: dict  # name -> Tyre
+    label: str
+
+
+def _source(where: str, t: dict) -> str:
+    s = t.get("source")
+    if not isinstance(s, str) or not s.strip():
+        raise ScenarioError(f"{where}.source is required: a citation of where its numbers come from, or a sentence "
+                            "starting with \"ASSUMED\" that says why they are taken as they are")
+    return s.strip()
+
+
+def _tyre(where: str, t) -> Tyre:
+    if not isinstance(t, dict):
+        raise ScenarioError(f"{where} = {t!r} must be a table of {', '.join(TYRE_KEYS)}")
+    check_keys(where, t, TYRE_KEYS)
+    _source(where, t)
+    vals = {}
+    for k, lo, hi in (("width_m", 0.1, 1.2), ("diameter_m", 0.3, 3.0), ("rated_load_kN", 0.0, 500.0),
+                      ("rated_inflation_kPa", 0.0, 1000.0)):
+        if k not in t:
+            raise ScenarioError(f"{where}.{k} is required")
+        vals[k] = number(f"{where}.{k}", t[k], lo, hi, low_open=True)
+    return Tyre(**vals)
+
+
+def _machine(name: str, t, tyres: dict) -> Machine:
+    where = f"machines.{name}"
+    if not isinstance(t, dict):
+        raise ScenarioError(f"{where} = {t!r} must be a table of {', '.join(MACHINE_KEYS)}")
+    check_keys(where, t, MACHINE_KEYS)
+    src = _source(where, t)
+    if "working_width_m" not in t:
+        raise ScenarioError(f"{where}.working_width_m is required")
+    w = number(f"{where}.working_width_m", t["working_width_m"], 0.0, 100.0, low_open=True)
+    outer = number(f"{where}.outer_width_m", t.get("outer_width_m", w), 0.0, 100.0, low_open=True)
+    radius = number(f"{where}.turn_radius_m", t.get("turn_radius_m", 5.0), 0.5, 100.0)
+    has_w, has_t = "wheels" in t, "tracks" in t
+    if has_w == has_t:
+        raise ScenarioError(f"{where}: give either wheels (a list of wheel tables) or tracks (a table of "
+                            f"{', '.join(TRACK_KEYS)}), not {'both' if has_w else 'neither'}")
+    if has_t:
+        tt = t["tracks"]
+        if not isinstance(tt, dict):
+            raise ScenarioError(f"{where}.tracks = {tt!r} must be a table of {', '.join(TRACK_KEYS)}")
+        check_keys(f"{where}.tracks", tt, TRACK_KEYS)
+        vals = {}
+        for k, lo, hi in (("contact_length_m", 0.0, 20.0), ("track_width_m", 0.0, 5.0), ("track_gauge_m", 0.0, 10.0),
+                          ("mass_kg", 0.0, 2e5)):
+            if k not in tt:
+                raise ScenarioError(f"{where}.tracks.{k} is required")
+            vals[k] = number(f"{where}.tracks.{k}", tt[k], lo, hi, low_open=True)
+        ts = TrackSet(**vals)
+        if ts.track_gauge_m < ts.track_width_m:
+            raise ScenarioError(f"{where}.tracks.track_gauge_m = {ts.track_gauge_m:g} is outside the allowed range "
+                                f"[{ts.track_width_m:g}, 10] m (at least the track width: the tracks would overlap)")
+        m = Machine(name, w, outer, radius, (), ts, src)
+    else:
+        wl = t["wheels"]
+        if not isinstance(wl, list) or not wl:
+            raise ScenarioError(f"{where}.wheels = {wl!r} must be a non-empty list of wheel tables")
+        wheels = []
+        for i, wt in enumerate(wl):
+            wh = f"{where}.wheels[{i}]"
+            if not isinstance(wt, dict):
+                raise ScenarioError(f"{wh} = {wt!r} must be a table of {', '.join(WHEEL_KEYS)}")
+            check_keys(wh, wt, WHEEL_KEYS)
+            for k in ("x_m", "y_m", "tyre", "load_kN"):
+                if k not in wt:
+                    raise ScenarioError(f"{wh}.{k} is required")
+            tn = wt["tyre"]
+            if tn not in tyres:
+                raise ScenarioError(f"{wh}.tyre = {tn!r} is not a tyre of the catalog ({', '.join(tyres)})")
+            ty = tyres[tn]
+            x = number(f"{wh}.x_m", wt["x_m"], -30.0, 30.0)
+            y = number(f"{wh}.y_m", wt["y_m"], -0.5 * outer + 0.5 * ty.width_m, 0.5 * outer - 0.5 * ty.width_m) \
+                if outer >= ty.width_m else None
+            if y is None:
+                raise ScenarioError(f"{wh}.tyre = {tn!r}: its width {ty.width_m:g} m is wider than "
+                                    f"{where}.outer_width_m "
+                                    f"= {outer:g}")
+            if radius < abs(y) + 0.5 * ty.width_m:
+                raise ScenarioError(f"{where}.turn_radius_m = {radius:g} is outside the allowed range "
+                                    f"[{abs(y) + 0.5 * ty.width_m:g}, 100] m: the wheel {wh} would cross the turn's "
+                                    "centre")
+            p_rated = ty.rated_inflation_kPa
+            cap = load_capacity_kN(ty, p_rated)
+            load = number(f"{wh}.load_kN", wt["load_kN"], 0.0, cap, low_open=True)
+            infl = wt.get("inflation_kPa", "recommended")
+            if infl == "recommended":
+                infl = recommended_inflation_kPa(ty, load)
+            else:
+                lo = recommended_inflation_kPa(ty, load)
+                infl = number(f"{wh}.inflation_kPa", infl, lo, p_rated)
+            wheels.append(WheelSpec(str(wt.get("name", f"wheel{i}")), x, y, ty, tn, load, infl))
+        m = Machine(name, w, outer, radius, tuple(wheels), None, src)
+    return m
+
+
+def parse_fleet(doc: dict, label: str = "fleet") -> Fleet:
+    """A fleet catalog document -> :class:`Fleet`, every tyre and machine checked (module doc)."""
+    if not isinstance(doc, dict):
+        raise ScenarioError(f"{label}: a fleet catalog is a TOML document with [tyres] and [machines]")
+    check_keys(label, doc, FLEET_KEYS)
+    tt = doc.get("tyres", {})
+    if not isinstance(tt, dict):
+        raise ScenarioError(f"{label}: tyres must be a table of tyre tables")
+    tyres = {str(k): _tyre(f"tyres.{k!r}" if "/" in str(k) else f"tyres.{k}", v) for k, v in tt.items()}
+    mm = doc.get("machines")
+    if not isinstance(mm, dict) or not mm:
+        raise ScenarioError(f"{label}: machines must be a non-empty table of machine tables")
+    machines = {str(k): _machine(str(k), v, tyres) for k, v in mm.items()}
+    return Fleet(machines, tyres, label)
+
+
+def load_fleet(name_or_path) -> Fleet:
+    """The built-in fleet (``"builtin"``) or a fleet catalog TOML file."""
+    from pathlib import Path
+
+    from ..foundations.files import read_text
+
+    if name_or_path in (None, BUILTIN_FLEET):
+        text = resources.files("symtrack.region").joinpath("data/fleet.toml").read_text()
+        label = "the built-in fleet"
+    else:
+        p = Path(name_or_path)
+        if not p.is_file():
+            raise ScenarioError(f"fleet = {str(name_or_path)!r}: no such file (or \"builtin\")")
+        text, label = read_text(p, "fleet catalog"), str(p)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"fleet {label}: not valid TOML: {err}") from err
+    return parse_fleet(doc, label)
+
+
+def track_machine(name: str, params: dict, working_width_m: float, turn_radius_m: float) -> Machine:
+    """A tracked machine from a vehicle parameter set (a preset's contact length, track width, gauge and
+    mass): the full fidelity's crawler as the fast one sees it."""
+    ts = TrackSet(float(params["contact_length_m"]), float(params["track_width_m"]), float(params["track_gauge_m"]),
+                  float(params["mass_kg"]))
+    return Machine(name, float(working_width_m), float(params["track_gauge_m"]) + float(params["track_width_m"]),
+                   float(turn_radius_m), (), ts, "the vehicle preset's own parameters")
+
+
+# ---- the stress profile ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StressProfile:
+    """sigma_z [Pa] (n_v, n_depths) at lateral offsets ``v_m`` (n_v,) from the path line: the largest
+    vertical stress a straight pass gives (module doc)."""
+
+    v_m: np.ndarray
+    sigma_Pa: np.ndarray
+    depths_m: tuple
+    xi: float
+
+    def at(self, v) -> np.ndarray:
+        """Linear interpolation in v (0 beyond the table): (n, n_depths)."""
+        v = np.asarray(v, dtype=float)
+        x = (v - self.v_m[0]) / (self.v_m[1] - self.v_m[0])
+        n = self.v_m.size
+        inside = (x >= 0) & (x <= n - 1)
+        i = np.clip(np.floor(x).astype(np.int64), 0, n - 2)
+        f = np.clip(x - i, 0.0, 1.0)[:, None]
+        out = (1 - f) * self.sigma_Pa[i] + f * self.sigma_Pa[i + 1]
+        return np.where(inside[:, None], out, 0.0)
+
+
+def _profile_from(stress_fn, x_lo, x_hi, v_lo, v_hi, step):
+    v = np.arange(math.floor(v_lo / step), math.ceil(v_hi / step) + 1) * step
+    u = np.arange(math.floor(x_lo / step), math.ceil(x_hi / step) + 1) * step
+    best = None
+    for uu in u:  # one row of points along v at each position along the path
+        s = stress_fn(np.full(v.size, uu), v)
+        best = s if best is None else np.maximum(best, s)
+    return v, best
+
+
+@functools.lru_cache(maxsize=64)
+def _profile_cached(key, machine: Machine, depths: tuple, xi: float, step: float, reach: float) -> StressProfile:
+    depths_a = np.asarray(depths, dtype=float)
+    if machine.tracks is not None:
+        t = machine.tracks
+        T = subsoil.build_tables(depths_a, xi, t.contact_length_m, t.track_width_m, t.track_gauge_m, reach)
+        p = t.pressure_Pa
+        a = np.array([0.0, 0.0, 1.0, 0.0, p, 0.0, p, 0.0])
+        geo = np.array([t.contact_length_m, t.track_width_m, t.track_gauge_m, 0.0, step, 0.0])
+
+        def fn(uu, vv):
+            return subsoil.stress_at(T, uu, vv, a, geo)
+
+        half_l = 0.5 * t.contact_length_m
+        v, s = _profile_from(fn, -half_l, half_l, -machine.reach_m, machine.reach_m, step)
+        return StressProfile(v, s, depths, xi)
+    tables = []
+    for w in machine.wheels:
+        _, tb = footprint_table(w.tyre, w.load_kN, w.inflation_kPa, TYRE_ELEMENT_M, depths, xi, reach, step)
+        tables.append(tb)
+
+    def fn(uu, vv):
+        s = np.zeros((uu.size, len(depths)))
+        for w, tb in zip(machine.wheels, tables, strict=True):
+            s += tb.at(uu - w.x_m, vv - w.y_m)[0]
+        return 1e3 * s  # kPa -> Pa
+
+    xs = [w.x_m for w in machine.wheels]
+    half_len = max(0.5 * w.tyre.diameter_m for w in machine.wheels)
+    v, s = _profile_from(fn, min(xs) - half_len, max(xs) + half_len, -machine.reach_m, machine.reach_m, step)
+    return StressProfile(v, s, depths, xi)
+
+
+def stress_profile(machine: Machine, depths_m, xi: float, step_m: float = PROFILE_STEP_M,
+                   reach_m: float = PROFILE_REACH_M) -> StressProfile:
+    """The machine's stress profile (module doc) at ``depths_m`` for concentration factor ``xi``, built once
+    per process for these arguments."""
+    depths = tuple(float(d) for d in depths_m)
+    return _profile_cached(machine.key(), machine, depths, float(xi), float(step_m), float(reach_m))
+
+
+def first_pass_rut_m(machine: Machine, soil: dict, pressure_fraction: float = 1.0) -> float | None:
+    """The plastic rut a tracked machine's first quasi-static pass leaves [m] (None for wheels: the package's
+    wheeled pass leaves no rut, vehicles/wheeled.py): the package's soil law (symtrack.soil.law, Bekker's
+    virgin loading) loaded to the track's static pressure p, z_max = (p / k_eq)^(1/n), then unloaded on its
+    elastic line, k_u = max(K_e, kappa p / z_max) (symtrack.soil.cell.unloading_slope): z_max - p / k_u. After N
+    passes the terrain engine's rut is this N^beta (the soil's ``repeated_loading_exponent``); the density
+    fold's column compression is bounded by it as the world bounds it (soil/density.py, cap_to_rut).
+    ``pressure_fraction``: of a cell the track covers in part, the share of its area under the track (the
+    terrain engine's channel weight: the cell carries that share of the pressure)."""
+    if machine.tracks is None:
+        return None
+    from ..model.options import ModelOptions
+    from ..soil import law as soil_law
+
+    law_obj = soil_law.make(ModelOptions())
+    law = law_obj.values({**soil, "track_width_m": machine.tracks.track_width_m})
+    p = machine.tracks.pressure_Pa * float(pressure_fraction)
+    if p <= 0:
+        return 0.0
+    z_max = float(law_obj.static_sinkage(p, law))
+    named = law_obj.named(law)
+    k_e, kappa = float(named["elastic_stiffness_Pa_per_m"]), float(named["kappa"])
+    k_u = max(k_e, kappa * p / max(z_max, 1e-12))
+    return max(z_max - p / k_u, 0.0)
+
+
+# the shares of a cell under a track at which the first-pass rut is tabulated (linear in between)
+COVER_FRACTIONS = tuple(k / 20 for k in range(21))
+
+
+def rut_table_m(machine: Machine, soil: dict) -> tuple | None:
+    """:func:`first_pass_rut_m` at each share of :data:`COVER_FRACTIONS` (None for wheels)."""
+    if machine.tracks is None:
+        return None
+    return tuple(first_pass_rut_m(machine, soil, f) for f in COVER_FRACTIONS)
