@@ -62,14 +62,13 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     p being the grid model's parameter vector (vehicle and soil parameters, then the terrain's Q).
     """
     from symtrack.model import SystemModel
-    from symtrack.model.system import PARAM_NAMES
     from symtrack.soil.law import make as make_soil_law
     from symtrack.terrain.channels import HIST_ROWS, NF, NG, build_cell_functions
     from symtrack.vehicles.planar import ENDS, TRACKS
 
     agg = SumsTerrain()
     veh = SystemModel(opts, agg)
-    npv = len(PARAM_NAMES)
+    npv = len(veh.model_param_names)
     xv, z, u, pv = veh.x, veh.z, veh.u, veh.p  # pv = (P, Q globals, S)
     NW = xv.numel() + z.numel()
     h = ca.SX.sym("h")
@@ -149,7 +148,7 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     XC, Wm, U, PV, Qg, QC, H = (ca.MX.sym("xc", 2, n), ca.MX.sym("w", NW), ca.MX.sym("u", 2),
                                 ca.MX.sym("pv", npv), ca.MX.sym("qg", NG), ca.MX.sym("qc", NF, n), ca.MX.sym("h"))
     Pm_ = [PV[i] for i in range(npv)]
-    Pd = dict(zip(PARAM_NAMES, Pm_, strict=True))
+    Pd = veh.model_layout.unpack(Pm_)
     law_mx = sl.vector(Pd)
     C_MX = ca.vertcat(Pd["contact_length_m"], Pd["track_width_m"], Pd["track_gauge_m"],
                       Pd["cg_ahead_of_contact_centre_m"], Qg[0], Qg[1], law_mx,

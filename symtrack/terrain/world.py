@@ -77,8 +77,7 @@ from ..foundations.memory import require_memory
 from ..model import SystemModel
 from ..model.layout import StateLayout
 from ..model.options import ModelOptions
-from ..model.parameters import SOIL_PARAM_NAMES
-from ..model.system import PARAM_NAMES
+from ..model.parameters import model_param_layout, soil_params
 from ..soil import density, moisture
 from ..vehicles import registry as vehicle_registry
 from . import gis
@@ -211,6 +210,8 @@ class World:
     def __init__(self, settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s: float,
                  start_xy=(0.0, 0.0), modulus: int | None = None, storage: Terrain | None = None):
         self.settings, self.params, self.opts = settings, dict(params), opts
+        # the soil parameters of the model (its vehicle's and soil law's declarations and the soil's)
+        self.soil_names = tuple(s.name for s in soil_params(opts))
         # the estimated peak memory of the process (run_memory_bytes; open_world's, for a terrain file)
         self.memory_estimate_bytes: int | None = None
         if not settings.cell_m < params["track_width_m"]:
@@ -243,7 +244,7 @@ class World:
         self.storage = storage if storage is not None else Terrain(self.grid)
         self.surface = self._apply_surface(settings.surface, storage is not None)
         if self.storage.soil is None:
-            self.storage.soil = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
+            self.storage.soil = {k: float(params[k]) for k in self.soil_names}
         self.storage.set_subsoil_depths(settings.subsoil_depths_m)
         # the largest vertical stress of this pass at each subsoil depth, per cell (the terrain
         # engine writes it; end_pass folds it into the storage's record over all passes)
@@ -263,7 +264,7 @@ class World:
         self.Q[1] = END_STRIP_CELLS * self.grid.cell_m
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
-        self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
+        self._pbase = np.array(model_param_layout(opts).pack(params))  # SystemModel.param_vector's order
         # each cell's own day parameters (N, lambda, kappa, sigma_pc; None: its soil's): a moisture raster of
         # more distinct values than a soil map holds (symtrack.soil.moisture.cell_day_parameters)
         self.cell_day = None
@@ -331,7 +332,7 @@ class World:
         pairs than a map holds: each cell's day parameters in ``cell_day``, the settings unchanged."""
         mm, sm = settings.moisture, settings.soil_map
         water = moisture.read_moisture(self.grid, mm)
-        base = [{n: float(params[n]) for n in SOIL_PARAM_NAMES}] + ([] if sm is None else list(sm.soils))
+        base = [{n: float(params[n]) for n in self.soil_names}] + ([] if sm is None else list(sm.soils))
         labels = ["[soil]"] + ([] if sm is None else list(sm.labels))
         index = self._map_index if self._map_index is not None else np.zeros(self.grid.n_cells, dtype=np.uint8)
         pairs = moisture.distinct_pairs(index, water)
@@ -358,8 +359,8 @@ class World:
                 ids: dict = {}
 
                 def cell_soils(index, tab):
-                    keys = [tuple(float(params[n]) for n in SOIL_PARAM_NAMES)]
-                    keys += [tuple(float(v[n]) for n in SOIL_PARAM_NAMES) for _, v in tab]
+                    keys = [tuple(float(params[n]) for n in self.soil_names)]
+                    keys += [tuple(float(v[n]) for n in self.soil_names) for _, v in tab]
                     return np.array([ids.setdefault(k, len(ids)) for k in keys])[index]
 
                 if not np.array_equal(cell_soils(idx, table), cell_soils(st.soil_index, st.soil_table)):
@@ -370,14 +371,14 @@ class World:
                 st.soil_table = table
             if sm.crs_wkt is not None:
                 st.crs_wkt = sm.crs_wkt
-        base = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
+        base = {k: float(params[k]) for k in self.soil_names}
         soils, table = [dict(params)], []
         remap = np.zeros(len(st.soil_table) + 1, dtype=np.uint8)
         used = np.bincount(st.soil_index, minlength=len(st.soil_table) + 1) > 0
         for k, (label, sp) in enumerate(st.soil_table, start=1):
-            if not used[k] or {n: sp[n] for n in SOIL_PARAM_NAMES} == base:
+            if not used[k] or {n: sp[n] for n in self.soil_names} == base:
                 continue
-            full = {**params, **{n: sp[n] for n in SOIL_PARAM_NAMES}}
+            full = {**params, **{n: sp[n] for n in self.soil_names}}
             for n in ("cell_areal_mass_kg_per_m2", "cell_damping_Pa_s_per_m"):
                 if full[n] != float(params[n]):
                     raise ScenarioError(f"terrain.soil_map: soil {k} has {n} = {full[n]!r}, the scenario's soil "
