@@ -1,8 +1,10 @@
 """The soil-law registry (symtrack.soil.law): adding a law is one class and one registry
-entry. A toy law registered here (linear loading, an elastic line on unloading) runs through the
-paths the Bekker/Wong law takes -- the homogeneous model's static state and compaction, a scenario
-simulated with ``model.soil_law``, one channel loaded, unloaded and reloaded with its history kept
-by the channel's INFO_OUT Function -- and meets its closed form there."""
+entry. A toy law registered here (linear loading, an elastic line on unloading), with two
+coefficients of its own declared in its class, runs through the paths the Bekker/Wong law takes --
+the homogeneous model's static state and compaction, a scenario simulated with ``model.soil_law``
+(its coefficients in the ``[soil]`` table and the model's parameter vector), one channel loaded,
+unloaded and reloaded with its history kept by the channel's INFO_OUT Function -- and meets its
+closed form there."""
 
 import casadi as ca
 import numpy as np
@@ -10,30 +12,36 @@ import pytest
 
 import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
+from symtrack.foundations.params import param
 from symtrack.model import SystemModel
 from symtrack.model.homogeneous import HomogeneousTerrain
 from symtrack.model.options import ModelOptions
+from symtrack.model.parameters import model_params, soil_params
 from symtrack.model.static import static_state
+from symtrack.model.system import PARAM_NAMES
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.soil import law as soil_law
 from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions
 
-PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
+_TOY_SOURCE = "a test's toy: the order of the clayey soil preset's unloading stiffness K_e (4e7 Pa/m)"
 
 
 class LinearPlastic(soil_law.SoilLaw):
-    """A toy: p = k z on virgin loading, the line of slope K_e through the top (z_max, p_max) below
-    it (clipped at 0 and at the virgin line), no load cycles. k = K_e / kappa (the soil's elastic
-    stiffness and unloading-stiffness floor, read for the toy as an unloading/loading ratio)."""
+    """A toy: p = k z on virgin loading, the line of slope k_u through the top (z_max, p_max) below
+    it (clipped at 0 and at the virgin line), no load cycles. k and k_u are the toy's own
+    coefficients, declared here and nowhere else."""
 
     name = "linear_plastic_toy"
     description = "linear loading, elastic unloading line (a test's toy)"
-    param_names = ("elastic_stiffness_Pa_per_m", "unloading_stiffness_floor")
+    params = (param("toy_loading_stiffness_Pa_per_m", "the toy's loading stiffness k", 0.0, 1e12, False,
+                    default=1.3e7, source=_TOY_SOURCE),
+              param("toy_unloading_stiffness_Pa_per_m", "the toy's unloading stiffness k_u", 0.0, 1e12, False,
+                    default=4e7, source=_TOY_SOURCE))
+    param_names = ("toy_loading_stiffness_Pa_per_m", "toy_unloading_stiffness_Pa_per_m")
     vector_names = ("loading_stiffness_Pa_per_m", "unloading_stiffness_Pa_per_m")
 
     def vector(self, params):
-        ke = params["elastic_stiffness_Pa_per_m"]
-        return ca.vertcat(ke / params["unloading_stiffness_floor"], ke)
+        return ca.vertcat(params["toy_loading_stiffness_Pa_per_m"], params["toy_unloading_stiffness_Pa_per_m"])
 
     def virgin_pressure(self, z, law):
         return law[0] * ca.fmax(z, 0)
@@ -77,9 +85,13 @@ def toy():
         soil_law.unregister(LinearPlastic.name)
 
 
-def _stiffness():
-    return PARAMS["elastic_stiffness_Pa_per_m"] / PARAMS["unloading_stiffness_floor"], \
-        PARAMS["elastic_stiffness_Pa_per_m"]
+# the toy's defaults beside a vehicle and a soil preset (which knows nothing of the toy)
+PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38"),
+          **{s.name: s.default for s in LinearPlastic.params}}
+
+
+def _stiffness(params=PARAMS):
+    return params["toy_loading_stiffness_Pa_per_m"], params["toy_unloading_stiffness_Pa_per_m"]
 
 
 def test_the_default_law_is_bekker_wong_and_an_unknown_name_is_refused():
@@ -115,14 +127,39 @@ def test_a_toy_law_in_the_homogeneous_model_meets_its_closed_form(toy):
     assert rc == pytest.approx([b * k * 3e-3**2 / 2, b * k * 1e-3**2 / 2], rel=1e-14)
 
 
+def test_a_laws_coefficients_are_declared_in_its_module_only(toy):
+    """The toy's two coefficients reach the model's parameter set and vector, after the vehicle's and
+    the other soil coefficients, and the ``[soil]`` table, from its class alone; the default model's
+    set and vector are unchanged by its registration, and a value out of the declared range is refused
+    naming the key."""
+    names = SystemModel(toy.opts).model_param_names
+    assert names[-2:] == LinearPlastic.param_names
+    assert not {"bekker_n", "k_c_N_per_m_n1", "elastic_stiffness_Pa_per_m"} & set(names)  # the Bekker/Wong law's
+    assert names[:len(PARAM_NAMES) - 10] == PARAM_NAMES[:len(PARAM_NAMES) - 10]  # the vehicle's, as the default's
+    assert {s.name for s in soil_params(toy.opts)} >= set(LinearPlastic.param_names)
+    assert not set(LinearPlastic.param_names) & {s.name for s in soil_params()}
+    assert tuple(s.name for s in model_params()) == PARAM_NAMES == SystemModel().model_param_names
+    spec = {s.name: s for s in model_params(toy.opts)}["toy_loading_stiffness_Pa_per_m"]
+    assert (spec.unit, spec.default, spec.source) == ("Pa/m", 1.3e7, _TOY_SOURCE)
+    with pytest.raises(ScenarioError, match="toy_loading_stiffness_Pa_per_m = -1"):
+        symtrack.load_scenario("validation", {"model.soil_law": LinearPlastic.name,
+                                              "soil.toy_loading_stiffness_Pa_per_m": -1.0})
+    with pytest.raises(ScenarioError, match="toy_loading_stiffness_Pa_per_m"):  # not a key of the Bekker/Wong model
+        symtrack.load_scenario("validation", {"soil.toy_loading_stiffness_Pa_per_m": 2e7})
+
+
 def test_a_toy_law_through_a_scenario(toy):
-    """``model.soil_law`` in a scenario: the validation run on the toy soil, its idler cells at
-    the toy's sinkage p / k under the idler pressure once the run is steady."""
+    """``model.soil_law`` in a scenario, with the toy's own coefficient given in ``[soil]``: the
+    validation run on the toy soil, its idler cells at the toy's sinkage p / k under the idler
+    pressure once the run is steady."""
     sc = symtrack.load_scenario("validation", {"model.soil_law": LinearPlastic.name, "run.duration_s": 3.0,
-                                               "run.stop_after_distance_m": "none"})
+                                               "run.stop_after_distance_m": "none",
+                                               "soil.toy_loading_stiffness_Pa_per_m": 1.6e7})
     assert sc.model.soil_law == LinearPlastic.name
+    assert sc.params["toy_loading_stiffness_Pa_per_m"] == 1.6e7 and "bekker_n" not in sc.params
     res = symtrack.simulate(sc)
-    k, _ = _stiffness()
+    k, _ = _stiffness(sc.params)
+    assert k == 1.6e7
     for track in ("left", "right"):
         z = res.column(f"sinkage_idler_{track}_m")[-1]
         p = res.column(f"p_idler_{track}_Pa")[-1]

@@ -28,8 +28,8 @@ from ..soil.cell import CELL_PARAMS
 from ..soil.pedotransfer import SUBSOIL_KEYS, SUBSOIL_TOP_DEFAULT_M, derive_soil
 from ..vehicles import registry as vehicle_registry
 
-__all__ = ["ParamLayout", "ParamSet", "ParamSpec", "check_set", "model_param_layout", "model_params", "soil_params",
-           "spec", "vehicle_params"]
+__all__ = ["ParamLayout", "ParamSet", "ParamSpec", "check_set", "known_soil_names", "model_param_layout",
+           "model_params", "soil_params", "spec", "vehicle_params"]
 
 
 def _spec(name, description, low, high, low_inclusive=True, default=None, derived=False, source=""):
