@@ -247,3 +247,24 @@ def test_a_toy_law_in_the_terrain_engines_cell_functions(toy):
     # the load's own static sinkage (the engine's step lags a little and moves the top)
     assert z == pytest.approx(zm + (20e3 - pm) / k_u, rel=1e-9)
     assert pm == pytest.approx(k * zm, rel=1e-12) and zm == pytest.approx(20e3 / k, rel=2e-2)
+
+
+def test_a_toy_law_on_the_terrain_engine_and_its_terrain_file(toy, tmp_path):
+    """The toy law's run on the grid (the terrain engine) writes a terrain file that records the parameter
+    layout it was made with: the law's name and its own coefficients by name, none of the Bekker/Wong
+    law's; the file continued under another law is refused, naming both."""
+    grid = {"terrain.size_m": [12.0, 6.0], "terrain.cell_m": 0.1, "run.duration_s": 1.0}
+    sc = symtrack.load_scenario("validation_grid", {**grid, "model.soil_law": LinearPlastic.name,
+                                                    "soil.toy_loading_stiffness_Pa_per_m": 1.6e7})
+    res = symtrack.simulate(sc)
+    path = tmp_path / "toy.npz"
+    res.terrain.save(path)
+    with np.load(path) as f:
+        assert str(f["soil_law"]) == LinearPlastic.name
+        names = [str(n) for n in f["soil_names"]]
+        assert dict(zip(names, f["soil_values"], strict=True))["toy_loading_stiffness_Pa_per_m"] == 1.6e7
+    assert set(LinearPlastic.param_names) <= set(names) and "bekker_n" not in names
+    assert float(res.terrain.zmax.max()) > 1e-3  # the cells were loaded
+    with pytest.raises(ScenarioError, match="soil law 'linear_plastic_toy', the scenario has model.soil_law = "
+                                            "'bekker_wong'"):
+        symtrack.simulate(symtrack.load_scenario("validation_grid", {**grid, "terrain.initial_state": str(path)}))

@@ -242,6 +242,12 @@ class World:
                                 f"terrain continued is in {gis.crs_label(storage.crs_wkt)}: two maps of one field must "
                                 "share their CRS (reproject the raster, gdalwarp -t_srs)")
         self.storage = storage if storage is not None else Terrain(self.grid)
+        if self.storage.soil_law is None:
+            self.storage.soil_law = opts.soil_law
+        elif self.storage.soil_law != opts.soil_law:
+            raise ScenarioError(f"the terrain's history was made with the soil law {self.storage.soil_law!r}, the "
+                                f"scenario has model.soil_law = {opts.soil_law!r}; continue a terrain under the law "
+                                "it was made with")
         self.surface = self._apply_surface(settings.surface, storage is not None)
         if self.storage.soil is None:
             self.storage.soil = {k: float(params[k]) for k in self.soil_names}
