@@ -268,3 +268,21 @@ def test_a_toy_law_on_the_terrain_engine_and_its_terrain_file(toy, tmp_path):
     with pytest.raises(ScenarioError, match="soil law 'linear_plastic_toy', the scenario has model.soil_law = "
                                             "'bekker_wong'"):
         symtrack.simulate(symtrack.load_scenario("validation_grid", {**grid, "terrain.initial_state": str(path)}))
+
+
+def test_a_toy_law_on_a_soil_map(toy):
+    """A soil map under the toy law: each soil of the map takes the toy's coefficients (their defaults: a
+    soil preset knows nothing of them) and leaves the Bekker/Wong law's out; the run on the terrain
+    engine carries both soils' traction coefficients under the tracks."""
+    sc = symtrack.load_scenario("validation_grid", {
+        "terrain.size_m": [12.0, 6.0], "terrain.cell_m": 0.1, "run.duration_s": 1.0,
+        "model.soil_law": LinearPlastic.name,
+        "terrain.soil_map": {"soils": ["clayey_soil_thailand_55"],
+                             "zones": [{"soil": 1, "x_m": [-100.0, 100.0], "y_m": [-100.0, 0.0]}]}})
+    res = symtrack.simulate(sc)
+    world_soils = res.terrain.soil_table
+    assert len(world_soils) == 1
+    label, soil = world_soils[0]
+    assert soil["toy_loading_stiffness_Pa_per_m"] == 1.3e7 and "bekker_n" not in soil
+    assert soil["cohesion_Pa"] != sc.params["cohesion_Pa"]  # the map's own soil
+    assert float(res.terrain.zmax.max()) > 1e-3

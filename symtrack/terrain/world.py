@@ -72,12 +72,12 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..foundations.errors import ScenarioError
+from ..foundations.errors import ParameterError, ScenarioError
 from ..foundations.memory import require_memory
 from ..model import SystemModel
 from ..model.layout import StateLayout
 from ..model.options import ModelOptions
-from ..model.parameters import model_param_layout, soil_params
+from ..model.parameters import check_set, known_soil_names, model_param_layout, soil_params
 from ..soil import density, moisture
 from ..vehicles import registry as vehicle_registry
 from . import gis
@@ -95,6 +95,23 @@ LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pa
 # A scenario's terrain.origin_m agrees with its continued terrain file's within a micrometre: far below
 # a cell (at least 1 cm), above the rounding of a coordinate of 1e7 m (2e-9 m in float64)
 ORIGIN_TOLERANCE_M = 1e-6
+
+
+def _soil_map_for_model(settings: TerrainSettings, opts: ModelOptions) -> TerrainSettings:
+    """``settings`` with the soils of its soil map as the model's ``[soil]`` table (the presets' values for
+    the default model's parameters: a soil law's own coefficients added, with their defaults, and
+    another law's left out), unchanged for the default model."""
+    sm = settings.soil_map
+    if sm is None:
+        return settings
+    specs, known = soil_params(opts), known_soil_names()
+    try:
+        soils = tuple(check_set(sp, specs, f"terrain.soil_map.soils[{i}]", known) for i, sp in enumerate(sm.soils))
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
+    if soils == sm.soils:
+        return settings
+    return dataclasses.replace(settings, soil_map=dataclasses.replace(sm, soils=soils))
 
 
 def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarray) -> np.ndarray:
@@ -212,6 +229,7 @@ class World:
         self.settings, self.params, self.opts = settings, dict(params), opts
         # the soil parameters of the model (its vehicle's and soil law's declarations and the soil's)
         self.soil_names = tuple(s.name for s in soil_params(opts))
+        settings = self.settings = _soil_map_for_model(settings, opts)
         # the estimated peak memory of the process (run_memory_bytes; open_world's, for a terrain file)
         self.memory_estimate_bytes: int | None = None
         if not settings.cell_m < params["track_width_m"]:
