@@ -24,7 +24,8 @@ from pathlib import Path
 
 from ..foundations.errors import ParameterError
 from ..foundations.files import read_text
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set
+from ..foundations.params import unit_of_name
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set, spec
 from ..soil.pedotransfer import derivation_note
 from . import soils, vehicles
 
@@ -32,18 +33,14 @@ __all__ = ["PRESET_FILE_KEYS", "describe", "format_preset", "preset_file_kind", 
            "read_preset_file", "unit_of"]
 
 PRESET_FILE_KEYS = ("base", "description", "sources")
-_UNITS = (("_kg_per_kg", "kg/kg"), ("_Mg_per_m3", "Mg/m^3"), ("_kPa", "kPa"),
-          ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
-          ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_N_m", "N m"),
-          ("_m_s", "m/s"), ("_rad", "rad"), ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_s", "s"), ("_m", "m"))
 
 
 def unit_of(name: str) -> str:
-    """The unit a parameter's name carries ("-" for a dimensionless one)."""
-    for suffix, unit in _UNITS:
-        if name.endswith(suffix):
-            return unit
-    return "-"
+    """The unit of the parameter ``name`` (its declaration's; "-" for a dimensionless one)."""
+    try:
+        return spec(name).unit
+    except KeyError:
+        return unit_of_name(name)
 
 
 def _comments_above(module) -> dict[int, str]:
@@ -174,7 +171,7 @@ def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
             src = _default_note(s)
         else:
             src = notes.get(s.name) or notes.get(_CONSTS.get(s.name, ""), "") or notes.get("*", "")
-        rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
+        rows.append((s.name, values[s.name], s.unit, s.description, src))
     return rows
 
 
@@ -199,7 +196,7 @@ def _describe_file(kind: str, path, specs) -> list[tuple[str, float, str, str, s
             src = _default_note(s)
         else:
             src = ""
-        rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
+        rows.append((s.name, values[s.name], s.unit, s.description, src))
     return rows
 
 
