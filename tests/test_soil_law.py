@@ -146,6 +146,13 @@ def test_a_laws_coefficients_are_declared_in_its_module_only(toy):
                                               "soil.toy_loading_stiffness_Pa_per_m": -1.0})
     with pytest.raises(ScenarioError, match="toy_loading_stiffness_Pa_per_m"):  # not a key of the Bekker/Wong model
         symtrack.load_scenario("validation", {"soil.toy_loading_stiffness_Pa_per_m": 2e7})
+    # an MPC scenario takes them too, and writes them back in its resolved document
+    from symtrack.control import scenario as mpc_scenario
+
+    mpc = mpc_scenario.load("straight_offset", {"model.soil_law": LinearPlastic.name,
+                                                "soil.toy_unloading_stiffness_Pa_per_m": 5e7})
+    assert mpc.params["toy_unloading_stiffness_Pa_per_m"] == 5e7 and "bekker_n" not in mpc.params
+    assert mpc.resolved_dict()["soil"]["toy_unloading_stiffness_Pa_per_m"] == 5e7
 
 
 def test_a_toy_law_through_a_scenario(toy):
