@@ -155,6 +155,22 @@ def test_a_laws_coefficients_are_declared_in_its_module_only(toy):
     assert mpc.resolved_dict()["soil"]["toy_unloading_stiffness_Pa_per_m"] == 5e7
 
 
+def test_a_users_soil_preset_file_holds_a_laws_own_coefficients(toy, tmp_path):
+    """A user soil preset file (a built-in base and the toy's coefficient, with its source) feeds a scenario
+    on the toy law; ``symtrack presets FILE`` lists the coefficient as set in the file."""
+    from symtrack.presets.catalog import describe
+
+    path = tmp_path / "toy_soil.toml"
+    path.write_text('base = "clayey_soil_thailand_38"\ntoy_loading_stiffness_Pa_per_m = 1.7e7\n'
+                    '[sources]\ntoy_loading_stiffness_Pa_per_m = "a plate test"\n')
+    sc = symtrack.load_scenario("validation", {"model.soil_law": LinearPlastic.name, "soil.preset": str(path)})
+    assert sc.params["toy_loading_stiffness_Pa_per_m"] == 1.7e7 and "bekker_n" not in sc.params
+    assert sc.params["toy_unloading_stiffness_Pa_per_m"] == 4e7  # the declared default
+    rows = {r[0]: r for r in describe("soil", str(path))}
+    assert rows["toy_loading_stiffness_Pa_per_m"][1:3] == (1.7e7, "Pa/m")
+    assert rows["toy_loading_stiffness_Pa_per_m"][4] == "set in toy_soil.toml: a plate test"
+
+
 def test_a_toy_law_through_a_scenario(toy):
     """``model.soil_law`` in a scenario, with the toy's own coefficient given in ``[soil]``: the
     validation run on the toy soil, its idler cells at the toy's sinkage p / k under the idler

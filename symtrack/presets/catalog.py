@@ -25,7 +25,7 @@ from pathlib import Path
 from ..foundations.errors import ParameterError
 from ..foundations.files import read_text
 from ..foundations.params import unit_of_name
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set, spec
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set, known_soil_names, spec
 from ..soil.pedotransfer import derivation_note
 from . import soils, vehicles
 
@@ -106,6 +106,15 @@ def preset_file_kind(path) -> str:
     return kinds.pop()
 
 
+def _file_specs(kind: str, d=()) -> tuple:
+    """The parameters a user preset file of ``kind`` holds: the default model's, and for a soil file the
+    coefficients of another registered soil law (or vehicle) it sets (a plug-in's, declared in its module)."""
+    if kind == "vehicle":
+        return VEHICLE_PARAMS
+    own = {s.name for s in SOIL_PARAMS}
+    return SOIL_PARAMS + tuple(spec(n) for n in known_soil_names() if n in d and n not in own)
+
+
 def _preset_file_doc(path, kind: str) -> dict:
     """A user preset file's TOML document, its keys checked."""
     path = Path(path)
@@ -115,7 +124,7 @@ def _preset_file_doc(path, kind: str) -> dict:
         d = tomllib.loads(read_text(path, f"{kind}.preset file", ParameterError))
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{path}: not valid TOML: {err}") from err
-    names = [s.name for s in (VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS)]
+    names = [s.name for s in _file_specs(kind, d)]
     unknown = sorted(set(d) - set(names) - set(PRESET_FILE_KEYS))
     if unknown:
         raise ParameterError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(PRESET_FILE_KEYS)} "
@@ -129,7 +138,7 @@ def _preset_file_doc(path, kind: str) -> dict:
 def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str], str]:
     """A user preset file -> (values, sources, description), checked as a complete set."""
     d = _preset_file_doc(path, kind)
-    specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS
+    specs = _file_specs(kind, d)
     names = [s.name for s in specs]
     values = ParamSet()
     base = d.get("base")
@@ -158,7 +167,7 @@ def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
     description; "default: ..." for the registry's default."""
     specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS
     if str(name).endswith(".toml"):
-        return _describe_file(kind, name, specs)
+        return _describe_file(kind, name, _file_specs(kind, _preset_file_doc(name, kind)))
     values = vehicles.vehicle_preset(name) if kind == "vehicle" else soils.soil_preset(name)
     notes = preset_sources(kind, name)
     raw = vehicles.VEHICLES[name] if kind == "vehicle" else soils.SOILS[name]
