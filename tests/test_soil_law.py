@@ -300,12 +300,15 @@ def test_a_toy_law_on_a_soil_map(toy):
     sc = symtrack.load_scenario("validation_grid", {
         "terrain.size_m": [12.0, 6.0], "terrain.cell_m": 0.1, "run.duration_s": 1.0,
         "model.soil_law": LinearPlastic.name,
-        "terrain.soil_map": {"soils": ["clayey_soil_thailand_55"],
-                             "zones": [{"soil": 1, "x_m": [-100.0, 100.0], "y_m": [-100.0, 0.0]}]}})
+        "terrain.soil_map": {"soils": ["clayey_soil_thailand_55",
+                                       {"preset": "clayey_soil_thailand_55", "toy_loading_stiffness_Pa_per_m": 2e7}],
+                             "zones": [{"soil": 1, "x_m": [-100.0, 100.0], "y_m": [-100.0, 0.0]},
+                                       {"soil": 2, "x_m": [-100.0, 100.0], "y_m": [1.0, 100.0]}]}})
     res = symtrack.simulate(sc)
     world_soils = res.terrain.soil_table
-    assert len(world_soils) == 1
-    label, soil = world_soils[0]
+    assert len(world_soils) == 2
+    (label, soil), (_, soil2) = world_soils
     assert soil["toy_loading_stiffness_Pa_per_m"] == 1.3e7 and "bekker_n" not in soil
+    assert soil2["toy_loading_stiffness_Pa_per_m"] == 2e7  # an entry's own value of the law's coefficient
     assert soil["cohesion_Pa"] != sc.params["cohesion_Pa"]  # the map's own soil
     assert float(res.terrain.zmax.max()) > 1e-3
