@@ -80,6 +80,7 @@ from ..model.options import ModelOptions
 from ..model.parameters import check_set, known_soil_names, model_param_layout, soil_params
 from ..soil import density, moisture
 from ..vehicles import registry as vehicle_registry
+from ..vehicles.planar import contact_rectangles
 from . import gis
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
@@ -417,15 +418,11 @@ class World:
 
     # ---- geometry -----------------------------------------------------------------------------
     def _rectangles(self, X, Y, psi, pad):
-        P = self.params
-        e, B = P["cg_ahead_of_contact_centre_m"], P["track_gauge_m"]
+        """Each track's contact rectangle (the vehicle's, planar.contact_rectangles) at the pose, grown by
+        pad: (centre x, centre y, cos, sin, half length, half width)."""
         c, s = math.cos(psi), math.sin(psi)
-        out = []
-        for side in (1.0, -1.0):
-            bx, by = -e, side * B / 2
-            out.append((X + c * bx - s * by, Y + s * bx + c * by, c, s,
-                        P["contact_length_m"] / 2 + pad, P["track_width_m"] / 2 + pad))
-        return out
+        return [(X + c * bx - s * by, Y + s * bx + c * by, c, s, hl + pad, hw + pad)
+                for bx, by, hl, hw in contact_rectangles(self.params)]
 
     def track_corners(self, X: float, Y: float, psi: float) -> list[np.ndarray]:
         """The corners (4, 2) of each track's contact rectangle in world coordinates."""

@@ -104,6 +104,15 @@ TRACK_SOIL_PARAMS = (
 TRACK_SOIL_PARAM_NAMES = tuple(s.name for s in TRACK_SOIL_PARAMS)
 
 
+def contact_rectangles(params) -> list[tuple[float, float, float, float]]:
+    """Each track's contact rectangle in the body frame, left then right: (its centre ahead of the CG,
+    its centre to the left of it, half its length l / 2, half its width b / 2) [m] (the terrain engine's
+    scan of the cells under the tracks, grid_engine.c, writes the same rectangles from geo)."""
+    ahead, off = -params["cg_ahead_of_contact_centre_m"], 0.5 * params["track_gauge_m"]
+    half_l, half_b = 0.5 * params["contact_length_m"], 0.5 * params["track_width_m"]
+    return [(ahead, off, half_l, half_b), (ahead, -off, half_l, half_b)]
+
+
 def mean_ground_pressure_Pa(params):
     """The tracks' mean ground pressure m g / (2 b l) [Pa] of the vehicle parameters ``params``."""
     return params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
