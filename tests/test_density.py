@@ -18,7 +18,7 @@ from symtrack.soil import density as D
 from symtrack.soil import moisture as M
 from symtrack.soil import subsoil as S
 from symtrack.soil.pedotransfer import K2_POSITION_OSR, SUBSOIL_KEYS
-from symtrack.terrain.storage import Grid, Terrain
+from symtrack.terrain.storage import TERRAIN_SCHEMA_VERSION, Grid, Terrain
 
 # Keller & Arvidsson's (2007) lines at the registry's default densities, without the yield line (m = 0:
 # the closed forms of the virgin and recompression lines; the yield line's own tests set m)
@@ -244,7 +244,7 @@ def test_a_soil_of_two_layers_through_a_run_and_its_terrain_file(tmp_path):
     f = tmp_path / "layered.npz"
     run.terrain.save(f, soil=soil)
     with np.load(f) as z:
-        assert int(z["schema_version"]) == 5
+        assert int(z["schema_version"]) == TERRAIN_SCHEMA_VERSION == 6 and str(z["soil_law"]) == "bekker_wong"
     back = Terrain.load(f)
     assert is_layered(back.soil) and back.soil["subsoil_bulk_density_initial_Mg_per_m3"] == 1.45
     assert np.array_equal(back.specific_volume, run.terrain.specific_volume)

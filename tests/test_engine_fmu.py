@@ -235,7 +235,7 @@ def _start_with_field(exported, path):
 
 
 @pytest.mark.parametrize("damage", ["shape", "origin", "magic", "truncated", "soil", "phase", "depths", "stress",
-                                    "missing"])
+                                    "missing", "version1", "law", "foreign"])
 def test_a_bad_field_file_is_an_fmi2_error_with_a_logged_message(exported, tmp_path, capsys, damage):
     sc = load_scenario("validation_grid")
     g = storage.Grid((-50.0, -50.0), 0.1, (1000, 1000))
@@ -244,7 +244,11 @@ def test_a_bad_field_file_is_an_fmi2_error_with_a_logged_message(exported, tmp_p
               "origin": "origin (-40, -50) m", "magic": "not a symtrack field file",
               "truncated": "the file is truncated or damaged", "soil": "the field was made with soil bekker_n",
               "phase": "phase of cell 7 is 3", "depths": "1 subsoil depths, this FMU has 4",
-              "stress": "sigma_max_Pa of cell 2 at depth 1 is -1", "missing": "cannot open it"}[damage]
+              "stress": "sigma_max_Pa of cell 2 at depth 1 is -1", "missing": "cannot open it",
+              "version1": "field file version 1, this FMU reads 2 (a version-1 file, which does not name its soil",
+              "law": "the field was made with the soil law linear_plastic, this FMU's is bekker_wong",
+              "foreign": "the field file holds soil parameter 'bekker_q' that this FMU's soil law does not read",
+              }[damage]
     depths = (0.2,) if damage == "depths" else sc.terrain.subsoil_depths_m
     if damage == "missing":
         path = tmp_path / "none.field"
@@ -267,6 +271,11 @@ def test_a_bad_field_file_is_an_fmi2_error_with_a_logged_message(exported, tmp_p
             data = data[:-9]
         if damage == "phase":
             data[-8 - 8 * 4 * g.n_cells - g.n_cells + 7] = 3
+        if damage in ("law", "foreign"):  # the parameter layout names another law, or a value no law reads
+            _rename_in_layout(data, "bekker_wong" if damage == "law" else "bekker_n",
+                              "linear_plastic" if damage == "law" else "bekker_q")
+        if damage == "version1":
+            data = bytearray(_version1(bytes(data)))
         path.write_bytes(bytes(data))
     _start_with_field(exported, path)
     assert expect in capsys.readouterr().out
@@ -333,7 +342,31 @@ def test_field_files_convert_both_ways_bit_for_bit_and_refuse_what_they_cannot_c
             st, name).dtype, name
     assert back.grid == st.grid and back.soil == {k: float(sc.params[k]) for k in back.soil}
     assert back.subsoil_depths_m == st.subsoil_depths_m == (0.1, 0.3, 0.5, 0.8)
-    assert (tmp_path / "a.field").stat().st_size == 64 + 8 * (len(back.soil) + 4) + (43 + 32) * st.grid.n_cells + 8
+    assert (tmp_path / "a.field").stat().st_size == 64 + 8 * (len(back.soil) + 4) + 64 * (1 + len(back.soil)) + (
+        43 + 32) * st.grid.n_cells + 8
+    assert back.soil_law == sc.model.soil_law == "bekker_wong"
+    # the file names each value: its values in another order read the same; a version-1 file (no names, the
+    # values in FIELD_V1_SOIL_NAMES order) too; one of another soil law, or naming a value no law reads, is refused
+    data = (tmp_path / "a.field").read_bytes()
+    hbytes, n_soil, n_depths, off = _layout(data)
+    perm = list(reversed(range(n_soil)))
+    shuffled = bytearray(data[:64] + b"".join(data[64 + 8 * k:72 + 8 * k] for k in perm)
+                         + data[64 + 8 * n_soil:off + 64]
+                         + b"".join(data[off + 64 * (1 + k):off + 64 * (2 + k)] for k in perm) + data[hbytes:])
+    assert bytes(shuffled) != data
+    (tmp_path / "shuffled.field").write_bytes(bytes(shuffled))
+    (tmp_path / "v1.field").write_bytes(_version1(data))
+    for other in ("shuffled.field", "v1.field"):
+        again = fieldfile.read_field(tmp_path / other)
+        assert again.soil == back.soil and again.soil_law == "bekker_wong", other
+        assert all(np.array_equal(getattr(again, n), getattr(back, n)) for n in STORAGE), other
+    for old, new, match in (("bekker_wong", "linear_plastic", "soil law 'linear_plastic', which this symtrack"),
+                            ("bekker_n", "bekker_q", "soil parameter\\(s\\) bekker_q, which the soil law")):
+        bad = bytearray(data)
+        _rename_in_layout(bad, old, new)
+        (tmp_path / "bad.field").write_bytes(bytes(bad))
+        with pytest.raises(ScenarioError, match=match):
+            fieldfile.read_field(tmp_path / "bad.field")
     fieldfile.convert(tmp_path / "a.field", tmp_path / "a.npz")  # and back through npz: the same bytes
     fieldfile.convert(tmp_path / "a.npz", tmp_path / "a2.field")
     assert (tmp_path / "a2.field").read_bytes() == (tmp_path / "a.field").read_bytes()
@@ -407,7 +440,8 @@ def test_without_the_subsoil_stress_the_fmu_and_its_field_file_leave_it_out(tmp_
     res = _master(exported, sc, 2.0, {"field_file_out": str(out)})
     assert _worst(res, ref.runs[0], _outputs(exported.path)) == dict.fromkeys(_outputs(exported.path), 0.0)
     field = fieldfile.read_field(out)
-    assert field.subsoil_depths_m == () and out.stat().st_size == 64 + 8 * len(field.soil) + 43 * 10**6 + 8
+    assert field.subsoil_depths_m == () and out.stat().st_size == 64 + 8 * len(field.soil) + 64 * (
+        1 + len(field.soil)) + 43 * 10**6 + 8
     for name in STORAGE:
         assert np.array_equal(getattr(field, name), getattr(ref.terrain, name)), name
     # a field file with the subsoil records does not fit this FMU
@@ -451,14 +485,48 @@ def test_the_yield_line_and_the_saturation_bound_fold_as_python_does_bit_for_bit
     assert np.all(second.specific_volume[second.specific_volume > 0] >= 1.6)
 
 
+def _layout(data: bytes):
+    """(header bytes, n_soil, n_depths, offset of the names) of a version-2 field file."""
+    hbytes, n_soil, n_depths = (struct.unpack_from("<I", data, k)[0] for k in (12, 56, 60))
+    return hbytes, n_soil, n_depths, 64 + 8 * (n_soil + n_depths)
+
+
+def _rename_in_layout(data: bytearray, old: str, new: str) -> None:
+    """The name ``old`` of a version-2 field file's parameter layout replaced by ``new``, in place."""
+    _, n_soil, _, off = _layout(bytes(data))
+    for k in range(1 + n_soil):
+        at = off + fieldfile.FIELD_NAME_BYTES * k
+        if bytes(data[at:at + fieldfile.FIELD_NAME_BYTES]).rstrip(b"\0") == old.encode():
+            data[at:at + fieldfile.FIELD_NAME_BYTES] = new.encode().ljust(fieldfile.FIELD_NAME_BYTES, b"\0")
+            return
+    raise AssertionError(f"{old} is not in the layout")
+
+
+def _version1(data: bytes) -> bytes:
+    """A version-2 field file as version 1 wrote it: its values in FIELD_V1_SOIL_NAMES order, no names."""
+    hbytes, n_soil, n_depths, off = _layout(data)
+    names = [data[off + 64 * k:off + 64 * (k + 1)].rstrip(b"\0").decode() for k in range(1, 1 + n_soil)]
+    values = dict(zip(names, struct.unpack_from(f"<{n_soil}d", data, 64), strict=True))
+    v1 = [n for n in fieldfile.FIELD_V1_SOIL_NAMES if n in values]
+    out = bytearray(data[:64] + struct.pack(f"<{len(v1)}d", *(values[n] for n in v1)) + data[64 + 8 * n_soil:off]
+                    + data[hbytes:])
+    struct.pack_into("<I", out, 8, 1)
+    struct.pack_into("<I", out, 12, 64 + 8 * (len(v1) + n_depths))
+    struct.pack_into("<I", out, 56, len(v1))
+    return bytes(out)
+
+
 def _older_field(src, dst, drop):
     """A field file as a symtrack before the last ``drop`` soil parameters were added wrote it: those
-    values cut from the header (n_soil and the header's size adjusted), the arrays as they were."""
+    values and their names cut from the header (n_soil and the header's size adjusted), the arrays as
+    they were."""
     data = bytes(src.read_bytes())
-    hbytes, n_soil = struct.unpack_from("<I", data, 12)[0], struct.unpack_from("<I", data, 56)[0]
-    out = bytearray(data[:64 + 8 * (n_soil - drop)] + data[64 + 8 * n_soil:])
-    struct.pack_into("<I", out, 12, hbytes - 8 * drop)
-    struct.pack_into("<I", out, 56, n_soil - drop)
+    hbytes, n_soil, n_depths, off = _layout(data)
+    keep = n_soil - drop
+    out = bytearray(data[:64 + 8 * keep] + data[64 + 8 * n_soil:off] + data[off:off + 64 * (1 + keep)]
+                    + data[hbytes:])
+    struct.pack_into("<I", out, 12, hbytes - (8 + 64) * drop)
+    struct.pack_into("<I", out, 56, keep)
     dst.write_bytes(bytes(out))
 
 

@@ -126,6 +126,25 @@ def test_every_registry_default_says_where_it_comes_from():
         assert (s.default is None) == (not s.default_source), s.name
 
 
+def test_every_declared_parameter_has_a_source_and_its_names_unit():
+    """Every parameter a vehicle, a soil law, the cell equation or the soil declares says where it comes
+    from, none by a path into the code, and its unit is its name's (the one without a suffix declared)."""
+    from symtrack.foundations.params import unit_of_name
+    from symtrack.model.parameters import model_params, soil_params, spec
+    from symtrack.soil import law as soil_law
+    from symtrack.vehicles import registry
+
+    specs = {s.name: s for s in soil_params()}
+    for v in registry.REGISTRY.values():
+        for law in soil_law.REGISTRY.values():
+            specs.update((s.name, s) for s in model_params(vehicle=v, law=law))
+    assert len(specs) == 47 and all(spec(n) is s for n, s in specs.items())
+    for s in specs.values():
+        assert s.source and "symtrack/" not in s.source and ".py" not in s.source, s.name
+        assert s.unit == unit_of_name(s.name) or (unit_of_name(s.name) == "-" and s.unit != "-"), s.name
+    assert specs["internal_resistance_per_km_h"].unit == "h/km" and specs["mass_kg"].unit == "kg"
+
+
 def test_the_presets_default_view_fits_100_columns_with_each_source_once(tmp_path, capsys):
     from symtrack.cli.main import main
 

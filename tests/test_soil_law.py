@@ -1,8 +1,10 @@
 """The soil-law registry (symtrack.soil.law): adding a law is one class and one registry
-entry. A toy law registered here (linear loading, an elastic line on unloading) runs through the
-paths the Bekker/Wong law takes -- the homogeneous model's static state and compaction, a scenario
-simulated with ``model.soil_law``, one channel loaded, unloaded and reloaded with its history kept
-by the channel's INFO_OUT Function -- and meets its closed form there."""
+entry. A toy law registered here (linear loading, an elastic line on unloading), with two
+coefficients of its own declared in its class, runs through the paths the Bekker/Wong law takes --
+the homogeneous model's static state and compaction, a scenario simulated with ``model.soil_law``
+(its coefficients in the ``[soil]`` table and the model's parameter vector), one channel loaded,
+unloaded and reloaded with its history kept by the channel's INFO_OUT Function -- and meets its
+closed form there."""
 
 import casadi as ca
 import numpy as np
@@ -10,30 +12,36 @@ import pytest
 
 import symtrack
 from symtrack.foundations.errors import ParameterError, ScenarioError
+from symtrack.foundations.params import param
 from symtrack.model import SystemModel
 from symtrack.model.homogeneous import HomogeneousTerrain
 from symtrack.model.options import ModelOptions
+from symtrack.model.parameters import model_params, soil_params
 from symtrack.model.static import static_state
+from symtrack.model.system import PARAM_NAMES
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.soil import law as soil_law
 from symtrack.terrain.channels import PHASE_LOADING, PHASE_UNLOADING, build_cell_functions
 
-PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38")}
+_TOY_SOURCE = "a test's toy: the order of the clayey soil preset's unloading stiffness K_e (4e7 Pa/m)"
 
 
 class LinearPlastic(soil_law.SoilLaw):
-    """A toy: p = k z on virgin loading, the line of slope K_e through the top (z_max, p_max) below
-    it (clipped at 0 and at the virgin line), no load cycles. k = K_e / kappa (the soil's elastic
-    stiffness and unloading-stiffness floor, read for the toy as an unloading/loading ratio)."""
+    """A toy: p = k z on virgin loading, the line of slope k_u through the top (z_max, p_max) below
+    it (clipped at 0 and at the virgin line), no load cycles. k and k_u are the toy's own
+    coefficients, declared here and nowhere else."""
 
     name = "linear_plastic_toy"
     description = "linear loading, elastic unloading line (a test's toy)"
-    param_names = ("elastic_stiffness_Pa_per_m", "unloading_stiffness_floor")
+    params = (param("toy_loading_stiffness_Pa_per_m", "the toy's loading stiffness k", 0.0, 1e12, False,
+                    default=1.3e7, source=_TOY_SOURCE),
+              param("toy_unloading_stiffness_Pa_per_m", "the toy's unloading stiffness k_u", 0.0, 1e12, False,
+                    default=4e7, source=_TOY_SOURCE))
+    param_names = ("toy_loading_stiffness_Pa_per_m", "toy_unloading_stiffness_Pa_per_m")
     vector_names = ("loading_stiffness_Pa_per_m", "unloading_stiffness_Pa_per_m")
 
     def vector(self, params):
-        ke = params["elastic_stiffness_Pa_per_m"]
-        return ca.vertcat(ke / params["unloading_stiffness_floor"], ke)
+        return ca.vertcat(params["toy_loading_stiffness_Pa_per_m"], params["toy_unloading_stiffness_Pa_per_m"])
 
     def virgin_pressure(self, z, law):
         return law[0] * ca.fmax(z, 0)
@@ -77,9 +85,13 @@ def toy():
         soil_law.unregister(LinearPlastic.name)
 
 
-def _stiffness():
-    return PARAMS["elastic_stiffness_Pa_per_m"] / PARAMS["unloading_stiffness_floor"], \
-        PARAMS["elastic_stiffness_Pa_per_m"]
+# the toy's defaults beside a vehicle and a soil preset (which knows nothing of the toy)
+PARAMS = {**vehicle_preset("reference_crawler"), **soil_preset("clayey_soil_thailand_38"),
+          **{s.name: s.default for s in LinearPlastic.params}}
+
+
+def _stiffness(params=PARAMS):
+    return params["toy_loading_stiffness_Pa_per_m"], params["toy_unloading_stiffness_Pa_per_m"]
 
 
 def test_the_default_law_is_bekker_wong_and_an_unknown_name_is_refused():
@@ -115,14 +127,62 @@ def test_a_toy_law_in_the_homogeneous_model_meets_its_closed_form(toy):
     assert rc == pytest.approx([b * k * 3e-3**2 / 2, b * k * 1e-3**2 / 2], rel=1e-14)
 
 
+def test_a_laws_coefficients_are_declared_in_its_module_only(toy):
+    """The toy's two coefficients reach the model's parameter set and vector, after the vehicle's and
+    the other soil coefficients, and the ``[soil]`` table, from its class alone; the default model's
+    set and vector are unchanged by its registration, and a value out of the declared range is refused
+    naming the key."""
+    names = SystemModel(toy.opts).model_param_names
+    assert names[-2:] == LinearPlastic.param_names
+    assert not {"bekker_n", "k_c_N_per_m_n1", "elastic_stiffness_Pa_per_m"} & set(names)  # the Bekker/Wong law's
+    assert names[:len(PARAM_NAMES) - 10] == PARAM_NAMES[:len(PARAM_NAMES) - 10]  # the vehicle's, as the default's
+    assert {s.name for s in soil_params(toy.opts)} >= set(LinearPlastic.param_names)
+    assert not set(LinearPlastic.param_names) & {s.name for s in soil_params()}
+    assert tuple(s.name for s in model_params()) == PARAM_NAMES == SystemModel().model_param_names
+    spec = {s.name: s for s in model_params(toy.opts)}["toy_loading_stiffness_Pa_per_m"]
+    assert (spec.unit, spec.default, spec.source) == ("Pa/m", 1.3e7, _TOY_SOURCE)
+    with pytest.raises(ScenarioError, match="toy_loading_stiffness_Pa_per_m = -1"):
+        symtrack.load_scenario("validation", {"model.soil_law": LinearPlastic.name,
+                                              "soil.toy_loading_stiffness_Pa_per_m": -1.0})
+    with pytest.raises(ScenarioError, match="toy_loading_stiffness_Pa_per_m"):  # not a key of the Bekker/Wong model
+        symtrack.load_scenario("validation", {"soil.toy_loading_stiffness_Pa_per_m": 2e7})
+    # an MPC scenario takes them too, and writes them back in its resolved document
+    from symtrack.control import scenario as mpc_scenario
+
+    mpc = mpc_scenario.load("straight_offset", {"model.soil_law": LinearPlastic.name,
+                                                "soil.toy_unloading_stiffness_Pa_per_m": 5e7})
+    assert mpc.params["toy_unloading_stiffness_Pa_per_m"] == 5e7 and "bekker_n" not in mpc.params
+    assert mpc.resolved_dict()["soil"]["toy_unloading_stiffness_Pa_per_m"] == 5e7
+
+
+def test_a_users_soil_preset_file_holds_a_laws_own_coefficients(toy, tmp_path):
+    """A user soil preset file (a built-in base and the toy's coefficient, with its source) feeds a scenario
+    on the toy law; ``symtrack presets FILE`` lists the coefficient as set in the file."""
+    from symtrack.presets.catalog import describe
+
+    path = tmp_path / "toy_soil.toml"
+    path.write_text('base = "clayey_soil_thailand_38"\ntoy_loading_stiffness_Pa_per_m = 1.7e7\n'
+                    '[sources]\ntoy_loading_stiffness_Pa_per_m = "a plate test"\n')
+    sc = symtrack.load_scenario("validation", {"model.soil_law": LinearPlastic.name, "soil.preset": str(path)})
+    assert sc.params["toy_loading_stiffness_Pa_per_m"] == 1.7e7 and "bekker_n" not in sc.params
+    assert sc.params["toy_unloading_stiffness_Pa_per_m"] == 4e7  # the declared default
+    rows = {r[0]: r for r in describe("soil", str(path))}
+    assert rows["toy_loading_stiffness_Pa_per_m"][1:3] == (1.7e7, "Pa/m")
+    assert rows["toy_loading_stiffness_Pa_per_m"][4] == "set in toy_soil.toml: a plate test"
+
+
 def test_a_toy_law_through_a_scenario(toy):
-    """``model.soil_law`` in a scenario: the validation run on the toy soil, its idler cells at
-    the toy's sinkage p / k under the idler pressure once the run is steady."""
+    """``model.soil_law`` in a scenario, with the toy's own coefficient given in ``[soil]``: the
+    validation run on the toy soil, its idler cells at the toy's sinkage p / k under the idler
+    pressure once the run is steady."""
     sc = symtrack.load_scenario("validation", {"model.soil_law": LinearPlastic.name, "run.duration_s": 3.0,
-                                               "run.stop_after_distance_m": "none"})
+                                               "run.stop_after_distance_m": "none",
+                                               "soil.toy_loading_stiffness_Pa_per_m": 1.6e7})
     assert sc.model.soil_law == LinearPlastic.name
+    assert sc.params["toy_loading_stiffness_Pa_per_m"] == 1.6e7 and "bekker_n" not in sc.params
     res = symtrack.simulate(sc)
-    k, _ = _stiffness()
+    k, _ = _stiffness(sc.params)
+    assert k == 1.6e7
     for track in ("left", "right"):
         z = res.column(f"sinkage_idler_{track}_m")[-1]
         p = res.column(f"p_idler_{track}_Pa")[-1]
@@ -210,3 +270,45 @@ def test_a_toy_law_in_the_terrain_engines_cell_functions(toy):
     # the load's own static sinkage (the engine's step lags a little and moves the top)
     assert z == pytest.approx(zm + (20e3 - pm) / k_u, rel=1e-9)
     assert pm == pytest.approx(k * zm, rel=1e-12) and zm == pytest.approx(20e3 / k, rel=2e-2)
+
+
+def test_a_toy_law_on_the_terrain_engine_and_its_terrain_file(toy, tmp_path):
+    """The toy law's run on the grid (the terrain engine) writes a terrain file that records the parameter
+    layout it was made with: the law's name and its own coefficients by name, none of the Bekker/Wong
+    law's; the file continued under another law is refused, naming both."""
+    grid = {"terrain.size_m": [12.0, 6.0], "terrain.cell_m": 0.1, "run.duration_s": 1.0}
+    sc = symtrack.load_scenario("validation_grid", {**grid, "model.soil_law": LinearPlastic.name,
+                                                    "soil.toy_loading_stiffness_Pa_per_m": 1.6e7})
+    res = symtrack.simulate(sc)
+    path = tmp_path / "toy.npz"
+    res.terrain.save(path)
+    with np.load(path) as f:
+        assert str(f["soil_law"]) == LinearPlastic.name
+        names = [str(n) for n in f["soil_names"]]
+        assert dict(zip(names, f["soil_values"], strict=True))["toy_loading_stiffness_Pa_per_m"] == 1.6e7
+    assert set(LinearPlastic.param_names) <= set(names) and "bekker_n" not in names
+    assert float(res.terrain.zmax.max()) > 1e-3  # the cells were loaded
+    with pytest.raises(ScenarioError, match="soil law 'linear_plastic_toy', the scenario has model.soil_law = "
+                                            "'bekker_wong'"):
+        symtrack.simulate(symtrack.load_scenario("validation_grid", {**grid, "terrain.initial_state": str(path)}))
+
+
+def test_a_toy_law_on_a_soil_map(toy):
+    """A soil map under the toy law: each soil of the map takes the toy's coefficients (their defaults: a
+    soil preset knows nothing of them) and leaves the Bekker/Wong law's out; the run on the terrain
+    engine carries both soils' traction coefficients under the tracks."""
+    sc = symtrack.load_scenario("validation_grid", {
+        "terrain.size_m": [12.0, 6.0], "terrain.cell_m": 0.1, "run.duration_s": 1.0,
+        "model.soil_law": LinearPlastic.name,
+        "terrain.soil_map": {"soils": ["clayey_soil_thailand_55",
+                                       {"preset": "clayey_soil_thailand_55", "toy_loading_stiffness_Pa_per_m": 2e7}],
+                             "zones": [{"soil": 1, "x_m": [-100.0, 100.0], "y_m": [-100.0, 0.0]},
+                                       {"soil": 2, "x_m": [-100.0, 100.0], "y_m": [1.0, 100.0]}]}})
+    res = symtrack.simulate(sc)
+    world_soils = res.terrain.soil_table
+    assert len(world_soils) == 2
+    (label, soil), (_, soil2) = world_soils
+    assert soil["toy_loading_stiffness_Pa_per_m"] == 1.3e7 and "bekker_n" not in soil
+    assert soil2["toy_loading_stiffness_Pa_per_m"] == 2e7  # an entry's own value of the law's coefficient
+    assert soil["cohesion_Pa"] != sc.params["cohesion_Pa"]  # the map's own soil
+    assert float(res.terrain.zmax.max()) > 1e-3

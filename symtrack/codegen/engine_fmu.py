@@ -46,7 +46,7 @@ from xml.sax.saxutils import escape, quoteattr
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes
-from ..model.parameters import SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
+from ..model.parameters import SOIL_DAY_PARAM_NAMES, soil_params, spec
 from ..native.generate import unit_of
 from ..simulation.scenario import Scenario
 from ..terrain import fieldfile
@@ -225,7 +225,10 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
     vr_y = vr_x + nv
     if variables[vr_x].name != fns.layout.names[0] or len(variables) != vr_y + state.ny_out:
         raise RuntimeError("fmu_variables and engine_fmu_model.h disagree on the value reference layout")
-    soil_values = [float(sc.params[n]) for n in SOIL_PARAM_NAMES]
+    # the model's soil parameters (its soil law's and its vehicle's declarations and the soil's): the field
+    # file's parameter layout, matched by name on reading
+    soil_names = tuple(s.name for s in soil_params(sc.model))
+    soil_values = [float(sc.params[n]) for n in soil_names]
     lines = [
         f"/* engine_fmu_model.h: the numbers of the engine FMU of scenario '{sc.name}'.",
         " * Written by symtrack export fmu (symtrack/codegen/engine_fmu.py); do not edit. */",
@@ -238,11 +241,12 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
         f"#define EF_LIFT_TIME_S {c_literal(LIFT_TIME_S)}", f"#define EF_LIFT_MAX_STEPS {LIFT_MAX_STEPS}LL",
         "#define EF_VR_U 0", f"#define EF_VR_POSE {vr_pose}", f"#define EF_VR_X {vr_x}", f"#define EF_VR_Y {vr_y}",
         f"#define EF_VR_END {len(variables)}", f"#define EF_VR_STR {len(variables)}",
-        f"#define EF_N_SOIL {len(soil_values)}",
+        f"#define EF_N_SOIL {len(soil_values)}", f'#define EF_SOIL_LAW "{sc.model.soil_law}"',
+        f"#define FIELD_VERSION {fieldfile.FIELD_VERSION}", f"#define FIELD_NAME_BYTES {fieldfile.FIELD_NAME_BYTES}",
         f"#define EF_NLOGCAT {len(ENGINE_LOG_CATEGORIES)}",
         "static const char *ef_log_categories[EF_NLOGCAT] = {"
         + ", ".join(f'"{c}"' for c in ENGINE_LOG_CATEGORIES) + "};",
-        "static const char *ef_soil_names[EF_N_SOIL] = {" + ", ".join(f'"{n}"' for n in SOIL_PARAM_NAMES) + "};",
+        "static const char *ef_soil_names[EF_N_SOIL] = {" + ", ".join(f'"{n}"' for n in soil_names) + "};",
     ]
     body = "\n".join(lines) + "\n"
     body += c_array("ef_pv", state.pv) + c_array("ef_geo", state.geo) + c_array("ef_soil_veh", state.soil_veh)
@@ -252,13 +256,13 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
     # the registry's defaults (ef_soil_has_default 0: none): the values of the soil parameters added since an
     # older field file was written
     body += c_array("ef_soil_defaults", [0.0 if spec(n).default is None else float(spec(n).default)
-                                         for n in SOIL_PARAM_NAMES])
-    body += c_array("ef_soil_has_default", [spec(n).default is not None for n in SOIL_PARAM_NAMES], "int")
+                                         for n in soil_names])
+    body += c_array("ef_soil_has_default", [spec(n).default is not None for n in soil_names], "int")
     # a subsoil value that a file lacks is its topsoil's (fieldfile.SAME_AS_TOPSOIL): that value's index, else -1
-    body += c_array("ef_soil_same_as", [SOIL_PARAM_NAMES.index(fieldfile.SAME_AS_TOPSOIL[n])
-                                        if n in fieldfile.SAME_AS_TOPSOIL else -1 for n in SOIL_PARAM_NAMES], "int")
+    body += c_array("ef_soil_same_as", [soil_names.index(fieldfile.SAME_AS_TOPSOIL[n])
+                                        if n in fieldfile.SAME_AS_TOPSOIL else -1 for n in soil_names], "int")
     # the day's soil parameters (moisture) are the scenario's on loading a terrain (storage.load): not compared
-    body += c_array("ef_soil_checked", [0 if n in SOIL_DAY_PARAM_NAMES else 1 for n in SOIL_PARAM_NAMES], "int")
+    body += c_array("ef_soil_checked", [0 if n in SOIL_DAY_PARAM_NAMES else 1 for n in soil_names], "int")
     body += _subsoil_constants(parts)
     body += "#endif\n"
     return body.encode()

@@ -209,6 +209,8 @@ static fmi2Status read_field(Instance *c, const char *path) {
   FILE *f = fopen(path, "rb");
   if (!f) return FAIL(c, "field_file '%s': cannot open it", path);
   fmi2Status st = fmi2Error;
+  double *file_values = NULL; /* the file's soil values and the names of its parameter layout */
+  char *file_names = NULL;
   if (fread(h, 1, sizeof h, f) != sizeof h || memcmp(h, "SYMFIELD", 8) != 0) {
     (void)FAIL(c, "field_file '%s': not a symtrack field file (no SYMFIELD header; `symtrack terrain convert IN.npz "
          "OUT.field` writes one)", path);
@@ -221,11 +223,14 @@ static fmi2Status read_field(Instance *c, const char *path) {
   memcpy(&nx, h + 16, 8); memcpy(&ny, h + 24, 8);
   memcpy(&x0, h + 32, 8); memcpy(&y0, h + 40, 8); memcpy(&dx, h + 48, 8);
   memcpy(&n_soil, h + 56, 4); memcpy(&n_depths, h + 60, 4);
-  if (version != 1) {
-    (void)FAIL(c, "field_file '%s': field file version %u, this FMU reads 1", path, (unsigned)version);
+  if (version != FIELD_VERSION) {
+    (void)FAIL(c, "field_file '%s': field file version %u, this FMU reads %d (a version-1 file, which does not name "
+         "its soil values: `symtrack terrain convert OLD.field OLD.npz` then `symtrack terrain convert OLD.npz "
+         "NEW.field` writes version %d)", path, (unsigned)version, FIELD_VERSION, FIELD_VERSION);
     goto done;
   }
-  if (n_soil > 1000 || n_depths > 64 || hbytes != FIELD_HEADER_BYTES + 8u * (n_soil + n_depths)) {
+  if (n_soil > 1000 || n_soil < 1 || n_depths > 64 ||
+      hbytes != FIELD_HEADER_BYTES + 8u * (n_soil + n_depths) + FIELD_NAME_BYTES * (1u + n_soil)) {
     (void)FAIL(c, "field_file '%s': malformed header (header bytes %u for %u soil values and %u subsoil depths)",
          path, (unsigned)hbytes, (unsigned)n_soil, (unsigned)n_depths);
     goto done;
@@ -240,30 +245,62 @@ static fmi2Status read_field(Instance *c, const char *path) {
          "%.17g m", path, x0, y0, dx, EF_X0, EF_Y0, EF_DX);
     goto done;
   }
-  /* a file written before soil parameters were added (they are appended to the list) has fewer values:
-     the missing ones take the registry's defaults, a subsoil value its topsoil's (fieldfile.read_field does
-     the same); none may lack both */
-  if (n_soil > EF_N_SOIL || n_soil < 1) {
-    (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters", path, (unsigned)n_soil, EF_N_SOIL);
+  /* the soil values by the names of the file's parameter layout (the soil law's name, then one name per
+     value); a file written before soil parameters were added lacks them: they take the registry's
+     defaults, a subsoil value its topsoil's (fieldfile.read_field does the same); none may lack both */
+  double soil[EF_N_SOIL];
+  int have[EF_N_SOIL];
+  for (int i = 0; i < EF_N_SOIL; ++i) have[i] = 0;
+  file_values = zalloc(c, n_soil, sizeof(double));
+  file_names = zalloc(c, 1u + n_soil, FIELD_NAME_BYTES + 1);
+  if (!file_values || !file_names) {
+    (void)FAIL(c, "field_file '%s': out of memory", path);
     goto done;
   }
-  double soil[EF_N_SOIL];
-  if (fread(soil, 8, n_soil, f) != (size_t)n_soil) {
+  if (fread(file_values, 8, n_soil, f) != (size_t)n_soil ||
+      fseek(f, (long)(FIELD_HEADER_BYTES + 8u * (n_soil + n_depths)), SEEK_SET) != 0) {
     (void)FAIL(c, "field_file '%s': truncated in the soil values", path);
     goto done;
   }
-  for (int i = (int)n_soil; i < EF_N_SOIL; ++i) {
+  for (uint32_t j = 0; j <= n_soil; ++j) {
+    char *nm = file_names + (size_t)j * (FIELD_NAME_BYTES + 1);
+    if (fread(nm, 1, FIELD_NAME_BYTES, f) != FIELD_NAME_BYTES) {
+      (void)FAIL(c, "field_file '%s': truncated in the parameter layout", path);
+      goto done;
+    }
+    nm[FIELD_NAME_BYTES] = 0;
+  }
+  if (strcmp(file_names, EF_SOIL_LAW) != 0) {
+    (void)FAIL(c, "field_file '%s': the field was made with the soil law %s, this FMU's is %s (model.soil_law of "
+         "scenario %s)", path, file_names, EF_SOIL_LAW, EF_SCENARIO);
+    goto done;
+  }
+  for (uint32_t j = 0; j < n_soil; ++j) {
+    const char *nm = file_names + (size_t)(j + 1) * (FIELD_NAME_BYTES + 1);
+    int i = 0;
+    while (i < EF_N_SOIL && strcmp(nm, ef_soil_names[i]) != 0) ++i;
+    if (i == EF_N_SOIL || have[i]) {
+      (void)FAIL(c, "field_file '%s': the field file holds soil parameter '%s' %s", path, nm,
+                 i == EF_N_SOIL ? "that this FMU's soil law does not read" : "twice");
+      goto done;
+    }
+    soil[i] = file_values[j];
+    have[i] = 1;
+  }
+  for (int i = 0; i < EF_N_SOIL; ++i) {
+    if (have[i]) continue;
     if (ef_soil_same_as[i] >= 0) { /* a subsoil value of a file written before the subsoil layer: its topsoil's */
       soil[i] = soil[ef_soil_same_as[i]];
       continue;
     }
     if (!ef_soil_has_default[i]) {
-      (void)FAIL(c, "field_file '%s': %u soil values, this FMU has %d soil parameters and %s has no default", path,
-                 (unsigned)n_soil, EF_N_SOIL, ef_soil_names[i]);
+      (void)FAIL(c, "field_file '%s': %u soil values, without %s, which has no default", path, (unsigned)n_soil,
+                 ef_soil_names[i]);
       goto done;
     }
     soil[i] = ef_soil_defaults[i];
   }
+  if (fseek(f, (long)(FIELD_HEADER_BYTES + 8u * n_soil), SEEK_SET) != 0) goto io;
   for (int i = 0; i < EF_N_SOIL; ++i)
     if (ef_soil_checked[i] && soil[i] != ef_soil_values[i]) {
       (void)FAIL(c, "field_file '%s': the field was made with soil %s = %.17g, this FMU has %.17g (the soil of scenario "
@@ -335,6 +372,8 @@ static fmi2Status read_field(Instance *c, const char *path) {
 io:
   (void)FAIL(c, "field_file '%s': read error", path);
 done:
+  if (file_values) c->cb.freeMemory(file_values);
+  if (file_names) c->cb.freeMemory(file_names);
   fclose(f);
   return st;
 }
@@ -353,8 +392,8 @@ static fmi2Status write_field(Instance *c, const char *path) {
     return fmi2Error;
   }
   unsigned char h[FIELD_HEADER_BYTES];
-  uint32_t version = 1, n_soil = EF_N_SOIL, n_depths = EF_N_DEPTHS;
-  uint32_t hbytes = FIELD_HEADER_BYTES + 8u * (EF_N_SOIL + EF_N_DEPTHS);
+  uint32_t version = FIELD_VERSION, n_soil = EF_N_SOIL, n_depths = EF_N_DEPTHS;
+  uint32_t hbytes = FIELD_HEADER_BYTES + 8u * (EF_N_SOIL + EF_N_DEPTHS) + FIELD_NAME_BYTES * (1u + EF_N_SOIL);
   int64_t nx = EF_NX, ny = EF_NY;
   double x0 = EF_X0, y0 = EF_Y0, dx = EF_DX;
   memcpy(h, "SYMFIELD", 8); memcpy(h + 8, &version, 4); memcpy(h + 12, &hbytes, 4);
@@ -366,6 +405,12 @@ static fmi2Status write_field(Instance *c, const char *path) {
 #if EF_N_DEPTHS > 0
   ok = ok && fwrite(ef_depths, 8, EF_N_DEPTHS, f) == (size_t)EF_N_DEPTHS;
 #endif
+  for (int i = -1; i < EF_N_SOIL && ok; ++i) { /* the parameter layout: the soil law, then each value's name */
+    char nm[FIELD_NAME_BYTES];
+    memset(nm, 0, sizeof nm);
+    strncpy(nm, i < 0 ? EF_SOIL_LAW : ef_soil_names[i], FIELD_NAME_BYTES - 1);
+    ok = fwrite(nm, 1, FIELD_NAME_BYTES, f) == FIELD_NAME_BYTES;
+  }
   const double *fl[] = {E->z, E->zdot, E->zmax, E->pmax, E->zoff};
   for (int i = 0; i < 5 && ok; ++i) ok = fwrite(fl[i], sizeof(double), (size_t)n, f) == (size_t)n;
   ok = ok && fwrite(E->cycles, sizeof(unsigned short), (size_t)n, f) == (size_t)n;

@@ -16,7 +16,8 @@ the fixed step) and ``symtrack_fmu.c`` (the FMI functions, a copy of ``fmu_templ
 FMI 2.0 headers of the Modelica Association (2-clause BSD, the copies fmpy ships, in ``fmi2/``).
 
 Variables (value references in this order): the inputs ``torque_cmd_left_N_m``, ``torque_cmd_right_N_m``;
-the parameters: :data:`~symtrack.model.system.PARAM_NAMES` (the scenario's vehicle and soil values) and
+the parameters: :attr:`~symtrack.model.system.SystemModel.model_param_names` (the scenario's vehicle and
+soil values) and
 the start pose ``start_x_m``, ``start_y_m``, ``start_yaw_rad`` (variability "fixed"); the outputs: the
 states (``SystemModel.state_names``), then the model's outputs (``SystemModel.output_names``) except
 those that repeat a state's name (the four sinkages, which are the states). Units are the names'
@@ -46,7 +47,6 @@ import casadi as ca
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, check_output_file
 from ..integrators.settings import FIXED_STEP_TOLERANCE
-from ..model.system import PARAM_NAMES
 from ..native.cache import generated_sources
 from ..native.generate import FIXED_STEP_METHOD, unit_of
 from ..native.generate import build as generate_functions
@@ -54,7 +54,7 @@ from ..simulation.builder import system_model
 from ..simulation.scenario import Scenario, load_scenario
 from ..soil.law import make as make_soil_law
 from ..toolchain import BuildSpec, build, casadi_tag, digest
-from ..vehicles.planar import GRAVITY_M_S2
+from ..vehicles.planar import mean_ground_pressure_Pa
 from .fmu_common import (
     BASE_UNITS,
     FMI2_HEADERS,
@@ -136,7 +136,7 @@ def fmu_variables(model, sc: Scenario) -> tuple[FmuVariable, ...]:
 
     for name, v in zip(model.input_names, u0, strict=True):
         add(name, "input", "continuous", float(v), "commanded sprocket torque (held over each communication step)")
-    for name in PARAM_NAMES:
+    for name in model.model_param_names:
         kind = "vehicle" if name in sc.vehicle else "soil"
         preset = sc.vehicle_preset if kind == "vehicle" else sc.soil_preset
         add(name, "parameter", "fixed", float(params[name]),
@@ -206,9 +206,9 @@ def init_functions(model, prefix: str) -> tuple[ca.Function, ...]:
     rates = lay.cell_indices("rate")
     pose_idx = lay.indices(("x_m", "y_m", "yaw_rad"))
     p = ca.SX.sym("p", model.p.sparsity())
-    P = {n: p[i] for i, n in enumerate(PARAM_NAMES)}
+    P = model.model_layout.unpack(p)
     law = make_soil_law(model.opts)
-    p_mean = P["mass_kg"] * GRAVITY_M_S2 / (2 * P["track_width_m"] * P["contact_length_m"])
+    p_mean = mean_ground_pressure_Pa(P)
     zg = law.static_sinkage(p_mean, law.vector({k: P[k] for k in law.param_names}))
     guess = ca.Function(f"{prefix}_fmu_static_guess", [p], [ca.repmat(zg, len(cells), 1)], ["p"], ["zc"])
     zc, pose = ca.SX.sym("zc", len(cells)), ca.SX.sym("pose", 3)
@@ -237,7 +237,7 @@ def _generate(functions, stem: str) -> dict[str, bytes]:
 
 def _model_header(model, sc: Scenario, variables, guid: str, prefix: str) -> bytes:
     lay = model.layout
-    n_in, n_p = len(model.input_names), len(PARAM_NAMES)
+    n_in, n_p = len(model.input_names), len(model.model_param_names)
     outs = [v.name for v in variables if v.causality == "output"][model.nx:]
     y_index = [model.output_names.index(n) for n in outs]
     # value reference blocks: u, p, pose, x, y (the template relies on this order)

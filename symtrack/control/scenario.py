@@ -68,7 +68,7 @@ from ..foundations.errors import ParameterError, ScenarioError
 from ..integrators.settings import EngineSettings
 from ..model import plausibility
 from ..model.options import ModelOptions, scenario_keys
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS
+from ..model.parameters import known_soil_names, soil_params, vehicle_params
 from ..presets import soil_preset, vehicle_preset
 from ..simulation.scenario import RunSettings, parse_engine, parse_ground, parse_params, parse_run
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
@@ -159,8 +159,9 @@ class MPCScenario:
         package's version (``symtrack_version``)."""
         d = self.to_dict()
         params = d.pop("parameters")
-        d["vehicle"] = {"preset": self.vehicle_preset, **{s.name: params[s.name] for s in VEHICLE_PARAMS}}
-        d["soil"] = {"preset": self.soil_preset, **{s.name: params[s.name] for s in SOIL_PARAMS if s.name in params}}
+        d["vehicle"] = {"preset": self.vehicle_preset, **{s.name: params[s.name] for s in vehicle_params(self.model)}}
+        d["soil"] = {"preset": self.soil_preset,
+                     **{s.name: params[s.name] for s in soil_params(self.model) if s.name in params}}
         d["model"] = {k: getattr(self.model, k) for k in scenario_keys()}
         return with_version(d)
 
@@ -248,8 +249,10 @@ def _model(t: dict) -> ModelOptions:
 def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
     check_document("MPC scenario", d, TOP_KEYS)
     name, desc = d.get("name", default_name), d.get("description", "")
-    vp, veh = _params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS, "reference_crawler")
-    sp, soil = _params("soil", d.get("soil", {}), soil_preset, SOIL_PARAMS, "sandy_loam_15")
+    model = _model(d.get("model", {}))  # its vehicle and soil law declare the [vehicle] and [soil] tables
+    vp, veh = _params("vehicle", d.get("vehicle", {}), vehicle_preset, vehicle_params(model), "reference_crawler")
+    sp, soil = _params("soil", d.get("soil", {}), soil_preset, soil_params(model), "sandy_loam_15",
+                       known_soil_names())
     st = d.get("start", {})
     _keys("start", st, [f.name for f in dataclasses.fields(StartSettings)])
     start = StartSettings(_num("start.x_m", st.get("x_m", 0.0), -1e6, 1e6),
@@ -257,7 +260,6 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
                           _num("start.yaw_deg", st.get("yaw_deg", 0.0), -360, 360),
                           _num("start.speed_m_s", st.get("speed_m_s", 2.0), 0.1, 10))
     run = parse_run(d.get("run", {}), MPC_RUN_KEYS, MPC_RUN_DEFAULTS)
-    model = _model(d.get("model", {}))
     terrain, surface = parse_ground(d.get("terrain"), model, veh,
                                     "the MPC's grid plant: --plant grid or [terrain]")
     mpc = _mpc(d.get("mpc", {}))

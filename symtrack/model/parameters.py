@@ -1,49 +1,39 @@
-"""The registry of model parameters: names (with units), meaning and allowed range.
+"""The parameter set: which parameters exist (names with units, meaning, allowed range, default,
+source) and which values are legal, so that a misspelt key or a negative mass fails with a message
+that names the key, the value and the allowed range.
 
-Values do NOT live here: they live in the parameter sets of :mod:`symtrack.presets`, each
-with its source. This module only says which parameters exist and which values are legal,
-so that a misspelt key or a negative mass fails with a message that names the key, the value
-and the allowed range.
+Each piece of the model declares its own parameters where its equations are
+(:class:`~symtrack.foundations.params.ParamSpec`): the vehicle model its body's and the soil
+coefficients its traction reads (``params`` and ``soil_params`` of a vehicle of
+:mod:`symtrack.vehicles.registry`), the soil law its coefficients (``params`` of a law of
+:mod:`symtrack.soil.law`), the cell equation its two (:data:`symtrack.soil.cell.CELL_PARAMS`), and
+this module the soil's description, compression and subsoil (:data:`SOIL_TERRAIN_PARAMS`, which
+only the grid terrain's cells read). :func:`model_params` joins a vehicle's and a law's into a
+model's parameter set and the layout of its parameter vector p; :func:`soil_params` and
+:func:`vehicle_params` are the ``[soil]`` and ``[vehicle]`` tables of a model's options. A new law
+or vehicle with coefficients of its own needs no edit here.
+
+Values do NOT live here: they live in the parameter sets of :mod:`symtrack.presets`, each with its
+source (or in a declaration's default).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from dataclasses import dataclass
 
 from ..foundations.errors import ParameterError
+from ..foundations.params import ParamLayout, ParamSpec, merge_specs, param
+from ..soil import law as soil_law
+from ..soil.cell import CELL_PARAMS
 from ..soil.pedotransfer import SUBSOIL_KEYS, SUBSOIL_TOP_DEFAULT_M, derive_soil
+from ..vehicles import registry as vehicle_registry
+
+__all__ = ["ParamLayout", "ParamSet", "ParamSpec", "check_set", "known_soil_names", "model_param_layout",
+           "model_params", "soil_params", "spec", "vehicle_params"]
 
 
-@dataclass(frozen=True)
-class ParamSpec:
-    name: str
-    description: str
-    low: float
-    high: float
-    low_inclusive: bool = True
-    default: float | None = None  # used when a parameter set leaves it out (terrain-only soil parameters)
-    derived: bool = False  # filled by the soil's pedotransfer functions when a set leaves it out
-    default_source: str = ""  # where the default comes from (symtrack presets shows it)
-
-    def check(self, value: object, where: str = "") -> float:
-        label = f"{where}.{self.name}" if where else self.name
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParameterError(f"{label} = {value!r} is not a number ({self.description})")
-        v = float(value)
-        ok_low = v >= self.low if self.low_inclusive else v > self.low
-        if not math.isfinite(v) or not ok_low or v > self.high:
-            lb = "[" if self.low_inclusive else "("
-            raise ParameterError(
-                f"{label} = {value!r} is outside the allowed range {lb}{self.low:g}, {self.high:g}] "
-                f"({self.description})"
-            )
-        return v
-
-
-def _spec(name, description, low, high, low_inclusive=True, default=None, derived=False, default_source=""):
-    return ParamSpec(name, description, low, high, low_inclusive, default, derived, default_source)
+def _spec(name, description, low, high, low_inclusive=True, default=None, derived=False, source=""):
+    return param(name, description, low, high, low_inclusive, default=default, derived=derived, source=source)
 
 
 # where each default of the registry comes from, for a reader of symtrack presets (the reasoning in full is in
@@ -63,44 +53,6 @@ DEFAULT_SOURCES = {
                      "layered soil gives no depth",
 }
 
-
-VEHICLE_PARAMS: tuple[ParamSpec, ...] = (
-    _spec("mass_kg", "vehicle mass", 0.0, 1e6, False),
-    _spec("yaw_inertia_kg_m2", "yaw moment of inertia about the CG", 0.0, 1e8, False),
-    _spec("track_gauge_m", "distance B between the track centre-lines", 0.0, 20.0, False),
-    _spec("track_width_m", "track width b", 0.0, 5.0, False),
-    _spec("contact_length_m", "track contact length l", 0.0, 20.0, False),
-    _spec("sprocket_radius_m", "sprocket pitch radius r", 0.0, 5.0, False),
-    _spec("cg_height_m", "CG height h above the ground", 0.0, 10.0),
-    _spec("cg_ahead_of_contact_centre_m", "CG offset e ahead of the contact centre", -5.0, 5.0),
-    _spec("sprocket_inertia_kg_m2", "equivalent inertia J_eq per side (sprocket, idler, rollers, track)",
-          0.0, 1e5, False),
-    _spec("torque_time_constant_s", "time constant tau_T of the first-order torque actuator", 0.0, 100.0, False),
-    _spec("internal_resistance_const", "Wong's internal resistance R_in/W_k, speed-independent part", 0.0, 1.0),
-    _spec("internal_resistance_per_km_h", "Wong's internal resistance R_in/W_k per km/h of track speed",
-          0.0, 0.1),
-    _spec("lateral_friction_coeff", "lateral friction coefficient mu_t between track and soil "
-          "(lateral_law = \"creep\" only)", 0.0, 5.0),
-    _spec("lateral_creep_speed_m_s", "lateral slip speed eps_v at which friction reaches tanh(1) of mu_t "
-          "(lateral_law = \"creep\" only)", 0.0, 10.0, False),
-    _spec("drawbar_pull_N", "drawbar pull P (external resistance at the hitch)", 0.0, 1e7),
-    _spec("hitch_height_m", "height h_d of the drawbar hitch", 0.0, 10.0),
-)
-
-SOIL_MODEL_PARAMS: tuple[ParamSpec, ...] = (
-    _spec("bekker_n", "Bekker sinkage exponent n", 0.0, 3.0, False),
-    _spec("k_c_N_per_m_n1", "Bekker cohesive modulus k_c [N/m^(n+1)]", 0.0, 1e9),
-    _spec("k_phi_N_per_m_n2", "Bekker frictional modulus k_phi [N/m^(n+2)]", 0.0, 1e12),
-    _spec("cohesion_Pa", "Mohr-Coulomb cohesion c", 0.0, 1e7),
-    _spec("friction_angle_rad", "Mohr-Coulomb internal friction angle phi", 0.0, 1.5),
-    _spec("shear_modulus_K_m", "Janosi-Hanamoto shear deformation modulus K", 0.0, 1.0, False),
-    _spec("elastic_stiffness_Pa_per_m", "unloading/reloading stiffness K_e (Chrono SCM's elastic stiffness)",
-          0.0, 1e12, False),
-    _spec("unloading_stiffness_floor", "kappa: the unloading slope is at least kappa * p_max / z_max",
-          1.0, 100.0),
-    _spec("cell_areal_mass_kg_per_m2", "tau_z of the cell equation: areal mass of a terrain cell", 0.0, 1e5, False),
-    _spec("cell_damping_Pa_s_per_m", "c'' of the cell equation: areal damping of a terrain cell", 0.0, 1e9),
-)
 
 # Soil parameters only the grid terrain's cells use (its world manager and engine): not in the
 # vehicle model's parameter vector. A parameter set may leave them out: a registry default (its source
@@ -170,9 +122,82 @@ _TOPSOIL = {s.name: s for s in SOIL_TERRAIN_PARAMS}
 SOIL_TERRAIN_PARAMS += tuple(
     _spec(sub, f"subsoil layer: {_TOPSOIL[top].description} (the topsoil's unless given)", _TOPSOIL[top].low,
           _TOPSOIL[top].high, _TOPSOIL[top].low_inclusive, derived=True) for top, sub in SUBSOIL_KEYS.items())
-SOIL_TERRAIN_PARAMS = tuple(dataclasses.replace(sp, default_source=DEFAULT_SOURCES[sp.name])
-                            if sp.default is not None else sp for sp in SOIL_TERRAIN_PARAMS)
-SOIL_PARAMS: tuple[ParamSpec, ...] = SOIL_MODEL_PARAMS + SOIL_TERRAIN_PARAMS
+# where each derived parameter comes from (the pedotransfer functions of symtrack/soil/pedotransfer.py)
+_DERIVED_SOURCES = {
+    "precompression_stress_Pa": "Schjoenning & Lamande (2018), from the soil's description",
+    "virgin_line_N": "v0 + (lambda - kappa) ln(sigma_pc / kPa), from the soil's description",
+    "compression_index_lambda": "Keller & Arvidsson (2007), from the soil's description",
+    "recompression_index_kappa": "Keller & Arvidsson (2007), from the soil's description",
+    "yield_compression_index_k2": "O'Sullivan & Robertson (1996): the published set's position between kappa and "
+                                  "lambda",
+}
+SOIL_TERRAIN_PARAMS = tuple(dataclasses.replace(sp, source=DEFAULT_SOURCES[sp.name]) if sp.default is not None
+                            else dataclasses.replace(sp, source=_DERIVED_SOURCES.get(sp.name, "the topsoil's value "
+                                                     "(a subsoil layer described like its topsoil)"))
+                            for sp in SOIL_TERRAIN_PARAMS)
+
+# The order in the parameter vector p and in the terrain files of the soil coefficients the built-in
+# models declare (the soil law's, the traction's, the cell equation's): the order of the files and
+# generated C written so far. A plug-in's coefficients follow them, in the order declared.
+SOIL_MODEL_ORDER = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "cohesion_Pa", "friction_angle_rad",
+                    "shear_modulus_K_m", "elastic_stiffness_Pa_per_m", "unloading_stiffness_floor",
+                    "cell_areal_mass_kg_per_m2", "cell_damping_Pa_s_per_m")
+
+
+def _in_soil_order(specs) -> tuple[ParamSpec, ...]:
+    rank = {n: i for i, n in enumerate(SOIL_MODEL_ORDER)}
+    return tuple(sorted(specs, key=lambda s: rank.get(s.name, len(rank))))  # (stable: the rest as declared)
+
+
+def _parts(opts=None, vehicle=None, law=None):
+    """The vehicle model and the soil-law class of model options ``opts`` (None: the default model)
+    unless given."""
+    if vehicle is None:
+        vehicle = vehicle_registry.for_options(opts)
+    if law is None:
+        law = soil_law.get(opts.soil_law if opts is not None else soil_law.DEFAULT)
+    return vehicle, law
+
+
+def model_params(opts=None, *, vehicle=None, law=None) -> tuple[ParamSpec, ...]:
+    """The parameters of the model of options ``opts`` (its vehicle and soil law, or ``vehicle`` and the
+    law class ``law``): the vehicle's own, then the soil coefficients (the traction's, the law's, the
+    cell equation's: :data:`SOIL_MODEL_ORDER`, then a plug-in's): the layout of the parameter vector p."""
+    vehicle, law = _parts(opts, vehicle, law)
+    return merge_specs(vehicle.params, _in_soil_order(merge_specs(vehicle.soil_params, law.params, CELL_PARAMS)))
+
+
+def model_param_layout(opts=None, *, vehicle=None, law=None) -> ParamLayout:
+    """The layout of the parameter vector p of :func:`model_params`."""
+    return ParamLayout(s.name for s in model_params(opts, vehicle=vehicle, law=law))
+
+
+def vehicle_params(opts=None, *, vehicle=None) -> tuple[ParamSpec, ...]:
+    """The ``[vehicle]`` table of the model of options ``opts``: its vehicle's own parameters."""
+    return tuple(_parts(opts, vehicle, soil_law.BekkerWong)[0].params)
+
+
+def soil_params(opts=None, *, vehicle=None, law=None) -> tuple[ParamSpec, ...]:
+    """The ``[soil]`` table of the model of options ``opts``: the soil coefficients of
+    :func:`model_params` and the soil's description, compression and subsoil (:data:`SOIL_TERRAIN_PARAMS`)."""
+    vehicle, law = _parts(opts, vehicle, law)
+    own = {s.name for s in vehicle.params}
+    return tuple(s for s in model_params(vehicle=vehicle, law=law) if s.name not in own) + SOIL_TERRAIN_PARAMS
+
+
+def known_soil_names() -> tuple[str, ...]:
+    """Every soil parameter some registered vehicle or soil law declares (a ``[soil]`` table or a preset
+    may carry another law's coefficients: a model that does not read them leaves them out)."""
+    groups = [v.soil_params for v in vehicle_registry.REGISTRY.values()]
+    groups += [law.params for law in soil_law.REGISTRY.values()]
+    return tuple(s.name for s in _in_soil_order(merge_specs(*groups, CELL_PARAMS))) + \
+        tuple(s.name for s in SOIL_TERRAIN_PARAMS)
+
+
+# the parameter set of the default model (the planar vehicle on the Bekker/Wong law): the presets'
+VEHICLE_PARAMS: tuple[ParamSpec, ...] = vehicle_params()
+SOIL_MODEL_PARAMS: tuple[ParamSpec, ...] = tuple(s for s in model_params() if s not in VEHICLE_PARAMS)
+SOIL_PARAMS: tuple[ParamSpec, ...] = soil_params()
 # the soil parameters the day's moisture sets (symtrack/soil/moisture.py): a terrain file made on
 # another day continues with the scenario's values of these (the compression state carries over)
 SOIL_DAY_PARAM_NAMES = ("virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
@@ -186,7 +211,17 @@ _ALL = {s.name: s for s in VEHICLE_PARAMS + SOIL_PARAMS}
 
 
 def spec(name: str) -> ParamSpec:
-    return _ALL[name]
+    """The declaration of the parameter ``name`` (the default model's, or any registered vehicle's or
+    soil law's)."""
+    if name in _ALL:
+        return _ALL[name]
+    groups = [(*v.params, *v.soil_params) for v in vehicle_registry.REGISTRY.values()]
+    groups += [law.params for law in soil_law.REGISTRY.values()]
+    for group in groups:
+        for s in group:
+            if s.name == name:
+                return s
+    raise KeyError(name)
 
 
 class ParamSet(dict):
@@ -213,16 +248,19 @@ class ParamSet(dict):
 DERIVED_SOIL_PARAM_NAMES = tuple(s.name for s in SOIL_PARAMS if s.derived)
 
 
-def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str) -> ParamSet:
+def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str, known: tuple[str, ...] = ()) -> ParamSet:
     """Validate a complete parameter set: no unknown key, no missing key, every value in range. A soil
-    set gets its derived parameters from its description (symtrack/soil/pedotransfer.py)."""
+    set gets its derived parameters from its description (symtrack/soil/pedotransfer.py). ``known``:
+    names a set may carry that ``specs`` do not read (another soil law's coefficients,
+    :func:`known_soil_names`): left out of the result."""
     names = [s.name for s in specs]
+    earlier = getattr(values, "derived", {})
+    values = {k: v for k, v in values.items() if k in names or k not in known}
     unknown = sorted(set(values) - set(names))
     if unknown:
         raise ParameterError(
             f"unknown parameter(s) in {where}: {', '.join(unknown)}; allowed: {', '.join(names)}"
         )
-    earlier = getattr(values, "derived", {})
     values = {k: v for k, v in values.items() if not (k in earlier and v == earlier[k])}
     for s in specs:
         if s.name not in values and s.default is not None:

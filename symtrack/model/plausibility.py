@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 
 from ..foundations.errors import ParameterError, SimulationError
-from ..vehicles.planar import GRAVITY_M_S2
+from ..vehicles.planar import GRAVITY_M_S2, mean_ground_pressure_Pa
 
 __all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S",
            "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX", "TRACTION_OVER_WEIGHT_MAX", "check_sinkage",
@@ -70,7 +70,7 @@ SINKAGE_OVER_CG_HEIGHT_MAX = 1.0
 
 def ground_pressure_kPa(vehicle: dict) -> float:
     """The mean ground pressure m g / (2 b l) [kPa] of a vehicle parameter set."""
-    return vehicle["mass_kg"] * GRAVITY_M_S2 / (2 * vehicle["track_width_m"] * vehicle["contact_length_m"]) / 1e3
+    return mean_ground_pressure_Pa(vehicle) / 1e3
 
 
 def check_vehicle(vehicle: dict, where: str = "vehicle") -> None:

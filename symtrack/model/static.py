@@ -8,7 +8,7 @@ import numpy as np
 from ..foundations.errors import SimulationError
 from ..soil.law import make as make_soil_law
 from ..vehicles.base import CONTACT_HULL
-from ..vehicles.planar import GRAVITY_M_S2
+from ..vehicles.planar import mean_ground_pressure_Pa
 from .system import SystemModel
 
 __all__ = ["static_state"]
@@ -26,7 +26,7 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
     cell_idx = lay.cell_indices("sinkage")
     rate_idx = lay.cell_indices("rate")
     law = make_soil_law(model.opts)
-    p_mean = params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
+    p_mean = mean_ground_pressure_Pa(params)
     z_guess = float(law.static_sinkage(p_mean, law.values(params)))
     hull = model.vehicle.contact == CONTACT_HULL
     if hull:

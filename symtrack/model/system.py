@@ -36,6 +36,7 @@ import functools
 import casadi as ca
 
 from ..foundations.errors import ParameterError
+from ..soil import law as soil_law
 from ..vehicles import registry as vehicle_registry
 from ..vehicles.base import CONTACT_HULL
 from ..vehicles.planar import codegen_options
@@ -43,11 +44,13 @@ from ..vehicles.vehicle3d import ContactTerrain
 from .homogeneous import HomogeneousTerrain
 from .layout import VehicleState
 from .options import ModelOptions
-from .parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
+from .parameters import model_param_layout
 
 __all__ = ["PARAM_NAMES", "SystemModel"]
 
-PARAM_NAMES = VEHICLE_PARAM_NAMES + SOIL_MODEL_PARAM_NAMES
+# the vehicle and soil parameters of p of the default model (the planar vehicle on the Bekker/Wong law); a
+# model's own: SystemModel.model_param_names
+PARAM_NAMES = model_param_layout().names
 
 
 def _syms(names):
@@ -64,10 +67,15 @@ class SystemModel:
         self.opts = opts or ModelOptions()
         self.vehicle = vehicle_registry.for_options(self.opts, vehicle)
         vm = self.vehicle
-        unknown = [n for n in vm.param_names if n not in PARAM_NAMES]
+        law = soil_law.get(self.opts.soil_law)
+        # p: the vehicle's and the soil's parameters their modules declare (parameters.model_params), then the
+        # terrain's own
+        self.model_layout = model_param_layout(vehicle=vm, law=law)
+        self.model_param_names = self.model_layout.names
+        unknown = [n for n in law.param_names if n not in self.model_param_names]
         if unknown:
-            raise ParameterError(f"vehicle model {vm.name!r} reads parameters the parameter set lacks: "
-                                 f"{', '.join(unknown)}")
+            raise ParameterError(f"soil law {law.name!r} reads parameters neither it nor the vehicle model "
+                                 f"{vm.name!r} declares: {', '.join(unknown)}")
         if vm.contact == CONTACT_HULL:
             # a hull's own contact (the 3D vehicle): its penetration is the sinkage; no travelling cells
             if terrain is not None and not isinstance(terrain, ContactTerrain) and \
@@ -87,11 +95,12 @@ class SystemModel:
         n_alg = len(self.alg_names)
 
         self.terrain_param_names = tuple(getattr(self.terrain, "param_names", ()))
-        self.param_names = PARAM_NAMES + self.terrain_param_names
+        self.param_names = self.model_param_names + self.terrain_param_names
         xs, us, zs, ps = (_syms(n) for n in (self.state_names, self.input_names, self.alg_names, self.param_names))
         x, u, z, p = (ca.vertcat(*s) for s in (xs, us, zs, ps))
-        P = dict(zip(PARAM_NAMES, ps[:len(PARAM_NAMES)], strict=True))
-        Q = ca.vertcat(*ps[len(PARAM_NAMES):])
+        n_model = len(self.model_layout)
+        P = self.model_layout.unpack(ps[:n_model])
+        Q = ca.vertcat(*ps[n_model:])
         xv, xc = x[self.layout.block("vehicle")], x[self.layout.block("cells")]
         # what the terrain sees of the vehicle: its states by name and its contact pose
         xs_v = VehicleState(xv, vm.layout, vm.contact_pose(xv))
@@ -190,9 +199,9 @@ class SystemModel:
         return self.output_names.index(name)
 
     def param_vector(self, values: dict, terrain_values=None) -> list[float]:
-        """The parameter vector p: vehicle and soil values by name, then the terrain's own
-        parameters (empty for the homogeneous terrain) as a flat sequence."""
-        out = [float(values[n]) for n in PARAM_NAMES]
+        """The parameter vector p: vehicle and soil values by name (:attr:`model_layout`), then the
+        terrain's own parameters (empty for the homogeneous terrain) as a flat sequence."""
+        out = self.model_layout.pack(values)
         if self.terrain_param_names:
             if terrain_values is None or len(terrain_values) != len(self.terrain_param_names):
                 raise ValueError(f"the {self.terrain.name} terrain needs {len(self.terrain_param_names)} values")

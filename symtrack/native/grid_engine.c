@@ -42,8 +42,8 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #define NW ENG_NW
 #define NA ENG_NA /* 8: the pose and the pressure lines; the 3D vehicle adds its segment pressures (engine_soils.inc) */
 #define NS 10     /* the cell sums */
-#define NS_MAX 18 /* with a soil map: + the soil under each track (grid_engine_model.SOIL_SUM_NAMES) */
-#define NGEO 7
+#define NS_MAX (NS + 2 + 2 * ENG_N_TRACK_SOIL) /* with a soil map: + the soil under each track (SOIL_SUM_NAMES) */
+#define NGEO ENG_NGEO /* generated: the entries of geo (grid_engine_model.engine_layout_c, ENG_GEO_*) */
 /* a Newton step inside the bracket below this fraction of |Z| is the last one (engine.py NEWTON_ACCEPT_STEP) */
 #define NEWTON_ACCEPT 1e-4
 
@@ -201,7 +201,8 @@ static void cell_geo(const double *c, const double *a, const double *geo, double
  * out): its geometry (load, fractions, end-strip weights) is then exactly zero (engine.py
  * outside_tracks) */
 static int outside_tracks(const double *geo, const double *c, const double *a) {
-  const double l = geo[0], b = geo[1], B = geo[2], e = geo[3], r = 0.7072 * geo[4];
+  const double l = geo[ENG_GEO_CONTACT_LENGTH_M], b = geo[ENG_GEO_TRACK_WIDTH_M], B = geo[ENG_GEO_TRACK_GAUGE_M];
+  const double e = geo[ENG_GEO_CG_AHEAD_OF_CONTACT_CENTRE_M], r = 0.7072 * geo[ENG_GEO_CELL_M];
   const double dx = c[0] - a[0], dy = c[1] - a[1];
   const double xb = a[2] * dx + a[3] * dy, yb = -a[3] * dx + a[2] * dy;
   if (fabs(xb + e) > l / 2 + r) return 1;
@@ -230,7 +231,8 @@ typedef void (*cell_fn)(eng_t *E, long long cell, long long ch, void *ctx);
 
 static int scan(eng_t *E, double X, double Y, double psi, double pad, int check_field, cell_fn fn, void *ctx) {
   const double *geo = E->geo;
-  double l = geo[0], b = geo[1], B = geo[2], e = geo[3];
+  double l = geo[ENG_GEO_CONTACT_LENGTH_M], b = geo[ENG_GEO_TRACK_WIDTH_M], B = geo[ENG_GEO_TRACK_GAUGE_M];
+  double e = geo[ENG_GEO_CG_AHEAD_OF_CONTACT_CENTRE_M];
   double c = cos(psi), s = sin(psi);
   double dx = E->dx, x0 = E->x0, y0 = E->y0;
   double x1 = x0 + E->nx * dx, y1 = y0 + E->ny * dx;
@@ -757,7 +759,7 @@ EXPORT void eng_info_out(eng_t *E) {
 static void seg_sums(const eng_t *E, long long ch, const double *g, double *S) {
   if (!(g[1] > 0.0) && !(g[2] > 0.0)) return;
   const double *a = E->a, *geo = E->geo;
-  const double l = geo[0], e = geo[3];
+  const double l = geo[ENG_GEO_CONTACT_LENGTH_M], e = geo[ENG_GEO_CG_AHEAD_OF_CONTACT_CENTRE_M];
   const double xb = a[2] * (E->ch_cx[ch] - a[0]) + a[3] * (E->ch_cy[ch] - a[1]);
   const double u = ((l / 2 - e) - xb) * (double)ENG_NSEG / l - 0.5; /* in segments from the first centre */
   long long i0 = (long long)floor(u);
@@ -813,10 +815,10 @@ static void sums(eng_t *E) {
     seg_sums(E, ch, g, S + NS);
 #endif
     if (NSEG_SUMS == 0 && E->n_sums > NS) { /* the soil under each track, weighted by the load fraction */
-      const double *sv = E->soil_veh + 3 * E->ch_soil[ch];
+      const double *sv = E->soil_veh + ENG_N_TRACK_SOIL * E->ch_soil[ch]; /* ENG_TRACK_SOIL_* */
       for (int t = 0; t < 2; ++t) {
         S[NS + t] += g[1 + t];
-        for (int i = 0; i < 3; ++i) S[NS + 2 + 3 * t + i] += g[1 + t] * sv[i];
+        for (int i = 0; i < ENG_N_TRACK_SOIL; ++i) S[NS + 2 + ENG_N_TRACK_SOIL * t + i] += g[1 + t] * sv[i];
       }
     }
   }

@@ -46,12 +46,13 @@ import re
 import casadi as ca
 
 from ..foundations.errors import ParameterError
+from ..foundations.params import ParamLayout
 from ..model import SystemModel
 from ..model.layout import StateLayout
-from ..model.system import PARAM_NAMES
 from ..soil import law as soil_law
 from ..terrain.channels import (
     COMPACTION_SPEED_FLOOR_M_S,
+    GEO_LAYOUT,
     GLOBAL_FIELDS,
     NF,
     NG,
@@ -60,7 +61,7 @@ from ..terrain.channels import (
 )
 from ..vehicles import registry as vehicle_registry
 from ..vehicles.base import CONTACT_HULL
-from ..vehicles.planar import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACKS
+from ..vehicles.planar import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACK_SOIL_PARAM_NAMES, TRACKS
 from ..vehicles.vehicle3d import hull_rotation
 from .rosenbrock import GAMMA as RB_GAMMA
 from .rosenbrock import N_STAGES as RB_STAGES
@@ -70,7 +71,7 @@ from .rosenbrock import M as RB_M
 
 NA = 8
 NS = 10
-NGEO = 7
+NGEO = len(GEO_LAYOUT)
 # the engine's vehicle is the planar one: w = its states and its algebraic accelerations (the C reads
 # ENG_NV and ENG_NW: engine_layout_c); NW of the default vehicle (the "shear" law's has two
 # more: EngineFunctions.nw)
@@ -85,11 +86,13 @@ def _sum_names():
 
 
 SUM_NAMES = _sum_names()
-# with a soil map: per track the load fraction and the load-fraction-weighted cohesion, friction
-# angle and shear modulus of the cells under it (the vehicle's traction uses their means)
-TRACK_SOIL_PARAMS = ("cohesion_Pa", "friction_angle_rad", "shear_modulus_K_m")
+# with a soil map: per track the load fraction and the load-fraction-weighted soil coefficients the
+# vehicle's traction reads (the planar vehicle's soil_params: cohesion, friction angle, shear modulus)
+# of the cells under it (the traction uses their means); per soil of the field their values are the
+# engine's soil_veh (C: ENG_TRACK_SOIL_*, ENG_N_TRACK_SOIL)
+TRACK_SOIL_LAYOUT = ParamLayout(TRACK_SOIL_PARAM_NAMES)
 SOIL_SUM_NAMES = tuple(f"sum_f_{k}" for k in TRACKS) + tuple(
-    f"sum_f_{name}_{k}" for k in TRACKS for name in TRACK_SOIL_PARAMS)
+    f"sum_f_{name}_{k}" for k in TRACKS for name in TRACK_SOIL_LAYOUT)
 NS_SOIL = len(SOIL_SUM_NAMES)
 
 
@@ -120,7 +123,7 @@ class SumsTerrain:
         for k in TRACKS:
             f = S[f"sum_f_{k}"]
             out[k] = tuple(ca.if_else(f > 1e-12, S[f"sum_f_{n}_{k}"] / ca.fmax(f, 1e-12), P[n])
-                           for n in TRACK_SOIL_PARAMS)
+                           for n in TRACK_SOIL_LAYOUT)
         return out
 
     def compaction(self, xv, xc, P, Q):
@@ -283,6 +286,7 @@ class EngineFunctions:
     cell_history: tuple
     cell_entry: tuple
     output_names: tuple
+    param_layout: ParamLayout  # the vehicle and soil parameters at the head of pv (SystemModel.model_layout)
     n_pv: int
     n_sums: int  # NS, or NS + NS_SOIL with a soil map
     layout: StateLayout = PLANAR_LAYOUT  # the vehicle's states (w = these, then its accelerations)
@@ -420,7 +424,8 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     if n_seg:
         n_sums = len(terr.names)
     return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, tuple(laws), tuple(histories), tuple(entries),
-                           veh.output_names, len(PARAM_NAMES) + NG + n_sums, n_sums, veh.layout, na, n_seg)
+                           veh.output_names, veh.model_layout, len(veh.model_layout) + NG + n_sums, n_sums,
+                           veh.layout, na, n_seg)
 
 
 def _cell_functions(opts, params: dict, k: int, fo: dict):
@@ -449,13 +454,17 @@ def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: in
     """The engine's state sizes and positions as C defines, from the vehicle's layout (grid_engine.c
     reads them): ENG_NV, the vehicle's states; ENG_NW, with its algebraic accelerations; ENG_NA, the
     length of a; ENG_NSEG, the 3D vehicle's segments per track (0: planar, its code compiled out);
-    ENG_W_X, ENG_W_Y, ... the position in w of each state the C reads (:data:`ENGINE_STATE_READS`)."""
+    ENG_W_X, ENG_W_Y, ... the position in w of each state the C reads (:data:`ENGINE_STATE_READS`); ENG_GEO_*, the
+    entries of geo (:data:`~symtrack.terrain.channels.GEO_LAYOUT`), ENG_NGEO its length; ENG_TRACK_SOIL_*, the soil
+    coefficients of a soil's soil_veh row (:data:`TRACK_SOIL_LAYOUT`), ENG_N_TRACK_SOIL their count."""
     return [f"#define ENG_NV {layout.nv} /* the vehicle's states (symtrack.model.layout) */",
             f"#define ENG_NW {layout.nv + len(ALGEBRAIC)} /* and its algebraic accelerations */",
             f"#define ENG_NA {na} /* the pose and pressure lines (and the 3D vehicle's segment pressures) */",
             f"#define ENG_NSEG {n_seg} /* the 3D vehicle's segments per track (0: planar) */",
             f"#define ENG_SEG_NF {SEG_NF} /* its sums per segment (grid_engine_model.SEG_FIELDS) */",
-            *(f"#define ENG_W_{c} {layout.index(name)} /* {name} */" for c, name in ENGINE_STATE_READS.items())]
+            *(f"#define ENG_W_{c} {layout.index(name)} /* {name} */" for c, name in ENGINE_STATE_READS.items()),
+            *GEO_LAYOUT.c_defines("ENG_GEO", "ENG_NGEO"),
+            *TRACK_SOIL_LAYOUT.c_defines("ENG_TRACK_SOIL", "ENG_N_TRACK_SOIL")]
 
 
 def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0,
@@ -590,15 +599,22 @@ def geo_lanes_c(cell_geo: ca.Function) -> str:
             + loop(cells))
 
 
-def pv_base(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
-    """The first entries of pv (vehicle and soil parameters, the terrain's globals); the sums follow."""
-    return [float(params[k]) for k in PARAM_NAMES] + [float(cell_m), float(end_strip_m)]
+def pv_base(layout: ParamLayout, params: dict, cell_m: float, end_strip_m: float) -> list[float]:
+    """The first entries of pv: the vehicle and soil parameters of ``layout`` (EngineFunctions.param_layout),
+    the terrain's globals; the sums follow."""
+    return layout.pack(params) + [float(cell_m), float(end_strip_m)]
 
 
 def geo_vector(params: dict, cell_m: float, end_strip_m: float) -> list[float]:
-    """(l, b, B, e, cell size, end strip, 1 / cell size): eng_cell_geo's geo."""
-    return [float(params["contact_length_m"]), float(params["track_width_m"]), float(params["track_gauge_m"]),
-            float(params["cg_ahead_of_contact_centre_m"]), float(cell_m), float(end_strip_m), 1.0 / float(cell_m)]
+    """eng_cell_geo's geo (:data:`~symtrack.terrain.channels.GEO_LAYOUT`: l, b, B, e, cell size, end strip,
+    1 / cell size)."""
+    return GEO_LAYOUT.pack({**params, "cell_m": cell_m, "end_strip_m": end_strip_m,
+                            "inv_cell_per_m": 1.0 / float(cell_m)})
+
+
+def track_soil_vector(soils) -> list[float]:
+    """The engine's soil_veh: per soil of the field (soil index order) its :data:`TRACK_SOIL_LAYOUT` values."""
+    return [v for sp in soils for v in TRACK_SOIL_LAYOUT.pack(sp)]
 
 
 def cell_constants(params: dict) -> tuple[float, float]:
@@ -608,4 +624,5 @@ def cell_constants(params: dict) -> tuple[float, float]:
 
 __all__ = ["EngineFunctions", "SEG_FIELDS", "SegmentSumsTerrain", "build_engine_functions", "least_squares_line",
            "piecewise_linear", "segment_sum_names", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
-           "NF", "TRACK_SOIL_PARAMS", "ENGINE_STATE_READS", "engine_layout_c", "soil_dispatch_c"]
+           "NF", "TRACK_SOIL_LAYOUT", "ENGINE_STATE_READS", "engine_layout_c", "geo_vector", "pv_base",
+           "soil_dispatch_c", "track_soil_vector"]

@@ -61,15 +61,16 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     "shear" law's),
     p being the grid model's parameter vector (vehicle and soil parameters, then the terrain's Q).
     """
+    from symtrack.foundations.params import ParamLayout
     from symtrack.model import SystemModel
-    from symtrack.model.system import PARAM_NAMES
+    from symtrack.soil.cell import CELL_PARAMS
     from symtrack.soil.law import make as make_soil_law
-    from symtrack.terrain.channels import HIST_ROWS, NF, NG, build_cell_functions
+    from symtrack.terrain.channels import GEO_LAYOUT, HIST_ROWS, NF, NG, build_cell_functions
     from symtrack.vehicles.planar import ENDS, TRACKS
 
     agg = SumsTerrain()
     veh = SystemModel(opts, agg)
-    npv = len(PARAM_NAMES)
+    npv = len(veh.model_param_names)
     xv, z, u, pv = veh.x, veh.z, veh.u, veh.p  # pv = (P, Q globals, S)
     NW = xv.numel() + z.numel()
     h = ca.SX.sym("h")
@@ -102,9 +103,16 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     q = ca.SX.sym("q", NF)
     av = ca.SX.sym("a", NA)
     sl = make_soil_law(opts)
-    nl = sl.size
-    cst = ca.SX.sym("c", 10 + nl)  # l, b, B, e, dx, strip, the soil law's vector, cellpar[2], h, unused
-    geo, law, cellpar, hh = cst[0:6], cst[6:6 + nl], cst[6 + nl:8 + nl], cst[8 + nl]
+    # a channel's constants c: the geometry's geo (without 1 / cell size), the soil law's vector, the cell
+    # equation's parameters, the step h and an unused entry
+    geo_names, cell_names = GEO_LAYOUT.names[:6], tuple(sp.name for sp in CELL_PARAMS)
+    consts = ParamLayout((*geo_names, *(f"law.{n}" for n in sl.vector_names), *cell_names, "h_s", "unused"))
+    cst = ca.SX.sym("c", len(consts))
+    law_at = consts.offset(f"law.{sl.vector_names[0]}")
+    geo = ca.vertcat(*(cst[consts.offset(n)] for n in geo_names))
+    law = cst[law_at:law_at + sl.size]
+    cellpar = ca.vertcat(*(cst[consts.offset(n)] for n in cell_names))
+    hh = cst[consts.offset("h_s")]
     # the cell centre in the body frame here (cos, sin of the yaw computed once per stage, not per
     # channel), then the channel's own geometry at the zero pose (cos 0 = 1 folds away)
     ddx, ddy = q[0] - av[0], q[1] - av[1]
@@ -149,11 +157,14 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     XC, Wm, U, PV, Qg, QC, H = (ca.MX.sym("xc", 2, n), ca.MX.sym("w", NW), ca.MX.sym("u", 2),
                                 ca.MX.sym("pv", npv), ca.MX.sym("qg", NG), ca.MX.sym("qc", NF, n), ca.MX.sym("h"))
     Pm_ = [PV[i] for i in range(npv)]
-    Pd = dict(zip(PARAM_NAMES, Pm_, strict=True))
+    Pd = veh.model_layout.unpack(Pm_)
     law_mx = sl.vector(Pd)
-    C_MX = ca.vertcat(Pd["contact_length_m"], Pd["track_width_m"], Pd["track_gauge_m"],
-                      Pd["cg_ahead_of_contact_centre_m"], Qg[0], Qg[1], law_mx,
-                      Pd["cell_areal_mass_kg_per_m2"], Pd["cell_damping_Pa_s_per_m"], H, 0)
+    # c in the order of consts: the vehicle's contact, the terrain's globals (cell size, end strip), the law's
+    # vector (one block), the cell equation's parameters, h, 0
+    C_MX = ca.vertcat(*(Pd[n] for n in GEO_LAYOUT.names[:4]), Qg[0], Qg[1], law_mx, *(Pd[n] for n in cell_names),
+                      H, 0)
+    if C_MX.numel() != len(consts):
+        raise RuntimeError(f"the channel constants: {C_MX.numel()} entries built, the layout has {len(consts)}")
     mass_w = ca.DM.zeros(NW)
     mass_w[veh.layout.block("vehicle")] = 1.0
 

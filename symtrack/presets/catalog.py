@@ -24,7 +24,8 @@ from pathlib import Path
 
 from ..foundations.errors import ParameterError
 from ..foundations.files import read_text
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set
+from ..foundations.params import unit_of_name
+from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set, known_soil_names, spec
 from ..soil.pedotransfer import derivation_note
 from . import soils, vehicles
 
@@ -32,18 +33,14 @@ __all__ = ["PRESET_FILE_KEYS", "describe", "format_preset", "preset_file_kind", 
            "read_preset_file", "unit_of"]
 
 PRESET_FILE_KEYS = ("base", "description", "sources")
-_UNITS = (("_kg_per_kg", "kg/kg"), ("_Mg_per_m3", "Mg/m^3"), ("_kPa", "kPa"),
-          ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
-          ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_N_m", "N m"),
-          ("_m_s", "m/s"), ("_rad", "rad"), ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_s", "s"), ("_m", "m"))
 
 
 def unit_of(name: str) -> str:
-    """The unit a parameter's name carries ("-" for a dimensionless one)."""
-    for suffix, unit in _UNITS:
-        if name.endswith(suffix):
-            return unit
-    return "-"
+    """The unit of the parameter ``name`` (its declaration's; "-" for a dimensionless one)."""
+    try:
+        return spec(name).unit
+    except KeyError:
+        return unit_of_name(name)
 
 
 def _comments_above(module) -> dict[int, str]:
@@ -109,6 +106,15 @@ def preset_file_kind(path) -> str:
     return kinds.pop()
 
 
+def _file_specs(kind: str, d=()) -> tuple:
+    """The parameters a user preset file of ``kind`` holds: the default model's, and for a soil file the
+    coefficients of another registered soil law (or vehicle) it sets (a plug-in's, declared in its module)."""
+    if kind == "vehicle":
+        return VEHICLE_PARAMS
+    own = {s.name for s in SOIL_PARAMS}
+    return SOIL_PARAMS + tuple(spec(n) for n in known_soil_names() if n in d and n not in own)
+
+
 def _preset_file_doc(path, kind: str) -> dict:
     """A user preset file's TOML document, its keys checked."""
     path = Path(path)
@@ -118,7 +124,7 @@ def _preset_file_doc(path, kind: str) -> dict:
         d = tomllib.loads(read_text(path, f"{kind}.preset file", ParameterError))
     except tomllib.TOMLDecodeError as err:
         raise ParameterError(f"{path}: not valid TOML: {err}") from err
-    names = [s.name for s in (VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS)]
+    names = [s.name for s in _file_specs(kind, d)]
     unknown = sorted(set(d) - set(names) - set(PRESET_FILE_KEYS))
     if unknown:
         raise ParameterError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(PRESET_FILE_KEYS)} "
@@ -132,7 +138,7 @@ def _preset_file_doc(path, kind: str) -> dict:
 def read_preset_file(path, kind: str) -> tuple[dict[str, float], dict[str, str], str]:
     """A user preset file -> (values, sources, description), checked as a complete set."""
     d = _preset_file_doc(path, kind)
-    specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS
+    specs = _file_specs(kind, d)
     names = [s.name for s in specs]
     values = ParamSet()
     base = d.get("base")
@@ -161,7 +167,7 @@ def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
     description; "default: ..." for the registry's default."""
     specs = VEHICLE_PARAMS if kind == "vehicle" else SOIL_PARAMS
     if str(name).endswith(".toml"):
-        return _describe_file(kind, name, specs)
+        return _describe_file(kind, name, _file_specs(kind, _preset_file_doc(name, kind)))
     values = vehicles.vehicle_preset(name) if kind == "vehicle" else soils.soil_preset(name)
     notes = preset_sources(kind, name)
     raw = vehicles.VEHICLES[name] if kind == "vehicle" else soils.SOILS[name]
@@ -174,7 +180,7 @@ def describe(kind: str, name: str) -> list[tuple[str, float, str, str, str]]:
             src = _default_note(s)
         else:
             src = notes.get(s.name) or notes.get(_CONSTS.get(s.name, ""), "") or notes.get("*", "")
-        rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
+        rows.append((s.name, values[s.name], s.unit, s.description, src))
     return rows
 
 
@@ -199,7 +205,7 @@ def _describe_file(kind: str, path, specs) -> list[tuple[str, float, str, str, s
             src = _default_note(s)
         else:
             src = ""
-        rows.append((s.name, values[s.name], unit_of(s.name), s.description, src))
+        rows.append((s.name, values[s.name], s.unit, s.description, src))
     return rows
 
 

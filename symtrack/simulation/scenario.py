@@ -63,7 +63,7 @@ from ..integrators import registry
 from ..integrators.settings import FIXED_STEP_TOLERANCE, EngineSettings, IntegratorSettings
 from ..model import plausibility
 from ..model.options import BUILD_FLAGS, ModelOptions, scenario_keys
-from ..model.parameters import SOIL_PARAMS, VEHICLE_PARAMS, ParamSet, check_set
+from ..model.parameters import ParamSet, check_set, known_soil_names, soil_params, vehicle_params
 from ..presets import soil_preset, vehicle_preset
 from ..presets.catalog import read_preset_file
 from ..soil import moisture
@@ -277,9 +277,10 @@ def _parse_model(t: dict) -> ModelOptions:
         raise ScenarioError(str(err)) from err
 
 
-def parse_params(section, t, preset_fn, specs, default_preset=None):
+def parse_params(section, t, preset_fn, specs, default_preset=None, known=()):
     """A [vehicle] or [soil] table: preset (a built-in name or a user preset file ``*.toml``)
-    plus overrides, validated as a complete set."""
+    plus overrides (of ``specs`` only), validated as a complete set of ``specs``; ``known``: keys the
+    preset may carry that ``specs`` do not read (another soil law's coefficients: left out)."""
     names = [s.name for s in specs]
     check_keys(section, t, ["preset"] + names)
     preset = t.get("preset", default_preset)
@@ -292,7 +293,7 @@ def parse_params(section, t, preset_fn, specs, default_preset=None):
             values = preset_fn(preset)
         overrides = {k: v for k, v in t.items() if k != "preset"}
         values = check_set(ParamSet(values, derived=getattr(values, "derived", {})).with_given(overrides), specs,
-                           section)
+                           section, known)
     except ParameterError as err:
         raise ScenarioError(str(err)) from err
     return preset, values
@@ -422,7 +423,9 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     desc = d.get("description", "")
     run = parse_run(d.get("run", {}))
     model = _parse_model(d.get("model", {}))
-    vp, vehicle = parse_params("vehicle", d.get("vehicle", {}), vehicle_preset, VEHICLE_PARAMS)
+    # the [vehicle] and [soil] tables of the model's vehicle and soil law (their declared parameters)
+    vehicle_specs, soil_specs, known = vehicle_params(model), soil_params(model), known_soil_names()
+    vp, vehicle = parse_params("vehicle", d.get("vehicle", {}), vehicle_preset, vehicle_specs)
     soil_t = d.get("soil", {})
     moist = None
     if isinstance(soil_t, dict) and any(k == "moisture" or k.startswith("moisture.") for k in soil_t):
@@ -432,10 +435,10 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
         if isinstance(moist, dict):
             moist.update({k.split(".", 1)[1]: v for k, v in soil_t.items() if k.startswith("moisture.")})
         soil_t = {k: v for k, v in soil_t.items() if k != "moisture" and not k.startswith("moisture.")}
-    sp, soil = parse_params("soil", soil_t, soil_preset, SOIL_PARAMS)
+    sp, soil = parse_params("soil", soil_t, soil_preset, soil_specs, known=known)
     if moist is not None:
         try:
-            soil = check_set(moisture.apply_moisture(soil, moist, "soil.moisture"), SOIL_PARAMS, "soil")
+            soil = check_set(moisture.apply_moisture(soil, moist, "soil.moisture"), soil_specs, "soil", known)
         except ParameterError as err:
             raise ScenarioError(str(err)) from err
     start = _parse_start(d.get("start", {}))

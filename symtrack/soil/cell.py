@@ -49,6 +49,16 @@ from __future__ import annotations
 
 import casadi as ca
 
+from ..foundations.params import param
+
+# the cell equation's parameters (every soil law's cells): the [soil] table
+CELL_PARAMS = (
+    param("cell_areal_mass_kg_per_m2", "tau_z of the cell equation: areal mass of a terrain cell", 0.0, 1e5, False,
+          source="the cell equation of the Politecnico di Milano thesis (docs/model.md)"),
+    param("cell_damping_Pa_s_per_m", "c'' of the cell equation: areal damping of a terrain cell", 0.0, 1e9,
+          source="the cell equation of the Politecnico di Milano thesis (docs/model.md)"),
+)
+
 # The relative bias of the regularised Bekker term that the regularisation length allows at the
 # reference pressure (lower pressures are not track loads): 0.2 % at 10 kPa, less above it
 # (agricultural tracks load the soil with 20-100 kPa). Calibrated against the 1 % target of

@@ -7,10 +7,15 @@ homogeneous terrain's compaction resistance) and the sinkage at which the virgin
 pressure (the static start guess). Everything is written in CasADi, so the same expressions reach
 the symbolic models, the channel pool and the terrain engine's generated C.
 
-The law owns its parameter vector: :meth:`SoilLaw.vector` builds it from a mapping of the
-model's parameter names (numbers, or the model's parameter symbols), :meth:`SoilLaw.values`
-as numbers, :meth:`SoilLaw.symbols` as a symbol of its own (the channel Functions' ``law``
-input). Nothing outside this module knows its length or the meaning of its entries.
+The law declares its own coefficients (:attr:`SoilLaw.params`, each a
+:class:`~symtrack.foundations.params.ParamSpec` with its unit, range, default and source): a
+model on the law has them in its parameter set and its parameter vector, a scenario's
+``[soil]`` table takes them, with no edit outside the law's module
+(:func:`symtrack.model.parameters.model_params`). The law owns its law vector:
+:meth:`SoilLaw.vector` builds it from a mapping of the model's parameter names (numbers, or the
+model's parameter symbols), :meth:`SoilLaw.values` as numbers, :meth:`SoilLaw.symbols` as a
+symbol of its own (the channel Functions' ``law`` input). Nothing outside this module knows its
+length or the meaning of its entries.
 
 The history a law reads is the cell's stored history (the world manager keeps it, the channel
 fields of :mod:`symtrack.terrain.channels` carry it), :data:`HISTORY_NAMES`: z_max, p_max (the
@@ -36,6 +41,7 @@ from collections.abc import Mapping
 import casadi as ca
 
 from ..foundations.errors import ParameterError
+from ..foundations.params import param
 from ..foundations.registry import Registry
 from . import cell
 
@@ -47,8 +53,10 @@ HISTORY_NAMES = ("z_max_m", "p_max_Pa", "z_off_m", "cycle_increment_m", "cycle_p
 
 
 class SoilLaw(abc.ABC):
-    """A soil law (module doc). Subclasses set :attr:`name`, :attr:`param_names` (the model
-    parameters :meth:`vector` reads) and :attr:`vector_names` (the entries of the law vector) and
+    """A soil law (module doc). Subclasses set :attr:`name`, :attr:`params` (the declarations of
+    the coefficients the law brings), :attr:`param_names` (the model parameters :meth:`vector`
+    reads: its own and any other of the model's) and :attr:`vector_names` (the entries of the law
+    vector) and
     write the abstract methods; ``hist`` is a sequence of the :data:`HISTORY_NAMES` (a CasADi
     vector or a tuple), ``law`` the law vector (symbolic, or a sequence of floats: then a law may
     specialise its expressions to the numbers, as the terrain engine wants).
@@ -62,6 +70,7 @@ class SoilLaw(abc.ABC):
 
     name: str = ""
     description: str = ""
+    params: tuple = ()
     param_names: tuple[str, ...] = ()
     vector_names: tuple[str, ...] = ()
 
@@ -125,6 +134,10 @@ class SoilLaw(abc.ABC):
         static start guess)."""
 
 
+_BEKKER = "Bekker's pressure-sinkage law (Bekker 1969, in Wong, Theory of Ground Vehicles)"
+_WONG_UNLOADING = "Wong, Theory of Ground Vehicles: the response to repetitive loading (docs/model.md)"
+
+
 class BekkerWong(SoilLaw):
     """Bekker's virgin loading, Wong's unloading/reloading line and the cycle law of
     :mod:`symtrack.soil.cell` (docs/model.md, "Pressure-sinkage"); the mathematics lives there.
@@ -137,6 +150,15 @@ class BekkerWong(SoilLaw):
 
     name = "bekker_wong"
     description = "Bekker loading, Wong unloading/reloading line, plastic load cycles (docs/model.md)"
+    params = (
+        param("bekker_n", "Bekker sinkage exponent n", 0.0, 3.0, False, source=_BEKKER),
+        param("k_c_N_per_m_n1", "Bekker cohesive modulus k_c [N/m^(n+1)]", 0.0, 1e9, source=_BEKKER),
+        param("k_phi_N_per_m_n2", "Bekker frictional modulus k_phi [N/m^(n+2)]", 0.0, 1e12, source=_BEKKER),
+        param("elastic_stiffness_Pa_per_m", "unloading/reloading stiffness K_e (Chrono SCM's elastic stiffness)",
+              0.0, 1e12, False, source=_WONG_UNLOADING),
+        param("unloading_stiffness_floor", "kappa: the unloading slope is at least kappa * p_max / z_max",
+              1.0, 100.0, source=_WONG_UNLOADING),
+    )
     param_names = ("k_c_N_per_m_n1", "k_phi_N_per_m_n2", "track_width_m", "bekker_n", "elastic_stiffness_Pa_per_m",
                    "unloading_stiffness_floor")
     vector_names = ("k_eq", "n", "elastic_stiffness_Pa_per_m", "kappa", "regularisation_m")

@@ -368,6 +368,7 @@ def plan_passes(spec: FieldSpec, pattern: str) -> list[PassLine]:
 # ---- the figures -----------------------------------------------------------------------------------
 def _copy_terrain(st: Terrain) -> Terrain:
     t = Terrain(st.grid, st.soil, st.subsoil_depths_m)
+    t.soil_law = st.soil_law
     _copy_into(t, st)
     return t
 

@@ -65,14 +65,21 @@ from __future__ import annotations
 
 import casadi as ca
 
+from ..foundations.params import ParamLayout
 from ..model.options import ModelOptions
 from ..soil import cell
 from ..soil import law as soil_law
 from ..vehicles.planar import ENDS, TRACKS
 
-__all__ = ["CHANNEL_FIELDS", "COMPACTION_SPEED_FLOOR_M_S", "ChannelTerrain", "GLOBAL_FIELDS", "HIST_ROWS", "NF",
-           "NG", "NH", "build_cell_functions", "channel_param_names", "channel_state_names"]
+__all__ = ["CHANNEL_FIELDS", "COMPACTION_SPEED_FLOOR_M_S", "ChannelTerrain", "GEO_LAYOUT", "GLOBAL_FIELDS", "HIST_ROWS",
+           "NF", "NG", "NH", "build_cell_functions", "channel_param_names", "channel_state_names"]
 
+# a cell's geometry input geo: the vehicle's contact (its parameters), the cell size and the end strip
+# (the terrain's globals) and, for the terrain engine, 1 / cell size (build_cell_functions'
+# cell_reciprocal; C: ENG_GEO_*)
+GEO_LAYOUT = ParamLayout(("contact_length_m", "track_width_m", "track_gauge_m", "cg_ahead_of_contact_centre_m",
+                          "cell_m", "end_strip_m", "inv_cell_per_m"))
+GEO_VEHICLE_PARAMS = GEO_LAYOUT.names[:4]
 CHANNEL_FIELDS = ("centre_x_m", "centre_y_m", "z_max_m", "p_max_Pa", "active", "z_off_m", "cycle_increment_m",
                   "cycle_progress_m")
 # the history the cell law reads, as rows of the channel fields: z_max, p_max, z_off, delta, d_c
@@ -141,9 +148,9 @@ def build_cell_functions(opts: ModelOptions, cell_reciprocal: bool = False) -> d
     """
     q = ca.SX.sym("q", NF)
     pose = ca.SX.sym("pose", 3)
-    geo = ca.SX.sym("geo", 7 if cell_reciprocal else 6)
-    l, b, B, e, dx, strip = (geo[i] for i in range(6))
-    inv = geo[6] if cell_reciprocal else None  # 1 / dx = 1 / (2 h)
+    geo = ca.SX.sym("geo", len(GEO_LAYOUT) if cell_reciprocal else len(GEO_LAYOUT) - 1)
+    l, b, B, e, dx, strip = (geo[GEO_LAYOUT.offset(n)] for n in GEO_LAYOUT.names[:6])
+    inv = geo[GEO_LAYOUT.offset("inv_cell_per_m")] if cell_reciprocal else None  # 1 / dx = 1 / (2 h)
     X, Y, psi = pose[0], pose[1], pose[2]
     ddx, ddy = q[0] - X, q[1] - Y
     xb = ca.cos(psi) * ddx + ca.sin(psi) * ddy
@@ -212,8 +219,7 @@ class ChannelTerrain:
         n = self.n
         qc = ca.reshape(Q[NG:], NF, n)
         pose = ca.vertcat(*xv.pose.planar)  # the flat field's geometry: x, y, yaw
-        geo = ca.vertcat(P["contact_length_m"], P["track_width_m"], P["track_gauge_m"],
-                         P["cg_ahead_of_contact_centre_m"], Q[0], Q[1])
+        geo = ca.vertcat(*(P[n] for n in GEO_VEHICLE_PARAMS), Q[0], Q[1])
         g = self._geometry(qc, pose, geo)  # 8 x n
         xcm = ca.reshape(xc, 2, n)
         law = self.law.vector(P)

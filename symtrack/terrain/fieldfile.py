@@ -3,20 +3,22 @@ libc alone (the engine FMU's ``field_file`` parameter: symtrack/codegen/engine_f
 "Files"). The npz terrain file (:mod:`symtrack.terrain.storage`) stays the project's terrain file and
 Python its one writer; this module converts both ways (``symtrack terrain convert IN OUT``).
 
-Layout (``FIELD_VERSION`` = 1), little-endian, no padding:
+Layout (``FIELD_VERSION`` = 2), little-endian, no padding:
 
 ====== ======================= ================================================================
 offset type                    content
 ====== ======================= ================================================================
 0      8 bytes                 magic ``SYMFIELD``
-8      uint32                  version (1)
-12     uint32                  header bytes H = 64 + 8 n_soil + 8 n_depths (the arrays start at H)
+8      uint32                  version (2)
+12     uint32                  header bytes H = 64 + 8 n_soil + 8 n_depths + 64 (1 + n_soil) (the
+                               arrays start at H)
 16     int64, int64            nx, ny: cells along x and y (cell (i, j) at flat index i ny + j)
 32     float64 x 3             origin x, origin y [m] (the field's lower-left corner), cell size [m]
 56     uint32, uint32          n_soil (the count of soil values), n_depths (the subsoil depths)
-64     float64 x n_soil        the soil parameters the history was made with, in the order of
-                               :data:`symtrack.model.parameters.SOIL_PARAM_NAMES`
+64     float64 x n_soil        the soil parameters the history was made with
        float64 x n_depths      the subsoil depths [m] (``subsoil_depths_m``)
+       64 bytes x (1 + n_soil) the parameter layout: the soil law's name (``model.soil_law``), then
+                               the name of each soil value in order (ASCII, padded with NUL bytes)
 H      float64 x n, five times z_m, z_rate_m_s, z_max_m, p_max_Pa, z_off_m (n = nx ny)
 H+40n  uint16 x n              load_cycles
 H+42n  int8 x n                phase (0 untouched, 1 loading, 2 unloading/reloading)
@@ -24,6 +26,10 @@ H+43n  float32 x n n_depths    sigma_max_Pa (per cell its n_depths depths), then
        float32 x n n_depths    specific_volume (as the npz's: 0 the soil's initial state)
 end-8  8 bytes                 magic ``ENDFIELD`` (a truncated file lacks it)
 ====== ======================= ================================================================
+
+A version-1 file (no names: its values in the order of :data:`FIELD_V1_SOIL_NAMES`, a file of an older
+symtrack the first of them, the Bekker/Wong law's) is read here; the engine FMU reads version 2 only
+(``symtrack terrain convert`` to npz and back writes one).
 
 These are the storage arrays the terrain engine reads and writes over a pass (grid_engine.c's
 ``z, zdot, zmax, pmax, zoff, cycles, phase``) and the subsoil records a pass's end folds into
@@ -43,16 +49,28 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, real_path
-from ..model.parameters import SOIL_PARAM_NAMES, spec
+from ..model.parameters import soil_params, spec
+from ..soil import law as soil_law
 from ..soil.pedotransfer import SUBSOIL_KEYS
-from .storage import Grid, Terrain, load, save
+from .storage import Grid, Terrain, load, save, soil_layout
 
-__all__ = ["FIELD_ARRAYS", "FIELD_HEADER", "FIELD_MAGIC", "FIELD_TRAILER", "FIELD_VERSION", "convert", "field_bytes",
-           "read_field", "write_field"]
+__all__ = ["FIELD_ARRAYS", "FIELD_HEADER", "FIELD_MAGIC", "FIELD_NAME_BYTES", "FIELD_TRAILER", "FIELD_V1_SOIL_NAMES",
+           "FIELD_VERSION", "convert", "field_bytes", "read_field", "write_field"]
 
 FIELD_MAGIC = b"SYMFIELD"
 FIELD_TRAILER = b"ENDFIELD"
-FIELD_VERSION = 1
+FIELD_VERSION = 2
+FIELD_NAME_BYTES = 64  # each name of the parameter layout (version 2)
+# the soil values of a version-1 file, in its order (a file of an older symtrack: the first n_soil of them)
+FIELD_V1_SOIL_NAMES = (
+    "bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "cohesion_Pa", "friction_angle_rad", "shear_modulus_K_m",
+    "elastic_stiffness_Pa_per_m", "unloading_stiffness_floor", "cell_areal_mass_kg_per_m2",
+    "cell_damping_Pa_s_per_m", "repeated_loading_exponent", "stress_concentration_factor",
+    "precompression_stress_Pa", "virgin_line_N", "compression_index_lambda", "recompression_index_kappa",
+    "particle_density_Mg_per_m3", "bulk_density_initial_Mg_per_m3", "yield_line_offset_ln_p",
+    "yield_compression_index_k2", "specific_volume_min", "clay_kg_per_kg", "silt_kg_per_kg", "sand_kg_per_kg",
+    "matric_suction_kPa", "subsoil_top_m", "subsoil_bulk_density_initial_Mg_per_m3", "subsoil_clay_kg_per_kg",
+    "subsoil_silt_kg_per_kg", "subsoil_sand_kg_per_kg", "subsoil_matric_suction_kPa")
 # the soil values a file may lack that take another's: a subsoil layer's description is its topsoil's
 # in a file written before the subsoil layer (a soil of one layer)
 SAME_AS_TOPSOIL = {sub: top for top, sub in SUBSOIL_KEYS.items()}
@@ -78,20 +96,33 @@ def field_bytes(st: Terrain, soil: dict | None = None, where: str = "field file"
     soil = soil if soil is not None else st.soil
     if soil is None:
         raise ScenarioError(f"{where}: the terrain has no soil yet; give soil= (the soil parameters)")
-    missing = [n for n in SOIL_PARAM_NAMES if n not in soil]
+    law = st.soil_law or soil_law.DEFAULT
+    missing = [s.name for s in soil_params(law=soil_law.get(law, "the terrain's soil law")) if s.name not in soil]
     if missing:
         raise ScenarioError(f"{where}: the soil lacks {', '.join(missing)}")
     g = st.grid
-    values = np.array([float(soil[n]) for n in SOIL_PARAM_NAMES], dtype="<f8")
+    names = soil_layout(soil)
+    values = np.array([float(soil[n]) for n in names], dtype="<f8")
     depths = np.array(st.subsoil_depths_m, dtype="<f8")
-    head = FIELD_HEADER.pack(FIELD_MAGIC, FIELD_VERSION, FIELD_HEADER.size + 8 * (values.size + depths.size),
+    head = FIELD_HEADER.pack(FIELD_MAGIC, FIELD_VERSION, _header_bytes(FIELD_VERSION, values.size, depths.size),
                              g.shape[0], g.shape[1], float(g.origin_m[0]), float(g.origin_m[1]), float(g.cell_m),
                              values.size, depths.size)
-    parts = [head, values.tobytes(), depths.tobytes()]
+    parts = [head, values.tobytes(), depths.tobytes(), *(_name_bytes(n) for n in (law, *names))]
     parts += [np.ascontiguousarray(getattr(st, attr), dtype=dt).tobytes() for attr, dt, _ in FIELD_ARRAYS]
     parts += [np.ascontiguousarray(getattr(st, attr), dtype="<f4").tobytes() for attr, _ in SUBSOIL_ARRAYS]
     parts.append(FIELD_TRAILER)
     return b"".join(parts)
+
+
+def _header_bytes(version: int, n_soil: int, n_depths: int) -> int:
+    return FIELD_HEADER.size + 8 * (n_soil + n_depths) + (FIELD_NAME_BYTES * (1 + n_soil) if version >= 2 else 0)
+
+
+def _name_bytes(name: str) -> bytes:
+    raw = name.encode("ascii")
+    if len(raw) >= FIELD_NAME_BYTES:
+        raise ScenarioError(f"field file: the name {name!r} is longer than {FIELD_NAME_BYTES - 1} characters")
+    return raw.ljust(FIELD_NAME_BYTES, b"\0")
 
 
 def write_field(path, st: Terrain, soil: dict | None = None) -> None:
@@ -109,18 +140,42 @@ def read_field(path) -> Terrain:
     if len(data) < FIELD_HEADER.size or data[:8] != FIELD_MAGIC:
         raise ScenarioError(f"{path}: not a symtrack field file (no SYMFIELD magic)")
     _, version, hbytes, nx, ny, x0, y0, dx, n_soil, n_depths = FIELD_HEADER.unpack_from(data)
-    if version != FIELD_VERSION:
-        raise ScenarioError(f"{path}: field file version {version}, this symtrack reads {FIELD_VERSION}")
-    if hbytes != FIELD_HEADER.size + 8 * (n_soil + n_depths) or nx < 1 or ny < 1 or not dx > 0 or n_depths > 64:
+    if version not in (1, FIELD_VERSION):
+        raise ScenarioError(f"{path}: field file version {version}, this symtrack reads 1 and {FIELD_VERSION}")
+    if hbytes != _header_bytes(version, n_soil, n_depths) or nx < 1 or ny < 1 or not dx > 0 or n_depths > 64 or \
+            n_soil < 1 or n_soil > 1000 or len(data) < hbytes:
         raise ScenarioError(f"{path}: malformed field header (header bytes {hbytes}, nx {nx}, ny {ny}, cell {dx} m, "
                             f"{n_soil} soil values, {n_depths} subsoil depths)")
-    # a file written before soil parameters were added (appended to the list) has fewer values: the
-    # missing ones take the registry's defaults, as a terrain file's do (storage.load)
-    missing = SOIL_PARAM_NAMES[n_soil:]
-    if n_soil > len(SOIL_PARAM_NAMES) or n_soil < 1 or any(spec(n).default is None and n not in SAME_AS_TOPSOIL
-                                                            for n in missing):
-        raise ScenarioError(f"{path}: {n_soil} soil values, this symtrack has {len(SOIL_PARAM_NAMES)} soil "
-                            "parameters (the file was written by another version)")
+    if version == 1:  # no names: the first values of the version-1 list, the Bekker/Wong law's
+        if n_soil > len(FIELD_V1_SOIL_NAMES):
+            raise ScenarioError(f"{path}: {n_soil} soil values in a version-1 field file, which holds at most "
+                                f"{len(FIELD_V1_SOIL_NAMES)}: the file is damaged")
+        law, names = soil_law.DEFAULT, FIELD_V1_SOIL_NAMES[:n_soil]
+    else:
+        off = FIELD_HEADER.size + 8 * (n_soil + n_depths)
+        raw = [data[off + FIELD_NAME_BYTES * i:off + FIELD_NAME_BYTES * (i + 1)] for i in range(1 + n_soil)]
+        try:
+            law, *names = (r.rstrip(b"\0").decode("ascii") for r in raw)
+        except UnicodeDecodeError as err:
+            raise ScenarioError(f"{path}: the field file's parameter layout is not ASCII: the file is damaged") from err
+        if len(set(names)) != len(names) or not all(names):
+            raise ScenarioError(f"{path}: the field file's parameter layout names a value twice or not at all: the "
+                                "file is damaged")
+    if law not in soil_law.names():
+        raise ScenarioError(f"{path}: the field was made with the soil law {law!r}, which this symtrack does not have "
+                            f"(model.soil_law: one of {', '.join(soil_law.names())})")
+    expected = [s.name for s in soil_params(law=soil_law.get(law))]
+    unknown = [nm for nm in names if nm not in expected]
+    if unknown:
+        raise ScenarioError(f"{path}: the field file holds soil parameter(s) {', '.join(unknown)}, which the soil "
+                            f"law {law!r} does not read (the file was written by another version)")
+    # a file written before soil parameters were added lacks them: they take the registry's defaults, as a
+    # terrain file's do (storage.load), a subsoil layer's description its topsoil's
+    missing = [nm for nm in expected if nm not in names]
+    lacking = [nm for nm in missing if spec(nm).default is None and nm not in SAME_AS_TOPSOIL]
+    if lacking:
+        raise ScenarioError(f"{path}: {n_soil} soil values, without {', '.join(lacking)}, which has no default "
+                            "(the file was written by another version)")
     n = nx * ny
     size = hbytes + (BYTES_PER_CELL + 8 * n_depths) * n + len(FIELD_TRAILER)
     if len(data) != size or data[-8:] != FIELD_TRAILER:
@@ -128,11 +183,12 @@ def read_field(path) -> Terrain:
                             f"takes {size} ending in ENDFIELD: the file is truncated or damaged")
     soil_values = np.frombuffer(data, "<f8", n_soil, FIELD_HEADER.size)
     depths = np.frombuffer(data, "<f8", n_depths, FIELD_HEADER.size + 8 * n_soil)
-    soil = dict(zip(SOIL_PARAM_NAMES[:n_soil], (float(v) for v in soil_values), strict=True))
+    soil = dict(zip(names, (float(v) for v in soil_values), strict=True))
     for name in missing:  # (in the list's order: a subsoil value is its topsoil's, filled before it)
         soil[name] = float(spec(name).default) if name not in SAME_AS_TOPSOIL else soil[SAME_AS_TOPSOIL[name]]
     st = Terrain(Grid((float(x0), float(y0)), float(dx), (int(nx), int(ny))), soil,
                  tuple(float(d) for d in depths))
+    st.soil_law = law
     off = hbytes
     for attr, dt, name in FIELD_ARRAYS:
         a = np.frombuffer(data, dt, n, off)

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..foundations.config import check_keys, number
 from ..foundations.errors import ParameterError, ScenarioError
-from ..model.parameters import SOIL_PARAMS, check_set
+from ..model.parameters import SOIL_PARAMS, check_set, known_soil_names, spec
 from ..presets.catalog import read_preset_file
 from ..presets.soils import soil_preset
 from ..soil import moisture
@@ -72,17 +72,21 @@ def _soil(entry, i: int) -> tuple[str, dict]:
             values = read_preset_file(entry, "soil")[0] if entry.endswith(".toml") else soil_preset(entry)
             return entry, check_set(values, SOIL_PARAMS, where)
         if isinstance(entry, dict):
-            check_keys(where, entry, ["preset", "moisture", *SOIL_NAMES])
+            # the default model's soil parameters, or a registered soil law's own (the World keeps the run's model's)
+            check_keys(where, entry, ["preset", "moisture", *SOIL_NAMES,
+                                      *(n for n in known_soil_names() if n not in SOIL_NAMES)])
+            specs = SOIL_PARAMS + tuple(spec(n) for n in entry
+                                        if n not in SOIL_NAMES and n not in ("preset", "moisture"))
             preset = entry.get("preset")
             if not isinstance(preset, str):
                 raise ScenarioError(f"{where}.preset is required (a soil preset name or file), got {preset!r}")
             values = read_preset_file(preset, "soil")[0] if preset.endswith(".toml") else soil_preset(preset)
             values.update({k: v for k, v in entry.items() if k not in ("preset", "moisture")})
             extra = ", ".join(f"{k}={v}" for k, v in entry.items() if k != "preset")
-            values = check_set(values, SOIL_PARAMS, where)
+            values = check_set(values, specs, where)
             if "moisture" in entry:  # the day's moisture of this soil (symtrack.soil.moisture)
                 values = check_set(moisture.apply_moisture(values, entry["moisture"], f"{where}.moisture"),
-                                   SOIL_PARAMS, where)
+                                   specs, where)
             return (f"{preset} ({extra})" if extra else preset), values
     except ParameterError as err:  # the preset lookups name soil.preset: name the soil map's entry instead
         key = where if isinstance(entry, str) else f"{where}.preset"

@@ -1,7 +1,7 @@
 """The field's cell storage (:class:`Grid`, :class:`Terrain`) and terrain files: the whole cell
 storage in one ``.npz`` file, written atomically.
 
-Schema (``TERRAIN_SCHEMA_VERSION`` = 5), one NumPy array per key:
+Schema (``TERRAIN_SCHEMA_VERSION`` = 6), one NumPy array per key:
 
 - ``kind``: the string "symtrack-terrain"; ``schema_version``: int;
 - ``origin_m`` (2,) float64: world (x, y) of the field's lower-left corner; ``cell_m`` float64;
@@ -27,7 +27,12 @@ Schema (``TERRAIN_SCHEMA_VERSION`` = 5), one NumPy array per key:
   k >= 1 row k - 1 of ``soil_map_values`` (float64 (n, len(soil_map_names))) with its label in
   ``soil_map_labels`` (a soil map: symtrack/terrain/soil_map.py; absent when the field has one soil);
 - ``soil_names`` (str array) and ``soil_values`` float64: the soil parameters the history
-  was made with. Loading a file into a scenario with a different soil is an error;
+  was made with, each by its name (the layout of the model's ``[soil]`` table:
+  :func:`symtrack.model.parameters.soil_params`). Loading a file into a scenario with a different
+  soil is an error;
+- ``soil_law`` str (schema 6): the soil law the history was made with (``model.soil_law``, whose
+  coefficients are among ``soil_names`` and whose history the cells hold); continuing the file under
+  another law is an error. A file before schema 6 was made with ``"bekker_wong"``, the one law then;
 - ``crs_wkt`` (str, optional): the coordinate reference system of the field's x, y (WKT), when
   it came from a georeferenced raster (symtrack/terrain/gis.py); absent for local coordinates.
 - ``file_id`` str (schema 3): this file's own id (32 hexadecimal digits, new at every write);
@@ -66,18 +71,25 @@ import numpy as np
 
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, npz_bytes, real_path
-from ..model.parameters import DERIVED_SOIL_PARAM_NAMES, SOIL_DAY_PARAM_NAMES, SOIL_PARAM_NAMES, spec
+from ..model.parameters import (
+    DERIVED_SOIL_PARAM_NAMES,
+    SOIL_DAY_PARAM_NAMES,
+    SOIL_PARAM_NAMES,
+    known_soil_names,
+    spec,
+)
+from ..soil import law as soil_law
 from ..soil.pedotransfer import derive_soil, precompression_from_virgin_line_kPa
 
 __all__ = ["HISTORY_KEYS", "KIND", "STORAGE_FIELDS", "TERRAIN_SCHEMA_VERSION", "Grid", "Terrain", "file_bytes",
-           "file_geometry", "file_identity", "load", "save"]
+           "file_geometry", "file_identity", "load", "save", "soil_layout"]
 
 STORAGE_FIELDS = ("z_m", "z_rate_m_s", "z_max_m", "p_max_Pa", "phase", "z_off_m", "load_cycles")
 STORAGE_ATTRS = ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles")  # the Terrain's attributes of them
 SCHEMA1_FIELDS = STORAGE_FIELDS[:5]
 
-TERRAIN_SCHEMA_VERSION = 5
-READABLE_SCHEMAS = (1, 2, 3, 4, 5)
+TERRAIN_SCHEMA_VERSION = 6
+READABLE_SCHEMAS = (1, 2, 3, 4, 5, 6)
 HISTORY_KEYS = ("run_id", "time_utc", "scenario", "scenario_sha256", "passes", "input_file_id")
 KIND = "symtrack-terrain"
 
@@ -130,6 +142,8 @@ class Terrain:
         n = grid.n_cells
         self.grid = grid
         self.soil = None if soil is None else {str(k): float(v) for k, v in soil.items()}
+        # the soil law the history is of (model.soil_law; None for a new field until a world writes into it)
+        self.soil_law: str | None = None
         self.z = np.zeros(n)
         self.zdot = np.zeros(n)
         self.zmax = np.zeros(n)
@@ -250,10 +264,12 @@ def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = No
     g = storage.grid
     arrays = {k: v.reshape(g.shape) for k, v in storage.arrays().items()
               if k not in ("sigma_max_Pa", "specific_volume")}
+    names = soil_layout(soil)
     if storage.soil_table:
+        map_names = soil_layout(storage.soil_table[0][1])
         arrays["soil_map_labels"] = np.array([lab for lab, _ in storage.soil_table])
-        arrays["soil_map_names"] = np.array(SOIL_PARAM_NAMES)
-        arrays["soil_map_values"] = np.array([[float(v[n]) for n in SOIL_PARAM_NAMES] for _, v in storage.soil_table])
+        arrays["soil_map_names"] = np.array(map_names)
+        arrays["soil_map_values"] = np.array([[float(v[n]) for n in map_names] for _, v in storage.soil_table])
     arrays["sigma_max_Pa"] = storage.sigma_max.reshape(*g.shape, len(storage.subsoil_depths_m))
     arrays["specific_volume"] = storage.specific_volume.reshape(*g.shape, len(storage.subsoil_depths_m))
     arrays["subsoil_depths_m"] = np.array(storage.subsoil_depths_m, dtype=np.float64)
@@ -265,7 +281,8 @@ def file_bytes(storage: Terrain, soil: dict | None = None, run: dict | None = No
         kind=np.array(KIND), schema_version=np.array(TERRAIN_SCHEMA_VERSION),
         origin_m=np.array(g.origin_m, dtype=np.float64), cell_m=np.array(g.cell_m, dtype=np.float64),
         shape=np.array(g.shape, dtype=np.int64),
-        soil_names=np.array(SOIL_PARAM_NAMES), soil_values=np.array([float(soil[n]) for n in SOIL_PARAM_NAMES]),
+        soil_names=np.array(names), soil_values=np.array([float(soil[n]) for n in names]),
+        soil_law=np.array(storage.soil_law or soil_law.DEFAULT),
         file_id=np.array(file_id), history_json=np.array(json.dumps(history)), **arrays)
     return data, file_id, history
 
@@ -336,6 +353,12 @@ def load(path, soil: dict | None = None) -> Terrain:
         raise ScenarioError(f"{path}: malformed terrain geometry: shape {shape}, cell_m {grid.cell_m}, "
                             f"origin_m {grid.origin_m}")
     st = Terrain(grid, file_soil)
+    if version >= 6:
+        if "soil_law" not in d or d["soil_law"].ndim != 0 or d["soil_law"].dtype.kind != "U":
+            raise ScenarioError(f"{path}: the terrain file lacks soil_law, one string (schema 6): the file is damaged")
+        st.soil_law = str(d["soil_law"])
+    else:  # written when Bekker/Wong was the one soil law
+        st.soil_law = soil_law.DEFAULT
     for name, attr, arr in zip(STORAGE_FIELDS, STORAGE_ATTRS, st._all(), strict=True):
         if name not in fields:
             continue
@@ -429,6 +452,12 @@ def load(path, soil: dict | None = None) -> Terrain:
                     if n not in st.soil and spec(n).default is not None})
     st.soil.update(_derived_missing(st.soil))
     return st
+
+
+def soil_layout(soil: dict) -> tuple[str, ...]:
+    """The names of the soil parameters of ``soil`` (a soil, or a run's parameters: its vehicle's left out)
+    in the order a terrain file records them (:func:`symtrack.model.parameters.known_soil_names`)."""
+    return tuple(n for n in known_soil_names() if n in soil)
 
 
 def _first_bad(st: Terrain, bad: np.ndarray) -> tuple[str, int]:

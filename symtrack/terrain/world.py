@@ -72,15 +72,15 @@ import math
 import casadi as ca
 import numpy as np
 
-from ..foundations.errors import ScenarioError
+from ..foundations.errors import ParameterError, ScenarioError
 from ..foundations.memory import require_memory
 from ..model import SystemModel
 from ..model.layout import StateLayout
 from ..model.options import ModelOptions
-from ..model.parameters import SOIL_PARAM_NAMES
-from ..model.system import PARAM_NAMES
+from ..model.parameters import check_set, known_soil_names, model_param_layout, soil_params
 from ..soil import density, moisture
 from ..vehicles import registry as vehicle_registry
+from ..vehicles.planar import contact_rectangles
 from . import gis
 from .channels import HIST_ROWS, NF, NG, ChannelTerrain
 from .settings import TerrainSettings
@@ -96,6 +96,23 @@ LIFT_TIME_S = 0.2  # the vehicle is lifted off over this time at the end of a pa
 # A scenario's terrain.origin_m agrees with its continued terrain file's within a micrometre: far below
 # a cell (at least 1 cm), above the rounding of a coordinate of 1e7 m (2e-9 m in float64)
 ORIGIN_TOLERANCE_M = 1e-6
+
+
+def _soil_map_for_model(settings: TerrainSettings, opts: ModelOptions) -> TerrainSettings:
+    """``settings`` with the soils of its soil map as the model's ``[soil]`` table (the presets' values for
+    the default model's parameters: a soil law's own coefficients added, with their defaults, and
+    another law's left out), unchanged for the default model."""
+    sm = settings.soil_map
+    if sm is None:
+        return settings
+    specs, known = soil_params(opts), known_soil_names()
+    try:
+        soils = tuple(check_set(sp, specs, f"terrain.soil_map.soils[{i}]", known) for i, sp in enumerate(sm.soils))
+    except ParameterError as err:
+        raise ScenarioError(str(err)) from err
+    if soils == sm.soils:
+        return settings
+    return dataclasses.replace(settings, soil_map=dataclasses.replace(sm, soils=soils))
 
 
 def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarray) -> np.ndarray:
@@ -211,6 +228,9 @@ class World:
     def __init__(self, settings: TerrainSettings, params: dict, opts: ModelOptions, dt_s: float,
                  start_xy=(0.0, 0.0), modulus: int | None = None, storage: Terrain | None = None):
         self.settings, self.params, self.opts = settings, dict(params), opts
+        # the soil parameters of the model (its vehicle's and soil law's declarations and the soil's)
+        self.soil_names = tuple(s.name for s in soil_params(opts))
+        settings = self.settings = _soil_map_for_model(settings, opts)
         # the estimated peak memory of the process (run_memory_bytes; open_world's, for a terrain file)
         self.memory_estimate_bytes: int | None = None
         if not settings.cell_m < params["track_width_m"]:
@@ -241,9 +261,15 @@ class World:
                                 f"terrain continued is in {gis.crs_label(storage.crs_wkt)}: two maps of one field must "
                                 "share their CRS (reproject the raster, gdalwarp -t_srs)")
         self.storage = storage if storage is not None else Terrain(self.grid)
+        if self.storage.soil_law is None:
+            self.storage.soil_law = opts.soil_law
+        elif self.storage.soil_law != opts.soil_law:
+            raise ScenarioError(f"the terrain's history was made with the soil law {self.storage.soil_law!r}, the "
+                                f"scenario has model.soil_law = {opts.soil_law!r}; continue a terrain under the law "
+                                "it was made with")
         self.surface = self._apply_surface(settings.surface, storage is not None)
         if self.storage.soil is None:
-            self.storage.soil = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
+            self.storage.soil = {k: float(params[k]) for k in self.soil_names}
         self.storage.set_subsoil_depths(settings.subsoil_depths_m)
         # the largest vertical stress of this pass at each subsoil depth, per cell (the terrain
         # engine writes it; end_pass folds it into the storage's record over all passes)
@@ -263,7 +289,7 @@ class World:
         self.Q[1] = END_STRIP_CELLS * self.grid.cell_m
         self.qc = self.Q[NG:].reshape(n, NF)  # a view: writes go to Q
         self.p_soil = np.zeros(n)
-        self._pbase = np.array([float(params[n]) for n in PARAM_NAMES])  # SystemModel.param_vector's order
+        self._pbase = np.array(model_param_layout(opts).pack(params))  # SystemModel.param_vector's order
         # each cell's own day parameters (N, lambda, kappa, sigma_pc; None: its soil's): a moisture raster of
         # more distinct values than a soil map holds (symtrack.soil.moisture.cell_day_parameters)
         self.cell_day = None
@@ -331,7 +357,7 @@ class World:
         pairs than a map holds: each cell's day parameters in ``cell_day``, the settings unchanged."""
         mm, sm = settings.moisture, settings.soil_map
         water = moisture.read_moisture(self.grid, mm)
-        base = [{n: float(params[n]) for n in SOIL_PARAM_NAMES}] + ([] if sm is None else list(sm.soils))
+        base = [{n: float(params[n]) for n in self.soil_names}] + ([] if sm is None else list(sm.soils))
         labels = ["[soil]"] + ([] if sm is None else list(sm.labels))
         index = self._map_index if self._map_index is not None else np.zeros(self.grid.n_cells, dtype=np.uint8)
         pairs = moisture.distinct_pairs(index, water)
@@ -358,8 +384,8 @@ class World:
                 ids: dict = {}
 
                 def cell_soils(index, tab):
-                    keys = [tuple(float(params[n]) for n in SOIL_PARAM_NAMES)]
-                    keys += [tuple(float(v[n]) for n in SOIL_PARAM_NAMES) for _, v in tab]
+                    keys = [tuple(float(params[n]) for n in self.soil_names)]
+                    keys += [tuple(float(v[n]) for n in self.soil_names) for _, v in tab]
                     return np.array([ids.setdefault(k, len(ids)) for k in keys])[index]
 
                 if not np.array_equal(cell_soils(idx, table), cell_soils(st.soil_index, st.soil_table)):
@@ -370,14 +396,14 @@ class World:
                 st.soil_table = table
             if sm.crs_wkt is not None:
                 st.crs_wkt = sm.crs_wkt
-        base = {k: float(params[k]) for k in SOIL_PARAM_NAMES}
+        base = {k: float(params[k]) for k in self.soil_names}
         soils, table = [dict(params)], []
         remap = np.zeros(len(st.soil_table) + 1, dtype=np.uint8)
         used = np.bincount(st.soil_index, minlength=len(st.soil_table) + 1) > 0
         for k, (label, sp) in enumerate(st.soil_table, start=1):
-            if not used[k] or {n: sp[n] for n in SOIL_PARAM_NAMES} == base:
+            if not used[k] or {n: sp[n] for n in self.soil_names} == base:
                 continue
-            full = {**params, **{n: sp[n] for n in SOIL_PARAM_NAMES}}
+            full = {**params, **{n: sp[n] for n in self.soil_names}}
             for n in ("cell_areal_mass_kg_per_m2", "cell_damping_Pa_s_per_m"):
                 if full[n] != float(params[n]):
                     raise ScenarioError(f"terrain.soil_map: soil {k} has {n} = {full[n]!r}, the scenario's soil "
@@ -392,15 +418,11 @@ class World:
 
     # ---- geometry -----------------------------------------------------------------------------
     def _rectangles(self, X, Y, psi, pad):
-        P = self.params
-        e, B = P["cg_ahead_of_contact_centre_m"], P["track_gauge_m"]
+        """Each track's contact rectangle (the vehicle's, planar.contact_rectangles) at the pose, grown by
+        pad: (centre x, centre y, cos, sin, half length, half width)."""
         c, s = math.cos(psi), math.sin(psi)
-        out = []
-        for side in (1.0, -1.0):
-            bx, by = -e, side * B / 2
-            out.append((X + c * bx - s * by, Y + s * bx + c * by, c, s,
-                        P["contact_length_m"] / 2 + pad, P["track_width_m"] / 2 + pad))
-        return out
+        return [(X + c * bx - s * by, Y + s * bx + c * by, c, s, hl + pad, hw + pad)
+                for bx, by, hl, hw in contact_rectangles(self.params)]
 
     def track_corners(self, X: float, Y: float, psi: float) -> list[np.ndarray]:
         """The corners (4, 2) of each track's contact rectangle in world coordinates."""

@@ -18,8 +18,11 @@ package instead of its name (:mod:`symtrack.vehicles.registry` lists the whole i
   quasi-static (``mpc.prediction_hull``; none: the prediction keeps every state);
 - :attr:`VehicleModel.figures`: the run folder's figures of its own (:mod:`symtrack.reports.figures`
   names);
-- :attr:`VehicleModel.param_names`: the parameters it reads (of :data:`symtrack.model.PARAM_NAMES`;
-  a model refuses a vehicle that reads one the set lacks);
+- :attr:`VehicleModel.params` and :attr:`VehicleModel.soil_params`: the declarations
+  (:class:`~symtrack.foundations.params.ParamSpec`) of the parameters it brings: its own (the
+  ``[vehicle]`` table) and the soil coefficients its equations read (the ``[soil]`` table); a
+  model's parameter set is these, its soil law's and the soil's (:mod:`symtrack.model.parameters`).
+  :attr:`VehicleModel.param_names`: their names;
 - :meth:`VehicleModel.for_options`: the model for a run's options and ground (a variant with the
   lateral shear states, a hull on a surface); :meth:`check_ground`, :meth:`check_start` and
   :meth:`check_grid`: what it refuses of a run before anything is built
@@ -50,9 +53,15 @@ class VehicleModel:
     standalone_engine: bool = False
     hull_states: tuple = ()
     figures: tuple = ()
-    param_names: tuple = ()
+    params: tuple = ()
+    soil_params: tuple = ()
     surface = None  # the ground's shape a hull drives on (None: flat, or no hull)
     menu_name: str | None = None  # a variant's registry entry (for_options gave it; None: its own name)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        """The names of the parameters it declares (:attr:`params`, then :attr:`soil_params`)."""
+        return tuple(s.name for s in (*self.params, *self.soil_params))
 
     @property
     def entry_name(self) -> str:

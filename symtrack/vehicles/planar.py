@@ -18,17 +18,17 @@ import numpy as np
 
 from ..foundations import caches
 from ..foundations.errors import ParameterError
+from ..foundations.params import param
 from ..model.layout import ContactPose, StateLayout, VehicleState
-from ..model.parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
 from .base import VehicleModel
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
            "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SHEAR_LAWS", "SLIP_SPEED_SCALE_M_S",
-           "SOIL_PARAMS_USED",
-           "TRACKS", "VEHICLE_STATES", "codegen_options", "creep_lateral_force", "direction", "gauss_nodes",
-           "graded_nodes", "integrate_track", "internal_resistance_N", "lateral_resistance_max_N",
-           "lateral_shear_rates", "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates",
-           "sprocket_speed_abs", "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
+           "TRACKS", "TRACK_SOIL_PARAMS", "TRACK_SOIL_PARAM_NAMES", "VEHICLE_PARAMS", "VEHICLE_STATES",
+           "codegen_options", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes", "integrate_track",
+           "internal_resistance_N", "lateral_resistance_max_N", "lateral_shear_rates", "mean_ground_pressure_Pa",
+           "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
+           "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # the lateral laws that take the tracks' forces from the soil's shear law (ModelOptions.lateral_law)
 SHEAR_LAWS = ("shear", "shear_quasistatic")
@@ -65,8 +65,57 @@ ALGEBRAIC = ("accel_x_m_s2", "accel_y_m_s2")
 # 1 - 1e-4 at a tread speed of 1 m/s, 0.99 at 0.1 m/s. An output only: no equation uses it.
 SLIP_SPEED_SCALE_M_S = 0.01
 
-# Vehicle-side parameters the equations use from the soil set.
-SOIL_PARAMS_USED = ("cohesion_Pa", "friction_angle_rad", "shear_modulus_K_m")
+_BODY = "Ferretti & Girelli (1999), the body equations (docs/model.md)"
+_WONG = "Wong, Theory of Ground Vehicles: the internal resistance of a track"
+# the planar vehicle's parameters (the 3D vehicle reads the same): the [vehicle] table
+VEHICLE_PARAMS = (
+    param("mass_kg", "vehicle mass", 0.0, 1e6, False, source=_BODY),
+    param("yaw_inertia_kg_m2", "yaw moment of inertia about the CG", 0.0, 1e8, False, source=_BODY),
+    param("track_gauge_m", "distance B between the track centre-lines", 0.0, 20.0, False, source=_BODY),
+    param("track_width_m", "track width b", 0.0, 5.0, False, source=_BODY),
+    param("contact_length_m", "track contact length l", 0.0, 20.0, False, source=_BODY),
+    param("sprocket_radius_m", "sprocket pitch radius r", 0.0, 5.0, False, source=_BODY),
+    param("cg_height_m", "CG height h above the ground", 0.0, 10.0, source=_BODY),
+    param("cg_ahead_of_contact_centre_m", "CG offset e ahead of the contact centre", -5.0, 5.0, source=_BODY),
+    param("sprocket_inertia_kg_m2", "equivalent inertia J_eq per side (sprocket, idler, rollers, track)",
+          0.0, 1e5, False, source=_BODY),
+    param("torque_time_constant_s", "time constant tau_T of the first-order torque actuator", 0.0, 100.0, False,
+          source="the first-order torque actuator (docs/model.md)"),
+    param("internal_resistance_const", "Wong's internal resistance R_in/W_k, speed-independent part", 0.0, 1.0,
+          source=_WONG),
+    param("internal_resistance_per_km_h", "Wong's internal resistance R_in/W_k per km/h of track speed",
+          0.0, 0.1, source=_WONG, unit="h/km"),
+    param("lateral_friction_coeff", "lateral friction coefficient mu_t between track and soil "
+          "(lateral_law = \"creep\" only)", 0.0, 5.0, source="Wong, Theory of Ground Vehicles: skid steering"),
+    param("lateral_creep_speed_m_s", "lateral slip speed eps_v at which friction reaches tanh(1) of mu_t "
+          "(lateral_law = \"creep\" only)", 0.0, 10.0, False, source="the creep lateral law (docs/model.md)"),
+    param("drawbar_pull_N", "drawbar pull P (external resistance at the hitch)", 0.0, 1e7, source=_BODY),
+    param("hitch_height_m", "height h_d of the drawbar hitch", 0.0, 10.0, source=_BODY),
+)
+# the soil's coefficients the tracks' traction reads (the [soil] table; with a soil map the terrain
+# engine carries them per soil and sums them under each track by name)
+TRACK_SOIL_PARAMS = (
+    param("cohesion_Pa", "Mohr-Coulomb cohesion c", 0.0, 1e7, source="Mohr-Coulomb, in Janosi & Hanamoto (1961)"),
+    param("friction_angle_rad", "Mohr-Coulomb internal friction angle phi", 0.0, 1.5,
+          source="Mohr-Coulomb, in Janosi & Hanamoto (1961)"),
+    param("shear_modulus_K_m", "Janosi-Hanamoto shear deformation modulus K", 0.0, 1.0, False,
+          source="Janosi & Hanamoto (1961)"),
+)
+TRACK_SOIL_PARAM_NAMES = tuple(s.name for s in TRACK_SOIL_PARAMS)
+
+
+def contact_rectangles(params) -> list[tuple[float, float, float, float]]:
+    """Each track's contact rectangle in the body frame, left then right: (its centre ahead of the CG,
+    its centre to the left of it, half its length l / 2, half its width b / 2) [m] (the terrain engine's
+    scan of the cells under the tracks, grid_engine.c, writes the same rectangles from geo)."""
+    ahead, off = -params["cg_ahead_of_contact_centre_m"], 0.5 * params["track_gauge_m"]
+    half_l, half_b = 0.5 * params["contact_length_m"], 0.5 * params["track_width_m"]
+    return [(ahead, off, half_l, half_b), (ahead, -off, half_l, half_b)]
+
+
+def mean_ground_pressure_Pa(params):
+    """The tracks' mean ground pressure m g / (2 b l) [Pa] of the vehicle parameters ``params``."""
+    return params["mass_kg"] * GRAVITY_M_S2 / (2 * params["track_width_m"] * params["contact_length_m"])
 
 
 def gauss_nodes(length, n_segments: int, n_points: int):
@@ -556,7 +605,8 @@ class PlanarVehicle(VehicleModel):
     alg_names = ALGEBRAIC
     tracks = TRACKS
     standalone_engine = True
-    param_names = VEHICLE_PARAM_NAMES + SOIL_MODEL_PARAM_NAMES
+    params = VEHICLE_PARAMS
+    soil_params = TRACK_SOIL_PARAMS
 
     def __init__(self, lateral: PlanarVehicle | None = None):
         self.lateral = lateral

@@ -20,8 +20,10 @@ A vehicle model is an object with
   parameters it reads, and :meth:`~symtrack.vehicles.base.VehicleModel.for_options`, the model for a
   run's options and ground.
 
-The vehicle and soil parameters are the project's (:data:`symtrack.model.PARAM_NAMES`). The terrain
-engine reads the states it needs by name (its C offsets come from the vehicle's layout).
+A vehicle declares its parameters (``params``, ``soil_params``:
+:class:`~symtrack.foundations.params.ParamSpec`); the model's parameter set adds the soil law's and the
+soil's (:func:`symtrack.model.parameters.model_params`). The terrain engine reads the states it needs
+by name (its C offsets come from the vehicle's layout).
 
 Adding a vehicle model is one module and one :func:`register` call::
 
@@ -40,8 +42,8 @@ __all__ = ["DEFAULT_VEHICLE", "REGISTRY", "check_plant", "for_options", "get", "
 
 DEFAULT_VEHICLE = "planar"
 _REQUIRED = ("name", "layout", "state_names", "input_names", "alg_names", "tracks", "equations", "contact_pose",
-             "contact", "plants", "integrators", "standalone_engine", "hull_states", "figures", "param_names",
-             "for_options", "check_ground", "check_start", "check_grid")
+             "contact", "plants", "integrators", "standalone_engine", "hull_states", "figures", "params",
+             "soil_params", "param_names", "for_options", "check_ground", "check_start", "check_grid")
 
 _MENU: Registry = Registry("a vehicle model", "vehicle", ParameterError)
 REGISTRY = _MENU.entries

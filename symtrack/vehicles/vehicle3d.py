@@ -84,7 +84,6 @@ import casadi as ca
 
 from ..foundations.errors import ParameterError, SimulationError
 from ..model.layout import ContactPose, StateLayout, VehicleState
-from ..model.parameters import SOIL_MODEL_PARAM_NAMES, VEHICLE_PARAM_NAMES
 from ..soil import law as soil_law
 from .base import CONTACT_HULL, VehicleModel
 from .planar import (
@@ -94,7 +93,9 @@ from .planar import (
     LATERAL_STATES,
     PLANAR_LAYOUT,
     SHEAR_LAWS,
+    TRACK_SOIL_PARAMS,
     TRACKS,
+    VEHICLE_PARAMS,
     creep_lateral_force,
     direction,
     internal_resistance_N,
@@ -218,7 +219,8 @@ class Vehicle3D(VehicleModel):
     plants = frozenset({"homogeneous", "engine"})
     hull_states = HULL_STATES
     figures = ("attitude", "load_split", "path_elevation")
-    param_names = VEHICLE_PARAM_NAMES + SOIL_MODEL_PARAM_NAMES
+    params = VEHICLE_PARAMS  # the planar vehicle's body and traction parameters
+    soil_params = TRACK_SOIL_PARAMS
 
     def __init__(self, surface=None, lateral: bool = False):
         self.surface = None if surface is None or surface.is_flat else surface

@@ -15,7 +15,7 @@ from ...foundations import caches
 from ...foundations.errors import ScenarioError, SimulationError
 from ...model import SystemModel
 from ...model.static import static_state
-from ...native.grid_engine_model import TRACK_SOIL_PARAMS, build_engine_functions
+from ...native.grid_engine_model import TRACK_SOIL_LAYOUT, build_engine_functions
 from ...soil import law as soil_law
 from ...terrain import query
 from ...terrain.world import LIFT_TIME_S
@@ -50,7 +50,7 @@ def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (
                   raster.values.shape, tuple(raster.origin_m or ()), float(raster.pixel_m))
     key = (opts, vehicle_substeps, tuple(
         (tuple(soil_law.make(opts).values(sp)), float(sp["repeated_loading_exponent"]),
-         tuple(float(sp[k]) for k in TRACK_SOIL_PARAMS)) for sp in soils), ground)
+         tuple(TRACK_SOIL_LAYOUT.pack(sp))) for sp in soils), ground)
     return _FUNCTIONS.get_or_build(key, lambda: build_engine_functions(
         opts, params, vehicle_substeps, soils if len(soils) > 1 else (), surface))
 

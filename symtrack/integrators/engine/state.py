@@ -11,7 +11,7 @@ import numpy as np
 
 from ...foundations import caches
 from ...foundations.errors import SimulationError
-from ...native.grid_engine_model import NGEO, TRACK_SOIL_PARAMS, cell_constants, geo_vector, pv_base
+from ...native.grid_engine_model import NGEO, cell_constants, geo_vector, pv_base, track_soil_vector
 from ...soil import subsoil
 from ...terrain.settings import MAX_SUBSOIL_DEPTHS
 from ...terrain.world import END_STRIP_CELLS, padding_m
@@ -176,11 +176,11 @@ class EngineState:
         self.stamp = 0
         strip = END_STRIP_CELLS * g.cell_m
         self.n_sums = fns.n_sums
-        self.pv = np.array(pv_base(world.params, g.cell_m, strip) + [0.0] * self.n_sums)
+        self.pv = np.array(pv_base(fns.param_layout, world.params, g.cell_m, strip) + [0.0] * self.n_sums)
         # the soil map: each channel's soil, per soil what the traction uses
         self.soil_index = world.storage.soil_index
         self.ch_soil = np.zeros(n, dtype=np.uint8)
-        self.soil_veh = np.array([[float(sp[k]) for k in TRACK_SOIL_PARAMS] for sp in world.soils]).ravel()
+        self.soil_veh = np.array(track_soil_vector(world.soils))
         self.geo = np.array(geo_vector(world.params, g.cell_m, strip))
         self.wv = np.zeros(fns.nw)
         self.a = np.zeros(fns.na)

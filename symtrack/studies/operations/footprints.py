@@ -13,6 +13,7 @@ import numpy as np
 from ...foundations import caches
 from ...foundations.errors import ScenarioError
 from ...terrain.world import padding_m
+from ...vehicles.planar import contact_rectangles
 from .. import boundary as bnd
 from .plans import OperationPlan, inner_ring, k_turn_headland_m, sample_roles
 from .settings import PASS_GAP_S, PATH_DS_M, OperationSettings
@@ -38,12 +39,10 @@ def footprint_mask(x, y, psi, params: dict, shape, cell_m: float) -> np.ndarray:
 
 
 def track_rects(params: dict):
-    """The two tracks' contact rectangles in the body frame: [(centre ahead, half l, half b)], [lateral]."""
-    half_l = 0.5 * params["contact_length_m"]
-    half_b = 0.5 * params["track_width_m"]
-    e = float(params["cg_ahead_of_contact_centre_m"])
-    off = 0.5 * params["track_gauge_m"]
-    return [(-e, half_l, half_b), (-e, half_l, half_b)], [off, -off]
+    """The two tracks' contact rectangles in the body frame (the vehicle's, planar.contact_rectangles):
+    [(centre ahead, half l, half b)], [lateral]."""
+    rects = contact_rectangles(params)
+    return [(float(ahead), hl, hb) for ahead, _, hl, hb in rects], [lat for _, lat, _, _ in rects]
 
 
 def _sweep(x, y, psi, shape, cell_m, rects, lateral=None, overlap=True) -> np.ndarray:
