@@ -1,6 +1,6 @@
 """Bench rows of the MPC closed loop on the grid plant: the terrain engine (``grid_fast``, the
 default since issue 9) against IDAS (the reference, the default before) and the compiled grid
-Rosenbrock, the same scenario in one process (docs/control.md, "Measured on the grid plant").
+Rosenbrock, the same scenario in one process (docs/control.md, "On the grid plant").
 
     python -m symtrack.bench.mpc_grid [--scenario field_pattern] [--integrators grid_fast idas rosenbrock]
                                       [--quick] [--out DIR]
