@@ -20,23 +20,13 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from .errors import ParameterError
+from .units import unit_of_suffix
 
-__all__ = ["PARAM_UNIT_SUFFIXES", "ParamLayout", "ParamSpec", "merge_specs", "param", "unit_of_name"]
-
-# the unit a parameter's name carries in its suffix (longest match first); "-": none (dimensionless)
-PARAM_UNIT_SUFFIXES = (("_kg_per_kg", "kg/kg"), ("_Mg_per_m3", "Mg/m^3"), ("_kPa", "kPa"),
-                       ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
-                       ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_N_m", "N m"),
-                       ("_m_s", "m/s"), ("_rad", "rad"), ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_s", "s"),
-                       ("_m", "m"))
-
+__all__ = ["ParamLayout", "ParamSpec", "merge_specs", "param", "unit_of_name"]
 
 def unit_of_name(name: str) -> str:
-    """The unit a parameter's name carries ("-" for a dimensionless one)."""
-    for suffix, unit in PARAM_UNIT_SUFFIXES:
-        if name.endswith(suffix):
-            return unit
-    return "-"
+    """The unit a parameter's name carries ("-" for a dimensionless one; :func:`.units.unit_of_suffix`)."""
+    return unit_of_suffix(name, "-")
 
 
 @dataclass(frozen=True)

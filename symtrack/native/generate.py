@@ -38,10 +38,11 @@ from pathlib import Path
 
 import casadi as ca
 
+from ..foundations.units import unit_of_suffix
 from . import rosenbrock
 
 __all__ = ["CHUNK_SIZES", "FIXED_STEP_METHOD", "GROUPS", "GROUP_OF", "Generated", "MANIFEST_SCHEMA_VERSION",
-           "UNIT_SUFFIXES", "build", "fixed_step_functions", "manifest", "render", "unit_of", "write_sources"]
+           "build", "fixed_step_functions", "manifest", "render", "unit_of", "write_sources"]
 
 MANIFEST_SCHEMA_VERSION = 1
 # Steps per call of the chunk functions: a long chunk for the bulk of a run and a short one
@@ -49,21 +50,10 @@ MANIFEST_SCHEMA_VERSION = 1
 CHUNK_SIZES = (256, 16)
 FIXED_STEP_METHOD = "rosenbrock"
 
-# Unit of a name from its suffix (longest match first); names without one are dimensionless.
-UNIT_SUFFIXES = (
-    ("_N_per_m_n1", "N/m^(n+1)"), ("_N_per_m_n2", "N/m^(n+2)"), ("_Pa_s_per_m", "Pa s/m"),
-    ("_Pa_per_m", "Pa/m"), ("_kg_per_m2", "kg/m^2"), ("_kg_m2", "kg m^2"), ("_per_km_h", "h/km"),
-    ("_rad_s", "rad/s"), ("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_N_m", "N m"), ("_rad", "rad"),
-    ("_kg", "kg"), ("_Pa", "Pa"), ("_N", "N"), ("_W", "W"), ("_m", "m"), ("_s", "s"),
-)
-
-
 def unit_of(name: str) -> str:
-    """The unit a symtrack name carries in its suffix ("1" when it has none)."""
-    for suffix, unit in UNIT_SUFFIXES:
-        if name.endswith(suffix):
-            return unit
-    return "1"
+    """The unit a symtrack name carries in its suffix ("1" when it has none;
+    :func:`symtrack.foundations.units.unit_of_suffix`)."""
+    return unit_of_suffix(name, "1")
 
 
 @dataclass(frozen=True)

@@ -106,20 +106,11 @@ def report_html(title: str, summary: dict, images: dict[str, bytes], scenario_te
     return "\n".join(parts)
 
 
-# the units of the summaries' figures that the model's signals do not use (the signals' own:
-# symtrack.native.generate's unit suffixes); the longest matching suffix wins (``_kPa`` over ``_Pa``)
-_SUMMARY_UNITS = (("_Mg_per_m3", "Mg/m^3"), ("_kg_per_kg", "kg/kg"), ("_kPa", "kPa"), ("_MPa", "MPa"),
-                  ("_mm", "mm"), ("_cm", "cm"), ("_km", "km"), ("_km_h", "km/h"), ("_deg", "deg"), ("_ms", "ms"),
-                  ("_percent", "%"), ("_ha", "ha"), ("_m2", "m^2"), ("_m3", "m^3"), ("_kJ", "kJ"), ("_J", "J"),
-                  ("_kW", "kW"), ("_h", "h"))
-
-
 def _unit(key: str) -> str:
     """The unit a summary key names in its suffix (``_mm`` -> mm, ``_N_m`` -> N m), or ""."""
-    from ..native.generate import UNIT_SUFFIXES
+    from ..foundations.units import unit_of_suffix
 
-    hits = [(len(sfx), unit) for sfx, unit in (*_SUMMARY_UNITS, *UNIT_SUFFIXES) if key.endswith(sfx)]
-    return max(hits)[1] if hits else ""
+    return unit_of_suffix(key, "")
 
 
 def notebook_html(title: str, summary: dict, facts: list[tuple[str, object]],
