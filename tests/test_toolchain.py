@@ -140,8 +140,11 @@ def test_an_interrupted_build_leaves_no_half_written_library(tmp_path, sig):
                   "exec sleep 60\n")
     cc.chmod(0o755)
     root = tmp_path / "cache"
+    # SIGINT as a terminal delivers it, whatever this worker's disposition (a Dask test before it may have left
+    # SIGINT ignored, which a child inherits: its Python would then never raise KeyboardInterrupt)
     p = subprocess.Popen([sys.executable, "-c", INTERRUPTED, str(root), str(cc)],
-                         env=dict(os.environ, PYTHONPATH=str(REPO)), stderr=subprocess.PIPE)
+                         env=dict(os.environ, PYTHONPATH=str(REPO)), stderr=subprocess.PIPE,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     t0 = time.monotonic()
     while not (started.exists() and started.read_text().strip()):
         assert p.poll() is None and time.monotonic() - t0 < 60, p.stderr.read().decode()
