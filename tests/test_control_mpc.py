@@ -118,6 +118,14 @@ def test_closed_loop_straight_offset(model, tmp_path):
     assert {"t_s", "x_m", "lateral_error_m", "torque_cmd_left_N_m", "solve_time_ms"} <= set(header)
     for png in ("path.png", "errors.png", "torques.png", "solve_times.png"):
         assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
+    # the notebook view: what ran and the summary's figures with their units, a well-formed fragment
+    import xml.etree.ElementTree as ET
+
+    root = ET.fromstring(res._repr_html_())
+    text = "".join(root.itertext())
+    assert f"scenario: {sc.name}" in text and f"solver: {sc.mpc.solver}" in text and "plant: homogeneous" in text
+    rows = {tr[0].text: (tr[1].text, tr[2].text) for tr in root.find("table").iter("tr") if tr[0].tag == "td"}
+    assert rows["solve_time_median_ms"][1] == "ms" and rows["rms_lateral_error_m"][1] == "m"
 
 
 def test_failed_solve_reuses_shifted_plan(model):
