@@ -1,4 +1,4 @@
-"""Driving across and along furrows with the 3D vehicle (``model.vehicle = "3d"``, issue 22 item 3;
+"""Driving across and along furrows with the 3D vehicle (``model.vehicle = "3d"``;
 docs/vehicle3d.md "Studies: furrows").
 
     python examples/furrows_3d.py                               # furrows 0.1 m deep

@@ -1,4 +1,4 @@
-"""The MPC keeping a line along a side slope with the 3D vehicle (issue 22 item 3; docs/vehicle3d.md,
+"""The MPC keeping a line along a side slope with the 3D vehicle (docs/vehicle3d.md,
 "The MPC on the 3D vehicle").
 
     python examples/mpc_side_slope_3d.py                                   # 8 deg, start on the line

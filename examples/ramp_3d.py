@@ -1,5 +1,5 @@
-"""A climb and a descent of a headland ramp with the 3D vehicle (``model.vehicle = "3d"``, issue 22
-item 3; docs/vehicle3d.md "Studies: a ramp").
+"""A climb and a descent of a headland ramp with the 3D vehicle (``model.vehicle = "3d"``;
+docs/vehicle3d.md "Studies: a ramp").
 
     python examples/ramp_3d.py                                  # 10 deg, 8 s each
     python examples/ramp_3d.py --slope-deg 15 --plot /tmp/ramp_3d.png

@@ -1,5 +1,5 @@
 """A second pass riding in the ruts of the first with the 3D vehicle on the grid terrain (``multipass``
-with ``model.vehicle = "3d"``, the terrain engine; issue 22 item 3, docs/vehicle3d.md "Studies: the
+with ``model.vehicle = "3d"``, the terrain engine; docs/vehicle3d.md "Studies: the
 second pass").
 
     python examples/second_pass_3d.py                                 # 30 m x 8 m field, 15 m each pass

@@ -1,4 +1,4 @@
-"""The whole-field traffic study's benchmark (issue 12's target: 20 passes over the 100 m x 100 m
+"""The whole-field traffic study's benchmark (the target: 20 passes over the 100 m x 100 m
 field in at most 60 s of wall time once compiled): the built-in ``field_traffic`` study, each
 pattern timed by its parts.
 

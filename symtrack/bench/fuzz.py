@@ -110,7 +110,7 @@ REFERENCE = {"integrator": "cvodes", "reltol": 1e-8, "abstol": 1e-10, "compiled"
 # a relative difference of two tiny numbers.
 FIGURES = {"distance_m": 1e-3, "lateral_deviation_signed_m": 1e-3, "yaw_final_deg": 0.01, "sinkage_sprocket_mm": 0.01,
            "sinkage_idler_mm": 0.01, "speed_final_m_s": 1e-3}
-# The fixed step against the reference: issue 37's target for the drive-and-coast case (every summary
+# The fixed step against the reference: the target for the drive-and-coast case (every summary
 # figure within 2 % of CVODES). The error control's tolerance (1e-3 per step) leaves a run's figures
 # within some 1e-4 where it holds; 2 % is what the user is promised.
 ACCURACY_RTOL = 0.02

@@ -1,5 +1,5 @@
 """Rows of ``symtrack bench``: the cost of the lagged shear law against the creep law on the
-million-cell validation (issue 21's target: ``validation_grid`` with ``model.lateral_law = "shear"``
+million-cell validation (the target: ``validation_grid`` with ``model.lateral_law = "shear"``
 at the terrain engine's 10 ms macro step costs at most 1.25 x the same run with the creep law and
 stays >= 100 x real time on one core; docs/turning.md section 8).
 
@@ -25,8 +25,8 @@ from ..simulation.scenario import load_scenario
 __all__ = ["LAWS", "TARGET_RATIO", "TARGET_REAL_TIME_FACTOR", "bench_rows", "density_rows", "density_runs", "law_runs"]
 
 LAWS = ("creep", "shear")
-TARGET_RATIO = 1.25  # issue 21: the shear law's run at most 1.25 x the creep law's
-TARGET_REAL_TIME_FACTOR = 100.0  # issue 21: >= 100 x real time on one core
+TARGET_RATIO = 1.25  # the shear law's run at most 1.25 x the creep law's
+TARGET_REAL_TIME_FACTOR = 100.0  # >= 100 x real time on one core
 
 FIGURES = ("yaw_final_deg", "lateral_deviation_m", "sinkage_sprocket_mm", "sinkage_idler_mm",
            "shear_driven_max_m", "shear_idle_min_m")

@@ -1,5 +1,5 @@
 """Bench rows of the MPC closed loop on the grid plant: the terrain engine (``grid_fast``, the
-default since issue 9) against IDAS (the reference, the default before) and the compiled grid
+default) against IDAS (the reference, the default before) and the compiled grid
 Rosenbrock, the same scenario in one process (docs/control.md, "On the grid plant").
 
     python -m symtrack.bench.mpc_grid [--scenario field_pattern] [--integrators grid_fast idas rosenbrock]

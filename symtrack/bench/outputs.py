@@ -1,4 +1,4 @@
-"""What a run's outputs cost (issue 26, item 2): ``symtrack simulate`` end to end against its
+"""What a run's outputs cost: ``symtrack simulate`` end to end against its
 simulation, with the default figures and with ``run.all_figures = true``.
 
 Each case runs twice in fresh processes: the real command (``python -m symtrack simulate NAME

@@ -1,5 +1,5 @@
 """``symtrack bench --sweep``: the overhead of a sweep on Dask against the same runs one after
-another in one process (issue 12's target: 8 validation runs on 2 workers in at most 0.65 x the
+another in one process (the target: 8 validation runs on 2 workers in at most 0.65 x the
 serial time, the model build counted).
 
 Both sides do the same work per run: load the scenario, build the model (compiled libraries from

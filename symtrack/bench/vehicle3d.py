@@ -1,6 +1,6 @@
 """Rows of ``symtrack bench``: the 3D vehicle's cost against the planar one on the homogeneous
-validation with the compiled Rosenbrock (issue 22's target: at most 2 x; docs/vehicle3d.md), and on
-``validation_grid`` through the terrain engine (the million-cell field; issue 22's target: at most
+validation with the compiled Rosenbrock (the target: at most 2 x; docs/vehicle3d.md), and on
+``validation_grid`` through the terrain engine (the million-cell field; the target: at most
 1.5 x the planar run and at least 100 x real time, :data:`GRID_TARGET_RATIO`, :data:`GRID_TARGET_RTF`).
 
 Both plants are built once (compiled, cached), then the runs alternate (planar, 3d, planar, ...) so
@@ -20,8 +20,8 @@ __all__ = ["GRID_TARGET_RATIO", "GRID_TARGET_RTF", "TARGET_RATIO", "VEHICLES", "
            "vehicle_runs"]
 
 VEHICLES = ("planar", "3d")
-TARGET_RATIO = 2.0  # issue 22: the homogeneous 3D validation at most 2 x the planar one (compiled Rosenbrock)
-GRID_TARGET_RATIO = 1.5  # issue 22: validation_grid with the 3D vehicle at most 1.5 x the planar run ...
+TARGET_RATIO = 2.0  # the homogeneous 3D validation at most 2 x the planar one (compiled Rosenbrock)
+GRID_TARGET_RATIO = 1.5  # validation_grid with the 3D vehicle at most 1.5 x the planar run ...
 GRID_TARGET_RTF = 100.0  # ... and at least 100 x real time (CPU, one core)
 FIGURES = ("yaw_final_deg", "lateral_deviation_m", "sinkage_sprocket_mm", "sinkage_idler_mm")
 

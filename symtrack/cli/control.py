@@ -131,7 +131,7 @@ def _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out) -> int:
         try:
             with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error
                 res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
-        except KeyboardInterrupt:  # issue 13: Ctrl-C stops at once, nothing written
+        except KeyboardInterrupt:  # Ctrl-C stops at once, nothing written
             import sys
 
             print("\nsymtrack mpc: interrupted; nothing written", file=sys.stderr)

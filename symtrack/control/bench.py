@@ -41,10 +41,10 @@ __all__ = ["FAST_CONFIG", "LinearMPC", "bench_rows", "prediction_effect", "table
 # converged on every solve of the built-in scenarios (with the plain quadratic penalty it failed
 # in the 1 m approach of straight_offset, where IPOPT does not). Measured in docs/control.md.
 FAST_CONFIG = {"solver": "fatrop", "jit": True, "lateral_huber_m": 0.2}
-# issue 13: the real-time iteration (symtrack.control.rti) with its functions compiled (cached);
+# the real-time iteration (symtrack.control.rti) with its functions compiled (cached);
 # the pseudo-Huber lateral penalty and a x5 terminal lateral weight keep its Gauss-Newton steps
 # contracting in the 1 m approach on the creep law (with x50 they diverge there: docs/control.md).
-# qrqp named: DAQP is the RTI's default QP solver since issue 21 (the row nmpc_rti_daqp adds it).
+# qrqp named: DAQP is the RTI's default QP solver (the row nmpc_rti_daqp adds it).
 RTI_CONFIG = {"solver": "rti", "jit": True, "lateral_huber_m": 0.2, "terminal_lateral_factor": 5.0,
               "rti_qp_solver": "qrqp"}
 
@@ -207,7 +207,7 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
             cfg = {"solver": "ipopt"} if name == "nmpc_ipopt_plain" else (dict(RTI_CONFIG) if rti else fast)
             if name == "nmpc_rti_daqp":  # the same RTI with DAQP (dual active set) on the dense QP
                 cfg["rti_qp_solver"] = "daqp"
-            if name == "nmpc_rti_default":  # the RTI's defaults (jit, DAQP, the scenario's cost: issue 21)
+            if name == "nmpc_rti_default":  # the RTI's defaults (jit, DAQP, the scenario's cost)
                 cfg = {"solver": "rti"}
             if rti and jit_dir is not None:
                 cfg["jit_dir"] = jit_dir
@@ -312,7 +312,7 @@ def bench_rows(quick: bool) -> list[dict]:
     ``headland_uturn`` (plain IPOPT without compilation, the fast configuration, the linear MPC,
     the RTI), measured in the bench's process. ``quick`` stops each closed loop after 60 samples."""
     rows = []
-    for scen in ("straight_offset", "headland_uturn"):  # issue 13: both scenarios of the RTI targets
+    for scen in ("straight_offset", "headland_uturn"):  # both scenarios of the RTI targets
         for r in timing_comparison(scen, max_steps=60 if quick else None):
             note = (f"solve median {r['solve_time_median_ms']:.1f} / p95 {r['solve_time_p95_ms']:.1f} / "
                     f"max {r['solve_time_max_ms']:.1f} ms; failed {r['failed_solves']}/{r['solves']} "

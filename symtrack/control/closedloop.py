@@ -405,7 +405,7 @@ def summarise(res: ClosedLoopResult, wall_s: float, mpc: PathTrackingMPC) -> dic
         if len(res.U) > 1 else 0.0,
         "machine_note": "solve times measured on this machine in this run (wall clock of the solver call)",
     }
-    # issue 13 (real-time honesty): overruns of the sample time, RTI preparation times
+    # overruns of the sample time, RTI preparation times
     out.update(realtime_figures(mpc.stats, sc.mpc.sample_time_s))
     return out
 

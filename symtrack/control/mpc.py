@@ -109,7 +109,7 @@ _SCALES = (
     # (heave, pitch, roll near 7 Hz, lightly damped) then puts the measurement itself far outside the
     # RTI's defect bound: headland_uturn on the 3D vehicle, RTI, with z 1, angles 0.1, rates 0.01: 37
     # failed solves before the run was stopped, against 7 over the whole path with all at 1
-    # (measured, issue 22; docs/vehicle3d.md). IPOPT: 5 and 6 failed in the first 30 samples of
+    # (measured; docs/vehicle3d.md). IPOPT: 5 and 6 failed in the first 30 samples of
     # straight_offset (no difference).
 )
 TORQUE_SCALE_N_M = 1000.0
@@ -145,7 +145,7 @@ class MPCSettings:
     # pitch and roll are algebraic variables of the prediction's DAE, fixed by its vertical force and pitch
     # and roll moment balances at zero hull acceleration, its rates those of the ground pose under the
     # moving hull; the measured hull states are not read), "dynamic" (the hull's six states predicted, as
-    # the plant's). "auto": quasi_static on the 3D vehicle (measured, issue 22: `symtrack mpc
+    # the plant's). "auto": quasi_static on the 3D vehicle (measured: `symtrack mpc
     # straight_offset --set model.vehicle=3d`, IPOPT, 0 failed of 299 against 96 failed before the dynamic
     # hull's run was stopped at 7 min; RTI 0 against 1; headland_uturn RTI 0 and 0). The planar vehicle
     # has no hull and takes "auto" only.

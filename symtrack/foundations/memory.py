@@ -1,4 +1,4 @@
-"""How much memory the machine can give, and a refusal before allocating more (issue 26, item 5).
+"""How much memory the machine can give, and a refusal before allocating more.
 
 ``available_bytes()`` is the kernel's estimate of the memory a new allocation can take without
 swapping (``MemAvailable`` of /proc/meminfo on Linux; elsewhere the free physical pages of

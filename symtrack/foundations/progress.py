@@ -15,7 +15,7 @@ __all__ = ["LOG_EVERY_S", "SLOW_STEP_S", "Progress", "timed_step"]
 log = logging.getLogger("symtrack.progress")
 
 LOG_EVERY_S = 10.0  # a progress line in logs (stderr not a terminal) at most this often
-SLOW_STEP_S = 2.0  # timed_step says what a step does once it has taken this long (issue 26: no silent wait over 2 s)
+SLOW_STEP_S = 2.0  # timed_step says what a step does once it has taken this long (no silent wait over 2 s)
 
 
 class Progress:

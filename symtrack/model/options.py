@@ -134,7 +134,7 @@ class ModelOptions:
     soil_law: the terrain cells' soil law, a name of the soil-law registry
         (:mod:`symtrack.soil.law`); "bekker_wong" (default): Bekker loading, Wong
         unloading/reloading line and the cycle law of docs/model.md, "Pressure-sinkage".
-    vehicle: the vehicle model (issue 22). "planar" (default): the planar vehicle of
+    vehicle: the vehicle model. "planar" (default): the planar vehicle of
         docs/model.md (x, y, yaw; pitch from the quasi-static load transfer). "3d": the rigid hull that
         heaves, pitches and rolls on the ground's shape (:mod:`symtrack.vehicles.vehicle3d`,
         docs/vehicle3d.md), on the homogeneous terrain or on the grid through the terrain engine.
@@ -148,7 +148,7 @@ class ModelOptions:
     quadrature_call: (a build flag, not a scenario key: :data:`BUILD_FLAGS`) a track quadrature of
         more than ``symtrack.vehicles.planar.INLINE_QUADRATURE_MAX_POINTS`` points is summed by one
         mapped CasADi Function called from the SX graph as a single node instead of being expanded,
-        so that the generated C does not grow with the points (issue 26 item 3). Set only by the
+        so that the generated C does not grow with the points. Set only by the
         builders of the fixed-step integrators' C (the compiled Rosenbrock: ``symtrack.native.cache.
         library(model, quadrature_call=True)``; the grid Rosenbrock) on their own copy of the model;
         CVODES, IDAS (interpreted or ``run.compiled``), trim and the MPC keep the expanded form: CasADi's

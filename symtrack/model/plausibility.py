@@ -40,7 +40,7 @@ log = logging.getLogger("symtrack.plausibility")
 # The mean ground pressure m g / (2 b l) of a crawler. Typical published values: the reference
 # crawler 25 kPa, rubber-tracked farm tractors and crawler dozers some tens of kPa to about 150 kPa,
 # low-ground-pressure (swamp) machines down to about 15-20 kPa. 5 and 300 kPa lie well outside what
-# any agricultural or construction crawler has (issue 37's bounds): below 5 kPa is a mass typed in
+# any agricultural or construction crawler has: below 5 kPa is a mass typed in
 # tonnes (7 kg on the reference tracks: 0.03 kPa), above 300 kPa a contact typed too small.
 GROUND_PRESSURE_RANGE_KPA = (5.0, 300.0)
 # track_gauge_m is the distance between the track centre-lines: the tracks are apart only while

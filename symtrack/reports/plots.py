@@ -33,7 +33,7 @@ def fixed_layout(fig, left_in: float = 1.0, right_in: float = 0.25, bottom_in: f
     """Lay out a figure of one column of axes with fixed margins in inches (left for the y label and
     tick labels of up to 8 characters, bottom for the x label, top for a title, ``hspace_in``
     between the rows), instead of tight_layout, which measures every tick label once more before the
-    drawing does: a third of the figure's time (issue 26 item 2, docs/terrain.md "What the outputs
+    drawing does: a third of the figure's time (docs/terrain.md "What the outputs
     cost"). tests/test_outputs.py draws every figure laid out so with long tick labels and checks
     that no text leaves the canvas or runs into another axes."""
     w, h = fig.get_size_inches()

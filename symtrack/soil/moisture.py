@@ -1,5 +1,5 @@
 """The soil's moisture on the day: its compression parameters and strength from pedotransfer
-functions of water content and texture (issue 24 item 2; docs/subsoil.md, "Moisture").
+functions of water content and texture (docs/subsoil.md, "Moisture").
 
 Two pedotransfer functions (PTFs), both as the soilphysics R package (de Lima, da Silva & da Silva;
 github.com/arsilva87/soilphysics, ``R/PredComp.R``) codes them; the papers themselves were not read:

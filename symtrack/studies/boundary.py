@@ -1,4 +1,4 @@
-"""Polygon field boundaries (issue 23; docs/studies.md, "Field operations: a polygon field").
+"""Polygon field boundaries (docs/studies.md, "Field operations: a polygon field").
 
 ``operation.boundary_file`` names the field's boundary in the field's own metric coordinates (m,
 the grid's: x east, y north, the grid [0, size_x] x [0, size_y] of ``operation.size_m``), in one of

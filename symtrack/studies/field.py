@@ -1,4 +1,4 @@
-"""The whole-field traffic study (issue 12 point 5; docs/studies.md, "Whole-field traffic study").
+"""The whole-field traffic study (docs/studies.md, "Whole-field traffic study").
 
 A field of the persistent grid terrain worked in parallel straight passes, in two patterns:
 

@@ -1,4 +1,4 @@
-"""The traffic-system comparison as a resumable sweep on Dask (issue 23; docs/studies.md, "Traffic
+"""The traffic-system comparison as a resumable sweep on Dask (docs/studies.md, "Traffic
 systems on Dask").
 
     from symtrack.studies.traffic import traffic_sweep

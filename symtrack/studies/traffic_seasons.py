@@ -1,5 +1,5 @@
-"""Seasons of wheeled machines as footprints: the field's trafficked share, geometrically (issue 23,
-"Published figures"; docs/studies.md, "Kroulik's three seasons as wheel footprints").
+"""Seasons of wheeled machines as footprints: the field's trafficked share, geometrically
+(docs/studies.md, "Kroulik's three seasons as wheel footprints").
 
 Kroulik, Kumhala, Hula, Honzik (Soil & Tillage Research 2009)
 logged every machine of a season by DGPS (every 2 s), marked each machine's tyre widths and wheel

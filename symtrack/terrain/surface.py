@@ -1,6 +1,6 @@
 """The ground's shape: the ``[terrain.surface]`` table and :class:`Surface`, the field's initial
 elevation z0(x, y) numerically (numpy, for the grid's cells) and symbolically (CasADi, for the
-homogeneous terrain and a 3D vehicle's contact: z0 and its gradient at a point). Issue 22, item 1.
+homogeneous terrain and a 3D vehicle's contact: z0 and its gradient at a point).
 
 Schema (docs/terrain.md, "The ground's shape"; every key optional, unknown keys are errors)::
 
@@ -53,7 +53,7 @@ Limits (checked before anything is built, each naming the key, the value and the
   only while the furrows are shallower than its ground clearance. The vehicle parameters have no
   clearance yet (symtrack/model/parameters.py); 0.40 m is ASSUMED for the reference crawler (an
   order of magnitude for a medium agricultural crawler, not taken from a data sheet). The 3D
-  vehicle of issue 22 may make it a vehicle parameter: then this limit takes it.
+  vehicle may make it a vehicle parameter: then this limit takes it.
 - a furrow spacing of at least 4 cells (``terrain.cell_m``): the cells sample a furrow period
   with four points at least (checked where the field's cell size is known: :meth:`Surface.check_field`).
 

@@ -326,7 +326,7 @@ def _creep_integrand(s, q: dict, opts):
 # (ModelOptions.quadrature_call, set by the fixed-step integrators' builders of C): the
 # generated code then stays the same size whatever the quadrature, so a refined variant (a 64 x 5
 # reference rule: 320 points) compiles in seconds, where its expanded Rosenbrock step of ~300,000
-# instructions took minutes of gcc (issue 26 item 3; docs/codegen.md). Up to this many the sum is
+# instructions took minutes of gcc (docs/codegen.md). Up to this many the sum is
 # expanded (the defaults: 24 points of the shear laws, 12 of the creep law; expanded code runs
 # fastest, and CasADi's virtual machine, which CVODES and IDAS use, evaluates a call node slowly).
 # ASSUMED: 48 = twice the default shear rule, a bound with room above the defaults, not a measured optimum.

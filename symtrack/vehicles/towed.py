@@ -1,6 +1,6 @@
 """A towed load following the crawler: a trailer or grain cart on one axle of two tyres, hitched
 behind the crawler, whose wheels load the cells along the crawler's driven path in the same run
-(issue 24 item 3; docs/subsoil.md, "A towed load").
+(docs/subsoil.md, "A towed load").
 
 The scenario's ``[terrain.towed]`` (every key required but ``element_m``)::
 

@@ -1,5 +1,5 @@
-"""A tyre's contact area, its stress distribution and the stress it gives at depth (issue 24 item 3;
-docs/subsoil.md, "Wheeled machines"). numpy only; not in the terrain engine.
+"""A tyre's contact area, its stress distribution and the stress it gives at depth
+(docs/subsoil.md, "Wheeled machines"). numpy only; not in the terrain engine.
 
 Contact model: Keller (2005), Biosyst. Eng. 92, 85-96, as the soilphysics R package codes it
 (``stressTraffic``, github.com/arsilva87/soilphysics; the paper was not read). For a tyre of width

@@ -1,4 +1,4 @@
-"""The 3D tracked vehicle (issue 22 item 2): a rigid hull that heaves, pitches and rolls on the
+"""The 3D tracked vehicle: a rigid hull that heaves, pitches and rolls on the
 ground's shape, written once as CasADi SX expressions (``[model] vehicle = "3d"``).
 
 States: the planar vehicle's (:data:`~symtrack.vehicles.planar.VEHICLE_STATES`, and the lateral shear
@@ -43,7 +43,7 @@ force and the drawbar pull; W = m g):
     I_pitch d2(pitch)/dt2 = -M_y' (+ the running gear's term below),   I_roll d2(roll)/dt2 = M_x',
     I_z dr_z/dt = M_z
 
-Running gear (issue 22, the braked chatter): the sprockets, idlers, rollers and tracks spin about the
+Running gear (the braked chatter): the sprockets, idlers, rollers and tracks spin about the
 hull's y axis with the angular momentum kappa J_eq omega_k (:func:`running_gear_momentum_ratio`), so the
 hull's pitch and the sprockets share an inertia coupling (the equations of a gyrostat: Euler's second law
 for the hull with internal rotors; the kinetic energy 1/2 I q^2 + 1/2 J sum omega^2 - kappa J q sum omega,
@@ -119,7 +119,7 @@ HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad
 # I_roll / I_yaw = (W^2 + H^2) / (L^2 + W^2) = 0.32.
 PITCH_INERTIA_PER_YAW = 1.0
 ROLL_INERTIA_PER_YAW = 0.32
-# The compaction resistance's depth is held at least this [m] (issue 22, the MPC on the 3D vehicle):
+# The compaction resistance's depth is held at least this [m] (the MPC on the 3D vehicle):
 # Bekker's work b k z^(n+1) / (n+1) has d/dn = W ln z and d2/dz2 = b k n z^(n-1), both NaN or infinite
 # at z = 0, where a track whose every segment has lifted off (an NLP iterate) puts it; the NaN went
 # into IPOPT's Hessian and the parameter gradient ("NaN detected for output hess_gamma_x_x",

@@ -1,4 +1,4 @@
-"""Field operations driven end to end (issue 23; docs/studies.md, "Field operations").
+"""Field operations driven end to end (docs/studies.md, "Field operations").
 
 A field operation works a rectangular field [0, size_x] x [0, size_y] (or a polygon inside that
 grid, ``boundary_file``: :func:`_plan_polygon`, :mod:`symtrack.studies.boundary`) with an implement of
