@@ -29,6 +29,7 @@ from .reports.run_files import (
     simulation_files,
     terrain_run,
     trajectory_columns,
+    validation_rows,
     validation_table,
     write_folder,
 )
@@ -232,14 +233,11 @@ class Result:
                  ("passes", len(self.runs)), ("terrain", "grid" if self.terrain is not None else "homogeneous")]
         facts += [("vehicle", sc.vehicle_preset + (" (with overrides)" if sc.vehicle else "")),
                   ("soil", sc.soil_preset + (" (with overrides)" if sc.soil else ""))]
-        rows = None
-        table = self.validation_table
-        if table:  # Markdown rows "| quantity | reported | simulated | within |" -> cells
-            lines = [ln for ln in table.splitlines() if ln.startswith("|") and not set(ln) <= set("|-: ")]
-            rows = [[c.strip() for c in ln.strip("|").split("|")] for ln in lines[1:]]
-            header = [c.strip() for c in lines[0].strip("|").split("|")] if lines else None
+        rows = validation_rows(sc, self.summary)
+        if rows is not None:
+            rows = [(k, reported, value, "yes" if ok else "NO") for k, reported, value, ok in rows]
         return notebook_html(repr(self).strip("<>"), self.summary, facts, rows=rows,
-                             row_header=header if rows else None)
+                             row_header=["quantity", "reported (Ferretti & Girelli 1999)", "simulated", "within"])
 
     def to_pandas(self, pass_no: int | None = None):
         """The trajectory (the columns of trajectory.csv) of the last pass, or of pass ``pass_no``,

@@ -139,16 +139,31 @@ def is_validation(scenario) -> bool:
     return scenario.run.stop_distance_event == "idle" and "validation" in scenario.name
 
 
+def validation_differences(scenario, summary: dict) -> list[str]:
+    """What sets this run apart from the validation case as published: its settings
+    (:func:`symtrack.reports.validation.differences`) and a run that ended before its distance stop."""
+    differ = validation.differences(scenario)
+    if summary.get("distance_stop_reached") is False:  # stopped by run.duration_s (or an error) first
+        differ.append(f"the run ended by {summary.get('stopped_by', 'its duration')} before its distance "
+                      f"stop (published: {scenario.run.stop_after_distance_m} m after the idle event)")
+    return differ
+
+
 def validation_table(scenario, summary: dict) -> str | None:
-    """The reported-vs-simulated table (Markdown) of a validation scenario, else None. A run whose
-    settings differ from the case as published (:func:`symtrack.reports.validation.differences`) gets
-    the table with those settings named first, and no grade."""
+    """The reported-vs-simulated table (Markdown) of a validation scenario, else None. A run that
+    differs from the case as published (:func:`validation_differences`) gets the table with those
+    differences named first, and no grade."""
     if is_validation(scenario):
-        differ = validation.differences(scenario)
-        if summary.get("distance_stop_reached") is False:  # stopped by run.duration_s (or an error) first
-            differ.append(f"the run ended by {summary.get('stopped_by', 'its duration')} before its distance "
-                          f"stop (published: {scenario.run.stop_after_distance_m} m after the idle event)")
-        return validation.table_markdown(summary, differ)
+        return validation.table_markdown(summary, validation_differences(scenario, summary))
+    return None
+
+
+def validation_rows(scenario, summary: dict) -> list | None:
+    """The graded (quantity, reported, simulated, within) rows of a run of the validation case as
+    published, else None (another scenario, or a run that differs from the case: it is compared, not
+    graded; :func:`validation_table`)."""
+    if is_validation(scenario) and not validation_differences(scenario, summary):
+        return validation.check(summary)
     return None
 
 
@@ -200,7 +215,7 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
                    "Set run.all_figures = true (--set run.all_figures=true) to write them too.")
     top["report.html"] = report_html(
         f"symtrack: {scenario.name}", summary, shown, to_toml(scenario.to_dict()),
-        validation.check(summary) if table is not None and not validation.differences(scenario) else None,
+        validation_rows(scenario, summary),
         summary.get("passes"),
         scenario.description, omitted=omitted).encode()
     if run is not None:
