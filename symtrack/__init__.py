@@ -24,38 +24,19 @@ The names are imported on first use, so that ``symtrack --help`` stays fast.
 
 from __future__ import annotations
 
-import importlib
-
+from .foundations.lazy import lazy_getattr
 from .foundations.version import __version__
 
 __all__ = ["Built", "Result", "Scenario", "SystemModel", "Terrain", "__version__", "build", "cache_info",
            "clear_caches", "control", "export_terrain", "load_scenario", "run", "simulate"]
 
-_LAZY = {
-    "Result": ("symtrack.api", "Result"),
-    "build": ("symtrack.api", "build"),
-    "Built": ("symtrack.api", "Built"),
-    "simulate": ("symtrack.api", "simulate"),
-    "run": ("symtrack.studies.runfile", "run"),
-    "load_scenario": ("symtrack.simulation.scenario", "load_scenario"),
-    "Scenario": ("symtrack.simulation.scenario", "Scenario"),
-    "Terrain": ("symtrack.terrain.storage", "Terrain"),
-    "export_terrain": ("symtrack.terrain.gis", "export_terrain"),
-    "SystemModel": ("symtrack.model.system", "SystemModel"),
-    "clear_caches": ("symtrack.foundations.caches", "clear_caches"),
-    "cache_info": ("symtrack.foundations.caches", "cache_info"),
-}
-
-
-def __getattr__(name: str):
-    if name in _LAZY:
-        module, attr = _LAZY[name]
-        value = getattr(importlib.import_module(module), attr)
-        globals()[name] = value
-        return value
-    if name == "control":
-        return importlib.import_module("symtrack.control")
-    raise AttributeError(f"module 'symtrack' has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, {
+    "Result": "symtrack.api", "build": "symtrack.api", "Built": "symtrack.api", "simulate": "symtrack.api",
+    "run": "symtrack.studies.runfile", "load_scenario": "symtrack.simulation.scenario",
+    "Scenario": "symtrack.simulation.scenario", "Terrain": "symtrack.terrain.storage",
+    "export_terrain": "symtrack.terrain.gis", "SystemModel": "symtrack.model.system",
+    "clear_caches": "symtrack.foundations.caches", "cache_info": "symtrack.foundations.caches", "control": "",
+}, globals())
 
 
 def __dir__():

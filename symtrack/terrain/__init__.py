@@ -20,18 +20,11 @@ cross it are :mod:`symtrack.vehicles`'.
 
 from __future__ import annotations
 
-import importlib
+from ..foundations.lazy import lazy_getattr
 
 __all__ = ["Grid", "Surface", "Terrain", "TerrainSettings"]
 
-_LAZY = {"Grid": "storage", "Surface": "surface", "Terrain": "storage", "TerrainSettings": "settings"}
-
-
-def __getattr__(name: str):
-    # imported on first use, so that a module of a room below (a vehicle, a soil law) may import one
-    # module of this package without running the whole of it
-    if name in _LAZY:
-        value = getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# imported on first use, so that a module of a room below (a vehicle, a soil law) may import one module of
+# this package without running the whole of it
+__getattr__ = lazy_getattr(__name__, {"Grid": "storage", "Surface": "surface", "Terrain": "storage",
+                                      "TerrainSettings": "settings"}, globals())
