@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError, SymtrackError
-from ..foundations.files import atomic_write_bytes, atomic_write_text, check_output_folder, npz_bytes
+from ..foundations.files import atomic_write_text, check_output_folder, npz_bytes
 from ..foundations.progress import Progress
+from ..reports.run_files import output_lock, write_folder
 from ..studies.operations import OperationSettings, field_mask, headland_mask, plan_operation
 from ..studies.traffic_seasons import TRAMLINE_SEED, auto_headland_passes
 from .fast import PLAN_DS_M, FastOp, density_change, risk_classes, run_season_fast
@@ -281,13 +282,9 @@ def _done(out: Path, f, year: int) -> bool:
 
 
 def _commit(out: Path, f, year: int, res: dict) -> None:
-    """A finished field-season's files, maps.npz first, summary.json last (the commit: module doc)."""
-    d = _season_dir(out, f, year)
-    files = dict(res["files"])
-    summary = files.pop("summary.json")
-    for name, data in files.items():
-        atomic_write_bytes(d / name, data)
-    atomic_write_bytes(d / "summary.json", summary)
+    """A finished field-season's files committed once (:func:`symtrack.reports.run_files.write_folder`: a kill
+    leaves the field-season as it was or whole; summary.json, written last, marks it finished)."""
+    write_folder(_season_dir(out, f, year), res["files"])  # staged, then in place with summary.json last
 
 
 def _state_on_disk(out: Path, f, year: int) -> np.ndarray:
@@ -345,27 +342,30 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
     say("region %s: %d fields, %.1f ha, %d seasons: %d field-seasons to run, %d finished before; %s", spec.name,
         len(spec.fields), spec.area_ha, len(spec.years), len(todo), skipped,
         f"scheduler {scheduler}" if scheduler else f"{workers} local workers")
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "region.json", json.dumps(_describe(spec), indent=2, default=str) + "\n")
-    if todo:
-        t1 = time.perf_counter()
-        with dask_client("region", workers, scheduler) as client:
-            t_tables = time.perf_counter()
-            ctx = build_context(spec, client)
-            say("the tables (%d stress profiles, %d soils by moisture class) in %.1f s", len(ctx.profiles),
-                len(ctx.class_soils), time.perf_counter() - t_tables)
-            t2 = time.perf_counter()
-            _run_all(out, spec, ctx, todo, client, progress)
-            t3 = time.perf_counter()
-        phases.update(cluster_s=t_tables - t1, tables_s=t2 - t_tables, tasks_s=t3 - t2)
-    rows = [json.loads((_season_dir(out, f, y) / "summary.json").read_text()) for f in spec.fields for y in spec.years]
-    summary = {}
-    if outputs:
-        from .outputs import write_outputs
+    # the folder's lock from before the first write: a second study into it is refused at once (the holder's pid)
+    with output_lock(out):
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / "region.json", json.dumps(_describe(spec), indent=2, default=str) + "\n")
+        if todo:
+            t1 = time.perf_counter()
+            with dask_client("region", workers, scheduler) as client:
+                t_tables = time.perf_counter()
+                ctx = build_context(spec, client)
+                say("the tables (%d stress profiles, %d soils by moisture class) in %.1f s", len(ctx.profiles),
+                    len(ctx.class_soils), time.perf_counter() - t_tables)
+                t2 = time.perf_counter()
+                _run_all(out, spec, ctx, todo, client, progress)
+                t3 = time.perf_counter()
+            phases.update(cluster_s=t_tables - t1, tables_s=t2 - t_tables, tasks_s=t3 - t2)
+        rows = [json.loads((_season_dir(out, f, y) / "summary.json").read_text())
+                for f in spec.fields for y in spec.years]
+        summary = {}
+        if outputs:
+            from .outputs import write_outputs
 
-        t4 = time.perf_counter()
-        summary = write_outputs(spec, out, rows)
-        phases["outputs_s"] = time.perf_counter() - t4
+            t4 = time.perf_counter()
+            summary = write_outputs(spec, out, rows)
+            phases["outputs_s"] = time.perf_counter() - t4
     return RegionResult(out, rows, len(todo), skipped, time.perf_counter() - t0, summary, phases)
 
 
