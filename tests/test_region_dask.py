@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -106,6 +107,35 @@ def test_a_rerun_skips_the_finished_and_redoes_the_rest_bit_for_bit(reference, t
     assert _figures(copy) == _figures(out)
 
 
+def test_a_field_season_killed_past_its_commit_point_is_completed_not_run_again(reference, tmp_path, monkeypatch):
+    inp, out, _ = reference
+    import shutil
+
+    from symtrack.reports import run_files
+
+    copy = tmp_path / "out"
+    shutil.copytree(out, copy)
+    spec = load_region(inp / "region_demo.toml")
+    season = copy / "fields" / spec.fields[2].field_id / "2021"
+    files = {p.relative_to(season).as_posix(): p.read_bytes() for p in season.rglob("*")
+             if p.is_file() and not p.name.startswith(".symtrack")}
+    shutil.rmtree(season)
+
+    def killed(*a, **k):  # the process stops after the journal (the commit point), before a file is moved in
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_files, "_apply", killed)
+    with pytest.raises(KeyboardInterrupt):
+        run_files.write_folder(season, files)
+    monkeypatch.undo()
+    assert (season / run_files.JOURNAL).is_file() and not (season / "summary.json").exists()
+    res = run_region(spec, copy, workers=1, progress=False)
+    assert res.ran == 0 and res.skipped == 6
+    assert not (season / run_files.JOURNAL).exists() and not list(season.parent.glob(".2021.staging-*"))
+    assert _hashes(copy) == _hashes(out)
+    assert _figures(copy) == _figures(out)
+
+
 def test_another_study_in_the_folder_is_refused(reference, tmp_path):
     inp, out, _ = reference
     text = (inp / "region_demo.toml").read_text().replace("seed = 7", "seed = 8")
@@ -140,11 +170,19 @@ def test_a_killed_client_then_a_rerun_gives_the_uninterrupted_outputs(reference,
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
-    done = len(list((tmp_path / "o" / "fields").rglob("summary.json")))
-    assert 2 <= done < 6
+    # the field-seasons in place (not a staged copy beside one: fields/F/.YEAR.staging-*/summary.json);
+    # one killed past its commit point (its journal written, its files not yet all moved in) is completed
+    # by the rerun, not run again: it counts as finished before
+    done = len(list((tmp_path / "o" / "fields").glob("*/[0-9][0-9][0-9][0-9]/summary.json")))
+    past_commit = len(list((tmp_path / "o" / "fields").glob("*/[0-9][0-9][0-9][0-9]/.symtrack-commit.json")))
+    assert 2 <= done < 6 and past_commit <= 1
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
-    assert f"({6 - done} run, {done} finished before)" in r.stdout
+    m = re.search(r"\((\d+) run, (\d+) finished before\)", r.stdout)
+    assert m, r.stdout
+    ran, before = int(m[1]), int(m[2])
+    assert ran + before == 6 and done <= before <= done + past_commit, (ran, before, done, past_commit)
+    assert before == done or "completing the files of the run that was stopped after its commit point" in r.stderr
     assert _hashes(tmp_path / "o") == _hashes(out)
     assert _figures(tmp_path / "o") == _figures(out)
 

@@ -36,7 +36,7 @@ import numpy as np
 from ..foundations.errors import ScenarioError, SymtrackError
 from ..foundations.files import atomic_write_text, check_output_folder, npz_bytes
 from ..foundations.progress import Progress
-from ..reports.run_files import output_lock, write_folder
+from ..reports.run_files import output_lock, recover, write_folder
 from ..studies.operations import OperationSettings, field_mask, headland_mask, plan_operation
 from ..studies.traffic_seasons import TRAMLINE_SEED, auto_headland_passes
 from .fast import PLAN_DS_M, FastOp, density_change, risk_classes, run_season_fast
@@ -278,7 +278,12 @@ def _season_dir(out: Path, f, year: int) -> Path:
 
 
 def _done(out: Path, f, year: int) -> bool:
-    return (_season_dir(out, f, year) / "summary.json").is_file()
+    """The field-season is committed: its summary.json is in place, or a run killed past its commit point
+    left it (its journal; completed here, not run again)."""
+    d = _season_dir(out, f, year)
+    if d.is_dir():
+        recover(d)
+    return (d / "summary.json").is_file()
 
 
 def _commit(out: Path, f, year: int, res: dict) -> None:
