@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import ctypes
 import math
+import os
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -119,11 +121,14 @@ def clib():
         pytest.skip("no C compiler")
     sources = {n: (NATIVE / n).read_bytes() for n in ("subsoil.h", "subsoil_check.c")}
     flags, target = build.native_cflags(build.find_compiler())  # the engine's flags (integrators/engine/kernel.py)
-    so = build.build(build.BuildSpec(kind="subsoil_check",
-                                     key=build.digest(*(sources[n] for n in sorted(sources)), target),
-                                     output="libsubsoil_check.so", sources=lambda: sources, cflags=flags,
-                                     what="the subsoil check library", suffix=f"-b{cache.BUILD_VERSION}",
-                                     tuned=True))  # its SIMD code is what is checked: never $SYMTRACK_OPT_LEVEL's
+    # its SIMD code is what is checked: the tuned flags themselves, never $SYMTRACK_(TUNED_)OPT_LEVEL's
+    with mock.patch.dict(os.environ):
+        os.environ.pop(build.TUNED_OPT_LEVEL_ENV, None)
+        so = build.build(build.BuildSpec(kind="subsoil_check",
+                                         key=build.digest(*(sources[n] for n in sorted(sources)), target),
+                                         output="libsubsoil_check.so", sources=lambda: sources, cflags=flags,
+                                         what="the subsoil check library", suffix=f"-b{cache.BUILD_VERSION}",
+                                         tuned=True))
     lib = ctypes.CDLL(str(so))
     lib.subsoil_stress_bench.restype = ctypes.c_longlong
     return lib
