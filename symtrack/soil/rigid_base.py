@@ -159,8 +159,8 @@ def point_correction(r_m, z_m, base_depth_m, interface: str = "rough", nu: float
     rho_max = float(np.max(r)) / H if r.size else 0.0
     zeta = z / H
     kappa_end = KAPPA_MAX / (2.0 - zeta)
-    # panels: J0(kappa rho) has period 2 pi / rho; a panel a quarter of that (and <= 1) with 8 nodes
-    width = min(1.0, 0.5 * math.pi / max(rho_max, 1e-9))
+    # panels: J0(kappa rho) has period 2 pi / rho; a panel half of that (and <= 2) with 8 nodes
+    width = min(2.0, math.pi / max(rho_max, 1e-9))
     n = max(8, int(math.ceil(kappa_end / width)))
     g, w = np.polynomial.legendre.leggauss(_N_GAUSS)
     edges = np.linspace(0.0, kappa_end, n + 1)
@@ -182,10 +182,10 @@ def point_correction(r_m, z_m, base_depth_m, interface: str = "rough", nu: float
 
 def correction_profile(z_m, base_depth_m, r_max_m, interface: str = "rough"):
     """(r_m, d_sigma_z, d_p): :func:`point_correction` on a radial grid from 0 to r_max_m with
-    steps of (2 H - z) / 200 (the correction's smallest length scale is 2 H - z >= H; linear
-    interpolation on it is accurate to about 1e-5 of the correction's peak)."""
+    steps of (2 H - z) / 100 (the correction's smallest length scale is 2 H - z >= H; linear
+    interpolation on it is accurate to about 1e-4 of the correction's peak)."""
     z, H = _check_depth(z_m, base_depth_m)
-    step = (2.0 * H - z) / 200.0
+    step = (2.0 * H - z) / 100.0
     n = max(2, int(math.ceil(float(r_max_m) / step)) + 1)
     r = np.arange(n) * step
     dz, dp = point_correction(r, z, H, interface)

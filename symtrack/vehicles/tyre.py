@@ -185,14 +185,14 @@ def contact(tyre: Tyre, wheel_load_kN, inflation_kPa, element_m=0.01) -> Contact
 
 
 def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=256, rigid_base_depth_m=None,
-                              rigid_base_interface="rough"):
+                              rigid_base_interface="rough", mean_stress=True):
     """Vertical and mean normal stress [kPa] (two arrays (n_points, n_depths)) at the points (px, py)
     below a set of surface point forces [kN] at (x_m, y_m): Söhne / Fröhlich summed
     (:func:`~symtrack.soil.subsoil.frohlich_point`); the mean normal stress by the identity
     p(xi) = xi / (3 (xi - 2)) sigma_z(xi - 2) (needs xi >= 3). ``rigid_base_depth_m``: a rigid base
     under the soil layer, ``rigid_base_interface`` "rough" or "smooth"; each force then also carries
     the base's corrections to both stresses (:func:`symtrack.soil.rigid_base.point_correction`;
-    None: a half-space)."""
+    None: a half-space). ``mean_stress=False`` skips the mean normal stress (returned as zeros)."""
     xi = float(xi)
     if not 3.0 <= xi <= 10.0:
         raise ParameterError(f"xi = {xi!r} is outside the allowed range [3, 10] (the mean normal stress needs "
@@ -211,11 +211,13 @@ def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=25
         r = np.hypot(px[a:a + chunk, None] - x[None, :], py[a:a + chunk, None] - y[None, :])
         for k, z in enumerate(d):
             sz[a:a + chunk, k] = frohlich_point(F[None, :], r, z, xi).sum(axis=1)
-            pm[a:a + chunk, k] = xi / (3 * (xi - 2)) * frohlich_point(F[None, :], r, z, xi - 2).sum(axis=1)
+            if mean_stress:
+                pm[a:a + chunk, k] = xi / (3 * (xi - 2)) * frohlich_point(F[None, :], r, z, xi - 2).sum(axis=1)
             if profiles is not None:
                 r_grid, dz, dp = profiles[k]
                 sz[a:a + chunk, k] += (F[None, :] * np.interp(r, r_grid, dz)).sum(axis=1)
-                pm[a:a + chunk, k] += (F[None, :] * np.interp(r, r_grid, dp)).sum(axis=1)
+                if mean_stress:
+                    pm[a:a + chunk, k] += (F[None, :] * np.interp(r, r_grid, dp)).sum(axis=1)
     return sz, pm
 
 
