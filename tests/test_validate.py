@@ -246,7 +246,7 @@ def test_traffic_shares_are_the_seasons_shares_of_each_system(cases):
 
 @pytest.mark.parametrize("xi", [3.0, 5.0, 8.0])
 def test_below_a_uniform_footprint_the_log_slope_steepens_with_depth(xi):
-    """The stress cases' finding (docs/validation.md): below any uniform rectangle on a homogeneous
+    """The track case's finding (its findings field): below any uniform rectangle on a homogeneous
     half-space the stress's log-log slope steepens with depth, so the track's measured profile, whose
     slope flattens (-1.04 then -0.52 over 250-400-650 mm), is out of the model's reach."""
     depths = (0.25, 0.40, 0.65)

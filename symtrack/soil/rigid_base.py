@@ -5,8 +5,8 @@ The elastic layer
 -----------------
 An elastic layer of thickness H on a rigid base, loaded at its free surface, is Burmister's (1945)
 layered problem with a rigid lower layer; Poulos & Davis (1974, chapter 3) tabulate it for uniform
-circles and strips. With Love's stress function phi = J0(k r) F(k z) (Timoshenko & Goodier,
-*Theory of Elasticity*, section 139), z downward, s = k z, h = k H and F a solution of
+circles and strips. With Love's stress function phi = J0(k r) F(k z) (Timoshenko & Goodier 1951,
+*Theory of Elasticity*, axisymmetric problems), z downward, s = k z, h = k H and F a solution of
 (d^2/ds^2 - 1)^2 F = 0, the vertical stress, the trace of the stress (sigma_r + sigma_theta +
 sigma_z), the shear stress and the displacements per wave number k are, up to powers of k,
 
