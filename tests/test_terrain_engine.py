@@ -90,9 +90,12 @@ def _one_cell():
     f = build_engine_functions(sc.model, P, 1)
     m, c = P["cell_areal_mass_kg_per_m2"], P["cell_damping_Pa_s_per_m"]
 
+    row = f.law_row(P)
+
     def law(z, zm, pm):
-        return tuple(float(v) for v in f.cell_law[0](z, [zm, pm, 0, 0, 0]))
-    st = types.SimpleNamespace(areal_mass=m, damping=c, stats={"n_newton": 0, "n_cell_stages": 0})
+        return tuple(float(v) for v in f.law(z, [zm, pm, 0, 0, 0], row))
+    st = types.SimpleNamespace(areal_mass=m, damping=c, stats={"n_newton": 0, "n_cell_stages": 0},
+                               soil_law=f.law_table([P]))
     return PyKernel(f, st), law, m, c
 
 
