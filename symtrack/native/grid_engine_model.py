@@ -373,9 +373,10 @@ def law_variant(variants: tuple, row) -> int:
 
 def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (),
                            surface=None) -> EngineFunctions:
-    """The Functions of the module doc for model options ``opts`` and the soil in ``params``;
-    ``soils``: with a soil map, the parameter dicts (vehicle and soil) of every soil of the field,
-    index 0 the scenario's: a cell law per soil, and the sums carry the soil under each track.
+    """The Functions of the module doc for model options ``opts``; ``params``, the scenario's vehicle
+    and soil, and ``soils``, with a soil map the parameter dicts of every soil of the field (index 0 the
+    scenario's), give no number to the Functions (the soils' values are the engine's law table and pv,
+    at run time): several soils only make the sums carry the soil under each track.
     The vehicle is the one ``opts.vehicle`` names (:func:`symtrack.vehicles.registry.for_options`); with
     a hull of its own (the 3D vehicle, ``opts.vehicle = "3d"``) it is the hull on the ground ``surface``
     (None: flat) over :class:`SegmentSumsTerrain`; its ``a`` is the pose, the least-squares line of each track
