@@ -535,15 +535,14 @@ def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: in
             *TRACK_SOIL_LAYOUT.c_defines("ENG_TRACK_SOIL", "ENG_N_TRACK_SOIL")]
 
 
-def soil_dispatch_c(fns: EngineFunctions, vehicle_sizes: tuple[int, int, int] | None = None,
-                    lanes: bool = True) -> str:
+def soil_dispatch_c(fns: EngineFunctions, vehicle_sizes: tuple[int, int, int] | None = None) -> str:
     """The C of engine_soils.inc for the engine Functions ``fns``: the state sizes of :func:`engine_layout_c`
     (of the vehicle's layout, ``na``, ``n_seg``); ENG_LAW_ROW, the length of a soil's row of the law table
     eng_t.soil_law (:func:`law_row`); ENG_LAW_CALL(row, arg, res), the call of the law Function that a soil of
     law row ``row`` runs (:meth:`EngineFunctions.law_variant`: a test of the row's entries that the law
-    fixes in a specialised copy, the general law otherwise; one Function: a plain call). With ``lanes``
-    also the laws over CELL_LANES lanes (:func:`law_lanes_c`) and the geometry over a window's poses
-    (:func:`geo_lanes_c`); with ``vehicle_sizes`` (engine.state.vehicle_work_sizes) ENG_SZ_ARG and
+    fixes in a specialised copy, the general law otherwise; one Function: a plain call); the laws over
+    CELL_LANES lanes (:func:`law_lanes_c`) and the geometry over a window's poses (:func:`geo_lanes_c`);
+    with ``vehicle_sizes`` (engine.state.vehicle_work_sizes) ENG_SZ_ARG and
     ENG_SZ_RES, the arg and res sizes of the vehicle's Functions (grid_engine.c's defaults, 4 and 3,
     without)."""
     lines = engine_layout_c(fns.layout, fns.na, fns.n_seg)
@@ -554,10 +553,7 @@ def soil_dispatch_c(fns: EngineFunctions, vehicle_sizes: tuple[int, int, int] | 
     if vehicle_sizes is not None:
         lines += [f"#define ENG_SZ_ARG {int(vehicle_sizes[0])} /* the vehicle's Functions' arg, res sizes */",
                   f"#define ENG_SZ_RES {int(vehicle_sizes[1])}"]
-    text = "\n".join(lines) + "\n"
-    if lanes:
-        text += law_lanes_c(fns) + geo_lanes_c(fns.cell_geo)
-    return text
+    return "\n".join(lines) + "\n" + law_lanes_c(fns) + geo_lanes_c(fns.cell_geo)
 
 
 def _c_double(value: float) -> str:
