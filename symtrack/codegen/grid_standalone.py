@@ -3,13 +3,14 @@ engine of ``validation_grid`` on its million-cell field, linking only libc and l
 
 ``python -m codegen`` writes, besides the homogeneous files, into ``generated/``:
 
-- ``engine_gen.inc``: the engine's CasADi Functions for the scenario's model options and soil
+- ``engine_gen.inc``: the engine's CasADi Functions for the scenario's model options
   (:func:`symtrack.native.grid_engine_model.build_engine_functions`, the same code the package's
-  engine library compiles), ``engine_soils.inc`` (the soil dispatch, one soil);
+  engine library compiles; the soil's values are not in it), ``engine_soils.inc`` (the sizes and
+  the law's dispatch by the soil's law row);
 - ``grid_validation.h``: the scenario as C constants: the field (origin, cell, shape), the
   channel modulus M, the engine's constants (padding, release rate, cells' areal mass and
   damping, SDIRK gamma, substeps, power mode), the parameter vector, the geometry vector, the
-  work size, the settling, the torque programme and the run settings.
+  soil's law row (``gv_soil_law``), the work size, the settling, the torque programme and the run settings.
 
 The program includes symtrack/native/grid_engine.c (and subsoil.h and terrain_query.h; the subsoil stress is off:
 it feeds nothing back) and runs what TerrainEngine.begin_pass and the time loop do: the set-down
@@ -76,7 +77,7 @@ def engine_parts(sc, scratch: Path) -> dict:
     cg.generate(str(scratch) + "/")
     gen = (Path(scratch) / "engine_gen.c").read_bytes()
     return {"world": world, "settings": settings, "fns": fns, "state": state, "gen": gen,
-            "soils": soil_dispatch_c(fns.n_soils, fns.layout, cell_law=fns.cell_law, cell_geo=fns.cell_geo).encode()}
+            "soils": soil_dispatch_c(fns).encode()}
 
 
 def engine_constants(tag: str, parts: dict) -> list[str]:
@@ -142,6 +143,7 @@ def render(scratch: Path, overrides=()) -> dict[str, bytes]:
     ]
     text = "\n".join(lines) + "\n"
     text += c_array("gv_pv", state.pv) + c_array("gv_geo", state.geo) + c_array("gv_soil_veh", state.soil_veh)
+    text += c_array("gv_soil_law", state.soil_law.ravel())
     text += c_array("gv_T", T) + c_array("gv_U", U.ravel())
     names = ", ".join(f'"{n}"' for n in fns.output_names)
     text += f"static const char *gv_output_names[{len(fns.output_names)}] = {{{names}}};\n"
