@@ -146,6 +146,11 @@ def test_another_study_in_the_folder_is_refused(reference, tmp_path):
         run_region(load_region(other), out, workers=1, progress=False)
 
 
+def _in_place(out: Path, name: str) -> int:
+    """The field-seasons in place holding ``name`` (not a staged copy beside one: fields/F/.YEAR.staging-*/)."""
+    return len(list((out / "fields").glob(f"*/[0-9][0-9][0-9][0-9]/{name}")))
+
+
 def _wait_for(pred, timeout_s, what):
     t0 = time.perf_counter()
     while not pred():
@@ -162,8 +167,8 @@ def test_a_killed_client_then_a_rerun_gives_the_uninterrupted_outputs(reference,
            "--workers", "1", "--quiet"]
     p = subprocess.Popen(cmd, env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
-        _wait_for(lambda: len(list((tmp_path / "o" / "fields").rglob("summary.json"))) >= 2 or p.poll() is not None,
-                  300, "the first commits")
+        _wait_for(lambda: _in_place(tmp_path / "o", "summary.json") >= 2 or p.poll() is not None, 300,
+                  "the first commits")
         assert p.poll() is None, p.stderr.read().decode()
         os.killpg(p.pid, signal.SIGKILL)  # the client and its local cluster, mid-run
         p.wait(30)
@@ -173,8 +178,8 @@ def test_a_killed_client_then_a_rerun_gives_the_uninterrupted_outputs(reference,
     # the field-seasons in place (not a staged copy beside one: fields/F/.YEAR.staging-*/summary.json);
     # one killed past its commit point (its journal written, its files not yet all moved in) is completed
     # by the rerun, not run again: it counts as finished before
-    done = len(list((tmp_path / "o" / "fields").glob("*/[0-9][0-9][0-9][0-9]/summary.json")))
-    past_commit = len(list((tmp_path / "o" / "fields").glob("*/[0-9][0-9][0-9][0-9]/.symtrack-commit.json")))
+    done = _in_place(tmp_path / "o", "summary.json")
+    past_commit = _in_place(tmp_path / "o", ".symtrack-commit.json")
     assert 2 <= done < 6 and past_commit <= 1
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
