@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError, SymtrackError
-from ..foundations.files import atomic_write_text, check_output_folder, npz_bytes
+from ..foundations.files import check_output_folder, npz_bytes
 from ..foundations.progress import Progress
 from ..reports.run_files import output_lock, recover, write_folder
 from ..studies.operations import OperationSettings, field_mask, headland_mask, plan_operation
@@ -350,7 +350,10 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
     # the folder's lock from before the first write: a second study into it is refused at once (the holder's pid)
     with output_lock(out):
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "region.json", json.dumps(_describe(spec), indent=2, default=str) + "\n")
+        region_json = json.dumps(_describe(spec), indent=2, default=str) + "\n"
+        # the study's identity first (a rerun into the folder resumes only the same study); the outputs at the end
+        # are committed together with it, once (write_outputs)
+        write_folder(out, {"region.json": region_json}, clear=False)
         if todo:
             t1 = time.perf_counter()
             with dask_client("region", workers, scheduler) as client:
@@ -369,7 +372,7 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
             from .outputs import write_outputs
 
             t4 = time.perf_counter()
-            summary = write_outputs(spec, out, rows)
+            summary = write_outputs(spec, out, rows, region_json)
             phases["outputs_s"] = time.perf_counter() - t4
     return RegionResult(out, rows, len(todo), skipped, time.perf_counter() - t0, summary, phases)
 
