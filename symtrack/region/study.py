@@ -243,7 +243,8 @@ def field_summary(spec, f, year, ops, maps, drho, risk, fmask, head) -> dict:
     n_field = int(fmask.sum())
     inner = fmask & ~head
     out = {"schema_version": SCHEMA_VERSION, "kind": "symtrack-region-field-season", "field_id": f.field_id,
-           "soil": f.soil, "system": f.system, "year": year, "area_ha": f.area_m2 / 1e4,
+           "soil": f.soil, "soil_from": f.soil_from, "soil_share": f.soil_share, "system": f.system, "year": year,
+           "area_ha": f.area_m2 / 1e4,
            "lines_direction_deg": math.degrees(f.theta_rad),
            "grid_area_ha": n_field * area / 1e4, "cell_m": spec.cell_m, "rule": spec.rule,
            "days_worked": {o.name: o.day for o in ops},
@@ -303,7 +304,9 @@ def _describe(spec: RegionSpec) -> dict:
             "map_cell_m": spec.map_cell_m, "depths_m": list(spec.depths_m), "rule": spec.rule,
             "workable_suction_kPa": spec.workable_suction_kPa, "moisture_class_pF": spec.moisture_class_pF,
             "fleet": spec.fleet.label, "soils": sorted(spec.soils), "systems": sorted(spec.systems),
-            "fields": [{"field_id": f.field_id, "soil": f.soil, "system": f.system, "area_ha": f.area_m2 / 1e4}
+            "fields": [{"field_id": f.field_id, "soil": f.soil, "system": f.system, "area_ha": f.area_m2 / 1e4,
+                        **({"soil_from": f.soil_from, "soil_share": f.soil_share} if f.soil_from != "fields_file"
+                           else {})}
                        for f in spec.fields],
             "fields_left_out": spec.skipped,
             "document": spec.document}

@@ -10,7 +10,7 @@ __all__ = ["FIXED_COLUMNS", "PER_DEPTH", "TABLE_COLUMNS", "cell_text", "fields_c
 
 FIXED_COLUMNS = ("field_id", "soil", "system", "year", "area_ha", "headland_share", "days_worked",
                  "trafficked_fraction", "headland_trafficked_fraction", "infield_trafficked_fraction",
-                 "repeated_coverage_fraction", "passes_max", "outside_field_trafficked_m2")
+                 "repeated_coverage_fraction", "passes_max", "outside_field_trafficked_m2", "soil_share", "fidelity")
 PER_DEPTH = ("risk_low_fraction_{d}", "risk_medium_fraction_{d}", "risk_high_fraction_{d}",
              "density_change_mean_{d}_Mg_per_m3", "density_change_trafficked_mean_{d}_Mg_per_m3",
              "density_change_max_{d}_Mg_per_m3", "stress_max_{d}_kPa")
