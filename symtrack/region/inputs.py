@@ -30,6 +30,7 @@ from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ParameterError, ScenarioError
 from ..foundations.files import read_text
 from .fleet import BUILTIN_FLEET, Fleet, load_fleet
+from .full import FullFidelity, parse_full_fidelity
 from .soilmap import field_soils, parse_soil_map
 
 __all__ = ["FieldShape", "OpEntry", "RegionSpec", "class_soil", "draw_day", "load_region", "moisture_class",
@@ -86,6 +87,8 @@ class FieldShape:
     # covering most of the field: soil_share of its area; symtrack.region.soilmap)
     soil_from: str = "fields_file"
     soil_share: float = 1.0
+    # the fidelity its seasons run in: "fast" or "full" ([full_fidelity]: symtrack.region.full)
+    fidelity: str = "fast"
 
     def to_world(self, x, y):
         c, s = math.cos(self.theta_rad), math.sin(self.theta_rad)
@@ -135,6 +138,7 @@ class RegionSpec:
     margin_m: float = DEFAULT_MARGIN_M
     unplannable_fields: str = "refuse"
     skipped: list = field(default_factory=list)  # [{"field_id", "reason"}] of the fields left out
+    full_fidelity: FullFidelity | None = None  # [full_fidelity]: the fields run in the full fidelity, the vehicle
 
     @property
     def area_ha(self) -> float:
@@ -464,8 +468,12 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
             if f["soil"] is None:
                 soil, share, _ = mapped[f["field_id"]]
                 f.update(soil=soil, soil_from="soil_map", soil_share=share)
+    full = None if doc.get("full_fidelity") is None else \
+        parse_full_fidelity(doc["full_fidelity"], [f["field_id"] for f in raw])
+    chosen = full.choose([f["field_id"] for f in raw], seed) if full is not None else set()
     fields = []
     for f in raw:
+        f["fidelity"] = "full" if f["field_id"] in chosen else "fast"
         if f["soil"] not in soils:
             raise ScenarioError(f"fields_file: field {f['field_id']!r}: soil = {f['soil']!r} is not a soil of [soils] "
                                 f"({', '.join(soils)})")
@@ -474,7 +482,8 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
                                 f"[systems] ({', '.join(systems)})")
         fields.append(FieldShape(**f))
     return RegionSpec(doc.get("name", name), doc.get("description", ""), folder, fields, soils, suction, fleet, systems,
-                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin, unplannable)
+                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin, unplannable,
+                      full_fidelity=full)
 
 
 def load_region(path) -> RegionSpec:

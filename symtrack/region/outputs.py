@@ -251,6 +251,7 @@ def region_figures(spec, rows: list[dict]) -> dict:
                            for r in worst]
     out["worst_fields_by"] = f"{key} in {spec.years[-1]}"
     out["wall_time_s_sum"] = float(sum(r.get("wall_time_s", 0.0) for r in rows))
+    out["fields_full_fidelity"] = sorted({r["field_id"] for r in rows if r.get("fidelity") == "full"})
     out["fields_left_out"] = list(spec.skipped)
     return out
 
@@ -367,25 +368,31 @@ def _write_outputs(spec, out, rows, region_json, scratch) -> dict:
     worst_rows = []
     for w in figs["worst_fields"]:
         r = last[w["field_id"]]
-        worst_rows.append([r["field_id"], r["soil"], r["system"], round(r["area_ha"], 2),
+        worst_rows.append([r["field_id"], r["soil"], r["system"], r.get("fidelity", "fast"), round(r["area_ha"], 2),
                            round(100 * r["trafficked_fraction"], 1), round(100 * r[key], 1),
                            round(r[key.replace("risk_high_fraction_", "density_change_mean_") + "_Mg_per_m3"], 5)])
     summary = {k: v for k, v in figs.items() if not isinstance(v, (list, dict))}
     for y in spec.years:
         summary[f"trafficked_fraction_{y}"] = figs["by_year"][str(y)]["trafficked_fraction"]
     depth_tag = key.replace("risk_high_fraction_", "")
-    note = (f"{len(spec.fields)} fields, {spec.area_ha:.1f} ha, seasons {', '.join(map(str, spec.years))}; the fast "
-            f"fidelity on {spec.cell_m:g} m cells ({spec.rule} rule). Shares are of the fields' area (a cell no "
+    full = sorted({r["field_id"] for r in rows if r.get("fidelity") == "full"})
+    fidelity = (f"the fast fidelity on {spec.cell_m:g} m cells ({spec.rule} rule)" if not full else
+                f"the fast fidelity on {spec.cell_m:g} m cells ({spec.rule} rule), the full fidelity (each plan "
+                f"driven over the field's terrain) on {len(full)} field(s): {', '.join(full[:20])}"
+                + (" ..." if len(full) > 20 else "") + " (fields.csv: fidelity)")
+    note = (f"{len(spec.fields)} fields, {spec.area_ha:.1f} ha, seasons {', '.join(map(str, spec.years))}; "
+            f"{fidelity}. Shares are of the fields' area (a cell no "
             "machine passed is low risk). The maps are Cloud-Optimized GeoTIFFs in maps/; the per-field table is "
-            "fields.csv." + (f" Left out (no plan fits them): {', '.join(x['field_id'] for x in spec.skipped)}; "
-                             "their reasons are in summary.json." if spec.skipped else ""))
+            "fields.csv (and fields.gpkg, with the fields' polygons)."
+            + (f" Left out (no plan fits them): {', '.join(x['field_id'] for x in spec.skipped)}; their reasons are "
+               "in summary.json." if spec.skipped else ""))
     text = (spec.folder / "region.toml").read_text() if (spec.folder / "region.toml").is_file() else \
         json.dumps(spec.document, indent=2, default=str)
     html = report_html(f"symtrack region: {spec.name}", summary, images, text, note=note, tables={
         "Share of the area at each risk class, by depth and year (%)":
             (["year", "depth_m", "low", "medium", "high", "density_change_mean_Mg_per_m3"], share_rows),
         f"The worst fields in {spec.years[-1]} (by the high-risk share at {depth_tag})":
-            (["field_id", "soil", "system", "area_ha", "trafficked_%", f"high_risk_%_{depth_tag}",
+            (["field_id", "soil", "system", "fidelity", "area_ha", "trafficked_%", f"high_risk_%_{depth_tag}",
               f"density_change_mean_{depth_tag}_Mg_per_m3"], worst_rows)})
     files["report.html"] = html
     files["summary.json"] = json.dumps(figs, indent=2) + "\n"  # the study's outputs are whole once it is in place

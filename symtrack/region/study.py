@@ -41,10 +41,11 @@ from ..studies.operations import OperationSettings, field_mask, headland_mask, p
 from ..studies.traffic_seasons import TRAMLINE_SEED, auto_headland_passes
 from .fast import PLAN_DS_M, FastOp, density_change, risk_classes, run_season_fast
 from .fleet import stress_profile
+from .full import BASE_SOIL_PRESET, DEFAULT_VEHICLE, check_full_operations, run_season_full
 from .inputs import RegionSpec, class_soil, class_suction_kPa, draw_day, field_frame, moisture_class
 
-__all__ = ["Context", "RegionResult", "build_context", "check_plans", "field_season", "field_season_ops",
-           "run_region"]
+__all__ = ["Context", "RegionResult", "build_context", "check_full", "check_plans", "class_soils", "field_season",
+           "field_season_ops", "run_region"]
 
 log = logging.getLogger("symtrack.region")
 
@@ -165,6 +166,43 @@ def check_plans(spec: RegionSpec, progress: bool = False) -> None:
     spec.fields[:] = kept
 
 
+def class_soils(spec: RegionSpec) -> dict:
+    """The soils of each (soil, moisture class) the study's suction series reach, as parameter dicts."""
+    out = {}
+    for sname, years in spec.suction.items():
+        for s in years.values():
+            for k in sorted({moisture_class(x, spec.moisture_class_pF) for x in s}):
+                if (sname, k) not in out:
+                    out[(sname, k)] = dict(class_soil(spec.soils[sname], class_suction_kPa(k, spec.moisture_class_pF),
+                                                      f"soils.{sname}"))
+    return out
+
+
+def _vehicle(spec: RegionSpec) -> str:
+    return spec.full_fidelity.vehicle if spec.full_fidelity is not None else DEFAULT_VEHICLE
+
+
+def _soil_preset(spec: RegionSpec, soil: str) -> str:
+    t = spec.document.get("soils", {}).get(soil, {})
+    return t.get("preset", BASE_SOIL_PRESET) if isinstance(t, dict) else BASE_SOIL_PRESET
+
+
+def check_full(spec: RegionSpec, soils_by_class: dict | None = None) -> None:
+    """The full fidelity's fields checked before any work (symtrack.region.full): every tracked machine's
+    operation of their seasons planned for the terrain engine (its cells narrower than the track, the turn
+    held on the day's soil); a refusal names the field, the year and the operation."""
+    full = [f for f in spec.fields if f.fidelity == "full"]
+    if not full:
+        return
+    ctx = Context(spec, {}, soils_by_class if soils_by_class is not None else class_soils(spec))
+    vehicle = _vehicle(spec)
+    for f in full:
+        for y in spec.years:
+            ops = field_season_ops(ctx, f, y)
+            check_full_operations(ops, vehicle, spec.depths_m, _shape(spec, f), spec.cell_m,
+                                  f"field {f.field_id!r}, {y}", _soil_preset(spec, f.soil))
+
+
 def build_context(spec: RegionSpec, client=None) -> Context:
     """The tables, once (module doc): the stress profiles on the client's workers when a client is given."""
     keys, jobs = [], []
@@ -179,15 +217,7 @@ def build_context(spec: RegionSpec, client=None) -> Context:
         profiles = dict(zip(keys, client.gather(futs), strict=True))
     else:
         profiles = {k: stress_profile(*j) for k, j in zip(keys, jobs, strict=True)}
-    class_soils = {}
-    for sname, years in spec.suction.items():
-        for s in years.values():
-            for k in sorted({moisture_class(x, spec.moisture_class_pF) for x in s}):
-                if (sname, k) not in class_soils:
-                    class_soils[(sname, k)] = dict(class_soil(spec.soils[sname],
-                                                              class_suction_kPa(k, spec.moisture_class_pF),
-                                                              f"soils.{sname}"))
-    return Context(spec, profiles, class_soils)
+    return Context(spec, profiles, class_soils(spec))
 
 
 def field_season_ops(ctx: Context, f, year: int) -> list:
@@ -198,7 +228,7 @@ def field_season_ops(ctx: Context, f, year: int) -> list:
     for day, _k, op, fs in field_season_plan(spec, f, year):
         cls = moisture_class(float(series[day - 1]), spec.moisture_class_pF)
         ops.append(FastOp(op.name, fs, spec.fleet.machines[op.machine], op.repeat, op.loosens_to_m,
-                          ctx.profiles[(op.machine, f.soil)], ctx.class_soils[(f.soil, cls)], day))
+                          ctx.profiles.get((op.machine, f.soil)), ctx.class_soils[(f.soil, cls)], day))
     return ops
 
 
@@ -207,9 +237,10 @@ def _shape(spec: RegionSpec, f) -> tuple:
 
 
 def field_season(ctx: Context, field_index: int, year: int, prev) -> dict:
-    """One task: a field's season in the fast fidelity. ``prev``: the previous season's result (its
-    ``state``), or the state itself (a rerun's, read back from its maps.npz), or None (the first season).
-    Returns {"files": {name: bytes}, "state": float32 array, "summary": dict}."""
+    """One task: a field's season in its fidelity (the fast one, or the full one: symtrack.region.full).
+    ``prev``: the previous season's result (its ``state``), or the state itself (a rerun's, read back from its
+    maps.npz), or None (the first season). Returns {"files": {name: bytes}, "state": float32 array, "summary":
+    dict}."""
     t0, c0 = time.perf_counter(), time.process_time()
     spec = ctx.spec
     f = spec.fields[field_index]
@@ -218,8 +249,14 @@ def field_season(ctx: Context, field_index: int, year: int, prev) -> dict:
     ops = field_season_ops(ctx, f, year)
     fs0 = ops[0].settings
     fmask = field_mask(fs0, shape, spec.cell_m)
-    maps = run_season_fast(ops, shape, spec.cell_m, spec.depths_m, state=state, field_mask=fmask, rule=spec.rule)
     soil0 = spec.soils[f.soil]
+    if f.fidelity == "full":
+        maps = run_season_full(ops, shape, spec.cell_m, spec.depths_m, float(soil0["stress_concentration_factor"]),
+                               _vehicle(spec), state=state, field_mask=fmask,
+                               soil_preset=_soil_preset(spec, f.soil))
+    else:
+        maps = run_season_fast(ops, shape, spec.cell_m, spec.depths_m, state=state, field_mask=fmask,
+                               rule=spec.rule)
     drho = density_change(maps.state, soil0, spec.depths_m).reshape(*shape, len(spec.depths_m)).astype(np.float32)
     risk = risk_classes(maps.risk_ratio_max)
     widest = max(ops, key=lambda o: o.settings.headland_m).settings
@@ -244,9 +281,10 @@ def field_summary(spec, f, year, ops, maps, drho, risk, fmask, head) -> dict:
     inner = fmask & ~head
     out = {"schema_version": SCHEMA_VERSION, "kind": "symtrack-region-field-season", "field_id": f.field_id,
            "soil": f.soil, "soil_from": f.soil_from, "soil_share": f.soil_share, "system": f.system, "year": year,
-           "area_ha": f.area_m2 / 1e4,
+           "fidelity": f.fidelity, "area_ha": f.area_m2 / 1e4,
            "lines_direction_deg": math.degrees(f.theta_rad),
-           "grid_area_ha": n_field * area / 1e4, "cell_m": spec.cell_m, "rule": spec.rule,
+           "grid_area_ha": n_field * area / 1e4, "cell_m": spec.cell_m,
+           "rule": spec.rule if f.fidelity == "fast" else "full: the wheels' strips' centre rule, the engine's overlap",
            "days_worked": {o.name: o.day for o in ops},
            "trafficked_fraction": float(run[fmask].mean()),
            "headland_share": float(head.sum() / max(n_field, 1)),
@@ -306,9 +344,11 @@ def _describe(spec: RegionSpec) -> dict:
             "fleet": spec.fleet.label, "soils": sorted(spec.soils), "systems": sorted(spec.systems),
             "fields": [{"field_id": f.field_id, "soil": f.soil, "system": f.system, "area_ha": f.area_m2 / 1e4,
                         **({"soil_from": f.soil_from, "soil_share": f.soil_share} if f.soil_from != "fields_file"
-                           else {})}
+                           else {}), **({"fidelity": "full"} if f.fidelity == "full" else {})}
                        for f in spec.fields],
             "fields_left_out": spec.skipped,
+            **({"fields_full_fidelity": [f.field_id for f in spec.fields if f.fidelity == "full"],
+                "full_fidelity_vehicle": spec.full_fidelity.vehicle} if spec.full_fidelity is not None else {}),
             "document": spec.document}
 
 
@@ -341,6 +381,7 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
     out = check_output_folder(str(out))
     t0 = time.perf_counter()
     check_plans(spec, progress=False)
+    check_full(spec)
     phases = {"plans_s": time.perf_counter() - t0}
     _check_same_study(out, spec)
     todo = [(fi, y) for fi, f in enumerate(spec.fields) for y in spec.years if not _done(out, f, y)]
