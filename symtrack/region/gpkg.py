@@ -83,7 +83,7 @@ def geometry_blob(geom, srs_id: int) -> bytes:
 def _last_change() -> str:
     epoch = os.environ.get("SOURCE_DATE_EPOCH", "")
     t = dt.datetime.fromtimestamp(int(epoch), dt.UTC) if epoch.isdigit() else dt.datetime.now(dt.UTC)
-    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
+    return t.isoformat(timespec="milliseconds").replace("+00:00", "Z")  # the standard's form: ...T12:34:56.789Z
 
 
 def fields_gpkg(path, spec, rows: list[dict]) -> Path:
