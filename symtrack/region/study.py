@@ -10,15 +10,20 @@ The folder::
     DIR/fields/<field_id>/<year>/summary.json
                                            its figures, written last: a field-season whose summary.json is there
                                            is finished, and a rerun into the folder skips it
-    DIR/fields.csv                         one row per field-season (:data:`symtrack.region.outputs.TABLE_COLUMNS`)
+    DIR/fields.csv, DIR/fields.gpkg        one row per field-season (:func:`symtrack.region.table.TABLE_COLUMNS`;
+                                           the GeoPackage with the fields' polygons: symtrack.region.gpkg)
     DIR/maps/<year>/*.tif, DIR/maps/all_years/*.tif
                                            the region's maps (Cloud-Optimized GeoTIFFs)
     DIR/report.html, DIR/summary.json      the report and the region's figures
 
-The client writes every file (atomically), from the bytes the tasks return: a cluster needs no shared file
-system. A field's seasons run in order (each starts from the compression state the one before left); the
-fields run in parallel. The tables (the machines' stress profiles on each soil, the soils of each moisture
-class) are built once, on the client, before any task, and sent to the workers once.
+The client writes every file, from the bytes the tasks return (a cluster needs no shared file system), through
+the package's run writer (:func:`symtrack.reports.run_files.write_folder`): each field-season committed once as
+it finishes, the study's own files committed together at the end (symtrack.region.outputs). A field's seasons
+run in order (each starts from the compression state the one before left); the fields run in parallel. Each
+field runs in its fidelity: the fast one (:mod:`symtrack.region.fast`), or the full one on the fields
+``[full_fidelity]`` chooses (:mod:`symtrack.region.full`; its tracked machines' operations checked for the
+terrain engine before any work, :func:`check_full`). The tables (the machines' stress profiles on each soil, the
+soils of each moisture class) are built once, before any task, and sent to the workers once.
 """
 
 from __future__ import annotations
