@@ -106,8 +106,13 @@ def test_a_tracked_machine_is_driven_on_the_terrain_engine(tmp_path):
     systems = {"one": [{"name": "drilling", "machine": "crawler", "window": [262, 292], "tracks": "ab"}]}
     p = demo.write_region(tmp_path, n_fields=1, seed=3, systems=systems, years={2021: 0.0}, cell_m=0.2,
                           length_m=(60.0, 60.0), width_m=(36.0, 36.0))
+    # the engine's rule of a trafficked cell in the fast fidelity too; the silt loam (on the demo's clay loam, whose
+    # preset is north_gower_clayey_loam_46, the law follower snakes: docs/region.md, "A mixed run")
     p.write_text(p.read_text().replace('fleet = "builtin"', 'fleet = "fleet.toml"')
-                 + '\n[full_fidelity]\nfields = ["F001"]\n')
+                 .replace("cell_m = 0.2", 'cell_m = 0.2\nrule = "overlap"') + '\n[full_fidelity]\nfields = ["F001"]\n')
+    fields = json.loads((tmp_path / "fields.geojson").read_text())
+    fields["features"][0]["properties"]["soil"] = "silt_loam"
+    (tmp_path / "fields.geojson").write_text(json.dumps(fields))
     spec = load_region(p)
     study.check_plans(spec)
     study.check_full(spec)
@@ -121,14 +126,16 @@ def test_a_tracked_machine_is_driven_on_the_terrain_engine(tmp_path):
     fast = study.field_season(ctx, 0, 2021, None)
     ma, mb = _npz(full["files"]["maps.npz"]), _npz(fast["files"]["maps.npz"])
     assert set(ma) == set(mb) and all(ma[k].shape == mb[k].shape and ma[k].dtype == mb[k].dtype for k in ma)
-    # the plan's tracks: the fast fidelity's cells (centre rule) are the engine's (its cells a contact overlapped)
+    # the plan's tracks: the fast fidelity's cells are the engine's (the cells a contact overlapped), the engine's
+    # a little more (the drive about its lines): the trafficked share within 5 points
     ca, cb = ma["counts"] > 0, mb["counts"] > 0
     assert (ca & cb).sum() > 0.95 * cb.sum()
-    # the stress at depth under the cells both trafficked: the engine's moving, pitching tracks against the static
-    # pressure line, within 30 % at 0.3-0.8 m
-    for k in (1, 2, 3):
+    assert abs(s["trafficked_fraction"] - fast["summary"]["trafficked_fraction"]) < 0.05
+    # the stress at depth under the cells both trafficked: the engine's moving, pitching tracks (and its turns of
+    # 4 m) against the static pressure line: measured 1.14-1.17 times it at 0.1-0.8 m
+    for k in range(4):
         r = ma["sigma_max_kPa"][..., k][ca & cb].mean() / mb["sigma_max_kPa"][..., k][ca & cb].mean()
-        assert 0.7 < r < 1.3, (k, r)
+        assert 0.95 < r < 1.3, (k, r)
     # cells as wide as the track: refused before any work, naming the field, the machine and the range
     p.write_text(p.read_text().replace("cell_m = 0.2", "cell_m = 0.5"))
     spec = load_region(p)
