@@ -55,6 +55,9 @@ __all__ = ["Context", "RegionResult", "build_context", "check_full", "check_plan
 log = logging.getLogger("symtrack.region")
 
 SCHEMA_VERSION = 1
+# the full fidelity's cost per hectare-season over the fast one's, for the progress's time left only (measured on
+# the demo's fields: 214-260, docs/region.md, "A mixed run")
+FULL_COST_RATIO = 240.0
 
 
 @dataclass
@@ -441,6 +444,12 @@ def _run_all(out: Path, spec: RegionSpec, ctx: Context, todo: list, client, prog
     from ..studies.engine import SchedulerLost
 
     ha_total = sum(spec.fields[fi].area_m2 for fi, _ in todo) / 1e4
+
+    def work(f) -> float:  # the time left from the work done: a full field's hectare costs FULL_COST_RATIO fast ones
+        return f.area_m2 / 1e4 * (FULL_COST_RATIO if f.fidelity == "full" else 1.0)
+
+    work_total = sum(work(spec.fields[fi]) for fi, _ in todo)
+    work_done = 0.0
     bar = Progress(ha_total, f"region {spec.name}", enabled=progress)
     futures = {}
     t0 = time.perf_counter()
@@ -471,8 +480,9 @@ def _run_all(out: Path, spec: RegionSpec, ctx: Context, todo: list, client, prog
             _commit(out, f, y, res)
             done += 1
             ha_done += f.area_m2 / 1e4
+            work_done += work(f)
             el = time.perf_counter() - t0
-            left = el / ha_done * (ha_total - ha_done) if ha_done > 0 else float("nan")
+            left = el / work_done * (work_total - work_done) if work_done > 0 else float("nan")
             bar.update(ha_done, f"{done}/{len(todo)} field-seasons, {ha_done:.1f}/{ha_total:.1f} ha, about "
                                 f"{left:.0f} s left")
             if progress and not bar.enabled:
