@@ -423,7 +423,7 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo_vehicle)
 
     # The 8-stage, order-5, L-stable, stiffly accurate Rosenbrock method of CasADi 3.8's plugin
-    # (codegen/rosenbrock.py's tableau) on the time-scaled DAE F = (h f, alg), unit step,
+    # (symtrack/native/rosenbrock.py's tableau) on the time-scaled DAE F = (h f, alg), unit step,
     # mass M = diag(1 (12), 0 (2)): W U_i = F(w0 + sum a_ij U_j) + M sum c_ij U_j, W = M / gamma - dF/dw,
     # w1 = w0 + sum m_i U_i. (ROS2, order 2, was measured first: docs/terrain.md.)
     h = ca.SX.sym("h")
