@@ -8,7 +8,8 @@ run the real-time factor in CPU time, the kernel's parts in microseconds per mac
 subsoil stress, vehicle, world manager, outputs: ``res.stats["ns_*"]``) and the first 12 hex digits of
 a SHA-256 over the vehicle's states and outputs, every stored field of the terrain and the pass's
 stress maxima. An engine change meant to leave the numbers alone must leave the fingerprint alone
-(docs/terrain.md, "Speed"; today's fingerprint: 72ad0dc2d177).
+(docs/terrain.md, "Speed"; the fingerprint depends on the compiler and the machine: compare runs of the
+commits before and after the change on one machine).
 """
 
 from __future__ import annotations

@@ -128,6 +128,25 @@ def test_closed_loop_straight_offset(model, tmp_path):
     assert rows["solve_time_median_ms"][1] == "ms" and rows["rms_lateral_error_m"][1] == "m"
 
 
+def test_mpcs_of_one_problem_share_its_solvers_and_solve_alike(model):
+    """Two MPCs of the same problem (model, settings) share the NLP solvers built once in the process
+    (symtrack.control.mpc._NLPSOLS; the RTI's cold start solves with the fallback), with their own starts:
+    the second's first step is the first's;
+    another problem (a longer horizon) gets solvers of its own."""
+    sc = fast_scenario()
+    a, b = (PathTrackingMPC(model, sc.params, sc.mpc) for _ in range(2))
+    assert a.fallback is not None and a.fallback is b.fallback and a.solver is b.solver
+    x, u = CL.initial_state(model, sc)
+    ref = sc.build_path().reference(0.0, a.N, sc.mpc.sample_time_s, 0.0)
+    nv = model.layout.nv
+    ua, ia = a.step(x[:nv], x[nv:], u, ref)
+    ub, ib = b.step(x[:nv], x[nv:], u, ref)
+    assert ia.success and ib.success
+    np.testing.assert_array_equal(ua, ub)
+    c = PathTrackingMPC(model, sc.params, dataclasses.replace(sc.mpc, horizon_steps=21))
+    assert c.fallback is not a.fallback
+
+
 def test_failed_solve_reuses_shifted_plan(model):
     sc = fast_scenario()
     mpc = PathTrackingMPC(model, sc.params, sc.mpc)

@@ -486,8 +486,8 @@ static fmi2Status begin_pass(Instance *c) {
 static fmi2Status outputs(Instance *c) {
   if (c->y_valid) return fmi2OK;
   WORK = c->E.work;
-  const double *arg[3] = {c->E.wv, c->u, c->E.pv};
-  double *res[1] = {c->y};
+  const double *arg[ENG_SZ_ARG] = {c->E.wv, c->u, c->E.pv};
+  double *res[ENG_SZ_RES] = {c->y};
   eng_outputs(arg, res, 0, WORK, 0);
   c->y_valid = 1;
   return fmi2OK;

@@ -57,6 +57,7 @@ def engine_parts(sc, scratch: Path) -> dict:
     (engine_soils.inc) as bytes; ``scratch``: a folder for the code generator."""
     from symtrack.foundations.errors import ScenarioError
     from symtrack.integrators.engine import EngineSettings, EngineState, engine_functions
+    from symtrack.integrators.engine.state import vehicle_work_sizes
     from symtrack.native.grid_engine_model import soil_dispatch_c
     from symtrack.terrain.world import open_world
     from symtrack.vehicles import registry as vehicle_registry
@@ -76,8 +77,14 @@ def engine_parts(sc, scratch: Path) -> dict:
         cg.add(f)
     cg.generate(str(scratch) + "/")
     gen = (Path(scratch) / "engine_gen.c").read_bytes()
+    # the vehicle step's stages call its F and J (call nodes): its arg and res arrays are larger than its
+    # inputs and outputs; the programs give the generated Functions no integer work (none needs it here)
+    sizes = vehicle_work_sizes(fns)
+    if sizes[2] > 1:
+        raise ScenarioError(f"the vehicle's Functions need {sizes[2]} integers of work, which the standalone "
+                            "engine does not give them")
     return {"world": world, "settings": settings, "fns": fns, "state": state, "gen": gen,
-            "soils": soil_dispatch_c(fns).encode()}
+            "soils": soil_dispatch_c(fns, sizes).encode()}
 
 
 def engine_constants(tag: str, parts: dict) -> list[str]:

@@ -62,6 +62,7 @@ counts the failure and warm-starts the next solve from the shifted plan.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import math
 import time
@@ -71,6 +72,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..foundations import caches
 from ..foundations.errors import ParameterError
 from ..foundations.interrupt import InterruptWatch
 from ..model import SystemModel
@@ -86,6 +88,8 @@ __all__ = ["MPCSettings", "MPCStats", "PREDICTIONS", "PREDICTION_HULLS", "PathTr
            "RTI_COLD_STARTS", "SOLVERS", "SolveInfo", "TORQUE_SCALE_N_M", "realtime_figures"]
 
 log = logging.getLogger("symtrack.control.mpc")
+# the NLP solvers built in this process, by problem (PathTrackingMPC._nlpsol; symtrack.foundations.caches)
+_NLPSOLS = caches.cache("mpc_nlpsols", 8)
 
 SOLVERS = ("ipopt", "fatrop")  # the NLP solvers (also the fallbacks)
 SOLVER_CHOICES = SOLVERS + ("rti",)  # rti: real-time iteration (symtrack.control.rti)
@@ -689,13 +693,22 @@ class PathTrackingMPC:
             opts.update({"structure_detection": "auto", "equality": eq, "debug": False})
             opts["fatrop"] = {"print_level": 0, "max_iter": s.max_iter, "tol": s.tol, "mu_init": 1e-2}
             name = "fatrop"
-        if jit:
-            symbolic = ca.nlpsol("mpc", name, nlp, opts)
-            problem = ca.Function("mpc_nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]).serialize()
-            payload = f"{name}|{sorted(opts.items())!r}|".encode() + problem.encode()
-            so = compiled_nlp_library(symbolic, payload, root=Path(s.jit_dir) if s.jit_dir else None)
-            return ca.nlpsol("mpc", name, str(so), opts)
-        return ca.nlpsol("mpc", name, nlp, opts)
+        problem = ca.Function("mpc_nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]]).serialize()
+        payload = f"{name}|{sorted(opts.items())!r}|".encode() + problem.encode()
+
+        def build():
+            if jit:
+                symbolic = ca.nlpsol("mpc", name, nlp, opts)
+                so = compiled_nlp_library(symbolic, payload, root=Path(s.jit_dir) if s.jit_dir else None)
+                return ca.nlpsol("mpc", name, str(so), opts)
+            return ca.nlpsol("mpc", name, nlp, opts)
+
+        # one solver per problem in this process: the NLP's parameters carry the vehicle, the soil, the
+        # references and the cells, so the MPCs of a season's operations, a sweep's runs or the tests
+        # with the same model and settings share it (building IPOPT's interpreted solver takes about
+        # 2 s of CPU; the solver keeps no state between calls: each solve is given its start)
+        key = (jit, s.jit_dir, hashlib.sha256(payload).hexdigest())
+        return _NLPSOLS.get_or_build(key, build)
 
     # ------------------------------------------------------------------ run time
     def _initial_guess(self, x0s, ref):
