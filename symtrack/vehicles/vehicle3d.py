@@ -21,8 +21,12 @@ deeper, the unloading/reloading line if not), plus the cells' areal damping c'' 
 penetration (the cell equation without the cell's own areal mass: the soil under the track moves with
 the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
 feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
-normal at the segment. So the load split between and along the tracks follows from the hull's
-rigid-body equilibrium on the ground: its shape, the weight's components and the accelerations
+normal at the segment. Within a segment the pressure is linear, its slope that of the centres' pressures
+(:func:`segment_gauss_offsets`), and carried by the segment's two Gauss-Legendre points: a couple
+added to the normal loads' moment, and the creep law's lateral resistance summed over the 2 n points
+(docs/vehicle3d.md, "Within a segment"; the ground and the soil law are sampled at the centres). So
+the load split between and along the tracks follows from the hull's rigid-body equilibrium on the
+ground: its shape, the weight's components and the accelerations
 (no algebraic loop: ``accel_x_m_s2``, ``accel_y_m_s2`` are the hull's horizontal accelerations,
 closed trivially).
 
@@ -108,10 +112,10 @@ from .planar import (
     traction_shape,
 )
 
-__all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
-           "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_raster",
-           "footprint_radius_m", "hull_rotation", "make_vehicle",
-           "running_gear_momentum_ratio"]
+__all__ = ["COMPACTION_DEPTH_FLOOR_M", "GAUSS_OFFSET", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW",
+           "ContactTerrain", "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid",
+           "check_raster", "footprint_radius_m", "hull_rotation", "make_vehicle", "running_gear_momentum_ratio",
+           "segment_gauss_offsets"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
