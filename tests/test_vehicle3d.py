@@ -59,24 +59,45 @@ def test_layout_and_outputs():
     assert SystemModel(ModelOptions(vehicle="3d")).vehicle.name == "3d_lateral"  # the "shear" law's states
 
 
+# the summary's run statistics, not figures of the vehicle's motion
+RUN_STATISTICS = ("schema_version", "wall_time_s", "real_time_factor", "fixed_step_error_max",
+                  "fixed_step_steps_halved")
+# The subsoil's vertical stress at the two shallow depths is the run's peak, during the torque step, from
+# the tracks' pressure lines: the 3D hull's is steeper than the planar one's by the pitching moment of the
+# running gear's spin-up, kappa J sum domega/dt (docs/vehicle3d.md, "Why the running gear's momentum"),
+# which the planar load transfer leaves out (at 3.9 s kappa J sum domega/dt = 398 N m against the planar
+# line's m a_x h = 4996 N m, 8.0 %: the 3D line's slope is 8.3 % steeper there).
+# Measured +1.34 % at 0.1 m, +1.11 % at 0.3 m, the same at 8 and 16 segments: a model difference,
+# not the contact's quadrature.
+SUBSOIL_SHALLOW = ("subsoil_sigma_z_max_kPa[0]", "subsoil_sigma_z_max_kPa[1]")
+
+
+def _figures(summary: dict) -> dict:
+    """Every figure of a run's summary (lists element by element), the run statistics left out."""
+    out = {}
+    for k, v in summary.items():
+        if k in RUN_STATISTICS:
+            continue
+        for i, x in enumerate(v) if isinstance(v, list) else ((None, v),):
+            out[k if i is None else f"{k}[{i}]"] = x
+    return out
+
+
 def test_flat_ground_reproduces_the_planar_validation():
-    """The validation scenario (creep law, compiled Rosenbrock at its 10 ms step): 3D at 16 segments
-    against planar, each figure of the table within 1 %, the sprocket sinkage apart (below)."""
-    planar = symtrack.simulate(load_scenario("validation")).summary
-    s3 = symtrack.simulate(load_scenario("validation", ["model.vehicle=3d", "model.contact_segments=16"])).summary
-    for k in FIGURES:
-        assert s3[k] == pytest.approx(planar[k], rel=0.01), k
+    """The validation scenario at its default settings (creep law, compiled Rosenbrock at its 10 ms step,
+    8 segments): every figure of the 3D run's summary within 1 % of the planar run's (the subsoil stress at
+    the shallow depths apart: SUBSOIL_SHALLOW). Measured: yaw +0.18 %, lateral deviation +0.22 %, sprocket
+    sinkage -0.58 %, the idle shear -0.48 % (+1.8 % in yaw and lateral deviation when the segments'
+    centres carried their loads: the midpoint rule's 1/n^2 of the yaw damping)."""
+    planar = _figures(symtrack.simulate(load_scenario("validation")).summary)
+    s3 = _figures(symtrack.simulate(load_scenario("validation", ["model.vehicle=3d"])).summary)
+    assert s3.keys() == planar.keys()
     assert s3["nose_up"] and s3["shear_idle_min_m"] < 0
-    # the extremes of the shear displacements: -0.06 % and +0.5 % here (8.864 against 8.869 mm, -2.093
-    # against -2.083 mm); +1.3 % and -4 % before the running gear's angular momentum was in the hull's
-    # pitch (the torque step's thrust pitched the hull with the lever h, an overshoot)
-    assert s3["shear_driven_max_m"] == pytest.approx(planar["shear_driven_max_m"], rel=0.01)
-    assert s3["shear_idle_min_m"] == pytest.approx(planar["shear_idle_min_m"], rel=0.01)
-    # the sprocket sinkage is the run's maximum, near the torque step (planar 1.892 mm at 0.53 s): -0.4 %
-    # here. Before the running gear's angular momentum was in the hull's pitch (issue 22, the braked
-    # chatter) it was +6.6 %: the step's thrust pitched the hull with the lever h (not h - kappa r), an
-    # overshoot (2.017 mm at 0.29 s, CVODES) above the quasi-static 1.775 mm at 3.9 s (now 1.822, planar 1.817)
-    assert s3["sinkage_sprocket_mm"] == pytest.approx(planar["sinkage_sprocket_mm"], rel=0.01)
+    for k, v in planar.items():
+        if isinstance(v, (str, bool)) or v is None:
+            assert s3[k] == v, k
+        else:
+            assert s3[k] == pytest.approx(v, rel=0.02 if k in SUBSOIL_SHALLOW else 0.01, abs=1e-12), k
 
 
 def _rigid_plate(W_track, e, h, b, l, keq, n):
@@ -101,8 +122,8 @@ def _rigid_plate(W_track, e, h, b, l, keq, n):
 def test_rest_on_flat_ground_is_a_rigid_plate_on_bekker_soil(e_m):
     """CG 5 cm behind the contact centre: the hull settles nose up as a rigid plate would on Bekker
     soil (every segment deeper than those ahead of it: virgin loading all along; nose down the rear
-    would ride the front's unloading line instead); the error falls with the segments as 1/n^2
-    (midpoint rule)."""
+    would ride the front's unloading line instead); the pitch's error falls with the segments as 1/n^2
+    (each segment's pressure linear within it: the slope from its neighbours' pressures)."""
     params = _params(cg_ahead_of_contact_centre_m=e_m)
     W = params["mass_kg"] * GRAVITY_M_S2
     b, l = params["track_width_m"], params["contact_length_m"]
@@ -115,10 +136,11 @@ def test_rest_on_flat_ground_is_a_rigid_plate_on_bekker_soil(e_m):
         y = dict(zip(m.output_names, np.array(m.outputs(x, [0, 0], m.param_vector(params))).ravel(), strict=True))
         errs.append(abs(y["sinkage_idler_left_m"] / zf - 1) + abs(y["sinkage_sprocket_left_m"] / zr - 1))
         pitch_errs.append(abs(y["pitch_rad"] / ((zr - zf) / l) - 1))
-    # measured: sinkage errors (front + rear) 0.81 %, 0.17 %, 0.12 % (the floor: the Bekker law's
-    # regularisation length, 1e-6 m against 1 mm); pitch 1.6 %, 0.40 %, 0.099 %
-    assert errs[-1] < 0.005 and pitch_errs[-1] < 0.002, (errs, pitch_errs)
-    assert errs[0] / errs[1] > 3
+    # measured: sinkage errors (front + rear) 0.117 %, 0.131 %, 0.135 % (at the floor already: the Bekker
+    # law's regularisation length, 1e-6 m against 1 mm); pitch 0.0083 %, 0.0021 %, 0.00058 % (the segments'
+    # centres alone, the midpoint rule: 0.81 %, 0.17 %, 0.12 % and 1.6 %, 0.40 %, 0.099 %: their loads'
+    # moment missed the pressure's slope within each segment)
+    assert max(errs) < 0.002 and pitch_errs[0] < 2e-4, (errs, pitch_errs)
     assert pitch_errs[0] / pitch_errs[1] > 3.5 and pitch_errs[1] / pitch_errs[2] > 3.5
 
 
@@ -215,10 +237,9 @@ def test_example_side_slope_3d_runs():
 
 def test_the_compiled_rosenbrock_converges_in_the_step_to_cvodes():
     """The validation on the 3D vehicle: the compiled Rosenbrock at 10 ms and 5 ms against CVODES at
-    reltol 1e-8 (at 16 segments, the model of the test above: one build for both)."""
+    reltol 1e-8 (at the default 8 segments, the model of the test above: one build for both)."""
     def figs(sets):
-        s = symtrack.simulate(load_scenario("validation", ["model.vehicle=3d", "model.contact_segments=16",
-                                                           *sets])).summary
+        s = symtrack.simulate(load_scenario("validation", ["model.vehicle=3d", *sets])).summary
         return np.array([s[k] for k in (*FIGURES, "sinkage_sprocket_mm", "shear_idle_min_m")])
     ref = figs(["run.integrator=cvodes", "run.reltol=1e-8"])
     e10 = np.max(np.abs(figs([]) / ref - 1))
@@ -274,8 +295,9 @@ def test_a_scenario_gives_the_3d_vehicle_its_ground():
 @pytest.mark.slow
 def test_flat_ground_reproduces_the_planar_validation_on_the_shear_law():
     """The validation on the package's default lateral law ("shear", the vehicle model 3d_lateral):
-    measured 3D against planar, yaw 15.454 against 15.451 deg, lateral deviation 2.5043 against
-    2.5037 m. (Slow: the first compile of this model takes about 40 s; cached after.)"""
+    measured 3D against planar, yaw 15.4513 against 15.4510 deg, lateral deviation 2.5034 against
+    2.5037 m (before the Gauss points within the segments: 15.454 and 2.5043). (Slow: the first compile
+    of this model takes about 40 s; cached after.)"""
     sets = ["model.lateral_law=shear"]
     planar = symtrack.simulate(load_scenario("validation", sets)).summary
     s3 = symtrack.simulate(load_scenario("validation", [*sets, "model.vehicle=3d"])).summary
@@ -286,28 +308,29 @@ def test_flat_ground_reproduces_the_planar_validation_on_the_shear_law():
 def test_trim_takes_the_3d_vehicle():
     """symtrack.control.trim through the vehicle interface: straight running at 2 m/s needs the planar
     torques (the rolling resistance: the same sinkage), a gentle creep-law turn (R = 150 m) the planar
-    torques within 2 % (measured -0.8 %: 8 segments against the planar Gauss rule)."""
+    torques within 1e-4 (measured -3e-6: 8 segments, each carried by its two Gauss points, against the
+    planar Gauss rule; -0.8 % when the segments' centres carried them, the midpoint rule)."""
     from symtrack.control.trim import trim
 
     params = _params()
     tp = {v: [trim(SystemModel(ModelOptions(lateral_law="creep", vehicle=v)), params, 2.0, r) for r in (None, 150.0)]
           for v in ("planar", "3d")}
     assert tp["3d"][0].u == pytest.approx(tp["planar"][0].u, rel=1e-6)
-    assert tp["3d"][1].u == pytest.approx(tp["planar"][1].u, rel=0.02)
+    assert tp["3d"][1].u == pytest.approx(tp["planar"][1].u, rel=1e-4)
 
 
 def test_bench_rows_of_the_3d_vehicle():
     """symtrack bench's 3D rows (symtrack.bench.vehicle3d) in quick mode: one run of the homogeneous
     validation per vehicle on the compiled Rosenbrock; the 3D run's figures are the planar run's within
-    2 % (the default 8 segments: +1.7 % in yaw and lateral deviation, docs/vehicle3d.md) and its ratio
-    row is filled."""
+    1 % (the default 8 segments, test_flat_ground_reproduces_the_planar_validation) and its ratio row is
+    filled."""
     from symtrack.bench import vehicle3d
 
     rows = vehicle3d.bench_rows(quick=True, grid=False)  # (the grid rows: tests/test_grid3d.py)
     assert [r["case"] for r in rows] == ["vehicle = planar", "vehicle = 3d", "3d / planar"]
     planar, solid = rows[0]["figures"], rows[1]["figures"]
     for k in ("yaw_final_deg", "lateral_deviation_m", "sinkage_idler_mm"):
-        assert solid[k] == pytest.approx(planar[k], rel=0.02), k
+        assert solid[k] == pytest.approx(planar[k], rel=0.01), k
     assert planar["yaw_final_deg"] == pytest.approx(0.4046, rel=1e-3)  # the planar validation, as ever
     assert rows[2]["cpu_ratio"] > 0 and rows[2]["wall_ratio"] > 0
 

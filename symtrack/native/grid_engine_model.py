@@ -227,17 +227,11 @@ def piecewise_linear(p, l, s):
 
 def least_squares_line(dist):
     """(alpha, beta): the least-squares line p = alpha + beta s through a
-    :class:`~symtrack.vehicles.vehicle3d.SegmentDistribution`'s segment pressures (at the centres of
-    equal segments its integral over the contact is the pieces' own: the load is kept). The subsoil
-    stress takes it (subsoil.h's strip tables are for a linear line per track)."""
-    n = len(dist.p)
-    if n == 1:
-        return dist.p[0], 0
-    sbar = sum(dist.s) / n
-    pbar = sum(dist.p) / n
-    sxx = sum((si - sbar) ** 2 for si in dist.s)
-    beta = sum((si - sbar) * (pi - pbar) for si, pi in zip(dist.s, dist.p, strict=True)) / sxx
-    return pbar - beta * sbar, beta
+    :class:`~symtrack.vehicles.vehicle3d.SegmentDistribution`'s segment pressures
+    (:meth:`~symtrack.vehicles.vehicle3d.SegmentDistribution.least_squares_line`: at the centres of equal
+    segments its integral over the contact is the pieces' own, the load is kept). The subsoil stress
+    takes it (subsoil.h's strip tables are for a linear line per track)."""
+    return dist.least_squares_line()
 
 
 def pressure_line(dist):

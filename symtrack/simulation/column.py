@@ -44,7 +44,7 @@ def _pressures(res) -> dict | None:
     names = {f"{what}_{side}": f"{what}_{side}_{unit}" for side in ("left", "right")
              for what, unit in (("p_idler", "Pa"), ("p_sprocket", "Pa"), ("normal_load", "N"))}
     if not all(n in res.output_names for n in names.values()):
-        return None  # (a model without these outputs: the 3D vehicle's segments)
+        return None  # (a model without these outputs; the 3D vehicle's are its segments' least-squares line)
     return {k: np.asarray(res.output(n), dtype=np.float64) for k, n in names.items()}
 
 

@@ -21,8 +21,12 @@ deeper, the unloading/reloading line if not), plus the cells' areal damping c'' 
 penetration (the cell equation without the cell's own areal mass: the soil under the track moves with
 the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
 feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
-normal at the segment. So the load split between and along the tracks follows from the hull's
-rigid-body equilibrium on the ground: its shape, the weight's components and the accelerations
+normal at the segment. Within a segment the pressure is linear, its slope that of the centres' pressures
+(:func:`segment_gauss_offsets`), and carried by the segment's two Gauss-Legendre points: a couple
+added to the normal loads' moment, and the creep law's lateral resistance summed over the 2 n points
+(docs/vehicle3d.md, "Within a segment"; the ground and the soil law are sampled at the centres). So
+the load split between and along the tracks follows from the hull's rigid-body equilibrium on the
+ground: its shape, the weight's components and the accelerations
 (no algebraic loop: ``accel_x_m_s2``, ``accel_y_m_s2`` are the hull's horizontal accelerations,
 closed trivially).
 
@@ -108,10 +112,10 @@ from .planar import (
     traction_shape,
 )
 
-__all__ = ["COMPACTION_DEPTH_FLOOR_M", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW", "ContactTerrain",
-           "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid", "check_raster",
-           "footprint_radius_m", "hull_rotation", "make_vehicle",
-           "running_gear_momentum_ratio"]
+__all__ = ["COMPACTION_DEPTH_FLOOR_M", "GAUSS_OFFSET", "HULL_STATES", "PITCH_INERTIA_PER_YAW", "ROLL_INERTIA_PER_YAW",
+           "ContactTerrain", "RasterGuard", "SegmentDistribution", "Vehicle3D", "check_contact", "check_grid",
+           "check_raster", "footprint_radius_m", "hull_rotation", "make_vehicle", "running_gear_momentum_ratio",
+           "segment_gauss_offsets"]
 
 HULL_STATES = ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s")
 # ASSUMED (module doc): a hull box L x W x H with L ~ 2.3 W and H ~ W (the reference crawler's 3.5 m x
@@ -168,6 +172,53 @@ class SegmentDistribution:
     @property
     def sprocket(self):
         return self.p[-1]
+
+    def least_squares_line(self):
+        """(alpha, beta): the least-squares line p = alpha + beta s through the segment pressures (at
+        the centres of equal segments its integral over the contact is the segments' load, and for a
+        linear pressure it is that pressure). The subsoil stress takes it: the terrain engine's
+        (subsoil.h's strip tables are for a linear line per track) and the homogeneous run's column
+        (the outputs ``p_idler_*_Pa``, ``p_sprocket_*_Pa`` are its ends)."""
+        n = len(self.p)
+        if n == 1:
+            return self.p[0], 0
+        sbar = sum(self.s) / n
+        pbar = sum(self.p) / n
+        sxx = sum((si - sbar) ** 2 for si in self.s)
+        beta = sum((si - sbar) * (pi - pbar) for si, pi in zip(self.s, self.p, strict=True)) / sxx
+        return pbar - beta * sbar, beta
+
+
+# the two-point Gauss-Legendre rule on a segment of length ds: its points at the centre -+ ds / (2 sqrt 3),
+# weights ds / 2 each (exact for cubics; Abramowitz & Stegun 25.4.29)
+GAUSS_OFFSET = 1 / (2 * math.sqrt(3))
+
+
+def segment_gauss_offsets(p):
+    """d_i = g_i a: the pressure's change from a segment's centre to its rear Gauss point (s_i + a, a =
+    ds / (2 sqrt 3)) of the linear pressure p_i + g_i (s - s_i) within segment i, g_i the slope of the
+    centres' pressures ``p`` (front to rear, equal spacing ds): the central difference (p_{i+1} -
+    p_{i-1}) / (2 ds) inside, the three-point one-sided difference (-3 p_0 + 4 p_1 - p_2) / (2 ds) at
+    the ends (exact for a quadratic; the two-point one with two segments, 0 with one), clamped to
+    [-p_i, p_i] so that neither Gauss point's pressure is negative (a segment lifted off, or beside
+    one: the slope-limited linear reconstruction of finite-volume schemes, van Leer 1979). The segment's
+    load p_i b ds and its centre stay; the slope adds the first moment g_i b ds^3 / 12 about the centre."""
+    n = len(p)
+    c = GAUSS_OFFSET  # a / ds
+    out = []
+    for i in range(n):
+        if n == 1:
+            d = 0 * p[0]
+        elif n == 2:
+            d = (p[1] - p[0]) * c
+        elif i == 0:
+            d = (-3 * p[0] + 4 * p[1] - p[2]) * (c / 2)
+        elif i == n - 1:
+            d = (3 * p[n - 1] - 4 * p[n - 2] + p[n - 3]) * (c / 2)
+        else:
+            d = (p[i + 1] - p[i - 1]) * (c / 2)
+        out.append(ca.fmin(ca.fmax(d, -p[i]), p[i]))
+    return out
 
 
 def running_gear_momentum_ratio(contact_length_m, sprocket_radius_m):
@@ -314,6 +365,7 @@ class Vehicle3D(VehicleModel):
         ds = l / n_seg
         x_front = l / 2 - e
         s_c = [(i + 0.5) * ds for i in range(n_seg)]
+        a_gauss = ds * GAUSS_OFFSET  # the Gauss-Legendre points of a segment: its centre -+ a_gauss
         ex = R[:, 0]  # the hull's forward axis in the world
         Fw = ca.SX.zeros(3)  # resultant contact force (world)
         Mw = ca.SX.zeros(3)  # resultant moment about the CG (world)
@@ -349,6 +401,9 @@ class Vehicle3D(VehicleModel):
                 normals.append(nrm)
                 n_sum += p * b * ds
             N[k] = n_sum
+            # the pressure within each segment: linear, p_i + g_i (s - s_i), carried by its two
+            # Gauss-Legendre points s_i -+ a (module doc, "Within a segment")
+            dp = segment_gauss_offsets(p_seg)
             depth[k] = ca.fmax(z_hist, COMPACTION_DEPTH_FLOOR_M)  # (not 0: the NaN of its derivatives)
             dist[k] = SegmentDistribution(p_seg, s_c, ds, n_sum)
             # the track's ground plane: its mean normal; the tangent along the track and across it
@@ -377,11 +432,13 @@ class Vehicle3D(VehicleModel):
             else:
                 F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
                 fy_sum, mz_sum = 0, 0
-                for s, p in zip(s_c, p_seg, strict=True):
-                    x_body = x_front - s
-                    fy = creep_lateral_force(p * b * ds, b * ds * c, ca.tan(phi), vy_eff + rz * x_body, mu, eps_v, opts)
-                    fy_sum += fy
-                    mz_sum += x_body * fy
+                for s, p, d in zip(s_c, p_seg, dp, strict=True):
+                    # the segment's two Gauss points: the front one (s - a) carries p - d, the rear one p + d
+                    for x_body, pg in ((x_front - s + a_gauss, p - d), (x_front - s - a_gauss, p + d)):
+                        fy = creep_lateral_force(pg * b * ds / 2, b * ds / 2 * c, ca.tan(phi), vy_eff + rz * x_body, mu,
+                                                 eps_v, opts)
+                        fy_sum += fy
+                        mz_sum += x_body * fy
                 Fy[k], Mz[k] = fy_sum, mz_sum
             jdot[k], omdot[k] = sprocket_rates(shear[k], omega[k], abs_om[k], v_track, torque[k], F[k], R_in[k], r, l,
                                                J)
@@ -390,10 +447,12 @@ class Vehicle3D(VehicleModel):
             # forces on the hull: the segments' normal loads, the thrust less the compaction
             # resistance along the track, the lateral force across it at the contact centre with the
             # rest of the planar law's yaw moment about the normal
-            for pt, nrm, p in zip(pts, normals, p_seg, strict=True):
+            for pt, nrm, p, d in zip(pts, normals, p_seg, dp, strict=True):
                 f = p * b * ds * nrm
                 Fw += f
-                Mw += ca.cross(pt - cg, f)
+                # the two Gauss points' loads (p -+ d) b ds / 2 at pt +- a ex: the centre's moment and the
+                # couple of the pressure's slope within the segment
+                Mw += ca.cross(pt - cg, f) - a_gauss * d * b * ds * ca.cross(ex, nrm)
             f_shear = (F[k] - Rc[k]) * tx + Fy[k] * ty
             Fw += f_shear
             Mw += ca.cross(centre - cg, f_shear) + (Mz[k] - (-e) * Fy[k]) * nk
@@ -402,8 +461,10 @@ class Vehicle3D(VehicleModel):
                 pe = world(x_front - s_end, yk, -h)
                 ze = self.ground(pe[0], pe[1])
                 signals[f"sinkage_{end}_{k}_m"] = (ze[0] - pe[2]) / ca.sqrt(1 + ze[1] ** 2 + ze[2] ** 2)
-            signals[f"p_idler_{k}_Pa"] = p_seg[0]
-            signals[f"p_sprocket_{k}_Pa"] = p_seg[-1]
+            # the track's pressure line: the least-squares line through its segments, at the track's ends
+            alpha, beta = dist[k].least_squares_line()
+            signals[f"p_idler_{k}_Pa"] = alpha
+            signals[f"p_sprocket_{k}_Pa"] = alpha + beta * l
         # the drawbar pull, horizontal against the heading, at the hitch height
         hitch = world(-e, 0, hd - h)
         f_bar = -drawbar * ca.vertcat(ca.cos(psi), ca.sin(psi), 0)
