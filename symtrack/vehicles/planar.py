@@ -425,16 +425,18 @@ def creep_lateral_force(q, c_line, tan_phi, v_lat, mu, eps_v, opts):
 
 def shear_exchange_speed(omega, opts):
     """|omega| in the shear states' exchange term (the rate 2 r |omega| / l at which a track's elements
-    leave the contact with their displacement and enter with none): omega^2 / sqrt(omega^2 + e^2) with
-    e = ``opts.omega_smoothing_rad_s`` (exact in ``traction_sign = "sign"`` mode). Smooth, within
-    e^2 / (2 |omega|) of |omega| (4e-6 relative at 5 rad/s), and 0 at rest, where no element is exchanged:
-    a standing track's shear states then hold the displacement that carries its load, as the soil under
-    it does (the regularised sqrt(omega^2 + e^2) of :func:`sprocket_speed_abs` would relax them with the
+    leave the contact with their displacement and enter with none): sqrt(omega^2 + e^2) (1 - exp(-omega^2
+    / e^2)) with e = ``opts.omega_smoothing_rad_s`` (exact in ``traction_sign = "sign"`` mode). From
+    |omega| = 10 e on (0.1 rad/s; the factor is then 1 - 4e-44) it is the regularised |omega| the shear law
+    divides its slips by (so the lagged law's steady states are the quasi-static law's to rounding), and it
+    is 0 at rest, where no element is exchanged: a standing track's shear states then hold the displacement
+    that carries its load, as the soil under it does. (The regularised |omega| alone relaxed them with the
     time constant l / (2 r e), 316 s on the reference crawler: a parked vehicle crept downhill at
-    some 0.03 mm/s)."""
+    0.03 mm/s.) Smooth and even in omega."""
     if opts.traction_sign == "sign":
         return ca.fabs(omega)
-    return omega**2 / ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
+    eps = opts.omega_smoothing_rad_s
+    return ca.sqrt(omega**2 + eps**2) * (1 - ca.exp(-(omega / eps) ** 2))
 
 
 # Below this x = 2 |j| / K the unloading ratio is its series (the closed form loses digits to cancellation there:
