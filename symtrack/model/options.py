@@ -48,7 +48,8 @@ MODEL_KEYS = {k.name: k for k in (
         integer=True),
     Key("lateral_split", "shear law: split the integral at the pivot and at the shear's zero (false: the plain "
         "composite rule)", **_BOOL),
-    Key("sliding_smoothing", "the regularisation of the sliding direction (a slip ratio)", **_POSITIVE),
+    Key("sliding_smoothing", "the regularisation of the sliding direction and of the shear's switch from loading to "
+        "unloading (a slip ratio)", **_POSITIVE),
     Key("sliding_sign", "shear law: where the longitudinal stress's sign comes from", choices=SLIDING_SIGNS),
     Key("pivot_smoothing_rad_s", "the regularisation of the pivot's position [rad/s]", **_POSITIVE),
     Key("soil_law", "the terrain cells' soil law", choices=tuple(SOIL_LAWS)),
@@ -110,7 +111,8 @@ class ModelOptions:
         regularised as sqrt(i_x^2 + d^2), d this value (a slip ratio, dimensionless). It matters
         only where both slips are below d: at 1e-5 and 2.6 m/s, within 0.1 mm of a turning track's
         pivot; in straight running the tractive force is eq. (1) for every slip (sign form as
-        traction_sign says).
+        traction_sign says). The same d smooths the mean shear displacement's switch from loading
+        to unloading when the slip ratio changes sign against it (symtrack.vehicles.planar.shear_rate).
     sliding_sign: ("shear" law only) where the sign of the longitudinal stress comes from.
         "displacement" (default): sign(j) of the tractive effort times the regularised |i_x| of the sliding
         velocity (eq. (1) exactly in straight running for every slip). "velocity": the sliding

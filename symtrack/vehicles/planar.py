@@ -489,9 +489,12 @@ def sprocket_acceleration(torque, F, R_in, r, J):
 
 def shear_retardation_time_s(damping_Pa_s_per_m, K, c, phi, N, b, l):
     """t_d = c'' K / tau_max [s]: the Kelvin-Voigt retardation time of the soil's shear under a track of
-    normal load N (docs/model.md, "Shear damping"): the tracks' shear states enter the shear law as
-    j + t_d dj/dt, so that on the shear curve's initial slope tau_max / K the stress is tau_max j / K
-    + c'' dj/dt, the soil's areal damping c'' on the rate of its shear deformation. tau_max = c + N tan(phi)
+    normal load N (docs/model.md, "Shear damping"): the lagged law's shear states q (j, j_y, theta) enter
+    its forces as q + t_d dq/dt with dq/dt their eq. (2) rate (:func:`shear_eq2_rate`,
+    :func:`lateral_shear_rates`; without the unloading factor), so that on the shear curve's initial
+    slope tau_max / K the stress is tau_max q / K + c'' dq/dt, the soil's areal damping c'' on the rate
+    of its shear deformation (a Kelvin-Voigt element; ASSUMED the cells' c'' in shear as in compression),
+    fading with the curve's slope as the strength is mobilised and 0 in steady running. tau_max = c + N tan(phi)
     / (b l), the track's mean strength, floored at 1 Pa (a track that has lifted off a cohesionless soil
     carries none; every contact that carries the vehicle has thousands)."""
     tau_max = ca.fmax(c + N / (b * l) * ca.tan(phi), 1.0)
