@@ -467,7 +467,9 @@ def shear_rate(j, omega, v_track, r, l, K, opts):
     on loading): the slip term is M(j) times larger (:func:`shear_unloading_ratio`), so that the mean stress
     S(j) falls at slip / K, not at S'(j) slip. The switch is smooth over ``opts.sliding_smoothing`` of the
     slip ratio (exact in ``traction_sign = "sign"`` mode); steady running is always loading (eq. 2's steady
-    state j = i l / 2 unchanged)."""
+    state j = i l / 2 unchanged). ``opts.shear_unloading`` false: eq. (2) throughout."""
+    if not opts.shear_unloading:
+        return shear_eq2_rate(j, omega, v_track, r, l, opts)
     slip = r * omega - v_track
     tread = r * ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
     against = 0.5 * (1 - direction(slip / tread * traction_sign(j, opts), opts.sliding_smoothing, opts))
