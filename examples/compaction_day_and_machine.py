@@ -80,7 +80,7 @@ def main(argv=None) -> int:
             res = symtrack.simulate(scenario_from_dict(document(day, a.passes, a.length, DAY_CRAWLER_MASS_KG)))
             s = res.summary
             days[day] = {"water_content_kg_per_kg": DAYS[day],
-                         "precompression_stress_kPa": s["subsoil_precompression_stress_kPa"],
+                         "precompression_stress_kPa": s["subsoil_precompression_stress_min_kPa"],
                          "bulk_density_initial_Mg_per_m3": s["bulk_density_initial_Mg_per_m3"],
                          "bulk_density_max_Mg_per_m3_by_pass": [p["bulk_density_max_Mg_per_m3"] for p in s["passes"]]}
         # crawler against tractor: one pass each on a fresh wet field

@@ -40,7 +40,8 @@ def loops(request, tmp_path_factory):
     assert pb.model.opts == sc.model and sc.model.lateral_law == request.param
     M.write(out, M.render(pb))
     assert f"#define PLANT_NX {pb.model.nx}\n" in (out / "mpc_scenario.h").read_text()
-    M.build_program(out, find_compiler(), M.CFLAGS.replace("-O2", "-O1"))  # no timing is asserted
+    # no timing is asserted: -O0 compiles in 4.9 s of CPU where -O1 takes 17.3 s (the loop then runs 1.8 s, not 0.5)
+    M.build_program(out, find_compiler(), M.CFLAGS.replace("-O2", "-O0"))
     summary = M.run_program(out)
     py = CL.run(sc, model=pb.model)
     return out, summary, py

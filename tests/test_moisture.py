@@ -124,7 +124,7 @@ def test_uniform_map_run_equals_single_value_and_wet_compacts_more():
     rd = np.array(dry.summary["passes"][0]["bulk_density_max_Mg_per_m3"])
     rw = np.array(wet.summary["passes"][0]["bulk_density_max_Mg_per_m3"])
     assert np.all(rw >= rd) and rw[0] > rd[0] + 0.003
-    assert wet.summary["subsoil_precompression_stress_kPa"] < dry.summary["subsoil_precompression_stress_kPa"]
+    assert wet.summary["subsoil_precompression_stress_min_kPa"] < dry.summary["subsoil_precompression_stress_min_kPa"]
     sm = {"soils": [{"preset": "clayey_soil_thailand_38", "bulk_density_initial_Mg_per_m3": 1.2,
                      "moisture": dict(DAY)}], "zones": [{"soil": 1, "x_m": [-6, 6], "y_m": [-2, 2]}]}
     mapped = symtrack.simulate(scenario_from_dict(_doc(DAY, soil_map=sm)))
@@ -239,7 +239,7 @@ def test_moisture_raster_of_many_values(tmp_path, monkeypatch):
     loaded = wd.pass_sigma[:, 0] > 0
     pc = [M.apply_moisture(soil, {"water_content_kg_per_kg": float(x), "clay_percent": 25.0})[
         "precompression_stress_Pa"] for x in w.ravel()[loaded]]
-    assert res.summary["subsoil_precompression_stress_kPa"] == 1e-3 * min(pc)
+    assert res.summary["subsoil_precompression_stress_min_kPa"] == 1e-3 * min(pc)
 
 
 @pytest.mark.parametrize("ptf, lo, hi", [({"compression_ptf": "defossez_2003_loess", "clay_percent": 25.0}, 0.073, 0.3),
@@ -294,7 +294,8 @@ def test_a_dry_day_then_a_wet_day_on_the_same_field(tmp_path):
     assert not dry.terrain.specific_volume.any()
     assert wet.summary["passes"][0]["bulk_density_max_Mg_per_m3"][0] > 1.203
     h = M.severiano_2013_suction_kPa(0.2 * 1.2, 25.0)
-    assert wet.summary["subsoil_precompression_stress_kPa"] == pytest.approx(M.severiano_2013_precompression_kPa(25, h))
+    pc_kPa = M.severiano_2013_precompression_kPa(25, h)
+    assert wet.summary["subsoil_precompression_stress_min_kPa"] == pytest.approx(pc_kPa)
     # the day's lines carry over: the virgin line through the day's (Severiano's) strength
     assert wet.terrain.soil["virgin_line_N"] == wet.scenario.soil["virgin_line_N"]
     assert wet.terrain.soil["compression_index_lambda"] == M.defossez_2003(0.2, "defossez_2003_loess")[1]

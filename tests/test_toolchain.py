@@ -75,6 +75,7 @@ def test_the_opt_level_overrides_the_flags_but_not_a_tuned_build_s_and_has_its_o
 
     monkeypatch.setattr(build_cache.subprocess, "Popen", spy)
     monkeypatch.delenv(build.OPT_LEVEL_ENV, raising=False)
+    monkeypatch.delenv(build.TUNED_OPT_LEVEL_ENV, raising=False)
     tuned_flags = build.build(_spec(tmp_path, 3, cflags=("-O2", "-Wall")))
     assert "-O2" in seen[-1] and "-O0" not in seen[-1]
     monkeypatch.setenv(build.OPT_LEVEL_ENV, "0")
@@ -87,6 +88,15 @@ def test_the_opt_level_overrides_the_flags_but_not_a_tuned_build_s_and_has_its_o
     tuned = build.build(_spec(tmp_path, 5, cflags=("-O2",), tuned=True))  # a tuned build keeps its flags
     assert "-O2" in seen[-1] and "-O0" not in seen[-1] and not tuned.parent.name.endswith("-O0")
     assert default.exists() and tuned.exists()
+    # the tuned builds' own level: their other flags kept, an entry of its own
+    monkeypatch.setenv(build.TUNED_OPT_LEVEL_ENV, "1")
+    assert build.opt_level(tuned=True) == 1 and build.opt_level() == 0
+    tuned_1 = build.build(_spec(tmp_path, 5, cflags=("-O2", "-Wall"), tuned=True))
+    assert "-O1" in seen[-1] and "-O2" not in seen[-1] and "-Wall" in seen[-1]
+    assert tuned_1.parent.name.endswith("-O1") and ctypes.CDLL(str(tuned_1)).symtrack_answer() == 5
+    monkeypatch.setenv(build.TUNED_OPT_LEVEL_ENV, "3x")
+    with pytest.raises(SimulationError, match="SYMTRACK_TUNED_OPT_LEVEL = '3x' is not one of 0, 1, 2, 3"):
+        build.opt_level(tuned=True)
     monkeypatch.setenv(build.OPT_LEVEL_ENV, "fast")
     with pytest.raises(SimulationError, match="SYMTRACK_OPT_LEVEL = 'fast' is not one of 0, 1, 2, 3"):
         build.opt_level()

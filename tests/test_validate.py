@@ -14,7 +14,7 @@ import pytest
 
 from symtrack.cli.main import main
 from symtrack.foundations.errors import ScenarioError
-from symtrack.soil import density, subsoil
+from symtrack.soil import density, rigid_base, subsoil
 from symtrack.studies import traffic_seasons
 from symtrack.studies import validate as V
 from symtrack.vehicles import tyre
@@ -129,19 +129,48 @@ def test_validate_writes_the_table_figures_and_report(tmp_path, capsys):
 
 # ---- the predictions, computed here another way ------------------------------------------------
 
+# Radon's seven-point rule over a disc (written out here: the centre 1/4, six points at sqrt(2/3) R, 1/8 each)
+def _radon(diameter_m):
+    r = 0.5 * diameter_m * math.sqrt(2 / 3)
+    th = np.arange(6) * np.pi / 3
+    return [(0.0, 0.0, 0.25)] + [(r * math.cos(t), r * math.sin(t), 0.125) for t in th]
+
+
+def test_the_face_rule_integrates_the_disc_exactly_to_degree_5():
+    dx, dy, w = V._face_points(0.1)
+    R = 0.05
+    assert w.sum() == pytest.approx(1.0)
+    # the disc's means: x^2 = R^2/4, x^4 = R^4/8, x^2 y^2 = R^4/24; odd moments 0
+    for f, want in ((dx**2, R**2 / 4), (dy**2, R**2 / 4), (dx**4, R**4 / 8), (dx**2 * dy**2, R**4 / 24),
+                    (dx, 0.0), (dx**3 * dy, 0.0), (dx * dy**2, 0.0)):
+        assert float(np.sum(w * f)) == pytest.approx(want, abs=1e-15)
+    assert np.allclose(np.column_stack([dx, dy, w]), np.array(_radon(0.1)), rtol=0, atol=1e-15)
+    assert V._face_points(0.0)[2].tolist() == [1.0]
+
+
 def test_track_stress_is_the_brute_force_sum_over_the_track(cases):
     c = cases["ansorge2007_stress_track"]
     a = c.nominal()
     got = V.track_stress_by_depth(c.setup, a, c.x)
     l_m, b_m, W = a["contact_length_m"], a["track_width_m"], c.setup["load_kN"]
-    # the point-load sum over the rectangle (subsoil.stress_bruteforce), averaged over the contact length
-    px = np.linspace(-l_m / 2, l_m / 2, 61)
+    H, face = a["rigid_base_depth_m"], a["transducer_face_diameter_m"]
+    assert (H, a["rigid_base_interface"], face) == (0.7, "rough", 0.1)
+    # the point-load sum over the rectangle with the rough base's correction (subsoil.stress_bruteforce),
+    # averaged over the transducer's face and the contact length
+    px = np.linspace(-l_m / 2, l_m / 2, 41)
     pose = (0.0, 0.0, 1.0, 0.0, W * 1e3 / (l_m * b_m), 0.0, 0.0, 0.0)
     geo = (l_m, b_m, 1.0 + b_m, 0.0, 0.1, 0.0)  # another gauge: the second track unloaded either way
     for k, d in enumerate(c.x):
-        s = subsoil.stress_bruteforce(px, np.full(px.shape, geo[2] / 2), pose, geo, d, a["xi"]) / 1e3
-        want = np.trapezoid(s, px) / l_m
+        want = 0.0
+        for dx, dy, w in _radon(face):
+            s = subsoil.stress_bruteforce(px + dx, np.full(px.shape, geo[2] / 2 + dy), pose, geo, d, a["xi"],
+                                          rigid_base_depth_m=H) / 1e3
+            want += w * np.trapezoid(s, px) / l_m
         assert got[k] == pytest.approx(want, rel=5e-3)
+    # below the base there is no soil; without the base, the half-space (the base adds 4-23 % here)
+    assert np.isnan(V.track_stress_by_depth(c.setup, a, [0.75]))[0]
+    half = V.track_stress_by_depth(c.setup, {**a, "rigid_base_depth_m": None}, c.x)
+    assert np.all(got > 1.03 * half) and np.all(got < 1.3 * half)
 
 
 def test_tyre_stress_is_froehlichs_sum_over_kellers_contact(cases):
@@ -151,11 +180,19 @@ def test_tyre_stress_is_froehlichs_sum_over_kellers_contact(cases):
     # the nominal case: the rig's 2 bar is the recommended pressure, so the tyre is rated at the wheel load
     W, p = c.setup["wheel_load_kN"], c.setup["inflation_kPa"]
     con = tyre.contact(tyre.Tyre(c.setup["tyre_width_m"], a["tyre_diameter_m"], W, p), W, p)
-    xs = np.linspace(-con.length_m / 2, con.length_m / 2, 81)
+    H = a["rigid_base_depth_m"]
+    xs = np.linspace(-con.length_m / 2, con.length_m / 2, 41)
     for k, d in enumerate(c.x):
-        s = [float(np.sum(subsoil.frohlich_point(con.force_kN, np.hypot(x - con.x_m, con.y_m), d, a["xi"])))
-             for x in xs]
-        assert got[k] == pytest.approx(np.trapezoid(s, xs) / con.length_m, rel=5e-3)
+        r_grid, dz, _ = rigid_base.correction_profile(d, H, 2.0)
+        want = 0.0
+        for dx, dy, w in _radon(a["transducer_face_diameter_m"]):
+            s = []
+            for x in xs:
+                r = np.hypot(x + dx - con.x_m, dy - con.y_m)
+                s.append(float(np.sum(con.force_kN * (subsoil.frohlich_point(1.0, r, d, a["xi"])
+                                                      + np.interp(r, r_grid, dz)))))
+            want += w * np.trapezoid(s, xs) / con.length_m
+        assert got[k] == pytest.approx(want, rel=5e-3)
 
 
 @pytest.mark.parametrize("yield_line", ["package_default", "none"])
@@ -209,7 +246,7 @@ def test_traffic_shares_are_the_seasons_shares_of_each_system(cases):
 
 @pytest.mark.parametrize("xi", [3.0, 5.0, 8.0])
 def test_below_a_uniform_footprint_the_log_slope_steepens_with_depth(xi):
-    """The stress cases' finding (docs/validation.md): below any uniform rectangle on a homogeneous
+    """The track case's finding (its findings field): below any uniform rectangle on a homogeneous
     half-space the stress's log-log slope steepens with depth, so the track's measured profile, whose
     slope flattens (-1.04 then -0.52 over 250-400-650 mm), is out of the model's reach."""
     depths = (0.25, 0.40, 0.65)

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from ..foundations import caches
 from ..foundations.errors import ParameterError, SymtrackError
 from ..model import SystemModel
 from ..model.static import static_state
@@ -255,6 +256,19 @@ class _TrimProblem:
         return x, wa[len(self.free_all):], res
 
 
+# the problems built (their Functions and rootfinders: about 0.3 s each), per model, parameter vector and settings:
+# the trims of one steering map or continuation on one soil share one (symtrack.foundations.caches)
+_PROBLEMS = caches.cache("trim_problems", 8)
+
+
+def _problem(model: SystemModel, p: np.ndarray, settings: TrimSettings) -> _TrimProblem:
+    key = (id(model), p.tobytes(), settings)
+    hit = _PROBLEMS.get(key)
+    if hit is not None and hit.model is model:  # (an id is reused only after its model is gone)
+        return hit
+    return _PROBLEMS.put(key, _TrimProblem(model, p, settings))
+
+
 def _outputs(model, x, u, p) -> dict:
     y = np.array(model.outputs(x, u, p)).ravel()
     return dict(zip(model.output_names, y, strict=True))
@@ -325,7 +339,7 @@ def trim(model: SystemModel, params: dict, speed_m_s: float, radius_m: float | N
                 f"trim radius_m = {radius_m!r}: |R| must exceed half the track gauge "
                 f"({0.5 * params['track_gauge_m']:g} m); turning on the spot has no steady forward speed")
     p = np.asarray(model.param_vector(params), dtype=float)
-    problem = _TrimProblem(model, p, settings)
+    problem = _problem(model, p, settings)
     w0 = _straight_guess(model, params, problem, speed_m_s, tuple(float(v) for v in pose))
     sol = problem.solve(w0, speed_m_s, 0.0)
     if sol is None:

@@ -114,7 +114,7 @@ def _subsoil_figures(world: World) -> dict:
     fr = subsoil.risk_area_fractions(total, pc, np.ones(loaded.size, dtype=bool), world.grid.cell_m ** 2)
     out = {"subsoil_depths_m": list(depths),
            "subsoil_sigma_z_max_kPa": [1e-3 * float(v) for v in sig.max(axis=0)],
-           "subsoil_precompression_stress_kPa": 1e-3 * float(pc.min()),
+           "subsoil_precompression_stress_min_kPa": 1e-3 * float(pc.min()),
            "subsoil_precompression_stress_by_depth_kPa": [1e-3 * float(v) for v in pc.min(axis=0)],
            "subsoil_loaded_area_m2": float(fr["touched_area_m2"])}
     for name in subsoil.RISK_NAMES:

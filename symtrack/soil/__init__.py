@@ -8,7 +8,8 @@
   track, its history, the work to press a rut); :mod:`.cell`: its mathematics, one terrain cell's
   pressure-sinkage law and cell equation, in CasADi;
 - :mod:`.subsoil`: the vertical stress by depth under the tracks (Söhne / Fröhlich) and the
-  compaction risk against the soil's strength;
+  compaction risk against the soil's strength; :mod:`.rigid_base`: the change a rigid base under
+  a soil layer makes to that stress (an elastic layer's);
 - :mod:`.density`: compression, the bulk density by depth from the stress history;
 - :mod:`.moisture`: the soil on the day, its compression parameters and strength from its water
   content (``[soil.moisture]``).

@@ -67,6 +67,16 @@ on them gives p). Needs xi - 2 in XI_RANGE, i.e. xi >= 3. Below a wide uniform l
 xi / (3 (xi - 2)) of the surface pressure (1 for xi = 3, 5/9 for xi = 5), below a point load to
 sigma_z / 3.
 
+A rigid base
+------------
+``rigid_base_depth_m`` (None: the half-space) puts a rigid base at depth H under a soil layer:
+the stress below a point load is then Fröhlich's plus the base's correction d_sigma_z(r, z) of an
+elastic layer on a rigid base, rough or smooth (:mod:`symtrack.soil.rigid_base`, docs/subsoil.md,
+"A soil layer on a rigid base"). The tables fold it into K(u, t): its integral across the width
+b by Gauss-Legendre (the correction is smooth on the scale 2H - d >= H) of the correction
+interpolated on a radial grid. Depths must be <= H. The tables' reach keeps the correction's tail
+(that of concentration factor 3) above TAIL_FRACTION.
+
 Soil strength and risk
 ----------------------
 Precompression stress from the pedotransfer function of Schjønning & Lamandé (2018)
@@ -84,6 +94,7 @@ import math
 import numpy as np
 
 from ..foundations.errors import ParameterError
+from . import rigid_base
 from .pedotransfer import SL2018
 
 __all__ = ["DEFAULT_DEPTHS_M", "DEFAULT_REACH_M", "MEAN_STRESS_XI_MIN", "MEAN_T_STEP_PER_DEPTH",
@@ -169,6 +180,8 @@ class SubsoilTables:
     track_width_m: float
     track_gauge_m: float
     reach_m: float
+    rigid_base_depth_m: float | None = None  # the rigid base under the soil layer (None: a half-space)
+    rigid_base_interface: str = "rough"  # rigid_base.INTERFACES; used only with a base
 
     @property
     def n_depths(self) -> int:
@@ -188,6 +201,9 @@ class SubsoilTables:
     def to_bytes(self) -> bytes:
         """Everything that defines the tables, as bytes (for a cache key or a file)."""
         head = np.array([self.xi, self.contact_length_m, self.track_width_m, self.track_gauge_m, self.reach_m])
+        if self.rigid_base_depth_m is not None:  # (a half-space's bytes are those of the tables before the base)
+            head = np.append(head, [self.rigid_base_depth_m,
+                                    rigid_base.INTERFACES.index(self.rigid_base_interface)])
         parts = (head, self.depth_m, self.x_step_m, self.t_step_m, self.n_x, self.n_t, self.offset, self.inv_x_step,
                  self.inv_t_step, self.data)
         return b"".join(np.ascontiguousarray(p).tobytes() for p in parts)
@@ -233,13 +249,48 @@ def _grid(extent_m, step_m):
     return n, extent_m / (n - 1)
 
 
+def _check_base(rigid_base_depth_m, rigid_base_interface, depths):
+    """The rigid base's depth (None: a half-space) and interface, checked against the depths."""
+    if rigid_base_depth_m is None:
+        return None, "rough"
+    H = _check_range("rigid_base_depth_m", rigid_base_depth_m, 0.0, 100.0, lo_open=True)
+    if rigid_base_interface not in rigid_base.INTERFACES:
+        raise ParameterError(f"rigid_base_interface = {rigid_base_interface!r} is not one of "
+                             f"{', '.join(rigid_base.INTERFACES)}")
+    below = [float(d) for d in np.atleast_1d(depths) if d > H * (1 + 1e-12)]
+    if below:
+        raise ParameterError(f"depths {below} are below the rigid base at rigid_base_depth_m = {H}: the stress is "
+                             "defined in the soil layer only")
+    return H, rigid_base_interface
+
+
+def _strip_base_correction(u, t, b, r_grid, dz_grid, v_nodes, v_weights):
+    """The rigid base's correction to K(u, t) (:func:`_strip_kernel`): the point correction
+    tabulated on r_grid integrated across the width b (|v| <= b/2) at the nodes v_nodes."""
+    r = np.sqrt(u[:, None, None] ** 2 + (t[None, :, None] - v_nodes[None, None, :]) ** 2)
+    return np.interp(r, r_grid, dz_grid) @ v_weights
+
+
+def _width_nodes(b, length_scale):
+    """Gauss-Legendre nodes and weights across [-b/2, b/2] on panels <= length_scale / 4."""
+    g, w = np.polynomial.legendre.leggauss(_N_U)
+    n = max(1, int(math.ceil(b / (length_scale / 4))))
+    edges = np.linspace(-b / 2, b / 2, n + 1)
+    h = edges[1] - edges[0]
+    return (edges[:-1, None] + 0.5 * h * (1 + g[None, :])).ravel(), np.tile(0.5 * h * w, n)
+
+
 def build_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_width_m=0.45, track_gauge_m=1.5,
                  reach_m=DEFAULT_REACH_M, x_step_per_depth=DEFAULT_X_STEP_PER_DEPTH,
-                 t_step_per_depth=DEFAULT_T_STEP_PER_DEPTH) -> SubsoilTables:
+                 t_step_per_depth=DEFAULT_T_STEP_PER_DEPTH, rigid_base_depth_m=None,
+                 rigid_base_interface="rough") -> SubsoilTables:
     """The (H0, H1) tables (module doc) at each depth for concentration factor xi and the track
     geometry l = contact_length_m, b = track_width_m, B = track_gauge_m. Grid steps
-    x_step_per_depth * depth along s, t_step_per_depth * depth across."""
+    x_step_per_depth * depth along s, t_step_per_depth * depth across. ``rigid_base_depth_m``: a
+    rigid base under the soil layer, ``rigid_base_interface`` "rough" or "smooth" (module doc, "A
+    rigid base"; None: a half-space)."""
     d_all = _check_depths(depths_m)
+    H_base, interface = _check_base(rigid_base_depth_m, rigid_base_interface, d_all)
     xi = _check_xi(xi)
     l_m = _check_range("contact_length_m", contact_length_m, 0.0, 20.0, lo_open=True)
     b_m = _check_range("track_width_m", track_width_m, 0.0, 5.0, lo_open=True)
@@ -255,6 +306,9 @@ def build_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_
     # beyond D the kernel's tail is below TAIL_FRACTION of the surface pressure (module doc)
     c_xi = math.sqrt(math.pi) * math.gamma((xi + 1) / 2) / (2 * math.pi * math.gamma((xi + 2) / 2))
     tail_per_depth = (c_xi / TAIL_FRACTION) ** (1.0 / xi)
+    if H_base is not None:  # the base's correction has the tail of concentration factor 3
+        c3 = math.sqrt(math.pi) * math.gamma(2.0) / (2 * math.pi * math.gamma(2.5))
+        tail_per_depth = max(tail_per_depth, (c3 / TAIL_FRACTION) ** (1.0 / 3.0))
     steps_x, steps_t, nxs, nts, offs, blocks = [], [], [], [], [], []
     off = 0
     for d in d_all:
@@ -263,6 +317,10 @@ def build_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_
         # panels of the u integral: the grid's intervals, cut to <= d/4
         sub = max(1, int(math.ceil(dx / (d / 4))))
         t = np.arange(n_t) * dt
+        if H_base is not None:
+            r_grid, dz_grid, _ = rigid_base.correction_profile(
+                d, H_base, math.hypot((n_x - 1) * dx, (n_t - 1) * dt + b_m / 2) + 1e-9, interface)
+            v_nodes, v_weights = _width_nodes(b_m, 2 * H_base - d)
         H = np.zeros((n_x, n_t, 2))
         for i in range(n_x - 1):
             a0 = i * dx
@@ -271,6 +329,8 @@ def build_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_
             u = (lo[:, None] + 0.5 * h * (1 + u_nodes[None, :])).ravel()
             w = np.tile(0.5 * h * u_weights, sub)
             K = _strip_kernel(u, t, d, b_m, xi, phi_nodes, phi_weights)
+            if H_base is not None:
+                K = K + _strip_base_correction(u, t, b_m, r_grid, dz_grid, v_nodes, v_weights)
             H[i + 1, :, 0] = H[i, :, 0] + w @ K
             H[i + 1, :, 1] = H[i, :, 1] + (w * u) @ K
         steps_x.append(dx)
@@ -285,7 +345,8 @@ def build_tables(depths_m=DEFAULT_DEPTHS_M, xi=5.0, contact_length_m=2.4, track_
                          inv_t_step=1.0 / steps_t,
                          n_x=np.array(nxs, dtype=np.int32), n_t=np.array(nts, dtype=np.int32),
                          offset=np.array(offs, dtype=np.int64), data=np.concatenate(blocks), xi=xi,
-                         contact_length_m=l_m, track_width_m=b_m, track_gauge_m=B_m, reach_m=reach)
+                         contact_length_m=l_m, track_width_m=b_m, track_gauge_m=B_m, reach_m=reach,
+                         rigid_base_depth_m=H_base, rigid_base_interface=interface)
 
 
 MEAN_STRESS_XI_MIN = XI_RANGE[0] + 2.0
@@ -386,12 +447,16 @@ def stress_at(T: SubsoilTables, px, py, a, geo) -> np.ndarray:
     return out
 
 
-def stress_bruteforce(px, py, a, geo, depth_m, xi, n_per_depth=4, n_gauss=4) -> np.ndarray:
+def stress_bruteforce(px, py, a, geo, depth_m, xi, n_per_depth=4, n_gauss=4, rigid_base_depth_m=None,
+                      rigid_base_interface="rough") -> np.ndarray:
     """Independent reference for :func:`stress_at` (tests): :func:`frohlich_point` summed over both
     contact rectangles by composite Gauss-Legendre in (s, t) with panels <= depth / n_per_depth
-    and the s-range cut at the kink of the clamped pressure line. Returns (n_points,) [Pa]."""
+    and the s-range cut at the kink of the clamped pressure line; with ``rigid_base_depth_m`` each
+    point load also carries the base's correction (:func:`symtrack.soil.rigid_base.point_correction`,
+    interpolated on its radial profile). Returns (n_points,) [Pa]."""
     d = _check_range("depth_m", depth_m, 0.0, 10.0, lo_open=True)
     xi = _check_xi(xi)
+    H_base, interface = _check_base(rigid_base_depth_m, rigid_base_interface, [d])
     px = np.atleast_1d(np.asarray(px, dtype=float))
     py = np.atleast_1d(np.asarray(py, dtype=float))
     X, Y, c, s = (float(v) for v in a[:4])
@@ -420,9 +485,15 @@ def stress_bruteforce(px, py, a, geo, depth_m, xi, n_per_depth=4, n_gauss=4) -> 
         wx = X + c * bx - s * by
         wy = Y + s * bx + c * by
         Q = (p * ws)[:, None] * wt[None, :]
+        if H_base is not None:
+            reach = math.hypot(float(np.ptp(np.concatenate([wx.ravel(), px]))),
+                               float(np.ptp(np.concatenate([wy.ravel(), py]))))
+            r_grid, dz_grid, _ = rigid_base.correction_profile(d, H_base, reach + 1e-9, interface)
         for n in range(px.size):
-            r2 = (wx - px[n]) ** 2 + (wy - py[n]) ** 2
-            out[n] += float(np.sum(frohlich_point(Q, np.sqrt(r2), d, xi)))
+            r = np.sqrt((wx - px[n]) ** 2 + (wy - py[n]) ** 2)
+            out[n] += float(np.sum(frohlich_point(Q, r, d, xi)))
+            if H_base is not None:
+                out[n] += float(np.sum(Q * np.interp(r, r_grid, dz_grid)))
     return out
 
 

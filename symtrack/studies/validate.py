@@ -87,21 +87,78 @@ def _track_frame_points(length_m, fraction, n=80):
     return 0.5 * (edges[:-1] + edges[1:])
 
 
+def _value(setup: dict, a: dict, name: str, default=None):
+    """An input a case gives as an assumption or, failing that, in its setup (else the default)."""
+    return a.get(name, setup.get(name, default))
+
+
+def _rigid_base(setup: dict, a: dict):
+    """The rigid base under the soil layer: (``rigid_base_depth_m`` or None for a half-space,
+    ``rigid_base_interface``), each an assumption or a setup value."""
+    H = _value(setup, a, "rigid_base_depth_m")
+    return (None if H is None else float(H)), str(_value(setup, a, "rigid_base_interface", "rough"))
+
+
+def _face_points(diameter_m: float):
+    """Offsets (dx, dy) [m] and weights (sum 1) over a disc of diameter_m, the transducer's face over
+    which its reading averages the vertical stress: Radon's seven-point rule, exact for polynomials
+    of degree 5 (the centre 1/4; six points at sqrt(2/3) of the radius, 1/8 each;
+    Radon 1948). One point when the diameter is 0."""
+    if diameter_m <= 0.0:
+        return np.zeros(1), np.zeros(1), np.ones(1)
+    r = 0.5 * diameter_m * math.sqrt(2.0 / 3.0)
+    th = np.pi / 3.0 * np.arange(6)
+    return (np.concatenate([[0.0], r * np.cos(th)]), np.concatenate([[0.0], r * np.sin(th)]),
+            np.array([0.25] + [0.125] * 6))
+
+
+def _fold_y(dx, dy, w):
+    """The face's points for a field symmetric in y about the points' line: each (dx, -dy) merged
+    into (dx, dy), its weight added."""
+    keys = [(round(float(x), 12), round(abs(float(y)), 12)) for x, y in zip(dx, dy, strict=True)]
+    merged: dict = {}
+    for k, wk in zip(keys, w, strict=True):
+        merged[k] = merged.get(k, 0.0) + float(wk)
+    return (np.array([k[0] for k in merged]), np.array([k[1] for k in merged]), np.array(list(merged.values())))
+
+
+def _in_layer(depths_m, base_m):
+    """The depths as an array and the mask of those in the soil layer (all without a base)."""
+    d = np.atleast_1d(np.asarray(depths_m, dtype=float))
+    return d, (np.ones(d.shape, bool) if base_m is None else d <= base_m * (1.0 + 1e-12))
+
+
 def track_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
     """Vertical stress [kPa] at ``depths_m`` below the middle of one rigid track unit of length
     ``a["contact_length_m"]`` and width ``a["track_width_m"]`` carrying ``setup["load_kN"]`` at uniform
     pressure, averaged over the passage window (``a["averaging_window_fraction"]`` of the contact
     length, centred on the track): :func:`symtrack.soil.subsoil.stress_at` on the engine's tables
-    (concentration factor ``a["xi"]``); the second track of the tables is left unloaded."""
+    (concentration factor ``a["xi"]``); the second track of the tables is left unloaded. Optional
+    inputs (assumptions or setup values): ``rigid_base_depth_m`` and ``rigid_base_interface``, a
+    rigid base under the soil (NaN below it); ``transducer_face_diameter_m``, the stress averaged
+    over the transducer's face (:func:`_face_points`)."""
     l_m, b_m = float(a["contact_length_m"]), float(a["track_width_m"])
     p_Pa = float(setup["load_kN"]) * KPA / (l_m * b_m)
     gauge_m = b_m  # the unloaded second track beside it: nothing of it enters the sum
-    T = subsoil.build_tables(tuple(float(d) for d in depths_m), float(a["xi"]), l_m, b_m, gauge_m)
+    base_m, interface = _rigid_base(setup, a)
+    depths, inside = _in_layer(depths_m, base_m)
+    out = np.full(depths.shape, np.nan)
+    if not inside.any():
+        return out
+    T = subsoil.build_tables(tuple(float(d) for d in depths[inside]), float(a["xi"]), l_m, b_m, gauge_m,
+                             rigid_base_depth_m=base_m, rigid_base_interface=interface)
     pose = (0.0, 0.0, 1.0, 0.0, p_Pa, 0.0, 0.0, 0.0)  # left track loaded, uniform; right track unloaded
     geo = (l_m, b_m, gauge_m, 0.0, 0.1, 0.0)
     px = _track_frame_points(l_m, float(a["averaging_window_fraction"]))
     py = np.full(px.shape, gauge_m / 2 + float(setup.get("lateral_offset_m", 0.0)))
-    return subsoil.stress_at(T, px, py, pose, geo).mean(axis=0) / KPA
+    face = float(_value(setup, a, "transducer_face_diameter_m", 0.0))
+    if face > 0.0:
+        dx, dy, w = _face_points(face)
+        s = subsoil.stress_at(T, (px[:, None] + dx).ravel(), (py[:, None] + dy).ravel(), pose, geo)
+        out[inside] = np.einsum("pfk,f->pk", s.reshape(px.size, w.size, -1), w).mean(axis=0) / KPA
+    else:
+        out[inside] = subsoil.stress_at(T, px, py, pose, geo).mean(axis=0) / KPA
+    return out
 
 
 def tyre_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
@@ -109,7 +166,8 @@ def tyre_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
     :func:`symtrack.vehicles.tyre.contact`; Söhne / Fröhlich summed over it with concentration factor
     ``a["xi"]``), averaged over the passage window (``a["averaging_window_fraction"]`` of the contact
     length). The tyre is rated so that ``a["recommended_inflation_kPa"]`` is its recommended pressure at
-    the wheel load."""
+    the wheel load. The optional inputs of :func:`track_stress_by_depth` (a rigid base, the
+    transducer's face) act the same way."""
     W = float(setup["wheel_load_kN"])
     p_i, p_rec = float(setup["inflation_kPa"]), float(a["recommended_inflation_kPa"])
     p_max = max(p_i, p_rec)
@@ -119,9 +177,20 @@ def tyre_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
     c = tyre.contact(t, W, p_i)
     px = _track_frame_points(c.length_m, float(a["averaging_window_fraction"]), n=40)
     py = np.full(px.shape, float(setup.get("lateral_offset_m", 0.0)))
-    sz, _ = tyre.footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, px, py, tuple(float(d) for d in depths_m),
-                                           float(a["xi"]))
-    return sz.mean(axis=0)
+    base_m, interface = _rigid_base(setup, a)
+    depths, inside = _in_layer(depths_m, base_m)
+    out = np.full(depths.shape, np.nan)
+    if not inside.any():
+        return out
+    dx, dy, w = _face_points(float(_value(setup, a, "transducer_face_diameter_m", 0.0)))
+    if float(setup.get("lateral_offset_m", 0.0)) == 0.0:  # Keller's contact is symmetric in y: fold the face
+        dx, dy, w = _fold_y(dx, dy, w)
+    sz, _ = tyre.footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, (px[:, None] + dx).ravel(),
+                                           (py[:, None] + dy).ravel(), tuple(float(d) for d in depths[inside]),
+                                           float(a["xi"]), rigid_base_depth_m=base_m, rigid_base_interface=interface,
+                                           mean_stress=False)
+    out[inside] = np.einsum("pfk,f->pk", sz.reshape(px.size, w.size, -1), w).mean(axis=0)
+    return out
 
 
 def density_change_vs_contact_pressure(setup: dict, a: dict, pressures_kPa) -> np.ndarray:

@@ -3,6 +3,7 @@ through :func:`build` (:mod:`symtrack.toolchain.cache`)."""
 
 from .cache import (
     OPT_LEVEL_ENV,
+    TUNED_OPT_LEVEL_ENV,
     BuildSpec,
     Built,
     LockBusy,
@@ -21,6 +22,7 @@ from .cache import (
     set_require_compiled,
 )
 
-__all__ = ["OPT_LEVEL_ENV", "BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root", "casadi_tag",
+__all__ = ["OPT_LEVEL_ENV", "TUNED_OPT_LEVEL_ENV", "BuildSpec", "Built", "LockBusy", "build", "builds", "cache_root",
+           "casadi_tag",
            "compiled_required", "compiler", "digest", "file_lock", "find_compiler", "native_cflags", "opt_level",
            "require_compiler", "set_require_compiled"]

@@ -19,7 +19,8 @@ A load the model cannot carry (r >= 1) is refused.
 
 Stress at depth: the project's Söhne / Fröhlich point formula (:func:`symtrack.soil.subsoil.frohlich_point`)
 summed over the contact cut into square elements; the mean normal stress is
-xi / (3 (xi - 2)) sigma_z(xi - 2) (subsoil.py's identity for the trace of the radial stress).
+xi / (3 (xi - 2)) sigma_z(xi - 2) (subsoil.py's identity for the trace of the radial stress). Over a
+rigid base each element also carries the base's correction (:mod:`symtrack.soil.rigid_base`).
 
 Load and inflation: a tyre carries its rated load W_max at its rated pressure p_max (its load index
 and the pressure it is rated at, from the tyre's data sheet); at a lower pressure it carries
@@ -39,6 +40,7 @@ import numpy as np
 
 from ..foundations import caches
 from ..foundations.errors import ParameterError
+from ..soil import rigid_base
 from ..soil.subsoil import frohlich_point
 
 __all__ = ["INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "Tyre", "contact", "footprint_stress_at_depth",
@@ -182,11 +184,15 @@ def contact(tyre: Tyre, wheel_load_kN, inflation_kPa, element_m=0.01) -> Contact
     return Contact(L, b, area, smax, alpha, p_rec, h, X[keep], Y[keep], F, n)
 
 
-def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=256):
+def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=256, rigid_base_depth_m=None,
+                              rigid_base_interface="rough", mean_stress=True):
     """Vertical and mean normal stress [kPa] (two arrays (n_points, n_depths)) at the points (px, py)
     below a set of surface point forces [kN] at (x_m, y_m): Söhne / Fröhlich summed
     (:func:`~symtrack.soil.subsoil.frohlich_point`); the mean normal stress by the identity
-    p(xi) = xi / (3 (xi - 2)) sigma_z(xi - 2) (needs xi >= 3)."""
+    p(xi) = xi / (3 (xi - 2)) sigma_z(xi - 2) (needs xi >= 3). ``rigid_base_depth_m``: a rigid base
+    under the soil layer, ``rigid_base_interface`` "rough" or "smooth"; each force then also carries
+    the base's corrections to both stresses (:func:`symtrack.soil.rigid_base.point_correction`;
+    None: a half-space). ``mean_stress=False`` skips the mean normal stress (returned as zeros)."""
     xi = float(xi)
     if not 3.0 <= xi <= 10.0:
         raise ParameterError(f"xi = {xi!r} is outside the allowed range [3, 10] (the mean normal stress needs "
@@ -194,13 +200,24 @@ def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=25
     px, py = np.atleast_1d(np.asarray(px, float)), np.atleast_1d(np.asarray(py, float))
     x, y, F = (np.asarray(v, float).ravel() for v in (x_m, y_m, force_kN))
     d = np.atleast_1d(np.asarray(depths_m, float))
+    profiles = None
+    if rigid_base_depth_m is not None:
+        reach = math.hypot(float(np.ptp(np.concatenate([x, px]))), float(np.ptp(np.concatenate([y, py]))))
+        profiles = [rigid_base.correction_profile(z, rigid_base_depth_m, reach + 1e-9, rigid_base_interface)
+                    for z in d]
     sz = np.zeros((px.size, d.size))
     pm = np.zeros((px.size, d.size))
     for a in range(0, px.size, chunk):
         r = np.hypot(px[a:a + chunk, None] - x[None, :], py[a:a + chunk, None] - y[None, :])
         for k, z in enumerate(d):
             sz[a:a + chunk, k] = frohlich_point(F[None, :], r, z, xi).sum(axis=1)
-            pm[a:a + chunk, k] = xi / (3 * (xi - 2)) * frohlich_point(F[None, :], r, z, xi - 2).sum(axis=1)
+            if mean_stress:
+                pm[a:a + chunk, k] = xi / (3 * (xi - 2)) * frohlich_point(F[None, :], r, z, xi - 2).sum(axis=1)
+            if profiles is not None:
+                r_grid, dz, dp = profiles[k]
+                sz[a:a + chunk, k] += (F[None, :] * np.interp(r, r_grid, dz)).sum(axis=1)
+                if mean_stress:
+                    pm[a:a + chunk, k] += (F[None, :] * np.interp(r, r_grid, dp)).sum(axis=1)
     return sz, pm
 
 
