@@ -23,8 +23,8 @@ from ..model.layout import ContactPose, StateLayout, VehicleState
 from .base import VehicleModel
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
-           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SHEAR_LAWS", "SLIP_SPEED_SCALE_M_S",
-           "TRACKS", "TRACK_SOIL_PARAMS", "TRACK_SOIL_PARAM_NAMES", "VEHICLE_PARAMS", "VEHICLE_STATES",
+           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SHEAR_LAWS", "SHEAR_UNLOADING_TIME_MIN_S",
+           "SLIP_SPEED_SCALE_M_S", "TRACKS", "TRACK_SOIL_PARAMS", "TRACK_SOIL_PARAM_NAMES", "VEHICLE_PARAMS", "VEHICLE_STATES",
            "codegen_options", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes", "integrate_track",
            "internal_resistance_N", "lateral_resistance_max_N", "lateral_shear_rates", "mean_ground_pressure_Pa",
            "quadrature_is_mapped", "quadrature_points", "shear_eq2_rate", "shear_exchange_speed", "shear_forces",
@@ -443,6 +443,18 @@ def shear_exchange_speed(omega, opts):
 # its denominator 1 - e^-x (1 + x) is x^2 / 2 to leading order; at 1e-3 the series' error is 1e-10)
 _UNLOADING_SERIES_BELOW = 1e-3
 
+# The shortest time constant of the mean shear displacement's elastic unloading [s]: the unloading term of
+# shear_rate, M(j) times the slip, is bounded smoothly by |j| / this (u / sqrt(1 + (u / u_max)^2)), so that j
+# runs back towards 0 no faster than exp(-t / 1 ms). Far beyond K the ratio M ~ 2 j^2 / K^2 is huge (1500 at
+# j = 55 K, 13600 at the 165 K of a spinning track's l / 2) and grows with j, and it switches on within
+# sliding_smoothing of the slip's reversal: the unbounded term's Jacobian (4 j slip / K^2, 10^4-10^5 1/s at a
+# 3D hull's landing on hard soil) outran the compiled Rosenbrock's linearly implicit steps even at 1/64 of
+# the 10 ms step, and its states went non-finite where eq. (2) on unloading too finished (the physics
+# fuzzer, docs/model.md). Within the bound (|slip| M < |j| / 1 ms: 1 m/s of reversed slip from j = 55 K of
+# a K = 8 mm soil is at 0.3 of it) the unloading is the elastic one; beyond it the stress falls from its
+# plateau within a few ms instead of at once (from 165 K to K in ln(165) ms = 5 ms).
+SHEAR_UNLOADING_TIME_MIN_S = 1e-3
+
 
 def shear_unloading_ratio(j, K, opts):
     """M(j) = S'(0) / S'(j) >= 1: the ratio of the initial slope of Ferretti & Girelli's tractive-effort shape
@@ -473,7 +485,10 @@ def shear_rate(j, omega, v_track, r, l, K, opts):
     slip = r * omega - v_track
     tread = r * ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
     against = 0.5 * (1 - direction(slip / tread * traction_sign(j, opts), opts.sliding_smoothing, opts))
-    return shear_eq2_rate(j, omega, v_track, r, l, opts) + (shear_unloading_ratio(j, K, opts) - 1) * against * slip
+    unload = (shear_unloading_ratio(j, K, opts) - 1) * against * slip
+    # no faster than |j| / SHEAR_UNLOADING_TIME_MIN_S (a smooth bound; module constant's note)
+    bound = ca.sqrt(j**2 + opts.shear_smoothing_m**2) / SHEAR_UNLOADING_TIME_MIN_S
+    return shear_eq2_rate(j, omega, v_track, r, l, opts) + unload / ca.sqrt(1 + (unload / bound) ** 2)
 
 
 def shear_eq2_rate(j, omega, v_track, r, l, opts):
