@@ -143,3 +143,31 @@ def test_3d_at_rest_across_a_side_slope_stays_bounded_on_the_fixed_step():
     out = fuzz.check_case(doc, {"variant": "3d-shear-side8", "programme": "zero", "flat": False}, reference=REFERENCE)
     assert not out.failed, out.messages
     assert out.status["accuracy"] == "pass" and out.figures["fixed_step_error_max"] <= 1.0, out.figures
+
+
+def test_a_3d_hull_landing_on_hard_soil_with_its_tracks_reversed_stays_finite_on_the_fixed_step(monkeypatch):
+    """From the long run (seed 37, case 3; the first 1.3 s of it): a 7.9 t crawler on the Chrono hard soil
+    (n = 1.23, K = 7.9 mm) at 5727 N m, reversed to -5404/-4800 N m at 0.93 s: the tracks spin backwards
+    while the body still rolls forwards at 2.5 m/s, and the hull, rung by the reversal on the stiff soil,
+    leaves the ground and lands (1.10-1.26 s) with the tracks' mean shear displacement at -0.43 m (55 K)
+    just when their slip reverses against it. The elastic unloading's ratio M(j) ~ 2 j^2 / K^2 (1500
+    there) switched on within the sliding smoothing and the compiled Rosenbrock's states went non-finite at
+    1.27 s even in steps of 1/64 of the 10 ms step (CVODES finished), where eq. (2) on unloading too
+    finished. With the unloading's rate bounded by |j| / 1 ms (planar.SHEAR_UNLOADING_TIME_MIN_S) the run
+    finishes with finite, bounded states (its own error estimate flags the landings, as on eq. 2)."""
+    doc = {"name": "fuzz-regression", "run": {"duration_s": 1.3, "output_dt_s": 0.01, "integrator": "rosenbrock"},
+           "model": {"lateral_law": "shear", "vehicle": "3d"},
+           "vehicle": {"preset": "reference_crawler", "mass_kg": 7904.6, "track_gauge_m": 1.675,
+                       "track_width_m": 0.44194, "contact_length_m": 2.58, "yaw_inertia_kg_m2": 10302.0,
+                       "sprocket_radius_m": 0.40753, "cg_height_m": 0.5906, "cg_ahead_of_contact_centre_m": -0.010243,
+                       "sprocket_inertia_kg_m2": 52.662, "torque_time_constant_s": 0.058944,
+                       "lateral_friction_coeff": 0.52603, "lateral_creep_speed_m_s": 0.0098481},
+           "soil": {"preset": "chrono_hard", "bekker_n": 1.2267, "k_phi_N_per_m_n2": 23643000.0,
+                    "friction_angle_rad": 0.31372, "shear_modulus_K_m": 0.0078869},
+           "torque": [{"t_s": 0.0, "left_N_m": 5726.5, "right_N_m": 5726.5},
+                      {"t_s": 0.9315, "left_N_m": -5404.0, "right_N_m": -4799.8}]}
+    monkeypatch.setattr(fuzz, "RUN_TIMEOUT_S", 600.0)  # the property is the states, not the wall time under load
+    out = fuzz.CaseOutcome(doc, {"variant": "3d-shear", "programme": "reversal", "flat": True})
+    res = fuzz._run(doc, out, "rosenbrock")
+    assert res is not None and not out.failed, out.messages
+    assert res.runs[-1].t[-1] == pytest.approx(1.3)

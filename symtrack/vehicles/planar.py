@@ -24,7 +24,8 @@ from .base import VehicleModel
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
            "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SHEAR_LAWS", "SHEAR_UNLOADING_TIME_MIN_S",
-           "SLIP_SPEED_SCALE_M_S", "TRACKS", "TRACK_SOIL_PARAMS", "TRACK_SOIL_PARAM_NAMES", "VEHICLE_PARAMS", "VEHICLE_STATES",
+           "SLIP_SPEED_SCALE_M_S", "TRACKS", "TRACK_SOIL_PARAMS", "TRACK_SOIL_PARAM_NAMES", "VEHICLE_PARAMS",
+           "VEHICLE_STATES",
            "codegen_options", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes", "integrate_track",
            "internal_resistance_N", "lateral_resistance_max_N", "lateral_shear_rates", "mean_ground_pressure_Pa",
            "quadrature_is_mapped", "quadrature_points", "shear_eq2_rate", "shear_exchange_speed", "shear_forces",
