@@ -150,7 +150,7 @@ def test_a_3d_hull_landing_on_hard_soil_with_its_tracks_reversed_stays_finite_on
     (n = 1.23, K = 7.9 mm) at 5727 N m, reversed to -5404/-4800 N m at 0.93 s: the tracks spin backwards
     while the body still rolls forwards at 2.5 m/s, and the hull, rung by the reversal on the stiff soil,
     leaves the ground and lands (1.10-1.26 s) with the tracks' mean shear displacement at -0.43 m (55 K)
-    just when their slip reverses against it. The elastic unloading's ratio M(j) ~ 2 j^2 / K^2 (1500
+    just when their slip reverses against it. The elastic unloading's ratio M(j) ~ 2 j^2 / K^2 (6000
     there) switched on within the sliding smoothing and the compiled Rosenbrock's states went non-finite at
     1.27 s even in steps of 1/64 of the 10 ms step (CVODES finished), where eq. (2) on unloading too
     finished. With the unloading's rate bounded by |j| / 1 ms (planar.SHEAR_UNLOADING_TIME_MIN_S) the run

@@ -445,15 +445,18 @@ def shear_exchange_speed(omega, opts):
 _UNLOADING_SERIES_BELOW = 1e-3
 
 # The shortest time constant of the mean shear displacement's elastic unloading [s]: the unloading term of
-# shear_rate, M(j) times the slip, is bounded smoothly by |j| / this (u / sqrt(1 + (u / u_max)^2)), so that j
-# runs back towards 0 no faster than exp(-t / 1 ms). Far beyond K the ratio M ~ 2 j^2 / K^2 is huge (1500 at
-# j = 55 K, 13600 at the 165 K of a spinning track's l / 2) and grows with j, and it switches on within
-# sliding_smoothing of the slip's reversal: the unbounded term's Jacobian (4 j slip / K^2, 10^4-10^5 1/s at a
-# 3D hull's landing on hard soil) outran the compiled Rosenbrock's linearly implicit steps even at 1/64 of
-# the 10 ms step, and its states went non-finite where eq. (2) on unloading too finished (the physics
-# fuzzer, docs/model.md). Within the bound (|slip| M < |j| / 1 ms: 1 m/s of reversed slip from j = 55 K of
-# a K = 8 mm soil is at 0.3 of it) the unloading is the elastic one; beyond it the stress falls from its
-# plateau within a few ms instead of at once (from 165 K to K in ln(165) ms = 5 ms).
+# shear_rate, u = (M(j) - 1) times the slip, is bounded smoothly by u_max = sqrt(j^2 + K^2) / this (u / sqrt(1 +
+# (u / u_max)^2)), so that j far beyond K runs back towards 0 no faster than exp(-t / 1 ms). Far beyond K the
+# ratio M ~ 2 j^2 / K^2 is huge (6000 at j = 55 K, 54000 at the 165 K of a spinning track's l / 2) and it
+# switches on within sliding_smoothing of the slip's reversal: the unbounded term (its Jacobian 4 j slip / K^2,
+# 10^4-10^5 1/s at a 3D hull's landing on hard soil) outran the compiled Rosenbrock's linearly implicit steps
+# even at 1/64 of the 10 ms step, and its states went non-finite where eq. (2) on unloading too finished (the
+# physics fuzzer, docs/model.md). Below K the bound leaves the elastic unloading as it is (at j = K and 1 m/s
+# of reversed slip u is 0.21 of it, the rate 2 % slower; at 0.1 m/s 0.02 %); far beyond K it binds, and the
+# stress falls from its plateau within a few ms instead of at once (from 165 K to K in about ln(165) ms =
+# 5 ms). (The floor K, not a smaller one: near j = 0 a bound that varies on the scale of shear_smoothing_m is a
+# sharp curvature on which CVODES's step choices amplify rounding: a plane's raster against the plane 1.2e-6
+# apart with the floor 1 um, 5e-8 without the bound.)
 SHEAR_UNLOADING_TIME_MIN_S = 1e-3
 
 
@@ -487,8 +490,8 @@ def shear_rate(j, omega, v_track, r, l, K, opts):
     tread = r * ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
     against = 0.5 * (1 - direction(slip / tread * traction_sign(j, opts), opts.sliding_smoothing, opts))
     unload = (shear_unloading_ratio(j, K, opts) - 1) * against * slip
-    # no faster than |j| / SHEAR_UNLOADING_TIME_MIN_S (a smooth bound; module constant's note)
-    bound = ca.sqrt(j**2 + opts.shear_smoothing_m**2) / SHEAR_UNLOADING_TIME_MIN_S
+    # no faster than sqrt(j^2 + K^2) / SHEAR_UNLOADING_TIME_MIN_S (a smooth bound; the constant's note)
+    bound = ca.sqrt(j**2 + K**2) / SHEAR_UNLOADING_TIME_MIN_S
     return shear_eq2_rate(j, omega, v_track, r, l, opts) + unload / ca.sqrt(1 + (unload / bound) ** 2)
 
 
