@@ -72,7 +72,8 @@ def test_the_standalone_programs_run_the_default_law(tmp_path):
         assert got[k] == pytest.approx(ref[k], rel=1e-9, abs=1e-12), k
     # the largest error estimate of a step, kept above its tolerance after the halvings (2.36 at 4.18 s, after
     # the idle instant): a difference of the stages over the tolerance, whose rounding the two builds amplify
-    # differently (measured 1.6e-9 relative; the states agree to 1e-9)
+    # differently (measured 3.3e-9 relative, 2.7e-10 without the elastic unloading's switch, where the
+    # tolerance was 1e-9; the states agree to 1e-9)
     assert got["fixed_step_error_max"] == pytest.approx(ref["fixed_step_error_max"], rel=1e-8)
     assert 10.0 < got["yaw_final_deg"] < 20.0  # the default law's turn (docs/validation-run.md)
     rows = grid_standalone.run(grid_standalone.build(tmp_path))
