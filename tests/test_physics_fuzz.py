@@ -114,7 +114,8 @@ def test_a_coast_after_spinning_tracks_gains_no_energy():
     """Shrunk from the long run: the reference crawler on the validation's clay, 6000 N m on both sprockets
     for 1 s (the tracks spin: tread 17.5 m/s, body 3.5 m/s, shear displacement 0.95 m = 63 K), then 0 N m.
     When the tread has slowed to the body's speed the slip reverses and the soil under the tracks unloads
-    elastically from the stress it carries (docs/model.md, "Shear displacement"): the force turns against
+    elastically from the stress it carries (docs/model.md, "Track kinematics and shear displacement"): the
+    force turns against
     the motion within a step and the body coasts. With the tractive force a function of the mean shear
     displacement alone (eq. 2 on unloading too) the force stayed forward while the displacement ran back from
     0.95 m to 0: the body went on accelerating to 5.4 m/s and the kinetic energy rose by some 9.4 kJ beyond
@@ -133,9 +134,10 @@ def test_3d_at_rest_across_a_side_slope_stays_bounded_on_the_fixed_step():
     estimate stayed above its tolerance after the halvings, and the run diverged (stopped by the speed limit
     at 2.6e6 m/s; in the other cases complete with tread speeds of hundreds of m/s and the hull rolled over, or
     stopped on a non-finite state) where CVODES held the vehicle. With the elastic unloading of the shear
-    (docs/model.md, "Shear displacement") both hold it; with the soil's damping on the shear states as well
-    ("Shear damping") the fixed step holds it within its own tolerance (measured: error estimate 0.98 of the
-    tolerance, 5 steps halved; 3000 x and 289 halved without the damping)."""
+    (docs/model.md, "Track kinematics and shear displacement") both hold it; with the soil's damping on the
+    shear states as well ("Lateral resistance and turning", shear damping) the fixed step holds it within its
+    own tolerance (measured: error estimate 0.98 of the tolerance, 5 steps halved; 3000 x and 289 halved
+    without the damping)."""
     doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 0.0, 0.0)], soil="sandy_loam_15", duration=0.855,
                vehicle={"cg_ahead_of_contact_centre_m": 0.063973, "sprocket_inertia_kg_m2": 10.0},
                surface={"slope_y_deg": 8.0})

@@ -136,7 +136,7 @@ def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures():
     """The compiled call-node Rosenbrock (0.5 ms steps: its own error 1e-8, where 1 ms steps leave
     2e-4 on the sinkage) against tight CVODES on the expanded model: measured within 1.4e-8, the idle
     track's shear minimum apart: 1.2e-6 (its path crosses the soil's switch from loading to unloading
-    at the idle instant, a kink where the fixed step is of second order; docs/model.md, "Shear
+    at the idle instant, a kink where the fixed step is of second order; docs/model.md, "Track kinematics and shear
     displacement"; 7.9e-9 without the elastic unloading, where its tolerance was 1e-6)."""
     figures = ("distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm",
                "sinkage_idler_mm", "shear_driven_max_m", "shear_idle_min_m", "speed_final_m_s")

@@ -282,7 +282,8 @@ def test_the_compiled_rosenbrock_converges_in_the_step_to_cvodes():
     """The validation on the 3D vehicle: the compiled Rosenbrock at 10 ms and 5 ms against CVODES at
     reltol 1e-8 (at 16 segments, the model of the test above: one build for both). The worst figure is the
     idle track's shear minimum, whose path crosses the soil's switch from loading to unloading when the
-    track is declutched (docs/model.md, "Shear displacement": the unloading is stiffer than the loading, a
+    track is declutched (docs/model.md, "Track kinematics and shear displacement": the unloading is stiffer
+    than the loading, a
     kink in dj/dt, where a fixed step is of second order): measured 3.7e-4 at 10 ms, 1.1e-4 at 5 ms (a
     ratio of 3.5; 6.6 before the elastic unloading, without the kink); every other figure within 7e-6."""
     def figs(sets):

@@ -474,8 +474,9 @@ def shear_unloading_ratio(j, K, opts):
 
 def shear_rate(j, omega, v_track, r, l, K, opts):
     """dj/dt of a track's mean shear displacement j (Ferretti & Girelli's eq. 2, elastic on unloading;
-    docs/model.md, "Shear displacement"). While the track slides in the sense of j (loading) it is eq. (2),
-    -(2 r |omega| / l) j + r omega - v_k (|omega| as :func:`shear_exchange_speed`): elements leave the
+    docs/model.md, "Track kinematics and shear displacement"). While the track slides in the sense of j
+    (loading) it is eq. (2), -(2 r |omega| / l) j + r omega - v_k (|omega| as :func:`shear_exchange_speed`):
+    elements leave the
     contact with their displacement and enter with none, and the mean stress follows S(j). While it slides
     against j (unloading: the slip has reversed) the soil under it unloads from the stress it carries with
     the shear curve's initial slope tau_max / K (Wong's unloading and reloading of a sheared soil; the Bouc-
@@ -510,7 +511,8 @@ def sprocket_acceleration(torque, F, R_in, r, J):
 
 def shear_retardation_time_s(damping_Pa_s_per_m, K, c, phi, N, b, l):
     """t_d = c'' K / tau_max [s]: the Kelvin-Voigt retardation time of the soil's shear under a track of
-    normal load N (docs/model.md, "Shear damping"): the lagged law's shear states q (j, j_y, theta) enter
+    normal load N (docs/model.md, "Lateral resistance and turning", shear damping): the lagged law's shear
+    states q (j, j_y, theta) enter
     its forces as q + t_d dq/dt with dq/dt their eq. (2) rate (:func:`shear_eq2_rate`,
     :func:`lateral_shear_rates`; without the unloading factor), so that on the shear curve's initial
     slope tau_max / K the stress is tau_max q / K + c'' dq/dt, the soil's areal damping c'' on the rate
