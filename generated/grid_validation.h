@@ -15,7 +15,7 @@
 #define GV_N_PV 38LL
 #define GV_N_SUMS 10LL
 #define GV_NY_OUT 25LL
-#define GV_WORK 701LL
+#define GV_WORK 764LL
 #define GV_CELL_SUBSTEPS 1LL
 #define GV_ENTRY_SUBSTEPS 8LL
 #define GV_EXIT_SUBSTEPS 8LL

@@ -70,7 +70,7 @@ int homogeneous_linearize_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, cas
 #define homogeneous_linearize_SZ_ARG 7
 #define homogeneous_linearize_SZ_RES 5
 #define homogeneous_linearize_SZ_IW 0
-#define homogeneous_linearize_SZ_W 5305
+#define homogeneous_linearize_SZ_W 5349
 void homogeneous_ode_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_ode_casadi_int_size(void);
 int homogeneous_ode_casadi_real_size(void);

@@ -70,7 +70,7 @@ int homogeneous_rosenbrock_controlled_chunk256_work_bytes(casadi_int *sz_arg, ca
 #define homogeneous_rosenbrock_controlled_chunk256_SZ_ARG 198
 #define homogeneous_rosenbrock_controlled_chunk256_SZ_RES 110
 #define homogeneous_rosenbrock_controlled_chunk256_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_chunk256_SZ_W 37604
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_W 37635
 int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_controlled_chunk16_checkout(void);
 void homogeneous_rosenbrock_controlled_chunk16_release(int mem);
@@ -88,7 +88,7 @@ int homogeneous_rosenbrock_controlled_chunk16_work_bytes(casadi_int *sz_arg, cas
 #define homogeneous_rosenbrock_controlled_chunk16_SZ_ARG 192
 #define homogeneous_rosenbrock_controlled_chunk16_SZ_RES 105
 #define homogeneous_rosenbrock_controlled_chunk16_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_chunk16_SZ_W 4412
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_W 4443
 int homogeneous_rosenbrock_controlled_step(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_controlled_step_checkout(void);
 void homogeneous_rosenbrock_controlled_step_release(int mem);
@@ -106,7 +106,7 @@ int homogeneous_rosenbrock_controlled_step_work_bytes(casadi_int *sz_arg, casadi
 #define homogeneous_rosenbrock_controlled_step_SZ_ARG 161
 #define homogeneous_rosenbrock_controlled_step_SZ_RES 79
 #define homogeneous_rosenbrock_controlled_step_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_step_SZ_W 1655
+#define homogeneous_rosenbrock_controlled_step_SZ_W 1686
 void homogeneous_rosenbrock_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_rosenbrock_casadi_int_size(void);
 int homogeneous_rosenbrock_casadi_real_size(void);

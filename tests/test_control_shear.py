@@ -2,6 +2,7 @@
 the prediction's regularisation of the sliding direction, the [model] section of MPC scenarios, and
 a short closed loop into the U-turn on the clay."""
 
+import dataclasses
 import itertools
 
 import casadi as ca
@@ -50,18 +51,28 @@ def test_the_prediction_regularisation_bounds_the_curvature_that_stalls_ipopt():
 
 
 def test_prediction_model_and_settings():
+    # every law: the prediction's shear displacement without the unloading switch (the plant's own
+    # unloading with mpc.prediction_shear_unloading = None), every other option the plant's
     creep = SystemModel(ModelOptions(lateral_law="creep"))
-    assert prediction_model(creep, MPCSettings()) is creep  # the creep law's OCP is unchanged
-    # the default (lagged) law: predicted exactly by every solver (measured: docs/turning.md section 6)
+    pm = prediction_model(creep, MPCSettings())
+    assert not pm.opts.shear_unloading and creep.opts.shear_unloading
+    assert dataclasses.replace(pm.opts, shear_unloading=True) == creep.opts
+    assert prediction_model(creep, MPCSettings(prediction_shear_unloading=None)) is creep
+    # the default (lagged) law: its sliding predicted exactly by every solver (measured: docs/turning.md
+    # section 6)
     lagged = SystemModel()
-    assert prediction_model(lagged, MPCSettings()) is lagged
-    assert prediction_model(lagged, MPCSettings(solver="rti")) is lagged
+    for settings in (MPCSettings(), MPCSettings(solver="rti")):
+        assert dataclasses.replace(prediction_model(lagged, settings).opts, shear_unloading=True) == lagged.opts
+    assert prediction_model(lagged, MPCSettings(prediction_shear_unloading=None)) is lagged
     shear = SystemModel(ModelOptions(lateral_law="shear_quasistatic"))
     pm = prediction_model(shear, MPCSettings())
-    assert pm.opts.sliding_smoothing == 0.01 and pm.opts.sliding_sign == "velocity"
+    assert pm.opts.sliding_smoothing == 0.01 and pm.opts.sliding_sign == "velocity" and not pm.opts.shear_unloading
     assert pm.opts.lateral_law == "shear_quasistatic" and shear.opts.sliding_sign == "displacement"
-    same = prediction_model(shear, MPCSettings(prediction_sliding_smoothing=None, prediction_sliding_sign="model"))
+    same = prediction_model(shear, MPCSettings(prediction_sliding_smoothing=None, prediction_sliding_sign="model",
+                                               prediction_shear_unloading=None))
     assert same is shear
+    with pytest.raises(ParameterError, match="mpc.prediction_shear_unloading"):
+        MPCSettings(prediction_shear_unloading=1)
     with pytest.raises(ParameterError, match="mpc.prediction_sliding_sign"):
         MPCSettings(prediction_sliding_sign="sideways")
     with pytest.raises(ParameterError, match="mpc.prediction_sliding_smoothing"):

@@ -68,9 +68,13 @@ def test_the_standalone_programs_run_the_default_law(tmp_path):
     got = run_standalone(build_standalone(tmp_path), 1)
     # (the standalone program controls its steps' error as the Python run does)
     ref = summarise(run(sim_scenario.load_scenario("validation", over)))
-    for k in ("yaw_final_deg", "lateral_deviation_m", "distance_m", "sinkage_sprocket_mm", "shear_driven_max_m",
-              "fixed_step_error_max"):
+    for k in ("yaw_final_deg", "lateral_deviation_m", "distance_m", "sinkage_sprocket_mm", "shear_driven_max_m"):
         assert got[k] == pytest.approx(ref[k], rel=1e-9, abs=1e-12), k
+    # the largest error estimate of a step, kept above its tolerance after the halvings (2.36 at 4.18 s, after
+    # the idle instant): a difference of the stages over the tolerance, whose rounding the two builds amplify
+    # differently (measured 3.3e-9 relative, 2.7e-10 without the elastic unloading's switch, where the
+    # tolerance was 1e-9; the states agree to 1e-9)
+    assert got["fixed_step_error_max"] == pytest.approx(ref["fixed_step_error_max"], rel=1e-8)
     assert 10.0 < got["yaw_final_deg"] < 20.0  # the default law's turn (docs/validation-run.md)
     rows = grid_standalone.run(grid_standalone.build(tmp_path))
     res = symtrack.simulate(sim_scenario.load_scenario("validation_grid", over)).runs[0]

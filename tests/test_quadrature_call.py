@@ -137,9 +137,12 @@ def test_the_compiled_twin_has_its_own_cache_key_and_matches_the_expanded_model(
 def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures():
     """The compiled call-node Rosenbrock (0.5 ms steps: its own error 1e-8, where 1 ms steps leave
     2e-4 on the sinkage) against tight CVODES on the expanded model, over the validation's first 4.6 s
-    (the 4 s straight and the start of the turn, the left sprocket idle): every state
-    at the end within 1e-6 relative, and the figures of the run (measured over the whole validation:
-    within 1.4e-8)."""
+    (the 4 s straight and the start of the turn, the left sprocket idle): every state at the end and
+    the figures of the run within 1e-6 relative, 3e-6 where the idle track's shear enters (over the
+    whole validation measured within 1.4e-8, the idle track's shear minimum apart: 1.2e-6; its path
+    crosses the soil's switch from loading to unloading at the idle instant, a kink where the fixed
+    step is of second order; docs/model.md, "Track kinematics and shear displacement"; 7.9e-9 without
+    the elastic unloading, where its tolerance was 1e-6)."""
     figures = ("lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm", "sinkage_idler_mm",
                "shear_driven_max_m", "shear_idle_min_m", "speed_final_m_s")
     m = SystemModel(load_scenario("validation", list(REFINED)).model)
@@ -157,10 +160,10 @@ def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures():
     a, b = runs["rosenbrock"], runs["cvodes"]
     assert a.t[-1] == pytest.approx(4.6) and b.t[-1] == pytest.approx(4.6)
     assert a.state("yaw_rad")[-1] > 1e-3  # it turned
-    np.testing.assert_allclose(np.asarray(a.X)[-1], np.asarray(b.X)[-1], rtol=1e-6, atol=1e-10)
+    np.testing.assert_allclose(np.asarray(a.X)[-1], np.asarray(b.X)[-1], rtol=3e-6, atol=1e-10)
     got, ref = summarise(a), summarise(b)
     for k in figures:
-        assert got[k] == pytest.approx(ref[k], rel=1e-6, abs=1e-12), k
+        assert got[k] == pytest.approx(ref[k], rel=3e-6 if k == "shear_idle_min_m" else 1e-6, abs=1e-12), k
 
 
 @needs_cc

@@ -193,7 +193,7 @@ def _sliding_slope_deg(params):
 def test_side_slope_beyond_the_soil_s_lateral_strength_slides(below):
     """On the 55 % Thailand clay (phi 10 deg, c 2.07 kPa) the tracks' Mohr-Coulomb strength gives way at
     about 14.6 deg: 2 deg below it the vehicle holds its line with a drift under 1 cm in 4 s; 2 deg
-    above it slides away downhill (metres)."""
+    above it slides away downhill (metres). (The lagged law: the next test.)"""
     params = _params("clayey_soil_thailand_55")
     t = _sliding_slope_deg(params) + (-2.0 if below else 2.0)
     m, X, _ = _run({"slope_y_deg": t}, ModelOptions(lateral_law="shear_quasistatic", vehicle="3d"), (0.0, 0.0), 4.0,
@@ -203,6 +203,71 @@ def test_side_slope_beyond_the_soil_s_lateral_strength_slides(below):
         assert -0.01 < dy <= 0.0
     else:
         assert dy < -1.0
+
+
+# the fuzzer's side-slope variant's ground (tests/test_physics_fuzz.py): its compiled model is shared
+PARKED_SLOPE_DEG = 8.0
+
+
+def _parked_shear_m(params, t_deg):
+    """The lateral shear displacement that holds a vehicle parked across a side slope of t: under a standing
+    track every element is displaced alike (the law's front- and rear-entry displacements average to the
+    state j_y), so each track carries its strength b l c + N_k tan(phi) times Janosi-Hanamoto's 1 - exp(-j_y / K),
+    and the two together W sin t: j_y = -K ln(1 - W sin t / (2 b l c + W cos t tan(phi)))."""
+    W, tr = params["mass_kg"] * GRAVITY_M_S2, math.radians(t_deg)
+    strength = 2 * params["track_width_m"] * params["contact_length_m"] * params["cohesion_Pa"] \
+        + W * math.cos(tr) * math.tan(params["friction_angle_rad"])
+    return -params["shear_modulus_K_m"] * math.log(1 - W * math.sin(tr) / strength)
+
+
+def test_parked_across_a_side_slope_the_lagged_law_holds_still():
+    """The default ("shear") law, zero torque, across an 8 deg side slope of the validation's clay (W sin t is
+    35 % of the tracks' strength): the hull slides until the tracks' lateral shear carries W sin t, with the
+    displacement of the closed form (_parked_shear_m, 6.5 mm) within 0.1 %, and then stays still: the soil's
+    damping on the shear states settles it within about a second (lateral speed below 1 mm/s from 1.5 s
+    on; measured 1.15 s) and the shear states do not relax at rest (the CG moves less than 10 um over the
+    last second; measured 6 um, the last of the damped oscillation). On
+    CVODES and on the compiled Rosenbrock. (Without the damping and with the states relaxing at the
+    regularised |omega| the hull rang +-7 mm at 1.9 Hz with a 160 s decay and crept downhill at 0.03 mm/s.)"""
+    params = _params()
+    j_cf = _parked_shear_m(params, PARKED_SLOPE_DEG)
+    m, X, _ = _run({"slope_y_deg": PARKED_SLOPE_DEG}, ModelOptions(vehicle="3d"), (0.0, 0.0), 3.0, params)
+    lay = m.layout
+    t = np.arange(len(X)) * 0.05
+    for k in ("left", "right"):
+        assert -X[-1, lay.index(f"lateral_shear_{k}_m")] == pytest.approx(j_cf, rel=1e-3), k
+    assert np.abs(X[t >= 1.5, lay.index("v_m_s")]).max() < 1e-3
+    assert np.ptp(X[t >= 2.0, lay.index("y_m")]) < 1e-5
+    doc = {"name": "parked", "run": {"duration_s": 3.0, "output_dt_s": 0.01, "integrator": "rosenbrock"},
+           "model": {"vehicle": "3d"}, "vehicle": {"preset": "reference_crawler"},
+           "soil": {"preset": "clayey_soil_thailand_38"}, "terrain": {"surface": {"slope_y_deg": PARKED_SLOPE_DEG}},
+           "torque": [{"t_s": 0.0, "left_N_m": 0.0, "right_N_m": 0.0}]}
+    res = symtrack.simulate(scenario_from_dict(doc))
+    run = res.runs[-1]
+    assert res.summary["fixed_step_error_max"] <= 1.0
+    for k in ("left", "right"):
+        assert -run.state(f"lateral_shear_{k}_m")[-1] == pytest.approx(j_cf, rel=1e-3), k
+    assert np.abs(run.state("v_m_s")[run.t >= 1.5]).max() < 1e-3
+    assert np.ptp(run.state("y_m")[run.t >= 2.0]) < 1e-5
+
+
+@pytest.mark.parametrize("below", [True, False])
+def test_side_slope_beyond_the_soil_s_lateral_strength_slides_on_the_lagged_law(below):
+    """The previous test on the default ("shear") law: 2 deg below the sliding slope (W sin t is 86 % of the
+    tracks' strength) the vehicle stops with its tracks' lateral shear at the closed form (_parked_shear_m,
+    11.9 mm) within 0.1 % (the soil's damping fades as the strength is mobilised: it takes some 6 s to settle
+    here, the lateral speed below 1 mm/s from 6.3 s on; 1.2 s at 35 %); 2 deg above it slides away downhill
+    (metres in 4 s)."""
+    params = _params("clayey_soil_thailand_55")
+    t = _sliding_slope_deg(params) + (-2.0 if below else 2.0)
+    m, X, _ = _run({"slope_y_deg": t}, ModelOptions(vehicle="3d"), (0.0, 0.0), 10.0 if below else 4.0, params)
+    lay = m.layout
+    if below:
+        for k in ("left", "right"):
+            assert -X[-1, lay.index(f"lateral_shear_{k}_m")] == pytest.approx(_parked_shear_m(params, t), rel=1e-3)
+        assert np.abs(X[-20:, lay.index("v_m_s")]).max() < 1e-3
+    else:
+        assert X[-1, lay.index("y_m")] - X[0, lay.index("y_m")] < -1.0
 
 
 def test_refusals():
@@ -237,14 +302,18 @@ def test_example_side_slope_3d_runs():
 
 def test_the_compiled_rosenbrock_converges_in_the_step_to_cvodes():
     """The validation on the 3D vehicle: the compiled Rosenbrock at 10 ms and 5 ms against CVODES at
-    reltol 1e-8 (at the default 8 segments, the model of the test above: one build for both)."""
+    reltol 1e-8 (at the default 8 segments, the model of the test above: one build for both). The worst
+    figure is the idle track's shear minimum, whose path crosses the soil's switch from loading to
+    unloading when the track is declutched (docs/model.md, "Track kinematics and shear displacement": the
+    unloading is stiffer than the loading, a kink in dj/dt, where a fixed step is of second order: the
+    error's ratio from 10 ms to 5 ms is then above 3 where a smooth path gives 6 or more)."""
     def figs(sets):
         s = symtrack.simulate(load_scenario("validation", ["model.vehicle=3d", *sets])).summary
         return np.array([s[k] for k in (*FIGURES, "sinkage_sprocket_mm", "shear_idle_min_m")])
     ref = figs(["run.integrator=cvodes", "run.reltol=1e-8"])
     e10 = np.max(np.abs(figs([]) / ref - 1))
     e5 = np.max(np.abs(figs(["run.fixed_step_s=0.005"]) / ref - 1))
-    assert e10 < 1e-3 and e5 < e10 / 4, (e10, e5)
+    assert e10 < 1e-3 and e5 < e10 / 3, (e10, e5)
 
 
 def test_linearization_of_the_3d_vehicle_is_finite_and_stable_in_heave():
@@ -295,9 +364,8 @@ def test_a_scenario_gives_the_3d_vehicle_its_ground():
 @pytest.mark.slow
 def test_flat_ground_reproduces_the_planar_validation_on_the_shear_law():
     """The validation on the package's default lateral law ("shear", the vehicle model 3d_lateral):
-    measured 3D against planar, yaw 15.4513 against 15.4510 deg, lateral deviation 2.5034 against
-    2.5037 m (before the Gauss points within the segments: 15.454 and 2.5043). (Slow: the first compile
-    of this model takes about 40 s; cached after.)"""
+    3D against planar within the test's tolerances below (the Gauss points within the segments carry
+    the turn's lateral forces). (Slow: the first compile of this model takes about 40 s; cached after.)"""
     sets = ["model.lateral_law=shear"]
     planar = symtrack.simulate(load_scenario("validation", sets)).summary
     s3 = symtrack.simulate(load_scenario("validation", [*sets, "model.vehicle=3d"])).summary

@@ -53,12 +53,17 @@ def _columns(sc) -> np.ndarray:
 
 def test_a_plane_s_raster_runs_as_the_analytic_plane(tmp_path):
     """The bilinear interpolation of a plane is the plane: 3 s climbing across a 5 deg / 3 deg plane on
-    its 0.5 m raster equals the analytic run (measured 5e-13 m in x; CVODES, both Jacobians exact)."""
+    its 0.5 m raster equals the analytic run (CVODES, both Jacobians exact) to the integrator's own
+    error: the two differ by rounding, which CVODES's step choices amplify where the soil's shear
+    switches between loading and unloading (docs/model.md, "Track kinematics and shear displacement"; the climb's
+    sprocket-shear oscillation reverses the slip some 20 times): measured 3.6e-7 of each column's scale
+    (the sprocket sinkage; 5e-8 before the unloading rate's bound, SHEAR_UNLOADING_TIME_MIN_S, 2e-12
+    without the elastic unloading, where the tolerance was 1e-9), 4.5e-9 of its scale in x."""
     ras = _raster(tmp_path, PLANE, 0.5, (-5.0, -6.0), (30.0, 12.0))
     a, b = _columns(scenario_from_dict(_doc(PLANE))), _columns(scenario_from_dict(_doc(ras)))
     assert a[-1, 0] > 2.0  # it climbed
     scale = np.maximum(np.abs(a).max(axis=0), 1e-3)
-    assert np.max(np.abs(a - b) / scale) < 1e-9, np.max(np.abs(a - b) / scale, axis=0)
+    assert np.max(np.abs(a - b) / scale) < 1e-6, np.max(np.abs(a - b) / scale, axis=0)
 
 
 def test_furrows_on_a_raster_hold_the_hull_within_the_interpolation_bound(tmp_path):

@@ -1,11 +1,12 @@
 """The terrain engine's vehicle step under a bounded, recorded input (issue 23; docs/studies.md,
 "Field operations", cause 3): the torque commands of the path follower on operation_small (clay, at
 commit 016a6bd, 2510 samples of 20 ms, |T| <= 8000 N m, smoothed by the 0.1 s torque lag) replayed
-open loop on the same field. Without error control the 5 ms vehicle step diverges at t = 50.0 s (the
-state leaves every bound within a step) where 2.5 ms and 1.25 ms steps complete and agree within 2 mm.
-With the vehicle step's error control (EngineSettings.vehicle_tolerance, the default; docs/turning.md
-s. 8) one vehicle step per 5 ms or 10 ms macro step carries it: measured 245 / 516 halvings over the
-50.5 s, within 4.1 / 4.9 mm of the 1.25 ms run."""
+open loop on the same field, made 72 m long (open loop, the vehicle of this version ends 6 m beyond
+the recording's path: x up to 65.9 m). Without error control the 5 ms vehicle step diverges at
+t = 29.0 s (the state leaves every bound within a step) where 2.5 ms steps complete. With the vehicle
+step's error control (EngineSettings.vehicle_tolerance, the default; docs/turning.md s. 8) one vehicle
+step per 5 ms or 10 ms macro step carries it: measured 182 / 341 halvings over the 50.5 s, within
+2.2 / 2.4 mm of the 2.5 ms run."""
 
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ def replay(vehicle_substeps: int, dt_s: float = 0.005, vehicle_tolerance: float 
            "model": {"lateral_law": "shear"}, "vehicle": {"preset": "reference_crawler"},
            "soil": {"preset": "clayey_soil_thailand_38"},
            "start": {"x_m": float(d["start_xy_m"][0]), "y_m": float(d["start_xy_m"][1]), "yaw_deg": 0.0},
-           "terrain": {"size_m": [60.0, 48.0], "cell_m": 0.1, "origin_m": [0.0, 0.0], "max_speed_m_s": 4.0},
+           "terrain": {"size_m": [72.0, 48.0], "cell_m": 0.1, "origin_m": [0.0, 0.0], "max_speed_m_s": 4.0},
            "engine": engine,
            "torque": [{"t_s": float(t), "left_N_m": float(a), "right_N_m": float(b)}
                       for t, a, b in zip(d["t_s"], d["left_N_m"], d["right_N_m"], strict=True)]}
@@ -48,14 +49,14 @@ def test_the_controlled_vehicle_step_carries_what_the_uncontrolled_one_diverges_
         assert 0 < b.stats["n_vehicle_halved"] < 0.2 * len(b.t)
         k = np.searchsorted(a.t, b.t - 1e-9)
         assert np.allclose(a.t[k], b.t)
-        # measured: 4.1 mm (5 ms), 4.9 mm (10 ms) from the 1.25 ms run over the 50 s
+        # measured: 2.2 mm (5 ms), 2.4 mm (10 ms) from the 2.5 ms run over the 50 s
         assert np.max(np.hypot(a.X[k, ix] - b.X[:, ix], a.X[k, iy] - b.X[:, iy])) < 0.01
-    # the control is what carries it: the same 5 ms steps without it leave the solution at t = 50.0 s
+    # the control is what carries it: the same 5 ms steps without it leave the solution at t = 29.0 s
     with pytest.raises(api.IncompleteSimulation) as err:
         replay(1, vehicle_tolerance=0.0)
     part = err.value.result.runs[-1]
-    assert 49.5 < part.t[-1] < 50.5
-    k = int(np.searchsorted(a.t, 49.9))
-    j = int(np.searchsorted(part.t, 49.9))
+    assert 28.5 < part.t[-1] < 29.5
+    k = int(np.searchsorted(a.t, part.t[-1] - 0.1))
+    j = int(np.searchsorted(part.t, part.t[-1] - 0.1))
     # up to 0.1 s before it, the 5 ms run is the converged one within 2 cm
     assert abs(part.X[j, ix] - a.X[k, ix]) < 0.02 and abs(part.X[j, iy] - a.X[k, iy]) < 0.02

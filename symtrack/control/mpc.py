@@ -179,6 +179,13 @@ class MPCSettings:
     # None / "model": the model's own (then IPOPT stalls on the clay: measured)
     prediction_sliding_smoothing: float | None = 0.01
     prediction_sliding_sign: str = "velocity"
+    # the prediction's shear displacement on unloading (ModelOptions.shear_unloading; docs/model.md, "Track
+    # kinematics and shear displacement"): False predicts with Ferretti & Girelli's eq. (2) throughout, the
+    # plant unloads elastically. The switch between loading and unloading is a kink (the unloading slope is up
+    # to thousands of times the loading one far beyond K) that the RTI's one linearisation per sample does not
+    # resolve: predicting with it, headland_uturn (20 m + the 4 m U-turn + 4 m) had 9 failed solves on the
+    # shear law and 2 IPOPT fallbacks on the creep law, 0 and 0 with False (measured). None: the model's own
+    prediction_shear_unloading: bool | None = False
     fallback_solver: str | None = "auto"
     tol: float = 1e-5
     # the RTI's dense QP solver: DAQP (dual active set) solves the condensed QP in 0.05 ms against
@@ -232,6 +239,9 @@ class MPCSettings:
             rng("prediction_lateral_creep_speed_m_s", 0.0, 10.0, lo_open=True)
         if self.prediction_sliding_smoothing is not None:
             rng("prediction_sliding_smoothing", 0.0, 1.0, lo_open=True)
+        if self.prediction_shear_unloading is not None and not isinstance(self.prediction_shear_unloading, bool):
+            raise ParameterError(f"mpc.prediction_shear_unloading = {self.prediction_shear_unloading!r} must be true, "
+                                 "false or left out (the model's own)")
         if self.prediction_sliding_sign not in ("model",) + SLIDING_SIGNS:
             raise ParameterError(f"mpc.prediction_sliding_sign = {self.prediction_sliding_sign!r} is not one of "
                                  f"model, {', '.join(SLIDING_SIGNS)}")
@@ -302,15 +312,20 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
     (headland_uturn on clay / sandy loam / the grid: 1 / 0 / 0-1 failed solves, RMS 0.4-0.5 cm,
     against 0 / 4 / 3 and 1.4-1.8 cm regularised), and so does the lane keeping on the grid
     (regularised, the second pass did not converge onto the lanes); IPOPT on the clay is the open
-    case (headland_uturn: 80 failed solves exact, 0 regularised)."""
+    case (headland_uturn: 80 failed solves exact, 0 regularised).
+
+    On every law the shear displacement's unloading is ``prediction_shear_unloading`` (default False:
+    Ferretti & Girelli's eq. (2) throughout, where the plant unloads elastically; the switch is a kink
+    the RTI does not resolve, MPCSettings)."""
     o = model.opts
-    if o.lateral_law != "shear_quasistatic":
-        return model
     changes = {}
-    if settings.prediction_sliding_smoothing is not None:
-        changes["sliding_smoothing"] = settings.prediction_sliding_smoothing
-    if settings.prediction_sliding_sign != "model":
-        changes["sliding_sign"] = settings.prediction_sliding_sign
+    if o.lateral_law == "shear_quasistatic":
+        if settings.prediction_sliding_smoothing is not None:
+            changes["sliding_smoothing"] = settings.prediction_sliding_smoothing
+        if settings.prediction_sliding_sign != "model":
+            changes["sliding_sign"] = settings.prediction_sliding_sign
+    if settings.prediction_shear_unloading is not None:
+        changes["shear_unloading"] = settings.prediction_shear_unloading
     if all(getattr(o, k) == v for k, v in changes.items()):
         return model
     opts = dataclasses.replace(o, **changes)
@@ -318,9 +333,10 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
         # a hull of its own (the 3D vehicle): the same ground under the prediction (its surface kept)
         return SystemModel(opts, vehicle=model.vehicle.for_options(opts, model.vehicle.surface))
     if not isinstance(model.terrain, HomogeneousTerrain):
-        raise ParameterError("mpc.prediction_sliding_*: the prediction's regularisation needs the homogeneous "
-                             "terrain's model (set prediction_sliding_smoothing = None and "
-                             "prediction_sliding_sign = \"model\" for another terrain)")
+        raise ParameterError("mpc.prediction_sliding_*, mpc.prediction_shear_unloading: the prediction's "
+                             "regularisation needs the homogeneous terrain's model (set "
+                             "prediction_sliding_smoothing = None, prediction_sliding_sign = \"model\" and "
+                             "prediction_shear_unloading = None for another terrain)")
     return SystemModel(opts)
 
 

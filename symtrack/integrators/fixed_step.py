@@ -114,7 +114,9 @@ class FixedStepper:
         self.n_halved += halved
         ratio = c.R[:k]
         if not np.all(np.isfinite(ratio)) or not np.all(np.isfinite(c.X[k - 1])):
-            j = int(np.nonzero(~np.isfinite(ratio))[0][0]) if not np.all(np.isfinite(ratio)) else k - 1
+            # the first step whose state or error estimate is not finite (the chunk goes on past it)
+            bad = ~np.isfinite(ratio) | ~np.all(np.isfinite(c.X[:k]), axis=1)
+            j = int(np.nonzero(bad)[0][0])
             h_min = float(H[j]) / 2 ** FIXED_STEP_MAX_HALVINGS
             raise SimulationError(f"{self.method} returned a non-finite state{self._at(t0_s, H, j)} even in steps of "
                                   f"{h_min:.3g} s: run it with --integrator cvodes")

@@ -39,6 +39,8 @@ MODEL_KEYS = {k.name: k for k in (
     Key("gauss_points", "creep law: Gauss-Legendre points per segment", 1, 16, integer=True),
     Key("accel_newton_iterations", "Newton steps on the load transfer's acceleration loop", 0, 20, integer=True),
     Key("lateral_shear_cap", "creep law: the lateral resistance capped at the soil's shear strength", **_BOOL),
+    Key("shear_unloading", "the mean shear displacement unloads elastically when the slip reverses (false: Ferretti & "
+        "Girelli's eq. (2) on unloading too; the MPC's prediction)", **_BOOL),
     Key("lateral_law", "how the tracks meet the soil: shear (lagged shear law), shear_quasistatic, creep (the "
         "validation's reconstruction)", choices=LATERAL_LAWS),
     Key("shear_strength_pressure", "the pressure in the shear strength c + p tan(phi): the track's mean or the "
@@ -48,7 +50,8 @@ MODEL_KEYS = {k.name: k for k in (
         integer=True),
     Key("lateral_split", "shear law: split the integral at the pivot and at the shear's zero (false: the plain "
         "composite rule)", **_BOOL),
-    Key("sliding_smoothing", "the regularisation of the sliding direction (a slip ratio)", **_POSITIVE),
+    Key("sliding_smoothing", "the regularisation of the sliding direction and of the shear's switch from loading to "
+        "unloading (a slip ratio)", **_POSITIVE),
     Key("sliding_sign", "shear law: where the longitudinal stress's sign comes from", choices=SLIDING_SIGNS),
     Key("pivot_smoothing_rad_s", "the regularisation of the pivot's position [rad/s]", **_POSITIVE),
     Key("soil_law", "the terrain cells' soil law", choices=tuple(SOIL_LAWS)),
@@ -110,7 +113,8 @@ class ModelOptions:
         regularised as sqrt(i_x^2 + d^2), d this value (a slip ratio, dimensionless). It matters
         only where both slips are below d: at 1e-5 and 2.6 m/s, within 0.1 mm of a turning track's
         pivot; in straight running the tractive force is eq. (1) for every slip (sign form as
-        traction_sign says).
+        traction_sign says). The same d smooths the mean shear displacement's switch from loading
+        to unloading when the slip ratio changes sign against it (symtrack.vehicles.planar.shear_rate).
     sliding_sign: ("shear" law only) where the sign of the longitudinal stress comes from.
         "displacement" (default): sign(j) of the tractive effort times the regularised |i_x| of the sliding
         velocity (eq. (1) exactly in straight running for every slip). "velocity": the sliding
@@ -131,6 +135,13 @@ class ModelOptions:
         than the soil lets its tracks push (mu_t W = 29.7 kN > b l c + W tan(phi) = 21.4 kN) and
         holds no steady turn tighter than about 100 m. Off by default: the validation was
         calibrated without it (its lateral creep is far from either limit).
+    shear_unloading: when true (default), a track's mean shear displacement unloads elastically from
+        the stress it carries when the slip reverses against it: the stress falls with the shear
+        curve's initial slope tau_max / K (docs/model.md, "Track kinematics and shear displacement";
+        symtrack.vehicles.planar.shear_rate). False: Ferretti & Girelli's eq. (2) on unloading too (the
+        stress follows the loading curve back, giving back the plastic work of a shear built up far
+        beyond K). The MPC predicts with false (MPCSettings.prediction_shear_unloading): the switch
+        between loading and unloading is a kink its one linearisation per sample does not resolve.
     soil_law: the terrain cells' soil law, a name of the soil-law registry
         (:mod:`symtrack.soil.law`); "bekker_wong" (default): Bekker loading, Wong
         unloading/reloading line and the cycle law of docs/model.md, "Pressure-sinkage".
@@ -166,6 +177,7 @@ class ModelOptions:
     gauss_points: int = 3
     accel_newton_iterations: int = 1
     lateral_shear_cap: bool = False
+    shear_unloading: bool = True
     lateral_law: str = "shear"
     shear_strength_pressure: str = "mean"
     shear_points: int = 4
@@ -200,7 +212,7 @@ class ModelOptions:
                 raise ParameterError(f"model.{key.name} = {v!r} must be a number > 0")
             if key.integer and not (isinstance(v, int) and not isinstance(v, bool) and key.low <= v <= key.high):
                 raise ParameterError(f"model.{key.name} = {v!r} must be an integer in [{key.low:g}, {key.high:g}]")
-        for name in ("lateral_shear_cap", "lateral_split", "quadrature_call"):
+        for name in ("lateral_shear_cap", "shear_unloading", "lateral_split", "quadrature_call"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"model.{name} = {getattr(self, name)!r} must be true or false")
 

@@ -23,12 +23,14 @@ from ..model.layout import ContactPose, StateLayout, VehicleState
 from .base import VehicleModel
 
 __all__ = ["ALGEBRAIC", "ENDS", "GRAVITY_M_S2", "INPUTS", "LATERAL_STATES", "PLANAR_LATERAL_LAYOUT", "PLANAR_LAYOUT",
-           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SHEAR_LAWS", "SLIP_SPEED_SCALE_M_S",
-           "TRACKS", "TRACK_SOIL_PARAMS", "TRACK_SOIL_PARAM_NAMES", "VEHICLE_PARAMS", "VEHICLE_STATES",
+           "PlanarLateralVehicle", "PlanarVehicle", "PressureDistribution", "SHEAR_LAWS", "SHEAR_UNLOADING_TIME_MIN_S",
+           "SLIP_SPEED_SCALE_M_S", "TRACKS", "TRACK_SOIL_PARAMS", "TRACK_SOIL_PARAM_NAMES", "VEHICLE_PARAMS",
+           "VEHICLE_STATES",
            "codegen_options", "creep_lateral_force", "direction", "gauss_nodes", "graded_nodes", "integrate_track",
            "internal_resistance_N", "lateral_resistance_max_N", "lateral_shear_rates", "mean_ground_pressure_Pa",
-           "quadrature_is_mapped", "quadrature_points", "shear_forces", "sprocket_rates", "sprocket_speed_abs",
-           "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
+           "quadrature_is_mapped", "quadrature_points", "shear_eq2_rate", "shear_exchange_speed", "shear_forces",
+           "shear_rate", "shear_retardation_time_s", "shear_unloading_ratio", "sprocket_acceleration",
+           "sprocket_speed_abs", "track_signals", "track_slip", "traction_shape", "traction_sign", "vehicle_equations"]
 
 # the lateral laws that take the tracks' forces from the soil's shear law (ModelOptions.lateral_law)
 SHEAR_LAWS = ("shear", "shear_quasistatic")
@@ -422,10 +424,104 @@ def creep_lateral_force(q, c_line, tan_phi, v_lat, mu, eps_v, opts):
     return -mu * q * ca.tanh(v_lat / eps_v)
 
 
-def sprocket_rates(j, omega, abs_om, v_track, torque, F, R_in, r, l, J):
-    """(dj/dt, domega/dt) of a track: Ferretti & Girelli's mean shear displacement and the sprocket's
-    rotation driven by its torque against the thrust and the internal resistance."""
-    return -(2 * r / l) * abs_om * j + r * omega - v_track, (torque - r * (F + R_in)) / J
+def shear_exchange_speed(omega, opts):
+    """|omega| in the shear states' exchange term (the rate 2 r |omega| / l at which a track's elements
+    leave the contact with their displacement and enter with none): sqrt(omega^2 + e^2) (1 - exp(-omega^2
+    / e^2)) with e = ``opts.omega_smoothing_rad_s`` (exact in ``traction_sign = "sign"`` mode). From
+    |omega| = 10 e on (0.1 rad/s; the factor is then 1 - 4e-44) it is the regularised |omega| the shear law
+    divides its slips by (so the lagged law's steady states are the quasi-static law's to rounding), and it
+    is 0 at rest, where no element is exchanged: a standing track's shear states then hold the displacement
+    that carries its load, as the soil under it does. (The regularised |omega| alone relaxed them with the
+    time constant l / (2 r e), 316 s on the reference crawler: a parked vehicle crept downhill at
+    0.03 mm/s.) Smooth and even in omega."""
+    if opts.traction_sign == "sign":
+        return ca.fabs(omega)
+    eps = opts.omega_smoothing_rad_s
+    return ca.sqrt(omega**2 + eps**2) * (1 - ca.exp(-(omega / eps) ** 2))
+
+
+# Below this x = 2 |j| / K the unloading ratio is its series (the closed form loses digits to cancellation there:
+# its denominator 1 - e^-x (1 + x) is x^2 / 2 to leading order; at 1e-3 the series' error is 1e-10)
+_UNLOADING_SERIES_BELOW = 1e-3
+
+# The shortest time constant of the mean shear displacement's elastic unloading [s]: the unloading term of
+# shear_rate, u = (M(j) - 1) times the slip, is bounded smoothly by u_max = sqrt(j^2 + K^2) / this (u / sqrt(1 +
+# (u / u_max)^2)), so that j far beyond K runs back towards 0 no faster than exp(-t / 1 ms). Far beyond K the
+# ratio M ~ 2 j^2 / K^2 is huge (6000 at j = 55 K, 54000 at the 165 K of a spinning track's l / 2) and it
+# switches on within sliding_smoothing of the slip's reversal: the unbounded term (its Jacobian 4 j slip / K^2,
+# 10^4-10^5 1/s at a 3D hull's landing on hard soil) outran the compiled Rosenbrock's linearly implicit steps
+# even at 1/64 of the 10 ms step, and its states went non-finite where eq. (2) on unloading too finished (the
+# physics fuzzer, docs/model.md). Below K the bound leaves the elastic unloading as it is (at j = K and 1 m/s
+# of reversed slip u is 0.21 of it, the rate 2 % slower; at 0.1 m/s 0.02 %); far beyond K it binds, and the
+# stress falls from its plateau within a few ms instead of at once (from 165 K to K in about ln(165) ms =
+# 5 ms). (The floor K, not a smaller one: near j = 0 a bound that varies on the scale of shear_smoothing_m is a
+# sharp curvature on which CVODES's step choices amplify rounding: a plane's raster against the plane 1.2e-6
+# apart with the floor 1 um, 5e-8 without the bound.)
+SHEAR_UNLOADING_TIME_MIN_S = 1e-3
+
+
+def shear_unloading_ratio(j, K, opts):
+    """M(j) = S'(0) / S'(j) >= 1: the ratio of the initial slope of Ferretti & Girelli's tractive-effort shape
+    S(j) = 1 + K / (2|j|) (exp(-2|j|/K) - 1) to its slope at j. With x = 2|j| / K it is
+    x^2 / (2 (1 - e^-x (1 + x))): 1 at j = 0, x^2 / 2 far beyond K (1 + 2x/3 + 7x^2/36 below
+    :data:`_UNLOADING_SERIES_BELOW`). A mean displacement j that runs back at M times the slip unloads the
+    track's mean stress at the initial slope 1 / K (:func:`shear_rate`)."""
+    x = 2 * ca.sqrt(j**2 + opts.shear_smoothing_m**2) / K
+    xe = ca.fmax(x, _UNLOADING_SERIES_BELOW)
+    exact = xe**2 / (2 * (1 - ca.exp(-xe) * (1 + xe)))
+    return ca.if_else(x < _UNLOADING_SERIES_BELOW, 1 + 2 * x / 3 + 7 * x**2 / 36, exact)
+
+
+def shear_rate(j, omega, v_track, r, l, K, opts):
+    """dj/dt of a track's mean shear displacement j (Ferretti & Girelli's eq. 2, elastic on unloading;
+    docs/model.md, "Track kinematics and shear displacement"). While the track slides in the sense of j
+    (loading) it is eq. (2), -(2 r |omega| / l) j + r omega - v_k (|omega| as :func:`shear_exchange_speed`):
+    elements leave the
+    contact with their displacement and enter with none, and the mean stress follows S(j). While it slides
+    against j (unloading: the slip has reversed) the soil under it unloads from the stress it carries with
+    the shear curve's initial slope tau_max / K (Wong's unloading and reloading of a sheared soil; the Bouc-
+    Wen hysteresis with equal loading and unloading coefficients, which gives Janosi-Hanamoto's exponential
+    on loading): the slip term is M(j) times larger (:func:`shear_unloading_ratio`), so that the mean stress
+    S(j) falls at slip / K, not at S'(j) slip. The switch is smooth over ``opts.sliding_smoothing`` of the
+    slip ratio (exact in ``traction_sign = "sign"`` mode); steady running is always loading (eq. 2's steady
+    state j = i l / 2 unchanged). ``opts.shear_unloading`` false: eq. (2) throughout."""
+    if not opts.shear_unloading:
+        return shear_eq2_rate(j, omega, v_track, r, l, opts)
+    slip = r * omega - v_track
+    tread = r * ca.sqrt(omega**2 + opts.omega_smoothing_rad_s**2)
+    against = 0.5 * (1 - direction(slip / tread * traction_sign(j, opts), opts.sliding_smoothing, opts))
+    unload = (shear_unloading_ratio(j, K, opts) - 1) * against * slip
+    # no faster than sqrt(j^2 + K^2) / SHEAR_UNLOADING_TIME_MIN_S (a smooth bound; the constant's note)
+    bound = ca.sqrt(j**2 + K**2) / SHEAR_UNLOADING_TIME_MIN_S
+    return shear_eq2_rate(j, omega, v_track, r, l, opts) + unload / ca.sqrt(1 + (unload / bound) ** 2)
+
+
+def shear_eq2_rate(j, omega, v_track, r, l, opts):
+    """Ferretti & Girelli's eq. (2), -(2 r |omega| / l) j + r omega - v_k (|omega| as
+    :func:`shear_exchange_speed`): the slip that shears the soil under the track less the displacement its
+    elements carry out of the contact; dj/dt while the track loads the soil (:func:`shear_rate`), and
+    the rate the soil's damping acts on (:func:`shear_retardation_time_s`): zero in steady running."""
+    return -(2 * r / l) * shear_exchange_speed(omega, opts) * j + r * omega - v_track
+
+
+def sprocket_acceleration(torque, F, R_in, r, J):
+    """domega/dt of a sprocket: its torque against the thrust and the internal resistance."""
+    return (torque - r * (F + R_in)) / J
+
+
+def shear_retardation_time_s(damping_Pa_s_per_m, K, c, phi, N, b, l):
+    """t_d = c'' K / tau_max [s]: the Kelvin-Voigt retardation time of the soil's shear under a track of
+    normal load N (docs/model.md, "Lateral resistance and turning", shear damping): the lagged law's shear
+    states q (j, j_y, theta) enter
+    its forces as q + t_d dq/dt with dq/dt their eq. (2) rate (:func:`shear_eq2_rate`,
+    :func:`lateral_shear_rates`; without the unloading factor), so that on the shear curve's initial
+    slope tau_max / K the stress is tau_max q / K + c'' dq/dt, the soil's areal damping c'' on the rate
+    of its shear deformation (a Kelvin-Voigt element; ASSUMED the cells' c'' in shear as in compression),
+    fading with the curve's slope as the strength is mobilised and 0 in steady running. tau_max = c + N tan(phi)
+    / (b l), the track's mean strength, floored at 1 Pa (a track that has lifted off a cohesionless soil
+    carries none; every contact that carries the vehicle has thousands)."""
+    tau_max = ca.fmax(c + N / (b * l) * ca.tan(phi), 1.0)
+    return damping_Pa_s_per_m * K / tau_max
 
 
 def track_slip(v_track, omega, r):
@@ -450,14 +546,15 @@ def track_signals(F, R_in, Rc, Fy, N, slip) -> dict:
     return signals
 
 
-def lateral_shear_rates(j_y, theta, abs_om, vy, rz, x_centre, l, r):
+def lateral_shear_rates(j_y, theta, omega, vy, rz, x_centre, l, r, opts):
     """(dj_y/dt, dtheta/dt) of a track's lateral shear states (the "shear" law): Ferretti
     & Girelli's shear law written for the lateral sliding velocity at the contact centre, v + r_z x_centre
     (x_centre the centre's body x), and for the yaw rate (the lateral sliding velocity's gradient
-    along the track), with eq. (2)'s time constant l / (2 r |omega|). Steady states: j_y = (l/2)
+    along the track), with eq. (2)'s time constant l / (2 r |omega|) (|omega| as
+    :func:`shear_exchange_speed`: no relaxation at rest). Steady states: j_y = (l/2)
     i_y(l/2), half the contact times the lateral slip, as eq. (2)'s j = i l / 2; theta = r_z l /
     (2 r |omega|), the hull's rotation while an element crosses half the contact."""
-    decay = (2 * r / l) * abs_om
+    decay = (2 * r / l) * shear_exchange_speed(omega, opts)
     return -decay * j_y + vy + rz * x_centre, -decay * theta + rz
 
 
@@ -530,7 +627,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts, track_soil=None,
     v_track = {"left": vx - rz * B / 2, "right": vx + rz * B / 2}
     abs_om = {k: sprocket_speed_abs(omega[k], opts) for k in TRACKS}
 
-    F, R_in, Rc, Fy, Mz, jdot, omdot = {}, {}, {}, {}, {}, {}, {}
+    F, R_in, Rc, Fy, Mz, jdot, omdot, rates = {}, {}, {}, {}, {}, {}, {}, {}
     s_nodes, w_nodes = gauss_nodes(1.0, opts.lateral_segments, opts.gauss_points)
     x_front = l / 2 - e  # body x of the front end of the contact (s = 0)
     for idx, k in enumerate(TRACKS):
@@ -539,10 +636,20 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts, track_soil=None,
         Rc[k] = compaction_N[idx] * direction(v_track[k], opts.motion_smoothing_m_s, opts)
         if track_soil is not None:
             c, phi, K = track_soil[k]
-        if opts.lateral_law in SHEAR_LAWS:
+        # Ferretti & Girelli's mean shear displacement (elastic on unloading)
+        jdot[k] = shear_rate(shear[k], omega[k], v_track[k], r, l, K, opts)
+        if transient:
+            # the lagged law: its shear states with the soil's damping on their eq. (2) rates
+            # (shear_retardation_time_s)
+            rates[k] = lateral_shear_rates(*lagged[k], omega[k], vy, rz, -e, l, r, opts)
+            t_d = shear_retardation_time_s(P["cell_damping_Pa_s_per_m"], K, c, phi, N[k], b, l)
+            damped = shear[k] + t_d * shear_eq2_rate(shear[k], omega[k], v_track[k], r, l, opts)
+            damped_lagged = tuple(x + t_d * xd for x, xd in zip(lagged[k], rates[k], strict=True))
+            F[k], Fy[k], Mz[k] = shear_forces(damped, omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k],
+                                              b, l, r, c, phi, K, opts, damped_lagged)
+        elif opts.lateral_law in SHEAR_LAWS:
             F[k], Fy[k], Mz[k] = shear_forces(
-                shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts,
-                lagged[k] if transient else None)
+                shear[k], omega[k], abs_om[k], v_track[k], vy, rz, x_front, dist[k], N[k], b, l, r, c, phi, K, opts)
         else:
             # Ferretti & Girelli's tractive effort: b l [c + (p_s + p_i)/2 tan phi] for a linear distribution equals the
             # integral of the shear strength over the contact, b l c + N tan phi, used here so that
@@ -554,8 +661,7 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts, track_soil=None,
                  **_distribution_scalars(dist[k])}
             _, Fy[k], Mz[k] = integrate_track(_creep_integrand, [(sn * l, wn * l) for sn, wn in zip(
                 s_nodes, w_nodes, strict=True)], ((0, l, l, s_nodes, w_nodes),), q, opts)
-        # Ferretti & Girelli's mean shear displacement.
-        jdot[k], omdot[k] = sprocket_rates(shear[k], omega[k], abs_om[k], v_track[k], torque[k], F[k], R_in[k], r, l, J)
+        omdot[k] = sprocket_acceleration(torque[k], F[k], R_in[k], r, J)
 
     Fx_net = (F["left"] - Rc["left"]) + (F["right"] - Rc["right"]) - drawbar
     acc_implied = ca.vertcat(Fx_net / m, (Fy["left"] + Fy["right"]) / m)
@@ -574,7 +680,6 @@ def vehicle_equations(xv, u, acc, P: dict, compaction_N, opts, track_soil=None,
         (u[1] - TR) / tauT,
     )
     if transient:
-        rates = {k: lateral_shear_rates(*lagged[k], abs_om[k], vy, rz, -e, l, r) for k in TRACKS}
         xdot = ca.vertcat(xdot, *(rates[k][0] for k in TRACKS), *(rates[k][1] for k in TRACKS))
     signals = track_signals(F, R_in, Rc, Fy, N, {k: track_slip(v_track[k], omega[k], r) for k in TRACKS})
     return {

@@ -104,8 +104,11 @@ from .planar import (
     direction,
     internal_resistance_N,
     lateral_shear_rates,
+    shear_eq2_rate,
     shear_forces,
-    sprocket_rates,
+    shear_rate,
+    shear_retardation_time_s,
+    sprocket_acceleration,
     sprocket_speed_abs,
     track_signals,
     track_slip,
@@ -425,10 +428,21 @@ class Vehicle3D(VehicleModel):
                 Rc[k] = compaction_N[TRACKS.index(k)] * direction(v_track, opts.motion_smoothing_m_s, opts)
             else:
                 Rc[k] = law_obj.compaction_work(depth[k], law, b) * direction(v_track, opts.motion_smoothing_m_s, opts)
-            lagged = (S[f"lateral_shear_{k}_m"], S[f"shear_twist_{k}_rad"]) if self.lateral else None
-            if opts.lateral_law in SHEAR_LAWS:
+            # Ferretti & Girelli's mean shear displacement (elastic on unloading)
+            jdot[k] = shear_rate(shear[k], omega[k], v_track, r, l, K, opts)
+            if self.lateral:
+                # the lagged law: its shear states with the soil's damping on their eq. (2) rates
+                # (planar.shear_retardation_time_s)
+                lagged = (S[f"lateral_shear_{k}_m"], S[f"shear_twist_{k}_rad"])
+                rates_lat[k] = lateral_shear_rates(*lagged, omega[k], vy_eff, rz, -e, l, r, opts)
+                t_d = shear_retardation_time_s(damping, K, c, phi, N[k], b, l)
+                damped = shear[k] + t_d * shear_eq2_rate(shear[k], omega[k], v_track, r, l, opts)
+                damped_lagged = tuple(x + t_d * xd for x, xd in zip(lagged, rates_lat[k], strict=True))
+                F[k], Fy[k], Mz[k] = shear_forces(damped, omega[k], abs_om[k], v_track, vy_eff, rz, x_front, dist[k],
+                                                  N[k], b, l, r, c, phi, K, opts, damped_lagged)
+            elif opts.lateral_law in SHEAR_LAWS:
                 F[k], Fy[k], Mz[k] = shear_forces(shear[k], omega[k], abs_om[k], v_track, vy_eff, rz, x_front, dist[k],
-                                                  N[k], b, l, r, c, phi, K, opts, lagged)
+                                                  N[k], b, l, r, c, phi, K, opts)
             else:
                 F[k] = traction_shape(shear[k], K, opts) * (b * l * c + N[k] * ca.tan(phi))
                 fy_sum, mz_sum = 0, 0
@@ -440,10 +454,7 @@ class Vehicle3D(VehicleModel):
                         fy_sum += fy
                         mz_sum += x_body * fy
                 Fy[k], Mz[k] = fy_sum, mz_sum
-            jdot[k], omdot[k] = sprocket_rates(shear[k], omega[k], abs_om[k], v_track, torque[k], F[k], R_in[k], r, l,
-                                               J)
-            if self.lateral:
-                rates_lat[k] = lateral_shear_rates(*lagged, abs_om[k], vy_eff, rz, -e, l, r)
+            omdot[k] = sprocket_acceleration(torque[k], F[k], R_in[k], r, J)
             # forces on the hull: the segments' normal loads, the thrust less the compaction
             # resistance along the track, the lateral force across it at the contact centre with the
             # rest of the planar law's yaw moment about the normal
