@@ -62,14 +62,15 @@ def test_layout_and_outputs():
 # the summary's run statistics, not figures of the vehicle's motion
 RUN_STATISTICS = ("schema_version", "wall_time_s", "real_time_factor", "fixed_step_error_max",
                   "fixed_step_steps_halved")
-# The subsoil's vertical stress at the two shallow depths is the run's peak, during the torque step, from
+# The subsoil's vertical stress is the run's peak, during the torque step, from
 # the tracks' pressure lines: the 3D hull's is steeper than the planar one's by the pitching moment of the
 # running gear's spin-up, kappa J sum domega/dt (docs/vehicle3d.md, "Why the running gear's momentum"),
 # which the planar load transfer leaves out (at 3.9 s kappa J sum domega/dt = 398 N m against the planar
 # line's m a_x h = 4996 N m, 8.0 %: the 3D line's slope is 8.3 % steeper there).
-# Measured +1.34 % at 0.1 m, +1.11 % at 0.3 m, the same at 8 and 16 segments: a model difference,
-# not the contact's quadrature.
-SUBSOIL_SHALLOW = ("subsoil_sigma_z_max_kPa[0]", "subsoil_sigma_z_max_kPa[1]")
+# Measured +1.68 / +1.39 / +1.17 / +0.92 % at 0.1 / 0.3 / 0.5 / 0.8 m with the shear law's elastic
+# unloading (+1.34 / +1.11 / +0.94 / +0.74 % without it; the same at 8 and 16 segments): a model
+# difference, not the contact's quadrature. Held within 2 % at every depth.
+SUBSOIL_SHALLOW = tuple(f"subsoil_sigma_z_max_kPa[{i}]" for i in range(4))
 
 
 def _figures(summary: dict) -> dict:
@@ -85,10 +86,10 @@ def _figures(summary: dict) -> dict:
 
 def test_flat_ground_reproduces_the_planar_validation():
     """The validation scenario at its default settings (creep law, compiled Rosenbrock at its 10 ms step,
-    8 segments): every figure of the 3D run's summary within 1 % of the planar run's (the subsoil stress at
-    the shallow depths apart: SUBSOIL_SHALLOW). Measured: yaw +0.18 %, lateral deviation +0.22 %, sprocket
-    sinkage -0.58 %, the idle shear -0.48 % (+1.8 % in yaw and lateral deviation when the segments'
-    centres carried their loads: the midpoint rule's 1/n^2 of the yaw damping)."""
+    8 segments): every figure of the 3D run's summary within 1 % of the planar run's (the subsoil stress
+    apart: SUBSOIL_SHALLOW). Measured: every other figure within 0.34 % (the idle shear +0.33 %; +1.8 % in
+    yaw and lateral deviation when the segments' centres carried their loads: the midpoint rule's 1/n^2
+    of the yaw damping)."""
     planar = _figures(symtrack.simulate(load_scenario("validation")).summary)
     s3 = _figures(symtrack.simulate(load_scenario("validation", ["model.vehicle=3d"])).summary)
     assert s3.keys() == planar.keys()
