@@ -711,6 +711,262 @@ def ramp_3d() -> str:
                f"descent (braked: -0.75 x holding, {-0.75 * hold:.0f} N m)"],
               [[lab, a, b] for lab, a, b in zip(labels, col(c), col(s), strict=True)])
 
+
+@table("furrows-across", "vehicle3d.md", "python examples/furrows_3d.py")
+def furrows_across() -> str:
+    d = run_json("python examples/furrows_3d.py")
+    rows = []
+    for r in d["across"]:
+        q, ref = r["pitch_range_deg"], r["rigid_ground_pitch_range_deg"]
+        flat = max(abs(v) for v in ref) < 1e-6
+        ratio = 1 / r["spacing_over_contact_length"]
+        rows.append([f"{r['spacing_m']:g} m", f"{ratio:g}" if ratio >= 1 else f"1/{1 / ratio:g}",
+                     f"{q[0]:.1f} .. {q[1]:.1f} deg", "0" if flat else f"{ref[0]:.1f} .. {ref[1]:.1f} deg",
+                     f"{r['pitch_rms_difference_deg']:.2g} deg", f"{r['pitch_wavelength_m']:.2f} m",
+                     f"{r['sinkage_sprocket_max_mm']:.0f} mm",
+                     f"{r['distance_m']:.1f} m, {r['speed_final_m_s']:.1f} m/s"])
+    return md(["spacing", "l / spacing", "pitch range", "rigid ground", "RMS difference", "pitch's wavelength",
+               "largest sprocket penetration", "distance, end speed"], rows)
+
+
+@table("furrows-along", "vehicle3d.md", "python examples/furrows_3d.py")
+def furrows_along() -> str:
+    d = run_json("python examples/furrows_3d.py")
+    a, b = d["along"]
+
+    def col(r):
+        change, closed = (1e3 * (r["offset_end_m"] - r["offset_start_m"]),
+                          1e3 * (r["offset_end_creep_closed_form_m"] - r["offset_start_m"]))
+        return [f"{r['roll_max_abs_deg']:.0e} deg, {r['pitch_max_abs_deg']:.3f} deg",
+                f"{r['lower_share_mean']:.4f}", f"{r['normal_load_sum_over_W']:.4f}",
+                f"{r['sinkage_sprocket_left_mm']:.4f}, {r['sinkage_sprocket_right_mm']:.4f} mm",
+                f"{1e3 * r['offset_start_m']:.1f} -> {1e3 * r['offset_end_m']:.2f} mm",
+                f"{1e3 * r['offset_end_creep_closed_form_m']:.2f} mm (change {change:+.2f} against {closed:+.2f}: "
+                f"{100 * (change / closed - 1):+.0f} %)",
+                f"{r['cg_height_end_m']:.5f} m"]
+    labels = ["roll, pitch (largest)", "lower track's share", "normal loads / W", "sprocket sinkage (left, right)",
+              "offset from the line: start -> end", "the creep law's closed form", "CG height at the end"]
+    return md([f"along, 8 s ({a['distance_m']:.0f} m)", f"{a['tracks']} (start y = {a['start_y_m']:g} m)",
+               f"{b['tracks']} (start y = {b['start_y_m']:g} m)"],
+              [[lab, x, y] for lab, x, y in zip(labels, col(a), col(b), strict=True)])
+
+
+@table("second-pass-3d", "vehicle3d.md", "python examples/second_pass_3d.py")
+def second_pass_3d() -> str:
+    d = run_json("python examples/second_pass_3d.py")
+    x0, x1 = d["x_window_m"]
+    return md([f"x = {x0:.1f} ... {x1:.1f} m", "pass 1", "pass 2"], [
+        ["rut (mean / max) after the pass",
+         f"{d['rut_after_pass_1_mean_mm']:.3f} / {d['rut_after_pass_1_max_mm']:.3f} mm",
+         f"new sinkage {d['new_sinkage_pass_2_mean_mm']:.3f} mm (deepening {100 * d['deepening']:.1f} % against the "
+         f"cycle law's 2^beta - 1 = {100 * d['deepening_closed_form']:.1f} %)"],
+        ["the hull's height", "(reference)", f"{d['hull_drop_mm'][0]:.3f} to {d['hull_drop_mm'][1]:.3f} mm lower"],
+        ["pitch (mean)", f"{d['pitch_pass_1_mrad']:.3f} mrad", f"{d['pitch_pass_2_mrad']:.3f} mrad"],
+        ["compaction resistance", f"{d['compaction_resistance_pass_1_N']:.1f} N",
+         f"{d['compaction_resistance_pass_2_N']:.1f} N"]])
+
+
+# ---------------------------------------------------------------------------------------------------------
+# docs/control.md
+
+@table("lane-keeping", "control.md", "python examples/lane_keeping_ruts.py --out DIR --baseline")
+def lane_keeping() -> str:
+    d = run_json("python examples/lane_keeping_ruts.py --out DIR --baseline")
+    ln, p2, base = d["lanes"], d["second_pass"], d["baseline_offset_pass"]
+    conv, bconv = p2["after_convergence"], base["after_convergence"]
+    return md(["figure", "controlled traffic (follows the lanes)", "offset pass (no lane keeping)"], [
+        ["lanes found: gauge / centre / heading",
+         f"{ln['gauge_m']:.3f} m (the track gauge {ln['vehicle_track_gauge_m']:g} m) / y = {ln['centre_y0_m']:.4f} m "
+         f"(pass 1 drove {ln['first_pass_reference_y_m']:g}) / {ln['heading_deg']:.4f} deg", ""],
+        ["converged (\\|e\\| < 5 cm from then on)", f"from s = {p2['converged_from_s_m']:.1f} m",
+         "(starts on its line)"],
+        ["RMS lateral error from 6 m on (max)",
+         f"**{100 * p2['rms_lateral_error_m']:.2f} cm** ({100 * p2['max_lateral_error_after_settle_m']:.2f} cm)", ""],
+        [f"new sinkage outside pass 1's ruts, after convergence (cells beyond x = {conv['x_after_m']:.1f} m)",
+         f"**{100 * conv['new_sinkage_outside_fraction']:.2f} %** of the new volume "
+         f"(max {conv['new_sinkage_max_outside_mm']:.3f} mm)",
+         f"{100 * bconv['new_sinkage_outside_fraction']:.0f} % (max {bconv['new_sinkage_max_outside_mm']:.2f} mm)"],
+        ["new volume after convergence / pass 1's volume there", f"{100 * conv['new_to_first_pass_volume']:.1f} %",
+         f"{100 * bconv['new_to_first_pass_volume']:.0f} %"],
+        ["new sinkage outside pass 1's ruts, whole pass",
+         f"{100 * p2['whole_pass']['new_sinkage_outside_fraction']:.0f} %",
+         f"{100 * base['whole_pass']['new_sinkage_outside_fraction']:.0f} %"]])
+
+
+GRID_FIGURES = (("distance after idle (m)", "distance_after_idle_m"), ("lateral deviation (m)", "lateral_deviation_m"),
+                ("yaw final (deg)", "yaw_final_deg"), ("sinkage sprocket (mm)", "sinkage_sprocket_mm"),
+                ("sinkage idler (mm)", "sinkage_idler_mm"), ("shear driven max (m)", "shear_driven_max_m"),
+                ("shear idle min (m)", "shear_idle_min_m"), ("rut max depth (mm)", "rut_max_depth_mm"),
+                ("rut mean depth (mm)", "rut_mean_depth_mm"),
+                ("compaction resistance, distance mean (N)", "compaction_resistance_mean_N"),
+                ("compaction resistance, time mean (N)", "compaction_resistance_time_mean_N"))
+VG_IDAS = "symtrack simulate validation_grid --integrator idas --out DIR --quiet"
+
+
+@table("grid-rosenbrock", "terrain.md", "symtrack simulate validation_grid --integrator idas|rosenbrock "
+       "[--set run.fixed_step_s=0.0003125] --out DIR")
+def grid_rosenbrock() -> str:
+    ref = summary(VG_IDAS)
+    rb = summary("symtrack simulate validation_grid --integrator rosenbrock --out DIR --quiet")
+    rb2 = summary("symtrack simulate validation_grid --integrator rosenbrock --set run.fixed_step_s=0.0003125 "
+                  "--out DIR --quiet")
+    rows = [[label, f"{ref[k]:.6g}", f"{rb[k]:.6g} ({pct(rb[k], ref[k])})", f"{rb2[k]:.6g} ({pct(rb2[k], ref[k])})"]
+            for label, k in GRID_FIGURES if k in ref]
+    return md(["figure", "IDAS", "rosenbrock 0.625 ms", "rosenbrock 0.3125 ms"], rows)
+
+
+@table("engine-accuracy", "terrain.md", "symtrack simulate validation_grid [--integrator idas] --out DIR")
+def engine_accuracy() -> str:
+    ref = summary(VG_IDAS)
+    eng = summary("symtrack simulate validation_grid --out DIR --quiet")
+    rows = [[label, f"{ref[k]:.6g}", f"{eng[k]:.6g}", pct(eng[k], ref[k])] for label, k in GRID_FIGURES if k in ref]
+    return md(["figure", "IDAS", "engine", "difference"], rows)
+
+
+def _thousands(n: int) -> str:
+    return f"{n:,}".replace(",", " ")
+
+
+def _risk(p: dict, depths) -> str:
+    """The field's share at medium / high risk by depth, or "low everywhere"."""
+    parts = [f"{d:g} m: {100 * m:.2f} / {100 * h:.2f} %" for d, m, h in
+             zip(depths, p["risk_fraction_of_field_medium"], p["risk_fraction_of_field_high"], strict=True) if m or h]
+    return "low everywhere" if not parts else "medium / high " + ", ".join(parts)
+
+
+@table("field-traffic", "studies.md", "symtrack field field_traffic --out DIR")
+def field_traffic() -> str:
+    s = summary("symtrack field field_traffic --out DIR --quiet")
+    rows = []
+    for p in s["patterns"].values():
+        label = f"random (seed {p['seed']})" if "seed" in p else f"controlled ({p['lanes']} lanes)"
+        depths = p["subsoil_depths_m"]
+        rows.append([label, f"{100 * p['trafficked_area_fraction']:.2f} %",
+                     " / ".join(_thousands(n) for n in p["passes_per_cell_histogram"]),
+                     " / ".join(_thousands(n) for n in p["load_cycles_histogram"]),
+                     f"{p['rut_mean_depth_mm']:.3f} / {p['rut_max_depth_mm']:.3f} mm",
+                     " / ".join(f"{v:.1f}" for v in p["subsoil_sigma_z_max_kPa"]) + " kPa", _risk(p, depths)])
+    d = " / ".join(f"{x:g}" for x in depths)
+    return md(["pattern", "trafficked", "passes per cell (cells passed 0 / 1 / 2 ... times)",
+               "load cycles (0 / 1 / 2 ...)", "rut mean / max", f"sigma_z max at {d} m", "risk"], rows)
+
+
+@table("field-mass-sweep", "studies.md", "symtrack sweep field_traffic --vary vehicle.mass_kg=5500,11000,22000 --set "
+       "field.passes=4 --set field.lanes=2 --out DIR --workers 2 (DIR/results.csv)")
+def field_mass_sweep() -> str:
+    _, folder = run("symtrack sweep field_traffic --vary vehicle.mass_kg=5500,11000,22000 --set field.passes=4 "
+                    "--set field.lanes=2 --out DIR --workers 2")
+    with (folder / "results.csv").open(encoding="utf-8") as f:
+        results = list(csv.DictReader(f))
+    depths = sorted({float(m.group(1)) for k in results[0] for m in [re.search(r"_at_([\d.]+)m$", k)] if m})
+    rows = []
+    for r in results:
+        if r["status"] != "ok":
+            raise RuntimeError(f"the sweep's run {r['run_id']} failed: {r['error']}")
+        for pat in ("random", "controlled"):
+            risk = [f"{100 * float(r[f'{pat}_risk_fraction_of_field_medium_at_{d:g}m']):.2f} / "
+                    f"{100 * float(r[f'{pat}_risk_fraction_of_field_high_at_{d:g}m']):.2f}" for d in depths]
+            rows.append([f"{float(r['vehicle.mass_kg']):.0f}", pat,
+                         f"{100 * float(r[f'{pat}_trafficked_area_fraction']):.2f} %",
+                         f"{float(r[f'{pat}_rut_mean_depth_mm']):.2f} / {float(r[f'{pat}_rut_max_depth_mm']):.2f} mm",
+                         *risk])
+    return md(["mass (kg)", "pattern", "trafficked", "rut mean / max", *(f"{d:g} m" for d in depths)], rows)
+
+
+@table("operation-rti", "studies.md", "symtrack field operation_small --set 'operation.follower=\"rti\"' --out DIR "
+       "[--set 'soil.preset=\"sandy_loam_15\"']")
+def operation_rti() -> str:
+    rows = []
+    for soil, extra in (("clay", ""), ("sandy loam", " --set 'soil.preset=\"sandy_loam_15\"'")):
+        s = summary(f"symtrack field operation_small --set 'operation.follower=\"rti\"'{extra} --out DIR --quiet",
+                    ok=(0, 1))
+        op = s["operations"][0]
+        done = f"yes, {s['turns_driven']} turns" if s["complete"] else f"**no**: {s['error']}"
+        rows.append([soil, done, f"{s['rms_lateral_error_lines_m']:.4f} / {s['rms_lateral_error_turns_m']:.4f}",
+                     f"{s['max_lateral_error_lines_m']:.3f}", op["solves"], f"**{op['failed_solves']}**",
+                     op["fallback_solves"]])
+    return md(["soil", "complete", "RMS lines / turns [m]", "max lines [m]", "solves", "failed", "IPOPT fallbacks"],
+              rows)
+
+
+TRAFFIC_SMALL = ("symtrack field traffic_small --set 'season.tracks=\"controlled\"' "
+                 "--set 'operation.turn_lane_m=\"{}\"' --set 'operation.follower=\"law\"' "
+                 "--out DIR --workers 0 --quiet")
+
+
+def _season_row(s: dict) -> list[str]:
+    return [f"{s['trafficked_fraction']:.4f}", f"{s['headland_trafficked_fraction']:.4f}",
+            f"{s['infield_trafficked_fraction']:.4f}",
+            f"{s['area_run_over_once_m2']:.1f} / {s['area_run_over_twice_m2']:.1f} / "
+            f"{s['area_run_over_3_or_more_m2']:.1f}", f"{s['repeated_coverage_fraction']:.4f}"]
+
+
+@table("turn-lanes", "studies.md", "symtrack field traffic_small --set 'season.tracks=\"controlled\"' --set "
+       "'operation.turn_lane_m=\"auto\"|\"none\"' --set 'operation.follower=\"law\"' --out DIR --workers 0")
+def turn_lanes() -> str:
+    rows = []
+    for lane, label in (("none", '"none"'), ("auto", '"auto"')):
+        s = summary(TRAFFIC_SMALL.format(lane), ok=(0, 1))
+        if not s["complete"]:
+            raise RuntimeError(f"traffic_small, turn_lane_m = {lane}: {s['error']}")
+        rows.append([label, *_season_row(s), f"{s['distance_m']:.1f} m",
+                     f"{s['rms_lateral_error_lines_m']:.3f} / {s['rms_lateral_error_turns_m']:.3f} m",
+                     f"{s['turns_driven']} / {s['turns_lifted']}"])
+    return md(["turn_lane_m", "trafficked", "headland", "in-field", "once / twice / 3+ [m^2]", "repeated coverage",
+               "distance", "RMS lines / turns", "turns driven / lifted"], rows)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# docs/region.md: `symtrack bench region --large` (the full fidelity's seasons, then the fast twins, 1 against 2
+# workers, a 1,000 ha region)
+
+def _region() -> dict:
+    _, folder = run("symtrack bench region --large --out DIR/region.json")
+    return json.loads((folder / "region.json").read_text(encoding="utf-8"))
+
+
+@table("region-fast-full", "region.md", "symtrack bench region --large --out FILE")
+def region_fast_full() -> str:
+    rows = []
+    for r in _region()["fast_vs_full"]:
+        stress = " / ".join(f"{r[f'stress_ratio_{d}m']:.2f}" for d in ("0.1", "0.3", "0.5")) \
+            if "stress_ratio_0.1m" in r else "-"  # on the same cells only
+        dens = " / ".join(f"{r[f'density_change_ratio_{d}m']:.2f}" for d in ("0.1", "0.3", "0.5"))
+        rows.append([r["case"], r["rule"], f"{r.get('cell_m', 0.1):g}", f"{100 * r['trafficked_fraction_full']:.1f}",
+                     f"{100 * r['trafficked_fraction_fast']:.1f}", f"{r['trafficked_difference_points']:+.1f}", stress,
+                     dens, f"{r['full_wall_time_s']:.0f}", f"{r['fast_wall_time_s']:.2f}", f"{r['cost_ratio']:.0f}"])
+    return md(["case", "rule", "cells [m]", "trafficked, full [%]", "fast [%]", "difference [points]",
+               "stress fast / full, 0.1 / 0.3 / 0.5 m", "density change fast / full, 0.1 / 0.3 / 0.5 m", "full [s]",
+               "fast [s]", "cost full / fast"], rows)
+
+
+@table("region-cost", "region.md", "symtrack bench region --large --out FILE")
+def region_cost() -> str:
+    rep = _region()
+    fine = [r for r in rep["fast_vs_full"] if "cells" in r]
+    full = ", ".join(f"{r['full_s_per_ha_season']:.0f} (`{r['case']}`)" for r in fine if r["rule"] == "overlap")
+    fast = ", ".join(f"{r['fast_wall_time_s']:.2f} s (`{r['case']}`, {r['rule']})" for r in fine)
+    w = rep.get("workers", [])
+    rows = [["the full fidelity, wall seconds per hectare-season (one core a run; the crawler, 0.1 m cells)", full],
+            ["the fast fidelity on the same fields and cells", fast]]
+    if w:
+        rows += [["the fast fidelity, the region's calendars, CPU seconds per hectare-season (the tasks' own)",
+                  " and ".join(f"{r['cpu_s_per_ha_season']:.3f} ({r['workers']} worker{'s' * (r['workers'] > 1)})"
+                               for r in w)],
+                 ["the same as wall seconds per hectare-season per worker",
+                  " and ".join(f"{r['s_per_ha_season_per_core']:.2f} ({r['workers']})" for r in w)],
+                 [f"{w[0]['field_seasons']} fields ({w[0]['area_ha']:.0f} ha) on 1 and on 2 workers",
+                  "tasks " + " and ".join(f"{r['tasks_s']:.1f} s" for r in w)
+                  + (f" ({w[1]['speedup_vs_1_worker']:.2f} x); the workers got "
+                     + " and ".join(f"{r['cores_used']:.2f}" for r in w) + " of a core in all"
+                     if len(w) == 2 else "")]]
+    if "large_region" in rep:
+        r = rep["large_region"]
+        parts = ", ".join(f"{k[:-2]} {r[k]:.0f} s" for k in ("plans_s", "tables_s", "tasks_s", "outputs_s") if k in r)
+        rows.append([f"{r['area_ha']:.0f} ha ({r['fields']} fields), one season, {r['workers']} workers, outputs "
+                     "included", f"{r['wall_time_s']:.0f} s ({parts})"])
+    return md(["what", "measured"], rows)
+
 # ---------------------------------------------------------------------------------------------------------
 # writing the pages
 
