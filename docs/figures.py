@@ -967,14 +967,29 @@ def region_cost() -> str:
                      "included", f"{r['wall_time_s']:.0f} s ({parts})"])
     return md(["what", "measured"], rows)
 
+
+@table("traffic-systems", "studies.md", "symtrack field traffic_small --set 'operation.follower=\"law\"' --out DIR "
+       "--workers 0 (DIR/traffic.csv)")
+def traffic_systems() -> str:
+    _, folder = run("symtrack field traffic_small --set 'operation.follower=\"law\"' --out DIR --workers 0 --quiet")
+    with (folder / "traffic.csv").open(encoding="utf-8") as f:
+        rows = []
+        for r in csv.DictReader(f):
+            s = {k: (float(v) if re.fullmatch(r"-?[\d.e+-]+", v or "") else v) for k, v in r.items()}
+            rows.append([r["tracks"], *_season_row(s), f"{s['rms_lateral_error_lines_m']:.3f} m",
+                         f"{int(s['turns_driven'])} / {int(s['turns_lifted'])}",
+                         "yes" if r["complete"] == "True" else "**no**"])
+    return md(["system", "trafficked", "headland", "in-field", "once / twice / 3+ [m^2]", "repeated coverage",
+               "RMS lines", "turns driven / lifted", "complete"], rows)
+
 # ---------------------------------------------------------------------------------------------------------
 # writing the pages
 
 def stamp(t: Table, seconds: float) -> str:
     day = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d")
     took = f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min"
-    return (f"Produced {day} by `{t.command}` on {machine()} ({took}); "
-            f"regenerate with `make figures NAMES={t.name}`.")
+    return (f"Produced {day} by `{t.command}` on {machine()}, load average {os.getloadavg()[0]:.1f} at the end "
+            f"({took}); regenerate with `make figures NAMES={t.name}`.")
 
 
 def replace(text: str, name: str, body: str, page: str) -> str:
