@@ -68,7 +68,7 @@ def table(name: str, page: str, command: str):
 # ---------------------------------------------------------------------------------------------------------
 # running the commands: a fresh process from the checkout, each command once per regeneration
 
-WORK = Path(tempfile.mkdtemp(prefix="symtrack-figures-"))
+WORK = Path(tempfile.gettempdir()) / f"symtrack-figures-{os.getpid()}"  # the runs' folders, removed at the end
 _ELAPSED: dict[str, float] = {}  # command -> seconds it took
 _USED: list[str] = []  # the commands the table being made used
 
@@ -118,6 +118,15 @@ def summary(command: str, ok=(0,)) -> dict:
     """summary.json of a ``symtrack simulate|field ... --out DIR`` run."""
     _, folder = run(command, ok)
     return json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+
+
+@contextlib.contextmanager
+def _timed(label: str):
+    """Times a computation of this process as a command's run."""
+    t0 = time.perf_counter()
+    yield
+    _ELAPSED[label] = time.perf_counter() - t0
+    _USED.append(label)
 
 
 def md_tables(text: str) -> list[str]:
@@ -340,15 +349,235 @@ def hull_rotation() -> str:
 
 
 # ---------------------------------------------------------------------------------------------------------
-# docs/subsoil.md: the figures of the package's functions (computed here, in this process)
+# docs/terrain.md
 
-@contextlib.contextmanager
-def _timed(label: str):
+MEMORY_PROBE = """
+name = "memory_probe"
+[run]
+duration_s = 10.0
+output_dt_s = 0.01
+integrator = "grid_fast"
+stop_after_distance_m = 1.0
+[vehicle]
+preset = "reference_crawler"
+[soil]
+preset = "clayey_soil_thailand_38"
+[terrain]
+size_m = [10.0, 10.0]
+cell_m = 0.1
+[[torque]]
+t_s = 0.0
+left_N_m = 2000.0
+right_N_m = 2000.0
+"""
+
+# the process's own high-water mark as it ends (VmHWM: what a fresh `symtrack simulate` process reached)
+_HWM = """
+import sys
+from symtrack.cli import main
+code = main(sys.argv[2:])
+with open("/proc/self/status") as f:
+    kb = next(line.split()[1] for line in f if line.startswith("VmHWM:"))
+with open(sys.argv[1], "w") as f:
+    f.write(kb)
+sys.exit(code)
+"""
+
+
+def _peak(args: list[str], label: str) -> tuple[float, float]:
+    """(the run's own estimate, its process's peak resident set), MB, of `symtrack simulate ARGS --out DIR`."""
+    out, hwm = WORK / f"mem{len(_ELAPSED)}", WORK / f"hwm{len(_ELAPSED)}"
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     t0 = time.perf_counter()
-    yield
+    proc = subprocess.run([sys.executable, "-c", _HWM, str(hwm), "simulate", *args, "--out", str(out), "--quiet"],
+                          cwd=ROOT, env=env, capture_output=True, text=True)
     _ELAPSED[label] = time.perf_counter() - t0
     _USED.append(label)
+    if proc.returncode != 0:
+        raise RuntimeError(f"symtrack simulate {' '.join(args)}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+    estimate = json.loads((out / "summary.json").read_text())["terrain_memory_estimate_MB"]
+    shutil.rmtree(out, ignore_errors=True)
+    return estimate, float(hwm.read_text()) * 1024.0 / 1e6
 
+
+@table("memory-peaks", "terrain.md", "symtrack simulate PROBE --set terrain.size_m=[S, S] [--set terrain.passes=3] "
+       "[--terrain-in FILE] --out DIR, its process's VmHWM (docs/figures.py)")
+def memory_peaks() -> str:
+    from symtrack.presets import soil_preset
+    from symtrack.terrain import storage as persist
+    from symtrack.terrain.storage import Grid, Terrain
+
+    if not sys.platform.startswith("linux"):
+        raise RuntimeError("the peak resident set is read from /proc/self/status: Linux only")
+    probe = WORK / "memory_probe.toml"
+    probe.write_text(MEMORY_PROBE)
+    rows = []
+
+    def row(cells, what, args, label):
+        est, peak = _peak(args, label)
+        rows.append([cells, what, f"{est:.1f} MB", f"{peak:.1f} MB", f"{est / peak:.2f}"])
+
+    def side(cells):
+        return (cells / 100) ** 0.5
+
+    for cells in (1e4, 1e5, 1e6, 3e6):
+        row(f"{cells:.0e}".replace("e+0", "e"), "new",
+            [str(probe), "--set", f"terrain.size_m=[{side(cells)},{side(cells)}]"], f"memory {cells:.0e}")
+    row("1e6", "new, 3 passes", [str(probe), "--set", "terrain.size_m=[100.0,100.0]", "--set", "terrain.passes=3"],
+        "memory 1e6 x3")
+    for cells in (1e6, 3e6):
+        n = int(round(side(cells) * 10))
+        field = WORK / f"field{n}.npz"
+        persist.save(field, Terrain(Grid((-n / 20, -n / 20), 0.1, (n, n)), None, (0.1, 0.3, 0.5, 0.8)),
+                     soil_preset("clayey_soil_thailand_38"))
+        row(f"{cells:.0e}".replace("e+0", "e"), "continued",
+            [_probe_without_size(probe), "--terrain-in", str(field), "--terrain-out", str(field)],
+            f"memory {cells:.0e} continued")
+        field.unlink()
+    row("1e6", "`validation_grid` (20 m)", ["validation_grid"], "memory validation_grid")
+    return md(["cells", "field", "estimate", "peak", "estimate / peak"], rows)
+
+
+def _probe_without_size(probe: Path) -> str:
+    p = probe.with_name("memory_probe_file.toml")
+    p.write_text(MEMORY_PROBE.replace("size_m = [10.0, 10.0]\n", ""))
+    return str(p)
+
+
+GRID_FIGURES = (("distance after idle (m)", "distance_after_idle_m"), ("lateral deviation (m)", "lateral_deviation_m"),
+                ("yaw final (deg)", "yaw_final_deg"), ("sinkage sprocket (mm)", "sinkage_sprocket_mm"),
+                ("sinkage idler (mm)", "sinkage_idler_mm"), ("shear driven max (m)", "shear_driven_max_m"),
+                ("shear idle min (m)", "shear_idle_min_m"), ("rut max depth (mm)", "rut_max_depth_mm"),
+                ("rut mean depth (mm)", "rut_mean_depth_mm"),
+                ("compaction resistance, distance mean (N)", "compaction_resistance_mean_N"),
+                ("compaction resistance, time mean (N)", "compaction_resistance_time_mean_N"))
+VG_IDAS = "symtrack simulate validation_grid --integrator idas --out DIR --quiet"
+
+
+@table("grid-rosenbrock", "terrain.md", "symtrack simulate validation_grid --integrator idas|rosenbrock "
+       "[--set run.fixed_step_s=0.0003125] --out DIR")
+def grid_rosenbrock() -> str:
+    ref = summary(VG_IDAS)
+    rb = summary("symtrack simulate validation_grid --integrator rosenbrock --out DIR --quiet")
+    rb2 = summary("symtrack simulate validation_grid --integrator rosenbrock --set run.fixed_step_s=0.0003125 "
+                  "--out DIR --quiet")
+    rows = [[label, f"{ref[k]:.6g}", f"{rb[k]:.6g} ({pct(rb[k], ref[k])})", f"{rb2[k]:.6g} ({pct(rb2[k], ref[k])})"]
+            for label, k in GRID_FIGURES if k in ref]
+    return md(["figure", "IDAS", "rosenbrock 0.625 ms", "rosenbrock 0.3125 ms"], rows)
+
+
+@table("engine-accuracy", "terrain.md", "symtrack simulate validation_grid [--integrator idas] --out DIR")
+def engine_accuracy() -> str:
+    ref = summary(VG_IDAS)
+    eng = summary("symtrack simulate validation_grid --out DIR --quiet")
+    rows = [[label, f"{ref[k]:.6g}", f"{eng[k]:.6g}", pct(eng[k], ref[k])] for label, k in GRID_FIGURES if k in ref]
+    return md(["figure", "IDAS", "engine", "difference"], rows)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# docs/vehicle3d.md
+
+@table("flat-ground-3d", "vehicle3d.md", "symtrack simulate validation [--set model.vehicle=3d "
+       "[--set model.contact_segments=16]] --out DIR")
+def flat_ground_3d() -> str:
+    runs = [summary("symtrack simulate validation --out DIR --quiet"),
+            summary("symtrack simulate validation --set model.vehicle=3d --out DIR --quiet"),
+            summary("symtrack simulate validation --set model.vehicle=3d --set model.contact_segments=16 "
+                    "--out DIR --quiet")]
+    figs = (("lateral deviation [m]", "lateral_deviation_m", 1, True), ("yaw [deg]", "yaw_final_deg", 1, True),
+            ("distance [m]", "distance_m", 1, False), ("final speed [m/s]", "speed_final_m_s", 1, False),
+            ("idler sinkage [mm]", "sinkage_idler_mm", 1, False),
+            ("sprocket sinkage [mm]", "sinkage_sprocket_mm", 1, True),
+            ("driven shear, max [mm]", "shear_driven_max_m", 1e3, False),
+            ("idle shear, min [mm]", "shear_idle_min_m", 1e3, False))
+    rows = []
+    for label, key, scale, rel in figs:
+        ref = runs[0][key] * scale
+        cells = [f"{ref:.5g}"]
+        for s in runs[1:]:
+            v = s[key] * scale
+            cells.append(f"{v:.5g} ({100 * (v / ref - 1):+.1f} %)" if rel else f"{v:.5g}")
+        rows.append([label, *cells])
+    return md(["figure", "planar", "3D, 8 segments", "3D, 16"], rows)
+
+
+@table("ramp-3d", "vehicle3d.md", "python examples/ramp_3d.py")
+def ramp_3d() -> str:
+    d = run_json("python examples/ramp_3d.py")
+    hold, c, s = d["holding_torque_N_m"], d["climb"], d["descent"]
+
+    def col(r):
+        return [f"{r['distance_along_slope_m']:.2f} m, {r['speed_final_m_s']:.3f} m/s at the end",
+                f"{r['cg_rise_m']:.6f} / {r['cg_rise_geometry_m']:.6f} m ({r['cg_rise_error_rel']:+.1e})",
+                f"{r['pitch_mean_deg']:.4f} / {r['pitch_expected_deg']:.4f} deg",
+                f"{r['normal_load_sum_over_W_cos_t']:.7f}",
+                f"{r['p_idler_kPa']:.1f} / {r['p_sprocket_kPa']:.1f} kPa",
+                f"{r['sinkage_idler_mm']:.3f} / {r['sinkage_sprocket_mm']:.3f} mm"]
+    labels = ["distance along the slope", "CG rise after the first second / s sin t",
+              "pitch (mean of the last 2 s) / the ramp's + the ends' sinkage difference over l",
+              "normal loads / W cos t (mean of the last 2 s)", "idler / sprocket pressure (mean)",
+              "idler / sprocket sinkage"]
+    return md([f"{abs(c['slope_deg']):g} deg, 8 s", f"climb (1.4 x holding: {1.4 * hold:.0f} N m)",
+               f"descent (braked: -0.75 x holding, {-0.75 * hold:.0f} N m)"],
+              [[lab, a, b] for lab, a, b in zip(labels, col(c), col(s), strict=True)])
+
+
+@table("furrows-across", "vehicle3d.md", "python examples/furrows_3d.py")
+def furrows_across() -> str:
+    d = run_json("python examples/furrows_3d.py")
+    rows = []
+    for r in d["across"]:
+        q, ref = r["pitch_range_deg"], r["rigid_ground_pitch_range_deg"]
+        flat = max(abs(v) for v in ref) < 1e-6
+        ratio = 1 / r["spacing_over_contact_length"]
+        rows.append([f"{r['spacing_m']:g} m", f"{ratio:g}" if ratio >= 1 else f"1/{1 / ratio:g}",
+                     f"{q[0]:.1f} .. {q[1]:.1f} deg", "0" if flat else f"{ref[0]:.1f} .. {ref[1]:.1f} deg",
+                     f"{r['pitch_rms_difference_deg']:.2g} deg", f"{r['pitch_wavelength_m']:.2f} m",
+                     f"{r['sinkage_sprocket_max_mm']:.0f} mm",
+                     f"{r['distance_m']:.1f} m, {r['speed_final_m_s']:.1f} m/s"])
+    return md(["spacing", "l / spacing", "pitch range", "rigid ground", "RMS difference", "pitch's wavelength",
+               "largest sprocket penetration", "distance, end speed"], rows)
+
+
+@table("furrows-along", "vehicle3d.md", "python examples/furrows_3d.py")
+def furrows_along() -> str:
+    d = run_json("python examples/furrows_3d.py")
+    a, b = d["along"]
+
+    def col(r):
+        change, closed = (1e3 * (r["offset_end_m"] - r["offset_start_m"]),
+                          1e3 * (r["offset_end_creep_closed_form_m"] - r["offset_start_m"]))
+        return [f"{r['roll_max_abs_deg']:.0e} deg, {r['pitch_max_abs_deg']:.3f} deg",
+                f"{r['lower_share_mean']:.4f}", f"{r['normal_load_sum_over_W']:.4f}",
+                f"{r['sinkage_sprocket_left_mm']:.4f}, {r['sinkage_sprocket_right_mm']:.4f} mm",
+                f"{1e3 * r['offset_start_m']:.1f} -> {1e3 * r['offset_end_m']:.2f} mm",
+                f"{1e3 * r['offset_end_creep_closed_form_m']:.2f} mm (change {change:+.2f} against {closed:+.2f}: "
+                f"{100 * (change / closed - 1):+.0f} %)",
+                f"{r['cg_height_end_m']:.5f} m"]
+    labels = ["roll, pitch (largest)", "lower track's share", "normal loads / W", "sprocket sinkage (left, right)",
+              "offset from the line: start -> end", "the creep law's closed form", "CG height at the end"]
+    return md([f"along, 8 s ({a['distance_m']:.0f} m)", f"{a['tracks']} (start y = {a['start_y_m']:g} m)",
+               f"{b['tracks']} (start y = {b['start_y_m']:g} m)"],
+              [[lab, x, y] for lab, x, y in zip(labels, col(a), col(b), strict=True)])
+
+
+@table("second-pass-3d", "vehicle3d.md", "python examples/second_pass_3d.py")
+def second_pass_3d() -> str:
+    d = run_json("python examples/second_pass_3d.py")
+    x0, x1 = d["x_window_m"]
+    return md([f"x = {x0:.1f} ... {x1:.1f} m", "pass 1", "pass 2"], [
+        ["rut (mean / max) after the pass",
+         f"{d['rut_after_pass_1_mean_mm']:.3f} / {d['rut_after_pass_1_max_mm']:.3f} mm",
+         f"new sinkage {d['new_sinkage_pass_2_mean_mm']:.3f} mm (deepening {100 * d['deepening']:.1f} % against the "
+         f"cycle law's 2^beta - 1 = {100 * d['deepening_closed_form']:.1f} %)"],
+        ["the hull's height", "(reference)", f"{d['hull_drop_mm'][0]:.3f} to {d['hull_drop_mm'][1]:.3f} mm lower"],
+        ["pitch (mean)", f"{d['pitch_pass_1_mrad']:.3f} mrad", f"{d['pitch_pass_2_mrad']:.3f} mrad"],
+        ["compaction resistance", f"{d['compaction_resistance_pass_1_N']:.1f} N",
+         f"{d['compaction_resistance_pass_2_N']:.1f} N"]])
+
+
+# ---------------------------------------------------------------------------------------------------------
+# docs/subsoil.md: the figures of the package's functions (computed here, in this process)
 
 @table("stress-table-memory", "subsoil.md",
        "symtrack.soil.subsoil.build_tables(xi=XI) for the reference crawler (docs/figures.py)")
@@ -464,130 +693,6 @@ def arvidsson_2011() -> str:
     return md(["", *(f"{d:g} m" for d in depths)], rows)
 
 
-# ---------------------------------------------------------------------------------------------------------
-# docs/vehicle3d.md
-
-@table("flat-ground-3d", "vehicle3d.md", "symtrack simulate validation [--set model.vehicle=3d "
-       "[--set model.contact_segments=16]] --out DIR")
-def flat_ground_3d() -> str:
-    runs = [summary("symtrack simulate validation --out DIR --quiet"),
-            summary("symtrack simulate validation --set model.vehicle=3d --out DIR --quiet"),
-            summary("symtrack simulate validation --set model.vehicle=3d --set model.contact_segments=16 "
-                    "--out DIR --quiet")]
-    figs = (("lateral deviation [m]", "lateral_deviation_m", 1, True), ("yaw [deg]", "yaw_final_deg", 1, True),
-            ("distance [m]", "distance_m", 1, False), ("final speed [m/s]", "speed_final_m_s", 1, False),
-            ("idler sinkage [mm]", "sinkage_idler_mm", 1, False),
-            ("sprocket sinkage [mm]", "sinkage_sprocket_mm", 1, True),
-            ("driven shear, max [mm]", "shear_driven_max_m", 1e3, False),
-            ("idle shear, min [mm]", "shear_idle_min_m", 1e3, False))
-    rows = []
-    for label, key, scale, rel in figs:
-        ref = runs[0][key] * scale
-        cells = [f"{ref:.5g}"]
-        for s in runs[1:]:
-            v = s[key] * scale
-            cells.append(f"{v:.5g} ({100 * (v / ref - 1):+.1f} %)" if rel else f"{v:.5g}")
-        rows.append([label, *cells])
-    return md(["figure", "planar", "3D, 8 segments", "3D, 16"], rows)
-
-
-
-# ---------------------------------------------------------------------------------------------------------
-# docs/terrain.md
-
-MEMORY_PROBE = """
-name = "memory_probe"
-[run]
-duration_s = 10.0
-output_dt_s = 0.01
-integrator = "grid_fast"
-stop_after_distance_m = 1.0
-[vehicle]
-preset = "reference_crawler"
-[soil]
-preset = "clayey_soil_thailand_38"
-[terrain]
-size_m = [10.0, 10.0]
-cell_m = 0.1
-[[torque]]
-t_s = 0.0
-left_N_m = 2000.0
-right_N_m = 2000.0
-"""
-
-# the process's own high-water mark as it ends (VmHWM: what a fresh `symtrack simulate` process reached)
-_HWM = """
-import sys
-from symtrack.cli import main
-code = main(sys.argv[2:])
-with open("/proc/self/status") as f:
-    kb = next(line.split()[1] for line in f if line.startswith("VmHWM:"))
-with open(sys.argv[1], "w") as f:
-    f.write(kb)
-sys.exit(code)
-"""
-
-
-def _peak(args: list[str], label: str) -> tuple[float, float]:
-    """(the run's own estimate, its process's peak resident set), MB, of `symtrack simulate ARGS --out DIR`."""
-    out, hwm = WORK / f"mem{len(_ELAPSED)}", WORK / f"hwm{len(_ELAPSED)}"
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", _HWM, str(hwm), "simulate", *args, "--out", str(out), "--quiet"],
-                          cwd=ROOT, env=env, capture_output=True, text=True)
-    _ELAPSED[label] = time.perf_counter() - t0
-    _USED.append(label)
-    if proc.returncode != 0:
-        raise RuntimeError(f"symtrack simulate {' '.join(args)}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
-    estimate = json.loads((out / "summary.json").read_text())["terrain_memory_estimate_MB"]
-    shutil.rmtree(out, ignore_errors=True)
-    return estimate, float(hwm.read_text()) * 1024.0 / 1e6
-
-
-@table("memory-peaks", "terrain.md", "symtrack simulate PROBE --set terrain.size_m=[S, S] [--set terrain.passes=3] "
-       "[--terrain-in FILE] --out DIR, its process's VmHWM (docs/figures.py)")
-def memory_peaks() -> str:
-    from symtrack.presets import soil_preset
-    from symtrack.terrain import storage as persist
-    from symtrack.terrain.storage import Grid, Terrain
-
-    if not sys.platform.startswith("linux"):
-        raise RuntimeError("the peak resident set is read from /proc/self/status: Linux only")
-    probe = WORK / "memory_probe.toml"
-    probe.write_text(MEMORY_PROBE)
-    rows = []
-
-    def row(cells, what, args, label):
-        est, peak = _peak(args, label)
-        rows.append([cells, what, f"{est:.1f} MB", f"{peak:.1f} MB", f"{est / peak:.2f}"])
-
-    def side(cells):
-        return (cells / 100) ** 0.5
-
-    for cells in (1e4, 1e5, 1e6, 3e6):
-        row(f"{cells:.0e}".replace("e+0", "e"), "new",
-            [str(probe), "--set", f"terrain.size_m=[{side(cells)},{side(cells)}]"], f"memory {cells:.0e}")
-    row("1e6", "new, 3 passes", [str(probe), "--set", "terrain.size_m=[100.0,100.0]", "--set", "terrain.passes=3"],
-        "memory 1e6 x3")
-    for cells in (1e6, 3e6):
-        n = int(round(side(cells) * 10))
-        field = WORK / f"field{n}.npz"
-        persist.save(field, Terrain(Grid((-n / 20, -n / 20), 0.1, (n, n)), None, (0.1, 0.3, 0.5, 0.8)),
-                     soil_preset("clayey_soil_thailand_38"))
-        row(f"{cells:.0e}".replace("e+0", "e"), "continued",
-            [_probe_without_size(probe), "--terrain-in", str(field), "--terrain-out", str(field)],
-            f"memory {cells:.0e} continued")
-        field.unlink()
-    row("1e6", "`validation_grid` (20 m)", ["validation_grid"], "memory validation_grid")
-    return md(["cells", "field", "estimate", "peak", "estimate / peak"], rows)
-
-
-def _probe_without_size(probe: Path) -> str:
-    p = probe.with_name("memory_probe_file.toml")
-    p.write_text(MEMORY_PROBE.replace("size_m = [10.0, 10.0]\n", ""))
-    return str(p)
-
-
 @table("one-soil", "subsoil.md", "python examples/one_soil.py --passes 0")
 def one_soil() -> str:
     out, _ = run("python examples/one_soil.py --passes 0")
@@ -691,138 +796,6 @@ def kroulik_seasons() -> str:
     return md_tables(out)[0]
 
 
-@table("ramp-3d", "vehicle3d.md", "python examples/ramp_3d.py")
-def ramp_3d() -> str:
-    d = run_json("python examples/ramp_3d.py")
-    hold, c, s = d["holding_torque_N_m"], d["climb"], d["descent"]
-
-    def col(r):
-        return [f"{r['distance_along_slope_m']:.2f} m, {r['speed_final_m_s']:.3f} m/s at the end",
-                f"{r['cg_rise_m']:.6f} / {r['cg_rise_geometry_m']:.6f} m ({r['cg_rise_error_rel']:+.1e})",
-                f"{r['pitch_mean_deg']:.4f} / {r['pitch_expected_deg']:.4f} deg",
-                f"{r['normal_load_sum_over_W_cos_t']:.7f}",
-                f"{r['p_idler_kPa']:.1f} / {r['p_sprocket_kPa']:.1f} kPa",
-                f"{r['sinkage_idler_mm']:.3f} / {r['sinkage_sprocket_mm']:.3f} mm"]
-    labels = ["distance along the slope", "CG rise after the first second / s sin t",
-              "pitch (mean of the last 2 s) / the ramp's + the ends' sinkage difference over l",
-              "normal loads / W cos t (mean of the last 2 s)", "idler / sprocket pressure (mean)",
-              "idler / sprocket sinkage"]
-    return md([f"{abs(c['slope_deg']):g} deg, 8 s", f"climb (1.4 x holding: {1.4 * hold:.0f} N m)",
-               f"descent (braked: -0.75 x holding, {-0.75 * hold:.0f} N m)"],
-              [[lab, a, b] for lab, a, b in zip(labels, col(c), col(s), strict=True)])
-
-
-@table("furrows-across", "vehicle3d.md", "python examples/furrows_3d.py")
-def furrows_across() -> str:
-    d = run_json("python examples/furrows_3d.py")
-    rows = []
-    for r in d["across"]:
-        q, ref = r["pitch_range_deg"], r["rigid_ground_pitch_range_deg"]
-        flat = max(abs(v) for v in ref) < 1e-6
-        ratio = 1 / r["spacing_over_contact_length"]
-        rows.append([f"{r['spacing_m']:g} m", f"{ratio:g}" if ratio >= 1 else f"1/{1 / ratio:g}",
-                     f"{q[0]:.1f} .. {q[1]:.1f} deg", "0" if flat else f"{ref[0]:.1f} .. {ref[1]:.1f} deg",
-                     f"{r['pitch_rms_difference_deg']:.2g} deg", f"{r['pitch_wavelength_m']:.2f} m",
-                     f"{r['sinkage_sprocket_max_mm']:.0f} mm",
-                     f"{r['distance_m']:.1f} m, {r['speed_final_m_s']:.1f} m/s"])
-    return md(["spacing", "l / spacing", "pitch range", "rigid ground", "RMS difference", "pitch's wavelength",
-               "largest sprocket penetration", "distance, end speed"], rows)
-
-
-@table("furrows-along", "vehicle3d.md", "python examples/furrows_3d.py")
-def furrows_along() -> str:
-    d = run_json("python examples/furrows_3d.py")
-    a, b = d["along"]
-
-    def col(r):
-        change, closed = (1e3 * (r["offset_end_m"] - r["offset_start_m"]),
-                          1e3 * (r["offset_end_creep_closed_form_m"] - r["offset_start_m"]))
-        return [f"{r['roll_max_abs_deg']:.0e} deg, {r['pitch_max_abs_deg']:.3f} deg",
-                f"{r['lower_share_mean']:.4f}", f"{r['normal_load_sum_over_W']:.4f}",
-                f"{r['sinkage_sprocket_left_mm']:.4f}, {r['sinkage_sprocket_right_mm']:.4f} mm",
-                f"{1e3 * r['offset_start_m']:.1f} -> {1e3 * r['offset_end_m']:.2f} mm",
-                f"{1e3 * r['offset_end_creep_closed_form_m']:.2f} mm (change {change:+.2f} against {closed:+.2f}: "
-                f"{100 * (change / closed - 1):+.0f} %)",
-                f"{r['cg_height_end_m']:.5f} m"]
-    labels = ["roll, pitch (largest)", "lower track's share", "normal loads / W", "sprocket sinkage (left, right)",
-              "offset from the line: start -> end", "the creep law's closed form", "CG height at the end"]
-    return md([f"along, 8 s ({a['distance_m']:.0f} m)", f"{a['tracks']} (start y = {a['start_y_m']:g} m)",
-               f"{b['tracks']} (start y = {b['start_y_m']:g} m)"],
-              [[lab, x, y] for lab, x, y in zip(labels, col(a), col(b), strict=True)])
-
-
-@table("second-pass-3d", "vehicle3d.md", "python examples/second_pass_3d.py")
-def second_pass_3d() -> str:
-    d = run_json("python examples/second_pass_3d.py")
-    x0, x1 = d["x_window_m"]
-    return md([f"x = {x0:.1f} ... {x1:.1f} m", "pass 1", "pass 2"], [
-        ["rut (mean / max) after the pass",
-         f"{d['rut_after_pass_1_mean_mm']:.3f} / {d['rut_after_pass_1_max_mm']:.3f} mm",
-         f"new sinkage {d['new_sinkage_pass_2_mean_mm']:.3f} mm (deepening {100 * d['deepening']:.1f} % against the "
-         f"cycle law's 2^beta - 1 = {100 * d['deepening_closed_form']:.1f} %)"],
-        ["the hull's height", "(reference)", f"{d['hull_drop_mm'][0]:.3f} to {d['hull_drop_mm'][1]:.3f} mm lower"],
-        ["pitch (mean)", f"{d['pitch_pass_1_mrad']:.3f} mrad", f"{d['pitch_pass_2_mrad']:.3f} mrad"],
-        ["compaction resistance", f"{d['compaction_resistance_pass_1_N']:.1f} N",
-         f"{d['compaction_resistance_pass_2_N']:.1f} N"]])
-
-
-# ---------------------------------------------------------------------------------------------------------
-# docs/control.md
-
-@table("lane-keeping", "control.md", "python examples/lane_keeping_ruts.py --out DIR --baseline")
-def lane_keeping() -> str:
-    d = run_json("python examples/lane_keeping_ruts.py --out DIR --baseline")
-    ln, p2, base = d["lanes"], d["second_pass"], d["baseline_offset_pass"]
-    conv, bconv = p2["after_convergence"], base["after_convergence"]
-    return md(["figure", "controlled traffic (follows the lanes)", "offset pass (no lane keeping)"], [
-        ["lanes found: gauge / centre / heading",
-         f"{ln['gauge_m']:.3f} m (the track gauge {ln['vehicle_track_gauge_m']:g} m) / y = {ln['centre_y0_m']:.4f} m "
-         f"(pass 1 drove {ln['first_pass_reference_y_m']:g}) / {ln['heading_deg']:.4f} deg", ""],
-        ["converged (\\|e\\| < 5 cm from then on)", f"from s = {p2['converged_from_s_m']:.1f} m",
-         "(starts on its line)"],
-        ["RMS lateral error from 6 m on (max)",
-         f"**{100 * p2['rms_lateral_error_m']:.2f} cm** ({100 * p2['max_lateral_error_after_settle_m']:.2f} cm)", ""],
-        [f"new sinkage outside pass 1's ruts, after convergence (cells beyond x = {conv['x_after_m']:.1f} m)",
-         f"**{100 * conv['new_sinkage_outside_fraction']:.2f} %** of the new volume "
-         f"(max {conv['new_sinkage_max_outside_mm']:.3f} mm)",
-         f"{100 * bconv['new_sinkage_outside_fraction']:.0f} % (max {bconv['new_sinkage_max_outside_mm']:.2f} mm)"],
-        ["new volume after convergence / pass 1's volume there", f"{100 * conv['new_to_first_pass_volume']:.1f} %",
-         f"{100 * bconv['new_to_first_pass_volume']:.0f} %"],
-        ["new sinkage outside pass 1's ruts, whole pass",
-         f"{100 * p2['whole_pass']['new_sinkage_outside_fraction']:.0f} %",
-         f"{100 * base['whole_pass']['new_sinkage_outside_fraction']:.0f} %"]])
-
-
-GRID_FIGURES = (("distance after idle (m)", "distance_after_idle_m"), ("lateral deviation (m)", "lateral_deviation_m"),
-                ("yaw final (deg)", "yaw_final_deg"), ("sinkage sprocket (mm)", "sinkage_sprocket_mm"),
-                ("sinkage idler (mm)", "sinkage_idler_mm"), ("shear driven max (m)", "shear_driven_max_m"),
-                ("shear idle min (m)", "shear_idle_min_m"), ("rut max depth (mm)", "rut_max_depth_mm"),
-                ("rut mean depth (mm)", "rut_mean_depth_mm"),
-                ("compaction resistance, distance mean (N)", "compaction_resistance_mean_N"),
-                ("compaction resistance, time mean (N)", "compaction_resistance_time_mean_N"))
-VG_IDAS = "symtrack simulate validation_grid --integrator idas --out DIR --quiet"
-
-
-@table("grid-rosenbrock", "terrain.md", "symtrack simulate validation_grid --integrator idas|rosenbrock "
-       "[--set run.fixed_step_s=0.0003125] --out DIR")
-def grid_rosenbrock() -> str:
-    ref = summary(VG_IDAS)
-    rb = summary("symtrack simulate validation_grid --integrator rosenbrock --out DIR --quiet")
-    rb2 = summary("symtrack simulate validation_grid --integrator rosenbrock --set run.fixed_step_s=0.0003125 "
-                  "--out DIR --quiet")
-    rows = [[label, f"{ref[k]:.6g}", f"{rb[k]:.6g} ({pct(rb[k], ref[k])})", f"{rb2[k]:.6g} ({pct(rb2[k], ref[k])})"]
-            for label, k in GRID_FIGURES if k in ref]
-    return md(["figure", "IDAS", "rosenbrock 0.625 ms", "rosenbrock 0.3125 ms"], rows)
-
-
-@table("engine-accuracy", "terrain.md", "symtrack simulate validation_grid [--integrator idas] --out DIR")
-def engine_accuracy() -> str:
-    ref = summary(VG_IDAS)
-    eng = summary("symtrack simulate validation_grid --out DIR --quiet")
-    rows = [[label, f"{ref[k]:.6g}", f"{eng[k]:.6g}", pct(eng[k], ref[k])] for label, k in GRID_FIGURES if k in ref]
-    return md(["figure", "IDAS", "engine", "difference"], rows)
-
-
 def _thousands(n: int) -> str:
     return f"{n:,}".replace(",", " ")
 
@@ -916,6 +889,48 @@ def turn_lanes() -> str:
                "distance", "RMS lines / turns", "turns driven / lifted"], rows)
 
 
+@table("traffic-systems", "studies.md", "symtrack field traffic_small --set 'operation.follower=\"law\"' --out DIR "
+       "--workers 0 (DIR/traffic.csv)")
+def traffic_systems() -> str:
+    _, folder = run("symtrack field traffic_small --set 'operation.follower=\"law\"' --out DIR --workers 0 --quiet")
+    with (folder / "traffic.csv").open(encoding="utf-8") as f:
+        rows = []
+        for r in csv.DictReader(f):
+            s = {k: (float(v) if re.fullmatch(r"-?[\d.e+-]+", v or "") else v) for k, v in r.items()}
+            rows.append([r["tracks"], *_season_row(s), f"{s['rms_lateral_error_lines_m']:.3f} m",
+                         f"{int(s['turns_driven'])} / {int(s['turns_lifted'])}",
+                         "yes" if r["complete"] == "True" else "**no**"])
+    return md(["system", "trafficked", "headland", "in-field", "once / twice / 3+ [m^2]", "repeated coverage",
+               "RMS lines", "turns driven / lifted", "complete"], rows)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# docs/control.md
+
+@table("lane-keeping", "control.md", "python examples/lane_keeping_ruts.py --out DIR --baseline")
+def lane_keeping() -> str:
+    d = run_json("python examples/lane_keeping_ruts.py --out DIR --baseline")
+    ln, p2, base = d["lanes"], d["second_pass"], d["baseline_offset_pass"]
+    conv, bconv = p2["after_convergence"], base["after_convergence"]
+    return md(["figure", "controlled traffic (follows the lanes)", "offset pass (no lane keeping)"], [
+        ["lanes found: gauge / centre / heading",
+         f"{ln['gauge_m']:.3f} m (the track gauge {ln['vehicle_track_gauge_m']:g} m) / y = {ln['centre_y0_m']:.4f} m "
+         f"(pass 1 drove {ln['first_pass_reference_y_m']:g}) / {ln['heading_deg']:.4f} deg", ""],
+        ["converged (\\|e\\| < 5 cm from then on)", f"from s = {p2['converged_from_s_m']:.1f} m",
+         "(starts on its line)"],
+        ["RMS lateral error from 6 m on (max)",
+         f"**{100 * p2['rms_lateral_error_m']:.2f} cm** ({100 * p2['max_lateral_error_after_settle_m']:.2f} cm)", ""],
+        [f"new sinkage outside pass 1's ruts, after convergence (cells beyond x = {conv['x_after_m']:.1f} m)",
+         f"**{100 * conv['new_sinkage_outside_fraction']:.2f} %** of the new volume "
+         f"(max {conv['new_sinkage_max_outside_mm']:.3f} mm)",
+         f"{100 * bconv['new_sinkage_outside_fraction']:.0f} % (max {bconv['new_sinkage_max_outside_mm']:.2f} mm)"],
+        ["new volume after convergence / pass 1's volume there", f"{100 * conv['new_to_first_pass_volume']:.1f} %",
+         f"{100 * bconv['new_to_first_pass_volume']:.0f} %"],
+        ["new sinkage outside pass 1's ruts, whole pass",
+         f"{100 * p2['whole_pass']['new_sinkage_outside_fraction']:.0f} %",
+         f"{100 * base['whole_pass']['new_sinkage_outside_fraction']:.0f} %"]])
+
+
 # ---------------------------------------------------------------------------------------------------------
 # docs/region.md: `symtrack bench region --large` (the full fidelity's seasons, then the fast twins, 1 against 2
 # workers, a 1,000 ha region)
@@ -968,20 +983,6 @@ def region_cost() -> str:
     return md(["what", "measured"], rows)
 
 
-@table("traffic-systems", "studies.md", "symtrack field traffic_small --set 'operation.follower=\"law\"' --out DIR "
-       "--workers 0 (DIR/traffic.csv)")
-def traffic_systems() -> str:
-    _, folder = run("symtrack field traffic_small --set 'operation.follower=\"law\"' --out DIR --workers 0 --quiet")
-    with (folder / "traffic.csv").open(encoding="utf-8") as f:
-        rows = []
-        for r in csv.DictReader(f):
-            s = {k: (float(v) if re.fullmatch(r"-?[\d.e+-]+", v or "") else v) for k, v in r.items()}
-            rows.append([r["tracks"], *_season_row(s), f"{s['rms_lateral_error_lines_m']:.3f} m",
-                         f"{int(s['turns_driven'])} / {int(s['turns_lifted'])}",
-                         "yes" if r["complete"] == "True" else "**no**"])
-    return md(["system", "trafficked", "headland", "in-field", "once / twice / 3+ [m^2]", "repeated coverage",
-               "RMS lines", "turns driven / lifted", "complete"], rows)
-
 # ---------------------------------------------------------------------------------------------------------
 # writing the pages
 
@@ -1032,6 +1033,7 @@ def main(argv=None) -> int:
     if unknown:
         ap.error(f"no table {', '.join(unknown)}; the tables: {', '.join(TABLES)}")
     t_all, failed = time.perf_counter(), []
+    WORK.mkdir(parents=True, exist_ok=True)
     try:
         for name in names:
             t = TABLES[name]
