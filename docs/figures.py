@@ -77,7 +77,7 @@ def _argv(command: str, out: Path | None) -> list[str]:
     """A command as the pages write it (``python examples/x.py ...``, ``symtrack ...``) as this process's
     interpreter runs it; ``DIR`` is the command's output folder."""
     args = shlex.split(command)
-    args = [str(out) if a == "DIR" else a for a in args]
+    args = [str(out) + a[3:] if a == "DIR" or a.startswith("DIR/") else a for a in args]
     if args[0] == "python":
         return [sys.executable, *args[1:]]
     if args[0] == "symtrack":
@@ -130,8 +130,8 @@ def _timed(label: str):
 
 
 def md_tables(text: str) -> list[str]:
-    """The Markdown tables of a command's output, in order."""
-    return [m.group(0).rstrip("\n") for m in re.finditer(r"(?m)^\|.*\|\n\|[-:| ]+\|\n(?:\|.*\|\n?)*", text)]
+    """The Markdown tables of a command's output with at least one row, in order."""
+    return [m.group(0).rstrip("\n") for m in re.finditer(r"(?m)^\|.*\|\n\|[-:| ]+\|\n(?:\|.*\|(?:\n|\Z))+", text)]
 
 
 def md(head: list[str], rows: list[list]) -> str:
@@ -146,7 +146,11 @@ def g(v, digits=4) -> str:
 
 
 def pct(new, ref, digits=3) -> str:
-    return f"{100 * (new / ref - 1):+.{digits}f} %" if ref else ""
+    """The relative difference in per cent, signed ("0.000 %" when it rounds to nothing)."""
+    if not ref:
+        return ""
+    s = f"{100 * (new / ref - 1):+.{digits}f} %"
+    return s[1:] if float(s[:-2]) == 0 else s
 
 
 # ---------------------------------------------------------------------------------------------------------
