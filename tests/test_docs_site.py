@@ -134,7 +134,7 @@ def test_the_tables_of_run_results_are_generated():
         for ind, name, body in re.findall(r"^([ \t]*)<!-- figures:([\w-]+):start -->\n(.*?)^\1<!-- figures:\2:end -->",
                                           text, re.S | re.M):
             where = page.relative_to(DOCS).as_posix()
-            body = "".join(ln[len(ind):] for ln in body.splitlines(keepends=True))  # a table in a list item
+            body = "".join(ln.removeprefix(ind) for ln in body.splitlines(keepends=True))  # a table in a list item
             assert name not in found, f"the table {name!r} is in {found[name]} and in {where}"
             found[name] = where
             assert entries.get(name) == where, f"{where}: the table {name!r} is not one docs/figures.py writes there"
