@@ -1,12 +1,12 @@
 # symtrack: two commands on a fresh clone (Python 3.11+ and a C compiler):
 #   make demo   -> .venv, install, run the validation scenario, plots and summary in out/validation/
-#   make test   -> .venv with the dev extra, ruff, the test suite's fast set (make test-slow: the slow
-#                  physics and build checks; CI runs both)
+#   make test   -> .venv with the dev extra, ruff, the whole test suite (what CI runs; make test-fast: the
+#                  fast set without the slow physics and build checks, make test-slow: only those)
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance keys figures
+.PHONY: demo test test-fast test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance keys figures
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,7 +23,12 @@ demo: $(VENV)/.installed
 lint: $(VENV)/.installed-dev
 	$(VENV)/bin/ruff check .
 
+# the whole suite in one pytest session (the slow tests share their files' fixtures and workers)
 test: lint
+	$(PY) -m pytest
+
+# the fast set: everything but the tests marked slow
+test-fast: lint
 	$(PY) -m pytest -m "not slow"
 
 # the tests marked slow (pyproject.toml: brute-force, IDAS and fixed-step references, large compiles)

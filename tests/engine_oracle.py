@@ -118,8 +118,12 @@ class PyKernel:
         self.e = PyErr()
 
     # the generated Functions
+    def _row(self, soil):
+        """The soil's law row (grid_engine.c's LAW_ROW: the state's soil_law table)."""
+        return self.s.soil_law[soil]
+
     def _law(self, z, hist, soil):
-        p, dp = self.f.cell_law[soil](z, hist)
+        p, dp = self.f.law(z, hist, self._row(soil))
         return float(p), float(dp)
 
     def _hist(self, ch):
@@ -222,7 +226,8 @@ class PyKernel:
             s.ch_zoff[ch], s.ch_delta[ch], s.ch_dc[ch], s.ch_counted[ch] = st.zoff[cell], 0.0, 0.0, 0
             s.ch_soil[ch] = st.soil_index[cell]
             soil = int(s.ch_soil[ch])
-            s.ch_delta[ch] = float(self.f.cell_entry[soil](float(s.ch_z[ch]), self._hist(ch), float(st.cycles[cell])))
+            s.ch_delta[ch] = float(self.f.cell_entry(float(s.ch_z[ch]), self._hist(ch), float(st.cycles[cell]),
+                                                self._row(soil)))
             s.ch_p[ch] = 0.0
             s.ch_pw[ch] = 0.0
             s.ch_vr[ch] = s.ch_v[ch]
@@ -329,7 +334,7 @@ class PyKernel:
     def _info_out(self, ch, hist, soil):
         s, st = self.s, self.s.storage
         zc, p = float(s.ch_z[ch]), float(s.ch_p[ch])
-        zm1, pm1, dc1, plastic, phase = np.array(self.f.cell_history[soil](zc, p, hist)).ravel()
+        zm1, pm1, dc1, plastic, phase = np.array(self.f.cell_history(zc, p, hist, self._row(soil))).ravel()
         cell = int(s.ch_cell[ch])
         st.z[cell], st.zdot[cell], st.zmax[cell], st.pmax[cell] = zc, s.ch_v[ch], zm1, pm1
         st.phase[cell] = int(phase) if zm1 > 0 else 0

@@ -261,3 +261,128 @@ def test_a_fleet_without_sources_or_overloaded_tyres_is_refused():
         parse_fleet({"tyres": {"t": tyre}, "machines": {"m": heavy}})
     assert math.isfinite(stress_profile(parse_fleet({"tyres": {"t": tyre}, "machines": {"m": mach}}).machines["m"],
                                         DEPTHS, 5.0).sigma_Pa.max())
+
+
+# ---- soils from a soil map ---------------------------------------------------------------------------------------
+def _soil_map_region(tmp_path, **kw):
+    p = demo.write_region(tmp_path, n_fields=4, seed=7, soil_map=True, length_m=(90.0, 120.0), width_m=(60.0, 80.0),
+                          spacing_m=160.0, **kw)
+    units = json.loads((tmp_path / "soil_units.geojson").read_text())
+    return p, units
+
+
+def test_each_field_takes_the_soil_covering_most_of_it_from_polygons(tmp_path, caplog):
+    from shapely.geometry import Polygon
+
+    p, units = _soil_map_region(tmp_path)
+    spec = load_region(p)
+    xm = units["features"][0]["geometry"]["coordinates"][0][1][0]  # the units' boundary (x)
+    for f in spec.fields:  # the generated map: silt loam west of the boundary, clay loam east of it
+        west = Polygon(f.world_ring).centroid.x < xm
+        assert f.soil == ("silt_loam" if west else "clay_loam") and f.soil_from == "soil_map"
+        assert f.soil_share == pytest.approx(1.0)
+    # the boundary moved through a field: its soil is the one over most of its area, its share that area's
+    f = spec.fields[0]
+    poly = Polygon(f.world_ring)
+    x0, _, x1, _ = poly.bounds
+    cut = x0 + 0.45 * (x1 - x0)
+    for k, u in enumerate(units["features"]):
+        ring = u["geometry"]["coordinates"][0]
+        for pt in ring:
+            if pt[0] == xm:
+                pt[0] = cut
+        units["features"][k] = u
+    (tmp_path / "soil_units.geojson").write_text(json.dumps(units))
+    west_share = poly.intersection(Polygon([(x0 - 1, -1e9), (cut, -1e9), (cut, 1e9), (x0 - 1, 1e9)])).area / poly.area
+    assert 0.25 < west_share < 0.5
+    with caplog.at_level("WARNING", logger="symtrack.region"):
+        spec = load_region(p)
+    g = spec.fields[0]
+    assert g.soil == "clay_loam" and g.soil_share == pytest.approx(1 - west_share, rel=1e-9)
+    assert f"field '{f.field_id}' is split across soils (clay_loam" in caplog.text
+    p.write_text(p.read_text().replace('attribute = "soil"', 'attribute = "soil"\nsplit_fields = "refuse"'))
+    with pytest.raises(ScenarioError, match=rf"field '{f.field_id}' is split across soils \(clay_loam \d+\.\d %, "
+                                            r"silt_loam \d+\.\d %\): .* outside the range \[80, 100\] %"):
+        load_region(p)
+    p.write_text(p.read_text().replace('split_fields = "refuse"', 'split_fields = "refuse"\nsplit_share = 0.5'))
+    assert load_region(p).fields[0].soil == "clay_loam"
+
+
+def test_a_fields_own_soil_wins_over_the_map(tmp_path):
+    p, _ = _soil_map_region(tmp_path)
+    fields = json.loads((tmp_path / "fields.geojson").read_text())
+    fields["features"][0]["properties"]["soil"] = "clay_loam"
+    (tmp_path / "fields.geojson").write_text(json.dumps(fields))
+    f = load_region(p).fields[0]
+    assert f.soil == "clay_loam" and f.soil_from == "fields_file" and f.soil_share == 1.0
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda u: u["features"][1]["properties"].update(soil="peat"),
+     r"soil_units.geojson: feature 1 \(id 'U2'\): properties.soil = 'peat' is not a soil of \[soils\] "
+     r"\(silt_loam, clay_loam\)"),
+    (lambda u: u["features"][0]["geometry"].update(coordinates=[[[0, 0], [1e5, 1e5], [1e5, 0], [0, 1e5], [0, 0]]]),
+     r"feature 0 \(id 'U1'\): not a valid polygon \(Self-intersection"),
+    (lambda u: u["features"][0]["geometry"].update(type="LineString", coordinates=[[5e5, 5e6], [5e5, 5.1e6]]),
+     r"feature 0 \(id 'U1'\): the geometry is a LineString"),
+    (lambda u: u["features"].pop(1), r"no soil unit covers field 'F002'"),
+])
+def test_bad_soil_polygons_are_refused_naming_the_feature(tmp_path, change, message):
+    p, units = _soil_map_region(tmp_path)
+    change(units)
+    (tmp_path / "soil_units.geojson").write_text(json.dumps(units))
+    with pytest.raises(ScenarioError, match=message):
+        load_region(p)
+
+
+def _soil_raster(path, spec_fields, codes, crs="EPSG:32633", pixel_m=10.0, nodata=0):
+    """A GeoTIFF of soil-unit codes over the fields: ``codes(x, y)`` gives each pixel's code."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    pts = np.vstack([np.array(f.world_ring) for f in spec_fields])
+    x0, y0 = pts.min(axis=0) - 50.0
+    x1, y1 = pts.max(axis=0) + 50.0
+    nx, ny = int(math.ceil((x1 - x0) / pixel_m)), int(math.ceil((y1 - y0) / pixel_m))
+    xs = x0 + (np.arange(nx) + 0.5) * pixel_m
+    ys = y1 - (np.arange(ny) + 0.5) * pixel_m
+    data = codes(xs[None, :], ys[:, None]).astype(np.uint8)
+    with rasterio.open(path, "w", driver="GTiff", width=nx, height=ny, count=1, dtype="uint8", crs=crs,
+                       transform=from_origin(x0, y1, pixel_m, pixel_m), nodata=nodata) as ds:
+        ds.write(data, 1)
+    return (x0, y1)
+
+
+def test_soils_from_a_raster_of_codes_and_its_refusals(tmp_path):
+    from shapely.geometry import Polygon
+
+    p, units = _soil_map_region(tmp_path)
+    fields = load_region(p).fields
+    xm = units["features"][0]["geometry"]["coordinates"][0][1][0]
+    text = p.read_text().replace('file = "soil_units.geojson"\nattribute = "soil"',
+                                 'file = "soil_units.tif"\ncodes = { 1 = "silt_loam", 2 = "clay_loam" }')
+    p.write_text(text)
+    # codes 1 west of the boundary, 2 east of it, 3 (not in the table) and nodata far from the fields
+    _soil_raster(tmp_path / "soil_units.tif", fields, lambda x, y: np.where(x < xm, 1, 2) + 0 * y)
+    spec = load_region(p)
+    for f, g in zip(fields, spec.fields, strict=True):
+        assert g.soil == f.soil and g.soil_from == "soil_map" and g.soil_share == 1.0
+    # a code the table does not give, under a field: refused naming the pixel, the code and the codes allowed
+    f0 = Polygon(fields[0].world_ring).centroid
+    _soil_raster(tmp_path / "soil_units.tif", fields,
+                 lambda x, y: np.where((abs(x - f0.x) < 10) & (abs(y - f0.y) < 10), 7, np.where(x < xm, 1, 2)))
+    with pytest.raises(ScenarioError, match=r"soil_units.tif': the pixel at row \d+, column \d+ \(centre x = [\d.]+, "
+                                            r"y = [\d.]+ m\), under field 'F001', has the code 7, which "
+                                            r"soil_map.codes does not give a soil \(its codes: 1, 2\)"):
+        load_region(p)
+    # nodata under a whole field, another CRS, a code that is no soil
+    _soil_raster(tmp_path / "soil_units.tif", fields, lambda x, y: np.where(x < xm, 0, 2) + 0 * y)
+    with pytest.raises(ScenarioError, match=r"no soil unit covers field 'F001'"):
+        load_region(p)
+    _soil_raster(tmp_path / "soil_units.tif", fields, lambda x, y: np.where(x < xm, 1, 2) + 0 * y, crs="EPSG:32632")
+    with pytest.raises(ScenarioError, match=r"soil_units.tif' is in EPSG:32632, the fields in EPSG:32633"):
+        load_region(p)
+    p.write_text(text.replace('2 = "clay_loam"', '2 = "loess"'))
+    with pytest.raises(ScenarioError, match=r"soil_map.codes.2 = 'loess' is not a soil of \[soils\] \(silt_loam, "
+                                            r"clay_loam\)"):
+        load_region(p)

@@ -146,6 +146,11 @@ def test_another_study_in_the_folder_is_refused(reference, tmp_path):
         run_region(load_region(other), out, workers=1, progress=False)
 
 
+def _in_place(out: Path, name: str) -> int:
+    """The field-seasons in place holding ``name`` (not a staged copy beside one: fields/F/.YEAR.staging-*/)."""
+    return len(list((out / "fields").glob(f"*/[0-9][0-9][0-9][0-9]/{name}")))
+
+
 def _wait_for(pred, timeout_s, what):
     t0 = time.perf_counter()
     while not pred():
@@ -162,8 +167,8 @@ def test_a_killed_client_then_a_rerun_gives_the_uninterrupted_outputs(reference,
            "--workers", "1", "--quiet"]
     p = subprocess.Popen(cmd, env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
-        _wait_for(lambda: len(list((tmp_path / "o" / "fields").rglob("summary.json"))) >= 2 or p.poll() is not None,
-                  300, "the first commits")
+        _wait_for(lambda: _in_place(tmp_path / "o", "summary.json") >= 2 or p.poll() is not None, 300,
+                  "the first commits")
         assert p.poll() is None, p.stderr.read().decode()
         os.killpg(p.pid, signal.SIGKILL)  # the client and its local cluster, mid-run
         p.wait(30)
@@ -173,8 +178,8 @@ def test_a_killed_client_then_a_rerun_gives_the_uninterrupted_outputs(reference,
     # the field-seasons in place (not a staged copy beside one: fields/F/.YEAR.staging-*/summary.json);
     # one killed past its commit point (its journal written, its files not yet all moved in) is completed
     # by the rerun, not run again: it counts as finished before
-    done = len(list((tmp_path / "o" / "fields").glob("*/[0-9][0-9][0-9][0-9]/summary.json")))
-    past_commit = len(list((tmp_path / "o" / "fields").glob("*/[0-9][0-9][0-9][0-9]/.symtrack-commit.json")))
+    done = _in_place(tmp_path / "o", "summary.json")
+    past_commit = _in_place(tmp_path / "o", ".symtrack-commit.json")
     assert 2 <= done < 6 and past_commit <= 1
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
@@ -245,3 +250,149 @@ def test_a_field_no_plan_fits_is_refused_or_left_out(tmp_path):
     check_plans(spec)
     assert [f.field_id for f in spec.fields] == ["F001", "F002"]
     assert spec.skipped[0]["field_id"] == "strip" and "operation.headland_passes" in spec.skipped[0]["reason"]
+
+
+# ---- the study's top-level outputs, committed once ---------------------------------------------------------------
+OUTPUTS = ("region.json", "fields.csv", "fields.gpkg", "summary.json", "report.html")
+
+
+def _top(out: Path) -> dict:
+    """The study's own files a user sees (not fields/, not the dot files: manifest, journal, lock)."""
+    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*"))
+            if p.is_file() and not any(q.startswith(".") for q in p.relative_to(out).parts)
+            and p.relative_to(out).parts[0] != "fields"}
+
+
+def _fork_region(spec, out: Path, kill_at: int | None = None) -> int:
+    """run_region in a forked child (no field-season left to run: no cluster), killed (SIGKILL) at its
+    ``kill_at``-th commit step; its exit code, or -signal."""
+    from symtrack.reports import run_files
+
+    pid = os.fork()
+    if pid == 0:  # the child: no output, no clean-up on exit (as a killed process)
+        code = 70
+        try:
+            run_files._step_count = 0
+            if kill_at is not None:
+                os.environ[run_files.KILL_AT_STEP_ENV] = str(kill_at)
+            res = run_region(spec, out, workers=1, progress=False)
+            code = 0 if res.ran == 0 else 72
+        except BaseException:  # noqa: BLE001 - the child's exit code tells
+            code = 71
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    return -os.WTERMSIG(status) if os.WIFSIGNALED(status) else os.WEXITSTATUS(status)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="the runs are forked (POSIX)")
+def test_the_top_level_outputs_appear_together_when_killed_at_any_commit_step(reference, tmp_path, monkeypatch):
+    """The study's outputs killed at the steps of their commit (SYMTRACK_KILL_AT_COMMIT_STEP): the folder
+    holds none of them (but region.json, the study's identity, written first) or all of them, or, past the
+    commit point, a journal the next run completes; the rerun's outputs are the uninterrupted run's."""
+    import shutil
+
+    from symtrack.region import outputs
+    from symtrack.reports import run_files
+
+    inp, out, _ = reference
+    # the report's images are not what is tested: small stand-ins (the files' names and order kept)
+    monkeypatch.setattr(outputs, "_map_png", lambda spec, canv, title: f"PNG {title}".encode())
+    monkeypatch.setattr(outputs, "_shares_png", lambda spec, figs: b"PNG shares")
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")  # fields.gpkg's last_change: byte for byte
+    spec = load_region(inp / "region_demo.toml")
+    base = tmp_path / "base"
+    shutil.copytree(out / "fields", base / "fields")
+    ref = tmp_path / "ref"
+    shutil.copytree(base, ref)
+    before = run_files._step_count
+    res = run_region(spec, ref, workers=1, progress=False)
+    assert res.ran == 0
+    steps = run_files.COMMIT_STEPS[before:run_files._step_count]
+    new = _top(ref)
+    assert set(OUTPUTS) <= set(new) and sum(n.startswith("maps/") for n in new) == 12
+    first = steps.index("renamed region.json into place") + 1  # region.json's own commit, first
+    start = steps.index("staged region.json", first) + 1  # the outputs' commit, its first step
+    commit = steps.index("journal written, not yet renamed", start) + 1  # the outputs' commit point
+    last = steps.index("renamed summary.json into place") + 1
+    # every step of the outputs' commit: before its journal, the renames, summary.json, the clean-up
+    picks = sorted({start, start + 5, commit - 1, commit, commit + 1, commit + 3, (commit + last) // 2, last - 1, last,
+                    len(steps)})
+    for k in picks:
+        case = tmp_path / f"kill_{k}"
+        shutil.copytree(base, case)
+        assert _fork_region(spec, case, kill_at=k) == -signal.SIGKILL, f"step {k} ({steps[k - 1]})"
+        got = _top(case)
+        journal = (case / run_files.JOURNAL).is_file()
+        if k <= commit:  # before the commit point: none of the outputs but region.json
+            assert set(got) == {"region.json"} and not journal, f"step {k} ({steps[k - 1]}): {sorted(got)}"
+        elif "summary.json" in got:  # summary.json is the last file moved in: all of them are there
+            assert got == new, f"step {k} ({steps[k - 1]})"
+        else:  # past the commit point: the journal completes the folder
+            assert journal, f"step {k} ({steps[k - 1]})"
+        run_files.recover(case)  # what the next writer of the folder does first: the old state or the new one
+        assert _top(case) == ({"region.json": new["region.json"]} if k <= commit else new), \
+            f"recovered after step {k} ({steps[k - 1]})"
+        assert _fork_region(spec, case) == 0
+        assert _top(case) == new, f"rerun after step {k} ({steps[k - 1]})"
+        assert not list(case.glob(".symtrack-region-scratch-*")) and not list(tmp_path.glob(f".{case.name}.staging-*"))
+
+
+def _gpkg_rows(path: Path):
+    """fields.gpkg read with sqlite3 (the GeoPackage standard's tables) and shapely (the geometries' WKB)."""
+    import sqlite3
+    import struct
+
+    import shapely
+
+    con = sqlite3.connect(path)
+    try:
+        head = (con.execute("PRAGMA application_id").fetchone()[0], con.execute("PRAGMA user_version").fetchone()[0])
+        geom_cols = con.execute("SELECT table_name, column_name, geometry_type_name, srs_id FROM "
+                                "gpkg_geometry_columns").fetchall()
+        srs = {r[0]: r[1:] for r in con.execute("SELECT srs_id, organization, organization_coordsys_id FROM "
+                                                "gpkg_spatial_ref_sys")}
+        contents = con.execute("SELECT table_name, data_type, srs_id FROM gpkg_contents").fetchall()
+        cur = con.execute('SELECT * FROM "fields" ORDER BY fid')
+        names = [d[0] for d in cur.description]
+        rows = []
+        for r in cur.fetchall():
+            blob = r[1]
+            magic, version, flags, srs_id = blob[:2], blob[2], blob[3], struct.unpack("<i", blob[4:8])[0]
+            assert magic == b"GP" and version == 0 and flags == 0b11, blob[:8]
+            env = struct.unpack("<4d", blob[8:40])
+            g = shapely.from_wkb(blob[40:])
+            rows.append((g, env, srs_id, dict(zip(names[2:], r[2:], strict=True))))
+    finally:
+        con.close()
+    return head, geom_cols, srs, contents, names, rows
+
+
+def test_fields_gpkg_is_the_table_with_the_fields_polygons(reference):
+    import csv
+    import shutil
+
+    inp, out, _ = reference
+    head, geom_cols, srs, contents, names, rows = _gpkg_rows(out / "fields.gpkg")
+    assert head == (0x47504B47, 10301)  # "GPKG", GeoPackage 1.3.1
+    assert geom_cols == [("fields", "geom", "POLYGON", 32633)] and contents == [("fields", "features", 32633)]
+    assert srs[32633] == ("EPSG", 32633) and {4326, -1, 0} <= set(srs)
+    with open(out / "fields.csv", newline="") as fh:
+        table = list(csv.DictReader(fh))
+    assert names[:2] == ["fid", "geom"] and names[2:] == list(table[0])  # the columns of fields.csv, in its order
+    assert len(rows) == len(table) == 6
+    spec = load_region(inp / "region_demo.toml")
+    rings = {f.field_id: f for f in spec.fields}
+    for (g, env, srs_id, vals), row in zip(rows, table, strict=True):
+        f = rings[vals["field_id"]]
+        assert srs_id == 32633 and g.geom_type == "Polygon" and g.is_valid
+        assert np.allclose(np.asarray(g.exterior.coords)[:-1], np.asarray(f.world_ring))  # the field's own ring
+        assert env == (g.bounds[0], g.bounds[2], g.bounds[1], g.bounds[3])
+        assert g.area / 1e4 == pytest.approx(float(row["area_ha"]), rel=1e-12)
+        for k, v in row.items():  # the same values as the CSV's (the numbers' repr, the text as written)
+            x = vals[k]
+            assert (x if isinstance(x, str) else repr(x) if isinstance(x, float) else str(x)) == v, (k, v, x)
+    if shutil.which("ogrinfo"):  # GDAL's GeoPackage driver, where it is installed: the same features
+        r = subprocess.run(["ogrinfo", "-ro", "-so", "-al", str(out / "fields.gpkg")], capture_output=True, text=True)
+        assert r.returncode == 0 and "Feature Count: 6" in r.stdout and "Geometry: Polygon" in r.stdout, r.stdout
+        assert "ERROR" not in r.stderr and "Warning" not in r.stderr, r.stderr

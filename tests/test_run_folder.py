@@ -68,6 +68,19 @@ def test_a_run_removes_only_what_an_earlier_run_recorded(tmp_path, caplog):
     assert read_manifest(tmp_path) == ["extra.md", "pass_1/summary.json", "summary.json"]
 
 
+def test_a_finished_file_is_moved_in_as_a_staged_one(tmp_path):
+    """A Path value (a large file the caller wrote, a region's map): moved into the staging folder, then into
+    place with the others; the caller's file is gone, no copy held in memory."""
+    big = tmp_path / "scratch" / "map.tif"
+    big.parent.mkdir()
+    big.write_bytes(b"tif" * 1000)
+    out = tmp_path / "out"
+    write_folder(out, {"maps/2021/map.tif": big, "summary.json": "{}"}, clear=False)
+    assert (out / "maps" / "2021" / "map.tif").read_bytes() == b"tif" * 1000 and not big.exists()
+    assert read_manifest(out) == ["maps/2021/map.tif", "summary.json"]
+    assert not list(tmp_path.glob(".out.staging-*"))
+
+
 def test_a_folder_without_a_manifest_is_not_cleared(tmp_path):
     # an older symtrack's folder, or anybody's: summary.json and scenario.resolved.toml do not make it a run's
     for name in ("summary.json", "scenario.resolved.toml", "pyproject.toml", "data.csv", "plot.png"):

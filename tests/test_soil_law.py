@@ -247,25 +247,29 @@ def test_a_toy_law_in_the_terrain_engines_cell_functions(toy):
     from symtrack.native.grid_engine_model import build_engine_functions
 
     f = build_engine_functions(toy.opts, PARAMS, 1)
+    row = f.law_row(PARAMS)  # the toy's own coefficients, then the repeated-loading exponent
+    assert row == [*toy.values(PARAMS), PARAMS["repeated_loading_exponent"]] and f.law_size == 3
+    assert len(f.cell_law) == 1  # the toy declares no specialised copy
     k, k_u = _stiffness()
     top = (30e3 / k, 30e3)
     for z, hist, p, dp in ((1e-3, (0, 0), k * 1e-3, k), (2.1e-3, top, 30e3 + k_u * (2.1e-3 - top[0]), k_u),
                            (1e-3, top, 0.0, 0.0), (3e-3, top, k * 3e-3, k)):
-        got = [float(v) for v in f.cell_law[0](z, [*hist, 0, 0, 0])]
+        got = [float(v) for v in f.law(z, [*hist, 0, 0, 0], row)]
         assert got == pytest.approx([p, dp], rel=1e-12, abs=1e-9)
-    zm1, pm1, _, plastic, phase = np.array(f.cell_history[0](3e-3, k * 3e-3, [*top, 0, 0, 0])).ravel()
+    zm1, pm1, _, plastic, phase = np.array(f.cell_history(3e-3, k * 3e-3, [*top, 0, 0, 0], row)).ravel()
     assert (zm1, pm1, plastic, phase) == pytest.approx((3e-3, k * 3e-3, 1, 1), rel=1e-15)
-    assert float(f.cell_entry[0](1e-3, [*top, 0, 0, 0], 2)) == 0.0
+    assert float(f.cell_entry(1e-3, [*top, 0, 0, 0], 2, row)) == 0.0
     st = types.SimpleNamespace(areal_mass=PARAMS["cell_areal_mass_kg_per_m2"],
-                               damping=PARAMS["cell_damping_Pa_s_per_m"], stats={"n_newton": 0, "n_cell_stages": 0})
+                               damping=PARAMS["cell_damping_Pa_s_per_m"], stats={"n_newton": 0, "n_cell_stages": 0},
+                               soil_law=f.law_table([PARAMS]))
     kern = PyKernel(f, st)
     z = v = zm = pm = 0.0
-    p, dp = (float(x) for x in f.cell_law[0](0.0, [0, 0, 0, 0, 0]))
+    p, dp = (float(x) for x in f.law(0.0, [0, 0, 0, 0, 0], row))
     for i in range(150):  # the load ramped to 20 kPa over 0.5 s, then held: 10 ms macro steps, the history after each
         pl = [20e3 * min(1.0, j * 0.02) for j in (i, i + 1)]
         z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0, 1.0, 0.0], [zm, pm, 0, 0, 0], 0, 0.01, 1,
                                          [0.0, 0.0])
-        zm, pm = np.array(f.cell_history[0](z, p, [zm, pm, 0, 0, 0])).ravel()[:2]
+        zm, pm = np.array(f.cell_history(z, p, [zm, pm, 0, 0, 0], row)).ravel()[:2]
     # at rest on the elastic line through the top the history recorded, the top on p = k z near
     # the load's own static sinkage (the engine's step lags a little and moves the top)
     assert z == pytest.approx(zm + (20e3 - pm) / k_u, rel=1e-9)

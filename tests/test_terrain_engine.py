@@ -90,9 +90,12 @@ def _one_cell():
     f = build_engine_functions(sc.model, P, 1)
     m, c = P["cell_areal_mass_kg_per_m2"], P["cell_damping_Pa_s_per_m"]
 
+    row = f.law_row(P)
+
     def law(z, zm, pm):
-        return tuple(float(v) for v in f.cell_law[0](z, [zm, pm, 0, 0, 0]))
-    st = types.SimpleNamespace(areal_mass=m, damping=c, stats={"n_newton": 0, "n_cell_stages": 0})
+        return tuple(float(v) for v in f.law(z, [zm, pm, 0, 0, 0], row))
+    st = types.SimpleNamespace(areal_mass=m, damping=c, stats={"n_newton": 0, "n_cell_stages": 0},
+                               soil_law=f.law_table([P]))
     return PyKernel(f, st), law, m, c
 
 
@@ -266,6 +269,39 @@ def test_compiled_equals_interpreted(method):
     for name in ("pass_sigma", "pass_p_mean"):
         c, i = getattr(wc, name), getattr(wi, name)
         assert np.any(c > 0) and np.allclose(c, i, rtol=1e-6, atol=0.0), name
+
+
+def test_soils_that_differ_in_law_values_share_one_engine_build():
+    """The soil's law values reach the engine at run time (eng_t.soil_law: a row per soil, the cell
+    Functions' input ``law``): soils that differ only in a law value (k_phi, as a sweep over it does) or
+    in n (the general law instead of its n = 0.5 copy, chosen at run time) make the same Functions and
+    run on one build of the engine, each with its own sinkage: the compiled run equals the interpreted
+    oracle's on each soil."""
+    if find_compiler() is None:
+        pytest.skip("no C compiler")
+    from symtrack import toolchain
+
+    n_builds = len(toolchain.builds)
+    keys, libs, sinkage = set(), set(), []
+    for soil in ({}, {"k_phi_N_per_m_n2": 2 * 692.15e3}, {"bekker_n": 0.7}):
+        d = copy.deepcopy(SMALL)
+        d["run"]["duration_s"] = 0.3
+        d["soil"].update(soil)
+        sc = scenario_from_dict(d)
+        keys.add(tuple(f.serialize() for f in build_engine_functions(sc.model, sc.params, 1).all()))
+        plant = make_plant(sc)
+        libs.add(plant.engine.kernel.lib._name)
+        rc = loop.run(sc, plant)
+        wc = plant.world
+        wi, ri = _engine_run(sc, kernel=PyKernel)
+        assert rc.stats["n_cell_stages"] == ri.stats["n_cell_stages"]
+        assert np.max(np.abs(rc.X - ri.X) / np.maximum(1.0, np.abs(ri.X))) < 1e-12
+        assert np.max(np.abs(wc.z_at_pass_end - wi.z_at_pass_end)) < 1e-15
+        sinkage.append(float(wc.z_at_pass_end.max()))
+    assert len(keys) == 1 and len(libs) == 1  # one engine (its Functions hold no soil value)
+    assert sum(b.kind == "engine" for b in toolchain.builds[n_builds:]) <= 1  # built at most once (else cached)
+    z, z_stiff, z_n = sinkage
+    assert z > 5e-4 and z_stiff < 0.8 * z and abs(z_n - z) > 0.2 * z  # each soil its own sinkage
 
 
 @pytest.mark.slow  # a brute-force / step-refinement reference (make test-slow)

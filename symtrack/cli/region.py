@@ -62,8 +62,10 @@ def add_parser(sub) -> None:
     rp = sub.add_parser(
         "region", help="a region study: many fields, season after season, on Dask (docs/region.md)",
         description="Work every field of a region through its seasons (the fast fidelity: each operation's planned "
-        "paths swept by the machine's footprint, the stress and density by depth from the package's soil models) on "
-        "a Dask cluster, and write DIR/fields.csv, DIR/maps/ (Cloud-Optimized GeoTIFFs), DIR/report.html. A rerun "
+        "paths swept by the machine's footprint, the stress and density by depth from the package's soil models; "
+        "the full fidelity, each plan driven over the field's terrain, on the fields the region file's "
+        "[full_fidelity] names) on a Dask cluster, and write DIR/fields.csv, DIR/fields.gpkg, DIR/maps/ "
+        "(Cloud-Optimized GeoTIFFs), DIR/report.html. A rerun "
         "into the same folder skips the field-seasons finished. Exit code 0 when done, 2 for invalid inputs "
         f"(nothing run), 130 on Ctrl-C. Built-in: {DEMO} (generated into DIR/inputs).")
     rp.add_argument("region", help=f"a region TOML file, or {DEMO}")

@@ -250,6 +250,7 @@ def _model_header(sc: Scenario, parts: dict, variables, guid: str) -> bytes:
     ]
     body = "\n".join(lines) + "\n"
     body += c_array("ef_pv", state.pv) + c_array("ef_geo", state.geo) + c_array("ef_soil_veh", state.soil_veh)
+    body += c_array("ef_soil_law", state.soil_law.ravel())
     body += c_array("ef_u_start", [v.start for v in variables[:vr_pose]])
     body += c_array("ef_pose_start", [v.start for v in variables[vr_pose:vr_x]])
     body += c_array("ef_soil_values", soil_values)

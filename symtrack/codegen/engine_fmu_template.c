@@ -186,7 +186,7 @@ static int engine_alloc(Instance *c) {
   E->power_mode = EF_POWER_MODE; E->pad = EF_PAD; E->release_rate = EF_RELEASE_RATE; E->areal_mass = EF_AREAL_MASS;
   E->damping = EF_DAMPING; E->gamma = EF_GAMMA; E->entry_fraction = EF_ENTRY_FRACTION; E->ring_tol = EF_RING_TOL;
   E->vehicle_rtol = EF_VEHICLE_RTOL; E->vehicle_atol = EF_VEHICLE_ATOL; E->vehicle_max_halvings = EF_VEHICLE_MAX_HALVINGS;
-  E->soil_veh = ef_soil_veh; E->n_sums = EF_N_SUMS;
+  E->soil_veh = ef_soil_veh; E->soil_law = ef_soil_law; E->n_sums = EF_N_SUMS;
   return 0;
 }
 

@@ -82,7 +82,7 @@ int main(int argc, char **argv) {
   E.power_mode = GV_POWER_MODE; E.pad = GV_PAD; E.release_rate = GV_RELEASE_RATE; E.areal_mass = GV_AREAL_MASS;
   E.damping = GV_DAMPING; E.gamma = GV_GAMMA; E.entry_fraction = GV_ENTRY_FRACTION; E.ring_tol = GV_RING_TOL;
   E.vehicle_rtol = GV_VEHICLE_RTOL; E.vehicle_atol = GV_VEHICLE_ATOL; E.vehicle_max_halvings = GV_VEHICLE_MAX_HALVINGS;
-  E.soil_veh = gv_soil_veh; E.n_sums = GV_N_SUMS;
+  E.soil_veh = gv_soil_veh; E.soil_law = gv_soil_law; E.n_sums = GV_N_SUMS;
   /* TerrainEngine.begin_pass: set down at rest, the cells at their static sinkage, the settling */
   E.wv[ENG_W_X] = GV_START_X; E.wv[ENG_W_Y] = GV_START_Y; E.wv[ENG_W_YAW] = GV_START_YAW;
   WORK = E.work;

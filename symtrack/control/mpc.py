@@ -163,7 +163,11 @@ class MPCSettings:
     terminal_factor: float = 5.0
     terminal_lateral_factor: float | None = 50.0
     lateral_huber_m: float = 0.0
-    max_iter: int = 60
+    # the NLP solvers' iterations per solve (and the RTI's Gauss-Newton cold start without a fallback): 300.
+    # headland_uturn on IPOPT needs more than 60 at 4 of its 336 samples (the turn entering the horizon),
+    # where 60 gave 4 failed solves (Maximum_Iterations_Exceeded, the fatrop fallback failing too) and 300
+    # none; the median stays 4 (measured: symtrack mpc headland_uturn --solver ipopt [--set mpc.max_iter=300])
+    max_iter: int = 300
     prediction_lateral_creep_speed_m_s: float | None = None
     # the shear law's prediction regularisation (used only when the model's lateral_law is "shear";
     # docs/turning.md, "Nonlinear MPC on the shear law"): the sliding direction's slip floor d and

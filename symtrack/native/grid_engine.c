@@ -3,7 +3,7 @@
  * Per macro step: the footprint, release and sector assignment of the world manager
  * (symtrack/terrain/world.py, same rules and the same floating-point expressions), the vehicle's
  * step (generated from CasADi: eng_vehicle_step), each active cell's step (two-stage SDIRK with a
- * safeguarded scalar Newton per stage on the generated law eng_cell_law), INFO_OUT (history of
+ * safeguarded scalar Newton per stage on the generated law eng_cell_law_<v>), INFO_OUT (history of
  * the active channels only), the channel sums, the outputs (eng_outputs) and the coverage check.
  * This file is the one home of the world manager's rules (footprint, release, sector assignment,
  * INFO_IN, INFO_OUT, the collision and coverage errors): the engine runs them inside eng_run, the
@@ -33,7 +33,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #define CELL_LANES 8
 #endif
 #include "engine_gen.inc"
-#include "engine_soils.inc" /* ENG_SOIL_CALL: the Function of a cell's soil (generated: a soil map's soils) */
+#include "engine_soils.inc" /* ENG_LAW_CALL: the law Function a soil's law row runs (generated) */
 #include "subsoil.h" /* the subsoil stress below the tracks (symtrack/soil/subsoil.py) */
 #include "terrain_query.h" /* the ground's height, normal and cell under a point (symtrack/terrain/query.py) */
 
@@ -111,6 +111,9 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
      angle and shear modulus the traction uses; n_sums = NS, or NS_MAX with a soil map */ \
   F(unsigned char *, soil_index) F(unsigned char *, ch_soil) \
   F(const double *, soil_veh) \
+  /* per soil its law row (ENG_LAW_ROW: the soil law's vector and the repeated-loading exponent), the \
+     input ``law`` of the cell Functions (grid_engine_model.law_row): the soils' values at run time */ \
+  F(const double *, soil_law) \
   F(long long, n_sums) \
   /* the exit windows' substeps (not below cell_substeps; their poses: agrid), the entry windows' poses: \
      NA (entry_substeps + 1) */ \
@@ -174,12 +177,15 @@ static long long now_ns(void) {
 #endif
 static double *WORK;
 static casadi_int *IWORK;
+static const double *SOIL_LAW; /* eng_t.soil_law: soil k's law row at SOIL_LAW + ENG_LAW_ROW k */
+#define LAW_ROW(soil) (SOIL_LAW + ENG_LAW_ROW * (long long)(soil))
 
 /* hist: (z_max, p_max, z_off, delta, d_c) */
 static void law(double z, const double *hist, int soil, double *p, double *dp) {
-  const double *arg[2] = {&z, hist};
+  const double *row = LAW_ROW(soil);
+  const double *arg[3] = {&z, hist, row};
   double *res[2] = {p, dp};
-  ENG_SOIL_CALL(eng_cell_law, soil, arg, res);
+  ENG_LAW_CALL(row, arg, res);
 }
 
 static void channel_hist(const eng_t *E, long long ch, double *hist) {
@@ -303,6 +309,7 @@ static void mark_footprint(eng_t *E, long long cell, long long ch, void *ctx) {
 EXPORT int eng_assign(eng_t *E, double h) {
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
   const double *w = E->wv;
   double X = w[ENG_W_X], Y = w[ENG_W_Y], psi = w[ENG_W_YAW], u = w[ENG_W_U], v = w[ENG_W_V], r = w[ENG_W_R];
   double c = cos(psi), s = sin(psi);
@@ -355,9 +362,9 @@ EXPORT int eng_assign(eng_t *E, double h) {
     {
       double hist[5], ncyc = (double)E->cycles[cell], zc = E->ch_z[ch];
       channel_hist(E, ch, hist);
-      const double *arg[3] = {&zc, hist, &ncyc};
+      const double *arg[4] = {&zc, hist, &ncyc, LAW_ROW(E->ch_soil[ch])};
       double *res[1] = {E->ch_delta + ch};
-      ENG_SOIL_CALL(eng_cell_entry, E->ch_soil[ch], arg, res);
+      eng_cell_entry(arg, res, 0, WORK, 0);
     }
     E->ch_p[ch] = 0.0;
     E->ch_pw[2 * ch] = 0.0;
@@ -388,13 +395,14 @@ static inline void stage_coefficients(const eng_t *E, double gh, double *a, doub
 }
 
 /* INFO_OUT of one channel after its step: the history (cell.history_update, generated:
- * eng_cell_history) and the storage; hist: the history the step was integrated with */
+ * eng_cell_history, on the channel's soil's law row) and the storage; hist: the history the step was
+ * integrated with */
 static void info_out(eng_t *E, long long ch, const double *hist) {
   double zc = E->ch_z[ch], p = E->ch_p[ch], hn[5];
   {
-    const double *arg[3] = {&zc, &p, hist};
+    const double *arg[4] = {&zc, &p, hist, LAW_ROW(E->ch_soil[ch])};
     double *res[1] = {hn};
-    ENG_SOIL_CALL(eng_cell_history, E->ch_soil[ch], arg, res);
+    eng_cell_history(arg, res, 0, WORK, 0);
   }
   double zm1 = hn[0], pm1 = hn[1], dc1 = hn[2];
   long long cell = E->ch_cell[ch];
@@ -427,7 +435,8 @@ static void info_out(eng_t *E, long long ch, const double *hist) {
    without it, law() lane by lane. */
 static void law_lanes(const double *z, const double *hist, int soil, double *p, double *dp) {
 #ifdef ENG_LAW_LANES
-  ENG_LAW_LANES(soil, z, hist, p, dp);
+  const double *row = LAW_ROW(soil);
+  ENG_LAW_LANES(row, z, hist, p, dp);
 #else
   for (int i = 0; i < CELL_LANES; ++i) {
     double h[5];
@@ -742,6 +751,7 @@ EXPORT long long eng_uncovered(eng_t *E, double X, double Y, double psi) {
 EXPORT void eng_info_out(eng_t *E) {
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     double hist[5];
@@ -828,6 +838,7 @@ static void sums(eng_t *E) {
 EXPORT void eng_sums(eng_t *E) {
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
   sums(E);
 }
 
@@ -942,6 +953,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
   double t = t0;
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
   *n_done = 0;
   for (long long k = 0; k < n; ++k) {
     double t_next = T[k], h = t_next - t;
@@ -951,6 +963,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     if (eng_assign(E, h)) return -(int)E->err_code;
     WORK = E->work;
     IWORK = (casadi_int *)E->iwork;
+    SOIL_LAW = E->soil_law;
     long long c1 = now_ns();
     E->ns_manager += c1 - c0;
     vehicle_step(E, u, h, w1, a1);
@@ -1180,6 +1193,7 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
                           int *settled) {
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
   *settled = 0;
   /* the cells in batches (cell_step_block, SDIRK, n substeps), no overlap fractions (no work) */
   double lift_buf[CELL_LANES * 3 * (n + 1)];
@@ -1228,6 +1242,7 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
 EXPORT void eng_static(eng_t *E) {
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     int soil = E->ch_soil[ch];

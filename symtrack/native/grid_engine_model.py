@@ -25,25 +25,31 @@ interpolated between the step's two poses. So the Functions are:
 - ``eng_cell_geo(c[2], a[8], geo[7]) -> g[7]``: one cell's load p_load = sum_k frac_k
   p_k(s_mid,k), its overlap fractions (left, right) and its four end-strip weights, from
   :func:`symtrack.terrain.channels.build_cell_functions`'s geometry.
-- ``eng_cell_law(z, hist[5]) -> (p, dp/dz)``: the reaction pressure of the model's soil law
-  (:mod:`symtrack.soil.law`) with the soil's law constants baked in, and its exact
-  derivative (the Newton iteration of each implicit stage), written by branch (the law's
-  ``pressure_and_slope``); hist = (z_max, p_max, z_off, delta, d_c), the cycle law's history.
-  With numeric constants the Bekker/Wong law writes the regularised Bekker term
-  k z+ (z+ + d)^(n-1) for n = 0.5 as k z+ / sqrt(z+ + d) (the same number; libm's pow is about
-  20 x slower than sqrt).
-- ``eng_cell_history(z, p, hist[5]) -> (z_max', p_max', d_c', plastic, phase)``: the law's
+- ``eng_cell_law_<v>(z, hist[5], law) -> (p, dp/dz)``: the reaction pressure of the model's soil law
+  (:mod:`symtrack.soil.law`) and its exact derivative (the Newton iteration of each implicit stage),
+  written by branch (the law's ``pressure_and_slope``); hist = (z_max, p_max, z_off, delta, d_c), the
+  cycle law's history; ``law`` the soil's law row (:func:`law_row`: the law vector, then the
+  repeated-loading exponent), an input, so one build of the engine runs every soil of the law: the
+  C holds a table of the rows (eng_t.soil_law, one per soil of the field) and passes the cell's soil's.
+  v = 0 is the general law; v >= 1 the law's specialised copies
+  (:attr:`~symtrack.soil.law.SoilLaw.engine_specialisations`), with some entries of the row fixed as
+  numbers, which the C runs for a soil whose row has those values (a test of the row at run time). The
+  Bekker/Wong law has one, n = 0.5: its regularised Bekker term k z+ (z+ + d)^(n-1) written
+  k z+ / sqrt(z+ + d) (the same number; libm's pow is about 20 x slower than sqrt).
+- ``eng_cell_history(z, p, hist[5], law) -> (z_max', p_max', d_c', plastic, phase)``: the law's
   ``history_update`` (INFO_OUT).
-- ``eng_cell_entry(z, hist[5], cycles) -> delta``: the law's ``cycle_increment`` with the soil's
-  exponent (INFO_IN).
+- ``eng_cell_entry(z, hist[5], cycles, law) -> delta``: the law's ``cycle_increment`` with the soil's
+  repeated-loading exponent (INFO_IN).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 
 import casadi as ca
+import numpy as np
 
 from ..foundations.errors import ParameterError
 from ..foundations.params import ParamLayout
@@ -282,9 +288,9 @@ class EngineFunctions:
     vehicle_a: ca.Function
     outputs: ca.Function
     cell_geo: ca.Function
-    cell_law: tuple  # one Function per soil of the field (soil index order)
-    cell_history: tuple
-    cell_entry: tuple
+    cell_law: tuple  # eng_cell_law_<v>: the general law (v = 0), then one per law_variants entry
+    cell_history: ca.Function
+    cell_entry: ca.Function
     output_names: tuple
     param_layout: ParamLayout  # the vehicle and soil parameters at the head of pv (SystemModel.model_layout)
     n_pv: int
@@ -292,6 +298,9 @@ class EngineFunctions:
     layout: StateLayout = PLANAR_LAYOUT  # the vehicle's states (w = these, then its accelerations)
     na: int = NA  # the length of a: 8, or 8 + 2 n_seg for the 3D vehicle (its segment pressures)
     n_seg: int = 0  # the 3D vehicle's segments per track (0: the planar vehicle)
+    soil_law_model: soil_law.SoilLaw | None = None  # the law the cell Functions evaluate (its rows: law_row)
+    # cell_law[v], v >= 1: the law with these entries of the law row fixed, ((index, value), ...)
+    law_variants: tuple = ()
 
     @property
     def nw(self) -> int:
@@ -299,19 +308,75 @@ class EngineFunctions:
         return self.layout.nv + len(ALGEBRAIC)
 
     @property
-    def n_soils(self) -> int:
-        return len(self.cell_law)
+    def law_size(self) -> int:
+        """The length of a soil's law row (:func:`law_row`): the law vector and the repeated-loading exponent."""
+        return self.soil_law_model.size + len(LAW_ROW_EXTRA)
+
+    def law_row(self, params: dict) -> list[float]:
+        """The row of the soil ``params`` in the engine's law table (:func:`law_row`)."""
+        return law_row(self.soil_law_model, params)
+
+    def law_table(self, soils) -> np.ndarray:
+        """The engine's law table: one :meth:`law_row` per soil of ``soils`` (soil index order), (n, law_size)."""
+        return np.array([self.law_row(sp) for sp in soils], dtype=float).reshape(len(soils), self.law_size)
+
+    def law_variant(self, row) -> int:
+        """The law Function a soil's row runs (the C's ENG_LAW_CALL): the first variant whose fixed
+        entries the row has, else 0, the general law."""
+        return law_variant(self.law_variants, row)
+
+    def law(self, z, hist, row):
+        """(p, dp/dz) of the law at sinkage z on history ``hist`` for the soil of law row ``row``, by the
+        variant that soil runs (as grid_engine.c's law())."""
+        return self.cell_law[self.law_variant(row)](z, hist, row)
 
     def all(self):
-        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, *self.cell_law, *self.cell_history,
-                *self.cell_entry)
+        return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, *self.cell_law, self.cell_history,
+                self.cell_entry)
+
+
+# the entries of a soil's law row after its law vector (SoilLaw.vector_names)
+LAW_ROW_EXTRA = ("repeated_loading_exponent",)
+
+
+def law_row(sl: soil_law.SoilLaw, params: dict) -> list[float]:
+    """A soil's row of the engine's law table (eng_t.soil_law): the law vector of ``sl`` for the soil
+    ``params`` (:meth:`~symtrack.soil.law.SoilLaw.values`) and its :data:`LAW_ROW_EXTRA` (the cycle
+    law's exponent)."""
+    return sl.values(params) + [float(params[n]) for n in LAW_ROW_EXTRA]
+
+
+def law_variants(sl: soil_law.SoilLaw) -> tuple:
+    """The law's specialised copies for the engine (:attr:`~symtrack.soil.law.SoilLaw.engine_specialisations`)
+    as ((index in the law row, value), ...) per copy."""
+    out = []
+    for spec in sl.engine_specialisations:
+        fixed = []
+        for name, value in spec.items():
+            if name not in sl.vector_names:
+                raise ValueError(f"soil law {sl.name!r}: engine_specialisations names {name!r}, not an entry of "
+                                 f"its law vector {sl.vector_names}")
+            if not math.isfinite(float(value)):
+                raise ValueError(f"soil law {sl.name!r}: engine_specialisations {name} = {value!r} is not finite")
+            fixed.append((sl.vector_names.index(name), float(value)))
+        out.append(tuple(fixed))
+    return tuple(out)
+
+
+def law_variant(variants: tuple, row) -> int:
+    """The index of the law Function for ``row`` (EngineFunctions.law_variant)."""
+    for v, fixed in enumerate(variants, start=1):
+        if all(float(row[i]) == value for i, value in fixed):
+            return v
+    return 0
 
 
 def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (),
                            surface=None) -> EngineFunctions:
-    """The Functions of the module doc for model options ``opts`` and the soil in ``params``;
-    ``soils``: with a soil map, the parameter dicts (vehicle and soil) of every soil of the field,
-    index 0 the scenario's: a cell law per soil, and the sums carry the soil under each track.
+    """The Functions of the module doc for model options ``opts``; ``params``, the scenario's vehicle
+    and soil, and ``soils``, with a soil map the parameter dicts of every soil of the field (index 0 the
+    scenario's), give no number to the Functions (the soils' values are the engine's law table and pv,
+    at run time): several soils only make the sums carry the soil under each track.
     The vehicle is the one ``opts.vehicle`` names (:func:`symtrack.vehicles.registry.for_options`); with
     a hull of its own (the 3D vehicle, ``opts.vehicle = "3d"``) it is the hull on the ground ``surface``
     (None: flat) over :class:`SegmentSumsTerrain`; its ``a`` is the pose, the least-squares line of each track
@@ -358,7 +423,7 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     outputs = ca.Function("eng_outputs", [x, u, pv], [veh.outputs(x, u, pv)], ["x", "u", "pv"], ["y"], fo_vehicle)
 
     # The 8-stage, order-5, L-stable, stiffly accurate Rosenbrock method of CasADi 3.8's plugin
-    # (codegen/rosenbrock.py's tableau) on the time-scaled DAE F = (h f, alg), unit step,
+    # (symtrack/native/rosenbrock.py's tableau) on the time-scaled DAE F = (h f, alg), unit step,
     # mass M = diag(1 (12), 0 (2)): W U_i = F(w0 + sum a_ij U_j) + M sum c_ij U_j, W = M / gamma - dF/dw,
     # w1 = w0 + sum m_i U_i. (ROS2, order 2, was measured first: docs/terrain.md.)
     h = ca.SX.sym("h")
@@ -414,35 +479,38 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     cell_geo = ca.Function("eng_cell_geo", [c, av, geo], [ca.vertcat(p_load, g[0], g[1], g[4], g[5], g[6], g[7])],
                            ["c", "a", "geo"], ["g"], fo)
 
-    laws, histories, entries = [], [], []
-    for k, sp in enumerate(soils):
-        law_k, hist_k, entry_k = _cell_functions(opts, sp, k, fo)
-        laws.append(law_k)
-        histories.append(hist_k)
-        entries.append(entry_k)
+    sl = soil_law.make(opts)
+    variants = law_variants(sl)
+    cell_law, cell_history, cell_entry = _cell_functions(sl, variants, fo)
     n_sums = NS + (NS_SOIL if len(soils) > 1 else 0)
     if n_seg:
         n_sums = len(terr.names)
-    return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, tuple(laws), tuple(histories), tuple(entries),
+    return EngineFunctions(vehicle_step, vehicle_a, outputs, cell_geo, cell_law, cell_history, cell_entry,
                            veh.output_names, veh.model_layout, len(veh.model_layout) + NG + n_sums, n_sums,
-                           veh.layout, na, n_seg)
+                           veh.layout, na, n_seg, sl, variants)
 
 
-def _cell_functions(opts, params: dict, k: int, fo: dict):
-    """eng_cell_law_<k>, eng_cell_history_<k>, eng_cell_entry_<k> of soil k (the module doc)."""
-    sl = soil_law.make(opts)
-    law = sl.values(params)  # floats: the constants baked in (and the law's numeric specialisations)
-    z, hist, ps = ca.SX.sym("z"), ca.SX.sym("hist", NH), ca.SX.sym("p")
-    p, dp = sl.pressure_and_slope(z, hist, law)
-    cell_law = ca.Function(f"eng_cell_law_{k}", [z, hist], [p, dp], ["z", "hist"], ["p", "dp_dz"], fo)
-    zm1, pm1, dc1, plastic, phase = sl.history_update(z, ps, hist, law)
-    cell_history = ca.Function(f"eng_cell_history_{k}", [z, ps, hist], [ca.vertcat(zm1, pm1, dc1, plastic, phase)],
-                               ["z", "p", "hist"], ["h"], fo)
-    cycles = ca.SX.sym("cycles")
-    delta = sl.cycle_increment(z, hist, cycles, law, float(params["repeated_loading_exponent"]))
-    cell_entry = ca.Function(f"eng_cell_entry_{k}", [z, hist, cycles], [delta], ["z", "hist", "cycles"], ["delta"],
-                             fo)
-    return cell_law, cell_history, cell_entry
+def _cell_functions(sl: soil_law.SoilLaw, variants: tuple, fo: dict):
+    """eng_cell_law_<v> (the general law, then one per variant), eng_cell_history and eng_cell_entry (the
+    module doc), each taking the soil's law row (:func:`law_row`) as its input ``law``."""
+    z, hist, ps, cycles = ca.SX.sym("z"), ca.SX.sym("hist", NH), ca.SX.sym("p"), ca.SX.sym("cycles")
+    row = ca.SX.sym("law", sl.size + len(LAW_ROW_EXTRA))
+    vec = [row[i] for i in range(sl.size)]
+    laws = []
+    for v, fixed in enumerate(((),) + variants):
+        law = list(vec)
+        for i, value in fixed:  # the variant's entries as numbers (the law's specialised form)
+            law[i] = value
+        p, dp = sl.pressure_and_slope(z, hist, law)
+        laws.append(ca.Function(f"eng_cell_law_{v}", [z, hist, row], [p, dp], ["z", "hist", "law"], ["p", "dp_dz"],
+                                fo))
+    zm1, pm1, dc1, plastic, phase = sl.history_update(z, ps, hist, vec)
+    cell_history = ca.Function("eng_cell_history", [z, ps, hist, row], [ca.vertcat(zm1, pm1, dc1, plastic, phase)],
+                               ["z", "p", "hist", "law"], ["h"], fo)
+    delta = sl.cycle_increment(z, hist, cycles, vec, row[sl.size])
+    cell_entry = ca.Function("eng_cell_entry", [z, hist, cycles, row], [delta], ["z", "hist", "cycles", "law"],
+                             ["delta"], fo)
+    return tuple(laws), cell_history, cell_entry
 
 
 # the vehicle states the C reads (grid_engine.c, the standalone program, the engine FMU): C name ->
@@ -467,36 +535,43 @@ def engine_layout_c(layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: in
             *TRACK_SOIL_LAYOUT.c_defines("ENG_TRACK_SOIL", "ENG_N_TRACK_SOIL")]
 
 
-def soil_dispatch_c(n_soils: int, layout: StateLayout = PLANAR_LAYOUT, na: int = NA, n_seg: int = 0,
-                    cell_law: tuple = (), cell_geo: ca.Function | None = None,
-                    vehicle_sizes: tuple[int, int, int] | None = None) -> str:
-    """The C of engine_soils.inc: the state sizes of :func:`engine_layout_c` (of the vehicle's
-    ``layout``, ``na``, ``n_seg``), and ENG_SOIL_CALL(fn, soil, arg, res) that calls fn_<soil> (a switch
-    the compiler can inline; one soil: a plain call). With ``cell_law`` (EngineFunctions.cell_law, one
-    Function per soil) also the laws over CELL_LANES lanes (:func:`law_lanes_c`); with ``cell_geo`` the
-    geometry over a window's poses (:func:`geo_lanes_c`); with ``vehicle_sizes`` (engine.state.vehicle_work_sizes)
-    ENG_SZ_ARG and ENG_SZ_RES, the arg and res sizes of the vehicle's Functions (grid_engine.c's
-    defaults, 4 and 3, without)."""
-    lines = engine_layout_c(layout, na, n_seg)
-    lines += [f"#define ENG_N_SOILS {n_soils}", "#define ENG_SOIL_CALL(fn, soil, arg, res) \\"]
-    if n_soils == 1:
-        lines.append("  fn##_0(arg, res, 0, WORK, 0)")
-    else:
-        lines.append("  do { switch (soil) { \\")
-        for k in range(1, n_soils):
-            lines.append(f"    case {k}: fn##_{k}(arg, res, 0, WORK, 0); break; \\")
-        lines.append("    default: fn##_0(arg, res, 0, WORK, 0); } } while (0)")
+def soil_dispatch_c(fns: EngineFunctions, vehicle_sizes: tuple[int, int, int] | None = None) -> str:
+    """The C of engine_soils.inc for the engine Functions ``fns``: the state sizes of :func:`engine_layout_c`
+    (of the vehicle's layout, ``na``, ``n_seg``); ENG_LAW_ROW, the length of a soil's row of the law table
+    eng_t.soil_law (:func:`law_row`); ENG_LAW_CALL(row, arg, res), the call of the law Function that a soil of
+    law row ``row`` runs (:meth:`EngineFunctions.law_variant`: a test of the row's entries that the law
+    fixes in a specialised copy, the general law otherwise; one Function: a plain call); the laws over
+    CELL_LANES lanes (:func:`law_lanes_c`) and the geometry over a window's poses (:func:`geo_lanes_c`);
+    with ``vehicle_sizes`` (engine.state.vehicle_work_sizes) ENG_SZ_ARG and
+    ENG_SZ_RES, the arg and res sizes of the vehicle's Functions (grid_engine.c's defaults, 4 and 3,
+    without)."""
+    lines = engine_layout_c(fns.layout, fns.na, fns.n_seg)
+    names = ", ".join((*fns.soil_law_model.vector_names, *LAW_ROW_EXTRA))
+    lines += [f"#define ENG_LAW_ROW {fns.law_size} /* a soil's row of eng_t.soil_law: {names} */",
+              "#define ENG_LAW_CALL(row, arg, res) \\",
+              *_variant_dispatch(fns, lambda v: f"eng_cell_law_{v}(arg, res, 0, WORK, 0)")]
     if vehicle_sizes is not None:
         lines += [f"#define ENG_SZ_ARG {int(vehicle_sizes[0])} /* the vehicle's Functions' arg, res sizes */",
                   f"#define ENG_SZ_RES {int(vehicle_sizes[1])}"]
-    text = "\n".join(lines) + "\n"
-    if cell_law:
-        if len(cell_law) != n_soils:
-            raise ValueError(f"soil_dispatch_c: {len(cell_law)} cell laws for {n_soils} soils")
-        text += law_lanes_c(cell_law)
-    if cell_geo is not None:
-        text += geo_lanes_c(cell_geo)
-    return text
+    return "\n".join(lines) + "\n" + law_lanes_c(fns) + geo_lanes_c(fns.cell_geo)
+
+
+def _c_double(value: float) -> str:
+    """A C literal of exactly ``value`` (Python's repr is the shortest string that reads back to it)."""
+    return repr(float(value))
+
+
+def _variant_dispatch(fns: EngineFunctions, call) -> list[str]:
+    """The body lines of a macro that runs ``call(v)`` for the law variant of the row ``row``
+    (:meth:`EngineFunctions.law_variant`, in C)."""
+    if not fns.law_variants:
+        return [f"  {call(0)}"]
+    out = []
+    for v, fixed in enumerate(fns.law_variants, start=1):
+        test = " && ".join(f"(row)[{i}] == {_c_double(value)}" for i, value in fixed)
+        out.append(f"  {'do { if' if v == 1 else 'else if'} ({test}) {call(v)}; \\")
+    out.append(f"  else {call(0)}; }} while (0)")
+    return out
 
 
 _GENERATED_BODY = re.compile(
@@ -534,10 +609,11 @@ def _lanes_body(f: ca.Function, args: list, results: list) -> str | None:
     return body
 
 
-def law_lanes_c(cell_law: tuple) -> str:
-    """The cell laws (eng_cell_law_<k>, one per soil) over the CELL_LANES lanes of grid_engine.c's
-    stage_block: ``eng_cell_law_<k>_lanes(z[L], hist[5 L], p[L], dp[L])``, ``hist`` by component
-    (``hist[c L + i]``), and ENG_LAW_LANES(soil, z, hist, p, dp) that calls soil's.
+def law_lanes_c(fns: EngineFunctions) -> str:
+    """The law Functions (eng_cell_law_<v>: the general law and its variants) over the CELL_LANES lanes of
+    grid_engine.c's stage_block: ``eng_cell_law_<v>_lanes(z[L], hist[5 L], law, p[L], dp[L])``, ``hist`` by
+    component (``hist[c L + i]``), ``law`` the lanes' soil's law row, and ENG_LAW_LANES(row, z, hist, p, dp)
+    that calls the variant of the soil of law row ``row`` (as ENG_LAW_CALL).
 
     Each function is CasADi's generated body of that law (:func:`_lanes_body`) in a loop over the lanes
     with a fixed count: the generated law is branch-free (its if_else are selects), so the compiler
@@ -546,24 +622,19 @@ def law_lanes_c(cell_law: tuple) -> str:
     (tests/test_terrain_engine.py, the one-lane build and the stored SHA). A law of another form gives
     no ENG_LAW_LANES, and grid_engine.c calls the scalar law lane by lane."""
     out = []
-    for k, f in enumerate(cell_law):
-        body = _lanes_body(f, [lambda c: "z[i]", lambda c: f"hist[{c} * CELL_LANES + i]"],
+    for v, f in enumerate(fns.cell_law):
+        body = _lanes_body(f, [lambda c: "z[i]", lambda c: f"hist[{c} * CELL_LANES + i]", lambda c: f"law[{c}]"],
                            [lambda c: "p[i]", lambda c: "dp[i]"])
         if body is None:
             return ""
-        out.append(f"static void eng_cell_law_{k}_lanes(const double *restrict z, const double *restrict hist,\n"
-                   f"                                  double *restrict p, double *restrict dp) {{\n"
+        out.append(f"static void eng_cell_law_{v}_lanes(const double *restrict z, const double *restrict hist,\n"
+                   f"                                  const double *restrict law, double *restrict p,\n"
+                   f"                                  double *restrict dp) {{\n"
                    f"  for (int i = 0; i < CELL_LANES; ++i) {{\n"
                    + "\n".join("  " + ln for ln in body.splitlines()) + "\n  }\n}\n")
     lines = ["/* the cell laws over CELL_LANES lanes (grid_engine_model.law_lanes_c) */", *out,
-             "#define ENG_LAW_LANES(soil, z, hist, p, dp) \\"]
-    if len(cell_law) == 1:
-        lines.append("  eng_cell_law_0_lanes(z, hist, p, dp)")
-    else:
-        lines.append("  do { switch (soil) { \\")
-        for k in range(1, len(cell_law)):
-            lines.append(f"    case {k}: eng_cell_law_{k}_lanes(z, hist, p, dp); break; \\")
-        lines.append("    default: eng_cell_law_0_lanes(z, hist, p, dp); } } while (0)")
+             "#define ENG_LAW_LANES(row, z, hist, p, dp) \\",
+             *_variant_dispatch(fns, lambda v: f"eng_cell_law_{v}_lanes(z, hist, row, p, dp)")]
     return "\n".join(lines) + "\n"
 
 
@@ -625,4 +696,4 @@ def cell_constants(params: dict) -> tuple[float, float]:
 __all__ = ["EngineFunctions", "SEG_FIELDS", "SegmentSumsTerrain", "build_engine_functions", "least_squares_line",
            "piecewise_linear", "segment_sum_names", "SUM_NAMES", "SOIL_SUM_NAMES", "NA", "NS", "NS_SOIL", "NGEO",
            "NF", "TRACK_SOIL_LAYOUT", "ENGINE_STATE_READS", "engine_layout_c", "geo_vector", "pv_base",
-           "soil_dispatch_c", "track_soil_vector"]
+           "soil_dispatch_c", "track_soil_vector", "LAW_ROW_EXTRA", "law_row", "law_variants"]

@@ -133,14 +133,36 @@ def suction_series(year: int, shift_pF: float, seed: int, clayey: bool) -> list[
             for d, v in zip(doy, kpa, strict=True)]
 
 
+def soil_units(fields: dict, soils=tuple(SOILS)) -> dict:
+    """A GeoJSON FeatureCollection of two soil units (a generated soil map: docs/region.md, "A soil map"): the
+    fields' extent (100 m around them) cut by a north-south line midway between its west and east edges, the
+    first soil west of it, the second east of it (property ``soil``)."""
+    pts = [p for f in fields["features"] for p in f["geometry"]["coordinates"][0]]
+    x0, y0 = min(p[0] for p in pts) - 100.0, min(p[1] for p in pts) - 100.0
+    x1, y1 = max(p[0] for p in pts) + 100.0, max(p[1] for p in pts) + 100.0
+    xm = round(0.5 * (x0 + x1), 3)
+
+    def unit(k, a, b):
+        ring = [[a, y0], [b, y0], [b, y1], [a, y1], [a, y0]]
+        return {"type": "Feature", "id": f"U{k + 1}", "properties": {"soil": soils[k]},
+                "geometry": {"type": "Polygon", "coordinates": [ring]}}
+
+    return {"type": "FeatureCollection", "name": "soil_units", "features": [unit(0, x0, xm), unit(1, xm, x1)]}
+
+
 def write_region(folder, n_fields: int = 36, seed: int = 1, name: str = DEMO_NAME, years=None, cell_m: float = 0.5,
-                 systems=None, **field_kw) -> Path:
+                 systems=None, soil_map: bool = False, **field_kw) -> Path:
     """Write a generated region into ``folder`` (fields.geojson, one suction CSV per soil, region.toml);
-    returns the region file."""
+    returns the region file. ``soil_map``: the fields' soils from a generated soil map (soil_units.geojson,
+    :func:`soil_units`; the fields without a soil of their own) instead of drawn per field."""
     folder = Path(folder)
     years = dict(YEARS) if years is None else dict(years)
     systems = SYSTEMS if systems is None else systems
     fields = generate_fields(n_fields, seed, systems=tuple(systems), **field_kw)
+    if soil_map:
+        for f in fields["features"]:
+            del f["properties"]["soil"]
+        atomic_write_text(folder / "soil_units.geojson", json.dumps(soil_units(fields), indent=1) + "\n")
     atomic_write_text(folder / "fields.geojson", json.dumps(fields, indent=1) + "\n")
     soils = {}
     for k, (sname, desc) in enumerate(SOILS.items()):
@@ -154,6 +176,7 @@ def write_region(folder, n_fields: int = 36, seed: int = 1, name: str = DEMO_NAM
                           f"{len(systems)} tillage systems",
            "fields_file": "fields.geojson", "crs": CRS, "fleet": "builtin", "years": sorted(years), "seed": seed,
            "cell_m": cell_m, "map_cell_m": max(1.0, cell_m), "soils": soils,
+           **({"soil_map": {"file": "soil_units.geojson", "attribute": "soil"}} if soil_map else {}),
            "systems": {k: {"operations": v} for k, v in systems.items()}}
     path = folder / f"{name}.toml"
     atomic_write_text(path, "# a generated region (symtrack/region/demo.py): not measured data\n" + to_toml(doc))

@@ -30,6 +30,8 @@ from ..foundations.config import check_keys, integer, number
 from ..foundations.errors import ParameterError, ScenarioError
 from ..foundations.files import read_text
 from .fleet import BUILTIN_FLEET, Fleet, load_fleet
+from .full import FullFidelity, parse_full_fidelity
+from .soilmap import field_soils, parse_soil_map
 
 __all__ = ["FieldShape", "OpEntry", "RegionSpec", "class_soil", "draw_day", "load_region", "moisture_class",
            "read_fields", "read_suction_csv", "region_from_dict"]
@@ -37,13 +39,13 @@ __all__ = ["FieldShape", "OpEntry", "RegionSpec", "class_soil", "draw_day", "loa
 SCHEMA_VERSION = 1
 TOP_KEYS = ("schema_version", "name", "description", "fields_file", "crs", "fleet", "years", "seed", "cell_m",
             "map_cell_m", "depths_m", "rule", "workable_suction_kPa", "moisture_class_pF", "margin_m",
-            "unplannable_fields", "soils",
+            "unplannable_fields", "soils", "soil_map", "full_fidelity",
             "systems")
 SOIL_ENTRY_KEYS = ("preset", "suction_file")  # and any soil parameter (symtrack presets NAME lists them)
 SYSTEM_KEYS = ("operations",)
 OP_KEYS = ("name", "machine", "window", "same_day_as", "loosens_to_m", "repeat", "same_lines_as", "tracks",
            "random_offset_m", "headland_passes")
-FIELD_PROPERTY_KEYS = ("field_id", "soil", "system")
+FIELD_PROPERTY_KEYS = ("field_id", "soil", "system")  # soil: optional with a [soil_map]
 # defaults (docs/region.md): 0.5 m cells hold a tyre's strip (0.38-0.80 m) in one to two cells; the area under the
 # strips is unbiased with the centre rule; 1 m maps; the package's subsoil depths
 DEFAULT_CELL_M = 0.5
@@ -81,6 +83,12 @@ class FieldShape:
     theta_rad: float
     origin: tuple
     offset: tuple
+    # where the soil comes from: the field's own property ("fields_file") or the soil map ("soil_map", the soil
+    # covering most of the field: soil_share of its area; symtrack.region.soilmap)
+    soil_from: str = "fields_file"
+    soil_share: float = 1.0
+    # the fidelity its seasons run in: "fast" or "full" ([full_fidelity]: symtrack.region.full)
+    fidelity: str = "fast"
 
     def to_world(self, x, y):
         c, s = math.cos(self.theta_rad), math.sin(self.theta_rad)
@@ -130,6 +138,7 @@ class RegionSpec:
     margin_m: float = DEFAULT_MARGIN_M
     unplannable_fields: str = "refuse"
     skipped: list = field(default_factory=list)  # [{"field_id", "reason"}] of the fields left out
+    full_fidelity: FullFidelity | None = None  # [full_fidelity]: the fields run in the full fidelity, the vehicle
 
     @property
     def area_ha(self) -> float:
@@ -237,10 +246,11 @@ def draw_day(series: np.ndarray, window: tuple, workable_kPa: float, rng: np.ran
 
 
 # ---- fields -----------------------------------------------------------------------------------------------
-def read_fields(path, margin_m: float, where: str = "fields_file") -> list[dict]:
+def read_fields(path, margin_m: float, where: str = "fields_file", soil_required: bool = True) -> list[dict]:
     """The fields of a GeoJSON FeatureCollection of Polygon features (properties field_id, soil, system), each
     checked with shapely (a valid polygon without holes, in a metric CRS). Returns dicts of the properties, the
-    ring (world), the area and the field's frame (:class:`FieldShape`'s theta, origin, offset, ring, size)."""
+    ring (world), the area and the field's frame (:class:`FieldShape`'s theta, origin, offset, ring, size).
+    Without ``soil_required`` (a soil map gives the soils) a field's ``soil`` may be left out (None)."""
     import shapely
     from shapely.geometry import Polygon, shape
 
@@ -263,6 +273,8 @@ def read_fields(path, margin_m: float, where: str = "fields_file") -> list[dict]
             raise ScenarioError(f"{label} is not a GeoJSON Feature")
         props = f.get("properties") or {}
         for k in FIELD_PROPERTY_KEYS:
+            if k == "soil" and not soil_required and props.get(k) is None:
+                continue
             if not isinstance(props.get(k), str) or not props.get(k):
                 raise ScenarioError(f"{label}: properties.{k} = {props.get(k)!r} must be a non-empty string")
         fid = props["field_id"]
@@ -285,7 +297,7 @@ def read_fields(path, margin_m: float, where: str = "fields_file") -> list[dict]
             raise ScenarioError(f"{label}: the polygon has {len(geom.interiors)} hole(s); a field with holes is not "
                                 "supported (give its exterior ring only)")
         if not geom.is_valid:
-            raise ScenarioError(f"{label}: not a valid polygon ({shapely.validation.explain_validity(geom)})")
+            raise ScenarioError(f"{label}: not a valid polygon ({shapely.is_valid_reason(geom)})")
         coords = np.asarray(geom.exterior.coords)[:-1, :2]
         if np.abs(coords).max() < 360.0 and geom.area < 1e-2:
             raise ScenarioError(f"{label}: the coordinates look like degrees (longitude, latitude); the fields must be "
@@ -303,7 +315,7 @@ def read_fields(path, margin_m: float, where: str = "fields_file") -> list[dict]
         elif theta <= -math.pi / 2:
             theta += math.pi
         ring = np.asarray(geom.exterior.coords)[:-1, :2]
-        out.append({"field_id": fid, "index": i, "soil": props["soil"], "system": props["system"],
+        out.append({"field_id": fid, "index": i, "soil": props.get("soil"), "system": props["system"],
                     "area_m2": float(geom.area), "world_ring": tuple(map(tuple, ring.tolist())),
                     **field_frame(ring, theta, margin_m)})
     return out
@@ -448,9 +460,20 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
         if len(set(names)) != len(names):
             raise ScenarioError(f"systems.{sname}.operations: the names {names} must differ")
         systems[sname] = entries
-    raw = read_fields(path("fields_file", doc["fields_file"]), margin)
+    soil_map = None if doc.get("soil_map") is None else parse_soil_map(doc["soil_map"], tuple(soils), path)
+    raw = read_fields(path("fields_file", doc["fields_file"]), margin, soil_required=soil_map is None)
+    if soil_map is not None:  # the soil covering most of each field; a field's own soil property wins
+        mapped = field_soils(soil_map, [f for f in raw if f["soil"] is None], tuple(soils), crs)
+        for f in raw:
+            if f["soil"] is None:
+                soil, share, _ = mapped[f["field_id"]]
+                f.update(soil=soil, soil_from="soil_map", soil_share=share)
+    full = None if doc.get("full_fidelity") is None else \
+        parse_full_fidelity(doc["full_fidelity"], [f["field_id"] for f in raw])
+    chosen = full.choose([f["field_id"] for f in raw], seed) if full is not None else set()
     fields = []
     for f in raw:
+        f["fidelity"] = "full" if f["field_id"] in chosen else "fast"
         if f["soil"] not in soils:
             raise ScenarioError(f"fields_file: field {f['field_id']!r}: soil = {f['soil']!r} is not a soil of [soils] "
                                 f"({', '.join(soils)})")
@@ -459,7 +482,8 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
                                 f"[systems] ({', '.join(systems)})")
         fields.append(FieldShape(**f))
     return RegionSpec(doc.get("name", name), doc.get("description", ""), folder, fields, soils, suction, fleet, systems,
-                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin, unplannable)
+                      years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin, unplannable,
+                      full_fidelity=full)
 
 
 def load_region(path) -> RegionSpec:

@@ -1,6 +1,13 @@
 """A region study's outputs (docs/region.md, "Outputs"): the per-field table (``fields.csv``), the region's maps
 (Cloud-Optimized GeoTIFFs per season and over the years), the region's figures (``summary.json``) and
-``report.html``. Every file is written atomically.
+``report.html``, and ``fields.gpkg`` (:mod:`symtrack.region.gpkg`).
+
+Committed once: the top-level files (region.json, fields.csv, fields.gpkg, maps/, the report's images,
+report.html, summary.json) are written by the package's one run writer,
+:func:`symtrack.reports.run_files.write_folder` (without clearing: the field-seasons' folders stay): staged
+beside the folder, then moved into place after its journal, summary.json last. A study killed while it writes
+them leaves the folder's earlier outputs (none, or those of the run before) or, past the commit point, a journal
+the next writer completes; never a mixture.
 
 The maps are on one grid over the region (the fields' bounding box in the region's CRS, ``map_cell_m``
 cells, north up): each map cell takes the value of the field cell its centre falls in (nearest neighbour;
@@ -20,18 +27,20 @@ file                            type        value
 
 from __future__ import annotations
 
-import csv
 import io
 import json
 import math
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from ..foundations.files import atomic_write_bytes, atomic_write_text
 from ..reports.html import report_html
+from ..reports.run_files import write_folder
+from .gpkg import fields_gpkg
+from .table import TABLE_COLUMNS, fields_csv
 
 __all__ = ["LAYERS", "TABLE_COLUMNS", "fields_csv", "region_grid", "write_outputs"]
 
@@ -42,37 +51,6 @@ LAYERS = {  # name: (dtype, nodata, per depth, unit, long name)
     "density_change_Mg_per_m3": ("float32", float("nan"), True, "Mg/m^3", "dry bulk density minus the initial one"),
     "risk_class": ("uint8", 255, True, "1", "compaction risk class (0 low, 1 medium, 2 high)"),
 }
-FIXED_COLUMNS = ("field_id", "soil", "system", "year", "area_ha", "headland_share", "days_worked",
-                 "trafficked_fraction", "headland_trafficked_fraction", "infield_trafficked_fraction",
-                 "repeated_coverage_fraction", "passes_max", "outside_field_trafficked_m2")
-PER_DEPTH = ("risk_low_fraction_{d}", "risk_medium_fraction_{d}", "risk_high_fraction_{d}",
-             "density_change_mean_{d}_Mg_per_m3", "density_change_trafficked_mean_{d}_Mg_per_m3",
-             "density_change_max_{d}_Mg_per_m3", "stress_max_{d}_kPa")
-
-
-def TABLE_COLUMNS(depths_m) -> list[str]:  # noqa: N802 - the table's schema, a function of the depths
-    """fields.csv's columns for a study's depths (docs/region.md, "Outputs", documents each)."""
-    return [*FIXED_COLUMNS, *(c.format(d=f"{d:g}m") for d in depths_m for c in PER_DEPTH), "wall_time_s"]
-
-
-def _cell(v) -> str:
-    if isinstance(v, float):
-        return repr(v)
-    if isinstance(v, dict):
-        return ";".join(f"{k}={x}" for k, x in v.items())
-    return str(v)
-
-
-def fields_csv(rows: list[dict], depths_m) -> str:
-    cols = TABLE_COLUMNS(depths_m)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(cols)
-    for r in rows:
-        w.writerow([_cell(r.get(c, "")) for c in cols])
-    return buf.getvalue()
-
-
 # ---- the region's maps -----------------------------------------------------------------------------------------
 def region_grid(spec) -> tuple:
     """(x0, y1, nx, ny): the region grid's west and north edges and its size in map cells."""
@@ -128,7 +106,8 @@ PREVIEW_PX = 1200
 
 
 def _open_layer(path: Path, name: str, spec, grid, depths):
-    """A scratch GeoTIFF for one layer (tiled, deflate), with its bands' descriptions and tags."""
+    """A scratch GeoTIFF for one layer (tiled, deflate), with its bands' descriptions and tags, beside ``path``
+    (in the study's scratch folder)."""
     import rasterio
     from rasterio.transform import from_origin
 
@@ -151,21 +130,16 @@ def _open_layer(path: Path, name: str, spec, grid, depths):
 
 
 def _finish_cog(ds, tmp: str, path: Path) -> None:
-    """The scratch GeoTIFF copied as a Cloud-Optimized GeoTIFF (GDAL's COG driver: tiled, overviews) and its
-    bytes written atomically to ``path``; the scratch removed."""
+    """The scratch GeoTIFF copied as a Cloud-Optimized GeoTIFF (GDAL's COG driver: tiled, overviews) into
+    ``path`` (in the study's scratch folder: the commit moves it into place); the scratch removed."""
     from rasterio.shutil import copy as rio_copy
 
     ds.close()
-    fd, cog = tempfile.mkstemp(prefix="." + path.name + ".", suffix=".cog.tif", dir=path.parent)
-    os.close(fd)
     try:
-        rio_copy(tmp, cog, driver="COG", compress="DEFLATE", overview_resampling="NEAREST", BIGTIFF="IF_SAFER")
-        with open(cog, "rb") as fh:
-            atomic_write_bytes(path, fh.read())
+        rio_copy(tmp, path, driver="COG", compress="DEFLATE", overview_resampling="NEAREST", BIGTIFF="IF_SAFER")
     finally:
-        for t in (tmp, cog):
-            if os.path.exists(t):
-                os.unlink(t)
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def _read_maps(path: Path) -> dict:
@@ -186,9 +160,10 @@ def _combine(cs: list) -> dict:
                                    np.max([c["risk_class"] for c in cs], axis=0)).astype(np.uint8)}
 
 
-def write_maps(spec, out: Path):
-    """The region's maps per season and over the years (module doc), painted and written tile by tile;
-    returns (the files, the decimated maps of each season and over the years for the report)."""
+def write_maps(spec, out: Path, scratch: Path):
+    """The region's maps per season and over the years (module doc), painted from the field-seasons' maps in
+    ``out``/fields and written tile by tile into ``scratch``/maps; returns (the files written, the decimated
+    maps of each season and over the years for the report)."""
     from rasterio.windows import Window
 
     grid = region_grid(spec)
@@ -198,7 +173,7 @@ def write_maps(spec, out: Path):
     keys = [str(y) for y in spec.years] + ["all_years"]
     step = max(1, int(math.ceil(max(nx, ny) / PREVIEW_PX)))
     previews = {k: _canvas(nd, (ny + step - 1) // step, (nx + step - 1) // step) for k in keys}
-    files = {(k, name): _open_layer(out / "maps" / k / f"{name}.tif", name, spec, grid, spec.depths_m)
+    files = {(k, name): _open_layer(scratch / "maps" / k / f"{name}.tif", name, spec, grid, spec.depths_m)
              for k in keys for name in LAYERS}
     boxes = []
     for f in spec.fields:
@@ -238,7 +213,7 @@ def write_maps(spec, out: Path):
                         pv[..., R0:R0 + sub.shape[-2], C0:C0 + sub.shape[-1]] = sub
         written = []
         for (k, name), (ds, tmp) in files.items():
-            p = out / "maps" / k / f"{name}.tif"
+            p = scratch / "maps" / k / f"{name}.tif"
             _finish_cog(ds, tmp, p)
             written.append(p)
     finally:
@@ -276,6 +251,7 @@ def region_figures(spec, rows: list[dict]) -> dict:
                            for r in worst]
     out["worst_fields_by"] = f"{key} in {spec.years[-1]}"
     out["wall_time_s_sum"] = float(sum(r.get("wall_time_s", 0.0) for r in rows))
+    out["fields_full_fidelity"] = sorted({r["field_id"] for r in rows if r.get("fidelity") == "full"})
     out["fields_left_out"] = list(spec.skipped)
     return out
 
@@ -345,19 +321,41 @@ def _shares_png(spec, figs: dict) -> bytes:
     return buf.getvalue()
 
 
-def write_outputs(spec, out: Path, rows: list[dict]) -> dict:
-    """fields.csv, the maps, summary.json and report.html (module doc); returns the region's figures."""
+SCRATCH_PREFIX = ".symtrack-region-scratch-"
+
+
+def write_outputs(spec, out: Path, rows: list[dict], region_json: str | None = None) -> dict:
+    """The study's top-level files committed once (module doc, "Committed once"): ``region_json`` (the study's
+    region.json), fields.csv, fields.gpkg, the maps, the report's images, report.html and summary.json, last;
+    returns the region's figures. The maps are written into a scratch folder in ``out`` first (removed
+    whatever happens; a killed run's is removed by the next, which holds the folder's lock)."""
     out = Path(out)
-    atomic_write_text(out / "fields.csv", fields_csv(rows, spec.depths_m))
+    for old in out.glob(SCRATCH_PREFIX + "*"):  # a killed run's (this process holds the folder's lock)
+        shutil.rmtree(old, ignore_errors=True)
+    scratch = Path(tempfile.mkdtemp(prefix=SCRATCH_PREFIX, dir=out))
+    try:
+        return _write_outputs(spec, out, rows, region_json, scratch)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _write_outputs(spec, out, rows, region_json, scratch) -> dict:
+    files: dict = {}
+    if region_json is not None:
+        files["region.json"] = region_json
+    files["fields.csv"] = fields_csv(rows, spec.depths_m)
+    gpkg = scratch / "fields.gpkg"
+    fields_gpkg(gpkg, spec, rows)
+    files["fields.gpkg"] = gpkg
     figs = region_figures(spec, rows)
-    written, years, allc = write_maps(spec, out)
-    figs["maps"] = sorted(str(p.relative_to(out)) for p in written)
+    written, years, allc = write_maps(spec, out, scratch)
+    maps = {p.relative_to(scratch).as_posix(): p for p in written}
+    files.update(sorted(maps.items()))
+    figs["maps"] = sorted(maps)
     images = {f"map_{y}.png": _map_png(spec, years[y], str(y)) for y in spec.years}
     images["map_all_years.png"] = _map_png(spec, allc, "all years")
     images["risk_shares.png"] = _shares_png(spec, figs)
-    for name, data in images.items():
-        atomic_write_bytes(out / name, data)
-    atomic_write_text(out / "summary.json", json.dumps(figs, indent=2) + "\n")
+    files.update(images)
     share_rows = []
     for y in spec.years:
         fy = figs["by_year"][str(y)]
@@ -370,25 +368,33 @@ def write_outputs(spec, out: Path, rows: list[dict]) -> dict:
     worst_rows = []
     for w in figs["worst_fields"]:
         r = last[w["field_id"]]
-        worst_rows.append([r["field_id"], r["soil"], r["system"], round(r["area_ha"], 2),
+        worst_rows.append([r["field_id"], r["soil"], r["system"], r.get("fidelity", "fast"), round(r["area_ha"], 2),
                            round(100 * r["trafficked_fraction"], 1), round(100 * r[key], 1),
                            round(r[key.replace("risk_high_fraction_", "density_change_mean_") + "_Mg_per_m3"], 5)])
     summary = {k: v for k, v in figs.items() if not isinstance(v, (list, dict))}
     for y in spec.years:
         summary[f"trafficked_fraction_{y}"] = figs["by_year"][str(y)]["trafficked_fraction"]
     depth_tag = key.replace("risk_high_fraction_", "")
-    note = (f"{len(spec.fields)} fields, {spec.area_ha:.1f} ha, seasons {', '.join(map(str, spec.years))}; the fast "
-            f"fidelity on {spec.cell_m:g} m cells ({spec.rule} rule). Shares are of the fields' area (a cell no "
+    full = sorted({r["field_id"] for r in rows if r.get("fidelity") == "full"})
+    fidelity = (f"the fast fidelity on {spec.cell_m:g} m cells ({spec.rule} rule)" if not full else
+                f"the fast fidelity on {spec.cell_m:g} m cells ({spec.rule} rule), the full fidelity (each plan "
+                f"driven over the field's terrain) on {len(full)} field(s): {', '.join(full[:20])}"
+                + (" ..." if len(full) > 20 else "") + " (fields.csv: fidelity)")
+    note = (f"{len(spec.fields)} fields, {spec.area_ha:.1f} ha, seasons {', '.join(map(str, spec.years))}; "
+            f"{fidelity}. Shares are of the fields' area (a cell no "
             "machine passed is low risk). The maps are Cloud-Optimized GeoTIFFs in maps/; the per-field table is "
-            "fields.csv." + (f" Left out (no plan fits them): {', '.join(x['field_id'] for x in spec.skipped)}; "
-                             "their reasons are in summary.json." if spec.skipped else ""))
+            "fields.csv (and fields.gpkg, with the fields' polygons)."
+            + (f" Left out (no plan fits them): {', '.join(x['field_id'] for x in spec.skipped)}; their reasons are "
+               "in summary.json." if spec.skipped else ""))
     text = (spec.folder / "region.toml").read_text() if (spec.folder / "region.toml").is_file() else \
         json.dumps(spec.document, indent=2, default=str)
     html = report_html(f"symtrack region: {spec.name}", summary, images, text, note=note, tables={
         "Share of the area at each risk class, by depth and year (%)":
             (["year", "depth_m", "low", "medium", "high", "density_change_mean_Mg_per_m3"], share_rows),
         f"The worst fields in {spec.years[-1]} (by the high-risk share at {depth_tag})":
-            (["field_id", "soil", "system", "area_ha", "trafficked_%", f"high_risk_%_{depth_tag}",
+            (["field_id", "soil", "system", "fidelity", "area_ha", "trafficked_%", f"high_risk_%_{depth_tag}",
               f"density_change_mean_{depth_tag}_Mg_per_m3"], worst_rows)})
-    atomic_write_text(out / "report.html", html)
+    files["report.html"] = html
+    files["summary.json"] = json.dumps(figs, indent=2) + "\n"  # the study's outputs are whole once it is in place
+    write_folder(out, files, clear=False)
     return figs

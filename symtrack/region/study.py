@@ -10,15 +10,20 @@ The folder::
     DIR/fields/<field_id>/<year>/summary.json
                                            its figures, written last: a field-season whose summary.json is there
                                            is finished, and a rerun into the folder skips it
-    DIR/fields.csv                         one row per field-season (:data:`symtrack.region.outputs.TABLE_COLUMNS`)
+    DIR/fields.csv, DIR/fields.gpkg        one row per field-season (:func:`symtrack.region.table.TABLE_COLUMNS`;
+                                           the GeoPackage with the fields' polygons: symtrack.region.gpkg)
     DIR/maps/<year>/*.tif, DIR/maps/all_years/*.tif
                                            the region's maps (Cloud-Optimized GeoTIFFs)
     DIR/report.html, DIR/summary.json      the report and the region's figures
 
-The client writes every file (atomically), from the bytes the tasks return: a cluster needs no shared file
-system. A field's seasons run in order (each starts from the compression state the one before left); the
-fields run in parallel. The tables (the machines' stress profiles on each soil, the soils of each moisture
-class) are built once, on the client, before any task, and sent to the workers once.
+The client writes every file, from the bytes the tasks return (a cluster needs no shared file system), through
+the package's run writer (:func:`symtrack.reports.run_files.write_folder`): each field-season committed once as
+it finishes, the study's own files committed together at the end (symtrack.region.outputs). A field's seasons
+run in order (each starts from the compression state the one before left); the fields run in parallel. Each
+field runs in its fidelity: the fast one (:mod:`symtrack.region.fast`), or the full one on the fields
+``[full_fidelity]`` chooses (:mod:`symtrack.region.full`; its tracked machines' operations checked for the
+terrain engine before any work, :func:`check_full`). The tables (the machines' stress profiles on each soil, the
+soils of each moisture class) are built once, before any task, and sent to the workers once.
 """
 
 from __future__ import annotations
@@ -34,21 +39,25 @@ from pathlib import Path
 import numpy as np
 
 from ..foundations.errors import ScenarioError, SymtrackError
-from ..foundations.files import atomic_write_text, check_output_folder, npz_bytes
+from ..foundations.files import check_output_folder, npz_bytes
 from ..foundations.progress import Progress
 from ..reports.run_files import output_lock, recover, write_folder
 from ..studies.operations import OperationSettings, field_mask, headland_mask, plan_operation
 from ..studies.traffic_seasons import TRAMLINE_SEED, auto_headland_passes
 from .fast import PLAN_DS_M, FastOp, density_change, risk_classes, run_season_fast
 from .fleet import stress_profile
+from .full import BASE_SOIL_PRESET, DEFAULT_VEHICLE, check_full_operations, run_season_full
 from .inputs import RegionSpec, class_soil, class_suction_kPa, draw_day, field_frame, moisture_class
 
-__all__ = ["Context", "RegionResult", "build_context", "check_plans", "field_season", "field_season_ops",
-           "run_region"]
+__all__ = ["Context", "RegionResult", "build_context", "check_full", "check_plans", "class_soils", "field_season",
+           "field_season_ops", "run_region"]
 
 log = logging.getLogger("symtrack.region")
 
 SCHEMA_VERSION = 1
+# the full fidelity's cost per hectare-season over the fast one's, for the progress's time left only (measured on
+# the demo's fields: 214-260, docs/region.md, "A mixed run")
+FULL_COST_RATIO = 240.0
 
 
 @dataclass
@@ -165,6 +174,43 @@ def check_plans(spec: RegionSpec, progress: bool = False) -> None:
     spec.fields[:] = kept
 
 
+def class_soils(spec: RegionSpec) -> dict:
+    """The soils of each (soil, moisture class) the study's suction series reach, as parameter dicts."""
+    out = {}
+    for sname, years in spec.suction.items():
+        for s in years.values():
+            for k in sorted({moisture_class(x, spec.moisture_class_pF) for x in s}):
+                if (sname, k) not in out:
+                    out[(sname, k)] = dict(class_soil(spec.soils[sname], class_suction_kPa(k, spec.moisture_class_pF),
+                                                      f"soils.{sname}"))
+    return out
+
+
+def _vehicle(spec: RegionSpec) -> str:
+    return spec.full_fidelity.vehicle if spec.full_fidelity is not None else DEFAULT_VEHICLE
+
+
+def _soil_preset(spec: RegionSpec, soil: str) -> str:
+    t = spec.document.get("soils", {}).get(soil, {})
+    return t.get("preset", BASE_SOIL_PRESET) if isinstance(t, dict) else BASE_SOIL_PRESET
+
+
+def check_full(spec: RegionSpec, soils_by_class: dict | None = None) -> None:
+    """The full fidelity's fields checked before any work (symtrack.region.full): every tracked machine's
+    operation of their seasons planned for the terrain engine (its cells narrower than the track, the turn
+    held on the day's soil); a refusal names the field, the year and the operation."""
+    full = [f for f in spec.fields if f.fidelity == "full"]
+    if not full:
+        return
+    ctx = Context(spec, {}, soils_by_class if soils_by_class is not None else class_soils(spec))
+    vehicle = _vehicle(spec)
+    for f in full:
+        for y in spec.years:
+            ops = field_season_ops(ctx, f, y)
+            check_full_operations(ops, vehicle, spec.depths_m, _shape(spec, f), spec.cell_m,
+                                  f"field {f.field_id!r}, {y}", _soil_preset(spec, f.soil))
+
+
 def build_context(spec: RegionSpec, client=None) -> Context:
     """The tables, once (module doc): the stress profiles on the client's workers when a client is given."""
     keys, jobs = [], []
@@ -179,15 +225,7 @@ def build_context(spec: RegionSpec, client=None) -> Context:
         profiles = dict(zip(keys, client.gather(futs), strict=True))
     else:
         profiles = {k: stress_profile(*j) for k, j in zip(keys, jobs, strict=True)}
-    class_soils = {}
-    for sname, years in spec.suction.items():
-        for s in years.values():
-            for k in sorted({moisture_class(x, spec.moisture_class_pF) for x in s}):
-                if (sname, k) not in class_soils:
-                    class_soils[(sname, k)] = dict(class_soil(spec.soils[sname],
-                                                              class_suction_kPa(k, spec.moisture_class_pF),
-                                                              f"soils.{sname}"))
-    return Context(spec, profiles, class_soils)
+    return Context(spec, profiles, class_soils(spec))
 
 
 def field_season_ops(ctx: Context, f, year: int) -> list:
@@ -198,7 +236,7 @@ def field_season_ops(ctx: Context, f, year: int) -> list:
     for day, _k, op, fs in field_season_plan(spec, f, year):
         cls = moisture_class(float(series[day - 1]), spec.moisture_class_pF)
         ops.append(FastOp(op.name, fs, spec.fleet.machines[op.machine], op.repeat, op.loosens_to_m,
-                          ctx.profiles[(op.machine, f.soil)], ctx.class_soils[(f.soil, cls)], day))
+                          ctx.profiles.get((op.machine, f.soil)), ctx.class_soils[(f.soil, cls)], day))
     return ops
 
 
@@ -207,9 +245,10 @@ def _shape(spec: RegionSpec, f) -> tuple:
 
 
 def field_season(ctx: Context, field_index: int, year: int, prev) -> dict:
-    """One task: a field's season in the fast fidelity. ``prev``: the previous season's result (its
-    ``state``), or the state itself (a rerun's, read back from its maps.npz), or None (the first season).
-    Returns {"files": {name: bytes}, "state": float32 array, "summary": dict}."""
+    """One task: a field's season in its fidelity (the fast one, or the full one: symtrack.region.full).
+    ``prev``: the previous season's result (its ``state``), or the state itself (a rerun's, read back from its
+    maps.npz), or None (the first season). Returns {"files": {name: bytes}, "state": float32 array, "summary":
+    dict}."""
     t0, c0 = time.perf_counter(), time.process_time()
     spec = ctx.spec
     f = spec.fields[field_index]
@@ -218,8 +257,14 @@ def field_season(ctx: Context, field_index: int, year: int, prev) -> dict:
     ops = field_season_ops(ctx, f, year)
     fs0 = ops[0].settings
     fmask = field_mask(fs0, shape, spec.cell_m)
-    maps = run_season_fast(ops, shape, spec.cell_m, spec.depths_m, state=state, field_mask=fmask, rule=spec.rule)
     soil0 = spec.soils[f.soil]
+    if f.fidelity == "full":
+        maps = run_season_full(ops, shape, spec.cell_m, spec.depths_m, float(soil0["stress_concentration_factor"]),
+                               _vehicle(spec), state=state, field_mask=fmask,
+                               soil_preset=_soil_preset(spec, f.soil))
+    else:
+        maps = run_season_fast(ops, shape, spec.cell_m, spec.depths_m, state=state, field_mask=fmask,
+                               rule=spec.rule)
     drho = density_change(maps.state, soil0, spec.depths_m).reshape(*shape, len(spec.depths_m)).astype(np.float32)
     risk = risk_classes(maps.risk_ratio_max)
     widest = max(ops, key=lambda o: o.settings.headland_m).settings
@@ -243,9 +288,11 @@ def field_summary(spec, f, year, ops, maps, drho, risk, fmask, head) -> dict:
     n_field = int(fmask.sum())
     inner = fmask & ~head
     out = {"schema_version": SCHEMA_VERSION, "kind": "symtrack-region-field-season", "field_id": f.field_id,
-           "soil": f.soil, "system": f.system, "year": year, "area_ha": f.area_m2 / 1e4,
+           "soil": f.soil, "soil_from": f.soil_from, "soil_share": f.soil_share, "system": f.system, "year": year,
+           "fidelity": f.fidelity, "area_ha": f.area_m2 / 1e4,
            "lines_direction_deg": math.degrees(f.theta_rad),
-           "grid_area_ha": n_field * area / 1e4, "cell_m": spec.cell_m, "rule": spec.rule,
+           "grid_area_ha": n_field * area / 1e4, "cell_m": spec.cell_m,
+           "rule": spec.rule if f.fidelity == "fast" else "full: the wheels' strips' centre rule, the engine's overlap",
            "days_worked": {o.name: o.day for o in ops},
            "trafficked_fraction": float(run[fmask].mean()),
            "headland_share": float(head.sum() / max(n_field, 1)),
@@ -303,9 +350,13 @@ def _describe(spec: RegionSpec) -> dict:
             "map_cell_m": spec.map_cell_m, "depths_m": list(spec.depths_m), "rule": spec.rule,
             "workable_suction_kPa": spec.workable_suction_kPa, "moisture_class_pF": spec.moisture_class_pF,
             "fleet": spec.fleet.label, "soils": sorted(spec.soils), "systems": sorted(spec.systems),
-            "fields": [{"field_id": f.field_id, "soil": f.soil, "system": f.system, "area_ha": f.area_m2 / 1e4}
+            "fields": [{"field_id": f.field_id, "soil": f.soil, "system": f.system, "area_ha": f.area_m2 / 1e4,
+                        **({"soil_from": f.soil_from, "soil_share": f.soil_share} if f.soil_from != "fields_file"
+                           else {}), **({"fidelity": "full"} if f.fidelity == "full" else {})}
                        for f in spec.fields],
             "fields_left_out": spec.skipped,
+            **({"fields_full_fidelity": [f.field_id for f in spec.fields if f.fidelity == "full"],
+                "full_fidelity_vehicle": spec.full_fidelity.vehicle} if spec.full_fidelity is not None else {}),
             "document": spec.document}
 
 
@@ -338,6 +389,7 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
     out = check_output_folder(str(out))
     t0 = time.perf_counter()
     check_plans(spec, progress=False)
+    check_full(spec)
     phases = {"plans_s": time.perf_counter() - t0}
     _check_same_study(out, spec)
     todo = [(fi, y) for fi, f in enumerate(spec.fields) for y in spec.years if not _done(out, f, y)]
@@ -350,7 +402,10 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
     # the folder's lock from before the first write: a second study into it is refused at once (the holder's pid)
     with output_lock(out):
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "region.json", json.dumps(_describe(spec), indent=2, default=str) + "\n")
+        region_json = json.dumps(_describe(spec), indent=2, default=str) + "\n"
+        # the study's identity first (a rerun into the folder resumes only the same study); the outputs at the end
+        # are committed together with it, once (write_outputs)
+        write_folder(out, {"region.json": region_json}, clear=False)
         if todo:
             t1 = time.perf_counter()
             with dask_client("region", workers, scheduler) as client:
@@ -369,7 +424,7 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
             from .outputs import write_outputs
 
             t4 = time.perf_counter()
-            summary = write_outputs(spec, out, rows)
+            summary = write_outputs(spec, out, rows, region_json)
             phases["outputs_s"] = time.perf_counter() - t4
     return RegionResult(out, rows, len(todo), skipped, time.perf_counter() - t0, summary, phases)
 
@@ -389,6 +444,12 @@ def _run_all(out: Path, spec: RegionSpec, ctx: Context, todo: list, client, prog
     from ..studies.engine import SchedulerLost
 
     ha_total = sum(spec.fields[fi].area_m2 for fi, _ in todo) / 1e4
+
+    def work(f) -> float:  # the time left from the work done: a full field's hectare costs FULL_COST_RATIO fast ones
+        return f.area_m2 / 1e4 * (FULL_COST_RATIO if f.fidelity == "full" else 1.0)
+
+    work_total = sum(work(spec.fields[fi]) for fi, _ in todo)
+    work_done = 0.0
     bar = Progress(ha_total, f"region {spec.name}", enabled=progress)
     futures = {}
     t0 = time.perf_counter()
@@ -419,8 +480,9 @@ def _run_all(out: Path, spec: RegionSpec, ctx: Context, todo: list, client, prog
             _commit(out, f, y, res)
             done += 1
             ha_done += f.area_m2 / 1e4
+            work_done += work(f)
             el = time.perf_counter() - t0
-            left = el / ha_done * (ha_total - ha_done) if ha_done > 0 else float("nan")
+            left = el / work_done * (work_total - work_done) if work_done > 0 else float("nan")
             bar.update(ha_done, f"{done}/{len(todo)} field-seasons, {ha_done:.1f}/{ha_total:.1f} ha, about "
                                 f"{left:.0f} s left")
             if progress and not bar.enabled:

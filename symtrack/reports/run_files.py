@@ -550,11 +550,13 @@ def finished_before(out_dir, scenario, terrain_in, terrain_out) -> dict | None:
     return t if start in (t.get("input_file_id"), t["file_id"]) else None
 
 
-def write_folder(out_dir, files: dict[str, bytes | str], clear: bool = True,
+def write_folder(out_dir, files: dict[str, bytes | str | Path], clear: bool = True,
                  terrain: TerrainOut | None = None) -> list[Path]:
     """The one writer of a run's folder, committed once (module doc): ``files`` (names relative to
     the folder, sub-folders created; str written as UTF-8) are written into a staging folder beside
-    ``out_dir`` and ``terrain`` (its file, with the run in its history) into a temporary file beside
+    ``out_dir`` (a :class:`~pathlib.Path` value: a finished file the caller wrote, moved into the staging
+    folder, so that a large file, a region's map, is not held in memory; the caller gives up the file) and
+    ``terrain`` (its file, with the run in its history) into a temporary file beside
     its file; then the journal; then the commit point: the terrain file's rename (without ``terrain``,
     the journal's); then, with ``clear``, the files of a previous run are removed
     (:func:`clear_previous_run`: those its manifest lists, its summary.json first; anything else stays,
@@ -596,7 +598,11 @@ def _write_folder(out: Path, files: dict, clear: bool, terrain: TerrainOut | Non
         names.append(Path(terrain.path).resolve().relative_to(out.resolve()).as_posix())  # the run's own file
     try:
         for name, data in files.items():
-            atomic_write_bytes(stage / name, data.encode() if isinstance(data, str) else data)
+            if isinstance(data, Path):  # a finished file of this writer's: moved in (renamed on one file system)
+                (stage / name).parent.mkdir(parents=True, exist_ok=True)
+                shutil.move(data, stage / name)
+            else:
+                atomic_write_bytes(stage / name, data.encode() if isinstance(data, str) else data)
             _step(f"staged {name}")
         record = None
         if terrain is not None:

@@ -58,8 +58,9 @@ class SoilLaw(abc.ABC):
     reads: its own and any other of the model's) and :attr:`vector_names` (the entries of the law
     vector) and
     write the abstract methods; ``hist`` is a sequence of the :data:`HISTORY_NAMES` (a CasADi
-    vector or a tuple), ``law`` the law vector (symbolic, or a sequence of floats: then a law may
-    specialise its expressions to the numbers, as the terrain engine wants).
+    vector or a tuple), ``law`` the law vector (symbolic, or a sequence of floats and symbols: a law
+    may specialise its expressions to the entries given as numbers, as the terrain engine's copies of
+    :attr:`engine_specialisations` want).
 
     Parameters
     ----------
@@ -73,6 +74,11 @@ class SoilLaw(abc.ABC):
     params: tuple = ()
     param_names: tuple[str, ...] = ()
     vector_names: tuple[str, ...] = ()
+    # values of law-vector entries (a dict of vector_names entry -> number per copy) for which the terrain
+    # engine compiles a specialised copy of pressure_and_slope beside the general one, that entry given to
+    # it as a float (a law may then write a faster form of the same numbers); a soil whose law vector has
+    # those values runs the copy, chosen at run time
+    engine_specialisations: tuple[dict[str, float], ...] = ()
 
     def __init__(self, opts):
         self.opts = opts
@@ -162,6 +168,8 @@ class BekkerWong(SoilLaw):
     param_names = ("k_c_N_per_m_n1", "k_phi_N_per_m_n2", "track_width_m", "bekker_n", "elastic_stiffness_Pa_per_m",
                    "unloading_stiffness_floor")
     vector_names = ("k_eq", "n", "elastic_stiffness_Pa_per_m", "kappa", "regularisation_m")
+    # the terrain engine's copy for n = 0.5 (pressure_and_slope's sqrt form; the presets' clays)
+    engine_specialisations = ({"n": 0.5},)
 
     def vector(self, params):
         keq = cell.k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])

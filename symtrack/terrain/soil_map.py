@@ -39,7 +39,7 @@ from . import gis
 
 __all__ = ["MAX_SOILS", "PATH_KEYS", "SoilMap", "parse_soil_map", "soil_index"]
 
-MAX_SOILS = 16  # soils of one field (the engine dispatches the cell law by a switch over them)
+MAX_SOILS = 16  # soils of one field (a soil map and its terrain file; the engine reads their law rows at run time)
 SOIL_NAMES = tuple(s.name for s in SOIL_PARAMS)
 # the keys of a scenario document that hold a soil map's file (resolved against a scenario file's folder)
 PATH_KEYS = (("terrain", "soil_map", "raster"),)

@@ -15,8 +15,7 @@ from ...foundations import caches
 from ...foundations.errors import ScenarioError, SimulationError
 from ...model import SystemModel
 from ...model.static import static_state
-from ...native.grid_engine_model import TRACK_SOIL_LAYOUT, build_engine_functions
-from ...soil import law as soil_law
+from ...native.grid_engine_model import build_engine_functions
 from ...terrain import query
 from ...terrain.world import LIFT_TIME_S
 from ...vehicles import registry as vehicle_registry
@@ -39,18 +38,18 @@ _FUNCTIONS = caches.cache("engine_functions", 8)  # symtrack.foundations.caches
 
 
 def engine_functions(opts, params: dict, vehicle_substeps: int, soils: tuple = (), surface=None):
-    """build_engine_functions, cached per (options, soil laws, substeps, the 3D vehicle's ground) in
-    this process; ``soils``: the parameter dicts of a soil map's soils (index 0 the scenario's);
-    ``surface``: the ground's shape under the 3D vehicle (analytic; None: flat)."""
+    """build_engine_functions, cached per (options, substeps, a soil map or not, the 3D vehicle's ground)
+    in this process; ``soils``: the parameter dicts of a soil map's soils (index 0 the scenario's);
+    ``surface``: the ground's shape under the 3D vehicle (analytic; None: flat). The soils' values are
+    not part of the Functions (the engine's law table takes them at run time: EngineState.soil_law),
+    only whether there are several (the channel sums then carry the soil under each track)."""
     soils = tuple(soils) or (params,)
     ground = None if surface is None or surface.is_flat else surface._coefficients()
     raster = getattr(surface, "raster", None)
     if raster is not None:  # the raster's heights and place are part of the ground
         ground = (ground, hashlib.sha256(np.ascontiguousarray(raster.values, dtype=np.float64).tobytes()).hexdigest(),
                   raster.values.shape, tuple(raster.origin_m or ()), float(raster.pixel_m))
-    key = (opts, vehicle_substeps, tuple(
-        (tuple(soil_law.make(opts).values(sp)), float(sp["repeated_loading_exponent"]),
-         tuple(TRACK_SOIL_LAYOUT.pack(sp))) for sp in soils), ground)
+    key = (opts, vehicle_substeps, len(soils) > 1, ground)
     return _FUNCTIONS.get_or_build(key, lambda: build_engine_functions(
         opts, params, vehicle_substeps, soils if len(soils) > 1 else (), surface))
 

@@ -92,12 +92,11 @@ def library(fns):
     cc = compiler()
     if cc is None:
         raise SimulationError(NO_COMPILER)
-    check_no_work((fns.cell_geo, *fns.cell_law, *fns.cell_history, *fns.cell_entry))
+    check_no_work((fns.cell_geo, *fns.cell_law, fns.cell_history, fns.cell_entry))
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
     qsrc = resources.files("symtrack.native").joinpath("terrain_query.h").read_bytes()
-    dsrc = soil_dispatch_c(fns.n_soils, fns.layout, fns.na, fns.n_seg, fns.cell_law, fns.cell_geo,
-                           vehicle_work_sizes(fns)).encode()
+    dsrc = soil_dispatch_c(fns, vehicle_work_sizes(fns)).encode()
     flags, target = native_cflags(cc)
     key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dsrc, casadi_tag(BUILD_VERSION), target)
 

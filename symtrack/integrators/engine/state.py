@@ -54,7 +54,7 @@ class EngineStruct(ctypes.Structure):
                 + [(n, ctypes.c_void_p) for n in ("zoff", "cycles", "ch_zoff", "ch_delta", "ch_dc", "ch_counted",
                                                   "subsoil", "sig_pass")]
                 + [(n, ctypes.c_longlong) for n in ("n_depths", "ns_subsoil")]
-                + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh")]
+                + [(n, ctypes.c_void_p) for n in ("soil_index", "ch_soil", "soil_veh", "soil_law")]
                 + [("n_sums", ctypes.c_longlong), ("exit_substeps", ctypes.c_longlong),
                    ("agrid_entry", ctypes.c_void_p), ("steady_euler", ctypes.c_longlong),
                    ("ring_tol", ctypes.c_double), ("elev", ctypes.c_void_p), ("subsoil_p", ctypes.c_void_p),
@@ -181,6 +181,8 @@ class EngineState:
         self.soil_index = world.storage.soil_index
         self.ch_soil = np.zeros(n, dtype=np.uint8)
         self.soil_veh = np.array(track_soil_vector(world.soils))
+        # per soil its law row (the cell Functions' input law: the soils' values at run time)
+        self.soil_law = np.ascontiguousarray(fns.law_table(world.soils))
         self.geo = np.array(geo_vector(world.params, g.cell_m, strip))
         self.wv = np.zeros(fns.nw)
         self.a = np.zeros(fns.na)
@@ -238,7 +240,7 @@ class EngineState:
             "ch_cell", "ch_foot", "ch_new_stamp", "ch_new_cell", "ch_z", "ch_v", "ch_zmax", "ch_pmax", "ch_p", "ch_cx",
             "ch_cy", "ch_g", "ch_dp", "ch_pw", "ch_vr", "ch_new", "act", "new_list", "pv", "geo", "wv", "a", "work",
             "agrid", "agrid_entry", "ch_zoff", "ch_delta", "ch_dc", "ch_counted", "ch_soil",
-            "soil_veh", "iwork")]
+            "soil_veh", "soil_law", "iwork")]
         # the addresses, taken again only when an array was replaced (a call runs 100 macro steps:
         # ctypes' data_as for the 43 arrays was a few percent of a call)
         cached = self._addresses

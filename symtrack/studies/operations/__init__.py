@@ -88,7 +88,14 @@ from .settings import (
     OperationSettings,
     parse_operation,
 )
-from .spec import OperationSpec, is_operation_doc, is_operation_document, load_operation_spec, operation_spec_from_dict
+from .spec import (
+    OperationSpec,
+    is_operation_doc,
+    is_operation_document,
+    load_operation_spec,
+    operation_of,
+    operation_spec_from_dict,
+)
 
 __all__ = ["COUNT_SAMPLE_S", "FIELD_PACKAGE", "FOLLOWERS", "MAP_CURVATURES", "MAX_TRACK_LINES", "MPCFollower",
            "OPERATION_KEYS", "OPERATION_RTI_STEP_HALVINGS", "OPERATION_RUN_KEYS", "OperationPlan", "OperationResult",
@@ -97,6 +104,7 @@ __all__ = ["COUNT_SAMPLE_S", "FIELD_PACKAGE", "FOLLOWERS", "MAP_CURVATURES", "MA
            "TRAFFIC_COLUMNS", "TURNS", "animation", "check_plan", "count_passes", "count_passes_and_times",
            "counts_npz", "field_mask", "field_shares", "follower_of", "footprint_mask", "headland_mask", "inner_ring",
            "is_operation_doc", "is_operation_document", "k_turn_angles_deg", "k_turn_headland_m", "lane_positions_m",
-           "line_positions_m", "load_operation_spec", "map_pngs", "mpc_follower", "operation_spec_from_dict",
-           "parse_operation", "plan_operation", "run_operation", "run_season", "sample_roles", "steering_map",
-           "swath_mask", "sweep_windows", "track_rects", "traffic_comparison", "traffic_files", "traffic_row"]
+           "line_positions_m", "load_operation_spec", "map_pngs", "mpc_follower", "operation_of",
+           "operation_spec_from_dict", "parse_operation", "plan_operation", "run_operation", "run_season",
+           "sample_roles", "steering_map", "swath_mask", "sweep_windows", "track_rects", "traffic_comparison",
+           "traffic_files", "traffic_row"]

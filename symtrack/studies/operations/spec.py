@@ -96,6 +96,14 @@ def _operation(doc: dict, fs: OperationSettings):
     return fs, plan, sc, rows
 
 
+def operation_of(doc: dict, fs: OperationSettings) -> tuple:
+    """One operation of a run file's document (its [run], [model], [vehicle], [soil], [terrain], [engine]) on
+    the settings ``fs``: (settings, plan, scenario, steering rows), planned and checked as every operation of
+    :func:`operation_spec_from_dict` is (the footprint in the field, the turn held on the soil). A region
+    study's full fidelity builds its tracked machines' operations with it (symtrack/region/full.py)."""
+    return _operation(doc, fs)
+
+
 def operation_spec_from_dict(doc: dict, default_name: str = "operation", tracks: str | None = None) -> OperationSpec:
     """An operation (``[operation]``) or a season (``[operation]`` the defaults, ``[season]``
     ``operations`` a list of tables over them) -> :class:`OperationSpec`, every operation planned
