@@ -987,6 +987,91 @@ def region_cost() -> str:
     return md(["what", "measured"], rows)
 
 
+@table("region-two-fidelities", "region.md",
+       "symtrack.region.study.field_season in each fidelity on the generated field of "
+       "tests/test_region_full.py (the drill's tractor and the combine, one season; docs/figures.py)")
+def region_two_fidelities() -> str:
+    import dataclasses as dc
+    import io
+
+    import numpy as np
+
+    from symtrack.region import demo, study
+    from symtrack.region.inputs import load_region
+
+    systems = {"one": [{"name": "drilling", "machine": "drill_6m", "window": [262, 292]},
+                       {"name": "harvest", "machine": "combine_7m5", "window": [196, 220]}]}
+    WORK.mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(dir=WORK))
+    with _timed("region field_season, full and fast"):
+        p = demo.write_region(folder, n_fields=2, seed=7, systems=systems, years={2021: 0.0},
+                              length_m=(90.0, 100.0), width_m=(50.0, 60.0), spacing_m=160.0)
+        p.write_text(p.read_text() + '\n[full_fidelity]\nfields = ["F002"]\n')
+        spec = load_region(p)
+        study.check_plans(spec)
+        ctx = study.build_context(spec)
+        f = spec.fields[0]
+        res = {}
+        for fid in ("fast", "full"):
+            spec.fields[0] = dc.replace(f, fidelity=fid)
+            res[fid] = study.field_season(ctx, 0, 2021, None)
+    a, b = res["full"]["summary"], res["fast"]["summary"]
+
+    def npz(r):
+        with np.load(io.BytesIO(r["files"]["maps.npz"])) as z:
+            return {k: z[k] for k in z.files}
+
+    ma, mb = npz(res["full"]), npz(res["fast"])
+    both = (ma["counts"] > 0) & (mb["counts"] > 0)
+    depths = list(a["depths_m"])
+    tags = [f"{d:g}m" for d in depths]
+    dl = " / ".join(f"{d:g}" for d in depths)
+    largest = [a[f"stress_max_{t}_kPa"] / b[f"stress_max_{t}_kPa"] for t in tags]
+    mean = [ma["sigma_max_kPa"][..., k][both].mean() / mb["sigma_max_kPa"][..., k][both].mean()
+            for k in range(len(depths))]
+    dens = [a[f"density_change_mean_{t}_Mg_per_m3"] / b[f"density_change_mean_{t}_Mg_per_m3"] for t in tags]
+    return md(["figure", "full", "fast", "full / fast"], [
+        ["field area, cells", f"{a['area_ha']:.2f} ha, {a['cell_m']:g} m", f"{b['area_ha']:.2f} ha, {b['cell_m']:g} m",
+         ""],
+        ["trafficked share", f"{100 * a['trafficked_fraction']:.1f} %", f"{100 * b['trafficked_fraction']:.1f} %",
+         f"{a['trafficked_fraction'] / b['trafficked_fraction']:.3f}"],
+        [f"largest stress at {dl} m [kPa]", " / ".join(f"{a[f'stress_max_{t}_kPa']:.1f}" for t in tags),
+         " / ".join(f"{b[f'stress_max_{t}_kPa']:.1f}" for t in tags), " / ".join(f"{r:.3f}" for r in largest)],
+        [f"mean stress under the cells both trafficked, {dl} m", "", "", " / ".join(f"{r:.3f}" for r in mean)],
+        [f"mean density change at {dl} m", "", "", " / ".join(f"{r:.3f}" for r in dens)],
+        ["CPU time of the field-season [s] (the full's with its tyres' stress tables, built at their first use)",
+         f"{a['cpu_time_s']:.2f}", f"{b['cpu_time_s']:.3f}",
+         f"{a['cpu_time_s'] / b['cpu_time_s']:.0f}"]])
+
+
+@table("region-cost-model", "region.md", "symtrack bench region --large --out FILE")
+def region_cost_model() -> str:
+    rep = _region()
+    w, r = rep["workers"], rep["large_region"]
+    ha = r["area_ha"]
+    tasks = max(x["cpu_s_per_ha_season"] for x in w)  # the tasks' own CPU seconds per hectare-season
+    plans, outputs = r["plans_s"] / ha, r["outputs_s"] / ha  # the client's, one core
+    full = max(x["full_s_per_ha_season"] for x in rep["fast_vs_full"] if "full_s_per_ha_season" in x)
+    m = 1e6  # hectare-seasons: a 2,000 km^2 region worked for five seasons, all of it fields
+
+    def hours(core_s: float, cores: int) -> str:
+        h = core_s / 3600 / cores
+        return f"{h:,.0f} h" if h >= 2 else f"{60 * h:,.0f} min"
+
+    return md(["part", "core-seconds", "for 1 million hectare-seasons"], [
+        ["the tasks, on the workers (their own CPU time)", f"{tasks:.2f} s x hectare-seasons",
+         f"{tasks * m / 3600:,.0f} core-hours: {hours(tasks * m, 64)} on 64 cores, {hours(tasks * m, 1000)} on 1,000"],
+        ["checking the plans, on the client", f"{plans:.3f} s x hectare-seasons", f"{hours(plans * m, 1)} on one core"],
+        ["the region's maps and report, on the client", f"{outputs:.3f} s x hectare-seasons",
+         f"{hours(outputs * m, 1)} on one core"],
+        ["the tables, once", f"{r['tables_s']:.0f} s", ""],
+        ["the workers beyond which the client's one core sets the study's time", "",
+         f"about {tasks / (plans + outputs):.0f}"],
+        ["the full fidelity instead (the slowest case above, wall seconds of one core)",
+         f"{full:.0f} s x hectare-seasons",
+         f"{full * m / 3600:,.0f} core-hours: {hours(full * m, 1000)} on 1,000 cores"]])
+
+
 # ---------------------------------------------------------------------------------------------------------
 # writing the pages
 
