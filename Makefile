@@ -6,7 +6,7 @@ PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: demo test test-fast test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance keys
+.PHONY: demo test test-fast test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance keys figures
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -108,6 +108,12 @@ docs-examples: $(VENV)/.installed
 # today's speed figures: measures and rewrites the tables of docs/performance.md (a few minutes)
 performance: $(VENV)/.installed
 	$(PY) docs/performance.py
+
+# the tables of run results in the pages (docs/figures.py): runs each table's command again and rewrites the
+# table between its markers; NAMES="a b" for some of them (python docs/figures.py --list names them); the whole
+# takes about an hour on a 2-core machine (docs/howto.md, "Regenerate the figures")
+figures: $(VENV)/.installed
+	$(PY) docs/figures.py $(if $(NAMES),--only $(NAMES))
 
 clean:
 	rm -rf out build *.egg-info docs/_build

@@ -66,6 +66,110 @@ def test_performance_tables_name_their_command_machine_and_date():
     assert "performance:" in (ROOT / "Makefile").read_text()
 
 
+# The tables of the pages that are not figures the package computes: reference material (what a key, a
+# column, a file, a command or a symbol is; a source's published figures; a layout of images), each by its
+# header row with the reason it is reference. Every other table of docs/*.md is a table of run results: it
+# sits between `<!-- figures:NAME:start -->` and `<!-- figures:NAME:end -->` and docs/figures.py writes it
+# (`make figures`), or between the markers of docs/performance.py (`make performance`) or of the key tables
+# (`make keys`). A new hand-typed table of results fails test_no_table_of_results_is_typed_by_hand.
+REFERENCE_TABLES = {
+    "| command | what it does |": "codegen.md: the commands of the generated code",
+    "| file | functions (inputs -> outputs) |": "codegen.md: the generated files",
+    "| file | what |": "codegen.md: the files of an export",
+    "| member | what |": "codegen.md: the members of a C struct",
+    "| value references | causality | what | names [unit] |": "codegen.md: the FMU's variables",
+    "| value references | type, causality | what | names [unit] |": "codegen.md: the engine FMU's variables",
+    "| file | content |": "control.md: the files a run writes",
+    "| name | path | soil |": "control.md: the built-in MPC scenarios",
+    "| symbol | state / input | unit |": "model.md: the symbols of the equations",
+    "| name | method | terrains |": "model.md: the integrators' registry",
+    "| property | checked | tolerance and why |": "model.md: what the physics fuzzer checks",
+    "| quantity | reported |": "model.md: Ferretti & Girelli's published validation figures",
+    "| key | default | meaning |": "region.md: the keys of a region file",
+    "| file | type | value | no data |": "region.md: the input rasters",
+    "| column | meaning |": "region.md, validation.md: the columns of an output file",
+    "| section | kind of run | the same as |": "scenarios.md: the sections of a scenario file",
+    "| key | default | allowed | meaning |": "scenarios.md, terrain.md: the keys of a section",
+    "| `[field]` key | default | allowed | meaning |": "studies.md: the keys of a field study",
+    "| key | meaning | default |": "subsoil.md: the keys of the subsoil stress",
+    "| parameter | default | source |": "subsoil.md: soil parameters and their sources",
+    "| parameter | default | meaning, source |": "subsoil.md: soil parameters and their sources",
+    "| offset | type | content |": "terrain.md: the layout of the raw field file",
+    "| layer | units | GeoTIFF / NetCDF type | what |": "terrain.md: the exported GIS layers",
+    "| `lateral_law` | what it is | fixed-step integrators | use it for |": "turning.md: the lateral laws",
+    "| what | form | value | effect |": "turning.md: the regularisations and their settings",
+    "| path (lateral deviation magnified) | yaw |": "validation-run.md: a layout of the figures",
+    "| file | what it holds |": "validation.md: the files of a case",
+    "| field | meaning |": "validation.md: the fields of a case file",
+}
+
+
+def _tables(text: str):
+    """(line number, header row) of every Markdown table of a page, indented ones included."""
+    lines = text.splitlines()
+    for i in range(len(lines) - 1):
+        if (re.match(r"^\s*\|", lines[i]) and re.match(r"^\s*\|[-:| ]+\|\s*$", lines[i + 1])
+                and not (i and re.match(r"^\s*\|", lines[i - 1]))):
+            yield i + 1, lines[i].strip()
+
+
+def _pages():
+    return sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.parts)
+
+
+GENERATED = (r"<!-- figures:([\w-]+):start -->\n.*?<!-- figures:\1:end -->",
+             r"<!-- perf:([\w-]+):start -->\n.*?<!-- perf:\1:end -->",
+             r"<!-- the key tables: .*?<!-- end of the key tables -->")
+
+
+def test_the_tables_of_run_results_are_generated():
+    """Every table docs/figures.py writes is in its page between its markers, with the line naming the
+    command, the machine and the date above it; every pair of markers is one docs/figures.py writes."""
+    script = (DOCS / "figures.py").read_text(encoding="utf-8")
+    entries = dict(re.findall(r'^@table\("([\w-]+)", "([\w/.-]+\.md)"', script, re.M))
+    assert len(entries) >= 30, "docs/figures.py writes fewer tables than the pages hold"
+    found = {}
+    for page in _pages():
+        text = page.read_text(encoding="utf-8")
+        for ind, name, body in re.findall(r"^([ \t]*)<!-- figures:([\w-]+):start -->\n(.*?)^\1<!-- figures:\2:end -->",
+                                          text, re.S | re.M):
+            where = page.relative_to(DOCS).as_posix()
+            body = "".join(ln.removeprefix(ind) for ln in body.splitlines(keepends=True))  # a table in a list item
+            assert name not in found, f"the table {name!r} is in {found[name]} and in {where}"
+            found[name] = where
+            assert entries.get(name) == where, f"{where}: the table {name!r} is not one docs/figures.py writes there"
+            assert re.match(rf"Produced \d{{4}}-\d\d-\d\d by `[^`]+` on .+ \(\d+ (s|min)\); regenerate with "
+                            rf"`make figures NAMES={name}`\.\n\n\|.*\|\n\|[-:| ]+\|\n(\|.*\|\n)+\Z", body), \
+                f"{where}: the table {name!r} lacks its line (command, machine, date) or its table"
+        starts = re.findall(r"<!-- figures:([\w-]+):start -->", text)
+        ends = re.findall(r"<!-- figures:([\w-]+):end -->", text)
+        assert sorted(starts) == sorted(ends) == sorted(n for n, w in found.items() if w == page.relative_to(
+            DOCS).as_posix()), f"{page.name}: unpaired figures markers"
+    assert sorted(found) == sorted(entries), f"tables docs/figures.py writes into no page: {set(entries) - set(found)}"
+    make = (ROOT / "Makefile").read_text(encoding="utf-8")
+    assert re.search(r"^figures:.*\n\t\$\(PY\) docs/figures\.py \$\(if \$\(NAMES\),--only \$\(NAMES\)\)", make, re.M)
+    assert re.search(r"<!-- figures-total:start -->\n.+\n<!-- figures-total:end -->",
+                     (DOCS / "howto.md").read_text(encoding="utf-8"))
+
+
+def test_no_table_of_results_is_typed_by_hand():
+    """A table outside the generated blocks is reference material listed in REFERENCE_TABLES (by its
+    header row, with the reason); a table of figures the package computes must be written by a command."""
+    bad, used = [], set()
+    for page in _pages():
+        text = page.read_text(encoding="utf-8")
+        for pat in GENERATED:
+            text = re.sub(pat, lambda m: "\n" * m.group(0).count("\n"), text, flags=re.S)
+        for line, head in _tables(text):
+            if head in REFERENCE_TABLES:
+                used.add(head)
+            else:
+                bad.append(f"docs/{page.relative_to(DOCS).as_posix()}:{line}: {head}")
+    assert not bad, ("tables that no command writes (put them between figures markers with an entry in "
+                     "docs/figures.py, or, if reference material, in REFERENCE_TABLES):\n" + "\n".join(bad))
+    assert used == set(REFERENCE_TABLES), f"REFERENCE_TABLES entries no page has: {set(REFERENCE_TABLES) - used}"
+
+
 def test_the_changelog_has_one_entry_per_release():
     text = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
     import tomllib

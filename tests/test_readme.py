@@ -19,8 +19,9 @@ def test_readme_validation_table_matches_the_code():
     """The validation table (docs/validation-run.md): the validation as it declares itself (the creep law,
     what `make demo` prints) and beside it the same manoeuvre on the package's default law."""
     text = (ROOT / "docs" / "validation-run.md").read_text()
-    m = re.search(r"<!-- validation-table:start -->\n(.*?)<!-- validation-table:end -->", text, re.S)
-    assert m, "docs/validation-run.md has no validation table markers"
+    m = re.search(r"<!-- figures:validation:start -->\nProduced .*?\n\n(.*?)<!-- figures:validation:end -->",
+                  text, re.S)
+    assert m, "docs/validation-run.md has no validation table markers (docs/figures.py writes the table)"
     declared = load_scenario("validation")
     assert declared.model.lateral_law == "creep"
     shear = load_scenario("validation", ["model.lateral_law=shear"])
