@@ -26,7 +26,10 @@ SMALL = {
 
 # Tolerances (stated): the two systems differ only in the cells the pool has released (at rest
 # to |dz/dt| <= 1e-5 m/s, p = 0) and in the integrator's step choices (reltol 1e-7).
-POSE_TOL_M = 1e-6
+# The pose: 3 um (measured 2.1e-6 m with the shear law's elastic unloading, whose switch from loading
+# to unloading is a kink in the shear's rate that the two integrators' different step choices cross at
+# different points; the tolerance was 1e-6 before it)
+POSE_TOL_M = 3e-6
 SINKAGE_TOL_M = 1e-7  # 0.1 um, against sinkages of about 1 mm
 RATE_TOL = 1e-4  # velocities, speeds, shears, torques: relative to 1 + abs(value)
 
