@@ -41,17 +41,19 @@ def test_drive_and_coast_within_two_percent_of_cvodes(model, cvodes):
 
 def test_without_the_error_control_the_coast_is_wrong_and_says_so(model, cvodes):
     """run.fixed_step_tolerance = 0: every step taken as it is (the run before the control): the
-    sprocket sinkage far off, and the summary's error estimate thousands of times the tolerance."""
+    sprocket sinkage far off (measured +31 %: 2.742 against 2.099 mm; +54 % before the shear law's
+    elastic unloading), and the summary's error estimate thousands of times the tolerance."""
     got = summarise(run_once(load_scenario(COAST, ["run.fixed_step_tolerance=0"]), model))
-    assert got["sinkage_sprocket_mm"] > 1.5 * cvodes["sinkage_sprocket_mm"]
+    assert got["sinkage_sprocket_mm"] > 1.2 * cvodes["sinkage_sprocket_mm"]
     assert got["fixed_step_error_max"] > 100.0 and got["fixed_step_steps_halved"] == 0
 
 
 def test_a_step_still_above_its_tolerance_after_the_halvings_is_kept_and_said(model, caplog):
-    """A tolerance that no step of 10 ms / 64 meets in the release transient (1e-9: the absolute part,
-    1e-6, decides): the step is kept, one warning names the time and what to compare with, and the
-    summary's error figure is above 1."""
-    sc = load_scenario(COAST, ["run.fixed_step_tolerance=1e-9"])
+    """A tolerance that no step of 50 ms / 64 meets in the release transient (1e-9: the absolute part,
+    1e-6, decides; measured 75 x it at t = 5.2 s; at 10 ms / 64 the shear law's elastic unloading
+    leaves 0.97 x, met): the step is kept, one warning names the time and what to compare with, and
+    the summary's error figure is above 1."""
+    sc = load_scenario(COAST, ["run.fixed_step_tolerance=1e-9", "run.fixed_step_s=0.05", "run.output_dt_s=0.05"])
     with caplog.at_level("WARNING", logger="symtrack.integrators"):
         got = summarise(run_once(sc, model))
     warnings = [r.getMessage() for r in caplog.records if r.name == "symtrack.integrators"]

@@ -160,13 +160,14 @@ def _validation_at_10_ms(model, t_end_s):
 
 def test_a_10_ms_step_carries_the_validation_manoeuvre(models):
     """The quasi-static shear law's fixed-step Rosenbrock needs 0.5 ms (docs/turning.md section 4:
-    at 10 ms it returns a non-finite state at t = 2.56 s); the transient law's runs the manoeuvre
+    its uncontrolled 10 ms step returns a non-finite state, measured at t = 5.36 s with the smoothed
+    loading/unloading switch, 2.56 s before); the transient law's runs the manoeuvre
     at 10 ms, within 0.5 % of its CVODES reference at t = 6 s (measured, section 8: 6.87 s of the
     validation at 10 ms within 1e-5 of CVODES at reltol 1e-10)."""
     shear, model = models
-    # the quasi-static law at this step: a non-finite state within the first 3 s
+    # the quasi-static law at this step: a non-finite state within the 6 s
     qs = _validation_at_10_ms(shear, 6.0)
-    assert not np.all(np.isfinite(qs[-1])) and len(qs) < 350
+    assert not np.all(np.isfinite(qs[-1])) and len(qs) < 601
     xs = _validation_at_10_ms(model, 6.0)
     assert len(xs) == 601 and np.all(np.isfinite(xs))
     yaw = xs[:, model.state_index("yaw_rad")]

