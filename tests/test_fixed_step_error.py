@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
 import pytest
 from conftest import run_once
 
@@ -65,3 +66,35 @@ def test_a_step_still_above_its_tolerance_after_the_halvings_is_kept_and_said(mo
 def test_the_tolerance_is_checked():
     with pytest.raises(ScenarioError, match=r"run.fixed_step_tolerance = 0.5 is outside the allowed range"):
         load_scenario(COAST, ["run.fixed_step_tolerance=0.5"])
+
+
+def test_a_non_finite_step_keeps_the_run_up_to_the_intervals_finished_before_it(model, monkeypatch):
+    """A step of the compiled C that returns a non-finite state (here injected into the third call's
+    chunk, from its step 5 on) stops the run with the error that names it, and the run is kept up to
+    the last output interval finished before that step: its rows are the uninterrupted run's, bit for
+    bit (the batch's earlier intervals and the chunk's sound rows are not dropped)."""
+    from symtrack.integrators import fixed_step
+    from symtrack.simulation.loop import IncompleteRun
+
+    whole = run_once(load_scenario(COAST), model)
+    calls = {"n": 0, "steps": 0}
+    call = fixed_step.Chunk.__call__
+
+    def poisoned(self):
+        call(self)
+        calls["n"] += 1
+        if calls["n"] == 3:
+            self.X[5:] = np.nan
+            self.R[5:] = np.nan
+        else:
+            calls["steps"] += int(np.count_nonzero(self.H))
+
+    monkeypatch.setattr(fixed_step.Chunk, "__call__", poisoned)
+    with pytest.raises(IncompleteRun, match="non-finite state at t = .*kept up to t = ") as err:
+        run_once(load_scenario(COAST), model)
+    part = err.value.partial
+    n = len(part.t)
+    # one 10 ms step per output interval: the start, the first two calls' steps and the third's first 5
+    assert n == 1 + calls["steps"] + 5 and part.t[-1] > 0.0
+    np.testing.assert_array_equal(part.t, whole.t[:n])
+    np.testing.assert_array_equal(part.X, whole.X[:n])

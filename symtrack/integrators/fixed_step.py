@@ -12,7 +12,8 @@ half its length, each controlled the same way, down to 2^-FIXED_STEP_MAX_HALVING
 step still above its tolerance there is kept, with a warning (once per run) and its ratio in
 ``error_max`` (a kink of the dynamics, such as the shear law's at the idle instant of the
 validation, keeps the estimate up however short the step); a non-finite state stops the run with
-a :class:`SimulationError` that says what to change.
+a :class:`SimulationError` that says what to change and how many of the chunk's steps came before it
+(``steps_done``: the batch plant keeps the output intervals they finished).
 """
 
 from __future__ import annotations
@@ -118,8 +119,10 @@ class FixedStepper:
             bad = ~np.isfinite(ratio) | ~np.all(np.isfinite(c.X[:k]), axis=1)
             j = int(np.nonzero(bad)[0][0])
             h_min = float(H[j]) / 2 ** FIXED_STEP_MAX_HALVINGS
-            raise SimulationError(f"{self.method} returned a non-finite state{self._at(t0_s, H, j)} even in steps of "
+            err = SimulationError(f"{self.method} returned a non-finite state{self._at(t0_s, H, j)} even in steps of "
                                   f"{h_min:.3g} s: run it with --integrator cvodes")
+            err.steps_done = j  # the chunk's rows before it are sound (BatchPlant.advance keeps them)
+            raise err
         if self.tolerance > 0 and not np.all(ratio <= 1.0) and not self.warned:
             # a step still above its tolerance at 1/64 of its length: kept (a kink of the dynamics, where the
             # estimate does not fall with the step, would otherwise stop a sound run), said once per run

@@ -297,6 +297,14 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 except SimulationError as err:
                     raise_if_interrupted()
                     failure = err
+                    done = int(getattr(err, "intervals_done", 0))  # intervals a batch plant finished before it
+                    if done > 0:
+                        Y = plant.commit(done)
+                        ts.append(np.array([t1 for _, t1, _, _ in ivs[:done]]))
+                        xs.append(np.array(plant.Xe[:done]))
+                        us.append(np.array([u for _, _, _, u in ivs[:done]]))
+                        ys.append(np.array(Y[:done]))
+                        t, x = float(ts[-1][-1]), xs[-1][-1]
                     break
                 k = len(times)
                 ts.append(times)

@@ -206,7 +206,17 @@ class BatchPlant:
         t0 = np.concatenate([[self.t0], self.t0 + np.cumsum(H_all)])
         for c0 in range(0, total, n_cols):
             c1 = min(c0 + n_cols, total)
-            X, Z, Y = self.stepper.run_chunk(n_cols, x, z, U_all[c0:c1], H_all[c0:c1], self.p, t0[c0])
+            try:
+                X, Z, Y = self.stepper.run_chunk(n_cols, x, z, U_all[c0:c1], H_all[c0:c1], self.p, t0[c0])
+            except SimulationError as err:
+                # the intervals that ended before the chunk's first non-finite step are kept: the error
+                # says how many (intervals_done), the loop commits them (nothing computed is lost)
+                c = self.stepper.chunk[n_cols]
+                i0, done = np.searchsorted(ends, c0), np.searchsorted(ends, c0 + int(getattr(err, "steps_done", 0)))
+                rows = ends[i0:done] - c0
+                self.Xe[i0:done], self.Ze[i0:done], self.Ye[i0:done] = c.X[rows], c.Z[rows], c.Y[rows]
+                err.intervals_done = int(done)
+                raise
             k = c1 - c0
             x, z = X[k - 1].copy(), Z[k - 1].copy()
             i0, i1 = np.searchsorted(ends, c0), np.searchsorted(ends, c1)
