@@ -355,25 +355,7 @@ def hull_rotation() -> str:
 # ---------------------------------------------------------------------------------------------------------
 # docs/terrain.md
 
-MEMORY_PROBE = """
-name = "memory_probe"
-[run]
-duration_s = 10.0
-output_dt_s = 0.01
-integrator = "grid_fast"
-stop_after_distance_m = 1.0
-[vehicle]
-preset = "reference_crawler"
-[soil]
-preset = "clayey_soil_thailand_38"
-[terrain]
-size_m = [10.0, 10.0]
-cell_m = 0.1
-[[torque]]
-t_s = 0.0
-left_N_m = 2000.0
-right_N_m = 2000.0
-"""
+MEMORY_PROBE = (Path(__file__).resolve().parent.parent / "examples" / "scenarios" / "memory_probe.toml").read_text()
 
 # the process's own high-water mark as it ends (VmHWM: what a fresh `symtrack simulate` process reached)
 _HWM = """

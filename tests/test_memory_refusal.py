@@ -29,25 +29,7 @@ from symtrack.terrain.world import (
 ROOT = Path(__file__).resolve().parent.parent
 
 # a straight metre from the centre of a square field of 0.1 m cells (its side set per test)
-PROBE = """
-name = "memory_probe"
-[run]
-duration_s = 10.0
-output_dt_s = 0.01
-integrator = "grid_fast"
-stop_after_distance_m = 1.0
-[vehicle]
-preset = "reference_crawler"
-[soil]
-preset = "clayey_soil_thailand_38"
-[terrain]
-size_m = [10.0, 10.0]
-cell_m = 0.1
-[[torque]]
-t_s = 0.0
-left_N_m = 2000.0
-right_N_m = 2000.0
-"""
+PROBE = (ROOT / "examples" / "scenarios" / "memory_probe.toml").read_text()
 
 
 def test_the_estimate_counts_the_field_as_it_comes_into_memory():

@@ -46,7 +46,7 @@ Schema (unknown keys are errors; ranges in brackets)::
                                       # "shear", the soil's own strength)
     [terrain]                         # optional: the plant is then the vehicle on the persistent
     cell_m = 0.25                     # grid terrain (symtrack.control.closedloop.make_grid_plant); keys
-                                      # and ranges of symtrack/terrain/config.py (docs/terrain.md).
+                                      # and ranges of symtrack/terrain/settings.py (docs/terrain.md).
                                       # Without size_m and origin_m the field covers the path
                                       # plus 4 m; passes must be 1; the plant runs the terrain
                                       # engine unless run.integrator is idas or rosenbrock.

@@ -53,7 +53,7 @@ acceleration, which sets the pressure distribution, which loads every cell. In t
 derivative depends on every other cell's rate and the Jacobian is dense (N x N). In the DAE
 form (IDAS) the accelerations are algebraic variables: a cell depends only on its own states,
 the pose and the accelerations, and the Jacobian is an arrowhead (see
-tests/test_terrain_channels.py). The grid terrain therefore runs with IDAS.
+tests/test_terrain_channel.py). The grid terrain therefore runs with IDAS.
 
 The channel equations are CasADi Functions of one cell, applied to all channels with
 ``Function.map`` (shared inputs reduced). The model is SX, so the mapped calls are expanded
