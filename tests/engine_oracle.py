@@ -1,10 +1,11 @@
 """The test oracle of the terrain engine and of the world manager: symtrack/native/grid_engine.c in Python on CasADi's
 interpreter, the same algorithm expression by expression (:class:`PyKernel`; slow). It is a second
 copy of the world manager's rules (footprint, release, sector assignment, INFO_IN / INFO_OUT, the
-collision error) and of the cells' step, kept here, with the tests, to check the C against:
-``TerrainEngine(world, settings, kernel=PyKernel)`` runs the engine on it. :func:`cells_under` and
-:func:`channel_of` are the footprint and the sector rule in numpy on a World (the World's own copy
-before the rules moved to grid_engine.c), for the invariant tests of tests/test_terrain_world.py."""
+collision error), of the cells' step and of the set-down (:func:`static_sinkage`), kept here, with the
+tests, to check the C against: ``TerrainEngine(world, settings, kernel=PyKernel)`` runs the engine on
+it. :func:`cells_under` and :func:`channel_of` are the footprint and the sector rule in numpy on a World
+(the World's own copy before the rules moved to grid_engine.c), for the invariant tests of
+tests/test_terrain_world.py."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ from symtrack.native.grid_engine_model import NS
 from symtrack.soil import subsoil
 from symtrack.terrain import query
 
-__all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "outside_tracks", "ringing"]
+__all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "outside_tracks", "ringing", "static_sinkage"]
 
 
 def cells_under(world, X, Y, psi, pad, check_field=True) -> np.ndarray:
@@ -63,6 +64,49 @@ def cells_under(world, X, Y, psi, pad, check_field=True) -> np.ndarray:
     if not found:
         return np.zeros(0, dtype=np.int64)
     return np.unique(np.concatenate(found))
+
+
+def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarray) -> np.ndarray:
+    """grid_engine.c's set_down_z (the set-down's rule), vectorised on CasADi's interpreter: the sinkage at
+    which each cell's reaction equals its load, p(z; hist) = p_load (the cells at rest under a vehicle
+    set down quasi-statically): bisection on the monotone law, to 1e-15 m (every cell bisected until
+    all are within it: the C stops each cell at its own, so the two agree to about 1e-15 m).
+    ``soil``: the channel soil Function (z, hist[5], law) -> p; law (5,) or (5, k) (per cell); z0 (k,),
+    hist (5, k), p_load (k,).
+    A cell whose reaction at z0 already equals its load keeps z0."""
+    z0 = np.asarray(z0, dtype=float)
+    k = z0.size
+    if k == 0:
+        return z0.copy()
+    law = np.asarray(law, dtype=float)
+    if law.ndim == 1 or law.shape[1] == 1:  # one law for all cells
+        law = np.repeat(law.reshape(-1, 1), k, axis=1)
+    f = soil.map(k)
+
+    def p_of(z):
+        return np.array(f(z[None, :], hist, law)).ravel()
+
+    p0 = p_of(z0)
+    lo, hi = z0.copy(), z0.copy()
+    up = p_load > p0
+    down = p_load < p0
+    step = np.full(k, 1e-4)
+    for _ in range(60):  # bracket the root
+        hi = np.where(up, lo + step, hi)
+        lo = np.where(down, hi - step, lo)
+        ph, pl = p_of(hi), p_of(lo)
+        open_ = (up & (ph < p_load)) | (down & (pl > p_load))
+        if not open_.any():
+            break
+        step = np.where(open_, 2 * step, step)
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        below = p_of(mid) <= p_load  # (<=: for p_load = 0 the top of the unloaded set, the rest position)
+        lo = np.where(below, mid, lo)
+        hi = np.where(below, hi, mid)
+        if np.all(hi - lo <= 1e-15):
+            break
+    return np.where(up | down, 0.5 * (lo + hi), z0)
 
 
 def channel_of(world, cells: np.ndarray) -> np.ndarray:

@@ -5,8 +5,10 @@ multipass targets in the terrain engine, and the new storage fields through save
 import casadi as ca
 import numpy as np
 import pytest
+from engine_oracle import static_sinkage
 
 from symtrack import api
+from symtrack.integrators.engine import manager
 from symtrack.model import SystemModel
 from symtrack.model.options import ModelOptions
 from symtrack.model.static import static_state
@@ -17,7 +19,6 @@ from symtrack.soil import cell
 from symtrack.soil.law import BekkerWong
 from symtrack.terrain.channels import build_cell_functions
 from symtrack.terrain.storage import Grid, Terrain
-from symtrack.terrain.world import static_sinkage
 
 VEHICLE = vehicle_preset("reference_crawler")
 FN = build_cell_functions(ModelOptions())
@@ -40,9 +41,13 @@ def test_static_sinkage_is_bekkers_inverse_on_every_preset(soil):
     p = _params(soil)
     values = LAW.values(p)
     law = ca.DM(values)
-    for pressure in (0.5 * _mean_pressure(p), _mean_pressure(p), 2 * _mean_pressure(p)):
-        z = static_sinkage(FN["soil"], law, np.zeros(1), np.zeros((5, 1)), np.array([pressure]))[0]
-        assert z == pytest.approx(LAW.static_sinkage(pressure, values), rel=1e-2)
+    pressures = np.array([0.5, 1.0, 2.0]) * _mean_pressure(p)
+    # the set-down's rule (grid_engine.c, the engine's and the IDAS path's) and the oracle's copy of it
+    z = manager.static_sinkage(ModelOptions(), p, np.zeros(3), np.zeros((5, 3)), pressures)
+    z_oracle = static_sinkage(FN["soil"], law, np.zeros(3), np.zeros((5, 3)), pressures)
+    assert np.max(np.abs(z - z_oracle)) < 1e-14
+    for pressure, zk in zip(pressures, z, strict=True):
+        assert zk == pytest.approx(LAW.static_sinkage(pressure, values), rel=1e-2)
     model = SystemModel()
     x = static_state(model, p)
     y = np.array(model.outputs(x, [0, 0], model.param_vector(p))).ravel()

@@ -16,6 +16,7 @@ import time
 import casadi as ca
 import numpy as np
 
+from ..integrators.engine.manager import static_sinkage
 from ..integrators.grid_idas import ChannelStepper
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
@@ -28,7 +29,7 @@ from ..simulation.scenario import load_scenario
 from ..terrain.channels import HIST_ROWS, NF, NG, ChannelTerrain
 from ..terrain.settings import TerrainSettings
 from ..terrain.storage import Grid
-from ..terrain.world import END_STRIP_CELLS, static_sinkage
+from ..terrain.world import END_STRIP_CELLS
 
 __all__ = ["BruteResult", "GRID_FIXED_STEP_S", "bench_rows", "benchmark", "brute_force_run", "main", "pool_run"]
 
@@ -83,7 +84,7 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
     acc = np.array(model.ode(x, np.zeros(2), P0)).ravel()[L.cell_field("rate")]
     p_load = params["cell_areal_mass_kg_per_m2"] * acc
     loaded = np.nonzero(p_load > 0)[0]
-    x[L.cell_index(loaded, "sinkage")] = static_sinkage(terrain.fn["soil"], law, np.zeros(loaded.size),
+    x[L.cell_index(loaded, "sinkage")] = static_sinkage(scenario.model, params, np.zeros(loaded.size),
                                                         qc[loaded][:, HIST_ROWS].T, p_load[loaded])
     for _ in range(int(round(s.settle_s / 0.01))):
         x = stepper.step(x, np.zeros(2), np.concatenate([pbase, Q]), 0.01)

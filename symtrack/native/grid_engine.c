@@ -1235,10 +1235,33 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
   return max_steps;
 }
 
-/* The set-down (TerrainEngine.begin_pass): every active cell at the sinkage where its reaction equals
- * the load it carries at rest (ch_g[0], evaluated at assignment), p(z; history) = p_load, by
- * bracketing from its stored z and bisection on the monotone law to 1e-15 m (world.static_sinkage's
- * rule; the top of the unloaded set for p_load = 0); rate 0. */
+/* The set-down's rule: the sinkage at which a cell's reaction equals the load it carries at rest,
+ * p(z; hist) = pl, by bracketing from its stored z0 and bisection on the monotone law to 1e-15 m (the
+ * top of the unloaded set for pl = 0); z0 itself when its reaction already equals the load. */
+static double set_down_z(double z0, const double *hist, int soil, double pl) {
+  double p, dp;
+  law(z0, hist, soil, &p, &dp);
+  if (!(pl != p)) return z0;
+  int up = pl > p;
+  double lo = z0, hi = z0, step = 1e-4;
+  for (int it = 0; it < 60; ++it) {
+    if (up) hi = lo + step;
+    else lo = hi - step;
+    law(up ? hi : lo, hist, soil, &p, &dp);
+    if (up ? !(p < pl) : !(p > pl)) break;
+    step *= 2.0;
+  }
+  for (int it = 0; it < 200 && hi - lo > 1e-15; ++it) {
+    double mid = 0.5 * (lo + hi);
+    law(mid, hist, soil, &p, &dp);
+    if (p <= pl) lo = mid;
+    else hi = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+/* The set-down (TerrainEngine.begin_pass): every active cell at its static sinkage (set_down_z) under
+ * the load it carries at rest (ch_g[0], evaluated at assignment); rate 0. */
 EXPORT void eng_static(eng_t *E) {
   WORK = E->work;
   IWORK = (casadi_int *)E->iwork;
@@ -1246,31 +1269,25 @@ EXPORT void eng_static(eng_t *E) {
   for (long long q = 0; q < E->n_act; ++q) {
     long long ch = E->act[q];
     int soil = E->ch_soil[ch];
-    double hist[5], p, dp, z0 = E->ch_z[ch], pl = E->ch_g[NGEO * ch];
+    double hist[5];
     channel_hist(E, ch, hist);
-    law(z0, hist, soil, &p, &dp);
-    if (pl != p) {
-      int up = pl > p;
-      double lo = z0, hi = z0, step = 1e-4;
-      for (int it = 0; it < 60; ++it) {
-        if (up) hi = lo + step;
-        else lo = hi - step;
-        law(up ? hi : lo, hist, soil, &p, &dp);
-        if (up ? !(p < pl) : !(p > pl)) break;
-        step *= 2.0;
-      }
-      for (int it = 0; it < 200 && hi - lo > 1e-15; ++it) {
-        double mid = 0.5 * (lo + hi);
-        law(mid, hist, soil, &p, &dp);
-        if (p <= pl) lo = mid;
-        else hi = mid;
-      }
-      E->ch_z[ch] = 0.5 * (lo + hi);
-    }
+    E->ch_z[ch] = set_down_z(E->ch_z[ch], hist, soil, E->ch_g[NGEO * ch]);
     E->ch_v[ch] = 0.0;
     E->ch_vr[ch] = 0.0;
     law(E->ch_z[ch], hist, soil, E->ch_p + ch, E->ch_dp + ch);
   }
+}
+
+/* The set-down's rule on n cells given by their values (the IDAS reference path's set-down,
+ * ChannelManager.begin_pass, and the brute-force reference, whose loads are their DAE's): cell k from
+ * z0[k] with history hist[5 k ..] (z_max, p_max, z_off, delta, d_c) on soil soil[k] under the load
+ * p_load[k] -> z[k]. Only the law table and the work vectors of E are read. */
+EXPORT void eng_static_cells(eng_t *E, long long n, const double *z0, const double *hist, const unsigned char *soil,
+                             const double *p_load, double *z) {
+  WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
+  for (long long k = 0; k < n; ++k) z[k] = set_down_z(z0[k], hist + 5 * k, soil[k], p_load[k]);
 }
 
 /* The terrain query on the engine's own storage (terrain_query.h; TerrainEngine.surface): per point n

@@ -56,10 +56,11 @@ shear displacement is the vehicle's state.
 
 A pass (``ChannelManager.begin_pass`` / ``end_pass``; the engine's ``begin_pass`` / ``end_pass``):
 the vehicle is set down at rest at its start pose on the current terrain, the cells under it
-placed at their static sinkage (:func:`static_sinkage`: a sudden load would overshoot it and write the
-overshoot into the history), then they settle for ``settle_s`` with zero torque (the initial static state), the
-run follows its torque programme to its stop rule, then the vehicle is lifted off: the active
-cells unload with zero load until they are released. Between passes
+placed at their static sinkage (grid_engine.c's ``eng_static`` and ``eng_static_cells``: a sudden
+load would overshoot it and write the overshoot into the history), then they settle for
+``settle_s`` with zero torque (the initial static state), the run follows its torque programme to
+its stop rule, then the vehicle is lifted off: the active cells unload with zero load until they
+are released. Between passes
 the storage is the only state, which is why a saved and reloaded terrain continues bit-exactly.
 """
 
@@ -88,7 +89,7 @@ from .soil_map import MAX_SOILS, SoilMap, soil_index
 from .storage import Grid, Terrain, file_geometry
 
 __all__ = ["END_STRIP_CELLS", "LIFT_TIME_S", "World", "derive_modulus", "open_world", "padding_m",
-           "run_memory_bytes", "static_sinkage", "world_storage_bytes_per_cell",
+           "run_memory_bytes", "world_storage_bytes_per_cell",
            "zero_in_place"]
 
 END_STRIP_CELLS = 2  # the sprocket/idler sinkage averages over a strip of two cells
@@ -113,47 +114,6 @@ def _soil_map_for_model(settings: TerrainSettings, opts: ModelOptions) -> Terrai
     if soils == sm.soils:
         return settings
     return dataclasses.replace(settings, soil_map=dataclasses.replace(sm, soils=soils))
-
-
-def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarray) -> np.ndarray:
-    """The sinkage at which each cell's reaction equals its load, p(z; hist) = p_load (the cells
-    at rest under a vehicle set down quasi-statically): bisection on the monotone law, to 1e-15 m.
-    ``soil``: the channel soil Function (z, hist[5], law) -> p; law (5,) or (5, k) (per cell); z0 (k,),
-    hist (5, k), p_load (k,).
-    A cell whose reaction at z0 already equals its load keeps z0."""
-    z0 = np.asarray(z0, dtype=float)
-    k = z0.size
-    if k == 0:
-        return z0.copy()
-    law = np.asarray(law, dtype=float)
-    if law.ndim == 1 or law.shape[1] == 1:  # one law for all cells
-        law = np.repeat(law.reshape(-1, 1), k, axis=1)
-    f = soil.map(k)
-
-    def p_of(z):
-        return np.array(f(z[None, :], hist, law)).ravel()
-
-    p0 = p_of(z0)
-    lo, hi = z0.copy(), z0.copy()
-    up = p_load > p0
-    down = p_load < p0
-    step = np.full(k, 1e-4)
-    for _ in range(60):  # bracket the root
-        hi = np.where(up, lo + step, hi)
-        lo = np.where(down, hi - step, lo)
-        ph, pl = p_of(hi), p_of(lo)
-        open_ = (up & (ph < p_load)) | (down & (pl > p_load))
-        if not open_.any():
-            break
-        step = np.where(open_, 2 * step, step)
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        below = p_of(mid) <= p_load  # (<=: for p_load = 0 the top of the unloaded set, the rest position)
-        lo = np.where(below, mid, lo)
-        hi = np.where(below, hi, mid)
-        if np.all(hi - lo <= 1e-15):
-            break
-    return np.where(up | down, 0.5 * (lo + hi), z0)
 
 
 def padding_m(cell_m: float) -> float:

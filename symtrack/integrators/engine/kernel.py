@@ -22,7 +22,8 @@ from ...native.grid_engine_model import soil_dispatch_c
 from ...toolchain import BuildSpec, build, casadi_tag, compiler, digest, native_cflags
 from .state import EngineState, EngineStruct, vehicle_work_sizes
 
-__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "check_struct", "dptr", "library"]
+__all__ = ["BUILD_VERSION", "CKernel", "NO_COMPILER", "check_no_work", "check_struct", "dptr", "library",
+           "static_sinkage_cells"]
 
 log = logging.getLogger("symtrack.terrain")
 
@@ -129,14 +130,31 @@ def library(fns):
     lib.eng_lift.restype = ctypes.c_longlong
     lib.eng_static.argtypes = [P]
     lib.eng_static.restype = None
+    vp = ctypes.c_void_p
+    lib.eng_static_cells.argtypes = [P, ctypes.c_longlong, vp, vp, vp, vp, vp]
+    lib.eng_static_cells.restype = None
     lib.eng_info_out.argtypes = [P]
     lib.eng_info_out.restype = None
     lib.eng_uncovered.argtypes = [P, ctypes.c_double, ctypes.c_double, ctypes.c_double]
     lib.eng_uncovered.restype = ctypes.c_longlong
-    vp = ctypes.c_void_p
     lib.eng_surface.argtypes = [P, vp, vp, ctypes.c_longlong, vp, vp, vp]
     lib.eng_surface.restype = ctypes.c_longlong
     return lib
+
+
+def static_sinkage_cells(lib, e: EngineStruct, z0, hist, soil, p_load) -> np.ndarray:
+    """``lib``'s eng_static_cells on the struct ``e`` (only its law table and work vectors are read):
+    :meth:`CKernel.static_sinkage`'s rule for callers without an engine state."""
+    z0 = np.ascontiguousarray(z0, dtype=float).ravel()
+    k = z0.size
+    hist = np.ascontiguousarray(np.asarray(hist, dtype=float).reshape(5, k).T)
+    soil = np.ascontiguousarray(np.broadcast_to(np.asarray(soil, dtype=np.uint8), (k,)))
+    p_load = np.ascontiguousarray(np.broadcast_to(np.asarray(p_load, dtype=float), (k,)))
+    z = np.empty(k)
+    if k:
+        lib.eng_static_cells(ctypes.byref(e), k, z0.ctypes.data, hist.ctypes.data, soil.ctypes.data,
+                             p_load.ctypes.data, z.ctypes.data)
+    return z
 
 
 def dptr(a: np.ndarray):
@@ -173,6 +191,12 @@ class CKernel:
     def static(self) -> None:
         e = self.s.struct()
         self.lib.eng_static(ctypes.byref(e))
+
+    def static_sinkage(self, z0, hist, soil, p_load) -> np.ndarray:
+        """The set-down's rule (grid_engine.c set_down_z) on cells given by their values: z0 (k,), hist
+        (5, k) (z_max, p_max, z_off, delta, d_c), soil (k,) (rows of the engine's law table), p_load (k,)
+        -> the sinkage (k,) at which each cell's reaction equals its load."""
+        return static_sinkage_cells(self.lib, self.s.struct(), z0, hist, soil, p_load)
 
     def info_out_all(self) -> None:
         """INFO_OUT of every active channel at its state (the IDAS reference path's after_step)."""

@@ -24,18 +24,34 @@ import logging
 import numpy as np
 
 from ...terrain.channels import HIST_ROWS
-from ...terrain.world import LIFT_TIME_S, World, static_sinkage, zero_in_place
+from ...terrain.world import LIFT_TIME_S, World, zero_in_place
 from ..settings import EngineSettings
 from .engine import engine_functions
-from .kernel import CKernel, library
-from .state import EngineState, engine_error
+from .kernel import CKernel, library, static_sinkage_cells
+from .state import EngineState, EngineStruct, array_address, engine_error
 
-__all__ = ["ChannelManager"]
+__all__ = ["ChannelManager", "static_sinkage"]
 
 log = logging.getLogger("symtrack.terrain")
 
 # the Q entries of a channel (symtrack.terrain.channels: NF per channel) and the engine's arrays
 QC_COLUMNS = ((0, "ch_cx"), (1, "ch_cy"), (2, "ch_zmax"), (3, "ch_pmax"), (5, "ch_zoff"), (6, "ch_delta"), (7, "ch_dc"))
+
+
+def static_sinkage(opts, params: dict, z0, hist, p_load, soils: tuple = (), soil=0) -> np.ndarray:
+    """The set-down's rule (grid_engine.c set_down_z, the engine's) on cells given by their values, for a
+    caller without a World (the brute-force reference): the sinkage at which each cell's reaction equals
+    its load, p(z; hist) = p_load, bracketed from z0 and bisected on the monotone law to 1e-15 m.
+    ``z0`` (k,), ``hist`` (5, k) (z_max, p_max, z_off, delta, d_c), ``p_load`` (k,); ``soils``: a soil
+    map's parameter dicts (default: ``params``'s soil alone), ``soil`` each cell's index in them."""
+    fns = engine_functions(opts, params, 1, soils)
+    lib = library(fns)
+    law = np.ascontiguousarray(fns.law_table(tuple(soils) or (params,)))
+    work = np.zeros(max(f.sz_w() for f in fns.all()) + 1)
+    iwork = np.zeros(1, dtype=np.int64)
+    e = EngineStruct()
+    e.soil_law, e.work, e.iwork = array_address(law), array_address(work), array_address(iwork)
+    return static_sinkage_cells(lib, e, z0, hist, soil, p_load)
 
 
 class ChannelManager:
@@ -160,8 +176,7 @@ class ChannelManager:
                 zc[None, :], hist, w.laws[:, w.ch_soil[act]])).ravel()
             p_load = w.params["cell_areal_mass_kg_per_m2"] * acc + p_soil + w.params[
                 "cell_damping_Pa_s_per_m"] * vc
-            x[L.cell_index(act, "sinkage")] = static_sinkage(w.terrain.fn["soil"], w.laws[:, w.ch_soil[act]], zc, hist,
-                                                             p_load)
+            x[L.cell_index(act, "sinkage")] = self.kernel.static_sinkage(zc, hist, w.ch_soil[act], p_load)
             x[L.cell_index(act, "rate")] = 0.0
             stepper.reset()
         n = int(round(w.settings.settle_s / dt_s))

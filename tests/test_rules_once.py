@@ -1,0 +1,68 @@
+"""The pass rules written once, in grid_engine.c: the terrain engine and the IDAS reference path
+(:class:`symtrack.integrators.engine.ChannelManager`) run the same C, and the interpreted copies of
+the tests' oracle (tests/engine_oracle.py) agree with it."""
+
+import numpy as np
+from engine_oracle import static_sinkage
+from small_field import small_field
+
+from symtrack.integrators.engine import ChannelManager
+from symtrack.simulation.plants import make_plant
+from symtrack.simulation.scenario import scenario_from_dict
+
+
+def _plant(integrator: str, **terrain):
+    d = small_field(f"rules_{integrator}", run={"integrator": integrator}, terrain=terrain)
+    sc = scenario_from_dict(d)
+    return sc, make_plant(sc)
+
+
+def test_the_set_down_is_the_engines_rule_on_the_idas_path():
+    """The vehicle set down without settling (settle_s = 0) on the engine and on the IDAS path: the
+    manager's set-down is eng_static's rule (the same C on the same loads gives the same cells, bit for
+    bit); its loads are its DAE's, the engine's its cell geometry's, and both paths put the cells at
+    the same sinkage (to 1e-12 of it); the oracle's interpreted copy agrees to 1e-15 m."""
+    sc, pe = _plant("grid_fast", settle_s=0.0)
+    pose = (sc.start.x_m, sc.start.y_m, np.radians(sc.start.yaw_deg))
+    pe.engine.begin_pass(*pose)
+    s = pe.engine.state
+    act = s.active_channels().copy()
+    z_engine = dict(zip(s.ch_cell[act].tolist(), s.ch_z[act].tolist(), strict=True))
+    assert len(z_engine) > 50 and max(z_engine.values()) > 5e-4
+
+    _, pi = _plant("idas", settle_s=0.0)
+    calls = []
+    kernel = pi.manager.kernel
+    solve = kernel.static_sinkage
+
+    def spy(z0, hist, soil, p_load):
+        z = solve(z0, hist, soil, p_load)
+        calls.append((np.array(z0), np.array(hist), np.array(soil), np.array(p_load), z.copy()))
+        return z
+    kernel.static_sinkage = spy
+    x = pi.manager.begin_pass(pi.stepper, *pose)
+    assert len(calls) == 1  # the set-down went through the C rule
+    w = pi.world
+    L = w.layout
+    held = np.nonzero(w.channel_cell >= 0)[0]
+    z_idas = dict(zip(w.channel_cell[held].tolist(), x[L.cell_index(held, "sinkage")].tolist(), strict=True))
+    assert set(z_idas) == set(z_engine)
+    zmax = max(z_engine.values())
+    assert max(abs(z_idas[c] - z_engine[c]) for c in z_engine) < 1e-12 * zmax
+
+    # the same loads through the engine's own eng_static (its state's channels): bit for bit
+    z0, hist, soil, p_load, z_manager = calls[0]
+    cells = w.channel_cell[held]
+    s.ch_z[act] = 0.0
+    by_cell = dict(zip(s.ch_cell[act].tolist(), act.tolist(), strict=True))
+    chs = np.array([by_cell[c] for c in cells.tolist()])
+    s.ch_z[chs] = z0
+    s.ch_g[chs, 0] = p_load
+    pe.engine.kernel.static()
+    assert np.array_equal(s.ch_z[chs], z_manager)
+    assert np.array_equal(x[L.cell_index(held, "sinkage")], z_manager)
+    # the oracle's copy (numpy on CasADi's interpreter)
+    z_oracle = static_sinkage(w.terrain.fn["soil"], w.laws[:, soil], z0, hist, p_load)
+    assert np.max(np.abs(z_oracle - z_manager)) <= 1e-15
+    # a second manager on the same World gives the same bits (one library, no state of its own)
+    assert np.array_equal(ChannelManager(w).kernel.static_sinkage(z0, hist, soil, p_load), z_manager)
