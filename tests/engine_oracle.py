@@ -30,8 +30,11 @@ from symtrack.integrators.settings import VEHICLE_ATOL, VEHICLE_MAX_HALVINGS, wi
 from symtrack.native.grid_engine_model import NS
 from symtrack.soil import subsoil
 from symtrack.terrain import query
+from symtrack.terrain.channels import HIST_ROWS, NF, NG
+from symtrack.terrain.world import LIFT_TIME_S
 
-__all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "outside_tracks", "ringing", "static_sinkage"]
+__all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "cvodes_end_pass", "outside_tracks", "ringing",
+           "static_sinkage", "unload_dae"]
 
 
 def cells_under(world, X, Y, psi, pad, check_field=True) -> np.ndarray:
@@ -107,6 +110,58 @@ def static_sinkage(soil, law, z0: np.ndarray, hist: np.ndarray, p_load: np.ndarr
         if np.all(hi - lo <= 1e-15):
             break
     return np.where(up | down, 0.5 * (lo + hi), z0)
+
+
+def unload_dae(world) -> dict:
+    """The cells-only DAE of the lift on a World's whole channel pool (the load falling linearly to zero
+    over T from the pass end's pressures p_end), time-scaled to [0, 1] over a step of length h:
+    parameters (Q, p_end, t0, h, T, each channel's soil law (5 x n, column-major)); the lift's
+    reference, which :func:`cvodes_end_pass` integrates with CVODES."""
+    n = world.n_channels
+    fn = world.terrain.fn
+    xc = ca.SX.sym("xc", 2 * n)
+    Q = ca.SX.sym("Q", NG + NF * n)
+    p_end = ca.SX.sym("p_end", n)
+    t0, h, T, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("tau")
+    qc = ca.reshape(Q[NG:], NF, n)
+    xm = ca.reshape(xc, 2, n)
+    law = ca.SX.sym("law", world.laws.shape[0], n)  # each channel's soil law (a soil map)
+    hist = ca.vertcat(*(qc[r, :] for r in HIST_ROWS))
+    p = fn["soil"].map(n)(xm[0, :], hist, law)
+    load = p_end.T * ca.fmax(0, 1 - (t0 + h * tau) / T)
+    cellpar = ca.DM([world.params["cell_areal_mass_kg_per_m2"], world.params["cell_damping_Pa_s_per_m"]])
+    d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], load, p, qc[4, :], cellpar)
+    return {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T, ca.vec(law)), "ode": h * ca.reshape(d, 2 * n, 1)}
+
+
+def cvodes_end_pass(manager, x: np.ndarray, dt_s: float = 0.01, max_steps: int = 300) -> bool:
+    """grid_engine.c eng_lift's rule by CVODES over the whole channel pool at tight tolerances (rtol
+    1e-9, atol 1e-12) on ``manager``'s World (a ChannelManager) from the pass end x, INFO_OUT through
+    the manager after every step; then every channel freed and the pass folded in, as
+    ChannelManager.end_pass. Returns whether the cells came to rest within max_steps."""
+    w = manager.world
+    F = ca.integrator("unload", "cvodes", unload_dae(w), 0.0, 1.0, {"abstol": 1e-12, "reltol": 1e-9})
+    manager.after_step(x)
+    w.z_at_pass_end = w.storage.z.copy()
+    act = np.nonzero(w.channel_cell >= 0)[0]
+    settled = True
+    if act.size:
+        L = w.layout
+        xc = np.array(x[L.block("cells")], dtype=float)
+        p_end = w.p_soil.copy()
+        for k in range(max_steps):
+            t0 = k * dt_s
+            rates = xc[L.cell_index(act, "rate") - L.nv]  # (xc: the cells block)
+            if t0 >= LIFT_TIME_S and np.all((w.p_soil[act] <= 0.0) & (np.abs(rates) <= w.settings.release_rate_m_s)):
+                break
+            par = np.concatenate([w.Q, p_end, [t0, dt_s, LIFT_TIME_S], w.laws[:, w.ch_soil].ravel(order="F")])
+            xc = np.array(F(x0=xc, p=par)["xf"]).ravel()
+            manager.after_step(np.concatenate([x[L.block("vehicle")], xc]))
+        else:
+            settled = False
+    w.release_all()
+    w.fold_pass()
+    return settled
 
 
 def channel_of(world, cells: np.ndarray) -> np.ndarray:

@@ -66,3 +66,36 @@ def test_the_set_down_is_the_engines_rule_on_the_idas_path():
     assert np.max(np.abs(z_oracle - z_manager)) <= 1e-15
     # a second manager on the same World gives the same bits (one library, no state of its own)
     assert np.array_equal(ChannelManager(w).kernel.static_sinkage(z0, hist, soil, p_load), z_manager)
+
+
+def test_the_lift_off_is_the_engines_rule_on_the_idas_path():
+    """From one pass end (the engine's, checkpointed), the engine's lift-off and the IDAS path's
+    (ChannelManager.end_pass, through eng_lift) leave the same terrain: the manager's pass-end
+    reactions and slopes are its channel model's (CasADi's interpreter), the rule and the cell step
+    the same C (measured: within 4e-18 m, the history and the cycle counts equal)."""
+    from symtrack.simulation import loop
+
+    sc, pe = _plant("grid_fast")
+    pe.finish = lambda: None  # keep the pass end
+    loop.run(sc, pe)
+    eng, w = pe.engine, pe.world
+    saved = eng.checkpoint()
+    eng.end_pass()
+    after_engine = {k: getattr(w.storage, k).copy() for k in ("z", "zdot", "zmax", "pmax", "phase", "zoff", "cycles")}
+    eng.restore(saved)
+    mgr = ChannelManager(w)
+    lifts = []
+    lift = mgr.kernel.lift
+
+    def spy(*args):
+        lifts.append(args)
+        return lift(*args)
+    mgr.kernel.lift = spy
+    mgr.end_pass(eng.sync_world())
+    assert len(lifts) == 1 and not (w.channel_cell >= 0).any()
+    z = after_engine["z"]
+    assert z.max() > 5e-4
+    assert np.max(np.abs(w.storage.z - z)) < 1e-12 * z.max()
+    assert np.max(np.abs(w.storage.zmax - after_engine["zmax"])) < 1e-12 * z.max()
+    assert np.array_equal(w.storage.phase, after_engine["phase"])
+    assert np.array_equal(w.storage.cycles, after_engine["cycles"])

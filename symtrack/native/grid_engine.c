@@ -1184,7 +1184,7 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
   return 0;
 }
 
-/* The lift at a pass end (World.end_pass, here in C): each active cell's load falls linearly from
+/* The lift at a pass end (TerrainEngine.end_pass and the IDAS path's ChannelManager.end_pass): each active cell's load falls linearly from
  * p_end (its reaction at the pass end, given per channel) to zero over T, the cells alone, steps
  * of h in n substeps each, INFO_OUT after every step; it stops at the first step start t >= T at
  * which every active cell has p <= 0 and |dz/dt| <= release_rate. Returns the steps done, or
@@ -1233,6 +1233,21 @@ EXPORT long long eng_lift(eng_t *E, const double *p_end, double h, double T, lon
     }
   }
   return max_steps;
+}
+
+/* dp/dz of every active channel at its state (ch_dp; ch_p kept): the slope the cells' first implicit
+ * stage starts from, for a caller whose channels were not stepped here (the IDAS reference path's
+ * lift-off, ChannelManager.end_pass, before eng_lift). */
+EXPORT void eng_slopes(eng_t *E) {
+  WORK = E->work;
+  IWORK = (casadi_int *)E->iwork;
+  SOIL_LAW = E->soil_law;
+  for (long long q = 0; q < E->n_act; ++q) {
+    long long ch = E->act[q];
+    double hist[5], p;
+    channel_hist(E, ch, hist);
+    law(E->ch_z[ch], hist, E->ch_soil[ch], &p, E->ch_dp + ch);
+  }
 }
 
 /* The set-down's rule: the sinkage at which a cell's reaction equals the load it carries at rest,

@@ -42,7 +42,6 @@ from ..foundations.progress import timed_step
 from ..integrators import registry
 from ..integrators.engine import ChannelManager
 from ..integrators.settings import IntegratorSettings, substeps
-from ..integrators.unload import unloader
 from ..model import SystemModel
 from ..model.static import static_state
 from ..terrain.settings import TerrainSettings
@@ -275,7 +274,6 @@ class GridPlant:
         self.state_names = world.layout.vehicle_names
         self.output_names = tuple(world.model.output_names)
         self._x = None  # the full state (vehicle + channel slots)
-        self._unloader = None
         self.finished = True
 
     @property
@@ -340,9 +338,7 @@ class GridPlant:
     def finish(self):
         if self._x is None or self.finished:
             return
-        if self._unloader is None:
-            self._unloader = unloader(self.world)
-        self.manager.end_pass(self._x, self._unloader)
+        self.manager.end_pass(self._x)
         self.finished = True
 
     def figures(self):

@@ -70,7 +70,6 @@ import dataclasses
 import functools
 import math
 
-import casadi as ca
 import numpy as np
 
 from ..foundations.errors import ParameterError, ScenarioError
@@ -83,7 +82,7 @@ from ..soil import density, moisture
 from ..vehicles import registry as vehicle_registry
 from ..vehicles.planar import contact_rectangles
 from . import gis
-from .channels import HIST_ROWS, NF, NG, ChannelTerrain
+from .channels import NF, NG, ChannelTerrain
 from .settings import TerrainSettings
 from .soil_map import MAX_SOILS, SoilMap, soil_index
 from .storage import Grid, Terrain, file_geometry
@@ -420,29 +419,6 @@ class World:
         self.qc[:] = 0.0
         self.p_soil[:] = 0.0
         self.counted[:] = False
-
-    def unload_dae(self) -> dict:
-        """The cells-only DAE of the lift (all channels, the load falling linearly to zero over
-        T from the pass end's pressures p_end), time-scaled to [0, 1] over a step of length h:
-        parameters (Q, p_end, t0, h, T, each channel's soil law (5 x n, column-major)). An
-        integrator of it is :meth:`end_pass`'s unloader."""
-        n = self.n_channels
-        fn = self.terrain.fn
-        xc = ca.SX.sym("xc", 2 * n)
-        Q = ca.SX.sym("Q", NG + NF * n)
-        p_end = ca.SX.sym("p_end", n)
-        t0, h, T, tau = ca.SX.sym("t0"), ca.SX.sym("h"), ca.SX.sym("T"), ca.SX.sym("tau")
-        qc = ca.reshape(Q[NG:], NF, n)
-        xm = ca.reshape(xc, 2, n)
-        law = ca.SX.sym("law", self.laws.shape[0], n)  # each channel's soil law (a soil map)
-        hist = ca.vertcat(*(qc[r, :] for r in HIST_ROWS))
-        p = fn["soil"].map(n)(xm[0, :], hist, law)
-        load = p_end.T * ca.fmax(0, 1 - (t0 + h * tau) / T)
-        cellpar = ca.DM([self.params["cell_areal_mass_kg_per_m2"], self.params["cell_damping_Pa_s_per_m"]])
-        d = fn["dynamics"].map(n, [False, False, False, False, True], [False])(xm[1, :], load, p, qc[4, :],
-                                                                              cellpar)
-        return {"t": tau, "x": xc, "p": ca.vertcat(Q, p_end, t0, h, T, ca.vec(law)),
-                "ode": h * ca.reshape(d, 2 * n, 1)}
 
     def fold_pass(self) -> None:
         """At a pass's end: its largest vertical stress into the terrain's record, and the same stress

@@ -136,11 +136,13 @@ class TerrainEngine:
         return np.asarray(x, dtype=float)[model.layout.block("vehicle")]
 
     def end_pass(self, dt_s: float = SETTLE_STEP_S, max_steps: int = 300) -> None:
-        """World.end_pass in the engine: the vehicle lifted off (each active cell's load falls from its
-        reaction at the pass end to zero over LIFT_TIME_S), the cells settle until released (or
+        """The lift-off (grid_engine.c eng_lift, as the IDAS path's ChannelManager.end_pass): the vehicle
+        lifted off (each active cell's load falls from its reaction at the pass end to zero over
+        LIFT_TIME_S), the cells settle until released (or
         max_steps, with a warning), every channel freed; the pass's subsoil maxima folded into the
         terrain's record. The cells are integrated by the engine's own cell step (SDIRK, the exit
-        windows' substep count per step): the same as CVODES over the pool to the tolerance tested."""
+        windows' substep count per step): the same as CVODES over the pool (the tests' oracle) to the
+        tolerance tested."""
         w, s = self.world, self.state
         w.z_at_pass_end = w.storage.z.copy()
         w.peak_active = s.peak_active  # the World's figures report it

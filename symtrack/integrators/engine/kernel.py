@@ -130,6 +130,8 @@ def library(fns):
     lib.eng_lift.restype = ctypes.c_longlong
     lib.eng_static.argtypes = [P]
     lib.eng_static.restype = None
+    lib.eng_slopes.argtypes = [P]
+    lib.eng_slopes.restype = None
     vp = ctypes.c_void_p
     lib.eng_static_cells.argtypes = [P, ctypes.c_longlong, vp, vp, vp, vp, vp]
     lib.eng_static_cells.restype = None
@@ -222,6 +224,11 @@ class CKernel:
         outside = self.lib.eng_surface(ctypes.byref(e), x.ctypes.data, y.ctypes.data, n, cell.ctypes.data,
                                        phase.ctypes.data, out.ctypes.data)
         return int(outside), cell, phase, out
+
+    def slopes(self) -> None:
+        """dp/dz of every active channel at its state into ch_dp (eng_slopes)."""
+        e = self.s.struct()
+        self.lib.eng_slopes(ctypes.byref(e))
 
     def lift(self, p_end, h, T, n, max_steps):
         e = self.s.struct()

@@ -14,8 +14,9 @@ storage, the history in Q, p_soil), :meth:`ChannelManager.check_covered` ``eng_u
 World owns the tables between calls (the engine's state is scratch here), so a World may pass
 between the engine and this path (:meth:`symtrack.integrators.engine.TerrainEngine.sync_world`).
 
-:meth:`ChannelManager.begin_pass` and :meth:`ChannelManager.end_pass` set the vehicle down and lift
-it off on the channel model with any integrator of it."""
+:meth:`ChannelManager.begin_pass` sets the vehicle down (the cells at their static sinkage by the
+engine's rule, eng_static_cells, then settled with any integrator of the channel model) and
+:meth:`ChannelManager.end_pass` lifts it off by the engine's eng_lift."""
 
 from __future__ import annotations
 
@@ -25,8 +26,8 @@ import numpy as np
 
 from ...terrain.channels import HIST_ROWS
 from ...terrain.world import LIFT_TIME_S, World, zero_in_place
-from ..settings import EngineSettings
-from .engine import engine_functions
+from ..settings import EngineSettings, window_substeps
+from .engine import SETTLE_STEP_S, engine_functions
 from .kernel import CKernel, library, static_sinkage_cells
 from .state import EngineState, EngineStruct, array_address, engine_error
 
@@ -190,36 +191,26 @@ class ChannelManager:
         stepper.reset()
         return x
 
-    def end_pass(self, x: np.ndarray, unloader, dt_s: float = 0.01, max_steps: int = 300) -> None:
-        """Lift the vehicle off: each active cell's load falls linearly from its reaction pressure at
-        the end of the pass to zero over LIFT_TIME_S (quasi-statically: a sudden removal would fling
-        the underdamped cells above their unloaded rest, as no tension holds them back), then the
-        cells settle until released; all channels are freed. Cells that have not come to rest
-        within max_steps keep their (stored) state and a warning says so.
-
-        ``unloader(xc, par) -> xc``: the cells-only integrator of :meth:`World.unload_dae` over one
-        step of dt_s (built by :func:`symtrack.integrators.unload.unloader`)."""
-        w = self.world
+    def end_pass(self, x: np.ndarray, dt_s: float = SETTLE_STEP_S, max_steps: int = 300) -> None:
+        """Lift the vehicle off by the engine's rule (grid_engine.c eng_lift, as
+        :meth:`TerrainEngine.end_pass`): each active cell's load falls linearly from its reaction pressure
+        at the end of the pass to zero over LIFT_TIME_S (quasi-statically: a sudden removal would fling
+        the underdamped cells above their unloaded rest, as no tension holds them back), the cells alone
+        by the engine's cell step (SDIRK, the exit windows' substeps), INFO_OUT after every step, until
+        every active cell has let go of the track and come to rest; all channels are then freed. Cells
+        that have not come to rest within max_steps keep their (stored) state and a warning says so."""
+        w, s = self.world, self.state
         self.after_step(x)
         w.z_at_pass_end = w.storage.z.copy()  # the terrain with the vehicle still on it
-        act = np.nonzero(w.channel_cell >= 0)[0]
+        act = self._load(x)
         if act.size:
-            L = w.layout
-            xc = np.array(x[L.block("cells")], dtype=float)
-            p_end = w.p_soil.copy()
-            for k in range(max_steps):
-                t0 = k * dt_s
-                rates = xc[L.cell_index(act, "rate") - L.nv]  # (xc: the cells block)
-                if t0 >= LIFT_TIME_S and np.all((w.p_soil[act] <= 0.0)
-                                                & (np.abs(rates) <= w.settings.release_rate_m_s)):
-                    break
-                par = np.concatenate([w.Q, p_end, [t0, dt_s, LIFT_TIME_S],
-                                      w.laws[:, w.ch_soil].ravel(order="F")])
-                xc = np.asarray(unloader(xc, par), dtype=float).ravel()
-                self.after_step(np.concatenate([x[L.block("vehicle")], xc]))
-            else:
+            self.kernel.slopes()  # dp/dz at the pass end: the cells' first stage starts from it
+            n = window_substeps(s.settings)[1]
+            rc, settled, e = self.kernel.lift(w.p_soil.copy(), dt_s, LIFT_TIME_S, n, max_steps)
+            if rc < 0:
+                raise engine_error(-rc, e, s)
+            if not settled:
                 log.warning("%d cells had not unloaded %g s after the vehicle was lifted; their state is stored",
                             act.size, max_steps * dt_s)
         w.release_all()
         w.fold_pass()
-
