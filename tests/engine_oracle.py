@@ -32,9 +32,19 @@ from symtrack.soil import subsoil
 from symtrack.terrain import query
 from symtrack.terrain.channels import HIST_ROWS, NF, NG
 from symtrack.terrain.world import LIFT_TIME_S
+from symtrack.vehicles.planar import contact_rectangles
 
-__all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "cvodes_end_pass", "outside_tracks", "ringing",
-           "static_sinkage", "unload_dae"]
+__all__ = ["PyErr", "PyKernel", "cells_under", "channel_of", "cvodes_end_pass", "outside_tracks", "rectangles",
+           "ringing", "static_sinkage", "unload_dae"]
+
+
+def rectangles(params, X, Y, psi, pad) -> list[tuple]:
+    """Each track's contact rectangle (the vehicle's, planar.contact_rectangles) at the pose grown by pad,
+    left then right: (centre x, centre y, cos, sin, half length, half width) (grid_engine.c
+    eng_track_rects)."""
+    c, s = math.cos(psi), math.sin(psi)
+    return [(X + c * bx - s * by, Y + s * bx + c * by, c, s, hl + pad, hw + pad)
+            for bx, by, hl, hw in contact_rectangles(params)]
 
 
 def cells_under(world, X, Y, psi, pad, check_field=True) -> np.ndarray:
@@ -44,7 +54,7 @@ def cells_under(world, X, Y, psi, pad, check_field=True) -> np.ndarray:
     dx = g.cell_m
     x0, x1, y0, y1 = g.bounds()
     found = []
-    for cx, cy, c, s, hl, hw in world._rectangles(X, Y, psi, pad):
+    for cx, cy, c, s, hl, hw in rectangles(world.params, X, Y, psi, pad):
         ex = abs(c) * hl + abs(s) * hw
         ey = abs(s) * hl + abs(c) * hw
         if check_field:

@@ -2,6 +2,8 @@
 (:class:`symtrack.integrators.engine.ChannelManager`) run the same C, and the interpreted copies of
 the tests' oracle (tests/engine_oracle.py) agree with it."""
 
+import types
+
 import numpy as np
 from engine_oracle import static_sinkage
 from small_field import small_field
@@ -9,12 +11,21 @@ from small_field import small_field
 from symtrack.integrators.engine import ChannelManager
 from symtrack.simulation.plants import make_plant
 from symtrack.simulation.scenario import scenario_from_dict
+from symtrack.terrain.world import open_world
 
 
 def _plant(integrator: str, **terrain):
     d = small_field(f"rules_{integrator}", run={"integrator": integrator}, terrain=terrain)
     sc = scenario_from_dict(d)
     return sc, make_plant(sc)
+
+
+def _manager(**terrain) -> ChannelManager:
+    """The IDAS path's world manager on the small field (no integrator: a set-down without settling
+    steps none)."""
+    d = small_field("rules_idas", run={"integrator": "idas"}, terrain=terrain)
+    sc = scenario_from_dict(d)
+    return ChannelManager(open_world(sc.terrain, sc.params, sc.model, sc.run.output_dt_s))
 
 
 def test_the_set_down_is_the_engines_rule_on_the_idas_path():
@@ -30,9 +41,9 @@ def test_the_set_down_is_the_engines_rule_on_the_idas_path():
     z_engine = dict(zip(s.ch_cell[act].tolist(), s.ch_z[act].tolist(), strict=True))
     assert len(z_engine) > 50 and max(z_engine.values()) > 5e-4
 
-    _, pi = _plant("idas", settle_s=0.0)
+    mgr = _manager(settle_s=0.0)
     calls = []
-    kernel = pi.manager.kernel
+    kernel = mgr.kernel
     solve = kernel.static_sinkage
 
     def spy(z0, hist, soil, p_load):
@@ -40,9 +51,9 @@ def test_the_set_down_is_the_engines_rule_on_the_idas_path():
         calls.append((np.array(z0), np.array(hist), np.array(soil), np.array(p_load), z.copy()))
         return z
     kernel.static_sinkage = spy
-    x = pi.manager.begin_pass(pi.stepper, *pose)
+    x = mgr.begin_pass(types.SimpleNamespace(reset=lambda: None), *pose)
     assert len(calls) == 1  # the set-down went through the C rule
-    w = pi.world
+    w = mgr.world
     L = w.layout
     held = np.nonzero(w.channel_cell >= 0)[0]
     z_idas = dict(zip(w.channel_cell[held].tolist(), x[L.cell_index(held, "sinkage")].tolist(), strict=True))
@@ -99,3 +110,28 @@ def test_the_lift_off_is_the_engines_rule_on_the_idas_path():
     assert np.max(np.abs(w.storage.zmax - after_engine["zmax"])) < 1e-12 * z.max()
     assert np.array_equal(w.storage.phase, after_engine["phase"])
     assert np.array_equal(w.storage.cycles, after_engine["cycles"])
+
+
+def test_the_footprint_rectangles_are_the_engines_on_the_idas_path_and_the_plots():
+    """The tracks' rectangles that the plots draw (ChannelManager.track_corners) and that the engine's
+    footprint scan visits are grid_engine.c's eng_track_rects: equal bit for bit to the oracle's copy
+    from the vehicle's contact_rectangles, in any heading; and the cells the C finds loaded at a pose
+    with every channel free (eng_uncovered: centres in the rectangles padded by half a cell) are the
+    cells whose centres lie in those rectangles."""
+    from engine_oracle import cells_under, rectangles
+
+    mgr = _manager()
+    w = mgr.world
+    rng = np.random.default_rng(3)
+    for X, Y, psi in zip(rng.uniform(-3, 3, 8), rng.uniform(-0.5, 0.5, 8), rng.uniform(-np.pi, np.pi, 8),
+                         strict=True):
+        for pad in (0.0, 0.5 * w.grid.cell_m):
+            c_rects = mgr.kernel.track_rects(X, Y, psi, pad)
+            assert np.array_equal(c_rects, np.array(rectangles(w.params, X, Y, psi, pad)))
+        for corners, rect in zip(mgr.track_corners(X, Y, psi), rectangles(w.params, X, Y, psi, 0.0), strict=True):
+            assert np.allclose(corners.mean(axis=0), rect[:2], atol=1e-12)
+            assert np.isclose(np.linalg.norm(corners[0] - corners[1]), 2 * rect[4])
+            assert np.isclose(np.linalg.norm(corners[1] - corners[2]), 2 * rect[5])
+        mgr.state.ch_cell[:] = -1
+        n, _ = mgr.kernel.uncovered(X, Y, psi)
+        assert n == cells_under(w, X, Y, psi, 0.5 * w.grid.cell_m, check_field=False).size > 0

@@ -230,23 +230,45 @@ static int ringing(const eng_t *E, long long ch, double plA, double plB, double 
   return d * d + E->areal_mass * ev * ev * ik > tz * tz;
 }
 
-/* ---- geometry: the tracks' rectangles (world.World._rectangles / cells_under) ------------------- */
+/* ---- geometry: the tracks' rectangles (their one home: the IDAS path and the plots read them through
+   eng_track_rects, ChannelManager.track_corners) ----------------------------------------------------- */
+/* track side (0: left, 1: right)'s contact rectangle at the pose (X, Y, psi) with cos c and sin s,
+   grown by pad: its centre (cx, cy), half length hl and half width hw */
+static inline void track_rect(const double *geo, double X, double Y, double c, double s, double pad, int side,
+                              double *cx, double *cy, double *hl, double *hw) {
+  double l = geo[ENG_GEO_CONTACT_LENGTH_M], b = geo[ENG_GEO_TRACK_WIDTH_M], B = geo[ENG_GEO_TRACK_GAUGE_M];
+  double e = geo[ENG_GEO_CG_AHEAD_OF_CONTACT_CENTRE_M];
+  double sg = side == 0 ? 1.0 : -1.0;
+  double bx = -e, by = sg * B / 2;
+  *cx = X + c * bx - s * by;
+  *cy = Y + s * bx + c * by;
+  *hl = l / 2 + pad;
+  *hw = b / 2 + pad;
+}
+
+/* each track's contact rectangle at the pose, grown by pad: out[6 side ..] = (centre x, centre y, cos psi,
+   sin psi, half length, half width), left then right (what scan visits) */
+EXPORT void eng_track_rects(const eng_t *E, double X, double Y, double psi, double pad, double *out) {
+  double c = cos(psi), s = sin(psi);
+  for (int side = 0; side < 2; ++side) {
+    double *r = out + 6 * side;
+    track_rect(E->geo, X, Y, c, s, pad, side, r, r + 1, r + 4, r + 5);
+    r[2] = c;
+    r[3] = s;
+  }
+}
+
 /* fn(E, cell, its channel, ctx): the channel from the sector rule, computed here by rows (no integer
    division per cell) */
 typedef void (*cell_fn)(eng_t *E, long long cell, long long ch, void *ctx);
 
 static int scan(eng_t *E, double X, double Y, double psi, double pad, int check_field, cell_fn fn, void *ctx) {
-  const double *geo = E->geo;
-  double l = geo[ENG_GEO_CONTACT_LENGTH_M], b = geo[ENG_GEO_TRACK_WIDTH_M], B = geo[ENG_GEO_TRACK_GAUGE_M];
-  double e = geo[ENG_GEO_CG_AHEAD_OF_CONTACT_CENTRE_M];
   double c = cos(psi), s = sin(psi);
   double dx = E->dx, x0 = E->x0, y0 = E->y0;
   double x1 = x0 + E->nx * dx, y1 = y0 + E->ny * dx;
   for (int side = 0; side < 2; ++side) {
-    double sg = side == 0 ? 1.0 : -1.0;
-    double bx = -e, by = sg * B / 2;
-    double cx = X + c * bx - s * by, cy = Y + s * bx + c * by;
-    double hl = l / 2 + pad, hw = b / 2 + pad;
+    double cx, cy, hl, hw;
+    track_rect(E->geo, X, Y, c, s, pad, side, &cx, &cy, &hl, &hw);
     double ex = fabs(c) * hl + fabs(s) * hw;
     double ey = fabs(s) * hl + fabs(c) * hw;
     if (check_field) {

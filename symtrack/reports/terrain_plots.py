@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..integrators.engine import ChannelManager
 from ..soil.density import bulk_density
 from .plots import fixed_layout, plt, png_bytes
 from .subsoil_plots import density_map_png, density_passes_png
@@ -140,6 +141,7 @@ def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 6) -> byt
     from matplotlib.patches import Polygon
 
     g = world.grid
+    manager = ChannelManager(world)  # the tracks' rectangles: the engine's (grid_engine.c eng_track_rects)
     si, sj = _window(world, [z_after])
     x0, y0, dx = g.origin_m[0], g.origin_m[1], g.cell_m
     ext = (x0 + si.start * dx, x0 + si.stop * dx, y0 + sj.start * dx, y0 + sj.stop * dx)
@@ -166,7 +168,7 @@ def pass_animation_gif(world, z_before, snapshots, z_after, fps: int = 6) -> byt
             applied[0] += 1
         t, pose, _, _ = snapshots[k]
         im.set_data(1e3 * z.reshape(g.shape)[si, sj].T)
-        for patch, corners in zip(tracks, world.track_corners(*pose), strict=True):
+        for patch, corners in zip(tracks, manager.track_corners(*pose), strict=True):
             patch.set_xy(corners)
         title.set_text(f"t = {t:.2f} s")
         return [im, *tracks, title]

@@ -80,7 +80,6 @@ from ..model.options import ModelOptions
 from ..model.parameters import check_set, known_soil_names, model_param_layout, soil_params
 from ..soil import density, moisture
 from ..vehicles import registry as vehicle_registry
-from ..vehicles.planar import contact_rectangles
 from . import gis
 from .channels import NF, NG, ChannelTerrain
 from .settings import TerrainSettings
@@ -375,22 +374,7 @@ class World:
             st.soil_table = table
         return soils
 
-    # ---- geometry -----------------------------------------------------------------------------
-    def _rectangles(self, X, Y, psi, pad):
-        """Each track's contact rectangle (the vehicle's, planar.contact_rectangles) at the pose, grown by
-        pad: (centre x, centre y, cos, sin, half length, half width)."""
-        c, s = math.cos(psi), math.sin(psi)
-        return [(X + c * bx - s * by, Y + s * bx + c * by, c, s, hl + pad, hw + pad)
-                for bx, by, hl, hw in contact_rectangles(self.params)]
-
-    def track_corners(self, X: float, Y: float, psi: float) -> list[np.ndarray]:
-        """The corners (4, 2) of each track's contact rectangle in world coordinates."""
-        out = []
-        for cx, cy, c, s, hl, hw in self._rectangles(X, Y, psi, 0.0):
-            loc = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
-            out.append(np.column_stack([cx + c * loc[:, 0] - s * loc[:, 1], cy + s * loc[:, 0] + c * loc[:, 1]]))
-        return out
-
+    # ---- cells -----------------------------------------------------------------------------------
     def ij(self, cell: int) -> tuple[int, int]:
         return tuple(int(v) for v in divmod(int(cell), self.grid.shape[1]))
 

@@ -130,6 +130,8 @@ def library(fns):
     lib.eng_lift.restype = ctypes.c_longlong
     lib.eng_static.argtypes = [P]
     lib.eng_static.restype = None
+    lib.eng_track_rects.argtypes = [P, ctypes.c_double, ctypes.c_double, ctypes.c_double, ctypes.c_double, dp]
+    lib.eng_track_rects.restype = None
     lib.eng_slopes.argtypes = [P]
     lib.eng_slopes.restype = None
     vp = ctypes.c_void_p
@@ -224,6 +226,15 @@ class CKernel:
         outside = self.lib.eng_surface(ctypes.byref(e), x.ctypes.data, y.ctypes.data, n, cell.ctypes.data,
                                        phase.ctypes.data, out.ctypes.data)
         return int(outside), cell, phase, out
+
+    def track_rects(self, X: float, Y: float, psi: float, pad: float) -> np.ndarray:
+        """Each track's contact rectangle at the pose grown by pad (eng_track_rects, the rectangles the
+        footprint scan visits): (2, 6) rows (centre x, centre y, cos psi, sin psi, half length, half
+        width), left then right."""
+        out = np.zeros((2, 6))
+        e = self.s.struct()
+        self.lib.eng_track_rects(ctypes.byref(e), float(X), float(Y), float(psi), float(pad), dptr(out))
+        return out
 
     def slopes(self) -> None:
         """dp/dz of every active channel at its state into ch_dp (eng_slopes)."""

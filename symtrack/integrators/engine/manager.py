@@ -150,6 +150,15 @@ class ChannelManager:
         if n:
             raise engine_error(e.err_code, e, s)
 
+    def track_corners(self, X: float, Y: float, psi: float) -> list[np.ndarray]:
+        """The corners (4, 2) of each track's contact rectangle at the pose in world coordinates, left
+        then right: the rectangles of the engine's footprint (grid_engine.c eng_track_rects, unpadded)."""
+        out = []
+        for cx, cy, c, s, hl, hw in self.kernel.track_rects(X, Y, psi, 0.0):
+            loc = np.array([[hl, hw], [-hl, hw], [-hl, -hw], [hl, -hw]])
+            out.append(np.column_stack([cx + c * loc[:, 0] - s * loc[:, 1], cy + s * loc[:, 0] + c * loc[:, 1]]))
+        return out
+
     # ---- passes ------------------------------------------------------------------------------
     def begin_pass(self, stepper, x_m: float, y_m: float, yaw_rad: float, dt_s: float = 0.01) -> np.ndarray:
         """The vehicle at rest at the pose with the cells under it settled: the initial state.
