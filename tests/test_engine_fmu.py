@@ -560,3 +560,34 @@ def test_a_field_file_written_before_the_soil_description_loads_with_the_default
         fieldfile.read_field(bad)
     with pytest.raises(FMICallException):
         _master(exported, sc, 1.0, {"field_file": str(bad)})
+
+
+def test_the_soil_is_a_parameter_and_a_changed_value_runs_as_the_python_engine_does(exported, capsys):
+    """The soil's run-time values are Real parameters with their units and ranges: a soil law coefficient
+    and a traction value set on the FMU give the Python engine's run with the same values in the scenario,
+    bit for bit (the law row computed in the FMU by the law's generated vector); a value outside its range
+    is an fmi2Error."""
+    md = fmpy.read_model_description(str(exported.path))
+    by_name = {v.name: v for v in md.modelVariables}
+    k_phi = by_name["k_phi_N_per_m_n2"]
+    assert k_phi.causality == "parameter" and k_phi.variability == "fixed" and k_phi.unit == "N/m^(n+2)"
+    assert float(k_phi.min) == 0.0 and float(k_phi.max) == 1e12
+    assert float(by_name["bekker_n"].max) == 3.0 and by_name["cohesion_Pa"].unit == "Pa"
+    changed = {"k_phi_N_per_m_n2": 1.2e6, "cohesion_Pa": 2000.0}
+    sc = load_scenario("validation_grid", [*PASS, "run.duration_s=1.0",
+                                           *(f"soil.{k}={v!r}" for k, v in changed.items())])
+    ref = simulate(sc).runs[0]
+    res = _master(exported, sc, 1.0, reals=changed)
+    outs = _outputs(exported.path)
+    assert _worst(res, ref, outs) == dict.fromkeys(outs, 0.0)
+    exported_soil = _master(exported, sc, 1.0)
+    z = exported_soil["sinkage_sprocket_left_m"]
+    assert np.max(np.abs(res["sinkage_sprocket_left_m"] - z)) > 0.1 * np.max(np.abs(z))  # a stiffer soil sinks less
+    slave, vr = _slave(exported)
+    slave.instantiate()
+    try:
+        with pytest.raises(FMICallException):
+            slave.setReal([vr["bekker_n"]], [5.0])
+    finally:
+        slave.freeInstance()
+    assert "bekker_n = 5 is outside its range (0, 3]" in capsys.readouterr().out

@@ -47,6 +47,8 @@ class FmuVariable:
     unit: str  # "1": dimensionless (no unit attribute)
     description: str
     initial: str | None = None
+    low: float | None = None  # the range the modelDescription gives (min, max; None: none)
+    high: float | None = None
 
 
 def xml_number(v: float) -> str:
@@ -76,6 +78,10 @@ def scalar_variable_xml(v) -> list[str]:
     real = [f"unit={quoteattr(v.unit)}"] if v.unit != "1" else []
     if v.start is not None:
         real.append(f'start="{xml_number(v.start)}"')
+    if v.low is not None:
+        real.append(f'min="{xml_number(v.low)}"')
+    if v.high is not None:
+        real.append(f'max="{xml_number(v.high)}"')
     return [f"    <!-- {v.value_reference + 1} -->", f"    <ScalarVariable {' '.join(attrs)}>",
             f"      <Real {' '.join(real)}/>".replace("<Real />", "<Real/>"), "    </ScalarVariable>"]
 
