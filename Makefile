@@ -44,15 +44,15 @@ CC ?= cc
 codegen: $(VENV)/.installed
 	$(PY) -m codegen
 
-build/symtrack_standalone: symtrack/codegen/standalone_main.c generated/homogeneous_rosenbrock.c generated/homogeneous_rosenbrock.h generated/homogeneous_validation.h
+build/symtrack_standalone: symtrack/codegen/standalone_main.c symtrack/native/distance_stop.h generated/homogeneous_rosenbrock.c generated/homogeneous_rosenbrock.h generated/homogeneous_validation.h
 	mkdir -p build
-	$(CC) -O2 -std=c99 -Wall -Igenerated symtrack/codegen/standalone_main.c generated/homogeneous_rosenbrock.c -o $@ -lm
+	$(CC) -O2 -std=c99 -Wall -Igenerated -Isymtrack/native symtrack/codegen/standalone_main.c generated/homogeneous_rosenbrock.c -o $@ -lm
 
 standalone: build/symtrack_standalone
 	./build/symtrack_standalone
 
 # the grid validation (validation_grid, the million-cell field) on the terrain engine, libc and libm only
-build/symtrack_grid_standalone: symtrack/codegen/grid_standalone_main.c symtrack/native/grid_engine.c symtrack/native/subsoil.h symtrack/native/terrain_query.h generated/engine_gen.inc generated/engine_soils.inc generated/grid_validation.h
+build/symtrack_grid_standalone: symtrack/codegen/grid_standalone_main.c symtrack/native/grid_engine.c symtrack/native/subsoil.h symtrack/native/terrain_query.h symtrack/native/distance_stop.h generated/engine_gen.inc generated/engine_soils.inc generated/grid_validation.h
 	mkdir -p build
 	$(CC) -O2 -Wall -Wno-unused-function -Wno-unused-variable -Wno-unused-but-set-variable -Igenerated -Isymtrack/native symtrack/codegen/grid_standalone_main.c -o $@ -lm
 

@@ -2,9 +2,11 @@
 (:class:`symtrack.integrators.engine.ChannelManager`) run the same C, and the interpreted copies of
 the tests' oracle (tests/engine_oracle.py) agree with it."""
 
+import importlib.resources
 import types
 
 import numpy as np
+import pytest
 from engine_oracle import static_sinkage
 from small_field import small_field
 
@@ -135,3 +137,127 @@ def test_the_footprint_rectangles_are_the_engines_on_the_idas_path_and_the_plots
         mgr.state.ch_cell[:] = -1
         n, _ = mgr.kernel.uncovered(X, Y, psi)
         assert n == cells_under(w, X, Y, psi, 0.5 * w.grid.cell_m, check_field=False).size > 0
+
+
+_STOP_CHECK_C = b"""
+#include "distance_stop.h"
+/* a centre of gravity at x = bx + s, y = by + 0.3 s with s = a t^2 / 2 (the test's plant) */
+typedef struct { double a, bx, by, t0; double xy[2]; } path_t;
+static void at(const path_t *p, double t, double *xy) {
+  double s = 0.5 * p->a * t * t;
+  xy[0] = p->bx + s;
+  xy[1] = p->by + 0.3 * s;
+}
+static int retake(void *ctx, double h) {
+  path_t *p = (path_t *)ctx;
+  at(p, p->t0 + h, p->xy);
+  return 0;
+}
+/* the steps (t0[k], h[k]) in turn until the stop: out = (end time, distance, x, y); returns the steps done */
+__attribute__((visibility("default")))
+long long stop_run(double a, double bx, double by, double target, double from_t, long long n, const double *t0,
+                   const double *h, double *out) {
+  path_t p = {a, bx, by, 0.0, {0.0, 0.0}};
+  double dist = 0.0, xy0[2];
+  at(&p, 0.0, xy0);
+  for (long long k = 0; k < n; ++k) {
+    double hk = h[k], t_next = t0[k] + h[k];
+    p.t0 = t0[k];
+    at(&p, t0[k] + h[k], p.xy);
+    int done = distance_stop(&dist, target, from_t, t0[k], &t_next, &hk, xy0, p.xy, retake, &p);
+    xy0[0] = p.xy[0];
+    xy0[1] = p.xy[1];
+    if (done) {
+      out[0] = t_next; out[1] = dist; out[2] = p.xy[0]; out[3] = p.xy[1];
+      return k + 1;
+    }
+  }
+  return -1;
+}
+"""
+
+
+class _PathPlant:
+    """A plant whose centre of gravity follows x = x0 + s, y = y0 + 0.3 s, s = a t^2 / 2, whatever its
+    torques (the distance stop's test); it records the intervals it is asked for."""
+
+    kind = "homogeneous"
+    max_intervals = short_intervals = 1
+    output_names = ()
+
+    def __init__(self, state_names, a):
+        self.state_names, self.a = tuple(state_names), a
+        self.ix, self.iy, self.iu = (self.state_names.index(n) for n in ("x_m", "y_m", "u_m_s"))
+        self.intervals = []
+
+    def _x(self, t):
+        x = np.zeros(len(self.state_names))
+        s = 0.5 * self.a * t * t
+        x[self.ix], x[self.iy], x[self.iu] = self.x0 + s, self.y0 + 0.3 * s, self.a * t
+        return x
+
+    def start(self, x_m, y_m, yaw_rad, u0, state=None):
+        self.x0, self.y0 = x_m, y_m
+        return self._x(0.0), np.zeros(0)
+
+    def synchronize(self, intervals):
+        (self.t0, self.h, _), = intervals
+        self.intervals.append((self.t0, self.h))
+
+    def advance(self):
+        return self._x(self.t0 + self.h)[None, :]
+
+    def retry(self, k, length_s):
+        return self._x(self.t0 + length_s)
+
+    def commit(self, k):
+        return np.zeros((k, 0))
+
+    def finish(self):
+        pass
+
+    def figures(self):
+        return {}
+
+    def stats(self):
+        return {}
+
+
+def test_the_distance_stop_of_the_compiled_runs_is_the_python_loops():
+    """The distance stop's one C copy (symtrack/native/distance_stop.h: the terrain engine's eng_run, the
+    grid and homogeneous standalone programs, the engine FMU) and the Python time loop's (for the plants it
+    steps itself: CVODES, IDAS, the Rosenbrock steppers, which need no compiler) end a run at the same
+    time and place, bit for bit, on a path the secant does not hit exactly."""
+    import ctypes
+
+    from symtrack.simulation import loop
+    from symtrack.simulation.scenario import load_scenario
+    from symtrack.toolchain import BuildSpec, build, digest, find_compiler
+    from symtrack.vehicles.planar import VEHICLE_STATES
+
+    cc = find_compiler()
+    if cc is None:
+        pytest.skip("no C compiler")
+    native = importlib.resources.files("symtrack.native")
+    sources = {"distance_stop.h": native.joinpath("distance_stop.h").read_bytes(), "stop_check.c": _STOP_CHECK_C}
+    so = build(BuildSpec(kind="distance_stop_check", key=digest(*(sources[n] for n in sorted(sources))),
+                         output="libdistance_stop_check.so", sources=lambda: sources,
+                         what="the distance stop's C check"), cc)
+    lib = ctypes.CDLL(str(so))
+    vp = ctypes.c_void_p
+    lib.stop_run.restype = ctypes.c_longlong
+    lib.stop_run.argtypes = [ctypes.c_double] * 5 + [ctypes.c_longlong, vp, vp, vp]
+    for target, a in ((0.5, 0.5), (0.3, 0.7)):
+        sc = load_scenario("validation", [f"run.stop_after_distance_m={target}"])
+        plant = _PathPlant(VEHICLE_STATES, a)
+        res = loop.run(sc, plant)
+        assert res.stopped_by == "distance"
+        t0 = np.array([iv[0] for iv in plant.intervals])
+        h = np.array([iv[1] for iv in plant.intervals])
+        out = np.zeros(4)
+        n = lib.stop_run(a, sc.start.x_m, sc.start.y_m, target, sc.event_time(sc.run.stop_distance_event), t0.size,
+                         t0.ctypes.data, h.ctypes.data, out.ctypes.data)
+        assert n == t0.size  # the C stopped in the interval where Python did
+        assert out[0] == res.t[-1] and res.t[-1] < t0[-1] + h[-1]  # the same shortened step
+        assert (out[2], out[3]) == (res.X[-1, plant.ix], res.X[-1, plant.iy])
+        assert abs(out[1] - target) < 1e-6 * target  # the secant's distance

@@ -410,7 +410,7 @@ def test_cells_in_lanes_equal_one_cell_at_a_time(tmp_path, monkeypatch):
 
     from symtrack.integrators.engine import kernel as engine_kernel
     native = importlib.resources.files("symtrack.native")
-    for name in ("grid_engine.c", "subsoil.h", "terrain_query.h"):
+    for name in ("grid_engine.c", "subsoil.h", "terrain_query.h", "distance_stop.h"):
         (tmp_path / name).write_bytes(native.joinpath(name).read_bytes())
     src = (tmp_path / "grid_engine.c").read_text()
     assert "#define CELL_LANES 8\n" in src

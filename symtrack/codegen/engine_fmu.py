@@ -70,7 +70,7 @@ from .fmu_common import (
     xml_number,
     zip_bytes,
 )
-from .grid_standalone import NATIVE, engine_constants, engine_parts
+from .grid_standalone import NATIVE, NATIVE_FILES, engine_constants, engine_parts
 from .standalone import c_array, c_literal
 
 __all__ = ["ENGINE_FMU_CFLAGS", "ENGINE_INTEGRATOR", "ENGINE_LOG_CATEGORIES", "ENGINE_MODEL_IDENTIFIER",
@@ -89,7 +89,6 @@ ENGINE_LOG_CATEGORIES = ("logStatusError", "logStatusWarning", "logAll")
 ENGINE_FMU_CFLAGS = ("-O2", "-std=c99", "-Wall", "-Wno-unused-function", "-Wno-unused-variable",
                      "-Wno-unused-but-set-variable", "-ffp-contract=off")
 ENGINE_FMU_SHARED_CFLAGS = ("-fPIC", "-fvisibility=hidden")
-NATIVE_FILES = ("grid_engine.c", "subsoil.h", "terrain_query.h")
 START_POSE = ("start_x_m", "start_y_m", "start_yaw_rad")
 FIELD_PARAMETERS = (
     ("field_file", "the field at the start: a raw field file (symtrack terrain convert IN.npz OUT.field; "

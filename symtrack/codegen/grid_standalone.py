@@ -31,12 +31,14 @@ from ..foundations.errors import SimulationError
 from ..native.cache import REPO_GENERATED
 from .standalone import build_program, c_array, c_literal
 
-__all__ = ["CFLAGS", "FILES", "MAIN_C", "NATIVE", "SCENARIO", "build", "engine_constants", "engine_parts", "render",
-           "run"]
+__all__ = ["CFLAGS", "FILES", "MAIN_C", "NATIVE", "NATIVE_FILES", "SCENARIO", "build", "engine_constants",
+           "engine_parts", "render", "run"]
 
 SCENARIO = "validation_grid"
 MAIN_C = Path(__file__).resolve().parent / "grid_standalone_main.c"
 NATIVE = Path(__file__).resolve().parent.parent / "native"
+# the terrain engine's C that the program (and the engine FMU) include, unchanged
+NATIVE_FILES = ("grid_engine.c", "subsoil.h", "terrain_query.h", "distance_stop.h")
 FILES = ("engine_gen.inc", "engine_soils.inc", "grid_validation.h")
 CFLAGS = ("-O2", "-Wall", "-Wno-unused-function", "-Wno-unused-variable", "-Wno-unused-but-set-variable")
 
@@ -162,7 +164,7 @@ def build(src_dir: Path | None = None) -> Path:
     """Compile the grid standalone program from the generated sources in src_dir (default: the
     repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
     src = Path(src_dir) if src_dir else REPO_GENERATED
-    hashed = [*(src / n for n in FILES), NATIVE / "grid_engine.c", NATIVE / "subsoil.h", NATIVE / "terrain_query.h"]
+    hashed = [*(src / n for n in FILES), *(NATIVE / n for n in NATIVE_FILES)]
     return build_program("grid_standalone", MAIN_C, hashed, CFLAGS)
 
 

@@ -98,6 +98,8 @@ def validation_header(model, gen, scenario="validation") -> bytes:
 
 
 MAIN_C = Path(__file__).resolve().parent / "standalone_main.c"
+# the distance stop's one copy in C (the terrain engine's too)
+DISTANCE_STOP_H = Path(__file__).resolve().parent.parent / "native" / "distance_stop.h"
 
 
 def build_program(stem: str, main_c: Path, inputs: list[Path], cflags, extra_units: tuple[str, ...] = ()) -> Path:
@@ -125,7 +127,8 @@ def build_standalone(src_dir: Path | None = None, prefix: str = "homogeneous") -
     repository's generated/) into the cache (keyed by the sources' hash); returns its path."""
     src = Path(src_dir) if src_dir else REPO_GENERATED
     names = [f"{prefix}_{FIXED_STEP}.c", f"{prefix}_{FIXED_STEP}.h", f"{prefix}_validation.h"]
-    return build_program("standalone", MAIN_C, [src / n for n in names], STANDALONE_CFLAGS, (names[0],))
+    return build_program("standalone", MAIN_C, [*(src / n for n in names), DISTANCE_STOP_H], STANDALONE_CFLAGS,
+                         (names[0],))
 
 
 def run_standalone(binary: Path, repeats: int = 1) -> dict:

@@ -1,7 +1,7 @@
 /* symtrack standalone: the validation scenario on the homogeneous terrain in plain C.
  *
  * Links only the generated sources (generated/homogeneous_rosenbrock.c) and libc/libm:
- *   make standalone        (or: cc -O2 -Igenerated symtrack/codegen/standalone_main.c
+ *   make standalone        (or: cc -O2 -Igenerated -Isymtrack/native symtrack/codegen/standalone_main.c
  *                                 generated/homogeneous_rosenbrock.c -lm -o build/symtrack_standalone)
  *   build/symtrack_standalone [repeats]
  *
@@ -22,6 +22,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "distance_stop.h" /* the distance stop (symtrack/native/distance_stop.h, the engine's too) */
 #include "homogeneous_rosenbrock.h"
 #include "homogeneous_validation.h"
 
@@ -56,6 +57,22 @@ static int advance(const double *x0, const double *z0, const double *u, double l
     memcpy(x, xt, sizeof xt);
     memcpy(z, zt, sizeof zt);
   }
+  return 0;
+}
+
+/* an output step from (x, z) taken again over h by the distance stop: its end into (xn, zn), its position
+   into xy; nonzero when a step failed */
+typedef struct {
+  const double *x, *z, *u;
+  double *xn, *zn;
+  double xy[2];
+} retake_t;
+
+static int retake(void *ctx, double h) {
+  retake_t *r = (retake_t *)ctx;
+  if (advance(r->x, r->z, r->u, h, r->xn, r->zn)) return 1;
+  r->xy[0] = r->xn[SYM_I_X_M];
+  r->xy[1] = r->xn[SYM_I_Y_M];
   return 0;
 }
 
@@ -128,22 +145,13 @@ static int run(Summary *s) {
     }
     torque_at(t, u);
     if (advance(x, z, u, t_next - t, xn, zn)) return 1;
-    int done = 0;
-    if (SYM_HAS_STOP_DISTANCE && t_next > SYM_STOP_FROM_T_S + 1e-12) {
-      double d_step = hypot(xn[SYM_I_X_M] - x[SYM_I_X_M], xn[SYM_I_Y_M] - x[SYM_I_Y_M]);
-      if (dist + d_step >= SYM_STOP_DISTANCE_M) {
-        double h = t_next - t;
-        for (int it = 0; it < 3; it++) {
-          if (d_step <= 0) break;
-          h *= (SYM_STOP_DISTANCE_M - dist) / d_step;
-          if (advance(x, z, u, h, xn, zn)) return 1;
-          d_step = hypot(xn[SYM_I_X_M] - x[SYM_I_X_M], xn[SYM_I_Y_M] - x[SYM_I_Y_M]);
-        }
-        t_next = t + h;
-        done = 1;
-      }
-      dist += d_step;
-    }
+    /* the distance stop (distance_stop.h): the output step taken again over the shortened h */
+    double h = t_next - t;
+    retake_t rt = {x, z, u, xn, zn, {xn[SYM_I_X_M], xn[SYM_I_Y_M]}};
+    const double xy0[2] = {x[SYM_I_X_M], x[SYM_I_Y_M]};
+    int done = distance_stop(&dist, SYM_HAS_STOP_DISTANCE ? SYM_STOP_DISTANCE_M : -1.0, SYM_STOP_FROM_T_S, t, &t_next,
+                             &h, xy0, rt.xy, retake, &rt);
+    if (done < 0) return 1;
     double seg = hypot(xn[SYM_I_X_M] - x[SYM_I_X_M], xn[SYM_I_Y_M] - x[SYM_I_Y_M]);
     s->distance_m += seg;
     if (t_next > SYM_STOP_FROM_T_S + 1e-12) s->distance_after_m += seg;

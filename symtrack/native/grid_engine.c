@@ -36,6 +36,7 @@ static inline double eng_fmin_(double x, double y) { return x < y ? x : (y == y 
 #include "engine_soils.inc" /* ENG_LAW_CALL: the law Function a soil's law row runs (generated) */
 #include "subsoil.h" /* the subsoil stress below the tracks (symtrack/soil/subsoil.py) */
 #include "terrain_query.h" /* the ground's height, normal and cell under a point (symtrack/terrain/query.py) */
+#include "distance_stop.h" /* the distance stop (one copy for the compiled runs) */
 
 #define EXPORT __attribute__((visibility("default")))
 #define NV ENG_NV /* generated: engine_soils.inc (grid_engine_model.engine_layout_c) */
@@ -964,6 +965,23 @@ static void cells_geo(int n, const double *cT, const double *a, const double *ge
 #endif
 }
 
+/* the vehicle's step retaken over h by the distance stop (distance_stop.h): its end state into w1, a1 and
+   its position into xy */
+typedef struct {
+  eng_t *E;
+  const double *u;
+  double *w1, *a1;
+  double xy[2];
+} retake_t;
+
+static int vehicle_retake(void *ctx, double h) {
+  retake_t *r = (retake_t *)ctx;
+  vehicle_step(r->E, r->u, h, r->w1, r->a1);
+  r->xy[0] = r->w1[ENG_W_X];
+  r->xy[1] = r->w1[ENG_W_Y];
+  return 0;
+}
+
 /* n macro steps: step k ends at T[k] (the step starts at t0, then at T[k-1]) with the inputs
  * U[2k..2k+1]. dist[0]: distance covered so far, dist[1]: the stop distance (< 0: none), dist[2]:
  * the time from which distance counts. Writes T_out (the step's end time, shortened on the
@@ -989,19 +1007,11 @@ EXPORT int eng_run(eng_t *E, long long n, double t0, const double *T, const doub
     long long c1 = now_ns();
     E->ns_manager += c1 - c0;
     vehicle_step(E, u, h, w1, a1);
-    if (dist[1] >= 0.0 && t_next > dist[2] + 1e-12) {
-      double d_step = hypot(w1[ENG_W_X] - E->wv[ENG_W_X], w1[ENG_W_Y] - E->wv[ENG_W_Y]);
-      if (dist[0] + d_step >= dist[1]) {
-        for (int it = 0; it < 3; ++it) { /* three secant refinements (runner.run) */
-          if (d_step <= 0) break;
-          h *= (dist[1] - dist[0]) / d_step;
-          vehicle_step(E, u, h, w1, a1);
-          d_step = hypot(w1[ENG_W_X] - E->wv[ENG_W_X], w1[ENG_W_Y] - E->wv[ENG_W_Y]);
-        }
-        t_next = t + h;
-        done = 1;
-      }
-      dist[0] += d_step;
+    {
+      /* the distance stop (distance_stop.h): the vehicle's step taken again over the shortened h */
+      retake_t rt = {E, u, w1, a1, {w1[ENG_W_X], w1[ENG_W_Y]}};
+      const double xy0[2] = {E->wv[ENG_W_X], E->wv[ENG_W_Y]};
+      done = distance_stop(dist, dist[1], dist[2], t, &t_next, &h, xy0, rt.xy, vehicle_retake, &rt);
     }
     for (int i = 0; i < NW; ++i) {
       if (!isfinite(w1[i])) {

@@ -97,9 +97,10 @@ def library(fns):
     csrc = resources.files("symtrack.native").joinpath("grid_engine.c").read_bytes()
     hsrc = resources.files("symtrack.native").joinpath("subsoil.h").read_bytes()
     qsrc = resources.files("symtrack.native").joinpath("terrain_query.h").read_bytes()
+    dstop = resources.files("symtrack.native").joinpath("distance_stop.h").read_bytes()
     dsrc = soil_dispatch_c(fns, vehicle_work_sizes(fns)).encode()
     flags, target = native_cflags(cc)
-    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dsrc, casadi_tag(BUILD_VERSION), target)
+    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dstop, dsrc, casadi_tag(BUILD_VERSION), target)
 
     def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-enginegen-") as scratch:
@@ -111,6 +112,7 @@ def library(fns):
         if b"#error" in gen:
             raise SimulationError("the generated engine functions are not exportable (#error in engine_gen.c)")
         return {"engine.c": csrc, "engine_gen.inc": gen, "subsoil.h": hsrc, "terrain_query.h": qsrc,
+                "distance_stop.h": dstop,
                 "engine_soils.inc": dsrc}
 
     so = build(BuildSpec(kind="engine", key=key, output="libsymtrack_engine.so", sources=sources,
