@@ -654,36 +654,17 @@ def soilflex() -> str:
         ["p (mean normal) at the same depths [kPa]", SOILFLEX_PRINTED["p"], " / ".join(f"{v:.1f}" for v in pm)]])
 
 
-@table("arvidsson-2011", "subsoil.md",
-       "symtrack.vehicles.tyre.footprint_stress_at_depth (singles, duals) and symtrack.soil.subsoil.stress_bruteforce "
-       "(tracks), as tests/test_tyre.py::test_arvidsson_2011_tracks_duals_singles (docs/figures.py)")
+@table("arvidsson-2011", "subsoil.md", "symtrack.vehicles.tyre.arvidsson_2011() (docs/figures.py)")
 def arvidsson_2011() -> str:
-    import numpy as np
-
-    from symtrack.soil import subsoil
-    from symtrack.vehicles import tyre as T
+    from symtrack.vehicles import tyre
 
     with _timed("arvidsson 2011"):
-        G = 9.81
-        depths = (0.15, 0.3, 0.5)
-        W = 7700.0 * G / 1e3
-        Wr = 0.6 * W / 2
-        ty = T.Tyre(0.65, 1.85, 4125.0 * G / 1e3, 160.0)
-        ys = np.linspace(-1.0, 1.0, 201)
-        c1 = T.contact(ty, Wr, T.recommended_inflation_kPa(ty, Wr))
-        single, _ = T.footprint_stress_at_depth(c1.x_m, c1.y_m, c1.force_kN, 0 * ys, ys, depths, 5.0)
-        c2 = T.contact(ty, Wr / 2, T.recommended_inflation_kPa(ty, Wr / 2))
-        gap = 0.65 + 0.1
-        x, y = np.concatenate([c2.x_m] * 2), np.concatenate([c2.y_m - gap / 2, c2.y_m + gap / 2])
-        dual, _ = T.footprint_stress_at_depth(x, y, np.concatenate([c2.force_kN] * 2), 0 * ys, ys, depths, 5.0)
-        l, b, B = 2.4, 0.45, 1.5
-        pr = W * 1e3 / (2 * l * b)
-        a, geo = [0, 0, 1, 0, pr, 0, pr, 0], [l, b, B, 0.0, 0.05, 0.05]
-        track = np.array([subsoil.stress_bruteforce(np.zeros(1), np.array([B / 2]), a, geo, d, 5.0)[0]
-                          for d in depths]) / 1e3
-    rows = [[name, *(f"{v:.1f}" for v in vals)]
-            for name, vals in (("single", single.max(axis=0)), ("duals", dual.max(axis=0)), ("tracks", track))]
-    return md(["", *(f"{d:g} m" for d in depths)], rows)
+        r = tyre.arvidsson_2011()
+    rows = [["single", f"{r.single_inflation_kPa:.1f} (inflation)", *(f"{v:.1f}" for v in r.single_kPa)],
+            ["duals", f"{r.duals_inflation_kPa:.1f} (inflation)", *(f"{v:.1f}" for v in r.duals_kPa)],
+            ["tracks", f"{r.track_pressure_kPa:.1f} (uniform)", *(f"{v:.1f}" for v in r.tracks_kPa)],
+            ["tracks / duals", "", *(f"{t / d:.2f}" for t, d in zip(r.tracks_kPa, r.duals_kPa, strict=True))]]
+    return md(["", "pressure [kPa]", *(f"{d:g} m" for d in r.depths_m)], rows)
 
 
 @table("one-soil", "subsoil.md", "python examples/one_soil.py --passes 0")

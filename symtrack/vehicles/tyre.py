@@ -41,10 +41,10 @@ import numpy as np
 from ..foundations import caches
 from ..foundations.errors import ParameterError
 from ..soil import rigid_base
-from ..soil.subsoil import frohlich_point
+from ..soil.subsoil import frohlich_point, stress_bruteforce
 
-__all__ = ["INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "Tyre", "contact", "footprint_stress_at_depth",
-           "footprint_table", "load_capacity_kN", "recommended_inflation_kPa"]
+__all__ = ["INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "TracksDualsSingles", "Tyre", "arvidsson_2011",
+           "contact", "footprint_stress_at_depth", "footprint_table", "load_capacity_kN", "recommended_inflation_kPa"]
 
 # p = p_max (W / W_max)^1.25 (module doc): the tyre-pressure guides' rule
 INFLATION_RULE_EXPONENT = 1.25
@@ -266,6 +266,55 @@ def footprint_table(tyre: Tyre, wheel_load_kN: float, inflation_kPa: float, elem
     sz, pm = footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, X.ravel(), Y.ravel(), depths, xi)
     nd = len(depths)
     return c, FootprintTable(h, depths, float(xi), sz.reshape(n, n, nd), pm.reshape(n, n, nd))
+
+
+@dataclasses.dataclass(frozen=True)
+class TracksDualsSingles:
+    """The largest vertical stress [kPa] at each depth under one machine on single wheels, on dual
+    wheels and on tracks (:func:`arvidsson_2011`), with the pressures it ran at."""
+
+    depths_m: tuple
+    single_kPa: np.ndarray  # (n_depths,), the largest across the wheel
+    duals_kPa: np.ndarray
+    tracks_kPa: np.ndarray  # below a track's centre line
+    single_inflation_kPa: float
+    duals_inflation_kPa: float
+    track_pressure_kPa: float  # uniform over each track's contact
+
+
+def arvidsson_2011(depths_m=(0.15, 0.3, 0.5), xi=5.0) -> TracksDualsSingles:
+    """The comparison of Arvidsson, Westlin, Keller & Gilbertsson (2011), Soil Till. Res. 117:103-109
+    (from its abstract): a 7.7 t tractor on rubber tracks, on single and on dual wheels; measured at
+    0.15, 0.3 and 0.5 m, the tracks' stress about equal to the duals', both below the singles'.
+
+    ASSUMED here (the paper's machine was not read beyond its mass): the rear axle carries 60 % of
+    the weight; 650/65R38 tyres (0.65 m wide, 1.85 m, load index 157: 4125 kg at 160 kPa) at the
+    inflation rule's recommended pressure for their load (:func:`recommended_inflation_kPa`), duals
+    0.1 m apart; the tracks of the reference crawler (2.4 x 0.45 m, gauge 1.5 m) at a uniform
+    pressure carrying the whole weight. The wheels' stress by :func:`footprint_stress_at_depth`
+    across the axle (y in [-1, 1] m, 201 points), the tracks' by
+    :func:`symtrack.soil.subsoil.stress_bruteforce` below a track's centre line. docs/subsoil.md
+    ("Wheeled machines") and tests/test_tyre.py use it."""
+    g = 9.81
+    depths = tuple(float(d) for d in depths_m)
+    W = 7700.0 * g / 1e3  # kN, the whole tractor
+    Wr = 0.6 * W / 2  # kN, a rear wheel's share (single)
+    ty = Tyre(0.65, 1.85, 4125.0 * g / 1e3, 160.0)
+    ys = np.linspace(-1.0, 1.0, 201)
+    p1 = recommended_inflation_kPa(ty, Wr)
+    c1 = contact(ty, Wr, p1)
+    single, _ = footprint_stress_at_depth(c1.x_m, c1.y_m, c1.force_kN, 0 * ys, ys, depths, xi, mean_stress=False)
+    p2 = recommended_inflation_kPa(ty, Wr / 2)
+    c2 = contact(ty, Wr / 2, p2)
+    gap = 0.65 + 0.1  # centre to centre
+    x, y = np.concatenate([c2.x_m] * 2), np.concatenate([c2.y_m - gap / 2, c2.y_m + gap / 2])
+    dual, _ = footprint_stress_at_depth(x, y, np.concatenate([c2.force_kN] * 2), 0 * ys, ys, depths, xi,
+                                        mean_stress=False)
+    length, width, gauge = 2.4, 0.45, 1.5
+    pr = W * 1e3 / (2 * length * width)  # Pa
+    a, geo = [0, 0, 1, 0, pr, 0, pr, 0], [length, width, gauge, 0.0, 0.05, 0.05]
+    track = np.array([stress_bruteforce(np.zeros(1), np.array([gauge / 2]), a, geo, d, xi)[0] for d in depths]) / 1e3
+    return TracksDualsSingles(depths, single.max(axis=0), dual.max(axis=0), track, float(p1), float(p2), pr / 1e3)
 
 
 # bounded by their maxsize; emptied by symtrack.clear_caches() (symtrack.foundations.caches)
