@@ -154,6 +154,66 @@ def pct(new, ref, digits=3) -> str:
 
 
 # ---------------------------------------------------------------------------------------------------------
+# docs/codegen.md: the compiled fixed-step Rosenbrock against CVODES and its observed order
+
+ROSENBROCK_FIGURES = ("distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm",
+                      "sinkage_idler_mm", "shear_driven_max_m", "shear_idle_min_m", "speed_final_m_s", "sim_time_s")
+
+
+@table("rosenbrock-cvodes", "codegen.md", "symtrack simulate validation --integrator rosenbrock|cvodes "
+       "[--set run.reltol=1e-10 --set run.abstol=1e-12] --out DIR")
+def rosenbrock_cvodes() -> str:
+    ref = summary("symtrack simulate validation --integrator cvodes --set run.reltol=1e-10 --set run.abstol=1e-12 "
+                  "--out DIR --quiet")
+    rb = summary("symtrack simulate validation --integrator rosenbrock --out DIR --quiet")
+    rows = [[f"`{k}`", f"{ref[k]:.7g}", f"{rb[k]:.7g}", f"{abs(rb[k] / ref[k] - 1):.1e}" if ref[k] else ""]
+            for k in ROSENBROCK_FIGURES]
+    return md(["figure", "CVODES (reltol 1e-10)", "rosenbrock, 10 ms", "relative difference"], rows)
+
+
+ORDER_STEPS = (4, 8, 16, 32, 64)  # steps over the 0.2 s: h = 50 ... 3.125 ms
+ORDER_REFERENCE = 1000  # h = 0.2 ms
+
+
+@table("rosenbrock-order", "codegen.md",
+       "symtrack.integrators.fixed_step.FixedStepper (rosenbrock) over 0.2 s of the validation run from t = 1 s "
+       "and t = 6 s, inputs held, h = 50 ... 3.125 ms against 0.2 ms (docs/figures.py)")
+def rosenbrock_order() -> str:
+    import numpy as np
+
+    from symtrack.integrators.fixed_step import FixedStepper
+    from symtrack.integrators.settings import IntegratorSettings
+    from symtrack.model import SystemModel
+    from symtrack.simulation import loop
+    from symtrack.simulation.plants import make_plant
+    from symtrack.simulation.scenario import load_scenario
+
+    span, rows = 0.2, []
+    with _timed("rosenbrock order"):
+        sc = load_scenario("validation", ["run.integrator=rosenbrock"])
+        model = SystemModel(sc.model)
+        res = loop.run(sc, make_plant(sc, model=model))
+        p = np.array(model.param_vector(sc.params))
+        scale = np.maximum(np.abs(res.X).max(axis=0), 1e-12)  # each state's range over the run
+        for t0, what in ((1.0, "acceleration (from t = 1 s)"), (6.0, "steady turning (from t = 6 s)")):
+            k = int(np.searchsorted(res.t, t0))
+            x0, u = res.X[k], res.U[k]
+
+            def solve(n, x0=x0, u=u):
+                st = FixedStepper(model, IntegratorSettings("rosenbrock", fixed_step_s=span / n))
+                z0 = np.array(st.lib.f("accel")(x0, u, p)).ravel()
+                return np.array(st.advance(x0, z0, u, p, span)[0]).ravel()
+
+            ref = solve(ORDER_REFERENCE)
+            errs = [float(np.max(np.abs(solve(n) - ref) / scale)) for n in ORDER_STEPS]
+            orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+            rows.append([what, " / ".join(f"{e:.1e}" for e in errs), " / ".join(f"{o:.1f}" for o in orders)])
+    hs = " / ".join(f"{1e3 * span / n:g}" for n in ORDER_STEPS)
+    return md(["0.2 s of the validation run", f"largest error over the states at h = {hs} ms (of each state's "
+               f"range, against h = {1e3 * span / ORDER_REFERENCE:g} ms)", "observed orders between them"], rows)
+
+
+# ---------------------------------------------------------------------------------------------------------
 # docs/scenarios.md
 
 @table("drive-and-coast", "scenarios.md",
