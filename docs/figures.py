@@ -688,6 +688,32 @@ def rigid_base() -> str:
     return md(["h / a", "depth", "half-space", "rough base", "smooth base"], rows)
 
 
+@table("rigid-base-dip", "subsoil.md",
+       "symtrack.soil.subsoil.stress_bruteforce(..., xi, rigid_base_depth_m=0.7) beside one track unit (1.9 x 0.635 m, "
+       "uniform pressure q), 0.4 to 3 m from its centre line (docs/figures.py)")
+def rigid_base_dip() -> str:
+    import numpy as np
+
+    from symtrack.soil import subsoil
+
+    length, width, q, base = 1.9, 0.635, 100e3, 0.7
+    geo = (length, width, width, 0.0, 0.1, 0.0)  # the left track alone is loaded: its centre line at y = width / 2
+    a = np.array([0.0, 0.0, 1.0, 0.0, q, 0.0, 0.0, 0.0])
+    side = np.arange(0.4, 3.0 + 1e-9, 0.05)
+    depths = (0.35, 0.6, base)
+    rows = []
+    with _timed("rigid base dip"):
+        for xi in (3.0, 5.0):
+            cells = []
+            for z in depths:
+                sz = subsoil.stress_bruteforce(np.zeros_like(side), width / 2 + side, a, geo, min(z, base * (1 - 1e-9)),
+                                               xi, rigid_base_depth_m=base) / q
+                i = int(np.argmin(sz))
+                cells.append(f"{sz[i]:+.4f} q at {side[i]:.2f} m" if sz[i] < 0 else f"none (least {sz[i]:.4f} q)")
+            rows.append([f"{xi:g}", *cells])
+    return md(["xi", *(f"depth {z:g} m" + (" (the base)" if z == base else "") for z in depths)], rows)
+
+
 SOILFLEX_PRINTED = {"sigma_max": "289", "area": "0.29 / 0.83", "sigma_z": "275 / 262 / 154 / 85 / 51 / 28",
                     "p": "169 / 132 / 62 / 31 / 18 / 10"}  # soilphysics' README, its worked stressTraffic example
 
@@ -1072,6 +1098,64 @@ def region_two_fidelities() -> str:
         ["CPU time of the field-season [s] (the full's with its tyres' stress tables, built at their first use)",
          f"{a['cpu_time_s']:.2f}", f"{b['cpu_time_s']:.3f}",
          f"{a['cpu_time_s'] / b['cpu_time_s']:.0f}"]])
+
+
+# one field-season of a generated one-field region in a fresh process, as a worker runs it (the fast fidelity,
+# the region's default cells): the process's resident set before the season (imports, region, tables) and
+# its peak during the season (VmHWM reset by /proc/self/clear_refs before it)
+_REGION_HWM = """
+import io, json, sys
+from pathlib import Path
+import numpy as np
+from symtrack.region import demo, study
+from symtrack.region.inputs import load_region
+
+def status(key):
+    with open("/proc/self/status") as f:
+        return 1024.0 * float(next(line.split()[1] for line in f if line.startswith(key + ":")))
+
+folder, length, width = Path(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
+p = demo.write_region(folder, n_fields=1, seed=7, years={2021: 0.0}, length_m=(length, length),
+                      width_m=(width, width))
+spec = load_region(p)
+study.check_plans(spec)
+ctx = study.build_context(spec)
+before = status("VmRSS")
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")
+res = study.field_season(ctx, 0, 2021, None)
+peak = status("VmHWM")
+s = res["summary"]
+with np.load(io.BytesIO(res["files"]["maps.npz"])) as z:
+    shape = z["counts"].shape  # the field's grid
+print(json.dumps({"area_ha": s["area_ha"], "cell_m": s["cell_m"], "shape": list(shape), "before": before,
+                  "peak": peak}))
+"""
+REGION_MEMORY_FIELDS = ((200.0, 180.0), (600.0, 500.0))  # (length, width) [m] of the generated fields
+
+
+@table("region-worker-memory", "region.md",
+       "symtrack.region.study.field_season of a generated one-field region in a fresh process, its VmRSS before "
+       "and VmHWM during the season (docs/figures.py)")
+def region_worker_memory() -> str:
+    if not sys.platform.startswith("linux"):
+        raise RuntimeError("the resident set is read from /proc/self/status: Linux only")
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    rows = []
+    for length, width in REGION_MEMORY_FIELDS:
+        WORK.mkdir(parents=True, exist_ok=True)
+        folder = Path(tempfile.mkdtemp(dir=WORK))
+        with _timed(f"region memory {length:g} x {width:g}"):
+            proc = subprocess.run([sys.executable, "-c", _REGION_HWM, str(folder), str(length), str(width)],
+                                  cwd=ROOT, env=env, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise RuntimeError(f"field_season {length:g} x {width:g} m: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+        d = json.loads(proc.stdout.strip().splitlines()[-1])
+        grid_ha = d["shape"][0] * d["shape"][1] * d["cell_m"] ** 2 / 1e4
+        rows.append([f"{d['area_ha']:.1f} ha", f"{grid_ha:.1f} ha at {d['cell_m']:g} m", f"{d['before'] / 1e9:.2f} GB",
+                     f"{d['peak'] / 1e9:.2f} GB", f"{(d['peak'] - d['before']) / 1e6 / grid_ha:.0f} MB"])
+    return md(["field", "its grid", "the process before the season", "its peak in the season",
+               "peak above before, per hectare of grid"], rows)
 
 
 @table("region-cost-model", "region.md", "symtrack bench region --large --out FILE")
