@@ -740,6 +740,26 @@ def soilflex() -> str:
         ["p (mean normal) at the same depths [kPa]", SOILFLEX_PRINTED["p"], " / ".join(f"{v:.1f}" for v in pm)]])
 
 
+@table("arvidsson-keller-2007", "subsoil.md", "symtrack.vehicles.tyre.arvidsson_keller_2007() (docs/figures.py)")
+def arvidsson_keller_2007() -> str:
+    import numpy as np
+
+    from symtrack.vehicles import tyre
+
+    with _timed("arvidsson keller 2007"):
+        r = tyre.arvidsson_keller_2007()
+    dl = " / ".join(f"{d:g}" for d in r.depths_m)
+    rows, ratios = [], []
+    for W, (b, D) in r.tyres.items():
+        lo, hi = r.peak_kPa[W, 100.0], r.peak_kPa[W, 150.0]
+        ratios.append(lo[0] / 100.0)
+        rows.append([f"{W:g}", f"{b:g} x {D:g}", f"{lo[0] / 100.0:.2f}", " / ".join(f"{v:.1f}" for v in lo),
+                     " / ".join(f"{100 * (h / v - 1):+.0f} %" for h, v in zip(hi, lo, strict=True))])
+    rows.append(["mean", "", f"**{np.mean(ratios):.2f}** (measured: 1.39)", "", ""])
+    return md(["wheel load [kN]", "tyre (ASSUMED) width x diameter [m]", f"peak at {r.depths_m[0]:g} m / 100 kPa",
+               f"peak at {dl} m at 100 kPa [kPa]", "100 -> 150 kPa: the peak's change at the same depths"], rows)
+
+
 @table("arvidsson-2011", "subsoil.md", "symtrack.vehicles.tyre.arvidsson_2011() (docs/figures.py)")
 def arvidsson_2011() -> str:
     from symtrack.vehicles import tyre
@@ -843,6 +863,16 @@ def tracks_wheels() -> str:
                 " / ".join(f"{v:.1f}" for v in m["inflation_kPa_front_rear"]))
         rows.append([label, infl, " / ".join(f"{v:.1f}" for v in m["subsoil_sigma_z_max_kPa"]),
                      " / ".join(f"{v:.3f}" for v in m["bulk_density_max_Mg_per_m3"])])
+
+    def ratio(a, b):
+        return " / ".join(f"{x / y:.2f}" for x, y in zip(d[a]["subsoil_sigma_z_max_kPa"],
+                                                          d[b]["subsoil_sigma_z_max_kPa"], strict=True))
+    sz0 = d["singles"]["subsoil_sigma_z_max_kPa"][0]
+    rows += [["tracks / duals", "", ratio("tracks", "duals"), ""],
+             ["tracks / singles", "", ratio("tracks", "singles"), ""],
+             ["singles at 1.5 x / singles", "", ratio("singles_inflated_1_5", "singles"), ""],
+             ["singles: sigma_z at the first depth / inflation front / rear", "",
+              " / ".join(f"{sz0 / p:.2f}" for p in d["singles"]["inflation_kPa_front_rear"]), ""]]
     dl = " / ".join(f"{x:g}" for x in d["depths_m"])
     return md(["machine", "inflation front / rear [kPa]", f"sigma_z {dl} m", f"rho_b {dl} m"], rows)
 

@@ -43,8 +43,9 @@ from ..foundations.errors import ParameterError
 from ..soil import rigid_base
 from ..soil.subsoil import frohlich_point, stress_bruteforce
 
-__all__ = ["INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "TracksDualsSingles", "Tyre", "arvidsson_2011",
-           "contact", "footprint_stress_at_depth", "footprint_table", "load_capacity_kN", "recommended_inflation_kPa"]
+__all__ = ["ARVIDSSON_KELLER_2007_TYRES", "INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "LoadsAndPressures",
+           "TracksDualsSingles", "Tyre", "arvidsson_2011", "arvidsson_keller_2007", "contact",
+           "footprint_stress_at_depth", "footprint_table", "load_capacity_kN", "recommended_inflation_kPa"]
 
 # p = p_max (W / W_max)^1.25 (module doc): the tyre-pressure guides' rule
 INFLATION_RULE_EXPONENT = 1.25
@@ -266,6 +267,47 @@ def footprint_table(tyre: Tyre, wheel_load_kN: float, inflation_kPa: float, elem
     sz, pm = footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, X.ravel(), Y.ravel(), depths, xi)
     nd = len(depths)
     return c, FootprintTable(h, depths, float(xi), sz.reshape(n, n, nd), pm.reshape(n, n, nd))
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadsAndPressures:
+    """The largest vertical stress [kPa] across a wheel at each depth, per wheel load and inflation
+    pressure (:func:`arvidsson_keller_2007`)."""
+
+    depths_m: tuple
+    tyres: dict  # wheel load [kN] -> (width, diameter) [m], ASSUMED
+    peak_kPa: dict  # (wheel load [kN], inflation [kPa]) -> (n_depths,)
+
+
+# Arvidsson & Keller (2007)'s wheel loads [kN] and the tyre sizes ASSUMED for them (width, diameter [m])
+ARVIDSSON_KELLER_2007_TYRES = {11.0: (0.40, 1.25), 15.0: (0.50, 1.45), 33.0: (0.65, 1.75)}
+
+
+def arvidsson_keller_2007(inflations_kPa=(100.0, 150.0), depths_m=(0.1, 0.3, 0.5, 0.7), xi=5.0) -> LoadsAndPressures:
+    """The loads and pressures of Arvidsson & Keller (2007), Soil Till. Res. 96:284-291 (abstract read):
+    wheel loads 11, 15, 33 kN at 70, 100, 150 kPa; "the maximum stress at 10 cm depth was considerably
+    higher than the inflation pressure (39% on average) and also increased with increasing wheel load";
+    inflation pressure "had a large influence on soil stresses measured at 10 cm depth, ... very little
+    influence in the subsoil (30 cm and deeper). In contrast, wheel load had a very large influence on
+    subsoil stresses."
+
+    The tyres' sizes were not read: ASSUMED sizes growing with the load
+    (:data:`ARVIDSSON_KELLER_2007_TYRES`), each rated so that its recommended pressure at its load is
+    100 kPa (the paper used "the same recommended tyre inflation pressure" for the loads); a pressure
+    below that (70 kPa) is refused by the load rule (:func:`contact` raises). The largest stress across
+    the wheel (y in [-0.4, 0.4] m, 81 points) by :func:`footprint_stress_at_depth`. docs/subsoil.md
+    ("Wheeled machines") and tests/test_tyre.py use it."""
+    depths = tuple(float(d) for d in depths_m)
+    ys = np.linspace(-0.4, 0.4, 81)
+    peaks = {}
+    for W, (b, D) in ARVIDSSON_KELLER_2007_TYRES.items():
+        ty = Tyre(b, D, W * (240.0 / 100.0) ** 0.8, 240.0)  # rated at 240 kPa: p_rec = 100 kPa at W
+        for p in inflations_kPa:
+            c = contact(ty, W, float(p))
+            sz, _ = footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, np.zeros_like(ys), ys, depths, xi,
+                                              mean_stress=False)
+            peaks[(W, float(p))] = sz.max(axis=0)
+    return LoadsAndPressures(depths, dict(ARVIDSSON_KELLER_2007_TYRES), peaks)
 
 
 @dataclasses.dataclass(frozen=True)
