@@ -1021,6 +1021,26 @@ def lane_keeping() -> str:
          f"{100 * base['whole_pass']['new_sinkage_outside_fraction']:.0f} %"]])
 
 
+def _modes_of(command: str) -> dict[str, list[str]]:
+    """The eigenvalues of a `symtrack linearize ... --out DIR` run by the reading of its modes.md."""
+    _, folder = run(command)
+    modes: dict[str, list[str]] = {}
+    for line in md_tables((folder / "modes.md").read_text(encoding="utf-8"))[0].splitlines()[2:]:
+        eig, _, _, reading, _ = (c.strip() for c in line.strip("|").split("|"))
+        modes.setdefault(reading, []).append(eig.replace("±", "+-"))
+    return modes
+
+
+@table("linearization-creep", "control.md", "symtrack linearize --speed 2 [--radius 20] --set model.lateral_law=creep "
+       "--out DIR (DIR/modes.md; sandy loam, the default soil)")
+def linearization_creep() -> str:
+    base = "symtrack linearize --speed 2 --set model.lateral_law=creep"
+    straight, turn = _modes_of(f"{base} --out DIR"), _modes_of(f"{base} --radius 20 --out DIR")
+    rows = [[reading, ", ".join(straight.get(reading, [])) or "-", ", ".join(turn.get(reading, [])) or "-"]
+            for reading in dict.fromkeys([*straight, *turn])]
+    return md(["mode (modes.md's reading)", "straight running [1/s]", "20 m turn [1/s]"], rows)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # docs/region.md: `symtrack bench region --large` (the full fidelity's seasons, then the fast twins, 1 against 2
 # workers, a 1,000 ha region)
