@@ -554,6 +554,19 @@ def flat_ground_3d() -> str:
     return md(["figure", "planar", "3D, 8 segments", "3D, 16"], rows)
 
 
+@table("side-slope-3d", "vehicle3d.md", "python examples/side_slope_3d.py")
+def side_slope_3d() -> str:
+    d = run_json("python examples/side_slope_3d.py")
+    rows = []
+    for name, r in d.items():
+        p0, p1 = r["pitch_deg_range"]
+        rows.append([name, f"{r['distance_m']:.1f} m", f"{r['drift_y_m']:.3f} m", f"{r['roll_deg_final']:.2f} deg",
+                     f"{p0:.1f} .. {p1:.1f} deg", f"{100 * r['load_share_right_final']:.1f} %",
+                     f"{r['sinkage_sprocket_right_mm']:.2f} / {r['sinkage_sprocket_left_mm']:.2f} mm"])
+    return md(["run (8 s, 1500 N m a sprocket)", "distance", "drift in y", "roll at the end", "pitch range",
+               "lower (right) track's share of W at the end", "sprocket sinkage right / left at the end"], rows)
+
+
 @table("ramp-3d", "vehicle3d.md", "python examples/ramp_3d.py")
 def ramp_3d() -> str:
     d = run_json("python examples/ramp_3d.py")
