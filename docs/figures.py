@@ -490,6 +490,22 @@ def _probe_without_size(probe: Path) -> str:
     return str(p)
 
 
+@table("multipass-deepening", "terrain.md", "symtrack simulate multipass --out DIR (its summary's passes)")
+def multipass_deepening() -> str:
+    from symtrack.presets import soil_preset
+
+    s = summary("symtrack simulate multipass --out DIR --quiet")
+    beta = soil_preset("clayey_soil_thailand_38")["repeated_loading_exponent"]
+    first = s["passes"][0]["new_sinkage_mean_mm"]
+    rows = []
+    for k, p in enumerate(s["passes"], start=1):
+        new = p["new_sinkage_mean_mm"]
+        rows.append([k, f"{new:.4f}", f"{100 * new / first:.1f} %", f"{100 * (k ** beta - (k - 1) ** beta):.1f} %",
+                     f"{p['rut_mean_depth_mm']:.3f}", f"{p['rut_max_depth_mm']:.3f}"])
+    return md(["pass", "new sinkage, mean [mm]", "of pass 1's", f"closed form k^beta - (k-1)^beta (beta = {beta:g})",
+               "rut mean after it [mm]", "rut max [mm]"], rows)
+
+
 GRID_FIGURES = (("distance after idle (m)", "distance_after_idle_m"), ("lateral deviation (m)", "lateral_deviation_m"),
                 ("yaw final (deg)", "yaw_final_deg"), ("sinkage sprocket (mm)", "sinkage_sprocket_mm"),
                 ("sinkage idler (mm)", "sinkage_idler_mm"), ("shear driven max (m)", "shear_driven_max_m"),
