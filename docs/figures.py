@@ -915,6 +915,28 @@ def kroulik_seasons() -> str:
     return md_tables(out)[0]
 
 
+KROULIK_VARIANTS = (("as built (line offsets up to 0.5 m)", ""), ("line offsets 0", " --random-offset 0"),
+                    ("line offsets up to 1.0 m", " --random-offset 1.0"),
+                    ("ploughing and harvest across the field", " --across ploughing harvest"),
+                    ("a 1 ha field (100 m x 100 m)", " --size 100 100"),
+                    ("a 20 ha field (500 m x 400 m at 0.2 m cells)", " --size 500 400 --cell 0.2"))
+
+
+@table("kroulik-sensitivity", "studies.md", "python examples/kroulik_seasons.py [--random-offset M] [--across ...] "
+       "[--size X Y] [--cell C] (each row's)")
+def kroulik_sensitivity() -> str:
+    rows, systems = [], None
+    for label, opts in KROULIK_VARIANTS:
+        out, _ = run(f"python examples/kroulik_seasons.py{opts}")
+        lines = md_tables(out)[0].splitlines()
+        head = [c.strip() for c in lines[0].strip("|").split("|")]
+        col = head.index("run over >= 1x")
+        cells = [[c.strip() for c in ln.strip("|").split("|")] for ln in lines[2:]]
+        systems = systems or [c[0] for c in cells]
+        rows.append([label, *(c[col] for c in cells)])
+    return md(["variant (`--` options of the example)", *(f"{name}: run over >= 1x" for name in systems)], rows)
+
+
 def _thousands(n: int) -> str:
     return f"{n:,}".replace(",", " ")
 
