@@ -583,6 +583,102 @@ def side_slope_3d() -> str:
                "lower (right) track's share of W at the end", "sprocket sinkage right / left at the end"], rows)
 
 
+@table("mpc-side-slope-3d", "vehicle3d.md", "python examples/mpc_side_slope_3d.py --slope-deg 8")
+def mpc_side_slope_3d() -> str:
+    d = run_json("python examples/mpc_side_slope_3d.py --slope-deg 8")
+    return md(["figure", "the MPC (RTI)", "open loop (the start's trim torques held)"], [
+        ["distance, time", f"{d['distance_m']:.1f} m, {d['time_s']:.1f} s", f"{d['open_loop_distance_m']:.1f} m"],
+        ["failed solves / solves (fallbacks)", f"{d['failed_solves']} / {d['solves']} ({d['fallback_solves']})", ""],
+        ["lateral error: RMS / max", f"{1e3 * d['rms_lateral_error_m']:.2f} / {1e3 * d['max_lateral_error_m']:.2f} mm",
+         f"drift downhill {d['open_loop_drift_downhill_m']:.3f} m"],
+        ["last half: normal load lower (right) / upper (left) track",
+         f"{d['normal_load_right_last_half_N'] / 1e3:.2f} / {d['normal_load_left_last_half_N'] / 1e3:.2f} kN", ""],
+        ["last half: roll", f"{d['roll_last_half_deg']:.3f} deg", ""],
+        ["last half: torque lower (right) / upper (left) sprocket",
+         f"{d['torque_right_last_half_N_m']:+.0f} / {d['torque_left_last_half_N_m']:+.0f} N m", ""]])
+
+
+GRID3D_FIGURES = (("distance [m]", "distance_m"), ("lateral deviation [m]", "lateral_deviation_m"),
+                  ("yaw [deg]", "yaw_final_deg"), ("final speed [m/s]", "speed_final_m_s"),
+                  ("driven shear, max [m]", "shear_driven_max_m"), ("idle shear, min [m]", "shear_idle_min_m"),
+                  ("idler sinkage [mm]", "sinkage_idler_mm"), ("sprocket sinkage [mm]", "sinkage_sprocket_mm"))
+
+
+@table("grid-3d", "vehicle3d.md", "symtrack simulate validation|validation_grid --set model.vehicle=3d "
+       "[--set terrain.surface.slope_y_deg=5] --out DIR")
+def grid_3d() -> str:
+    runs = {}
+    for slope in ("", " --set terrain.surface.slope_y_deg=5"):
+        for name in ("validation", "validation_grid"):
+            runs[name, slope] = summary(f"symtrack simulate {name} --set model.vehicle=3d{slope} --out DIR --quiet")
+    rows = []
+    for label, k in GRID3D_FIGURES:
+        cells = [label]
+        for slope in ("", " --set terrain.surface.slope_y_deg=5"):
+            h, g = runs["validation", slope][k], runs["validation_grid", slope][k]
+            cells += [f"{h:.6g}", f"{g:.6g}", pct(g, h, 2)]
+        rows.append(cells)
+    return md(["figure", "homogeneous 3D", "grid 3D", "difference", "5 deg side slope: homogeneous", "grid",
+               "difference"], rows)
+
+
+HILL_TOML = """name = "hill"
+description = "The 3D crawler past a Gaussian hill on an elevation raster"
+
+[run]
+duration_s = 6.0
+integrator = "cvodes"
+
+[vehicle]
+preset = "reference_crawler"
+
+[soil]
+preset = "clayey_soil_thailand_38"
+
+[model]
+vehicle = "3d"
+lateral_law = "creep"
+
+[terrain.surface]
+elevation_file = "hill.npy"
+elevation_cell_m = 0.1
+elevation_origin_m = [-4.0, -5.0]
+
+[[torque]]
+t_s = 0.0
+left_N_m = 1500.0
+right_N_m = 1500.0
+"""
+HILL_RUNS = (("CVODES, reltol 1e-6 (the file's)", ""), ("CVODES, reltol 1e-8", " --set run.reltol=1e-8"),
+             ("rosenbrock, 10 ms, its error control off", " --integrator rosenbrock --set run.fixed_step_tolerance=0"),
+             ("rosenbrock, 10 ms (its default: the error control on)", " --integrator rosenbrock"),
+             ("rosenbrock, 5 ms", " --integrator rosenbrock --set run.fixed_step_s=0.005"),
+             ("rosenbrock, 2.5 ms", " --integrator rosenbrock --set run.fixed_step_s=0.0025"))
+
+
+@table("hill-raster", "vehicle3d.md", "symtrack simulate hill.toml [--integrator rosenbrock] [--set ...] --out DIR "
+       "(the page's hill.npy and hill.toml; each row's options)")
+def hill_raster() -> str:
+    import numpy as np
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    folder = WORK / "hill"
+    folder.mkdir(exist_ok=True)
+    px, (x0, y0), (nx, ny) = 0.1, (-4.0, -5.0), (300, 100)  # as the page writes it
+    X, Y = np.meshgrid(x0 + (np.arange(nx) + 0.5) * px, y0 + (np.arange(ny) + 0.5) * px, indexing="ij")
+    np.save(folder / "hill.npy", 0.3 * np.exp(-((X - 10) ** 2 + (Y - 1.0) ** 2) / (2 * 2.0**2)))
+    (folder / "hill.toml").write_text(HILL_TOML, encoding="utf-8")
+    rows = []
+    for label, opts in HILL_RUNS:
+        s = summary(f"symtrack simulate {folder / 'hill.toml'}{opts} --out DIR --quiet")
+        rows.append([label, f"{s['distance_m']:.2f} m", f"{s['speed_final_m_s']:.2f} m/s",
+                     f"{s['lateral_deviation_m']:.4f} m", f"{s['yaw_final_deg']:.3f} deg",
+                     f"{s['sinkage_sprocket_mm']:.1f} / {s['sinkage_idler_mm']:.1f} mm",
+                     str(s.get("fixed_step_steps_halved", "")) if "rosenbrock" in opts else ""])
+    return md(["integrator", "distance", "final speed", "lateral deviation", "yaw", "largest sinkage sprocket / idler",
+               "steps halved"], rows)
+
+
 @table("ramp-3d", "vehicle3d.md", "python examples/ramp_3d.py")
 def ramp_3d() -> str:
     d = run_json("python examples/ramp_3d.py")
