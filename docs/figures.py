@@ -289,8 +289,13 @@ def steady_turns() -> str:
 
 def _modes(law: str) -> dict[str, list[str]]:
     """The eigenvalues of `symtrack linearize` at the clay's 10 m, 2 m/s turn, by the reading of its modes.md."""
-    _, folder = run(f"symtrack linearize --speed 2 --radius 10 --soil clayey_soil_thailand_38 "
-                    f"--set model.lateral_law={law} --out DIR")
+    return _modes_of(f"symtrack linearize --speed 2 --radius 10 --soil clayey_soil_thailand_38 "
+                     f"--set model.lateral_law={law} --out DIR")
+
+
+def _modes_of(command: str) -> dict[str, list[str]]:
+    """The eigenvalues of a `symtrack linearize ... --out DIR` run by the reading of its modes.md."""
+    _, folder = run(command)
     modes: dict[str, list[str]] = {}
     for line in md_tables((folder / "modes.md").read_text(encoding="utf-8"))[0].splitlines()[2:]:
         eig, _, _, reading, _ = (c.strip() for c in line.strip("|").split("|"))
@@ -1166,16 +1171,6 @@ def lane_keeping() -> str:
         ["new sinkage outside pass 1's ruts, whole pass",
          f"{100 * p2['whole_pass']['new_sinkage_outside_fraction']:.0f} %",
          f"{100 * base['whole_pass']['new_sinkage_outside_fraction']:.0f} %"]])
-
-
-def _modes_of(command: str) -> dict[str, list[str]]:
-    """The eigenvalues of a `symtrack linearize ... --out DIR` run by the reading of its modes.md."""
-    _, folder = run(command)
-    modes: dict[str, list[str]] = {}
-    for line in md_tables((folder / "modes.md").read_text(encoding="utf-8"))[0].splitlines()[2:]:
-        eig, _, _, reading, _ = (c.strip() for c in line.strip("|").split("|"))
-        modes.setdefault(reading, []).append(eig.replace("±", "+-"))
-    return modes
 
 
 @table("linearization-creep", "control.md", "symtrack linearize --speed 2 [--radius 20] --set model.lateral_law=creep "
