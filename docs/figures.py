@@ -154,6 +154,66 @@ def pct(new, ref, digits=3) -> str:
 
 
 # ---------------------------------------------------------------------------------------------------------
+# docs/codegen.md: the compiled fixed-step Rosenbrock against CVODES and its observed order
+
+ROSENBROCK_FIGURES = ("distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_sprocket_mm",
+                      "sinkage_idler_mm", "shear_driven_max_m", "shear_idle_min_m", "speed_final_m_s", "sim_time_s")
+
+
+@table("rosenbrock-cvodes", "codegen.md", "symtrack simulate validation --integrator rosenbrock|cvodes "
+       "[--set run.reltol=1e-10 --set run.abstol=1e-12] --out DIR")
+def rosenbrock_cvodes() -> str:
+    ref = summary("symtrack simulate validation --integrator cvodes --set run.reltol=1e-10 --set run.abstol=1e-12 "
+                  "--out DIR --quiet")
+    rb = summary("symtrack simulate validation --integrator rosenbrock --out DIR --quiet")
+    rows = [[f"`{k}`", f"{ref[k]:.7g}", f"{rb[k]:.7g}", f"{abs(rb[k] / ref[k] - 1):.1e}" if ref[k] else ""]
+            for k in ROSENBROCK_FIGURES]
+    return md(["figure", "CVODES (reltol 1e-10)", "rosenbrock, 10 ms", "relative difference"], rows)
+
+
+ORDER_STEPS = (4, 8, 16, 32, 64)  # steps over the 0.2 s: h = 50 ... 3.125 ms
+ORDER_REFERENCE = 1000  # h = 0.2 ms
+
+
+@table("rosenbrock-order", "codegen.md",
+       "symtrack.integrators.fixed_step.FixedStepper (rosenbrock) over 0.2 s of the validation run from t = 1 s "
+       "and t = 6 s, inputs held, h = 50 ... 3.125 ms against 0.2 ms (docs/figures.py)")
+def rosenbrock_order() -> str:
+    import numpy as np
+
+    from symtrack.integrators.fixed_step import FixedStepper
+    from symtrack.integrators.settings import IntegratorSettings
+    from symtrack.model import SystemModel
+    from symtrack.simulation import loop
+    from symtrack.simulation.plants import make_plant
+    from symtrack.simulation.scenario import load_scenario
+
+    span, rows = 0.2, []
+    with _timed("rosenbrock order"):
+        sc = load_scenario("validation", ["run.integrator=rosenbrock"])
+        model = SystemModel(sc.model)
+        res = loop.run(sc, make_plant(sc, model=model))
+        p = np.array(model.param_vector(sc.params))
+        scale = np.maximum(np.abs(res.X).max(axis=0), 1e-12)  # each state's range over the run
+        for t0, what in ((1.0, "acceleration (from t = 1 s)"), (6.0, "steady turning (from t = 6 s)")):
+            k = int(np.searchsorted(res.t, t0))
+            x0, u = res.X[k], res.U[k]
+
+            def solve(n, x0=x0, u=u):
+                st = FixedStepper(model, IntegratorSettings("rosenbrock", fixed_step_s=span / n))
+                z0 = np.array(st.lib.f("accel")(x0, u, p)).ravel()
+                return np.array(st.advance(x0, z0, u, p, span)[0]).ravel()
+
+            ref = solve(ORDER_REFERENCE)
+            errs = [float(np.max(np.abs(solve(n) - ref) / scale)) for n in ORDER_STEPS]
+            orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+            rows.append([what, " / ".join(f"{e:.1e}" for e in errs), " / ".join(f"{o:.1f}" for o in orders)])
+    hs = " / ".join(f"{1e3 * span / n:g}" for n in ORDER_STEPS)
+    return md(["0.2 s of the validation run", f"largest error over the states at h = {hs} ms (of each state's "
+               f"range, against h = {1e3 * span / ORDER_REFERENCE:g} ms)", "observed orders between them"], rows)
+
+
+# ---------------------------------------------------------------------------------------------------------
 # docs/scenarios.md
 
 @table("drive-and-coast", "scenarios.md",
@@ -229,8 +289,13 @@ def steady_turns() -> str:
 
 def _modes(law: str) -> dict[str, list[str]]:
     """The eigenvalues of `symtrack linearize` at the clay's 10 m, 2 m/s turn, by the reading of its modes.md."""
-    _, folder = run(f"symtrack linearize --speed 2 --radius 10 --soil clayey_soil_thailand_38 "
-                    f"--set model.lateral_law={law} --out DIR")
+    return _modes_of(f"symtrack linearize --speed 2 --radius 10 --soil clayey_soil_thailand_38 "
+                     f"--set model.lateral_law={law} --out DIR")
+
+
+def _modes_of(command: str) -> dict[str, list[str]]:
+    """The eigenvalues of a `symtrack linearize ... --out DIR` run by the reading of its modes.md."""
+    _, folder = run(command)
     modes: dict[str, list[str]] = {}
     for line in md_tables((folder / "modes.md").read_text(encoding="utf-8"))[0].splitlines()[2:]:
         eig, _, _, reading, _ = (c.strip() for c in line.strip("|").split("|"))
@@ -430,6 +495,22 @@ def _probe_without_size(probe: Path) -> str:
     return str(p)
 
 
+@table("multipass-deepening", "terrain.md", "symtrack simulate multipass --out DIR (its summary's passes)")
+def multipass_deepening() -> str:
+    from symtrack.presets import soil_preset
+
+    s = summary("symtrack simulate multipass --out DIR --quiet")
+    beta = soil_preset("clayey_soil_thailand_38")["repeated_loading_exponent"]
+    first = s["passes"][0]["new_sinkage_mean_mm"]
+    rows = []
+    for k, p in enumerate(s["passes"], start=1):
+        new = p["new_sinkage_mean_mm"]
+        rows.append([k, f"{new:.4f}", f"{100 * new / first:.1f} %", f"{100 * (k ** beta - (k - 1) ** beta):.1f} %",
+                     f"{p['rut_mean_depth_mm']:.3f}", f"{p['rut_max_depth_mm']:.3f}"])
+    return md(["pass", "new sinkage, mean [mm]", "of pass 1's", f"closed form k^beta - (k-1)^beta (beta = {beta:g})",
+               "rut mean after it [mm]", "rut max [mm]"], rows)
+
+
 GRID_FIGURES = (("distance after idle (m)", "distance_after_idle_m"), ("lateral deviation (m)", "lateral_deviation_m"),
                 ("yaw final (deg)", "yaw_final_deg"), ("sinkage sprocket (mm)", "sinkage_sprocket_mm"),
                 ("sinkage idler (mm)", "sinkage_idler_mm"), ("shear driven max (m)", "shear_driven_max_m"),
@@ -492,6 +573,115 @@ def flat_ground_3d() -> str:
             cells.append(f"{v:.5g} ({100 * (v / ref - 1):+.2f} %)" if rel else f"{v:.5g}")
         rows.append([label, *cells])
     return md(["figure", "planar", "3D, 8 segments", "3D, 16"], rows)
+
+
+@table("side-slope-3d", "vehicle3d.md", "python examples/side_slope_3d.py")
+def side_slope_3d() -> str:
+    d = run_json("python examples/side_slope_3d.py")
+    rows = []
+    for name, r in d.items():
+        p0, p1 = r["pitch_deg_range"]
+        rows.append([name, f"{r['distance_m']:.1f} m", f"{r['drift_y_m']:.3f} m", f"{r['roll_deg_final']:.2f} deg",
+                     f"{p0:.1f} .. {p1:.1f} deg", f"{100 * r['load_share_right_final']:.1f} %",
+                     f"{r['sinkage_sprocket_right_mm']:.2f} / {r['sinkage_sprocket_left_mm']:.2f} mm"])
+    return md(["run (8 s, 1500 N m a sprocket)", "distance", "drift in y", "roll at the end", "pitch range",
+               "lower (right) track's share of W at the end", "sprocket sinkage right / left at the end"], rows)
+
+
+@table("mpc-side-slope-3d", "vehicle3d.md", "python examples/mpc_side_slope_3d.py --slope-deg 8")
+def mpc_side_slope_3d() -> str:
+    d = run_json("python examples/mpc_side_slope_3d.py --slope-deg 8")
+    return md(["figure", "the MPC (RTI)", "open loop (the start's trim torques held)"], [
+        ["distance, time", f"{d['distance_m']:.1f} m, {d['time_s']:.1f} s", f"{d['open_loop_distance_m']:.1f} m"],
+        ["failed solves / solves (fallbacks)", f"{d['failed_solves']} / {d['solves']} ({d['fallback_solves']})", ""],
+        ["lateral error: RMS / max", f"{1e3 * d['rms_lateral_error_m']:.2f} / {1e3 * d['max_lateral_error_m']:.2f} mm",
+         f"drift downhill {d['open_loop_drift_downhill_m']:.3f} m"],
+        ["last half: normal load lower (right) / upper (left) track",
+         f"{d['normal_load_right_last_half_N'] / 1e3:.2f} / {d['normal_load_left_last_half_N'] / 1e3:.2f} kN", ""],
+        ["last half: roll", f"{d['roll_last_half_deg']:.3f} deg", ""],
+        ["last half: torque lower (right) / upper (left) sprocket",
+         f"{d['torque_right_last_half_N_m']:+.0f} / {d['torque_left_last_half_N_m']:+.0f} N m", ""]])
+
+
+GRID3D_FIGURES = (("distance [m]", "distance_m"), ("lateral deviation [m]", "lateral_deviation_m"),
+                  ("yaw [deg]", "yaw_final_deg"), ("final speed [m/s]", "speed_final_m_s"),
+                  ("driven shear, max [m]", "shear_driven_max_m"), ("idle shear, min [m]", "shear_idle_min_m"),
+                  ("idler sinkage [mm]", "sinkage_idler_mm"), ("sprocket sinkage [mm]", "sinkage_sprocket_mm"))
+
+
+@table("grid-3d", "vehicle3d.md", "symtrack simulate validation|validation_grid --set model.vehicle=3d "
+       "[--set terrain.surface.slope_y_deg=5] --out DIR")
+def grid_3d() -> str:
+    runs = {}
+    for slope in ("", " --set terrain.surface.slope_y_deg=5"):
+        for name in ("validation", "validation_grid"):
+            runs[name, slope] = summary(f"symtrack simulate {name} --set model.vehicle=3d{slope} --out DIR --quiet")
+    rows = []
+    for label, k in GRID3D_FIGURES:
+        cells = [label]
+        for slope in ("", " --set terrain.surface.slope_y_deg=5"):
+            h, g = runs["validation", slope][k], runs["validation_grid", slope][k]
+            cells += [f"{h:.6g}", f"{g:.6g}", pct(g, h, 2)]
+        rows.append(cells)
+    return md(["figure", "homogeneous 3D", "grid 3D", "difference", "5 deg side slope: homogeneous", "grid",
+               "difference"], rows)
+
+
+HILL_TOML = """name = "hill"
+description = "The 3D crawler past a Gaussian hill on an elevation raster"
+
+[run]
+duration_s = 6.0
+integrator = "cvodes"
+
+[vehicle]
+preset = "reference_crawler"
+
+[soil]
+preset = "clayey_soil_thailand_38"
+
+[model]
+vehicle = "3d"
+lateral_law = "creep"
+
+[terrain.surface]
+elevation_file = "hill.npy"
+elevation_cell_m = 0.1
+elevation_origin_m = [-4.0, -5.0]
+
+[[torque]]
+t_s = 0.0
+left_N_m = 1500.0
+right_N_m = 1500.0
+"""
+HILL_RUNS = (("CVODES, reltol 1e-6 (the file's)", ""), ("CVODES, reltol 1e-8", " --set run.reltol=1e-8"),
+             ("rosenbrock, 10 ms, its error control off", " --integrator rosenbrock --set run.fixed_step_tolerance=0"),
+             ("rosenbrock, 10 ms (its default: the error control on)", " --integrator rosenbrock"),
+             ("rosenbrock, 5 ms", " --integrator rosenbrock --set run.fixed_step_s=0.005"),
+             ("rosenbrock, 2.5 ms", " --integrator rosenbrock --set run.fixed_step_s=0.0025"))
+
+
+@table("hill-raster", "vehicle3d.md", "symtrack simulate hill.toml [--integrator rosenbrock] [--set ...] --out DIR "
+       "(the page's hill.npy and hill.toml; each row's options)")
+def hill_raster() -> str:
+    import numpy as np
+
+    WORK.mkdir(parents=True, exist_ok=True)
+    folder = WORK / "hill"
+    folder.mkdir(exist_ok=True)
+    px, (x0, y0), (nx, ny) = 0.1, (-4.0, -5.0), (300, 100)  # as the page writes it
+    X, Y = np.meshgrid(x0 + (np.arange(nx) + 0.5) * px, y0 + (np.arange(ny) + 0.5) * px, indexing="ij")
+    np.save(folder / "hill.npy", 0.3 * np.exp(-((X - 10) ** 2 + (Y - 1.0) ** 2) / (2 * 2.0**2)))
+    (folder / "hill.toml").write_text(HILL_TOML, encoding="utf-8")
+    rows = []
+    for label, opts in HILL_RUNS:
+        s = summary(f"symtrack simulate {folder / 'hill.toml'}{opts} --out DIR --quiet")
+        rows.append([label, f"{s['distance_m']:.2f} m", f"{s['speed_final_m_s']:.2f} m/s",
+                     f"{s['lateral_deviation_m']:.4f} m", f"{s['yaw_final_deg']:.3f} deg",
+                     f"{s['sinkage_sprocket_mm']:.1f} / {s['sinkage_idler_mm']:.1f} mm",
+                     str(s.get("fixed_step_steps_halved", "")) if "rosenbrock" in opts else ""])
+    return md(["integrator", "distance", "final speed", "lateral deviation", "yaw", "largest sinkage sprocket / idler",
+               "steps halved"], rows)
 
 
 @table("ramp-3d", "vehicle3d.md", "python examples/ramp_3d.py")
@@ -628,6 +818,32 @@ def rigid_base() -> str:
     return md(["h / a", "depth", "half-space", "rough base", "smooth base"], rows)
 
 
+@table("rigid-base-dip", "subsoil.md",
+       "symtrack.soil.subsoil.stress_bruteforce(..., xi, rigid_base_depth_m=0.7) beside one track unit (1.9 x 0.635 m, "
+       "uniform pressure q), 0.4 to 3 m from its centre line (docs/figures.py)")
+def rigid_base_dip() -> str:
+    import numpy as np
+
+    from symtrack.soil import subsoil
+
+    length, width, q, base = 1.9, 0.635, 100e3, 0.7
+    geo = (length, width, width, 0.0, 0.1, 0.0)  # the left track alone is loaded: its centre line at y = width / 2
+    a = np.array([0.0, 0.0, 1.0, 0.0, q, 0.0, 0.0, 0.0])
+    side = np.arange(0.4, 3.0 + 1e-9, 0.05)
+    depths = (0.35, 0.6, base)
+    rows = []
+    with _timed("rigid base dip"):
+        for xi in (3.0, 5.0):
+            cells = []
+            for z in depths:
+                sz = subsoil.stress_bruteforce(np.zeros_like(side), width / 2 + side, a, geo, min(z, base * (1 - 1e-9)),
+                                               xi, rigid_base_depth_m=base) / q
+                i = int(np.argmin(sz))
+                cells.append(f"{sz[i]:+.4f} q at {side[i]:.2f} m" if sz[i] < 0 else f"none (least {sz[i]:.4f} q)")
+            rows.append([f"{xi:g}", *cells])
+    return md(["xi", *(f"depth {z:g} m" + (" (the base)" if z == base else "") for z in depths)], rows)
+
+
 SOILFLEX_PRINTED = {"sigma_max": "289", "area": "0.29 / 0.83", "sigma_z": "275 / 262 / 154 / 85 / 51 / 28",
                     "p": "169 / 132 / 62 / 31 / 18 / 10"}  # soilphysics' README, its worked stressTraffic example
 
@@ -654,36 +870,37 @@ def soilflex() -> str:
         ["p (mean normal) at the same depths [kPa]", SOILFLEX_PRINTED["p"], " / ".join(f"{v:.1f}" for v in pm)]])
 
 
-@table("arvidsson-2011", "subsoil.md",
-       "symtrack.vehicles.tyre.footprint_stress_at_depth (singles, duals) and symtrack.soil.subsoil.stress_bruteforce "
-       "(tracks), as tests/test_tyre.py::test_arvidsson_2011_tracks_duals_singles (docs/figures.py)")
-def arvidsson_2011() -> str:
+@table("arvidsson-keller-2007", "subsoil.md", "symtrack.vehicles.tyre.arvidsson_keller_2007() (docs/figures.py)")
+def arvidsson_keller_2007() -> str:
     import numpy as np
 
-    from symtrack.soil import subsoil
-    from symtrack.vehicles import tyre as T
+    from symtrack.vehicles import tyre
+
+    with _timed("arvidsson keller 2007"):
+        r = tyre.arvidsson_keller_2007()
+    dl = " / ".join(f"{d:g}" for d in r.depths_m)
+    rows, ratios = [], []
+    for W, (b, D) in r.tyres.items():
+        lo, hi = r.peak_kPa[W, 100.0], r.peak_kPa[W, 150.0]
+        ratios.append(lo[0] / 100.0)
+        rows.append([f"{W:g}", f"{b:g} x {D:g}", f"{lo[0] / 100.0:.2f}", " / ".join(f"{v:.1f}" for v in lo),
+                     " / ".join(f"{100 * (h / v - 1):+.0f} %" for h, v in zip(hi, lo, strict=True))])
+    rows.append(["mean", "", f"**{np.mean(ratios):.2f}** (measured: 1.39)", "", ""])
+    return md(["wheel load [kN]", "tyre (ASSUMED) width x diameter [m]", f"peak at {r.depths_m[0]:g} m / 100 kPa",
+               f"peak at {dl} m at 100 kPa [kPa]", "100 -> 150 kPa: the peak's change at the same depths"], rows)
+
+
+@table("arvidsson-2011", "subsoil.md", "symtrack.vehicles.tyre.arvidsson_2011() (docs/figures.py)")
+def arvidsson_2011() -> str:
+    from symtrack.vehicles import tyre
 
     with _timed("arvidsson 2011"):
-        G = 9.81
-        depths = (0.15, 0.3, 0.5)
-        W = 7700.0 * G / 1e3
-        Wr = 0.6 * W / 2
-        ty = T.Tyre(0.65, 1.85, 4125.0 * G / 1e3, 160.0)
-        ys = np.linspace(-1.0, 1.0, 201)
-        c1 = T.contact(ty, Wr, T.recommended_inflation_kPa(ty, Wr))
-        single, _ = T.footprint_stress_at_depth(c1.x_m, c1.y_m, c1.force_kN, 0 * ys, ys, depths, 5.0)
-        c2 = T.contact(ty, Wr / 2, T.recommended_inflation_kPa(ty, Wr / 2))
-        gap = 0.65 + 0.1
-        x, y = np.concatenate([c2.x_m] * 2), np.concatenate([c2.y_m - gap / 2, c2.y_m + gap / 2])
-        dual, _ = T.footprint_stress_at_depth(x, y, np.concatenate([c2.force_kN] * 2), 0 * ys, ys, depths, 5.0)
-        l, b, B = 2.4, 0.45, 1.5
-        pr = W * 1e3 / (2 * l * b)
-        a, geo = [0, 0, 1, 0, pr, 0, pr, 0], [l, b, B, 0.0, 0.05, 0.05]
-        track = np.array([subsoil.stress_bruteforce(np.zeros(1), np.array([B / 2]), a, geo, d, 5.0)[0]
-                          for d in depths]) / 1e3
-    rows = [[name, *(f"{v:.1f}" for v in vals)]
-            for name, vals in (("single", single.max(axis=0)), ("duals", dual.max(axis=0)), ("tracks", track))]
-    return md(["", *(f"{d:g} m" for d in depths)], rows)
+        r = tyre.arvidsson_2011()
+    rows = [["single", f"{r.single_inflation_kPa:.1f} (inflation)", *(f"{v:.1f}" for v in r.single_kPa)],
+            ["duals", f"{r.duals_inflation_kPa:.1f} (inflation)", *(f"{v:.1f}" for v in r.duals_kPa)],
+            ["tracks", f"{r.track_pressure_kPa:.1f} (uniform)", *(f"{v:.1f}" for v in r.tracks_kPa)],
+            ["tracks / duals", "", *(f"{t / d:.2f}" for t, d in zip(r.tracks_kPa, r.duals_kPa, strict=True))]]
+    return md(["", "pressure [kPa]", *(f"{d:g} m" for d in r.depths_m)], rows)
 
 
 @table("one-soil", "subsoil.md", "python examples/one_soil.py --passes 0")
@@ -776,6 +993,16 @@ def tracks_wheels() -> str:
                 " / ".join(f"{v:.1f}" for v in m["inflation_kPa_front_rear"]))
         rows.append([label, infl, " / ".join(f"{v:.1f}" for v in m["subsoil_sigma_z_max_kPa"]),
                      " / ".join(f"{v:.3f}" for v in m["bulk_density_max_Mg_per_m3"])])
+
+    def ratio(a, b):
+        return " / ".join(f"{x / y:.2f}" for x, y in zip(d[a]["subsoil_sigma_z_max_kPa"],
+                                                          d[b]["subsoil_sigma_z_max_kPa"], strict=True))
+    sz0 = d["singles"]["subsoil_sigma_z_max_kPa"][0]
+    rows += [["tracks / duals", "", ratio("tracks", "duals"), ""],
+             ["tracks / singles", "", ratio("tracks", "singles"), ""],
+             ["singles at 1.5 x / singles", "", ratio("singles_inflated_1_5", "singles"), ""],
+             ["singles: sigma_z at the first depth / inflation front / rear", "",
+              " / ".join(f"{sz0 / p:.2f}" for p in d["singles"]["inflation_kPa_front_rear"]), ""]]
     dl = " / ".join(f"{x:g}" for x in d["depths_m"])
     return md(["machine", "inflation front / rear [kPa]", f"sigma_z {dl} m", f"rho_b {dl} m"], rows)
 
@@ -787,6 +1014,28 @@ def tracks_wheels() -> str:
 def kroulik_seasons() -> str:
     out, _ = run("python examples/kroulik_seasons.py")
     return md_tables(out)[0]
+
+
+KROULIK_VARIANTS = (("as built (line offsets up to 0.5 m)", ""), ("line offsets 0", " --random-offset 0"),
+                    ("line offsets up to 1.0 m", " --random-offset 1.0"),
+                    ("ploughing and harvest across the field", " --across ploughing harvest"),
+                    ("a 1 ha field (100 m x 100 m)", " --size 100 100"),
+                    ("a 20 ha field (500 m x 400 m at 0.2 m cells)", " --size 500 400 --cell 0.2"))
+
+
+@table("kroulik-sensitivity", "studies.md", "python examples/kroulik_seasons.py [--random-offset M] [--across ...] "
+       "[--size X Y] [--cell C] (each row's)")
+def kroulik_sensitivity() -> str:
+    rows, systems = [], None
+    for label, opts in KROULIK_VARIANTS:
+        out, _ = run(f"python examples/kroulik_seasons.py{opts}")
+        lines = md_tables(out)[0].splitlines()
+        head = [c.strip() for c in lines[0].strip("|").split("|")]
+        col = head.index("run over >= 1x")
+        cells = [[c.strip() for c in ln.strip("|").split("|")] for ln in lines[2:]]
+        systems = systems or [c[0] for c in cells]
+        rows.append([label, *(c[col] for c in cells)])
+    return md(["variant (`--` options of the example)", *(f"{name}: run over >= 1x" for name in systems)], rows)
 
 
 def _thousands(n: int) -> str:
@@ -924,6 +1173,16 @@ def lane_keeping() -> str:
          f"{100 * base['whole_pass']['new_sinkage_outside_fraction']:.0f} %"]])
 
 
+@table("linearization-creep", "control.md", "symtrack linearize --speed 2 [--radius 20] --set model.lateral_law=creep "
+       "--out DIR (DIR/modes.md; sandy loam, the default soil)")
+def linearization_creep() -> str:
+    base = "symtrack linearize --speed 2 --set model.lateral_law=creep"
+    straight, turn = _modes_of(f"{base} --out DIR"), _modes_of(f"{base} --radius 20 --out DIR")
+    rows = [[reading, ", ".join(straight.get(reading, [])) or "-", ", ".join(turn.get(reading, [])) or "-"]
+            for reading in dict.fromkeys([*straight, *turn])]
+    return md(["mode (modes.md's reading)", "straight running [1/s]", "20 m turn [1/s]"], rows)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # docs/region.md: `symtrack bench region --large` (the full fidelity's seasons, then the fast twins, 1 against 2
 # workers, a 1,000 ha region)
@@ -1031,6 +1290,64 @@ def region_two_fidelities() -> str:
         ["CPU time of the field-season [s] (the full's with its tyres' stress tables, built at their first use)",
          f"{a['cpu_time_s']:.2f}", f"{b['cpu_time_s']:.3f}",
          f"{a['cpu_time_s'] / b['cpu_time_s']:.0f}"]])
+
+
+# one field-season of a generated one-field region in a fresh process, as a worker runs it (the fast fidelity,
+# the region's default cells): the process's resident set before the season (imports, region, tables) and
+# its peak during the season (VmHWM reset by /proc/self/clear_refs before it)
+_REGION_HWM = """
+import io, json, sys
+from pathlib import Path
+import numpy as np
+from symtrack.region import demo, study
+from symtrack.region.inputs import load_region
+
+def status(key):
+    with open("/proc/self/status") as f:
+        return 1024.0 * float(next(line.split()[1] for line in f if line.startswith(key + ":")))
+
+folder, length, width = Path(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3])
+p = demo.write_region(folder, n_fields=1, seed=7, years={2021: 0.0}, length_m=(length, length),
+                      width_m=(width, width))
+spec = load_region(p)
+study.check_plans(spec)
+ctx = study.build_context(spec)
+before = status("VmRSS")
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")
+res = study.field_season(ctx, 0, 2021, None)
+peak = status("VmHWM")
+s = res["summary"]
+with np.load(io.BytesIO(res["files"]["maps.npz"])) as z:
+    shape = z["counts"].shape  # the field's grid
+print(json.dumps({"area_ha": s["area_ha"], "cell_m": s["cell_m"], "shape": list(shape), "before": before,
+                  "peak": peak}))
+"""
+REGION_MEMORY_FIELDS = ((200.0, 180.0), (600.0, 500.0))  # (length, width) [m] of the generated fields
+
+
+@table("region-worker-memory", "region.md",
+       "symtrack.region.study.field_season of a generated one-field region in a fresh process, its VmRSS before "
+       "and VmHWM during the season (docs/figures.py)")
+def region_worker_memory() -> str:
+    if not sys.platform.startswith("linux"):
+        raise RuntimeError("the resident set is read from /proc/self/status: Linux only")
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    rows = []
+    for length, width in REGION_MEMORY_FIELDS:
+        WORK.mkdir(parents=True, exist_ok=True)
+        folder = Path(tempfile.mkdtemp(dir=WORK))
+        with _timed(f"region memory {length:g} x {width:g}"):
+            proc = subprocess.run([sys.executable, "-c", _REGION_HWM, str(folder), str(length), str(width)],
+                                  cwd=ROOT, env=env, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise RuntimeError(f"field_season {length:g} x {width:g} m: exit {proc.returncode}\n{proc.stderr[-2000:]}")
+        d = json.loads(proc.stdout.strip().splitlines()[-1])
+        grid_ha = d["shape"][0] * d["shape"][1] * d["cell_m"] ** 2 / 1e4
+        rows.append([f"{d['area_ha']:.1f} ha", f"{grid_ha:.1f} ha at {d['cell_m']:g} m", f"{d['before'] / 1e9:.2f} GB",
+                     f"{d['peak'] / 1e9:.2f} GB", f"{(d['peak'] - d['before']) / 1e6 / grid_ha:.0f} MB"])
+    return md(["field", "its grid", "the process before the season", "its peak in the season",
+               "peak above before, per hectare of grid"], rows)
 
 
 @table("region-cost-model", "region.md", "symtrack bench region --large --out FILE")

@@ -170,6 +170,17 @@ def test_no_table_of_results_is_typed_by_hand():
     assert used == set(REFERENCE_TABLES), f"REFERENCE_TABLES entries no page has: {set(REFERENCE_TABLES) - used}"
 
 
+def test_the_constants_the_prose_quotes_are_the_codes():
+    """A constant of the package that a page quotes in its prose (with its name and file) is the one
+    the code holds: the memory estimate's parts (docs/terrain.md, "Memory")."""
+    from symtrack.terrain import world
+
+    text = (DOCS / "terrain.md").read_text(encoding="utf-8")
+    assert f"- {world.RUN_BYTES_PER_CELL} bytes per cell (`RUN_BYTES_PER_CELL` of `symtrack/terrain/world.py`" in text
+    assert f"- {world.RUN_FIXED_BYTES / 1e6:g} MB (`RUN_FIXED_BYTES`" in text
+    assert f"{world.PASS_BYTES_PER_CELL} bytes per cell and pass" in text
+
+
 def test_the_changelog_has_one_entry_per_release():
     text = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
     import tomllib

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from symtrack.foundations.errors import ParameterError
-from symtrack.soil import subsoil
 from symtrack.vehicles import tyre as T
 
 G = 9.81
@@ -49,69 +48,40 @@ def test_load_rule_refusals():
         T.Tyre(1.5, 1.85, 40.0, 160.0)
 
 
-# Arvidsson & Keller (2007), Soil Till. Res. 96:284-291 (abstract read): wheel loads 11, 15, 33 kN
-# at 70, 100, 150 kPa; "the maximum stress at 10 cm depth was considerably higher than the inflation
-# pressure (39% on average) and also increased with increasing wheel load"; inflation pressure "had a
-# large influence on soil stresses measured at 10 cm depth, ... very little influence in the subsoil
-# (30 cm and deeper). In contrast, wheel load had a very large influence on subsoil stresses."
-# The tyres' sizes were not read: ASSUMED sizes growing with the load, each rated so that its
-# recommended pressure at its load is 100 kPa (the paper used "the same recommended tyre
-# inflation pressure" for the loads). 70 kPa is below that and refused by the load rule.
-AK_TYRES = {11.0: (0.40, 1.25), 15.0: (0.50, 1.45), 33.0: (0.65, 1.75)}
-DEPTHS = (0.1, 0.3, 0.5, 0.7)
-
-
-def _peak(W, p, xi=5.0):
-    b, D = AK_TYRES[W]
-    ty = T.Tyre(b, D, W * (240.0 / 100.0) ** 0.8, 240.0)
-    c = T.contact(ty, W, p)
-    ys = np.linspace(-0.4, 0.4, 81)
-    sz, _ = T.footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, np.zeros_like(ys), ys, DEPTHS, xi)
-    return sz.max(axis=0)
-
-
 def test_arvidsson_keller_2007():
-    peaks = {(W, p): _peak(W, p) for W in AK_TYRES for p in (100.0, 150.0)}
-    ratio = [peaks[W, 100.0][0] / 100.0 for W in AK_TYRES]
+    """Arvidsson & Keller (2007), Soil Till. Res. 96:284-291 (abstract read): the peak at 0.1 m 39 %
+    above the inflation pressure on average; the inflation pressure felt at 0.1 m, hardly at 0.3 m and
+    below; the load dominating the subsoil. The case and its ASSUMED tyres:
+    symtrack.vehicles.tyre.arvidsson_keller_2007 (docs/subsoil.md shows its figures)."""
+    r = T.arvidsson_keller_2007()
+    loads = list(r.tyres)
+    peaks = r.peak_kPa
+    ratio = [peaks[W, 100.0][0] / 100.0 for W in loads]
     # at the recommended pressure the peak at 0.1 m is above the inflation pressure; the mean ratio
-    # (1.23 here) against the measured 1.39 on average
+    # against the measured 1.39 on average
     assert min(ratio) > 1.05 and 1.1 < np.mean(ratio) < 1.7
     assert peaks[33.0, 100.0][0] > peaks[15.0, 100.0][0] and peaks[33.0, 100.0][0] > peaks[11.0, 100.0][0]
-    for W in AK_TYRES:
+    for W in loads:
         change = peaks[W, 150.0] / peaks[W, 100.0] - 1.0
         assert change[0] > 0.10  # the topsoil feels the inflation pressure
         assert change[1] < 0.08 and np.all(change[2:] < 0.05)  # the subsoil hardly
     assert peaks[33.0, 100.0][2] > 2.0 * peaks[11.0, 100.0][2]  # the load dominates at 0.5 m
     with pytest.raises(ParameterError, match="wheel_load_kN"):
-        _peak(33.0, 70.0)
+        T.arvidsson_keller_2007(inflations_kPa=(70.0,))
 
 
 def test_arvidsson_2011_tracks_duals_singles():
-    """Arvidsson, Westlin, Keller, Gilbertsson (2011), Soil Till. Res. 117:103-109 (from
-    its abstract): a 7.7 t tractor on rubber tracks, single and dual wheels, stress
-    at 0.15, 0.3, 0.5 m: tracks about equal to duals, below singles. ASSUMED here: the rear axle
-    carries 60 % of the weight; 650/65R38 tyres (0.65 m, 1.85 m, load index 157: 4125 kg at
-    160 kPa) at the rule's recommended pressure, duals 0.1 m apart; the tracks of the reference
-    crawler (2.4 x 0.45 m, gauge 1.5 m) at a uniform pressure."""
-    depths = (0.15, 0.3, 0.5)
-    W = 7700.0 * G / 1e3
-    Wr = 0.6 * W / 2
-    ty = T.Tyre(0.65, 1.85, 4125.0 * G / 1e3, 160.0)
-    ys = np.linspace(-1.0, 1.0, 201)
-    c1 = T.contact(ty, Wr, T.recommended_inflation_kPa(ty, Wr))
-    single, _ = T.footprint_stress_at_depth(c1.x_m, c1.y_m, c1.force_kN, 0 * ys, ys, depths, 5.0)
-    c2 = T.contact(ty, Wr / 2, T.recommended_inflation_kPa(ty, Wr / 2))
-    gap = 0.65 + 0.1
-    x, y = np.concatenate([c2.x_m] * 2), np.concatenate([c2.y_m - gap / 2, c2.y_m + gap / 2])
-    dual, _ = T.footprint_stress_at_depth(x, y, np.concatenate([c2.force_kN] * 2), 0 * ys, ys, depths, 5.0)
-    l, b, B = 2.4, 0.45, 1.5
-    pr = W * 1e3 / (2 * l * b)
-    a, geo = [0, 0, 1, 0, pr, 0, pr, 0], [l, b, B, 0.0, 0.05, 0.05]
-    track = np.array([subsoil.stress_bruteforce(np.zeros(1), np.array([B / 2]), a, geo, d, 5.0)[0]
-                      for d in depths]) / 1e3
-    single, dual = single.max(axis=0), dual.max(axis=0)
+    """Arvidsson, Westlin, Keller, Gilbertsson (2011), Soil Till. Res. 117:103-109 (from its abstract):
+    a 7.7 t tractor's stress at 0.15, 0.3, 0.5 m, tracks about equal to duals, below singles. The case
+    and its ASSUMED machine: symtrack.vehicles.tyre.arvidsson_2011 (docs/subsoil.md shows its figures)."""
+    r = T.arvidsson_2011()
+    assert r.depths_m == (0.15, 0.3, 0.5)
+    single, dual, track = r.single_kPa, r.duals_kPa, r.tracks_kPa
     assert np.all(track < 0.8 * single) and np.all(dual < 0.8 * single)
     assert np.all(track / dual > 0.6) and np.all(track / dual < 1.1)
+    # the duals at the lower pressure their half load allows; the tracks carry the whole weight
+    assert r.duals_inflation_kPa < r.single_inflation_kPa
+    assert r.track_pressure_kPa == pytest.approx(7700.0 * G / (2 * 2.4 * 0.45) / 1e3, rel=1e-12)
 
 
 def test_soilflex_worked_example_as_soilphysics_prints_it():

@@ -41,10 +41,11 @@ import numpy as np
 from ..foundations import caches
 from ..foundations.errors import ParameterError
 from ..soil import rigid_base
-from ..soil.subsoil import frohlich_point
+from ..soil.subsoil import frohlich_point, stress_bruteforce
 
-__all__ = ["INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "Tyre", "contact", "footprint_stress_at_depth",
-           "footprint_table", "load_capacity_kN", "recommended_inflation_kPa"]
+__all__ = ["ARVIDSSON_KELLER_2007_TYRES", "INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "LoadsAndPressures",
+           "TracksDualsSingles", "Tyre", "arvidsson_2011", "arvidsson_keller_2007", "contact",
+           "footprint_stress_at_depth", "footprint_table", "load_capacity_kN", "recommended_inflation_kPa"]
 
 # p = p_max (W / W_max)^1.25 (module doc): the tyre-pressure guides' rule
 INFLATION_RULE_EXPONENT = 1.25
@@ -266,6 +267,96 @@ def footprint_table(tyre: Tyre, wheel_load_kN: float, inflation_kPa: float, elem
     sz, pm = footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, X.ravel(), Y.ravel(), depths, xi)
     nd = len(depths)
     return c, FootprintTable(h, depths, float(xi), sz.reshape(n, n, nd), pm.reshape(n, n, nd))
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadsAndPressures:
+    """The largest vertical stress [kPa] across a wheel at each depth, per wheel load and inflation
+    pressure (:func:`arvidsson_keller_2007`)."""
+
+    depths_m: tuple
+    tyres: dict  # wheel load [kN] -> (width, diameter) [m], ASSUMED
+    peak_kPa: dict  # (wheel load [kN], inflation [kPa]) -> (n_depths,)
+
+
+# Arvidsson & Keller (2007)'s wheel loads [kN] and the tyre sizes ASSUMED for them (width, diameter [m])
+ARVIDSSON_KELLER_2007_TYRES = {11.0: (0.40, 1.25), 15.0: (0.50, 1.45), 33.0: (0.65, 1.75)}
+
+
+def arvidsson_keller_2007(inflations_kPa=(100.0, 150.0), depths_m=(0.1, 0.3, 0.5, 0.7), xi=5.0) -> LoadsAndPressures:
+    """The loads and pressures of Arvidsson & Keller (2007), Soil Till. Res. 96:284-291 (abstract read):
+    wheel loads 11, 15, 33 kN at 70, 100, 150 kPa; "the maximum stress at 10 cm depth was considerably
+    higher than the inflation pressure (39% on average) and also increased with increasing wheel load";
+    inflation pressure "had a large influence on soil stresses measured at 10 cm depth, ... very little
+    influence in the subsoil (30 cm and deeper). In contrast, wheel load had a very large influence on
+    subsoil stresses."
+
+    The tyres' sizes were not read: ASSUMED sizes growing with the load
+    (:data:`ARVIDSSON_KELLER_2007_TYRES`), each rated so that its recommended pressure at its load is
+    100 kPa (the paper used "the same recommended tyre inflation pressure" for the loads); a pressure
+    below that (70 kPa) is refused by the load rule (:func:`contact` raises). The largest stress across
+    the wheel (y in [-0.4, 0.4] m, 81 points) by :func:`footprint_stress_at_depth`. docs/subsoil.md
+    ("Wheeled machines") and tests/test_tyre.py use it."""
+    depths = tuple(float(d) for d in depths_m)
+    ys = np.linspace(-0.4, 0.4, 81)
+    peaks = {}
+    for W, (b, D) in ARVIDSSON_KELLER_2007_TYRES.items():
+        ty = Tyre(b, D, W * (240.0 / 100.0) ** 0.8, 240.0)  # rated at 240 kPa: p_rec = 100 kPa at W
+        for p in inflations_kPa:
+            c = contact(ty, W, float(p))
+            sz, _ = footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, np.zeros_like(ys), ys, depths, xi,
+                                              mean_stress=False)
+            peaks[(W, float(p))] = sz.max(axis=0)
+    return LoadsAndPressures(depths, dict(ARVIDSSON_KELLER_2007_TYRES), peaks)
+
+
+@dataclasses.dataclass(frozen=True)
+class TracksDualsSingles:
+    """The largest vertical stress [kPa] at each depth under one machine on single wheels, on dual
+    wheels and on tracks (:func:`arvidsson_2011`), with the pressures it ran at."""
+
+    depths_m: tuple
+    single_kPa: np.ndarray  # (n_depths,), the largest across the wheel
+    duals_kPa: np.ndarray
+    tracks_kPa: np.ndarray  # below a track's centre line
+    single_inflation_kPa: float
+    duals_inflation_kPa: float
+    track_pressure_kPa: float  # uniform over each track's contact
+
+
+def arvidsson_2011(depths_m=(0.15, 0.3, 0.5), xi=5.0) -> TracksDualsSingles:
+    """The comparison of Arvidsson, Westlin, Keller & Gilbertsson (2011), Soil Till. Res. 117:103-109
+    (from its abstract): a 7.7 t tractor on rubber tracks, on single and on dual wheels; measured at
+    0.15, 0.3 and 0.5 m, the tracks' stress about equal to the duals', both below the singles'.
+
+    ASSUMED here (the paper's machine was not read beyond its mass): the rear axle carries 60 % of
+    the weight; 650/65R38 tyres (0.65 m wide, 1.85 m, load index 157: 4125 kg at 160 kPa) at the
+    inflation rule's recommended pressure for their load (:func:`recommended_inflation_kPa`), duals
+    0.1 m apart; the tracks of the reference crawler (2.4 x 0.45 m, gauge 1.5 m) at a uniform
+    pressure carrying the whole weight. The wheels' stress by :func:`footprint_stress_at_depth`
+    across the axle (y in [-1, 1] m, 201 points), the tracks' by
+    :func:`symtrack.soil.subsoil.stress_bruteforce` below a track's centre line. docs/subsoil.md
+    ("Wheeled machines") and tests/test_tyre.py use it."""
+    g = 9.81
+    depths = tuple(float(d) for d in depths_m)
+    W = 7700.0 * g / 1e3  # kN, the whole tractor
+    Wr = 0.6 * W / 2  # kN, a rear wheel's share (single)
+    ty = Tyre(0.65, 1.85, 4125.0 * g / 1e3, 160.0)
+    ys = np.linspace(-1.0, 1.0, 201)
+    p1 = recommended_inflation_kPa(ty, Wr)
+    c1 = contact(ty, Wr, p1)
+    single, _ = footprint_stress_at_depth(c1.x_m, c1.y_m, c1.force_kN, 0 * ys, ys, depths, xi, mean_stress=False)
+    p2 = recommended_inflation_kPa(ty, Wr / 2)
+    c2 = contact(ty, Wr / 2, p2)
+    gap = 0.65 + 0.1  # centre to centre
+    x, y = np.concatenate([c2.x_m] * 2), np.concatenate([c2.y_m - gap / 2, c2.y_m + gap / 2])
+    dual, _ = footprint_stress_at_depth(x, y, np.concatenate([c2.force_kN] * 2), 0 * ys, ys, depths, xi,
+                                        mean_stress=False)
+    length, width, gauge = 2.4, 0.45, 1.5
+    pr = W * 1e3 / (2 * length * width)  # Pa
+    a, geo = [0, 0, 1, 0, pr, 0, pr, 0], [length, width, gauge, 0.0, 0.05, 0.05]
+    track = np.array([stress_bruteforce(np.zeros(1), np.array([gauge / 2]), a, geo, d, xi)[0] for d in depths]) / 1e3
+    return TracksDualsSingles(depths, single.max(axis=0), dual.max(axis=0), track, float(p1), float(p2), pr / 1e3)
 
 
 # bounded by their maxsize; emptied by symtrack.clear_caches() (symtrack.foundations.caches)
