@@ -430,7 +430,9 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     # engine with 2 substeps: 30.6 s of gcc CPU, 5.8 s with the calls; the same arithmetic to rounding:
     # validation_grid's states within 4e-14 m). Measured with the sources the build writes (the
     # BuildSpec's sources() in a folder) and `gcc <the build's flags> -c engine.c` under /usr/bin/time.
-    call = {"cse": True, "never_inline": True}
+    # (cse over a raster's interpolant call nodes as for eng_vehicle_step: 68 s of CPU in CasADi's cse
+    # for eng_vehicle_J alone over a 200 x 100 raster, measured 2026-12-06)
+    call = {"cse": raster is None, "never_inline": True}
     fF = ca.Function("eng_vehicle_F", [w, u, pv, hsym], [Fh], call)
     fJ = ca.Function("eng_vehicle_J", [w, u, pv, hsym], [ca.jacobian(Fh, w)], call)
     mass = ca.DM.zeros(veh.layout.nv + len(ALGEBRAIC))
