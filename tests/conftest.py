@@ -43,8 +43,8 @@ def run_once(scenario, model=None, **plant_kw):
 # (--durations=60 of the fast and the slow set, each scaled to its unloaded wall time): an ordering hint
 # only; a test not listed counts as 1 s.
 SLOW_S = {
-    "tests/test_operations.py::test_season_4ha_reduced_writes_its_summary_and_animation": 122,
-    "tests/test_grid3d.py::test_an_elevation_raster_of_a_plane_gives_the_analytic_side_slope": 98,
+    "tests/test_operations.py::test_season_4ha_reduced_writes_its_summary_and_animation": 80,
+    "tests/test_grid3d.py::test_an_elevation_raster_of_a_plane_gives_the_analytic_side_slope": 45,
     "tests/test_vehicle_step_replay.py::test_the_controlled_vehicle_step_carries_what_the_uncontrolled_one_diverges_on": 53,  # noqa: E501
     "tests/test_terrain_pool_passes.py::test_two_passes_equal_one_pass_save_load_and_a_second_pass": 48,
     "tests/test_traffic_sweep.py::test_a_traffic_sweep_missing_a_system_resumes_to_the_same_table": 48,
