@@ -18,7 +18,8 @@ Warned (one line, the run goes on): a contact length outside :data:`CONTACT_LENG
 times the gauge, and a torque programme that pushes more than :data:`TRACTION_OVER_WEIGHT_MAX`
 times the vehicle's weight.
 
-Stopped (:class:`~symtrack.foundations.errors.SimulationError`): a run whose speed exceeds
+Stopped (:class:`~symtrack.foundations.errors.ImplausibleRunError`, a
+:class:`~symtrack.foundations.errors.SimulationError` whose ``quantity`` names the limit): a run whose speed exceeds
 :data:`MAX_SPEED_M_S`, whose sprockets' tread speed exceeds :data:`MAX_TREAD_SPEED_M_S`, or whose
 track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height.
 """
@@ -27,7 +28,7 @@ from __future__ import annotations
 
 import logging
 
-from ..foundations.errors import ParameterError, SimulationError
+from ..foundations.errors import ImplausibleRunError, ParameterError
 from ..vehicles.planar import GRAVITY_M_S2, mean_ground_pressure_Pa
 
 __all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S",
@@ -59,8 +60,16 @@ TRACTION_OVER_WEIGHT_MAX = 2.0
 # 11 m/s (40 km/h) at most. A run faster than 30 m/s (108 km/h) is an implausible input (the mass
 # in tonnes, a torque in the wrong unit) or a numerical failure: it is stopped.
 MAX_SPEED_M_S = 30.0
-# A sprocket's tread speed r |omega| above the same 30 m/s: the tracks spin on the soil (a torque far above
-# what it carries; the sprocket torque has no speed limit of its own): stopped.
+# A sprocket's tread speed r |omega| above 30 m/s: stopped. The tread speed is what the drive turns the
+# track at, and a real drive bounds it: the engine's governed speed in the top gear gives the vehicle's top
+# speed on firm ground, where the slip is a few per cent, so the tread runs at most about that top speed.
+# Published top speeds of the fastest tracked vehicles: the M1 Abrams 72 km/h (governed), the Leopard 2
+# 68-72 km/h, the FV101 Scorpion 72-80 km/h (about 20-22 m/s); rubber-tracked farm tractors 40 km/h
+# (11 m/s, the road limit for tractors in the EU). 30 m/s (108 km/h) is above all of them. The model's
+# sprocket torque is a torque source with no speed limit of its own (no engine map, no power limit): where
+# a torque programme asks more than the soil carries, the tracks spin up without bound, and a run there
+# is one no drive can give, whatever its figures say. It stops, keeping its trajectory up to the last
+# output within the limit, with a message that says so (a refusal of the programme, not a complete run).
 MAX_TREAD_SPEED_M_S = 30.0
 # A track end sunk deeper than the CG's height above the ground: the hull would be in the soil, and the
 # model has no hull contact (no belly drag), so its figures have left its domain: stopped. (Found by the
@@ -110,30 +119,32 @@ def check_torque(vehicle: dict, torque_max_N_m: float, where: str = "torque") ->
 
 
 def check_tread_speed(tread_m_s: float, t_s: float) -> None:
-    """Stop (SimulationError) a run whose track tread runs faster than :data:`MAX_TREAD_SPEED_M_S` (r |omega|
-    of a sprocket: the tracks spin, a torque far above what the soil carries)."""
+    """Stop (ImplausibleRunError, quantity "tread_speed") a run whose track tread runs faster than
+    :data:`MAX_TREAD_SPEED_M_S` (r |omega| of a sprocket: the tracks spin, a torque far above what the soil
+    carries, faster than any drive turns them)."""
     if tread_m_s > MAX_TREAD_SPEED_M_S:
-        raise SimulationError(
+        raise ImplausibleRunError(
             f"tread speed = {tread_m_s:.4g} m/s (sprocket_radius_m x |omega|) at t = {t_s:.3f} s is outside the "
             f"allowed range [0, {MAX_TREAD_SPEED_M_S:g}] m/s (the tracks spin: the torque exceeds what the soil "
-            f"carries; check the torques in N m)")
+            f"carries, and no crawler's drive turns its tracks that fast; the model's torque has no power limit: "
+            f"lower the torques, which are in N m)", "tread_speed")
 
 
 def check_sinkage(sinkage_m: float, cg_height_m: float, t_s: float) -> None:
-    """Stop (SimulationError) a run whose track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times
-    the CG height (the hull in the soil: the model has no hull contact)."""
+    """Stop (ImplausibleRunError, quantity "sinkage") a run whose track sinks deeper than
+    :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height (the hull in the soil: the model has no hull contact)."""
     limit = SINKAGE_OVER_CG_HEIGHT_MAX * cg_height_m
     if cg_height_m > 0 and sinkage_m > limit:
-        raise SimulationError(
+        raise ImplausibleRunError(
             f"sinkage = {sinkage_m:.4g} m at t = {t_s:.3f} s is outside the allowed range [0, {limit:.4g}] m (deeper "
             f"than the CG height vehicle.cg_height_m = {cg_height_m:g} m: the hull would be in the soil, which the "
-            f"model does not carry; check the soil's Bekker values and the vehicle's mass)")
+            f"model does not carry; check the soil's Bekker values and the vehicle's mass)", "sinkage")
 
 
 def check_speed(speed_m_s: float, t_s: float) -> None:
-    """Stop (SimulationError) a run whose speed exceeds :data:`MAX_SPEED_M_S`."""
+    """Stop (ImplausibleRunError, quantity "speed") a run whose speed exceeds :data:`MAX_SPEED_M_S`."""
     if speed_m_s > MAX_SPEED_M_S:
-        raise SimulationError(
+        raise ImplausibleRunError(
             f"speed = {speed_m_s:.4g} m/s ({3.6 * speed_m_s:.4g} km/h) at t = {t_s:.3f} s is outside the allowed range "
             f"[0, {MAX_SPEED_M_S:g}] m/s (faster than any crawler: check that vehicle.mass_kg is in kg and the "
-            f"torques in N m)")
+            f"torques in N m)", "speed")

@@ -43,6 +43,12 @@ __all__ = ["IncompleteRun", "OutputGrid", "SampleGrid", "SampledLaw", "StartPoin
 log = logging.getLogger("symtrack.simulation")
 
 
+def _first_over(values: np.ndarray, limit: float) -> int:
+    """The index of the first of ``values`` above ``limit``, or of the largest when none is."""
+    over = np.flatnonzero(values > limit)
+    return int(over[0]) if len(over) else int(np.argmax(values))
+
+
 class IncompleteRun(SimulationError):
     """A run that failed part of the way (the vehicle left the field, the integrator failed):
     ``partial`` is the :class:`RunResult` up to the last completed output step
@@ -316,9 +322,13 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 treads = r_sprocket * np.max(np.abs(xs[-1][:, iw]), axis=1) if iw else np.zeros(len(times))
                 sinks = np.max(xs[-1][:, isk], axis=1) if isk else np.zeros(len(times))
                 try:  # faster than any crawler, or the hull in the soil: stopped (symtrack.model.plausibility)
-                    plausibility.check_speed(float(np.max(speeds)), float(times[int(np.argmax(speeds))]))
-                    plausibility.check_tread_speed(float(np.max(treads)), float(times[int(np.argmax(treads))]))
-                    plausibility.check_sinkage(float(np.max(sinks)), cg_height, float(times[int(np.argmax(sinks))]))
+                    # (each checked at its first sample over the limit: the message names where it was passed)
+                    i = _first_over(speeds, plausibility.MAX_SPEED_M_S)
+                    plausibility.check_speed(float(speeds[i]), float(times[i]))
+                    i = _first_over(treads, plausibility.MAX_TREAD_SPEED_M_S)
+                    plausibility.check_tread_speed(float(treads[i]), float(times[i]))
+                    i = _first_over(sinks, plausibility.SINKAGE_OVER_CG_HEIGHT_MAX * cg_height)
+                    plausibility.check_sinkage(float(sinks[i]), cg_height, float(times[i]))
                 except SimulationError as err:
                     # the run is kept up to the last sample within the limits
                     bad = int(np.argmax((speeds > plausibility.MAX_SPEED_M_S)
