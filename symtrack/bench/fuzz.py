@@ -53,13 +53,15 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 
 from ..api import IncompleteSimulation, build, simulate
 from ..foundations.errors import ImplausibleRunError, SymtrackError
-from ..model.plausibility import GROUND_PRESSURE_RANGE_KPA, MAX_TREAD_SPEED_M_S
+from ..model.plausibility import GROUND_PRESSURE_RANGE_KPA, MAX_TREAD_SPEED_M_S, bekker_pressure_limit_Pa
 from ..presets.soils import SOILS
 from ..simulation.scenario import scenario_from_dict
+from ..soil import law as soil_law
 from ..vehicles.planar import GRAVITY_M_S2
 from ..vehicles.vehicle3d import PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW, running_gear_momentum_ratio
 
@@ -207,6 +209,10 @@ def _vehicle(draw, soil: dict) -> dict:
     s = {**SOILS[soil["preset"]], **soil}
     k = s["k_c_N_per_m_n1"] / width + s["k_phi_N_per_m_n2"]
     pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"])
+    # and inside the rule that Bekker's law is no stiffer than the soil's elastic reloading at that sinkage
+    # (plausibility.check_soil_contact: a nearly flat law, the WES heavy clay's, under a light crawler)
+    lo, hi = bekker_pressure_limit_Pa({"track_width_m": width}, s)
+    pressure = min(max(pressure, 1.01 * lo), 0.99 * hi)
     mass = pressure * 2 * width * length / GRAVITY_M_S2
     hull_l, hull_w = 1.4 * length, gauge + width
     v = {"preset": "reference_crawler",
@@ -442,6 +448,45 @@ def _potential(res, params: dict) -> np.ndarray:
     return params["mass_kg"] * GRAVITY_M_S2 * run.state("z_m")
 
 
+def _normal_elastic(res, sc, points: int = 48) -> np.ndarray:
+    """The energy [J] the soil's normal pressure under the 3D hull holds at the output times (flat ground), zero
+    on the planar vehicle: sum over the contact's segments of b ds times the integral of the model's own
+    pressure p(z) from 0 to the segment's sinkage, on its branch (:mod:`symtrack.vehicles.vehicle3d`: a
+    segment's history is the deepest sinkage of the segments ahead of it on its track, the front one's
+    none; the virgin curve is then the path back up), by trapezoids on ``points`` points. The hull's
+    contact has no history of its own, so its pressure is a function of the present pose: it gives back
+    on the way up what it took on the way down, less the cells' damping."""
+    run = res.runs[-1]
+    if "z_m" not in run.state_names:
+        return np.zeros(len(run.t))
+    P, opts = sc.params, sc.model
+    law_obj = soil_law.make(opts)
+    law_num = np.array(law_obj.vector(P), dtype=float).ravel()
+    z, z_hist, law = ca.SX.sym("z"), ca.SX.sym("z_hist"), ca.SX.sym("law", len(law_num))
+    pressure = ca.Function("p", [z, z_hist, law],
+                           [law_obj.pressure(z, (z_hist, law_obj.virgin_pressure(z_hist, law), 0, 0, 0), law)])
+    B, b, l, h, e = (P[k] for k in ("track_gauge_m", "track_width_m", "contact_length_m", "cg_height_m",
+                                    "cg_ahead_of_contact_centre_m"))
+    n = opts.contact_segments
+    ds = l / n
+    x_body = l / 2 - e - (np.arange(n) + 0.5) * ds  # the segments' centres, front first
+    Z, pitch, roll = run.state("z_m"), run.state("pitch_rad"), run.state("roll_rad")
+    frac = np.linspace(0.0, 1.0, points)
+    out = np.zeros(len(Z))
+    for y_body in (B / 2, -B / 2):
+        # the segment centre's depth below the flat ground (vehicle3d.hull_rotation's third row)
+        depth = -(Z[:, None] + np.sin(pitch)[:, None] * x_body[None, :]
+                  + (np.cos(pitch) * np.sin(roll))[:, None] * y_body - (np.cos(pitch) * np.cos(roll))[:, None] * h)
+        ahead = np.concatenate([np.zeros((len(Z), 1)), np.maximum(depth[:, :-1], 0.0)], axis=1)
+        hist = np.maximum.accumulate(ahead, axis=1)
+        zz = np.maximum(depth, 0.0)[:, :, None] * frac[None, None, :]
+        m = zz.size
+        p = np.array(pressure.map(m)(zz.reshape(1, m), np.repeat(hist.reshape(1, -1), points, axis=1),
+                                     np.tile(law_num[:, None], (1, m))), dtype=float).reshape(zz.shape)
+        out += b * ds * np.trapezoid(p, zz, axis=2).sum(axis=1)
+    return out
+
+
 def _elastic(res, soil: dict) -> np.ndarray:
     """An upper bound [J] of the energy the tracks' shear displacement holds elastically: |F| min(|j|, K) per
     track and direction (Janosi-Hanamoto's K is the displacement of the soil's elastic build-up; beyond it
@@ -468,7 +513,7 @@ def _check_energy(res, sc, out: CaseOutcome, label: str) -> None:
     tw = t[window]
     work = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(tw))])
     kin = _kinetic(res, sc.vehicle)[window]
-    e = kin + _potential(res, sc.vehicle)[window]
+    e = kin + _potential(res, sc.vehicle)[window] + _normal_elastic(res, sc)[window]
     gain = e - e[0] - work  # the mechanical energy gained beyond the motors' work since the release
     # from any t1 to a later t2 the gain may rise by at most the elastic energy held at t1
     rise = gain - np.minimum.accumulate(gain + _elastic(res, sc.soil)[window])

@@ -12,7 +12,9 @@ Refused (:class:`~symtrack.foundations.errors.ParameterError`, named as the regi
 the key, the value, the allowed range):
 
 - mean ground pressure m g / (2 b l) outside :data:`GROUND_PRESSURE_RANGE_KPA`;
-- a track as wide as the gauge or wider (:data:`TRACK_WIDTH_OVER_GAUGE_MAX`): the tracks overlap.
+- a track as wide as the gauge or wider (:data:`TRACK_WIDTH_OVER_GAUGE_MAX`): the tracks overlap;
+- a static sinkage where Bekker's law is stiffer than the soil's elastic stiffness
+  (:data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX`, :func:`check_soil_contact`): the law used outside its range.
 
 Warned (one line, the run goes on): a contact length outside :data:`CONTACT_LENGTH_OVER_GAUGE_RANGE`
 times the gauge, and a torque programme that pushes more than :data:`TRACTION_OVER_WEIGHT_MAX`
@@ -27,14 +29,16 @@ track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height.
 from __future__ import annotations
 
 import logging
+import math
 
 from ..foundations.errors import ImplausibleRunError, ParameterError
 from ..vehicles.planar import GRAVITY_M_S2, mean_ground_pressure_Pa
 
-__all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S",
-           "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX", "TRACTION_OVER_WEIGHT_MAX", "check_sinkage",
-           "check_speed", "check_torque", "check_tread_speed",
-           "check_vehicle", "ground_pressure_kPa"]
+__all__ = ["BEKKER_STIFFNESS_OVER_ELASTIC_MAX", "CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA",
+           "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S", "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX",
+           "TRACTION_OVER_WEIGHT_MAX", "bekker_pressure_limit_Pa", "bekker_stiffness_ratio",
+           "check_sinkage", "check_soil_contact", "check_speed",
+           "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa"]
 
 log = logging.getLogger("symtrack.plausibility")
 
@@ -71,6 +75,16 @@ MAX_SPEED_M_S = 30.0
 # is one no drive can give, whatever its figures say. It stops, keeping its trajectory up to the last
 # output within the limit, with a message that says so (a refusal of the programme, not a complete run).
 MAX_TREAD_SPEED_M_S = 30.0
+# Bekker's loading stiffness dp/dz = n p / z at the static sinkage z = (p / k_eq)^(1/n) of the mean ground
+# pressure, over the soil's elastic (unloading/reloading) stiffness K_e: refused above 1. A soil's virgin
+# (plastic) loading is softer than its elastic unloading and reloading (Wong, Theory of Ground Vehicles: the
+# response to repetitive loading, the unloading-reloading line much steeper than the loading curve), so a
+# loading curve stiffer than K_e is the Bekker fit used outside the sinkages its plate tests measured
+# (centimetres). It happens with a nearly flat law: the WES heavy clay's n = 0.11 puts a 25 kPa crawler at a
+# static sinkage of micrometres (n p / z some 40 x K_e), where the integrators stall on the stiffness (the
+# physics fuzzer's CVODES runs: too much work, or minutes for a 3 s run). Every other preset carries 15-120
+# kPa at 0.03-0.53 of K_e.
+BEKKER_STIFFNESS_OVER_ELASTIC_MAX = 1.0
 # A track end sunk deeper than the CG's height above the ground: the hull would be in the soil, and the
 # model has no hull contact (no belly drag), so its figures have left its domain: stopped. (Found by the
 # physics fuzzer: a 16 t crawler on a very soft clay ran "complete" with 93 m of sinkage.)
@@ -106,6 +120,61 @@ def check_vehicle(vehicle: dict, where: str = "vehicle") -> None:
     if not lo <= l / B <= hi:
         log.warning("%s: contact_length_m / track_gauge_m = %.3g is outside [%g, %g] (crawlers: about 0.9-1.8); "
                     "the run goes on", where, l / B, lo, hi)
+
+
+def bekker_stiffness_ratio(vehicle: dict, soil: dict) -> float | None:
+    """Bekker's loading stiffness n p / z at the static sinkage z = (p / k_eq)^(1/n) of the mean ground pressure
+    p, over the soil's elastic (unloading/reloading) stiffness K_e; None for a soil without these values."""
+    keys = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "elastic_stiffness_Pa_per_m")
+    if not all(k in soil for k in keys):
+        return None
+    n, k_c, k_phi, k_e = (float(soil[k]) for k in keys)
+    k_eq = k_c / float(vehicle["track_width_m"]) + k_phi
+    p = mean_ground_pressure_Pa(vehicle)
+    if n <= 0 or k_eq <= 0 or k_e <= 0 or p <= 0:
+        return None
+    # n p / z with z = (p / k_eq)^(1/n), in logarithms (z underflows for n = 0.1 and a light crawler)
+    return math.exp(math.log(n * p) - (math.log(p) - math.log(k_eq)) / n - math.log(k_e))
+
+
+def bekker_pressure_limit_Pa(vehicle: dict, soil: dict) -> tuple[float, float]:
+    """(lowest, highest) mean ground pressure [Pa] that :func:`check_soil_contact` accepts for ``soil`` and the
+    vehicle's track width (0 and inf where it bounds none): n p^(1 - 1/n) k_eq^(1/n) = the limit x K_e."""
+    keys = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "elastic_stiffness_Pa_per_m")
+    if not all(k in soil for k in keys):
+        return 0.0, math.inf
+    n, k_c, k_phi, k_e = (float(soil[k]) for k in keys)
+    k_eq = k_c / float(vehicle["track_width_m"]) + k_phi
+    if n <= 0 or k_eq <= 0 or k_e <= 0 or n == 1:
+        return 0.0, math.inf
+    log_p = (math.log(BEKKER_STIFFNESS_OVER_ELASTIC_MAX * k_e) - math.log(n) - math.log(k_eq) / n) / (1 - 1 / n)
+    p = math.inf if log_p > 700 else math.exp(max(log_p, -700.0))  # (n near 1: the bound is far or none)
+    return (p, math.inf) if n < 1 else (0.0, p)
+
+
+def check_soil_contact(vehicle: dict, soil: dict, where: str = "soil") -> None:
+    """Refuse (ParameterError) a vehicle and soil whose static sinkage is where Bekker's law is stiffer than the
+    soil's elastic stiffness (:data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX`)."""
+    ratio = bekker_stiffness_ratio(vehicle, soil)
+    if ratio is None or ratio <= BEKKER_STIFFNESS_OVER_ELASTIC_MAX:
+        return
+    n, k_e = float(soil["bekker_n"]), float(soil["elastic_stiffness_Pa_per_m"])
+    k_eq = float(soil["k_c_N_per_m_n1"]) / float(vehicle["track_width_m"]) + float(soil["k_phi_N_per_m_n2"])
+    p = mean_ground_pressure_Pa(vehicle)
+    z_log10 = (math.log10(p) - math.log10(k_eq)) / n
+    lo, hi = bekker_pressure_limit_Pa(vehicle, soil)
+    bound = ""
+    if n != 1:
+        p_lim = lo if n < 1 else hi
+        bound = (f"; a mean ground pressure {'above' if n < 1 else 'below'} {p_lim / 1e3:.3g} kPa (mass_kg, "
+                 f"track_width_m, contact_length_m) or a soil with a larger {where}.bekker_n would be inside")
+    raise ParameterError(
+        f"{where}: Bekker's loading stiffness n p / z = {ratio * k_e:.3g} Pa/m at the static sinkage z = (p / k)^(1/n) "
+        f"= {10 ** z_log10:.3g} m of the mean ground pressure p = {p / 1e3:.3g} kPa ({where}.bekker_n = {n:g}) is "
+        f"outside the allowed range (0, {BEKKER_STIFFNESS_OVER_ELASTIC_MAX:g} x {where}.elastic_stiffness_Pa_per_m "
+        f"= {BEKKER_STIFFNESS_OVER_ELASTIC_MAX * k_e:.3g}] Pa/m: the pressure-sinkage law is used far below the "
+        f"sinkages its plate tests measured, where it is stiffer than the soil's elastic reloading (no soil "
+        f"loads plastically stiffer than it reloads elastically){bound}")
 
 
 def check_torque(vehicle: dict, torque_max_N_m: float, where: str = "torque") -> None:
