@@ -14,8 +14,14 @@ Each case runs on the default compiled Rosenbrock (10 ms steps with error contro
 reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`check_case`):
 
 - ``finite``: every integrator completes with finite and bounded states (:data:`TREAD_SPEED_MAX_M_S`,
-  :data:`TILT_MAX_DEG`) within :data:`RUN_TIMEOUT_S`, or the scenario is refused on load with the
-  package's own error (an acceptable outcome, counted as ``refused``);
+  :data:`TILT_MAX_DEG`) within :data:`RUN_TIMEOUT_S` of CPU (the model built and compiled before the
+  clock starts), or the scenario is refused on load with the package's own error (an acceptable
+  outcome, counted as ``refused``), or the package stops a run on one of :data:`ACCEPTED_STOPS`: a
+  sprocket's tread speed past :data:`~symtrack.model.plausibility.MAX_TREAD_SPEED_M_S`, the
+  programme's torque spinning the tracks faster than any drive turns them, with the package's message
+  (:class:`~symtrack.foundations.errors.ImplausibleRunError`; an acceptable outcome, counted as
+  ``stopped``, where the other integrator's run stops too or comes within :data:`STOP_AGREEMENT` of the
+  limit; an accuracy failure where it does not);
 - ``accuracy``: the Rosenbrock run's summary figures (:data:`FIGURES`) within
   :data:`ACCURACY_RTOL` of the reference plus each figure's absolute floor, or the run's own error
   estimate flags it (``fixed_step_error_max`` above 1: the run warned that a step was kept above its
@@ -23,10 +29,13 @@ reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`che
 - ``symmetry`` (flat ground): the programme mirrored (left and right swapped) gives the mirrored
   run: yaw and lateral deviation with the sign flipped, the other figures equal, within
   :data:`SYMMETRY_RTOL` and floors 1000 x finer than the accuracy's;
-- ``energy`` (flat ground, a programme that ends with zero torque): from the release on, the kinetic
-  energy of the body, its yaw and the running gears never rises by more than the motors' work plus
-  the elastic energy the tracks' shear displacement held (:func:`_elastic`), within
-  :data:`ENERGY_RTOL` of the kinetic energy (both integrators);
+- ``energy`` (flat ground, a programme that ends with zero torque): from the release on, the mechanical
+  energy never rises by more than the motors' work plus the elastic energy the tracks' shear
+  displacement held (:func:`_elastic`), within :data:`ENERGY_RTOL` of the kinetic energy (both
+  integrators). The mechanical energy is the kinetic energy of the body, its yaw and the running gears
+  (:func:`_kinetic`) and on the 3D vehicle the hull's heave, pitch and roll too, the hull's potential
+  energy (:func:`_potential`) and the soil's normal elastic energy under it (:func:`_normal_elastic`):
+  the whole balance;
 - ``rest`` (flat ground, zero torque throughout): the vehicle at rest stays at rest: speed, travel
   and yaw below :data:`REST_SPEED_M_S`, :data:`REST_TRAVEL_M`, :data:`REST_YAW_RAD` (both
   integrators).
@@ -34,7 +43,8 @@ reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`che
 ``python -m symtrack.bench.fuzz --budget N [--seed S] --out DIR`` draws N cases (from S),
 prints one progress line per case, writes ``DIR/cases.csv`` (:data:`CSV_COLUMNS`) and
 ``DIR/failures.json`` (each failure with its scenario document, reproducible with
-``symtrack simulate``) and exits 1 if any property failed. The test suite runs the same checks
+``symtrack simulate``), prints the counts of ok, refused, stopped and failed cases and exits 1 if any
+property failed. The test suite runs the same checks
 through hypothesis with a small budget (tests/test_physics_fuzz.py).
 """
 
