@@ -258,3 +258,33 @@ def test_a_3d_coast_on_sand_keeps_the_whole_energy_balance():
     assert res is not None, out.messages
     fuzz._check_energy(res, scenario_from_dict(doc, "fuzz"), out, "rosenbrock")
     assert out.status["energy"] == "pass", out.messages
+
+
+HEAVY_CLAY_RAMP_VEHICLE = {"mass_kg": 13322.0, "track_gauge_m": 1.2281, "track_width_m": 0.52806,
+                           "contact_length_m": 1.5308, "yaw_inertia_kg_m2": 9848.9, "sprocket_radius_m": 0.43343,
+                           "cg_height_m": 0.90589, "cg_ahead_of_contact_centre_m": -0.077676,
+                           "sprocket_inertia_kg_m2": 11.399, "torque_time_constant_s": 0.097267,
+                           "lateral_friction_coeff": 0.50746, "lateral_creep_speed_m_s": 0.005173}
+
+
+@pytest.mark.slow
+def test_a_crawler_that_tips_into_heavy_clay_on_a_ramp_says_why_and_is_not_drawn():
+    """From the long run (seed 37, case 75): a 13.3 t crawler (81 kPa, static sinkage 9 mm at the mean pressure)
+    with its CG 7.8 cm behind the contact centre and 0.91 m high, on an 8 deg ramp of the WES heavy clay
+    (n = 0.099): the hull has no rest there. Its loaded rear end would carry some 1.8 x the mean pressure, which
+    the nearly flat law reaches only metres deep; the pitch acceleration found with the heave settled stays
+    nose up at every pitch (with the tracks' traction holding the slope's weight too), Newton fails and
+    the damped settling runs out of steps. The start's error now says what it means (no rest: check the
+    soil, the CG offset and the slope) instead of the settling's CVODES error alone, and the generator keeps the
+    most loaded end's static sinkage within the clearance (case 75 is now drawn at 8.8 t and runs)."""
+    doc = _doc({"lateral_law": "creep", "vehicle": "3d"}, [(0.0, 3940.3, 3940.3)], soil="heavy_clay_wes_40",
+               vehicle=HEAVY_CLAY_RAMP_VEHICLE, duration=0.2, surface={"slope_x_deg": 8.0})
+    doc["soil"].update({"bekker_n": 0.098577, "k_c_N_per_m_n1": 1948.9, "k_phi_N_per_m_n2": 124450.0,
+                        "cohesion_Pa": 21055.0, "friction_angle_rad": 0.10523, "shear_modulus_K_m": 0.0054325})
+    out = fuzz.CaseOutcome(doc, {"variant": "3d-creep-ramp8", "programme": "hold", "flat": False})
+    assert fuzz._run(doc, out, "rosenbrock") is None
+    msg = out.messages["finite"]
+    assert "could not be settled" in msg and "Newton found no rest either" in msg, msg
+    assert "vehicle.cg_ahead_of_contact_centre_m" in msg and "soil.bekker_n" in msg, msg
+    case, _ = fuzz.case_document(fuzz.RandomDraw(37 * 1_000_003 + 75))
+    assert case["soil"]["preset"] == "heavy_clay_wes_40" and case["vehicle"]["mass_kg"] < 9000.0, case["vehicle"]

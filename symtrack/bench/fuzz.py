@@ -210,15 +210,23 @@ def _soil(draw, soils=None) -> dict:
     return out
 
 
-def _vehicle(draw, soil: dict) -> dict:
+def _vehicle(draw, soil: dict, slope_deg: float = 0.0) -> dict:
     gauge = draw.uniform(1.1, 2.2)
     width = draw.uniform(0.3, min(0.75, 0.45 * gauge))
     length = gauge * draw.uniform(0.9, 1.8)
     pressure = _log_uniform(draw, *VEHICLE_PRESSURE_KPA) * 1e3
-    # no deeper than STATIC_SINKAGE_MAX_M at rest on this soil (Bekker: z = (p / k)^(1/n), k = k_c / b + k_phi)
+    iz_factor = draw.uniform(0.8, 1.2)
+    radius, cg_h, cg_e = draw.uniform(0.25, 0.45), draw.uniform(0.5, 1.1), draw.uniform(-0.06, 0.06) * length
+    # no deeper than STATIC_SINKAGE_MAX_M at rest on this soil (Bekker: z = (p / k)^(1/n), k = k_c / b + k_phi),
+    # at the most loaded track end too: a rigid track's linear pressure under the CG's offset and, on a slope
+    # (``slope_deg``, along and across), the weight's moment h tan(a) about the contact. (On the WES heavy
+    # clay's nearly flat law the loaded end sinks without bound where the mean sinks millimetres: the 3D
+    # hull on its 8 deg ramp has no static start, it tips into the soil.)
     s = {**SOILS[soil["preset"]], **soil}
     k = s["k_c_N_per_m_n1"] / width + s["k_phi_N_per_m_n2"]
-    pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"])
+    tilt = math.tan(math.radians(slope_deg))
+    peak = (1 + 6 * (abs(cg_e) + cg_h * tilt) / length) * (1 + 2 * cg_h * tilt / gauge)
+    pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"] / peak)
     # and inside the rule that Bekker's law is no stiffer than the soil's elastic reloading at that sinkage
     # (plausibility.check_soil_contact: a nearly flat law, the WES heavy clay's, under a light crawler)
     lo, hi = bekker_pressure_limit_Pa({"track_width_m": width}, s)
@@ -227,9 +235,8 @@ def _vehicle(draw, soil: dict) -> dict:
     hull_l, hull_w = 1.4 * length, gauge + width
     v = {"preset": "reference_crawler",
          "mass_kg": mass, "track_gauge_m": gauge, "track_width_m": width, "contact_length_m": length,
-         "yaw_inertia_kg_m2": mass * (hull_l ** 2 + hull_w ** 2) / 12 * draw.uniform(0.8, 1.2),
-         "sprocket_radius_m": draw.uniform(0.25, 0.45), "cg_height_m": draw.uniform(0.5, 1.1),
-         "cg_ahead_of_contact_centre_m": draw.uniform(-0.06, 0.06) * length,
+         "yaw_inertia_kg_m2": mass * (hull_l ** 2 + hull_w ** 2) / 12 * iz_factor,
+         "sprocket_radius_m": radius, "cg_height_m": cg_h, "cg_ahead_of_contact_centre_m": cg_e,
          "sprocket_inertia_kg_m2": draw.uniform(10.0, 60.0), "torque_time_constant_s": draw.uniform(0.05, 0.2),
          "lateral_friction_coeff": draw.uniform(0.5, 0.65), "lateral_creep_speed_m_s": draw.uniform(0.005, 0.02)}
     return {k: (x if isinstance(x, str) else _round(x)) for k, x in v.items()}
@@ -285,7 +292,7 @@ def case_document(draw, variants=None, programmes=None, duration_s=DURATION_S, s
         kind = draw.choice([k for k in kinds if k != "hold"] or kinds)
     duration = _round(draw.uniform(*duration_s), 3)
     soil = _soil(draw, soils)
-    vehicle = _vehicle(draw, soil)
+    vehicle = _vehicle(draw, soil, max((surface or {}).values(), default=0.0))
     flat = surface is None
     start_yaw = 0.0 if flat else _round(draw.choice([0.0, 30.0, 90.0, 180.0, -90.0]))
     if kind == "hold":  # facing up the ramp, where the programme's torque holds the vehicle
