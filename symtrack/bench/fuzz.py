@@ -18,7 +18,8 @@ reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`che
   clock starts), or the scenario is refused on load with the package's own error (an acceptable
   outcome, counted as ``refused``), or the package stops a run on one of :data:`ACCEPTED_STOPS`: a
   sprocket's tread speed past :data:`~symtrack.model.plausibility.MAX_TREAD_SPEED_M_S`, the
-  programme's torque spinning the tracks faster than any drive turns them, with the package's message
+  programme's torque spinning the tracks faster than any drive turns them, or the 3D hull turned over
+  (:func:`~symtrack.model.plausibility.check_tilt`), with the package's message
   (:class:`~symtrack.foundations.errors.ImplausibleRunError`; an acceptable outcome, counted as
   ``stopped``, where the other integrator's run stops too or comes within :data:`STOP_AGREEMENT` of the
   limit; an accuracy failure where it does not);
@@ -68,7 +69,12 @@ import numpy as np
 
 from ..api import IncompleteSimulation, build, simulate
 from ..foundations.errors import ImplausibleRunError, SymtrackError
-from ..model.plausibility import GROUND_PRESSURE_RANGE_KPA, MAX_TREAD_SPEED_M_S, bekker_pressure_limit_Pa
+from ..model.plausibility import (
+    GROUND_PRESSURE_RANGE_KPA,
+    MAX_TREAD_SPEED_M_S,
+    bekker_pressure_limit_Pa,
+    tilt_over_tipping,
+)
 from ..presets.soils import SOILS
 from ..simulation.scenario import scenario_from_dict
 from ..soil import law as soil_law
@@ -163,9 +169,11 @@ PROPERTIES = ("finite", "accuracy", "symmetry", "energy", "rest")
 # The plausibility stops (ImplausibleRunError's quantity) that count as a refusal, not a failure: the tread
 # speed, where the programme's torque spins the tracks faster than any drive turns them (the model's torque
 # has no power limit; the generator's torques reach 0.6 of the weight's thrust, which spins the tracks on
-# soft soil, on purpose: the package must say so). A stop on the body's speed or on the sinkage is not
-# accepted: the generator stays far inside both, so such a stop is a run that diverged.
-ACCEPTED_STOPS = ("tread_speed",)
+# soft soil, on purpose: the package must say so), and the tilt, where the 3D hull turns over (a tall crawler
+# on a short track sinking at its rear on a soft ramp: the model's answer, beyond which it has no hull). A
+# stop on the body's speed or on the sinkage is not accepted: the generator stays far inside both, so such a
+# stop is a run that diverged.
+ACCEPTED_STOPS = ("tread_speed", "tilt")
 CSV_COLUMNS = ("case", "seed", "variant", "programme", "soil", "duration_s", "mass_kg", "ground_pressure_kPa",
                "torque_max_N_m", "outcome", "failed", *PROPERTIES, "worst_figure", "worst_ratio",
                "fixed_step_error_max", "fixed_step_steps_halved", "energy_rise_J", "distance_m", "wall_s", "message")
@@ -334,7 +342,8 @@ class CaseOutcome:
     worst: tuple = ("", 0.0)
     wall_s: float = 0.0
     stops: dict = field(default_factory=dict)  # label -> the message of a run stopped on an ACCEPTED_STOPS limit
-    treads: dict = field(default_factory=dict)  # label -> the largest tread speed [m/s] of a complete run
+    stop_kinds: dict = field(default_factory=dict)  # label -> the quantity of that limit
+    near: dict = field(default_factory=dict)  # label -> {quantity: the largest value over its limit} of a complete run
 
     @property
     def failed(self) -> list[str]:
@@ -404,6 +413,7 @@ def _run(doc: dict, out: CaseOutcome, label: str):
         limit = _stop_limit(err)
         if isinstance(err, IncompleteSimulation) and limit in ACCEPTED_STOPS:
             out.stops[label] = str(err)  # the package refused the programme part of the way: acceptable
+            out.stop_kinds[label] = limit
             return None
         if isinstance(err, IncompleteSimulation):
             out.fail("finite", f"{label}: {err}")
@@ -426,7 +436,10 @@ def _run(doc: dict, out: CaseOutcome, label: str):
                            f"{math.degrees(tilt):.4g} deg (allowed {TILT_MAX_DEG:g}; fixed_step_error_max "
                            f"{res.summary.get('fixed_step_error_max', float('nan')):.3g})")
         return None
-    out.treads[label] = tread
+    params = res.scenario.params
+    out.near[label] = {"tread_speed": tread / TREAD_SPEED_MAX_M_S,
+                       "tilt": float(np.max(tilt_over_tipping(run.state("pitch_rad"), run.state("roll_rad"), params)))
+                       if "pitch_rad" in run.state_names else 0.0}
     return res
 
 
@@ -626,9 +639,9 @@ def check_case(doc: dict, meta: dict, reference: dict | None = None, symmetry: b
     return out
 
 
-# A run stopped on the tread speed while the other integrator's run of the same case completed: that run
-# must have come near the limit too (its largest tread speed at least this fraction of it), or the stop is
-# the stopped integrator's error, not the programme's.
+# A run stopped on an accepted limit while the other integrator's run of the same case completed: that run
+# must have come near the limit too (its largest tread speed or tilt at least this fraction of it), or the
+# stop is the stopped integrator's error, not the programme's.
 STOP_AGREEMENT = 0.9
 
 
@@ -636,10 +649,11 @@ def _check_stops(out: CaseOutcome, runs) -> None:
     """A case where a run was stopped on an accepted limit: "stopped" (acceptable) when every other run of it
     was stopped so too or completed with a tread speed near the limit; ``accuracy`` fails otherwise."""
     for res, label in runs:
-        if res is not None and out.treads[label] < STOP_AGREEMENT * TREAD_SPEED_MAX_M_S:
-            out.fail("accuracy", f"{label} completed with tread speeds up to {out.treads[label]:.4g} m/s where "
-                                 f"{', '.join(out.stops)} stopped on the limit {TREAD_SPEED_MAX_M_S:g} m/s "
-                                 f"({STOP_AGREEMENT:g} of it allowed)")
+        for kind in sorted(set(out.stop_kinds.values())):
+            if res is not None and out.near[label][kind] < STOP_AGREEMENT:
+                out.fail("accuracy", f"{label} completed with its {kind} up to {out.near[label][kind]:.3g} of the "
+                                     f"limit where {', '.join(out.stops)} stopped on it ({STOP_AGREEMENT:g} of it "
+                                     f"allowed)")
     if not out.failed:
         out.outcome = "stopped"
         out.messages["stopped"] = "; ".join(f"{k}: {m}" for k, m in out.stops.items())

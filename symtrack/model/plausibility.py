@@ -23,7 +23,8 @@ times the vehicle's weight.
 Stopped (:class:`~symtrack.foundations.errors.ImplausibleRunError`, a
 :class:`~symtrack.foundations.errors.SimulationError` whose ``quantity`` names the limit): a run whose speed exceeds
 :data:`MAX_SPEED_M_S`, whose sprockets' tread speed exceeds :data:`MAX_TREAD_SPEED_M_S`, or whose
-track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height.
+track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height, or whose 3D hull pitches or rolls
+beyond its static tipping angle (:func:`check_tilt`: turned over).
 """
 
 from __future__ import annotations
@@ -31,14 +32,17 @@ from __future__ import annotations
 import logging
 import math
 
+import numpy as np
+
 from ..foundations.errors import ImplausibleRunError, ParameterError
 from ..vehicles.planar import GRAVITY_M_S2, mean_ground_pressure_Pa
 
 __all__ = ["BEKKER_STIFFNESS_OVER_ELASTIC_MAX", "CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA",
            "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S", "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX",
            "TRACTION_OVER_WEIGHT_MAX", "bekker_pressure_limit_Pa", "bekker_stiffness_ratio",
-           "check_sinkage", "check_soil_contact", "check_speed",
-           "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa"]
+           "check_sinkage", "check_soil_contact", "check_speed", "check_tilt",
+           "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa", "tilt_over_tipping",
+           "tipping_angles_rad"]
 
 log = logging.getLogger("symtrack.plausibility")
 
@@ -208,6 +212,35 @@ def check_sinkage(sinkage_m: float, cg_height_m: float, t_s: float) -> None:
             f"sinkage = {sinkage_m:.4g} m at t = {t_s:.3f} s is outside the allowed range [0, {limit:.4g}] m (deeper "
             f"than the CG height vehicle.cg_height_m = {cg_height_m:g} m: the hull would be in the soil, which the "
             f"model does not carry; check the soil's Bekker values and the vehicle's mass)", "sinkage")
+
+
+def tipping_angles_rad(params: dict) -> tuple[float, float, float]:
+    """The vehicle's static tipping angles [rad] (:func:`check_tilt`): nose up (the CG over the rear track end),
+    nose down (over the front end) and sideways (over a track's outer edge)."""
+    l, e, h = (float(params[k]) for k in ("contact_length_m", "cg_ahead_of_contact_centre_m", "cg_height_m"))
+    B, b = float(params["track_gauge_m"]), float(params["track_width_m"])
+    return math.atan2(l / 2 + e, h), math.atan2(l / 2 - e, h), math.atan2((B + b) / 2, h)
+
+
+def tilt_over_tipping(pitch_rad, roll_rad, params: dict):
+    """The hull's tilt over its tipping angle (:func:`tipping_angles_rad`): above 1 the CG is beyond the
+    tracks' footprint (elementwise for arrays)."""
+    up, down, side = tipping_angles_rad(params)
+    pitch = np.asarray(pitch_rad, dtype=float)
+    return np.maximum(np.where(pitch > 0, pitch / up, -pitch / down), np.abs(np.asarray(roll_rad, dtype=float)) / side)
+
+
+def check_tilt(pitch_rad: float, roll_rad: float, params: dict, t_s: float) -> None:
+    """Stop (ImplausibleRunError, quantity "tilt") a 3D run whose hull has turned over: pitched or rolled (from
+    the horizontal) beyond its static tipping angle, the CG beyond the tracks' footprint (a track end or
+    outer edge); the model's contact has no hull, so that what follows is outside it."""
+    if float(tilt_over_tipping(pitch_rad, roll_rad, params)) > 1.0:
+        up, down, side = (math.degrees(a) for a in tipping_angles_rad(params))
+        raise ImplausibleRunError(
+            f"pitch = {math.degrees(pitch_rad):.4g} deg, roll = {math.degrees(roll_rad):.4g} deg at t = {t_s:.3f} s "
+            f"are outside the allowed range (pitch in [-{down:.3g}, {up:.3g}] deg, roll in [-{side:.3g}, {side:.3g}] "
+            f"deg: the vehicle's static tipping angles, atan of the CG's distance to a track end or outer edge "
+            f"over vehicle.cg_height_m): the vehicle has turned over, and the model's contact has no hull", "tilt")
 
 
 def check_speed(speed_m_s: float, t_s: float) -> None:
