@@ -32,7 +32,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from ..foundations.errors import SimulationError
+from ..foundations.errors import ImplausibleRunError, SimulationError
 from ..foundations.interrupt import raise_if_interrupted, watch_interrupts
 from ..foundations.progress import Progress
 from ..model import plausibility
@@ -338,6 +338,13 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                         plausibility.check_tilt(float(xs[-1][i, itilt[0]]), float(xs[-1][i, itilt[1]]),
                                                 scenario.params, float(times[i]))
                 except SimulationError as err:
+                    err_max = float((plant.stats() or {}).get("fixed_step_error_max", 0.0) or 0.0)
+                    if err_max > 1.0:  # the fixed step kept steps above its tolerance: perhaps a numerical divergence
+                        err = type(err)(
+                            f"{err}; the fixed step's error estimate had reached {err_max:.3g} x its tolerance "
+                            f"(steps kept above it: summary.json fixed_step_error_max), so the run may have "
+                            f"diverged numerically: compare with --integrator cvodes or a smaller run.fixed_step_s",
+                            *([err.quantity] if isinstance(err, ImplausibleRunError) else []))
                     # the run is kept up to the last sample within the limits
                     bad = int(np.argmax((speeds > plausibility.MAX_SPEED_M_S)
                                         | (treads > plausibility.MAX_TREAD_SPEED_M_S)
