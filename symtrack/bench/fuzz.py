@@ -73,6 +73,7 @@ from ..model.plausibility import (
     GROUND_PRESSURE_RANGE_KPA,
     MAX_TREAD_SPEED_M_S,
     bekker_pressure_limit_Pa,
+    leaning_sinkage_limit_m,
     tilt_over_tipping,
 )
 from ..presets.soils import SOILS
@@ -116,6 +117,9 @@ assert GROUND_PRESSURE_RANGE_KPA[0] < VEHICLE_PRESSURE_KPA[0] < VEHICLE_PRESSURE
 # crawler's ground clearance. (The plausibility rules bound the pressure alone: on the WES heavy clay,
 # n = 0.11, a 122 kPa crawler sinks tens of metres; docs/model.md, "The physics fuzzer".)
 STATIC_SINKAGE_MAX_M = 0.2
+# The static sinkage is kept below the leaning limit (plausibility.check_leaning) divided by this: the
+# rule's onset is a mean; the loaded end of a track sinks deeper.
+LEANING_MARGIN_FUZZ = 2.0
 # The largest torque of a programme as a fraction of the torque whose thrust 2 T / r equals the weight
 # (the plausibility rule warns above 2): from gentle driving to what spins the tracks on soft soil.
 TORQUE_FRACTION = (0.03, 0.6)
@@ -235,6 +239,10 @@ def _vehicle(draw, soil: dict, slope_deg: float = 0.0) -> dict:
     tilt = math.tan(math.radians(slope_deg))
     peak = (1 + 6 * (abs(cg_e) + cg_h * tilt) / length) * (1 + 2 * cg_h * tilt / gauge)
     pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"] / peak)
+    # and no deeper than the 3D hull leans over at (plausibility.check_leaning, with a margin for the load's
+    # distribution along the track): the same sinkage bound, n min(l^2 / 12, B^2 / 4) / h
+    lean = leaning_sinkage_limit_m({"contact_length_m": length, "track_gauge_m": gauge, "cg_height_m": cg_h}, s)
+    pressure = min(pressure, k * (lean / (LEANING_MARGIN_FUZZ * peak)) ** s["bekker_n"])
     # and inside the rule that Bekker's law is no stiffer than the soil's elastic reloading at that sinkage
     # (plausibility.check_soil_contact: a nearly flat law, the WES heavy clay's, under a light crawler)
     lo, hi = bekker_pressure_limit_Pa({"track_width_m": width}, s)

@@ -14,7 +14,8 @@ the key, the value, the allowed range):
 - mean ground pressure m g / (2 b l) outside :data:`GROUND_PRESSURE_RANGE_KPA`;
 - a track as wide as the gauge or wider (:data:`TRACK_WIDTH_OVER_GAUGE_MAX`): the tracks overlap;
 - a static sinkage where Bekker's law is stiffer than the soil's elastic stiffness
-  (:data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX`, :func:`check_soil_contact`): the law used outside its range.
+  (:data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX`, :func:`check_soil_contact`): the law used outside its range;
+- a 3D vehicle whose static sinkage makes it lean over at rest (:func:`check_leaning`).
 
 Warned (one line, the run goes on): a contact length outside :data:`CONTACT_LENGTH_OVER_GAUGE_RANGE`
 times the gauge, and a torque programme that pushes more than :data:`TRACTION_OVER_WEIGHT_MAX`
@@ -41,8 +42,8 @@ __all__ = ["BEKKER_STIFFNESS_OVER_ELASTIC_MAX", "CONTACT_LENGTH_OVER_GAUGE_RANGE
            "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S", "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX",
            "TRACTION_OVER_WEIGHT_MAX", "bekker_pressure_limit_Pa", "bekker_stiffness_ratio",
            "check_sinkage", "check_soil_contact", "check_speed", "check_tilt",
-           "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa", "tilt_over_tipping",
-           "tipping_angles_rad"]
+           "check_leaning", "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa",
+           "leaning_sinkage_limit_m", "tilt_over_tipping", "tipping_angles_rad", "LEANING_MARGIN"]
 
 log = logging.getLogger("symtrack.plausibility")
 
@@ -89,6 +90,15 @@ MAX_TREAD_SPEED_M_S = 30.0
 # physics fuzzer's CVODES runs: too much work, or minutes for a 3 s run). Every other preset carries 15-120
 # kPa at 0.03-0.53 of K_e.
 BEKKER_STIFFNESS_OVER_ELASTIC_MAX = 1.0
+# The 3D vehicle's leaning stability: its tracks' rotational stiffness on the soil, with Bekker's tangent
+# n p / z at the static sinkage as the subgrade modulus, (n p / z) b l^3 / 6 about the pitch axis and
+# (n p / z) b l B^2 / 2 about the roll axis, must exceed the weight's overturning moment per radian W h (the
+# leaning instability of a tall structure on soft soil: E. C. Hambly, "Soil buckling and the leaning
+# instability of tall structures", The Structural Engineer 63A(3), 1985). With W = 2 p b l both come to a
+# static sinkage below n l^2 / (12 h) and n B^2 / (4 h); refused beyond (at a margin of 1: the onset). Found
+# by the physics fuzzer: a 17 t crawler on the WES heavy clay (n = 0.11, 12 cm of static sinkage, its pitch
+# stiffness 0.23 W h) had no static start on flat ground.
+LEANING_MARGIN = 1.0
 # A track end sunk deeper than the CG's height above the ground: the hull would be in the soil, and the
 # model has no hull contact (no belly drag), so its figures have left its domain: stopped. (Found by the
 # physics fuzzer: a 16 t crawler on a very soft clay ran "complete" with 93 m of sinkage.)
@@ -179,6 +189,40 @@ def check_soil_contact(vehicle: dict, soil: dict, where: str = "soil") -> None:
         f"= {BEKKER_STIFFNESS_OVER_ELASTIC_MAX * k_e:.3g}] Pa/m: the pressure-sinkage law is used far below the "
         f"sinkages its plate tests measured, where it is stiffer than the soil's elastic reloading (no soil "
         f"loads plastically stiffer than it reloads elastically){bound}")
+
+
+def leaning_sinkage_limit_m(vehicle: dict, soil: dict) -> float | None:
+    """The static sinkage [m] above which a rigid-hulled crawler leans over on its soil (:func:`check_leaning`):
+    n min(l^2 / 12, B^2 / 4) / h; None for a soil without a Bekker n."""
+    if "bekker_n" not in soil:
+        return None
+    n, h = float(soil["bekker_n"]), float(vehicle["cg_height_m"])
+    l, B = float(vehicle["contact_length_m"]), float(vehicle["track_gauge_m"])
+    return n * min(l * l / 12, B * B / 4) / h if h > 0 else None
+
+
+def check_leaning(vehicle: dict, soil: dict, where: str = "soil") -> None:
+    """Refuse (ParameterError) a 3D vehicle that leans over at rest on its soil (:data:`LEANING_MARGIN`)."""
+    limit = leaning_sinkage_limit_m(vehicle, soil)
+    keys = ("k_c_N_per_m_n1", "k_phi_N_per_m_n2")
+    if limit is None or not all(k in soil for k in keys):
+        return
+    n = float(soil["bekker_n"])
+    k_eq = float(soil["k_c_N_per_m_n1"]) / float(vehicle["track_width_m"]) + float(soil["k_phi_N_per_m_n2"])
+    p = mean_ground_pressure_Pa(vehicle)
+    if n <= 0 or k_eq <= 0:
+        return
+    z_log = (math.log(p) - math.log(k_eq)) / n
+    if z_log <= math.log(limit / LEANING_MARGIN):
+        return
+    raise ParameterError(
+        f"{where}: the static sinkage z = (p / k)^(1/n) = {math.exp(z_log):.3g} m of the mean ground pressure "
+        f"p = {p / 1e3:.3g} kPa ({where}.bekker_n = {n:g}) is outside the allowed range [0, {limit:.3g}] m = n "
+        f"min(l^2 / 12, B^2 / 4) / h (vehicle.contact_length_m, track_gauge_m, cg_height_m): the tracks' rotational "
+        f"stiffness on the soil, Bekker's n p / z times b l^3 / 6 (pitch) or b l B^2 / 2 (roll), is below the "
+        f"weight's overturning moment W h per radian, and the 3D vehicle leans over at rest (the leaning "
+        f"instability of a tall structure on soft soil, Hambly 1985); a lighter or lower vehicle, a longer "
+        f"contact or a wider gauge would be inside")
 
 
 def check_torque(vehicle: dict, torque_max_N_m: float, where: str = "torque") -> None:
