@@ -329,3 +329,31 @@ def test_a_fixed_step_that_diverges_into_the_speed_limit_says_it_may_have_diverg
     assert fuzz._run(doc, out, "rosenbrock") is None
     msg = out.messages["finite"]
     assert "speed = " in msg and "may have diverged numerically" in msg and "--integrator cvodes" in msg, msg
+
+
+def test_a_3d_crawler_that_leans_over_on_heavy_clay_is_refused_on_load():
+    """From the second long run (seed 2026, case 126): a 10.4 t crawler (73 kPa, CG 0.86 m high over 1.59 m of
+    contact) on the WES heavy clay (n = 0.109): its static sinkage of 12 cm makes Bekker's tangent n p / z so
+    soft that the tracks' pitch stiffness is 0.23 of the weight's overturning moment W h per radian: the hull
+    leans over at rest, and the 3D start found no equilibrium ("no static equilibrium ... after Newton", a
+    failure of ``finite``). It is refused on load now with the sinkage that would be inside, n l^2 / (12 h) =
+    2.7 cm; the planar model, which has no pitch, runs it; the generator keeps its draws at half that."""
+    vehicle = {"mass_kg": 10427.0, "track_gauge_m": 1.6785, "track_width_m": 0.43812, "contact_length_m": 1.5927,
+               "yaw_inertia_kg_m2": 7371.4, "sprocket_radius_m": 0.43506, "cg_height_m": 0.86306,
+               "cg_ahead_of_contact_centre_m": -0.015683, "sprocket_inertia_kg_m2": 58.689,
+               "torque_time_constant_s": 0.17712, "lateral_friction_coeff": 0.57051,
+               "lateral_creep_speed_m_s": 0.012702}
+    soil = {"bekker_n": 0.10899, "k_c_N_per_m_n1": 1782.6, "k_phi_N_per_m_n2": 88409.0, "cohesion_Pa": 23546.0,
+            "friction_angle_rad": 0.1254, "shear_modulus_K_m": 0.007458}
+    doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 1052.4, 812.38)], soil="heavy_clay_wes_40",
+               vehicle=vehicle)
+    doc["soil"].update(soil)
+    out = fuzz.check_case(doc, {"variant": "3d-shear", "programme": "ramp", "flat": True}, reference=REFERENCE)
+    msg = out.messages.get("refused", "")
+    assert out.outcome == "refused" and "leans over at rest" in msg and "0.0267] m" in msg, out.messages
+    planar = _doc({"lateral_law": "shear"}, [(0.0, 1052.4, 812.38)], soil="heavy_clay_wes_40", vehicle=vehicle)
+    planar["soil"].update(soil)
+    scenario_from_dict(planar, "fuzz")  # accepted
+    case, _ = fuzz.case_document(fuzz.RandomDraw(2026 * 1_000_003 + 126))
+    assert case["vehicle"]["mass_kg"] < 9000.0, case["vehicle"]
+    scenario_from_dict(case, "fuzz")

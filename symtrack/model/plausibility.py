@@ -96,7 +96,7 @@ BEKKER_STIFFNESS_OVER_ELASTIC_MAX = 1.0
 # leaning instability of a tall structure on soft soil: E. C. Hambly, "Soil buckling and the leaning
 # instability of tall structures", The Structural Engineer 63A(3), 1985). With W = 2 p b l both come to a
 # static sinkage below n l^2 / (12 h) and n B^2 / (4 h); refused beyond (at a margin of 1: the onset). Found
-# by the physics fuzzer: a 17 t crawler on the WES heavy clay (n = 0.11, 12 cm of static sinkage, its pitch
+# by the physics fuzzer: a 10.4 t crawler on the WES heavy clay (n = 0.11, 12 cm of static sinkage, its pitch
 # stiffness 0.23 W h) had no static start on flat ground.
 LEANING_MARGIN = 1.0
 # A track end sunk deeper than the CG's height above the ground: the hull would be in the soil, and the
