@@ -120,10 +120,9 @@ STATIC_SINKAGE_MAX_M = 0.2
 # The static sinkage is kept below the leaning limit (plausibility.check_leaning) divided by this: the
 # rule's onset is a mean; the loaded end of a track sinks deeper.
 LEANING_MARGIN_FUZZ = 2.0
-# The mean pressure is kept this far inside the soil-contact rule's bound (plausibility.check_soil_contact)
-# where the sinkage caps leave room (else 1.01): at the bound itself a track's lighter end is outside it (the
-# WES heavy clay's 3D start on a ramp, CVODES on a drive up to 0.6 of the weight's thrust: both failed at
-# 1.01 x the bound).
+# The mean pressure is kept this far inside the soil-contact rule's bound (plausibility.check_soil_contact):
+# at the bound itself a track's lighter end is outside it (the WES heavy clay's 3D start on a ramp, CVODES on
+# a drive up to 0.6 of the weight's thrust: both failed at 1.01 x the bound).
 SOIL_CONTACT_MARGIN_FUZZ = 1.5
 # The largest torque of a programme as a fraction of the torque whose thrust 2 T / r equals the weight
 # (the plausibility rule warns above 2): from gentle driving to what spins the tracks on soft soil.
@@ -243,19 +242,18 @@ def _vehicle(draw, soil: dict, slope_deg: float = 0.0) -> dict:
     k = s["k_c_N_per_m_n1"] / width + s["k_phi_N_per_m_n2"]
     tilt = math.tan(math.radians(slope_deg))
     peak = (1 + 6 * (abs(cg_e) + cg_h * tilt) / length) * (1 + 2 * cg_h * tilt / gauge)
+    pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"] / peak)
     # and no deeper than the 3D hull leans over at (plausibility.check_leaning, with a margin for the load's
     # distribution along the track): the same sinkage bound, n min(l^2 / 12, B^2 / 4) / h
     lean = leaning_sinkage_limit_m({"contact_length_m": length, "track_gauge_m": gauge, "cg_height_m": cg_h}, s)
-    cap = min(k * STATIC_SINKAGE_MAX_M ** s["bekker_n"] / peak,
-              k * (lean / (LEANING_MARGIN_FUZZ * peak)) ** s["bekker_n"])
-    pressure = min(pressure, cap)
+    pressure = min(pressure, k * (lean / (LEANING_MARGIN_FUZZ * peak)) ** s["bekker_n"])
     # and inside the rule that Bekker's law is no stiffer than the soil's elastic reloading at that sinkage
-    # (plausibility.check_soil_contact: a nearly flat law, the WES heavy clay's, under a light crawler), with a
-    # margin where the caps above leave room for it: the rule holds at the mean pressure, and a track's
-    # lighter end (a CG off the centre, the load transfer of a drive) is at less
+    # (plausibility.check_soil_contact: a nearly flat law, the WES heavy clay's, under a light crawler)
+    # with a margin: the rule holds at the mean pressure, and a track's lighter end (a CG off the centre, the
+    # load transfer of a drive) is at less
     lo, hi = bekker_pressure_limit_Pa({"track_width_m": width}, s)
-    floor = SOIL_CONTACT_MARGIN_FUZZ * lo if SOIL_CONTACT_MARGIN_FUZZ * lo <= cap else 1.01 * lo
-    pressure = min(max(pressure, floor), 0.99 * hi, 0.99e3 * GROUND_PRESSURE_RANGE_KPA[1])
+    pressure = min(max(pressure, SOIL_CONTACT_MARGIN_FUZZ * lo), hi / SOIL_CONTACT_MARGIN_FUZZ,
+                   0.99e3 * GROUND_PRESSURE_RANGE_KPA[1])
     mass = pressure * 2 * width * length / GRAVITY_M_S2
     hull_l, hull_w = 1.4 * length, gauge + width
     v = {"preset": "reference_crawler",
