@@ -120,10 +120,6 @@ STATIC_SINKAGE_MAX_M = 0.2
 # The static sinkage is kept below the leaning limit (plausibility.check_leaning) divided by this: the
 # rule's onset is a mean; the loaded end of a track sinks deeper.
 LEANING_MARGIN_FUZZ = 2.0
-# The mean pressure is kept this far inside the soil-contact rule's bound (plausibility.check_soil_contact):
-# at the bound itself a track's lighter end is outside it (the WES heavy clay's 3D start on a ramp, CVODES on
-# a drive up to 0.6 of the weight's thrust: both failed at 1.01 x the bound).
-SOIL_CONTACT_MARGIN_FUZZ = 1.5
 # The largest torque of a programme as a fraction of the torque whose thrust 2 T / r equals the weight
 # (the plausibility rule warns above 2): from gentle driving to what spins the tracks on soft soil.
 TORQUE_FRACTION = (0.03, 0.6)
@@ -249,11 +245,8 @@ def _vehicle(draw, soil: dict, slope_deg: float = 0.0) -> dict:
     pressure = min(pressure, k * (lean / (LEANING_MARGIN_FUZZ * peak)) ** s["bekker_n"])
     # and inside the rule that Bekker's law is no stiffer than the soil's elastic reloading at that sinkage
     # (plausibility.check_soil_contact: a nearly flat law, the WES heavy clay's, under a light crawler)
-    # with a margin: the rule holds at the mean pressure, and a track's lighter end (a CG off the centre, the
-    # load transfer of a drive) is at less
     lo, hi = bekker_pressure_limit_Pa({"track_width_m": width}, s)
-    pressure = min(max(pressure, SOIL_CONTACT_MARGIN_FUZZ * lo), hi / SOIL_CONTACT_MARGIN_FUZZ,
-                   0.99e3 * GROUND_PRESSURE_RANGE_KPA[1])
+    pressure = min(max(pressure, 1.01 * lo), 0.99 * hi)
     mass = pressure * 2 * width * length / GRAVITY_M_S2
     hull_l, hull_w = 1.4 * length, gauge + width
     v = {"preset": "reference_crawler",
