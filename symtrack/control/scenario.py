@@ -265,6 +265,7 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
     mpc = _mpc(d.get("mpc", {}))
     try:  # what no crawler has (symtrack.model.plausibility): refused, or warned in one line
         plausibility.check_vehicle(veh)
+        plausibility.check_soil_contact(veh, soil)
         plausibility.check_torque(veh, mpc.torque_max_N_m, "mpc.torque_max_N_m")
     except ParameterError as err:
         raise ScenarioError(str(err)) from err

@@ -1,5 +1,6 @@
 
-__all__ = ["MissingExtraError", "ParameterError", "ScenarioError", "SimulationError", "SymtrackError"]
+__all__ = ["ImplausibleRunError", "MissingExtraError", "ParameterError", "ScenarioError", "SimulationError",
+           "SymtrackError"]
 """Exception types of symtrack. Every message names what was wrong and what is allowed."""
 
 
@@ -17,6 +18,16 @@ class ScenarioError(SymtrackError, ValueError):
 
 class SimulationError(SymtrackError, RuntimeError):
     """The integrator failed or the simulation left its domain of validity."""
+
+
+class ImplausibleRunError(SimulationError):
+    """A run stopped by a plausibility limit (:mod:`symtrack.model.plausibility`): a figure no crawler
+    reaches, so that the run cannot be physically true from there on. ``quantity`` names the limit
+    ("speed", "tread_speed" or "sinkage"); the message says the value, the time and the allowed range."""
+
+    def __init__(self, message: str, quantity: str = ""):
+        super().__init__(message)
+        self.quantity = quantity
 
 
 class MissingExtraError(SymtrackError, ImportError):

@@ -12,28 +12,38 @@ Refused (:class:`~symtrack.foundations.errors.ParameterError`, named as the regi
 the key, the value, the allowed range):
 
 - mean ground pressure m g / (2 b l) outside :data:`GROUND_PRESSURE_RANGE_KPA`;
-- a track as wide as the gauge or wider (:data:`TRACK_WIDTH_OVER_GAUGE_MAX`): the tracks overlap.
+- a track as wide as the gauge or wider (:data:`TRACK_WIDTH_OVER_GAUGE_MAX`): the tracks overlap;
+- a static sinkage where Bekker's law is stiffer than the soil's elastic stiffness
+  (:data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX`, :func:`check_soil_contact`): the law used outside its range;
+- a 3D vehicle whose static sinkage makes it lean over at rest (:func:`check_leaning`).
 
 Warned (one line, the run goes on): a contact length outside :data:`CONTACT_LENGTH_OVER_GAUGE_RANGE`
 times the gauge, and a torque programme that pushes more than :data:`TRACTION_OVER_WEIGHT_MAX`
 times the vehicle's weight.
 
-Stopped (:class:`~symtrack.foundations.errors.SimulationError`): a run whose speed exceeds
+Stopped (:class:`~symtrack.foundations.errors.ImplausibleRunError`, a
+:class:`~symtrack.foundations.errors.SimulationError` whose ``quantity`` names the limit): a run whose speed exceeds
 :data:`MAX_SPEED_M_S`, whose sprockets' tread speed exceeds :data:`MAX_TREAD_SPEED_M_S`, or whose
-track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height.
+track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height, or whose 3D hull pitches or rolls
+beyond its static tipping angle (:func:`check_tilt`: turned over).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 
-from ..foundations.errors import ParameterError, SimulationError
+import numpy as np
+
+from ..foundations.errors import ImplausibleRunError, ParameterError
 from ..vehicles.planar import GRAVITY_M_S2, mean_ground_pressure_Pa
 
-__all__ = ["CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA", "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S",
-           "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX", "TRACTION_OVER_WEIGHT_MAX", "check_sinkage",
-           "check_speed", "check_torque", "check_tread_speed",
-           "check_vehicle", "ground_pressure_kPa"]
+__all__ = ["BEKKER_STIFFNESS_OVER_ELASTIC_MAX", "CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA",
+           "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S", "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX",
+           "TRACTION_OVER_WEIGHT_MAX", "bekker_pressure_limit_Pa", "bekker_stiffness_ratio",
+           "check_sinkage", "check_soil_contact", "check_speed", "check_tilt",
+           "check_leaning", "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa",
+           "leaning_sinkage_limit_m", "tilt_over_tipping", "tipping_angles_rad", "LEANING_MARGIN"]
 
 log = logging.getLogger("symtrack.plausibility")
 
@@ -59,9 +69,36 @@ TRACTION_OVER_WEIGHT_MAX = 2.0
 # 11 m/s (40 km/h) at most. A run faster than 30 m/s (108 km/h) is an implausible input (the mass
 # in tonnes, a torque in the wrong unit) or a numerical failure: it is stopped.
 MAX_SPEED_M_S = 30.0
-# A sprocket's tread speed r |omega| above the same 30 m/s: the tracks spin on the soil (a torque far above
-# what it carries; the sprocket torque has no speed limit of its own): stopped.
+# A sprocket's tread speed r |omega| above 30 m/s: stopped. The tread speed is what the drive turns the
+# track at, and a real drive bounds it: the engine's governed speed in the top gear gives the vehicle's top
+# speed on firm ground, where the slip is a few per cent, so the tread runs at most about that top speed.
+# Published top speeds of the fastest tracked vehicles: the M1 Abrams 72 km/h (governed), the Leopard 2
+# 68-72 km/h, the FV101 Scorpion 72-80 km/h (about 20-22 m/s); rubber-tracked farm tractors 40 km/h
+# (11 m/s, the road limit for tractors in the EU). 30 m/s (108 km/h) is above all of them. The model's
+# sprocket torque is a torque source with no speed limit of its own (no engine map, no power limit): where
+# a torque programme asks more than the soil carries, the tracks spin up without bound, and a run there
+# is one no drive can give, whatever its figures say. It stops, keeping its trajectory up to the last
+# output within the limit, with a message that says so (a refusal of the programme, not a complete run).
 MAX_TREAD_SPEED_M_S = 30.0
+# Bekker's loading stiffness dp/dz = n p / z at the static sinkage z = (p / k_eq)^(1/n) of the mean ground
+# pressure, over the soil's elastic (unloading/reloading) stiffness K_e: refused above 1. A soil's virgin
+# (plastic) loading is softer than its elastic unloading and reloading (Wong, Theory of Ground Vehicles: the
+# response to repetitive loading, the unloading-reloading line much steeper than the loading curve), so a
+# loading curve stiffer than K_e is the Bekker fit used outside the sinkages its plate tests measured
+# (centimetres). It happens with a nearly flat law: the WES heavy clay's n = 0.11 puts a 25 kPa crawler at a
+# static sinkage of micrometres (n p / z some 40 x K_e), where the integrators stall on the stiffness (the
+# physics fuzzer's CVODES runs: too much work, or minutes for a 3 s run). Every other preset carries 15-120
+# kPa at 0.03-0.53 of K_e.
+BEKKER_STIFFNESS_OVER_ELASTIC_MAX = 1.0
+# The 3D vehicle's leaning stability: its tracks' rotational stiffness on the soil, with Bekker's tangent
+# n p / z at the static sinkage as the subgrade modulus, (n p / z) b l^3 / 6 about the pitch axis and
+# (n p / z) b l B^2 / 2 about the roll axis, must exceed the weight's overturning moment per radian W h (the
+# leaning instability of a tall structure on soft soil: E. C. Hambly, "Soil buckling and the leaning
+# instability of tall structures", The Structural Engineer 63A(3), 1985). With W = 2 p b l both come to a
+# static sinkage below n l^2 / (12 h) and n B^2 / (4 h); refused beyond (at a margin of 1: the onset). Found
+# by the physics fuzzer: a 10.4 t crawler on the WES heavy clay (n = 0.11, 12 cm of static sinkage, its pitch
+# stiffness 0.23 W h) had no static start on flat ground.
+LEANING_MARGIN = 1.0
 # A track end sunk deeper than the CG's height above the ground: the hull would be in the soil, and the
 # model has no hull contact (no belly drag), so its figures have left its domain: stopped. (Found by the
 # physics fuzzer: a 16 t crawler on a very soft clay ran "complete" with 93 m of sinkage.)
@@ -99,6 +136,95 @@ def check_vehicle(vehicle: dict, where: str = "vehicle") -> None:
                     "the run goes on", where, l / B, lo, hi)
 
 
+def bekker_stiffness_ratio(vehicle: dict, soil: dict) -> float | None:
+    """Bekker's loading stiffness n p / z at the static sinkage z = (p / k_eq)^(1/n) of the mean ground pressure
+    p, over the soil's elastic (unloading/reloading) stiffness K_e; None for a soil without these values."""
+    keys = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "elastic_stiffness_Pa_per_m")
+    if not all(k in soil for k in keys):
+        return None
+    n, k_c, k_phi, k_e = (float(soil[k]) for k in keys)
+    k_eq = k_c / float(vehicle["track_width_m"]) + k_phi
+    p = mean_ground_pressure_Pa(vehicle)
+    if n <= 0 or k_eq <= 0 or k_e <= 0 or p <= 0:
+        return None
+    # n p / z with z = (p / k_eq)^(1/n), in logarithms (z underflows for n = 0.1 and a light crawler)
+    return math.exp(math.log(n * p) - (math.log(p) - math.log(k_eq)) / n - math.log(k_e))
+
+
+def bekker_pressure_limit_Pa(vehicle: dict, soil: dict) -> tuple[float, float]:
+    """(lowest, highest) mean ground pressure [Pa] that :func:`check_soil_contact` accepts for ``soil`` and the
+    vehicle's track width (0 and inf where it bounds none): n p^(1 - 1/n) k_eq^(1/n) = the limit x K_e."""
+    keys = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "elastic_stiffness_Pa_per_m")
+    if not all(k in soil for k in keys):
+        return 0.0, math.inf
+    n, k_c, k_phi, k_e = (float(soil[k]) for k in keys)
+    k_eq = k_c / float(vehicle["track_width_m"]) + k_phi
+    if n <= 0 or k_eq <= 0 or k_e <= 0 or n == 1:
+        return 0.0, math.inf
+    log_p = (math.log(BEKKER_STIFFNESS_OVER_ELASTIC_MAX * k_e) - math.log(n) - math.log(k_eq) / n) / (1 - 1 / n)
+    p = math.inf if log_p > 700 else math.exp(max(log_p, -700.0))  # (n near 1: the bound is far or none)
+    return (p, math.inf) if n < 1 else (0.0, p)
+
+
+def check_soil_contact(vehicle: dict, soil: dict, where: str = "soil") -> None:
+    """Refuse (ParameterError) a vehicle and soil whose static sinkage is where Bekker's law is stiffer than the
+    soil's elastic stiffness (:data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX`)."""
+    ratio = bekker_stiffness_ratio(vehicle, soil)
+    if ratio is None or ratio <= BEKKER_STIFFNESS_OVER_ELASTIC_MAX:
+        return
+    n, k_e = float(soil["bekker_n"]), float(soil["elastic_stiffness_Pa_per_m"])
+    k_eq = float(soil["k_c_N_per_m_n1"]) / float(vehicle["track_width_m"]) + float(soil["k_phi_N_per_m_n2"])
+    p = mean_ground_pressure_Pa(vehicle)
+    z_log10 = (math.log10(p) - math.log10(k_eq)) / n
+    lo, hi = bekker_pressure_limit_Pa(vehicle, soil)
+    bound = ""
+    if n != 1:
+        p_lim = lo if n < 1 else hi
+        bound = (f"; a mean ground pressure {'above' if n < 1 else 'below'} {p_lim / 1e3:.3g} kPa (mass_kg, "
+                 f"track_width_m, contact_length_m) or a soil with a larger {where}.bekker_n would be inside")
+    raise ParameterError(
+        f"{where}: Bekker's loading stiffness n p / z = {ratio * k_e:.3g} Pa/m at the static sinkage z = (p / k)^(1/n) "
+        f"= {10 ** z_log10:.3g} m of the mean ground pressure p = {p / 1e3:.3g} kPa ({where}.bekker_n = {n:g}) is "
+        f"outside the allowed range (0, {BEKKER_STIFFNESS_OVER_ELASTIC_MAX:g} x {where}.elastic_stiffness_Pa_per_m "
+        f"= {BEKKER_STIFFNESS_OVER_ELASTIC_MAX * k_e:.3g}] Pa/m: the pressure-sinkage law is used far below the "
+        f"sinkages its plate tests measured, where it is stiffer than the soil's elastic reloading (no soil "
+        f"loads plastically stiffer than it reloads elastically){bound}")
+
+
+def leaning_sinkage_limit_m(vehicle: dict, soil: dict) -> float | None:
+    """The static sinkage [m] above which a rigid-hulled crawler leans over on its soil (:func:`check_leaning`):
+    n min(l^2 / 12, B^2 / 4) / h; None for a soil without a Bekker n."""
+    if "bekker_n" not in soil:
+        return None
+    n, h = float(soil["bekker_n"]), float(vehicle["cg_height_m"])
+    l, B = float(vehicle["contact_length_m"]), float(vehicle["track_gauge_m"])
+    return n * min(l * l / 12, B * B / 4) / h if h > 0 else None
+
+
+def check_leaning(vehicle: dict, soil: dict, where: str = "soil") -> None:
+    """Refuse (ParameterError) a 3D vehicle that leans over at rest on its soil (:data:`LEANING_MARGIN`)."""
+    limit = leaning_sinkage_limit_m(vehicle, soil)
+    keys = ("k_c_N_per_m_n1", "k_phi_N_per_m_n2")
+    if limit is None or not all(k in soil for k in keys):
+        return
+    n = float(soil["bekker_n"])
+    k_eq = float(soil["k_c_N_per_m_n1"]) / float(vehicle["track_width_m"]) + float(soil["k_phi_N_per_m_n2"])
+    p = mean_ground_pressure_Pa(vehicle)
+    if n <= 0 or k_eq <= 0:
+        return
+    z_log = (math.log(p) - math.log(k_eq)) / n
+    if z_log <= math.log(limit / LEANING_MARGIN):
+        return
+    raise ParameterError(
+        f"{where}: the static sinkage z = (p / k)^(1/n) = {math.exp(z_log):.3g} m of the mean ground pressure "
+        f"p = {p / 1e3:.3g} kPa ({where}.bekker_n = {n:g}) is outside the allowed range [0, {limit:.3g}] m = n "
+        f"min(l^2 / 12, B^2 / 4) / h (vehicle.contact_length_m, track_gauge_m, cg_height_m): the tracks' rotational "
+        f"stiffness on the soil, Bekker's n p / z times b l^3 / 6 (pitch) or b l B^2 / 2 (roll), is below the "
+        f"weight's overturning moment W h per radian, and the 3D vehicle leans over at rest (the leaning "
+        f"instability of a tall structure on soft soil, Hambly 1985); a lighter or lower vehicle, a longer "
+        f"contact or a wider gauge would be inside")
+
+
 def check_torque(vehicle: dict, torque_max_N_m: float, where: str = "torque") -> None:
     """Warn (one log line) when commanded torques of ``torque_max_N_m`` on both sprockets push more
     than :data:`TRACTION_OVER_WEIGHT_MAX` times the vehicle's weight."""
@@ -110,30 +236,61 @@ def check_torque(vehicle: dict, torque_max_N_m: float, where: str = "torque") ->
 
 
 def check_tread_speed(tread_m_s: float, t_s: float) -> None:
-    """Stop (SimulationError) a run whose track tread runs faster than :data:`MAX_TREAD_SPEED_M_S` (r |omega|
-    of a sprocket: the tracks spin, a torque far above what the soil carries)."""
+    """Stop (ImplausibleRunError, quantity "tread_speed") a run whose track tread runs faster than
+    :data:`MAX_TREAD_SPEED_M_S` (r |omega| of a sprocket: the tracks spin, a torque far above what the soil
+    carries, faster than any drive turns them)."""
     if tread_m_s > MAX_TREAD_SPEED_M_S:
-        raise SimulationError(
+        raise ImplausibleRunError(
             f"tread speed = {tread_m_s:.4g} m/s (sprocket_radius_m x |omega|) at t = {t_s:.3f} s is outside the "
             f"allowed range [0, {MAX_TREAD_SPEED_M_S:g}] m/s (the tracks spin: the torque exceeds what the soil "
-            f"carries; check the torques in N m)")
+            f"carries, and no crawler's drive turns its tracks that fast; the model's torque has no power limit: "
+            f"lower the torques, which are in N m)", "tread_speed")
 
 
 def check_sinkage(sinkage_m: float, cg_height_m: float, t_s: float) -> None:
-    """Stop (SimulationError) a run whose track sinks deeper than :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times
-    the CG height (the hull in the soil: the model has no hull contact)."""
+    """Stop (ImplausibleRunError, quantity "sinkage") a run whose track sinks deeper than
+    :data:`SINKAGE_OVER_CG_HEIGHT_MAX` times the CG height (the hull in the soil: the model has no hull contact)."""
     limit = SINKAGE_OVER_CG_HEIGHT_MAX * cg_height_m
     if cg_height_m > 0 and sinkage_m > limit:
-        raise SimulationError(
+        raise ImplausibleRunError(
             f"sinkage = {sinkage_m:.4g} m at t = {t_s:.3f} s is outside the allowed range [0, {limit:.4g}] m (deeper "
             f"than the CG height vehicle.cg_height_m = {cg_height_m:g} m: the hull would be in the soil, which the "
-            f"model does not carry; check the soil's Bekker values and the vehicle's mass)")
+            f"model does not carry; check the soil's Bekker values and the vehicle's mass)", "sinkage")
+
+
+def tipping_angles_rad(params: dict) -> tuple[float, float, float]:
+    """The vehicle's static tipping angles [rad] (:func:`check_tilt`): nose up (the CG over the rear track end),
+    nose down (over the front end) and sideways (over a track's outer edge)."""
+    l, e, h = (float(params[k]) for k in ("contact_length_m", "cg_ahead_of_contact_centre_m", "cg_height_m"))
+    B, b = float(params["track_gauge_m"]), float(params["track_width_m"])
+    return math.atan2(l / 2 + e, h), math.atan2(l / 2 - e, h), math.atan2((B + b) / 2, h)
+
+
+def tilt_over_tipping(pitch_rad, roll_rad, params: dict):
+    """The hull's tilt over its tipping angle (:func:`tipping_angles_rad`): above 1 the CG is beyond the
+    tracks' footprint (elementwise for arrays)."""
+    up, down, side = tipping_angles_rad(params)
+    pitch = np.asarray(pitch_rad, dtype=float)
+    return np.maximum(np.where(pitch > 0, pitch / up, -pitch / down), np.abs(np.asarray(roll_rad, dtype=float)) / side)
+
+
+def check_tilt(pitch_rad: float, roll_rad: float, params: dict, t_s: float) -> None:
+    """Stop (ImplausibleRunError, quantity "tilt") a 3D run whose hull has turned over: pitched or rolled (from
+    the horizontal) beyond its static tipping angle, the CG beyond the tracks' footprint (a track end or
+    outer edge); the model's contact has no hull, so that what follows is outside it."""
+    if float(tilt_over_tipping(pitch_rad, roll_rad, params)) > 1.0:
+        up, down, side = (math.degrees(a) for a in tipping_angles_rad(params))
+        raise ImplausibleRunError(
+            f"pitch = {math.degrees(pitch_rad):.4g} deg, roll = {math.degrees(roll_rad):.4g} deg at t = {t_s:.3f} s "
+            f"are outside the allowed range (pitch in [-{down:.3g}, {up:.3g}] deg, roll in [-{side:.3g}, {side:.3g}] "
+            f"deg: the vehicle's static tipping angles, atan of the CG's distance to a track end or outer edge "
+            f"over vehicle.cg_height_m): the vehicle has turned over, and the model's contact has no hull", "tilt")
 
 
 def check_speed(speed_m_s: float, t_s: float) -> None:
-    """Stop (SimulationError) a run whose speed exceeds :data:`MAX_SPEED_M_S`."""
+    """Stop (ImplausibleRunError, quantity "speed") a run whose speed exceeds :data:`MAX_SPEED_M_S`."""
     if speed_m_s > MAX_SPEED_M_S:
-        raise SimulationError(
+        raise ImplausibleRunError(
             f"speed = {speed_m_s:.4g} m/s ({3.6 * speed_m_s:.4g} km/h) at t = {t_s:.3f} s is outside the allowed range "
             f"[0, {MAX_SPEED_M_S:g}] m/s (faster than any crawler: check that vehicle.mass_kg is in kg and the "
-            f"torques in N m)")
+            f"torques in N m)", "speed")

@@ -126,5 +126,9 @@ def _settle_hull(model, x, p, pos_idx, acc_idx, guess):
         return np.array(F(x0=np.concatenate([guess, np.zeros(3)]))["xf"]).ravel()[:3]
     except RuntimeError as err:  # CVODES gave up (a soil too stiff for its step budget): the package's error
         raise SimulationError(f"the 3D vehicle's hull could not be settled on the ground to find its static start "
-                              f"(CVODES over {SETTLE_TIME_S:g} s of damped settling: {str(err).splitlines()[-1]})"
-                              ) from err
+                              f"(CVODES over {SETTLE_TIME_S:g} s of damped settling: {str(err).splitlines()[-1]}); "
+                              f"Newton found no rest either: the soil may not carry the vehicle at rest here (a "
+                              f"nearly flat pressure-sinkage law, a small soil.bekker_n, sinks the most loaded track "
+                              f"end without bound when the CG is off the contact's centre or the ground slopes; the "
+                              f"start is searched with no traction); check the soil, "
+                              f"vehicle.cg_ahead_of_contact_centre_m and the slope") from err

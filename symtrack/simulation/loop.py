@@ -32,7 +32,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from ..foundations.errors import SimulationError
+from ..foundations.errors import ImplausibleRunError, SimulationError
 from ..foundations.interrupt import raise_if_interrupted, watch_interrupts
 from ..foundations.progress import Progress
 from ..model import plausibility
@@ -41,6 +41,12 @@ from .result import RunResult
 __all__ = ["IncompleteRun", "OutputGrid", "SampleGrid", "SampledLaw", "StartPoint", "run"]
 
 log = logging.getLogger("symtrack.simulation")
+
+
+def _first_over(values: np.ndarray, limit: float) -> int:
+    """The index of the first of ``values`` above ``limit``, or of the largest when none is."""
+    over = np.flatnonzero(values > limit)
+    return int(over[0]) if len(over) else int(np.argmax(values))
 
 
 class IncompleteRun(SimulationError):
@@ -201,6 +207,8 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
     # the track ends' sinkages (the hull in the soil is out of the model's domain)
     isk = [k for k, n in enumerate(names) if n.startswith("sinkage_") and n.endswith("_m") and "rate" not in n]
     cg_height = float(scenario.params.get("cg_height_m", 0.0)) if isk else 0.0
+    # the 3D hull's pitch and roll (a hull turned over is out of the model's domain)
+    itilt = [names.index(n) for n in ("pitch_rad", "roll_rad")] if {"pitch_rad", "roll_rad"} <= set(names) else []
     sampled = torque_law is not None and hasattr(torque_law, "sample_time_s")
     if start is None:
         st = scenario.start
@@ -315,16 +323,34 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 speeds = np.hypot(xs[-1][:, iu], xs[-1][:, iv])
                 treads = r_sprocket * np.max(np.abs(xs[-1][:, iw]), axis=1) if iw else np.zeros(len(times))
                 sinks = np.max(xs[-1][:, isk], axis=1) if isk else np.zeros(len(times))
+                tilts = (plausibility.tilt_over_tipping(xs[-1][:, itilt[0]], xs[-1][:, itilt[1]], scenario.params)
+                         if itilt else np.zeros(len(times)))
                 try:  # faster than any crawler, or the hull in the soil: stopped (symtrack.model.plausibility)
-                    plausibility.check_speed(float(np.max(speeds)), float(times[int(np.argmax(speeds))]))
-                    plausibility.check_tread_speed(float(np.max(treads)), float(times[int(np.argmax(treads))]))
-                    plausibility.check_sinkage(float(np.max(sinks)), cg_height, float(times[int(np.argmax(sinks))]))
+                    # (each checked at its first sample over the limit: the message names where it was passed)
+                    i = _first_over(speeds, plausibility.MAX_SPEED_M_S)
+                    plausibility.check_speed(float(speeds[i]), float(times[i]))
+                    i = _first_over(treads, plausibility.MAX_TREAD_SPEED_M_S)
+                    plausibility.check_tread_speed(float(treads[i]), float(times[i]))
+                    i = _first_over(sinks, plausibility.SINKAGE_OVER_CG_HEIGHT_MAX * cg_height)
+                    plausibility.check_sinkage(float(sinks[i]), cg_height, float(times[i]))
+                    if itilt:
+                        i = _first_over(tilts, 1.0)
+                        plausibility.check_tilt(float(xs[-1][i, itilt[0]]), float(xs[-1][i, itilt[1]]),
+                                                scenario.params, float(times[i]))
                 except SimulationError as err:
+                    err_max = float((plant.stats() or {}).get("fixed_step_error_max", 0.0) or 0.0)
+                    if err_max > 1.0:  # the fixed step kept steps above its tolerance: perhaps a numerical divergence
+                        err = type(err)(
+                            f"{err}; the fixed step's error estimate had reached {err_max:.3g} x its tolerance "
+                            f"(steps kept above it: summary.json fixed_step_error_max), so the run may have "
+                            f"diverged numerically: compare with --integrator cvodes or a smaller run.fixed_step_s",
+                            *([err.quantity] if isinstance(err, ImplausibleRunError) else []))
                     # the run is kept up to the last sample within the limits
                     bad = int(np.argmax((speeds > plausibility.MAX_SPEED_M_S)
                                         | (treads > plausibility.MAX_TREAD_SPEED_M_S)
                                         | ((cg_height > 0) & (sinks > plausibility.SINKAGE_OVER_CG_HEIGHT_MAX
-                                                              * cg_height))))
+                                                              * cg_height))
+                                        | (tilts > 1.0)))
                     ts[-1], xs[-1], us[-1], ys[-1] = ts[-1][:bad], xs[-1][:bad], us[-1][:bad], ys[-1][:bad]
                     if bad > 0:
                         t = float(ts[-1][-1])
