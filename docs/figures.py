@@ -717,9 +717,11 @@ def furrows_across() -> str:
                      f"{q[0]:.1f} .. {q[1]:.1f} deg", "0" if flat else f"{ref[0]:.1f} .. {ref[1]:.1f} deg",
                      f"{r['pitch_rms_difference_deg']:.2g} deg", f"{r['pitch_wavelength_m']:.2f} m",
                      f"{r['sinkage_sprocket_max_mm']:.0f} mm",
-                     f"{r['distance_m']:.1f} m, {r['speed_final_m_s']:.1f} m/s"])
+                     f"{r['distance_m']:.1f} m, {r['speed_final_m_s']:.1f} m/s",
+                     "complete" if not r.get("stopped") else
+                     f"stopped at {r['time_s']:.2f} s" + (": turned over" if "turned over" in r["stopped"] else "")])
     return md(["spacing", "l / spacing", "pitch range", "rigid ground", "RMS difference", "pitch's wavelength",
-               "largest sprocket penetration", "distance, end speed"], rows)
+               "largest sprocket penetration", "distance, end speed", "run"], rows)
 
 
 @table("furrows-along", "vehicle3d.md", "python examples/furrows_3d.py")

@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 import symtrack
+from symtrack.api import IncompleteSimulation
 from symtrack.simulation.scenario import scenario_from_dict
 from symtrack.vehicles.planar import GRAVITY_M_S2
 
@@ -63,9 +64,16 @@ COLUMNS = ("x_m", "y_m", "z_m", "pitch_rad", "roll_rad", "u_m_s", "normal_load_l
 
 
 def drive(sc) -> dict:
-    run = symtrack.simulate(sc).runs[0]
+    """The run's columns; a run the package stops (the hull turned over: the contact has no hull, so
+    what would follow is outside the model) is kept up to the stop, its message in ``stopped``."""
+    try:
+        res, stopped = symtrack.simulate(sc), None
+    except IncompleteSimulation as err:
+        res, stopped = err.result, str(err)
+    run = res.runs[0]
     c = {n: np.asarray(run.column(n)) for n in COLUMNS}
     c["t_s"] = np.asarray(run.t)
+    c["stopped"] = stopped
     c["distance_m"] = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(c["x_m"]), np.diff(c["y_m"])))])
     return c
 
@@ -128,6 +136,7 @@ def across(spacing_m, depth_m, torque_N_m, duration_s, segments) -> dict:
         "pitch_wavelength_m": dominant_wavelength_m(c["distance_m"][keep], pitch),
         "roll_max_abs_deg": math.degrees(float(np.max(np.abs(c["roll_rad"])))),
         "sinkage_sprocket_max_mm": 1e3 * float(np.max(c["sinkage_sprocket_left_m"][keep])),
+        "time_s": float(c["t_s"][-1]), "stopped": c["stopped"],
     }}
 
 

@@ -225,8 +225,10 @@ def test_a_3d_hull_landing_on_hard_soil_with_its_tracks_reversed_stays_finite_on
     assert res.runs[-1].t[-1] == pytest.approx(1.3)
 
 
-@pytest.mark.xfail(strict=True, reason="the 3D hull's hop on the soil is self-excited: it gains energy (docs/model.md, "
-                                       "'The physics fuzzer')")
+HOP = "the 3D hull's hop on the soil is self-excited: it gains energy"
+
+
+@pytest.mark.xfail(strict=True, reason=f"{HOP} (docs/model.md, \"The physics fuzzer\")")
 def test_a_3d_coast_on_sand_keeps_the_whole_energy_balance():
     """From the long run (seed 37, case 50): a 7.3 t crawler on LETE sand (static sinkage 1 mm), 3.6 kN m for
     0.58 s and then a coast, on the 3D vehicle with the creep law. The energy balance is the whole one: the

@@ -117,6 +117,10 @@ assert GROUND_PRESSURE_RANGE_KPA[0] < VEHICLE_PRESSURE_KPA[0] < VEHICLE_PRESSURE
 # crawler's ground clearance. (The plausibility rules bound the pressure alone: on the WES heavy clay,
 # n = 0.11, a 122 kPa crawler sinks tens of metres; docs/model.md, "The physics fuzzer".)
 STATIC_SINKAGE_MAX_M = 0.2
+# The generator keeps Bekker's loading stiffness at the static sinkage at most this times the soil's elastic
+# stiffness: the physical bound (no soil loads plastically stiffer than it reloads), tighter than the package's
+# refusal (plausibility.BEKKER_STIFFNESS_OVER_ELASTIC_MAX, which allows for the assumed K_e of the Wong soils).
+SOIL_CONTACT_RATIO_MAX = 1.0
 # The static sinkage is kept below the leaning limit (plausibility.check_leaning) divided by this: the
 # rule's onset is a mean; the loaded end of a track sinks deeper.
 LEANING_MARGIN_FUZZ = 2.0
@@ -245,7 +249,7 @@ def _vehicle(draw, soil: dict, slope_deg: float = 0.0) -> dict:
     pressure = min(pressure, k * (lean / (LEANING_MARGIN_FUZZ * peak)) ** s["bekker_n"])
     # and inside the rule that Bekker's law is no stiffer than the soil's elastic reloading at that sinkage
     # (plausibility.check_soil_contact: a nearly flat law, the WES heavy clay's, under a light crawler)
-    lo, hi = bekker_pressure_limit_Pa({"track_width_m": width}, s)
+    lo, hi = bekker_pressure_limit_Pa({"track_width_m": width}, s, SOIL_CONTACT_RATIO_MAX)
     pressure = min(max(pressure, 1.01 * lo), 0.99 * hi)
     mass = pressure * 2 * width * length / GRAVITY_M_S2
     hull_l, hull_w = 1.4 * length, gauge + width

@@ -446,7 +446,7 @@ def scenario_from_dict(d: dict, default_name: str = "scenario") -> Scenario:
     try:  # what no crawler has (symtrack.model.plausibility): refused, or warned in one line
         plausibility.check_vehicle(vehicle)
         plausibility.check_soil_contact(vehicle, soil)
-        if model.vehicle == "3d":
+        if vehicle_registry.get(model.vehicle).contact == CONTACT_HULL:  # a hull that can lean over
             plausibility.check_leaning(vehicle, soil)
         plausibility.check_torque(vehicle, max(max(abs(e.left_N_m), abs(e.right_N_m)) for e in torque), "torque")
     except ParameterError as err:
