@@ -422,33 +422,17 @@ def hull_rotation() -> str:
 
 MEMORY_PROBE = (Path(__file__).resolve().parent.parent / "examples" / "scenarios" / "memory_probe.toml").read_text()
 
-# the process's own high-water mark as it ends (VmHWM: what a fresh `symtrack simulate` process reached)
-_HWM = """
-import sys
-from symtrack.cli import main
-code = main(sys.argv[2:])
-with open("/proc/self/status") as f:
-    kb = next(line.split()[1] for line in f if line.startswith("VmHWM:"))
-with open(sys.argv[1], "w") as f:
-    f.write(kb)
-sys.exit(code)
-"""
-
-
 def _peak(args: list[str], label: str) -> tuple[float, float]:
     """(the run's own estimate, its process's peak resident set), MB, of `symtrack simulate ARGS --out DIR`."""
-    out, hwm = WORK / f"mem{len(_ELAPSED)}", WORK / f"hwm{len(_ELAPSED)}"
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    from symtrack.bench.memory import simulate_peak
+
+    out = WORK / f"mem{len(_ELAPSED)}"
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", _HWM, str(hwm), "simulate", *args, "--out", str(out), "--quiet"],
-                          cwd=ROOT, env=env, capture_output=True, text=True)
+    estimate, peak = simulate_peak(args, out, cwd=ROOT)
     _ELAPSED[label] = time.perf_counter() - t0
     _USED.append(label)
-    if proc.returncode != 0:
-        raise RuntimeError(f"symtrack simulate {' '.join(args)}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
-    estimate = json.loads((out / "summary.json").read_text())["terrain_memory_estimate_MB"]
     shutil.rmtree(out, ignore_errors=True)
-    return estimate, float(hwm.read_text()) * 1024.0 / 1e6
+    return estimate / 1e6, peak / 1e6
 
 
 @table("memory-peaks", "terrain.md", "symtrack simulate PROBE --set terrain.size_m=[S, S] [--set terrain.passes=3] "
@@ -458,8 +442,6 @@ def memory_peaks() -> str:
     from symtrack.terrain import storage as persist
     from symtrack.terrain.storage import Grid, Terrain
 
-    if not sys.platform.startswith("linux"):
-        raise RuntimeError("the peak resident set is read from /proc/self/status: Linux only")
     probe = WORK / "memory_probe.toml"
     probe.write_text(MEMORY_PROBE)
     rows = []
@@ -779,32 +761,15 @@ def stress_table_memory() -> str:
     return md(["xi", "memory", f"nodes (n_x x n_t) at {depths} m"], rows)
 
 
-def _disc_forces(q_kPa: float, a_m: float):
-    """A uniform disc cut into point forces [kN] by polar Gauss-Legendre (as tests/test_subsoil.py)."""
-    import numpy as np
-
-    gl, wl = np.polynomial.legendre.leggauss(8)
-
-    def nodes(lo, hi, n):
-        e = np.linspace(lo, hi, n + 1)
-        h = e[1] - e[0]
-        return (e[:-1, None] + 0.5 * h * (1 + gl)).ravel(), np.tile(0.5 * h * wl, n)
-
-    r, wr = nodes(0.0, a_m, 24)
-    th, wth = nodes(0.0, 2 * np.pi, 12)
-    x = (r[:, None] * np.cos(th)[None, :]).ravel()
-    y = (r[:, None] * np.sin(th)[None, :]).ravel()
-    return x, y, ((q_kPa * r * wr)[:, None] * wth[None, :]).ravel()
-
-
 @table("rigid-base", "subsoil.md",
        "symtrack.vehicles.tyre.footprint_stress_at_depth(..., 3.0, rigid_base_depth_m=h, rigid_base_interface=...) "
        "of a uniform circle, a = 0.3 m (docs/figures.py)")
 def rigid_base() -> str:
+    from symtrack.soil.rigid_base import disc_point_forces
     from symtrack.vehicles import tyre
 
     q, a = 100.0, 0.3
-    x, y, F = _disc_forces(q, a)
+    x, y, F = disc_point_forces(q, a)
     rows = []
     with _timed("rigid base"):
         for h_over_a, fracs in ((1.0, (0.5, 1.0)), (2.0, (1.0,))):

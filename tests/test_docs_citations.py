@@ -10,14 +10,16 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-# (what it catches, the pattern); MODEL.md is matched case-sensitively: docs/model.md is ours
+# (what it catches, the pattern). The notes are matched by the stem of their file names with ".md" after it
+# (this file names no file itself); the model note's case-sensitively: docs/model.md is ours.
+_MD = r"\.md"
 OUTSIDE = (
-    ("the project's model note", re.compile(r"\bMODEL\.md")),
-    ("a reference note", re.compile(r"\bREFERENCES\.md", re.I)),
-    ("a validation-data note", re.compile(r"\bVALIDATION-DATA(\.md)?\b", re.I)),
-    ("a design note", re.compile(r"\bDESIGN\.md", re.I)),
+    ("the project's model note", re.compile(r"\bMODEL" + _MD)),
+    ("a reference note", re.compile(r"\bREFERENCES" + _MD, re.I)),
+    ("a validation-data note", re.compile(r"\bVALIDATION-DATA(" + _MD + r")?\b", re.I)),
+    ("a design note", re.compile(r"\bDESIGN" + _MD, re.I)),
     ("CasADi notes", re.compile(r"\bCASADI_NOTES\b", re.I)),
-    ("review notes", re.compile(r"\bREVIEW\.md", re.I)),
+    ("review notes", re.compile(r"\bREVIEW" + _MD, re.I)),
     ("a sibling folder", re.compile(r"\.\./shared\b|\bshared/", re.I)),
     ("the source papers' text files", re.compile(r"\bseeds/", re.I)),
     ("a folder of the development machine", re.compile(r"(?<![\w.~])/work/")),

@@ -6,13 +6,13 @@ cells, new and continued. A run that asks for absurdly many output steps is refu
 from __future__ import annotations
 
 import json
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from symtrack.bench.memory import simulate_peak
 from symtrack.cli import main
 from symtrack.foundations import memory
 from symtrack.foundations.errors import ScenarioError
@@ -89,46 +89,16 @@ def test_a_terrain_file_too_big_for_the_memory_is_refused_before_it_is_read(monk
     assert loaded == []
 
 
-_HWM = """
-import sys
-from symtrack.cli import main
-code = main(sys.argv[2:])
-with open("/proc/self/status") as f:
-    kb = next(line.split()[1] for line in f if line.startswith("VmHWM:"))
-with open(sys.argv[1], "w") as f:
-    f.write(kb)
-sys.exit(code)
-"""
-
-
 def _peak(tmp_path: Path, cells: float, terrain_in: Path | None = None) -> tuple[float, float]:
     """(the estimate in the run's summary, the peak resident set of its process), bytes: a fresh
-    `symtrack simulate` process, its peak read from /proc (VmHWM) as it ends."""
+    `symtrack simulate` process, its peak read from /proc (VmHWM) as it ends (symtrack.bench.memory)."""
     side = (cells / 100) ** 0.5
     sc = tmp_path / "probe.toml"
     sc.write_text(PROBE)
-    out = tmp_path / f"o{int(cells)}{'c' if terrain_in else ''}"
-    hwm = tmp_path / f"hwm{int(cells)}{'c' if terrain_in else ''}"
-    # `python -m symtrack simulate ...`, then the process's own high-water mark (VmHWM of its memory map:
-    # getrusage's ru_maxrss would count the forking test process's pages, which exec leaves behind)
-    argv = [sys.executable, "-c", _HWM, str(hwm), "simulate", str(sc), "--out", str(out), "--quiet",
-            "--set", f"terrain.size_m=[{side},{side}]"]
+    args = [str(sc), "--set", f"terrain.size_m=[{side},{side}]"]
     if terrain_in is not None:
-        argv += ["--terrain-in", str(terrain_in), "--terrain-out", str(terrain_in)]
-    pid = os.fork()
-    if pid == 0:
-        try:
-            fd = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(fd, 1)
-            os.dup2(fd, 2)
-            os.environ["PYTHONPATH"] = str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")
-            os.execv(sys.executable, argv)
-        finally:
-            os._exit(70)
-    _, status, _ = os.wait4(pid, 0)
-    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
-    estimate = json.loads((out / "summary.json").read_text())["terrain_memory_estimate_MB"] * 1e6
-    return estimate, float(hwm.read_text()) * 1024.0  # kB
+        args += ["--terrain-in", str(terrain_in), "--terrain-out", str(terrain_in)]
+    return simulate_peak(args, tmp_path / f"o{int(cells)}{'c' if terrain_in else ''}")
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc/self/status: Linux")

@@ -16,6 +16,7 @@ import pytest
 from symtrack import toolchain as build
 from symtrack.foundations.errors import ParameterError
 from symtrack.native import cache
+from symtrack.soil import rigid_base
 from symtrack.soil import subsoil as S
 
 GEO = (2.4, 0.45, 1.5, 0.1, 0.1, 0.2)  # l, b, B, e (CG 0.1 m ahead of the contact centre), cell, end strip
@@ -336,22 +337,6 @@ PYMASTIC_ROUGH = {
 }
 
 
-def _disc_forces(q_kPa, a_m):
-    """A uniform disc cut into point forces [kN] by polar Gauss-Legendre."""
-    g, w = np.polynomial.legendre.leggauss(8)
-
-    def nodes(lo, hi, n):
-        e = np.linspace(lo, hi, n + 1)
-        h = e[1] - e[0]
-        return (e[:-1, None] + 0.5 * h * (1 + g)).ravel(), np.tile(0.5 * h * w, n)
-
-    r, wr = nodes(0.0, a_m, 24)
-    th, wth = nodes(0.0, 2 * np.pi, 12)
-    x = (r[:, None] * np.cos(th)[None, :]).ravel()
-    y = (r[:, None] * np.sin(th)[None, :]).ravel()
-    return x, y, ((q_kPa * r * wr)[:, None] * wth[None, :]).ravel()
-
-
 @pytest.mark.parametrize("h_over_a", [1.0, 2.0])
 def test_rigid_base_with_xi_3_is_the_elastic_layer_on_a_rough_base(h_over_a):
     """Concentration factor 3 over a rough rigid base: the vertical and the mean normal stress of a
@@ -362,7 +347,7 @@ def test_rigid_base_with_xi_3_is_the_elastic_layer_on_a_rough_base(h_over_a):
 
     a_m = 0.3
     H = h_over_a * a_m
-    x, y, F = _disc_forces(100.0, a_m)
+    x, y, F = rigid_base.disc_point_forces(100.0, a_m)
     depths = tuple(f * H for f in (0.25, 0.5, 0.75, 0.9999))
     px, py = np.array([0.0, 1.5 * a_m]), np.zeros(2)
     sz, pm = tyre.footprint_stress_at_depth(x, y, F, px, py, depths, 3.0, rigid_base_depth_m=H)

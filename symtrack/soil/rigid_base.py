@@ -57,7 +57,8 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 
-__all__ = ["INTERFACES", "POISSON_RATIO", "bessel_j0", "correction_profile", "point_correction", "transfer"]
+__all__ = ["INTERFACES", "POISSON_RATIO", "bessel_j0", "correction_profile", "disc_point_forces", "point_correction",
+           "transfer"]
 
 INTERFACES = ("rough", "smooth")
 POISSON_RATIO = 0.5  # the incompressible layer of Fröhlich's concentration factor 3 (module doc)
@@ -190,3 +191,22 @@ def correction_profile(z_m, base_depth_m, r_max_m, interface: str = "rough"):
     r = np.arange(n) * step
     dz, dp = point_correction(r, z, H, interface)
     return r, dz, dp
+
+
+def disc_point_forces(q_kPa: float, radius_m: float, radial: int = 24, angular: int = 12):
+    """A uniform circular load of ``q_kPa`` on a disc of ``radius_m`` cut into vertical point forces by
+    polar Gauss-Legendre (8 points in each of ``radial`` rings and ``angular`` sectors): (x, y) [m] and
+    the forces [kN], for the point-load stress sums (:func:`symtrack.vehicles.tyre.footprint_stress_at_depth`,
+    :func:`symtrack.soil.subsoil.stress_bruteforce`) checked against the elastic layer's uniform circle."""
+    g, w = np.polynomial.legendre.leggauss(8)
+
+    def nodes(lo, hi, n):
+        e = np.linspace(lo, hi, n + 1)
+        h = e[1] - e[0]
+        return (e[:-1, None] + 0.5 * h * (1 + g)).ravel(), np.tile(0.5 * h * w, n)
+
+    r, wr = nodes(0.0, radius_m, radial)
+    th, wth = nodes(0.0, 2 * np.pi, angular)
+    x = (r[:, None] * np.cos(th)[None, :]).ravel()
+    y = (r[:, None] * np.sin(th)[None, :]).ravel()
+    return x, y, ((q_kPa * r * wr)[:, None] * wth[None, :]).ravel()
