@@ -37,7 +37,8 @@ from ..soil import subsoil
 from ..vehicles.tyre import Tyre, footprint_table, load_capacity_kN, recommended_inflation_kPa
 
 __all__ = ["BUILTIN_FLEET", "COVER_FRACTIONS", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec",
-           "first_pass_rut_m", "load_fleet", "parse_fleet", "rut_table_m", "stress_profile", "track_machine"]
+           "first_pass_rut_m", "load_fleet", "parse_fleet", "plastic_rut_m", "rut_table_m", "stress_profile",
+           "track_machine"]
 
 BUILTIN_FLEET = "builtin"
 GRAVITY_M_S2 = 9.81
@@ -346,21 +347,29 @@ def stress_profile(machine: Machine, depths_m, xi: float, step_m: float = PROFIL
 
 def first_pass_rut_m(machine: Machine, soil: dict, pressure_fraction: float = 1.0) -> float | None:
     """The plastic rut a tracked machine's first quasi-static pass leaves [m] (None for wheels: the package's
-    wheeled pass leaves no rut, vehicles/wheeled.py): the package's soil law (symtrack.soil.law, Bekker's
-    virgin loading) loaded to the track's static pressure p, z_max = (p / k_eq)^(1/n), then unloaded on its
-    elastic line, k_u = max(K_e, kappa p / z_max) (symtrack.soil.cell.unloading_slope): z_max - p / k_u. After N
-    passes the terrain engine's rut is this N^beta (the soil's ``repeated_loading_exponent``); the density
-    fold's column compression is bounded by it as the world bounds it (soil/density.py, cap_to_rut).
-    ``pressure_fraction``: of a cell the track covers in part, the share of its area under the track (the
-    terrain engine's channel weight: the cell carries that share of the pressure)."""
+    wheeled pass leaves no rut, vehicles/wheeled.py): :func:`plastic_rut_m` of the track's static pressure
+    and width. After N passes the terrain engine's rut is this N^beta (the soil's
+    ``repeated_loading_exponent``); the density fold's column compression is bounded by it as the world bounds
+    it (soil/density.py, cap_to_rut). ``pressure_fraction``: of a cell the track covers in part, the share of
+    its area under the track (the terrain engine's channel weight: the cell carries that share of the
+    pressure)."""
     if machine.tracks is None:
         return None
+    return plastic_rut_m(machine.tracks.pressure_Pa * float(pressure_fraction), soil, machine.tracks.track_width_m)
+
+
+def plastic_rut_m(pressure_Pa: float, soil: dict, width_m: float) -> float:
+    """The plastic rut [m] one quasi-static loading to ``pressure_Pa`` leaves on virgin soil: the package's soil
+    law (symtrack.soil.law, Bekker's virgin loading with k_eq = k_c / b + k_phi at b = ``width_m``) loaded to p,
+    z_max = (p / k_eq)^(1/n), then unloaded on its elastic line, k_u = max(K_e, kappa p / z_max)
+    (symtrack.soil.cell.unloading_slope): z_max - p / k_u. ``soil``: the law's parameters (a soil preset's
+    keys: k_c, k_phi, n, K_e, kappa)."""
     from ..model.options import ModelOptions
     from ..soil import law as soil_law
 
     law_obj = soil_law.make(ModelOptions())
-    law = law_obj.values({**soil, "track_width_m": machine.tracks.track_width_m})
-    p = machine.tracks.pressure_Pa * float(pressure_fraction)
+    law = law_obj.values({**soil, "track_width_m": float(width_m)})
+    p = float(pressure_Pa)
     if p <= 0:
         return 0.0
     z_max = float(law_obj.static_sinkage(p, law))

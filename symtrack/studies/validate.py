@@ -170,10 +170,8 @@ def tyre_stress_by_depth(setup: dict, a: dict, depths_m) -> np.ndarray:
     transducer's face) act the same way."""
     W = float(setup["wheel_load_kN"])
     p_i, p_rec = float(setup["inflation_kPa"]), float(a["recommended_inflation_kPa"])
-    p_max = max(p_i, p_rec)
-    # the package's inflation rule p = p_max (W / W_max)^1.25 gives p_rec at W for this rated load
-    w_max = W * (p_max / p_rec) ** (1.0 / tyre.INFLATION_RULE_EXPONENT)
-    t = tyre.Tyre(float(setup["tyre_width_m"]), float(a["tyre_diameter_m"]), w_max, p_max)
+    # the package's inflation rule p = p_max (W / W_max)^1.25 gives p_rec at W for the rated load
+    t = validate_vehicle.rated_tyre(float(setup["tyre_width_m"]), float(a["tyre_diameter_m"]), W, p_i, p_rec)
     c = tyre.contact(t, W, p_i)
     px = _track_frame_points(c.length_m, float(a["averaging_window_fraction"]), n=40)
     py = np.full(px.shape, float(setup.get("lateral_offset_m", 0.0)))
@@ -280,6 +278,8 @@ MODELS: dict[str, Callable] = {
     "track_traction_at_slip": validate_vehicle.track_traction_at_slip,
     "track_motion_resistance": validate_vehicle.track_motion_resistance,
     "steady_turn_resistance_ratio": validate_vehicle.steady_turn_resistance_ratio,
+    "track_unit_sinkage": validate_vehicle.track_unit_sinkage,
+    "combine_rut_depth": validate_vehicle.combine_rut_depth,
 }
 
 

@@ -40,12 +40,16 @@ from ..control.trim import TrimError, trim
 from ..foundations import caches
 from ..model import ModelOptions, SystemModel
 from ..presets import soil_preset, vehicle_preset
+from ..presets.soils import UNLOADING_STIFFNESS_FLOOR, WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M
+from ..region.fleet import plastic_rut_m
 from ..soil import law as soil_laws
 from ..vehicles import planar as veh
+from ..vehicles import tyre
 
-__all__ = ["REFINE_POINTS", "TRACTION_SLIPS", "cone_index_sinkage_law", "cone_index_soil",
-           "steady_turn_resistance_ratio", "straight_track_performance", "track_motion_resistance",
-           "track_traction_at_max_efficiency", "track_traction_at_slip", "turning_resistance_coefficient"]
+__all__ = ["REFINE_POINTS", "TRACTION_SLIPS", "combine_rut_depth", "cone_index_sinkage_law", "cone_index_soil",
+           "density_table_soil", "rated_tyre", "sinkage_m", "steady_turn_resistance_ratio",
+           "straight_track_performance", "track_motion_resistance", "track_traction_at_max_efficiency",
+           "track_traction_at_slip", "track_unit_sinkage", "turning_resistance_coefficient"]
 
 KPA = 1e3
 # the slips (travel reductions) of the steady sweep, geometric; the maximum of the tractive efficiency is
@@ -196,6 +200,108 @@ def track_motion_resistance(setup: dict, a: dict, cone_indices_kPa) -> np.ndarra
         _, R_in = _track_forces(0.0, float(a["speed_m_s"]), N, b, l, 0.0, 0.5, 0.01,
                                 float(setup["internal_resistance_const"]), float(setup["internal_resistance_per_km_h"]))
         out.append(100.0 * (R_c + float(R_in[0])) / N)
+    return np.array(out, dtype=float)
+
+
+# ---------------------------------------------------------------------------------------------
+# sinkage and ruts: the soil law's static sinkage (or the rut its unloading leaves) under a track or a tyre
+
+def density_table_soil(setup: dict, density_Mg_per_m3: float, k_reading: str) -> dict:
+    """The soil law's parameters (a soil preset's keys) of a soil given as Bekker's n and k by initial dry
+    density (the case's ``setup["table_density_Mg_per_m3"]``, ``table_n``, ``table_k``; n and k linear in
+    the density between the rows, the end rows beyond them). ``k_reading``: ``"k_eq"`` reads k as Bekker's
+    combined modulus k_eq in kN/m^(n+2) (k_phi, k_c = 0), ``"k_c"`` as the cohesive modulus k_c in
+    kN/m^(n+1) (k_eq = k_c / b at the contact's width b). The unloading line: the package's values for soils
+    without a measured one (:data:`symtrack.presets.soils.WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M`, the floor
+    :data:`~symtrack.presets.soils.UNLOADING_STIFFNESS_FLOOR`)."""
+    rho = [float(v) for v in setup["table_density_Mg_per_m3"]]
+    n = float(np.interp(float(density_Mg_per_m3), rho, [float(v) for v in setup["table_n"]]))
+    k = float(np.interp(float(density_Mg_per_m3), rho, [float(v) for v in setup["table_k"]])) * KPA
+    if k_reading not in ("k_eq", "k_c"):
+        raise ValueError(f"k_reading = {k_reading!r} is not k_eq or k_c")
+    return {"bekker_n": n, "k_c_N_per_m_n1": k if k_reading == "k_c" else 0.0,
+            "k_phi_N_per_m_n2": k if k_reading == "k_eq" else 0.0,
+            "elastic_stiffness_Pa_per_m": WONG_SOILS_ELASTIC_STIFFNESS_PA_PER_M,
+            "unloading_stiffness_floor": UNLOADING_STIFFNESS_FLOOR}
+
+
+def sinkage_m(soil: dict, pressure_Pa: float, width_m: float, measured_as: str) -> float:
+    """The soil law's response to a contact of ``width_m`` at the mean pressure ``pressure_Pa`` on virgin
+    soil: ``measured_as`` = "under_load", the static sinkage (the law's inverse, ``static_sinkage``, at
+    k_eq = k_c / b + k_phi), or "rut_after_unloading", the plastic rut its elastic unloading leaves
+    (:func:`symtrack.region.fleet.plastic_rut_m`)."""
+    if measured_as == "rut_after_unloading":
+        return plastic_rut_m(pressure_Pa, soil, width_m)
+    if measured_as != "under_load":
+        raise ValueError(f"measured_as = {measured_as!r} is not under_load or rut_after_unloading")
+    law = soil_laws.make(ModelOptions())
+    return float(law.static_sinkage(float(pressure_Pa), law.values({**soil, "track_width_m": float(width_m)})))
+
+
+def track_unit_sinkage(setup: dict, a: dict, points) -> np.ndarray:
+    """The sinkage [mm] of each track unit ``setup["units"][k - 1]`` at the measured points 1, 2, ...: a
+    rigid track of ``a["<unit>_contact_length_m"]`` x ``a["<unit>_track_width_m"]`` carrying
+    ``setup["load_kN"]`` at uniform pressure (the package's track at rest, no moment) on the soil of the
+    density table (:func:`density_table_soil` at ``a["bulk_density_initial_Mg_per_m3"]``, k read as
+    ``a["k_reading"]``), :func:`sinkage_m` as ``a["sinkage_as"]``."""
+    soil = density_table_soil(setup, float(a["bulk_density_initial_Mg_per_m3"]), str(a["k_reading"]))
+    out = []
+    for k in np.atleast_1d(points):
+        unit = setup["units"][int(round(float(k))) - 1]
+        l_m, b_m = float(a[f"{unit}_contact_length_m"]), float(a[f"{unit}_track_width_m"])
+        p = float(setup["load_kN"]) * KPA / (l_m * b_m)
+        out.append(1e3 * sinkage_m(soil, p, b_m, str(a["sinkage_as"])))
+    return np.array(out, dtype=float)
+
+
+def rated_tyre(width_m: float, diameter_m: float, wheel_load_kN: float, inflation_kPa: float,
+               recommended_kPa: float) -> tyre.Tyre:
+    """A tyre of the given size rated so that ``recommended_kPa`` is its recommended pressure at the wheel load
+    by the package's inflation rule p = p_max (W / W_max)^1.25 (:mod:`symtrack.vehicles.tyre`), its rated
+    pressure the larger of that and the inflation pressure (the tyre must carry the load at it)."""
+    p_max = max(float(inflation_kPa), float(recommended_kPa))
+    w_max = float(wheel_load_kN) * (p_max / float(recommended_kPa)) ** (1.0 / tyre.INFLATION_RULE_EXPONENT)
+    return tyre.Tyre(float(width_m), float(diameter_m), w_max, p_max)
+
+
+def _field_soil(setup: dict, a: dict, field: str) -> dict:
+    """The soil law's parameters of one field of :func:`combine_rut_depth`."""
+    if field == "clay":
+        return soil_preset(str(a["clay_soil"]))
+    if str(a["sandy_loam_soil"]) != "density_table":
+        return soil_preset(str(a["sandy_loam_soil"]))
+    return density_table_soil(setup, float(a[f"{field}_density_Mg_per_m3"]), str(a["k_reading"]))
+
+
+def combine_rut_depth(setup: dict, a: dict, points) -> np.ndarray:
+    """The rut depth [mm] of a combine harvester's front tyre or track at the measured points 1, 2, ...
+    (field ``setup["fields"][k - 1]``, machine ``setup["machines"][k - 1]``): :func:`sinkage_m` (as
+    ``a["sinkage_as"]``) of the mean pressure of the contact, on the field's soil (the sandy loams: the
+    density table at ``a["<field>_density_Mg_per_m3"]`` or the preset ``a["sandy_loam_soil"]``; the clay: the
+    preset ``a["clay_soil"]``). The track (machine "track"): a rigid track of ``a["track_contact_length_m"]`` x
+    ``a["track_width_m"]`` carrying ``a["track_unit_load_kN"]`` at uniform pressure. The tyre ("tyre" at
+    ``setup["inflation_kPa"]``, "tyre_high" at ``setup["high_inflation_kPa"]``): Keller's (2005) contact
+    (:func:`symtrack.vehicles.tyre.contact`) of a ``a["tyre_width_m"]`` x ``a["tyre_diameter_m"]`` tyre
+    (:func:`rated_tyre`, recommended pressure ``a["recommended_inflation_kPa"]``) at ``a["wheel_load_kN"]``,
+    its mean pressure the load over Keller's contact area, the soil's k_eq at the tyre's width. The rear
+    wheels that follow are not in it."""
+    out = []
+    for k in np.atleast_1d(points):
+        i = int(round(float(k))) - 1
+        field, machine = str(setup["fields"][i]), str(setup["machines"][i])
+        soil = _field_soil(setup, a, field)
+        if machine == "track":
+            b_m = float(a["track_width_m"])
+            p = float(a["track_unit_load_kN"]) * KPA / (float(a["track_contact_length_m"]) * b_m)
+        elif machine in ("tyre", "tyre_high"):
+            p_i = float(setup["inflation_kPa" if machine == "tyre" else "high_inflation_kPa"])
+            W = float(a["wheel_load_kN"])
+            t = rated_tyre(a["tyre_width_m"], a["tyre_diameter_m"], W, p_i, a["recommended_inflation_kPa"])
+            c = tyre.contact(t, W, p_i)
+            b_m, p = t.width_m, W * KPA / c.area_m2
+        else:
+            raise ValueError(f"machine = {machine!r} is not track, tyre or tyre_high")
+        out.append(1e3 * sinkage_m(soil, p, b_m, str(a["sinkage_as"])))
     return np.array(out, dtype=float)
 
 
