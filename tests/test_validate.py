@@ -365,3 +365,109 @@ def test_line_points_must_be_a_whole_number(tmp_path):
     bad.write_text(text)
     with pytest.raises(ScenarioError, match="line_points"):
         V.load_case(bad)
+
+
+# ---- sinkage and ruts: Bekker's inverse under a track and under Keller's tyre contact ----------------
+
+NEW_ANSORGE = ("ansorge2007_track_unit_sinkage", "ansorge2007_field_ruts")
+
+
+def _table8(density):
+    """Bekker's n and k [kN/m^(n+2) or kN/m^(n+1)] of the thesis' Table 8, linear in the density between its rows."""
+    rows = ((1.2, 0.89, 700.0), (1.4, 0.62, 2150.0), (1.6, 0.42, 2400.0))
+    for (r0, n0, k0), (r1, n1, k1) in zip(rows[:-1], rows[1:], strict=True):
+        if r0 <= density <= r1:
+            f = (density - r0) / (r1 - r0)
+            return n0 + f * (n1 - n0), k0 + f * (k1 - k0)
+    raise ValueError(density)
+
+
+def _bekker_rut_mm(p_Pa, k_eq, n, under_load, K_e=4e7, kappa=3.0):
+    """Bekker's inverse z = (p / k_eq)^(1/n) [mm], or the rut after unloading on the elastic line
+    z - p / max(K_e, kappa p / z) (docs/model.md, "Pressure-sinkage")."""
+    z = (p_Pa / k_eq) ** (1.0 / n)
+    return 1e3 * (z if under_load else z - p_Pa / max(K_e, kappa * p_Pa / z))
+
+
+@pytest.mark.parametrize("k_reading, sinkage_as", [("k_eq", "under_load"), ("k_c", "under_load"),
+                                                   ("k_eq", "rut_after_unloading")])
+def test_track_unit_sinkage_is_bekkers_inverse_of_the_mean_pressure(cases, k_reading, sinkage_as):
+    c = cases["ansorge2007_track_unit_sinkage"]
+    a = {**c.nominal(), "k_reading": k_reading, "sinkage_as": sinkage_as, "pts_contact_length_m": 2.4,
+         "westtrack_track_width_m": 0.89}
+    got = V.MODELS[c.model](c.setup, a, c.x)
+    n, k = _table8(a["bulk_density_initial_Mg_per_m3"])
+    for i, unit in enumerate(("stocks", "pts", "westtrack", "terra_trac")):
+        length, width = a[f"{unit}_contact_length_m"], a[f"{unit}_track_width_m"]
+        k_eq = k * 1e3 / (width if k_reading == "k_c" else 1.0)
+        want = _bekker_rut_mm(117.68e3 / (length * width), k_eq, n, sinkage_as == "under_load")
+        assert got[i] == pytest.approx(want, rel=1e-9), unit
+    # the units differ only where their dimensions do; a longer contact sinks less, and a wider one too unless
+    # k is k_c / b (then the width cancels: p / k_eq = W / (l k_c))
+    assert got[0] == got[3] and got[1] < got[0]
+    assert got[2] < got[0] if k_reading == "k_eq" else got[2] == pytest.approx(got[0], rel=1e-12)
+
+
+def _keller_area_m2(width, diameter, p_i, p_rec):
+    """Keller's (2005) contact area in closed form: the super-ellipse |2x/L|^s + |2y/b|^s <= 1 has the area
+    L b Gamma(1 + 1/s)^2 / Gamma(1 + 2/s), L = 0.47 + 0.11 D^2 - 0.16 ln(p_i / p_rec), s = 2.1 (b D)^2 + 2."""
+    L = 0.47 + 0.11 * diameter**2 - 0.16 * math.log(p_i / p_rec)
+    s = 2.1 * (width * diameter) ** 2 + 2.0
+    return L * width * math.gamma(1 + 1 / s) ** 2 / math.gamma(1 + 2 / s)
+
+
+@pytest.mark.parametrize("changes", [{}, {"sandy_loam_soil": "sandy_loam_15", "sinkage_as": "under_load"},
+                                     {"recommended_inflation_kPa": 160.0, "clay_soil": "north_gower_clayey_loam_46",
+                                      "k_reading": "k_c", "subsoiled_density_Mg_per_m3": 1.3}])
+def test_combine_ruts_are_bekkers_inverse_under_the_track_and_kellers_tyre_contact(cases, changes):
+    from symtrack.presets import soil_preset
+
+    c = cases["ansorge2007_field_ruts"]
+    a = {**c.nominal(), **changes}
+    got = V.MODELS[c.model](c.setup, a, c.x)
+    under = a["sinkage_as"] == "under_load"
+    for i, (field, machine) in enumerate(zip(c.setup["fields"], c.setup["machines"], strict=True)):
+        if machine == "track":
+            width = a["track_width_m"]
+            p = a["track_unit_load_kN"] * 1e3 / (a["track_contact_length_m"] * width)
+        else:
+            width, p_i = a["tyre_width_m"], c.setup["inflation_kPa" if machine == "tyre" else "high_inflation_kPa"]
+            p = a["wheel_load_kN"] * 1e3 / _keller_area_m2(width, a["tyre_diameter_m"], p_i,
+                                                           a["recommended_inflation_kPa"])
+        preset = a["clay_soil"] if field == "clay" else a["sandy_loam_soil"]
+        if preset == "density_table":
+            n, k = _table8(a[f"{field}_density_Mg_per_m3"])
+            k_eq, K_e = k * 1e3 / (width if a["k_reading"] == "k_c" else 1.0), 4e7
+        else:
+            s = soil_preset(preset)
+            n, k_eq, K_e = s["bekker_n"], s["k_c_N_per_m_n1"] / width + s["k_phi_N_per_m_n2"], \
+                s["elastic_stiffness_Pa_per_m"]
+        # Keller's area by the package's quadrature against the closed form: within 0.1 %
+        assert got[i] == pytest.approx(_bekker_rut_mm(p, k_eq, n, under, K_e), rel=3e-3), (field, machine)
+    # on every field the track's rut is the shallowest and the high pressure's the deepest
+    assert np.all(got[1::3] < got[0::3]) and np.all(got[0::3] < got[2::3])
+
+
+def test_the_sinkage_cases_write_their_rows_references_and_figures(tmp_path, capsys):
+    out = tmp_path / "v"
+    assert main(["validate", *NEW_ANSORGE, "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "sinkage" in printed and "rut_depth" in printed
+    rows = list(csv.DictReader((out / "validation.csv").open()))
+    assert [r["case"] for r in rows] == [NEW_ANSORGE[0]] * 4 + [NEW_ANSORGE[1]] * 9
+    track = rows[:4]
+    assert [r["depth_or_pass"] for r in track] == ["Stocks", "PTS", "Westtrack", "Terra Trac"]
+    assert [float(r["ref_Bekker_track_slag_0_02"]) for r in track] == [64.0, 79.0, 57.0, 62.0]
+    assert [float(r["ref_Bernstein"]) for r in track] == [51.0, 58.0, 36.0, 29.0]
+    assert all(r["ref_Bernstein"] == "" for r in rows[4:])
+    for r in rows:
+        assert float(r["band_low"]) <= float(r["predicted"]) <= float(r["band_high"])
+        assert r["calibration"] == "false"
+    for name in NEW_ANSORGE:
+        assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert name in (out / "report.html").read_text()
+    # docs/validation.md's tables hold this command's rows of these cases
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "validation.md").read_text()
+    heads = tuple(f"| {n} |" for n in NEW_ANSORGE)
+    ours = [ln for ln in (out / "validation.md").read_text().splitlines() if ln.startswith(heads)]
+    assert len(ours) > 13 and [ln for ln in ours if ln not in docs] == []
