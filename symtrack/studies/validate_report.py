@@ -88,8 +88,9 @@ def case_figure(r: CaseResult) -> bytes:
 
 def _categories_figure(fig, ax, r: CaseResult) -> bytes:
     """A case whose points are categories: the band as a bar from its low to its high end at each, the
-    prediction and the measured value as markers."""
+    prediction and the measured value as markers; wider than the others past six categories."""
     c = r.case
+    fig.set_size_inches(max(6.4, 1.0 * c.x.size), 4.6)
     ax.bar(c.x, r.band_high - r.band_low, bottom=r.band_low, width=0.5, color="tab:blue", alpha=0.18,
            label="band of the assumptions")
     ax.plot(c.x, r.predicted, "_", color="tab:blue", ms=30, mew=2.5, label="symtrack")
@@ -99,7 +100,10 @@ def _categories_figure(fig, ax, r: CaseResult) -> bytes:
         ax.errorbar(c.x, c.measured, yerr=c.spread, fmt="o", color="k", label=_measured_label(c))
     else:
         ax.plot(c.x, c.measured, "o", color="k", ms=8, label=_measured_label(c))
-    ax.set_xticks(c.x, c.x_labels)
+    # long names wrapped to the width a category has
+    width = 15
+    ax.set_xticks(c.x, ["\n".join(textwrap.wrap(lab, width, break_long_words=False, break_on_hyphens=False))
+                        for lab in c.x_labels], fontsize=7.5 if any(len(lab) > width for lab in c.x_labels) else None)
     ax.set_xlim(float(c.x.min()) - 0.7, float(c.x.max()) + 0.7)
     ax.set_ylim(bottom=0.0)
     ax.set_ylabel(f"{c.quantity} [{c.unit}]")
