@@ -45,7 +45,7 @@ def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0
 
 def _history_indices(model) -> list:
     """The positions of the soil memory's states of a 3D hull's homogeneous terrain (none on other terrains)."""
-    if model.vehicle.contact != CONTACT_HULL or not hasattr(model.terrain, "segment_history"):
+    if model.vehicle.contact != CONTACT_HULL or not getattr(model.terrain, "memory", False):
         return []
     return model.layout.indices(model.terrain.state_names)
 

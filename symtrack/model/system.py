@@ -111,7 +111,7 @@ class SystemModel:
         history = {"contact_history": self.terrain.contact_history(P, Q)} if hasattr(self.terrain,
                                                                                      "contact_history") else {}
         # the homogeneous terrain under the 3D hull: the soil's memory under each segment (its states)
-        if hasattr(self.terrain, "segment_history"):
+        if getattr(self.terrain, "memory", False):
             history = {"segment_history": self.terrain.segment_history(xc)}
 
         def evaluate(acc):

@@ -571,9 +571,12 @@ class ContactTerrain:
     name = "homogeneous"
     param_names = ()
 
-    def __init__(self, opts):
+    def __init__(self, opts, memory: bool = True):
+        """``memory`` false: no states, each segment's history the deepest sinkage of the segments ahead at the
+        present pose (the memory's steady state: the MPC's quasi-static hull, symtrack.control.mpc)."""
         self.opts = opts
-        self.state_names = history_state_names(opts.contact_segments)
+        self.memory = bool(memory)
+        self.state_names = history_state_names(opts.contact_segments) if self.memory else ()
 
     def segment_history(self, xc):
         """track -> the memory states H_1 .. H_(n-1) of its segments (front to rear)."""
@@ -584,7 +587,7 @@ class ContactTerrain:
         return ca.DM.zeros(len(TRACKS))  # the 3D vehicle computes its own (module doc)
 
     def equations(self, xv, xc, dist, P, Q):
-        if not self.state_names:
+        if not self.memory or not self.state_names:
             return ca.SX(0, 1), {}
         return ca.vertcat(*(r for k in TRACKS for r in dist[k].history_rates)), {}
 
