@@ -14,10 +14,12 @@ the CG, y_k = +-B/2, h the CG height above the track's ground line), is placed i
 hull's pose (R = Rz(yaw) Ry(-pitch) Rx(roll)). Its penetration into the ground is the height of the
 surface above it, z0(X_i, Y_i) - Z_i, times the cosine of the ground's inclination there (the depth
 measured normal to the ground: a plate pressed normal to the surface, as Bekker's law is measured).
-Its pressure is the model's soil law at that sinkage, with the history the homogeneous terrain gives
-its sprocket cell (:mod:`symtrack.model.homogeneous`): the front segment meets virgin soil, each
-later segment soil already pressed to the deepest sinkage ahead of it (Bekker loading if it sinks
-deeper, the unloading/reloading line if not), plus the cells' areal damping c'' times the rate of
+Its pressure is the model's soil law at that sinkage, with the soil's history under it: the front segment
+meets virgin soil, each later segment soil pressed to the sinkage H_i of the soil's memory under it (Bekker
+loading if it sinks deeper, the unloading/reloading line if not), the states of the homogeneous terrain
+:class:`ContactTerrain`, carried from the segment ahead as the track moves over the ground (in steady running
+the deepest sinkage ahead of the segment, the history the homogeneous terrain gives its sprocket cell,
+:mod:`symtrack.model.homogeneous`), plus the cells' areal damping c'' times the rate of
 penetration (the cell equation without the cell's own areal mass: the soil under the track moves with
 the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
 feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
