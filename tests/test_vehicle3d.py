@@ -21,7 +21,7 @@ from symtrack.model.static import static_state
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
 from symtrack.terrain.surface import parse_surface
 from symtrack.vehicles.planar import GRAVITY_M_S2
-from symtrack.vehicles.vehicle3d import make_vehicle
+from symtrack.vehicles.vehicle3d import history_state_names, make_vehicle
 
 FIGURES = ("distance_m", "distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_idler_mm",
            "speed_final_m_s")
@@ -51,7 +51,9 @@ def _run(surface, opts, torque, duration_s, params, dt=0.05):
 
 def test_layout_and_outputs():
     m = SystemModel(ModelOptions(lateral_law="creep", vehicle="3d"))
-    assert m.vehicle.name == "3d" and m.layout.n_cells == 0
+    assert m.vehicle.name == "3d"
+    # no travelling cells: the terrain's states are the soil's memory under the segments behind the front one
+    assert m.layout.block_names_of("cells") == history_state_names(8) and len(history_state_names(8)) == 14
     for name in ("z_m", "pitch_rad", "roll_rad", "heave_rate_m_s", "pitch_rate_rad_s", "roll_rate_rad_s"):
         assert name in m.state_names
     for name in ("z_m", "roll_rad", "pitch_rad", "normal_load_left_N"):
@@ -84,12 +86,20 @@ def _figures(summary: dict) -> dict:
     return out
 
 
+# The sprocket sinkage of the summary is the run's largest, in the first second of the torque step at walking pace,
+# where the 3D contact's soil memory holds the start's compaction under the front of the track while the hull
+# pitches nose up (its unloading lines stiffer in pitch than the planar load transfer's cells): -1.8 % against
+# the planar run; in steady running the two agree (docs/vehicle3d.md, "Accuracy (tests/test_vehicle3d.py)"). The
+# soil column's compression under the rear is that sinkage.
+PEAK_SINKAGE = ("sinkage_sprocket_mm", "column_compression_mm")
+
+
 def test_flat_ground_reproduces_the_planar_validation():
     """The validation scenario at its default settings (creep law, compiled Rosenbrock at its 10 ms step,
-    8 segments): every figure of the 3D run's summary within 1 % of the planar run's (the subsoil stress
-    apart: SUBSOIL_SHALLOW). Measured: every other figure within 0.34 % (the idle shear +0.33 %; +1.8 % in
-    yaw and lateral deviation when the segments' centres carried their loads: the midpoint rule's 1/n^2
-    of the yaw damping)."""
+    8 segments): every figure of the 3D run's summary within 1 % of the planar run's (the subsoil stress and
+    the sprocket sinkage apart: SUBSOIL_SHALLOW, PEAK_SINKAGE). Measured: every other figure within 0.34 % (the
+    idle shear +0.33 %; +1.8 % in yaw and lateral deviation when the segments' centres carried their loads: the
+    midpoint rule's 1/n^2 of the yaw damping)."""
     planar = _figures(symtrack.simulate(load_scenario("validation")).summary)
     s3 = _figures(symtrack.simulate(load_scenario("validation", ["model.vehicle=3d"])).summary)
     assert s3.keys() == planar.keys()
@@ -98,7 +108,7 @@ def test_flat_ground_reproduces_the_planar_validation():
         if isinstance(v, (str, bool)) or v is None:
             assert s3[k] == v, k
         else:
-            assert s3[k] == pytest.approx(v, rel=0.02 if k in SUBSOIL_SHALLOW else 0.01, abs=1e-12), k
+            assert s3[k] == pytest.approx(v, rel=0.02 if k in SUBSOIL_SHALLOW + PEAK_SINKAGE else 0.01, abs=1e-12), k
 
 
 def _rigid_plate(W_track, e, h, b, l, keq, n):
@@ -456,9 +466,11 @@ def test_braked_descent_is_smooth(kappa, monkeypatch):
     """Issue 22, the braked chatter: braked at 0.75 x the holding torque on a 10 deg descent the vehicle
     rolls down smoothly (the planar vehicle does), its sprocket's oscillation (the start's) decaying and
     the Jacobian's oscillatory eigenvalues in the left half-plane (measured: the rim speed's oscillation
-    about its trend 0.081 m/s in 0.2-1 s, 0.024 m/s in 4-6 s; the largest real part -0.227 1/s at t = 1 s).
-    The control, kappa = 0 (the model before: the running gear's angular momentum left out of the hull's
-    pitch), grows (0.22 -> 2.86 m/s; +1.50 1/s)."""
+    about its trend 0.047 m/s in 0.2-1 s, 0.008 m/s in 4-6 s; the largest real part -1.55 1/s at t = 1 s).
+    With kappa = 0 too (the running gear's angular momentum left out of the hull's pitch: 0.052 -> 0.009 m/s,
+    -2.18 1/s): that control grew (0.22 -> 2.86 m/s; +1.50 1/s) while the contact read the soil's history
+    from the hull's present pose, whose forces have no potential (docs/vehicle3d.md, "Why the running gear's
+    momentum"); with the soil's memory under the segments it decays."""
     from symtrack.vehicles import vehicle3d
     if kappa is not None:
         monkeypatch.setattr(vehicle3d, "running_gear_momentum_ratio", lambda l, r: kappa)
@@ -468,7 +480,7 @@ def test_braked_descent_is_smooth(kappa, monkeypatch):
     lam = np.linalg.eigvals(A)
     re_osc = float(np.max(lam.real[np.abs(lam.imag) > 1.0]))
     smooth = late < 0.5 * early and re_osc < 0
-    assert smooth == (kappa is None), (early, late, re_osc)
+    assert smooth, (early, late, re_osc)
     assert 0.5 < X[-1, m.layout.index("u_m_s")] < 1.5  # rolling down, held back
 
 
@@ -524,3 +536,45 @@ def test_in_the_air_the_running_gear_s_angular_momentum_is_conserved():
     # 0.10 m in 0.2 s instead of 0.196 m and was pushed forward to 0.25 m/s)
     assert x[lay.index("heave_rate_m_s")] == pytest.approx(-GRAVITY_M_S2 * 0.2, rel=1e-6)
     assert abs(x[lay.index("u_m_s")]) < 1e-6
+
+
+def test_a_heave_and_pitch_cycle_of_the_hull_on_the_soil_gives_back_what_it_took():
+    """The 3D contact on homogeneous soil is elastic at a given soil memory: the hull driven through a closed
+    cycle of heave and pitch about its rest (0.5 mm, 0.3 mrad, the pitch a quarter period behind or ahead), at
+    rest otherwise (no damping, no shear, the memory held), takes from the contact forces the work they did,
+    integral of m (dw/dt) dz + (I_pitch - 2 kappa^2 J) (dq/dt) dpitch around the cycle: zero but for the couple
+    of the pressure's slope within the segments (a reconstruction from the neighbours' pressures: +-0.09 J at 8
+    segments, +-0.006 J at 32, falling as 1 / n^2). The LETE sand crawler whose coast hopped
+    (tests/test_physics_fuzz.py): with the soil's history read from the present pose (the deepest sinkage of the
+    segments ahead now) the same cycles did +-30 J, the sign set by the sense."""
+    from symtrack.vehicles.vehicle3d import PITCH_INERTIA_PER_YAW, running_gear_momentum_ratio
+
+    doc = {"name": "cycle", "model": {"lateral_law": "creep", "vehicle": "3d"},
+           "vehicle": {"preset": "reference_crawler", "mass_kg": 7265.9, "track_gauge_m": 1.4353,
+                       "track_width_m": 0.5799, "contact_length_m": 1.5842, "yaw_inertia_kg_m2": 4643.3,
+                       "sprocket_radius_m": 0.38631, "cg_height_m": 0.79863, "cg_ahead_of_contact_centre_m": 0.040983,
+                       "sprocket_inertia_kg_m2": 57.464},
+           "soil": {"preset": "lete_sand", "bekker_n": 0.75356, "k_c_N_per_m_n1": 88913.0,
+                    "k_phi_N_per_m_n2": 6880800.0},
+           "torque": [{"t_s": 0.0, "left_N_m": 0.0, "right_N_m": 0.0}]}
+    sc = scenario_from_dict(doc, "cycle")
+    model = SystemModel(sc.model)
+    params = sc.params
+    x0 = static_state(model, params)
+    lay = model.layout
+    iz, iq = lay.index("z_m"), lay.index("pitch_rad")
+    n = 4000
+    phase = np.linspace(0.0, 2 * np.pi, n + 1)
+    kappa = running_gear_momentum_ratio(params["contact_length_m"], params["sprocket_radius_m"])
+    i_eff = PITCH_INERTIA_PER_YAW * params["yaw_inertia_kg_m2"] - 2 * kappa**2 * params["sprocket_inertia_kg_m2"]
+    ode = model.ode.map(n + 1)
+    p = model.param_vector(params)
+    for lag in (-np.pi / 2, np.pi / 2):
+        X = np.repeat(x0[:, None], n + 1, axis=1)
+        X[iz] = x0[iz] - 0.5e-3 * np.sin(phase)
+        X[iq] = x0[iq] + 0.3e-3 * np.sin(phase + lag)
+        xdot = np.array(ode(X, np.zeros((2, n + 1)), np.repeat(np.array(p).reshape(-1, 1), n + 1, axis=1)))
+        fz = params["mass_kg"] * xdot[lay.index("heave_rate_m_s")]
+        my = i_eff * xdot[lay.index("pitch_rate_rad_s")]
+        work = np.sum(0.5 * (fz[1:] + fz[:-1]) * np.diff(X[iz]) + 0.5 * (my[1:] + my[:-1]) * np.diff(X[iq]))
+        assert abs(work) < 0.2, work

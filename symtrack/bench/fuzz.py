@@ -494,10 +494,11 @@ def _normal_elastic(res, sc, points: int = 48) -> np.ndarray:
     """The energy [J] the soil's normal pressure under the 3D hull holds at the output times (flat ground), zero
     on the planar vehicle: sum over the contact's segments of b ds times the integral of the model's own
     pressure p(z) from 0 to the segment's sinkage, on its branch (:mod:`symtrack.vehicles.vehicle3d`: a
-    segment's history is the deepest sinkage of the segments ahead of it on its track, the front one's
-    none; the virgin curve is then the path back up), by trapezoids on ``points`` points. The hull's
-    contact has no history of its own, so its pressure is a function of the present pose: it gives back
-    on the way up what it took on the way down, less the cells' damping."""
+    segment's history is the soil's memory under it, the states ``soil_history_{track}_{i}_m`` of
+    :class:`~symtrack.vehicles.vehicle3d.ContactTerrain`, the front one's none; the virgin curve is then the
+    path back up), by trapezoids on ``points`` points. At a given memory the pressure is a function of the
+    segment's sinkage alone: it gives back on the way up what it took on the way down, less the cells'
+    damping. The memory changes only as the track moves over the ground (soil from the segment ahead)."""
     run = res.runs[-1]
     if "z_m" not in run.state_names:
         return np.zeros(len(run.t))
@@ -519,8 +520,10 @@ def _normal_elastic(res, sc, points: int = 48) -> np.ndarray:
         # the segment centre's depth below the flat ground (vehicle3d.hull_rotation's third row)
         depth = -(Z[:, None] + np.sin(pitch)[:, None] * x_body[None, :]
                   + (np.cos(pitch) * np.sin(roll))[:, None] * y_body - (np.cos(pitch) * np.cos(roll))[:, None] * h)
-        ahead = np.concatenate([np.zeros((len(Z), 1)), np.maximum(depth[:, :-1], 0.0)], axis=1)
-        hist = np.maximum.accumulate(ahead, axis=1)
+        side = "left" if y_body > 0 else "right"
+        hist = np.zeros_like(depth)
+        for i in range(1, n):  # the soil's memory under each segment behind the front one (its states)
+            hist[:, i] = run.state(f"soil_history_{side}_{i}_m")
         zz = np.maximum(depth, 0.0)[:, :, None] * frac[None, None, :]
         m = zz.size
         p = np.array(pressure.map(m)(zz.reshape(1, m), np.repeat(hist.reshape(1, -1), points, axis=1),

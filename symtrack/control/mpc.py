@@ -79,7 +79,7 @@ from ..model import SystemModel
 from ..model.homogeneous import HomogeneousTerrain
 from ..model.options import SLIDING_SIGNS
 from ..vehicles.base import CONTACT_HULL
-from ..vehicles.vehicle3d import PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW
+from ..vehicles.vehicle3d import PITCH_INERTIA_PER_YAW, ROLL_INERTIA_PER_YAW, ContactTerrain
 from .linearization import scale_by_name
 from .rti import QP_SOLVERS, RTI, gn_solve, shift_guess
 from .solver_cache import compiled_nlp_library
@@ -316,8 +316,16 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
 
     On every law the shear displacement's unloading is ``prediction_shear_unloading`` (default False:
     Ferretti & Girelli's eq. (2) throughout, where the plant unloads elastically; the switch is a kink
-    the RTI does not resolve, MPCSettings)."""
+    the RTI does not resolve, MPCSettings).
+
+    The 3D vehicle's quasi-static hull (``prediction_hull``) is in steady running, so its contact reads the
+    soil history of steady running, the deepest sinkage of the segments ahead at the present pose: the
+    steady state of the plant's soil memory (:class:`~symtrack.vehicles.vehicle3d.ContactTerrain` with
+    ``memory`` false: no memory states in the prediction)."""
     o = model.opts
+    quasi_static_hull = model.vehicle.contact == CONTACT_HULL and settings.prediction_hull in ("auto", "quasi_static")
+    if quasi_static_hull and getattr(model.terrain, "memory", False):
+        model = SystemModel(o, terrain=ContactTerrain(o, memory=False), vehicle=model.vehicle)
     changes = {}
     if o.lateral_law == "shear_quasistatic":
         if settings.prediction_sliding_smoothing is not None:
@@ -330,8 +338,10 @@ def prediction_model(model: SystemModel, settings: MPCSettings) -> SystemModel:
         return model
     opts = dataclasses.replace(o, **changes)
     if model.vehicle.contact == CONTACT_HULL:
-        # a hull of its own (the 3D vehicle): the same ground under the prediction (its surface kept)
-        return SystemModel(opts, vehicle=model.vehicle.for_options(opts, model.vehicle.surface))
+        # a hull of its own (the 3D vehicle): the same ground under the prediction (its surface kept), the same
+        # contact terrain (with or without the soil's memory)
+        terrain = ContactTerrain(opts, memory=not quasi_static_hull)
+        return SystemModel(opts, terrain=terrain, vehicle=model.vehicle.for_options(opts, model.vehicle.surface))
     if not isinstance(model.terrain, HomogeneousTerrain):
         raise ParameterError("mpc.prediction_sliding_*, mpc.prediction_shear_unloading: the prediction's "
                              "regularisation needs the homogeneous terrain's model (set "

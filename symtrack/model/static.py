@@ -14,14 +14,72 @@ from .system import SystemModel
 __all__ = ["static_state"]
 
 
+# the soil memory's fixed point at the 3D hull's start (static_state): at most this many settlings, until the
+# memory moves less than HISTORY_TOL_M between two
+HISTORY_ITERATIONS = 20
+HISTORY_TOL_M = 1e-10
+
+
 def static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0) -> np.ndarray:
     """The vehicle at rest at the given pose with its terrain cells in static equilibrium.
 
     Solved with a CasADi Newton root-finder on the model's own cell equations (rates zero), from
     the sinkage at which the model's soil law carries the vehicle's mean pressure (its static inverse).
+    The 3D hull on the homogeneous terrain starts with the soil's memory under its segments
+    (:class:`~symtrack.vehicles.vehicle3d.ContactTerrain`) at its steady state for the start pose (the soil
+    as a run at that pose leaves it: each segment's soil pressed to the deepest sinkage ahead of it), found
+    with the pose by fixed-point iteration.
     """
+    x = _static_state(model, params, x_m, y_m, yaw_rad)
+    hidx = _history_indices(model)
+    if not hidx:
+        return x
+    p = model.param_vector(params)
+    for _ in range(HISTORY_ITERATIONS):
+        h = _steady_history(model, x, p, hidx)
+        if np.max(np.abs(h - x[hidx])) <= HISTORY_TOL_M:
+            break
+        x = _static_state(model, params, x_m, y_m, yaw_rad, history=h)
+    return x
+
+
+def _history_indices(model) -> list:
+    """The positions of the soil memory's states of a 3D hull's homogeneous terrain (none on other terrains)."""
+    if model.vehicle.contact != CONTACT_HULL or not getattr(model.terrain, "memory", False):
+        return []
+    return model.layout.indices(model.terrain.state_names)
+
+
+def _steady_history(model, x, p, hidx) -> np.ndarray:
+    """The soil memory's steady state at the pose of ``x``: each track's chain H_i = T_i(H_(i-1)) of
+    :func:`~symtrack.vehicles.vehicle3d.segment_history_rates`, read from the model's own rates with the hull
+    moving forward at 1 m/s (the rates are c (T_i - H_i), c the track's speed over a segment length: found from
+    H_1, whose target does not depend on the memory), one pass per segment."""
+    xm = np.array(x, dtype=float)
+    xm[model.layout.index("u_m_s")] = 1.0
+    n = model.opts.contact_segments - 1
+    h = xm[hidx].copy()
+
+    def rates(hv):
+        xt = xm.copy()
+        xt[hidx] = hv
+        return np.array(model.ode(xt, ca.DM.zeros(len(model.input_names)), p)).ravel()[hidx]
+
+    for _ in range(n):
+        r0 = rates(h)
+        shifted = h.copy()
+        shifted[0::n] += 1e-3  # each track's H_1
+        c = np.repeat(-(rates(shifted)[0::n] - r0[0::n]) / 1e-3, n)
+        h = h + r0 / c
+    return h
+
+
+def _static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.0, history=None) -> np.ndarray:
+    """:func:`static_state` at a given soil memory ``history`` of the 3D hull (zero: virgin soil)."""
     lay = model.layout
     x = np.zeros(model.nx)
+    if history is not None:
+        x[_history_indices(model)] = history
     x[lay.indices(("x_m", "y_m", "yaw_rad"))] = x_m, y_m, yaw_rad
     cell_idx = lay.cell_indices("sinkage")
     rate_idx = lay.cell_indices("rate")

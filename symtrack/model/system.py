@@ -110,6 +110,9 @@ class SystemModel:
         # the grid under the 3D hull (the terrain engine's segment sums): the soil history under each segment
         history = {"contact_history": self.terrain.contact_history(P, Q)} if hasattr(self.terrain,
                                                                                      "contact_history") else {}
+        # the homogeneous terrain under the 3D hull: the soil's memory under each segment (its states)
+        if getattr(self.terrain, "memory", False):
+            history = {"segment_history": self.terrain.segment_history(xc)}
 
         def evaluate(acc):
             veh = vm.equations(xv, u, acc, P, compaction, self.opts, track_soil, **history)

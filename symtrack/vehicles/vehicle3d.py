@@ -14,10 +14,12 @@ the CG, y_k = +-B/2, h the CG height above the track's ground line), is placed i
 hull's pose (R = Rz(yaw) Ry(-pitch) Rx(roll)). Its penetration into the ground is the height of the
 surface above it, z0(X_i, Y_i) - Z_i, times the cosine of the ground's inclination there (the depth
 measured normal to the ground: a plate pressed normal to the surface, as Bekker's law is measured).
-Its pressure is the model's soil law at that sinkage, with the history the homogeneous terrain gives
-its sprocket cell (:mod:`symtrack.model.homogeneous`): the front segment meets virgin soil, each
-later segment soil already pressed to the deepest sinkage ahead of it (Bekker loading if it sinks
-deeper, the unloading/reloading line if not), plus the cells' areal damping c'' times the rate of
+Its pressure is the model's soil law at that sinkage, with the soil's history under it: the front segment
+meets virgin soil, each later segment soil pressed to the sinkage H_i of the soil's memory under it (Bekker
+loading if it sinks deeper, the unloading/reloading line if not), the states of the homogeneous terrain
+:class:`ContactTerrain`, carried from the segment ahead as the track moves over the ground (in steady running
+the deepest sinkage ahead of the segment, the history the homogeneous terrain gives its sprocket cell,
+:mod:`symtrack.model.homogeneous`), plus the cells' areal damping c'' times the rate of
 penetration (the cell equation without the cell's own areal mass: the soil under the track moves with
 the hull) where the segment touches the soil (its soil pressure positive: a segment above the ground
 feels no damping), never below zero (no tension). The segment's load p b (l / n) acts along the ground's
@@ -317,7 +319,7 @@ class Vehicle3D(VehicleModel):
 
     # -- the equations -----------------------------------------------------------------------------------
     def equations(self, xv, u, acc, P: dict, compaction_N, opts, track_soil=None,
-                  contact_history=None) -> dict:
+                  contact_history=None, segment_history=None) -> dict:
         """The vehicle's state derivatives and signals (module doc). ``acc`` is not used (no
         load-transfer loop: ``acc_implied`` returns the accelerations); ``compaction_N`` neither
         (the contact's own compaction resistance) unless ``contact_history`` is given; ``track_soil``
@@ -325,7 +327,10 @@ class Vehicle3D(VehicleModel):
         docs/vehicle3d.md "The grid under the 3D vehicle"): track -> the soil history (the
         :data:`~symtrack.soil.law.HISTORY_NAMES`) of the cells under each segment; each segment's
         pressure is then the law on that history (not the homogeneous rule of the segments ahead) and
-        the compaction resistance is ``compaction_N``, the cells' own work."""
+        the compaction resistance is ``compaction_N``, the cells' own work. ``segment_history``: the
+        homogeneous terrain's memory (:class:`ContactTerrain`): track -> the deepest sinkage of the soil
+        under each segment behind the front one, its rates set on ``dist[track].history_rates``
+        (:func:`segment_history_rates`)."""
         if (opts.lateral_law == "shear") != self.lateral:
             raise ParameterError(f"model.lateral_law = {opts.lateral_law!r} needs the vehicle model "
                                  f"{'3d_lateral' if opts.lateral_law == 'shear' else '3d'}")
@@ -380,8 +385,8 @@ class Vehicle3D(VehicleModel):
         depth, v_tracks = {}, {}
         for k in TRACKS:
             yk = B / 2 if k == "left" else -B / 2
-            p_seg, n_sum, pts, normals = [], 0, [], []
-            z_hist = 0
+            p_seg, n_sum, pts, normals, deltas = [], 0, [], [], []
+            z_hist, deepest = 0, 0
             for i, s in enumerate(s_c):
                 pt = world(x_front - s, yk, -h)
                 z0, gx, gy = self.ground(pt[0], pt[1])
@@ -389,13 +394,17 @@ class Vehicle3D(VehicleModel):
                 nrm = ca.vertcat(-gx, -gy, 1) / norm
                 delta = (z0 - pt[2]) / norm  # the penetration normal to the ground
                 ddelta = rate(delta)
+                deltas.append(delta)
                 if contact_history is not None:
                     p_soil = law_obj.pressure(delta, contact_history[k][i], law)
                 elif i == 0:
                     p_soil = law_obj.pressure(delta, (0, 0, 0, 0, 0), law)
                 else:
+                    if segment_history is not None:  # the soil's memory under the segment (ContactTerrain)
+                        z_hist = segment_history[k][i - 1]
                     p_soil = law_obj.pressure(delta, (z_hist, law_obj.virgin_pressure(z_hist, law), 0, 0, 0), law)
                 z_hist = ca.fmax(z_hist, ca.fmax(delta, 0))
+                deepest = ca.fmax(deepest, ca.fmax(delta, 0))
                 # the cells' damping only where the segment touches the soil (p_soil > 0): above the ground
                 # (or above the rebound of soil pressed ahead) a segment moving toward it feels nothing
                 p = ca.fmax(p_soil + ca.if_else(p_soil > 0, damping * ddelta, 0), 0)
@@ -407,7 +416,7 @@ class Vehicle3D(VehicleModel):
             # the pressure within each segment: linear, p_i + g_i (s - s_i), carried by its two
             # Gauss-Legendre points s_i -+ a (module doc, "Within a segment")
             dp = segment_gauss_offsets(p_seg)
-            depth[k] = ca.fmax(z_hist, COMPACTION_DEPTH_FLOOR_M)  # (not 0: the NaN of its derivatives)
+            depth[k] = ca.fmax(deepest, COMPACTION_DEPTH_FLOOR_M)  # (not 0: the NaN of its derivatives)
             dist[k] = SegmentDistribution(p_seg, s_c, ds, n_sum)
             # the track's ground plane: its mean normal; the tangent along the track and across it
             nk = sum(normals[1:], normals[0]) / n_seg
@@ -419,6 +428,8 @@ class Vehicle3D(VehicleModel):
             vel = rate(centre)
             v_track = ca.dot(vel, tx)
             v_tracks[k] = v_track
+            if segment_history is not None:
+                dist[k].history_rates = segment_history_rates(segment_history[k], deltas, v_track, ds, opts)
             v_lat_centre = ca.dot(vel, ty)
             vy_eff = v_lat_centre + rz * e  # the lateral speed at the CG's x that gives it at the centre (x = -e)
             if track_soil is not None:
@@ -519,23 +530,73 @@ class Vehicle3D(VehicleModel):
                 "yaw_moment_N_m": yaw_moment}
 
 
+def track_speed_abs(v, opts):
+    """|v| of a track's speed over the ground in the soil history's transport (:func:`segment_history_rates`):
+    sqrt(v^2 + e^2) (1 - exp(-v^2 / e^2)) with e = ``opts.motion_smoothing_m_s`` (exact in ``traction_sign =
+    "sign"`` mode): smooth and even, |v| from |v| = 10 e on, 0 at rest (a standing hull's soil keeps its
+    memory), as the shear states' exchange speed (:func:`~symtrack.vehicles.planar.shear_exchange_speed`)."""
+    if opts.traction_sign == "sign":
+        return ca.fabs(v)
+    eps = opts.motion_smoothing_m_s
+    return ca.sqrt(v**2 + eps**2) * (1 - ca.exp(-(v / eps) ** 2))
+
+
+def segment_history_rates(history, deltas, v_track, ds, opts):
+    """dH_i/dt of the soil's memory under a track's segments i = 1 .. n - 1 (:class:`ContactTerrain`): the soil
+    under segment i is replaced, at the track's speed over the ground |v| (:func:`track_speed_abs`) per segment
+    length ds, by the soil under the segment ahead with the deepest sinkage it has had there,
+    T_i = max(H_(i-1), max(delta_(i-1), 0)) (H_0 = 0: the front segment meets virgin soil), the first-order
+    upwind transport dH_i/dt = |v| (T_i - H_i) / ds. Its steady state is the deepest sinkage ahead of the
+    segment at the present pose. ``history`` are the H_i, ``deltas`` the n segments' penetrations (front
+    first)."""
+    speed = track_speed_abs(v_track, opts) / ds
+    rates, ahead = [], 0
+    for i, h in enumerate(history):
+        ahead = ca.fmax(ahead, ca.fmax(deltas[i], 0)) if i == 0 else ca.fmax(history[i - 1], ca.fmax(deltas[i], 0))
+        rates.append(speed * (ahead - h))
+    return rates
+
+
 class ContactTerrain:
     """The homogeneous terrain of the 3D vehicle: virgin soil following the surface, no travelling
     cells (the hull's penetration is the sinkage, :mod:`symtrack.vehicles.vehicle3d`); the soil law's
-    signals come from the vehicle."""
+    signals come from the vehicle. Its states are the soil's memory under the tracks: for each track and
+    each segment i behind the front one (``soil_history_{track}_{i}_m``, i = 1 .. n - 1 from the front),
+    the deepest sinkage H_i the soil under it has had, carried from the segment ahead as the track moves over
+    the ground (:func:`segment_history_rates`); the segment's pressure is the soil law on it (docs/vehicle3d.md,
+    "The soil's memory under the hull"). At rest the memory holds, so the contact's pressure is a function of
+    the pose and of that memory, elastic at a given memory: a cycle of the hull's heave and pitch gives back
+    what it took. (A history taken from the present pose, the deepest sinkage of the segments ahead now, gave a
+    contact whose forces have no potential: such a cycle fed the hull energy, the sign of the work set by the
+    sense of the cycle; tests/test_physics_fuzz.py.)"""
 
     name = "homogeneous"
     param_names = ()
-    state_names = ()
 
-    def __init__(self, opts):
+    def __init__(self, opts, memory: bool = True):
+        """``memory`` false: no states, each segment's history the deepest sinkage of the segments ahead at the
+        present pose (the memory's steady state: the MPC's quasi-static hull, symtrack.control.mpc)."""
         self.opts = opts
+        self.memory = bool(memory)
+        self.state_names = history_state_names(opts.contact_segments) if self.memory else ()
+
+    def segment_history(self, xc):
+        """track -> the memory states H_1 .. H_(n-1) of its segments (front to rear)."""
+        n = self.opts.contact_segments - 1
+        return {k: [xc[t * n + i] for i in range(n)] for t, k in enumerate(TRACKS)}
 
     def compaction(self, xv, xc, P, Q):
         return ca.DM.zeros(len(TRACKS))  # the 3D vehicle computes its own (module doc)
 
     def equations(self, xv, xc, dist, P, Q):
-        return ca.SX(0, 1), {}
+        if not self.memory or not self.state_names:
+            return ca.SX(0, 1), {}
+        return ca.vertcat(*(r for k in TRACKS for r in dist[k].history_rates)), {}
+
+
+def history_state_names(contact_segments: int) -> tuple:
+    """The names of :class:`ContactTerrain`'s states for ``contact_segments`` segments per track."""
+    return tuple(f"soil_history_{k}_{i}_m" for k in TRACKS for i in range(1, contact_segments))
 
 
 def make_vehicle(opts, surface=None) -> Vehicle3D:
