@@ -15,6 +15,28 @@ import pytest
 from symtrack.model import SystemModel
 from symtrack.presets import soil_preset, vehicle_preset
 
+# The test files whose terrain engines run for seconds, not minutes: their engines compiled at -O0 (gcc's
+# time is most of such a file's; the files that drive an engine for long keep -O1 above). Measured on an
+# empty cache, the CPU of these files with their other engine-building neighbours (test_operations.py
+# without the season, test_vehicle_step_replay.py) at -O0 / -O1: test_grid3d 48 / 83 s, test_moisture
+# 7 / 15 s, test_soil_law 13 / 15 s, test_terrain_engine 74 / 80 s, test_vehicle_registry 9.9 / 10.6 s,
+# but test_operations 180 / 72 s and test_vehicle_step_replay 36 / 24 s.
+ENGINE_O0_FILES = frozenset({"test_grid3d.py", "test_moisture.py", "test_soil_law.py", "test_terrain_engine.py",
+                             "test_vehicle_registry.py"})
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _engine_opt_level(request):
+    """SYMTRACK_TUNED_OPT_LEVEL=0 for the module's tests (and its module fixtures: an autouse fixture is set up
+    before the others of its scope) when the module is one of ENGINE_O0_FILES; the level is part of a compiled
+    artefact's cache key, so an engine another file built at -O1 is built once more, not replaced."""
+    if request.path.name not in ENGINE_O0_FILES:
+        yield
+        return
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("SYMTRACK_TUNED_OPT_LEVEL", "0")
+        yield
+
 
 @pytest.fixture(scope="session")
 def model():
