@@ -19,17 +19,16 @@ import numpy as np
 from ..integrators.engine.manager import static_sinkage
 from ..integrators.grid_idas import ChannelStepper
 from ..integrators.settings import IntegratorSettings
-from ..model import SystemModel
 from ..reports import validation
 from ..simulation import loop
 from ..simulation.passes import RUT_THRESHOLD_M, pass_figures
 from ..simulation.plants import make_plant
 from ..simulation.result import summarise
 from ..simulation.scenario import load_scenario
-from ..terrain.channels import HIST_ROWS, NF, NG, ChannelTerrain
+from ..terrain.channels import HIST_ROWS, NF, NG
 from ..terrain.settings import TerrainSettings
 from ..terrain.storage import Grid
-from ..terrain.world import END_STRIP_CELLS
+from ..terrain.world import END_STRIP_CELLS, channel_model
 
 __all__ = ["BruteResult", "GRID_FIXED_STEP_S", "bench_rows", "benchmark", "brute_force_run", "main", "pool_run"]
 
@@ -56,8 +55,8 @@ def brute_force_run(scenario, duration_s: float) -> BruteResult:
     origin = s.origin_m or (scenario.start.x_m - 0.5 * nx * s.cell_m, scenario.start.y_m - 0.5 * ny * s.cell_m)
     grid = Grid(tuple(float(v) for v in origin), float(s.cell_m), (nx, ny))
     n = grid.n_cells
-    terrain = ChannelTerrain(scenario.model, n)
-    model = SystemModel(scenario.model, terrain)
+    model = channel_model(scenario.model, n)
+    terrain = model.terrain
     Q = np.zeros(NG + NF * n)
     Q[0], Q[1] = grid.cell_m, END_STRIP_CELLS * grid.cell_m
     qc = Q[NG:].reshape(n, NF)

@@ -72,6 +72,7 @@ import math
 
 import numpy as np
 
+from ..foundations import caches
 from ..foundations.errors import ParameterError, ScenarioError
 from ..foundations.memory import require_memory
 from ..model import SystemModel
@@ -180,6 +181,23 @@ def zero_in_place(a: np.ndarray, block: int = 1 << 16) -> None:
             b[...] = 0
 
 
+# the vehicle + channel pool models built in this process, by the model options and the pool's size
+# (symtrack.foundations.caches): a second world of the same vehicle, soil law and channel count (the
+# passes of a continued terrain, a run again on its saved field, the channel-per-cell reference) takes
+# the first's, as the homogeneous terrain's models are shared (symtrack.simulation.builder.system_model:
+# a SystemModel is not changed after its construction). Building one of 512 channels takes seconds.
+_CHANNEL_MODELS = caches.cache("channel_models", 2)
+
+
+def channel_model(opts: ModelOptions, n_channels: int, terrain: ChannelTerrain | None = None) -> SystemModel:
+    """The vehicle of ``opts`` with a pool of ``n_channels`` channels as one symbolic system, built
+    on the first call for these options and this size (on ``terrain``, a ChannelTerrain of them, if
+    given) and then shared."""
+    n = int(n_channels)
+    return _CHANNEL_MODELS.get_or_build((opts, n), lambda: SystemModel(opts, terrain if terrain is not None
+                                                                       else ChannelTerrain(opts, n)))
+
+
 class World:
     """The world manager for one field and one vehicle (see the module doc)."""
 
@@ -280,7 +298,7 @@ class World:
         if len(self.soils) > 1:
             raise ScenarioError("this field has a soil map (several soils): it runs on the terrain engine only "
                                 "(run.integrator = \"grid_fast\"); IDAS and the grid Rosenbrock take one soil")
-        return SystemModel(self.opts, self.terrain)
+        return channel_model(self.opts, self.n_channels, self.terrain)
 
     def _apply_surface(self, surface, continued: bool):
         """The ground's shape (symtrack/terrain/surface.py): a new field takes the scenario's
