@@ -15,26 +15,32 @@ import pytest
 from symtrack.model import SystemModel
 from symtrack.presets import soil_preset, vehicle_preset
 
-# The test files whose terrain engines run for seconds, not minutes: their engines compiled at -O0 (gcc's
-# time is most of such a file's; the files that drive an engine for long keep -O1 above). Measured on an
-# empty cache, the CPU of these files with their other engine-building neighbours (test_operations.py
-# without the season, test_vehicle_step_replay.py) at -O0 / -O1: test_grid3d 48 / 83 s, test_moisture
-# 7 / 15 s, test_soil_law 13 / 15 s, test_terrain_engine 74 / 80 s, test_vehicle_registry 9.9 / 10.6 s,
-# but test_operations 180 / 72 s and test_vehicle_step_replay 36 / 24 s.
-ENGINE_O0_FILES = frozenset({"test_grid3d.py", "test_moisture.py", "test_soil_law.py", "test_terrain_engine.py",
-                             "test_vehicle_registry.py"})
+# Files compiled at other levels than the ones above (the level is part of a compiled artefact's cache key:
+# an artefact another file built at another level is built once more, not replaced). Measured on empty
+# caches, CPU of the file run alone at the two levels:
+# - the terrain engine at -O0 where the files run their engines for seconds, not minutes (gcc's time is most
+#   of such a file's; with their engine-building neighbours: test_grid3d 48 / 83 s at -O0 / -O1,
+#   test_moisture 7 / 15 s, test_soil_law 13 / 15 s, test_terrain_engine 74 / 80 s, test_vehicle_registry
+#   9.9 / 10.6 s; but test_vehicle_step_replay 36 / 24 s, which keeps -O1);
+# - the other generated code at -O1 in test_operations.py, whose MPC functions and grid steps run for the
+#   minutes of simulated field work (165 s at -O0, 141 s at -O1).
+FILE_OPT_LEVELS = {
+    **{name: ("SYMTRACK_TUNED_OPT_LEVEL", "0") for name in ("test_grid3d.py", "test_moisture.py", "test_soil_law.py",
+                                                          "test_terrain_engine.py", "test_vehicle_registry.py")},
+    "test_operations.py": ("SYMTRACK_OPT_LEVEL", "1"),
+}
 
 
 @pytest.fixture(autouse=True, scope="module")
-def _engine_opt_level(request):
-    """SYMTRACK_TUNED_OPT_LEVEL=0 for the module's tests (and its module fixtures: an autouse fixture is set up
-    before the others of its scope) when the module is one of ENGINE_O0_FILES; the level is part of a compiled
-    artefact's cache key, so an engine another file built at -O1 is built once more, not replaced."""
-    if request.path.name not in ENGINE_O0_FILES:
+def _file_opt_level(request):
+    """The module's optimisation level of FILE_OPT_LEVELS for its tests, its module fixtures (an autouse fixture
+    is set up before the others of its scope) and the processes they start."""
+    level = FILE_OPT_LEVELS.get(request.path.name)
+    if level is None:
         yield
         return
     with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("SYMTRACK_TUNED_OPT_LEVEL", "0")
+        mp.setenv(*level)
         yield
 
 
