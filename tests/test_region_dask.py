@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import signal
@@ -36,8 +37,9 @@ def _small(folder: Path, n: int = 3) -> Path:
 
 
 def _hashes(out: Path) -> dict:
+    """The field-seasons' maps (maps.npz and the per-field COGs)."""
     return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted((out / "fields").rglob("*.npz"))}
+            for p in sorted((out / "fields").rglob("*")) if p.suffix in (".npz", ".tif")}
 
 
 def _figures(out: Path) -> dict:
@@ -89,6 +91,134 @@ def test_the_folder_table_maps_and_report(reference):
     html = (out / "report.html").read_text()
     assert "Share of the area at each risk class" in html and "The worst fields" in html
     assert html.count("data:image/png;base64,") >= 3
+
+
+def _field_layers(season: Path) -> dict:
+    """A field-season's maps.npz layers by their file's name."""
+    from symtrack.region.outputs import FIELD_ARRAYS
+
+    with np.load(season / "maps.npz") as z:
+        return {name: z[key] for name, key in FIELD_ARRAYS.items()} | {"field_mask": z["field_mask"]}
+
+
+def _agree(region: dict, rt, files: dict, mask: np.ndarray, transform) -> tuple:
+    """The region map cells (rows, columns) whose centres fall in the field's polygon's cells through the field
+    COGs' ``transform``, and how many values the field's COGs (``files``: {layer: (bands, transform)}) give
+    them unlike the region's maps (``region``: {layer: bands}, transform ``rt``)."""
+    from rasterio.transform import rowcol
+
+    R, C = np.nonzero(region["risk_class"][0] != 255)
+    X, Y = rt @ (C + 0.5, R + 0.5)
+    rows, cols = (np.asarray(a) for a in rowcol(transform, X, Y))  # the cell each centre falls in (floor)
+    ok = (rows >= 0) & (cols >= 0) & (rows < mask.shape[0]) & (cols < mask.shape[1])
+    ok[ok] = mask[rows[ok], cols[ok]]
+    bad = 0
+    for name, (data, _) in files.items():
+        a, b = data[:, rows[ok], cols[ok]], region[name][:, R[ok], C[ok]]
+        bad += int(np.count_nonzero(~((a == b) | ((a != a) & (b != b)))))  # NaN equals NaN
+    return R[ok], C[ok], bad
+
+
+def test_each_field_seasons_cogs_are_its_maps_on_its_own_grid_and_agree_with_the_region_maps(reference):
+    import rasterio
+    from affine import Affine
+
+    from symtrack.region.outputs import LAYERS, field_band, field_transform
+
+    inp, out, _ = reference
+    spec = load_region(inp / "region_demo.toml")
+    assert spec.field_maps
+    c = spec.map_cell_m
+    for y in spec.years:
+        region = {}
+        for name in LAYERS:
+            with rasterio.open(out / "maps" / str(y) / f"{name}.tif") as ds:
+                region[name] = ds.read()
+                rt = ds.transform
+        checked = np.zeros(region["risk_class"].shape[1:], dtype=bool)
+        for f in spec.fields:
+            season = out / "fields" / f.field_id / str(y)
+            arrays = _field_layers(season)
+            shape = arrays["trafficked_count"].shape
+            files = {}
+            for name, (dtype, nodata, per_depth, unit, _) in LAYERS.items():
+                with rasterio.open(season / f"{name}.tif") as ds:
+                    # Cloud-Optimized (GDAL's COG driver's layout, tiled), the region maps' types and bands
+                    assert ds.tags(ns="IMAGE_STRUCTURE").get("LAYOUT") == "COG" and ds.profile["tiled"]
+                    assert ds.dtypes[0] == dtype and ds.crs.to_epsg() == 32633
+                    assert ds.nodata == nodata or (np.isnan(nodata) and np.isnan(ds.nodata))
+                    assert ds.count == (len(spec.depths_m) if per_depth else 1)
+                    assert (ds.width, ds.height) == shape[:2]
+                    if per_depth:
+                        assert ds.descriptions == tuple(f"{name} at {d:g} m [{unit}]" for d in spec.depths_m)
+                    assert ds.transform.almost_equals(field_transform(f, spec.cell_m, shape), precision=1e-9)
+                    data = ds.read()
+                    files[name] = (data, ds.transform)
+                src = arrays[name]
+                for b in range(data.shape[0]):  # bit for bit the field's maps.npz (in the layer's type: lossless)
+                    want = field_band(src, b if per_depth else None)
+                    assert np.array_equal(want.astype(dtype), want, equal_nan=want.dtype.kind == "f")
+                    assert want.astype(dtype).tobytes() == data[b].tobytes(), (f.field_id, y, name, b)
+            mask = field_band(arrays["field_mask"])
+
+            T = files["risk_class"][1]
+            R, C, bad = _agree(region, rt, files, mask, T)
+            assert len(R) > 0.8 * f.area_m2 / c ** 2 and bad == 0, (f.field_id, y, bad)
+            checked[R, C] = True
+            # one cell off along either of the grid's axes: the region maps disagree
+            for shift in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                assert _agree(region, rt, files, mask, T @ Affine.translation(*shift))[2] > 0.01 * len(R), \
+                    (f.field_id, y, shift)
+        assert np.array_equal(checked, region["risk_class"][0] != 255)  # every region cell is a field's
+
+
+def test_a_field_cog_larger_than_a_tile_has_overviews_and_a_rotated_transform():
+    from rasterio.io import MemoryFile
+
+    from symtrack.region.inputs import FieldShape, field_frame
+    from symtrack.region.outputs import field_band, field_cogs
+
+    ring = [(500000.0, 6000000.0), (500300.0, 6000150.0), (500240.0, 6000270.0), (499940.0, 6000120.0)]
+    theta = math.atan2(150.0, 300.0)
+    f = FieldShape("big", 0, "s", "x", 1.0, tuple(ring), **field_frame(ring, theta, 8.0))
+    spec = type("Spec", (), {"cell_m": 0.5, "depths_m": (0.1, 0.3), "crs": "EPSG:32633"})()
+    shape = (math.ceil(f.size_m[0] / 0.5), math.ceil(f.size_m[1] / 0.5))
+    assert shape[0] > 512
+    rng = np.random.default_rng(3)
+    arrays = {"counts": rng.integers(0, 5, shape).astype(np.uint16),
+              "sigma_max_kPa": rng.random((*shape, 2), dtype=np.float32),
+              "density_change_Mg_per_m3": rng.random((*shape, 2), dtype=np.float32),
+              "risk_class": rng.integers(0, 3, (*shape, 2)).astype(np.uint8)}
+    files = field_cogs(spec, f, arrays)
+    assert files == field_cogs(spec, f, arrays)  # the same bytes each time
+    with MemoryFile(files["stress_max_kPa.tif"]) as m, m.open() as ds:
+        assert ds.tags(ns="IMAGE_STRUCTURE").get("LAYOUT") == "COG" and ds.profile["tiled"]
+        assert ds.overviews(1) and ds.block_shapes[0] == (512, 512)
+        assert ds.read(2).tobytes() == field_band(arrays["sigma_max_kPa"], 1).tobytes()
+        # the field's cell (i, j) centre, in the region's CRS, is in the raster's row shape[1]-1-j, column i
+        for i, j in ((0, 0), (shape[0] - 1, 3), (17, shape[1] - 1)):
+            assert ds.index(*f.to_world((i + 0.5) * 0.5, (j + 0.5) * 0.5)) == (shape[1] - 1 - j, i)
+        assert ds.transform.b != 0 and ds.transform.d != 0  # rotated: the field's lines are not east-west
+
+
+def test_the_field_cogs_can_be_switched_off(reference, tmp_path):
+    from symtrack.region.study import build_context, field_season
+
+    inp, _, _ = reference
+    text = (inp / "region_demo.toml").read_text()
+    p = inp / "no_field_maps.toml"
+    p.write_text(text + "\n[outputs]\nfield_maps = false\n")
+    spec = load_region(p)
+    assert not spec.field_maps
+    res = field_season(build_context(spec), 0, spec.years[0], None)
+    assert sorted(res["files"]) == ["maps.npz", "summary.json"]
+    p.write_text(text + "\n[outputs]\nfield_map = false\n")
+    with pytest.raises(ScenarioError, match=r"unknown key\(s\) in \[outputs\]: field_map; allowed: field_maps"):
+        load_region(p)
+    p.write_text(text + "\n[outputs]\nfield_maps = 1\n")
+    with pytest.raises(ScenarioError, match="outputs.field_maps = 1 must be true or false"):
+        load_region(p)
+    p.unlink()
 
 
 def test_a_rerun_skips_the_finished_and_redoes_the_rest_bit_for_bit(reference, tmp_path):

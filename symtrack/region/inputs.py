@@ -40,7 +40,8 @@ SCHEMA_VERSION = 1
 TOP_KEYS = ("schema_version", "name", "description", "fields_file", "crs", "fleet", "years", "seed", "cell_m",
             "map_cell_m", "depths_m", "rule", "workable_suction_kPa", "moisture_class_pF", "margin_m",
             "unplannable_fields", "soils", "soil_map", "full_fidelity",
-            "systems")
+            "systems", "outputs")
+OUTPUTS_KEYS = ("field_maps",)
 SOIL_ENTRY_KEYS = ("preset", "suction_file")  # and any soil parameter (symtrack presets NAME lists them)
 SYSTEM_KEYS = ("operations",)
 OP_KEYS = ("name", "machine", "window", "same_day_as", "loosens_to_m", "repeat", "same_lines_as", "tracks",
@@ -139,6 +140,8 @@ class RegionSpec:
     unplannable_fields: str = "refuse"
     skipped: list = field(default_factory=list)  # [{"field_id", "reason"}] of the fields left out
     full_fidelity: FullFidelity | None = None  # [full_fidelity]: the fields run in the full fidelity, the vehicle
+    # [outputs] field_maps: each field-season's maps also as Cloud-Optimized GeoTIFFs in its folder
+    field_maps: bool = True
 
     @property
     def area_ha(self) -> float:
@@ -420,6 +423,11 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
     unplannable = doc.get("unplannable_fields", "refuse")
     if unplannable not in UNPLANNABLE:
         raise ScenarioError(f"unplannable_fields = {unplannable!r} is not one of {', '.join(UNPLANNABLE)}")
+    outputs = doc.get("outputs", {})
+    check_keys("outputs", outputs, OUTPUTS_KEYS)
+    field_maps = outputs.get("field_maps", True)
+    if not isinstance(field_maps, bool):
+        raise ScenarioError(f"outputs.field_maps = {field_maps!r} must be true or false")
     crs = doc.get("crs")
     if crs is not None:
         from ..terrain.gis import crs_wkt
@@ -483,7 +491,7 @@ def region_from_dict(doc: dict, folder: Path, name: str = "region") -> RegionSpe
         fields.append(FieldShape(**f))
     return RegionSpec(doc.get("name", name), doc.get("description", ""), folder, fields, soils, suction, fleet, systems,
                       years, seed, cell, map_cell, depths, rule, workable, width, crs, doc, margin, unplannable,
-                      full_fidelity=full)
+                      full_fidelity=full, field_maps=field_maps)
 
 
 def load_region(path) -> RegionSpec:

@@ -142,6 +142,65 @@ def _finish_cog(ds, tmp: str, path: Path) -> None:
             os.unlink(tmp)
 
 
+# ---- a field-season's own maps -----------------------------------------------------------------------------------
+# the layers of a field-season's maps.npz, by the name of their file
+FIELD_ARRAYS = {"trafficked_count": "counts", "stress_max_kPa": "sigma_max_kPa",
+                "density_change_Mg_per_m3": "density_change_Mg_per_m3", "risk_class": "risk_class"}
+
+
+def field_transform(f, cell_m: float, shape: tuple):
+    """The affine transform of a field's own grid (``shape`` cells (along the track lines, across them) of
+    ``cell_m``) in the region's CRS: the raster's columns run along the field's x (the track lines), its rows
+    down its y, so row r holds the field's cells j = shape[1] - 1 - r (:func:`field_band`); rotated by the
+    field's theta (north up where theta is 0)."""
+    from affine import Affine
+
+    c, s = math.cos(f.theta_rad), math.sin(f.theta_rad)
+    ox, oy = f.to_world(0.0, shape[1] * cell_m)  # the raster's corner: local (0, top)
+    return Affine(c * cell_m, s * cell_m, float(ox), s * cell_m, -c * cell_m, float(oy))
+
+
+def field_band(arr: np.ndarray, k: int | None = None) -> np.ndarray:
+    """A field's map (cells (i along x, j along y[, depth])) as a raster band: rows down y, columns along x."""
+    a = arr if k is None else arr[..., k]
+    return np.ascontiguousarray(a.T[::-1])
+
+
+def field_cogs(spec, f, arrays: dict) -> dict:
+    """A field-season's maps (``arrays``: its maps.npz's arrays, by their names there) as Cloud-Optimized
+    GeoTIFFs on the field's own grid (:func:`field_transform`), the layers and bands of the region's maps:
+    {"<layer>.tif": bytes}. Written in GDAL's memory file system (nothing on the worker's disk), a band at a
+    time."""
+    import rasterio
+    from rasterio.io import MemoryFile
+    from rasterio.shutil import copy as rio_copy
+
+    shape = arrays["counts"].shape
+    transform = field_transform(f, spec.cell_m, shape)
+    depths = spec.depths_m
+    out = {}
+    for name, key in FIELD_ARRAYS.items():
+        dtype, nodata, per_depth, unit, long_name = LAYERS[name]
+        src = arrays[key]
+        with MemoryFile() as scratch, MemoryFile() as cog:
+            with scratch.open(driver="GTiff", width=shape[0], height=shape[1], count=len(depths) if per_depth else 1,
+                              dtype=dtype, crs=spec.crs, transform=transform, nodata=nodata, tiled=True,
+                              blockxsize=512, blockysize=512) as ds:
+                for b in range(ds.count):
+                    at = f" at {depths[b]:g} m" if per_depth else ""
+                    ds.set_band_description(b + 1, f"{name}{at} [{unit}]")
+                    ds.update_tags(b + 1, units=unit, long_name=long_name + at,
+                                   **({"depth_m": repr(depths[b])} if per_depth else {}))
+                    ds.write(field_band(src, b if per_depth else None).astype(dtype, copy=False), b + 1)
+                ds.update_tags(symtrack_kind="symtrack-region-field-layer", layer=name, units=unit,
+                               long_name=long_name, field_id=f.field_id, cell_m=repr(float(spec.cell_m)),
+                               lines_direction_deg=repr(math.degrees(f.theta_rad)))
+            with rasterio.open(scratch.name) as ds:
+                rio_copy(ds, cog.name, driver="COG", compress="DEFLATE", overview_resampling="NEAREST")
+            out[f"{name}.tif"] = cog.read()
+    return out
+
+
 def _read_maps(path: Path) -> dict:
     with np.load(path) as z:
         return {"trafficked_count": z["counts"], "stress_max_kPa": z["sigma_max_kPa"],

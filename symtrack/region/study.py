@@ -270,13 +270,19 @@ def field_season(ctx: Context, field_index: int, year: int, prev) -> dict:
     widest = max(ops, key=lambda o: o.settings.headland_m).settings
     head = headland_mask(widest, shape, spec.cell_m) & fmask
     summary = field_summary(spec, f, year, ops, maps, drho, risk, fmask, head)
-    summary["wall_time_s"] = time.perf_counter() - t0
-    summary["cpu_time_s"] = time.process_time() - c0
-    files = {"maps.npz": npz_bytes(counts=maps.counts, sigma_max_kPa=(1e-3 * maps.sigma_max_Pa).astype(np.float32),
+    sigma_kPa = (1e-3 * maps.sigma_max_Pa).astype(np.float32)
+    files = {"maps.npz": npz_bytes(counts=maps.counts, sigma_max_kPa=sigma_kPa,
                                    risk_ratio=maps.risk_ratio_max, risk_class=risk, density_change_Mg_per_m3=drho,
                                    field_mask=fmask, headland_mask=head, state=maps.state,
-                                   depths_m=np.asarray(spec.depths_m), cell_m=np.float64(spec.cell_m)),
-             "summary.json": (json.dumps(summary, indent=2) + "\n").encode()}
+                                   depths_m=np.asarray(spec.depths_m), cell_m=np.float64(spec.cell_m))}
+    if spec.field_maps:  # the same maps as COGs on the field's grid, committed with maps.npz (docs/region.md)
+        from .outputs import field_cogs
+
+        files.update(field_cogs(spec, f, {"counts": maps.counts, "sigma_max_kPa": sigma_kPa,
+                                          "density_change_Mg_per_m3": drho, "risk_class": risk}))
+    summary["wall_time_s"] = time.perf_counter() - t0  # the task's, its files included
+    summary["cpu_time_s"] = time.process_time() - c0
+    files["summary.json"] = (json.dumps(summary, indent=2) + "\n").encode()
     return {"files": files, "state": maps.state, "summary": summary}
 
 
