@@ -1,6 +1,8 @@
 """A region study's outputs (docs/region.md, "Outputs"): the per-field table (``fields.csv``), the region's maps
 (Cloud-Optimized GeoTIFFs per season and over the years), the region's figures (``summary.json``) and
-``report.html``, and ``fields.gpkg`` (:mod:`symtrack.region.gpkg`).
+``report.html``, and ``fields.gpkg`` (:mod:`symtrack.region.gpkg`); and each field-season's maps as
+Cloud-Optimized GeoTIFFs on its own grid (:func:`field_cogs`, written by its task and committed with its
+maps.npz: symtrack.region.study).
 
 Committed once: the top-level files (region.json, fields.csv, fields.gpkg, maps/, the report's images,
 report.html, summary.json) are written by the package's one run writer,

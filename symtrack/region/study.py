@@ -7,6 +7,8 @@ The folder::
 
     DIR/region.json                        the study: its inputs resolved, the fields, the years
     DIR/fields/<field_id>/<year>/maps.npz  the field-season's maps on its own grid (docs/region.md, "Outputs")
+    DIR/fields/<field_id>/<year>/*.tif     the same maps as Cloud-Optimized GeoTIFFs on the field's grid, in the
+                                           region's CRS ([outputs] field_maps; symtrack.region.outputs.field_cogs)
     DIR/fields/<field_id>/<year>/summary.json
                                            its figures, written last: a field-season whose summary.json is there
                                            is finished, and a rerun into the folder skips it
