@@ -479,3 +479,24 @@ def test_a_lost_scheduler_ends_the_sweep_with_a_message_and_a_rerun_resumes(tmp_
         assert (out / "runs" / r["run_id"] / "summary.json").is_file() == (r["status"] == "ok")
     res = studies.sweep("validation", vary, out=out, overrides=FAST, workers=1, progress=False)
     assert res.ok and res.skipped == statuses.count("ok") and res.ran == 4 - res.skipped
+
+
+def test_ctrl_c_as_a_run_is_stored_leaves_it_ok_in_the_table(tmp_path, monkeypatch):
+    """Ctrl-C that lands in the store of a finished run after its folder (summary.json last) is in place: the
+    table written on the interrupt says the run is ok, as its folder does (the interrupt's table comes from
+    the folder, not from the rows the sweep had reached)."""
+    real = sweep_module.write_folder
+
+    def store_then_interrupt(folder, files, **kw):
+        real(folder, files, **kw)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sweep_module, "write_folder", store_then_interrupt)
+    out = tmp_path / "cut"
+    with pytest.raises(KeyboardInterrupt):
+        studies.sweep("validation", ["vehicle.mass_kg=5000,5010"], out=out, overrides=FAST, workers=1,
+                      progress=False)
+    rows = _table(out / "results.csv")
+    done = [r for r in rows if (out / "runs" / r["run_id"] / "summary.json").is_file()]
+    assert len(done) == 1 and done[0]["status"] == "ok"
+    assert [r["status"] for r in rows if r is not done[0]] == ["not_run"]

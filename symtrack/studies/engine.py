@@ -505,6 +505,10 @@ def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, 
                 last_table = time.perf_counter()
     except KeyboardInterrupt:
         client.cancel(list(futures), force=True)
+        # the rows from the folder: a run whose summary.json was stored when Ctrl-C came (between its store
+        # and its row, or inside the store after the summary) is finished, and the table says so
+        for r in todo:
+            rows[r["id"]] = _row_on_disk(out, r)
         _write_table(out, p, rows)
         raise
     except SchedulerLost as lost:  # the runs not finished stay not_run: a rerun of the command does them
