@@ -65,7 +65,8 @@ def add_parser(sub) -> None:
         "paths swept by the machine's footprint, the stress and density by depth from the package's soil models; "
         "the full fidelity, each plan driven over the field's terrain, on the fields the region file's "
         "[full_fidelity] names) on a Dask cluster, and write DIR/fields.csv, DIR/fields.gpkg, DIR/maps/ "
-        "(Cloud-Optimized GeoTIFFs), DIR/report.html. A rerun "
+        "(Cloud-Optimized GeoTIFFs), each field-season's maps in DIR/fields/<field_id>/<year>/ (maps.npz and, "
+        "unless [outputs] field_maps = false, one GeoTIFF per map on the field's own grid), DIR/report.html. A rerun "
         "into the same folder skips the field-seasons finished. Exit code 0 when done, 2 for invalid inputs "
         f"(nothing run), 130 on Ctrl-C. Built-in: {DEMO} (generated into DIR/inputs).")
     rp.add_argument("region", help=f"a region TOML file, or {DEMO}")
