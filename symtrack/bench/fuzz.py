@@ -72,6 +72,7 @@ from ..foundations.errors import ImplausibleRunError, SymtrackError
 from ..model.plausibility import (
     GROUND_PRESSURE_RANGE_KPA,
     MAX_TREAD_SPEED_M_S,
+    bekker_k_eq,
     bekker_pressure_limit_Pa,
     leaning_sinkage_limit_m,
     tilt_over_tipping,
@@ -239,7 +240,7 @@ def _vehicle(draw, soil: dict, slope_deg: float = 0.0) -> dict:
     # clay's nearly flat law the loaded end sinks without bound where the mean sinks millimetres: the 3D
     # hull on its 8 deg ramp has no static start, it tips into the soil.)
     s = {**SOILS[soil["preset"]], **soil}
-    k = s["k_c_N_per_m_n1"] / width + s["k_phi_N_per_m_n2"]
+    k = bekker_k_eq(s, width)
     tilt = math.tan(math.radians(slope_deg))
     peak = (1 + 6 * (abs(cg_e) + cg_h * tilt) / length) * (1 + 2 * cg_h * tilt / gauge)
     pressure = min(pressure, k * STATIC_SINKAGE_MAX_M ** s["bekker_n"] / peak)

@@ -13,8 +13,8 @@ the key, the value, the allowed range):
 
 - mean ground pressure m g / (2 b l) outside :data:`GROUND_PRESSURE_RANGE_KPA`;
 - a track as wide as the gauge or wider (:data:`TRACK_WIDTH_OVER_GAUGE_MAX`): the tracks overlap;
-- a static sinkage where Bekker's law is stiffer than the soil's elastic stiffness
-  (:data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX`, :func:`check_soil_contact`): the law used outside its range;
+- a static sinkage where Bekker's law is more than :data:`BEKKER_STIFFNESS_OVER_ELASTIC_MAX` times stiffer than
+  the soil's elastic stiffness (:func:`check_soil_contact`): the law used outside its range;
 - a 3D vehicle whose static sinkage makes it lean over at rest (:func:`check_leaning`).
 
 Warned (one line, the run goes on): a contact length outside :data:`CONTACT_LENGTH_OVER_GAUGE_RANGE`
@@ -40,7 +40,7 @@ from ..vehicles.planar import GRAVITY_M_S2, mean_ground_pressure_Pa
 
 __all__ = ["BEKKER_STIFFNESS_OVER_ELASTIC_MAX", "CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA",
            "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S", "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX",
-           "TRACTION_OVER_WEIGHT_MAX", "bekker_pressure_limit_Pa", "bekker_stiffness_ratio",
+           "TRACTION_OVER_WEIGHT_MAX", "bekker_k_eq", "bekker_pressure_limit_Pa", "bekker_stiffness_ratio",
            "check_sinkage", "check_soil_contact", "check_speed", "check_tilt",
            "check_leaning", "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa",
            "leaning_sinkage_limit_m", "tilt_over_tipping", "tipping_angles_rad", "LEANING_MARGIN"]
@@ -81,7 +81,7 @@ MAX_SPEED_M_S = 30.0
 # output within the limit, with a message that says so (a refusal of the programme, not a complete run).
 MAX_TREAD_SPEED_M_S = 30.0
 # Bekker's loading stiffness dp/dz = n p / z at the static sinkage z = (p / k_eq)^(1/n) of the mean ground
-# pressure, over the soil's elastic (unloading/reloading) stiffness K_e: refused above 1. A soil's virgin
+# pressure, over the soil's elastic (unloading/reloading) stiffness K_e: refused above this. A soil's virgin
 # (plastic) loading is softer than its elastic unloading and reloading (Wong, Theory of Ground Vehicles: the
 # response to repetitive loading, the unloading-reloading line much steeper than the loading curve), so a
 # loading curve stiffer than K_e is the Bekker fit used outside the sinkages its plate tests measured
@@ -139,19 +139,36 @@ def check_vehicle(vehicle: dict, where: str = "vehicle") -> None:
                     "the run goes on", where, l / B, lo, hi)
 
 
+def bekker_k_eq(soil: dict, track_width_m: float) -> float:
+    """Bekker's modulus of p = k z^n for a track of ``track_width_m``: k_eq = k_c / b + k_phi [N/m^(n+2)]."""
+    return float(soil["k_c_N_per_m_n1"]) / float(track_width_m) + float(soil["k_phi_N_per_m_n2"])
+
+
+def _bekker(vehicle: dict, soil: dict, elastic: bool = True) -> tuple[float, float, float] | None:
+    """(n, k_eq, K_e) of ``soil`` under the vehicle's tracks (K_e nan when ``elastic`` is false), or None for a
+    soil without these values or with one not positive."""
+    keys = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2") + (("elastic_stiffness_Pa_per_m",) if elastic else ())
+    if not all(k in soil for k in keys):
+        return None
+    n, k_eq = float(soil["bekker_n"]), bekker_k_eq(soil, vehicle["track_width_m"])
+    k_e = float(soil["elastic_stiffness_Pa_per_m"]) if elastic else math.nan
+    return None if n <= 0 or k_eq <= 0 or (elastic and k_e <= 0) else (n, k_eq, k_e)
+
+
+def _log_static_sinkage(p: float, n: float, k_eq: float) -> float:
+    """ln z of the static sinkage z = (p / k_eq)^(1/n), in logarithms (z underflows for n = 0.1 and a light
+    crawler)."""
+    return (math.log(p) - math.log(k_eq)) / n
+
+
 def bekker_stiffness_ratio(vehicle: dict, soil: dict) -> float | None:
     """Bekker's loading stiffness n p / z at the static sinkage z = (p / k_eq)^(1/n) of the mean ground pressure
     p, over the soil's elastic (unloading/reloading) stiffness K_e; None for a soil without these values."""
-    keys = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "elastic_stiffness_Pa_per_m")
-    if not all(k in soil for k in keys):
+    b, p = _bekker(vehicle, soil), mean_ground_pressure_Pa(vehicle)
+    if b is None or p <= 0:
         return None
-    n, k_c, k_phi, k_e = (float(soil[k]) for k in keys)
-    k_eq = k_c / float(vehicle["track_width_m"]) + k_phi
-    p = mean_ground_pressure_Pa(vehicle)
-    if n <= 0 or k_eq <= 0 or k_e <= 0 or p <= 0:
-        return None
-    # n p / z with z = (p / k_eq)^(1/n), in logarithms (z underflows for n = 0.1 and a light crawler)
-    return math.exp(math.log(n * p) - (math.log(p) - math.log(k_eq)) / n - math.log(k_e))
+    n, k_eq, k_e = b
+    return math.exp(math.log(n * p) - _log_static_sinkage(p, n, k_eq) - math.log(k_e))
 
 
 def bekker_pressure_limit_Pa(vehicle: dict, soil: dict,
@@ -159,13 +176,10 @@ def bekker_pressure_limit_Pa(vehicle: dict, soil: dict,
     """(lowest, highest) mean ground pressure [Pa] that :func:`check_soil_contact` accepts for ``soil`` and the
     vehicle's track width (0 and inf where it bounds none): n p^(1 - 1/n) k_eq^(1/n) = ``ratio_max`` x K_e
     (default the rule's limit)."""
-    keys = ("bekker_n", "k_c_N_per_m_n1", "k_phi_N_per_m_n2", "elastic_stiffness_Pa_per_m")
-    if not all(k in soil for k in keys):
+    b = _bekker(vehicle, soil)
+    if b is None or b[0] == 1:
         return 0.0, math.inf
-    n, k_c, k_phi, k_e = (float(soil[k]) for k in keys)
-    k_eq = k_c / float(vehicle["track_width_m"]) + k_phi
-    if n <= 0 or k_eq <= 0 or k_e <= 0 or n == 1:
-        return 0.0, math.inf
+    n, k_eq, k_e = b
     log_p = (math.log(ratio_max * k_e) - math.log(n) - math.log(k_eq) / n) / (1 - 1 / n)
     p = math.inf if log_p > 700 else math.exp(max(log_p, -700.0))  # (n near 1: the bound is far or none)
     return (p, math.inf) if n < 1 else (0.0, p)
@@ -177,10 +191,9 @@ def check_soil_contact(vehicle: dict, soil: dict, where: str = "soil") -> None:
     ratio = bekker_stiffness_ratio(vehicle, soil)
     if ratio is None or ratio <= BEKKER_STIFFNESS_OVER_ELASTIC_MAX:
         return
-    n, k_e = float(soil["bekker_n"]), float(soil["elastic_stiffness_Pa_per_m"])
-    k_eq = float(soil["k_c_N_per_m_n1"]) / float(vehicle["track_width_m"]) + float(soil["k_phi_N_per_m_n2"])
+    n, k_eq, k_e = _bekker(vehicle, soil)
     p = mean_ground_pressure_Pa(vehicle)
-    z_log10 = (math.log10(p) - math.log10(k_eq)) / n
+    z_log10 = _log_static_sinkage(p, n, k_eq) / math.log(10)
     lo, hi = bekker_pressure_limit_Pa(vehicle, soil)
     bound = ""
     if n != 1:
@@ -208,16 +221,12 @@ def leaning_sinkage_limit_m(vehicle: dict, soil: dict) -> float | None:
 
 def check_leaning(vehicle: dict, soil: dict, where: str = "soil") -> None:
     """Refuse (ParameterError) a 3D vehicle that leans over at rest on its soil (:data:`LEANING_MARGIN`)."""
-    limit = leaning_sinkage_limit_m(vehicle, soil)
-    keys = ("k_c_N_per_m_n1", "k_phi_N_per_m_n2")
-    if limit is None or not all(k in soil for k in keys):
+    limit, b = leaning_sinkage_limit_m(vehicle, soil), _bekker(vehicle, soil, elastic=False)
+    if limit is None or b is None:
         return
-    n = float(soil["bekker_n"])
-    k_eq = float(soil["k_c_N_per_m_n1"]) / float(vehicle["track_width_m"]) + float(soil["k_phi_N_per_m_n2"])
+    n, k_eq, _ = b
     p = mean_ground_pressure_Pa(vehicle)
-    if n <= 0 or k_eq <= 0:
-        return
-    z_log = (math.log(p) - math.log(k_eq)) / n
+    z_log = _log_static_sinkage(p, n, k_eq)
     if z_log <= math.log(limit / LEANING_MARGIN):
         return
     raise ParameterError(

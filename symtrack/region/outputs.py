@@ -122,13 +122,24 @@ def _open_layer(path: Path, name: str, spec, grid, depths):
                        dtype=dtype, crs=spec.crs, transform=from_origin(x0, y1, spec.map_cell_m, spec.map_cell_m),
                        nodata=nodata, tiled=True, blockxsize=512, blockysize=512, compress="deflate",
                        BIGTIFF="IF_SAFER")
+    _describe(ds, name, depths)
+    ds.update_tags(symtrack_kind="symtrack-region-layer", layer=name, units=unit, long_name=long_name)
+    return ds, tmp
+
+
+def _describe(ds, name: str, depths) -> None:
+    """The bands' descriptions and tags of one layer's GeoTIFF (the region's maps and a field's own): its name,
+    unit and long name, and the depth of each band where the layer has depths."""
+    _, _, per_depth, unit, long_name = LAYERS[name]
     for b in range(ds.count):
         at = f" at {depths[b]:g} m" if per_depth else ""
         ds.set_band_description(b + 1, f"{name}{at} [{unit}]")
         ds.update_tags(b + 1, units=unit, long_name=long_name + at, **({"depth_m": repr(depths[b])} if per_depth
                                                                       else {}))
-    ds.update_tags(symtrack_kind="symtrack-region-layer", layer=name, units=unit, long_name=long_name)
-    return ds, tmp
+
+
+# GDAL's COG driver's options of every map the study writes
+COG_OPTIONS = {"driver": "COG", "compress": "DEFLATE", "overview_resampling": "NEAREST"}
 
 
 def _finish_cog(ds, tmp: str, path: Path) -> None:
@@ -138,7 +149,7 @@ def _finish_cog(ds, tmp: str, path: Path) -> None:
 
     ds.close()
     try:
-        rio_copy(tmp, path, driver="COG", compress="DEFLATE", overview_resampling="NEAREST", BIGTIFF="IF_SAFER")
+        rio_copy(tmp, path, **COG_OPTIONS, BIGTIFF="IF_SAFER")
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -188,26 +199,22 @@ def field_cogs(spec, f, arrays: dict) -> dict:
             with scratch.open(driver="GTiff", width=shape[0], height=shape[1], count=len(depths) if per_depth else 1,
                               dtype=dtype, crs=spec.crs, transform=transform, nodata=nodata, tiled=True,
                               blockxsize=512, blockysize=512) as ds:
+                _describe(ds, name, depths)
                 for b in range(ds.count):
-                    at = f" at {depths[b]:g} m" if per_depth else ""
-                    ds.set_band_description(b + 1, f"{name}{at} [{unit}]")
-                    ds.update_tags(b + 1, units=unit, long_name=long_name + at,
-                                   **({"depth_m": repr(depths[b])} if per_depth else {}))
                     ds.write(field_band(src, b if per_depth else None).astype(dtype, copy=False), b + 1)
                 ds.update_tags(symtrack_kind="symtrack-region-field-layer", layer=name, units=unit,
                                long_name=long_name, field_id=f.field_id, cell_m=repr(float(spec.cell_m)),
                                lines_direction_deg=repr(math.degrees(f.theta_rad)))
             with rasterio.open(scratch.name) as ds:
-                rio_copy(ds, cog.name, driver="COG", compress="DEFLATE", overview_resampling="NEAREST")
+                rio_copy(ds, cog.name, **COG_OPTIONS)
             out[f"{name}.tif"] = cog.read()
     return out
 
 
 def _read_maps(path: Path) -> dict:
     with np.load(path) as z:
-        return {"trafficked_count": z["counts"], "stress_max_kPa": z["sigma_max_kPa"],
-                "density_change_Mg_per_m3": z["density_change_Mg_per_m3"], "risk_class": z["risk_class"],
-                "field_mask": z["field_mask"], "cell_m": z["cell_m"]}
+        return {**{layer: z[key] for layer, key in FIELD_ARRAYS.items()}, "field_mask": z["field_mask"],
+                "cell_m": z["cell_m"]}
 
 
 def _combine(cs: list) -> dict:

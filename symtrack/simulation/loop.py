@@ -43,10 +43,10 @@ __all__ = ["IncompleteRun", "OutputGrid", "SampleGrid", "SampledLaw", "StartPoin
 log = logging.getLogger("symtrack.simulation")
 
 
-def _first_over(values: np.ndarray, limit: float) -> int:
-    """The index of the first of ``values`` above ``limit``, or of the largest when none is."""
-    over = np.flatnonzero(values > limit)
-    return int(over[0]) if len(over) else int(np.argmax(values))
+def _first_over(over: np.ndarray, values: np.ndarray) -> int:
+    """The index of the first sample ``over`` its limit, or of the largest of ``values`` when none is."""
+    first = np.flatnonzero(over)
+    return int(first[0]) if len(first) else int(np.argmax(values))
 
 
 class IncompleteRun(SimulationError):
@@ -325,32 +325,33 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
                 sinks = np.max(xs[-1][:, isk], axis=1) if isk else np.zeros(len(times))
                 tilts = (plausibility.tilt_over_tipping(xs[-1][:, itilt[0]], xs[-1][:, itilt[1]], scenario.params)
                          if itilt else np.zeros(len(times)))
+                # the samples over each limit (the sinkage's only with a CG height)
+                over = {"speed": speeds > plausibility.MAX_SPEED_M_S,
+                        "tread": treads > plausibility.MAX_TREAD_SPEED_M_S,
+                        "sinkage": (cg_height > 0) & (sinks > plausibility.SINKAGE_OVER_CG_HEIGHT_MAX * cg_height),
+                        "tilt": tilts > 1.0}
                 try:  # faster than any crawler, or the hull in the soil: stopped (symtrack.model.plausibility)
                     # (each checked at its first sample over the limit: the message names where it was passed)
-                    i = _first_over(speeds, plausibility.MAX_SPEED_M_S)
+                    i = _first_over(over["speed"], speeds)
                     plausibility.check_speed(float(speeds[i]), float(times[i]))
-                    i = _first_over(treads, plausibility.MAX_TREAD_SPEED_M_S)
+                    i = _first_over(over["tread"], treads)
                     plausibility.check_tread_speed(float(treads[i]), float(times[i]))
-                    i = _first_over(sinks, plausibility.SINKAGE_OVER_CG_HEIGHT_MAX * cg_height)
+                    i = _first_over(over["sinkage"], sinks)
                     plausibility.check_sinkage(float(sinks[i]), cg_height, float(times[i]))
                     if itilt:
-                        i = _first_over(tilts, 1.0)
+                        i = _first_over(over["tilt"], tilts)
                         plausibility.check_tilt(float(xs[-1][i, itilt[0]]), float(xs[-1][i, itilt[1]]),
                                                 scenario.params, float(times[i]))
-                except SimulationError as err:
+                except ImplausibleRunError as err:
                     err_max = float((plant.stats() or {}).get("fixed_step_error_max", 0.0) or 0.0)
                     if err_max > 1.0:  # the fixed step kept steps above its tolerance: perhaps a numerical divergence
-                        err = type(err)(
+                        err = ImplausibleRunError(
                             f"{err}; the fixed step's error estimate had reached {err_max:.3g} x its tolerance "
                             f"(steps kept above it: summary.json fixed_step_error_max), so the run may have "
                             f"diverged numerically: compare with --integrator cvodes or a smaller run.fixed_step_s",
-                            *([err.quantity] if isinstance(err, ImplausibleRunError) else []))
+                            err.quantity)
                     # the run is kept up to the last sample within the limits
-                    bad = int(np.argmax((speeds > plausibility.MAX_SPEED_M_S)
-                                        | (treads > plausibility.MAX_TREAD_SPEED_M_S)
-                                        | ((cg_height > 0) & (sinks > plausibility.SINKAGE_OVER_CG_HEIGHT_MAX
-                                                              * cg_height))
-                                        | (tilts > 1.0)))
+                    bad = int(np.argmax(np.logical_or.reduce(list(over.values()))))
                     ts[-1], xs[-1], us[-1], ys[-1] = ts[-1][:bad], xs[-1][:bad], us[-1][:bad], ys[-1][:bad]
                     if bad > 0:
                         t = float(ts[-1][-1])
