@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Generic, TypeVar
 
+from . import caches
 from .errors import SymtrackError
 
 __all__ = ["Registry"]
@@ -32,12 +33,21 @@ class Registry(Generic[T]):
     def __init__(self, kind: str, where: str, error: type[SymtrackError]):
         self.kind, self.where, self.error = kind, where, error
         self.entries: dict[str, T] = {}
+        self._last: dict[str, T] = {}  # the entry last registered under each name, removed or not
 
     def add(self, name: str, entry: T, replace: bool = False) -> T:
-        """Add ``entry`` as ``name``; a name taken already is a ValueError unless ``replace``."""
+        """Add ``entry`` as ``name``; a name taken already is a ValueError unless ``replace``.
+
+        An entry other than the one last registered under ``name`` (a replacement, or a new entry after
+        a removal) empties the package's in-memory caches (:func:`~symtrack.foundations.caches.clear_caches`):
+        what they hold was built from the old entry and is found by its name (a set of model options
+        names its soil law, vehicle and integrator), so a model built before would otherwise be
+        returned for the new entry. Registering the same entry again clears nothing."""
         if name in self.entries and not replace:
             raise ValueError(f"{self.kind} named {name!r} is registered already")
-        self.entries[name] = entry
+        if self._last.get(name, entry) is not entry:
+            caches.clear_caches()
+        self.entries[name] = self._last[name] = entry
         return entry
 
     def remove(self, name: str) -> None:
