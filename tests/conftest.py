@@ -21,14 +21,15 @@ from symtrack.presets import soil_preset, vehicle_preset
 # - the terrain engine at -O0 where the files run their engines for seconds, not minutes (gcc's time is most
 #   of such a file's; with their engine-building neighbours: test_grid3d 48 / 83 s at -O0 / -O1,
 #   test_moisture 7 / 15 s, test_soil_law 13 / 15 s, test_terrain_engine 74 / 80 s, test_vehicle_registry
-#   9.9 / 10.6 s; alone: test_soil_map 22 / 41 s, test_vehicle3d_report 16 / 22 s; but test_vehicle_step_replay
-#   36 / 24 s, which keeps -O1);
+#   9.9 / 10.6 s; alone: test_soil_map 22 / 41 s, test_vehicle3d_report 16 / 22 s, test_gis 11 / 23 s;
+#   but test_vehicle_step_replay 36 / 24 s, which keeps -O1);
 # - the other generated code at -O1 in test_operations.py, whose MPC functions and grid steps run for the
 #   minutes of simulated field work (165 s at -O0, 141 s at -O1).
 FILE_OPT_LEVELS = {
-    **{name: ("SYMTRACK_TUNED_OPT_LEVEL", "0") for name in ("test_grid3d.py", "test_moisture.py", "test_soil_law.py",
-                                                          "test_soil_map.py", "test_terrain_engine.py",
-                                                          "test_vehicle3d_report.py", "test_vehicle_registry.py")},
+    **{name: ("SYMTRACK_TUNED_OPT_LEVEL", "0") for name in ("test_gis.py", "test_grid3d.py", "test_moisture.py",
+                                                          "test_soil_law.py", "test_soil_map.py",
+                                                          "test_terrain_engine.py", "test_vehicle3d_report.py",
+                                                          "test_vehicle_registry.py")},
     "test_operations.py": ("SYMTRACK_OPT_LEVEL", "1"),
 }
 
