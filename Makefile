@@ -8,13 +8,18 @@ PY := $(VENV)/bin/python
 
 .PHONY: demo test test-fast test-slow lint clean codegen standalone grid-standalone bench fuzz validate docs docs-examples performance keys figures
 
+# installs through uv (pip's interface and resolution, about a seventh of pip's time for the dev extra on a
+# fresh machine), or through pip where uv does not install
+PIP := $(PY) -m pip install --quiet --disable-pip-version-check
+install = ($(PIP) uv && $(VENV)/bin/uv pip install --quiet --python $(PY) $(1)) || $(PIP) $(1)
+
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -e .
+	$(call install,-e .)
 	touch $@
 
 $(VENV)/.installed-dev: $(VENV)/.installed
-	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	$(call install,-e '.[dev]')
 	touch $@
 
 demo: $(VENV)/.installed
@@ -68,7 +73,7 @@ bench: $(VENV)/.installed build/symtrack_standalone
 
 # the documentation site (docs/index.md): Sphinx over docs/*.md, warnings as errors, into docs/_build/html
 $(VENV)/.installed-docs: $(VENV)/.installed
-	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[docs]'
+	$(call install,-e '.[docs]')
 	touch $@
 
 # the key tables of docs/scenarios.md ("Keys of a simulation"), made from the loader's own declarations
