@@ -103,14 +103,23 @@ class ClosedLoopResult:
         """The plant state ``name`` at the samples (a column of X, by name)."""
         return self.X[:, self.state_names.index(name)]
 
+    def __repr__(self) -> str:
+        from ..reports.html import short_repr
+
+        return short_repr("ClosedLoopResult", self.scenario.name, self.summary,
+                          ("sim_time_s", "rms_lateral_error_m", "max_lateral_error_m", "failed_solves",
+                           "solve_time_median_ms", "wall_time_s"))
+
     def _repr_html_(self) -> str:
-        """The view in a notebook: what ran (scenario, plant, solver, machine, soil) and the summary's
-        figures with their units."""
-        from ..reports.html import notebook_html
+        """The view in a notebook: what ran (scenario, plant and its integrator, solver, machine, soil) and
+        the summary's figures with their units."""
+        from ..reports.html import machine_facts, notebook_html
 
         sc = self.scenario
-        facts = [("scenario", sc.name), ("plant", sc.plant), ("solver", sc.mpc.solver),
-                 ("vehicle", sc.vehicle_preset), ("soil", sc.soil_preset), ("samples", len(self.t))]
+        facts = [("scenario", sc.name), ("plant", sc.plant),
+                 ("integrator", self.summary.get("plant_integrator", "")), ("solver", sc.mpc.solver),
+                 *machine_facts(sc.vehicle_preset, sc.soil_preset, getattr(sc, "params", None)),
+                 ("samples", len(self.t))]
         return notebook_html(f"MPC run {sc.name!r}", self.summary, facts)
 
 

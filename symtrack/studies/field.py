@@ -492,6 +492,36 @@ class FieldStudyResult:
     def complete(self) -> bool:
         return bool(self.summary.get("complete"))
 
+    def _figure_keys(self) -> list[str]:
+        s = self.summary
+        keys = []
+        for p in s.get("patterns_run") or ():
+            keys += [f"{p}_{k}" for k in ("passes_done", "trafficked_area_fraction", "passes_per_cell_max",
+                                          "rut_mean_depth_mm", "rut_max_depth_mm")]
+            keys += [k for k in s if k.startswith(f"{p}_risk_fraction_of_field_high_at_")]
+        return keys + ["sim_time_s", "build_s", "wall_time_s"]
+
+    def __repr__(self) -> str:
+        from ..reports.html import short_repr
+
+        keys = [k for k in self._figure_keys() if k.endswith(("_trafficked_area_fraction", "wall_time_s"))]
+        return short_repr("FieldStudyResult", self.spec.name, self.summary, tuple(keys))
+
+    def _repr_html_(self) -> str:
+        """The view in a notebook: what ran (the study, its field, patterns and passes, the integrator, the
+        machine and soil), each pattern's figures with their units (the share of the field trafficked, the
+        rut, the area at high compaction risk by depth) and the run time."""
+        from ..reports.html import machine_facts, notebook_html
+
+        s, sc = self.summary, self.spec.scenario
+        size = s.get("field_size_m") or list(self.spec.field.size_m)
+        facts = [("field study", self.spec.name),
+                 ("field", f"{size[0]:g} m x {size[1]:g} m, {s.get('field_cell_m', self.spec.field.cell_m):g} m cells"),
+                 ("patterns", ", ".join(map(str, s.get("patterns_run") or ()))),
+                 ("passes per pattern", s.get("passes_per_pattern", "")), ("integrator", sc.run.integrator),
+                 *machine_facts(sc.vehicle_preset, sc.soil_preset, sc.params)]
+        return notebook_html(f"field study {self.spec.name!r}", s, facts, keys=tuple(self._figure_keys()))
+
 
 class IncompleteFieldStudy(SimulationError):
     """A field study in which a pass failed; ``result`` holds (and ``out`` has) what was computed."""

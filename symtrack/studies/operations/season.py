@@ -138,6 +138,39 @@ class SeasonResult:
     terrain: Terrain
     written: list
 
+    FIGURES = ("trafficked_fraction", "headland_trafficked_fraction", "infield_trafficked_fraction",
+               "rut_max_depth_mm", "distance_m", "turns_driven", "rms_lateral_error_lines_m",
+               "energy_sprockets_J", "energy_compaction_J", "sim_time_s", "build_s", "wall_time_s")
+
+    def __repr__(self) -> str:
+        from ...reports.html import short_repr
+
+        return short_repr("SeasonResult", self.spec.name, self.summary,
+                          ("trafficked_fraction", "rut_max_depth_mm", "sim_time_s", "wall_time_s"))
+
+    def _repr_html_(self) -> str:
+        """The view in a notebook: what ran (the operations in order, each with its machine; the field, the
+        soil, the integrator), the season's figures with their units and the run time, then one row of
+        figures per operation."""
+        from ...reports.html import machine_facts, notebook_html
+
+        s = self.summary
+        size = s.get("field_size_m") or list(self.spec.base.size_m)
+        ops = []
+        for fs, _plan, sc, _rows in self.spec.operations:
+            vehicle = machine_facts(sc.vehicle_preset, sc.soil_preset, sc.params)[0][1]
+            ops.append(f"{fs.name} ({vehicle})")
+        sc0 = self.spec.operations[0][2] if self.spec.operations else None
+        facts = [("season", self.spec.name), ("operations", "; ".join(ops)),
+                 ("field", f"{size[0]:g} m x {size[1]:g} m, {s.get('field_cell_m', self.spec.base.cell_m):g} m cells")]
+        if sc0 is not None:
+            facts += [("soil", machine_facts(sc0.vehicle_preset, sc0.soil_preset)[1][1]),
+                      ("integrator", sc0.run.integrator)]
+        per_op = ("distance_m", "rut_max_depth_mm", "sim_time_s", "wall_time_s")
+        rows = [[r.name, *(r.figures.get(k) for k in per_op)] for r in self.operations]
+        return notebook_html(f"season {self.spec.name!r}", s, facts, keys=self.FIGURES, rows=rows or None,
+                             row_header=["operation", *per_op])
+
 
 def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through_files: bool = True,
                figures: bool = True) -> SeasonResult:
