@@ -273,6 +273,11 @@ def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
     Built
         ``Built.scenario`` is the scenario as run; ``simulate(built)`` runs it.
     """
+    if isinstance(terrain, str | Path) and not Path(terrain).is_file():  # named as typed (as --terrain-in)
+        what = "is a folder" if Path(terrain).is_dir() else "does not exist"
+        raise ScenarioError(f"terrain = {str(terrain)!r} {what}: give a terrain file (the .npz that "
+                            "Result.write(..., terrain_out=...) or symtrack simulate --terrain-out writes) "
+                            "or a Terrain")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     if integrator is not None:

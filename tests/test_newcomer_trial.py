@@ -38,3 +38,52 @@ def test_the_starting_files_hold_no_measured_speed():
         if f.name.endswith(".toml"):
             text = f.read_text(encoding="utf-8")
             assert not re.search(r"\d\s*x real time", text), f.name
+
+
+def test_a_missing_terrain_file_from_python_names_the_argument(tmp_path):
+    for path, what in ((tmp_path / "nothere.npz", "does not exist"), (tmp_path, "is a folder")):
+        with pytest.raises(ScenarioError, match=r"^terrain = .* " + what) as err:
+            symtrack.simulate("validation_grid", terrain=str(path))
+        assert "initial_state" not in str(err.value)
+        with pytest.raises(ScenarioError, match=what):
+            symtrack.build("validation_grid", terrain=path)
+
+
+def test_an_mpc_run_says_what_it_loads_before_the_solver(monkeypatch, tmp_path):
+    """The seconds before the MPC's solver build (the modules, the run file, the vehicle model) are one
+    step that says what it does once it passes half a second."""
+    from contextlib import contextmanager
+
+    from symtrack.cli.main import main
+    from symtrack.control import scenario as mpc_scenario
+    from symtrack.foundations import progress
+
+    steps = []
+
+    class Stop(Exception):
+        pass
+
+    @contextmanager
+    def recorded(what, logger=None, slow_s=progress.SLOW_STEP_S):
+        steps.append((what, slow_s))
+        yield
+
+    def stop(*a, **k):
+        raise Stop
+
+    monkeypatch.setattr(progress, "timed_step", recorded)
+    monkeypatch.setattr(mpc_scenario, "load", stop)
+    with pytest.raises(Stop):
+        main(["mpc", "straight_offset", "--out", str(tmp_path / "o")])
+    assert steps == [("loading straight_offset and building its vehicle model", 0.5)]
+
+
+def test_symtrack_run_starts_without_matplotlib():
+    """The front door reads its run file before any plotting module loads (matplotlib is a second of
+    import: imported by the first run that draws)."""
+    import subprocess
+    import sys
+
+    code = "import sys, symtrack.studies.runfile, symtrack.cli.main; print('matplotlib' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -79,7 +79,6 @@ from ..foundations.version import __version__
 from ..terrain.storage import Terrain, file_bytes, file_identity
 from ..toolchain import LockBusy, file_lock
 from . import validation
-from .figures import TerrainRun, extras, figures
 from .html import report_html
 
 __all__ = ["COMMIT_STEPS", "JOURNAL", "KILL_AT_STEP_ENV", "MANIFEST", "MANIFEST_KIND", "MANIFEST_VERSION",
@@ -167,6 +166,21 @@ def validation_rows(scenario, summary: dict) -> list | None:
     return None
 
 
+def figures(kinds, source, all_figures: bool = True) -> dict[str, bytes]:
+    """:func:`symtrack.reports.figures.figures`, imported when first drawn: the plotting modules (matplotlib,
+    a second of import) are not loaded by a command that only reads its run file or fails early."""
+    from . import figures as registry
+
+    return registry.figures(kinds, source, all_figures)
+
+
+def extras(kinds) -> list[str]:
+    """:func:`symtrack.reports.figures.extras` (imported when first asked, as :func:`figures`)."""
+    from . import figures as registry
+
+    return registry.extras(kinds)
+
+
 def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[dict],
                      study=None) -> dict[str, bytes | str]:
     """The folder of a ``symtrack simulate`` run (docs/outputs.md): the run's files with its
@@ -179,6 +193,8 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
     which: the pass animations and, of several passes, the earlier passes' sinkage maps and
     trajectory plots (their ``pass_<k>/`` keep trajectory.csv, the resolved scenario and the
     summary); docs/terrain.md, "What the outputs cost"."""
+    from .figures import TerrainRun
+
     table = validation_table(scenario, summary)
     every = scenario.run.all_figures
     top: dict[str, bytes] = {}  # the files of the folder's top, besides the run files

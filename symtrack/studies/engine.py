@@ -40,7 +40,6 @@ from ..foundations.progress import Progress
 from ..reports.html import report_html
 from ..reports.run_files import output_lock, write_folder
 from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
-from .plots import comparison_png
 from .runs import Source, load, resolve_source, run_one
 
 __all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "check_scheduler_address", "dask_client", "plan",
@@ -452,6 +451,8 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
         if todo:
             failed = _run_all(out, p, todo, rows, client, cluster, progress)
         table = _write_table(out, p, rows)
+        from .plots import comparison_png  # matplotlib: imported when a sweep draws
+
         png = comparison_png(table, [a.key for a in p.axes])
         if png is not None:
             atomic_write_bytes(out / "comparison.png", png)
