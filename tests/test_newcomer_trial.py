@@ -87,3 +87,57 @@ def test_symtrack_run_starts_without_matplotlib():
     code = "import sys, symtrack.studies.runfile, symtrack.cli.main; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_the_season_animation_shows_every_operation():
+    """A season's animation.gif: both operations in order on one time axis, the first's ruts kept while
+    the second drives, each frame's path that of its own operation (no line from one's end to the next
+    one's start)."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from symtrack.studies import field_plots
+
+    z = np.zeros((200, 100))
+    z[20:180, 20:30] = z[20:180, 70:80] = 0.01
+    first1 = np.full((200, 100), np.inf, np.float32)
+    first1[20:180, 20:30] = np.linspace(0.0, 10.0, 160)[:, None]
+    first2 = np.full((200, 100), np.inf, np.float32)
+    first2[20:180, 70:80] = np.linspace(10.0, 0.0, 160)[:, None]  # driven from x = 18 m to 2 m
+    traj1 = np.array([(t, 2.0 + 1.6 * t, 2.5, 0.0) for t in np.linspace(0.0, 10.0, 11)])
+    traj2 = np.array([(t, 18.0 - 1.6 * t, 7.5, np.pi) for t in np.linspace(0.0, 10.0, 11)])
+    gif = field_plots.season_gif(z, [("tillage", first1, traj1), ("drilling", first2, traj2)],
+                                 (0.0, 20.0, 0.0, 10.0), "season", frames=6, blocks=100)
+    im = Image.open(io.BytesIO(gif))
+    assert im.n_frames == 6
+
+    def shown(k):
+        im.seek(k)
+        a = np.asarray(im.convert("RGB"))[22:][::-1]  # rows: y up
+        m = a.shape[1] // 20  # pixels per metre
+        lane1 = a[int(2.5 * m):3 * m, 10 * m:15 * m]  # y 2.5-3 m, x 10-15 m
+        lane2 = a[int(7.5 * m):8 * m, 10 * m:15 * m]
+        return [float(np.mean(~np.all(lane == 225, axis=2))) for lane in (lane1, lane2)]
+
+    early, mid, last = shown(0), shown(3), shown(5)
+    assert early[0] < 0.5 and early[1] == 0.0  # the first operation under way, the second not begun
+    assert mid[0] > 0.9 and 0.0 < mid[1] < 0.9  # the first's ruts kept while the second drives
+    assert last[0] > 0.9 and last[1] > 0.9
+    # the second operation's frames draw its own path only: nothing red where neither drove (y 5 m)
+    im.seek(4)
+    a = np.asarray(im.convert("RGB"))[22:][::-1]
+    m = a.shape[1] // 20
+    middle = a[int(4.5 * m):int(5.5 * m), 2 * m:19 * m].astype(int)
+    assert not np.any((middle[..., 0] > 150) & (middle[..., 1] < 80)), "a line between the operations"
+
+
+def test_a_simulation_report_says_what_ran():
+    from symtrack.reports.run_files import what_ran
+
+    sc = symtrack.load_scenario("validation", {"vehicle.mass_kg": 6500.0, "run.integrator": "cvodes"})
+    assert what_ran(sc, {}) == ("Ran: reference_crawler, 6500 kg on clayey_soil_thailand_38, the homogeneous "
+                                "terrain, integrator cvodes.")
+    assert "the grid terrain, integrator grid_fast" in what_ran(symtrack.load_scenario("validation_grid"),
+                                                                 {"integrator": "grid_fast"})

@@ -181,6 +181,17 @@ def extras(kinds) -> list[str]:
     return registry.extras(kinds)
 
 
+def what_ran(scenario, summary: dict) -> str:
+    """One sentence of a run's report: the machine with the mass it ran with, the soil, the terrain and
+    the integrator (the resolved scenario at the page's end has every value)."""
+    from .html import machine_facts
+
+    (_, vehicle), (_, soil) = machine_facts(scenario.vehicle_preset, scenario.soil_preset, scenario.params)
+    terrain = "the homogeneous terrain" if scenario.terrain is None else "the grid terrain"
+    integrator = summary.get("integrator", scenario.run.integrator)
+    return f"Ran: {vehicle} on {soil}, {terrain}, integrator {integrator}."
+
+
 def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[dict],
                      study=None) -> dict[str, bytes | str]:
     """The folder of a ``symtrack simulate`` run (docs/outputs.md): the run's files with its
@@ -233,7 +244,7 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
         f"symtrack: {scenario.name}", summary, shown, to_toml(scenario.to_dict()),
         validation_rows(scenario, summary),
         summary.get("passes"),
-        scenario.description, omitted=omitted).encode()
+        " ".join(filter(None, [scenario.description, what_ran(scenario, summary)])), omitted=omitted).encode()
     if run is not None:
         return run_files(run, summary, top)
     return {**passes, **top, "summary.json": json.dumps(summary, indent=2) + "\n"}

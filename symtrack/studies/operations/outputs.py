@@ -53,6 +53,23 @@ def animation(r: OperationResult, terrain: Terrain, fs: OperationSettings, label
     return gif
 
 
+def season_animation(results: list, terrain: Terrain, fs: OperationSettings, labels: list, title: str,
+                     progress: bool) -> bytes:
+    """The season's GIF: every operation in order over the season's rut map
+    (:func:`symtrack.studies.field_plots.season_gif`), with progress."""
+    from ...foundations.progress import Progress
+    from .. import field_plots
+
+    bar = Progress(1.0, "animation of the season", enabled=progress)
+    ops = [(label, r.first_contact_s, r.trajectory) for r, label in zip(results, labels, strict=True)
+           if r.first_contact_s is not None]
+    gif = field_plots.season_gif(terrain.z.reshape(results[0].counts.shape), ops,
+                                 (0.0, fs.size_m[0], 0.0, fs.size_m[1]), title,
+                                 progress=lambda k, n: bar.update(k / n, f"frame {k}/{n}"))
+    bar.close()
+    return gif
+
+
 def counts_npz(counts, cell_m) -> bytes:
     return npz_bytes(kind=np.array("symtrack-field-passes"), schema_version=np.array(SCHEMA_VERSION),
                      origin_m=np.zeros(2), cell_m=np.array(cell_m), shape=np.array(counts.shape), passes=counts)

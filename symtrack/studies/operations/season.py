@@ -20,7 +20,7 @@ from ...simulation.plants import make_plant
 from ...terrain.storage import Terrain
 from .followers import PathFollower, follower_of, mpc_follower
 from .footprints import count_passes_and_times, field_shares
-from .outputs import OperationResult, animation, counts_npz, map_pngs, traffic_files, traffic_row
+from .outputs import OperationResult, animation, counts_npz, map_pngs, season_animation, traffic_files, traffic_row
 from .plans import OperationPlan
 from .settings import COUNT_SAMPLE_S, SCHEMA_VERSION
 from .spec import OperationSpec, operation_spec_from_dict
@@ -206,7 +206,7 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
                     op_files |= {f"{sub}/{n}": b for n, b in
                                  map_pngs(r.counts, terrain.z.reshape(r.counts.shape), fs, label).items()}
                     op_files[f"{sub}/animation.gif"] = animation(r, terrain, fs, label, progress)
-                    if k == 0:
+                    if k == 0:  # the season's own, of every operation, replaces it below when there are more
                         op_files["animation.gif"] = op_files[f"{sub}/animation.gif"]
                 files |= op_files
             if r.error:
@@ -221,6 +221,9 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
         if tmp is not None:
             tmp.cleanup()
     fs0 = spec.base
+    if folder is not None and figures and len(results) > 1:
+        files["animation.gif"] = season_animation(results, terrain, fs0, [r.name for r in results],
+                                                  f"{spec.name}", progress)
     counts = np.minimum(total, np.iinfo(np.uint16).max).astype(np.uint16)
     stressed = (terrain.sigma_max[:, 0] > 0).reshape(counts.shape) if terrain.subsoil_depths_m else \
         (terrain.z != 0).reshape(counts.shape)
