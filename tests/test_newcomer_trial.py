@@ -141,3 +141,13 @@ def test_a_simulation_report_says_what_ran():
                                 "terrain, integrator cvodes.")
     assert "the grid terrain, integrator grid_fast" in what_ran(symtrack.load_scenario("validation_grid"),
                                                                  {"integrator": "grid_fast"})
+
+
+def test_a_pair_typed_without_brackets_says_how_to_write_it():
+    from symtrack.foundations.config import list_hint
+    from symtrack.studies.field import load_field_spec
+
+    assert list_hint("field.size_m", "30,10") == " (on the command line, in brackets: --set 'field.size_m=[30, 10]')"
+    assert list_hint("field.size_m", [30.0]) == ""
+    with pytest.raises(ScenarioError, match=r"--set 'field.size_m=\[30, 10\]'"):
+        load_field_spec("field_traffic", ["field.size_m=30,10"])

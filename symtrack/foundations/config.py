@@ -21,8 +21,8 @@ from .errors import ScenarioError
 from .files import read_text
 
 __all__ = ["Key", "number", "integer", "check_document", "check_keys", "key_table", "parse_override", "apply_overrides",
-           "short_number", "key_hints", "builtin_names", "read_document", "resolve_file_paths", "resolve_paths",
-           "to_toml"]
+           "short_number", "key_hints", "list_hint", "builtin_names", "read_document", "resolve_file_paths",
+           "resolve_paths", "to_toml"]
 
 
 def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
@@ -128,6 +128,15 @@ def key_hints(unknown: Iterable[str], allowed: Iterable[str]) -> str:
         if close:
             hints.append(f"{key}: did you mean {close[0]}?")
     return (". " + "; ".join(hints)) if hints else ""
+
+
+def list_hint(where: str, value) -> str:
+    """What follows an error on a value that should be a list but came as text (a ``--set`` without the
+    brackets): how to write it on the command line; "" for any other value."""
+    if not isinstance(value, str):
+        return ""
+    items = [v.strip() for v in value.strip("()").split(",") if v.strip()]
+    return f" (on the command line, in brackets: --set '{where}=[{', '.join(items) or '...'}]')"
 
 
 def check_keys(section: str, table, allowed: Iterable[str]) -> None:

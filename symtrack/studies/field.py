@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
+from ..foundations.config import check_document, check_keys, integer, list_hint, number, read_document, to_toml
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_folder, npz_bytes
 from ..foundations.interrupt import defer_interrupts
@@ -203,7 +203,8 @@ def _parse_field(t: dict) -> FieldSettings:
     d = FieldSettings()
     size = t.get("size_m", list(d.size_m))
     if not isinstance(size, (list, tuple)) or len(size) != 2:
-        raise ScenarioError(f"field.size_m = {size!r} must be a pair [x, y] of lengths in m")
+        raise ScenarioError(f"field.size_m = {size!r} must be a pair [x, y] of lengths in m"
+                            f"{list_hint('field.size_m', size)}")
     size = tuple(_num(f"size_m[{i}]", v, 1.0, 1e4) for i, v in enumerate(size))
     cell = _num("cell_m", t.get("cell_m", d.cell_m), 0.01, 5.0)
     pattern = t.get("pattern", d.pattern)
