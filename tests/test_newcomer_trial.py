@@ -151,3 +151,11 @@ def test_a_pair_typed_without_brackets_says_how_to_write_it():
     assert list_hint("field.size_m", [30.0]) == ""
     with pytest.raises(ScenarioError, match=r"--set 'field.size_m=\[30, 10\]'"):
         load_field_spec("field_traffic", ["field.size_m=30,10"])
+
+
+def test_a_field_study_report_says_what_ran(tmp_path):
+    from symtrack.studies.field import _report, load_field_spec
+
+    spec = load_field_spec("field_traffic", {"vehicle.mass_kg": 6500.0})
+    page = _report(tmp_path, spec, {}, {"complete": True}, {"field.resolved.toml": "name = 'x'\n"})
+    assert "Ran: reference_crawler, 6500 kg on clayey_soil_thailand_38, the grid terrain, integrator" in page

@@ -463,7 +463,7 @@ def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
     ``symtrack simulate``'s: a scenario file that loads back to the scenario as run), the
     ``control`` figures of :mod:`symtrack.reports.figures`, report.html (what ran, the summary, the
     figures and the scenario on one page), summary.json."""
-    from ..reports.html import report_html
+    from ..reports.html import machine_facts, report_html
 
     scenario_toml = to_toml(res.scenario.resolved_dict())
     images = figures("control", res)
@@ -471,6 +471,10 @@ def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
     note = (f"The {sm.get('solver')} MPC ({sm.get('horizon_steps')} steps of {sm.get('sample_time_s')} s) tracking "
             f"the path of scenario '{sm.get('scenario')}': {sm.get('solves')} solves, {sm.get('failed_solves')} "
             f"failed, median {sm.get('solve_time_median_ms', float('nan')):.3g} ms.")
+    sc = res.scenario
+    (_, vehicle), (_, soil) = machine_facts(sc.vehicle_preset, sc.soil_preset, getattr(sc, "params", None))
+    note += (f" Ran: {vehicle} on {soil}, the {sm.get('plant', sc.plant)} plant"
+             + (f", integrator {sm['plant_integrator']}." if sm.get("plant_integrator") else "."))
     return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res), "scenario.resolved.toml": scenario_toml,
             **images, "report.html": report_html(f"symtrack mpc: {sm.get('scenario')}", sm, images, scenario_toml,
                                                  note=note).encode(),

@@ -963,8 +963,10 @@ def _report(folder, spec: FieldSpec, results: dict, summary: dict, files: dict) 
     if names:
         tables["Patterns"] = (["figure", *names], rows)
     done = ", ".join(f"{n}: {len(results[n].records)} passes" for n in names)
+    from ..reports.run_files import what_ran
+
     note = (f"Field study '{spec.name}': the patterns {done}; "
-            f"{'complete' if summary.get('complete', True) else 'incomplete'}.")
+            f"{'complete' if summary.get('complete', True) else 'incomplete'}. {what_ran(spec.scenario, {})}")
     return report_html(f"symtrack field: {spec.name}", summary, images, files["field.resolved.toml"], note=note,
                        tables=tables)
 

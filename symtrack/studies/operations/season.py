@@ -279,6 +279,14 @@ def _season_report(spec, summary: dict, files: dict, results) -> str:
     note = (f"'{spec.name}': {len(results)} operation(s), {summary.get('turns_driven', 0)} turns driven; "
             f"{'complete' if summary.get('complete') else 'incomplete: ' + str(summary.get('error'))}."
             + (f" The animation: {summary['animation_gif']}." if summary.get("animation_gif") else ""))
+    if spec.operations:
+        from ...reports.html import machine_facts
+
+        machines = "; ".join(f"{fs.name}: {machine_facts(sc.vehicle_preset, sc.soil_preset, sc.params)[0][1]}"
+                             for fs, _plan, sc, _rows in spec.operations)
+        sc0 = spec.operations[0][2]
+        note += (f" Ran: {machines}; on {machine_facts(sc0.vehicle_preset, sc0.soil_preset)[1][1]}, "
+                 f"integrator {sc0.run.integrator}.")
     return report_html(f"symtrack field: {spec.name}", summary, images, files["operation.resolved.toml"], note=note,
                        tables={"Operations": (["figure", *map(str, names)], rows)} if results else None)
 
