@@ -149,3 +149,15 @@ def test_machine_facts(params):
     (v, vehicle), (s, soil) = machine_facts("reference_crawler", "/some/where/wet_clay.toml", params)
     assert (v, s, soil) == ("vehicle", "soil", "wet_clay.toml")
     assert vehicle == ("reference_crawler, 7000 kg" if params else "reference_crawler")
+
+
+def test_an_operation_and_a_pattern_print_one_line():
+    from symtrack.studies.field import PatternResult
+    from symtrack.studies.operations.outputs import OperationResult
+
+    big = np.zeros((400, 300), np.uint16)
+    op = OperationResult("drilling", {"distance_m": 120.0, "wall_time_s": 4.0}, big, big.astype(bool),
+                         np.zeros((0, 5)), np.zeros((0, 4)), error="boom")
+    assert repr(op) == "<OperationResult 'drilling': distance_m 120, wall_time_s 4, incomplete>"
+    pr = PatternResult("random", [], counts=big, figures={"rut_max_depth_mm": 1.5}, complete=True, wall_time_s=0.6)
+    assert repr(pr) == "<PatternResult 'random': passes_done 0, rut_max_depth_mm 1.5, wall_time_s 0.6>"

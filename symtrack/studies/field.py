@@ -478,6 +478,14 @@ class PatternResult:
     # the bulk density (docs/subsoil.md "Bulk density"): the field's largest by depth before the passes
     density0: list | None = None
 
+    def __repr__(self) -> str:
+        from ..reports.html import short_repr
+
+        figures = {**self.figures, "passes_done": len(self.records), "complete": self.complete,
+                   "wall_time_s": self.wall_time_s}
+        return short_repr("PatternResult", self.pattern, figures,
+                          ("passes_done", "trafficked_area_fraction", "rut_max_depth_mm", "wall_time_s"))
+
 
 @dataclass
 class FieldStudyResult:

@@ -31,6 +31,14 @@ class OperationResult:
     error: str | None = None
     first_contact_s: np.ndarray | None = None  # (nx, ny) float32: when a track first came over the cell (inf: never)
 
+    def __repr__(self) -> str:
+        from ...reports.html import short_repr
+
+        figures = {**self.figures, "complete": self.error is None}
+        return short_repr("OperationResult", self.name, figures,
+                          ("operation_trafficked_fraction", "distance_m", "rut_max_depth_mm", "sim_time_s",
+                           "wall_time_s"))
+
 
 def map_pngs(counts, z, fs: OperationSettings, label: str) -> dict:
     from .. import field_plots
