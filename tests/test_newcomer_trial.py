@@ -159,3 +159,29 @@ def test_a_field_study_report_says_what_ran(tmp_path):
     spec = load_field_spec("field_traffic", {"vehicle.mass_kg": 6500.0})
     page = _report(tmp_path, spec, {}, {"complete": True}, {"field.resolved.toml": "name = 'x'\n"})
     assert "Ran: reference_crawler, 6500 kg on clayey_soil_thailand_38, the grid terrain, integrator" in page
+
+
+def test_writing_a_run_says_what_it_waits_for(monkeypatch, tmp_path):
+    """Drawing a run's figures is seconds after the run (the grid's maps: several): one step that says so
+    once it passes 2 s."""
+    from contextlib import contextmanager
+    from types import SimpleNamespace
+
+    from symtrack import api
+    from symtrack.cli.main import main
+    from symtrack.foundations import progress
+
+    steps, written = [], []
+
+    @contextmanager
+    def recorded(what, logger=None, slow_s=progress.SLOW_STEP_S):
+        steps.append(what)
+        yield
+
+    res = SimpleNamespace(write=lambda out, terrain_out=None: written.append(steps[-1]), validation_table=None,
+                          terrain=None, summary={"sim_time_s": 1.0, "wall_time_s": 1.0, "real_time_factor": 1.0})
+    monkeypatch.setattr(progress, "timed_step", recorded)
+    monkeypatch.setattr(api, "simulate", lambda sc, **k: res)
+    out = tmp_path / "o"
+    assert main(["simulate", "validation", "--out", str(out), "--quiet"]) == 0
+    assert written == [f"writing the results and drawing the figures into {out}"]

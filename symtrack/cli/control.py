@@ -144,7 +144,8 @@ def _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out) -> int:
             return 130
         if terrain_in:
             res.summary["terrain_in"] = str(terrain_in)
-        closedloop.write(out, res, terrain_out=terrain_out or None, plant=plant)
+        with progress.timed_step(f"writing the results and drawing the figures into {out}"):
+            closedloop.write(out, res, terrain_out=terrain_out or None, plant=plant)
     s = res.summary
     rms = s["rms_lateral_error_m"]
     print(f"{sc.name}: rms lateral error on straights "
