@@ -185,3 +185,21 @@ def test_writing_a_run_says_what_it_waits_for(monkeypatch, tmp_path):
     out = tmp_path / "o"
     assert main(["simulate", "validation", "--out", str(out), "--quiet"]) == 0
     assert written == [f"writing the results and drawing the figures into {out}"]
+
+
+def test_a_progress_bar_says_a_slow_step_at_once():
+    import io
+
+    from symtrack.foundations.progress import Progress
+
+    s = io.StringIO()
+    bar = Progress(8, "field f", stream=s)
+    bar.update(1, "random pass 1/4")
+    bar.update(4, "random pass 4/4")  # within the log's interval: not written
+    bar.say("drawing the random pattern's maps")
+    lines = s.getvalue().splitlines()
+    assert len(lines) == 2 and lines[-1].startswith("field f:  50.0% after ")
+    assert lines[-1].endswith("drawing the random pattern's maps")
+    quiet = Progress(8, "x", enabled=False, stream=s)
+    quiet.say("nothing")
+    assert "nothing" not in s.getvalue()

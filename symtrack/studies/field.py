@@ -50,7 +50,7 @@ from ..foundations.config import check_document, check_keys, integer, list_hint,
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_folder, npz_bytes
 from ..foundations.interrupt import defer_interrupts
-from ..foundations.progress import Progress
+from ..foundations.progress import Progress, timed_step
 from ..integrators import registry
 from ..reports.run_files import TerrainOut, clear_previous_run, recover, terrain_run, write_folder
 from ..reports.subsoil_plots import density_map_png, risk_map_png
@@ -815,6 +815,7 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
                 _copy_into(plant.world.storage, pr.terrain)
             _run_pattern(spec, plant, pr, bar, k * fs.passes + len(pr.records), checkpoint)
             if folder is not None:
+                bar.say(f"writing the {pattern} pattern's field and drawing its maps")
                 _write_pattern(folder, spec, pr)
             pending = None
             if not pr.complete:
@@ -828,7 +829,10 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
         if folder is not None and pending is not None and pending.terrain is not None:
             _write_pattern(folder, spec, pending)  # the pattern Ctrl-C stopped: its passes done
         summary = _summary(spec, results, build_s, t_start, error, interrupted, plant.world)
-        written = _write_top(folder, spec, results, summary) if folder is not None else []
+        written = []
+        if folder is not None:
+            with timed_step(f"drawing the comparison and writing the report into {folder}"):
+                written = _write_top(folder, spec, results, summary)
         result = FieldStudyResult(spec, results, summary, written)
     if error is not None:
         raise IncompleteFieldStudy(error, result)
