@@ -84,7 +84,9 @@ def test_symtrack_run_starts_without_matplotlib():
     import subprocess
     import sys
 
-    code = "import sys, symtrack.studies.runfile, symtrack.cli.main; print('matplotlib' in sys.modules)"
+    code = ("import sys, symtrack.studies.runfile, symtrack.cli.main, symtrack.studies.field, "
+            "symtrack.studies.operations, symtrack.control.closedloop, symtrack.cli.control, symtrack.api; "
+            "print('matplotlib' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 

@@ -47,7 +47,6 @@ from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
-from ..reports.figures import figures
 from ..reports.run_files import TerrainOut, terrain_run, write_folder
 from ..simulation import loop
 from ..simulation.builder import system_model
@@ -463,6 +462,7 @@ def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
     ``symtrack simulate``'s: a scenario file that loads back to the scenario as run), the
     ``control`` figures of :mod:`symtrack.reports.figures`, report.html (what ran, the summary, the
     figures and the scenario on one page), summary.json."""
+    from ..reports.figures import figures  # matplotlib: imported when a run draws
     from ..reports.html import machine_facts, report_html
 
     scenario_toml = to_toml(res.scenario.resolved_dict())

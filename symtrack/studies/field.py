@@ -53,7 +53,6 @@ from ..foundations.interrupt import defer_interrupts
 from ..foundations.progress import Progress, timed_step
 from ..integrators import registry
 from ..reports.run_files import TerrainOut, clear_previous_run, recover, terrain_run, write_folder
-from ..reports.subsoil_plots import density_map_png, risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario_from_dict
@@ -62,7 +61,6 @@ from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
 from ..vehicles.wheeled import terrain_soils
-from . import field_plots
 
 __all__ = ["FIELD_KEYS", "FIELD_PACKAGE", "PATTERNS", "SCHEMA_VERSION", "FieldSettings", "FieldSpec",
            "FieldStudyResult", "IncompleteFieldStudy", "PassLine", "PatternResult", "SpeedGovernor",
@@ -682,6 +680,9 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult, figures: bool = True) -> 
     files = {"passes_per_cell.npz": passes_per_cell_npz(pr), "passes.csv": _passes_csv(pr.records).encode()}
     if not figures:
         return files
+    from ..reports.subsoil_plots import density_map_png, risk_map_png  # matplotlib: imported when drawn
+    from . import field_plots
+
     g = pr.terrain.grid
     x0, x1, y0, y1 = g.bounds()
     ext = (x0, x1, y0, y1)
@@ -941,6 +942,8 @@ def _write_top(folder, spec: FieldSpec, results: dict, summary: dict) -> list:
     for pr in results.values():
         written += [folder / pr.pattern / n for n in PATTERN_FILES if (folder / pr.pattern / n).is_file()]
     if len(results) == 2:
+        from . import field_plots
+
         files["comparison.png"] = field_plots.comparison_png({k: r.figures for k, r in results.items()})
         written.append(folder / "comparison.png")
     files["report.html"] = _report(folder, spec, results, summary, files).encode()
