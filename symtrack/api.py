@@ -226,13 +226,12 @@ class Result:
     def _repr_html_(self) -> str:
         """The view in a notebook: what ran (scenario, vehicle, soil, integrator, passes), the summary's
         figures with their units, the validation table of a validation scenario."""
-        from .reports.html import notebook_html
+        from .reports.html import machine_facts, notebook_html
 
         sc = self.scenario
         facts = [("scenario", sc.name), ("integrator", self.summary.get("integrator", sc.run.integrator)),
                  ("passes", len(self.runs)), ("terrain", "grid" if self.terrain is not None else "homogeneous")]
-        facts += [("vehicle", sc.vehicle_preset + (" (with overrides)" if sc.vehicle else "")),
-                  ("soil", sc.soil_preset + (" (with overrides)" if sc.soil else ""))]
+        facts += machine_facts(sc.vehicle_preset, sc.soil_preset, sc.params)
         rows = validation_rows(sc, self.summary)
         if rows is not None:
             rows = [(k, reported, value, "yes" if ok else "NO") for k, reported, value, ok in rows]
@@ -274,6 +273,11 @@ def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
     Built
         ``Built.scenario`` is the scenario as run; ``simulate(built)`` runs it.
     """
+    if isinstance(terrain, str | Path) and not Path(terrain).is_file():  # named as typed (as --terrain-in)
+        what = "is a folder" if Path(terrain).is_dir() else "does not exist"
+        raise ScenarioError(f"terrain = {str(terrain)!r} {what}: give a terrain file (the .npz that "
+                            "Result.write(..., terrain_out=...) or symtrack simulate --terrain-out writes) "
+                            "or a Terrain")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     if integrator is not None:

@@ -107,16 +107,21 @@ def mpc_command(args) -> int:
 
 
 def _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out) -> int:
-    from ..control import closedloop, scenario
-    from ..foundations.errors import ScenarioError
+    from ..foundations import progress
 
-    sc = scenario.load(args.scenario, overrides, plant_kind)
-    if terrain_out and sc.terrain is None:
-        raise ScenarioError(f"--terrain-out: scenario {sc.name!r} runs on the homogeneous plant (no [terrain] "
-                            "section); add --plant grid")
-    from ..simulation.builder import system_model
+    # loading the modules, the run file and the vehicle model is seconds of its own, after the seconds of
+    # starting Python: said once it passes half a second
+    with progress.timed_step(f"loading {args.scenario} and building its vehicle model", slow_s=0.5):
+        from ..control import closedloop, scenario
+        from ..foundations.errors import ScenarioError
 
-    model = system_model(sc.model)  # the cached build (symtrack.simulation.builder)
+        sc = scenario.load(args.scenario, overrides, plant_kind)
+        if terrain_out and sc.terrain is None:
+            raise ScenarioError(f"--terrain-out: scenario {sc.name!r} runs on the homogeneous plant (no [terrain] "
+                                "section); add --plant grid")
+        from ..simulation.builder import system_model
+
+        model = system_model(sc.model)  # the cached build (symtrack.simulation.builder)
     from ..foundations.interrupt import InterruptWatch
     from ..reports.run_files import finished_before, terrain_lock
 
@@ -127,7 +132,8 @@ def _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out) -> int:
             print(f"{sc.name}: this run (run id {done['run_id']}) was stopped after it had updated {terrain_out}; "
                   f"its files are now complete and it was not run again; results in {args.out}")
             return 0
-        plant = closedloop.make_plant(sc, model, terrain_in)
+        with progress.timed_step(f"building the {sc.plant} plant"):
+            plant = closedloop.make_plant(sc, model, terrain_in)
         try:
             with InterruptWatch():  # also when CasADi turns the interrupt into a solver/integrator error
                 res = closedloop.run(sc, plant=plant, model=model, progress=not args.quiet)
@@ -138,7 +144,8 @@ def _mpc(args, overrides, terrain_in, terrain_out, plant_kind, out) -> int:
             return 130
         if terrain_in:
             res.summary["terrain_in"] = str(terrain_in)
-        closedloop.write(out, res, terrain_out=terrain_out or None, plant=plant)
+        with progress.timed_step(f"writing the results and drawing the figures into {out}"):
+            closedloop.write(out, res, terrain_out=terrain_out or None, plant=plant)
     s = res.summary
     rms = s["rms_lateral_error_m"]
     print(f"{sc.name}: rms lateral error on straights "

@@ -34,6 +34,7 @@ def simulate_command(args) -> int:
 
 def _simulate(args, out, terrain_out) -> int:
     from ..api import IncompleteSimulation, simulate
+    from ..foundations import progress
     from ..reports.run_files import finished_before, terrain_lock
     from ..simulation.scenario import load_scenario
 
@@ -56,7 +57,8 @@ def _simulate(args, out, terrain_out) -> int:
             err.result.write(out)
             raise SimulationError(f"{err}; what was computed up to there is in {out} (summary.json: "
                                   "complete = false); no terrain file was written") from err
-        res.write(out, terrain_out=terrain_out)
+        with progress.timed_step(f"writing the results and drawing the figures into {out}"):
+            res.write(out, terrain_out=terrain_out)
     table = res.validation_table
     if table is not None:
         print(table)

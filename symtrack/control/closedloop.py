@@ -47,7 +47,6 @@ from ..integrators import registry
 from ..integrators.grid_rosenbrock import MAX_STEP_S
 from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
-from ..reports.figures import figures
 from ..reports.run_files import TerrainOut, terrain_run, write_folder
 from ..simulation import loop
 from ..simulation.builder import system_model
@@ -103,14 +102,23 @@ class ClosedLoopResult:
         """The plant state ``name`` at the samples (a column of X, by name)."""
         return self.X[:, self.state_names.index(name)]
 
+    def __repr__(self) -> str:
+        from ..reports.html import short_repr
+
+        return short_repr("ClosedLoopResult", self.scenario.name, self.summary,
+                          ("sim_time_s", "rms_lateral_error_m", "max_lateral_error_m", "failed_solves",
+                           "solve_time_median_ms", "wall_time_s"))
+
     def _repr_html_(self) -> str:
-        """The view in a notebook: what ran (scenario, plant, solver, machine, soil) and the summary's
-        figures with their units."""
-        from ..reports.html import notebook_html
+        """The view in a notebook: what ran (scenario, plant and its integrator, solver, machine, soil) and
+        the summary's figures with their units."""
+        from ..reports.html import machine_facts, notebook_html
 
         sc = self.scenario
-        facts = [("scenario", sc.name), ("plant", sc.plant), ("solver", sc.mpc.solver),
-                 ("vehicle", sc.vehicle_preset), ("soil", sc.soil_preset), ("samples", len(self.t))]
+        facts = [("scenario", sc.name), ("plant", sc.plant),
+                 ("integrator", self.summary.get("plant_integrator", "")), ("solver", sc.mpc.solver),
+                 *machine_facts(sc.vehicle_preset, sc.soil_preset, getattr(sc, "params", None)),
+                 ("samples", len(self.t))]
         return notebook_html(f"MPC run {sc.name!r}", self.summary, facts)
 
 
@@ -454,7 +462,8 @@ def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
     ``symtrack simulate``'s: a scenario file that loads back to the scenario as run), the
     ``control`` figures of :mod:`symtrack.reports.figures`, report.html (what ran, the summary, the
     figures and the scenario on one page), summary.json."""
-    from ..reports.html import report_html
+    from ..reports.figures import figures  # matplotlib: imported when a run draws
+    from ..reports.html import machine_facts, report_html
 
     scenario_toml = to_toml(res.scenario.resolved_dict())
     images = figures("control", res)
@@ -462,6 +471,10 @@ def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
     note = (f"The {sm.get('solver')} MPC ({sm.get('horizon_steps')} steps of {sm.get('sample_time_s')} s) tracking "
             f"the path of scenario '{sm.get('scenario')}': {sm.get('solves')} solves, {sm.get('failed_solves')} "
             f"failed, median {sm.get('solve_time_median_ms', float('nan')):.3g} ms.")
+    sc = res.scenario
+    (_, vehicle), (_, soil) = machine_facts(sc.vehicle_preset, sc.soil_preset, getattr(sc, "params", None))
+    note += (f" Ran: {vehicle} on {soil}, the {sm.get('plant', sc.plant)} plant"
+             + (f", integrator {sm['plant_integrator']}." if sm.get("plant_integrator") else "."))
     return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res), "scenario.resolved.toml": scenario_toml,
             **images, "report.html": report_html(f"symtrack mpc: {sm.get('scenario')}", sm, images, scenario_toml,
                                                  note=note).encode(),

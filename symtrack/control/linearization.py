@@ -23,7 +23,6 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 from ..model import SystemModel
-from ..reports.plots import plt, png_bytes
 from .trim import POSITION_STATES, TrimPoint
 
 if TYPE_CHECKING:
@@ -280,6 +279,9 @@ def load_npz(path) -> control.StateSpace:
 def bode_png(lin: Linearization, omega_rad_s=None) -> bytes:
     """Bode plots of the yaw-rate and speed responses to the two commanded torques."""
     import control  # python-control, imported on first use: its scipy.signal import takes seconds
+
+    from ..reports.plots import plt, png_bytes  # matplotlib, imported when drawn (a second of its own)
+
     omega = np.logspace(-3, 3, 400) if omega_rad_s is None else omega_rad_s
     outs = ("u_m_s", "yaw_rate_rad_s")
     fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)

@@ -9,6 +9,7 @@ helpers here, so that every error names the key, the value and the allowed range
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
 from collections.abc import Iterable, Mapping
@@ -20,7 +21,8 @@ from .errors import ScenarioError
 from .files import read_text
 
 __all__ = ["Key", "number", "integer", "check_document", "check_keys", "key_table", "parse_override", "apply_overrides",
-           "short_number", "builtin_names", "read_document", "resolve_file_paths", "resolve_paths", "to_toml"]
+           "short_number", "key_hints", "list_hint", "builtin_names", "read_document", "resolve_file_paths",
+           "resolve_paths", "to_toml"]
 
 
 def number(where: str, value, low: float, high: float, low_open: bool = False) -> float:
@@ -108,6 +110,35 @@ def integer(where: str, value, low: int, high: int) -> int:
     return value
 
 
+def key_hints(unknown: Iterable[str], allowed: Iterable[str]) -> str:
+    """What an unknown key was likely meant to be, as text to follow an error ("" when nothing is
+    close): a key of the same name in another unit (``friction_angle_deg`` -> ``friction_angle_rad``,
+    in radians; ``cohesion_kPa`` -> ``cohesion_Pa``), else a near spelling."""
+    allowed = list(allowed)
+    hints = []
+    for key in unknown:
+        stem = key.rsplit("_", 1)[0] if "_" in key else key
+        same = [a for a in allowed if "_" in a and a.rsplit("_", 1)[0] == stem and a != key]
+        if same:
+            unit = same[0].rsplit("_", 1)[1]
+            note = {"rad": " (in radians: degrees x pi / 180)"}.get(unit, f" (in {unit})")
+            hints.append(f"{key}: did you mean {same[0]}{note}?")
+            continue
+        close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.75)
+        if close:
+            hints.append(f"{key}: did you mean {close[0]}?")
+    return (". " + "; ".join(hints)) if hints else ""
+
+
+def list_hint(where: str, value) -> str:
+    """What follows an error on a value that should be a list but came as text (a ``--set`` without the
+    brackets): how to write it on the command line; "" for any other value."""
+    if not isinstance(value, str):
+        return ""
+    items = [v.strip() for v in value.strip("()").split(",") if v.strip()]
+    return f" (on the command line, in brackets: --set '{where}=[{', '.join(items) or '...'}]')"
+
+
 def check_keys(section: str, table, allowed: Iterable[str]) -> None:
     """Unknown keys of a table are errors that list the allowed ones."""
     allowed = list(allowed)
@@ -116,7 +147,8 @@ def check_keys(section: str, table, allowed: Iterable[str]) -> None:
     unknown = sorted(set(table) - set(allowed))
     if unknown:
         raise ScenarioError(
-            f"unknown key(s) in [{section}]: {', '.join(unknown)}; allowed: {', '.join(allowed)}")
+            f"unknown key(s) in [{section}]: {', '.join(unknown)}; allowed: {', '.join(allowed)}"
+            f"{key_hints(unknown, allowed)}")
 
 
 def check_document(kind: str, doc, top_keys: Iterable[str], arrays: Iterable[str] = ()) -> None:

@@ -43,6 +43,14 @@ class Progress:
         self._last = now
         self._write(now)
 
+    def say(self, note: str):
+        """Show ``note`` now, at the progress reached (a step between the updates that takes seconds of its
+        own, such as drawing maps: the bar says what it waits for)."""
+        self._note = note
+        if self.enabled:
+            self._last = time.perf_counter()
+            self._write(self._last)
+
     def _write(self, now, end=False):
         frac = min(max(self._done / self.total, 0.0), 1.0)
         if self.tty:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from ..foundations.config import key_hints
 from ..foundations.errors import ParameterError
 from ..foundations.params import ParamLayout, ParamSpec, merge_specs, param
 from ..soil import law as soil_law
@@ -260,6 +261,7 @@ def check_set(values: dict, specs: tuple[ParamSpec, ...], where: str, known: tup
     if unknown:
         raise ParameterError(
             f"unknown parameter(s) in {where}: {', '.join(unknown)}; allowed: {', '.join(names)}"
+            f"{key_hints(unknown, names)}"
         )
     values = {k: v for k, v in values.items() if not (k in earlier and v == earlier[k])}
     for s in specs:

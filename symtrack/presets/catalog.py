@@ -22,6 +22,7 @@ import tokenize
 import tomllib
 from pathlib import Path
 
+from ..foundations.config import key_hints
 from ..foundations.errors import ParameterError
 from ..foundations.files import read_text
 from ..foundations.params import unit_of_name
@@ -128,7 +129,7 @@ def _preset_file_doc(path, kind: str) -> dict:
     unknown = sorted(set(d) - set(names) - set(PRESET_FILE_KEYS))
     if unknown:
         raise ParameterError(f"{path}: unknown key(s) {', '.join(unknown)}; allowed: {', '.join(PRESET_FILE_KEYS)} "
-                             f"and the {kind} parameters ({', '.join(names)})")
+                             f"and the {kind} parameters ({', '.join(names)}){key_hints(unknown, names)}")
     sources = d.get("sources", {})
     if not isinstance(sources, dict) or set(sources) - set(names):
         raise ParameterError(f"{path}: [sources] must map {kind} parameter names to text")

@@ -13,7 +13,7 @@ import base64
 import html
 import json
 
-__all__ = ["REPORT_SCHEMA_VERSION", "notebook_html", "report_html", "table_html"]
+__all__ = ["REPORT_SCHEMA_VERSION", "machine_facts", "notebook_html", "report_html", "short_repr", "table_html"]
 
 REPORT_SCHEMA_VERSION = 1
 
@@ -111,6 +111,26 @@ def _unit(key: str) -> str:
     from ..foundations.units import unit_of_suffix
 
     return unit_of_suffix(key, "")
+
+
+def machine_facts(vehicle_preset, soil_preset, params=None) -> list[tuple[str, str]]:
+    """What a run's view names of its machine and soil: the vehicle preset with the mass it ran with, the
+    soil preset (a preset file by its file name)."""
+    mass = (params or {}).get("mass_kg")
+    vehicle = str(vehicle_preset) + (f", {mass:g} kg" if isinstance(mass, int | float) else "")
+    soil = str(soil_preset)
+    if soil.endswith(".toml"):
+        soil = soil.replace("\\", "/").rsplit("/", 1)[-1]
+    return [("vehicle", vehicle), ("soil", soil)]
+
+
+def short_repr(kind: str, name: str, summary: dict, keys: tuple[str, ...]) -> str:
+    """A result's plain repr: ``<kind 'name': key value, ...>``, the figures of ``keys`` the summary has
+    (numbers to 4 significant digits), ", incomplete" when the run did not finish."""
+    figs = [f"{k} {summary[k]:.4g}" for k in keys
+            if isinstance(summary.get(k), int | float) and not isinstance(summary.get(k), bool)]
+    tail = "" if summary.get("complete", True) else ", incomplete"
+    return f"<{kind} {name!r}{': ' if figs else ''}{', '.join(figs)}{tail}>"
 
 
 def notebook_html(title: str, summary: dict, facts: list[tuple[str, object]],

@@ -79,7 +79,6 @@ from ..foundations.version import __version__
 from ..terrain.storage import Terrain, file_bytes, file_identity
 from ..toolchain import LockBusy, file_lock
 from . import validation
-from .figures import TerrainRun, extras, figures
 from .html import report_html
 
 __all__ = ["COMMIT_STEPS", "JOURNAL", "KILL_AT_STEP_ENV", "MANIFEST", "MANIFEST_KIND", "MANIFEST_VERSION",
@@ -167,6 +166,32 @@ def validation_rows(scenario, summary: dict) -> list | None:
     return None
 
 
+def figures(kinds, source, all_figures: bool = True) -> dict[str, bytes]:
+    """:func:`symtrack.reports.figures.figures`, imported when first drawn: the plotting modules (matplotlib,
+    a second of import) are not loaded by a command that only reads its run file or fails early."""
+    from . import figures as registry
+
+    return registry.figures(kinds, source, all_figures)
+
+
+def extras(kinds) -> list[str]:
+    """:func:`symtrack.reports.figures.extras` (imported when first asked, as :func:`figures`)."""
+    from . import figures as registry
+
+    return registry.extras(kinds)
+
+
+def what_ran(scenario, summary: dict) -> str:
+    """One sentence of a run's report: the machine with the mass it ran with, the soil, the terrain and
+    the integrator (the resolved scenario at the page's end has every value)."""
+    from .html import machine_facts
+
+    (_, vehicle), (_, soil) = machine_facts(scenario.vehicle_preset, scenario.soil_preset, scenario.params)
+    terrain = "the homogeneous terrain" if scenario.terrain is None else "the grid terrain"
+    integrator = summary.get("integrator", scenario.run.integrator)
+    return f"Ran: {vehicle} on {soil}, {terrain}, integrator {integrator}."
+
+
 def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[dict],
                      study=None) -> dict[str, bytes | str]:
     """The folder of a ``symtrack simulate`` run (docs/outputs.md): the run's files with its
@@ -179,6 +204,8 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
     which: the pass animations and, of several passes, the earlier passes' sinkage maps and
     trajectory plots (their ``pass_<k>/`` keep trajectory.csv, the resolved scenario and the
     summary); docs/terrain.md, "What the outputs cost"."""
+    from .figures import TerrainRun
+
     table = validation_table(scenario, summary)
     every = scenario.run.all_figures
     top: dict[str, bytes] = {}  # the files of the folder's top, besides the run files
@@ -217,7 +244,7 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
         f"symtrack: {scenario.name}", summary, shown, to_toml(scenario.to_dict()),
         validation_rows(scenario, summary),
         summary.get("passes"),
-        scenario.description, omitted=omitted).encode()
+        " ".join(filter(None, [scenario.description, what_ran(scenario, summary)])), omitted=omitted).encode()
     if run is not None:
         return run_files(run, summary, top)
     return {**passes, **top, "summary.json": json.dumps(summary, indent=2) + "\n"}

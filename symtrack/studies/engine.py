@@ -40,7 +40,6 @@ from ..foundations.progress import Progress
 from ..reports.html import report_html
 from ..reports.run_files import output_lock, write_folder
 from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
-from .plots import comparison_png
 from .runs import Source, load, resolve_source, run_one
 
 __all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "check_scheduler_address", "dask_client", "plan",
@@ -93,6 +92,33 @@ class SweepResult:
 
     def count(self, status: str) -> int:
         return sum(r["status"] == status for r in self.rows)
+
+    SHOWN_ROWS = 12
+    SHOWN_COLUMNS = 8
+
+    def _figures(self) -> dict:
+        return {"runs": len(self.rows), "runs_ok": self.count("ok"), "runs_failed": self.count("failed"),
+                "ran": self.ran, "skipped": self.skipped, "wall_time_s": self.wall_time_s}
+
+    def __repr__(self) -> str:
+        from ..reports.html import short_repr
+
+        return short_repr("SweepResult", str(self.out), self._figures(),
+                          ("runs", "runs_ok", "runs_failed", "wall_time_s"))
+
+    def _repr_html_(self) -> str:
+        """The view in a notebook: the folder, the counts of runs and the run time, then the first rows of
+        results.csv (its first columns; the file has them all)."""
+        from ..reports.html import notebook_html
+
+        columns = list(self.rows[0])[:self.SHOWN_COLUMNS] if self.rows else []
+        rows = [[r.get(c) for c in columns] for r in self.rows[:self.SHOWN_ROWS]]
+        more = len(self.rows) - len(rows)
+        facts = [("sweep", str(self.out)), ("table", str(Path(self.out) / "results.csv"))]
+        if more > 0:
+            facts.append(("rows not shown", more))
+        return notebook_html(f"sweep in {str(self.out)!r}", self._figures(), facts, rows=rows or None,
+                             row_header=columns)
 
 
 def plan(scenario, vary=None, *, ranges=None, samples: int | None = None, seed: int = 0, overrides=None,
@@ -425,6 +451,8 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
         if todo:
             failed = _run_all(out, p, todo, rows, client, cluster, progress)
         table = _write_table(out, p, rows)
+        from .plots import comparison_png  # matplotlib: imported when a sweep draws
+
         png = comparison_png(table, [a.key for a in p.axes])
         if png is not None:
             atomic_write_bytes(out / "comparison.png", png)

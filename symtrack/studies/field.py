@@ -46,14 +46,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..foundations.config import check_document, check_keys, integer, number, read_document, to_toml
+from ..foundations.config import check_document, check_keys, integer, list_hint, number, read_document, to_toml
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.files import check_output_folder, npz_bytes
 from ..foundations.interrupt import defer_interrupts
-from ..foundations.progress import Progress
+from ..foundations.progress import Progress, timed_step
 from ..integrators import registry
 from ..reports.run_files import TerrainOut, clear_previous_run, recover, terrain_run, write_folder
-from ..reports.subsoil_plots import density_map_png, risk_map_png
 from ..simulation import loop
 from ..simulation.plants import make_plant
 from ..simulation.scenario import SIMULATION_RUN_KEYS, Scenario, Start, scenario_from_dict
@@ -62,7 +61,6 @@ from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.storage import Terrain
 from ..terrain.world import padding_m
 from ..vehicles.wheeled import terrain_soils
-from . import field_plots
 
 __all__ = ["FIELD_KEYS", "FIELD_PACKAGE", "PATTERNS", "SCHEMA_VERSION", "FieldSettings", "FieldSpec",
            "FieldStudyResult", "IncompleteFieldStudy", "PassLine", "PatternResult", "SpeedGovernor",
@@ -203,7 +201,8 @@ def _parse_field(t: dict) -> FieldSettings:
     d = FieldSettings()
     size = t.get("size_m", list(d.size_m))
     if not isinstance(size, (list, tuple)) or len(size) != 2:
-        raise ScenarioError(f"field.size_m = {size!r} must be a pair [x, y] of lengths in m")
+        raise ScenarioError(f"field.size_m = {size!r} must be a pair [x, y] of lengths in m"
+                            f"{list_hint('field.size_m', size)}")
     size = tuple(_num(f"size_m[{i}]", v, 1.0, 1e4) for i, v in enumerate(size))
     cell = _num("cell_m", t.get("cell_m", d.cell_m), 0.01, 5.0)
     pattern = t.get("pattern", d.pattern)
@@ -477,6 +476,14 @@ class PatternResult:
     # the bulk density (docs/subsoil.md "Bulk density"): the field's largest by depth before the passes
     density0: list | None = None
 
+    def __repr__(self) -> str:
+        from ..reports.html import short_repr
+
+        figures = {**self.figures, "passes_done": len(self.records), "complete": self.complete,
+                   "wall_time_s": self.wall_time_s}
+        return short_repr("PatternResult", self.pattern, figures,
+                          ("passes_done", "trafficked_area_fraction", "rut_max_depth_mm", "wall_time_s"))
+
 
 @dataclass
 class FieldStudyResult:
@@ -491,6 +498,36 @@ class FieldStudyResult:
     @property
     def complete(self) -> bool:
         return bool(self.summary.get("complete"))
+
+    def _figure_keys(self) -> list[str]:
+        s = self.summary
+        keys = []
+        for p in s.get("patterns_run") or ():
+            keys += [f"{p}_{k}" for k in ("passes_done", "trafficked_area_fraction", "passes_per_cell_max",
+                                          "rut_mean_depth_mm", "rut_max_depth_mm")]
+            keys += [k for k in s if k.startswith(f"{p}_risk_fraction_of_field_high_at_")]
+        return keys + ["sim_time_s", "build_s", "wall_time_s"]
+
+    def __repr__(self) -> str:
+        from ..reports.html import short_repr
+
+        keys = [k for k in self._figure_keys() if k.endswith(("_trafficked_area_fraction", "wall_time_s"))]
+        return short_repr("FieldStudyResult", self.spec.name, self.summary, tuple(keys))
+
+    def _repr_html_(self) -> str:
+        """The view in a notebook: what ran (the study, its field, patterns and passes, the integrator, the
+        machine and soil), each pattern's figures with their units (the share of the field trafficked, the
+        rut, the area at high compaction risk by depth) and the run time."""
+        from ..reports.html import machine_facts, notebook_html
+
+        s, sc = self.summary, self.spec.scenario
+        size = s.get("field_size_m") or list(self.spec.field.size_m)
+        facts = [("field study", self.spec.name),
+                 ("field", f"{size[0]:g} m x {size[1]:g} m, {s.get('field_cell_m', self.spec.field.cell_m):g} m cells"),
+                 ("patterns", ", ".join(map(str, s.get("patterns_run") or ()))),
+                 ("passes per pattern", s.get("passes_per_pattern", "")), ("integrator", sc.run.integrator),
+                 *machine_facts(sc.vehicle_preset, sc.soil_preset, sc.params)]
+        return notebook_html(f"field study {self.spec.name!r}", s, facts, keys=tuple(self._figure_keys()))
 
 
 class IncompleteFieldStudy(SimulationError):
@@ -643,6 +680,9 @@ def _pattern_files(spec: FieldSpec, pr: PatternResult, figures: bool = True) -> 
     files = {"passes_per_cell.npz": passes_per_cell_npz(pr), "passes.csv": _passes_csv(pr.records).encode()}
     if not figures:
         return files
+    from ..reports.subsoil_plots import density_map_png, risk_map_png  # matplotlib: imported when drawn
+    from . import field_plots
+
     g = pr.terrain.grid
     x0, x1, y0, y1 = g.bounds()
     ext = (x0, x1, y0, y1)
@@ -776,6 +816,7 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
                 _copy_into(plant.world.storage, pr.terrain)
             _run_pattern(spec, plant, pr, bar, k * fs.passes + len(pr.records), checkpoint)
             if folder is not None:
+                bar.say(f"writing the {pattern} pattern's field and drawing its maps")
                 _write_pattern(folder, spec, pr)
             pending = None
             if not pr.complete:
@@ -789,7 +830,10 @@ def run_field_study(spec, out=None, *, overrides=None, progress: bool = False, p
         if folder is not None and pending is not None and pending.terrain is not None:
             _write_pattern(folder, spec, pending)  # the pattern Ctrl-C stopped: its passes done
         summary = _summary(spec, results, build_s, t_start, error, interrupted, plant.world)
-        written = _write_top(folder, spec, results, summary) if folder is not None else []
+        written = []
+        if folder is not None:
+            with timed_step(f"drawing the comparison and writing the report into {folder}"):
+                written = _write_top(folder, spec, results, summary)
         result = FieldStudyResult(spec, results, summary, written)
     if error is not None:
         raise IncompleteFieldStudy(error, result)
@@ -898,6 +942,8 @@ def _write_top(folder, spec: FieldSpec, results: dict, summary: dict) -> list:
     for pr in results.values():
         written += [folder / pr.pattern / n for n in PATTERN_FILES if (folder / pr.pattern / n).is_file()]
     if len(results) == 2:
+        from . import field_plots
+
         files["comparison.png"] = field_plots.comparison_png({k: r.figures for k, r in results.items()})
         written.append(folder / "comparison.png")
     files["report.html"] = _report(folder, spec, results, summary, files).encode()
@@ -932,8 +978,10 @@ def _report(folder, spec: FieldSpec, results: dict, summary: dict, files: dict) 
     if names:
         tables["Patterns"] = (["figure", *names], rows)
     done = ", ".join(f"{n}: {len(results[n].records)} passes" for n in names)
+    from ..reports.run_files import what_ran
+
     note = (f"Field study '{spec.name}': the patterns {done}; "
-            f"{'complete' if summary.get('complete', True) else 'incomplete'}.")
+            f"{'complete' if summary.get('complete', True) else 'incomplete'}. {what_ran(spec.scenario, {})}")
     return report_html(f"symtrack field: {spec.name}", summary, images, files["field.resolved.toml"], note=note,
                        tables=tables)
 

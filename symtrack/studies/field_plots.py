@@ -142,12 +142,14 @@ ANIMATION_FRAME_MS = 120
 
 
 def operation_gif(z_m, first_contact_s, trajectory, extent_m, title: str, frames: int = ANIMATION_FRAMES,
-                  blocks: int = ANIMATION_BLOCKS, progress=None) -> bytes:
+                  blocks: int = ANIMATION_BLOCKS, progress=None, phases=None) -> bytes:
     """An animated GIF of an operation over its rut map: frame k shows the rut depth (the
     operation's final sinkage ``z_m``, (nx, ny) m) of the cells a track had come over by the frame's
     time (``first_contact_s``, (nx, ny), inf: never), the rest of the field grey, the driven path up
     to then and the vehicle's position (``trajectory``: rows t, x, y, yaw). The field is drawn in
-    blocks (:func:`block_max`, at most ``blocks`` along a side); ``progress(k, n)`` is called per frame."""
+    blocks (:func:`block_max`, at most ``blocks`` along a side); ``progress(k, n)`` is called per frame.
+    ``phases`` (a season, :func:`season_gif`): (t_start, t_end, label, (first row, end row)) of each
+    operation on the one time axis; a frame names its operation and draws that operation's path only."""
     from PIL import Image, ImageDraw
 
     z, f = block_max(np.asarray(z_m, dtype=np.float32), blocks)
@@ -178,17 +180,49 @@ def operation_gif(z_m, first_contact_s, trajectory, extent_m, title: str, frames
         canvas = Image.new("RGB", (img.shape[1], img.shape[0] + header), (255, 255, 255))
         canvas.paste(Image.fromarray(np.ascontiguousarray(img)), (0, header))
         draw = ImageDraw.Draw(canvas)
-        upto = traj[traj[:, 0] <= tk]
+        rows = traj
+        label = title
+        if phases:  # this frame's operation: its rows of the trajectory
+            _ta, _tb, name, (ra, rb) = next((p for p in phases if tk <= p[1]), phases[-1])
+            rows = traj[ra:rb]
+            label = f"{title}, {name}"
+        upto = rows[rows[:, 0] <= tk]
         if upto.shape[0] > 1:
             pts = [to_px(x, y) for x, y in upto[:: max(1, upto.shape[0] // 2000), 1:3]]
             draw.line(pts, fill=(200, 30, 30), width=1)
         if upto.shape[0]:
             px, py = to_px(upto[-1, 1], upto[-1, 2])
             draw.ellipse([px - 4, py - 4, px + 4, py + 4], fill=(255, 60, 0), outline=(0, 0, 0))
-        draw.text((4, 4), f"{title}: t = {tk:.0f} s, rut depth 0-{1e3 * top:.1f} mm (viridis)", fill=(0, 0, 0))
+        draw.text((4, 4), f"{label}: t = {tk:.0f} s, rut depth 0-{1e3 * top:.1f} mm (viridis)", fill=(0, 0, 0))
         images.append(canvas.convert("P", palette=Image.ADAPTIVE, colors=128))
         if progress is not None:
             progress(k + 1, n)
     buf = io.BytesIO()
     images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=ANIMATION_FRAME_MS, loop=0)
     return buf.getvalue()
+
+
+def season_gif(z_m, operations, extent_m, title: str, frames: int = ANIMATION_FRAMES,
+               blocks: int = ANIMATION_BLOCKS, progress=None) -> bytes:
+    """The animation of a season: every operation in order on one time axis (each driven after the
+    one before), over the season's rut map ``z_m``: a cell is shown from the time a track of any
+    operation first came over it, each frame names its operation and draws its path.
+    ``operations``: (label, first_contact_s (nx, ny), trajectory rows t, x, y, yaw) in order."""
+    firsts, trajs, phases = [], [], []
+    offset = 0.0
+    for label, first, traj in operations:
+        traj = np.asarray(traj, dtype=float)
+        if traj.shape[0] == 0:
+            continue
+        t0 = float(traj[0, 0])
+        shifted = traj.copy()
+        shifted[:, 0] += offset - t0
+        firsts.append(np.asarray(first, dtype=np.float32) + np.float32(offset - t0))
+        rows = sum(t.shape[0] for t in trajs)
+        trajs.append(shifted)
+        phases.append((offset, float(shifted[-1, 0]), label, (rows, rows + shifted.shape[0])))
+        offset = float(shifted[-1, 0])
+    first_all = np.minimum.reduce(firsts) if firsts else np.full(np.shape(z_m), np.inf, np.float32)
+    traj_all = np.concatenate(trajs) if trajs else np.zeros((1, 4))
+    return operation_gif(z_m, first_all, traj_all, extent_m, title, frames=frames, blocks=blocks,
+                         progress=progress, phases=phases or None)

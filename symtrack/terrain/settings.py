@@ -39,7 +39,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from ..foundations.config import Key, check_keys, number
+from ..foundations.config import Key, check_keys, list_hint, number
 from ..foundations.errors import ScenarioError
 from ..soil.moisture import PATH_KEYS as MOISTURE_PATH_KEYS
 from ..soil.moisture import MoistureMap, parse_moisture_map
@@ -168,7 +168,7 @@ def _num(key, value, low, high, low_open=False):
 
 def _pair(key, value):
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise ScenarioError(f"terrain.{key} = {value!r} must be a pair [x, y]")
+        raise ScenarioError(f"terrain.{key} = {value!r} must be a pair [x, y]{list_hint(f'terrain.{key}', value)}")
     return tuple(_num(f"{key}[{i}]", v, -1e7, 1e7) for i, v in enumerate(value))
 
 

@@ -31,6 +31,14 @@ class OperationResult:
     error: str | None = None
     first_contact_s: np.ndarray | None = None  # (nx, ny) float32: when a track first came over the cell (inf: never)
 
+    def __repr__(self) -> str:
+        from ...reports.html import short_repr
+
+        figures = {**self.figures, "complete": self.error is None}
+        return short_repr("OperationResult", self.name, figures,
+                          ("operation_trafficked_fraction", "distance_m", "rut_max_depth_mm", "sim_time_s",
+                           "wall_time_s"))
+
 
 def map_pngs(counts, z, fs: OperationSettings, label: str) -> dict:
     from .. import field_plots
@@ -49,6 +57,23 @@ def animation(r: OperationResult, terrain: Terrain, fs: OperationSettings, label
     gif = field_plots.operation_gif(terrain.z.reshape(r.counts.shape), r.first_contact_s, r.trajectory,
                                     (0.0, fs.size_m[0], 0.0, fs.size_m[1]), label,
                                     progress=lambda k, n: bar.update(k / n, f"frame {k}/{n}"))
+    bar.close()
+    return gif
+
+
+def season_animation(results: list, terrain: Terrain, fs: OperationSettings, labels: list, title: str,
+                     progress: bool) -> bytes:
+    """The season's GIF: every operation in order over the season's rut map
+    (:func:`symtrack.studies.field_plots.season_gif`), with progress."""
+    from ...foundations.progress import Progress
+    from .. import field_plots
+
+    bar = Progress(1.0, "animation of the season", enabled=progress)
+    ops = [(label, r.first_contact_s, r.trajectory) for r, label in zip(results, labels, strict=True)
+           if r.first_contact_s is not None]
+    gif = field_plots.season_gif(terrain.z.reshape(results[0].counts.shape), ops,
+                                 (0.0, fs.size_m[0], 0.0, fs.size_m[1]), title,
+                                 progress=lambda k, n: bar.update(k / n, f"frame {k}/{n}"))
     bar.close()
     return gif
 

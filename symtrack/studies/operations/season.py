@@ -20,7 +20,7 @@ from ...simulation.plants import make_plant
 from ...terrain.storage import Terrain
 from .followers import PathFollower, follower_of, mpc_follower
 from .footprints import count_passes_and_times, field_shares
-from .outputs import OperationResult, animation, counts_npz, map_pngs, traffic_files, traffic_row
+from .outputs import OperationResult, animation, counts_npz, map_pngs, season_animation, traffic_files, traffic_row
 from .plans import OperationPlan
 from .settings import COUNT_SAMPLE_S, SCHEMA_VERSION
 from .spec import OperationSpec, operation_spec_from_dict
@@ -138,6 +138,39 @@ class SeasonResult:
     terrain: Terrain
     written: list
 
+    FIGURES = ("trafficked_fraction", "headland_trafficked_fraction", "infield_trafficked_fraction",
+               "rut_max_depth_mm", "distance_m", "turns_driven", "rms_lateral_error_lines_m",
+               "energy_sprockets_J", "energy_compaction_J", "sim_time_s", "build_s", "wall_time_s")
+
+    def __repr__(self) -> str:
+        from ...reports.html import short_repr
+
+        return short_repr("SeasonResult", self.spec.name, self.summary,
+                          ("trafficked_fraction", "rut_max_depth_mm", "sim_time_s", "wall_time_s"))
+
+    def _repr_html_(self) -> str:
+        """The view in a notebook: what ran (the operations in order, each with its machine; the field, the
+        soil, the integrator), the season's figures with their units and the run time, then one row of
+        figures per operation."""
+        from ...reports.html import machine_facts, notebook_html
+
+        s = self.summary
+        size = s.get("field_size_m") or list(self.spec.base.size_m)
+        ops = []
+        for fs, _plan, sc, _rows in self.spec.operations:
+            vehicle = machine_facts(sc.vehicle_preset, sc.soil_preset, sc.params)[0][1]
+            ops.append(f"{fs.name} ({vehicle})")
+        sc0 = self.spec.operations[0][2] if self.spec.operations else None
+        facts = [("season", self.spec.name), ("operations", "; ".join(ops)),
+                 ("field", f"{size[0]:g} m x {size[1]:g} m, {s.get('field_cell_m', self.spec.base.cell_m):g} m cells")]
+        if sc0 is not None:
+            facts += [("soil", machine_facts(sc0.vehicle_preset, sc0.soil_preset)[1][1]),
+                      ("integrator", sc0.run.integrator)]
+        per_op = ("distance_m", "rut_max_depth_mm", "sim_time_s", "wall_time_s")
+        rows = [[r.name, *(r.figures.get(k) for k in per_op)] for r in self.operations]
+        return notebook_html(f"season {self.spec.name!r}", s, facts, keys=self.FIGURES, rows=rows or None,
+                             row_header=["operation", *per_op])
+
 
 def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through_files: bool = True,
                figures: bool = True) -> SeasonResult:
@@ -173,7 +206,7 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
                     op_files |= {f"{sub}/{n}": b for n, b in
                                  map_pngs(r.counts, terrain.z.reshape(r.counts.shape), fs, label).items()}
                     op_files[f"{sub}/animation.gif"] = animation(r, terrain, fs, label, progress)
-                    if k == 0:
+                    if k == 0:  # the season's own, of every operation, replaces it below when there are more
                         op_files["animation.gif"] = op_files[f"{sub}/animation.gif"]
                 files |= op_files
             if r.error:
@@ -188,6 +221,9 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
         if tmp is not None:
             tmp.cleanup()
     fs0 = spec.base
+    if folder is not None and figures and len(results) > 1:
+        files["animation.gif"] = season_animation(results, terrain, fs0, [r.name for r in results],
+                                                  f"{spec.name}", progress)
     counts = np.minimum(total, np.iinfo(np.uint16).max).astype(np.uint16)
     stressed = (terrain.sigma_max[:, 0] > 0).reshape(counts.shape) if terrain.subsoil_depths_m else \
         (terrain.z != 0).reshape(counts.shape)
@@ -243,6 +279,14 @@ def _season_report(spec, summary: dict, files: dict, results) -> str:
     note = (f"'{spec.name}': {len(results)} operation(s), {summary.get('turns_driven', 0)} turns driven; "
             f"{'complete' if summary.get('complete') else 'incomplete: ' + str(summary.get('error'))}."
             + (f" The animation: {summary['animation_gif']}." if summary.get("animation_gif") else ""))
+    if spec.operations:
+        from ...reports.html import machine_facts
+
+        machines = "; ".join(f"{fs.name}: {machine_facts(sc.vehicle_preset, sc.soil_preset, sc.params)[0][1]}"
+                             for fs, _plan, sc, _rows in spec.operations)
+        sc0 = spec.operations[0][2]
+        note += (f" Ran: {machines}; on {machine_facts(sc0.vehicle_preset, sc0.soil_preset)[1][1]}, "
+                 f"integrator {sc0.run.integrator}.")
     return report_html(f"symtrack field: {spec.name}", summary, images, files["operation.resolved.toml"], note=note,
                        tables={"Operations": (["figure", *map(str, names)], rows)} if results else None)
 

@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import dataclass
 
 from ...control.mpc import MPCSettings
-from ...foundations.config import check_keys, integer, number
+from ...foundations.config import check_keys, integer, list_hint, number
 from ...foundations.errors import ScenarioError
 from ...simulation.scenario import SIMULATION_RUN_KEYS
 from ..boundary import read_boundary
@@ -111,7 +111,8 @@ def parse_operation(t: dict, base: OperationSettings | None = None, where: str =
     if "size_m" in t:
         size = t["size_m"]
         if not isinstance(size, (list, tuple)) or len(size) != 2:
-            raise ScenarioError(f"{where}.size_m = {size!r} must be a pair [x, y] of lengths in m")
+            raise ScenarioError(f"{where}.size_m = {size!r} must be a pair [x, y] of lengths in m"
+                                f"{list_hint(f'{where}.size_m', size)}")
         kw["size_m"] = tuple(_num(f"size_m[{i}]", v, 5.0, 1e4) for i, v in enumerate(size))
     for k, lo, hi, lo_open in (("cell_m", 0.01, 1.0, False), ("working_width_m", 0.0, 100.0, True),
                                ("random_offset_m", 0.0, 50.0, False), ("turn_radius_m", 0.5, 100.0, False),
