@@ -10,6 +10,7 @@ gives CVODES's validation figures (docs/codegen.md, "Large quadratures")."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import casadi as ca
 import numpy as np
@@ -17,6 +18,7 @@ import pytest
 from conftest import run_once
 
 from symtrack.foundations.errors import ScenarioError
+from symtrack.integrators import grid_rosenbrock as grid_integrator
 from symtrack.integrators import registry
 from symtrack.integrators.grid_rosenbrock import grid_library
 from symtrack.integrators.settings import IntegratorSettings
@@ -180,10 +182,14 @@ def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures(monkeypatch
 
 @needs_cc
 @pytest.mark.slow
-def test_the_compiled_grid_step_takes_the_call_node_and_equals_the_expanded_one():
+def test_the_compiled_grid_step_takes_the_call_node_and_equals_the_expanded_one(monkeypatch):
+    # each of the two steps built once: grid_library builds the same two as the assertions below (a 64 x 5
+    # step is some 4 s of CPU to build)
+    built = functools.cache(build_step)
+    monkeypatch.setattr(grid_integrator, "build_step", built)
     opts = load_scenario("validation", list(REFINED)).model
-    assert n_calls(build_step(codegen_options(opts), 4, 1)["vehicle_F"]) == 2
-    assert n_calls(build_step(opts, 4, 1)["vehicle_F"]) == 0
+    assert n_calls(built(codegen_options(opts), 4, 1)["vehicle_F"]) == 2
+    assert n_calls(built(opts, 4, 1)["vehicle_F"]) == 0
     f, is_compiled = grid_library(opts, 4, 1)
     fi, _ = grid_library(opts, 4, 1, compiled=False)  # the interpreter's: expanded
     assert is_compiled and f.class_name() == "External"
