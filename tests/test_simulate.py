@@ -60,14 +60,15 @@ def test_cvodes_and_idas_agree(summaries):
 
 @pytest.mark.slow  # a fixed-step Radau IIA reference in Python (make test-slow)
 def test_cvodes_and_idas_match_a_fine_fixed_step_reference(model, params):
-    """Radau IIA (3 stages, order 5) with fixed 1 ms steps over the first second of the
-    validation manoeuvre, a scheme independent of the BDF methods of CVODES and IDAS."""
+    """Radau IIA (3 stages, order 5) with fixed 5 ms steps over the first second of the
+    validation manoeuvre, a scheme independent of the BDF methods of CVODES and IDAS (its states
+    within 1.2e-8 of the 1 ms steps' at the end, measured; CVODES's within 2.5e-8 of them)."""
     p = model.param_vector(params)
     x0 = static_state(model, params)
     u = [2000.0, 2000.0]
     dt, n_out = 0.05, 20
     ref = ca.integrator("ref", "collocation", {"x": model.x, "u": model.u, "p": model.p, "ode": model.ode_expr},
-                        0, dt, {"number_of_finite_elements": 50, "collocation_scheme": "radau",
+                        0, dt, {"number_of_finite_elements": 10, "collocation_scheme": "radau",
                                 "interpolation_order": 3})
     xr = x0.copy()
     for _ in range(n_out):

@@ -25,6 +25,7 @@ cross a sample; the run ends when the law returns None (``stopped_by = "controll
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 import time
@@ -78,9 +79,11 @@ class OutputGrid:
         t, dt = self.t, self.dt
         while len(out) < n and t < self.duration - 1e-12:
             t_next = min(float(np.floor(t / dt + 1e-9) + 1) * dt, self.duration)
-            for tc in self.changes:
-                if t + 1e-12 < tc < t_next - 1e-12:
-                    t_next = tc
+            # the first change after t (the entries' times increase strictly, Scenario): the one that can
+            # end the interval early; a search, not a scan (a recorded programme has thousands of entries)
+            k = bisect.bisect_right(self.changes, t + 1e-12)
+            if k < len(self.changes) and self.changes[k] < t_next - 1e-12:
+                t_next = self.changes[k]
             while self.cur + 1 < len(self.starts) and self.starts[self.cur + 1] <= t + 1e-12:
                 self.cur += 1
             out.append((t, t_next, self.torque[self.cur]))
