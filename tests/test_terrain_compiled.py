@@ -11,7 +11,6 @@ import pytest
 from symtrack import toolchain as compiled
 from symtrack.bench.terrain import pool_run
 from symtrack.foundations.errors import ScenarioError
-from symtrack.integrators import grid_idas
 from symtrack.integrators.grid_rosenbrock import grid_library
 from symtrack.simulation.scenario import scenario_from_dict
 
@@ -44,12 +43,7 @@ def _run(integrator, fixed_step_s=0.000625):
 
 @pytest.fixture(scope="module")
 def runs():
-    # the IDAS reference built without CasADi's cse (the same numbers to the last bit: grid_idas.CSE): for
-    # 0.6 s of steps the cse costs more than it saves
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(grid_idas, "CSE", False)
-        idas = _run("idas")
-    return {"idas": idas, "rb": _run("rosenbrock"), "rb_fine": _run("rosenbrock", 0.0003125)}
+    return {"idas": _run("idas"), "rb": _run("rosenbrock"), "rb_fine": _run("rosenbrock", 0.0003125)}
 
 
 @pytest.mark.slow  # IDAS and two fixed-step runs on 768 cells (make test-slow)
