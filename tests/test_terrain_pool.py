@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow
 
 # An 8 m x 4 m field at 0.25 m (512 cells: the pool's peak of 96 active cells is under a quarter of
 # it); both sprockets at 2000 N m for 0.3 s, then the left one idle: the vehicle starts from rest,
-# accelerates and begins to turn. 0.6 s (0.25 m driven): the brute-force reference's steps were most of
+# accelerates and begins to turn. 0.6 s (0.17 m driven): the brute-force reference's steps were most of
 # the test's CPU over the 1 s (0.55 m) it ran before.
 SMALL = {
     "name": "pool_vs_brute",
@@ -52,7 +52,7 @@ def both():
 def test_pool_and_brute_force_give_the_same_vehicle_motion(both):
     world, pool, brute = both
     assert pool.t.shape == brute.t.shape and np.allclose(pool.t, brute.t)
-    assert pool.X[-1, 0] - pool.X[0, 0] > 0.15  # it did drive
+    assert pool.X[-1, 0] - pool.X[0, 0] > 0.1  # it did drive (0.17 m)
     assert np.max(np.abs(pool.X[:, :3] - brute.X[:, :3])) < POSE_TOL_M
     assert np.max(np.abs(pool.X[:, 3:12] - brute.X[:, 3:12]) / (1 + np.abs(brute.X[:, 3:12]))) < RATE_TOL
 
