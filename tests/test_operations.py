@@ -115,8 +115,8 @@ def test_trafficked_share_against_independent_rasters(driven):
 
 @pytest.mark.slow  # a two-operation season driven twice (about 40 s; make test-slow)
 def test_field_persists_bit_for_bit_through_save_and_load(tmp_path):
-    # on a 24 m x 20 m field (the two headland rounds and the one line: 120 m an operation, against 220 m on
-    # SMALL's 36 m x 30 m): what is tested is the field's persistence, not the driving
+    # on a 24 m x 20 m field (two headland rounds and one line: about half the driving of SMALL's
+    # 36 m x 30 m): what is tested is the field's persistence, not the driving
     two = {**SMALL, "operation": {**SMALL["operation"], "size_m": [24.0, 20.0]},
            "season": {"operations": [{"name": "a", "lines": 1},
                                      {"name": "b", "lines": 1, "tracks": "random", "seed": 3}]}}
