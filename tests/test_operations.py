@@ -115,8 +115,11 @@ def test_trafficked_share_against_independent_rasters(driven):
 
 @pytest.mark.slow  # a two-operation season driven twice (about 40 s; make test-slow)
 def test_field_persists_bit_for_bit_through_save_and_load(tmp_path):
-    two = {**SMALL, "season": {"operations": [{"name": "a", "lines": 1}, {"name": "b", "lines": 1,
-                                                                           "tracks": "random", "seed": 3}]}}
+    # on a 24 m x 20 m field (two headland rounds and one line: about half the driving of SMALL's
+    # 36 m x 30 m): what is tested is the field's persistence, not the driving
+    two = {**SMALL, "operation": {**SMALL["operation"], "size_m": [24.0, 20.0]},
+           "season": {"operations": [{"name": "a", "lines": 1},
+                                     {"name": "b", "lines": 1, "tracks": "random", "seed": 3}]}}
     spec = op.operation_spec_from_dict(two)
     mem = op.run_season(spec, None, through_files=False, figures=False)
     disk = op.run_season(spec, tmp_path / "s", through_files=True, figures=False)
@@ -190,11 +193,15 @@ def test_season_4ha_reduced_writes_its_summary_and_animation(tmp_path):
     """The built-in season on a 56 m x 80 m field (the 4 ha run takes about 5 minutes: docs/studies.md):
     every operation complete, every turn driven, the summary's keys, the GIF's frames. 56 m along the lines
     is the shortest field on which the 24 m sprayer still turns (two headland rounds of the 8 m machines
-    and one of the sprayer, then 5, 5, 1 and 4 turns): 950 s of simulated driving against 1233 s on
-    80 m x 80 m."""
+    and one of the sprayer); the first two lines of each operation, one turn each (all lines: 5, 5, 1 and 4
+    turns, 950 s of simulated driving). Driven by the path-following law, not the season's MPC: the season
+    is what is tested here (the MPC's solves were 40 % of the test's CPU; the MPC drives an operation in
+    test_the_mpc_drives_a_small_operation_on_clay)."""
     from PIL import Image
 
-    spec = op.load_operation_spec("season_4ha", ["operation.size_m=[56.0, 80.0]"])
+    spec = op.load_operation_spec("season_4ha", ["operation.size_m=[56.0, 80.0]", "operation.follower=\"law\"",
+                                                 "operation.lines=2"])
+    assert all(op.follower_of(o[0], o[1]) == "law" for o in spec.operations)
     assert all(o[1].turns > 0 for o in spec.operations)
     assert [o[0].name for o in spec.operations] == ["tillage", "drilling", "spraying", "harvest"]
     res = op.run_season(spec, tmp_path / "s")

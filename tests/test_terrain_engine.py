@@ -18,7 +18,7 @@ from small_field import small_field
 
 from symtrack.bench.terrain import brute_force_run, pool_run
 from symtrack.foundations.errors import ScenarioError, SimulationError
-from symtrack.integrators import engine
+from symtrack.integrators import engine, grid_idas
 from symtrack.integrators.settings import STEADY_METHODS
 from symtrack.native.grid_engine_model import build_engine_functions
 from symtrack.simulation import loop
@@ -60,7 +60,11 @@ def _engine_run(sc, settings=None, world=None, kernel=None, mean_stress=False):
 @pytest.fixture(scope="module")
 def idas():
     sc = _scenario("idas", reltol=1e-7, abstol=1e-9)
-    return pool_run(sc, SMALL["run"]["duration_s"])
+    # the IDAS system without CasADi's cse (the same numbers to the last bit: grid_idas.CSE): for 0.6 s
+    # of steps the cse costs more than it saves
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(grid_idas, "CSE", False)
+        return pool_run(sc, SMALL["run"]["duration_s"])
 
 
 @pytest.fixture(scope="module")
@@ -112,10 +116,12 @@ def _radau_step(law, load, m, c, t0, h, y, zm, pm):
     return z, v, w, max(zm, z), (max(pm, pr) if z >= zm else pm)
 
 
-def _one_cell_reference_and_engine(substeps, h=0.01, t_end=0.9):
+def _one_cell_reference_and_engine(substep_counts, h=0.01, t_end=0.9):
     """One cell under a track passing at 3 m/s (the load ramps up over a cell, grows along the
-    track, ramps down): the engine's cell step (exact load at its substep ends) against Radau at
-    rtol 1e-10, the history updated after every macro step in both."""
+    track, ramps down): the engine's cell step (exact load at its substep ends) at each of
+    ``substep_counts`` against Radau at rtol 1e-10, the history updated after every macro step in
+    both. Returns ({substeps: the engine's sinkages}, the reference's); the reference and the
+    cell's Functions are computed once for all substep counts."""
     kern, law, m, c = _one_cell()
     t_in, t_c = 0.1 / 3.0, 1.8 / 3.0
 
@@ -124,30 +130,33 @@ def _one_cell_reference_and_engine(substeps, h=0.01, t_end=0.9):
         return frac * (20000.0 + 10000.0 * min(t, t_c) / t_c)
 
     n = int(round(t_end / h))
-    z = v = zm = pm = 0.0
     zr = vr = zmr = pmr = 0.0
-    p, dp = law(0.0, 0.0, 0.0)
-    mine, ref = [], []
+    ref = []
     for k in range(n):
-        t0 = k * h
-        pl = [load(t0 + j * h / substeps) for j in range(substeps + 1)]
-        work = [0.0, 0.0]
-        z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0] * (substeps + 1), [zm, pm, 0, 0, 0], 0, h,
-                                         substeps, work)
-        pm = max(pm, p) if z >= zm else pm
-        zm = max(zm, z)
-        mine.append(z)
-        zr, vr, _, zmr, pmr = _radau_step(law, load, m, c, t0, h, (zr, vr), zmr, pmr)
+        zr, vr, _, zmr, pmr = _radau_step(law, load, m, c, k * h, h, (zr, vr), zmr, pmr)
         ref.append(zr)
-    return np.array(mine), np.array(ref)
+    mine = {}
+    for substeps in substep_counts:
+        z = v = zm = pm = 0.0
+        p, dp = law(0.0, 0.0, 0.0)
+        zs = []
+        for k in range(n):
+            t0 = k * h
+            pl = [load(t0 + j * h / substeps) for j in range(substeps + 1)]
+            work = [0.0, 0.0]
+            z, v, p, dp, _ = kern._cell_step(z, v, p, dp, pl, [1.0, 0.0] * (substeps + 1), [zm, pm, 0, 0, 0], 0, h,
+                                             substeps, work)
+            pm = max(pm, p) if z >= zm else pm
+            zm = max(zm, z)
+            zs.append(z)
+        mine[substeps] = np.array(zs)
+    return mine, np.array(ref)
 
 
 @pytest.mark.slow  # a brute-force / step-refinement reference (make test-slow)
 def test_one_cell_converges_under_step_refinement():
-    errs = {}
-    for n in (1, 4, 16):
-        mine, ref = _one_cell_reference_and_engine(n)
-        errs[n] = (abs(mine.max() / ref.max() - 1), abs(mine[-1] / ref[-1] - 1))
+    mine, ref = _one_cell_reference_and_engine((1, 4, 16))
+    errs = {n: (abs(z.max() / ref.max() - 1), abs(z[-1] / ref[-1] - 1)) for n, z in mine.items()}
     print("one cell: (peak, after the track) relative error per substep count:", errs)
     # the peak sinkage is right at any substep count; the rebound after the track needs the
     # substeps (the fast unloading on the elastic line): measured 1.8 %, 0.68 %, 0.096 %
@@ -305,7 +314,7 @@ def test_soils_that_differ_in_law_values_share_one_engine_build():
 
 
 @pytest.mark.slow  # a brute-force / step-refinement reference (make test-slow)
-def test_pool_equals_one_channel_per_cell_and_brute_force(fast):
+def test_pool_equals_one_channel_per_cell_and_brute_force(fast, monkeypatch):
     wf, rf = fast
     sc = _scenario()
     nx, ny = wf.grid.shape
@@ -318,7 +327,10 @@ def test_pool_equals_one_channel_per_cell_and_brute_force(fast):
     assert np.array_equal(wb.z_at_pass_end, wf.z_at_pass_end)
     # the lift-off (World.end_pass: CVODES over the whole pool, whose size differs) to its tolerance
     assert np.max(np.abs(wb.storage.z - wf.storage.z)) < 1e-9
-    # brute force (every cell a state of one IDAS system): the engine's tolerances against IDAS
+    # brute force (every cell a state of one IDAS system): the engine's tolerances against IDAS; built
+    # without CasADi's cse (the same numbers to the last bit: grid_idas.CSE; on 768 cells its build cost
+    # more than 0.6 s of steps)
+    monkeypatch.setattr(grid_idas, "CSE", False)
     brute = brute_force_run(_scenario("idas", reltol=1e-7, abstol=1e-9), SMALL["run"]["duration_s"])
     assert np.max(np.abs(rf.X[:, :3] - brute.X[:, :3])) < POSE_TOL_M
     zb = brute.z.ravel()
