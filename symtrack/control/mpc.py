@@ -427,7 +427,7 @@ class PathTrackingMPC:
         self.nk = self.d * self.nc
         self.sx = np.array([_scale(n) for n in self.pred_names] + [TORQUE_SCALE_N_M] * 2)
         self._hull_fn = self._hull_function() if self.hull_quasi_static else None
-        self._build()
+        self._build(solvers)
         self.stats = MPCStats()
         self._w = None
         self._plan_u = None  # (N, 2) commands in N m of the last accepted plan
