@@ -32,13 +32,15 @@ def test_lqr_example(tmp_path):
 
 def test_mpc_example(tmp_path):
     mod = _load("mpc_headland_uturn")
-    s = mod.run(out=tmp_path, solver="fatrop", max_steps=15)
-    assert s["solves"] == 15 and s["failed_solves"] == 0
+    # 5 steps of an 8-step horizon: the example's code path (build, closed loop, files, report) at the
+    # smallest NLP (its build is most of the test's CPU and grows with the horizon)
+    s = mod.run(out=tmp_path, solver="fatrop", max_steps=5, horizon_steps=8)
+    assert s["solves"] == 5 and s["failed_solves"] == 0
     assert s["max_lateral_error_m"] < 0.05  # the run starts on the path
     assert (tmp_path / "summary.json").exists()
     # the report: what ran and how it went, its figures embedded
     page = (tmp_path / "report.html").read_text()
-    assert "symtrack mpc: headland_uturn" in page and "15 solves, 0 failed" in page and "data:image/png" in page
+    assert "symtrack mpc: headland_uturn" in page and "5 solves, 0 failed" in page and "data:image/png" in page
 
 
 @pytest.mark.slow  # a JIT build: gcc of the fatrop solver every run (a short horizon: the smallest C; make test-slow)
@@ -64,7 +66,10 @@ def test_jit_build_runs(tmp_path, monkeypatch):
 
 
 def test_timing_comparison_rows():
-    rows = bench.timing_comparison(max_steps=5, include=("nmpc_ipopt_plain", "linear_mpc"))
+    # an 8-step horizon: the rows are the subject, and the NMPC's build grows with the horizon (18.8 s of
+    # CPU at the scenario's 20 steps, 11.8 s at 8)
+    rows = bench.timing_comparison(max_steps=5, include=("nmpc_ipopt_plain", "linear_mpc"),
+                                   overrides=("mpc.horizon_steps=8",))
     assert [r["controller"] for r in rows] == ["nmpc_ipopt_plain", "linear_mpc"]
     for r in rows:
         assert r["solves"] == 5 and np.isfinite(r["solve_time_median_ms"])

@@ -81,16 +81,18 @@ def test_no_nan_in_the_mpc_s_derivatives_for_the_3d_vehicle():
 
 @pytest.mark.slow
 def test_the_3d_closed_loop_keeps_the_line_along_a_side_slope():
-    """examples/mpc_side_slope_3d.py on an 8 deg side slope with its default solver, the RTI: the MPC
-    holds the line within 5 cm RMS (measured 0.069 cm) without a failed solve (measured 0 of 300, median
-    0.9 ms) where the open loop drifts downhill (0.16 m over 60 m), the lower track carries more and its
-    sprocket drives harder than the upper one."""
+    """examples/mpc_side_slope_3d.py on an 8 deg side slope with its default solver, the RTI, on the first
+    30 m of the line (150 samples; --max-steps): the MPC holds the line within 5 cm RMS (measured 0.071 cm)
+    without a failed solve (measured 0 of 150) where the open loop drifts downhill (0.08 m over 30 m, 0.16 m
+    over the whole 60 m), the lower track carries more and its sprocket drives harder than the upper one."""
     import runpy
 
     ns = runpy.run_path("examples/mpc_side_slope_3d.py")
-    out = ns["main"](["--slope-deg", "8"])
-    assert out["solver"] == "rti" and out["solves"] >= 299 and out["failed_solves"] == 0
-    assert out["rms_lateral_error_m"] <= 0.05 and out["distance_m"] >= 59.0
+    # half the line: the open loop's drift (0.08 m) still well over the 5 cm the test asks, at about 2/3 of
+    # the whole line's CPU (19 s)
+    out = ns["main"](["--slope-deg", "8", "--max-steps", "150"])
+    assert out["solver"] == "rti" and out["solves"] >= 149 and out["failed_solves"] == 0
+    assert out["rms_lateral_error_m"] <= 0.05 and out["distance_m"] >= 29.0
     assert out["open_loop_drift_downhill_m"] > 0.05 > abs(out["lateral_error_last_half_mean_m"])
     assert out["normal_load_right_last_half_N"] > out["normal_load_left_last_half_N"]
     assert out["torque_right_last_half_N_m"] > out["torque_left_last_half_N_m"]

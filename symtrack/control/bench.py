@@ -270,7 +270,7 @@ def prediction_effect(speed_m_s: float = 2.0, radius_m: float = 10.0, horizon_st
         # comparison is with the plant, started at the exact law's trim
         mpc = PathTrackingMPC(model, params, MPCSettings(horizon_steps=N, sample_time_s=sample_time_s, solver="ipopt",
                                                          prediction=pred, prediction_sliding_smoothing=None,
-                                                         prediction_sliding_sign="model"))
+                                                         prediction_sliding_sign="model"), solvers=False)
         fn = mpc.stage_fn
         xs = np.concatenate([st.x[mpc.pred_index], st.u]) / mpc.sx
         xc = st.x[model.layout.block("cells")] if pred == "vehicle" else np.zeros(0)

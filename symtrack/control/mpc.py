@@ -392,7 +392,10 @@ class PathTrackingMPC:
 
     REF_COLUMNS = ("x_m", "y_m", "yaw_rad", "speed_m_s", "curvature_1_per_m")
 
-    def __init__(self, model: SystemModel, params: dict, settings: MPCSettings | None = None):
+    def __init__(self, model: SystemModel, params: dict, settings: MPCSettings | None = None, *,
+                 solvers: bool = True):
+        # solvers=False: the prediction (stage_fn, the NLP's functions and bounds) without its solvers, for
+        # what integrates the prediction and never solves (control.bench.prediction_effect)
         self.settings = settings or MPCSettings()
         s = self.settings
         self.plant_model = model
@@ -424,7 +427,7 @@ class PathTrackingMPC:
         self.nk = self.d * self.nc
         self.sx = np.array([_scale(n) for n in self.pred_names] + [TORQUE_SCALE_N_M] * 2)
         self._hull_fn = self._hull_function() if self.hull_quasi_static else None
-        self._build()
+        self._build(solvers)
         self.stats = MPCStats()
         self._w = None
         self._plan_u = None  # (N, 2) commands in N m of the last accepted plan
@@ -635,7 +638,7 @@ class PathTrackingMPC:
                           math.sqrt(s.weight_along) * e_lon, math.sqrt(s.weight_speed) * e_v,
                           math.sqrt(s.weight_yaw_rate) * e_r)
 
-    def _build(self):
+    def _build(self, solvers: bool = True):
         s = self.settings
         N, nxa, nu, nk = self.N, self.nxa, self.nu, self.nk
         stage, term = self._stage_function()
@@ -668,7 +671,9 @@ class PathTrackingMPC:
         nlp = {"x": w, "p": par, "f": f, "g": g}
         self.nlp = nlp
         self.rti = None
-        if s.solver == "rti":
+        if not solvers:
+            self.solver = None
+        elif s.solver == "rti":
             self.solver = None
             self.rti = RTI(self, s.rti_qp_solver, compiled=s.uses_jit, max_defect=s.rti_max_defect,
                            halvings=s.rti_step_halvings, cache=Path(s.jit_dir) if s.jit_dir else None,
@@ -680,7 +685,7 @@ class PathTrackingMPC:
         fb = s.fallback_solver
         if fb == "auto":
             fb = next(x for x in SOLVERS if x != s.solver)
-        if fb not in (None, "none") and (fb, False) != (s.solver, s.uses_jit):
+        if solvers and fb not in (None, "none") and (fb, False) != (s.solver, s.uses_jit):
             self.fallback = self._nlpsol(nlp, eq, fb, False)
         self.fallback_name = fb
         # bounds
