@@ -332,7 +332,7 @@ def test_mpc_sweep_on_a_scheduler_and_workers_started_here(tmp_path, dask_cluste
         folder = out / "runs" / r["run_id"]
         assert {"summary.json", "trajectory.csv", "path.csv", "scenario.resolved.toml"} <= {
             p.name for p in folder.iterdir()}
-        assert int(r["solves"]) == 4
+        assert int(r["solves"]) == 4 and int(r["failed_solves"]) == 0  # the runs ran, and their solves succeeded
         pids.add(json.loads((folder / "run.json").read_text())["pid"])
     assert os.getpid() not in pids  # run by the workers, not here
 
