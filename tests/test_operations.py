@@ -74,7 +74,7 @@ def test_bad_plans_are_refused_before_anything_runs():
 # the path-following law (the tests of what the engine keeps and of the law's own tracking; the default follower,
 # the MPC, drives test_the_mpc_drives_a_small_operation_on_clay and the built-in seasons)
 # 28 m x 22 m with one headland round: a headland with its corners, two lines and the U-turn between them
-# (150 m driven; 36 m x 30 m with two rounds drove 240 m for the same assertions, at 1.6 x the CPU)
+# (a 123 m path; 36 m x 30 m with two rounds, 235 m, for the same assertions at 1.5 x the CPU)
 SMALL = {**BASE, "operation": {"size_m": [28.0, 22.0], "working_width_m": 4.0, "headland_passes": 1, "turn": "u",
                                "turn_radius_m": 2.0, "lines": 2, "follower": "law"}}
 
@@ -118,7 +118,7 @@ def test_trafficked_share_against_independent_rasters(driven):
 
 @pytest.mark.slow  # a two-operation season driven twice (about 40 s; make test-slow)
 def test_field_persists_bit_for_bit_through_save_and_load(tmp_path):
-    # on a 20 m x 16 m field (one headland round and one line: 120 m per operation, 4/5 of SMALL's driving):
+    # on a 20 m x 16 m field (one headland round and one line: a 61 m path per operation, half SMALL's):
     # what is tested is the field's persistence, not the driving
     two = {**SMALL, "operation": {**SMALL["operation"], "size_m": [20.0, 16.0]},
            "season": {"operations": [{"name": "a", "lines": 1},
@@ -320,7 +320,7 @@ def test_the_mpc_follower_refuses_k_turns():
 
 @pytest.mark.slow  # the MPC's build (cached) and one small operation (about 30 s)
 def test_the_mpc_drives_a_small_operation_on_clay():
-    # on SMALL (73 s driven, 728 solves): the MPC's build is most of the cost, not the driving
+    # on SMALL (73 s of driving, 728 solves): the MPC's build is most of the cost, not the driving
     spec = op.operation_spec_from_dict({**SMALL, "operation": {**SMALL["operation"], "follower": "auto"}})
     assert op.follower_of(spec.operations[0][0], spec.operations[0][1]) == "rti"  # the default: the MPC
     res = op.run_season(spec, None, through_files=False, figures=False)
