@@ -70,9 +70,10 @@ def test_jit_build_runs(tmp_path, monkeypatch):
 
 def test_timing_comparison_rows():
     # an 8-step horizon: the rows are the subject, and the NMPC's build grows with the horizon (18.8 s of
-    # CPU at the scenario's 20 steps, 11.8 s at 8)
+    # CPU at the scenario's 20 steps, 11.8 s at 8); the creep law by an override: the comparison runs the
+    # scenario's [model] as overridden (it built the default model and refused the override)
     rows = bench.timing_comparison(max_steps=5, include=("nmpc_ipopt_plain", "linear_mpc"),
-                                   overrides=("mpc.horizon_steps=8",))
+                                   overrides=("mpc.horizon_steps=8", "model.lateral_law=creep"))
     assert [r["controller"] for r in rows] == ["nmpc_ipopt_plain", "linear_mpc"]
     for r in rows:
         assert r["solves"] == 5 and np.isfinite(r["solve_time_median_ms"])

@@ -28,6 +28,7 @@ import control
 import numpy as np
 
 from ..model import SystemModel
+from ..simulation.builder import system_model
 from . import closedloop
 from . import scenario as scenario_mod
 from .linearization import linearize
@@ -190,8 +191,8 @@ def timing_comparison(scenario: str = "straight_offset", max_steps: int | None =
     --set``) with each controller in ``include``; returns one dict per row."""
     from .mpc import PathTrackingMPC
 
-    model = model or SystemModel()
     base = scenario_mod.load(scenario, overrides)
+    model = model or system_model(base.model, base.surface)  # the scenario's [model] (an override's too)
     rows = []
     fast = dict(FAST_CONFIG if fast_config is None else fast_config)
     if jit_dir is not None:
