@@ -48,34 +48,36 @@ def map_pngs(counts, z, fs: OperationSettings, label: str) -> dict:
             "rut_map.png": field_plots.sinkage_map_png(z, ext, f"rut depth: {label}")}
 
 
-def animation(r: OperationResult, terrain: Terrain, fs: OperationSettings, label: str, progress: bool) -> bytes:
-    """The operation's GIF over the rut map (:func:`symtrack.studies.field_plots.operation_gif`), with progress."""
+def _gif(what: str, progress: bool, draw) -> bytes:
+    """``draw(progress=...)``'s GIF, its frames counted on a progress bar named ``what``."""
     from ...foundations.progress import Progress
-    from .. import field_plots
 
-    bar = Progress(1.0, f"animation {fs.name}", enabled=progress)
-    gif = field_plots.operation_gif(terrain.z.reshape(r.counts.shape), r.first_contact_s, r.trajectory,
-                                    (0.0, fs.size_m[0], 0.0, fs.size_m[1]), label,
-                                    progress=lambda k, n: bar.update(k / n, f"frame {k}/{n}"))
+    bar = Progress(1.0, what, enabled=progress)
+    gif = draw(progress=lambda k, n: bar.update(k / n, f"frame {k}/{n}"))
     bar.close()
     return gif
+
+
+def animation(r: OperationResult, terrain: Terrain, fs: OperationSettings, label: str, progress: bool) -> bytes:
+    """The operation's GIF over the rut map (:func:`symtrack.studies.field_plots.operation_gif`), with progress."""
+    from .. import field_plots
+
+    return _gif(f"animation {fs.name}", progress, lambda progress: field_plots.operation_gif(
+        terrain.z.reshape(r.counts.shape), r.first_contact_s, r.trajectory, (0.0, fs.size_m[0], 0.0, fs.size_m[1]),
+        label, progress=progress))
 
 
 def season_animation(results: list, terrain: Terrain, fs: OperationSettings, labels: list, title: str,
                      progress: bool) -> bytes:
     """The season's GIF: every operation in order over the season's rut map
     (:func:`symtrack.studies.field_plots.season_gif`), with progress."""
-    from ...foundations.progress import Progress
     from .. import field_plots
 
-    bar = Progress(1.0, "animation of the season", enabled=progress)
     ops = [(label, r.first_contact_s, r.trajectory) for r, label in zip(results, labels, strict=True)
            if r.first_contact_s is not None]
-    gif = field_plots.season_gif(terrain.z.reshape(results[0].counts.shape), ops,
-                                 (0.0, fs.size_m[0], 0.0, fs.size_m[1]), title,
-                                 progress=lambda k, n: bar.update(k / n, f"frame {k}/{n}"))
-    bar.close()
-    return gif
+    return _gif("animation of the season", progress, lambda progress: field_plots.season_gif(
+        terrain.z.reshape(results[0].counts.shape), ops, (0.0, fs.size_m[0], 0.0, fs.size_m[1]), title,
+        progress=progress))
 
 
 def counts_npz(counts, cell_m) -> bytes:

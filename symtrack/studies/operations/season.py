@@ -222,8 +222,8 @@ def run_season(spec: OperationSpec, out=None, *, progress: bool = False, through
             tmp.cleanup()
     fs0 = spec.base
     if folder is not None and figures and len(results) > 1:
-        files["animation.gif"] = season_animation(results, terrain, fs0, [r.name for r in results],
-                                                  f"{spec.name}", progress)
+        files["animation.gif"] = season_animation(results, terrain, fs0, [r.name for r in results], spec.name,
+                                                  progress)
     counts = np.minimum(total, np.iinfo(np.uint16).max).astype(np.uint16)
     stressed = (terrain.sigma_max[:, 0] > 0).reshape(counts.shape) if terrain.subsoil_depths_m else \
         (terrain.z != 0).reshape(counts.shape)
