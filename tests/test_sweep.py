@@ -348,7 +348,10 @@ def test_ctrl_c_cancels_the_runs_in_flight_and_keeps_the_finished_ones(tmp_path)
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 180
-        while not list((out / "runs").glob("*/summary.json")) and time.monotonic() < deadline:
+        # a committed run: its folder's own name (pathlib's glob also finds a run's staging folder beside it,
+        # ".<id>.staging-*", whose summary.json is written before the run is committed)
+        while not [p for p in (out / "runs").glob("*/summary.json") if not p.parent.name.startswith(".")] \
+                and time.monotonic() < deadline:
             assert proc.poll() is None, proc.communicate()
             time.sleep(0.2)
         os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C on a terminal signals the whole process group
@@ -463,7 +466,10 @@ def test_a_lost_scheduler_ends_the_sweep_with_a_message_and_a_rerun_resumes(tmp_
     th.start()
     try:
         deadline = time.monotonic() + 180
-        while not list((out / "runs").glob("*/summary.json")) and time.monotonic() < deadline:
+        # a committed run: its folder's own name (pathlib's glob also finds a run's staging folder beside it,
+        # ".<id>.staging-*", whose summary.json is written before the run is committed)
+        while not [p for p in (out / "runs").glob("*/summary.json") if not p.parent.name.startswith(".")] \
+                and time.monotonic() < deadline:
             time.sleep(0.05)
     finally:
         cluster.close()
