@@ -172,7 +172,11 @@ def test_an_mpc_resolved_scenario_holds_every_model_option_and_the_version(tmp_p
 
     sc = mpc_scenario.load("straight_offset")  # the defaults: no [model] section in the file
     res = closedloop.run(sc, max_steps=2)
-    text = closedloop.closed_loop_files(res)["scenario.resolved.toml"]
+    files = closedloop.closed_loop_files(res)
+    text = files["scenario.resolved.toml"]
+    # the report names the machine, the soil and the plant in the simulation reports' words
+    assert (f"Ran: {sc.vehicle_preset}, " in files["report.html"].decode()
+            and f"on {sc.soil_preset}, the {res.summary['plant']} plant" in files["report.html"].decode())
     doc = tomllib.loads(text)
     assert doc["symtrack_version"] == __version__
     defaults = ModelOptions()

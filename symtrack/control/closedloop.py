@@ -463,7 +463,8 @@ def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
     ``control`` figures of :mod:`symtrack.reports.figures`, report.html (what ran, the summary, the
     figures and the scenario on one page), summary.json."""
     from ..reports.figures import figures  # matplotlib: imported when a run draws
-    from ..reports.html import machine_facts, report_html
+    from ..reports.html import report_html
+    from ..reports.run_files import what_ran
 
     scenario_toml = to_toml(res.scenario.resolved_dict())
     images = figures("control", res)
@@ -472,9 +473,8 @@ def closed_loop_files(res: ClosedLoopResult) -> dict[str, str | bytes]:
             f"the path of scenario '{sm.get('scenario')}': {sm.get('solves')} solves, {sm.get('failed_solves')} "
             f"failed, median {sm.get('solve_time_median_ms', float('nan')):.3g} ms.")
     sc = res.scenario
-    (_, vehicle), (_, soil) = machine_facts(sc.vehicle_preset, sc.soil_preset, getattr(sc, "params", None))
-    note += (f" Ran: {vehicle} on {soil}, the {sm.get('plant', sc.plant)} plant"
-             + (f", integrator {sm['plant_integrator']}." if sm.get("plant_integrator") else "."))
+    note += " " + what_ran(sc, sm, ground=f"the {sm.get('plant', sc.plant)} plant",
+                           integrator=sm.get("plant_integrator") or "")
     return {"trajectory.csv": trajectory_csv(res), "path.csv": path_csv(res), "scenario.resolved.toml": scenario_toml,
             **images, "report.html": report_html(f"symtrack mpc: {sm.get('scenario')}", sm, images, scenario_toml,
                                                  note=note).encode(),

@@ -181,15 +181,19 @@ def extras(kinds) -> list[str]:
     return registry.extras(kinds)
 
 
-def what_ran(scenario, summary: dict) -> str:
-    """One sentence of a run's report: the machine with the mass it ran with, the soil, the terrain and
-    the integrator (the resolved scenario at the page's end has every value)."""
+def what_ran(scenario, summary: dict, ground: str | None = None, integrator: str | None = None) -> str:
+    """One sentence of a run's report: the machine with the mass it ran with, the soil, the terrain (or
+    ``ground``, e.g. an MPC's plant) and the integrator (``integrator``, else the summary's or the
+    scenario's; an empty string leaves it out). The resolved scenario at the page's end has every value."""
     from .html import machine_facts
 
-    (_, vehicle), (_, soil) = machine_facts(scenario.vehicle_preset, scenario.soil_preset, scenario.params)
-    terrain = "the homogeneous terrain" if scenario.terrain is None else "the grid terrain"
-    integrator = summary.get("integrator", scenario.run.integrator)
-    return f"Ran: {vehicle} on {soil}, {terrain}, integrator {integrator}."
+    (_, vehicle), (_, soil) = machine_facts(scenario.vehicle_preset, scenario.soil_preset,
+                                            getattr(scenario, "params", None))
+    if ground is None:
+        ground = "the homogeneous terrain" if scenario.terrain is None else "the grid terrain"
+    if integrator is None:
+        integrator = summary.get("integrator", scenario.run.integrator)
+    return f"Ran: {vehicle} on {soil}, {ground}" + (f", integrator {integrator}." if integrator else ".")
 
 
 def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[dict],
