@@ -680,13 +680,17 @@ class PathTrackingMPC:
                            relinearisations=s.rti_relinearisations)
         else:
             self.solver = self._nlpsol(nlp, eq, s.solver, s.uses_jit)
-        # the fallback: interpreted (no compilation), tried when the primary solver fails
+        # the fallback: interpreted (no compilation), tried when the primary solver fails and for the RTI's
+        # cold start. On the MX graph, not expanded to SX: building IPOPT on the expanded U-turn NLP took
+        # 3.0 s of CPU in every process that ran an MPC, on the MX graph 0.3 s, and the few solves it makes
+        # (the cold start, a rare fallback) cost less than the difference (the U-turn's closed loop 10.0 ->
+        # 7.6 s of CPU, the same figures to 1e-6; docs/control.md)
         self.fallback = None
         fb = s.fallback_solver
         if fb == "auto":
             fb = next(x for x in SOLVERS if x != s.solver)
         if solvers and fb not in (None, "none") and (fb, False) != (s.solver, s.uses_jit):
-            self.fallback = self._nlpsol(nlp, eq, fb, False)
+            self.fallback = self._nlpsol(nlp, eq, fb, False, expand=False)
         self.fallback_name = fb
         # bounds
         rate = s.torque_rate_max_N_m_s * s.sample_time_s / TORQUE_SCALE_N_M
@@ -704,13 +708,15 @@ class PathTrackingMPC:
             ubx[o + nxa:o + nxa + nu] = tmax
         self.lbx0, self.ubx0 = lbx, ubx
 
-    def _nlpsol(self, nlp, eq, solver: str, jit: bool):
+    def _nlpsol(self, nlp, eq, solver: str, jit: bool, expand: bool | None = None):
         s = self.settings
         common = {"print_time": False, "error_on_fail": False}
         # jit: the NLP's functions compiled once into the solver cache (symtrack.control.solver_cache,
         # keyed by the problem, the CasADi version and the flags) and loaded by the next process
-        # without a compiler; expand off (the expanded SX graph takes minutes of gcc, notes section 6)
-        common["expand"] = not jit
+        # without a compiler; expand off (the expanded SX graph takes minutes of gcc, notes section 6).
+        # ``expand``: the interpreted solver on the SX graph (faster solves, seconds to build) or the MX
+        # graph (the fallback's); default: expanded unless jit
+        common["expand"] = (not jit) if expand is None else bool(expand)
         if solver == "ipopt":
             opts = dict(common)
             # Primal warm start only: with warm_start_init_point = yes (and the shifted multipliers)

@@ -45,6 +45,7 @@ interpolated between the step's two poses. So the Functions are:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 
@@ -53,6 +54,7 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 from ..foundations.params import ParamLayout
+from ..toolchain import digest
 from ..model import SystemModel
 from ..model.layout import StateLayout
 from ..soil import law as soil_law
@@ -327,6 +329,13 @@ class EngineFunctions:
     def all(self):
         return (self.vehicle_step, self.vehicle_a, self.outputs, self.cell_geo, *self.cell_law, self.cell_history,
                 self.cell_entry)
+
+    @functools.cached_property
+    def serial_digest(self) -> str:
+        """SHA-256 of the serialised Functions (:meth:`all`), the Functions' part of the engine library's
+        cache key: computed once per EngineFunctions (serialising the vehicle step's Functions takes a
+        good part of a second, and every engine on these Functions asks for the key)."""
+        return digest(*(f.serialize() for f in self.all()))
 
 
 # the entries of a soil's law row after its law vector (SoilLaw.vector_names)

@@ -23,6 +23,7 @@ models, the same ones the full fidelity uses:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import tomllib
@@ -34,7 +35,16 @@ import numpy as np
 from ..foundations.config import check_keys, number
 from ..foundations.errors import ScenarioError
 from ..soil import subsoil
-from ..vehicles.tyre import Tyre, footprint_table, load_capacity_kN, recommended_inflation_kPa
+from ..toolchain.tables import cached_arrays
+from ..vehicles import tyre as tyre_model
+from ..vehicles.tyre import (
+    FootprintTable,
+    Tyre,
+    contact,
+    footprint_table,
+    load_capacity_kN,
+    recommended_inflation_kPa,
+)
 
 __all__ = ["BUILTIN_FLEET", "COVER_FRACTIONS", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec",
            "first_pass_rut_m", "load_fleet", "parse_fleet", "plastic_rut_m", "rut_table_m", "stress_profile",
@@ -304,6 +314,25 @@ def _profile_from(stress_fn, x_lo, x_hi, v_lo, v_hi, step):
     return v, best
 
 
+@functools.lru_cache(maxsize=32)
+def footprint_table_cached(tyre: Tyre, wheel_load_kN: float, inflation_kPa: float, element_m: float, depths_m: tuple,
+                           xi: float, reach_m: float, step_m: float | None = None):
+    """:func:`symtrack.vehicles.tyre.footprint_table`'s (contact, table), the table computed once for the
+    machine's cache and read there by every other process (symtrack/toolchain/tables.py): a region study's
+    workers, and the next study, build each tyre's table once instead of once per process (seconds each)."""
+    args = repr((dataclasses.astuple(tyre), float(wheel_load_kN), float(inflation_kPa), float(element_m),
+                 tuple(float(d) for d in depths_m), float(xi), float(reach_m),
+                 None if step_m is None else float(step_m)))
+
+    def compute():
+        _, tb = footprint_table(tyre, wheel_load_kN, inflation_kPa, element_m, depths_m, xi, reach_m, step_m)
+        return {"sz": tb.sz, "pm": tb.pm, "step_m": np.array(tb.step_m)}
+
+    a = cached_arrays("footprint", args, compute, ("sz", "pm", "step_m"), modules=(tyre_model, subsoil))
+    return (contact(tyre, wheel_load_kN, inflation_kPa, element_m),
+            FootprintTable(float(a["step_m"]), tuple(float(d) for d in depths_m), float(xi), a["sz"], a["pm"]))
+
+
 @functools.lru_cache(maxsize=64)
 def _profile_cached(key, machine: Machine, depths: tuple, xi: float, step: float, reach: float) -> StressProfile:
     depths_a = np.asarray(depths, dtype=float)
@@ -322,7 +351,7 @@ def _profile_cached(key, machine: Machine, depths: tuple, xi: float, step: float
         return StressProfile(v, s, depths, xi)
     tables = []
     for w in machine.wheels:
-        _, tb = footprint_table(w.tyre, w.load_kN, w.inflation_kPa, TYRE_ELEMENT_M, depths, xi, reach, step)
+        _, tb = footprint_table_cached(w.tyre, w.load_kN, w.inflation_kPa, TYRE_ELEMENT_M, depths, xi, reach, step)
         tables.append(tb)
 
     def fn(uu, vv):

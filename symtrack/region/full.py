@@ -43,9 +43,8 @@ from ..soil import density
 from ..studies.operations import operation_of, plan_operation, run_operation
 from ..terrain.storage import Grid, Terrain
 from ..vehicles import wheeled
-from ..vehicles.tyre import footprint_table
 from .fast import SeasonMaps
-from .fleet import TYRE_ELEMENT_M
+from .fleet import TYRE_ELEMENT_M, footprint_table_cached
 
 __all__ = ["DEFAULT_VEHICLE", "FULL_KEYS", "FullFidelity", "check_full_operations", "engine_operation",
            "parse_full_fidelity", "run_season_full"]
@@ -182,7 +181,7 @@ def _wheeled_drive(op, terrain: Terrain, xi: float) -> tuple:
     poses = np.column_stack([p.x[:end], p.y[:end], p.psi[:end]])
     wheels, tables = [], []
     for w in op.machine.wheels:  # (built once per worker process for each tyre, load and soil)
-        c, tb = footprint_table(w.tyre, w.load_kN, w.inflation_kPa, TYRE_ELEMENT_M, depths, xi,
+        c, tb = footprint_table_cached(w.tyre, w.load_kN, w.inflation_kPa, TYRE_ELEMENT_M, depths, xi,
                                 wheeled.DEFAULT_REACH_M + 0.5 * w.tyre.diameter_m, TABLE_STEP_M)
         wheels.append(wheeled.Wheel(c, w.x_m, w.y_m))
         tables.append(tb)

@@ -73,17 +73,19 @@ def column_figures(res, depths_m=subsoil.DEFAULT_DEPTHS_M) -> dict:
     qx = np.concatenate([px, px])
     qy = np.concatenate([np.full(POINTS_ALONG, y0) for y0 in sides.values()])
     r = np.hypot(qx[:, None] - ex_all[None, :], qy[:, None] - ey_all[None, :])
-    sig = np.zeros(depths.size)
-    for k in steps:
+    # the elements' forces at each of the steps, one column per step
+    F = np.empty((ex_all.size, steps.size))
+    for c, k in enumerate(steps):
         forces = []
         for side in sides:
             pe = p[f"p_idler_{side}"][k] + (p[f"p_sprocket_{side}"][k] - p[f"p_idler_{side}"][k]) * u
             f = np.repeat(np.maximum(pe, 0.0), n_across)
             total = f.sum()
             forces.append(f * (max(p[f"normal_load_{side}"][k], 0.0) / total) if total > 0 else 0.0 * f)
-        F = np.concatenate(forces)
-        for j, z in enumerate(depths):
-            sig[j] = max(sig[j], float(subsoil.frohlich_point(F[None, :], r, z, xi).sum(axis=1).max()))
+        F[:, c] = np.concatenate(forces)
+    # Fröhlich's stress is linear in the force: the stress of a unit force from every element at every
+    # point, once per depth, times the steps' forces
+    sig = np.array([float(np.max(subsoil.frohlich_point(1.0, r, z, xi) @ F, initial=0.0)) for z in depths])
     # the fold of the one pass (density.pass_update's operations) and the rut's bound
     a = density.soil_arrays([params], depths)
     geo = density.geostatic_table([params], depths)[0]

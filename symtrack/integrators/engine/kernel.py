@@ -100,7 +100,7 @@ def library(fns):
     dstop = resources.files("symtrack.native").joinpath("distance_stop.h").read_bytes()
     dsrc = soil_dispatch_c(fns, vehicle_work_sizes(fns)).encode()
     flags, target = native_cflags(cc)
-    key = digest(*(f.serialize() for f in fns.all()), csrc, hsrc, qsrc, dstop, dsrc, casadi_tag(BUILD_VERSION), target)
+    key = digest(fns.serial_digest, csrc, hsrc, qsrc, dstop, dsrc, casadi_tag(BUILD_VERSION), target)
 
     def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-enginegen-") as scratch:
