@@ -54,7 +54,6 @@ import numpy as np
 
 from ..foundations.errors import ParameterError
 from ..foundations.params import ParamLayout
-from ..toolchain import digest
 from ..model import SystemModel
 from ..model.layout import StateLayout
 from ..soil import law as soil_law
@@ -67,6 +66,7 @@ from ..terrain.channels import (
     NH,
     build_cell_functions,
 )
+from ..toolchain import digest
 from ..vehicles import registry as vehicle_registry
 from ..vehicles.base import CONTACT_HULL
 from ..vehicles.planar import ALGEBRAIC, ENDS, PLANAR_LAYOUT, TRACK_SOIL_PARAM_NAMES, TRACKS
