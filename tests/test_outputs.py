@@ -76,6 +76,32 @@ def test_all_figures_must_be_true_or_false(tmp_path, capsys):
         load_field_spec("field_traffic", ["run.all_figures=true"])
 
 
+def test_figures_false_writes_the_run_files_without_figures(tmp_path, capsys):
+    """run.figures = false (a sweep's many runs): no image in the folder, report.html says why and how to
+    draw them, the run's files as with figures; a terrain run of two passes and a homogeneous run."""
+    out = tmp_path / "grid"
+    assert main(["simulate", "multipass", "--out", str(out), "--quiet", *SHORT, "--set", "terrain.passes=2",
+                 "--set", "run.figures=false"]) == 0
+    assert not list(out.rglob("*.png")) and not list(out.rglob("*.gif"))
+    for name in ("summary.json", "pass_1/scenario.resolved.toml", "pass_1/trajectory.csv", "pass_2/summary.json"):
+        assert (out / name).is_file(), name
+    page = (out / "report.html").read_text()
+    assert "No figures drawn (run.figures = false)" in page and "<figcaption>" not in page
+    assert "\nfigures = false" in (out / "pass_2" / "scenario.resolved.toml").read_text()
+    homog = tmp_path / "homog"
+    assert main(["simulate", "validation", "--out", str(homog), "--quiet", "--set", "run.duration_s=0.3",
+                 "--set", "run.figures=false"]) == 0
+    assert not list(homog.glob("*.png")) and (homog / "trajectory.csv").is_file()
+    assert (homog / "validation_table.md").is_file() and (homog / "summary.json").is_file()
+    # bad values and a contradiction are refused before any work
+    for sets, words in ((["run.figures=0"], "run.figures = 0"),
+                        (["run.figures=false", "run.all_figures=true"], "set one of them")):
+        bad = tmp_path / "bad"
+        args = [a for kv in sets for a in ("--set", kv)]
+        assert main(["simulate", "validation", "--out", str(bad), "--quiet", *args]) == 2
+        assert words in capsys.readouterr().err and not bad.exists()
+
+
 def test_the_bench_row_of_the_outputs_adds_up():
     """symtrack bench's output-cost row (symtrack/bench/outputs.py) on a short pass: the command
     and the timed run ran, the parts add up to the timed run; no wall-time bound."""

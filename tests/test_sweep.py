@@ -125,6 +125,7 @@ name = "grid_fault"
 [run]
 duration_s = 0.05
 integrator = "grid_fast"
+figures = false
 [vehicle]
 preset = "reference_crawler"
 [soil]

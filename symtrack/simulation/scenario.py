@@ -16,6 +16,7 @@ Schema (every key optional unless marked required; unknown keys are errors)::
     stop_after_distance_m = 20.0   # (0, 1e6] or "none": stop once the CG has covered this path length ...
     stop_distance_event = "idle"   # ... counted from this [[torque]] event (default: from t = 0)
     all_figures = false            # true: also the slow figures (pass animations, earlier passes' plots)
+    figures = true                 # false: the run folder without its figures (a sweep's many runs)
     [model]                        # numerical/structural options, see symtrack.model.ModelOptions
     traction_sign = "smooth"       # smooth | tanh | sign
     tanh_steepness_per_m = 1000.0
@@ -111,6 +112,9 @@ class RunSettings:
     # the default writes the figures read first, in about a tenth of the time
     all_figures: bool = False
     fixed_step_tolerance: float = FIXED_STEP_TOLERANCE
+    # the run folder's figures at all: false writes its files without them (report.html says so), for the
+    # many runs of a sweep, where drawing each run's figures took twice the simulation's own CPU
+    figures: bool = True
 
     @property
     def macro_step_s(self) -> float:
@@ -126,7 +130,8 @@ class RunSettings:
 
 
 SIMULATION_RUN_KEYS = ("duration_s", "output_dt_s", "integrator", "reltol", "abstol", "stop_after_distance_m",
-                       "stop_distance_event", "fixed_step_s", "fixed_step_tolerance", "compiled", "all_figures")
+                       "stop_distance_event", "fixed_step_s", "fixed_step_tolerance", "compiled", "all_figures",
+                       "figures")
 
 # the [run] keys as parse_run checks them (their defaults: RunSettings; docs/scenarios.md's table is made from both)
 RUN_KEYS = {k.name: k for k in (
@@ -147,6 +152,8 @@ RUN_KEYS = {k.name: k for k in (
         0, 0.1),
     Key("compiled", "cvodes and idas on the compiled dynamics and Jacobian", choices=(True, False)),
     Key("all_figures", "also the slow figures of a terrain run (pass animations, earlier passes' plots)",
+        choices=(True, False)),
+    Key("figures", "false: the run folder without its figures (report.html says so; for a sweep's many runs)",
         choices=(True, False)),
     Key("rms_exclude_first_m", "(an MPC run's) the path length before the RMS tracking error is counted [m]", 0, 1e6),
 )}
@@ -264,8 +271,15 @@ def parse_run(t: dict, keys=SIMULATION_RUN_KEYS, defaults: RunSettings = RunSett
     if not isinstance(all_figures, bool):
         raise ScenarioError(f"run.all_figures = {all_figures!r} must be true or false (true: also the pass "
                             "animations and the earlier passes' plots)")
+    figs = t.get("figures", d.figures)
+    if not isinstance(figs, bool):
+        raise ScenarioError(f"run.figures = {figs!r} must be true or false (false: the run folder without its "
+                            "figures)")
+    if all_figures and not figs:
+        raise ScenarioError("run.all_figures = true asks for the slow figures too, run.figures = false for none: "
+                            "set one of them")
     return RunSettings(duration, out_dt, integ, reltol, abstol, stop, ev, fixed, compiled, rms, all_figures,
-                       fixed_step_tolerance=fixed_tol)
+                       fixed_step_tolerance=fixed_tol, figures=figs)
 
 
 def _parse_model(t: dict) -> ModelOptions:

@@ -83,9 +83,9 @@ TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain",
 FIELD_KEYS = ("size_m", "cell_m", "pattern", "passes", "seed", "lane_spacing_m", "lanes", "headland_m",
               "pass_length_m", "speed_m_s", "torque_N_m")
 # [run] keys of a field spec: a simulation's, without the stop rule (the field sets it) and
-# all_figures (a field study draws its own figures, none per pass)
+# the run folder's figures (a field study draws its own figures, none per pass)
 FIELD_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS
-                       if k not in ("stop_after_distance_m", "stop_distance_event", "all_figures"))
+                       if k not in ("stop_after_distance_m", "stop_distance_event", "all_figures", "figures"))
 # [terrain] keys the [field] section sets
 TERRAIN_KEYS_OF_FIELD = ("size_m", "cell_m", "origin_m", "passes", "initial_state")
 DEFAULT_PASS_LIMIT_S = 300.0

@@ -25,7 +25,9 @@ OPERATION_KEYS = ("name", "size_m", "boundary_file", "cell_m",
                   "torque_limit_N_m", "max_lateral_error_m", "vehicle", "lines", "turn_lane_m", "follower")
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "terrain", "engine", "operation", "season")
 SEASON_KEYS = ("operations", "compare", "tracks")
-OPERATION_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS if k not in ("stop_after_distance_m", "stop_distance_event"))
+# (an operation draws its own figures: the run folder's switch is not one of its keys)
+OPERATION_RUN_KEYS = tuple(k for k in SIMULATION_RUN_KEYS
+                           if k not in ("stop_after_distance_m", "stop_distance_event", "figures"))
 TERRAIN_KEYS_OF_OPERATION = ("size_m", "cell_m", "origin_m", "passes", "initial_state")
 
 # the path's sampling (control.path.Path) and the room the footprint check keeps to the border
