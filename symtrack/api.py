@@ -291,7 +291,7 @@ def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
     return build_plant(scenario, terrain)
 
 
-def simulate(scenario, *, integrator: str | None = None, terrain=None, progress: bool = False) -> Result:
+def simulate(scenario, *, integrator: str | None = None, terrain=None, progress: bool | None = None) -> Result:
     """Run a scenario: its torque programme until its stop rule, every pass of a terrain study.
 
     Parameters
@@ -304,8 +304,9 @@ def simulate(scenario, *, integrator: str | None = None, terrain=None, progress:
     terrain : Terrain or path, optional
         A grid terrain to start from (instead of a new field); the scenario needs a
         ``[terrain]`` section.
-    progress : bool
-        Show progress on stderr.
+    progress : bool or None
+        Show progress on stderr: None (the default) once the run has taken 2 s (a quick run says
+        nothing), True from the start, False never.
 
     Returns
     -------

@@ -205,3 +205,32 @@ def test_a_progress_bar_says_a_slow_step_at_once():
     quiet = Progress(8, "x", enabled=False, stream=s)
     quiet.say("nothing")
     assert "nothing" not in s.getvalue()
+
+
+def test_a_python_run_shows_its_progress_once_it_takes_two_seconds(capsys):
+    """symtrack.simulate's default (progress=None): a quick run writes nothing on stderr, a run past 2 s says
+    where it is (symtrack/foundations/progress.py)."""
+    import io
+
+    from symtrack.foundations.progress import SLOW_STEP_S, Progress
+
+    symtrack.simulate(symtrack.load_scenario("validation", {"run.duration_s": 0.2}))
+    assert capsys.readouterr().err == ""
+    quick, slow = io.StringIO(), io.StringIO()
+    bar = Progress(1.0, "quick", enabled=None, stream=quick)
+    bar.update(0.5)
+    bar.close()
+    assert quick.getvalue() == ""
+    bar = Progress(1.0, "slow", enabled=None, stream=slow)
+    bar.update(0.1)
+    assert slow.getvalue() == ""
+    bar._t0 -= SLOW_STEP_S  # as if the run had taken 2 s
+    bar.update(0.5)
+    bar.close()
+    assert "slow:  50.0%" in slow.getvalue() and "slow: 100.0%" in slow.getvalue()
+    silent = io.StringIO()
+    bar = Progress(1.0, "off", enabled=False, stream=silent)
+    bar._t0 -= SLOW_STEP_S
+    bar.update(0.5)
+    bar.close()
+    assert silent.getvalue() == ""

@@ -412,7 +412,7 @@ def _run(doc: dict, out: CaseOutcome, label: str):
             prev = signal.signal(signal.SIGPROF, _alarm)
             signal.setitimer(signal.ITIMER_PROF, timeout_s)
         try:
-            res = simulate(built)
+            res = simulate(built, progress=False)
         finally:
             if timed:
                 signal.setitimer(signal.ITIMER_PROF, 0.0)

@@ -55,7 +55,7 @@ def phases(name: str, overrides: list[str], out: str, t0: float) -> dict:
 
     sc = load_scenario(name, overrides)
     t2 = time.perf_counter()
-    res = simulate(sc)
+    res = simulate(sc, progress=False)
     t3 = time.perf_counter()
     files = simulation_files(res.scenario, res.runs, res.summary, res.pass_summaries, res._study)
     t4 = time.perf_counter()

@@ -37,7 +37,7 @@ def serial_wall_time(scenario: str, key: str, values, overrides: list[str], out:
     t0 = time.perf_counter()
     sim = 0.0
     for k, v in enumerate(values):
-        res = simulate(load_scenario(scenario, [*overrides, f"{key}={v!r}"]))
+        res = simulate(load_scenario(scenario, [*overrides, f"{key}={v!r}"]), progress=False)
         res.write(out / f"run_{k}")
         sim += res.summary["sim_time_s"]
     return time.perf_counter() - t0, sim

@@ -19,13 +19,15 @@ SLOW_STEP_S = 2.0  # timed_step says what a step does once it has taken this lon
 
 
 class Progress:
-    """Progress of one task as a fraction of ``total``. ``enabled=False`` shows nothing."""
+    """Progress of one task as a fraction of ``total``. ``enabled=False`` shows nothing; ``None`` shows it once
+    the task has taken :data:`SLOW_STEP_S` (a quick task says nothing, a long one is never silent)."""
 
-    def __init__(self, total: float, label: str = "", enabled: bool = True, stream=None):
+    def __init__(self, total: float, label: str = "", enabled: bool | None = True, stream=None):
         self.total = max(float(total), 1e-12)
         self.label = label
         self.stream = stream or sys.stderr
-        self.enabled = enabled
+        self.delay_s = SLOW_STEP_S if enabled is None else 0.0  # nothing shown before this
+        self.enabled = enabled is not False
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self._last = 0.0
         self._t0 = time.perf_counter()
@@ -38,6 +40,8 @@ class Progress:
         if not self.enabled:
             return
         now = time.perf_counter()
+        if now - self._t0 < self.delay_s:
+            return
         if now - self._last < (0.1 if self.tty else LOG_EVERY_S) and done < self.total:
             return
         self._last = now
@@ -47,7 +51,7 @@ class Progress:
         """Show ``note`` now, at the progress reached (a step between the updates that takes seconds of its
         own, such as drawing maps: the bar says what it waits for)."""
         self._note = note
-        if self.enabled:
+        if self.enabled and time.perf_counter() - self._t0 >= self.delay_s:
             self._last = time.perf_counter()
             self._write(self._last)
 
@@ -68,8 +72,8 @@ class Progress:
     def close(self, complete: bool = True):
         """End the bar; ``complete`` shows 100 % (the task ended by its own rule, which may be
         before the nominal total, e.g. a distance reached before the time limit)."""
-        if not self.enabled:
-            return
+        if not self.enabled or (self.delay_s and not self._last):
+            return  # off, or a quick task that never showed its bar
         if complete:
             self._done = self.total
         self._write(time.perf_counter(), end=True)

@@ -151,7 +151,7 @@ class Built:
         :class:`~symtrack.terrain.storage.Terrain` or terrain file, if given)."""
         return make_plant(self.scenario, terrain=terrain, model=self.model, spec=self.spec)
 
-    def run(self, terrain=None, progress: bool = False, record_every_s: float | None = None) -> Outcome:
+    def run(self, terrain=None, progress: bool | None = False, record_every_s: float | None = None) -> Outcome:
         """Run the scenario on a fresh plant (:meth:`plant`): the one time loop
         (:func:`symtrack.simulation.loop.run`) until its stop rule, on the grid terrain every
         pass (:func:`~symtrack.simulation.passes.run_passes`, the grid plant keeping a snapshot

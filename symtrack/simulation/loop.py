@@ -161,7 +161,7 @@ def _xy_dist(a, b) -> float:
 
 
 
-def run(scenario, plant, progress: bool = False, label: str | None = None, torque_law=None,
+def run(scenario, plant, progress: bool | None = False, label: str | None = None, torque_law=None,
         start: StartPoint | None = None, finish: bool = True) -> RunResult:
     """Drive ``plant`` through ``scenario``'s torque programme until its stop rule.
 
@@ -172,8 +172,8 @@ def run(scenario, plant, progress: bool = False, label: str | None = None, torqu
     plant : symtrack.simulation.plants.Plant
         A plant not yet started; the loop starts it at the scenario's start pose and finishes
         it at the end (the grid lifts the vehicle off), also when the run fails.
-    progress : bool
-        Show a progress bar (or log lines when stderr is no terminal).
+    progress : bool or None
+        Show a progress bar (or log lines when stderr is no terminal); None: once the run has taken 2 s.
     torque_law : callable or SampledLaw, optional
         ``law(t_s, x) -> (left_N_m, right_N_m)`` in place of the torque programme, sampled at
         each plant call, or a :class:`SampledLaw` on its own clock (module doc).

@@ -131,7 +131,7 @@ def _density_figures(world: World) -> dict:
     return {"bulk_density_max_Mg_per_m3": world.bulk_density_max()}
 
 
-def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: bool = False) -> PassStudy:
+def run_passes(scenario, plant: GridPlant, passes: int | None = None, progress: bool | None = False) -> PassStudy:
     """All passes of the scenario (``terrain.passes`` unless given) with one grid plant. A pass
     that fails raises :class:`~symtrack.simulation.loop.IncompleteRun` with ``study``: the passes
     so far, the failed one up to where it failed."""

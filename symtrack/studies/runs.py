@@ -127,7 +127,7 @@ def run_one(task: dict) -> dict:
             if task["kind"] == "simulate":
                 from ..api import simulate
 
-                simulate(sc).write(folder)
+                simulate(sc, progress=False).write(folder)
             elif task["kind"] == "field":
                 from .operations import OperationSpec, run_season
 
