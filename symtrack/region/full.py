@@ -180,7 +180,7 @@ def _wheeled_drive(op, terrain: Terrain, xi: float) -> tuple:
     end = int(np.nonzero(p.segment == -1)[0][0]) + 1  # the path's end (the extension after it left out)
     poses = np.column_stack([p.x[:end], p.y[:end], p.psi[:end]])
     wheels, tables = [], []
-    for w in op.machine.wheels:  # (built once per worker process for each tyre, load and soil)
+    for w in op.machine.wheels:  # (each tyre, load and soil's table computed once into the cache)
         c, tb = footprint_table_cached(w.tyre, w.load_kN, w.inflation_kPa, TYRE_ELEMENT_M, depths, xi,
                                 wheeled.DEFAULT_REACH_M + 0.5 * w.tyre.diameter_m, TABLE_STEP_M)
         wheels.append(wheeled.Wheel(c, w.x_m, w.y_m))

@@ -243,8 +243,8 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
         top["validation_table.md"] = table.encode()
     omitted = ""
     if not draw:
-        omitted = ("No figures drawn (run.figures = false). Run the scenario.resolved.toml of this folder with "
-                   "run.figures = true (--set run.figures=true) to draw them.")
+        omitted = ("No figures drawn (run.figures = false). Run the scenario again with run.figures = true "
+                   "(--set run.figures=true) to draw them.")
     elif left_out:
         omitted = (f"Not drawn (run.all_figures = false, the default: the slow figures): {'; '.join(left_out)}. "
                    "Set run.all_figures = true (--set run.all_figures=true) to write them too.")
