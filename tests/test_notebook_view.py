@@ -129,6 +129,22 @@ def test_a_season_result_lists_its_operations():
     assert repr(res).startswith("<SeasonResult ") and "wall_time_s 9" in repr(res)
 
 
+def test_a_traffic_comparison_shows_a_row_per_system_and_stays_a_dict():
+    import json
+
+    from symtrack.studies.operations import TRAFFIC_COLUMNS, TrafficComparison, traffic_row
+
+    done = {k: 0.25 for k in TRAFFIC_COLUMNS}
+    rows = [traffic_row(HOSTILE, {**done, "complete": True, "trafficked_fraction": 0.4321}),
+            traffic_row("controlled", None)]
+    res = TrafficComparison(HOSTILE, rows)
+    p = _check(res._repr_html_(), f"Traffic systems: {HOSTILE}", "controlled")
+    assert p.cells[:len(TrafficComparison.KEYS)] == list(TrafficComparison.KEYS)
+    assert "0.4321" in p.cells and p.cells.count(HOSTILE) == 1
+    assert repr(res) == f"<TrafficComparison {HOSTILE!r}: trafficked_fraction {HOSTILE} 0.4321, controlled incomplete>"
+    assert res["rows"] == rows and json.loads(json.dumps(res)) == {"rows": rows}  # the dict it always was
+
+
 def test_a_sweep_result_shows_its_counts_and_first_rows(tmp_path):
     from symtrack.studies.engine import SweepResult
 

@@ -256,8 +256,8 @@ def run(spec_or_path, out=None, *, overrides=None, progress: bool = False):
     -------
     The kind's result: :class:`symtrack.Result` (simulation),
     :class:`symtrack.control.closedloop.ClosedLoopResult` (MPC), a field study's
-    ``FieldStudyResult``, an operation's or season's ``SeasonResult`` (a traffic comparison: its
-    table as a dict), a sweep's ``SweepResult``.
+    ``FieldStudyResult``, an operation's or season's ``SeasonResult`` (a traffic comparison: a
+    ``TrafficComparison``, its table's rows under ``["rows"]``), a sweep's ``SweepResult``.
     """
     rf = read_run_file(spec_or_path, overrides)
     if rf.kind in ("field", "operation", "season", "sweep") and out is None:

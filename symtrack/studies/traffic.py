@@ -20,7 +20,7 @@ from __future__ import annotations
 from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, atomic_write_text
 from .engine import sweep
-from .operations import TRACKS, load_operation_spec, traffic_files, traffic_row
+from .operations import TRACKS, TrafficComparison, load_operation_spec, traffic_files, traffic_row
 
 __all__ = ["TRACKS_KEY", "traffic_sweep"]
 
@@ -28,11 +28,12 @@ TRACKS_KEY = "season.tracks"  # the varied key: every operation's track system
 
 
 def traffic_sweep(scenario, out, *, systems=None, overrides=None, workers: int = 2, scheduler: str | None = None,
-                  progress: bool = True) -> dict:
+                  progress: bool = True) -> TrafficComparison:
     """The traffic systems ``systems`` (default: the season's ``[season] compare``) of the season
     ``scenario`` (a built-in of ``symtrack field`` or a TOML file) compared as a sweep on Dask: a
-    local cluster of ``workers`` processes or the scheduler at ``scheduler``. Returns ``{"rows":
-    the rows of traffic.csv, "sweep": the SweepResult}``. Refused (ScenarioError) before anything
+    local cluster of ``workers`` processes or the scheduler at ``scheduler``. Returns a
+    :class:`~symtrack.studies.operations.TrafficComparison`, ``{"rows": the rows of traffic.csv, "sweep": the
+    SweepResult}`` with a notebook view. Refused (ScenarioError) before anything
     runs when the season or a system is invalid; on Ctrl-C the finished systems are kept (rerun to
     do the rest)."""
     spec = load_operation_spec(scenario, overrides)  # the season checked here first (its message, not the sweep's)
@@ -53,4 +54,4 @@ def traffic_sweep(scenario, out, *, systems=None, overrides=None, workers: int =
             atomic_write_bytes(res.out / name, data)
         else:
             atomic_write_text(res.out / name, data)
-    return {"rows": rows, "sweep": res}
+    return TrafficComparison(spec.name, rows, sweep=res)

@@ -55,7 +55,16 @@ from .footprints import (
     sweep_windows,
     track_rects,
 )
-from .outputs import TRAFFIC_COLUMNS, OperationResult, animation, counts_npz, map_pngs, traffic_files, traffic_row
+from .outputs import (
+    TRAFFIC_COLUMNS,
+    OperationResult,
+    TrafficComparison,
+    animation,
+    counts_npz,
+    map_pngs,
+    traffic_files,
+    traffic_row,
+)
 from .plans import (
     MAX_TRACK_LINES,
     OperationPlan,
@@ -101,7 +110,8 @@ __all__ = ["COUNT_SAMPLE_S", "FIELD_PACKAGE", "FOLLOWERS", "MAP_CURVATURES", "MA
            "OPERATION_KEYS", "OPERATION_RTI_STEP_HALVINGS", "OPERATION_RUN_KEYS", "OperationPlan", "OperationResult",
            "OperationSettings", "OperationSpec", "PASS_GAP_S", "PATH_DS_M", "PLAN_ACCEL_M_S2", "PathFollower", "Path_",
            "SCHEMA_VERSION", "SEASON_KEYS", "SeasonResult", "TERRAIN_KEYS_OF_OPERATION", "TOP_KEYS", "TRACKS",
-           "TRAFFIC_COLUMNS", "TURNS", "animation", "check_plan", "count_passes", "count_passes_and_times",
+           "TRAFFIC_COLUMNS", "TURNS", "TrafficComparison", "animation", "check_plan", "count_passes",
+           "count_passes_and_times",
            "counts_npz", "field_mask", "field_shares", "follower_of", "footprint_mask", "headland_mask", "inner_ring",
            "is_operation_doc", "is_operation_document", "k_turn_angles_deg", "k_turn_headland_m", "lane_positions_m",
            "line_positions_m", "load_operation_spec", "map_pngs", "mpc_follower", "operation_of",

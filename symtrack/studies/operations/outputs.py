@@ -92,6 +92,32 @@ TRAFFIC_COLUMNS = ("tracks", "complete", "trafficked_fraction", "headland_traffi
                    "turns_driven", "turns_lifted", "rms_lateral_error_lines_m", "wall_time_s")
 
 
+class TrafficComparison(dict):
+    """The traffic systems' comparison: a dict with ``rows`` (one per system, :data:`TRAFFIC_COLUMNS`; the
+    rows of traffic.csv) and, from the Dask sweep, ``sweep`` (its :class:`~symtrack.studies.engine.SweepResult`);
+    in a notebook a table of the systems, in a console one line per system's share trafficked."""
+
+    KEYS = ("tracks", "complete", "trafficked_fraction", "repeated_coverage_fraction", "rut_max_depth_mm",
+            "distance_m", "wall_time_s")
+
+    def __init__(self, name: str, rows: list, **more):
+        super().__init__(rows=rows, **more)
+        self.name = name
+
+    def __repr__(self) -> str:
+        shares = ", ".join(f"{r['tracks']} {r['trafficked_fraction']:.4g}" if r.get("trafficked_fraction") is not None
+                           else f"{r['tracks']} incomplete" for r in self["rows"])
+        return f"<TrafficComparison {self.name!r}: trafficked_fraction {shares}>"
+
+    def _repr_html_(self) -> str:
+        """A table of the systems' figures (the columns of :data:`KEYS`)."""
+        from ...reports.html import notebook_html
+
+        rows = [tuple(r.get(k) for k in self.KEYS) for r in self["rows"]]
+        return notebook_html(f"Traffic systems: {self.name}", {}, [("systems", len(rows))], keys=(), rows=rows,
+                             row_header=list(self.KEYS))
+
+
 def traffic_row(system: str, summary: dict | None) -> dict:
     """A row of the traffic table (:data:`TRAFFIC_COLUMNS`) from a system's season summary (None:
     the season did not finish: complete false, the figures empty)."""

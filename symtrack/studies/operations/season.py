@@ -20,7 +20,16 @@ from ...simulation.plants import make_plant
 from ...terrain.storage import Terrain
 from .followers import PathFollower, follower_of, mpc_follower
 from .footprints import count_passes_and_times, field_shares
-from .outputs import OperationResult, animation, counts_npz, map_pngs, season_animation, traffic_files, traffic_row
+from .outputs import (
+    OperationResult,
+    TrafficComparison,
+    animation,
+    counts_npz,
+    map_pngs,
+    season_animation,
+    traffic_files,
+    traffic_row,
+)
 from .plans import OperationPlan
 from .settings import COUNT_SAMPLE_S, SCHEMA_VERSION
 from .spec import OperationSpec, operation_spec_from_dict
@@ -303,7 +312,8 @@ def Path_(p):
     return _P(p)
 
 
-def traffic_comparison(doc: dict, systems, out=None, progress: bool = False, name: str = "operation") -> dict:
+def traffic_comparison(doc: dict, systems, out=None, progress: bool = False,
+                       name: str = "operation") -> TrafficComparison:
     """The same season under each traffic system of ``systems`` (e.g. ("random", "controlled")), each
     on a new field, one after another in this process: one table (``traffic.csv``, a row per system)
     and one figure (``traffic.png``). :func:`symtrack.studies.traffic.traffic_sweep` runs the same
@@ -319,4 +329,4 @@ def traffic_comparison(doc: dict, systems, out=None, progress: bool = False, nam
         from ...reports.run_files import write_folder
 
         write_folder(folder, traffic_files(rows), clear=False)
-    return {"rows": rows}
+    return TrafficComparison(name, rows)
