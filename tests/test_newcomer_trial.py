@@ -234,3 +234,30 @@ def test_a_python_run_shows_its_progress_once_it_takes_two_seconds(capsys):
     bar.update(0.5)
     bar.close()
     assert silent.getvalue() == ""
+
+
+def test_the_front_door_shows_progress_as_simulate_does(monkeypatch):
+    """symtrack.run's default is symtrack.simulate's (progress once a run has taken 2 s): it hands its
+    simulation None, not False; a sweep through it shows its bar from the start."""
+    from symtrack import api
+    from symtrack.studies import engine
+
+    seen = {}
+    real = api.simulate
+
+    def spy(sc, **kw):
+        seen["simulate"] = kw.get("progress")
+        return real(sc, **kw)
+
+    monkeypatch.setattr(api, "simulate", spy)
+    symtrack.run("validation", overrides=["run.duration_s=0.2"])
+    assert seen["simulate"] is None
+
+    def sweep_spy(**kw):
+        seen["sweep"] = kw["progress"]
+
+    monkeypatch.setattr(engine, "sweep", sweep_spy)
+    from symtrack.studies.runfile import run
+
+    run({"sweep": {"scenario": "validation", "vary": {"vehicle.mass_kg": [5000.0, 6000.0]}}}, out="unused")
+    assert seen["sweep"] is True

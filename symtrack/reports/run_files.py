@@ -213,30 +213,34 @@ def simulation_files(scenario, runs: list, summary: dict, pass_summaries: list[d
     table = validation_table(scenario, summary)
     every = scenario.run.all_figures
     draw = scenario.run.figures  # false: no figure at all (report.html says so)
+
+    def figures_of(kinds, source, *every_):
+        return figures(kinds, source, *every_) if draw else {}
+
     top: dict[str, bytes] = {}  # the files of the folder's top, besides the run files
     shown: dict[str, bytes] = {}  # the images of report.html
     passes = {}  # the files of each pass's folder (several passes)
     left_out: list[str] = []  # what report.html says was not drawn
     if study is None:
         run = runs[0]
-        top.update(figures("trajectory", run) if draw else {})
+        top.update(figures_of("trajectory", run))
         shown.update(top)
     else:
         src = TerrainRun(scenario, study, every)
-        top.update(figures(("terrain", "subsoil"), src, every) if draw else {})
-        left_out += [] if every or not draw else extras(("terrain", "subsoil"))
+        top.update(figures_of(("terrain", "subsoil"), src, every))
+        left_out += [] if every else extras(("terrain", "subsoil"))
         if src.multi:
             last = len(study.runs) - 1
             for k, (res, summ) in enumerate(zip(study.runs, pass_summaries, strict=True)):
-                figs = figures("trajectory", res) if draw and (every or k == last) else {}
+                figs = figures_of("trajectory", res) if every or k == last else {}
                 passes.update({f"pass_{k + 1}/{n}": d for n, d in run_files(res, summ, figs).items()})
-            if not every and draw:
+            if not every:
                 left_out.append(f"the sinkage maps and the trajectory plots of passes 1 to {last} "
                                 f"(sinkage_map_pass_<k>.png, pass_<k>/*.png; pass_{last + 1}/ has its plots)")
             shown.update(top)
             shown.update({f"pass_{len(study.runs)}/{n}": d for n, d in figs.items()})
         else:
-            top.update(figures("trajectory", study.runs[0]) if draw else {})
+            top.update(figures_of("trajectory", study.runs[0]))
             shown.update(top)
         run = None if src.multi else study.runs[0]
     if table is not None:

@@ -237,7 +237,7 @@ def sweep_arguments(rf: RunFile) -> dict:
             "kind": kind}
 
 
-def run(spec_or_path, out=None, *, overrides=None, progress: bool = False):
+def run(spec_or_path, out=None, *, overrides=None, progress: bool | None = None):
     """Run any run file and return its result (the kind told by its sections, :data:`KINDS`).
 
     Parameters
@@ -249,8 +249,9 @@ def run(spec_or_path, out=None, *, overrides=None, progress: bool = False):
         an operation, a season and a sweep write their folder as they go and need it).
     overrides : list of str or dict, optional
         ``["vehicle.mass_kg=6000"]`` as ``--set`` takes them, or ``{"vehicle.mass_kg": 6000}``.
-    progress : bool
-        A progress bar.
+    progress : bool or None
+        A progress bar: None (the default) once the run has taken 2 s, as :func:`symtrack.simulate`
+        (a sweep shows its bar from the start), True from the start, False never.
 
     Returns
     -------
@@ -300,4 +301,4 @@ def run(spec_or_path, out=None, *, overrides=None, progress: bool = False):
         return run_season(spec, out, progress=progress)
     from .engine import sweep
 
-    return sweep(out=out, progress=progress, **sweep_arguments(rf))
+    return sweep(out=out, progress=progress is not False, **sweep_arguments(rf))
