@@ -206,7 +206,7 @@ def test_the_compiled_grid_step_takes_the_call_node_and_equals_the_expanded_one(
     for name, v in (("u_m_s", 2.0), ("v_m_s", 0.05), ("yaw_rate_rad_s", 0.3), ("omega_left_rad_s", 4.5),
                     ("omega_right_rad_s", 7.5), ("shear_left_m", -0.02), ("shear_right_m", 0.05)):
         w[VEHICLE_STATES.index(name)] = v
-    args = [np.full(8, 1e-3), w, [3000.0, 5000.0], p, 1e-3]
+    args = [np.full(8, 1e-3), w, [3000.0, 5000.0], p, 1e-3, 1e-3]  # ..., h, the error ratio's rtol
     got, ref = ([np.array(v).ravel() for v in g(*args)] for g in (f, fi))
     assert np.abs(ref[1] - w).max() > 1e-4  # the step moved the vehicle
     for a, b in zip(got, ref, strict=True):

@@ -11,6 +11,15 @@ interpreter (slow; an error with ``--require-compiled``).
 
 Every macro step of the world manager (one output step) is one call: n equal steps of at most
 ``run.fixed_step_s``, the algebraic state first made consistent for the (possibly reset) channels.
+
+Error control (``run.fixed_step_tolerance``, as the homogeneous terrain's compiled Rosenbrock,
+:mod:`symtrack.integrators.fixed_step`): the call returns the largest error ratio of its steps (the
+last stage's increment, the method's embedded error estimate, over FIXED_STEP_TOLERANCE max(|y0|, |y1|) +
+FIXED_STEP_ATOL in every differential state: :mod:`symtrack.native.grid_rosenbrock`). A macro step whose
+ratio exceeds 1, or whose state is not finite, is taken again in steps of half the length (two calls of
+the same compiled code), down to 2^-FIXED_STEP_MAX_HALVINGS of the step. A macro step still above its
+tolerance there is kept with a warning (once per run); ``fixed_step_error_max`` in summary.json is the
+largest ratio kept. ``run.fixed_step_tolerance = 0``: no step halved, the ratios measured.
 """
 
 from __future__ import annotations
@@ -24,10 +33,11 @@ import numpy as np
 
 from ..foundations.errors import SimulationError
 from ..native.grid_rosenbrock import build as build_step
+from ..native.rosenbrock import FIXED_STEP_MAX_HALVINGS
 from ..terrain.channels import NF, NG
 from ..toolchain import BuildSpec, build, casadi_tag, compiler, digest
 from ..vehicles.planar import codegen_options
-from .settings import substeps
+from .settings import FIXED_STEP_TOLERANCE, substeps
 
 __all__ = ["MAX_STEP_S", "PACK_SLOTS", "GridRosenbrockStepper", "grid_library"]
 
@@ -80,6 +90,13 @@ class GridRosenbrockStepper:
         self.z = None
         self.nsteps = 0
         self.ncalls = 0
+        # the error control (module doc): the relative tolerance, 0 for off (the ratios are then measured
+        # against FIXED_STEP_TOLERANCE and no step is halved)
+        self.tolerance = float(getattr(settings, "fixed_step_tolerance", FIXED_STEP_TOLERANCE))
+        self.rtol = self.tolerance if self.tolerance > 0 else FIXED_STEP_TOLERANCE
+        self.error_max = 0.0
+        self.n_halved = 0
+        self.warned = False
 
     def function(self, slots: int, n_steps: int) -> ca.Function:
         f = self._f.get((slots, n_steps))
@@ -92,7 +109,9 @@ class GridRosenbrockStepper:
         """Nothing to forget: each call makes the algebraic state consistent first."""
 
     def stats(self) -> dict:
-        return {"nsteps": self.nsteps, "n_calls": self.ncalls, "compiled": bool(self.compiled)}
+        return {"nsteps": self.nsteps, "n_calls": self.ncalls, "compiled": bool(self.compiled),
+                "fixed_step_tolerance": self.tolerance, "fixed_step_error_max": self.error_max,
+                "fixed_step_steps_halved": self.n_halved}
 
     def step(self, x, u, p, dt: float):
         """One macro step. Only the active channels are integrated (an idle channel is inert: its
@@ -113,16 +132,33 @@ class GridRosenbrockStepper:
         q_p = np.zeros((cap, NF))
         q_p[:act.size] = qc[act]
         z0 = self.z if self.z is not None else np.array(self.model.accel(x, u, p)).ravel()
-        xc1, w1 = f(xc_p.ravel(), np.concatenate([x[vs], z0]), u, np.concatenate([p[:npv + NG], q_p.ravel()]),
-                    dt / n)
-        w1 = np.array(w1).ravel()
+        w_start, p_call = np.concatenate([x[vs], z0]), np.concatenate([p[:npv + NG], q_p.ravel()])
+        on = self.tolerance > 0
+        for level in range(FIXED_STEP_MAX_HALVINGS + 1 if on else 1):
+            # 2^level calls of n steps of dt / (n 2^level): the same compiled code (module doc)
+            xc1, w1, ratio = xc_p.ravel(), w_start, 0.0
+            for _ in range(2 ** level):
+                xc1, w1, r = f(xc1, w1, u, p_call, dt / (n * 2 ** level), self.rtol)
+                ratio = max(ratio, float(r))
+            self.nsteps += n * 2 ** level
+            self.ncalls += 2 ** level
+            xc1, w1 = np.array(xc1).ravel(), np.array(w1).ravel()
+            finite = np.all(np.isfinite(xc1)) and np.all(np.isfinite(w1)) and np.isfinite(ratio)
+            if finite and ratio <= 1.0:
+                break
+            if level < FIXED_STEP_MAX_HALVINGS and on:
+                self.n_halved += n * 2 ** level  # each of these steps is taken again as two halves
+        if not finite:
+            raise SimulationError("the grid rosenbrock integrator returned a non-finite state (steps of "
+                                  f"{dt / (n * 2 ** level):.3g} s): run it with --integrator idas")
+        if on and ratio > 1.0 and not self.warned:
+            log.warning("the grid Rosenbrock's error estimate stays %.3g x its tolerance in steps of %.3g s (%d "
+                        "halvings of the %g s step); the step was kept: compare with --integrator idas "
+                        "(summary.json: fixed_step_error_max)", ratio, dt / (n * 2 ** level), level, dt / n)
+            self.warned = True
+        self.error_max = max(self.error_max, ratio)
         xc_new = xc.copy()
-        xc_new[act] = np.array(xc1).reshape(cap, 2)[:act.size]
+        xc_new[act] = xc1.reshape(cap, 2)[:act.size]
         out = np.concatenate([w1[vs], xc_new.ravel()])
-        if not np.all(np.isfinite(out)):
-            raise SimulationError("the grid rosenbrock integrator returned a non-finite state "
-                                  f"(step {dt / n:g} s: lower run.fixed_step_s)")
         self.z = w1[vs.stop:]  # w1 = (vehicle states, accelerations)
-        self.nsteps += n
-        self.ncalls += 1
         return out

@@ -33,6 +33,14 @@ system is solved per stage (its cost does not depend on the pool size).
 
 The algebraic state is first made consistent (two Newton steps on g(w) = 0 at the step start,
 the sums S held), so the step accepts the channel resets of the world manager between macro steps.
+
+Each step also gives its error ratio, as the homogeneous terrain's compiled step does
+(:func:`symtrack.native.rosenbrock.step_and_error_expressions`): the method is stiffly accurate with an
+embedded solution of order 4, so the last stage's increment U_8 is the local error estimate; the ratio is
+its largest |U_8,i| / (FIXED_STEP_ATOL + rtol max(|y0,i|, |y1,i|)) over the differential states (the
+channels' two states and the vehicle's, not the accelerations), rtol an input. The error control itself
+(halving the steps of a macro step whose ratio exceeds 1) is the stepper's
+(:class:`symtrack.integrators.grid_rosenbrock.GridRosenbrockStepper`).
 """
 
 from __future__ import annotations
@@ -43,7 +51,7 @@ import casadi as ca
 # accelerations, w, are sized by the vehicle model the options select (12 + 2 planar, 16 + 2 with the
 # "shear" law's lateral shear states)
 from .grid_engine_model import NS, SumsTerrain, pressure_line
-from .rosenbrock import GAMMA, N_STAGES
+from .rosenbrock import FIXED_STEP_ATOL, GAMMA, N_STAGES
 from .rosenbrock import A as RB_A
 from .rosenbrock import C as RB_C
 from .rosenbrock import M as RB_M
@@ -56,10 +64,10 @@ NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_
 def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") -> dict[str, ca.Function]:
     """The Functions of the grid Rosenbrock integrator for a pool of n_channels channels.
 
-    ``<name>``: (xc[2n], w[nw], u[2], p[np], h) -> (xc, w) after n_steps steps of length h (s), w the
-    vehicle's states and its algebraic accelerations (nw = 14 for the planar vehicle, 18 for the
-    "shear" law's),
-    p being the grid model's parameter vector (vehicle and soil parameters, then the terrain's Q).
+    ``<name>``: (xc[2n], w[nw], u[2], p[np], h, rtol) -> (xc, w, r) after n_steps steps of length h (s),
+    w the vehicle's states and its algebraic accelerations (nw = 14 for the planar vehicle, 18 for the
+    "shear" law's), p being the grid model's parameter vector (vehicle and soil parameters, then the
+    terrain's Q), r the largest error ratio of the steps at the relative tolerance rtol (module doc).
     """
     from symtrack.foundations.params import ParamLayout
     from symtrack.model import SystemModel
@@ -211,20 +219,28 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     for mi, ci, wi in zip(RB_M, Uc, Uw, strict=True):
         XC1 = XC1 + mi * ci
         W1 = W1 + mi * wi
-    step = ca.Function(name + "_step", [XC, Wm, U, PV, Qg, QC, H], [XC1, W1],
-                       ["xc", "w", "u", "pv", "qg", "qc", "h"], ["xc1", "w1"])
+    # the error ratio: the last stage's increment over the tolerance, the differential states only (an
+    # idle slot's zeros give 0)
+    RT = ca.MX.sym("rtol")
+    ratio_c = ca.fabs(Uc[-1]) / (FIXED_STEP_ATOL + RT * ca.fmax(ca.fabs(XC), ca.fabs(XC1)))
+    ratio_w = mass_w * ca.fabs(Uw[-1]) / (FIXED_STEP_ATOL + RT * ca.fmax(ca.fabs(Wm), ca.fabs(W1)))
+    ratio = ca.fmax(ca.mmax(ratio_c), ca.mmax(ratio_w))
+    step = ca.Function(name + "_step", [XC, Wm, U, PV, Qg, QC, H, RT], [XC1, W1, ratio],
+                       ["xc", "w", "u", "pv", "qg", "qc", "h", "rtol"], ["xc1", "w1", "r"])
 
     # ---- n_steps steps per call, on the model's vectors ----------------------------------------------
     xcv, w0 = ca.MX.sym("xc", 2 * n), ca.MX.sym("w", NW)
-    u0, p0, h0 = ca.MX.sym("u", 2), ca.MX.sym("p", npv + NG + NF * n), ca.MX.sym("h")
+    u0, p0, h0, rt0 = ca.MX.sym("u", 2), ca.MX.sym("p", npv + NG + NF * n), ca.MX.sym("h"), ca.MX.sym("rtol")
     PV0, Qg0 = p0[:npv], p0[npv:npv + NG]
     QC0 = ca.reshape(p0[npv + NG:], NF, n)
     Xc = ca.reshape(xcv, 2, n)
     a_s = vehicle_F(w0, u0, ca.vertcat(PV0, Qg0, zeroS), h0)[1]
     S_start = ca.sum2(mF(Xc, QC0, a_s, ca.substitute(C_MX, ca.vertcat(PV, Qg, H), ca.vertcat(PV0, Qg0, h0)))[1])
     Wc = consistent(w0, u0, ca.vertcat(PV0, Qg0, S_start))
+    r_max = 0
     for _ in range(n_steps):
-        Xc, Wc = step(Xc, Wc, u0, PV0, Qg0, QC0, h0)
-    multi = ca.Function(name, [xcv, w0, u0, p0, h0], [ca.reshape(Xc, 2 * n, 1), Wc],
-                        ["xc", "w", "u", "p", "h"], ["xc1", "w1"])
+        Xc, Wc, r = step(Xc, Wc, u0, PV0, Qg0, QC0, h0, rt0)
+        r_max = ca.fmax(r_max, r)
+    multi = ca.Function(name, [xcv, w0, u0, p0, h0, rt0], [ca.reshape(Xc, 2 * n, 1), Wc, r_max],
+                        ["xc", "w", "u", "p", "h", "rtol"], ["xc1", "w1", "r"])
     return {"step": step, "multi": multi, "vehicle_F": vehicle_F, "channel_F": chan_F, "channel_J": chan_J}
