@@ -5,8 +5,8 @@ Every script of examples/ gets a page (its docstring, its code, a download link)
 by the build with reduced settings, their figures written to a temporary folder by their own ``--plot`` or
 ``--out`` option and shown from there (each example saves its figure as a file, as a user running it would
 get it; several close it after saving, so sphinx-gallery's matplotlib scraper would find nothing); the
-others (long runs, or tables and no figure) are shown unexecuted with a note of how long they take and how
-to run them.
+others (longer runs, tables and no figure, the GIS extra) are shown unexecuted with a note of why and how to
+run them.
 
 An executed example must not call ``sys.exit`` when it succeeds: sphinx-gallery runs it in the Sphinx
 process, where a ``SystemExit`` ends the build (tests/test_docs_site.py then misses its pages).
@@ -36,26 +36,27 @@ RUN: dict[str, tuple[list[str], list[str]]] = {
                        ["second_pass_3d.png"]),
 }
 
-# the examples shown but not run by the build: how long their own default run takes on a 2-core machine
+# the examples shown but not run by the build, and why: their time at their own settings on a 2-core machine
+# (measured with a warm compile cache), what they show
 NOT_RUN: dict[str, str] = {
-    "bench_terrain": "minutes (``--quick``: seconds); prints a JSON object, no figure",
-    "compaction_day_and_machine": "about a minute; prints tables, no figure",
-    "compaction_reference": "about 20 s (``--big``: IDAS for 6-8 min); prints the figures, no figure",
-    "density_passes": "several minutes; prints tables, no figure",
-    "engine_clocks": "minutes; prints the clocks, no figure",
-    "engine_variants": "minutes; prints the speeds, no figure",
-    "gis_field": "about a minute; needs ``pip install 'symtrack[gis]'``",
-    "hull_rotation": "under a minute; prints a table, no figure",
-    "lane_keeping_ruts": "about a minute",
-    "lqr_speed_yaw": "about 20 s",
-    "mpc_headland_uturn": "several minutes",
-    "mpc_side_slope_3d": "about a minute",
-    "one_soil": "several minutes; prints tables, no figure",
-    "steady_turns": "under a minute; prints a table, no figure",
-    "tracks_against_wheels": "about a minute; prints a table, no figure",
-    "turn_rut": "about a minute",
-    "validation_sensitivity": "about a minute; prints a table, no figure",
-    "wet_headland": "about a minute",
+    "bench_terrain": "it takes minutes (``--quick``: seconds) and prints a JSON object, no figure",
+    "compaction_day_and_machine": "it takes under a minute and prints tables, no figure",
+    "compaction_reference": "it takes under a minute (``--big``: IDAS for 6-8 min) and prints its figures, no figure",
+    "density_passes": "it takes minutes and prints tables, no figure",
+    "engine_clocks": "it takes seconds and prints the terrain engine's clocks, no figure",
+    "engine_variants": "it takes seconds and prints the terrain engine's speeds, no figure",
+    "gis_field": "it takes seconds but needs the GIS extra (``pip install 'symtrack[gis]'``)",
+    "hull_rotation": "it takes seconds and prints a table, no figure",
+    "lane_keeping_ruts": "it takes under a minute",
+    "lqr_speed_yaw": "it takes about ten seconds",
+    "mpc_headland_uturn": "it takes minutes",
+    "mpc_side_slope_3d": "it takes under a minute",
+    "one_soil": "it takes minutes and prints tables, no figure",
+    "steady_turns": "it takes seconds and prints a table, no figure",
+    "tracks_against_wheels": "it takes under a minute and prints a table, no figure",
+    "turn_rut": "it takes under a minute, most of it compiling the terrain engine the first time",
+    "validation_sensitivity": "it takes under a minute and prints a table, no figure",
+    "wet_headland": "it takes under a minute",
 }
 
 # sphinx-gallery's filename_pattern: the scripts it executes
@@ -115,5 +116,5 @@ def note(name: str) -> str:
         args = " ".join(a.replace("{out}", "OUT") for a in RUN[name][0])
         return (f"The output below is the documentation build's run, with reduced settings: "
                 f"``python examples/{name}.py {args}``.")
-    return (f"Not run by the documentation build: {NOT_RUN[name]}. Run it from the checkout with "
-            f"``python examples/{name}.py`` (its options: ``--help``).")
+    return (f"Not run when this site is built: {NOT_RUN[name]}. Run it from the checkout: "
+            f"``python examples/{name}.py`` (``--help`` lists its options).")

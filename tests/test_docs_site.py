@@ -66,7 +66,7 @@ def test_the_site_builds_with_no_warning(tmp_path):
             assert images, f"{name}: no figure in its gallery page"
             assert all((tmp_path / "html" / "_images" / image).stat().st_size > 10_000 for image in images), name
         else:
-            assert not images and "Not run by the documentation build" in page, name
+            assert not images and "Not run when this site is built" in page, name
     assert _files(src / "examples") == examples, "the gallery's examples wrote into examples/"
 
 
