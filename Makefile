@@ -81,7 +81,9 @@ validate: $(VENV)/.installed
 bench: $(VENV)/.installed build/symtrack_standalone
 	$(VENV)/bin/symtrack bench --out out/bench.json
 
-# the documentation site (docs/index.md): Sphinx over docs/*.md, warnings as errors, into docs/_build/html
+# the documentation site (docs/index.md): Sphinx over docs/*.md, warnings as errors, into docs/_build/html; the
+# gallery of examples/ generated into docs/gallery, its quick examples run (docs/gallery_examples.py; an
+# unchanged example is not run again: make clean removes the gallery)
 $(VENV)/.installed-docs: $(VENV)/.installed
 	$(call install,-e '.[docs]')
 	touch $@
@@ -131,4 +133,4 @@ figures: $(VENV)/.installed
 	$(PY) docs/figures.py $(if $(NAMES),--only $(NAMES))
 
 clean:
-	rm -rf out build *.egg-info docs/_build
+	rm -rf out build *.egg-info docs/_build docs/gallery

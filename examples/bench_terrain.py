@@ -1,4 +1,7 @@
-"""Benchmark of the grid terrain (not a test): the figures of docs/terrain.md, measured in one run.
+"""Benchmark of the grid terrain
+=============================
+
+Benchmark of the grid terrain (not a test): the figures of docs/terrain.md, measured in one run.
 
     python examples/bench_terrain.py              # the figures of docs/terrain.md (minutes)
     python examples/bench_terrain.py --quick      # a smoke run in seconds (tests/test_terrain_examples.py)

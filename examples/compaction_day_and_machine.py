@@ -1,4 +1,7 @@
-"""The same traffic on a dry and on a wet day, and a crawler against a wheeled tractor of the same
+"""A dry and a wet day, a crawler and a tractor
+============================================
+
+The same traffic on a dry and on a wet day, and a crawler against a wheeled tractor of the same
 mass on the same field (docs/subsoil.md, "Moisture" and "Wheeled machines"): two tables of the
 largest vertical stress and bulk density by depth.
 

@@ -1,4 +1,7 @@
-"""The compaction resistance of the terrain engine against IDAS with exact integrals
+"""The compaction resistance against IDAS
+======================================
+
+The compaction resistance of the terrain engine against IDAS with exact integrals
 (docs/terrain.md, "The compaction resistance figure").
 
 IDAS integrates, beside the DAE, the compaction power and both tracks' compaction resistance

@@ -1,4 +1,7 @@
-"""Bulk density against pass number (docs/subsoil.md, "Repeated passes"): the built-in multipass
+"""Bulk density against pass number
+================================
+
+Bulk density against pass number (docs/subsoil.md, "Repeated passes"): the built-in multipass
 scenario (the reference crawler, clayey soil, passes of 4 m on one line) for 1..N passes under three
 compression laws, and the grain cart of examples/scenarios/multipass_trailer.toml with and without
 the saturation bound. Prints markdown tables of the field's largest bulk density by depth.
@@ -6,6 +9,7 @@ the saturation bound. Prints markdown tables of the field's largest bulk density
     python examples/density_passes.py [--passes 12]
 
 Laws (symtrack/soil/density.py):
+
 - "default": the registry's lines (Keller & Arvidsson's 2007 PTF at 1.5 Mg/m^3), no yield line;
 - "osr": O'Sullivan & Robertson's (1996) model with its yield line, the complete parameter set of
   soilphysics' documented soilDeformation example (N 1.9392, lambda 0.06037, kappa 0.00608,

@@ -1,4 +1,7 @@
-"""The terrain engine's kernel clocks per macro step and a fingerprint of the run.
+"""The terrain engine's kernel clocks
+==================================
+
+The terrain engine's kernel clocks per macro step and a fingerprint of the run.
 
     python examples/engine_clocks.py [--repeats 3] [--set KEY=VALUE ...]
 

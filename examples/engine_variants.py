@@ -1,4 +1,7 @@
-"""The terrain engine's speed on validation_grid (1e6 cells): the default, the two-stage SDIRK for
+"""The terrain engine's variants on a million cells
+================================================
+
+The terrain engine's speed on validation_grid (1e6 cells): the default, the two-stage SDIRK for
 the steady cells, the previous stop's default (SDIRK, entry windows of 4, no ring windows), the
 default without the subsoil stress; built in one process and run in turn, the best of --repeats
 kept (ratios taken in one run; docs/terrain.md, "The terrain engine").

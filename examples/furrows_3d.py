@@ -1,4 +1,7 @@
-"""Driving across and along furrows with the 3D vehicle (``model.vehicle = "3d"``;
+"""Across and along furrows in 3D
+==============================
+
+Driving across and along furrows with the 3D vehicle (``model.vehicle = "3d"``;
 docs/vehicle3d.md "Studies: furrows").
 
     python examples/furrows_3d.py                               # furrows 0.1 m deep

@@ -1,4 +1,7 @@
-"""GIS rasters in and out (docs/terrain.md, "GIS rasters"; needs ``pip install 'symtrack[gis]'``):
+"""GIS rasters in and out
+======================
+
+GIS rasters in and out (docs/terrain.md, "GIS rasters"; needs ``pip install 'symtrack[gis]'``):
 a soil map given as a GeoTIFF in a projected CRS, one pass of the reference crawler over it on the
 terrain engine, the field's state exported as GeoTIFF layers and one NetCDF dataset, and the rut
 depth read back from its GeoTIFF with rasterio and drawn in the CRS's coordinates.

@@ -1,4 +1,7 @@
-"""What the hull-frame rotation that the shear law neglects changes (docs/turning.md, "The hull-frame
+"""The hull-frame rotation of the shear law
+========================================
+
+What the hull-frame rotation that the shear law neglects changes (docs/turning.md, "The hull-frame
 rotation"): a brute-force numpy reference at the steady turns of symtrack.control.trim.
 
     python examples/hull_rotation.py
@@ -7,12 +10,12 @@ rotation"): a brute-force numpy reference at the steady turns of symtrack.contro
 The law (docs/turning.md section 1) accumulates a track element's shear displacement in the hull
 frame: j(s) = integral over [0, s] of (i_x, i_y(s')) ds'. The soil is fixed in the ground, so each
 increment of sliding keeps its direction on the ground while the hull turns on: seen from the hull
-now, the increment made at s' has turned by -r_z (s - s') / (r |omega|) (the hull's yaw while the element
+now, the increment made at s' has turned by ``-r_z (s - s') / (r |omega|)`` (the hull's yaw while the element
 travelled from s' to s at the tread speed). The reference sums the rotated increments,
 
-    j_rot(s) = integral over [0, s] of R(-r_z (s - s') / (r |omega|)) (i_x, i_y(s')) ds',
+    ``j_rot(s) = integral over [0, s] of R(-r_z (s - s') / (r |omega|)) (i_x, i_y(s')) ds'``,
 
-and takes the stress magnitude from |j_rot| (its direction stays against the sliding velocity now, as
+and takes the stress magnitude from ``|j_rot|`` (its direction stays against the sliding velocity now, as
 in the law). Both are integrated on 4000 midpoints per track, at the trim's state (normal loads, slips,
 lateral velocity); the table gives the law's forces (sum over both tracks: thrust-moment of the
 tractive forces, lateral force, the soil's yaw moment) and the relative change with the rotation.

@@ -1,4 +1,7 @@
-"""Kroulik et al. (2009)'s three seasons as wheel footprints: the share of the field run over at least
+"""Kroulik's three seasons as wheel footprints
+===========================================
+
+Kroulik et al. (2009)'s three seasons as wheel footprints: the share of the field run over at least
 once and the repeated coverage of conventional tillage, minimum tillage and direct seeding, against
 their published 95.3 / 72.8 / 55.7 % and 145.6 / 44.8 / 18.4 % (symtrack/studies/traffic_seasons.py;
 docs/studies.md, "Kroulik's three seasons as wheel footprints").
@@ -110,7 +113,7 @@ def variant(seasons, random_offset=None, across=()):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=float, nargs=2, default=ts.FIELD_SIZE_M, metavar=("X_M", "Y_M"))
     ap.add_argument("--cell", type=float, default=ts.FIELD_CELL_M)
     ap.add_argument("--plot", help="the figure (PNG): the three maps of passes per cell")

@@ -1,4 +1,7 @@
-"""Lane keeping on compacted ground (controlled traffic): the MPC on the grid plant follows the rut
+"""Lane keeping in the ruts of an earlier pass
+===========================================
+
+Lane keeping on compacted ground (controlled traffic): the MPC on the grid plant follows the rut
 pair of an earlier pass.
 
     PYTHONPATH=. .venv/bin/python examples/lane_keeping_ruts.py --out out/lane_keeping [--baseline]

@@ -1,4 +1,7 @@
-"""LQR with integral action for speed and yaw rate, designed on the exact linearization at a
+"""LQR of the speed and the yaw rate
+=================================
+
+LQR with integral action for speed and yaw rate, designed on the exact linearization at a
 steady turn and run on the nonlinear model (the full simulator, CVODES).
 
     PYTHONPATH=. .venv/bin/python examples/lqr_speed_yaw.py --out out/lqr

@@ -1,4 +1,7 @@
-"""Nonlinear MPC of the sprocket torques on a headland U-turn, against the full simulator.
+"""MPC of a headland U-turn
+========================
+
+Nonlinear MPC of the sprocket torques on a headland U-turn, against the full simulator.
 
     PYTHONPATH=. .venv/bin/python examples/mpc_headland_uturn.py --out out/mpc_uturn [--solver fatrop --jit]
 

@@ -1,4 +1,7 @@
-"""The MPC keeping a line along a side slope with the 3D vehicle (docs/vehicle3d.md,
+"""MPC along a side slope in 3D
+============================
+
+The MPC keeping a line along a side slope with the 3D vehicle (docs/vehicle3d.md,
 "The MPC on the 3D vehicle").
 
     python examples/mpc_side_slope_3d.py                                   # 8 deg, start on the line
@@ -125,7 +128,7 @@ def plot(path, res, col, ol, slope_deg):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--slope-deg", type=float, default=8.0)
     ap.add_argument("--offset-m", type=float, default=0.0, help="start this far left (uphill) of the line")
     ap.add_argument("--set", action="append", default=[], help="scenario override, e.g. mpc.max_iter=100")

@@ -1,4 +1,7 @@
-"""One soil, one deformation (docs/subsoil.md, "One soil"): for every soil preset, one pass of the
+"""One soil, one deformation
+=========================
+
+One soil, one deformation (docs/subsoil.md, "One soil"): for every soil preset, one pass of the
 reference crawler (the built-in ``multipass`` scenario, 4 m on one line) and the table of the soil's
 description, its one strength, the plastic rut and the column's compression below it; then the bulk
 density at 0.1 m against pass number on one soil.

@@ -1,8 +1,12 @@
-"""The oscillation study of the Politecnico di Milano thesis "Model of a Tracked Vehicle for
+"""The oscillation study: torque steps and sign()
+==============================================
+
+The oscillation study of the Politecnico di Milano thesis "Model of a Tracked Vehicle for
 Agricultural Applications" (docs/model.md, "References"): torque step vs filtered torque, and sign()
 vs tanh.
 
 The thesis (section 2) reports two kinds of oscillation of the shear displacement:
+
 - numerical, from the sign() functions, reduced by approximating sign() with tanh;
 - model-related, from the coupling torque -> tractive effort -> shear -> motion, excited by a
   torque step and reduced by a first-order torque filter (realistic: no actuator is instantaneous).
@@ -25,7 +29,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -165,7 +168,7 @@ def plot(results) -> bytes:
     return buf.getvalue()
 
 
-def main(argv=None) -> int:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/oscillation_study")
     ap.add_argument("--duration", type=float, default=6.0)
@@ -180,8 +183,7 @@ def main(argv=None) -> int:
     for r in table:
         print(f"{r['variant']:26s} {r['oscillation_right_mm']:11.3f} /{r['oscillation_left_mm']:11.3f} "
               f"{r['startup_chatter_rad_s']:22.5f}  {r['cvodes_first_0.05_s']}")
-    return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -1,4 +1,7 @@
-"""A climb and a descent of a headland ramp with the 3D vehicle (``model.vehicle = "3d"``;
+"""A climb and a descent of a ramp in 3D
+=====================================
+
+A climb and a descent of a headland ramp with the 3D vehicle (``model.vehicle = "3d"``;
 docs/vehicle3d.md "Studies: a ramp").
 
     python examples/ramp_3d.py                                  # 10 deg, 8 s each

@@ -1,4 +1,7 @@
-"""A second pass riding in the ruts of the first with the 3D vehicle on the grid terrain (``multipass``
+"""A second pass in the ruts of the first, in 3D
+=============================================
+
+A second pass riding in the ruts of the first with the 3D vehicle on the grid terrain (``multipass``
 with ``model.vehicle = "3d"``, the terrain engine; docs/vehicle3d.md "Studies: the
 second pass").
 

@@ -1,4 +1,7 @@
-"""The 3D vehicle (``model.vehicle = "3d"``, docs/vehicle3d.md) driving along a side slope and across
+"""A side slope and furrows in 3D
+==============================
+
+The 3D vehicle (``model.vehicle = "3d"``, docs/vehicle3d.md) driving along a side slope and across
 furrows on homogeneous soil: the path over the elevation, roll and pitch against distance, the load
 split between the tracks.
 

@@ -1,4 +1,7 @@
-"""Steady turns of the reference crawler (docs/turning.md): trim points (symtrack.control.trim) at
+"""Steady turns
+============
+
+Steady turns of the reference crawler (docs/turning.md): trim points (symtrack.control.trim) at
 several radii and speeds on the validation clay and on sandy loam, printed as a markdown table.
 
     python examples/steady_turns.py                            # the lagged shear law "shear" (this example's default)

@@ -1,4 +1,7 @@
-"""A crawler and a wheeled tractor of the same mass on the same field (docs/subsoil.md, "Tracks
+"""Tracks against wheels
+=====================
+
+A crawler and a wheeled tractor of the same mass on the same field (docs/subsoil.md, "Tracks
 against wheels"): the largest vertical stress at 0.1, 0.15, 0.3 and 0.5 m and the bulk density after
 one pass, for the crawler on its tracks (terrain engine), the tractor on single wheels and on dual
 wheels (symtrack/vehicles/wheeled.py, along the crawler's driven path), and the singles at 1.5 x
@@ -12,6 +15,7 @@ dual wheels, on two Swedish clays; stress at 0.15, 0.3, 0.5 m: tracks about equa
 singles; under singles the bulk density rose from 1.24 to 1.36 Mg/m^3.
 
 Here (ASSUMED where no figure of the paper was read):
+
 - the machines weigh 7.7 t: the reference crawler with ``mass_kg = 7700`` (its 2 x 2.4 x 0.45 m
   tracks, 35 kPa on average); the tractor 40 % on the front axle, wheelbase 2.8 m, gauge 1.8 m;
   front 540/65R28 (0.54 m x 1.42 m, load index 142: 2650 kg at 160 kPa), rear 650/65R38

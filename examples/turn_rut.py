@@ -1,4 +1,7 @@
-"""The rut of a steady turn against the rut of a straight pass at the same speed, on the grid terrain
+"""The rut of a steady turn
+========================
+
+The rut of a steady turn against the rut of a straight pass at the same speed, on the grid terrain
 (the terrain engine, ``run.integrator = "grid_fast"``; docs/turning.md section 5).
 
     python examples/turn_rut.py                                   # sandy loam, R = 10 m, 2 m/s, shear law

@@ -1,4 +1,7 @@
-"""Sensitivity of the validation figures (docs/turning.md section 4): the validation scenario with
+"""Sensitivity of the validation figures
+=====================================
+
+Sensitivity of the validation figures (docs/turning.md section 4): the validation scenario with
 one --set change per row, CVODES, printed as a markdown table.
 
     python examples/validation_sensitivity.py                 # the table of docs/turning.md

@@ -1,4 +1,7 @@
-"""A field with a wet headland (docs/terrain.md, "Soil maps"): two passes of the reference crawler
+"""A field with a wet headland
+===========================
+
+A field with a wet headland (docs/terrain.md, "Soil maps"): two passes of the reference crawler
 along a 20 m strip whose last 8 m are a wetter, weaker clay, through the terrain engine; the
 summary by pass (sinkage, subsoil stress, risk area by depth) and the run folder with the risk
 map by depth.

@@ -1,11 +1,17 @@
 """The documentation site builds with no warning (``make docs``: Sphinx over docs/*.md, the API reference
-from the docstrings), every page of docs/ is in a table of contents, the measured tables are the ones a
-command writes, and every `symtrack ...` command the README and the docs show is one the command line
-accepts. Nothing is run here (the example tests run the examples; ``make docs-examples``)."""
+from the docstrings, the gallery of examples/ with the figures of the examples it runs), every page of docs/
+is in a table of contents, the measured tables are the ones a command writes, and every `symtrack ...`
+command the README and the docs show is one the command line accepts. Beside the gallery's few examples
+(docs/gallery_examples.py, seconds each), nothing is run here (the example tests run the examples;
+``make docs-examples``)."""
 
 from __future__ import annotations
 
+import html
+import os
 import re
+import runpy
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -16,22 +22,52 @@ ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 
 
+def _files(folder: Path) -> set[str]:
+    return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if "__pycache__" not in p.parts}
+
+
 def test_the_site_builds_with_no_warning(tmp_path):
     pytest.importorskip("sphinx")
     pytest.importorskip("myst_parser")
     pytest.importorskip("furo")
-    # a fresh output and doctree folder: every page read, every docstring imported
+    pytest.importorskip("sphinx_gallery")
+    # the sources copied (docs/ without an earlier build's gallery, examples/, the changelog the docs include):
+    # every page read, every docstring imported, every example of the gallery run and drawn in this build,
+    # nothing written into the checkout
+    src = tmp_path / "src"
+    shutil.copytree(DOCS, src / "docs", ignore=shutil.ignore_patterns("_build", "gallery", "__pycache__"))
+    shutil.copytree(ROOT / "examples", src / "examples", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "CHANGELOG.md", src)
+    examples = _files(src / "examples")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
     proc = subprocess.run([sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q",
-                           "-d", str(tmp_path / "doctrees"), str(DOCS), str(tmp_path / "html")],
-                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+                           "-d", str(tmp_path / "doctrees"), str(src / "docs"), str(tmp_path / "html")],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, f"sphinx failed (warnings are errors):\n{proc.stderr[-6000:]}"
     for page in ("index", "getting-started", "howto", "model", "scenarios", "outputs", "performance",
-                 "api/symtrack", "changelog"):
+                 "api/symtrack", "changelog", "gallery/index"):
         assert (tmp_path / "html" / f"{page}.html").is_file(), page
     # the API reference has the docstrings of the front door
     api = (tmp_path / "html" / "api" / "symtrack.html").read_text(encoding="utf-8")
     for name in ("symtrack.simulate", "symtrack.load_scenario", "symtrack.Result", "symtrack.run"):
         assert f'id="{name}"' in api, name
+    # the gallery: a page per example with its title; the examples it runs show the figures they drew, the
+    # others say how to run them; no example wrote next to the scripts
+    run = runpy.run_path(str(DOCS / "gallery_examples.py"))["RUN"]
+    names = sorted(p.stem for p in (ROOT / "examples").glob("*.py"))
+    assert set(run) <= set(names) and len(names) >= 20
+    index = (tmp_path / "html" / "gallery" / "index.html").read_text(encoding="utf-8")
+    for name in names:
+        page = (tmp_path / "html" / "gallery" / f"{name}.html").read_text(encoding="utf-8")
+        title = (ROOT / "examples" / f"{name}.py").read_text(encoding="utf-8").split("\n", 1)[0].removeprefix('"""')
+        assert f"{name}.html" in index and title in html.unescape(page).replace("\u2019", "'"), name
+        images = re.findall(rf'src="\.\./_images/(sphx_glr_{name}_\d+\.png)"', page)
+        if name in run:
+            assert images, f"{name}: no figure in its gallery page"
+            assert all((tmp_path / "html" / "_images" / image).stat().st_size > 10_000 for image in images), name
+        else:
+            assert not images and "Not run when this site is built" in page, name
+    assert _files(src / "examples") == examples, "the gallery's examples wrote into examples/"
 
 
 def test_every_page_is_in_a_table_of_contents():
