@@ -27,3 +27,13 @@ def test_the_example_prints_a_soils_row_and_its_passes(capsys):
     assert rut_mm > 0 and comp_mm > 0 and drho > 0  # the pass left a rut, compressed and densified the column
     passes = [line for line in out.splitlines() if line.startswith("| 1 |") or line.startswith("| 2 |")]
     assert len(passes) == 2
+
+
+def test_a_preset_the_check_refuses_gets_its_reason_in_a_row_and_the_table_goes_on(capsys):
+    """heavy_clay_wes_40 (Bekker n = 0.11) is refused under the reference crawler's 25 kPa (its law stiffer than
+    its elastic reloading there): its row says why, and the example still ends well (the presets' loop of its
+    defaults stopped there with exit 1)."""
+    assert EX["main"](["--presets", "heavy_clay_wes_40", "--passes", "0"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| heavy_clay_wes_40 |")]
+    assert len(rows) == 1 and "refused on load: Bekker's loading stiffness" in rows[0]
+    assert "allowed range" in rows[0]
