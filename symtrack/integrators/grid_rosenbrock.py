@@ -15,7 +15,8 @@ Every macro step of the world manager (one output step) is one call: n equal ste
 Error control (``run.fixed_step_tolerance``, as the homogeneous terrain's compiled Rosenbrock,
 :mod:`symtrack.integrators.fixed_step`): the call returns the largest error ratio of its steps (the
 last stage's increment, the method's embedded error estimate, over FIXED_STEP_TOLERANCE max(|y0|, |y1|) +
-FIXED_STEP_ATOL in every differential state: :mod:`symtrack.native.grid_rosenbrock`). A macro step whose
+FIXED_STEP_ATOL in the vehicle's differential states and the channels' sinkage:
+:mod:`symtrack.native.grid_rosenbrock`, which says why not the channels' rate). A macro step whose
 ratio exceeds 1, or whose state is not finite, is taken again in steps of half the length (two calls of
 the same compiled code), down to 2^-FIXED_STEP_MAX_HALVINGS of the step. A macro step still above its
 tolerance there is kept with a warning (once per run); ``fixed_step_error_max`` in summary.json is the

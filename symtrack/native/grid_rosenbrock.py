@@ -37,8 +37,13 @@ the sums S held), so the step accepts the channel resets of the world manager be
 Each step also gives its error ratio, as the homogeneous terrain's compiled step does
 (:func:`symtrack.native.rosenbrock.step_and_error_expressions`): the method is stiffly accurate with an
 embedded solution of order 4, so the last stage's increment U_8 is the local error estimate; the ratio is
-its largest |U_8,i| / (FIXED_STEP_ATOL + rtol max(|y0,i|, |y1,i|)) over the differential states (the
-channels' two states and the vehicle's, not the accelerations), rtol an input. The error control itself
+its largest |U_8,i| / (FIXED_STEP_ATOL + rtol max(|y0,i|, |y1,i|)) over the vehicle's differential states
+and the channels' sinkage, rtol an input. Not over the channels' sinkage rate: where a cell starts loading
+its rate has a kink (the regularised Bekker slope) that no halving resolves, and in a fast, damped mode
+whose error does not carry over. Measured on validation_grid at 0.625 ms with the rate in the ratio:
+103,255 steps halved and the run about 15 x longer, for figures within 0.1 % of the run without control
+(what halving the step once gives at 2 x); without it: 224 steps halved, 3 % longer, the rut's mean depth
+0.031 % -> 0.002 % from IDAS's. The error control itself
 (halving the steps of a macro step whose ratio exceeds 1) is the stepper's
 (:class:`symtrack.integrators.grid_rosenbrock.GridRosenbrockStepper`).
 """
@@ -219,10 +224,10 @@ def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") ->
     for mi, ci, wi in zip(RB_M, Uc, Uw, strict=True):
         XC1 = XC1 + mi * ci
         W1 = W1 + mi * wi
-    # the error ratio: the last stage's increment over the tolerance, the differential states only (an
-    # idle slot's zeros give 0)
+    # the error ratio: the last stage's increment over the tolerance, the vehicle's differential states and the
+    # channels' sinkage (row 0; not its rate, row 1: module doc); an idle slot's zeros give 0
     RT = ca.MX.sym("rtol")
-    ratio_c = ca.fabs(Uc[-1]) / (FIXED_STEP_ATOL + RT * ca.fmax(ca.fabs(XC), ca.fabs(XC1)))
+    ratio_c = ca.fabs(Uc[-1][0, :]) / (FIXED_STEP_ATOL + RT * ca.fmax(ca.fabs(XC[0, :]), ca.fabs(XC1[0, :])))
     ratio_w = mass_w * ca.fabs(Uw[-1]) / (FIXED_STEP_ATOL + RT * ca.fmax(ca.fabs(Wm), ca.fabs(W1)))
     ratio = ca.fmax(ca.mmax(ratio_c), ca.mmax(ratio_w))
     step = ca.Function(name + "_step", [XC, Wm, U, PV, Qg, QC, H, RT], [XC1, W1, ratio],
