@@ -20,8 +20,8 @@ from symtrack.model.options import ModelOptions
 from symtrack.model.static import static_state
 from symtrack.simulation.scenario import load_scenario, scenario_from_dict
 from symtrack.terrain.surface import parse_surface
-from symtrack.vehicles.planar import GRAVITY_M_S2
 from symtrack.vehicles import vehicle3d
+from symtrack.vehicles.planar import GRAVITY_M_S2
 from symtrack.vehicles.vehicle3d import history_state_names, make_vehicle
 
 FIGURES = ("distance_m", "distance_after_idle_m", "lateral_deviation_m", "yaw_final_deg", "sinkage_idler_mm",
