@@ -734,6 +734,29 @@ def furrows_along() -> str:
               [[lab, x, y] for lab, x, y in zip(labels, col(a), col(b), strict=True)])
 
 
+FURROWS_CONVERGENCE = "python examples/furrows_3d.py --convergence 8 16 32 64 --spacings 9.6 --torque 2000"
+FURROWS_CONVERGENCE_SOFT = FURROWS_CONVERGENCE + " --soil elastic_stiffness_Pa_per_m=4e6 unloading_stiffness_floor=1"
+
+
+def _furrows_convergence(command: str) -> str:
+    rows = [[r["segments"], f"{r['speed_final_m_s']:.2f} m/s",
+             f"{r['normal_load_over_W'][0]:.2f} .. {r['normal_load_over_W'][1]:.2f}",
+             f"{r['heave_rate_max_m_s']:.2f} m/s", f"{r['compaction_resistance_mean_N']:.0f} N",
+             f"{r['cpu_time_s']:.1f} s"] for r in run_json(command)["convergence"]]
+    return md(["segments", "speed at 8 s", "total normal load / W", "largest heave rate",
+               "compaction resistance (mean)", "CPU"], rows)
+
+
+@table("furrows-convergence", "vehicle3d.md", FURROWS_CONVERGENCE)
+def furrows_convergence() -> str:
+    return _furrows_convergence(FURROWS_CONVERGENCE)
+
+
+@table("furrows-convergence-soft", "vehicle3d.md", FURROWS_CONVERGENCE_SOFT)
+def furrows_convergence_soft() -> str:
+    return _furrows_convergence(FURROWS_CONVERGENCE_SOFT)
+
+
 @table("second-pass-3d", "vehicle3d.md", "python examples/second_pass_3d.py")
 def second_pass_3d() -> str:
     d = run_json("python examples/second_pass_3d.py")

@@ -6,6 +6,7 @@ docs/vehicle3d.md "Studies: furrows").
 
     python examples/furrows_3d.py                               # furrows 0.1 m deep
     python examples/furrows_3d.py --spacings 2.4 4.8 --plot /tmp/furrows_3d.png
+    python examples/furrows_3d.py --convergence 8 16 32 64 --spacings 9.6 --torque 2000   # docs: "Limits"
 
 Runs from rest on homogeneous soil (clayey soil 38 %, the creep law), both sprockets at ``--torque``
 N m, heading +x, CVODES (``run.integrator = "cvodes"``: no C compile per ground), ``--segments``
@@ -49,13 +50,14 @@ SETTLE_M = 1.0  # the stretch compared starts after this distance (the set-off)
 
 
 def furrow_scenario(spacing_m: float, depth_m: float, heading_deg: float, torque_N_m: float, duration_s: float,
-                    segments: int, start_y_m: float = 0.0, dt_s: float = 0.02):
-    """The 3D vehicle from rest at (0, ``start_y_m``) heading +x on furrows (a ridge at s = 0)."""
+                    segments: int, start_y_m: float = 0.0, dt_s: float = 0.02, soil: dict | None = None):
+    """The 3D vehicle from rest at (0, ``start_y_m``) heading +x on furrows (a ridge at s = 0); ``soil``:
+    soil parameters over the preset's."""
     return scenario_from_dict({
         "name": f"furrows_{spacing_m:g}m_{heading_deg:g}deg",
         "run": {"duration_s": float(duration_s), "output_dt_s": float(dt_s), "integrator": "cvodes"},
         "model": {"vehicle": "3d", "lateral_law": "creep", "contact_segments": int(segments)},
-        "vehicle": {"preset": "reference_crawler"}, "soil": {"preset": SOIL},
+        "vehicle": {"preset": "reference_crawler"}, "soil": {"preset": SOIL, **(soil or {})},
         "start": {"x_m": 0.0, "y_m": float(start_y_m), "yaw_deg": 0.0},
         "terrain": {"surface": {"furrow_spacing_m": float(spacing_m), "furrow_depth_m": float(depth_m),
                                 "furrow_heading_deg": float(heading_deg)}},
@@ -193,6 +195,30 @@ def along(spacing_m, depth_m, torque_N_m, duration_s, segments, start_y_m) -> di
     }}
 
 
+def convergence(spacing_m, depth_m, torque_N_m, duration_s, segments_list, soil=None) -> list:
+    """Across the furrows at each of ``segments_list`` contact segments a track: the speed at the end,
+    the tracks' total normal load over the weight and the largest heave rate after the set-off, the
+    compaction resistance's mean and the CPU time of the time loop (docs/vehicle3d.md, "Limits")."""
+    rows = []
+    for n in segments_list:
+        sc = furrow_scenario(spacing_m, depth_m, 90.0, torque_N_m, duration_s, n, soil=soil)
+        run = symtrack.simulate(sc).runs[0]
+        col = {k: np.asarray(run.column(k)) for k in ("x_m", "y_m", "u_m_s", "heave_rate_m_s", "normal_load_left_N",
+                                                      "normal_load_right_N", "compaction_resistance_left_N",
+                                                      "compaction_resistance_right_N")}
+        dist = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(col["x_m"]), np.diff(col["y_m"])))])
+        keep = dist >= SETTLE_M
+        W = sc.params["mass_kg"] * GRAVITY_M_S2
+        load = (col["normal_load_left_N"] + col["normal_load_right_N"])[keep] / W
+        rows.append({"segments": n, "speed_final_m_s": float(col["u_m_s"][-1]),
+                     "normal_load_over_W": [float(load.min()), float(load.max())],
+                     "heave_rate_max_m_s": float(np.max(np.abs(col["heave_rate_m_s"][keep]))),
+                     "compaction_resistance_mean_N": float(np.mean((col["compaction_resistance_left_N"]
+                                                                    + col["compaction_resistance_right_N"])[keep])),
+                     "cpu_time_s": float(run.cpu_time_s)})
+    return rows
+
+
 def plot(runs_across: list, runs_along: list, path: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -258,7 +284,19 @@ def main(argv=None) -> dict:
     ap.add_argument("--duration", type=float, default=8.0, help="each run [s]")
     ap.add_argument("--segments", type=int, default=16, help="model.contact_segments")
     ap.add_argument("--plot", default=None, help="write the figure here (.png)")
+    ap.add_argument("--convergence", type=int, nargs="+", default=None, metavar="SEGMENTS",
+                    help="instead: across the furrows of the first --spacings at these contact segments a track "
+                         "(docs/vehicle3d.md, \"Limits\")")
+    ap.add_argument("--soil", nargs="+", default=[], metavar="KEY=VALUE",
+                    help="soil parameters over the preset's (e.g. elastic_stiffness_Pa_per_m=4e6)")
     a = ap.parse_args(argv)
+    soil = {k: float(v) for k, v in (kv.split("=", 1) for kv in a.soil)}
+    if a.convergence:
+        out = {"convergence": convergence(a.spacings[0], a.depth_m, a.torque, a.duration, a.convergence, soil)}
+        print(json.dumps(out, indent=2))
+        return out
+    if soil:
+        ap.error("--soil is taken with --convergence only")
     runs_across = [across(lam, a.depth_m, a.torque, a.duration, a.segments) for lam in a.spacings]
     runs_along = [along(a.along_spacing, a.depth_m, a.torque, a.duration, a.segments, y0)
                   for y0 in (a.along_shift_m, a.along_offset * a.along_spacing + a.along_shift_m)]

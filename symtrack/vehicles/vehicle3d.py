@@ -84,6 +84,7 @@ of IDAS and the grid Rosenbrock is refused (:func:`symtrack.vehicles.registry.ch
 
 from __future__ import annotations
 
+import logging
 import math
 
 import casadi as ca
@@ -606,12 +607,17 @@ def make_vehicle(opts, surface=None) -> Vehicle3D:
 
 # segments per furrow period at least (the same sampling the grid's cells need: MIN_FURROW_CELLS)
 MIN_SEGMENTS_PER_FURROW = 4
+log = logging.getLogger("symtrack.vehicle3d")
+# (contact_segments, furrow spacing, depth, heading) already warned of in this process (check_contact)
+_FURROWS_WARNED: set = set()
 
 
 def check_contact(opts, surface, params: dict) -> None:
     """A :class:`ParameterError` naming ``model.contact_segments`` when the track's segments cannot
     resolve the furrows of ``surface``: a segment at most a quarter of the furrow spacing (furrows
-    running across the track are sampled like the grid's cells, four points a period at least)."""
+    running across the track are sampled like the grid's cells, four points a period at least).
+    Furrows it takes are warned of, one line once a process for a ground and a segment count: across
+    them the run's figures still change with the segments (docs/vehicle3d.md, "Limits")."""
     if surface is None or getattr(surface, "furrow_depth_m", 0.0) <= 0.0:
         return
     l = float(params["contact_length_m"])
@@ -621,6 +627,15 @@ def check_contact(opts, surface, params: dict) -> None:
             f"model.contact_segments = {opts.contact_segments} is too few for furrows every "
             f"{surface.furrow_spacing_m:g} m under a {l:g} m contact: the allowed range is [{need}, 64] (a segment "
             f"at most a quarter of the furrow spacing, {MIN_SEGMENTS_PER_FURROW} segments a furrow period)")
+    key = (opts.contact_segments, surface.furrow_spacing_m, surface.furrow_depth_m, surface.furrow_heading_deg)
+    if key not in _FURROWS_WARNED:
+        _FURROWS_WARNED.add(key)
+        log.warning(
+            "terrain.surface: furrows every %g m, %g m deep, under the 3D vehicle with model.contact_segments = %d: "
+            "across them its figures are not converged in the segments (where the rigid track's ends press in, the "
+            "soil being loaded can be centimetres long, a segment is %.3g m; docs/vehicle3d.md, \"Limits\"): compare "
+            "runs at several counts (1 to 64); the run goes on", surface.furrow_spacing_m, surface.furrow_depth_m,
+            opts.contact_segments, l / opts.contact_segments)
 
 
 def footprint_radius_m(params: dict) -> float:
