@@ -155,10 +155,11 @@ def test_the_raster_is_evaluated_through_few_call_nodes(tmp_path):
     """The contact's points go through one call of the surface mapped over them (Vehicle3D.grounds), so
     the call nodes to the raster do not grow with the points: the DAE holds two (the heights and
     gradients, and their rates) with 8 segments a track as with 16, its Jacobian (the generated
-    jac_<m>_dae) one per call node and direction (at most one direction per input), the unrolled
-    Rosenbrock step (the generated C's) two per stage and two per direction of its Jacobian. A call
-    per point and per derivative made 96, 5,376 and 3,936 with 8 segments (the Jacobian's C 6.6 MB,
-    20 s of gcc's CPU at -O0); measured now 2, 112 and 82 (16 segments: 2, 144, 114)."""
+    jac_<m>_dae) one per call node and sweep (at most one sweep per input), the unrolled Rosenbrock
+    step (the generated C's) two per stage and two per sweep of its Jacobian. A call per point and per
+    derivative made 96, 5,376 and 3,936 with 8 segments (the Jacobian's C 6.6 MB, 20 s of gcc's CPU at
+    -O0); measured now 2, 58 and 74 (16 segments: 2, 90, 106; in forward mode, before
+    SystemModel.reverse_jacobians, 2, 112 and 82)."""
     import casadi as ca
 
     from symtrack.native import rosenbrock
@@ -172,7 +173,7 @@ def test_the_raster_is_evaluated_through_few_call_nodes(tmp_path):
         x0, z0 = ca.SX.sym("x0", m.nx), ca.SX.sym("z0", m.z.numel())
         u, p, h = ca.SX.sym("u", m.u.numel()), ca.SX.sym("p", m.p.numel()), ca.SX.sym("h")
         step = ca.Function("step", [x0, z0, u, p, h],
-                           list(rosenbrock.step_and_error_expressions(m.dae, x0, z0, u, p, h)))
+                           list(rosenbrock.step_and_error_expressions(m.dae, x0, z0, u, p, h, m.reverse_jacobians)))
         dae, jac, stepped = _call_nodes(m.dae), _call_nodes(m.dae.jacobian()), _call_nodes(step)
         assert dae == 2 and jac <= dae * n_in and stepped <= dae * (rosenbrock.N_STAGES + ny), (n, dae, jac, stepped)
         outputs.append(_call_nodes(m.outputs))
