@@ -160,12 +160,12 @@ class SystemModel:
         """Whether the model's Functions eliminate common subexpressions (CasADi's ``cse``): yes, unless the
         vehicle's ground is an elevation raster: CSE hashes each call node to the raster's interpolant with
         its data (measured: 100 call nodes to a 300 x 100 raster's B-spline, 2.9 s). The 3D vehicle evaluates
-        the raster through one mapped call (``Vehicle3D.grounds``: 2 call nodes in ``dae``, 112 in its
-        Jacobian, 82 in the unrolled Rosenbrock step with 8 segments a track, where there were 96, 5,376 and
-        3,936), and CSE still costs more than it saves: the generated ``dae`` and Rosenbrock files of the
-        3D vehicle took 2.4 s to build with it on a 60 x 60 raster, 8.4 s on 200 x 200 and 66 s on 600 x 600
-        (0.35 to 1.1 s without), growing with the pixels, against 4 s of gcc's CPU saved at -O0 (the
-        Rosenbrock file; measured with CasADi 3.8 on 2 cores)."""
+        the raster through one mapped call (``Vehicle3D.grounds``: 2 call nodes in ``dae``, 58 in its
+        Jacobian, 74 in the unrolled Rosenbrock step with 8 segments a track, where there were 96, 5,376 and
+        3,936), and CSE still costs more than it saves: it took the build of the generated ``dae`` and
+        Rosenbrock files from 0.3 s to 1.5 s on a 60 x 60 raster, to 6.6 s on 200 x 200 and to 64 s on
+        600 x 600 (growing with the pixels), paid on every run (the build cache's key is taken from the
+        built Functions), for 4.5 s of gcc's CPU at -O0 paid once (measured with CasADi 3.8 on 2 cores)."""
         surface = getattr(self.vehicle, "surface", None)
         return getattr(surface, "raster", None) is None
 
