@@ -142,3 +142,39 @@ def test_the_compiled_rosenbrock_takes_the_raster(tmp_path):
     a, b = _columns(scenario_from_dict(da)), _columns(scenario_from_dict(db))
     scale = np.maximum(np.abs(a).max(axis=0), 1e-3)
     assert np.max(np.abs(a - b) / scale) < 1e-7, np.max(np.abs(a - b) / scale, axis=0)
+
+
+def _call_nodes(f) -> int:
+    """The call nodes of an SX Function (here: to the surface mapped over the contact's points)."""
+    import casadi as ca
+
+    return sum(f.instruction_id(k) == ca.OP_CALL for k in range(f.n_instructions()))
+
+
+def test_the_raster_is_evaluated_through_few_call_nodes(tmp_path):
+    """The contact's points go through one call of the surface mapped over them (Vehicle3D.grounds), so
+    the call nodes to the raster do not grow with the points: the DAE holds two (the heights and
+    gradients, and their rates) with 8 segments a track as with 16, its Jacobian (the generated
+    jac_<m>_dae) one per call node and sweep (at most one sweep per input), the unrolled Rosenbrock
+    step (the generated C's) two per stage and two per sweep of its Jacobian. A call per point and per
+    derivative made 96, 5,376 and 3,936 with 8 segments (the Jacobian's C 6.6 MB, 20 s of gcc's CPU at
+    -O0); measured now 2, 58 and 74 (16 segments: 2, 90, 106; in forward mode, before
+    SystemModel.reverse_jacobians, 2, 112 and 82)."""
+    import casadi as ca
+
+    from symtrack.native import rosenbrock
+
+    surface = parse_surface(_raster(tmp_path, PLANE, 0.5, (-5.0, -6.0), (30.0, 12.0)))
+    outputs = []
+    for n in (8, 16):
+        opts = ModelOptions(lateral_law="creep", vehicle="3d", contact_segments=n)
+        m = SystemModel(opts, vehicle=make_vehicle(opts, surface))
+        ny, n_in = m.nx + m.z.numel(), m.nx + m.z.numel() + m.u.numel() + m.p.numel()
+        x0, z0 = ca.SX.sym("x0", m.nx), ca.SX.sym("z0", m.z.numel())
+        u, p, h = ca.SX.sym("u", m.u.numel()), ca.SX.sym("p", m.p.numel()), ca.SX.sym("h")
+        step = ca.Function("step", [x0, z0, u, p, h],
+                           list(rosenbrock.step_and_error_expressions(m.dae, x0, z0, u, p, h, m.reverse_jacobians)))
+        dae, jac, stepped = _call_nodes(m.dae), _call_nodes(m.dae.jacobian()), _call_nodes(step)
+        assert dae == 2 and jac <= dae * n_in and stepped <= dae * (rosenbrock.N_STAGES + ny), (n, dae, jac, stepped)
+        outputs.append(_call_nodes(m.outputs))
+    assert outputs[0] == outputs[1] <= 5, outputs  # the outputs: also the tracks' ends and the CG's ground

@@ -148,7 +148,7 @@ class SystemModel:
 
         self.x, self.z, self.u, self.p = x, z, u, p
         self.ode_expr, self.alg_expr, self.ode_dae_expr = ode, alg, ode_z
-        fo = {"cse": self.cse}
+        fo = {"cse": self.cse, **self.ad_options}
         self.dae = ca.Function("dae", [x, z, u, p], [ode_z, alg], ["x", "z", "u", "p"], ["ode", "alg"], fo)
         self.ode = ca.Function("ode", [x, u, p], [ode], ["x", "u", "p"], ["ode"], fo)
         self.outputs = ca.Function("outputs", [x, u, p], [y], ["x", "u", "p"], ["y"], fo)
@@ -159,10 +159,41 @@ class SystemModel:
     def cse(self) -> bool:
         """Whether the model's Functions eliminate common subexpressions (CasADi's ``cse``): yes, unless the
         vehicle's ground is an elevation raster: CSE hashes each call node to the raster's interpolant with
-        its data (measured: 100 call nodes to a 300 x 100 raster's B-spline, 2.9 s; the 3D vehicle's
-        unrolled Rosenbrock step, 156 s), where the graph already shares its nodes."""
+        its data (measured: 100 call nodes to a 300 x 100 raster's B-spline, 2.9 s). The 3D vehicle evaluates
+        the raster through one mapped call (``Vehicle3D.grounds``: 2 call nodes in ``dae``, 58 in its
+        Jacobian, 74 in the unrolled Rosenbrock step with 8 segments a track, where there were 96, 5,376 and
+        3,936), and CSE still costs more than it saves: it took the build of the generated ``dae`` and
+        Rosenbrock files from 0.3 s to 1.5 s on a 60 x 60 raster, to 6.6 s on 200 x 200 and to 64 s on
+        600 x 600 (growing with the pixels), paid on every run (the build cache's key is taken from the
+        built Functions), for 4.5 s of gcc's CPU at -O0 paid once (measured with CasADi 3.8 on 2 cores)."""
         surface = getattr(self.vehicle, "surface", None)
         return getattr(surface, "raster", None) is None
+
+    @property
+    def reverse_jacobians(self) -> bool:
+        """Whether the model's Jacobians are taken in CasADi's reverse mode (one sweep per colour of their
+        rows) rather than its default choice, forward mode here (one sweep per colour of their columns):
+        yes when the vehicle's ground is an elevation raster. Every sweep passes through each call node to
+        the raster (the forward mode's too, where the seed of the pose's states is zero): the DAE's
+        Jacobian in reverse mode has 58 call nodes and 92,000 SX instructions where the forward mode had
+        112 and 166,000, the Rosenbrock step's 113,000 where it had 146,000 (8 segments a track), and
+        gcc's CPU for the generated dae and Rosenbrock files at -O1 is 46 s instead of 54 s (13 s instead
+        of 18 s at -O0). The same Jacobians to rounding (1e-14 of their largest entry, measured with CasADi
+        3.8). Without a raster the model keeps the default (the same expressions as before)."""
+        surface = getattr(self.vehicle, "surface", None)
+        return getattr(surface, "raster", None) is not None
+
+    @property
+    def ad_options(self) -> dict:
+        """The model's Functions' options for their Jacobians (:attr:`reverse_jacobians`: ``ad_weight`` 1,
+        reverse mode), empty otherwise."""
+        return {"ad_weight": 1.0} if self.reverse_jacobians else {}
+
+    @property
+    def jacobian_options(self) -> dict:
+        """The options of ``casadi.jacobian`` on the model's expressions (:attr:`reverse_jacobians`:
+        ``allow_forward`` False, reverse mode), empty otherwise."""
+        return {"allow_forward": False} if self.reverse_jacobians else {}
 
     # The Jacobian Functions are built on first use: for the grid terrain the ODE form's
     # Jacobian is dense (see symtrack/terrain/channels.py) and costly to build, and the
@@ -170,13 +201,15 @@ class SystemModel:
     @functools.cached_property
     def jac_ode(self) -> ca.Function:
         x, u, p, ode = self.x, self.u, self.p, self.ode_expr
-        return ca.Function("jac_ode", [x, u, p], [ca.jacobian(ode, x), ca.jacobian(ode, u)],
+        jo = self.jacobian_options
+        return ca.Function("jac_ode", [x, u, p], [ca.jacobian(ode, x, jo), ca.jacobian(ode, u, jo)],
                            ["x", "u", "p"], ["A", "B"], {"cse": self.cse})
 
     @functools.cached_property
     def jac_outputs(self) -> ca.Function:
         x, u, p, y = self.x, self.u, self.p, self._y_expr
-        return ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x), ca.jacobian(y, u)],
+        jo = self.jacobian_options
+        return ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x, jo), ca.jacobian(y, u, jo)],
                            ["x", "u", "p"], ["C", "D"], {"cse": self.cse})
 
     @functools.cached_property

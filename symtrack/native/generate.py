@@ -97,11 +97,12 @@ class Generated:
         return h.hexdigest()
 
 
-def _rename(f: ca.Function, name: str, cse: bool = True) -> ca.Function:
+def _rename(f: ca.Function, name: str, cse: bool = True, ad: dict | None = None) -> ca.Function:
     """A copy of the SX Function f under another name (same expressions, common subexpressions
-    eliminated unless ``cse`` is False: a model on an elevation raster, ``SystemModel.cse``)."""
+    eliminated unless ``cse`` is False: a model on an elevation raster, ``SystemModel.cse``; ``ad``: the
+    options of its Jacobians, ``SystemModel.ad_options``)."""
     args = f.sx_in()
-    return ca.Function(name, args, f.call(args), f.name_in(), f.name_out(), {"cse": cse})
+    return ca.Function(name, args, f.call(args), f.name_in(), f.name_out(), {"cse": cse, **(ad or {})})
 
 
 def fixed_step_functions(model, prefix: str):
@@ -109,7 +110,8 @@ def fixed_step_functions(model, prefix: str):
     with its error estimate, the consistent z, and chunks of many error-controlled steps per call."""
     x0, z0 = ca.SX.sym("x0", model.x.sparsity()), ca.SX.sym("z0", model.z.sparsity())
     u, p, h = ca.SX.sym("u", model.u.sparsity()), ca.SX.sym("p", model.p.sparsity()), ca.SX.sym("h")
-    x1, z1, e1 = rosenbrock.step_and_error_expressions(model.dae, x0, z0, u, p, h)
+    x1, z1, e1 = rosenbrock.step_and_error_expressions(model.dae, x0, z0, u, p, h,
+                                                       getattr(model, "reverse_jacobians", False))
     cse = getattr(model, "cse", True)
     step = ca.Function(f"{prefix}_{FIXED_STEP_METHOD}_step", [x0, z0, u, p, h], [x1, z1, e1],
                        ["x0", "z0", "u", "p", "h"], ["xf", "zf", "ef"], {"cse": cse})
@@ -203,7 +205,7 @@ GROUP_OF = {"ode": "ode", "linearize": "ode", "dae": "dae", "accel": "dae", "out
 
 def _group(model, prefix: str, group: str) -> tuple:
     if group == "ode":
-        ode = _rename(model.ode, f"{prefix}_ode", getattr(model, "cse", True))
+        ode = _rename(model.ode, f"{prefix}_ode", getattr(model, "cse", True), getattr(model, "ad_options", None))
         jac_ode = ode.jacobian()  # named jac_<prefix>_ode: casadi.external finds it
         x, u, p = (ca.MX.sym(n, s) for n, s in (("x", model.x.sparsity()), ("u", model.u.sparsity()),
                                                   ("p", model.p.sparsity())))
@@ -212,7 +214,7 @@ def _group(model, prefix: str, group: str) -> tuple:
         return ode, jac_ode, lin
     if group == "dae":
         cse = getattr(model, "cse", True)
-        dae = _rename(model.dae, f"{prefix}_dae", cse)
+        dae = _rename(model.dae, f"{prefix}_dae", cse, getattr(model, "ad_options", None))
         return dae, dae.jacobian(), _rename(model.accel, f"{prefix}_accel", cse)
     if group == "outputs":
         return (_rename(model.outputs, f"{prefix}_outputs", getattr(model, "cse", True)),)

@@ -417,9 +417,12 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
         foot = ca.mtimes(ca.mtimes(Rz, Rpr), ca.vertcat(0, 0, -pv[veh.param_names.index("cg_height_m")]))
         ax, ay = ax + foot[0], ay + foot[1]
     a = ca.vertcat(ax, ay, ca.cos(pose.yaw_rad), ca.sin(pose.yaw_rad), *D, *Dseg)
-    # common subexpressions merged (CasADi's cse), except over an elevation raster's interpolant: with its
-    # call nodes the merge of eng_vehicle_step took 83 s of the plant's build (a 200 x 100 raster, measured
-    # 2026-12-04), without it well under a second (docs/vehicle3d.md, "An elevation raster on the grid")
+    # common subexpressions merged (CasADi's cse), except over an elevation raster's interpolant: cse hashes
+    # each call node to it with the raster's data. With a call per segment the merge of eng_vehicle_step took
+    # 83 s of the plant's build (a 200 x 100 raster, measured 2026-12-04); with the contact's points in one
+    # mapped call (Vehicle3D.grounds: 15 call nodes in eng_vehicle_step, 297 before) the merge of these
+    # Functions still took 15 s against 1 s without, for 2 s of gcc's CPU saved at -O0 (docs/vehicle3d.md,
+    # "An elevation raster on the grid")
     raster = getattr(surface, "raster", None) if n_seg else None
     fo, fo_vehicle = {"cse": True}, {"cse": raster is None}
     vehicle_a = ca.Function("eng_vehicle_a", [w, pv], [a], ["w", "pv"], ["a"], fo_vehicle)
@@ -440,10 +443,12 @@ def build_engine_functions(opts, params: dict, vehicle_substeps: int, soils: tup
     # validation_grid's states within 4e-14 m). Measured with the sources the build writes (the
     # BuildSpec's sources() in a folder) and `gcc <the build's flags> -c engine.c` under /usr/bin/time.
     # (cse over a raster's interpolant call nodes as for eng_vehicle_step: 68 s of CPU in CasADi's cse
-    # for eng_vehicle_J alone over a 200 x 100 raster, measured 2026-12-06)
+    # for eng_vehicle_J alone over a 200 x 100 raster with a call per segment, measured 2026-12-06; with the
+    # mapped call, above)
     call = {"cse": raster is None, "never_inline": True}
     fF = ca.Function("eng_vehicle_F", [w, u, pv, hsym], [Fh], call)
-    fJ = ca.Function("eng_vehicle_J", [w, u, pv, hsym], [ca.jacobian(Fh, w)], call)
+    # (in reverse mode on a raster: SystemModel.reverse_jacobians)
+    fJ = ca.Function("eng_vehicle_J", [w, u, pv, hsym], [ca.jacobian(Fh, w, veh.jacobian_options)], call)
     mass = ca.DM.zeros(veh.layout.nv + len(ALGEBRAIC))
     vs = veh.layout.block("vehicle")
     mass[vs] = 1.0

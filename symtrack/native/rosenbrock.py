@@ -140,9 +140,10 @@ def step_expressions(dae: ca.Function, x0, z0, u, p, h):
     return x1, z1
 
 
-def step_and_error_expressions(dae: ca.Function, x0, z0, u, p, h):
+def step_and_error_expressions(dae: ca.Function, x0, z0, u, p, h, reverse: bool = False):
     """(x1, z1, e1): :func:`step_expressions` and the step's local error estimate e1 of the
-    differential states, in their units.
+    differential states, in their units. ``reverse``: the Jacobian J in CasADi's reverse mode (a model on
+    an elevation raster, ``SystemModel.reverse_jacobians``), else in its default choice.
 
     The method is stiffly accurate with an embedded solution: its last stage's argument
     y0 + sum_{j<8} a_8j U_j (order 4) is the step's result without the last increment, since
@@ -157,7 +158,7 @@ def step_and_error_expressions(dae: ca.Function, x0, z0, u, p, h):
 
     y0 = ca.vertcat(x0, z0)
     ny = y0.numel()
-    J = ca.jacobian(F(y0), y0)
+    J = ca.jacobian(F(y0), y0, {"allow_forward": False}) if reverse else ca.jacobian(F(y0), y0)
     mass = ca.DM.zeros(ny)
     mass[:nx] = 1.0
     W = ca.diag(mass / GAMMA) - J

@@ -281,8 +281,11 @@ class Vehicle3D(VehicleModel):
 
     def __init__(self, surface=None, lateral: bool = False):
         self.surface = None if surface is None or surface.is_flat else surface
-        # (z0, dz0/dx, dz0/dy); an elevation raster is a B-spline of degree 1 (bilinear), a call node in SX
+        # (z0, dz0/dx, dz0/dy); an elevation raster is a B-spline of degree 1 (bilinear), a call node in SX:
+        # the contact's points then go through one call of the surface mapped over them (grounds)
         self._ground_f = None if self.surface is None else self.surface.function()
+        self._mapped = self.surface is not None and self.surface.raster is not None
+        self._ground_maps = {}
         self.lateral = bool(lateral)
         self.name = "3d_lateral" if lateral else "3d"
         self.menu_name = "3d"
@@ -313,6 +316,22 @@ class Vehicle3D(VehicleModel):
             return 0, 0, 0
         z, gx, gy = self._ground_f(x, y)
         return z, gx, gy
+
+    def grounds(self, points):
+        """[(z0, dz0/dx, dz0/dy)] of the ground at the world points ``points`` (pairs (x, y), CasADi). On an
+        elevation raster the points go through one call of the surface mapped over them
+        (:meth:`~symtrack.terrain.surface.Surface.points_function`): one call node to the raster in the SX
+        graph instead of one per point, and one per derivative of it (the penetrations' rates, the
+        model's Jacobians: a few per Jacobian, not a few per point and per direction), the same values.
+        An analytic surface (no call node) is expanded point by point as :meth:`ground` does."""
+        if not self._mapped or len(points) < 2:
+            return [self.ground(x, y) for x, y in points]
+        n = len(points)
+        f = self._ground_maps.get(n)
+        if f is None:
+            f = self._ground_maps[n] = self.surface.points_function(n, self._ground_f)
+        z, gx, gy = f(ca.horzcat(*(x for x, _ in points)), ca.horzcat(*(y for _, y in points)))
+        return [(z[i], gx[i], gy[i]) for i in range(n)]
 
     def contact_pose(self, xv) -> ContactPose:
         s = VehicleState(xv, self.layout)
@@ -384,17 +403,32 @@ class Vehicle3D(VehicleModel):
         torque = {k: S[f"torque_{k}_N_m"] for k in TRACKS}
         abs_om = {k: sprocket_speed_abs(omega[k], opts) for k in TRACKS}
         depth, v_tracks = {}, {}
-        for k in TRACKS:
-            yk = B / 2 if k == "left" else -B / 2
+        # the ground under the contact's points, all of them in one evaluation (grounds: one call node on a
+        # raster): the segments' centres of both tracks; the tracks' ends and the CG (the signals)
+        gauge = {k: B / 2 if k == "left" else -B / 2 for k in TRACKS}
+        centres = {k: [world(x_front - s, gauge[k], -h) for s in s_c] for k in TRACKS}
+        under = self.grounds([(pt[0], pt[1]) for k in TRACKS for pt in centres[k]])
+        ends = {(k, end): world(x_front - s_end, gauge[k], -h) for k in TRACKS
+                for end, s_end in (("idler", 0), ("sprocket", l))}
+        under_ends = self.grounds([(pe[0], pe[1]) for pe in ends.values()] + [(X, Y)])
+        ground_ends = dict(zip(ends, under_ends[:-1], strict=True))  # (the last: the CG's)
+        # each centre's normal and penetration (normal to the ground) and its rate
+        contact = []
+        for pt, (z0, gx, gy) in zip((pt for k in TRACKS for pt in centres[k]), under, strict=True):
+            norm = ca.sqrt(1 + gx**2 + gy**2)
+            contact.append((ca.vertcat(-gx, -gy, 1) / norm, (z0 - pt[2]) / norm))
+        if self._mapped:  # the rates of all in one derivative: one call node (grounds)
+            rates = ca.vertsplit(rate(ca.vertcat(*(delta for _, delta in contact))))
+        else:
+            rates = [rate(delta) for _, delta in contact]
+        for t, k in enumerate(TRACKS):
+            yk = gauge[k]
             p_seg, n_sum, pts, normals, deltas = [], 0, [], [], []
             z_hist, deepest = 0, 0
-            for i, s in enumerate(s_c):
-                pt = world(x_front - s, yk, -h)
-                z0, gx, gy = self.ground(pt[0], pt[1])
-                norm = ca.sqrt(1 + gx**2 + gy**2)
-                nrm = ca.vertcat(-gx, -gy, 1) / norm
-                delta = (z0 - pt[2]) / norm  # the penetration normal to the ground
-                ddelta = rate(delta)
+            for i in range(n_seg):
+                pt = centres[k][i]
+                nrm, delta = contact[t * n_seg + i]
+                ddelta = rates[t * n_seg + i]
                 deltas.append(delta)
                 if contact_history is not None:
                     p_soil = law_obj.pressure(delta, contact_history[k][i], law)
@@ -480,9 +514,8 @@ class Vehicle3D(VehicleModel):
             Fw += f_shear
             Mw += ca.cross(centre - cg, f_shear) + (Mz[k] - (-e) * Fy[k]) * nk
             # the sinkage under the track's ends (the rigid track's penetration there)
-            for end, s_end in (("idler", 0), ("sprocket", l)):
-                pe = world(x_front - s_end, yk, -h)
-                ze = self.ground(pe[0], pe[1])
+            for end in ("idler", "sprocket"):
+                pe, ze = ends[(k, end)], ground_ends[(k, end)]
                 signals[f"sinkage_{end}_{k}_m"] = (ze[0] - pe[2]) / ca.sqrt(1 + ze[1] ** 2 + ze[2] ** 2)
             # the track's pressure line: the least-squares line through its segments, at the track's ends
             alpha, beta = dist[k].least_squares_line()
@@ -526,7 +559,7 @@ class Vehicle3D(VehicleModel):
         signals["pitch_rad"] = pitch
         signals["roll_rad"] = roll
         signals["z_m"] = Z
-        signals["ground_z_m"] = self.ground(X, Y)[0] + 0 * X
+        signals["ground_z_m"] = under_ends[-1][0] + 0 * X
         return {"xdot": ca.vertcat(*xdot), "acc_implied": ca.vertcat(ax, ay), "dist": dist, "signals": signals,
                 "yaw_moment_N_m": yaw_moment}
 
