@@ -94,9 +94,14 @@ class FixedStepper:
         self.z = None
 
     def consistent_z(self, x, u, p, z_guess=None):
-        """The algebraic state consistent with (x, u, p) (Newton steps from z_guess or accel)."""
+        """The algebraic state consistent with (x, u, p) (Newton steps from z_guess or accel). The guess
+        ``accel`` is the model's own SX Function, evaluated by CasADi (as the SUNDIALS steppers' start): its
+        compiled copy lives in the library's ``dae`` file, which holds the DAE's Jacobian, the largest of the
+        model's C (half of gcc's time for a 3D model on an elevation raster), and which a run on this
+        integrator does not otherwise load (the start's guess only: the Newton steps that follow are the
+        compiled ``consistent_z``)."""
         if z_guess is None:
-            z_guess = self.lib.f("accel")(x, u, p)
+            z_guess = self.model.accel(x, u, p)
         return np.array(self.lib.f("consistent_z")(x, z_guess, u, p)).ravel()
 
     def run_chunk(self, n_cols, x, z, U, H, p, t0_s=None):
