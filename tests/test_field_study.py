@@ -145,6 +145,9 @@ def test_output_files_and_their_schema(study):
     assert "[field]" in (out / "field.resolved.toml").read_text()
     page = (out / "report.html").read_text()  # what ran, the patterns side by side, every map embedded
     assert "symtrack field:" in page and "<h2>Patterns</h2>" in page and "trafficked_area_fraction" in page
+    # the figures by depth get a row per depth; a list of another kind does not, even of the same length (4 passes,
+    # 4 depths: the passes' lateral positions were shown "at 0.1 m")
+    assert "subsoil_sigma_z_max_kPa at 0.1 m" in page and "lateral_positions_m at" not in page
     assert page.count("data:image/png") >= 1 + 2 * len(PATTERNS)
     for name in PATTERNS:
         f = s["patterns"][name]
@@ -152,6 +155,8 @@ def test_output_files_and_their_schema(study):
         assert sum(hist) == s["field_cells"]
         assert f["trafficked_cells"] == s["field_cells"] - hist[0]
         assert s[f"{name}_trafficked_area_fraction"] == f["trafficked_area_fraction"]
+        for d, v in zip(f["subsoil_depths_m"], f["subsoil_sigma_z_max_kPa"], strict=True):
+            assert s[f"{name}_subsoil_sigma_z_max_at_{d:g}m_kPa"] == v > 0
         for k in ("rut_mean_depth_mm", "rut_max_depth_mm", "sinkage_volume_m3", "load_cycles_histogram",
                   "subsoil_depths_m", "subsoil_sigma_z_max_kPa", "wall_time_s", "sim_time_s", "passes"):
             assert k in f

@@ -436,10 +436,18 @@ def field_figures(terrain: Terrain, counts: np.ndarray, precompression_stress_Pa
     return out
 
 
+# a pattern's figures that are lists by subsoil depth (subsoil_depths_m): the report's rows by depth
+FIGURES_BY_DEPTH = ("subsoil_precompression_stress_by_depth_kPa", "subsoil_sigma_z_max_kPa",
+                    "bulk_density_initial_Mg_per_m3",
+                    *(f"{kind}_{name}" for name in subsoil.RISK_NAMES
+                      for kind in ("risk_fraction_of_trafficked", "risk_area_m2", "risk_fraction_of_field")))
+
+
 def flat_figures(pattern: str, figures: dict) -> dict:
     """The scalar figures of a pattern under ``<pattern>_<name>`` (the per-depth risk fractions of
     the field as ``<pattern>_risk_fraction_of_field_<class>_at_<depth>m``, the precompression stress as
-    ``<pattern>_subsoil_precompression_stress_at_<depth>m_kPa``): the top-level keys of summary.json that a
+    ``<pattern>_subsoil_precompression_stress_at_<depth>m_kPa``, the largest vertical stress of the trafficked
+    cells as ``<pattern>_subsoil_sigma_z_max_at_<depth>m_kPa``): the top-level keys of summary.json that a
     sweep's results.csv takes."""
     out = {}
     for k, v in figures.items():
@@ -452,6 +460,8 @@ def flat_figures(pattern: str, figures: dict) -> dict:
     for d, v in zip(figures.get("subsoil_depths_m", []), figures.get("subsoil_precompression_stress_by_depth_kPa", []),
                     strict=True):
         out[f"{pattern}_subsoil_precompression_stress_at_{d:g}m_kPa"] = v
+    for d, v in zip(figures.get("subsoil_depths_m", []), figures.get("subsoil_sigma_z_max_kPa", []), strict=True):
+        out[f"{pattern}_subsoil_sigma_z_max_at_{d:g}m_kPa"] = v
     return out
 
 
@@ -967,11 +977,11 @@ def _report(folder, spec: FieldSpec, results: dict, summary: dict, files: dict) 
     names = list(results)
     keys = [k for k, v in results[names[0]].figures.items() if isinstance(v, (bool, int, float, str))] if names else []
     rows = [[k, *(results[n].figures.get(k) for n in names)] for k in keys]
-    # the figures by depth, a row per depth (the strength, the stress, the density, the risk)
+    # the figures by depth, a row per depth (the strength, the stress, the risk; not the other lists, such as
+    # the passes' lateral positions, whatever their length)
     depths = results[names[0]].figures.get("subsoil_depths_m", []) if names else []
     for k, v in (results[names[0]].figures.items() if names else ()):
-        if k != "subsoil_depths_m" and isinstance(v, list) and len(v) == len(depths) and \
-                all(isinstance(x, (int, float)) for x in v):
+        if k in FIGURES_BY_DEPTH and isinstance(v, list) and len(v) == len(depths):
             rows += [[f"{k} at {d:g} m", *(_at(results[n].figures.get(k), j) for n in names)]
                      for j, d in enumerate(depths)]
     tables = {"Soil": soil_table(spec.scenario.soil, depths, spec.scenario.soil_preset)}
