@@ -119,9 +119,11 @@ def comparison_png(figures: dict) -> bytes:
         if not d:
             continue
         shown = True
-        for name, style in zip(RISK_NAMES[1:], ("--", "-"), strict=True):
-            ax.plot([100 * v for v in f[f"risk_fraction_of_field_{name}"]], d, style, marker="o",
-                    color=PATTERN_COLOURS.get(n, "C2"), label=f"{n}: {name} risk")
+        for name, style, marker in zip(RISK_NAMES[1:], ("--", "-"), ("o", "s"), strict=True):
+            v = [100 * x for x in f[f"risk_fraction_of_field_{name}"]]
+            # a class the pattern never reaches lies on the axis: its label says so
+            ax.plot(v, d, style, marker=marker, color=PATTERN_COLOURS.get(n, "C2"),
+                    label=f"{n}: {name} risk" + ("" if any(v) else " (none)"))
     if shown:
         if not any(v for n in names for r in RISK_NAMES[1:] for v in figures[n].get(f"risk_fraction_of_field_{r}", [])):
             ax.text(0.5, 0.5, "no cell above low risk at any depth", transform=ax.transAxes, ha="center")
