@@ -21,6 +21,19 @@ def test_the_pattern_line_counts_cells_by_pass_count():
     assert lines[1] == "  medium risk (% of the field): 0.1 m 6.10 %, 0.3 m 2.80 %"
 
 
+def test_the_pattern_lines_give_the_stress_and_the_density_by_depth():
+    """A field's console lines say the largest vertical stress and bulk density below the tracks by depth (a
+    newcomer found the rut and the risk there, not the stress or the density)."""
+    f = {"passes_per_cell_histogram": [10, 5], "trafficked_area_fraction": 0.3, "rut_mean_depth_mm": 1.2,
+         "rut_max_depth_mm": 2.1, "passes_done": 4, "wall_time_s": 0.5, "subsoil_depths_m": [0.1, 0.3],
+         "subsoil_sigma_z_max_kPa": [38.04, 31.2], "risk_fraction_of_field_medium": [0.6, 0.4],
+         "passes": [{"bulk_density_max_Mg_per_m3": [1.2531, 1.2522]},
+                    {"bulk_density_max_Mg_per_m3": [1.25398, 1.25327]}]}
+    lines = pattern_lines("random", f)
+    assert "  largest vertical stress (kPa): 0.1 m 38.0, 0.3 m 31.2" in lines
+    assert "  largest bulk density after the passes (Mg/m^3): 0.1 m 1.2540, 0.3 m 1.2533" in lines
+
+
 def test_a_value_given_equal_to_the_bases_derived_one_is_kept(tmp_path):
     """sandy_loam_15's topsoil is 1.55 Mg/m^3, so its derived subsoil density is 1.55 too: a file (or a
     scenario) that loosens the topsoil to 1.35 and gives the subsoil 1.55 keeps its subsoil at 1.55, not

@@ -91,6 +91,15 @@ def pattern_lines(name: str, f: dict) -> list[str]:
     lines = [f"{name}: {100 * f['trafficked_area_fraction']:.2f} % of the field trafficked; cells by pass count "
              f"{dict(enumerate(hist))}; rut mean {f['rut_mean_depth_mm']:.3f} mm, max {f['rut_max_depth_mm']:.3f} "
              f"mm; {f['passes_done']} passes in {f['wall_time_s']:.1f} s"]
+    if f.get("subsoil_sigma_z_max_kPa"):
+        by = ", ".join(f"{d:g} m {v:.1f}" for d, v in zip(f["subsoil_depths_m"], f["subsoil_sigma_z_max_kPa"],
+                                                            strict=True))
+        lines.append(f"  largest vertical stress (kPa): {by}")
+    passes = f.get("passes") or []
+    rho = passes[-1].get("bulk_density_max_Mg_per_m3") if passes else None
+    if rho and len(rho) == len(f.get("subsoil_depths_m", ())):
+        by = ", ".join(f"{d:g} m {v:.4f}" for d, v in zip(f["subsoil_depths_m"], rho, strict=True))
+        lines.append(f"  largest bulk density after the passes (Mg/m^3): {by}")
     for risk in ("medium", "high"):
         if f"risk_fraction_of_field_{risk}" in f:
             by = ", ".join(f"{d:g} m {100 * v:.2f} %" for d, v in zip(
