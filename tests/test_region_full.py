@@ -26,9 +26,10 @@ ONE = {"one": [{"name": "drilling", "machine": "drill_6m", "window": [262, 292]}
                {"name": "harvest", "machine": "combine_7m5", "window": [196, 220]}]}
 
 
-def _region(folder: Path, years=None, full=('F002',), systems=None) -> Path:
+def _region(folder: Path, years=None, full=('F002',), systems=None, length_m=(90.0, 100.0),
+            width_m=(50.0, 60.0)) -> Path:
     p = demo.write_region(folder, n_fields=2, seed=7, systems=systems or ONE, years=years or {2021: 0.0},
-                          length_m=(90.0, 100.0), width_m=(50.0, 60.0), spacing_m=160.0)
+                          length_m=length_m, width_m=width_m, spacing_m=160.0)
     p.write_text(p.read_text() + "\n[full_fidelity]\nfields = [" + ", ".join(f'"{f}"' for f in full) + "]\n")
     return p
 
@@ -153,7 +154,9 @@ def _hashes(out: Path) -> dict:
 
 def test_a_mixed_run_records_the_fidelity_and_resumes_a_full_field_season(tmp_path):
     drill = {"one": ONE["one"][:1]}  # one machine: the worker builds its tables once
-    p = _region(tmp_path / "in", systems=drill)
+    # the records and the resume, not the physics: smaller fields than the comparison's (the full fidelity's wheeled
+    # pass costs per pose of the plan: about a third of the fields' area, a third of the time)
+    p = _region(tmp_path / "in", systems=drill, length_m=(60.0, 66.0), width_m=(44.0, 48.0))
     res = run_region(load_region(p), tmp_path / "out", workers=1, progress=False)
     out = tmp_path / "out"
     assert res.ran == 2
