@@ -357,7 +357,7 @@ def _profile_cached(key, machine: Machine, depths: tuple, xi: float, step: float
     def fn(uu, vv):
         s = np.zeros((uu.size, len(depths)))
         for w, tb in zip(machine.wheels, tables, strict=True):
-            s += tb.at(uu - w.x_m, vv - w.y_m)[0]
+            s += tb.sigma_z(uu - w.x_m, vv - w.y_m)
         return 1e3 * s  # kPa -> Pa
 
     xs = [w.x_m for w in machine.wheels]

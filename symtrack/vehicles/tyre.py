@@ -236,6 +236,14 @@ class FootprintTable:
 
     def at(self, x, y) -> tuple[np.ndarray, np.ndarray]:
         """(sigma_z, p) [kPa] (n_points, n_depths) at points (x, y) of the wheel's frame."""
+        return self._interpolate((self.sz, self.pm), x, y)
+
+    def sigma_z(self, x, y) -> np.ndarray:
+        """sigma_z [kPa] (n_points, n_depths) at points (x, y) of the wheel's frame: :meth:`at`'s first
+        table alone (the fields' and the region's stress maps read no other: half the interpolation)."""
+        return self._interpolate((self.sz,), x, y)[0]
+
+    def _interpolate(self, tables, x, y) -> list[np.ndarray]:
         n = self.sz.shape[0]
         u, v = np.abs(np.asarray(x, float)) / self.step_m, np.abs(np.asarray(y, float)) / self.step_m
         inside = (u <= n - 1) & (v <= n - 1)
@@ -244,11 +252,11 @@ class FootprintTable:
         i, j = np.where(inside, i, 0), np.where(inside, j, 0)
         fu, fv = (np.where(inside, u - i, 0.0)[:, None], np.where(inside, v - j, 0.0)[:, None])
         out = []
-        for T in (self.sz, self.pm):
+        for T in tables:
             val = ((1 - fu) * (1 - fv) * T[i, j] + fu * (1 - fv) * T[i + 1, j]
                    + (1 - fu) * fv * T[i, j + 1] + fu * fv * T[i + 1, j + 1])
             out.append(np.where(inside[:, None], val, 0.0))
-        return out[0], out[1]
+        return out
 
 
 @functools.lru_cache(maxsize=8)

@@ -111,7 +111,7 @@ def wheeled_pass(terrain: Terrain, wheels, poses, xi: float, reach_m: float = DE
             sz = np.zeros((near.size, n_d))
             for (wx, wy), tb in zip(centres, tables, strict=True):
                 dxw, dyw = nxc - wx, nyc - wy
-                sz += tb.at(c * dxw + s * dyw, -s * dxw + c * dyw)[0]
+                sz += tb.sigma_z(c * dxw + s * dyw, -s * dxw + c * dyw)
             sig[near] = np.maximum(sig[near], sz)
             continue
         for w in wheels:
