@@ -48,6 +48,7 @@ test-fast: lint
 
 # the tests marked slow (pyproject.toml: brute-force, IDAS and fixed-step references, large compiles)
 test-slow: $(VENV)/.installed-dev
+	$(compile_package)
 	$(PY) -m pytest -m slow
 
 # the scenario loader's fuzz tests with a longer search than the test suite's (100 mutated documents)

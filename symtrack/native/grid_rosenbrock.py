@@ -41,9 +41,10 @@ its largest |U_8,i| / (FIXED_STEP_ATOL + rtol max(|y0,i|, |y1,i|)) over the vehi
 and the channels' sinkage, rtol an input. Not over the channels' sinkage rate: where a cell starts loading
 its rate has a kink (the regularised Bekker slope) that no halving resolves, and in a fast, damped mode
 whose error does not carry over. Measured on validation_grid at 0.625 ms with the rate in the ratio:
-103,255 steps halved and the run about 15 x longer, for figures within 0.1 % of the run without control
+103,255 steps halved and the run over ten times longer (272 s of wall against 18 s, each compiling its
+libraries, the first on a busier machine), for figures within 0.1 % of the run without control
 (what halving the step once gives at 2 x); without it: 224 steps halved, 3 % longer, the rut's mean depth
-0.031 % -> 0.002 % from IDAS's. The error control itself
+0.030 % -> 0.002 % from IDAS's (docs/terrain.md). The error control itself
 (halving the steps of a macro step whose ratio exceeds 1) is the stepper's
 (:class:`symtrack.integrators.grid_rosenbrock.GridRosenbrockStepper`).
 """

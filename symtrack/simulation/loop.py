@@ -348,10 +348,12 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
                 except ImplausibleRunError as err:
                     err_max = float((plant.stats() or {}).get("fixed_step_error_max", 0.0) or 0.0)
                     if err_max > 1.0:  # the fixed step kept steps above its tolerance: perhaps a numerical divergence
+                        # the reference integrator of the plant's terrain (the grid's channel pool: IDAS)
+                        ref = "idas" if getattr(plant, "kind", "") == "grid" else "cvodes"
                         err = ImplausibleRunError(
                             f"{err}; the fixed step's error estimate had reached {err_max:.3g} x its tolerance "
                             f"(steps kept above it: summary.json fixed_step_error_max), so the run may have "
-                            f"diverged numerically: compare with --integrator cvodes or a smaller run.fixed_step_s",
+                            f"diverged numerically: compare with --integrator {ref} or a smaller run.fixed_step_s",
                             err.quantity)
                     # the run is kept up to the last sample within the limits
                     bad = int(np.argmax(np.logical_or.reduce(list(over.values()))))
