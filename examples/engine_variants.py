@@ -6,7 +6,10 @@ the steady cells, the previous stop's default (SDIRK, entry windows of 4, no rin
 default without the subsoil stress; built in one process and run in turn, the best of --repeats
 kept (ratios taken in one run; docs/terrain.md, "The terrain engine").
 
-    python examples/engine_variants.py --repeats 6
+    python examples/engine_variants.py --repeats 6 [--set KEY=VALUE ...]
+
+``--set`` adds overrides to every variant, as ``symtrack simulate --set`` (the tests run it on a small
+field for half a second).
 """
 
 from __future__ import annotations
@@ -25,10 +28,13 @@ VARIANTS = {"default": [], "sdirk2": ["engine.steady_method='sdirk2'"], "previou
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=4)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args(argv)
+    if args.repeats < 1:
+        ap.error(f"--repeats = {args.repeats} must be at least 1")
     plants = {}
     for k, extra in VARIANTS.items():
-        sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, ["run.integrator=grid_fast", *extra])
+        sc = _field_scenario("validation_grid", (100.0, 100.0), 0.1, ["run.integrator=grid_fast", *extra, *args.set])
         plants[k] = (sc, make_plant(sc))
     best = {}
     for _ in range(args.repeats):

@@ -46,3 +46,20 @@ def test_engine_clocks_prints_the_same_fingerprint_for_repeated_runs(capsys):
     assert len(prints) == 1 and len(next(iter(prints))) == 12
     for part in ("cells", "subsoil", "vehicle", "manager", "outputs"):
         assert all(f" {part} " in ln for ln in lines)
+
+
+def test_engine_variants_runs_each_variant_on_one_engine(capsys):
+    """examples/engine_variants.py on a 12 m x 4 m field for 0.5 s: a row per variant; the variants are run-time
+    settings of one engine, and the one without the subsoil spends nothing on it."""
+    mod = runpy.run_path("examples/engine_variants.py")
+    best = mod["main"](["--repeats", "1", "--set", "terrain.size_m=[12.0, 4.0]", "--set", "terrain.cell_m=0.25",
+                        "--set", "run.duration_s=0.5"])
+    assert set(best) == {"default", "sdirk2", "previous default", "no subsoil"}
+    for res in best.values():
+        assert res.t[-1] == pytest.approx(0.5) and res.wall_time_s > 0
+    assert best["default"].stats["ns_subsoil"] > 0 and best["no subsoil"].stats["ns_subsoil"] == 0
+    # the same physics to within the steady cells' method: the poses agree to a millimetre
+    ix = best["default"].state_names.index("x_m")
+    assert abs(best["sdirk2"].X[-1, ix] - best["default"].X[-1, ix]) < 1e-3
+    out = capsys.readouterr().out
+    assert out.count("x real time") == 4
