@@ -334,3 +334,30 @@ def test_the_density_map_draws_the_change_from_the_initial_density(monkeypatch):
     (top, kw), (sub, _) = shown
     assert kw["vmin"] == 0.0 and kw["vmax"] == pytest.approx(0.02)
     assert top.max() == pytest.approx(0.02) and sub.max() == pytest.approx(0.005) and top.min() == 0.0
+
+
+def test_getting_starteds_table_of_soils_is_the_presets():
+    """docs/getting-started.md, step 4: the table of the built-in soils by texture, density and suction
+    holds every soil preset, with the values `symtrack presets NAME` shows (to the table's digits)."""
+    import re
+    from pathlib import Path
+
+    from symtrack.presets import soil_preset
+    from symtrack.presets.catalog import preset_names
+
+    text = (Path(__file__).parents[1] / "docs" / "getting-started.md").read_text()
+    rows = [ln for ln in text.splitlines() if ln.startswith("| `")]
+    named = set()
+    for ln in rows:
+        cells = [c.strip() for c in ln.strip("|").split("|")]
+        names = re.findall(r"`([a-z0-9_]+)`", cells[0])
+        dens = [float(v) for v in cells[3].split(",")]
+        suct = [float(v) for v in cells[4].split(",")]
+        frac = [float(v) for v in cells[2].split("/")]
+        for k, name in enumerate(names):
+            p = soil_preset(name)
+            named.add(name)
+            assert frac == pytest.approx([p["clay_kg_per_kg"], p["silt_kg_per_kg"], p["sand_kg_per_kg"]]), name
+            assert dens[min(k, len(dens) - 1)] == pytest.approx(p["bulk_density_initial_Mg_per_m3"]), name
+            assert suct[min(k, len(suct) - 1)] == pytest.approx(p["matric_suction_kPa"], rel=0.1, abs=0.006), name
+    assert named == set(preset_names("soil"))
