@@ -459,8 +459,10 @@ def arc_bands(machine: Machine, radius_m: float) -> tuple:
     out = []
     for lat, b in machine.strips():
         rho_in, rho_out = R - sg * lat - 0.5 * b, R - sg * lat + 0.5 * b
-        r_hi = math.hypot(rho_out, half_l)
-        lo, hi = sorted((sg * (R - rho_in), sg * (R - r_hi)))
+        # (a turn tighter than the track's inner edge: the track spans the centre, its nearest point is on it)
+        r_lo = max(rho_in, 0.0) if rho_out > 0 else -rho_out
+        r_hi = math.hypot(max(abs(rho_in), abs(rho_out)), half_l)
+        lo, hi = sorted((sg * (R - r_lo), sg * (R - r_hi)))
         out.append((lo, hi))
     return tuple(out)
 
@@ -485,7 +487,9 @@ def arc_stays(machine: Machine, radius_m: float, sweep_rad: float, r, alpha, hal
     half_l = 0.5 * machine.tracks.contact_length_m
     alpha = np.asarray(alpha, dtype=float)
     for lat, b in machine.strips():
-        rho_out = R - sg * lat + 0.5 * b
+        rho_in, rho_out = R - sg * lat - 0.5 * b, R - sg * lat + 0.5 * b
+        if rho_in <= 0:  # a track spanning the turn's centre: one stay (its rim's second pass not counted)
+            continue
         beyond = (r - half_cell_m > rho_out) & (r <= math.hypot(rho_out, half_l))
         if not beyond.any():
             continue
@@ -527,8 +531,10 @@ def _turn_profile_cached(key, machine: Machine, depths: tuple, xi: float, radius
     r = R - sg * v
     # the poses, as the cell's angle phi from the machine's axis seen from the centre: steps of at most `step`
     # along the outermost circle, over the half-turn in which the machine's frame holds the cell (|phi| <= 90 deg)
-    n_phi = int(math.ceil(math.pi * max(r.max(), step) / step)) + 1
-    phi = np.linspace(-0.5 * math.pi, 0.5 * math.pi, n_phi)
+    # (all round when the machine reaches across the centre: a turn tighter than its half-width)
+    half_turn = 0.5 * math.pi if R > machine.reach_m else math.pi
+    n_phi = int(math.ceil(2 * half_turn * max(r.max(), step) / step)) + 1
+    phi = np.linspace(-half_turn, half_turn, n_phi)
     fn = _track_stress_fn(machine, depths, xi, step, reach)
     uu = (r[None, :] * np.sin(phi)[:, None]).ravel()
     yy = (sg * (R - r[None, :] * np.cos(phi)[:, None])).ravel()
