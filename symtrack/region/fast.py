@@ -89,8 +89,8 @@ class FastOp:
     profile: StressProfile
     soil_day: dict
     day: int = 0
-    # a tracked machine's first-pass plastic rut [m] at each share of a cell under the track
-    # (fleet.rut_table_m, at fleet.COVER_FRACTIONS) and the soil's repeated-loading exponent: the rut after N
+    # a tracked machine's first-pass plastic rut [m] at each share of the track's static pressure a cell carries
+    # (fleet.rut_table_m, at fleet.PRESSURE_FRACTIONS) and the soil's repeated-loading exponent: the rut after N
     # passes, the first pass's N^beta, bounds the column's compression (step 4b); None: wheels
     rut_table_m: tuple | None = None
     rut_exponent: float = 0.0
@@ -111,8 +111,9 @@ class SeasonMaps:
 
 def sweep_operation(op: FastOp, shape, cell_m: float, rule: str = "centre"):
     """The operation's passes per cell (nx, ny) int32, its largest stress per cell (nx, ny, n_depths) float32
-    [Pa] and the largest share of each cell under a strip (nx, ny) float32 (its width across the path under the
-    strip over its width: the terrain engine's channel weight) from one drive of its plan (module doc, steps
+    [Pa] and the largest share of the static pressure each cell carries (nx, ny) float32 (its width across the
+    path under the strip over its width, the terrain engine's channel weight, times the pitched line's peak over
+    the static pressure where the plan's speed changes) from one drive of its plan (module doc, steps
     1-3; the repeats not applied)."""
     plan = plan_operation(op.settings, ds_m=PLAN_DS_M)
     geo = segment_geometry(plan)
@@ -260,7 +261,7 @@ def _arc(x0, y0, c, s, g, machine, bands, pad, profile, shape, cell_m, out):
     for lo, hi in bands:
         under |= (v >= lo - pv) & (v < hi + pv)
     under &= along
-    # a point beyond a track's outer edge is under its front end, then its rear end: two passes (fleet.arc_stays)
+    # a cell beyond a track's outer edge is under its front end, then its rear end: two passes (fleet.arc_stays)
     stays = arc_stays(machine, R, sweep, r, a, 0.5 * cell_m) if under.any() else None
     _apply(i0, i1, j0, j1, under, v, 0.5 * cell_m, bands, profile, out, stays)
 
