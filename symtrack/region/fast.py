@@ -59,7 +59,7 @@ import numpy as np
 
 from ..soil import density, subsoil
 from ..studies.operations import PLAN_ACCEL_M_S2, OperationSettings, plan_operation
-from ..studies.operations.followers import _speed_profile
+from ..studies.operations.followers import speed_profile
 from ..studies.traffic_seasons import segment_geometry
 from .fleet import Machine, StressProfile, arc_bands, arc_stays, peak_pressure_factor, stress_profile, turn_profile
 
@@ -174,7 +174,7 @@ def _ramps(plan) -> dict:
     ((u0, u1, pitched), ...)} covering [0, length] in order, ``pitched`` where the speed changes. The profile is
     the plan's, sampled every :data:`PLAN_DS_M`: a stretch's ends to that."""
     path = plan.path
-    v = _speed_profile(path, 0.0)
+    v = speed_profile(path, 0.0)
     out = {}
     s0 = 0.0
     for i, seg in enumerate(path.segments):
