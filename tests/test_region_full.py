@@ -132,8 +132,9 @@ def test_a_tracked_machine_is_driven_on_the_terrain_engine(tmp_path):
     ca, cb = ma["counts"] > 0, mb["counts"] > 0
     assert (ca & cb).sum() > 0.95 * cb.sum()
     assert abs(s["trafficked_fraction"] - fast["summary"]["trafficked_fraction"]) < 0.05
-    # the stress at depth under the cells both trafficked: the engine's moving, pitching tracks (and its turns of
-    # 4 m) against the static pressure line: measured 1.14-1.17 times it at 0.1-0.8 m
+    # the stress at depth under the cells both trafficked: the engine's moving, pitching tracks against the static
+    # pressure line (a catalog's crawler has no centre of gravity's height: no pitched line where the plan's speed
+    # changes), the turns of 4 m the turned contacts' in both: measured 1.05-1.06 times it at 0.1-0.8 m
     for k in range(4):
         r = ma["sigma_max_kPa"][..., k][ca & cb].mean() / mb["sigma_max_kPa"][..., k][ca & cb].mean()
         assert 0.95 < r < 1.3, (k, r)

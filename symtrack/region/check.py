@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from ..model.parameters import SOIL_PARAMS
-from .fast import FastOp, density_change, run_season_fast
+from .fast import FastOp, build_profiles, density_change, run_season_fast
 from .fleet import rut_table_m, stress_profile, track_machine
 
 __all__ = ["CASES", "bench_rows", "bench_table", "compare", "fast_twin", "full_and_fast", "full_season",
@@ -54,6 +54,8 @@ def run_fast_twin(opspec, cell_m: float | None = None, rule: str = "overlap"):
     Returns (SeasonMaps, soil, depths, cell_m, wall time [s], the tables' time [s])."""
     t0 = time.perf_counter()
     ops, soil, depths = fast_twin(opspec)
+    for op in ops:  # the turned and pitched profiles too (tables, not the sweep's time)
+        build_profiles(op)
     t_tables = time.perf_counter() - t0
     fs0 = opspec.base
     cell = fs0.cell_m if cell_m is None else float(cell_m)

@@ -11,11 +11,19 @@ For each operation of the season, in the order of the days they are worked:
    field's cells. A cell is under a strip when its centre is (``rule = "centre"``: the area is unbiased) or
    when its square overlaps the strip (``rule = "overlap"``: the terrain engine's rule, which the full
    fidelity's trafficked share counts). One pass per segment that covers a cell (a tractor's front and rear
-   tyres in line are one pass), times the operation's repeats.
+   tyres in line are one pass), times the operation's repeats. On an arc a track is its rigid l x b contact
+   turned about the turn's centre (:func:`symtrack.region.fleet.arc_bands`): its ends sweep beyond its edges,
+   and a cell beyond a track's outer edge is passed twice, by its front end and then by its rear end
+   (:func:`~symtrack.region.fleet.arc_stays`).
 3. **The stress**: the pass's largest vertical stress at each depth of a cell under a strip is the machine's
    stress profile (:func:`symtrack.region.fleet.stress_profile`, built once per machine and soil) at the
-   cell's lateral distance from the path line (on an arc, its radial distance from the path's circle). As in
-   the terrain engine, the stress is recorded under the footprint only.
+   cell's lateral distance from the path line (on an arc, its radial distance from the path's circle, and a
+   track's profile the turned contact's: :func:`~symtrack.region.fleet.turn_profile`). Where the plan's speed
+   changes (the followers' speed profile, :data:`~symtrack.studies.operations.PLAN_ACCEL_M_S2` before and after
+   its slow parts), a tracked machine whose centre of gravity's height is known has the terrain engine's
+   pitched pressure line (:func:`~symtrack.region.fleet.pressure_line`): the stress profile of that line, and
+   its peak's share of the static pressure for the rut (step 4b). As in the terrain engine, the stress is
+   recorded under the footprint only.
 4. **The density**: each pass is folded into the cells' compression state by
    :func:`symtrack.soil.density.pass_update` (the function the full fidelity's world folds its passes
    with) with the soil of the day's matric suction (its moisture class, :mod:`symtrack.region.inputs`) and
@@ -25,7 +33,8 @@ For each operation of the season, in the order of the days they are worked:
    world bounds it (:func:`symtrack.soil.density.cap_to_rut`): after each tracked pass the cells it passed
    get the rut of their N tracked passes so far, the first pass's quasi-static plastic rut
    (:func:`symtrack.region.fleet.first_pass_rut_m`) times N^beta (the engine's cycle law). A cell the track
-   covers in part carries that share of its pressure (the engine's channel weight) and gets the smaller rut.
+   covers in part carries that share of its pressure (the engine's channel weight) and gets the smaller rut;
+   a cell a pitched line passes carries its peak (the whole contact passes over it) and gets the larger one.
    Wheels leave no rut here, as in the package's wheeled pass (symtrack/vehicles/wheeled.py), so their
    compression is not bounded.
 5. **The risk**: (traffic stress + own weight) / the day's precompression stress, graded by
@@ -49,11 +58,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..soil import density, subsoil
-from ..studies.operations import OperationSettings, plan_operation
+from ..studies.operations import PLAN_ACCEL_M_S2, OperationSettings, plan_operation
+from ..studies.operations.followers import speed_profile
 from ..studies.traffic_seasons import segment_geometry
-from .fleet import Machine, StressProfile
+from .fleet import Machine, StressProfile, arc_bands, arc_stays, peak_pressure_factor, stress_profile, turn_profile
 
-__all__ = ["RULES", "FastOp", "SeasonMaps", "fold_operation", "run_season_fast", "sweep_operation"]
+__all__ = ["RULES", "FastOp", "SeasonMaps", "build_profiles", "fold_operation", "run_season_fast",
+           "sweep_operation"]
 
 RULES = ("centre", "overlap")
 # a straight segment is rasterised in pieces at most this long (their bounding boxes stay narrow on a
@@ -78,8 +89,8 @@ class FastOp:
     profile: StressProfile
     soil_day: dict
     day: int = 0
-    # a tracked machine's first-pass plastic rut [m] at each share of a cell under the track
-    # (fleet.rut_table_m, at fleet.COVER_FRACTIONS) and the soil's repeated-loading exponent: the rut after N
+    # a tracked machine's first-pass plastic rut [m] at each share of the track's static pressure a cell carries
+    # (fleet.rut_table_m, at fleet.PRESSURE_FRACTIONS) and the soil's repeated-loading exponent: the rut after N
     # passes, the first pass's N^beta, bounds the column's compression (step 4b); None: wheels
     rut_table_m: tuple | None = None
     rut_exponent: float = 0.0
@@ -100,8 +111,9 @@ class SeasonMaps:
 
 def sweep_operation(op: FastOp, shape, cell_m: float, rule: str = "centre"):
     """The operation's passes per cell (nx, ny) int32, its largest stress per cell (nx, ny, n_depths) float32
-    [Pa] and the largest share of each cell under a strip (nx, ny) float32 (its width across the path under the
-    strip over its width: the terrain engine's channel weight) from one drive of its plan (module doc, steps
+    [Pa] and the largest share of the static pressure each cell carries (nx, ny) float32 (its width across the
+    path under the strip over its width, the terrain engine's channel weight, times the pitched line's peak over
+    the static pressure where the plan's speed changes) from one drive of its plan (module doc, steps
     1-3; the repeats not applied)."""
     plan = plan_operation(op.settings, ds_m=PLAN_DS_M)
     geo = segment_geometry(plan)
@@ -111,20 +123,74 @@ def sweep_operation(op: FastOp, shape, cell_m: float, rule: str = "centre"):
     sig = np.zeros((nx, ny, nd), dtype=np.float32)
     cover = np.zeros(shape, dtype=np.float32)
     out = (counts, sig, cover)
-    strips = op.machine.strips()
+    bands = tuple((lat - 0.5 * b, lat + 0.5 * b) for lat, b in op.machine.strips())
     reach = op.machine.reach_m
     pad = 0.5 * cell_m if rule == "overlap" else 0.0
-    for kind, x0, y0, psi0, g in geo:
+    # where the plan's speed changes, a tracked machine's pressure line pitches (fleet.pressure_line): the stress
+    # and the pressure share of its pitched line there
+    m = op.machine
+    ramps = _ramps(plan) if m.tracks is not None and m.cg_height_m is not None else {}
+    ramp = None
+    if ramps:
+        ramp = (stress_profile(m, op.profile.depths_m, op.profile.xi, accel_m_s2=PLAN_ACCEL_M_S2),
+                peak_pressure_factor(m, PLAN_ACCEL_M_S2))
+    for i, (kind, x0, y0, psi0, g) in enumerate(geo):
         c, s = math.cos(psi0), math.sin(psi0)
         if kind == "straight":
-            n_pieces = max(1, int(math.ceil(g / PIECE_M)))
-            for k in range(n_pieces):
-                u0, u1 = g * k / n_pieces, g * (k + 1) / n_pieces
-                px0, py0 = x0 + u0 * c, y0 + u0 * s
-                _straight(px0, py0, c, s, u1 - u0, strips, reach, pad, op.profile, shape, cell_m, out)
+            for w0, w1, pitched in ramps.get(i, ((0.0, g, False),)):
+                profile, factor = ramp if pitched else (op.profile, 1.0)
+                n_pieces = max(1, int(math.ceil((w1 - w0) / PIECE_M)))
+                for k in range(n_pieces):
+                    u0, u1 = w0 + (w1 - w0) * k / n_pieces, w0 + (w1 - w0) * (k + 1) / n_pieces
+                    px0, py0 = x0 + u0 * c, y0 + u0 * s
+                    _straight(px0, py0, c, s, u1 - u0, bands, reach, pad, profile, shape, cell_m, out, factor)
         else:
-            _arc(x0, y0, c, s, g, strips, reach, pad, op.profile, shape, cell_m, out)
+            # a track's rigid contact turned about the turn's centre: its ends sweep beyond its width, and its
+            # stress is the turned footprint's (fleet.arc_bands, fleet.turn_profile; wheels: their strips)
+            R = g[0]
+            profile = turn_profile(op.machine, op.profile.depths_m, op.profile.xi, R) or op.profile
+            _arc(x0, y0, c, s, g, op.machine, arc_bands(op.machine, R), pad, profile, shape, cell_m, out)
     return counts, sig, cover
+
+
+def build_profiles(op: FastOp) -> None:
+    """Build the operation's turned and pitched stress profiles (:func:`sweep_operation` builds them when it
+    first needs them; fleet caches them per process): a caller that times the tables apart from the sweep."""
+    m = op.machine
+    if m.tracks is None:
+        return
+    plan = plan_operation(op.settings, ds_m=PLAN_DS_M)
+    for kind, _x0, _y0, _psi0, g in segment_geometry(plan):
+        if kind != "straight":
+            turn_profile(m, op.profile.depths_m, op.profile.xi, g[0])
+    if m.cg_height_m is not None and _ramps(plan):
+        stress_profile(m, op.profile.depths_m, op.profile.xi, accel_m_s2=PLAN_ACCEL_M_S2)
+
+
+def _ramps(plan) -> dict:
+    """The stretches of each straight segment of the plan where the followers' speed profile (symtrack.studies.
+    operations.followers: the path's speeds, reached at :data:`~symtrack.studies.operations.PLAN_ACCEL_M_S2` in
+    deceleration before its slow parts and in acceleration after them) changes the speed: {segment index:
+    ((u0, u1, pitched), ...)} covering [0, length] in order, ``pitched`` where the speed changes. The profile is
+    the plan's, sampled every :data:`PLAN_DS_M`: a stretch's ends to that."""
+    path = plan.path
+    v = speed_profile(path, 0.0)
+    out = {}
+    s0 = 0.0
+    for i, seg in enumerate(path.segments):
+        L = seg.length_m if seg.kind == "straight" else abs(seg.radius_m) * math.radians(seg.angle_deg)
+        if seg.kind == "straight" and L > 0:
+            u = np.linspace(0.0, L, max(2, int(math.ceil(L / (0.25 * PLAN_DS_M))) + 1))
+            vv = np.interp(s0 + u, path.s, v)
+            acc = np.diff(vv ** 2) / (2.0 * np.diff(u))
+            flag = np.abs(acc) > 0.5 * PLAN_ACCEL_M_S2
+            if flag.any():
+                cuts = np.flatnonzero(np.diff(flag.astype(np.int8))) + 1
+                edges = np.concatenate([[0], cuts, [flag.size]])
+                out[i] = tuple((float(u[a]), float(u[b]), bool(flag[a])) for a, b in zip(edges[:-1], edges[1:],
+                                                                                          strict=True))
+        s0 += L
+    return out
 
 
 def _window(xs, ys, shape, cell_m):
@@ -136,25 +202,24 @@ def _window(xs, ys, shape, cell_m):
     return i0, i1, j0, j1
 
 
-def _apply(i0, i1, j0, j1, under, v, hv, strips, profile, out):
+def _apply(i0, i1, j0, j1, under, v, hv, bands, profile, out, stays=None, factor=1.0):
     counts, sig, cover = out
     if not under.any():
         return
-    counts[i0:i1, j0:j1] += under
+    counts[i0:i1, j0:j1] += under if stays is None else np.where(under, stays, 0)
     ii, jj = np.nonzero(under)
     vv = v[ii, jj]
     st = profile.at(vv).astype(np.float32)
     w = sig[i0:i1, j0:j1]
     w[ii, jj] = np.maximum(w[ii, jj], st)
     f = np.zeros(vv.size)
-    for lat, b in strips:  # the cell's extent across the path, [v - hv, v + hv], under the strip
-        f = np.maximum(f, np.clip((np.minimum(vv + hv, lat + 0.5 * b) - np.maximum(vv - hv, lat - 0.5 * b))
-                                  / (2 * hv), 0.0, 1.0))
+    for lo, hi in bands:  # the cell's extent across the path, [v - hv, v + hv], under the strip's band
+        f = np.maximum(f, np.clip((np.minimum(vv + hv, hi) - np.maximum(vv - hv, lo)) / (2 * hv), 0.0, 1.0))
     cw = cover[i0:i1, j0:j1]
-    cw[ii, jj] = np.maximum(cw[ii, jj], f.astype(np.float32))
+    cw[ii, jj] = np.maximum(cw[ii, jj], (factor * f).astype(np.float32))
 
 
-def _straight(x0, y0, c, s, L, strips, reach, pad, profile, shape, cell_m, out):
+def _straight(x0, y0, c, s, L, bands, reach, pad, profile, shape, cell_m, out, factor=1.0):
     r = reach + pad
     xs = [x0 - r * s, x0 + r * s, x0 + L * c - r * s, x0 + L * c + r * s]
     ys = [y0 + r * c, y0 - r * c, y0 + L * s + r * c, y0 + L * s - r * c]
@@ -169,17 +234,17 @@ def _straight(x0, y0, c, s, L, strips, reach, pad, profile, shape, cell_m, out):
     pv = pad * (abs(c) + abs(s))
     along = (u >= 0.0) & (u < L) if pv == 0 else (u >= -pv) & (u < L + pv)
     under = np.zeros(u.shape, dtype=bool)
-    for lat, b in strips:
-        under |= (v >= lat - 0.5 * b - pv) & (v < lat + 0.5 * b + pv)
+    for lo, hi in bands:
+        under |= (v >= lo - pv) & (v < hi + pv)
     # the cell's half-width across the path: its square's projection
-    _apply(i0, i1, j0, j1, under & along, v, 0.5 * cell_m * (abs(c) + abs(s)), strips, profile, out)
+    _apply(i0, i1, j0, j1, under & along, v, 0.5 * cell_m * (abs(c) + abs(s)), bands, profile, out, None, factor)
 
 
-def _arc(x0, y0, c, s, g, strips, reach, pad, profile, shape, cell_m, out):
+def _arc(x0, y0, c, s, g, machine, bands, pad, profile, shape, cell_m, out):
     R, sweep = g
     sg = 1.0 if R > 0 else -1.0
     cx, cy = x0 - R * s, y0 + R * c
-    rr = abs(R) + reach + pad
+    rr = abs(R) + max(max(abs(lo), abs(hi)) for lo, hi in bands) + pad
     i0, i1, j0, j1 = _window([cx - rr, cx + rr], [cy - rr, cy + rr], shape, cell_m)
     if i1 <= i0 or j1 <= j0:
         return
@@ -193,9 +258,12 @@ def _arc(x0, y0, c, s, g, strips, reach, pad, profile, shape, cell_m, out):
     v = sg * (abs(R) - r)  # left of the path line positive (a left turn's centre is on its left)
     pv = math.sqrt(2.0) * pad if pad else 0.0
     under = np.zeros(r.shape, dtype=bool)
-    for lat, b in strips:
-        under |= (v >= lat - 0.5 * b - pv) & (v < lat + 0.5 * b + pv)
-    _apply(i0, i1, j0, j1, under & along, v, 0.5 * cell_m, strips, profile, out)
+    for lo, hi in bands:
+        under |= (v >= lo - pv) & (v < hi + pv)
+    under &= along
+    # a cell beyond a track's outer edge is under its front end, then its rear end: two passes (fleet.arc_stays)
+    stays = arc_stays(machine, R, sweep, r, a, 0.5 * cell_m) if under.any() else None
+    _apply(i0, i1, j0, j1, under, v, 0.5 * cell_m, bands, profile, out, stays)
 
 
 def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: FastOp, depths_m, arrays: dict,
@@ -217,10 +285,10 @@ def fold_operation(state: np.ndarray, counts: np.ndarray, sig: np.ndarray, op: F
         moved += density.pass_update(state, p, si, [op.soil_day], cells=cells, geostatic_Pa=geostatic_Pa,
                                      depths_m=list(depths_m), arrays=arrays)
         if op.rut_table_m is not None and track_passes is not None:
-            from .fleet import COVER_FRACTIONS
+            from .fleet import PRESSURE_FRACTIONS
 
             track_passes[cells] += 1
-            r1 = np.interp(cover.ravel()[cells], COVER_FRACTIONS, op.rut_table_m)
+            r1 = np.interp(cover.ravel()[cells], PRESSURE_FRACTIONS, op.rut_table_m)
             rut_first[cells] = np.maximum(rut_first[cells], r1)
             rut = rut_first[cells] * track_passes[cells].astype(np.float64) ** op.rut_exponent
             v0 = np.broadcast_to(arrays["v0"][0], (cells.size, len(depths_m)))

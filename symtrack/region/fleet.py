@@ -18,7 +18,10 @@ models, the same ones the full fidelity uses:
 - tracks: the terrain engine's strip tables (:func:`symtrack.soil.subsoil.build_tables`,
   :func:`~symtrack.soil.subsoil.stress_at`) under the static pressure line of a track whose centre of
   gravity is over its contact's centre: p = m g / (2 l b), uniform (the engine's line with no
-  acceleration, no drawbar pull and no pitch: the quasi-static part of its load).
+  acceleration, no drawbar pull and no pitch: the quasi-static part of its load). Where the plan's speed
+  changes, the engine's line pitched by the acceleration (:func:`pressure_line`, for a machine whose centre of
+  gravity's height is known); on an arc, the rigid contacts turned about the turn's centre
+  (:func:`turn_profile`, :func:`arc_bands`, :func:`arc_stays`).
 """
 
 from __future__ import annotations
@@ -47,8 +50,9 @@ from ..vehicles.tyre import (
 )
 
 __all__ = ["BUILTIN_FLEET", "COVER_FRACTIONS", "Fleet", "Machine", "StressProfile", "TrackSet", "WheelSpec",
-           "first_pass_rut_m", "load_fleet", "parse_fleet", "plastic_rut_m", "rut_table_m", "stress_profile",
-           "track_machine"]
+           "PRESSURE_FRACTIONS", "arc_bands", "arc_stays", "first_pass_rut_m", "peak_pressure_factor",
+           "pressure_line", "load_fleet", "parse_fleet", "plastic_rut_m", "rut_table_m",
+           "stress_profile", "track_machine", "turn_profile"]
 
 BUILTIN_FLEET = "builtin"
 GRAVITY_M_S2 = 9.81
@@ -107,6 +111,9 @@ class Machine:
     wheels: tuple = ()
     tracks: TrackSet | None = None
     source: str = ""
+    # a tracked machine's centre of gravity's height [m] (the pitch of its pressure line where it accelerates:
+    # pressure_line); None: not given (a fleet catalog's machine), its line static everywhere
+    cg_height_m: float | None = None
 
     def strips(self) -> tuple:
         """The strips its tyres or tracks run on: ((lateral_m, width_m), ...), left positive."""
@@ -277,8 +284,10 @@ def track_machine(name: str, params: dict, working_width_m: float, turn_radius_m
     mass): the full fidelity's crawler as the fast one sees it."""
     ts = TrackSet(float(params["contact_length_m"]), float(params["track_width_m"]), float(params["track_gauge_m"]),
                   float(params["mass_kg"]))
+    h = params.get("cg_height_m")
     return Machine(name, float(working_width_m), float(params["track_gauge_m"]) + float(params["track_width_m"]),
-                   float(turn_radius_m), (), ts, "the vehicle preset's own parameters")
+                   float(turn_radius_m), (), ts, "the vehicle preset's own parameters",
+                   None if h is None else float(h))
 
 
 # ---- the stress profile ------------------------------------------------------------------------------------
@@ -333,19 +342,35 @@ def footprint_table_cached(tyre: Tyre, wheel_load_kN: float, inflation_kPa: floa
             FootprintTable(float(a["step_m"]), tuple(float(d) for d in depths_m), float(xi), a["sz"], a["pm"]))
 
 
+def _track_stress_fn(machine: Machine, depths: tuple, xi: float, step: float, reach: float, accel: float = 0.0):
+    """The vertical stress [Pa] (n, n_depths) at points (u ahead, v left) of a tracked machine's frame, its
+    contact centre at the origin: the terrain engine's strip tables under the pressure line of
+    :func:`pressure_line` (the static one at ``accel`` = 0: module doc)."""
+    t = machine.tracks
+    T = _track_tables(depths, xi, t.contact_length_m, t.track_width_m, t.track_gauge_m, reach)
+    alpha, beta = pressure_line(machine, accel)
+    a = np.array([0.0, 0.0, 1.0, 0.0, alpha, beta, alpha, beta])
+    geo = np.array([t.contact_length_m, t.track_width_m, t.track_gauge_m, 0.0, step, 0.0])
+
+    def fn(uu, vv):
+        return subsoil.stress_at(T, uu, vv, a, geo)
+
+    return fn
+
+
+@functools.lru_cache(maxsize=16)
+def _track_tables(depths: tuple, xi: float, length: float, width: float, gauge: float, reach: float):
+    """The terrain engine's strip tables of a track geometry (one build for a machine's static, pitched and
+    turned profiles)."""
+    return subsoil.build_tables(np.asarray(depths, dtype=float), xi, length, width, gauge, reach)
+
+
 @functools.lru_cache(maxsize=64)
-def _profile_cached(key, machine: Machine, depths: tuple, xi: float, step: float, reach: float) -> StressProfile:
-    depths_a = np.asarray(depths, dtype=float)
+def _profile_cached(key, machine: Machine, depths: tuple, xi: float, step: float, reach: float,
+                    accel: float = 0.0) -> StressProfile:
     if machine.tracks is not None:
         t = machine.tracks
-        T = subsoil.build_tables(depths_a, xi, t.contact_length_m, t.track_width_m, t.track_gauge_m, reach)
-        p = t.pressure_Pa
-        a = np.array([0.0, 0.0, 1.0, 0.0, p, 0.0, p, 0.0])
-        geo = np.array([t.contact_length_m, t.track_width_m, t.track_gauge_m, 0.0, step, 0.0])
-
-        def fn(uu, vv):
-            return subsoil.stress_at(T, uu, vv, a, geo)
-
+        fn = _track_stress_fn(machine, depths, xi, step, reach, accel)
         half_l = 0.5 * t.contact_length_m
         v, s = _profile_from(fn, -half_l, half_l, -machine.reach_m, machine.reach_m, step)
         return StressProfile(v, s, depths, xi)
@@ -367,11 +392,154 @@ def _profile_cached(key, machine: Machine, depths: tuple, xi: float, step: float
 
 
 def stress_profile(machine: Machine, depths_m, xi: float, step_m: float = PROFILE_STEP_M,
-                   reach_m: float = PROFILE_REACH_M) -> StressProfile:
+                   reach_m: float = PROFILE_REACH_M, accel_m_s2: float = 0.0) -> StressProfile:
     """The machine's stress profile (module doc) at ``depths_m`` for concentration factor ``xi``, built once
-    per process for these arguments."""
+    per process for these arguments. ``accel_m_s2``: a tracked machine's profile while it speeds up or slows
+    down at that rate, under its pitched pressure line (:func:`pressure_line`; the same for either sign: the
+    largest stress over the positions along the path); 0, and for wheels, the static profile."""
     depths = tuple(float(d) for d in depths_m)
-    return _profile_cached(machine.key(), machine, depths, float(xi), float(step_m), float(reach_m))
+    accel = abs(float(accel_m_s2)) if machine.tracks is not None and machine.cg_height_m is not None else 0.0
+    return _profile_cached(machine.key(), machine, depths, float(xi), float(step_m), float(reach_m), accel)
+
+
+def pressure_line(machine: Machine, accel_m_s2: float = 0.0) -> tuple:
+    """(alpha, beta) of each track's pressure line p(s) = max(0, alpha + beta s) [Pa], s from the contact's
+    front end, of a tracked machine speeding up at ``accel_m_s2`` (< 0: slowing down) on level ground: the
+    terrain engine's quasi-static line (symtrack/vehicles/planar.py, PressureDistribution: each track's normal
+    load N = m g / 2 and its share of the pitching moment about the contact's centre, M = -m a h / 2, the
+    inertial force m a at the centre of gravity's height h = ``cg_height_m``; the centre of gravity over the
+    contact's centre and no drawbar pull, as the static profile): linear, p = N / (b l) + 12 M / (b l^3)
+    (l / 2 - s), while the resultant's offset e = M / N = -a h / g stays within l / 6; beyond it triangular over
+    3 (l / 2 - |e|) from the loaded end. a = 0, or no ``cg_height_m``: the static p = m g / (2 l b)."""
+    t = machine.tracks
+    p0 = t.pressure_Pa
+    if machine.cg_height_m is None or accel_m_s2 == 0.0:
+        return p0, 0.0
+    l, b = t.contact_length_m, t.track_width_m
+    N = 0.5 * t.mass_kg * GRAVITY_M_S2
+    e = -float(accel_m_s2) * machine.cg_height_m / GRAVITY_M_S2
+    if abs(e) <= l / 6:
+        slope = 12.0 * e * N / (b * l ** 3)
+        return p0 + slope * 0.5 * l, -slope
+    e_c = min(abs(e), 0.45 * l)
+    Lc = 3.0 * (0.5 * l - e_c)
+    peak = 2.0 * N / (b * Lc)
+    if e > 0:  # loaded at the front (s = 0)
+        return peak, -peak / Lc
+    return peak * (1.0 - l / Lc), peak / Lc  # loaded at the rear (s = l)
+
+
+def peak_pressure_factor(machine: Machine, accel_m_s2: float) -> float:
+    """The largest pressure of :func:`pressure_line` over the static pressure (1 at rest or at constant speed,
+    and for wheels): what a cell a track passes over carries at most (the whole contact passes over it)."""
+    if machine.tracks is None:
+        return 1.0
+    alpha, beta = pressure_line(machine, accel_m_s2)
+    return max(alpha, alpha + beta * machine.tracks.contact_length_m) / machine.tracks.pressure_Pa
+
+
+def arc_bands(machine: Machine, radius_m: float) -> tuple:
+    """The band each strip of the machine sweeps on an arc of signed radius ``radius_m`` (> 0: a left turn,
+    its centre on the left), as ((v_lo, v_hi), ...) in the arc's lateral coordinate v = sign(R) (|R| - r)
+    (r the distance from the turn's centre; left of the path line positive, as on a straight).
+
+    A track is a rigid l x b rectangle whose contact centre is on the path line and whose axis is the path's
+    tangent (the full fidelity's vehicle: the engine's contact rectangle at each pose, symtrack/terrain/
+    channels.py). Turned about the centre, its points (x along, y across, in the machine's frame) lie at
+    r = sqrt(x^2 + rho^2), rho = |R| - sign(R) y the radius of its centre line's point: the smallest radius is its
+    inner edge's at x = 0, rho_in, the largest its outer edge's at its ends, sqrt(rho_out^2 + (l/2)^2). On the
+    2 m turns of the reference crawler (l = 2.4 m, b = 0.45 m, B = 1.5 m) the inner track sweeps 1.03-1.90 m
+    (0.45 m wider than its width) and the outer track 2.53-3.21 m (0.23 m wider): the straight strip's band
+    misses the ends' sweep (plane geometry). Wheels keep their strips (each tyre at its lateral offset, rigidly:
+    the module doc of symtrack.region.fast)."""
+    if machine.tracks is None:
+        return tuple((lat - 0.5 * b, lat + 0.5 * b) for lat, b in machine.strips())
+    R, sg = abs(float(radius_m)), (1.0 if radius_m > 0 else -1.0)
+    half_l = 0.5 * machine.tracks.contact_length_m
+    out = []
+    for lat, b in machine.strips():
+        rho_in, rho_out = R - sg * lat - 0.5 * b, R - sg * lat + 0.5 * b
+        # (a turn tighter than the track's inner edge: the track spans the centre, its nearest point is on it)
+        r_lo = max(rho_in, 0.0) if rho_out > 0 else -rho_out
+        r_hi = math.hypot(max(abs(rho_in), abs(rho_out)), half_l)
+        lo, hi = sorted((sg * (R - r_lo), sg * (R - r_hi)))
+        out.append((lo, hi))
+    return tuple(out)
+
+
+def arc_stays(machine: Machine, radius_m: float, sweep_rad: float, r, alpha, half_cell_m: float = 0.0) -> np.ndarray:
+    """How many separate times (stays) a track's rigid contact covers a cell whose centre is at distance ``r``
+    from the centre of an arc of signed radius ``radius_m`` and sweep ``sweep_rad``, at angle ``alpha`` from the
+    arc's start (0 <= alpha < sweep; arrays): 1, or 2 for a cell wholly beyond a track's outer edge (:func:`arc_bands`),
+    r - ``half_cell_m`` > rho_out, and r <= sqrt(rho_out^2 + (l/2)^2). Such a cell is under the track where the
+    angle of its centre from the machine's axis seen from the turn's centre, phi, has |phi| between phi_lo =
+    acos(rho_out / r) (nearer the axis it lies beyond the edge) and phi_hi = min(asin(l / (2 r)), acos(rho_in /
+    r)): under the contact's front end, then out of every contact, then under its rear end, two load cycles of
+    the soil under it (the terrain engine counts a cycle per stay: symtrack/soil/cell.py; a cell within half a
+    cell of the edge stays partly under it in between: one stay). Both stays fall within the arc where phi_lo
+    <= alpha <= sweep - phi_lo; nearer the arc's ends one of them is the straight's beyond, which does not reach
+    the cell (plane geometry). Wheels: 1."""
+    r = np.asarray(r, dtype=float)
+    out = np.ones(r.shape, dtype=np.int32)
+    if machine.tracks is None:
+        return out
+    R, sg = abs(float(radius_m)), (1.0 if radius_m > 0 else -1.0)
+    half_l = 0.5 * machine.tracks.contact_length_m
+    alpha = np.asarray(alpha, dtype=float)
+    for lat, b in machine.strips():
+        rho_in, rho_out = R - sg * lat - 0.5 * b, R - sg * lat + 0.5 * b
+        if rho_in <= 0:  # a track spanning the turn's centre: one stay (its rim's second pass not counted)
+            continue
+        beyond = (r - half_cell_m > rho_out) & (r <= math.hypot(rho_out, half_l))
+        if not beyond.any():
+            continue
+        phi_lo = np.arccos(np.clip(rho_out / np.where(beyond, r, 1.0), -1.0, 1.0))
+        out[beyond & (alpha >= phi_lo) & (alpha <= sweep_rad - phi_lo)] = 2
+    return out
+
+
+def turn_profile(machine: Machine, depths_m, xi: float, radius_m: float, step_m: float = PROFILE_STEP_M,
+                 reach_m: float = PROFILE_REACH_M) -> StressProfile | None:
+    """A tracked machine's stress profile on an arc of signed radius ``radius_m`` (None for wheels: their
+    straight profile serves): at each lateral offset v = sign(R) (|R| - r) from the path's circle, the largest
+    vertical stress [Pa] of the rigid tracks (:func:`arc_bands`) turned about the turn's centre, the maximum over
+    their poses of the stress the terrain engine's strip tables give under the static pressure line, as
+    :func:`stress_profile` is along a straight. Built once per process for these arguments."""
+    if machine.tracks is None:
+        return None
+    depths = tuple(float(d) for d in depths_m)
+    prof = _turn_profile_cached(machine.key(), machine, depths, float(xi), round(abs(float(radius_m)), 6),
+                                float(step_m), float(reach_m))
+    if radius_m > 0:
+        return prof
+    # a right turn is the left turn's mirror image (the two tracks alike, at +-B/2): v -> -v
+    return StressProfile(-prof.v_m[::-1], prof.sigma_Pa[::-1], prof.depths_m, prof.xi)
+
+
+@functools.lru_cache(maxsize=64)
+def _turn_profile_cached(key, machine: Machine, depths: tuple, xi: float, radius: float, step: float,
+                         reach: float) -> StressProfile:
+    R, sg = abs(radius), (1.0 if radius > 0 else -1.0)
+    bands = arc_bands(machine, radius)
+    lo = min(b[0] for b in bands) - reach
+    hi = max(b[1] for b in bands) + reach
+    if sg > 0:  # the cells between the turn's centre and the path: r = R - v >= 0
+        hi = min(hi, R)
+    else:
+        lo = max(lo, -R)
+    v = np.arange(math.floor(lo / step), math.ceil(hi / step) + 1) * step
+    r = R - sg * v
+    # the poses, as the cell's angle phi from the machine's axis seen from the centre: steps of at most `step`
+    # along the outermost circle, over the half-turn in which the machine's frame holds the cell (|phi| <= 90 deg)
+    # (all round when the machine reaches across the centre: a turn tighter than its half-width)
+    half_turn = 0.5 * math.pi if R > machine.reach_m else math.pi
+    n_phi = int(math.ceil(2 * half_turn * max(r.max(), step) / step)) + 1
+    phi = np.linspace(-half_turn, half_turn, n_phi)
+    fn = _track_stress_fn(machine, depths, xi, step, reach)
+    uu = (r[None, :] * np.sin(phi)[:, None]).ravel()
+    yy = (sg * (R - r[None, :] * np.cos(phi)[:, None])).ravel()
+    s = fn(uu, yy).reshape(n_phi, v.size, len(depths)).max(axis=0)
+    return StressProfile(v, s, depths, xi)
 
 
 def first_pass_rut_m(machine: Machine, soil: dict, pressure_fraction: float = 1.0) -> float | None:
@@ -410,10 +578,15 @@ def plastic_rut_m(pressure_Pa: float, soil: dict, width_m: float) -> float:
 
 # the shares of a cell under a track at which the first-pass rut is tabulated (linear in between)
 COVER_FRACTIONS = tuple(k / 20 for k in range(21))
+# and beyond the static pressure, up to twice it (the peak of an accelerating track's pitched line:
+# peak_pressure_factor; 1.06 at the operations' 0.4 m/s^2 for the reference crawler): the shares at which the
+# rut table is tabulated (fast.fold_operation interpolates it at each cell's largest share)
+PRESSURE_FRACTIONS = COVER_FRACTIONS + tuple(1 + k / 20 for k in range(1, 21))
 
 
 def rut_table_m(machine: Machine, soil: dict) -> tuple | None:
-    """:func:`first_pass_rut_m` at each share of :data:`COVER_FRACTIONS` (None for wheels)."""
+    """:func:`first_pass_rut_m` at each share of the static pressure of :data:`PRESSURE_FRACTIONS` (None for
+    wheels)."""
     if machine.tracks is None:
         return None
-    return tuple(first_pass_rut_m(machine, soil, f) for f in COVER_FRACTIONS)
+    return tuple(first_pass_rut_m(machine, soil, f) for f in PRESSURE_FRACTIONS)

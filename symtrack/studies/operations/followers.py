@@ -106,7 +106,7 @@ def _map_eval(rows: dict, v: float, kappa: float) -> tuple[float, float, float, 
     return m, math.copysign(dd, kappa), om, math.copysign(dom, kappa)
 
 
-def _speed_profile(path: Path, creep_m_s: float) -> np.ndarray:
+def speed_profile(path: Path, creep_m_s: float) -> np.ndarray:
     """The followers' speed profile: the path's, limited by :data:`PLAN_ACCEL_M_S2` in deceleration before
     its slow parts and in acceleration after them (the line's speed asked for at once after a turn made
     the mean torque and the sprockets' speed references step, and the tracks spin: measured, the state
@@ -214,7 +214,7 @@ class PathFollower:
         self.diff_prev = None
         self.s = 0.0
         self.roles = sample_roles(plan)
-        self.v_profile = _speed_profile(self.path, self.CUSP_CREEP_M_S)
+        self.v_profile = speed_profile(self.path, self.CUSP_CREEP_M_S)
         # the path between cusps: one direction each; the projection never crosses a cusp it has not reached
         self.phase_s = np.concatenate([[-np.inf], self.path.cusps_s, [np.inf]])
         self.phase_dir = [float(self.path.direction[min(int(np.searchsorted(self.path.s, a)), self.path.s.size - 1)])
@@ -379,7 +379,7 @@ def mpc_follower(plan: OperationPlan, sc, plant, fs: OperationSettings, duration
     # the MPC's reference at the followers' speed profile (the path's own steps from the lines' speed to
     # the turns')
     path = copy.copy(plan.path)
-    path.speed = _speed_profile(plan.path, 0.0)
+    path.speed = speed_profile(plan.path, 0.0)
     path.speed[0] = v0
     # TrackingLaw reads the scenario's mpc settings, run.duration_s and name only
     view = _MPCView(fs.name, settings, duration_s)
