@@ -110,6 +110,8 @@ def test_performance_tables_name_their_command_machine_and_date():
 # (`make keys`). A new hand-typed table of results fails test_no_table_of_results_is_typed_by_hand.
 REFERENCE_TABLES = {
     "| command | what it does |": "codegen.md: the commands of the generated code",
+    "| preset | soil | clay / silt / sand [kg/kg] | bulk density [Mg/m^3] | suction [kPa] |":
+        "getting-started.md: the built-in soils' inputs (checked against the presets: tests/test_newcomer_docs.py)",
     "| file | functions (inputs -> outputs) |": "codegen.md: the generated files",
     "| file | what |": "codegen.md: the files of an export",
     "| member | what |": "codegen.md: the members of a C struct",
