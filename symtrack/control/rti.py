@@ -172,7 +172,10 @@ class RTI:
         self._rows_fn = rows
         self._rows_buf, self._rows_call = rows.buffer()
         self._rows_buf.set_res(0, memoryview(self._Mall[:N * nr]))
-        self._stages = np.arange(N)
+        # the flat indices in _Mall of the stages' own ru_k (stage k's rows, du_k's columns), in the
+        # order of the residual Function's output (N nu x nr: [k, a, i] -> row k nr + i, column k nu + a)
+        k, a, i = np.meshgrid(np.arange(N), np.arange(nu), np.arange(nr), indexing="ij")
+        self._ru_at = ((k * nr + i) * nz + k * nu + a).ravel()
         self.lin = None  # the prepared linearisation (dict), or None
 
     def _rows_eval(self, rx: np.ndarray, gam_t: np.ndarray) -> None:
@@ -246,13 +249,12 @@ class RTI:
         if relinearisations is None:
             relinearisations = self.relinearisations
         L = self.lin
-        N, nxa, nu, nxp, nr = self.N, self.nxa, self.nu, self.nxp, self.nr
+        N, nxa, nxp, nr = self.N, self.nxa, self.nxp, self.nr
         X, U, Phi, Gam, xi = L["X"], L["U"], L["Phi"], L["Gam"], L["xi"]
         dx0 = x0s - X[0]
         ref = np.asarray(ref, float)  # (N+1) x 5
         r, rx, ru = self.res(X[:N], U, ref[:N])  # r: N x nr
         rx = rx.reshape(N, nxa, nr).transpose(0, 2, 1)
-        ru = ru.reshape(N, nu, nr).transpose(0, 2, 1)
         rN, rxN = self.resN(X[N], ref[N])
         rN = rN.ravel()
         rxN = rxN.T
@@ -261,7 +263,7 @@ class RTI:
         # straight into the rows' array (RTI._rows_eval), then each stage's own du_k
         Mall = self._Mall
         self._rows_eval(self.res.out[1], L["GamT"])
-        Mall[:N * nr].reshape(N, nr, N, nu)[self._stages, :, self._stages, :] += ru
+        Mall.reshape(-1)[self._ru_at] += ru.reshape(-1)  # ru: N nu x nr, as _ru_at
         vk = r + np.einsum("kij,kj->ki", rx, dxa[:N])
         np.matmul(rxN, Gam[N], out=Mall[N * nr:])
         vN = rN + rxN @ dxa[N]
@@ -281,7 +283,7 @@ class RTI:
         self._qp_eval()
         st = self._qp_buf.stats()
         dU = self._qp_out[0].copy()
-        ok = self._qp_buf.ret() == 0 and bool(st.get("success", False)) and bool(np.all(np.isfinite(dU)))
+        ok = self._qp_buf.ret() == 0 and bool(st.get("success", False)) and bool(np.isfinite(dU).all())
         status = str(st.get("return_status", st.get("success")))
         if not ok:
             return None, False, status
@@ -296,7 +298,7 @@ class RTI:
         alpha = 1.0
         for _ in range(self.halvings + 1):
             w = self._point(L, x0s, dxa, alpha * GdU, alpha * dU, Msol)
-            if not np.all(np.isfinite(w)):
+            if not np.isfinite(w).all():
                 return None, False, "non-finite step"
             defect = self.defect(w)
             if defect <= self.max_defect:
