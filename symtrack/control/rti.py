@@ -119,7 +119,7 @@ class RTI:
         self.N, self.nxa, self.nu, self.nk, self.nxp = N, mpc.nxa, mpc.nu, mpc.nk, mpc.nxp
         self.reg = regularisation
         fns = {"mpc_rti_coll": mpc.coll_fn.map(N), "mpc_rti_res": mpc.res_fn.map(N),
-               "mpc_rti_res_term": mpc.res_term_fn, "mpc_rti_coll_res": mpc.coll_res_fn.map(N)}
+               "mpc_rti_res_term": mpc.res_term_fn, "mpc_rti_coll_res": mpc.coll_res_fn}
         calls = []
         for name, f in fns.items():
             # dense outputs, so that the buffer interface fills whole numpy arrays (_Buffered), and the
@@ -135,6 +135,20 @@ class RTI:
                 f = compiled_function(f, root=cache)
             calls.append(_Buffered(f))
         self.coll, self.res, self.resN, self.collg = calls
+        # the collocation residual of a whole w (RTI.defect), of its last stage and of the others
+        # (the stage Function mapped by CasADi's interpreted MX, the stage blocks cut out of w inside,
+        # so that w is passed as it is): a rejected step is nearly always rejected by its last stage
+        # (the turn entering the horizon), which is evaluated first (RTI._defect_upto)
+        nxa, nu, blk = self.nxa, self.nu, self.nxa + self.nu + self.nk
+        stage = self.collg.f
+        ws = ca.MX.sym("w", N * blk + nxa)
+        ps, xcs = ca.MX.sym("p", stage.size1_in(3)), ca.MX.sym("xc", stage.size1_in(4))
+        W = ca.reshape(ws[:N * blk], blk, N)
+        head = stage.map(N - 1)(W[:nxa, :N - 1], W[nxa:nxa + nu, :N - 1], W[nxa + nu:, :N - 1], ps, xcs)
+        tail = stage(W[:nxa, N - 1], W[nxa:nxa + nu, N - 1], W[nxa + nu:, N - 1], ps, xcs)
+        io = ["w", "p", "xc"], ["g"]
+        self._coll_head = _Buffered(ca.Function("mpc_rti_coll_res_head", [ws, ps, xcs], [head], *io))
+        self._coll_tail = _Buffered(ca.Function("mpc_rti_coll_res_tail", [ws, ps, xcs], [tail], *io))
         self.nr = mpc.res_fn.size1_out(0)
         self.nrN = mpc.res_term_fn.size1_out(0)
         nz = self.nu * N
@@ -300,7 +314,8 @@ class RTI:
             w = self._point(L, x0s, dxa, alpha * GdU, alpha * dU, Msol)
             if not np.isfinite(w).all():
                 return None, False, "non-finite step"
-            defect = self.defect(w)
+            # (a step that is not the shortest only needs to be known to exceed the bound)
+            defect = self._defect_upto(w, None if alpha <= 0.5 ** self.halvings else self.max_defect)
             if defect <= self.max_defect:
                 break
             if alpha <= 0.5 ** self.halvings:
@@ -353,11 +368,18 @@ class RTI:
 
     def defect(self, w: np.ndarray) -> float:
         """Largest collocation residual (scaled rows) of w: how far it is from the dynamics."""
-        N, nxa, nu = self.N, self.nxa, self.nu
-        blk = nxa + nu + self.nk
-        W = w[:N * blk].reshape(N, blk)
-        (g,) = self.collg(W[:, :nxa], W[:, nxa:nxa + nu], W[:, nxa + nu:], self.m.p_model, self._xc)
-        return float(np.max(np.abs(g)))
+        return self._defect_upto(w, None)
+
+    def _defect_upto(self, w: np.ndarray, bound: float | None) -> float:
+        """The largest collocation residual of w; with a ``bound``, the last stage's alone when
+        that one exceeds it (then so does w's: enough to reject w)."""
+        p = self.m.p_model
+        (g,) = self._coll_tail(w, p, self._xc)
+        last = float(np.max(np.abs(g)))
+        if bound is not None and last > bound:
+            return last
+        (g,) = self._coll_head(w, p, self._xc)
+        return float(np.max((last, np.max(np.abs(g)))))  # (NaN as np.max of all would give it)
 
 
 def shift_guess(mpc, w: np.ndarray) -> np.ndarray:
