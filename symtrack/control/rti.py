@@ -135,20 +135,34 @@ class RTI:
                 f = compiled_function(f, root=cache)
             calls.append(_Buffered(f))
         self.coll, self.res, self.resN, self.collg = calls
-        # the collocation residual of a whole w (RTI.defect), of its last stage and of the others
-        # (the stage Function mapped by CasADi's interpreted MX, the stage blocks cut out of w inside,
-        # so that w is passed as it is): a rejected step is nearly always rejected by its last stage
-        # (the turn entering the horizon), which is evaluated first (RTI._defect_upto)
+        # the collocation residual of a whole w (RTI.defect): its last stage's, then the others'
+        # unless the last one's exceeds a bound (a rejected step is nearly always rejected by its
+        # last stage, the turn entering the horizon: RTI._defect_upto). One Function (the stage
+        # Function mapped by CasADi's interpreted MX, the stage blocks cut out of w inside) whose
+        # arguments are arrays bound once (w copied in, the parameters and cells bound by
+        # prepare_at): each call of CasADi's Python interface cost 10-15 us in the closed loop
+        # (cold caches between samples, measured)
         nxa, nu, blk = self.nxa, self.nu, self.nxa + self.nu + self.nk
         stage = self.collg.f
         ws = ca.MX.sym("w", N * blk + nxa)
         ps, xcs = ca.MX.sym("p", stage.size1_in(3)), ca.MX.sym("xc", stage.size1_in(4))
         W = ca.reshape(ws[:N * blk], blk, N)
-        head = stage.map(N - 1)(W[:nxa, :N - 1], W[nxa:nxa + nu, :N - 1], W[nxa + nu:, :N - 1], ps, xcs)
         tail = stage(W[:nxa, N - 1], W[nxa:nxa + nu, N - 1], W[nxa + nu:, N - 1], ps, xcs)
-        io = ["w", "p", "xc"], ["g"]
-        self._coll_head = _Buffered(ca.Function("mpc_rti_coll_res_head", [ws, ps, xcs], [head], *io))
-        self._coll_tail = _Buffered(ca.Function("mpc_rti_coll_res_tail", [ws, ps, xcs], [tail], *io))
+        bound = ca.MX.sym("bound")
+        cut = ca.mmax(ca.fabs(tail)) > bound
+        others = stage.map(N - 1)(W[:nxa, :N - 1], W[nxa:nxa + nu, :N - 1], W[nxa + nu:, :N - 1], ps, xcs)
+        head = ca.if_else(cut, ca.DM.zeros(self.nk, N - 1), others, True)
+        fn = ca.Function("mpc_rti_coll_res_w", [ws, ps, xcs, bound], [tail, head, cut], ["w", "p", "xc", "bound"],
+                         ["g_last", "g_others", "cut"])
+        self._w_in, self._bound_in = np.zeros(N * blk + nxa), np.zeros(1)
+        self._g_out = [np.zeros(self.nk), np.zeros((N - 1, self.nk)), np.zeros(1)]
+        self._coll_fn = fn
+        self._coll_buf, self._coll_call = fn.buffer()
+        self._coll_buf.set_arg(0, memoryview(self._w_in))
+        self._coll_buf.set_arg(3, memoryview(self._bound_in))
+        for i, a in enumerate(self._g_out):
+            self._coll_buf.set_res(i, memoryview(a))
+        self._bound_p = None  # (p, xc) bound to the defect Functions
         self.nr = mpc.res_fn.size1_out(0)
         self.nrN = mpc.res_term_fn.size1_out(0)
         nz = self.nu * N
@@ -162,6 +176,7 @@ class RTI:
         self._qp_in = {n: np.zeros(max(1, self.qp.nnz_in(i))) for i, n in enumerate(self.qp.name_in())}
         self._qp_out = [np.zeros(max(1, self.qp.nnz_out(i))) for i in range(self.qp.n_out())]
         self._qp_buf, self._qp_eval = self.qp.buffer()
+        self._qp_arg = {n: i for i, n in enumerate(self.qp.name_in())}
         for i, n in enumerate(self.qp.name_in()):
             self._qp_buf.set_arg(i, memoryview(self._qp_in[n]))
         for i, a in enumerate(self._qp_out):
@@ -183,24 +198,29 @@ class RTI:
         rows = ca.Function("mpc_rti_rows", [rx, gam], [ca.densify(ca.horzcat(*blocks))], ["rx", "gam_t"], ["rows_t"])
         if compiled:
             rows = compiled_function(rows, flags=("-O3",), root=cache)
-        self._rows_fn = rows
-        self._rows_buf, self._rows_call = rows.buffer()
-        self._rows_buf.set_res(0, memoryview(self._Mall[:N * nr]))
+        # ... evaluated with the cost residuals against the reference in one call: the residuals r,
+        # their Jacobians rx, ru, the terminal ones and the rows, into arrays allocated here (each the
+        # transpose of the output matrix, as _Buffered's), its arguments bound by prepare_at (the
+        # guess's X, U and GamT) and here (the reference, copied in by the feedback)
+        Xs, Us = ca.MX.sym("X", nxa, N + 1), ca.MX.sym("U", nu, N)
+        refs = ca.MX.sym("ref", self.res.f.size1_in(2), N + 1)
+        gs = ca.MX.sym("gam_t", nxa, N * nz)
+        r, r_x, r_u = self.res.f(Xs[:, :N], Us, refs[:, :N])
+        rN, rN_x = self.resN.f(Xs[:, N], refs[:, N])
+        fn = ca.Function("mpc_rti_residual_rows", [Xs, Us, refs, gs], [r, r_x, r_u, rN, rN_x, rows(r_x, gs)],
+                         ["X", "U", "ref", "gam_t"], ["r", "r_x", "r_u", "rN", "rN_x", "rows_t"])
+        self._ref_in = np.zeros((N + 1, refs.size1()))
+        self._res_out = [np.zeros((fn.size2_out(i), fn.size1_out(i))) for i in range(5)] + [self._Mall[:N * nr]]
+        self._res_buf, self._res_call = fn.buffer()
+        self._res_fn = fn
+        self._res_buf.set_arg(2, memoryview(self._ref_in))
+        for i, a in enumerate(self._res_out):
+            self._res_buf.set_res(i, memoryview(a))
         # the flat indices in _Mall of the stages' own ru_k (stage k's rows, du_k's columns), in the
         # order of the residual Function's output (N nu x nr: [k, a, i] -> row k nr + i, column k nu + a)
         k, a, i = np.meshgrid(np.arange(N), np.arange(nu), np.arange(nr), indexing="ij")
         self._ru_at = ((k * nr + i) * nz + k * nu + a).ravel()
         self.lin = None  # the prepared linearisation (dict), or None
-
-    def _rows_eval(self, rx: np.ndarray, gam_t: np.ndarray) -> None:
-        """The stages' rx_k Gam_k into the first N nr rows of ``_Mall``: rx as the mapped residual
-        Function's Jacobian output (N nxa x nr, :class:`_Buffered`), gam_t the prepared ``GamT``
-        (N x 2N x nxa, stage k's Gam_k column-major)."""
-        self._rows_buf.set_arg(0, memoryview(rx))
-        self._rows_buf.set_arg(1, memoryview(gam_t))
-        self._rows_call()
-        if self._rows_buf.ret() != 0:
-            raise RuntimeError(f"mpc_rti_rows failed (status {self._rows_buf.ret()})")
 
     # ------------------------------------------------------------------ preparation
     def prepare_at(self, w: np.ndarray, p_model: np.ndarray, x_cells: np.ndarray) -> None:
@@ -246,13 +266,31 @@ class RTI:
         # what the feedback needs that does not depend on the measurement or the reference: the
         # rate rows (u_k - prev_k, prev_k = state entries nxp: of x_k, in the steps dU) as their
         # column-major values (the QP's buffer), the guess's own rates and torque bounds, the
-        # stages' Gam_k, each as its column-major values (RTI._rows_eval)
+        # stages' Gam_k, each as its column-major values (the rows of mpc_rti_residual_rows)
         Arate = -Gam[:N, nxp:, :].reshape(N * nu, nzu) + np.eye(nzu)
         tmax = self.m.tmax_scaled
         ug = U.ravel()
-        self.lin = {"w": w.copy(), "M": Msol, "Phi": Phi, "Gam": Gam, "xi": xi, "X": X, "U": U,
-                    "AT": np.ascontiguousarray(Arate.T), "rate_guess": (U - X[:N, nxp:]).ravel(),
-                    "lbx": -tmax - ug, "ubx": tmax - ug, "GamT": np.ascontiguousarray(Gam[:N].transpose(0, 2, 1))}
+        L = {"w": w.copy(), "M": Msol, "Phi": Phi, "Gam": Gam, "xi": xi, "X": X, "U": U,
+             "AT": np.ascontiguousarray(Arate.T), "rate_guess": (U - X[:N, nxp:]).ravel(),
+             "lbx": -tmax - ug, "ubx": tmax - ug, "GamT": np.ascontiguousarray(Gam[:N].transpose(0, 2, 1))}
+        # bound to the feedback's Functions (kept alive by self._bound while bound)
+        for i, a in enumerate((X, U)):
+            self._res_buf.set_arg(i, memoryview(a))
+        self._res_buf.set_arg(3, memoryview(L["GamT"]))
+        for n in ("lbx", "ubx"):
+            self._qp_buf.set_arg(self._qp_arg[n], memoryview(L[n]))
+        self._qp_buf.set_arg(self._qp_arg["a"], memoryview(L["AT"]))
+        self._bound = L
+        self._bind_p(p_model, xc)
+        self.lin = L
+
+    def _bind_p(self, p_model, xc) -> None:
+        """Bind the model's parameters and the frozen cells to the defect Functions (copies)."""
+        p = np.array(p_model, dtype=float).ravel()
+        c = np.array(xc, dtype=float).ravel()
+        self._bound_p = (p, c if c.size else np.zeros(1), p_model, xc)
+        self._coll_buf.set_arg(1, memoryview(self._bound_p[0]))
+        self._coll_buf.set_arg(2, memoryview(self._bound_p[1]))
 
     # ------------------------------------------------------------------ feedback
     def feedback(self, x0s: np.ndarray, ref: np.ndarray, relinearisations: int | None = None):
@@ -264,19 +302,22 @@ class RTI:
             relinearisations = self.relinearisations
         L = self.lin
         N, nxa, nxp, nr = self.N, self.nxa, self.nxp, self.nr
-        X, U, Phi, Gam, xi = L["X"], L["U"], L["Phi"], L["Gam"], L["xi"]
+        X, Phi, Gam, xi = L["X"], L["Phi"], L["Gam"], L["xi"]
         dx0 = x0s - X[0]
         ref = np.asarray(ref, float)  # (N+1) x 5
-        r, rx, ru = self.res(X[:N], U, ref[:N])  # r: N x nr
+        # the residuals, their Jacobians and the stages' rx_k Gam_k rows (into _Mall) in one call
+        self._ref_in[...] = ref
+        self._res_call()
+        if self._res_buf.ret() != 0:
+            raise RuntimeError(f"mpc_rti_residual_rows failed (status {self._res_buf.ret()})")
+        r, rx, ru, rN, rxN, _ = self._res_out  # r: N x nr
         rx = rx.reshape(N, nxa, nr).transpose(0, 2, 1)
-        rN, rxN = self.resN(X[N], ref[N])
         rN = rN.ravel()
         rxN = rxN.T
         dxa = np.einsum("kij,j->ki", Phi, dx0) + xi  # (N+1) x nxa: the state steps without dU
-        # residual rows: r_k + rx_k dx_k + ru_k du_k, dx_k = dxa_k + Gam_k dU; the stages' rx_k Gam_k
-        # straight into the rows' array (RTI._rows_eval), then each stage's own du_k
+        # residual rows: r_k + rx_k dx_k + ru_k du_k, dx_k = dxa_k + Gam_k dU; to the stages' rx_k
+        # Gam_k each stage's own du_k
         Mall = self._Mall
-        self._rows_eval(self.res.out[1], L["GamT"])
         Mall.reshape(-1)[self._ru_at] += ru.reshape(-1)  # ru: N nu x nr, as _ru_at
         vk = r + np.einsum("kij,kj->ki", rx, dxa[:N])
         np.matmul(rxN, Gam[N], out=Mall[N * nr:])
@@ -287,17 +328,16 @@ class RTI:
         q = self._qp_in
         q["h"].reshape(H.shape)[:] = H.T
         q["g"][:] = 2.0 * (Mall.T @ vall)
-        q["a"][:] = L["AT"].ravel()
         rate_now = L["rate_guess"] - dxa[:N, nxp:].ravel()
         rate = self.m.rate_scaled
         q["lba"][:] = -rate - rate_now
         q["uba"][:] = rate - rate_now
-        q["lbx"][:] = L["lbx"]
-        q["ubx"][:] = L["ubx"]
         self._qp_eval()
         st = self._qp_buf.stats()
         dU = self._qp_out[0].copy()
-        ok = self._qp_buf.ret() == 0 and bool(st.get("success", False)) and bool(np.isfinite(dU).all())
+        if self._qp_buf.ret() != 0:
+            raise RuntimeError(f"mpc_rti_qp failed (status {self._qp_buf.ret()})")
+        ok = bool(st.get("success", False)) and bool(np.isfinite(dU).all())
         status = str(st.get("return_status", st.get("success")))
         if not ok:
             return None, False, status
@@ -368,18 +408,24 @@ class RTI:
 
     def defect(self, w: np.ndarray) -> float:
         """Largest collocation residual (scaled rows) of w: how far it is from the dynamics."""
+        if self._bound_p is None or self._bound_p[2] is not self.m.p_model or self._bound_p[3] is not self._xc:
+            self._bind_p(self.m.p_model, self._xc)
         return self._defect_upto(w, None)
 
     def _defect_upto(self, w: np.ndarray, bound: float | None) -> float:
         """The largest collocation residual of w; with a ``bound``, the last stage's alone when
-        that one exceeds it (then so does w's: enough to reject w)."""
-        p = self.m.p_model
-        (g,) = self._coll_tail(w, p, self._xc)
-        last = float(np.max(np.abs(g)))
-        if bound is not None and last > bound:
+        that one exceeds it (then so does w's: enough to reject w). The model's parameters and
+        cells are those bound by prepare_at (the MPC's p_model and the prepared cells)."""
+        self._w_in[:] = w
+        self._bound_in[0] = np.inf if bound is None else bound
+        self._coll_call()
+        if self._coll_buf.ret() != 0:
+            raise RuntimeError(f"mpc_rti_coll_res_w failed (status {self._coll_buf.ret()})")
+        g_last, g_others, cut = self._g_out
+        last = float(np.max(np.abs(g_last)))
+        if cut[0]:  # (some residual of the last stage above the bound: the others were not evaluated)
             return last
-        (g,) = self._coll_head(w, p, self._xc)
-        return float(np.max((last, np.max(np.abs(g)))))  # (NaN as np.max of all would give it)
+        return float(np.max((last, np.max(np.abs(g_others)))))  # (NaN as np.max of all would give it)
 
 
 def shift_guess(mpc, w: np.ndarray) -> np.ndarray:
