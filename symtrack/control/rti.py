@@ -369,7 +369,8 @@ class RTI:
         Msol = L["M"]
         alpha = 1.0
         for _ in range(self.halvings + 1):
-            w = self._point(L, x0s, dxa, alpha * GdU, alpha * dU, Msol)
+            full = alpha == 1.0  # (1.0 x is x)
+            w = self._point(L, x0s, dxa, GdU if full else alpha * GdU, dU if full else alpha * dU, Msol)
             if not np.isfinite(w).all():
                 return None, False, "non-finite step"
             # (a step that is not the shortest only needs to be known to exceed the bound)
@@ -413,13 +414,13 @@ class RTI:
         blk = nxa + nu + nk
         dX = dxa + GdU
         dUk = dU.reshape(N, nu)
-        dK = -(Msol[:, :, 0] + np.einsum("kij,kj->ki", Msol[:, :, 1:1 + nxa], dX[:N])
-               + np.einsum("kij,kj->ki", Msol[:, :, 1 + nxa:], dUk))
+        minus_dK = (Msol[:, :, 0] + np.einsum("kij,kj->ki", Msol[:, :, 1:1 + nxa], dX[:N])
+                    + np.einsum("kij,kj->ki", Msol[:, :, 1 + nxa:], dUk))
         w = L["w"].copy()
         Wv = w[:N * blk].reshape(N, blk)
         Wv[:, :nxa] += dX[:N]
         Wv[:, nxa:nxa + nu] += dUk
-        Wv[:, nxa + nu:] += dK
+        Wv[:, nxa + nu:] -= minus_dK  # (a - b is a + (-b))
         w[N * blk:] += dX[N]
         w[:nxa] = x0s  # dX[0] = dx0: no round-off in the fixed initial state
         return w
