@@ -210,7 +210,7 @@ CACHE_SCRIPT = textwrap.dedent("""
 
 # IPOPT's NLP functions are one large C file (gcc's longest compile of the MPC; once, in the first process):
 # the slow set (make test-slow; CI runs it)
-@pytest.mark.parametrize("solver, n_libs", [("rti", 4), pytest.param("ipopt", 1, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("solver, n_libs", [("rti", 5), pytest.param("ipopt", 1, marks=pytest.mark.slow)])
 def test_compiled_mpc_cached_across_processes(tmp_path, solver, n_libs):
     """The first process compiles the RTI functions (or IPOPT's NLP functions) into the cache and
     says so; a second process with the same problem calls no compiler (a CC wrapper logs every

@@ -55,6 +55,9 @@ log = logging.getLogger("symtrack.control.rti")
 # the stage structure (N, nx, nu, ng) of an uncondensed QP and rejects the dense one ("HPIPM:
 # specified structure of A does not correspond to what the interface can handle").
 QP_SOLVERS = ("qrqp", "osqp", "daqp", "piqp")
+# the return status of every successful solve, for a solver whose CasADi interface has one
+# (DAQP: success is exit flag 1, EXIT_OPTIMAL, only; the others report several)
+QP_SUCCESS_STATUS = {"daqp": "1"}
 
 
 def _qp_options(name: str) -> dict:
@@ -119,7 +122,7 @@ class RTI:
         self.N, self.nxa, self.nu, self.nk, self.nxp = N, mpc.nxa, mpc.nu, mpc.nk, mpc.nxp
         self.reg = regularisation
         fns = {"mpc_rti_coll": mpc.coll_fn.map(N), "mpc_rti_res": mpc.res_fn.map(N),
-               "mpc_rti_res_term": mpc.res_term_fn, "mpc_rti_coll_res": mpc.coll_res_fn.map(N)}
+               "mpc_rti_res_term": mpc.res_term_fn, "mpc_rti_coll_res": mpc.coll_res_fn}
         calls = []
         for name, f in fns.items():
             # dense outputs, so that the buffer interface fills whole numpy arrays (_Buffered), and the
@@ -135,13 +138,101 @@ class RTI:
                 f = compiled_function(f, root=cache)
             calls.append(_Buffered(f))
         self.coll, self.res, self.resN, self.collg = calls
+        # the collocation residual of a whole w (RTI.defect): its last stage's, then the others'
+        # unless the last one's exceeds a bound (a rejected step is nearly always rejected by its
+        # last stage, the turn entering the horizon: RTI._defect_upto). One Function (the stage
+        # Function mapped by CasADi's interpreted MX, the stage blocks cut out of w inside) whose
+        # arguments are arrays bound once (w copied in, the parameters and cells bound by
+        # prepare_at): each call of CasADi's Python interface cost 10-15 us in the closed loop
+        # (cold caches between samples, measured)
+        nxa, nu, blk = self.nxa, self.nu, self.nxa + self.nu + self.nk
+        stage = self.collg.f
+        ws = ca.MX.sym("w", N * blk + nxa)
+        ps, xcs = ca.MX.sym("p", stage.size1_in(3)), ca.MX.sym("xc", stage.size1_in(4))
+        W = ca.reshape(ws[:N * blk], blk, N)
+        tail = stage(W[:nxa, N - 1], W[nxa:nxa + nu, N - 1], W[nxa + nu:, N - 1], ps, xcs)
+        bound = ca.MX.sym("bound")
+        cut = ca.mmax(ca.fabs(tail)) > bound
+        others = stage.map(N - 1)(W[:nxa, :N - 1], W[nxa:nxa + nu, :N - 1], W[nxa + nu:, :N - 1], ps, xcs)
+        head = ca.if_else(cut, ca.DM.zeros(self.nk, N - 1), others, True)
+        fn = ca.Function("mpc_rti_coll_res_w", [ws, ps, xcs, bound], [tail, head, cut], ["w", "p", "xc", "bound"],
+                         ["g_last", "g_others", "cut"])
+        self._w_in, self._bound_in = np.zeros(N * blk + nxa), np.zeros(1)
+        self._g_out = [np.zeros(self.nk), np.zeros((N - 1, self.nk)), np.zeros(1)]
+        self._coll_fn = fn
+        self._coll_buf, self._coll_call = fn.buffer()
+        self._coll_buf.set_arg(0, memoryview(self._w_in))
+        self._coll_buf.set_arg(3, memoryview(self._bound_in))
+        for i, a in enumerate(self._g_out):
+            self._coll_buf.set_res(i, memoryview(a))
+        self._bound_p = None  # (p, xc) bound to the defect Functions
         self.nr = mpc.res_fn.size1_out(0)
         self.nrN = mpc.res_term_fn.size1_out(0)
         nz = self.nu * N
         # the dense QP: H (2N x 2N) and the rate rows A (2N x 2N, dense after condensing)
         self.qp_name = qp_solver
+        # A solver whose interface reports success for one return status only (CasADi's DAQP: exit
+        # flag 1, EXIT_OPTIMAL) raises on failure instead (error_on_fail), so that a successful
+        # solve needs no stats(): that call took 25-50 us in the closed loop, the solve 30-60 us
+        self._qp_success_status = QP_SUCCESS_STATUS.get(qp_solver)
+        opts = _qp_options(qp_solver)
+        if self._qp_success_status is not None:
+            opts["error_on_fail"] = True
         self.qp = ca.conic("mpc_rti_qp", qp_solver, {"h": ca.Sparsity.dense(nz, nz), "a": ca.Sparsity.dense(nz, nz)},
-                           _qp_options(qp_solver))
+                           opts)
+        # ... called through its buffer interface on arrays allocated here (each dense matrix as its
+        # column-major values): converting the numpy arguments to DM took 0.4-0.5 ms of a feedback
+        # whose QP solve takes 0.03-0.1 ms (measured, headland_uturn, DAQP)
+        self._qp_in = {n: np.zeros(max(1, self.qp.nnz_in(i))) for i, n in enumerate(self.qp.name_in())}
+        self._qp_out = [np.zeros(max(1, self.qp.nnz_out(i))) for i in range(self.qp.n_out())]
+        self._qp_buf, self._qp_eval = self.qp.buffer()
+        self._qp_arg = {n: i for i, n in enumerate(self.qp.name_in())}
+        for i, n in enumerate(self.qp.name_in()):
+            self._qp_buf.set_arg(i, memoryview(self._qp_in[n]))
+        for i, a in enumerate(self._qp_out):
+            self._qp_buf.set_res(i, memoryview(a))
+        # the feedback's dense algebra on preallocated arrays: the residual rows of the condensed
+        # least squares (stage k's nr rows, then the terminal rows) and the constant regularisation
+        self._Mall = np.zeros((N * self.nr + self.nrN, nz))
+        self._reg2 = 2.0 * self.reg * np.eye(nz)
+        # ... of which the stages' rx_k Gam_k (without the stage's own ru_k du_k), a Function writing
+        # them into those rows: only the structural nonzeros of rx_k and the first k nu columns of
+        # Gam_k (the steps of the stages before k) enter, and each product accumulates over the
+        # states in order as numpy's einsum did, so the values are the same to the bit (the terms
+        # left out are zeros, which add nothing to sums that start at +0, while Gam is finite:
+        # prepare_at checks; the einsum took 0.2 ms of the feedback)
+        nr, nxa, nu = self.nr, self.nxa, self.nu
+        rx, gam = ca.MX.sym("rx", nr, N * nxa), ca.MX.sym("gam_t", nxa, N * nz)
+        rx_sp = mpc.res_fn.sparsity_out(1)
+        blocks = [ca.MX(nz, nr)]
+        for k in range(1, N):
+            mk = ca.mtimes(ca.project(rx[:, k * nxa:(k + 1) * nxa], rx_sp), gam[:, k * nz:k * nz + k * nu])
+            blocks.append(ca.horzcat(mk, ca.MX(nr, nz - k * nu)).T)
+        rows = ca.Function("mpc_rti_rows", [rx, gam], [ca.densify(ca.horzcat(*blocks))], ["rx", "gam_t"], ["rows_t"])
+        if compiled:
+            rows = compiled_function(rows, flags=("-O3",), root=cache)
+        # ... evaluated with the cost residuals against the reference in one call: the residuals r,
+        # their Jacobians rx, ru, the terminal ones and the rows, into arrays allocated here (each the
+        # transpose of the output matrix, as _Buffered's), its arguments bound by prepare_at (the
+        # guess's X, U and GamT) and here (the reference, copied in by the feedback)
+        Xs, Us = ca.MX.sym("X", nxa, N + 1), ca.MX.sym("U", nu, N)
+        refs = ca.MX.sym("ref", self.res.f.size1_in(2), N + 1)
+        gs = ca.MX.sym("gam_t", nxa, N * nz)
+        r, r_x, r_u = self.res.f(Xs[:, :N], Us, refs[:, :N])
+        rN, rN_x = self.resN.f(Xs[:, N], refs[:, N])
+        fn = ca.Function("mpc_rti_residual_rows", [Xs, Us, refs, gs], [r, r_x, r_u, rN, rN_x, rows(r_x, gs)],
+                         ["X", "U", "ref", "gam_t"], ["r", "r_x", "r_u", "rN", "rN_x", "rows_t"])
+        self._ref_in = np.zeros((N + 1, refs.size1()))
+        self._res_out = [np.zeros((fn.size2_out(i), fn.size1_out(i))) for i in range(5)] + [self._Mall[:N * nr]]
+        self._res_buf, self._res_call = fn.buffer()
+        self._res_fn = fn
+        self._res_buf.set_arg(2, memoryview(self._ref_in))
+        for i, a in enumerate(self._res_out):
+            self._res_buf.set_res(i, memoryview(a))
+        # the flat indices in _Mall of the stages' own ru_k (stage k's rows, du_k's columns), in the
+        # order of the residual Function's output (N nu x nr: [k, a, i] -> row k nr + i, column k nu + a)
+        k, a, i = np.meshgrid(np.arange(N), np.arange(nu), np.arange(nr), indexing="ij")
+        self._ru_at = ((k * nr + i) * nz + k * nu + a).ravel()
         self.lin = None  # the prepared linearisation (dict), or None
 
     # ------------------------------------------------------------------ preparation
@@ -183,8 +274,37 @@ class RTI:
             Gam[k + 1] = A[k] @ Gam[k]
             Gam[k + 1][:, k * nu:(k + 1) * nu] += B[k]
             xi[k + 1] = A[k] @ xi[k] + c[k]
-        self.lin = {"w": w.copy(), "M": Msol, "Phi": Phi, "Gam": Gam, "xi": xi, "X": np.vstack([Xk, w[N * blk:]]),
-                    "U": Uk.copy()}
+        X = np.vstack([Xk, w[N * blk:]])
+        U = Uk.copy()
+        # what the feedback needs that does not depend on the measurement or the reference: the
+        # rate rows (u_k - prev_k, prev_k = state entries nxp: of x_k, in the steps dU) as their
+        # column-major values (the QP's buffer), the guess's own rates and torque bounds, the
+        # stages' Gam_k, each as its column-major values (the rows of mpc_rti_residual_rows)
+        Arate = -Gam[:N, nxp:, :].reshape(N * nu, nzu) + np.eye(nzu)
+        tmax = self.m.tmax_scaled
+        ug = U.ravel()
+        L = {"w": w.copy(), "M": Msol, "Phi": Phi, "Gam": Gam, "xi": xi, "X": X, "U": U,
+             "AT": np.ascontiguousarray(Arate.T), "rate_guess": (U - X[:N, nxp:]).ravel(),
+             "lbx": -tmax - ug, "ubx": tmax - ug, "GamT": np.ascontiguousarray(Gam[:N].transpose(0, 2, 1)),
+             "finite": bool(np.isfinite(Gam).all())}
+        # bound to the feedback's Functions (kept alive by self._bound while bound)
+        for i, a in enumerate((X, U)):
+            self._res_buf.set_arg(i, memoryview(a))
+        self._res_buf.set_arg(3, memoryview(L["GamT"]))
+        for n in ("lbx", "ubx"):
+            self._qp_buf.set_arg(self._qp_arg[n], memoryview(L[n]))
+        self._qp_buf.set_arg(self._qp_arg["a"], memoryview(L["AT"]))
+        self._bound = L
+        self._bind_p(p_model, xc)
+        self.lin = L
+
+    def _bind_p(self, p_model, xc) -> None:
+        """Bind the model's parameters and the frozen cells to the defect Functions (copies)."""
+        p = np.array(p_model, dtype=float).ravel()
+        c = np.array(xc, dtype=float).ravel()
+        self._bound_p = (p, c if c.size else np.zeros(1), p_model, xc)
+        self._coll_buf.set_arg(1, memoryview(self._bound_p[0]))
+        self._coll_buf.set_arg(2, memoryview(self._bound_p[1]))
 
     # ------------------------------------------------------------------ feedback
     def feedback(self, x0s: np.ndarray, ref: np.ndarray, relinearisations: int | None = None):
@@ -195,43 +315,54 @@ class RTI:
         if relinearisations is None:
             relinearisations = self.relinearisations
         L = self.lin
-        N, nxa, nu, nxp = self.N, self.nxa, self.nu, self.nxp
-        nzu = nu * N
-        X, U, Phi, Gam, xi = L["X"], L["U"], L["Phi"], L["Gam"], L["xi"]
+        N, nxa, nxp, nr = self.N, self.nxa, self.nxp, self.nr
+        X, Phi, Gam, xi = L["X"], L["Phi"], L["Gam"], L["xi"]
         dx0 = x0s - X[0]
         ref = np.asarray(ref, float)  # (N+1) x 5
-        r, rx, ru = self.res(X[:N], U, ref[:N])  # r: N x nr
-        rx = rx.reshape(N, nxa, self.nr).transpose(0, 2, 1)
-        ru = ru.reshape(N, nu, self.nr).transpose(0, 2, 1)
-        rN, rxN = self.resN(X[N], ref[N])
+        # the residuals, their Jacobians and the stages' rx_k Gam_k rows (into _Mall) in one call
+        self._ref_in[...] = ref
+        self._res_call()
+        if self._res_buf.ret() != 0:
+            raise RuntimeError(f"mpc_rti_residual_rows failed (status {self._res_buf.ret()})")
+        r, rx, ru, rN, rxN, _ = self._res_out  # r: N x nr
+        rx = rx.reshape(N, nxa, nr).transpose(0, 2, 1)
+        if not L["finite"]:  # (a linearisation gone non-finite: the products in full, NaN where they give it)
+            self._Mall[:N * nr] = np.einsum("kij,kjl->kil", rx, Gam[:N]).reshape(N * nr, -1)
         rN = rN.ravel()
         rxN = rxN.T
         dxa = np.einsum("kij,j->ki", Phi, dx0) + xi  # (N+1) x nxa: the state steps without dU
-        # residual rows: r_k + rx_k dx_k + ru_k du_k, dx_k = dxa_k + Gam_k dU
-        Mk = np.einsum("kij,kjl->kil", rx, Gam[:N])
-        for k in range(N):
-            Mk[k][:, k * nu:(k + 1) * nu] += ru[k]
+        # residual rows: r_k + rx_k dx_k + ru_k du_k, dx_k = dxa_k + Gam_k dU; to the stages' rx_k
+        # Gam_k each stage's own du_k
+        Mall = self._Mall
+        Mall.reshape(-1)[self._ru_at] += ru.reshape(-1)  # ru: N nu x nr, as _ru_at
         vk = r + np.einsum("kij,kj->ki", rx, dxa[:N])
-        MN = rxN @ Gam[N]
+        np.matmul(rxN, Gam[N], out=Mall[N * nr:])
         vN = rN + rxN @ dxa[N]
-        Mall = np.vstack([Mk.reshape(N * self.nr, nzu), MN])
         vall = np.concatenate([vk.ravel(), vN])
-        H = 2.0 * (Mall.T @ Mall) + 2.0 * self.reg * np.eye(nzu)
-        gvec = 2.0 * (Mall.T @ vall)
-        # rate rows: u_k - prev_k in [-rate, rate], prev_k = state entries nxp: of x_k
-        s = self.m
-        Arate = -Gam[:N, nxp:, :].reshape(N * nu, nzu) + np.eye(nzu)
-        rate_now = (U - X[:N, nxp:]).ravel() - dxa[:N, nxp:].ravel()
-        rate = s.rate_scaled
-        lba = -rate - rate_now
-        uba = rate - rate_now
-        tmax = s.tmax_scaled
-        ug = U.ravel()
-        sol = self.qp(h=H, g=gvec, a=Arate, lba=lba, uba=uba, lbx=-tmax - ug, ubx=tmax - ug)
-        st = self.qp.stats()
-        dU = np.asarray(sol["x"]).ravel()
-        ok = bool(st.get("success", False)) and bool(np.all(np.isfinite(dU)))
-        status = str(st.get("return_status", st.get("success")))
+        H = 2.0 * (Mall.T @ Mall) + self._reg2
+        # the QP (column-major values into the buffer's arrays)
+        q = self._qp_in
+        q["h"].reshape(H.shape)[:] = H.T
+        q["g"][:] = 2.0 * (Mall.T @ vall)
+        rate_now = L["rate_guess"] - dxa[:N, nxp:].ravel()
+        rate = self.m.rate_scaled
+        q["lba"][:] = -rate - rate_now
+        q["uba"][:] = rate - rate_now
+        try:
+            self._qp_eval()
+        except RuntimeError as err:  # (error_on_fail: the failed solve's return status from its stats)
+            if self._qp_success_status is None or "conic process failed" not in str(err):
+                raise
+            return None, False, str(self._qp_buf.stats().get("return_status", False))
+        if self._qp_buf.ret() != 0:
+            raise RuntimeError(f"mpc_rti_qp failed (status {self._qp_buf.ret()})")
+        if self._qp_success_status is None:
+            st = self._qp_buf.stats()
+            success, status = bool(st.get("success", False)), str(st.get("return_status", st.get("success")))
+        else:
+            success, status = True, self._qp_success_status
+        dU = self._qp_out[0].copy()
+        ok = success and bool(np.isfinite(dU).all())
         if not ok:
             return None, False, status
         # Safeguard: the collocation residual at the new point (the linearisation's error). A
@@ -244,10 +375,12 @@ class RTI:
         Msol = L["M"]
         alpha = 1.0
         for _ in range(self.halvings + 1):
-            w = self._point(L, x0s, dxa, alpha * GdU, alpha * dU, Msol)
-            if not np.all(np.isfinite(w)):
+            full = alpha == 1.0  # (1.0 x is x)
+            w = self._point(L, x0s, dxa, GdU if full else alpha * GdU, dU if full else alpha * dU, Msol)
+            if not np.isfinite(w).all():
                 return None, False, "non-finite step"
-            defect = self.defect(w)
+            # (a step that is not the shortest only needs to be known to exceed the bound)
+            defect = self._defect_upto(w, None if alpha <= 0.5 ** self.halvings else self.max_defect)
             if defect <= self.max_defect:
                 break
             if alpha <= 0.5 ** self.halvings:
@@ -287,24 +420,37 @@ class RTI:
         blk = nxa + nu + nk
         dX = dxa + GdU
         dUk = dU.reshape(N, nu)
-        dK = -(Msol[:, :, 0] + np.einsum("kij,kj->ki", Msol[:, :, 1:1 + nxa], dX[:N])
-               + np.einsum("kij,kj->ki", Msol[:, :, 1 + nxa:], dUk))
+        minus_dK = (Msol[:, :, 0] + np.einsum("kij,kj->ki", Msol[:, :, 1:1 + nxa], dX[:N])
+                    + np.einsum("kij,kj->ki", Msol[:, :, 1 + nxa:], dUk))
         w = L["w"].copy()
         Wv = w[:N * blk].reshape(N, blk)
         Wv[:, :nxa] += dX[:N]
         Wv[:, nxa:nxa + nu] += dUk
-        Wv[:, nxa + nu:] += dK
+        Wv[:, nxa + nu:] -= minus_dK  # (a - b is a + (-b))
         w[N * blk:] += dX[N]
         w[:nxa] = x0s  # dX[0] = dx0: no round-off in the fixed initial state
         return w
 
     def defect(self, w: np.ndarray) -> float:
         """Largest collocation residual (scaled rows) of w: how far it is from the dynamics."""
-        N, nxa, nu = self.N, self.nxa, self.nu
-        blk = nxa + nu + self.nk
-        W = w[:N * blk].reshape(N, blk)
-        (g,) = self.collg(W[:, :nxa], W[:, nxa:nxa + nu], W[:, nxa + nu:], self.m.p_model, self._xc)
-        return float(np.max(np.abs(g)))
+        if self._bound_p is None or self._bound_p[2] is not self.m.p_model or self._bound_p[3] is not self._xc:
+            self._bind_p(self.m.p_model, self._xc)
+        return self._defect_upto(w, None)
+
+    def _defect_upto(self, w: np.ndarray, bound: float | None) -> float:
+        """The largest collocation residual of w; with a ``bound``, the last stage's alone when
+        that one exceeds it (then so does w's: enough to reject w). The model's parameters and
+        cells are those bound by prepare_at (the MPC's p_model and the prepared cells)."""
+        self._w_in[:] = w
+        self._bound_in[0] = np.inf if bound is None else bound
+        self._coll_call()
+        if self._coll_buf.ret() != 0:
+            raise RuntimeError(f"mpc_rti_coll_res_w failed (status {self._coll_buf.ret()})")
+        g_last, g_others, cut = self._g_out
+        last = float(np.max(np.abs(g_last)))
+        if cut[0]:  # (some residual of the last stage above the bound: the others were not evaluated)
+            return last
+        return float(np.max((last, np.max(np.abs(g_others)))))  # (NaN as np.max of all would give it)
 
 
 def shift_guess(mpc, w: np.ndarray) -> np.ndarray:
