@@ -323,6 +323,30 @@ def test_a_3d_coast_keeps_the_energy_balance_with_the_soil_energy_integrated_at_
         assert out.status["energy"] == "pass", (doc["soil"]["preset"], out.messages)
         assert abs(out.figures["energy_rise_J"]) < 0.1, (doc["soil"]["preset"], out.figures)
 
+
+def test_a_fixed_step_run_that_ends_non_finite_reports_the_steps_it_kept_above_its_tolerance():
+    """From the long run (seed 37, case 410): a 19.9 t crawler parked across an 8 deg side slope of the 15 % sandy
+    loam on the "shear" law, zero torque; the hull sways (lateral speed pulses up to 0.09 m/s, CVODES at reltol
+    1e-6, 1e-8 and 1e-10 alike) and the compiled Rosenbrock keeps steps far above its tolerance and diverges (at
+    10 ms: the speed stop at 0.67 s; at 5 ms, here: a non-finite state at 0.935 s, after steps kept 40 x its
+    tolerance from 0.335 s on). The chunk whose state went non-finite left its earlier steps' error ratios out of
+    fixed_step_error_max: the incomplete run's summary said 0.0, no step above the tolerance. It counts them now."""
+    from symtrack.api import IncompleteSimulation, build, simulate
+    doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 0.0, 0.0)], soil="sandy_loam_15", duration=1.0,
+               surface={"slope_y_deg": 8.0},
+               vehicle={"mass_kg": 19943.0, "track_gauge_m": 1.4105, "track_width_m": 0.52152,
+                        "contact_length_m": 1.9529, "yaw_inertia_kg_m2": 17959.0, "sprocket_radius_m": 0.29969,
+                        "cg_height_m": 0.76743, "cg_ahead_of_contact_centre_m": 0.063973,
+                        "sprocket_inertia_kg_m2": 10.348, "torque_time_constant_s": 0.068974,
+                        "lateral_friction_coeff": 0.63442, "lateral_creep_speed_m_s": 0.019532})
+    doc["soil"].update({"bekker_n": 0.60479, "k_c_N_per_m_n1": 6614.8, "k_phi_N_per_m_n2": 1684800.0,
+                        "cohesion_Pa": 2034.8, "friction_angle_rad": 0.52034, "shear_modulus_K_m": 0.0094724})
+    doc["start"] = {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 180.0}
+    doc["run"]["fixed_step_s"] = 0.005
+    with pytest.raises(IncompleteSimulation, match="non-finite state") as err:
+        simulate(build(scenario_from_dict(doc, "fuzz")), progress=False)
+    assert err.value.result.summary["fixed_step_error_max"] > 1.0, err.value.result.summary
+
 HEAVY_CLAY_RAMP_VEHICLE = {"mass_kg": 13322.0, "track_gauge_m": 1.2281, "track_width_m": 0.52806,
                            "contact_length_m": 1.5308, "yaw_inertia_kg_m2": 9848.9, "sprocket_radius_m": 0.43343,
                            "cg_height_m": 0.90589, "cg_ahead_of_contact_centre_m": -0.077676,
