@@ -285,6 +285,68 @@ def test_a_3d_coast_on_sand_keeps_the_whole_energy_balance():
     assert out.status["energy"] == "pass", out.messages
 
 
+
+def test_a_3d_coast_keeps_the_energy_balance_with_the_soil_energy_integrated_at_its_kinks():
+    """From the long run (seed 37, cases 402 and 998): a 17.7 t crawler on the WES heavy clay (n = 0.11, static
+    sinkage 16 mm), its CG 8.5 cm behind the contact centre, 3.5/2.4 kN m for 0.93 s and then a coast (its first
+    1.6 s), and an 8.5 t crawler on dry sand (n = 1.29) at 7.0/5.1 kN m for 0.43 s and then a coast, both on the
+    3D vehicle with the creep law. The energy check failed on CVODES and the Rosenbrock alike: a rise of 10.3 J
+    at one output (t = 1.55 s, 0.76 J allowed) and back at the next, and 5.7 J (2.6 J allowed). The soil's
+    normal energy under the hull (fuzz._normal_elastic, some 1000 J and 3000 J) was integrated by trapezoids on
+    one grid of 48 points over [0, z]: the reloading line's zero and the memory, where the law has kinks (an
+    unloading stiffness of some 1e8 Pa/m on the clay), fell between the points, and the trapezoids' error (13 J
+    on the clay) moved from one output to the next. Split at both, its error on the clay is 0.011 J against 2000
+    points, and the balance holds: the rise is none (-7e-5 J and -0.03 J)."""
+    heavy_clay = _doc({"lateral_law": "creep", "vehicle": "3d"}, [(0.0, 3511.5, 2370.7), (0.929, 0.0, 0.0)],
+                      soil="heavy_clay_wes_40", duration=1.6,
+                      vehicle={"mass_kg": 17670.0, "track_gauge_m": 1.943, "track_width_m": 0.70878,
+                               "contact_length_m": 2.1276, "yaw_inertia_kg_m2": 22061.0, "sprocket_radius_m": 0.29482,
+                               "cg_height_m": 1.0646, "cg_ahead_of_contact_centre_m": -0.08505,
+                               "sprocket_inertia_kg_m2": 57.217, "torque_time_constant_s": 0.17488,
+                               "lateral_friction_coeff": 0.50569, "lateral_creep_speed_m_s": 0.0053531})
+    heavy_clay["soil"].update({"bekker_n": 0.11078, "k_c_N_per_m_n1": 1476.6, "k_phi_N_per_m_n2": 88867.0,
+                               "cohesion_Pa": 18050.0, "friction_angle_rad": 0.11292, "shear_modulus_K_m": 0.0057639})
+    sand = _doc({"lateral_law": "creep", "vehicle": "3d"}, [(0.0, 7034.1, 5077.7), (0.4334, 0.0, 0.0)],
+                soil="dry_sand", duration=1.22,
+                vehicle={"mass_kg": 8464.9, "track_gauge_m": 1.1219, "track_width_m": 0.43387,
+                         "contact_length_m": 1.4751, "yaw_inertia_kg_m2": 3957.0, "sprocket_radius_m": 0.43308,
+                         "cg_height_m": 0.98341, "cg_ahead_of_contact_centre_m": -0.032985,
+                         "sprocket_inertia_kg_m2": 44.575, "torque_time_constant_s": 0.051208,
+                         "lateral_friction_coeff": 0.55132, "lateral_creep_speed_m_s": 0.01384})
+    sand["soil"].update({"bekker_n": 1.2896, "k_c_N_per_m_n1": 916.0, "k_phi_N_per_m_n2": 1186700.0,
+                         "cohesion_Pa": 807.7, "friction_angle_rad": 0.53714, "shear_modulus_K_m": 0.030494})
+    for doc in (heavy_clay, sand):
+        out = fuzz.CaseOutcome(doc, {"variant": "3d-creep", "programme": "coast", "flat": True})
+        res = fuzz._run(doc, out, "rosenbrock")
+        assert res is not None, out.messages
+        fuzz._check_energy(res, scenario_from_dict(doc, "fuzz"), out, "rosenbrock")
+        assert out.status["energy"] == "pass", (doc["soil"]["preset"], out.messages)
+        assert abs(out.figures["energy_rise_J"]) < 0.1, (doc["soil"]["preset"], out.figures)
+
+
+def test_a_fixed_step_run_that_ends_non_finite_reports_the_steps_it_kept_above_its_tolerance():
+    """From the long run (seed 37, case 410): a 19.9 t crawler parked across an 8 deg side slope of the 15 % sandy
+    loam on the "shear" law, zero torque; the hull sways (lateral speed pulses up to 0.09 m/s, CVODES at reltol
+    1e-6, 1e-8 and 1e-10 alike) and the compiled Rosenbrock keeps steps far above its tolerance and diverges (at
+    10 ms: the speed stop at 0.67 s; at 5 ms, here: a non-finite state at 0.935 s, after steps kept 40 x its
+    tolerance from 0.335 s on). The chunk whose state went non-finite left its earlier steps' error ratios out of
+    fixed_step_error_max: the incomplete run's summary said 0.0, no step above the tolerance. It counts them now."""
+    from symtrack.api import IncompleteSimulation, build, simulate
+    doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 0.0, 0.0)], soil="sandy_loam_15", duration=1.0,
+               surface={"slope_y_deg": 8.0},
+               vehicle={"mass_kg": 19943.0, "track_gauge_m": 1.4105, "track_width_m": 0.52152,
+                        "contact_length_m": 1.9529, "yaw_inertia_kg_m2": 17959.0, "sprocket_radius_m": 0.29969,
+                        "cg_height_m": 0.76743, "cg_ahead_of_contact_centre_m": 0.063973,
+                        "sprocket_inertia_kg_m2": 10.348, "torque_time_constant_s": 0.068974,
+                        "lateral_friction_coeff": 0.63442, "lateral_creep_speed_m_s": 0.019532})
+    doc["soil"].update({"bekker_n": 0.60479, "k_c_N_per_m_n1": 6614.8, "k_phi_N_per_m_n2": 1684800.0,
+                        "cohesion_Pa": 2034.8, "friction_angle_rad": 0.52034, "shear_modulus_K_m": 0.0094724})
+    doc["start"] = {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 180.0}
+    doc["run"]["fixed_step_s"] = 0.005
+    with pytest.raises(IncompleteSimulation, match="non-finite state") as err:
+        simulate(build(scenario_from_dict(doc, "fuzz")), progress=False)
+    assert err.value.result.summary["fixed_step_error_max"] > 1.0, err.value.result.summary
+
 HEAVY_CLAY_RAMP_VEHICLE = {"mass_kg": 13322.0, "track_gauge_m": 1.2281, "track_width_m": 0.52806,
                            "contact_length_m": 1.5308, "yaw_inertia_kg_m2": 9848.9, "sprocket_radius_m": 0.43343,
                            "cg_height_m": 0.90589, "cg_ahead_of_contact_centre_m": -0.077676,

@@ -123,6 +123,8 @@ class FixedStepper:
             # the first step whose state or error estimate is not finite (the chunk goes on past it)
             bad = ~np.isfinite(ratio) | ~np.all(np.isfinite(c.X[:k]), axis=1)
             j = int(np.nonzero(bad)[0][0])
+            if j > 0:  # the steps kept before it count in error_max (the summary of the incomplete run says so)
+                self.error_max = max(self.error_max, float(np.max(ratio[:j])))
             h_min = float(H[j]) / 2 ** FIXED_STEP_MAX_HALVINGS
             err = SimulationError(f"{self.method} returned a non-finite state{self._at(t0_s, H, j)} even in steps of "
                                   f"{h_min:.3g} s: run it with --integrator cvodes")
