@@ -285,7 +285,6 @@ def test_a_3d_coast_on_sand_keeps_the_whole_energy_balance():
     assert out.status["energy"] == "pass", out.messages
 
 
-
 def test_a_3d_coast_keeps_the_energy_balance_with_the_soil_energy_integrated_at_its_kinks():
     """From the long run (seed 37, cases 402 and 998): a 17.7 t crawler on the WES heavy clay (n = 0.11, static
     sinkage 16 mm), its CG 8.5 cm behind the contact centre, 3.5/2.4 kN m for 0.93 s and then a coast (its first
@@ -332,6 +331,7 @@ def test_a_fixed_step_run_that_ends_non_finite_reports_the_steps_it_kept_above_i
     tolerance from 0.335 s on). The chunk whose state went non-finite left its earlier steps' error ratios out of
     fixed_step_error_max: the incomplete run's summary said 0.0, no step above the tolerance. It counts them now."""
     from symtrack.api import IncompleteSimulation, build, simulate
+
     doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 0.0, 0.0)], soil="sandy_loam_15", duration=1.0,
                surface={"slope_y_deg": 8.0},
                vehicle={"mass_kg": 19943.0, "track_gauge_m": 1.4105, "track_width_m": 0.52152,
@@ -346,6 +346,7 @@ def test_a_fixed_step_run_that_ends_non_finite_reports_the_steps_it_kept_above_i
     with pytest.raises(IncompleteSimulation, match="non-finite state") as err:
         simulate(build(scenario_from_dict(doc, "fuzz")), progress=False)
     assert err.value.result.summary["fixed_step_error_max"] > 1.0, err.value.result.summary
+
 
 HEAVY_CLAY_RAMP_VEHICLE = {"mass_kg": 13322.0, "track_gauge_m": 1.2281, "track_width_m": 0.52806,
                            "contact_length_m": 1.5308, "yaw_inertia_kg_m2": 9848.9, "sprocket_radius_m": 0.43343,
