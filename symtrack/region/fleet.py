@@ -410,23 +410,24 @@ def pressure_line(machine: Machine, accel_m_s2: float = 0.0) -> tuple:
     inertial force m a at the centre of gravity's height h = ``cg_height_m``; the centre of gravity over the
     contact's centre and no drawbar pull, as the static profile): linear, p = N / (b l) + 12 M / (b l^3)
     (l / 2 - s), while the resultant's offset e = M / N = -a h / g stays within l / 6; beyond it triangular over
-    3 (l / 2 - |e|) from the loaded end. a = 0, or no ``cg_height_m``: the static p = m g / (2 l b)."""
+    3 (l / 2 - |e|) from the loaded end: evaluated from PressureDistribution itself, the line through two points
+    of its loaded end. a = 0, or no ``cg_height_m``: the static p = m g / (2 l b)."""
+    import casadi as ca
+
+    from ..vehicles.planar import PressureDistribution
+
     t = machine.tracks
-    p0 = t.pressure_Pa
     if machine.cg_height_m is None or accel_m_s2 == 0.0:
-        return p0, 0.0
-    l, b = t.contact_length_m, t.track_width_m
+        return t.pressure_Pa, 0.0
+    l = t.contact_length_m
     N = 0.5 * t.mass_kg * GRAVITY_M_S2
-    e = -float(accel_m_s2) * machine.cg_height_m / GRAVITY_M_S2
-    if abs(e) <= l / 6:
-        slope = 12.0 * e * N / (b * l ** 3)
-        return p0 + slope * 0.5 * l, -slope
-    e_c = min(abs(e), 0.45 * l)
-    Lc = 3.0 * (0.5 * l - e_c)
-    peak = 2.0 * N / (b * Lc)
-    if e > 0:  # loaded at the front (s = 0)
-        return peak, -peak / Lc
-    return peak * (1.0 - l / Lc), peak / Lc  # loaded at the rear (s = l)
+    pd = PressureDistribution(ca.DM(N), ca.DM(-N * float(accel_m_s2) * machine.cg_height_m / GRAVITY_M_S2),
+                              t.track_width_m, l)
+    front, rear = float(pd.at(0.0)), float(pd.at(l))
+    # two points within the loaded part (a triangle's is at least 3 (l/2 - 0.45 l) = 0.15 l long)
+    s0, p_0, s1 = (0.0, front, 0.1 * l) if front >= rear else (l, rear, 0.9 * l)
+    beta = (float(pd.at(s1)) - p_0) / (s1 - s0)
+    return p_0 - beta * s0, beta
 
 
 def peak_pressure_factor(machine: Machine, accel_m_s2: float) -> float:
