@@ -348,6 +348,21 @@ def test_a_fleet_without_sources_or_overloaded_tyres_is_refused():
                                         DEPTHS, 5.0).sigma_Pa.max())
 
 
+def test_a_catalogs_crawler_with_its_cg_height_gets_the_pitched_pressure_line():
+    from symtrack.region.fleet import peak_pressure_factor
+
+    tracks = {"contact_length_m": 2.4, "track_width_m": 0.45, "track_gauge_m": 1.5, "mass_kg": 9000.0}
+    mach = {"working_width_m": 6.0, "source": "ASSUMED: a test", "tracks": tracks}
+    flat = parse_fleet({"machines": {"c": mach}}).machines["c"]
+    tall = parse_fleet({"machines": {"c": {**mach, "tracks": {**tracks, "cg_height_m": 0.9}}}}).machines["c"]
+    assert flat.cg_height_m is None and peak_pressure_factor(flat, 0.4) == 1.0
+    # the loaded end's pressure m g / (2 l b) (1 + 6 a h / (g l)) (docs/region.md, step 3)
+    assert tall.cg_height_m == 0.9
+    assert peak_pressure_factor(tall, 0.4) == pytest.approx(1 + 6 * 0.4 * 0.9 / (9.81 * 2.4), rel=1e-3)
+    with pytest.raises(ScenarioError, match=r"machines.c.tracks.cg_height_m = -1 is outside the allowed range"):
+        parse_fleet({"machines": {"c": {**mach, "tracks": {**tracks, "cg_height_m": -1}}}})
+
+
 # ---- soils from a soil map ---------------------------------------------------------------------------------------
 def _soil_map_region(tmp_path, **kw):
     p = demo.write_region(tmp_path, n_fields=4, seed=7, soil_map=True, length_m=(90.0, 120.0), width_m=(60.0, 80.0),

@@ -71,6 +71,48 @@ def test_the_tracked_columns_compression_is_bounded_by_the_rut():
     assert comp_free.max() > 2 * comp.max()  # the bound binds on this soil (its rut is under a millimetre)
 
 
+def test_a_region_bounds_a_tracked_machines_compression_by_its_rut(tmp_path):
+    """The region study's fast fidelity (what `symtrack region` runs) bounds a tracked machine's column compression
+    by its rut on the day's soil, as the fast twin above and the terrain engine do (docs/region.md, step 4)."""
+    import dataclasses
+    import json
+
+    from symtrack.region import demo, study
+    from symtrack.region.inputs import load_region
+
+    (tmp_path / "fleet.toml").write_text(
+        "[machines.crawler]\nworking_width_m = 6.0\nturn_radius_m = 4.0\nsource = \"ASSUMED: a test crawler\"\n"
+        "tracks = { contact_length_m = 2.4, track_width_m = 0.45, track_gauge_m = 1.5, mass_kg = 9000.0 }\n")
+    systems = {"one": [{"name": "drilling", "machine": "crawler", "window": [262, 292], "tracks": "ab"}]}
+    p = demo.write_region(tmp_path, n_fields=1, seed=3, systems=systems, years={2021: 0.0}, cell_m=0.2,
+                          length_m=(60.0, 60.0), width_m=(36.0, 36.0))
+    # the silt loam on a stiffer base law, whose rut (2.6 mm under 9 t) is less than the column would compress
+    p.write_text(p.read_text().replace('fleet = "builtin"', 'fleet = "fleet.toml"')
+                 .replace('"sandy_loam_15"', '"clayey_soil_thailand_38"'))
+    fields = json.loads((tmp_path / "fields.geojson").read_text())
+    fields["features"][0]["properties"]["soil"] = "silt_loam"
+    (tmp_path / "fields.geojson").write_text(json.dumps(fields))
+    spec = load_region(p)
+    ctx = study.build_context(spec)
+    f = spec.fields[0]
+    ops = study.field_season_ops(ctx, f, 2021)
+    op = ops[0]
+    assert op.rut_table_m == rut_table_m(op.machine, op.soil_day)
+    assert op.rut_exponent == op.soil_day["repeated_loading_exponent"] > 0
+    shape = study._shape(spec, f)
+    capped = run_season_fast(ops, shape, spec.cell_m, spec.depths_m)
+    free = run_season_fast([dataclasses.replace(o, rut_table_m=None) for o in ops], shape, spec.cell_m,
+                           spec.depths_m)
+    v0 = np.broadcast_to(density.soil_arrays([op.soil_day], list(spec.depths_m))["v0"][0], capped.state.shape)
+    comp = density.column_compression_m(np.where(capped.state > 0, capped.state, v0), v0, spec.depths_m)
+    comp_free = density.column_compression_m(np.where(free.state > 0, free.state, v0), v0, spec.depths_m)
+    n = capped.counts.ravel().astype(float)
+    # a catalog's crawler has no centre of gravity's height: its static pressure everywhere (no pitched line)
+    bound = op.rut_table_m[PRESSURE_FRACTIONS.index(1.0)] * np.where(n > 0, n, 1.0) ** op.rut_exponent
+    assert np.all(comp <= bound + 1e-7)
+    assert np.count_nonzero(comp_free > bound + 1e-7) > 1000  # the bound binds on this soil
+
+
 @pytest.mark.slow
 def test_fast_agrees_with_full_on_operation_small():
     """The full fidelity (the terrain engine, about 12 s once compiled) against its fast twin on the same cells:

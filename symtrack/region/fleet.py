@@ -60,7 +60,7 @@ FLEET_KEYS = ("schema_version", "tyres", "machines")
 TYRE_KEYS = ("width_m", "diameter_m", "rated_load_kN", "rated_inflation_kPa", "source")
 MACHINE_KEYS = ("working_width_m", "outer_width_m", "turn_radius_m", "wheels", "tracks", "source")
 WHEEL_KEYS = ("name", "x_m", "y_m", "tyre", "load_kN", "inflation_kPa")
-TRACK_KEYS = ("contact_length_m", "track_width_m", "track_gauge_m", "mass_kg")
+TRACK_KEYS = ("contact_length_m", "track_width_m", "track_gauge_m", "mass_kg", "cg_height_m")
 # the profile's sampling, lateral and along the path, and the tyre contact's elements (tyre.contact: the forces
 # of a square grid of this side): 3 cm. Measured on the combine (the largest loads) against 1 cm: the profile's
 # peak +0.6 % and its mean over the strips +0.6 % at 0.1 m depth, below 0.1 % at 0.3-0.8 m; 0.5 s against 52 s
@@ -112,7 +112,8 @@ class Machine:
     tracks: TrackSet | None = None
     source: str = ""
     # a tracked machine's centre of gravity's height [m] (the pitch of its pressure line where it accelerates:
-    # pressure_line); None: not given (a fleet catalog's machine), its line static everywhere
+    # pressure_line); None: not given (a fleet catalog's machine without tracks.cg_height_m), its line static
+    # everywhere
     cg_height_m: float | None = None
 
     def strips(self) -> tuple:
@@ -199,7 +200,15 @@ def _machine(name: str, t, tyres: dict) -> Machine:
         if ts.track_gauge_m < ts.track_width_m:
             raise ScenarioError(f"{where}.tracks.track_gauge_m = {ts.track_gauge_m:g} is outside the allowed range "
                                 f"[{ts.track_width_m:g}, 10] m (at least the track width: the tracks would overlap)")
-        m = Machine(name, w, outer, radius, (), ts, src)
+        # optional: the centre of gravity's height above the ground, for the pitched pressure line where the plan's
+        # speed changes (pressure_line), in the vehicle parameter's range (vehicles/planar.py, VEHICLE_PARAMS)
+        h = None
+        if "cg_height_m" in tt:
+            from ..vehicles.planar import VEHICLE_PARAMS
+
+            spec_h = next(q for q in VEHICLE_PARAMS if q.name == "cg_height_m")
+            h = number(f"{where}.tracks.cg_height_m", tt["cg_height_m"], spec_h.low, spec_h.high, low_open=True)
+        m = Machine(name, w, outer, radius, (), ts, src, h)
     else:
         wl = t["wheels"]
         if not isinstance(wl, list) or not wl:

@@ -47,7 +47,7 @@ from ..reports.run_files import output_lock, recover, write_folder
 from ..studies.operations import OperationSettings, field_mask, headland_mask, plan_operation
 from ..studies.traffic_seasons import TRAMLINE_SEED, auto_headland_passes
 from .fast import PLAN_DS_M, FastOp, density_change, risk_classes, run_season_fast
-from .fleet import stress_profile
+from .fleet import rut_table_m, stress_profile
 from .full import BASE_SOIL_PRESET, DEFAULT_VEHICLE, check_full_operations, run_season_full
 from .inputs import RegionSpec, class_soil, class_suction_kPa, draw_day, field_frame, moisture_class
 
@@ -237,8 +237,12 @@ def field_season_ops(ctx: Context, f, year: int) -> list:
     ops = []
     for day, _k, op, fs in field_season_plan(spec, f, year):
         cls = moisture_class(float(series[day - 1]), spec.moisture_class_pF)
-        ops.append(FastOp(op.name, fs, spec.fleet.machines[op.machine], op.repeat, op.loosens_to_m,
-                          ctx.profiles.get((op.machine, f.soil)), ctx.class_soils[(f.soil, cls)], day))
+        machine, soil_day = spec.fleet.machines[op.machine], ctx.class_soils[(f.soil, cls)]
+        # a tracked machine's rut bounds the compression below it (docs/region.md, step 4), as in the fast twin of
+        # the check (check.fast_twin) and the terrain engine: the first-pass rut on the day's soil, times N^beta
+        ops.append(FastOp(op.name, fs, machine, op.repeat, op.loosens_to_m, ctx.profiles.get((op.machine, f.soil)),
+                          soil_day, day, rut_table_m=rut_table_m(machine, soil_day),
+                          rut_exponent=float(soil_day["repeated_loading_exponent"])))
     return ops
 
 
