@@ -456,3 +456,18 @@ def test_a_3d_crawler_that_leans_over_on_heavy_clay_is_refused_on_load():
     case, _ = fuzz.case_document(fuzz.RandomDraw(2026 * 1_000_003 + 126))
     assert case["vehicle"]["mass_kg"] < 9000.0, case["vehicle"]
     scenario_from_dict(case, "fuzz")
+
+
+def test_the_cases_checked_by_two_workers_are_the_rows_of_one_process(tmp_path):
+    import csv
+    import io
+
+    rows = {}
+    for jobs in (1, 2):
+        fuzz.run_fuzz(2, 5, tmp_path / f"j{jobs}", variants=["planar-creep"], stream=io.StringIO(),
+                 shrink_failures=False, jobs=jobs)
+        with open(tmp_path / f"j{jobs}" / "cases.csv") as fh:
+            rows[jobs] = [{k: v for k, v in r.items() if k != "wall_s"} for r in csv.DictReader(fh)]
+    assert len(rows[1]) == 2 and rows[1] == rows[2]
+    with pytest.raises(ValueError, match=r"jobs = 0 is outside the allowed range \[1, 64\]"):
+        fuzz.run_fuzz(1, 5, tmp_path / "j0", jobs=0)

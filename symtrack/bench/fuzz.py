@@ -796,16 +796,39 @@ def _row(i: int, seed: int, out: CaseOutcome) -> dict:
 SHRINK_PER_CLASS = 2
 
 
+def _draw_and_check(task: tuple) -> tuple:
+    """One case of :func:`run_fuzz` (in its process or a worker's): (i, seed, document, meta, outcome)."""
+    i, case_seed, variants = task
+    logging.getLogger("symtrack").setLevel(logging.ERROR)
+    doc, meta = case_document(RandomDraw(case_seed), variants)
+    doc["name"] = f"fuzz-{case_seed}"
+    return i, case_seed, doc, meta, check_case(doc, meta)
+
+
 def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None, variants=None,
-             stream=sys.stdout, shrink_failures: bool = True) -> int:
+             stream=sys.stdout, shrink_failures: bool = True, jobs: int = 1) -> int:
     """Draw and check ``budget`` cases (case i from its own seed ``seed * 1_000_003 + i``, so that a case is
     redrawn alone by its seed); write ``cases.csv`` and ``failures.json`` into ``out_dir`` as it goes.
-    Stops early after ``time_limit_s``. Returns the number of cases with a failed property."""
+    Stops early after ``time_limit_s``. ``jobs`` > 1: the cases checked by that many worker processes, written
+    in the cases' order (the same rows as one process: each case depends on its seed alone, and its CPU limit
+    is its own process's). Returns the number of cases with a failed property."""
+    if not (isinstance(jobs, int) and 1 <= jobs <= 64):
+        raise ValueError(f"jobs = {jobs!r} is outside the allowed range [1, 64]")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     failures, counts = [], {p: 0 for p in PROPERTIES}
     outcomes = {"ok": 0, "refused": 0, "stopped": 0, "failed": 0}
     t0 = time.perf_counter()
+    tasks = ((i, seed * 1_000_003 + i, variants) for i in range(budget))
+    pool = None
+    if jobs > 1:
+        import multiprocessing
+
+        # spawn: each worker imports the package afresh (no CasADi or compiled library state shared by a fork)
+        pool = multiprocessing.get_context("spawn").Pool(jobs)
+        results = pool.imap(_draw_and_check, tasks, chunksize=1)
+    else:
+        results = map(_draw_and_check, tasks)
     with open(out_dir / "cases.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
         writer.writeheader()
@@ -813,10 +836,12 @@ def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None,
             if time_limit_s is not None and time.perf_counter() - t0 > time_limit_s:
                 print(f"time limit of {time_limit_s:g} s reached after {i} cases", file=stream, flush=True)
                 break
-            case_seed = seed * 1_000_003 + i
-            doc, meta = case_document(RandomDraw(case_seed), variants)
-            doc["name"] = f"fuzz-{case_seed}"
-            out = check_case(doc, meta)
+            try:
+                _, case_seed, doc, meta, out = next(results)
+            except BaseException:
+                if pool is not None:
+                    pool.terminate()
+                raise
             outcomes[out.outcome] += 1
             for p in out.failed:
                 counts[p] += 1
@@ -830,6 +855,9 @@ def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None,
             print(f"[{i + 1}/{budget}] {meta['variant']:15s} {meta['programme']:8s} {out.outcome:7s} "
                   f"{' '.join(out.failed) or '-':20s} {out.wall_s:6.2f} s  "
                   f"({time.perf_counter() - t0:.0f} s; failures {sum(counts.values())})", file=stream, flush=True)
+    if pool is not None:
+        pool.terminate()  # the workers of cases drawn beyond a time limit are not waited for
+        pool.join()
     if shrink_failures:
         seen: dict = {}
         for f in failures:  # the first SHRINK_PER_CLASS of each class (variant and failed properties)
@@ -858,6 +886,8 @@ def main(argv=None) -> int:
     ap.add_argument("--time-limit", type=float, default=None, help="stop after this many seconds (wall)")
     ap.add_argument("--no-shrink", action="store_true", help="do not shrink the failures at the end")
     ap.add_argument("--variants", default=None, help=f"comma-separated subset of {', '.join(VARIANTS)}")
+    ap.add_argument("--jobs", type=int, default=1, help="worker processes that check cases side by side (default 1; "
+                                                        "the rows are the same and in the same order)")
     args = ap.parse_args(argv)
     variants = None if args.variants is None else [v.strip() for v in args.variants.split(",")]
     unknown = [v for v in variants or [] if v not in VARIANTS]
@@ -866,8 +896,10 @@ def main(argv=None) -> int:
     # the runs' own warnings (a step kept above its tolerance, an implausible input) go to the CSV's
     # columns; stderr keeps the progress readable
     logging.getLogger("symtrack").setLevel(logging.ERROR)
+    if not 1 <= args.jobs <= 64:
+        ap.error(f"--jobs {args.jobs} is outside the allowed range [1, 64]")
     failed = run_fuzz(args.budget, args.seed, args.out, args.time_limit, variants,
-                      shrink_failures=not args.no_shrink)
+                      shrink_failures=not args.no_shrink, jobs=args.jobs)
     return 1 if failed else 0
 
 
