@@ -61,7 +61,9 @@ def add_parser(sub) -> None:
                     help="worker processes of the local Dask cluster (default 2; ignored with --scheduler)")
     sw.add_argument("--scheduler", metavar="ADDRESS",
                     help="a running Dask scheduler, e.g. tcp://127.0.0.1:8786 (instead of a local cluster)")
-    sw.add_argument("--kind", choices=("auto", "simulate", "mpc", "field"), default="auto",
+    from ..studies.runfile import sweep_kinds  # the registry (no CasADi, no Dask)
+
+    sw.add_argument("--kind", choices=("auto", *sweep_kinds()), default="auto",
                     help="the scenario kind (default: the kind whose loader accepts the scenario)")
     sw.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a fixed override of every run")
     sw.add_argument("--quiet", action="store_true", help="no progress bar or log lines")
