@@ -1,7 +1,7 @@
 """A sweep runs the kinds of run file of the one registry (symtrack.studies.runfile.KINDS): the run ids
 of each kind are those earlier versions computed (so their sweep folders resume), a folder an earlier
-version wrote resumes without running anything, and a kind registered once runs in a sweep and by
-symtrack.run."""
+version wrote resumes without running anything, and a kind registered once runs in a sweep, by
+symtrack.run and by `symtrack run`."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from symtrack import studies
+from symtrack.cli import main
 from symtrack.cli.run import template_text
 from symtrack.foundations.errors import ScenarioError
 from symtrack.studies import engine as sweep_module
@@ -85,7 +86,7 @@ def toy_kind(monkeypatch):
     return register_kind(Kind("toy", ("[toy]",), "a toy run", "symtrack run", None, _load_toy, _run_toy, sweep="toy"))
 
 
-def test_a_kind_registered_once_runs_in_a_sweep_and_by_the_front_door(toy_kind, tmp_path):
+def test_a_kind_registered_once_runs_in_a_sweep_and_by_the_front_doors(toy_kind, tmp_path):
     from distributed import LocalCluster
 
     import symtrack
@@ -95,6 +96,8 @@ def test_a_kind_registered_once_runs_in_a_sweep_and_by_the_front_door(toy_kind, 
     assert read_run_file(str(f)).kind == "toy"
     assert symtrack.run(str(f), tmp_path / "one", overrides=["toy.side_m=3.0"]) == 9.0
     assert json.loads((tmp_path / "one" / "summary.json").read_text())["area_m2"] == 9.0
+    assert main(["run", str(f), "--out", str(tmp_path / "cli"), "--quiet"]) == 0
+    assert json.loads((tmp_path / "cli" / "summary.json").read_text())["area_m2"] == 1.0
     with pytest.raises(ScenarioError, match="must hold side_m"):
         plan(str(f), {"toy.side_m": [2.0, 0.0]})
     # a cluster in this process (its workers are threads): they see the kind registered here

@@ -11,6 +11,10 @@ The sections that decide the kind (:data:`KINDS`)::
     [season]            a season of operations over an [operation] section (as symtrack field)
     [sweep]             a sweep of any of the above (as symtrack sweep; symtrack/studies/engine.py)
 
+Each kind is one registration (:class:`Kind`, :func:`register_kind`): its deciding sections, its
+loader and how it runs into a folder; ``symtrack run``, :func:`run` and a sweep's runs
+(:mod:`symtrack.studies.runs`) take every kind from there, a kind registered by a plug-in too.
+
 A file with sections of two kinds, or of none, is refused in one line naming these sections.
 Every other section ([run], [vehicle], [soil], [model], [terrain], ...) belongs to the kind's
 own schema and is checked by its loader, with the loader's messages.
@@ -176,6 +180,7 @@ for _kind in (
          needs_out=True),
 ):
     register_kind(_kind)
+del _kind
 SWEEP_KEYS = ("scenario", "vary", "ranges", "samples", "seed", "workers", "scheduler")
 
 
