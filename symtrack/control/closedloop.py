@@ -70,6 +70,7 @@ __all__ = ["FIELD_MARGIN_M", "GRID_ABSTOL", "GRID_RELTOL", "GRID_SUBSTEP_S", "Cl
            "closed_loop_files", "field_from_path", "grid_integrator", "initial_state", "make_plant", "run", "summarise",
            "write"]
 
+
 @dataclass
 class ClosedLoopResult:
     scenario: MPCScenario
