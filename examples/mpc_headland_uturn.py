@@ -29,7 +29,7 @@ def run(out=None, solver="ipopt", jit=False, max_steps=None, horizon_steps=None)
     sc = dataclasses.replace(sc, mpc=dataclasses.replace(sc.mpc, **changes))
     model = SystemModel()
     mpc = PathTrackingMPC(model, sc.params, sc.mpc)
-    plant = closedloop.homogeneous_plant(model, sc.params, sc.run.integrator)
+    plant = closedloop.make_plant(sc, model)
     res = closedloop.run(sc, plant=plant, model=model, mpc=mpc, max_steps=max_steps)
     if out is not None:
         closedloop.write(out, res)

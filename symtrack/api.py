@@ -14,7 +14,6 @@ A scenario with a ``[terrain]`` section runs on the persistent grid terrain (all
 
 from __future__ import annotations
 
-import dataclasses
 import re
 from pathlib import Path
 
@@ -22,7 +21,6 @@ import numpy as np
 
 from .foundations.errors import ScenarioError, SimulationError
 from .foundations.version import __version__
-from .integrators import registry
 from .native.generate import unit_of
 from .reports.run_files import (
     TerrainOut,
@@ -33,10 +31,9 @@ from .reports.run_files import (
     validation_table,
     write_folder,
 )
-from .simulation.builder import Built
-from .simulation.builder import build as build_plant
+from .simulation.builder import Built, build
 from .simulation.result import RunResult
-from .simulation.scenario import Scenario, builtin_names, load_scenario
+from .simulation.scenario import Scenario
 from .terrain.storage import Terrain
 
 __all__ = ["ANIMATION_EVERY_S", "Built", "IncompleteSimulation", "Result", "build", "describe_series", "simulate"]
@@ -249,46 +246,6 @@ class Result:
         run = self.runs[-1 if pass_no is None else self._pass_index(pass_no)]
         names, data = trajectory_columns(run)
         return pandas.DataFrame(data, columns=names)
-
-
-def _grid_names() -> list[str]:
-    return [n for n in builtin_names() if load_scenario(n).terrain is not None]
-
-
-def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
-    """Build a scenario's plant ingredients, explicitly (:mod:`symtrack.simulation.builder`: the
-    model is built once per process for its options; :func:`simulate` builds through here).
-
-    Parameters
-    ----------
-    scenario : Scenario or str
-        A loaded scenario, or a built-in name / TOML path (loaded with no overrides).
-    integrator : str, optional
-        Instead of the scenario's ``run.integrator`` (a name of the integrator registry).
-    terrain : Terrain or path, optional
-        A grid terrain the run will start from; the scenario needs a ``[terrain]`` section.
-
-    Returns
-    -------
-    Built
-        ``Built.scenario`` is the scenario as run; ``simulate(built)`` runs it.
-    """
-    if isinstance(terrain, str | Path) and not Path(terrain).is_file():  # named as typed (as --terrain-in)
-        what = "is a folder" if Path(terrain).is_dir() else "does not exist"
-        raise ScenarioError(f"terrain = {str(terrain)!r} {what}: give a terrain file (the .npz that "
-                            "Result.write(..., terrain_out=...) or symtrack simulate --terrain-out writes) "
-                            "or a Terrain")
-    if not isinstance(scenario, Scenario):
-        scenario = load_scenario(scenario)
-    if integrator is not None:
-        if not isinstance(integrator, str):
-            raise ScenarioError(f"integrator = {integrator!r} must be a name: {', '.join(registry.names())}")
-        scenario = dataclasses.replace(scenario, run=dataclasses.replace(scenario.run, integrator=integrator))
-    if terrain is not None and scenario.terrain is None:
-        raise ScenarioError(f"scenario {scenario.name!r} has no [terrain] section, so it runs on the homogeneous "
-                            f"terrain and cannot start from a terrain file; the grid scenarios are "
-                            f"{', '.join(_grid_names())} (or add a [terrain] section)")
-    return build_plant(scenario, terrain)
 
 
 def simulate(scenario, *, integrator: str | None = None, terrain=None, progress: bool | None = None) -> Result:

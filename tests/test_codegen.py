@@ -8,7 +8,7 @@ import pytest
 
 from symtrack.codegen import cli as codegen_cli
 from symtrack.model import SystemModel
-from symtrack.native.generate import build, unit_of
+from symtrack.native.generate import model_functions, unit_of
 from symtrack.simulation.scenario import load_scenario
 
 GEN = codegen_cli.REPO_GENERATED
@@ -40,7 +40,7 @@ def test_manifest_names_hash_and_units():
     # generated/ holds the validation scenario's model (the creep law it declares), not the default
     model = SystemModel(load_scenario("validation").model)
     assert model.opts.lateral_law == "creep" and SystemModel().opts.lateral_law == "shear"
-    gen = build(model, "homogeneous")
+    gen = model_functions(model, "homogeneous")
     assert man["model_hash"] == gen.model_hash
     assert man["casadi_version"] == gen.casadi_version
     funcs = man["functions"]
@@ -85,7 +85,7 @@ def test_unrolled_rosenbrock_step_is_the_casadi_plugin_method():
 
     sc = load_scenario("validation")
     model = SystemModel(sc.model)
-    gen = build(model, "homogeneous")
+    gen = model_functions(model, "homogeneous")
     ours, ref = gen.function("homogeneous_rosenbrock_step"), plugin_step(model)
     p = model.param_vector(sc.params)
     x = static_state(model, sc.params)

@@ -170,8 +170,8 @@ def test_failed_solve_reuses_shifted_plan(model):
 class _RecordingPlant:
     """Any object with the Plant protocol (here one that delegates and counts its steps)."""
 
-    def __init__(self, model, params):
-        self.inner = CL.homogeneous_plant(model, params)
+    def __init__(self, model, sc):
+        self.inner = CL.make_plant(sc, model)
         self.calls = 0
 
     def __getattr__(self, name):
@@ -184,7 +184,7 @@ class _RecordingPlant:
 
 def test_any_plant_with_the_plant_protocol(model):
     sc = fast_scenario()
-    plant = _RecordingPlant(model, sc.params)
+    plant = _RecordingPlant(model, sc)
     res = CL.run(sc, model=model, plant=plant, max_steps=5)
     assert plant.calls == 5
     assert len(res.t) == 6
@@ -205,8 +205,8 @@ def test_mpc_cli(tmp_path):
 class _ExtendedPlant:
     """A plant whose state has more entries than the model's (as a grid-terrain plant would)."""
 
-    def __init__(self, model, params):
-        self.inner = CL.homogeneous_plant(model, params)
+    def __init__(self, model, sc):
+        self.inner = CL.make_plant(sc, model)
         self.state_names = self.inner.state_names + ("channel_0_sinkage_m",)
         self.extra = 0.0
 
@@ -227,7 +227,7 @@ def test_plant_with_another_state_layout_needs_x0(model):
     from symtrack.foundations.errors import SimulationError
 
     sc = fast_scenario()
-    plant = _ExtendedPlant(model, sc.params)
+    plant = _ExtendedPlant(model, sc)
     with pytest.raises(SimulationError, match="give x0"):
         CL.run(sc, model=model, plant=plant, max_steps=2)
     x, _ = CL.initial_state(model, sc)

@@ -25,7 +25,7 @@ from symtrack.integrators.settings import IntegratorSettings
 from symtrack.model import ModelOptions, SystemModel
 from symtrack.model.system import PARAM_NAMES
 from symtrack.native import cache as compiled
-from symtrack.native.grid_rosenbrock import build as build_step
+from symtrack.native.grid_rosenbrock import step_functions
 from symtrack.presets import soil_preset, vehicle_preset
 from symtrack.simulation.result import summarise
 from symtrack.simulation.scenario import load_scenario
@@ -121,7 +121,7 @@ def test_the_compiled_twin_has_its_own_cache_key_and_matches_the_expanded_model(
     assert lib.source is m.codegen_twin
     lib.load("dae")
     assert lib.compiled
-    gen_twin, gen_expanded = lib.gens["dae"], compiled.build_functions(m, "homogeneous", ("dae",))
+    gen_twin, gen_expanded = lib.gens["dae"], compiled.model_functions(m, "homogeneous", ("dae",))
     assert gen_twin.file_hash("homogeneous_dae") != gen_expanded.file_hash("homogeneous_dae")
     assert lib.paths["dae"].parent.name.startswith("homogeneous_dae-" + gen_twin.file_hash("homogeneous_dae")[:8])
     x, z, u, p = _point(m)
@@ -191,8 +191,8 @@ def test_compiled_rosenbrock_on_a_64x5_rule_gives_the_cvodes_figures(monkeypatch
 def test_the_compiled_grid_step_takes_the_call_node_and_equals_the_expanded_one(monkeypatch):
     # each of the two steps built once: grid_library builds the same two as the assertions below (a 64 x 5
     # step is some 4 s of CPU to build)
-    built = functools.cache(build_step)
-    monkeypatch.setattr(grid_integrator, "build_step", built)
+    built = functools.cache(step_functions)
+    monkeypatch.setattr(grid_integrator, "step_functions", built)
     opts = load_scenario("validation", list(REFINED)).model
     assert n_calls(built(codegen_options(opts), 4, 1)["vehicle_F"]) == 2
     assert n_calls(built(opts, 4, 1)["vehicle_F"]) == 0

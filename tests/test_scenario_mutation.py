@@ -23,8 +23,11 @@ from hypothesis import strategies as st
 
 from symtrack.foundations.config import to_toml
 from symtrack.foundations.errors import SymtrackError
-from symtrack.studies.runs import KINDS, PACKAGES, load, package_names, scenario_text
+from symtrack.studies.runfile import sweep_kinds
+from symtrack.studies.runs import load, package_names, scenario_text
 
+PACKAGES = {name: kind.package for name, kind in sweep_kinds().items()}  # a sweep's kinds: simulate, mpc, field
+KINDS = tuple(PACKAGES)
 BUILTINS = [(kind, name) for kind in KINDS for name in package_names(PACKAGES[kind])]
 
 VALUES = st.one_of(

@@ -63,7 +63,13 @@ def run_command(args) -> int:
         from .field import field_command
 
         return field_command(_namespace(args, scenario=args.file, pattern=None, workers=2, scheduler=None))
-    return _sweep(args, rf)
+    if rf.kind == "sweep":
+        return _sweep(args, rf)
+    from ..studies.runfile import KINDS, run  # a kind registered by a plug-in: its own run
+
+    run(args.file, args.out, overrides=args.set or [], progress=not args.quiet)
+    print(f"{rf.name}: {KINDS[rf.kind].what}; results in {args.out}")
+    return 0
 
 
 def _sweep(args, rf) -> int:

@@ -61,8 +61,11 @@ def add_parser(sub) -> None:
                     help="worker processes of the local Dask cluster (default 2; ignored with --scheduler)")
     sw.add_argument("--scheduler", metavar="ADDRESS",
                     help="a running Dask scheduler, e.g. tcp://127.0.0.1:8786 (instead of a local cluster)")
-    sw.add_argument("--kind", choices=("auto", "simulate", "mpc", "field"), default="auto",
-                    help="the scenario kind (default: the kind whose loader accepts the scenario)")
+    # checked by the sweep against the kinds of symtrack.studies.runfile (not imported here: its package
+    # imports numpy and CasADi)
+    sw.add_argument("--kind", default="auto",
+                    help="the scenario kind: a sweep name of the run-file kinds (simulate, mpc, field and any "
+                    "registered) or auto (default: the first kind whose loader accepts the scenario)")
     sw.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE", help="a fixed override of every run")
     sw.add_argument("--quiet", action="store_true", help="no progress bar or log lines")
     sw.set_defaults(func=sweep_command)

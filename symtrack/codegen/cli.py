@@ -32,7 +32,7 @@ def render_all(scratch: Path, overrides=()) -> dict[str, bytes]:
     validation scenarios (for example ``model.lateral_law=shear``: the standalone programs on the
     package's default law, into a folder of their own)."""
     from symtrack.model import SystemModel
-    from symtrack.native.generate import build, render
+    from symtrack.native.generate import model_functions, render
     from symtrack.simulation.scenario import load_scenario
 
     from . import grid_standalone, standalone
@@ -41,7 +41,7 @@ def render_all(scratch: Path, overrides=()) -> dict[str, bytes]:
     # program runs; other options are generated afresh into the cache (native.cache.generated_sources)
     sc = load_scenario("validation", list(overrides))
     model = SystemModel(sc.model)
-    gen = build(model, model.terrain.name)
+    gen = model_functions(model, model.terrain.name)
     files = render(gen, scratch)
     files[f"{gen.prefix}_validation.h"] = standalone.validation_header(model, gen, sc)
     files.update(grid_standalone.render(scratch, overrides))  # the grid validation's standalone program

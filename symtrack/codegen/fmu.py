@@ -48,8 +48,7 @@ from ..foundations.errors import ScenarioError
 from ..foundations.files import atomic_write_bytes, check_output_file
 from ..integrators.settings import FIXED_STEP_TOLERANCE
 from ..native.cache import generated_sources
-from ..native.generate import FIXED_STEP_METHOD, unit_of
-from ..native.generate import build as generate_functions
+from ..native.generate import FIXED_STEP_METHOD, model_functions, unit_of
 from ..simulation.builder import system_model
 from ..simulation.scenario import Scenario, load_scenario
 from ..soil.law import make as make_soil_law
@@ -323,7 +322,7 @@ def export_fmu(scenario, out, overrides=None) -> ExportedFmu:
     model = system_model(sc.model)
     prefix = model.terrain.name  # the generated files' prefix
     variables = fmu_variables(model, sc)
-    gen = generate_functions(model, prefix, groups=(FIXED_STEP_METHOD, "outputs"))
+    gen = model_functions(model, prefix, groups=(FIXED_STEP_METHOD, "outputs"))
     sources: dict[str, bytes] = {}
     for stem in (f"{prefix}_{FIXED_STEP_METHOD}", f"{prefix}_outputs"):
         sources.update({k: v for k, v in generated_sources(gen, stem).items() if k.startswith(stem + ".")})

@@ -322,7 +322,7 @@ clean:
 def render(pb: Problem) -> dict[str, bytes]:
     """Every file of the C closed loop, name -> bytes."""
     from symtrack.native.cache import generated_sources
-    from symtrack.native.generate import FIXED_STEP_METHOD, build
+    from symtrack.native.generate import FIXED_STEP_METHOD, model_functions
 
     files: dict[str, bytes] = {}
     with tempfile.TemporaryDirectory(prefix="symtrack-mpcgen-") as scratch:
@@ -332,7 +332,7 @@ def render(pb: Problem) -> dict[str, bytes]:
         cg.generate(str(scratch) + os.sep)
         for n in ("mpc_rti.c", "mpc_rti.h"):
             files[n] = (Path(scratch) / n).read_bytes()
-    gen = build(pb.model, pb.model.terrain.name, (FIXED_STEP_METHOD,))
+    gen = model_functions(pb.model, pb.model.terrain.name, (FIXED_STEP_METHOD,))
     plant = generated_sources(gen, PLANT_STEM)
     files.update({n: d for n, d in plant.items() if n.startswith(PLANT_STEM)})
     files["mpc_scenario.h"] = scenario_header(pb).encode()

@@ -8,11 +8,13 @@ as its sampled torque law (:class:`TrackingLaw`). The plant is any plant of
 sample the loop advances it by the sample time with the commands held (in sub-steps of the
 plant's ``macro_step_s`` when it has one: the grid's world-manager step).
 
-The default plant, :class:`~symtrack.simulation.plants.StepPlant`, is the full simulator
+The plant is built by the one plant factory (:func:`~symtrack.simulation.plants.make_plant`, with
+the MPC's choices of :meth:`~symtrack.control.scenario.MPCScenario.plant_setup`). The default plant,
+:class:`~symtrack.simulation.plants.StepPlant`, is the full simulator
 (CVODES/IDAS on the SystemModel with its terrain cells), not the MPC's prediction model: the
 mismatch (cells frozen in the prediction, collocation error, the plant's tight tolerances) is
 real. With a ``[terrain]`` section the plant is the vehicle on the persistent grid terrain
-(:func:`make_grid_plant`): by default the terrain engine
+(the field around the path unless the section sizes it): by default the terrain engine
 (:class:`~symtrack.simulation.plants.EnginePlant`, ``grid_fast``, 10 ms macro steps), with
 ``run.integrator = "idas"`` (the reference) or ``"rosenbrock"`` a
 :class:`~symtrack.simulation.plants.GridPlant` (:func:`grid_integrator`). A plant whose state
@@ -28,7 +30,6 @@ merged into the summary, and the plant's share of the loop's wall time is report
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import json
 import logging
@@ -43,40 +44,31 @@ import numpy as np
 from ..foundations.config import to_toml
 from ..foundations.errors import ScenarioError, SimulationError
 from ..foundations.progress import Progress, timed_step
-from ..integrators import registry
-from ..integrators.grid_rosenbrock import MAX_STEP_S
-from ..integrators.settings import IntegratorSettings
 from ..model import SystemModel
 from ..reports.run_files import TerrainOut, terrain_run, write_folder
 from ..simulation import loop
 from ..simulation.builder import system_model
-from ..simulation.plants import StepPlant
-from ..simulation.plants import make_grid_plant as plant_for_world
-from ..terrain.settings import TerrainSettings
-from ..terrain.world import open_world
+from ..simulation.plants import make_plant
 from ..vehicles.base import CONTACT_HULL
 from .mpc import PathTrackingMPC, realtime_figures
-from .scenario import MPCScenario
+from .scenario import (
+    FIELD_MARGIN_M,
+    GRID_ABSTOL,
+    GRID_RELTOL,
+    GRID_SUBSTEP_S,
+    MPCScenario,
+    field_from_path,
+    grid_integrator,
+)
 from .trim import trim
 
 log = logging.getLogger("symtrack.control.closedloop")
 
 SUMMARY_SCHEMA_VERSION = 1
-__all__ = ["ClosedLoopResult", "TrackingLaw", "closed_loop_files", "field_from_path", "grid_integrator",
-           "homogeneous_plant", "initial_state", "make_grid_plant", "make_plant", "run", "summarise", "write"]
-
-# IDAS tolerances of the grid plant: those of `symtrack simulate validation_grid` (docs/terrain.md:
-# every validation figure equal to 3 digits against 1e-7 / 1e-9, in half the time)
-GRID_RELTOL = 1e-5
-GRID_ABSTOL = 1e-8
-# plant sub-step: the world manager's macro step (footprint prediction, release); the MPC's sample
-# is split into sub-steps no longer than this
-GRID_SUBSTEP_S = 0.02
-# the terrain engine's macro step (its integration step: vehicle Rosenbrock, each cell SDIRK), the
-# step its accuracy was measured at (docs/terrain.md, "The terrain engine")
-ENGINE_SUBSTEP_S = 0.01
-# margin around the reference path when the field is sized from it
-FIELD_MARGIN_M = 4.0
+# the MPC's choices of plant (symtrack.control.scenario: MPCScenario.plant_setup), here as before
+__all__ = ["FIELD_MARGIN_M", "GRID_ABSTOL", "GRID_RELTOL", "GRID_SUBSTEP_S", "ClosedLoopResult", "TrackingLaw",
+           "closed_loop_files", "field_from_path", "grid_integrator", "initial_state", "make_plant", "run", "summarise",
+           "write"]
 
 
 @dataclass
@@ -135,78 +127,6 @@ def initial_state(model: SystemModel, sc: MPCScenario) -> np.ndarray:
     x[model.state_index("y_m")] = sc.start.y_m
     x[model.state_index("yaw_rad")] = math.radians(sc.start.yaw_deg)
     return x, tp.u.copy()
-
-
-def homogeneous_plant(model: SystemModel, params: dict, integrator: str = "cvodes") -> StepPlant:
-    """The full simulator on homogeneous soil (CVODES or IDAS at their default tolerances)."""
-    settings = IntegratorSettings(integrator)
-    return StepPlant(model, params, registry.get(integrator).stepper("homogeneous", model, settings))
-
-
-def field_from_path(path, margin_m: float = FIELD_MARGIN_M) -> tuple[tuple[float, float], tuple[float, float]]:
-    """(origin_m, size_m) of a field covering the reference path (without its straight extension
-    past the end) with a margin on every side."""
-    on = path.segment >= 0
-    x, y = path.x[on], path.y[on]
-    x0, x1 = float(x.min()) - margin_m, float(x.max()) + margin_m
-    y0, y1 = float(y.min()) - margin_m, float(y.max()) + margin_m
-    return (x0, y0), (x1 - x0, y1 - y0)
-
-
-def grid_integrator(sc: MPCScenario) -> IntegratorSettings:
-    """The grid plant's integrator from ``run.integrator``: the terrain engine (``grid_fast``) by
-    default (``cvodes``, the homogeneous plant's default, means the engine here: the grid needs
-    the DAE form), IDAS at the tolerances of ``validation_grid`` (``idas``, the reference), or the
-    compiled fixed-step grid Rosenbrock (``rosenbrock``)."""
-    name = sc.run.integrator
-    if name in ("cvodes", "grid_fast"):
-        return IntegratorSettings("grid_fast", engine=sc.engine)
-    if name == "idas":
-        return IntegratorSettings("idas", GRID_RELTOL, GRID_ABSTOL)
-    if name == "rosenbrock":
-        return IntegratorSettings("rosenbrock", fixed_step_s=MAX_STEP_S)
-    raise ScenarioError(f"run.integrator = {name!r}: the grid plant runs grid_fast (the default), idas or rosenbrock")
-
-
-def make_grid_plant(sc: MPCScenario, terrain=None, substep_s: float | None = None):
-    """The grid plant of an MPC scenario: the world of its [terrain] section (without size_m and
-    origin_m the field covers the path plus FIELD_MARGIN_M; ``terrain``: a Terrain or terrain
-    file to continue from, whose geometry it takes) with the integrator of :func:`grid_integrator`:
-    an :class:`~symtrack.simulation.plants.EnginePlant` (the terrain engine, the default) or a
-    :class:`~symtrack.simulation.plants.GridPlant` (IDAS, the compiled Rosenbrock). The MPC's
-    sample is split into macro steps of at most ``substep_s`` (default: ENGINE_SUBSTEP_S for the
-    engine, whose macro step is its integration step; GRID_SUBSTEP_S, the world manager's
-    step, for the others)."""
-    settings = grid_integrator(sc)
-    engine = settings.method == "grid_fast"
-    if substep_s is None:
-        # the engine: its macro step, run.output_dt_s (default ENGINE_SUBSTEP_S; the shear law needs
-        # 2 ms with 4 vehicle substeps: docs/turning.md)
-        substep_s = sc.run.macro_step_s if engine else GRID_SUBSTEP_S
-    if not 0.0 < substep_s <= 1.0:
-        raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
-    s = sc.terrain if sc.terrain is not None else TerrainSettings()
-    if s.passes != 1:
-        raise ScenarioError(f"terrain.passes = {s.passes}: an MPC run drives its path once (use --terrain-in "
-                            "to continue from a saved terrain)")
-    if terrain is None and not s.initial_state and "size_m" not in s.given and "origin_m" not in s.given:
-        origin, size = field_from_path(sc.build_path())
-        s = dataclasses.replace(s, origin_m=origin, size_m=size)
-    world = open_world(s, sc.params, sc.model, substep_s, start_xy=(sc.start.x_m, sc.start.y_m),
-                       terrain=terrain, where="[terrain]")
-    log.info("grid plant (%s): %d x %d cells of %g m, M = %d (%d channels)", settings.method, *world.grid.shape,
-             world.grid.cell_m, world.M, world.n_channels)
-    plant = plant_for_world(world, settings)
-    plant.macro_step_s = substep_s
-    return plant
-
-
-def make_plant(sc: MPCScenario, model: SystemModel, terrain=None):
-    """The scenario's plant: the grid terrain with a [terrain] section (or a ``terrain`` to
-    continue from), else the homogeneous one."""
-    if sc.terrain is not None or terrain is not None:
-        return make_grid_plant(sc, terrain)
-    return homogeneous_plant(model, sc.params, sc.run.integrator)
 
 
 def plant_integrator(plant) -> str | None:
@@ -325,6 +245,10 @@ def run(sc: MPCScenario, plant=None, model: SystemModel | None = None, mpc: Path
             mpc = PathTrackingMPC(model, sc.params, sc.mpc)
     with timed_step("building the plant", log):
         plant = plant or make_plant(sc, model)
+    world = getattr(plant, "world", None)
+    if world is not None:
+        log.info("grid plant (%s): %d x %d cells of %g m, M = %d (%d channels)", plant_integrator(plant),
+                 *world.grid.shape, world.grid.cell_m, world.M, world.n_channels)
     path = sc.build_path()
     xt, ut = initial_state(model, sc)
     if x0 is None:

@@ -45,7 +45,7 @@ Schema (unknown keys are errors; ranges in brackets)::
     lateral_law = "creep"             # for the plant and the prediction (docs/turning.md; default:
                                       # "shear", the soil's own strength)
     [terrain]                         # optional: the plant is then the vehicle on the persistent
-    cell_m = 0.25                     # grid terrain (symtrack.control.closedloop.make_grid_plant); keys
+    cell_m = 0.25                     # grid terrain (MPCScenario.plant_setup); keys
                                       # and ranges of symtrack/terrain/settings.py (docs/terrain.md).
                                       # Without size_m and origin_m the field covers the path
                                       # plus 4 m; passes must be 1; the plant runs the terrain
@@ -65,12 +65,13 @@ from dataclasses import dataclass
 from ..foundations.config import builtin_names as _package_names
 from ..foundations.config import check_document, check_keys, integer, number, read_document, with_version
 from ..foundations.errors import ParameterError, ScenarioError
-from ..integrators.settings import EngineSettings
+from ..integrators.grid_rosenbrock import MAX_STEP_S
+from ..integrators.settings import EngineSettings, IntegratorSettings
 from ..model import plausibility
 from ..model.options import ModelOptions, scenario_keys
 from ..model.parameters import known_soil_names, soil_params, vehicle_params
 from ..presets import soil_preset, vehicle_preset
-from ..simulation.scenario import RunSettings, parse_engine, parse_ground, parse_params, parse_run
+from ..simulation.scenario import PlantSetup, RunSettings, parse_engine, parse_ground, parse_params, parse_run
 from ..terrain.settings import PATH_KEYS as TERRAIN_PATH_KEYS
 from ..terrain.settings import TerrainSettings
 from ..terrain.surface import Surface
@@ -78,8 +79,9 @@ from .mpc import MPCSettings
 from .path import Path as RefPath
 from .path import Segment, field_segments
 
-__all__ = ["GRID_DEFAULT_TERRAIN", "MPCScenario", "MPC_RUN_DEFAULTS", "MPC_RUN_KEYS", "SCENARIO_PACKAGE",
-           "StartSettings", "TOP_KEYS", "builtin_names", "load", "scenario_from_dict"]
+__all__ = ["FIELD_MARGIN_M", "GRID_ABSTOL", "GRID_DEFAULT_TERRAIN", "GRID_RELTOL", "GRID_SUBSTEP_S", "MPCScenario",
+           "MPC_RUN_DEFAULTS", "MPC_RUN_KEYS", "SCENARIO_PACKAGE", "StartSettings", "TOP_KEYS", "builtin_names",
+           "field_from_path", "grid_integrator", "load", "scenario_from_dict"]
 
 TOP_KEYS = ("name", "description", "vehicle", "soil", "start", "path", "run", "mpc", "model", "terrain", "engine")
 SCENARIO_PACKAGE = "symtrack.control.scenarios"
@@ -87,6 +89,17 @@ SCENARIO_PACKAGE = "symtrack.control.scenarios"
 # 0.25 m cells (the track is 0.45 m wide) and a speed bound of 4 m/s for the channel modulus M
 # keep a closed loop of a minute or two affordable (docs/control.md); the field covers the path
 GRID_DEFAULT_TERRAIN = {"cell_m": 0.25, "max_speed_m_s": 4.0}
+# IDAS tolerances of the grid plant: those of `symtrack simulate validation_grid` (docs/terrain.md:
+# every validation figure equal to 3 digits against 1e-7 / 1e-9, in half the time)
+GRID_RELTOL = 1e-5
+GRID_ABSTOL = 1e-8
+# the grid plant's macro step (the world manager's step: footprint prediction, release) with IDAS or
+# the compiled Rosenbrock; the MPC's sample is split into macro steps no longer than this. The terrain
+# engine's macro step is its integration step, run.output_dt_s (default 0.01 s, the step its accuracy
+# was measured at: docs/terrain.md, "The terrain engine"; the shear law needs 2 ms: docs/turning.md)
+GRID_SUBSTEP_S = 0.02
+# margin around the reference path when the field is sized from it
+FIELD_MARGIN_M = 4.0
 
 
 @dataclass(frozen=True)
@@ -132,6 +145,29 @@ class MPCScenario:
             segs = d["segments"]
         return RefPath(d["x_m"], d["y_m"], math.radians(d["heading_deg"]), segs, d["speed_m_s"],
                        d.get("turn_speed_m_s"))
+
+    def plant_setup(self, grid: bool, terrain=None) -> PlantSetup:
+        """The MPC's plant (:class:`~symtrack.simulation.scenario.PlantSetup` of the one plant factory,
+        :func:`symtrack.simulation.plants.make_plant`). On the homogeneous terrain: ``run.integrator``
+        at its default tolerances, one MPC sample per advance. On the grid (``terrain``: a Terrain or
+        terrain file to continue from, whose geometry it takes): the integrator of
+        :func:`grid_integrator`; the ``[terrain]`` section, without size_m and origin_m the field
+        covering the path plus :data:`FIELD_MARGIN_M`; the macro step ``run.output_dt_s`` for the terrain
+        engine, :data:`GRID_SUBSTEP_S` for the others (the MPC's sample is split into such steps)."""
+        if not grid:
+            return PlantSetup(self.run.integrator_settings(), self.run.macro_step_s, batch=False)
+        settings = grid_integrator(self)
+        substep_s = self.run.macro_step_s if settings.method == "grid_fast" else GRID_SUBSTEP_S
+        if not 0.0 < substep_s <= 1.0:
+            raise ScenarioError(f"grid plant substep_s = {substep_s!r} must be in (0, 1] s")
+        s = self.terrain if self.terrain is not None else TerrainSettings()
+        if s.passes != 1:
+            raise ScenarioError(f"terrain.passes = {s.passes}: an MPC run drives its path once (use --terrain-in "
+                                "to continue from a saved terrain)")
+        if terrain is None and not s.initial_state and "size_m" not in s.given and "origin_m" not in s.given:
+            origin, size = field_from_path(self.build_path())
+            s = dataclasses.replace(s, origin_m=origin, size_m=size)
+        return PlantSetup(settings, substep_s, s)
 
     def to_dict(self) -> dict:
         path = dict(self.path_spec)
@@ -271,6 +307,31 @@ def scenario_from_dict(d: dict, default_name="mpc") -> MPCScenario:
         raise ScenarioError(str(err)) from err
     return MPCScenario(name, desc, vp, sp, {**veh, **soil}, start, _path(d.get("path", {})), run,
                        mpc, terrain, model, parse_engine(d.get("engine")), surface)
+
+
+def grid_integrator(sc: MPCScenario) -> IntegratorSettings:
+    """The grid plant's integrator from ``run.integrator``: the terrain engine (``grid_fast``) by
+    default (``cvodes``, the homogeneous plant's default, means the engine here: the grid needs
+    the DAE form), IDAS at the tolerances of ``validation_grid`` (``idas``, the reference), or the
+    compiled fixed-step grid Rosenbrock (``rosenbrock``)."""
+    name = sc.run.integrator
+    if name in ("cvodes", "grid_fast"):
+        return IntegratorSettings("grid_fast", engine=sc.engine)
+    if name == "idas":
+        return IntegratorSettings("idas", GRID_RELTOL, GRID_ABSTOL)
+    if name == "rosenbrock":
+        return IntegratorSettings("rosenbrock", fixed_step_s=MAX_STEP_S)
+    raise ScenarioError(f"run.integrator = {name!r}: the grid plant runs grid_fast (the default), idas or rosenbrock")
+
+
+def field_from_path(path, margin_m: float = FIELD_MARGIN_M) -> tuple[tuple[float, float], tuple[float, float]]:
+    """(origin_m, size_m) of a field covering the reference path (without its straight extension
+    past the end) with a margin on every side."""
+    on = path.segment >= 0
+    x, y = path.x[on], path.y[on]
+    x0, x1 = float(x.min()) - margin_m, float(x.max()) + margin_m
+    y0, y1 = float(y.min()) - margin_m, float(y.max()) + margin_m
+    return (x0, y0), (x1 - x0, y1 - y0)
 
 
 def builtin_names() -> list[str]:

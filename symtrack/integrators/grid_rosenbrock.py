@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from ..foundations.errors import SimulationError
-from ..native.grid_rosenbrock import build as build_step
+from ..native.grid_rosenbrock import step_functions
 from ..native.rosenbrock import FIXED_STEP_MAX_HALVINGS
 from ..terrain.channels import NF, NG
 from ..toolchain import BuildSpec, build, casadi_tag, compiler, digest
@@ -59,9 +59,9 @@ def grid_library(opts, n_channels: int, n_steps: int, compiled: bool = True):
     """(Function, compiled?) of ``grid_rosenbrock`` for n_channels channels and n_steps steps per call."""
     cc = compiler() if compiled else None
     if cc is None:
-        return build_step(opts, n_channels, n_steps)["multi"], False
+        return step_functions(opts, n_channels, n_steps)["multi"], False
     # generated C: a large track quadrature as one call node (symtrack.vehicles.planar.codegen_options)
-    f = build_step(codegen_options(opts), n_channels, n_steps)["multi"]
+    f = step_functions(codegen_options(opts), n_channels, n_steps)["multi"]
 
     def sources():
         with tempfile.TemporaryDirectory(prefix="symtrack-gridgen-") as scratch:

@@ -30,8 +30,7 @@ import casadi as ca
 
 from ..foundations import caches
 from ..toolchain import BuildSpec, build, compiler
-from .generate import GROUP_OF, render
-from .generate import build as build_functions
+from .generate import GROUP_OF, model_functions, render
 
 log = logging.getLogger("symtrack.native")
 
@@ -91,7 +90,7 @@ class Library:
         if group in self.paths:
             return
         cc = compiler() if self.want_compiled else None
-        gen = build_functions(self.model if cc is None else self.source, self.prefix, (group,))
+        gen = model_functions(self.model if cc is None else self.source, self.prefix, (group,))
         stem = f"{self.prefix}_{group}"
         interp = {f.name(): f for f in gen.functions()}
         path = None

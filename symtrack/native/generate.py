@@ -42,7 +42,7 @@ from ..foundations.units import unit_of_suffix
 from . import rosenbrock
 
 __all__ = ["CHUNK_SIZES", "FIXED_STEP_METHOD", "GROUPS", "GROUP_OF", "Generated", "MANIFEST_SCHEMA_VERSION",
-           "build", "fixed_step_functions", "manifest", "render", "unit_of", "write_sources"]
+           "fixed_step_functions", "manifest", "model_functions", "render", "unit_of", "write_sources"]
 
 MANIFEST_SCHEMA_VERSION = 1
 # Steps per call of the chunk functions: a long chunk for the bulk of a run and a short one
@@ -226,7 +226,7 @@ def _group(model, prefix: str, group: str) -> tuple:
     raise ValueError(f"unknown group {group!r}; groups: {', '.join(GROUPS)}")
 
 
-def build(model, prefix: str = "homogeneous", groups=GROUPS) -> Generated:
+def model_functions(model, prefix: str = "homogeneous", groups=GROUPS) -> Generated:
     """The generated Functions of ``model`` (a SystemModel) in the given groups, with their
     element names."""
     sx, su, sz, sp, sy = (tuple(model.state_names), tuple(model.input_names), tuple(model.alg_names),

@@ -62,12 +62,12 @@ from .rosenbrock import A as RB_A
 from .rosenbrock import C as RB_C
 from .rosenbrock import M as RB_M
 
-__all__ = ["NA", "NS", "build"]
+__all__ = ["NA", "NS", "step_functions"]
 
 NA = 8  # a = (X, Y, cos psi, sin psi, alpha_left, beta_left, alpha_right, beta_right)
 
 
-def build(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") -> dict[str, ca.Function]:
+def step_functions(opts, n_channels: int, n_steps: int, name: str = "grid_rosenbrock") -> dict[str, ca.Function]:
     """The Functions of the grid Rosenbrock integrator for a pool of n_channels channels.
 
     ``<name>``: (xc[2n], w[nw], u[2], p[np], h, rtol) -> (xc, w, r) after n_steps steps of length h (s),

@@ -27,6 +27,7 @@ import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -42,6 +43,7 @@ from . import loop
 from .passes import PassStudy, run_passes, study_summary
 from .plants import make_plant
 from .result import summarise
+from .scenario import Scenario, builtin_names, load_scenario
 
 __all__ = ["MAX_MODELS", "MODELS", "Built", "Outcome", "build", "build_cache_info", "clear_build_cache", "system_model"]
 
@@ -118,7 +120,7 @@ class Built:
     Attributes
     ----------
     scenario : Scenario
-        The scenario built for (a simulation scenario or an MPC scenario).
+        The scenario built for.
     kind : str
         "homogeneous" or "grid" (a ``[terrain]`` section, or a terrain to start from).
     settings : IntegratorSettings
@@ -178,10 +180,45 @@ class Built:
         return Outcome([res], summary, [summary], None, failure)
 
 
-def build(scenario, terrain=None) -> Built:
-    """Build what ``scenario``'s plant is made of (cached: a second build of the same model
-    options costs nothing). ``terrain``: a grid terrain the run will start from (the plant is then
-    the grid's)."""
+def _grid_names() -> list[str]:
+    return [n for n in builtin_names() if load_scenario(n).terrain is not None]
+
+
+def build(scenario, *, integrator: str | None = None, terrain=None) -> Built:
+    """Build what a scenario's plant is made of, explicitly (module doc: the model is built once per
+    process for its options, so a second build of the same model options costs nothing;
+    :func:`symtrack.simulate` builds through here). ``symtrack.build`` is this function.
+
+    Parameters
+    ----------
+    scenario : Scenario or str
+        A loaded scenario, or a built-in name / TOML path (loaded with no overrides).
+    integrator : str, optional
+        Instead of the scenario's ``run.integrator`` (a name of the integrator registry).
+    terrain : Terrain or path, optional
+        A grid terrain the run will start from (the plant is then the grid's); the scenario needs
+        a ``[terrain]`` section.
+
+    Returns
+    -------
+    Built
+        ``Built.scenario`` is the scenario as run; ``symtrack.simulate(built)`` runs it.
+    """
+    if isinstance(terrain, str | Path) and not Path(terrain).is_file():  # named as typed (as --terrain-in)
+        what = "is a folder" if Path(terrain).is_dir() else "does not exist"
+        raise ScenarioError(f"terrain = {str(terrain)!r} {what}: give a terrain file (the .npz that "
+                            "Result.write(..., terrain_out=...) or symtrack simulate --terrain-out writes) "
+                            "or a Terrain")
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    if integrator is not None:
+        if not isinstance(integrator, str):
+            raise ScenarioError(f"integrator = {integrator!r} must be a name: {', '.join(registry.names())}")
+        scenario = dataclasses.replace(scenario, run=dataclasses.replace(scenario.run, integrator=integrator))
+    if terrain is not None and scenario.terrain is None:
+        raise ScenarioError(f"scenario {scenario.name!r} has no [terrain] section, so it runs on the homogeneous "
+                            f"terrain and cannot start from a terrain file; the grid scenarios are "
+                            f"{', '.join(_grid_names())} (or add a [terrain] section)")
     settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
     spec = registry.get(settings.method, "integrator")
     surface = getattr(scenario, "surface", None)

@@ -25,12 +25,12 @@ of the generated C).
 - :class:`EnginePlant`: the persistent grid terrain through the compiled terrain engine
   (``grid_fast``; many macro steps per call, the stop rule inside, start from a state, retry
   from checkpoints);
-- :func:`make_plant`: the plant a scenario asks for (the integrator from the registry).
+- :func:`make_plant`: the plant a scenario of any kind asks for (the integrator from the registry, the
+  kind's choices from its scenario's ``plant_setup``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from typing import Protocol
@@ -516,29 +516,38 @@ def make_grid_plant(world: World, settings: IntegratorSettings, spec: registry.I
     return GridPlant(world, spec.stepper("grid", world.model, settings, world.n_channels))
 
 
-def make_plant(scenario, *, terrain=None, world: World | None = None, model: SystemModel | None = None,
+def make_plant(scenario, model: SystemModel | None = None, terrain=None, *, world: World | None = None,
                spec: registry.IntegratorSpec | None = None):
-    """The plant a simulation scenario asks for: the grid terrain when it has a ``[terrain]``
-    section (or a ``world`` / ``terrain`` is given: a :class:`~symtrack.terrain.storage.Terrain`
-    or a terrain file), else the homogeneous terrain; the integrator of ``run.integrator`` (``spec``:
-    its registry entry, as :class:`~symtrack.simulation.builder.Built` holds it; looked up when None)."""
-    settings = dataclasses.replace(scenario.run.integrator_settings(), engine=getattr(scenario, "engine", None))
+    """The plant a scenario asks for, of every kind of run (a simulation, an MPC run, a field study's
+    passes): the grid terrain when it has a ``[terrain]`` section (or a ``world`` / ``terrain`` is
+    given: a :class:`~symtrack.terrain.storage.Terrain` or a terrain file to continue from), else the
+    homogeneous terrain (on ``model`` when given). What the run's kind chooses (the integrator, the
+    grid's section and macro step, a batch stepper or not) is its scenario's
+    ``plant_setup(grid, terrain)`` (:class:`~symtrack.simulation.scenario.PlantSetup`); ``spec``: the
+    integrator's registry entry, as :class:`~symtrack.simulation.builder.Built` holds it (looked up
+    when None). A grid plant on a world opened here has the world's ``macro_step_s``."""
+    grid = world is not None or scenario.terrain is not None or terrain is not None
+    setup = scenario.plant_setup(grid, terrain)
+    settings = setup.integrator
     spec = spec or registry.get(settings.method)
     surface = getattr(scenario, "surface", None)
     vehicle = model.vehicle if model is not None else vehicle_registry.for_options(scenario.model, surface=surface)
-    if world is not None or scenario.terrain is not None or terrain is not None:
+    if grid:
         vehicle_registry.check_plant(vehicle, "engine" if spec.grid_engine is not None else "grid", settings.method)
         with timed_step("building the grid terrain's model and its integrator", log):
-            if world is None:
-                spec.check("grid", settings)
-                st = scenario.start
-                world = open_world(scenario.terrain or TerrainSettings(), scenario.params, scenario.model,
-                                   scenario.run.macro_step_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
-            return make_grid_plant(world, settings, spec)
+            if world is not None:
+                return make_grid_plant(world, settings, spec)
+            spec.check("grid", settings)
+            st = scenario.start
+            world = open_world(setup.terrain or TerrainSettings(), scenario.params, scenario.model,
+                               setup.macro_step_s, start_xy=(st.x_m, st.y_m), terrain=terrain)
+            plant = make_grid_plant(world, settings, spec)
+        plant.macro_step_s = setup.macro_step_s
+        return plant
     vehicle_registry.check_plant(vehicle, "homogeneous", settings.method)
     with timed_step("building the model and its integrator", log):
         model = model or SystemModel(scenario.model, vehicle=vehicle)
         stepper = spec.stepper("homogeneous", model, settings)
-    if "homogeneous" in spec.batch:
+    if setup.batch and "homogeneous" in spec.batch:
         return BatchPlant(model, scenario.params, stepper, scenario.run.output_dt_s)
     return StepPlant(model, scenario.params, stepper)

@@ -75,8 +75,8 @@ from ..vehicles import registry as vehicle_registry
 from ..vehicles import towed
 from ..vehicles.base import CONTACT_HULL
 
-__all__ = ["RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario", "parse_params",
-           "parse_ground", "parse_run", "parse_terrain", "scenario_from_dict"]
+__all__ = ["PlantSetup", "RunSettings", "Scenario", "Start", "TorqueEntry", "builtin_names", "load_scenario",
+           "parse_params", "parse_ground", "parse_run", "parse_terrain", "scenario_from_dict"]
 
 SCENARIO_PACKAGE = "symtrack.simulation.scenarios"
 TOP_KEYS = ("name", "description", "run", "model", "vehicle", "soil", "start", "torque", "terrain", "engine")
@@ -127,6 +127,18 @@ class RunSettings:
     def integrator_settings(self) -> IntegratorSettings:
         return IntegratorSettings(self.integrator, self.reltol, self.abstol, compiled=self.compiled,
                                   fixed_step_s=self.fixed_step_s, fixed_step_tolerance=self.fixed_step_tolerance)
+
+
+@dataclass(frozen=True)
+class PlantSetup:
+    """What a run asks of the one plant factory (:func:`symtrack.simulation.plants.make_plant`) beyond
+    its vehicle, soil, model options and start: a scenario's ``plant_setup(grid, terrain)``
+    (:meth:`Scenario.plant_setup`; an MPC run's own, :meth:`symtrack.control.scenario.MPCScenario.plant_setup`)."""
+
+    integrator: IntegratorSettings  # the plant's integrator (on the terrain it runs on)
+    macro_step_s: float  # the grid's macro step (the world manager's step)
+    terrain: TerrainSettings | None = None  # the grid's [terrain] section (None: its defaults)
+    batch: bool = True  # a batch stepper advances many output intervals per call (False: one, a StepPlant)
 
 
 SIMULATION_RUN_KEYS = ("duration_s", "output_dt_s", "integrator", "reltol", "abstol", "stop_after_distance_m",
@@ -192,6 +204,12 @@ class Scenario:
     @property
     def params(self) -> dict:
         return {**self.vehicle, **self.soil}
+
+    def plant_setup(self, grid: bool, terrain=None) -> PlantSetup:
+        """The plant of this scenario (:class:`PlantSetup`): ``run.integrator`` with the ``[engine]``
+        section, the macro step of ``run``, the ``[terrain]`` section."""
+        return PlantSetup(dataclasses.replace(self.run.integrator_settings(), engine=self.engine),
+                          self.run.macro_step_s, self.terrain)
 
     def event_time(self, name: str) -> float:
         for e in self.torque:

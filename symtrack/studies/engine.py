@@ -40,6 +40,7 @@ from ..foundations.progress import Progress
 from ..reports.html import report_html
 from ..reports.run_files import output_lock, write_folder
 from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
+from .runfile import worker_modules
 from .runs import Source, load, resolve_source, run_one
 
 __all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "check_scheduler_address", "dask_client", "plan",
@@ -246,21 +247,20 @@ def _store(out: Path, run: dict, result: dict, kind: str) -> dict:
     return _row(run, json.loads(summary), record) if ok else _row(run, None, record)
 
 
-# the modules a worker needs for a run of each kind, imported once by the fork server of the local
-# cluster's workers (:func:`_start_fork_server`), never by each worker
-WORKER_MODULES = {"simulate": ("symtrack.api",), "mpc": ("symtrack.control.closedloop",),
-                  "field": ("symtrack.studies.field", "symtrack.studies.operations"),
-                  "validate": ("symtrack.studies.validate",)}
+# the modules a worker needs for the tasks of :func:`dask_client` other than a sweep's runs (those of a
+# sweep's runs: their kind's, :func:`symtrack.studies.runfile.worker_modules`), imported once by the fork
+# server of the local cluster's workers (:func:`_start_fork_server`), never by each worker
+WORKER_MODULES = {"validate": ("symtrack.studies.validate",)}
 MP_METHOD_KEY = "distributed.worker.multiprocessing-method"
 # Dask's defaults of distributed.nanny.pre-spawn-environ: what a nanny sets before it spawns a worker
 WORKER_ENVIRON = {"MALLOC_TRIM_THRESHOLD_": 65536, "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
                   "OPENBLAS_NUM_THREADS": 1}
 
 
-def _start_fork_server(kind: str) -> bool:
+def _start_fork_server(modules: tuple[str, ...]) -> bool:
     """Start the fork server of the local cluster's workers (multiprocessing's forkserver method),
     if it is not running yet: a fresh single-threaded process that imports distributed, symtrack,
-    CasADi, matplotlib and the modules of ``kind``'s runs once. Each worker is then a fork of it:
+    CasADi, matplotlib and the ``modules`` of the tasks once. Each worker is then a fork of it:
     no import of its own (2-3 s a worker when spawned), and it exits without an interpreter's
     teardown (most of the 1.7 s that a cluster of spawned workers took to stop). Returns before
     the server's imports are done, so they overlap the client's own start; a worker's start waits
@@ -273,7 +273,7 @@ def _start_fork_server(kind: str) -> bool:
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return False
     multiprocessing.get_context("forkserver").set_forkserver_preload(
-        ["distributed", "numpy", "symtrack.studies.runs", *WORKER_MODULES.get(kind, ())])
+        ["distributed", "numpy", "symtrack.studies.runs", *modules])
     # the variables a nanny sets before it spawns a worker (one thread for OpenMP, OpenBLAS, MKL) must
     # be there before the server imports numpy; the nanny writes them into this process's environment
     # the same way. Dask's config has them once distributed is imported (not yet, on a first sweep)
@@ -284,7 +284,7 @@ def _start_fork_server(kind: str) -> bool:
     return True
 
 
-def _worker_start(kind: str):
+def _worker_start(modules: tuple[str, ...]):
     """Dask's settings of a new local cluster's workers, for as long as the cluster runs (a nanny
     that restarts a dead worker starts it the same way): forked from the fork server
     (:func:`_start_fork_server`, started here) in place of Dask's default start method (spawn),
@@ -297,7 +297,7 @@ def _worker_start(kind: str):
 
     # read before distributed is imported (its import is what the fork server's imports overlap): the
     # user's config files and DASK_* variables only, spawn when they say nothing
-    forked = dask.config.get(MP_METHOD_KEY, default="spawn") == "spawn" and _start_fork_server(kind)
+    forked = dask.config.get(MP_METHOD_KEY, default="spawn") == "spawn" and _start_fork_server(modules)
     import distributed  # noqa: F401 - its defaults in Dask's config first: leaving the setting removes what it added
 
     return dask.config.set({"distributed.worker.profile.enabled": False,
@@ -312,7 +312,7 @@ def dask_client(kind: str, workers: int = 2, scheduler: str | None = None):
     Closed, and the local cluster stopped, on leaving."""
     if scheduler:
         _check_scheduler_address(scheduler)
-    with _worker_start(kind) if not scheduler else contextlib.nullcontext():
+    with _worker_start(WORKER_MODULES.get(kind, ())) if not scheduler else contextlib.nullcontext():
         client, cluster = _client(workers, scheduler)
         try:
             yield client
@@ -405,7 +405,8 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     overrides : list of str or dict, optional
         Fixed overrides of every run, as ``--set``.
     kind : "auto", "simulate", "mpc" or "field"
-        The scenario kind; "auto" takes the loader that accepts the scenario.
+        The scenario kind (a sweep name of :func:`symtrack.studies.runfile.sweep_kinds`); "auto" takes
+        the first kind whose loader accepts the scenario.
     workers : int
         Processes of the local cluster (ignored with ``scheduler``).
     scheduler : str, optional
@@ -444,7 +445,8 @@ def sweep(scenario, vary=None, *, out, ranges=None, samples: int | None = None, 
     failed = []
     # the folder's lock (a second sweep into it is refused at once), then the cluster: a scheduler that
     # cannot be reached leaves nothing written
-    with (output_lock(out), _worker_start(p.source.kind) if todo and not scheduler else contextlib.nullcontext()):
+    start = _worker_start(worker_modules(p.source.kind)) if todo and not scheduler else contextlib.nullcontext()
+    with output_lock(out), start:
         client, cluster = _client(workers, scheduler) if todo else (None, None)
         out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(out / "sweep.json", json.dumps(p.describe(), indent=2, default=repr) + "\n")
@@ -501,11 +503,12 @@ def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, 
     futures = {}
     failed = []
     bar = Progress(len(todo), f"sweep {p.source.name}", enabled=progress)
+    modules = worker_modules(p.source.kind)
     try:
         by_id = {r["id"]: r for r in todo}
         for r in todo:
             task = {"id": r["id"], "kind": p.source.kind, "text": p.source.text, "name": p.source.name,
-                    "overrides": r["overrides"]}
+                    "overrides": r["overrides"], "modules": modules}
             futures[client.submit(run_one, task, key=f"symtrack-run-{r['id']}-{time.time_ns()}", pure=False)] = r
         done, last_table = 0, time.perf_counter()
         bar.update(0, f"0/{len(todo)} runs")

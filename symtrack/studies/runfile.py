@@ -11,6 +11,10 @@ The sections that decide the kind (:data:`KINDS`)::
     [season]            a season of operations over an [operation] section (as symtrack field)
     [sweep]             a sweep of any of the above (as symtrack sweep; symtrack/studies/engine.py)
 
+Each kind is one registration (:class:`Kind`, :func:`register_kind`): its deciding sections, its
+loader and how it runs into a folder; ``symtrack run``, :func:`run` and a sweep's runs
+(:mod:`symtrack.studies.runs`) take every kind from there, a kind registered by a plug-in too.
+
 A file with sections of two kinds, or of none, is refused in one line naming these sections.
 Every other section ([run], [vehicle], [soil], [model], [terrain], ...) belongs to the kind's
 own schema and is checked by its loader, with the loader's messages.
@@ -34,40 +38,193 @@ from __future__ import annotations
 
 import copy
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..foundations.config import apply_overrides, builtin_names, check_keys, integer, read_document, to_toml
 from ..foundations.errors import ScenarioError
 from ..foundations.files import read_text
 
-__all__ = ["KINDS", "RunFile", "SWEEP_KEYS", "detect_kind", "kind_rules", "read_run_file", "run", "split_overrides",
-           "sweep_arguments"]
+__all__ = ["KINDS", "Kind", "RunFile", "SWEEP_KEYS", "detect_kind", "kind_rules", "read_run_file", "register_kind",
+           "run", "split_overrides", "sweep_arguments", "sweep_kind", "sweep_kinds", "worker_modules"]
 
 
 @dataclass(frozen=True)
 class Kind:
     """A kind of run file: the sections that decide it, what it is, the command it shares its schema
-    with, the package of its built-in files."""
+    with, the package of its built-in files, and how it runs: ``load(run_file)`` its spec from a
+    :class:`RunFile` (a file's path, or a document), ``run(spec, out, progress)`` the spec into the
+    folder ``out`` (and its result). Registered once (:func:`register_kind`), it is a kind of
+    ``symtrack run`` and, with a ``sweep`` name, of a sweep's scenario.
+
+    ``sweep``: its name in a sweep (``--kind``, sweep.json, and the hash of every run id:
+    :func:`symtrack.studies.design.run_id`; the names of earlier versions, so that a sweep folder
+    resumes); kinds may share one, their documents then told apart by their sections; None: not run
+    by a sweep. ``sweep_run``: how a sweep's run runs the spec into its folder, when not as ``run``.
+    ``needs_out``: the kind writes its folder as it goes (``out`` required). ``modules``: what a
+    sweep's worker imports for its runs (a kind registered by a plug-in: its module)."""
 
     name: str
     sections: tuple[str, ...]
     what: str
     command: str
     package: str | None
+    load: Callable[[RunFile], Any]
+    run: Callable[[Any, Any, bool | None], Any]
+    sweep: str | None = None
+    sweep_run: Callable[[Any, Any, bool | None], Any] | None = None
+    needs_out: bool = False
+    modules: tuple[str, ...] = ()
 
 
-KINDS = {k.name: k for k in (
-    Kind("simulation", ("[[torque]]",), "a simulation", "symtrack simulate", "symtrack.simulation.scenarios"),
-    Kind("mpc", ("[path]", "[mpc]"), "an MPC run", "symtrack mpc", "symtrack.control.scenarios"),
-    Kind("field", ("[field]",), "a field study", "symtrack field", "symtrack.studies.fields"),
-    Kind("operation", ("[operation]",), "a field operation", "symtrack field", "symtrack.studies.fields"),
-    Kind("season", ("[season]",), "a season", "symtrack field", "symtrack.studies.fields"),
-    Kind("sweep", ("[sweep]",), "a sweep", "symtrack sweep", None),
-)}
-# the kind of a sweep's scenario as the sweep engine names it (symtrack.studies.runs.KINDS)
-SWEEP_KIND = {"simulation": "simulate", "mpc": "mpc", "field": "field", "operation": "field", "season": "field"}
+def _load_simulation(rf: RunFile):
+    from ..simulation.scenario import load_scenario, scenario_from_dict
+
+    return load_scenario(rf.source, rf.overrides) if rf.source is not None else scenario_from_dict(rf.document, rf.name)
+
+
+def _run_simulation(sc, out, progress):
+    from ..api import simulate
+
+    res = simulate(sc, progress=progress)
+    if out is not None:
+        res.write(out)
+    return res
+
+
+def _load_mpc(rf: RunFile):
+    from ..control.scenario import load, scenario_from_dict
+
+    return load(rf.source, rf.overrides) if rf.source is not None else scenario_from_dict(rf.document, rf.name)
+
+
+def _run_mpc(sc, out, progress):
+    from ..control import closedloop
+
+    res = closedloop.run(sc, progress=progress)
+    if out is not None:
+        closedloop.write(out, res)
+    return res
+
+
+def _load_field(rf: RunFile):
+    from .field import field_spec_from_dict, load_field_spec
+
+    return load_field_spec(rf.source, rf.overrides) if rf.source is not None else \
+        field_spec_from_dict(rf.document, rf.name)
+
+
+def _run_field(spec, out, progress):
+    from .field import run_field_study
+
+    return run_field_study(spec, out=out, progress=progress)
+
+
+def _load_operation(rf: RunFile):
+    from .operations import load_operation_spec, operation_spec_from_dict
+
+    return load_operation_spec(rf.source, rf.overrides) if rf.source is not None else \
+        operation_spec_from_dict(rf.document, rf.name)
+
+
+def _run_operation(spec, out, progress):
+    from .operations import run_season, traffic_comparison
+
+    if spec.compare:
+        return traffic_comparison(spec.document, spec.compare, out, progress=progress, name=spec.name)
+    return run_season(spec, out, progress=progress)
+
+
+def _sweep_run_operation(spec, out, progress):
+    """A sweep's run of a field operation or a season: one traffic system."""
+    if spec.compare:
+        raise ScenarioError("season.compare: a traffic comparison is a sweep of its own (symtrack field ... "
+                            "--workers N, or vary season.tracks); a sweep run drives one system: set season.tracks")
+    return _run_operation(spec, out, progress)
+
+
+def _run_sweep(arguments, out, progress):
+    from .engine import sweep
+
+    return sweep(out=out, progress=progress is not False, **arguments)
+
+
+KINDS: dict[str, Kind] = {}
+
+
+def register_kind(kind: Kind, replace: bool = False) -> Kind:
+    """Add a kind of run file (one registration: ``symtrack run``, :func:`run` and a sweep's runs take
+    it from here); a name taken already is a ValueError unless ``replace``."""
+    if kind.name in KINDS and not replace:
+        raise ValueError(f"a kind of run file named {kind.name!r} is registered already")
+    KINDS[kind.name] = kind
+    return kind
+
+
+_FIELD = "symtrack.studies.fields"
+_OPERATION_MODULES = ("symtrack.studies.field", "symtrack.studies.operations")
+for _kind in (
+    Kind("simulation", ("[[torque]]",), "a simulation", "symtrack simulate", "symtrack.simulation.scenarios",
+         _load_simulation, _run_simulation, sweep="simulate", modules=("symtrack.api",)),
+    Kind("mpc", ("[path]", "[mpc]"), "an MPC run", "symtrack mpc", "symtrack.control.scenarios", _load_mpc, _run_mpc,
+         sweep="mpc", modules=("symtrack.control.closedloop",)),
+    Kind("field", ("[field]",), "a field study", "symtrack field", _FIELD, _load_field, _run_field, sweep="field",
+         needs_out=True, modules=_OPERATION_MODULES),
+    Kind("operation", ("[operation]",), "a field operation", "symtrack field", _FIELD, _load_operation,
+         _run_operation, sweep="field", sweep_run=_sweep_run_operation, needs_out=True, modules=_OPERATION_MODULES),
+    Kind("season", ("[season]",), "a season", "symtrack field", _FIELD, _load_operation, _run_operation,
+         sweep="field", sweep_run=_sweep_run_operation, needs_out=True, modules=_OPERATION_MODULES),
+    Kind("sweep", ("[sweep]",), "a sweep", "symtrack sweep", None, lambda rf: sweep_arguments(rf), _run_sweep,
+         needs_out=True),
+):
+    register_kind(_kind)
+del _kind
 SWEEP_KEYS = ("scenario", "vary", "ranges", "samples", "seed", "workers", "scheduler")
+
+
+def sweep_kinds() -> dict[str, Kind]:
+    """The kinds a sweep runs, by their sweep name, in the order registered: of kinds sharing a name,
+    the first (whose package holds their built-in files)."""
+    out: dict[str, Kind] = {}
+    for k in KINDS.values():
+        if k.sweep is not None:
+            out.setdefault(k.sweep, k)
+    return out
+
+
+def worker_modules(sweep_name: str) -> tuple[str, ...]:
+    """What a sweep's worker imports for the runs of ``sweep_name`` (of every kind of that name)."""
+    return tuple(dict.fromkeys(m for k in KINDS.values() if k.sweep == sweep_name for m in k.modules))
+
+
+def _held(doc: dict) -> dict[str, list[str]]:
+    """kind -> the deciding sections ``doc`` holds, of each kind that has any ("[[torque]]" is the key
+    "torque"); a season's [operation] section is its own."""
+    found = {}
+    for kind in KINDS.values():
+        have = [s for s in kind.sections if s.strip("[]") in doc]
+        if have:
+            found[kind.name] = have
+    if "season" in found:  # a season's operations are laid over its [operation] section
+        found.pop("operation", None)
+    return found
+
+
+def sweep_kind(sweep_name: str, doc) -> Kind:
+    """The registered kind of a sweep's scenario document of ``sweep_name`` (those sharing the name
+    told apart by the document's sections; the first of them when it has none of theirs, so that its
+    loader says what is missing)."""
+    kinds = [k for k in KINDS.values() if k.sweep == sweep_name]
+    if not kinds:
+        raise ScenarioError(f"kind = {sweep_name!r} is not one of {', '.join(sweep_kinds())}")
+    if len(kinds) == 1 or not isinstance(doc, dict):
+        return kinds[0]
+    held = [k for k in kinds if k.name in _held(doc)]
+    if len(held) > 1:
+        detect_kind(doc, f"a {sweep_name} scenario")  # several kinds: refused naming their sections
+    return held[0] if held else kinds[0]
 
 
 def kind_rules() -> str:
@@ -82,15 +239,7 @@ def detect_kind(doc, label: str = "run file") -> str:
         raise ScenarioError(f"{label}: a run file is a TOML table of sections, got {type(doc).__name__}")
     if "sweep" in doc:
         return "sweep"
-    key = {"[[torque]]": "torque", "[path]": "path", "[mpc]": "mpc", "[field]": "field",
-           "[operation]": "operation", "[season]": "season"}  # the deciding sections' keys in the document
-    found = {}  # kind -> the deciding sections the document holds
-    for kind in KINDS.values():
-        have = [s for s in kind.sections if s in key and key[s] in doc]
-        if have:
-            found[kind.name] = have
-    if "season" in found:  # a season's operations are laid over its [operation] section
-        found.pop("operation", None)
+    found = _held(doc)  # kind -> the deciding sections the document holds
     if len(found) == 1:
         return next(iter(found))
     rules = f"a run file has the sections of one kind: {kind_rules()} (symtrack new KIND writes one)"
@@ -229,9 +378,11 @@ def sweep_arguments(rf: RunFile) -> dict:
             rest, _ = read_document(str(rf.source), "symtrack.simulation.scenarios", "run file",
                                     paths=(*PATH_KEYS, ("operation", "boundary_file")))
             rest.pop("sweep", None)
-        base_kind = detect_kind(rest, f"{rf.label} (its scenario: the file without [sweep])")
-        scenario = Source(SWEEP_KIND[base_kind], to_toml(rest), rf.name, rf.label)
-        kind = SWEEP_KIND[base_kind]
+        base = KINDS[detect_kind(rest, f"{rf.label} (its scenario: the file without [sweep])")]
+        if base.sweep is None:
+            raise ScenarioError(f"{rf.label}: its scenario is {base.what}, which a sweep does not run")
+        scenario = Source(base.sweep, to_toml(rest), rf.name, rf.label)
+        kind = base.sweep
     return {"scenario": scenario, "vary": vary, "ranges": {k: tuple(v) for k, v in ranges.items()} or None,
             "samples": samples, "seed": seed, "overrides": fixed, "workers": workers, "scheduler": scheduler,
             "kind": kind}
@@ -261,44 +412,7 @@ def run(spec_or_path, out=None, *, overrides=None, progress: bool | None = None)
     ``TrafficComparison``, its table's rows under ``["rows"]``), a sweep's ``SweepResult``.
     """
     rf = read_run_file(spec_or_path, overrides)
-    if rf.kind in ("field", "operation", "season", "sweep") and out is None:
-        raise ScenarioError(f"{rf.label} is {KINDS[rf.kind].what}, which writes its folder as it goes: give out=")
-    if rf.kind == "simulation":
-        from ..api import simulate
-        from ..simulation.scenario import load_scenario, scenario_from_dict
-
-        sc = load_scenario(rf.source, rf.overrides) if rf.source is not None else scenario_from_dict(rf.document,
-                                                                                                      rf.name)
-        res = simulate(sc, progress=progress)
-        if out is not None:
-            res.write(out)
-        return res
-    if rf.kind == "mpc":
-        from ..control import closedloop
-        from ..control.scenario import load, scenario_from_dict
-        from ..simulation.builder import system_model
-
-        sc = load(rf.source, rf.overrides) if rf.source is not None else scenario_from_dict(rf.document, rf.name)
-        model = system_model(sc.model)
-        plant = closedloop.make_plant(sc, model)
-        res = closedloop.run(sc, plant=plant, model=model, progress=progress)
-        if out is not None:
-            closedloop.write(out, res, plant=plant)
-        return res
-    if rf.kind == "field":
-        from .field import field_spec_from_dict, load_field_spec, run_field_study
-
-        spec = load_field_spec(rf.source, rf.overrides) if rf.source is not None else \
-            field_spec_from_dict(rf.document, rf.name)
-        return run_field_study(spec, out=out, progress=progress)
-    if rf.kind in ("operation", "season"):
-        from .operations import load_operation_spec, operation_spec_from_dict, run_season, traffic_comparison
-
-        spec = load_operation_spec(rf.source, rf.overrides) if rf.source is not None else \
-            operation_spec_from_dict(rf.document, rf.name)
-        if spec.compare:
-            return traffic_comparison(spec.document, spec.compare, out, progress=progress, name=spec.name)
-        return run_season(spec, out, progress=progress)
-    from .engine import sweep
-
-    return sweep(out=out, progress=progress is not False, **sweep_arguments(rf))
+    kind = KINDS[rf.kind]
+    if kind.needs_out and out is None:
+        raise ScenarioError(f"{rf.label} is {kind.what}, which writes its folder as it goes: give out=")
+    return kind.run(kind.load(rf), out, progress)

@@ -9,6 +9,7 @@ needs no shared file system).
 
 from __future__ import annotations
 
+import importlib
 import os
 import socket
 import tempfile
@@ -21,18 +22,15 @@ from ..foundations.config import apply_overrides
 from ..foundations.config import builtin_names as package_names
 from ..foundations.errors import ScenarioError
 from ..foundations.files import read_text
+from .runfile import Kind, RunFile, sweep_kind, sweep_kinds
 
-__all__ = ["KINDS", "Source", "load", "resolve_source", "run_one", "scenario_text"]
-
-# the scenario kinds a sweep runs: those of `symtrack simulate`, `symtrack mpc` and `symtrack field`
-KINDS = ("simulate", "mpc", "field")
-PACKAGES = {"simulate": "symtrack.simulation.scenarios", "mpc": "symtrack.control.scenarios",
-            "field": "symtrack.studies.fields"}
+__all__ = ["Source", "load", "resolve_source", "run_one", "scenario_text"]
 
 
 @dataclass(frozen=True)
 class Source:
-    """The scenario of a sweep as workers receive it: its kind, its TOML text and its default name."""
+    """The scenario of a sweep as workers receive it: its kind (its sweep name,
+    :func:`symtrack.studies.runfile.sweep_kinds`), its TOML text and its default name."""
 
     kind: str
     text: str
@@ -40,63 +38,55 @@ class Source:
     label: str  # what the user gave (a built-in name or a path)
 
 
-def scenario_text(name_or_path, package: str) -> tuple[str, str] | None:
-    """(TOML text, default name) of a built-in scenario of ``package`` or of a TOML file; None
-    when it is neither."""
+def scenario_text(name_or_path, package: str | None) -> tuple[str, str] | None:
+    """(TOML text, default name) of a built-in scenario of ``package`` (None: a kind without built-ins)
+    or of a TOML file; None when it is neither."""
     from importlib import resources
 
     s = str(name_or_path)
     p = Path(s)
-    if p.suffix == ".toml" or (s not in package_names(package) and p.exists()):
+    names = package_names(package) if package else []
+    if p.suffix == ".toml" or (s not in names and p.exists()):
         if not p.is_file():
             raise ScenarioError(f"scenario file {s!r} does not exist")
         return read_text(p, "scenario file"), p.stem
-    if s in package_names(package):
+    if s in names:
         return resources.files(package).joinpath(s + ".toml").read_text(), s
     return None
 
 
-def load(kind: str, text: str, name: str, overrides: dict | None = None):
-    """The validated scenario of ``kind`` from its text and overrides (``{"section.key": value}``):
-    a :class:`symtrack.Scenario`, a :class:`symtrack.control.MPCScenario` or a
-    :class:`symtrack.studies.field.FieldSpec`."""
+def _load(kind: str, text: str, name: str, overrides: dict | None) -> tuple[Kind, object]:
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"{name}: not valid TOML: {err}") from err
     apply_overrides(doc, overrides or {})
-    if kind == "simulate":
-        from ..simulation.scenario import scenario_from_dict
+    k = sweep_kind(kind, doc)
+    return k, k.load(RunFile(k.name, doc, None, name, overrides or {}, doc))
 
-        return scenario_from_dict(doc, name)
-    if kind == "mpc":
-        from ..control.scenario import scenario_from_dict as mpc_from_dict
 
-        return mpc_from_dict(doc, name)
-    if kind == "field":
-        from .operations import is_operation_doc, operation_spec_from_dict
-
-        if is_operation_doc(doc):  # a field operation or a season (docs/studies.md, "Field operations")
-            return operation_spec_from_dict(doc, name)
-        from .field import field_spec_from_dict
-
-        return field_spec_from_dict(doc, name)
-    raise ScenarioError(f"kind = {kind!r} is not one of {', '.join(KINDS)}")
+def load(kind: str, text: str, name: str, overrides: dict | None = None):
+    """The validated spec of a sweep's scenario of ``kind`` (its sweep name) from its text and
+    overrides (``{"section.key": value}``), by the loader of its registered kind
+    (:data:`symtrack.studies.runfile.KINDS`): a :class:`symtrack.Scenario`, a
+    :class:`symtrack.control.MPCScenario`, a :class:`symtrack.studies.field.FieldSpec`, ..."""
+    return _load(kind, text, name, overrides)[1]
 
 
 def resolve_source(name_or_path, kind: str = "auto") -> Source:
     """The scenario of a sweep: a built-in name (of ``symtrack scenarios`` or of ``symtrack mpc``)
     or a TOML file. ``kind`` "auto" takes the kind whose loader accepts the scenario."""
-    if kind not in ("auto", *KINDS):
-        raise ScenarioError(f"--kind {kind!r} is not one of auto, {', '.join(KINDS)}")
+    kinds = sweep_kinds()
+    if kind not in ("auto", *kinds):
+        raise ScenarioError(f"--kind {kind!r} is not one of auto, {', '.join(kinds)}")
     if not isinstance(name_or_path, (str, os.PathLike)):
         raise ScenarioError(f"scenario {name_or_path!r}: give a built-in name or a TOML file path")
-    kinds = KINDS if kind == "auto" else (kind,)
     errors = []
-    for k in kinds:
-        found = scenario_text(name_or_path, PACKAGES[k])
+    for k in (kinds if kind == "auto" else (kind,)):
+        package = kinds[k].package
+        found = scenario_text(name_or_path, package)
         if found is None:
-            errors.append(f"not a built-in {k} scenario ({', '.join(package_names(PACKAGES[k]))})")
+            errors.append(f"not a built-in {k} scenario ({', '.join(package_names(package)) if package else 'none'})")
             continue
         text, name = found
         try:
@@ -114,37 +104,20 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 def run_one(task: dict) -> dict:
     """Run one task of a sweep (on a worker): ``task`` has ``id``, ``kind``, ``text``, ``name``
-    and ``overrides``. Returns ``{"id", "status": "ok" | "failed", "error", "files": {relative
-    path: bytes}, "wall_time_s", "cpu_time_s", "host", "pid"}``; any exception of the run is a failed run with
-    its message (the sweep goes on), an interrupt is not caught."""
+    and ``overrides`` (and ``modules``, imported first: :func:`symtrack.studies.runfile.worker_modules`);
+    the spec is run by its kind's ``sweep_run`` or ``run``. Returns ``{"id", "status": "ok" | "failed",
+    "error", "files": {relative path: bytes}, "wall_time_s", "cpu_time_s", "host", "pid"}``; any
+    exception of the run is a failed run with its message (the sweep goes on), an interrupt is not caught."""
     t0, c0 = time.perf_counter(), time.process_time()
     out = {"id": task["id"], "status": "ok", "error": "", "files": {}, "host": socket.gethostname(),
            "pid": os.getpid()}
     try:
-        sc = load(task["kind"], task["text"], task["name"], task["overrides"])
+        for module in task.get("modules", ()):  # a kind registered by a plug-in: its registration
+            importlib.import_module(module)
+        kind, spec = _load(task["kind"], task["text"], task["name"], task["overrides"])
         with tempfile.TemporaryDirectory(prefix="symtrack-sweep-run-") as scratch:
             folder = Path(scratch)
-            if task["kind"] == "simulate":
-                from ..api import simulate
-
-                simulate(sc, progress=False).write(folder)
-            elif task["kind"] == "field":
-                from .operations import OperationSpec, run_season
-
-                if isinstance(sc, OperationSpec):  # a field operation or a season (one traffic system)
-                    if sc.compare:
-                        raise ScenarioError("season.compare: a traffic comparison is a sweep of its own "
-                                            "(symtrack field ... --workers N, or vary season.tracks); "
-                                            "a sweep run drives one system: set season.tracks")
-                    run_season(sc, out=folder)
-                else:
-                    from .field import run_field_study
-
-                    run_field_study(sc, out=folder)
-            else:
-                from ..control.closedloop import run, write
-
-                write(folder, run(sc))
+            (kind.sweep_run or kind.run)(spec, folder, False)
             out["files"] = _files(folder)
     except Exception as err:  # noqa: BLE001 - a failed run is recorded with its message; the others go on
         out.update(status="failed", error=f"{type(err).__name__}: {err}".strip(), files={})
