@@ -37,7 +37,10 @@ def _mean_pressure(p):
 @pytest.mark.parametrize("soil", sorted(SOILS))
 def test_static_sinkage_is_bekkers_inverse_on_every_preset(soil):
     """The regularised law's static sinkage under the vehicle's mean pressure, and the four
-    cells of the homogeneous model at rest, within 1 % of Bekker's z = (p / k_eq)^(1/n)."""
+    cells of the homogeneous model at rest, within 1 % of Bekker's z = (p / k_eq)^(1/n) (on the heavy
+    clay within the bias of its regularisation's length); far deeper where Bekker's slope there is beyond
+    the regularisation's bound (the reference crawler on the heavy clay, which the soil-contact rule
+    refuses)."""
     p = _params(soil)
     values = LAW.values(p)
     law = ca.DM(values)
@@ -46,8 +49,18 @@ def test_static_sinkage_is_bekkers_inverse_on_every_preset(soil):
     z = manager.static_sinkage(ModelOptions(), p, np.zeros(3), np.zeros((5, 3)), pressures)
     z_oracle = static_sinkage(FN["soil"], law, np.zeros(3), np.zeros((5, 3)), pressures)
     assert np.max(np.abs(z - z_oracle)) < 1e-14
-    for pressure, zk in zip(pressures, z, strict=True):
-        assert zk == pytest.approx(LAW.static_sinkage(pressure, values), rel=1e-2)
+    bound = cell.BEKKER_SLOPE_OVER_ELASTIC_MAX * p["elastic_stiffness_Pa_per_m"]
+    beyond = [p["bekker_n"] * pk / LAW.static_sinkage(pk, values) > bound for pk in pressures]
+    assert any(beyond) == (soil == "heavy_clay_wes_40")
+    n, d = p["bekker_n"], values[4]
+    for pressure, zk, far in zip(pressures, z, beyond, strict=True):
+        zb = LAW.static_sinkage(pressure, values)
+        # within 1 %, or on the heavy clay within the bias the bound's length gives it, (1 - n) d / z in pressure
+        # and 1/n of it in sinkage (21 % at twice the mean pressure, 1 mm: a nearly flat law); beyond the bound
+        # far deeper
+        assert zk > 10 * zb if far else zk == pytest.approx(zb, rel=max(1e-2, 1.1 * (1 - n) / n * d / zb))
+    if any(beyond):
+        return  # (the homogeneous model's cells at rest below: Bekker's curve)
     model = SystemModel()
     x = static_state(model, p)
     y = np.array(model.outputs(x, [0, 0], model.param_vector(p))).ravel()
@@ -59,6 +72,42 @@ def test_static_sinkage_is_bekkers_inverse_on_every_preset(soil):
             # is on Bekker's curve too when its pressure is the larger
             if end == "idler" or pe >= y[model.output_index(f"p_idler_{track}_Pa")]:
                 assert z == pytest.approx(LAW.static_sinkage(pe, values), rel=1e-2), (end, track)
+
+
+def _bias_length(keq, n):
+    """The regularisation length of the bias alone (cell.bekker_regularisation_length's first part)."""
+    return min(ModelOptions().bekker_regularisation_m, cell.BEKKER_REG_RELATIVE_ERROR
+               * (cell.BEKKER_REG_REFERENCE_PRESSURE_PA / keq) ** (1 / n) / max(abs(1 - n), 1e-3))
+
+
+@pytest.mark.parametrize("soil", sorted(SOILS))
+def test_the_virgin_law_is_nowhere_steeper_than_the_slope_bound(soil):
+    """The regularised Bekker law's slope, steepest at z = 0 (and falling with z), is at most
+    cell.BEKKER_SLOPE_OVER_ELASTIC_MAX times the soil's elastic stiffness on every preset (n < 1: Bekker's own
+    slope is infinite there): at the bound on the WES heavy clay, whose length of the bias alone gave it 1e16
+    Pa/m; every other preset keeps the bias's length exactly (its figures and the validation's unchanged)."""
+    p = _params(soil)
+    values = LAW.values(p)
+    keq, n, k_e, d = values[0], values[1], values[2], values[4]
+    bound = cell.BEKKER_SLOPE_OVER_ELASTIC_MAX * k_e
+    z = np.geomspace(1e-16, 1.0, 241)  # (at z = 0 the piecewise slope is the branch below the surface's, 0)
+    _, slope = cell.reaction_pressure_and_slope(ca.DM(z), 0, 0, keq, n, k_e, values[3], d)
+    slope = np.array(slope).ravel()
+    if soil != "heavy_clay_wes_40":
+        assert d == _bias_length(keq, n)
+    if n >= 1:
+        return
+    assert np.all(slope[1:] <= slope[:-1] * (1 + 1e-12))
+    if soil == "heavy_clay_wes_40":
+        assert slope[0] == pytest.approx(bound, rel=1e-6)
+        assert d == pytest.approx((keq / bound) ** (1 / (1 - n)), rel=1e-12) and 2e-5 < d < 4e-5
+        assert keq * _bias_length(keq, n) ** (n - 1) > 1e15  # what the bias's length alone gave
+    else:
+        assert slope[0] < bound
+    # the regularised pressure is Bekker's within its bias (1 - n) d / z
+    zb = np.geomspace(100 * d, 1.0, 50)
+    p_reg = np.array(cell.bekker_pressure(ca.DM(zb), keq, n, d)).ravel()
+    assert np.all(np.abs(p_reg / (keq * zb ** n) - 1) <= 1.01 * (1 - n) * d / zb)
 
 
 def _cycle(hist, z, cycles, peak, law, beta):

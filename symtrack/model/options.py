@@ -34,7 +34,8 @@ MODEL_KEYS = {k.name: k for k in (
     Key("shear_smoothing_m", "the smoothing d of sign(j) = j / sqrt(j^2 + d^2) [m]", **_POSITIVE),
     Key("omega_smoothing_rad_s", "the smoothing of the internal resistance's direction [rad/s]", **_POSITIVE),
     Key("motion_smoothing_m_s", "the smoothing of the compaction resistance's direction [m/s]", **_POSITIVE),
-    Key("bekker_regularisation_m", "the regularisation of Bekker's z^n at zero sinkage [m]", **_POSITIVE),
+    Key("bekker_regularisation_m", "the regularisation of Bekker's z^n at zero sinkage, at most [m] (a soil whose law "
+        "would be steeper than 30 x its elastic stiffness there takes what bounds it: docs/model.md)", **_POSITIVE),
     Key("lateral_segments", "creep law: Gauss-Legendre segments along each track", 1, 64, integer=True),
     Key("gauss_points", "creep law: Gauss-Legendre points per segment", 1, 16, integer=True),
     Key("accel_newton_iterations", "Newton steps on the load transfer's acceleration loop", 0, 20, integer=True),

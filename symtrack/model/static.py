@@ -151,8 +151,10 @@ def _static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.
     if hull:
         resid_v = np.array(model.ode(x, ca.DM.zeros(2), p)).ravel()[rate_idx]
         if not np.all(np.abs(resid_v) < 1e-4):
-            raise SimulationError(f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m "
-                                  f"(heave, pitch and roll accelerations {resid_v} after Newton)")
+            raise SimulationError(
+                f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m: the damped settling "
+                f"and Newton found no rest (its heave, pitch and roll accelerations "
+                f"{np.array2string(resid_v, precision=3)} m/s^2, rad/s^2 there): {_NO_REST}")
     return x
 
 
@@ -163,6 +165,15 @@ def _static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.
 # default gave up there; tests/test_physics_fuzz.py)
 SETTLE_DAMPING_PER_S = 4.0
 SETTLE_TIME_S = 8.0
+
+
+# what the two failures of the 3D hull's start search say: the same cause, found at one step or the other
+_NO_REST = ("the soil may not carry the vehicle at rest here (a nearly flat pressure-sinkage law, a small "
+            "soil.bekker_n, sinks the most loaded track end without bound when the CG is off the contact's centre "
+            "or the ground slopes: the hull pitches or rolls towards it at every attitude; the start is searched "
+            "with no traction); check the soil, vehicle.cg_ahead_of_contact_centre_m and the slope, or, a vehicle "
+            "near the edge of rest, raise model.contact_segments (the segments resolve the pressure along a track, "
+            "which a nearly flat law makes steep)")
 
 
 def _settle_hull(model, x, p, pos_idx, acc_idx, guess):
@@ -185,8 +196,4 @@ def _settle_hull(model, x, p, pos_idx, acc_idx, guess):
     except RuntimeError as err:  # CVODES gave up (a soil too stiff for its step budget): the package's error
         raise SimulationError(f"the 3D vehicle's hull could not be settled on the ground to find its static start "
                               f"(CVODES over {SETTLE_TIME_S:g} s of damped settling: {str(err).splitlines()[-1]}); "
-                              f"Newton found no rest either: the soil may not carry the vehicle at rest here (a "
-                              f"nearly flat pressure-sinkage law, a small soil.bekker_n, sinks the most loaded track "
-                              f"end without bound when the CG is off the contact's centre or the ground slopes; the "
-                              f"start is searched with no traction); check the soil, "
-                              f"vehicle.cg_ahead_of_contact_centre_m and the slope") from err
+                              f"Newton found no rest either: {_NO_REST}") from err

@@ -150,8 +150,9 @@ class BekkerWong(SoilLaw):
 
     Law vector: k_eq = k_c / b + k_phi [N/m^(n+2)], n, the elastic stiffness K_e [Pa/m], kappa
     (the unloading-stiffness floor) and the regularisation length d [m] of the Bekker term
-    (:func:`~symtrack.soil.cell.bekker_regularisation_length`, capped at the model option
-    ``bekker_regularisation_m``).
+    (:func:`~symtrack.soil.cell.bekker_regularisation_length`: its bias's length capped at the model option
+    ``bekker_regularisation_m``, and at least the length that bounds the law's slope by
+    ``cell.BEKKER_SLOPE_OVER_ELASTIC_MAX`` times K_e).
     """
 
     name = "bekker_wong"
@@ -175,7 +176,8 @@ class BekkerWong(SoilLaw):
         keq = cell.k_eq(params["k_c_N_per_m_n1"], params["k_phi_N_per_m_n2"], params["track_width_m"])
         n = params["bekker_n"]
         return ca.vertcat(keq, n, params["elastic_stiffness_Pa_per_m"], params["unloading_stiffness_floor"],
-                          cell.bekker_regularisation_length(keq, n, self.opts.bekker_regularisation_m))
+                          cell.bekker_regularisation_length(keq, n, self.opts.bekker_regularisation_m,
+                                                          params["elastic_stiffness_Pa_per_m"]))
 
     def virgin_pressure(self, z, law):
         return cell.bekker_pressure(z, law[0], law[1], law[4])
