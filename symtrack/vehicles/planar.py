@@ -264,14 +264,15 @@ def shear_forces(j, omega, abs_om, v_k, vy, rz, x_front, dist, N, b, l, r, c, ph
         if lagged is None:
             s_pivot = x_front + vy * rz / (rz**2 + opts.pivot_smoothing_rad_s**2)
         else:
-            # the lagged slip's own zero a0 / a1, regularised on the slip's gradient a1 [1/m] by
-            # sliding_smoothing / l (below it the lateral slip turns by less than the sliding direction's
-            # smoothing over the whole contact: no sharp turn inside it to split at). Not through a yaw rate
-            # a1 r|omega|: at a standing sprocket that is below pivot_smoothing_rad_s, and the split then
-            # moved with omega; the quadrature's error moved with it, a slope dF/domega of -9e5 N s that no
-            # soil has, an unstable sprocket mode of 2e4 1/s (the physics fuzzer, seed 37, case 410)
+            # the lagged slip's own zero a0 / a1 = x_front + (a0 - a1 x_front) / a1, regularised on the slip's
+            # gradient a1 [1/m] by sliding_smoothing / l (below it the lateral slip turns by less than the
+            # sliding direction's smoothing over the whole contact: no sharp turn inside it to split at; at
+            # a1 = 0, straight running, the split stays at the CG's x as the quasi-static law's). Not through
+            # a yaw rate a1 r|omega|: at a standing sprocket that is below pivot_smoothing_rad_s, and the split
+            # then moved with omega; the quadrature's error moved with it, a slope dF/domega of -9e5 N s that
+            # no soil has, an unstable sprocket mode of 2e4 1/s (the physics fuzzer, seed 37, case 410)
             a1_reg = opts.sliding_smoothing / l
-            s_pivot = a0 * a1 / (a1**2 + a1_reg**2)
+            s_pivot = x_front + (a0 - a1 * x_front) * a1 / (a1**2 + a1_reg**2)
         s_zero = 2 * s_pivot - (1 - fwd) * l
         clip = lambda z: ca.fmin(ca.fmax(z, 0), l)  # noqa: E731
         s1 = clip(ca.fmin(s_pivot, s_zero))
