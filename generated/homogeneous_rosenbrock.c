@@ -66,6 +66,14 @@ extern "C" {
 #define casadi_f38 CASADI_PREFIX(f38)
 #define casadi_f39 CASADI_PREFIX(f39)
 #define casadi_f4 CASADI_PREFIX(f4)
+#define casadi_f40 CASADI_PREFIX(f40)
+#define casadi_f41 CASADI_PREFIX(f41)
+#define casadi_f42 CASADI_PREFIX(f42)
+#define casadi_f43 CASADI_PREFIX(f43)
+#define casadi_f44 CASADI_PREFIX(f44)
+#define casadi_f45 CASADI_PREFIX(f45)
+#define casadi_f46 CASADI_PREFIX(f46)
+#define casadi_f47 CASADI_PREFIX(f47)
 #define casadi_f5 CASADI_PREFIX(f5)
 #define casadi_f6 CASADI_PREFIX(f6)
 #define casadi_f7 CASADI_PREFIX(f7)
@@ -19658,8 +19666,54 @@ static int casadi_f30(const casadi_real** arg, casadi_real** res, casadi_int* iw
   return 0;
 }
 
-/* homogeneous_rosenbrock_controlled6:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+/* homogeneous_rosenbrock_keep6:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_keep7:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real *w1=w+0, w2;
+  const casadi_real *wr0;
+  /* #0: @0 = input[6][0] */
+  wr0 = arg[6] ? arg[6] : casadi_zeros;
+  /* #1: output[0][0] = @0 */
+  casadi_copy(wr0, 20, res[0]);
+  /* #2: @1 = input[7][0] */
+  casadi_copy(arg[7], 2, w1);
+  /* #3: output[1][0] = @1 */
+  casadi_copy(w1, 2, res[1]);
+  /* #4: @2 = input[8][0] */
+  w2 = arg[8] ? arg[8][0] : 0;
+  /* #5: output[2][0] = @2 */
+  if (res[2]) res[2][0] = w2;
+  /* #6: @2 = 0 */
+  w2 = 0.;
+  /* #7: output[3][0] = @2 */
+  if (res[3]) res[3][0] = w2;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled8:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f40(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real **res1=res+4, *w1=w+564, *w2=w+566, w4, *w5=w+568, *w6=w+588, *w7=w+590;
   const casadi_real **arg1=arg+6, *wr0, *wr3;
   /* #0: @0 = input[0][0] */
@@ -19704,9 +19758,297 @@ static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw
   return 0;
 }
 
+/* homogeneous_rosenbrock_halve7:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+657, *w01=w+677, *w02=w+679, w04, w05, *w06=w+681, *w07=w+683, *w08=w+703, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled8(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f40(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled8(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f40(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch7:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f37(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f39(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f38(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled7:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+736, *w02=w+738, w04, *w05=w+740, *w06=w+760, *w07=w+762, *w08=w+782, w09, w10, *w11=w+784;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch7(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f37(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_halve6:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
+static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *w00=w+837, *w01=w+857, *w02=w+859, w04, w05, *w06=w+861, *w07=w+863, *w08=w+883, w09, w10, w11;
+  const casadi_real **arg1=arg+9, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #5: @5 = input[4][0] */
+  w05 = arg[4] ? arg[4][0] : 0;
+  /* #6: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #7: @6 = input[5][0] */
+  casadi_copy(arg[5], 2, w06);
+  /* #8: {@7, @8, @9, @10} = homogeneous_rosenbrock_controlled7(@0, @1, @2, @3, @4, @6) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w07;
+  res1[1]=w08;
+  res1[2]=(&w09);
+  res1[3]=(&w10);
+  if (casadi_f36(arg1, res1, iw, w, 0)) return 1;
+  /* #9: @4 = 0.5 */
+  w04 = 5.0000000000000000e-01;
+  /* #10: @4 = (@4*@5) */
+  w04 *= w05;
+  /* #11: {@0, @1, @5, @11} = homogeneous_rosenbrock_controlled7(@7, @8, @2, @3, @4, @6) */
+  arg1[0]=w07;
+  arg1[1]=w08;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  arg1[5]=w06;
+  res1[0]=w00;
+  res1[1]=w01;
+  res1[2]=(&w05);
+  res1[3]=(&w11);
+  if (casadi_f36(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @0 */
+  casadi_copy(w00, 20, res[0]);
+  /* #13: output[1][0] = @1 */
+  casadi_copy(w01, 2, res[1]);
+  /* #14: @9 = fmax(@9,@5) */
+  w09  = casadi_fmax(w09,w05);
+  /* #15: output[2][0] = @9 */
+  if (res[2]) res[2][0] = w09;
+  /* #16: @9 = 1 */
+  w09 = 1.;
+  /* #17: @9 = (@9+@10) */
+  w09 += w10;
+  /* #18: @9 = (@9+@11) */
+  w09 += w11;
+  /* #19: output[3][0] = @9 */
+  if (res[3]) res[3][0] = w09;
+  return 0;
+}
+
+/* homogeneous_rosenbrock_branch6:(i0,i1[20],i2[2],i3[2],i4[26],i5,i6[2],i7[20],i8[2],i9)->(o0[20],o1[2],o2,o3) */
+static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  if (arg[0] ? casadi_to_int(*arg[0]) : 0) {
+    if (casadi_f35(arg+1, res, iw, w, 0)) return 1;
+  } else {
+    if (casadi_f34(arg+1, res, iw, w, 0)) return 1;
+  }
+  return 0;
+}
+
+/* homogeneous_rosenbrock_controlled6:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
+static int casadi_f32(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+916, *w02=w+918, w04, *w05=w+920, *w06=w+940, *w07=w+942, *w08=w+962, w09, w10, *w11=w+964;
+  casadi_real w12, w13;
+  const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
+  /* #0: @0 = input[0][0] */
+  wr00 = arg[0] ? arg[0] : casadi_zeros;
+  /* #1: @1 = input[1][0] */
+  casadi_copy(arg[1], 2, w01);
+  /* #2: @2 = input[2][0] */
+  casadi_copy(arg[2], 2, w02);
+  /* #3: @3 = input[3][0] */
+  wr03 = arg[3] ? arg[3] : casadi_zeros;
+  /* #4: @4 = input[4][0] */
+  w04 = arg[4] ? arg[4][0] : 0;
+  /* #5: {@5, @6, @7} = homogeneous_rosenbrock_step(@0, @1, @2, @3, @4) */
+  arg1[0]=wr00;
+  arg1[1]=w01;
+  arg1[2]=w02;
+  arg1[3]=wr03;
+  arg1[4]=(&w04);
+  res1[0]=w05;
+  res1[1]=w06;
+  res1[2]=w07;
+  if (casadi_f0(arg1, res1, iw, w, 0)) return 1;
+  /* #6: @8 = input[5][0] */
+  casadi_copy(arg[5], 2, w08);
+  /* #7: @9 = homogeneous_rosenbrock_error_ratio(@0, @5, @7, @8) */
+  arg1[0]=wr00;
+  arg1[1]=w05;
+  arg1[2]=w07;
+  arg1[3]=w08;
+  res1[0]=(&w09);
+  if (casadi_f8(arg1, res1, iw, w, 0)) return 1;
+  /* #8: @10 = @8[1] */
+  for (rr=(&w10), cs=w08+1; cs!=w08+2; cs+=1) *rr++ = *cs;
+  /* #9: @10 = (@9<=@10) */
+  w10  = (w09<=w10);
+  /* #10: @10 = (!@10) */
+  w10 = (! w10 );
+  /* #11: {@7, @11, @12, @13} = homogeneous_rosenbrock_branch6(@10, @0, @1, @2, @3, @4, @8, @5, @6, @9) */
+  arg1[0]=(&w10);
+  arg1[1]=wr00;
+  arg1[2]=w01;
+  arg1[3]=w02;
+  arg1[4]=wr03;
+  arg1[5]=(&w04);
+  arg1[6]=w08;
+  arg1[7]=w05;
+  arg1[8]=w06;
+  arg1[9]=(&w09);
+  res1[0]=w07;
+  res1[1]=w11;
+  res1[2]=(&w12);
+  res1[3]=(&w13);
+  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
+  /* #12: output[0][0] = @7 */
+  casadi_copy(w07, 20, res[0]);
+  /* #13: output[1][0] = @11 */
+  casadi_copy(w11, 2, res[1]);
+  /* #14: output[2][0] = @12 */
+  if (res[2]) res[2][0] = w12;
+  /* #15: output[3][0] = @13 */
+  if (res[3]) res[3][0] = w13;
+  return 0;
+}
+
 /* homogeneous_rosenbrock_halve5:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
 static int casadi_f31(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+657, *w01=w+677, *w02=w+679, w04, w05, *w06=w+681, *w07=w+683, *w08=w+703, w09, w10, w11;
+  casadi_real **res1=res+4, *w00=w+1017, *w01=w+1037, *w02=w+1039, w04, w05, *w06=w+1041, *w07=w+1043, *w08=w+1063, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -19783,7 +20125,7 @@ static int casadi_f29(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled5:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
 static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *rr, *w01=w+736, *w02=w+738, w04, *w05=w+740, *w06=w+760, *w07=w+762, *w08=w+782, w09, w10, *w11=w+784;
+  casadi_real **res1=res+4, *rr, *w01=w+1096, *w02=w+1098, w04, *w05=w+1100, *w06=w+1120, *w07=w+1122, *w08=w+1142, w09, w10, *w11=w+1144;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -19850,7 +20192,7 @@ static int casadi_f28(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_halve4:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
 static int casadi_f27(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+837, *w01=w+857, *w02=w+859, w04, w05, *w06=w+861, *w07=w+863, *w08=w+883, w09, w10, w11;
+  casadi_real **res1=res+4, *w00=w+1197, *w01=w+1217, *w02=w+1219, w04, w05, *w06=w+1221, *w07=w+1223, *w08=w+1243, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -19927,7 +20269,7 @@ static int casadi_f25(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled4:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
 static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *rr, *w01=w+916, *w02=w+918, w04, *w05=w+920, *w06=w+940, *w07=w+942, *w08=w+962, w09, w10, *w11=w+964;
+  casadi_real **res1=res+4, *rr, *w01=w+1276, *w02=w+1278, w04, *w05=w+1280, *w06=w+1300, *w07=w+1302, *w08=w+1322, w09, w10, *w11=w+1324;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -19994,7 +20336,7 @@ static int casadi_f24(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_halve3:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
 static int casadi_f23(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1017, *w01=w+1037, *w02=w+1039, w04, w05, *w06=w+1041, *w07=w+1043, *w08=w+1063, w09, w10, w11;
+  casadi_real **res1=res+4, *w00=w+1377, *w01=w+1397, *w02=w+1399, w04, w05, *w06=w+1401, *w07=w+1403, *w08=w+1423, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -20071,7 +20413,7 @@ static int casadi_f21(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled3:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
 static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *rr, *w01=w+1096, *w02=w+1098, w04, *w05=w+1100, *w06=w+1120, *w07=w+1122, *w08=w+1142, w09, w10, *w11=w+1144;
+  casadi_real **res1=res+4, *rr, *w01=w+1456, *w02=w+1458, w04, *w05=w+1460, *w06=w+1480, *w07=w+1482, *w08=w+1502, w09, w10, *w11=w+1504;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -20138,7 +20480,7 @@ static int casadi_f20(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_halve2:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
 static int casadi_f19(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1197, *w01=w+1217, *w02=w+1219, w04, w05, *w06=w+1221, *w07=w+1223, *w08=w+1243, w09, w10, w11;
+  casadi_real **res1=res+4, *w00=w+1557, *w01=w+1577, *w02=w+1579, w04, w05, *w06=w+1581, *w07=w+1583, *w08=w+1603, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -20215,7 +20557,7 @@ static int casadi_f17(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled2:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
 static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *rr, *w01=w+1276, *w02=w+1278, w04, *w05=w+1280, *w06=w+1300, *w07=w+1302, *w08=w+1322, w09, w10, *w11=w+1324;
+  casadi_real **res1=res+4, *rr, *w01=w+1636, *w02=w+1638, w04, *w05=w+1640, *w06=w+1660, *w07=w+1662, *w08=w+1682, w09, w10, *w11=w+1684;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -20282,7 +20624,7 @@ static int casadi_f16(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_halve1:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
 static int casadi_f15(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1377, *w01=w+1397, *w02=w+1399, w04, w05, *w06=w+1401, *w07=w+1403, *w08=w+1423, w09, w10, w11;
+  casadi_real **res1=res+4, *w00=w+1737, *w01=w+1757, *w02=w+1759, w04, w05, *w06=w+1761, *w07=w+1763, *w08=w+1783, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -20359,7 +20701,7 @@ static int casadi_f13(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled1:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
 static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *rr, *w01=w+1456, *w02=w+1458, w04, *w05=w+1460, *w06=w+1480, *w07=w+1482, *w08=w+1502, w09, w10, *w11=w+1504;
+  casadi_real **res1=res+4, *rr, *w01=w+1816, *w02=w+1818, w04, *w05=w+1820, *w06=w+1840, *w07=w+1842, *w08=w+1862, w09, w10, *w11=w+1864;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -20426,7 +20768,7 @@ static int casadi_f12(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_halve0:(x0[20],z0[2],u[2],p[26],h,ctl[2],x1[20],z1[2],r1)->(xf[20],zf[2],r,nh) */
 static int casadi_f11(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *w00=w+1557, *w01=w+1577, *w02=w+1579, w04, w05, *w06=w+1581, *w07=w+1583, *w08=w+1603, w09, w10, w11;
+  casadi_real **res1=res+4, *w00=w+1917, *w01=w+1937, *w02=w+1939, w04, w05, *w06=w+1941, *w07=w+1943, *w08=w+1963, w09, w10, w11;
   const casadi_real **arg1=arg+9, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -20502,7 +20844,7 @@ static int casadi_f9(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* outputs:(x[20],u[2],p[26])->(y[24]) */
-static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f41(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_real a000, a001, a002, a003, a004, a005, a006, a007, a008, a009, a010, a011;
   casadi_real a012, a013, a014, a015, a016, a017, a018, a019, a020, a021, a022, a023;
   casadi_real a024, a025, a026, a027, a028, a029, a030, a031, a032, a033, a034, a035;
@@ -23821,8 +24163,8 @@ static int casadi_f33(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled_column_step:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
 static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *rr, *w01=w+1636, *w02=w+1638, w04, *w05=w+1640, *w06=w+1660, *w07=w+1662, *w08=w+1682, w09, w10, *w11=w+1684;
-  casadi_real w12, w13, *w14=w+1686;
+  casadi_real **res1=res+5, *rr, *w01=w+1996, *w02=w+1998, w04, *w05=w+2000, *w06=w+2020, *w07=w+2022, *w08=w+2042, w09, w10, *w11=w+2044;
+  casadi_real w12, w13, *w14=w+2046;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -23884,7 +24226,7 @@ static int casadi_f7(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   arg1[1]=w02;
   arg1[2]=wr03;
   res1[0]=w14;
-  if (casadi_f33(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f41(arg1, res1, iw, w, 0)) return 1;
   /* #15: output[2][0] = @14 */
   casadi_copy(w14, 24, res[2]);
   /* #16: output[3][0] = @12 */
@@ -23906,7 +24248,7 @@ static int casadi_f5(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 
 /* homogeneous_rosenbrock_controlled_column:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],y[24],r,nh) */
 static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, w00, w01, *w03=w+1761, *w04=w+1763, *w06=w+1765, *w07=w+1767, *w08=w+1787, *w09=w+1789, w10, w11;
+  casadi_real **res1=res+5, w00, w01, *w03=w+2121, *w04=w+2123, *w06=w+2125, *w07=w+2127, *w08=w+2147, *w09=w+2149, w10, w11;
   const casadi_real **arg1=arg+6, *wr02, *wr05;
   /* #0: @0 = 0 */
   w00 = 0.;
@@ -23952,11 +24294,11 @@ static int casadi_f4(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
-static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+1863, *w01=w+1883, *w02=w+1885, w04, *w05=w+1887, *w06=w+1889, *w07=w+1909, *w08=w+1911, w09, w10, *w11=w+1935;
-  casadi_real w12, w13, *w14=w+1959, *w15=w+1961, w16, w17, *w18=w+1985, *w19=w+1987, w20, w21, *w22=w+2011, *w23=w+2013;
-  casadi_real w24, w25, *w26=w+2037, *w27=w+2039, w28, w29, *w30=w+2063, *w31=w+2065, w32, w33, *w34=w+2089, *w35=w+2091;
-  casadi_real w36, w37, *w38=w+2115, *w39=w+2117, w40, w41, *w42=w+2141, *w43=w+2143, w44, w45;
+static int casadi_f42(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2223, *w01=w+2243, *w02=w+2245, w04, *w05=w+2247, *w06=w+2249, *w07=w+2269, *w08=w+2271, w09, w10, *w11=w+2295;
+  casadi_real w12, w13, *w14=w+2319, *w15=w+2321, w16, w17, *w18=w+2345, *w19=w+2347, w20, w21, *w22=w+2371, *w23=w+2373;
+  casadi_real w24, w25, *w26=w+2397, *w27=w+2399, w28, w29, *w30=w+2423, *w31=w+2425, w32, w33, *w34=w+2449, *w35=w+2451;
+  casadi_real w36, w37, *w38=w+2475, *w39=w+2477, w40, w41, *w42=w+2501, *w43=w+2503, w44, w45;
   const casadi_real **arg1=arg+6, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24276,11 +24618,11 @@ static int casadi_f34(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10_acc10:(x0[20],z0[2],u[2x100],p[26x100],h[1x100],ctl[2x100])->(xf[20x100],zf[2x100],y[24x100],r[1x100],nh[1x100]) */
-static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2214, *w01=w+2234, *w06=w+2236, *w07=w+2436, *w08=w+2456, *w09=w+2696, *w10=w+2706, *w11=w+2716, *w12=w+2736, *w13=w+2976, *w14=w+2986;
-  casadi_real *w15=w+2996, *w16=w+3016, *w17=w+3256, *w18=w+3266, *w19=w+3276, *w20=w+3296, *w21=w+3536, *w22=w+3546, *w23=w+3556, *w24=w+3576, *w25=w+3816, *w26=w+3826;
-  casadi_real *w27=w+3836, *w28=w+3856, *w29=w+4096, *w30=w+4106, *w31=w+4116, *w32=w+4136, *w33=w+4376, *w34=w+4386, *w35=w+4396, *w36=w+4416, *w37=w+4656, *w38=w+4666;
-  casadi_real *w39=w+4676, *w40=w+4696, *w41=w+4936, *w42=w+4946, *w43=w+4956, *w44=w+4976, *w45=w+5216, *w46=w+5226;
+static int casadi_f43(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2574, *w01=w+2594, *w06=w+2596, *w07=w+2796, *w08=w+2816, *w09=w+3056, *w10=w+3066, *w11=w+3076, *w12=w+3096, *w13=w+3336, *w14=w+3346;
+  casadi_real *w15=w+3356, *w16=w+3376, *w17=w+3616, *w18=w+3626, *w19=w+3636, *w20=w+3656, *w21=w+3896, *w22=w+3906, *w23=w+3916, *w24=w+3936, *w25=w+4176, *w26=w+4186;
+  casadi_real *w27=w+4196, *w28=w+4216, *w29=w+4456, *w30=w+4466, *w31=w+4476, *w32=w+4496, *w33=w+4736, *w34=w+4746, *w35=w+4756, *w36=w+4776, *w37=w+5016, *w38=w+5026;
+  casadi_real *w39=w+5036, *w40=w+5056, *w41=w+5296, *w42=w+5306, *w43=w+5316, *w44=w+5336, *w45=w+5576, *w46=w+5586;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr04, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24306,7 +24648,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w08;
   res1[3]=w09;
   res1[4]=w10;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #7: output[0][0] = @6 */
   casadi_copy(w06, 200, res[0]);
   /* #8: {NULL, @0} = horzsplit(@6) */
@@ -24333,7 +24675,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w12;
   res1[3]=w13;
   res1[4]=w14;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #15: output[0][1] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+200);
   /* #16: {NULL, @0} = horzsplit(@6) */
@@ -24360,7 +24702,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w16;
   res1[3]=w17;
   res1[4]=w18;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #23: output[0][2] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+400);
   /* #24: {NULL, @0} = horzsplit(@6) */
@@ -24387,7 +24729,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w20;
   res1[3]=w21;
   res1[4]=w22;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #31: output[0][3] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+600);
   /* #32: {NULL, @0} = horzsplit(@6) */
@@ -24414,7 +24756,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w24;
   res1[3]=w25;
   res1[4]=w26;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #39: output[0][4] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+800);
   /* #40: {NULL, @0} = horzsplit(@6) */
@@ -24441,7 +24783,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w28;
   res1[3]=w29;
   res1[4]=w30;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #47: output[0][5] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1000);
   /* #48: {NULL, @0} = horzsplit(@6) */
@@ -24468,7 +24810,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w32;
   res1[3]=w33;
   res1[4]=w34;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #55: output[0][6] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1200);
   /* #56: {NULL, @0} = horzsplit(@6) */
@@ -24495,7 +24837,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w36;
   res1[3]=w37;
   res1[4]=w38;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #63: output[0][7] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1400);
   /* #64: {NULL, @0} = horzsplit(@6) */
@@ -24522,7 +24864,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w40;
   res1[3]=w41;
   res1[4]=w42;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #71: output[0][8] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1600);
   /* #72: {NULL, @0} = horzsplit(@6) */
@@ -24549,7 +24891,7 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w44;
   res1[3]=w45;
   res1[4]=w46;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #79: output[0][9] = @6 */
   if (res[0]) casadi_copy(w06, 200, res[0]+1800);
   /* #80: output[1][0] = @7 */
@@ -24637,11 +24979,11 @@ static int casadi_f35(const casadi_real** arg, casadi_real** res, casadi_int* iw
 
 /* homogeneous_rosenbrock_controlled_acc256:(x0[20],z0[2],u[2x256],p[26x256],h[1x256],ctl[2x256])->(xf[20x256],zf[2x256],y[24x256],r[1x256],nh[1x256]) */
 static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+5546, *w01=w+5566, *w02=w+5568, w04, *w05=w+5570, *w06=w+5572, *w07=w+5592, *w08=w+5594, w09, w10, *w11=w+5618;
-  casadi_real w12, w13, *w14=w+5642, *w15=w+5644, w16, w17, *w18=w+5668, *w19=w+5670, w20, w21, *w22=w+5694, *w23=w+5696;
-  casadi_real w24, w25, *w26=w+5720, *w27=w+5722, w28, w29, *w33=w+5746, *w34=w+5946, *w35=w+5966, *w36=w+6206, *w37=w+6216, *w38=w+6226;
-  casadi_real *w39=w+6246, *w40=w+6486, *w41=w+6496, *w42=w+6506, *w43=w+6526, *w44=w+6766, *w45=w+6776, *w46=w+6786, *w47=w+6806, *w48=w+7046, *w49=w+7056, *w50=w+7066;
-  casadi_real *w51=w+7086, *w52=w+7326, *w53=w+7336, *w57=w+7346, *w58=w+9346, *w59=w+9546, *w60=w+11946, *w61=w+12046, *w62=w+12146, *w63=w+12346, *w64=w+14746, *w65=w+14846;
+  casadi_real **res1=res+5, *w00=w+5906, *w01=w+5926, *w02=w+5928, w04, *w05=w+5930, *w06=w+5932, *w07=w+5952, *w08=w+5954, w09, w10, *w11=w+5978;
+  casadi_real w12, w13, *w14=w+6002, *w15=w+6004, w16, w17, *w18=w+6028, *w19=w+6030, w20, w21, *w22=w+6054, *w23=w+6056;
+  casadi_real w24, w25, *w26=w+6080, *w27=w+6082, w28, w29, *w33=w+6106, *w34=w+6306, *w35=w+6326, *w36=w+6566, *w37=w+6576, *w38=w+6586;
+  casadi_real *w39=w+6606, *w40=w+6846, *w41=w+6856, *w42=w+6866, *w43=w+6886, *w44=w+7126, *w45=w+7136, *w46=w+7146, *w47=w+7166, *w48=w+7406, *w49=w+7416, *w50=w+7426;
+  casadi_real *w51=w+7446, *w52=w+7686, *w53=w+7696, *w57=w+7706, *w58=w+9706, *w59=w+9906, *w60=w+12306, *w61=w+12406, *w62=w+12506, *w63=w+12706, *w64=w+15106, *w65=w+15206;
   const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32, *wr33, *wr54, *wr55, *wr56;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -24805,7 +25147,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w35;
   res1[3]=w36;
   res1[4]=w37;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+120);
   /* #44: {NULL, @0} = horzsplit(@33) */
@@ -24832,7 +25174,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w39;
   res1[3]=w40;
   res1[4]=w41;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #51: output[0][7] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+320);
   /* #52: {NULL, @0} = horzsplit(@33) */
@@ -24859,7 +25201,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w43;
   res1[3]=w44;
   res1[4]=w45;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #59: output[0][8] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+520);
   /* #60: {NULL, @0} = horzsplit(@33) */
@@ -24886,7 +25228,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w47;
   res1[3]=w48;
   res1[4]=w49;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #67: output[0][9] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+720);
   /* #68: {NULL, @0} = horzsplit(@33) */
@@ -24913,7 +25255,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w51;
   res1[3]=w52;
   res1[4]=w53;
-  if (casadi_f34(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f42(arg1, res1, iw, w, 0)) return 1;
   /* #75: output[0][10] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+920);
   /* #76: {NULL, @0} = horzsplit(@33) */
@@ -24940,7 +25282,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w59;
   res1[3]=w60;
   res1[4]=w61;
-  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f43(arg1, res1, iw, w, 0)) return 1;
   /* #83: output[0][11] = @57 */
   if (res[0]) casadi_copy(w57, 2000, res[0]+1120);
   /* #84: {NULL, @0} = horzsplit(@57) */
@@ -24967,7 +25309,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   res1[2]=w63;
   res1[3]=w64;
   res1[4]=w65;
-  if (casadi_f35(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f43(arg1, res1, iw, w, 0)) return 1;
   /* #91: output[0][12] = @57 */
   if (res[0]) casadi_copy(w57, 2000, res[0]+3120);
   /* #92: output[1][0] = @7 */
@@ -25080,7 +25422,7 @@ static int casadi_f3(const casadi_real** arg, casadi_real** res, casadi_int* iw,
 /* homogeneous_rosenbrock_controlled_chunk256:(x0[20],z0[2],U[2x256],H[1x256],p[26],ctl[2])->(X[20x256],Z[2x256],Y[24x256],R[1x256],NH[1x256]) */
 static int casadi_f2(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+5, *w01=w+18175, *w04=w+18177, *w06=w+24833, *w07=w+24835, *w08=w+25347, *w09=w+30467, *w10=w+30979, *w11=w+37123, *w12=w+37379;
+  casadi_real **res1=res+5, *w01=w+18535, *w04=w+18537, *w06=w+25193, *w07=w+25195, *w08=w+25707, *w09=w+30827, *w10=w+31339, *w11=w+37483, *w12=w+37739;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -25202,27 +25544,27 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk25
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 198;
-  if (sz_res) *sz_res = 110;
+  if (sz_arg) *sz_arg = 248;
+  if (sz_res) *sz_res = 134;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 37635;
+  if (sz_w) *sz_w = 37995;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 198*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 110*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 248*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 134*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 37635*sizeof(casadi_real);
+  if (sz_w) *sz_w = 37995*sizeof(casadi_real);
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled_column_acc10:(x0[20],z0[2],u[2x10],p[26x10],h[1x10],ctl[2x10])->(xf[20x10],zf[2x10],y[24x10],r[1x10],nh[1x10]) */
-static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+1863, *w01=w+1883, *w02=w+1885, w04, *w05=w+1887, *w06=w+1889, *w07=w+1909, *w08=w+1911, w09, w10, *w11=w+1935;
-  casadi_real w12, w13, *w14=w+1959, *w15=w+1961, w16, w17, *w18=w+1985, *w19=w+1987, w20, w21, *w22=w+2011, *w23=w+2013;
-  casadi_real w24, w25, *w26=w+2037, *w27=w+2039, w28, w29, *w30=w+2063, *w31=w+2065, w32, w33, *w34=w+2089, *w35=w+2091;
-  casadi_real w36, w37, *w38=w+2115, *w39=w+2117, w40, w41, *w42=w+2141, *w43=w+2143, w44, w45;
+static int casadi_f46(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2223, *w01=w+2243, *w02=w+2245, w04, *w05=w+2247, *w06=w+2249, *w07=w+2269, *w08=w+2271, w09, w10, *w11=w+2295;
+  casadi_real w12, w13, *w14=w+2319, *w15=w+2321, w16, w17, *w18=w+2345, *w19=w+2347, w20, w21, *w22=w+2371, *w23=w+2373;
+  casadi_real w24, w25, *w26=w+2397, *w27=w+2399, w28, w29, *w30=w+2423, *w31=w+2425, w32, w33, *w34=w+2449, *w35=w+2451;
+  casadi_real w36, w37, *w38=w+2475, *w39=w+2477, w40, w41, *w42=w+2501, *w43=w+2503, w44, w45;
   const casadi_real **arg1=arg+6, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -25542,10 +25884,10 @@ static int casadi_f38(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_acc16:(x0[20],z0[2],u[2x16],p[26x16],h[1x16],ctl[2x16])->(xf[20x16],zf[2x16],y[24x16],r[1x16],nh[1x16]) */
-static int casadi_f37(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+5, *w00=w+2214, *w01=w+2234, *w02=w+2236, w04, *w05=w+2238, *w06=w+2240, *w07=w+2260, *w08=w+2262, w09, w10, *w11=w+2286;
-  casadi_real w12, w13, *w14=w+2310, *w15=w+2312, w16, w17, *w18=w+2336, *w19=w+2338, w20, w21, *w22=w+2362, *w23=w+2364;
-  casadi_real w24, w25, *w26=w+2388, *w27=w+2390, w28, w29, *w33=w+2414, *w34=w+2614, *w35=w+2634, *w36=w+2874, *w37=w+2884;
+static int casadi_f45(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+5, *w00=w+2574, *w01=w+2594, *w02=w+2596, w04, *w05=w+2598, *w06=w+2600, *w07=w+2620, *w08=w+2622, w09, w10, *w11=w+2646;
+  casadi_real w12, w13, *w14=w+2670, *w15=w+2672, w16, w17, *w18=w+2696, *w19=w+2698, w20, w21, *w22=w+2722, *w23=w+2724;
+  casadi_real w24, w25, *w26=w+2748, *w27=w+2750, w28, w29, *w33=w+2774, *w34=w+2974, *w35=w+2994, *w36=w+3234, *w37=w+3244;
   const casadi_real **arg1=arg+6, *wr00, *wr03, *wr06, *wr30, *wr31, *wr32;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -25709,7 +26051,7 @@ static int casadi_f37(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w35;
   res1[3]=w36;
   res1[4]=w37;
-  if (casadi_f38(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f46(arg1, res1, iw, w, 0)) return 1;
   /* #43: output[0][6] = @33 */
   if (res[0]) casadi_copy(w33, 200, res[0]+120);
   /* #44: output[1][0] = @7 */
@@ -25772,9 +26114,9 @@ static int casadi_f37(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 /* homogeneous_rosenbrock_controlled_chunk16:(x0[20],z0[2],U[2x16],H[1x16],p[26],ctl[2])->(X[20x16],Z[2x16],Y[24x16],R[1x16],NH[1x16]) */
-static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+static int casadi_f44(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   casadi_int i;
-  casadi_real **res1=res+5, *w01=w+3223, *w04=w+3225, *w06=w+3641, *w07=w+3643, *w08=w+3675, *w09=w+3995, *w10=w+4027, *w11=w+4411, *w12=w+4427;
+  casadi_real **res1=res+5, *w01=w+3583, *w04=w+3585, *w06=w+4001, *w07=w+4003, *w08=w+4035, *w09=w+4355, *w10=w+4387, *w11=w+4771, *w12=w+4787;
   const casadi_real **arg1=arg+6, *wr00, *wr02, *wr03, *wr05;
   /* #0: @0 = input[0][0] */
   wr00 = arg[0] ? arg[0] : casadi_zeros;
@@ -25808,7 +26150,7 @@ static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw
   res1[2]=w10;
   res1[3]=w11;
   res1[4]=w12;
-  if (casadi_f37(arg1, res1, iw, w, 0)) return 1;
+  if (casadi_f45(arg1, res1, iw, w, 0)) return 1;
   /* #9: output[0][0] = @8 */
   casadi_copy(w08, 320, res[0]);
   /* #10: output[1][0] = @9 */
@@ -25823,7 +26165,7 @@ static int casadi_f36(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f36(arg, res, iw, w, mem);
+  return casadi_f44(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_checkout(void) {
@@ -25896,24 +26238,24 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_chunk16
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 192;
-  if (sz_res) *sz_res = 105;
+  if (sz_arg) *sz_arg = 242;
+  if (sz_res) *sz_res = 129;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 4443;
+  if (sz_w) *sz_w = 4803;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 192*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 105*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 242*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 129*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 4443*sizeof(casadi_real);
+  if (sz_w) *sz_w = 4803*sizeof(casadi_real);
   return 0;
 }
 
 /* homogeneous_rosenbrock_controlled_step:(x0[20],z0[2],u[2],p[26],h,ctl[2])->(xf[20],zf[2],r,nh) */
-static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
-  casadi_real **res1=res+4, *rr, *w01=w+1636, *w02=w+1638, w04, *w05=w+1640, *w06=w+1660, *w07=w+1662, *w08=w+1682, w09, w10, *w11=w+1684;
+static int casadi_f47(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
+  casadi_real **res1=res+4, *rr, *w01=w+1996, *w02=w+1998, w04, *w05=w+2000, *w06=w+2020, *w07=w+2022, *w08=w+2042, w09, w10, *w11=w+2044;
   casadi_real w12, w13;
   const casadi_real **arg1=arg+6, *cs, *wr00, *wr03;
   /* #0: @0 = input[0][0] */
@@ -25979,7 +26321,7 @@ static int casadi_f39(const casadi_real** arg, casadi_real** res, casadi_int* iw
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem){
-  return casadi_f39(arg, res, iw, w, mem);
+  return casadi_f47(arg, res, iw, w, mem);
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step_checkout(void) {
@@ -26050,18 +26392,18 @@ CASADI_SYMBOL_EXPORT const casadi_int* homogeneous_rosenbrock_controlled_step_sp
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 161;
-  if (sz_res) *sz_res = 79;
+  if (sz_arg) *sz_arg = 211;
+  if (sz_res) *sz_res = 103;
   if (sz_iw) *sz_iw = 0;
-  if (sz_w) *sz_w = 1686;
+  if (sz_w) *sz_w = 2046;
   return 0;
 }
 
 CASADI_SYMBOL_EXPORT int homogeneous_rosenbrock_controlled_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w) {
-  if (sz_arg) *sz_arg = 161*sizeof(const casadi_real*);
-  if (sz_res) *sz_res = 79*sizeof(casadi_real*);
+  if (sz_arg) *sz_arg = 211*sizeof(const casadi_real*);
+  if (sz_res) *sz_res = 103*sizeof(casadi_real*);
   if (sz_iw) *sz_iw = 0*sizeof(casadi_int);
-  if (sz_w) *sz_w = 1686*sizeof(casadi_real);
+  if (sz_w) *sz_w = 2046*sizeof(casadi_real);
   return 0;
 }
 

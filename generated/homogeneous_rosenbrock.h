@@ -67,10 +67,10 @@ const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_in(casadi_
 const casadi_int* homogeneous_rosenbrock_controlled_chunk256_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_controlled_chunk256_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_controlled_chunk256_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_controlled_chunk256_SZ_ARG 198
-#define homogeneous_rosenbrock_controlled_chunk256_SZ_RES 110
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_ARG 248
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_RES 134
 #define homogeneous_rosenbrock_controlled_chunk256_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_chunk256_SZ_W 37635
+#define homogeneous_rosenbrock_controlled_chunk256_SZ_W 37995
 int homogeneous_rosenbrock_controlled_chunk16(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_controlled_chunk16_checkout(void);
 void homogeneous_rosenbrock_controlled_chunk16_release(int mem);
@@ -85,10 +85,10 @@ const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_in(casadi_i
 const casadi_int* homogeneous_rosenbrock_controlled_chunk16_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_controlled_chunk16_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_controlled_chunk16_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_controlled_chunk16_SZ_ARG 192
-#define homogeneous_rosenbrock_controlled_chunk16_SZ_RES 105
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_ARG 242
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_RES 129
 #define homogeneous_rosenbrock_controlled_chunk16_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_chunk16_SZ_W 4443
+#define homogeneous_rosenbrock_controlled_chunk16_SZ_W 4803
 int homogeneous_rosenbrock_controlled_step(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem);
 int homogeneous_rosenbrock_controlled_step_checkout(void);
 void homogeneous_rosenbrock_controlled_step_release(int mem);
@@ -103,10 +103,10 @@ const casadi_int* homogeneous_rosenbrock_controlled_step_sparsity_in(casadi_int 
 const casadi_int* homogeneous_rosenbrock_controlled_step_sparsity_out(casadi_int i);
 int homogeneous_rosenbrock_controlled_step_work(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
 int homogeneous_rosenbrock_controlled_step_work_bytes(casadi_int *sz_arg, casadi_int* sz_res, casadi_int *sz_iw, casadi_int *sz_w);
-#define homogeneous_rosenbrock_controlled_step_SZ_ARG 161
-#define homogeneous_rosenbrock_controlled_step_SZ_RES 79
+#define homogeneous_rosenbrock_controlled_step_SZ_ARG 211
+#define homogeneous_rosenbrock_controlled_step_SZ_RES 103
 #define homogeneous_rosenbrock_controlled_step_SZ_IW 0
-#define homogeneous_rosenbrock_controlled_step_SZ_W 1686
+#define homogeneous_rosenbrock_controlled_step_SZ_W 2046
 void homogeneous_rosenbrock_casadi_version(int* major, int* minor, int* patch);
 int homogeneous_rosenbrock_casadi_int_size(void);
 int homogeneous_rosenbrock_casadi_real_size(void);

@@ -98,3 +98,28 @@ def test_a_non_finite_step_keeps_the_run_up_to_the_intervals_finished_before_it(
     assert n == 1 + calls["steps"] + 5 and part.t[-1] > 0.0
     np.testing.assert_array_equal(part.t, whole.t[:n])
     np.testing.assert_array_equal(part.X, whole.X[:n])
+
+
+def test_a_chunk_that_ends_non_finite_counts_its_earlier_steps_above_the_tolerance(model, monkeypatch):
+    """A chunk whose state goes non-finite at its step 5 after a step kept 40 x its tolerance (injected into the
+    third call's chunk): the incomplete run's fixed_step_error_max counts that step (it said 0.0, no step above
+    the tolerance, where the physics fuzzer's seed 37, case 410 at 5 ms steps had kept steps 40 x its
+    tolerance before it went non-finite)."""
+    from symtrack.integrators import fixed_step
+    from symtrack.simulation.loop import IncompleteRun
+
+    calls = {"n": 0}
+    call = fixed_step.Chunk.__call__
+
+    def poisoned(self):
+        call(self)
+        calls["n"] += 1
+        if calls["n"] == 3:
+            self.R[2] = 40.0
+            self.X[5:] = np.nan
+            self.R[5:] = np.nan
+
+    monkeypatch.setattr(fixed_step.Chunk, "__call__", poisoned)
+    with pytest.raises(IncompleteRun, match="non-finite state") as err:
+        run_once(load_scenario(COAST), model)
+    assert summarise(err.value.partial)["fixed_step_error_max"] == pytest.approx(40.0)

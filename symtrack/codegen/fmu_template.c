@@ -18,7 +18,7 @@
  *   then one shorter Rosenbrock step to the communication point (a master's last step to its stop
  *   time, a variable-step master's steps); h <= 0 is fmi2Error;
  * - every step is error-controlled as the Python run's (FMU_TOLERANCE, the scenario's
- *   run.fixed_step_tolerance): halved while its error estimate exceeds the tolerance, down to 1/64 of
+ *   run.fixed_step_tolerance): halved while its error estimate exceeds the tolerance, down to 1/256 of
  *   its length; a step still above it is kept, reported once and the fmi2DoStep returns fmi2Warning;
  * - the parameters (vehicle, soil, start pose) have variability "fixed": settable until
  *   fmi2ExitInitializationMode, which computes the start state from them;
@@ -447,7 +447,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
   }
   /* the steps (n of hs, then the shorter one, last, when > 0), each through the generated controlled step
      as the Python run's (symtrack/integrators/fixed_step.py: halved while its estimate exceeds the
-     tolerance, down to 1/64; a step still above it is kept and reported once, fmi2Warning) */
+     tolerance, down to 1/256; a step still above it is kept and reported once, fmi2Warning) */
   static const double ctl[2] = {FMU_TOLERANCE, FMU_TOLERANCE_ON ? 1.0 : INFINITY};
   fmi2Status status = fmi2OK;
   double xn[FMU_NX], zn[FMU_NZ], r, nh;
@@ -463,7 +463,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
     for (int i = 0; i < FMU_NX; i++)
       if (!isfinite(xn[i]) || !isfinite(r)) {
         c->phase = ST_ERROR;
-        return FAIL(c, "fmi2DoStep: non-finite state %s at t = %.17g s even in steps of 1/64 of the fixed step "
+        return FAIL(c, "fmi2DoStep: non-finite state %s at t = %.17g s even in steps of 1/256 of the fixed step "
                     "(the vehicle left the model's domain)", fmu_state_names[i], tk + hk);
       }
     if (r > c->error_max) c->error_max = r;
@@ -472,7 +472,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint, fm
       status = fmi2Warning;
       if (!c->warned) {
         logf_(c, fmi2Warning, "logStatusWarning", "fmi2DoStep: the error estimate of the step at t = %.17g s stays "
-              "%.3g x its tolerance %g at 1/64 of the fixed step; the step was kept (compare with a variable-step "
+              "%.3g x its tolerance %g at 1/256 of the fixed step; the step was kept (compare with a variable-step "
               "integrator)", tk, r, FMU_TOLERANCE);
         c->warned = 1;
       }

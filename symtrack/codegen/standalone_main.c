@@ -27,7 +27,7 @@
 #include "homogeneous_validation.h"
 
 /* each step error-controlled as the Python run's (symtrack/integrators/fixed_step.py: halved while its
-   estimate exceeds the tolerance, down to 1/64 of its length) */
+   estimate exceeds the tolerance, down to 1/256 of its length) */
 #define F(name) homogeneous_rosenbrock_controlled_step##name
 
 static const casadi_real **g_arg;

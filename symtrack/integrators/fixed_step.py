@@ -8,7 +8,7 @@ difference from the method's embedded solution,
 :func:`symtrack.native.rosenbrock.step_and_error_expressions`). In the generated C
 (:func:`symtrack.native.generate.controlled_chunks`), a step whose estimate exceeds
 tolerance max(|x0|, |x1|) + FIXED_STEP_ATOL in any differential state is replaced by two steps of
-half its length, each controlled the same way, down to 2^-FIXED_STEP_MAX_HALVINGS of the step. A
+half its length, each controlled the same way, down to 2^-FIXED_STEP_MAX_HALVINGS (1/256) of the step. A
 step still above its tolerance there is kept, with a warning (once per run) and its ratio in
 ``error_max`` (a kink of the dynamics, such as the shear law's at the idle instant of the
 validation, keeps the estimate up however short the step); a non-finite state stops the run with
@@ -131,7 +131,7 @@ class FixedStepper:
             err.steps_done = j  # the chunk's rows before it are sound (BatchPlant.advance keeps them)
             raise err
         if self.tolerance > 0 and not np.all(ratio <= 1.0) and not self.warned:
-            # a step still above its tolerance at 1/64 of its length: kept (a kink of the dynamics, where the
+            # a step still above its tolerance at 1/256 of its length: kept (a kink of the dynamics, where the
             # estimate does not fall with the step, would otherwise stop a sound run), said once per run
             j = int(np.nonzero(~(ratio <= 1.0))[0][0])
             log.warning("the compiled Rosenbrock's error estimate%s stays %.3g x its tolerance in steps of %.3g s "

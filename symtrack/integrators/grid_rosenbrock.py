@@ -18,7 +18,7 @@ last stage's increment, the method's embedded error estimate, over FIXED_STEP_TO
 FIXED_STEP_ATOL in the vehicle's differential states and the channels' sinkage:
 :mod:`symtrack.native.grid_rosenbrock`, which says why not the channels' rate). A macro step whose
 ratio exceeds 1, or whose state is not finite, is taken again in steps of half the length (two calls of
-the same compiled code), down to 2^-FIXED_STEP_MAX_HALVINGS of the step. A macro step still above its
+the same compiled code), down to 2^-GRID_MAX_HALVINGS of the step. A macro step still above its
 tolerance there is kept with a warning (once per run); ``fixed_step_error_max`` in summary.json is the
 largest ratio kept. ``run.fixed_step_tolerance = 0``: no step halved, the ratios measured.
 """
@@ -34,7 +34,6 @@ import numpy as np
 
 from ..foundations.errors import SimulationError
 from ..native.grid_rosenbrock import step_functions
-from ..native.rosenbrock import FIXED_STEP_MAX_HALVINGS
 from ..terrain.channels import NF, NG
 from ..toolchain import BuildSpec, build, casadi_tag, compiler, digest
 from ..vehicles.planar import codegen_options
@@ -43,6 +42,11 @@ from .settings import FIXED_STEP_TOLERANCE, substeps
 __all__ = ["MAX_STEP_S", "PACK_SLOTS", "GridRosenbrockStepper", "grid_library"]
 
 log = logging.getLogger("symtrack.terrain")
+# how many times a macro step is halved at most (to 1/64 of it, as the terrain engine's vehicle step,
+# VEHICLE_MAX_HALVINGS): each level takes the whole macro step again in uniform steps (2^level calls), so the
+# homogeneous chunks' deeper limit (symtrack.native.rosenbrock.FIXED_STEP_MAX_HALVINGS, halving one step
+# where it is needed) is not taken here
+GRID_MAX_HALVINGS = 6
 
 BUILD_VERSION = 1
 # the active channels are packed into calls of a multiple of PACK_SLOTS slots (one compiled library
@@ -135,7 +139,7 @@ class GridRosenbrockStepper:
         z0 = self.z if self.z is not None else np.array(self.model.accel(x, u, p)).ravel()
         w_start, p_call = np.concatenate([x[vs], z0]), np.concatenate([p[:npv + NG], q_p.ravel()])
         on = self.tolerance > 0
-        for level in range(FIXED_STEP_MAX_HALVINGS + 1 if on else 1):
+        for level in range(GRID_MAX_HALVINGS + 1 if on else 1):
             # 2^level calls of n steps of dt / (n 2^level): the same compiled code (module doc)
             xc1, w1, ratio = xc_p.ravel(), w_start, 0.0
             for _ in range(2 ** level):
@@ -147,7 +151,7 @@ class GridRosenbrockStepper:
             finite = np.all(np.isfinite(xc1)) and np.all(np.isfinite(w1)) and np.isfinite(ratio)
             if finite and ratio <= 1.0:
                 break
-            if level < FIXED_STEP_MAX_HALVINGS and on:
+            if level < GRID_MAX_HALVINGS and on:
                 self.n_halved += n * 2 ** level  # each of these steps is taken again as two halves
         if not finite:
             raise SimulationError("the grid rosenbrock integrator returned a non-finite state (steps of "

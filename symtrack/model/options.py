@@ -126,7 +126,9 @@ class ModelOptions:
         docs/turning.md, "Nonlinear MPC on the shear law"); not for simulation: with it a track needs
         a slip of order d to develop its tractive force.
     pivot_smoothing_rad_s: the pivot s = x_front + v/r_z is computed as x_front + v r_z/(r_z^2 + e^2),
-        e this yaw rate; it only places a split point (the integral does not depend on it).
+        e this yaw rate ("shear_quasistatic"; "shear" places it at its lagged slip's zero, regularised by
+        sliding_smoothing / l); it only places a split point (the integral depends on it through the
+        quadrature's error alone).
     lateral_segments, gauss_points: the "creep" law is integrated along each track with composite
         Gauss-Legendre quadrature (segments x points per segment); the "shear" law too when
         lateral_split is false.
