@@ -46,14 +46,16 @@ def test_bad_input_fails_clearly_and_writes_nothing(tmp_path, capsys):
 def test_a_shortened_builtin_run_ends_by_duration(tmp_path, caplog):
     out = tmp_path / "short"
     # 0.5 s is not enough to cover 20 m after the idle event at 4 s: the run ends by duration
+    # (without figures: the summary and the log are what is checked)
     assert main(["simulate", "validation", "--out", str(out), "--quiet", "--set", "run.duration_s=0.5",
-                 "--set", "run.integrator=rosenbrock"]) == 0
+                 "--set", "run.integrator=rosenbrock", "--set", "run.figures=false"]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert s["stopped_by"] == "duration" and s["sim_time_s"] == 0.5 and s["distance_stop_reached"] is False
     assert "before covering run.stop_after_distance_m" in caplog.text
     # the distance stop switched off
     assert main(["simulate", "validation", "--out", str(out), "--quiet", "--set", "run.duration_s=0.3",
-                 "--set", "run.stop_after_distance_m=none", "--set", "run.integrator=rosenbrock"]) == 0
+                 "--set", "run.stop_after_distance_m=none", "--set", "run.integrator=rosenbrock",
+                 "--set", "run.figures=false"]) == 0
     s = json.loads((out / "summary.json").read_text())
     assert s["stopped_by"] == "duration" and "distance_stop_reached" not in s and s["sim_time_s"] == 0.3
 

@@ -44,6 +44,20 @@ def study(tmp_path_factory):
     return spec, run_field_study(spec, out=out), out
 
 
+@pytest.fixture
+def data_only(monkeypatch):
+    """The study's folder without its drawings: each pattern's data files only (field.npz, passes.csv, the
+    counts; ``_pattern_files(figures=False)``, the checkpoint's) and a stand-in for comparison.png. For the
+    tests of resuming, interrupting and counting, which read the data files: the maps and the comparison were
+    most of their CPU (12 of 16 s); they are drawn and checked in test_output_files_and_their_schema."""
+    from symtrack.studies import field as field_module
+    from symtrack.studies import field_plots
+
+    pattern_files = field_module._pattern_files
+    monkeypatch.setattr(field_module, "_pattern_files", lambda spec, pr, figures=True: pattern_files(spec, pr, False))
+    monkeypatch.setattr(field_plots, "comparison_png", lambda figures: b"not drawn")
+
+
 def _expected_counts(spec, lines, tol_lat, tol_long):
     """Per cell: the passes that surely load it and the passes that may (the cells within tol of a
     swept contact's edge are the undecided ones), from the pass geometry alone: each track's
@@ -212,7 +226,7 @@ def test_bad_spec_values_are_refused_with_the_key_named(override, key, tmp_path)
     assert not out.exists() or not any(out.iterdir())
 
 
-def test_the_field_study_is_a_sweep_kind():
+def test_the_field_study_is_a_sweep_kind(data_only):
     p = plan("field_traffic", {"vehicle.mass_kg": [5500.0, 8000.0]}, overrides=SMALL)
     assert p.source.kind == "field" and len(p.runs) == 2
     with pytest.raises(ScenarioError, match=r"vehicle\.mass_kg"):
@@ -227,7 +241,7 @@ def test_the_field_study_is_a_sweep_kind():
     assert "controlled/field.npz" in done["files"] and s["controlled_rut_max_depth_mm"] > 0
 
 
-def test_ctrl_c_keeps_the_passes_done(tmp_path):
+def test_ctrl_c_keeps_the_passes_done(tmp_path, data_only):
     """Ctrl-C during the third pass (raised from the plant's set-down, as the loop's interrupt
     watch raises it): the two passes done are written, marked incomplete, and the interrupt goes on."""
     spec = load_field_spec("field_traffic", [*SMALL, "field.pattern=random", "field.passes=3"])
@@ -277,7 +291,7 @@ def test_a_reused_out_loses_only_the_previous_studys_files(tmp_path):
     assert clear_previous_study(tmp_path) == [] and (tmp_path / "comparison.png").exists()
 
 
-def test_a_pass_that_fails_is_reported_and_what_was_done_is_written(tmp_path, capsys):
+def test_a_pass_that_fails_is_reported_and_what_was_done_is_written(tmp_path, capsys, data_only):
     out = tmp_path / "out"
     args = ["field", "field_traffic", "--out", str(out), "--quiet", "--pattern", "random"]
     for o in (*SMALL, "field.passes=2", "run.duration_s=1.0"):
@@ -324,7 +338,7 @@ def _killed_at_pass(spec, out, k, kill):
     return plant, calls
 
 
-def test_a_rerun_resumes_an_interrupted_study_and_gives_the_uninterrupted_result(study, tmp_path):
+def test_a_rerun_resumes_an_interrupted_study_and_gives_the_uninterrupted_result(study, tmp_path, data_only):
     """Ctrl-C at the random pattern's third pass, then the same study again into the same folder: it
     runs passes 3 and 4 only (and the controlled pattern), and every file of the random pattern's
     field equals the uninterrupted study's bit for bit."""
@@ -355,7 +369,7 @@ def test_a_rerun_resumes_an_interrupted_study_and_gives_the_uninterrupted_result
         assert s[k] == s_ref[k]
 
 
-def test_a_killed_study_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
+def test_a_killed_study_resumes_from_its_last_checkpoint(tmp_path, monkeypatch, data_only):
     """SIGKILL in the random pattern's third pass (checkpoints after every pass): the folder holds
     the two passes' checkpoint and no summary; a rerun runs the last pass only, and the field equals
     an uninterrupted study's."""
@@ -388,7 +402,8 @@ def test_a_killed_study_resumes_from_its_last_checkpoint(tmp_path, monkeypatch):
     assert res.summary["random_trafficked_area_fraction"] == ref.summary["random_trafficked_area_fraction"]
 
 
-def test_ctrl_c_between_a_pass_and_its_record_exits_130_and_keeps_the_passes_done(tmp_path, monkeypatch, capsys):
+def test_ctrl_c_between_a_pass_and_its_record_exits_130_and_keeps_the_passes_done(tmp_path, monkeypatch, capsys,
+                                                                                 data_only):
     """Ctrl-C in the moment after a pass, while its record is made (the field's bulk density taken):
     `symtrack field` exits 130 with one line, no traceback; the folder holds the whole passes before
     it (passes.csv, field.npz and the counts agree), and the same command again runs the rest only."""

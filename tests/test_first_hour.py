@@ -17,8 +17,10 @@ import pytest
 
 from symtrack.cli import main
 
+# (without figures: what these tests check is the command's behaviour and the folder, not the drawings,
+# which tests/test_outputs.py checks; they were most of a run's CPU here)
 FAST = ["--quiet", "--set", "run.integrator=rosenbrock", "--set", "run.duration_s=0.2",
-        "--set", "run.stop_after_distance_m=none"]
+        "--set", "run.stop_after_distance_m=none", "--set", "run.figures=false"]
 
 TINY_GRID = """
 name = "tiny_grid"

@@ -220,20 +220,26 @@ class SystemModel:
 
     # The Jacobian Functions are built on first use: for the grid terrain the ODE form's
     # Jacobian is dense (see symtrack/terrain/channels.py) and costly to build, and the
-    # simulation does not need it.
+    # simulation does not need it. Without CasADi's cse: they are evaluated at a few points (a trim's
+    # linearisation, a check), where eliminating the common subexpressions of the whole Jacobian cost 30 x
+    # what it saves (measured with CasADi 3.8 on the shear law's model: jac_ode 1.54 s to build with cse,
+    # 0.05 s without, 1 ms an evaluation either way, the same numbers to the last bit: cse merges identical
+    # operations on identical operands). The generated C of jac_outputs (native/generate.py, ``_rename``) is
+    # built with cse from it, the same C as from a Function built with cse (compared on the shear, creep and
+    # 3D models).
     @functools.cached_property
     def jac_ode(self) -> ca.Function:
         x, u, p, ode = self.x, self.u, self.p, self.ode_expr
         jo = self.jacobian_options
         return ca.Function("jac_ode", [x, u, p], [ca.jacobian(ode, x, jo), ca.jacobian(ode, u, jo)],
-                           ["x", "u", "p"], ["A", "B"], {"cse": self.cse})
+                           ["x", "u", "p"], ["A", "B"], {"cse": False})
 
     @functools.cached_property
     def jac_outputs(self) -> ca.Function:
         x, u, p, y = self.x, self.u, self.p, self._y_expr
         jo = self.jacobian_options
         return ca.Function("jac_outputs", [x, u, p], [ca.jacobian(y, x, jo), ca.jacobian(y, u, jo)],
-                           ["x", "u", "p"], ["C", "D"], {"cse": self.cse})
+                           ["x", "u", "p"], ["C", "D"], {"cse": False})
 
     @functools.cached_property
     def codegen_twin(self) -> SystemModel:
