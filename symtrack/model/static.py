@@ -155,6 +155,20 @@ def _static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.
                 f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m: the damped settling "
                 f"and Newton found no rest (its heave, pitch and roll accelerations "
                 f"{np.array2string(resid_v, precision=3)} m/s^2, rad/s^2 there): {_NO_REST}")
+        # a rest of the equations with the hull in the soil is none the model can carry (no hull contact): a
+        # track end deeper than the CG's height, as the run is stopped for (plausibility.check_sinkage)
+        from .plausibility import SINKAGE_OVER_CG_HEIGHT_MAX
+
+        y = np.array(model.outputs(x, ca.DM.zeros(2), p)).ravel()
+        sink = max(float(y[i]) for i, n in enumerate(model.output_names)
+                   if n.startswith("sinkage_") and n.endswith("_m") and "rate" not in n)
+        h = float(params["cg_height_m"])
+        if sink > SINKAGE_OVER_CG_HEIGHT_MAX * h:
+            raise SimulationError(
+                f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m that the model carries: "
+                f"the one Newton found has a track end {sink:.3g} m deep, deeper than the CG's height "
+                f"vehicle.cg_height_m = {h:g} m (the hull would be in the soil), at a pitch of "
+                f"{np.degrees(float(x[cell_idx[1]])):.3g} deg: {_NO_REST}")
     return x
 
 
@@ -171,9 +185,7 @@ SETTLE_TIME_S = 8.0
 _NO_REST = ("the soil may not carry the vehicle at rest here (a nearly flat pressure-sinkage law, a small "
             "soil.bekker_n, sinks the most loaded track end without bound when the CG is off the contact's centre "
             "or the ground slopes: the hull pitches or rolls towards it at every attitude; the start is searched "
-            "with no traction); check the soil, vehicle.cg_ahead_of_contact_centre_m and the slope, or, a vehicle "
-            "near the edge of rest, raise model.contact_segments (the segments resolve the pressure along a track, "
-            "which a nearly flat law makes steep)")
+            "with no traction); check the soil, vehicle.cg_ahead_of_contact_centre_m and the slope")
 
 
 def _settle_hull(model, x, p, pos_idx, acc_idx, guess):

@@ -208,8 +208,11 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
     iw = [names.index(n) for n in ("omega_left_rad_s", "omega_right_rad_s") if n in names]
     r_sprocket = float(scenario.params.get("sprocket_radius_m", 0.0)) if iw else 0.0
     # the track ends' sinkages (the hull in the soil is out of the model's domain)
-    isk = [k for k, n in enumerate(names) if n.startswith("sinkage_") and n.endswith("_m") and "rate" not in n]
-    cg_height = float(scenario.params.get("cg_height_m", 0.0)) if isk else 0.0
+    is_sinkage = lambda n: n.startswith("sinkage_") and n.endswith("_m") and "rate" not in n  # noqa: E731
+    isk = [k for k, n in enumerate(names) if is_sinkage(n)]
+    # a vehicle whose sinkage is not a state (the 3D hull's contact: its track ends' penetrations are outputs)
+    iysk = [] if isk else [k for k, n in enumerate(getattr(plant, "output_names", ())) if is_sinkage(n)]
+    cg_height = float(scenario.params.get("cg_height_m", 0.0)) if isk or iysk else 0.0
     # the 3D hull's pitch and roll (a hull turned over is out of the model's domain)
     itilt = [names.index(n) for n in ("pitch_rad", "roll_rad")] if {"pitch_rad", "roll_rad"} <= set(names) else []
     sampled = torque_law is not None and hasattr(torque_law, "sample_time_s")
@@ -325,7 +328,12 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
                 t, x = float(times[-1]), xs[-1][-1]
                 speeds = np.hypot(xs[-1][:, iu], xs[-1][:, iv])
                 treads = r_sprocket * np.max(np.abs(xs[-1][:, iw]), axis=1) if iw else np.zeros(len(times))
-                sinks = np.max(xs[-1][:, isk], axis=1) if isk else np.zeros(len(times))
+                if isk:
+                    sinks = np.max(xs[-1][:, isk], axis=1)
+                elif iysk:
+                    sinks = np.max(ys[-1][:, iysk], axis=1)
+                else:
+                    sinks = np.zeros(len(times))
                 tilts = (plausibility.tilt_over_tipping(xs[-1][:, itilt[0]], xs[-1][:, itilt[1]], scenario.params)
                          if itilt else np.zeros(len(times)))
                 # the samples over each limit (the sinkage's only with a CG height)
