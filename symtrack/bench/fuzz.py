@@ -796,10 +796,14 @@ def _row(i: int, seed: int, out: CaseOutcome) -> dict:
 SHRINK_PER_CLASS = 2
 
 
+def _quiet_worker() -> None:
+    """A worker's logging as :func:`main` sets the process's: the runs' own warnings go to the CSV's columns."""
+    logging.getLogger("symtrack").setLevel(logging.ERROR)
+
+
 def _draw_and_check(task: tuple) -> tuple:
     """One case of :func:`run_fuzz` (in its process or a worker's): (i, seed, document, meta, outcome)."""
     i, case_seed, variants = task
-    logging.getLogger("symtrack").setLevel(logging.ERROR)
     doc, meta = case_document(RandomDraw(case_seed), variants)
     doc["name"] = f"fuzz-{case_seed}"
     return i, case_seed, doc, meta, check_case(doc, meta)
@@ -825,7 +829,7 @@ def run_fuzz(budget: int, seed: int, out_dir, time_limit_s: float | None = None,
         import multiprocessing
 
         # spawn: each worker imports the package afresh (no CasADi or compiled library state shared by a fork)
-        pool = multiprocessing.get_context("spawn").Pool(jobs)
+        pool = multiprocessing.get_context("spawn").Pool(jobs, initializer=_quiet_worker)
         results = pool.imap(_draw_and_check, tasks, chunksize=1)
     else:
         results = map(_draw_and_check, tasks)

@@ -40,7 +40,7 @@ from ..foundations.progress import Progress
 from ..reports.html import report_html
 from ..reports.run_files import output_lock, write_folder
 from .design import Axis, axes_from, design_runs, normalise_overrides, run_id
-from .runfile import worker_modules
+from .runfile import Kind, register_kind, sweep_arguments, worker_modules
 from .runs import Source, load, resolve_source, run_one
 
 __all__ = ["SCHEMA_VERSION", "STATUSES", "SweepResult", "check_scheduler_address", "dask_client", "plan",
@@ -553,3 +553,14 @@ def _run_all(out: Path, p: Plan, todo: list[dict], rows: dict, client, cluster, 
         if cluster is not None:
             cluster.close()
     return failed
+
+
+def _run_sweep_file(arguments, out, progress):
+    return sweep(out=out, progress=progress is not False, **arguments)
+
+
+# the sweep's own kind of run file, registered here with its runner (symtrack.studies imports this module, so
+# it is registered whenever symtrack.studies.runfile is imported; the run-file module does not import the sweep)
+register_kind(Kind("sweep", ("[sweep]",), "a sweep", "symtrack sweep", None, sweep_arguments, _run_sweep_file,
+                   needs_out=True))
+

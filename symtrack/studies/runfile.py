@@ -52,6 +52,17 @@ __all__ = ["KINDS", "Kind", "RunFile", "SWEEP_KEYS", "detect_kind", "kind_rules"
 
 
 @dataclass(frozen=True)
+class Source:
+    """The scenario of a sweep as workers receive it: its kind (its sweep name, :func:`sweep_kinds`), its
+    TOML text and its default name (:mod:`symtrack.studies.runs` runs it)."""
+
+    kind: str
+    text: str
+    name: str
+    label: str  # what the user gave (a built-in name or a path)
+
+
+@dataclass(frozen=True)
 class Kind:
     """A kind of run file: the sections that decide it, what it is, the command it shares its schema
     with, the package of its built-in files, and how it runs: ``load(run_file)`` its spec from a
@@ -145,12 +156,6 @@ def _sweep_run_operation(spec, out, progress):
     return _run_operation(spec, out, progress)
 
 
-def _run_sweep(arguments, out, progress):
-    from .engine import sweep
-
-    return sweep(out=out, progress=progress is not False, **arguments)
-
-
 KINDS: dict[str, Kind] = {}
 
 
@@ -176,8 +181,6 @@ for _kind in (
          _run_operation, sweep="field", sweep_run=_sweep_run_operation, needs_out=True, modules=_OPERATION_MODULES),
     Kind("season", ("[season]",), "a season", "symtrack field", _FIELD, _load_operation, _run_operation,
          sweep="field", sweep_run=_sweep_run_operation, needs_out=True, modules=_OPERATION_MODULES),
-    Kind("sweep", ("[sweep]",), "a sweep", "symtrack sweep", None, lambda rf: sweep_arguments(rf), _run_sweep,
-         needs_out=True),
 ):
     register_kind(_kind)
 del _kind
@@ -330,8 +333,6 @@ def sweep_arguments(rf: RunFile) -> dict:
     without ``sweep.scenario``, the rest of the file as the scenario): ``scenario`` (a name, a
     path or a :class:`~symtrack.studies.runs.Source`), ``vary``, ``ranges``, ``samples``, ``seed``,
     ``overrides``, ``workers``, ``scheduler``, ``kind``."""
-    from .runs import Source
-
     doc = rf.document
     sw = doc["sweep"]
     if not isinstance(sw, dict):

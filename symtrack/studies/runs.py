@@ -15,27 +15,15 @@ import socket
 import tempfile
 import time
 import tomllib
-from dataclasses import dataclass
 from pathlib import Path
 
 from ..foundations.config import apply_overrides
 from ..foundations.config import builtin_names as package_names
 from ..foundations.errors import ScenarioError
 from ..foundations.files import read_text
-from .runfile import Kind, RunFile, sweep_kind, sweep_kinds
+from .runfile import Kind, RunFile, Source, sweep_kind, sweep_kinds
 
 __all__ = ["Source", "load", "resolve_source", "run_one", "scenario_text"]
-
-
-@dataclass(frozen=True)
-class Source:
-    """The scenario of a sweep as workers receive it: its kind (its sweep name,
-    :func:`symtrack.studies.runfile.sweep_kinds`), its TOML text and its default name."""
-
-    kind: str
-    text: str
-    name: str
-    label: str  # what the user gave (a built-in name or a path)
 
 
 def scenario_text(name_or_path, package: str | None) -> tuple[str, str] | None:
