@@ -208,10 +208,10 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
     iw = [names.index(n) for n in ("omega_left_rad_s", "omega_right_rad_s") if n in names]
     r_sprocket = float(scenario.params.get("sprocket_radius_m", 0.0)) if iw else 0.0
     # the track ends' sinkages (the hull in the soil is out of the model's domain)
-    is_sinkage = lambda n: n.startswith("sinkage_") and n.endswith("_m") and "rate" not in n  # noqa: E731
-    isk = [k for k, n in enumerate(names) if is_sinkage(n)]
+    isk = [k for k, n in enumerate(names) if plausibility.is_sinkage_name(n)]
     # a vehicle whose sinkage is not a state (the 3D hull's contact: its track ends' penetrations are outputs)
-    iysk = [] if isk else [k for k, n in enumerate(getattr(plant, "output_names", ())) if is_sinkage(n)]
+    iysk = [] if isk else [k for k, n in enumerate(getattr(plant, "output_names", ()))
+                           if plausibility.is_sinkage_name(n)]
     cg_height = float(scenario.params.get("cg_height_m", 0.0)) if isk or iysk else 0.0
     # the 3D hull's pitch and roll (a hull turned over is out of the model's domain)
     itilt = [names.index(n) for n in ("pitch_rad", "roll_rad")] if {"pitch_rad", "roll_rad"} <= set(names) else []
