@@ -1230,6 +1230,22 @@ def region_cost() -> str:
     return md(["what", "measured"], rows)
 
 
+@table("region-workers", "region.md", "symtrack bench region --workers --repeats 5 --out FILE")
+def region_workers() -> str:
+    _, folder = run("symtrack bench region --workers --repeats 5 --out DIR/workers.json")
+    rep = json.loads((folder / "workers.json").read_text(encoding="utf-8"))
+    w = rep["workers"]
+    rows = []
+    for one, two in zip(w[0::2], w[1::2], strict=True):
+        rows.append([f"{one['repeat'] + 1}", f"{one['tasks_s']:.1f}", f"{two['tasks_s']:.1f}",
+                     f"{two['speedup_vs_1_worker']:.2f}", f"{one['cores_used']:.2f} / {two['cores_used']:.2f}",
+                     f"{one['cpu_s_per_ha_season']:.3f} / {two['cpu_s_per_ha_season']:.3f}"])
+    rows.append(["median", "", "", f"{rep['speedup_median']:.2f}", "", ""])
+    return md([f"pair ({w[0]['field_seasons']} fields, {w[0]['area_ha']:.0f} ha, one season)", "tasks, 1 worker [s]",
+               "tasks, 2 workers [s]", "throughput 2 / 1", "cores the tasks got, 1 / 2 workers",
+               "CPU s per hectare-season, 1 / 2 workers"], rows)
+
+
 @table("region-two-fidelities", "region.md",
        "symtrack.region.study.field_season in each fidelity on the generated field of "
        "tests/test_region_full.py (the drill's tractor and the combine, one season; docs/figures.py)")

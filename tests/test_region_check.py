@@ -141,3 +141,34 @@ def test_fast_agrees_with_full_on_operation_small():
     r1 = ops[0].rut_table_m[PRESSURE_FRACTIONS.index(1.0)]
     assert float(np.median(t.z[once])) == pytest.approx(r1, rel=0.05)
     assert soil == soil_of(spec.operations[0][2].params)
+
+
+def test_one_against_two_workers_alternates_the_pairs_and_takes_their_median(monkeypatch, tmp_path):
+    """``symtrack bench region --workers``: each pair's ratio is its own 1-worker task time over its 2-worker one
+    (pairs alternated, so a machine's drift moves both alike), the median over the pairs; ``--workers`` belongs
+    to ``bench region`` only."""
+    import argparse
+
+    from symtrack.bench import homogeneous
+    from symtrack.foundations.errors import ScenarioError
+    from symtrack.region import check, study
+
+    calls = []
+    times = iter([40.0, 20.0, 30.0, 20.0, 36.0, 18.0])  # pairs: 2.0, 1.5, 2.0
+
+    def fake_run_region(spec, out, workers, progress, outputs):
+        calls.append(workers)
+        t = next(times)
+        rows = [{"cpu_time_s": 0.9 * t * workers}]
+        return study.RegionResult(out, rows, 1, 0, t + 1.0, {}, {"plans_s": 0.5, "tasks_s": t})
+
+    monkeypatch.setattr(study, "run_region", fake_run_region)
+    rep = check.bench_rows(workers_only=True, repeats=3)
+    assert calls == [1, 2, 1, 2, 1, 2]
+    assert [r["speedup_vs_1_worker"] for r in rep["workers"] if r["workers"] == 2] == [2.0, 1.5, 2.0]
+    assert rep["speedup_median"] == 2.0 and [r["repeat"] for r in rep["workers"]] == [0, 0, 1, 1, 2, 2]
+    assert "median of 3 alternated pairs: 2.00 x" in check.bench_table(rep)
+    ap = argparse.ArgumentParser()
+    homogeneous.add_arguments(ap)
+    with pytest.raises(ScenarioError, match="--workers is an option of `symtrack bench region`"):
+        homogeneous.run_cli(ap.parse_args(["--workers", "--out", str(tmp_path / "b.json")]))

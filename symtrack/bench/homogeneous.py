@@ -140,10 +140,13 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
                     "only; --large: and a 1,000 ha region)")
     ap.add_argument("--out", default="out/bench.json", help="JSON file to write (default out/bench.json)")
     ap.add_argument("--large", action="store_true", help="bench region: also a generated 1,000 ha region, one season")
+    ap.add_argument("--workers", action="store_true", help="bench region: only 1 against 2 workers on 24 generated "
+                    "fields, --repeats pairs alternated, the median ratio (about 70 s a pair)")
     ap.add_argument("--keep", metavar="DIR", help="bench region: keep the full fidelity's runs in DIR/<case> and "
                     "reuse them when their inputs are the same (they take minutes)")
     ap.add_argument("--quick", action="store_true", help="fewer rows and sizes (providers decide what to skip)")
-    ap.add_argument("--repeats", type=int, default=3, help="timed runs per row after a warm-up (best is kept)")
+    ap.add_argument("--repeats", type=int, default=3, help="timed runs per row after a warm-up (best is kept); "
+                    "bench region --workers: the alternated pairs (the median is kept)")
     ap.add_argument("--sweep", action="store_true",
                     help="only the sweep overhead: 8 validation runs one after another vs symtrack sweep on 1 and 2 "
                     "workers (docs/studies.md; --quick: 4 runs)")
@@ -155,13 +158,15 @@ def run_cli(args) -> int:
 
     if args.repeats < 1:
         raise ScenarioError(f"--repeats = {args.repeats} must be >= 1")
+    if getattr(args, "workers", False) and getattr(args, "what", None) != "region":
+        raise ScenarioError("--workers is an option of `symtrack bench region` (1 against 2 workers of a region)")
     if getattr(args, "what", None) == "region":
         import os
 
         from ..region.check import bench_rows as region_rows
         from ..region.check import bench_table as region_table
 
-        rep = region_rows(args.quick, args.large, keep=args.keep)
+        rep = region_rows(args.quick, args.large, keep=args.keep, workers_only=args.workers, repeats=args.repeats)
         rep.update(load_average=list(os.getloadavg()), cpus=os.cpu_count())
         atomic_write_text(Path(args.out), json.dumps(rep, indent=2, default=str) + "\n")
         print(region_table(rep))

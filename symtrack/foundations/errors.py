@@ -23,7 +23,8 @@ class SimulationError(SymtrackError, RuntimeError):
 class ImplausibleRunError(SimulationError):
     """A run stopped by a plausibility limit (:mod:`symtrack.model.plausibility`): a figure no crawler
     reaches, so that the run cannot be physically true from there on. ``quantity`` names the limit
-    ("speed", "tread_speed" or "sinkage"); the message says the value, the time and the allowed range."""
+    ("speed", "tread_speed", "sinkage" or "tilt"; "rest": the 3D vehicle's start found no static rest that the
+    model carries, raised before the first step); the message says the value, the time and the allowed range."""
 
     def __init__(self, message: str, quantity: str = ""):
         super().__init__(message)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..foundations.errors import SimulationError
+from ..foundations.errors import ImplausibleRunError, SimulationError
 from ..soil.law import make as make_soil_law
 from ..vehicles.base import CONTACT_HULL
 from ..vehicles.planar import mean_ground_pressure_Pa
@@ -151,10 +151,10 @@ def _static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.
     if hull:
         resid_v = np.array(model.ode(x, ca.DM.zeros(2), p)).ravel()[rate_idx]
         if not np.all(np.abs(resid_v) < 1e-4):
-            raise SimulationError(
+            raise ImplausibleRunError(
                 f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m: the damped settling "
                 f"and Newton found no rest (its heave, pitch and roll accelerations "
-                f"{np.array2string(resid_v, precision=3)} m/s^2, rad/s^2 there): {_NO_REST}")
+                f"{np.array2string(resid_v, precision=3)} m/s^2, rad/s^2 there): {_NO_REST}", "rest")
         # a rest of the equations with the hull in the soil is none the model can carry (no hull contact): a
         # track end deeper than the CG's height, as the run is stopped for (plausibility.check_sinkage)
         from .plausibility import SINKAGE_OVER_CG_HEIGHT_MAX, is_sinkage_name
@@ -163,11 +163,11 @@ def _static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.
         sink = max(float(y[i]) for i, n in enumerate(model.output_names) if is_sinkage_name(n))
         h = float(params["cg_height_m"])
         if sink > SINKAGE_OVER_CG_HEIGHT_MAX * h:
-            raise SimulationError(
+            raise ImplausibleRunError(
                 f"no static equilibrium of the 3D vehicle's hull at x, y = {x_m:g}, {y_m:g} m that the model carries: "
                 f"the one Newton found has a track end {sink:.3g} m deep, deeper than the CG's height "
                 f"vehicle.cg_height_m = {h:g} m (the hull would be in the soil), at a pitch of "
-                f"{np.degrees(float(x[cell_idx[1]])):.3g} deg: {_NO_REST}")
+                f"{np.degrees(float(x[cell_idx[1]])):.3g} deg: {_NO_REST}", "rest")
     return x
 
 
@@ -205,6 +205,7 @@ def _settle_hull(model, x, p, pos_idx, acc_idx, guess):
     try:
         return np.array(F(x0=np.concatenate([guess, np.zeros(3)]))["xf"]).ravel()[:3]
     except RuntimeError as err:  # CVODES gave up (a soil too stiff for its step budget): the package's error
-        raise SimulationError(f"the 3D vehicle's hull could not be settled on the ground to find its static start "
-                              f"(CVODES over {SETTLE_TIME_S:g} s of damped settling: {str(err).splitlines()[-1]}); "
-                              f"Newton found no rest either: {_NO_REST}") from err
+        raise ImplausibleRunError(f"the 3D vehicle's hull could not be settled on the ground to find its static "
+                                  f"start (CVODES over {SETTLE_TIME_S:g} s of damped settling: "
+                                  f"{str(err).splitlines()[-1]}); Newton found no rest either: {_NO_REST}",
+                                  "rest") from err

@@ -475,8 +475,10 @@ def _run_all(out: Path, spec: RegionSpec, ctx: Context, todo: list, client, prog
             k = spec.years.index(years[0])
             prev = _state_on_disk(out, f, spec.years[k - 1]) if k > 0 else None
             for y in years:
+                # the largest fields first (the longest tasks first: no worker is left with a large field at the
+                # end while the others idle; the outputs do not depend on the order)
                 fut = client.submit(field_season, cfut, fi, y, prev, key=f"symtrack-region-{f.field_id}-{y}-"
-                                    f"{time.time_ns()}", pure=False)
+                                    f"{time.time_ns()}", pure=False, priority=int(round(work(f) * 1000)))
                 futures[fut] = (fi, y)
                 prev = fut
         done, ha_done = 0, 0.0
