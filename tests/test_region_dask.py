@@ -526,3 +526,99 @@ def test_fields_gpkg_is_the_table_with_the_fields_polygons(reference):
         r = subprocess.run(["ogrinfo", "-ro", "-so", "-al", str(out / "fields.gpkg")], capture_output=True, text=True)
         assert r.returncode == 0 and "Feature Count: 6" in r.stdout and "Geometry: Polygon" in r.stdout, r.stdout
         assert "ERROR" not in r.stderr and "Warning" not in r.stderr, r.stderr
+
+
+def test_a_worker_lets_go_of_each_field_season_once_it_is_committed(tmp_path, monkeypatch):
+    """A worker's memory does not grow with the region: the client lets go of a field-season's result once it is
+    committed (a worker kept every finished field-season's maps and state until the study ended: some 5.5 MB a
+    field-season of the demo's, 0.7 GB a worker on a 1,000 ha region). At each commit, every field-season
+    committed two or more commits before is gone from the workers (within 10 s: the release is asynchronous)."""
+    from distributed import get_client
+
+    from symtrack.region import study
+
+    spec = load_region(demo.write_region(tmp_path / "in", n_fields=4, seed=7, systems=MINI, years={2021: 0.0},
+                                         length_m=(90.0, 120.0), width_m=(60.0, 80.0), spacing_m=160.0))
+    committed, lingering = [], []
+    commit = study._commit
+
+    def spy(out, f, y, res):
+        client = get_client()
+        old = committed[:-1]
+        deadline = time.monotonic() + 10.0
+        while True:
+            held = set().union(*client.has_what().values())
+            stale = [p for p in old if any(str(k).startswith(p) for k in held)]
+            if not stale or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        lingering.append(len(stale))
+        committed.append(f"symtrack-region-{f.field_id}-{y}-")
+        return commit(out, f, y, res)
+
+    monkeypatch.setattr(study, "_commit", spy)
+    res = run_region(spec, tmp_path / "out", workers=1, progress=False, outputs=False)
+    assert res.ran == 4 and len(lingering) == 4
+    assert lingering == [0, 0, 0, 0], lingering
+
+
+class _Workers:
+    """A client's scheduler_info with the given workers' memory limits [bytes] (0: none)."""
+
+    def __init__(self, *limits):
+        self.limits = limits
+
+    def scheduler_info(self):
+        return {"workers": {f"tcp://w{i}": {"memory_limit": m} for i, m in enumerate(self.limits)}}
+
+
+def test_a_field_too_large_for_a_workers_memory_is_refused_before_any_task(tmp_path):
+    """The largest fast field's season against the smallest worker's memory limit times Dask's terminate
+    fraction (0.95): refused with the field, its grid, the need and the limit; workers without a limit, or none
+    connected yet, are not checked."""
+    from symtrack.region import study
+
+    spec = load_region(_small(tmp_path / "in"))
+    need = max(study.task_memory_bytes(spec, f) for f in spec.fields)
+    study.check_worker_memory(spec, _Workers(int(need / 0.9), 0))  # room enough: nothing raised
+    study.check_worker_memory(spec, _Workers(0))
+    study.check_worker_memory(spec, _Workers())
+    with pytest.raises(ScenarioError, match=r"field '.+': a season on its grid of \d+ x \d+ cells of cell_m = 0.5 m "
+                                            r"\(.* ha, 4 depths\) needs about .* GB on a worker, more than the .* GB"):
+        study.check_worker_memory(spec, _Workers(int(2 * need), int(need / 0.96)))
+
+
+_TASK_PEAK = """
+import json, sys
+from pathlib import Path
+from symtrack.region import demo, study
+from symtrack.region.inputs import load_region
+
+def status(key):
+    with open("/proc/self/status") as f:
+        return 1024.0 * float(next(line.split()[1] for line in f if line.startswith(key + ":")))
+
+folder = Path(sys.argv[1])
+spec = load_region(demo.write_region(folder, n_fields=1, seed=7, years={2021: 0.0}, length_m=(400.0, 400.0),
+                                     width_m=(300.0, 300.0)))
+ctx = study.build_context(spec)
+before = status("VmRSS")
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")
+study.field_season(ctx, 0, 2021, None)
+print(json.dumps({"before": before, "peak": status("VmHWM"),
+                  "estimate": study.task_memory_bytes(spec, spec.fields[0]) - study.WORKER_BASE_BYTES}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the peak is read from /proc/self/status")
+def test_the_task_memory_estimate_bounds_a_field_seasons_measured_peak(tmp_path):
+    """A process's first field-season (the largest: its per-process tables are built on the way) peaks above what
+    the process held before it (VmHWM, a fresh process, a 12 ha field at 0.5 m) by at most the estimate's
+    per-cell share and at least 70 % of it (study.TASK_BYTES_PER_CELL_DEPTH: the measured peaks rounded up)."""
+    proc = subprocess.run([sys.executable, "-c", _TASK_PEAK, str(tmp_path)], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    d = json.loads(proc.stdout.strip().splitlines()[-1])
+    grown = d["peak"] - d["before"]
+    assert 0.7 * d["estimate"] <= grown <= d["estimate"], (grown / 1e6, d["estimate"] / 1e6)

@@ -51,8 +51,8 @@ from .fleet import rut_table_m, stress_profile
 from .full import BASE_SOIL_PRESET, DEFAULT_VEHICLE, check_full_operations, run_season_full
 from .inputs import RegionSpec, class_soil, class_suction_kPa, draw_day, field_frame, moisture_class
 
-__all__ = ["Context", "RegionResult", "build_context", "check_full", "check_plans", "class_soils", "field_season",
-           "field_season_ops", "run_region"]
+__all__ = ["Context", "RegionResult", "build_context", "check_full", "check_plans", "check_worker_memory",
+           "class_soils", "field_season", "field_season_ops", "run_region", "task_memory_bytes"]
 
 log = logging.getLogger("symtrack.region")
 
@@ -60,6 +60,14 @@ SCHEMA_VERSION = 1
 # the full fidelity's cost per hectare-season over the fast one's, for the progress's time left only (measured on
 # the demo's fields: 214-260, docs/region.md, "A mixed run")
 FULL_COST_RATIO = 240.0
+# A fast field-season's memory on a worker (docs/region.md, "Memory"): the worker's resident set once it has run a
+# field-season (the package, the context, Dask's own: 134-169 MB measured on a LocalCluster worker after a first
+# field-season of the demo's generator) and a season's peak above what the process held before it, per cell and
+# depth of the field's grid: a process's first season, the largest (its per-process tables built on the way),
+# 94-100 B on 4.1 and 31 ha grids at 0.5 m with four depths (docs/region.md's region-worker-memory table) and 105 B
+# on a 12 ha one (tests/test_region_dask.py); a worker's later seasons 60-80 B. Both rounded up
+WORKER_BASE_BYTES = 0.17e9
+TASK_BYTES_PER_CELL_DEPTH = 120.0
 
 
 @dataclass
@@ -250,6 +258,45 @@ def _shape(spec: RegionSpec, f) -> tuple:
     return (int(math.ceil(f.size_m[0] / spec.cell_m)), int(math.ceil(f.size_m[1] / spec.cell_m)))
 
 
+def task_memory_bytes(spec: RegionSpec, f) -> float:
+    """A worker's peak resident set [bytes] while it runs a fast field-season of field ``f``
+    (:data:`WORKER_BASE_BYTES` plus :data:`TASK_BYTES_PER_CELL_DEPTH` per cell and depth of its grid)."""
+    nx, ny = _shape(spec, f)
+    return WORKER_BASE_BYTES + TASK_BYTES_PER_CELL_DEPTH * nx * ny * len(spec.depths_m)
+
+
+def check_worker_memory(spec: RegionSpec, client) -> None:
+    """Refuse, before any task, a fast field whose field-season would take a worker past the memory at which Dask
+    terminates it (``distributed.worker.memory.terminate`` of its ``memory_limit``: it would be restarted and the
+    field tried again until Dask gives up). Workers without a limit, or none connected yet (an existing
+    scheduler), are not checked. A full fidelity's field is checked in its task (the terrain world's estimate against
+    the worker machine's available memory)."""
+    import dask
+
+    limits = [w.get("memory_limit") or 0 for w in client.scheduler_info().get("workers", {}).values()]
+    limits = [x for x in limits if x > 0]
+    frac = dask.config.get("distributed.worker.memory.terminate", 0.95)
+    if not limits or not frac:
+        log.debug("the workers' memory is not checked: %s", "no limit or no worker" if not limits else
+                  "Dask's terminate threshold is off")
+        return
+    limit = min(limits) * float(frac)
+    fast = [f for f in spec.fields if f.fidelity == "fast"]
+    if not fast:
+        return
+    worst = max(fast, key=lambda f: task_memory_bytes(spec, f))
+    need = task_memory_bytes(spec, worst)
+    if need > limit:
+        nx, ny = _shape(spec, worst)
+        raise ScenarioError(
+            f"field {worst.field_id!r}: a season on its grid of {nx} x {ny} cells of cell_m = {spec.cell_m:g} m "
+            f"({nx * ny * spec.cell_m ** 2 / 1e4:.1f} ha, {len(spec.depths_m)} depths) needs about {need / 1e9:.2f} GB "
+            f"on a worker, more than the {limit / 1e9:.2f} GB at which Dask stops a worker ({float(frac):g} of the "
+            f"smallest worker's memory_limit {min(limits) / 1e9:.2f} GB): give the workers more memory (fewer local "
+            f"--workers share the machine's memory among fewer), raise cell_m (half as many cells at sqrt(2) x), "
+            f"or split the field in the fields file")
+
+
 def field_season(ctx: Context, field_index: int, year: int, prev) -> dict:
     """One task: a field's season in its fidelity (the fast one, or the full one: symtrack.region.full).
     ``prev``: the previous season's result (its ``state``), or the state itself (a rerun's, read back from its
@@ -421,6 +468,7 @@ def run_region(spec: RegionSpec, out, *, workers: int = 2, scheduler: str | None
         if todo:
             t1 = time.perf_counter()
             with dask_client("region", workers, scheduler) as client:
+                check_worker_memory(spec, client)
                 t_tables = time.perf_counter()
                 ctx = build_context(spec, client)
                 say("the tables (%d stress profiles, %d soils by moisture class) in %.1f s", len(ctx.profiles),
@@ -492,6 +540,11 @@ def _run_all(out: Path, spec: RegionSpec, ctx: Context, todo: list, client, prog
                     raise SchedulerLost(done, len(todo)) from err
                 raise SymtrackError(f"field {f.field_id!r}, {y}: {type(err).__name__}: {err}") from err
             _commit(out, f, y, res)
+            task_s = res["summary"]["wall_time_s"]
+            # the client lets go of the committed result: the workers drop it once the field's next season (a
+            # task that takes it as its input) has run, so that a worker holds a field-season's result only as
+            # long as something needs it, whatever the region's size
+            del futures[fut], res
             done += 1
             ha_done += f.area_m2 / 1e4
             work_done += work(f)
@@ -500,7 +553,7 @@ def _run_all(out: Path, spec: RegionSpec, ctx: Context, todo: list, client, prog
             bar.update(ha_done, f"{done}/{len(todo)} field-seasons, {ha_done:.1f}/{ha_total:.1f} ha, about "
                                 f"{left:.0f} s left")
             if progress and not bar.enabled:
-                log.info("[%d/%d] field %s %d in %.1f s", done, len(todo), f.field_id, y, res["summary"]["wall_time_s"])
+                log.info("[%d/%d] field %s %d in %.1f s", done, len(todo), f.field_id, y, task_s)
     except KeyboardInterrupt:
         client.cancel(list(futures), force=True)
         raise
