@@ -576,3 +576,24 @@ def test_a_3d_crawler_whose_loaded_end_reaches_the_clearance_on_heavy_clay_says_
     doc["run"]["duration_s"] = 2.5
     with pytest.raises(IncompleteSimulation, match=r"sinkage = 0.69\d* m at t = 2.2\d* s is outside the allowed range"):
         simulate(build(scenario_from_dict(doc, "x")), progress=False)
+
+
+def test_a_crawler_that_digs_its_track_into_heavy_clay_in_a_turn_on_a_side_slope_counts_as_stopped():
+    """From the long run (seed 37, case 362): an 8.8 t crawler turning (one track reversed) across the 8 deg side
+    slope of the WES heavy clay (n = 0.088) digs its loaded track in: a track end passes the CG's height, 0.93 m,
+    at 2.12 s, on the Rosenbrock and on CVODES alike, and both runs stop there (plausibility.check_sinkage: the
+    hull would be in the soil). The fuzzer counts it stopped, as it counts a turned-over hull: the package's own
+    stop, where the other integrator stops too (it counted "finite" failed)."""
+    vehicle = {"mass_kg": 8818.6, "track_gauge_m": 2.086, "track_width_m": 0.42896, "contact_length_m": 2.159,
+               "yaw_inertia_kg_m2": 10209.0, "sprocket_radius_m": 0.36644, "cg_height_m": 0.92935,
+               "cg_ahead_of_contact_centre_m": -0.03029, "sprocket_inertia_kg_m2": 52.85,
+               "torque_time_constant_s": 0.16045, "lateral_friction_coeff": 0.55331,
+               "lateral_creep_speed_m_s": 0.0071279}
+    doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 9002.7, 9002.7), (0.9238, -1994.9, 9002.7)],
+               soil="heavy_clay_wes_40", vehicle=vehicle, duration=2.35, surface={"slope_y_deg": 8.0})
+    doc["soil"].update({"bekker_n": 0.08761, "k_c_N_per_m_n1": 1672.4, "k_phi_N_per_m_n2": 83642.0,
+                        "cohesion_Pa": 17961.0, "friction_angle_rad": 0.10458, "shear_modulus_K_m": 0.0058026})
+    out = fuzz.check_case(doc, {"variant": "3d-shear-side8", "programme": "turn", "flat": False}, reference=REFERENCE)
+    assert out.outcome == "stopped" and not out.failed, out.messages
+    assert set(out.stop_kinds.values()) == {"sinkage"} and len(out.stops) == 2, out.stops
+    assert "sinkage = 0.93" in out.messages["stopped"] and "t = 2.12" in out.messages["stopped"], out.messages
