@@ -3,7 +3,6 @@
 import json
 
 import casadi as ca
-import control
 import numpy as np
 import pytest
 
@@ -167,6 +166,8 @@ def test_linear_matches_nonlinear_for_small_perturbations(model, turn, du, names
     dt, t_end = 0.02, 3.0
     X = _nonlinear_response(model, turn, np.array(du), t_end, dt)
     t = np.arange(X.shape[0]) * dt
+    import control  # python-control where it is used: its import is 1.6 s of CPU in every worker that collects
+
     resp = control.forced_response(lin.sys, t, np.tile(np.array(du)[:, None], (1, t.size)), return_x=True)
     keep = [model.state_names.index(n) for n in lin.state_names]
     dx_nl = X[:, keep] - turn.x[keep]

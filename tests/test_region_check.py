@@ -128,7 +128,14 @@ def test_fast_agrees_with_full_on_operation_small():
     # the machine ran over, whoever drove it, and the MPC follower costs the season most of its CPU
     spec = load_operation_spec("operation_small", ['operation.follower="law"'])
     full = run_season(spec, None, figures=False)
-    assert full.summary["complete"]
+    s = full.summary
+    assert s["complete"], s["error"]
+    # the run of tests/test_operations.py::test_operation_small_meets_the_tracking_target on the clay (the
+    # built-in's soil; the same run to the last bit): the target, RMS lateral error <= 5 cm on the lines,
+    # with one vehicle step per macro step (measured 0.035 m, max 0.12 m)
+    assert s["turns_driven"] == spec.operations[0][1].turns == 2 and s["turns_lifted"] == 0
+    assert s["rms_lateral_error_lines_m"] <= 0.05
+    assert s["max_lateral_error_lines_m"] < 0.2
     fast = run_fast_twin(spec, rule="overlap")
     c = compare(full.terrain, full.summary, fast, fast[1], fast[2], 0.288)
     assert abs(c["trafficked_difference_points"]) < 5.0, c

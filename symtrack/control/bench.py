@@ -24,7 +24,6 @@ import dataclasses
 import time
 
 import casadi as ca
-import control
 import numpy as np
 
 from ..model import SystemModel
@@ -69,6 +68,8 @@ class LinearMPC:
         self.cell_names = model.layout.cell_names
         self.N = s.horizon_steps
         self.stats = MPCStats()
+        import control  # python-control, imported on first use: its scipy.signal import takes seconds
+
         sysd = control.c2d(self.lin.sys, s.sample_time_s, "zoh")
         Ad, Bd = np.asarray(sysd.A), np.asarray(sysd.B) * TORQUE_SCALE_N_M  # inputs in kN m
         n, m, N = Ad.shape[0], 2, self.N
