@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
@@ -599,3 +600,27 @@ def test_a_crawler_that_digs_its_track_into_heavy_clay_in_a_turn_on_a_side_slope
     assert out.outcome == "stopped" and not out.failed, out.messages
     assert set(out.stop_kinds.values()) == {"sinkage"} and len(out.stops) == 2, out.stops
     assert "sinkage = 0.93" in out.messages["stopped"] and "t = 2.12" in out.messages["stopped"], out.messages
+
+
+def test_a_run_that_passes_two_limits_in_one_chunk_names_the_one_it_passed_first():
+    """From the long run (seed 37, case 1111): a 3.7 t crawler, its CG 0.98 m high over 1.19 m of track, on the
+    8 deg side slope of the WES heavy clay turns over at 0.65 s (the tilt) and then sinks past its CG's height
+    (1.23 s) within one chunk of the compiled Rosenbrock's steps. The stop named the sinkage at 1.23 s while it
+    kept the run up to 0.64 s: the limits were checked in a fixed order. The message now names the limit passed
+    first, where the run is cut, as CVODES's run of the case does (the tilt at 0.65 s)."""
+    vehicle = {"mass_kg": 3742.4, "track_gauge_m": 1.3067, "track_width_m": 0.42745, "contact_length_m": 1.1879,
+               "yaw_inertia_kg_m2": 1796.5, "sprocket_radius_m": 0.32151, "cg_height_m": 0.97933,
+               "cg_ahead_of_contact_centre_m": -0.047872, "sprocket_inertia_kg_m2": 13.987,
+               "torque_time_constant_s": 0.078327, "lateral_friction_coeff": 0.5467,
+               "lateral_creep_speed_m_s": 0.0069338}
+    doc = _doc({"lateral_law": "shear", "vehicle": "3d"}, [(0.0, 3093.4, 1919.8), (0.6407, 0.0, 0.0)],
+               soil="heavy_clay_wes_40", vehicle=vehicle, duration=1.56, surface={"slope_y_deg": 8.0})
+    doc["soil"].update({"bekker_n": 0.11326, "k_c_N_per_m_n1": 1571.7, "k_phi_N_per_m_n2": 97731.0,
+                        "cohesion_Pa": 22070.0, "friction_angle_rad": 0.10232, "shear_modulus_K_m": 0.0062947})
+    doc["torque"][-1]["event"] = "coast"
+    doc["start"] = {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 180.0}
+    with pytest.raises(IncompleteSimulation) as info:
+        simulate(build(scenario_from_dict(doc, "x")), progress=False)
+    msg = str(info.value)
+    assert re.search(r"pitch = 30\.\d+ deg, roll = -12\.\d+ deg at t = 0\.650 s", msg), msg
+    assert "sinkage" not in msg.split("(the run is kept")[0] and "kept up to t = 0.64" in msg, msg

@@ -341,18 +341,22 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
                         "tread": treads > plausibility.MAX_TREAD_SPEED_M_S,
                         "sinkage": (cg_height > 0) & (sinks > plausibility.SINKAGE_OVER_CG_HEIGHT_MAX * cg_height),
                         "tilt": tilts > 1.0}
+                values = {"speed": speeds, "tread": treads, "sinkage": sinks, "tilt": tilts}
+                # each limit at its first sample over it (the message names where it was passed), the limit passed
+                # first checked first (several may be passed in one chunk: a hull that turns over, then sinks)
+                first = {k: _first_over(over[k], values[k]) for k in over}
                 try:  # faster than any crawler, or the hull in the soil: stopped (symtrack.model.plausibility)
-                    # (each checked at its first sample over the limit: the message names where it was passed)
-                    i = _first_over(over["speed"], speeds)
-                    plausibility.check_speed(float(speeds[i]), float(times[i]))
-                    i = _first_over(over["tread"], treads)
-                    plausibility.check_tread_speed(float(treads[i]), float(times[i]))
-                    i = _first_over(over["sinkage"], sinks)
-                    plausibility.check_sinkage(float(sinks[i]), cg_height, float(times[i]))
-                    if itilt:
-                        i = _first_over(over["tilt"], tilts)
-                        plausibility.check_tilt(float(xs[-1][i, itilt[0]]), float(xs[-1][i, itilt[1]]),
-                                                scenario.params, float(times[i]))
+                    for k in sorted(over, key=lambda k: (not over[k].any(), first[k])):
+                        i = first[k]
+                        if k == "speed":
+                            plausibility.check_speed(float(speeds[i]), float(times[i]))
+                        elif k == "tread":
+                            plausibility.check_tread_speed(float(treads[i]), float(times[i]))
+                        elif k == "sinkage":
+                            plausibility.check_sinkage(float(sinks[i]), cg_height, float(times[i]))
+                        elif itilt:
+                            plausibility.check_tilt(float(xs[-1][i, itilt[0]]), float(xs[-1][i, itilt[1]]),
+                                                    scenario.params, float(times[i]))
                 except ImplausibleRunError as err:
                     err_max = float((plant.stats() or {}).get("fixed_step_error_max", 0.0) or 0.0)
                     if err_max > 1.0:  # the fixed step kept steps above its tolerance: perhaps a numerical divergence
