@@ -507,3 +507,29 @@ def test_ctrl_c_as_a_run_is_stored_leaves_it_ok_in_the_table(tmp_path, monkeypat
     done = [r for r in rows if (out / "runs" / r["run_id"] / "summary.json").is_file()]
     assert len(done) == 1 and done[0]["status"] == "ok"
     assert [r["status"] for r in rows if r is not done[0]] == ["not_run"]
+
+
+_NO_MAIN_GUARD = """
+import sys
+from symtrack.foundations.errors import SymtrackError
+from symtrack.studies.engine import dask_client
+
+try:
+    with dask_client("sweep", 1, None):
+        pass
+except SymtrackError as err:
+    print("ERROR:", err)
+    sys.exit(3)
+"""
+
+
+def test_a_script_that_starts_a_local_cluster_without_the_main_guard_is_told_so(tmp_path):
+    """A local cluster's worker process imports the script that started it: a script that starts one at its top
+    level (no ``if __name__ == "__main__":``) kills its workers as they start, and Dask says only "Nanny failed to
+    start". The package's error says what to change."""
+    script = tmp_path / "no_guard.py"
+    script.write_text(_NO_MAIN_GUARD, encoding="utf-8")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert proc.returncode == 3, (proc.stdout[-2000:], proc.stderr[-2000:])
+    assert "did not start" in proc.stdout and 'under `if __name__ == "__main__":`' in proc.stdout, proc.stdout

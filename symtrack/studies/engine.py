@@ -376,8 +376,15 @@ def _client(workers: int, scheduler: str | None):
         except (OSError, TimeoutError) as err:
             raise SymtrackError(f"--scheduler {scheduler!r}: cannot connect ({err}); start one with "
                                 "`dask scheduler` and workers with `dask worker ADDRESS`") from err
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.CRITICAL)
+    try:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.CRITICAL)
+    except RuntimeError as err:  # Dask's "Nanny failed to start": its worker process died while it started
+        raise SymtrackError(
+            f"the local Dask cluster's {workers} worker process(es) did not start ({err}); a worker process imports "
+            "the script that started it: a script that runs a sweep or a region study on a local cluster must make "
+            "that call under `if __name__ == \"__main__\":` (docs/studies.md); the worker's own error is printed "
+            "above") from err
     return Client(cluster), cluster
 
 
