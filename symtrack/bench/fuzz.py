@@ -19,8 +19,9 @@ reference, CVODES at reltol 1e-8 (:data:`REFERENCE`), and is checked (:func:`che
   start finds no static rest that the model carries (:data:`ACCEPTED_REFUSALS`; both acceptable outcomes,
   counted as ``refused``), or the package stops a run on one of :data:`ACCEPTED_STOPS`: a
   sprocket's tread speed past :data:`~symtrack.model.plausibility.MAX_TREAD_SPEED_M_S`, the
-  programme's torque spinning the tracks faster than any drive turns them, or the 3D hull turned over
-  (:func:`~symtrack.model.plausibility.check_tilt`), with the package's message
+  programme's torque spinning the tracks faster than any drive turns them, the 3D hull turned over
+  (:func:`~symtrack.model.plausibility.check_tilt`), or a track end sunk deeper than the CG's height
+  (:func:`~symtrack.model.plausibility.check_sinkage`), with the package's message
   (:class:`~symtrack.foundations.errors.ImplausibleRunError`; an acceptable outcome, counted as
   ``stopped``, where the other integrator's run stops too or comes within :data:`STOP_AGREEMENT` of the
   limit; an accuracy failure where it does not);
