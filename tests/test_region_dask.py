@@ -568,7 +568,8 @@ class _Workers:
     def __init__(self, *limits):
         self.limits = limits
 
-    def scheduler_info(self):
+    def scheduler_info(self, n_workers: int = 5):
+        assert n_workers == -1  # every worker asked for
         return {"workers": {f"tcp://w{i}": {"memory_limit": m} for i, m in enumerate(self.limits)}}
 
 

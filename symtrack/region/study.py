@@ -273,7 +273,11 @@ def check_worker_memory(spec: RegionSpec, client) -> None:
     the worker machine's available memory)."""
     import dask
 
-    limits = [w.get("memory_limit") or 0 for w in client.scheduler_info().get("workers", {}).values()]
+    try:  # every worker (some versions of distributed list only the first five unless asked)
+        info = client.scheduler_info(n_workers=-1)
+    except TypeError:  # a distributed without the argument lists them all
+        info = client.scheduler_info()
+    limits = [w.get("memory_limit") or 0 for w in info.get("workers", {}).values()]
     limits = [x for x in limits if x > 0]
     frac = dask.config.get("distributed.worker.memory.terminate", 0.95)
     if not limits or not frac:
