@@ -77,8 +77,8 @@ from ..model.plausibility import (
     SINKAGE_OVER_CG_HEIGHT_MAX,
     bekker_k_eq,
     bekker_pressure_limit_Pa,
-    is_sinkage_name,
     leaning_sinkage_limit_m,
+    sinkage_columns,
     tilt_over_tipping,
 )
 from ..presets.soils import SOILS
@@ -470,11 +470,10 @@ def _run(doc: dict, out: CaseOutcome, label: str):
                            f"{res.summary.get('fixed_step_error_max', float('nan')):.3g})")
         return None
     params = res.scenario.params
-    sinks = [run.X[:, k] for k, n in enumerate(run.state_names) if is_sinkage_name(n)] or \
-        [run.Y[:, k] for k, n in enumerate(run.output_names) if is_sinkage_name(n)]
+    sk_from, isk = sinkage_columns(run.state_names, run.output_names)
     h = float(params.get("cg_height_m", 0.0))
-    out.near[label] = {"sinkage": max((float(np.max(z)) for z in sinks), default=0.0)
-                       / (SINKAGE_OVER_CG_HEIGHT_MAX * h) if h > 0 else 0.0,
+    out.near[label] = {"sinkage": float(np.max((run.X if sk_from == "x" else run.Y)[:, isk]))
+                       / (SINKAGE_OVER_CG_HEIGHT_MAX * h) if isk and h > 0 else 0.0,
                        "tread_speed": tread / TREAD_SPEED_MAX_M_S,
                        "tilt": float(np.max(tilt_over_tipping(run.state("pitch_rad"), run.state("roll_rad"), params)))
                        if "pitch_rad" in run.state_names else 0.0}

@@ -41,7 +41,7 @@ from ..vehicles.planar import GRAVITY_M_S2, mean_ground_pressure_Pa
 __all__ = ["BEKKER_STIFFNESS_OVER_ELASTIC_MAX", "CONTACT_LENGTH_OVER_GAUGE_RANGE", "GROUND_PRESSURE_RANGE_KPA",
            "MAX_SPEED_M_S", "MAX_TREAD_SPEED_M_S", "SINKAGE_OVER_CG_HEIGHT_MAX", "TRACK_WIDTH_OVER_GAUGE_MAX",
            "TRACTION_OVER_WEIGHT_MAX", "bekker_k_eq", "bekker_pressure_limit_Pa", "bekker_stiffness_ratio",
-           "check_sinkage", "check_soil_contact", "is_sinkage_name", "check_speed", "check_tilt",
+           "check_sinkage", "check_soil_contact", "is_sinkage_name", "sinkage_columns", "check_speed", "check_tilt",
            "check_leaning", "check_torque", "check_tread_speed", "check_vehicle", "ground_pressure_kPa",
            "leaning_sinkage_limit_m", "tilt_over_tipping", "tipping_angles_rad", "LEANING_MARGIN"]
 
@@ -264,6 +264,16 @@ def check_tread_speed(tread_m_s: float, t_s: float) -> None:
 def is_sinkage_name(name: str) -> bool:
     """A track end's sinkage [m] among a model's state or output names (not its rate)."""
     return name.startswith("sinkage_") and name.endswith("_m") and "rate" not in name
+
+
+def sinkage_columns(state_names, output_names) -> tuple[str, list[int]]:
+    """Where a model's track-end sinkages [m] are: ("x", their indices among the states), or, where none is a
+    state (the 3D hull's contact: its track ends' penetrations are outputs), ("y", their indices among the
+    outputs); an empty list where the model has none."""
+    isk = [k for k, n in enumerate(state_names) if is_sinkage_name(n)]
+    if isk:
+        return "x", isk
+    return "y", [k for k, n in enumerate(output_names) if is_sinkage_name(n)]
 
 
 def check_sinkage(sinkage_m: float, cg_height_m: float, t_s: float) -> None:

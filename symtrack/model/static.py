@@ -157,10 +157,11 @@ def _static_state(model: SystemModel, params: dict, x_m=0.0, y_m=0.0, yaw_rad=0.
                 f"{np.array2string(resid_v, precision=3)} m/s^2, rad/s^2 there): {_NO_REST}", "rest")
         # a rest of the equations with the hull in the soil is none the model can carry (no hull contact): a
         # track end deeper than the CG's height, as the run is stopped for (plausibility.check_sinkage)
-        from .plausibility import SINKAGE_OVER_CG_HEIGHT_MAX, is_sinkage_name
+        from .plausibility import SINKAGE_OVER_CG_HEIGHT_MAX, sinkage_columns
 
-        y = np.array(model.outputs(x, ca.DM.zeros(2), p)).ravel()
-        sink = max(float(y[i]) for i, n in enumerate(model.output_names) if is_sinkage_name(n))
+        sk_from, isk = sinkage_columns(model.state_names, model.output_names)
+        values = x if sk_from == "x" else np.array(model.outputs(x, ca.DM.zeros(2), p)).ravel()
+        sink = max(float(values[i]) for i in isk)
         h = float(params["cg_height_m"])
         if sink > SINKAGE_OVER_CG_HEIGHT_MAX * h:
             raise ImplausibleRunError(

@@ -288,8 +288,7 @@ def check_worker_memory(spec: RegionSpec, client) -> None:
     fast = [f for f in spec.fields if f.fidelity == "fast"]
     if not fast:
         return
-    worst = max(fast, key=lambda f: task_memory_bytes(spec, f))
-    need = task_memory_bytes(spec, worst)
+    need, worst = max(((task_memory_bytes(spec, f), f) for f in fast), key=lambda t: t[0])
     if need > limit:
         nx, ny = _shape(spec, worst)
         raise ScenarioError(

@@ -44,12 +44,6 @@ __all__ = ["IncompleteRun", "OutputGrid", "SampleGrid", "SampledLaw", "StartPoin
 log = logging.getLogger("symtrack.simulation")
 
 
-def _first_over(over: np.ndarray, values: np.ndarray) -> int:
-    """The index of the first sample ``over`` its limit, or of the largest of ``values`` when none is."""
-    first = np.flatnonzero(over)
-    return int(first[0]) if len(first) else int(np.argmax(values))
-
-
 class IncompleteRun(SimulationError):
     """A run that failed part of the way (the vehicle left the field, the integrator failed):
     ``partial`` is the :class:`RunResult` up to the last completed output step
@@ -208,11 +202,8 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
     iw = [names.index(n) for n in ("omega_left_rad_s", "omega_right_rad_s") if n in names]
     r_sprocket = float(scenario.params.get("sprocket_radius_m", 0.0)) if iw else 0.0
     # the track ends' sinkages (the hull in the soil is out of the model's domain)
-    isk = [k for k, n in enumerate(names) if plausibility.is_sinkage_name(n)]
-    # a vehicle whose sinkage is not a state (the 3D hull's contact: its track ends' penetrations are outputs)
-    iysk = [] if isk else [k for k, n in enumerate(getattr(plant, "output_names", ()))
-                           if plausibility.is_sinkage_name(n)]
-    cg_height = float(scenario.params.get("cg_height_m", 0.0)) if isk or iysk else 0.0
+    sk_from, isk = plausibility.sinkage_columns(names, getattr(plant, "output_names", ()))
+    cg_height = float(scenario.params.get("cg_height_m", 0.0)) if isk else 0.0
     # the 3D hull's pitch and roll (a hull turned over is out of the model's domain)
     itilt = [names.index(n) for n in ("pitch_rad", "roll_rad")] if {"pitch_rad", "roll_rad"} <= set(names) else []
     sampled = torque_law is not None and hasattr(torque_law, "sample_time_s")
@@ -328,12 +319,8 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
                 t, x = float(times[-1]), xs[-1][-1]
                 speeds = np.hypot(xs[-1][:, iu], xs[-1][:, iv])
                 treads = r_sprocket * np.max(np.abs(xs[-1][:, iw]), axis=1) if iw else np.zeros(len(times))
-                if isk:
-                    sinks = np.max(xs[-1][:, isk], axis=1)
-                elif iysk:
-                    sinks = np.max(ys[-1][:, iysk], axis=1)
-                else:
-                    sinks = np.zeros(len(times))
+                sinks = (np.max((xs if sk_from == "x" else ys)[-1][:, isk], axis=1) if isk
+                         else np.zeros(len(times)))
                 tilts = (plausibility.tilt_over_tipping(xs[-1][:, itilt[0]], xs[-1][:, itilt[1]], scenario.params)
                          if itilt else np.zeros(len(times)))
                 # the samples over each limit (the sinkage's only with a CG height)
@@ -341,20 +328,20 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
                         "tread": treads > plausibility.MAX_TREAD_SPEED_M_S,
                         "sinkage": (cg_height > 0) & (sinks > plausibility.SINKAGE_OVER_CG_HEIGHT_MAX * cg_height),
                         "tilt": tilts > 1.0}
-                values = {"speed": speeds, "tread": treads, "sinkage": sinks, "tilt": tilts}
-                # each limit at its first sample over it (the message names where it was passed), the limit passed
-                # first checked first (several may be passed in one chunk: a hull that turns over, then sinks)
-                first = {k: _first_over(over[k], values[k]) for k in over}
+                # the limit passed first is the one the run is cut at and the message names, at the sample where it
+                # was passed (several may be passed in one chunk: a hull that turns over, then sinks)
+                passed = {k: int(np.flatnonzero(v)[0]) for k, v in over.items() if v.any()}
                 try:  # faster than any crawler, or the hull in the soil: stopped (symtrack.model.plausibility)
-                    for k in sorted(over, key=lambda k: (not over[k].any(), first[k])):
-                        i = first[k]
+                    if passed:
+                        k = min(passed, key=passed.get)
+                        i = passed[k]
                         if k == "speed":
                             plausibility.check_speed(float(speeds[i]), float(times[i]))
                         elif k == "tread":
                             plausibility.check_tread_speed(float(treads[i]), float(times[i]))
                         elif k == "sinkage":
                             plausibility.check_sinkage(float(sinks[i]), cg_height, float(times[i]))
-                        elif itilt:
+                        else:
                             plausibility.check_tilt(float(xs[-1][i, itilt[0]]), float(xs[-1][i, itilt[1]]),
                                                     scenario.params, float(times[i]))
                 except ImplausibleRunError as err:
@@ -368,7 +355,7 @@ def run(scenario, plant, progress: bool | None = False, label: str | None = None
                             f"diverged numerically: compare with --integrator {ref} or a smaller run.fixed_step_s",
                             err.quantity)
                     # the run is kept up to the last sample within the limits
-                    bad = int(np.argmax(np.logical_or.reduce(list(over.values()))))
+                    bad = min(passed.values())
                     ts[-1], xs[-1], us[-1], ys[-1] = ts[-1][:bad], xs[-1][:bad], us[-1][:bad], ys[-1][:bad]
                     if bad > 0:
                         t = float(ts[-1][-1])

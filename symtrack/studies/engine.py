@@ -570,4 +570,3 @@ def _run_sweep_file(arguments, out, progress):
 # it is registered whenever symtrack.studies.runfile is imported; the run-file module does not import the sweep)
 register_kind(Kind("sweep", ("[sweep]",), "a sweep", "symtrack sweep", None, sweep_arguments, _run_sweep_file,
                    needs_out=True))
-
