@@ -101,3 +101,25 @@ def test_soilflex_worked_example_as_soilphysics_prints_it():
         sz, pm = T.footprint_stress_at_depth(c.x_m, c.y_m, c.force_kN, [0.0], [0.0], [d], xi)
         assert float(sz[0, 0]) == pytest.approx(s_r, abs=1.5), d
         assert float(pm[0, 0]) == pytest.approx(p_r, abs=1.0), d
+
+
+@pytest.mark.parametrize("xi", [3.0, 4.7, 9.0])
+def test_the_stress_sum_is_froehlichs_point_load_summed(xi):
+    """footprint_stress_at_depth (one power per point and depth) against frohlich_point summed over the
+    forces, the mean normal stress by its identity xi / (3 (xi - 2)) sigma_z(xi - 2), to rounding; a depth
+    of 0 is refused."""
+    from symtrack.soil.subsoil import frohlich_point
+
+    rng = np.random.default_rng(7)
+    x, y, F = rng.uniform(-0.3, 0.3, 50), rng.uniform(-0.2, 0.2, 50), rng.uniform(0.1, 2.0, 50)
+    px, py = rng.uniform(-1, 1, 300), rng.uniform(-1, 1, 300)
+    depths = (0.05, 0.3, 1.1)
+    sz, pm = T.footprint_stress_at_depth(x, y, F, px, py, depths, xi, chunk=64)
+    r = np.hypot(px[:, None] - x[None, :], py[:, None] - y[None, :])
+    for k, d in enumerate(depths):
+        ref_sz = frohlich_point(F[None, :], r, d, xi).sum(axis=1)
+        ref_pm = xi / (3 * (xi - 2)) * frohlich_point(F[None, :], r, d, xi - 2).sum(axis=1)
+        np.testing.assert_allclose(sz[:, k], ref_sz, rtol=1e-12)
+        np.testing.assert_allclose(pm[:, k], ref_pm, rtol=1e-12)
+    with pytest.raises(ParameterError, match=r"depths_m = .*each depth must be > 0 m"):
+        T.footprint_stress_at_depth(x, y, F, px, py, (0.3, 0.0), xi)

@@ -41,7 +41,8 @@ class Path:
         if not segments:
             raise ScenarioError("path: at least one segment is required")
         self.segments = tuple(segments)
-        xs, ys, ps, ks, si, st, vs, ds = [x_m], [y_m], [heading_rad], [], [], [], [], []
+        xs, ys, ps = [np.array([x_m], float)], [np.array([y_m], float)], [np.array([heading_rad], float)]
+        ks, si, st, vs, ds = [], [], [], [], []
         x, y, psi = x_m, y_m, heading_rad
         all_segs = list(self.segments) + [Segment("straight", extension_m)]
         for idx, seg in enumerate(all_segs):
@@ -54,32 +55,32 @@ class Path:
             n = max(1, int(math.ceil(L / ds_m)))
             h = L / n
             sgn = -1.0 if seg.reverse else 1.0
-            for _ in range(n):
-                ks.append(kappa)
-                si.append(idx if idx < len(self.segments) else -1)
-                st.append(seg.kind == "straight")
-                vs.append(v)
-                ds.append(sgn)
-                if kappa == 0.0:
-                    x += sgn * h * math.cos(psi)
-                    y += sgn * h * math.sin(psi)
-                else:
-                    dpsi = h * kappa
-                    x += sgn * (math.sin(psi + dpsi) - math.sin(psi)) / kappa
-                    y -= sgn * (math.cos(psi + dpsi) - math.cos(psi)) / kappa
-                    psi += dpsi
-                xs.append(x)
-                ys.append(y)
-                ps.append(psi)
-        ks.append(ks[-1])
-        si.append(-1)
-        st.append(True)
-        vs.append(vs[-1])
-        ds.append(ds[-1])
-        self.direction = np.array(ds)
-        self.x, self.y, self.psi = np.array(xs), np.array(ys), np.array(ps)
-        self.kappa, self.segment, self.straight = np.array(ks), np.array(si), np.array(st)
-        self.speed = np.array(vs)
+            k = np.arange(1, n + 1)
+            # the segment's n samples after its start, in closed form (a straight line; an arc of curvature
+            # kappa: the heading psi + k h kappa, the position on the circle through the start)
+            if kappa == 0.0:
+                xk, yk = x + sgn * h * math.cos(psi) * k, y + sgn * h * math.sin(psi) * k
+                pk = np.full(n, psi)
+            else:
+                pk = psi + k * (h * kappa)
+                xk = x + sgn * (np.sin(pk) - math.sin(psi)) / kappa
+                yk = y - sgn * (np.cos(pk) - math.cos(psi)) / kappa
+            xs.append(xk)
+            ys.append(yk)
+            ps.append(pk)
+            ks.append(np.full(n, kappa))
+            si.append(np.full(n, idx if idx < len(self.segments) else -1))
+            st.append(np.full(n, seg.kind == "straight"))
+            vs.append(np.full(n, float(v)))
+            ds.append(np.full(n, sgn))
+            x, y, psi = float(xk[-1]), float(yk[-1]), float(pk[-1])
+        # the last sample: the extension's (straight, segment -1) curvature, direction and speed once more
+        ks, si, st, vs, ds = (np.concatenate([*a, a[-1][-1:]]) for a in (ks, si, st, vs, ds))
+        xs, ys, ps = (np.concatenate(a) for a in (xs, ys, ps))
+        self.direction = ds
+        self.x, self.y, self.psi = xs, ys, ps
+        self.kappa, self.segment, self.straight = ks, si, st
+        self.speed = vs
         seg_len = np.hypot(np.diff(self.x), np.diff(self.y))
         self.s = np.concatenate([[0.0], np.cumsum(seg_len)])
         # the path ends where the extension's first interval starts

@@ -41,7 +41,7 @@ import numpy as np
 from ..foundations import caches
 from ..foundations.errors import ParameterError
 from ..soil import rigid_base
-from ..soil.subsoil import frohlich_point, stress_bruteforce
+from ..soil.subsoil import stress_bruteforce
 
 __all__ = ["ARVIDSSON_KELLER_2007_TYRES", "INFLATION_RULE_EXPONENT", "Contact", "FootprintTable", "LoadsAndPressures",
            "TracksDualsSingles", "Tyre", "arvidsson_2011", "arvidsson_keller_2007", "contact",
@@ -206,14 +206,22 @@ def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=25
         reach = math.hypot(float(np.ptp(np.concatenate([x, px]))), float(np.ptp(np.concatenate([y, py]))))
         profiles = [rigid_base.correction_profile(z, rigid_base_depth_m, reach + 1e-9, rigid_base_interface)
                     for z in d]
+    if np.any(~(d > 0)):
+        raise ParameterError(f"depths_m = {depths_m!r}: each depth must be > 0 m")
     sz = np.zeros((px.size, d.size))
     pm = np.zeros((px.size, d.size))
     for a in range(0, px.size, chunk):
-        r = np.hypot(px[a:a + chunk, None] - x[None, :], py[a:a + chunk, None] - y[None, :])
+        r2 = (px[a:a + chunk, None] - x[None, :]) ** 2 + (py[a:a + chunk, None] - y[None, :]) ** 2
+        r = np.sqrt(r2) if profiles is not None else None
         for k, z in enumerate(d):
-            sz[a:a + chunk, k] = frohlich_point(F[None, :], r, z, xi).sum(axis=1)
+            # frohlich_point's xi F cos^xi / (2 pi R^2), cos = z / R, as xi F z^xi R^-(xi + 2) / (2 pi): one
+            # power a point and depth; its mean-stress twin xi / (3 (xi - 2)) of the same with xi - 2 is
+            # xi F cos^xi / (6 pi z^2) (cos^(xi - 2) / R^2 = cos^xi / z^2), the same power again
+            R2 = r2 + z * z
+            cos_xi = z**xi * R2 ** (-xi / 2)
+            sz[a:a + chunk, k] = xi / (2 * np.pi) * ((cos_xi / R2) @ F)
             if mean_stress:
-                pm[a:a + chunk, k] = xi / (3 * (xi - 2)) * frohlich_point(F[None, :], r, z, xi - 2).sum(axis=1)
+                pm[a:a + chunk, k] = xi / (6 * np.pi * z * z) * (cos_xi @ F)
             if profiles is not None:
                 r_grid, dz, dp = profiles[k]
                 sz[a:a + chunk, k] += (F[None, :] * np.interp(r, r_grid, dz)).sum(axis=1)
