@@ -70,6 +70,39 @@ def test_builtin_scenarios_load():
         sc.build_path()
 
 
+def _walked(x, y, psi, segments, extension_m=30.0, ds_m=0.02):
+    """A path's samples walked step by step (each straight step along the heading, each arc step along its
+    circle), the reference the vectorised Path reproduces to the last bit: the closed-loop runs on it
+    (test_control_rti's re-linearised step at the apex of the shear law's cone) depend on its last bits."""
+    xs, ys, ps = [x], [y], [psi]
+    for seg in [*segments, Segment("straight", extension_m)]:
+        kappa = 0.0 if seg.kind == "straight" else 1.0 / seg.radius_m
+        L = seg.length_m if seg.kind == "straight" else abs(seg.radius_m) * math.radians(seg.angle_deg)
+        n = max(1, math.ceil(L / ds_m))
+        h, sgn = L / n, (-1.0 if seg.reverse else 1.0)
+        for _ in range(n):
+            if kappa == 0.0:
+                x += sgn * h * math.cos(psi)
+                y += sgn * h * math.sin(psi)
+            else:
+                x += sgn * (math.sin(psi + h * kappa) - math.sin(psi)) / kappa
+                y -= sgn * (math.cos(psi + h * kappa) - math.cos(psi)) / kappa
+                psi += h * kappa
+            xs.append(x)
+            ys.append(y)
+            ps.append(psi)
+    return np.array(xs), np.array(ys), np.array(ps)
+
+
+def test_a_path_is_the_step_by_step_walk_to_the_last_bit():
+    segs = [Segment("straight", 7.3), Segment("arc", radius_m=4.0, angle_deg=180.0),
+            Segment("arc", radius_m=-3.0, angle_deg=75.0, reverse=True), Segment("straight", 2.01, reverse=True)]
+    p = Path(1.5, -2.25, 0.3, segs, 1.5, 0.8)
+    for got, want in zip((p.x, p.y, p.psi), _walked(1.5, -2.25, 0.3, segs), strict=True):
+        assert np.array_equal(got, want)
+    assert list(np.unique(p.segment)) == [-1, 0, 1, 2, 3] and set(p.direction) == {-1.0, 1.0}
+
+
 def test_field_path_geometry():
     p = Path(0, 0, 0, field_segments(3, 20.0, 6.0), 2.0, 1.0)
     assert p.length_m == pytest.approx(3 * 20 + 2 * math.pi * 3, rel=1e-6)

@@ -55,16 +55,21 @@ class Path:
             n = max(1, int(math.ceil(L / ds_m)))
             h = L / n
             sgn = -1.0 if seg.reverse else 1.0
-            k = np.arange(1, n + 1)
-            # the segment's n samples after its start, in closed form (a straight line; an arc of curvature
-            # kappa: the heading psi + k h kappa, the position on the circle through the start)
+            # the segment's n samples after its start: each step's increment summed in order (np.cumsum adds
+            # one after the other: the samples to the last bit of a step-by-step walk, on which the
+            # controllers' runs depend), the headings psi + dpsi + ... on an arc and its position's
+            # increments (sin(psi_k) - sin(psi_(k-1))) / kappa, exact on its circle
             if kappa == 0.0:
-                xk, yk = x + sgn * h * math.cos(psi) * k, y + sgn * h * math.sin(psi) * k
+                xk = np.cumsum(np.concatenate([[x], np.full(n, sgn * h * math.cos(psi))]))[1:]
+                yk = np.cumsum(np.concatenate([[y], np.full(n, sgn * h * math.sin(psi))]))[1:]
                 pk = np.full(n, psi)
             else:
-                pk = psi + k * (h * kappa)
-                xk = x + sgn * (np.sin(pk) - math.sin(psi)) / kappa
-                yk = y - sgn * (np.cos(pk) - math.cos(psi)) / kappa
+                heads = np.cumsum(np.concatenate([[psi], np.full(n, h * kappa)]))
+                sin = np.array([math.sin(v) for v in heads])  # (the math library's, as the walk had)
+                cos = np.array([math.cos(v) for v in heads])
+                xk = np.cumsum(np.concatenate([[x], sgn * (sin[1:] - sin[:-1]) / kappa]))[1:]
+                yk = np.cumsum(np.concatenate([[y], -(sgn * (cos[1:] - cos[:-1]) / kappa)]))[1:]
+                pk = heads[1:]
             xs.append(xk)
             ys.append(yk)
             ps.append(pk)
