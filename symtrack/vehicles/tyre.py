@@ -201,13 +201,13 @@ def footprint_stress_at_depth(x_m, y_m, force_kN, px, py, depths_m, xi, chunk=25
     px, py = np.atleast_1d(np.asarray(px, float)), np.atleast_1d(np.asarray(py, float))
     x, y, F = (np.asarray(v, float).ravel() for v in (x_m, y_m, force_kN))
     d = np.atleast_1d(np.asarray(depths_m, float))
+    if np.any(~(d > 0)):
+        raise ParameterError(f"depths_m = {depths_m!r}: each depth must be > 0 m")
     profiles = None
     if rigid_base_depth_m is not None:
         reach = math.hypot(float(np.ptp(np.concatenate([x, px]))), float(np.ptp(np.concatenate([y, py]))))
         profiles = [rigid_base.correction_profile(z, rigid_base_depth_m, reach + 1e-9, rigid_base_interface)
                     for z in d]
-    if np.any(~(d > 0)):
-        raise ParameterError(f"depths_m = {depths_m!r}: each depth must be > 0 m")
     sz = np.zeros((px.size, d.size))
     pm = np.zeros((px.size, d.size))
     for a in range(0, px.size, chunk):
