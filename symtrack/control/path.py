@@ -65,8 +65,9 @@ class Path:
                 pk = np.full(n, psi)
             else:
                 heads = np.cumsum(np.concatenate([[psi], np.full(n, h * kappa)]))
-                sin = np.array([math.sin(v) for v in heads])  # (the math library's, as the walk had)
-                cos = np.array([math.cos(v) for v in heads])
+                # the math library's sine and cosine, as the walk's (numpy's may differ in the last bit)
+                sin = np.fromiter(map(math.sin, heads), float, heads.size)
+                cos = np.fromiter(map(math.cos, heads), float, heads.size)
                 xk = np.cumsum(np.concatenate([[x], sgn * (sin[1:] - sin[:-1]) / kappa]))[1:]
                 yk = np.cumsum(np.concatenate([[y], -(sgn * (cos[1:] - cos[:-1]) / kappa)]))[1:]
                 pk = heads[1:]
